@@ -1,0 +1,1 @@
+"""Bundled sensor description files (TOML)."""

@@ -1,0 +1,38 @@
+"""A progress line on stderr when it is a terminal; silent otherwise (logs, CI, pipes)."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+
+class Progress:
+    def __init__(self, label: str, total: int, stream=None, min_interval: float = 0.1):
+        self.label, self.total = label, max(int(total), 1)
+        self.stream = stream or sys.stderr
+        self.enabled = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.start = self.last = time.monotonic()
+        self.min_interval = min_interval
+        self.done = 0
+
+    def update(self, step: int = 1, note: str = "") -> None:
+        self.done += step
+        now = time.monotonic()
+        if not self.enabled or (now - self.last < self.min_interval and self.done < self.total):
+            return
+        self.last = now
+        frac = min(self.done / self.total, 1.0)
+        bar = "#" * int(frac * 24)
+        self.stream.write(f"\r{self.label} [{bar:<24}] {self.done}/{self.total} {now - self.start:5.1f}s {note}\033[K")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            self.stream.write("\r\033[K")
+            self.stream.flush()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

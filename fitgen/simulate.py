@@ -1,0 +1,131 @@
+"""Pose sets (the paper's grids, regular grids, random poses) and simulated datasets."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from . import __version__
+from .dataset import Dataset
+from .errors import InputError
+from .pose import POSE_NAMES, as_poses
+from .sensor import Sensor
+from .transfer import readings
+
+PAPER_GRIDS = {
+    # the seed's simulation grid (1,875 poses) and its experiment grid (450 poses)
+    "paper-sim": {"dx": [-2, -1, 0, 1, 2], "dy": [-2, -1, 0, 1, 2], "dz": [0, -1, -2],
+                  "thx": [-5, -2.5, 0, 2.5, 5], "thy": [-5, -2.5, 0, 2.5, 5]},
+    "paper-exp": {"dx": [-2, -1, 0, 1, 2], "dy": [-2, -1, 0, 1, 2], "dz": [-2, -3],
+                  "thx": [-5, 0, 5], "thy": [-5, 0, 5]},
+}
+DEFAULT_RANGES = {"dx": (-2.0, 2.0), "dy": (-2.0, 2.0), "dz": (-2.0, 0.0), "thx": (-5.0, 5.0), "thy": (-5.0, 5.0)}
+
+_NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+
+
+def grid_poses(levels: dict[str, list[float]]) -> np.ndarray:
+    """Full factorial grid; components not named stay 0. Row order: dx slowest, thy fastest."""
+    axes = [np.asarray(levels.get(n, [0.0]), dtype=float) for n in POSE_NAMES]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    return np.column_stack([m.ravel() for m in mesh])
+
+
+def _components(spec: str, what: str) -> dict[str, str]:
+    out = {}
+    for part in re.split(r"[;\s]+", spec.strip()):
+        if not part:
+            continue
+        name, sep, value = part.partition("=")
+        if not sep or name not in POSE_NAMES:
+            raise InputError(f"{what} {spec!r}: each part must be NAME=VALUES with NAME in {','.join(POSE_NAMES)}")
+        if name in out:
+            raise InputError(f"{what} {spec!r}: {name} given twice")
+        out[name] = value
+    if not out:
+        raise InputError(f"{what} is empty")
+    return out
+
+
+def parse_grid(spec: str) -> dict[str, list[float]]:
+    """A paper grid name, or ``dx=-2:2:5 dz=0,-1,-2 ...`` (start:stop:count or a list)."""
+    if spec in PAPER_GRIDS:
+        return PAPER_GRIDS[spec]
+    levels = {}
+    for name, value in _components(spec, "grid").items():
+        m = re.fullmatch(rf"({_NUM}):({_NUM}):(\d+)", value)
+        if m:
+            lo, hi, count = float(m.group(1)), float(m.group(2)), int(m.group(3))
+            if count < 1 or count > 10000:
+                raise InputError(f"grid {spec!r}: {name} count must be 1..10000, got {count}")
+            levels[name] = list(np.linspace(lo, hi, count)) if count > 1 else [lo]
+        elif re.fullmatch(rf"{_NUM}(?:,{_NUM})*", value):
+            levels[name] = [float(v) for v in value.split(",")]
+        else:
+            raise InputError(f"grid {spec!r}: {name}={value!r} is neither START:STOP:COUNT nor a list of numbers")
+    total = int(np.prod([len(v) for v in levels.values()]))
+    if total > 5_000_000:
+        raise InputError(f"grid {spec!r} has {total} poses; at most 5,000,000")
+    return levels
+
+
+def parse_ranges(spec: str | None) -> dict[str, tuple[float, float]]:
+    """``dx=-2:2 thx=-5:5 ...`` (components not named: the paper-sim box)."""
+    ranges = dict(DEFAULT_RANGES)
+    if not spec:
+        return ranges
+    for name, value in _components(spec, "ranges").items():
+        m = re.fullmatch(rf"({_NUM}):({_NUM})", value)
+        if not m or float(m.group(1)) > float(m.group(2)):
+            raise InputError(f"ranges {spec!r}: {name}={value!r} must be LOW:HIGH with LOW <= HIGH")
+        ranges[name] = (float(m.group(1)), float(m.group(2)))
+    return ranges
+
+
+def random_poses(n: int, ranges: dict[str, tuple[float, float]], rng: np.random.Generator) -> np.ndarray:
+    """``n`` poses uniform in the box ``ranges``."""
+    if n < 1:
+        raise InputError(f"number of random poses must be >= 1, got {n}")
+    lo = np.array([ranges[k][0] for k in POSE_NAMES])
+    hi = np.array([ranges[k][1] for k in POSE_NAMES])
+    return lo + (hi - lo) * rng.random((n, 5))
+
+
+def simulate(
+    sensor: Sensor,
+    poses,
+    *,
+    noise: float = 0.0,
+    adc_bits: int | None = None,
+    seed: int = 0,
+    targets: tuple[str, ...] = POSE_NAMES,
+    provenance: dict | None = None,
+) -> Dataset:
+    """Readings for ``poses`` through the sensor's transfer, as a :class:`Dataset`.
+
+    Deterministic: the noise stream is drawn from ``seed``.
+    """
+    poses = as_poses(poses)
+    if noise < 0:
+        raise InputError(f"noise must be >= 0, got {noise}")
+    rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
+    values = readings(sensor, poses, noise=noise, adc_bits=adc_bits, rng=rng)
+    cols = [POSE_NAMES.index(t) for t in targets]
+    meta = {
+        "generator": f"fitgen {__version__}",
+        "sensor": sensor.name,
+        "sensor_sha256": sensor.sha256,
+        "transfer": sensor.transfer,
+        "units": sensor.units,
+        "noise": noise,
+        "adc_bits": adc_bits,
+        "seed": seed,
+    }
+    meta.update(provenance or {})
+    return Dataset(values, poses[:, cols].copy(), tuple(targets), meta)
+
+
+def pose_rng(seed: int) -> np.random.Generator:
+    """The random stream for pose sampling (independent of the noise stream)."""
+    return np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[0])
