@@ -1,0 +1,41 @@
+"""Shared test helpers. Under CI (CI=true) a missing external tool fails the test instead of skipping it."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
+
+
+def require_tool(name: str) -> str:
+    """Path of an external tool; skip locally, fail under CI, when it is absent."""
+    path = shutil.which(name)
+    if path is None:
+        msg = f"{name} is not installed (scripts/test installs it)"
+        if IN_CI:
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return path
+
+
+def run_cli(*args, input=None, cwd=None):
+    """Run a console script's module as a subprocess; returns CompletedProcess (text)."""
+    tool, rest = args[0], list(args[1:])
+    module = {"fitgen": "fitgen.cli", "tactile-host": "host.cli", "tactile-hil": "hil.cli"}[tool]
+    code = f"import sys; from {module} import main; sys.argv[0] = {tool!r}; main()"
+    return subprocess.run([sys.executable, "-c", code, *rest], capture_output=True, text=True,
+                          input=input, cwd=cwd, timeout=600)
+
+
+def assert_one_line_error(proc, status: int = 2, contains: str | None = None):
+    assert proc.returncode == status, (proc.returncode, proc.stdout, proc.stderr)
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    if contains:
+        assert contains in lines[0], lines[0]

@@ -1,0 +1,74 @@
+import numpy as np
+from scipy.optimize import least_squares
+
+from fitgen.observe import analyse, jacobian, observe
+from fitgen.pose import field_readings
+from fitgen.scenes import PRESETS
+from fitgen.sensor import load_sensor
+from fitgen.transfer import apply_transfer
+
+from conftest import assert_one_line_error, run_cli
+
+PAPER = load_sensor("paper")
+
+
+def test_ring_cannot_tell_tilt_from_slide_at_rest():
+    """At rest the tilt columns of the Jacobian are parallel to the slide columns: rank 3."""
+    J = jacobian(PAPER, np.zeros(5))[0]
+    s = np.linalg.svd(J, compute_uv=False)
+    assert s[2] > 1e-3 * s[0]
+    assert s[3] < 1e-8 * s[0] and s[4] < 1e-8 * s[0]
+    # d/dthx is a multiple of d/dy
+    cos = J[:, 1] @ J[:, 3] / np.linalg.norm(J[:, 1]) / np.linalg.norm(J[:, 3])
+    assert abs(abs(cos) - 1) < 1e-9
+
+
+def test_jacobian_matches_a_coarser_difference():
+    pose = np.array([[1.0, -0.5, -1.5, 3.0, -2.0]])
+    J = jacobian(PAPER, pose)[0]
+    h = 1e-2
+    for j in range(5):
+        e = np.zeros(5)
+        e[j] = h
+        d = (field_readings(PAPER, pose + e) - field_readings(PAPER, pose - e))[0] / (2 * h)
+        d = d * -1  # readings are |B . r|; B . r < 0 under the magnet
+        np.testing.assert_allclose(J[:, j], d, rtol=2e-4, atol=1e-9)
+
+
+def test_cramer_rao_bound_matches_monte_carlo():
+    """The least-squares pose estimate from noisy readings scatters as the bound says."""
+    pose = np.array([-2.0, -2.0, -2.0, -5.0, -5.0])
+    noise = 0.0005
+    bound = analyse(PAPER, pose, noise)[0].bounds
+    clean = apply_transfer(PAPER, field_readings(PAPER, pose))[0]
+    rng = np.random.default_rng(7)
+    est = []
+    for _ in range(150):
+        meas = clean + rng.normal(0, noise, clean.shape)
+        fit = least_squares(lambda p: apply_transfer(PAPER, field_readings(PAPER, p))[0] - meas,
+                            pose, x_scale=[0.01, 0.01, 0.01, 0.3, 0.3])
+        est.append(fit.x)
+    std = np.std(np.array(est), axis=0)
+    np.testing.assert_allclose(std, bound, rtol=0.2)
+
+
+def test_verdicts_for_the_paper_layout():
+    rep = observe(PAPER, PRESETS["full"].ranges)
+    assert len(rep.results) == 33  # rest + 2^5 corners
+    assert rep.unresolved() == ["dx", "dy", "thx", "thy"]  # at rest, jointly with tilt
+    words = "\n".join(rep.verdicts())
+    assert "dz: resolvable" in words and "thx: NOT resolvable" in words
+    slide = observe(PAPER, PRESETS["slide"].ranges, ("dx", "dy", "dz"))
+    assert slide.unresolved() == []
+    assert len(slide.results) == 9  # rest + 2^3 corners (tilt held at 0)
+
+
+def test_cli_table_and_words():
+    proc = run_cli("fitgen", "observe", "--sensor", "paper")
+    assert proc.returncode == 0, proc.stderr
+    assert "s_min" in proc.stdout and "thx [deg]" in proc.stdout
+    assert "NOT resolvable" in proc.stdout
+    proc = run_cli("fitgen", "observe", "paper", "--scene", "press", "--accuracy", "dz=0.0001")
+    assert proc.returncode == 0 and "dz: NOT resolvable" in proc.stdout
+    assert_one_line_error(run_cli("fitgen", "observe", "--accuracy", "dz=abc"), contains="not a number")
+    assert_one_line_error(run_cli("fitgen", "observe", "--scene", "nosuch"), contains="scene")

@@ -1,0 +1,85 @@
+import math
+
+import numpy as np
+import pytest
+
+from fitgen.errors import InputError
+from fitgen.sensor import load_sensor, parse_sensor, preset_names, tomllib
+from importlib import resources
+
+from conftest import assert_one_line_error, run_cli
+
+
+def paper_dict():
+    return tomllib.loads(resources.files("fitgen.presets").joinpath("paper.toml").read_text())
+
+
+def test_paper_preset_matches_conventions():
+    s = load_sensor("paper")
+    assert s.magnet.diameter == 6.0 and s.magnet.height == 1.0 and s.magnet.polarization == 1.32
+    # magnet bottom 11.0 above the board top, elements on the 1.5 mm board's bottom face
+    assert s.magnet.rest_center == (0.0, 0.0, 13.0)
+    assert s.n_elements == 8
+    for k in range(8):
+        phi = math.radians(45 * k)
+        np.testing.assert_allclose(s.positions[k], [10 * math.cos(phi), 10 * math.sin(phi), 0.0], atol=1e-12)
+        np.testing.assert_allclose(s.axes[k], [math.cos(phi), math.sin(phi), 0.0], atol=1e-12)
+    assert s.transfer == "raw" and s.units == "mT"
+    assert "paper" in preset_names()
+
+
+def test_hash_is_stable_and_sensitive():
+    a, b = load_sensor("paper"), load_sensor("paper")
+    assert a.sha256 == b.sha256
+    d = paper_dict()
+    d["magnet"]["polarization"] = 1.2
+    assert parse_sensor(d).sha256 != a.sha256
+
+
+@pytest.mark.parametrize(
+    "mutate, key",
+    [
+        (lambda d: d["magnet"].__setitem__("diamter", 6.0), "magnet.diamter"),
+        (lambda d: d["magnet"].pop("height"), "magnet.height"),
+        (lambda d: d["magnet"].__setitem__("diameter", -6.0), "magnet.diameter"),
+        (lambda d: d["board"].__setitem__("gap", 0), "board.gap"),
+        (lambda d: d["elements"]["ring"][0].__setitem__("radius", "ten"), "elements.ring[0].radius"),
+        (lambda d: d["elements"]["ring"][0].__setitem__("axis", "sideways"), "elements.ring[0].axis"),
+        (lambda d: d["transfer"]["gmr"].__setitem__("adc_max", -1.0), "adc_max"),
+        (lambda d: d.__setitem__("colour", "red"), "colour"),
+        (lambda d: d["transfer"].__setitem__("kind", "hall"), "transfer.kind"),
+    ],
+)
+def test_bad_sensor_files_name_the_key(mutate, key):
+    d = paper_dict()
+    mutate(d)
+    with pytest.raises(InputError, match=key.replace("[", r"\[").replace("]", r"\]")):
+        parse_sensor(d)
+
+
+def test_element_inside_magnet_is_rejected():
+    d = paper_dict()
+    d["elements"]["list"] = [{"position": [0.0, 0.0, 13.2], "axis": [0, 0, 1]}]
+    with pytest.raises(InputError, match="element 9 .* inside the magnet"):
+        parse_sensor(d)
+
+
+def test_explicit_elements_and_rings_combine():
+    d = paper_dict()
+    d["elements"]["ring"].append({"count": 4, "radius": 5.0, "z": 2.0, "axis": "z"})
+    d["elements"]["list"] = [{"position": [1.0, 2.0, 0.0], "axis": [0, 3, 4]}]
+    s = parse_sensor(d)
+    assert s.n_elements == 13
+    np.testing.assert_allclose(s.axes[-1], [0, 0.6, 0.8])
+    np.testing.assert_allclose(s.axes[8:12], np.tile([0, 0, 1.0], (4, 1)))
+
+
+def test_bad_sensor_file_cli(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("name = 'x'\n[magnet]\ndiameter = -1\nheight = 1\n")
+    proc = run_cli("fitgen", "simulate", "--sensor", str(bad), "-o", str(tmp_path / "o.csv"))
+    assert_one_line_error(proc, contains="magnet.diameter")
+    assert not (tmp_path / "o.csv").exists()
+    bad.write_text("this is = = not toml")
+    assert_one_line_error(run_cli("fitgen", "observe", str(bad)), contains="not valid TOML")
+    assert_one_line_error(run_cli("fitgen", "observe", "--sensor", "nope"), contains="not a preset")

@@ -1,0 +1,123 @@
+import numpy as np
+import pytest
+
+from fitgen.dataset import load_dataset
+from fitgen.errors import InputError
+from fitgen.sensor import load_sensor
+from fitgen.simulate import PAPER_GRIDS, grid_poses, parse_grid, pose_rng, random_poses, simulate, parse_ranges
+from fitgen.transfer import quantise
+
+from conftest import assert_one_line_error, run_cli
+
+
+def test_paper_grids_sizes_and_levels():
+    sim = grid_poses(PAPER_GRIDS["paper-sim"])
+    exp = grid_poses(PAPER_GRIDS["paper-exp"])
+    assert sim.shape == (1875, 5) and exp.shape == (450, 5)
+    assert sorted(set(sim[:, 2])) == [-2, -1, 0]
+    assert sorted(set(exp[:, 3])) == [-5, 0, 5]
+    assert len({tuple(r) for r in sim}) == 1875
+
+
+def test_cli_writes_paper_sim(tmp_path):
+    out = tmp_path / "sim.csv"
+    proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--grid", "paper-sim", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    lines = out.read_text().splitlines()
+    assert lines[0] == "v1,v2,v3,v4,v5,v6,v7,v8,dx,dy,dz,thx,thy"
+    assert len(lines) == 1876
+    ds = load_dataset(out)
+    assert ds.meta["sensor_sha256"] == load_sensor("paper").sha256
+    assert ds.meta["dataset_sha256"] == ds.sha256
+    # at rest every element of the symmetric ring reads the same
+    rest = np.all(ds.poses() == 0, axis=1)
+    assert rest.sum() == 1
+    v = ds.inputs[rest][0]
+    np.testing.assert_allclose(v, v[0], rtol=1e-12)
+    assert 0.5 < v[0] < 1.5  # about 1 mT: inside the AA003-02's linear range (0.2-1.4 mT)
+
+
+def test_deterministic_for_a_seed(tmp_path):
+    a, b, c = (tmp_path / n for n in ("a.csv", "b.csv", "c.csv"))
+    for path, seed in ((a, 3), (b, 3), (c, 4)):
+        proc = run_cli("fitgen", "simulate", "--random", "50", "--seed", str(seed), "--noise", "0.001", "-o", str(path))
+        assert proc.returncode == 0, proc.stderr
+    assert a.read_bytes() == b.read_bytes()
+    assert a.read_bytes() != c.read_bytes()
+
+
+def test_noise_has_the_requested_rms():
+    s = load_sensor("paper")
+    poses = np.zeros((20000, 5))
+    clean = simulate(s, poses).inputs
+    noisy = simulate(s, poses, noise=0.01, seed=1).inputs
+    assert abs(np.std(noisy - clean) / 0.01 - 1) < 0.02
+
+
+def test_gmr_transfer_quantises_and_saturates():
+    s = load_sensor("paper").with_transfer("gmr")
+    ds = simulate(s, grid_poses(PAPER_GRIDS["paper-sim"]))
+    g = s.gmr
+    lsb = (g.adc_max - g.adc_min) / (2**g.adc_bits - 1)
+    codes = (ds.inputs - g.adc_min) / lsb
+    np.testing.assert_allclose(codes, np.round(codes), atol=1e-6)
+    assert np.all(ds.inputs <= g.adc_max)
+    # volts follow |B| linearly below saturation
+    raw = simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])).inputs
+    k = g.supply * g.sensitivity * 1e-3 * 10 * g.gain
+    np.testing.assert_allclose(ds.inputs, g.offset + k * np.minimum(raw, g.saturation), atol=lsb)
+
+
+def test_quantise_is_within_half_lsb():
+    x = np.linspace(0, 1, 1001)
+    q = quantise(x, 0.0, 1.0, 8)
+    assert np.max(np.abs(q - x)) <= 0.5 / 255 + 1e-15
+    assert len(np.unique(q)) == 256
+
+
+def test_grid_and_range_specs():
+    lv = parse_grid("dx=-1:1:3 dz=0,-1")
+    assert grid_poses(lv).shape == (6, 5)
+    with pytest.raises(InputError):
+        parse_grid("dq=1:2:3")
+    with pytest.raises(InputError):
+        parse_grid("dx=1:2")
+    r = parse_ranges("dz=-3:0")
+    p = random_poses(1000, r, pose_rng(0))
+    assert p[:, 2].min() >= -3 and p[:, 2].max() <= 0
+    with pytest.raises(InputError):
+        parse_ranges("dx=2:1")
+
+
+def test_poses_file(tmp_path):
+    poses = tmp_path / "p.csv"
+    poses.write_text("dz,thx\n-1,0\n-2,5\n")
+    out = tmp_path / "o.csv"
+    assert run_cli("fitgen", "simulate", "--poses", str(poses), "-o", str(out)).returncode == 0
+    ds = load_dataset(out)
+    np.testing.assert_array_equal(ds.poses(), [[0, 0, -1, 0, 0], [0, 0, -2, 5, 0]])
+
+
+@pytest.mark.parametrize("args, text", [
+    (["--grid", "dx=a:b:c"], "grid"),
+    (["--grid", "paper-huge"], "grid"),
+    (["--random", "0"], "random"),
+    (["--noise", "-1"], "noise"),
+    (["--adc-bits", "99"], "adc-bits"),
+    (["--grid", "paper-sim", "--random", "5"], "one of"),
+    (["--bogus"], "unrecognized"),
+])
+def test_bad_options_one_line(tmp_path, args, text):
+    out = tmp_path / "o.csv"
+    assert_one_line_error(run_cli("fitgen", "simulate", *args, "-o", str(out)), contains=text)
+    assert not out.exists()
+
+
+def test_unwritable_output(tmp_path):
+    assert_one_line_error(run_cli("fitgen", "simulate", "-o", str(tmp_path / "no" / "such" / "dir.csv")),
+                          contains="cannot write")
+    # a folder where the file should go: the rename fails, nothing is left behind
+    target = tmp_path / "taken"
+    target.mkdir()
+    assert_one_line_error(run_cli("fitgen", "simulate", "-o", str(target)), contains="cannot write")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
