@@ -1,0 +1,214 @@
+"""The fitted model: a small typed object that the Python evaluator and the C templates both read.
+
+Model files are JSON (``schema_version`` 1): the input domain, per output its terms
+(canonical text), coefficients and intercept, and how and on what it was fitted.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .errors import InputError
+from .fileio import canonical_json, sha256_hex, write_atomic
+from .pose import POSE_NAMES, POSE_UNITS
+from .terms import DISPLACEMENTS, Term, design_matrix, parse_term
+
+SCHEMA_VERSION = 1
+STATUS_NONFINITE = -1
+
+
+@dataclass(frozen=True)
+class Equation:
+    """One output: ``intercept + sum(coefficients[j] * terms[j])``."""
+
+    name: str
+    intercept: float
+    terms: tuple[Term, ...]
+    coefficients: tuple[float, ...]
+
+    @property
+    def unit(self) -> str:
+        return POSE_UNITS[POSE_NAMES.index(self.name)]
+
+    @property
+    def uses_d(self) -> bool:
+        return any(t.mult for t in self.terms)
+
+
+@dataclass
+class Model:
+    """Equations in output order (displacements before rotations) and the fitted input domain."""
+
+    input_min: np.ndarray
+    input_max: np.ndarray
+    equations: tuple[Equation, ...]
+    input_units: str = "mT"
+    fit_info: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.input_min = np.asarray(self.input_min, dtype=float)
+        self.input_max = np.asarray(self.input_max, dtype=float)
+        _validate(self, "model")
+
+    @property
+    def n_inputs(self) -> int:
+        return int(self.input_min.size)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(e.name for e in self.equations)
+
+    def equation(self, name: str) -> Equation:
+        for e in self.equations:
+            if e.name == name:
+                return e
+        raise InputError(f"the model has no output {name!r} (it has {', '.join(self.output_names)})")
+
+    # --- evaluation ------------------------------------------------------------
+
+    def clamp(self, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Inputs clamped into the domain, and the status per row (C's return value).
+
+        Status: 0 inside, bit k-1 set when input k was clamped, -1 for a non-finite input.
+        """
+        v = np.asarray(inputs, dtype=float)
+        if v.ndim == 1:
+            v = v[None, :]
+        if v.shape[1] != self.n_inputs:
+            raise InputError(f"the model takes {self.n_inputs} inputs, got {v.shape[1]}")
+        finite = np.all(np.isfinite(v), axis=1)
+        low, high = v < self.input_min, v > self.input_max
+        bits = (1 << np.arange(self.n_inputs)).astype(np.int64)
+        status = ((low | high) * bits).sum(axis=1)
+        status[~finite] = STATUS_NONFINITE
+        clamped = np.clip(np.where(np.isfinite(v), v, self.input_min), self.input_min, self.input_max)
+        return clamped, status
+
+    def predict(self, inputs: np.ndarray, with_status: bool = False):
+        """Outputs (n, n_outputs) for rows of inputs; rows with a non-finite input give 0."""
+        v, status = self.clamp(inputs)
+        out = np.zeros((v.shape[0], len(self.equations)))
+        d = np.zeros((v.shape[0], 3))
+        for j, eq in enumerate(self.equations):
+            cols = design_matrix(list(eq.terms), v, d)
+            out[:, j] = eq.intercept + cols @ np.asarray(eq.coefficients)
+            if eq.name in DISPLACEMENTS:
+                d[:, DISPLACEMENTS.index(eq.name)] = out[:, j]
+        out[status < 0] = 0.0
+        return (out, status) if with_status else out
+
+    # --- files -------------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        return {
+            "schema_version": SCHEMA_VERSION,
+            "generator": f"fitgen {__version__}",
+            "inputs": {
+                "names": [f"v{k}" for k in range(1, self.n_inputs + 1)],
+                "units": self.input_units,
+                "min": self.input_min.tolist(),
+                "max": self.input_max.tolist(),
+            },
+            "outputs": [
+                {"name": e.name, "unit": e.unit, "intercept": e.intercept,
+                 "terms": [t.text for t in e.terms], "coefficients": list(e.coefficients)}
+                for e in self.equations
+            ],
+            "fit": self.fit_info,
+        }
+
+    @property
+    def sha256(self) -> str:
+        """Hash of what the estimate depends on (domain and equations), not of the fit notes."""
+        d = self.to_dict()
+        return sha256_hex(canonical_json({"inputs": d["inputs"], "outputs": d["outputs"]}))
+
+    def save(self, path: str | Path) -> Path:
+        try:
+            text = json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n"
+        except ValueError:
+            raise InputError("the model holds a non-finite number; not written") from None
+        return write_atomic(path, text)
+
+
+def load_model(path: str | Path) -> Model:
+    origin = f"model file {path}"
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise InputError(f"{origin}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{origin}: cannot read: {exc}") from None
+    except ValueError as exc:
+        raise InputError(f"{origin}: not valid JSON: {exc}") from None
+    return model_from_dict(data, origin)
+
+
+def _number(val, where: str) -> float:
+    if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+        raise InputError(f"{where} must be a finite number, got {val!r}")
+    return float(val)
+
+
+def model_from_dict(data, origin: str = "model") -> Model:
+    if not isinstance(data, dict):
+        raise InputError(f"{origin}: not a model (a JSON object is expected)")
+    ver = data.get("schema_version")
+    if ver != SCHEMA_VERSION:
+        raise InputError(f"{origin}: schema_version {ver!r} is not supported (this fitgen reads {SCHEMA_VERSION})")
+    try:
+        inputs = data["inputs"]
+        lo = [_number(x, f"{origin}: inputs.min") for x in inputs["min"]]
+        hi = [_number(x, f"{origin}: inputs.max") for x in inputs["max"]]
+        units = inputs.get("units", "mT")
+        eqs = []
+        for i, o in enumerate(data["outputs"]):
+            where = f"{origin}: outputs[{i}]"
+            terms = tuple(parse_term(t) for t in o["terms"])
+            coefs = tuple(_number(c, f"{where}.coefficients") for c in o["coefficients"])
+            if len(terms) != len(coefs):
+                raise InputError(f"{where}: {len(terms)} terms but {len(coefs)} coefficients")
+            eqs.append(Equation(o["name"], _number(o["intercept"], f"{where}.intercept"), terms, coefs))
+    except (KeyError, TypeError) as exc:
+        raise InputError(f"{origin}: malformed model ({type(exc).__name__}: {exc})") from None
+    if not isinstance(units, str):
+        raise InputError(f"{origin}: inputs.units must be a string")
+    fit = data.get("fit", {})
+    return Model(np.array(lo), np.array(hi), tuple(eqs), units, fit if isinstance(fit, dict) else {})
+
+
+def _validate(m: Model, origin: str) -> None:
+    if m.input_min.ndim != 1 or m.input_min.shape != m.input_max.shape or m.n_inputs < 1:
+        raise InputError(f"{origin}: the input domain must give min and max for each of 1 or more inputs")
+    if not (np.all(np.isfinite(m.input_min)) and np.all(np.isfinite(m.input_max))):
+        raise InputError(f"{origin}: the input domain must be finite")
+    if np.any(m.input_min > m.input_max):
+        k = int(np.argmax(m.input_min > m.input_max)) + 1
+        raise InputError(f"{origin}: input v{k} has min > max")
+    names = [e.name for e in m.equations]
+    if not names:
+        raise InputError(f"{origin}: no outputs")
+    for n in names:
+        if n not in POSE_NAMES:
+            raise InputError(f"{origin}: unknown output {n!r} (outputs are {', '.join(POSE_NAMES)})")
+    if names != sorted(names, key=POSE_NAMES.index) or len(set(names)) != len(names):
+        raise InputError(f"{origin}: outputs must be distinct and in the order {','.join(POSE_NAMES)}")
+    for e in m.equations:
+        if len(set(e.terms)) != len(e.terms):
+            raise InputError(f"{origin}: output {e.name} lists a term twice")
+        for t in e.terms:
+            if t.element > m.n_inputs:
+                raise InputError(f"{origin}: output {e.name} term {t.text} refers to input v{t.element}; "
+                                 f"the model has {m.n_inputs}")
+            if t.needs_positive and not m.input_min[t.element - 1] > 0:
+                raise InputError(f"{origin}: output {e.name} term {t.text} needs v{t.element} > 0, "
+                                 f"but its domain starts at {m.input_min[t.element - 1]!r}")
+            if t.mult and (t.mult not in names or names.index(t.mult) > names.index(e.name)):
+                raise InputError(f"{origin}: output {e.name} term {t.text} needs output {t.mult} "
+                                 "computed before it")
