@@ -75,6 +75,139 @@ def cmd_observe(args) -> int:
     return 0
 
 
+def _settings(args):
+    from .fit import FitSettings
+    from .terms import FAMILIES
+
+    if args.k in ("aic", "bic"):
+        k = 2.0 if args.k == "aic" else "bic"
+    else:
+        try:
+            k = float(args.k)
+        except ValueError:
+            raise InputError(f"--k must be aic, bic or a number > 0, got {args.k!r}") from None
+        if not k > 0 or k != k or k == float("inf"):
+            raise InputError(f"--k must be a finite number > 0, got {args.k}")
+    if args.max_terms is not None and args.max_terms < 1:
+        raise InputError(f"--max-terms must be >= 1, got {args.max_terms}")
+    return FitSettings(k=k, max_terms=args.max_terms, exponents=FAMILIES[args.family],
+                       d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated")
+
+
+def _outputs(spec):
+    if spec is None:
+        return None
+    names = tuple(x.strip() for x in spec.split(",") if x.strip())
+    bad = [n for n in names if n not in POSE_NAMES]
+    if bad or not names:
+        raise InputError(f"--outputs takes names from {','.join(POSE_NAMES)}, got {spec!r}")
+    return names
+
+
+def cmd_fit(args) -> int:
+    from .dataset import load_dataset
+    from .fit import fit_model
+    from .progress import Progress
+
+    settings = _settings(args)
+    ds = load_dataset(args.data)
+    outputs = _outputs(args.outputs) or ds.target_names
+    bar = Progress("fit", len(outputs))
+    state = {"name": None}
+
+    def progress(name, step, aic, n_terms):
+        if state["name"] != name:
+            if state["name"] is not None:
+                bar.update()
+            state["name"] = name
+        bar.update(0, f"{name}: step {step}, {n_terms} terms, AIC {aic:.1f}")
+
+    with bar:
+        model = fit_model(ds, outputs, settings, progress=progress)
+    model.fit_info["dataset"] = str(args.data)
+    model.save(args.output)
+    for e in model.equations:
+        i = model.fit_info["outputs"][e.name]
+        err = i["model_training_error"]
+        print(f"{e.name}: {len(e.terms)} terms, AIC {i['aic']:.2f}, training max error {err['max']:.4g} {e.unit}, "
+              f"RMS {err['rms']:.4g}, condition {i['condition']:.3g}", file=sys.stderr)
+    print(f"wrote {args.output}", file=sys.stderr)
+    return 0
+
+
+def cmd_predict(args) -> int:
+    import numpy as np
+
+    from .dataset import parse_table, read_text
+    from .fileio import write_atomic
+    from .model import load_model
+
+    model = load_model(args.model)
+    names, table = parse_table(read_text(args.data), f"dataset {args.data}")
+    cols = [f"v{k}" for k in range(1, model.n_inputs + 1)]
+    missing = [c for c in cols if c not in names]
+    if missing:
+        raise InputError(f"dataset {args.data}: missing column {missing[0]} (the model takes {cols[0]}..{cols[-1]})")
+    inputs = table[:, [names.index(c) for c in cols]]
+    pred, status = model.predict(inputs, with_status=True)
+    header = ",".join(list(model.output_names) + ["status"])
+    lines = [header] + [",".join(map(repr, row)) + f",{int(s)}" for row, s in zip(pred.tolist(), status)]
+    write_atomic(args.output, "\n".join(lines) + "\n")
+    clamped = int(np.sum(status > 0))
+    print(f"wrote {len(pred)} estimates to {args.output}" + (f" ({clamped} rows clamped into the domain)"
+                                                             if clamped else ""), file=sys.stderr)
+    return 0
+
+
+def cmd_report(args) -> int:
+    from .dataset import load_dataset
+    from .fileio import write_atomic
+    from .model import load_model
+    from .report import format_report
+
+    model = load_model(args.model)
+    ds = load_dataset(args.data) if args.data else None
+    text = format_report(model, ds, title=f"Report for {args.model}", paper=args.paper)
+    if args.output:
+        write_atomic(args.output, text)
+    else:
+        print(text, end="")
+    if args.plot:
+        from . import plots
+
+        folder = Path(args.plot)
+        if not folder.is_dir():
+            try:
+                folder.mkdir(parents=True)
+            except OSError as exc:
+                raise InputError(f"cannot create {folder}: {exc.strerror}") from None
+        if ds is None:
+            raise InputError("--plot needs --data (the rows to plot estimates for)")
+        paths = plots.estimate_vs_target(model, ds, folder)
+        if args.sensor:
+            paths += _sweeps(model, args.sensor, folder)
+        print("plots: " + ", ".join(str(p) for p in paths), file=sys.stderr)
+    return 0
+
+
+def _sweeps(model, sensor_spec, folder):
+    import numpy as np
+
+    from . import plots
+    from .sensor import load_sensor
+    from .simulate import simulate
+
+    sensor = load_sensor(sensor_spec)
+    paths = []
+    for j, name in enumerate(POSE_NAMES[3:], start=3):
+        if name in model.output_names:
+            values = np.round(np.arange(-5.0, 5.0 + 1e-9, 0.1), 10)
+            poses = np.zeros((len(values), 5))
+            poses[:, j] = values
+            paths.append(plots.resolution_sweep(model, simulate(sensor, poses).inputs, values, name, folder))
+    return paths
+
+
 def cmd_demo(args) -> int:
     from .demo import run_demo
 
@@ -108,6 +241,33 @@ def build_parser() -> Parser:
     o.add_argument("--accuracy", help="required 1-sigma accuracy, e.g. 'dx=0.05 thx=0.5'")
     o.add_argument("--transfer", choices=("raw", "gmr"))
     o.set_defaults(func=cmd_observe)
+
+    f = sub.add_parser("fit", help="choose and fit the estimate equations by stepwise AIC")
+    f.add_argument("data", metavar="DATA.csv")
+    f.add_argument("-o", "--output", required=True, help="model file (JSON) to write")
+    f.add_argument("--outputs", help="comma-separated outputs to fit (default: every pose column of the data)")
+    f.add_argument("--k", default="aic", help="penalty per term: aic (2), bic (log n) or a number")
+    f.add_argument("--max-terms", type=int, help="cap on terms per equation")
+    f.add_argument("--family", default="all", choices=("all", "no-roots"), help="candidate exponents")
+    f.add_argument("--no-d-terms", action="store_true", help="rotations without the displacement terms")
+    f.add_argument("--true-d", action="store_true",
+                   help="rotation d-terms from the true displacements instead of the fitted estimates")
+    f.set_defaults(func=cmd_fit)
+
+    pr = sub.add_parser("predict", help="estimates for the rows of a dataset")
+    pr.add_argument("model", metavar="MODEL")
+    pr.add_argument("data", metavar="DATA.csv")
+    pr.add_argument("-o", "--output", required=True, help="CSV of estimates (and status) to write")
+    pr.set_defaults(func=cmd_predict)
+
+    r = sub.add_parser("report", help="terms, AIC trace and errors of a model")
+    r.add_argument("model", metavar="MODEL")
+    r.add_argument("--data", help="dataset to measure errors on (default: the fit's own figures only)")
+    r.add_argument("--paper", action="store_true", help="show the seed paper's figures beside ours")
+    r.add_argument("--plot", metavar="DIR", help="write estimate-vs-target PNGs here (needs matplotlib)")
+    r.add_argument("--sensor", help="with --plot: also the 0.1-degree rotation sweep on this sensor")
+    r.add_argument("-o", "--output", help="write the report here instead of stdout")
+    r.set_defaults(func=cmd_report)
 
     d = sub.add_parser("demo", help="the main job end to end on the paper sensor")
     d.add_argument("--out", default="demo-out", help="folder for the demo's files (default: demo-out)")

@@ -1,0 +1,179 @@
+"""Model files, the fit's two stages, predict and report, and bad input on every path."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fitgen.dataset import load_dataset
+from fitgen.errors import InputError
+from fitgen.fit import FitSettings, fit_model
+from fitgen.model import Model, load_model, model_from_dict
+from fitgen.sensor import load_sensor
+from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from fitgen.terms import Term, candidate_terms, design_matrix, element_powers, parse_term, EXPONENTS
+
+from conftest import assert_one_line_error, run_cli
+
+PAPER = load_sensor("paper")
+
+
+@pytest.fixture(scope="module")
+def paper_fit(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("fit")
+    ds = simulate(PAPER, grid_poses(PAPER_GRIDS["paper-sim"]))
+    ds.save(folder / "sim.csv")
+    proc = run_cli("fitgen", "fit", str(folder / "sim.csv"), "-o", str(folder / "m.json"))
+    assert proc.returncode == 0, proc.stderr
+    return folder, ds, load_model(folder / "m.json")
+
+
+def test_terms_round_trip_and_powers():
+    for out in ("dx", "thx"):
+        for t in candidate_terms(8, out):
+            assert parse_term(t.text) == t
+    assert len(candidate_terms(8, "dx")) == 88 and len(candidate_terms(8, "thy")) == 88 + 3 + 24
+    v = np.array([0.3, 1.0, 2.7])
+    for e in EXPONENTS:
+        num, _, den = e.partition("/")
+        np.testing.assert_allclose(element_powers(v, e), v ** (float(num) / float(den or 1)), rtol=1e-14)
+    for bad in ("v0^1", "v1^5", "v1^-1/2", "x", "v1*dq", "v2^1*dx", ""):
+        with pytest.raises(InputError):
+            parse_term(bad)
+
+
+def test_nonpositive_inputs_never_meet_negative_or_root_powers():
+    cands = candidate_terms(3, "dz", positive=np.array([True, False, True]))
+    assert not any(t.element == 2 and t.needs_positive for t in cands)
+    assert Term(2, "3") in cands
+
+
+def test_model_file_round_trip_and_prediction(paper_fit):
+    folder, ds, model = paper_fit
+    again = load_model(folder / "m.json")
+    assert again.sha256 == model.sha256
+    np.testing.assert_array_equal(again.predict(ds.inputs), model.predict(ds.inputs))
+    info = model.fit_info
+    assert info["dataset_sha256"] == ds.sha256 and info["dataset_rows"] == 1875
+    assert info["sensor_sha256"] == PAPER.sha256
+    for name in model.output_names:
+        o = info["outputs"][name]
+        assert o["steps"][0][0] == "" and o["condition"] > 1
+        assert o["aic"] == pytest.approx(o["steps"][-1][1])
+    # the ring's symmetry: dy's terms are dx's under one of the ring's 16 rotations and reflections
+    dx = {(t.element, t.exponent) for t in model.equation("dx").terms}
+    dy = {(t.element, t.exponent) for t in model.equation("dy").terms}
+    images = [{((s * (k - 1) + r) % 8 + 1, e) for k, e in dx} for s in (1, -1) for r in range(8)]
+    assert dy in images
+
+
+def test_rotations_use_the_fitted_displacements(paper_fit):
+    _, ds, model = paper_fit
+    thx = model.equation("thx")
+    assert thx.uses_d
+    # evaluating by hand with the model's own displacement estimates gives the model's output
+    pred = model.predict(ds.inputs)
+    d = pred[:, :3]
+    by_hand = thx.intercept + design_matrix(list(thx.terms), ds.inputs, d) @ np.array(thx.coefficients)
+    np.testing.assert_allclose(pred[:, 3], by_hand, rtol=1e-12, atol=1e-9)
+    assert model.fit_info["d_terms"] == "estimated"
+
+
+def test_domain_clamp_and_status():
+    ds = simulate(PAPER, random_poses(300, DEFAULT_RANGES, pose_rng(3)))
+    model = fit_model(ds, ("dz",))
+    v = ds.inputs[:4].copy()
+    v[1, 2] = model.input_max[2] * 10
+    v[2, 0] = model.input_min[0] * 0.1
+    v[3, 5] = np.nan
+    out, status = model.predict(v, with_status=True)
+    assert status.tolist() == [0, 1 << 2, 1 << 0, -1]
+    assert out[3, 0] == 0.0 and np.all(np.isfinite(out))
+    clamped = v[1].copy()
+    clamped[2] = model.input_max[2]
+    assert out[1, 0] == pytest.approx(model.predict(clamped[None])[0, 0], rel=1e-12)
+
+
+def test_cap_and_bic_give_smaller_models():
+    ds = simulate(PAPER, random_poses(800, DEFAULT_RANGES, pose_rng(4)), noise=0.0005, seed=4)
+    aic = fit_model(ds, ("dz",))
+    bic = fit_model(ds, ("dz",), FitSettings(k="bic"))
+    cap = fit_model(ds, ("dz",), FitSettings(max_terms=8))
+    n_aic, n_bic, n_cap = (len(m.equation("dz").terms) for m in (aic, bic, cap))
+    assert n_bic <= n_aic and n_cap <= 8
+    assert bic.fit_info["settings"]["k"] == pytest.approx(np.log(800))
+
+
+def test_true_d_option(tmp_path):
+    ds = simulate(PAPER, random_poses(400, DEFAULT_RANGES, pose_rng(8)))
+    m = fit_model(ds, settings=FitSettings(d_source="true"))
+    assert m.fit_info["d_terms"] == "true"
+    m2 = fit_model(ds, ("dx", "thx"))  # without all three displacements there are no d-terms
+    assert not m2.equation("thx").uses_d and m2.fit_info["d_terms"] == "none"
+
+
+def test_predict_and_report_cli(paper_fit, tmp_path):
+    folder, ds, model = paper_fit
+    out = tmp_path / "pred.csv"
+    proc = run_cli("fitgen", "predict", str(folder / "m.json"), str(folder / "sim.csv"), "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    lines = out.read_text().splitlines()
+    assert lines[0] == "dx,dy,dz,thx,thy,status" and len(lines) == 1876
+    table = np.array([[float(x) for x in ln.split(",")] for ln in lines[1:]])
+    np.testing.assert_array_equal(table[:, :5], model.predict(ds.inputs))
+    proc = run_cli("fitgen", "report", str(folder / "m.json"), "--data", str(folder / "sim.csv"), "--paper",
+                   "--plot", str(tmp_path / "plots"), "--sensor", "paper")
+    assert proc.returncode == 0, proc.stderr
+    assert "max error per dz level" in proc.stdout and "paper sim max" in proc.stdout
+    assert (tmp_path / "plots" / "estimate_thx.png").stat().st_size > 1000
+    assert (tmp_path / "plots" / "sweep_thx.png").exists()
+
+
+@pytest.mark.parametrize("text, msg", [
+    ("v1,v2,dx\n1,2,3\n", "at least"),  # a single row
+    ("v1,v2,dx\n1,2,3\n1,abc,3\n", "line 3, column v2"),
+    ("v1,v2,dx\n1,2,3\n1,nan,3\n", "not a finite number"),
+    ("v1,v3,dx\n1,2,3\n1,2,3\n", "v1..vN"),
+    ("v1,v2,dq\n1,2,3\n1,2,3\n", "unknown column"),
+    ("v1,v2\n1,2\n3,4\n5,6\n", "no pose columns"),
+    ("v1,v2,dx\n1,2\n3,4,5\n", "fields"),
+    ("", "empty"),
+])
+def test_malformed_csv_one_line(tmp_path, text, msg):
+    data = tmp_path / "d.csv"
+    data.write_text(text)
+    assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json")), contains=msg)
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_more_terms_than_rows(tmp_path):
+    ds = simulate(PAPER, random_poses(10, DEFAULT_RANGES, pose_rng(1)))
+    ds.save(tmp_path / "small.csv")
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "small.csv"), "-o", str(tmp_path / "m.json")),
+                          contains="rows")
+
+
+def test_bad_model_files(paper_fit, tmp_path):
+    folder, _, _ = paper_fit
+    data = json.loads((folder / "m.json").read_text())
+    cases = {
+        "version": ({**data, "schema_version": 2}, "schema_version 2"),
+        "term": ({**data, "outputs": [{**data["outputs"][0], "terms": ["v9^7"] + data["outputs"][0]["terms"][1:]}]},
+                 "not a term"),
+        "nan": ({**data, "outputs": [{**data["outputs"][0], "intercept": "NaN"}]}, "finite"),
+    }
+    for name, (content, msg) in cases.items():
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps(content))
+        assert_one_line_error(run_cli("fitgen", "predict", str(path), str(folder / "sim.csv"), "-o",
+                                      str(tmp_path / "p.csv")), contains=msg)
+    (tmp_path / "junk.json").write_text("{not json")
+    assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "junk.json")), contains="not valid JSON")
+    with pytest.raises(InputError, match="needs v1 > 0"):
+        bad = json.loads(json.dumps(data))
+        bad["inputs"]["min"][0] = 0.0
+        model_from_dict(bad)
+    assert_one_line_error(run_cli("fitgen", "fit", str(folder / "sim.csv"), "-o", str(tmp_path / "x.json"),
+                                  "--k", "-1"), contains="--k")
+    assert_one_line_error(run_cli("fitgen", "fit", str(folder / "sim.csv"), "-o", str(tmp_path / "x.json"),
+                                  "--outputs", "dq"), contains="--outputs")
