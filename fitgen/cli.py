@@ -208,6 +208,16 @@ def _sweeps(model, sensor_spec, folder):
     return paths
 
 
+def cmd_codegen(args) -> int:
+    from .codegen import write_header
+    from .model import load_model
+
+    model = load_model(args.model)
+    path = write_header(model, args.output, args.precision, args.style, args.prefix)
+    print(f"wrote {path} ({args.precision}, {args.style}, model {model.sha256[:12]})", file=sys.stderr)
+    return 0
+
+
 def cmd_demo(args) -> int:
     from .demo import run_demo
 
@@ -268,6 +278,14 @@ def build_parser() -> Parser:
     r.add_argument("--sensor", help="with --plot: also the 0.1-degree rotation sweep on this sensor")
     r.add_argument("-o", "--output", help="write the report here instead of stdout")
     r.set_defaults(func=cmd_report)
+
+    c = sub.add_parser("codegen", help="generate the header-only C99 estimator of a model")
+    c.add_argument("model", metavar="MODEL")
+    c.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for <prefix>_model.h")
+    c.add_argument("--precision", default="double", choices=("double", "float"))
+    c.add_argument("--style", default="table", choices=("table", "unrolled"))
+    c.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
+    c.set_defaults(func=cmd_codegen)
 
     d = sub.add_parser("demo", help="the main job end to end on the paper sensor")
     d.add_argument("--out", default="demo-out", help="folder for the demo's files (default: demo-out)")

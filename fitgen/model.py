@@ -97,7 +97,11 @@ class Model:
         d = np.zeros((v.shape[0], 3))
         for j, eq in enumerate(self.equations):
             cols = design_matrix(list(eq.terms), v, d)
-            out[:, j] = eq.intercept + cols @ np.asarray(eq.coefficients)
+            # summed term by term in model order, as the generated C does, so that both round alike
+            acc = np.full(v.shape[0], eq.intercept)
+            for c, col in zip(eq.coefficients, cols.T):
+                acc = acc + c * col
+            out[:, j] = acc
             if eq.name in DISPLACEMENTS:
                 d[:, DISPLACEMENTS.index(eq.name)] = out[:, j]
         out[status < 0] = 0.0

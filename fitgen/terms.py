@@ -120,7 +120,10 @@ def candidate_terms(n_elements: int, output: str, *, exponents=EXPONENTS, d_term
 
 
 def element_powers(v: np.ndarray, exponent: str) -> np.ndarray:
-    """v ** exponent by products, divisions, sqrt and cbrt (the operations the C uses)."""
+    """v ** exponent by the exact operations the generated C uses, so both round alike.
+
+    v2 = v*v, v3 = v2*v, v4 = v2*v2, v^-e = 1/v^e, sqrt, cbrt and sqrt(sqrt(v)).
+    """
     if exponent == "1/2":
         return np.sqrt(v)
     if exponent == "1/3":
@@ -128,9 +131,9 @@ def element_powers(v: np.ndarray, exponent: str) -> np.ndarray:
     if exponent == "1/4":
         return np.sqrt(np.sqrt(v))
     e = int(exponent)
-    p = v
-    for _ in range(abs(e) - 1):
-        p = p * v
+    m = abs(e)
+    v2 = v * v
+    p = v if m == 1 else v2 if m == 2 else v2 * v if m == 3 else v2 * v2
     return 1.0 / p if e < 0 else p
 
 

@@ -75,7 +75,7 @@ def test_rotations_use_the_fitted_displacements(paper_fit):
     pred = model.predict(ds.inputs)
     d = pred[:, :3]
     by_hand = thx.intercept + design_matrix(list(thx.terms), ds.inputs, d) @ np.array(thx.coefficients)
-    np.testing.assert_allclose(pred[:, 3], by_hand, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(pred[:, 3], by_hand, rtol=1e-12, atol=1e-7)  # terms reach 1e6: order of summation
     assert model.fit_info["d_terms"] == "estimated"
 
 

@@ -1,0 +1,173 @@
+"""From a fitted :class:`Model` to a header-only C99 estimator, through jinja2 templates.
+
+The templates see only a :class:`CModel`: numbers already turned into round-trip
+literals and names already checked as C identifiers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import jinja2
+import numpy as np
+
+from . import __version__
+from .cgen import c_real, identifier
+from .errors import InputError
+from .fileio import write_atomic
+from .model import Model
+from .terms import DISPLACEMENTS, EXPONENTS
+
+PRECISIONS = ("double", "float")
+STYLES = ("table", "unrolled")
+# C enum names of the exponent kinds, in EXPONENTS order
+EXP_CODE = {"1": "P1", "2": "P2", "3": "P3", "4": "P4", "-1": "M1", "-2": "M2", "-3": "M3", "-4": "M4",
+            "1/2": "R2", "1/3": "R3", "1/4": "R4"}
+# Largest sum of |coefficient * term| allowed anywhere in the domain. float: far enough
+# below FLT_MAX (3.4e38) that no partial sum can overflow. double: past 1e15 a sum in
+# mm or deg keeps no correct digit (eps 2.2e-16); such a model is refused as absurd.
+_LIMIT = {"double": 1e15, "float": 1e30}
+
+
+@dataclass(frozen=True)
+class CTerm:
+    element: int  # 0-based input index, -1 for a bare displacement term
+    exp: str  # exponent code (P1..R4), "" for a bare displacement term
+    mult: int  # 0 none, 1 dx, 2 dy, 3 dz
+    coef: str  # C literal
+    text: str  # canonical term text, for comments
+
+
+@dataclass(frozen=True)
+class COutput:
+    name: str
+    index: int
+    unit: str
+    intercept: str
+    terms: tuple[CTerm, ...]
+    d_slot: int  # 1..3 when this output is dx, dy or dz (its value feeds d-terms), else 0
+
+
+@dataclass(frozen=True)
+class CModel:
+    prefix: str
+    upper: str
+    precision: str
+    style: str
+    n_inputs: int
+    outputs: tuple[COutput, ...]
+    input_min: tuple[str, ...]
+    input_max: tuple[str, ...]
+    needed: tuple[tuple[str, ...], ...]  # per input: exponent codes to compute, in EXPONENTS order
+    model_hash: str
+    version: str
+    uses_d: bool
+    input_units: str
+
+
+def term_magnitudes(model: Model) -> dict[str, float]:
+    """Upper bound of |intercept| + sum |coefficient * term| over the input domain, per output.
+
+    Interval arithmetic on the clamped inputs: |v|^p is largest at the domain's end farthest
+    from 0 for p > 0, and at its lower end (> 0 by the model's rule) for p < 0; d-terms use
+    the bound of the displacement output they multiply.
+    """
+    lo, hi = model.input_min, model.input_max
+    bound_d: dict[str, float] = {}
+    out = {}
+    for eq in model.equations:
+        total = abs(eq.intercept)
+        for t, c in zip(eq.terms, eq.coefficients):
+            mag = 1.0
+            if t.element:
+                a, b = lo[t.element - 1], hi[t.element - 1]
+                num, _, den = t.exponent.partition("/")
+                p = float(num) / float(den or 1)
+                mag = max(abs(a), abs(b)) ** p if p > 0 else a ** p
+            if t.mult:
+                mag *= bound_d[t.mult]
+            total += abs(c) * mag
+        out[eq.name] = total
+        if eq.name in DISPLACEMENTS:
+            bound_d[eq.name] = total
+    return out
+
+
+def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    """The domain as floats, rounded outward so that every double inside it stays inside."""
+    lo = model.input_min.astype(np.float32)
+    hi = model.input_max.astype(np.float32)
+    lo = np.where(lo.astype(float) > model.input_min, np.nextafter(lo, np.float32(-np.inf)), lo)
+    hi = np.where(hi.astype(float) < model.input_max, np.nextafter(hi, np.float32(np.inf)), hi)
+    lo = np.where((model.input_min > 0) & (lo <= 0), np.float32(np.finfo(np.float32).tiny), lo)
+    return lo.astype(float), hi.astype(float)
+
+
+def build_cmodel(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm") -> CModel:
+    if precision not in PRECISIONS:
+        raise InputError(f"precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
+    if style not in STYLES:
+        raise InputError(f"style must be one of {', '.join(STYLES)}, got {style!r}")
+    prefix = identifier(prefix, "prefix")
+    if len(prefix) > 16:
+        raise InputError(f"prefix {prefix!r} is longer than 16 characters")
+    for name, mag in term_magnitudes(model).items():
+        if not mag <= _LIMIT[precision]:
+            raise InputError(f"output {name}: its terms reach {mag:.3g} in the input domain, over the {precision} "
+                             f"limit {_LIMIT[precision]:g} (absurd coefficients, or a sum that could overflow)")
+    domain = float_domain(model) if precision == "float" else (model.input_min, model.input_max)
+    outs = []
+    needed = [set() for _ in range(model.n_inputs)]
+    for i, eq in enumerate(model.equations):
+        terms = []
+        for t, c in zip(eq.terms, eq.coefficients):
+            if t.element:
+                needed[t.element - 1].add(t.exponent)
+            terms.append(CTerm(t.element - 1, EXP_CODE[t.exponent] if t.element else "",
+                               DISPLACEMENTS.index(t.mult) + 1 if t.mult else 0, c_real(c, precision), t.text))
+        d_slot = DISPLACEMENTS.index(eq.name) + 1 if eq.name in DISPLACEMENTS else 0
+        outs.append(COutput(identifier(eq.name, "output name"), i, eq.unit, c_real(eq.intercept, precision),
+                            tuple(terms), d_slot))
+    return CModel(
+        prefix=prefix,
+        upper=prefix.upper(),
+        precision=precision,
+        style=style,
+        n_inputs=model.n_inputs,
+        outputs=tuple(outs),
+        input_min=tuple(c_real(x, precision) for x in domain[0]),
+        input_max=tuple(c_real(x, precision) for x in domain[1]),
+        needed=tuple(tuple(EXP_CODE[e] for e in EXPONENTS if e in need) for need in needed),
+        model_hash=model.sha256,
+        version=__version__,
+        uses_d=any(e.uses_d for e in model.equations),
+        input_units=model.input_units if model.input_units in ("mT", "V", "codes") else "units",
+    )
+
+
+def _env() -> jinja2.Environment:
+    loader = jinja2.FileSystemLoader(str(resources.files("firmware_templates")))
+    return jinja2.Environment(loader=loader, undefined=jinja2.StrictUndefined, autoescape=False,
+                              keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True)
+
+
+def render_header(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm") -> str:
+    """The text of ``<prefix>_model.h``."""
+    cm = build_cmodel(model, precision, style, prefix)
+    if model.n_inputs > 30:
+        raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most 30")
+    return _env().get_template("model.h.j2").render(m=cm, exp_codes=[EXP_CODE[e] for e in EXPONENTS])
+
+
+def write_header(model: Model, folder: str | Path, precision: str = "double", style: str = "table",
+                 prefix: str = "tm") -> Path:
+    folder = Path(folder)
+    if not folder.is_dir():
+        try:
+            folder.mkdir(parents=True)
+        except OSError as exc:
+            raise InputError(f"cannot create {folder}: {exc.strerror}") from None
+    text = render_header(model, precision, style, prefix)
+    return write_atomic(folder / f"{prefix}_model.h", text)

@@ -1,0 +1,1 @@
+"""Hardware-in-the-loop checks of the firmware against the Python evaluation."""

@@ -1,0 +1,134 @@
+"""Verification of generated C against the Python evaluation: vectors, comparison, report."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fitgen.codegen import float_domain
+from fitgen.model import Model
+from fitgen.precision import U_DOUBLE, U_FLOAT, error_bound
+
+from .compiled import CompiledModel
+
+# double: a few roundings at the scale of the terms (the formula of fitgen.precision, times 4)
+DOUBLE_SLACK = 4.0
+
+
+def test_vectors(model: Model, n_random: int = 2000, seed: int = 0) -> tuple[np.ndarray, list[str]]:
+    """Inputs and a kind per row: random in the domain, its edges and corners, outside it,
+    near zero, huge, and non-finite."""
+    rng = np.random.default_rng(seed)
+    lo, hi = model.input_min, model.input_max
+    n_in = model.n_inputs
+    mid = (lo + hi) / 2
+    rows, kinds = [], []
+
+    def add(block, kind):
+        block = np.atleast_2d(block)
+        rows.append(block)
+        kinds.extend([kind] * len(block))
+
+    add(lo + (hi - lo) * rng.random((n_random, n_in)), "random")
+    add(np.vstack([lo, hi, mid]), "edge")
+    for k in range(n_in):
+        for val in (lo[k], hi[k], np.nextafter(lo[k], -np.inf), np.nextafter(hi[k], np.inf)):
+            r = mid.copy()
+            r[k] = val
+            add(r, "edge")
+    add(np.where(rng.random((64, n_in)) < 0.5, lo, hi), "corner")
+    width = hi - lo
+    add(lo - width * rng.uniform(0.01, 2.0, (200, n_in)), "outside")
+    add(hi + width * rng.uniform(0.01, 2.0, (200, n_in)), "outside")
+    for val in (0.0, -0.0, 1e-30, -1e-30, 1e-8, 1e30, -1e30, 3.0e38):
+        r = mid.copy()
+        r[rng.integers(n_in)] = val
+        add(r, "extreme")
+        add(np.full(n_in, val), "extreme")
+    for val in (np.nan, np.inf, -np.inf):
+        for k in range(n_in):
+            r = mid.copy()
+            r[k] = val
+            add(r, "nonfinite")
+    return np.vstack(rows), kinds
+
+
+@dataclass
+class VerifyResult:
+    precision: str
+    style: str
+    n_vectors: int
+    outputs: tuple[str, ...]
+    max_error: np.ndarray
+    max_bound: np.ndarray
+    max_ratio: np.ndarray  # measured error over bound, worst vector
+    status_mismatches: int
+    nonfinite_outputs: int
+    failures: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.failures
+
+    def table(self) -> str:
+        lines = [f"{self.precision}/{self.style}: {self.n_vectors} vectors, status mismatches "
+                 f"{self.status_mismatches}, non-finite outputs {self.nonfinite_outputs}",
+                 "| output | max abs error | bound (max) | worst error / bound |",
+                 "| --- | --- | --- | --- |"]
+        for j, name in enumerate(self.outputs):
+            lines.append(f"| {name} | {self.max_error[j]:.3g} | {self.max_bound[j]:.3g} | {self.max_ratio[j]:.3g} |")
+        return "\n".join(lines)
+
+
+def compare(model: Model, compiled: CompiledModel, inputs: np.ndarray) -> VerifyResult:
+    """Run ``inputs`` through the C and through Python; check status, finiteness and the error bound."""
+    precision = compiled.precision
+    if precision == "float":
+        # the C takes float inputs and clamps into the float-rounded domain: so does the reference
+        inputs = inputs.astype(np.float32).astype(float)
+        lo, hi = float_domain(model)
+        ref_model = Model(lo, hi, model.equations, model.input_units, model.fit_info)
+        u, slack = U_FLOAT, 1.0
+    else:
+        ref_model, u, slack = model, U_DOUBLE, DOUBLE_SLACK
+    ref, ref_status = ref_model.predict(inputs, with_status=True)
+    out, status = compiled.predict(inputs)
+    failures = []
+    mism = int(np.sum(status != ref_status))
+    if mism:
+        i = int(np.argmax(status != ref_status))
+        failures.append(f"status differs on {mism} vectors (first: C {status[i]}, Python {ref_status[i]})")
+    nonfinite = int(np.sum(~np.isfinite(out)))
+    if nonfinite:
+        failures.append(f"{nonfinite} non-finite outputs")
+    ok_rows = ref_status >= 0
+    bound = np.zeros_like(ref)
+    bound[ok_rows] = slack * (error_bound(ref_model, inputs[ok_rows], u)
+                              + error_bound(ref_model, inputs[ok_rows], U_DOUBLE))
+    err = np.abs(out - ref)
+    err[~np.isfinite(err)] = np.inf
+    bad_nf = ~ok_rows & np.any(out != 0, axis=1)
+    if np.any(bad_nf):
+        failures.append(f"{int(bad_nf.sum())} non-finite inputs did not give zero outputs")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(err == 0, 0.0, err / bound)
+    ratio[~ok_rows] = 0.0
+    over = ratio > 1.0
+    if np.any(over):
+        i, j = np.argwhere(over)[0]
+        failures.append(f"{int(over.sum())} outputs outside the {precision} error bound "
+                        f"(first: {model.output_names[j]} error {err[i, j]:.3g} > bound {bound[i, j]:.3g})")
+    return VerifyResult(precision, compiled.style, len(inputs), model.output_names,
+                        err[ok_rows].max(axis=0), bound[ok_rows].max(axis=0), ratio.max(axis=0), mism,
+                        nonfinite, failures)
+
+
+def verify(model: Model, precision: str, style: str, *, cc: str = "gcc", runner: str = "", prefix: str = "tm",
+           n_random: int = 2000, extra_inputs: np.ndarray | None = None, cflags: list[str] | None = None,
+           seed: int = 0) -> VerifyResult:
+    inputs, _ = test_vectors(model, n_random, seed)
+    if extra_inputs is not None:
+        inputs = np.vstack([inputs, extra_inputs])
+    with CompiledModel(model, precision, style, prefix, cc=cc, runner=runner, cflags=cflags) as cm:
+        return compare(model, cm, inputs)

@@ -1,0 +1,178 @@
+"""Generated C against the Python evaluation, through gcc (and qemu-arm for an ARM Linux build)."""
+
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+from fitgen.codegen import render_header, write_header
+from fitgen.errors import InputError
+from fitgen.fit import fit_model
+from fitgen.model import Equation, Model, model_from_dict
+from fitgen.sensor import load_sensor
+from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.terms import EXPONENTS, Term
+from host.compiled import CompiledModel
+from host.verify import test_vectors as make_vectors, verify
+
+from conftest import assert_one_line_error, require_tool, run_cli
+
+
+@pytest.fixture(scope="module")
+def paper_model():
+    return fit_model(simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])))
+
+
+def every_kind_model(scale: float = 1.0) -> Model:
+    """Every exponent kind of every element, bare d-terms and v*d products; power coefficients over
+    1e-12..1e8, d-term coefficients over 1e-6..1e-2 (the d's themselves reach 1e13)."""
+    rng = np.random.default_rng(3)
+    n = 4
+
+    def eq(name, terms, low, high):
+        mags = 10 ** rng.uniform(low, high, len(terms))
+        coefs = tuple(float(c) for c in scale * rng.choice([-1, 1], len(terms)) * mags)
+        return Equation(name, float(rng.normal()), tuple(terms), coefs)
+
+    powers = [Term(k, e) for k in range(1, n + 1) for e in EXPONENTS]
+    d_terms = [Term(mult=d) for d in ("dx", "dy", "dz")] + [Term(k, "1", d) for k in range(1, n + 1) for d in ("dx", "dz")]
+    eqs = (eq("dx", powers[:20], -12, 8), eq("dy", powers[20:], -12, 8), eq("dz", powers[::3], -12, 8),
+           eq("thx", d_terms, -6, -2), eq("thy", powers[1::2], -12, 8))
+    return Model(np.array([0.05, 0.5, 1.0, 2.0]), np.array([3.0, 2.5, 40.0, 2.0]), eqs)
+
+
+@pytest.mark.parametrize("precision", ["double", "float"])
+@pytest.mark.parametrize("style", ["table", "unrolled"])
+def test_paper_model_matches_python(paper_model, precision, style):
+    require_tool("gcc")
+    res = verify(paper_model, precision, style, n_random=1500)
+    assert res.ok, res.failures
+    if precision == "double":
+        # same operations in the same order: the C answer is the Python answer, to a few roundings at most
+        assert np.all(res.max_ratio <= 1.0)
+    else:
+        # the float bound is not vacuous: the measured error reaches a visible part of it
+        assert np.max(res.max_ratio) > 0.01
+
+
+@pytest.mark.parametrize("precision", ["double", "float"])
+@pytest.mark.parametrize("style", ["table", "unrolled"])
+def test_every_term_kind_and_extreme_coefficients(precision, style):
+    require_tool("gcc")
+    model = every_kind_model(1e-6 if precision == "float" else 1.0)
+    res = verify(model, precision, style, n_random=500)
+    assert res.ok, res.failures
+    assert res.nonfinite_outputs == 0
+
+
+def test_generation_is_deterministic(paper_model, tmp_path):
+    for precision in ("double", "float"):
+        for style in ("table", "unrolled"):
+            a = write_header(paper_model, tmp_path / "a", precision, style).read_bytes()
+            b = write_header(paper_model, tmp_path / "b", precision, style).read_bytes()
+            assert a == b
+            assert paper_model.sha256.encode() in a
+    assert render_header(paper_model) != render_header(paper_model, style="unrolled")
+
+
+def test_literals_round_trip(paper_model):
+    import re
+
+    text = render_header(paper_model)
+    lits = [float(x) for x in re.findall(r"(?<![\w.])-?\d+\.\d+(?:e-?\d+)?(?![\w.])", text)]
+    coefs = [c for e in paper_model.equations for c in e.coefficients + (e.intercept,)]
+    assert set(coefs) <= set(lits)
+    ftext = render_header(paper_model, "float")
+    flits = {np.float32(float(x)) for x in re.findall(r"(-?\d+\.\d+(?:e-?\d+)?)f", ftext)}
+    assert {np.float32(c) for c in coefs} <= flits
+
+
+def test_status_and_guard_through_c(paper_model):
+    require_tool("gcc")
+    with CompiledModel(paper_model, "float", "table") as cm:
+        lo, hi = paper_model.input_min, paper_model.input_max
+        mid = (lo + hi) / 2
+        rows = np.vstack([mid, mid, mid, mid])
+        rows[1, 0] = hi[0] * 5
+        rows[2, 7] = -1.0
+        rows[3, 3] = np.nan
+        out, status = cm.predict(rows)
+    assert status.tolist() == [0, 1, 1 << 7, -1]
+    assert np.all(out[3] == 0) and np.all(np.isfinite(out))
+
+
+def test_identifiers_and_bad_models_refused(paper_model, tmp_path):
+    for bad in ("int", "1tm", "a-b", "x" * 40, "tm__x", "static"):
+        with pytest.raises(InputError):
+            render_header(paper_model, prefix=bad)
+    path = tmp_path / "m.json"
+    paper_model.save(path)
+    data = json.loads(path.read_text())
+    data["outputs"][0]["coefficients"][0] = 1e200
+    huge = tmp_path / "huge.json"
+    huge.write_text(json.dumps(data))
+    assert_one_line_error(run_cli("fitgen", "codegen", str(huge), "-o", str(tmp_path / "c")), contains="limit")
+    # a name that would inject text is refused before any C is written
+    data = json.loads(path.read_text())
+    data["outputs"][0]["name"] = 'dx"; system("rm'
+    with pytest.raises(InputError):
+        model_from_dict(data)
+    assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "c"), "--prefix", "for"),
+                          contains="keyword")
+    assert not (tmp_path / "c").exists() or not list((tmp_path / "c").iterdir())
+
+
+def test_codegen_and_verify_cli(paper_model, tmp_path):
+    require_tool("gcc")
+    path = tmp_path / "m.json"
+    paper_model.save(path)
+    proc = run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "out"), "--precision", "float",
+                   "--style", "unrolled", "--prefix", "pad")
+    assert proc.returncode == 0, proc.stderr
+    assert "typedef float pad_real;" in (tmp_path / "out" / "pad_model.h").read_text()
+    proc = run_cli("tactile-host", "verify", str(path), "--vectors", "200")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.count("PASS") == 4
+    assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--cc", "no-such-cc"), contains="not found")
+
+
+def test_verify_catches_a_wrong_compiler_result(paper_model, tmp_path):
+    """A C build that computes something else (here: -ffast-math reordering) fails the check with status 1."""
+    require_tool("gcc")
+    path = tmp_path / "m.json"
+    paper_model.save(path)
+    proc = run_cli("tactile-host", "verify", str(path), "--precision", "double", "--style", "unrolled",
+                   "--cc", "gcc -ffast-math -O3 -DTM_API=static", "--vectors", "300")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "FAIL" in proc.stdout
+
+
+def test_arm_linux_build_under_qemu(paper_model):
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    res = verify(paper_model, "float", "table", cc="arm-linux-gnueabihf-gcc -static", runner="qemu-arm",
+                 n_random=300)
+    assert res.ok, res.failures
+    res = verify(paper_model, "double", "unrolled", cc="arm-linux-gnueabihf-gcc -static", runner="qemu-arm",
+                 n_random=300)
+    assert res.ok, res.failures
+
+
+@pytest.mark.parametrize("cpu", [["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16"],
+                                 ["-mcpu=cortex-m0", "-mthumb", "-mfloat-abi=soft"]])
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_cortex_m_builds_warning_free(paper_model, tmp_path, cpu, precision):
+    require_tool("arm-none-eabi-gcc")
+    from host.compiled import compile_checked
+
+    for style in ("table", "unrolled"):
+        write_header(paper_model, tmp_path, precision, style)
+        src = tmp_path / "use.c"
+        src.write_text('#include "tm_model.h"\nint use(const tm_real *in, tm_real *out);\n'
+                       "int use(const tm_real *in, tm_real *out) { return tm_estimate(in, out); }\n")
+        obj = tmp_path / f"use_{style}.o"
+        compile_checked("arm-none-eabi-gcc", [src], obj, tmp_path, cpu, link=False)
+        size = subprocess.run(["arm-none-eabi-size", str(obj)], capture_output=True, text=True, check=True)
+        text_bytes = int(size.stdout.splitlines()[1].split()[0])
+        assert 100 < text_bytes < 64000
