@@ -53,7 +53,34 @@ def run_demo(out: Path) -> int:
     write_atomic(out / "paper-report.md", text)
     _print_comparison(model, train, test)
     print(f"   full report -> {out / 'paper-report.md'}")
-    return 0
+
+    _stage("4. C code generation, verified against Python by gcc")
+    return _codegen_stage(model, out)
+
+
+def _codegen_stage(model, out: Path) -> int:
+    import shutil
+
+    from .codegen import write_header
+
+    status = 0
+    for precision, style in (("float", "table"), ("double", "table"), ("float", "unrolled")):
+        folder = out / f"c-{precision}-{style}"
+        header = write_header(model, folder, precision, style)
+        line = f"   {precision:6} {style:8} -> {header}"
+        if shutil.which("gcc") is None:
+            print(line + ": not verified (gcc not found; install it: apt-get install gcc)")
+            continue
+        from host.verify import verify
+
+        res = verify(model, precision, style, n_random=2000)
+        worst = ", ".join(f"{n} {e:.2g}" for n, e in zip(res.outputs, res.max_error))
+        print(f"{line}: {res.n_vectors} vectors {'PASS' if res.ok else 'FAIL'} "
+              f"(max |C - Python|: {worst}; worst error/bound {res.max_ratio.max():.2f})")
+        if not res.ok:
+            print("   " + "; ".join(res.failures))
+            status = 1
+    return status
 
 
 def _fit_progress():

@@ -1,0 +1,22 @@
+from conftest import require_tool, run_cli
+
+
+def test_demo_runs_end_to_end(tmp_path):
+    require_tool("gcc")
+    out = tmp_path / "demo"
+    proc = run_cli("fitgen", "demo", "--out", str(out))
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    for name in ("paper-sim.csv", "paper-model.json", "random-2000.csv", "paper-report.md",
+                 "c-float-table/tm_model.h", "c-double-table/tm_model.h"):
+        assert (out / name).is_file(), name
+    text = proc.stdout
+    assert "dz: resolvable" in text
+    assert "paper max" in text and "thx" in text
+    assert text.count("PASS") == 3 and "FAIL" not in text
+
+
+def test_demo_bad_output_folder(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    proc = run_cli("fitgen", "demo", "--out", str(blocker / "sub"))
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
