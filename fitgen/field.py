@@ -83,19 +83,31 @@ def cylinder_axial_rz(r: np.ndarray, z: np.ndarray, z0: float) -> tuple[np.ndarr
     gamma = dmr / dpr
     gamma2 = np.concatenate([gamma * gamma] * 2)
     one = np.ones_like(kc)
+    # kc = 0 on the edge circles (and NaN for non-finite points): the AGM would never converge there
+    stuck = ~(kc > 0) | ~np.isfinite(gamma2)
+    if np.any(stuck):
+        kc = np.where(stuck, 1.0, kc)
+        gamma2 = np.where(stuck, 1.0, gamma2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        cel_r, cel_z = _cel_pair(kc, one, one, -one, gamma2, one, np.concatenate([gamma] * 2))
+        cel_r, cel_z = _cel_pair(kc, one, one, -one, gamma2, one, np.concatenate([np.where(np.isfinite(gamma), gamma, 1.0)] * 2))
     n = r.size
     br = (cel_r[:n] / sq1 - cel_r[n:] / sq0) / np.pi
     bz = (zp * cel_z[:n] / sq1 - zm * cel_z[n:] / sq0) / (np.pi * dpr)
     on_axis = r == 0
     if np.any(on_axis):
+        # 1/2 (a/sa - b/sb) with a = |z| + z0, b = |z| - z0, rewritten without the cancellation far away
+        a, b = np.abs(z) + z0, np.abs(z) - z0
+        sa, sb = np.sqrt(a * a + 1.0), np.sqrt(b * b + 1.0)
+        far = 2.0 * z0 * np.abs(z) / (sa * sb * (a * sb + b * sa))
+        near = 0.5 * (zp / np.sqrt(zp2 + 1.0) - zm / np.sqrt(zm2 + 1.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            axial = np.where(np.abs(z) > z0, far, near)
         br = np.where(on_axis, 0.0, br)
-        bz = np.where(on_axis, 0.5 * (zp / np.sqrt(zp2 + 1.0) - zm / np.sqrt(zm2 + 1.0)), bz)
-    edge = (r == 1.0) & (np.abs(z) == z0)
-    if np.any(edge):
-        br = np.where(edge, np.nan, br)
-        bz = np.where(edge, np.nan, bz)
+        bz = np.where(on_axis, axial, bz)
+    bad = (r == 1.0) & (np.abs(z) == z0) | stuck[:n] | stuck[n:]
+    if np.any(bad):
+        br = np.where(bad, np.nan, br)
+        bz = np.where(bad, np.nan, bz)
     return br, bz
 
 
