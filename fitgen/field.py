@@ -96,11 +96,11 @@ def cylinder_axial_rz(r: np.ndarray, z: np.ndarray, z0: float) -> tuple[np.ndarr
     on_axis = r == 0
     if np.any(on_axis):
         # 1/2 (a/sa - b/sb) with a = |z| + z0, b = |z| - z0, rewritten without the cancellation far away
-        a, b = np.abs(z) + z0, np.abs(z) - z0
-        sa, sb = np.sqrt(a * a + 1.0), np.sqrt(b * b + 1.0)
-        far = 2.0 * z0 * np.abs(z) / (sa * sb * (a * sb + b * sa))
-        near = 0.5 * (zp / np.sqrt(zp2 + 1.0) - zm / np.sqrt(zm2 + 1.0))
         with np.errstate(divide="ignore", invalid="ignore"):
+            a, b = np.abs(z) + z0, np.abs(z) - z0
+            sa, sb = np.sqrt(a * a + 1.0), np.sqrt(b * b + 1.0)
+            far = 2.0 * z0 * np.abs(z) / (sa * sb * (a * sb + b * sa))
+            near = 0.5 * (zp / np.sqrt(zp2 + 1.0) - zm / np.sqrt(zm2 + 1.0))
             axial = np.where(np.abs(z) > z0, far, near)
         br = np.where(on_axis, 0.0, br)
         bz = np.where(on_axis, axial, bz)
