@@ -61,6 +61,7 @@ class CModel:
     input_min: tuple[str, ...]
     input_max: tuple[str, ...]
     needed: tuple[tuple[str, ...], ...]  # per input: exponent codes to compute, in EXPONENTS order
+    kinds: tuple[str, ...]  # exponent codes some input needs
     model_hash: str
     version: str
     uses_d: bool
@@ -140,6 +141,7 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
         input_min=tuple(c_real(x, precision) for x in domain[0]),
         input_max=tuple(c_real(x, precision) for x in domain[1]),
         needed=tuple(tuple(EXP_CODE[e] for e in EXPONENTS if e in need) for need in needed),
+        kinds=tuple(EXP_CODE[e] for e in EXPONENTS if any(e in need for need in needed)),
         model_hash=model.sha256,
         version=__version__,
         uses_d=any(e.uses_d for e in model.equations),

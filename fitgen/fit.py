@@ -71,10 +71,10 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     if len(init) > cap:
         init = init[:cap]
     k = settings.penalty(n)
-    res = stepwise(X, y, init, names=[t.text for t in cands], k=k, max_terms=cap,
-                   compressed=compress(X, y), progress=progress)
+    A = compress(X, y)
+    res = stepwise(X, y, init, names=[t.text for t in cands], k=k, max_terms=cap, compressed=A, progress=progress)
     terms = [cands[j] for j in res.selected]
-    intercept, coefs, rss, cond = refit(X[:, res.selected], y)
+    intercept, coefs, rss, cond = refit(A, res.selected)
     pred = intercept + X[:, res.selected] @ coefs
     info = {
         "terms": len(terms),

@@ -17,12 +17,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import qr, solve_triangular
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 # Threaded OpenBLAS is slower here at every size we meet (~100 columns): on a loaded
 # machine a 1,875 x 117 QR took 1.3 s with threads against 15 ms on one. Every
 # entry point below runs its linear algebra on one BLAS thread.
-_ONE_THREAD = threadpool_limits.wrap(limits=1, user_api="blas")
+# The controller scans the loaded libraries once (about 1 ms); each limit then costs ~20 us.
+_BLAS = ThreadpoolController()
+_ONE_THREAD = _BLAS.wrap(limits=1, user_api="blas")
 
 ALIAS_TOL = 1e-7  # relative residual norm below which a column is aliased (R's lm.fit tol)
 _BLOCK = 1 << 14  # rows per block of the compressing QR
@@ -114,7 +116,7 @@ def stepwise(
     (relative residual norm < 1e-7 against the current model) are never added.
     """
     A = compress(columns, y) if compressed is None else compressed
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _BLAS.limit(limits=1, user_api="blas"):
         return _search(A, columns.shape[0], initial, names or [str(j) for j in range(columns.shape[1])],
                        k, max_terms, max_steps, progress)
 
@@ -188,19 +190,19 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> Stepwise
 
 
 @_ONE_THREAD
-def refit(columns: np.ndarray, y: np.ndarray) -> tuple[float, np.ndarray, float, float]:
-    """Least squares with an intercept by Householder QR on all rows.
+def refit(compressed: np.ndarray, selected: list[int]) -> tuple[float, np.ndarray, float, float]:
+    """Least squares with an intercept on the ``selected`` candidates, by Householder QR.
 
-    Returns (intercept, coefficients, RSS, condition number of the column-equilibrated design).
+    Works on the compressed triangle of :func:`compress`, which holds every inner
+    product of the rows, so the answer is that of a QR of all n rows (RSS included)
+    at a cost independent of n. Returns (intercept, coefficients, RSS, condition
+    number of the column-equilibrated design).
     """
-    n, p = columns.shape
-    X = np.empty((n, p + 1))
-    X[:, 0] = 1.0
-    X[:, 1:] = columns
+    X = compressed[:, [0] + [c + 1 for c in selected]]
+    y = compressed[:, -1]
     scale = np.linalg.norm(X, axis=0)
     scale[scale == 0] = 1.0
-    Xs = X / scale
-    Q, R = qr(Xs, mode="economic", check_finite=False)
+    Q, R = qr(X / scale, mode="economic", check_finite=False)
     beta = solve_triangular(R, Q.T @ y, check_finite=False) / scale
     resid = y - X @ beta
     sv = np.linalg.svd(R, compute_uv=False)

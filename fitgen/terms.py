@@ -144,6 +144,7 @@ def design_matrix(terms: list[Term], inputs: np.ndarray, d: np.ndarray | None = 
     """
     n = inputs.shape[0]
     cols = np.empty((n, len(terms)))
+    # powers already computed, by (element, exponent): kept as views, never as copies
     cache: dict[tuple[int, str], np.ndarray] = {}
     for j, t in enumerate(terms):
         col = None
@@ -153,6 +154,10 @@ def design_matrix(terms: list[Term], inputs: np.ndarray, d: np.ndarray | None = 
             key = (t.element, t.exponent)
             if key not in cache:
                 cache[key] = element_powers(inputs[:, t.element - 1], t.exponent)
+                if not t.mult:
+                    cols[:, j] = cache[key]
+                    cache[key] = cols[:, j]
+                    continue
             col = cache[key]
         if t.mult:
             if d is None:
