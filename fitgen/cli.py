@@ -138,12 +138,13 @@ def cmd_fit(args) -> int:
 def cmd_predict(args) -> int:
     import numpy as np
 
-    from .dataset import parse_table, read_text
+    from .dataset import parse_table
+    from .fileio import read_text
     from .fileio import write_atomic
     from .model import load_model
 
     model = load_model(args.model)
-    names, table = parse_table(read_text(args.data), f"dataset {args.data}")
+    names, table = parse_table(read_text(args.data, "dataset"), f"dataset {args.data}")
     cols = [f"v{k}" for k in range(1, model.n_inputs + 1)]
     missing = [c for c in cols if c not in names]
     if missing:

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .fileio import sha256_hex, write_atomic
+from .fileio import read_text, sha256_hex, write_atomic
 from .pose import POSE_NAMES
 
 _INPUT_RE = re.compile(r"^v([1-9][0-9]*)$")
@@ -135,19 +135,10 @@ def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
     return names, table
 
 
-def read_text(path: str | Path, what: str = "dataset") -> str:
-    try:
-        return Path(path).read_text()
-    except FileNotFoundError:
-        raise InputError(f"{what} {path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{what} {path}: cannot read: {exc}") from None
-
-
 def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
     """Read and validate a dataset CSV (and its ``.meta.json`` if present)."""
     origin = f"dataset {path}"
-    names, table = parse_table(read_text(path), origin)
+    names, table = parse_table(read_text(path, "dataset"), origin)
     n_in, targets = _header(names, origin)
     if table.shape[0] < min_rows:
         raise InputError(f"{origin}: {table.shape[0]} data row(s); at least {min_rows} needed")

@@ -46,3 +46,13 @@ def canonical_json(obj) -> str:
 def sha256_hex(data: str | bytes) -> str:
     raw = data.encode() if isinstance(data, str) else data
     return hashlib.sha256(raw).hexdigest()
+
+
+def read_text(path: str | os.PathLike, what: str) -> str:
+    """A text file's content; a missing or unreadable file is an InputError naming ``what``."""
+    try:
+        return Path(path).read_text()
+    except FileNotFoundError:
+        raise InputError(f"{what} {path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{what} {path}: cannot read: {exc}") from None

@@ -15,7 +15,7 @@ import numpy as np
 
 from . import __version__
 from .errors import InputError
-from .fileio import canonical_json, sha256_hex, write_atomic
+from .fileio import canonical_json, read_text, sha256_hex, write_atomic
 from .pose import POSE_NAMES, POSE_UNITS
 from .terms import DISPLACEMENTS, Term, design_matrix, parse_term
 
@@ -143,12 +143,9 @@ class Model:
 
 def load_model(path: str | Path) -> Model:
     origin = f"model file {path}"
+    text = read_text(path, "model file")
     try:
-        data = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise InputError(f"{origin}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{origin}: cannot read: {exc}") from None
+        data = json.loads(text)
     except ValueError as exc:
         raise InputError(f"{origin}: not valid JSON: {exc}") from None
     return model_from_dict(data, origin)

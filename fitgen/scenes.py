@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import InputError
+from .fileio import read_text
 from .pose import POSE_NAMES
 from .simulate import DEFAULT_RANGES
 
@@ -49,9 +50,7 @@ def load_scene(spec: str | None) -> Scene:
         raise InputError(f"scene {spec!r}: no such file, and not a preset ({', '.join(PRESETS)})")
     origin = f"scene file {spec}"
     try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{origin}: cannot read: {exc}") from None
+        data = tomllib.loads(read_text(path, "scene file"))
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{origin}: not valid TOML: {exc}") from None
     unknown = set(data) - {"name", "outputs", "ranges", "levels"}

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .fileio import canonical_json, sha256_hex
+from .fileio import canonical_json, read_text, sha256_hex
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -324,10 +324,7 @@ def load_sensor(spec: str | Path) -> Sensor:
             raise InputError(
                 f"sensor {spec!r}: no such file, and not a preset ({', '.join(preset_names())})"
             )
-        try:
-            text = path.read_text()
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"sensor file {spec}: cannot read: {exc}") from None
+        text = read_text(path, "sensor file")
         origin = f"sensor file {spec}"
     try:
         data = tomllib.loads(text)
