@@ -7,6 +7,8 @@ import sys
 from fitgen.cliutil import EXIT_CHECK_FAILED, Parser, run
 from fitgen.errors import InputError
 
+from .channelmap import ADS1115_PGA, ADS1115_RATES, MODES
+
 
 def cmd_verify(args) -> int:
     from fitgen.codegen import PRECISIONS, STYLES
@@ -38,6 +40,232 @@ def cmd_verify(args) -> int:
     return 0 if ok else EXIT_CHECK_FAILED
 
 
+def _vref(text: str):
+    if text.lower() == "internal":
+        return "internal"
+    try:
+        return float(text)
+    except ValueError:
+        raise InputError(f"--vref {text!r}: give 'internal' or the external reference in volts") from None
+
+
+def _channel_map(args):
+    from .channelmap import Settings, channel_map
+
+    settings = Settings(pga=args.pga, data_rate=args.data_rate, mode=args.mode, vref=_vref(args.vref)).checked("option")
+    return channel_map(args.adc, settings)
+
+
+def _open_bus(args, cmap, simulate_pose):
+    """Bus and clock from the options; with a simulated pose, a SimBus instead of /dev/i2c-N."""
+    from fitgen.sensor import load_sensor
+
+    from .adc import open_bus
+    from .clock import REAL_CLOCK
+    from .simbus import SimBus, parse_fault
+
+    sim_opts = [o for o, v in (("--sim-noise", args.sim_noise), ("--sim-fault", args.sim_fault),
+                               ("--sim-offsets", args.sim_offsets)) if v is not None]
+    if simulate_pose is None:
+        if sim_opts:
+            raise InputError(f"{sim_opts[0]} needs --simulate")
+        number = args.bus if args.bus is not None else (cmap.bus if cmap.bus is not None else 1)
+        return open_bus(number), REAL_CLOCK
+    sensor = load_sensor(args.sensor)
+    noise = sensor.gmr.noise if args.sim_noise is None else args.sim_noise
+    offsets = None
+    if args.sim_offsets:
+        try:
+            offsets = [float(x) for x in args.sim_offsets.replace(",", " ").split()]
+        except ValueError:
+            raise InputError(f"--sim-offsets {args.sim_offsets!r}: not numbers") from None
+        if len(offsets) != sensor.n_elements:
+            raise InputError(f"--sim-offsets: give {sensor.n_elements} numbers (V), got {len(offsets)}")
+    faults = [parse_fault(f) for f in args.sim_fault or ()]
+    if noise < 0:
+        raise InputError(f"--sim-noise must be >= 0 V, got {noise}")
+    bus = SimBus.for_channel_map(cmap, sensor, simulate_pose, clock=REAL_CLOCK, noise=noise, offsets=offsets,
+                                 seed=args.seed)
+    for f in faults:
+        bus.inject(**f)
+    return bus, REAL_CLOCK
+
+
+def _positive(text: str, what: str, *, integer: bool = False, zero: bool = False):
+    import math
+
+    try:
+        val = int(text) if integer else float(text)
+    except ValueError:
+        raise InputError(f"{what} {text!r} is not a{' whole' if integer else ''} number") from None
+    if not math.isfinite(val) or val < 0 or (val == 0 and not zero):
+        raise InputError(f"{what} must be {'>= 0' if zero else '> 0'}, got {text}")
+    return val
+
+
+class _StopFlag:
+    """SIGINT and SIGTERM set a flag the loop checks between samples (restored on exit)."""
+
+    def __init__(self):
+        self.stopped = False
+
+    def __call__(self) -> bool:
+        return self.stopped
+
+    def __enter__(self):
+        import signal
+
+        def handler(signum, frame):
+            self.stopped = True
+
+        self._old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+        return self
+
+    def __exit__(self, *exc):
+        import signal
+
+        for s, h in self._old.items():
+            signal.signal(s, h)
+
+
+def cmd_read(args) -> int:
+    from fitgen.model import load_model
+
+    from .adc import AdcArray, DeviceSilent, RetryPolicy
+    from .engine import make_engine
+    from .readout import LineFormat, Readout, rest_reference, tare
+    from .simbus import parse_pose
+
+    rate = _positive(args.rate, "--rate") if args.rate is not None else None
+    count = _positive(args.count, "--count", integer=True) if args.count is not None else None
+    duration = _positive(args.duration, "--duration") if args.duration is not None else None
+    tare_n = _positive(args.tare_samples, "--tare-samples", integer=True)
+    retries = _positive(args.retries, "--retries", integer=True)
+    pose = parse_pose(args.simulate) if args.simulate is not None else None
+    model = load_model(args.model)
+    if model.input_units != "V":
+        raise InputError(f"model {args.model} takes inputs in {model.input_units}; the ADCs give volts: fit it on "
+                         "a dataset in V (fitgen simulate --transfer gmr, or tactile-host capture)")
+    fmt = LineFormat(args.format, model.n_inputs, model.output_names)
+    cmap = _channel_map(args)
+    if cmap.n_elements != model.n_inputs:
+        raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
+    reference = rest_reference(args.rest or args.sensor, model.n_inputs) if args.tare else None
+    engine = make_engine(args.engine, model, **({"precision": args.precision, "cc": args.cc}
+                                                 if args.engine == "c" else {}))
+    sink = bus = None
+    try:
+        # a simulated sensor rests during the tare, then moves to its pose, as a real one is pressed after it
+        bus, clock = _open_bus(args, cmap, None if pose is None else (0 * pose if args.tare else pose))
+        array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
+        array.probe()
+        array.setup()
+        offsets = None
+        if args.tare:
+            t = tare(array, reference, tare_n)
+            print(f"tactile-host read: {t.describe()}", file=sys.stderr)
+            offsets = t.offsets
+            if pose is not None:
+                bus.set_pose(pose)
+        if args.output:
+            try:
+                sink = open(args.output, "w")
+            except OSError as exc:
+                raise InputError(f"cannot write {args.output}: {exc.strerror}") from None
+        out = sink or sys.stdout
+        out.write(fmt.header)
+        reader = Readout(array, engine, out, fmt, clock=clock, offsets=offsets)
+        with _StopFlag() as stop:
+            stats = reader.run(rate=rate, count=count, duration=duration, stop=stop)
+        how = "stopped" if stop.stopped else "done"
+        print(f"tactile-host read: {how}: {stats.summary()}", file=sys.stderr)
+        return 0
+    except DeviceSilent as exc:
+        done = getattr(exc, "stats", None)
+        where = f"stopped after {done.summary()}" if done is not None else "stopped before the first sample"
+        print(f"tactile-host read: error: {exc}; {where}", file=sys.stderr)
+        return EXIT_CHECK_FAILED
+    finally:
+        engine.close()
+        if sink is not None:
+            sink.close()
+        if bus is not None:
+            bus.close()
+
+
+def cmd_capture(args) -> int:
+    from fitgen.progress import Progress
+
+    from .adc import AdcArray, DeviceSilent, RetryPolicy
+    from .capture import (SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, prepare_output,
+                          trigger_waiter)
+
+    samples = _positive(args.samples, "--samples", integer=True)
+    spread = _positive(args.max_spread, "--max-spread")
+    tries = _positive(args.tries, "--tries", integer=True)
+    settle = _positive(args.settle, "--settle", zero=True)
+    retries = _positive(args.retries, "--retries", integer=True)
+    schedule = load_schedule(args.poses)
+    cmap = _channel_map(args)
+    state = prepare_output(args.output, cmap.n_elements, schedule, write=False)  # checked before any waiting
+    total, pending = len(schedule.poses), int((~state.done).sum())
+    interactive = not args.trigger and not args.simulate
+    if args.trigger:
+        wait = trigger_waiter(args.trigger, schedule)
+    elif args.simulate:
+        wait = None  # the simulated stage sets each pose itself
+    else:
+        wait = enter_waiter(schedule)
+    meta = {"adc": cmap.describe(), "source": f"simulated {args.sensor}" if args.simulate else "hardware"}
+    bus, clock = _open_bus(args, cmap, schedule.poses[0] if args.simulate else None)
+    keep = f"the rows written so far are kept in {args.output}: run the same command again to resume"
+    try:
+        array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
+        array.probe()
+        array.setup()
+        with Progress("capture", pending) as progress:
+            res = capture(array, schedule, args.output, samples=samples, max_spread=spread, tries=tries,
+                          wait=wait, set_pose=bus.set_pose if args.simulate else None, settle=settle,
+                          clock=clock, progress=None if interactive else progress, meta=meta)
+    except KeyboardInterrupt:
+        print(f"tactile-host capture: interrupted; {keep}", file=sys.stderr)
+        return 130
+    except (DeviceSilent, SpreadTooLarge, TriggerFailed) as exc:
+        print(f"tactile-host capture: error: {exc}; {keep}", file=sys.stderr)
+        return EXIT_CHECK_FAILED
+    finally:
+        bus.close()
+    done = res.before + res.captured
+    note = "; dropped an unfinished last line" if res.dropped_partial else ""
+    if res.complete:
+        print(f"tactile-host capture: {done}/{total} poses in {args.output} ({res.captured} captured now, "
+              f"{res.before} already there{note})", file=sys.stderr)
+    else:
+        print(f"tactile-host capture: stopped with {done}/{total} poses in {args.output}{note}; run the same "
+              "command again to resume", file=sys.stderr)
+    return 0
+
+
+def _adc_options(p) -> None:
+    p.add_argument("--adc", required=True, metavar="SPEC|FILE.toml",
+                   help="channel map: e.g. ads1115@0x48:0-3,ads1115@0x49:0-3 or ads7828@0x48, or a TOML file")
+    p.add_argument("--bus", type=int, help="I2C bus number: /dev/i2c-N (default 1, or the map file's bus)")
+    p.add_argument("--pga", type=float, default=4.096, choices=ADS1115_PGA, metavar="V",
+                   help="ADS1115 full scale +-V: 6.144, 4.096 (default), 2.048, 1.024, 0.512, 0.256")
+    p.add_argument("--data-rate", type=int, default=860, choices=ADS1115_RATES, metavar="SPS",
+                   help="ADS1115 samples per second: 8..860 (default 860)")
+    p.add_argument("--mode", default="single", choices=MODES, help="ADS1115 conversion mode (default single)")
+    p.add_argument("--vref", default="3.3", help="ADS7828 reference: external volts (default 3.3) or 'internal' (2.5 V)")
+    p.add_argument("--retries", default="5", help="tries per I2C transfer before a chip counts as silent (default 5)")
+    p.add_argument("--sensor", default="paper",
+                   help="sensor preset or TOML file: what --simulate simulates, and the rest readings for --tare")
+    p.add_argument("--sim-noise", type=float, help="simulated element noise, V rms (default: the sensor file's)")
+    p.add_argument("--sim-offsets", metavar="V1,..,VN", help="simulated offset of each element, V")
+    p.add_argument("--sim-fault", action="append", metavar="SPEC",
+                   help="simulated fault: nack|timeout|stuck[:ADDR]:RATE or silent:ADDR[:AFTER] (repeatable)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated noise and faults")
+
+
 def build_parser() -> Parser:
     p = Parser(prog="tactile-host", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
@@ -51,6 +279,44 @@ def build_parser() -> Parser:
     v.add_argument("--vectors", type=int, default=2000, help="random vectors inside the domain (default 2000)")
     v.add_argument("--data", help="also run the rows of this dataset")
     v.set_defaults(func=cmd_verify)
+
+    r = sub.add_parser("read", help="stream readings and pose estimates from I2C ADCs")
+    r.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
+    _adc_options(r)
+    r.add_argument("--rate", help="samples per second (default: as fast as the converters allow)")
+    r.add_argument("--format", default="csv", choices=("csv", "jsonl"))
+    r.add_argument("-o", "--output", metavar="FILE", help="write the stream here instead of stdout")
+    r.add_argument("--count", help="stop after this many samples")
+    r.add_argument("--duration", help="stop after this many seconds")
+    r.add_argument("--tare", action="store_true", help="measure the rest readings first and correct the offsets")
+    r.add_argument("--tare-samples", default="50", help="samples averaged for --tare (default 50)")
+    r.add_argument("--rest", metavar="SENSOR|DATASET.csv",
+                   help="the rest readings --tare maps onto: a dataset's rows at pose 0, or a sensor's physics "
+                        "(default: --sensor)")
+    r.add_argument("--engine", default="python", choices=("python", "c"),
+                   help="python: Model.predict; c: the generated header as a shared library (default python)")
+    r.add_argument("--precision", default="double", choices=("double", "float"), help="C engine precision")
+    r.add_argument("--cc", default="gcc", help="C compiler for --engine c (default gcc)")
+    r.add_argument("--simulate", metavar="POSE",
+                   help="no hardware: a simulated bus with the sensor at POSE, e.g. dx=1,dz=-1 or 0.5,0,-1,0,0")
+    r.set_defaults(func=cmd_read)
+
+    c = sub.add_parser("capture", help="record a calibration dataset, one averaged row per scheduled pose")
+    c.add_argument("--poses", required=True, metavar="SCHEDULE.csv", help="poses to visit: columns of dx,dy,dz,thx,thy")
+    _adc_options(c)
+    c.add_argument("-o", "--output", required=True, metavar="DATASET.csv",
+                   help="dataset to write; an existing one is resumed")
+    c.add_argument("--samples", default="16", help="samples averaged per pose (default 16)")
+    c.add_argument("--max-spread", default="0.003", metavar="V",
+                   help="largest standard deviation of an element over the samples, V (default 0.003)")
+    c.add_argument("--tries", default="3", help="measurements of a pose before giving up on its spread (default 3)")
+    c.add_argument("--trigger", metavar="CMD",
+                   help="shell command run for each pose instead of waiting for Enter; it gets TM_POSE_INDEX, "
+                        "TM_DX..TM_THY and must exit 0 once the pose is set")
+    c.add_argument("--settle", default="0", help="seconds to wait after Enter or the trigger (default 0)")
+    c.add_argument("--simulate", action="store_true",
+                   help="no hardware: a simulated sensor that moves to each scheduled pose by itself")
+    c.set_defaults(func=cmd_capture)
     return p
 
 

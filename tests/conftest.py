@@ -39,3 +39,28 @@ def assert_one_line_error(proc, status: int = 2, contains: str | None = None):
     assert "Traceback" not in proc.stderr
     if contains:
         assert contains in lines[0], lines[0]
+
+
+# --- the sensor and model the readout tests share (volts, as an ADC sees them) ---------------
+
+
+@pytest.fixture(scope="session")
+def sensor():
+    """The paper sensor in its ``gmr`` transfer: element outputs in volts."""
+    from fitgen.sensor import load_sensor
+
+    return load_sensor("paper").with_transfer("gmr")
+
+
+@pytest.fixture(scope="session")
+def model(sensor):
+    """A model fitted on that sensor's paper-sim grid."""
+    from fitgen.fit import fit_model
+    from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+
+    return fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])))
+
+
+@pytest.fixture(scope="session")
+def model_file(model, tmp_path_factory):
+    return str(model.save(tmp_path_factory.mktemp("model") / "model.json"))

@@ -1,0 +1,267 @@
+"""Software time per sample of ``tactile-host read``: drivers, estimate and output line, bus access excluded.
+
+Run: ``python bench/readout.py > /tmp/readout.md`` (markdown on stdout; about 15 s). Needs gcc.
+Figures and their reading: docs/readout.md.
+
+The model: fit_model on the paper-sim grid (1,875 poses, no noise) of the ``paper`` sensor
+in its ``gmr`` transfer (inputs in V). The channel map: two ADS1115, AIN0-3 single-ended
+each, +-4.096 V, 860 SPS, single-shot (the default): 24 transfers a sample (4 rounds x
+2 chips x config write, OS poll, result read).
+
+How bus access is taken out. One sample is first read through the simulated bus
+(host.simbus.SimBus, the magnet at dx=1 dy=0.5 dz=-1, 0.5 mV noise, a virtual clock) and
+every smbus2 call and its answer recorded. A replay bus then answers the same calls from
+that record, one ``next()`` on a cycle per call, and the clock is virtual (a sleep only
+adds to a number): what is left of a sample is the drivers' Python (building and parsing
+bytes, the round schedule, the retry wrapper's fast path), the estimate, and formatting
+the CSV line (written to a sink that drops it: the write system call is I/O). The
+replay's own time, measured by replaying the record alone (the same calls, in a loop of
+``fn(*args)``), is then subtracted; that loop's overhead makes the subtraction slightly
+too large, so the software column is, if anything, low by about the loop's cost
+(reported beside it). A check pass first confirms that the replay sees exactly the
+recorded calls.
+
+Each engine: 300 warm-up samples, then 5,000 samples with perf_counter_ns around each
+``Readout.step()``; the median per sample. The replay alone: the same for 5,000 replays.
+Components (median of 5,000 calls each): ``AdcArray.read_volts`` on the replay bus,
+``engine.estimate``, ``LineFormat.line``.
+
+The second table is not a measurement of hardware: it is the simulated bus's timing model
+(datasheet conversion times, 25 us wake-up, 9 clock cycles a byte plus start, repeated
+start and stop at the bus clock) for several set-ups, i.e. the time a sample takes on
+the wire and in the converters, and the rate that allows.
+
+The third table: what each converter's resolution costs the estimate (the same model
+evaluated on the simulated ADC's volts and on the exact volts), and how much one
+sample's estimate scatters with the preset's 0.5 mV element noise.
+"""
+
+from __future__ import annotations
+
+import itertools
+import platform
+import statistics
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from fitgen.fit import fit_model
+from fitgen.sensor import load_sensor
+from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from host.adc import AdcArray
+from host.channelmap import Settings, parse_spec
+from host.clock import VirtualClock
+from host.engine import CEngine, PythonEngine
+from host.readout import LineFormat, Readout
+from host.simbus import SimBus
+
+SPEC = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+POSE = np.array([1.0, 0.5, -1.0, 0.0, 0.0])
+CALLS = ("read_i2c_block_data", "write_i2c_block_data", "write_byte", "read_byte", "read_word_data")
+N, WARM = 5000, 300
+
+
+class Recorder:
+    """Passes calls to a bus and records (name, args, answer)."""
+
+    def __init__(self, bus):
+        self.bus, self.log = bus, []
+        for name in CALLS:
+            setattr(self, name, self._wrap(name))
+
+    def _wrap(self, name):
+        fn = getattr(self.bus, name)
+
+        def call(*args):
+            ans = fn(*args)
+            self.log.append((name, args, ans))
+            return ans
+        return call
+
+
+class ReplayBus:
+    """Answers the recorded calls in order, cyclically; ``check`` compares each call with the record."""
+
+    def __init__(self, log, check=False):
+        self.log = log
+        self._answers = itertools.cycle([a for _, _, a in log])
+        self._expect = itertools.cycle([(n, args) for n, args, _ in log])
+        for name in CALLS:
+            setattr(self, name, self._checked(name) if check else self._fast)
+
+    def _fast(self, *args):
+        return next(self._answers)
+
+    def _checked(self, name):
+        def call(*args):
+            exp = next(self._expect)
+            if exp != (name, args):
+                raise AssertionError(f"replay saw {(name, args)}, the record has {exp}")
+            return next(self._answers)
+        return call
+
+
+class NullSink:
+    def write(self, text):
+        pass
+
+
+def median_ns(fn, n=N, warm=WARM) -> float:
+    for _ in range(warm):
+        fn()
+    t = []
+    pc = time.perf_counter_ns
+    for _ in range(n):
+        a = pc()
+        fn()
+        t.append(pc() - a)
+    return statistics.median(t)
+
+
+def main() -> None:
+    sensor = load_sensor("paper").with_transfer("gmr")
+    model = fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])))
+    cmap = parse_spec(SPEC)
+
+    # record one sample through the simulated bus
+    clock = VirtualClock()
+    sim = SimBus.for_channel_map(cmap, sensor, POSE, clock=clock, noise=0.0005)
+    rec = Recorder(sim)
+    AdcArray(rec, cmap, clock=clock).read_volts()
+    log = rec.log
+    rec.log = []
+    AdcArray(rec, cmap, clock=clock).read_volts()
+    assert [(n, a) for n, a, _ in rec.log] == [(n, a) for n, a, _ in log], "the call sequence is not steady"
+
+    # check pass: the replay sees exactly the recorded calls
+    chk = AdcArray(ReplayBus(log, check=True), cmap, clock=VirtualClock())
+    for _ in range(3):
+        chk.read_volts()
+
+    # the replay alone
+    replay = ReplayBus(log)
+    calls = [(getattr(replay, n), a) for n, a, _ in log]
+
+    def replay_only():
+        for fn, args in calls:
+            fn(*args)
+
+    def loop_only():
+        for fn, args in calls:
+            pass
+
+    bus_ns = median_ns(replay_only)
+    loop_ns = median_ns(loop_only)
+
+    engines = [PythonEngine(model), CEngine(model), CEngine(model, precision="float")]
+    labels = ["python (Model.predict)", "c, double (ctypes)", "c, float (ctypes)"]
+    fmt = LineFormat("csv", 8, model.output_names)
+    v0 = AdcArray(ReplayBus(log), cmap, clock=VirtualClock()).read_volts()
+    rows = []
+    for eng, label in zip(engines, labels):
+        arr = AdcArray(ReplayBus(log), cmap, clock=VirtualClock())
+        reader = Readout(arr, eng, NullSink(), fmt, clock=arr.clock)
+        step_ns = median_ns(reader.step)
+        drv_ns = median_ns(arr.read_volts)
+        est_ns = median_ns(lambda: eng.estimate(v0))
+        out, st = eng.estimate(v0)
+        fmt_ns = median_ns(lambda: fmt.line(1.7e9, v0, out, st))
+        rows.append((label, step_ns, drv_ns, est_ns, fmt_ns))
+        print(f"{label}: done", file=sys.stderr)
+
+    gcc = subprocess.run(["gcc", "--version"], capture_output=True, text=True).stdout.splitlines()[0]
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    print(f"Machine: {cpu}; Python {platform.python_version()}, numpy {np.__version__}, {gcc}.\n")
+    print(f"Set-up: {SPEC}, single-shot, 860 SPS; {len(log)} transfers a sample. Replay bus alone: "
+          f"{bus_ns / 1e3:.1f} us a sample (of which {loop_ns / 1e3:.1f} us is the replay loop itself).\n")
+    print("| engine | sample, replay bus (us) | software, bus excluded (us) | drivers on the replay bus (us) "
+          "| estimate (us) | CSV line (us) | target < 100 us |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for label, step_ns, drv_ns, est_ns, fmt_ns in rows:
+        sw = (step_ns - bus_ns) / 1e3
+        print(f"| {label} | {step_ns / 1e3:.1f} | {sw:.1f} | {drv_ns / 1e3:.1f} | {est_ns / 1e3:.1f} | "
+              f"{fmt_ns / 1e3:.1f} | {'yes' if sw < 100 else 'no'} |")
+    for eng in engines:
+        eng.close()
+
+    print("\nTime on the wire and in the converters per 8-element sample (the simulated bus's timing model, "
+          "not a hardware measurement):\n")
+    print("| set-up | bus clock | transfers | time per sample (ms) | samples/s at most |")
+    print("| --- | --- | --- | --- | --- |")
+    setups = [
+        (SPEC, Settings(), 100e3), (SPEC, Settings(), 400e3),
+        (SPEC, Settings(data_rate=475), 400e3), (SPEC, Settings(data_rate=128), 400e3),
+        (SPEC, Settings(mode="continuous"), 400e3),
+        ("ads1115@0x48:0-1,ads1115@0x49:0-1,ads1115@0x4a:0-1,ads1115@0x4b:0-1", Settings(), 400e3),
+        ("ads7828@0x48", Settings(), 100e3), ("ads7828@0x48", Settings(), 400e3),
+    ]
+    for spec, settings, hz in setups:
+        cm = parse_spec(spec, settings)
+        clk = VirtualClock()
+        bus = SimBus.for_channel_map(cm, sensor, POSE, clock=clk, bus_hz=hz)
+        arr = AdcArray(bus, cm, clock=clk)
+        arr.setup()
+        arr.read_volts()
+        t0, n0 = clk.monotonic(), bus.transfers
+        for _ in range(10):
+            arr.read_volts()
+        dt = (clk.monotonic() - t0) / 10
+        chips = spec.split(",")[0].split("@")[0]
+        what = f"{len(cm.chips)} x {chips}" + (f", {settings.data_rate} SPS, {settings.mode}" if chips == "ads1115"
+                                                else ", 3.3 V reference")
+        print(f"| {what} | {hz / 1e3:.0f} kHz | {(bus.transfers - n0) // 10} | {dt * 1e3:.2f} | {1 / dt:.0f} |")
+
+    print("\nWhat the converter costs in accuracy: |estimate through the simulated ADC - estimate from the exact "
+          "volts| over 200 random poses (dx, dy in -2..2 mm, dz in -2..0 mm, thx, thy in -5..5 deg; seed 7; "
+          "no noise), in mm; and the scatter (standard deviation) of single-sample estimates at dx=1 dy=0.5 dz=-1 "
+          "over 200 samples with 0.5 mV rms element noise (the preset's), in mm:\n")
+    print("| converter | LSB (mV) | dx max / rms | dy max / rms | dz max / rms | scatter dx, dy, dz at 0.5 mV noise |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    from fitgen.transfer import readings
+
+    rng = np.random.default_rng(7)
+    lo, hi = np.array([-2, -2, -2, -5, -5.0]), np.array([2, 2, 0, 5, 5.0])
+    poses = lo + (hi - lo) * rng.random((200, 5))
+    exact = model.predict(readings(sensor, poses, adc_bits=0))[:, :3]
+    for spec, settings, label, lsb in [
+        (SPEC, Settings(), "2 x ADS1115, +-4.096 V", 4.096 / 32768),
+        (SPEC, Settings(pga=6.144), "2 x ADS1115, +-6.144 V", 6.144 / 32768),
+        ("ads7828@0x48", Settings(), "ADS7828, 3.3 V external reference", 3.3 / 4096),
+    ]:
+        cm = parse_spec(spec, settings)
+        clk = VirtualClock()
+        bus = SimBus.for_channel_map(cm, sensor, poses[0], clock=clk)
+        arr = AdcArray(bus, cm, clock=clk)
+        est = []
+        for p in poses:
+            bus.set_pose(p)
+            est.append(model.predict(arr.read_volts())[0, :3])
+        d = np.abs(np.array(est) - exact)
+        bus = SimBus.for_channel_map(cm, sensor, POSE, clock=clk, noise=0.0005)
+        arr = AdcArray(bus, cm, clock=clk)
+        scatter = np.array([model.predict(arr.read_volts())[0, :3] for _ in range(200)]).std(axis=0)
+        cells = " | ".join(f"{d[:, j].max():.3f} / {np.sqrt(np.mean(d[:, j] ** 2)):.3f}" for j in range(3))
+        print(f"| {label} | {lsb * 1e3:.3f} | {cells} | {', '.join(f'{x:.3f}' for x in scatter)} |")
+    cf = CEngine(model, precision="float")
+    exact_v = readings(sensor, poses, adc_bits=0)
+    diff = np.array([np.abs(cf.estimate(v)[0] - model.predict(v)[0]) for v in exact_v]).max(axis=0)
+    cf.close()
+    print("\nThe float C engine against Python (double) on the exact volts of the same 200 poses, largest "
+          "difference: " + ", ".join(f"{o} {x:.2g}" for o, x in zip(model.output_names, diff)) + " (mm, deg).")
+    tr = model.fit_info["outputs"]
+    print("\nThe model's own training error (max / rms, mm): " + "; ".join(
+        f"{o} {tr[o]['model_training_error']['max']:.3f} / {tr[o]['model_training_error']['rms']:.3f}"
+        for o in ("dx", "dy", "dz")) + ".")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,291 @@
+"""Recording a calibration dataset: for each pose of a schedule, wait, average, check, append one row.
+
+The output is the shared dataset CSV (v1..vN in volts, then the schedule's pose
+columns) with ``<output>.meta.json`` beside it (units V, so ``fitgen fit`` makes a
+model in volts). Every row is one ``write`` of a complete line on a file opened
+for appending, then ``fsync``: a row is on disk whole or not at all. A run that
+stops for any reason (Ctrl-C, a kill, a power cut, a silent chip) loses no row;
+run the same command again and it resumes: a last line without its newline (a
+write cut short) is dropped, and each schedule pose already in the file is
+skipped -- counted with multiplicity, so a schedule may visit a pose twice.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fitgen import __version__
+from fitgen.dataset import meta_path, parse_table, read_text
+from fitgen.errors import InputError
+from fitgen.fileio import sha256_hex, write_atomic
+from fitgen.pose import POSE_NAMES, as_poses
+
+from .adc import AdcArray
+from .clock import REAL_CLOCK
+from .readout import measure
+
+
+class SpreadTooLarge(RuntimeError):
+    """The readings of a pose kept moving more than allowed."""
+
+
+class TriggerFailed(RuntimeError):
+    """The trigger command did not succeed."""
+
+
+@dataclass(frozen=True)
+class Schedule:
+    poses: np.ndarray  # (P, 5)
+    columns: tuple[str, ...]  # the pose columns the schedule names, in the order dx,dy,dz,thx,thy
+    origin: str = "schedule"
+
+    @property
+    def values(self) -> np.ndarray:
+        """(P, len(columns)): what goes into the dataset's pose columns."""
+        return self.poses[:, [POSE_NAMES.index(c) for c in self.columns]]
+
+    def describe(self, i: int) -> str:
+        return " ".join(f"{c}={v:g}" for c, v in zip(self.columns, self.values[i]))
+
+
+def load_schedule(path: str | Path) -> Schedule:
+    """A CSV with any of the columns dx,dy,dz,thx,thy (other columns ignored); missing components are 0."""
+    origin = f"schedule {path}"
+    names, table = parse_table(read_text(path, "schedule"), origin)
+    columns = tuple(n for n in POSE_NAMES if n in names)
+    if not columns:
+        raise InputError(f"{origin}: none of the columns {','.join(POSE_NAMES)}")
+    if len(set(names)) != len(names):
+        raise InputError(f"{origin}: a column appears twice")
+    poses = np.zeros((table.shape[0], 5))
+    for j, name in enumerate(names):
+        if name in POSE_NAMES:
+            poses[:, POSE_NAMES.index(name)] = table[:, j]
+    return Schedule(as_poses(poses), columns, origin)
+
+
+def header_line(n_inputs: int, columns: tuple[str, ...]) -> str:
+    return ",".join([f"v{k}" for k in range(1, n_inputs + 1)] + list(columns)) + "\n"
+
+
+def row_line(volts: np.ndarray, pose_values: np.ndarray) -> str:
+    """Shortest round-trip text of each number (repr), as ``Dataset.to_csv_text`` writes them."""
+    return ",".join(repr(float(x) + 0.0) for x in list(volts) + list(pose_values)) + "\n"
+
+
+@dataclass
+class ResumeState:
+    done: np.ndarray  # (P,) bool: schedule poses already in the file
+    rows: int  # complete rows found
+    dropped_partial: bool = False  # a last line without its newline was removed
+
+
+def _key(values) -> tuple:
+    return tuple(round(float(x), 9) + 0.0 for x in values)
+
+
+def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write: bool = True) -> ResumeState:
+    """Create the output with its header, or read it back and work out which poses are done.
+
+    ``write=False`` only checks: nothing is created or repaired.
+    """
+    path = Path(path)
+    header = header_line(n_inputs, schedule.columns)
+    n_poses = len(schedule.poses)
+    if not path.exists() or path.stat().st_size == 0:
+        if write:
+            write_atomic(path, header)
+        elif not path.parent.is_dir():
+            raise InputError(f"cannot write {path}: folder {path.parent} does not exist")
+        return ResumeState(np.zeros(n_poses, dtype=bool), 0)
+    origin = f"output {path}"
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{origin}: cannot read it to resume: {exc}") from None
+    dropped = False
+    if not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]  # the last write was cut short: it never was a row
+        dropped = True
+    if not text.startswith(header):
+        first = text.split("\n", 1)[0]
+        raise InputError(f"{origin}: its header {first!r} is not {header.strip()!r}; it belongs to another "
+                         "channel map or schedule (choose another -o)")
+    if dropped and write:
+        write_atomic(path, text)
+    counts: Counter = Counter()
+    where: dict = {}
+    width = n_inputs + len(schedule.columns)
+    lines = text.split("\n")[1:-1]
+    for lineno, line in enumerate(lines, start=2):
+        if not line.strip():
+            continue
+        try:
+            vals = [float(x) for x in line.split(",")]
+        except ValueError:
+            vals = []
+        if len(vals) != width or not np.all(np.isfinite(vals)):
+            raise InputError(f"{origin} line {lineno}: not a row of {width} numbers; repair or remove it to resume")
+        key = _key(vals[n_inputs:])
+        counts[key] += 1
+        where.setdefault(key, lineno)
+    rows = sum(counts.values())
+    done = np.zeros(n_poses, dtype=bool)
+    for i, vals in enumerate(schedule.values):
+        key = _key(vals)
+        if counts[key] > 0:
+            counts[key] -= 1
+            done[i] = True
+    extra = [k for k, c in counts.items() if c > 0]
+    if extra:
+        raise InputError(f"{origin} line {where[extra[0]]}: pose {dict(zip(schedule.columns, extra[0]))} is not "
+                         f"(or not that often) in the {schedule.origin}; it belongs to another run (choose another -o)")
+    return ResumeState(done, rows, dropped)
+
+
+class RowWriter:
+    """Appends complete lines: one write of the whole line, then fsync."""
+
+    def __init__(self, path: str | Path):
+        try:
+            self.fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+        except OSError as exc:
+            raise InputError(f"cannot append to {path}: {exc.strerror}") from None
+
+    def append(self, line: str) -> None:
+        data = line.encode()
+        while data:
+            n = os.write(self.fd, data)
+            data = data[n:]
+        os.fsync(self.fd)
+
+    def close(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+
+
+def enter_waiter(schedule: Schedule, stdin=None, stderr=None):
+    """Wait for Enter on ``stdin``; 'q' or the end of input stops."""
+    stdin = stdin or sys.stdin
+    stderr = stderr or sys.stderr
+    total = len(schedule.poses)
+
+    def wait(i: int, pose) -> bool:
+        stderr.write(f"pose {i + 1}/{total}: {schedule.describe(i)}; set it, then press Enter (q to stop) ")
+        stderr.flush()
+        line = stdin.readline()
+        if not line or line.strip().lower() in ("q", "quit"):
+            stderr.write("\n")
+            return False
+        return True
+
+    return wait
+
+
+def trigger_waiter(command: str, schedule: Schedule):
+    """Run ``command`` (a shell command line) for each pose; it must exit 0 once the pose is set.
+
+    Its environment has TM_POSE_INDEX (1-based), TM_POSE_COUNT and TM_DX, TM_DY, TM_DZ, TM_THX, TM_THY.
+    """
+    total = len(schedule.poses)
+
+    def wait(i: int, pose) -> bool:
+        env = dict(os.environ, TM_POSE_INDEX=str(i + 1), TM_POSE_COUNT=str(total),
+                   **{f"TM_{n.upper()}": repr(float(v)) for n, v in zip(POSE_NAMES, pose)})
+        try:
+            proc = subprocess.run(command, shell=True, env=env)
+        except OSError as exc:
+            raise TriggerFailed(f"trigger {command!r} could not run: {exc.strerror}") from None
+        if proc.returncode != 0:
+            raise TriggerFailed(f"trigger {command!r} failed with exit status {proc.returncode} "
+                                f"at pose {i + 1}/{total} ({schedule.describe(i)})")
+        return True
+
+    return wait
+
+
+@dataclass
+class CaptureResult:
+    total: int  # poses in the schedule
+    before: int  # poses already in the file at the start
+    captured: int = 0  # rows written by this run
+    stopped: bool = False  # the user stopped before the end
+    dropped_partial: bool = False
+    spreads: list = field(default_factory=list)  # max spread (V rms) of each row written
+
+    @property
+    def complete(self) -> bool:
+        return self.before + self.captured == self.total
+
+
+def write_meta(path: str | Path, info: dict) -> None:
+    text = Path(path).read_text()
+    meta = dict(info)
+    meta.update({"dataset_sha256": sha256_hex(text), "rows": max(text.count("\n") - 1, 0),
+                 "columns": text.split("\n", 1)[0].split(","), "units": "V",
+                 "generator": f"tactile-host capture (fitgen {__version__})"})
+    write_atomic(meta_path(path), json.dumps(meta, indent=2, sort_keys=True) + "\n")
+
+
+def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples: int = 16,
+            max_spread: float = 0.003, tries: int = 3, wait=None, set_pose=None, settle: float = 0.0,
+            clock=REAL_CLOCK, progress=None, meta: dict | None = None) -> CaptureResult:
+    """Capture every pose of ``schedule`` not yet in ``output``.
+
+    Per pose: ``set_pose(pose)`` (a simulated stage), ``wait(i, pose)`` (Enter or a
+    trigger; False stops), ``settle`` seconds, then ``samples`` readings averaged;
+    when some element's standard deviation exceeds ``max_spread`` volts the pose is
+    measured again, up to ``tries`` times, then ``SpreadTooLarge``.
+    """
+    if samples < 1:
+        raise InputError(f"--samples must be >= 1, got {samples}")
+    if not max_spread > 0:
+        raise InputError(f"--max-spread must be > 0 V, got {max_spread}")
+    if tries < 1:
+        raise InputError(f"--tries must be >= 1, got {tries}")
+    if settle < 0:
+        raise InputError(f"--settle must be >= 0 s, got {settle}")
+    state = prepare_output(output, array.n, schedule)
+    res = CaptureResult(len(schedule.poses), int(state.done.sum()), dropped_partial=state.dropped_partial)
+    info = {"schedule": schedule.origin, "samples_per_row": samples, "max_spread_volts": max_spread,
+            **(meta or {})}
+    write_meta(output, info)
+    writer = RowWriter(output)
+    values = schedule.values
+    try:
+        for i in np.flatnonzero(~state.done):
+            pose = schedule.poses[i]
+            if set_pose is not None:
+                set_pose(pose)
+            if wait is not None and not wait(int(i), pose):
+                res.stopped = True
+                break
+            clock.sleep(settle)
+            for attempt in range(tries):
+                block = measure(array, samples)
+                spread = block.std(axis=0)
+                if spread.max() <= max_spread:
+                    break
+            else:
+                k = int(np.argmax(spread))
+                raise SpreadTooLarge(f"pose {i + 1}/{res.total} ({schedule.describe(i)}): v{k + 1} spreads "
+                                     f"{spread[k] * 1e3:.3g} mV rms over {samples} samples (limit "
+                                     f"{max_spread * 1e3:.3g} mV) in {tries} tries; is the sensor still moving?")
+            writer.append(row_line(block.mean(axis=0), values[i]))
+            res.captured += 1
+            res.spreads.append(float(spread.max()))
+            if progress is not None:
+                progress.update(1)
+    finally:
+        writer.close()
+        write_meta(output, info)
+    return res

@@ -1,0 +1,265 @@
+"""Which ADC input reads which sensor element: a ``--adc`` spec string or a TOML file, validated.
+
+Spec string (elements numbered in the order listed, chips separated by commas)::
+
+    ads1115@0x48:0-3,ads1115@0x49:0-3     two ADS1115, AIN0..AIN3 single-ended each
+    ads1115@0x48:d0-1,d2-3                one ADS1115, differential pairs AIN0-AIN1, AIN2-AIN3
+    ads1115@0x48:0,2,ads1115@0x49:1       single inputs may be listed one by one
+    ads7828@0x4a                          one ADS7828, CH0..CH7 (same as ads7828@0x4a:0-7)
+
+TOML file (per-chip settings; anything left out takes the command-line value)::
+
+    bus = 1
+    [[chip]]
+    type = "ads1115"
+    address = 0x48
+    inputs = [0, 1, 2, 3]          # as in a spec: ["0-3"] is the same, ["d0-1", "d2-3"] two pairs
+    pga = 4.096                    # full scale, V
+    data_rate = 860                # samples per second
+    mode = "single"                # or "continuous"
+    [[chip]]
+    type = "ads7828"
+    address = 0x4b
+    inputs = [0, 1, 2, 3]
+    vref = 3.3                     # external reference in V, or "internal" (2.5 V)
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from fitgen.errors import InputError
+from fitgen.fileio import read_text
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+CHIPS = ("ads1115", "ads7828")
+ADDRESSES = (0x48, 0x49, 0x4A, 0x4B)  # both chips: 1001 0xx, set by the ADDR / A1 A0 pins
+ADS1115_PGA = (6.144, 4.096, 2.048, 1.024, 0.512, 0.256)  # full-scale range, +-V
+ADS1115_RATES = (8, 16, 32, 64, 128, 250, 475, 860)  # samples per second
+ADS1115_PAIRS = ((0, 1), (0, 3), (1, 3), (2, 3))  # the differential pairs the MUX offers
+MODES = ("single", "continuous")
+INTERNAL_VREF = 2.5  # V, the ADS7828's internal reference
+N_INPUTS = {"ads1115": 4, "ads7828": 8}
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Chip settings from the command line; a TOML file may override them per chip."""
+
+    pga: float = 4.096
+    data_rate: int = 860
+    mode: str = "single"
+    vref: float | str = 3.3  # ADS7828: external reference in V, or "internal"
+
+    def checked(self, origin: str = "option") -> "Settings":
+        if self.pga not in ADS1115_PGA:
+            raise InputError(f"{origin}: pga {self.pga:g} is not one of {', '.join(f'{p:g}' for p in ADS1115_PGA)} (V)")
+        if self.data_rate not in ADS1115_RATES:
+            raise InputError(f"{origin}: data rate {self.data_rate} is not one of "
+                             f"{', '.join(map(str, ADS1115_RATES))} (samples/s)")
+        if self.mode not in MODES:
+            raise InputError(f"{origin}: mode {self.mode!r} is not one of {', '.join(MODES)}")
+        if self.vref != "internal":
+            if isinstance(self.vref, bool) or not isinstance(self.vref, (int, float)) or not 0.05 <= self.vref <= 5.5:
+                raise InputError(f"{origin}: vref must be 'internal' or an external reference in 0.05..5.5 V, "
+                                 f"got {self.vref!r}")
+        return self
+
+
+@dataclass(frozen=True)
+class Chip:
+    kind: str  # ads1115 | ads7828
+    address: int
+    inputs: tuple  # per element: an input number, or a (positive, negative) pair
+    settings: Settings
+
+    @property
+    def label(self) -> str:
+        return f"{self.kind}@0x{self.address:02x}"
+
+    @property
+    def vref_volts(self) -> float:
+        v = self.settings.vref
+        return INTERNAL_VREF if v == "internal" else float(v)
+
+
+@dataclass(frozen=True)
+class ChannelMap:
+    chips: tuple[Chip, ...]
+    bus: int | None = None  # from a TOML file; the command line's --bus wins when given
+
+    @property
+    def n_elements(self) -> int:
+        return sum(len(c.inputs) for c in self.chips)
+
+    def elements(self) -> list[tuple[Chip, object]]:
+        """(chip, input) for element 1..N, in order."""
+        return [(c, i) for c in self.chips for i in c.inputs]
+
+    def describe(self) -> str:
+        parts = []
+        for c in self.chips:
+            ins = ",".join(f"d{i[0]}-{i[1]}" if isinstance(i, tuple) else str(i) for i in c.inputs)
+            parts.append(f"{c.label}:{ins}")
+        return ",".join(parts)
+
+
+# --- parsing -----------------------------------------------------------------------
+
+
+def _address(text, origin: str) -> int:
+    if isinstance(text, bool):
+        raise InputError(f"{origin}: address must be one of 0x48..0x4b, got {text!r}")
+    if isinstance(text, int):
+        addr = text
+    else:
+        try:
+            addr = int(str(text), 0)
+        except ValueError:
+            raise InputError(f"{origin}: address {text!r} is not a number (use 0x48..0x4b)") from None
+    if addr not in ADDRESSES:
+        raise InputError(f"{origin}: address 0x{addr:02x} is not one an ADS1115 or ADS7828 can take "
+                         "(0x48..0x4b, set by the ADDR or A1/A0 pins)")
+    return addr
+
+
+def _inputs(kind: str, items: list, origin: str) -> tuple:
+    """Inputs from spec items: '2', '0-3' (a range of single inputs), 'd0-1' (a differential pair)."""
+    out = []
+    top = N_INPUTS[kind] - 1
+    for item in items:
+        text = str(item).strip().lower()
+        m_pair = re.fullmatch(r"d(\d)-(\d)", text)
+        m_range = re.fullmatch(r"(\d+)-(\d+)", text)
+        if m_pair:
+            pair = (int(m_pair.group(1)), int(m_pair.group(2)))
+            if kind != "ads1115":
+                raise InputError(f"{origin}: {kind} differential inputs are not supported; "
+                                 f"list single-ended channels 0-{top}")
+            if pair not in ADS1115_PAIRS:
+                raise InputError(f"{origin}: d{pair[0]}-{pair[1]} is not a pair the ADS1115 offers "
+                                 f"({', '.join(f'd{p}-{n}' for p, n in ADS1115_PAIRS)})")
+            out.append(pair)
+        elif m_range:
+            lo, hi = int(m_range.group(1)), int(m_range.group(2))
+            if lo > hi or hi > top:
+                raise InputError(f"{origin}: input range {text!r} must lie in 0-{top} with start <= end")
+            out.extend(range(lo, hi + 1))
+        elif re.fullmatch(r"\d+", text):
+            if int(text) > top:
+                raise InputError(f"{origin}: input {text} does not exist on the {kind} (0-{top})")
+            out.append(int(text))
+        else:
+            raise InputError(f"{origin}: input {item!r} is neither N, N-M (a range) nor dP-N (a differential pair)")
+    if not out:
+        raise InputError(f"{origin}: no inputs listed")
+    positives = [i if isinstance(i, int) else i[0] for i in out]
+    negatives = {i[1] for i in out if isinstance(i, tuple)}  # pairs may share a negative input (d0-3, d1-3)
+    for n, p in enumerate(positives):
+        if p in positives[:n]:
+            raise InputError(f"{origin}: input {p} is listed twice")
+        if p in negatives:
+            raise InputError(f"{origin}: input {p} is both read and used as a pair's negative input")
+    return tuple(out)
+
+
+def _kind(text: str, origin: str) -> str:
+    kind = str(text).strip().lower()
+    if kind not in CHIPS:
+        raise InputError(f"{origin}: unknown chip {text!r} (known: {', '.join(CHIPS)})")
+    return kind
+
+
+def _finish(chips: list[Chip], origin: str, bus: int | None = None) -> ChannelMap:
+    if not chips:
+        raise InputError(f"{origin}: no chips")
+    seen = {}
+    for c in chips:
+        if c.address in seen:
+            raise InputError(f"{origin}: address 0x{c.address:02x} is given twice ({seen[c.address]} and {c.label}); "
+                             "chips on one bus need distinct addresses")
+        seen[c.address] = c.label
+    return ChannelMap(tuple(chips), bus)
+
+
+def parse_spec(spec: str, settings: Settings = Settings()) -> ChannelMap:
+    """A spec string such as ``ads1115@0x48:0-3,ads1115@0x49:0-3`` (see the module's text)."""
+    origin = f"--adc {spec!r}"
+    settings = settings.checked("--adc")
+    chips: list[Chip] = []
+    current = None  # [kind, address, items]
+    groups = []
+    for part in [p.strip() for p in spec.split(",")]:
+        if not part:
+            raise InputError(f"{origin}: empty item (two commas in a row?)")
+        m = re.fullmatch(r"([A-Za-z0-9_]+)@([^:]+)(?::(.*))?", part)
+        if m:
+            current = [_kind(m.group(1), origin), _address(m.group(2), origin), []]
+            groups.append(current)
+            if m.group(3) is not None:
+                current[2].append(m.group(3))
+        elif current is None:
+            raise InputError(f"{origin}: expected CHIP@ADDRESS[:INPUTS] first (e.g. ads1115@0x48:0-3 or ads7828@0x48)")
+        else:
+            current[2].append(part)
+    for kind, addr, items in groups:
+        items = items or [f"0-{N_INPUTS[kind] - 1}"]
+        chips.append(Chip(kind, addr, _inputs(kind, items, f"{origin}, {kind}@0x{addr:02x}"), settings))
+    return _finish(chips, origin)
+
+
+def load_map_file(path: str | Path, settings: Settings = Settings()) -> ChannelMap:
+    """A TOML channel map (see the module's text)."""
+    origin = f"channel map {path}"
+    try:
+        data = tomllib.loads(read_text(path, "channel map"))
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{origin}: not valid TOML: {exc}") from None
+    unknown = sorted(set(data) - {"bus", "chip"})
+    if unknown:
+        raise InputError(f"{origin}: unknown key {unknown[0]!r} (known: bus, chip)")
+    bus = data.get("bus")
+    if bus is not None and (isinstance(bus, bool) or not isinstance(bus, int) or bus < 0):
+        raise InputError(f"{origin}: bus must be a whole number >= 0, got {bus!r}")
+    tables = data.get("chip", [])
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise InputError(f"{origin}: 'chip' must be an array of tables ([[chip]])")
+    chips = []
+    for n, t in enumerate(tables):
+        where = f"{origin}, chip[{n}]"
+        unknown = sorted(set(t) - {"type", "address", "inputs", "pga", "data_rate", "mode", "vref"})
+        if unknown:
+            raise InputError(f"{where}: unknown key {unknown[0]!r}")
+        if "type" not in t or "address" not in t:
+            raise InputError(f"{where}: 'type' and 'address' are required")
+        kind = _kind(t["type"], where)
+        addr = _address(t["address"], where)
+        items = t.get("inputs", list(range(N_INPUTS[kind])))
+        if not isinstance(items, list):
+            raise InputError(f"{where}: 'inputs' must be a list such as [0, 1, 2, 3], [\"0-3\"] or [\"d0-1\", \"d2-3\"]")
+        for x in items:
+            if isinstance(x, bool) or not isinstance(x, (int, str)):
+                raise InputError(f"{where}: input {x!r} must be a number or a string like \"0-3\" or \"d0-1\"")
+        over = {k: t[k] for k in ("pga", "data_rate", "mode", "vref") if k in t}
+        if "pga" in over and (isinstance(over["pga"], bool) or not isinstance(over["pga"], (int, float))):
+            raise InputError(f"{where}: pga must be a number")
+        if "data_rate" in over and (isinstance(over["data_rate"], bool) or not isinstance(over["data_rate"], int)):
+            raise InputError(f"{where}: data_rate must be a whole number")
+        if "pga" in over:
+            over["pga"] = float(over["pga"])
+        chips.append(Chip(kind, addr, _inputs(kind, items, where), replace(settings, **over).checked(where)))
+    return _finish(chips, origin, bus)
+
+
+def channel_map(arg: str, settings: Settings = Settings()) -> ChannelMap:
+    """``--adc``: a TOML file when the argument names one (or ends in .toml), else a spec string."""
+    if arg.endswith(".toml") or Path(arg).is_file():
+        return load_map_file(arg, settings)
+    return parse_spec(arg, settings)

@@ -1,0 +1,192 @@
+"""The live readout: read every element, estimate the pose, write a timestamped line; pace, tare, count.
+
+One sample is ``Readout.step()``: the ADC array's volts (transient I2C errors retried
+with back-off inside it), minus the tare offsets, through the engine, formatted as a
+CSV or JSON line and written in one piece. ``run`` repeats it at a rate or as fast as
+the converters allow, until a count, a duration or a stop request (Ctrl-C), and
+returns the statistics the summary line shows. A chip that stays silent raises
+``DeviceSilent`` out of ``run`` with the statistics so far attached (``exc.stats``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fitgen.dataset import load_dataset
+from fitgen.errors import InputError
+from fitgen.sensor import load_sensor
+from fitgen.transfer import readings
+
+from .adc import AdcArray, DeviceSilent, ErrorCounts
+from .clock import REAL_CLOCK
+
+FORMATS = ("csv", "jsonl")
+
+
+class LineFormat:
+    """Lines of one sample: ``t`` (Unix time, s), v1..vN (V, after tare), the outputs, the status."""
+
+    def __init__(self, kind: str, n_inputs: int, outputs: tuple[str, ...]):
+        if kind not in FORMATS:
+            raise InputError(f"format must be one of {', '.join(FORMATS)}, got {kind!r}")
+        self.kind, self.n_inputs, self.outputs = kind, n_inputs, tuple(outputs)
+        vf, of = "%.6f", "%.4f"
+        if kind == "csv":
+            self.header = ",".join(["t"] + [f"v{k}" for k in range(1, n_inputs + 1)] + list(outputs) + ["status"]) + "\n"
+            self._fmt = ",".join(["%.6f"] + [vf] * n_inputs + [of] * len(outputs) + ["%d"]) + "\n"
+        else:
+            self.header = ""
+            self._fmt = ('{"t":%.6f,"v":[' + ",".join([vf] * n_inputs) + "]," +
+                         ",".join(f'"{o}":{of}' for o in outputs) + ',"status":%d}\n')
+
+    def line(self, t: float, volts, outputs, status: int) -> str:
+        return self._fmt % (t, *volts, *outputs, status)
+
+
+@dataclass
+class ReadoutStats:
+    samples: int = 0
+    elapsed: float = 0.0
+    late: int = 0  # samples that started later than the pace by more than a period
+    clipped: int = 0  # samples with an input at its converter's full scale
+    outside: int = 0  # samples with an input outside the model's fitted domain (status > 0)
+    errors: ErrorCounts = field(default_factory=ErrorCounts)
+
+    @property
+    def rate(self) -> float:
+        return self.samples / self.elapsed if self.elapsed > 0 else 0.0
+
+    def summary(self) -> str:
+        e = self.errors
+        errs = (f"I2C errors {e.total} (nack {e.nack}, timeout {e.timeout}, stuck {e.stuck}, other {e.other}; "
+                f"{e.retries} retries, {e.resets} resets)")
+        text = f"{self.samples} samples in {self.elapsed:.2f} s ({self.rate:.1f} Hz); {errs}"
+        if self.late:
+            text += f"; {self.late} late"
+        if self.clipped:
+            text += f"; {self.clipped} with a clipped input"
+        if self.outside:
+            text += f"; {self.outside} outside the model's domain"
+        return text
+
+
+def rest_reference(spec: str, n_inputs: int) -> np.ndarray:
+    """The readings the model expects at rest: a dataset's rows at pose 0 (averaged), or a sensor's
+    physics at pose 0 in its ``gmr`` transfer (volts)."""
+    if spec.lower().endswith(".csv"):
+        ds = load_dataset(spec, min_rows=1)
+        at_rest = np.all(ds.targets == 0, axis=1)
+        if not at_rest.any():
+            raise InputError(f"--rest {spec}: the dataset has no row at pose 0 (every pose column 0)")
+        ref = ds.inputs[at_rest].mean(axis=0)
+    else:
+        sensor = load_sensor(spec).with_transfer("gmr")
+        ref = readings(sensor, np.zeros(5), adc_bits=0)[0]
+    if ref.size != n_inputs:
+        raise InputError(f"--rest {spec}: gives {ref.size} rest readings; the model takes {n_inputs}")
+    return ref
+
+
+def measure(array: AdcArray, n: int) -> np.ndarray:
+    """``n`` samples (n, N) in volts."""
+    if n < 1:
+        raise InputError(f"the number of samples must be >= 1, got {n}")
+    return np.vstack([array.read_volts() for _ in range(n)])
+
+
+@dataclass
+class Tare:
+    measured: np.ndarray  # mean rest readings
+    reference: np.ndarray
+    spread: np.ndarray  # standard deviation of each element during the tare
+
+    @property
+    def offsets(self) -> np.ndarray:
+        return self.measured - self.reference
+
+    def describe(self) -> str:
+        mv = " ".join(f"{x * 1e3:+.2f}" for x in self.offsets)
+        return f"tare: offsets [mV] {mv} (spread up to {self.spread.max() * 1e3:.2f} mV rms)"
+
+
+def tare(array: AdcArray, reference: np.ndarray, n: int = 50) -> Tare:
+    """Rest readings averaged over ``n`` samples; subtracting ``offsets`` maps them onto ``reference``."""
+    block = measure(array, n)
+    return Tare(block.mean(axis=0), np.asarray(reference, dtype=float), block.std(axis=0))
+
+
+class Readout:
+    """One sample at a time: read, correct, estimate, format, write."""
+
+    def __init__(self, array: AdcArray, engine, sink, fmt: LineFormat, *, clock=REAL_CLOCK,
+                 offsets: np.ndarray | None = None):
+        if engine.n_inputs != array.n:
+            raise InputError(f"the channel map reads {array.n} elements; the model takes {engine.n_inputs}")
+        self.array, self.engine, self.sink, self.fmt, self.clock = array, engine, sink, fmt, clock
+        self.offsets = None if offsets is None else np.asarray(offsets, dtype=float)
+        self.stats = ReadoutStats(errors=array.counts)
+        self._write = sink.write
+        self._flush = getattr(sink, "flush", None)
+
+    def step(self) -> None:
+        v = self.array.read_volts()
+        if self.offsets is not None:
+            v -= self.offsets
+        out, status = self.engine.estimate(v)
+        self._write(self.fmt.line(self.clock.time(), v, out, status))
+        st = self.stats
+        st.samples += 1
+        if status:
+            st.outside += 1
+        if self.array.clipped.any():
+            st.clipped += 1
+
+    def run(self, *, rate: float | None = None, count: int | None = None, duration: float | None = None,
+            stop=lambda: False, flush_every: float = 0.0) -> ReadoutStats:
+        """Samples until ``count``, ``duration`` (s) or ``stop()``; at ``rate`` Hz when given.
+
+        Pacing keeps to a fixed grid (t0 + i/rate); a sample later than one period
+        is counted as late and the grid restarts from it, so a stall never turns
+        into a burst. ``flush_every``: seconds between flushes of the sink (0: each line).
+        """
+        if rate is not None and not (rate > 0 and math.isfinite(rate)):
+            raise InputError(f"--rate must be a positive number of samples per second, got {rate}")
+        clock = self.clock
+        st = self.stats = ReadoutStats(errors=self.array.counts)
+        period = 1.0 / rate if rate else 0.0
+        t0 = clock.monotonic()
+        next_t, last_flush = t0, t0
+        try:
+            while not stop():
+                if count is not None and st.samples >= count:
+                    break
+                now = clock.monotonic()
+                if duration is not None and now - t0 >= duration:
+                    break
+                if period:
+                    if now < next_t:
+                        clock.sleep(next_t - now)
+                    elif now - next_t > period:
+                        st.late += 1
+                        next_t = now
+                    next_t += period
+                self.step()
+                if self._flush is not None and clock.monotonic() - last_flush >= flush_every:
+                    self._flush()
+                    last_flush = clock.monotonic()
+        except DeviceSilent as exc:
+            st.elapsed = clock.monotonic() - t0
+            exc.stats = st
+            raise
+        finally:
+            if self._flush is not None:
+                try:
+                    self._flush()
+                except (BrokenPipeError, ValueError):
+                    pass
+        st.elapsed = clock.monotonic() - t0
+        return st
+

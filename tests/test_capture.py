@@ -1,0 +1,210 @@
+"""Recording a calibration dataset: averaging, the spread check, and no row lost or doubled across interruptions."""
+
+import io
+import json
+import shlex
+
+import numpy as np
+import pytest
+
+from fitgen.dataset import load_dataset
+from fitgen.errors import InputError
+from fitgen.fit import fit_model
+from fitgen.sensor import load_sensor
+from fitgen.transfer import readings
+from host.adc import AdcArray
+from host.capture import (SpreadTooLarge, capture, enter_waiter, header_line, load_schedule, prepare_output,
+                          trigger_waiter)
+from host.channelmap import parse_spec
+from host.clock import VirtualClock
+from host.simbus import SimBus
+
+from conftest import assert_one_line_error, run_cli
+
+TWO_1115 = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+
+
+def write_schedule(path, rows, columns=("dx", "dy", "dz")):
+    path.write_text(",".join(columns) + "\n" + "".join(",".join(map(str, r)) + "\n" for r in rows))
+    return path
+
+
+def grid_rows():
+    return [(dx, dy, dz) for dz in (0, -1, -2) for dy in (-1, 0, 1) for dx in (-2, 0, 2)]  # 27 poses
+
+
+def rig(sensor, noise=0.0005, seed=0):
+    cmap = parse_spec(TWO_1115)
+    clock = VirtualClock()
+    bus = SimBus.for_channel_map(cmap, sensor, None, clock=clock, noise=noise, seed=seed)
+    return bus, AdcArray(bus, cmap, clock=clock), clock
+
+
+def data_rows(path):
+    lines = path.read_text().splitlines()
+    return lines[0], [tuple(float(x) for x in ln.split(",")) for ln in lines[1:]]
+
+
+def test_capture_writes_averaged_rows_in_the_dataset_format(sensor, tmp_path):
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid_rows()[:6]))
+    bus, arr, clock = rig(sensor)
+    out = tmp_path / "d.csv"
+    res = capture(arr, sched, out, samples=16, wait=None, set_pose=bus.set_pose, clock=clock)
+    assert res.complete and res.captured == 6 and res.before == 0
+    ds = load_dataset(out)
+    assert ds.target_names == ("dx", "dy", "dz") and ds.n_rows == 6
+    np.testing.assert_array_equal(ds.targets, sched.values)
+    truth = readings(sensor, sched.poses, adc_bits=0)
+    # 16 samples of 0.5 mV noise: the mean is within 4 standard errors (plus half an LSB)
+    assert np.max(np.abs(ds.inputs - truth)) < 4 * 0.0005 / 4 + 62.5e-6
+    assert np.max(np.abs(ds.inputs - truth)) > 0  # and it is a noisy measurement, not the physics copied
+    meta = json.loads((tmp_path / "d.csv.meta.json").read_text())
+    assert meta["units"] == "V" and meta["rows"] == 6 and meta["samples_per_row"] == 16
+    assert ds.meta["units"] == "V"  # what fitgen fit reads: a model in volts
+    assert max(res.spreads) < 0.001
+
+
+def test_a_spread_over_the_limit_is_measured_again_then_refused(sensor, tmp_path):
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid_rows()[:3]))
+    bus, arr, clock = rig(sensor, noise=0.004)
+    out = tmp_path / "d.csv"
+    with pytest.raises(SpreadTooLarge, match=r"pose 1/3 \(dx=-2 dy=-1 dz=0\): v\d spreads .* in 3 tries"):
+        capture(arr, sched, out, samples=8, max_spread=0.003, wait=None, set_pose=bus.set_pose, clock=clock)
+    assert out.read_text() == header_line(8, ("dx", "dy", "dz"))  # no row for it
+    transfers = bus.transfers
+    bus.feed.noise = 0.0005  # the sensor has settled
+    res = capture(arr, sched, out, samples=8, max_spread=0.003, wait=None, set_pose=bus.set_pose, clock=clock)
+    assert res.complete and bus.transfers > transfers
+
+
+class Interrupt(Exception):
+    pass
+
+
+def test_an_interruption_loses_and_doubles_no_row(sensor, tmp_path):
+    rows = grid_rows()
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", rows))
+    out = tmp_path / "d.csv"
+    bus, arr, clock = rig(sensor)
+
+    def stop_at(k):
+        def wait(i, pose):
+            if i == k:
+                raise KeyboardInterrupt
+            return True
+        return wait
+
+    with pytest.raises(KeyboardInterrupt):
+        capture(arr, sched, out, samples=4, wait=stop_at(10), set_pose=bus.set_pose, clock=clock)
+    assert len(data_rows(out)[1]) == 10
+    # a write cut short by a power cut leaves a line without its newline
+    with open(out, "a") as fh:
+        fh.write("1.4812,1.52")
+    with pytest.raises(KeyboardInterrupt):
+        capture(arr, sched, out, samples=4, wait=stop_at(17), set_pose=bus.set_pose, clock=clock)
+    visited = []
+    res = capture(arr, sched, out, samples=4, wait=lambda i, p: visited.append(i) or True, set_pose=bus.set_pose,
+                  clock=clock)
+    assert res.before == 17 and res.captured == 10 and res.complete and not res.dropped_partial
+    assert visited == list(range(17, 27))
+    header, got = data_rows(out)
+    assert [r[8:] for r in got] == [tuple(map(float, r)) for r in rows]  # every pose once, in schedule order
+    truth = readings(sensor, sched.poses, adc_bits=0)
+    assert np.max(np.abs(np.array(got)[:, :8] - truth)) < 0.002
+
+
+def test_a_pose_scheduled_twice_is_captured_twice(sensor, tmp_path):
+    rows = [(0, 0, 0), (1, 0, -1), (0, 0, 0), (1, 0, -1)]
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", rows))
+    out = tmp_path / "d.csv"
+    bus, arr, clock = rig(sensor)
+    capture(arr, sched, out, samples=2, wait=lambda i, p: i < 3, set_pose=bus.set_pose, clock=clock)
+    state = prepare_output(out, 8, sched)
+    assert state.done.tolist() == [True, True, True, False]
+    capture(arr, sched, out, samples=2, wait=None, set_pose=bus.set_pose, clock=clock)
+    assert [r[8:] for r in data_rows(out)[1]] == [tuple(map(float, r)) for r in rows]
+
+
+def test_an_output_from_another_run_is_refused(sensor, tmp_path):
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid_rows()[:4]))
+    out = tmp_path / "d.csv"
+    out.write_text(header_line(8, ("dx", "dz")))
+    with pytest.raises(InputError, match="belongs to another channel map or schedule"):
+        prepare_output(out, 8, sched)
+    out.write_text(header_line(8, ("dx", "dy", "dz")) + ",".join(["1.5"] * 8 + ["9", "9", "9"]) + "\n")
+    with pytest.raises(InputError, match="line 2: pose .* is not"):
+        prepare_output(out, 8, sched)
+    out.write_text(header_line(8, ("dx", "dy", "dz")) + "1.5,2\n")
+    with pytest.raises(InputError, match="line 2: not a row of 11 numbers"):
+        prepare_output(out, 8, sched)
+
+
+def test_enter_and_trigger_waiters(tmp_path):
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", [(1, 0, -1), (2, 0, -1)]))
+    err = io.StringIO()
+    wait = enter_waiter(sched, io.StringIO("\nq\n"), err)
+    assert wait(0, sched.poses[0]) is True and wait(1, sched.poses[1]) is False
+    assert "pose 1/2: dx=1 dy=0 dz=-1; set it, then press Enter" in err.getvalue()
+    assert enter_waiter(sched, io.StringIO(""), err)(0, sched.poses[0]) is False  # end of input stops
+    log = tmp_path / "log"
+    wait = trigger_waiter(f'echo "$TM_POSE_INDEX/$TM_POSE_COUNT $TM_DX $TM_DZ" >> {shlex.quote(str(log))}', sched)
+    assert wait(1, sched.poses[1]) is True
+    assert log.read_text() == "2/2 2.0 -1.0\n"
+
+
+# --- command line ------------------------------------------------------------------
+
+
+def test_capture_command_killed_midway_resumes_without_loss_or_duplicates(tmp_path):
+    rows = grid_rows()
+    sched = write_schedule(tmp_path / "s.csv", rows)
+    out = tmp_path / "d.csv"
+    # the trigger kills the capture outright (SIGKILL, as a power cut would) when pose 9 is due
+    kill = 'if [ "$TM_POSE_INDEX" = 9 ]; then kill -9 $PPID; sleep 5; fi'
+    args = ["capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate", "--samples", "4"]
+    proc = run_cli("tactile-host", *args, "--trigger", kill)
+    assert proc.returncode == -9
+    assert len(data_rows(out)[1]) == 8
+    proc = run_cli("tactile-host", *args, "--trigger", "true")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.strip() == f"tactile-host capture: 27/27 poses in {out} (19 captured now, 8 already there)"
+    header, got = data_rows(out)
+    assert header == "v1,v2,v3,v4,v5,v6,v7,v8,dx,dy,dz"
+    assert [r[8:] for r in got] == [tuple(map(float, r)) for r in rows]
+    # a finished dataset fits: a model in volts
+    model = fit_model(load_dataset(out))
+    assert model.input_units == "V"
+    proc = run_cli("tactile-host", *args)  # nothing left to do
+    assert proc.returncode == 0 and "(0 captured now, 27 already there)" in proc.stderr
+
+
+def test_capture_command_a_failing_trigger_is_one_line_status_1_and_rows_are_kept(tmp_path):
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:5])
+    out = tmp_path / "d.csv"
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate",
+                   "--samples", "2", "--trigger", '[ "$TM_POSE_INDEX" -lt 4 ]')
+    assert_one_line_error(proc, 1, "exit status 1 at pose 4/5")
+    assert "run the same command again to resume" in proc.stderr
+    assert len(data_rows(out)[1]) == 3
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--samples", "0"], "--samples must be > 0"),
+    (["--max-spread", "x"], "--max-spread 'x' is not a number"),
+    (["--adc", "ads1115@0x48:0-3,ads7829@0x49"], "unknown chip 'ads7829'"),
+    (["--bus", "99"], "/dev/i2c-99 does not exist"),
+])
+def test_capture_command_bad_input_is_one_line_exit_2(tmp_path, extra, message):
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:2])
+    args = ["capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(tmp_path / "d.csv")]
+    if "--bus" not in extra:
+        args.append("--simulate")
+    proc = run_cli("tactile-host", *args, *extra)
+    assert_one_line_error(proc, 2, message)
+    assert not (tmp_path / "d.csv").exists()
+
+
+def test_capture_command_missing_schedule(tmp_path):
+    proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "none.csv"), "--adc", TWO_1115,
+                   "-o", str(tmp_path / "d.csv"), "--simulate")
+    assert_one_line_error(proc, 2, "no such file")

@@ -1,0 +1,248 @@
+"""The live readout: engines, output lines, pacing, tare, retries, a silent chip, Ctrl-C."""
+
+import io
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from fitgen.errors import InputError
+from fitgen.fit import fit_model
+from fitgen.sensor import load_sensor
+from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.transfer import readings
+from host.adc import AdcArray, DeviceSilent
+from host.channelmap import parse_spec
+from host.clock import VirtualClock
+from host.engine import CEngine, PythonEngine
+from host.readout import LineFormat, Readout, rest_reference, tare
+from host.simbus import SimBus
+
+from conftest import assert_one_line_error, require_tool, run_cli
+
+TWO_1115 = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+POSE = np.array([1.0, 0.5, -1.0, 0.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def c_engine(model):
+    require_tool("gcc")
+    eng = CEngine(model)
+    yield eng
+    eng.close()
+
+
+def rig(sensor, pose=POSE, spec=TWO_1115, **kw):
+    cmap = parse_spec(spec)
+    clock = VirtualClock()
+    bus = SimBus.for_channel_map(cmap, sensor, pose, clock=clock, **kw)
+    return bus, AdcArray(bus, cmap, clock=clock), clock
+
+
+def parse_csv(text):
+    lines = text.splitlines()
+    header = lines[0].split(",")
+    return header, np.array([[float(x) for x in ln.split(",")] for ln in lines[1:]])
+
+
+# --- engines -----------------------------------------------------------------------
+
+
+def test_c_engine_gives_the_python_numbers(model, c_engine):
+    rng = np.random.default_rng(2)
+    lo, hi = model.input_min, model.input_max
+    inputs = np.vstack([lo + (hi - lo) * rng.random((300, 8)),  # inside the domain
+                        lo + (hi - lo) * rng.uniform(-0.5, 1.5, (100, 8))])  # partly outside: clamped
+    py = PythonEngine(model)
+    statuses = set()
+    for row in inputs:
+        (a, sa), (b, sb) = c_engine.estimate(row), py.estimate(row)
+        assert sa == sb
+        statuses.add(sa)
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    assert 0 in statuses and len(statuses) > 10  # in-domain rows and many clamping masks were exercised
+    bad = inputs[0].copy()
+    bad[3] = np.nan
+    out, status = c_engine.estimate(bad)
+    assert status == -1 and not out.any()
+
+
+def test_float_c_engine_is_close(sensor, model):
+    require_tool("gcc")
+    eng = CEngine(model, precision="float")
+    try:
+        row = readings(sensor, POSE, adc_bits=0)[0]
+        a, _ = eng.estimate(row)
+        b, _ = PythonEngine(model).estimate(row)
+        assert not np.array_equal(a, b)
+        np.testing.assert_allclose(a[:3], b[:3], atol=1e-3)  # mm
+        np.testing.assert_allclose(a[3:], b[3:], atol=0.3)  # deg: the rotations' many terms cancel in float
+    finally:
+        eng.close()
+
+
+# --- lines -------------------------------------------------------------------------
+
+
+def test_csv_and_jsonl_lines():
+    csv = LineFormat("csv", 3, ("dx", "dz"))
+    assert csv.header == "t,v1,v2,v3,dx,dz,status\n"
+    assert csv.line(12.5, [1.0, 2.0, 3.0], [0.1, -0.2], 4) == "12.500000,1.000000,2.000000,3.000000,0.1000,-0.2000,4\n"
+    js = LineFormat("jsonl", 2, ("dx",))
+    rec = json.loads(js.line(1.25, [1.5, 2.5], [0.125], 0))
+    assert rec == {"t": 1.25, "v": [1.5, 2.5], "dx": 0.125, "status": 0}
+    with pytest.raises(InputError):
+        LineFormat("xml", 2, ("dx",))
+
+
+# --- the loop ----------------------------------------------------------------------
+
+
+def test_readout_streams_timestamped_estimates_at_a_rate(sensor, model, c_engine):
+    bus, arr, clock = rig(sensor)
+    sink = io.StringIO()
+    fmt = LineFormat("csv", 8, model.output_names)
+    sink.write(fmt.header)
+    stats = Readout(arr, c_engine, sink, fmt, clock=clock).run(rate=50, count=40)
+    header, table = parse_csv(sink.getvalue())
+    assert header == ["t"] + [f"v{k}" for k in range(1, 9)] + list(model.output_names) + ["status"]
+    assert len(table) == 40 and stats.samples == 40
+    np.testing.assert_allclose(np.diff(table[:, 0]), 0.02, atol=1e-5)  # paced on the clock
+    assert stats.rate == pytest.approx(50, rel=0.02) and stats.late == 0
+    np.testing.assert_allclose(table[:, 1:9], readings(sensor, POSE, adc_bits=0).repeat(40, 0), atol=1e-4)
+    assert np.all(np.abs(table[:, 9:12] - POSE[:3]) < 0.15)
+    assert np.all(table[:, -1] == 0)
+
+
+def test_a_rate_above_what_the_converters_allow_counts_late_samples(sensor, model):
+    bus, arr, clock = rig(sensor)
+    reader = Readout(arr, PythonEngine(model), io.StringIO(), LineFormat("csv", 8, model.output_names), clock=clock)
+    stats = reader.run(rate=1000, count=30)  # 8 elements on 2 chips at 860 SPS: about 135 Hz
+    assert stats.late > 20
+    assert 100 < stats.rate < 150
+
+
+def test_duration_and_stop_end_the_run(sensor, model):
+    bus, arr, clock = rig(sensor)
+    reader = Readout(arr, PythonEngine(model), io.StringIO(), LineFormat("jsonl", 8, model.output_names),
+                     clock=clock)
+    stats = reader.run(duration=0.5)
+    assert 0.5 <= stats.elapsed < 0.52 and stats.samples > 50
+    calls = []
+    stats = reader.run(stop=lambda: calls.append(1) or len(calls) > 5)
+    assert stats.samples == 5 and len(calls) == 6
+
+
+def test_tare_corrects_element_offsets(sensor, model, c_engine):
+    offsets = np.array([0.02, -0.015, 0.01, 0.0, -0.02, 0.012, 0.0, -0.008])  # amplifier offsets, V
+    bus, arr, clock = rig(sensor, pose=np.zeros(5), offsets=offsets, noise=0.0005)
+    reference = rest_reference("paper", 8)
+    t = tare(arr, reference, 40)
+    np.testing.assert_allclose(t.offsets, offsets, atol=3e-4)
+    bus.set_pose(POSE)
+    fmt = LineFormat("csv", 8, model.output_names)
+    results = {}
+    for name, off in (("raw", None), ("tared", t.offsets)):
+        sink = io.StringIO()
+        Readout(arr, c_engine, sink, fmt, clock=clock, offsets=off).run(count=20)
+        results[name] = np.abs(parse_csv(fmt.header + sink.getvalue())[1][:, 9:12].mean(axis=0) - POSE[:3])
+    assert results["tared"].max() < 0.15
+    assert results["raw"].max() > 3 * results["tared"].max()
+
+
+def test_rest_reference_from_a_dataset(sensor, tmp_path):
+    ds = simulate(sensor, grid_poses({"dx": [-1, 0, 1], "dz": [0, -1]}))
+    ds.save(tmp_path / "d.csv")
+    np.testing.assert_allclose(rest_reference(str(tmp_path / "d.csv"), 8), readings(sensor, np.zeros(5))[0])
+    simulate(sensor, grid_poses({"dx": [-1, 1], "dz": [0, -1]})).save(tmp_path / "e.csv")
+    with pytest.raises(InputError, match="no row at pose 0"):
+        rest_reference(str(tmp_path / "e.csv"), 8)
+    with pytest.raises(InputError, match="model takes 4"):
+        rest_reference("paper", 4)
+
+
+def test_transient_errors_are_retried_and_counted_without_losing_samples(sensor, model, c_engine):
+    bus, arr, clock = rig(sensor)
+    bus.inject("nack", rate=0.03)
+    bus.inject("timeout", rate=0.01)
+    bus.inject("stuck", address=0x49, rate=0.02)
+    sink = io.StringIO()
+    fmt = LineFormat("csv", 8, model.output_names)
+    stats = Readout(arr, c_engine, sink, fmt, clock=clock).run(count=60)
+    e = stats.errors
+    assert stats.samples == 60 and len(sink.getvalue().splitlines()) == 60
+    assert e.nack == bus.injected["nack"] > 0 and e.timeout == bus.injected["timeout"] > 0
+    assert e.stuck == bus.injected["stuck"] > 0 and e.resets == e.stuck
+    assert e.retries == e.total
+    table = parse_csv(fmt.header + sink.getvalue())[1]
+    np.testing.assert_allclose(table[:, 1:9], readings(sensor, POSE, adc_bits=0).repeat(60, 0), atol=1e-4)
+    assert "I2C errors" in stats.summary() and f"nack {e.nack}" in stats.summary()
+
+
+def test_a_chip_that_goes_silent_ends_the_run_with_the_statistics(sensor, model):
+    bus, arr, clock = rig(sensor)
+    bus.inject("nack", address=0x49, after=12 * 10)  # 12 transfers to 0x49 a sample: gone during the 11th
+    reader = Readout(arr, PythonEngine(model), io.StringIO(), LineFormat("csv", 8, model.output_names), clock=clock)
+    with pytest.raises(DeviceSilent, match="ads1115@0x49 stays silent") as info:
+        reader.run(count=100)
+    assert info.value.stats.samples == 10
+    assert "10 samples" in info.value.stats.summary()
+
+
+# --- command line ------------------------------------------------------------------
+
+
+def test_read_command_with_the_c_engine_to_a_jsonl_file(model_file, tmp_path):
+    require_tool("gcc")
+    out = tmp_path / "stream.jsonl"
+    proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_1115, "--simulate", "dx=1,dy=0.5,dz=-1",
+                   "--engine", "c", "--format", "jsonl", "-o", str(out), "--count", "15", "--tare",
+                   "--sim-offsets", "0.02,0,0,-0.01,0,0,0.01,0")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stderr.splitlines()
+    assert lines[0].startswith("tactile-host read: tare: offsets [mV] ") and len(lines) == 2
+    measured = [float(x) for x in lines[0].split("[mV] ")[1].split(" (")[0].split()]
+    np.testing.assert_allclose(measured, [20, 0, 0, -10, 0, 0, 10, 0], atol=0.5)
+    assert lines[1].startswith("tactile-host read: done: 15 samples in")
+    recs = [json.loads(ln) for ln in out.read_text().splitlines()]
+    assert len(recs) == 15
+    est = np.array([[r["dx"], r["dy"], r["dz"]] for r in recs]).mean(axis=0)
+    assert np.all(np.abs(est - [1.0, 0.5, -1.0]) < 0.2)
+    assert all(len(r["v"]) == 8 and r["status"] == 0 for r in recs)
+    assert np.all(np.diff([r["t"] for r in recs]) > 0)
+
+
+def test_read_command_ends_on_a_silent_chip_with_one_line_and_status_1(model_file):
+    proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_1115, "--simulate", "dz=-1",
+                   "--sim-fault", "silent:0x48:100", "--count", "1000")
+    assert_one_line_error(proc, 1, "ads1115@0x48 stays silent: Remote I/O error (errno 121) on all 5 tries; "
+                                   "stopped after")
+    assert len(proc.stdout.splitlines()) >= 5  # the samples before it are all there, whole
+
+
+def test_read_command_stops_cleanly_on_ctrl_c(model_file):
+    code = "import sys; from host.cli import main; sys.argv[0] = 'tactile-host'; main()"
+    proc = subprocess.Popen([sys.executable, "-c", code, "read", "--model", model_file, "--adc", TWO_1115,
+                             "--simulate", "dx=0.5", "--rate", "100"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        first = [proc.stdout.readline() for _ in range(6)]  # the header and 5 samples: it is running
+        assert first[0].startswith("t,v1")
+        time.sleep(0.1)
+        proc.send_signal(signal.SIGINT)
+        rest, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
+    summary = err.strip().splitlines()
+    assert len(summary) == 1 and summary[0].startswith("tactile-host read: stopped: ")
+    n = int(summary[0].split("stopped: ")[1].split()[0])
+    body = (("".join(first) + rest).splitlines())[1:]
+    assert len(body) == n >= 5
+    assert all(len(ln.split(",")) == 15 for ln in body)  # every line whole
+    assert " Hz)" in summary[0] and "I2C errors 0" in summary[0]
