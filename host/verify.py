@@ -16,7 +16,7 @@ from .compiled import CompiledModel
 DOUBLE_SLACK = 4.0
 
 
-def test_vectors(model: Model, n_random: int = 2000, seed: int = 0) -> tuple[np.ndarray, list[str]]:
+def make_vectors(model: Model, n_random: int = 2000, seed: int = 0) -> tuple[np.ndarray, list[str]]:
     """Inputs and a kind per row: random in the domain, its edges and corners, outside it,
     near zero, huge, and non-finite."""
     rng = np.random.default_rng(seed)
@@ -127,7 +127,7 @@ def compare(model: Model, compiled: CompiledModel, inputs: np.ndarray) -> Verify
 def verify(model: Model, precision: str, style: str, *, cc: str = "gcc", runner: str = "", prefix: str = "tm",
            n_random: int = 2000, extra_inputs: np.ndarray | None = None, cflags: list[str] | None = None,
            seed: int = 0) -> VerifyResult:
-    inputs, _ = test_vectors(model, n_random, seed)
+    inputs, _ = make_vectors(model, n_random, seed)
     if extra_inputs is not None:
         inputs = np.vstack([inputs, extra_inputs])
     with CompiledModel(model, precision, style, prefix, cc=cc, runner=runner, cflags=cflags) as cm:

@@ -10,7 +10,7 @@ import smbus2
 from fitgen.errors import InputError
 from fitgen.fit import fit_model
 from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.simulate import grid_poses, simulate
 from fitgen.transfer import readings
 from host.adc import ADS1115, ADS7828, AdcArray, BusIO, DeviceSilent, ads7828_channel_code
 from host.channelmap import Settings, channel_map, parse_spec

@@ -10,7 +10,6 @@ import pytest
 from fitgen.dataset import load_dataset
 from fitgen.errors import InputError
 from fitgen.fit import fit_model
-from fitgen.sensor import load_sensor
 from fitgen.transfer import readings
 from host.adc import AdcArray
 from host.capture import (SpreadTooLarge, capture, enter_waiter, header_line, load_schedule, prepare_output,

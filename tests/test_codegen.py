@@ -14,7 +14,7 @@ from fitgen.sensor import load_sensor
 from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
 from fitgen.terms import EXPONENTS, Term
 from host.compiled import CompiledModel
-from host.verify import test_vectors as make_vectors, verify
+from host.verify import verify
 
 from conftest import assert_one_line_error, require_tool, run_cli
 

@@ -5,10 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from fitgen.dataset import load_dataset
 from fitgen.errors import InputError
 from fitgen.fit import FitSettings, fit_model
-from fitgen.model import Model, load_model, model_from_dict
+from fitgen.model import load_model, model_from_dict
 from fitgen.sensor import load_sensor
 from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 from fitgen.terms import Term, candidate_terms, design_matrix, element_powers, parse_term, EXPONENTS

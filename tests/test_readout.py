@@ -11,9 +11,7 @@ import numpy as np
 import pytest
 
 from fitgen.errors import InputError
-from fitgen.fit import fit_model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.simulate import grid_poses, simulate
 from fitgen.transfer import readings
 from host.adc import AdcArray, DeviceSilent
 from host.channelmap import parse_spec
