@@ -34,7 +34,7 @@ def _noise(value: str, sensor) -> float:
 
 def cmd_simulate(args) -> int:
     from .dataset import load_poses
-    from .simulate import PAPER_GRIDS, grid_poses, parse_grid, parse_ranges, pose_rng, random_poses, simulate
+    from .simulate import grid_poses, parse_grid, parse_ranges, pose_rng, random_poses, simulate
 
     sensor = _sensor(args)
     chosen = [x for x in (args.grid, args.random, args.poses) if x is not None]
@@ -47,7 +47,7 @@ def cmd_simulate(args) -> int:
         source = {"random": args.random, "ranges": args.ranges}
     else:
         grid = args.grid or "paper-sim"
-        poses, source = grid_poses(parse_grid(grid)), {"grid": grid if grid in PAPER_GRIDS else grid}
+        poses, source = grid_poses(parse_grid(grid)), {"grid": grid}
     ds = simulate(sensor, poses, noise=_noise(args.noise, sensor), adc_bits=args.adc_bits,
                   seed=args.seed, provenance=source)
     ds.save(args.output)

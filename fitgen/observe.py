@@ -7,10 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .pose import POSE_NAMES, POSE_UNITS, as_poses
+from .pose import POSE_NAMES, POSE_UNITS, as_poses, field_readings
 from .sensor import Sensor
 from .transfer import apply_transfer
-from .pose import field_readings
 
 # central-difference steps (mm, deg): small against the field's length scale (mm),
 # large against rounding (readings ~1 mT, eps ~1e-16)
@@ -27,7 +26,7 @@ def jacobian(sensor: Sensor, poses) -> np.ndarray:
     shifts = np.concatenate([np.diag(_STEP), -np.diag(_STEP)])  # (10, 5)
     probe = (poses[:, None, :] + shifts[None]).reshape(-1, 5)
     vals = apply_transfer(sensor, field_readings(sensor, probe), adc_bits=0).reshape(P, 10, -1)
-    # a quantiser clips the gmr output: apply_transfer with adc_bits=0 still clips to the ADC range
+    # adc_bits=0: no quantisation steps, but the gmr output is still clipped to the ADC range
     return ((vals[:, :5] - vals[:, 5:]) / (2 * _STEP[None, :, None])).transpose(0, 2, 1)
 
 
