@@ -70,29 +70,27 @@ def aic_of(rss: float, n: int, n_terms: int, k: float) -> float:
     return n * np.log(rss / n) + k * (n_terms + 1)
 
 
-def _basis(A: np.ndarray, cols: list[int]) -> np.ndarray:
-    """Orthonormal basis of the intercept and ``cols`` of the compressed data."""
-    Q, _ = qr(A[:, [0] + [c + 1 for c in cols]], mode="economic", check_finite=False)
-    return Q
+def _factor(A: np.ndarray, cols: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Thin QR of the intercept and ``cols`` of the compressed data: the one factor a step uses."""
+    return qr(A[:, [0] + [c + 1 for c in cols]], mode="economic", check_finite=False)
 
 
-def _aliased_in(A: np.ndarray, cols: list[int]) -> list[int]:
-    """Columns of ``cols`` whose residual against the intercept and the columns before them is aliased."""
+def _aliased_in(A: np.ndarray, cols: list[int], R: np.ndarray) -> list[int]:
+    """Columns of ``cols`` whose residual against the intercept and the columns before them is aliased.
+
+    ``R`` is the triangle of :func:`_factor` for ``cols``: its diagonal is each column's residual norm.
+    """
     if not cols:
         return []
-    _, R = qr(A[:, [0] + [c + 1 for c in cols]], mode="economic", check_finite=False)
     norms = np.linalg.norm(A[:, [c + 1 for c in cols]], axis=0)
     return [c for c, d, nrm in zip(cols, np.abs(np.diag(R))[1:], norms) if d <= ALIAS_TOL * nrm]
 
 
-def _rss_drops(A: np.ndarray, cols: list[int], y: np.ndarray) -> np.ndarray:
-    """RSS of the model without each of ``cols`` (the intercept stays), from one factor."""
-    Q, R = qr(A[:, [0] + [c + 1 for c in cols]], mode="economic", check_finite=False)
+def _rss_drops(Q: np.ndarray, R: np.ndarray, y: np.ndarray, rss: float) -> np.ndarray:
+    """RSS of the model without each of its columns (the intercept stays), from its factor."""
     beta = solve_triangular(R, Q.T @ y, check_finite=False)
     rinv = solve_triangular(R, np.eye(R.shape[0]), check_finite=False)
     # dropping column t raises RSS by beta_t^2 / [(R^T R)^-1]_tt = beta_t^2 / |row t of R^-1|^2
-    resid = y - Q @ (Q.T @ y)
-    rss = resid @ resid
     return rss + beta[1:] ** 2 / np.sum(rinv[1:] ** 2, axis=1)
 
 
@@ -130,29 +128,29 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> Stepwise
         raise ValueError(f"the initial model has {len(current)} terms, more than the cap of {max_terms}")
 
     def rss_of(cols):
-        Q = _basis(A, cols)
+        Q, R = _factor(A, cols)
         r = yc - Q @ (Q.T @ yc)
         r = r - Q @ (Q.T @ r)
-        return float(r @ r), Q, r
+        return float(r @ r), Q, R, r
 
-    rss, Q, r = rss_of(current)
+    rss, Q, R, r = rss_of(current)
     aic = aic_of(rss, n, len(current), k)
     trace = [Step("", aic, rss, len(current))]
     aliased_seen: set[int] = set()
     for _ in range(max_steps):
         # R first drops a term of the current model that is aliased with the others (Df 0), the last one first
-        dead = _aliased_in(A, current)
+        dead = _aliased_in(A, current, R)
         if dead:
             current.remove(dead[-1])
             aliased_seen.add(dead[-1])
-            rss, Q, r = rss_of(current)
+            rss, Q, R, r = rss_of(current)
             aic = aic_of(rss, n, len(current), k)
             trace.append(Step(f"- {names[dead[-1]]}", aic, rss, len(current)))
             continue
         # row 0: stay; then removals in model order; then additions in candidate order
         labels, scores = ["<none>"], [aic]
         if current:
-            drops = _rss_drops(A, current, yc)
+            drops = _rss_drops(Q, R, yc, rss)
             labels += [("-", c) for c in current]
             scores += [aic_of(max(v, 1e-300), n, len(current) - 1, k) for v in drops]
         if max_terms is None or len(current) < max_terms:
@@ -178,7 +176,7 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> Stepwise
             current.remove(j)
         else:
             current.append(j)
-        new_rss, Q, r = rss_of(current)
+        new_rss, Q, R, r = rss_of(current)
         new_aic = aic_of(new_rss, n, len(current), k)
         trace.append(Step(f"{sign} {names[j]}", new_aic, new_rss, len(current)))
         if progress is not None:
