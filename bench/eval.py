@@ -69,7 +69,15 @@ PY_SINGLE_CALLS = 2000
 PY_ROWS = 100_000
 PY_VECTOR_REPEATS = 5
 N1, N2 = 1_000, 11_000
-VARIANTS = [(s, p) for s in STYLES for p in PRECISIONS]
+# (style, precision, fma): the four plain builds, then the unrolled style with fused multiply-adds,
+# built for a core that has them (x86-64-v3) and without errno checks after sqrt (safe: see the header)
+VARIANTS = [(s, p, False) for s in STYLES for p in PRECISIONS] + [("unrolled", p, True) for p in PRECISIONS]
+FMA_FLAGS = ["-march=x86-64-v3", "-fno-math-errno"]
+
+
+def vlabel(v) -> str:
+    style, precision, fma = v
+    return f"{style} {precision}" + (" fma" if fma else "")
 ARM_CC = "arm-none-eabi-gcc -mcpu=cortex-m4 -mthumb -mfloat-abi=hard -mfpu=fpv4-sp-d16"
 
 C_BENCH = r"""
@@ -272,14 +280,14 @@ def template_ops(model: Model, style: str, fold_one: bool = False) -> Counter:
 
 # --- builds ---------------------------------------------------------------------------------
 
-def build_bench(model: Model, style: str, precision: str, root: Path) -> Path:
-    d = root / f"{style}-{precision}"
+def build_bench(model: Model, style: str, precision: str, fma: bool, root: Path) -> Path:
+    d = root / f"{style}-{precision}{'-fma' if fma else ''}"
     d.mkdir()
-    write_header(model, d, precision, style)
+    write_header(model, d, precision, style, fma=fma)
     src = d / "bench.c"
     src.write_text(C_BENCH)
     binary = d / "bench"
-    compile_checked("gcc", [src], binary, d)
+    compile_checked("gcc", [src], binary, d, FMA_FLAGS if fma else None)
     return binary
 
 
@@ -369,6 +377,7 @@ def disassembly(binary: Path, symbol_prefix: str = "tm_estimate") -> dict[int, t
     return out
 
 
+FMA_KIND = "FP fused multiply-add"
 MIX_KINDS = ("FP multiply", "FP add/sub", "FP fused multiply-add", "FP divide", "FP sqrt", "FP compare",
              "FP/SIMD move, load, store, logic",
              "integer ALU, address, load, store", "branch", "call, ret, push, pop")
@@ -411,10 +420,10 @@ def instruction_counts(binary: Path, inputs_file: Path, work: Path) -> dict:
 
 # --- 6. Cortex-M4F sizes ------------------------------------------------------------------------
 
-def arm_sizes(model: Model, style: str, precision: str, root: Path) -> dict:
-    d = root / f"arm-{style}-{precision}"
+def arm_sizes(model: Model, style: str, precision: str, fma: bool, root: Path) -> dict:
+    d = root / f"arm-{style}-{precision}{'-fma' if fma else ''}"
     d.mkdir()
-    write_header(model, d, precision, style)
+    write_header(model, d, precision, style, fma=fma)
     (d / "call.c").write_text(C_ARM)
     obj = d / "call.o"
     compile_checked(ARM_CC, [d / "call.c"], obj, d, ["-fstack-usage"], link=False)
@@ -446,6 +455,10 @@ def main() -> None:
     for tool in ("gcc", "valgrind", "objdump"):
         if shutil.which(tool) is None:
             sys.exit(f"{tool} not found")
+    flags = next((ln for ln in open("/proc/cpuinfo") if ln.startswith("flags")), "").split()
+    have_fma = {"fma", "avx2"} <= set(flags)
+    if not have_fma:
+        log("this CPU has no FMA/AVX2: the fma builds are skipped")
     have_arm = all(shutil.which(t) for t in ("arm-none-eabi-gcc", "arm-none-eabi-size", "arm-none-eabi-nm"))
 
     log("fitting the paper model ...")
@@ -459,13 +472,15 @@ def main() -> None:
         inputs_file = root / "inputs.f64"
         np.ascontiguousarray(X, dtype=np.float64).tofile(inputs_file)
         binaries = {}
-        for style, precision in VARIANTS:
-            log(f"C {style} {precision}: build, callgrind, Cortex-M4F sizes ...")
-            binary = build_bench(model, style, precision, root)
-            binaries[style, precision] = binary
-            results[style, precision] = {"ir": instruction_counts(binary, inputs_file, binary.parent)}
+        for v in VARIANTS:
+            if v[2] and not have_fma:
+                continue
+            log(f"C {vlabel(v)}: build, callgrind, Cortex-M4F sizes ...")
+            binary = build_bench(model, *v, root)
+            binaries[v] = binary
+            results[v] = {"ir": instruction_counts(binary, inputs_file, binary.parent)}
             if have_arm:
-                results[style, precision]["arm"] = arm_sizes(model, style, precision, root)
+                results[v]["arm"] = arm_sizes(model, *v, root)
         log(f"C timing: {TIME_REPEATS} rounds over the 4 builds ...")
         for v, ns in time_c(binaries, inputs_file).items():
             results[v]["ns"] = ns
@@ -500,18 +515,20 @@ def main() -> None:
           f"{fc['T']} terms ({', '.join(f'{k} {v}' for k, v in n_terms.items())}); model {model.sha256[:12]}.")
     print(f"Machine: {cpu or platform.processor()} ({platform.machine()}), {gcc_version}, "
           f"Python {platform.python_version()}, numpy {np.__version__}.")
-    print(f"C flags: gcc -O2 {' '.join(WARNING_FLAGS)}; inputs {N_VECTORS} vectors uniform in the input box.\n")
+    print(f"C flags: gcc -O2 {' '.join(WARNING_FLAGS)}; the fma builds add {' '.join(FMA_FLAGS)}; "
+          f"inputs {N_VECTORS} vectors uniform in the input box.\n")
 
-    base = statistics.median(results["unrolled", "double"]["ns"])
+    variants = [v for v in VARIANTS if v in results]
+    base = statistics.median(results["unrolled", "double", False]["ns"])
     print("## Time per estimate (all 5 outputs)\n")
-    print(f"C: median of {TIME_REPEATS} runs of ~{TIME_SECONDS:g} s each, the 4 builds in turn (bench loop "
+    print(f"C: median of {TIME_REPEATS} runs of ~{TIME_SECONDS:g} s each, the {len(variants)} builds in turn (bench loop "
           f"included); Python: "
           f"median of {PY_SINGLE_CALLS} single calls, and of {PY_VECTOR_REPEATS} calls on {PY_ROWS:,} rows.\n")
     print("| evaluator | ns per estimate (median) | min - max | vs. C unrolled double |")
     print("| --- | --- | --- | --- |")
-    for style, precision in VARIANTS:
-        med, lo, hi = median_spread(results[style, precision]["ns"])
-        print(f"| C {style} {precision} | {med:.1f} | {lo:.1f} - {hi:.1f} | {med / base:.2f}x |")
+    for v in variants:
+        med, lo, hi = median_spread(results[v]["ns"])
+        print(f"| C {vlabel(v)} | {med:.1f} | {lo:.1f} - {hi:.1f} | {med / base:.2f}x |")
     for label, xs in (("Python predict(row[None]), 1 row per call", single),
                       (f"Python predict(X), {PY_ROWS:,} rows per call", vector)):
         med, lo, hi = median_spread(xs)
@@ -534,49 +551,51 @@ def main() -> None:
     cols = [("unrolled, written", template_ops(model, "unrolled")),
             ("unrolled, written, x*1 folded", template_ops(model, "unrolled", fold_one=True)),
             ("table, written", template_ops(model, "table"))]
-    exe = {v: results[v]["ir"]["mix"] for v in VARIANTS}
+    exe = {v: results[v]["ir"]["mix"] for v in variants}
     print("| kind | " + " | ".join(c for c, _ in cols) + " | " +
-          " | ".join(f"executed, {s} {p}" for s, p in VARIANTS) + " |")
-    print("| --- " * (1 + len(cols) + len(VARIANTS)) + "|")
+          " | ".join(f"executed, {vlabel(v)}" for v in variants) + " |")
+    print("| --- " * (1 + len(cols) + len(variants)) + "|")
     mapping = [("mul", "FP multiply"), ("add", "FP add/sub"), ("div", "FP divide"), ("sqrt", "FP sqrt"),
                ("cbrt", None), ("compare", "FP compare"), ("isfinite", None)]
     for kind, exe_kind in mapping:
         row = [str(c[kind]) for _, c in cols]
-        row += [(f"{exe[v][exe_kind]:.0f}" if exe_kind else "-") for v in VARIANTS]
+        row += [(f"{exe[v][exe_kind]:.0f}" if exe_kind else "-") for v in variants]
         print(f"| {kind} | " + " | ".join(row) + " |")
     arith = ("mul", "add", "div", "sqrt", "cbrt")
     row = [str(sum(c[k] for k in arith)) for _, c in cols]
-    row += [f"{sum(exe[v][k] for k in ('FP multiply', 'FP add/sub', 'FP divide', 'FP sqrt')):.0f}" for v in VARIANTS]
-    print("| arithmetic total (mul+add+div+sqrt+cbrt) | " + " | ".join(row) + " |")
+    row += [f"{sum(exe[v][k] for k in ('FP multiply', 'FP add/sub', 'FP divide', 'FP sqrt')) + 2 * exe[v][FMA_KIND]:.0f}"
+            for v in variants]
+    print(f"| fused multiply-add | 0 | 0 | 0 | " + " | ".join(f"{exe[v][FMA_KIND]:.0f}" for v in variants) + " |")
+    print("| arithmetic total (mul+add+div+sqrt+cbrt, an fma counted as 2) | " + " | ".join(row) + " |")
 
     print(f"\n## Instructions per estimate (callgrind, x86-64)\n")
     print(f"Whole loop: (Ir({N2:,}) - Ir({N1:,})) / {N2 - N1:,} from the totals: line (call, bench loop and "
           f"output sums included). In tm_estimate: the cost lines of tm_estimate and its callees only. "
           f"Repeat: Ir of a second run at N1 minus the first.\n")
-    print("| style | precision | instr/estimate, whole loop | instr/estimate, in tm_estimate | floor 2T+P | "
+    print("| build | instr/estimate, whole loop | instr/estimate, in tm_estimate | floor 2T+P | "
           "whole loop / floor | tm_estimate / floor | repeat |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
-    for style, precision in VARIANTS:
-        ir = results[style, precision]["ir"]
-        print(f"| {style} | {precision} | {ir['loop']:.1f} | {ir['fn']:.1f} | {fc['floor']} | "
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for v in variants:
+        ir = results[v]["ir"]
+        print(f"| {vlabel(v)} | {ir['loop']:.1f} | {ir['fn']:.1f} | {fc['floor']} | "
               f"{ir['loop'] / fc['floor']:.2f}x | {ir['fn'] / fc['floor']:.2f}x | {ir['repeat']:+d} |")
 
     print("\nInstructions executed inside tm_estimate per estimate, by kind:\n")
-    print("| kind | " + " | ".join(f"{s} {p}" for s, p in VARIANTS) + " |")
-    print("| --- " * (1 + len(VARIANTS)) + "|")
+    print("| kind | " + " | ".join(vlabel(v) for v in variants) + " |")
+    print("| --- " * (1 + len(variants)) + "|")
     for kind in MIX_KINDS:
-        if not any(results[v]["ir"]["mix"][kind] for v in VARIANTS):
+        if not any(results[v]["ir"]["mix"][kind] for v in variants):
             continue
-        print(f"| {kind} | " + " | ".join(f"{results[v]['ir']['mix'][kind]:.1f}" for v in VARIANTS) + " |")
-    print("| total | " + " | ".join(f"{sum(results[v]['ir']['mix'].values()):.1f}" for v in VARIANTS) + " |")
+        print(f"| {kind} | " + " | ".join(f"{results[v]['ir']['mix'][kind]:.1f}" for v in variants) + " |")
+    print("| total | " + " | ".join(f"{sum(results[v]['ir']['mix'].values()):.1f}" for v in variants) + " |")
 
     print("\n## Target: unrolled within 1.5x of the floor in instructions\n")
-    print("| style | precision | in tm_estimate / floor | whole loop / floor | within 1.5x |")
-    print("| --- | --- | --- | --- | --- |")
-    for style, precision in VARIANTS:
-        ir = results[style, precision]["ir"]
+    print("| build | in tm_estimate / floor | whole loop / floor | within 1.5x |")
+    print("| --- | --- | --- | --- |")
+    for v in variants:
+        ir = results[v]["ir"]
         r = ir["fn"] / fc["floor"]
-        print(f"| {style} | {precision} | {r:.2f}x | {ir['loop'] / fc['floor']:.2f}x | {'yes' if r <= 1.5 else 'no'} |")
+        print(f"| {vlabel(v)} | {r:.2f}x | {ir['loop'] / fc['floor']:.2f}x | {'yes' if r <= 1.5 else 'no'} |")
 
     if have_arm:
         print("\n## Cortex-M4F sizes (bytes)\n")
@@ -586,12 +605,12 @@ def main() -> None:
               "the .o calls, not in its size; double arithmetic on the single-precision FPU is software "
               "(libgcc __aeabi_d*). Linked: flash a newlib program (nosys.specs, --gc-sections) grows by over "
               "an empty main, library code included.\n")
-        print("| style | precision | text | data | bss | flash (text+data) | RAM (data+bss) | stack | "
+        print("| build | text | data | bss | flash (text+data) | RAM (data+bss) | stack | "
               "linked flash | undefined symbols |")
-        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
-        for style, precision in VARIANTS:
-            a = results[style, precision]["arm"]
-            print(f"| {style} | {precision} | {a['text']} | {a['data']} | {a['bss']} | {a['text'] + a['data']} | "
+        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+        for v in variants:
+            a = results[v]["arm"]
+            print(f"| {vlabel(v)} | {a['text']} | {a['data']} | {a['bss']} | {a['text'] + a['data']} | "
                   f"{a['data'] + a['bss']} | {a['stack']} | {a['linked']} | {', '.join(a['undefined']) or '-'} |")
     else:
         print("\n(arm-none-eabi tools not found: Cortex-M4F sizes skipped)")

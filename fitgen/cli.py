@@ -214,8 +214,9 @@ def cmd_codegen(args) -> int:
     from .model import load_model
 
     model = load_model(args.model)
-    path = write_header(model, args.output, args.precision, args.style, args.prefix)
-    print(f"wrote {path} ({args.precision}, {args.style}, model {model.sha256[:12]})", file=sys.stderr)
+    path = write_header(model, args.output, args.precision, args.style, args.prefix, args.fma)
+    print(f"wrote {path} ({args.precision}, {args.style}{', fma' if args.fma else ''}, model {model.sha256[:12]})",
+          file=sys.stderr)
     return 0
 
 
@@ -286,6 +287,8 @@ def build_parser() -> Parser:
     c.add_argument("--precision", default="double", choices=("double", "float"))
     c.add_argument("--style", default="table", choices=("table", "unrolled"))
     c.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
+    c.add_argument("--fma", action="store_true",
+                   help="sum each term with fma(): fewer instructions on cores with fused multiply-add")
     c.set_defaults(func=cmd_codegen)
 
     d = sub.add_parser("demo", help="the main job end to end on the paper sensor")

@@ -66,6 +66,7 @@ class CModel:
     version: str
     uses_d: bool
     input_units: str
+    fma: bool  # each term added by fma(): one rounding instead of two
 
 
 def term_magnitudes(model: Model) -> dict[str, float]:
@@ -106,7 +107,8 @@ def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
     return lo.astype(float), hi.astype(float)
 
 
-def build_cmodel(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm") -> CModel:
+def build_cmodel(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",
+                 fma: bool = False) -> CModel:
     if precision not in PRECISIONS:
         raise InputError(f"precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
     if style not in STYLES:
@@ -146,6 +148,7 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
         version=__version__,
         uses_d=any(e.uses_d for e in model.equations),
         input_units=model.input_units if model.input_units in ("mT", "V", "codes") else "units",
+        fma=bool(fma),
     )
 
 
@@ -155,21 +158,22 @@ def _env() -> jinja2.Environment:
                               keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True)
 
 
-def render_header(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm") -> str:
-    """The text of ``<prefix>_model.h``."""
-    cm = build_cmodel(model, precision, style, prefix)
+def render_header(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",
+                  fma: bool = False) -> str:
+    """The text of ``<prefix>_model.h``; ``fma`` sums each term with C99 fma()/fmaf()."""
+    cm = build_cmodel(model, precision, style, prefix, fma)
     if model.n_inputs > 30:
         raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most 30")
     return _env().get_template("model.h.j2").render(m=cm, exp_codes=[EXP_CODE[e] for e in EXPONENTS])
 
 
 def write_header(model: Model, folder: str | Path, precision: str = "double", style: str = "table",
-                 prefix: str = "tm") -> Path:
+                 prefix: str = "tm", fma: bool = False) -> Path:
     folder = Path(folder)
     if not folder.is_dir():
         try:
             folder.mkdir(parents=True)
         except OSError as exc:
             raise InputError(f"cannot create {folder}: {exc.strerror}") from None
-    text = render_header(model, precision, style, prefix)
+    text = render_header(model, precision, style, prefix, fma)
     return write_atomic(folder / f"{prefix}_model.h", text)

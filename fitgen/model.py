@@ -16,6 +16,7 @@ import numpy as np
 from . import __version__
 from .errors import InputError
 from .fileio import canonical_json, read_text, sha256_hex, write_atomic
+from .fma import fma as fused_multiply_add
 from .pose import POSE_NAMES, POSE_UNITS
 from .terms import DISPLACEMENTS, Term, design_matrix, parse_term
 
@@ -90,8 +91,11 @@ class Model:
         clamped = np.clip(np.where(np.isfinite(v), v, self.input_min), self.input_min, self.input_max)
         return clamped, status
 
-    def predict(self, inputs: np.ndarray, with_status: bool = False):
-        """Outputs (n, n_outputs) for rows of inputs; rows with a non-finite input give 0."""
+    def predict(self, inputs: np.ndarray, with_status: bool = False, fma: bool = False):
+        """Outputs (n, n_outputs) for rows of inputs; rows with a non-finite input give 0.
+
+        ``fma``: each term added with one rounding, as C generated with fused multiply-adds does.
+        """
         v, status = self.clamp(inputs)
         out = np.zeros((v.shape[0], len(self.equations)))
         d = np.zeros((v.shape[0], 3))
@@ -100,7 +104,7 @@ class Model:
             # summed term by term in model order, as the generated C does, so that both round alike
             acc = np.full(v.shape[0], eq.intercept)
             for c, col in zip(eq.coefficients, cols.T):
-                acc = acc + c * col
+                acc = fused_multiply_add(c, col, acc) if fma else acc + c * col
             out[:, j] = acc
             if eq.name in DISPLACEMENTS:
                 d[:, DISPLACEMENTS.index(eq.name)] = out[:, j]

@@ -32,7 +32,7 @@ def cmd_verify(args) -> int:
     for precision in precisions:
         for style in styles:
             res = verify(model, precision, style, cc=args.cc, runner=args.runner or "", prefix=args.prefix,
-                         n_random=args.vectors, extra_inputs=extra)
+                         n_random=args.vectors, extra_inputs=extra, fma=args.fma)
             print(res.table())
             print("PASS" if res.ok else "FAIL: " + "; ".join(res.failures))
             print()
@@ -278,6 +278,7 @@ def build_parser() -> Parser:
     v.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
     v.add_argument("--vectors", type=int, default=2000, help="random vectors inside the domain (default 2000)")
     v.add_argument("--data", help="also run the rows of this dataset")
+    v.add_argument("--fma", action="store_true", help="generate with fused multiply-adds (fitgen codegen --fma)")
     v.set_defaults(func=cmd_verify)
 
     r = sub.add_parser("read", help="stream readings and pose estimates from I2C ADCs")

@@ -38,15 +38,16 @@ class CompiledModel:
     """
 
     def __init__(self, model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",
-                 cc: str = "gcc", runner: str = "", workdir: str | Path | None = None, cflags: list[str] | None = None):
-        self.model, self.precision, self.style, self.prefix = model, precision, style, prefix
+                 cc: str = "gcc", runner: str = "", workdir: str | Path | None = None, cflags: list[str] | None = None,
+                 fma: bool = False):
+        self.model, self.precision, self.style, self.prefix, self.fma = model, precision, style, prefix, fma
         self.runner = shlex.split(runner) if runner else []
         self._tmp = None
         if workdir is None:
             self._tmp = tempfile.TemporaryDirectory(prefix="fitgen-c-")
             workdir = self._tmp.name
         self.dir = Path(workdir)
-        self.header = write_header(model, self.dir, precision, style, prefix)
+        self.header = write_header(model, self.dir, precision, style, prefix, fma)
         main = _env().get_template("vector_main.c.j2").render(P=prefix, U=prefix.upper(),
                                                                version=model.to_dict()["generator"])
         src = self.dir / f"{prefix}_vectors.c"
