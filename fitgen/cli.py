@@ -40,7 +40,20 @@ def cmd_simulate(args) -> int:
     chosen = [x for x in (args.grid, args.random, args.poses) if x is not None]
     if len(chosen) > 1:
         raise InputError("give one of --grid, --random, --poses")
-    if args.poses:
+    if args.scene and (args.grid or args.poses or args.ranges):
+        raise InputError("--scene sets the poses: give it with --random N or alone, not with --grid, --poses, --ranges")
+    scene_info = {}
+    if args.scene:
+        from .scenes import load_scene
+
+        scene = load_scene(args.scene)
+        scene_info = {"scene": scene.name, "scene_spec": args.scene, "scene_outputs": list(scene.outputs)}
+    if args.scene and args.random is None:
+        poses, source = scene.poses(), {"scene_grid_levels": scene.levels}
+    elif args.scene:
+        poses = random_poses(args.random, scene.ranges, pose_rng(args.seed))
+        source = {"random": args.random}
+    elif args.poses:
         poses, source = load_poses(args.poses), {"poses_file": str(args.poses)}
     elif args.random is not None:
         poses = random_poses(args.random, parse_ranges(args.ranges), pose_rng(args.seed))
@@ -49,7 +62,7 @@ def cmd_simulate(args) -> int:
         grid = args.grid or "paper-sim"
         poses, source = grid_poses(parse_grid(grid)), {"grid": grid}
     ds = simulate(sensor, poses, noise=_noise(args.noise, sensor), adc_bits=args.adc_bits,
-                  seed=args.seed, provenance=source)
+                  seed=args.seed, provenance={**source, **scene_info})
     ds.save(args.output)
     print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}",
           file=sys.stderr)
@@ -72,6 +85,9 @@ def cmd_observe(args) -> int:
     report = observe(sensor, ranges, scene.outputs, noise=noise, accuracy=accuracy)
     print(f"sensor {sensor.name} ({sensor.n_elements} elements, {sensor.transfer}), scene {scene.name}")
     print(report.text(), end="")
+    for c in report.unresolved():
+        print(f"warning: scene {scene.name} asks for {c}, which sensor {sensor.name} cannot resolve to "
+              f"{report.accuracy[c]:g} {'deg' if c.startswith('th') else 'mm'} everywhere in its box", file=sys.stderr)
     return 0
 
 
@@ -104,6 +120,35 @@ def _outputs(spec):
     return names
 
 
+def _scene_outputs(args, ds):
+    """The outputs a scene asks for (--scene, or the scene the dataset was simulated for), after
+    checking that the sensor resolves them; None when no scene applies."""
+    from .scenes import load_scene, unresolved_warnings
+    from .sensor import load_sensor
+
+    spec = args.scene or ds.meta.get("scene_spec")
+    if spec is None:
+        return None
+    if args.outputs:
+        raise InputError("give --outputs or a scene, not both (the scene names the outputs)")
+    scene = load_scene(spec)
+    missing = [o for o in scene.outputs if o not in ds.target_names]
+    if missing:
+        raise InputError(f"scene {scene.name} asks for {missing[0]}, which dataset {args.data} does not have")
+    if not args.force:
+        sensor_spec = args.sensor or ds.meta.get("sensor")
+        if sensor_spec is None:
+            raise InputError("give --sensor (to check that it resolves the scene's outputs) or --force")
+        sensor = load_sensor(sensor_spec)
+        if ds.meta.get("transfer") in ("raw", "gmr"):
+            sensor = sensor.with_transfer(ds.meta["transfer"])
+        bad = unresolved_warnings(sensor, scene)
+        if bad:
+            raise InputError(f"scene {scene.name}: sensor {sensor.name} cannot resolve {bad[0]} "
+                             f"Fit anyway with --force, or use a scene without it.")
+    return scene.outputs
+
+
 def cmd_fit(args) -> int:
     from .dataset import load_dataset
     from .fit import fit_model
@@ -111,7 +156,7 @@ def cmd_fit(args) -> int:
 
     settings = _settings(args)
     ds = load_dataset(args.data)
-    outputs = _outputs(args.outputs) or ds.target_names
+    outputs = _scene_outputs(args, ds) or _outputs(args.outputs) or ds.target_names
     bar = Progress("fit", len(outputs))
     state = {"name": None}
 
@@ -241,6 +286,7 @@ def build_parser() -> Parser:
     s.add_argument("--noise", default="0", help="element noise rms in output units, or 'sensor' (default 0)")
     s.add_argument("--adc-bits", type=int, help="override the transfer's ADC bits (0: no quantisation)")
     s.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
+    s.add_argument("--scene", help="full, slide, press or a scene TOML: simulate its grid (or --random N in its box)")
     s.add_argument("-o", "--output", required=True, help="dataset CSV to write")
     s.set_defaults(func=cmd_simulate)
 
@@ -264,6 +310,9 @@ def build_parser() -> Parser:
     f.add_argument("--no-d-terms", action="store_true", help="rotations without the displacement terms")
     f.add_argument("--true-d", action="store_true",
                    help="rotation d-terms from the true displacements instead of the fitted estimates")
+    f.add_argument("--scene", help="fit only the outputs of this scene (default: the dataset's scene, if any)")
+    f.add_argument("--sensor", help="sensor to check the scene against (default: the dataset's)")
+    f.add_argument("--force", action="store_true", help="fit a scene's outputs even if the sensor cannot resolve them")
     f.set_defaults(func=cmd_fit)
 
     pr = sub.add_parser("predict", help="estimates for the rows of a dataset")

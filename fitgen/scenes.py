@@ -6,10 +6,12 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from .errors import InputError
 from .fileio import read_text
 from .pose import POSE_NAMES
-from .simulate import DEFAULT_RANGES
+from .simulate import DEFAULT_RANGES, grid_poses
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -29,6 +31,18 @@ class Scene:
     def fixed(self) -> tuple[str, ...]:
         """Components the scene holds at 0 (range of width 0)."""
         return tuple(n for n in POSE_NAMES if self.ranges[n][0] == self.ranges[n][1])
+
+    def grid(self) -> dict[str, list[float]]:
+        """Grid levels: ``levels`` evenly spaced values over each range; a held component at its value."""
+        out = {}
+        for n in POSE_NAMES:
+            lo, hi = self.ranges[n]
+            out[n] = [float(lo)] if lo == hi else np.linspace(lo, hi, self.levels).round(12).tolist()
+        return out
+
+    def poses(self) -> np.ndarray:
+        """The scene's full factorial grid of poses (n, 5)."""
+        return grid_poses(self.grid())
 
 
 _ZERO_TILT = {**DEFAULT_RANGES, "thx": (0.0, 0.0), "thy": (0.0, 0.0)}
@@ -81,3 +95,12 @@ def load_scene(spec: str | None) -> Scene:
         raise InputError(f"{origin}: 'name' must be a string")
     ordered = tuple(n for n in POSE_NAMES if n in outputs)
     return Scene(name, ordered, ranges, levels)
+
+
+def unresolved_warnings(sensor, scene: Scene, accuracy: dict | None = None) -> list[str]:
+    """One line per scene output the sensor cannot resolve to the required accuracy (fitgen.observe)."""
+    from .observe import observe
+
+    report = observe(sensor, scene.ranges, scene.outputs, accuracy=accuracy)
+    bad = set(report.unresolved())
+    return [v for c, v in zip(report.components, report.verdicts()) if c in bad]

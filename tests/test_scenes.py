@@ -1,0 +1,98 @@
+"""Scenes carried through simulate, fit and codegen: only the outputs and poses a use needs."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fitgen.codegen import render_header
+from fitgen.model import load_model
+from fitgen.scenes import PRESETS, load_scene
+from fitgen.sensor import load_sensor
+
+from conftest import assert_one_line_error, run_cli
+
+SMALL_FULL = """
+name = "small-full"
+outputs = ["dx", "dy", "dz", "thx", "thy"]
+levels = 3
+[ranges]
+dx = [-1.5, 1.5]
+dy = [-1.5, 1.5]
+dz = [-2.0, 0.0]
+thx = [-4.0, 4.0]
+thy = [-4.0, 4.0]
+"""
+
+
+def test_scene_grids_hold_what_the_scene_holds():
+    press = PRESETS["press"].poses()
+    assert press.shape == (21, 5)
+    assert np.all(press[:, [0, 1, 3, 4]] == 0)
+    assert press[:, 2].min() == PRESETS["press"].ranges["dz"][0]
+    slide = PRESETS["slide"].poses()
+    assert slide.shape == (125, 5) and np.all(slide[:, 3:] == 0)
+    assert PRESETS["full"].poses().shape == (5 ** 5, 5)
+
+
+def test_press_scene_end_to_end(tmp_path):
+    data, model_path = tmp_path / "press.csv", tmp_path / "press.json"
+    proc = run_cli("fitgen", "simulate", "--scene", "press", "-o", str(data))
+    assert proc.returncode == 0, proc.stderr
+    meta = json.loads((tmp_path / "press.csv.meta.json").read_text())
+    assert meta["scene"] == "press" and meta["scene_outputs"] == ["dz"] and meta["rows"] == 21
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(model_path))
+    assert proc.returncode == 0, proc.stderr
+    model = load_model(model_path)
+    assert model.output_names == ("dz",)
+    header = render_header(model, "float", "table")
+    assert "#define TM_N_OUTPUTS 1" in header and "tm_terms_thx" not in header
+
+
+def test_fit_refuses_a_scene_the_sensor_cannot_resolve(tmp_path):
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL_FULL)
+    data = tmp_path / "full.csv"
+    assert run_cli("fitgen", "simulate", "--scene", str(scene), "-o", str(data)).returncode == 0
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"))
+    # the paper's single ring cannot tell tilt from slide at rest (docs/observe.md)
+    assert_one_line_error(proc, 2, "cannot resolve")
+    assert not (tmp_path / "m.json").exists()
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--force", "--max-terms", "6")
+    assert proc.returncode == 0, proc.stderr
+    assert load_model(tmp_path / "m.json").output_names == ("dx", "dy", "dz", "thx", "thy")
+
+
+def test_observe_warns_for_unresolvable_scene_outputs():
+    proc = run_cli("fitgen", "observe", "paper", "--scene", "full")
+    assert proc.returncode == 0
+    warned = {ln.split(" asks for ")[1].split(",")[0] for ln in proc.stderr.splitlines() if ln.startswith("warning:")}
+    assert warned == {"dx", "dy", "thx", "thy"}
+    proc = run_cli("fitgen", "observe", "paper", "--scene", "slide")
+    assert proc.returncode == 0 and "warning" not in proc.stderr
+
+
+@pytest.mark.parametrize("args, msg", [
+    (["--scene", "press", "--grid", "paper-sim"], "--scene sets the poses"),
+    (["--scene", "nope"], "not a preset"),
+])
+def test_simulate_scene_bad_options(tmp_path, args, msg):
+    assert_one_line_error(run_cli("fitgen", "simulate", *args, "-o", str(tmp_path / "x.csv")), 2, msg)
+
+
+def test_fit_scene_with_outputs_is_refused(tmp_path):
+    data = tmp_path / "p.csv"
+    assert run_cli("fitgen", "simulate", "--scene", "press", "-o", str(data)).returncode == 0
+    assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--outputs", "dx"),
+                          2, "not both")
+
+
+def test_scene_toml_levels_and_unresolved_check_agree_with_observe(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text(SMALL_FULL)
+    s = load_scene(str(scene))
+    assert s.poses().shape == (3 ** 5, 5)
+    from fitgen.scenes import unresolved_warnings
+
+    assert unresolved_warnings(load_sensor("paper"), PRESETS["slide"]) == []
+    assert len(unresolved_warnings(load_sensor("paper"), s)) == 4
