@@ -20,7 +20,7 @@ from .fileio import write_atomic
 from .model import Model
 from .terms import DISPLACEMENTS, EXPONENTS
 
-PRECISIONS = ("double", "float")
+PRECISIONS = ("double", "float", "fixed")  # fixed: integer codes in, int32 out (fitgen/fixedpoint.py)
 STYLES = ("table", "unrolled")
 # C enum names of the exponent kinds, in EXPONENTS order
 EXP_CODE = {"1": "P1", "2": "P2", "3": "P3", "4": "P4", "-1": "M1", "-2": "M2", "-3": "M3", "-4": "M4",
@@ -111,6 +111,8 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
                  fma: bool = False) -> CModel:
     if precision not in PRECISIONS:
         raise InputError(f"precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
+    if precision == "fixed":
+        raise InputError("fixed point has its own plan: use fitgen.fixedpoint.build_fixed")
     if style not in STYLES:
         raise InputError(f"style must be one of {', '.join(STYLES)}, got {style!r}")
     prefix = identifier(prefix, "prefix")
@@ -158,9 +160,42 @@ def _env() -> jinja2.Environment:
                               keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True)
 
 
+def _prefix(prefix: str) -> str:
+    prefix = identifier(prefix, "prefix")
+    if len(prefix) > 16:
+        raise InputError(f"prefix {prefix!r} is longer than 16 characters")
+    return prefix
+
+
+def render_fixed_header(fm, prefix: str = "tm") -> str:
+    """The text of ``<prefix>_model.h`` for a fixed-point plan (:class:`fitgen.fixedpoint.FixedModel`)."""
+    prefix = _prefix(prefix)
+    units = fm.input_units if fm.input_units in ("mT", "V", "codes") else "units"
+    return _env().get_template("model_fixed.h.j2").render(
+        m=fm, P=prefix, U=prefix.upper(), input_units=units,
+        input_lsb=c_real(fm.input_lsb, "double"), input_offset=c_real(fm.input_offset, "double"))
+
+
 def render_header(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",
-                  fma: bool = False) -> str:
-    """The text of ``<prefix>_model.h``; ``fma`` sums each term with C99 fma()/fmaf()."""
+                  fma: bool = False, input_lsb: float | None = None, input_offset: float | None = None) -> str:
+    """The text of ``<prefix>_model.h``; ``fma`` sums each term with C99 fma()/fmaf().
+
+    ``precision="fixed"``: integer ADC codes in (value = input_offset + input_lsb * code; by
+    default the scale of the model's sensor, see :func:`fitgen.fixedpoint.default_input_scale`),
+    int32 outputs out; ``style`` does not apply (the fixed header is straight-line code).
+    """
+    if precision == "fixed":
+        from .fixedpoint import build_fixed, default_input_scale
+
+        if fma:
+            raise InputError("--fma does not apply to fixed point (it has no floating-point multiply-add)")
+        _prefix(prefix)
+        if input_lsb is None:
+            input_lsb, default_offset, _ = default_input_scale(model)
+            input_offset = default_offset if input_offset is None else input_offset
+        return render_fixed_header(build_fixed(model, input_lsb, input_offset or 0.0), prefix)
+    if input_lsb is not None or input_offset is not None:
+        raise InputError("an input LSB and offset apply to --precision fixed only")
     cm = build_cmodel(model, precision, style, prefix, fma)
     if model.n_inputs > 30:
         raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most 30")
@@ -168,12 +203,13 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
 
 
 def write_header(model: Model, folder: str | Path, precision: str = "double", style: str = "table",
-                 prefix: str = "tm", fma: bool = False) -> Path:
+                 prefix: str = "tm", fma: bool = False, input_lsb: float | None = None,
+                 input_offset: float | None = None) -> Path:
     folder = Path(folder)
+    text = render_header(model, precision, style, prefix, fma, input_lsb, input_offset)
     if not folder.is_dir():
         try:
             folder.mkdir(parents=True)
         except OSError as exc:
             raise InputError(f"cannot create {folder}: {exc.strerror}") from None
-    text = render_header(model, precision, style, prefix, fma)
     return write_atomic(folder / f"{prefix}_model.h", text)

@@ -62,6 +62,9 @@ class CEngine:
                  cc: str = "gcc", workdir: str | Path | None = None):
         if precision not in PRECISIONS:
             raise InputError(f"precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
+        if precision == "fixed":
+            raise InputError("the C engine takes input values (a double or float build); a fixed-point build takes "
+                             "ADC codes: check it with tactile-host verify --precision fixed")
         self.model, self.precision = model, precision
         self.n_inputs, self.n_outputs = model.n_inputs, len(model.equations)
         self._tmp = None

@@ -1,0 +1,358 @@
+"""Fixed-point generation (integer ADC codes in, int32 out, no floating point): the C against the numpy
+model of the same integer arithmetic, against double within the plan's bound, and the plan's proof."""
+
+import json
+import re
+import subprocess
+
+import numpy as np
+import pytest
+
+from fitgen.codegen import render_fixed_header, render_header, write_header
+from fitgen.errors import InputError
+from fitgen.fit import FitSettings, fit_model
+from fitgen.fixedpoint import BUDGET, INT32_MAX, INT32_MIN, build_fixed, default_input_scale
+from fitgen.model import Equation, Model
+from fitgen.sensor import load_sensor
+from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.terms import FAMILIES, Term
+from host.compiled import CompiledModel, compile_checked
+from host.verify import make_code_vectors, verify
+
+from conftest import assert_one_line_error, require_tool, run_cli
+
+M0 = ["-mcpu=cortex-m0", "-mthumb", "-mfloat-abi=soft"]
+
+
+@pytest.fixture(scope="module")
+def paper_fixed_model():
+    """The paper sensor in volts (16-bit ADC), fitted with integer powers only."""
+    ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
+    return fit_model(ds, settings=FitSettings(exponents=FAMILIES["no-roots"]))
+
+
+@pytest.fixture(scope="module")
+def plan(paper_fixed_model):
+    lsb, off, _ = default_input_scale(paper_fixed_model)
+    return build_fixed(paper_fixed_model, lsb, off)
+
+
+@pytest.fixture(scope="module")
+def compiled(paper_fixed_model):
+    require_tool("gcc")
+    with CompiledModel(paper_fixed_model, "fixed", cflags=["-Wconversion", "-Wsign-conversion"]) as cm:
+        yield cm
+
+
+def every_kind_model() -> Model:
+    """Every integer power of every element, d-terms and v*d products, an element whose domain
+    crosses zero (positive powers only there), coefficients over many decades."""
+    rng = np.random.default_rng(7)
+    lo = np.array([0.05, 0.5, -1.5, 2.0])
+    hi = np.array([3.0, 2.5, 1.0, 40.0])
+
+    def eq(name, terms, low, high):
+        mags = 10 ** rng.uniform(low, high, len(terms))
+        coefs = tuple(float(c) for c in rng.choice([-1, 1], len(terms)) * mags)
+        return Equation(name, float(rng.normal()), tuple(terms), coefs)
+
+    exps = ("1", "2", "3", "4", "-1", "-2", "-3", "-4")
+    powers = [Term(k, e) for k in (1, 2, 4) for e in exps] + [Term(3, e) for e in ("1", "2", "3", "4")]
+    d_terms = [Term(mult=d) for d in ("dx", "dy", "dz")] + [Term(k, "1", d) for k in (1, 2, 3, 4) for d in ("dx", "dz")]
+    return Model(lo, hi, (eq("dx", powers[:14], -4, 0), eq("dy", powers[14:], -6, -2), eq("dz", powers[::3], -5, -1),
+                          eq("thx", d_terms, -3, 0), eq("thy", powers[1::2] + d_terms[:4], -5, -1)), "V")
+
+
+# --- the C against the numpy integer model ---------------------------------------------------------
+
+
+def test_c_equals_numpy_integer_model(compiled, plan):
+    codes, kinds = make_code_vectors(plan, n_random=3000, seed=1)
+    assert "corner" in kinds and kinds.count("corner") == 2**8
+    assert np.any(codes == INT32_MIN) and np.any(codes == INT32_MAX)
+    out, status = compiled.predict_codes(codes)
+    ref, ref_status = plan.predict_codes(codes)
+    assert np.array_equal(status, ref_status)
+    # the same integer operations in the same order: exact, not merely within 1 LSB
+    assert np.array_equal(out, ref)
+    assert out.dtype == np.int64 and np.all(np.abs(out) <= INT32_MAX)
+
+
+def test_status_and_clamping_in_codes(compiled, plan):
+    lo, hi = np.array(plan.code_min), np.array(plan.code_max)
+    mid = (lo + hi) // 2
+    rows = np.vstack([mid, lo, hi, mid, mid, mid, mid])
+    rows[3, 0] = lo[0] - 1
+    rows[4, 7] = hi[7] + 1
+    rows[5, :] = INT32_MIN
+    rows[6, 2] = INT32_MAX
+    out, status = compiled.predict_codes(rows)
+    assert status.tolist() == [0, 0, 0, 1, 1 << 7, 255, 1 << 2]
+    # a clamped code gives the answer of the domain's edge
+    edge = rows[3].copy()
+    edge[0] = lo[0]
+    assert np.array_equal(compiled.predict_codes(edge[None, :])[0][0], out[3])
+    assert np.array_equal(out[5], compiled.predict_codes(lo[None, :])[0][0])
+
+
+def test_code_domain_matches_value_domain(paper_fixed_model, plan):
+    # the model was fitted on 16-bit codes: its domain is a whole number of codes, kept exactly
+    vals = plan.input_offset + plan.input_lsb * np.array(plan.code_min, dtype=float)
+    assert np.allclose(vals, paper_fixed_model.input_min, rtol=1e-12, atol=0)
+    vals = plan.input_offset + plan.input_lsb * np.array(plan.code_max, dtype=float)
+    assert np.allclose(vals, paper_fixed_model.input_max, rtol=1e-12, atol=0)
+    # otherwise rounded inward: every code inside has its value inside the model's domain
+    m = Model(paper_fixed_model.input_min + 0.3e-4, paper_fixed_model.input_max - 0.3e-4,
+              paper_fixed_model.equations, "V")
+    fm = build_fixed(m, plan.input_lsb)
+    assert np.all(fm.input_lsb * np.array(fm.code_min) >= m.input_min)
+    assert np.all(fm.input_lsb * np.array(fm.code_max) <= m.input_max)
+    assert np.all(fm.input_lsb * (np.array(fm.code_min) - 1) < m.input_min)
+
+
+# --- against double ---------------------------------------------------------------------------------
+
+
+def test_against_double_within_bound(paper_fixed_model, plan):
+    require_tool("gcc")
+    res = verify(paper_fixed_model, "fixed", "unrolled", n_random=2000, seed=2)
+    assert res.ok, res.failures
+    assert np.all(res.max_lsb_diff == 0)
+    assert np.all(res.max_ratio <= 1.0)
+    # the bound is not vacuous: the measured error reaches a visible part of it ...
+    assert np.min(res.max_ratio) > 0.05
+    # ... and it is small in the outputs' units
+    bound = dict(zip(plan.output_names, plan.error_bound()))
+    assert bound["dx"] < 1e-6 and bound["dy"] < 1e-6 and bound["dz"] < 1e-4
+    assert bound["thx"] < 2e-3 and bound["thy"] < 2e-3
+
+
+def test_every_kind_offset_and_negative_domain():
+    """A non-integral offset (u in Q(f) with f > 0), an odd LSB, all integer powers, d-terms."""
+    require_tool("gcc")
+    model = every_kind_model()
+    res = verify(model, "fixed", "unrolled", n_random=1500, input_lsb=1.7e-4, input_offset=-0.123456789)
+    assert res.ok, res.failures
+    assert np.all(res.max_lsb_diff == 0)
+    fm = build_fixed(model, 1.7e-4, -0.123456789)
+    assert fm.op("u1").frac_bits > 0  # the offset is not a whole number of codes
+    assert fm.op("u3").lo < 0 < fm.op("u3").hi
+    assert {op.kind for op in fm.ops} == {"input", "mul", "recip", "init", "term", "out"}
+
+
+# --- the proof -------------------------------------------------------------------------------------
+
+
+def _check_trace(fm, codes):
+    out, _, tr = fm.predict_codes(codes, trace=True)
+    out_x, _, tr_x = fm.predict_codes(codes, trace=True, exact=True)
+    # the int64 evaluation never wrapped around: it equals the evaluation on unbounded integers
+    assert np.array_equal(out, out_x.astype(np.int64))
+    for op in fm.ops:
+        # the plan's claims lie inside the budgets ...
+        assert -BUDGET[op.bits] <= op.lo <= op.hi <= BUDGET[op.bits], op
+        assert -BUDGET[64] <= op.wide_lo <= op.wide_hi <= BUDGET[64], op
+        val, wide = tr_x[op.name]
+        # ... and every value computed at the test points lies inside the plan's proven range
+        assert np.all((val >= op.lo) & (val <= op.hi)), (op.name, val.min(), val.max(), op.lo, op.hi)
+        if wide is not None:
+            assert np.all((wide >= op.wide_lo) & (wide <= op.wide_hi)), op.name
+        assert np.array_equal(tr[op.name][0], val.astype(np.int64))
+
+
+def test_proof_holds_at_corners_and_edges(plan):
+    codes, kinds = make_code_vectors(plan, n_random=500, seed=3)
+    _check_trace(plan, codes)
+    corners = codes[[k == "corner" for k in kinds]]
+    assert len(corners) == 256
+    # the ranges are not loose for the powers: their extremes are reached at the domain's corners
+    _, _, tr = plan.predict_codes(corners, trace=True)
+    for op in plan.ops:
+        if op.kind in ("input", "recip") or (op.kind == "mul" and not op.name.startswith("vd")):
+            assert tr[op.name][0].min() == op.lo and tr[op.name][0].max() == op.hi, op.name
+
+
+def test_proof_every_kind():
+    fm = build_fixed(every_kind_model(), 1.7e-4, -0.123456789)
+    codes, _ = make_code_vectors(fm, n_random=500, seed=4)
+    _check_trace(fm, codes)
+
+
+def test_error_bound_holds_on_numpy_model(plan, paper_fixed_model):
+    codes, _ = make_code_vectors(plan, n_random=4000, seed=5)
+    out, _ = plan.predict_codes(codes)
+    ref = plan.reference_model().predict(plan.code_values(codes))
+    err = np.abs(plan.to_real(out) - ref).max(axis=0)
+    assert np.all(err <= plan.error_bound())
+    assert np.all(err > 0)
+
+
+# --- the header ------------------------------------------------------------------------------------
+
+
+def _code_only(text: str) -> str:
+    text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
+    return "\n".join(ln for ln in text.splitlines() if not ln.lstrip().startswith("#define"))
+
+
+def test_header_api_and_no_floating_point(paper_fixed_model, plan):
+    text = render_header(paper_fixed_model, "fixed")
+    for needle in ("#define TM_FIXED_POINT 1", "#define TM_N_INPUTS 8", "#define TM_N_OUTPUTS 5",
+                   "#define TM_STATUS_NONFINITE (-1)", "#define TM_PRECISION_FLOAT 0", "#define TM_FMA 0",
+                   "typedef int32_t tm_input;", "typedef int32_t tm_output;", "static const signed char tm_out_frac_bits",
+                   "static const int32_t tm_input_min[TM_N_INPUTS]", "#define TM_INPUT_LSB 5.03547722590981",
+                   "TM_API int tm_estimate(const tm_input in[TM_N_INPUTS], tm_output out[TM_N_OUTPUTS])",
+                   f"#define TM_MODEL_HASH \"{paper_fixed_model.sha256}\"", "#include <stdint.h>"):
+        assert needle in text, needle
+    assert re.findall(r"#include <(\w+)\.h>", text) == ["stdint"]
+    code = _code_only(text)
+    assert not re.search(r"\b(float|double|math)\b", code)
+    assert not re.search(r"\d\.\d", code)  # no floating literal
+    assert f"#define TM_OUT_FRAC_BITS {{ {', '.join(str(f) for f in plan.out_frac_bits)} }}" in text
+
+
+def test_generation_is_deterministic(paper_fixed_model, tmp_path):
+    a = write_header(paper_fixed_model, tmp_path / "a", "fixed").read_bytes()
+    b = write_header(paper_fixed_model, tmp_path / "b", "fixed").read_bytes()
+    assert a == b
+    lsb, off, _ = default_input_scale(paper_fixed_model)
+    assert render_fixed_header(build_fixed(paper_fixed_model, lsb, off)).encode() == a
+    assert render_header(paper_fixed_model, "fixed", prefix="pad") != a.decode()
+
+
+def test_cortex_m0_build_has_no_floating_point(paper_fixed_model, tmp_path):
+    require_tool("arm-none-eabi-gcc")
+    require_tool("arm-none-eabi-nm")
+    write_header(paper_fixed_model, tmp_path, "fixed")
+    src = tmp_path / "use.c"
+    src.write_text('#include "tm_model.h"\nint use(const tm_input *in, tm_output *out);\n'
+                   "int use(const tm_input *in, tm_output *out) { return tm_estimate(in, out); }\n")
+    obj = tmp_path / "use.o"
+    compile_checked("arm-none-eabi-gcc", [src], obj, tmp_path, M0 + ["-Wconversion", "-Wsign-conversion"], link=False)
+    nm = subprocess.run(["arm-none-eabi-nm", str(obj)], capture_output=True, text=True, check=True).stdout
+    undefined = [ln.split()[-1] for ln in nm.splitlines() if ln.split()[0] == "U"]
+    assert undefined, nm  # the 64-bit integer helpers
+    for sym in undefined:
+        assert not re.match(r"__aeabi_[fd]|__aeabi_[ilu]+2[fd]|__(add|sub|mul|div|cmp|fix|float)[sd]f|__.*[sd]f\d", sym), sym
+        assert sym in ("__aeabi_lmul", "__aeabi_ldivmod", "__aeabi_llsr", "__aeabi_llsl", "__aeabi_lasr",
+                       "__aeabi_uldivmod", "__aeabi_idiv", "__aeabi_uidiv"), sym
+    size = subprocess.run(["arm-none-eabi-size", str(obj)], capture_output=True, text=True, check=True)
+    text_bytes = int(size.stdout.splitlines()[1].split()[0])
+    assert 500 < text_bytes < 32000
+
+
+def test_native_build_warning_free_with_conversion_warnings(compiled):
+    # the fixture compiled with -Wconversion -Wsign-conversion on top of the project's flags (and -Werror)
+    assert compiled.binary.exists()
+
+
+# --- refusals and the command line -------------------------------------------------------------------
+
+
+def test_refusals(paper_fixed_model, tmp_path):
+    roots = Model(np.array([0.5, 0.5]), np.array([2.0, 2.0]),
+                  (Equation("dx", 0.1, (Term(1, "1/2"), Term(2, "-1")), (1.0, 2.0)),), "V")
+    with pytest.raises(InputError, match="no-roots"):
+        build_fixed(roots, 1e-4)
+    for bad in (0.0, -1e-4, float("nan"), float("inf")):
+        with pytest.raises(InputError, match="LSB"):
+            build_fixed(paper_fixed_model, bad)
+    with pytest.raises(InputError, match="no whole ADC code"):
+        build_fixed(Model(np.array([1.00001]), np.array([1.00002]), (Equation("dx", 0.0, (Term(1, "1"),), (1.0,)),)),
+                    1e-3)
+    huge = Model(np.array([1.0]), np.array([2.0]), (Equation("dx", 0.0, (Term(1, "4"),), (1e12,)),), "V")
+    with pytest.raises(InputError, match="LSB over 1 mm"):
+        build_fixed(huge, 1e-3)
+    # a positive domain never reaches code 0, even when its floor is within a millionth of a code of it
+    tiny = Model(np.array([1e-12]), np.array([2.0]), (Equation("dx", 0.0, (Term(1, "-1"),), (1e-6,)),), "V")
+    assert build_fixed(tiny, 1e-3).code_min == (1,)
+    with pytest.raises(InputError, match="--input-lsb"):
+        default_input_scale(Model(np.array([1.0]), np.array([2.0]), (Equation("dx", 0.0, (), ()),), "mT"))
+    with pytest.raises(InputError, match="fma"):
+        render_header(paper_fixed_model, "fixed", fma=True)
+    with pytest.raises(InputError):
+        render_header(paper_fixed_model, "fixed", prefix="int")
+
+
+def test_default_input_scale(paper_fixed_model):
+    lsb, off, source = default_input_scale(paper_fixed_model)
+    assert lsb == 3.3 / 65535 and off == 0.0 and "paper" in source
+    anon = Model(paper_fixed_model.input_min, paper_fixed_model.input_max, paper_fixed_model.equations, "V")
+    assert default_input_scale(anon)[:2] == (3.3 / 65535, 0.0)
+
+
+def test_codegen_cli(paper_fixed_model, tmp_path):
+    path = tmp_path / "m.json"
+    paper_fixed_model.save(path)
+    proc = run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "out"), "--precision", "fixed",
+                   "--prefix", "pad")
+    assert proc.returncode == 0, proc.stderr
+    text = (tmp_path / "out" / "pad_model.h").read_text()
+    assert "typedef int32_t pad_input;" in text and "#define PAD_FIXED_POINT 1" in text
+    proc = run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "o2"), "--precision", "fixed",
+                   "--input-lsb", "1e-4", "--input-offset", "0.5")
+    assert proc.returncode == 0, proc.stderr
+    assert "#define TM_INPUT_OFFSET 0.5" in (tmp_path / "o2" / "tm_model.h").read_text()
+    # bad input: one line, exit status 2
+    assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--precision", "fixed",
+                                  "--input-lsb", "0"), contains="LSB")
+    assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--precision", "fixed",
+                                  "--input-lsb", "abc"), contains="not a number")
+    assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--input-lsb", "1e-4"),
+                          contains="fixed only")
+    data = json.loads(path.read_text())
+    data["outputs"][0]["terms"][0] = "v1^1/2"
+    roots = tmp_path / "roots.json"
+    roots.write_text(json.dumps(data))
+    assert_one_line_error(run_cli("fitgen", "codegen", str(roots), "-o", str(tmp_path / "x"), "--precision", "fixed"),
+                          contains="--family no-roots")
+    data = json.loads(path.read_text())
+    data["inputs"]["units"] = "mT"
+    data["fit"] = {}
+    mt = tmp_path / "mt.json"
+    mt.write_text(json.dumps(data))
+    assert_one_line_error(run_cli("fitgen", "codegen", str(mt), "-o", str(tmp_path / "x"), "--precision", "fixed"),
+                          contains="--input-lsb")
+    assert not (tmp_path / "x").exists()
+
+
+def test_verify_cli(paper_fixed_model, tmp_path):
+    require_tool("gcc")
+    path = tmp_path / "m.json"
+    paper_fixed_model.save(path)
+    proc = run_cli("tactile-host", "verify", str(path), "--precision", "fixed", "--vectors", "300")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.count("PASS") == 1 and "fixed/" in proc.stdout and "LSB" in proc.stdout
+    assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--precision", "fixed", "--fma"),
+                          contains="fma")
+    # an explicit scale works too; a wrong one (not the sensor's codes) still verifies its own plan
+    proc = run_cli("tactile-host", "verify", str(path), "--precision", "fixed", "--vectors", "200",
+                   "--input-lsb", "5e-05", "--input-offset", "0.001")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--precision", "double", "--input-lsb", "1"),
+                          contains="fixed only")
+
+
+def test_arm_linux_build_under_qemu(paper_fixed_model):
+    """32-bit ARM (its own 64-bit multiply, shift and divide helpers) gives the same integers."""
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    res = verify(paper_fixed_model, "fixed", "unrolled", cc="arm-linux-gnueabihf-gcc -static", runner="qemu-arm",
+                 n_random=300)
+    assert res.ok, res.failures
+    assert np.all(res.max_lsb_diff == 0)
+
+
+def test_verify_catches_a_wrong_c_result(paper_fixed_model):
+    """A build whose arithmetic differs (here: the rounding helper replaced by truncation) fails."""
+    require_tool("gcc")
+    from host.verify import compare_fixed
+
+    with CompiledModel(paper_fixed_model, "fixed") as cm:
+        text = cm.header.read_text().replace("((uint64_t)1 << (s - 1u))", "0u")
+        cm.header.write_text(text)
+        compile_checked("gcc", [cm.dir / "tm_vectors.c"], cm.binary, cm.dir)
+        codes, _ = make_code_vectors(cm.fixed, n_random=300)
+        res = compare_fixed(paper_fixed_model, cm, codes)
+    assert not res.ok
+    assert any("LSB" in f for f in res.failures)
