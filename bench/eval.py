@@ -10,7 +10,7 @@ The model is the paper model: fit_model on the paper-sim grid (1,875 poses, no n
 input box (seed 2026), the same for every measurement.
 
 1. ns per estimate of the generated C: the header written by fitgen.codegen.write_header,
-   included by a bench program (C_BENCH below) built with gcc -O2 and host.compiled's
+   included by a bench program (host.cost.C_BENCH) built with gcc -O2 and host.compiled's
    WARNING_FLAGS. tm_estimate is kept out of line (TM_API = static noinline noclone) so
    that every estimate is a call, as on a device. Each build first calibrates how many
    estimates take ~0.2 s; then 11 rounds run each of the 4 builds once in turn (a process
@@ -42,35 +42,34 @@ input box (seed 2026), the same for every measurement.
 from __future__ import annotations
 
 import platform
-import re
 import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
-from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
-from fitgen.codegen import PRECISIONS, STYLES, write_header
+from fitgen.codegen import STYLES
 from fitgen.fit import fit_model
 from fitgen.model import Model
 from fitgen.sensor import load_sensor
 from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
-from host.compiled import WARNING_FLAGS, compile_checked
+from host import cost
+from host.compiled import WARNING_FLAGS
+from host.cost import ARM_CC, FMA_KIND, MIX_KINDS, N1, N2, floor_counts, instruction_counts, run, template_ops
 
-N_VECTORS = 4096
+N_VECTORS = cost.NVEC
 SEED = 2026
 TIME_SECONDS = 0.2
 TIME_REPEATS = 11
 PY_SINGLE_CALLS = 2000
 PY_ROWS = 100_000
 PY_VECTOR_REPEATS = 5
-N1, N2 = 1_000, 11_000
 # (style, precision, fma): the four plain builds, then the unrolled style with fused multiply-adds,
 # built for a core that has them (x86-64-v3) and without errno checks after sqrt (safe: see the header)
+PRECISIONS = ("double", "float")  # fixed point: fitgen tradeoff (its cost on a Cortex-M0)
 VARIANTS = [(s, p, False) for s in STYLES for p in PRECISIONS] + [("unrolled", p, True) for p in PRECISIONS]
 FMA_FLAGS = ["-march=x86-64-v3", "-fno-math-errno"]
 
@@ -78,140 +77,10 @@ FMA_FLAGS = ["-march=x86-64-v3", "-fno-math-errno"]
 def vlabel(v) -> str:
     style, precision, fma = v
     return f"{style} {precision}" + (" fma" if fma else "")
-ARM_CC = "arm-none-eabi-gcc -mcpu=cortex-m4 -mthumb -mfloat-abi=hard -mfpu=fpv4-sp-d16"
-
-C_BENCH = r"""
-#define _POSIX_C_SOURCE 199309L
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <time.h>
-
-#define TM_API static __attribute__((noinline, noclone))
-#include "tm_model.h"
-
-#define NVEC 4096
-static tm_real inputs[NVEC][TM_N_INPUTS];
-static volatile double sink;
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-/* n estimates over the vectors in turn; status and outputs summed so that none is dead */
-static double run(long n)
-{
-    tm_real out[TM_N_OUTPUTS];
-    double acc = 0.0;
-    long i;
-    int j, k = 0;
-    for (i = 0; i < n; ++i) {
-        acc += (double)tm_estimate(inputs[k], out);
-        for (j = 0; j < TM_N_OUTPUTS; ++j) {
-            acc += (double)out[j];
-        }
-        if (++k == NVEC) {
-            k = 0;
-        }
-    }
-    return acc;
-}
-
-static double timed(long n)
-{
-    double t0 = now_s();
-    sink = run(n);
-    return now_s() - t0;
-}
-
-/* usage: bench INPUTS calibrate SECONDS  (prints how many estimates take about SECONDS)
- *        bench INPUTS time N              (prints ns per estimate over N estimates)
- *        bench INPUTS count N             (runs N estimates, prints their sum) */
-int main(int argc, char **argv)
-{
-    static double raw[NVEC][TM_N_INPUTS];
-    FILE *f;
-    int i, j;
-    long n;
-    double t;
-    if (argc < 4) {
-        fprintf(stderr, "usage: %s INPUTS calibrate SECONDS | INPUTS time N | INPUTS count N\n", argv[0]);
-        return 2;
-    }
-    f = fopen(argv[1], "rb");
-    if (f == NULL || fread(raw, sizeof raw, 1, f) != 1) {
-        fprintf(stderr, "cannot read %s\n", argv[1]);
-        return 2;
-    }
-    fclose(f);
-    for (i = 0; i < NVEC; ++i) {
-        for (j = 0; j < TM_N_INPUTS; ++j) {
-            inputs[i][j] = (tm_real)raw[i][j];
-        }
-    }
-    if (strcmp(argv[2], "count") == 0) {
-        printf("%.17g\n", run(atol(argv[3])));
-        return 0;
-    }
-    if (strcmp(argv[2], "calibrate") == 0) {
-        n = NVEC;
-        timed(n);
-        while ((t = timed(n)) < 0.05) {
-            n *= 2;
-        }
-        printf("%ld\n", (long)((double)n * atof(argv[3]) / t) + 1);
-        return 0;
-    }
-    if (strcmp(argv[2], "time") == 0) {
-        n = atol(argv[3]);
-        timed(NVEC);
-        printf("%.4f\n", 1e9 * timed(n) / (double)n);
-        return 0;
-    }
-    fprintf(stderr, "unknown mode %s\n", argv[2]);
-    return 2;
-}
-"""
-
-C_ARM = """
-#include "tm_model.h"
-int tm_bench_call(const tm_real *in, tm_real *out);
-int tm_bench_call(const tm_real *in, tm_real *out)
-{
-    return tm_estimate(in, out);
-}
-"""
-C_ARM_MAIN = """
-#include "tm_model.h"
-int tm_bench_call(const tm_real *in, tm_real *out);
-int main(void);
-int main(void)
-{
-    static tm_real in[TM_N_INPUTS], out[TM_N_OUTPUTS];
-    return tm_bench_call(in, out);
-}
-"""
-C_ARM_EMPTY = """
-int main(void);
-int main(void)
-{
-    return 0;
-}
-"""
 
 
 def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
-
-
-def run(cmd: list[str], **kw) -> subprocess.CompletedProcess:
-    proc = subprocess.run(cmd, capture_output=True, text=True, **kw)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}): {proc.stderr.strip()[:400]}")
-    return proc
 
 
 def paper_model() -> Model:
@@ -223,72 +92,15 @@ def random_inputs(model: Model, n: int, seed: int = SEED) -> np.ndarray:
     return model.input_min + (model.input_max - model.input_min) * rng.random((n, model.n_inputs))
 
 
-# --- 3. operation counts -------------------------------------------------------------------
-
-def needs(model: Model) -> list[set[str]]:
-    out = [set() for _ in range(model.n_inputs)]
-    for eq in model.equations:
-        for t in eq.terms:
-            if t.element:
-                out[t.element - 1].add(t.exponent)
-    return out
-
-
-def floor_counts(model: Model) -> dict:
-    terms = [t for eq in model.equations for t in eq.terms]
-    pairs = {(k, e) for k, need in enumerate(needs(model)) for e in need}
-    costly = {(k, e) for k, e in pairs if e != "1"}
-    return {"T": len(terms), "vd": sum(1 for t in terms if t.element and t.mult),
-            "d": sum(1 for t in terms if t.mult and not t.element), "pairs": len(pairs), "P": len(costly),
-            "floor": 2 * len(terms) + len(costly), "floor_all": 2 * len(terms) + len(pairs)}
-
-
-def template_ops(model: Model, style: str, fold_one: bool = False) -> Counter:
-    """Floating-point operations per estimate as model.h.j2 writes them (inputs inside the domain).
-
-    unrolled: v2 = v*v once per input that needs any of ^2..^4, ^-2..^-4; v3 = v2*v and
-    v4 = v2*v2 once each (the ^3/^-3 and ^4/^-4 expressions are the same, gcc shares them);
-    1/v^k one division each; ^1/2 sqrt, ^1/3 cbrt, ^1/4 two sqrt. table: v2 = v*v for every
-    input; each of ^3, ^-3 (^4, ^-4) computes its own v2*v (v2*v2). Per term: coefficient *
-    (base * d) and one add; ``fold_one`` drops the base * 1 (or 1 * d) multiply gcc folds away
-    in the unrolled style. Clamp: isfinite and 2 compares per input.
-    """
-    ops = Counter()
-    for need in needs(model):
-        if not need:
-            if style == "table":
-                ops["mul"] += 1
-            continue
-        if style == "table" or need & {"2", "3", "4", "-2", "-3", "-4"}:
-            ops["mul"] += 1
-        for group in (("3", "-3"), ("4", "-4")):
-            n = sum(e in need for e in group)
-            ops["mul"] += n if style == "table" else min(n, 1)
-        ops["div"] += sum(e in need for e in ("-1", "-2", "-3", "-4"))
-        ops["sqrt"] += ("1/2" in need) + 2 * ("1/4" in need)
-        ops["cbrt"] += "1/3" in need
-    for eq in model.equations:
-        for t in eq.terms:
-            ops["add"] += 1
-            ops["mul"] += 1
-            if not fold_one or (t.element and t.mult):
-                ops["mul"] += 1
-    ops["compare"] += 2 * model.n_inputs
-    ops["isfinite"] += model.n_inputs
-    return ops
-
-
-# --- builds ---------------------------------------------------------------------------------
+# --- builds (the bench program, callgrind, operation counts and sizes: host/cost.py) ---------
 
 def build_bench(model: Model, style: str, precision: str, fma: bool, root: Path) -> Path:
-    d = root / f"{style}-{precision}{'-fma' if fma else ''}"
-    d.mkdir()
-    write_header(model, d, precision, style, fma=fma)
-    src = d / "bench.c"
-    src.write_text(C_BENCH)
-    binary = d / "bench"
-    compile_checked("gcc", [src], binary, d, FMA_FLAGS if fma else None)
-    return binary
+    return cost.build_bench(model, style, precision, fma, root / f"{style}-{precision}{'-fma' if fma else ''}",
+                            FMA_FLAGS if fma else None)
+
+
+def arm_sizes(model: Model, style: str, precision: str, fma: bool, root: Path) -> dict:
+    return cost.arm_sizes(model, style, precision, fma, root / f"arm-{style}-{precision}{'-fma' if fma else ''}")
 
 
 def time_c(binaries: dict, inputs_file: Path) -> dict:
@@ -300,148 +112,6 @@ def time_c(binaries: dict, inputs_file: Path) -> dict:
         for v, b in binaries.items():
             out[v].append(float(run([str(b), str(inputs_file), "time", counts[v]]).stdout))
     return out
-
-
-# --- 4. callgrind ------------------------------------------------------------------------------
-
-def callgrind(binary: Path, inputs_file: Path, n: int, out: Path) -> Path:
-    run(["valgrind", "--tool=callgrind", "--dump-instr=yes", "--dump-line=no", f"--callgrind-out-file={out}",
-         str(binary), str(inputs_file), "count", str(n)])
-    return out
-
-
-def parse_callgrind(path: Path, fn_prefix: str = "tm_estimate") -> tuple[int, int, Counter]:
-    """(total Ir, Ir inside the function and its callees, self Ir per instruction address).
-
-    The file is written with --dump-instr=yes --dump-line=no: cost lines are "ADDR IR", ADDR
-    absolute (0x...), relative to the previous one (+n/-n, decimal) or "*"; the cost line after
-    a calls= line is the inclusive cost of that call.
-    """
-    names: dict[str, str] = {}
-    total = None
-    current = ""
-    addr = 0
-    after_call = False
-    inclusive = 0
-    per_addr: Counter = Counter()
-    for line in path.read_text().splitlines():
-        if not line:
-            continue
-        c = line[0]
-        if c.isdigit() or c in "+-*":
-            parts = line.split()
-            pos = parts[0]
-            if pos.startswith("0x"):
-                addr = int(pos, 16)
-            elif pos[0] in "+-":
-                addr += int(pos)
-            ir = int(parts[1]) if len(parts) > 1 else 0
-            if current.startswith(fn_prefix):
-                inclusive += ir
-                if not after_call:
-                    per_addr[addr] += ir
-            after_call = False
-            continue
-        if line.startswith(("fn=", "cfn=", "cfi=", "cfl=")):
-            key, _, rest = line.partition("=")
-            m = re.match(r"\((\d+)\)(?: (.*))?", rest)
-            name = rest
-            if m:
-                if m.group(2) is not None:
-                    names[m.group(1)] = m.group(2)
-                name = names.get(m.group(1), "?")
-            if key == "fn":
-                current = name
-        elif line.startswith("calls="):
-            after_call = True
-        elif line.startswith(("totals:", "summary:")):
-            total = int(line.split()[1])
-    if total is None:
-        raise RuntimeError(f"{path}: no totals: or summary: line")
-    return total, inclusive, per_addr
-
-
-def disassembly(binary: Path, symbol_prefix: str = "tm_estimate") -> dict[int, tuple[str, str]]:
-    """address -> (mnemonic, operands) of the instructions of the function."""
-    text = run(["objdump", "-d", "--no-show-raw-insn", str(binary)]).stdout
-    out = {}
-    inside = False
-    for line in text.splitlines():
-        m = re.match(r"^[0-9a-f]+ <([^>]+)>:", line)
-        if m:
-            inside = m.group(1).startswith(symbol_prefix)
-            continue
-        m = re.match(r"^\s+([0-9a-f]+):\s+(\S+)\s*(.*)$", line)
-        if inside and m:
-            out[int(m.group(1), 16)] = (m.group(2), m.group(3))
-    return out
-
-
-FMA_KIND = "FP fused multiply-add"
-MIX_KINDS = ("FP multiply", "FP add/sub", "FP fused multiply-add", "FP divide", "FP sqrt", "FP compare",
-             "FP/SIMD move, load, store, logic",
-             "integer ALU, address, load, store", "branch", "call, ret, push, pop")
-
-
-def kind_of(mnemonic: str, operands: str) -> str:
-    if re.fullmatch(r"v?f(n)?m(add|sub)\d*[sp][sd]", mnemonic):
-        return "FP fused multiply-add"
-    m = re.fullmatch(r"v?(mul|add|sub|div|sqrt)[sp][sd]", mnemonic)
-    if m:
-        return {"mul": "FP multiply", "add": "FP add/sub", "sub": "FP add/sub", "div": "FP divide",
-                "sqrt": "FP sqrt"}[m.group(1)]
-    if re.fullmatch(r"v?u?comis[sd]", mnemonic):
-        return "FP compare"
-    if mnemonic.startswith(("call", "ret", "push", "pop", "leave")):
-        return "call, ret, push, pop"
-    if mnemonic.startswith("j"):
-        return "branch"
-    if "%xmm" in operands or re.fullmatch(r"v?(p\w+|\w+p[sd]|cvt\w+)", mnemonic):
-        return "FP/SIMD move, load, store, logic"
-    return "integer ALU, address, load, store"
-
-
-def instruction_counts(binary: Path, inputs_file: Path, work: Path) -> dict:
-    a = parse_callgrind(callgrind(binary, inputs_file, N1, work / "cg-n1.out"))
-    b = parse_callgrind(callgrind(binary, inputs_file, N2, work / "cg-n2.out"))
-    again = parse_callgrind(callgrind(binary, inputs_file, N1, work / "cg-n1b.out"))
-    n = N2 - N1
-    dis = disassembly(binary)
-    mix: Counter = Counter()
-    mnem: Counter = Counter()
-    for addr in set(a[2]) | set(b[2]):
-        count = (b[2][addr] - a[2][addr]) / n
-        op, args = dis.get(addr, ("?", ""))
-        mix[kind_of(op, args)] += count
-        mnem[op] += count
-    return {"loop": (b[0] - a[0]) / n, "fn": (b[1] - a[1]) / n, "repeat": again[0] - a[0],
-            "n1_total": a[0], "mix": mix, "mnemonics": mnem}
-
-
-# --- 6. Cortex-M4F sizes ------------------------------------------------------------------------
-
-def arm_sizes(model: Model, style: str, precision: str, fma: bool, root: Path) -> dict:
-    d = root / f"arm-{style}-{precision}{'-fma' if fma else ''}"
-    d.mkdir()
-    write_header(model, d, precision, style, fma=fma)
-    (d / "call.c").write_text(C_ARM)
-    obj = d / "call.o"
-    compile_checked(ARM_CC, [d / "call.c"], obj, d, ["-fstack-usage"], link=False)
-    text, data, bss = (int(x) for x in run(["arm-none-eabi-size", str(obj)]).stdout.splitlines()[1].split()[:3])
-    su = (d / "call.su").read_text().split()
-    undefined = [ln.split()[-1] for ln in run(["arm-none-eabi-nm", "-u", str(obj)]).stdout.splitlines() if ln.strip()]
-    # flash the function adds to a linked program (library code included) over an empty main
-    (d / "main.c").write_text(C_ARM_MAIN)
-    (d / "empty.c").write_text(C_ARM_EMPTY)
-    link = ARM_CC.split() + ["-O2", "-specs=nosys.specs", "-Wl,--gc-sections", "-I", str(d)]
-    run(link + [str(d / "main.c"), str(obj), "-o", str(d / "full.elf"), "-lm"])
-    run(link + [str(d / "empty.c"), "-o", str(d / "empty.elf")])
-    sizes = []
-    for elf in ("full.elf", "empty.elf"):
-        t, dt, _ = (int(x) for x in run(["arm-none-eabi-size", str(d / elf)]).stdout.splitlines()[1].split()[:3])
-        sizes.append(t + dt)
-    return {"text": text, "data": data, "bss": bss, "stack": int(su[1]), "undefined": undefined,
-            "linked": sizes[0] - sizes[1]}
 
 
 # --- main ---------------------------------------------------------------------------------------

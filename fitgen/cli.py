@@ -254,14 +254,74 @@ def _sweeps(model, sensor_spec, folder):
     return paths
 
 
+def _finite(text: str) -> float:
+    import argparse
+    import math
+
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(x):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return x
+
+
 def cmd_codegen(args) -> int:
     from .codegen import write_header
     from .model import load_model
 
     model = load_model(args.model)
+    if args.precision == "fixed":
+        from .codegen import render_fixed_header
+        from .fixedpoint import build_fixed, default_input_scale
+        from .fileio import write_atomic
+
+        if args.fma:
+            raise InputError("--fma does not apply to --precision fixed")
+        lsb, offset, source = args.input_lsb, args.input_offset, "--input-lsb"
+        if lsb is None:
+            lsb, default_offset, source = default_input_scale(model)
+            offset = default_offset if offset is None else offset
+        fm = build_fixed(model, lsb, offset or 0.0)
+        text = render_fixed_header(fm, args.prefix)
+        folder = Path(args.output)
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise InputError(f"cannot create {folder}: {exc.strerror}") from None
+        path = write_atomic(folder / f"{args.prefix}_model.h", text)
+        print(f"wrote {path} (fixed point, input LSB {fm.input_lsb:.6g} {model.input_units} from {source}, "
+              f"offset {fm.input_offset:g}; {fm.summary()}; model {model.sha256[:12]})", file=sys.stderr)
+        return 0
+    if args.input_lsb is not None or args.input_offset is not None:
+        raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
     path = write_header(model, args.output, args.precision, args.style, args.prefix, args.fma)
     print(f"wrote {path} ({args.precision}, {args.style}{', fma' if args.fma else ''}, model {model.sha256[:12]})",
           file=sys.stderr)
+    return 0
+
+
+def cmd_tradeoff(args) -> int:
+    from .progress import Progress
+    from .scenes import load_scene
+    from .tradeoff import grid_from, parse_knob_list, parse_target, quick_grid, sweep, write_outputs
+
+    knobs = {name: parse_knob_list(name, getattr(args, name)) for name in ("k", "max_terms", "family", "precision",
+                                                                         "style") if getattr(args, name) is not None}
+    if args.jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {args.jobs}")
+    sensor = _sensor(args)
+    scene = load_scene(args.scene)
+    target = parse_target(args.target, scene.outputs)
+    grid = grid_from(**knobs) if args.full or knobs else quick_grid()
+    bar = Progress("tradeoff", len(grid))
+    with bar:
+        result = sweep(sensor, scene, grid, target=target, seed=args.seed, jobs=args.jobs,
+                       progress=lambda note: bar.update(1, note))
+    paths, text = write_outputs(result, args.output)
+    print(text, end="")
+    print("wrote " + ", ".join(str(p) for p in paths), file=sys.stderr)
     return 0
 
 
@@ -306,7 +366,8 @@ def build_parser() -> Parser:
     f.add_argument("--outputs", help="comma-separated outputs to fit (default: every pose column of the data)")
     f.add_argument("--k", default="aic", help="penalty per term: aic (2), bic (log n) or a number")
     f.add_argument("--max-terms", type=int, help="cap on terms per equation")
-    f.add_argument("--family", default="all", choices=("all", "no-roots"), help="candidate exponents")
+    f.add_argument("--family", default="all", choices=("all", "no-roots", "integer"),
+                   help="candidate exponents: all 11 kinds, no-roots, or integer (v^1..v^4 only)")
     f.add_argument("--no-d-terms", action="store_true", help="rotations without the displacement terms")
     f.add_argument("--true-d", action="store_true",
                    help="rotation d-terms from the true displacements instead of the fitted estimates")
@@ -333,12 +394,36 @@ def build_parser() -> Parser:
     c = sub.add_parser("codegen", help="generate the header-only C99 estimator of a model")
     c.add_argument("model", metavar="MODEL")
     c.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for <prefix>_model.h")
-    c.add_argument("--precision", default="double", choices=("double", "float"))
+    c.add_argument("--precision", default="double", choices=("double", "float", "fixed"),
+                   help="fixed: integer ADC codes in, int32 outputs, no floating point (Cortex-M0)")
     c.add_argument("--style", default="table", choices=("table", "unrolled"))
     c.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
     c.add_argument("--fma", action="store_true",
                    help="sum each term with fma(): fewer instructions on cores with fused multiply-add")
+    c.add_argument("--input-lsb", type=_finite, metavar="X",
+                   help="fixed: the input value of one ADC code (default: the model's sensor's ADC, "
+                        "or 3.3/65535 for inputs in V)")
+    c.add_argument("--input-offset", type=_finite, metavar="Y", help="fixed: the input value of code 0 (default 0)")
     c.set_defaults(func=cmd_codegen)
+
+    t = sub.add_parser("tradeoff", help="accuracy against cost over penalty, cap, family, precision and style")
+    t.add_argument("sensor", metavar="SENSOR", help="preset name or sensor TOML")
+    t.add_argument("--scene", required=True, help="full, slide, press or a scene TOML")
+    t.add_argument("--target", help="RMS error with noise to meet, e.g. 'dz=0.1 thx=2' "
+                                    "(default: 0.1 mm and 1 deg for the scene's outputs)")
+    t.add_argument("--full", action="store_true",
+                   help="every combination of the knobs (135 points) instead of the quick subset")
+    t.add_argument("--k", help="sweep only these penalties per term, e.g. aic,bic,6 (all: aic,bic,6)")
+    t.add_argument("--max-terms", help="sweep only these caps, e.g. none,8 (all: none,20,8)")
+    t.add_argument("--family", help="sweep only these families (all: all,no-roots,integer)")
+    t.add_argument("--precision", help="sweep only these precisions (all: double,float,fixed)")
+    t.add_argument("--style", help="sweep only these code styles (all: table,unrolled; fixed point has one)")
+    t.add_argument("--seed", type=int, default=0, help="held-out poses and noise draws (default 0)")
+    t.add_argument("--jobs", type=int, default=2, help="builds measured at once (default 2)")
+    t.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
+    t.add_argument("-o", "--output", default="tradeoff-out", metavar="DIR",
+                   help="folder for tradeoff.csv, .md, .png (default: tradeoff-out)")
+    t.set_defaults(func=cmd_tradeoff)
 
     d = sub.add_parser("demo", help="the main job end to end on the paper sensor")
     d.add_argument("--out", default="demo-out", help="folder for the demo's files (default: demo-out)")

@@ -58,7 +58,7 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     n, n_in = inputs.shape
     cands = candidate_terms(n_in, name, exponents=settings.exponents,
                             d_terms=settings.d_terms and d is not None, positive=positive)
-    init_terms = [t for t in initial_terms(n_in) if t in set(cands)]
+    init_terms = [t for t in initial_terms(n_in, settings.exponents) if t in set(cands)]
     init = [cands.index(t) for t in init_terms]
     if n < len(init) + 3:
         raise InputError(f"{n} rows cannot fit the {len(init) + 1} coefficients of the initial equation "

@@ -74,3 +74,45 @@ def resolution_sweep(model: Model, sweep_inputs: np.ndarray, sweep_values: np.nd
     path = _save(fig, folder / f"sweep_{output}.png")
     plt.close(fig)
     return path
+
+
+def tradeoff(result, path: Path) -> Path:
+    """fitgen tradeoff: instructions per estimate against score (log axes), the front joined, the
+    target (score 1) dashed, the recommended point ringed; colour by precision, marker by family."""
+    plt = _plt()
+    colours = {"double": "tab:blue", "float": "tab:orange", "fixed": "tab:green"}
+    markers = {"all": "o", "no-roots": "s", "integer": "^"}
+    fig, ax = plt.subplots(figsize=(7.5, 4.8))
+    pts = [(i, p) for i, p in enumerate(result.points) if p.instructions is not None and p.score is not None]
+    seen = set()
+    for i, p in pts:
+        key = (p.knobs.precision, p.knobs.family)
+        face = "none" if p.knobs.style == "table" else colours[p.knobs.precision]
+        ax.scatter(p.instructions, p.score, s=36, marker=markers[p.knobs.family], facecolors=face,
+                   edgecolors=colours[p.knobs.precision], linewidths=1, alpha=0.85,
+                   label=None if key in seen else f"{p.knobs.precision}, {p.knobs.family}")
+        seen.add(key)
+    front = [result.points[i] for i in result.front]
+    if front:
+        ax.plot([p.instructions for p in front], [p.score for p in front], "-", color="k", lw=1, label="Pareto front")
+    if result.recommended is not None:
+        r = result.points[result.recommended]
+        ax.scatter(r.instructions, r.score, s=220, facecolors="none", edgecolors="red", linewidths=1.6,
+                   label="recommended" if result.met else "most accurate (target not met)")
+    ax.axhline(1.0, color="red", ls="--", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    from matplotlib.ticker import FuncFormatter
+
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
+        axis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if f"{x:g}"[0] in "1235" else ""))
+    ax.set_xlabel("x86-64 instructions per estimate (callgrind)")
+    ax.set_ylabel("score: worst RMS error with noise / target")
+    ax.set_title(f"sensor {result.sensor}, scene {result.scene.name} (hollow: table style)", fontsize=10)
+    ax.grid(True, which="both", lw=0.3, alpha=0.5)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    _save(fig, path)
+    plt.close(fig)
+    return path

@@ -30,6 +30,8 @@ ROTATIONS: tuple[str, ...] = ("thx", "thy")
 FAMILIES = {
     "all": EXPONENTS,
     "no-roots": tuple(e for e in EXPONENTS if "/" not in e),
+    # positive integer powers only: no division and no roots on the device
+    "integer": ("1", "2", "3", "4"),
 }
 
 
@@ -94,9 +96,14 @@ def parse_term(text: str) -> Term:
     return Term(int(m.group(1)), m.group(2))
 
 
-def initial_terms(n_elements: int) -> list[Term]:
-    """The paper's eq. 1 generalised to N elements: v_k^-1 and v_k^-2 for every k."""
-    return [Term(k, e) for k in range(1, n_elements + 1) for e in ("-1", "-2")]
+def initial_terms(n_elements: int, exponents=EXPONENTS) -> list[Term]:
+    """The paper's eq. 1 generalised to N elements: v_k^-1 and v_k^-2 for every k.
+
+    For a family without both of those powers (e.g. ``integer``), the same shape from what it
+    allows: its first two exponents in the paper's order (v_k and v_k^2 for ``integer``).
+    """
+    first = ("-1", "-2") if {"-1", "-2"} <= set(exponents) else tuple(e for e in EXPONENTS if e in exponents)[:2]
+    return [Term(k, e) for k in range(1, n_elements + 1) for e in first]
 
 
 def candidate_terms(n_elements: int, output: str, *, exponents=EXPONENTS, d_terms: bool = True,

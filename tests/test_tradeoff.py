@@ -1,0 +1,171 @@
+"""fitgen tradeoff: the Pareto front, the recommendation rule, the integer family, a tiny sweep end to end."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+from conftest import assert_one_line_error, require_tool, run_cli
+
+from fitgen.errors import InputError
+from fitgen.tradeoff import (Knobs, full_grid, grid_from, parse_knob_list, parse_target, pareto_front, quick_grid,
+                             recommend)
+
+# --- the front --------------------------------------------------------------------------------------
+
+
+def test_front_drops_dominated_points_and_sorts_by_cost():
+    cost = [100, 200, 150, 300, 120]
+    score = [5.0, 1.0, 2.0, 1.5, 5.0]
+    # 3 (300, 1.5) is dominated by 1 (200, 1.0); 4 (120, 5.0) by 0 (100, 5.0)
+    assert pareto_front(cost, score) == [0, 2, 1]
+
+
+def test_front_keeps_exact_ties_and_drops_weak_ties():
+    cost = [100, 100, 100, 200]
+    score = [2.0, 2.0, 3.0, 2.0]
+    # 0 and 1 are equal: neither dominates the other; 2 is worse in score at equal cost, 3 in cost
+    assert pareto_front(cost, score) == [0, 1]
+
+
+def test_front_ignores_unmeasured_points():
+    assert pareto_front([None, 10, math.nan], [0.1, 1.0, 0.01]) == [1]
+    assert pareto_front([], []) == []
+
+
+def test_front_of_a_random_cloud_matches_the_definition():
+    rng = np.random.default_rng(1)
+    cost, score = rng.integers(1, 20, 60).tolist(), rng.integers(1, 20, 60).astype(float).tolist()
+    front = set(pareto_front(cost, score))
+    for i in range(60):
+        dominated = any(cost[j] <= cost[i] and score[j] <= score[i] and (cost[j], score[j]) != (cost[i], score[i])
+                        for j in range(60))
+        assert (i in front) == (not dominated)
+
+
+# --- the recommendation -----------------------------------------------------------------------------
+
+
+def test_recommend_fewest_instructions_meeting_the_target():
+    cost = [500, 100, 120, 90]
+    score = [0.2, 0.9, 0.5, 1.3]
+    assert recommend(cost, score, [None] * 4) == (1, True)
+
+
+def test_recommend_ties_go_to_less_flash():
+    assert recommend([100, 100, 100], [0.5, 0.9, 0.7], [900, 300, None]) == (1, True)
+
+
+def test_recommend_when_nothing_meets_names_the_most_accurate():
+    cost = [100, 300, 200]
+    score = [3.0, 2.0, 2.01]
+    # 2.01 is within 1 % of the best 2.0: taken as equal, and cheaper
+    assert recommend(cost, score, [None] * 3) == (2, False)
+    assert recommend(cost, score, [None] * 3, close=0.0) == (1, False)
+    assert recommend([], [], []) == (None, False)
+    assert recommend([math.nan], [1.0], [None]) == (None, False)
+
+
+# --- grids, targets, knobs ----------------------------------------------------------------------------
+
+
+def test_grids():
+    full = full_grid()
+    assert len(full) == len(set(full)) == 3 * 3 * 3 * (2 + 2 + 1)
+    assert set(quick_grid()) <= set(full)
+    assert {k.style for k in full if k.precision == "fixed"} == {"-"}
+    assert grid_from(k=["aic"], max_terms=[None], family=["integer"], precision=["float"]) == [
+        Knobs("aic", None, "integer", "float", "table"), Knobs("aic", None, "integer", "float", "unrolled")]
+
+
+def test_parse_knobs_and_target():
+    assert parse_knob_list("k", "aic,6,aic") == ["aic", 6.0]
+    assert parse_knob_list("max_terms", "none,8") == [None, 8]
+    for name, bad in (("k", "-1"), ("k", "nan"), ("max_terms", "0"), ("family", "roots"), ("style", "fast")):
+        with pytest.raises(InputError):
+            parse_knob_list(name, bad)
+    assert parse_target(None, ("dz",)) == {"dz": 0.1}
+    assert parse_target("thx=2", ("dx", "thx")) == {"dx": 0.1, "thx": 2.0}
+    for bad in ("dx=0.1", "dz=0", "dz=inf", "dz", ""):
+        with pytest.raises(InputError):
+            parse_target(bad, ("dz",))
+
+
+def test_integer_family_starts_from_what_it_allows():
+    from fitgen.fit import FitSettings, fit_model
+    from fitgen.scenes import load_scene
+    from fitgen.sensor import load_sensor
+    from fitgen.simulate import simulate
+    from fitgen.terms import FAMILIES, initial_terms
+
+    assert {t.exponent for t in initial_terms(8)} == {"-1", "-2"}
+    assert {t.exponent for t in initial_terms(8, FAMILIES["no-roots"])} == {"-1", "-2"}
+    assert {t.exponent for t in initial_terms(8, FAMILIES["integer"])} == {"1", "2"}
+    scene = load_scene("slide")
+    ds = simulate(load_sensor("paper"), scene.poses())
+    model = fit_model(ds, scene.outputs, FitSettings(exponents=FAMILIES["integer"]))
+    exps = {t.exponent for e in model.equations for t in e.terms}
+    assert exps <= {"1", "2", "3", "4"}
+    assert max(i["model_training_error"]["max"] for i in model.fit_info["outputs"].values()) < 0.5
+
+
+def test_sweep_needs_valgrind(monkeypatch):
+    import fitgen.tradeoff as tradeoff
+    from fitgen.scenes import load_scene
+    from fitgen.sensor import load_sensor
+
+    real = tradeoff.shutil.which
+    monkeypatch.setattr(tradeoff.shutil, "which", lambda name: None if name == "valgrind" else real(name))
+    with pytest.raises(InputError, match="valgrind"):
+        tradeoff.sweep(load_sensor("paper"), load_scene("press"), quick_grid())
+
+
+# --- end to end ---------------------------------------------------------------------------------------------
+
+
+def test_tiny_sweep_through_the_cli(tmp_path):
+    require_tool("gcc")
+    require_tool("valgrind")
+    out = tmp_path / "t"
+    proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "--k", "aic", "--max-terms", "none,2",
+                   "--family", "integer", "--precision", "float", "--style", "unrolled", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    rows = list(csv.DictReader((out / "tradeoff.csv").open()))
+    assert len(rows) == 2
+    assert "## Recommendation" in proc.stdout and "Meets the target" in proc.stdout
+    assert (out / "tradeoff.md").read_text() == proc.stdout
+    big, small = sorted(rows, key=lambda r: -int(r["terms"]))
+    assert int(small["terms"]) <= 2 < int(big["terms"])
+    # fewer terms, fewer instructions; the counts are whole numbers (callgrind is exact)
+    assert 0 < float(small["instructions"]) < float(big["instructions"]) < 1000
+    assert float(small["instructions"]).is_integer()
+    for r in rows:
+        assert 0 < float(r["dz_rms"]) <= float(r["dz_noisy_rms"]) < 0.1
+        assert float(r["score"]) == pytest.approx(float(r["dz_noisy_rms"]) / 0.1, rel=1e-5)
+        assert int(r["ops_div"]) == int(r["ops_sqrt"]) == int(r["ops_cbrt"]) == 0  # integer powers only
+    rec = [r for r in rows if r["recommended"] == "1"]
+    assert len(rec) == 1 and float(rec[0]["score"]) <= 1.0 and rec[0]["front"] == "1"
+    assert all(float(rec[0]["instructions"]) <= float(r["instructions"]) for r in rows if float(r["score"]) <= 1)
+    if rec[0]["flash"]:
+        assert 0 < int(rec[0]["flash"]) < 4096
+
+
+@pytest.mark.parametrize("args,contains", [
+    (["--target", "dx=0.1"], "does not estimate"),
+    (["--target", "dz=-1"], "> 0"),
+    (["--k", "often"], "--k"),
+    (["--max-terms", "0"], "--max-terms"),
+    (["--family", "roots"], "--family"),
+    (["--jobs", "0"], "--jobs"),
+])
+def test_bad_options_one_line(args, contains, tmp_path):
+    proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "-o", str(tmp_path / "x"), *args)
+    assert_one_line_error(proc, 2, contains)
+
+
+def test_bad_scene_and_sensor_one_line(tmp_path):
+    assert_one_line_error(run_cli("fitgen", "tradeoff", "paper", "--scene", "nowhere", "-o", str(tmp_path)), 2)
+    assert_one_line_error(run_cli("fitgen", "tradeoff", "nosuch", "--scene", "press", "-o", str(tmp_path)), 2)
+    assert_one_line_error(run_cli("fitgen", "tradeoff", "paper", "-o", str(tmp_path)), 2)
