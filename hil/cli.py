@@ -1,21 +1,136 @@
-"""The ``tactile-hil`` command: hardware-in-the-loop checks (see issue 6; not yet built)."""
+"""tactile-hil: hardware-in-the-loop checks of the reference firmware, on a board or an emulated Cortex-M4.
+
+  run       send vectors, calibrations and fuzz frames to a device and compare with Python
+  emulate   build the firmware with a model and boot it (QEMU mps2-an386, or the host build on a pty)
+"""
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
 
-from fitgen.cliutil import Parser, run
+from fitgen.cliutil import EXIT_CHECK_FAILED, Parser, run
+from fitgen.errors import InputError
+
+
+def _load(args):
+    from fitgen.model import load_model
+
+    model = load_model(args.model)
+    data = None
+    if getattr(args, "data", None):
+        from fitgen.dataset import load_dataset
+
+        ds = load_dataset(args.data, min_rows=1)
+        if ds.n_inputs != model.n_inputs:
+            raise InputError(f"dataset {args.data} has {ds.n_inputs} inputs; the model takes {model.n_inputs}")
+        data = ds.inputs
+    return model, data
+
+
+def _check_counts(args) -> None:
+    if args.vectors < 0:
+        raise InputError("--vectors must be >= 0")
+    if args.fuzz < 0:
+        raise InputError("--fuzz must be >= 0")
+
+
+def _suite(url: str, model, data, args) -> int:
+    from host.device import Device
+
+    from .suite import run_suite
+
+    with Device.open(url, timeout=args.timeout) as dev:
+        res = run_suite(dev, model, url=url, n_vectors=args.vectors, data=data, n_fuzz=args.fuzz,
+                        flash=not args.no_flash, sensor_id=args.sensor_id, fma=args.fma)
+    print(res.table())
+    if args.junit:
+        res.write_junit(args.junit)
+    print("PASS" if res.ok else "FAIL")
+    return 0 if res.ok else EXIT_CHECK_FAILED
+
+
+def cmd_run(args) -> int:
+    _check_counts(args)
+    model, data = _load(args)
+    return _suite(args.port, model, data, args)
+
+
+def _describe(runner, dev, target: str) -> None:
+    from .emulate import bench_instructions
+
+    info = dev.info()
+    b = bench_instructions(dev)
+    cost = (f"{b['instructions']:.0f} instructions per estimate (icount)" if b["instructions"] is not None
+            else f"{b['ns']:.0f} ns per estimate")
+    print(f"{target} firmware: {info.precision}, {info.style_name}, model {info.model_hash[:12]}; {cost}")
+    if runner.size:
+        print(f"flash {runner.size['flash']} bytes, RAM {runner.size['ram']} bytes")
+
+
+def cmd_emulate(args) -> int:
+    from host.device import Device
+
+    from .emulate import start_target
+
+    _check_counts(args)
+    model, data = _load(args)
+    with start_target(model, args.target, precision=args.precision, style=args.style, fma=args.fma,
+                      port=args.port, workdir=args.build_dir, sensor_id=args.sensor_id) as runner:
+        with Device.open(runner.url, timeout=args.timeout) as dev:
+            _describe(runner, dev, args.target)
+        if args.suite:
+            return _suite(runner.url, model, data, args)
+        print(f"ready: {runner.url} (Ctrl-C stops)", flush=True)
+        stop = threading.Event()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: stop.set())
+        while not stop.is_set() and runner.proc is not None and runner.proc.poll() is None:
+            stop.wait(0.2)
+        if not stop.is_set():
+            raise InputError(f"the {args.target} firmware exited on its own (status {runner.proc.returncode})")
+    print("stopped", file=sys.stderr)
+    return 0
+
+
+def _suite_options(p) -> None:
+    p.add_argument("--model", required=True, metavar="MODEL", help="the model compiled into the firmware")
+    p.add_argument("--vectors", type=int, default=1000, help="random vectors inside the domain (default 1000)")
+    p.add_argument("--data", metavar="CSV", help="also send the rows of this dataset")
+    p.add_argument("--fuzz", type=int, default=10_000, help="random or mutated frames to send (default 10000)")
+    p.add_argument("--no-flash", action="store_true", help="skip the calibration flashing checks")
+    p.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
+    p.add_argument("--sensor-id", default="paper", help="sensor id written into flashed blobs (default paper)")
+    p.add_argument("--fma", action="store_true", help="the compiled-in model sums terms by fma")
+    p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for each reply (default 2)")
 
 
 def build_parser() -> Parser:
     p = Parser(prog="tactile-hil", description=__doc__)
-    p.add_subparsers(dest="command", required=True, parser_class=Parser)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
+    r = sub.add_parser("run", help="run the HIL suite against a device")
+    r.add_argument("--port", required=True, metavar="URL",
+                   help="serial device, pty path, or socket://127.0.0.1:PORT (the emulator)")
+    _suite_options(r)
+    r.set_defaults(func=cmd_run)
+
+    e = sub.add_parser("emulate", help="build the firmware with a model and boot it")
+    e.add_argument("--target", default="mps2", choices=("mps2", "host"),
+                   help="mps2: Cortex-M4 in qemu-system-arm (default); host: the POSIX build on a pty")
+    e.add_argument("--port", type=int, help="TCP port of the emulated UART (default: a free one)")
+    e.add_argument("--precision", default="float", choices=("float", "double", "fixed"))
+    e.add_argument("--style", default="table", choices=("table", "unrolled"))
+    e.add_argument("--build-dir", metavar="DIR", help="keep the firmware sources and image here")
+    e.add_argument("--suite", action="store_true", help="run the HIL suite against it, then stop")
+    _suite_options(e)
+    e.set_defaults(func=cmd_emulate)
     return p
 
 
 def _main(argv) -> int:
-    build_parser().parse_args(argv)
-    return 0
+    args = build_parser().parse_args(argv)
+    return args.func(args)
 
 
 def main(argv=None) -> int:

@@ -11,15 +11,19 @@ from .channelmap import ADS1115_PGA, ADS1115_RATES, MODES
 
 
 def cmd_verify(args) -> int:
-    from fitgen.codegen import PRECISIONS, STYLES
+    from fitgen.codegen import STYLES
     from fitgen.dataset import load_dataset
     from fitgen.model import load_model
 
     from .verify import verify
 
     model = load_model(args.model)
-    precisions = PRECISIONS if args.precision == "both" else (args.precision,)
+    precisions = ("double", "float") if args.precision == "both" else (args.precision,)
     styles = STYLES if args.style == "both" else (args.style,)
+    if (args.input_lsb is not None or args.input_offset is not None) and args.precision != "fixed":
+        raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
+    if args.fma and args.precision == "fixed":
+        raise InputError("--fma does not apply to --precision fixed")
     extra = None
     if args.data:
         ds = load_dataset(args.data, min_rows=1)
@@ -30,14 +34,57 @@ def cmd_verify(args) -> int:
         raise InputError("--vectors must be >= 0")
     ok = True
     for precision in precisions:
-        for style in styles:
+        # the fixed-point header has one form (straight-line code): checked once
+        for style in (("unrolled",) if precision == "fixed" else styles):
             res = verify(model, precision, style, cc=args.cc, runner=args.runner or "", prefix=args.prefix,
-                         n_random=args.vectors, extra_inputs=extra, fma=args.fma)
+                         n_random=args.vectors, extra_inputs=extra, fma=args.fma, input_lsb=args.input_lsb,
+                         input_offset=args.input_offset)
             print(res.table())
             print("PASS" if res.ok else "FAIL: " + "; ".join(res.failures))
             print()
             ok &= res.ok
     return 0 if ok else EXIT_CHECK_FAILED
+
+
+def cmd_flash(args) -> int:
+    from fitgen.calblob import to_blob
+    from fitgen.model import load_model
+
+    from .device import Device, DeviceError
+    from .protocol import ProtocolError
+
+    timeout = _positive(args.timeout, "--timeout")
+    model = load_model(args.model)
+    with Device.open(args.port, timeout=timeout) as dev:
+        try:
+            info = dev.info()
+        except (DeviceError, ProtocolError) as exc:
+            raise InputError(f"{args.port}: INFO failed: {exc}") from None
+        if info.precision == "fixed":
+            raise InputError("the device is a fixed-point build; calibration blobs need a float or double build")
+        if (info.n_inputs, info.n_outputs) != (model.n_inputs, len(model.equations)):
+            raise InputError(f"model {args.model} has {model.n_inputs} inputs and {len(model.equations)} outputs; "
+                             f"the device's build has {info.n_inputs} and {info.n_outputs}")
+        blob = to_blob(model, info.precision, sensor_id=args.sensor_id, fma=args.fma)
+        try:
+            answer = dev.load_calibration(blob)
+            back = dev.read_calibration()
+        except (DeviceError, ProtocolError) as exc:
+            print(f"tactile-host flash: error: calibration not loaded: {exc}", file=sys.stderr)
+            return EXIT_CHECK_FAILED
+    if back != blob:
+        first = next((i for i, (a, b) in enumerate(zip(back, blob)) if a != b), min(len(back), len(blob)))
+        print(f"tactile-host flash: error: read-back differs from the {len(blob)}-byte blob sent "
+              f"({len(back)} bytes read, first difference at byte {first})", file=sys.stderr)
+        return EXIT_CHECK_FAILED
+    if answer != model.sha256:
+        print(f"tactile-host flash: error: the device reports active model {answer}, expected {model.sha256}",
+              file=sys.stderr)
+        return EXIT_CHECK_FAILED
+    print(f"flashed model {model.sha256} ({len(blob)}-byte {info.precision} blob{', fma' if args.fma else ''}, "
+          f"sensor id {args.sensor_id!r}) to {args.port}: the device reports active model {answer}, "
+          "read-back identical")
+    return 0
 
 
 def _vref(text: str):
@@ -271,7 +318,8 @@ def build_parser() -> Parser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     v = sub.add_parser("verify", help="compile the generated C and compare it with the Python evaluation")
     v.add_argument("model", metavar="MODEL")
-    v.add_argument("--precision", default="both", choices=("double", "float", "both"))
+    v.add_argument("--precision", default="both", choices=("double", "float", "fixed", "both"),
+                   help="both: double and float; fixed: the integer header against its numpy model and double")
     v.add_argument("--style", default="both", choices=("table", "unrolled", "both"))
     v.add_argument("--cc", default="gcc", help="C compiler command, with flags if needed (default gcc)")
     v.add_argument("--runner", help="prefix to run the binary with, e.g. qemu-arm")
@@ -279,7 +327,19 @@ def build_parser() -> Parser:
     v.add_argument("--vectors", type=int, default=2000, help="random vectors inside the domain (default 2000)")
     v.add_argument("--data", help="also run the rows of this dataset")
     v.add_argument("--fma", action="store_true", help="generate with fused multiply-adds (fitgen codegen --fma)")
+    v.add_argument("--input-lsb", type=float, metavar="X", help="fixed: the input value of one ADC code")
+    v.add_argument("--input-offset", type=float, metavar="Y", help="fixed: the input value of code 0")
     v.set_defaults(func=cmd_verify)
+
+    f = sub.add_parser("flash", help="load a model into a device as a calibration blob and read it back")
+    f.add_argument("model", metavar="MODEL")
+    f.add_argument("--port", required=True, metavar="URL",
+                   help="serial port: /dev/ttyACM0, /dev/pts/N or socket://HOST:PORT")
+    f.add_argument("--sensor-id", default="paper", help="sensor id stored in the blob (ASCII, <= 16 bytes; "
+                                                       "default paper)")
+    f.add_argument("--fma", action="store_true", help="the device sums the terms by fused multiply-add")
+    f.add_argument("--timeout", default="2", help="seconds to wait for each answer (default 2)")
+    f.set_defaults(func=cmd_flash)
 
     r = sub.add_parser("read", help="stream readings and pose estimates from I2C ADCs")
     r.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")

@@ -2,7 +2,8 @@ from conftest import require_tool, run_cli
 
 
 def test_demo_runs_end_to_end(tmp_path):
-    require_tool("gcc")
+    for tool in ("gcc", "qemu-system-arm", "arm-none-eabi-gcc"):
+        require_tool(tool)
     out = tmp_path / "demo"
     proc = run_cli("fitgen", "demo", "--out", str(out))
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]

@@ -1,0 +1,80 @@
+/* startup_mps2.c: vector table and reset handler for the Cortex-M4F of mps2-an386. */
+#include <stdint.h>
+
+extern uint32_t _sidata; /* .data's image in flash */
+extern uint32_t _sdata;
+extern uint32_t _edata;
+extern uint32_t _sbss;
+extern uint32_t _ebss;
+extern uint32_t _estack;
+
+int main(int argc, char **argv);
+void Reset_Handler(void);
+void Default_Handler(void);
+void SysTick_Handler(void);
+void UART0RX_Handler(void);
+
+#define SCB_CPACR (*(volatile uint32_t *)0xE000ED88u)
+
+typedef union {
+    void (*handler)(void);
+    uint32_t *stack;
+} vector_entry;
+
+#define N_IRQ 32
+
+__attribute__((section(".isr_vector"), used)) const vector_entry vector_table[16 + N_IRQ] = {
+    { .stack = &_estack },
+    { .handler = Reset_Handler },
+    { .handler = Default_Handler }, /* NMI */
+    { .handler = Default_Handler }, /* HardFault */
+    { .handler = Default_Handler }, /* MemManage */
+    { .handler = Default_Handler }, /* BusFault */
+    { .handler = Default_Handler }, /* UsageFault */
+    { .handler = 0 },
+    { .handler = 0 },
+    { .handler = 0 },
+    { .handler = 0 },
+    { .handler = Default_Handler }, /* SVCall */
+    { .handler = Default_Handler }, /* DebugMonitor */
+    { .handler = 0 },
+    { .handler = Default_Handler }, /* PendSV */
+    { .handler = SysTick_Handler },
+    { .handler = UART0RX_Handler }, /* IRQ 0: UART0 RX */
+    { .handler = Default_Handler }, /* IRQ 1: UART0 TX (not enabled); the rest likewise */
+    { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
+    { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
+    { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
+    { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
+    { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
+    { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
+    { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
+    { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
+    { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
+    { .handler = Default_Handler }, { .handler = Default_Handler }
+};
+
+void Reset_Handler(void)
+{
+    uint32_t *src = &_sidata;
+    uint32_t *dst = &_sdata;
+    while (dst < &_edata) {
+        *dst++ = *src++;
+    }
+    for (dst = &_sbss; dst < &_ebss;) {
+        *dst++ = 0;
+    }
+    /* full access to CP10 and CP11 (the FPU) before any floating-point instruction */
+    SCB_CPACR |= 0xFu << 20;
+    __asm__ __volatile__("dsb\n\tisb" ::: "memory");
+    (void)main(0, 0);
+    for (;;) {
+    }
+}
+
+/* an unexpected exception is a firmware bug: stop here, where a debugger finds it */
+void Default_Handler(void)
+{
+    for (;;) {
+    }
+}

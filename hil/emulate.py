@@ -1,0 +1,190 @@
+"""Run the reference firmware where the HIL suite can reach it: QEMU's mps2-an386, or the host build on a pty."""
+
+from __future__ import annotations
+
+import os
+import select
+import shutil
+import signal
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+from fitgen.errors import InputError
+
+QEMU = "qemu-system-arm"
+INSTALL_HINT = "install them with: sudo apt-get install qemu-system-arm gcc-arm-none-eabi"
+# -icount shift=0: the emulated core retires one instruction per ns of virtual time, so the
+# 25 MHz SysTick counts one tick per 40 instructions (docs/hil.md)
+ICOUNT_SHIFT = 0
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _stop(proc: subprocess.Popen | None) -> None:
+    if proc is None or proc.poll() is not None:
+        return
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+class _Running:
+    """A started firmware process: stopped (and its build folder removed) on exit."""
+
+    proc: subprocess.Popen | None = None
+    _tmp = None
+
+    def start(self):
+        raise NotImplementedError
+
+    def stop(self) -> None:
+        _stop(self.proc)
+        if self.proc is not None and self.proc.stderr is not None:
+            self.proc.stderr.close()
+        self.proc = None
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+class Emulator(_Running):
+    """A Cortex-M4 firmware ELF booted in qemu-system-arm, its UART on ``socket://127.0.0.1:port``."""
+
+    def __init__(self, elf: str | Path, port: int | None = None, icount: bool = True, boot_timeout: float = 10.0):
+        if shutil.which(QEMU) is None:
+            raise InputError(f"{QEMU} not found; {INSTALL_HINT}")
+        if not Path(elf).is_file():
+            raise InputError(f"firmware {elf} not found")
+        self.elf, self.icount, self.boot_timeout = Path(elf), icount, boot_timeout
+        self.port = port if port is not None else free_port()
+        if not 0 < self.port < 65536:
+            raise InputError(f"port {self.port} is not a TCP port number")
+        self.proc: subprocess.Popen | None = None
+
+    @property
+    def url(self) -> str:
+        return f"socket://127.0.0.1:{self.port}"
+
+    def command(self) -> list[str]:
+        cmd = [QEMU, "-M", "mps2-an386", "-display", "none", "-monitor", "none", "-nodefaults",
+               "-serial", f"tcp:127.0.0.1:{self.port},server=on,wait=off,nodelay=on", "-kernel", str(self.elf)]
+        if self.icount:
+            cmd += ["-icount", f"shift={ICOUNT_SHIFT}"]
+        return cmd
+
+    def start(self) -> "Emulator":
+        self.proc = subprocess.Popen(self.command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + self.boot_timeout
+        while True:
+            if self.proc.poll() is not None:
+                err = (self.proc.stderr.read() or "").strip().splitlines()
+                raise InputError(f"{QEMU} exited at start: {err[-1] if err else 'no message'}")
+            try:
+                # QEMU listens once its chardev is up; the probe's connection is closed at once
+                with socket.create_connection(("127.0.0.1", self.port), timeout=0.5):
+                    return self
+            except OSError:
+                if time.monotonic() > deadline:
+                    self.stop()
+                    raise InputError(f"{QEMU} did not open port {self.port} within {self.boot_timeout:g} s") from None
+                time.sleep(0.05)
+
+
+
+class HostFirmware(_Running):
+    """The host build of the firmware serving on a pseudo-terminal; ``url`` is the pty's path."""
+
+    def __init__(self, binary: str | Path, boot_timeout: float = 5.0):
+        if not Path(binary).is_file():
+            raise InputError(f"firmware {binary} not found")
+        self.binary, self.boot_timeout = Path(binary), boot_timeout
+        self.proc: subprocess.Popen | None = None
+        self.url = ""
+
+    def start(self) -> "HostFirmware":
+        self.proc = subprocess.Popen([str(self.binary), "--pty"], stdin=subprocess.DEVNULL,
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        fd = self.proc.stderr.fileno()
+        buf = b""
+        deadline = time.monotonic() + self.boot_timeout
+        while b"\n" not in buf:
+            left = deadline - time.monotonic()
+            ready = select.select([fd], [], [], max(left, 0))[0] if left > 0 else []
+            chunk = os.read(fd, 256) if ready else b""
+            if not chunk:
+                self.stop()
+                raise InputError(f"host firmware {self.binary} did not announce its pty")
+            buf += chunk
+        line = buf.split(b"\n", 1)[0].decode(errors="replace").strip()
+        if not line.startswith("PTY "):
+            self.stop()
+            raise InputError(f"host firmware said {line!r} instead of 'PTY <path>'")
+        self.url = line[4:]
+        return self
+
+
+
+def instructions_per_estimate(ticks_small: int, ticks_large: int, n_small: int, n_large: int, tick_hz: int,
+                              shift: int = ICOUNT_SHIFT) -> float:
+    """Instructions per estimate from two BENCH runs under ``-icount shift``: the difference cancels the
+    fixed cost of the command; one instruction takes 2^shift ns of virtual time."""
+    ns_per_tick = 1e9 / tick_hz
+    return (ticks_large - ticks_small) * ns_per_tick / (2 ** shift) / (n_large - n_small)
+
+
+def bench_instructions(dev, n_small: int = 200, n_large: int = 2200) -> dict:
+    """Instructions (emulator, icount) or ns (host build) per estimate of the active calibration, from BENCH."""
+    t1, hz, _ = dev.bench(n_small)
+    t2, hz2, _ = dev.bench(n_large)
+    per = (t2 - t1) / (n_large - n_small)
+    return {"ticks_per_estimate": per, "tick_hz": hz,
+            "instructions": instructions_per_estimate(t1, t2, n_small, n_large, hz) if hz != 1_000_000_000 else None,
+            "ns": per * 1e9 / hz}
+
+
+def start_target(model, target: str = "mps2", *, precision: str = "float", style: str = "table", fma: bool = False,
+                 port: int | None = None, workdir: str | Path | None = None, sensor_id: str = "paper"):
+    """Render and build the firmware for ``target`` (mps2 or host) with ``model`` compiled in, and start it.
+
+    Returns the started :class:`Emulator` or :class:`HostFirmware`, with ``size`` (mps2: flash and RAM
+    bytes) and ``workdir`` set; the caller stops it (it is a context manager).
+    """
+    import tempfile
+
+    from .firmware import build_firmware, firmware_size, render_firmware
+
+    if target not in ("mps2", "host"):
+        raise InputError(f"target must be mps2 or host, got {target!r}")
+    if target == "mps2":
+        missing = [t for t in (QEMU, "arm-none-eabi-gcc") if shutil.which(t) is None]
+        if missing:
+            raise InputError(f"{' and '.join(missing)} not found; {INSTALL_HINT}")
+    tmp = None
+    if workdir is None:
+        tmp = tempfile.TemporaryDirectory(prefix="tactile-fw-")
+        workdir = tmp.name
+    folder = Path(workdir)
+    port_name = "mps2" if target == "mps2" else "posix"
+    render_firmware(model, folder, precision=precision, style=style, fma=fma, port=port_name, sensor_id=sensor_id)
+    image = build_firmware(folder, port_name)
+    runner = Emulator(image, port) if target == "mps2" else HostFirmware(image)
+    runner.size = firmware_size(image) if target == "mps2" else None
+    runner.workdir = folder
+    runner._tmp = tmp  # removed with the runner
+    return runner

@@ -1,0 +1,105 @@
+"""The reference firmware (``firmware_templates/firmware/``, protocol in docs/protocol.md) for a model:
+rendered into a folder next to its ``tm_model.h``, and built for a host process or QEMU's mps2-an386."""
+
+from __future__ import annotations
+
+import shlex
+import shutil
+import subprocess
+from importlib import resources
+from pathlib import Path
+
+import jinja2
+
+from fitgen import __version__
+from fitgen.codegen import PRECISIONS, STYLES, write_header
+from fitgen.errors import InputError
+from fitgen.fileio import write_atomic
+from fitgen.model import Model
+from host.compiled import WARNING_FLAGS
+
+PORTS = ("posix", "mps2")
+COMMON_FILES = ("model_api.h", "proto.h", "proto.c", "cal.h", "cal.c", "device.h", "device.c", "hal.h", "hal_sim.c")
+PORT_FILES = {"posix": ("hal_posix.c",), "mps2": ("hal_mps2.c", "startup_mps2.c", "mps2_an386.ld")}
+BINARY = {"posix": "firmware", "mps2": "firmware.elf"}
+DEFAULT_CC = {"posix": "gcc", "mps2": "arm-none-eabi-gcc"}
+LINKER_SCRIPT = "mps2_an386.ld"
+MPS2_FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16", "-fno-math-errno",
+              "-ffunction-sections", "-fdata-sections", "-nostartfiles", "-Wl,--gc-sections",
+              "-Wl,--fatal-warnings", "--specs=nano.specs", "--specs=nosys.specs"]
+SENSOR_ID_MAX = 16
+
+
+def _check_port(port: str) -> None:
+    if port not in PORTS:
+        raise InputError(f"port must be one of {', '.join(PORTS)}, got {port!r}")
+
+
+def _source(name: str) -> bytes:
+    return (resources.files("firmware_templates") / "firmware" / name).read_bytes()
+
+
+def render_firmware(model: Model, folder: str | Path, *, precision: str = "float", style: str = "table",
+                    fma: bool = False, port: str = "mps2", sensor_id: str = "paper") -> Path:
+    """Write ``tm_model.h``, ``main.c`` and the port's sources into ``folder``; return ``folder``.
+
+    Each file is written atomically; the same arguments give the same bytes.
+    """
+    _check_port(port)
+    if precision not in PRECISIONS or style not in STYLES:
+        raise InputError(f"precision must be one of {', '.join(PRECISIONS)} and style one of "
+                         f"{', '.join(STYLES)}, got {precision!r}, {style!r}")
+    if not (0 < len(sensor_id) <= SENSOR_ID_MAX and sensor_id.isascii() and sensor_id.isprintable()
+            and '"' not in sensor_id and "\\" not in sensor_id):
+        raise InputError(f"sensor id must be 1..{SENSOR_ID_MAX} printable ASCII characters without quotes "
+                         f"or backslashes, got {sensor_id!r}")
+    folder = Path(folder)
+    write_header(model, folder, precision, style, "tm", fma)  # creates the folder
+    for name in COMMON_FILES + PORT_FILES[port]:
+        write_atomic(folder / name, _source(name))
+    digest = bytes.fromhex(model.sha256)
+    rows = [", ".join(f"0x{b:02x}" for b in digest[i:i + 8]) + ("," if i < 24 else "") for i in range(0, 32, 8)]
+    env = jinja2.Environment(undefined=jinja2.StrictUndefined, autoescape=False, keep_trailing_newline=True,
+                             trim_blocks=True, lstrip_blocks=True)
+    main = env.from_string(_source("main.c.j2").decode()).render(
+        port=port, version=__version__, model_hash=model.sha256, precision=precision, style=style, fma=fma,
+        n_inputs=model.n_inputs, n_outputs=len(model.equations), hash_rows=rows, sensor_id=sensor_id)
+    write_atomic(folder / "main.c", main)
+    return folder
+
+
+def _run(cmd: list[str], what: str) -> subprocess.CompletedProcess:
+    if shutil.which(cmd[0]) is None:
+        raise InputError(f"{what}: {cmd[0]!r} not found")
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        lines = proc.stderr.strip().splitlines()
+        first = next((ln for ln in lines if "error" in ln), lines[0] if lines else "(no message)")
+        raise InputError(f"{what} failed: {first.strip()}")
+    return proc
+
+
+def build_firmware(folder: str | Path, port: str, cc: str | None = None) -> Path:
+    """Compile a rendered folder: ``port`` "posix" gives the host binary ``folder/firmware`` (gcc),
+    "mps2" the ELF ``folder/firmware.elf`` (arm-none-eabi-gcc). Warnings are errors; a failure or a
+    missing compiler is an InputError with the compiler's first error line."""
+    _check_port(port)
+    folder = Path(folder)
+    names = ("main.c",) + COMMON_FILES + PORT_FILES[port]
+    missing = [n for n in names if not (folder / n).is_file()]
+    if missing or not (folder / "tm_model.h").is_file():
+        raise InputError(f"{folder} holds no rendered {port} firmware (missing {', '.join(missing) or 'tm_model.h'})")
+    output = folder / BINARY[port]
+    cmd = shlex.split(cc or DEFAULT_CC[port]) + WARNING_FLAGS + ["-O2", "-I", str(folder)]
+    if port == "mps2":
+        cmd += MPS2_FLAGS + ["-T", str(folder / LINKER_SCRIPT)]
+    cmd += [str(folder / n) for n in names if n.endswith(".c")] + ["-o", str(output), "-lm"]
+    _run(cmd, f"building the {port} firmware")
+    return output
+
+
+def firmware_size(elf: str | Path, size_tool: str = "arm-none-eabi-size") -> dict[str, int]:
+    """Bytes of an ELF: text, data, bss (``size`` in Berkeley format), flash = text + data, ram = data + bss."""
+    proc = _run([size_tool, str(elf)], f"measuring {elf}")
+    text, data, bss = (int(x) for x in proc.stdout.splitlines()[1].split()[:3])
+    return {"text": text, "data": data, "bss": bss, "flash": text + data, "ram": data + bss}

@@ -1,0 +1,374 @@
+"""The HIL suite: the same vectors through a device and through Python, calibration flashing, and fuzzing.
+
+Each check talks to a :class:`host.device.Device` and returns a :class:`Check`; ``run_suite``
+runs them in order and stops early only when the device stops answering.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from fitgen.calblob import to_blob
+from fitgen.fileio import write_atomic
+from fitgen.model import Equation, Model
+from fitgen.progress import Progress
+from host import protocol as P
+from host.device import Device, DeviceError, NoAnswer
+from host.verify import VerifyResult, compare, compare_fixed, make_code_vectors, make_vectors
+
+
+@dataclass
+class Check:
+    name: str
+    ok: bool
+    detail: str
+    seconds: float = 0.0
+    figures: dict = field(default_factory=dict)
+
+
+@dataclass
+class SuiteResult:
+    url: str
+    checks: list[Check]
+
+    @property
+    def ok(self) -> bool:
+        return all(c.ok for c in self.checks)
+
+    def table(self) -> str:
+        lines = [f"HIL suite on {self.url}", "| check | result | detail |", "| --- | --- | --- |"]
+        lines += [f"| {c.name} | {'pass' if c.ok else 'FAIL'} | {c.detail} |" for c in self.checks]
+        return "\n".join(lines)
+
+    def junit(self) -> str:
+        fails = sum(not c.ok for c in self.checks)
+        total = sum(c.seconds for c in self.checks)
+        out = ['<?xml version="1.0" encoding="UTF-8"?>',
+               f'<testsuite name="tactile-hil" tests="{len(self.checks)}" failures="{fails}" errors="0" '
+               f'time="{total:.3f}">']
+        for c in self.checks:
+            out.append(f'  <testcase classname="hil" name={quoteattr(c.name)} time="{c.seconds:.3f}">')
+            if c.ok:
+                out.append(f"    <system-out>{_xml_text(c.detail)}</system-out>")
+            else:
+                out.append(f"    <failure message={quoteattr(c.detail)}/>")
+            out.append("  </testcase>")
+        out.append("</testsuite>")
+        return "\n".join(out) + "\n"
+
+    def write_junit(self, path: str | Path) -> Path:
+        return write_atomic(path, self.junit())
+
+
+def _xml_text(s: str) -> str:
+    return s.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+class DeviceEvaluator:
+    """A device seen as ``host.verify.compare`` sees a compiled model: precision, style, fma, predict."""
+
+    def __init__(self, device: Device, precision: str, style: str, fma: bool = False):
+        self.device, self.precision, self.style, self.fma = device, precision, style, fma
+
+    def predict(self, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        status, out = self.device.eval(inputs)
+        return np.asarray(out, dtype=float), np.asarray(status)
+
+
+def flash_variant(model: Model) -> Model:
+    """A second calibration for the flash checks: the same terms, coefficients scaled by 1.001 and
+    intercepts moved, so that its hash and its answers differ from the compiled-in model's."""
+    eqs = tuple(Equation(e.name, e.intercept + 0.01, e.terms, tuple(c * 1.001 for c in e.coefficients))
+                for e in model.equations)
+    return Model(model.input_min, model.input_max, eqs, model.input_units, dict(model.fit_info))
+
+
+def _verify_detail(res: VerifyResult) -> str:
+    worst = float(np.max(res.max_ratio)) if len(res.max_ratio) else 0.0
+    text = f"{res.n_vectors} vectors, max error " + ", ".join(
+        f"{n} {e:.3g}" for n, e in zip(res.outputs, res.max_error)) + f"; worst error/bound {worst:.3g}"
+    return text if res.ok else text + "; " + "; ".join(res.failures)
+
+
+def check_info(dev: Device, model: Model) -> Check:
+    info = dev.info(refresh=True)
+    problems = []
+    if info.n_inputs != model.n_inputs or info.n_outputs != len(model.equations):
+        problems.append(f"device takes {info.n_inputs} inputs and gives {info.n_outputs} outputs, "
+                        f"the model {model.n_inputs} and {len(model.equations)}")
+    if info.model_hash != model.sha256:
+        problems.append(f"device runs model {info.model_hash[:12]}, not {model.sha256[:12]}")
+    detail = (f"protocol {info.protocol_version}, firmware {info.firmware_version}, {info.precision}, "
+              f"{info.style_name}, model {info.model_hash[:12]}, sensor {info.sensor_id}")
+    return Check("info", not problems, "; ".join(problems) or detail)
+
+
+def check_eval(dev: Device, model: Model, inputs: np.ndarray, name: str, fma: bool = False) -> Check:
+    info = dev.info()
+    res = compare(model, DeviceEvaluator(dev, info.precision, info.style_name, fma), inputs)
+    return Check(name, res.ok, _verify_detail(res), figures={"max_error": res.max_error.tolist(),
+                                                            "worst_ratio": float(np.max(res.max_ratio))})
+
+
+class FixedDeviceEvaluator:
+    """A fixed-point device seen as ``host.verify.compare_fixed`` sees a compiled model."""
+
+    style = "unrolled"  # the fixed-point header's one form
+
+    def __init__(self, device: Device, fixed):
+        self.device, self.fixed = device, fixed
+
+    def predict_codes(self, codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        status, out = self.device.eval(codes)
+        return np.asarray(out, dtype=np.int64), np.asarray(status)
+
+
+def check_eval_fixed(dev: Device, model: Model, fixed, codes: np.ndarray, name: str) -> Check:
+    res = compare_fixed(model, FixedDeviceEvaluator(dev, fixed), codes)
+    lsb = int(np.max(res.max_lsb_diff))
+    detail = _verify_detail(res) + f"; largest difference from the numpy integer model {lsb} LSB"
+    return Check(name, res.ok, detail, figures={"max_error": res.max_error.tolist(),
+                                                "worst_ratio": float(np.max(res.max_ratio)),
+                                                "max_lsb_diff": lsb})
+
+
+def check_fixed_refuses_blobs(dev: Device, model: Model, sensor_id: str) -> Check:
+    """A fixed-point build has no blob interpreter: CAL_BEGIN must be refused and the model kept."""
+    blob = to_blob(model, "float", sensor_id)
+    try:
+        dev.load_calibration(blob)
+    except DeviceError as exc:
+        kept = dev.info(refresh=True).model_hash == model.sha256
+        ok = exc.code == P.ErrorCode.CAL_INVALID and kept
+        return Check("flash (fixed point)", ok, f"blob refused with {P.error_name(exc.code)}; "
+                     f"compiled-in model {'kept' if kept else 'LOST'}")
+    return Check("flash (fixed point)", False, "a fixed-point build accepted a float calibration blob")
+
+
+def check_timing(dev: Device, model: Model, n_single: int = 200, n_batch: int = 400, fixed=None) -> Check:
+    """Round trip of one-vector EVALs (median) and throughput of batched EVALs."""
+    rng = np.random.default_rng(5)
+    n = max(n_single, n_batch)
+    if fixed is not None:
+        x = rng.integers(np.array(fixed.code_min), np.array(fixed.code_max) + 1, (n, model.n_inputs))
+    else:
+        x = model.input_min + (model.input_max - model.input_min) * rng.random((n, model.n_inputs))
+    rtt = []
+    for row in x[:n_single]:
+        t0 = time.perf_counter()
+        dev.eval(row[None])
+        rtt.append(time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    dev.eval(x[:n_batch])
+    rate = n_batch / (time.perf_counter() - t0)
+    med = statistics.median(rtt) * 1e3
+    return Check("timing", True, f"round trip median {med:.2f} ms (min {min(rtt) * 1e3:.2f}), "
+                 f"throughput {rate:,.0f} estimates/s batched",
+                 figures={"rtt_ms_median": med, "rtt_ms_min": min(rtt) * 1e3, "per_s": rate})
+
+
+def check_flash(dev: Device, model: Model, new: Model, inputs: np.ndarray, sensor_id: str) -> Check:
+    """Load a new calibration, read it back, and find the device answering with it."""
+    info = dev.info()
+    blob = to_blob(new, info.precision, sensor_id)
+    answered = dev.load_calibration(blob)
+    back = dev.read_calibration()
+    info = dev.info(refresh=True)
+    problems = []
+    if back != blob:
+        problems.append(f"read-back differs ({len(back)} bytes back for {len(blob)} sent)")
+    if answered != new.sha256 or info.model_hash != new.sha256 or info.cal_source != 1:
+        problems.append(f"device reports model {info.model_hash[:12]} (source {info.cal_source}), "
+                        f"flashed {new.sha256[:12]}")
+    res = compare(new, DeviceEvaluator(dev, info.precision, "table"), inputs)
+    if not res.ok:
+        problems.append("EVAL after flash: " + "; ".join(res.failures))
+    return Check("flash", not problems, "; ".join(problems) or
+                 f"{len(blob)} bytes flashed and read back; EVAL on {len(inputs)} vectors agrees with the new model",
+                 figures={"blob_bytes": len(blob)})
+
+
+def check_corrupt_flash(dev: Device, new: Model, inputs: np.ndarray, sensor_id: str) -> Check:
+    """Corrupt, truncated and out-of-order transfers: each refused, the calibration before them kept."""
+    info = dev.info()
+    blob = to_blob(new, info.precision, sensor_id)
+    before = dev.read_calibration()
+    refused = []
+    problems = []
+
+    def expect_refusal(what, fn, codes):
+        try:
+            fn()
+        except DeviceError as exc:
+            if exc.code not in codes:
+                problems.append(f"{what}: refused with {P.error_name(exc.code)}, expected "
+                                f"{' or '.join(P.error_name(c) for c in codes)}")
+            refused.append(what)
+            return
+        problems.append(f"{what}: accepted")
+
+    bad = bytearray(blob)
+    bad[len(bad) // 2] ^= 0x40
+    expect_refusal("flipped byte", lambda: dev.load_calibration(bytes(bad)), {P.ErrorCode.CAL_CRC, P.ErrorCode.CAL_INVALID})
+    # a blob whose CRC is right but whose content is not: a format version this firmware does not know
+    forged = bytearray(blob)
+    forged[4:6] = (99).to_bytes(2, "little")
+    forged[-4:] = P.crc32(bytes(forged[:-4])).to_bytes(4, "little")
+    expect_refusal("unknown format version", lambda: dev.load_calibration(bytes(forged)), {P.ErrorCode.CAL_INVALID})
+
+    def truncated():
+        dev.request(P.MsgType.CAL_BEGIN, len(blob).to_bytes(4, "little") + P.crc32(blob).to_bytes(4, "little"))
+        dev.request(P.MsgType.CAL_DATA, (0).to_bytes(4, "little") + blob[:100])
+        dev.request(P.MsgType.CAL_COMMIT, b"")
+
+    expect_refusal("interrupted transfer", truncated, {P.ErrorCode.CAL_SEQUENCE})
+
+    def out_of_order():
+        dev.request(P.MsgType.CAL_BEGIN, len(blob).to_bytes(4, "little") + P.crc32(blob).to_bytes(4, "little"))
+        dev.request(P.MsgType.CAL_DATA, (100).to_bytes(4, "little") + blob[100:200])
+
+    expect_refusal("chunk out of order", out_of_order, {P.ErrorCode.CAL_SEQUENCE})
+    after = dev.read_calibration()
+    if after != before:
+        problems.append("the active calibration changed")
+    res = compare(new, DeviceEvaluator(dev, info.precision, "table"), inputs)
+    if not res.ok:
+        problems.append("EVAL after the refused transfers: " + "; ".join(res.failures))
+    return Check("corrupt flash", not problems, "; ".join(problems) or
+                 f"{len(refused)} bad transfers refused ({', '.join(refused)}); the old calibration still answers")
+
+
+def fuzz_frames(n: int, seed: int = 0) -> list[bytes]:
+    """Random and mutated wire frames: garbage, bit flips, truncations, wrong lengths, oversize,
+    and well-formed frames of every type with random payloads (arguments that would make the
+    device busy for long, BENCH n and STREAM counts, kept small)."""
+    rng = np.random.default_rng(seed)
+    frames = []
+    types = [int(t) for t in P.MsgType] + [0x00, 0x0B, 0x7F, 0x80, 0xFF]
+    for i in range(n):
+        kind = i % 6
+        t = int(rng.choice(types))
+        payload = rng.bytes(int(rng.integers(0, 300)))
+        if t == P.MsgType.BENCH:
+            payload = int(rng.integers(0, 64)).to_bytes(4, "little")
+        elif t == P.MsgType.STREAM:
+            payload = int(rng.integers(0, 3)).to_bytes(2, "little") + int(rng.integers(0, 3)).to_bytes(2, "little")
+        seq = int(rng.integers(1, 256))
+        body = bytes([t & 0xFF, seq]) + len(payload).to_bytes(2, "little") + payload
+        body += P.crc32(body).to_bytes(4, "little")
+        if kind == 0:  # garbage, delimited
+            frames.append(rng.bytes(int(rng.integers(1, 80))) + b"\x00")
+        elif kind == 1:  # a valid frame with flipped bits
+            enc = bytearray(P.cobs_encode(body))
+            for _ in range(int(rng.integers(1, 4))):
+                enc[int(rng.integers(len(enc)))] ^= 1 << int(rng.integers(8))
+            frames.append(bytes(enc) + b"\x00")
+        elif kind == 2:  # truncated
+            enc = P.cobs_encode(body)
+            frames.append(enc[: int(rng.integers(0, len(enc)))] + b"\x00")
+        elif kind == 3:  # length field disagreeing with the payload, CRC made right
+            wrong = bytearray(body[:-4])
+            wrong[2:4] = int(rng.integers(0, 65536)).to_bytes(2, "little")
+            frames.append(P.cobs_encode(bytes(wrong) + P.crc32(bytes(wrong)).to_bytes(4, "little")) + b"\x00")
+        elif kind == 4:  # oversize: no delimiter for longer than a frame
+            frames.append(bytes(rng.integers(1, 256, int(rng.integers(300, 1200)), dtype=np.uint8)) + b"\x00")
+        else:  # well formed, random type and payload (may be refused for its length or arguments)
+            frames.append(P.cobs_encode(body) + b"\x00")
+    return frames
+
+
+def sync(dev: Device, token: bytes, timeout: float | None = None) -> bool:
+    """PING with a token no fuzz frame carries and read until its echo: every frame sent before has
+    then been answered, so no stale reply is left to be taken for the next request's."""
+    seq = dev.next_seq()
+    dev.send(P.MsgType.PING, seq, token)
+    t_end = time.monotonic() + (dev.timeout if timeout is None else timeout)
+    while time.monotonic() < t_end:
+        frame = dev.receive(max(0.0, t_end - time.monotonic()))
+        if frame is not None and frame.type == (P.MsgType.PING | P.REPLY) and frame.payload == token:
+            return True
+    return False
+
+
+def check_fuzz(dev: Device, n_frames: int, batch: int = 50, seed: int = 0, progress: Progress | None = None) -> Check:
+    """Send ``n_frames`` bad or random frames in batches; after each batch the device must answer PING."""
+    frames = fuzz_frames(n_frames, seed)
+    rng_token = np.random.default_rng(seed + 1)
+    sent = 0
+    for start in range(0, len(frames), batch):
+        chunk = frames[start:start + batch]
+        dev.send_raw(b"".join(chunk))
+        sent += len(chunk)
+        # the token is 24 bytes; fuzz PINGs echo random payloads, so none can match it by chance
+        if not sync(dev, b"hil-sync" + rng_token.bytes(16), timeout=max(dev.timeout, 10.0)):
+            return Check("fuzz", False, f"device stopped answering after {sent} fuzz frames")
+        if progress:
+            progress.update(len(chunk))
+    dev.reset_calibration()
+    return Check("fuzz", True, f"{sent} random or mutated frames; the device answered PING after every {batch}",
+                 figures={"frames": sent})
+
+
+def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000, data: np.ndarray | None = None,
+              n_fuzz: int = 10_000, flash: bool = True, sensor_id: str = "paper", fma: bool = False,
+              seed: int = 0, verbose: bool = True, input_lsb: float | None = None,
+              input_offset: float | None = None) -> SuiteResult:
+    """Every check in turn against the device at ``url`` that runs ``model`` compiled in.
+
+    A fixed-point device (INFO precision 2) gets ADC codes, compared with the numpy model of its
+    integer arithmetic (``input_lsb``/``input_offset`` as given to codegen; default: the model's sensor).
+    """
+    checks: list[Check] = []
+    fixed = None
+    if dev.info(refresh=True).precision == "fixed":
+        from fitgen.fixedpoint import build_fixed, default_input_scale
+
+        lsb, offset, _ = default_input_scale(model) if input_lsb is None else (input_lsb, input_offset or 0.0, "")
+        fixed = build_fixed(model, lsb, offset if input_offset is None else input_offset)
+        inputs, _ = make_code_vectors(fixed, n_vectors, seed)
+        if data is not None:
+            inputs = np.vstack([inputs, fixed.codes_of(data)])
+    else:
+        inputs, _ = make_vectors(model, n_vectors, seed)
+        if data is not None:
+            inputs = np.vstack([inputs, data])
+
+    def evaluate(subset, name):
+        if fixed is not None:
+            return step(check_eval_fixed, dev, model, fixed, subset, name)
+        return step(check_eval, dev, model, subset, name, fma)
+
+    def step(fn, *args, **kw):
+        t0 = time.perf_counter()
+        c = fn(*args, **kw)
+        c.seconds = time.perf_counter() - t0
+        checks.append(c)
+        if verbose:
+            print(f"  {c.name}: {'pass' if c.ok else 'FAIL'} ({c.seconds:.1f} s)", flush=True)
+        return c
+
+    if not sync(dev, b"hil-start" + bytes(np.random.default_rng().bytes(16))):
+        raise NoAnswer(f"{url or 'the device'} does not answer PING")
+    step(check_info, dev, model)
+    dev.reset_calibration()
+    evaluate(inputs, "eval")
+    step(check_timing, dev, model, fixed=fixed)
+    if flash and fixed is not None:
+        step(check_fixed_refuses_blobs, dev, model, sensor_id)
+    elif flash:
+        new = flash_variant(model)
+        few = inputs[: min(len(inputs), 300)]
+        step(check_flash, dev, model, new, few, sensor_id)
+        step(check_corrupt_flash, dev, new, few, sensor_id)
+        dev.reset_calibration()
+    if n_fuzz:
+        with Progress("fuzz frames", n_fuzz) as prog:
+            step(check_fuzz, dev, n_fuzz, seed=seed, progress=prog)
+        evaluate(inputs[: min(len(inputs), 300)], "eval after fuzz")
+    return SuiteResult(url, checks)

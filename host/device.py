@@ -1,0 +1,235 @@
+"""A client of the device protocol (docs/protocol.md) over a serial port, a pty or a TCP socket (pyserial)."""
+
+from __future__ import annotations
+
+import struct
+import time
+
+import numpy as np
+
+from fitgen.errors import InputError
+
+from . import protocol as p
+from .protocol import DeviceInfo, ErrorCode, Frame, MsgType
+
+POLL = 0.02  # seconds one read of the port blocks at most
+
+
+class NoAnswer(InputError):
+    """The device did not answer in time (a port with nothing behind it, or a hung device)."""
+
+
+class DeviceError(Exception):
+    """The device answered a request with ERROR."""
+
+    def __init__(self, code: int, request_type: int):
+        self.code = code
+        self.request_type = request_type
+        super().__init__(f"the device answered {p.type_name(request_type)} with ERROR {p.error_name(code)}")
+
+
+def _reason(exc: BaseException) -> str:
+    """The OS's words for why a port did not open ("connection refused"), else pyserial's."""
+    for e in (exc.__cause__, exc.__context__, exc):
+        if isinstance(e, OSError) and e.strerror:
+            return e.strerror[:1].lower() + e.strerror[1:]
+    text = str(exc).strip() or type(exc).__name__
+    return text.splitlines()[0]
+
+
+class Device:
+    """Requests and replies over one open port. Use ``Device.open(url)`` as a context manager."""
+
+    def __init__(self, port, timeout: float = 1.0, name: str = ""):
+        self.port = port
+        self.timeout = float(timeout)
+        self.name = name or getattr(port, "name", "") or "device"
+        self.reader = p.FrameReader()
+        self._seq = 0
+        self._info: DeviceInfo | None = None
+        self._backlog: list[Frame] = []
+
+    @classmethod
+    def open(cls, url: str, timeout: float = 1.0) -> "Device":
+        import serial
+
+        try:
+            port = serial.serial_for_url(url, baudrate=115200, timeout=POLL, write_timeout=max(timeout, POLL))
+        except (serial.SerialException, ValueError, OSError) as exc:
+            raise InputError(f"cannot open port {url}: {_reason(exc)}") from None
+        sock = getattr(port, "_socket", None)
+        if sock is not None:
+            import socket
+
+            # small request frames must not wait for Nagle's algorithm (40 ms with delayed ACKs)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        return cls(port, timeout, url)
+
+    def close(self) -> None:
+        if self.port is not None:
+            try:
+                self.port.close()
+            finally:
+                self.port = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # --- frames -----------------------------------------------------------------
+
+    def next_seq(self) -> int:
+        self._seq = self._seq % 255 + 1
+        return self._seq
+
+    def send_raw(self, data: bytes) -> None:
+        """Write bytes as they are (fuzzing, or a frame built by hand)."""
+        import serial
+
+        try:
+            self.port.write(bytes(data))
+            self.port.flush()
+        except serial.SerialTimeoutException:
+            raise NoAnswer(f"{self.name}: the device does not take the bytes written to it") from None
+        except (serial.SerialException, OSError) as exc:
+            raise InputError(f"{self.name}: {_reason(exc)}") from None
+
+    def send(self, type: int, seq: int, payload: bytes = b"") -> None:
+        self.send_raw(p.encode_frame(type, seq, payload))
+
+    def receive(self, timeout: float | None = None) -> Frame | None:
+        """The next frame from the device, or None after ``timeout`` s. Undecodable bytes count in reader.errors."""
+        import serial
+
+        if self._backlog:
+            return self._backlog.pop(0)
+        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
+        while True:
+            try:
+                data = self.port.read(1)
+                if data:
+                    waiting = self.port.in_waiting
+                    if waiting:
+                        data += self.port.read(waiting)
+            except (serial.SerialException, OSError) as exc:
+                raise InputError(f"{self.name}: {_reason(exc)}") from None
+            if data:
+                self._backlog += self.reader.feed(data)
+                if self._backlog:
+                    return self._backlog.pop(0)
+            if time.monotonic() >= deadline:
+                return None
+
+    def request(self, type: int, payload: bytes = b"", timeout: float | None = None) -> Frame:
+        """Send one request and return its reply; DeviceError for an ERROR reply, NoAnswer after ``timeout``."""
+        seq = self.next_seq()
+        self.send(type, seq, payload)
+        wait = self.timeout if timeout is None else timeout
+        deadline = time.monotonic() + wait
+        while True:
+            frame = self.receive(max(0.0, deadline - time.monotonic()))
+            if frame is None:
+                raise NoAnswer(f"{self.name}: no answer to {p.type_name(type)} within {wait:g} s")
+            if frame.seq != seq:
+                continue  # stale: a reply to an earlier request, a stream sample, an error about garbage
+            if frame.type == MsgType.ERROR:
+                code, req = p.unpack_error(frame.payload)
+                raise DeviceError(code, req)
+            if frame.type == type | p.REPLY:
+                return frame
+
+    # --- messages ---------------------------------------------------------------
+
+    def ping(self, data: bytes = b"") -> bytes:
+        return self.request(MsgType.PING, data).payload
+
+    def info(self, refresh: bool = False) -> DeviceInfo:
+        if self._info is None or refresh:
+            self._info = p.unpack_info(self.request(MsgType.INFO).payload)
+        return self._info
+
+    def eval(self, inputs) -> tuple[np.ndarray, np.ndarray]:
+        """Status (n,) and outputs (n, n_outputs) of the active calibration for rows of inputs (n, n_inputs)."""
+        info = self.info()
+        x = np.atleast_2d(np.asarray(inputs, dtype=float))
+        if x.ndim != 2 or x.shape[1] != info.n_inputs:
+            raise InputError(f"the device takes {info.n_inputs} inputs, got rows of shape {x.shape[1:]}")
+        k = p.max_eval_batch(info.n_inputs, info.n_outputs, info.real_size)
+        status, outputs = [np.zeros(0, dtype=np.int64)], [np.zeros((0, info.n_outputs))]
+        for start in range(0, len(x), k):
+            reply = self.request(MsgType.EVAL, p.pack_eval(x[start:start + k], info.real_dtype))
+            s, o = p.unpack_eval_reply(reply.payload, info.n_outputs, info.real_dtype)
+            if len(s) != len(x[start:start + k]):
+                raise p.ProtocolError(ErrorCode.BAD_LENGTH, f"EVAL of {len(x[start:start + k])} vectors "
+                                                            f"answered with {len(s)} results")
+            status.append(s)
+            outputs.append(o)
+        return np.concatenate(status), np.vstack(outputs)
+
+    def stream(self, period_ms: int, count: int, timeout: float | None = None) -> list[p.StreamSample]:
+        """Start a stream of ``count`` samples and collect them (NoAnswer when they stop coming)."""
+        info = self.info()
+        seq = self._seq % 255 + 1
+        self.request(MsgType.STREAM, p.pack_stream(period_ms, count))
+        samples = []
+        wait = self.timeout + period_ms / 1000 if timeout is None else timeout
+        while len(samples) < count:
+            deadline = time.monotonic() + wait
+            frame = None
+            while frame is None or frame.seq != seq or frame.type != MsgType.STREAM_SAMPLE:
+                frame = self.receive(max(0.0, deadline - time.monotonic()))
+                if frame is None:
+                    raise NoAnswer(f"{self.name}: stream stopped after {len(samples)} of {count} samples")
+            samples.append(p.unpack_stream_sample(frame.payload, info.n_inputs, info.n_outputs, info.real_dtype))
+        return samples
+
+    def stop_stream(self) -> None:
+        self.request(MsgType.STREAM, p.pack_stream(0, 0))
+
+    def load_calibration(self, blob: bytes, chunk: int = p.CAL_DATA_MAX) -> str:
+        """CAL_BEGIN, CAL_DATA in chunks, CAL_COMMIT; the active model hash the device reports (hex)."""
+        if not 1 <= chunk <= p.CAL_DATA_MAX:
+            raise InputError(f"chunk must be 1..{p.CAL_DATA_MAX} bytes, got {chunk}")
+        blob = bytes(blob)
+        self._info = None
+        self.request(MsgType.CAL_BEGIN, p.pack_cal_begin(len(blob), p.crc32(blob)))
+        for offset in range(0, len(blob), chunk):
+            part = blob[offset:offset + chunk]
+            reply = self.request(MsgType.CAL_DATA, p.pack_cal_data(offset, part))
+            if len(reply.payload) != 4 or struct.unpack("<I", reply.payload)[0] != offset + len(part):
+                raise p.ProtocolError(ErrorCode.BAD_LENGTH, f"CAL_DATA at {offset}: the device reports "
+                                                            f"{reply.payload.hex()} received, "
+                                                            f"expected {offset + len(part)}")
+        reply = self.request(MsgType.CAL_COMMIT)
+        if len(reply.payload) != 32:
+            raise p.ProtocolError(ErrorCode.BAD_LENGTH, f"CAL_COMMIT reply of {len(reply.payload)} bytes "
+                                                        "(expected a 32-byte hash)")
+        return reply.payload.hex()
+
+    def read_calibration(self, limit: int = 1 << 20) -> bytes:
+        """The loaded blob's bytes (DeviceError NO_CAL when none is loaded)."""
+        from fitgen.calblob import HEADER_SIZE, size_from_header
+
+        out = bytearray(self.request(MsgType.CAL_READ, p.pack_cal_read(0, HEADER_SIZE)).payload)
+        try:
+            size = size_from_header(bytes(out))
+        except InputError:
+            size = None  # not a v1 header: read until a short chunk
+        while size is None or len(out) < size:
+            want = p.CAL_READ_MAX if size is None else min(p.CAL_READ_MAX, size - len(out))
+            part = self.request(MsgType.CAL_READ, p.pack_cal_read(len(out), want)).payload
+            out += part
+            if len(part) < want or len(out) >= limit:
+                break
+        return bytes(out)
+
+    def reset_calibration(self) -> None:
+        self._info = None
+        self.request(MsgType.CAL_RESET)
+
+    def bench(self, n: int, timeout: float | None = None) -> p.BenchResult:
+        """``n`` estimates timed on the device: (ticks, tick_hz, n)."""
+        wait = self.timeout + n * 1e-4 if timeout is None else timeout
+        return p.unpack_bench(self.request(MsgType.BENCH, struct.pack("<I", n), timeout=wait).payload)

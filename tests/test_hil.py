@@ -1,0 +1,170 @@
+"""The HIL suite against the real firmware: the emulated Cortex-M4 (QEMU mps2-an386) and the host build on a pty."""
+
+import socket
+import threading
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from fitgen.fit import fit_model
+from fitgen.sensor import load_sensor
+from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from hil.emulate import bench_instructions, start_target
+from hil.suite import flash_variant, run_suite
+from host.device import Device
+
+from conftest import assert_one_line_error, require_tool, run_cli
+
+
+@pytest.fixture(scope="module")
+def paper_model():
+    return fit_model(simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])))
+
+
+@pytest.fixture(scope="module")
+def model_file(paper_model, tmp_path_factory):
+    return paper_model.save(tmp_path_factory.mktemp("hil") / "paper.json")
+
+
+def _assert_suite(res, n_vectors, n_fuzz):
+    assert res.ok, res.table()
+    by_name = {c.name: c for c in res.checks}
+    assert {"info", "eval", "timing", "flash", "corrupt flash", "fuzz", "eval after fuzz"} <= set(by_name)
+    assert int(by_name["eval"].detail.split()[0]) >= n_vectors
+    assert by_name["fuzz"].figures["frames"] == n_fuzz
+
+
+def test_full_suite_on_emulated_cortex_m4(paper_model):
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    with start_target(paper_model, "mps2", precision="float", style="table") as emu:
+        with Device.open(emu.url, timeout=5) as dev:
+            res = run_suite(dev, paper_model, url=emu.url, n_vectors=1000, n_fuzz=10_000, verbose=False)
+    _assert_suite(res, 1000, 10_000)
+
+
+@pytest.mark.parametrize("precision, style", [("double", "unrolled"), ("float", "table")])
+def test_full_suite_on_host_build_over_a_pty(paper_model, precision, style):
+    require_tool("gcc")
+    with start_target(paper_model, "host", precision=precision, style=style) as fw:
+        assert fw.url.startswith("/dev/pts/")
+        with Device.open(fw.url, timeout=5) as dev:
+            res = run_suite(dev, paper_model, url=fw.url, n_vectors=1000, n_fuzz=10_000, verbose=False)
+    _assert_suite(res, 1000, 10_000)
+    if precision == "double":
+        # same header, same compiler, same order of operations: the device's answers are Python's exactly
+        assert max(res.checks[1].figures["max_error"]) == 0.0
+
+
+def test_fixed_point_suite_on_emulated_cortex_m4():
+    """A fixed-point build (integer powers only, ADC codes in) through the same suite on the emulated core."""
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    from fitgen.fit import FitSettings
+    from fitgen.terms import FAMILIES
+
+    ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
+    model = fit_model(ds, settings=FitSettings(exponents=FAMILIES["no-roots"]))
+    with start_target(model, "mps2", precision="fixed") as emu:
+        with Device.open(emu.url, timeout=5) as dev:
+            assert dev.info().precision == "fixed"
+            res = run_suite(dev, model, url=emu.url, n_vectors=1000, n_fuzz=2000, verbose=False)
+    assert res.ok, res.table()
+    by_name = {c.name: c for c in res.checks}
+    assert by_name["eval"].figures["max_lsb_diff"] <= 1
+    assert "flash (fixed point)" in by_name and int(by_name["eval"].detail.split()[0]) >= 1000
+
+
+def test_suite_fails_when_the_device_runs_another_model(paper_model):
+    require_tool("gcc")
+    other = flash_variant(paper_model)
+    with start_target(other, "host", precision="double", style="table") as fw:
+        with Device.open(fw.url, timeout=5) as dev:
+            res = run_suite(dev, paper_model, url=fw.url, n_vectors=100, n_fuzz=0, flash=False, verbose=False)
+    assert not res.ok
+    failed = {c.name for c in res.checks if not c.ok}
+    assert failed == {"info", "eval"}
+
+
+def test_emulated_instruction_counts(paper_model):
+    """icount makes the emulated core's counts repeatable; the unrolled style needs fewer instructions."""
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    counts = {}
+    for style in ("table", "unrolled"):
+        with start_target(paper_model, "mps2", precision="float", style=style) as emu:
+            with Device.open(emu.url, timeout=5) as dev:
+                a, b = bench_instructions(dev), bench_instructions(dev)
+                counts[style] = a["instructions"]
+                assert abs(a["instructions"] - b["instructions"]) <= 0.01 * a["instructions"]
+            assert 0 < emu.size["flash"] < 256 * 1024
+    n_terms = sum(len(e.terms) for e in paper_model.equations)
+    # at least a multiply-add's worth per term, and not absurdly more
+    assert 2 * n_terms < counts["unrolled"] < counts["table"] < 40 * n_terms
+
+
+def test_cli_emulate_suite_writes_junit(model_file, tmp_path):
+    require_tool("gcc")
+    junit = tmp_path / "hil.xml"
+    proc = run_cli("tactile-hil", "emulate", "--target", "host", "--model", str(model_file), "--suite",
+                   "--vectors", "100", "--fuzz", "200", "--junit", str(junit))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "PASS" in proc.stdout and "ns per estimate" in proc.stdout
+    root = ET.parse(junit).getroot()
+    assert root.get("failures") == "0" and int(root.get("tests")) >= 6
+
+
+def test_cli_run_against_a_wrong_model_fails_with_status_1(paper_model, tmp_path):
+    require_tool("gcc")
+    other = flash_variant(paper_model).save(tmp_path / "other.json")
+    with start_target(paper_model, "host", precision="double", style="table") as fw:
+        proc = run_cli("tactile-hil", "run", "--port", fw.url, "--model", str(other), "--vectors", "50",
+                       "--fuzz", "0", "--no-flash")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "FAIL" in proc.stdout
+
+
+def test_cli_bad_ports_and_silent_devices(model_file, tmp_path):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        free = s.getsockname()[1]
+    assert_one_line_error(run_cli("tactile-hil", "run", "--port", f"socket://127.0.0.1:{free}",
+                                  "--model", str(model_file)), 2, "cannot open port")
+    assert_one_line_error(run_cli("tactile-hil", "run", "--port", str(tmp_path / "no-tty"),
+                                  "--model", str(model_file)), 2, "cannot open port")
+    # a device that accepts the connection and never answers
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    held = []
+    t = threading.Thread(target=lambda: held.append(server.accept()), daemon=True)
+    t.start()
+    try:
+        proc = run_cli("tactile-hil", "run", "--port", f"socket://127.0.0.1:{server.getsockname()[1]}",
+                       "--model", str(model_file), "--timeout", "0.5")
+        assert_one_line_error(proc, 2, "answer")
+    finally:
+        for conn, _ in held:
+            conn.close()
+        server.close()
+    assert_one_line_error(run_cli("tactile-hil", "run", "--port", "/dev/null", "--model", str(tmp_path / "none.json")),
+                          2, "model file")
+    assert_one_line_error(run_cli("tactile-hil", "run", "--port", "x", "--model", str(model_file), "--vectors", "-1"),
+                          2, "--vectors")
+
+
+def test_cli_emulate_without_qemu_says_how_to_install(model_file, tmp_path, monkeypatch):
+    import os
+    import shutil
+
+    # a PATH with python but without qemu-system-arm
+    bindir = tmp_path / "bin"
+    bindir.mkdir()
+    import sys
+
+    os.symlink(sys.executable, bindir / "python3")
+    monkeypatch.setenv("PATH", str(bindir))
+    assert shutil.which("qemu-system-arm") is None
+    proc = run_cli("tactile-hil", "emulate", "--model", str(model_file))
+    assert_one_line_error(proc, 2, "apt-get install")

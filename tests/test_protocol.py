@@ -1,0 +1,333 @@
+"""The serial protocol (docs/protocol.md): COBS, frames, payloads, the Device client against a fake device,
+and ``tactile-host flash``."""
+
+from __future__ import annotations
+
+import socket
+import struct
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from fitgen.errors import InputError
+from host import protocol as p
+from host.protocol import ErrorCode, Frame, MsgType, ProtocolError
+
+from conftest import assert_one_line_error, run_cli
+
+# --- COBS ---------------------------------------------------------------------------
+
+RUN254 = bytes(range(1, 255))
+COBS_VECTORS = [  # Wikipedia's examples (encoded without the delimiter)
+    (b"\x00", b"\x01\x01"),
+    (b"\x00\x00", b"\x01\x01\x01"),
+    (b"\x00\x11\x00", b"\x01\x02\x11\x01"),
+    (b"\x11\x22\x00\x33", b"\x03\x11\x22\x02\x33"),
+    (b"\x11\x22\x33\x44", b"\x05\x11\x22\x33\x44"),
+    (b"\x11\x00\x00\x00", b"\x02\x11\x01\x01\x01"),
+    (RUN254, b"\xff" + RUN254),
+    (b"\x00" + RUN254, b"\x01\xff" + RUN254),
+    (RUN254 + b"\xff", b"\xff" + RUN254 + b"\x02\xff"),
+    (bytes(range(2, 256)) + b"\x00", b"\xff" + bytes(range(2, 256)) + b"\x01\x01"),
+    (bytes(range(3, 256)) + b"\x00\x01", b"\xfe" + bytes(range(3, 256)) + b"\x02\x01"),
+    (b"", b"\x01"),
+]
+
+
+@pytest.mark.parametrize("raw, encoded", COBS_VECTORS)
+def test_cobs_known_vectors(raw, encoded):
+    assert p.cobs_encode(raw) == encoded
+    assert p.cobs_decode(encoded) == raw
+
+
+@given(st.binary(max_size=600))
+def test_cobs_round_trip(data):
+    enc = p.cobs_encode(data)
+    assert 0 not in enc
+    assert len(enc) <= len(data) + 1 + len(data) // 254
+    assert p.cobs_decode(enc) == data
+
+
+@given(st.binary(max_size=600))
+def test_cobs_decode_raises_only_protocol_error(data):
+    try:
+        out = p.cobs_decode(data)
+    except ProtocolError as exc:
+        assert exc.kind == ErrorCode.BAD_FRAME
+    else:
+        assert 0 not in data and len(out) <= len(data)
+
+
+@pytest.mark.parametrize("bad", [b"", b"\x00", b"\x02", b"\x05\x11\x22", b"\x03\x11\x00", b"\x01\x00\x01"])
+def test_cobs_decode_rejects_malformed(bad):
+    with pytest.raises(ProtocolError):
+        p.cobs_decode(bad)
+
+
+# --- frames -------------------------------------------------------------------------
+
+
+@given(st.integers(0, 255), st.integers(0, 255), st.binary(max_size=p.MAX_PAYLOAD))
+def test_frame_round_trip(type_, seq, payload):
+    wire = p.encode_frame(type_, seq, payload)
+    assert wire.endswith(b"\x00") and 0 not in wire[:-1]
+    assert len(wire) - 1 <= p.MAX_ENCODED
+    assert p.decode_frame(wire[:-1]) == Frame(type_, seq, payload)
+
+
+@given(st.binary(max_size=300))
+def test_decode_frame_raises_only_protocol_error(data):
+    try:
+        p.decode_frame(data)
+    except ProtocolError as exc:
+        assert exc.kind in (ErrorCode.BAD_FRAME, ErrorCode.BAD_CRC)
+
+
+def test_decode_frame_errors():
+    body = p.frame_body(MsgType.PING, 3, b"abc")
+    assert p.decode_frame(p.cobs_encode(body)) == Frame(1, 3, b"abc")
+    with pytest.raises(ProtocolError) as exc:
+        p.decode_frame(p.cobs_encode(body[:7]))
+    assert exc.value.kind == ErrorCode.BAD_FRAME
+    with pytest.raises(ProtocolError) as exc:  # len disagrees
+        p.decode_frame(p.cobs_encode(body[:2] + b"\x04\x00" + body[4:]))
+    assert exc.value.kind == ErrorCode.BAD_FRAME
+    with pytest.raises(ProtocolError) as exc:
+        p.decode_frame(p.cobs_encode(p.frame_body(MsgType.PING, 3, b"abc", crc=0x12345678)))
+    assert exc.value.kind == ErrorCode.BAD_CRC
+    with pytest.raises(ValueError):
+        p.encode_frame(1, 1, bytes(p.MAX_PAYLOAD + 1))
+
+
+def test_frame_reader_splits_streams():
+    frames = [Frame(1, i, bytes([i]) * i) for i in range(1, 40)]
+    wire = b"\x00".join([b""] + [p.encode_frame(f.type, f.seq, f.payload)[:-1] for f in frames]) + b"\x00\x00"
+    assert p.FrameReader().feed(wire) == frames  # concatenated, with empty frames between
+    for step in (1, 2, 7, 100):  # in pieces
+        r = p.FrameReader()
+        got = []
+        for i in range(0, len(wire), step):
+            got += r.feed(wire[i:i + step])
+        assert got == frames and not r.errors and r.pending == 0
+
+
+def test_frame_reader_drops_oversize_and_resynchronises():
+    r = p.FrameReader()
+    good = p.encode_frame(2, 9, b"")
+    events = list(r.events(b"\x01" * 200))
+    assert events == []
+    events = list(r.events(b"\x01" * 200 + b"\x01" * 500))  # one OVERSIZE, however long it runs
+    assert len(events) == 1 and events[0].kind == ErrorCode.OVERSIZE
+    events = list(r.events(b"\x01\x01\x00" + good))  # the end of the long frame, then a good one
+    assert events == [Frame(2, 9, b"")]
+    # exactly MAX_ENCODED bytes is still a frame (a bad one here), not an oversize one
+    events = list(r.events(b"\x01" * p.MAX_ENCODED + b"\x00"))
+    assert len(events) == 1 and events[0].kind == ErrorCode.BAD_FRAME
+    events = list(r.events(b"\x03\x01\x00" + p.frame_body(1, 1)[:0] + good))
+    assert [type(e) for e in events] == [ProtocolError, Frame]
+
+
+# --- payloads -----------------------------------------------------------------------
+
+
+def test_payloads():
+    assert p.max_eval_batch(8, 5, 8) == 4
+    assert p.max_eval_batch(8, 5, 4) == 8
+    x = np.arange(16.0).reshape(2, 8) / 3
+    for prec, dt in (("double", "<f8"), ("float", "<f4")):
+        assert np.array_equal(np.frombuffer(p.pack_eval(x, p.real_dtype(prec)), dt).reshape(2, 8),
+                              x.astype(dt))
+        reply = p.pack_eval_reply([0, -1], x[:, :5], dt)
+        assert len(reply) == 2 * (4 + 5 * np.dtype(dt).itemsize)
+        status, out = p.unpack_eval_reply(reply, 5, dt)
+        assert status.tolist() == [0, -1] and np.array_equal(out, x[:, :5].astype(dt))
+        with pytest.raises(ProtocolError):
+            p.unpack_eval_reply(reply[:-1], 5, dt)
+        s = p.unpack_stream_sample(p.pack_stream_sample(7, 1234, 3, x[0], x[1, :5], dt), 8, 5, dt)
+        assert (s.index, s.time_ms, s.status) == (7, 1234, 3) and np.array_equal(s.outputs, x[1, :5].astype(dt))
+    info = p.DeviceInfo(1, "float", 8, 5, 1, 0, 256, "ab" * 32, "paper", "0.1.0")
+    raw = p.pack_info(info)
+    assert len(raw) == p.INFO_SIZE and raw[40:56] == b"paper" + bytes(11)
+    assert p.unpack_info(raw) == info and p.unpack_info(raw).real_size == 4
+    with pytest.raises(ProtocolError):
+        p.unpack_info(raw[:-1])
+    assert p.unpack_bench(struct.pack("<QII", 10**9, 10**6, 100)) == (10**9, 10**6, 100)
+
+
+# --- the Device client against the fake device ------------------------------------
+
+
+@pytest.fixture(scope="module")
+def paper_model():
+    from fitgen.fit import fit_model
+    from fitgen.sensor import load_sensor
+    from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+
+    return fit_model(simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])))
+
+
+@pytest.fixture(scope="module")
+def other_model(paper_model):
+    """The paper model with other coefficients: a calibration to load."""
+    from fitgen.model import Equation, Model
+
+    eqs = tuple(Equation(e.name, e.intercept + 0.5, e.terms, tuple(c * 1.01 for c in e.coefficients))
+                for e in paper_model.equations)
+    return Model(paper_model.input_min, paper_model.input_max, eqs)
+
+
+def vectors(model, n=37):
+    rng = np.random.default_rng(1)
+    x = model.input_min + (model.input_max - model.input_min) * rng.uniform(-0.2, 1.2, (n, model.n_inputs))
+    x[3, 2] = np.nan
+    return x
+
+
+@pytest.mark.parametrize("transport", ["pty", "tcp"])
+def test_device_ping_info_eval(paper_model, transport):
+    from host.device import Device
+
+    from fake_device import FakeDevice
+
+    with FakeDevice(paper_model, "double", transport=transport) as fake, Device.open(fake.url, timeout=2) as dev:
+        assert dev.ping(b"hello\x00world") == b"hello\x00world"
+        assert dev.ping(bytes(range(256)) * 1) == bytes(range(256))
+        info = dev.info()
+        assert (info.precision, info.n_inputs, info.n_outputs, info.cal_source) == ("double", 8, 5, 0)
+        assert info.model_hash == paper_model.sha256 and info.sensor_id == "paper"
+        x = vectors(paper_model)
+        status, out = dev.eval(x)
+        ref, ref_status = paper_model.predict(x, with_status=True)
+        assert np.array_equal(status, ref_status) and status[3] == -1
+        assert np.array_equal(out, ref)
+        assert sum(f.type == MsgType.EVAL for f in fake.requests) == -(-len(x) // 4)
+
+
+def test_device_calibration_cycle(paper_model, other_model):
+    from fitgen.calblob import rounded_model, to_blob
+    from host.device import Device, DeviceError
+
+    from fake_device import FakeDevice
+
+    with FakeDevice(paper_model, "float") as fake, Device.open(fake.url, timeout=2) as dev:
+        with pytest.raises(DeviceError) as exc:
+            dev.read_calibration()
+        assert exc.value.code == ErrorCode.NO_CAL and "CAL_READ" in str(exc.value)
+        blob = to_blob(other_model, "float", sensor_id="rig-2")
+        assert dev.load_calibration(blob, chunk=100) == other_model.sha256
+        assert dev.read_calibration() == blob
+        info = dev.info()
+        assert info.cal_source == 1 and info.model_hash == other_model.sha256 and info.sensor_id == "rig-2"
+        x = vectors(paper_model)
+        _, out = dev.eval(x)
+        x32 = x.astype(np.float32).astype(float)  # as the float wire carries them
+        assert np.array_equal(out, rounded_model(other_model, "float").predict(x32).astype(np.float32))
+        # a corrupt blob, a double blob and a broken sequence are refused; the loaded one stays
+        bad = bytearray(blob)
+        bad[100] ^= 4
+        for wrong, code in ((bytes(bad), ErrorCode.CAL_CRC), (to_blob(other_model, "double"), ErrorCode.CAL_INVALID)):
+            with pytest.raises(DeviceError) as exc:
+                dev.load_calibration(wrong)
+            assert exc.value.code == code
+        with pytest.raises(DeviceError) as exc:
+            dev.request(MsgType.CAL_DATA, p.pack_cal_data(0, b"x"))
+        assert exc.value.code == ErrorCode.CAL_SEQUENCE
+        assert dev.read_calibration() == blob
+        dev.reset_calibration()
+        assert dev.info().cal_source == 0 and dev.info().model_hash == paper_model.sha256
+
+
+def test_device_stream_bench_errors(paper_model):
+    from host.device import Device, DeviceError
+
+    from fake_device import FakeDevice
+
+    with FakeDevice(paper_model, "double", stale=True) as fake, Device.open(fake.url, timeout=2) as dev:
+        samples = dev.stream(5, 6)
+        assert [s.index for s in samples] == list(range(6))
+        assert all(s.inputs.shape == (8,) and s.outputs.shape == (5,) for s in samples)
+        assert np.array_equal(samples[2].outputs, paper_model.predict(samples[2].inputs)[0])
+        dev.stop_stream()
+        res = dev.bench(100)
+        assert res.n == 100 and res.tick_hz == 10**9 and res.ticks > 0
+        with pytest.raises(DeviceError) as exc:
+            dev.bench(0)
+        assert exc.value.code == ErrorCode.BAD_ARG
+        with pytest.raises(DeviceError) as exc:
+            dev.request(0x42)
+        assert exc.value.code == ErrorCode.UNKNOWN_TYPE
+        assert dev.reader.errors  # the fake's garbage was seen and skipped
+        # garbage on the wire: the device answers with seq 0 and stays in step
+        dev.send_raw(b"\x01" * 300 + b"\x00")
+        dev.send_raw(p.cobs_encode(p.frame_body(1, 7, b"x", crc=1)) + b"\x00")
+        got = [dev.receive(1.0) for _ in range(2)]
+        errors = [p.unpack_error(f.payload)[0] for f in got if f.type == MsgType.ERROR and f.seq == 0]
+        assert errors == [ErrorCode.OVERSIZE, ErrorCode.BAD_CRC]
+        assert dev.ping(b"ok") == b"ok"
+        for i in range(300):  # seq wraps past 255, never 0
+            assert dev.next_seq() != 0
+
+
+def test_device_no_answer_and_bad_port(paper_model):
+    from host.device import Device, NoAnswer
+
+    from fake_device import FakeDevice
+
+    with FakeDevice(paper_model, mute=True) as fake, Device.open(fake.url, timeout=0.2) as dev:
+        with pytest.raises(NoAnswer, match="no answer to PING"):
+            dev.ping()
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]  # nothing listens on it
+    with pytest.raises(InputError, match=f"cannot open port socket://127.0.0.1:{port}: connection refused"):
+        Device.open(f"socket://127.0.0.1:{port}")
+    for url in ("/dev/nonexistent-tty", "bogus://x"):
+        with pytest.raises(InputError, match="cannot open port"):
+            Device.open(url)
+
+
+# --- tactile-host flash -------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def paper_model_file(paper_model, tmp_path_factory):
+    return str(paper_model.save(tmp_path_factory.mktemp("flash") / "model.json"))
+
+
+def test_flash_absent_port(paper_model_file):
+    proc = run_cli("tactile-host", "flash", "--port", "socket://127.0.0.1:1", paper_model_file)
+    assert_one_line_error(proc, 2, "cannot open port socket://127.0.0.1:1")
+
+
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_flash_loads_and_reads_back(paper_model, paper_model_file, precision):
+    from fake_device import FakeDevice
+
+    with FakeDevice(paper_model, precision, transport="tcp") as fake:
+        proc = run_cli("tactile-host", "flash", "--port", fake.url, "--sensor-id", "rig-9", "--fma",
+                       paper_model_file)
+        assert proc.returncode == 0, proc.stderr
+        assert len(proc.stdout.splitlines()) == 1 and paper_model.sha256 in proc.stdout
+        assert fake.active is not None and fake.active[1].sensor_id == "rig-9" and fake.active[1].fma
+        assert fake.active[1].precision == precision
+
+
+def test_flash_failures(paper_model, paper_model_file):
+    from fake_device import FakeDevice
+
+    with FakeDevice(paper_model, "double", corrupt_read=True) as fake:
+        proc = run_cli("tactile-host", "flash", "--port", fake.url, paper_model_file)
+        assert_one_line_error(proc, 1, "read-back differs")
+    with FakeDevice(paper_model, "double", capacity=100) as fake:
+        proc = run_cli("tactile-host", "flash", "--port", fake.url, paper_model_file)
+        assert_one_line_error(proc, 1, "BAD_ARG")
+    with FakeDevice(paper_model, "fixed") as fake:
+        proc = run_cli("tactile-host", "flash", "--port", fake.url, paper_model_file)
+        assert_one_line_error(proc, 2, "fixed-point build")
+    with FakeDevice(paper_model, mute=True) as fake:
+        proc = run_cli("tactile-host", "flash", "--port", fake.url, "--timeout", "0.3", paper_model_file)
+        assert_one_line_error(proc, 2, "no answer to INFO")
+    proc = run_cli("tactile-host", "flash", "--port", "socket://127.0.0.1:1", "--sensor-id", "é", paper_model_file)
+    assert proc.returncode == 2
