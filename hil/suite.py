@@ -10,7 +10,7 @@ import statistics
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
+from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
@@ -55,7 +55,7 @@ class SuiteResult:
         for c in self.checks:
             out.append(f'  <testcase classname="hil" name={quoteattr(c.name)} time="{c.seconds:.3f}">')
             if c.ok:
-                out.append(f"    <system-out>{_xml_text(c.detail)}</system-out>")
+                out.append(f"    <system-out>{escape(c.detail)}</system-out>")
             else:
                 out.append(f"    <failure message={quoteattr(c.detail)}/>")
             out.append("  </testcase>")
@@ -64,10 +64,6 @@ class SuiteResult:
 
     def write_junit(self, path: str | Path) -> Path:
         return write_atomic(path, self.junit())
-
-
-def _xml_text(s: str) -> str:
-    return s.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
 
 
 class DeviceEvaluator:
@@ -223,15 +219,15 @@ def check_corrupt_flash(dev: Device, new: Model, inputs: np.ndarray, sensor_id: 
     expect_refusal("unknown format version", lambda: dev.load_calibration(bytes(forged)), {P.ErrorCode.CAL_INVALID})
 
     def truncated():
-        dev.request(P.MsgType.CAL_BEGIN, len(blob).to_bytes(4, "little") + P.crc32(blob).to_bytes(4, "little"))
-        dev.request(P.MsgType.CAL_DATA, (0).to_bytes(4, "little") + blob[:100])
+        dev.request(P.MsgType.CAL_BEGIN, P.pack_cal_begin(len(blob), P.crc32(blob)))
+        dev.request(P.MsgType.CAL_DATA, P.pack_cal_data(0, blob[:100]))
         dev.request(P.MsgType.CAL_COMMIT, b"")
 
     expect_refusal("interrupted transfer", truncated, {P.ErrorCode.CAL_SEQUENCE})
 
     def out_of_order():
-        dev.request(P.MsgType.CAL_BEGIN, len(blob).to_bytes(4, "little") + P.crc32(blob).to_bytes(4, "little"))
-        dev.request(P.MsgType.CAL_DATA, (100).to_bytes(4, "little") + blob[100:200])
+        dev.request(P.MsgType.CAL_BEGIN, P.pack_cal_begin(len(blob), P.crc32(blob)))
+        dev.request(P.MsgType.CAL_DATA, P.pack_cal_data(100, blob[100:200]))
 
     expect_refusal("chunk out of order", out_of_order, {P.ErrorCode.CAL_SEQUENCE})
     after = dev.read_calibration()

@@ -86,6 +86,28 @@ class VerifyResult:
         return "\n".join(lines)
 
 
+def _status_mismatches(status: np.ndarray, ref_status: np.ndarray, ref_name: str, failures: list[str]) -> int:
+    """Rows whose C status differs from the reference's; a failure line names the first."""
+    mism = int(np.sum(status != ref_status))
+    if mism:
+        i = int(np.argmax(status != ref_status))
+        failures.append(f"status differs on {mism} vectors (first: C {status[i]}, {ref_name} {ref_status[i]})")
+    return mism
+
+
+def _bound_ratio(err: np.ndarray, bound: np.ndarray, rows: np.ndarray, what: str, names, failures: list[str]):
+    """Error over bound per output (0 where the error is 0 and outside ``rows``); a failure line when over 1."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(err == 0, 0.0, err / bound)
+    ratio[~rows] = 0.0
+    over = ratio > 1.0
+    if np.any(over):
+        i, j = np.argwhere(over)[0]
+        failures.append(f"{int(over.sum())} outputs outside {what} "
+                        f"(first: {names[j]} error {err[i, j]:.3g} > bound {bound[i, j]:.3g})")
+    return ratio
+
+
 def compare(model: Model, compiled: CompiledModel, inputs: np.ndarray) -> VerifyResult:
     """Run ``inputs`` through the C and through Python; check status, finiteness and the error bound."""
     precision = compiled.precision
@@ -100,11 +122,8 @@ def compare(model: Model, compiled: CompiledModel, inputs: np.ndarray) -> Verify
     # double with fma: Python rounds each term once too, so the answers stay bit-identical
     ref, ref_status = ref_model.predict(inputs, with_status=True, fma=compiled.fma and precision == "double")
     out, status = compiled.predict(inputs)
-    failures = []
-    mism = int(np.sum(status != ref_status))
-    if mism:
-        i = int(np.argmax(status != ref_status))
-        failures.append(f"status differs on {mism} vectors (first: C {status[i]}, Python {ref_status[i]})")
+    failures: list[str] = []
+    mism = _status_mismatches(status, ref_status, "Python", failures)
     nonfinite = int(np.sum(~np.isfinite(out)))
     if nonfinite:
         failures.append(f"{nonfinite} non-finite outputs")
@@ -117,14 +136,7 @@ def compare(model: Model, compiled: CompiledModel, inputs: np.ndarray) -> Verify
     bad_nf = ~ok_rows & np.any(out != 0, axis=1)
     if np.any(bad_nf):
         failures.append(f"{int(bad_nf.sum())} non-finite inputs did not give zero outputs")
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(err == 0, 0.0, err / bound)
-    ratio[~ok_rows] = 0.0
-    over = ratio > 1.0
-    if np.any(over):
-        i, j = np.argwhere(over)[0]
-        failures.append(f"{int(over.sum())} outputs outside the {precision} error bound "
-                        f"(first: {model.output_names[j]} error {err[i, j]:.3g} > bound {bound[i, j]:.3g})")
+    ratio = _bound_ratio(err, bound, ok_rows, f"the {precision} error bound", model.output_names, failures)
     return VerifyResult(precision, compiled.style, len(inputs), model.output_names,
                         err[ok_rows].max(axis=0), bound[ok_rows].max(axis=0), ratio.max(axis=0), mism,
                         nonfinite, failures)
@@ -177,11 +189,8 @@ def compare_fixed(model: Model, compiled: CompiledModel, codes: np.ndarray) -> V
     fm = compiled.fixed
     out, status = compiled.predict_codes(codes)
     ref_int, ref_status = fm.predict_codes(codes)
-    failures = []
-    mism = int(np.sum(status != ref_status))
-    if mism:
-        i = int(np.argmax(status != ref_status))
-        failures.append(f"status differs on {mism} vectors (first: C {status[i]}, numpy {ref_status[i]})")
+    failures: list[str] = []
+    mism = _status_mismatches(status, ref_status, "numpy", failures)
     lsb_diff = np.abs(out - ref_int)
     if np.any(lsb_diff > 1):
         i, j = np.argwhere(lsb_diff > 1)[0]
@@ -193,13 +202,8 @@ def compare_fixed(model: Model, compiled: CompiledModel, codes: np.ndarray) -> V
     ref = ref_model.predict(values)
     bound = fm.error_bound()[None, :] + DOUBLE_SLACK * error_bound(ref_model, values, U_DOUBLE)
     err = np.abs(fm.to_real(out) - ref)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(err == 0, 0.0, err / bound)
-    over = ratio > 1.0
-    if np.any(over):
-        i, j = np.argwhere(over)[0]
-        failures.append(f"{int(over.sum())} outputs outside the fixed-point error bound "
-                        f"(first: {model.output_names[j]} error {err[i, j]:.3g} > bound {bound[i, j]:.3g})")
+    ratio = _bound_ratio(err, bound, np.ones(len(err), bool), "the fixed-point error bound", model.output_names,
+                         failures)
     return VerifyResult("fixed", compiled.style, len(codes), model.output_names, err.max(axis=0),
                         bound.max(axis=0), ratio.max(axis=0), mism, 0, failures, lsb_diff.max(axis=0))
 
