@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.codegen import STYLES
-from fitgen.fit import fit_model
+from fitgen.fit import FitSettings, fit_model
 from fitgen.model import Model
 from fitgen.sensor import load_sensor
 from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
@@ -84,7 +84,7 @@ def log(msg: str) -> None:
 
 
 def paper_model() -> Model:
-    return fit_model(simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])))
+    return fit_model(simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])), settings=FitSettings.exact())
 
 
 def random_inputs(model: Model, n: int, seed: int = SEED) -> np.ndarray:

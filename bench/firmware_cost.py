@@ -25,11 +25,11 @@ BUILDS = [("float", "table", False), ("float", "unrolled", False), ("float", "un
 
 def main() -> None:
     print("fitting the paper models ...", file=sys.stderr)
-    model = fit_model(simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])))
+    model = fit_model(simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])), settings=FitSettings.exact())
     gmr = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
-    fixed_model = fit_model(gmr, settings=FitSettings(exponents=FAMILIES["no-roots"]))
+    fixed_model = fit_model(gmr, settings=FitSettings.exact(exponents=FAMILIES["no-roots"]))
     press = fit_model(simulate(load_sensor("paper"), grid_poses({"dz": [x / 10 for x in range(-20, 1)]})),
-                      outputs=("dz",))
+                      outputs=("dz",), settings=FitSettings.exact())
     rows = []
     runs = [(model, "paper", *b) for b in BUILDS] + [(fixed_model, "paper (gmr, no roots)", "fixed", "-", False),
                                                      (press, "press (dz only)", "float", "table", False),

@@ -47,7 +47,7 @@ import time
 
 import numpy as np
 
-from fitgen.fit import fit_model
+from fitgen.fit import FitSettings, fit_model
 from fitgen.sensor import load_sensor
 from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
 from host.adc import AdcArray
@@ -122,7 +122,7 @@ def median_ns(fn, n=N, warm=WARM) -> float:
 
 def main() -> None:
     sensor = load_sensor("paper").with_transfer("gmr")
-    model = fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])))
+    model = fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])), settings=FitSettings.exact())
     cmap = parse_spec(SPEC)
 
     # record one sample through the simulated bus

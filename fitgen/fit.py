@@ -7,29 +7,42 @@ displacements when asked.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from . import __version__
+from .augment import ROUNDING_FACTOR, UNIT_ROUNDOFF, noise_blocks, rounding_rows
 from .dataset import Dataset
 from .errors import InputError
 from .model import Equation, Model
 from .pose import POSE_NAMES
 from .stepwise import compress, refit, stepwise
-from .terms import DISPLACEMENTS, EXPONENTS, ROTATIONS, candidate_terms, design_matrix, initial_terms
+from .terms import DISPLACEMENTS, EXPONENTS, ROTATIONS, candidate_terms, design_jacobian, design_matrix, initial_terms
 
 
 @dataclass(frozen=True)
 class FitSettings:
     """Knobs of the search: penalty per term ``k`` (2: AIC, log(n): BIC), a cap on terms,
-    the exponent family, whether rotations may use d-terms, and where those d's come from."""
+    the exponent family, whether rotations may use d-terms, where those d's come from, and what
+    the device adds: its reading noise and its precision (fitgen.augment)."""
 
     k: float | str = 2.0
     max_terms: int | None = None
     exponents: tuple[str, ...] = EXPONENTS
     d_terms: bool = True
     d_source: str = "estimated"  # or "true"
+    # the reading noise (rms, input units) the device will see; None: the sensor named in the
+    # dataset's meta, or what measured data carry. 0 with precision None: the data as given (R's step()).
+    noise: float | None = None
+    # the precision the equations must survive (fitgen.augment.UNIT_ROUNDOFF); None: exact arithmetic
+    precision: str | None = "float"
+
+    @classmethod
+    def exact(cls, **kw) -> "FitSettings":
+        """The paper's procedure: the data as given, exact arithmetic (what R's step() computes)."""
+        return cls(noise=0.0, precision=None, **kw)
 
     def penalty(self, n: int) -> float:
         if self.k == "bic":
@@ -53,8 +66,13 @@ class FittedOutput:
 
 
 def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | None, *,
-               settings: FitSettings, positive: np.ndarray, progress=None) -> FittedOutput:
-    """Choose and fit one output's equation."""
+               settings: FitSettings, positive: np.ndarray, progress=None, noise: float = 0.0,
+               d_jac: np.ndarray | None = None) -> FittedOutput:
+    """Choose and fit one output's equation.
+
+    ``noise``: reading noise (rms) to add in expectation (fitgen.augment); ``d_jac`` (n, 3, N):
+    the gradient of the displacement estimates ``d`` by the inputs, for the d-terms' share of it.
+    """
     n, n_in = inputs.shape
     cands = candidate_terms(n_in, name, exponents=settings.exponents,
                             d_terms=settings.d_terms and d is not None, positive=positive)
@@ -71,7 +89,12 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     if len(init) > cap:
         init = init[:cap]
     k = settings.penalty(n)
-    A = compress(X, y)
+    extra = []
+    if noise > 0:
+        extra.append(noise_blocks(cands, inputs, noise, d, d_jac))
+    if settings.precision is not None:
+        extra.append([rounding_rows(X, ROUNDING_FACTOR * UNIT_ROUNDOFF[settings.precision])])
+    A = compress(X, y, extra=itertools.chain(*extra))
     res = stepwise(X, y, init, names=[t.text for t in cands], k=k, max_terms=cap, compressed=A, progress=progress)
     terms = [cands[j] for j in res.selected]
     intercept, coefs, rss, cond = refit(A, res.selected)
@@ -89,9 +112,51 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     return FittedOutput(Equation(name, intercept, tuple(terms), tuple(float(c) for c in coefs)), info)
 
 
+def noise_to_add(ds: Dataset, settings: FitSettings, sensor=None) -> dict:
+    """The reading noise the fit adds in expectation, and where the figures come from.
+
+    device: ``settings.noise``, else the noise figure of ``sensor`` or of the sensor named in a
+    simulated dataset's meta. data: the noise a simulated dataset was made with; measured data
+    (no such record) carry the device's own, so nothing is added (never counted twice).
+    Added: sqrt(device^2 - data^2), 0 when the data are already as noisy.
+    """
+    from .simulate import dataset_sensor
+
+    if settings.noise is not None and not settings.noise >= 0:
+        raise InputError(f"noise must be >= 0, got {settings.noise}")
+    data = ds.meta.get("noise")
+    data = float(data) if isinstance(data, (int, float)) and not isinstance(data, bool) else None
+    if settings.noise is not None:
+        device, source = float(settings.noise), "given"
+    else:
+        sensor = sensor or dataset_sensor(ds.meta)
+        device, source = (sensor.noise, f"sensor {sensor.name}") if sensor is not None else (None, "unknown")
+    if device is None or data is None:
+        added = 0.0
+        why = "measured data carry the device's noise" if data is None else "no device noise known"
+    else:
+        added = float(np.sqrt(max(device**2 - data**2, 0.0)))
+        why = "the device's noise less the data's own"
+    return {"device": device, "device_source": source, "data": data, "added": added, "why": why}
+
+
+def _d_jacobian(equations, v: np.ndarray, rows: int = 4096) -> np.ndarray:
+    """(n, 3, N): the gradient of the displacement equations dx, dy, dz by the inputs."""
+    out = np.zeros((v.shape[0], 3, v.shape[1]))
+    for eq in equations:
+        coefs = np.asarray(eq.coefficients)
+        i = DISPLACEMENTS.index(eq.name)
+        for lo in range(0, v.shape[0], rows):
+            out[lo : lo + rows, i, :] = design_jacobian(list(eq.terms), v[lo : lo + rows]) @ coefs
+    return out
+
+
 def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: FitSettings = FitSettings(),
-              progress=None) -> Model:
-    """Fit every requested output (default: all pose columns of the dataset), two stages."""
+              progress=None, sensor=None) -> Model:
+    """Fit every requested output (default: all pose columns of the dataset), two stages.
+
+    ``sensor``: the device's sensor when the dataset's meta does not name it (for its noise figure).
+    """
     outputs = tuple(ds.target_names) if outputs is None else tuple(outputs)
     if not outputs:
         raise InputError("nothing to fit: the dataset has no pose columns (dx,dy,dz,thx,thy)")
@@ -101,6 +166,9 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
     if settings.d_source not in ("estimated", "true"):
         raise InputError(f"d_source must be 'estimated' or 'true', got {settings.d_source!r}")
     outputs = tuple(n for n in POSE_NAMES if n in outputs)
+    if settings.precision is not None and settings.precision not in UNIT_ROUNDOFF:
+        raise InputError(f"precision must be one of {', '.join(UNIT_ROUNDOFF)} or None, got {settings.precision!r}")
+    noise = noise_to_add(ds, settings, sensor)
     v = ds.inputs
     lo, hi = v.min(axis=0), v.max(axis=0)
     positive = lo > 0
@@ -109,24 +177,33 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
     stage1 = [o for o in outputs if o in DISPLACEMENTS]
     for o in stage1:
         fitted[o] = fit_output(o, v, ds.target(o), None, settings=settings, positive=positive,
-                               progress=progress and (lambda s, a, p, o=o: progress(o, s, a, p)))
+                               progress=progress and (lambda s, a, p, o=o: progress(o, s, a, p)),
+                               noise=noise["added"])
     stage2 = [o for o in outputs if o in ROTATIONS]
-    d = None
+    d = d_jac = None
     if stage2 and settings.d_terms and all(x in stage1 for x in DISPLACEMENTS):
+        stage1_eqs = tuple(fitted[x].equation for x in DISPLACEMENTS)
         if settings.d_source == "true":
             d = np.column_stack([ds.target(x) for x in DISPLACEMENTS])
         else:
-            partial = Model(lo, hi, tuple(fitted[x].equation for x in DISPLACEMENTS))
-            d = partial.predict(v)
+            d = Model(lo, hi, stage1_eqs).predict(v)
+        if noise["added"] > 0:
+            # the device computes d from the same noisy readings, whatever d trained on
+            d_jac = _d_jacobian(stage1_eqs, v)
     for o in stage2:
         fitted[o] = fit_output(o, v, ds.target(o), d, settings=settings, positive=positive,
-                               progress=progress and (lambda s, a, p, o=o: progress(o, s, a, p)))
+                               progress=progress and (lambda s, a, p, o=o: progress(o, s, a, p)),
+                               noise=noise["added"], d_jac=d_jac)
 
     info = {
         "generator": f"fitgen {__version__}",
         "method": "bidirectional stepwise regression on AIC (R step() rules), Householder QR refit",
         "settings": {**asdict(settings), "exponents": list(settings.exponents),
                      "k": settings.penalty(ds.n_rows)},
+        "noise": noise,
+        "precision": {"target": settings.precision,
+                      "rounding_noise": None if settings.precision is None
+                      else ROUNDING_FACTOR * UNIT_ROUNDOFF[settings.precision]},
         "d_terms": "none" if d is None else settings.d_source,
         "dataset_sha256": ds.sha256,
         "dataset_rows": ds.n_rows,

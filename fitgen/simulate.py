@@ -129,3 +129,21 @@ def simulate(
 def pose_rng(seed: int) -> np.random.Generator:
     """The random stream for pose sampling (independent of the noise stream)."""
     return np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[0])
+
+
+def dataset_sensor(meta: dict, spec: str | None = None) -> Sensor | None:
+    """The sensor a dataset was simulated with: ``spec`` (a preset or file) if given, else the
+    preset its meta names when the hash matches; None for measured data or an unknown sensor."""
+    from .sensor import load_sensor, preset_names
+
+    if spec is None:
+        name = meta.get("sensor")
+        if name not in preset_names():
+            return None
+        spec = name
+    sensor = load_sensor(spec)
+    if meta.get("transfer") in ("raw", "gmr"):
+        sensor = sensor.with_transfer(meta["transfer"])
+    if spec == meta.get("sensor") and meta.get("sensor_sha256") not in (None, sensor.sha256):
+        return None
+    return sensor

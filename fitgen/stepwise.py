@@ -31,10 +31,12 @@ _BLOCK = 1 << 14  # rows per block of the compressing QR
 
 
 @_ONE_THREAD
-def compress(columns: np.ndarray, y: np.ndarray, block: int = _BLOCK) -> np.ndarray:
+def compress(columns: np.ndarray, y: np.ndarray, block: int = _BLOCK, extra=()) -> np.ndarray:
     """Upper-triangular R with R^T R = A^T A for A = [1, columns, y], built block by block.
 
-    Peak memory is one block of rows, whatever n is.
+    ``extra``: further rows of A, already formed (m + 2 columns each), as an iterable of blocks:
+    the expected effect of noise (fitgen.augment) enters the search this way. Peak memory is one
+    block of rows, whatever n is.
     """
     n, m = columns.shape
     acc = np.zeros((0, m + 2))
@@ -43,6 +45,8 @@ def compress(columns: np.ndarray, y: np.ndarray, block: int = _BLOCK) -> np.ndar
         blk[:, 0] = 1.0
         blk[:, 1:-1] = columns[lo : lo + block]
         blk[:, -1] = y[lo : lo + block]
+        acc = qr(np.vstack([acc, blk]), mode="r", check_finite=False)[0][: m + 2]
+    for blk in extra:
         acc = qr(np.vstack([acc, blk]), mode="r", check_finite=False)[0][: m + 2]
     return acc
 

@@ -173,3 +173,38 @@ def design_matrix(terms: list[Term], inputs: np.ndarray, d: np.ndarray | None = 
             col = dcol if col is None else col * dcol
         cols[:, j] = col
     return cols
+
+
+def element_power_slopes(v: np.ndarray, exponent: str) -> np.ndarray:
+    """d(v ** exponent) / dv."""
+    p = float(Fraction(exponent))
+    return p * v ** (p - 1.0)
+
+
+def design_jacobian(terms: list[Term], inputs: np.ndarray, d: np.ndarray | None = None,
+                    d_jac: np.ndarray | None = None) -> np.ndarray:
+    """d(column j) / d(input k) for rows of ``inputs``: an array (n, N, len(terms)).
+
+    ``d_jac`` (n, 3, N) is the gradient of each displacement estimate by the inputs, for the
+    d-terms (the device computes d from the same noisy readings); None treats d as exact.
+    """
+    n, n_in = inputs.shape
+    out = np.zeros((n, n_in, len(terms)))
+    for j, t in enumerate(terms):
+        base = None
+        if t.element:
+            if t.element > n_in:
+                raise InputError(f"term {t.text} needs input v{t.element}; the data has {n_in} inputs")
+            slope = element_power_slopes(inputs[:, t.element - 1], t.exponent)
+            base = element_powers(inputs[:, t.element - 1], t.exponent)
+        if not t.mult:
+            out[:, t.element - 1, j] = slope
+            continue
+        if d is None:
+            raise InputError(f"term {t.text} needs the displacement estimates")
+        i = DISPLACEMENTS.index(t.mult)
+        if d_jac is not None:
+            out[:, :, j] = d_jac[:, i, :] if base is None else base[:, None] * d_jac[:, i, :]
+        if base is not None:
+            out[:, t.element - 1, j] += slope * d[:, i]
+    return out

@@ -26,9 +26,10 @@ M0 = ["-mcpu=cortex-m0", "-mthumb", "-mfloat-abi=soft"]
 
 @pytest.fixture(scope="module")
 def paper_fixed_model():
-    """The paper sensor in volts (16-bit ADC), fitted with integer powers only."""
+    """The paper sensor in volts (16-bit ADC), fitted with integer powers only, the paper's way (the
+    planner's figures below are this model's; tests/test_deployed.py covers the device's fit)."""
     ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
-    return fit_model(ds, settings=FitSettings(exponents=FAMILIES["no-roots"]))
+    return fit_model(ds, settings=FitSettings.exact(exponents=FAMILIES["no-roots"]))
 
 
 @pytest.fixture(scope="module")

@@ -25,7 +25,7 @@ def _problem(ds, output, d=None):
 
 def _compare_with_r(ds, k=2.0):
     require_tool("Rscript")
-    model = fit_model(ds, settings=FitSettings(k=k))
+    model = fit_model(ds, settings=FitSettings.exact(k=k))
     d = Model(model.input_min, model.input_max,
               tuple(model.equation(x) for x in DISPLACEMENTS)).predict(ds.inputs)
     for out in ds.target_names:
