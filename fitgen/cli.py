@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
-from .cliutil import Parser, parse_assignments, run
+from .cliutil import EXIT_CHECK_FAILED, Parser, parse_assignments, run
 from .errors import InputError
 from .pose import POSE_NAMES
 
@@ -106,8 +106,20 @@ def _settings(args):
             raise InputError(f"--k must be a finite number > 0, got {args.k}")
     if args.max_terms is not None and args.max_terms < 1:
         raise InputError(f"--max-terms must be >= 1, got {args.max_terms}")
+    noise = None
+    if args.noise is not None:
+        try:
+            noise = float(args.noise)
+        except ValueError:
+            raise InputError(f"--noise must be a number >= 0 (reading noise rms, input units), got {args.noise!r}") \
+                from None
+        if not (noise >= 0 and noise != float("inf")):
+            raise InputError(f"--noise must be a finite number >= 0, got {args.noise}")
+    # --noise 0 alone is the paper's procedure (what R's step() computes): no rounding term either
+    precision = args.precision or ("exact" if noise == 0 else "float")
     return FitSettings(k=k, max_terms=args.max_terms, exponents=FAMILIES[args.family],
-                       d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated")
+                       d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated",
+                       noise=noise, precision=None if precision == "exact" else precision)
 
 
 def _outputs(spec):
@@ -153,6 +165,8 @@ def cmd_fit(args) -> int:
     from .dataset import load_dataset
     from .fit import fit_model
     from .progress import Progress
+    from .report import deployed_table, fit_assumptions
+    from .simulate import dataset_sensor
 
     settings = _settings(args)
     ds = load_dataset(args.data)
@@ -167,15 +181,30 @@ def cmd_fit(args) -> int:
             state["name"] = name
         bar.update(0, f"{name}: step {step}, {n_terms} terms, AIC {aic:.1f}")
 
+    sensor = dataset_sensor(ds.meta, args.sensor)
     with bar:
-        model = fit_model(ds, outputs, settings, progress=progress)
+        model = fit_model(ds, outputs, settings, progress=progress, sensor=sensor)
     model.fit_info["dataset"] = str(args.data)
+    if args.held_out and sensor is not None:
+        from .holdout import box_of, evaluate
+
+        with Progress("held-out", 1) as hbar:
+            hbar.update(0, f"{args.held_out} random poses, {model.fit_info['noise']['device'] or 0:g} noise")
+            model.fit_info["held_out"] = evaluate(model, sensor, box_of(ds.poses()),
+                                                  noise=model.fit_info["noise"]["device"], n=args.held_out)
+            hbar.update()
     model.save(args.output)
     for e in model.equations:
         i = model.fit_info["outputs"][e.name]
         err = i["model_training_error"]
         print(f"{e.name}: {len(e.terms)} terms, AIC {i['aic']:.2f}, training max error {err['max']:.4g} {e.unit}, "
               f"RMS {err['rms']:.4g}, condition {i['condition']:.3g}", file=sys.stderr)
+    print(fit_assumptions(model.fit_info), file=sys.stderr)
+    if "held_out" in model.fit_info:
+        print(deployed_table(model), end="", file=sys.stderr)
+    elif args.held_out:
+        print("no held-out figures: the dataset names no sensor to simulate held-out poses with (give --sensor)",
+              file=sys.stderr)
     print(f"wrote {args.output}", file=sys.stderr)
     return 0
 
@@ -316,12 +345,18 @@ def cmd_tradeoff(args) -> int:
     target = parse_target(args.target, scene.outputs)
     grid = grid_from(**knobs) if args.full or knobs else quick_grid()
     bar = Progress("tradeoff", len(grid))
+    if not 0 < args.max_share < 1e6:
+        raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
     with bar:
         result = sweep(sensor, scene, grid, target=target, seed=args.seed, jobs=args.jobs,
-                       progress=lambda note: bar.update(1, note))
+                       progress=lambda note: bar.update(1, note), max_share=args.max_share)
     paths, text = write_outputs(result, args.output)
     print(text, end="")
     print("wrote " + ", ".join(str(p) for p in paths), file=sys.stderr)
+    if result.over_share:
+        print(f"FAIL: rounding adds more than {args.max_share:.0%} of the model's held-out max error at points "
+              + ", ".join(str(i + 1) for i in result.over_share), file=sys.stderr)
+        return EXIT_CHECK_FAILED
     return 0
 
 
@@ -372,8 +407,18 @@ def build_parser() -> Parser:
     f.add_argument("--true-d", action="store_true",
                    help="rotation d-terms from the true displacements instead of the fitted estimates")
     f.add_argument("--scene", help="fit only the outputs of this scene (default: the dataset's scene, if any)")
-    f.add_argument("--sensor", help="sensor to check the scene against (default: the dataset's)")
+    f.add_argument("--sensor", help="the dataset's sensor, for its noise, the held-out poses and the scene check "
+                                    "(default: the preset the dataset's meta names)")
     f.add_argument("--force", action="store_true", help="fit a scene's outputs even if the sensor cannot resolve them")
+    f.add_argument("--noise", metavar="X",
+                   help="reading noise rms (input units) the device will see, added in expectation (default: the "
+                        "noise figure of the dataset's sensor; measured data carry their own). 0 alone: the data as "
+                        "given and exact arithmetic, the paper's procedure (R's step())")
+    f.add_argument("--precision", choices=("float", "double", "fixed", "exact"),
+                   help="arithmetic the equations must survive on the device (default float; exact with --noise 0)")
+    f.add_argument("--held-out", type=int, default=2000, metavar="N",
+                   help="random held-out poses in the data's box for the deployed-accuracy figures (default 2000; "
+                        "0: none)")
     f.set_defaults(func=cmd_fit)
 
     pr = sub.add_parser("predict", help="estimates for the rows of a dataset")
@@ -420,6 +465,9 @@ def build_parser() -> Parser:
     t.add_argument("--style", help="sweep only these code styles (all: table,unrolled; fixed point has one)")
     t.add_argument("--seed", type=int, default=0, help="held-out poses and noise draws (default 0)")
     t.add_argument("--jobs", type=int, default=2, help="builds measured at once (default 2)")
+    t.add_argument("--max-share", type=float, default=0.05, metavar="S",
+                   help="fail (exit 1) when a point's rounding adds more than this share of its model's held-out "
+                        "max error (default 0.05)")
     t.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
     t.add_argument("-o", "--output", default="tradeoff-out", metavar="DIR",
                    help="folder for tradeoff.csv, .md, .png (default: tradeoff-out)")

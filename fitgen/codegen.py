@@ -17,7 +17,7 @@ from . import __version__
 from .cgen import c_real, identifier
 from .errors import InputError
 from .fileio import write_atomic
-from .model import Model
+from .model import Model, float_domain
 from .terms import DISPLACEMENTS, EXPONENTS
 
 PRECISIONS = ("double", "float", "fixed")  # fixed: integer codes in, int32 out (fitgen/fixedpoint.py)
@@ -95,16 +95,6 @@ def term_magnitudes(model: Model) -> dict[str, float]:
         if eq.name in DISPLACEMENTS:
             bound_d[eq.name] = total
     return out
-
-
-def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
-    """The domain as floats, rounded outward so that every double inside it stays inside."""
-    lo = model.input_min.astype(np.float32)
-    hi = model.input_max.astype(np.float32)
-    lo = np.where(lo.astype(float) > model.input_min, np.nextafter(lo, np.float32(-np.inf)), lo)
-    hi = np.where(hi.astype(float) < model.input_max, np.nextafter(hi, np.float32(np.inf)), hi)
-    lo = np.where((model.input_min > 0) & (lo <= 0), np.float32(np.finfo(np.float32).tiny), lo)
-    return lo.astype(float), hi.astype(float)
 
 
 def build_cmodel(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",

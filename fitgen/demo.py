@@ -18,7 +18,8 @@ def run_demo(out: Path) -> int:
     from .observe import observe
     from .scenes import PRESETS
     from .sensor import load_sensor
-    from .fit import fit_model
+    from .fit import FitSettings, fit_model
+    from .holdout import box_of, deployed_errors, held_out_set
     from .report import format_report
     from .simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 
@@ -41,27 +42,42 @@ def run_demo(out: Path) -> int:
     for line in report.verdicts():
         print("   " + line)
 
-    t = _stage("3. stepwise AIC fit of dx, dy, dz, then thx, thy (from eq. 1, 17 kinds of candidates)")
-    model = fit_model(train, progress=_fit_progress())
-    model.fit_info["dataset"] = str(out / "paper-sim.csv")
-    model.save(out / "paper-model.json")
+    t = _stage("3. the paper's procedure: stepwise AIC fit of dx, dy, dz, then thx, thy (from eq. 1, 17 kinds "
+               "of candidates), noise-free data, exact arithmetic")
+    paper_model = fit_model(train, settings=FitSettings.exact(), progress=_fit_progress())
+    paper_model.fit_info["dataset"] = str(out / "paper-sim.csv")
+    paper_model.save(out / "paper-model.json")
     print(f"   model -> {out / 'paper-model.json'} ({time.monotonic() - t:.1f} s)")
     test = simulate(sensor, random_poses(2000, DEFAULT_RANGES, pose_rng(2026)), provenance={"random": 2000})
     test.save(out / "random-2000.csv")
-    text = format_report(model, train, "paper-sim (training grid), beside the paper's simulation", paper=True)
-    text += "\n" + format_report(model, test, "2,000 random poses never used in fitting", paper=True)
+    text = format_report(paper_model, train, "paper-sim (training grid), beside the paper's simulation", paper=True)
+    text += "\n" + format_report(paper_model, test, "2,000 random poses never used in fitting", paper=True)
     write_atomic(out / "paper-report.md", text)
-    _print_comparison(model, train, test)
+    _print_comparison(paper_model, train, test)
     print(f"   full report -> {out / 'paper-report.md'}")
 
-    _stage("4. C code generation, verified against Python by gcc")
-    status = _codegen_stage(model, out)
+    t = _stage(f"4. the device's model: fitted for the sensor's noise ({sensor.noise:g} {sensor.units} rms) and "
+               "float arithmetic, judged as deployed")
+    model = fit_model(train, progress=_fit_progress())
+    model.fit_info["dataset"] = str(out / "paper-sim.csv")
+    held = held_out_set(sensor, box_of(train.poses()), model.output_names)
+    model.fit_info["held_out"] = {**held.spec, "errors": deployed_errors(model, held, sensor)}
+    model.save(out / "device-model.json")
+    write_atomic(out / "device-report.md", format_report(model, test, "2,000 random poses never used in fitting"))
+    print(f"   model -> {out / 'device-model.json'}, report -> {out / 'device-report.md'} "
+          f"({time.monotonic() - t:.1f} s)")
+    _print_deployed(paper_model, model, deployed_errors(paper_model, held, sensor, ("double", "float")),
+                    model.fit_info["held_out"]["errors"], held.spec)
 
-    _stage("5. reference firmware on an emulated Cortex-M4 (QEMU mps2-an386), HIL suite")
-    return max(status, _hil_stage(model, out))
+    _stage("5. C code generation of the device's model, verified against Python by gcc")
+    held_clean = (held.clean, held.truth)
+    status = _codegen_stage(model, out, held_clean)
+
+    _stage("6. reference firmware on an emulated Cortex-M4 (QEMU mps2-an386), HIL suite")
+    return max(status, _hil_stage(model, out, held_clean))
 
 
-def _codegen_stage(model, out: Path) -> int:
+def _codegen_stage(model, out: Path, held_out) -> int:
     import shutil
 
     from .codegen import write_header
@@ -76,17 +92,18 @@ def _codegen_stage(model, out: Path) -> int:
             continue
         from host.verify import verify
 
-        res = verify(model, precision, style, n_random=2000)
+        res = verify(model, precision, style, n_random=2000, held_out=held_out)
         worst = ", ".join(f"{n} {e:.2g}" for n, e in zip(res.outputs, res.max_error))
         print(f"{line}: {res.n_vectors} vectors {'PASS' if res.ok else 'FAIL'} "
-              f"(max |C - Python|: {worst}; worst error/bound {res.max_ratio.max():.2f})")
+              f"(max |C - Python|: {worst}; worst error/bound {res.max_ratio.max():.2f}; rounding's share of the "
+              f"held-out error at most {res.held_out.share.max():.1%})")
         if not res.ok:
             print("   " + "; ".join(res.failures))
             status = 1
     return status
 
 
-def _hil_stage(model, out: Path) -> int:
+def _hil_stage(model, out: Path, held_out) -> int:
     import shutil
 
     missing = [t for t in ("qemu-system-arm", "arm-none-eabi-gcc") if shutil.which(t) is None]
@@ -104,9 +121,10 @@ def _hil_stage(model, out: Path) -> int:
             cost = bench_instructions(dev)
             print(f"   firmware {folder / 'firmware.elf'}: flash {emu.size['flash']} bytes, RAM {emu.size['ram']} "
                   f"bytes; {cost['instructions']:.0f} instructions per estimate (float, table; QEMU -icount)")
-            res = run_suite(dev, model, url=emu.url, n_vectors=1000, n_fuzz=10_000, verbose=False)
+            res = run_suite(dev, model, url=emu.url, n_vectors=1000, n_fuzz=10_000, verbose=False,
+                            held_out=held_out)
     for c in res.checks:
-        print(f"   {c.name:14} {'pass' if c.ok else 'FAIL'}  {c.detail}")
+        print(f"   {c.name:17} {'pass' if c.ok else 'FAIL'}  {c.detail}")
     print(f"   HIL suite on the emulated core: {'PASS' if res.ok else 'FAIL'}")
     return 0 if res.ok else 1
 
@@ -116,6 +134,22 @@ def _fit_progress():
 
     bar = Progress("   fit", 1)
     return lambda name, step, aic, n: bar.update(0, f"{name}: step {step}, {n} terms, AIC {aic:.1f}")
+
+
+def _print_deployed(paper_model, model, paper_errs: dict, errs: dict, spec: dict) -> None:
+    print(f"   held out: {spec['poses']} random poses (seed {spec['seed']}); 'noise': the sensor's {spec['noise']:g} "
+          f"rms, {spec['noise_draws']} draws; 'float C': the float header's arithmetic")
+    print(f"   {'':6} {'paper procedure':>44} {'device model':>44}")
+    head = f"{'terms':>5} {'max':>8} {'RMS noise':>10} {'float C RMS':>11} {'share':>6}"
+    print(f"   {'output':6} {head} {head}")
+    for pe, e in zip(paper_model.equations, model.equations):
+        cells = []
+        for eq, er in ((pe, paper_errs), (e, errs)):
+            d, f = er["double"][eq.name], er["float"][eq.name]
+            cells.append(f"{len(eq.terms):5d} {d['max']:8.3g} {d['noisy_rms']:10.3g} {f['noisy_rms']:11.3g} "
+                         f"{f['share']:6.1%}")
+        print(f"   {e.name:6} {cells[0]} {cells[1]}")
+    print("   max: double, noise-free; share: the float C's largest deviation from double over the model's max error")
 
 
 def _print_comparison(model, train, test) -> None:

@@ -557,3 +557,22 @@ def default_input_scale(model: Model) -> tuple[float, float, str]:
     if model.input_units == "V":
         return 3.3 / 65535, 0.0, "default 16-bit ADC over 0..3.3 V"
     raise InputError(f"fixed point needs the value of one ADC code: give --input-lsb (in {model.input_units})")
+
+
+FIXED_BITS = 16  # ADC bits assumed for fixed point when the sensor's transfer does not quantise
+
+
+def sensor_input_scale(sensor) -> tuple[float, float, str]:
+    """(lsb, offset, description) of the input codes for fixed point: the ADC of the sensor's
+    transfer, or FIXED_BITS bits over its range when the transfer does not quantise."""
+    if sensor.transfer == "gmr":
+        g = sensor.gmr
+        bits = g.adc_bits or FIXED_BITS
+        lsb, offset, span = (g.adc_max - g.adc_min) / (2**bits - 1), g.adc_min, f"{g.adc_min:g}..{g.adc_max:g} V"
+    else:
+        r = sensor.raw
+        bits = r.adc_bits or FIXED_BITS
+        lsb, offset, span = r.full_scale / (2**bits - 1), 0.0, f"0..{r.full_scale:g} mT"
+    src = "the transfer's ADC" if (sensor.gmr.adc_bits if sensor.transfer == "gmr" else sensor.raw.adc_bits) \
+        else "assumed: the transfer has no ADC"
+    return lsb, offset, f"{bits}-bit codes over {span} (LSB {lsb:.4g} {sensor.units}; {src})"

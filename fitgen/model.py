@@ -91,23 +91,38 @@ class Model:
         clamped = np.clip(np.where(np.isfinite(v), v, self.input_min), self.input_min, self.input_max)
         return clamped, status
 
-    def predict(self, inputs: np.ndarray, with_status: bool = False, fma: bool = False):
+    def predict(self, inputs: np.ndarray, with_status: bool = False, fma: bool = False,
+                precision: str = "double"):
         """Outputs (n, n_outputs) for rows of inputs; rows with a non-finite input give 0.
 
         ``fma``: each term added with one rounding, as C generated with fused multiply-adds does.
+        ``precision="float"``: the float C's arithmetic in numpy float32 (inputs, domain,
+        coefficients, powers and sums rounded as the float header rounds them; no fma).
         """
-        v, status = self.clamp(inputs)
+        if precision == "float":
+            if fma:
+                raise InputError("the float emulation has no fused multiply-add")
+            lo, hi = float_domain(self)
+            f32 = np.asarray(inputs, dtype=float).astype(np.float32).astype(float)
+            v, status = Model(lo, hi, self.equations, self.input_units).clamp(f32)
+            dtype = np.float32
+        elif precision == "double":
+            v, status = self.clamp(inputs)
+            dtype = np.float64
+        else:
+            raise InputError(f"predict evaluates in double or float, not {precision!r}")
+        v = v.astype(dtype)
         out = np.zeros((v.shape[0], len(self.equations)))
-        d = np.zeros((v.shape[0], 3))
+        d = np.zeros((v.shape[0], 3), dtype=dtype)
         for j, eq in enumerate(self.equations):
-            cols = design_matrix(list(eq.terms), v, d)
+            cols = design_matrix(list(eq.terms), v, d).astype(dtype, copy=False)
             # summed term by term in model order, as the generated C does, so that both round alike
-            acc = np.full(v.shape[0], eq.intercept)
-            for c, col in zip(eq.coefficients, cols.T):
+            acc = np.full(v.shape[0], eq.intercept, dtype=dtype)
+            for c, col in zip(np.asarray(eq.coefficients, dtype=dtype), cols.T):
                 acc = fused_multiply_add(c, col, acc) if fma else acc + c * col
             out[:, j] = acc
             if eq.name in DISPLACEMENTS:
-                d[:, DISPLACEMENTS.index(eq.name)] = out[:, j]
+                d[:, DISPLACEMENTS.index(eq.name)] = acc
         out[status < 0] = 0.0
         return (out, status) if with_status else out
 
@@ -143,6 +158,16 @@ class Model:
         except ValueError:
             raise InputError("the model holds a non-finite number; not written") from None
         return write_atomic(path, text)
+
+
+def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    """The domain as floats, rounded outward so that every double inside it stays inside."""
+    lo = model.input_min.astype(np.float32)
+    hi = model.input_max.astype(np.float32)
+    lo = np.where(lo.astype(float) > model.input_min, np.nextafter(lo, np.float32(-np.inf)), lo)
+    hi = np.where(hi.astype(float) < model.input_max, np.nextafter(hi, np.float32(np.inf)), hi)
+    lo = np.where((model.input_min > 0) & (lo <= 0), np.float32(np.finfo(np.float32).tiny), lo)
+    return lo.astype(float), hi.astype(float)
 
 
 def load_model(path: str | Path) -> Model:

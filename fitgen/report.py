@@ -42,6 +42,39 @@ def _g(x: float) -> str:
     return f"{x:.3g}"
 
 
+def fit_assumptions(info: dict) -> str:
+    """One line: the noise and the precision the fit assumed (from a model file's fit notes)."""
+    noise, prec = info.get("noise"), info.get("precision", {})
+    if not isinstance(noise, dict):
+        return "fitted for: not recorded (a model file from before noise-aware fitting)"
+    dev = "unknown" if noise.get("device") is None else f"{noise['device']:g}"
+    data = "measured (carry their own)" if noise.get("data") is None else f"{noise['data']:g}"
+    target = prec.get("target") or "exact arithmetic"
+    return (f"fitted for: reading noise {dev} rms ({noise.get('device_source', '?')}), data's own noise {data}, "
+            f"added in expectation {noise.get('added', 0):g}; precision {target}")
+
+
+def deployed_table(model: Model) -> str:
+    """Markdown: held-out errors per precision (the model file's ``held_out`` record), '' without one."""
+    rec = model.fit_info.get("held_out")
+    if not isinstance(rec, dict):
+        return ""
+    lines = [f"### deployed accuracy, held out ({rec['poses']} random poses in the training box, seed {rec['seed']}; "
+             f"noise {rec['noise']:g} rms, {rec['noise_draws']} draws)", "",
+             "| output | unit | precision | max | RMS | max, noise | RMS, noise | rounding's share |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for e in model.equations:
+        for prec, errs in rec["errors"].items():
+            if "unavailable" in errs:
+                continue
+            x = errs[e.name]
+            lines.append(f"| {e.name} | {e.unit} | {prec} | {_g(x['max'])} | {_g(x['rms'])} | {_g(x['noisy_max'])} | "
+                         f"{_g(x['noisy_rms'])} | {x['share']:.1%} |")
+    missing = [f"{p}: {errs['unavailable']}" for p, errs in rec["errors"].items() if "unavailable" in errs]
+    lines += [""] + [f"Not available in {m}" for m in missing] + ([""] if missing else [])
+    return "\n".join(lines) + "\n"
+
+
 def format_report(model: Model, ds: Dataset | None = None, title: str = "", paper: bool = False) -> str:
     """Markdown: terms and fit figures per output; errors on ``ds`` (default: the fit's training errors)."""
     info = model.fit_info.get("outputs", {})
@@ -58,6 +91,10 @@ def format_report(model: Model, ds: Dataset | None = None, title: str = "", pape
                      str(len(i.get("steps", [])) - 1) if "steps" in i else "-",
                      _g(i["condition"]) if "condition" in i else "-"])
     parts += [_table(head, rows), ""]
+    parts += [fit_assumptions(model.fit_info), ""]
+    deployed = deployed_table(model)
+    if deployed:
+        parts.append(deployed)
 
     if ds is not None:
         ev = evaluate(model, ds)
@@ -80,8 +117,9 @@ def format_report(model: Model, ds: Dataset | None = None, title: str = "", pape
     parts.append("### terms")
     parts.append("")
     for e in model.equations:
-        parts.append(f"- {e.name} = {e.intercept:.6g} " + " ".join(
-            f"{'-' if c < 0 else '+'} {abs(c):.6g} {t.text}" for t, c in zip(e.terms, e.coefficients)))
+        # every digit: an equation with cancelling terms cannot be evaluated from rounded coefficients
+        parts.append(f"- {e.name} = {e.intercept!r} " + " ".join(
+            f"{'-' if c < 0 else '+'} {abs(c)!r} {t.text}" for t, c in zip(e.terms, e.coefficients)))
     parts.append("")
     parts.append("### AIC trace")
     parts.append("")

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
+from .fixedpoint import sensor_input_scale as fixed_scale
 from .fit import FitSettings, fit_model
 from .model import Model
 from .pose import POSE_NAMES, POSE_UNITS
@@ -40,7 +41,6 @@ FAMILY_NAMES = ("all", "no-roots", "integer")
 PRECISIONS = ("double", "float", "fixed")
 STYLES = ("table", "unrolled")
 FIXED_STYLE = "-"  # the fixed-point header is straight-line code: the style knob does not apply
-FIXED_BITS = 16  # ADC bits assumed for fixed point when the sensor's transfer does not quantise
 OP_KINDS = ("mul", "add", "div", "sqrt", "cbrt")
 # Cortex-M core whose flash is reported, per precision (see host.cost.ARM_CORES)
 CORE_OF = {"double": "cortex-m4f", "float": "cortex-m4f", "fixed": "cortex-m0"}
@@ -205,6 +205,7 @@ class Point:
     object_flash: int | None = None  # text + data of the estimator's object file
     errors: dict = field(default_factory=dict)
     score: float | None = None
+    share: float | None = None  # rounding's share: worst output's deviation from double / the model's max error
     model_hash: str = ""
     note: str = ""
 
@@ -222,6 +223,8 @@ class TradeoffResult:
     warnings: list[str]
     notes: list[str]
     setup: dict
+    max_share: float = 0.05
+    over_share: list[int] = field(default_factory=list)  # points whose rounding adds more than max_share
 
 
 def _fixed_backend():
@@ -234,12 +237,17 @@ def _fixed_backend():
 
 
 def _errors(pred: np.ndarray, truth: np.ndarray, noisy_pred: np.ndarray, noisy_truth: np.ndarray,
-            outputs: tuple[str, ...]) -> dict:
+            outputs: tuple[str, ...], double: np.ndarray) -> dict:
+    """Per output: errors noise-free and with noise, and rounding's share: the largest deviation
+    from the ``double`` model's outputs (noise-free) over that model's own max error."""
     out = {}
     for j, o in enumerate(outputs):
         e, en = np.abs(pred[:, j] - truth[:, j]), np.abs(noisy_pred[:, j] - noisy_truth[:, j])
+        model_max = float(np.abs(double[:, j] - truth[:, j]).max())
+        dev = float(np.abs(pred[:, j] - double[:, j]).max())
         out[o] = {"max": float(e.max()), "rms": float(np.sqrt(np.mean(e * e))),
-                  "noisy_max": float(en.max()), "noisy_rms": float(np.sqrt(np.mean(en * en)))}
+                  "noisy_max": float(en.max()), "noisy_rms": float(np.sqrt(np.mean(en * en))),
+                  "deviation": dev, "share": dev / model_max if model_max > 0 else 0.0}
     return out
 
 
@@ -277,7 +285,8 @@ class _Measure:
             pred = fm.to_real(fm.predict_codes(fm.codes_of(both))[0])
             header, bench_inputs = {"input_lsb": lsb, "input_offset": offset}, fm.codes_of(self.X).astype(float)
             style = "table"  # not read by the fixed-point template
-        res["errors"] = _errors(pred[: len(self.X)], self.Y, pred[len(self.X):], self.Yn, self.outputs)
+        res["errors"] = _errors(pred[: len(self.X)], self.Y, pred[len(self.X):], self.Yn, self.outputs,
+                                model.predict(self.X))
         inputs_file = cost.write_inputs(bench_inputs, folder / "inputs.f64")
         binary = cost.build_bench(model, style, precision, False, folder / "bench", **header)
         ir = cost.instruction_counts(binary, inputs_file, folder / "bench", mix=False, repeat=False)
@@ -289,22 +298,6 @@ class _Measure:
         return res
 
 
-def fixed_scale(sensor) -> tuple[float, float, str]:
-    """(lsb, offset, description) of the input codes for fixed point: the ADC of the sensor's
-    transfer, or FIXED_BITS bits over its range when the transfer does not quantise."""
-    if sensor.transfer == "gmr":
-        g = sensor.gmr
-        bits = g.adc_bits or FIXED_BITS
-        lsb, offset, span = (g.adc_max - g.adc_min) / (2**bits - 1), g.adc_min, f"{g.adc_min:g}..{g.adc_max:g} V"
-    else:
-        r = sensor.raw
-        bits = r.adc_bits or FIXED_BITS
-        lsb, offset, span = r.full_scale / (2**bits - 1), 0.0, f"0..{r.full_scale:g} mT"
-    src = "the transfer's ADC" if (sensor.gmr.adc_bits if sensor.transfer == "gmr" else sensor.raw.adc_bits) \
-        else "assumed: the transfer has no ADC"
-    return lsb, offset, f"{bits}-bit codes over {span} (LSB {lsb:.4g} {sensor.units}; {src})"
-
-
 def fixed_ops(fm) -> dict:
     """Integer operations of a fixed-point plan, by the float kinds: a product (and its shift) is a
     mul, a reciprocal a div, a term a mul and an add."""
@@ -314,8 +307,12 @@ def fixed_ops(fm) -> dict:
 
 
 def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None, seed: int = 0,
-          n_held: int = N_HELD, noise_draws: int = NOISE_DRAWS, jobs: int = 2, progress=None) -> TradeoffResult:
+          n_held: int = N_HELD, noise_draws: int = NOISE_DRAWS, jobs: int = 2, progress=None,
+          max_share: float = 0.05) -> TradeoffResult:
     """Fit, build and measure every point of ``grid`` for ``sensor`` on ``scene``.
+
+    A point whose rounding adds more than ``max_share`` of its model's held-out max error is
+    listed in ``over_share`` and is neither on the front nor recommended.
 
     ``progress(note)`` is called once per measured point. Needs gcc and valgrind; the flash
     figures need arm-none-eabi-gcc/size/nm (left empty, with a note, without them).
@@ -353,7 +350,7 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
     fits: dict[tuple, Model] = {}
     for kn in grid:
         if kn.fit_key not in fits:
-            fits[kn.fit_key] = fit_model(train, outputs, kn.settings())
+            fits[kn.fit_key] = fit_model(train, outputs, kn.settings(), sensor=sensor)
 
     points = [Point(kn) for kn in grid]
     units: dict[tuple, list[int]] = {}
@@ -385,17 +382,24 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
                         for key, val in res.items():
                             setattr(p, key, val)
                         p.score = max(p.errors[o]["noisy_rms"] / target[o] for o in outputs)
+                        p.share = max(p.errors[o]["share"] for o in outputs)
                 if progress:
                     progress(points[idx[0]].knobs.label)
 
-    cost_ = [p.instructions if p.score is not None else None for p in points]
+    over = [i for i, p in enumerate(points) if p.share is not None and p.share > max_share]
+    for i in over:
+        worst = max(outputs, key=lambda o: points[i].errors[o]["share"])
+        points[i].note = (f"rounding adds {points[i].share:.1%} of {worst}'s held-out max error "
+                          f"(over {max_share:.0%}): not recommended")
+    cost_ = [p.instructions if p.score is not None and i not in over else None for i, p in enumerate(points)]
     score = [p.score for p in points]
     front = pareto_front(cost_, score)
     rec, met = recommend([math.nan if c is None else c for c in cost_],
                          [math.nan if s is None else s for s in score], [p.flash for p in points])
     setup = {"training_rows": train.n_rows, "levels": scene.levels, "held_out": n_held, "noise_draws": noise_draws,
              "noise": sensor.noise, "units": sensor.units, "seed": seed, "fits": len(fits), "measured": len(units)}
-    return TradeoffResult(sensor.name, sensor.transfer, scene, target, points, front, rec, met, warnings, notes, setup)
+    return TradeoffResult(sensor.name, sensor.transfer, scene, target, points, front, rec, met, warnings, notes, setup,
+                          max_share, over)
 
 
 # --- output --------------------------------------------------------------------------------------------
@@ -416,7 +420,7 @@ def to_csv(result: TradeoffResult) -> str:
                + [f"terms_{o}" for o in outs] + [f"ops_{k}" for k in OP_KINDS]
                + ["instructions", "loop_instructions", "flash", "object_flash"]
                + [f"{o}_{s}" for o in outs for s in ("max", "rms", "noisy_max", "noisy_rms")]
-               + ["score", "front", "recommended", "model", "note"])
+               + [f"{o}_share" for o in outs] + ["score", "share", "front", "recommended", "model", "note"])
     for i, p in enumerate(result.points):
         kn = p.knobs
         w.writerow([i + 1, _k(kn.k), kn.max_terms or "", kn.family, kn.precision, kn.style, p.terms]
@@ -424,7 +428,9 @@ def to_csv(result: TradeoffResult) -> str:
                    + [_g(p.instructions, 6), _g(p.loop_instructions, 6), _g(p.flash, 9), _g(p.object_flash, 9)]
                    + [_g(p.errors[o][s], 6) if p.errors else "" for o in outs
                       for s in ("max", "rms", "noisy_max", "noisy_rms")]
-                   + [_g(p.score, 6), int(i in result.front), int(i == result.recommended), p.model_hash[:12], p.note])
+                   + [_g(p.errors[o]["share"], 6) if p.errors else "" for o in outs]
+                   + [_g(p.score, 6), _g(p.share, 6), int(i in result.front), int(i == result.recommended),
+                      p.model_hash[:12], p.note])
     return buf.getvalue()
 
 
@@ -435,7 +441,8 @@ def _row(i: int, p: Point, result: TradeoffResult) -> str:
     errs = " | ".join(f"{_g(p.errors[o]['rms'])} / {_g(p.errors[o]['noisy_rms'])} / {_g(p.errors[o]['noisy_max'])}"
                       if p.errors else "" for o in result.scene.outputs)
     return (f"| {i + 1} | {_k(kn.k)} | {kn.max_terms or '-'} | {kn.family} | {kn.precision} | {kn.style} | {p.terms} | "
-            f"{ops} | {_g(p.instructions, 4)} | {_g(p.flash, 6)} | {errs} | {_g(p.score)} | {mark.strip()} |"
+            f"{ops} | {_g(p.instructions, 4)} | {_g(p.flash, 6)} | {errs} | {_g(p.score)} | "
+            f"{'' if p.share is None else f'{p.share:.1%}'} | {mark.strip()} |"
             + (f" {p.note}" if p.note else ""))
 
 
@@ -466,6 +473,12 @@ def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
         lines.append("")
     for n in result.notes:
         lines.append(f"Note: {n}.")
+        lines.append("")
+    if result.over_share:
+        lines.append(f"**Rounding check failed** on {len(result.over_share)} point(s): the generated C deviates from "
+                     f"the double model by more than {result.max_share:.0%} of that model's held-out max error "
+                     "(they are left off the front and the recommendation): points "
+                     + ", ".join(str(i + 1) for i in result.over_share) + ".")
         lines.append("")
     lines.append("## Recommendation")
     lines.append("")
@@ -498,11 +511,13 @@ def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
     lines.append("Ops: mul/add/div/sqrt/cbrt per estimate as the templates write them. Instructions: x86-64, inside "
                  "tm_estimate, per estimate (callgrind). Flash: bytes the estimator adds to a linked Cortex-M4F "
                  "(double, float) or Cortex-M0 (fixed) program, library code included. Errors per output: RMS "
-                 "noise-free / RMS with noise / max with noise.")
+                 "noise-free / RMS with noise / max with noise. Rounding's share: the largest deviation of this "
+                 "precision's C from the double model on the noise-free held-out readings, over the double model's "
+                 "max error there (worst output).")
     lines.append("")
     lines.append("| # | k | cap | family | precision | style | terms | ops | instructions | flash | "
-                 + " | ".join(f"{o} [{units[o]}]" for o in outs) + " | score | |")
-    lines.append("|" + " --- |" * (13 + len(outs) - 1))
+                 + " | ".join(f"{o} [{units[o]}]" for o in outs) + " | score | rounding's share | |")
+    lines.append("|" + " --- |" * (14 + len(outs) - 1))
     lines += [_row(i, p, result) for i, p in enumerate(result.points)]
     return "\n".join(lines) + "\n"
 

@@ -38,13 +38,19 @@ def _check_counts(args) -> None:
 
 def _suite(url: str, model, data, args) -> int:
     from host.device import Device
+    from host.verify import held_out_from_args
 
     from .suite import run_suite
 
+    held_out = held_out_from_args(model, args)
     with Device.open(url, timeout=args.timeout) as dev:
         res = run_suite(dev, model, url=url, n_vectors=args.vectors, data=data, n_fuzz=args.fuzz,
-                        flash=not args.no_flash, sensor_id=args.sensor_id, fma=args.fma)
+                        flash=not args.no_flash, sensor_id=args.sensor_id, fma=args.fma, held_out=held_out,
+                        max_share=args.max_share)
     print(res.table())
+    if held_out is None and not args.no_held_out:
+        print("note: no held-out accuracy check: the model file has no held_out record or its sensor is unknown "
+              "(give --sensor)")
     if args.junit:
         res.write_junit(args.junit)
     print("PASS" if res.ok else "FAIL")
@@ -95,6 +101,8 @@ def cmd_emulate(args) -> int:
 
 
 def _suite_options(p) -> None:
+    from host.verify import add_held_out_options
+
     p.add_argument("--model", required=True, metavar="MODEL", help="the model compiled into the firmware")
     p.add_argument("--vectors", type=int, default=1000, help="random vectors inside the domain (default 1000)")
     p.add_argument("--data", metavar="CSV", help="also send the rows of this dataset")
@@ -104,6 +112,7 @@ def _suite_options(p) -> None:
     p.add_argument("--sensor-id", default="paper", help="sensor id written into flashed blobs (default paper)")
     p.add_argument("--fma", action="store_true", help="the compiled-in model sums terms by fma")
     p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for each reply (default 2)")
+    add_held_out_options(p)
 
 
 def build_parser() -> Parser:

@@ -20,7 +20,7 @@ from fitgen.model import Equation, Model
 from fitgen.progress import Progress
 from host import protocol as P
 from host.device import Device, DeviceError, NoAnswer
-from host.verify import VerifyResult, compare, compare_fixed, make_code_vectors, make_vectors
+from host.verify import MAX_SHARE, VerifyResult, compare, compare_fixed, held_out_check, make_code_vectors, make_vectors
 
 
 @dataclass
@@ -132,6 +132,26 @@ def check_eval_fixed(dev: Device, model: Model, fixed, codes: np.ndarray, name: 
     return Check(name, res.ok, detail, figures={"max_error": res.max_error.tolist(),
                                                 "worst_ratio": float(np.max(res.max_ratio)),
                                                 "max_lsb_diff": lsb})
+
+
+def check_held_out(dev: Device, model: Model, held_out: tuple[np.ndarray, np.ndarray], max_share: float,
+                   fixed=None) -> Check:
+    """The device on noise-free held-out readings: rounding may add at most ``max_share`` of the
+    model's own held-out max error (a fixed-point device gets the readings' ADC codes)."""
+    readings, truth = held_out
+    if fixed is not None:
+        out = fixed.to_real(FixedDeviceEvaluator(dev, fixed).predict_codes(fixed.codes_of(readings))[0])
+    else:
+        info = dev.info()
+        sent = readings.astype(np.float32).astype(float) if info.precision == "float" else readings
+        out = DeviceEvaluator(dev, info.precision, info.style_name).predict(sent)[0]
+    failures: list[str] = []
+    chk = held_out_check(model, out, readings, truth, max_share, failures)
+    detail = f"{len(readings)} held-out readings; rounding's share " + ", ".join(
+        f"{n} {x:.1%}" for n, x in zip(model.output_names, chk.share)) + f" (at most {max_share:.0%})"
+    return Check("held-out accuracy", not failures, detail + ("; " + "; ".join(failures) if failures else ""),
+                 figures={"share": chk.share.tolist(), "deviation": chk.deviation.tolist(),
+                          "model_max_error": chk.model_max.tolist()})
 
 
 def check_fixed_refuses_blobs(dev: Device, model: Model, sensor_id: str) -> Check:
@@ -314,8 +334,12 @@ def check_fuzz(dev: Device, n_frames: int, batch: int = 50, seed: int = 0, progr
 def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000, data: np.ndarray | None = None,
               n_fuzz: int = 10_000, flash: bool = True, sensor_id: str = "paper", fma: bool = False,
               seed: int = 0, verbose: bool = True, input_lsb: float | None = None,
-              input_offset: float | None = None) -> SuiteResult:
+              input_offset: float | None = None, held_out: tuple[np.ndarray, np.ndarray] | None = None,
+              max_share: float = MAX_SHARE) -> SuiteResult:
     """Every check in turn against the device at ``url`` that runs ``model`` compiled in.
+
+    ``held_out``: noise-free held-out (readings, truth) for the rounding's-share check
+    (fitgen.holdout.clean_readings); without it that check is not run.
 
     A fixed-point device (INFO precision 2) gets ADC codes, compared with the numpy model of its
     integer arithmetic (``input_lsb``/``input_offset`` as given to codegen; default: the model's sensor).
@@ -354,6 +378,8 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
     step(check_info, dev, model)
     dev.reset_calibration()
     evaluate(inputs, "eval")
+    if held_out is not None:
+        step(check_held_out, dev, model, held_out, max_share, fixed)
     step(check_timing, dev, model, fixed=fixed)
     if flash and fixed is not None:
         step(check_fixed_refuses_blobs, dev, model, sensor_id)

@@ -15,7 +15,7 @@ def cmd_verify(args) -> int:
     from fitgen.dataset import load_dataset
     from fitgen.model import load_model
 
-    from .verify import verify
+    from .verify import held_out_from_args, verify
 
     model = load_model(args.model)
     precisions = ("double", "float") if args.precision == "both" else (args.precision,)
@@ -32,13 +32,14 @@ def cmd_verify(args) -> int:
         extra = ds.inputs
     if args.vectors < 0:
         raise InputError("--vectors must be >= 0")
+    held_out = held_out_from_args(model, args)
     ok = True
     for precision in precisions:
         # the fixed-point header has one form (straight-line code): checked once
         for style in (("unrolled",) if precision == "fixed" else styles):
             res = verify(model, precision, style, cc=args.cc, runner=args.runner or "", prefix=args.prefix,
                          n_random=args.vectors, extra_inputs=extra, fma=args.fma, input_lsb=args.input_lsb,
-                         input_offset=args.input_offset)
+                         input_offset=args.input_offset, held_out=held_out, max_share=args.max_share)
             print(res.table())
             print("PASS" if res.ok else "FAIL: " + "; ".join(res.failures))
             print()
@@ -314,6 +315,8 @@ def _adc_options(p) -> None:
 
 
 def build_parser() -> Parser:
+    from .verify import add_held_out_options
+
     p = Parser(prog="tactile-host", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     v = sub.add_parser("verify", help="compile the generated C and compare it with the Python evaluation")
@@ -329,6 +332,7 @@ def build_parser() -> Parser:
     v.add_argument("--fma", action="store_true", help="generate with fused multiply-adds (fitgen codegen --fma)")
     v.add_argument("--input-lsb", type=float, metavar="X", help="fixed: the input value of one ADC code")
     v.add_argument("--input-offset", type=float, metavar="Y", help="fixed: the input value of code 0")
+    add_held_out_options(v)
     v.set_defaults(func=cmd_verify)
 
     f = sub.add_parser("flash", help="load a model into a device as a calibration blob and read it back")

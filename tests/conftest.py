@@ -54,11 +54,12 @@ def sensor():
 
 @pytest.fixture(scope="session")
 def model(sensor):
-    """A model fitted on that sensor's paper-sim grid."""
-    from fitgen.fit import fit_model
+    """A model fitted on that sensor's paper-sim grid, the paper's way (the readout tests' tolerances are
+    this model's; the device's fit is tests/test_deployed.py's)."""
+    from fitgen.fit import FitSettings, fit_model
     from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
 
-    return fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])))
+    return fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])), settings=FitSettings.exact())
 
 
 @pytest.fixture(scope="session")

@@ -150,6 +150,25 @@ def test_tiny_sweep_through_the_cli(tmp_path):
     assert all(float(rec[0]["instructions"]) <= float(r["instructions"]) for r in rows if float(r["score"]) <= 1)
     if rec[0]["flash"]:
         assert 0 < int(rec[0]["flash"]) < 4096
+    for r in rows:  # rounding's share beside the model's own error, within the default 5 %
+        assert float(r["share"]) == pytest.approx(float(r["dz_share"]))
+        assert 0 <= float(r["share"]) <= 0.05
+
+
+def test_sweep_fails_when_rounding_exceeds_the_share(tmp_path):
+    require_tool("gcc")
+    require_tool("valgrind")
+    out = tmp_path / "t"
+    proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "--k", "aic", "--max-terms", "none",
+                   "--family", "integer", "--precision", "float,double", "--style", "unrolled", "--max-share", "1e-12",
+                   "-o", str(out))
+    assert proc.returncode == 1, proc.stderr
+    assert "FAIL: rounding adds more than" in proc.stderr
+    rows = {r["precision"]: r for r in csv.DictReader((out / "tradeoff.csv").open())}
+    # float deviates from double and fails; double is double: its share is 0 and it is the recommendation
+    assert float(rows["float"]["share"]) > 1e-12 and "not recommended" in rows["float"]["note"]
+    assert float(rows["double"]["share"]) == 0 and rows["double"]["recommended"] == "1"
+    assert "Rounding check failed" in proc.stdout
 
 
 @pytest.mark.parametrize("args,contains", [
@@ -159,6 +178,7 @@ def test_tiny_sweep_through_the_cli(tmp_path):
     (["--max-terms", "0"], "--max-terms"),
     (["--family", "roots"], "--family"),
     (["--jobs", "0"], "--jobs"),
+    (["--max-share", "0"], "--max-share"),
 ])
 def test_bad_options_one_line(args, contains, tmp_path):
     proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "-o", str(tmp_path / "x"), *args)

@@ -1,0 +1,125 @@
+"""Held-out accuracy of a fitted model, as the device will deliver it (docs/deployed-accuracy.md).
+
+Held out: random poses in the training data's box (a stated seed), never used in fitting,
+simulated with the sensor noise-free and with its noise in several draws. Per precision the
+device can run, per output: the error noise-free and with noise (max, RMS), the largest
+deviation from the double model on noise-free readings, and that deviation's share of the
+model's own held-out max error ("rounding's share"). Float is computed by the numpy float32
+emulation of the float header (Model.predict(precision="float"), bit-identical to the C built
+by gcc on x86-64); fixed point by the numpy model of its integer arithmetic. `tactile-host
+verify` and the HIL suite measure the same share on the real C.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .model import Model
+from .pose import POSE_NAMES
+from .simulate import pose_rng, random_poses, simulate
+
+N_POSES = 2000
+SEED = 2026
+NOISE_DRAWS = 5
+PRECISIONS = ("double", "float", "fixed")
+
+
+@dataclass
+class HeldOut:
+    """Held-out readings: ``clean`` (n, N) noise-free, ``noisy`` (draws * n, N); targets per row."""
+
+    clean: np.ndarray
+    truth: np.ndarray
+    noisy: np.ndarray
+    noisy_truth: np.ndarray
+    spec: dict
+
+
+def box_of(poses: np.ndarray) -> dict[str, tuple[float, float]]:
+    """The box the poses span, per component."""
+    return {n: (float(poses[:, j].min()), float(poses[:, j].max())) for j, n in enumerate(POSE_NAMES)}
+
+
+def held_out_set(sensor, ranges: dict, outputs: tuple[str, ...], *, noise: float | None = None, n: int = N_POSES,
+                 seed: int = SEED, draws: int = NOISE_DRAWS) -> HeldOut:
+    """``n`` random poses in ``ranges`` (pose seed ``seed``), simulated with ``sensor``; noise
+    draws with seeds seed + 1 .. seed + draws at ``noise`` (default: the sensor's)."""
+    noise = sensor.noise if noise is None else noise
+    poses = random_poses(n, ranges, pose_rng(seed))
+    cols = [POSE_NAMES.index(o) for o in outputs]
+    clean = simulate(sensor, poses).inputs
+    noisy = np.vstack([simulate(sensor, poses, noise=noise, seed=seed + 1 + i).inputs for i in range(draws)])
+    truth = poses[:, cols]
+    spec = {"poses": n, "seed": seed, "box": {k: list(v) for k, v in ranges.items()}, "noise": noise,
+            "noise_draws": draws, "noise_seeds": [seed + 1, seed + draws], "sensor": sensor.name,
+            "sensor_sha256": sensor.sha256, "transfer": sensor.transfer}
+    return HeldOut(clean, truth, noisy, np.tile(truth, (draws, 1)), spec)
+
+
+def _fixed_predict(model: Model, sensor):
+    """A function values -> outputs through the numpy model of the fixed-point C, or the reason there is none."""
+    from .fixedpoint import build_fixed, sensor_input_scale
+
+    lsb, offset, _ = sensor_input_scale(sensor)
+    try:
+        fm = build_fixed(model, lsb, offset)
+    except InputError as exc:
+        return str(exc)
+    return lambda x: fm.to_real(fm.predict_codes(fm.codes_of(x))[0])
+
+
+def deployed_errors(model: Model, held: HeldOut, sensor=None, precisions=PRECISIONS) -> dict:
+    """Per precision, per output: max, rms (noise-free), noisy_max, noisy_rms, deviation (max |this
+    precision - double| noise-free) and share (deviation / the double model's max). A precision the
+    model cannot be generated in gets {"unavailable": reason}."""
+    double_clean = model.predict(held.clean)
+    model_max = np.abs(double_clean - held.truth).max(axis=0)
+    out = {}
+    for prec in precisions:
+        if prec == "double":
+            fn = model.predict
+        elif prec == "float":
+            def fn(x):
+                return model.predict(x, precision="float")
+        else:
+            fn = _fixed_predict(model, sensor) if sensor is not None else "no sensor to take the ADC scale from"
+        if isinstance(fn, str):
+            out[prec] = {"unavailable": fn.splitlines()[0]}
+            continue
+        clean, noisy = fn(held.clean), fn(held.noisy)
+        e, en = np.abs(clean - held.truth), np.abs(noisy - held.noisy_truth)
+        dev = np.abs(clean - double_clean).max(axis=0)
+        out[prec] = {o: {"max": float(e[:, j].max()), "rms": float(np.sqrt(np.mean(e[:, j] ** 2))),
+                         "noisy_max": float(en[:, j].max()), "noisy_rms": float(np.sqrt(np.mean(en[:, j] ** 2))),
+                         "deviation": float(dev[j]),
+                         "share": float(dev[j] / model_max[j]) if model_max[j] > 0 else 0.0}
+                     for j, o in enumerate(model.output_names)}
+    return out
+
+
+def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, n: int = N_POSES,
+             seed: int = SEED, draws: int = NOISE_DRAWS) -> dict:
+    """The ``held_out`` record of a model file: how it was made and the errors per precision."""
+    held = held_out_set(sensor, ranges, model.output_names, noise=noise, n=n, seed=seed, draws=draws)
+    return {**held.spec, "errors": deployed_errors(model, held, sensor)}
+
+
+def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] | None:
+    """The noise-free held-out readings and targets the model file's ``held_out`` record names,
+    simulated again (with ``sensor``, else the preset it names, checked by hash); None when the
+    model has no such record or its sensor cannot be had."""
+    from .simulate import dataset_sensor
+
+    rec = model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None
+    if not isinstance(rec, dict):
+        return None
+    sensor = sensor or dataset_sensor(rec)
+    if sensor is None:
+        return None
+    ranges = {k: tuple(v) for k, v in rec["box"].items()}
+    poses = random_poses(int(rec["poses"]), ranges, pose_rng(int(rec["seed"])))
+    cols = [POSE_NAMES.index(o) for o in model.output_names]
+    return simulate(sensor, poses).inputs, poses[:, cols]
