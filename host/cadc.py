@@ -120,6 +120,27 @@ def chip_table(cmap: ChannelMap):
     return table
 
 
+def smbus_transfer(bus, addr: int, wr: list[int], nr: int) -> list[int]:
+    """One transfer of the C drivers as the smbus2 call the Python drivers make for it: a register
+    read (one pointer byte, then nr bytes) is ``read_i2c_block_data``, a one-byte write ``write_byte``,
+    a longer write ``write_i2c_block_data``, a bare read an ``i2c_rdwr`` read message."""
+    if wr and nr:
+        if len(wr) != 1:
+            raise InputError("the C drivers read registers with a one-byte pointer only")
+        return list(bus.read_i2c_block_data(addr, wr[0], nr))
+    if nr:
+        from smbus2 import i2c_msg
+
+        msg = i2c_msg.read(addr, nr)
+        bus.i2c_rdwr(msg)
+        return list(bytes(msg))
+    if len(wr) == 1:
+        bus.write_byte(addr, wr[0])
+    else:
+        bus.write_i2c_block_data(addr, wr[0], list(wr[1:]))
+    return []
+
+
 def _status_of(exc: OSError) -> int:
     if exc.errno in NACK_ERRNOS:
         return I2C_NACK
@@ -166,31 +187,20 @@ class CAdcArray:
             self._error = exc
             return I2C_OTHER
 
+    def _transfer(self, addr, wr, nr, rd=None):
+        def run():
+            for i, x in enumerate(smbus_transfer(self.bus, addr, wr, nr)):
+                rd[i] = x
+        return self._guard(run)
+
     def _write(self, ctx, addr, data, n):
-        b = [data[i] for i in range(n)]
-        if n == 1:
-            return self._guard(self.bus.write_byte, addr, b[0])
-        return self._guard(self.bus.write_i2c_block_data, addr, b[0], b[1:])
+        return self._transfer(addr, data[:n], 0)
 
     def _read(self, ctx, addr, data, n):
-        def read():
-            from smbus2 import i2c_msg
-
-            msg = i2c_msg.read(addr, n)
-            self.bus.i2c_rdwr(msg)
-            for i, x in enumerate(bytes(msg)):
-                data[i] = x
-        return self._guard(read)
+        return self._transfer(addr, [], n, data)
 
     def _write_read(self, ctx, addr, wr, nw, rd, nr):
-        if nw != 1:
-            self._error = InputError("the C drivers read registers with a one-byte pointer only")
-            return I2C_OTHER
-
-        def read():
-            for i, x in enumerate(self.bus.read_i2c_block_data(addr, wr[0], nr)):
-                rd[i] = x
-        return self._guard(read)
+        return self._transfer(addr, wr[:nw], nr, rd)
 
     def _now(self, ctx):
         return round(self.clock.monotonic() * 1e9)

@@ -294,16 +294,34 @@ def cmd_capture(args) -> int:
     return 0
 
 
-def _adc_options(p) -> None:
+def cmd_pi_build(args) -> int:
+    from fitgen.model import load_model
+
+    from .pi import build_pi, render_pi
+
+    model = load_model(args.model)
+    cmap = _channel_map(args)
+    folder = render_pi(model, cmap, args.output, precision=args.precision, style=args.style)
+    binary = build_pi(folder, args.cc)
+    print(f"wrote {binary} ({cmap.describe()}, model {model.sha256[:12]}, {args.precision}); on the Pi: "
+          f"{binary.name} --bus 1 --format csv", file=sys.stderr)
+    return 0
+
+
+def _map_options(p) -> None:
     p.add_argument("--adc", required=True, metavar="SPEC|FILE.toml",
                    help="channel map: e.g. ads1115@0x48:0-3,ads1115@0x49:0-3 or ads7828@0x48, or a TOML file")
-    p.add_argument("--bus", type=int, help="I2C bus number: /dev/i2c-N (default 1, or the map file's bus)")
     p.add_argument("--pga", type=float, default=4.096, choices=ADS1115_PGA, metavar="V",
                    help="ADS1115 full scale +-V: 6.144, 4.096 (default), 2.048, 1.024, 0.512, 0.256")
     p.add_argument("--data-rate", type=int, default=860, choices=ADS1115_RATES, metavar="SPS",
                    help="ADS1115 samples per second: 8..860 (default 860)")
     p.add_argument("--mode", default="single", choices=MODES, help="ADS1115 conversion mode (default single)")
     p.add_argument("--vref", default="3.3", help="ADS7828 reference: external volts (default 3.3) or 'internal' (2.5 V)")
+
+
+def _adc_options(p) -> None:
+    _map_options(p)
+    p.add_argument("--bus", type=int, help="I2C bus number: /dev/i2c-N (default 1, or the map file's bus)")
     p.add_argument("--retries", default="5", help="tries per I2C transfer before a chip counts as silent (default 5)")
     p.add_argument("--sensor", default="paper",
                    help="sensor preset or TOML file: what --simulate simulates, and the rest readings for --tare")
@@ -334,6 +352,17 @@ def build_parser() -> Parser:
     v.add_argument("--input-offset", type=float, metavar="Y", help="fixed: the input value of code 0")
     add_held_out_options(v)
     v.set_defaults(func=cmd_verify)
+
+    pb = sub.add_parser("pi-build", help="the readout in C for a Raspberry Pi: drivers, channel map and model "
+                                         "over i2c-dev, built with arm-linux-gnueabihf-gcc")
+    pb.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
+    _map_options(pb)
+    pb.add_argument("--precision", default="float", choices=("float", "double"))
+    pb.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
+    pb.add_argument("--cc", default="arm-linux-gnueabihf-gcc -static",
+                    help="compiler and flags (default: arm-linux-gnueabihf-gcc -static; gcc on the Pi itself)")
+    pb.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the sources and tm_pi")
+    pb.set_defaults(func=cmd_pi_build)
 
     f = sub.add_parser("flash", help="load a model into a device as a calibration blob and read it back")
     f.add_argument("model", metavar="MODEL")

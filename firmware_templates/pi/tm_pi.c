@@ -1,0 +1,186 @@
+/* tm_pi.c: readings and pose estimates on a Raspberry Pi, in C: the ADC drivers (adc.c) over
+ * i2c-dev, the channel map (adc_map.h) and the model (tm_model.h) rendered by `tactile-host pi-build`.
+ * Writes the lines `tactile-host read` writes (t, v1..vN in V, the outputs, the model's status),
+ * as CSV or JSONL on stdout; a summary on stderr.
+ *
+ *   tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] [--retries N]
+ *
+ * Exit status 0, 1 when a chip stays silent (the samples so far are written), 2 for bad options
+ * or a bus that cannot be opened (one line on stderr). */
+#define _POSIX_C_SOURCE 200809L
+#include <errno.h>
+#include <limits.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "adc.h"
+#include "adc_map.h"
+#include "i2c_linux.h"
+#include "tm_model.h"
+
+typedef char tm_pi_assert_map_fits_model[(ADC_MAP_N_ELEMENTS == TM_N_INPUTS) ? 1 : -1];
+
+static int usage(const char *msg, const char *arg)
+{
+    fprintf(stderr, "tm_pi: error: %s%s%s (usage: tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] "
+                    "[--retries N])\n", msg, arg ? ": " : "", arg ? arg : "");
+    return 2;
+}
+
+/* a whole number in [lo, hi] */
+static int parse_long(const char *s, long lo, long hi, long *out)
+{
+    char *end;
+    long v;
+    errno = 0;
+    v = strtol(s, &end, 10);
+    if (errno || end == s || *end || v < lo || v > hi) {
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+static void print_line(int jsonl, double t, const double v[TM_N_INPUTS], const tm_real out[TM_N_OUTPUTS], int status)
+{
+    static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
+    int k;
+    if (jsonl) {
+        printf("{\"t\":%.6f,\"v\":[", t);
+        for (k = 0; k < TM_N_INPUTS; ++k) {
+            printf(k ? ",%.6f" : "%.6f", v[k]);
+        }
+        printf("]");
+        for (k = 0; k < TM_N_OUTPUTS; ++k) {
+            printf(",\"%s\":%.4f", names[k], (double)out[k]);
+        }
+        printf(",\"status\":%d}\n", status);
+    } else {
+        printf("%.6f", t);
+        for (k = 0; k < TM_N_INPUTS; ++k) {
+            printf(",%.6f", v[k]);
+        }
+        for (k = 0; k < TM_N_OUTPUTS; ++k) {
+            printf(",%.4f", (double)out[k]);
+        }
+        printf(",%d\n", status);
+    }
+}
+
+int main(int argc, char **argv)
+{
+    static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
+    long bus = 1, count = 0, retries = 5, rate_hz = 0;
+    int jsonl = 0, i, st = ADC_OK;
+    long n = 0;
+    char err[200];
+    i2c_linux port;
+    adc_i2c i2c;
+    adc_array array;
+    adc_policy policy = adc_default_policy();
+    double lsb[TM_N_INPUTS];
+    uint64_t next = 0, period = 0;
+
+    for (i = 1; i < argc; ++i) {
+        const char *opt = argv[i];
+        const char *val = i + 1 < argc ? argv[i + 1] : NULL;
+        if (strcmp(opt, "--format") == 0 && val) {
+            if (strcmp(val, "csv") && strcmp(val, "jsonl")) {
+                return usage("--format must be csv or jsonl, got", val);
+            }
+            jsonl = strcmp(val, "jsonl") == 0;
+        } else if (strcmp(opt, "--bus") == 0 && val) {
+            if (parse_long(val, 0, 255, &bus)) return usage("--bus must be 0..255, got", val);
+        } else if (strcmp(opt, "--count") == 0 && val) {
+            if (parse_long(val, 0, LONG_MAX, &count)) return usage("--count must be a whole number >= 0, got", val);
+        } else if (strcmp(opt, "--rate") == 0 && val) {
+            if (parse_long(val, 1, 100000, &rate_hz)) return usage("--rate must be 1..100000 Hz, got", val);
+        } else if (strcmp(opt, "--retries") == 0 && val) {
+            if (parse_long(val, 1, 100, &retries)) return usage("--retries must be 1..100, got", val);
+        } else {
+            return usage("unknown or incomplete option", opt);
+        }
+        ++i;
+    }
+    policy.attempts = (uint8_t)retries;
+    if (i2c_linux_open(&port, (int)bus, &i2c, err, sizeof err) != 0) {
+        fprintf(stderr, "tm_pi: error: %s\n", err);
+        return 2;
+    }
+    if (adc_init(&array, &i2c, ADC_MAP, ADC_MAP_N_CHIPS, policy) != ADC_OK) {
+        fprintf(stderr, "tm_pi: error: the channel map %s is not one the drivers take\n", ADC_MAP_DESCRIPTION);
+        i2c_linux_close(&port);
+        return 2;
+    }
+    for (i = 0; i < ADC_MAP_N_CHIPS; ++i) {
+        int j;
+        for (j = 0; j < ADC_MAP[i].n_inputs; ++j) {
+            lsb[ADC_MAP_FIRST_ELEMENT[i] + j] = adc_lsb_volts(&ADC_MAP[i]);
+        }
+    }
+    st = adc_probe(&array);
+    if (st == ADC_OK) {
+        st = adc_setup(&array);
+    }
+    if (st != ADC_OK) {
+        fprintf(stderr, "tm_pi: error: %s %s\n", array.failed_chip >= 0 ? ADC_MAP_LABELS[array.failed_chip] :
+                "general-call reset", st == ADC_ERR_NOT_CHIP ? "answers as another part: is the chip type in the "
+                "channel map right?" : "does not answer: check the wiring, its address pins and i2cdetect");
+        i2c_linux_close(&port);
+        return 2;
+    }
+    if (!jsonl) {
+        printf("t");
+        for (i = 1; i <= TM_N_INPUTS; ++i) {
+            printf(",v%d", i);
+        }
+        for (i = 0; i < TM_N_OUTPUTS; ++i) {
+            printf(",%s", names[i]);
+        }
+        printf(",status\n");
+    }
+    if (rate_hz) {
+        period = 1000000000u / (uint64_t)rate_hz;
+        next = i2c.now_ns(i2c.ctx);
+    }
+    while (count == 0 || n < count) {
+        int32_t codes[TM_N_INPUTS];
+        double v[TM_N_INPUTS];
+        tm_real in[TM_N_INPUTS], out[TM_N_OUTPUTS];
+        double t;
+        int status;
+        if (period) {
+            const uint64_t now = i2c.now_ns(i2c.ctx);
+            if (next > now) {
+                i2c.sleep_ns(i2c.ctx, next - now);
+            }
+            next += period;
+        }
+        t = (double)i2c_linux_realtime_ns() * 1e-9;
+        st = adc_read_codes(&array, codes);
+        if (st != ADC_OK) {
+            break;
+        }
+        for (i = 0; i < TM_N_INPUTS; ++i) {
+            v[i] = codes[i] * lsb[i];
+            in[i] = (tm_real)v[i];
+        }
+        status = tm_estimate(in, out);
+        print_line(jsonl, t, v, out, status);
+        ++n;
+    }
+    fflush(stdout);
+    fprintf(stderr, "tm_pi: %ld samples; I2C errors %lu (nack %lu, timeout %lu, stuck %lu, other %lu; %lu retries, "
+                    "%lu resets)\n", n,
+            (unsigned long)(array.counts.nack + array.counts.timeout + array.counts.stuck + array.counts.other),
+            (unsigned long)array.counts.nack, (unsigned long)array.counts.timeout, (unsigned long)array.counts.stuck,
+            (unsigned long)array.counts.other, (unsigned long)array.counts.retries, (unsigned long)array.counts.resets);
+    if (st != ADC_OK) {
+        fprintf(stderr, "tm_pi: error: %s %s; stopped after %ld samples\n",
+                array.failed_chip >= 0 ? ADC_MAP_LABELS[array.failed_chip] : "general-call reset",
+                st == ADC_ERR_STUCK ? "never completes a conversion" : "stays silent", n);
+    }
+    i2c_linux_close(&port);
+    return st == ADC_OK ? 0 : 1;
+}

@@ -1,0 +1,129 @@
+"""The Raspberry Pi build (firmware_templates/pi/): the C drivers over i2c-dev, built for ARM Linux and run
+under qemu-arm against a stand-in for the kernel device answered by the bus model (host/simbus.py)."""
+
+import numpy as np
+import pytest
+
+from fitgen.fit import FitSettings, fit_model
+from fitgen.sensor import load_sensor
+from fitgen.simulate import grid_poses, simulate
+from host.adc import AdcArray, DeviceSilent, RetryPolicy
+from host.channelmap import Settings, parse_spec
+from host.clock import VirtualClock
+from host.pi import StandIn, build_pi, render_adc_map, render_pi
+from host.readout import LineFormat
+from host.simbus import SimBus
+
+from conftest import assert_one_line_error, require_tool, run_cli
+
+SENSOR = load_sensor("paper").with_transfer("gmr")
+POSE = [0.5, 0.2, -1.0, 1.0, 0.0]
+MAP = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+
+
+@pytest.fixture(scope="module")
+def model():
+    grid = grid_poses({"dx": [-2, -1, 0, 1, 2], "dy": [-2, -1, 0, 1, 2], "dz": [0, -1, -2], "thx": [-5, 0, 5],
+                       "thy": [-5, 0, 5]})
+    return fit_model(simulate(SENSOR, grid), settings=FitSettings())
+
+
+@pytest.fixture(scope="module")
+def standin_build(model, tmp_path_factory):
+    require_tool("arm-linux-gnueabihf-gcc")
+    folder = render_pi(model, parse_spec(MAP), tmp_path_factory.mktemp("pi"), precision="float")
+    return build_pi(folder, standin=True)
+
+
+def _bus(spec=MAP, faults=(), settings=Settings()):
+    cmap = parse_spec(spec, settings)
+    clock = VirtualClock()
+    bus = SimBus.for_channel_map(cmap, SENSOR, POSE, clock=clock, noise=0.0005, seed=3)
+    for f in faults:
+        bus.inject(**f)
+    return cmap, bus, clock
+
+
+def _python_lines(model, n, faults=()):
+    """What the Python drivers and the float model give for the same bus, as tactile-host read's lines."""
+    cmap, bus, clock = _bus(faults=faults)
+    arr = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy())
+    arr.probe()
+    arr.setup()
+    fmt = LineFormat("csv", model.n_inputs, model.output_names)
+    lines = []
+    try:
+        for _ in range(n):
+            t = clock.time()
+            v = arr.read_volts()
+            out, status = model.predict(v, with_status=True, precision="float")
+            lines.append(fmt.line(t, v, out[0], int(status[0])))
+    except DeviceSilent:
+        pass
+    return lines, arr.counts
+
+
+def test_pi_build_under_qemu_gives_the_python_readout(model, standin_build):
+    require_tool("qemu-arm")
+    cmap, bus, clock = _bus()
+    res = StandIn(bus, clock).run(["qemu-arm", str(standin_build), "--count", "6", "--format", "csv"])
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines(keepends=True)
+    assert lines[0] == LineFormat("csv", model.n_inputs, model.output_names).header
+    expected, _ = _python_lines(model, 6)
+    # the same readings from the same conversions, the same float estimates, to every printed digit
+    assert [ln.split(",", 1)[1] for ln in lines[1:]] == [ln.split(",", 1)[1] for ln in expected]
+    assert "6 samples; I2C errors 0" in res.stderr
+
+
+def test_pi_build_counts_faults_as_python_does_and_stops_on_a_silent_chip(model, standin_build):
+    require_tool("qemu-arm")
+    faults = [dict(kind="nack", rate=0.2), dict(kind="nack", address=0x49, after=120)]
+    cmap, bus, clock = _bus(faults=faults)
+    res = StandIn(bus, clock).run(["qemu-arm", str(standin_build), "--count", "50"])
+    expected, counts = _python_lines(model, 50, faults)
+    assert res.returncode == 1, res.stderr
+    assert "ads1115@0x49 stays silent" in res.stderr
+    got = res.stdout.splitlines(keepends=True)[1:]
+    assert len(got) == len(expected) < 50
+    assert [ln.split(",", 1)[1] for ln in got] == [ln.split(",", 1)[1] for ln in expected]
+    c = counts
+    assert (f"I2C errors {c.total} (nack {c.nack}, timeout {c.timeout}, stuck {c.stuck}, other {c.other}; "
+            f"{c.retries} retries, {c.resets} resets)") in res.stderr
+
+
+def test_pi_build_bad_options_and_missing_bus(standin_build):
+    require_tool("qemu-arm")
+    for args, contains in ((["--count", "-1"], "--count"), (["--format", "xml"], "--format"),
+                           (["--bogus"], "unknown"), (["--bus", "3"], "cannot open /dev/i2c-3")):
+        cmap, bus, clock = _bus()
+        res = StandIn(bus, clock).run(["qemu-arm", str(standin_build), *args])
+        assert_one_line_error(res, 2, contains)
+
+
+def test_pi_build_native_i2c_dev_port_compiles(model, tmp_path):
+    """The real i2c-dev port (no stand-in) builds warning-free natively and for ARM Linux."""
+    require_tool("gcc")
+    folder = render_pi(model, parse_spec("ads7828@0x4a", Settings(vref="internal")), tmp_path, precision="double")
+    assert build_pi(folder, "gcc").is_file()
+    require_tool("arm-linux-gnueabihf-gcc")
+    assert build_pi(folder).is_file()
+
+
+def test_adc_map_header_carries_the_channel_map():
+    text = render_adc_map(parse_spec("ads1115@0x48:d0-1,2,ads7828@0x4b:0-3", Settings(pga=2.048, data_rate=128,
+                                                                                      vref="internal")))
+    assert "#define ADC_MAP_N_CHIPS 2" in text and "#define ADC_MAP_N_ELEMENTS 6" in text
+    assert "{ ADC_ADS1115, 0x48, 2, { 0, 2, 0, 0, 0, 0, 0, 0 }, { 1, 255," in text
+    assert ", 2, 4, 0, 1, 0.0f }" in text  # PGA code 2 (2.048 V), rate 4 (128 SPS), single-shot, internal ref
+    assert '"ads1115@0x48", "ads7828@0x4b"' in text
+
+
+def test_pi_build_cli_errors(tmp_path, model):
+    path = str(model.save(tmp_path / "m.json"))
+    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", "ads1116@0x48:0-3",
+                                  "-o", str(tmp_path / "x")), 2, "unknown chip")
+    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", "ads1115@0x48:0-3",
+                                  "-o", str(tmp_path / "x")), 2, "reads 4 elements")
+    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "no-such-cc",
+                                  "-o", str(tmp_path / "y")), 2, "not found")
