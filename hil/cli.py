@@ -73,6 +73,29 @@ def _describe(runner, dev, target: str) -> None:
     print(f"{target} firmware: {info.precision}, {info.style_name}, model {info.model_hash[:12]}; {cost}")
     if runner.size:
         print(f"flash {runner.size['flash']} bytes, RAM {runner.size['ram']} bytes")
+    if info.adc_chips:
+        print("inputs from " + ", ".join(f"{c[0]}@0x{c[1]:02x} ({c[2]} inputs)" for c in info.adc_chips)
+              + " over the I2C bridge to the bus model")
+
+
+def _adc_bridge(args):
+    """(channel map, stand-in bus) for --adc, or (None, None)."""
+    if not args.adc:
+        return None, None
+    from fitgen.sensor import load_sensor
+    from host.channelmap import channel_map
+    from host.clock import VirtualClock
+    from host.pi import StandIn
+    from host.simbus import SimBus, parse_pose
+
+    cmap = channel_map(args.adc)
+    sensor = load_sensor(args.sim_sensor).with_transfer("gmr")
+    noise = sensor.noise if args.sim_noise is None else args.sim_noise
+    if not noise >= 0:
+        raise InputError(f"--sim-noise must be >= 0, got {args.sim_noise}")
+    clock = VirtualClock()
+    bus = SimBus.for_channel_map(cmap, sensor, parse_pose(args.simulate), clock=clock, noise=noise, seed=args.seed)
+    return cmap, StandIn(bus, clock)
 
 
 def cmd_emulate(args) -> int:
@@ -82,8 +105,10 @@ def cmd_emulate(args) -> int:
 
     _check_counts(args)
     model, data = _load(args)
+    cmap, bridge = _adc_bridge(args)
     with start_target(model, args.target, precision=args.precision, style=args.style, fma=args.fma,
-                      port=args.port, workdir=args.build_dir, sensor_id=args.sensor_id) as runner:
+                      port=args.port, workdir=args.build_dir, sensor_id=args.sensor_id, cmap=cmap,
+                      bridge=bridge) as runner:
         with Device.open(runner.url, timeout=args.timeout) as dev:
             _describe(runner, dev, args.target)
         if args.suite:
@@ -132,6 +157,14 @@ def build_parser() -> Parser:
     e.add_argument("--style", default="table", choices=("table", "unrolled"))
     e.add_argument("--build-dir", metavar="DIR", help="keep the firmware sources and image here")
     e.add_argument("--suite", action="store_true", help="run the HIL suite against it, then stop")
+    e.add_argument("--adc", metavar="SPEC|FILE.toml",
+                   help="the firmware reads its inputs from these ADCs (a channel map, as tactile-host read --adc) "
+                        "over the emulated board's I2C bridge, answered by the bus model of --simulate")
+    e.add_argument("--simulate", metavar="POSE", default="0,0,0,0,0",
+                   help="with --adc: the bus model's magnet pose dx,dy,dz,thx,thy (default rest)")
+    e.add_argument("--sim-sensor", default="paper", help="with --adc: the simulated sensor (default paper, gmr)")
+    e.add_argument("--sim-noise", type=float, help="with --adc: simulated element noise, V rms (default: the sensor's)")
+    e.add_argument("--seed", type=int, default=0, help="with --adc: seed of the simulated noise")
     _suite_options(e)
     e.set_defaults(func=cmd_emulate)
     return p

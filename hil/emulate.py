@@ -65,12 +65,16 @@ class _Running:
 class Emulator(_Running):
     """A Cortex-M4 firmware ELF booted in qemu-system-arm, its UART on ``socket://127.0.0.1:port``."""
 
-    def __init__(self, elf: str | Path, port: int | None = None, icount: bool = True, boot_timeout: float = 10.0):
+    def __init__(self, elf: str | Path, port: int | None = None, icount: bool = True, boot_timeout: float = 10.0,
+                 bridge=None):
         if shutil.which(QEMU) is None:
             raise InputError(f"{QEMU} not found; {INSTALL_HINT}")
         if not Path(elf).is_file():
             raise InputError(f"firmware {elf} not found")
         self.elf, self.icount, self.boot_timeout = Path(elf), icount, boot_timeout
+        # bridge (host.pi.StandIn): answers the firmware's I2C bridge on the board's second UART
+        self.bridge = bridge
+        self.bridge_port = free_port() if bridge is not None else None
         self.port = port if port is not None else free_port()
         if not 0 < self.port < 65536:
             raise InputError(f"port {self.port} is not a TCP port number")
@@ -83,6 +87,8 @@ class Emulator(_Running):
     def command(self) -> list[str]:
         cmd = [QEMU, "-M", "mps2-an386", "-display", "none", "-monitor", "none", "-nodefaults",
                "-serial", f"tcp:127.0.0.1:{self.port},server=on,wait=off,nodelay=on", "-kernel", str(self.elf)]
+        if self.bridge is not None:
+            cmd += ["-serial", f"tcp:127.0.0.1:{self.bridge_port},server=on,wait=off,nodelay=on"]
         if self.icount:
             cmd += ["-icount", f"shift={ICOUNT_SHIFT}"]
         return cmd
@@ -98,7 +104,13 @@ class Emulator(_Running):
             try:
                 # QEMU listens once its chardev is up; the probe's connection is closed at once
                 with socket.create_connection(("127.0.0.1", self.port), timeout=0.5):
-                    return self
+                    pass
+                if self.bridge is not None:
+                    sock = socket.create_connection(("127.0.0.1", self.bridge_port), timeout=5)
+                    sock.settimeout(None)
+                    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    self.bridge.serve_socket(sock)
+                return self
             except OSError:
                 if time.monotonic() > deadline:
                     self.stop()
@@ -110,16 +122,18 @@ class Emulator(_Running):
 class HostFirmware(_Running):
     """The host build of the firmware serving on a pseudo-terminal; ``url`` is the pty's path."""
 
-    def __init__(self, binary: str | Path, boot_timeout: float = 5.0):
+    def __init__(self, binary: str | Path, boot_timeout: float = 5.0, bridge=None):
         if not Path(binary).is_file():
             raise InputError(f"firmware {binary} not found")
-        self.binary, self.boot_timeout = Path(binary), boot_timeout
+        self.binary, self.boot_timeout, self.bridge = Path(binary), boot_timeout, bridge
         self.proc: subprocess.Popen | None = None
         self.url = ""
 
     def start(self) -> "HostFirmware":
-        self.proc = subprocess.Popen([str(self.binary), "--pty"], stdin=subprocess.DEVNULL,
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        popen = dict(stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        cmd = [str(self.binary), "--pty"]
+        # with a bridge (host.pi.StandIn) the firmware's I2C requests go out on fd 3, answers come on fd 4
+        self.proc = self.bridge.spawn(cmd, **popen) if self.bridge is not None else subprocess.Popen(cmd, **popen)
         fd = self.proc.stderr.fileno()
         buf = b""
         deadline = time.monotonic() + self.boot_timeout
@@ -159,7 +173,8 @@ def bench_instructions(dev, n_small: int = 200, n_large: int = 2200) -> dict:
 
 
 def start_target(model, target: str = "mps2", *, precision: str = "float", style: str = "table", fma: bool = False,
-                 port: int | None = None, workdir: str | Path | None = None, sensor_id: str = "paper"):
+                 port: int | None = None, workdir: str | Path | None = None, sensor_id: str = "paper",
+                 cmap=None, bridge=None):
     """Render and build the firmware for ``target`` (mps2 or host) with ``model`` compiled in, and start it.
 
     Returns the started :class:`Emulator` or :class:`HostFirmware`, with ``size`` (mps2: flash and RAM
@@ -181,9 +196,10 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
         workdir = tmp.name
     folder = Path(workdir)
     port_name = "mps2" if target == "mps2" else "posix"
-    render_firmware(model, folder, precision=precision, style=style, fma=fma, port=port_name, sensor_id=sensor_id)
+    render_firmware(model, folder, precision=precision, style=style, fma=fma, port=port_name, sensor_id=sensor_id,
+                    cmap=cmap)
     image = build_firmware(folder, port_name)
-    runner = Emulator(image, port) if target == "mps2" else HostFirmware(image)
+    runner = Emulator(image, port, bridge=bridge) if target == "mps2" else HostFirmware(image, bridge=bridge)
     runner.size = firmware_size(image) if target == "mps2" else None
     runner.workdir = folder
     runner._tmp = tmp  # removed with the runner

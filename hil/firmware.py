@@ -19,7 +19,11 @@ from fitgen.model import Model
 from host.compiled import WARNING_FLAGS
 
 PORTS = ("posix", "mps2")
-COMMON_FILES = ("model_api.h", "proto.h", "proto.c", "cal.h", "cal.c", "device.h", "device.c", "hal.h", "hal_sim.c")
+COMMON_FILES = ("model_api.h", "proto.h", "proto.c", "cal.h", "cal.c", "device.h", "device.c", "hal.h", "adc.h",
+                "inputs.h")
+# where the inputs come from: simulated triangle waves, or the ADC drivers through a channel map
+SIM_FILES = ("inputs_sim.c",)
+ADC_FILES = ("adc.c", "inputs_adc.c", "i2c_bridge.c")
 PORT_FILES = {"posix": ("hal_posix.c",), "mps2": ("hal_mps2.c", "startup_mps2.c", "mps2_an386.ld")}
 BINARY = {"posix": "firmware", "mps2": "firmware.elf"}
 DEFAULT_CC = {"posix": "gcc", "mps2": "arm-none-eabi-gcc"}
@@ -39,11 +43,25 @@ def _source(name: str) -> bytes:
     return (resources.files("firmware_templates") / "firmware" / name).read_bytes()
 
 
+def adc_input_lsb(cmap) -> float:
+    """The one value of an ADC code every element of ``cmap`` shares (a fixed-point build needs one)."""
+    from host.adc import BusIO, make_driver
+
+    lsbs = {make_driver(BusIO(None), chip).lsb for chip in cmap.chips}
+    if len(lsbs) != 1:
+        raise InputError(f"a fixed-point firmware takes one ADC code scale; the channel map {cmap.describe()} mixes "
+                         f"{len(lsbs)} (give every chip the same PGA, or the same reference)")
+    return lsbs.pop()
+
+
 def render_firmware(model: Model, folder: str | Path, *, precision: str = "float", style: str = "table",
-                    fma: bool = False, port: str = "mps2", sensor_id: str = "paper") -> Path:
+                    fma: bool = False, port: str = "mps2", sensor_id: str = "paper", cmap=None) -> Path:
     """Write ``tm_model.h``, ``main.c`` and the port's sources into ``folder``; return ``folder``.
 
-    Each file is written atomically; the same arguments give the same bytes.
+    ``cmap`` (a host.channelmap.ChannelMap): the inputs come from the ADC drivers through it (its
+    ``adc_map.h``), over the port's I2C: the emulated ports reach the bus model through
+    i2c_bridge.c. Without it, simulated triangle waves. Each file is written atomically; the same
+    arguments give the same bytes.
     """
     _check_port(port)
     if precision not in PRECISIONS or style not in STYLES:
@@ -54,9 +72,22 @@ def render_firmware(model: Model, folder: str | Path, *, precision: str = "float
         raise InputError(f"sensor id must be 1..{SENSOR_ID_MAX} printable ASCII characters without quotes "
                          f"or backslashes, got {sensor_id!r}")
     folder = Path(folder)
-    write_header(model, folder, precision, style, "tm", fma)  # creates the folder
-    for name in COMMON_FILES + PORT_FILES[port]:
+    if cmap is not None and cmap.n_elements != model.n_inputs:
+        raise InputError(f"the channel map reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
+    if cmap is not None and model.input_units != "V" and precision != "fixed":
+        raise InputError(f"the model takes inputs in {model.input_units}; the ADCs give volts")
+    header = {"input_lsb": adc_input_lsb(cmap), "input_offset": 0.0} if cmap is not None and precision == "fixed" \
+        else {}
+    write_header(model, folder, precision, style, "tm", fma, **header)  # creates the folder
+    inputs = ADC_FILES if cmap is not None else SIM_FILES
+    for name in COMMON_FILES + inputs + PORT_FILES[port]:
         write_atomic(folder / name, _source(name))
+    for name in (SIM_FILES if cmap is not None else ADC_FILES + ("adc_map.h",)):
+        (folder / name).unlink(missing_ok=True)  # the other kind of build's, from an earlier render
+    if cmap is not None:
+        from host.pi import render_adc_map
+
+        write_atomic(folder / "adc_map.h", render_adc_map(cmap))
     digest = bytes.fromhex(model.sha256)
     rows = [", ".join(f"0x{b:02x}" for b in digest[i:i + 8]) + ("," if i < 24 else "") for i in range(0, 32, 8)]
     env = jinja2.Environment(undefined=jinja2.StrictUndefined, autoescape=False, keep_trailing_newline=True,
@@ -85,7 +116,8 @@ def build_firmware(folder: str | Path, port: str, cc: str | None = None) -> Path
     missing compiler is an InputError with the compiler's first error line."""
     _check_port(port)
     folder = Path(folder)
-    names = ("main.c",) + COMMON_FILES + PORT_FILES[port]
+    names = ("main.c",) + COMMON_FILES + (ADC_FILES if (folder / "inputs_adc.c").is_file() else SIM_FILES) \
+        + PORT_FILES[port]
     missing = [n for n in names if not (folder / n).is_file()]
     if missing or not (folder / "tm_model.h").is_file():
         raise InputError(f"{folder} holds no rendered {port} firmware (missing {', '.join(missing) or 'tm_model.h'})")

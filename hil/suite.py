@@ -154,6 +154,27 @@ def check_held_out(dev: Device, model: Model, held_out: tuple[np.ndarray, np.nda
                           "model_max_error": chk.model_max.tolist()})
 
 
+READ_FAILED = 0x40000000  # STREAM_SAMPLE status bit of a failed read (docs/protocol.md)
+
+
+def check_stream(dev: Device, n: int = 3, period_ms: int = 10) -> Check:
+    """STREAM ``n`` samples: every read succeeds, and each sample's outputs are what the device's own
+    EVAL gives for the inputs it read (the stream runs the same estimator on what it read)."""
+    samples = dev.stream(period_ms, n, timeout=60.0)
+    failed = [s.status for s in samples if s.status > 0 and s.status & READ_FAILED]
+    inputs = np.array([np.asarray(s.inputs) for s in samples])
+    status, out = dev.eval(inputs)
+    same = np.array_equal(np.asarray(out), np.array([np.asarray(s.outputs) for s in samples])) and \
+        np.array_equal(np.asarray(status), [s.status for s in samples])
+    info = dev.info(refresh=True)
+    source = (f"inputs from {len(info.adc_chips)} ADC chips, I2C counts "
+              + ", ".join(f"{k} {v}" for k, v in info.adc_counts.items()) if info.adc_chips else "simulated inputs")
+    problems = ([f"{len(failed)} reads failed (first status 0x{failed[0]:08x})"] if failed else []) + \
+        ([] if same else ["a sample's outputs differ from EVAL of its inputs"])
+    return Check("stream", not problems, "; ".join(problems) or f"{n} samples at {period_ms} ms; {source}",
+                 figures={"samples": n, "adc_counts": info.adc_counts})
+
+
 def check_fixed_refuses_blobs(dev: Device, model: Model, sensor_id: str) -> Check:
     """A fixed-point build has no blob interpreter: CAL_BEGIN must be refused and the model kept."""
     blob = to_blob(model, "float", sensor_id)
@@ -380,6 +401,7 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
     evaluate(inputs, "eval")
     if held_out is not None:
         step(check_held_out, dev, model, held_out, max_share, fixed)
+    step(check_stream, dev)
     step(check_timing, dev, model, fixed=fixed)
     if flash and fixed is not None:
         step(check_fixed_refuses_blobs, dev, model, sensor_id)

@@ -140,41 +140,63 @@ class StandIn:
                 return f"E {exc.errno}"
         return f"E {errno.EINVAL}"
 
-    def run(self, cmd: list[str], timeout: float = 120.0) -> subprocess.CompletedProcess:
-        """Run a stand-in build (``cmd``: the binary, or qemu-arm and it, with its options) to its end."""
+    def serve(self, requests, answers) -> None:
+        """Answer request lines from the text stream ``requests`` on ``answers`` until it ends."""
+        for line in requests:
+            answers.write(self.answer(line) + "\n")
+            answers.flush()
+
+    def serve_socket(self, sock) -> threading.Thread:
+        """Answer requests on a connected socket (an emulator's bridge UART) in a daemon thread."""
+        def run():
+            try:
+                with sock, sock.makefile("r", newline="\n") as requests, sock.makefile("w") as answers:
+                    self.serve(requests, answers)
+            except (OSError, ValueError):
+                pass  # the emulator went away
+
+        thread = threading.Thread(target=run, daemon=True)
+        thread.start()
+        return thread
+
+    def spawn(self, cmd: list[str], **popen) -> subprocess.Popen:
+        """Start ``cmd`` with its fd 3 (requests) and fd 4 (answers) served by this stand-in in a daemon
+        thread; ``popen``: further subprocess.Popen arguments. ``self.error`` holds what the server raised."""
         req_r, req_w = os.pipe()
         ans_r, ans_w = os.pipe()
-        # the program writes requests on fd 3 and reads answers on fd 4; its ends are moved above 10
-        # first, so that neither dup2 below clobbers the other
+        # the child's ends move above 10 first, so that neither dup2 below clobbers the other
         child = [fcntl.fcntl(fd, fcntl.F_DUPFD, 10) for fd in (req_w, ans_r)]
         for fd in (req_w, ans_r):
             os.close(fd)
-        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                pass_fds=(3, 4), preexec_fn=lambda: (os.dup2(child[0], 3), os.dup2(child[1], 4)))
+        proc = subprocess.Popen(cmd, pass_fds=(3, 4), preexec_fn=lambda: (os.dup2(child[0], 3), os.dup2(child[1], 4)),
+                                **popen)
         for fd in child:
             os.close(fd)
-        error: list[BaseException] = []
+        self.error: list[BaseException] = []
 
         def serve():
             with os.fdopen(req_r, "r") as requests, os.fdopen(ans_w, "w") as answers:
                 try:
-                    for line in requests:
-                        answers.write(self.answer(line) + "\n")
-                        answers.flush()
+                    self.serve(requests, answers)
                 except BrokenPipeError:
                     pass
-                except BaseException as exc:  # noqa: BLE001 - reported after the run
-                    error.append(exc)
+                except BaseException as exc:  # noqa: BLE001 - reported by run()
+                    self.error.append(exc)
 
-        server = threading.Thread(target=serve, daemon=True)
-        server.start()
+        self.thread = threading.Thread(target=serve, daemon=True)
+        self.thread.start()
+        return proc
+
+    def run(self, cmd: list[str], timeout: float = 120.0) -> subprocess.CompletedProcess:
+        """Run a stand-in build (``cmd``: the binary, or qemu-arm and it, with its options) to its end."""
+        proc = self.spawn(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         try:
             out, err = proc.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
             proc.kill()
             out, err = proc.communicate()
             raise RuntimeError(f"the stand-in run did not finish in {timeout:g} s") from None
-        server.join(timeout=10)
-        if error:
-            raise error[0]
+        self.thread.join(timeout=10)
+        if self.error:
+            raise self.error[0]
         return subprocess.CompletedProcess(cmd, proc.returncode, out.decode(), err.decode())

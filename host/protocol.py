@@ -305,6 +305,9 @@ class DeviceInfo:
     model_hash: str  # hex
     sensor_id: str
     firmware_version: str
+    # the ADC block after the 68 bytes (firmware that reads ADCs): chips and I2C counts; None before it
+    adc_chips: tuple = ()  # per chip: (kind "ads1115" | "ads7828", address, inputs, PGA code, rate code, mode)
+    adc_counts: dict | None = None  # nack, timeout, stuck, other, retries, resets
 
     @property
     def real_dtype(self) -> np.dtype:
@@ -323,20 +326,41 @@ class DeviceInfo:
         return {0: "table", 1: "unrolled"}.get(self.style, f"style {self.style}")
 
 
+ADC_COUNTS = ("nack", "timeout", "stuck", "other", "retries", "resets")
+ADC_KINDS = ("ads1115", "ads7828")
+
+
 def unpack_info(payload: bytes) -> DeviceInfo:
-    if len(payload) != INFO_SIZE:
-        raise ProtocolError(ErrorCode.BAD_LENGTH, f"INFO reply of {len(payload)} bytes (expected {INFO_SIZE})")
-    ver, prec, n_in, n_out, src, style, maxp, h, sid, fw = _INFO.unpack(bytes(payload))
+    """INFO's 68 bytes, and the ADC block a firmware that reads ADCs appends (docs/protocol.md)."""
+    payload = bytes(payload)
+    if len(payload) < INFO_SIZE:
+        raise ProtocolError(ErrorCode.BAD_LENGTH, f"INFO reply of {len(payload)} bytes (expected {INFO_SIZE} or more)")
+    ver, prec, n_in, n_out, src, style, maxp, h, sid, fw = _INFO.unpack(payload[:INFO_SIZE])
     if prec >= len(PRECISIONS):
         raise ProtocolError(ErrorCode.BAD_ARG, f"INFO: unknown precision code {prec}")
-    return DeviceInfo(ver, PRECISIONS[prec], n_in, n_out, src, style, maxp, h.hex(), _text(sid), _text(fw))
+    chips, counts = (), None
+    if len(payload) > INFO_SIZE:
+        n = payload[INFO_SIZE]
+        if len(payload) != INFO_SIZE + 1 + 6 * n + 24:
+            raise ProtocolError(ErrorCode.BAD_LENGTH, f"INFO reply of {len(payload)} bytes: its ADC block for {n} "
+                                                      f"chips needs {INFO_SIZE + 1 + 6 * n + 24}")
+        raw = payload[INFO_SIZE + 1: INFO_SIZE + 1 + 6 * n]
+        chips = tuple((ADC_KINDS[r[0]] if r[0] < len(ADC_KINDS) else f"kind {r[0]}",) + tuple(r[1:])
+                      for r in (raw[i:i + 6] for i in range(0, 6 * n, 6)))
+        counts = dict(zip(ADC_COUNTS, struct.unpack("<6I", payload[INFO_SIZE + 1 + 6 * n:])))
+    return DeviceInfo(ver, PRECISIONS[prec], n_in, n_out, src, style, maxp, h.hex(), _text(sid), _text(fw),
+                      chips, counts)
 
 
 def pack_info(info: DeviceInfo) -> bytes:
-    """The device side of INFO (fake devices and tests)."""
-    return _INFO.pack(info.protocol_version, PRECISIONS.index(info.precision), info.n_inputs, info.n_outputs,
+    """The device side of INFO (fake devices and tests); the ADC block when ``adc_counts`` is set."""
+    head = _INFO.pack(info.protocol_version, PRECISIONS.index(info.precision), info.n_inputs, info.n_outputs,
                       info.cal_source, info.style, info.max_payload, bytes.fromhex(info.model_hash),
                       info.sensor_id.encode("ascii"), info.firmware_version.encode("ascii"))
+    if info.adc_counts is None:
+        return head
+    chips = b"".join(bytes([ADC_KINDS.index(c[0]), *c[1:]]) for c in info.adc_chips)
+    return head + bytes([len(info.adc_chips)]) + chips + struct.pack("<6I", *(info.adc_counts[k] for k in ADC_COUNTS))
 
 
 class StreamSample(NamedTuple):

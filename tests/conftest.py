@@ -63,5 +63,16 @@ def model(sensor):
 
 
 @pytest.fixture(scope="session")
+def device_model(sensor):
+    """The same sensor fitted as a device model is (noise- and float-aware, the default), on a 675-pose grid."""
+    from fitgen.fit import FitSettings, fit_model
+    from fitgen.simulate import grid_poses, simulate
+
+    grid = grid_poses({"dx": [-2, -1, 0, 1, 2], "dy": [-2, -1, 0, 1, 2], "dz": [0, -1, -2], "thx": [-5, 0, 5],
+                       "thy": [-5, 0, 5]})
+    return fit_model(simulate(sensor, grid), settings=FitSettings())
+
+
+@pytest.fixture(scope="session")
 def model_file(model, tmp_path_factory):
     return str(model.save(tmp_path_factory.mktemp("model") / "model.json"))

@@ -4,9 +4,7 @@ under qemu-arm against a stand-in for the kernel device answered by the bus mode
 import numpy as np
 import pytest
 
-from fitgen.fit import FitSettings, fit_model
 from fitgen.sensor import load_sensor
-from fitgen.simulate import grid_poses, simulate
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.channelmap import Settings, parse_spec
 from host.clock import VirtualClock
@@ -22,10 +20,8 @@ MAP = "ads1115@0x48:0-3,ads1115@0x49:0-3"
 
 
 @pytest.fixture(scope="module")
-def model():
-    grid = grid_poses({"dx": [-2, -1, 0, 1, 2], "dy": [-2, -1, 0, 1, 2], "dz": [0, -1, -2], "thx": [-5, 0, 5],
-                       "thy": [-5, 0, 5]})
-    return fit_model(simulate(SENSOR, grid), settings=FitSettings())
+def model(device_model):
+    return device_model
 
 
 @pytest.fixture(scope="module")

@@ -3,6 +3,7 @@
 #include "device.h"
 
 #include "hal.h"
+#include "inputs.h"
 
 enum {
     T_PING = 0x01,
@@ -29,7 +30,8 @@ enum {
 #define CAL_DATA_MAX 248u
 #define BENCH_MAX 1000000u
 
-/* one vector in and one result out must fit a frame */
+/* one vector in and one result out must fit a frame, and so must INFO with its ADC block */
+typedef char device_assert_info_fits[(INFO_SIZE + INPUTS_INFO_MAX <= PROTO_MAX_PAYLOAD) ? 1 : -1];
 typedef char device_assert_eval_fits[(EVAL_IN_SIZE <= PROTO_MAX_PAYLOAD && EVAL_OUT_SIZE <= PROTO_MAX_PAYLOAD) ? 1 : -1];
 
 static volatile int bench_sink; /* keeps the BENCH loop's work observable */
@@ -113,7 +115,7 @@ static void do_info(device *d, const proto_msg *m)
         put_text(p + 40, d->cfg->sensor_id, SENSOR_ID_SIZE);
     }
     put_text(p + 56, d->cfg->fw_version, FW_VERSION_SIZE);
-    send(d, (uint8_t)(m->type | 0x80u), m->seq, INFO_SIZE);
+    send(d, (uint8_t)(m->type | 0x80u), m->seq, INFO_SIZE + inputs_info(p + INFO_SIZE));
 }
 
 static void do_eval(device *d, const proto_msg *m)
@@ -382,8 +384,16 @@ void device_tick(device *d)
     if ((int32_t)(now - d->stream_next_ms) < 0) {
         return;
     }
-    hal_read_inputs(in);
-    status = estimate(d, in, out);
+    status = inputs_read(in);
+    if (status < 0) {
+        /* a failed read: flagged, and the model is not run on readings it did not get */
+        status = (int)inputs_failure_status(status);
+        for (i = 0; i < TM_N_OUTPUTS; ++i) {
+            out[i] = 0;
+        }
+    } else {
+        status = estimate(d, in, out);
+    }
     proto_put_u16(p, d->stream_index);
     proto_put_u32(p + 2, now);
     proto_put_u32(p + 6, (uint32_t)status);

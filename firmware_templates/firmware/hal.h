@@ -5,6 +5,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "adc.h"
 #include "model_api.h"
 
 #define HAL_IDLE_FOREVER 0xFFFFFFFFu
@@ -22,12 +23,14 @@ uint32_t hal_millis(void);
 /* a free-running 64-bit count of hal_tick_hz() ticks per second */
 uint64_t hal_ticks(void);
 uint32_t hal_tick_hz(void);
-/* the sensor: a simulated ADC on both ports, a deterministic slowly varying vector inside the domain */
-void hal_read_inputs(tm_input in[TM_N_INPUTS]);
 /* nothing to do for up to max_ms (HAL_IDLE_FOREVER: until input): wait for input or the time */
 void hal_idle(uint32_t max_ms);
 
-/* shared by the ports: the simulated inputs at time t_ms (triangle waves, one phase per input) */
-void hal_sim_inputs(uint32_t t_ms, tm_input in[TM_N_INPUTS]);
+/* ADC builds (inputs_adc.c): the I2C bus and clock the drivers use. A board implements it against its
+ * I2C peripheral; the emulated ports take i2c_bridge.c's, which talks over the byte channel below */
+const adc_i2c *hal_i2c(void);
+/* the bridge's byte channel (emulated ports): send n bytes; a byte within timeout_ms (1) or none (0) */
+void hal_bridge_write(const uint8_t *p, size_t n);
+int hal_bridge_read_byte(uint8_t *b, uint32_t timeout_ms);
 
 #endif /* HAL_H */

@@ -113,9 +113,37 @@ uint32_t hal_millis(void)
     return (uint32_t)(hal_ticks() / (SYSCLK_HZ / 1000u));
 }
 
-void hal_read_inputs(tm_input in[TM_N_INPUTS])
+/* the I2C bridge's channel: CMSDK UART1, polled (the emulator's second serial port) */
+#define UART1_BASE 0x40005000u
+#define UART1_DATA REG(UART1_BASE + 0x00u)
+#define UART1_STATE REG(UART1_BASE + 0x04u)
+#define UART1_CTRL REG(UART1_BASE + 0x08u)
+#define UART1_BAUDDIV REG(UART1_BASE + 0x10u)
+
+void hal_bridge_write(const uint8_t *p, size_t n)
 {
-    hal_sim_inputs(hal_millis(), in);
+    size_t i;
+    if (!(UART1_CTRL & UART_CTRL_TX_EN)) {
+        UART1_BAUDDIV = 16u;
+        UART1_CTRL = UART_CTRL_TX_EN | UART_CTRL_RX_EN;
+    }
+    for (i = 0; i < n; ++i) {
+        while (UART1_STATE & UART_STATE_TX_FULL) {
+        }
+        UART1_DATA = p[i];
+    }
+}
+
+int hal_bridge_read_byte(uint8_t *b, uint32_t timeout_ms)
+{
+    const uint32_t start = hal_millis();
+    while (!(UART1_STATE & UART_STATE_RX_FULL)) {
+        if (hal_millis() - start > timeout_ms) {
+            return 0;
+        }
+    }
+    *b = (uint8_t)UART1_DATA;
+    return 1;
 }
 
 void hal_idle(uint32_t max_ms)

@@ -1,0 +1,107 @@
+/* inputs_adc.c: a sample's inputs from the ADC drivers (adc.c) through the channel map (adc_map.h,
+ * rendered from the same map file `tactile-host read --adc` takes), over the port's I2C (hal_i2c).
+ * The chips are probed and set up on the first read, as tactile-host read does before its first
+ * sample, and again after a read that failed before they were ready. Float and double builds get
+ * volts (code times the chip's LSB, in double as host/adc.py computes it); a fixed-point build gets
+ * the codes themselves, whose LSB the render step checked against the model's. */
+#include "adc.h"
+#include "adc_map.h"
+#include "hal.h"
+#include "inputs.h"
+
+typedef char inputs_assert_map_fits_model[(ADC_MAP_N_ELEMENTS == TM_N_INPUTS) ? 1 : -1];
+
+static adc_array array;
+static int stage; /* 0: nothing done, 1: array planned, 2: chips probed and set up */
+#ifndef TM_FIXED_POINT
+static double lsb[TM_N_INPUTS];
+#endif
+
+static int ready(void)
+{
+    int st;
+    if (stage == 0) {
+        unsigned i, j;
+        if (adc_init(&array, hal_i2c(), ADC_MAP, ADC_MAP_N_CHIPS, adc_default_policy()) != ADC_OK) {
+            return ADC_ERR_CONFIG;
+        }
+#ifndef TM_FIXED_POINT
+        for (i = 0; i < ADC_MAP_N_CHIPS; ++i) {
+            for (j = 0; j < ADC_MAP[i].n_inputs; ++j) {
+                lsb[ADC_MAP_FIRST_ELEMENT[i] + j] = adc_lsb_volts(&ADC_MAP[i]);
+            }
+        }
+#else
+        (void)i;
+        (void)j;
+#endif
+        stage = 1;
+    }
+    if (stage == 1) {
+        st = adc_probe(&array);
+        if (st == ADC_OK) {
+            st = adc_setup(&array);
+        }
+        if (st != ADC_OK) {
+            return st;
+        }
+        stage = 2;
+    }
+    return ADC_OK;
+}
+
+int inputs_read(tm_input in[TM_N_INPUTS])
+{
+    int32_t codes[TM_N_INPUTS];
+    unsigned i;
+    int st = ready();
+    if (st == ADC_OK) {
+        st = adc_read_codes(&array, codes);
+    }
+    for (i = 0; i < TM_N_INPUTS; ++i) {
+#ifdef TM_FIXED_POINT
+        in[i] = st == ADC_OK ? codes[i] : 0;
+#else
+        in[i] = st == ADC_OK ? (tm_input)((double)codes[i] * lsb[i]) : 0;
+#endif
+    }
+    return st;
+}
+
+uint32_t inputs_failure_status(int read_status)
+{
+    const uint32_t chip = stage >= 1 && array.failed_chip >= 0 ? (uint32_t)array.failed_chip + 1u : 0u;
+    return INPUTS_READ_FAILED | (chip << 8) | ((uint32_t)(-read_status) & 0xFFu);
+}
+
+static void put_u32(uint8_t *p, uint32_t v)
+{
+    p[0] = (uint8_t)v;
+    p[1] = (uint8_t)(v >> 8);
+    p[2] = (uint8_t)(v >> 16);
+    p[3] = (uint8_t)(v >> 24);
+}
+
+size_t inputs_info(uint8_t *p)
+{
+    const adc_counts *k = &array.counts;
+    size_t n = 0;
+    unsigned i;
+    p[n++] = ADC_MAP_N_CHIPS;
+    for (i = 0; i < ADC_MAP_N_CHIPS; ++i) {
+        const adc_chip *c = &ADC_MAP[i];
+        p[n++] = c->kind;
+        p[n++] = c->address;
+        p[n++] = c->n_inputs;
+        p[n++] = c->pga;
+        p[n++] = c->rate;
+        p[n++] = c->continuous;
+    }
+    put_u32(p + n, stage ? k->nack : 0u);
+    put_u32(p + n + 4, stage ? k->timeout : 0u);
+    put_u32(p + n + 8, stage ? k->stuck : 0u);
+    put_u32(p + n + 12, stage ? k->other : 0u);
+    put_u32(p + n + 16, stage ? k->retries : 0u);
+    put_u32(p + n + 20, stage ? k->resets : 0u);
+    return n + 24u;
+}

@@ -1,0 +1,126 @@
+"""The reference firmware reading its ADCs (issue 12, part 2): the C drivers in the firmware, through the
+channel map, over the emulated board's I2C bridge to the bus model (host/simbus.py); STREAM carries
+estimates from those readings, and a failed read is flagged instead of fed to the model."""
+
+import numpy as np
+import pytest
+
+from fitgen.sensor import load_sensor
+from hil.emulate import start_target
+from hil.suite import READ_FAILED
+from host import protocol as P
+from host.adc import AdcArray, DeviceSilent, RetryPolicy
+from host.channelmap import parse_spec
+from host.clock import VirtualClock
+from host.compiled import CompiledModel
+from host.device import Device
+from host.pi import StandIn
+from host.simbus import SimBus
+
+from conftest import assert_one_line_error, require_tool, run_cli
+
+SENSOR = load_sensor("paper").with_transfer("gmr")
+POSE = [0.5, 0.2, -1.0, 1.0, 0.0]
+MAP = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+
+
+@pytest.fixture(scope="module")
+def model(device_model):
+    return device_model
+
+
+def _bus(faults=()):
+    cmap = parse_spec(MAP)
+    clock = VirtualClock()
+    bus = SimBus.for_channel_map(cmap, SENSOR, POSE, clock=clock, noise=0.0005, seed=3)
+    for f in faults:
+        bus.inject(**f)
+    return cmap, bus, clock
+
+
+def _stream(model, target, n, faults=()):
+    cmap, bus, clock = _bus(faults)
+    with start_target(model, target, precision="float", style="unrolled", cmap=cmap,
+                      bridge=StandIn(bus, clock)) as emu:
+        with Device.open(emu.url, timeout=5) as dev:
+            samples = dev.stream(10, n, timeout=60)
+            info = dev.info(refresh=True)
+    return samples, info
+
+
+def _python(model, n, faults=()):
+    """The Python drivers on the same bus, through the float C engine (tactile-host read --engine c --precision
+    float): inputs as the float firmware holds them, outputs, and the counts; None for a failed read."""
+    cmap, bus, clock = _bus(faults)
+    arr = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy())
+    arr.probe()
+    arr.setup()
+    rows = []
+    with CompiledModel(model, "float", "unrolled") as cm:
+        for _ in range(n):
+            try:
+                v = arr.read_volts().astype(np.float32).astype(float)
+            except DeviceSilent:
+                rows.append(None)
+                continue
+            out, status = cm.predict(v)
+            rows.append((v, out[0], int(status[0])))
+    return rows, arr.counts
+
+
+@pytest.mark.parametrize("target", ["host", "mps2"])
+def test_stream_from_the_c_drivers_equals_the_python_readout(model, target):
+    """On the emulated Cortex-M4 (and the host build) the firmware's STREAM, fed by the C ADS1115 driver and
+    the bus model at a set pose, gives tactile-host read --engine c's estimates on the Python driver."""
+    require_tool("gcc")
+    if target == "mps2":
+        require_tool("qemu-system-arm")
+        require_tool("arm-none-eabi-gcc")
+    n = 3 if target == "mps2" else 8
+    faults = [dict(kind="nack", rate=0.1)]
+    samples, info = _stream(model, target, n, faults)
+    rows, counts = _python(model, n, faults)
+    for s, (v, out, status) in zip(samples, rows):
+        assert s.status == status
+        np.testing.assert_array_equal(np.asarray(s.inputs), v)
+        np.testing.assert_array_equal(np.asarray(s.outputs), out)
+    assert info.adc_chips == (("ads1115", 0x48, 4, 1, 7, 0), ("ads1115", 0x49, 4, 1, 7, 0))
+    assert info.adc_counts == counts.as_dict() and counts.nack > 0
+
+
+def test_a_failed_read_is_flagged_not_estimated(model):
+    require_tool("gcc")
+    faults = [dict(kind="nack", address=0x49, after=60)]  # the second chip falls silent after a few samples
+    samples, info = _stream(model, "host", 6, faults)
+    rows, counts = _python(model, 6, faults)
+    good = [r for r in rows if r is not None]
+    assert 0 < len(good) < 6
+    for s, row in zip(samples, rows):
+        if row is None:
+            # READ_FAILED, chip 2 (0x49), ADC_ERR_SILENT; nothing made up
+            assert s.status == READ_FAILED | (2 << 8) | 2
+            assert not np.any(np.asarray(s.outputs)) and not np.any(np.asarray(s.inputs))
+        else:
+            np.testing.assert_array_equal(np.asarray(s.outputs), row[1])
+    assert info.adc_counts["nack"] >= 5 and info.adc_counts["retries"] >= 4
+
+
+def test_info_adc_block_round_trip():
+    info = P.DeviceInfo(1, "float", 8, 5, 0, 1, 256, "ab" * 32, "paper", "0.1.0",
+                        (("ads1115", 0x48, 4, 1, 7, 0), ("ads7828", 0x4B, 8, 0, 0, 0)),
+                        {"nack": 3, "timeout": 1, "stuck": 0, "other": 0, "retries": 4, "resets": 0})
+    raw = P.pack_info(info)
+    assert len(raw) == P.INFO_SIZE + 1 + 12 + 24
+    assert P.unpack_info(raw) == info
+    with pytest.raises(P.ProtocolError):
+        P.unpack_info(raw[:-1])
+    old = P.pack_info(P.DeviceInfo(1, "float", 8, 5, 0, 1, 256, "ab" * 32, "paper", "0.1.0"))
+    assert len(old) == P.INFO_SIZE and P.unpack_info(old).adc_counts is None
+
+
+def test_emulate_refuses_a_bad_channel_map(tmp_path, model):
+    path = str(model.save(tmp_path / "m.json"))
+    assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc",
+                                  "ads1116@0x48:0-3"), 2, "unknown chip")
+    assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc",
+                                  "ads1115@0x48:0-3"), 2, "reads 4 elements")
