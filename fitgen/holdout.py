@@ -59,39 +59,45 @@ def held_out_set(sensor, ranges: dict, outputs: tuple[str, ...], *, noise: float
     return HeldOut(clean, truth, noisy, np.tile(truth, (draws, 1)), spec)
 
 
-def _fixed_predict(model: Model, sensor):
-    """A function values -> outputs through the numpy model of the fixed-point C, or the reason there is none."""
+def _fixed_plan(model: Model, sensor):
+    """The fixed-point plan at the sensor's ADC scale, or the reason there is none."""
     from .fixedpoint import build_fixed, sensor_input_scale
 
     lsb, offset, _ = sensor_input_scale(sensor)
     try:
-        fm = build_fixed(model, lsb, offset)
+        return build_fixed(model, lsb, offset)
     except InputError as exc:
         return str(exc)
-    return lambda x: fm.to_real(fm.predict_codes(fm.codes_of(x))[0])
 
 
 def deployed_errors(model: Model, held: HeldOut, sensor=None, precisions=PRECISIONS) -> dict:
     """Per precision, per output: max, rms (noise-free), noisy_max, noisy_rms, deviation (max |this
-    precision - double| noise-free) and share (deviation / the double model's max). A precision the
-    model cannot be generated in gets {"unavailable": reason}."""
+    precision - double| noise-free) and share (deviation / the double model's max). Fixed point takes
+    the readings' ADC codes and is compared with double on the codes' values: its share is the
+    arithmetic's, the quantisation stays in its errors. A precision the model cannot be generated in
+    gets {"unavailable": reason}."""
     double_clean = model.predict(held.clean)
     model_max = np.abs(double_clean - held.truth).max(axis=0)
     out = {}
     for prec in precisions:
+        ref = double_clean
         if prec == "double":
             fn = model.predict
         elif prec == "float":
             def fn(x):
                 return model.predict(x, precision="float")
         else:
-            fn = _fixed_predict(model, sensor) if sensor is not None else "no sensor to take the ADC scale from"
-        if isinstance(fn, str):
-            out[prec] = {"unavailable": fn.splitlines()[0]}
-            continue
+            fm = _fixed_plan(model, sensor) if sensor is not None else "no sensor to take the ADC scale from"
+            if isinstance(fm, str):
+                out[prec] = {"unavailable": fm.splitlines()[0]}
+                continue
+
+            def fn(x, fm=fm):
+                return fm.to_real(fm.predict_codes(fm.codes_of(x))[0])
+            ref = model.predict(fm.code_values(fm.codes_of(held.clean)))
         clean, noisy = fn(held.clean), fn(held.noisy)
         e, en = np.abs(clean - held.truth), np.abs(noisy - held.noisy_truth)
-        dev = np.abs(clean - double_clean).max(axis=0)
+        dev = np.abs(clean - ref).max(axis=0)
         out[prec] = {o: {"max": float(e[:, j].max()), "rms": float(np.sqrt(np.mean(e[:, j] ** 2))),
                          "noisy_max": float(en[:, j].max()), "noisy_rms": float(np.sqrt(np.mean(en[:, j] ** 2))),
                          "deviation": float(dev[j]),

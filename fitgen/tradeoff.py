@@ -237,14 +237,15 @@ def _fixed_backend():
 
 
 def _errors(pred: np.ndarray, truth: np.ndarray, noisy_pred: np.ndarray, noisy_truth: np.ndarray,
-            outputs: tuple[str, ...], double: np.ndarray) -> dict:
-    """Per output: errors noise-free and with noise, and rounding's share: the largest deviation
-    from the ``double`` model's outputs (noise-free) over that model's own max error."""
+            outputs: tuple[str, ...], double: np.ndarray, reference: np.ndarray) -> dict:
+    """Per output: errors noise-free and with noise, and rounding's share: the largest deviation from
+    ``reference`` (the double model on the inputs this precision took) over the ``double`` model's
+    own max error."""
     out = {}
     for j, o in enumerate(outputs):
         e, en = np.abs(pred[:, j] - truth[:, j]), np.abs(noisy_pred[:, j] - noisy_truth[:, j])
         model_max = float(np.abs(double[:, j] - truth[:, j]).max())
-        dev = float(np.abs(pred[:, j] - double[:, j]).max())
+        dev = float(np.abs(pred[:, j] - reference[:, j]).max())
         out[o] = {"max": float(e.max()), "rms": float(np.sqrt(np.mean(e * e))),
                   "noisy_max": float(en.max()), "noisy_rms": float(np.sqrt(np.mean(en * en))),
                   "deviation": dev, "share": dev / model_max if model_max > 0 else 0.0}
@@ -265,7 +266,7 @@ class _Measure:
         folder = self.work / tag
         folder.mkdir()
         both = np.vstack([self.X, self.Xn])
-        header, bench_inputs = {}, self.X
+        header, bench_inputs, ref_inputs = {}, self.X, self.X
         if precision == "double":
             res = {"ops": dict(cost.template_ops(model, style))}
             pred = model.predict(both)  # rounds as the generated double C does, term by term
@@ -284,9 +285,11 @@ class _Measure:
             # the numpy model of the integer arithmetic: the C's integers exactly, on the inputs' codes
             pred = fm.to_real(fm.predict_codes(fm.codes_of(both))[0])
             header, bench_inputs = {"input_lsb": lsb, "input_offset": offset}, fm.codes_of(self.X).astype(float)
+            # rounding's share is the arithmetic's: double on the values of the codes the C takes
+            ref_inputs = fm.code_values(fm.codes_of(self.X))
             style = "table"  # not read by the fixed-point template
         res["errors"] = _errors(pred[: len(self.X)], self.Y, pred[len(self.X):], self.Yn, self.outputs,
-                                model.predict(self.X))
+                                model.predict(self.X), model.predict(ref_inputs))
         inputs_file = cost.write_inputs(bench_inputs, folder / "inputs.f64")
         binary = cost.build_bench(model, style, precision, False, folder / "bench", **header)
         ir = cost.instruction_counts(binary, inputs_file, folder / "bench", mix=False, repeat=False)
@@ -459,7 +462,8 @@ def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
     units = {o: POSE_UNITS[POSE_NAMES.index(o)] for o in outs}
     lines = [f"# Trade-off: sensor {result.sensor} ({result.transfer}), scene {result.scene.name}", ""]
     lines.append(f"Training: the scene's grid, {s['training_rows']:,} poses ({s['levels']} levels per moving "
-                 f"component), noise-free. Held-out: {s['held_out']:,} random poses in the scene's box (seed "
+                 "component), simulated noise-free and fitted for the sensor's noise and float rounding. "
+                 f"Held-out: {s['held_out']:,} random poses in the scene's box (seed "
                  f"{s['seed']}), noise-free and with the sensor's noise ({s['noise']:g} {s['units']} rms per element, "
                  f"{s['noise_draws']} draws). {s['fits']} fits, {s['measured']} distinct builds measured.")
     lines.append("")

@@ -137,16 +137,20 @@ def check_eval_fixed(dev: Device, model: Model, fixed, codes: np.ndarray, name: 
 def check_held_out(dev: Device, model: Model, held_out: tuple[np.ndarray, np.ndarray], max_share: float,
                    fixed=None) -> Check:
     """The device on noise-free held-out readings: rounding may add at most ``max_share`` of the
-    model's own held-out max error (a fixed-point device gets the readings' ADC codes)."""
+    model's own held-out max error (a fixed-point device gets the readings' ADC codes, and is
+    compared with double on the codes' values)."""
     readings, truth = held_out
+    c_inputs = None
     if fixed is not None:
-        out = fixed.to_real(FixedDeviceEvaluator(dev, fixed).predict_codes(fixed.codes_of(readings))[0])
+        codes = fixed.codes_of(readings)
+        out = fixed.to_real(FixedDeviceEvaluator(dev, fixed).predict_codes(codes)[0])
+        c_inputs = fixed.code_values(codes)
     else:
         info = dev.info()
         sent = readings.astype(np.float32).astype(float) if info.precision == "float" else readings
         out = DeviceEvaluator(dev, info.precision, info.style_name).predict(sent)[0]
     failures: list[str] = []
-    chk = held_out_check(model, out, readings, truth, max_share, failures)
+    chk = held_out_check(model, out, readings, truth, max_share, failures, c_inputs)
     detail = f"{len(readings)} held-out readings; rounding's share " + ", ".join(
         f"{n} {x:.1%}" for n, x in zip(model.output_names, chk.share)) + f" (at most {max_share:.0%})"
     return Check("held-out accuracy", not failures, detail + ("; " + "; ".join(failures) if failures else ""),
