@@ -1,10 +1,14 @@
-"""Cost of the paper model on the emulated Cortex-M4 (QEMU mps2-an386, -icount) and HIL round trips.
+"""Cost of the paper model on the emulated Cortex-M4 (QEMU mps2-an386) and Cortex-M0 (QEMU microbit, nRF51),
+both under -icount, and HIL round trips.
 
     python bench/firmware_cost.py > /tmp/firmware.md
 
-Prints markdown: per build, flash and RAM of the firmware image, instructions per estimate (BENCH
-under -icount shift=0: two runs of different length, the difference per estimate), and the round
-trip and batched throughput of EVAL over the emulator's TCP UART and the host build's pty.
+Prints markdown: per build and core, flash and RAM of the firmware image, instructions per estimate
+(BENCH under -icount shift=0: two runs of different length, the difference per estimate), and the
+round trip and batched throughput of EVAL over the emulator's TCP UART and the host build's pty.
+The same fixed-point build runs on both cores; a second table counts its 64-bit products and
+divisions (the fixed-point plan's operations), which the M0 computes in library calls
+(__aeabi_lmul, __aeabi_ldivmod) and the M4 in single instructions (SMULL) or a short sequence.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from hil.emulate import bench_instructions, start_target
 from hil.suite import check_timing
 from host.device import Device
 
+CORES = {"mps2": "Cortex-M4F", "microbit": "Cortex-M0"}
 BUILDS = [("float", "table", False), ("float", "unrolled", False), ("float", "unrolled", True),
           ("double", "table", False), ("double", "unrolled", False)]
 
@@ -31,24 +36,36 @@ def main() -> None:
     press = fit_model(simulate(load_sensor("paper"), grid_poses({"dz": [x / 10 for x in range(-20, 1)]})),
                       outputs=("dz",), settings=FitSettings.exact())
     rows = []
-    runs = [(model, "paper", *b) for b in BUILDS] + [(fixed_model, "paper (gmr, no roots)", "fixed", "-", False),
-                                                     (press, "press (dz only)", "float", "table", False),
-                                                     (press, "press (dz only)", "float", "unrolled", False)]
-    for m, name, precision, style, fma in runs:
-        print(f"{name} {precision} {style}{' fma' if fma else ''} ...", file=sys.stderr)
-        with start_target(m, "mps2", precision=precision, style=style if style != "-" else "table", fma=fma) as emu:
+    runs = [(model, "paper", *b, "mps2") for b in BUILDS] + [
+        (fixed_model, "paper (gmr, no roots)", "fixed", "-", False, "mps2"),
+        (fixed_model, "paper (gmr, no roots)", "fixed", "-", False, "microbit"),
+        (press, "press (dz only)", "float", "table", False, "mps2"),
+        (press, "press (dz only)", "float", "unrolled", False, "mps2")]
+    for m, name, precision, style, fma, target in runs:
+        print(f"{name} {precision} {style}{' fma' if fma else ''} on {target} ...", file=sys.stderr)
+        with start_target(m, target, precision=precision, style=style if style != "-" else "table", fma=fma) as emu:
             with Device.open(emu.url, timeout=10) as dev:
                 b = bench_instructions(dev)
                 t = check_timing(dev, m, fixed=_fixed(m) if precision == "fixed" else None)
         terms = sum(len(e.terms) for e in m.equations)
-        rows.append((name, precision, style + (" fma" if fma else ""), terms, emu.size["flash"], emu.size["ram"],
-                     b["instructions"], t.figures))
-    print("| model | precision | style | terms | flash (B) | RAM (B) | instructions per estimate | "
+        rows.append((name, precision, style + (" fma" if fma else ""), CORES[target], terms, emu.size["flash"],
+                     emu.size["ram"], b["instructions"], t.figures))
+    print("| model | precision | style | core | terms | flash (B) | RAM (B) | instructions per estimate | "
           "EVAL round trip, median (ms) | batched EVAL (estimates/s) |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
-    for name, precision, style, terms, flash, ram, instr, fig in rows:
-        print(f"| {name} | {precision} | {style} | {terms} | {flash:,} | {ram:,} | {instr:,.0f} | "
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for name, precision, style, core, terms, flash, ram, instr, fig in rows:
+        print(f"| {name} | {precision} | {style} | {core} | {terms} | {flash:,} | {ram:,} | {instr:,.0f} | "
               f"{fig['rtt_ms_median']:.2f} | {fig['per_s']:,.0f} |")
+    fixed_rows = {core: instr for name, precision, _, core, _, _, _, instr, _ in rows if precision == "fixed"}
+    kinds = [op.kind for op in _fixed(fixed_model).ops]
+    products, divisions = kinds.count("mul") + kinds.count("term"), kinds.count("recip")
+    m0, m4 = fixed_rows["Cortex-M0"], fixed_rows["Cortex-M4F"]
+    print("\nThe fixed-point build on both cores (the same C, the same integers):\n")
+    print("| 64-bit products per estimate | 64-bit divisions per estimate | instructions, Cortex-M4F | "
+          "instructions, Cortex-M0 | M0 / M4F | extra M0 instructions per product or division |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    print(f"| {products} | {divisions} | {m4:,.0f} | {m0:,.0f} | {m0 / m4:.1f}x | "
+          f"{(m0 - m4) / max(products + divisions, 1):.0f} |")
     print("\nHost build over a pty (paper model, double, unrolled):\n")
     with start_target(model, "host", precision="double", style="unrolled") as fw:
         with Device.open(fw.url, timeout=5) as dev:

@@ -150,8 +150,9 @@ def build_parser() -> Parser:
     r.set_defaults(func=cmd_run)
 
     e = sub.add_parser("emulate", help="build the firmware with a model and boot it")
-    e.add_argument("--target", default="mps2", choices=("mps2", "host"),
-                   help="mps2: Cortex-M4 in qemu-system-arm (default); host: the POSIX build on a pty")
+    e.add_argument("--target", default="mps2", choices=("mps2", "microbit", "host"),
+                   help="mps2: Cortex-M4F in qemu-system-arm (default); microbit: Cortex-M0 (nRF51, fixed point "
+                        "only); host: the POSIX build on a pty")
     e.add_argument("--port", type=int, help="TCP port of the emulated UART (default: a free one)")
     e.add_argument("--precision", default="float", choices=("float", "double", "fixed"))
     e.add_argument("--style", default="table", choices=("table", "unrolled"))

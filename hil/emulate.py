@@ -14,6 +14,9 @@ from pathlib import Path
 from fitgen.errors import InputError
 
 QEMU = "qemu-system-arm"
+# the emulated boards: QEMU machine per target (mps2: Cortex-M4F; microbit: nRF51822, Cortex-M0)
+MACHINES = {"mps2": "mps2-an386", "microbit": "microbit"}
+TARGETS = tuple(MACHINES) + ("host",)
 INSTALL_HINT = "install them with: sudo apt-get install qemu-system-arm gcc-arm-none-eabi"
 # -icount shift=0: the emulated core retires one instruction per ns of virtual time, so the
 # 25 MHz SysTick counts one tick per 40 instructions (docs/hil.md)
@@ -66,12 +69,12 @@ class Emulator(_Running):
     """A Cortex-M4 firmware ELF booted in qemu-system-arm, its UART on ``socket://127.0.0.1:port``."""
 
     def __init__(self, elf: str | Path, port: int | None = None, icount: bool = True, boot_timeout: float = 10.0,
-                 bridge=None):
+                 bridge=None, machine: str = "mps2-an386"):
         if shutil.which(QEMU) is None:
             raise InputError(f"{QEMU} not found; {INSTALL_HINT}")
         if not Path(elf).is_file():
             raise InputError(f"firmware {elf} not found")
-        self.elf, self.icount, self.boot_timeout = Path(elf), icount, boot_timeout
+        self.elf, self.icount, self.boot_timeout, self.machine = Path(elf), icount, boot_timeout, machine
         # bridge (host.pi.StandIn): answers the firmware's I2C bridge on the board's second UART
         self.bridge = bridge
         self.bridge_port = free_port() if bridge is not None else None
@@ -85,7 +88,7 @@ class Emulator(_Running):
         return f"socket://127.0.0.1:{self.port}"
 
     def command(self) -> list[str]:
-        cmd = [QEMU, "-M", "mps2-an386", "-display", "none", "-monitor", "none", "-nodefaults",
+        cmd = [QEMU, "-M", self.machine, "-display", "none", "-monitor", "none", "-nodefaults",
                "-serial", f"tcp:127.0.0.1:{self.port},server=on,wait=off,nodelay=on", "-kernel", str(self.elf)]
         if self.bridge is not None:
             cmd += ["-serial", f"tcp:127.0.0.1:{self.bridge_port},server=on,wait=off,nodelay=on"]
@@ -184,9 +187,9 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
 
     from .firmware import build_firmware, firmware_size, render_firmware
 
-    if target not in ("mps2", "host"):
-        raise InputError(f"target must be mps2 or host, got {target!r}")
-    if target == "mps2":
+    if target not in TARGETS:
+        raise InputError(f"target must be one of {', '.join(TARGETS)}, got {target!r}")
+    if target in MACHINES:
         missing = [t for t in (QEMU, "arm-none-eabi-gcc") if shutil.which(t) is None]
         if missing:
             raise InputError(f"{' and '.join(missing)} not found; {INSTALL_HINT}")
@@ -195,12 +198,16 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
         tmp = tempfile.TemporaryDirectory(prefix="tactile-fw-")
         workdir = tmp.name
     folder = Path(workdir)
-    port_name = "mps2" if target == "mps2" else "posix"
+    port_name = "posix" if target == "host" else target
     render_firmware(model, folder, precision=precision, style=style, fma=fma, port=port_name, sensor_id=sensor_id,
                     cmap=cmap)
     image = build_firmware(folder, port_name)
-    runner = Emulator(image, port, bridge=bridge) if target == "mps2" else HostFirmware(image, bridge=bridge)
-    runner.size = firmware_size(image) if target == "mps2" else None
+    if target in MACHINES:
+        runner = Emulator(image, port, bridge=bridge, machine=MACHINES[target])
+        runner.size = firmware_size(image)
+    else:
+        runner = HostFirmware(image, bridge=bridge)
+        runner.size = None
     runner.workdir = folder
     runner._tmp = tmp  # removed with the runner
     return runner

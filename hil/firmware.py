@@ -18,19 +18,23 @@ from fitgen.fileio import write_atomic
 from fitgen.model import Model
 from host.compiled import WARNING_FLAGS
 
-PORTS = ("posix", "mps2")
+PORTS = ("posix", "mps2", "microbit")
 COMMON_FILES = ("model_api.h", "proto.h", "proto.c", "cal.h", "cal.c", "device.h", "device.c", "hal.h", "adc.h",
                 "inputs.h")
 # where the inputs come from: simulated triangle waves, or the ADC drivers through a channel map
 SIM_FILES = ("inputs_sim.c",)
 ADC_FILES = ("adc.c", "inputs_adc.c", "i2c_bridge.c")
-PORT_FILES = {"posix": ("hal_posix.c",), "mps2": ("hal_mps2.c", "startup_mps2.c", "mps2_an386.ld")}
-BINARY = {"posix": "firmware", "mps2": "firmware.elf"}
-DEFAULT_CC = {"posix": "gcc", "mps2": "arm-none-eabi-gcc"}
-LINKER_SCRIPT = "mps2_an386.ld"
-MPS2_FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16", "-fno-math-errno",
-              "-ffunction-sections", "-fdata-sections", "-nostartfiles", "-Wl,--gc-sections",
-              "-Wl,--fatal-warnings", "--specs=nano.specs", "--specs=nosys.specs"]
+PORT_FILES = {"posix": ("hal_posix.c",), "mps2": ("hal_mps2.c", "startup_mps2.c", "mps2_an386.ld"),
+              "microbit": ("hal_microbit.c", "startup_microbit.c", "microbit.ld")}
+BINARY = {"posix": "firmware", "mps2": "firmware.elf", "microbit": "firmware.elf"}
+DEFAULT_CC = {"posix": "gcc", "mps2": "arm-none-eabi-gcc", "microbit": "arm-none-eabi-gcc"}
+LINKER_SCRIPT = {"mps2": "mps2_an386.ld", "microbit": "microbit.ld"}
+_BARE = ["-ffunction-sections", "-fdata-sections", "-nostartfiles", "-Wl,--gc-sections", "-Wl,--fatal-warnings",
+         "--specs=nano.specs", "--specs=nosys.specs"]
+MPS2_FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16", "-fno-math-errno"] + _BARE
+# the nRF51's Cortex-M0: ARMv6-M, no FPU, no 32x32->64 multiply (64-bit products are __aeabi_lmul calls)
+MICROBIT_FLAGS = ["-mcpu=cortex-m0", "-mthumb", "-mfloat-abi=soft"] + _BARE
+PORT_FLAGS = {"mps2": MPS2_FLAGS, "microbit": MICROBIT_FLAGS}
 SENSOR_ID_MAX = 16
 
 
@@ -72,6 +76,11 @@ def render_firmware(model: Model, folder: str | Path, *, precision: str = "float
         raise InputError(f"sensor id must be 1..{SENSOR_ID_MAX} printable ASCII characters without quotes "
                          f"or backslashes, got {sensor_id!r}")
     folder = Path(folder)
+    if port == "microbit" and precision != "fixed":
+        raise InputError("the microbit port (Cortex-M0, no FPU) runs fixed-point firmware: give --precision fixed")
+    if port == "microbit" and cmap is not None:
+        raise InputError("the microbit has one UART: it has no I2C bridge to the bus model (use --target mps2 or "
+                         "host for --adc)")
     if cmap is not None and cmap.n_elements != model.n_inputs:
         raise InputError(f"the channel map reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
     if cmap is not None and model.input_units != "V" and precision != "fixed":
@@ -123,8 +132,8 @@ def build_firmware(folder: str | Path, port: str, cc: str | None = None) -> Path
         raise InputError(f"{folder} holds no rendered {port} firmware (missing {', '.join(missing) or 'tm_model.h'})")
     output = folder / BINARY[port]
     cmd = shlex.split(cc or DEFAULT_CC[port]) + WARNING_FLAGS + ["-O2", "-I", str(folder)]
-    if port == "mps2":
-        cmd += MPS2_FLAGS + ["-T", str(folder / LINKER_SCRIPT)]
+    if port in PORT_FLAGS:
+        cmd += PORT_FLAGS[port] + ["-T", str(folder / LINKER_SCRIPT[port])]
     cmd += [str(folder / n) for n in names if n.endswith(".c")] + ["-o", str(output), "-lm"]
     _run(cmd, f"building the {port} firmware")
     return output

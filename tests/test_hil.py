@@ -76,6 +76,47 @@ def test_fixed_point_suite_on_emulated_cortex_m4():
     assert "flash (fixed point)" in by_name and int(by_name["eval"].detail.split()[0]) >= 1000
 
 
+def test_full_suite_on_emulated_cortex_m0(tmp_path):
+    """The fixed-point firmware on QEMU's microbit (nRF51822: Cortex-M0, ARMv6-M, no FPU), the whole suite:
+    10,000 fuzz frames, the held-out check from the model file's record, and its instruction count."""
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    from fitgen.fit import FitSettings
+    from fitgen.holdout import box_of, clean_readings, evaluate
+    from fitgen.terms import FAMILIES
+
+    sensor = load_sensor("paper").with_transfer("gmr")
+    ds = simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"]))
+    model = fit_model(ds, settings=FitSettings(precision="fixed", exponents=FAMILIES["no-roots"]))
+    model.fit_info["held_out"] = evaluate(model, sensor, box_of(ds.poses()), n=500, draws=1)
+    with start_target(model, "microbit", precision="fixed") as emu:
+        assert emu.machine == "microbit" and emu.size["ram"] < 16 * 1024
+        with Device.open(emu.url, timeout=5) as dev:
+            assert dev.info().precision == "fixed"
+            cost = bench_instructions(dev)
+            res = run_suite(dev, model, url=emu.url, n_vectors=1000, n_fuzz=10_000, verbose=False,
+                            held_out=clean_readings(model))
+    assert res.ok, res.table()
+    by_name = {c.name: c for c in res.checks}
+    assert {"held-out accuracy", "stream", "flash (fixed point)", "fuzz"} <= set(by_name)
+    assert by_name["eval"].figures["max_lsb_diff"] <= 1
+    assert by_name["fuzz"].figures["frames"] == 10_000
+    # no FPU, no 32x32->64 multiply: many more instructions than the M4F's few thousand, but bounded
+    assert 5_000 < cost["instructions"] < 100_000
+
+
+def test_fixed_only_on_the_m0_and_no_bridge(paper_model, tmp_path):
+    from fitgen.errors import InputError
+    from hil.firmware import render_firmware
+    from host.channelmap import parse_spec
+
+    with pytest.raises(InputError, match="fixed-point firmware"):
+        render_firmware(paper_model, tmp_path / "a", precision="float", port="microbit")
+    with pytest.raises(InputError, match="one UART"):
+        render_firmware(paper_model, tmp_path / "b", precision="fixed", port="microbit",
+                        cmap=parse_spec("ads1115@0x48:0-3,ads1115@0x49:0-3"))
+
+
 def test_suite_fails_when_the_device_runs_another_model(paper_model):
     require_tool("gcc")
     other = flash_variant(paper_model)

@@ -15,6 +15,14 @@ typedef struct {
     uint8_t style;              /* the compiled-in model: 0 table, 1 unrolled */
 } device_config;
 
+#ifdef TM_FIXED_POINT
+/* a fixed-point build refuses every blob at CAL_BEGIN (blobs carry reals): no buffer is ever used,
+ * which leaves a Cortex-M0's 16 KB of RAM to the rest */
+#define DEVICE_CAL_BUF 4u
+#else
+#define DEVICE_CAL_BUF CAL_CAPACITY
+#endif
+
 typedef struct {
     const device_config *cfg;
     proto_rx rx;
@@ -25,12 +33,12 @@ typedef struct {
     uint8_t use_blob;
     cal_model active;
     uint32_t active_size;
-    uint8_t active_buf[CAL_CAPACITY];
+    uint8_t active_buf[DEVICE_CAL_BUF];
     uint8_t stage_open;           /* CAL_BEGIN seen, no COMMIT yet */
     uint32_t stage_size;
     uint32_t stage_crc;
     uint32_t stage_received;
-    uint8_t stage_buf[CAL_CAPACITY];
+    uint8_t stage_buf[DEVICE_CAL_BUF];
     /* STREAM */
     uint8_t stream_on;
     uint8_t stream_seq;
