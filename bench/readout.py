@@ -261,7 +261,211 @@ def main() -> None:
     print("\nThe model's own training error (max / rms, mm): " + "; ".join(
         f"{o} {tr[o]['model_training_error']['max']:.3f} / {tr[o]['model_training_error']['rms']:.3f}"
         for o in ("dx", "dy", "dz")) + ".")
+    c_drivers_table(model, sensor)
+
+
+# --- the C drivers (firmware_templates/firmware/adc.c) as tm_pi runs them -------------------------------
+
+C_REPLAY = r"""
+#define _POSIX_C_SOURCE 199309L
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include "adc.h"
+#include "adc_map.h"
+#include "replay.h"
+#define TM_API static __attribute__((noinline, noclone))
+#include "tm_model.h"
+
+static unsigned pos;
+static uint64_t t_ns;
+
+/* the recorded answer of the next transfer, in order, cyclically (check: the request must match) */
+static int next(uint8_t addr, const uint8_t *wr, uint16_t nw, uint8_t *rd, uint16_t nr)
+{
+    const replay_rec *r = &REPLAY[pos];
+    pos = (pos + 1u) % REPLAY_N;
+#ifdef REPLAY_CHECK
+    if (r->addr != addr || r->nw != nw || r->nr != nr || memcmp(r->wr, wr, nw) != 0) {
+        fprintf(stderr, "replay mismatch at %u\n", pos);
+        exit(3);
+    }
+#else
+    (void)addr; (void)wr; (void)nw;
+#endif
+    memcpy(rd, r->rd, nr);
+    return 0;
+}
+static int w(void *c, uint8_t a, const uint8_t *d, uint16_t n) { (void)c; return next(a, d, n, NULL, 0); }
+static int r_(void *c, uint8_t a, uint8_t *d, uint16_t n) { (void)c; return next(a, NULL, 0, d, n); }
+static int wr(void *c, uint8_t a, const uint8_t *x, uint16_t nx, uint8_t *y, uint16_t ny)
+{
+    (void)c;
+    return next(a, x, nx, y, ny);
+}
+static uint64_t now(void *c) { (void)c; return t_ns; }
+static void nap(void *c, uint64_t ns) { (void)c; t_ns += ns; }
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+int main(int argc, char **argv)
+{
+    static const adc_i2c bus = { 0, w, r_, wr, now, nap };
+    adc_array a;
+    double lsb[TM_N_INPUTS];
+    volatile double sink = 0;
+    const int bus_only = argc > 1 && strcmp(argv[1], "bus") == 0;
+    const long n = argc > 2 ? atol(argv[2]) : 1000;
+    const int timed = argc > 3;
+    long i;
+    unsigned k;
+    double t0;
+    if (adc_init(&a, &bus, ADC_MAP, ADC_MAP_N_CHIPS, adc_default_policy()) != ADC_OK) {
+        return 2;
+    }
+    for (k = 0; k < TM_N_INPUTS; ++k) {
+        lsb[k] = adc_lsb_volts(&ADC_MAP[0]);
+    }
+    t0 = now_s();
+    for (i = 0; i < n; ++i) {
+        if (bus_only) {
+            /* the replay alone: the same transfers' answers, no driver logic */
+            uint8_t buf[4];
+            for (k = 0; k < REPLAY_N; ++k) {
+                next(REPLAY[k].addr, REPLAY[k].wr, REPLAY[k].nw, buf, REPLAY[k].nr);
+            }
+            sink = sink + buf[0];
+        } else {
+            int32_t codes[TM_N_INPUTS];
+            tm_real in[TM_N_INPUTS], out[TM_N_OUTPUTS];
+            if (adc_read_codes(&a, codes) != ADC_OK) {
+                return 3;
+            }
+            for (k = 0; k < TM_N_INPUTS; ++k) {
+                in[k] = (tm_real)((double)codes[k] * lsb[k]);
+            }
+            tm_estimate(in, out);
+            sink = sink + (double)out[0];
+        }
+    }
+    if (timed) {
+        printf("%.1f\n", (now_s() - t0) / (double)n * 1e9);
+    }
+    return sink == 12345.678 ? 1 : 0;
+}
+"""
+
+
+class Recording:
+    """Passes the C drivers' smbus2 calls to a bus and records each transfer (addr, written, answer)."""
+
+    def __init__(self, bus):
+        self.bus, self.log, self.on = bus, [], False
+
+    def read_i2c_block_data(self, addr, reg, n):
+        ans = self.bus.read_i2c_block_data(addr, reg, n)
+        if self.on:
+            self.log.append((addr, [reg], list(ans)))
+        return ans
+
+    def write_i2c_block_data(self, addr, reg, data):
+        self.bus.write_i2c_block_data(addr, reg, data)
+        if self.on:
+            self.log.append((addr, [reg] + list(data), []))
+
+    def write_byte(self, addr, value):
+        self.bus.write_byte(addr, value)
+        if self.on:
+            self.log.append((addr, [value], []))
+
+
+def _replay_header(log) -> str:
+    rows = []
+    for addr, wr_bytes, rd in log:
+        wr = ", ".join(str(b) for b in (wr_bytes + [0] * 4)[:4])
+        rd_ = ", ".join(str(b) for b in (rd + [0] * 4)[:4])
+        rows.append(f"    {{ {addr}, {len(wr_bytes)}, {len(rd)}, {{ {wr} }}, {{ {rd_} }} }}")
+    return ("typedef struct { uint8_t addr, nw, nr; uint8_t wr[4]; uint8_t rd[4]; } replay_rec;\n"
+            f"#define REPLAY_N {len(log)}u\n"
+            "static const replay_rec REPLAY[REPLAY_N] = {\n" + ",\n".join(rows) + "\n};\n")
+
+
+def _callgrind_ir(binary, args) -> int:
+    out = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", str(binary), *args],
+                         capture_output=True, text=True)
+    line = next(ln for ln in out.stderr.splitlines() if "Collected" in ln)
+    return int(line.split(":")[-1].replace(",", "").strip())
+
+
+def _qemu_instructions(binary, args, work) -> int:
+    log = work / "exec.log"
+    subprocess.run(["qemu-arm", "-singlestep", "-d", "nochain,exec", "-D", str(log), str(binary), *args],
+                   capture_output=True, check=False)
+    with open(log, "rb") as f:
+        n = sum(chunk.count(b"\nTrace") for chunk in iter(lambda: f.read(1 << 20), b""))
+    log.unlink()
+    return n
+
+
+def c_drivers_table(model, sensor) -> None:
+    """Software per sample of tm_pi's loop (the C drivers through the channel map, the volts, the float
+    estimate), bus access excluded: x86-64 time and instructions, ARM instructions under qemu-arm."""
+    import tempfile
+    from pathlib import Path
+
+    from host.cadc import CAdcArray
+    from host.pi import render_pi
+
+    cm = parse_spec(SPEC)
+    clk = VirtualClock()
+    rec = Recording(SimBus.for_channel_map(cm, sensor, POSE, clock=clk, noise=0.0005))
+    arr = CAdcArray(rec, cm, clock=clk)
+    arr.probe()
+    arr.setup()
+    arr.read_codes()
+    rec.on = True
+    arr.read_codes()
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        render_pi(model, cm, work, precision="float")
+        (work / "replay.h").write_text(_replay_header(rec.log))
+        (work / "bench.c").write_text(C_REPLAY)
+        flags = ["-std=c99", "-O2", "-I", str(work), str(work / "bench.c"), str(work / "adc.c"), "-lm"]
+        subprocess.run(["gcc", *flags, "-DREPLAY_CHECK", "-o", str(work / "check")], check=True)
+        if subprocess.run([str(work / "check"), "full", "100"]).returncode != 0:
+            raise SystemExit("the C replay does not see the recorded transfers")
+        subprocess.run(["gcc", *flags, "-o", str(work / "x86")], check=True)
+        subprocess.run(["arm-linux-gnueabihf-gcc", "-static", *flags, "-o", str(work / "arm")], check=True)
+        n1, n2 = 200, 2200
+        ns = {m: statistics.median(float(subprocess.run([str(work / "x86"), m, "200000", "t"], capture_output=True,
+                                                        text=True).stdout) for _ in range(5)) for m in ("full", "bus")}
+        ir = {m: (_callgrind_ir(work / "x86", [m, str(n2)]) - _callgrind_ir(work / "x86", [m, str(n1)])) / (n2 - n1)
+              for m in ("full", "bus")}
+        q1, q2 = 20, 120
+        arm = {m: (_qemu_instructions(work / "arm", [m, str(q2)], work)
+                   - _qemu_instructions(work / "arm", [m, str(q1)], work)) / (q2 - q1) for m in ("full", "bus")}
+    print(f"\nThe C drivers (tm_pi's loop: firmware_templates/firmware/adc.c through the channel map, code x LSB, "
+          f"the float estimate), one 8-element sample from the same record ({len(rec.log)} transfers), replayed "
+          "in C on a virtual clock; the replay's own cost subtracted:\n")
+    print("| where | sample, replay bus | replay alone | software, bus excluded |")
+    print("| --- | --- | --- | --- |")
+    print(f"| x86-64, time (median of 5 runs of 200,000) | {ns['full']:.0f} ns | {ns['bus']:.0f} ns | "
+          f"{ns['full'] - ns['bus']:.0f} ns |")
+    print(f"| x86-64, instructions (callgrind) | {ir['full']:.0f} | {ir['bus']:.0f} | {ir['full'] - ir['bus']:.0f} |")
+    print(f"| ARMv7 Linux (qemu-arm), instructions | {arm['full']:.0f} | {arm['bus']:.0f} | "
+          f"{arm['full'] - arm['bus']:.0f} |")
 
 
 if __name__ == "__main__":
-    main()
+    if sys.argv[1:] == ["--c-only"]:
+        _sensor = load_sensor("paper").with_transfer("gmr")
+        c_drivers_table(fit_model(simulate(_sensor, grid_poses(PAPER_GRIDS["paper-sim"])),
+                                  settings=FitSettings.exact()), _sensor)
+    else:
+        main()
