@@ -12,8 +12,8 @@ from host import protocol as P
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
-from host.compiled import CompiledModel
 from host.device import Device
+from host.engine import make_engine
 from host.pi import StandIn
 from host.simbus import SimBus
 
@@ -56,15 +56,18 @@ def _python(model, n, faults=()):
     arr.probe()
     arr.setup()
     rows = []
-    with CompiledModel(model, "float", "unrolled") as cm:
+    engine = make_engine("c", model, precision="float", style="unrolled")  # tactile-host read's C engine
+    try:
         for _ in range(n):
             try:
-                v = arr.read_volts().astype(np.float32).astype(float)
+                v = arr.read_volts()
             except DeviceSilent:
                 rows.append(None)
                 continue
-            out, status = cm.predict(v)
-            rows.append((v, out[0], int(status[0])))
+            out, status = engine.estimate(v)
+            rows.append((v.astype(np.float32).astype(float), out, status))
+    finally:
+        engine.close()
     return rows, arr.counts
 
 
