@@ -41,22 +41,28 @@ _ROWS = 2048  # data rows per block of noise rows (each gives n_inputs rows)
 
 
 def noise_blocks(terms: list[Term], inputs: np.ndarray, sigma: float, d: np.ndarray | None = None,
-                 d_jac: np.ndarray | None = None, rows: int = _ROWS) -> Iterator[np.ndarray]:
-    """Blocks of rows [0, sigma * d(x)/d(v_k), 0] (m + 2 columns) for the terms' columns x."""
+                 d_jac=None, rows: int = _ROWS) -> Iterator[np.ndarray]:
+    """Blocks of rows [0, sigma * d(x)/d(v_k), 0] (m + 2 columns) for the terms' columns x.
+
+    ``d_jac``: a function (lo, hi) -> the (hi - lo, 3, N) gradient of the displacement estimates ``d``
+    by the inputs on those rows (None: d is exact), formed block by block like everything here."""
     n, n_in = inputs.shape
     m = len(terms)
     for lo in range(0, n, rows):
-        sl = slice(lo, lo + rows)
-        jac = design_jacobian(terms, inputs[sl], None if d is None else d[sl], None if d_jac is None else d_jac[sl])
+        hi = min(n, lo + rows)
+        jac = design_jacobian(terms, inputs[lo:hi], None if d is None else d[lo:hi],
+                              None if d_jac is None else d_jac(lo, hi))
         blk = np.zeros((jac.shape[0] * n_in, m + 2))
         blk[:, 1:-1] = sigma * jac.reshape(-1, m)
         yield blk
 
 
-def rounding_rows(columns: np.ndarray, u: float) -> np.ndarray:
-    """Rows u * ||column|| on the diagonal, for the intercept and each column (m + 2 columns)."""
-    n, m = columns.shape
-    norms = np.concatenate([[np.sqrt(n)], np.linalg.norm(columns, axis=0)])
-    out = np.zeros((m + 1, m + 2))
-    out[np.arange(m + 1), np.arange(m + 1)] = u * norms
+def rounding_rows(compressed: np.ndarray, u: float) -> np.ndarray:
+    """Rows u * ||column|| on the diagonal, for the intercept and each column (m + 2 columns).
+
+    The norms come from the compressed data (R^T R = A^T A, so ||A_j|| = ||R_j||): no pass over the rows."""
+    norms = np.linalg.norm(compressed[:, :-1], axis=0)
+    m1 = norms.size
+    out = np.zeros((m1, m1 + 1))
+    out[np.arange(m1), np.arange(m1)] = u * norms
     return out

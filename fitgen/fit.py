@@ -65,13 +65,17 @@ class FittedOutput:
     info: dict
 
 
+ROWS = 1 << 14  # rows per block: the candidate columns are never all in memory at once
+
+
 def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | None, *,
                settings: FitSettings, positive: np.ndarray, progress=None, noise: float = 0.0,
-               d_jac: np.ndarray | None = None) -> FittedOutput:
-    """Choose and fit one output's equation.
+               d_jac=None) -> FittedOutput:
+    """Choose and fit one output's equation; memory grows with the candidates, not with the rows.
 
-    ``noise``: reading noise (rms) to add in expectation (fitgen.augment); ``d_jac`` (n, 3, N):
-    the gradient of the displacement estimates ``d`` by the inputs, for the d-terms' share of it.
+    ``noise``: reading noise (rms) to add in expectation (fitgen.augment); ``d_jac``: a function
+    (lo, hi) -> the gradient of the displacement estimates ``d`` by the inputs on those rows, for
+    the d-terms' share of it.
     """
     n, n_in = inputs.shape
     cands = candidate_terms(n_in, name, exponents=settings.exponents,
@@ -81,24 +85,30 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     if n < len(init) + 3:
         raise InputError(f"{n} rows cannot fit the {len(init) + 1} coefficients of the initial equation "
                          f"for {name} with residual degrees of freedom; give at least {len(init) + 3} rows")
-    X = design_matrix(cands, inputs, d)
-    if not np.all(np.isfinite(X)):
-        raise InputError(f"a candidate term for {name} is not finite on the data (an input too close to 0?)")
+    def columns(lo, hi, terms=cands):
+        X = design_matrix(terms, inputs[lo:hi], None if d is None else d[lo:hi])
+        if not np.all(np.isfinite(X)):
+            raise InputError(f"a candidate term for {name} is not finite on the data (an input too close to 0?)")
+        return X
+
     # keep at least one residual degree of freedom, so that RSS > 0 and AIC is finite
     cap = n - 2 if settings.max_terms is None else min(settings.max_terms, n - 2)
     if len(init) > cap:
         init = init[:cap]
     k = settings.penalty(n)
+    A = compress(columns, y, block=ROWS)
     extra = []
-    if noise > 0:
-        extra.append(noise_blocks(cands, inputs, noise, d, d_jac))
     if settings.precision is not None:
-        extra.append([rounding_rows(X, ROUNDING_FACTOR * UNIT_ROUNDOFF[settings.precision])])
-    A = compress(X, y, extra=itertools.chain(*extra))
-    res = stepwise(X, y, init, names=[t.text for t in cands], k=k, max_terms=cap, compressed=A, progress=progress)
+        # from the data's own triangle, before the noise rows: rounding scales with the terms' sizes
+        extra.append([rounding_rows(A, ROUNDING_FACTOR * UNIT_ROUNDOFF[settings.precision])])
+    if noise > 0:
+        extra.append(noise_blocks(cands, inputs, noise, d, d_jac, rows=ROWS // 8))
+    if extra:
+        A = compress(None, y[:0], extra=itertools.chain(*extra), start=A)
+    res = stepwise(None, y, init, names=[t.text for t in cands], k=k, max_terms=cap, compressed=A, progress=progress)
     terms = [cands[j] for j in res.selected]
     intercept, coefs, rss, cond = refit(A, res.selected)
-    pred = intercept + X[:, res.selected] @ coefs
+    pred = np.concatenate([intercept + columns(lo, min(n, lo + ROWS), terms) @ coefs for lo in range(0, n, ROWS)])
     info = {
         "terms": len(terms),
         "candidates": len(cands),
@@ -140,15 +150,15 @@ def noise_to_add(ds: Dataset, settings: FitSettings, sensor=None) -> dict:
     return {"device": device, "device_source": source, "data": data, "added": added, "why": why}
 
 
-def _d_jacobian(equations, v: np.ndarray, rows: int = 4096) -> np.ndarray:
-    """(n, 3, N): the gradient of the displacement equations dx, dy, dz by the inputs."""
-    out = np.zeros((v.shape[0], 3, v.shape[1]))
-    for eq in equations:
-        coefs = np.asarray(eq.coefficients)
-        i = DISPLACEMENTS.index(eq.name)
-        for lo in range(0, v.shape[0], rows):
-            out[lo : lo + rows, i, :] = design_jacobian(list(eq.terms), v[lo : lo + rows]) @ coefs
-    return out
+def _d_jacobian(equations, v: np.ndarray):
+    """A function (lo, hi) -> the (hi - lo, 3, N) gradient of the displacement equations by the inputs."""
+    def block(lo, hi):
+        out = np.zeros((hi - lo, 3, v.shape[1]))
+        for eq in equations:
+            out[:, DISPLACEMENTS.index(eq.name), :] = design_jacobian(list(eq.terms), v[lo:hi]) @ np.asarray(
+                eq.coefficients)
+        return out
+    return block
 
 
 def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: FitSettings = FitSettings(),

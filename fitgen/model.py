@@ -22,6 +22,7 @@ from .terms import DISPLACEMENTS, Term, design_matrix, parse_term
 
 SCHEMA_VERSION = 1
 STATUS_NONFINITE = -1
+_ROWS = 1 << 15  # rows per block of predict
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,13 @@ class Model:
         ``fma``: each term added with one rounding, as C generated with fused multiply-adds does.
         ``precision="float"``: the float C's arithmetic in numpy float32 (inputs, domain,
         coefficients, powers and sums rounded as the float header rounds them; no fma).
+        Rows are taken in blocks, so that memory does not grow with their number.
         """
+        rows = np.asarray(inputs, dtype=float)
+        if rows.ndim == 2 and rows.shape[0] > _ROWS:
+            parts = [self.predict(rows[lo:lo + _ROWS], True, fma, precision) for lo in range(0, rows.shape[0], _ROWS)]
+            out, status = np.vstack([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+            return (out, status) if with_status else out
         if precision == "float":
             if fma:
                 raise InputError("the float emulation has no fused multiply-add")

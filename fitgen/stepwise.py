@@ -31,24 +31,34 @@ _BLOCK = 1 << 14  # rows per block of the compressing QR
 
 
 @_ONE_THREAD
-def compress(columns: np.ndarray, y: np.ndarray, block: int = _BLOCK, extra=()) -> np.ndarray:
+def compress(columns, y: np.ndarray, block: int = _BLOCK, extra=(), start: np.ndarray | None = None) -> np.ndarray:
     """Upper-triangular R with R^T R = A^T A for A = [1, columns, y], built block by block.
 
-    ``extra``: further rows of A, already formed (m + 2 columns each), as an iterable of blocks:
-    the expected effect of noise (fitgen.augment) enters the search this way. Peak memory is one
-    block of rows, whatever n is.
+    ``columns``: the (n, m) candidate columns, or a function (lo, hi) -> the columns of rows lo..hi,
+    so that they never need to be in memory all at once. ``extra``: further rows of A, already
+    formed (m + 2 columns each), as an iterable of blocks: the expected effect of noise
+    (fitgen.augment) enters the search this way. ``start``: a triangle to fold the rows into (the
+    compression is associative). Peak memory is one block of rows, whatever n is.
     """
-    n, m = columns.shape
-    acc = np.zeros((0, m + 2))
+    acc = start
+    n = len(y)
     for lo in range(0, n, block):
-        blk = np.empty((min(block, n - lo), m + 2))
+        hi = min(n, lo + block)
+        cols = columns(lo, hi) if callable(columns) else columns[lo:hi]
+        if acc is None:
+            acc = np.zeros((0, cols.shape[1] + 2))
+        blk = np.empty((hi - lo, cols.shape[1] + 2))
         blk[:, 0] = 1.0
-        blk[:, 1:-1] = columns[lo : lo + block]
-        blk[:, -1] = y[lo : lo + block]
-        acc = qr(np.vstack([acc, blk]), mode="r", check_finite=False)[0][: m + 2]
+        blk[:, 1:-1] = cols
+        blk[:, -1] = y[lo:hi]
+        acc = _fold(acc, blk)
     for blk in extra:
-        acc = qr(np.vstack([acc, blk]), mode="r", check_finite=False)[0][: m + 2]
+        acc = _fold(acc, blk)
     return acc
+
+
+def _fold(acc: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    return qr(np.vstack([acc, rows]), mode="r", check_finite=False)[0][: acc.shape[1]]
 
 
 @dataclass
@@ -110,7 +120,8 @@ def stepwise(
     compressed: np.ndarray | None = None,
     progress=None,
 ) -> StepwiseResult:
-    """Choose columns of ``columns`` (n, m) for ``y`` by bidirectional stepwise AIC.
+    """Choose columns of ``columns`` (n, m) for ``y`` by bidirectional stepwise AIC (``columns`` may be
+    None when ``compressed``, the triangle of :func:`compress`, is given).
 
     Starts from ``initial`` (indices); each step takes the single addition or removal
     with the lowest AIC, stops when none lowers it. Ties go as in R: staying put, then
@@ -118,9 +129,9 @@ def stepwise(
     (relative residual norm < 1e-7 against the current model) are never added.
     """
     A = compress(columns, y) if compressed is None else compressed
+    m = A.shape[1] - 2
     with _BLAS.limit(limits=1, user_api="blas"):
-        return _search(A, columns.shape[0], initial, names or [str(j) for j in range(columns.shape[1])],
-                       k, max_terms, max_steps, progress)
+        return _search(A, len(y), initial, names or [str(j) for j in range(m)], k, max_terms, max_steps, progress)
 
 
 def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> StepwiseResult:

@@ -108,7 +108,7 @@ def test_noise_rows_give_the_expected_rss_exactly_for_linear_terms():
     expected = np.sum((y - 0.7 - X @ b) ** 2) + 200 * sigma**2 * np.sum(b**2)
     assert np.sum((R @ coef) ** 2) == pytest.approx(expected, rel=1e-12)
     # rounding rows: (u ||column||)^2 per coefficient squared
-    R2 = compress(X, y, extra=[rounding_rows(X, 1e-3)])
+    R2 = compress(X, y, extra=[rounding_rows(compress(X, y), 1e-3)])
     norms = np.concatenate([[np.sqrt(200)], np.linalg.norm(X, axis=0)])
     expected2 = np.sum((y - 0.7 - X @ b) ** 2) + np.sum((1e-3 * norms * coef[:-1]) ** 2)
     assert np.sum((R2 @ coef) ** 2) == pytest.approx(expected2, rel=1e-12)
