@@ -176,3 +176,23 @@ def test_bad_model_files(paper_fit, tmp_path):
                                   "--k", "-1"), contains="--k")
     assert_one_line_error(run_cli("fitgen", "fit", str(folder / "sim.csv"), "-o", str(tmp_path / "x.json"),
                                   "--outputs", "dq"), contains="--outputs")
+
+
+def test_fit_by_blocks_of_rows_is_the_fit_of_all_rows(monkeypatch):
+    """The candidate columns are built and compressed a block of rows at a time, the training error and
+    Model.predict likewise: blocks of 97 rows give the equations of one block of all 1,500."""
+    import fitgen.fit as fit_mod
+    import fitgen.model as model_mod
+
+    ds = simulate(PAPER, random_poses(1500, DEFAULT_RANGES, pose_rng(11)))
+    whole = fit_model(ds)
+    monkeypatch.setattr(fit_mod, "ROWS", 97)
+    monkeypatch.setattr(model_mod, "_ROWS", 97)
+    blocks = fit_model(ds)
+    for a, b in zip(whole.equations, blocks.equations):
+        assert a.terms == b.terms, a.name
+        np.testing.assert_allclose(b.coefficients, a.coefficients, rtol=1e-6, atol=1e-9)
+    by_blocks = blocks.predict(ds.inputs)
+    np.testing.assert_allclose(by_blocks, whole.predict(ds.inputs), atol=1e-9)
+    monkeypatch.setattr(model_mod, "_ROWS", 10**9)
+    np.testing.assert_array_equal(by_blocks, blocks.predict(ds.inputs))  # row by row arithmetic: bit-identical
