@@ -200,6 +200,10 @@ def cmd_fit(args) -> int:
         print(f"{e.name}: {len(e.terms)} terms, AIC {i['aic']:.2f}, training max error {err['max']:.4g} {e.unit}, "
               f"RMS {err['rms']:.4g}, condition {i['condition']:.3g}", file=sys.stderr)
     print(fit_assumptions(model.fit_info), file=sys.stderr)
+    noise = model.fit_info["noise"]
+    if noise["device"] is None and noise["data"] == 0:
+        print("warning: the dataset was simulated without noise and names no sensor this fitgen knows: fitted "
+              "without the device's noise (give --sensor FILE or --noise X)", file=sys.stderr)
     if "held_out" in model.fit_info:
         print(deployed_table(model), end="", file=sys.stderr)
     elif args.held_out:

@@ -11,7 +11,6 @@ from importlib import resources
 from pathlib import Path
 
 import jinja2
-import numpy as np
 
 from . import __version__
 from .cgen import c_real, identifier

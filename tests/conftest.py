@@ -73,6 +73,27 @@ def device_model(sensor):
     return fit_model(simulate(sensor, grid), settings=FitSettings())
 
 
+# the set-up the C-driver tests share: two ADS1115 reading the paper sensor's 8 elements, magnet at a pose
+TWO_CHIPS = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+GMR_POSE = [0.5, 0.2, -1.0, 1.0, 0.0]
+
+
+def sim_bus(spec=TWO_CHIPS, faults=(), settings=None, seed=3):
+    """(channel map, SimBus with 0.5 mV noise at GMR_POSE, its VirtualClock), with ``faults`` injected."""
+    from fitgen.sensor import load_sensor
+    from host.channelmap import Settings, parse_spec
+    from host.clock import VirtualClock
+    from host.simbus import SimBus
+
+    cmap = parse_spec(spec, settings or Settings())
+    clock = VirtualClock()
+    bus = SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), GMR_POSE, clock=clock,
+                                 noise=0.0005, seed=seed)
+    for f in faults:
+        bus.inject(**f)
+    return cmap, bus, clock
+
+
 @pytest.fixture(scope="session")
 def model_file(model, tmp_path_factory):
     return str(model.save(tmp_path_factory.mktemp("model") / "model.json"))

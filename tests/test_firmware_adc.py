@@ -5,23 +5,17 @@ estimates from those readings, and a failed read is flagged instead of fed to th
 import numpy as np
 import pytest
 
-from fitgen.sensor import load_sensor
 from hil.emulate import start_target
 from hil.suite import READ_FAILED
 from host import protocol as P
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.channelmap import parse_spec
-from host.clock import VirtualClock
 from host.device import Device
 from host.engine import make_engine
 from host.pi import StandIn
-from host.simbus import SimBus
 
-from conftest import assert_one_line_error, require_tool, run_cli
+from conftest import TWO_CHIPS, assert_one_line_error, require_tool, run_cli, sim_bus
 
-SENSOR = load_sensor("paper").with_transfer("gmr")
-POSE = [0.5, 0.2, -1.0, 1.0, 0.0]
-MAP = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+MAP = TWO_CHIPS
 
 
 @pytest.fixture(scope="module")
@@ -30,12 +24,7 @@ def model(device_model):
 
 
 def _bus(faults=()):
-    cmap = parse_spec(MAP)
-    clock = VirtualClock()
-    bus = SimBus.for_channel_map(cmap, SENSOR, POSE, clock=clock, noise=0.0005, seed=3)
-    for f in faults:
-        bus.inject(**f)
-    return cmap, bus, clock
+    return sim_bus(MAP, faults)
 
 
 def _stream(model, target, n, faults=()):

@@ -1,22 +1,16 @@
 """The Raspberry Pi build (firmware_templates/pi/): the C drivers over i2c-dev, built for ARM Linux and run
 under qemu-arm against a stand-in for the kernel device answered by the bus model (host/simbus.py)."""
 
-import numpy as np
 import pytest
 
-from fitgen.sensor import load_sensor
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.channelmap import Settings, parse_spec
-from host.clock import VirtualClock
 from host.pi import StandIn, build_pi, render_adc_map, render_pi
 from host.readout import LineFormat
-from host.simbus import SimBus
 
-from conftest import assert_one_line_error, require_tool, run_cli
+from conftest import TWO_CHIPS, assert_one_line_error, require_tool, run_cli, sim_bus
 
-SENSOR = load_sensor("paper").with_transfer("gmr")
-POSE = [0.5, 0.2, -1.0, 1.0, 0.0]
-MAP = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+MAP = TWO_CHIPS
 
 
 @pytest.fixture(scope="module")
@@ -31,13 +25,8 @@ def standin_build(model, tmp_path_factory):
     return build_pi(folder, standin=True)
 
 
-def _bus(spec=MAP, faults=(), settings=Settings()):
-    cmap = parse_spec(spec, settings)
-    clock = VirtualClock()
-    bus = SimBus.for_channel_map(cmap, SENSOR, POSE, clock=clock, noise=0.0005, seed=3)
-    for f in faults:
-        bus.inject(**f)
-    return cmap, bus, clock
+def _bus(faults=()):
+    return sim_bus(MAP, faults)
 
 
 def _python_lines(model, n, faults=()):
