@@ -85,6 +85,7 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     if n < len(init) + 3:
         raise InputError(f"{n} rows cannot fit the {len(init) + 1} coefficients of the initial equation "
                          f"for {name} with residual degrees of freedom; give at least {len(init) + 3} rows")
+
     def columns(lo, hi, terms=cands):
         X = design_matrix(terms, inputs[lo:hi], None if d is None else d[lo:hi])
         if not np.all(np.isfinite(X)):
