@@ -73,6 +73,7 @@ from fitgen.terms import FAMILIES
 from fitgen.fixedpoint import sensor_input_scale as fixed_scale
 from host import cost
 from host.compiled import CompiledModel
+from benchutil import START, fmt, log, stats, table
 
 LAYOUTS = ("paper", "two-radii", "ring-vertical", "two-rings")
 TRANSFERS = ("raw", "gmr")
@@ -95,19 +96,6 @@ FLOWS = (
     ("fixed target", FitSettings(precision="fixed", exponents=FAMILIES["no-roots"]), ("fixed", "float")),
 )
 FIXED_FLOWS = tuple(name for name, _, precs in FLOWS if "fixed" in precs)
-START = time.monotonic()
-
-
-def log(msg: str) -> None:
-    print(f"[{time.monotonic() - START:6.1f}s] {msg}", file=sys.stderr, flush=True)
-
-
-def fmt(x: float | None) -> str:
-    if x is None:
-        return "-"
-    if not np.isfinite(x) or x > 1e6:
-        return "inf"
-    return f"{x:.3g}"
 
 
 def pct(x: float | None) -> str:
@@ -116,17 +104,6 @@ def pct(x: float | None) -> str:
     if not np.isfinite(x):
         return "inf"
     return f"{100 * x:.2g} %" if x < 0.1 else f"{100 * x:.0f} %"
-
-
-def table(head: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(head) + " |", "| " + " | ".join("---" for _ in head) + " |"]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
-
-
-def stats(err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(max |e|, RMS e) per column."""
-    return np.abs(err).max(axis=0), np.sqrt(np.mean(err * err, axis=0))
 
 
 class Config:

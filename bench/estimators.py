@@ -80,6 +80,7 @@ from fitgen.terms import DISPLACEMENTS, ROTATIONS, candidate_terms, design_matri
 from fitgen.transfer import apply_transfer
 from host import cost
 from host.compiled import compile_checked
+from benchutil import START, fmt, log, stats, table
 
 try:
     from abess.linear import LinearRegression as AbessLinear
@@ -100,31 +101,6 @@ MLPS = (("mlp 64-64 tanh", (64, 64), "tanh"), ("mlp 16-16 tanh", (16, 16), "tanh
 MLP_MAX_ITER = 3000
 OURS_VARIANTS = (("ours, BIC", FitSettings(k="bic")), ("ours, max 25 terms", FitSettings(max_terms=25)),
                  ("ours, max 10 terms", FitSettings(max_terms=10)))
-START = time.monotonic()
-
-
-def log(msg: str) -> None:
-    print(f"[{time.monotonic() - START:6.1f}s] {msg}", file=sys.stderr, flush=True)
-
-
-def fmt(x) -> str:
-    if x is None:
-        return "-"
-    x = float(x)
-    if not np.isfinite(x) or x > 1e6:
-        return "inf"
-    return f"{x:.3g}"
-
-
-def table(head: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(head) + " |", "| " + " | ".join("---" for _ in head) + " |"]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
-
-
-def stats(err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(max |e|, RMS e) per column."""
-    return np.abs(err).max(axis=0), np.sqrt(np.mean(err * err, axis=0))
 
 
 class Result:

@@ -40,7 +40,6 @@ magnet, board, element noise (0.5 uT rms) and the ``raw`` transfer (|B . axis| i
 from __future__ import annotations
 
 import sys
-import time
 
 import numpy as np
 
@@ -50,6 +49,7 @@ from fitgen.pose import POSE_NAMES
 from fitgen.scenes import PRESETS
 from fitgen.sensor import load_sensor, parse_sensor, tomllib
 from fitgen.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from benchutil import fmt, log, table
 
 LAYOUTS = ("paper", "two-rings", "two-radii", "ring-vertical")
 N_EVAL = 2000
@@ -58,26 +58,9 @@ EVAL_NOISE_SEED = 1
 FIT_NOISE_SEED = 2
 SATURATION = 2.0  # mT, the AA003-02's (transfer.gmr.saturation in every preset)
 RANK_TOL = 1e-8  # singular values below this fraction of the largest count as zero
-START = time.monotonic()
 # the study fits as the paper does (data as given, exact arithmetic); docs/deployed-accuracy.md
 # has the same layouts fitted for the device
 EXACT = FitSettings.exact()
-
-
-def log(msg: str) -> None:
-    print(f"[{time.monotonic() - START:5.1f}s] {msg}", file=sys.stderr, flush=True)
-
-
-def fmt(x: float) -> str:
-    if not np.isfinite(x) or x > 1e6:
-        return "inf"
-    return f"{x:.3g}"
-
-
-def table(head: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(head) + " |", "| " + " | ".join("---" for _ in head) + " |"]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
 
 
 def rank_at_rest(sensor) -> tuple[int, np.ndarray]:

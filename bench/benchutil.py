@@ -1,0 +1,39 @@
+"""What the benchmark scripts share: a progress log with elapsed time, number formats, markdown tables.
+
+The scripts run as ``python bench/NAME.py``, so this folder is on their path: ``from benchutil import ...``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+
+START = time.monotonic()
+
+
+def log(msg: str) -> None:
+    """A progress line on stderr, with the seconds since the script started."""
+    print(f"[{time.monotonic() - START:6.1f}s] {msg}", file=sys.stderr, flush=True)
+
+
+def fmt(x) -> str:
+    """3 significant digits; '-' for None, 'inf' for a non-finite or huge value."""
+    if x is None:
+        return "-"
+    x = float(x)
+    if not np.isfinite(x) or x > 1e6:
+        return "inf"
+    return f"{x:.3g}"
+
+
+def table(head: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(head) + " |", "| " + " | ".join("---" for _ in head) + " |"]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def stats(err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(max |e|, RMS e) per column."""
+    return np.abs(err).max(axis=0), np.sqrt(np.mean(err * err, axis=0))
