@@ -37,3 +37,15 @@ def table(head: list[str], rows: list[list[str]]) -> str:
 def stats(err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(max |e|, RMS e) per column."""
     return np.abs(err).max(axis=0), np.sqrt(np.mean(err * err, axis=0))
+
+
+def cramer_rao_floor(sensor, poses: np.ndarray) -> dict:
+    """The Cramer-Rao bounds (fitgen.observe.analyse, the sensor's noise, all five components) at each pose:
+    RMS over the poses, median, how many are infinite, and the RMS over the finite ones."""
+    from fitgen.observe import analyse
+
+    b = np.array([r.bounds for r in analyse(sensor, poses, sensor.noise)])
+    finite = np.where(np.isfinite(b), b, np.nan)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return {"rms": np.sqrt(np.mean(b * b, axis=0)), "median": np.median(b, axis=0),
+                "inf": np.isinf(b).sum(axis=0), "finite_rms": np.sqrt(np.nanmean(finite * finite, axis=0))}

@@ -65,7 +65,6 @@ import numpy as np
 
 from fitgen.errors import InputError
 from fitgen.fit import FitSettings, fit_model
-from fitgen.observe import analyse
 from fitgen.pose import POSE_NAMES
 from fitgen.sensor import load_sensor
 from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
@@ -73,7 +72,7 @@ from fitgen.terms import FAMILIES
 from fitgen.fixedpoint import sensor_input_scale as fixed_scale
 from host import cost
 from host.compiled import CompiledModel
-from benchutil import START, fmt, log, stats, table
+from benchutil import START, cramer_rao_floor, fmt, log, stats, table
 
 LAYOUTS = ("paper", "two-radii", "ring-vertical", "two-rings")
 TRANSFERS = ("raw", "gmr")
@@ -127,14 +126,9 @@ class Config:
         self.notes: list[str] = []
 
     def floor(self) -> None:
-        b = np.array([r.bounds for r in analyse(self.sensor, self.poses, self.sensor.noise)])
-        with np.errstate(over="ignore", invalid="ignore"):
-            self.floor_rms = np.sqrt(np.mean(b * b, axis=0))
-        self.floor_median = np.median(b, axis=0)
-        self.floor_inf = np.isinf(b).sum(axis=0)
-        finite = np.where(np.isfinite(b), b, np.nan)
-        with np.errstate(invalid="ignore"):
-            self.floor_finite_rms = np.sqrt(np.nanmean(finite * finite, axis=0))
+        f = cramer_rao_floor(self.sensor, self.poses)
+        self.floor_rms, self.floor_median, self.floor_inf, self.floor_finite_rms = (
+            f["rms"], f["median"], f["inf"], f["finite_rms"])
 
     def fit(self) -> None:
         train = simulate(self.sensor, self.grid)

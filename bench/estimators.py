@@ -80,7 +80,7 @@ from fitgen.terms import DISPLACEMENTS, ROTATIONS, candidate_terms, design_matri
 from fitgen.transfer import apply_transfer
 from host import cost
 from host.compiled import compile_checked
-from benchutil import START, fmt, log, stats, table
+from benchutil import START, cramer_rao_floor, fmt, log, stats, table
 
 try:
     from abess.linear import LinearRegression as AbessLinear
@@ -401,10 +401,8 @@ class Layout:
         self.notes: list[str] = []
 
     def floor(self) -> None:
-        b = np.array([r.bounds for r in analyse(self.sensor, self.poses, self.sensor.noise)])
-        with np.errstate(over="ignore", invalid="ignore"):
-            self.floor_rms = np.sqrt(np.mean(b * b, axis=0))
-        self.floor_median = np.median(b, axis=0)
+        f = cramer_rao_floor(self.sensor, self.poses)
+        self.floor_rms, self.floor_median = f["rms"], f["median"]
 
     def judge_model(self, r: Result) -> None:
         r.clean = stats(r.model.predict(self.clean) - self.poses)
