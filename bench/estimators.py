@@ -72,7 +72,7 @@ from sklearn.neural_network import MLPRegressor
 from fitgen.errors import InputError
 from fitgen.fit import FitSettings, fit_model
 from fitgen.model import Equation, Model
-from fitgen.observe import analyse, jacobian
+from fitgen.observe import jacobian
 from fitgen.pose import POSE_NAMES, field_readings
 from fitgen.sensor import load_sensor
 from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
