@@ -5,12 +5,14 @@ multiply-add, and inputs already representable, one output of the C evaluation
 acc = c0; acc += c_t * (b_t * d_t) for each term t differs from the exact value of
 the same equation by at most (first order in u)
 
-    u * ( |c0| + sum_t |c_t b_t d_t| (3 + a_t) + sum_t |s_t| ) + sum_t |c_t b_t| E_d(t)
+    u * ( |c0| + sum_t |c_t b_t d_t| (3 + a_t) + sum_t |s_t| ) + sum_i |sum_{t: d_t = d_i} c_t b_t| E_d(i)
 
 where b_t is the element power (a_t roundings to compute it: v^2 1, v^3 2, v^4 2,
 1/v 1, 1/v^2 2, 1/v^3 3, 1/v^4 3, sqrt 1, cbrt 2, fourth root 2), the 3 counts the
 coefficient's own rounding and the two products, s_t are the partial sums, and E_d
-is the bound of the displacement estimate a d-term multiplies. Python evaluates the
+is the bound of the displacement estimate a d-term multiplies. The last sum is taken
+per displacement before its absolute value (|sum_t c_t b_t| E_d): every term that
+multiplies the same displacement sees the same error of it. Python evaluates the
 same expression in double; its own error is the same formula with u = 2^-53.
 """
 
@@ -41,15 +43,18 @@ def error_bound(model: Model, inputs: np.ndarray, u: float) -> np.ndarray:
         acc = np.full(n, eq.intercept)
         partial = np.zeros(n)
         weighted = np.full(n, abs(eq.intercept))
-        prop = np.zeros(n)
+        # per displacement, the sum of c_t * b_t over the terms that multiply it: every such term sees
+        # the same error of that displacement, so its share is |sum c_t b_t| E_d, not sum |c_t b_t| E_d
+        slope = np.zeros((n, 3))
         for k, t in enumerate(eq.terms):
             acc = acc + coefs[k] * cols[:, k]
             partial += np.abs(acc)
             weighted += terms[:, k] * (3 + (POWER_ROUNDINGS[t.exponent] if t.element else 0))
             if t.mult:
                 i = DISPLACEMENTS.index(t.mult)
-                base = np.abs(element_powers(v[:, t.element - 1], t.exponent)) if t.element else 1.0
-                prop += abs(coefs[k]) * base * e_d[:, i]
+                base = element_powers(v[:, t.element - 1], t.exponent) if t.element else 1.0
+                slope[:, i] += coefs[k] * base
+        prop = np.sum(np.abs(slope) * e_d, axis=1)
         out[:, j] = u * (weighted + partial) + prop
         if eq.name in DISPLACEMENTS:
             i = DISPLACEMENTS.index(eq.name)
