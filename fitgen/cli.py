@@ -132,11 +132,10 @@ def _outputs(spec):
     return names
 
 
-def _scene_outputs(args, ds):
+def _scene_outputs(args, ds, sensor):
     """The outputs a scene asks for (--scene, or the scene the dataset was simulated for), after
-    checking that the sensor resolves them; None when no scene applies."""
+    checking that ``sensor`` (the dataset's, or None when unknown) resolves them; None when no scene applies."""
     from .scenes import load_scene, unresolved_warnings
-    from .sensor import load_sensor
 
     spec = args.scene or ds.meta.get("scene_spec")
     if spec is None:
@@ -148,12 +147,8 @@ def _scene_outputs(args, ds):
     if missing:
         raise InputError(f"scene {scene.name} asks for {missing[0]}, which dataset {args.data} does not have")
     if not args.force:
-        sensor_spec = args.sensor or ds.meta.get("sensor")
-        if sensor_spec is None:
+        if sensor is None:
             raise InputError("give --sensor (to check that it resolves the scene's outputs) or --force")
-        sensor = load_sensor(sensor_spec)
-        if ds.meta.get("transfer") in ("raw", "gmr"):
-            sensor = sensor.with_transfer(ds.meta["transfer"])
         bad = unresolved_warnings(sensor, scene)
         if bad:
             raise InputError(f"scene {scene.name}: sensor {sensor.name} cannot resolve {bad[0]} "
@@ -170,7 +165,8 @@ def cmd_fit(args) -> int:
 
     settings = _settings(args)
     ds = load_dataset(args.data)
-    outputs = _scene_outputs(args, ds) or _outputs(args.outputs) or ds.target_names
+    sensor = dataset_sensor(ds.meta, args.sensor)
+    outputs = _scene_outputs(args, ds, sensor) or _outputs(args.outputs) or ds.target_names
     bar = Progress("fit", len(outputs))
     state = {"name": None}
 
@@ -181,7 +177,6 @@ def cmd_fit(args) -> int:
             state["name"] = name
         bar.update(0, f"{name}: step {step}, {n_terms} terms, AIC {aic:.1f}")
 
-    sensor = dataset_sensor(ds.meta, args.sensor)
     with bar:
         model = fit_model(ds, outputs, settings, progress=progress, sensor=sensor)
     model.fit_info["dataset"] = str(args.data)

@@ -46,12 +46,13 @@ def box_of(poses: np.ndarray) -> dict[str, tuple[float, float]]:
 def held_out_set(sensor, ranges: dict, outputs: tuple[str, ...], *, noise: float | None = None, n: int = N_POSES,
                  seed: int = SEED, draws: int = NOISE_DRAWS) -> HeldOut:
     """``n`` random poses in ``ranges`` (pose seed ``seed``), simulated with ``sensor``; noise
-    draws with seeds seed + 1 .. seed + draws at ``noise`` (default: the sensor's)."""
+    draws with seeds seed + 1 .. seed + draws at ``noise`` (default: the sensor's; ``draws`` 0: none)."""
     noise = sensor.noise if noise is None else noise
     poses = random_poses(n, ranges, pose_rng(seed))
     cols = [POSE_NAMES.index(o) for o in outputs]
     clean = simulate(sensor, poses).inputs
-    noisy = np.vstack([simulate(sensor, poses, noise=noise, seed=seed + 1 + i).inputs for i in range(draws)])
+    noisy = np.vstack([clean[:0]] + [simulate(sensor, poses, noise=noise, seed=seed + 1 + i).inputs
+                                     for i in range(draws)])
     truth = poses[:, cols]
     spec = {"poses": n, "seed": seed, "box": {k: list(v) for k, v in ranges.items()}, "noise": noise,
             "noise_draws": draws, "noise_seeds": [seed + 1, seed + draws], "sensor": sensor.name,
@@ -125,7 +126,6 @@ def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] |
     sensor = sensor or dataset_sensor(rec)
     if sensor is None:
         return None
-    ranges = {k: tuple(v) for k, v in rec["box"].items()}
-    poses = random_poses(int(rec["poses"]), ranges, pose_rng(int(rec["seed"])))
-    cols = [POSE_NAMES.index(o) for o in model.output_names]
-    return simulate(sensor, poses).inputs, poses[:, cols]
+    held = held_out_set(sensor, {k: tuple(v) for k, v in rec["box"].items()}, model.output_names,
+                        n=int(rec["poses"]), seed=int(rec["seed"]), draws=0)
+    return held.clean, held.truth

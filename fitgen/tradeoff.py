@@ -266,7 +266,7 @@ class _Measure:
         folder = self.work / tag
         folder.mkdir()
         both = np.vstack([self.X, self.Xn])
-        header, bench_inputs, ref_inputs = {}, self.X, self.X
+        header, bench_inputs, ref_inputs = {}, self.X, None
         if precision == "double":
             res = {"ops": dict(cost.template_ops(model, style))}
             pred = model.predict(both)  # rounds as the generated double C does, term by term
@@ -288,8 +288,9 @@ class _Measure:
             # rounding's share is the arithmetic's: double on the values of the codes the C takes
             ref_inputs = fm.code_values(fm.codes_of(self.X))
             style = "table"  # not read by the fixed-point template
+        double = model.predict(self.X)
         res["errors"] = _errors(pred[: len(self.X)], self.Y, pred[len(self.X):], self.Yn, self.outputs,
-                                model.predict(self.X), model.predict(ref_inputs))
+                                double, double if ref_inputs is None else model.predict(ref_inputs))
         inputs_file = cost.write_inputs(bench_inputs, folder / "inputs.f64")
         binary = cost.build_bench(model, style, precision, False, folder / "bench", **header)
         ir = cost.instruction_counts(binary, inputs_file, folder / "bench", mix=False, repeat=False)
