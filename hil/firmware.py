@@ -24,8 +24,8 @@ COMMON_FILES = ("model_api.h", "proto.h", "proto.c", "cal.h", "cal.c", "device.h
 # where the inputs come from: simulated triangle waves, or the ADC drivers through a channel map
 SIM_FILES = ("inputs_sim.c",)
 ADC_FILES = ("adc.c", "inputs_adc.c", "i2c_bridge.c")
-PORT_FILES = {"posix": ("hal_posix.c",), "mps2": ("hal_mps2.c", "startup_mps2.c", "mps2_an386.ld"),
-              "microbit": ("hal_microbit.c", "startup_microbit.c", "microbit.ld")}
+PORT_FILES = {"posix": ("hal_posix.c",), "mps2": ("hal_mps2.c", "startup.h", "startup_mps2.c", "mps2_an386.ld"),
+              "microbit": ("hal_microbit.c", "startup.h", "startup_microbit.c", "microbit.ld")}
 BINARY = {"posix": "firmware", "mps2": "firmware.elf", "microbit": "firmware.elf"}
 DEFAULT_CC = {"posix": "gcc", "mps2": "arm-none-eabi-gcc", "microbit": "arm-none-eabi-gcc"}
 LINKER_SCRIPT = {"mps2": "mps2_an386.ld", "microbit": "microbit.ld"}

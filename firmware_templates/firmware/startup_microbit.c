@@ -1,14 +1,5 @@
 /* startup_microbit.c: vector table and reset handler for the Cortex-M0 of the nRF51822 (QEMU microbit). */
-#include <stdint.h>
-
-extern uint32_t _sidata; /* .data's image in flash */
-extern uint32_t _sdata;
-extern uint32_t _edata;
-extern uint32_t _sbss;
-extern uint32_t _ebss;
-extern uint32_t _estack;
-
-int main(int argc, char **argv);
+#include "startup.h"
 void Reset_Handler(void);
 void Default_Handler(void);
 void UART0_Handler(void);
@@ -50,22 +41,13 @@ __attribute__((section(".isr_vector"), used)) const vector_entry vector_table[16
 
 void Reset_Handler(void)
 {
-    uint32_t *src = &_sidata;
-    uint32_t *dst = &_sdata;
-    while (dst < &_edata) {
-        *dst++ = *src++;
-    }
-    for (dst = &_sbss; dst < &_ebss;) {
-        *dst++ = 0;
-    }
+    startup_init_memory();
     (void)main(0, 0);
     for (;;) {
     }
 }
 
-/* an unexpected exception is a firmware bug: stop here, where a debugger finds it */
 void Default_Handler(void)
 {
-    for (;;) {
-    }
+    startup_halt();
 }
