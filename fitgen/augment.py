@@ -41,7 +41,7 @@ _ROWS = 2048  # data rows per block of noise rows (each gives n_inputs rows)
 
 
 def noise_blocks(terms: list[Term], inputs: np.ndarray, sigma: float, d: np.ndarray | None = None,
-                 d_jac=None, rows: int = _ROWS) -> Iterator[np.ndarray]:
+                 d_jac=None, rows: int = _ROWS, harmonics=None) -> Iterator[np.ndarray]:
     """Blocks of rows [0, sigma * d(x)/d(v_k), 0] (m + 2 columns) for the terms' columns x.
 
     ``d_jac``: a function (lo, hi) -> the (hi - lo, 3, N) gradient of the displacement estimates ``d``
@@ -51,7 +51,7 @@ def noise_blocks(terms: list[Term], inputs: np.ndarray, sigma: float, d: np.ndar
     for lo in range(0, n, rows):
         hi = min(n, lo + rows)
         jac = design_jacobian(terms, inputs[lo:hi], None if d is None else d[lo:hi],
-                              None if d_jac is None else d_jac(lo, hi))
+                              None if d_jac is None else d_jac(lo, hi), harmonics)
         blk = np.zeros((jac.shape[0] * n_in, m + 2))
         blk[:, 1:-1] = sigma * jac.reshape(-1, m)
         yield blk

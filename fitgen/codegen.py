@@ -17,7 +17,7 @@ from .cgen import c_real, identifier
 from .errors import InputError
 from .fileio import write_atomic
 from .model import Model, float_domain
-from .terms import DISPLACEMENTS, EXPONENTS
+from .terms import DISPLACEMENTS, EXPONENTS, monomial_factors
 
 PRECISIONS = ("double", "float", "fixed")  # fixed: integer codes in, int32 out (fitgen/fixedpoint.py)
 STYLES = ("table", "unrolled")
@@ -32,11 +32,23 @@ _LIMIT = {"double": 1e15, "float": 1e30}
 
 @dataclass(frozen=True)
 class CTerm:
-    element: int  # 0-based input index, -1 for a bare displacement term
-    exp: str  # exponent code (P1..R4), "" for a bare displacement term
+    element: int  # 0-based input index, -1 for a bare displacement term, the monomial's index for a harmonic one
+    exp: str  # exponent code (P1..R4), "" for a bare displacement term, "HARM" for a harmonic monomial
     mult: int  # 0 none, 1 dx, 2 dy, 3 dz
     coef: str  # C literal
     text: str  # canonical term text, for comments
+
+
+@dataclass(frozen=True)
+class CHarmonic:
+    name: str  # symbol, a C identifier (hc1, hs1, ...)
+    terms: tuple[tuple[int, str], ...]  # (0-based input, weight literal) for the nonzero weights
+
+
+@dataclass(frozen=True)
+class CMonomial:
+    factors: tuple[str, ...]  # symbols multiplied left to right
+    text: str
 
 
 @dataclass(frozen=True)
@@ -66,6 +78,8 @@ class CModel:
     uses_d: bool
     input_units: str
     fma: bool  # each term added by fma(): one rounding instead of two
+    harmonics: tuple[CHarmonic, ...] = ()  # the ring's harmonics the monomials use (hr is always computed)
+    monomials: tuple[CMonomial, ...] = ()  # harmonic monomials, in order of first use
 
 
 def term_magnitudes(model: Model) -> dict[str, float]:
@@ -77,11 +91,15 @@ def term_magnitudes(model: Model) -> dict[str, float]:
     """
     lo, hi = model.input_min, model.input_max
     bound_d: dict[str, float] = {}
+    bound_h = model.harmonics.bounds(lo, hi) if model.harmonics is not None else {}
     out = {}
     for eq in model.equations:
         total = abs(eq.intercept)
         for t, c in zip(eq.terms, eq.coefficients):
             mag = 1.0
+            if t.harm:
+                for f in monomial_factors(t.harm):
+                    mag *= bound_h[f]
             if t.element:
                 a, b = lo[t.element - 1], hi[t.element - 1]
                 num, _, den = t.exponent.partition("/")
@@ -114,9 +132,15 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
     domain = float_domain(model) if precision == "float" else (model.input_min, model.input_max)
     outs = []
     needed = [set() for _ in range(model.n_inputs)]
+    monomials: list[str] = []
     for i, eq in enumerate(model.equations):
         terms = []
         for t, c in zip(eq.terms, eq.coefficients):
+            if t.harm:
+                if t.harm not in monomials:
+                    monomials.append(t.harm)
+                terms.append(CTerm(monomials.index(t.harm), "HARM", 0, c_real(c, precision), t.text))
+                continue
             if t.element:
                 needed[t.element - 1].add(t.exponent)
             terms.append(CTerm(t.element - 1, EXP_CODE[t.exponent] if t.element else "",
@@ -140,7 +164,17 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
         uses_d=any(e.uses_d for e in model.equations),
         input_units=model.input_units if model.input_units in ("mT", "V", "codes") else "units",
         fma=bool(fma),
+        harmonics=_c_harmonics(model, monomials, precision),
+        monomials=tuple(CMonomial(tuple(monomial_factors(h)), h) for h in monomials),
     )
+
+
+def _c_harmonics(model: Model, monomials: list[str], precision: str) -> tuple[CHarmonic, ...]:
+    used = {f for h in monomials for f in monomial_factors(h)}
+    if not monomials:
+        return ()
+    return tuple(CHarmonic(identifier(sym, "harmonic"), tuple((k, c_real(w, precision)) for k, w in enumerate(ws) if w != 0.0))
+                 for sym, ws in model.harmonics.weights if sym in used)
 
 
 def _env() -> jinja2.Environment:

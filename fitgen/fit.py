@@ -19,14 +19,16 @@ from .errors import InputError
 from .model import Equation, Model
 from .pose import POSE_NAMES
 from .stepwise import compress, refit, stepwise
-from .terms import DISPLACEMENTS, EXPONENTS, ROTATIONS, candidate_terms, design_jacobian, design_matrix, initial_terms
+from .terms import (DISPLACEMENTS, EXPONENTS, FAMILIES, HARMONIC_DEGREE, ROTATIONS, Harmonics, candidate_terms,
+                    design_jacobian, design_matrix, initial_terms)
 
 
 @dataclass(frozen=True)
 class FitSettings:
     """Knobs of the search: penalty per term ``k`` (2: AIC, log(n): BIC), a cap on terms,
-    the exponent family, whether rotations may use d-terms, where those d's come from, and what
-    the device adds: its reading noise and its precision (fitgen.augment)."""
+    the exponent family, the degree of the ring's harmonic monomials (0: none), whether rotations
+    may use d-terms, where those d's come from, and what the device adds: its reading noise and
+    its precision (fitgen.augment)."""
 
     k: float | str = 2.0
     max_terms: int | None = None
@@ -38,6 +40,14 @@ class FitSettings:
     noise: float | None = None
     # the precision the equations must survive (fitgen.augment.UNIT_ROUNDOFF); None: exact arithmetic
     precision: str | None = "float"
+    harmonic_degree: int = 0
+
+    @classmethod
+    def family(cls, name: str, **kw) -> "FitSettings":
+        """Settings with a named candidate family (fitgen.terms.FAMILIES)."""
+        if name not in FAMILIES:
+            raise InputError(f"unknown family {name!r} (families: {', '.join(FAMILIES)})")
+        return cls(exponents=FAMILIES[name], harmonic_degree=HARMONIC_DEGREE.get(name, 0), **kw)
 
     @classmethod
     def exact(cls, **kw) -> "FitSettings":
@@ -70,7 +80,7 @@ ROWS = 1 << 14  # rows per block: the candidate columns are never all in memory 
 
 def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | None, *,
                settings: FitSettings, positive: np.ndarray, progress=None, noise: float = 0.0,
-               d_jac=None) -> FittedOutput:
+               d_jac=None, harmonics: Harmonics | None = None) -> FittedOutput:
     """Choose and fit one output's equation; memory grows with the candidates, not with the rows.
 
     ``noise``: reading noise (rms) to add in expectation (fitgen.augment); ``d_jac``: a function
@@ -79,7 +89,8 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     """
     n, n_in = inputs.shape
     cands = candidate_terms(n_in, name, exponents=settings.exponents,
-                            d_terms=settings.d_terms and d is not None, positive=positive)
+                            d_terms=settings.d_terms and d is not None, positive=positive,
+                            harmonics=harmonics, harmonic_degree=settings.harmonic_degree)
     init_terms = [t for t in initial_terms(n_in, settings.exponents) if t in set(cands)]
     init = [cands.index(t) for t in init_terms]
     if n < len(init) + 3:
@@ -87,7 +98,7 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
                          f"for {name} with residual degrees of freedom; give at least {len(init) + 3} rows")
 
     def columns(lo, hi, terms=cands):
-        X = design_matrix(terms, inputs[lo:hi], None if d is None else d[lo:hi])
+        X = design_matrix(terms, inputs[lo:hi], None if d is None else d[lo:hi], harmonics)
         if not np.all(np.isfinite(X)):
             raise InputError(f"a candidate term for {name} is not finite on the data (an input too close to 0?)")
         return X
@@ -103,7 +114,7 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
         # from the data's own triangle, before the noise rows: rounding scales with the terms' sizes
         extra.append([rounding_rows(A, ROUNDING_FACTOR * UNIT_ROUNDOFF[settings.precision])])
     if noise > 0:
-        extra.append(noise_blocks(cands, inputs, noise, d, d_jac, rows=ROWS // 8))
+        extra.append(noise_blocks(cands, inputs, noise, d, d_jac, rows=ROWS // 8, harmonics=harmonics))
     if extra:
         A = compress(None, y[:0], extra=itertools.chain(*extra), start=A)
     res = stepwise(None, y, init, names=[t.text for t in cands], k=k, max_terms=cap, compressed=A, progress=progress)
@@ -151,15 +162,27 @@ def noise_to_add(ds: Dataset, settings: FitSettings, sensor=None) -> dict:
     return {"device": device, "device_source": source, "data": data, "added": added, "why": why}
 
 
-def _d_jacobian(equations, v: np.ndarray):
+def _d_jacobian(equations, v: np.ndarray, harmonics=None):
     """A function (lo, hi) -> the (hi - lo, 3, N) gradient of the displacement equations by the inputs."""
     def block(lo, hi):
         out = np.zeros((hi - lo, 3, v.shape[1]))
         for eq in equations:
-            out[:, DISPLACEMENTS.index(eq.name), :] = design_jacobian(list(eq.terms), v[lo:hi]) @ np.asarray(
-                eq.coefficients)
+            out[:, DISPLACEMENTS.index(eq.name), :] = design_jacobian(
+                list(eq.terms), v[lo:hi], harmonics=harmonics) @ np.asarray(eq.coefficients)
         return out
     return block
+
+
+def ring_harmonics(ds: Dataset, sensor=None) -> Harmonics:
+    """The harmonics of the dataset's sensor's ring: from each element's azimuth about the board's z axis."""
+    from .simulate import dataset_sensor
+
+    sensor = sensor or dataset_sensor(ds.meta)
+    if sensor is None:
+        raise InputError("the harmonics family needs the elements' positions: give --sensor (a preset or a TOML file)")
+    if sensor.n_elements != ds.n_inputs:
+        raise InputError(f"sensor {sensor.name} has {sensor.n_elements} elements; the data have {ds.n_inputs} inputs")
+    return Harmonics.from_azimuths(np.arctan2(sensor.positions[:, 1], sensor.positions[:, 0]))
 
 
 def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: FitSettings = FitSettings(),
@@ -183,13 +206,17 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
     v = ds.inputs
     lo, hi = v.min(axis=0), v.max(axis=0)
     positive = lo > 0
+    harmonics = ring_harmonics(ds, sensor) if settings.harmonic_degree > 0 else None
+    if harmonics is not None and not np.sum(lo) > 0:
+        raise InputError("the harmonics family divides by the readings' sum, which is not > 0 over the data's "
+                         f"domain (lowest {float(np.sum(lo)):.4g}): fit another family")
 
     fitted: dict[str, FittedOutput] = {}
     stage1 = [o for o in outputs if o in DISPLACEMENTS]
     for o in stage1:
         fitted[o] = fit_output(o, v, ds.target(o), None, settings=settings, positive=positive,
                                progress=progress and (lambda s, a, p, o=o: progress(o, s, a, p)),
-                               noise=noise["added"])
+                               noise=noise["added"], harmonics=harmonics)
     stage2 = [o for o in outputs if o in ROTATIONS]
     d = d_jac = None
     if stage2 and settings.d_terms and all(x in stage1 for x in DISPLACEMENTS):
@@ -197,14 +224,14 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
         if settings.d_source == "true":
             d = np.column_stack([ds.target(x) for x in DISPLACEMENTS])
         else:
-            d = Model(lo, hi, stage1_eqs).predict(v)
+            d = Model(lo, hi, stage1_eqs, harmonics=harmonics).predict(v)
         if noise["added"] > 0:
             # the device computes d from the same noisy readings, whatever d trained on
-            d_jac = _d_jacobian(stage1_eqs, v)
+            d_jac = _d_jacobian(stage1_eqs, v, harmonics)
     for o in stage2:
         fitted[o] = fit_output(o, v, ds.target(o), d, settings=settings, positive=positive,
                                progress=progress and (lambda s, a, p, o=o: progress(o, s, a, p)),
-                               noise=noise["added"], d_jac=d_jac)
+                               noise=noise["added"], d_jac=d_jac, harmonics=harmonics)
 
     info = {
         "generator": f"fitgen {__version__}",
@@ -222,7 +249,7 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
         "outputs": {o: fitted[o].info for o in outputs},
     }
     units = ds.meta.get("units", "mT")
-    model = Model(lo, hi, tuple(fitted[o].equation for o in outputs), units, info)
+    model = Model(lo, hi, tuple(fitted[o].equation for o in outputs), units, info, harmonics)
     # the errors of the model as the device computes it (rotations from estimated d's)
     pred = model.predict(v)
     for j, o in enumerate(outputs):

@@ -396,6 +396,9 @@ def build_fixed(model: Model, input_lsb: float, input_offset: float = 0.0) -> Fi
         raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most 30")
     for eq in model.equations:
         for t in eq.terms:
+            if t.harm:
+                raise InputError(f"fixed point has no harmonic terms (they divide by the readings' sum), but output "
+                                 f"{eq.name} has {t.text}: fit with --family no-roots (or integer)")
             if t.exponent and "/" in t.exponent:
                 raise InputError(f"fixed point takes integer powers only, but output {eq.name} has the root "
                                  f"{t.text}: fit with --family no-roots (or integer)")

@@ -1,11 +1,13 @@
 """The fitted model: a small typed object that the Python evaluator and the C templates both read.
 
-Model files are JSON (``schema_version`` 1): the input domain, per output its terms
-(canonical text), coefficients and intercept, and how and on what it was fitted.
+Model files are JSON (``schema_version`` 1): the input domain (and, for harmonic terms, the
+ring's harmonic weights), per output its terms (canonical text), coefficients and intercept,
+and how and on what it was fitted.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
@@ -18,7 +20,7 @@ from .errors import InputError
 from .fileio import canonical_json, read_text, sha256_hex, write_atomic
 from .fma import fma as fused_multiply_add
 from .pose import POSE_NAMES, POSE_UNITS
-from .terms import DISPLACEMENTS, Term, design_matrix, parse_term
+from .terms import DISPLACEMENTS, Harmonics, Term, design_matrix, monomial_factors, parse_term
 
 SCHEMA_VERSION = 1
 STATUS_NONFINITE = -1
@@ -52,6 +54,7 @@ class Model:
     equations: tuple[Equation, ...]
     input_units: str = "mT"
     fit_info: dict = field(default_factory=dict)
+    harmonics: Harmonics | None = None  # the ring's, when a term uses them
 
     def __post_init__(self):
         self.input_min = np.asarray(self.input_min, dtype=float)
@@ -111,7 +114,7 @@ class Model:
                 raise InputError("the float emulation has no fused multiply-add")
             lo, hi = float_domain(self)
             f32 = np.asarray(inputs, dtype=float).astype(np.float32).astype(float)
-            v, status = Model(lo, hi, self.equations, self.input_units).clamp(f32)
+            v, status = dataclasses.replace(self, input_min=lo, input_max=hi, fit_info={}).clamp(f32)
             dtype = np.float32
         elif precision == "double":
             v, status = self.clamp(inputs)
@@ -122,7 +125,7 @@ class Model:
         out = np.zeros((v.shape[0], len(self.equations)))
         d = np.zeros((v.shape[0], 3), dtype=dtype)
         for j, eq in enumerate(self.equations):
-            cols = design_matrix(list(eq.terms), v, d).astype(dtype, copy=False)
+            cols = design_matrix(list(eq.terms), v, d, self.harmonics).astype(dtype, copy=False)
             # summed term by term in model order, as the generated C does, so that both round alike
             acc = np.full(v.shape[0], eq.intercept, dtype=dtype)
             for c, col in zip(np.asarray(eq.coefficients, dtype=dtype), cols.T):
@@ -135,16 +138,24 @@ class Model:
 
     # --- files -------------------------------------------------------------------
 
+    def with_domain(self, lo, hi) -> "Model":
+        """The same equations (and harmonics) on another input domain, without the fit notes."""
+        return dataclasses.replace(self, input_min=np.asarray(lo, dtype=float), input_max=np.asarray(hi, dtype=float),
+                                   fit_info={})
+
     def to_dict(self) -> dict:
+        inputs = {
+            "names": [f"v{k}" for k in range(1, self.n_inputs + 1)],
+            "units": self.input_units,
+            "min": self.input_min.tolist(),
+            "max": self.input_max.tolist(),
+        }
+        if self.harmonics is not None:
+            inputs["harmonics"] = self.harmonics.to_dict()
         return {
             "schema_version": SCHEMA_VERSION,
             "generator": f"fitgen {__version__}",
-            "inputs": {
-                "names": [f"v{k}" for k in range(1, self.n_inputs + 1)],
-                "units": self.input_units,
-                "min": self.input_min.tolist(),
-                "max": self.input_max.tolist(),
-            },
+            "inputs": inputs,
             "outputs": [
                 {"name": e.name, "unit": e.unit, "intercept": e.intercept,
                  "terms": [t.text for t in e.terms], "coefficients": list(e.coefficients)}
@@ -204,6 +215,8 @@ def model_from_dict(data, origin: str = "model") -> Model:
         lo = [_number(x, f"{origin}: inputs.min") for x in inputs["min"]]
         hi = [_number(x, f"{origin}: inputs.max") for x in inputs["max"]]
         units = inputs.get("units", "mT")
+        harmonics = (None if "harmonics" not in inputs
+                     else Harmonics.from_dict(inputs["harmonics"], len(lo), origin))
         eqs = []
         for i, o in enumerate(data["outputs"]):
             where = f"{origin}: outputs[{i}]"
@@ -217,7 +230,7 @@ def model_from_dict(data, origin: str = "model") -> Model:
     if not isinstance(units, str):
         raise InputError(f"{origin}: inputs.units must be a string")
     fit = data.get("fit", {})
-    return Model(np.array(lo), np.array(hi), tuple(eqs), units, fit if isinstance(fit, dict) else {})
+    return Model(np.array(lo), np.array(hi), tuple(eqs), units, fit if isinstance(fit, dict) else {}, harmonics)
 
 
 def _validate(m: Model, origin: str) -> None:
@@ -240,12 +253,22 @@ def _validate(m: Model, origin: str) -> None:
         if len(set(e.terms)) != len(e.terms):
             raise InputError(f"{origin}: output {e.name} lists a term twice")
         for t in e.terms:
+            if t.harm:
+                if m.harmonics is None:
+                    raise InputError(f"{origin}: output {e.name} term {t.text} needs inputs.harmonics")
+                missing = [f for f in monomial_factors(t.harm) if f not in m.harmonics.symbols]
+                if missing:
+                    raise InputError(f"{origin}: output {e.name} term {t.text}: the ring has no {missing[0]}")
+                if not np.sum(m.input_min) > 0:
+                    raise InputError(f"{origin}: output {e.name} term {t.text} needs the inputs' sum > 0, "
+                                     f"but the domain's lowest sum is {float(np.sum(m.input_min))!r}")
+                continue
             if t.element > m.n_inputs:
                 raise InputError(f"{origin}: output {e.name} term {t.text} refers to input v{t.element}; "
                                  f"the model has {m.n_inputs}")
             if t.needs_positive and not m.input_min[t.element - 1] > 0:
                 raise InputError(f"{origin}: output {e.name} term {t.text} needs v{t.element} > 0, "
-                                 f"but its domain starts at {m.input_min[t.element - 1]!r}")
+                                 f"but its domain starts at {float(m.input_min[t.element - 1])!r}")
             if t.mult and (t.mult not in names or names.index(t.mult) > names.index(e.name)):
                 raise InputError(f"{origin}: output {e.name} term {t.text} needs output {t.mult} "
                                  "computed before it")

@@ -33,11 +33,11 @@ from .model import Model
 from .pose import POSE_NAMES, POSE_UNITS
 from .scenes import Scene, unresolved_warnings
 from .simulate import pose_rng, random_poses, simulate
-from .terms import FAMILIES
 
 K_VALUES = ("aic", "bic", 6.0)
 CAPS = (None, 20, 8)
-FAMILY_NAMES = ("all", "no-roots", "integer")
+FAMILY_NAMES = ("all", "no-roots", "integer", "harmonics")
+NO_FIXED = ("harmonics",)  # families fixed point cannot generate (their terms divide)
 PRECISIONS = ("double", "float", "fixed")
 STYLES = ("table", "unrolled")
 FIXED_STYLE = "-"  # the fixed-point header is straight-line code: the style knob does not apply
@@ -70,17 +70,23 @@ class Knobs:
 
     def settings(self) -> FitSettings:
         k = 2.0 if self.k == "aic" else self.k
-        return FitSettings(k=k, max_terms=self.max_terms, exponents=FAMILIES[self.family])
+        return FitSettings.family(self.family, k=k, max_terms=self.max_terms)
 
 
 def _styles(precision: str) -> tuple[str, ...]:
     return (FIXED_STYLE,) if precision == "fixed" else STYLES
 
 
+def _possible(points: list[Knobs]) -> list[Knobs]:
+    return [k for k in points if not (k.precision == "fixed" and k.family in NO_FIXED)]
+
+
 def full_grid() -> list[Knobs]:
-    """Every combination: 3 penalties x 3 caps x 3 families x (double, float in 2 styles; fixed) = 135 points."""
-    return [Knobs(k, cap, fam, p, s) for k, cap, fam, p in itertools.product(K_VALUES, CAPS, FAMILY_NAMES, PRECISIONS)
-            for s in _styles(p)]
+    """Every combination: 3 penalties x 3 caps x (3 families x (double, float in 2 styles; fixed) and
+    harmonics x (double, float in 2 styles)) = 171 points."""
+    return _possible([Knobs(k, cap, fam, p, s)
+                      for k, cap, fam, p in itertools.product(K_VALUES, CAPS, FAMILY_NAMES, PRECISIONS)
+                      for s in _styles(p)])
 
 
 def quick_grid() -> list[Knobs]:
@@ -91,15 +97,15 @@ def quick_grid() -> list[Knobs]:
            for k, cap, fam, p in itertools.product(("aic", "bic"), CAPS, FAMILY_NAMES, PRECISIONS)]
     pts += [Knobs("aic", None, "all", p, "table") for p in PRECISIONS if p != "fixed"]
     pts += [Knobs(6.0, None, fam, p, _styles(p)[-1]) for fam in ("all", "integer") for p in PRECISIONS]
-    return pts
+    return _possible(pts)
 
 
 def grid_from(k=None, max_terms=None, family=None, precision=None, style=None) -> list[Knobs]:
     """The product of the given value lists, each knob not given taking all its values."""
     ks, caps = k or K_VALUES, max_terms or CAPS
     fams, precs, styles = family or FAMILY_NAMES, precision or PRECISIONS, style or STYLES
-    return [Knobs(kk, cap, fam, p, s) for kk, cap, fam, p in itertools.product(ks, caps, fams, precs)
-            for s in (_styles(p) if p == "fixed" else styles)]
+    return _possible([Knobs(kk, cap, fam, p, s) for kk, cap, fam, p in itertools.product(ks, caps, fams, precs)
+                      for s in (_styles(p) if p == "fixed" else styles)])
 
 
 def parse_knob_list(name: str, spec: str) -> list:

@@ -28,6 +28,7 @@ import numpy as np
 
 from fitgen.codegen import write_header
 from fitgen.model import Model
+from fitgen.terms import monomial_factors
 from host.compiled import compile_checked
 
 NVEC = 4096
@@ -200,9 +201,22 @@ def template_ops(model: Model, style: str, fold_one: bool = False) -> Counter:
     1/v^k one division each; ^1/2 sqrt, ^1/3 cbrt, ^1/4 two sqrt. table: v2 = v*v for every
     input; each of ^3, ^-3 (^4, ^-4) computes its own v2*v (v2*v2). Per term: coefficient *
     (base * d) and one add; ``fold_one`` drops the base * 1 (or 1 * d) multiply gcc folds away
-    in the unrolled style. Clamp: isfinite and 2 compares per input.
+    in the unrolled style. Clamp: isfinite and 2 compares per input. Harmonic terms: the ring's
+    sum (N - 1 adds) and its reciprocal (1 division), per harmonic used one multiply and add per
+    nonzero weight and one multiply by 1/sum, per monomial one multiply per factor after the first.
     """
     ops = Counter()
+    monomials = {t.harm for eq in model.equations for t in eq.terms if t.harm}
+    if monomials:
+        used = {f for text in monomials for f in monomial_factors(text)}
+        ops["add"] += model.n_inputs - 1
+        ops["div"] += 1
+        for sym, w in model.harmonics.weights:
+            if sym in used:
+                n_w = sum(1 for x in w if x != 0.0)
+                ops["mul"] += n_w + 1
+                ops["add"] += n_w - 1
+        ops["mul"] += sum(len(monomial_factors(text)) - 1 for text in monomials)
     for need in needs(model):
         if not need:
             if style == "table":

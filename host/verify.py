@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -196,7 +197,7 @@ def compare(model: Model, compiled: CompiledModel, inputs: np.ndarray, held_out=
         # the C takes float inputs and clamps into the float-rounded domain: so does the reference
         inputs = inputs.astype(np.float32).astype(float)
         lo, hi = float_domain(model)
-        ref_model = Model(lo, hi, model.equations, model.input_units, model.fit_info)
+        ref_model = dataclasses.replace(model, input_min=lo, input_max=hi)
         u, slack = U_FLOAT, 1.0
     else:
         ref_model, u, slack = model, U_DOUBLE, DOUBLE_SLACK

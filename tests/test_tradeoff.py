@@ -73,7 +73,9 @@ def test_recommend_when_nothing_meets_names_the_most_accurate():
 
 def test_grids():
     full = full_grid()
-    assert len(full) == len(set(full)) == 3 * 3 * 3 * (2 + 2 + 1)
+    # 3 penalties x 3 caps x (3 families x (double, float: 2 styles each; fixed) + harmonics without fixed)
+    assert len(full) == len(set(full)) == 3 * 3 * (3 * (2 + 2 + 1) + (2 + 2))
+    assert not any(k.family == "harmonics" and k.precision == "fixed" for k in full + quick_grid())
     assert set(quick_grid()) <= set(full)
     assert {k.style for k in full if k.precision == "fixed"} == {"-"}
     assert grid_from(k=["aic"], max_terms=[None], family=["integer"], precision=["float"]) == [
