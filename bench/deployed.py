@@ -31,6 +31,8 @@ Flows (models), per configuration (layout x transfer):
 3. `default`: FitSettings() (noise and float rounding in expectation).
 4. `replicas`: the noisy-replica baseline above (double is its reference).
 5. `fixed target`: FitSettings(precision="fixed", exponents=FAMILIES["no-roots"]).
+6. `harmonics`: FitSettings.family("harmonics") (the default's noise and float rounding, with the
+   ring's harmonic monomials among the candidates; no fixed point).
 
 Measured, per flow x precision x output:
 
@@ -93,6 +95,7 @@ FLOWS = (
     ("default", FitSettings(), ("double", "float")),
     ("replicas", "replicas", ("double", "float")),
     ("fixed target", FitSettings(precision="fixed", exponents=FAMILIES["no-roots"]), ("fixed", "float")),
+    ("harmonics", FitSettings.family("harmonics"), ("double", "float")),
 )
 FIXED_FLOWS = tuple(name for name, _, precs in FLOWS if "fixed" in precs)
 

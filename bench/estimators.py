@@ -21,6 +21,8 @@ Setting (deterministic), per layout (`paper`, `ring-vertical`; transfer raw):
 Methods:
 
 1. `ours`: fit_model(train) with the default FitSettings() (noise- and float-aware stepwise AIC).
+   `ours, harmonics`: the same search with the harmonics family (FitSettings.family("harmonics"):
+   the paper's powers and monomials up to degree 3 of the ring's harmonics), AIC, BIC and caps.
 2. `lasso-aic`, `lasso-bic`: scikit-learn LassoLarsIC per output on the same candidate columns
    (fitgen.terms.candidate_terms + design_matrix; columns standardised, coefficients mapped back
    to raw columns and intercept); thx, thy get the d-terms from the same method's stage-1
@@ -101,6 +103,12 @@ MLPS = (("mlp 64-64 tanh", (64, 64), "tanh"), ("mlp 16-16 tanh", (16, 16), "tanh
 MLP_MAX_ITER = 3000
 OURS_VARIANTS = (("ours, BIC", FitSettings(k="bic")), ("ours, max 25 terms", FitSettings(max_terms=25)),
                  ("ours, max 10 terms", FitSettings(max_terms=10)))
+# the same search with the ring's harmonic monomials among the candidates (fitgen.terms.Harmonics)
+HARMONIC_VARIANTS = (("ours, harmonics (AIC)", FitSettings.family("harmonics")),
+                     ("ours, harmonics, BIC", FitSettings.family("harmonics", k="bic")),
+                     ("ours, harmonics, max 30 terms", FitSettings.family("harmonics", max_terms=30)),
+                     ("ours, harmonics, max 15 terms", FitSettings.family("harmonics", max_terms=15)),
+                     ("ours, harmonics, max 8 terms", FitSettings.family("harmonics", max_terms=8)))
 
 
 class Result:
@@ -420,7 +428,11 @@ class Layout:
         for name, settings in OURS_VARIANTS:
             self.results.append(Result(name, "ours", model=fit_model(self.train, settings=settings,
                                                                      sensor=self.sensor)))
-        log(f"{self.name}: ours fitted, {1 + len(OURS_VARIANTS)} settings ({time.monotonic() - t:.1f} s)")
+        for name, settings in HARMONIC_VARIANTS:
+            self.results.append(Result(name, "harmonics", model=fit_model(self.train, settings=settings,
+                                                                          sensor=self.sensor)))
+        log(f"{self.name}: ours fitted, {1 + len(OURS_VARIANTS) + len(HARMONIC_VARIANTS)} settings "
+            f"({time.monotonic() - t:.1f} s)")
         sizes = {e.name: len(e.terms) for e in ours.model.equations}
         for crit in ("aic", "bic"):
             for relaxed in (False, True):
@@ -602,7 +614,8 @@ def plot(layouts: list[Layout], folder: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    styles = {"ours": ("o", "C0", "ours (stepwise, AIC/BIC/caps)"), "lasso": ("s", "C1", "LassoLarsIC (+ relaxed)"),
+    styles = {"ours": ("o", "C0", "ours (stepwise, AIC/BIC/caps)"),
+              "harmonics": ("*", "C5", "ours, harmonics family (AIC/BIC/caps)"), "lasso": ("s", "C1", "LassoLarsIC (+ relaxed)"),
               "abess": ("D", "C2", "abess best subset"), "mlp": ("^", "C3", "MLP (float C)")}
     fig, axes = plt.subplots(2, len(layouts), figsize=(6.5 * len(layouts), 9), squeeze=False)
     for col, L in enumerate(layouts):
@@ -619,7 +632,8 @@ def plot(layouts: list[Layout], folder: Path) -> Path:
                 ax.scatter(r.instructions, min(y, top / 1.15), marker="^" if off else m, color=c, s=45, zorder=3,
                            label=None if r.family in seen else label, facecolors="none" if off else c)
                 seen.add(r.family)
-                tag = r.name.split(" (")[0].replace("lasso-", "").replace("ours, ", "").replace("mlp ", "")
+                tag = (r.name.split(" (")[0].replace("lasso-", "").replace("ours, ", "").replace("mlp ", "")
+                       .replace("harmonics, ", "h ").replace("harmonics", "h"))
                 if off:
                     tag += f" (off scale: {fmt(y)})"
                 ax.annotate(tag, (r.instructions, min(y, top / 1.15)), fontsize=6.5, xytext=(4, -8 if off else 3),

@@ -10,6 +10,9 @@ from .cliutil import EXIT_CHECK_FAILED, Parser, parse_assignments, run
 from .errors import InputError
 from .pose import POSE_NAMES
 
+# fitgen.terms.FAMILIES (not imported here: the parser stays light)
+FAMILY_CHOICES = ("auto", "all", "no-roots", "integer", "harmonics")
+
 
 def _sensor(args):
     from .sensor import load_sensor
@@ -93,7 +96,7 @@ def cmd_observe(args) -> int:
 
 def _settings(args):
     from .fit import FitSettings
-    from .terms import FAMILIES
+    from .terms import FAMILIES, HARMONIC_DEGREE
 
     if args.k in ("aic", "bic"):
         k = 2.0 if args.k == "aic" else "bic"
@@ -117,7 +120,9 @@ def _settings(args):
             raise InputError(f"--noise must be a finite number >= 0, got {args.noise}")
     # --noise 0 alone is the paper's procedure (what R's step() computes): no rounding term either
     precision = args.precision or ("exact" if noise == 0 else "float")
-    return FitSettings(k=k, max_terms=args.max_terms, exponents=FAMILIES[args.family],
+    family = "all" if args.family == "auto" else args.family  # auto: fitgen.family chooses
+    return FitSettings(k=k, max_terms=args.max_terms, exponents=FAMILIES[family],
+                       harmonic_degree=HARMONIC_DEGREE.get(family, 0),
                        d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated",
                        noise=noise, precision=None if precision == "exact" else precision)
 
@@ -167,7 +172,9 @@ def cmd_fit(args) -> int:
     ds = load_dataset(args.data)
     sensor = dataset_sensor(ds.meta, args.sensor)
     outputs = _scene_outputs(args, ds, sensor) or _outputs(args.outputs) or ds.target_names
-    bar = Progress("fit", len(outputs))
+    # --noise 0 is the paper's procedure: the paper's power kinds too, unless a family is named
+    auto = args.family == "auto" and settings.noise != 0
+    bar = Progress("fit", len(outputs) * (2 if auto and sensor is not None else 1))
     state = {"name": None}
 
     def progress(name, step, aic, n_terms):
@@ -178,7 +185,15 @@ def cmd_fit(args) -> int:
         bar.update(0, f"{name}: step {step}, {n_terms} terms, AIC {aic:.1f}")
 
     with bar:
-        model = fit_model(ds, outputs, settings, progress=progress, sensor=sensor)
+        if auto:
+            from .family import fit_auto
+
+            model, family = fit_auto(ds, outputs, settings, sensor, progress=progress)
+        else:
+            model = fit_model(ds, outputs, settings, progress=progress, sensor=sensor)
+            family = ({"name": args.family, "auto": False} if args.family != "auto" else
+                      {"name": "all", "auto": True, "why": "--noise 0: the paper's procedure"})
+    model.fit_info["family"] = family
     model.fit_info["dataset"] = str(args.data)
     if args.held_out and sensor is not None:
         from .holdout import box_of, evaluate
@@ -343,6 +358,8 @@ def cmd_tradeoff(args) -> int:
     scene = load_scene(args.scene)
     target = parse_target(args.target, scene.outputs)
     grid = grid_from(**knobs) if args.full or knobs else quick_grid()
+    if not grid:
+        raise InputError("nothing to sweep: fixed point has no harmonics family (pick another --family or --precision)")
     bar = Progress("tradeoff", len(grid))
     if not 0 < args.max_share < 1e6:
         raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
@@ -400,8 +417,10 @@ def build_parser() -> Parser:
     f.add_argument("--outputs", help="comma-separated outputs to fit (default: every pose column of the data)")
     f.add_argument("--k", default="aic", help="penalty per term: aic (2), bic (log n) or a number")
     f.add_argument("--max-terms", type=int, help="cap on terms per equation")
-    f.add_argument("--family", default="all", choices=("all", "no-roots", "integer"),
-                   help="candidate exponents: all 11 kinds, no-roots, or integer (v^1..v^4 only)")
+    f.add_argument("--family", default="auto", choices=FAMILY_CHOICES,
+                   help="candidates: all 11 power kinds, no-roots, integer (v^1..v^4 only), harmonics (all 11 "
+                        "and monomials of the ring's harmonics up to degree 3; needs the sensor), or auto (default: "
+                        "all or harmonics, whichever is more accurate on validation poses; all without a sensor)")
     f.add_argument("--no-d-terms", action="store_true", help="rotations without the displacement terms")
     f.add_argument("--true-d", action="store_true",
                    help="rotation d-terms from the true displacements instead of the fitted estimates")
@@ -459,7 +478,8 @@ def build_parser() -> Parser:
                    help="every combination of the knobs (135 points) instead of the quick subset")
     t.add_argument("--k", help="sweep only these penalties per term, e.g. aic,bic,6 (all: aic,bic,6)")
     t.add_argument("--max-terms", help="sweep only these caps, e.g. none,8 (all: none,20,8)")
-    t.add_argument("--family", help="sweep only these families (all: all,no-roots,integer)")
+    t.add_argument("--family", help="sweep only these families (all: all,no-roots,integer,harmonics; harmonics has "
+                   "no fixed point)")
     t.add_argument("--precision", help="sweep only these precisions (all: double,float,fixed)")
     t.add_argument("--style", help="sweep only these code styles (all: table,unrolled; fixed point has one)")
     t.add_argument("--seed", type=int, default=0, help="held-out poses and noise draws (default 0)")

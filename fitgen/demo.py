@@ -18,6 +18,7 @@ def run_demo(out: Path) -> int:
     from .observe import observe
     from .scenes import PRESETS
     from .sensor import load_sensor
+    from .family import fit_auto
     from .fit import FitSettings, fit_model
     from .holdout import box_of, deployed_errors, held_out_set
     from .report import format_report
@@ -57,8 +58,10 @@ def run_demo(out: Path) -> int:
     print(f"   full report -> {out / 'paper-report.md'}")
 
     t = _stage(f"4. the device's model: fitted for the sensor's noise ({sensor.noise:g} {sensor.units} rms) and "
-               "float arithmetic, judged as deployed")
-    model = fit_model(train, progress=_fit_progress())
+               "float arithmetic, candidates as `fitgen fit` chooses them (family auto), judged as deployed")
+    model, family = fit_auto(train, None, FitSettings(), sensor, progress=_fit_progress())
+    model.fit_info["family"] = family
+    print(f"   candidates: family {family['name']} ({family['why']})")
     model.fit_info["dataset"] = str(out / "paper-sim.csv")
     held = held_out_set(sensor, box_of(train.poses()), model.output_names)
     model.fit_info["held_out"] = {**held.spec, "errors": deployed_errors(model, held, sensor)}

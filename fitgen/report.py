@@ -50,8 +50,12 @@ def fit_assumptions(info: dict) -> str:
     dev = "unknown" if noise.get("device") is None else f"{noise['device']:g}"
     data = "measured (carry their own)" if noise.get("data") is None else f"{noise['data']:g}"
     target = prec.get("target") or "exact arithmetic"
-    return (f"fitted for: reading noise {dev} rms ({noise.get('device_source', '?')}), data's own noise {data}, "
+    line = (f"fitted for: reading noise {dev} rms ({noise.get('device_source', '?')}), data's own noise {data}, "
             f"added in expectation {noise.get('added', 0):g}; precision {target}")
+    fam = info.get("family")
+    if isinstance(fam, dict) and "name" in fam:
+        line += f"\ncandidates: family {fam['name']}" + (f" (auto: {fam.get('why', '')})" if fam.get("auto") else "")
+    return line
 
 
 def deployed_table(model: Model) -> str:

@@ -1,6 +1,7 @@
 """What runs on the device is as accurate as what the fit reports: noise- and precision-aware fitting,
 the float emulation against gcc, held-out figures in the model file, and verify's rounding gate."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -161,12 +162,12 @@ def test_float_emulation_is_bit_identical_to_gcc():
 
 @pytest.fixture(scope="module")
 def fitted_files(tmp_path_factory):
-    """ring-vertical's paper-sim grid, fitted the paper's way (--noise 0) and the default way."""
+    """ring-vertical's paper-sim grid, fitted the paper's way (--noise 0, the paper's power kinds) and the default way."""
     folder = tmp_path_factory.mktemp("deployed")
     proc = run_cli("fitgen", "simulate", "--sensor", "ring-vertical", "--grid", "paper-sim", "-o",
                    str(folder / "sim.csv"))
     assert proc.returncode == 0, proc.stderr
-    for name, extra in (("exact", ["--noise", "0"]), ("default", [])):
+    for name, extra in (("exact", ["--noise", "0", "--family", "all"]), ("default", [])):
         proc = run_cli("fitgen", "fit", str(folder / "sim.csv"), "-o", str(folder / f"{name}.json"), *extra)
         assert proc.returncode == 0, proc.stderr
     return folder
@@ -228,9 +229,8 @@ def test_clean_readings_needs_a_known_sensor(fitted_files):
     from fitgen.model import load_model
 
     model = load_model(fitted_files / "default.json")
-    assert clean_readings(Model(model.input_min, model.input_max, model.equations)) is None  # no record
-    foreign = Model(model.input_min, model.input_max, model.equations, fit_info={
-        "held_out": {**model.fit_info["held_out"], "sensor": "my-own-sensor"}})
+    assert clean_readings(dataclasses.replace(model, fit_info={})) is None  # no record
+    foreign = dataclasses.replace(model, fit_info={"held_out": {**model.fit_info["held_out"], "sensor": "my-own-sensor"}})
     assert clean_readings(foreign) is None
     assert clean_readings(foreign, load_sensor("ring-vertical")) is not None  # named by the user
 

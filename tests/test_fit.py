@@ -22,7 +22,7 @@ def paper_fit(tmp_path_factory):
     folder = tmp_path_factory.mktemp("fit")
     ds = simulate(PAPER, grid_poses(PAPER_GRIDS["paper-sim"]))
     ds.save(folder / "sim.csv")
-    proc = run_cli("fitgen", "fit", str(folder / "sim.csv"), "-o", str(folder / "m.json"))
+    proc = run_cli("fitgen", "fit", str(folder / "sim.csv"), "-o", str(folder / "m.json"), "--family", "all")
     assert proc.returncode == 0, proc.stderr
     return folder, ds, load_model(folder / "m.json")
 

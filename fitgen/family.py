@@ -1,0 +1,58 @@
+"""The candidate family ``auto``: fit the paper's powers and the harmonics family, keep the one more
+accurate as deployed on validation poses.
+
+Validation poses are random poses in the training box, simulated with the sensor and its noise
+(seed VALIDATION_SEED, not the held-out seed of fitgen.holdout), evaluated in float as the device
+computes: the figures the model file reports stay held out from this choice. The harmonics family
+wins when the geometric mean over outputs of its noisy RMS error over the powers' is below 1.
+It is not tried when the elements' positions are unknown or the readings' sum is not > 0.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .dataset import Dataset
+from .fit import FitSettings, fit_model
+from .holdout import box_of, held_out_set
+from .model import Model
+from .terms import FAMILIES, HARMONIC_DEGREE
+
+VALIDATION_SEED = 7919
+VALIDATION_POSES = 1000
+VALIDATION_DRAWS = 2
+CANDIDATES = ("all", "harmonics")
+
+
+def with_family(settings: FitSettings, name: str) -> FitSettings:
+    return dataclasses.replace(settings, exponents=FAMILIES[name], harmonic_degree=HARMONIC_DEGREE.get(name, 0))
+
+
+def validation_rms(model: Model, sensor, ranges: dict) -> dict[str, float]:
+    """Per output: RMS error of the float evaluation on noisy validation readings."""
+    val = held_out_set(sensor, ranges, model.output_names, n=VALIDATION_POSES, seed=VALIDATION_SEED,
+                       draws=VALIDATION_DRAWS)
+    err = model.predict(val.noisy, precision="float") - val.noisy_truth
+    return {o: float(np.sqrt(np.mean(err[:, j] ** 2))) for j, o in enumerate(model.output_names)}
+
+
+def fit_auto(ds: Dataset, outputs, settings: FitSettings, sensor, progress=None) -> tuple[Model, dict]:
+    """The model of the better family, and the record of the choice (``fit_info["family"]``)."""
+    if sensor is None or sensor.n_elements != ds.n_inputs:
+        return fit_model(ds, outputs, with_family(settings, "all"), progress, sensor), {
+            "name": "all", "auto": True, "why": "the elements' positions are unknown (no sensor)"}
+    if not np.sum(ds.inputs.min(axis=0)) > 0:
+        return fit_model(ds, outputs, with_family(settings, "all"), progress, sensor), {
+            "name": "all", "auto": True, "why": "the readings' sum is not > 0 over the data's domain"}
+    models = {f: fit_model(ds, outputs, with_family(settings, f), progress, sensor) for f in CANDIDATES}
+    ranges = box_of(ds.poses())
+    rms = {f: validation_rms(m, sensor, ranges) for f, m in models.items()}
+    ratio = float(np.exp(np.mean([np.log(rms["harmonics"][o] / rms["all"][o]) for o in rms["all"]])))
+    name = "harmonics" if ratio < 1 else "all"
+    return models[name], {
+        "name": name, "auto": True,
+        "why": f"validation ({VALIDATION_POSES} poses, seed {VALIDATION_SEED}, {VALIDATION_DRAWS} noise draws, float): "
+               f"harmonics' RMS error {ratio:.3g}x the powers' (geometric mean over outputs)",
+        "validation_rms": rms}

@@ -1,0 +1,226 @@
+"""The harmonics family: the ring's harmonics as candidate terms, through the fit, the model file,
+the generated C (gcc), the error bound, the refusals, and the firmware on the emulated Cortex-M4."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fitgen.calblob import to_blob
+from fitgen.codegen import render_header, term_magnitudes
+from fitgen.errors import InputError
+from fitgen.fit import FitSettings, fit_model
+from fitgen.holdout import held_out_set
+from fitgen.model import load_model, model_from_dict
+from fitgen.precision import U_FLOAT, error_bound
+from fitgen.sensor import load_sensor
+from fitgen.pose import POSE_NAMES
+from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, simulate
+from fitgen.terms import (Harmonics, Term, candidate_terms, design_jacobian, design_matrix, harmonic_monomials,
+                          parse_term)
+from host.compiled import CompiledModel
+from host.cost import template_ops
+
+from conftest import assert_one_line_error, require_tool, run_cli
+
+RING = load_sensor("ring-vertical")
+PAPER = load_sensor("paper")
+
+
+def _azimuths(sensor):
+    return np.arctan2(sensor.positions[:, 1], sensor.positions[:, 0])
+
+
+@pytest.fixture(scope="module")
+def train():
+    return simulate(RING, grid_poses(PAPER_GRIDS["paper-sim"]))
+
+
+@pytest.fixture(scope="module")
+def harmonic_model(train):
+    return fit_model(train, settings=FitSettings.family("harmonics"), sensor=RING)
+
+
+@pytest.fixture(scope="module")
+def held_out():
+    h = held_out_set(RING, DEFAULT_RANGES, POSE_NAMES, draws=0)
+    return h.clean, h.truth
+
+
+def test_monomials_parse_to_one_canonical_text():
+    assert parse_term("hr*hc1^2").text == "hc1^2*hr"
+    assert parse_term("hs2*hc1*hs2") == Term(harm="hc1*hs2^2")
+    for bad in ("hc1^4", "hc1*hc1*hc1*hc1", "hx1", "hc0", "hc1^1", "hr*", "hc1*v1^1"):
+        with pytest.raises(InputError):
+            parse_term(bad)
+    with pytest.raises(InputError):
+        Term(harm="hr*hc1")  # not canonical: one text per term
+    h = Harmonics.from_azimuths(_azimuths(PAPER))
+    cands = candidate_terms(8, "thx", harmonics=h, harmonic_degree=3)
+    assert all(parse_term(t.text) == t for t in cands)
+    # 8 symbols (hs4 is identically 0 on an even ring of 8 and is dropped): C(8 + 3, 3) - 1 monomials
+    assert h.symbols == ("hc1", "hs1", "hc2", "hs2", "hc3", "hs3", "hc4", "hr")
+    assert len(harmonic_monomials(h.symbols, 3)) == 164
+    assert len(cands) == 88 + 27 + 164
+
+
+def test_values_match_the_definition_and_the_jacobian_matches_differences():
+    rng = np.random.default_rng(3)
+    v = rng.uniform(0.2, 2.0, (50, 8))
+    phi = _azimuths(RING)
+    h = Harmonics.from_azimuths(phi)
+    vals = h.values(v)
+    np.testing.assert_allclose(vals["hr"], 1 / v.sum(axis=1), rtol=1e-14)
+    np.testing.assert_allclose(vals["hc2"], (v @ np.cos(2 * phi)) / v.sum(axis=1), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(vals["hs3"], (v @ np.sin(3 * phi)) / v.sum(axis=1), rtol=1e-12, atol=1e-15)
+    terms = [Term(harm=t) for t in ("hc1", "hc1*hr", "hs2^2*hc3", "hr^3", "hc1^3")]
+    jac = design_jacobian(terms, v, harmonics=h)
+    step = 1e-6
+    for k in range(8):
+        e = np.zeros(8)
+        e[k] = step
+        num = (design_matrix(terms, v + e, harmonics=h) - design_matrix(terms, v - e, harmonics=h)) / (2 * step)
+        np.testing.assert_allclose(jac[:, k, :], num, rtol=1e-5, atol=1e-8)
+
+
+def test_fit_resolves_tilt_with_fewer_terms_than_the_powers(train, harmonic_model, held_out):
+    powers = fit_model(train, sensor=RING)
+    readings, truth = held_out
+    for name in ("thx", "thy"):
+        j = powers.output_names.index(name)
+        err_h = np.abs(harmonic_model.predict(readings)[:, j] - truth[:, j]).max()
+        err_p = np.abs(powers.predict(readings)[:, j] - truth[:, j]).max()
+        assert err_h <= 0.1 and err_h < err_p / 2, (name, err_h, err_p)
+        assert len(harmonic_model.equation(name).terms) < len(powers.equation(name).terms)
+    assert any(t.harm for e in harmonic_model.equations for t in e.terms)
+
+
+def test_model_file_round_trip_and_validation(harmonic_model, tmp_path):
+    path = harmonic_model.save(tmp_path / "h.json")
+    again = load_model(path)
+    assert again.harmonics == harmonic_model.harmonics and again.sha256 == harmonic_model.sha256
+    v = simulate(RING, grid_poses({"dx": [-1, 1], "thx": [-3, 3]})).inputs
+    np.testing.assert_array_equal(again.predict(v, precision="float"), harmonic_model.predict(v, precision="float"))
+    data = json.loads(path.read_text())
+    bad = json.loads(json.dumps(data))
+    del bad["inputs"]["harmonics"]
+    with pytest.raises(InputError, match="needs inputs.harmonics"):
+        model_from_dict(bad)
+    bad = json.loads(json.dumps(data))
+    bad["inputs"]["harmonics"]["hc1"] = [1.0, 2.0]
+    (tmp_path / "bad.json").write_text(json.dumps(bad))
+    assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "bad.json")), contains="8 finite weights")
+    bad = json.loads(json.dumps(data))
+    bad["inputs"]["min"][0] = -sum(bad["inputs"]["min"])
+    bad["outputs"] = [{"name": "dx", "intercept": 0.0, "terms": ["hc1*hr"], "coefficients": [1.0]}]
+    with pytest.raises(InputError, match="sum > 0"):
+        model_from_dict(bad)
+    bad["outputs"][0]["terms"] = ["hs4"]
+    bad["inputs"]["min"][0] = 0.5
+    with pytest.raises(InputError, match="the ring has no hs4"):
+        model_from_dict(bad)
+
+
+def test_generated_c_is_python_bit_for_bit(harmonic_model, held_out):
+    require_tool("gcc")
+    readings, _ = held_out
+    rng = np.random.default_rng(7)
+    extremes = np.vstack([readings[:300], readings[:50] * 3, readings[:50] * -2,
+                          np.full((1, 8), np.nan), rng.normal(0, 1e6, (20, 8))])
+    for precision in ("double", "float"):
+        for style in ("table", "unrolled"):
+            with CompiledModel(harmonic_model, precision, style) as cm:
+                out, status = cm.predict(extremes)
+            ref, ref_status = harmonic_model.predict(extremes, with_status=True, precision=precision)
+            np.testing.assert_array_equal(status, ref_status)
+            np.testing.assert_array_equal(out, ref)
+    text = render_header(harmonic_model, "float", "unrolled")
+    assert "h_hr = TM_ONE / (x[0] + x[1]" in text and "pow(" not in text
+
+
+def test_float_error_bound_holds(harmonic_model, held_out):
+    readings, _ = held_out
+    bound = error_bound(harmonic_model, readings, U_FLOAT)
+    err = np.abs(harmonic_model.predict(readings, precision="float") - harmonic_model.predict(readings))
+    assert np.all(err <= bound)
+    assert all(np.isfinite(x) for x in term_magnitudes(harmonic_model).values())
+
+
+def test_the_prelude_is_counted(harmonic_model):
+    without = type(harmonic_model)(harmonic_model.input_min, harmonic_model.input_max, tuple(
+        type(e)(e.name, e.intercept, tuple(t for t in e.terms if not t.harm),
+                tuple(c for t, c in zip(e.terms, e.coefficients) if not t.harm)) for e in harmonic_model.equations))
+    extra = template_ops(harmonic_model, "unrolled") - template_ops(without, "unrolled")
+    n_terms = sum(1 for e in harmonic_model.equations for t in e.terms if t.harm)
+    assert extra["div"] == 1 and extra["add"] >= 7 + n_terms and extra["mul"] >= 2 * n_terms
+
+
+def test_fixed_point_and_blobs_refuse_in_one_line(harmonic_model, tmp_path):
+    with pytest.raises(InputError, match="no harmonic terms"):
+        to_blob(harmonic_model)
+    path = harmonic_model.save(tmp_path / "h.json")
+    assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "gen"), "--precision", "fixed",
+                                  "--input-lsb", "1e-4"),
+                          contains="fixed point has no harmonic terms")
+    assert not (tmp_path / "gen" / "tm_model.h").exists()
+
+
+def test_cli_needs_the_sensor_and_a_positive_sum(tmp_path):
+    ds = simulate(RING, grid_poses({"dx": [-2, 0, 2], "dy": [-2, 0, 2], "dz": [0, -2], "thx": [-5, 5]}))
+    bare = tmp_path / "measured.csv"
+    ds.save(bare)
+    bare.with_name(bare.name + ".meta.json").unlink()  # as measured: no sensor named
+    proc = run_cli("fitgen", "fit", str(bare), "-o", str(tmp_path / "m.json"), "--family", "harmonics",
+                   "--outputs", "dx")
+    assert_one_line_error(proc, contains="--sensor")
+    proc = run_cli("fitgen", "fit", str(bare), "-o", str(tmp_path / "m.json"), "--family", "harmonics",
+                   "--outputs", "dx", "--sensor", "ring-vertical")
+    assert proc.returncode == 0, proc.stderr
+    assert any(t.harm for t in load_model(tmp_path / "m.json").equation("dx").terms)
+    shifted = ds.inputs - ds.inputs.sum(axis=1, keepdims=True).max() / 8 - 0.1
+    with pytest.raises(InputError, match="sum, which is not > 0"):
+        fit_model(type(ds)(shifted, ds.targets, ds.target_names, ds.meta),
+                  settings=FitSettings.family("harmonics"), sensor=RING)
+
+
+def test_full_suite_on_emulated_cortex_m4(harmonic_model, held_out):
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    from hil.emulate import start_target
+    from hil.suite import run_suite
+    from host.device import Device
+
+    with start_target(harmonic_model, "mps2", precision="float", style="unrolled") as emu:
+        with Device.open(emu.url, timeout=5) as dev:
+            res = run_suite(dev, harmonic_model, url=emu.url, n_vectors=500, n_fuzz=500, verbose=False,
+                            held_out=held_out)
+    assert res.ok, res.table()
+    names = {c.name for c in res.checks}
+    assert {"eval", "held-out accuracy", "flash", "fuzz"} <= names
+
+
+def test_auto_keeps_the_family_that_validates_better(tmp_path):
+    """The default family: harmonics where it is more accurate on validation poses (paper), the powers
+    where it is not (two-rings in gmr, which saturates) or where the ring is unknown."""
+    results = {}
+    for name, sensor, transfer in (("paper", "paper", "raw"), ("saturating", "two-rings", "gmr")):
+        data = tmp_path / f"{name}.csv"
+        proc = run_cli("fitgen", "simulate", "--sensor", sensor, "--transfer", transfer, "--grid", "paper-sim",
+                       "-o", str(data))
+        assert proc.returncode == 0, proc.stderr
+        proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / f"{name}.json"), "--held-out", "0")
+        assert proc.returncode == 0, proc.stderr
+        fam = load_model(tmp_path / f"{name}.json").fit_info["family"]
+        results[name] = fam
+        assert fam["auto"] and f"candidates: family {fam['name']} (auto: validation" in proc.stderr
+        rms = fam["validation_rms"]
+        ratio = np.exp(np.mean([np.log(rms["harmonics"][o] / rms["all"][o]) for o in rms["all"]]))
+        assert (fam["name"] == "harmonics") == (ratio < 1)
+    assert results["paper"]["name"] == "harmonics" and results["saturating"]["name"] == "all"
+    bare = tmp_path / "bare.csv"
+    (tmp_path / "paper.csv").rename(bare)
+    (tmp_path / "paper.csv.meta.json").unlink()
+    proc = run_cli("fitgen", "fit", str(bare), "-o", str(tmp_path / "bare.json"), "--outputs", "dx")
+    assert proc.returncode == 0, proc.stderr
+    fam = load_model(tmp_path / "bare.json").fit_info["family"]
+    assert fam["name"] == "all" and "unknown" in fam["why"]
