@@ -99,12 +99,25 @@ def _vref(text: str):
 
 def _channel_map(args):
     from .channelmap import Settings, channel_map
+    from .temperature import split_channel_map
 
     settings = Settings(pga=args.pga, data_rate=args.data_rate, mode=args.mode, vref=_vref(args.vref)).checked("option")
-    return channel_map(args.adc, settings)
+    return channel_map(split_channel_map(args.adc)[0], settings)
 
 
-def _open_bus(args, cmap, simulate_pose):
+def _temperature_input(args):
+    """The thermistor's input (``temp=`` in --adc) and its divider, or None."""
+    from .temperature import parse_temperature_input, split_channel_map
+
+    spec = split_channel_map(args.adc)[1]
+    if spec is None:
+        if args.thermistor:
+            raise InputError("--thermistor describes the temperature input: add temp=CHIP@ADDRESS:INPUT to --adc")
+        return None
+    return parse_temperature_input(spec, args.thermistor)
+
+
+def _open_bus(args, cmap, simulate_pose, *, motion=None, drift=None, thermistor=None):
     """Bus and clock from the options; with a simulated pose, a SimBus instead of /dev/i2c-N."""
     from fitgen.sensor import load_sensor
 
@@ -133,7 +146,7 @@ def _open_bus(args, cmap, simulate_pose):
     if noise < 0:
         raise InputError(f"--sim-noise must be >= 0 V, got {noise}")
     bus = SimBus.for_channel_map(cmap, sensor, simulate_pose, clock=REAL_CLOCK, noise=noise, offsets=offsets,
-                                 seed=args.seed)
+                                 seed=args.seed, motion=motion, drift=drift, thermistor=thermistor)
     for f in faults:
         bus.inject(**f)
     return bus, REAL_CLOCK
@@ -176,45 +189,163 @@ class _StopFlag:
             signal.signal(s, h)
 
 
-def cmd_read(args) -> int:
-    from fitgen.model import load_model
+def _motion(spec: str):
+    """``--simulate``: a pose, or ``motion`` (a slow circular slide with a press every few seconds)."""
+    import numpy as np
 
-    from .adc import AdcArray, DeviceSilent, RetryPolicy
-    from .engine import make_engine
-    from .readout import LineFormat, Readout, rest_reference, tare
     from .simbus import parse_pose
 
-    rate = _positive(args.rate, "--rate") if args.rate is not None else None
-    count = _positive(args.count, "--count", integer=True) if args.count is not None else None
-    duration = _positive(args.duration, "--duration") if args.duration is not None else None
-    tare_n = _positive(args.tare_samples, "--tare-samples", integer=True)
-    retries = _positive(args.retries, "--retries", integer=True)
-    pose = parse_pose(args.simulate) if args.simulate is not None else None
-    model = load_model(args.model)
-    if model.input_units != "V":
-        raise InputError(f"model {args.model} takes inputs in {model.input_units}; the ADCs give volts: fit it on "
-                         "a dataset in V (fitgen simulate --transfer gmr, or tactile-host capture)")
-    fmt = LineFormat(args.format, model.n_inputs, model.output_names)
-    cmap = _channel_map(args)
-    if cmap.n_elements != model.n_inputs:
-        raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
-    reference = rest_reference(args.rest or args.sensor, model.n_inputs) if args.tare else None
-    engine = make_engine(args.engine, model, **({"precision": args.precision, "cc": args.cc}
-                                                 if args.engine == "c" else {}))
-    sink = bus = None
+    if spec.strip().lower() != "motion":
+        return parse_pose(spec), None
+
+    def motion(t: float):
+        # 8 s circle of 1 mm radius; every 6 s a 1.5 s press to dz = -1 mm with a little tilt
+        phase = (t % 6.0) / 1.5
+        press = np.sin(np.pi * phase) if phase < 1.0 else 0.0
+        return np.array([np.cos(2 * np.pi * t / 8), np.sin(2 * np.pi * t / 8), -press, 2.0 * press, -1.0 * press])
+
+    return np.zeros(5), motion
+
+
+def _sim_drift(spec: str | None, n: int):
+    """``--sim-drift ramp=5,over=300,tau=100,creep=0.002,start=25,seed=0``: host.simbus.Drift."""
+    from fitgen.cliutil import parse_assignments
+
+    from .simbus import Drift
+
+    if spec is None:
+        return None
+    keys = ("ramp", "over", "tau", "creep", "start", "seed")
+    vals = parse_assignments(spec, keys, "--sim-drift")
+    over, tau = vals.get("over", 600.0), vals.get("tau", 600.0)
+    if not (over > 0 and tau > 0):
+        raise InputError(f"--sim-drift {spec!r}: over and tau must be > 0 s")
+    d = Drift.typical(n, seed=int(vals.get("seed", 0)), ramp_degc=vals.get("ramp", 5.0), ramp_s=over,
+                      creep_tau=tau, start_degc=vals.get("start", 25.0))
+    if "creep" in vals:
+        d.creep = d.creep / 2e-3 * vals["creep"]
+    return d
+
+
+class _Session:
+    """What ``read`` and ``view`` share: model, channel map, bus (or simulated bus), ADC array, engine and
+    the corrections (tare, auto-zero, temperature), built from the options and closed in one place."""
+
+    def __init__(self, args, prog: str):
+        import numpy as np
+
+        from fitgen.model import load_model
+
+        from .adc import AdcArray, RetryPolicy
+        from .autozero import AutoZero, AutoZeroSettings
+        from .engine import make_engine
+        from .readout import Corrections, rest_reference, tare
+        from .temperature import Thermometer, load_tempcomp
+
+        self.prog = prog
+        self.rate = _positive(args.rate, "--rate") if args.rate is not None else None
+        self.count = _positive(args.count, "--count", integer=True) if args.count is not None else None
+        self.duration = _positive(args.duration, "--duration") if args.duration is not None else None
+        tare_n = _positive(args.tare_samples, "--tare-samples", integer=True)
+        retries = _positive(args.retries, "--retries", integer=True)
+        pose, motion = _motion(args.simulate) if args.simulate is not None else (None, None)
+        tin = _temperature_input(args)
+        if args.temp_comp and tin is None:
+            raise InputError("--temp-comp needs the temperature: add the thermistor's input to --adc as "
+                             "temp=CHIP@ADDRESS:INPUT (e.g. temp=ads1115@0x4a:0)")
+        tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
+        band = _rest_band(args.rest_band)
+        az_settings = AutoZeroSettings(band_mm=band[0], band_deg=band[1],
+                                       hold=_positive(args.rest_hold, "--rest-hold")).checked()
+        self.model = model = load_model(args.model)
+        if model.input_units != "V":
+            raise InputError(f"model {args.model} takes inputs in {model.input_units}; the ADCs give volts: fit it on "
+                             "a dataset in V (fitgen simulate --transfer gmr, or tactile-host capture)")
+        if tempcomp is not None and tempcomp.n != model.n_inputs:
+            raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
+        self.cmap = cmap = _channel_map(args)
+        if cmap.n_elements != model.n_inputs:
+            raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
+        need_ref = args.tare or args.auto_zero
+        reference = rest_reference(args.rest or args.sensor, model.n_inputs) if need_ref else None
+        self.engine = make_engine(args.engine, model, **({"precision": args.precision, "cc": args.cc}
+                                                         if args.engine == "c" else {}))
+        self.bus = None
+        try:
+            drift = _sim_drift(args.sim_drift, cmap.n_elements) if args.simulate is not None else None
+            if args.sim_drift and args.simulate is None:
+                raise InputError("--sim-drift needs --simulate")
+            rest_first = pose is not None and need_ref
+            # a simulated sensor rests during the tare, then moves to its pose, as a real one is pressed after it
+            self.bus, self.clock = _open_bus(args, cmap, None if pose is None else (0 * pose if rest_first else pose),
+                                             motion=None if rest_first else motion, drift=drift, thermistor=tin)
+            self.array = array = AdcArray(self.bus, cmap, clock=self.clock, policy=RetryPolicy(attempts=retries))
+            array.probe()
+            array.setup()
+            self.thermometer = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
+            offsets, noise = None, None
+            if need_ref:
+                t = tare(array, reference, tare_n)
+                print(f"{prog}: {t.describe()}", file=sys.stderr)
+                offsets = t.offsets
+                noise = max(float(np.median(t.spread)), float(array.lsb.max()) / np.sqrt(12.0))
+                if pose is not None:
+                    self.bus.set_pose(pose)
+                    self.bus.feed.motion = motion
+            autozero = None
+            if args.auto_zero:
+                autozero = AutoZero(reference, noise, model.output_names, zero=offsets, settings=az_settings)
+                autozero.log = lambda text: print(f"{prog}: {text}", file=sys.stderr)
+            self.corrections = Corrections(offsets, tempcomp, autozero)
+            self.reference, self.noise = reference, noise
+        except BaseException:
+            self.close()
+            raise
+        self.source = (f"simulated {args.sensor}: " + ("motion" if motion is not None else
+                                                       ",".join(f"{x:g}" for x in pose))
+                       if pose is not None else f"I2C bus: {cmap.describe()}")
+
+    def record(self, path):
+        from .readout import RunRecord
+
+        if path is None:
+            return None
+        try:
+            self._record_file = open(path, "w")
+        except OSError as exc:
+            raise InputError(f"cannot write {path}: {exc.strerror}") from None
+        ref = None if self.reference is None else [float(x) for x in self.reference]
+        return RunRecord(self._record_file, {"model": self.model.sha256, "outputs": list(self.model.output_names),
+                                             "n_inputs": self.model.n_inputs, "source": self.source,
+                                             "reference": ref, "noise": self.noise,
+                                             **self.corrections.describe(), "model_file": self.model.to_dict()})
+
+    def close(self):
+        self.engine.close()
+        f = getattr(self, "_record_file", None)
+        if f is not None:
+            f.close()
+        if self.bus is not None:
+            self.bus.close()
+
+
+def _rest_band(text: str) -> tuple[float, float]:
+    parts = text.replace(",", " ").split()
     try:
-        # a simulated sensor rests during the tare, then moves to its pose, as a real one is pressed after it
-        bus, clock = _open_bus(args, cmap, None if pose is None else (0 * pose if args.tare else pose))
-        array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
-        array.probe()
-        array.setup()
-        offsets = None
-        if args.tare:
-            t = tare(array, reference, tare_n)
-            print(f"tactile-host read: {t.describe()}", file=sys.stderr)
-            offsets = t.offsets
-            if pose is not None:
-                bus.set_pose(pose)
+        mm, deg = (float(p) for p in parts)
+    except ValueError:
+        raise InputError(f"--rest-band {text!r}: give MM,DEG, e.g. 0.08,1.5") from None
+    return mm, deg
+
+
+def cmd_read(args) -> int:
+    from .adc import DeviceSilent
+    from .readout import LineFormat, Readout
+
+    s = _Session(args, "tactile-host read")
+    sink = None
+    try:
+        fmt = LineFormat(args.format, s.model.n_inputs, s.model.output_names)
         if args.output:
             try:
                 sink = open(args.output, "w")
@@ -222,9 +353,10 @@ def cmd_read(args) -> int:
                 raise InputError(f"cannot write {args.output}: {exc.strerror}") from None
         out = sink or sys.stdout
         out.write(fmt.header)
-        reader = Readout(array, engine, out, fmt, clock=clock, offsets=offsets)
+        reader = Readout(s.array, s.engine, out, fmt, clock=s.clock, corrections=s.corrections,
+                         thermometer=s.thermometer, record=s.record(args.record))
         with _StopFlag() as stop:
-            stats = reader.run(rate=rate, count=count, duration=duration, stop=stop)
+            stats = reader.run(rate=s.rate, count=s.count, duration=s.duration, stop=stop)
         how = "stopped" if stop.stopped else "done"
         print(f"tactile-host read: {how}: {stats.summary()}", file=sys.stderr)
         return 0
@@ -234,25 +366,209 @@ def cmd_read(args) -> int:
         print(f"tactile-host read: error: {exc}; {where}", file=sys.stderr)
         return EXIT_CHECK_FAILED
     finally:
-        engine.close()
+        s.close()
         if sink is not None:
             sink.close()
-        if bus is not None:
-            bus.close()
+
+
+def cmd_view(args) -> int:
+    from fitgen.pose import POSE_UNITS, POSE_NAMES
+
+    from .adc import DeviceSilent
+    from .live import LiveHub, LiveServer
+    from .readout import LineFormat, Readout
+
+    if args.replay:
+        return _view_replay(args)
+    if args.model is None or args.adc is None:
+        raise InputError("view needs --model and --adc (or --replay RUN.jsonl)")
+    s = _Session(args, "tactile-host view")
+    server = None
+    try:
+        meta = {"inputs": [f"v{k}" for k in range(1, s.model.n_inputs + 1)], "input_units": "V",
+                "outputs": list(s.model.output_names),
+                "units": [POSE_UNITS[POSE_NAMES.index(o)] for o in s.model.output_names],
+                "model": s.model.sha256[:12], "source": s.source, "rate": s.rate}
+        hub = LiveHub(meta)
+        server = LiveServer(hub, args.host, args.port)
+        server.start()
+        print(f"tactile-host view: serving {server.url} ({s.source}); Ctrl-C stops", file=sys.stderr, flush=True)
+        fmt = LineFormat("csv", s.model.n_inputs, s.model.output_names)
+        reader = Readout(s.array, s.engine, None, fmt, clock=s.clock, corrections=s.corrections,
+                         thermometer=s.thermometer, observer=hub.publish, record=s.record(args.record))
+        with _StopFlag() as stop:
+            stats = reader.run(rate=s.rate, count=s.count, duration=s.duration, stop=stop)
+        print(f"tactile-host view: {'stopped' if stop.stopped else 'done'}: {stats.summary()}", file=sys.stderr)
+        return 0
+    except DeviceSilent as exc:
+        print(f"tactile-host view: error: {exc}", file=sys.stderr)
+        return EXIT_CHECK_FAILED
+    finally:
+        if server is not None:
+            server.stop()
+        s.close()
+
+
+def _view_replay(args) -> int:
+    import time
+
+    from fitgen.pose import POSE_UNITS, POSE_NAMES
+
+    from .live import LiveHub, LiveServer
+    from .replay import load_run, replay
+
+    run = load_run(args.replay)
+    res = replay(run, model=args.model, auto_zero=_flag(args), temp_comp=args.temp_comp)
+    outputs = res.outputs
+    meta = {"inputs": [f"v{k}" for k in range(1, run.n_inputs + 1)], "input_units": "V", "outputs": list(outputs),
+            "units": [POSE_UNITS[POSE_NAMES.index(o)] for o in outputs], "model": res.model_hash[:12],
+            "source": f"replay of {args.replay}", "rate": None}
+    hub = LiveHub(meta)
+    server = LiveServer(hub, args.host, args.port)
+    server.start()
+    print(f"tactile-host view: serving {server.url} (replay of {args.replay}, {len(res.t)} samples); Ctrl-C stops",
+          file=sys.stderr, flush=True)
+    try:
+        with _StopFlag() as stop:
+            t0, w0 = res.t[0], time.monotonic()
+            for i in range(len(res.t)):
+                if stop():
+                    break
+                wait = (res.t[i] - t0) - (time.monotonic() - w0)
+                if wait > 0:
+                    time.sleep(wait)
+                hub.publish(res.sample(i))
+            while args.hold and not stop():
+                time.sleep(0.2)
+    finally:
+        server.stop()
+    return 0
+
+
+def _flag(args):
+    """--auto-zero / --no-auto-zero for replay: True, False, or None (as recorded)."""
+    return True if args.auto_zero else (False if getattr(args, "no_auto_zero", False) else None)
+
+
+def cmd_replay(args) -> int:
+    from .replay import load_run, replay
+
+    run = load_run(args.run)
+    res = replay(run, model=args.model, auto_zero=_flag(args), temp_comp=args.temp_comp,
+                 no_temp_comp=args.no_temp_comp)
+    if args.output:
+        res.save(args.output)
+    print(res.report(), end="")
+    return 0
+
+
+def _temperatures(text: str) -> list[float]:
+    import math
+
+    try:
+        vals = [float(x) for x in text.replace(",", " ").split()]
+    except ValueError:
+        raise InputError(f"--temperature {text!r}: give temperatures in degC, e.g. 15,25,35") from None
+    if len(vals) < 2 or len(set(vals)) != len(vals) or not all(math.isfinite(v) and -40 <= v <= 125 for v in vals):
+        raise InputError(f"--temperature {text!r}: give two or more different temperatures in -40..125 degC")
+    return vals
+
+
+def _capture_numbers(args) -> tuple:
+    """--samples, --max-spread, --tries, --settle and --retries, checked."""
+    return (_positive(args.samples, "--samples", integer=True), _positive(args.max_spread, "--max-spread"),
+            _positive(args.tries, "--tries", integer=True), _positive(args.settle, "--settle", zero=True),
+            _positive(args.retries, "--retries", integer=True))
+
+
+def cmd_capture_temperatures(args) -> int:
+    """``capture --temperature T1,T2,..``: the schedule at each temperature, then the compensation fitted."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from fitgen.dataset import load_dataset
+
+    from .adc import AdcArray, DeviceSilent, RetryPolicy
+    from .capture import SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, trigger_waiter
+    from .simbus import Drift
+    from .temperature import Thermometer, fit_tempcomp
+
+    temps = _temperatures(args.temperature)
+    samples, spread, tries, settle, retries = _capture_numbers(args)
+    schedule = load_schedule(args.poses)
+    if len(schedule.poses) < 2:
+        print("tactile-host capture: note: one pose per temperature gives offsets only (gain needs two poses)",
+              file=sys.stderr)
+    cmap = _channel_map(args)
+    tin = _temperature_input(args)
+    out = Path(args.output)
+    drift = None
+    if args.simulate:
+        drift = _sim_drift(args.sim_drift, cmap.n_elements) or Drift.typical(cmap.n_elements, seed=args.seed)
+        drift.ramp_degc, drift.creep = 0.0, drift.creep * 0.0
+    bus, clock = _open_bus(args, cmap, schedule.poses[0] if args.simulate else None, drift=drift, thermistor=tin)
+    rows, pose_ids, row_temps, files = [], [], [], []
+    try:
+        array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
+        array.probe()
+        array.setup()
+        thermo = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
+        for T in temps:
+            path = out.with_name(f"{out.stem}.T{T:g}{out.suffix or '.csv'}")
+            if args.simulate:
+                drift.start_degc = T
+            elif args.trigger:
+                pass
+            else:
+                print(f"tactile-host capture: bring the sensor to {T:g} degC and let it settle, then press Enter",
+                      file=sys.stderr, flush=True)
+                if not sys.stdin.readline():
+                    return 130
+            wait = trigger_waiter(args.trigger, schedule) if args.trigger else None
+            if wait is None and not args.simulate:
+                wait = enter_waiter(schedule)
+            capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
+                    set_pose=bus.set_pose if args.simulate else None, settle=settle, clock=clock,
+                    meta={"adc": cmap.describe(), "temperature_set": T,
+                          "source": f"simulated {args.sensor}" if args.simulate else "hardware"})
+            measured = thermo.read() if thermo is not None else float("nan")
+            ds = load_dataset(path, min_rows=1)
+            rows.append(ds.inputs)
+            pose_ids.append(np.arange(ds.n_rows))
+            row_temps.append(np.full(ds.n_rows, measured if np.isfinite(measured) else T))
+            files.append(str(path))
+            print(f"tactile-host capture: {ds.n_rows} poses at {T:g} degC"
+                  f"{f' (thermistor {measured:.2f} degC)' if np.isfinite(measured) else ''} in {path}", file=sys.stderr)
+    except (DeviceSilent, SpreadTooLarge, TriggerFailed) as exc:
+        print(f"tactile-host capture: error: {exc}; the temperatures done so far are kept: run the same command "
+              "again to resume", file=sys.stderr)
+        return EXIT_CHECK_FAILED
+    finally:
+        bus.close()
+    tc = fit_tempcomp(np.vstack(rows), np.concatenate(pose_ids), np.concatenate(row_temps),
+                      t0=_positive(args.t0, "--t0", zero=True) if args.t0 is not None else None)
+    tc.info["captures"] = files
+    dest = args.temp_comp_output or str(out.with_name(out.stem + ".tempcomp.json"))
+    tc.save(dest)
+    worst = max(tc.info["residual_rms_v"]) * 1e3
+    print(f"tactile-host capture: temperature compensation about {tc.t0:g} degC -> {dest} (offsets up to "
+          f"{np.abs(tc.offset).max() * 1e3:.3g} mV/degC, gains up to {np.abs(tc.gain).max() * 100:.3g} %/degC; "
+          f"residual up to {worst:.3g} mV rms)", file=sys.stderr)
+    return 0
 
 
 def cmd_capture(args) -> int:
     from fitgen.progress import Progress
 
+    if args.temperature is not None:
+        return cmd_capture_temperatures(args)
+
     from .adc import AdcArray, DeviceSilent, RetryPolicy
     from .capture import (SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, prepare_output,
                           trigger_waiter)
 
-    samples = _positive(args.samples, "--samples", integer=True)
-    spread = _positive(args.max_spread, "--max-spread")
-    tries = _positive(args.tries, "--tries", integer=True)
-    settle = _positive(args.settle, "--settle", zero=True)
-    retries = _positive(args.retries, "--retries", integer=True)
+    samples, spread, tries, settle, retries = _capture_numbers(args)
     schedule = load_schedule(args.poses)
     cmap = _channel_map(args)
     state = prepare_output(args.output, cmap.n_elements, schedule, write=False)  # checked before any waiting
@@ -308,9 +624,12 @@ def cmd_pi_build(args) -> int:
     return 0
 
 
-def _map_options(p) -> None:
-    p.add_argument("--adc", required=True, metavar="SPEC|FILE.toml",
-                   help="channel map: e.g. ads1115@0x48:0-3,ads1115@0x49:0-3 or ads7828@0x48, or a TOML file")
+def _map_options(p, required: bool = True) -> None:
+    p.add_argument("--adc", required=required, metavar="SPEC|FILE.toml",
+                   help="channel map: e.g. ads1115@0x48:0-3,ads1115@0x49:0-3 or ads7828@0x48, or a TOML file; "
+                        "temp=CHIP@ADDRESS:INPUT adds a thermistor, e.g. ...,temp=ads1115@0x4a:0")
+    p.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",
+                   help="the thermistor's NTC divider (default beta=3950,r25=10000,series=10000,vref=3.3)")
     p.add_argument("--pga", type=float, default=4.096, choices=ADS1115_PGA, metavar="V",
                    help="ADS1115 full scale +-V: 6.144, 4.096 (default), 2.048, 1.024, 0.512, 0.256")
     p.add_argument("--data-rate", type=int, default=860, choices=ADS1115_RATES, metavar="SPS",
@@ -319,8 +638,39 @@ def _map_options(p) -> None:
     p.add_argument("--vref", default="3.3", help="ADS7828 reference: external volts (default 3.3) or 'internal' (2.5 V)")
 
 
-def _adc_options(p) -> None:
-    _map_options(p)
+def _readout_options(p) -> None:
+    """Options read and view share (beside the ADC's)."""
+    p.add_argument("--rate", help="samples per second (default: as fast as the converters allow)")
+    p.add_argument("--count", help="stop after this many samples")
+    p.add_argument("--duration", help="stop after this many seconds")
+    p.add_argument("--tare", action="store_true", help="measure the rest readings first and correct the offsets")
+    p.add_argument("--tare-samples", default="50", help="samples averaged for --tare (default 50)")
+    p.add_argument("--rest", metavar="SENSOR|DATASET.csv",
+                   help="the rest readings --tare maps onto: a dataset's rows at pose 0, or a sensor's physics "
+                        "(default: --sensor)")
+    p.add_argument("--auto-zero", action="store_true",
+                   help="tare, then keep re-zeroing slowly while the sensor is at rest (never while touched); "
+                        "each update is logged")
+    p.add_argument("--rest-band", default="0.08,1.5", metavar="MM,DEG",
+                   help="at rest: every displacement estimate within MM and tilt within DEG (default 0.08,1.5)")
+    p.add_argument("--rest-hold", default="1", metavar="S", help="seconds at rest before an auto-zero update (default 1)")
+    p.add_argument("--temp-comp", metavar="FILE.json",
+                   help="per-element temperature compensation (tactile-host capture --temperature); needs the "
+                        "thermistor's input in --adc (temp=CHIP@ADDRESS:INPUT)")
+    p.add_argument("--record", metavar="RUN.jsonl", help="also record the run at full precision for tactile-host replay")
+    p.add_argument("--engine", default="python", choices=("python", "c"),
+                   help="python: Model.predict; c: the generated header as a shared library (default python)")
+    p.add_argument("--precision", default="double", choices=("double", "float"), help="C engine precision")
+    p.add_argument("--cc", default="gcc", help="C compiler for --engine c (default gcc)")
+    p.add_argument("--simulate", metavar="POSE|motion",
+                   help="no hardware: a simulated bus with the sensor at POSE (e.g. dx=1,dz=-1 or 0.5,0,-1,0,0), or "
+                        "'motion': sliding in a circle and pressed every 6 s")
+    p.add_argument("--sim-drift", metavar="ramp=5,over=300,tau=100,creep=0.002",
+                   help="simulated drift: a temperature ramp (degC over s), creep (V, time constant s)")
+
+
+def _adc_options(p, required: bool = True) -> None:
+    _map_options(p, required)
     p.add_argument("--bus", type=int, help="I2C bus number: /dev/i2c-N (default 1, or the map file's bus)")
     p.add_argument("--retries", default="5", help="tries per I2C transfer before a chip counts as silent (default 5)")
     p.add_argument("--sensor", default="paper",
@@ -377,23 +727,32 @@ def build_parser() -> Parser:
     r = sub.add_parser("read", help="stream readings and pose estimates from I2C ADCs")
     r.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
     _adc_options(r)
-    r.add_argument("--rate", help="samples per second (default: as fast as the converters allow)")
+    _readout_options(r)
     r.add_argument("--format", default="csv", choices=("csv", "jsonl"))
     r.add_argument("-o", "--output", metavar="FILE", help="write the stream here instead of stdout")
-    r.add_argument("--count", help="stop after this many samples")
-    r.add_argument("--duration", help="stop after this many seconds")
-    r.add_argument("--tare", action="store_true", help="measure the rest readings first and correct the offsets")
-    r.add_argument("--tare-samples", default="50", help="samples averaged for --tare (default 50)")
-    r.add_argument("--rest", metavar="SENSOR|DATASET.csv",
-                   help="the rest readings --tare maps onto: a dataset's rows at pose 0, or a sensor's physics "
-                        "(default: --sensor)")
-    r.add_argument("--engine", default="python", choices=("python", "c"),
-                   help="python: Model.predict; c: the generated header as a shared library (default python)")
-    r.add_argument("--precision", default="double", choices=("double", "float"), help="C engine precision")
-    r.add_argument("--cc", default="gcc", help="C compiler for --engine c (default gcc)")
-    r.add_argument("--simulate", metavar="POSE",
-                   help="no hardware: a simulated bus with the sensor at POSE, e.g. dx=1,dz=-1 or 0.5,0,-1,0,0")
     r.set_defaults(func=cmd_read)
+
+    w = sub.add_parser("view", help="a live web page of the readings and estimates (same options as read)")
+    w.add_argument("--model", metavar="MODEL", help="model file (inputs in V)")
+    _adc_options(w, required=False)
+    _readout_options(w)
+    w.add_argument("--host", default="127.0.0.1",
+                   help="address to serve on (default 127.0.0.1: this machine only; 0.0.0.0 serves the network)")
+    w.add_argument("--port", type=int, default=8765, help="TCP port (default 8765)")
+    w.add_argument("--replay", metavar="RUN.jsonl", help="play a recorded run (read/view --record) in the page")
+    w.add_argument("--hold", action="store_true", help="with --replay: keep serving after the run's end")
+    w.set_defaults(func=cmd_view)
+
+    rp = sub.add_parser("replay", help="re-estimate a recorded run (--record) with another model or corrections")
+    rp.add_argument("run", metavar="RUN.jsonl")
+    rp.add_argument("--model", metavar="MODEL", help="model to re-estimate with (default: the run's own, if given "
+                    "as the file whose hash the run names)")
+    rp.add_argument("--auto-zero", action="store_true", help="re-zero at rest (default: as recorded)")
+    rp.add_argument("--no-auto-zero", action="store_true", help="no auto-zero (default: as recorded)")
+    rp.add_argument("--temp-comp", metavar="FILE.json", help="temperature compensation to apply (default: as recorded)")
+    rp.add_argument("--no-temp-comp", action="store_true", help="no temperature compensation")
+    rp.add_argument("-o", "--output", metavar="OUT.jsonl", help="write the re-estimated run here")
+    rp.set_defaults(func=cmd_replay)
 
     c = sub.add_parser("capture", help="record a calibration dataset, one averaged row per scheduled pose")
     c.add_argument("--poses", required=True, metavar="SCHEDULE.csv", help="poses to visit: columns of dx,dy,dz,thx,thy")
@@ -410,6 +769,14 @@ def build_parser() -> Parser:
     c.add_argument("--settle", default="0", help="seconds to wait after Enter or the trigger (default 0)")
     c.add_argument("--simulate", action="store_true",
                    help="no hardware: a simulated sensor that moves to each scheduled pose by itself")
+    c.add_argument("--temperature", metavar="T1,T2,..",
+                   help="capture the schedule at each of these temperatures (degC; one file OUTPUT.T<t>.csv each) and "
+                        "fit per-element offset and gain compensation from them (OUTPUT.tempcomp.json)")
+    c.add_argument("--t0", metavar="DEGC", help="with --temperature: the calibration temperature (default: the one "
+                   "nearest the median)")
+    c.add_argument("--temp-comp-output", metavar="FILE.json", help="with --temperature: where the compensation goes")
+    c.add_argument("--sim-drift", metavar="ramp=..,over=..,tau=..,creep=..,seed=..",
+                   help="with --simulate --temperature: the simulated drift's coefficients (default: typical, seed --seed)")
     c.set_defaults(func=cmd_capture)
     return p
 

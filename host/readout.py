@@ -1,8 +1,10 @@
 """The live readout: read every element, estimate the pose, write a timestamped line; pace, tare, count.
 
 One sample is ``Readout.step()``: the ADC array's volts (transient I2C errors retried
-with back-off inside it), minus the tare offsets, through the engine, formatted as a
-CSV or JSON line and written in one piece. ``run`` repeats it at a rate or as fast as
+with back-off inside it) through the corrections (:class:`Corrections`: temperature
+compensation, then the tare's or the auto-zero's offsets), through the engine, formatted
+as a CSV or JSON line and written in one piece; an observer (the live view) and a run
+record (``--record``, for ``tactile-host replay``) may see each sample too. ``run`` repeats it at a rate or as fast as
 the converters allow, until a count, a duration or a stop request (Ctrl-C), and
 returns the statistics the summary line shows. A chip that stays silent raises
 ``DeviceSilent`` out of ``run`` with the statistics so far attached (``exc.stats``).
@@ -10,6 +12,7 @@ returns the statistics the summary line shows. A chip that stays silent raises
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 
@@ -118,31 +121,112 @@ def tare(array: AdcArray, reference: np.ndarray, n: int = 50) -> Tare:
     return Tare(block.mean(axis=0), np.asarray(reference, dtype=float), block.std(axis=0))
 
 
+@dataclass
+class Corrections:
+    """From ADC volts to what the model takes: temperature compensation, then the zero offsets.
+
+    ``offsets``: the tare's (fixed); ``autozero``: a :class:`host.autozero.AutoZero` whose zero starts
+    at the tare's and follows drift at rest (then ``offsets`` is not used separately).
+    """
+
+    offsets: np.ndarray | None = None
+    tempcomp: object = None  # host.temperature.TempComp
+    autozero: object = None  # host.autozero.AutoZero
+
+    def __call__(self, raw: np.ndarray, temp: float) -> tuple[np.ndarray, np.ndarray]:
+        """(compensated readings before the zero, readings for the model)."""
+        v = self.tempcomp.apply(raw, temp) if self.tempcomp is not None else raw
+        if self.autozero is not None:
+            return v, self.autozero.correct(v)
+        return v, (v - self.offsets if self.offsets is not None else v)
+
+    def observe(self, t: float, comp: np.ndarray, out: np.ndarray, status: int):
+        if self.autozero is not None:
+            return self.autozero.observe(t, comp, out, status)
+        return None
+
+    def describe(self) -> dict:
+        az = self.autozero
+        return {"tare": None if self.offsets is None else [float(x) for x in self.offsets],
+                "temp_comp": None if self.tempcomp is None else self.tempcomp.to_dict(),
+                "auto_zero": None if az is None else {
+                    **{k: getattr(az.settings, k) for k in az.settings.__dataclass_fields__},
+                    "reference": [float(x) for x in az.reference], "noise": az.noise,
+                    "start": [float(x) for x in az.zero]}}
+
+
+def _num(x: float):
+    return float(x) if math.isfinite(x) else None
+
+
+class RunRecord:
+    """A run, sample by sample, at full precision (JSON lines): what ``tactile-host replay`` re-estimates.
+
+    First line: ``{"run": 1, ...}`` with the model's hash, outputs and the corrections in force at the
+    start; then per sample ``{"t", "raw", "temp", "out", "status"}``: the ADC volts before any
+    correction, the temperature (null without a thermometer), the estimates and the status.
+    """
+
+    def __init__(self, sink, header: dict):
+        self.sink = sink
+        sink.write(json.dumps({"run": 1, **header}) + "\n")
+
+    def write(self, t: float, raw, temp: float, out, status: int) -> None:
+        self.sink.write(json.dumps({"t": t, "raw": [float(x) for x in raw], "temp": _num(temp),
+                                    "out": [float(x) for x in out], "status": int(status)}) + "\n")
+
+
 class Readout:
     """One sample at a time: read, correct, estimate, format, write."""
 
     def __init__(self, array: AdcArray, engine, sink, fmt: LineFormat, *, clock=REAL_CLOCK,
-                 offsets: np.ndarray | None = None):
+                 offsets: np.ndarray | None = None, corrections: Corrections | None = None, thermometer=None,
+                 observer=None, record: RunRecord | None = None):
         if engine.n_inputs != array.n:
             raise InputError(f"the channel map reads {array.n} elements; the model takes {engine.n_inputs}")
         self.array, self.engine, self.sink, self.fmt, self.clock = array, engine, sink, fmt, clock
-        self.offsets = None if offsets is None else np.asarray(offsets, dtype=float)
+        self.corrections = corrections or Corrections(None if offsets is None else np.asarray(offsets, dtype=float))
+        self.offsets = self.corrections.offsets
+        self.thermometer, self.observer, self.record = thermometer, observer, record
         self.stats = ReadoutStats(errors=array.counts)
-        self._write = sink.write
+        self._write = sink.write if sink is not None else None
         self._flush = getattr(sink, "flush", None)
+        self._rate_t, self._rate_n, self.rate = None, 0, 0.0
 
     def step(self) -> None:
-        v = self.array.read_volts()
-        if self.offsets is not None:
-            v -= self.offsets
+        raw = self.array.read_volts()
+        temp = self.thermometer.read() if self.thermometer is not None else math.nan
+        comp, v = self.corrections(raw, temp)
         out, status = self.engine.estimate(v)
-        self._write(self.fmt.line(self.clock.time(), v, out, status))
+        t = self.clock.time()
+        update = self.corrections.observe(t, comp, out, status)
+        if self._write is not None:
+            self._write(self.fmt.line(t, v, out, status))
+        if self.record is not None:
+            self.record.write(t, raw, temp, out, status)
         st = self.stats
         st.samples += 1
         if status:
             st.outside += 1
         if self.array.clipped.any():
             st.clipped += 1
+        if self.observer is not None:
+            self._publish(t, raw, v, out, status, temp, update)
+
+    def _publish(self, t, raw, v, out, status, temp, update) -> None:
+        now = self.clock.monotonic()
+        if self._rate_t is None:
+            self._rate_t = now
+        self._rate_n += 1
+        if now - self._rate_t >= 1.0:
+            self.rate, self._rate_t, self._rate_n = self._rate_n / (now - self._rate_t), now, 0
+        az = self.corrections.autozero
+        self.observer({
+            "t": t, "v": [float(x) for x in v], "raw": [float(x) for x in raw],
+            "out": {o: float(x) for o, x in zip(self.fmt.outputs, out)}, "status": int(status), "temp": _num(temp),
+            "rate": self.rate, "errors": {**self.array.counts.as_dict(), "total": self.array.counts.total},
+            "zero": {"updates": 0 if az is None else len(az.updates),
+                     "last": None if az is None or not az.updates else az.updates[-1].describe()}})
 
     def run(self, *, rate: float | None = None, count: int | None = None, duration: float | None = None,
             stop=lambda: False, flush_every: float = 0.0) -> ReadoutStats:

@@ -201,11 +201,58 @@ class Fault:
     fired: int = 0
 
 
+@dataclass
+class Drift:
+    """What moves a real skin's readings while its pose does not: temperature and creep.
+
+    Element k reads v_k (1 + gain_tc_k (T - t0)) + offset_tc_k (T - t0) + creep_k (1 - exp(-t / creep_tau)),
+    with T = ``temperature(t)`` (degC; t the bus clock's seconds). Defaults are of the order of a GMR
+    bridge's datasheet figures (offset drift about 1 mV/degC after the amplifier, gain -0.1 %/degC) and a
+    silicone skin's creep; ``ramp`` makes T rise linearly by ``ramp_degc`` over ``ramp_s`` seconds.
+    """
+
+    offset_tc: np.ndarray  # V / degC, per element
+    gain_tc: np.ndarray  # 1 / degC, per element
+    creep: np.ndarray  # V, per element, reached after a few creep_tau
+    creep_tau: float = 600.0  # s
+    t0: float = 25.0  # degC at which the sensor reads as calibrated
+    start_degc: float = 25.0
+    ramp_degc: float = 0.0
+    ramp_s: float = 1.0
+
+    @classmethod
+    def typical(cls, n: int, *, seed: int = 0, ramp_degc: float = 5.0, ramp_s: float = 600.0,
+                creep_tau: float = 600.0, start_degc: float = 25.0) -> "Drift":
+        rng = np.random.default_rng(seed)
+        return cls(offset_tc=rng.normal(0.0, 1e-3, n), gain_tc=rng.normal(-1e-3, 3e-4, n),
+                   creep=rng.normal(0.0, 2e-3, n), creep_tau=creep_tau, start_degc=start_degc,
+                   ramp_degc=ramp_degc, ramp_s=ramp_s)
+
+    def temperature(self, t: float) -> float:
+        return self.start_degc + self.ramp_degc * min(max(t / self.ramp_s, 0.0), 1.0)
+
+    def apply(self, volts: np.ndarray, t: float) -> np.ndarray:
+        dT = self.temperature(t) - self.t0
+        return volts * (1.0 + self.gain_tc * dT) + self.offset_tc * dT + self.creep * (1.0 - math.exp(-t / self.creep_tau))
+
+
+def ntc_volts(temp_degc: float, *, beta: float = 3950.0, r25: float = 10_000.0, series: float = 10_000.0,
+              vref: float = 3.3) -> float:
+    """The divider's output: an NTC (beta model, r25 at 25 degC) to ground, ``series`` ohms to ``vref``."""
+    r = r25 * math.exp(beta * (1.0 / (temp_degc + 273.15) - 1.0 / 298.15))
+    return vref * r / (r + series)
+
+
 class SensorFeed:
-    """Element voltages of a sensor (its ``gmr`` transfer, no ADC) at a pose, with offsets and noise."""
+    """Element voltages of a sensor (its ``gmr`` transfer, no ADC) at a pose, with offsets and noise.
+
+    ``motion``: a function of the bus clock's time (s) giving the pose, evaluated at most every
+    ``motion_step`` seconds; ``drift``: a :class:`Drift` applied to the volts at that time.
+    """
 
     def __init__(self, sensor: Sensor, pose=None, *, noise: float = 0.0, offsets=None,
-                 rng: np.random.Generator | None = None):
+                 rng: np.random.Generator | None = None, motion=None, drift: Drift | None = None,
+                 motion_step: float = 5e-3):
         self.sensor = sensor.with_transfer("gmr")
         self.noise = float(noise)
         if self.noise < 0:
@@ -213,14 +260,36 @@ class SensorFeed:
         n = self.sensor.n_elements
         self.offsets = np.zeros(n) if offsets is None else np.asarray(offsets, dtype=float).reshape(n)
         self.rng = rng or np.random.default_rng(0)
+        self.motion, self.drift, self.motion_step = motion, drift, motion_step
+        self._t_motion = -math.inf
+        self._t_drift = None
         self.set_pose(np.zeros(5) if pose is None else pose)
 
     def set_pose(self, pose) -> None:
         self.pose = as_poses(pose)[0].copy()
         self.volts = readings(self.sensor, self.pose, adc_bits=0)[0]
+        self._t_drift = None
 
-    def element(self, k: int) -> float:
-        v = self.volts[k] + self.offsets[k]
+    def at(self, t: float) -> None:
+        """Move to time ``t``: the motion's pose and the drift there."""
+        if self.motion is not None and abs(t - self._t_motion) >= self.motion_step:
+            self._t_motion = t
+            pose = as_poses(self.motion(t))[0]
+            if not np.array_equal(pose, self.pose):
+                self.set_pose(pose)
+        if self.drift is not None and self._t_drift != t:
+            self._t_drift = t
+            self.drifted = self.drift.apply(self.volts, t)
+
+    def temperature(self, t: float) -> float:
+        return self.drift.temperature(t) if self.drift is not None else 25.0
+
+    def element(self, k: int, t: float | None = None) -> float:
+        if t is not None and (self.motion is not None or self.drift is not None):
+            self.at(t)
+            v = (self.drifted[k] if self.drift is not None else self.volts[k]) + self.offsets[k]
+        else:
+            v = self.volts[k] + self.offsets[k]
         return v + self.noise * self.rng.standard_normal() if self.noise else v
 
 
@@ -239,6 +308,7 @@ class SimBus:
         self.transfers = 0
         self.bus_time = 0.0
         self.closed = False
+        self.t0 = self.clock.monotonic()
 
     # --- building ----------------------------------------------------------------------
 
@@ -263,7 +333,14 @@ class SimBus:
             return 0.0
         if w[0] == "volts":
             return w[1]
-        return self.feed.element(w[1]) + w[2]
+        # the feed's time (motion, drift) starts when the bus is made
+        if w[0] == "ntc":
+            return ntc_volts(self.feed.temperature(self.clock.monotonic() - self.t0), **w[1])
+        return self.feed.element(w[1], self.clock.monotonic() - self.t0) + w[2]
+
+    def wire_thermistor(self, address: int, pin: int, **divider) -> None:
+        """Pin ``pin`` of the chip at ``address`` reads an NTC divider (:func:`ntc_volts`) at the drift's temperature."""
+        self.wiring[(address, pin)] = ("ntc", dict(divider))
 
     def set_pose(self, pose) -> None:
         """Move the magnet; conversions finished before now keep the old pose's values."""
@@ -275,17 +352,21 @@ class SimBus:
     @classmethod
     def for_channel_map(cls, cmap: ChannelMap, sensor: Sensor, pose=None, *, clock=None, noise: float = 0.0,
                         offsets=None, seed: int = 0, common_mode: float = 0.0, rate_error: float = 0.0,
-                        bus_hz: float = 400_000.0) -> "SimBus":
+                        bus_hz: float = 400_000.0, motion=None, drift: Drift | None = None,
+                        thermistor=None) -> "SimBus":
         """The chips of ``cmap``, wired as it says to ``sensor``'s elements, the magnet at ``pose``.
 
         A differential pair's negative input sits at ``common_mode`` volts and its
-        positive input at the element's voltage above it.
+        positive input at the element's voltage above it. ``motion`` and ``drift``: see
+        :class:`SensorFeed`. ``thermistor``: a :class:`host.temperature.TemperatureInput` whose
+        pin reads the NTC divider at the drift's temperature (its chip is added if the map has none there).
         """
         if cmap.n_elements != sensor.n_elements:
             raise InputError(f"the channel map reads {cmap.n_elements} elements; the simulated sensor "
                              f"{sensor.name!r} has {sensor.n_elements}")
         bus = cls(clock, bus_hz=bus_hz, seed=seed)
-        bus.feed = SensorFeed(sensor, pose, noise=noise, offsets=offsets, rng=np.random.default_rng(seed + 1))
+        bus.feed = SensorFeed(sensor, pose, noise=noise, offsets=offsets, rng=np.random.default_rng(seed + 1),
+                              motion=motion, drift=drift)
         for chip in cmap.chips:
             if chip.kind == "ads1115":
                 bus.add_ads1115(chip.address, rate_error=rate_error)
@@ -298,6 +379,13 @@ class SimBus:
                 bus.set_pin(chip.address, inp[1], common_mode)
             else:
                 bus.wire(chip.address, inp, k)
+        if thermistor is not None:
+            if thermistor.address not in bus.devices:
+                if thermistor.kind == "ads1115":
+                    bus.add_ads1115(thermistor.address, rate_error=rate_error)
+                else:
+                    bus.add_ads7828(thermistor.address)
+            bus.wire_thermistor(thermistor.address, thermistor.input, **thermistor.divider)
         return bus
 
     # --- faults --------------------------------------------------------------------

@@ -1,0 +1,179 @@
+"""Replay: a recorded run (``read``/``view --record``) re-estimated with another model or other corrections.
+
+The record holds the ADC volts before any correction and the temperature of every sample, and its
+first line the model and the corrections in force (tare, auto-zero settings and starting zero,
+temperature compensation). Replaying with the same model and corrections repeats the readout's
+arithmetic in the same order (Python engine), so it reproduces the recorded estimates exactly;
+with another model, auto-zero on or off, or another compensation, it reports how the estimates move.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fitgen.errors import InputError
+from fitgen.fileio import read_text, write_atomic
+from fitgen.model import Model, load_model, model_from_dict
+
+from .autozero import AutoZero, AutoZeroSettings
+from .engine import PythonEngine
+from .readout import Corrections
+from .temperature import TempComp, load_tempcomp
+
+
+@dataclass
+class Run:
+    header: dict
+    t: np.ndarray
+    raw: np.ndarray
+    temp: np.ndarray
+    out: np.ndarray
+    status: np.ndarray
+
+    @property
+    def n_inputs(self) -> int:
+        return int(self.raw.shape[1])
+
+
+def load_run(path) -> Run:
+    origin = f"run {path}"
+    lines = [ln for ln in read_text(path, "run record").splitlines() if ln.strip()]
+    try:
+        header = json.loads(lines[0]) if lines else None
+    except ValueError:
+        header = None
+    if not isinstance(header, dict) or header.get("run") != 1:
+        raise InputError(f"{origin}: not a run record (its first line must be the run's header; record one with "
+                         "tactile-host read --record RUN.jsonl)")
+    t, raw, temp, out, status = [], [], [], [], []
+    n, m = header.get("n_inputs"), len(header.get("outputs", []))
+    for i, ln in enumerate(lines[1:], start=2):
+        try:
+            rec = json.loads(ln)
+            row = [float(x) for x in rec["raw"]]
+            o = [float(x) for x in rec["out"]]
+            tt, st = float(rec["t"]), int(rec["status"])
+            tp = math.nan if rec.get("temp") is None else float(rec["temp"])
+        except (ValueError, KeyError, TypeError):
+            if i == len(lines):
+                break  # a last line cut short by a stop: drop it
+            raise InputError(f"{origin}: line {i} is not a sample") from None
+        if len(row) != n or len(o) != m:
+            raise InputError(f"{origin}: line {i} has {len(row)} readings and {len(o)} outputs; the header says {n} "
+                             f"and {m}")
+        t.append(tt), raw.append(row), temp.append(tp), out.append(o), status.append(st)
+    if not t:
+        raise InputError(f"{origin}: no samples")
+    return Run(header, np.array(t), np.array(raw), np.array(temp), np.array(out), np.array(status))
+
+
+@dataclass
+class ReplayResult:
+    t: np.ndarray
+    raw: np.ndarray
+    temp: np.ndarray
+    v: np.ndarray
+    out: np.ndarray
+    status: np.ndarray
+    recorded: np.ndarray
+    outputs: tuple[str, ...]
+    model_hash: str
+    same_model: bool
+    updates: list
+    notes: list
+
+    @property
+    def exact(self) -> bool:
+        return self.out.shape == self.recorded.shape and bool(np.array_equal(self.out, self.recorded))
+
+    def sample(self, i: int) -> dict:
+        """Sample ``i`` as the live view's hub takes it."""
+        n_up = sum(1 for u in self.updates if u.t <= self.t[i])
+        return {"t": float(self.t[i]), "v": self.v[i].tolist(), "raw": self.raw[i].tolist(),
+                "out": {o: float(x) for o, x in zip(self.outputs, self.out[i])}, "status": int(self.status[i]),
+                "temp": None if not math.isfinite(self.temp[i]) else float(self.temp[i]), "rate": None,
+                "errors": {}, "zero": {"updates": n_up, "last": self.updates[n_up - 1].describe() if n_up else None}}
+
+    def report(self) -> str:
+        lines = [f"replayed {len(self.t)} samples with model {self.model_hash[:12]}"
+                 f"{' (the recording model)' if self.same_model else ''}; auto-zero updates {len(self.updates)}"]
+        lines += [f"note: {n}" for n in self.notes]
+        if self.exact:
+            lines.append("estimates identical to the recorded ones")
+        elif self.out.shape == self.recorded.shape:
+            d = self.out - self.recorded
+            lines.append("| output | max abs difference | RMS difference |")
+            lines.append("| --- | --- | --- |")
+            for j, o in enumerate(self.outputs):
+                lines.append(f"| {o} | {np.abs(d[:, j]).max():.4g} | {np.sqrt(np.mean(d[:, j] ** 2)):.4g} |")
+        else:
+            lines.append("the recorded run has other outputs: no differences computed")
+        return "\n".join(lines) + "\n"
+
+    def save(self, path) -> None:
+        text = "".join(json.dumps({"t": float(t), "raw": r.tolist(), "temp": None if not math.isfinite(tp) else float(tp),
+                                   "out": o.tolist(), "status": int(s)}) + "\n"
+                       for t, r, tp, o, s in zip(self.t, self.raw, self.temp, self.out, self.status))
+        write_atomic(path, text)
+
+
+def _recorded_model(run: Run) -> Model | None:
+    data = run.header.get("model_file")
+    return model_from_dict(data, "the run's model") if isinstance(data, dict) else None
+
+
+def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None = None,
+           temp_comp: str | None = None, no_temp_comp: bool = False) -> ReplayResult:
+    """Re-estimate ``run``; ``auto_zero`` / temperature compensation None: as recorded."""
+    h, notes = run.header, []
+    if isinstance(model, str):
+        model = load_model(model)
+    if model is None:
+        model = _recorded_model(run)
+        if model is None:
+            raise InputError("the run does not carry its model: give --model")
+    if model.n_inputs != run.n_inputs:
+        raise InputError(f"the model takes {model.n_inputs} inputs; the run has {run.n_inputs} readings per sample")
+    same = model.sha256 == h.get("model")
+    if temp_comp and no_temp_comp:
+        raise InputError("give --temp-comp or --no-temp-comp, not both")
+    tc = None
+    if temp_comp:
+        tc = load_tempcomp(temp_comp)
+    elif not no_temp_comp and h.get("temp_comp"):
+        d = h["temp_comp"]
+        tc = TempComp(float(d["t0"]), np.array(d["offset_v_per_degc"]), np.array(d["gain_per_degc"]), d.get("fit", {}))
+    if tc is not None and not np.isfinite(run.temp).any():
+        raise InputError("temperature compensation needs the run's temperatures, and this run recorded none "
+                         "(record with --temperature)")
+    tare = None if h.get("tare") is None else np.array(h["tare"], dtype=float)
+    az_rec = h.get("auto_zero")
+    use_az = bool(az_rec) if auto_zero is None else auto_zero
+    az = None
+    if use_az:
+        ref, noise = h.get("reference"), h.get("noise")
+        if ref is None or noise is None:
+            raise InputError("auto-zero needs the rest readings and the noise floor, which a run records only when "
+                             "it was made with --tare or --auto-zero")
+        settings = AutoZeroSettings(**{k: az_rec[k] for k in AutoZeroSettings.__dataclass_fields__}) if az_rec \
+            else AutoZeroSettings()
+        start = az_rec["start"] if az_rec else (None if tare is None else tare.tolist())
+        az = AutoZero(np.array(ref), float(noise), model.output_names, zero=start, settings=settings)
+    corrections = Corrections(tare, tc, az)
+    engine = PythonEngine(model)
+    n = len(run.t)
+    v_all, out_all, st_all = np.empty_like(run.raw), np.empty((n, len(model.equations))), np.empty(n, dtype=int)
+    # one sample at a time, as the readout does: auto-zero's state depends on every sample before
+    for i in range(n):
+        comp, v = corrections(run.raw[i].copy(), run.temp[i])
+        out, status = engine.estimate(v)
+        corrections.observe(run.t[i], comp, out, status)
+        v_all[i], out_all[i], st_all[i] = v, out, status
+    if not same:
+        notes.append(f"the run was recorded with model {str(h.get('model'))[:12]}")
+    return ReplayResult(run.t, run.raw, run.temp, v_all, out_all, st_all, run.out,
+                        tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes)

@@ -1,0 +1,214 @@
+"""Temperature: a thermistor on a spare ADC input, and per-element offset and gain compensation.
+
+A GMR bridge's offset and sensitivity move with temperature. With element k reading
+r_k(T) = v_k (1 + g_k (T - t0)) + o_k (T - t0) for the reading v_k it gives at the
+calibration temperature t0, the compensation is v_k = (r_k - o_k (T - t0)) / (1 + g_k (T - t0)),
+applied before the model, on the host (:meth:`TempComp.apply`) and in the generated C
+(:func:`render_c`, the same operations in the same order).
+
+The coefficients are fitted per element by least squares from captures of the same poses at
+several temperatures: r_k(T) - v_k = g_k v_k (T - t0) + o_k (T - t0), v_k being the mean reading
+of that pose at the temperature closest to t0. Two poses or more are needed to tell gain from
+offset; with one (rest only) the gain is taken as 0.
+
+Thermistor: an NTC (beta model) to ground with a series resistor to the reference, read as a
+voltage on a spare ADC input named in the channel map: ``--adc ads1115@0x48:0-3,ads1115@0x49:0-3,temp=ads1115@0x4a:0``,
+its divider with ``--thermistor beta=3950,r25=10000,series=10000,vref=3.3``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.errors import InputError
+from fitgen.fileio import read_text, write_atomic
+
+DIVIDER_KEYS = ("beta", "r25", "series", "vref")
+DIVIDER_DEFAULTS = {"beta": 3950.0, "r25": 10_000.0, "series": 10_000.0, "vref": 3.3}
+READ_EVERY = 0.25  # s between thermistor reads: temperature moves slowly, conversions cost bus time
+
+
+@dataclass(frozen=True)
+class TemperatureInput:
+    """Where the thermistor is (chip kind, address, single-ended input) and its divider."""
+
+    kind: str
+    address: int
+    input: int
+    divider: dict = field(default_factory=lambda: dict(DIVIDER_DEFAULTS))
+
+    def degc(self, volts: float) -> float:
+        """The temperature of a divider voltage (inverse of host.simbus.ntc_volts)."""
+        d = self.divider
+        if not 0.0 < volts < d["vref"]:
+            return math.nan  # open or shorted thermistor
+        r = d["series"] * volts / (d["vref"] - volts)
+        return 1.0 / (1.0 / 298.15 + math.log(r / d["r25"]) / d["beta"]) - 273.15
+
+
+def split_channel_map(spec: str) -> tuple[str, str | None]:
+    """``--adc`` without its ``temp=CHIP@ADDRESS:INPUT`` item, and that item's value (None without one)."""
+    parts = [p.strip() for p in spec.split(",")]
+    temps = [p for p in parts if p.lower().startswith("temp=")]
+    if len(temps) > 1:
+        raise InputError(f"--adc {spec!r}: one temp= input at most")
+    return ",".join(p for p in parts if not p.lower().startswith("temp=")), (temps[0][5:] if temps else None)
+
+
+def parse_temperature_input(spec: str, thermistor: str | None = None) -> TemperatureInput:
+    """``ads1115@0x4a:0`` (or ``ads7828@0x48:7``) and ``beta=3950,r25=10000,series=10000,vref=3.3``."""
+    from fitgen.cliutil import parse_assignments
+
+    from .channelmap import ADDRESSES, N_INPUTS
+
+    head, _, inp = spec.strip().partition(":")
+    kind, _, addr = head.partition("@")
+    kind = kind.lower()
+    if kind not in N_INPUTS or not addr or not inp:
+        raise InputError(f"temp={spec!r} in --adc: expected CHIP@ADDRESS:INPUT, e.g. temp=ads1115@0x4a:0")
+    try:
+        address, pin = int(addr, 0), int(inp)
+    except ValueError:
+        raise InputError(f"temp={spec!r} in --adc: the address and input must be numbers") from None
+    if address not in ADDRESSES:
+        raise InputError(f"temp={spec!r} in --adc: address 0x{address:02x} is not one of "
+                         f"{', '.join(f'0x{a:02x}' for a in ADDRESSES)}")
+    if not 0 <= pin < N_INPUTS[kind]:
+        raise InputError(f"temp={spec!r} in --adc: {kind} has inputs 0-{N_INPUTS[kind] - 1}")
+    divider = dict(DIVIDER_DEFAULTS)
+    if thermistor:
+        divider.update(parse_assignments(thermistor, DIVIDER_KEYS, "--thermistor"))
+        if not all(v > 0 and math.isfinite(v) for v in divider.values()):
+            raise InputError(f"--thermistor {thermistor!r}: every value must be a finite number > 0")
+    return TemperatureInput(kind, address, pin, divider)
+
+
+class Thermometer:
+    """Reads the thermistor through the ADC array's bus (same retries and counts), at most every READ_EVERY s."""
+
+    def __init__(self, array, tin: TemperatureInput, cmap_settings):
+        from .adc import make_driver
+        from .channelmap import Chip
+
+        for chip, inp in array.cmap.elements():
+            if chip.address == tin.address and inp == tin.input:
+                raise InputError(f"temp={tin.kind}@0x{tin.address:02x}:{tin.input} is also an element's input in --adc")
+            if chip.address == tin.address and chip.kind != tin.kind:
+                raise InputError(f"temp= in --adc: the chip at 0x{tin.address:02x} is a {chip.kind} elsewhere in --adc")
+            if chip.address == tin.address and chip.settings.mode == "continuous":
+                raise InputError("temp= in --adc on a chip in continuous mode: use single-shot mode or another chip")
+        self.tin, self.clock = tin, array.clock
+        self.driver = make_driver(array.io, Chip(tin.kind, tin.address, (tin.input,), cmap_settings))
+        self.last_t = -math.inf
+        self.value = math.nan
+
+    def read(self) -> float:
+        now = self.clock.monotonic()
+        if now - self.last_t >= READ_EVERY:
+            self.last_t = now
+            self.value = self.tin.degc(self.driver.read(self.tin.input))
+        return self.value
+
+
+@dataclass
+class TempComp:
+    """Per-element offset (V/degC) and gain (1/degC) coefficients about ``t0`` (degC)."""
+
+    t0: float
+    offset: np.ndarray
+    gain: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return int(self.offset.size)
+
+    def apply(self, raw: np.ndarray, temp: float) -> np.ndarray:
+        """Compensated readings; a non-finite temperature leaves them as they are."""
+        if not math.isfinite(temp):
+            return raw
+        dT = temp - self.t0
+        return (raw - self.offset * dT) / (1.0 + self.gain * dT)
+
+    def to_dict(self) -> dict:
+        return {"kind": "tactile temperature compensation", "version": 1, "t0": self.t0,
+                "offset_v_per_degc": self.offset.tolist(), "gain_per_degc": self.gain.tolist(), "fit": self.info}
+
+    def save(self, path) -> Path:
+        return write_atomic(path, json.dumps(self.to_dict(), indent=1) + "\n")
+
+
+def load_tempcomp(path) -> TempComp:
+    origin = f"temperature compensation {path}"
+    try:
+        data = json.loads(read_text(path, "temperature compensation file"))
+        t0 = float(data["t0"])
+        off = np.asarray(data["offset_v_per_degc"], dtype=float)
+        gain = np.asarray(data["gain_per_degc"], dtype=float)
+    except (ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{origin}: not a compensation file ({type(exc).__name__}: {exc})") from None
+    if off.ndim != 1 or off.shape != gain.shape or not (np.all(np.isfinite(off)) and np.all(np.isfinite(gain))
+                                                         and math.isfinite(t0)):
+        raise InputError(f"{origin}: offsets and gains must be finite lists of the same length")
+    return TempComp(t0, off, gain, data.get("fit", {}))
+
+
+def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, t0: float | None = None) -> TempComp:
+    """Coefficients from rows of readings (n, N), the pose each row was taken at, and its temperature.
+
+    ``t0``: the calibration temperature (default: the temperature closest to the median).
+    """
+    readings, pose_ids, temps = np.asarray(readings, float), np.asarray(pose_ids), np.asarray(temps, float)
+    if not np.all(np.isfinite(temps)):
+        raise InputError("a capture row has no temperature (is the thermistor connected?)")
+    levels = np.unique(np.round(temps, 1))
+    if levels.size < 2:
+        raise InputError("the capture holds one temperature: capture at two or more (--temperature T1,T2,...)")
+    t0 = float(t0) if t0 is not None else float(levels[np.argmin(np.abs(levels - np.median(temps)))])
+    n = readings.shape[1]
+    base = np.full(readings.shape, np.nan)
+    for p in np.unique(pose_ids):
+        rows = pose_ids == p
+        near = rows & (np.abs(temps - t0) == np.abs(temps[rows] - t0).min())
+        base[rows] = readings[near].mean(axis=0)
+    dT = temps - t0
+    multi = np.unique(pose_ids).size >= 2
+    off, gain, resid = np.zeros(n), np.zeros(n), np.zeros(n)
+    for k in range(n):
+        y = readings[:, k] - base[:, k]
+        X = np.column_stack([dT, base[:, k] * dT]) if multi else dT[:, None]
+        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+        off[k] = coef[0]
+        gain[k] = coef[1] if multi else 0.0
+        resid[k] = float(np.sqrt(np.mean((y - X @ coef) ** 2)))
+    info = {"rows": int(readings.shape[0]), "temperatures": levels.tolist(), "poses": int(np.unique(pose_ids).size),
+            "residual_rms_v": resid.tolist(), "gain_fitted": bool(multi)}
+    return TempComp(t0, off, gain, info)
+
+
+def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:
+    """``<prefix>_tempcomp.h``: the compensation in C99, the operations of :meth:`TempComp.apply`."""
+    from fitgen.cgen import c_real, identifier
+
+    prefix = identifier(prefix, "prefix")
+    P, U = prefix, prefix.upper()
+    real = "float" if precision == "float" else "double"
+    lit = lambda x: c_real(float(x), precision)  # noqa: E731
+    lines = [f"/* {P}_tempcomp.h: per-element temperature compensation, generated by tactile-host. Do not edit. */",
+             f"#ifndef {U}_TEMPCOMP_H", f"#define {U}_TEMPCOMP_H", "", "#include <math.h>", "",
+             f"#define {U}_TEMPCOMP_N {tc.n}",
+             f"static const {real} {P}_tc_offset[{U}_TEMPCOMP_N] = {{ {', '.join(lit(x) for x in tc.offset)} }};",
+             f"static const {real} {P}_tc_gain[{U}_TEMPCOMP_N] = {{ {', '.join(lit(x) for x in tc.gain)} }};",
+             "",
+             f"/* v[k] = (v[k] - offset[k] (t - t0)) / (1 + gain[k] (t - t0)); a non-finite t leaves v as it is */",
+             f"static void {P}_tempcomp({real} v[{U}_TEMPCOMP_N], {real} temp)",
+             "{", "    int k;", f"    const {real} dt = temp - {lit(tc.t0)};", "    if (!isfinite(temp)) {",
+             "        return;", "    }", f"    for (k = 0; k < {U}_TEMPCOMP_N; ++k) {{",
+             f"        v[k] = (v[k] - {P}_tc_offset[k] * dt) / ({lit(1.0)} + {P}_tc_gain[k] * dt);", "    }", "}", "",
+             f"#endif /* {U}_TEMPCOMP_H */", ""]
+    return "\n".join(lines)

@@ -1,0 +1,181 @@
+"""Drift and what answers it: the simulated drift and thermistor, temperature compensation (Python and C),
+auto-zero, run records and replay, and the options' bad input."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fitgen.errors import InputError
+from host.adc import AdcArray
+from host.autozero import AutoZero, AutoZeroSettings
+from host.channelmap import parse_spec
+from host.clock import VirtualClock
+from host.compiled import compile_checked
+from host.simbus import Drift, SimBus, ntc_volts
+from host.temperature import (TempComp, Thermometer, fit_tempcomp, load_tempcomp, parse_temperature_input,
+                              render_c, split_channel_map)
+
+from conftest import TWO_CHIPS, assert_one_line_error, require_tool, run_cli
+
+OUTPUTS = ("dx", "dy", "dz", "thx", "thy")
+
+
+def _bus(sensor, drift, *, noise=0.0, pose=np.zeros(5), tin=None, clock=None):
+    clock = clock or VirtualClock()
+    bus = SimBus.for_channel_map(parse_spec(TWO_CHIPS), sensor, pose, clock=clock, noise=noise, drift=drift,
+                                 thermistor=tin)
+    array = AdcArray(bus, parse_spec(TWO_CHIPS), clock=clock)
+    array.probe()
+    array.setup()
+    return bus, array, clock
+
+
+def test_thermistor_reads_the_drifts_temperature(sensor):
+    tin = parse_temperature_input("ads1115@0x4a:0")
+    d = Drift.typical(8, ramp_degc=10.0, ramp_s=100.0)
+    bus, array, clock = _bus(sensor, d, tin=tin)
+    thermo = Thermometer(array, tin, array.cmap.chips[0].settings)
+    for t in (0.0, 30.0, 100.0, 150.0):
+        clock.t = t
+        thermo.last_t = -1e9
+        assert thermo.read() == pytest.approx(d.temperature(t), abs=0.02)
+    assert tin.degc(ntc_volts(-10.0)) == pytest.approx(-10.0, abs=1e-9)
+    assert np.isnan(tin.degc(0.0)) and np.isnan(tin.degc(3.3))  # shorted or open
+    assert split_channel_map(TWO_CHIPS + ",temp=ads1115@0x4a:0") == (TWO_CHIPS, "ads1115@0x4a:0")
+    for bad in ("ads1115@0x4a", "ads1115@0x50:0", "ads1115@0x4a:4", "max31855@0x4a:0"):
+        with pytest.raises(InputError):
+            parse_temperature_input(bad)
+    with pytest.raises(InputError, match="also an element's input"):
+        Thermometer(array, parse_temperature_input("ads1115@0x48:2"), array.cmap.chips[0].settings)
+
+
+def test_compensation_undoes_the_drift_in_python_and_in_c(sensor, tmp_path):
+    d = Drift.typical(8, seed=3)
+    tc = TempComp(d.t0, d.offset_tc, d.gain_tc)
+    rng = np.random.default_rng(0)
+    true = rng.uniform(0.5, 2.5, (20, 8))
+    temps = rng.uniform(10, 40, 20)
+    raw = np.array([true[i] * (1 + d.gain_tc * (temps[i] - d.t0)) + d.offset_tc * (temps[i] - d.t0) for i in range(20)])
+    back = np.array([tc.apply(raw[i], temps[i]) for i in range(20)])
+    np.testing.assert_allclose(back, true, rtol=1e-12)
+    np.testing.assert_array_equal(tc.apply(raw[0], float("nan")), raw[0])
+    # the generated C: the same operations, so the same doubles
+    require_tool("gcc")
+    (tmp_path / "tm_tempcomp.h").write_text(render_c(tc, precision="double"))
+    src = tmp_path / "main.c"
+    src.write_text('#include <stdio.h>\n#include "tm_tempcomp.h"\nint main(void) {\n double v[8], t; int k;\n'
+                   ' while (scanf("%lf", &t) == 1) {\n  for (k = 0; k < 8; ++k) if (scanf("%lf", &v[k]) != 1) return 1;\n'
+                   '  tm_tempcomp(v, t);\n  for (k = 0; k < 8; ++k) printf("%.17g ", v[k]);\n  printf("\\n");\n }\n'
+                   ' return 0;\n}\n')
+    compile_checked("gcc", [src], tmp_path / "tc", tmp_path)
+    import subprocess
+
+    text = "\n".join(" ".join(repr(float(x)) for x in [temps[i], *raw[i]]) for i in range(20)) + "\n"
+    proc = subprocess.run([str(tmp_path / "tc")], input=text, capture_output=True, text=True, check=True)
+    c_out = np.array([[float(x) for x in ln.split()] for ln in proc.stdout.splitlines()])
+    np.testing.assert_array_equal(c_out, back)
+
+
+def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dz\n0,0\n1,-1\n-1,-0.5\n")
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+                   "--simulate", "--temperature", "15,25,35", "--sim-noise", "0", "-o", str(tmp_path / "cap.csv"))
+    assert proc.returncode == 0, proc.stderr
+    tc = load_tempcomp(tmp_path / "cap.tempcomp.json")
+    truth = Drift.typical(8, seed=0)
+    assert tc.t0 == 25.0 and tc.info["gain_fitted"]
+    # within what the 16-bit ADC's 0.125 mV steps leave over 3 poses and 10 degC steps (coefficients ~1e-3)
+    np.testing.assert_allclose(tc.offset, truth.offset_tc, atol=1e-4)
+    np.testing.assert_allclose(tc.gain, truth.gain_tc, atol=1e-4)
+    from fitgen.dataset import load_dataset
+
+    hot, ref = load_dataset(tmp_path / "cap.T35.csv").inputs, load_dataset(tmp_path / "cap.T25.csv").inputs
+    fixed = np.array([tc.apply(r, 35.0) for r in hot])
+    assert np.abs(hot - ref).max() > 5e-3 and np.abs(fixed - ref).max() < 3e-4
+    assert all((tmp_path / f"cap.T{t}.csv").exists() for t in (15, 25, 35))
+    with pytest.raises(InputError, match="one temperature"):
+        fit_tempcomp(np.ones((3, 8)), np.arange(3), np.full(3, 25.0))
+    one = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS, "--simulate", "--temperature",
+                  "25", "-o", str(tmp_path / "x.csv"))
+    assert_one_line_error(one, contains="two or more different temperatures")
+
+
+def test_auto_zero_follows_drift_at_rest_and_never_during_a_press():
+    ref = np.full(8, 1.0)
+    az = AutoZero(ref, 5e-4, OUTPUTS, settings=AutoZeroSettings(window=16, hold=0.5))
+    rng = np.random.default_rng(1)
+    offset = np.linspace(-2e-3, 2e-3, 8)
+    t = 0.0
+    for _ in range(400):  # 20 s at 20 Hz, at rest, offsets present
+        t += 0.05
+        v = ref + offset + rng.normal(0, 5e-4, 8)
+        az.observe(t, v, np.zeros(5), 0)
+    assert len(az.updates) >= 8
+    np.testing.assert_allclose(az.zero, offset, atol=3e-4)
+    n = len(az.updates)
+    for _ in range(400):  # pressed: the estimate leaves the rest band, the readings move far
+        t += 0.05
+        az.observe(t, ref + 0.05 + rng.normal(0, 5e-4, 8), np.array([0.0, 0.0, -0.5, 1.0, 0.0]), 0)
+    assert len(az.updates) == n
+    for _ in range(400):  # inside the band but loud (being touched lightly): no update either
+        t += 0.05
+        az.observe(t, ref + offset + rng.normal(0, 5e-3, 8), np.zeros(5), 0)
+    assert len(az.updates) == n
+    for bad in (dict(band_mm=0), dict(rate=1.5), dict(window=2), dict(hold=float("nan"))):
+        with pytest.raises(InputError):
+            AutoZeroSettings(**bad).checked()
+
+
+@pytest.fixture(scope="module")
+def rest_model_file(sensor, tmp_path_factory):
+    """A model whose noisy estimates at rest stay inside the rest band: the paper ring cannot see tilt at
+    rest, and only the harmonics family keeps its tilt estimates there quiet (docs/harmonics.md)."""
+    from fitgen.fit import FitSettings, fit_model
+    from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+
+    model = fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])),
+                      settings=FitSettings.family("harmonics"), sensor=sensor)
+    return str(model.save(tmp_path_factory.mktemp("rest") / "harmonics.json"))
+
+
+def test_read_records_and_replay_reproduces_it_exactly(rest_model_file, tmp_path):
+    model_file = rest_model_file
+    run = tmp_path / "run.jsonl"
+    proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+                   "--simulate", "0,0,0,0,0", "--sim-drift", "ramp=5,over=20,tau=10,creep=0.004", "--auto-zero",
+                   "--rest-hold", "0.2", "--count", "500", "--record", str(run), "-o", str(tmp_path / "s.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert "auto-zero update 1" in proc.stderr
+    rep = run_cli("tactile-host", "replay", str(run))
+    assert rep.returncode == 0, rep.stderr
+    assert "estimates identical to the recorded ones" in rep.stdout and "(the recording model)" in rep.stdout
+    off = run_cli("tactile-host", "replay", str(run), "--no-auto-zero", "-o", str(tmp_path / "off.jsonl"))
+    assert off.returncode == 0 and "| dz |" in off.stdout and "auto-zero updates 0" in off.stdout
+    recs = [json.loads(ln) for ln in (tmp_path / "off.jsonl").read_text().splitlines()]
+    head = json.loads(run.read_text().splitlines()[0])
+    assert len(recs) == 500 and head["run"] == 1 and head["auto_zero"]["start"] is not None
+    assert all(r["temp"] is not None for r in recs)
+    assert_one_line_error(run_cli("tactile-host", "replay", str(tmp_path / "s.csv")), contains="not a run record")
+    assert_one_line_error(run_cli("tactile-host", "replay", str(run), "--temp-comp", str(tmp_path / "none.json")))
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--temp-comp", "tc.json"], "temp=CHIP@ADDRESS:INPUT"),
+    (["--thermistor", "beta=3950"], "add temp=CHIP@ADDRESS:INPUT to --adc"),
+    (["--rest-band", "0.1"], "--rest-band"),
+    (["--rest-hold", "-1"], "--rest-hold"),
+    (["--sim-drift", "ramp=5,over=0"], "over and tau must be > 0"),
+    (["--sim-drift", "warp=9"], "--sim-drift"),
+])
+def test_bad_drift_options_are_one_line(model_file, extra, message):
+    proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "0,0,0,0,0",
+                   "--count", "2", *extra)
+    assert_one_line_error(proc, contains=message)
+
+
+def test_sim_drift_needs_simulate(model_file):
+    proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--sim-drift", "ramp=5",
+                   "--count", "2", "--bus", "97")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
