@@ -77,7 +77,22 @@ def run_demo(out: Path) -> int:
     status = _codegen_stage(model, out, held_clean)
 
     _stage("6. reference firmware on an emulated Cortex-M4 (QEMU mps2-an386), HIL suite")
-    return max(status, _hil_stage(model, out, held_clean))
+    status = max(status, _hil_stage(model, out, held_clean))
+
+    t = _stage("7. a model in volts for the live view (the gmr transfer an ADC sees, fitted for its noise)")
+    volts = sensor.with_transfer("gmr")
+    vtrain = simulate(volts, grid_poses(PAPER_GRIDS["paper-sim"]), provenance={"grid": "paper-sim"})
+    vtrain.save(out / "paper-sim-volts.csv")
+    vmodel, vfamily = fit_auto(vtrain, None, FitSettings(), volts, progress=_fit_progress())
+    vmodel.fit_info["family"] = vfamily
+    vmodel.fit_info["dataset"] = str(out / "paper-sim-volts.csv")
+    vmodel.save(out / "model-volts.json")
+    print(f"   model -> {out / 'model-volts.json'} (family {vfamily['name']}, noise {volts.noise:g} V rms; "
+          f"{time.monotonic() - t:.1f} s)")
+    print("   watch it live (a simulated sensor sliding and pressed; open the address it prints):")
+    print(f"   tactile-host view --model {out / 'model-volts.json'} --adc ads1115@0x48:0-3,ads1115@0x49:0-3 "
+          "--simulate motion --auto-zero")
+    return status
 
 
 def _codegen_stage(model, out: Path, held_out) -> int:

@@ -450,6 +450,26 @@ def _flag(args):
     return True if args.auto_zero else (False if getattr(args, "no_auto_zero", False) else None)
 
 
+def cmd_tempcomp_c(args) -> int:
+    from pathlib import Path
+
+    from fitgen.fileio import write_atomic
+
+    from .temperature import load_tempcomp, render_c
+
+    tc = load_tempcomp(args.tempcomp)
+    text = render_c(tc, args.prefix, args.precision)
+    folder = Path(args.output)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create {folder}: {exc.strerror}") from None
+    path = write_atomic(folder / f"{args.prefix}_tempcomp.h", text)
+    print(f"wrote {path} ({tc.n} elements about {tc.t0:g} degC, {args.precision}); call "
+          f"{args.prefix}_tempcomp(v, degc) on the readings before {args.prefix}_estimate", file=sys.stderr)
+    return 0
+
+
 def cmd_replay(args) -> int:
     from .replay import load_run, replay
 
@@ -753,6 +773,13 @@ def build_parser() -> Parser:
     rp.add_argument("--no-temp-comp", action="store_true", help="no temperature compensation")
     rp.add_argument("-o", "--output", metavar="OUT.jsonl", help="write the re-estimated run here")
     rp.set_defaults(func=cmd_replay)
+
+    tcc = sub.add_parser("tempcomp-c", help="the temperature compensation as a C99 header (<prefix>_tempcomp.h)")
+    tcc.add_argument("tempcomp", metavar="FILE.json", help="from tactile-host capture --temperature")
+    tcc.add_argument("-o", "--output", required=True, metavar="DIR")
+    tcc.add_argument("--precision", default="float", choices=("float", "double"))
+    tcc.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
+    tcc.set_defaults(func=cmd_tempcomp_c)
 
     c = sub.add_parser("capture", help="record a calibration dataset, one averaged row per scheduled pose")
     c.add_argument("--poses", required=True, metavar="SCHEDULE.csv", help="poses to visit: columns of dx,dy,dz,thx,thy")

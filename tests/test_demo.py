@@ -16,6 +16,12 @@ def test_demo_runs_end_to_end(tmp_path):
     # three headers verified by gcc, then the HIL suite on the emulated Cortex-M4
     assert text.count("PASS") == 4 and "FAIL" not in text
     assert "HIL suite on the emulated core: PASS" in text
+    # a model in volts, and the line that opens the live view with it
+    from fitgen.model import load_model
+
+    volts = load_model(out / "model-volts.json")
+    assert volts.input_units == "V" and volts.fit_info["family"]["auto"]
+    assert f"tactile-host view --model {out / 'model-volts.json'} --adc" in text and "--simulate motion" in text
 
 
 def test_demo_bad_output_folder(tmp_path):
