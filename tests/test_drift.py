@@ -179,3 +179,42 @@ def test_sim_drift_needs_simulate(model_file):
     proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--sim-drift", "ramp=5",
                    "--count", "2", "--bus", "97")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
+
+
+def test_view_replays_a_recorded_run_in_the_page(rest_model_file, tmp_path):
+    """view --replay serves the run's samples, re-estimated, as the live stream does."""
+    import subprocess
+    import sys
+    import time
+    import urllib.request
+
+    run = tmp_path / "run.jsonl"
+    proc = run_cli("tactile-host", "read", "--model", rest_model_file, "--adc", TWO_CHIPS, "--simulate", "motion",
+                   "--count", "60", "--record", str(run), "-o", str(tmp_path / "s.csv"))
+    assert proc.returncode == 0, proc.stderr
+    code = "import sys; from host.cli import main; sys.argv[0] = 'tactile-host'; main()"
+    view = subprocess.Popen([sys.executable, "-c", code, "view", "--replay", str(run), "--port", "0", "--hold"],
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        line = view.stderr.readline()
+        assert "serving http://127.0.0.1:" in line, line
+        url = line.split("serving ")[1].split()[0]
+        recorded = [json.loads(ln)["out"] for ln in run.read_text().splitlines()[1:]]
+        seen = {}
+        deadline = time.monotonic() + 30
+        while len(seen) < len(recorded) and time.monotonic() < deadline:
+            with urllib.request.urlopen(url + "events?since=0", timeout=10) as resp:
+                for raw in resp:
+                    text = raw.decode().strip()
+                    if text.startswith("data: {\"t\""):
+                        s = json.loads(text[6:])
+                        seen[s["seq"]] = list(s["out"].values())
+                    if len(seen) >= len(recorded):
+                        break
+        assert [seen[i + 1] for i in range(len(recorded))] == recorded
+    finally:
+        view.terminate()
+        view.wait(timeout=10)
+    assert_one_line_error(run_cli("tactile-host", "view", "--port", "0"), contains="--replay")
+    assert_one_line_error(run_cli("tactile-host", "view", "--replay", str(tmp_path / "s.csv"), "--port", "0"),
+                          contains="not a run record")
