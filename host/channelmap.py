@@ -22,6 +22,9 @@ TOML file (per-chip settings; anything left out takes the command-line value)::
     address = 0x4b
     inputs = [0, 1, 2, 3]
     vref = 3.3                     # external reference in V, or "internal" (2.5 V)
+    [temperature]                  # optional: a thermistor on a spare input (host/temperature.py)
+    input = "ads1115@0x4a:0"
+    beta = 3950                    # and r25, series (ohms), vref (V): the NTC divider
 """
 
 from __future__ import annotations
@@ -94,6 +97,7 @@ class Chip:
 class ChannelMap:
     chips: tuple[Chip, ...]
     bus: int | None = None  # from a TOML file; the command line's --bus wins when given
+    temperature: tuple | None = None  # from a TOML file: (input spec, {divider key: value})
 
     @property
     def n_elements(self) -> int:
@@ -222,9 +226,21 @@ def load_map_file(path: str | Path, settings: Settings = Settings()) -> ChannelM
         data = tomllib.loads(read_text(path, "channel map"))
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{origin}: not valid TOML: {exc}") from None
-    unknown = sorted(set(data) - {"bus", "chip"})
+    unknown = sorted(set(data) - {"bus", "chip", "temperature"})
     if unknown:
-        raise InputError(f"{origin}: unknown key {unknown[0]!r} (known: bus, chip)")
+        raise InputError(f"{origin}: unknown key {unknown[0]!r} (known: bus, chip, temperature)")
+    temperature = None
+    if "temperature" in data:
+        tt = data["temperature"]
+        if not isinstance(tt, dict) or not isinstance(tt.get("input"), str):
+            raise InputError(f"{origin}: [temperature] needs input = \"CHIP@ADDRESS:INPUT\"")
+        extra = sorted(set(tt) - {"input", "beta", "r25", "series", "vref"})
+        if extra:
+            raise InputError(f"{origin}: [temperature]: unknown key {extra[0]!r}")
+        divider = {k: tt[k] for k in ("beta", "r25", "series", "vref") if k in tt}
+        if not all(not isinstance(v, bool) and isinstance(v, (int, float)) and v > 0 for v in divider.values()):
+            raise InputError(f"{origin}: [temperature]: beta, r25, series and vref must be numbers > 0")
+        temperature = (tt["input"], {k: float(v) for k, v in divider.items()})
     bus = data.get("bus")
     if bus is not None and (isinstance(bus, bool) or not isinstance(bus, int) or bus < 0):
         raise InputError(f"{origin}: bus must be a whole number >= 0, got {bus!r}")
@@ -255,7 +271,7 @@ def load_map_file(path: str | Path, settings: Settings = Settings()) -> ChannelM
         if "pga" in over:
             over["pga"] = float(over["pga"])
         chips.append(Chip(kind, addr, _inputs(kind, items, where), replace(settings, **over).checked(where)))
-    return _finish(chips, origin, bus)
+    return replace(_finish(chips, origin, bus), temperature=temperature)
 
 
 def channel_map(arg: str, settings: Settings = Settings()) -> ChannelMap:

@@ -105,11 +105,13 @@ def _channel_map(args):
     return channel_map(split_channel_map(args.adc)[0], settings)
 
 
-def _temperature_input(args):
-    """The thermistor's input (``temp=`` in --adc) and its divider, or None."""
+def _temperature_input(args, cmap=None):
+    """The thermistor's input (``temp=`` in --adc, or a TOML map's [temperature]) and its divider, or None."""
     from .temperature import parse_temperature_input, split_channel_map
 
     spec = split_channel_map(args.adc)[1]
+    if spec is None and cmap is not None and cmap.temperature is not None:
+        return parse_temperature_input(cmap.temperature[0], args.thermistor, cmap.temperature[1])
     if spec is None:
         if args.thermistor:
             raise InputError("--thermistor describes the temperature input: add temp=CHIP@ADDRESS:INPUT to --adc")
@@ -249,7 +251,8 @@ class _Session:
         tare_n = _positive(args.tare_samples, "--tare-samples", integer=True)
         retries = _positive(args.retries, "--retries", integer=True)
         pose, motion = _motion(args.simulate) if args.simulate is not None else (None, None)
-        tin = _temperature_input(args)
+        cmap0 = _channel_map(args)
+        tin = _temperature_input(args, cmap0)
         if args.temp_comp and tin is None:
             raise InputError("--temp-comp needs the temperature: add the thermistor's input to --adc as "
                              "temp=CHIP@ADDRESS:INPUT (e.g. temp=ads1115@0x4a:0)")
@@ -263,7 +266,7 @@ class _Session:
                              "a dataset in V (fitgen simulate --transfer gmr, or tactile-host capture)")
         if tempcomp is not None and tempcomp.n != model.n_inputs:
             raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
-        self.cmap = cmap = _channel_map(args)
+        self.cmap = cmap = cmap0
         if cmap.n_elements != model.n_inputs:
             raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
         need_ref = args.tare or args.auto_zero
@@ -521,7 +524,7 @@ def cmd_capture_temperatures(args) -> int:
         print("tactile-host capture: note: one pose per temperature gives offsets only (gain needs two poses)",
               file=sys.stderr)
     cmap = _channel_map(args)
-    tin = _temperature_input(args)
+    tin = _temperature_input(args, cmap)
     out = Path(args.output)
     drift = None
     if args.simulate:

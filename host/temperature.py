@@ -60,7 +60,7 @@ def split_channel_map(spec: str) -> tuple[str, str | None]:
     return ",".join(p for p in parts if not p.lower().startswith("temp=")), (temps[0][5:] if temps else None)
 
 
-def parse_temperature_input(spec: str, thermistor: str | None = None) -> TemperatureInput:
+def parse_temperature_input(spec: str, thermistor: str | None = None, divider: dict | None = None) -> TemperatureInput:
     """``ads1115@0x4a:0`` (or ``ads7828@0x48:7``) and ``beta=3950,r25=10000,series=10000,vref=3.3``."""
     from fitgen.cliutil import parse_assignments
 
@@ -80,7 +80,7 @@ def parse_temperature_input(spec: str, thermistor: str | None = None) -> Tempera
                          f"{', '.join(f'0x{a:02x}' for a in ADDRESSES)}")
     if not 0 <= pin < N_INPUTS[kind]:
         raise InputError(f"temp={spec!r} in --adc: {kind} has inputs 0-{N_INPUTS[kind] - 1}")
-    divider = dict(DIVIDER_DEFAULTS)
+    divider = {**DIVIDER_DEFAULTS, **(divider or {})}
     if thermistor:
         divider.update(parse_assignments(thermistor, DIVIDER_KEYS, "--thermistor"))
         if not all(v > 0 and math.isfinite(v) for v in divider.values()):

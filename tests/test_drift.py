@@ -218,3 +218,23 @@ def test_view_replays_a_recorded_run_in_the_page(rest_model_file, tmp_path):
     assert_one_line_error(run_cli("tactile-host", "view", "--port", "0"), contains="--replay")
     assert_one_line_error(run_cli("tactile-host", "view", "--replay", str(tmp_path / "s.csv"), "--port", "0"),
                           contains="not a run record")
+
+
+def test_a_toml_channel_map_names_the_thermistor(rest_model_file, tmp_path):
+    (tmp_path / "map.toml").write_text(
+        '[[chip]]\ntype = "ads1115"\naddress = 0x48\ninputs = ["0-3"]\n'
+        '[[chip]]\ntype = "ads1115"\naddress = 0x49\ninputs = ["0-3"]\n'
+        '[temperature]\ninput = "ads1115@0x4a:1"\nbeta = 3380\n')
+    d = Drift.typical(8)
+    TempComp(25.0, d.offset_tc, d.gain_tc).save(tmp_path / "tc.json")
+    run = tmp_path / "r.jsonl"
+    proc = run_cli("tactile-host", "read", "--model", rest_model_file, "--adc", str(tmp_path / "map.toml"),
+                   "--simulate", "0,0,0,0,0", "--temp-comp", str(tmp_path / "tc.json"), "--count", "5",
+                   "--record", str(run), "-o", str(tmp_path / "s.csv"))
+    assert proc.returncode == 0, proc.stderr
+    recs = [json.loads(ln) for ln in run.read_text().splitlines()]
+    # the simulated thermistor (beta 3380 as the map says) reads the drift-free 25 degC
+    assert recs[0]["temp_comp"]["t0"] == 25.0 and all(abs(r["temp"] - 25.0) < 0.05 for r in recs[1:])
+    (tmp_path / "bad.toml").write_text('[[chip]]\ntype = "ads1115"\naddress = 0x48\n[temperature]\nbeta = 1\n')
+    assert_one_line_error(run_cli("tactile-host", "read", "--model", rest_model_file, "--adc",
+                                  str(tmp_path / "bad.toml"), "--simulate", "0,0,0,0,0"), contains="[temperature]")
