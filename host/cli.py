@@ -637,10 +637,14 @@ def cmd_pi_build(args) -> int:
     from fitgen.model import load_model
 
     from .pi import build_pi, render_pi
+    from .temperature import load_tempcomp
 
     model = load_model(args.model)
     cmap = _channel_map(args)
-    folder = render_pi(model, cmap, args.output, precision=args.precision, style=args.style)
+    tin = _temperature_input(args, cmap)
+    tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
+    folder = render_pi(model, cmap, args.output, precision=args.precision, style=args.style, tin=tin,
+                       tempcomp=tempcomp)
     binary = build_pi(folder, args.cc)
     print(f"wrote {binary} ({cmap.describe()}, model {model.sha256[:12]}, {args.precision}); on the Pi: "
           f"{binary.name} --bus 1 --format csv", file=sys.stderr)
@@ -735,6 +739,8 @@ def build_parser() -> Parser:
     pb.add_argument("--cc", default="arm-linux-gnueabihf-gcc -static",
                     help="compiler and flags (default: arm-linux-gnueabihf-gcc -static; gcc on the Pi itself)")
     pb.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the sources and tm_pi")
+    pb.add_argument("--temp-comp", metavar="FILE.json", help="temperature compensation before the model (needs "
+                    "temp=CHIP@ADDRESS:INPUT in --adc)")
     pb.set_defaults(func=cmd_pi_build)
 
     f = sub.add_parser("flash", help="load a model into a device as a calibration blob and read it back")

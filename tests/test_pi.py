@@ -112,3 +112,62 @@ def test_pi_build_cli_errors(tmp_path, model):
                                   "-o", str(tmp_path / "x")), 2, "reads 4 elements")
     assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "no-such-cc",
                                   "-o", str(tmp_path / "y")), 2, "not found")
+
+
+def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_path):
+    """A thermistor in the map and a compensation: tm_pi reads it after the elements every 0.25 s and applies
+    tm_tempcomp.h before the model; the lines equal tactile-host read --temp-comp's to every printed digit."""
+    import numpy as np
+
+    from fitgen.sensor import load_sensor
+    from host.clock import VirtualClock
+    from host.readout import Corrections, Readout
+    from host.simbus import Drift, SimBus
+    from host.engine import PythonEngine
+    from host.temperature import TempComp, Thermometer, parse_temperature_input
+
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    tin = parse_temperature_input("ads1115@0x4a:2")
+    cmap = parse_spec(MAP)
+    drift = Drift.typical(8, seed=4, ramp_degc=0.0, start_degc=33.0)
+    drift.creep = drift.creep * 0.0  # readings that do not depend on when they are taken
+    tc = TempComp(25.0, drift.offset_tc * 0.9, drift.gain_tc * 1.1)
+
+    def bus():
+        clock = VirtualClock()
+        return SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), [0.5, 0.2, -1.0, 1.0, 0.0],
+                                      clock=clock, noise=0.0005, seed=3, drift=drift, thermistor=tin), clock
+
+    folder = render_pi(model, cmap, tmp_path / "pi", precision="float", tin=tin, tempcomp=tc)
+    binary = build_pi(folder, standin=True)
+    b, clock = bus()
+    res = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", "8"])
+    assert res.returncode == 0, res.stderr
+
+    class FloatEngine(PythonEngine):
+        def estimate(self, inputs):
+            out, status = self.model.predict(np.asarray(inputs).reshape(1, -1), with_status=True, precision="float")
+            return out[0], int(status[0])
+
+    import io
+
+    b, clock = bus()
+    arr = AdcArray(b, cmap, clock=clock, policy=RetryPolicy())
+    arr.probe()
+    arr.setup()
+    sink = io.StringIO()
+    fmt = LineFormat("csv", model.n_inputs, model.output_names)
+    sink.write(fmt.header)
+    Readout(arr, FloatEngine(model), sink, fmt, clock=clock, corrections=Corrections(None, tc),
+            thermometer=Thermometer(arr, tin, cmap.chips[0].settings)).run(count=8)
+    expected = sink.getvalue().splitlines()
+    got = res.stdout.splitlines()
+    assert [ln.split(",", 1)[1] for ln in got[1:]] == [ln.split(",", 1)[1] for ln in expected[1:]]
+    # and the compensation did something: without it the readings differ
+    plain = render_pi(model, cmap, tmp_path / "plain", precision="float", tin=tin)
+    b, clock = bus()
+    res2 = StandIn(b, clock).run(["qemu-arm", str(build_pi(plain, standin=True)), "--count", "8"])
+    assert [ln.split(",", 1)[1] for ln in res2.stdout.splitlines()[1:]] != [ln.split(",", 1)[1] for ln in got[1:]]
+    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", str(tmp_path / "m.json"), "--adc", MAP,
+                                  "--temp-comp", "x.json", "-o", str(tmp_path / "z")))

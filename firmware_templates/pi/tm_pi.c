@@ -1,7 +1,9 @@
 /* tm_pi.c: readings and pose estimates on a Raspberry Pi, in C: the ADC drivers (adc.c) over
  * i2c-dev, the channel map (adc_map.h) and the model (tm_model.h) rendered by `tactile-host pi-build`.
  * Writes the lines `tactile-host read` writes (t, v1..vN in V, the outputs, the model's status),
- * as CSV or JSONL on stdout; a summary on stderr.
+ * as CSV or JSONL on stdout; a summary on stderr. With a thermistor in the channel map it is read
+ * every 0.25 s after the elements, and with PI_TEMPCOMP the readings are compensated (tm_tempcomp.h)
+ * before the model, as `tactile-host read --temp-comp` does.
  *
  *   tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] [--retries N]
  *
@@ -17,7 +19,17 @@
 #include "adc.h"
 #include "adc_map.h"
 #include "i2c_linux.h"
+#include "pi_options.h"
 #include "tm_model.h"
+#if ADC_HAS_TEMPERATURE
+#include <math.h>
+#endif
+#if PI_TEMPCOMP
+#include "tm_tempcomp.h"
+typedef char tm_pi_assert_tempcomp_fits_model[(TM_TEMPCOMP_N == TM_N_INPUTS) ? 1 : -1];
+#endif
+
+#define TEMP_EVERY_NS 250000000u /* host/temperature.py READ_EVERY */
 
 typedef char tm_pi_assert_map_fits_model[(ADC_MAP_N_ELEMENTS == TM_N_INPUTS) ? 1 : -1];
 
@@ -41,6 +53,19 @@ static int parse_long(const char *s, long lo, long hi, long *out)
     *out = v;
     return 0;
 }
+
+#if ADC_HAS_TEMPERATURE
+/* the divider's temperature in degC, as host/temperature.py computes it; NAN for an open or shorted NTC */
+static double ntc_degc(double volts)
+{
+    double r;
+    if (!(volts > 0.0 && volts < ADC_TEMP_VREF)) {
+        return NAN;
+    }
+    r = ADC_TEMP_SERIES * volts / (ADC_TEMP_VREF - volts);
+    return 1.0 / (1.0 / 298.15 + log(r / ADC_TEMP_R25) / ADC_TEMP_BETA) - 273.15;
+}
+#endif
 
 static void print_line(int jsonl, double t, const double v[TM_N_INPUTS], const tm_real out[TM_N_OUTPUTS], int status)
 {
@@ -81,6 +106,14 @@ int main(int argc, char **argv)
     adc_policy policy = adc_default_policy();
     double lsb[TM_N_INPUTS];
     uint64_t next = 0, period = 0;
+    const char *failed = NULL; /* the chip that stopped the readout, when the map's table does not name it */
+    adc_counts total;
+#if ADC_HAS_TEMPERATURE
+    adc_array tarray;
+    double degc = NAN;
+    uint64_t t_last = 0;
+    int t_read = 0;
+#endif
 
     for (i = 1; i < argc; ++i) {
         const char *opt = argv[i];
@@ -130,6 +163,13 @@ int main(int argc, char **argv)
         i2c_linux_close(&port);
         return 2;
     }
+#if ADC_HAS_TEMPERATURE
+    if (adc_init(&tarray, &i2c, ADC_TEMP_CHIP, 1, policy) != ADC_OK) {
+        fprintf(stderr, "tm_pi: error: the thermistor's input %s is not one the drivers take\n", ADC_TEMP_LABEL);
+        i2c_linux_close(&port);
+        return 2;
+    }
+#endif
     if (!jsonl) {
         printf("t");
         for (i = 1; i <= TM_N_INPUTS; ++i) {
@@ -164,6 +204,29 @@ int main(int argc, char **argv)
         }
         for (i = 0; i < TM_N_INPUTS; ++i) {
             v[i] = codes[i] * lsb[i];
+        }
+#if ADC_HAS_TEMPERATURE
+        {
+            const uint64_t now = i2c.now_ns(i2c.ctx);
+            if (!t_read || now - t_last >= TEMP_EVERY_NS) {
+                int32_t tcode;
+                t_read = 1;
+                t_last = now;
+                st = adc_read_codes(&tarray, &tcode);
+                if (st != ADC_OK) {
+                    failed = ADC_TEMP_LABEL;
+                    break;
+                }
+                degc = ntc_degc(tcode * adc_lsb_volts(&ADC_TEMP_CHIP[0]));
+            }
+        }
+#endif
+#if PI_TEMPCOMP
+        tm_tempcomp(v, degc);
+#elif ADC_HAS_TEMPERATURE
+        (void)degc; /* read as the Python readout reads it (same transfers), not applied */
+#endif
+        for (i = 0; i < TM_N_INPUTS; ++i) {
             in[i] = (tm_real)v[i];
         }
         status = tm_estimate(in, out);
@@ -171,14 +234,24 @@ int main(int argc, char **argv)
         ++n;
     }
     fflush(stdout);
+    total = array.counts;
+#if ADC_HAS_TEMPERATURE
+    /* one bus: the thermistor's errors count with the elements', as the Python readout counts them */
+    total.nack += tarray.counts.nack;
+    total.timeout += tarray.counts.timeout;
+    total.stuck += tarray.counts.stuck;
+    total.other += tarray.counts.other;
+    total.retries += tarray.counts.retries;
+    total.resets += tarray.counts.resets;
+#endif
     fprintf(stderr, "tm_pi: %ld samples; I2C errors %lu (nack %lu, timeout %lu, stuck %lu, other %lu; %lu retries, "
                     "%lu resets)\n", n,
-            (unsigned long)(array.counts.nack + array.counts.timeout + array.counts.stuck + array.counts.other),
-            (unsigned long)array.counts.nack, (unsigned long)array.counts.timeout, (unsigned long)array.counts.stuck,
-            (unsigned long)array.counts.other, (unsigned long)array.counts.retries, (unsigned long)array.counts.resets);
+            (unsigned long)(total.nack + total.timeout + total.stuck + total.other),
+            (unsigned long)total.nack, (unsigned long)total.timeout, (unsigned long)total.stuck,
+            (unsigned long)total.other, (unsigned long)total.retries, (unsigned long)total.resets);
     if (st != ADC_OK) {
         fprintf(stderr, "tm_pi: error: %s %s; stopped after %ld samples\n",
-                array.failed_chip >= 0 ? ADC_MAP_LABELS[array.failed_chip] : "general-call reset",
+                failed ? failed : array.failed_chip >= 0 ? ADC_MAP_LABELS[array.failed_chip] : "general-call reset",
                 st == ADC_ERR_STUCK ? "never completes a conversion" : "stays silent", n);
     }
     i2c_linux_close(&port);
