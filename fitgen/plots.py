@@ -81,7 +81,7 @@ def tradeoff(result, path: Path) -> Path:
     target (score 1) dashed, the recommended point ringed; colour by precision, marker by family."""
     plt = _plt()
     colours = {"double": "tab:blue", "float": "tab:orange", "fixed": "tab:green"}
-    markers = {"all": "o", "no-roots": "s", "integer": "^"}
+    markers = {"all": "o", "no-roots": "s", "integer": "^", "harmonics": "D"}
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
     pts = [(i, p) for i, p in enumerate(result.points) if p.instructions is not None and p.score is not None]
     seen = set()

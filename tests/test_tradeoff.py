@@ -157,6 +157,19 @@ def test_tiny_sweep_through_the_cli(tmp_path):
         assert 0 <= float(r["share"]) <= 0.05
 
 
+def test_a_harmonics_sweep_is_plotted(tmp_path):
+    """Every family of the sweep has its marker: a harmonics point writes the markdown and the plot."""
+    require_tool("gcc")
+    require_tool("valgrind")
+    out = tmp_path / "h"
+    proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "--k", "aic", "--max-terms", "8",
+                   "--family", "harmonics", "--precision", "float", "--style", "unrolled", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert (out / "tradeoff.md").is_file() and list(out.glob("*.png"))
+    rows = list(csv.DictReader((out / "tradeoff.csv").open()))
+    assert [r["family"] for r in rows] == ["harmonics"]
+
+
 def test_sweep_fails_when_rounding_exceeds_the_share(tmp_path):
     require_tool("gcc")
     require_tool("valgrind")
