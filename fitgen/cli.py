@@ -318,7 +318,7 @@ def cmd_codegen(args) -> int:
     if args.precision == "fixed":
         from .codegen import render_fixed_header
         from .fixedpoint import build_fixed, default_input_scale
-        from .fileio import write_atomic
+        from .fileio import write_in_folder
 
         if args.fma:
             raise InputError("--fma does not apply to --precision fixed")
@@ -327,13 +327,7 @@ def cmd_codegen(args) -> int:
             lsb, default_offset, source = default_input_scale(model)
             offset = default_offset if offset is None else offset
         fm = build_fixed(model, lsb, offset or 0.0)
-        text = render_fixed_header(fm, args.prefix)
-        folder = Path(args.output)
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise InputError(f"cannot create {folder}: {exc.strerror}") from None
-        path = write_atomic(folder / f"{args.prefix}_model.h", text)
+        path = write_in_folder(args.output, f"{args.prefix}_model.h", render_fixed_header(fm, args.prefix))
         print(f"wrote {path} (fixed point, input LSB {fm.input_lsb:.6g} {model.input_units} from {source}, "
               f"offset {fm.input_offset:g}; {fm.summary()}; model {model.sha256[:12]})", file=sys.stderr)
         return 0

@@ -15,7 +15,7 @@ import jinja2
 from . import __version__
 from .cgen import c_real, identifier
 from .errors import InputError
-from .fileio import write_atomic
+from .fileio import write_in_folder
 from .model import Model, float_domain
 from .terms import DISPLACEMENTS, EXPONENTS, monomial_factors
 
@@ -228,11 +228,5 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
 def write_header(model: Model, folder: str | Path, precision: str = "double", style: str = "table",
                  prefix: str = "tm", fma: bool = False, input_lsb: float | None = None,
                  input_offset: float | None = None) -> Path:
-    folder = Path(folder)
     text = render_header(model, precision, style, prefix, fma, input_lsb, input_offset)
-    if not folder.is_dir():
-        try:
-            folder.mkdir(parents=True)
-        except OSError as exc:
-            raise InputError(f"cannot create {folder}: {exc.strerror}") from None
-    return write_atomic(folder / f"{prefix}_model.h", text)
+    return write_in_folder(folder, f"{prefix}_model.h", text)

@@ -38,6 +38,16 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
     return path
 
 
+def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes) -> Path:
+    """:func:`write_atomic` into ``folder/name``, creating ``folder`` (and its parents) when missing."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create {folder}: {exc.strerror}") from None
+    return write_atomic(folder / name, data)
+
+
 def canonical_json(obj) -> str:
     """JSON with sorted keys and no spacing variation, for hashing."""
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)

@@ -454,20 +454,12 @@ def _flag(args):
 
 
 def cmd_tempcomp_c(args) -> int:
-    from pathlib import Path
-
-    from fitgen.fileio import write_atomic
+    from fitgen.fileio import write_in_folder
 
     from .temperature import load_tempcomp, render_c
 
     tc = load_tempcomp(args.tempcomp)
-    text = render_c(tc, args.prefix, args.precision)
-    folder = Path(args.output)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create {folder}: {exc.strerror}") from None
-    path = write_atomic(folder / f"{args.prefix}_tempcomp.h", text)
+    path = write_in_folder(args.output, f"{args.prefix}_tempcomp.h", render_c(tc, args.prefix, args.precision))
     print(f"wrote {path} ({tc.n} elements about {tc.t0:g} degC, {args.precision}); call "
           f"{args.prefix}_tempcomp(v, degc) on the readings before {args.prefix}_estimate", file=sys.stderr)
     return 0
