@@ -96,7 +96,6 @@ def cmd_observe(args) -> int:
 
 def _settings(args):
     from .fit import FitSettings
-    from .terms import FAMILIES, HARMONIC_DEGREE
 
     if args.k in ("aic", "bic"):
         k = 2.0 if args.k == "aic" else "bic"
@@ -121,10 +120,9 @@ def _settings(args):
     # --noise 0 alone is the paper's procedure (what R's step() computes): no rounding term either
     precision = args.precision or ("exact" if noise == 0 else "float")
     family = "all" if args.family == "auto" else args.family  # auto: fitgen.family chooses
-    return FitSettings(k=k, max_terms=args.max_terms, exponents=FAMILIES[family],
-                       harmonic_degree=HARMONIC_DEGREE.get(family, 0),
-                       d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated",
-                       noise=noise, precision=None if precision == "exact" else precision)
+    return FitSettings.family(family, k=k, max_terms=args.max_terms, d_terms=not args.no_d_terms,
+                              d_source="true" if args.true_d else "estimated", noise=noise,
+                              precision=None if precision == "exact" else precision)
 
 
 def _outputs(spec):

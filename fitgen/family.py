@@ -10,24 +10,17 @@ It is not tried when the elements' positions are unknown or the readings' sum is
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
 from .dataset import Dataset
 from .fit import FitSettings, fit_model
 from .holdout import box_of, held_out_set
 from .model import Model
-from .terms import FAMILIES, HARMONIC_DEGREE
 
 VALIDATION_SEED = 7919
 VALIDATION_POSES = 1000
 VALIDATION_DRAWS = 2
 CANDIDATES = ("all", "harmonics")
-
-
-def with_family(settings: FitSettings, name: str) -> FitSettings:
-    return dataclasses.replace(settings, exponents=FAMILIES[name], harmonic_degree=HARMONIC_DEGREE.get(name, 0))
 
 
 def validation_rms(model: Model, sensor, ranges: dict) -> dict[str, float]:
@@ -41,12 +34,12 @@ def validation_rms(model: Model, sensor, ranges: dict) -> dict[str, float]:
 def fit_auto(ds: Dataset, outputs, settings: FitSettings, sensor, progress=None) -> tuple[Model, dict]:
     """The model of the better family, and the record of the choice (``fit_info["family"]``)."""
     if sensor is None or sensor.n_elements != ds.n_inputs:
-        return fit_model(ds, outputs, with_family(settings, "all"), progress, sensor), {
+        return fit_model(ds, outputs, settings.with_family("all"), progress, sensor), {
             "name": "all", "auto": True, "why": "the elements' positions are unknown (no sensor)"}
     if not np.sum(ds.inputs.min(axis=0)) > 0:
-        return fit_model(ds, outputs, with_family(settings, "all"), progress, sensor), {
+        return fit_model(ds, outputs, settings.with_family("all"), progress, sensor), {
             "name": "all", "auto": True, "why": "the readings' sum is not > 0 over the data's domain"}
-    models = {f: fit_model(ds, outputs, with_family(settings, f), progress, sensor) for f in CANDIDATES}
+    models = {f: fit_model(ds, outputs, settings.with_family(f), progress, sensor) for f in CANDIDATES}
     ranges = box_of(ds.poses())
     rms = {f: validation_rms(m, sensor, ranges) for f, m in models.items()}
     ratio = float(np.exp(np.mean([np.log(rms["harmonics"][o] / rms["all"][o]) for o in rms["all"]])))

@@ -8,7 +8,7 @@ displacements when asked.
 from __future__ import annotations
 
 import itertools
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -45,9 +45,13 @@ class FitSettings:
     @classmethod
     def family(cls, name: str, **kw) -> "FitSettings":
         """Settings with a named candidate family (fitgen.terms.FAMILIES)."""
+        return cls(**kw).with_family(name)
+
+    def with_family(self, name: str) -> "FitSettings":
+        """These settings with the candidates of family ``name`` instead."""
         if name not in FAMILIES:
             raise InputError(f"unknown family {name!r} (families: {', '.join(FAMILIES)})")
-        return cls(exponents=FAMILIES[name], harmonic_degree=HARMONIC_DEGREE.get(name, 0), **kw)
+        return replace(self, exponents=FAMILIES[name], harmonic_degree=HARMONIC_DEGREE.get(name, 0))
 
     @classmethod
     def exact(cls, **kw) -> "FitSettings":
