@@ -186,7 +186,6 @@ class Readout:
             raise InputError(f"the channel map reads {array.n} elements; the model takes {engine.n_inputs}")
         self.array, self.engine, self.sink, self.fmt, self.clock = array, engine, sink, fmt, clock
         self.corrections = corrections or Corrections(None if offsets is None else np.asarray(offsets, dtype=float))
-        self.offsets = self.corrections.offsets
         self.thermometer, self.observer, self.record = thermometer, observer, record
         self.stats = ReadoutStats(errors=array.counts)
         self._write = sink.write if sink is not None else None
