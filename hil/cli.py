@@ -79,23 +79,43 @@ def _describe(runner, dev, target: str) -> None:
 
 
 def _adc_bridge(args):
-    """(channel map, stand-in bus) for --adc, or (None, None)."""
+    """(channel map, stand-in bus, thermistor input, compensation) for --adc, or Nones."""
     if not args.adc:
-        return None, None
+        if args.temp_comp or args.thermistor or args.sim_temperature is not None:
+            raise InputError("--temp-comp, --thermistor and --sim-temperature go with --adc")
+        return None, None, None, None
     from fitgen.sensor import load_sensor
     from host.channelmap import channel_map
     from host.clock import VirtualClock
     from host.pi import StandIn
-    from host.simbus import SimBus, parse_pose
+    from host.simbus import Drift, SimBus, parse_pose
+    from host.temperature import load_tempcomp, parse_temperature_input, split_channel_map
 
-    cmap = channel_map(args.adc)
+    spec, temp = split_channel_map(args.adc)
+    cmap = channel_map(spec)
+    if temp is None and cmap.temperature is not None:
+        tin = parse_temperature_input(cmap.temperature[0], args.thermistor, cmap.temperature[1])
+    elif temp is not None:
+        tin = parse_temperature_input(temp, args.thermistor)
+    elif args.thermistor or args.temp_comp:
+        raise InputError("--thermistor and --temp-comp need the thermistor's input: add temp=CHIP@ADDRESS:INPUT "
+                         "to --adc")
+    else:
+        tin = None
+    tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
+    drift = None
+    if args.sim_temperature is not None:
+        # the sensor at a steady temperature: typical temperature coefficients, no creep
+        drift = Drift.typical(cmap.n_elements, seed=args.seed, ramp_degc=0.0, start_degc=args.sim_temperature)
+        drift.creep = drift.creep * 0.0
     sensor = load_sensor(args.sim_sensor).with_transfer("gmr")
     noise = sensor.noise if args.sim_noise is None else args.sim_noise
     if not noise >= 0:
         raise InputError(f"--sim-noise must be >= 0, got {args.sim_noise}")
     clock = VirtualClock()
-    bus = SimBus.for_channel_map(cmap, sensor, parse_pose(args.simulate), clock=clock, noise=noise, seed=args.seed)
-    return cmap, StandIn(bus, clock)
+    bus = SimBus.for_channel_map(cmap, sensor, parse_pose(args.simulate), clock=clock, noise=noise, seed=args.seed,
+                                 drift=drift, thermistor=tin)
+    return cmap, StandIn(bus, clock), tin, tempcomp
 
 
 def cmd_emulate(args) -> int:
@@ -105,10 +125,10 @@ def cmd_emulate(args) -> int:
 
     _check_counts(args)
     model, data = _load(args)
-    cmap, bridge = _adc_bridge(args)
+    cmap, bridge, tin, tempcomp = _adc_bridge(args)
     with start_target(model, args.target, precision=args.precision, style=args.style, fma=args.fma,
                       port=args.port, workdir=args.build_dir, sensor_id=args.sensor_id, cmap=cmap,
-                      bridge=bridge) as runner:
+                      bridge=bridge, tin=tin, tempcomp=tempcomp) as runner:
         with Device.open(runner.url, timeout=args.timeout) as dev:
             _describe(runner, dev, args.target)
         if args.suite:
@@ -166,6 +186,12 @@ def build_parser() -> Parser:
     e.add_argument("--sim-sensor", default="paper", help="with --adc: the simulated sensor (default paper, gmr)")
     e.add_argument("--sim-noise", type=float, help="with --adc: simulated element noise, V rms (default: the sensor's)")
     e.add_argument("--seed", type=int, default=0, help="with --adc: seed of the simulated noise")
+    e.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",
+                   help="with temp= in --adc: the thermistor's NTC divider (default beta=3950,r25=10000,series=10000)")
+    e.add_argument("--temp-comp", metavar="FILE.json",
+                   help="with temp= in --adc: temperature compensation before the model (float and double builds)")
+    e.add_argument("--sim-temperature", type=float, metavar="DEGC",
+                   help="with --adc: the simulated sensor at this temperature (typical coefficients, seed --seed)")
     _suite_options(e)
     e.set_defaults(func=cmd_emulate)
     return p

@@ -177,7 +177,7 @@ def bench_instructions(dev, n_small: int = 200, n_large: int = 2200) -> dict:
 
 def start_target(model, target: str = "mps2", *, precision: str = "float", style: str = "table", fma: bool = False,
                  port: int | None = None, workdir: str | Path | None = None, sensor_id: str = "paper",
-                 cmap=None, bridge=None):
+                 cmap=None, bridge=None, tin=None, tempcomp=None):
     """Render and build the firmware for ``target`` (mps2 or host) with ``model`` compiled in, and start it.
 
     Returns the started :class:`Emulator` or :class:`HostFirmware`, with ``size`` (mps2: flash and RAM
@@ -200,7 +200,7 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
     folder = Path(workdir)
     port_name = "posix" if target == "host" else target
     render_firmware(model, folder, precision=precision, style=style, fma=fma, port=port_name, sensor_id=sensor_id,
-                    cmap=cmap)
+                    cmap=cmap, tin=tin, tempcomp=tempcomp)
     image = build_firmware(folder, port_name)
     if target in MACHINES:
         runner = Emulator(image, port, bridge=bridge, machine=MACHINES[target])

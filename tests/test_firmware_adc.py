@@ -116,3 +116,64 @@ def test_emulate_refuses_a_bad_channel_map(tmp_path, model):
                                   "ads1116@0x48:0-3"), 2, "unknown chip")
     assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc",
                                   "ads1115@0x48:0-3"), 2, "reads 4 elements")
+
+
+@pytest.mark.parametrize("target", ["host", "mps2"])
+def test_the_firmware_compensates_temperature_as_the_python_readout_does(model, target):
+    """A thermistor in the map and a compensation: the firmware reads it after the elements every 0.25 s and
+    compensates the volts (tm_tempcomp.h) before its model; STREAM equals tactile-host read --temp-comp's
+    engine input and estimates on the Python driver."""
+    from fitgen.sensor import load_sensor
+    from host.channelmap import parse_spec
+    from host.clock import VirtualClock
+    from host.readout import Corrections
+    from host.simbus import Drift, SimBus
+    from host.temperature import TempComp, Thermometer, parse_temperature_input
+
+    require_tool("gcc")
+    if target == "mps2":
+        require_tool("qemu-system-arm")
+        require_tool("arm-none-eabi-gcc")
+    tin = parse_temperature_input("ads1115@0x4a:3")
+    cmap = parse_spec(MAP)
+    drift = Drift.typical(8, seed=6, ramp_degc=0.0, start_degc=18.0)
+    drift.creep = drift.creep * 0.0
+    tc = TempComp(25.0, drift.offset_tc, drift.gain_tc)
+
+    def bus():
+        clock = VirtualClock()
+        return SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), [0.5, 0.2, -1.0, 1.0, 0.0],
+                                      clock=clock, noise=0.0005, seed=3, drift=drift, thermistor=tin), clock
+
+    b, clock = bus()
+    n = 3 if target == "mps2" else 6
+    with start_target(model, target, precision="float", style="unrolled", cmap=cmap, bridge=StandIn(b, clock),
+                      tin=tin, tempcomp=tc) as emu:
+        with Device.open(emu.url, timeout=5) as dev:
+            samples = dev.stream(10, n, timeout=60)
+    b, clock = bus()
+    arr = AdcArray(b, cmap, clock=clock, policy=RetryPolicy())
+    arr.probe()
+    arr.setup()
+    thermo = Thermometer(arr, tin, cmap.chips[0].settings)
+    corr = Corrections(None, tc)
+    engine = make_engine("c", model, precision="float", style="unrolled")
+    try:
+        for s in samples:
+            raw = arr.read_volts()
+            _, v = corr(raw, thermo.read())
+            out, status = engine.estimate(v)
+            assert s.status == status
+            np.testing.assert_array_equal(np.asarray(s.inputs), v.astype(np.float32).astype(float))
+            np.testing.assert_array_equal(np.asarray(s.outputs), out)
+            assert np.abs(v - raw).max() > 1e-3  # 7 degC from calibration: the compensation moved the readings
+    finally:
+        engine.close()
+
+
+def test_emulate_temperature_options_need_the_thermistor(model, tmp_path):
+    path = str(model.save(tmp_path / "m.json"))
+    assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--temp-comp",
+                                  "tc.json"), contains="go with --adc")
+    assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc", MAP,
+                                  "--temp-comp", "tc.json"), contains="temp=CHIP@ADDRESS:INPUT")

@@ -2,6 +2,7 @@
  * host/adc.py, whose comments cite the datasheets, SBAS444 and SBAS181). */
 #include "adc.h"
 
+#include <math.h>
 #include <stddef.h>
 
 /* ADS1115 */
@@ -39,6 +40,16 @@ double adc_lsb_volts(const adc_chip *c)
         return PGA_VOLTS[c->pga] / 32768.0;
     }
     return (c->vref_internal ? 2.5 : (double)c->vref) / 4096.0;
+}
+
+double adc_ntc_degc(double volts, double beta, double r25, double series, double vref)
+{
+    double r;
+    if (!(volts > 0.0 && volts < vref)) {
+        return NAN;
+    }
+    r = series * volts / (vref - volts);
+    return 1.0 / (1.0 / 298.15 + log(r / r25) / beta) - 273.15;
 }
 
 /* the MUX code of an input: single-ended AINx 100..111, pairs 000 (0-1) 001 (0-3) 010 (1-3) 011 (2-3) */

@@ -22,7 +22,7 @@
 #include "pi_options.h"
 #include "tm_model.h"
 #if ADC_HAS_TEMPERATURE
-#include <math.h>
+#include <math.h> /* NAN */
 #endif
 #if PI_TEMPCOMP
 #include "tm_tempcomp.h"
@@ -54,18 +54,6 @@ static int parse_long(const char *s, long lo, long hi, long *out)
     return 0;
 }
 
-#if ADC_HAS_TEMPERATURE
-/* the divider's temperature in degC, as host/temperature.py computes it; NAN for an open or shorted NTC */
-static double ntc_degc(double volts)
-{
-    double r;
-    if (!(volts > 0.0 && volts < ADC_TEMP_VREF)) {
-        return NAN;
-    }
-    r = ADC_TEMP_SERIES * volts / (ADC_TEMP_VREF - volts);
-    return 1.0 / (1.0 / 298.15 + log(r / ADC_TEMP_R25) / ADC_TEMP_BETA) - 273.15;
-}
-#endif
 
 static void print_line(int jsonl, double t, const double v[TM_N_INPUTS], const tm_real out[TM_N_OUTPUTS], int status)
 {
@@ -217,7 +205,8 @@ int main(int argc, char **argv)
                     failed = ADC_TEMP_LABEL;
                     break;
                 }
-                degc = ntc_degc(tcode * adc_lsb_volts(&ADC_TEMP_CHIP[0]));
+                degc = adc_ntc_degc(tcode * adc_lsb_volts(&ADC_TEMP_CHIP[0]), ADC_TEMP_BETA, ADC_TEMP_R25,
+                                     ADC_TEMP_SERIES, ADC_TEMP_VREF);
             }
         }
 #endif
