@@ -16,6 +16,7 @@ an input >= min_k > 0. Harmonic terms need sum_k min_k > 0, so the ring's sum st
 
 from __future__ import annotations
 
+import itertools
 import re
 from dataclasses import dataclass
 from fractions import Fraction
@@ -225,8 +226,6 @@ class Harmonics:
 
 def harmonic_monomials(symbols, degree: int) -> list[str]:
     """Every monomial of degree 1..``degree`` in the symbols, in a fixed order."""
-    import itertools
-
     out = []
     for deg in range(1, degree + 1):
         for combo in itertools.combinations_with_replacement(sorted(symbols, key=symbol_key), deg):
