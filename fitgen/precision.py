@@ -15,10 +15,13 @@ per displacement before its absolute value (|sum_t c_t b_t| E_d): every term tha
 multiplies the same displacement sees the same error of it. Python evaluates the
 same expression in double; its own error is the same formula with u = 2^-53.
 
-A harmonic monomial's own error replaces a_t |b_t|: with S = sum v_k (N - 1 additions),
-hr = 1/S is off by at most u N |hr|, a harmonic h = (sum w_k v_k) hr by
-u ((2 n_w - 1) sum |w_k v_k| |hr| + (N + 1) |h|), and a product of factors by the sum over
-factors of (the others' product) times that factor's error, plus u per multiplication.
+A harmonic monomial counts its own multiplications (deg - 1) in place of a_t; the errors of the
+harmonics it is made of enter like the displacements'. The sums are bounded by running error
+analysis on the row's own partial sums: S = v_1 + ... + v_N is off by at most u sum_{i>=2} |S_i|,
+so hr = 1/S by |hr| (that |hr| + u); a weighted sum H by u (sum of its partial sums' sizes and twice
+its products by weights other than +-1: literal and product), so h = H hr by |hr| err(H) + |H| err(hr) + u |h| = E_h;
+the output by sum_h |sum_t c_t d(monomial_t)/dh| E_h: every monomial holding h sees the same
+error of it.
 """
 
 from __future__ import annotations
@@ -34,34 +37,47 @@ POWER_ROUNDINGS = {"1": 0, "2": 1, "3": 2, "4": 2, "-1": 1, "-2": 2, "-3": 3, "-
                    "1/2": 1, "1/3": 2, "1/4": 2}
 
 
-def harmonic_errors(model: Model, v: np.ndarray) -> dict[str, np.ndarray]:
-    """Per harmonic monomial a term uses: its rounding error bound in units of u, per row of clamped v."""
-    texts = {t.harm for eq in model.equations for t in eq.terms if t.harm}
-    if not texts:
-        return {}
+def harmonic_errors(model: Model, v: np.ndarray) -> tuple[dict, dict]:
+    """The harmonics' values and each one's rounding error bound in units of u, per row of clamped v."""
+    if not any(t.harm for eq in model.equations for t in eq.terms):
+        return {}, {}
     h = model.harmonics
     vals = h.values(v)
-    n_in = v.shape[1]
+    # running error bounds of the left-to-right sums the C computes: each addition rounds to its
+    # partial sum; a product by a weight other than +-1 rounds twice (the weight's literal, the product)
+    total = v[:, 0].copy()
+    s_err = np.zeros(v.shape[0])
+    for k in range(1, v.shape[1]):
+        total = total + v[:, k]
+        s_err += np.abs(total)
     hr = np.abs(vals["hr"])
-    err = {"hr": n_in * hr}
+    err = {"hr": hr * (s_err * hr + 1.0)}
     for sym, w in h.weights:
-        w = np.asarray(w)
-        n_w = int(np.count_nonzero(w))
-        err[sym] = (2 * n_w - 1) * (np.abs(v) @ np.abs(w)) * hr + (n_in + 1) * np.abs(vals[sym])
+        acc, e = None, np.zeros(v.shape[0])
+        for k, wk in enumerate(w):
+            if wk == 0.0:
+                continue
+            p = wk * v[:, k]
+            if abs(wk) != 1.0:
+                e += 2.0 * np.abs(p)
+            acc = p if acc is None else acc + p
+            if acc is not p:
+                e += np.abs(acc)
+        err[sym] = e * hr + np.abs(acc) * err["hr"] + np.abs(vals[sym])
+    return vals, err
+
+
+def monomial_slopes(text: str, vals: dict) -> dict[str, np.ndarray]:
+    """d(monomial) / d(symbol) for each symbol it holds: p f^(p-1) times the other factors."""
+    fs = monomial_factors(text)
     out = {}
-    for text in texts:
-        fs = monomial_factors(text)
-        total = np.zeros(v.shape[0])
-        for i in range(len(fs)):
-            others = np.ones(v.shape[0])
-            for o, f in enumerate(fs):
-                if o != i:
-                    others = others * np.abs(vals[f])
-            total += others * err[fs[i]]
-        prod = np.ones(v.shape[0])
-        for f in fs:
-            prod = prod * np.abs(vals[f])
-        out[text] = total + (len(fs) - 1) * prod
+    for f in dict.fromkeys(fs):
+        rest = list(fs)
+        rest.remove(f)
+        d = np.full(vals[f].shape, float(fs.count(f)))
+        for g in rest:
+            d = d * vals[g]
+        out[f] = d
     return out
 
 
@@ -69,7 +85,7 @@ def error_bound(model: Model, inputs: np.ndarray, u: float) -> np.ndarray:
     """Bound (n, n_outputs) on |C result - exact result| for each row of (clamped, finite) inputs."""
     v, _ = model.clamp(inputs)
     n = v.shape[0]
-    harm_err = harmonic_errors(model, v)
+    harm_vals, harm_err = harmonic_errors(model, v)
     d = np.zeros((n, 3))
     e_d = np.zeros((n, 3))
     out = np.zeros((n, len(model.equations)))
@@ -83,11 +99,16 @@ def error_bound(model: Model, inputs: np.ndarray, u: float) -> np.ndarray:
         # per displacement, the sum of c_t * b_t over the terms that multiply it: every such term sees
         # the same error of that displacement, so its share is |sum c_t b_t| E_d, not sum |c_t b_t| E_d
         slope = np.zeros((n, 3))
+        # likewise per harmonic: every monomial holding it sees the same error of it
+        slope_h = {f: np.zeros(n) for f in harm_err}
         for k, t in enumerate(eq.terms):
             acc = acc + coefs[k] * cols[:, k]
             partial += np.abs(acc)
             if t.harm:
-                weighted += terms[:, k] * 3 + abs(coefs[k]) * harm_err[t.harm]
+                # the coefficient's rounding, its product and sum, and the monomial's own multiplications
+                weighted += terms[:, k] * (3 + len(monomial_factors(t.harm)) - 1)
+                for f, dm in monomial_slopes(t.harm, harm_vals).items():
+                    slope_h[f] += coefs[k] * dm
             else:
                 weighted += terms[:, k] * (3 + (POWER_ROUNDINGS[t.exponent] if t.element else 0))
             if t.mult:
@@ -95,7 +116,8 @@ def error_bound(model: Model, inputs: np.ndarray, u: float) -> np.ndarray:
                 base = element_powers(v[:, t.element - 1], t.exponent) if t.element else 1.0
                 slope[:, i] += coefs[k] * base
         prop = np.sum(np.abs(slope) * e_d, axis=1)
-        out[:, j] = u * (weighted + partial) + prop
+        prop_h = sum((np.abs(slope_h[f]) * harm_err[f] for f in slope_h), np.zeros(n))
+        out[:, j] = u * (weighted + partial + prop_h) + prop
         if eq.name in DISPLACEMENTS:
             i = DISPLACEMENTS.index(eq.name)
             d[:, i] = acc
