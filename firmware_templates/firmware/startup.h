@@ -14,6 +14,15 @@ extern uint32_t _estack;
 
 int main(int argc, char **argv);
 
+/* a vector table entry: the initial stack pointer first, then handlers */
+typedef union {
+    void (*handler)(void);
+    uint32_t *stack;
+} vector_entry;
+
+void Reset_Handler(void);
+void Default_Handler(void);
+
 static inline void startup_init_memory(void)
 {
     uint32_t *src = &_sidata;

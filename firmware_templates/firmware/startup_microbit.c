@@ -1,14 +1,7 @@
 /* startup_microbit.c: vector table and reset handler for the Cortex-M0 of the nRF51822 (QEMU microbit). */
 #include "startup.h"
-void Reset_Handler(void);
-void Default_Handler(void);
 void UART0_Handler(void);
 void TIMER0_Handler(void);
-
-typedef union {
-    void (*handler)(void);
-    uint32_t *stack;
-} vector_entry;
 
 #define N_IRQ 32
 

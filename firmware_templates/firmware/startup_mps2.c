@@ -1,16 +1,9 @@
 /* startup_mps2.c: vector table and reset handler for the Cortex-M4F of mps2-an386. */
 #include "startup.h"
-void Reset_Handler(void);
-void Default_Handler(void);
 void SysTick_Handler(void);
 void UART0RX_Handler(void);
 
 #define SCB_CPACR (*(volatile uint32_t *)0xE000ED88u)
-
-typedef union {
-    void (*handler)(void);
-    uint32_t *stack;
-} vector_entry;
 
 #define N_IRQ 32
 
