@@ -89,19 +89,12 @@ def _adc_bridge(args):
     from host.clock import VirtualClock
     from host.pi import StandIn
     from host.simbus import Drift, SimBus, parse_pose
-    from host.temperature import load_tempcomp, parse_temperature_input, split_channel_map
+    from host.temperature import load_tempcomp, split_channel_map, temperature_input
 
-    spec, temp = split_channel_map(args.adc)
-    cmap = channel_map(spec)
-    if temp is None and cmap.temperature is not None:
-        tin = parse_temperature_input(cmap.temperature[0], args.thermistor, cmap.temperature[1])
-    elif temp is not None:
-        tin = parse_temperature_input(temp, args.thermistor)
-    elif args.thermistor or args.temp_comp:
-        raise InputError("--thermistor and --temp-comp need the thermistor's input: add temp=CHIP@ADDRESS:INPUT "
-                         "to --adc")
-    else:
-        tin = None
+    cmap = channel_map(split_channel_map(args.adc)[0])
+    tin = temperature_input(args.adc, cmap, args.thermistor)
+    if tin is None and args.temp_comp:
+        raise InputError("--temp-comp needs the thermistor's input: add temp=CHIP@ADDRESS:INPUT to --adc")
     tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
     drift = None
     if args.sim_temperature is not None:

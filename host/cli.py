@@ -105,20 +105,6 @@ def _channel_map(args):
     return channel_map(split_channel_map(args.adc)[0], settings)
 
 
-def _temperature_input(args, cmap=None):
-    """The thermistor's input (``temp=`` in --adc, or a TOML map's [temperature]) and its divider, or None."""
-    from .temperature import parse_temperature_input, split_channel_map
-
-    spec = split_channel_map(args.adc)[1]
-    if spec is None and cmap is not None and cmap.temperature is not None:
-        return parse_temperature_input(cmap.temperature[0], args.thermistor, cmap.temperature[1])
-    if spec is None:
-        if args.thermistor:
-            raise InputError("--thermistor describes the temperature input: add temp=CHIP@ADDRESS:INPUT to --adc")
-        return None
-    return parse_temperature_input(spec, args.thermistor)
-
-
 def _open_bus(args, cmap, simulate_pose, *, motion=None, drift=None, thermistor=None):
     """Bus and clock from the options; with a simulated pose, a SimBus instead of /dev/i2c-N."""
     from fitgen.sensor import load_sensor
@@ -242,7 +228,7 @@ class _Session:
         from .autozero import AutoZero, AutoZeroSettings
         from .engine import make_engine
         from .readout import Corrections, rest_reference, tare
-        from .temperature import Thermometer, load_tempcomp
+        from .temperature import Thermometer, load_tempcomp, temperature_input
 
         self.prog = prog
         self.rate = _positive(args.rate, "--rate") if args.rate is not None else None
@@ -252,7 +238,7 @@ class _Session:
         retries = _positive(args.retries, "--retries", integer=True)
         pose, motion = _motion(args.simulate) if args.simulate is not None else (None, None)
         cmap0 = _channel_map(args)
-        tin = _temperature_input(args, cmap0)
+        tin = temperature_input(args.adc, cmap0, args.thermistor)
         if args.temp_comp and tin is None:
             raise InputError("--temp-comp needs the temperature: add the thermistor's input to --adc as "
                              "temp=CHIP@ADDRESS:INPUT (e.g. temp=ads1115@0x4a:0)")
@@ -507,7 +493,7 @@ def cmd_capture_temperatures(args) -> int:
     from .adc import AdcArray, DeviceSilent, RetryPolicy
     from .capture import SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, trigger_waiter
     from .simbus import Drift
-    from .temperature import Thermometer, fit_tempcomp
+    from .temperature import Thermometer, fit_tempcomp, temperature_input
 
     temps = _temperatures(args.temperature)
     samples, spread, tries, settle, retries = _capture_numbers(args)
@@ -516,7 +502,7 @@ def cmd_capture_temperatures(args) -> int:
         print("tactile-host capture: note: one pose per temperature gives offsets only (gain needs two poses)",
               file=sys.stderr)
     cmap = _channel_map(args)
-    tin = _temperature_input(args, cmap)
+    tin = temperature_input(args.adc, cmap, args.thermistor)
     out = Path(args.output)
     drift = None
     if args.simulate:
@@ -629,11 +615,11 @@ def cmd_pi_build(args) -> int:
     from fitgen.model import load_model
 
     from .pi import build_pi, render_pi
-    from .temperature import load_tempcomp
+    from .temperature import load_tempcomp, temperature_input
 
     model = load_model(args.model)
     cmap = _channel_map(args)
-    tin = _temperature_input(args, cmap)
+    tin = temperature_input(args.adc, cmap, args.thermistor)
     tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
     folder = render_pi(model, cmap, args.output, precision=args.precision, style=args.style, tin=tin,
                        tempcomp=tempcomp)

@@ -88,6 +88,19 @@ def parse_temperature_input(spec: str, thermistor: str | None = None, divider: d
     return TemperatureInput(kind, address, pin, divider)
 
 
+def temperature_input(adc: str, cmap, thermistor: str | None = None) -> TemperatureInput | None:
+    """The thermistor's input and divider: ``temp=`` in the ``--adc`` spec, else the TOML map's
+    ``[temperature]`` (``cmap.temperature``); None without one (then ``thermistor`` is refused)."""
+    spec = split_channel_map(adc)[1]
+    if spec is not None:
+        return parse_temperature_input(spec, thermistor)
+    if cmap.temperature is not None:
+        return parse_temperature_input(cmap.temperature[0], thermistor, cmap.temperature[1])
+    if thermistor:
+        raise InputError("--thermistor describes the temperature input: add temp=CHIP@ADDRESS:INPUT to --adc")
+    return None
+
+
 class Thermometer:
     """Reads the thermistor through the ADC array's bus (same retries and counts), at most every READ_EVERY s."""
 
