@@ -198,7 +198,7 @@ class Readout:
         comp, v = self.corrections(raw, temp)
         out, status = self.engine.estimate(v)
         t = self.clock.time()
-        update = self.corrections.observe(t, comp, out, status)
+        self.corrections.observe(t, comp, out, status)
         if self._write is not None:
             self._write(self.fmt.line(t, v, out, status))
         if self.record is not None:
@@ -210,9 +210,9 @@ class Readout:
         if self.array.clipped.any():
             st.clipped += 1
         if self.observer is not None:
-            self._publish(t, raw, v, out, status, temp, update)
+            self._publish(t, raw, v, out, status, temp)
 
-    def _publish(self, t, raw, v, out, status, temp, update) -> None:
+    def _publish(self, t, raw, v, out, status, temp) -> None:
         now = self.clock.monotonic()
         if self._rate_t is None:
             self._rate_t = now

@@ -9,6 +9,7 @@ with another model, auto-zero on or off, or another compensation, it reports how
 
 from __future__ import annotations
 
+import io
 import json
 import math
 from dataclasses import dataclass
@@ -21,7 +22,7 @@ from fitgen.model import Model, load_model, model_from_dict
 
 from .autozero import AutoZero, AutoZeroSettings
 from .engine import PythonEngine
-from .readout import Corrections
+from .readout import Corrections, RunRecord
 from .temperature import TempComp, load_tempcomp
 
 
@@ -85,6 +86,7 @@ class ReplayResult:
     same_model: bool
     updates: list
     notes: list
+    header: dict  # the re-estimation's run-record header: its model and the corrections at the start
 
     @property
     def exact(self) -> bool:
@@ -115,10 +117,12 @@ class ReplayResult:
         return "\n".join(lines) + "\n"
 
     def save(self, path) -> None:
-        text = "".join(json.dumps({"t": float(t), "raw": r.tolist(), "temp": None if not math.isfinite(tp) else float(tp),
-                                   "out": o.tolist(), "status": int(s)}) + "\n"
-                       for t, r, tp, o, s in zip(self.t, self.raw, self.temp, self.out, self.status))
-        write_atomic(path, text)
+        """The re-estimated run as a run record (replayable in its turn), written atomically."""
+        buf = io.StringIO()
+        rec = RunRecord(buf, self.header)
+        for i in range(len(self.t)):
+            rec.write(float(self.t[i]), self.raw[i], float(self.temp[i]), self.out[i], int(self.status[i]))
+        write_atomic(path, buf.getvalue())
 
 
 def _recorded_model(run: Run) -> Model | None:
@@ -164,6 +168,8 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
         start = az_rec["start"] if az_rec else (None if tare is None else tare.tolist())
         az = AutoZero(np.array(ref), float(noise), model.output_names, zero=start, settings=settings)
     corrections = Corrections(tare, tc, az)
+    header = {**{k: v for k, v in h.items() if k != "run"}, "model": model.sha256,
+              "outputs": list(model.output_names), **corrections.describe(), "model_file": model.to_dict()}
     engine = PythonEngine(model)
     n = len(run.t)
     v_all, out_all, st_all = np.empty_like(run.raw), np.empty((n, len(model.equations))), np.empty(n, dtype=int)
@@ -176,4 +182,5 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     if not same:
         notes.append(f"the run was recorded with model {str(h.get('model'))[:12]}")
     return ReplayResult(run.t, run.raw, run.temp, v_all, out_all, st_all, run.out,
-                        tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes)
+                        tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes,
+                        header)

@@ -153,10 +153,15 @@ def test_read_records_and_replay_reproduces_it_exactly(rest_model_file, tmp_path
     assert "estimates identical to the recorded ones" in rep.stdout and "(the recording model)" in rep.stdout
     off = run_cli("tactile-host", "replay", str(run), "--no-auto-zero", "-o", str(tmp_path / "off.jsonl"))
     assert off.returncode == 0 and "| dz |" in off.stdout and "auto-zero updates 0" in off.stdout
-    recs = [json.loads(ln) for ln in (tmp_path / "off.jsonl").read_text().splitlines()]
+    lines = (tmp_path / "off.jsonl").read_text().splitlines()
+    recs = [json.loads(ln) for ln in lines[1:]]
     head = json.loads(run.read_text().splitlines()[0])
     assert len(recs) == 500 and head["run"] == 1 and head["auto_zero"]["start"] is not None
     assert all(r["temp"] is not None for r in recs)
+    # the re-estimation is a run record in its turn: without auto-zero, and replaying to itself
+    assert json.loads(lines[0])["auto_zero"] is None
+    again = run_cli("tactile-host", "replay", str(tmp_path / "off.jsonl"))
+    assert again.returncode == 0 and "estimates identical to the recorded ones" in again.stdout
     assert_one_line_error(run_cli("tactile-host", "replay", str(tmp_path / "s.csv")), contains="not a run record")
     assert_one_line_error(run_cli("tactile-host", "replay", str(run), "--temp-comp", str(tmp_path / "none.json")))
 
