@@ -361,10 +361,8 @@ def cmd_read(args) -> int:
 
 
 def cmd_view(args) -> int:
-    from fitgen.pose import POSE_UNITS, POSE_NAMES
-
     from .adc import DeviceSilent
-    from .live import LiveHub, LiveServer
+    from .live import LiveHub, LiveServer, view_meta
     from .readout import LineFormat, Readout
 
     if args.replay:
@@ -374,11 +372,7 @@ def cmd_view(args) -> int:
     s = _Session(args, "tactile-host view")
     server = None
     try:
-        meta = {"inputs": [f"v{k}" for k in range(1, s.model.n_inputs + 1)], "input_units": "V",
-                "outputs": list(s.model.output_names),
-                "units": [POSE_UNITS[POSE_NAMES.index(o)] for o in s.model.output_names],
-                "model": s.model.sha256[:12], "source": s.source, "rate": s.rate}
-        hub = LiveHub(meta)
+        hub = LiveHub(view_meta(s.model.n_inputs, s.model.output_names, s.model.sha256, s.source, s.rate))
         server = LiveServer(hub, args.host, args.port)
         server.start()
         print(f"tactile-host view: serving {server.url} ({s.source}); Ctrl-C stops", file=sys.stderr, flush=True)
@@ -401,18 +395,12 @@ def cmd_view(args) -> int:
 def _view_replay(args) -> int:
     import time
 
-    from fitgen.pose import POSE_UNITS, POSE_NAMES
-
-    from .live import LiveHub, LiveServer
+    from .live import LiveHub, LiveServer, view_meta
     from .replay import load_run, replay
 
     run = load_run(args.replay)
     res = replay(run, model=args.model, auto_zero=_flag(args), temp_comp=args.temp_comp)
-    outputs = res.outputs
-    meta = {"inputs": [f"v{k}" for k in range(1, run.n_inputs + 1)], "input_units": "V", "outputs": list(outputs),
-            "units": [POSE_UNITS[POSE_NAMES.index(o)] for o in outputs], "model": res.model_hash[:12],
-            "source": f"replay of {args.replay}", "rate": None}
-    hub = LiveHub(meta)
+    hub = LiveHub(view_meta(run.n_inputs, res.outputs, res.model_hash, f"replay of {args.replay}", None))
     server = LiveServer(hub, args.host, args.port)
     server.start()
     print(f"tactile-host view: serving {server.url} (replay of {args.replay}, {len(res.t)} samples); Ctrl-C stops",

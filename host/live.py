@@ -71,6 +71,15 @@ def _event(kind: str, data: dict) -> bytes:
     return b"event: %s\ndata: %s\n\n" % (kind.encode(), json.dumps(data, separators=(",", ":")).encode())
 
 
+def view_meta(n_inputs: int, outputs, model_hash: str, source: str, rate: float | None) -> dict:
+    """The ``meta`` a hub serves at /meta: inputs, outputs with their units, model, source, rate."""
+    from fitgen.pose import POSE_NAMES, POSE_UNITS
+
+    return {"inputs": [f"v{k}" for k in range(1, n_inputs + 1)], "input_units": "V", "outputs": list(outputs),
+            "units": [POSE_UNITS[POSE_NAMES.index(o)] for o in outputs], "model": model_hash[:12],
+            "source": source, "rate": rate}
+
+
 class LiveHub:
     """The last ``backlog`` samples, numbered; ``publish`` from the readout, ``collect`` from the viewers.
 
