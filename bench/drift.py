@@ -118,7 +118,7 @@ def run_flow(flow: str, sensor, model, cmap, tin, tc) -> dict:
     thermo = Thermometer(array, tin, cmap.chips[0].settings)
     reference = rest_reference("paper", model.n_inputs)
     t0 = tare(array, reference, 50)
-    noise = max(float(np.median(t0.spread)), float(array.lsb.max()) / np.sqrt(12.0))
+    noise = t0.noise_floor(array.lsb)
     start = clock.monotonic()
     bus.feed.motion = lambda t: motion(t - start)
     az = AutoZero(reference, noise, model.output_names, zero=t0.offsets) if flow in ("auto-zero", "both") else None

@@ -220,8 +220,6 @@ class _Session:
     the corrections (tare, auto-zero, temperature), built from the options and closed in one place."""
 
     def __init__(self, args, prog: str):
-        import numpy as np
-
         from fitgen.model import load_model
 
         from .adc import AdcArray, RetryPolicy
@@ -277,7 +275,7 @@ class _Session:
                 t = tare(array, reference, tare_n)
                 print(f"{prog}: {t.describe()}", file=sys.stderr)
                 offsets = t.offsets
-                noise = max(float(np.median(t.spread)), float(array.lsb.max()) / np.sqrt(12.0))
+                noise = t.noise_floor(array.lsb)
                 if pose is not None:
                     self.bus.set_pose(pose)
                     self.bus.feed.motion = motion

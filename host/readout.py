@@ -110,6 +110,11 @@ class Tare:
     def offsets(self) -> np.ndarray:
         return self.measured - self.reference
 
+    def noise_floor(self, lsb: np.ndarray) -> float:
+        """The readings' noise for auto-zero (V rms): the median element's spread, at least the ADC's
+        quantisation (the largest LSB / sqrt(12)), so that a noise-free simulation has a floor too."""
+        return max(float(np.median(self.spread)), float(np.max(lsb)) / math.sqrt(12.0))
+
     def describe(self) -> str:
         mv = " ".join(f"{x * 1e3:+.2f}" for x in self.offsets)
         return f"tare: offsets [mV] {mv} (spread up to {self.spread.max() * 1e3:.2f} mV rms)"
