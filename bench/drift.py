@@ -63,8 +63,8 @@ def motion(t: float) -> np.ndarray:
     return PRESS_POSE if any(a <= t < b for a, b in PRESSES) else np.zeros(5)
 
 
-def drift(ramp: bool = True) -> Drift:
-    return Drift.typical(8, seed=0, ramp_degc=5.0 if ramp else 0.0, ramp_s=240.0, creep_tau=120.0)
+def drift() -> Drift:
+    return Drift.typical(8, seed=0, ramp_degc=5.0, ramp_s=240.0, creep_tau=120.0)
 
 
 def bus_for(sensor, cmap, tin, clock, d: Drift | None, seed: int, mover=None):
@@ -74,8 +74,7 @@ def bus_for(sensor, cmap, tin, clock, d: Drift | None, seed: int, mover=None):
 
 def fit_compensation(sensor, cmap, tin, work: Path):
     """The compensation a `capture --temperature 20,25,30` of three poses gives."""
-    d = drift(ramp=False)
-    d.creep = d.creep * 0.0
+    d = drift().steady(25.0)
     clock = VirtualClock()
     bus = bus_for(sensor, cmap, tin, clock, d, seed=11)
     array = AdcArray(bus, cmap, clock=clock)

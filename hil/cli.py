@@ -99,8 +99,7 @@ def _adc_bridge(args):
     drift = None
     if args.sim_temperature is not None:
         # the sensor at a steady temperature: typical temperature coefficients, no creep
-        drift = Drift.typical(cmap.n_elements, seed=args.seed, ramp_degc=0.0, start_degc=args.sim_temperature)
-        drift.creep = drift.creep * 0.0
+        drift = Drift.typical(cmap.n_elements, seed=args.seed).steady(args.sim_temperature)
     sensor = load_sensor(args.sim_sensor).with_transfer("gmr")
     noise = sensor.noise if args.sim_noise is None else args.sim_noise
     if not noise >= 0:

@@ -492,8 +492,8 @@ def cmd_capture_temperatures(args) -> int:
     out = Path(args.output)
     drift = None
     if args.simulate:
-        drift = _sim_drift(args.sim_drift, cmap.n_elements) or Drift.typical(cmap.n_elements, seed=args.seed)
-        drift.ramp_degc, drift.creep = 0.0, drift.creep * 0.0
+        drift = (_sim_drift(args.sim_drift, cmap.n_elements) or Drift.typical(cmap.n_elements, seed=args.seed)
+                 ).steady(temps[0])
     bus, clock = _open_bus(args, cmap, schedule.poses[0] if args.simulate else None, drift=drift, thermistor=tin)
     rows, pose_ids, row_temps, files = [], [], [], []
     try:

@@ -32,7 +32,7 @@ from __future__ import annotations
 import ctypes
 import errno
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -227,6 +227,10 @@ class Drift:
         return cls(offset_tc=rng.normal(0.0, 1e-3, n), gain_tc=rng.normal(-1e-3, 3e-4, n),
                    creep=rng.normal(0.0, 2e-3, n), creep_tau=creep_tau, start_degc=start_degc,
                    ramp_degc=ramp_degc, ramp_s=ramp_s)
+
+    def steady(self, degc: float) -> "Drift":
+        """The same coefficients at a steady ``degc``: no ramp, no creep (readings that do not depend on time)."""
+        return replace(self, start_degc=float(degc), ramp_degc=0.0, creep=np.zeros_like(self.creep))
 
     def temperature(self, t: float) -> float:
         return self.start_degc + self.ramp_degc * min(max(t / self.ramp_s, 0.0), 1.0)

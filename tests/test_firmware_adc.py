@@ -136,8 +136,7 @@ def test_the_firmware_compensates_temperature_as_the_python_readout_does(model, 
         require_tool("arm-none-eabi-gcc")
     tin = parse_temperature_input("ads1115@0x4a:3")
     cmap = parse_spec(MAP)
-    drift = Drift.typical(8, seed=6, ramp_degc=0.0, start_degc=18.0)
-    drift.creep = drift.creep * 0.0
+    drift = Drift.typical(8, seed=6).steady(18.0)
     tc = TempComp(25.0, drift.offset_tc, drift.gain_tc)
 
     def bus():

@@ -130,8 +130,7 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     require_tool("qemu-arm")
     tin = parse_temperature_input("ads1115@0x4a:2")
     cmap = parse_spec(MAP)
-    drift = Drift.typical(8, seed=4, ramp_degc=0.0, start_degc=33.0)
-    drift.creep = drift.creep * 0.0  # readings that do not depend on when they are taken
+    drift = Drift.typical(8, seed=4).steady(33.0)  # readings that do not depend on when they are taken
     tc = TempComp(25.0, drift.offset_tc * 0.9, drift.gain_tc * 1.1)
 
     def bus():
