@@ -100,6 +100,9 @@ def to_blob(model: Model, precision: str = "float", sensor_id: str = "paper", fm
     """The calibration blob (format version 1) of ``model`` for a firmware of this precision."""
     if precision not in PRECISION_CODES:
         raise InputError(f"precision must be one of {', '.join(PRECISION_CODES)}, got {precision!r}")
+    if model.refine is not None:
+        raise InputError("the calibration blob format has no refinement: build the model into the firmware with "
+                         "`fitgen codegen`, or fit without --refine to flash it")
     harm = next((t for e in model.equations for t in e.terms if t.harm), None)
     if harm is not None:
         raise InputError(f"the calibration blob format has no harmonic terms ({harm.text}): build the model into the "

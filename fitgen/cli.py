@@ -120,9 +120,14 @@ def _settings(args):
     # --noise 0 alone is the paper's procedure (what R's step() computes): no rounding term either
     precision = args.precision or ("exact" if noise == 0 else "float")
     family = "all" if args.family == "auto" else args.family  # auto: fitgen.family chooses
+    if not 0 <= args.refine <= 8:
+        raise InputError(f"--refine takes 0 (none) to 8 steps, got {args.refine}")
+    if args.refine_terms < 5:
+        raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {args.refine_terms}")
     return FitSettings.family(family, k=k, max_terms=args.max_terms, d_terms=not args.no_d_terms,
                               d_source="true" if args.true_d else "estimated", noise=noise,
-                              precision=None if precision == "exact" else precision)
+                              precision=None if precision == "exact" else precision, refine=args.refine,
+                              refine_terms=args.refine_terms)
 
 
 def _outputs(spec):
@@ -172,7 +177,8 @@ def cmd_fit(args) -> int:
     outputs = _scene_outputs(args, ds, sensor) or _outputs(args.outputs) or ds.target_names
     # --noise 0 is the paper's procedure: the paper's power kinds too, unless a family is named
     auto = args.family == "auto" and settings.noise != 0
-    bar = Progress("fit", len(outputs) * (2 if auto and sensor is not None else 1))
+    steps = len(outputs) + (ds.n_inputs if settings.refine else 0)  # the equations, then the forward model's
+    bar = Progress("fit", steps * (2 if auto and sensor is not None else 1))
     state = {"name": None}
 
     def progress(name, step, aic, n_terms):
@@ -426,6 +432,12 @@ def build_parser() -> Parser:
                         "given and exact arithmetic, the paper's procedure (R's step())")
     f.add_argument("--precision", choices=("float", "double", "fixed", "exact"),
                    help="arithmetic the equations must survive on the device (default float; exact with --noise 0)")
+    f.add_argument("--refine", type=int, default=0, metavar="STEPS",
+                   help="after the equations, STEPS Gauss-Newton steps on a forward model (readings from the pose) "
+                        "fitted to the same data, with the equations' estimate as prior (docs/refine.md; default 0: "
+                        "none). Needs all five pose columns and data that vary in each")
+    f.add_argument("--refine-terms", type=int, default=30, metavar="N",
+                   help="cap on the forward model's terms per element (default 30)")
     f.add_argument("--held-out", type=int, default=2000, metavar="N",
                    help="random held-out poses in the data's box for the deployed-accuracy figures (default 2000; "
                         "0: none)")

@@ -62,6 +62,25 @@ class COutput:
 
 
 @dataclass(frozen=True)
+class CRefine:
+    """The refinement's tables as literals (fitgen.refine)."""
+
+    steps: int
+    cbrt: bool
+    degree: int
+    centre: tuple[str, ...]
+    scale: tuple[str, ...]
+    lo: tuple[str, ...]
+    hi: tuple[str, ...]
+    weights: tuple[str, ...]
+    intercepts: tuple[str, ...]
+    prior: tuple[tuple[str, ...], ...]
+    starts: tuple[int, ...]  # element k's terms: starts[k] .. starts[k + 1] - 1
+    exps: tuple[tuple[int, ...], ...]  # per term
+    terms: tuple[str, ...]  # per term, its coefficient
+
+
+@dataclass(frozen=True)
 class CModel:
     prefix: str
     upper: str
@@ -80,6 +99,7 @@ class CModel:
     fma: bool  # each term added by fma(): one rounding instead of two
     harmonics: tuple[CHarmonic, ...] = ()  # the ring's harmonics the monomials use (hr is always computed)
     monomials: tuple[CMonomial, ...] = ()  # harmonic monomials, in order of first use
+    refine: CRefine | None = None
 
 
 def term_magnitudes(model: Model) -> dict[str, float]:
@@ -166,7 +186,28 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
         fma=bool(fma),
         harmonics=_c_harmonics(model, monomials, precision),
         monomials=tuple(CMonomial(tuple(monomial_factors(h)), h) for h in monomials),
+        refine=_c_refine(model, precision),
     )
+
+
+def _c_refine(model: Model, precision: str) -> CRefine | None:
+    r = model.refine
+    if r is None:
+        return None
+
+    def lits(xs):
+        return tuple(c_real(x, precision) for x in xs)
+
+    starts = [0]
+    for eq in r.forward:
+        starts.append(starts[-1] + len(eq.exponents))
+    if starts[-1] > 65535:
+        raise InputError(f"the refinement has {starts[-1]} forward terms; the tables index at most 65535")
+    return CRefine(r.steps, r.transform == "cbrt", r.degree, lits(r.centre), lits(r.scale), lits(r.pose_min),
+                   lits(r.pose_max), lits(r.weights), lits(eq.intercept for eq in r.forward),
+                   tuple(lits(row) for row in r.prior), tuple(starts),
+                   tuple(e for eq in r.forward for e in eq.exponents),
+                   lits(c for eq in r.forward for c in eq.coefficients))
 
 
 def _c_harmonics(model: Model, monomials: list[str], precision: str) -> tuple[CHarmonic, ...]:

@@ -27,8 +27,8 @@ from .terms import (DISPLACEMENTS, EXPONENTS, FAMILIES, HARMONIC_DEGREE, ROTATIO
 class FitSettings:
     """Knobs of the search: penalty per term ``k`` (2: AIC, log(n): BIC), a cap on terms,
     the exponent family, the degree of the ring's harmonic monomials (0: none), whether rotations
-    may use d-terms, where those d's come from, and what the device adds: its reading noise and
-    its precision (fitgen.augment)."""
+    may use d-terms, where those d's come from, what the device adds: its reading noise and
+    its precision (fitgen.augment), and the refinement steps after the equations (fitgen.refine)."""
 
     k: float | str = 2.0
     max_terms: int | None = None
@@ -41,6 +41,10 @@ class FitSettings:
     # the precision the equations must survive (fitgen.augment.UNIT_ROUNDOFF); None: exact arithmetic
     precision: str | None = "float"
     harmonic_degree: int = 0
+    # Gauss-Newton steps on a fitted forward model after the equations (fitgen.refine; 0: none), and
+    # the cap on that model's terms per element
+    refine: int = 0
+    refine_terms: int = 30
 
     @classmethod
     def family(cls, name: str, **kw) -> "FitSettings":
@@ -254,6 +258,11 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
     }
     units = ds.meta.get("units", "mT")
     model = Model(lo, hi, tuple(fitted[o].equation for o in outputs), units, info, harmonics)
+    if settings.refine:
+        from .refine_fit import fit_refinement
+
+        model.refine, info["refine"] = fit_refinement(ds, model, steps=settings.refine, noise=noise["added"],
+                                                      max_terms=settings.refine_terms, progress=progress)
     # the errors of the model as the device computes it (rotations from estimated d's)
     pred = model.predict(v)
     for j, o in enumerate(outputs):

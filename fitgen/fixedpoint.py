@@ -394,6 +394,9 @@ def build_fixed(model: Model, input_lsb: float, input_offset: float = 0.0) -> Fi
         raise InputError(f"the input offset must be a finite number, got {input_offset!r}")
     if model.n_inputs > 30:
         raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most 30")
+    if model.refine is not None:
+        raise InputError("fixed point has no refinement (its Gauss-Newton steps run in float or double): "
+                         "fit without --refine for fixed point")
     for eq in model.equations:
         for t in eq.terms:
             if t.harm:

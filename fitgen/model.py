@@ -20,6 +20,7 @@ from .errors import InputError
 from .fileio import canonical_json, read_text, sha256_hex, write_atomic
 from .fma import fma as fused_multiply_add
 from .pose import POSE_NAMES, POSE_UNITS
+from .refine import Refinement
 from .terms import DISPLACEMENTS, Harmonics, Term, design_matrix, monomial_factors, parse_term
 
 SCHEMA_VERSION = 1
@@ -55,6 +56,7 @@ class Model:
     input_units: str = "mT"
     fit_info: dict = field(default_factory=dict)
     harmonics: Harmonics | None = None  # the ring's, when a term uses them
+    refine: Refinement | None = None  # Gauss-Newton steps on a forward model after the equations (fitgen.refine)
 
     def __post_init__(self):
         self.input_min = np.asarray(self.input_min, dtype=float)
@@ -102,6 +104,7 @@ class Model:
         ``fma``: each term added with one rounding, as C generated with fused multiply-adds does.
         ``precision="float"``: the float C's arithmetic in numpy float32 (inputs, domain,
         coefficients, powers and sums rounded as the float header rounds them; no fma).
+        A refinement (fitgen.refine) runs after the equations, without fma in either precision.
         Rows are taken in blocks, so that memory does not grow with their number.
         """
         rows = np.asarray(inputs, dtype=float)
@@ -133,6 +136,8 @@ class Model:
             out[:, j] = acc
             if eq.name in DISPLACEMENTS:
                 d[:, DISPLACEMENTS.index(eq.name)] = acc
+        if self.refine is not None:
+            out = self.refine.apply(v, out.astype(dtype), dtype).astype(float)
         out[status < 0] = 0.0
         return (out, status) if with_status else out
 
@@ -152,7 +157,7 @@ class Model:
         }
         if self.harmonics is not None:
             inputs["harmonics"] = self.harmonics.to_dict()
-        return {
+        out = {
             "schema_version": SCHEMA_VERSION,
             "generator": f"fitgen {__version__}",
             "inputs": inputs,
@@ -163,12 +168,15 @@ class Model:
             ],
             "fit": self.fit_info,
         }
+        if self.refine is not None:
+            out["refine"] = self.refine.to_dict()
+        return out
 
     @property
     def sha256(self) -> str:
-        """Hash of what the estimate depends on (domain and equations), not of the fit notes."""
+        """Hash of what the estimate depends on (domain, equations, refinement), not of the fit notes."""
         d = self.to_dict()
-        return sha256_hex(canonical_json({"inputs": d["inputs"], "outputs": d["outputs"]}))
+        return sha256_hex(canonical_json({k: d[k] for k in ("inputs", "outputs", "refine") if k in d}))
 
     def save(self, path: str | Path) -> Path:
         try:
@@ -230,7 +238,8 @@ def model_from_dict(data, origin: str = "model") -> Model:
     if not isinstance(units, str):
         raise InputError(f"{origin}: inputs.units must be a string")
     fit = data.get("fit", {})
-    return Model(np.array(lo), np.array(hi), tuple(eqs), units, fit if isinstance(fit, dict) else {}, harmonics)
+    refine = None if "refine" not in data else Refinement.from_dict(data["refine"], len(lo), origin)
+    return Model(np.array(lo), np.array(hi), tuple(eqs), units, fit if isinstance(fit, dict) else {}, harmonics, refine)
 
 
 def _validate(m: Model, origin: str) -> None:
@@ -249,6 +258,11 @@ def _validate(m: Model, origin: str) -> None:
             raise InputError(f"{origin}: unknown output {n!r} (outputs are {', '.join(POSE_NAMES)})")
     if names != sorted(names, key=POSE_NAMES.index) or len(set(names)) != len(names):
         raise InputError(f"{origin}: outputs must be distinct and in the order {','.join(POSE_NAMES)}")
+    if m.refine is not None:
+        if tuple(names) != POSE_NAMES:
+            raise InputError(f"{origin}: a refinement estimates the whole pose: it needs the outputs "
+                             f"{','.join(POSE_NAMES)}, the model has {','.join(names)}")
+        m.refine.validate(m.n_inputs, f"{origin}: refine")
     for e in m.equations:
         if len(set(e.terms)) != len(e.terms):
             raise InputError(f"{origin}: output {e.name} lists a term twice")

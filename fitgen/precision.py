@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import InputError
 from .model import Model
 from .terms import DISPLACEMENTS, design_matrix, element_powers, monomial_factors
 
@@ -82,7 +83,12 @@ def monomial_slopes(text: str, vals: dict) -> dict[str, np.ndarray]:
 
 
 def error_bound(model: Model, inputs: np.ndarray, u: float) -> np.ndarray:
-    """Bound (n, n_outputs) on |C result - exact result| for each row of (clamped, finite) inputs."""
+    """Bound (n, n_outputs) on |C result - exact result| for each row of (clamped, finite) inputs.
+
+    Of the equations only: a refinement's iterations have none (InputError)."""
+    if model.refine is not None:
+        raise InputError("no a-priori rounding bound through a refinement's Gauss-Newton steps: compare the C with "
+                         "Model.predict in its own precision (bit for bit) and measure the held-out deviation")
     v, _ = model.clamp(inputs)
     n = v.shape[0]
     harm_vals, harm_err = harmonic_errors(model, v)

@@ -55,6 +55,12 @@ def fit_assumptions(info: dict) -> str:
     fam = info.get("family")
     if isinstance(fam, dict) and "name" in fam:
         line += f"\ncandidates: family {fam['name']}" + (f" (auto: {fam.get('why', '')})" if fam.get("auto") else "")
+    ref = info.get("refine")
+    if isinstance(ref, dict) and "steps" in ref:
+        sd = ", ".join(f"{k} {v:.3g}" for k, v in ref.get("prior_sd", {}).items())
+        line += (f"\nrefinement: {ref['steps']} Gauss-Newton step(s) after the equations on a forward model "
+                 f"({ref['transform']}, {sum(ref['terms'])} terms over {len(ref['terms'])} elements, at most "
+                 f"{max(ref['terms'])} each); prior sd about the equations' estimate: {sd}")
     return line
 
 

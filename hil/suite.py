@@ -81,11 +81,12 @@ class DeviceEvaluator:
 def flash_variant(model: Model) -> Model:
     """A second calibration for the flash checks: the same terms, coefficients scaled by 1.001 and
     intercepts moved, so that its hash and its answers differ from the compiled-in model's. Harmonic
-    terms are left out: the blob format has none (the firmware's interpreter evaluates powers only)."""
+    terms and a refinement are left out: the blob format has neither (the firmware's interpreter
+    evaluates powers only)."""
     eqs = tuple(Equation(e.name, e.intercept + 0.01, tuple(t for t in e.terms if not t.harm),
                          tuple(c * 1.001 for t, c in zip(e.terms, e.coefficients) if not t.harm))
                 for e in model.equations)
-    return dataclasses.replace(model, equations=eqs, fit_info=dict(model.fit_info))
+    return dataclasses.replace(model, equations=eqs, fit_info=dict(model.fit_info), refine=None)
 
 
 def _verify_detail(res: VerifyResult) -> str:

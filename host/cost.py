@@ -238,6 +238,42 @@ def template_ops(model: Model, style: str, fold_one: bool = False) -> Counter:
                 ops["mul"] += 1
     ops["compare"] += 2 * model.n_inputs
     ops["isfinite"] += model.n_inputs
+    if model.refine is not None:
+        ops += refine_ops(model.refine)
+    return ops
+
+
+def refine_ops(r) -> Counter:
+    """Floating-point operations of a refinement's steps (fitgen.refine) as model.h.j2 writes them,
+    every step taken: per step the scaled pose and its powers, the prior's share, per forward term its
+    monomial, its derivative in each component it holds and six multiply-adds, per element the
+    transform, the residual and the normal equations' updates, then a 5x5 Cholesky solve and the clamp."""
+    ops = Counter()
+    n = len(r.forward)
+    ops["add"] += 5 + 5 + 25  # u, dp, g
+    ops["mul"] += 5 + 5 * r.degree + 25
+    for eq in r.forward:
+        for e in eq.exponents:
+            held = sum(1 for a in e if a)
+            ops["mul"] += 4 + 1 + held * 5 + 5
+            ops["add"] += 1 + 5
+    if r.transform == "cbrt":
+        ops["mul"] += 3 * n
+        ops["div"] += 2 * n
+        ops["compare"] += n
+    ops["add"] += n * (1 + 5 + 15)
+    ops["mul"] += n * (1 + 10 + 5 + 5 + 15)
+    for j in range(5):
+        ops["mul"] += j + (4 - j) * j + 2 * j
+        ops["add"] += j + (4 - j) * j + 2 * j
+        ops["div"] += (4 - j) + 2
+        ops["sqrt"] += 1
+        ops["compare"] += 1
+    ops["add"] += 5
+    ops["compare"] += 10
+    ops["isfinite"] += 5
+    for k in ops:
+        ops[k] *= r.steps
     return ops
 
 

@@ -97,3 +97,16 @@ def sim_bus(spec=TWO_CHIPS, faults=(), settings=None, seed=3):
 @pytest.fixture(scope="session")
 def model_file(model, tmp_path_factory):
     return str(model.save(tmp_path_factory.mktemp("model") / "model.json"))
+
+
+def emulated_suite(model, held_out, style: str, n: int = 500):
+    """The whole HIL suite against ``model`` built (float, ``style``) into the emulated Cortex-M4 (mps2)."""
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    from hil.emulate import start_target
+    from hil.suite import run_suite
+    from host.device import Device
+
+    with start_target(model, "mps2", precision="float", style=style) as emu:
+        with Device.open(emu.url, timeout=5) as dev:
+            return run_suite(dev, model, url=emu.url, n_vectors=n, n_fuzz=n, verbose=False, held_out=held_out)

@@ -21,7 +21,7 @@ from fitgen.terms import (Harmonics, Term, candidate_terms, design_jacobian, des
 from host.compiled import CompiledModel
 from host.cost import template_ops
 
-from conftest import assert_one_line_error, require_tool, run_cli
+from conftest import assert_one_line_error, emulated_suite, require_tool, run_cli
 
 RING = load_sensor("ring-vertical")
 PAPER = load_sensor("paper")
@@ -186,16 +186,7 @@ def test_cli_needs_the_sensor_and_a_positive_sum(tmp_path):
 
 
 def test_full_suite_on_emulated_cortex_m4(harmonic_model, held_out):
-    require_tool("qemu-system-arm")
-    require_tool("arm-none-eabi-gcc")
-    from hil.emulate import start_target
-    from hil.suite import run_suite
-    from host.device import Device
-
-    with start_target(harmonic_model, "mps2", precision="float", style="unrolled") as emu:
-        with Device.open(emu.url, timeout=5) as dev:
-            res = run_suite(dev, harmonic_model, url=emu.url, n_vectors=500, n_fuzz=500, verbose=False,
-                            held_out=held_out)
+    res = emulated_suite(harmonic_model, held_out, "unrolled", n=500)
     assert res.ok, res.table()
     names = {c.name for c in res.checks}
     assert {"eval", "held-out accuracy", "flash", "fuzz"} <= names

@@ -1,0 +1,209 @@
+"""The refinement (fitgen.refine): Gauss-Newton steps on a fitted forward model after the equations,
+through the fit, the model file, the generated C (gcc, bit for bit), verify, the refusals, the cost
+model and the firmware on the emulated Cortex-M4."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from fitgen.calblob import to_blob
+from fitgen.codegen import render_header
+from fitgen.errors import InputError
+from fitgen.fit import FitSettings, fit_model
+from fitgen.holdout import box_of, held_out_set
+from fitgen.model import load_model, model_from_dict
+from fitgen.pose import POSE_NAMES
+from fitgen.precision import U_FLOAT, error_bound
+from fitgen.refine import ForwardEquation, Refinement
+from fitgen.refine_fit import monomial_exponents
+from fitgen.sensor import load_sensor
+from fitgen.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from host.compiled import CompiledModel
+from host.cost import template_ops
+from host.verify import compare
+
+from conftest import assert_one_line_error, emulated_suite, require_tool, run_cli
+
+PAPER = load_sensor("paper")
+GRID = grid_poses(PAPER_GRIDS["paper-sim"])
+BOX = box_of(GRID)
+
+
+@pytest.fixture(scope="module")
+def train():
+    # the grid has 3 levels of dz: random poses give the forward model the rest of the box
+    return simulate(PAPER, np.vstack([GRID, random_poses(3000, BOX, pose_rng(1))]))
+
+
+@pytest.fixture(scope="module")
+def model(train):
+    return fit_model(train, settings=FitSettings.family("all", max_terms=12, refine=2, refine_terms=12), sensor=PAPER)
+
+
+@pytest.fixture(scope="module")
+def held():
+    return held_out_set(PAPER, BOX, POSE_NAMES, n=500, draws=2)
+
+
+def _extremes(held):
+    rng = np.random.default_rng(3)
+    return np.vstack([held.clean[:200], held.noisy[:200], held.clean[:30] * 3, held.clean[:30] * 0.1,
+                      held.clean[:30] * -2, np.full((1, 8), np.nan), rng.normal(0, 1e6, (20, 8))])
+
+
+def test_refinement_beats_its_own_equations_on_held_out_poses(model, held):
+    base = dataclasses.replace(model, refine=None)
+    for readings, truth, precision in ((held.clean, held.truth, "double"), (held.noisy, held.noisy_truth, "float")):
+        rms = {}
+        for name, m in (("equations", base), ("refined", model)):
+            err = m.predict(readings, precision=precision) - truth
+            rms[name] = np.sqrt(np.mean(err**2, axis=0))
+        # displacements: the forward model knows what the readings say; at least 1.25x better
+        assert np.all(rms["refined"][:3] < 0.8 * rms["equations"][:3]), rms
+    info = model.fit_info["refine"]
+    assert info["transform"] == "cbrt" and max(info["terms"]) <= 12 and info["steps"] == 2
+    # the prior couples slide and tilt: the equations' errors in dx and thy are correlated
+    assert abs(info["prior_correlation"][0][4]) > 0.2
+
+
+def test_forward_model_predicts_the_readings(model, held):
+    pred = model.refine.forward_values(held.truth)
+    rel = np.abs(pred - held.clean) / held.clean
+    assert np.median(rel) < 2e-3, np.median(rel)
+    assert len(monomial_exponents(5)) == 251 and monomial_exponents(2)[:5] == [
+        (1, 0, 0, 0, 0), (0, 1, 0, 0, 0), (0, 0, 1, 0, 0), (0, 0, 0, 1, 0), (0, 0, 0, 0, 1)]
+
+
+def test_generated_c_is_python_bit_for_bit(model, held):
+    require_tool("gcc")
+    x = _extremes(held)
+    for precision in ("double", "float"):
+        for style in ("table", "unrolled"):
+            with CompiledModel(model, precision, style) as cm:
+                out, status = cm.predict(x)
+            ref, ref_status = model.predict(x, with_status=True, precision=precision)
+            np.testing.assert_array_equal(status, ref_status)
+            np.testing.assert_array_equal(out, ref)
+    with CompiledModel(model, "double", "unrolled", fma=True) as cm:
+        out, _ = cm.predict(x)
+    np.testing.assert_array_equal(out, model.predict(x, fma=True))
+    text = render_header(model, "float", "table")
+    assert "tm_refine(x, out);" in text and "pow(" not in text.replace("never pow()", "") and "malloc" not in text
+
+
+def test_verify_holds_the_c_to_the_emulation(model, held):
+    require_tool("gcc")
+    x = _extremes(held)
+    with CompiledModel(model, "float", "table") as cm:
+        res = compare(model, cm, x, held_out=(held.clean, held.truth))
+    assert res.ok, res.failures
+    # another refinement compiled in: verify sees it
+    other = dataclasses.replace(model, refine=dataclasses.replace(model.refine, steps=1))
+    with CompiledModel(other, "float", "table") as cm:
+        res = compare(model, cm, x)
+    assert not res.ok and "bit for bit" in res.failures[0]
+    with pytest.raises(InputError, match="refinement"):
+        error_bound(model, held.clean, U_FLOAT)
+
+
+def test_identity_transform_when_a_reading_is_not_positive(train):
+    require_tool("gcc")
+    v = train.inputs.copy()
+    v[:, 2] -= v[:, 2].min() + 0.05  # element 3 reads <= 0 somewhere: no v^(-1/3)
+    ds = type(train)(v, train.targets, train.target_names, train.meta)
+    m = fit_model(ds, settings=FitSettings.family("integer", max_terms=8, refine=1, refine_terms=8), sensor=PAPER)
+    assert m.refine.transform == "identity"
+    x = np.vstack([v[::40], v[:10] * 5])
+    for precision in ("double", "float"):
+        with CompiledModel(m, precision, "table") as cm:
+            out, _ = cm.predict(x)
+        np.testing.assert_array_equal(out, m.predict(x, precision=precision))
+
+
+def test_a_step_that_cannot_be_taken_keeps_the_pose(model, held):
+    require_tool("gcc")
+    r = model.refine
+    # t_k = -1 everywhere: 1 / t^3 is not a reading, so no step is taken
+    bad = dataclasses.replace(r, forward=tuple(ForwardEquation(-1.0, eq.exponents, (0.0,) * len(eq.exponents))
+                                               for eq in r.forward))
+    m = dataclasses.replace(model, refine=bad)
+    base = dataclasses.replace(model, refine=None)
+    x = held.clean[:50]
+    np.testing.assert_array_equal(m.predict(x), base.predict(x))
+    with CompiledModel(m, "double", "table") as cm:
+        np.testing.assert_array_equal(cm.predict(x)[0], base.predict(x))
+
+
+def test_model_file_round_trip_and_validation(model, tmp_path):
+    path = model.save(tmp_path / "r.json")
+    back = load_model(path)
+    assert back.refine == model.refine and back.sha256 == model.sha256
+    assert dataclasses.replace(model, refine=None).sha256 != model.sha256
+    data = json.loads(path.read_text())
+    cases = [
+        (lambda d: d["refine"].__setitem__("steps", 0), "steps must be an integer"),
+        (lambda d: d["refine"].__setitem__("transform", "log"), "transform must be one of"),
+        (lambda d: d["refine"]["prior_precision"][0].__setitem__(1, 1.0), "symmetric 5x5"),
+        (lambda d: d["refine"]["forward"].pop(), "one equation per input"),
+        (lambda d: d["refine"]["forward"][0]["exponents"].__setitem__(0, [0, 0, 0, 0, 0]), "not 5 powers"),
+        (lambda d: d["refine"]["forward"][0]["coefficients"].pop(), "exponents but"),
+        (lambda d: d["refine"].__setitem__("pose_max", d["refine"]["pose_min"]), "pose_min < pose_max"),
+        (lambda d: d["refine"]["weights"].__setitem__(0, -1.0), "weights must be > 0"),
+        (lambda d: d["refine"].__setitem__("weights", "x"), "must be a list"),
+        (lambda d: d["outputs"].pop(), "needs the outputs"),
+    ]
+    for change, msg in cases:
+        d = json.loads(json.dumps(data))
+        change(d)
+        with pytest.raises(InputError, match=msg):
+            model_from_dict(d, "m")
+
+
+def test_blobs_and_fixed_point_refuse_in_one_line(model, tmp_path):
+    with pytest.raises(InputError, match="no refinement"):
+        to_blob(dataclasses.replace(model, equations=tuple(
+            dataclasses.replace(e, terms=tuple(t for t in e.terms if not t.needs_positive),
+                                coefficients=tuple(c for t, c in zip(e.terms, e.coefficients) if not t.needs_positive))
+            for e in model.equations)))
+    path = model.save(tmp_path / "r.json")
+    proc = run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "gen"), "--precision", "fixed",
+                   "--input-lsb", "1e-4")
+    assert_one_line_error(proc)
+    assert not (tmp_path / "gen" / "tm_model.h").exists()
+
+
+def test_the_steps_are_counted(model):
+    extra = template_ops(model, "unrolled") - template_ops(dataclasses.replace(model, refine=None), "unrolled")
+    steps = model.refine.steps
+    assert extra["sqrt"] == 5 * steps
+    assert extra["mul"] >= steps * 6 * model.refine.n_terms
+    assert extra["div"] >= steps * (2 * model.n_inputs + 10)
+
+
+def test_cli_fit_predict_codegen_and_bad_input(tmp_path, train):
+    data = tmp_path / "train.csv"
+    train.save(data)
+    out = tmp_path / "m.json"
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(out), "--family", "all", "--max-terms", "8", "--refine", "1",
+                   "--refine-terms", "8", "--held-out", "200")
+    assert proc.returncode == 0, proc.stderr
+    m = load_model(out)
+    assert m.refine is not None and m.refine.steps == 1 and max(len(e.exponents) for e in m.refine.forward) <= 8
+    held = m.fit_info["held_out"]["errors"]
+    assert "refine" in m.fit_info and held["float"]["dx"]["noisy_rms"] > 0
+    proc = run_cli("fitgen", "codegen", str(out), "-o", str(tmp_path / "gen"), "--precision", "float")
+    assert proc.returncode == 0, proc.stderr
+    assert "tm_refine" in (tmp_path / "gen" / "tm_model.h").read_text()
+    for args, msg in ((["--refine", "9"], "0 (none) to 8"), (["--refine", "1", "--refine-terms", "3"], ">= 5"),
+                      (["--refine", "1", "--outputs", "dx"], "whole pose")):
+        proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "bad.json"), "--family", "all", *args)
+        assert_one_line_error(proc, contains=msg)
+        assert not (tmp_path / "bad.json").exists()
+
+
+def test_full_suite_on_emulated_cortex_m4(model, held):
+    res = emulated_suite(model, (held.clean, held.truth), "table", n=300)
+    assert res.ok, res.table()
+    assert {"eval", "held-out accuracy", "flash", "fuzz"} <= {c.name for c in res.checks}
