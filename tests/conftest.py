@@ -110,3 +110,18 @@ def emulated_suite(model, held_out, style: str, n: int = 500):
     with start_target(model, "mps2", precision="float", style=style) as emu:
         with Device.open(emu.url, timeout=5) as dev:
             return run_suite(dev, model, url=emu.url, n_vectors=n, n_fuzz=n, verbose=False, held_out=held_out)
+
+
+def assert_c_equals_python(model, inputs):
+    """gcc's double and float builds, table and unrolled, give Model.predict's outputs and status bit for bit."""
+    import numpy as np
+    from host.compiled import CompiledModel
+
+    require_tool("gcc")
+    for precision in ("double", "float"):
+        for style in ("table", "unrolled"):
+            with CompiledModel(model, precision, style) as cm:
+                out, status = cm.predict(inputs)
+            ref, ref_status = model.predict(inputs, with_status=True, precision=precision)
+            np.testing.assert_array_equal(status, ref_status)
+            np.testing.assert_array_equal(out, ref)

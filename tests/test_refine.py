@@ -16,7 +16,7 @@ from fitgen.holdout import box_of, held_out_set
 from fitgen.model import load_model, model_from_dict
 from fitgen.pose import POSE_NAMES
 from fitgen.precision import U_FLOAT, error_bound
-from fitgen.refine import ForwardEquation, Refinement
+from fitgen.refine import ForwardEquation
 from fitgen.refine_fit import monomial_exponents
 from fitgen.sensor import load_sensor
 from fitgen.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
@@ -24,7 +24,7 @@ from host.compiled import CompiledModel
 from host.cost import template_ops
 from host.verify import compare
 
-from conftest import assert_one_line_error, emulated_suite, require_tool, run_cli
+from conftest import assert_c_equals_python, assert_one_line_error, emulated_suite, require_tool, run_cli
 
 PAPER = load_sensor("paper")
 GRID = grid_poses(PAPER_GRIDS["paper-sim"])
@@ -77,15 +77,8 @@ def test_forward_model_predicts_the_readings(model, held):
 
 
 def test_generated_c_is_python_bit_for_bit(model, held):
-    require_tool("gcc")
     x = _extremes(held)
-    for precision in ("double", "float"):
-        for style in ("table", "unrolled"):
-            with CompiledModel(model, precision, style) as cm:
-                out, status = cm.predict(x)
-            ref, ref_status = model.predict(x, with_status=True, precision=precision)
-            np.testing.assert_array_equal(status, ref_status)
-            np.testing.assert_array_equal(out, ref)
+    assert_c_equals_python(model, x)
     with CompiledModel(model, "double", "unrolled", fma=True) as cm:
         out, _ = cm.predict(x)
     np.testing.assert_array_equal(out, model.predict(x, fma=True))
@@ -109,17 +102,12 @@ def test_verify_holds_the_c_to_the_emulation(model, held):
 
 
 def test_identity_transform_when_a_reading_is_not_positive(train):
-    require_tool("gcc")
     v = train.inputs.copy()
     v[:, 2] -= v[:, 2].min() + 0.05  # element 3 reads <= 0 somewhere: no v^(-1/3)
     ds = type(train)(v, train.targets, train.target_names, train.meta)
     m = fit_model(ds, settings=FitSettings.family("integer", max_terms=8, refine=1, refine_terms=8), sensor=PAPER)
     assert m.refine.transform == "identity"
-    x = np.vstack([v[::40], v[:10] * 5])
-    for precision in ("double", "float"):
-        with CompiledModel(m, precision, "table") as cm:
-            out, _ = cm.predict(x)
-        np.testing.assert_array_equal(out, m.predict(x, precision=precision))
+    assert_c_equals_python(m, np.vstack([v[::40], v[:10] * 5]))
 
 
 def test_a_step_that_cannot_be_taken_keeps_the_pose(model, held):
