@@ -41,8 +41,8 @@ def cmd_simulate(args) -> int:
 
     sensor = _sensor(args)
     chosen = [x for x in (args.grid, args.random, args.poses) if x is not None]
-    if len(chosen) > 1:
-        raise InputError("give one of --grid, --random, --poses")
+    if len(chosen) > 1 and not (len(chosen) == 2 and args.poses is None and not args.scene):
+        raise InputError("give one of --grid, --random, --poses (or --grid with --random: the grid, then random poses)")
     if args.scene and (args.grid or args.poses or args.ranges):
         raise InputError("--scene sets the poses: give it with --random N or alone, not with --grid, --poses, --ranges")
     scene_info = {}
@@ -61,6 +61,11 @@ def cmd_simulate(args) -> int:
     elif args.random is not None:
         poses = random_poses(args.random, parse_ranges(args.ranges), pose_rng(args.seed))
         source = {"random": args.random, "ranges": args.ranges}
+        if args.grid:
+            # a rig's sweep and random presses between its levels: the grid's poses first
+            import numpy as np
+
+            poses, source = np.vstack([grid_poses(parse_grid(args.grid)), poses]), {**source, "grid": args.grid}
     else:
         grid = args.grid or "paper-sim"
         poses, source = grid_poses(parse_grid(grid)), {"grid": grid}
@@ -388,7 +393,8 @@ def build_parser() -> Parser:
     s = sub.add_parser("simulate", help="simulate element readings for a pose set")
     s.add_argument("--sensor", default="paper", help="preset name or sensor TOML (default: paper)")
     s.add_argument("--grid", help="paper-sim, paper-exp, or 'dx=-2:2:5 dz=0,-1 ...'")
-    s.add_argument("--random", type=int, metavar="N", help="N random poses in --ranges")
+    s.add_argument("--random", type=int, metavar="N",
+                   help="N random poses in --ranges (with --grid: after the grid's poses)")
     s.add_argument("--ranges", help="box for --random: 'dx=-2:2 thx=-5:5 ...' (default: paper-sim box)")
     s.add_argument("--poses", metavar="FILE.csv", help="simulate the poses in this CSV")
     s.add_argument("--seed", type=int, default=0)

@@ -98,13 +98,25 @@ def test_poses_file(tmp_path):
     np.testing.assert_array_equal(ds.poses(), [[0, 0, -1, 0, 0], [0, 0, -2, 5, 0]])
 
 
+def test_grid_then_random_poses(tmp_path):
+    out = tmp_path / "o.csv"
+    proc = run_cli("fitgen", "simulate", "--grid", "dx=-1,1 dz=0,-2", "--random", "7", "--seed", "3", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    poses = load_dataset(out).poses()
+    np.testing.assert_array_equal(poses[:4, [0, 2]], [[-1, 0], [-1, -2], [1, 0], [1, -2]])
+    alone = tmp_path / "r.csv"
+    assert run_cli("fitgen", "simulate", "--random", "7", "--seed", "3", "-o", str(alone)).returncode == 0
+    np.testing.assert_array_equal(poses[4:], load_dataset(alone).poses())
+
+
 @pytest.mark.parametrize("args, text", [
     (["--grid", "dx=a:b:c"], "grid"),
     (["--grid", "paper-huge"], "grid"),
     (["--random", "0"], "random"),
     (["--noise", "-1"], "noise"),
     (["--adc-bits", "99"], "adc-bits"),
-    (["--grid", "paper-sim", "--random", "5"], "one of"),
+    (["--grid", "paper-sim", "--poses", "p.csv"], "one of"),
+    (["--random", "5", "--poses", "p.csv"], "one of"),
     (["--bogus"], "unrecognized"),
 ])
 def test_bad_options_one_line(tmp_path, args, text):
