@@ -23,6 +23,8 @@ Methods:
 1. `ours`: fit_model(train) with the default FitSettings() (noise- and float-aware stepwise AIC).
    `ours, harmonics`: the same search with the harmonics family (FitSettings.family("harmonics"):
    the paper's powers and monomials up to degree 3 of the ring's harmonics), AIC, BIC and caps.
+   `+ refine k`: those equations, then k Gauss-Newton steps on a forward model fitted to the same
+   grid (fitgen.refine; `--refine k`), all in the same float C.
 2. `lasso-aic`, `lasso-bic`: scikit-learn LassoLarsIC per output on the same candidate columns
    (fitgen.terms.candidate_terms + design_matrix; columns standardised, coefficients mapped back
    to raw columns and intercept); thx, thy get the d-terms from the same method's stage-1
@@ -109,6 +111,11 @@ HARMONIC_VARIANTS = (("ours, harmonics (AIC)", FitSettings.family("harmonics")),
                      ("ours, harmonics, max 30 terms", FitSettings.family("harmonics", max_terms=30)),
                      ("ours, harmonics, max 15 terms", FitSettings.family("harmonics", max_terms=15)),
                      ("ours, harmonics, max 8 terms", FitSettings.family("harmonics", max_terms=8)))
+# the equations, then Gauss-Newton steps on a forward model fitted to the same grid (fitgen.refine)
+REFINE_VARIANTS = (("ours, harmonics, max 30 + refine 1", FitSettings.family("harmonics", max_terms=30, refine=1)),
+                   ("ours, harmonics, max 30 + refine 2", FitSettings.family("harmonics", max_terms=30, refine=2)),
+                   ("ours, harmonics, max 15 + refine 1", FitSettings.family("harmonics", max_terms=15, refine=1,
+                                                                             refine_terms=15)))
 
 
 class Result:
@@ -431,7 +438,10 @@ class Layout:
         for name, settings in HARMONIC_VARIANTS:
             self.results.append(Result(name, "harmonics", model=fit_model(self.train, settings=settings,
                                                                           sensor=self.sensor)))
-        log(f"{self.name}: ours fitted, {1 + len(OURS_VARIANTS) + len(HARMONIC_VARIANTS)} settings "
+        for name, settings in REFINE_VARIANTS:
+            self.results.append(Result(name, "refine", model=fit_model(self.train, settings=settings,
+                                                                       sensor=self.sensor)))
+        log(f"{self.name}: ours fitted, {1 + len(OURS_VARIANTS) + len(HARMONIC_VARIANTS) + len(REFINE_VARIANTS)} settings "
             f"({time.monotonic() - t:.1f} s)")
         sizes = {e.name: len(e.terms) for e in ours.model.equations}
         for crit in ("aic", "bic"):
@@ -615,7 +625,8 @@ def plot(layouts: list[Layout], folder: Path) -> Path:
     import matplotlib.pyplot as plt
 
     styles = {"ours": ("o", "C0", "ours (stepwise, AIC/BIC/caps)"),
-              "harmonics": ("*", "C5", "ours, harmonics family (AIC/BIC/caps)"), "lasso": ("s", "C1", "LassoLarsIC (+ relaxed)"),
+              "harmonics": ("*", "C5", "ours, harmonics family (AIC/BIC/caps)"),
+              "refine": ("P", "C6", "ours, harmonics + refinement steps"), "lasso": ("s", "C1", "LassoLarsIC (+ relaxed)"),
               "abess": ("D", "C2", "abess best subset"), "mlp": ("^", "C3", "MLP (float C)")}
     fig, axes = plt.subplots(2, len(layouts), figsize=(6.5 * len(layouts), 9), squeeze=False)
     for col, L in enumerate(layouts):

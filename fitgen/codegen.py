@@ -76,7 +76,8 @@ class CRefine:
     intercepts: tuple[str, ...]
     prior: tuple[tuple[str, ...], ...]
     starts: tuple[int, ...]  # element k's terms: starts[k] .. starts[k + 1] - 1
-    exps: tuple[tuple[int, ...], ...]  # per term
+    monos: tuple[tuple[int, ...], ...]  # the monomials a step computes (fitgen.refine.Refinement.monomials)
+    table: tuple[tuple[int, ...], ...]  # per term: monomial, then per component (power, derivative's monomial or NONE)
     terms: tuple[str, ...]  # per term, its coefficient
 
 
@@ -190,6 +191,9 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
     )
 
 
+NONE = 0xFFFF  # the refinement's "no derivative" index (TM_R_NONE)
+
+
 def _c_refine(model: Model, precision: str) -> CRefine | None:
     r = model.refine
     if r is None:
@@ -201,12 +205,16 @@ def _c_refine(model: Model, precision: str) -> CRefine | None:
     starts = [0]
     for eq in r.forward:
         starts.append(starts[-1] + len(eq.exponents))
-    if starts[-1] > 65535:
-        raise InputError(f"the refinement has {starts[-1]} forward terms; the tables index at most 65535")
+    monos = r.monomials
+    if max(starts[-1], len(monos)) >= NONE:
+        raise InputError(f"the refinement has {starts[-1]} forward terms and {len(monos)} monomials; "
+                         f"its tables index fewer than {NONE}")
+    exps = [e for eq in r.forward for e in eq.exponents]
+    table = tuple((row[0],) + tuple(x for j in range(5) for x in (e[j], NONE if row[1 + j] < 0 else row[1 + j]))
+                  for e, row in zip(exps, r.term_table()))
     return CRefine(r.steps, r.transform == "cbrt", r.degree, lits(r.centre), lits(r.scale), lits(r.pose_min),
                    lits(r.pose_max), lits(r.weights), lits(eq.intercept for eq in r.forward),
-                   tuple(lits(row) for row in r.prior), tuple(starts),
-                   tuple(e for eq in r.forward for e in eq.exponents),
+                   tuple(lits(row) for row in r.prior), tuple(starts), monos, table,
                    lits(c for eq in r.forward for c in eq.coefficients))
 
 

@@ -65,12 +65,29 @@ class Refinement:
 
     @property
     def monomials(self) -> tuple[tuple[int, ...], ...]:
-        """The distinct exponent tuples the elements use, in order of first use."""
-        seen: dict[tuple[int, ...], None] = {}
+        """The distinct monomials a step computes, in order of first use: each term's, then the
+        monomials of its derivatives (its exponents with one power fewer in one component)."""
+        return self._tables()[0]
+
+    def term_table(self) -> tuple[tuple[int, ...], ...]:
+        """Per term, in element order: its monomial's index, then per component the index of its
+        derivative's monomial, -1 where the term does not hold that component."""
+        return self._tables()[1]
+
+    def _tables(self):
+        index: dict[tuple[int, ...], int] = {}
+        rows = []
         for eq in self.forward:
             for e in eq.exponents:
-                seen.setdefault(e, None)
-        return tuple(seen)
+                row = [index.setdefault(e, len(index))]
+                for j in range(5):
+                    if e[j]:
+                        lower = tuple(a - (q == j) for q, a in enumerate(e))
+                        row.append(index.setdefault(lower, len(index)))
+                    else:
+                        row.append(-1)
+                rows.append(tuple(row))
+        return tuple(index), tuple(rows)
 
     @property
     def degree(self) -> int:
@@ -96,32 +113,26 @@ class Refinement:
         for _ in range(deg):
             pw.append(pw[-1] * u)
         pw = np.stack(pw, axis=-1)  # (n, 5, deg + 1)
-        monos = self.monomials
+        monos, table = self._tables()
         m = np.empty((len(u), len(monos)), dtype=dt)
-        dm = np.empty((len(u), len(monos), 5), dtype=dt)
         for i, e in enumerate(monos):
             val = pw[:, 0, e[0]]
             for j in range(1, 5):
                 val = val * pw[:, j, e[j]]
             m[:, i] = val
-            for j in range(5):
-                if e[j] == 0:
-                    dm[:, i, j] = 0
-                    continue
-                acc = dt(e[j]) * pw[:, j, e[j] - 1]
-                for q in range(5):
-                    if q != j:
-                        acc = acc * pw[:, q, e[q]]
-                dm[:, i, j] = acc
-        index = {e: i for i, e in enumerate(monos)}
         t = np.empty((len(u), len(self.forward)), dtype=dt)
         dtdu = np.empty((len(u), len(self.forward), 5), dtype=dt)
+        rows = iter(table)
         for k, eq in enumerate(self.forward):
             acc = np.full(len(u), eq.intercept, dtype=dt)
             dacc = np.zeros((len(u), 5), dtype=dt)
             for e, c in zip(eq.exponents, np.asarray(eq.coefficients, dtype=dt)):
-                acc = acc + c * m[:, index[e]]
-                dacc = dacc + c * dm[:, index[e], :]
+                row = next(rows)
+                acc = acc + c * m[:, row[0]]
+                for j in range(5):
+                    if row[1 + j] >= 0:
+                        # d(u^e)/du_j = e_j u^(e - 1_j): the power times the derivative's monomial
+                        dacc[:, j] = dacc[:, j] + c * (dt(e[j]) * m[:, row[1 + j]])
             t[:, k] = acc
             dtdu[:, k, :] = dacc
         return t, dtdu

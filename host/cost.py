@@ -245,18 +245,19 @@ def template_ops(model: Model, style: str, fold_one: bool = False) -> Counter:
 
 def refine_ops(r) -> Counter:
     """Floating-point operations of a refinement's steps (fitgen.refine) as model.h.j2 writes them,
-    every step taken: per step the scaled pose and its powers, the prior's share, per forward term its
-    monomial, its derivative in each component it holds and six multiply-adds, per element the
-    transform, the residual and the normal equations' updates, then a 5x5 Cholesky solve and the clamp."""
+    every step taken: per step the scaled pose and its powers, each monomial once (4 multiplies),
+    the prior's share, per forward term one multiply-add for the value and, per component it holds,
+    the power times the derivative's monomial and a multiply-add; per element the transform, the
+    residual and the normal equations' updates; then a 5x5 Cholesky solve and the clamp."""
     ops = Counter()
     n = len(r.forward)
     ops["add"] += 5 + 5 + 25  # u, dp, g
-    ops["mul"] += 5 + 5 * r.degree + 25
+    ops["mul"] += 5 + 5 * r.degree + 4 * len(r.monomials) + 25
     for eq in r.forward:
         for e in eq.exponents:
             held = sum(1 for a in e if a)
-            ops["mul"] += 4 + 1 + held * 5 + 5
-            ops["add"] += 1 + 5
+            ops["mul"] += 1 + 2 * held
+            ops["add"] += 1 + held
     if r.transform == "cbrt":
         ops["mul"] += 3 * n
         ops["div"] += 2 * n
