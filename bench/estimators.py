@@ -662,6 +662,8 @@ def plot(layouts: list[Layout], folder: Path) -> Path:
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_ylim(top=top)
+            # room on the right for the labels of the costliest points
+            ax.set_xlim(right=4 * max(r.instructions for r, _ in pts))
             ax.set_xlabel("instructions per estimate (float C, x86-64, callgrind)")
             ax.set_ylabel(f"worst RMS error with noise [{unit}]")
             ax.set_title(f"{L.name} {TRANSFER}: worst of {'dx, dy, dz' if row == 0 else 'thx, thy'}")

@@ -9,14 +9,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from . import __version__
-from .errors import InputError
+from .errors import InputError, finite_number
 from .fileio import canonical_json, read_text, sha256_hex, write_atomic
 from .fma import fma as fused_multiply_add
 from .pose import POSE_NAMES, POSE_UNITS
@@ -206,12 +205,6 @@ def load_model(path: str | Path) -> Model:
     return model_from_dict(data, origin)
 
 
-def _number(val, where: str) -> float:
-    if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
-        raise InputError(f"{where} must be a finite number, got {val!r}")
-    return float(val)
-
-
 def model_from_dict(data, origin: str = "model") -> Model:
     if not isinstance(data, dict):
         raise InputError(f"{origin}: not a model (a JSON object is expected)")
@@ -220,8 +213,8 @@ def model_from_dict(data, origin: str = "model") -> Model:
         raise InputError(f"{origin}: schema_version {ver!r} is not supported (this fitgen reads {SCHEMA_VERSION})")
     try:
         inputs = data["inputs"]
-        lo = [_number(x, f"{origin}: inputs.min") for x in inputs["min"]]
-        hi = [_number(x, f"{origin}: inputs.max") for x in inputs["max"]]
+        lo = [finite_number(x, f"{origin}: inputs.min") for x in inputs["min"]]
+        hi = [finite_number(x, f"{origin}: inputs.max") for x in inputs["max"]]
         units = inputs.get("units", "mT")
         harmonics = (None if "harmonics" not in inputs
                      else Harmonics.from_dict(inputs["harmonics"], len(lo), origin))
@@ -229,10 +222,10 @@ def model_from_dict(data, origin: str = "model") -> Model:
         for i, o in enumerate(data["outputs"]):
             where = f"{origin}: outputs[{i}]"
             terms = tuple(parse_term(t) for t in o["terms"])
-            coefs = tuple(_number(c, f"{where}.coefficients") for c in o["coefficients"])
+            coefs = tuple(finite_number(c, f"{where}.coefficients") for c in o["coefficients"])
             if len(terms) != len(coefs):
                 raise InputError(f"{where}: {len(terms)} terms but {len(coefs)} coefficients")
-            eqs.append(Equation(o["name"], _number(o["intercept"], f"{where}.intercept"), terms, coefs))
+            eqs.append(Equation(o["name"], finite_number(o["intercept"], f"{where}.intercept"), terms, coefs))
     except (KeyError, TypeError) as exc:
         raise InputError(f"{origin}: malformed model ({type(exc).__name__}: {exc})") from None
     if not isinstance(units, str):

@@ -21,12 +21,11 @@ float32 numpy gives the float header's results bit for bit.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, finite_number
 from .pose import POSE_NAMES
 
 TRANSFORMS = ("identity", "cbrt")
@@ -214,8 +213,8 @@ class Refinement:
             forward = []
             for k, eq in enumerate(data["forward"]):
                 exps = tuple(tuple(e) for e in eq["exponents"])
-                forward.append(ForwardEquation(_num(eq["intercept"], f"{where}.forward[{k}].intercept"), exps,
-                                               tuple(_num(c, f"{where}.forward[{k}].coefficients") for c in eq["coefficients"])))
+                forward.append(ForwardEquation(finite_number(eq["intercept"], f"{where}.forward[{k}].intercept"), exps,
+                                               tuple(finite_number(c, f"{where}.forward[{k}].coefficients") for c in eq["coefficients"])))
             ref = cls(steps, data["transform"], _nums(data["pose_min"], f"{where}.pose_min"),
                       _nums(data["pose_max"], f"{where}.pose_max"), _nums(data["weights"], f"{where}.weights"),
                       tuple(_nums(row, f"{where}.prior_precision") for row in prior), tuple(forward))
@@ -286,13 +285,7 @@ def _cholesky_solve(A: np.ndarray, g: np.ndarray, dt) -> tuple[np.ndarray, np.nd
     return delta, ok
 
 
-def _num(val, where: str) -> float:
-    if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
-        raise InputError(f"{where} must be a finite number, got {val!r}")
-    return float(val)
-
-
 def _nums(vals, where: str) -> tuple[float, ...]:
     if not isinstance(vals, list):
         raise InputError(f"{where} must be a list of numbers")
-    return tuple(_num(v, where) for v in vals)
+    return tuple(finite_number(v, where) for v in vals)

@@ -11,6 +11,7 @@ device's noise adds to them (the readings perturbed by it, a fixed seed).
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
@@ -73,7 +74,7 @@ def fit_refinement(ds: Dataset, model: Model, *, steps: int, noise: float, max_t
     def columns(a, b):
         return monomial_columns((poses[a:b] - centre) * scale, exps)
 
-    forward, notes = [], []
+    forward = []
     cap = min(max_terms, n - 2)
     for k in range(ds.n_inputs):
         A = compress(columns, target[:, k], block=_ROWS)
@@ -106,8 +107,7 @@ def fit_refinement(ds: Dataset, model: Model, *, steps: int, noise: float, max_t
                          "nothing to refine") from None
     prior = (prior + prior.T) / 2  # exactly symmetric, as the file requires
     sd = np.sqrt(np.diag(cov))
-    ref = Refinement(steps, transform, ref.pose_min, ref.pose_max, tuple(map(float, weights)),
-                     tuple(tuple(map(float, row)) for row in prior), ref.forward)
+    ref = dataclasses.replace(ref, weights=tuple(map(float, weights)), prior=tuple(tuple(map(float, row)) for row in prior))
     info = {"steps": steps, "transform": transform, "degree": degree, "max_terms": cap,
             "terms": [len(eq.exponents) for eq in forward], "forward_rms": fit_rms.tolist(), "noise": noise,
             "prior_scale": prior_scale, "prior_sd": dict(zip(POSE_NAMES, sd.tolist())),
