@@ -79,6 +79,9 @@ class CRefine:
     monos: tuple[tuple[int, ...], ...]  # the monomials a step computes (fitgen.refine.Refinement.monomials)
     table: tuple[tuple[int, ...], ...]  # per term: monomial, then per component (power, derivative's monomial or NONE)
     terms: tuple[str, ...]  # per term, its coefficient
+    factors: tuple[tuple[tuple[int, int], ...], ...]  # per monomial, its (component, power) with power > 0
+    powers: tuple[str, ...]  # the literal of each power 0 .. 8, as a real
+    none: int
 
 
 @dataclass(frozen=True)
@@ -215,7 +218,8 @@ def _c_refine(model: Model, precision: str) -> CRefine | None:
     return CRefine(r.steps, r.transform == "cbrt", r.degree, lits(r.centre), lits(r.scale), lits(r.pose_min),
                    lits(r.pose_max), lits(r.weights), lits(eq.intercept for eq in r.forward),
                    tuple(lits(row) for row in r.prior), tuple(starts), monos, table,
-                   lits(c for eq in r.forward for c in eq.coefficients))
+                   lits(c for eq in r.forward for c in eq.coefficients),
+                   tuple(tuple((j, a) for j, a in enumerate(e) if a) for e in monos), lits(range(9)), NONE)
 
 
 def _c_harmonics(model: Model, monomials: list[str], precision: str) -> tuple[CHarmonic, ...]:
