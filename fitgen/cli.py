@@ -354,7 +354,8 @@ def cmd_tradeoff(args) -> int:
     from .tradeoff import grid_from, parse_knob_list, parse_target, quick_grid, sweep, write_outputs
 
     knobs = {name: parse_knob_list(name, getattr(args, name)) for name in ("k", "max_terms", "family", "precision",
-                                                                         "style") if getattr(args, name) is not None}
+                                                                         "style", "refine")
+             if getattr(args, name) is not None}
     if args.jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {args.jobs}")
     sensor = _sensor(args)
@@ -362,7 +363,8 @@ def cmd_tradeoff(args) -> int:
     target = parse_target(args.target, scene.outputs)
     grid = grid_from(**knobs) if args.full or knobs else quick_grid()
     if not grid:
-        raise InputError("nothing to sweep: fixed point has no harmonics family (pick another --family or --precision)")
+        raise InputError("nothing to sweep: fixed point has no harmonics family and no refinement, and the refinement "
+                         "is swept on the harmonics family only (pick other --family, --precision or --refine)")
     bar = Progress("tradeoff", len(grid))
     if not 0 < args.max_share < 1e6:
         raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
@@ -479,19 +481,22 @@ def build_parser() -> Parser:
     c.add_argument("--input-offset", type=_finite, metavar="Y", help="fixed: the input value of code 0 (default 0)")
     c.set_defaults(func=cmd_codegen)
 
-    t = sub.add_parser("tradeoff", help="accuracy against cost over penalty, cap, family, precision and style")
+    t = sub.add_parser("tradeoff", help="accuracy against cost over penalty, cap, family, precision, style and "
+                                        "refinement")
     t.add_argument("sensor", metavar="SENSOR", help="preset name or sensor TOML")
     t.add_argument("--scene", required=True, help="full, slide, press or a scene TOML")
     t.add_argument("--target", help="RMS error with noise to meet, e.g. 'dz=0.1 thx=2' "
                                     "(default: 0.1 mm and 1 deg for the scene's outputs)")
     t.add_argument("--full", action="store_true",
-                   help="every combination of the knobs (135 points) instead of the quick subset")
+                   help="every combination of the knobs (207 points) instead of the quick subset")
     t.add_argument("--k", help="sweep only these penalties per term, e.g. aic,bic,6 (all: aic,bic,6)")
     t.add_argument("--max-terms", help="sweep only these caps, e.g. none,8 (all: none,20,8)")
     t.add_argument("--family", help="sweep only these families (all: all,no-roots,integer,harmonics; harmonics has "
                    "no fixed point)")
     t.add_argument("--precision", help="sweep only these precisions (all: double,float,fixed)")
     t.add_argument("--style", help="sweep only these code styles (all: table,unrolled; fixed point has one)")
+    t.add_argument("--refine", help="sweep only these refinement step counts (all: 0,1; on the harmonics family, "
+                                    "float and double, scenes with the whole pose; docs/refine.md)")
     t.add_argument("--seed", type=int, default=0, help="held-out poses and noise draws (default 0)")
     t.add_argument("--jobs", type=int, default=2, help="builds measured at once (default 2)")
     t.add_argument("--max-share", type=float, default=0.05, metavar="S",

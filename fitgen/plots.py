@@ -82,15 +82,16 @@ def tradeoff(result, path: Path) -> Path:
     plt = _plt()
     colours = {"double": "tab:blue", "float": "tab:orange", "fixed": "tab:green"}
     markers = {"all": "o", "no-roots": "s", "integer": "^", "harmonics": "D"}
+    refined = "P"  # any family with refinement steps
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
     pts = [(i, p) for i, p in enumerate(result.points) if p.instructions is not None and p.score is not None]
     seen = set()
     for i, p in pts:
-        key = (p.knobs.precision, p.knobs.family)
+        key = (p.knobs.precision, p.knobs.method)
         face = "none" if p.knobs.style == "table" else colours[p.knobs.precision]
-        ax.scatter(p.instructions, p.score, s=36, marker=markers[p.knobs.family], facecolors=face,
-                   edgecolors=colours[p.knobs.precision], linewidths=1, alpha=0.85,
-                   label=None if key in seen else f"{p.knobs.precision}, {p.knobs.family}")
+        ax.scatter(p.instructions, p.score, s=36, marker=refined if p.knobs.refine else markers[p.knobs.family],
+                   facecolors=face, edgecolors=colours[p.knobs.precision], linewidths=1, alpha=0.85,
+                   label=None if key in seen else f"{p.knobs.precision}, {p.knobs.method}")
         seen.add(key)
     front = [result.points[i] for i in result.front]
     if front:

@@ -1,7 +1,8 @@
 """Accuracy against cost over the knobs a user can turn: penalty per term, cap on terms, candidate
-family, precision and code style.
+family, precision, code style and refinement steps (fitgen.refine: swept on the harmonics family,
+in float and double, for scenes that estimate the whole pose).
 
-One fit per (k, cap, family) on the scene's grid, simulated noise-free with the sensor; every
+One fit per (k, cap, family, refinement) on the scene's grid, simulated noise-free with the sensor; every
 precision and style of that fit is then measured on held-out random poses in the scene's box
 (noise-free, and with the sensor's noise in several draws) and in cost: terms, floating-point
 operations by kind as the templates write them, x86-64 instructions per estimate counted by
@@ -40,6 +41,8 @@ FAMILY_NAMES = ("all", "no-roots", "integer", "harmonics")
 NO_FIXED = ("harmonics",)  # families fixed point cannot generate (their terms divide)
 PRECISIONS = ("double", "float", "fixed")
 STYLES = ("table", "unrolled")
+REFINE_STEPS = (0, 1)
+REFINED_FAMILIES = ("harmonics",)  # the refinement is swept on these (docs/refine.md measures it on them)
 FIXED_STYLE = "-"  # the fixed-point header is straight-line code: the style knob does not apply
 OP_KINDS = ("mul", "add", "div", "sqrt", "cbrt")
 # Cortex-M core whose flash is reported, per precision (see host.cost.ARM_CORES)
@@ -58,19 +61,25 @@ class Knobs:
     family: str
     precision: str
     style: str
+    refine: int = 0  # Gauss-Newton steps after the equations (fitgen.refine)
 
     @property
     def fit_key(self) -> tuple:
-        return (self.k, self.max_terms, self.family)
+        return (self.k, self.max_terms, self.family, self.refine)
+
+    @property
+    def method(self) -> str:
+        """The family, and the refinement if any: ``harmonics+refine1``."""
+        return self.family + (f"+refine{self.refine}" if self.refine else "")
 
     @property
     def label(self) -> str:
         k = self.k if isinstance(self.k, str) else f"k={self.k:g}"
-        return f"{k} cap={self.max_terms or '-'} {self.family} {self.precision} {self.style}"
+        return f"{k} cap={self.max_terms or '-'} {self.method} {self.precision} {self.style}"
 
     def settings(self) -> FitSettings:
         k = 2.0 if self.k == "aic" else self.k
-        return FitSettings.family(self.family, k=k, max_terms=self.max_terms)
+        return FitSettings.family(self.family, k=k, max_terms=self.max_terms, refine=self.refine)
 
 
 def _styles(precision: str) -> tuple[str, ...]:
@@ -78,15 +87,14 @@ def _styles(precision: str) -> tuple[str, ...]:
 
 
 def _possible(points: list[Knobs]) -> list[Knobs]:
-    return [k for k in points if not (k.precision == "fixed" and k.family in NO_FIXED)]
+    return [k for k in points if not (k.precision == "fixed" and (k.family in NO_FIXED or k.refine))
+            and not (k.refine and k.family not in REFINED_FAMILIES)]
 
 
 def full_grid() -> list[Knobs]:
     """Every combination: 3 penalties x 3 caps x (3 families x (double, float in 2 styles; fixed) and
-    harmonics x (double, float in 2 styles)) = 171 points."""
-    return _possible([Knobs(k, cap, fam, p, s)
-                      for k, cap, fam, p in itertools.product(K_VALUES, CAPS, FAMILY_NAMES, PRECISIONS)
-                      for s in _styles(p)])
+    harmonics x (double, float in 2 styles) x (no refinement, one step)) = 207 points."""
+    return grid_from()
 
 
 def quick_grid() -> list[Knobs]:
@@ -97,14 +105,17 @@ def quick_grid() -> list[Knobs]:
            for k, cap, fam, p in itertools.product(("aic", "bic"), CAPS, FAMILY_NAMES, PRECISIONS)]
     pts += [Knobs("aic", None, "all", p, "table") for p in PRECISIONS if p != "fixed"]
     pts += [Knobs(6.0, None, fam, p, _styles(p)[-1]) for fam in ("all", "integer") for p in PRECISIONS]
+    pts += [Knobs("aic", None, "harmonics", "float", "unrolled", 1)]
     return _possible(pts)
 
 
-def grid_from(k=None, max_terms=None, family=None, precision=None, style=None) -> list[Knobs]:
-    """The product of the given value lists, each knob not given taking all its values."""
+def grid_from(k=None, max_terms=None, family=None, precision=None, style=None, refine=None) -> list[Knobs]:
+    """The product of the given value lists, each knob not given taking all its values (the
+    refinement only where it is swept: REFINED_FAMILIES, float and double)."""
     ks, caps = k or K_VALUES, max_terms or CAPS
     fams, precs, styles = family or FAMILY_NAMES, precision or PRECISIONS, style or STYLES
-    return _possible([Knobs(kk, cap, fam, p, s) for kk, cap, fam, p in itertools.product(ks, caps, fams, precs)
+    return _possible([Knobs(kk, cap, fam, p, s, r)
+                      for kk, cap, fam, p, r in itertools.product(ks, caps, fams, precs, refine or REFINE_STEPS)
                       for s in (_styles(p) if p == "fixed" else styles)])
 
 
@@ -122,6 +133,10 @@ def parse_knob_list(name: str, spec: str) -> list:
                     val = math.nan
                 if not (val > 0 and math.isfinite(val)):
                     raise InputError(f"--k takes aic, bic or numbers > 0, got {part!r}")
+        elif name == "refine":
+            if not (part.isdigit() and int(part) <= 8):
+                raise InputError(f"--refine takes step counts from 0 to 8, got {part!r}")
+            val = int(part)
         elif name == "max_terms":
             if part == "none":
                 val = None
@@ -333,6 +348,13 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
     target = parse_target(None, outputs) if target is None else dict(target)
     notes: list[str] = []
     warnings = unresolved_warnings(sensor, scene, accuracy=target)
+    if tuple(outputs) != POSE_NAMES and any(k.refine for k in grid):
+        notes.append(f"no refinement: it estimates the whole pose, and scene {scene.name} asks for "
+                     f"{','.join(outputs)} only")
+        grid = [k for k in grid if not k.refine]
+        if not grid:
+            raise InputError(f"nothing to sweep: the refinement estimates the whole pose, and scene {scene.name} "
+                             f"asks for {','.join(outputs)} only")
 
     scale = None
     if any(k.precision == "fixed" for k in grid):
@@ -426,14 +448,14 @@ def to_csv(result: TradeoffResult) -> str:
     outs = result.scene.outputs
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["point", "k", "max_terms", "family", "precision", "style", "terms"]
+    w.writerow(["point", "k", "max_terms", "family", "refine", "precision", "style", "terms"]
                + [f"terms_{o}" for o in outs] + [f"ops_{k}" for k in OP_KINDS]
                + ["instructions", "loop_instructions", "flash", "object_flash"]
                + [f"{o}_{s}" for o in outs for s in ("max", "rms", "noisy_max", "noisy_rms")]
                + [f"{o}_share" for o in outs] + ["score", "share", "front", "recommended", "model", "note"])
     for i, p in enumerate(result.points):
         kn = p.knobs
-        w.writerow([i + 1, _k(kn.k), kn.max_terms or "", kn.family, kn.precision, kn.style, p.terms]
+        w.writerow([i + 1, _k(kn.k), kn.max_terms or "", kn.family, kn.refine, kn.precision, kn.style, p.terms]
                    + [p.terms_per_output.get(o, "") for o in outs] + [p.ops.get(k, "") for k in OP_KINDS]
                    + [_g(p.instructions, 6), _g(p.loop_instructions, 6), _g(p.flash, 9), _g(p.object_flash, 9)]
                    + [_g(p.errors[o][s], 6) if p.errors else "" for o in outs
@@ -450,7 +472,7 @@ def _row(i: int, p: Point, result: TradeoffResult) -> str:
     ops = "/".join(str(p.ops.get(k, 0)) for k in OP_KINDS) if p.ops else ""
     errs = " | ".join(f"{_g(p.errors[o]['rms'])} / {_g(p.errors[o]['noisy_rms'])} / {_g(p.errors[o]['noisy_max'])}"
                       if p.errors else "" for o in result.scene.outputs)
-    return (f"| {i + 1} | {_k(kn.k)} | {kn.max_terms or '-'} | {kn.family} | {kn.precision} | {kn.style} | {p.terms} | "
+    return (f"| {i + 1} | {_k(kn.k)} | {kn.max_terms or '-'} | {kn.method} | {kn.precision} | {kn.style} | {p.terms} | "
             f"{ops} | {_g(p.instructions, 4)} | {_g(p.flash, 6)} | {errs} | {_g(p.score)} | "
             f"{'' if p.share is None else f'{p.share:.1%}'} | {mark.strip()} |"
             + (f" {p.note}" if p.note else ""))

@@ -73,9 +73,13 @@ def test_recommend_when_nothing_meets_names_the_most_accurate():
 
 def test_grids():
     full = full_grid()
-    # 3 penalties x 3 caps x (3 families x (double, float: 2 styles each; fixed) + harmonics without fixed)
-    assert len(full) == len(set(full)) == 3 * 3 * (3 * (2 + 2 + 1) + (2 + 2))
+    # 3 penalties x 3 caps x (3 families x (double, float: 2 styles each; fixed) + harmonics without fixed,
+    # with and without one refinement step)
+    assert len(full) == len(set(full)) == 3 * 3 * (3 * (2 + 2 + 1) + 2 * (2 + 2))
     assert not any(k.family == "harmonics" and k.precision == "fixed" for k in full + quick_grid())
+    refined = [k for k in full + quick_grid() if k.refine]
+    assert refined and {(k.family, k.refine) for k in refined} == {("harmonics", 1)}
+    assert not any(k.precision == "fixed" for k in refined)
     assert set(quick_grid()) <= set(full)
     assert {k.style for k in full if k.precision == "fixed"} == {"-"}
     assert grid_from(k=["aic"], max_terms=[None], family=["integer"], precision=["float"]) == [
@@ -85,7 +89,9 @@ def test_grids():
 def test_parse_knobs_and_target():
     assert parse_knob_list("k", "aic,6,aic") == ["aic", 6.0]
     assert parse_knob_list("max_terms", "none,8") == [None, 8]
-    for name, bad in (("k", "-1"), ("k", "nan"), ("max_terms", "0"), ("family", "roots"), ("style", "fast")):
+    assert parse_knob_list("refine", "0,1,1") == [0, 1]
+    for name, bad in (("k", "-1"), ("k", "nan"), ("max_terms", "0"), ("family", "roots"), ("style", "fast"),
+                      ("refine", "9"), ("refine", "-1"), ("refine", "one")):
         with pytest.raises(InputError):
             parse_knob_list(name, bad)
     assert parse_target(None, ("dz",)) == {"dz": 0.1}
@@ -170,6 +176,23 @@ def test_a_harmonics_sweep_is_plotted(tmp_path):
     assert [r["family"] for r in rows] == ["harmonics"]
 
 
+def test_the_refinement_is_swept_beside_its_equations(tmp_path):
+    """On the whole pose the refined point (docs/refine.md) costs more instructions and is more accurate
+    with noise in every output than the same equations alone; it is marked as its own method."""
+    require_tool("gcc")
+    require_tool("valgrind")
+    out = tmp_path / "r"
+    proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "full", "--k", "bic", "--max-terms", "8",
+                   "--family", "harmonics", "--precision", "float", "--style", "unrolled", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    rows = {r["refine"]: r for r in csv.DictReader((out / "tradeoff.csv").open())}
+    assert set(rows) == {"0", "1"} and rows["0"]["terms"] == rows["1"]["terms"]
+    assert float(rows["1"]["instructions"]) > 5 * float(rows["0"]["instructions"])
+    for o in ("dx", "dy", "dz", "thx", "thy"):
+        assert float(rows["1"][f"{o}_noisy_rms"]) < float(rows["0"][f"{o}_noisy_rms"])
+    assert "harmonics+refine1" in proc.stdout and list(out.glob("*.png"))
+
+
 def test_sweep_fails_when_rounding_exceeds_the_share(tmp_path):
     require_tool("gcc")
     require_tool("valgrind")
@@ -194,6 +217,9 @@ def test_sweep_fails_when_rounding_exceeds_the_share(tmp_path):
     (["--family", "roots"], "--family"),
     (["--jobs", "0"], "--jobs"),
     (["--max-share", "0"], "--max-share"),
+    (["--refine", "2"], "nothing to sweep"),
+    (["--refine", "1", "--family", "harmonics"], "whole pose"),
+    (["--refine", "x"], "--refine"),
 ])
 def test_bad_options_one_line(args, contains, tmp_path):
     proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "-o", str(tmp_path / "x"), *args)
