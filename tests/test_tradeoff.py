@@ -133,14 +133,20 @@ def test_sweep_needs_valgrind(monkeypatch):
 # --- end to end ---------------------------------------------------------------------------------------------
 
 
-def test_tiny_sweep_through_the_cli(tmp_path):
+def _sweep(out, scene, k, cap, family, precision="float", *more):
+    """``fitgen tradeoff paper`` in the unrolled style into ``out``: the process and the CSV's rows."""
     require_tool("gcc")
     require_tool("valgrind")
+    proc = run_cli("fitgen", "tradeoff", "paper", "--scene", scene, "--k", k, "--max-terms", cap, "--family", family,
+                   "--precision", precision, "--style", "unrolled", *more, "-o", str(out))
+    rows = list(csv.DictReader((out / "tradeoff.csv").open())) if (out / "tradeoff.csv").exists() else []
+    return proc, rows
+
+
+def test_tiny_sweep_through_the_cli(tmp_path):
     out = tmp_path / "t"
-    proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "--k", "aic", "--max-terms", "none,2",
-                   "--family", "integer", "--precision", "float", "--style", "unrolled", "-o", str(out))
+    proc, rows = _sweep(out, "press", "aic", "none,2", "integer")
     assert proc.returncode == 0, proc.stderr
-    rows = list(csv.DictReader((out / "tradeoff.csv").open()))
     assert len(rows) == 2
     assert "## Recommendation" in proc.stdout and "Meets the target" in proc.stdout
     assert (out / "tradeoff.md").read_text() == proc.stdout
@@ -165,27 +171,20 @@ def test_tiny_sweep_through_the_cli(tmp_path):
 
 def test_a_harmonics_sweep_is_plotted(tmp_path):
     """Every family of the sweep has its marker: a harmonics point writes the markdown and the plot."""
-    require_tool("gcc")
-    require_tool("valgrind")
     out = tmp_path / "h"
-    proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "--k", "aic", "--max-terms", "8",
-                   "--family", "harmonics", "--precision", "float", "--style", "unrolled", "-o", str(out))
+    proc, rows = _sweep(out, "press", "aic", "8", "harmonics")
     assert proc.returncode == 0, proc.stderr
     assert (out / "tradeoff.md").is_file() and list(out.glob("*.png"))
-    rows = list(csv.DictReader((out / "tradeoff.csv").open()))
     assert [r["family"] for r in rows] == ["harmonics"]
 
 
 def test_the_refinement_is_swept_beside_its_equations(tmp_path):
     """On the whole pose the refined point (docs/refine.md) costs more instructions and is more accurate
     with noise in every output than the same equations alone; it is marked as its own method."""
-    require_tool("gcc")
-    require_tool("valgrind")
     out = tmp_path / "r"
-    proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "full", "--k", "bic", "--max-terms", "8",
-                   "--family", "harmonics", "--precision", "float", "--style", "unrolled", "-o", str(out))
+    proc, rows = _sweep(out, "full", "bic", "8", "harmonics")
     assert proc.returncode == 0, proc.stderr
-    rows = {r["refine"]: r for r in csv.DictReader((out / "tradeoff.csv").open())}
+    rows = {r["refine"]: r for r in rows}
     assert set(rows) == {"0", "1"} and rows["0"]["terms"] == rows["1"]["terms"]
     assert float(rows["1"]["instructions"]) > 5 * float(rows["0"]["instructions"])
     for o in ("dx", "dy", "dz", "thx", "thy"):
@@ -194,15 +193,11 @@ def test_the_refinement_is_swept_beside_its_equations(tmp_path):
 
 
 def test_sweep_fails_when_rounding_exceeds_the_share(tmp_path):
-    require_tool("gcc")
-    require_tool("valgrind")
     out = tmp_path / "t"
-    proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "--k", "aic", "--max-terms", "none",
-                   "--family", "integer", "--precision", "float,double", "--style", "unrolled", "--max-share", "1e-12",
-                   "-o", str(out))
+    proc, rows = _sweep(out, "press", "aic", "none", "integer", "float,double", "--max-share", "1e-12")
     assert proc.returncode == 1, proc.stderr
     assert "FAIL: rounding adds more than" in proc.stderr
-    rows = {r["precision"]: r for r in csv.DictReader((out / "tradeoff.csv").open())}
+    rows = {r["precision"]: r for r in rows}
     # float deviates from double and fails; double is double: its share is 0 and it is the recommendation
     assert float(rows["float"]["share"]) > 1e-12 and "not recommended" in rows["float"]["note"]
     assert float(rows["double"]["share"]) == 0 and rows["double"]["recommended"] == "1"
