@@ -239,7 +239,7 @@ def template_ops(model: Model, style: str, fold_one: bool = False) -> Counter:
     ops["compare"] += 2 * model.n_inputs
     ops["isfinite"] += model.n_inputs
     if model.refine is not None:
-        ops += refine_ops(model.refine)
+        ops.update(refine_ops(model.refine))  # update, not +=: a Counter sum drops the zero counts
     return ops
 
 
