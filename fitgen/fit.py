@@ -208,6 +208,10 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
     if settings.d_source not in ("estimated", "true"):
         raise InputError(f"d_source must be 'estimated' or 'true', got {settings.d_source!r}")
     outputs = tuple(n for n in POSE_NAMES if n in outputs)
+    if settings.refine:
+        from .refine_fit import check_refinable
+
+        check_refinable(ds, outputs, settings.refine, settings.refine_terms)  # before the equations' fit
     if settings.precision is not None and settings.precision not in UNIT_ROUNDOFF:
         raise InputError(f"precision must be one of {', '.join(UNIT_ROUNDOFF)} or None, got {settings.precision!r}")
     noise = noise_to_add(ds, settings, sensor)

@@ -46,6 +46,20 @@ def monomial_columns(u: np.ndarray, exponents: list[tuple[int, ...]]) -> np.ndar
     return np.prod(np.stack([pw[:, j, idx[:, j]] for j in range(5)]), axis=0)
 
 
+def check_refinable(ds: Dataset, outputs, steps: int, max_terms: int) -> None:
+    """InputError, before any fitting, when a refinement cannot be fitted to ``ds`` for ``outputs``."""
+    if tuple(outputs) != POSE_NAMES or any(n not in ds.target_names for n in POSE_NAMES):
+        raise InputError(f"--refine estimates the whole pose: the data and the fit need every one of {','.join(POSE_NAMES)}")
+    if not 1 <= steps <= 8:
+        raise InputError(f"--refine takes 1 to 8 steps, got {steps}")
+    if max_terms < 5:
+        raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {max_terms}")
+    poses = ds.poses()
+    moves = poses.max(axis=0) > poses.min(axis=0)
+    if not np.all(moves):
+        raise InputError(f"--refine fits readings from poses: the data's {POSE_NAMES[int(np.argmin(moves))]} never varies")
+
+
 def fit_refinement(ds: Dataset, model: Model, *, steps: int, noise: float, max_terms: int = MAX_TERMS,
                    degree: int = DEGREE, prior_scale: float = PRIOR_SCALE, progress=None) -> tuple[Refinement, dict]:
     """The refinement for ``model`` from its training data, and notes on it for the model file.
@@ -53,17 +67,9 @@ def fit_refinement(ds: Dataset, model: Model, *, steps: int, noise: float, max_t
     ``noise``: the device's reading noise (rms, input units) beyond what the data carry;
     ``progress(name, step, aic, n_terms)`` hears each element's search, as fit_model's does.
     """
-    if tuple(model.output_names) != POSE_NAMES or any(n not in ds.target_names for n in POSE_NAMES):
-        raise InputError(f"--refine estimates the whole pose: the data and the fit need every one of {','.join(POSE_NAMES)}")
-    if not 1 <= steps <= 8:
-        raise InputError(f"--refine takes 1 to 8 steps, got {steps}")
-    if max_terms < 5:
-        raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {max_terms}")
+    check_refinable(ds, model.output_names, steps, max_terms)
     poses = ds.poses()
     lo, hi = poses.min(axis=0), poses.max(axis=0)
-    if not np.all(hi > lo):
-        flat = POSE_NAMES[int(np.argmin(hi > lo))]
-        raise InputError(f"--refine fits readings from poses: the data's {flat} never varies")
     v = ds.inputs
     transform = "cbrt" if np.all(v > 0) else "identity"
     target = v ** (-1.0 / 3.0) if transform == "cbrt" else v

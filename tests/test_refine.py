@@ -191,6 +191,17 @@ def test_cli_fit_predict_codegen_and_bad_input(tmp_path, train):
         assert not (tmp_path / "bad.json").exists()
 
 
+def test_data_that_never_move_a_component_are_refused(tmp_path):
+    flat = simulate(PAPER, grid_poses({"dx": [-1, 0, 1], "dy": [-1, 0, 1], "dz": [0, -1, -2], "thx": [-5, 0, 5],
+                                       "thy": [0]}))
+    data = tmp_path / "flat.csv"
+    flat.save(data)
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--family", "all", "--max-terms", "5",
+                   "--refine", "1", "--held-out", "0")
+    assert_one_line_error(proc, contains="thy never varies")
+    assert not (tmp_path / "m.json").exists()
+
+
 def test_full_suite_on_emulated_cortex_m4(model, held):
     res = emulated_suite(model, (held.clean, held.truth), "table", n=300)
     assert res.ok, res.table()
