@@ -125,10 +125,11 @@ def _settings(args):
     # --noise 0 alone is the paper's procedure (what R's step() computes): no rounding term either
     precision = args.precision or ("exact" if noise == 0 else "float")
     family = "all" if args.family == "auto" else args.family  # auto: fitgen.family chooses
-    if not 0 <= args.refine <= 8:
-        raise InputError(f"--refine takes 0 (none) to 8 steps, got {args.refine}")
-    if args.refine_terms < 5:
-        raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {args.refine_terms}")
+    from .refine import MAX_STEPS
+
+    # the rest of --refine's checks (--refine-terms, the data) are fitgen.refine_fit.check_refinable's
+    if not 0 <= args.refine <= MAX_STEPS:
+        raise InputError(f"--refine takes 0 (none) to {MAX_STEPS} steps, got {args.refine}")
     return FitSettings.family(family, k=k, max_terms=args.max_terms, d_terms=not args.no_d_terms,
                               d_source="true" if args.true_d else "estimated", noise=noise,
                               precision=None if precision == "exact" else precision, refine=args.refine,

@@ -22,6 +22,7 @@ float32 numpy gives the float header's results bit for bit.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -66,14 +67,16 @@ class Refinement:
     def monomials(self) -> tuple[tuple[int, ...], ...]:
         """The distinct monomials a step computes, in order of first use: each term's, then the
         monomials of its derivatives (its exponents with one power fewer in one component)."""
-        return self._tables()[0]
+        return self._tables[0]
 
     def term_table(self) -> tuple[tuple[int, ...], ...]:
         """Per term, in element order: its monomial's index, then per component the index of its
         derivative's monomial, -1 where the term does not hold that component."""
-        return self._tables()[1]
+        return self._tables[1]
 
+    @cached_property
     def _tables(self):
+        # computed once per object (a frozen dataclass: cached_property writes the instance's __dict__)
         index: dict[tuple[int, ...], int] = {}
         rows = []
         for eq in self.forward:
@@ -112,7 +115,7 @@ class Refinement:
         for _ in range(deg):
             pw.append(pw[-1] * u)
         pw = np.stack(pw, axis=-1)  # (n, 5, deg + 1)
-        monos, table = self._tables()
+        monos, table = self._tables
         m = np.empty((len(u), len(monos)), dtype=dt)
         for i, e in enumerate(monos):
             val = pw[:, 0, e[0]]

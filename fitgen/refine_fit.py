@@ -20,7 +20,7 @@ from .dataset import Dataset
 from .errors import InputError
 from .model import Model
 from .pose import POSE_NAMES
-from .refine import ForwardEquation, Refinement
+from .refine import MAX_STEPS, ForwardEquation, Refinement
 from .stepwise import compress, refit, stepwise
 
 DEGREE = 5
@@ -50,8 +50,8 @@ def check_refinable(ds: Dataset, outputs, steps: int, max_terms: int) -> None:
     """InputError, before any fitting, when a refinement cannot be fitted to ``ds`` for ``outputs``."""
     if tuple(outputs) != POSE_NAMES or any(n not in ds.target_names for n in POSE_NAMES):
         raise InputError(f"--refine estimates the whole pose: the data and the fit need every one of {','.join(POSE_NAMES)}")
-    if not 1 <= steps <= 8:
-        raise InputError(f"--refine takes 1 to 8 steps, got {steps}")
+    if not 1 <= steps <= MAX_STEPS:
+        raise InputError(f"--refine takes 1 to {MAX_STEPS} steps, got {steps}")
     if max_terms < 5:
         raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {max_terms}")
     poses = ds.poses()
@@ -86,7 +86,7 @@ def fit_refinement(ds: Dataset, model: Model, *, steps: int, noise: float, max_t
         A = compress(columns, target[:, k], block=_ROWS)
         res = stepwise(None, target[:, k], list(range(5)), k=float(np.log(n)), max_terms=cap, compressed=A,
                        progress=progress and (lambda s, a, p, k=k: progress(f"forward v{k + 1}", s, a, p)))
-        b0, coefs, _, cond = refit(A, res.selected)
+        b0, coefs, _, _ = refit(A, res.selected)
         forward.append(ForwardEquation(float(b0), tuple(exps[j] for j in res.selected), tuple(float(c) for c in coefs)))
     ref = Refinement(steps, transform, tuple(map(float, lo)), tuple(map(float, hi)), (1.0,) * ds.n_inputs,
                      ((0.0,) * 5,) * 5, tuple(forward))
