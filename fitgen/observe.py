@@ -38,6 +38,26 @@ class PoseObservability:
     bounds: np.ndarray  # (5,) Cramer-Rao standard deviation per component
 
 
+def _svd_bounds(J: np.ndarray, noise: float):
+    """Batched SVD of J (P, N, C) and the Cramer-Rao standard deviations (P, C); inf where singular."""
+    _, s, vt = np.linalg.svd(J, full_matrices=False)
+    # fewer readings than components: J^T J is singular whatever the values
+    ok = (s[:, -1] > s[:, 0] * 1e-12) & (s.shape[1] == J.shape[2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # (J^T J)^-1 = V diag(1/s^2) V^T, without forming J^T J
+        bounds = noise * np.sqrt(np.sum((vt.transpose(0, 2, 1) / s[:, None, :]) ** 2, axis=2))
+    bounds[~ok] = np.inf
+    full_s = np.zeros((len(J), J.shape[2]))
+    full_s[:, : s.shape[1]] = s
+    return full_s, vt, bounds
+
+
+def cramer_rao(sensor: Sensor, poses, noise: float, components: tuple[str, ...] = POSE_NAMES) -> np.ndarray:
+    """Cramer-Rao standard deviation per pose and component, shape (P, C), for Gaussian noise of rms ``noise``."""
+    cols = [POSE_NAMES.index(c) for c in components]
+    return _svd_bounds(jacobian(sensor, poses)[:, :, cols], noise)[2]
+
+
 def analyse(sensor: Sensor, poses, noise: float, components: tuple[str, ...] = POSE_NAMES) -> list[PoseObservability]:
     """SVD and Cramer-Rao bound per pose for Gaussian element noise of rms ``noise``.
 
@@ -46,18 +66,8 @@ def analyse(sensor: Sensor, poses, noise: float, components: tuple[str, ...] = P
     """
     poses = as_poses(poses)
     cols = [POSE_NAMES.index(c) for c in components]
-    J = jacobian(sensor, poses)[:, :, cols]
-    out = []
-    for pose, Jp in zip(poses, J):
-        _, s, vt = np.linalg.svd(Jp, full_matrices=False)
-        bounds = np.full(len(cols), np.inf)
-        if s[-1] > s[0] * 1e-12:
-            # (J^T J)^-1 = V diag(1/s^2) V^T, without forming J^T J
-            bounds = noise * np.sqrt(np.sum((vt.T / s) ** 2, axis=1))
-        full_s = np.zeros(len(cols))
-        full_s[: len(s)] = s
-        out.append(PoseObservability(pose, full_s, vt, bounds))
-    return out
+    s, vt, bounds = _svd_bounds(jacobian(sensor, poses)[:, :, cols], noise)
+    return [PoseObservability(p, s[i], vt[i], bounds[i]) for i, p in enumerate(poses)]
 
 
 def corner_poses(ranges: dict) -> np.ndarray:

@@ -198,6 +198,10 @@ def _ring(sec: _Section) -> tuple[np.ndarray, np.ndarray]:
     z = sec.number("z", 0.0)
     start = sec.number("start", 0.0)
     axis = sec.string("axis", "radial", choices=AXIS_WORDS)
+    # a part mounted on a wedge: its in-plane axis tilted toward the board's normal
+    elevation = sec.number("elevation", 0.0, min_=-90.0, max_=90.0)
+    if elevation != 0.0 and axis not in ("radial", "tangential"):
+        raise InputError(f"{sec.origin}: '{sec._key('elevation')}' tilts a radial or tangential axis, not '{axis}'")
     sec.finish()
     phi = np.deg2rad(start + 360.0 / count * np.arange(count))
     c, s = np.cos(phi), np.sin(phi)
@@ -208,6 +212,9 @@ def _ring(sec: _Section) -> tuple[np.ndarray, np.ndarray]:
         "z": np.tile([0.0, 0.0, 1.0], (count, 1)),
         "-z": np.tile([0.0, 0.0, -1.0], (count, 1)),
     }[axis]
+    if elevation != 0.0:
+        e = math.radians(elevation)
+        axes = math.cos(e) * axes + math.sin(e) * np.array([0.0, 0.0, 1.0])
     return pos, axes
 
 

@@ -1,7 +1,7 @@
 import numpy as np
 from scipy.optimize import least_squares
 
-from fitgen.observe import analyse, jacobian, observe
+from fitgen.observe import analyse, cramer_rao, jacobian, observe
 from fitgen.pose import field_readings
 from fitgen.scenes import PRESETS
 from fitgen.sensor import load_sensor
@@ -50,6 +50,28 @@ def test_cramer_rao_bound_matches_monte_carlo():
         est.append(fit.x)
     std = np.std(np.array(est), axis=0)
     np.testing.assert_allclose(std, bound, rtol=0.2)
+
+
+def test_batched_bounds_match_a_per_pose_inverse():
+    """cramer_rao (one batched SVD) against noise * sqrt(diag((J^T J)^-1)) pose by pose; inf where singular."""
+    ring = load_sensor("ring-vertical")
+    poses = np.array([[0.0, 0, 0, 0, 0], [1.0, -0.5, -1.5, 3.0, -2.0], [-2, 2, -2, 5, -5]])
+    got = cramer_rao(ring, poses, 0.0005)
+    for p, b in zip(poses, got):
+        J = jacobian(ring, p)[0]
+        np.testing.assert_allclose(b, 0.0005 * np.sqrt(np.diag(np.linalg.inv(J.T @ J))), rtol=1e-9)
+    np.testing.assert_array_equal(got, [r.bounds for r in analyse(ring, poses, 0.0005)])
+    assert np.all(cramer_rao(PAPER, np.zeros((1, 5)), 0.0005)[0, 3:] > 1e6)  # rank 3 at rest: unbounded
+    slide = cramer_rao(PAPER, np.zeros((1, 5)), 0.0005, ("dx", "dy", "dz"))
+    assert np.all(np.isfinite(slide))  # tilt held fixed: the slide alone is resolvable
+
+
+def test_fewer_readings_than_components_have_no_finite_bound():
+    d = PAPER.source | {"elements": {"ring": [{"count": 4, "radius": 10.0}]}}
+    from fitgen.sensor import parse_sensor
+
+    four = parse_sensor(d)
+    assert np.all(np.isinf(cramer_rao(four, np.array([[0.5, 0.5, -1, 1, 1]]), 0.0005)))
 
 
 def test_verdicts_for_the_paper_layout():

@@ -46,6 +46,8 @@ def test_hash_is_stable_and_sensitive():
         (lambda d: d["elements"]["ring"][0].__setitem__("radius", "ten"), "elements.ring[0].radius"),
         (lambda d: d["elements"]["ring"][0].__setitem__("axis", "sideways"), "elements.ring[0].axis"),
         (lambda d: d["transfer"]["gmr"].__setitem__("adc_max", -1.0), "adc_max"),
+        (lambda d: d["elements"]["ring"][0].__setitem__("elevation", 95.0), "elements.ring[0].elevation"),
+        (lambda d: d["elements"]["ring"][0].update(axis="z", elevation=10.0), "elements.ring[0].elevation"),
         (lambda d: d.__setitem__("colour", "red"), "colour"),
         (lambda d: d["transfer"].__setitem__("kind", "hall"), "transfer.kind"),
     ],
@@ -72,6 +74,20 @@ def test_explicit_elements_and_rings_combine():
     assert s.n_elements == 13
     np.testing.assert_allclose(s.axes[-1], [0, 0.6, 0.8])
     np.testing.assert_allclose(s.axes[8:12], np.tile([0, 0, 1.0], (4, 1)))
+
+
+def test_elevation_raises_a_ring_axis_toward_the_normal():
+    d = paper_dict()
+    d["elements"]["ring"] = [{"count": 4, "radius": 10.0, "axis": "radial", "elevation": 30.0},
+                             {"count": 4, "radius": 10.0, "start": 45.0, "axis": "tangential", "elevation": -90.0}]
+    s = parse_sensor(d)
+    phi = np.radians([0.0, 90.0, 180.0, 270.0])
+    c = math.cos(math.radians(30.0))
+    np.testing.assert_allclose(s.axes[:4], np.column_stack([c * np.cos(phi), c * np.sin(phi), np.full(4, 0.5)]),
+                               atol=1e-15)
+    np.testing.assert_allclose(s.axes[4:], np.tile([0.0, 0.0, -1.0], (4, 1)), atol=1e-15)  # straight down
+    d["elements"]["ring"][0]["elevation"] = 0.0
+    np.testing.assert_array_equal(parse_sensor(d).axes[:4], load_sensor("paper").axes[::2])
 
 
 def test_bad_sensor_file_cli(tmp_path):
