@@ -6,7 +6,9 @@ about 5 s on 2 cores). Tables and their reading: docs/layouts.md.
 Layouts: the sensor presets ``paper`` (the reference: 8 radial elements, r = 10 mm),
 ``two-rings`` (4 radial at r = 10 mm on the board's bottom face, 4 radial at r = 6 mm on its
 top face), ``two-radii`` (the same two rings, both on the bottom face: the planar control) and
-``ring-vertical`` (the paper's 8 positions, 4 radial and 4 with a +z axis). All share the
+``ring-vertical`` (the paper's 8 positions, 4 radial and 4 with a +z axis) and ``tilted-axes``
+(two rings of 4 whose radial axes are raised toward +z by 37 and 17 deg, on the two faces;
+bench/layout_search.py found it). All share the
 magnet, board, element noise (0.5 uT rms) and the ``raw`` transfer (|B . axis| in mT).
 
 1. Readings: the smallest and largest reading over the training grid and the evaluation
@@ -51,7 +53,7 @@ from fitgen.sensor import load_sensor, parse_sensor, tomllib
 from fitgen.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 from benchutil import fmt, log, table
 
-LAYOUTS = ("paper", "two-rings", "two-radii", "ring-vertical")
+LAYOUTS = ("paper", "two-rings", "two-radii", "ring-vertical", "tilted-axes")
 N_EVAL = 2000
 POSE_SEED = 2026
 EVAL_NOISE_SEED = 1

