@@ -3,7 +3,8 @@ room for issue 13's ring-vertical target (thx and thy within 1.2 x 0.1 deg with 
 
 Run:
 
-    python bench/layout_search.py > out.md     # about 5 minutes on 2 cores; progress on stderr
+    python bench/layout_search.py --plot docs/img > out.md   # about 6 minutes on 2 cores; progress on stderr
+    python bench/layout_search.py --no-search                # the presets' rows only, seconds
 
 The family searched: two rings of four elements (ring A at azimuth 0, 90, 180, 270 deg; ring B at
 45, 135, 225, 315 deg), each with its radius (3 to 20 mm) and the elevation of its sensitive axis
@@ -27,8 +28,9 @@ stays within 0.12 deg in thx and thy together.
 
 from __future__ import annotations
 
+import argparse
 import copy
-import sys
+from pathlib import Path
 
 import numpy as np
 from scipy.optimize import differential_evolution
@@ -36,6 +38,7 @@ from scipy.stats import norm
 
 from benchutil import fmt, log, table
 
+from fitgen.errors import InputError
 from fitgen.observe import corner_poses, cramer_rao
 from fitgen.pose import POSE_NAMES, field_readings
 from fitgen.scenes import PRESETS
@@ -98,38 +101,82 @@ def search(top: bool) -> np.ndarray:
     return res.x
 
 
-def floor_row(name: str, sensor, held: np.ndarray, rng: np.random.Generator, trials: int = 200) -> list[str]:
-    v = np.abs(field_readings(sensor, held))
+def floor(sensor, held: np.ndarray, rng: np.random.Generator, trials: int = 200) -> dict:
+    """Readings, tilt bounds (P, 2) and the unbiased estimator's noisy tilt maxima per trial (trials, 2)."""
     b = cramer_rao(sensor, held, sensor.noise)[:, TILT]
     mx = np.array([np.abs(rng.standard_normal((DRAWS,) + b.shape) * b).reshape(-1, 2).max(axis=0)
                    for _ in range(trials)])
+    return {"readings": np.abs(field_readings(sensor, held)), "bounds": b, "maxima": mx}
+
+
+def floor_row(name: str, f: dict) -> list[str]:
+    v, b, mx = f["readings"], f["bounds"], f["maxima"]
     both = np.mean(np.all(mx <= LIMIT, axis=1))
     rms = np.sqrt(np.mean(b * b, axis=0))
     return [name, f"{v.min():.3f}-{v.max():.2f}", fmt(rms[0]), fmt(rms[1]), fmt(b.max()),
             fmt(np.median(mx[:, 0])), fmt(np.median(mx[:, 1])), f"{both:.0%}"]
 
 
+def plot(floors: dict, held: np.ndarray, folder: Path) -> Path:
+    """Left: the thx bound against dz (the press is what the floor depends on most); right: the distribution of
+    the unbiased estimator's noisy tilt maximum over the trials, against the target."""
+    from fitgen.plots import _plt, _save
+
+    plt = _plt()
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.6))
+    edges = np.linspace(-2, 0, 11)
+    mid = (edges[:-1] + edges[1:]) / 2
+    where = np.digitize(held[:, POSE_NAMES.index("dz")], edges[1:-1])
+    for name, f in floors.items():
+        b = f["bounds"][:, 0]
+        ax1.plot(mid, [np.sqrt(np.mean(b[where == k] ** 2)) for k in range(len(mid))], marker="o", label=name)
+        worst = np.sort(f["maxima"].max(axis=1))
+        ax2.plot(worst, np.arange(1, len(worst) + 1) / len(worst), label=name)
+    ax1.set_xlabel("dz [mm] (0: rest height; -2: pressed)")
+    ax1.set_ylabel("thx Cramer-Rao bound, RMS in the bin [deg]")
+    ax1.set_title("Tilt floor across the box (0.5 uT noise)")
+    ax1.grid(alpha=0.3)
+    ax1.legend()
+    ax2.axvline(LIMIT, color="k", linestyle="--", label=f"target x 1.2 = {LIMIT:g} deg")
+    ax2.set_xlabel(f"max |thx|, |thy| error over {DRAWS} x {HELD:,} noisy readings [deg]")
+    ax2.set_ylabel("share of trials at or below")
+    ax2.set_title("An unbiased estimator at the bound")
+    ax2.grid(alpha=0.3)
+    ax2.legend(loc="lower right")
+    fig.tight_layout()
+    return _save(fig, folder / "layouts-tilt-floor.png")
+
+
 def main() -> None:
-    if len(sys.argv) > 1:
-        raise SystemExit("usage: python bench/layout_search.py > out.md")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--plot", type=Path, metavar="DIR", help="also write DIR/layouts-tilt-floor.png")
+    ap.add_argument("--no-search", action="store_true", help="only the presets' rows (seconds, not minutes)")
+    args = ap.parse_args()
     optima = {}
-    for top in (True, False):
+    for top in () if args.no_search else (True, False):
         optima[top] = search(top)
         log(f"{'top' if top else 'bottom'} face: optimum {np.round(optima[top], 2).tolist()}")
     held = poses(HELD, SEED)
-    rows = []
-    for name in ("paper", "two-rings", "two-radii", "ring-vertical", "tilted-axes"):
-        rows.append(floor_row(f"`{name}`", load_sensor(name), held, np.random.default_rng(0)))
-    for top, label in ((True, "optimum, ring B on the top face"), (False, "optimum, both rings on the bottom face")):
-        r_a, e_a, r_b, e_b = optima[top]
-        name = f"{label} (A: {r_a:.2f} mm, {e_a:.1f} deg; B: {r_b:.2f} mm, {e_b:.1f} deg)"
-        rows.append(floor_row(name, layout(optima[top], top), held, np.random.default_rng(0)))
+    floors = {name: floor(load_sensor(name), held, np.random.default_rng(0))
+              for name in ("paper", "two-rings", "two-radii", "ring-vertical", "tilted-axes")}
+    rows = [floor_row(f"`{name}`", f) for name, f in floors.items()]
+    labels = {True: "optimum, ring B on the top face", False: "optimum, both rings on the bottom face"}
+    for top, params in optima.items():
+        r_a, e_a, r_b, e_b = params
+        name = f"{labels[top]} (A: {r_a:.2f} mm, {e_a:.1f} deg; B: {r_b:.2f} mm, {e_b:.1f} deg)"
+        rows.append(floor_row(name, floor(layout(params, top), held, np.random.default_rng(0))))
     head = ["layout", "readings [mT]", "thx bound RMS", "thy bound RMS", "worst bound", "thx median max",
             "thy median max", f"both within {LIMIT:g} deg"]
     print(f"Bounds in deg, on {HELD:,} held-out poses (seed {SEED}); maxima of an unbiased estimator at the bound "
           f"over {DRAWS} x {HELD:,} noisy readings, median of 200 trials, and the share of trials in which both "
           f"stay within {LIMIT:g} deg.\n")
     print(table(head, rows))
+    if args.plot:
+        shown = {n: floors[n] for n in ("two-rings", "two-radii", "ring-vertical", "tilted-axes")}
+        try:
+            log(f"plot: {plot(shown, held, args.plot)}")
+        except InputError as e:  # no matplotlib: one line, as the CLIs do
+            raise SystemExit(f"error: {e}") from None
 
 
 if __name__ == "__main__":
