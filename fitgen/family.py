@@ -16,6 +16,7 @@ from .dataset import Dataset
 from .fit import FitSettings, fit_model
 from .holdout import box_of, held_out_set
 from .model import Model
+from .pose import POSE_NAMES
 
 VALIDATION_SEED = 7919
 VALIDATION_POSES = 1000
@@ -39,7 +40,15 @@ def fit_auto(ds: Dataset, outputs, settings: FitSettings, sensor, progress=None)
     if not np.sum(ds.inputs.min(axis=0)) > 0:
         return fit_model(ds, outputs, settings.with_family("all"), progress, sensor), {
             "name": "all", "auto": True, "why": "the readings' sum is not > 0 over the data's domain"}
-    models = {f: fit_model(ds, outputs, settings.with_family(f), progress, sensor) for f in CANDIDATES}
+    forward = None
+    if settings.refine:
+        from .refine_fit import check_refinable, fit_forward
+
+        # the forward model depends on the data alone: one fit serves both families' refinements
+        wanted = POSE_NAMES if outputs is None else tuple(n for n in POSE_NAMES if n in outputs)
+        check_refinable(ds, wanted, settings.refine, settings.refine_terms)
+        forward = fit_forward(ds, max_terms=settings.refine_terms, progress=progress)
+    models = {f: fit_model(ds, outputs, settings.with_family(f), progress, sensor, forward) for f in CANDIDATES}
     ranges = box_of(ds.poses())
     rms = {f: validation_rms(m, sensor, ranges) for f, m in models.items()}
     ratio = float(np.exp(np.mean([np.log(rms["harmonics"][o] / rms["all"][o]) for o in rms["all"]])))

@@ -194,10 +194,11 @@ def ring_harmonics(ds: Dataset, sensor=None) -> Harmonics:
 
 
 def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: FitSettings = FitSettings(),
-              progress=None, sensor=None) -> Model:
+              progress=None, sensor=None, forward=None) -> Model:
     """Fit every requested output (default: all pose columns of the dataset), two stages.
 
-    ``sensor``: the device's sensor when the dataset's meta does not name it (for its noise figure).
+    ``sensor``: the device's sensor when the dataset's meta does not name it (for its noise figure);
+    ``forward``: with ``settings.refine``, a forward model already fitted to ``ds`` (refine_fit.fit_forward).
     """
     outputs = tuple(ds.target_names) if outputs is None else tuple(outputs)
     if not outputs:
@@ -266,7 +267,8 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
         from .refine_fit import fit_refinement
 
         model.refine, info["refine"] = fit_refinement(ds, model, steps=settings.refine, noise=noise["added"],
-                                                      max_terms=settings.refine_terms, progress=progress)
+                                                      max_terms=settings.refine_terms, progress=progress,
+                                                      forward=forward)
     # the errors of the model as the device computes it (rotations from estimated d's)
     pred = model.predict(v)
     for j, o in enumerate(outputs):

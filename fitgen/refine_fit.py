@@ -60,14 +60,20 @@ def check_refinable(ds: Dataset, outputs, steps: int, max_terms: int) -> None:
         raise InputError(f"--refine fits readings from poses: the data's {POSE_NAMES[int(np.argmin(moves))]} never varies")
 
 
-def fit_refinement(ds: Dataset, model: Model, *, steps: int, noise: float, max_terms: int = MAX_TERMS,
-                   degree: int = DEGREE, prior_scale: float = PRIOR_SCALE, progress=None) -> tuple[Refinement, dict]:
-    """The refinement for ``model`` from its training data, and notes on it for the model file.
+@dataclasses.dataclass(frozen=True)
+class Forward:
+    """A forward model fitted to one dataset, before any equations' prior: what a refinement of any
+    equations fitted to that dataset shares."""
 
-    ``noise``: the device's reading noise (rms, input units) beyond what the data carry;
-    ``progress(name, step, aic, n_terms)`` hears each element's search, as fit_model's does.
-    """
-    check_refinable(ds, model.output_names, steps, max_terms)
+    refinement: Refinement  # steps, weights and prior not yet set
+    fit_rms: np.ndarray  # per element, on the training rows
+    dataset_sha256: str
+    max_terms: int
+    degree: int
+
+
+def fit_forward(ds: Dataset, *, max_terms: int = MAX_TERMS, degree: int = DEGREE, progress=None) -> Forward:
+    """The forward model of ``ds``'s readings from its poses (``progress`` as in fit_refinement)."""
     poses = ds.poses()
     lo, hi = poses.min(axis=0), poses.max(axis=0)
     v = ds.inputs
@@ -88,10 +94,30 @@ def fit_refinement(ds: Dataset, model: Model, *, steps: int, noise: float, max_t
                        progress=progress and (lambda s, a, p, k=k: progress(f"forward v{k + 1}", s, a, p)))
         b0, coefs, _, _ = refit(A, res.selected)
         forward.append(ForwardEquation(float(b0), tuple(exps[j] for j in res.selected), tuple(float(c) for c in coefs)))
-    ref = Refinement(steps, transform, tuple(map(float, lo)), tuple(map(float, hi)), (1.0,) * ds.n_inputs,
+    ref = Refinement(1, transform, tuple(map(float, lo)), tuple(map(float, hi)), (1.0,) * ds.n_inputs,
                      ((0.0,) * 5,) * 5, tuple(forward))
     fit_rms = np.sqrt(np.mean((np.vstack([ref.forward_values(poses[a:a + _ROWS]) for a in range(0, n, _ROWS)]) - v) ** 2,
                               axis=0))
+    return Forward(ref, fit_rms, ds.sha256, cap, degree)
+
+
+def fit_refinement(ds: Dataset, model: Model, *, steps: int, noise: float, max_terms: int = MAX_TERMS,
+                   degree: int = DEGREE, prior_scale: float = PRIOR_SCALE, progress=None,
+                   forward: Forward | None = None) -> tuple[Refinement, dict]:
+    """The refinement for ``model`` from its training data, and notes on it for the model file.
+
+    ``noise``: the device's reading noise (rms, input units) beyond what the data carry;
+    ``progress(name, step, aic, n_terms)`` hears each element's search, as fit_model's does;
+    ``forward``: the forward model already fitted to ``ds`` (fit_forward), to share it between fits.
+    """
+    check_refinable(ds, model.output_names, steps, max_terms)
+    if forward is None:
+        forward = fit_forward(ds, max_terms=max_terms, degree=degree, progress=progress)
+    elif (forward.dataset_sha256, forward.max_terms, forward.degree) != (ds.sha256, min(max_terms, ds.n_rows - 2),
+                                                                         degree):
+        raise ValueError("the forward model was fitted to other data or with other settings")
+    v, n = ds.inputs, ds.n_rows
+    ref, fit_rms, cap = forward.refinement, forward.fit_rms, forward.max_terms
     weights = 1.0 / (noise**2 + fit_rms**2)
     if not np.all(np.isfinite(weights)):
         raise InputError("--refine: the forward model fits the readings exactly and the device's noise is 0: "
@@ -113,9 +139,10 @@ def fit_refinement(ds: Dataset, model: Model, *, steps: int, noise: float, max_t
                          "nothing to refine") from None
     prior = (prior + prior.T) / 2  # exactly symmetric, as the file requires
     sd = np.sqrt(np.diag(cov))
-    ref = dataclasses.replace(ref, weights=tuple(map(float, weights)), prior=tuple(tuple(map(float, row)) for row in prior))
-    info = {"steps": steps, "transform": transform, "degree": degree, "max_terms": cap,
-            "terms": [len(eq.exponents) for eq in forward], "forward_rms": fit_rms.tolist(), "noise": noise,
+    ref = dataclasses.replace(ref, steps=steps, weights=tuple(map(float, weights)),
+                              prior=tuple(tuple(map(float, row)) for row in prior))
+    info = {"steps": steps, "transform": ref.transform, "degree": degree, "max_terms": cap,
+            "terms": [len(eq.exponents) for eq in ref.forward], "forward_rms": fit_rms.tolist(), "noise": noise,
             "prior_scale": prior_scale, "prior_sd": dict(zip(POSE_NAMES, sd.tolist())),
             "prior_correlation": np.round(cov / np.outer(sd, sd), 3).tolist(),
             "method": "per element, stepwise BIC over pose monomials; MAP Gauss-Newton steps from the equations' estimate"}

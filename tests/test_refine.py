@@ -203,3 +203,22 @@ def test_full_suite_on_emulated_cortex_m4(model, held):
     res = emulated_suite(model, (held.clean, held.truth), "table", n=300)
     assert res.ok, res.table()
     assert {"eval", "held-out accuracy", "flash", "fuzz"} <= {c.name for c in res.checks}
+
+
+def test_auto_fits_the_forward_model_once_and_refines_as_the_chosen_family_would(train, monkeypatch):
+    """`--family auto --refine`: the forward model depends on the data alone, so both families share one fit,
+    and the kept model's refinement is the one fitting that family directly gives."""
+    import fitgen.refine_fit as refine_fit
+    from fitgen.family import fit_auto
+
+    calls = []
+    real = refine_fit.fit_forward
+    monkeypatch.setattr(refine_fit, "fit_forward", lambda *a, **k: calls.append(1) or real(*a, **k))
+    settings = FitSettings(max_terms=8, refine=1, refine_terms=8)
+    model, family = fit_auto(train, None, settings, PAPER)
+    assert len(calls) == 1
+    direct = fit_model(train, settings=settings.with_family(family["name"]), sensor=PAPER)
+    assert model.refine == direct.refine and len(calls) == 2  # the direct fit fits its own
+    with pytest.raises(ValueError, match="other data"):
+        refine_fit.fit_refinement(simulate(PAPER, GRID), model, steps=1, noise=0.0005, max_terms=8,
+                                  forward=refine_fit.fit_forward(train, max_terms=8))
