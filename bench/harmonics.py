@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchutil import fmt, log, table
+from benchutil import fmt, log, table, unbiased_maxima
 
 from fitgen.dataset import load_dataset
 from fitgen.model import load_model
@@ -82,8 +82,7 @@ def floor_max(sensor, poses: np.ndarray, rng: np.random.Generator, trials: int =
     """(RMS of the Cramer-Rao bound over the poses, median over trials of the max |e| of DRAWS x poses draws,
     those maxima per trial (trials, 5))."""
     b = cramer_rao(sensor, poses, sensor.noise)
-    mx = np.array([np.abs(rng.standard_normal((DRAWS,) + b.shape) * b).reshape(-1, b.shape[1]).max(axis=0)
-                   for _ in range(trials)])
+    mx = unbiased_maxima(b, DRAWS, rng, trials)
     return np.sqrt(np.mean(b * b, axis=0)), np.median(mx, axis=0), mx
 
 

@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import differential_evolution
 from scipy.stats import norm
 
-from benchutil import fmt, log, table
+from benchutil import fmt, log, table, unbiased_maxima
 
 from fitgen.errors import InputError
 from fitgen.observe import corner_poses, cramer_rao
@@ -51,6 +51,7 @@ BOX = PRESETS["full"].ranges  # the paper-sim box: dx, dy +-2 mm, dz -2..0 mm, t
 READ_MIN, READ_MAX = 0.1, 1.95  # mT
 BOUNDS = [(3.0, 20.0), (-90.0, 90.0), (3.0, 20.0), (-90.0, 90.0)]  # r_A, elevation_A, r_B, elevation_B
 TILT = [POSE_NAMES.index("thx"), POSE_NAMES.index("thy")]
+PAPER = load_sensor("paper").source  # magnet, board, noise and transfer of every layout searched
 
 
 def poses(n: int, seed: int) -> np.ndarray:
@@ -60,10 +61,9 @@ def poses(n: int, seed: int) -> np.ndarray:
 
 def layout(params, top: bool):
     """The sensor of ring A (r, elevation) on the bottom face and ring B on the top (or bottom) face."""
-    base = load_sensor("paper").source
-    data = copy.deepcopy(base)
+    data = copy.deepcopy(PAPER)
     r_a, e_a, r_b, e_b = (float(p) for p in params)
-    z_b = float(base["board"]["thickness"]) if top else 0.0
+    z_b = float(PAPER["board"]["thickness"]) if top else 0.0
     data["name"] = "search"
     data["elements"] = {"ring": [
         {"count": 4, "radius": r_a, "z": 0.0, "start": 0.0, "axis": "radial", "elevation": e_a},
@@ -104,9 +104,7 @@ def search(top: bool) -> np.ndarray:
 def floor(sensor, held: np.ndarray, rng: np.random.Generator, trials: int = 200) -> dict:
     """Readings, tilt bounds (P, 2) and the unbiased estimator's noisy tilt maxima per trial (trials, 2)."""
     b = cramer_rao(sensor, held, sensor.noise)[:, TILT]
-    mx = np.array([np.abs(rng.standard_normal((DRAWS,) + b.shape) * b).reshape(-1, 2).max(axis=0)
-                   for _ in range(trials)])
-    return {"readings": np.abs(field_readings(sensor, held)), "bounds": b, "maxima": mx}
+    return {"readings": np.abs(field_readings(sensor, held)), "bounds": b, "maxima": unbiased_maxima(b, DRAWS, rng, trials)}
 
 
 def floor_row(name: str, f: dict) -> list[str]:
