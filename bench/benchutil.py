@@ -40,11 +40,11 @@ def stats(err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def cramer_rao_floor(sensor, poses: np.ndarray) -> dict:
-    """The Cramer-Rao bounds (fitgen.observe.analyse, the sensor's noise, all five components) at each pose:
+    """The Cramer-Rao bounds (fitgen.observe.cramer_rao, the sensor's noise, all five components) at each pose:
     RMS over the poses, median, how many are infinite, and the RMS over the finite ones."""
-    from fitgen.observe import analyse
+    from fitgen.observe import cramer_rao
 
-    b = np.array([r.bounds for r in analyse(sensor, poses, sensor.noise)])
+    b = cramer_rao(sensor, poses, sensor.noise)
     finite = np.where(np.isfinite(b), b, np.nan)
     with np.errstate(over="ignore", invalid="ignore"):
         return {"rms": np.sqrt(np.mean(b * b, axis=0)), "median": np.median(b, axis=0),

@@ -43,7 +43,7 @@ Measured, per flow x precision x output:
   that deviation over the model's held-out max error.
 - deployed error: the C on the noisy held-out readings (all draws pooled) against the true
   poses, RMS and max; its RMS over the `replicas` flow's double-C noisy RMS.
-- floor: the Cramer-Rao bound (fitgen.observe.analyse, the sensor's noise, all five components
+- floor: the Cramer-Rao bound (fitgen.observe.cramer_rao, the sensor's noise, all five components
   estimated) at each of the held-out poses; the table gives its RMS over the poses (the
   floor of an unbiased estimator's RMS error there) and, in brackets, its median. A pose the
   layout cannot resolve has an infinite bound and makes the RMS inf; the table then also gives
