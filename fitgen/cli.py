@@ -248,7 +248,18 @@ def cmd_predict(args) -> int:
     if missing:
         raise InputError(f"dataset {args.data}: missing column {missing[0]} (the model takes {cols[0]}..{cols[-1]})")
     inputs = table[:, [names.index(c) for c in cols]]
-    pred, status = model.predict(inputs, with_status=True)
+    if args.precision == "fixed":
+        from .fixedpoint import plan_at
+
+        fm, source = plan_at(model, args.input_lsb, args.input_offset)
+        pred, status = fm.predict_codes(inputs) if args.codes else fm.predict_values(inputs)
+        pred = fm.to_real(pred) if args.codes else pred
+        print(f"fixed point: {'ADC codes as given' if args.codes else 'values rounded to ADC codes'}, input LSB "
+              f"{fm.input_lsb:.6g} {model.input_units} from {source}, offset {fm.input_offset:g}", file=sys.stderr)
+    else:
+        if args.codes or args.input_lsb is not None or args.input_offset is not None:
+            raise InputError("--codes, --input-lsb and --input-offset apply to --precision fixed only")
+        pred, status = model.predict(inputs, with_status=True, precision=args.precision)
     header = ",".join(list(model.output_names) + ["status"])
     lines = [header] + [",".join(map(repr, row)) + f",{int(s)}" for row, s in zip(pred.tolist(), status)]
     write_atomic(args.output, "\n".join(lines) + "\n")
@@ -327,16 +338,12 @@ def cmd_codegen(args) -> int:
     model = load_model(args.model)
     if args.precision == "fixed":
         from .codegen import render_fixed_header
-        from .fixedpoint import build_fixed, default_input_scale
+        from .fixedpoint import plan_at
         from .fileio import write_in_folder
 
         if args.fma:
             raise InputError("--fma does not apply to --precision fixed")
-        lsb, offset, source = args.input_lsb, args.input_offset, "--input-lsb"
-        if lsb is None:
-            lsb, default_offset, source = default_input_scale(model)
-            offset = default_offset if offset is None else offset
-        fm = build_fixed(model, lsb, offset or 0.0)
+        fm, source = plan_at(model, args.input_lsb, args.input_offset)
         path = write_in_folder(args.output, f"{args.prefix}_model.h", render_fixed_header(fm, args.prefix))
         print(f"wrote {path} (fixed point, input LSB {fm.input_lsb:.6g} {model.input_units} from {source}, "
               f"offset {fm.input_offset:g}; {fm.summary()}; model {model.sha256[:12]})", file=sys.stderr)
@@ -456,6 +463,15 @@ def build_parser() -> Parser:
     pr.add_argument("model", metavar="MODEL")
     pr.add_argument("data", metavar="DATA.csv")
     pr.add_argument("-o", "--output", required=True, help="CSV of estimates (and status) to write")
+    pr.add_argument("--precision", default="double", choices=("double", "float", "fixed"),
+                    help="the arithmetic of the generated C, bit for bit: double (default) or float, as the "
+                         "header computes them; fixed: the fixed-point header's integers (as real values), from "
+                         "the v columns rounded to ADC codes as the ADC would, or taken as codes with --codes")
+    pr.add_argument("--codes", action="store_true",
+                    help="fixed: the v columns are the ADC codes the fixed header takes (whole numbers)")
+    pr.add_argument("--input-lsb", type=_finite, metavar="X",
+                    help="fixed: the input value of one ADC code, as for codegen (default: the model's sensor's ADC)")
+    pr.add_argument("--input-offset", type=_finite, metavar="Y", help="fixed: the input value of code 0")
     pr.set_defaults(func=cmd_predict)
 
     r = sub.add_parser("report", help="terms, AIC trace and errors of a model")

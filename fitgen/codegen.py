@@ -261,15 +261,12 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
     int32 outputs out; ``style`` does not apply (the fixed header is straight-line code).
     """
     if precision == "fixed":
-        from .fixedpoint import build_fixed, default_input_scale
+        from .fixedpoint import plan_at
 
         if fma:
             raise InputError("--fma does not apply to fixed point (it has no floating-point multiply-add)")
         _prefix(prefix)
-        if input_lsb is None:
-            input_lsb, default_offset, _ = default_input_scale(model)
-            input_offset = default_offset if input_offset is None else input_offset
-        return render_fixed_header(build_fixed(model, input_lsb, input_offset or 0.0), prefix)
+        return render_fixed_header(plan_at(model, input_lsb, input_offset)[0], prefix)
     if input_lsb is not None or input_offset is not None:
         raise InputError("an input LSB and offset apply to --precision fixed only")
     cm = build_cmodel(model, precision, style, prefix, fma)

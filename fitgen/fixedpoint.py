@@ -253,6 +253,11 @@ class FixedModel:
         c = np.round((np.asarray(values, dtype=float) - self.input_offset) / self.input_lsb)
         return np.clip(c, INT32_MIN, INT32_MAX).astype(np.int64)
 
+    def predict_values(self, values) -> tuple[np.ndarray, np.ndarray]:
+        """(real outputs (n, K), status) for input values rounded to codes as the ADC rounds them."""
+        out, status = self.predict_codes(self.codes_of(values))
+        return self.to_real(out), status
+
     def summary(self) -> str:
         parts = [f"{o.name} Q{o.frac_bits} (LSB {math.ldexp(1.0, -o.frac_bits):.3g} {o.unit}, "
                  f"error <= {o.error_bound:.3g} {o.unit})" for o in self.outputs]
@@ -563,6 +568,19 @@ def default_input_scale(model: Model) -> tuple[float, float, str]:
     if model.input_units == "V":
         return 3.3 / 65535, 0.0, "default 16-bit ADC over 0..3.3 V"
     raise InputError(f"fixed point needs the value of one ADC code: give --input-lsb (in {model.input_units})")
+
+
+def plan_at(model: Model, input_lsb: float | None = None, input_offset: float | None = None) -> tuple[FixedModel, str]:
+    """The fixed-point plan at the given input scale, and where the scale came from.
+
+    Without ``input_lsb``: the model's own (:func:`default_input_scale`; ``input_offset`` still
+    overrides its offset). With it: that LSB and ``input_offset`` (default 0).
+    """
+    source = "--input-lsb"
+    if input_lsb is None:
+        input_lsb, default_offset, source = default_input_scale(model)
+        input_offset = default_offset if input_offset is None else input_offset
+    return build_fixed(model, input_lsb, input_offset or 0.0), source
 
 
 FIXED_BITS = 16  # ADC bits assumed for fixed point when the sensor's transfer does not quantise

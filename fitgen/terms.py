@@ -24,6 +24,7 @@ from fractions import Fraction
 import numpy as np
 
 from .errors import InputError
+from .roots import cbrt
 
 # the paper's order: v, v^2, v^3, v^4, 1/v, 1/v^2, 1/v^3, 1/v^4, v^1/2, v^1/3, v^1/4
 EXPONENTS: tuple[str, ...] = ("1", "2", "3", "4", "-1", "-2", "-3", "-4", "1/2", "1/3", "1/4")
@@ -271,12 +272,13 @@ def candidate_terms(n_elements: int, output: str, *, exponents=EXPONENTS, d_term
 def element_powers(v: np.ndarray, exponent: str) -> np.ndarray:
     """v ** exponent by the exact operations the generated C uses, so both round alike.
 
-    v2 = v*v, v3 = v2*v, v4 = v2*v2, v^-e = 1/v^e, sqrt, cbrt and sqrt(sqrt(v)).
+    v2 = v*v, v3 = v2*v, v4 = v2*v2, v^-e = 1/v^e, sqrt, sqrt(sqrt(v)) and the cube root of
+    fitgen.roots (never libm's or numpy's cbrt, whose bits differ between libraries and CPUs).
     """
     if exponent == "1/2":
         return np.sqrt(v)
     if exponent == "1/3":
-        return np.cbrt(v)
+        return cbrt(v)
     if exponent == "1/4":
         return np.sqrt(np.sqrt(v))
     e = int(exponent)

@@ -48,14 +48,11 @@ class CompiledModel:
         self.runner = shlex.split(runner) if runner else []
         self.fixed = None
         if precision == "fixed":
-            from fitgen.fixedpoint import build_fixed, default_input_scale
+            from fitgen.fixedpoint import plan_at
 
             if fma:
                 raise InputError("--fma does not apply to fixed point")
-            if input_lsb is None:
-                input_lsb, default_offset, _ = default_input_scale(model)
-                input_offset = default_offset if input_offset is None else input_offset
-            self.fixed = build_fixed(model, input_lsb, input_offset or 0.0)
+            self.fixed = plan_at(model, input_lsb, input_offset)[0]
             text = render_fixed_header(self.fixed, prefix)
         self._tmp = None
         if workdir is None:

@@ -145,6 +145,7 @@ def test_noise_zero_is_the_papers_procedure(tmp_path):
     assert default["outputs"] != exact["outputs"]
 
 
+@pytest.mark.bitexact
 def test_float_emulation_is_bit_identical_to_gcc():
     require_tool("gcc")
     sensor = load_sensor("two-radii")

@@ -317,6 +317,41 @@ def test_codegen_cli(paper_fixed_model, tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+def test_predict_cli_fixed_equals_the_c(paper_fixed_model, compiled, plan, tmp_path):
+    """`fitgen predict --precision fixed` answers what the fixed header computes: from values rounded to
+    codes as the ADC would, or from the codes themselves (--codes)."""
+    from fitgen.dataset import Dataset
+
+    path = tmp_path / "m.json"
+    paper_fixed_model.save(path)
+    rng = np.random.default_rng(3)
+    lo, hi = paper_fixed_model.input_min, paper_fixed_model.input_max
+    values = rng.uniform(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo), (300, paper_fixed_model.n_inputs))
+    codes = plan.codes_of(values)
+    c_out, c_status = compiled.predict(codes)
+    assert np.any(c_status > 0) and np.any(c_status == 0)
+    for name, table, extra in (("values", values, []), ("codes", codes.astype(float), ["--codes"])):
+        Dataset(table, np.zeros((len(table), 0)), ()).save(tmp_path / f"{name}.csv")
+        proc = run_cli("fitgen", "predict", str(path), str(tmp_path / f"{name}.csv"), "-o",
+                       str(tmp_path / f"{name}-est.csv"), "--precision", "fixed", *extra)
+        assert proc.returncode == 0, proc.stderr
+        assert ("codes as given" if extra else "rounded to ADC codes") in proc.stderr
+        est = np.loadtxt(tmp_path / f"{name}-est.csv", delimiter=",", skiprows=1, ndmin=2)
+        np.testing.assert_array_equal(est[:, -1].astype(int), c_status)
+        np.testing.assert_array_equal(est[:, :-1], c_out)
+    # the C's own scale options: another LSB gives other codes, hence other outputs
+    proc = run_cli("fitgen", "predict", str(path), str(tmp_path / "values.csv"), "-o", str(tmp_path / "l.csv"),
+                   "--precision", "fixed", "--input-lsb", "1e-4")
+    assert proc.returncode == 0, proc.stderr
+    assert not np.array_equal(np.loadtxt(tmp_path / "l.csv", delimiter=",", skiprows=1)[:, :-1], c_out)
+    # bad input: one line, exit status 2, nothing written
+    assert_one_line_error(run_cli("fitgen", "predict", str(path), str(tmp_path / "values.csv"), "-o",
+                                  str(tmp_path / "x.csv"), "--precision", "fixed", "--codes"), contains="whole numbers")
+    assert_one_line_error(run_cli("fitgen", "predict", str(path), str(tmp_path / "values.csv"), "-o",
+                                  str(tmp_path / "x.csv"), "--codes"), contains="fixed only")
+    assert not (tmp_path / "x.csv").exists()
+
+
 def test_verify_cli(paper_fixed_model, tmp_path):
     require_tool("gcc")
     path = tmp_path / "m.json"

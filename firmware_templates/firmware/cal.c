@@ -3,6 +3,14 @@
 
 #include <math.h>
 
+/* cal_estimate rounds as the header does only without contraction into fused multiply-adds
+ * (GCC contracts by default in GNU modes on cores with an FMA); see tm_model.h */
+#if defined(__clang__)
+#pragma clang fp contract(off)
+#elif defined(__GNUC__)
+#pragma GCC optimize("fp-contract=off")
+#endif
+
 #ifdef TM_FIXED_POINT
 
 int cal_parse(cal_model *c, const uint8_t *blob, uint32_t size)

@@ -1,0 +1,226 @@
+"""The cube root of the generated C (fitgen.roots): accurate, and the same bits in C and Python on every machine.
+
+Tests marked ``bitexact`` run twice: here, and in a subprocess with numpy's SIMD dispatch switched off
+(NPY_DISABLE_CPU_FEATURES), so that nothing bit-exact rests on the CPU numpy finds.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import mpmath
+import numpy as np
+import pytest
+
+from conftest import IN_CI, require_tool, run_cli
+from fitgen.codegen import write_header
+from fitgen.model import Equation, Model
+from fitgen.roots import cbrt
+from fitgen.terms import parse_term
+
+UINT = {np.float32: np.uint32, np.float64: np.uint64}
+
+
+def _bit_patterns(dtype, n: int, seed: int) -> np.ndarray:
+    """Random bit patterns of ``dtype`` (every sign, exponent and mantissa: subnormals, huge, specials)."""
+    rng = np.random.default_rng(seed)
+    bits = rng.integers(0, np.iinfo(np.int64).max, n, dtype=np.int64).astype(np.uint64)
+    bits = bits.astype(UINT[dtype]) if dtype is np.float32 else bits * np.uint64(2) + (bits & np.uint64(1))
+    fi = np.finfo(dtype)
+    special = np.array([0.0, -0.0, fi.smallest_subnormal, fi.tiny, fi.max, -fi.max, np.inf, -np.inf, 1.0, 8.0,
+                        27.0, 0.001, 2.0**-60, 2.0**60, 2.0**-600 if dtype is np.float64 else 0.5], dtype=dtype)
+    return np.concatenate([special.view(UINT[dtype]), bits])
+
+
+@pytest.mark.parametrize("dtype, max_ulp", [(np.float32, 1.0), (np.float64, 1.0)])
+def test_cbrt_within_one_ulp_of_the_correctly_rounded_root(dtype, max_ulp):
+    x = _bit_patterns(dtype, 3000, 1).view(dtype)
+    x = np.abs(x[np.isfinite(x) & (x != 0)])
+    y = cbrt(x)
+    assert y.dtype == dtype
+    mpmath.mp.prec = 200
+    worst = 0.0
+    for xi, yi in zip(x.tolist(), y.tolist()):
+        exact = mpmath.cbrt(mpmath.mpf(xi))
+        ulp = float(np.spacing(dtype(abs(yi))))
+        worst = max(worst, float(abs(mpmath.mpf(yi) - exact)) / ulp)
+    assert worst <= max_ulp, worst
+
+
+def test_cbrt_specials_and_sign():
+    for dt in (np.float32, np.float64):
+        x = np.array([0.0, -0.0, np.inf, -np.inf, -27.0, 27.0, np.nan], dtype=dt)
+        y = cbrt(x)
+        assert y.dtype == dt
+        np.testing.assert_array_equal(y[:6], np.array([0.0, -0.0, np.inf, -np.inf, -3.0, 3.0], dtype=dt))
+        assert np.signbit(y[1]) and np.isnan(y[6])
+
+
+def _root_model() -> Model:
+    return Model(np.array([0.1, 0.1]), np.array([3.0, 3.0]),
+                 (Equation("dx", 0.5, (parse_term("v1^1/3"), parse_term("v2^-2")), (1.5, -0.25)),))
+
+
+def _cbrt_runner(folder: Path, precision: str, cc: list[str]) -> Path:
+    """A program that reads bit patterns (hex) and prints the header's cube root of each, as bits."""
+    write_header(_root_model(), folder, precision, "table", "tm")
+    real, fn, w = ("float", "tm_cbrtf", "32") if precision == "float" else ("double", "tm_cbrt", "64")
+    (folder / "roots.c").write_text(f"""#include <inttypes.h>
+#include <stdio.h>
+#include "tm_model.h"
+int main(void)
+{{
+    uint{w}_t b;
+    {real} x;
+    (void)tm_estimate;
+    while (scanf("%" SCNx{w}, &b) == 1) {{
+        memcpy(&x, &b, sizeof x);
+        x = {fn}(x);
+        memcpy(&b, &x, sizeof b);
+        printf("%" PRIx{w} "\\n", b);
+    }}
+    return 0;
+}}
+""")
+    from host.compiled import WARNING_FLAGS
+
+    exe = folder / "roots"
+    proc = subprocess.run(cc + WARNING_FLAGS + ["-O2", "-I", str(folder), str(folder / "roots.c"), "-o", str(exe),
+                                                "-lm"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    return exe
+
+
+@pytest.mark.bitexact
+@pytest.mark.parametrize("precision", ["float", "double"])
+@pytest.mark.parametrize("target", ["gcc", "qemu-arm"])
+def test_cbrt_c_equals_python_bit_for_bit(tmp_path, precision, target):
+    """The header's tm_cbrtf / tm_cbrt against fitgen.roots.cbrt on random bit patterns of the whole range."""
+    if target == "gcc":
+        cc, runner = [require_tool("gcc")], []
+    else:
+        cc, runner = [require_tool("arm-linux-gnueabihf-gcc"), "-static"], [require_tool("qemu-arm")]
+    dtype = np.float32 if precision == "float" else np.float64
+    exe = _cbrt_runner(tmp_path, precision, cc)
+    bits = _bit_patterns(dtype, 50000, 2)
+    proc = subprocess.run(runner + [str(exe)], input="\n".join(format(int(b), "x") for b in bits) + "\n",
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    c = np.array([int(t, 16) for t in proc.stdout.split()], dtype=UINT[dtype])
+    py = cbrt(bits.view(dtype)).view(UINT[dtype])
+    nan = np.isnan(bits.view(dtype))
+    assert len(c) == len(bits)
+    np.testing.assert_array_equal(c[~nan], py[~nan])
+    assert np.all(np.isnan(c[nan].view(dtype)))
+
+
+@pytest.fixture(scope="module")
+def two_radii(tmp_path_factory):
+    """two-radii fitted the paper's way (roots and negative powers), its held-out readings, and those scaled
+    by 0.4 and 1.7 (clamped rows), as a CSV that `fitgen predict` reads."""
+    from fitgen.dataset import Dataset
+    from fitgen.holdout import clean_readings
+    from fitgen.model import load_model
+
+    folder = tmp_path_factory.mktemp("roots")
+    for args in (("simulate", "--sensor", "two-radii", "--grid", "paper-sim", "-o", str(folder / "sim.csv")),
+                 ("fit", str(folder / "sim.csv"), "--noise", "0", "--held-out", "500", "-o", str(folder / "m.json"))):
+        proc = run_cli("fitgen", *args)
+        assert proc.returncode == 0, proc.stderr
+    model = load_model(folder / "m.json")
+    kinds = {t.exponent for e in model.equations for t in e.terms}
+    assert {"1/3", "1/2"} & kinds and {"-1", "-2", "-3", "-4"} & kinds, kinds
+    clean, _ = clean_readings(model)
+    v = np.vstack([clean, clean * 0.4, clean * 1.7])
+    Dataset(v, np.zeros((len(v), 0)), ()).save(folder / "v.csv")
+    return folder, model, v
+
+
+def _predicted(folder: Path, precision: str) -> tuple[np.ndarray, np.ndarray]:
+    out = folder / f"est-{precision}.csv"
+    proc = run_cli("fitgen", "predict", str(folder / "m.json"), str(folder / "v.csv"), "-o", str(out),
+                   "--precision", precision)
+    assert proc.returncode == 0, proc.stderr
+    table = np.loadtxt(out, delimiter=",", skiprows=1, ndmin=2)
+    return table[:, :-1], table[:, -1].astype(int)
+
+
+@pytest.mark.bitexact
+@pytest.mark.parametrize("target", ["gcc", "qemu-arm"])
+def test_float_header_equals_fitgen_predict(two_radii, target):
+    """gcc's float header (x86-64, and armhf glibc under qemu-arm) equals `fitgen predict --precision float`."""
+    from host.compiled import CompiledModel
+
+    folder, model, v = two_radii
+    if target == "gcc":
+        kw = {"cc": require_tool("gcc")}
+    else:
+        kw = {"cc": require_tool("arm-linux-gnueabihf-gcc") + " -static", "runner": require_tool("qemu-arm")}
+    ref, ref_status = _predicted(folder, "float")
+    assert np.any(ref_status > 0) and np.any(ref_status == 0)
+    for style in ("table", "unrolled"):
+        with CompiledModel(model, "float", style, **kw) as cm:
+            out, status = cm.predict(v)
+        np.testing.assert_array_equal(status, ref_status)
+        np.testing.assert_array_equal(out, ref)
+
+
+@pytest.mark.bitexact
+def test_firmware_eval_equals_fitgen_predict(two_radii):
+    """The reference firmware (newlib, Cortex-M4F in QEMU) answers EVAL with `fitgen predict --precision float`."""
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    from hil.emulate import start_target
+    from host.device import Device
+
+    folder, model, v = two_radii
+    ref, ref_status = _predicted(folder, "float")
+    with start_target(model, "mps2", precision="float", style="table") as emu:
+        with Device.open(emu.url, timeout=5) as dev:
+            status, out = dev.eval(v)
+    np.testing.assert_array_equal(status, ref_status)
+    np.testing.assert_array_equal(out, ref)
+
+
+def _simd_probe() -> dict:
+    from numpy._core import _multiarray_umath as mu
+
+    x = np.linspace(0.01, 3.0, 20000, dtype=np.float32)
+    return {"features": {k: bool(v) for k, v in mu.__cpu_features__.items()},
+            "dispatch": list(mu.__cpu_dispatch__),
+            "numpy_cbrt": hashlib.sha256(np.cbrt(x).tobytes()).hexdigest(),
+            "ours": hashlib.sha256(cbrt(x).tobytes()).hexdigest()}
+
+
+PROBE = ("import json, sys; sys.path.insert(0, 'tests'); from test_roots import _simd_probe; "
+         "print(json.dumps(_simd_probe()))")
+
+
+def test_bit_identity_holds_without_numpy_simd():
+    """The bitexact tests again in a subprocess with every SIMD target numpy dispatches to switched off."""
+    here = _simd_probe()
+    off = [t for t in here["dispatch"] if here["features"].get(t)]
+    assert off, "numpy dispatches to no SIMD target on this CPU: nothing to switch off"
+    env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": " ".join(off)}
+    root = Path(__file__).resolve().parent.parent
+    probe = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True, env=env, cwd=root)
+    assert probe.returncode == 0, probe.stderr
+    there = json.loads(probe.stdout)
+    # the switch took effect: the targets are off in the subprocess, and where the CPU has AVX-512,
+    # numpy's own float32 cbrt gives other bits (its AVX-512 path) while ours gives the same
+    assert not any(there["features"][t] for t in off), there["features"]
+    if here["features"].get("AVX512_SKX"):
+        assert there["numpy_cbrt"] != here["numpy_cbrt"]
+    assert there["ours"] == here["ours"]
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-m", "bitexact",
+                           "tests/test_roots.py", "tests/test_deployed.py"],
+                          capture_output=True, text=True, env={**env, "CI": "true" if IN_CI else ""}, cwd=root,
+                          timeout=1200)
+    tail = proc.stdout.strip().splitlines()[-1:] or [proc.stderr[-300:]]
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
+    assert "passed" in tail[0] and "skipped" not in tail[0] and "deselected" in tail[0], tail[0]
