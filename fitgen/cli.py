@@ -124,12 +124,21 @@ def _settings(args):
             raise InputError(f"--noise must be a finite number >= 0, got {args.noise}")
     # --noise 0 alone is the paper's procedure (what R's step() computes): no rounding term either
     precision = args.precision or ("exact" if noise == 0 else "float")
-    family = "all" if args.family == "auto" else args.family  # auto: fitgen.family chooses
+    from .family import candidates
     from .refine import MAX_STEPS
 
+    # auto: fitgen.family chooses among what the precision can run
+    family = candidates(precision)[0] if args.family == "auto" else args.family
     # the rest of --refine's checks (--refine-terms, the data) are fitgen.refine_fit.check_refinable's
     if not 0 <= args.refine <= MAX_STEPS:
         raise InputError(f"--refine takes 0 (none) to {MAX_STEPS} steps, got {args.refine}")
+    if precision == "fixed":
+        if args.refine:
+            raise InputError("fixed point has no refinement (its Gauss-Newton steps run in float or double): "
+                             "drop --refine, or fit for --precision float")
+        if family not in candidates("fixed"):
+            raise InputError(f"fixed point runs no roots and no harmonic terms, which --family {family} offers: "
+                             f"use --family {' or '.join(candidates('fixed'))} (or auto)")
     return FitSettings.family(family, k=k, max_terms=args.max_terms, d_terms=not args.no_d_terms,
                               d_source="true" if args.true_d else "estimated", noise=noise,
                               precision=None if precision == "exact" else precision, refine=args.refine,
@@ -181,8 +190,8 @@ def cmd_fit(args) -> int:
     ds = load_dataset(args.data)
     sensor = dataset_sensor(ds.meta, args.sensor)
     outputs = _scene_outputs(args, ds, sensor) or _outputs(args.outputs) or ds.target_names
-    # --noise 0 is the paper's procedure: the paper's power kinds too, unless a family is named
-    auto = args.family == "auto" and settings.noise != 0
+    # --noise 0 is the paper's procedure: the paper's power kinds too, unless a family or fixed point is named
+    auto = args.family == "auto" and (settings.noise != 0 or settings.precision == "fixed")
     steps = len(outputs) + (ds.n_inputs if settings.refine else 0)  # the equations, then the forward model's
     bar = Progress("fit", steps * (2 if auto and sensor is not None else 1))
     state = {"name": None}

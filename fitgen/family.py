@@ -22,22 +22,40 @@ VALIDATION_SEED = 7919
 VALIDATION_POSES = 1000
 VALIDATION_DRAWS = 2
 CANDIDATES = ("all", "harmonics")
+# fixed point runs neither roots nor harmonic terms (fitgen.fixedpoint): auto chooses among these for it
+FIXED_CANDIDATES = ("no-roots", "integer")
 
 
-def validation_rms(model: Model, sensor, ranges: dict) -> dict[str, float]:
-    """Per output: RMS error of the float evaluation on noisy validation readings."""
+def candidates(precision: str | None) -> tuple[str, ...]:
+    """The families ``auto`` compares for a target precision (the first is the fallback)."""
+    return FIXED_CANDIDATES if precision == "fixed" else CANDIDATES
+
+
+def validation_rms(model: Model, sensor, ranges: dict, precision: str = "float") -> dict[str, float]:
+    """Per output: RMS error on noisy validation readings, evaluated as the device computes (float
+    emulation, or fixed point at the sensor's ADC scale)."""
     val = held_out_set(sensor, ranges, model.output_names, n=VALIDATION_POSES, seed=VALIDATION_SEED,
                        draws=VALIDATION_DRAWS)
-    err = model.predict(val.noisy, precision="float") - val.noisy_truth
+    if precision == "fixed":
+        from .fixedpoint import build_fixed, sensor_input_scale
+
+        lsb, offset, _ = sensor_input_scale(sensor)
+        est = build_fixed(model, lsb, offset).predict_values(val.noisy)[0]
+    else:
+        est = model.predict(val.noisy, precision="float")
+    err = est - val.noisy_truth
     return {o: float(np.sqrt(np.mean(err[:, j] ** 2))) for j, o in enumerate(model.output_names)}
 
 
 def fit_auto(ds: Dataset, outputs, settings: FitSettings, sensor, progress=None) -> tuple[Model, dict]:
-    """The model of the better family, and the record of the choice (``fit_info["family"]``)."""
+    """The model of the better family, and the record of the choice (``fit_info["family"]``).
+
+    The families compared are those the target precision can run (:func:`candidates`)."""
+    cands = candidates(settings.precision)
     if sensor is None or sensor.n_elements != ds.n_inputs:
-        return fit_model(ds, outputs, settings.with_family("all"), progress, sensor), {
-            "name": "all", "auto": True, "why": "the elements' positions are unknown (no sensor)"}
-    if not np.sum(ds.inputs.min(axis=0)) > 0:
+        return fit_model(ds, outputs, settings.with_family(cands[0]), progress, sensor), {
+            "name": cands[0], "auto": True, "why": "the elements' positions are unknown (no sensor)"}
+    if "harmonics" in cands and not np.sum(ds.inputs.min(axis=0)) > 0:
         return fit_model(ds, outputs, settings.with_family("all"), progress, sensor), {
             "name": "all", "auto": True, "why": "the readings' sum is not > 0 over the data's domain"}
     forward = None
@@ -48,13 +66,16 @@ def fit_auto(ds: Dataset, outputs, settings: FitSettings, sensor, progress=None)
         wanted = POSE_NAMES if outputs is None else tuple(n for n in POSE_NAMES if n in outputs)
         check_refinable(ds, wanted, settings.refine, settings.refine_terms)
         forward = fit_forward(ds, max_terms=settings.refine_terms, progress=progress)
-    models = {f: fit_model(ds, outputs, settings.with_family(f), progress, sensor, forward) for f in CANDIDATES}
+    models = {f: fit_model(ds, outputs, settings.with_family(f), progress, sensor, forward) for f in cands}
     ranges = box_of(ds.poses())
-    rms = {f: validation_rms(m, sensor, ranges) for f, m in models.items()}
-    ratio = float(np.exp(np.mean([np.log(rms["harmonics"][o] / rms["all"][o]) for o in rms["all"]])))
-    name = "harmonics" if ratio < 1 else "all"
+    precision = "fixed" if settings.precision == "fixed" else "float"
+    rms = {f: validation_rms(m, sensor, ranges, precision) for f, m in models.items()}
+    base, other = cands
+    ratio = float(np.exp(np.mean([np.log(rms[other][o] / rms[base][o]) for o in rms[base]])))
+    name = other if ratio < 1 else base
+    label = {"all": "the powers'", "harmonics": "harmonics'", "no-roots": "no-roots'", "integer": "integer's"}
     return models[name], {
         "name": name, "auto": True,
-        "why": f"validation ({VALIDATION_POSES} poses, seed {VALIDATION_SEED}, {VALIDATION_DRAWS} noise draws, float): "
-               f"harmonics' RMS error {ratio:.3g}x the powers' (geometric mean over outputs)",
+        "why": f"validation ({VALIDATION_POSES} poses, seed {VALIDATION_SEED}, {VALIDATION_DRAWS} noise draws, "
+               f"{precision}): {label[other]} RMS error {ratio:.3g}x {label[base]} (geometric mean over outputs)",
         "validation_rms": rms}

@@ -352,6 +352,28 @@ def test_predict_cli_fixed_equals_the_c(paper_fixed_model, compiled, plan, tmp_p
     assert not (tmp_path / "x.csv").exists()
 
 
+def test_fit_for_fixed_point_gives_what_fixed_point_runs(tmp_path):
+    """`fitgen fit --precision fixed` searches only what fixed point can run (auto: no-roots or integer,
+    chosen on validation in fixed point), so codegen --precision fixed takes the model; what can never run
+    in fixed point is refused in one line before any fitting."""
+    data, model = tmp_path / "d.csv", tmp_path / "m.json"
+    proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--grid", "paper-exp", "-o", str(data))
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli("fitgen", "fit", str(data), "--precision", "fixed", "--held-out", "200", "-o", str(model))
+    assert proc.returncode == 0, proc.stderr
+    info = json.loads(model.read_text())["fit"]
+    assert info["family"]["name"] in ("no-roots", "integer") and info["family"]["auto"]
+    assert "fixed" in info["family"]["why"] and set(info["family"]["validation_rms"]) == {"no-roots", "integer"}
+    assert info["precision"]["target"] == "fixed" and "unavailable" not in info["held_out"]["errors"]["fixed"]
+    proc = run_cli("fitgen", "codegen", str(model), "-o", str(tmp_path / "c"), "--precision", "fixed")
+    assert proc.returncode == 0, proc.stderr
+    for extra, message in ((["--refine", "1"], "no refinement"), (["--family", "harmonics"], "--family no-roots"),
+                           (["--family", "all", "--noise", "0"], "--family no-roots")):
+        proc = run_cli("fitgen", "fit", str(data), "--precision", "fixed", "-o", str(tmp_path / "x.json"), *extra)
+        assert_one_line_error(proc, contains=message)
+    assert not (tmp_path / "x.json").exists()
+
+
 def test_verify_cli(paper_fixed_model, tmp_path):
     require_tool("gcc")
     path = tmp_path / "m.json"
