@@ -40,6 +40,18 @@ def cmd_simulate(args) -> int:
     from .simulate import grid_poses, parse_grid, parse_ranges, pose_rng, random_poses, simulate
 
     sensor = _sensor(args)
+    unit_info = {}
+    if args.unit is not None:
+        from .sensor import load_sensor
+        from .units import draw_unit, unit_path, write_unit
+
+        unit, _ = draw_unit(sensor, args.unit)
+        path = write_unit(unit_path(args.output), unit, sensor.name,
+                          {"seed": args.unit, "source": "drawn within the drawing's tolerances (fitgen simulate --unit)"})
+        # simulated with the file as written, so that the data and the file agree to the last bit
+        unit_info = {"sensor_file": str(path.resolve()), "unit_seed": args.unit, "drawing": sensor.name}
+        sensor = load_sensor(path).with_transfer(sensor.transfer)
+        print(f"wrote unit {sensor.name} (a unit of {unit_info['drawing']}) to {path}", file=sys.stderr)
     chosen = [x for x in (args.grid, args.random, args.poses) if x is not None]
     if len(chosen) > 1 and not (len(chosen) == 2 and args.poses is None and not args.scene):
         raise InputError("give one of --grid, --random, --poses (or --grid with --random: the grid, then random poses)")
@@ -70,7 +82,7 @@ def cmd_simulate(args) -> int:
         grid = args.grid or "paper-sim"
         poses, source = grid_poses(parse_grid(grid)), {"grid": grid}
     ds = simulate(sensor, poses, noise=_noise(args.noise, sensor), adc_bits=args.adc_bits,
-                  seed=args.seed, provenance={**source, **scene_info})
+                  seed=args.seed, provenance={**source, **scene_info, **unit_info})
     ds.save(args.output)
     print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}",
           file=sys.stderr)
@@ -421,6 +433,9 @@ def build_parser() -> Parser:
     s.add_argument("--adc-bits", type=int, help="override the transfer's ADC bits (0: no quantisation)")
     s.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
     s.add_argument("--scene", help="full, slide, press or a scene TOML: simulate its grid (or --random N in its box)")
+    s.add_argument("--unit", type=int, metavar="SEED",
+                   help="simulate a built unit of the sensor, drawn within its [tolerances] with this seed; its sensor "
+                        "file is written beside the data (<stem>.unit.toml)")
     s.add_argument("-o", "--output", required=True, help="dataset CSV to write")
     s.set_defaults(func=cmd_simulate)
 

@@ -47,10 +47,17 @@ def rotation_matrices(thx_deg: np.ndarray, thy_deg: np.ndarray) -> np.ndarray:
 
 
 def magnet_frame(sensor: Sensor, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Element positions and axes in the magnet's own frame, each (P, N, 3)."""
+    """Element positions and axes in the magnet's own frame, each (P, N, 3).
+
+    For a built unit (fitgen.units) the pose's displacement is the stage's: the magnet moves by
+    ``stage_map @ (dx, dy, dz)``; its tilt is the pose's applied after the unit's rest tilt.
+    """
     poses = as_poses(poses)
     R = rotation_matrices(poses[:, 3], poses[:, 4])
-    centre = np.asarray(sensor.magnet.rest_center) + poses[:, :3]
+    if any(sensor.magnet.tilt):
+        R = R @ rotation_matrices(*sensor.magnet.tilt)
+    shift = poses[:, :3] if sensor.is_drawing else poses[:, :3] @ sensor.stage_map.T
+    centre = np.asarray(sensor.magnet.rest_center) + shift
     rel = sensor.positions[None, :, :] - centre[:, None, :]
     # R^T v for every pose and element: local = rel @ R
     local = np.einsum("pnj,pjk->pnk", rel, R)
@@ -75,5 +82,7 @@ def field_readings(sensor: Sensor, poses) -> np.ndarray:
     mag = sensor.magnet
     out = cylinder_projection(
         local.reshape(-1, 3), axes.reshape(-1, 3), mag.diameter, mag.height, mag.polarization * 1e3
-    )
-    return out.reshape(local.shape[:2])
+    ).reshape(local.shape[:2])
+    if np.any(sensor.ambient):
+        out = out + sensor.axes @ sensor.ambient  # a uniform field, the same at every pose
+    return out

@@ -26,7 +26,33 @@ class Magnet:
     diameter: float  # mm
     height: float  # mm
     polarization: float  # T, along the magnet's own +z
-    rest_center: tuple[float, float, float]  # mm
+    rest_center: tuple[float, float, float]  # mm (the drawing's centre plus a unit's offset)
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # mm, a unit's rest centre from the drawing's
+    tilt: tuple[float, float] = (0.0, 0.0)  # deg, a unit's rest tilt (thx, thy), applied before a pose's
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """The spreads a maker expects between a built unit and its drawing, as standard deviations
+    (fitgen.units draws them normal, clipped at 3 sigma). Sources: docs/calibration.md."""
+
+    magnet_offset_xy: float = 0.2  # mm, each of x and y: a magnet placed by hand in a cast elastomer
+    magnet_offset_z: float = 0.12  # mm: the casting's thickness
+    magnet_tilt: float = 2.0  # deg, each of thx and thy
+    polarization: float = 0.03  # relative: the magnet grade's remanence band and batch spread
+    element_azimuth: float = 1.0  # deg
+    element_radius: float = 0.08  # mm: hand placement or pick-and-place and solder float
+    element_height: float = 0.04  # mm: solder and board flatness
+    element_axis: float = 2.0  # deg, the sensitive axis turned in the board's plane
+    element_tilt: float = 1.0  # deg, the axis raised out of it (a part not flat on its pads)
+    gain: float = 0.077  # relative: AA003-02 sensitivity 2.0-3.2 mV/V/Oe read as 2.6 +- 3 sigma
+    offset: float = 0.004  # mT, each element's offset after trimming
+    ambient: float = 0.03  # mT, each component of a static ambient field (the Earth's is about 0.05 mT)
+    stage_gain: float = 0.05  # relative, each diagonal entry of the stage-to-magnet map
+    stage_cross: float = 0.02  # each off-diagonal entry: the magnet does not follow quite parallel
+
+    def to_dict(self) -> dict:
+        return dict(vars(self))
 
 
 @dataclass(frozen=True)
@@ -64,10 +90,31 @@ class Sensor:
     raw: RawTransfer = RawTransfer()
     gmr: GmrTransfer = GmrTransfer()
     source: dict = field(default_factory=dict, repr=False, compare=False)
+    # a built unit's own: per element gain (x the transfer's) and offset (mT, after |B . axis|), a static
+    # ambient field (mT), and the map from the labels' (the stage's) displacement to the magnet's
+    gains: np.ndarray | None = field(default=None, repr=False)
+    offsets: np.ndarray | None = field(default=None, repr=False)
+    ambient: np.ndarray | None = field(default=None, repr=False)
+    stage_map: np.ndarray | None = field(default=None, repr=False)
+    tolerances: Tolerances = field(default=Tolerances(), compare=False)
+
+    def __post_init__(self):
+        n = self.positions.shape[0]
+        for name, default in (("gains", np.ones(n)), ("offsets", np.zeros(n)), ("ambient", np.zeros(3)),
+                              ("stage_map", np.eye(3))):
+            val = getattr(self, name)
+            object.__setattr__(self, name, default if val is None else np.asarray(val, dtype=float))
 
     @property
     def n_elements(self) -> int:
         return int(self.positions.shape[0])
+
+    @property
+    def is_drawing(self) -> bool:
+        """True when nothing of a built unit differs from the drawing's defaults."""
+        m = self.magnet
+        return (not any(m.offset) and not any(m.tilt) and np.all(self.gains == 1) and not np.any(self.offsets)
+                and not np.any(self.ambient) and np.array_equal(self.stage_map, np.eye(3)))
 
     @property
     def noise(self) -> float:
@@ -106,7 +153,13 @@ class Sensor:
                 "raw": vars(self.raw),
                 "gmr": vars(self.gmr),
             },
-        }
+        } | ({} if self.is_drawing else {"unit": {
+            "magnet_tilt": list(self.magnet.tilt),
+            "gains": self.gains.tolist(),
+            "offsets": self.offsets.tolist(),
+            "ambient": self.ambient.tolist(),
+            "stage_map": self.stage_map.tolist(),
+        }})
 
     @property
     def sha256(self) -> str:
@@ -238,30 +291,60 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
     pol = mag.number("polarization", 1.32)
     if pol == 0:
         raise InputError(f"{origin}: 'magnet.polarization' must not be 0")
+    offset = tuple(mag.vector("offset", required=False)) if mag.has("offset") else (0.0, 0.0, 0.0)
+    tilt = tuple(_numbers(mag, "tilt", 2)) if mag.has("tilt") else (0.0, 0.0)
+    if max(abs(t) for t in tilt) > 45:
+        raise InputError(f"{origin}: 'magnet.tilt' must be within +-45 deg, got {list(tilt)}")
     mag.finish()
 
     board = top.sub("board")
     thickness = board.number("thickness", required=True, min_=0.0)
     gap = board.number("gap", required=True, positive=True)
     board.finish()
-    rest_center = (0.0, 0.0, thickness + gap + height / 2)
+    rest_center = tuple(float(c) for c in np.add((0.0, 0.0, thickness + gap + height / 2), offset))
 
     el = top.sub("elements")
-    positions, axes = [], []
+    positions, axes, gains, offsets = [], [], [], []
     for i, ring in enumerate(_table_list(el, "ring")):
         p, a = _ring(_Section(ring, f"elements.ring[{i}]", origin))
         positions.append(p)
         axes.append(a)
+        gains += [1.0] * len(p)
+        offsets += [0.0] * len(p)
     for i, item in enumerate(_table_list(el, "list")):
         sec = _Section(item, f"elements.list[{i}]", origin)
         positions.append(sec.vector("position")[None])
         axes.append(sec.vector("axis", unit=True)[None])
+        gains.append(sec.number("gain", 1.0, positive=True))
+        offsets.append(sec.number("offset", 0.0))
         sec.finish()
     el.finish()
     if not positions:
         raise InputError(f"{origin}: 'elements' must have at least one [[elements.ring]] or [[elements.list]]")
     positions = np.vstack(positions)
     axes = np.vstack(axes)
+
+    amb = top.sub("ambient", required=False)
+    ambient = amb.vector("field", required=False) if amb.has("field") else np.zeros(3)
+    amb.finish()
+    st = top.sub("stage", required=False)
+    stage_map = np.eye(3)
+    if st.has("map"):
+        rows = st.raw("map")
+        if not isinstance(rows, list) or len(rows) != 3:
+            raise InputError(f"{origin}: 'stage.map' must be 3 rows of 3 numbers (magnet displacement = map x "
+                             "stage displacement)")
+        stage_map = np.array([_numbers(_Section({"row": r}, "stage.map", origin), "row", 3) for r in rows])
+        if not abs(np.linalg.det(stage_map)) > 1e-6:
+            raise InputError(f"{origin}: 'stage.map' is singular: the magnet would not follow the stage")
+    st.finish()
+    tol = top.sub("tolerances", required=False)
+    tolerances = Tolerances(**{k: tol.number(k, v, min_=0.0) for k, v in vars(Tolerances()).items()})
+    tol.finish()
+    unit = top.sub("unit", required=False)  # provenance of a unit file (fitgen simulate --unit, fitgen identify)
+    for key in list(unit.data):
+        unit.raw(key)
+    unit.finish()
 
     radius = diameter / 2
     for k, p in enumerate(positions, start=1):
@@ -303,7 +386,7 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
     return Sensor(
         name=name,
         description=description,
-        magnet=Magnet(diameter, height, pol, rest_center),
+        magnet=Magnet(diameter, height, pol, rest_center, offset, tilt),
         board_thickness=thickness,
         board_gap=gap,
         positions=positions,
@@ -312,7 +395,20 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
         raw=raw,
         gmr=gmr,
         source=data,
+        gains=np.array(gains),
+        offsets=np.array(offsets),
+        ambient=ambient,
+        stage_map=stage_map,
+        tolerances=tolerances,
     )
+
+
+def _numbers(sec: _Section, key: str, n: int) -> list[float]:
+    val = sec.raw(key, None, True)
+    if not (isinstance(val, list) and len(val) == n and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in val)):
+        raise InputError(f"{sec.origin}: '{sec._key(key)}' must be a list of {n} finite numbers, got {val!r}")
+    return [float(v) for v in val]
 
 
 def preset_names() -> list[str]:

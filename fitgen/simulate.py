@@ -134,16 +134,22 @@ def pose_rng(seed: int) -> np.random.Generator:
 def dataset_sensor(meta: dict, spec: str | None = None) -> Sensor | None:
     """The sensor a dataset was simulated with: ``spec`` (a preset or file) if given, else the
     preset its meta names when the hash matches; None for measured data or an unknown sensor."""
+    from pathlib import Path
+
     from .sensor import load_sensor, preset_names
 
     if spec is None:
         name = meta.get("sensor")
-        if name not in preset_names():
+        unit_file = meta.get("sensor_file")
+        if isinstance(unit_file, str) and Path(unit_file).is_file():
+            spec = unit_file  # a unit's own sensor file (fitgen simulate --unit, fitgen identify)
+        elif name not in preset_names():
             return None
-        spec = name
+        else:
+            spec = name
     sensor = load_sensor(spec)
     if meta.get("transfer") in ("raw", "gmr"):
         sensor = sensor.with_transfer(meta["transfer"])
-    if spec == meta.get("sensor") and meta.get("sensor_sha256") not in (None, sensor.sha256):
+    if spec in (meta.get("sensor"), meta.get("sensor_file")) and meta.get("sensor_sha256") not in (None, sensor.sha256):
         return None
     return sensor

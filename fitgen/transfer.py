@@ -1,6 +1,7 @@
 """Element transfer models: signed field along the sensitive axis -> reading.
 
-``raw``: |B . r_hat| in mT (the paper's simulation). ``gmr``: the NVE AA003-02's
+``raw``: |B . r_hat| in mT (the paper's simulation); a built unit's element gains and offsets
+act on it (fitgen.units). ``gmr``: the NVE AA003-02's
 omnipolar response in volts, linear in |B . r_hat| up to saturation, amplified,
 offset, and clipped and quantised by the ADC. Noise is added before the ADC.
 """
@@ -23,6 +24,14 @@ def quantise(x: np.ndarray, lo: float, hi: float, bits: int) -> np.ndarray:
     return lo + np.round((x - lo) / lsb) * lsb
 
 
+def element_response(sensor: Sensor, mag: np.ndarray) -> np.ndarray:
+    """Each element's field-equivalent output (mT) from |B . axis|: its gain and offset (a unit's; 1 and 0
+    on a drawing)."""
+    if sensor.is_drawing:
+        return mag.copy()
+    return sensor.gains * mag + sensor.offsets
+
+
 def apply_transfer(
     sensor: Sensor,
     b_axis: np.ndarray,
@@ -38,13 +47,13 @@ def apply_transfer(
     """
     mag = np.abs(b_axis)
     if sensor.transfer == "raw":
-        out = mag.copy()
+        out = element_response(sensor, mag)
         bits = sensor.raw.adc_bits if adc_bits is None else adc_bits
         lo, hi = 0.0, sensor.raw.full_scale
     else:
         g = sensor.gmr
         volts_per_mt = g.supply * g.sensitivity * 1e-3 * OE_PER_MT * g.gain
-        out = g.offset + volts_per_mt * np.minimum(mag, g.saturation)
+        out = g.offset + volts_per_mt * element_response(sensor, np.minimum(mag, g.saturation))
         bits = g.adc_bits if adc_bits is None else adc_bits
         lo, hi = g.adc_min, g.adc_max
     if noise > 0:

@@ -1,0 +1,37 @@
+"""A unit's readings drawn with magpylib, written from the unit's sensor file alone: the independent
+truth that tests/test_units.py and bench/units.py hold fitgen's unit physics to."""
+
+from __future__ import annotations
+
+import magpylib as magpy
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+OE_PER_MT = 10.0
+
+
+def magpylib_readings(sensor, poses: np.ndarray) -> np.ndarray:
+    """Readings (P, N) of ``sensor`` (a drawing or a unit) at label poses, noise-free, no ADC quantisation.
+
+    The magnet: magpylib's Cylinder with the unit's polarisation, rest centre + map @ (dx, dy, dz), and
+    orientation Ry(thy) Rx(thx) of the pose after the unit's rest tilt; the field along each element's axis
+    plus the ambient field's; then |.|, the element's gain and offset, and the transfer.
+    """
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    mag = sensor.magnet
+    rest = Rotation.from_euler("xy", mag.tilt, degrees=True)
+    pose_rot = Rotation.from_euler("xy", poses[:, 3:5], degrees=True)
+    cyl = magpy.magnet.Cylinder(
+        dimension=(mag.diameter, mag.height),
+        polarization=(0.0, 0.0, mag.polarization),
+        position=np.asarray(mag.rest_center) + poses[:, :3] @ np.asarray(sensor.stage_map).T,
+        orientation=pose_rot * rest,
+    )
+    B = cyl.getB(magpy.Sensor(pixel=sensor.positions)) * 1e3  # (P, N, 3) mT
+    b = np.einsum("pnj,nj->pn", B, sensor.axes) + sensor.axes @ sensor.ambient
+    m = np.abs(b)
+    if sensor.transfer == "raw":
+        return sensor.gains * m + sensor.offsets
+    g = sensor.gmr
+    vpm = g.supply * g.sensitivity * 1e-3 * OE_PER_MT * g.gain
+    return np.clip(g.offset + vpm * (sensor.gains * np.minimum(m, g.saturation) + sensor.offsets), g.adc_min, g.adc_max)

@@ -1,0 +1,115 @@
+"""Built units (fitgen.units): the physics of a unit against magpylib, unit files, draws within tolerances,
+and `fitgen simulate --unit`."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from conftest import assert_one_line_error, run_cli
+from fitgen.errors import InputError
+from fitgen.sensor import load_sensor
+from fitgen.simulate import DEFAULT_RANGES, pose_rng, random_poses
+from fitgen.transfer import readings
+from fitgen.units import UnitSpace, draw_unit, unit_toml, write_unit
+from magpy_truth import magpylib_readings
+
+POSES = random_poses(300, DEFAULT_RANGES, pose_rng(11))
+
+
+@pytest.mark.parametrize("preset", ["paper", "tilted-axes", "ring-vertical"])
+@pytest.mark.parametrize("transfer", ["raw", "gmr"])
+def test_unit_readings_match_magpylib(preset, transfer):
+    """Every part of a unit (magnet offset, tilt, polarisation; element places, axes, gains, offsets; ambient
+    field; stage map) against an independent model written from the unit's file alone."""
+    drawing = load_sensor(preset).with_transfer(transfer)
+    for seed in (1, 2):
+        unit, theta = draw_unit(drawing, seed)
+        assert not unit.is_drawing and np.count_nonzero(theta) == theta.size
+        ref = magpylib_readings(unit, POSES)
+        np.testing.assert_allclose(readings(unit, POSES, adc_bits=0), ref, rtol=0, atol=1e-11)
+        # the batched model identify uses gives the same readings
+        np.testing.assert_allclose(UnitSpace.of(drawing).readings(theta, POSES)[0], ref, rtol=0, atol=1e-11)
+        # and the unit differs from its drawing by far more than the noise
+        assert np.abs(ref - readings(drawing, POSES, adc_bits=0)).max() > 50 * drawing.noise
+
+
+def test_drawing_is_unchanged():
+    d = load_sensor("paper")
+    assert d.is_drawing and "unit" not in d.to_dict()
+    np.testing.assert_allclose(readings(d, POSES, adc_bits=0), magpylib_readings(d, POSES), rtol=0, atol=1e-11)
+    space = UnitSpace.of(d)
+    np.testing.assert_allclose(space.readings(np.zeros(space.size), POSES)[0], readings(d, POSES, adc_bits=0),
+                               rtol=0, atol=1e-12)
+
+
+def test_unit_file_round_trips(tmp_path):
+    unit, _ = draw_unit(load_sensor("paper").with_transfer("gmr"), 5)
+    path = write_unit(tmp_path / "u.toml", unit, "paper", {"seed": 5})
+    again = load_sensor(path)
+    assert again.transfer == "gmr" and again.name == unit.name
+    for attr in ("positions", "gains", "offsets", "ambient", "stage_map"):
+        np.testing.assert_array_equal(getattr(again, attr), getattr(unit, attr))
+    np.testing.assert_allclose(readings(again, POSES, adc_bits=0), readings(unit, POSES, adc_bits=0), rtol=0,
+                               atol=1e-13)
+    # written again from what was read, the file is the same: a stable hash
+    assert unit_toml(again, "paper", {"seed": 5}) == unit_toml(load_sensor(write_unit(tmp_path / "v.toml", again, "paper",
+                                                                                         {"seed": 5})), "paper",
+                                                                  {"seed": 5})
+
+
+def test_draws_follow_the_tolerances():
+    d = load_sensor("paper")
+    space = UnitSpace.of(d)
+    rng = np.random.default_rng(0)
+    z = np.array([space.draw(rng) for _ in range(4000)]) / space.prior_sd
+    assert np.all(np.abs(z) <= 3.0 + 1e-12)
+    np.testing.assert_allclose(z.std(axis=0), 0.986, atol=0.05)  # a normal clipped at 3 sigma: sd 0.9866
+    assert np.abs(z.mean(axis=0)).max() < 0.08
+    with pytest.raises(InputError, match="built unit"):
+        UnitSpace.of(draw_unit(d, 1)[0])
+
+
+def test_tolerances_from_the_sensor_file(tmp_path):
+    path = tmp_path / "s.toml"
+    unit, _ = draw_unit(load_sensor("paper"), 1)
+    body = unit_toml(unit, "paper").replace("magnet_offset_xy = 0.2", "magnet_offset_xy = 0.5")
+    path.write_text(body)
+    assert load_sensor(path).tolerances.magnet_offset_xy == 0.5
+    assert load_sensor("paper").tolerances.gain == pytest.approx(0.077)  # a preset: the defaults
+
+
+@pytest.mark.parametrize("edit, message", [
+    (("tilt = [", "tilt = [1.0, "), "magnet.tilt"),
+    (("map = [[", "map = [[0.0, 0.0, 0.0], ["), "stage.map"),
+    (("[tolerances]", "[tolerances]\nbogus = 1.0"), "tolerances.bogus"),
+    (("gain = ", "gain = -"), "must be > 0"),
+])
+def test_bad_unit_files_are_one_line(tmp_path, edit, message):
+    unit, _ = draw_unit(load_sensor("paper"), 1)
+    body = unit_toml(unit, "paper")
+    assert edit[0] in body
+    path = tmp_path / "bad.toml"
+    path.write_text(body.replace(edit[0], edit[1], 1))
+    proc = run_cli("fitgen", "simulate", "--sensor", str(path), "--grid", "dx=0", "-o", str(tmp_path / "x.csv"))
+    assert_one_line_error(proc, contains=message)
+
+
+def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
+    out = tmp_path / "u.csv"
+    proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "4", "--grid",
+                   "paper-exp", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    meta = json.loads((tmp_path / "u.csv.meta.json").read_text())
+    unit = load_sensor(tmp_path / "u.unit.toml")
+    assert meta["sensor_file"] == str((tmp_path / "u.unit.toml").resolve()) and meta["unit_seed"] == 4
+    assert meta["sensor_sha256"] == unit.sha256 and unit.transfer == "gmr" and not unit.is_drawing
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    np.testing.assert_allclose(data[:, :8], readings(unit, data[:, 8:]), rtol=0, atol=1e-12)
+    proc = run_cli("fitgen", "fit", str(out), "-o", str(tmp_path / "m.json"), "--held-out", "100",
+                   "--family", "no-roots")
+    assert proc.returncode == 0, proc.stderr
+    held = json.loads((tmp_path / "m.json").read_text())["fit"]["held_out"]
+    assert held["sensor"] == unit.name and held["sensor_sha256"] == unit.sha256
