@@ -339,6 +339,62 @@ def _sweeps(model, sensor_spec, folder):
     return paths
 
 
+def cmd_identify(args) -> int:
+    import numpy as np
+
+    from .dataset import load_dataset
+    from .identify import CHI2_LIMIT, identify, report, row_noise, save
+    from .progress import Progress
+
+    ds = load_dataset(args.capture)
+    drawing = _sensor(args)
+    units = ds.meta.get("units")
+    if not args.transfer and units in ("V", "mT"):
+        drawing = drawing.with_transfer("gmr" if units == "V" else "raw")
+    noise, source = row_noise(ds.meta, drawing, args.noise)
+    with Progress("identify", 4) as bar:
+        ident = identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
+                         progress=lambda i, n, note: bar.update(1, note))
+    if ident.reduced_chi2 > CHI2_LIMIT:
+        rms = float(np.sqrt(ident.reduced_chi2))
+        raise InputError(f"the physics does not explain {args.capture}: residuals {rms:.3g}x the reading noise "
+                         f"({source}); another sensor than {drawing.name}, labels in other units, or a noise figure too "
+                         "low; nothing written")
+    print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm", file=sys.stderr)
+    print(report(ident), end="")
+    unit, post = save(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256})
+    print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
+          "the posterior)", file=sys.stderr)
+    return 0
+
+
+def cmd_schedule(args) -> int:
+    import json
+
+    import numpy as np
+
+    from .dataset import meta_path
+    from .fileio import write_atomic
+    from .progress import Progress
+    from .schedule import schedule
+    from .simulate import parse_ranges
+
+    drawing = _sensor(args)
+    axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
+    noise = None if args.noise is None else _noise(args.noise, drawing)
+    with Progress("schedule", args.n) as bar:
+        poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits),
+                               noise=(drawing.noise if noise is None else noise) / np.sqrt(args.samples),
+                               rig_error=args.rig_error, progress=lambda i, n, note: bar.update(1, note))
+    names = [a for a in POSE_NAMES if a in axes]
+    rows = [",".join(names)] + [",".join(repr(float(p[POSE_NAMES.index(a)]) + 0.0) for a in names) for p in poses]
+    write_atomic(args.output, "\n".join(rows) + "\n")
+    write_atomic(meta_path(args.output), json.dumps({**info, "samples_per_row": args.samples}, indent=1) + "\n")
+    print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}) to {args.output}",
+          file=sys.stderr)
+    return 0
+
+
 def _finite(text: str) -> float:
     import argparse
     import math
@@ -482,6 +538,30 @@ def build_parser() -> Parser:
                    help="random held-out poses in the data's box for the deployed-accuracy figures (default 2000; "
                         "0: none)")
     f.set_defaults(func=cmd_fit)
+
+    i = sub.add_parser("identify", help="a built unit's physics from a short capture (its sensor file)")
+    i.add_argument("capture", metavar="CAPTURE.csv", help="rows of readings with the stage's displacements (dx,dy,dz)")
+    i.add_argument("--sensor", default="paper", help="the drawing the unit was built to (preset or TOML; default paper)")
+    i.add_argument("--transfer", choices=("raw", "gmr"), help="override the transfer (default: the capture's units)")
+    i.add_argument("--noise", type=_finite, metavar="X",
+                   help="the device's single-sample reading noise (default: what the capture measured, else the "
+                        "sensor file's), divided by sqrt(samples per row)")
+    i.add_argument("--rig-error", type=_finite, default=0.01, metavar="MM",
+                   help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
+    i.add_argument("-o", "--output", required=True, metavar="UNIT.toml", help="the unit's sensor file to write")
+    i.set_defaults(func=cmd_identify)
+
+    sc = sub.add_parser("schedule", help="the capture poses that pin a unit's parameters best (D-optimal)")
+    sc.add_argument("--sensor", default="paper", help="the drawing (preset or TOML; default paper)")
+    sc.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
+    sc.add_argument("--n", type=int, default=40, help="poses to capture (default 40)")
+    sc.add_argument("--axes", default="dx,dy,dz", help="the axes the stage moves (default dx,dy,dz)")
+    sc.add_argument("--limits", help="the stage's limits 'dx=-2:2 dz=-2:0 ...' (default: the sensor's pose box)")
+    sc.add_argument("--samples", type=int, default=16, help="samples the capture averages per row (default 16)")
+    sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
+    sc.add_argument("--rig-error", type=_finite, default=0.01, metavar="MM", help="the stage's error, mm rms")
+    sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv")
+    sc.set_defaults(func=cmd_schedule)
 
     pr = sub.add_parser("predict", help="estimates for the rows of a dataset")
     pr.add_argument("model", metavar="MODEL")

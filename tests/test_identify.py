@@ -1,0 +1,162 @@
+"""fitgen identify and fitgen schedule: a unit's physics from a short three-axis capture."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from conftest import assert_one_line_error, run_cli
+from fitgen.identify import Problem, derived_quantities, identify
+from fitgen.schedule import schedule
+from fitgen.sensor import load_sensor
+from fitgen.transfer import readings
+from fitgen.units import UnitSpace, draw_unit
+
+SAMPLES = 16
+
+
+@pytest.fixture(scope="module")
+def drawing():
+    return load_sensor("paper").with_transfer("gmr")
+
+
+@pytest.fixture(scope="module")
+def plan(drawing):
+    poses, info = schedule(drawing, 40, noise=drawing.noise / np.sqrt(SAMPLES))
+    return poses, info
+
+
+def capture(unit, poses, seed, rig_error=0.01, samples=SAMPLES):
+    """A simulated capture: the stage off its labels by the rig's error, rows averaged over ``samples``."""
+    rng = np.random.default_rng(seed)
+    true = poses.copy()
+    true[:, :3] += rng.normal(0.0, rig_error, (len(poses), 3))
+    noise = unit.noise / np.sqrt(samples)
+    return readings(unit, true, adc_bits=0) + rng.normal(0.0, noise, (len(poses), unit.n_elements)), noise
+
+
+@pytest.mark.parametrize("seed", [21, 22, 23])
+def test_identify_recovers_what_a_capture_determines(drawing, plan, seed):
+    unit, theta = draw_unit(drawing, seed)
+    y, noise = capture(unit, plan[0], seed)
+    ident = identify(drawing, y, plan[0], noise)
+    assert 0.6 < ident.reduced_chi2 < 1.5  # the physics explains the rows to the noise
+    truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+    for name, (value, se) in ident.derived().items():
+        assert abs(value - truth[name]) < 3.5 * se, (name, value, truth[name], se)
+        assert se < (0.06 if "offset" in name else 0.02), (name, se)
+    # the identified unit reads like the true one far better than the drawing does
+    test_poses = plan[0] + np.array([0.3, -0.2, -0.1, 0.0, 0.0])
+    twin_err = np.abs(readings(ident.unit(), test_poses, adc_bits=0) - readings(unit, test_poses, adc_bits=0)).max()
+    drawing_err = np.abs(readings(drawing, test_poses, adc_bits=0) - readings(unit, test_poses, adc_bits=0)).max()
+    assert twin_err < drawing_err / 20
+
+
+def test_what_no_capture_separates_comes_from_the_information(drawing, plan):
+    """The null space names the common gain against the polarisation and the ambient field against the offsets
+    (the omnipolar elements' readings never change sign here), among the moves of the whole sensor."""
+    unit, _ = draw_unit(drawing, 21)
+    y, noise = capture(unit, plan[0], 21)
+    ident = identify(drawing, y, plan[0], noise)
+    sp = ident.space
+    G = ident.gauge
+    assert G.shape[1] == 10
+
+    # the ambient field and the offsets follow along (they trade against each other), so compare the rest
+    keep = np.array([not (n.startswith("ambient") or n.endswith(".offset")) for n in sp.names])
+
+    def in_span(v):
+        coef, *_ = np.linalg.lstsq(G[keep], v[keep], rcond=None)
+        return np.linalg.norm(G[keep] @ coef - v[keep]) < 1e-3 * np.linalg.norm(v[keep])
+
+    scale = np.zeros(sp.size)  # the polarisation up, every gain down: the same readings
+    scale[sp.index("magnet.log_polarization")] = 1.0
+    for k in range(1, 9):
+        scale[sp.index(f"e{k}.log_gain")] = -1.0
+    assert in_span(scale / sp.prior_sd)
+    shift = np.zeros(sp.size)  # the magnet and every element 0.1 mm up
+    shift[sp.index("magnet.z")] = 0.1
+    for k in range(1, 9):
+        shift[sp.index(f"e{k}.height")] = 0.1
+    assert in_span(shift / sp.prior_sd)
+    assert not in_span(np.eye(sp.size)[sp.index("magnet.x")])  # the magnet's own offset is seen
+
+
+def test_a_capture_without_presses_names_what_it_starves(drawing, tmp_path):
+    poses, _ = schedule(drawing, 30, axes=("dx", "dy"), noise=drawing.noise / 4)
+    assert np.all(poses[:, 2] == 0)
+    unit, _ = draw_unit(drawing, 24)
+    y, noise = capture(unit, poses, 24)
+    ident = identify(drawing, y, poses, noise)
+    assert ident.starved, "a capture with no dz leaves something a press would pin"
+    assert any(np.any(p[:, 2] < 0) for _, p, _ in ident.starved)
+
+
+def test_schedule_is_d_optimal_within_limits(drawing, plan):
+    poses, info = plan
+    assert poses.shape == (40, 5) and np.all(poses[:, 3:] == 0)
+    assert np.all((poses[:, :2] >= -2) & (poses[:, :2] <= 2)) and np.all((poses[:, 2] >= -2) & (poses[:, 2] <= 0))
+    space = UnitSpace.of(drawing)
+    noise = np.full(8, drawing.noise / np.sqrt(SAMPLES))
+    logdet = lambda P: np.linalg.slogdet(Problem(space, np.zeros((len(P), 8)), P, noise, 0.01)  # noqa: E731
+                                         .information(np.zeros(space.size)) + np.eye(space.size))[1]
+    assert logdet(poses) == pytest.approx(info["log_det"], rel=1e-6)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        rnd = np.column_stack([rng.uniform(-2, 2, 40), rng.uniform(-2, 2, 40), rng.uniform(-2, 0, 40),
+                               np.zeros(40), np.zeros(40)])
+        assert logdet(rnd) < info["log_det"]
+
+
+def test_cli_schedule_capture_identify(tmp_path):
+    sch, cap, unit_file = tmp_path / "s.csv", tmp_path / "c.csv", tmp_path / "unit.toml"
+    proc = run_cli("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "30", "--limits",
+                   "dx=-1.5:1.5 dy=-1.5:1.5 dz=-1.5:0", "-o", str(sch))
+    assert proc.returncode == 0, proc.stderr
+    header = sch.read_text().splitlines()[0]
+    assert header == "dx,dy,dz"
+    table = np.loadtxt(sch, delimiter=",", skiprows=1)
+    assert table.shape == (30, 3) and np.abs(table[:, :2]).max() <= 1.5 and table[:, 2].min() >= -1.5
+    proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "31", "--poses", str(sch),
+                   "--noise", "0.0005", "-o", str(cap))
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli("fitgen", "identify", str(cap), "--sensor", "paper", "--noise", "0.0005", "-o", str(unit_file))
+    assert proc.returncode == 0, proc.stderr
+    assert "no capture can separate (10 directions" in proc.stdout and "e8 sensitivity" in proc.stdout
+    post = json.loads((tmp_path / "unit.posterior.json").read_text())
+    assert len(post["theta"]) == len(post["sd"]) == len(post["parameters"]) == 74
+    truth = load_sensor(tmp_path / "c.unit.toml")
+    twin = load_sensor(unit_file)
+    assert twin.transfer == "gmr" and not twin.is_drawing
+    P = np.loadtxt(sch, delimiter=",", skiprows=1)
+    P = np.hstack([P, np.zeros((len(P), 2))])
+    assert np.abs(readings(twin, P, adc_bits=0) - readings(truth, P, adc_bits=0)).max() < 0.02  # volts
+
+
+def _save_capture(path, y, poses, meta=None):
+    from fitgen.dataset import Dataset
+
+    Dataset(y, poses[:, :3], ("dx", "dy", "dz"), {"units": "V", **(meta or {})}).save(path)
+
+
+def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
+    unit, _ = draw_unit(drawing, 25)
+    y, noise = capture(unit, plan[0], 25)
+    cases = {
+        "few": (y[:6], plan[0][:6], "at least 10"),
+        "repeat": (np.repeat(y[:1], 20, axis=0), np.repeat(plan[0][:1], 20, axis=0), "distinct pose"),
+        "saturated": (np.where(np.arange(8) < 2, 3.3, y), plan[0], "saturated"),
+        "other sensor": (readings(load_sensor("tilted-axes").with_transfer("gmr"), plan[0], adc_bits=0), plan[0],
+                         "does not explain"),
+    }
+    for name, (yy, pp, message) in cases.items():
+        path = tmp_path / f"{name.replace(' ', '_')}.csv"
+        _save_capture(path, yy, pp, {"samples_per_row": SAMPLES})
+        out = tmp_path / f"{name.replace(' ', '_')}.toml"
+        proc = run_cli("fitgen", "identify", str(path), "--sensor", "paper", "-o", str(out))
+        assert_one_line_error(proc, contains=message)
+        assert not out.exists() and not out.with_suffix(".posterior.json").exists()
+    assert_one_line_error(run_cli("fitgen", "schedule", "--axes", "dx,dq", "-o", str(tmp_path / "x.csv")),
+                          contains="--axes")
