@@ -39,8 +39,11 @@ def cmd_simulate(args) -> int:
     from .dataset import load_poses
     from .simulate import grid_poses, parse_grid, parse_ranges, pose_rng, random_poses, simulate
 
+    from pathlib import Path
+
     sensor = _sensor(args)
-    unit_info = {}
+    # a sensor file (a unit's, say) is named in the meta, so that fit finds it to hold out on
+    unit_info = {"sensor_file": str(Path(args.sensor).resolve())} if Path(args.sensor).is_file() else {}
     if args.unit is not None:
         from .sensor import load_sensor
         from .units import draw_unit, unit_path, write_unit
@@ -228,11 +231,18 @@ def cmd_fit(args) -> int:
     model.fit_info["dataset"] = str(args.data)
     if args.held_out and sensor is not None:
         from .holdout import box_of, evaluate
+        from .identify import load_posterior
 
+        unit_file = args.sensor or ds.meta.get("sensor_file")
+        posterior = load_posterior(unit_file) if unit_file else None
         with Progress("held-out", 1) as hbar:
-            hbar.update(0, f"{args.held_out} random poses, {model.fit_info['noise']['device'] or 0:g} noise")
+            hbar.update(0, f"{args.held_out} random poses, {model.fit_info['noise']['device'] or 0:g} noise"
+                           + (", units from the identification's posterior" if posterior else ""))
             model.fit_info["held_out"] = evaluate(model, sensor, box_of(ds.poses()),
-                                                  noise=model.fit_info["noise"]["device"], n=args.held_out)
+                                                  noise=model.fit_info["noise"]["device"], n=args.held_out,
+                                                  posterior=posterior)
+            if unit_file and not sensor.is_drawing:
+                model.fit_info["held_out"]["sensor_file"] = str(unit_file)
             hbar.update()
     model.save(args.output)
     for e in model.equations:
@@ -362,7 +372,11 @@ def cmd_identify(args) -> int:
                          "low; nothing written")
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm", file=sys.stderr)
     print(report(ident), end="")
-    unit, post = save(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256})
+    from pathlib import Path
+
+    spec = str(Path(args.sensor).resolve()) if Path(args.sensor).is_file() else args.sensor
+    unit, post = save(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
+                                           "drawing_spec": spec})
     print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
           "the posterior)", file=sys.stderr)
     return 0

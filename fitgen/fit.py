@@ -146,28 +146,56 @@ def noise_to_add(ds: Dataset, settings: FitSettings, sensor=None) -> dict:
     """The reading noise the fit adds in expectation, and where the figures come from.
 
     device: ``settings.noise``, else the noise figure of ``sensor`` or of the sensor named in a
-    simulated dataset's meta. data: the noise a simulated dataset was made with; measured data
-    (no such record) carry the device's own, so nothing is added (never counted twice).
-    Added: sqrt(device^2 - data^2), 0 when the data are already as noisy.
+    simulated dataset's meta, else the single-sample noise a capture measured. data: the noise a
+    simulated dataset was made with; for a capture (``samples_per_row`` in its meta), the noise its
+    averaged rows carry: what it measured per row, else the device's over sqrt(samples). Measured
+    rows with no such record are taken as single samples that carry the device's own noise.
+    Added: sqrt(device^2 - data^2), 0 when the data are already as noisy (never counted twice).
     """
     from .simulate import dataset_sensor
 
     if settings.noise is not None and not settings.noise >= 0:
         raise InputError(f"noise must be >= 0, got {settings.noise}")
-    data = ds.meta.get("noise")
-    data = float(data) if isinstance(data, (int, float)) and not isinstance(data, bool) else None
+    meta = ds.meta
+    data = _number(meta.get("noise"))
     if settings.noise is not None:
         device, source = float(settings.noise), "given"
     else:
-        sensor = sensor or dataset_sensor(ds.meta)
-        device, source = (sensor.noise, f"sensor {sensor.name}") if sensor is not None else (None, "unknown")
-    if device is None or data is None:
-        added = 0.0
-        why = "measured data carry the device's noise" if data is None else "no device noise known"
+        sensor = sensor or dataset_sensor(meta)
+        measured = _rms(meta.get("sample_noise"))
+        if sensor is not None:
+            device, source = sensor.noise, f"sensor {sensor.name}"
+        elif measured is not None:
+            device, source = measured, "measured by the capture (single samples)"
+        else:
+            device, source = None, "unknown"
+    samples = meta.get("samples_per_row")
+    data_source = "simulated" if data is not None else None
+    if data is None and isinstance(samples, int) and samples >= 1:
+        data, data_source = _rms(meta.get("row_noise")), f"measured by the capture ({samples} samples per row)"
+        if data is None and device is not None:
+            data, data_source = device / np.sqrt(samples), f"the device's over sqrt({samples} samples per row)"
+    if device is None:
+        added, why = 0.0, "no device noise known"
+    elif data is None:
+        added, why = 0.0, ("measured rows with no samples_per_row in their meta: taken as single samples, which "
+                           "carry the device's noise")
     else:
         added = float(np.sqrt(max(device**2 - data**2, 0.0)))
-        why = "the device's noise less the data's own"
-    return {"device": device, "device_source": source, "data": data, "added": added, "why": why}
+        why = "the device's single-sample noise less the rows' own"
+    return {"device": device, "device_source": source, "data": data, "data_source": data_source, "added": added,
+            "why": why}
+
+
+def _number(x) -> float | None:
+    return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) else None
+
+
+def _rms(values) -> float | None:
+    """The rms of a per-element list of noise figures (None when there is none)."""
+    if not isinstance(values, list) or not values or not all(_number(v) is not None and v >= 0 for v in values):
+        return None
+    return float(np.sqrt(np.mean(np.square(values))))
 
 
 def _d_jacobian(equations, v: np.ndarray, harmonics=None):

@@ -107,11 +107,61 @@ def deployed_errors(model: Model, held: HeldOut, sensor=None, precisions=PRECISI
     return out
 
 
+POSTERIOR_UNITS = 8  # units drawn from an identification's posterior to widen the figures
+POSTERIOR_SEED = 2027
+FIGURES = ("max", "rms", "noisy_max", "noisy_rms", "deviation", "share")
+
+
 def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, n: int = N_POSES,
-             seed: int = SEED, draws: int = NOISE_DRAWS) -> dict:
-    """The ``held_out`` record of a model file: how it was made and the errors per precision."""
-    held = held_out_set(sensor, ranges, model.output_names, noise=noise, n=n, seed=seed, draws=draws)
-    return {**held.spec, "errors": deployed_errors(model, held, sensor)}
+             seed: int = SEED, draws: int = NOISE_DRAWS, posterior: dict | None = None) -> dict:
+    """The ``held_out`` record of a model file: how it was made and the errors per precision.
+
+    ``posterior`` (an identified unit's record, fitgen.identify.save): the figures are held out on
+    POSTERIOR_UNITS units drawn from it instead of on ``sensor`` alone, and each figure is the median
+    over those units (the 90th percentile beside it), so that what the file says includes how well the
+    capture pinned the unit down.
+    """
+    if posterior is None:
+        held = held_out_set(sensor, ranges, model.output_names, noise=noise, n=n, seed=seed, draws=draws)
+        return {**held.spec, "errors": deployed_errors(model, held, sensor)}
+    units = posterior_units(posterior, sensor, POSTERIOR_UNITS)
+    per_unit, spec = [], None
+    for u in units:
+        held = held_out_set(u, ranges, model.output_names, noise=noise, n=n, seed=seed, draws=draws)
+        spec = spec or held.spec
+        per_unit.append(deployed_errors(model, held, u))
+    errors = {}
+    for prec, rec in per_unit[0].items():
+        if "unavailable" in rec:
+            errors[prec] = rec
+            continue
+        errors[prec] = {o: {**{f: float(np.median([u[prec][o][f] for u in per_unit])) for f in FIGURES},
+                            **{f"{f}_p90": float(np.percentile([u[prec][o][f] for u in per_unit], 90))
+                               for f in ("max", "noisy_max")}}
+                        for o in rec}
+    return {**spec, "sensor": sensor.name, "sensor_sha256": sensor.sha256, "errors": errors,
+            "posterior": {"units": len(units), "seed": POSTERIOR_SEED,
+                          "statistic": "median over units drawn from the identification's posterior (Laplace); "
+                                       "*_p90: their 90th percentile"}}
+
+
+def posterior_units(record: dict, sensor, k: int) -> list:
+    """``k`` units drawn from an identification's posterior record, in ``sensor``'s transfer."""
+    from .sensor import load_sensor
+    from .units import UnitSpace
+
+    try:
+        drawing = load_sensor(record["drawing_spec"]).with_transfer(sensor.transfer)
+        theta = np.asarray(record["theta"], dtype=float)
+        cov = np.asarray(record["covariance"], dtype=float)
+    except (KeyError, TypeError, ValueError):
+        raise InputError("the unit's posterior record is malformed (expected fitgen identify's)") from None
+    space = UnitSpace.of(drawing)
+    if theta.shape != (space.size,) or cov.shape != (space.size, space.size):
+        raise InputError(f"the unit's posterior does not fit its drawing {record.get('drawing_spec')!r}")
+    L = np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov)) + 1e-300 * np.eye(space.size))
+    z = np.random.default_rng(POSTERIOR_SEED).standard_normal((k, space.size))
+    return [space.sensor(theta + L @ zi, f"{sensor.name}-posterior-{i + 1}") for i, zi in enumerate(z)]
 
 
 def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] | None:

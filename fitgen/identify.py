@@ -343,6 +343,7 @@ def save(ident: Identification, path, provenance: dict) -> tuple:
     unit = ident.unit(provenance.get("name", path.stem), f"identified from {provenance.get('capture', 'a capture')}")
     record = {
         "drawing": ident.space.drawing.name, "drawing_sha256": ident.space.drawing.sha256,
+        "drawing_spec": provenance.get("drawing_spec", ident.space.drawing.name),
         "parameters": ident.space.names, "theta": ident.theta.tolist(), "sd": ident.sd.tolist(),
         "prior_sd": ident.space.prior_sd.tolist(), "covariance": ident.cov.tolist(),
         "chi2": ident.chi2, "dof": ident.dof, "rows": int(ident.problem.readings.shape[0]),

@@ -69,8 +69,13 @@ def deployed_table(model: Model) -> str:
     rec = model.fit_info.get("held_out")
     if not isinstance(rec, dict):
         return ""
+    post = rec.get("posterior")
+    on = (f"on {post['units']} units drawn from the posterior of identified unit {rec.get('sensor', '?')} "
+          "(the median of each figure)" if isinstance(post, dict) else
+          f"on unit {rec.get('sensor', '?')} ({rec['sensor_file']})" if rec.get("sensor_file") else
+          f"on the drawing {rec.get('sensor', '?')}: a built unit differs from it (fitgen identify)")
     lines = [f"### deployed accuracy, held out ({rec['poses']} random poses in the training box, seed {rec['seed']}; "
-             f"noise {rec['noise']:g} rms, {rec['noise_draws']} draws)", "",
+             f"noise {rec['noise']:g} rms, {rec['noise_draws']} draws), {on}", "",
              "| output | unit | precision | max | RMS | max, noise | RMS, noise | rounding's share |",
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for e in model.equations:

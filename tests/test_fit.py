@@ -196,3 +196,32 @@ def test_fit_by_blocks_of_rows_is_the_fit_of_all_rows(monkeypatch):
     np.testing.assert_allclose(by_blocks, whole.predict(ds.inputs), atol=1e-9)
     monkeypatch.setattr(model_mod, "_ROWS", 10**9)
     np.testing.assert_array_equal(by_blocks, blocks.predict(ds.inputs))  # row by row arithmetic: bit-identical
+
+
+def test_fit_on_a_capture_adds_the_single_sample_noise_less_the_rows(tmp_path):
+    """Rows averaged over S samples carry the device's noise over sqrt(S): the fit adds what they lack, says
+    why in the model file, and honours --noise."""
+    import json
+
+    from conftest import run_cli
+    from fitgen.sensor import load_sensor
+    from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+
+    ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-exp"]))
+    capture = {"units": "V", "source": "hardware", "samples_per_row": 16, "row_noise": [0.000125] * 8,
+               "sample_noise": [0.0005] * 8}
+    cases = [(capture, [], 0.0005, 0.000125), (capture, ["--noise", "0.001"], 0.001, 0.000125),
+             ({k: v for k, v in capture.items() if k != "row_noise"}, [], 0.0005, 0.0005 / 4),
+             ({"units": "V", "source": "hardware"}, ["--noise", "0.001"], 0.001, None)]
+    for i, (meta, extra, device, data) in enumerate(cases):
+        ds.meta = dict(meta)
+        path = ds.save(tmp_path / f"c{i}.csv", meta)
+        proc = run_cli("fitgen", "fit", str(path), "-o", str(tmp_path / f"m{i}.json"), "--held-out", "0",
+                       "--family", "no-roots", *extra)
+        assert proc.returncode == 0, proc.stderr
+        noise = json.loads((tmp_path / f"m{i}.json").read_text())["fit"]["noise"]
+        assert noise["device"] == pytest.approx(device) and (noise["data"] == pytest.approx(data) if data else
+                                                             noise["data"] is None)
+        expected = np.sqrt(device**2 - data**2) if data else 0.0
+        assert noise["added"] == pytest.approx(expected), noise
+        assert noise["why"]

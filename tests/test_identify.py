@@ -133,6 +133,17 @@ def test_cli_schedule_capture_identify(tmp_path):
     P = np.loadtxt(sch, delimiter=",", skiprows=1)
     P = np.hstack([P, np.zeros((len(P), 2))])
     assert np.abs(readings(twin, P, adc_bits=0) - readings(truth, P, adc_bits=0)).max() < 0.02  # volts
+    # the twin's estimator: its held-out figures come from units drawn from the identification's posterior
+    proc = run_cli("fitgen", "simulate", "--sensor", str(unit_file), "--grid", "paper-exp", "-o", str(tmp_path / "t.csv"))
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli("fitgen", "fit", str(tmp_path / "t.csv"), "-o", str(tmp_path / "t.json"), "--held-out", "200",
+                   "--family", "no-roots")
+    assert proc.returncode == 0, proc.stderr
+    assert "units drawn from the posterior of identified unit" in proc.stderr
+    held = json.loads((tmp_path / "t.json").read_text())["fit"]["held_out"]
+    assert held["posterior"]["units"] == 8 and held["sensor_file"] == str(unit_file.resolve())
+    dx = held["errors"]["float"]["dx"]
+    assert 0 < dx["noisy_max"] <= dx["noisy_max_p90"]
 
 
 def _save_capture(path, y, poses, meta=None):
