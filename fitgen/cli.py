@@ -85,7 +85,7 @@ def cmd_simulate(args) -> int:
         grid = args.grid or "paper-sim"
         poses, source = grid_poses(parse_grid(grid)), {"grid": grid}
     ds = simulate(sensor, poses, noise=_noise(args.noise, sensor), adc_bits=args.adc_bits,
-                  seed=args.seed, provenance={**source, **scene_info, **unit_info})
+                  seed=args.seed, provenance={**source, **scene_info, **unit_info}, labels=args.labels)
     ds.save(args.output)
     print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}",
           file=sys.stderr)
@@ -240,7 +240,7 @@ def cmd_fit(args) -> int:
                            + (", units from the identification's posterior" if posterior else ""))
             model.fit_info["held_out"] = evaluate(model, sensor, box_of(ds.poses()),
                                                   noise=model.fit_info["noise"]["device"], n=args.held_out,
-                                                  posterior=posterior)
+                                                  posterior=posterior, labels=ds.meta.get("labels", "stage"))
             if unit_file and not sensor.is_drawing:
                 model.fit_info["held_out"]["sensor_file"] = str(unit_file)
             hbar.update()
@@ -503,6 +503,9 @@ def build_parser() -> Parser:
     s.add_argument("--adc-bits", type=int, help="override the transfer's ADC bits (0: no quantisation)")
     s.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
     s.add_argument("--scene", help="full, slide, press or a scene TOML: simulate its grid (or --random N in its box)")
+    s.add_argument("--labels", choices=("stage", "magnet"), default="stage",
+                   help="for a built unit: the displacements the poses and labels are, the stage's (what a capture "
+                        "measures; default) or the magnet's")
     s.add_argument("--unit", type=int, metavar="SEED",
                    help="simulate a built unit of the sensor, drawn within its [tolerances] with this seed; its sensor "
                         "file is written beside the data (<stem>.unit.toml)")

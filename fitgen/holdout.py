@@ -44,17 +44,18 @@ def box_of(poses: np.ndarray) -> dict[str, tuple[float, float]]:
 
 
 def held_out_set(sensor, ranges: dict, outputs: tuple[str, ...], *, noise: float | None = None, n: int = N_POSES,
-                 seed: int = SEED, draws: int = NOISE_DRAWS) -> HeldOut:
+                 seed: int = SEED, draws: int = NOISE_DRAWS, labels: str = "stage") -> HeldOut:
     """``n`` random poses in ``ranges`` (pose seed ``seed``), simulated with ``sensor``; noise
-    draws with seeds seed + 1 .. seed + draws at ``noise`` (default: the sensor's; ``draws`` 0: none)."""
+    draws with seeds seed + 1 .. seed + draws at ``noise`` (default: the sensor's; ``draws`` 0: none).
+    ``labels``: a unit's targets are the stage's displacements or the magnet's (fitgen.simulate)."""
     noise = sensor.noise if noise is None else noise
     poses = random_poses(n, ranges, pose_rng(seed))
     cols = [POSE_NAMES.index(o) for o in outputs]
-    clean = simulate(sensor, poses).inputs
-    noisy = np.vstack([clean[:0]] + [simulate(sensor, poses, noise=noise, seed=seed + 1 + i).inputs
+    clean = simulate(sensor, poses, labels=labels).inputs
+    noisy = np.vstack([clean[:0]] + [simulate(sensor, poses, noise=noise, seed=seed + 1 + i, labels=labels).inputs
                                      for i in range(draws)])
     truth = poses[:, cols]
-    spec = {"poses": n, "seed": seed, "box": {k: list(v) for k, v in ranges.items()}, "noise": noise,
+    spec = {"poses": n, "seed": seed, "box": {k: list(v) for k, v in ranges.items()}, "noise": noise, "labels": labels,
             "noise_draws": draws, "noise_seeds": [seed + 1, seed + draws], "sensor": sensor.name,
             "sensor_sha256": sensor.sha256, "transfer": sensor.transfer}
     return HeldOut(clean, truth, noisy, np.tile(truth, (draws, 1)), spec)
@@ -113,7 +114,8 @@ FIGURES = ("max", "rms", "noisy_max", "noisy_rms", "deviation", "share")
 
 
 def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, n: int = N_POSES,
-             seed: int = SEED, draws: int = NOISE_DRAWS, posterior: dict | None = None) -> dict:
+             seed: int = SEED, draws: int = NOISE_DRAWS, posterior: dict | None = None,
+             labels: str = "stage") -> dict:
     """The ``held_out`` record of a model file: how it was made and the errors per precision.
 
     ``posterior`` (an identified unit's record, fitgen.identify.save): the figures are held out on
@@ -122,12 +124,13 @@ def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, 
     capture pinned the unit down.
     """
     if posterior is None:
-        held = held_out_set(sensor, ranges, model.output_names, noise=noise, n=n, seed=seed, draws=draws)
+        held = held_out_set(sensor, ranges, model.output_names, noise=noise, n=n, seed=seed, draws=draws,
+                            labels=labels)
         return {**held.spec, "errors": deployed_errors(model, held, sensor)}
     units = posterior_units(posterior, sensor, POSTERIOR_UNITS)
     per_unit, spec = [], None
     for u in units:
-        held = held_out_set(u, ranges, model.output_names, noise=noise, n=n, seed=seed, draws=draws)
+        held = held_out_set(u, ranges, model.output_names, noise=noise, n=n, seed=seed, draws=draws, labels=labels)
         spec = spec or held.spec
         per_unit.append(deployed_errors(model, held, u))
     errors = {}
@@ -177,5 +180,5 @@ def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] |
     if sensor is None:
         return None
     held = held_out_set(sensor, {k: tuple(v) for k, v in rec["box"].items()}, model.output_names,
-                        n=int(rec["poses"]), seed=int(rec["seed"]), draws=0)
+                        n=int(rec["poses"]), seed=int(rec["seed"]), draws=0, labels=rec.get("labels", "stage"))
     return held.clean, held.truth

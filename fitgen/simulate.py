@@ -101,16 +101,25 @@ def simulate(
     seed: int = 0,
     targets: tuple[str, ...] = POSE_NAMES,
     provenance: dict | None = None,
+    labels: str = "stage",
 ) -> Dataset:
     """Readings for ``poses`` through the sensor's transfer, as a :class:`Dataset`.
 
-    Deterministic: the noise stream is drawn from ``seed``.
+    Deterministic: the noise stream is drawn from ``seed``. ``labels``: for a built unit whose magnet
+    does not follow the stage one to one (its stage map), whether the poses and the targets are the
+    stage's displacements (what a capture's labels measure) or the magnet's.
     """
     poses = as_poses(poses)
     if noise < 0:
         raise InputError(f"noise must be >= 0, got {noise}")
+    if labels not in ("stage", "magnet"):
+        raise InputError(f"labels are the stage's or the magnet's, not {labels!r}")
+    physical = poses
+    if labels == "magnet" and not sensor.is_drawing:
+        physical = poses.copy()
+        physical[:, :3] = np.linalg.solve(sensor.stage_map, poses[:, :3].T).T
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
-    values = readings(sensor, poses, noise=noise, adc_bits=adc_bits, rng=rng)
+    values = readings(sensor, physical, noise=noise, adc_bits=adc_bits, rng=rng)
     cols = [POSE_NAMES.index(t) for t in targets]
     meta = {
         "generator": f"fitgen {__version__}",
@@ -122,6 +131,8 @@ def simulate(
         "adc_bits": adc_bits,
         "seed": seed,
     }
+    if not sensor.is_drawing:
+        meta["labels"] = labels
     meta.update(provenance or {})
     return Dataset(values, poses[:, cols].copy(), tuple(targets), meta)
 

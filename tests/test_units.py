@@ -113,3 +113,18 @@ def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
     assert proc.returncode == 0, proc.stderr
     held = json.loads((tmp_path / "m.json").read_text())["fit"]["held_out"]
     assert held["sensor"] == unit.name and held["sensor_sha256"] == unit.sha256
+
+
+def test_labels_are_the_stages_or_the_magnets():
+    """A unit's magnet follows the stage through its map: the same readings labelled either way."""
+    from fitgen.simulate import simulate
+
+    unit, _ = draw_unit(load_sensor("paper"), 6)
+    stage = simulate(unit, POSES[:50])
+    magnet_poses = POSES[:50].copy()
+    magnet_poses[:, :3] = POSES[:50, :3] @ unit.stage_map.T
+    magnet = simulate(unit, magnet_poses, labels="magnet")
+    np.testing.assert_allclose(magnet.inputs, stage.inputs, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(magnet.targets, magnet_poses, rtol=0, atol=0)
+    assert stage.meta["labels"] == "stage" and magnet.meta["labels"] == "magnet"
+    assert np.abs(magnet.targets[:, :3] - stage.targets[:, :3]).max() > 0.01
