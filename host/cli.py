@@ -688,6 +688,10 @@ def cmd_capture(args) -> int:
         print(f"tactile-host capture: interrupted; {keep}", file=sys.stderr)
         return 130
     except (DeviceSilent, SpreadTooLarge, TriggerFailed, StageError) as exc:
+        from pathlib import Path
+
+        if not Path(args.output).exists():
+            keep = "nothing was written"  # the fault came before the first row's file was made
         print(f"tactile-host capture: error: {exc}; {keep}", file=sys.stderr)
         return EXIT_CHECK_FAILED
     finally:
