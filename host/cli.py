@@ -600,6 +600,8 @@ def _open_stage(args, opts, output, rows):
             raise StageError(f"{ctrl.name}: the GRBL controller is in ALARM (it starts so after a reset when homing "
                              "is on): home it (--home) or unlock it (--unlock), then set the zero again")
         ctrl.setup()
+        # moves a killed run left queued end first: the position that tells a reset must be a standstill's
+        ctrl.wait_idle(60.0 + opts["timeout"], "the moves already queued")
         settings = opts["settings"]
         state = StageState.load(output)
         jogger = PoseStage(ctrl, settings, {})
