@@ -8,6 +8,11 @@ stops for any reason (Ctrl-C, a kill, a power cut, a silent chip) loses no row;
 run the same command again and it resumes: a last line without its newline (a
 write cut short) is dropped, and each schedule pose already in the file is
 skipped -- counted with multiplicity, so a schedule may visit a pose twice.
+
+The meta also records the noise the capture measured (:class:`NoiseStats`), the
+time it took, and whatever the caller adds (the channel map, a stage's settings).
+It is rewritten at the start, at most every ``META_EVERY`` seconds and at the end
+of a run, so a run killed outright loses at most those seconds of figures, never a row.
 """
 
 from __future__ import annotations
@@ -31,6 +36,9 @@ from fitgen.pose import POSE_NAMES, as_poses
 from .adc import AdcArray
 from .clock import REAL_CLOCK
 from .readout import measure
+
+
+META_EVERY = 2.0  # seconds between rewrites of the meta during a run
 
 
 class SpreadTooLarge(RuntimeError):
@@ -221,6 +229,7 @@ class CaptureResult:
     stopped: bool = False  # the user stopped before the end
     dropped_partial: bool = False
     spreads: list = field(default_factory=list)  # max spread (V rms) of each row written
+    noise: "NoiseStats | None" = None  # the noise pooled over the file's rows (earlier runs' too)
 
     @property
     def complete(self) -> bool:
@@ -236,12 +245,68 @@ def write_meta(path: str | Path, info: dict) -> None:
     write_atomic(meta_path(path), json.dumps(meta, indent=2, sort_keys=True) + "\n")
 
 
+@dataclass
+class NoiseStats:
+    """The element noise measured over rows: each row's sample variance (ddof 1) per element, pooled.
+
+    ``sample_noise`` = sqrt(mean over rows of the variance): one sample's noise (V rms);
+    ``row_noise`` = sqrt(mean over rows of variance / samples): the noise left in a row's average.
+    """
+
+    n_elements: int
+    rows: int = 0
+    sum_var: np.ndarray | None = None  # sum over rows of the per-element sample variance, V^2
+    sum_var_row: np.ndarray | None = None  # ... of variance / samples of that row
+
+    def __post_init__(self):
+        if self.sum_var is None:
+            self.sum_var = np.zeros(self.n_elements)
+        if self.sum_var_row is None:
+            self.sum_var_row = np.zeros(self.n_elements)
+
+    def add(self, block: np.ndarray) -> None:
+        if block.shape[0] < 2:
+            return  # one sample has no spread to measure
+        var = block.var(axis=0, ddof=1)
+        self.rows += 1
+        self.sum_var += var
+        self.sum_var_row += var / block.shape[0]
+
+    @classmethod
+    def from_meta(cls, meta: dict, n: int) -> "NoiseStats":
+        """The figures an earlier run recorded (pooled over ``noise_rows`` rows), to pool on from."""
+        try:
+            rows = int(meta["noise_rows"])
+            ns, nr = np.asarray(meta["sample_noise"], dtype=float), np.asarray(meta["row_noise"], dtype=float)
+        except (KeyError, TypeError, ValueError):
+            return cls(n)
+        if rows < 1 or ns.shape != (n,) or nr.shape != (n,) or not (np.all(np.isfinite(ns)) and np.all(np.isfinite(nr))):
+            return cls(n)
+        return cls(n, rows, rows * ns ** 2, rows * nr ** 2)
+
+    def meta(self) -> dict:
+        if self.rows == 0:
+            return {"noise_rows": 0, "sample_noise": None, "row_noise": None}
+        return {"noise_rows": self.rows,
+                "sample_noise": [float(x) for x in np.sqrt(self.sum_var / self.rows)],
+                "row_noise": [float(x) for x in np.sqrt(self.sum_var_row / self.rows)]}
+
+
+def _prior_meta(output) -> dict:
+    try:
+        meta = json.loads(meta_path(output).read_text())
+    except (OSError, ValueError):
+        return {}
+    return meta if isinstance(meta, dict) else {}
+
+
 def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples: int = 16,
             max_spread: float = 0.003, tries: int = 3, wait=None, set_pose=None, settle: float = 0.0,
             clock=REAL_CLOCK, progress=None, meta: dict | None = None) -> CaptureResult:
     """Capture every pose of ``schedule`` not yet in ``output``.
 
-    Per pose: ``set_pose(pose)`` (a simulated stage), ``wait(i, pose)`` (Enter or a
+    Per pose: ``set_pose(pose)`` (a stage that moves itself: simulated, or
+    ``host.stage.PoseStage.move_to``), ``wait(i, pose)`` (Enter or a
     trigger; False stops), ``settle`` seconds, then ``samples`` readings averaged;
     when some element's standard deviation exceeds ``max_spread`` volts the pose is
     measured again, up to ``tries`` times, then ``SpreadTooLarge``.
@@ -256,9 +321,22 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
         raise InputError(f"--settle must be >= 0 s, got {settle}")
     state = prepare_output(output, array.n, schedule)
     res = CaptureResult(len(schedule.poses), int(state.done.sum()), dropped_partial=state.dropped_partial)
+    prior = _prior_meta(output) if state.rows > 0 else {}  # rows from earlier runs: pool on from their figures
+    noise = res.noise = NoiseStats.from_meta(prior, array.n)
+    try:
+        before_s, runs = float(prior.get("duration_s", 0.0)), int(prior.get("runs", 0)) + 1
+    except (TypeError, ValueError):
+        before_s, runs = 0.0, 1
+    t_start = clock.monotonic()
     info = {"schedule": schedule.origin, "samples_per_row": samples, "max_spread_volts": max_spread,
             **(meta or {})}
-    write_meta(output, info)
+
+    def refresh():
+        info.update(noise.meta(), duration_s=before_s + (clock.monotonic() - t_start), runs=runs)
+        write_meta(output, info)
+        return clock.monotonic()
+
+    last_meta = refresh()
     writer = RowWriter(output)
     values = schedule.values
     try:
@@ -281,11 +359,14 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
                                      f"{spread[k] * 1e3:.3g} mV rms over {samples} samples (limit "
                                      f"{max_spread * 1e3:.3g} mV) in {tries} tries; is the sensor still moving?")
             writer.append(row_line(block.mean(axis=0), values[i]))
+            noise.add(block)
             res.captured += 1
             res.spreads.append(float(spread.max()))
             if progress is not None:
                 progress.update(1)
+            if clock.monotonic() - last_meta >= META_EVERY:
+                last_meta = refresh()
     finally:
         writer.close()
-        write_meta(output, info)
+        refresh()
     return res

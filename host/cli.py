@@ -545,55 +545,205 @@ def cmd_capture_temperatures(args) -> int:
     return 0
 
 
+_STAGE_OPTIONS = ("stage_flavor", "stage_baud", "stage_axes", "stage_limits", "stage_feed", "stage_approach",
+                  "stage_timeout", "stage_boot_wait", "home", "unlock", "zero")
+
+
+def _stage_settings(args, schedule):
+    """--stage and its options, checked against the schedule before anything moves (None without --stage)."""
+    from .stage import AxisMap, StageSettings, parse_approach, parse_ranges, parse_zero, stage_url
+
+    given = [o for o in _STAGE_OPTIONS if getattr(args, o) not in (None, False)]
+    if args.stage is None:
+        if given:
+            raise InputError(f"--{given[0].replace('_', '-')} needs --stage gcode:URL")
+        if args.sim_pose_file:
+            raise InputError("--sim-pose-file needs --stage (the simulated sensor follows a simulated stage)")
+        return None
+    if args.trigger:
+        raise InputError("--stage and --trigger both set the poses: give one")
+    if args.temperature is not None:
+        raise InputError("--stage with --temperature is not supported yet: capture each temperature on its own")
+    if args.simulate and not args.sim_pose_file:
+        raise InputError("--simulate with --stage needs --sim-pose-file FILE (the pose file tactile-host stage-sim "
+                         "--pose-file FILE writes), or the simulated sensor would never move")
+    if args.sim_pose_file and not args.simulate:
+        raise InputError("--sim-pose-file needs --simulate")
+    if args.stage_limits is None:
+        raise InputError("--stage needs --stage-limits, e.g. dx=-3:3,dy=-3:3,dz=-2.5:0.5 (mm from the zero): "
+                         "a move outside them is never sent")
+    settings = StageSettings(AxisMap.parse(args.stage_axes or "X=dx,Y=dy,Z=dz"),
+                             parse_ranges(args.stage_limits, "--stage-limits"),
+                             feed=_positive(args.stage_feed or "600", "--stage-feed"),
+                             approach=parse_approach(args.stage_approach or "dx=-0.3,dy=-0.3,dz=0.3")).check()
+    settings.check_schedule(schedule.poses, schedule.describe)
+    return {"url": stage_url(args.stage), "settings": settings, "zero": parse_zero(args.zero or "ask"),
+            "baud": _positive(args.stage_baud or "115200", "--stage-baud", integer=True),
+            "timeout": _positive(args.stage_timeout or "5", "--stage-timeout"),
+            "boot_wait": _positive(args.stage_boot_wait or "2", "--stage-boot-wait", zero=True)}
+
+
+def _open_stage(args, opts, output, rows):
+    """Connect, home or unlock if asked, check the controller's state, and get the zero: (PoseStage, meta)."""
+    from .stage import GcodeController, PoseStage, StageError, StageState, choose_zero, jog_to_zero
+
+    prog = "tactile-host capture"
+    ctrl = GcodeController.open(opts["url"], baud=opts["baud"], timeout=opts["timeout"])
+    try:
+        ctrl.connect(args.stage_flavor or "auto", boot_wait=opts["boot_wait"])
+        if args.home:
+            print(f"{prog}: homing the stage", file=sys.stderr, flush=True)
+            ctrl.home(timeout=max(120.0, opts["timeout"]))
+        elif args.unlock:
+            ctrl.unlock()
+        if ctrl.alarm:
+            raise StageError(f"{ctrl.name}: the GRBL controller is in ALARM (it starts so after a reset when homing "
+                             "is on): home it (--home) or unlock it (--unlock), then set the zero again")
+        ctrl.setup()
+        # moves a killed run left queued end first: the position that tells a reset must be a standstill's
+        ctrl.wait_idle(60.0 + opts["timeout"], "the moves already queued")
+        settings = opts["settings"]
+        state = StageState.load(output)
+        jogger = PoseStage(ctrl, settings, {})
+
+        def ask(reason):
+            print(f"{prog}: {reason}", file=sys.stderr)
+            return jog_to_zero(jogger, sys.stdin, sys.stderr, prog)
+
+        zero, how = choose_zero(ctrl, state, settings.axes, opts["zero"], rows=rows, ask=ask)
+        homed = ctrl.homed or (how == "kept from the last run" and state.homed)
+        state = StageState(ctrl.flavor, str(settings.axes), zero, homed, None, [])
+        state.save(output)
+        stage = PoseStage(ctrl, settings, zero)
+
+        def on_move(targets):
+            if targets is None:
+                state.position, state.pending = [float(x) for x in stage.position], []
+            else:
+                state.pending = [{k: float(v) for k, v in t.items()} for t in targets]
+            state.save(output)
+
+        stage.on_move = on_move
+        z = " ".join(f"{m}{v:g}" for m, v in zero.items())
+        print(f"{prog}: stage {ctrl.flavor} ({ctrl.firmware or 'firmware unnamed'}) at {opts['url']}, zero {z} "
+              f"({how})", file=sys.stderr, flush=True)
+        meta = {"kind": "gcode", "url": opts["url"], "flavor": ctrl.flavor, "firmware": ctrl.firmware,
+                "zero_machine_mm": zero, "zero_homed": homed, "zero_source": how, **settings.describe()}
+        return stage, meta
+    except BaseException:
+        ctrl.close()
+        raise
+
+
 def cmd_capture(args) -> int:
+    import time
+
     from fitgen.progress import Progress
 
-    if args.temperature is not None:
+    if args.temperature is not None and args.stage is None:
         return cmd_capture_temperatures(args)
 
     from .adc import AdcArray, DeviceSilent, RetryPolicy
     from .capture import (SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, prepare_output,
                           trigger_waiter)
+    from .stage import StageError
 
     samples, spread, tries, settle, retries = _capture_numbers(args)
     schedule = load_schedule(args.poses)
     cmap = _channel_map(args)
     state = prepare_output(args.output, cmap.n_elements, schedule, write=False)  # checked before any waiting
+    stage_opts = _stage_settings(args, schedule)  # and the stage's settings before anything moves
     total, pending = len(schedule.poses), int((~state.done).sum())
-    interactive = not args.trigger and not args.simulate
+    interactive = not args.trigger and not args.simulate and stage_opts is None
     if args.trigger:
         wait = trigger_waiter(args.trigger, schedule)
-    elif args.simulate:
-        wait = None  # the simulated stage sets each pose itself
+    elif args.simulate or stage_opts is not None:
+        wait = None  # the stage (simulated or G-code) sets each pose itself
     else:
         wait = enter_waiter(schedule)
     meta = {"adc": cmap.describe(), "source": f"simulated {args.sensor}" if args.simulate else "hardware"}
-    bus, clock = _open_bus(args, cmap, schedule.poses[0] if args.simulate else None)
+    motion = None
+    if args.sim_pose_file:
+        from .stagesim import pose_file_motion
+
+        motion = pose_file_motion(args.sim_pose_file)
+    bus, clock = _open_bus(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion)
+    if motion is not None:
+        bus.feed.motion_step = 0.0  # follow the stage at every conversion: a move ends between two rows
     keep = f"the rows written so far are kept in {args.output}: run the same command again to resume"
+    stage = None
+    t0 = time.monotonic()
     try:
         array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
         array.probe()
         array.setup()
+        set_pose = bus.set_pose if args.simulate else None
+        if stage_opts is not None:
+            stage, meta["stage"] = _open_stage(args, stage_opts, args.output, state.rows)
+            meta["stage"]["settle_s"] = settle
+            set_pose = stage.move_to
         with Progress("capture", pending) as progress:
             res = capture(array, schedule, args.output, samples=samples, max_spread=spread, tries=tries,
-                          wait=wait, set_pose=bus.set_pose if args.simulate else None, settle=settle,
+                          wait=wait, set_pose=set_pose, settle=settle,
                           clock=clock, progress=None if interactive else progress, meta=meta)
     except KeyboardInterrupt:
         print(f"tactile-host capture: interrupted; {keep}", file=sys.stderr)
         return 130
-    except (DeviceSilent, SpreadTooLarge, TriggerFailed) as exc:
+    except (DeviceSilent, SpreadTooLarge, TriggerFailed, StageError) as exc:
+        from pathlib import Path
+
+        if not Path(args.output).exists():
+            keep = "nothing was written"  # the fault came before the first row's file was made
         print(f"tactile-host capture: error: {exc}; {keep}", file=sys.stderr)
         return EXIT_CHECK_FAILED
     finally:
+        if stage is not None:
+            stage.ctrl.close()
         bus.close()
     done = res.before + res.captured
     note = "; dropped an unfinished last line" if res.dropped_partial else ""
+    took = f" in {time.monotonic() - t0:.1f} s" if stage is not None else ""
     if res.complete:
-        print(f"tactile-host capture: {done}/{total} poses in {args.output} ({res.captured} captured now, "
+        print(f"tactile-host capture: {done}/{total} poses in {args.output} ({res.captured} captured now{took}, "
               f"{res.before} already there{note})", file=sys.stderr)
     else:
         print(f"tactile-host capture: stopped with {done}/{total} poses in {args.output}{note}; run the same "
               "command again to resume", file=sys.stderr)
+    return 0
+
+
+def cmd_stage_sim(args) -> int:
+    """``stage-sim``: a simulated Marlin or GRBL on a loopback port or a pty until Ctrl-C."""
+    import time
+
+    from .stagesim import PoseFile, PtyServer, SimController, SimRig, SocketServer, parse_matrix
+
+    def triple(text, what):
+        try:
+            vals = [float(x) for x in text.replace(",", " ").split()]
+        except ValueError:
+            vals = []
+        if len(vals) != 3:
+            raise InputError(f"{what} {text!r}: three numbers X,Y,Z (mm)")
+        return vals
+
+    M = parse_matrix(args.map) if args.map else None
+    backlash = _positive(args.backlash, "--backlash", zero=True)
+    rep = _positive(args.repeatability, "--repeatability", zero=True)
+    contact, start = triple(args.contact, "--contact"), triple(args.start, "--start")
+    target = PoseFile(args.pose_file) if args.pose_file else None
+    rig = SimRig(target, M, axes=args.axes, contact=contact, start=start, backlash=backlash, repeatability=rep,
+                 seed=args.seed)
+    ctrl = SimController(args.flavor, rig, homing_lock=args.homing)
+    server = PtyServer(ctrl) if args.pty else SocketServer(ctrl, port=args.port)
+    with server, _StopFlag() as stop:
+        print(server.url, flush=True)
+        first = " ".join(f"{a}{c - s:g}" for a, c, s in zip("XYZ", contact, start))
+        print(f"tactile-host stage-sim: {args.flavor} on {server.url}; first contact at machine {first} (until "
+              f"homed); {'pose in ' + args.pose_file if args.pose_file else 'no pose file'}; Ctrl-C stops",
+              file=sys.stderr, flush=True)
+        while not stop():
+            time.sleep(0.1)
     return 0
 
 
@@ -777,7 +927,55 @@ def build_parser() -> Parser:
     c.add_argument("--temp-comp-output", metavar="FILE.json", help="with --temperature: where the compensation goes")
     c.add_argument("--sim-drift", metavar="ramp=..,over=..,tau=..,creep=..,seed=..",
                    help="with --simulate --temperature: the simulated drift's coefficients (default: typical, seed --seed)")
+    st = c.add_argument_group("a stage that moves itself (docs/calibration.md)")
+    st.add_argument("--stage", metavar="gcode:URL",
+                    help="drive a Marlin or GRBL machine: gcode:/dev/ttyUSB0, gcode:socket://127.0.0.1:PORT "
+                         "(tactile-host stage-sim), any pyserial URL")
+    st.add_argument("--stage-flavor", choices=("auto", "marlin", "grbl"), help="default auto: from its banner or "
+                    "its answer to M115")
+    st.add_argument("--stage-baud", metavar="BAUD", help="serial baud rate (default 115200)")
+    st.add_argument("--stage-axes", metavar="X=dx,Y=dy,Z=dz",
+                    help="which machine axis moves along which pose axis, with its sign (default X=dx,Y=dy,Z=dz)")
+    st.add_argument("--stage-limits", metavar="dx=LO:HI,..",
+                    help="soft limits in mm from the zero for every mapped pose axis (required with --stage); "
+                         "checked for every pose and its approach before anything moves")
+    st.add_argument("--stage-feed", metavar="MM_MIN", help="feed rate of every move, mm/min (default 600)")
+    st.add_argument("--stage-approach", metavar="dx=-0.3,dy=-0.3,dz=0.3",
+                    help="where the last move to each pose starts, relative to it (backlash: every pose approached "
+                         "from the same side; 0 turns it off for an axis; default dx=-0.3,dy=-0.3,dz=0.3)")
+    st.add_argument("--stage-timeout", metavar="S", help="time limit for each answer of the controller (default 5 s, "
+                    "plus each move's own time)")
+    st.add_argument("--stage-boot-wait", metavar="S", help="seconds to wait for a start-up banner after opening the "
+                    "port (boards that reset on connect print one; default 2)")
+    st.add_argument("--home", action="store_true", help="home the machine first (G28 / $H): a zero taken on a homed "
+                    "machine holds across resets")
+    st.add_argument("--unlock", action="store_true", help="GRBL: leave ALARM by $X without homing")
+    st.add_argument("--zero", metavar="ask|here|X,Y,Z",
+                    help="the stage's zero, first contact with the resting sensor, when the last one does not hold: "
+                         "ask (default: jog to it at a prompt), here (new datasets only), or machine coordinates")
+    st.add_argument("--sim-pose-file", metavar="FILE",
+                    help="with --simulate --stage: the simulated sensor follows the pose tactile-host stage-sim "
+                         "--pose-file FILE writes")
     c.set_defaults(func=cmd_capture)
+
+    ss = sub.add_parser("stage-sim", help="a simulated Marlin or GRBL stage on a loopback port or a pty, moving a "
+                                          "simulated sensor through a pose file")
+    ss.add_argument("--flavor", default="grbl", choices=("grbl", "marlin"))
+    ss.add_argument("--port", type=int, default=0, help="TCP port on 127.0.0.1 (default 0: any free one)")
+    ss.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal instead (prints its path)")
+    ss.add_argument("--pose-file", metavar="FILE", help="write the magnet's pose here (capture --sim-pose-file FILE)")
+    ss.add_argument("--map", metavar="a,b,c;d,e,f;g,h,i",
+                    help="stage-to-magnet displacement map M, rows (default: identity)")
+    ss.add_argument("--axes", default="X=dx,Y=dy,Z=dz", help="the rig's true machine -> sensor axes")
+    ss.add_argument("--backlash", default="0.03", help="lost motion per axis on reversal, mm (default 0.03)")
+    ss.add_argument("--repeatability", default="0.002", help="random error at the end of each move, mm rms "
+                    "(default 0.002)")
+    ss.add_argument("--contact", default="12,8,4", help="first contact, mm from the home switches (default 12,8,4)")
+    ss.add_argument("--start", default="10,10,10", help="where the carriage stands at power-on, mm from the home "
+                    "switches (default 10,10,10; machine coordinates start at 0 there)")
+    ss.add_argument("--homing", action="store_true", help="homing on: GRBL starts in ALARM until $H or $X")
+    ss.add_argument("--seed", type=int, default=0)
+    ss.set_defaults(func=cmd_stage_sim)
     return p
 
 

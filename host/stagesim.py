@@ -1,0 +1,590 @@
+"""A simulated G-code stage: a Marlin or GRBL controller on a loopback socket or a pty, moving a simulated sensor.
+
+``SimRig`` is the mechanics: the carriage's position (machine coordinates plus
+the offset a reset or homing sets), the tool's true position behind it (a dead
+band of ``backlash`` mm per axis, then a fresh Gaussian ``repeatability`` error
+at the end of every move), and the magnet's pose: while the tool is in contact
+(its pose-dz at most ``adhesion`` above first contact), magnet displacement =
+``M @`` tool displacement from first contact (in the sensor's axes, through the
+true axis map); otherwise the magnet rests. It hands the pose to ``target.set_pose``:
+a ``host.simbus.SensorFeed`` or ``SimBus`` in the same process, or a ``PoseFile``
+that a capture in another process follows (``capture --simulate --sim-pose-file``).
+
+``SimController`` is the firmware as a host sees it: lines in, lines out, at the
+times a real one answers. Both flavors queue ``G1`` moves in a planner (``ok`` at
+once while it has room) and move at the feed; Marlin answers ``M400`` when the
+planner is empty (``echo:busy: processing`` every ``busy_interval`` meanwhile),
+``M114`` with ``X:.. Y:.. Z:.. E:.. Count ..``, ``M115`` with its firmware name,
+unknown commands with ``echo:Unknown command``, and clamps moves to its software
+endstops once homed, silently, as Marlin does; GRBL answers ``G4 P0`` when the
+planner is empty, the real-time ``?`` at once with ``<State|MPos:..|FS:..>``,
+``$I``, ``$#``, ``$X``, ``$H``, errors as ``error:N``, a target beyond its travel
+when homed as ``ALARM:2`` (then a reset), and after a reset with
+``homing_lock`` starts in Alarm with ``[MSG:'$H'|'$X' to unlock]``. ``reset()``
+is the reset button: the carriage stays where it is and its coordinates restart at 0.
+``inject(kind, at_move)`` makes the controller fail at its ``at_move``-th G1:
+``error`` (GRBL error:33 / Marlin Error: and a halt), ``alarm`` (GRBL ALARM:1, a hard limit),
+``silent`` (no answer ever again), ``reset`` (a brown-out).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import select
+import socket
+import threading
+import time
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.errors import InputError
+
+from .stage import MACHINE_AXES, STAGE_AXES, AxisMap
+
+GRBL_VERSION = "1.1h"
+MARLIN_VERSION = "2.1.2.1"
+
+
+class PoseFile:
+    """The magnet's pose as one line of five numbers in a file, replaced atomically at every change."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+
+    def set_pose(self, pose) -> None:
+        tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        tmp.write_text(",".join(repr(float(x)) for x in pose) + "\n")
+        os.replace(tmp, self.path)
+
+
+def pose_file_motion(path: str | Path):
+    """A ``SensorFeed.motion`` function reading a :class:`PoseFile` (re-read when it changes; rest until it exists)."""
+    path = Path(path)
+    cache = {"key": None, "pose": np.zeros(5)}
+
+    def motion(t: float) -> np.ndarray:
+        try:
+            st = path.stat()
+        except FileNotFoundError:
+            return cache["pose"]
+        key = (st.st_mtime_ns, st.st_size, st.st_ino)
+        if key != cache["key"]:
+            try:
+                vals = [float(x) for x in path.read_text().split(",")]
+            except (OSError, ValueError):
+                return cache["pose"]  # replaced atomically, so this is a file not yet written: keep the last
+            if len(vals) == 5 and all(math.isfinite(v) for v in vals):
+                cache["key"], cache["pose"] = key, np.array(vals)
+        return cache["pose"]
+
+    return motion
+
+
+class SimRig:
+    """Carriage -> tool (backlash, repeatability) -> magnet (contact, map ``M``) -> ``target.set_pose``."""
+
+    def __init__(self, target=None, M=None, *, axes: str = "X=dx,Y=dy,Z=dz", contact=(12.0, 8.0, 4.0),
+                 start=(10.0, 10.0, 10.0), backlash=0.03, repeatability=0.002, adhesion=0.05,
+                 travel=((0.0, 200.0),) * 3, seed: int = 0):
+        self.target = target
+        self.M = np.eye(3) if M is None else np.asarray(M, dtype=float).reshape(3, 3)
+        self.axes = AxisMap.parse(axes)  # the rig's true machine -> sensor axes
+        self.contact = np.asarray(contact, dtype=float)  # carriage position (home frame) at first contact
+        self.backlash = np.broadcast_to(np.asarray(backlash, dtype=float), (3,)).copy()
+        self.repeatability = float(repeatability)
+        self.adhesion = float(adhesion)
+        self.travel = np.asarray(travel, dtype=float)  # carriage range in the home frame
+        self.rng = np.random.default_rng(seed)
+        self.carriage = np.asarray(start, dtype=float).copy()  # where the motors put the carriage (home frame)
+        # the tool lags the carriage by half the backlash, on the side it last came from (unknown at power-on:
+        # centred)
+        self.nominal = self.carriage.copy()
+        self.tool = self.carriage.copy()
+        self.pose = np.zeros(5)
+        self.lock = threading.Lock()
+        self.publish()
+
+    def move(self, carriage) -> None:
+        """The carriage reached ``carriage`` (home frame): the tool follows through the dead band."""
+        with self.lock:
+            c = np.asarray(carriage, dtype=float)
+            half = self.backlash / 2
+            self.nominal = np.where(c > self.nominal + half, c - half, np.where(c < self.nominal - half, c + half,
+                                                                                 self.nominal))
+            self.carriage = c.copy()
+            self.tool = self.nominal + self.rng.normal(0.0, self.repeatability, 3) * (self.repeatability > 0)
+            self.publish()
+
+    def displacement(self) -> np.ndarray:
+        """The tool's displacement from first contact along the sensor's dx, dy, dz."""
+        d = np.zeros(3)
+        for m, p, s in self.axes.pairs:
+            k = MACHINE_AXES.index(m)
+            d[STAGE_AXES.index(p)] = s * (self.tool[k] - self.contact[k])
+        return d
+
+    def publish(self) -> None:
+        d = self.displacement()
+        pose = np.zeros(5)
+        if d[2] <= self.adhesion:  # in contact (a little adhesion holds the skin when the tool just lifts)
+            pose[:3] = self.M @ d
+        self.pose = pose
+        if self.target is not None:
+            self.target.set_pose(pose)
+
+
+class _Move:
+    __slots__ = ("start", "end", "t0", "t1")
+
+    def __init__(self, start, end, t0, t1):
+        self.start, self.end, self.t0, self.t1 = start, end, t0, t1
+
+
+class SimController:
+    """Marlin or GRBL, fed bytes by ``receive`` and stepped by ``step(now)``; ``take_output`` gives its bytes."""
+
+    def __init__(self, flavor: str, rig: SimRig, *, planner: int = 16, steps_per_mm: float = 400.0,
+                 busy_interval: float = 2.0, homing_lock: bool = False, homing_time: float = 0.2,
+                 max_feed: float = 12000.0, clock=time.monotonic):
+        if flavor not in ("marlin", "grbl"):
+            raise InputError(f"simulated stage flavor {flavor!r}: marlin or grbl")
+        self.flavor, self.rig = flavor, rig
+        self.planner_size, self.steps_per_mm = planner, steps_per_mm
+        self.busy_interval, self.homing_lock, self.homing_time = busy_interval, homing_lock, homing_time
+        self.max_feed = max_feed
+        self.clock = clock
+        self.lock = threading.RLock()
+        self.faults: list[dict] = []
+        self.g1_count = 0
+        self.lines: list[str] = []  # every line received (tests read it)
+        self.on_line = None  # optional callable(line) called before a line is executed
+        self._inbuf = bytearray()
+        self._out = bytearray()
+        self.silent = False
+        self._power_on()
+
+    # -- state
+
+    def _power_on(self) -> None:
+        self.offset = self.rig.carriage.copy()  # home frame = machine + offset; a reset restarts at 0 here
+        self.homed = False
+        self.queue: deque[_Move] = deque()
+        self.pending: deque[str] = deque()  # lines received and not yet executed
+        self.blocked_until = None  # a command waiting (M400, G4, homing): (predicate, then)
+        self.absolute = True
+        self.feed = None if self.flavor == "grbl" else 1500.0
+        self.halted = False
+        self.homing = False
+        self.alarm = self.flavor == "grbl" and self.homing_lock
+        self._last_busy = 0.0
+        self.planned = self.machine()  # where the last queued move ends (machine coordinates)
+
+    def machine(self) -> np.ndarray:
+        return self.rig.carriage - self.offset
+
+    def reset(self) -> None:
+        """The reset button (or a power cycle): motion stops, coordinates restart at 0, the banner comes."""
+        with self.lock:
+            now = self.clock()
+            moving = bool(self.queue)
+            if moving:  # the carriage stops where it is
+                self.rig.move(self._where(now))
+            self._power_on()
+            self.silent = False
+            self._inbuf.clear()
+            if self.flavor == "grbl":
+                self._say("", f"Grbl {GRBL_VERSION} ['$' for help]")
+                if moving:
+                    self.alarm = True
+                    self._say("ALARM:3")
+                if self.alarm:
+                    self._say("[MSG:'$H'|'$X' to unlock]")
+            else:
+                self._say("start", f"echo:Marlin {MARLIN_VERSION}", "echo: Last Updated: 2023-06-22 | Author: sim",
+                          "echo:Compiled: Jun 22 2023", "echo: Free Memory: 4096  PlannerBufferBytes: 1024")
+
+    def wait_idle(self, timeout: float = 10.0) -> None:
+        """Until every queued move has ended (real time)."""
+        end = time.monotonic() + timeout
+        while self.queue and time.monotonic() < end:
+            time.sleep(0.005)
+
+    def inject(self, kind: str, at_move: int) -> None:
+        """Fail at the ``at_move``-th G1 from now (1: the next): error, alarm, silent or reset."""
+        if kind not in ("error", "alarm", "silent", "reset"):
+            raise InputError(f"simulated stage fault {kind!r}: error, alarm, silent or reset")
+        self.faults.append({"kind": kind, "at": self.g1_count + int(at_move)})
+
+    # -- bytes
+
+    def _say(self, *lines: str) -> None:
+        if not self.silent:
+            for text in lines:
+                self._out += text.encode() + b"\r\n"
+
+    def take_output(self) -> bytes:
+        with self.lock:
+            out = bytes(self._out)
+            self._out.clear()
+            return out
+
+    def receive(self, data: bytes) -> None:
+        with self.lock:
+            for b in data:
+                if self.flavor == "grbl" and b in (0x3F, 0x18, 0x21, 0x7E):  # ? ctrl-x ! ~ : real-time, never queued
+                    if b == 0x3F:
+                        self._status(self.clock())
+                    elif b == 0x18:
+                        self.reset()
+                    continue
+                if b in (0x0A, 0x0D):
+                    if self._inbuf:
+                        self.pending.append(self._inbuf.decode("ascii", "replace"))
+                        self._inbuf.clear()
+                    continue
+                self._inbuf.append(b)
+
+    # -- time
+
+    def _where(self, now: float) -> np.ndarray:
+        """The carriage (home frame) at ``now``, inside the move under way."""
+        if not self.queue or now <= self.queue[0].t0:
+            return self.rig.carriage.copy()
+        m = self.queue[0]
+        f = min((now - m.t0) / (m.t1 - m.t0), 1.0) if m.t1 > m.t0 else 1.0
+        return m.start + f * (m.end - m.start)
+
+    def step(self, now: float | None = None) -> None:
+        with self.lock:
+            now = self.clock() if now is None else now
+            while self.queue and self.queue[0].t1 <= now:
+                self.rig.move(self.queue.popleft().end)
+            if self.silent or self.halted:
+                self.pending.clear()
+                return
+            if self.blocked_until is not None:
+                done, then = self.blocked_until
+                if not done(now):
+                    if self.flavor == "marlin" and now - self._last_busy >= self.busy_interval:
+                        self._last_busy = now
+                        self._say("echo:busy: processing")
+                    return
+                self.blocked_until = None
+                then()
+            while self.pending and self.blocked_until is None:
+                line = self.pending.popleft()
+                if not self._execute(line, now):
+                    self.pending.appendleft(line)  # planner full: the line waits, and so does its ok
+                    return
+
+    # -- commands
+
+    def _words(self, line: str) -> list[tuple[str, float]] | None:
+        line = re.sub(r"\(.*?\)|;.*$", "", line).replace(" ", "").upper()
+        words = re.findall(r"([A-Z])([-+]?\d*\.?\d+)", line)
+        if "".join(a + b for a, b in words) != line:
+            return None
+        return [(a, float(b)) for a, b in words]
+
+    def _execute(self, line: str, now: float) -> bool:
+        """Run one line; False when it has to wait for room in the planner."""
+        text = line.strip()
+        words = None if text.startswith("$") else self._words(text)
+        if words and words[0][0] == "G" and words[0][1] in (0, 1) and len(self.queue) >= self.planner_size:
+            return False
+        if self.on_line is not None:
+            self.on_line(text)
+        if self.flavor == "grbl" and text.startswith("$"):
+            self.lines.append(text)
+            self._grbl_system(text, now)
+            return True
+        if words is None or not words:
+            self.lines.append(text)
+            if self.flavor == "grbl":
+                self._say("error:1" if words is None else "ok")
+            else:
+                self._say(f'echo:Unknown command: "{text}"', "ok")
+            return True
+        letter, number = words[0]
+        code = f"{letter}{number:g}"
+        self.lines.append(text)
+        if self.flavor == "grbl" and self.alarm:
+            self._say("error:9")
+            return True
+        args = dict(words[1:])
+        if code in ("G0", "G1"):
+            self._g1(args, now)
+        elif code in ("G21", "G94", "M17", "M18", "M84", "M211"):
+            self._say("ok")
+        elif code == "G90":
+            self.absolute = True
+            self._say("ok")
+        elif code == "G91":
+            self.absolute = False
+            self._say("ok")
+        elif code == "G4" and self.flavor == "grbl":
+            dwell = args.get("P", 0.0)
+            self.blocked_until = (lambda t, d=dwell, s=now: not self.queue and t >= s + d, lambda: self._say("ok"))
+        elif code == "M400" and self.flavor == "marlin":
+            self._last_busy = now
+            self.blocked_until = (lambda t: not self.queue, lambda: self._say("ok"))
+        elif code == "M114" and self.flavor == "marlin":
+            p = self.planned  # Marlin reports where the planner is headed, not the motors
+            counts = " ".join(f"{a}:{round(v * self.steps_per_mm)}" for a, v in zip(MACHINE_AXES, self.machine()))
+            self._say(f"X:{p[0]:.2f} Y:{p[1]:.2f} Z:{p[2]:.2f} E:0.00 Count {counts}", "ok")
+        elif code == "M115" and self.flavor == "marlin":
+            self._say(f"FIRMWARE_NAME:Marlin {MARLIN_VERSION} (sim) SOURCE_CODE_URL:local PROTOCOL_VERSION:1.0 "
+                      "MACHINE_TYPE:sim stage EXTRUDER_COUNT:1", "Cap:AUTOREPORT_POS:0", "ok")
+        elif code == "G28" and self.flavor == "marlin":
+            self._home(now)
+        elif self.flavor == "grbl":
+            self._say("error:20")
+        else:
+            self._say(f'echo:Unknown command: "{text}"', "ok")
+        return True
+
+    def _g1(self, args: dict, now: float) -> None:
+        if "F" in args:
+            if args["F"] <= 0:
+                self._say("error:2" if self.flavor == "grbl" else "Error:feed rate must be positive", "ok")
+                return
+            self.feed = min(args["F"], self.max_feed)
+        if self.feed is None:  # GRBL: G1 needs a feed rate once
+            self._say("error:22")
+            return
+        target = self.planned.copy()
+        for k, a in enumerate(MACHINE_AXES):
+            if a in args:
+                target[k] = args[a] if self.absolute else target[k] + args[a]
+        self.g1_count += 1
+        for f in list(self.faults):
+            if f["at"] == self.g1_count:
+                self.faults.remove(f)
+                return self._fail(f["kind"], now)
+        home_frame = target + self.offset
+        if self.homed:
+            lo, hi = self.rig.travel[:, 0], self.rig.travel[:, 1]
+            outside = np.any((home_frame < lo) | (home_frame > hi))
+            if outside and self.flavor == "grbl":  # soft limits: alarm, and GRBL resets itself
+                self.queue.clear()
+                self._say("ALARM:2")
+                self._say(f"Grbl {GRBL_VERSION} ['$' for help]", "[MSG:'$H'|'$X' to unlock]")
+                self.alarm = True
+                self.pending.clear()
+                return
+            home_frame = np.clip(home_frame, lo, hi)  # Marlin's software endstops: clamped, silently
+            target = home_frame - self.offset
+        start = self.queue[-1].end if self.queue else self.rig.carriage.copy()
+        t0 = max(now, self.queue[-1].t1 if self.queue else now)
+        dist = float(np.linalg.norm(home_frame - start))
+        self.queue.append(_Move(start, home_frame, t0, t0 + dist / self.feed * 60.0))
+        self.planned = target
+        self._say("ok")
+
+    def _fail(self, kind: str, now: float) -> None:
+        if kind == "silent":
+            self.silent = True
+        elif kind == "reset":
+            self.reset()
+        elif kind == "error":
+            if self.flavor == "grbl":
+                self._say("error:33")
+            else:
+                self._say("Error:Printer halted. kill() called!", "!!")
+                self.halted = True
+        else:  # a hard limit switch hit
+            if self.flavor == "grbl":
+                self.queue.clear()
+                self.alarm = True
+                self._say("ALARM:1")
+            else:
+                self._say("Error:Printer halted. kill() called!", "!!")
+                self.halted = True
+
+    def _home(self, now: float) -> None:
+        def done():
+            self.rig.move(np.zeros(3))  # the switches sit at the home frame's origin
+            self.offset = np.zeros(3)
+            self.homed = True
+            self.homing = False
+            self.alarm = False
+            self.planned = self.machine()
+            if self.flavor == "marlin":
+                self._say("X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0")
+            self._say("ok")
+        self.queue.clear()
+        self.homing = True
+        self._last_busy = now
+        self.blocked_until = (lambda t, end=now + self.homing_time: t >= end, done)
+
+    def _grbl_system(self, text: str, now: float) -> None:
+        if text == "$I":
+            self._say(f"[VER:{GRBL_VERSION}.20190825:]", "[OPT:V,15,128]", "ok")
+        elif text == "$#":
+            self._say("[G54:0.000,0.000,0.000]", "[G55:0.000,0.000,0.000]", "[G28:0.000,0.000,0.000]",
+                      "[G30:0.000,0.000,0.000]", "[G92:0.000,0.000,0.000]", "[TLO:0.000]", "[PRB:0.000,0.000,0.000:0]",
+                      "ok")
+        elif text == "$X":
+            if self.alarm:
+                self._say("[MSG:Caution: Unlocked]")
+            self.alarm = False
+            self._say("ok")
+        elif text == "$H":
+            if not self.homing_lock:
+                self._say("error:5")  # homing not enabled in the settings
+            else:
+                self._home(now)
+        elif text in ("$", "$$", "$G", "$N"):
+            self._say("ok")
+        else:
+            self._say("error:3")
+
+    def _status(self, now: float) -> None:
+        if self.silent:
+            return
+        state = "Alarm" if self.alarm else "Home" if self.homing else "Run" if self.queue else "Idle"
+        pos = self._where(now) - self.offset
+        # GRBL counts steps: the report is the nearest step
+        pos = np.round(pos * self.steps_per_mm) / self.steps_per_mm
+        feed = self.feed if self.queue else 0
+        self._say(f"<{state}|MPos:{pos[0]:.3f},{pos[1]:.3f},{pos[2]:.3f}|FS:{feed or 0:g},0>")
+
+
+# --- transports --------------------------------------------------------------------------------
+
+
+class _Server:
+    def __init__(self, controller: SimController, tick: float = 0.002):
+        self.ctrl, self.tick = controller, tick
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self):
+        self._thread = threading.Thread(target=self._run, name=f"stage-sim-{self.ctrl.flavor}", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        self._close()
+
+    def _close(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+
+
+class SocketServer(_Server):
+    """Serves the controller on 127.0.0.1 (one client at a time, as a serial port): ``url`` is socket://..."""
+
+    def __init__(self, controller: SimController, port: int = 0, host: str = "127.0.0.1", **kw):
+        super().__init__(controller, **kw)
+        self.sock = socket.socket()
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            self.sock.bind((host, port))
+        except OSError as exc:
+            self.sock.close()
+            raise InputError(f"cannot serve on {host}:{port}: {exc.strerror}") from None
+        self.sock.listen(1)
+        self.port = self.sock.getsockname()[1]
+        self.url = f"socket://{host}:{self.port}"
+
+    def _run(self) -> None:
+        conn = None
+        try:
+            while not self._stop.is_set():
+                if conn is None:
+                    r, _, _ = select.select([self.sock], [], [], 0.05)
+                    self.ctrl.step()
+                    self.ctrl.take_output()  # nobody listens: what the controller says is lost, as on a wire
+                    if r:
+                        conn, _ = self.sock.accept()
+                        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    continue
+                r, _, _ = select.select([conn], [], [], self.tick)
+                if r:
+                    try:
+                        data = conn.recv(4096)
+                    except OSError:
+                        data = b""
+                    if not data:  # the host went away; the controller carries on
+                        conn.close()
+                        conn = None
+                        continue
+                    self.ctrl.receive(data)
+                self.ctrl.step()
+                out = self.ctrl.take_output()
+                if out:
+                    try:
+                        conn.sendall(out)
+                    except OSError:
+                        conn.close()
+                        conn = None
+        finally:
+            if conn is not None:
+                conn.close()
+
+    def _close(self) -> None:
+        self.sock.close()
+
+
+class PtyServer(_Server):
+    """Serves the controller on a pseudo-terminal: ``url`` is the path of its terminal side (/dev/pts/N)."""
+
+    def __init__(self, controller: SimController, **kw):
+        import tty
+
+        super().__init__(controller, **kw)
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)  # no echo, no line editing, until a client sets its own mode
+        self.url = os.ttyname(self.slave)  # keeping the slave open keeps the pty alive between clients
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            r, _, _ = select.select([self.master], [], [], self.tick)
+            if r:
+                try:
+                    data = os.read(self.master, 4096)
+                except OSError:
+                    data = b""
+                if data:
+                    self.ctrl.receive(data)
+            self.ctrl.step()
+            out = self.ctrl.take_output()
+            while out:
+                try:
+                    n = os.write(self.master, out)
+                except OSError:
+                    break
+                out = out[n:]
+
+    def _close(self) -> None:
+        for fd in (self.master, self.slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+def parse_matrix(spec: str) -> np.ndarray:
+    """``a,b,c;d,e,f;g,h,i`` (rows) -> 3x3."""
+    try:
+        rows = [[float(x) for x in r.replace(",", " ").split()] for r in spec.split(";")]
+        M = np.array(rows, dtype=float)
+    except ValueError:
+        M = np.zeros(0)
+    if M.shape != (3, 3) or not np.all(np.isfinite(M)):
+        raise InputError(f"--map {spec!r}: three rows of three numbers, rows split by ';' "
+                         "(e.g. 0.95,0.05,0;-0.05,0.95,0;0,0,0.9)")
+    return M

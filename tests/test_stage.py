@@ -1,0 +1,601 @@
+"""capture --stage: the G-code driver against simulated Marlin and GRBL controllers that move a simulated sensor."""
+
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import serial
+
+from fitgen.codegen import render_header
+from fitgen.dataset import load_dataset
+from fitgen.errors import InputError
+from fitgen.fit import fit_model
+from fitgen.transfer import readings
+from host.adc import AdcArray
+from host.capture import capture, load_schedule
+from host.channelmap import parse_spec
+from host.clock import VirtualClock
+from host.simbus import SimBus
+from host.stage import (AxisMap, GcodeController, PoseStage, StageError, StageSettings, StageState, choose_zero,
+                        jog_to_zero, parse_approach, parse_ranges, parse_zero)
+from host.stagesim import PoseFile, PtyServer, SimController, SimRig, SocketServer
+
+from conftest import assert_one_line_error
+
+TWO_1115 = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+# the rig's stage-to-magnet map: 3 degrees of yaw between stage and sensor, the skin passes 92..95 % of the
+# indenter's motion to the magnet, and a press drags it sideways a little
+M_RIG = np.array([[0.95, 0.05, 0.02], [-0.05, 0.95, 0.0], [0.0, 0.0, 0.92]])
+BACKLASH = 0.04
+CONTACT, START = (12.0, 8.0, 4.0), (10.0, 10.0, 10.0)  # home frame; machine coordinates start at 0 at START
+FEED = 6000.0
+LIMITS = "dx=-2:2,dy=-2:2,dz=-2:1"
+
+
+def grid():
+    return [(dx, dy, dz) for dz in (0, -0.5, -1) for dy in (-1, 0, 1) for dx in (-1.5, 0, 1.5)]  # 27 poses
+
+
+def write_schedule(path, rows):
+    path.write_text("dx,dy,dz\n" + "".join(",".join(map(str, r)) + "\n" for r in rows))
+    return path
+
+
+def settings(axes="X=dx,Y=dy,Z=dz", limits=LIMITS, approach="dx=-0.3,dy=-0.3,dz=0.3"):
+    return StageSettings(AxisMap.parse(axes), parse_ranges(limits, "--stage-limits"), feed=FEED,
+                         approach=parse_approach(approach)).check()
+
+
+class Sink:
+    def __init__(self):
+        self.pose = np.zeros(5)
+
+    def set_pose(self, pose):
+        self.pose = np.array(pose)
+
+
+def server(flavor, target=None, *, M=None, transport=None, backlash=BACKLASH, repeatability=0.0, **kw):
+    rig = SimRig(target if target is not None else Sink(), M, contact=CONTACT, start=START, backlash=backlash,
+                 repeatability=repeatability, seed=1)
+    ctrl = SimController(flavor, rig, **kw)
+    transport = transport or (SocketServer if flavor == "grbl" else PtyServer)
+    return transport(ctrl)
+
+
+def connect(srv, timeout=2.0):
+    c = GcodeController.open(srv.url, timeout=timeout)
+    c.connect(boot_wait=0.1)
+    return c
+
+
+def contact_zero(srv):
+    """First contact in the controller's present machine coordinates (what a careful user jogs to)."""
+    c = np.array(CONTACT) - srv.ctrl.offset
+    return dict(zip("XYZ", map(float, c)))
+
+
+def truth_poses(schedule_poses, M=M_RIG, approach=(-0.3, -0.3, 0.3)):
+    """Where the magnet is at each scheduled pose: backlash taken up on the approach's side, then M."""
+    lag = BACKLASH / 2 * np.sign(approach)
+    d = schedule_poses[:, :3] + lag
+    out = np.zeros_like(schedule_poses)
+    out[:, :3] = d @ M.T
+    return out
+
+
+# --- settings, checked before anything moves ----------------------------------------------------------------
+
+
+def test_axis_map_limits_and_approach_parse_or_refuse_in_one_line():
+    m = AxisMap.parse("Z=dz, X=-dy ,Y=dx")
+    assert str(m) == "X=-dy,Y=dx,Z=dz"
+    assert m.to_machine({"X": 1.0, "Y": 2.0, "Z": 3.0}, np.array([0.5, 0.25, -1])) == {"X": 0.75, "Y": 2.5, "Z": 2.0}
+    np.testing.assert_allclose(m.to_pose({"X": 1.0, "Y": 2.0, "Z": 3.0}, np.array([0.75, 2.5, 2.0])), [0.5, 0.25, -1])
+    for bad, msg in [("X=dx,X=dy", "X appears twice"), ("X=dx,Y=dx", "dx appears twice"), ("A=dx", "is not MACHINE="),
+                     ("X=thx", "is not MACHINE="), ("", "no axis")]:
+        with pytest.raises(InputError, match=msg):
+            AxisMap.parse(bad)
+    assert parse_ranges("dx=-1:2", "--stage-limits") == {"dx": (-1.0, 2.0)}
+    for bad in ("dx=2:1", "dq=0:1", "dx=0", "dx=a:1"):
+        with pytest.raises(InputError, match="AXIS=LO:HI"):
+            parse_ranges(bad, "--stage-limits")
+    np.testing.assert_array_equal(parse_approach("dz=0.5"), [0, 0, 0.5])
+    with pytest.raises(InputError):
+        parse_approach("dz=20")
+    assert parse_zero("ask") == "ask" and parse_zero("1,2,3") == {"X": 1.0, "Y": 2.0, "Z": 3.0}
+    assert parse_zero("z=-4.5,x=1,y=2") == {"X": 1.0, "Y": 2.0, "Z": -4.5}
+    with pytest.raises(InputError, match="ask, here, or the machine coordinates"):
+        parse_zero("1,2")
+    with pytest.raises(InputError, match="give a range for dz"):
+        StageSettings(AxisMap.parse("X=dx,Z=dz"), parse_ranges("dx=-1:1", "l")).check()
+
+
+def test_the_schedule_is_checked_against_limits_approach_and_axes(tmp_path):
+    s = settings(limits="dx=-2:2,dy=-2:2,dz=-1:0.2")
+    poses = np.zeros((3, 5))
+    poses[1, :3] = [1, 0, -1]
+    with pytest.raises(InputError, match=r"pose 1/3 \(#0\) \(with its approach\) reaches dz=0.3, outside"):
+        s.check_schedule(poses, lambda i: f"#{i}")  # rest + the approach from above is over dz's 0.2
+    ok = settings()
+    poses[2, 2] = -2.5
+    with pytest.raises(InputError, match=r"pose 3/3 \(#2\) reaches dz=-2.5, outside --stage-limits dz=-2:1"):
+        ok.check_schedule(poses, lambda i: f"#{i}")
+    poses[2] = [0, 0, -1, 3, 0]
+    with pytest.raises(InputError, match="has thx != 0: the stage moves dx,dy,dz only"):
+        ok.check_schedule(poses, lambda i: f"#{i}")
+    poses[2] = [0, 1, -1, 0, 0]
+    with pytest.raises(InputError, match="has dy != 0: --stage-axes X=dx,Z=dz moves no machine axis along it"):
+        settings(axes="X=dx,Z=dz").check_schedule(poses, lambda i: f"#{i}")
+
+
+def test_every_pose_is_approached_from_the_same_side():
+    class Recorder:
+        flavor = "grbl"
+
+        def __init__(self):
+            self.sent = []
+
+        def move(self, target, feed, start=None):
+            self.sent.append(dict(target))
+            return np.array([target["X"], target["Y"], target["Z"]])
+
+    rec = Recorder()
+    st = PoseStage(rec, settings(), {"X": 10.0, "Y": 20.0, "Z": 30.0})
+    st.move_to([0, 0, 0, 0, 0])  # backlash state unknown: through the approach point
+    assert rec.sent == [{"X": 9.7, "Y": 19.7, "Z": 30.3}, {"X": 10.0, "Y": 20.0, "Z": 30.0}]
+    rec.sent.clear()
+    st.move_to([1, 0.5, -1, 0, 0])  # +dx, +dy, -dz: all the approach's way: one move
+    assert rec.sent == [{"X": 11.0, "Y": 20.5, "Z": 29.0}]
+    rec.sent.clear()
+    st.move_to([0.5, 0.5, -1.5, 0, 0])  # dx goes back: only dx goes round by its approach point
+    assert rec.sent == [{"X": 10.2, "Y": 20.5, "Z": 28.5}, {"X": 10.5, "Y": 20.5, "Z": 28.5}]
+    rec.sent.clear()
+    st.move_to([0.5, 0.5, -1.0, 0, 0])  # dz lifts: from above again
+    assert rec.sent == [{"X": 10.5, "Y": 20.5, "Z": 29.3}, {"X": 10.5, "Y": 20.5, "Z": 29.0}]
+    st.settings.approach = np.zeros(3)  # approach off: straight there
+    rec.sent.clear()
+    st.move_to([0, 0, 0, 0, 0])
+    assert rec.sent == [{"X": 10.0, "Y": 20.0, "Z": 30.0}]
+
+
+def test_the_simulated_rig_has_backlash_and_repeatability():
+    sink = Sink()
+    rig = SimRig(sink, M_RIG, contact=CONTACT, start=(12, 8, 6), backlash=0.1, repeatability=0.0)
+    rig.move([12, 8, 3])  # down, 1 mm into the skin: the tool lags 0.05 above the carriage
+    np.testing.assert_allclose(rig.displacement(), [0, 0, -0.95])
+    np.testing.assert_allclose(sink.pose, [0.02 * -0.95, 0, 0.92 * -0.95, 0, 0])  # M applied
+    rig.move([12, 8, 3.08])  # reversal inside the dead band: nothing moves
+    np.testing.assert_allclose(rig.displacement(), [0, 0, -0.95])
+    rig.move([12, 8, 3.2])  # out of it: the tool follows 0.05 below the carriage
+    np.testing.assert_allclose(rig.displacement(), [0, 0, -0.85])
+    rig.move([12, 8, 6])  # lifted off: the magnet rests
+    np.testing.assert_array_equal(sink.pose, np.zeros(5))
+    rep = SimRig(None, contact=CONTACT, start=(0, 0, 0), backlash=0.0, repeatability=0.003, seed=2)
+    ends = []
+    for _ in range(400):
+        rep.move([0, 0, 0])
+        ends.append(rep.tool.copy())
+    assert 0.0025 < np.std(ends) < 0.0035
+
+
+# --- the protocol ----------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("flavor", ["grbl", "marlin"])
+def test_driver_detects_the_flavor_moves_and_reports_position(flavor):
+    with server(flavor) as srv:
+        c = connect(srv)
+        try:
+            assert c.flavor == flavor and not c.banner_seen  # no banner on this connection: detected by M115
+            assert ("Grbl 1.1h" if flavor == "grbl" else "Marlin 2.1.2.1") in c.firmware
+            c.setup()
+            pos = c.move({"X": 1.25, "Y": -0.5, "Z": -2.0}, FEED, start=np.zeros(3))
+            np.testing.assert_allclose(pos, [1.25, -0.5, -2.0], atol=0.003)
+            np.testing.assert_allclose(srv.ctrl.rig.carriage, np.array(START) + [1.25, -0.5, -2.0])
+            lines = srv.ctrl.lines
+            assert "G90" in lines and "G21" in lines and "G1 X1.250 Y-0.500 Z-2.000 F6000" in lines
+            assert ("M400" in lines) == (flavor == "marlin") and ("G4 P0" in lines) == (flavor == "grbl")
+        finally:
+            c.close()
+
+
+def test_a_banner_on_connect_means_a_reset_and_names_the_flavor():
+    with server("marlin") as srv:  # a pty keeps what the controller said before anyone opened it
+        srv.ctrl.reset()
+        c = connect(srv)
+        assert c.flavor == "marlin" and c.banner_seen and c.firmware.startswith("Marlin")
+        c.close()
+        with pytest.raises(InputError, match="--stage-flavor grbl, but the controller is marlin"):
+            GcodeController.open(srv.url, timeout=1).connect("grbl", boot_wait=0.1)
+
+
+def test_grbl_after_reset_with_homing_is_in_alarm_until_homed():
+    with server("grbl", homing_lock=True) as srv:
+        c = connect(srv)
+        try:
+            assert c.alarm == "Alarm"
+            with pytest.raises(StageError, match=r"error:9 \(G-code locked out during alarm or jog\)"):
+                c.command("G90")
+            c.home(timeout=5)
+            assert not c.alarm and c.homed
+            c.setup()
+            np.testing.assert_allclose(c.position(), [0, 0, 0])
+            # homed, GRBL's own soft limits hold: a target beyond its travel is ALARM:2
+            with pytest.raises(StageError, match=r"ALARM:2 \(soft limit"):
+                c.move({"X": -5.0}, FEED)
+        finally:
+            c.close()
+
+
+def test_marlin_clamping_at_its_endstops_is_caught_by_the_position_check():
+    with server("marlin") as srv:
+        c = connect(srv)
+        try:
+            c.home(timeout=5)
+            c.setup()
+            with pytest.raises(StageError, match="reports X0: a move clamped by its own software endstops"):
+                c.move({"X": -3.0}, FEED)  # Marlin says ok and goes to 0
+        finally:
+            c.close()
+
+
+def test_every_wait_has_a_time_limit_and_marlin_busy_extends_it():
+    with server("marlin", busy_interval=0.1) as srv:
+        c = connect(srv, timeout=0.4)
+        try:
+            c.setup()
+            c.command("G1 X15 F600")  # 1.5 s of travel
+            c.command("M400", timeout=0.4)  # answered late, but busy: processing every 0.1 s keeps it alive
+            np.testing.assert_allclose(c.position(), [15, 0, 0])
+            srv.ctrl.inject("silent", 1)
+            with pytest.raises(StageError, match=r"no answer to 'G1 X0.000 F6000' within 0.4 s"):
+                c.move({"X": 0.0}, FEED)
+        finally:
+            c.close()
+    with server("grbl") as srv:
+        c = connect(srv, timeout=0.4)
+        try:
+            c.setup()
+            c.command("G1 X15 F600")
+            with pytest.raises(StageError, match=r"no answer to 'G4 P0' within 0.4 s"):
+                c.command("G4 P0")  # GRBL says nothing until the move ends
+        finally:
+            c.close()
+
+
+def test_lines_are_length_checked():
+    port = serial.serial_for_url("loop://", timeout=0.02)
+    c = GcodeController(port, "loop", timeout=0.5)
+    port.write(b"x" * 300 + b"\n")
+    with pytest.raises(StageError, match="a line of 300 bytes from the controller"):
+        c.read_line(1e18)
+    port.write(b"y" * 300)
+    with pytest.raises(StageError, match="without a line end"):
+        c.read_line(1e18)
+    with pytest.raises(InputError, match="not one ASCII line"):
+        c.send("G1 X" + "1" * 80)
+
+
+# --- capture through the stage ------------------------------------------------------------------------
+
+
+def sim_rig_and_bus(sensor, flavor, *, M=M_RIG, seed=0, **kw):
+    cmap = parse_spec(TWO_1115)
+    clock = VirtualClock()
+    bus = SimBus.for_channel_map(cmap, sensor, None, clock=clock, noise=0.0005, seed=seed)
+    srv = server(flavor, bus.feed, M=M, repeatability=0.001, **kw)
+    return srv, bus, AdcArray(bus, cmap, clock=clock), clock
+
+
+@pytest.mark.parametrize("flavor", ["grbl", "marlin"])
+def test_capture_through_the_stage_gives_the_magnet_poses_of_the_rig(sensor, tmp_path, flavor):
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid()))
+    srv, bus, arr, clock = sim_rig_and_bus(sensor, flavor)
+    out = tmp_path / "d.csv"
+    with srv:
+        c = connect(srv)
+        try:
+            c.setup()
+            st = PoseStage(c, settings(), contact_zero(srv))
+            res = capture(arr, sched, out, samples=8, set_pose=st.move_to, clock=clock,
+                          meta={"stage": {"flavor": c.flavor}})
+        finally:
+            c.close()
+    assert res.complete and res.captured == 27
+    ds = load_dataset(out)
+    np.testing.assert_array_equal(ds.targets, sched.values)
+    want = readings(sensor, truth_poses(sched.poses), adc_bits=0)
+    naive = readings(sensor, sched.poses, adc_bits=0)
+    err = np.abs(ds.inputs - want).max()
+    assert err < 1.2e-3  # averaged noise (0.18 mV rms), 1 um repeatability and the ADC's LSB
+    assert np.abs(ds.inputs - naive).max() > 5 * err  # the rig is not the identity, and the data show it
+    # fewer moves than two per pose: only reversals go round by the approach point
+    assert 27 < sum(1 for ln in srv.ctrl.lines if ln.startswith("G1")) < 54
+    meta = json.loads((tmp_path / "d.csv.meta.json").read_text())
+    assert meta["samples_per_row"] == 8 and meta["noise_rows"] == 27 and meta["runs"] == 1
+    ns, nr = np.array(meta["sample_noise"]), np.array(meta["row_noise"])
+    assert np.all((ns > 0.0004) & (ns < 0.0006))  # the simulated 0.5 mV rms per sample
+    np.testing.assert_allclose(nr, ns / np.sqrt(8), rtol=1e-12)
+    assert meta["stage"] == {"flavor": flavor} and meta["duration_s"] >= 0
+
+
+def test_a_controller_fault_mid_capture_keeps_the_rows(sensor, tmp_path):
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid()[:9]))
+    for flavor, kind, message in [("grbl", "alarm", r"ALARM:1 \(hard limit triggered\)"),
+                                  ("marlin", "error", "halted"),
+                                  ("grbl", "error", r"error:33 \(invalid motion target\)"),
+                                  ("marlin", "reset", "reset itself")]:
+        srv, bus, arr, clock = sim_rig_and_bus(sensor, flavor)
+        out = tmp_path / f"{flavor}-{kind}.csv"
+        with srv:
+            c = connect(srv)
+            try:
+                c.setup()
+                st = PoseStage(c, settings(), contact_zero(srv))
+                srv.ctrl.inject(kind, 5)  # the 5th G1 from now
+                with pytest.raises(StageError, match=message):
+                    capture(arr, sched, out, samples=2, set_pose=st.move_to, clock=clock)
+            finally:
+                c.close()
+        rows = data_rows(out)
+        # G1 1-2 set pose 1 (through its approach point), 3 pose 2, 4 pose 3; the 5th, to pose 4's approach
+        # point (dx goes back), fails: the rows of poses 1-3, whole
+        assert [r[8:] for r in rows] == [(-1.5, -1.0, 0.0), (0.0, -1.0, 0.0), (1.5, -1.0, 0.0)], (flavor, kind)
+
+
+def test_the_zero_holds_until_a_reset_and_a_homed_zero_holds_after_one(tmp_path):
+    axes = AxisMap.parse("X=dx,Y=dy,Z=dz")
+    with server("grbl", homing_lock=True) as srv:
+        c = connect(srv)
+        c.home(timeout=5)
+        c.setup()
+        z = contact_zero(srv)
+        assert choose_zero(c, None, axes, "here", rows=0, ask=None)[1] == "here"
+        with pytest.raises(InputError, match="--zero here takes the zero only for a dataset without rows"):
+            choose_zero(c, None, axes, "here", rows=3, ask=None)
+        c.move({"X": 1.0, "Y": 2.0, "Z": 3.0}, FEED)
+        state = StageState("grbl", str(axes), z, True, [1.0, 2.0, 3.0], [])
+        assert choose_zero(c, state, axes, "ask", rows=3, ask=None) == (z, "kept from the last run")
+        c.close()
+        srv.ctrl.reset()  # between runs
+        c = connect(srv)
+        assert c.alarm
+        c.home(timeout=5)
+        assert choose_zero(c, state, axes, "ask", rows=3, ask=None) == (z, "kept from the last run")
+        c.close()
+    with server("marlin") as srv:
+        c = connect(srv)
+        c.setup()
+        c.move({"X": 1.0, "Y": 2.0, "Z": 3.0}, FEED)
+        state = StageState("marlin", str(axes), {"X": 2.0, "Y": -2.0, "Z": -6.0}, False, [1.0, 2.0, 3.0], [])
+        assert choose_zero(c, state, axes, "ask", rows=3, ask=None)[1] == "kept from the last run"
+        c.close()
+        srv.ctrl.reset()
+        c = connect(srv)  # the pty kept the banner
+        asked = []
+        zero, how = choose_zero(c, state, axes, "ask", rows=3, ask=lambda why: asked.append(why) or {"X": 0.0})
+        assert how == "set by jogging" and asked == ["the controller was reset (it printed its start-up banner on "
+                                                     "connect)"]
+        c.close()
+    with server("grbl") as srv:  # a reset nobody heard: the position tells
+        c = connect(srv)
+        c.setup()
+        c.move({"X": 1.0, "Y": 2.0, "Z": 3.0}, FEED)
+        c.close()
+        srv.ctrl.reset()
+        c = connect(srv)
+        assert not c.banner_seen
+        with pytest.raises(InputError, match="reports X0 Y0 Z0, not where the last run left it: it was reset"):
+            choose_zero(c, StageState("grbl", str(axes), {"X": 2.0, "Y": -2.0, "Z": -6.0}, False, [1.0, 2.0, 3.0]),
+                        axes, "ask", rows=3, ask=lambda why: None)
+        c.close()
+
+
+def test_jogging_to_the_zero(tmp_path):
+    with server("grbl") as srv:
+        c = connect(srv)
+        c.setup()
+        st = PoseStage(c, settings(), {})
+        err = io.StringIO()
+        zero = jog_to_zero(st, io.StringIO("dx 2\ndy -2\ndz -5\ndz 9\nwhat\ndz -1\n\n"), err, "cap")
+        assert zero == pytest.approx({"X": 2.0, "Y": -2.0, "Z": -6.0})
+        assert "a jog step is at most 5 mm" in err.getvalue() and "type AXIS STEP" in err.getvalue()
+        assert jog_to_zero(st, io.StringIO("dz 1\nq\n"), io.StringIO(), "cap") is None
+        c.close()
+
+
+# --- the command line ------------------------------------------------------------------------------------
+
+
+def host_cmd(*args):
+    code = "import sys; from host.cli import main; sys.argv[0] = 'tactile-host'; main()"
+    return [sys.executable, "-c", code, *args]
+
+
+def run_host(*args, input=""):
+    return subprocess.run(host_cmd(*args), capture_output=True, text=True, input=input, timeout=300)
+
+
+def capture_args(sched, out, url, posefile, *extra):
+    return ["capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate", "--samples", "8",
+            "--sim-pose-file", str(posefile), "--stage", f"gcode:{url}", "--stage-limits", LIMITS,
+            "--stage-feed", str(FEED), "--stage-boot-wait", "0.2", "--stage-timeout", "3", *extra]
+
+
+def jog_lines(srv):
+    """What a user types to reach first contact from where the stage stands, ending with a move down."""
+    steps = np.array(CONTACT) - srv.ctrl.rig.carriage
+    lines = [f"dx {steps[0]:.3f}", f"dy {steps[1]:.3f}"]
+    z = steps[2] + 1.0
+    while abs(z) > 4.9:
+        lines.append(f"dz {np.sign(z) * 4.9:.3f}")
+        z -= np.sign(z) * 4.9
+    lines += [f"dz {z:.3f}", "dz -1", ""]
+    return "\n".join(lines) + "\n"
+
+
+def data_rows(path):
+    return [tuple(float(x) for x in ln.split(",")) for ln in path.read_text().splitlines()[1:]]
+
+
+@pytest.mark.parametrize("flavor", ["grbl", "marlin"])
+def test_capture_command_killed_midway_and_reset_between_runs_keeps_every_row(sensor, tmp_path, flavor):
+    rows = grid()
+    sched = write_schedule(tmp_path / "s.csv", rows)
+    out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
+    srv = server(flavor, PoseFile(posefile), M=M_RIG, repeatability=0.001)
+    with srv:
+        args = capture_args(sched, out, srv.url, posefile)
+
+        def run_killed_at(k, stdin):
+            """The controller kills the capture (SIGKILL, as a power cut would) when the k-th G1 from now arrives."""
+            proc = subprocess.Popen(host_cmd(*args), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                    stderr=subprocess.PIPE, text=True)
+            seen = []
+
+            def hook(line):
+                if line.startswith("G1"):
+                    seen.append(line)
+                    if len(seen) == k:
+                        os.kill(proc.pid, signal.SIGKILL)
+            srv.ctrl.on_line = hook
+            _, err = proc.communicate(stdin, timeout=300)
+            srv.ctrl.on_line = None
+            return proc.returncode, err
+
+        rc, err = run_killed_at(20, jog_lines(srv))
+        assert rc == -signal.SIGKILL, err
+        first = data_rows(out)
+        assert 2 <= len(first) < 27
+        assert json.loads((tmp_path / "d.csv.stage.json").read_text())["pending"]  # killed mid-move
+        # again, no reset: the zero holds (no prompt), and it goes on where it stopped
+        rc, err = run_killed_at(12, "")
+        assert rc == -signal.SIGKILL and "(kept from the last run)" in err, err
+        second = data_rows(out)
+        assert len(first) < len(second) < 27 and second[:len(first)] == first
+        # the controller is reset between runs (standing still: GRBL reset in motion would be ALARM:3): the zero
+        # must be set again, and without one nothing moves
+        srv.ctrl.wait_idle()
+        srv.ctrl.reset()
+        moves = len(srv.ctrl.lines)
+        proc = run_host(*args)
+        assert proc.returncode == 2, proc.stderr
+        assert "was reset" in proc.stderr and "set the zero:" in proc.stderr
+        assert proc.stderr.strip().splitlines()[-1].startswith("tactile-host: error: ")
+        assert "no zero was set" in proc.stderr.strip().splitlines()[-1]
+        assert not any(ln.startswith("G1") for ln in srv.ctrl.lines[moves:])
+        assert data_rows(out) == second
+        proc = run_host(*args, input=jog_lines(srv))
+        assert proc.returncode == 0, proc.stderr
+        assert "(set by jogging)" in proc.stderr
+        assert f"27/27 poses in {out} ({27 - len(second)} captured now" in proc.stderr
+    got = data_rows(out)
+    assert got[:len(second)] == second
+    assert [r[8:] for r in got] == [tuple(map(float, r)) for r in rows]  # every pose once, in schedule order
+    sched_poses = load_schedule(sched).poses
+    want = readings(sensor, truth_poses(sched_poses), adc_bits=0)
+    assert np.abs(np.array(got)[:, :8] - want).max() < 1.2e-3
+    meta = json.loads((tmp_path / "d.csv.meta.json").read_text())
+    assert meta["runs"] == 3 and meta["rows"] == 27  # the run without a zero captured nothing and 0 < meta["noise_rows"] <= 27
+    assert meta["stage"]["flavor"] == flavor and meta["stage"]["axes"] == "X=dx,Y=dy,Z=dz"
+    # the dataset fits, and the model becomes C: a model in volts
+    model = fit_model(load_dataset(out))
+    assert model.input_units == "V" and model.output_names == ("dx", "dy", "dz")
+    assert "tm_estimate" in render_header(model)
+
+
+def test_capture_command_alarm_at_start_is_one_line_exit_1_and_home_clears_it(tmp_path):
+    sched = write_schedule(tmp_path / "s.csv", grid()[:3])
+    out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
+    with server("grbl", PoseFile(posefile), homing_lock=True) as srv:
+        args = capture_args(sched, out, srv.url, posefile)
+        proc = run_host(*args)
+        assert_one_line_error(proc, 1, "is in ALARM (it starts so after a reset when homing is on): home it (--home) "
+                                       "or unlock it (--unlock)")
+        assert proc.stderr.strip().endswith("; nothing was written") and not out.exists()
+        zero = ",".join(f"{v:g}" for v in CONTACT)  # homed: machine coordinates are the home frame's
+        proc = run_host(*args, "--home", "--zero", zero)
+        assert proc.returncode == 0, proc.stderr
+        assert f"zero X{CONTACT[0]:g} Y{CONTACT[1]:g} Z{CONTACT[2]:g} (given)" in proc.stderr
+        assert srv.ctrl.lines.count("$H") == 1
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--stage", "gcode:socket://127.0.0.1:1"], "cannot open stage socket://127.0.0.1:1"),
+    (["--stage", "serial:/dev/ttyUSB0"], "expected gcode:URL"),
+    (["--stage-axes", "X=dx,Y=dx"], "--stage-axes 'X=dx,Y=dx': dx appears twice"),
+    (["--stage-limits", "dx=-1:1,dy=-2:2,dz=-2:1"], "pose 1/27 (dx=-1.5 dy=-1 dz=0) reaches dx=-1.5, outside"),
+    (["--stage-limits", "dx=-2:2,dy=-2:2"], "--stage-limits: give a range for dz"),
+    (["--stage-feed", "0"], "--stage-feed must be > 0"),
+    (["--trigger", "true"], "--stage and --trigger both set the poses"),
+    (["--zero", "1,2"], "--zero '1,2': ask, here, or the machine coordinates"),
+])
+def test_capture_command_bad_stage_input_is_one_line_exit_2_before_anything(tmp_path, extra, message):
+    sched = write_schedule(tmp_path / "s.csv", grid())
+    out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
+    with server("grbl", PoseFile(posefile)) as srv:
+        args = capture_args(sched, out, srv.url, posefile)
+        for opt in ("--stage", "--stage-limits"):
+            if opt in extra:
+                k = args.index(opt)
+                del args[k:k + 2]
+        proc = run_host(*args, *extra)
+        assert_one_line_error(proc, 2, message)
+        assert not out.exists() and not (tmp_path / "d.csv.stage.json").exists()
+        assert not any(ln.startswith("G1") for ln in srv.ctrl.lines)
+
+
+def test_stage_options_need_stage(tmp_path):
+    sched = write_schedule(tmp_path / "s.csv", grid()[:2])
+    proc = run_host("capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(tmp_path / "d.csv"), "--simulate",
+                    "--home")
+    assert_one_line_error(proc, 2, "--home needs --stage gcode:URL")
+
+
+def test_stage_sim_command_prints_its_url_and_serves(tmp_path):
+    proc = subprocess.Popen(host_cmd("stage-sim", "--flavor", "marlin", "--pose-file", str(tmp_path / "p.txt"),
+                                     "--map", "1,0,0;0,1,0;0,0,0.9", "--repeatability", "0"),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        url = proc.stdout.readline().strip()
+        assert url.startswith("socket://127.0.0.1:")
+        c = GcodeController.open(url, timeout=3)
+        c.connect(boot_wait=0.1)
+        assert c.flavor == "marlin"
+        c.setup()
+        c.move({"X": 2.0, "Y": -2.0, "Z": -7.0}, FEED)  # 1 mm into the skin
+        c.close()
+        pose = [float(x) for x in (tmp_path / "p.txt").read_text().split(",")]
+        assert pose[2] == pytest.approx(-0.9 * (1 - 0.015), abs=1e-9)  # the default 0.03 mm backlash, from above
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=10)
+    assert proc.returncode == 0
+
+
+def test_the_meta_pools_the_noise_over_the_runs_that_wrote_the_rows(sensor, tmp_path):
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid()[:10]))
+    cmap = parse_spec(TWO_1115)
+    clock = VirtualClock()
+    bus = SimBus.for_channel_map(cmap, sensor, None, clock=clock, noise=0.001, seed=4)
+    arr = AdcArray(bus, cmap, clock=clock)
+    out = tmp_path / "d.csv"
+    first = capture(arr, sched, out, samples=4, wait=lambda i, p: i < 6, set_pose=bus.set_pose, clock=clock)
+    meta1 = json.loads((tmp_path / "d.csv.meta.json").read_text())
+    assert first.captured == 6 and meta1["noise_rows"] == 6 and meta1["runs"] == 1
+    bus.feed.noise = 0.002  # noisier in the second run: the pooled figure lies between
+    second = capture(arr, sched, out, samples=16, set_pose=bus.set_pose, clock=clock)
+    meta = json.loads((tmp_path / "d.csv.meta.json").read_text())
+    assert second.captured == 4 and meta["noise_rows"] == 10 and meta["runs"] == 2
+    ns1, ns = np.array(meta1["sample_noise"]), np.array(meta["sample_noise"])
+    ns2 = np.sqrt((10 * ns ** 2 - 6 * ns1 ** 2) / 4)  # the second run's own rows, if pooled as said
+    assert np.all((ns1 > 0.0007) & (ns1 < 0.0013)) and np.all((ns2 > 0.0014) & (ns2 < 0.0026))
+    # rows of 4 and of 16 samples pooled: each row's noise is its own variance / its samples
+    nr = np.array(meta["row_noise"])
+    np.testing.assert_allclose(nr ** 2, (6 * ns1 ** 2 / 4 + 4 * ns2 ** 2 / 16) / 10)
+    assert meta["duration_s"] > meta1["duration_s"] > 0  # the virtual clock's seconds: conversions take time
