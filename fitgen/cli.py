@@ -390,7 +390,7 @@ def cmd_schedule(args) -> int:
     from .dataset import meta_path
     from .fileio import write_atomic
     from .progress import Progress
-    from .schedule import schedule
+    from .schedule import schedule, schedule_csv
     from .simulate import parse_ranges
 
     drawing = _sensor(args)
@@ -400,9 +400,7 @@ def cmd_schedule(args) -> int:
         poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits),
                                noise=(drawing.noise if noise is None else noise) / np.sqrt(args.samples),
                                rig_error=args.rig_error, progress=lambda i, n, note: bar.update(1, note))
-    names = [a for a in POSE_NAMES if a in axes]
-    rows = [",".join(names)] + [",".join(repr(float(p[POSE_NAMES.index(a)]) + 0.0) for a in names) for p in poses]
-    write_atomic(args.output, "\n".join(rows) + "\n")
+    write_atomic(args.output, schedule_csv(poses, axes))
     write_atomic(meta_path(args.output), json.dumps({**info, "samples_per_row": args.samples}, indent=1) + "\n")
     print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}) to {args.output}",
           file=sys.stderr)

@@ -106,3 +106,10 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
             "ranges": {a: list(ranges[a]) for a in axes}, "noise": noise, "rig_error": rig_error,
             "sensor": drawing.name, "distinct_poses": int(len(np.unique(idx)))}
     return poses, info
+
+
+def schedule_csv(poses: np.ndarray, axes=("dx", "dy", "dz")) -> str:
+    """The schedule as `tactile-host capture --poses` reads it: the moving axes' columns, numbers that round-trip."""
+    names = [a for a in POSE_NAMES if a in axes]
+    rows = [",".join(names)] + [",".join(repr(float(p[POSE_NAMES.index(a)]) + 0.0) for a in names) for p in poses]
+    return "\n".join(rows) + "\n"

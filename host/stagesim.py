@@ -588,3 +588,43 @@ def parse_matrix(spec: str) -> np.ndarray:
         raise InputError(f"--map {spec!r}: three rows of three numbers, rows split by ';' "
                          "(e.g. 0.95,0.05,0;-0.05,0.95,0;0,0,0.9)")
     return M
+
+
+def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", samples: int = 16,
+                            noise: float = 0.0005, backlash: float = 0.03, repeatability: float = 0.005,
+                            limits: str = "dx=-2.5:2.5,dy=-2.5:2.5,dz=-2.5:1", approach: str = "dx=-0.3,dy=-0.3,dz=0.3",
+                            seed: int = 0, progress=None):
+    """A capture as `tactile-host capture --stage` makes it, all simulated: two ADS1115s on a simulated bus read
+    ``sensor`` (a unit, say, whose file carries its stage map), a simulated ``flavor`` controller moves it through a
+    rig with ``backlash`` and ``repeatability`` (mm), zeroed at first contact. Returns the capture's result."""
+    from .adc import AdcArray
+    from .capture import capture
+    from .channelmap import parse_spec
+    from .clock import VirtualClock
+    from .simbus import SimBus
+    from .stage import AxisMap, GcodeController, PoseStage, StageSettings, parse_approach, parse_ranges
+
+    contact, start = (12.0, 8.0, 4.0), (10.0, 10.0, 10.0)
+    cmap = parse_spec("ads1115@0x48:0-3,ads1115@0x49:0-3")
+    clock = VirtualClock()
+    bus = SimBus.for_channel_map(cmap, sensor.with_transfer("gmr"), None, clock=clock, noise=noise, seed=seed)
+    rig = SimRig(bus.feed, None, contact=contact, start=start, backlash=backlash, repeatability=repeatability,
+                 seed=seed + 1)
+    settings = StageSettings(AxisMap.parse("X=dx,Y=dy,Z=dz"), parse_ranges(limits, "--stage-limits"), feed=6000.0,
+                             approach=parse_approach(approach)).check()
+    settings.check_schedule(schedule.poses, schedule.describe)
+    with SocketServer(SimController(flavor, rig)) as srv:
+        ctrl = GcodeController.open(srv.url, timeout=2.0)
+        try:
+            ctrl.connect(boot_wait=0.1)
+            ctrl.setup()
+            zero = dict(zip("XYZ", map(float, np.array(contact) - srv.ctrl.offset)))
+            arr = AdcArray(bus, cmap, clock=clock)
+            arr.probe()
+            arr.setup()
+            return capture(arr, schedule, output, samples=samples, set_pose=PoseStage(ctrl, settings, zero).move_to,
+                           clock=clock, progress=progress,
+                           meta={"adc": cmap.describe(), "source": f"simulated {sensor.name} on a simulated "
+                                 f"{flavor} stage", "stage": {"flavor": ctrl.flavor, "simulated": True}})
+        finally:
+            ctrl.close()

@@ -15,18 +15,11 @@ from fitgen.model import load_model
 from fitgen.sensor import load_sensor
 from fitgen.simulate import pose_rng, random_poses, simulate
 from fitgen.transfer import readings
-from host.adc import AdcArray
-from host.capture import capture, load_schedule
-from host.channelmap import parse_spec
-from host.clock import VirtualClock
+from host.capture import load_schedule
 from host.compiled import CompiledModel
-from host.simbus import SimBus
-from host.stage import AxisMap, GcodeController, PoseStage, StageSettings, parse_approach, parse_ranges
-from host.stagesim import SimController, SimRig, SocketServer
+from host.stagesim import simulated_stage_capture
 
 BOX = {"dx": (-1.5, 1.5), "dy": (-1.5, 1.5), "dz": (-1.5, 0.0), "thx": (0.0, 0.0), "thy": (0.0, 0.0)}
-LIMITS = "dx=-2:2,dy=-2:2,dz=-2:1"  # room for the approach points
-CONTACT, START = (12.0, 8.0, 4.0), (10.0, 10.0, 10.0)
 
 
 def test_schedule_capture_identify_simulate_fit_codegen(tmp_path):
@@ -43,27 +36,8 @@ def test_schedule_capture_identify_simulate_fit_codegen(tmp_path):
 
     # the capture: two ADS1115s on a simulated bus read the unit; a simulated GRBL moves it (the rig's own map
     # is the identity: the unit's file carries the map), with backlash and 5 um repeatability
-    cmap = parse_spec("ads1115@0x48:0-3,ads1115@0x49:0-3")
-    clock = VirtualClock()
-    bus = SimBus.for_channel_map(cmap, unit, None, clock=clock, noise=0.0005, seed=4)
-    rig = SimRig(bus.feed, None, contact=CONTACT, start=START, backlash=0.03, repeatability=0.005, seed=2)
-    settings = StageSettings(AxisMap.parse("X=dx,Y=dy,Z=dz"), parse_ranges(LIMITS, "--stage-limits"), feed=6000.0,
-                             approach=parse_approach("dx=-0.3,dy=-0.3,dz=0.3")).check()
-    schedule = load_schedule(tmp_path / "schedule.csv")
-    with SocketServer(SimController("grbl", rig)) as srv:
-        ctrl = GcodeController.open(srv.url, timeout=2.0)
-        try:
-            ctrl.connect(boot_wait=0.1)
-            ctrl.setup()
-            zero = dict(zip("XYZ", map(float, np.array(CONTACT) - srv.ctrl.offset)))
-            stage = PoseStage(ctrl, settings, zero)
-            arr = AdcArray(bus, cmap, clock=clock)
-            arr.probe()
-            arr.setup()
-            res = capture(arr, schedule, tmp_path / "capture.csv", samples=16, set_pose=stage.move_to, clock=clock,
-                          meta={"stage": {"flavor": ctrl.flavor}})
-        finally:
-            ctrl.close()
+    res = simulated_stage_capture(unit, load_schedule(tmp_path / "schedule.csv"), tmp_path / "capture.csv",
+                                  flavor="grbl", seed=4)
     assert res.complete and res.captured == 30
 
     proc = run_cli("fitgen", "identify", str(tmp_path / "capture.csv"), "--sensor", "paper", "--rig-error", "0.02",

@@ -22,6 +22,15 @@ def test_demo_runs_end_to_end(tmp_path):
     volts = load_model(out / "model-volts.json")
     assert volts.input_units == "V" and volts.fit_info["family"]["auto"]
     assert f"tactile-host view --model {out / 'model-volts.json'} --adc" in text and "--simulate motion" in text
+    # a built unit calibrated through the simulated stage: the twin beats the drawing's model on the unit's truth
+    import re
+
+    assert "40 poses captured through a simulated GRBL" in text and (out / "twin.toml").is_file()
+    rows = {m.group(1): [float(x) for x in m.group(2, 4)] for m in
+            re.finditer(r"^\s+(d[xyz]|th[xy])\s+([\d.e+-]+)\s+(\S+|\(no label\))\s+([\d.e+-]+)\s+[\d.e+-]+", text, re.M)}
+    assert set(rows) == {"dx", "dy", "dz", "thx", "thy"}, text[-1500:]
+    for name, (drawing, twin) in rows.items():
+        assert twin < drawing / 5, (name, drawing, twin)
 
 
 def test_demo_bad_output_folder(tmp_path):
