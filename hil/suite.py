@@ -37,19 +37,21 @@ class Check:
 class SuiteResult:
     url: str
     checks: list[Check]
+    seconds: float = 0.0  # the whole suite, wall time (its checks, and the synchronisation before them)
 
     @property
     def ok(self) -> bool:
         return all(c.ok for c in self.checks)
 
     def table(self) -> str:
-        lines = [f"HIL suite on {self.url}", "| check | result | detail |", "| --- | --- | --- |"]
-        lines += [f"| {c.name} | {'pass' if c.ok else 'FAIL'} | {c.detail} |" for c in self.checks]
+        lines = [f"HIL suite on {self.url}: {len(self.checks)} checks in {self.seconds:.1f} s",
+                 "| check | result | seconds | detail |", "| --- | --- | --- | --- |"]
+        lines += [f"| {c.name} | {'pass' if c.ok else 'FAIL'} | {c.seconds:.1f} | {c.detail} |" for c in self.checks]
         return "\n".join(lines)
 
     def junit(self) -> str:
         fails = sum(not c.ok for c in self.checks)
-        total = sum(c.seconds for c in self.checks)
+        total = self.seconds or sum(c.seconds for c in self.checks)
         out = ['<?xml version="1.0" encoding="UTF-8"?>',
                f'<testsuite name="tactile-hil" tests="{len(self.checks)}" failures="{fails}" errors="0" '
                f'time="{total:.3f}">']
@@ -165,10 +167,13 @@ def check_held_out(dev: Device, model: Model, held_out: tuple[np.ndarray, np.nda
 READ_FAILED = 0x40000000  # STREAM_SAMPLE status bit of a failed read (docs/protocol.md)
 
 
-def check_stream(dev: Device, n: int = 3, period_ms: int = 10) -> Check:
+def check_stream(dev: Device, n: int = 5, period_ms: int = 10) -> Check:
     """STREAM ``n`` samples: every read succeeds, and each sample's outputs are what the device's own
-    EVAL gives for the inputs it read (the stream runs the same estimator on what it read)."""
-    samples = dev.stream(period_ms, n, timeout=60.0)
+    EVAL gives for the inputs it read (the stream runs the same estimator on what it read). Reports when
+    the first and the last sample arrived after the request (under ``tactile-hil emulate --suite``, the
+    first STREAM after boot: the firmware probes and sets up its ADCs on that first read)."""
+    arrivals: list[float] = []
+    samples = dev.stream(period_ms, n, timeout=60.0, arrivals=arrivals)
     failed = [s.status for s in samples if s.status > 0 and s.status & READ_FAILED]
     inputs = np.array([np.asarray(s.inputs) for s in samples])
     status, out = dev.eval(inputs)
@@ -179,8 +184,10 @@ def check_stream(dev: Device, n: int = 3, period_ms: int = 10) -> Check:
               + ", ".join(f"{k} {v}" for k, v in info.adc_counts.items()) if info.adc_chips else "simulated inputs")
     problems = ([f"{len(failed)} reads failed (first status 0x{failed[0]:08x})"] if failed else []) + \
         ([] if same else ["a sample's outputs differ from EVAL of its inputs"])
-    return Check("stream", not problems, "; ".join(problems) or f"{n} samples at {period_ms} ms; {source}",
-                 figures={"samples": n, "adc_counts": info.adc_counts})
+    timing = f"the first {arrivals[0]:.3f} s and the last {arrivals[-1]:.3f} s after the request"
+    return Check("stream", not problems, "; ".join(problems) or f"{n} samples at {period_ms} ms, {timing}; {source}",
+                 figures={"samples": n, "adc_counts": info.adc_counts, "first_sample_s": arrivals[0],
+                          "last_sample_s": arrivals[-1]})
 
 
 def check_fixed_refuses_blobs(dev: Device, model: Model, sensor_id: str) -> Check:
@@ -373,6 +380,7 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
     A fixed-point device (INFO precision 2) gets ADC codes, compared with the numpy model of its
     integer arithmetic (``input_lsb``/``input_offset`` as given to codegen; default: the model's sensor).
     """
+    t_suite = time.perf_counter()
     checks: list[Check] = []
     fixed = None
     if dev.info(refresh=True).precision == "fixed":
@@ -423,4 +431,4 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
         with Progress("fuzz frames", n_fuzz) as prog:
             step(check_fuzz, dev, n_fuzz, seed=seed, progress=prog)
         evaluate(inputs[: min(len(inputs), 300)], "eval after fuzz")
-    return SuiteResult(url, checks)
+    return SuiteResult(url, checks, time.perf_counter() - t_suite)

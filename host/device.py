@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import select
 import struct
 import time
 
@@ -13,6 +14,7 @@ from . import protocol as p
 from .protocol import DeviceInfo, ErrorCode, Frame, MsgType
 
 POLL = 0.02  # seconds one read of the port blocks at most
+READ_CHUNK = 4096  # bytes taken from a socket at once
 
 
 class NoAnswer(InputError):
@@ -48,6 +50,9 @@ class Device:
         self._seq = 0
         self._info: DeviceInfo | None = None
         self._backlog: list[Frame] = []
+        # pyserial's socket:// reports at most 1 byte waiting, so reading what in_waiting says takes a
+        # frame 2 bytes a turn: a socket is read directly, everything it holds at once
+        self._sock = getattr(port, "_socket", None)
 
     @classmethod
     def open(cls, url: str, timeout: float = 1.0) -> "Device":
@@ -108,11 +113,7 @@ class Device:
         deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
         while True:
             try:
-                data = self.port.read(1)
-                if data:
-                    waiting = self.port.in_waiting
-                    if waiting:
-                        data += self.port.read(waiting)
+                data = self._read_some()
             except (serial.SerialException, OSError) as exc:
                 raise InputError(f"{self.name}: {_reason(exc)}") from None
             if data:
@@ -121,6 +122,22 @@ class Device:
                     return self._backlog.pop(0)
             if time.monotonic() >= deadline:
                 return None
+
+    def _read_some(self) -> bytes:
+        """The bytes the port holds, after waiting up to POLL s for the first one (b"" if none came)."""
+        if self._sock is not None:
+            if not select.select([self._sock], [], [], POLL)[0]:
+                return b""
+            data = self._sock.recv(READ_CHUNK)
+            if not data:
+                raise ConnectionResetError(104, "Connection closed by the device")
+            return data
+        data = self.port.read(1)
+        if data:
+            waiting = self.port.in_waiting
+            if waiting:
+                data += self.port.read(waiting)
+        return data
 
     def request(self, type: int, payload: bytes = b"", timeout: float | None = None) -> Frame:
         """Send one request and return its reply; DeviceError for an ERROR reply, NoAnswer after ``timeout``."""
@@ -168,10 +185,13 @@ class Device:
             outputs.append(o)
         return np.concatenate(status), np.vstack(outputs)
 
-    def stream(self, period_ms: int, count: int, timeout: float | None = None) -> list[p.StreamSample]:
-        """Start a stream of ``count`` samples and collect them (NoAnswer when they stop coming)."""
+    def stream(self, period_ms: int, count: int, timeout: float | None = None,
+               arrivals: list[float] | None = None) -> list[p.StreamSample]:
+        """Start a stream of ``count`` samples and collect them (NoAnswer when they stop coming).
+        ``arrivals``: a list that gets each sample's arrival, in seconds after the request was sent."""
         info = self.info()
         seq = self._seq % 255 + 1
+        t0 = time.perf_counter()
         self.request(MsgType.STREAM, p.pack_stream(period_ms, count))
         samples = []
         wait = self.timeout + period_ms / 1000 if timeout is None else timeout
@@ -182,6 +202,8 @@ class Device:
                 frame = self.receive(max(0.0, deadline - time.monotonic()))
                 if frame is None:
                     raise NoAnswer(f"{self.name}: stream stopped after {len(samples)} of {count} samples")
+            if arrivals is not None:
+                arrivals.append(time.perf_counter() - t0)
             samples.append(p.unpack_stream_sample(frame.payload, info.n_inputs, info.n_outputs, info.real_dtype))
         return samples
 

@@ -80,6 +80,35 @@ def test_stream_from_the_c_drivers_equals_the_python_readout(model, target):
     assert info.adc_counts == counts.as_dict() and counts.nack > 0
 
 
+@pytest.mark.parametrize("target", ["host", "mps2"])
+def test_the_suites_stream_is_the_first_after_boot_and_reports_its_latency(model, target):
+    """emulate --adc ... --suite: the suite's stream check is the firmware's first STREAM after boot (the ADCs
+    are probed and set up on that read): 5 samples from the ADCs, none failed, each what EVAL gives for its
+    inputs. When the first and the last arrived is reported (a figure for docs/hil.md, not a limit), and so
+    is the suite's own duration, in its table and its JUnit XML."""
+    import xml.etree.ElementTree as ET
+
+    from hil.suite import run_suite
+
+    require_tool("gcc")
+    if target == "mps2":
+        require_tool("qemu-system-arm")
+        require_tool("arm-none-eabi-gcc")
+    cmap, bus, clock = _bus()
+    with start_target(model, target, precision="float", style="table", cmap=cmap,
+                      bridge=StandIn(bus, clock)) as emu:
+        with Device.open(emu.url, timeout=5) as dev:
+            res = run_suite(dev, model, url=emu.url, n_vectors=50, n_fuzz=100, flash=False, verbose=False)
+    assert res.ok, res.table()
+    stream = {c.name: c for c in res.checks}["stream"]
+    assert stream.figures["samples"] == 5 and "2 ADC chips" in stream.detail
+    assert 0 < stream.figures["first_sample_s"] <= stream.figures["last_sample_s"]
+    assert f"the first {stream.figures['first_sample_s']:.3f} s" in stream.detail
+    assert res.seconds >= sum(c.seconds for c in res.checks) > 0
+    assert f"checks in {res.seconds:.1f} s" in res.table().splitlines()[0]
+    assert float(ET.fromstring(res.junit()).get("time")) == pytest.approx(res.seconds, abs=1e-3)
+
+
 def test_a_failed_read_is_flagged_not_estimated(model):
     require_tool("gcc")
     faults = [dict(kind="nack", address=0x49, after=60)]  # the second chip falls silent after a few samples

@@ -270,6 +270,28 @@ def test_device_stream_bench_errors(paper_model):
             assert dev.next_seq() != 0
 
 
+def test_device_over_a_socket(paper_model):
+    """socket:// ports are read directly (pyserial's in_waiting says at most 1 there): whole frames of any
+    size, stream samples with their arrival times after the request, and a device that goes away is one
+    InputError, not a hang."""
+    from host.device import Device, NoAnswer
+
+    from fake_device import FakeDevice
+
+    fake = FakeDevice(paper_model, "double", transport="socket", stale=True)
+    with Device.open(fake.url, timeout=2) as dev:
+        big = bytes(range(1, 256)) + b"\x00"
+        assert dev.ping(big) == big
+        arrivals = []
+        samples = dev.stream(5, 4, arrivals=arrivals)
+        assert [s.index for s in samples] == list(range(4))
+        assert len(arrivals) == 4 and 0 < arrivals[0] and all(np.diff(arrivals) > 0)
+        fake.close()
+        with pytest.raises(InputError, match=fake.url) as exc:
+            dev.ping(b"gone")
+        assert not isinstance(exc.value, NoAnswer), exc.value
+
+
 def test_device_no_answer_and_bad_port(paper_model):
     from host.device import Device, NoAnswer
 

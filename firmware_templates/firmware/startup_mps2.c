@@ -2,6 +2,8 @@
 #include "startup.h"
 void SysTick_Handler(void);
 void UART0RX_Handler(void);
+void UART1RX_Handler(void);
+void TIMER0_Handler(void);
 
 #define SCB_CPACR (*(volatile uint32_t *)0xE000ED88u)
 
@@ -25,9 +27,11 @@ __attribute__((section(".isr_vector"), used)) const vector_entry vector_table[16
     { .handler = Default_Handler }, /* PendSV */
     { .handler = SysTick_Handler },
     { .handler = UART0RX_Handler }, /* IRQ 0: UART0 RX */
-    { .handler = Default_Handler }, /* IRQ 1: UART0 TX (not enabled); the rest likewise */
+    { .handler = Default_Handler }, /* IRQ 1: UART0 TX (not enabled); the others not named likewise */
+    { .handler = UART1RX_Handler }, /* IRQ 2: UART1 RX (the I2C bridge) */
     { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
-    { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
+    { .handler = Default_Handler }, { .handler = Default_Handler },
+    { .handler = TIMER0_Handler }, /* IRQ 8: TIMER0 (the alarm of a sleep with a time limit) */
     { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
     { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
     { .handler = Default_Handler }, { .handler = Default_Handler }, { .handler = Default_Handler },
