@@ -296,6 +296,10 @@ def check_corrupt_flash(dev: Device, new: Model, inputs: np.ndarray, sensor_id: 
                  f"{len(refused)} bad transfers refused ({', '.join(refused)}); the old calibration still answers")
 
 
+# the longest encoded frame is MAX_BODY + 2 bytes (COBS); an oversize run overflows the receiver once to three times
+OVERSIZE = (P.MAX_BODY + 4, 3 * (P.MAX_BODY + 3))
+
+
 def fuzz_frames(n: int, seed: int = 0) -> list[bytes]:
     """Random and mutated wire frames: garbage, bit flips, truncations, wrong lengths, oversize,
     and well-formed frames of every type with random payloads (arguments that would make the
@@ -328,8 +332,9 @@ def fuzz_frames(n: int, seed: int = 0) -> list[bytes]:
             wrong = bytearray(body[:-4])
             wrong[2:4] = int(rng.integers(0, 65536)).to_bytes(2, "little")
             frames.append(P.cobs_encode(bytes(wrong) + P.crc32(bytes(wrong)).to_bytes(4, "little")) + b"\x00")
-        elif kind == 4:  # oversize: no delimiter for longer than a frame
-            frames.append(bytes(rng.integers(1, 256, int(rng.integers(300, 1200)), dtype=np.uint8)) + b"\x00")
+        elif kind == 4:  # oversize: no delimiter for longer than the longest frame, up to three of them
+            size = int(rng.integers(OVERSIZE[0], OVERSIZE[1]))
+            frames.append(bytes(rng.integers(1, 256, size, dtype=np.uint8)) + b"\x00")
         else:  # well formed, random type and payload (may be refused for its length or arguments)
             frames.append(P.cobs_encode(body) + b"\x00")
     return frames
