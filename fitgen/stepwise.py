@@ -25,6 +25,7 @@ from threadpoolctl import ThreadpoolController
 # The controller scans the loaded libraries once (about 1 ms); each limit then costs ~20 us.
 _BLAS = ThreadpoolController()
 _ONE_THREAD = _BLAS.wrap(limits=1, user_api="blas")
+one_blas_thread = _ONE_THREAD  # for the fit's linear algebra outside this module (fitgen.augment)
 
 ALIAS_TOL = 1e-7  # relative residual norm below which a column is aliased (R's lm.fit tol)
 _BLOCK = 1 << 14  # rows per block of the compressing QR
@@ -66,6 +67,12 @@ def compress(columns, y: np.ndarray, block: int = _BLOCK, extra=(), start: np.nd
         rows[:, 1:-1] = gram_root(gram)
         acc = _fold(acc, rows)
     return acc
+
+
+@_ONE_THREAD
+def triangle(rows: np.ndarray) -> np.ndarray:
+    """R of a Householder QR of ``rows``: upper triangular, with R^T R = rows^T rows."""
+    return _triangle(np.array(rows, order="F", dtype=float))
 
 
 def _fold(acc: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -204,13 +211,14 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> Stepwise
             trace.append(Step(f"- {names[dead[-1]]}", aic, rss, len(current)))
             continue
         # row 0: stay; then removals in model order; then additions in candidate order
-        labels, scores = ["<none>"], [aic]
+        scores, outside = [np.array([aic])], np.zeros(0, dtype=int)
         if current:
             drops = _rss_drops(Q, R, yc, rss)
-            labels += [("-", c) for c in current]
-            scores += [aic_of(max(v, 1e-300), n, len(current) - 1, k) for v in drops]
+            scores.append(aic_of(np.maximum(drops, 1e-300), n, len(current) - 1, k))
         if max_terms is None or len(current) < max_terms:
-            outside = np.array([j for j in range(m) if j not in set(current)], dtype=int)
+            free = np.ones(m, dtype=bool)
+            free[current] = False
+            outside = np.flatnonzero(free)
             if outside.size:
                 Z = A[:, outside + 1]
                 Z = Z - Q @ (Q.T @ Z)
@@ -222,15 +230,15 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> Stepwise
                 coef = (Z.T @ r) / znorm**2
                 new_r = r[:, None] - Z * coef
                 add_rss = np.sum(new_r * new_r, axis=0)
-                labels += [("+", int(j)) for j in outside]
-                scores += [aic_of(max(v, 1e-300), n, len(current) + 1, k) for v in add_rss]
-        best = int(np.argmin(scores))  # argmin takes the first of equal scores: R's order()
+                scores.append(aic_of(np.maximum(add_rss, 1e-300), n, len(current) + 1, k))
+        best = int(np.argmin(np.concatenate(scores)))  # argmin takes the first of equal scores: R's order()
         if best == 0:
             break
-        sign, j = labels[best]
-        if sign == "-":
+        if best <= len(current):
+            sign, j = "-", current[best - 1]
             current.remove(j)
         else:
+            sign, j = "+", int(outside[best - 1 - len(current)])
             current.append(j)
         new_rss, Q, R, r = rss_of(current)
         new_aic = aic_of(new_rss, n, len(current), k)
