@@ -52,7 +52,8 @@ _GRAM_ROWS = 1024
 
 def noise_blocks(terms: list[Term], inputs: np.ndarray, sigma: float, d: np.ndarray | None = None,
                  d_jac=None, rows: int = _ROWS, harmonics=None) -> Iterator[np.ndarray]:
-    """Blocks of rows [0, sigma * d(x)/d(v_k), 0] (m + 2 columns) for the terms' columns x.
+    """Blocks of rows [0, sigma * d(x)/d(v_k), 0] (m + 2 columns) for the terms' columns x, to fold by QR
+    (where :func:`gram_fold` is False; elsewhere :func:`noise_gram` sums them).
 
     ``d_jac``: a function (lo, hi) -> the (hi - lo, 3, N) gradient of the displacement estimates ``d``
     by the inputs on those rows (None: d is exact), formed block by block like everything here."""

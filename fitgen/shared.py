@@ -5,7 +5,9 @@ their candidates. Data: one blocked QR (fitgen.stepwise.compress) of [1, the ter
 every target] serves each output whose terms are among them: its triangle is the QR of that
 triangle's columns [1, its terms, its target], with the same inner products to QR's rounding.
 Terms with d follow the stage-1 equations: [1, the output's terms, every target] is compressed
-once per (terms, d), which thx and thy share. Noise: fitgen.augment.NoiseGrams.
+once per (terms, d), which thx and thy share. Noise: fitgen.augment.NoiseGrams. A single fit
+(fitgen.fit.fit_model alone) shares the noise Gram only: its data triangles, and so the exact
+fit's bits (which decide R's ties the way R does), stay its own.
 """
 
 from __future__ import annotations
