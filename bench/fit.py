@@ -1,10 +1,11 @@
 """Benchmark of the stepwise fit: against R's step() and a plain refit loop, and in rows.
 
 Run: ``python bench/fit.py > /tmp/fitbench.md`` (markdown on stdout, progress on stderr;
-about 1.5-2 minutes on 2 cores, most of it in R and in the plain loop). Needs Rscript.
+about 5-6 minutes on 2 cores, most of it in part 4, R and the plain loop). Needs Rscript.
 
 Part 1, the paper grid (1,875 poses, no noise), outputs dx, dy, dz, thx, thy; the
-rotations get the d-columns from the stage-1 estimates, as tests/test_stepwise.py does:
+rotations get the d-columns from the stage-1 estimates of the exact fit (FitSettings.exact()),
+as tests/test_stepwise.py does:
   ours   stepwise(X, y, init) including its compress() of the rows, median of 11 runs
          after one warm-up call (the first LAPACK call of a process pays a start-up cost);
   R      step() as fitgen.rstep.r_step runs it; the seconds inside R around
@@ -24,6 +25,13 @@ is not timed. Memory at 200,000 rows: tracemalloc peak and the process max RSS.
 Part 3, rows without limit: fit_output("dz") at 200,000 and 2,000,000 rows (an hour of capture at
 860 samples/s), each in a fresh process: time, the fit's own peak and the process's max RSS.
 ``python bench/fit.py --rows-only`` runs this part alone.
+
+Part 4, the command: the whole `fitgen fit DATA -o MODEL` as a user runs it, the default (noise-aware,
+float, family auto, held-out figures) against `--noise 0` (the paper's procedure), at 1,875 / 20,000 /
+200,000 random rows, each run a fresh process, the two alternating; median time and peak RSS of each and
+their ratios (issue 20: the default within 3x the time and 1.5x the peak memory at 20,000 rows).
+``python bench/fit.py --command-only`` runs this part alone; ``--baseline DIR`` adds both commands run
+with the fitgen source tree at DIR (e.g. ``git archive COMMIT | tar -x -C DIR``) and compares its terms.
 """
 
 from __future__ import annotations
@@ -139,7 +147,8 @@ def part_paper_grid() -> tuple[str, dict]:
     warm, _ = timed(stepwise, X0, y0, init0)  # the warm-up call the brief asks for
     log(f"first stepwise call of the process {cold * 1e3:.1f} ms, second {warm * 1e3:.1f} ms")
 
-    t_model, model = timed(fit_model, ds)
+    # the d-columns as tests/test_stepwise.py makes them: the paper's procedure (R's step()), no noise rows
+    t_model, model = timed(fit_model, ds, settings=FitSettings.exact())
     d = Model(model.input_min, model.input_max, tuple(model.equation(x) for x in DISPLACEMENTS)).predict(ds.inputs)
     log(f"fit_model (5 outputs, two stages) {t_model:.2f} s; stage-1 d estimates ready")
 
@@ -223,7 +232,7 @@ def part_paper_grid() -> tuple[str, dict]:
                       f"{r['r_min'] / r['ours_min']:.0f}x", r["naive_runs"]] for o, r in results.items()]))
     md.append("")
     md.append(f"First stepwise() call of the process (dx, cold): {cold * 1e3:.1f} ms; the next call: "
-              f"{warm * 1e3:.1f} ms. fit_model on the grid (5 outputs, two stages, refits): {t_model:.2f} s, 1 run.")
+              f"{warm * 1e3:.1f} ms. fit_model on the grid (exact, 5 outputs, two stages, refits): {t_model:.2f} s, 1 run.")
     if notes:
         md.append("")
         md.append("Differences:")
@@ -448,9 +457,156 @@ def part_rows_without_limit() -> str:
     return "\n".join(md)
 
 
+# ---------------------------------------------------------------------------------------------- part 4
+
+COMMAND_ROWS = (1_875, 20_000, 200_000)
+COMMAND_REPEATS = {1_875: 3, 20_000: 5, 200_000: 3}
+BASELINE_REPEATS = {1_875: 3, 20_000: 3, 200_000: 1}
+TIME_TARGET, MEMORY_TARGET = 3.0, 1.5  # issue 20: the default within 3x the exact fit's time, 1.5x its peak memory
+# the user's `fitgen fit`: the console script's entry point, in a fresh interpreter that writes its
+# peak RSS (VmHWM, since its exec) on exit: a child's ru_maxrss also counts the parent's pages at fork
+_CLI = """import atexit, os, sys
+def _peak():
+    with open("/proc/self/status") as f, open(os.environ["FITBENCH_PEAK"], "w") as out:
+        out.write(next(line for line in f if line.startswith("VmHWM:")).split()[1])
+atexit.register(_peak)
+from fitgen.cli import main
+sys.argv[0] = "fitgen"
+main()
+"""
+
+
+def _run_cli(args: list[str], tree: str | None = None) -> tuple[float, int]:
+    """Wall time and peak RSS (bytes) of one fresh `fitgen ARGS` process; ``tree``: the fitgen source
+    tree it imports (default: the one this process imported)."""
+    import tempfile
+
+    import fitgen
+
+    tree = tree or os.path.dirname(os.path.dirname(os.path.abspath(fitgen.__file__)))
+    with tempfile.TemporaryFile() as err, tempfile.NamedTemporaryFile("r") as peak:
+        env = {**os.environ, "PYTHONPATH": tree, "FITBENCH_PEAK": peak.name}
+        t0 = time.perf_counter()
+        # run from the temporary folder: `python -c` puts the working folder first on the path
+        p = subprocess.run([sys.executable, "-c", _CLI, *args], stdout=subprocess.DEVNULL, stderr=err, env=env,
+                           cwd=tempfile.gettempdir())
+        t = time.perf_counter() - t0
+        if p.returncode:
+            err.seek(0)
+            sys.exit(f"fitgen {' '.join(args)} failed ({p.returncode}):\n{err.read().decode()[-2000:]}")
+        return t, int(peak.read()) * 1024
+
+
+def _model_summary(path: str) -> dict:
+    import json
+
+    m = json.load(open(path))
+    return {"terms": {o["name"]: o["terms"] for o in m["outputs"]}, "family": m["fit"]["family"]["name"],
+            "held_out": m["fit"].get("held_out", {}).get("errors", {})}
+
+
+def part_command(baseline: str | None = None) -> str:
+    """The whole `fitgen fit` command, default against `--noise 0`, in fresh processes, runs interleaved."""
+    import tempfile
+
+    rows, notes, verdict = [], [], {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in COMMAND_ROWS:
+            data = f"{tmp}/r{n}.csv"
+            _run_cli(["simulate", "--sensor", "paper", "--random", str(n), "--seed", str(SEED), "-o", data])
+            runs = {"default": [], "exact": [], "baseline": [], "baseline exact": []}
+            plan = [("default", []), ("exact", ["--noise", "0"])]
+            for i in range(COMMAND_REPEATS[n]):
+                if baseline is not None and i < BASELINE_REPEATS[n]:
+                    plan_i = plan + [("baseline", []), ("baseline exact", ["--noise", "0"])]
+                else:
+                    plan_i = plan
+                for name, extra in plan_i:
+                    out = f"{tmp}/{name.replace(' ', '-')}{n}.json"
+                    t, rss = _run_cli(["fit", data, "-o", out, *extra], baseline if name.startswith("baseline") else None)
+                    runs[name].append((t, rss))
+                    log(f"command, {n:,} rows: {name} run {len(runs[name])}: {t:.2f} s, peak RSS {rss / 1e6:.0f} MB")
+            med = {k: (statistics.median(t for t, _ in v), statistics.median(r for _, r in v))
+                   for k, v in runs.items() if v}
+            ours, exact = _model_summary(f"{tmp}/default{n}.json"), _model_summary(f"{tmp}/exact{n}.json")
+            t_ratio, m_ratio = med["default"][0] / med["exact"][0], med["default"][1] / med["exact"][1]
+            verdict[n] = (t_ratio, m_ratio)
+            row = [f"{n:,}", f"{med['default'][0]:.2f}", f"{med['exact'][0]:.2f}", f"{t_ratio:.2f}",
+                   f"{min(a[0] / b[0] for a, b in zip(runs['default'], runs['exact'])):.2f}-"
+                   f"{max(a[0] / b[0] for a, b in zip(runs['default'], runs['exact'])):.2f}",
+                   f"{med['default'][1] / 1e6:.0f}", f"{med['exact'][1] / 1e6:.0f}", f"{m_ratio:.2f}",
+                   f"{ours['family']}, {sum(map(len, ours['terms'].values()))}",
+                   f"{sum(map(len, exact['terms'].values()))}", len(runs["default"])]
+            if baseline is not None:
+                base = _model_summary(f"{tmp}/baseline{n}.json")
+                same = base["terms"] == ours["terms"] and base["family"] == ours["family"]
+                b, be = med["baseline"], med["baseline exact"]
+                row += [f"{b[0]:.2f}", f"{be[0]:.2f}", f"{b[0] / be[0]:.2f}", f"{b[1] / 1e6:.0f}", f"{be[1] / 1e6:.0f}",
+                        f"{b[1] / be[1]:.2f}", "yes" if same else "no"]
+                if not same:
+                    notes.append(_difference(n, base, ours))
+            rows.append(row)
+    header = ["rows", "default [s]", "--noise 0 [s]", "time ratio", "per-pair ratios", "default peak RSS [MB]",
+              "--noise 0 peak RSS [MB]", "memory ratio", "default: family, terms", "--noise 0: terms", "runs"]
+    if baseline is not None:
+        header += ["baseline default [s]", "baseline --noise 0 [s]", "baseline time ratio",
+                   "baseline default peak RSS [MB]", "baseline --noise 0 peak RSS [MB]", "baseline memory ratio",
+                   "same terms as baseline"]
+    md = ["## 4. The fit command: default (noise-aware, float, family auto) against `--noise 0`", ""]
+    md.append(table(header, rows))
+    md.append("")
+    md.append(f"Each run a fresh process running `fitgen fit DATA -o MODEL` as a user does (imports, reading the CSV, "
+              f"the fit, for the default both families and the validation that picks one, {2000:,} held-out poses, "
+              f"writing the model); `fitgen simulate --sensor paper --random N --seed {SEED}` data (noise-free, so "
+              f"the default adds the sensor's noise in expectation). Default and `--noise 0` runs alternate; "
+              f"medians of {', '.join(f'{COMMAND_REPEATS[n]} ({n:,} rows)' for n in COMMAND_ROWS)} runs; time ratio: "
+              f"default median / `--noise 0` median, per-pair ratios: the range over the consecutive pairs; peak RSS: "
+              f"the process's own high-water mark since its start (VmHWM, read at exit), median.")
+    if baseline is not None:
+        md.append("")
+        md.append(f"Baseline: the same two commands with the fitgen tree at `{baseline}`, in the same alternation "
+                  f"(medians of {', '.join(f'{BASELINE_REPEATS[n]} ({n:,} rows)' for n in COMMAND_ROWS)} runs); "
+                  f"'same terms': every output's terms and the family the same as this tree's default.")
+    for n in notes:
+        md += ["", n]
+    t20, m20 = verdict[20_000]
+    md.append("")
+    md.append(f"Target, the default at 20,000 rows within {TIME_TARGET:g}x the `--noise 0` fit's time and "
+              f"{MEMORY_TARGET:g}x its peak memory: time {'met' if t20 <= TIME_TARGET else 'NOT met'} ({t20:.2f}x), "
+              f"memory {'met' if m20 <= MEMORY_TARGET else 'NOT met'} ({m20:.2f}x).")
+    return "\n".join(md)
+
+
+def _difference(n: int, base: dict, ours: dict) -> str:
+    """The outputs whose terms differ from the baseline's, and the held-out errors of both models."""
+    lines = [f"{n:,} rows: terms differ from the baseline's (family {base['family']} -> {ours['family']}):"]
+    for o, terms in ours["terms"].items():
+        b = base["terms"].get(o, [])
+        if b != terms:
+            lines.append(f"- {o}: only baseline {', '.join(sorted(set(b) - set(terms))) or '-'}; only ours "
+                         f"{', '.join(sorted(set(terms) - set(b))) or '-'}")
+    for prec in ("double", "float"):
+        for o in ours["terms"]:
+            a, b = base["held_out"].get(prec, {}).get(o), ours["held_out"].get(prec, {}).get(o)
+            if a and b and "max" in a:
+                lines.append(f"- held out, {prec} {o}: max {a['max']:.4g} -> {b['max']:.4g}, noisy RMS "
+                             f"{a['noisy_rms']:.4g} -> {b['noisy_rms']:.4g}, rounding's share "
+                             f"{100 * a['share']:.1f} % -> {100 * b['share']:.1f} %")
+    return "\n".join(lines)
+
+
 def main() -> None:
-    if sys.argv[1:] == ["--rows-only"]:
+    args = sys.argv[1:]
+    baseline = None
+    if "--baseline" in args:  # --baseline DIR: also the default fit of the fitgen tree at DIR (before a change)
+        i = args.index("--baseline")
+        baseline = os.path.abspath(args[i + 1])
+        del args[i:i + 2]
+    if args == ["--rows-only"]:
         print(part_rows_without_limit())
+        return
+    if args == ["--command-only"]:
+        print(part_command(baseline))
         return
     if not have_r():
         sys.exit("Rscript not found: part 1 compares with R's step()")
@@ -461,7 +617,7 @@ def main() -> None:
             f"{r_version()} (reference BLAS); {os.cpu_count()} CPUs; "
             f"load average at start {load0[0]:.2f}", ""]
     p1, _ = part_paper_grid()
-    p2 = part_rows() + "\n\n" + part_rows_without_limit()
+    p2 = part_rows() + "\n\n" + part_rows_without_limit() + "\n\n" + part_command(baseline)
     load1 = os.getloadavg()
     total = time.perf_counter() - T_START
     tail = f"Total benchmark time {total:.0f} s; load average at end {load1[0]:.2f} (1 min), {load1[1]:.2f} (5 min)."

@@ -6,6 +6,8 @@ Validation poses are random poses in the training box, simulated with the sensor
 computes: the figures the model file reports stay held out from this choice. The harmonics family
 wins when the geometric mean over outputs of its noisy RMS error over the powers' is below 1.
 It is not tried when the elements' positions are unknown or the readings' sum is not > 0.
+The two fits share their compressed rows (fitgen.shared): each family's model is the one it gets
+fitted alone, to rounding, at little more than the cost of the larger family's fit.
 """
 
 from __future__ import annotations
@@ -13,10 +15,12 @@ from __future__ import annotations
 import numpy as np
 
 from .dataset import Dataset
-from .fit import FitSettings, fit_model
+from .fit import FitSettings, fit_model, noise_to_add, ring_harmonics
 from .holdout import box_of, held_out_set
 from .model import Model
 from .pose import POSE_NAMES
+from .shared import SharedRows
+from .terms import candidate_terms
 
 VALIDATION_SEED = 7919
 VALIDATION_POSES = 1000
@@ -47,6 +51,16 @@ def validation_rms(model: Model, sensor, ranges: dict, precision: str = "float")
     return {o: float(np.sqrt(np.mean(err[:, j] ** 2))) for j, o in enumerate(model.output_names)}
 
 
+def shared_rows(ds: Dataset, families, settings: FitSettings, sensor) -> SharedRows:
+    """The rows the candidate families' fits share (fitgen.shared): their terms without d have the same
+    data and noise rows, compressed once for all of them."""
+    harmonics, positive = ring_harmonics(ds, sensor), ds.inputs.min(axis=0) > 0
+    scope = [t for f in families for t in candidate_terms(
+        ds.n_inputs, "dx", exponents=settings.with_family(f).exponents, d_terms=False, positive=positive,
+        harmonics=harmonics, harmonic_degree=settings.with_family(f).harmonic_degree)]
+    return SharedRows(ds.inputs, noise_to_add(ds, settings, sensor)["added"], harmonics, scope, ds.targets)
+
+
 def fit_auto(ds: Dataset, outputs, settings: FitSettings, sensor, progress=None) -> tuple[Model, dict]:
     """The model of the better family, and the record of the choice (``fit_info["family"]``).
 
@@ -66,7 +80,8 @@ def fit_auto(ds: Dataset, outputs, settings: FitSettings, sensor, progress=None)
         wanted = POSE_NAMES if outputs is None else tuple(n for n in POSE_NAMES if n in outputs)
         check_refinable(ds, wanted, settings.refine, settings.refine_terms)
         forward = fit_forward(ds, max_terms=settings.refine_terms, progress=progress)
-    models = {f: fit_model(ds, outputs, settings.with_family(f), progress, sensor, forward) for f in cands}
+    shared = shared_rows(ds, cands, settings, sensor)
+    models = {f: fit_model(ds, outputs, settings.with_family(f), progress, sensor, forward, shared) for f in cands}
     ranges = box_of(ds.poses())
     precision = "fixed" if settings.precision == "fixed" else "float"
     rms = {f: validation_rms(m, sensor, ranges, precision) for f, m in models.items()}

@@ -13,11 +13,12 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from . import __version__
-from .augment import ROUNDING_FACTOR, UNIT_ROUNDOFF, noise_blocks, rounding_rows
+from .augment import ROUNDING_FACTOR, UNIT_ROUNDOFF, gram_fold, noise_blocks, rounding_rows
 from .dataset import Dataset
 from .errors import InputError
 from .model import Equation, Model
 from .pose import POSE_NAMES
+from .shared import SharedRows
 from .stepwise import compress, refit, stepwise
 from .terms import (DISPLACEMENTS, EXPONENTS, FAMILIES, HARMONIC_DEGREE, ROTATIONS, Harmonics, candidate_terms,
                     design_jacobian, design_matrix, initial_terms)
@@ -88,12 +89,12 @@ ROWS = 1 << 14  # rows per block: the candidate columns are never all in memory 
 
 def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | None, *,
                settings: FitSettings, positive: np.ndarray, progress=None, noise: float = 0.0,
-               d_jac=None, harmonics: Harmonics | None = None) -> FittedOutput:
+               d_jac=None, harmonics: Harmonics | None = None, shared: SharedRows | None = None) -> FittedOutput:
     """Choose and fit one output's equation; memory grows with the candidates, not with the rows.
 
     ``noise``: reading noise (rms) to add in expectation (fitgen.augment); ``d_jac``: a function
     (lo, hi) -> the gradient of the displacement estimates ``d`` by the inputs on those rows, for
-    the d-terms' share of it.
+    the d-terms' share of it; ``shared``: the compressed rows shared with other fits (fitgen.shared).
     """
     n, n_in = inputs.shape
     cands = candidate_terms(n_in, name, exponents=settings.exponents,
@@ -116,15 +117,22 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     if len(init) > cap:
         init = init[:cap]
     k = settings.penalty(n)
-    A = compress(columns, y, block=ROWS)
+    if shared is not None and not shared.serves(inputs, noise, harmonics):
+        shared = None
+    A = None if shared is None else shared.triangle(cands, y, d)
+    if A is None:
+        A = compress(columns, y, block=ROWS)
     extra = []
     if settings.precision is not None:
         # from the data's own triangle, before the noise rows: rounding scales with the terms' sizes
         extra.append([rounding_rows(A, ROUNDING_FACTOR * UNIT_ROUNDOFF[settings.precision])])
-    if noise > 0:
+    gram = None
+    if noise > 0 and gram_fold(settings.precision):
+        gram = (shared or SharedRows(inputs, noise, harmonics)).gram(cands, d, d_jac)
+    elif noise > 0:
         extra.append(noise_blocks(cands, inputs, noise, d, d_jac, rows=ROWS // 8, harmonics=harmonics))
-    if extra:
-        A = compress(None, y[:0], extra=itertools.chain(*extra), start=A)
+    if extra or gram is not None:
+        A = compress(None, y[:0], extra=itertools.chain(*extra), start=A, gram=gram)
     res = stepwise(None, y, init, names=[t.text for t in cands], k=k, max_terms=cap, compressed=A, progress=progress)
     terms = [cands[j] for j in res.selected]
     intercept, coefs, rss, cond = refit(A, res.selected)
@@ -199,13 +207,15 @@ def _rms(values) -> float | None:
 
 
 def _d_jacobian(equations, v: np.ndarray, harmonics=None):
-    """A function (lo, hi) -> the (hi - lo, 3, N) gradient of the displacement equations by the inputs."""
+    """A function (lo, hi) -> the (hi - lo, 3, N) gradient of the displacement equations by the inputs;
+    its ``equations``: those equations (fitgen.augment forms the gradient from their terms' own rows)."""
     def block(lo, hi):
         out = np.zeros((hi - lo, 3, v.shape[1]))
         for eq in equations:
             out[:, DISPLACEMENTS.index(eq.name), :] = design_jacobian(
                 list(eq.terms), v[lo:hi], harmonics=harmonics) @ np.asarray(eq.coefficients)
         return out
+    block.equations = equations
     return block
 
 
@@ -222,11 +232,12 @@ def ring_harmonics(ds: Dataset, sensor=None) -> Harmonics:
 
 
 def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: FitSettings = FitSettings(),
-              progress=None, sensor=None, forward=None) -> Model:
+              progress=None, sensor=None, forward=None, shared: SharedRows | None = None) -> Model:
     """Fit every requested output (default: all pose columns of the dataset), two stages.
 
     ``sensor``: the device's sensor when the dataset's meta does not name it (for its noise figure);
-    ``forward``: with ``settings.refine``, a forward model already fitted to ``ds`` (refine_fit.fit_forward).
+    ``forward``: with ``settings.refine``, a forward model already fitted to ``ds`` (refine_fit.fit_forward);
+    ``shared``: the compressed rows of ``ds`` to share with other fits of it (fitgen.family).
     """
     outputs = tuple(ds.target_names) if outputs is None else tuple(outputs)
     if not outputs:
@@ -253,11 +264,13 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
                          f"domain (lowest {float(np.sum(lo)):.4g}): fit another family")
 
     fitted: dict[str, FittedOutput] = {}
+    if shared is None or not shared.serves(v, noise["added"], harmonics):
+        shared = SharedRows(v, noise["added"], harmonics)  # the outputs share their noise rows
     stage1 = [o for o in outputs if o in DISPLACEMENTS]
     for o in stage1:
         fitted[o] = fit_output(o, v, ds.target(o), None, settings=settings, positive=positive,
                                progress=progress and (lambda s, a, p, o=o: progress(o, s, a, p)),
-                               noise=noise["added"], harmonics=harmonics)
+                               noise=noise["added"], harmonics=harmonics, shared=shared)
     stage2 = [o for o in outputs if o in ROTATIONS]
     d = d_jac = None
     if stage2 and settings.d_terms and all(x in stage1 for x in DISPLACEMENTS):
@@ -272,7 +285,7 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
     for o in stage2:
         fitted[o] = fit_output(o, v, ds.target(o), d, settings=settings, positive=positive,
                                progress=progress and (lambda s, a, p, o=o: progress(o, s, a, p)),
-                               noise=noise["added"], d_jac=d_jac, harmonics=harmonics)
+                               noise=noise["added"], d_jac=d_jac, harmonics=harmonics, shared=shared)
 
     info = {
         "generator": f"fitgen {__version__}",

@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import qr, solve_triangular
+from scipy.linalg import eigh, get_lapack_funcs, qr, solve_triangular
 from threadpoolctl import ThreadpoolController
 
 # Threaded OpenBLAS is slower here at every size we meet (~100 columns): on a loaded
@@ -25,20 +25,24 @@ from threadpoolctl import ThreadpoolController
 # The controller scans the loaded libraries once (about 1 ms); each limit then costs ~20 us.
 _BLAS = ThreadpoolController()
 _ONE_THREAD = _BLAS.wrap(limits=1, user_api="blas")
+one_blas_thread = _ONE_THREAD  # for the fit's linear algebra outside this module (fitgen.augment)
 
 ALIAS_TOL = 1e-7  # relative residual norm below which a column is aliased (R's lm.fit tol)
 _BLOCK = 1 << 14  # rows per block of the compressing QR
+_GEQRF = get_lapack_funcs("geqrf", dtype=np.float64)
 
 
 @_ONE_THREAD
-def compress(columns, y: np.ndarray, block: int = _BLOCK, extra=(), start: np.ndarray | None = None) -> np.ndarray:
+def compress(columns, y: np.ndarray, block: int = _BLOCK, extra=(), start: np.ndarray | None = None,
+             gram: np.ndarray | None = None) -> np.ndarray:
     """Upper-triangular R with R^T R = A^T A for A = [1, columns, y], built block by block.
 
     ``columns``: the (n, m) candidate columns, or a function (lo, hi) -> the columns of rows lo..hi,
     so that they never need to be in memory all at once. ``extra``: further rows of A, already
-    formed (m + 2 columns each), as an iterable of blocks: the expected effect of noise
-    (fitgen.augment) enters the search this way. ``start``: a triangle to fold the rows into (the
-    compression is associative). Peak memory is one block of rows, whatever n is.
+    formed (m + 2 columns each), as an iterable of blocks. ``gram``: the (m, m) Gram matrix of
+    further rows that are 0 in the intercept and y columns (the expected effect of noise,
+    fitgen.augment), folded in last through :func:`gram_root`. ``start``: a triangle to fold the
+    rows into (the compression is associative). Peak memory is one block of rows, whatever n is.
     """
     acc = start
     n = len(y)
@@ -47,18 +51,62 @@ def compress(columns, y: np.ndarray, block: int = _BLOCK, extra=(), start: np.nd
         cols = columns(lo, hi) if callable(columns) else columns[lo:hi]
         if acc is None:
             acc = np.zeros((0, cols.shape[1] + 2))
-        blk = np.empty((hi - lo, cols.shape[1] + 2))
-        blk[:, 0] = 1.0
-        blk[:, 1:-1] = cols
-        blk[:, -1] = y[lo:hi]
-        acc = _fold(acc, blk)
+        k = acc.shape[0]
+        # the block is written straight into the Fortran-ordered array LAPACK factorises
+        buf = np.empty((k + hi - lo, acc.shape[1]), order="F")
+        buf[:k] = acc
+        buf[k:, 0] = 1.0
+        buf[k:, 1:-1] = cols
+        buf[k:, -1] = y[lo:hi]
+        del cols
+        acc = _triangle(buf)
     for blk in extra:
         acc = _fold(acc, blk)
+    if gram is not None:
+        rows = np.zeros((gram.shape[0], gram.shape[0] + 2))
+        rows[:, 1:-1] = gram_root(gram)
+        acc = _fold(acc, rows)
     return acc
 
 
+@_ONE_THREAD
+def triangle(rows: np.ndarray) -> np.ndarray:
+    """R of a Householder QR of ``rows``: upper triangular, with R^T R = rows^T rows."""
+    return _triangle(np.array(rows, order="F", dtype=float))
+
+
 def _fold(acc: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    return qr(np.vstack([acc, rows]), mode="r", check_finite=False)[0][: acc.shape[1]]
+    """The triangle of [acc; rows]."""
+    buf = np.empty((acc.shape[0] + rows.shape[0], acc.shape[1]), order="F")
+    buf[: acc.shape[0]] = acc
+    buf[acc.shape[0]:] = rows
+    return _triangle(buf)
+
+
+def _triangle(buf: np.ndarray) -> np.ndarray:
+    """R of a Householder QR of ``buf`` (Fortran order; overwritten): LAPACK geqrf with the workspace it
+    asks for, as scipy.linalg.qr(mode="r") calls it (so the same bits), without that function's copies
+    and its triu of all the rows."""
+    if not buf.size:
+        return buf[: min(buf.shape)]
+    lwork = int(_GEQRF(buf, lwork=-1, overwrite_a=True)[2][0])  # a query: buf is not touched
+    qr_, _, _, info = _GEQRF(buf, lwork=lwork, overwrite_a=True)
+    if info < 0:
+        raise ValueError(f"illegal value in argument {-info} of geqrf")
+    return np.triu(qr_[: min(buf.shape)])
+
+
+def gram_root(gram: np.ndarray) -> np.ndarray:
+    """S (m, m) with S^T S = ``gram``, a symmetric positive semi-definite matrix, to rounding.
+
+    From the eigendecomposition of the gram with its diagonal scaled to 1, so that a column's
+    share is kept to rounding whatever its size against the others; eigenvalues below 0, which
+    only rounding makes, count as 0.
+    """
+    scale = np.sqrt(np.diag(gram))
+    scale[scale == 0] = 1.0
+    w, V = eigh(gram / scale[:, None] / scale[None, :], check_finite=False)
+    return (np.sqrt(np.clip(w, 0.0, None))[:, None] * V.T) * scale[None, :]
 
 
 @dataclass
@@ -163,13 +211,14 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> Stepwise
             trace.append(Step(f"- {names[dead[-1]]}", aic, rss, len(current)))
             continue
         # row 0: stay; then removals in model order; then additions in candidate order
-        labels, scores = ["<none>"], [aic]
+        scores, outside = [np.array([aic])], np.zeros(0, dtype=int)
         if current:
             drops = _rss_drops(Q, R, yc, rss)
-            labels += [("-", c) for c in current]
-            scores += [aic_of(max(v, 1e-300), n, len(current) - 1, k) for v in drops]
+            scores.append(aic_of(np.maximum(drops, 1e-300), n, len(current) - 1, k))
         if max_terms is None or len(current) < max_terms:
-            outside = np.array([j for j in range(m) if j not in set(current)], dtype=int)
+            free = np.ones(m, dtype=bool)
+            free[current] = False
+            outside = np.flatnonzero(free)
             if outside.size:
                 Z = A[:, outside + 1]
                 Z = Z - Q @ (Q.T @ Z)
@@ -181,15 +230,15 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> Stepwise
                 coef = (Z.T @ r) / znorm**2
                 new_r = r[:, None] - Z * coef
                 add_rss = np.sum(new_r * new_r, axis=0)
-                labels += [("+", int(j)) for j in outside]
-                scores += [aic_of(max(v, 1e-300), n, len(current) + 1, k) for v in add_rss]
-        best = int(np.argmin(scores))  # argmin takes the first of equal scores: R's order()
+                scores.append(aic_of(np.maximum(add_rss, 1e-300), n, len(current) + 1, k))
+        best = int(np.argmin(np.concatenate(scores)))  # argmin takes the first of equal scores: R's order()
         if best == 0:
             break
-        sign, j = labels[best]
-        if sign == "-":
+        if best <= len(current):
+            sign, j = "-", current[best - 1]
             current.remove(j)
         else:
+            sign, j = "+", int(outside[best - 1 - len(current)])
             current.append(j)
         new_rss, Q, R, r = rss_of(current)
         new_aic = aic_of(new_rss, n, len(current), k)

@@ -7,14 +7,14 @@ import json
 import numpy as np
 import pytest
 
-from fitgen.augment import noise_blocks, rounding_rows
+from fitgen.augment import NoiseGrams, noise_blocks, noise_gram, rounding_rows
 from fitgen.dataset import Dataset
-from fitgen.fit import FitSettings, fit_model, noise_to_add
+from fitgen.fit import FitSettings, _d_jacobian, fit_model, noise_to_add, ring_harmonics
 from fitgen.holdout import clean_readings, deployed_errors, held_out_set
 from fitgen.model import Model
 from fitgen.sensor import load_sensor
 from fitgen.simulate import DEFAULT_RANGES, grid_poses, pose_rng, random_poses, simulate
-from fitgen.stepwise import compress
+from fitgen.stepwise import compress, stepwise
 from fitgen.terms import Term, candidate_terms, design_jacobian, design_matrix
 from host.compiled import CompiledModel
 
@@ -113,6 +113,36 @@ def test_noise_rows_give_the_expected_rss_exactly_for_linear_terms():
     norms = np.concatenate([[np.sqrt(200)], np.linalg.norm(X, axis=0)])
     expected2 = np.sum((y - 0.7 - X @ b) ** 2) + np.sum((1e-3 * norms * coef[:-1]) ** 2)
     assert np.sum((R2 @ coef) ** 2) == pytest.approx(expected2, rel=1e-12)
+
+
+def test_the_noise_gram_is_the_noise_rows_folded_by_qr():
+    """The default fit's noise rows enter as their Gram matrix: on the paper ring, with the harmonics'
+    and the d-terms' candidates of thx, the triangle is the one a QR of the stacked rows (noise_blocks)
+    gives, and the search chooses alike. The Gram is the same whether d's gradient comes from the
+    stage-1 equations' own rows or from evaluating them, and whether the parts without d are shared."""
+    sensor = load_sensor("paper")
+    ds = simulate(sensor, random_poses(300, DEFAULT_RANGES, pose_rng(4)))
+    stage1 = fit_model(ds, ("dx", "dy", "dz"), FitSettings.family("harmonics"), sensor=sensor)
+    v, harmonics, sigma = ds.inputs, ring_harmonics(ds, sensor), sensor.noise
+    d = stage1.predict(v)
+    d_jac = _d_jacobian(stage1.equations, v, harmonics)
+    terms = candidate_terms(8, "thx", positive=v.min(axis=0) > 0, harmonics=harmonics, harmonic_degree=3)
+    X, y = design_matrix(terms, v, d, harmonics), ds.target("thx")
+    rounding = rounding_rows(compress(X, y), 8 * 2.0**-24)
+    plain = compress(X, y, extra=[rounding, *noise_blocks(terms, v, sigma, d, d_jac, harmonics=harmonics)])
+    gram = noise_gram(terms, v, sigma, d, d_jac, rows=128, harmonics=harmonics)
+    size = np.sqrt(np.diag(gram))
+    evaluated = noise_gram(terms, v, sigma, d, lambda lo, hi: d_jac(lo, hi), harmonics=harmonics)
+    shared = NoiseGrams(v, sigma, harmonics, scope=terms[::-1]).gram(terms, d, d_jac)
+    for other in (evaluated, shared):
+        assert np.all(np.abs(other - gram) <= 1e-12 * np.outer(size, size))
+    folded = compress(X, y, extra=[rounding], gram=gram)
+    col = np.linalg.norm(plain, axis=0)
+    assert np.all(np.abs(folded.T @ folded - plain.T @ plain) <= 1e-12 * np.outer(col, col))
+    init = [terms.index(Term(k, e)) for k in range(1, 9) for e in ("-1", "-2")]
+    a, b = (stepwise(None, y, init, compressed=R) for R in (plain, folded))
+    assert a.selected == b.selected and len(a.selected) > 10
+    assert a.aic == pytest.approx(b.aic, rel=1e-10)
 
 
 def test_noise_is_never_counted_twice():

@@ -229,3 +229,36 @@ def test_auto_keeps_the_family_that_validates_better(tmp_path):
     assert proc.returncode == 0, proc.stderr
     fam = load_model(tmp_path / "bare.json").fit_info["family"]
     assert fam["name"] == "all" and "unknown" in fam["why"]
+
+
+def test_families_sharing_their_rows_fit_as_each_family_alone(monkeypatch):
+    """fit_auto's two families share the compressed rows of their terms without d (fitgen.shared): the
+    data triangle over both families' terms and the noise Gram are formed once, the d-terms' once per
+    family, and each family's model is the one it gets fitted alone."""
+    import fitgen.augment
+    import fitgen.shared
+    from fitgen.family import CANDIDATES, fit_auto, shared_rows
+    from fitgen.simulate import pose_rng, random_poses
+
+    ds = simulate(PAPER, random_poses(1500, DEFAULT_RANGES, pose_rng(8)))
+    settings = FitSettings()
+    alone = {f: fit_model(ds, settings=settings.with_family(f), sensor=PAPER) for f in CANDIDATES}
+    passes = {"noise": 0, "data": 0}
+
+    def counted(name, fn):
+        def wrapper(*args, **kw):
+            passes[name] += 1
+            return fn(*args, **kw)
+        return wrapper
+
+    monkeypatch.setattr(fitgen.augment, "noise_gram", counted("noise", fitgen.augment.noise_gram))
+    monkeypatch.setattr(fitgen.shared.SharedRows, "_compress", counted("data", fitgen.shared.SharedRows._compress))
+    shared = shared_rows(ds, CANDIDATES, settings, PAPER)
+    together = {f: fit_model(ds, settings=settings.with_family(f), sensor=PAPER, shared=shared) for f in CANDIDATES}
+    assert passes == {"noise": 1 + 2, "data": 1 + 2}  # the shared pass, then the d-terms' of each family
+    for f in CANDIDATES:
+        for a, b in zip(together[f].equations, alone[f].equations):
+            assert a.terms == b.terms, (f, a.name)
+            np.testing.assert_allclose(a.coefficients, b.coefficients, rtol=1e-6, err_msg=f"{f} {a.name}")
+    kept, family = fit_auto(ds, None, settings, PAPER)
+    assert [e.terms for e in kept.equations] == [e.terms for e in alone[family["name"]].equations]

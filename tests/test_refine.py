@@ -207,7 +207,8 @@ def test_full_suite_on_emulated_cortex_m4(model, held):
 
 def test_auto_fits_the_forward_model_once_and_refines_as_the_chosen_family_would(train, monkeypatch):
     """`--family auto --refine`: the forward model depends on the data alone, so both families share one fit,
-    and the kept model's refinement is the one fitting that family directly gives."""
+    and the kept model's refinement is the one fitting that family directly gives (its prior, from the
+    equations' residuals, to rounding: the families share their compressed rows, fitgen.shared)."""
     import fitgen.refine_fit as refine_fit
     from fitgen.family import fit_auto
 
@@ -218,7 +219,12 @@ def test_auto_fits_the_forward_model_once_and_refines_as_the_chosen_family_would
     model, family = fit_auto(train, None, settings, PAPER)
     assert len(calls) == 1
     direct = fit_model(train, settings=settings.with_family(family["name"]), sensor=PAPER)
-    assert model.refine == direct.refine and len(calls) == 2  # the direct fit fits its own
+    assert len(calls) == 2  # the direct fit fits its own
+    assert [e.terms for e in model.equations] == [e.terms for e in direct.equations]
+    prior, direct_prior = np.array(model.refine.prior), np.array(direct.refine.prior)
+    scale = np.sqrt(np.outer(np.diag(direct_prior), np.diag(direct_prior)))
+    assert np.all(np.abs(prior - direct_prior) <= 1e-12 * scale)
+    assert dataclasses.replace(model.refine, prior=direct.refine.prior) == direct.refine
     with pytest.raises(ValueError, match="other data"):
         refine_fit.fit_refinement(simulate(PAPER, GRID), model, steps=1, noise=0.0005, max_terms=8,
                                   forward=refine_fit.fit_forward(train, max_terms=8))

@@ -84,3 +84,22 @@ def test_compress_preserves_inner_products():
     A = np.column_stack([np.ones(50000), X, y])
     np.testing.assert_allclose(R.T @ R, A.T @ A, rtol=1e-10, atol=1e-6)
     assert np.allclose(np.tril(R, -1), 0)
+
+
+def test_a_gram_fold_is_the_qr_of_the_stacked_rows():
+    """compress(gram=B^T B) gives the triangle of [1, X, y] and the rows [0, B, 0] that a QR of the stacked
+    rows gives (rows up to sign), with columns eight orders of magnitude apart, and the search chooses alike."""
+    rng = np.random.default_rng(3)
+    n, m = 3000, 12
+    X = rng.normal(size=(n, m)) * np.logspace(-4, 4, m)
+    y = X[:, 1] * 300 + X[:, 6] * 2e-2 - X[:, 9] * 1e-3 + rng.normal(size=n)
+    B = rng.normal(size=(8 * n, m)) * np.logspace(-7, 1, m)  # noise rows: ~1e-3 of each column or less
+    stacked = np.zeros((B.shape[0], m + 2))
+    stacked[:, 1:-1] = B
+    plain = compress(X, y, extra=[stacked])
+    folded = compress(X, y, gram=B.T @ B)
+    size = np.linalg.norm(plain, axis=0)
+    assert np.all(np.abs(np.abs(folded) - np.abs(plain)) <= 1e-10 * size)
+    a, b = stepwise(None, y, [0], compressed=plain), stepwise(None, y, [0], compressed=folded)
+    assert a.selected == b.selected and len(a.selected) >= 3
+    assert a.aic == pytest.approx(b.aic, rel=1e-12)
