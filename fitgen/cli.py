@@ -568,7 +568,8 @@ def build_parser() -> Parser:
 
     sc = sub.add_parser("schedule", help="the capture poses that pin a unit's parameters best (D-optimal)")
     sc.add_argument("--sensor", default="paper", help="the drawing (preset or TOML; default paper)")
-    sc.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
+    sc.add_argument("--transfer", choices=("raw", "gmr"), default="gmr",
+                    help="the readings the capture takes (default gmr: volts, as tactile-host capture reads them)")
     sc.add_argument("--n", type=int, default=40, help="poses to capture (default 40)")
     sc.add_argument("--axes", default="dx,dy,dz", help="the axes the stage moves (default dx,dy,dz)")
     sc.add_argument("--limits", help="the stage's limits 'dx=-2:2 dz=-2:0 ...' (default: the sensor's pose box)")
