@@ -224,3 +224,28 @@ def test_bit_identity_holds_without_numpy_simd():
     tail = proc.stdout.strip().splitlines()[-1:] or [proc.stderr[-300:]]
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
     assert "passed" in tail[0] and "skipped" not in tail[0] and "deselected" in tail[0], tail[0]
+
+
+def _has_fma() -> bool:
+    try:
+        flags = open("/proc/cpuinfo").read().split()
+    except OSError:
+        return False
+    return "fma" in flags and "avx2" in flags
+
+
+@pytest.mark.bitexact
+@pytest.mark.parametrize("cc", ["gcc -std=gnu99 -ffp-contract=fast", "clang -std=gnu99"])
+def test_the_header_turns_contraction_off_itself(two_radii, cc):
+    """In GNU mode on a core with an FMA, GCC fuses a * b + c unless told not to, even with -ffp-contract=fast on
+    the command line; clang fuses within statements by default: the header's pragmas keep the bits Python's."""
+    from host.compiled import CompiledModel
+
+    folder, model, v = two_radii
+    require_tool(cc.split()[0])
+    cc += " -march=x86-64-v3" if _has_fma() else ""  # where the CPU can run fused multiply-adds
+    for precision in ("float", "double"):
+        ref, _ = _predicted(folder, precision)
+        with CompiledModel(model, precision, "unrolled", cc=cc) as cm:
+            out, _ = cm.predict(v)
+        np.testing.assert_array_equal(out, ref)
