@@ -136,11 +136,6 @@ class Identification:
             out[name] = (float(fn(self.theta)), float(np.sqrt(g @ self.cov @ g)))
         return out
 
-    def posterior_draws(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        """``n`` units (rows of parameters) from the Laplace approximation of the posterior."""
-        L = np.linalg.cholesky(self.cov + 1e-18 * np.eye(self.space.size))
-        return self.theta + rng.standard_normal((n, self.space.size)) @ L.T
-
 
 def derived_quantities(space: UnitSpace) -> dict:
     """Functions of the parameters that a capture determines (invariant to the splits it cannot tell)."""

@@ -39,6 +39,15 @@ def _reason(exc: BaseException) -> str:
     return text.splitlines()[0]
 
 
+def no_nagle(port) -> None:
+    """On a pyserial socket:// port, send small frames at once: no Nagle wait (40 ms with delayed ACKs)."""
+    sock = getattr(port, "_socket", None)
+    if sock is not None:
+        import socket
+
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+
 class Device:
     """Requests and replies over one open port. Use ``Device.open(url)`` as a context manager."""
 
@@ -62,12 +71,7 @@ class Device:
             port = serial.serial_for_url(url, baudrate=115200, timeout=POLL, write_timeout=max(timeout, POLL))
         except (serial.SerialException, ValueError, OSError) as exc:
             raise InputError(f"cannot open port {url}: {_reason(exc)}") from None
-        sock = getattr(port, "_socket", None)
-        if sock is not None:
-            import socket
-
-            # small request frames must not wait for Nagle's algorithm (40 ms with delayed ACKs)
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        no_nagle(port)
         return cls(port, timeout, url)
 
     def close(self) -> None:

@@ -31,6 +31,8 @@ from fitgen.errors import InputError
 from fitgen.fileio import write_atomic
 from fitgen.pose import POSE_NAMES
 
+from .device import no_nagle
+
 MACHINE_AXES = ("X", "Y", "Z")
 STAGE_AXES = ("dx", "dy", "dz")  # what a 3-axis stage can set; thx, thy need a tilt stage
 FLAVORS = ("marlin", "grbl")
@@ -98,11 +100,7 @@ class GcodeController:
             port = serial.serial_for_url(url, baudrate=baud, timeout=POLL, write_timeout=timeout)
         except (serial.SerialException, ValueError, OSError) as exc:
             raise InputError(f"cannot open stage {url}: {_describe_port_error(exc)}") from None
-        sock = getattr(port, "_socket", None)
-        if sock is not None:
-            import socket
-
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # one short line each way: no Nagle wait
+        no_nagle(port)  # one short line each way
         return cls(port, url, timeout=timeout, log=log)
 
     def close(self) -> None:
