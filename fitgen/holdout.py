@@ -111,6 +111,7 @@ def deployed_errors(model: Model, held: HeldOut, sensor=None, precisions=PRECISI
 POSTERIOR_UNITS = 8  # units drawn from an identification's posterior to widen the figures
 POSTERIOR_SEED = 2027
 FIGURES = ("max", "rms", "noisy_max", "noisy_rms", "deviation", "share")
+SPREAD_FIGURES = ("max", "rms", "noisy_max", "noisy_rms")  # their range over the posterior's units is recorded
 
 
 def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, n: int = N_POSES,
@@ -140,12 +141,15 @@ def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, 
             continue
         errors[prec] = {o: {**{f: float(np.median([u[prec][o][f] for u in per_unit])) for f in FIGURES},
                             **{f"{f}_p90": float(np.percentile([u[prec][o][f] for u in per_unit], 90))
-                               for f in ("max", "noisy_max")}}
+                               for f in ("max", "noisy_max")},
+                            **{f"{f}_{k}": float(fn([u[prec][o][f] for u in per_unit]))
+                               for f in SPREAD_FIGURES for k, fn in (("lo", np.min), ("hi", np.max))}}
                         for o in rec}
     return {**spec, "sensor": sensor.name, "sensor_sha256": sensor.sha256, "errors": errors,
             "posterior": {"units": len(units), "seed": POSTERIOR_SEED,
                           "statistic": "median over units drawn from the identification's posterior (Laplace); "
-                                       "*_p90: their 90th percentile"}}
+                                       "*_p90: their 90th percentile; *_lo, *_hi: their least and greatest (a unit "
+                                       "is one draw of that spread: bench/identify_bound.py)"}}
 
 
 def posterior_units(record: dict, sensor, k: int) -> list:

@@ -71,7 +71,8 @@ def deployed_table(model: Model) -> str:
         return ""
     post = rec.get("posterior")
     on = (f"on {post['units']} units drawn from the posterior of identified unit {rec.get('sensor', '?')} "
-          "(the median of each figure)" if isinstance(post, dict) else
+          "(the median of each figure, their range in brackets: the unit is one draw of it)"
+          if isinstance(post, dict) else
           f"on unit {rec.get('sensor', '?')} ({rec['sensor_file']})" if rec.get("sensor_file") else
           f"on the drawing {rec.get('sensor', '?')}: a built unit differs from it (fitgen identify)")
     lines = [f"### deployed accuracy, held out ({rec['poses']} random poses in the training box, seed {rec['seed']}; "
@@ -83,8 +84,9 @@ def deployed_table(model: Model) -> str:
             if "unavailable" in errs:
                 continue
             x = errs[e.name]
-            lines.append(f"| {e.name} | {e.unit} | {prec} | {_g(x['max'])} | {_g(x['rms'])} | {_g(x['noisy_max'])} | "
-                         f"{_g(x['noisy_rms'])} | {x['share']:.1%} |")
+            cells = [_g(x[f]) + (f" ({_g(x[f + '_lo'])}-{_g(x[f + '_hi'])})" if f + "_lo" in x else "")
+                     for f in ("max", "rms", "noisy_max", "noisy_rms")]
+            lines.append(f"| {e.name} | {e.unit} | {prec} | {' | '.join(cells)} | {x['share']:.1%} |")
     missing = [f"{p}: {errs['unavailable']}" for p, errs in rec["errors"].items() if "unavailable" in errs]
     lines += [""] + [f"Not available in {m}" for m in missing] + ([""] if missing else [])
     return "\n".join(lines) + "\n"

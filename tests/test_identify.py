@@ -144,6 +144,10 @@ def test_cli_schedule_capture_identify(tmp_path):
     assert held["posterior"]["units"] == 8 and held["sensor_file"] == str(unit_file.resolve())
     dx = held["errors"]["float"]["dx"]
     assert 0 < dx["noisy_max"] <= dx["noisy_max_p90"]
+    # the range over the posterior's units is recorded and printed beside each median
+    for f in ("max", "rms", "noisy_max", "noisy_rms"):
+        assert dx[f + "_lo"] <= dx[f] <= dx[f + "_hi"] and dx[f + "_lo"] < dx[f + "_hi"]
+    assert f"({dx['noisy_max_lo']:.3g}-{dx['noisy_max_hi']:.3g})" in proc.stderr
 
 
 def _save_capture(path, y, poses, meta=None):
