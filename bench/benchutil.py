@@ -40,9 +40,9 @@ def stats(err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def cramer_rao_floor(sensor, poses: np.ndarray) -> dict:
-    """The Cramer-Rao bounds (fitgen.observe.cramer_rao, the sensor's noise, all five components) at each pose:
+    """The Cramer-Rao bounds (fitgen.physics.observe.cramer_rao, the sensor's noise, all five components) at each pose:
     RMS over the poses, median, how many are infinite, and the RMS over the finite ones."""
-    from fitgen.observe import cramer_rao
+    from fitgen.physics.observe import cramer_rao
 
     b = cramer_rao(sensor, poses, sensor.noise)
     finite = np.where(np.isfinite(b), b, np.nan)

@@ -1,6 +1,6 @@
 """Deployed accuracy: what the estimator a user flashes really does, against what the fit reports.
 
-Before the fit became noise-aware and precision-aware (fitgen.fit.FitSettings), a model fitted on
+Before the fit became noise-aware and precision-aware (fitgen.fitting.fit.FitSettings), a model fitted on
 noise-free simulated readings reported errors that its generated C, fed the sensor's noisy
 readings and computing in float, did not reach. This benchmark measures both sides for the flows
 below, on the four layouts of docs/layouts.md and both transfers; docs/deployed-accuracy.md
@@ -19,7 +19,7 @@ Data (deterministic):
 - Training, every flow but `replicas`: the paper-sim grid (1,875 poses) simulated without noise,
   as `fitgen simulate --grid paper-sim`. `replicas`: 4 copies of the grid with the sensor's
   noise (one simulate call, noise seed 2), fitted with FitSettings.exact().
-- Held out: 2,000 random poses uniform in fitgen.simulate.DEFAULT_RANGES (pose seed 2026),
+- Held out: 2,000 random poses uniform in fitgen.physics.simulate.DEFAULT_RANGES (pose seed 2026),
   never used in fitting; noise-free, and with the sensor's noise (5 draws, noise seeds 1..5).
 
 Flows (models), per configuration (layout x transfer):
@@ -38,20 +38,20 @@ Measured, per flow x precision x output:
 
 - model error: Model.predict (double Python) on the noise-free held-out readings, max and RMS.
 - C deviation: the largest |generated C - Model.predict| on the noise-free held-out readings
-  (gcc -O2, host.compiled.CompiledModel; style unrolled; float: inputs rounded to float32 first;
-  fixed: inputs turned into the ADC codes of fitgen.fixedpoint.sensor_input_scale). Rounding's share:
+  (gcc -O2, fitgen.c.compiled.CompiledModel; style unrolled; float: inputs rounded to float32 first;
+  fixed: inputs turned into the ADC codes of fitgen.equations.fixedpoint.sensor_input_scale). Rounding's share:
   that deviation over the model's held-out max error.
 - deployed error: the C on the noisy held-out readings (all draws pooled) against the true
   poses, RMS and max; its RMS over the `replicas` flow's double-C noisy RMS.
-- floor: the Cramer-Rao bound (fitgen.observe.cramer_rao, the sensor's noise, all five components
+- floor: the Cramer-Rao bound (fitgen.physics.observe.cramer_rao, the sensor's noise, all five components
   estimated) at each of the held-out poses; the table gives its RMS over the poses (the
   floor of an unbiased estimator's RMS error there) and, in brackets, its median. A pose the
   layout cannot resolve has an infinite bound and makes the RMS inf; the table then also gives
   how many poses are inf and the RMS over the others.
 
 Per flow: terms per output; instructions per estimate inside tm_estimate of the float unrolled C
-(callgrind, x86-64, host.cost); flash it adds on a Cortex-M4F (float unrolled) and, for the
-fixed-point flows, on a Cortex-M0 (host.cost.arm_sizes, linked newlib program over an empty main).
+(callgrind, x86-64, fitgen.c.cost); flash it adds on a Cortex-M4F (float unrolled) and, for the
+fixed-point flows, on a Cortex-M0 (fitgen.c.cost.arm_sizes, linked newlib program over an empty main).
 """
 
 from __future__ import annotations
@@ -65,15 +65,15 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.errors import InputError
-from fitgen.fit import FitSettings, fit_model
-from fitgen.pose import POSE_NAMES
-from fitgen.sensor import load_sensor
-from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
-from fitgen.terms import FAMILIES
-from fitgen.fixedpoint import sensor_input_scale as fixed_scale
-from host import cost
-from host.compiled import CompiledModel
+from fitgen.base.errors import InputError
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from fitgen.equations.terms import FAMILIES
+from fitgen.equations.fixedpoint import sensor_input_scale as fixed_scale
+from fitgen.c import cost
+from fitgen.c.compiled import CompiledModel
 from benchutil import START, cramer_rao_floor, fmt, log, stats, table
 
 LAYOUTS = ("paper", "two-radii", "ring-vertical", "two-rings")

@@ -36,10 +36,10 @@ import numpy as np
 
 from benchutil import fmt, log, table
 
-from fitgen.fit import FitSettings
-from fitgen.family import fit_auto
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.fitting.fit import FitSettings
+from fitgen.fitting.family import fit_auto
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
 from host.adc import AdcArray
 from host.autozero import AutoZero
 from host.capture import Schedule, capture
@@ -88,7 +88,7 @@ def fit_compensation(sensor, cmap, tin, work: Path):
         d.start_degc = T
         path = work / f"cap.T{T:g}.csv"
         capture(array, sched, path, samples=32, set_pose=bus.set_pose, clock=clock, max_spread=0.01)
-        from fitgen.dataset import load_dataset
+        from fitgen.physics.dataset import load_dataset
 
         ds = load_dataset(path)
         clock.sleep(1.0)

@@ -15,7 +15,7 @@ Setting (deterministic), per layout (`paper`, `ring-vertical`; transfer raw):
 - Training: the paper-sim grid (1,875 poses) simulated noise-free.
 - Held out: 2,000 random poses uniform in the paper-sim box (pose seed 2026); noise-free, and
   with the sensor's noise (draws with noise seeds 1..5, pooled).
-- Floor: the Cramer-Rao bound (fitgen.observe.analyse, the sensor's noise, all five components)
+- Floor: the Cramer-Rao bound (fitgen.physics.observe.analyse, the sensor's noise, all five components)
   at each held-out pose, RMS over the poses.
 
 Methods:
@@ -24,9 +24,9 @@ Methods:
    `ours, harmonics`: the same search with the harmonics family (FitSettings.family("harmonics"):
    the paper's powers and monomials up to degree 3 of the ring's harmonics), AIC, BIC and caps.
    `+ refine k`: those equations, then k Gauss-Newton steps on a forward model fitted to the same
-   grid (fitgen.refine; `--refine k`), all in the same float C.
+   grid (fitgen.equations.refine; `--refine k`), all in the same float C.
 2. `lasso-aic`, `lasso-bic`: scikit-learn LassoLarsIC per output on the same candidate columns
-   (fitgen.terms.candidate_terms + design_matrix; columns standardised, coefficients mapped back
+   (fitgen.equations.terms.candidate_terms + design_matrix; columns standardised, coefficients mapped back
    to raw columns and intercept); thx, thy get the d-terms from the same method's stage-1
    displacement equations on the training rows, as fit_model does. `relaxed`: the lasso's terms
    refitted by least squares.
@@ -41,9 +41,9 @@ Methods:
    box), k = 1, 3, 10; double, Python, not compiled: its cost is given as field-model evaluations
    (of all elements) per estimate.
 
-The regression models (1-3) become fitgen.model.Model objects, so cost is measured exactly like
-ours: callgrind instructions per estimate inside tm_estimate of the float unrolled C (host.cost)
-and the Cortex-M4F flash it adds to a newlib program (host.cost.arm_sizes, `linked`; `.o` is the
+The regression models (1-3) become fitgen.equations.model.Model objects, so cost is measured exactly like
+ours: callgrind instructions per estimate inside tm_estimate of the float unrolled C (fitgen.c.cost)
+and the Cortex-M4F flash it adds to a newlib program (fitgen.c.cost.arm_sizes, `linked`; `.o` is the
 object's text + data). Their deployed accuracy is Model.predict(precision="float") (bit-identical to
 the float C) on the noisy held-out readings; noise-free: Model.predict in double. The MLP's C goes
 through the same bench program and the same link, so its figures are on the same scale.
@@ -73,17 +73,17 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.linear_model import LassoLarsIC
 from sklearn.neural_network import MLPRegressor
 
-from fitgen.errors import InputError
-from fitgen.fit import FitSettings, fit_model
-from fitgen.model import Equation, Model
-from fitgen.observe import jacobian
-from fitgen.pose import POSE_NAMES, field_readings
-from fitgen.sensor import load_sensor
-from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
-from fitgen.terms import DISPLACEMENTS, ROTATIONS, candidate_terms, design_matrix
-from fitgen.transfer import apply_transfer
-from host import cost
-from host.compiled import compile_checked
+from fitgen.base.errors import InputError
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.equations.model import Equation, Model
+from fitgen.physics.observe import jacobian
+from fitgen.physics.pose import POSE_NAMES, field_readings
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from fitgen.equations.terms import DISPLACEMENTS, ROTATIONS, candidate_terms, design_matrix
+from fitgen.physics.transfer import apply_transfer
+from fitgen.c import cost
+from fitgen.c.compiled import compile_checked
 from benchutil import START, cramer_rao_floor, fmt, log, stats, table
 
 try:
@@ -105,13 +105,13 @@ MLPS = (("mlp 64-64 tanh", (64, 64), "tanh"), ("mlp 16-16 tanh", (16, 16), "tanh
 MLP_MAX_ITER = 3000
 OURS_VARIANTS = (("ours, BIC", FitSettings(k="bic")), ("ours, max 25 terms", FitSettings(max_terms=25)),
                  ("ours, max 10 terms", FitSettings(max_terms=10)))
-# the same search with the ring's harmonic monomials among the candidates (fitgen.terms.Harmonics)
+# the same search with the ring's harmonic monomials among the candidates (fitgen.equations.terms.Harmonics)
 HARMONIC_VARIANTS = (("ours, harmonics (AIC)", FitSettings.family("harmonics")),
                      ("ours, harmonics, BIC", FitSettings.family("harmonics", k="bic")),
                      ("ours, harmonics, max 30 terms", FitSettings.family("harmonics", max_terms=30)),
                      ("ours, harmonics, max 15 terms", FitSettings.family("harmonics", max_terms=15)),
                      ("ours, harmonics, max 8 terms", FitSettings.family("harmonics", max_terms=8)))
-# the equations, then Gauss-Newton steps on a forward model fitted to the same grid (fitgen.refine)
+# the equations, then Gauss-Newton steps on a forward model fitted to the same grid (fitgen.equations.refine)
 REFINE_VARIANTS = (("ours, harmonics, max 30 + refine 1", FitSettings.family("harmonics", max_terms=30, refine=1)),
                    ("ours, harmonics, max 30 + refine 2", FitSettings.family("harmonics", max_terms=30, refine=2)),
                    ("ours, harmonics, max 15 + refine 1", FitSettings.family("harmonics", max_terms=15, refine=1,
@@ -365,7 +365,7 @@ class MLP:
         return cost.instruction_counts(binary, inp, folder, mix=False, repeat=False)["fn"]
 
     def arm_sizes(self, folder: Path, cc: str = cost.ARM_CC) -> dict:
-        """As host.cost.arm_sizes, for this header: object text+data and the linked flash it adds."""
+        """As fitgen.c.cost.arm_sizes, for this header: object text+data and the linked flash it adds."""
         d = Path(folder)
         d.mkdir(parents=True, exist_ok=True)
         (d / "tm_model.h").write_text(self.header())

@@ -9,8 +9,8 @@ The model is the paper model: fit_model on the paper-sim grid (1,875 poses, no n
 ``paper`` sensor; 5 outputs, 8 inputs. Inputs are 4,096 vectors uniform in the model's
 input box (seed 2026), the same for every measurement.
 
-1. ns per estimate of the generated C: the header written by fitgen.codegen.write_header,
-   included by a bench program (host.cost.C_BENCH) built with gcc -O2 and host.compiled's
+1. ns per estimate of the generated C: the header written by fitgen.c.codegen.write_header,
+   included by a bench program (fitgen.c.cost.C_BENCH) built with gcc -O2 and fitgen.c.compiled's
    WARNING_FLAGS. tm_estimate is kept out of line (TM_API = static noinline noclone) so
    that every estimate is a call, as on a device. Each build first calibrates how many
    estimates take ~0.2 s; then 11 rounds run each of the 4 builds once in turn (a process
@@ -51,14 +51,14 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.codegen import STYLES
-from fitgen.fit import FitSettings, fit_model
-from fitgen.model import Model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
-from host import cost
-from host.compiled import WARNING_FLAGS
-from host.cost import ARM_CC, FMA_KIND, MIX_KINDS, N1, N2, floor_counts, instruction_counts, run, template_ops
+from fitgen.c.codegen import STYLES
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.equations.model import Model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.c import cost
+from fitgen.c.compiled import WARNING_FLAGS
+from fitgen.c.cost import ARM_CC, FMA_KIND, MIX_KINDS, N1, N2, floor_counts, instruction_counts, run, template_ops
 
 N_VECTORS = cost.NVEC
 SEED = 2026

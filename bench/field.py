@@ -5,7 +5,7 @@ Run:  python bench/field.py [--repeats N] [--large-repeats N] [--large N]
 Two cases on the ``paper`` sensor (8 radial elements): the paper's simulation grid
 (1,875 poses) and a large seeded random batch (200,000 poses). Each is computed by
 
-* fitgen:   ``fitgen.pose.field_readings(sensor, poses)``
+* fitgen:   ``fitgen.physics.pose.field_readings(sensor, poses)``
 * magpylib: one ``Cylinder`` whose path holds every pose (positions and scipy
   orientations), a ``Sensor`` with 8 pixels at the element positions, ``getB``,
   then B . axis_k -- the same work, done the way magpylib is meant to be used.
@@ -32,9 +32,9 @@ import numpy as np
 import magpylib as magpy
 from scipy.spatial.transform import Rotation
 
-from fitgen.pose import field_readings
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses
+from fitgen.physics.pose import field_readings
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses
 
 SEED = 2024
 RANGES = {"dx": (-2.0, 2.0), "dy": (-2.0, 2.0), "dz": (-3.0, 0.0), "thx": (-10.0, 10.0), "thy": (-10.0, 10.0)}

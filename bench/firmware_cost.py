@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import sys
 
-from fitgen.fit import FitSettings, fit_model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
-from fitgen.terms import FAMILIES
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.equations.terms import FAMILIES
 from hil.emulate import bench_instructions, start_target
 from hil.suite import check_timing
 from host.device import Device
@@ -76,7 +76,7 @@ def main() -> None:
 
 
 def _fixed(m):
-    from fitgen.fixedpoint import build_fixed, default_input_scale
+    from fitgen.equations.fixedpoint import build_fixed, default_input_scale
 
     lsb, off, _ = default_input_scale(m)
     return build_fixed(m, lsb, off)

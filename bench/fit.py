@@ -8,7 +8,7 @@ rotations get the d-columns from the stage-1 estimates of the exact fit (FitSett
 as tests/test_stepwise.py does:
   ours   stepwise(X, y, init) including its compress() of the rows, median of 11 runs
          after one warm-up call (the first LAPACK call of a process pays a start-up cost);
-  R      step() as fitgen.rstep.r_step runs it; the seconds inside R around
+  R      step() as rstep.r_step runs it; the seconds inside R around
          step(lm(...)) alone (no R start-up, no CSV reading), median of up to 3 runs
          (1 if a run takes more than 3 s);
   naive  stepwise_reference (refits every candidate model by lstsq on all rows),
@@ -49,13 +49,13 @@ import numpy as np
 import scipy
 from threadpoolctl import threadpool_limits
 
-from fitgen.fit import FitSettings, fit_model, fit_output
-from fitgen.model import Model
-from fitgen.rstep import have_r, r_step
-from fitgen.sensor import load_sensor
-from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
-from fitgen.stepwise import compress, refit, stepwise, stepwise_reference
-from fitgen.terms import DISPLACEMENTS, candidate_terms, design_matrix, initial_terms
+from fitgen.fitting.fit import FitSettings, fit_model, fit_output
+from fitgen.equations.model import Model
+from rstep import have_r, r_step
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from fitgen.fitting.stepwise import compress, refit, stepwise, stepwise_reference
+from fitgen.equations.terms import DISPLACEMENTS, candidate_terms, design_matrix, initial_terms
 
 OURS_REPEATS = 11
 NAIVE_MAX_REPEATS = 3
@@ -385,7 +385,7 @@ LIMIT_ROWS = (200_000, 2_000_000)
 _CHILD = r"""
 import json, resource, sys, time, tracemalloc
 import numpy as np
-from fitgen.fit import FitSettings, fit_output
+from fitgen.fitting.fit import FitSettings, fit_output
 def status(key):
     for line in open("/proc/self/status"):
         if line.startswith(key + ":"):
@@ -470,7 +470,7 @@ def _peak():
     with open("/proc/self/status") as f, open(os.environ["FITBENCH_PEAK"], "w") as out:
         out.write(next(line for line in f if line.startswith("VmHWM:")).split()[1])
 atexit.register(_peak)
-from fitgen.cli import main
+from fitgen.app.cli import main
 sys.argv[0] = "fitgen"
 main()
 """

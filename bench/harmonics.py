@@ -21,7 +21,7 @@ Per layout (paper, ring-vertical, tilted-axes: the layout bench/layout_search.py
   (gcc -O2, unrolled) on the noisy readings, the deployed figure. The C run here is the header
   `fitgen codegen` wrote, byte for byte (checked);
 - cost: instructions per estimate inside tm_estimate (callgrind, the float unrolled header, gcc -O2);
-- floor: the Cramer-Rao bound at each held-out pose (fitgen.observe), RMS over the poses, and the
+- floor: the Cramer-Rao bound at each held-out pose (fitgen.physics.observe), RMS over the poses, and the
   maximum |error| an unbiased estimator at that bound would show over the same 5 x 2,000 noisy
   readings (median of 200 Gaussian draws): no estimator's noisy maximum can be expected below it;
   and in how many of those draws that maximum stays within the noisy target;
@@ -42,13 +42,13 @@ import numpy as np
 
 from benchutil import fmt, log, table, unbiased_maxima
 
-from fitgen.dataset import load_dataset
-from fitgen.model import load_model
-from fitgen.observe import cramer_rao
-from fitgen.pose import POSE_NAMES
-from fitgen.sensor import load_sensor
-from host import cost
-from host.compiled import CompiledModel
+from fitgen.physics.dataset import load_dataset
+from fitgen.equations.model import load_model
+from fitgen.physics.observe import cramer_rao
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.sensor import load_sensor
+from fitgen.c import cost
+from fitgen.c.compiled import CompiledModel
 
 DRAWS = 5
 SEED = 2026
@@ -72,7 +72,7 @@ TERM_LIMIT = {"paper": 30, "ring-vertical": 60, "tilted-axes": 60}
 
 
 def cli(*args: str) -> None:
-    code = "import sys; from fitgen.cli import main; sys.argv[0] = 'fitgen'; main()"
+    code = "import sys; from fitgen.app.cli import main; sys.argv[0] = 'fitgen'; main()"
     proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True)
     if proc.returncode != 0:
         raise SystemExit(f"fitgen {' '.join(args)} failed: {proc.stderr.strip()}")
@@ -88,7 +88,7 @@ def floor_max(sensor, poses: np.ndarray, rng: np.random.Generator, trials: int =
 
 def noise_sets(model, sensor, poses: np.ndarray, targets: dict) -> dict[str, float]:
     """Per target output: the share of NOISE_SETS further sets of DRAWS noisy draws whose max |error| stays within 1.2x."""
-    from fitgen.simulate import simulate
+    from fitgen.physics.simulate import simulate
 
     ok = {o: 0 for o in targets}
     for k in range(NOISE_SETS):

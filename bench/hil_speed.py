@@ -36,14 +36,14 @@ from benchutil import log, table
 ROOT = Path(__file__).resolve().parent.parent
 ADC = "ads1115@0x48:0-3,ads1115@0x49:0-3"
 POSE = "dx=1,dz=-1"
-CLI = "import sys; from hil.cli import main; sys.argv[0] = 'tactile-hil'; main()"
+CLI = "import sys; from fitgen.app.hil_cli import main; sys.argv[0] = 'tactile-hil'; main()"
 
 # fits the two models with the version's own code (its model file format): paper (suite), volts (ADC builds)
 FIT = """
 import sys
-from fitgen.fit import FitSettings, fit_model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
 fit_model(simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"]))).save(sys.argv[1])
 grid = grid_poses({"dx": [-2, -1, 0, 1, 2], "dy": [-2, -1, 0, 1, 2], "dz": [0, -1, -2], "thx": [-5, 0, 5],
                    "thy": [-5, 0, 5]})

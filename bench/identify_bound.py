@@ -1,9 +1,9 @@
 """What a short capture can pin, whatever the estimator: the bound on identify's errors, and the spread of a
 twin's held-out figures over what the capture leaves unknown.
 
-Part 1, the bound. For a D-optimal schedule (fitgen.schedule) of n three-axis poses, rows averaged over S
+Part 1, the bound. For a D-optimal schedule (fitgen.fitting.schedule) of n three-axis poses, rows averaged over S
 samples, a rig error r: the posterior covariance of the quantities identify reports
-(fitgen.identify.derived_quantities: the magnet's offset from the elements' centre, each element's
+(fitgen.fitting.identify.derived_quantities: the magnet's offset from the elements' centre, each element's
 sensitivity), linearised at the drawing (prior + the capture's Fisher information, the rig's error in
 each row's covariance as identify weighs it). From it, by Monte Carlo of that Gaussian, the medians over
 units that an efficient estimator reaches: |offset error| per axis and the worst of the eight elements'
@@ -31,12 +31,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from benchutil import fmt, log, table  # noqa: E402
-from fitgen.holdout import box_of, deployed_errors, held_out_set, posterior_units  # noqa: E402
-from fitgen.identify import Problem, derived_quantities, identify, load_posterior, save  # noqa: E402
-from fitgen.schedule import candidates, d_optimal  # noqa: E402
-from fitgen.sensor import load_sensor  # noqa: E402
-from fitgen.simulate import DEFAULT_RANGES  # noqa: E402
-from fitgen.units import UnitSpace  # noqa: E402
+from fitgen.fitting.holdout import box_of, deployed_errors, held_out_set, posterior_units  # noqa: E402
+from fitgen.fitting.identify import Problem, derived_quantities, identify, load_posterior, save  # noqa: E402
+from fitgen.fitting.schedule import candidates, d_optimal  # noqa: E402
+from fitgen.physics.sensor import load_sensor  # noqa: E402
+from fitgen.physics.simulate import DEFAULT_RANGES  # noqa: E402
+from fitgen.physics.units import UnitSpace  # noqa: E402
 
 CONFIGS = [(n, r, s) for r in (0.0, 0.01, 0.03) for s in (16, 64) for n in (20, 40, 100)]
 MC = 20000

@@ -13,7 +13,7 @@ on the board's bottom face; ring B on the top face, or (the planar control) on t
 The magnet, board, noise (0.5 uT rms) and transfer (raw) are the paper's, as in docs/layouts.md.
 
 The criterion is physical, not fitted: an unbiased estimator at the Cramer-Rao bound
-(fitgen.observe.cramer_rao, marginal per component) errs by N(0, bound^2) per reading; the search
+(fitgen.physics.observe.cramer_rao, marginal per component) errs by N(0, bound^2) per reading; the search
 minimises the expected number of the acceptance's 5 x 2,000 noisy tilt errors beyond 0.12 deg,
 estimated on the box's rest and corners plus 400 random poses (seed 5). Constraints: every reading
 between 0.1 mT (away from the omnipolar fold of |B . axis| at 0) and 1.95 mT (below the AA003-02's
@@ -38,12 +38,12 @@ from scipy.stats import norm
 
 from benchutil import fmt, log, table, unbiased_maxima
 
-from fitgen.errors import InputError
-from fitgen.observe import corner_poses, cramer_rao
-from fitgen.pose import POSE_NAMES, field_readings
-from fitgen.scenes import PRESETS
-from fitgen.sensor import load_sensor, parse_sensor
-from fitgen.simulate import pose_rng, random_poses
+from fitgen.base.errors import InputError
+from fitgen.physics.observe import corner_poses, cramer_rao
+from fitgen.physics.pose import POSE_NAMES, field_readings
+from fitgen.physics.scenes import PRESETS
+from fitgen.physics.sensor import load_sensor, parse_sensor
+from fitgen.physics.simulate import pose_rng, random_poses
 
 LIMIT = 0.12  # deg: 1.2 x the target of 0.1 deg
 DRAWS, HELD, SEED = 5, 2000, 2026
@@ -118,7 +118,7 @@ def floor_row(name: str, f: dict) -> list[str]:
 def plot(floors: dict, held: np.ndarray, folder: Path) -> Path:
     """Left: the thx bound against dz (the press is what the floor depends on most); right: the distribution of
     the unbiased estimator's noisy tilt maximum over the trials, against the target."""
-    from fitgen.plots import _plt, _save
+    from fitgen.app.plots import _plt, _save
 
     plt = _plt()
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.6))

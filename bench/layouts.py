@@ -14,7 +14,7 @@ magnet, board, element noise (0.5 uT rms) and the ``raw`` transfer (|B . axis| i
 1. Readings: the smallest and largest reading over the training grid and the evaluation
    poses; the share of grid poses with a reading beyond 2 mT, where the AA003-02 saturates
    (the raw transfer does not); and the worst thx bound of scene full under the gmr transfer.
-2. Observability (fitgen.observe): the Jacobian d(readings)/d(pose) at rest, its rank
+2. Observability (fitgen.physics.observe): the Jacobian d(readings)/d(pose) at rest, its rank
    (singular values above 1e-8 of the largest) and smallest singular value; Cramer-Rao
    bounds at the sensor's noise, at rest and the worst over the 32 corners of the scene's
    box; scene ``full`` (all five components jointly) and scene ``slide`` (dx, dy, dz; tilt
@@ -45,12 +45,12 @@ import sys
 
 import numpy as np
 
-from fitgen.fit import FitSettings, error_stats, fit_model
-from fitgen.observe import jacobian, observe
-from fitgen.pose import POSE_NAMES
-from fitgen.scenes import PRESETS
-from fitgen.sensor import load_sensor, parse_sensor, tomllib
-from fitgen.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from fitgen.fitting.fit import FitSettings, error_stats, fit_model
+from fitgen.physics.observe import jacobian, observe
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.scenes import PRESETS
+from fitgen.physics.sensor import load_sensor, parse_sensor, tomllib
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 from benchutil import fmt, log, table
 
 LAYOUTS = ("paper", "two-rings", "two-radii", "ring-vertical", "tilted-axes")
@@ -144,7 +144,7 @@ def variant(second: dict):
     """The paper's outer 4 (0, 90, 180, 270 deg, radial, r = 10, z = 0) plus a second ring of 4."""
     from importlib import resources
 
-    data = tomllib.loads(resources.files("fitgen.presets").joinpath("paper.toml").read_text())
+    data = tomllib.loads(resources.files("fitgen.physics.presets").joinpath("paper.toml").read_text())
     data["name"] = "variant"
     data["elements"] = {"ring": [{"count": 4, "radius": 10.0, "z": 0.0, "start": 0.0, "axis": "radial"},
                                  {"count": 4, "start": 45.0, **second}]}

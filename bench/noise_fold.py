@@ -19,12 +19,12 @@ import time
 
 import numpy as np
 
-from fitgen.augment import ROUNDING_FACTOR, UNIT_ROUNDOFF, noise_blocks, noise_gram, rounding_rows
-from fitgen.fit import FitSettings, _d_jacobian, fit_model, ring_harmonics
-from fitgen.sensor import load_sensor
-from fitgen.simulate import DEFAULT_RANGES, pose_rng, random_poses, simulate
-from fitgen.stepwise import compress, stepwise
-from fitgen.terms import Term, candidate_terms, design_matrix
+from fitgen.fitting.augment import ROUNDING_FACTOR, UNIT_ROUNDOFF, noise_blocks, noise_gram, rounding_rows
+from fitgen.fitting.fit import FitSettings, _d_jacobian, fit_model, ring_harmonics
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES, pose_rng, random_poses, simulate
+from fitgen.fitting.stepwise import compress, stepwise
+from fitgen.equations.terms import Term, candidate_terms, design_matrix
 
 ROWS, SEED, REPEATS = 20_000, 1, 3
 

@@ -7,16 +7,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from fitgen.dataset import Dataset
-from fitgen.fit import FitSettings, fit_model
+from fitgen.physics.dataset import Dataset
+from fitgen.fitting.fit import FitSettings, fit_model
 
 # the paper's procedure: the data as given, exact arithmetic (docs/deployed-accuracy.md has the device's figures)
 PAPER_FIT = FitSettings.exact()
-from fitgen.observe import analyse
-from fitgen.pose import rotation_matrices
-from fitgen.report import PAPER_EXP_TERMS, PAPER_SIM_MAX_ERROR, evaluate
-from fitgen.sensor import load_sensor
-from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from fitgen.physics.observe import analyse
+from fitgen.physics.pose import rotation_matrices
+from fitgen.app.report import PAPER_EXP_TERMS, PAPER_SIM_MAX_ERROR, evaluate
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 
 SENSOR = load_sensor("paper")
 OUTPUTS = ("dx", "dy", "dz", "thx", "thy")

@@ -47,9 +47,9 @@ import time
 
 import numpy as np
 
-from fitgen.fit import FitSettings, fit_model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
 from host.adc import AdcArray
 from host.channelmap import Settings, parse_spec
 from host.clock import VirtualClock
@@ -226,7 +226,7 @@ def main() -> None:
           "over 200 samples with 0.5 mV rms element noise (the preset's), in mm:\n")
     print("| converter | LSB (mV) | dx max / rms | dy max / rms | dz max / rms | scatter dx, dy, dz at 0.5 mV noise |")
     print("| --- | --- | --- | --- | --- | --- |")
-    from fitgen.transfer import readings
+    from fitgen.physics.transfer import readings
 
     rng = np.random.default_rng(7)
     lo, hi = np.array([-2, -2, -2, -5, -5.0]), np.array([2, 2, 0, 5, 5.0])

@@ -20,10 +20,10 @@ import numpy as np
 
 from benchutil import log, table
 
-from fitgen.fit import FitSettings, fit_model
-from fitgen.holdout import box_of
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.fitting.holdout import box_of
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 from hil.emulate import bench_instructions, start_target
 from host.device import Device
 

@@ -6,10 +6,10 @@ Run:
 
 Per layout (paper, ring-vertical; transfer raw): the harmonics family capped at 30 terms, fitted on
 the paper-sim grid followed by 20,000 random poses (seed 1), then one refinement step
-(fitgen.refine) whose prior covariance is prior_scale^2 times the equations' expected error
-covariance, for several prior scales. Judged on the validation poses of fitgen.family (1,000
+(fitgen.equations.refine) whose prior covariance is prior_scale^2 times the equations' expected error
+covariance, for several prior scales. Judged on the validation poses of fitgen.fitting.family (1,000
 random poses, seed 7919, 2 noise draws; not the held-out seed 2026 that every reported figure
-uses), float arithmetic: the noisy RMS per output and their geometric mean. fitgen.refine_fit's
+uses), float arithmetic: the noisy RMS per output and their geometric mean. fitgen.fitting.refine_fit's
 PRIOR_SCALE is the scale this table favours.
 """
 
@@ -21,13 +21,13 @@ import numpy as np
 
 from benchutil import fmt, log, table
 
-from fitgen.family import VALIDATION_DRAWS, VALIDATION_POSES, VALIDATION_SEED
-from fitgen.fit import FitSettings, fit_model
-from fitgen.holdout import box_of, held_out_set
-from fitgen.pose import POSE_NAMES
-from fitgen.refine_fit import PRIOR_SCALE, fit_refinement
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from fitgen.fitting.family import VALIDATION_DRAWS, VALIDATION_POSES, VALIDATION_SEED
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.fitting.holdout import box_of, held_out_set
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.fitting.refine_fit import PRIOR_SCALE, fit_refinement
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 
 SCALES = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0)
 

@@ -10,8 +10,8 @@ and docs/eval-benchmark.md ("Cube roots: before and after").
 
 1. Accuracy, in ulp of the correctly rounded cube root (|y - r| / ulp(r), r the exact root, ulp
    that of r's binade in the routine's precision), and the fraction of results equal to the
-   correctly rounded root. Three routines: ours (fitgen.roots.cbrt in numpy; the C tm_cbrtf /
-   tm_cbrt from the generated header, compiled with gcc -O2 and host.compiled.WARNING_FLAGS, is
+   correctly rounded root. Three routines: ours (fitgen.equations.roots.cbrt in numpy; the C tm_cbrtf /
+   tm_cbrt from the generated header, compiled with gcc -O2 and fitgen.c.compiled.WARNING_FLAGS, is
    checked to give the same bits on every input), glibc's cbrtf / cbrt (called from the same C
    program), and numpy's np.cbrt.
    - float32, every float in [1, 8) (3 * 2^23 of them): the routine's error pattern repeats every
@@ -30,7 +30,7 @@ and docs/eval-benchmark.md ("Cube roots: before and after").
      root into a double, run for 1,000 and 11,000 roots; (Ir(11,000) - Ir(1,000)) / 10,000, and
      the same minus the loop with the identity in place of the root (net). Ours is inlined into
      the loop, as it is into tm_estimate; glibc's is a call through the PLT.
-   - per estimate: host.cost.C_BENCH and host.cost.instruction_counts (as bench/eval.py: gcc -O2,
+   - per estimate: fitgen.c.cost.C_BENCH and fitgen.c.cost.instruction_counts (as bench/eval.py: gcc -O2,
      WARNING_FLAGS, 1,000 and 11,000 estimates over 4,096 inputs uniform in the model's input box,
      seed 2026; "in tm_estimate" counts tm_estimate and its callees), for the header as generated
      (after) and for the same header text with its TM_CBRT define pointed back at libm's
@@ -58,11 +58,11 @@ import numpy as np
 
 from benchutil import log, table
 
-from fitgen.codegen import write_header
-from fitgen.model import Model, load_model
-from fitgen.roots import cbrt as ours_cbrt
-from host import cost
-from host.compiled import WARNING_FLAGS, compile_checked
+from fitgen.c.codegen import write_header
+from fitgen.equations.model import Model, load_model
+from fitgen.equations.roots import cbrt as ours_cbrt
+from fitgen.c import cost
+from fitgen.c.compiled import WARNING_FLAGS, compile_checked
 
 SENSOR = "two-rings"
 SEED = 2026
@@ -208,7 +208,7 @@ int main(int argc, char **argv)
 
 def fit_two_rings(folder: Path) -> Model:
     """The preset fitted the paper's way, through the command line exactly as a user would."""
-    fitgen = [sys.executable, "-c", "import sys; from fitgen.cli import main; main(sys.argv[1:])"]
+    fitgen = [sys.executable, "-c", "import sys; from fitgen.app.cli import main; main(sys.argv[1:])"]
     cost.run(fitgen + ["simulate", "--sensor", SENSOR, "--grid", "paper-sim", "-o", str(folder / "s.csv")])
     cost.run(fitgen + ["fit", str(folder / "s.csv"), "--noise", "0", "-o", str(folder / "m.json")])
     return load_model(folder / "m.json")
@@ -224,7 +224,7 @@ def point_at_libm(header: Path, precision: str) -> None:
 
 
 def build_estimate_bench(model: Model, style: str, precision: str, before: bool, folder: Path) -> Path:
-    """host.cost.build_bench, with the header patched in between for the 'before' build."""
+    """fitgen.c.cost.build_bench, with the header patched in between for the 'before' build."""
     folder.mkdir(parents=True, exist_ok=True)
     header = write_header(model, folder, precision, style)
     if before:
@@ -462,7 +462,7 @@ def main() -> None:
     except ImportError:
         avx512 = "CPU features unknown"
     print("# The cube root of the generated C: accuracy and cost (bench/roots.py)\n")
-    print(f"Ours: fitgen.roots.cbrt (numpy) and the C tm_cbrtf / tm_cbrt of the generated header. "
+    print(f"Ours: fitgen.equations.roots.cbrt (numpy) and the C tm_cbrtf / tm_cbrt of the generated header. "
           f"libm: {glibc}. numpy {np.__version__} ({avx512} on this CPU). {gcc_version}; "
           f"{platform.machine()}, {cpu_name()}.\n")
 
@@ -481,11 +481,11 @@ def main() -> None:
     print()
     for label, key in (("float32 [1, 8)", "f32 [1, 8)"), ("float32 random", "f32 random")):
         a = acc[key]
-        print(f"- {label}: C tm_cbrtf differs from fitgen.roots.cbrt on {a['c_differs']} of {a['n']:,} inputs; "
+        print(f"- {label}: C tm_cbrtf differs from fitgen.equations.roots.cbrt on {a['c_differs']} of {a['n']:,} inputs; "
               f"np.cbrt gives glibc's bits on {a['numpy_is_libm']:,}; {a['settled']} near-halfway cases "
               f"settled by mpmath.")
     for label, a in f64.items():
-        print(f"- float64 {label}: C tm_cbrt differs from fitgen.roots.cbrt on {a['c_differs']} of {a['n']:,}; "
+        print(f"- float64 {label}: C tm_cbrt differs from fitgen.equations.roots.cbrt on {a['c_differs']} of {a['n']:,}; "
               f"np.cbrt gives glibc's bits on {a['numpy_is_libm']:,}; {a['subnormal']} subnormal inputs.")
 
     print("\n## Instructions per cube root (callgrind, x86-64)\n")

@@ -1,6 +1,6 @@
 """Built units: what each calibration workflow delivers on units drawn within the drawing's tolerances.
 
-A unit (fitgen.units.draw_unit) differs from its drawing in the magnet's place, tilt and strength,
+A unit (fitgen.physics.units.draw_unit) differs from its drawing in the magnet's place, tilt and strength,
 each element's place, axis, gain and offset, a static ambient field and the map from the stage's
 displacement to the magnet's. This bench draws units of the paper sensor in its gmr transfer (volts,
 16-bit ADC, 0.5 mV rms noise per single sample), calibrates each of them in every workflow below
@@ -21,12 +21,12 @@ Tables on stdout, progress on stderr. --jobs N processes (default 2; one BLAS th
 
 Set-up (deterministic):
 
-- Units: fitgen.units.draw_unit(paper in gmr, seed) for seeds 1..N (N = 20).
+- Units: fitgen.physics.units.draw_unit(paper in gmr, seed) for seeds 1..N (N = 20).
 - A simulated capture of a unit at label poses: the stage off its labels by the rig's error (normal,
   per axis dx, dy, dz; tilts exact), magpylib's readings of the unit there, plus the device's noise
   over sqrt(16) (each row averages 16 samples), clipped to the ADC's range; meta units V,
-  samples_per_row 16 (so fit adds the rest of the device's noise, fitgen.fit.noise_to_add).
-- Schedules: fitgen.schedule.schedule(drawing, n, noise=drawing.noise/4, rig_error=r) for
+  samples_per_row 16 (so fit adds the rest of the device's noise, fitgen.fitting.fit.noise_to_add).
+- Schedules: fitgen.fitting.schedule.schedule(drawing, n, noise=drawing.noise/4, rig_error=r) for
   n = 10, 20, 40, 100 and the rig error r simulated (0.01 mm, a CNC; 0.03 mm, a printer).
 - Workflows (each fitted the default way, fit_auto with FitSettings(): noise-aware, float, the powers'
   and the harmonics family compared on validation poses, as `fitgen fit` does):
@@ -39,13 +39,13 @@ Set-up (deterministic):
   3. `direct, 40 three-axis rows`: fitted on the 40-pose capture the 0.01 mm twin is identified from
      (the same rows); they have no tilt labels, so it estimates dx, dy, dz only.
   4. `twin, n poses, r mm` (n = 40, r = 0.01 on every unit; the others fitted on the first --sweep-units
-     units and identified on all): fitgen.identify.identify(drawing, capture, labels, noise/4, rig_error=r),
-     saved with fitgen.identify.save (the unit file and its posterior record), the twin loaded from the
+     units and identified on all): fitgen.fitting.identify.identify(drawing, capture, labels, noise/4, rig_error=r),
+     saved with fitgen.fitting.identify.save (the unit file and its posterior record), the twin loaded from the
      unit file, simulated on the paper-sim grid + 5,000 random poses, fitted; the model file's
-     held-out figures computed as `fitgen fit` does (fitgen.holdout.evaluate with posterior = the
-     record fitgen.identify.load_posterior reads).
-- Held out, per unit: 2,000 random poses (pose seed 2026) in fitgen.simulate.DEFAULT_RANGES, all five
-  components; readings: magpylib's of the unit, quantised by fitgen.transfer.quantise to the 16-bit
+     held-out figures computed as `fitgen fit` does (fitgen.fitting.holdout.evaluate with posterior = the
+     record fitgen.fitting.identify.load_posterior reads).
+- Held out, per unit: 2,000 random poses (pose seed 2026) in fitgen.physics.simulate.DEFAULT_RANGES, all five
+  components; readings: magpylib's of the unit, quantised by fitgen.physics.transfer.quantise to the 16-bit
   ADC (noise-free), and with the device's noise (5 draws, seeds [2026, unit seed, draw]) before the
   ADC (noisy). Estimates by Model.predict(precision="float"): the float C's arithmetic in numpy
   float32, bit-identical to the generated float C (docs/codegen.md, deterministic arithmetic).
@@ -55,7 +55,7 @@ Acceptance (issue 21):
 
 1. The 40-pose, 0.01 mm twin's noisy held-out max error over the 1,875-pose direct fit's, per unit:
    median over units <= 1.25 (dx, dy, dz) and <= 1.5 (thx, thy); worst <= 1.5 and <= 2.
-2. identify (40 poses, 0.01 mm), against fitgen.identify.derived_quantities at the drawn parameters: the
+2. identify (40 poses, 0.01 mm), against fitgen.fitting.identify.derived_quantities at the drawn parameters: the
    median unit's |error| of the magnet's offset from the elements' centre <= 0.03 mm (per axis) and of
    each element's sensitivity (gain x polarisation) <= 1 % (the median over units of each unit's worst
    element); one-sigma intervals cover the truth in 55-80 % of (unit, quantity) pairs.
@@ -83,18 +83,18 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from benchutil import START, fmt, log, table  # noqa: E402
-from fitgen.dataset import Dataset  # noqa: E402
-from fitgen.errors import InputError  # noqa: E402
-from fitgen.family import fit_auto  # noqa: E402
-from fitgen.fit import FitSettings, fit_model  # noqa: E402
-from fitgen.holdout import box_of, evaluate  # noqa: E402
-from fitgen.identify import CHI2_LIMIT, derived_quantities, identify, load_posterior, save  # noqa: E402
-from fitgen.pose import POSE_NAMES  # noqa: E402
-from fitgen.schedule import schedule  # noqa: E402
-from fitgen.sensor import load_sensor  # noqa: E402
-from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate  # noqa: E402
-from fitgen.transfer import quantise  # noqa: E402
-from fitgen.units import UnitSpace, draw_unit  # noqa: E402
+from fitgen.physics.dataset import Dataset  # noqa: E402
+from fitgen.base.errors import InputError  # noqa: E402
+from fitgen.fitting.family import fit_auto  # noqa: E402
+from fitgen.fitting.fit import FitSettings, fit_model  # noqa: E402
+from fitgen.fitting.holdout import box_of, evaluate  # noqa: E402
+from fitgen.fitting.identify import CHI2_LIMIT, derived_quantities, identify, load_posterior, save  # noqa: E402
+from fitgen.physics.pose import POSE_NAMES  # noqa: E402
+from fitgen.fitting.schedule import schedule  # noqa: E402
+from fitgen.physics.sensor import load_sensor  # noqa: E402
+from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate  # noqa: E402
+from fitgen.physics.transfer import quantise  # noqa: E402
+from fitgen.physics.units import UnitSpace, draw_unit  # noqa: E402
 from magpy_truth import magpylib_readings  # noqa: E402
 
 PRESET = "paper"
@@ -380,7 +380,7 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
     verdicts = {}
     print("# Built units: held out on each unit's own truth (bench/units.py)\n")
     print(f"{len(seeds)} units of `{PRESET}` in `{TRANSFER}` (seeds {seeds[0]}..{seeds[-1]}), drawn by "
-          "fitgen.units.draw_unit within the default tolerances. Held out: "
+          "fitgen.physics.units.draw_unit within the default tolerances. Held out: "
           f"{len(ctx.held_poses)} random poses in the default box (pose seed {POSE_SEED}), all five components, "
           f"readings from magpylib (the unit's truth) quantised to the 16-bit ADC; noisy: {ctx.draws} draws of the "
           f"device's {1e3 * ctx.noise:g} mV rms before the ADC. Estimates: Model.predict(precision=\"float\"), the "
@@ -447,7 +447,7 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
 
     # identification
     print("## What identify recovers\n")
-    print("Against fitgen.identify.derived_quantities at the drawn parameters. Offset: the magnet's from the "
+    print("Against fitgen.fitting.identify.derived_quantities at the drawn parameters. Offset: the magnet's from the "
           "elements' centre, |error| in mm, median over units per axis (worst unit). Sensitivity: each element's "
           "gain x polarisation, |relative error|; per unit its worst element, median over units (worst unit). "
           "Coverage: share of (unit, quantity) pairs whose one-sigma interval holds the truth (11 quantities per "
@@ -482,7 +482,7 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
 
     # acceptance 3: the model file's figures against the unit's
     print("## The twin's model file against what the unit delivers\n")
-    print("The model file's held-out figures (fitgen.holdout.evaluate with the identification's posterior: the "
+    print("The model file's held-out figures (fitgen.fitting.holdout.evaluate with the identification's posterior: the "
           "median over 8 units drawn from it, float) over the same figures measured on the unit's magpylib truth. "
           "Factor: max(file/unit, unit/file); per unit the worst over the five outputs; median over units "
           "(worst). `unit/file` > 1: the file promised less error than the unit delivers.\n")
@@ -519,7 +519,7 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
 
     # capture duration
     print("## The capture's duration on a printer\n")
-    print(f"Schedules in the order fitgen.schedule visits them; moves at {SPEED_MM_S:g} mm/s with each pose "
+    print(f"Schedules in the order fitgen.fitting.schedule visits them; moves at {SPEED_MM_S:g} mm/s with each pose "
           f"approached from {APPROACH_MM:g} mm off on -dx, -dy and +dz, {MOVE_OVERHEAD_S:g} s of command round trips "
           f"per move, {SETTLE_S:g} s to settle, {SAMPLES} samples of 8 elements on two ADS1115 at 860 SPS "
           f"({1e3 * SAMPLES * SAMPLE_S:.0f} ms).\n")

@@ -11,7 +11,7 @@ import subprocess
 import time
 from pathlib import Path
 
-from fitgen.errors import InputError
+from fitgen.base.errors import InputError
 
 QEMU = "qemu-system-arm"
 # the emulated boards: QEMU machine per target (mps2: Cortex-M4F; microbit: nRF51822, Cortex-M0)
@@ -230,7 +230,7 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
     """
     import tempfile
 
-    from .firmware import build_firmware, firmware_size, render_firmware
+    from hil.firmware import build_firmware, firmware_size, render_firmware
 
     if target not in TARGETS:
         raise InputError(f"target must be one of {', '.join(TARGETS)}, got {target!r}")

@@ -12,11 +12,11 @@ from pathlib import Path
 import jinja2
 
 from fitgen import __version__
-from fitgen.codegen import PRECISIONS, STYLES, write_header
-from fitgen.errors import InputError
-from fitgen.fileio import write_atomic
-from fitgen.model import Model
-from host.compiled import WARNING_FLAGS
+from fitgen.c.codegen import PRECISIONS, STYLES, write_header
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import write_atomic
+from fitgen.equations.model import Model
+from fitgen.c.compiled import WARNING_FLAGS
 
 PORTS = ("posix", "mps2", "microbit")
 COMMON_FILES = ("model_api.h", "proto.h", "proto.c", "cal.h", "cal.c", "device.h", "device.c", "hal.h", "adc.h",

@@ -15,13 +15,13 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
-from fitgen.calblob import to_blob
-from fitgen.fileio import write_atomic
-from fitgen.model import Equation, Model
-from fitgen.progress import Progress
+from fitgen.c.calblob import to_blob
+from fitgen.base.fileio import write_atomic
+from fitgen.equations.model import Equation, Model
+from fitgen.base.progress import Progress
 from host import protocol as P
 from host.device import Device, DeviceError, NoAnswer
-from host.verify import MAX_SHARE, VerifyResult, compare, compare_fixed, held_out_check, make_code_vectors, make_vectors
+from fitgen.c.verify import MAX_SHARE, VerifyResult, compare, compare_fixed, held_out_check, make_code_vectors, make_vectors
 
 
 @dataclass
@@ -70,7 +70,7 @@ class SuiteResult:
 
 
 class DeviceEvaluator:
-    """A device seen as ``host.verify.compare`` sees a compiled model: precision, style, fma, predict."""
+    """A device seen as ``fitgen.c.verify.compare`` sees a compiled model: precision, style, fma, predict."""
 
     def __init__(self, device: Device, precision: str, style: str, fma: bool = False):
         self.device, self.precision, self.style, self.fma = device, precision, style, fma
@@ -119,7 +119,7 @@ def check_eval(dev: Device, model: Model, inputs: np.ndarray, name: str, fma: bo
 
 
 class FixedDeviceEvaluator:
-    """A fixed-point device seen as ``host.verify.compare_fixed`` sees a compiled model."""
+    """A fixed-point device seen as ``fitgen.c.verify.compare_fixed`` sees a compiled model."""
 
     style = "unrolled"  # the fixed-point header's one form
 
@@ -380,7 +380,7 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
     """Every check in turn against the device at ``url`` that runs ``model`` compiled in.
 
     ``held_out``: noise-free held-out (readings, truth) for the rounding's-share check
-    (fitgen.holdout.clean_readings); without it that check is not run.
+    (fitgen.fitting.holdout.clean_readings); without it that check is not run.
 
     A fixed-point device (INFO precision 2) gets ADC codes, compared with the numpy model of its
     integer arithmetic (``input_lsb``/``input_offset`` as given to codegen; default: the model's sensor).
@@ -389,7 +389,7 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
     checks: list[Check] = []
     fixed = None
     if dev.info(refresh=True).precision == "fixed":
-        from fitgen.fixedpoint import build_fixed, default_input_scale
+        from fitgen.equations.fixedpoint import build_fixed, default_input_scale
 
         lsb, offset, _ = default_input_scale(model) if input_lsb is None else (input_lsb, input_offset or 0.0, "")
         fixed = build_fixed(model, lsb, offset if input_offset is None else input_offset)

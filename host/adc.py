@@ -34,10 +34,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fitgen.errors import InputError
+from fitgen.base.errors import InputError
 
-from .channelmap import ADS1115_PAIRS, ADS1115_PGA, ADS1115_RATES, ChannelMap, Chip
-from .clock import REAL_CLOCK
+from host.channelmap import ADS1115_PAIRS, ADS1115_PGA, ADS1115_RATES, ChannelMap, Chip
+from host.clock import REAL_CLOCK
 
 # --- ADS1115 -----------------------------------------------------------------------
 REG_CONVERSION, REG_CONFIG = 0x00, 0x01

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fitgen.errors import InputError
+from fitgen.base.errors import InputError
 
 
 @dataclass(frozen=True)

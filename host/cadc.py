@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.errors import InputError
+from fitgen.base.errors import InputError
 
-from .adc import NACK_ERRNOS, TIMEOUT_ERRNOS, DeviceSilent, ErrorCounts, RetryPolicy
-from .channelmap import ADS1115_PGA, ADS1115_RATES, ChannelMap
-from .clock import REAL_CLOCK
-from .compiled import compile_checked
+from host.adc import NACK_ERRNOS, TIMEOUT_ERRNOS, DeviceSilent, ErrorCounts, RetryPolicy
+from host.channelmap import ADS1115_PGA, ADS1115_RATES, ChannelMap
+from host.clock import REAL_CLOCK
+from fitgen.c.compiled import compile_checked
 
 I2C_OK, I2C_NACK, I2C_TIMEOUT, I2C_OTHER = 0, 1, 2, 3
 ADC_OK, ERR_CONFIG, ERR_SILENT, ERR_STUCK, ERR_NOT_CHIP = 0, -1, -2, -3, -4

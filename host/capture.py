@@ -28,14 +28,14 @@ from pathlib import Path
 import numpy as np
 
 from fitgen import __version__
-from fitgen.dataset import meta_path, parse_table, read_text
-from fitgen.errors import InputError
-from fitgen.fileio import sha256_hex, write_atomic
-from fitgen.pose import POSE_NAMES, as_poses
+from fitgen.physics.dataset import meta_path, parse_table, read_text
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import sha256_hex, write_atomic
+from fitgen.physics.pose import POSE_NAMES, as_poses
 
-from .adc import AdcArray
-from .clock import REAL_CLOCK
-from .readout import measure
+from host.adc import AdcArray
+from host.clock import REAL_CLOCK
+from host.readout import measure
 
 
 META_EVERY = 2.0  # seconds between rewrites of the meta during a run

@@ -34,8 +34,8 @@ import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from fitgen.errors import InputError
-from fitgen.fileio import read_text
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import read_text
 
 if sys.version_info >= (3, 11):
     import tomllib

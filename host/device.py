@@ -8,10 +8,10 @@ import time
 
 import numpy as np
 
-from fitgen.errors import InputError
+from fitgen.base.errors import InputError
 
-from . import protocol as p
-from .protocol import DeviceInfo, ErrorCode, Frame, MsgType
+from host import protocol as p
+from host.protocol import DeviceInfo, ErrorCode, Frame, MsgType
 
 POLL = 0.02  # seconds one read of the port blocks at most
 READ_CHUNK = 4096  # bytes taken from a socket at once
@@ -236,7 +236,7 @@ class Device:
 
     def read_calibration(self, limit: int = 1 << 20) -> bytes:
         """The loaded blob's bytes (DeviceError NO_CAL when none is loaded)."""
-        from fitgen.calblob import HEADER_SIZE, size_from_header
+        from fitgen.c.calblob import HEADER_SIZE, size_from_header
 
         out = bytearray(self.request(MsgType.CAL_READ, p.pack_cal_read(0, HEADER_SIZE)).payload)
         try:

@@ -3,7 +3,7 @@
 Both take one row of element readings and give (outputs, status) with the status
 of the C API: 0 inside the fitted domain, a bit mask of clamped inputs, -1 for a
 non-finite input. The C engine runs the very code the firmware compiles: the
-header from ``fitgen.codegen.write_header``, included with ``TM_API`` defined
+header from ``fitgen.c.codegen.write_header``, included with ``TM_API`` defined
 empty so that ``tm_estimate`` is exported, built with the project's warning flags
 and ``-shared -fPIC -O2``.
 """
@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.codegen import PRECISIONS, write_header
-from fitgen.errors import InputError
-from fitgen.model import Model
+from fitgen.c.codegen import PRECISIONS, write_header
+from fitgen.base.errors import InputError
+from fitgen.equations.model import Model
 
-from .compiled import compile_checked
+from fitgen.c.compiled import compile_checked
 
 ENGINES = ("python", "c")
 

@@ -28,7 +28,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from urllib.parse import parse_qs, urlsplit
 
-from fitgen.errors import InputError
+from fitgen.base.errors import InputError
 
 STATIC_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
                 ".css": "text/css; charset=utf-8", ".png": "image/png", ".svg": "image/svg+xml",
@@ -73,7 +73,7 @@ def _event(kind: str, data: dict) -> bytes:
 
 def view_meta(n_inputs: int, outputs, model_hash: str, source: str, rate: float | None) -> dict:
     """The ``meta`` a hub serves at /meta: inputs, outputs with their units, model, source, rate."""
-    from fitgen.pose import POSE_NAMES, POSE_UNITS
+    from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
 
     return {"inputs": [f"v{k}" for k in range(1, n_inputs + 1)], "input_units": "V", "outputs": list(outputs),
             "units": [POSE_UNITS[POSE_NAMES.index(o)] for o in outputs], "model": model_hash[:12],

@@ -20,14 +20,14 @@ from importlib import resources
 from pathlib import Path
 
 from fitgen import __version__
-from fitgen.codegen import write_header
-from fitgen.errors import InputError
-from fitgen.fileio import write_atomic
-from fitgen.model import Model
+from fitgen.c.codegen import write_header
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import write_atomic
+from fitgen.equations.model import Model
 
-from .cadc import chip_table, smbus_transfer
-from .channelmap import ChannelMap
-from .compiled import WARNING_FLAGS
+from host.cadc import chip_table, smbus_transfer
+from host.channelmap import ChannelMap
+from fitgen.c.compiled import WARNING_FLAGS
 
 PI_FILES = ("tm_pi.c", "i2c_linux.h", "i2c_linux.c", "standin.h", "standin.c")
 DRIVER_FILES = ("adc.h", "adc.c")
@@ -48,7 +48,7 @@ def _chip_rows(cmap: ChannelMap) -> list[str]:
 
 def _temperature_block(cmap: ChannelMap, tin) -> list[str]:
     """The thermistor as a one-chip table and its divider (host/temperature.py), for a second adc_array."""
-    from .channelmap import Chip
+    from host.channelmap import Chip
 
     if tin is None:
         return ["#define ADC_HAS_TEMPERATURE 0", ""]
@@ -92,7 +92,7 @@ def render_pi(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: 
     ``tin``: the thermistor's input (read every 0.25 s, as host/temperature.py does); ``tempcomp``: a
     :class:`host.temperature.TempComp` applied to the readings before the model (needs ``tin``).
     """
-    from .temperature import render_c
+    from host.temperature import render_c
 
     if precision not in ("float", "double"):
         raise InputError(f"the Pi build computes in float or double, not {precision!r}")

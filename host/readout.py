@@ -18,13 +18,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fitgen.dataset import load_dataset
-from fitgen.errors import InputError
-from fitgen.sensor import load_sensor
-from fitgen.transfer import readings
+from fitgen.physics.dataset import load_dataset
+from fitgen.base.errors import InputError
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.transfer import readings
 
-from .adc import AdcArray, DeviceSilent, ErrorCounts
-from .clock import REAL_CLOCK
+from host.adc import AdcArray, DeviceSilent, ErrorCounts
+from host.clock import REAL_CLOCK
 
 FORMATS = ("csv", "jsonl")
 

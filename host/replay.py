@@ -16,14 +16,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fitgen.errors import InputError
-from fitgen.fileio import read_text, write_atomic
-from fitgen.model import Model, load_model, model_from_dict
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import read_text, write_atomic
+from fitgen.equations.model import Model, load_model, model_from_dict
 
-from .autozero import AutoZero, AutoZeroSettings
-from .engine import PythonEngine
-from .readout import Corrections, RunRecord
-from .temperature import TempComp, load_tempcomp
+from host.autozero import AutoZero, AutoZeroSettings
+from host.engine import PythonEngine
+from host.readout import Corrections, RunRecord
+from host.temperature import TempComp, load_tempcomp
 
 
 @dataclass

@@ -16,7 +16,7 @@ pins clamped to -0.3..VDD+0.3 V; the general-call reset. The ADS7828's command
 byte (its single-ended channel codes interleaved, PD1 switching the 2.5 V internal
 reference), 12-bit results converted inside the read, several results in one read.
 
-Pins are wired to the sensor's elements: ``fitgen.transfer.readings`` for the
+Pins are wired to the sensor's elements: ``fitgen.physics.transfer.readings`` for the
 sensor in its ``gmr`` transfer (volts, before any ADC) at the pose set with
 ``set_pose``, plus per-element offsets and fresh Gaussian noise per conversion.
 
@@ -36,13 +36,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fitgen.errors import InputError
-from fitgen.pose import POSE_NAMES, as_poses
-from fitgen.sensor import Sensor
-from fitgen.transfer import readings
+from fitgen.base.errors import InputError
+from fitgen.physics.pose import POSE_NAMES, as_poses
+from fitgen.physics.sensor import Sensor
+from fitgen.physics.transfer import readings
 
-from .channelmap import ADDRESSES, ChannelMap
-from .clock import VirtualClock
+from host.channelmap import ADDRESSES, ChannelMap
+from host.clock import VirtualClock
 
 # ADS1115 (independent of the driver's tables on purpose: a driver bug shows as a wrong answer)
 _PGA_FS = (6.144, 4.096, 2.048, 1.024, 0.512, 0.256, 0.256, 0.256)
@@ -530,7 +530,7 @@ def parse_fault(spec: str) -> dict:
 
 def parse_pose(spec: str) -> np.ndarray:
     """``dx=1,dz=-1`` (components left out are 0) or five numbers ``0.5,0,-1,0,0``."""
-    from fitgen.cliutil import parse_assignments
+    from fitgen.base.parse import parse_assignments
 
     if "=" in spec:
         vals = parse_assignments(spec, POSE_NAMES, "--simulate pose")

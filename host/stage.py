@@ -27,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.errors import InputError
-from fitgen.fileio import write_atomic
-from fitgen.pose import POSE_NAMES
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import write_atomic
+from fitgen.physics.pose import POSE_NAMES
 
-from .device import no_nagle
+from host.device import no_nagle
 
 MACHINE_AXES = ("X", "Y", "Z")
 STAGE_AXES = ("dx", "dy", "dz")  # what a 3-axis stage can set; thx, thy need a tilt stage
@@ -462,7 +462,7 @@ def parse_ranges(spec: str, what: str) -> dict[str, tuple[float, float]]:
 
 def parse_approach(spec: str) -> np.ndarray:
     """``dx=-0.3,dy=-0.3,dz=0.3`` -> where the last move to a pose starts from, relative to it (mm)."""
-    from fitgen.cliutil import parse_assignments
+    from fitgen.base.parse import parse_assignments
 
     vals = parse_assignments(spec, STAGE_AXES, "--stage-approach")
     d = np.array([vals.get(a, 0.0) for a in STAGE_AXES])
@@ -694,7 +694,7 @@ def parse_zero(spec: str) -> str | dict[str, float]:
     s = spec.strip().lower()
     if s in ("ask", "here"):
         return s
-    from fitgen.cliutil import parse_assignments
+    from fitgen.base.parse import parse_assignments
 
     if "=" in s:
         vals = parse_assignments(spec.upper(), MACHINE_AXES, "--zero")

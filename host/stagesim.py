@@ -41,9 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.errors import InputError
+from fitgen.base.errors import InputError
 
-from .stage import MACHINE_AXES, STAGE_AXES, AxisMap
+from host.stage import MACHINE_AXES, STAGE_AXES, AxisMap
 
 GRBL_VERSION = "1.1h"
 MARLIN_VERSION = "2.1.2.1"
@@ -597,12 +597,12 @@ def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", s
     """A capture as `tactile-host capture --stage` makes it, all simulated: two ADS1115s on a simulated bus read
     ``sensor`` (a unit, say, whose file carries its stage map), a simulated ``flavor`` controller moves it through a
     rig with ``backlash`` and ``repeatability`` (mm), zeroed at first contact. Returns the capture's result."""
-    from .adc import AdcArray
-    from .capture import capture
-    from .channelmap import parse_spec
-    from .clock import VirtualClock
-    from .simbus import SimBus
-    from .stage import AxisMap, GcodeController, PoseStage, StageSettings, parse_approach, parse_ranges
+    from host.adc import AdcArray
+    from host.capture import capture
+    from host.channelmap import parse_spec
+    from host.clock import VirtualClock
+    from host.simbus import SimBus
+    from host.stage import AxisMap, GcodeController, PoseStage, StageSettings, parse_approach, parse_ranges
 
     contact, start = (12.0, 8.0, 4.0), (10.0, 10.0, 10.0)
     cmap = parse_spec("ads1115@0x48:0-3,ads1115@0x49:0-3")

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.errors import InputError
-from fitgen.fileio import read_text, write_atomic
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import read_text, write_atomic
 
 DIVIDER_KEYS = ("beta", "r25", "series", "vref")
 DIVIDER_DEFAULTS = {"beta": 3950.0, "r25": 10_000.0, "series": 10_000.0, "vref": 3.3}
@@ -62,9 +62,9 @@ def split_channel_map(spec: str) -> tuple[str, str | None]:
 
 def parse_temperature_input(spec: str, thermistor: str | None = None, divider: dict | None = None) -> TemperatureInput:
     """``ads1115@0x4a:0`` (or ``ads7828@0x48:7``) and ``beta=3950,r25=10000,series=10000,vref=3.3``."""
-    from fitgen.cliutil import parse_assignments
+    from fitgen.base.parse import parse_assignments
 
-    from .channelmap import ADDRESSES, N_INPUTS
+    from host.channelmap import ADDRESSES, N_INPUTS
 
     head, _, inp = spec.strip().partition(":")
     kind, _, addr = head.partition("@")
@@ -105,8 +105,8 @@ class Thermometer:
     """Reads the thermistor through the ADC array's bus (same retries and counts), at most every READ_EVERY s."""
 
     def __init__(self, array, tin: TemperatureInput, cmap_settings):
-        from .adc import make_driver
-        from .channelmap import Chip
+        from host.adc import make_driver
+        from host.channelmap import Chip
 
         for chip, inp in array.cmap.elements():
             if chip.address == tin.address and inp == tin.input:
@@ -206,7 +206,7 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
 
 def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:
     """``<prefix>_tempcomp.h``: the compensation in C99, the operations of :meth:`TempComp.apply`."""
-    from fitgen.cgen import c_real, identifier
+    from fitgen.c.cgen import c_real, identifier
 
     prefix = identifier(prefix, "prefix")
     P, U = prefix, prefix.upper()

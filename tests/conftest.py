@@ -26,7 +26,7 @@ def require_tool(name: str) -> str:
 def run_cli(*args, input=None, cwd=None):
     """Run a console script's module as a subprocess; returns CompletedProcess (text)."""
     tool, rest = args[0], list(args[1:])
-    module = {"fitgen": "fitgen.cli", "tactile-host": "host.cli", "tactile-hil": "hil.cli"}[tool]
+    module = {"fitgen": "fitgen.app.cli", "tactile-host": "fitgen.app.host_cli", "tactile-hil": "fitgen.app.hil_cli"}[tool]
     code = f"import sys; from {module} import main; sys.argv[0] = {tool!r}; main()"
     return subprocess.run([sys.executable, "-c", code, *rest], capture_output=True, text=True,
                           input=input, cwd=cwd, timeout=600)
@@ -47,7 +47,7 @@ def assert_one_line_error(proc, status: int = 2, contains: str | None = None):
 @pytest.fixture(scope="session")
 def sensor():
     """The paper sensor in its ``gmr`` transfer: element outputs in volts."""
-    from fitgen.sensor import load_sensor
+    from fitgen.physics.sensor import load_sensor
 
     return load_sensor("paper").with_transfer("gmr")
 
@@ -56,8 +56,8 @@ def sensor():
 def model(sensor):
     """A model fitted on that sensor's paper-sim grid, the paper's way (the readout tests' tolerances are
     this model's; the device's fit is tests/test_deployed.py's)."""
-    from fitgen.fit import FitSettings, fit_model
-    from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+    from fitgen.fitting.fit import FitSettings, fit_model
+    from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
 
     return fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])), settings=FitSettings.exact())
 
@@ -65,8 +65,8 @@ def model(sensor):
 @pytest.fixture(scope="session")
 def device_model(sensor):
     """The same sensor fitted as a device model is (noise- and float-aware, the default), on a 675-pose grid."""
-    from fitgen.fit import FitSettings, fit_model
-    from fitgen.simulate import grid_poses, simulate
+    from fitgen.fitting.fit import FitSettings, fit_model
+    from fitgen.physics.simulate import grid_poses, simulate
 
     grid = grid_poses({"dx": [-2, -1, 0, 1, 2], "dy": [-2, -1, 0, 1, 2], "dz": [0, -1, -2], "thx": [-5, 0, 5],
                        "thy": [-5, 0, 5]})
@@ -80,7 +80,7 @@ GMR_POSE = [0.5, 0.2, -1.0, 1.0, 0.0]
 
 def sim_bus(spec=TWO_CHIPS, faults=(), settings=None, seed=3):
     """(channel map, SimBus with 0.5 mV noise at GMR_POSE, its VirtualClock), with ``faults`` injected."""
-    from fitgen.sensor import load_sensor
+    from fitgen.physics.sensor import load_sensor
     from host.channelmap import Settings, parse_spec
     from host.clock import VirtualClock
     from host.simbus import SimBus
@@ -115,7 +115,7 @@ def emulated_suite(model, held_out, style: str, n: int = 500):
 def assert_c_equals_python(model, inputs):
     """gcc's double and float builds, table and unrolled, give Model.predict's outputs and status bit for bit."""
     import numpy as np
-    from host.compiled import CompiledModel
+    from fitgen.c.compiled import CompiledModel
 
     require_tool("gcc")
     for precision in ("double", "float"):

@@ -3,7 +3,7 @@
 It serves one host on a pty (the host opens ``/dev/pts/N``) or a TCP socket
 (``socket://127.0.0.1:PORT``), evaluates with ``Model.predict`` (so a float build
 is not bit-exact with float C) and loads calibration blobs through
-``fitgen.calblob.from_blob``. A reference for the real firmware's replies, not a
+``fitgen.c.calblob.from_blob``. A reference for the real firmware's replies, not a
 model of its timing.
 """
 
@@ -19,8 +19,8 @@ import tty
 
 import numpy as np
 
-from fitgen.calblob import from_blob, rounded_model
-from fitgen.errors import InputError
+from fitgen.c.calblob import from_blob, rounded_model
+from fitgen.base.errors import InputError
 from host import protocol as p
 from host.protocol import ErrorCode as E
 from host.protocol import MsgType as T

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 import smbus2
 
-from fitgen.errors import InputError
-from fitgen.fit import fit_model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import grid_poses, simulate
-from fitgen.transfer import readings
+from fitgen.base.errors import InputError
+from fitgen.fitting.fit import fit_model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import grid_poses, simulate
+from fitgen.physics.transfer import readings
 from host.adc import ADS1115, ADS7828, AdcArray, BusIO, DeviceSilent, ads7828_channel_code
 from host.channelmap import Settings, channel_map, parse_spec
 from host.clock import VirtualClock

@@ -9,13 +9,13 @@ from importlib import resources
 import numpy as np
 import pytest
 
-from fitgen.errors import InputError
-from fitgen.sensor import load_sensor
+from fitgen.base.errors import InputError
+from fitgen.physics.sensor import load_sensor
 from host.adc import ADS1115, ADS7828, AdcArray, BusIO, DeviceSilent, RetryPolicy
 from host.cadc import ERR_CONFIG, AdcI2c, AdcPolicy, CAdcArray, chip_table, library
 from host.channelmap import Settings, parse_spec
 from host.clock import VirtualClock
-from host.compiled import WARNING_FLAGS
+from fitgen.c.compiled import WARNING_FLAGS
 from host.simbus import SimBus
 
 from conftest import require_tool

@@ -8,17 +8,17 @@ import zlib
 import numpy as np
 import pytest
 
-from fitgen.calblob import (HEADER_SIZE, blob_size, from_blob, rounded_model, size_from_header, to_blob)
-from fitgen.errors import InputError
-from fitgen.model import Equation, Model
-from fitgen.terms import parse_term
+from fitgen.c.calblob import (HEADER_SIZE, blob_size, from_blob, rounded_model, size_from_header, to_blob)
+from fitgen.base.errors import InputError
+from fitgen.equations.model import Equation, Model
+from fitgen.equations.terms import parse_term
 
 
 @pytest.fixture(scope="module")
 def paper_model():
-    from fitgen.fit import fit_model
-    from fitgen.sensor import load_sensor
-    from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+    from fitgen.fitting.fit import fit_model
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
 
     return fit_model(simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])))
 
@@ -50,7 +50,7 @@ def test_double_round_trip_is_exact(paper_model):
 
 
 def test_float_round_trip_is_the_rounded_model(paper_model):
-    from fitgen.codegen import float_domain
+    from fitgen.c.codegen import float_domain
 
     blob = to_blob(paper_model, "float")
     info = from_blob(blob)

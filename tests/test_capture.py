@@ -7,10 +7,10 @@ import shlex
 import numpy as np
 import pytest
 
-from fitgen.dataset import load_dataset
-from fitgen.errors import InputError
-from fitgen.fit import fit_model
-from fitgen.transfer import readings
+from fitgen.physics.dataset import load_dataset
+from fitgen.base.errors import InputError
+from fitgen.fitting.fit import fit_model
+from fitgen.physics.transfer import readings
 from host.adc import AdcArray
 from host.capture import (SpreadTooLarge, capture, enter_waiter, header_line, load_schedule, prepare_output,
                           trigger_waiter)

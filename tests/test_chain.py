@@ -10,13 +10,13 @@ import json
 import numpy as np
 
 from conftest import require_tool, run_cli
-from fitgen.dataset import load_dataset
-from fitgen.model import load_model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import pose_rng, random_poses, simulate
-from fitgen.transfer import readings
+from fitgen.physics.dataset import load_dataset
+from fitgen.equations.model import load_model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import pose_rng, random_poses, simulate
+from fitgen.physics.transfer import readings
 from host.capture import load_schedule
-from host.compiled import CompiledModel
+from fitgen.c.compiled import CompiledModel
 from host.stagesim import simulated_stage_capture
 
 BOX = {"dx": (-1.5, 1.5), "dy": (-1.5, 1.5), "dz": (-1.5, 0.0), "thx": (0.0, 0.0), "thy": (0.0, 0.0)}

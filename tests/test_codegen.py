@@ -6,15 +6,15 @@ import subprocess
 import numpy as np
 import pytest
 
-from fitgen.codegen import render_header, write_header
-from fitgen.errors import InputError
-from fitgen.fit import fit_model
-from fitgen.model import Equation, Model, model_from_dict
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
-from fitgen.terms import EXPONENTS, Term
-from host.compiled import CompiledModel
-from host.verify import verify
+from fitgen.c.codegen import render_header, write_header
+from fitgen.base.errors import InputError
+from fitgen.fitting.fit import fit_model
+from fitgen.equations.model import Equation, Model, model_from_dict
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.equations.terms import EXPONENTS, Term
+from fitgen.c.compiled import CompiledModel
+from fitgen.c.verify import verify
 
 from conftest import assert_one_line_error, require_tool, run_cli
 
@@ -164,7 +164,7 @@ def test_arm_linux_build_under_qemu(paper_model):
 @pytest.mark.parametrize("precision", ["double", "float"])
 def test_cortex_m_builds_warning_free(paper_model, tmp_path, cpu, precision):
     require_tool("arm-none-eabi-gcc")
-    from host.compiled import compile_checked
+    from fitgen.c.compiled import compile_checked
 
     for style in ("table", "unrolled"):
         write_header(paper_model, tmp_path, precision, style)

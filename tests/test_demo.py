@@ -17,7 +17,7 @@ def test_demo_runs_end_to_end(tmp_path):
     assert text.count("PASS") == 4 and "FAIL" not in text
     assert "HIL suite on the emulated core: PASS" in text
     # a model in volts, and the line that opens the live view with it
-    from fitgen.model import load_model
+    from fitgen.equations.model import load_model
 
     volts = load_model(out / "model-volts.json")
     assert volts.input_units == "V" and volts.fit_info["family"]["auto"]

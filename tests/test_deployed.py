@@ -7,16 +7,16 @@ import json
 import numpy as np
 import pytest
 
-from fitgen.augment import NoiseGrams, noise_blocks, noise_gram, rounding_rows
-from fitgen.dataset import Dataset
-from fitgen.fit import FitSettings, _d_jacobian, fit_model, noise_to_add, ring_harmonics
-from fitgen.holdout import clean_readings, deployed_errors, held_out_set
-from fitgen.model import Model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import DEFAULT_RANGES, grid_poses, pose_rng, random_poses, simulate
-from fitgen.stepwise import compress, stepwise
-from fitgen.terms import Term, candidate_terms, design_jacobian, design_matrix
-from host.compiled import CompiledModel
+from fitgen.fitting.augment import NoiseGrams, noise_blocks, noise_gram, rounding_rows
+from fitgen.physics.dataset import Dataset
+from fitgen.fitting.fit import FitSettings, _d_jacobian, fit_model, noise_to_add, ring_harmonics
+from fitgen.fitting.holdout import clean_readings, deployed_errors, held_out_set
+from fitgen.equations.model import Model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES, grid_poses, pose_rng, random_poses, simulate
+from fitgen.fitting.stepwise import compress, stepwise
+from fitgen.equations.terms import Term, candidate_terms, design_jacobian, design_matrix
+from fitgen.c.compiled import CompiledModel
 
 from conftest import assert_one_line_error, require_tool, run_cli
 
@@ -205,7 +205,7 @@ def fitted_files(tmp_path_factory):
 
 
 def test_model_file_says_what_its_numbers_assume(fitted_files):
-    from fitgen.model import load_model
+    from fitgen.equations.model import load_model
 
     model = load_model(fitted_files / "default.json")
     info = model.fit_info
@@ -246,7 +246,7 @@ def test_verify_fails_when_float_rounding_exceeds_the_share(fitted_files):
 
 def test_deployed_errors_fixed_point_within_share():
     """A no-roots fit for a fixed-point target: its integer arithmetic keeps the share small too."""
-    from fitgen.terms import FAMILIES
+    from fitgen.equations.terms import FAMILIES
 
     sensor = load_sensor("two-radii").with_transfer("gmr")
     model = fit_model(simulate(sensor, GRID), settings=FitSettings(precision="fixed", exponents=FAMILIES["no-roots"]))
@@ -257,7 +257,7 @@ def test_deployed_errors_fixed_point_within_share():
 
 
 def test_clean_readings_needs_a_known_sensor(fitted_files):
-    from fitgen.model import load_model
+    from fitgen.equations.model import load_model
 
     model = load_model(fitted_files / "default.json")
     assert clean_readings(dataclasses.replace(model, fit_info={})) is None  # no record
@@ -268,11 +268,11 @@ def test_clean_readings_needs_a_known_sensor(fitted_files):
 
 @pytest.mark.parametrize("layout", ["paper", "ring-vertical"])
 def test_float_bound_holds_and_is_within_10x_of_the_measured_worst_case(layout):
-    """The a-priori float bound (fitgen.precision) is never below the measured error and, since a d-term's
+    """The a-priori float bound (fitgen.equations.rounding) is never below the measured error and, since a d-term's
     share is taken per displacement, within 10x of the measured worst case on every output (it was
     15-30x on long rotation equations with d-terms)."""
     require_tool("gcc")
-    from host.verify import verify
+    from fitgen.c.verify import verify
 
     model = fit_model(simulate(load_sensor(layout), GRID))
     res = verify(model, "float", "unrolled", n_random=1000)

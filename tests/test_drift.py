@@ -6,12 +6,12 @@ import json
 import numpy as np
 import pytest
 
-from fitgen.errors import InputError
+from fitgen.base.errors import InputError
 from host.adc import AdcArray
 from host.autozero import AutoZero, AutoZeroSettings
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
-from host.compiled import compile_checked
+from fitgen.c.compiled import compile_checked
 from host.simbus import Drift, SimBus, ntc_volts
 from host.temperature import (TempComp, Thermometer, fit_tempcomp, load_tempcomp, parse_temperature_input,
                               render_c, split_channel_map)
@@ -89,7 +89,7 @@ def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
     # within what the 16-bit ADC's 0.125 mV steps leave over 3 poses and 10 degC steps (coefficients ~1e-3)
     np.testing.assert_allclose(tc.offset, truth.offset_tc, atol=1e-4)
     np.testing.assert_allclose(tc.gain, truth.gain_tc, atol=1e-4)
-    from fitgen.dataset import load_dataset
+    from fitgen.physics.dataset import load_dataset
 
     hot, ref = load_dataset(tmp_path / "cap.T35.csv").inputs, load_dataset(tmp_path / "cap.T25.csv").inputs
     fixed = np.array([tc.apply(r, 35.0) for r in hot])
@@ -132,8 +132,8 @@ def test_auto_zero_follows_drift_at_rest_and_never_during_a_press():
 def rest_model_file(sensor, tmp_path_factory):
     """A model whose noisy estimates at rest stay inside the rest band: the paper ring cannot see tilt at
     rest, and only the harmonics family keeps its tilt estimates there quiet (docs/harmonics.md)."""
-    from fitgen.fit import FitSettings, fit_model
-    from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+    from fitgen.fitting.fit import FitSettings, fit_model
+    from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
 
     model = fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])),
                       settings=FitSettings.family("harmonics"), sensor=sensor)
@@ -197,7 +197,7 @@ def test_view_replays_a_recorded_run_in_the_page(rest_model_file, tmp_path):
     proc = run_cli("tactile-host", "read", "--model", rest_model_file, "--adc", TWO_CHIPS, "--simulate", "motion",
                    "--count", "60", "--record", str(run), "-o", str(tmp_path / "s.csv"))
     assert proc.returncode == 0, proc.stderr
-    code = "import sys; from host.cli import main; sys.argv[0] = 'tactile-host'; main()"
+    code = "import sys; from fitgen.app.host_cli import main; sys.argv[0] = 'tactile-host'; main()"
     view = subprocess.Popen([sys.executable, "-c", code, "view", "--replay", str(run), "--port", "0", "--hold"],
                             stderr=subprocess.PIPE, text=True)
     try:

@@ -1,4 +1,4 @@
-"""Tests of fitgen.field: the closed-form field of an axially magnetised cylinder.
+"""Tests of fitgen.physics.field: the closed-form field of an axially magnetised cylinder.
 
 The reference is magpylib's ``Cylinder`` (an independent implementation of the
 same Derby & Olbert solution), the textbook on-axis formula, the point-dipole
@@ -18,7 +18,7 @@ import zlib
 import numpy as np
 import pytest
 
-from fitgen.field import cylinder_axial_rz, cylinder_field, cylinder_projection, dipole_field
+from fitgen.physics.field import cylinder_axial_rz, cylinder_field, cylinder_projection, dipole_field
 
 import magpylib as magpy  # noqa: E402  (the test extra; a missing oracle must fail, not skip)
 
@@ -384,7 +384,7 @@ def _run_isolated(code: str) -> dict:
 def test_edge_circle_is_nan():
     """On the edge circles (r == R, |z| == H/2) the field is singular: the kernel returns NaN."""
     out = _run_isolated("""
-        from fitgen.field import cylinder_axial_rz, cylinder_field
+        from fitgen.physics.field import cylinder_axial_rz, cylinder_field
         res = {}
         for name, (D, H) in %r.items():
             R, h = D / 2, H / 2
@@ -403,7 +403,7 @@ def test_edge_circle_is_nan():
 def test_non_finite_points_give_nan():
     """A NaN or infinite coordinate gives NaN for that point (and does not stop the batch)."""
     out = _run_isolated("""
-        from fitgen.field import cylinder_field
+        from fitgen.physics.field import cylinder_field
         pts = np.array([[np.nan, 0, 5.0], [np.inf, 0, 5.0], [1.0, 2.0, 5.0]])
         print(json.dumps(np.isfinite(cylinder_field(pts, 6.0, 1.0, 1.0)).all(axis=1).tolist()))
     """)

@@ -152,7 +152,7 @@ def test_the_firmware_compensates_temperature_as_the_python_readout_does(model, 
     """A thermistor in the map and a compensation: the firmware reads it after the elements every 0.25 s and
     compensates the volts (tm_tempcomp.h) before its model; STREAM equals tactile-host read --temp-comp's
     engine input and estimates on the Python driver."""
-    from fitgen.sensor import load_sensor
+    from fitgen.physics.sensor import load_sensor
     from host.channelmap import parse_spec
     from host.clock import VirtualClock
     from host.readout import Corrections

@@ -16,14 +16,14 @@ import tty
 import numpy as np
 import pytest
 
-from fitgen.calblob import to_blob
-from fitgen.errors import InputError
-from fitgen.fit import fit_model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.c.calblob import to_blob
+from fitgen.base.errors import InputError
+from fitgen.fitting.fit import fit_model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
 from hil.firmware import build_firmware, firmware_size, render_firmware
 from host import protocol as P
-from host.compiled import CompiledModel
+from fitgen.c.compiled import CompiledModel
 from host.protocol import ErrorCode as E
 from host.protocol import MsgType as T
 
@@ -487,7 +487,7 @@ def test_mps2_in_qemu(paper_model, tmp_path_factory):
 @pytest.fixture(scope="module")
 def integer_model():
     """A model fixed point can take: volts in (gmr transfer), integer powers only."""
-    from fitgen.fit import FitSettings
+    from fitgen.fitting.fit import FitSettings
 
     sensor = load_sensor("paper").with_transfer("gmr")
     settings = FitSettings(exponents=("1", "2", "3", "4", "-1", "-2", "-3", "-4"))

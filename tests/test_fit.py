@@ -5,12 +5,12 @@ import json
 import numpy as np
 import pytest
 
-from fitgen.errors import InputError
-from fitgen.fit import FitSettings, fit_model
-from fitgen.model import load_model, model_from_dict
-from fitgen.sensor import load_sensor
-from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
-from fitgen.terms import Term, candidate_terms, design_matrix, element_powers, parse_term, EXPONENTS
+from fitgen.base.errors import InputError
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.equations.model import load_model, model_from_dict
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from fitgen.equations.terms import Term, candidate_terms, design_matrix, element_powers, parse_term, EXPONENTS
 
 from conftest import assert_one_line_error, run_cli
 
@@ -181,8 +181,8 @@ def test_bad_model_files(paper_fit, tmp_path):
 def test_fit_by_blocks_of_rows_is_the_fit_of_all_rows(monkeypatch):
     """The candidate columns are built and compressed a block of rows at a time, the training error and
     Model.predict likewise: blocks of 97 rows give the equations of one block of all 1,500."""
-    import fitgen.fit as fit_mod
-    import fitgen.model as model_mod
+    import fitgen.fitting.fit as fit_mod
+    import fitgen.equations.model as model_mod
 
     ds = simulate(PAPER, random_poses(1500, DEFAULT_RANGES, pose_rng(11)))
     whole = fit_model(ds)
@@ -204,8 +204,8 @@ def test_fit_on_a_capture_adds_the_single_sample_noise_less_the_rows(tmp_path):
     import json
 
     from conftest import run_cli
-    from fitgen.sensor import load_sensor
-    from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
 
     ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-exp"]))
     capture = {"units": "V", "source": "hardware", "samples_per_row": 16, "row_noise": [0.000125] * 8,

@@ -8,16 +8,16 @@ import subprocess
 import numpy as np
 import pytest
 
-from fitgen.codegen import render_fixed_header, render_header, write_header
-from fitgen.errors import InputError
-from fitgen.fit import FitSettings, fit_model
-from fitgen.fixedpoint import BUDGET, INT32_MAX, INT32_MIN, build_fixed, default_input_scale
-from fitgen.model import Equation, Model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
-from fitgen.terms import FAMILIES, Term
-from host.compiled import CompiledModel, compile_checked
-from host.verify import make_code_vectors, verify
+from fitgen.c.codegen import render_fixed_header, render_header, write_header
+from fitgen.base.errors import InputError
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.equations.fixedpoint import BUDGET, INT32_MAX, INT32_MIN, build_fixed, default_input_scale
+from fitgen.equations.model import Equation, Model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.equations.terms import FAMILIES, Term
+from fitgen.c.compiled import CompiledModel, compile_checked
+from fitgen.c.verify import make_code_vectors, verify
 
 from conftest import assert_one_line_error, require_tool, run_cli
 
@@ -320,7 +320,7 @@ def test_codegen_cli(paper_fixed_model, tmp_path):
 def test_predict_cli_fixed_equals_the_c(paper_fixed_model, compiled, plan, tmp_path):
     """`fitgen predict --precision fixed` answers what the fixed header computes: from values rounded to
     codes as the ADC would, or from the codes themselves (--codes)."""
-    from fitgen.dataset import Dataset
+    from fitgen.physics.dataset import Dataset
 
     path = tmp_path / "m.json"
     paper_fixed_model.save(path)
@@ -404,7 +404,7 @@ def test_arm_linux_build_under_qemu(paper_fixed_model):
 def test_verify_catches_a_wrong_c_result(paper_fixed_model):
     """A build whose arithmetic differs (here: the rounding helper replaced by truncation) fails."""
     require_tool("gcc")
-    from host.verify import compare_fixed
+    from fitgen.c.verify import compare_fixed
 
     with CompiledModel(paper_fixed_model, "fixed") as cm:
         text = cm.header.read_text().replace("((uint64_t)1 << (s - 1u))", "0u")

@@ -8,11 +8,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fitgen.fma import fma
-from fitgen.fit import fit_model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
-from host.verify import verify
+from fitgen.equations.fma import fma
+from fitgen.fitting.fit import fit_model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.c.verify import verify
 
 from conftest import require_tool
 
@@ -92,8 +92,8 @@ def test_fmaf_is_one_instruction_on_cortex_m4f(paper_model, tmp_path):
     require_tool("arm-none-eabi-gcc")
     import subprocess
 
-    from fitgen.codegen import write_header
-    from host.compiled import compile_checked
+    from fitgen.c.codegen import write_header
+    from fitgen.c.compiled import compile_checked
 
     write_header(paper_model, tmp_path, "float", "unrolled", fma=True)
     src = tmp_path / "use.c"

@@ -6,19 +6,19 @@ import json
 import numpy as np
 import pytest
 
-from fitgen.calblob import to_blob
-from fitgen.codegen import render_header, term_magnitudes
-from fitgen.errors import InputError
-from fitgen.fit import FitSettings, fit_model
-from fitgen.holdout import held_out_set
-from fitgen.model import load_model, model_from_dict
-from fitgen.precision import U_FLOAT, error_bound
-from fitgen.sensor import load_sensor
-from fitgen.pose import POSE_NAMES
-from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, simulate
-from fitgen.terms import (Harmonics, Term, candidate_terms, design_jacobian, design_matrix, harmonic_monomials,
+from fitgen.c.calblob import to_blob
+from fitgen.c.codegen import render_header, term_magnitudes
+from fitgen.base.errors import InputError
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.fitting.holdout import held_out_set
+from fitgen.equations.model import load_model, model_from_dict
+from fitgen.equations.rounding import U_FLOAT, error_bound
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, simulate
+from fitgen.equations.terms import (Harmonics, Term, candidate_terms, design_jacobian, design_matrix, harmonic_monomials,
                           parse_term)
-from host.cost import template_ops
+from fitgen.c.cost import template_ops
 
 from conftest import assert_c_equals_python, assert_one_line_error, emulated_suite, require_tool, run_cli
 
@@ -98,7 +98,7 @@ def test_tilted_axes_tilt_within_the_target_and_near_its_floor():
     """Issue 13 on the layout with the lowest tilt floor (docs/layouts.md): fitted on the grid for the device,
     tilt within 0.1 deg noise-free with fewer terms than ring-vertical's 61-63 under the paper's procedure, and
     with the sensor's noise an RMS within 15 % of the Cramer-Rao floor at the same poses."""
-    from fitgen.observe import cramer_rao
+    from fitgen.physics.observe import cramer_rao
 
     sensor = load_sensor("tilted-axes")
     model = fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])),
@@ -232,13 +232,13 @@ def test_auto_keeps_the_family_that_validates_better(tmp_path):
 
 
 def test_families_sharing_their_rows_fit_as_each_family_alone(monkeypatch):
-    """fit_auto's two families share the compressed rows of their terms without d (fitgen.shared): the
+    """fit_auto's two families share the compressed rows of their terms without d (fitgen.fitting.shared): the
     data triangle over both families' terms and the noise Gram are formed once, the d-terms' once per
     family, and each family's model is the one it gets fitted alone."""
-    import fitgen.augment
-    import fitgen.shared
-    from fitgen.family import CANDIDATES, fit_auto, shared_rows
-    from fitgen.simulate import pose_rng, random_poses
+    import fitgen.fitting.augment
+    import fitgen.fitting.shared
+    from fitgen.fitting.family import CANDIDATES, fit_auto, shared_rows
+    from fitgen.physics.simulate import pose_rng, random_poses
 
     ds = simulate(PAPER, random_poses(1500, DEFAULT_RANGES, pose_rng(8)))
     settings = FitSettings()
@@ -251,8 +251,8 @@ def test_families_sharing_their_rows_fit_as_each_family_alone(monkeypatch):
             return fn(*args, **kw)
         return wrapper
 
-    monkeypatch.setattr(fitgen.augment, "noise_gram", counted("noise", fitgen.augment.noise_gram))
-    monkeypatch.setattr(fitgen.shared.SharedRows, "_compress", counted("data", fitgen.shared.SharedRows._compress))
+    monkeypatch.setattr(fitgen.fitting.augment, "noise_gram", counted("noise", fitgen.fitting.augment.noise_gram))
+    monkeypatch.setattr(fitgen.fitting.shared.SharedRows, "_compress", counted("data", fitgen.fitting.shared.SharedRows._compress))
     shared = shared_rows(ds, CANDIDATES, settings, PAPER)
     together = {f: fit_model(ds, settings=settings.with_family(f), sensor=PAPER, shared=shared) for f in CANDIDATES}
     assert passes == {"noise": 1 + 2, "data": 1 + 2}  # the shared pass, then the d-terms' of each family

@@ -7,9 +7,9 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from fitgen.fit import fit_model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+from fitgen.fitting.fit import fit_model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
 from hil.emulate import bench_instructions, start_target
 from hil.suite import flash_variant, run_suite
 from host.device import Device
@@ -78,8 +78,8 @@ def test_fixed_point_suite_on_emulated_cortex_m4():
     """A fixed-point build (integer powers only, ADC codes in) through the same suite on the emulated core."""
     require_tool("qemu-system-arm")
     require_tool("arm-none-eabi-gcc")
-    from fitgen.fit import FitSettings
-    from fitgen.terms import FAMILIES
+    from fitgen.fitting.fit import FitSettings
+    from fitgen.equations.terms import FAMILIES
 
     ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
     model = fit_model(ds, settings=FitSettings(exponents=FAMILIES["no-roots"]))
@@ -98,9 +98,9 @@ def test_full_suite_on_emulated_cortex_m0(tmp_path):
     10,000 fuzz frames, the held-out check from the model file's record, and its instruction count."""
     require_tool("qemu-system-arm")
     require_tool("arm-none-eabi-gcc")
-    from fitgen.fit import FitSettings
-    from fitgen.holdout import box_of, clean_readings, evaluate
-    from fitgen.terms import FAMILIES
+    from fitgen.fitting.fit import FitSettings
+    from fitgen.fitting.holdout import box_of, clean_readings, evaluate
+    from fitgen.equations.terms import FAMILIES
 
     sensor = load_sensor("paper").with_transfer("gmr")
     ds = simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"]))
@@ -123,7 +123,7 @@ def test_full_suite_on_emulated_cortex_m0(tmp_path):
 
 
 def test_fixed_only_on_the_m0_and_no_bridge(paper_model, tmp_path):
-    from fitgen.errors import InputError
+    from fitgen.base.errors import InputError
     from hil.firmware import render_firmware
     from host.channelmap import parse_spec
 

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from conftest import assert_one_line_error, run_cli
-from fitgen.identify import Problem, derived_quantities, identify
-from fitgen.schedule import schedule
-from fitgen.sensor import load_sensor
-from fitgen.transfer import readings
-from fitgen.units import UnitSpace, draw_unit
+from fitgen.fitting.identify import Problem, derived_quantities, identify
+from fitgen.fitting.schedule import schedule
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.transfer import readings
+from fitgen.physics.units import UnitSpace, draw_unit
 
 SAMPLES = 16
 
@@ -151,7 +151,7 @@ def test_cli_schedule_capture_identify(tmp_path):
 
 
 def _save_capture(path, y, poses, meta=None):
-    from fitgen.dataset import Dataset
+    from fitgen.physics.dataset import Dataset
 
     Dataset(y, poses[:, :3], ("dx", "dy", "dz"), {"units": "V", **(meta or {})}).save(path)
 

@@ -5,12 +5,12 @@ from importlib import resources
 import numpy as np
 import pytest
 
-from fitgen.fit import fit_model
-from fitgen.observe import cramer_rao, jacobian, observe
-from fitgen.pose import field_readings
-from fitgen.scenes import PRESETS
-from fitgen.sensor import load_sensor, parse_sensor, preset_names, tomllib
-from fitgen.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from fitgen.fitting.fit import fit_model
+from fitgen.physics.observe import cramer_rao, jacobian, observe
+from fitgen.physics.pose import field_readings
+from fitgen.physics.scenes import PRESETS
+from fitgen.physics.sensor import load_sensor, parse_sensor, preset_names, tomllib
+from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 
 from conftest import run_cli
 
@@ -73,7 +73,7 @@ def test_every_alternative_resolves_all_five_components_everywhere():
 
 def test_a_second_radius_matters_more_than_a_second_height():
     """In the paper's plane, another radius separates tilt from slide; another height alone barely does."""
-    data = tomllib.loads(resources.files("fitgen.presets").joinpath("paper.toml").read_text())
+    data = tomllib.loads(resources.files("fitgen.physics.presets").joinpath("paper.toml").read_text())
 
     def variant(radius, z):
         data["elements"] = {"ring": [{"count": 4, "radius": 10.0},

@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 
 from conftest import IN_CI, TWO_CHIPS, assert_one_line_error, require_tool, run_cli
-from fitgen.errors import InputError
+from fitgen.base.errors import InputError
 from host.live import LiveHub, LiveServer
 
 META = {"inputs": [f"v{k}" for k in range(1, 9)], "input_units": "V", "outputs": ["dx", "dy", "dz", "thx", "thy"],
@@ -412,7 +412,7 @@ def inked(drv, canvas_id: str) -> int:
 def test_page_follows_tactile_host_view(browser, device_model, tmp_path):
     docs_png = os.environ.get("TM_LIVE_PNG")
     model_file = str(device_model.save(tmp_path / "model.json"))  # fitted as `fitgen fit` does by default
-    code = "import sys; from host.cli import main; sys.argv[0] = 'tactile-host'; main()"
+    code = "import sys; from fitgen.app.host_cli import main; sys.argv[0] = 'tactile-host'; main()"
     proc = subprocess.Popen([sys.executable, "-c", code, "view", "--model", model_file, "--adc", TWO_CHIPS,
                              "--simulate", "motion", "--port", "0", "--duration", "90"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)

@@ -1,11 +1,11 @@
 import numpy as np
 from scipy.optimize import least_squares
 
-from fitgen.observe import analyse, cramer_rao, jacobian, observe
-from fitgen.pose import field_readings
-from fitgen.scenes import PRESETS
-from fitgen.sensor import load_sensor
-from fitgen.transfer import apply_transfer
+from fitgen.physics.observe import analyse, cramer_rao, jacobian, observe
+from fitgen.physics.pose import field_readings
+from fitgen.physics.scenes import PRESETS
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.transfer import apply_transfer
 
 from conftest import assert_one_line_error, run_cli
 
@@ -68,7 +68,7 @@ def test_batched_bounds_match_a_per_pose_inverse():
 
 def test_fewer_readings_than_components_have_no_finite_bound():
     d = PAPER.source | {"elements": {"ring": [{"count": 4, "radius": 10.0}]}}
-    from fitgen.sensor import parse_sensor
+    from fitgen.physics.sensor import parse_sensor
 
     four = parse_sensor(d)
     assert np.all(np.isinf(cramer_rao(four, np.array([[0.5, 0.5, -1, 1, 1]]), 0.0005)))

@@ -119,7 +119,7 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     tm_tempcomp.h before the model; the lines equal tactile-host read --temp-comp's to every printed digit."""
     import numpy as np
 
-    from fitgen.sensor import load_sensor
+    from fitgen.physics.sensor import load_sensor
     from host.clock import VirtualClock
     from host.readout import Corrections, Readout
     from host.simbus import Drift, SimBus

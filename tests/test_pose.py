@@ -1,4 +1,4 @@
-"""Tests of fitgen.pose: the pose convention and the element readings.
+"""Tests of fitgen.physics.pose: the pose convention and the element readings.
 
 Pose = (dx, dy, dz, thx, thy), R = Ry(thy) Rx(thx) about the magnet's own centre,
 rotation first, then translation; reading k = B . axis_k in mT
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fitgen.errors import InputError
-from fitgen.pose import as_poses, field_readings, magnet_frame, rotation_matrices
-from fitgen.sensor import load_sensor, parse_sensor
+from fitgen.base.errors import InputError
+from fitgen.physics.pose import as_poses, field_readings, magnet_frame, rotation_matrices
+from fitgen.physics.sensor import load_sensor, parse_sensor
 
 import magpylib as magpy  # noqa: E402  (the test extra; a missing oracle must fail, not skip)
 

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fitgen.errors import InputError
+from fitgen.base.errors import InputError
 from host import protocol as p
 from host.protocol import ErrorCode, Frame, MsgType, ProtocolError
 
@@ -161,9 +161,9 @@ def test_payloads():
 
 @pytest.fixture(scope="module")
 def paper_model():
-    from fitgen.fit import fit_model
-    from fitgen.sensor import load_sensor
-    from fitgen.simulate import PAPER_GRIDS, grid_poses, simulate
+    from fitgen.fitting.fit import fit_model
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
 
     return fit_model(simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])))
 
@@ -171,7 +171,7 @@ def paper_model():
 @pytest.fixture(scope="module")
 def other_model(paper_model):
     """The paper model with other coefficients: a calibration to load."""
-    from fitgen.model import Equation, Model
+    from fitgen.equations.model import Equation, Model
 
     eqs = tuple(Equation(e.name, e.intercept + 0.5, e.terms, tuple(c * 1.01 for c in e.coefficients))
                 for e in paper_model.equations)
@@ -206,7 +206,7 @@ def test_device_ping_info_eval(paper_model, transport):
 
 
 def test_device_calibration_cycle(paper_model, other_model):
-    from fitgen.calblob import rounded_model, to_blob
+    from fitgen.c.calblob import rounded_model, to_blob
     from host.device import Device, DeviceError
 
     from fake_device import FakeDevice

@@ -10,9 +10,9 @@ import time
 import numpy as np
 import pytest
 
-from fitgen.errors import InputError
-from fitgen.simulate import grid_poses, simulate
-from fitgen.transfer import readings
+from fitgen.base.errors import InputError
+from fitgen.physics.simulate import grid_poses, simulate
+from fitgen.physics.transfer import readings
 from host.adc import AdcArray, DeviceSilent
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
@@ -223,7 +223,7 @@ def test_read_command_ends_on_a_silent_chip_with_one_line_and_status_1(model_fil
 
 
 def test_read_command_stops_cleanly_on_ctrl_c(model_file):
-    code = "import sys; from host.cli import main; sys.argv[0] = 'tactile-host'; main()"
+    code = "import sys; from fitgen.app.host_cli import main; sys.argv[0] = 'tactile-host'; main()"
     proc = subprocess.Popen([sys.executable, "-c", code, "read", "--model", model_file, "--adc", TWO_1115,
                              "--simulate", "dx=0.5", "--rate", "100"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

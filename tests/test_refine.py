@@ -1,4 +1,4 @@
-"""The refinement (fitgen.refine): Gauss-Newton steps on a fitted forward model after the equations,
+"""The refinement (fitgen.equations.refine): Gauss-Newton steps on a fitted forward model after the equations,
 through the fit, the model file, the generated C (gcc, bit for bit), verify, the refusals, the cost
 model and the firmware on the emulated Cortex-M4."""
 
@@ -8,21 +8,21 @@ import json
 import numpy as np
 import pytest
 
-from fitgen.calblob import to_blob
-from fitgen.codegen import render_header
-from fitgen.errors import InputError
-from fitgen.fit import FitSettings, fit_model
-from fitgen.holdout import box_of, held_out_set
-from fitgen.model import load_model, model_from_dict
-from fitgen.pose import POSE_NAMES
-from fitgen.precision import U_FLOAT, error_bound
-from fitgen.refine import ForwardEquation
-from fitgen.refine_fit import monomial_exponents
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
-from host.compiled import CompiledModel
-from host.cost import template_ops
-from host.verify import compare
+from fitgen.c.calblob import to_blob
+from fitgen.c.codegen import render_header
+from fitgen.base.errors import InputError
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.fitting.holdout import box_of, held_out_set
+from fitgen.equations.model import load_model, model_from_dict
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.equations.rounding import U_FLOAT, error_bound
+from fitgen.equations.refine import ForwardEquation
+from fitgen.fitting.refine_fit import monomial_exponents
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
+from fitgen.c.compiled import CompiledModel
+from fitgen.c.cost import template_ops
+from fitgen.c.verify import compare
 
 from conftest import assert_c_equals_python, assert_one_line_error, emulated_suite, require_tool, run_cli
 
@@ -208,9 +208,9 @@ def test_full_suite_on_emulated_cortex_m4(model, held):
 def test_auto_fits_the_forward_model_once_and_refines_as_the_chosen_family_would(train, monkeypatch):
     """`--family auto --refine`: the forward model depends on the data alone, so both families share one fit,
     and the kept model's refinement is the one fitting that family directly gives (its prior, from the
-    equations' residuals, to rounding: the families share their compressed rows, fitgen.shared)."""
-    import fitgen.refine_fit as refine_fit
-    from fitgen.family import fit_auto
+    equations' residuals, to rounding: the families share their compressed rows, fitgen.fitting.shared)."""
+    import fitgen.fitting.refine_fit as refine_fit
+    from fitgen.fitting.family import fit_auto
 
     calls = []
     real = refine_fit.fit_forward

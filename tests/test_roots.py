@@ -1,4 +1,4 @@
-"""The cube root of the generated C (fitgen.roots): accurate, and the same bits in C and Python on every machine.
+"""The cube root of the generated C (fitgen.equations.roots): accurate, and the same bits in C and Python on every machine.
 
 Tests marked ``bitexact`` run twice: here, and in a subprocess with numpy's SIMD dispatch switched off
 (NPY_DISABLE_CPU_FEATURES), so that nothing bit-exact rests on the CPU numpy finds.
@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from conftest import IN_CI, require_tool, run_cli
-from fitgen.codegen import write_header
-from fitgen.model import Equation, Model
-from fitgen.roots import cbrt
-from fitgen.terms import parse_term
+from fitgen.c.codegen import write_header
+from fitgen.equations.model import Equation, Model
+from fitgen.equations.roots import cbrt
+from fitgen.equations.terms import parse_term
 
 UINT = {np.float32: np.uint32, np.float64: np.uint64}
 
@@ -87,7 +87,7 @@ int main(void)
     return 0;
 }}
 """)
-    from host.compiled import WARNING_FLAGS
+    from fitgen.c.compiled import WARNING_FLAGS
 
     exe = folder / "roots"
     proc = subprocess.run(cc + WARNING_FLAGS + ["-O2", "-I", str(folder), str(folder / "roots.c"), "-o", str(exe),
@@ -100,7 +100,7 @@ int main(void)
 @pytest.mark.parametrize("precision", ["float", "double"])
 @pytest.mark.parametrize("target", ["gcc", "qemu-arm"])
 def test_cbrt_c_equals_python_bit_for_bit(tmp_path, precision, target):
-    """The header's tm_cbrtf / tm_cbrt against fitgen.roots.cbrt on random bit patterns of the whole range."""
+    """The header's tm_cbrtf / tm_cbrt against fitgen.equations.roots.cbrt on random bit patterns of the whole range."""
     if target == "gcc":
         cc, runner = [require_tool("gcc")], []
     else:
@@ -123,9 +123,9 @@ def test_cbrt_c_equals_python_bit_for_bit(tmp_path, precision, target):
 def two_radii(tmp_path_factory):
     """two-radii fitted the paper's way (roots and negative powers), its held-out readings, and those scaled
     by 0.4 and 1.7 (clamped rows), as a CSV that `fitgen predict` reads."""
-    from fitgen.dataset import Dataset
-    from fitgen.holdout import clean_readings
-    from fitgen.model import load_model
+    from fitgen.physics.dataset import Dataset
+    from fitgen.fitting.holdout import clean_readings
+    from fitgen.equations.model import load_model
 
     folder = tmp_path_factory.mktemp("roots")
     for args in (("simulate", "--sensor", "two-radii", "--grid", "paper-sim", "-o", str(folder / "sim.csv")),
@@ -154,7 +154,7 @@ def _predicted(folder: Path, precision: str) -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("target", ["gcc", "qemu-arm"])
 def test_float_header_equals_fitgen_predict(two_radii, target):
     """gcc's float header (x86-64, and armhf glibc under qemu-arm) equals `fitgen predict --precision float`."""
-    from host.compiled import CompiledModel
+    from fitgen.c.compiled import CompiledModel
 
     folder, model, v = two_radii
     if target == "gcc":
@@ -239,7 +239,7 @@ def _has_fma() -> bool:
 def test_the_header_turns_contraction_off_itself(two_radii, cc):
     """In GNU mode on a core with an FMA, GCC fuses a * b + c unless told not to, even with -ffp-contract=fast on
     the command line; clang fuses within statements by default: the header's pragmas keep the bits Python's."""
-    from host.compiled import CompiledModel
+    from fitgen.c.compiled import CompiledModel
 
     folder, model, v = two_radii
     require_tool(cc.split()[0])

@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from fitgen.codegen import render_header
-from fitgen.model import load_model
-from fitgen.scenes import PRESETS, load_scene
-from fitgen.sensor import load_sensor
+from fitgen.c.codegen import render_header
+from fitgen.equations.model import load_model
+from fitgen.physics.scenes import PRESETS, load_scene
+from fitgen.physics.sensor import load_sensor
 
 from conftest import assert_one_line_error, run_cli
 
@@ -92,7 +92,7 @@ def test_scene_toml_levels_and_unresolved_check_agree_with_observe(tmp_path):
     scene.write_text(SMALL_FULL)
     s = load_scene(str(scene))
     assert s.poses().shape == (3 ** 5, 5)
-    from fitgen.scenes import unresolved_warnings
+    from fitgen.physics.scenes import unresolved_warnings
 
     assert unresolved_warnings(load_sensor("paper"), PRESETS["slide"]) == []
     assert len(unresolved_warnings(load_sensor("paper"), s)) == 4

@@ -3,15 +3,15 @@ import math
 import numpy as np
 import pytest
 
-from fitgen.errors import InputError
-from fitgen.sensor import load_sensor, parse_sensor, preset_names, tomllib
+from fitgen.base.errors import InputError
+from fitgen.physics.sensor import load_sensor, parse_sensor, preset_names, tomllib
 from importlib import resources
 
 from conftest import assert_one_line_error, run_cli
 
 
 def paper_dict():
-    return tomllib.loads(resources.files("fitgen.presets").joinpath("paper.toml").read_text())
+    return tomllib.loads(resources.files("fitgen.physics.presets").joinpath("paper.toml").read_text())
 
 
 def test_paper_preset_matches_conventions():

@@ -1,11 +1,11 @@
 import numpy as np
 import pytest
 
-from fitgen.dataset import load_dataset
-from fitgen.errors import InputError
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, parse_grid, pose_rng, random_poses, simulate, parse_ranges
-from fitgen.transfer import quantise
+from fitgen.physics.dataset import load_dataset
+from fitgen.base.errors import InputError
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, parse_grid, pose_rng, random_poses, simulate, parse_ranges
+from fitgen.physics.transfer import quantise
 
 from conftest import assert_one_line_error, run_cli
 

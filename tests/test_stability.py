@@ -6,11 +6,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from fitgen.fit import fit_model
-from fitgen.sensor import load_sensor
-from fitgen.simulate import DEFAULT_RANGES, pose_rng, random_poses, simulate
-from fitgen.stepwise import stepwise
-from host.compiled import CompiledModel
+from fitgen.fitting.fit import fit_model
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES, pose_rng, random_poses, simulate
+from fitgen.fitting.stepwise import stepwise
+from fitgen.c.compiled import CompiledModel
 
 from conftest import require_tool
 

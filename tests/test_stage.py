@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 import serial
 
-from fitgen.codegen import render_header
-from fitgen.dataset import load_dataset
-from fitgen.errors import InputError
-from fitgen.fit import fit_model
-from fitgen.transfer import readings
+from fitgen.c.codegen import render_header
+from fitgen.physics.dataset import load_dataset
+from fitgen.base.errors import InputError
+from fitgen.fitting.fit import fit_model
+from fitgen.physics.transfer import readings
 from host.adc import AdcArray
 from host.capture import capture, load_schedule
 from host.channelmap import parse_spec
@@ -413,7 +413,7 @@ def test_jogging_to_the_zero(tmp_path):
 
 
 def host_cmd(*args):
-    code = "import sys; from host.cli import main; sys.argv[0] = 'tactile-host'; main()"
+    code = "import sys; from fitgen.app.host_cli import main; sys.argv[0] = 'tactile-host'; main()"
     return [sys.executable, "-c", code, *args]
 
 

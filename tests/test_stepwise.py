@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from fitgen.fit import FitSettings, fit_model
-from fitgen.model import Model
-from fitgen.rstep import r_step
-from fitgen.sensor import load_sensor
-from fitgen.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate, DEFAULT_RANGES
-from fitgen.stepwise import compress, stepwise, stepwise_reference
-from fitgen.terms import DISPLACEMENTS, candidate_terms, design_matrix, initial_terms
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.equations.model import Model
+from rstep import r_step
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate, DEFAULT_RANGES
+from fitgen.fitting.stepwise import compress, stepwise, stepwise_reference
+from fitgen.equations.terms import DISPLACEMENTS, candidate_terms, design_matrix, initial_terms
 
 from conftest import require_tool
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from conftest import assert_one_line_error, require_tool, run_cli
 
-from fitgen.errors import InputError
-from fitgen.tradeoff import (Knobs, full_grid, grid_from, parse_knob_list, parse_target, pareto_front, quick_grid,
+from fitgen.base.errors import InputError
+from fitgen.app.tradeoff import (Knobs, full_grid, grid_from, parse_knob_list, parse_target, pareto_front, quick_grid,
                              recommend)
 
 # --- the front --------------------------------------------------------------------------------------
@@ -102,11 +102,11 @@ def test_parse_knobs_and_target():
 
 
 def test_integer_family_starts_from_what_it_allows():
-    from fitgen.fit import FitSettings, fit_model
-    from fitgen.scenes import load_scene
-    from fitgen.sensor import load_sensor
-    from fitgen.simulate import simulate
-    from fitgen.terms import FAMILIES, initial_terms
+    from fitgen.fitting.fit import FitSettings, fit_model
+    from fitgen.physics.scenes import load_scene
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.simulate import simulate
+    from fitgen.equations.terms import FAMILIES, initial_terms
 
     assert {t.exponent for t in initial_terms(8)} == {"-1", "-2"}
     assert {t.exponent for t in initial_terms(8, FAMILIES["no-roots"])} == {"-1", "-2"}
@@ -120,9 +120,9 @@ def test_integer_family_starts_from_what_it_allows():
 
 
 def test_sweep_needs_valgrind(monkeypatch):
-    import fitgen.tradeoff as tradeoff
-    from fitgen.scenes import load_scene
-    from fitgen.sensor import load_sensor
+    import fitgen.app.tradeoff as tradeoff
+    from fitgen.physics.scenes import load_scene
+    from fitgen.physics.sensor import load_sensor
 
     real = tradeoff.shutil.which
     monkeypatch.setattr(tradeoff.shutil, "which", lambda name: None if name == "valgrind" else real(name))

@@ -1,4 +1,4 @@
-"""Built units (fitgen.units): the physics of a unit against magpylib, unit files, draws within tolerances,
+"""Built units (fitgen.physics.units): the physics of a unit against magpylib, unit files, draws within tolerances,
 and `fitgen simulate --unit`."""
 
 from __future__ import annotations
@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from conftest import assert_one_line_error, run_cli
-from fitgen.errors import InputError
-from fitgen.sensor import load_sensor
-from fitgen.simulate import DEFAULT_RANGES, pose_rng, random_poses
-from fitgen.transfer import readings
-from fitgen.units import UnitSpace, draw_unit, unit_toml, write_unit
+from fitgen.base.errors import InputError
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES, pose_rng, random_poses
+from fitgen.physics.transfer import readings
+from fitgen.physics.units import UnitSpace, draw_unit, unit_toml, write_unit
 from magpy_truth import magpylib_readings
 
 POSES = random_poses(300, DEFAULT_RANGES, pose_rng(11))
@@ -117,7 +117,7 @@ def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
 
 def test_labels_are_the_stages_or_the_magnets():
     """A unit's magnet follows the stage through its map: the same readings labelled either way."""
-    from fitgen.simulate import simulate
+    from fitgen.physics.simulate import simulate
 
     unit, _ = draw_unit(load_sensor("paper"), 6)
     stage = simulate(unit, POSES[:50])

@@ -1,0 +1,32 @@
+"""What every command-line tool here shares: one-line errors with exit status 2."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from fitgen.base.errors import InputError
+
+EXIT_USAGE = 2
+EXIT_CHECK_FAILED = 1
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (no usage dump) and exit status 2."""
+
+    def error(self, message):  # noqa: D401 - argparse's hook
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+
+def run(main_fn, argv=None, prog: str = "") -> int:
+    """Call ``main_fn(argv)``; turn bad input into one line on stderr and exit status 2."""
+    try:
+        return int(main_fn(argv) or 0)
+    except InputError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0

@@ -1,0 +1,198 @@
+"""tactile-hil: hardware-in-the-loop checks of the reference firmware, on a board or an emulated Cortex-M4.
+
+  run       send vectors, calibrations and fuzz frames to a device and compare with Python
+  emulate   build the firmware with a model and boot it (QEMU mps2-an386, or the host build on a pty)
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, run
+from fitgen.base.errors import InputError
+
+
+def _load(args):
+    from fitgen.equations.model import load_model
+
+    model = load_model(args.model)
+    data = None
+    if getattr(args, "data", None):
+        from fitgen.physics.dataset import load_dataset
+
+        ds = load_dataset(args.data, min_rows=1)
+        if ds.n_inputs != model.n_inputs:
+            raise InputError(f"dataset {args.data} has {ds.n_inputs} inputs; the model takes {model.n_inputs}")
+        data = ds.inputs
+    return model, data
+
+
+def _check_counts(args) -> None:
+    if args.vectors < 0:
+        raise InputError("--vectors must be >= 0")
+    if args.fuzz < 0:
+        raise InputError("--fuzz must be >= 0")
+
+
+def _suite(url: str, model, data, args) -> int:
+    from host.device import Device
+    from fitgen.c.verify import held_out_from_args
+
+    from hil.suite import run_suite
+
+    held_out = held_out_from_args(model, args)
+    with Device.open(url, timeout=args.timeout) as dev:
+        res = run_suite(dev, model, url=url, n_vectors=args.vectors, data=data, n_fuzz=args.fuzz,
+                        flash=not args.no_flash, sensor_id=args.sensor_id, fma=args.fma, held_out=held_out,
+                        max_share=args.max_share)
+    print(res.table())
+    if held_out is None and not args.no_held_out:
+        print("note: no held-out accuracy check: the model file has no held_out record or its sensor is unknown "
+              "(give --sensor)")
+    if args.junit:
+        res.write_junit(args.junit)
+    print("PASS" if res.ok else "FAIL")
+    return 0 if res.ok else EXIT_CHECK_FAILED
+
+
+def cmd_run(args) -> int:
+    _check_counts(args)
+    model, data = _load(args)
+    return _suite(args.port, model, data, args)
+
+
+def _describe(runner, dev, target: str) -> None:
+    from hil.emulate import bench_instructions
+
+    info = dev.info()
+    b = bench_instructions(dev)
+    cost = (f"{b['instructions']:.0f} instructions per estimate (icount)" if b["instructions"] is not None
+            else f"{b['ns']:.0f} ns per estimate")
+    print(f"{target} firmware: {info.precision}, {info.style_name}, model {info.model_hash[:12]}; {cost}")
+    if runner.size:
+        print(f"flash {runner.size['flash']} bytes, RAM {runner.size['ram']} bytes")
+    if info.adc_chips:
+        print("inputs from " + ", ".join(f"{c[0]}@0x{c[1]:02x} ({c[2]} inputs)" for c in info.adc_chips)
+              + " over the I2C bridge to the bus model")
+
+
+def _adc_bridge(args):
+    """(channel map, stand-in bus, thermistor input, compensation) for --adc, or Nones."""
+    if not args.adc:
+        if args.temp_comp or args.thermistor or args.sim_temperature is not None:
+            raise InputError("--temp-comp, --thermistor and --sim-temperature go with --adc")
+        return None, None, None, None
+    from fitgen.physics.sensor import load_sensor
+    from host.channelmap import channel_map
+    from host.clock import VirtualClock
+    from host.pi import StandIn
+    from host.simbus import Drift, SimBus, parse_pose
+    from host.temperature import load_tempcomp, split_channel_map, temperature_input
+
+    cmap = channel_map(split_channel_map(args.adc)[0])
+    tin = temperature_input(args.adc, cmap, args.thermistor)
+    if tin is None and args.temp_comp:
+        raise InputError("--temp-comp needs the thermistor's input: add temp=CHIP@ADDRESS:INPUT to --adc")
+    tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
+    drift = None
+    if args.sim_temperature is not None:
+        # the sensor at a steady temperature: typical temperature coefficients, no creep
+        drift = Drift.typical(cmap.n_elements, seed=args.seed).steady(args.sim_temperature)
+    sensor = load_sensor(args.sim_sensor).with_transfer("gmr")
+    noise = sensor.noise if args.sim_noise is None else args.sim_noise
+    if not noise >= 0:
+        raise InputError(f"--sim-noise must be >= 0, got {args.sim_noise}")
+    clock = VirtualClock()
+    bus = SimBus.for_channel_map(cmap, sensor, parse_pose(args.simulate), clock=clock, noise=noise, seed=args.seed,
+                                 drift=drift, thermistor=tin)
+    return cmap, StandIn(bus, clock), tin, tempcomp
+
+
+def cmd_emulate(args) -> int:
+    from host.device import Device
+
+    from hil.emulate import start_target
+
+    _check_counts(args)
+    model, data = _load(args)
+    cmap, bridge, tin, tempcomp = _adc_bridge(args)
+    with start_target(model, args.target, precision=args.precision, style=args.style, fma=args.fma,
+                      port=args.port, workdir=args.build_dir, sensor_id=args.sensor_id, cmap=cmap,
+                      bridge=bridge, tin=tin, tempcomp=tempcomp) as runner:
+        with Device.open(runner.url, timeout=args.timeout) as dev:
+            _describe(runner, dev, args.target)
+        if args.suite:
+            return _suite(runner.url, model, data, args)
+        print(f"ready: {runner.url} (Ctrl-C stops)", flush=True)
+        stop = threading.Event()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: stop.set())
+        while not stop.is_set() and runner.proc is not None and runner.proc.poll() is None:
+            stop.wait(0.2)
+        if not stop.is_set():
+            raise InputError(f"the {args.target} firmware exited on its own (status {runner.proc.returncode})")
+    print("stopped", file=sys.stderr)
+    return 0
+
+
+def _suite_options(p) -> None:
+    from fitgen.c.verify import add_held_out_options
+
+    p.add_argument("--model", required=True, metavar="MODEL", help="the model compiled into the firmware")
+    p.add_argument("--vectors", type=int, default=1000, help="random vectors inside the domain (default 1000)")
+    p.add_argument("--data", metavar="CSV", help="also send the rows of this dataset")
+    p.add_argument("--fuzz", type=int, default=10_000, help="random or mutated frames to send (default 10000)")
+    p.add_argument("--no-flash", action="store_true", help="skip the calibration flashing checks")
+    p.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
+    p.add_argument("--sensor-id", default="paper", help="sensor id written into flashed blobs (default paper)")
+    p.add_argument("--fma", action="store_true", help="the compiled-in model sums terms by fma")
+    p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for each reply (default 2)")
+    add_held_out_options(p)
+
+
+def build_parser() -> Parser:
+    p = Parser(prog="tactile-hil", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
+    r = sub.add_parser("run", help="run the HIL suite against a device")
+    r.add_argument("--port", required=True, metavar="URL",
+                   help="serial device, pty path, or socket://127.0.0.1:PORT (the emulator)")
+    _suite_options(r)
+    r.set_defaults(func=cmd_run)
+
+    e = sub.add_parser("emulate", help="build the firmware with a model and boot it")
+    e.add_argument("--target", default="mps2", choices=("mps2", "microbit", "host"),
+                   help="mps2: Cortex-M4F in qemu-system-arm (default); microbit: Cortex-M0 (nRF51, fixed point "
+                        "only); host: the POSIX build on a pty")
+    e.add_argument("--port", type=int, help="TCP port of the emulated UART (default: a free one)")
+    e.add_argument("--precision", default="float", choices=("float", "double", "fixed"))
+    e.add_argument("--style", default="table", choices=("table", "unrolled"))
+    e.add_argument("--build-dir", metavar="DIR", help="keep the firmware sources and image here")
+    e.add_argument("--suite", action="store_true", help="run the HIL suite against it, then stop")
+    e.add_argument("--adc", metavar="SPEC|FILE.toml",
+                   help="the firmware reads its inputs from these ADCs (a channel map, as tactile-host read --adc) "
+                        "over the emulated board's I2C bridge, answered by the bus model of --simulate")
+    e.add_argument("--simulate", metavar="POSE", default="0,0,0,0,0",
+                   help="with --adc: the bus model's magnet pose dx,dy,dz,thx,thy (default rest)")
+    e.add_argument("--sim-sensor", default="paper", help="with --adc: the simulated sensor (default paper, gmr)")
+    e.add_argument("--sim-noise", type=float, help="with --adc: simulated element noise, V rms (default: the sensor's)")
+    e.add_argument("--seed", type=int, default=0, help="with --adc: seed of the simulated noise")
+    e.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",
+                   help="with temp= in --adc: the thermistor's NTC divider (default beta=3950,r25=10000,series=10000)")
+    e.add_argument("--temp-comp", metavar="FILE.json",
+                   help="with temp= in --adc: temperature compensation before the model (float and double builds)")
+    e.add_argument("--sim-temperature", type=float, metavar="DEGC",
+                   help="with --adc: the simulated sensor at this temperature (typical coefficients, seed --seed)")
+    _suite_options(e)
+    e.set_defaults(func=cmd_emulate)
+    return p
+
+
+def _main(argv) -> int:
+    args = build_parser().parse_args(argv)
+    return args.func(args)
+
+
+def main(argv=None) -> int:
+    sys.exit(run(_main, argv, "tactile-hil"))

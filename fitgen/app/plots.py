@@ -1,0 +1,119 @@
+"""Figures (matplotlib, an optional extra): estimate against target, as the paper's Figures 4-7."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.physics.dataset import Dataset
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import write_atomic
+from fitgen.equations.model import Model
+
+
+def _plt():
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise InputError("plots need matplotlib: pip install 'magtactile-fitgen[plots]'") from None
+    return plt
+
+
+def _save(fig, path: Path) -> Path:
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, metadata={"Software": None})
+    write_atomic(path, buf.getvalue())
+    return path
+
+
+def estimate_vs_target(model: Model, ds: Dataset, folder: Path) -> list[Path]:
+    """One PNG per output: target and estimate against the row index (rows sorted by target)."""
+    plt = _plt()
+    pred = model.predict(ds.inputs)
+    paths = []
+    for j, eq in enumerate(model.equations):
+        if eq.name not in ds.target_names:
+            continue
+        y = ds.target(eq.name)
+        order = np.argsort(y, kind="stable")
+        fig, (a, b) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+        a.plot(pred[order, j], ".", ms=2, label="estimate")
+        a.plot(y[order], "-", lw=1.2, color="k", label="target")
+        a.set_ylabel(f"{eq.name} [{eq.unit}]")
+        a.legend(loc="upper left")
+        a.set_title(f"{eq.name}: {len(eq.terms)} terms, max error {np.max(np.abs(pred[:, j] - y)):.3g} {eq.unit}")
+        b.plot(pred[order, j] - y[order], ".", ms=2)
+        b.set_ylabel("error")
+        b.set_xlabel("data index (sorted by target)")
+        fig.tight_layout()
+        paths.append(_save(fig, folder / f"estimate_{eq.name}.png"))
+        plt.close(fig)
+    return paths
+
+
+def resolution_sweep(model: Model, sweep_inputs: np.ndarray, sweep_values: np.ndarray, output: str,
+                     folder: Path) -> Path:
+    """The paper's Figure 7: one component stepped 0.1 deg at a time, the others at 0."""
+    plt = _plt()
+    j = model.output_names.index(output)
+    est = model.predict(sweep_inputs)[:, j]
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.plot(sweep_values, est, ".", ms=3, label="estimate")
+    ax.plot(sweep_values, sweep_values, "-", color="k", lw=1, label="target")
+    ax.set_xlabel(f"target {output}")
+    ax.set_ylabel(f"estimated {output}")
+    ax.legend()
+    ax.set_title(f"{output} in steps of {sweep_values[1] - sweep_values[0]:.2g}, other components 0")
+    fig.tight_layout()
+    path = _save(fig, folder / f"sweep_{output}.png")
+    plt.close(fig)
+    return path
+
+
+def tradeoff(result, path: Path) -> Path:
+    """fitgen tradeoff: instructions per estimate against score (log axes), the front joined, the
+    target (score 1) dashed, the recommended point ringed; colour by precision, marker by family."""
+    plt = _plt()
+    colours = {"double": "tab:blue", "float": "tab:orange", "fixed": "tab:green"}
+    markers = {"all": "o", "no-roots": "s", "integer": "^", "harmonics": "D"}
+    refined = "P"  # any family with refinement steps
+    fig, ax = plt.subplots(figsize=(7.5, 4.8))
+    pts = [(i, p) for i, p in enumerate(result.points) if p.instructions is not None and p.score is not None]
+    seen = set()
+    for i, p in pts:
+        key = (p.knobs.precision, p.knobs.method)
+        face = "none" if p.knobs.style == "table" else colours[p.knobs.precision]
+        ax.scatter(p.instructions, p.score, s=36, marker=refined if p.knobs.refine else markers[p.knobs.family],
+                   facecolors=face, edgecolors=colours[p.knobs.precision], linewidths=1, alpha=0.85,
+                   label=None if key in seen else f"{p.knobs.precision}, {p.knobs.method}")
+        seen.add(key)
+    front = [result.points[i] for i in result.front]
+    if front:
+        ax.plot([p.instructions for p in front], [p.score for p in front], "-", color="k", lw=1, label="Pareto front")
+    if result.recommended is not None:
+        r = result.points[result.recommended]
+        ax.scatter(r.instructions, r.score, s=220, facecolors="none", edgecolors="red", linewidths=1.6,
+                   label="recommended" if result.met else "most accurate (target not met)")
+    ax.axhline(1.0, color="red", ls="--", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    from matplotlib.ticker import FuncFormatter
+
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
+        axis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if f"{x:g}"[0] in "1235" else ""))
+    ax.set_xlabel("x86-64 instructions per estimate (callgrind)")
+    ax.set_ylabel("score: worst RMS error with noise / target")
+    ax.set_title(f"sensor {result.sensor}, scene {result.scene.name} (hollow: table style)", fontsize=10)
+    ax.grid(True, which="both", lw=0.3, alpha=0.5)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    _save(fig, path)
+    plt.close(fig)
+    return path

@@ -1,0 +1,148 @@
+"""Accuracy reports: errors per output and per dz level, terms, AIC traces, the paper's numbers beside ours."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fitgen.physics.dataset import Dataset
+from fitgen.fitting.fit import error_stats
+from fitgen.equations.model import Model
+
+# the seed paper's figures (simulation study on paper-sim, and experiment term counts)
+PAPER_SIM_MAX_ERROR = {"dx": 0.06, "dz": 0.25, "thx": 1.23}
+PAPER_EXP_TERMS = {"dx": 18, "dz": 21, "thx": 39}
+
+
+def evaluate(model: Model, ds: Dataset) -> dict:
+    """Per output: errors overall and per dz level (when the data has at most 12 dz levels)."""
+    pred = model.predict(ds.inputs)
+    out = {}
+    levels = np.unique(ds.target("dz")) if "dz" in ds.target_names else np.array([])
+    for j, name in enumerate(model.output_names):
+        if name not in ds.target_names:
+            continue
+        err = pred[:, j] - ds.target(name)
+        row = {"all": error_stats(err)}
+        if 1 < len(levels) <= 12:
+            dz = ds.target("dz")
+            row["by_dz"] = {float(v): error_stats(err[dz == v]) for v in levels}
+        out[name] = row
+    return out
+
+
+def _table(head: list[str], rows: list[list[str]]) -> str:
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(head)]
+    lines = ["| " + " | ".join(h.ljust(w) for h, w in zip(head, widths)) + " |",
+             "| " + " | ".join("-" * w for w in widths) + " |"]
+    lines += ["| " + " | ".join(c.ljust(w) for c, w in zip(r, widths)) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _g(x: float) -> str:
+    return f"{x:.3g}"
+
+
+def fit_assumptions(info: dict) -> str:
+    """One line: the noise and the precision the fit assumed (from a model file's fit notes)."""
+    noise, prec = info.get("noise"), info.get("precision", {})
+    if not isinstance(noise, dict):
+        return "fitted for: not recorded (a model file from before noise-aware fitting)"
+    dev = "unknown" if noise.get("device") is None else f"{noise['device']:g}"
+    data = "measured (carry their own)" if noise.get("data") is None else f"{noise['data']:g}"
+    target = prec.get("target") or "exact arithmetic"
+    line = (f"fitted for: reading noise {dev} rms ({noise.get('device_source', '?')}), data's own noise {data}, "
+            f"added in expectation {noise.get('added', 0):g}; precision {target}")
+    fam = info.get("family")
+    if isinstance(fam, dict) and "name" in fam:
+        line += f"\ncandidates: family {fam['name']}" + (f" (auto: {fam.get('why', '')})" if fam.get("auto") else "")
+    ref = info.get("refine")
+    if isinstance(ref, dict) and "steps" in ref:
+        sd = ", ".join(f"{k} {v:.3g}" for k, v in ref.get("prior_sd", {}).items())
+        line += (f"\nrefinement: {ref['steps']} Gauss-Newton step(s) after the equations on a forward model "
+                 f"({ref['transform']}, {sum(ref['terms'])} terms over {len(ref['terms'])} elements, at most "
+                 f"{max(ref['terms'])} each); prior sd about the equations' estimate: {sd}")
+    return line
+
+
+def deployed_table(model: Model) -> str:
+    """Markdown: held-out errors per precision (the model file's ``held_out`` record), '' without one."""
+    rec = model.fit_info.get("held_out")
+    if not isinstance(rec, dict):
+        return ""
+    post = rec.get("posterior")
+    on = (f"on {post['units']} units drawn from the posterior of identified unit {rec.get('sensor', '?')} "
+          "(the median of each figure, their range in brackets: the unit is one draw of it)"
+          if isinstance(post, dict) else
+          f"on unit {rec.get('sensor', '?')} ({rec['sensor_file']})" if rec.get("sensor_file") else
+          f"on the drawing {rec.get('sensor', '?')}: a built unit differs from it (fitgen identify)")
+    lines = [f"### deployed accuracy, held out ({rec['poses']} random poses in the training box, seed {rec['seed']}; "
+             f"noise {rec['noise']:g} rms, {rec['noise_draws']} draws), {on}", "",
+             "| output | unit | precision | max | RMS | max, noise | RMS, noise | rounding's share |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for e in model.equations:
+        for prec, errs in rec["errors"].items():
+            if "unavailable" in errs:
+                continue
+            x = errs[e.name]
+            cells = [_g(x[f]) + (f" ({_g(x[f + '_lo'])}-{_g(x[f + '_hi'])})" if f + "_lo" in x else "")
+                     for f in ("max", "rms", "noisy_max", "noisy_rms")]
+            lines.append(f"| {e.name} | {e.unit} | {prec} | {' | '.join(cells)} | {x['share']:.1%} |")
+    missing = [f"{p}: {errs['unavailable']}" for p, errs in rec["errors"].items() if "unavailable" in errs]
+    lines += [""] + [f"Not available in {m}" for m in missing] + ([""] if missing else [])
+    return "\n".join(lines) + "\n"
+
+
+def format_report(model: Model, ds: Dataset | None = None, title: str = "", paper: bool = False) -> str:
+    """Markdown: terms and fit figures per output; errors on ``ds`` (default: the fit's training errors)."""
+    info = model.fit_info.get("outputs", {})
+    parts = [f"## {title}" if title else "## Model", ""]
+    parts.append(f"Model {model.sha256[:12]}: {len(model.equations)} outputs, {model.n_inputs} inputs "
+                 f"({model.input_units}); fitted on {model.fit_info.get('dataset_rows', '?')} rows, "
+                 f"d-terms: {model.fit_info.get('d_terms', '?')}.")
+    parts.append("")
+    head = ["output", "terms", "AIC", "steps", "cond"]
+    rows = []
+    for e in model.equations:
+        i = info.get(e.name, {})
+        rows.append([e.name, str(len(e.terms)), _g(i["aic"]) if "aic" in i else "-",
+                     str(len(i.get("steps", [])) - 1) if "steps" in i else "-",
+                     _g(i["condition"]) if "condition" in i else "-"])
+    parts += [_table(head, rows), ""]
+    parts += [fit_assumptions(model.fit_info), ""]
+    deployed = deployed_table(model)
+    if deployed:
+        parts.append(deployed)
+
+    if ds is not None:
+        ev = evaluate(model, ds)
+        label = f"errors on {ds.n_rows} rows"
+        head = ["output", "unit", "max", "RMS", "p95"] + (["paper sim max"] if paper else [])
+        rows = []
+        for e in model.equations:
+            if e.name not in ev:
+                continue
+            s = ev[e.name]["all"]
+            rows.append([e.name, e.unit, _g(s["max"]), _g(s["rms"]), _g(s["p95"])]
+                        + ([str(PAPER_SIM_MAX_ERROR.get(e.name, "-"))] if paper else []))
+        parts += [f"### {label}", "", _table(head, rows), ""]
+        by = {n: r["by_dz"] for n, r in ev.items() if "by_dz" in r}
+        if by:
+            levels = sorted(next(iter(by.values())))
+            head = ["output"] + [f"max at dz={lv:g}" for lv in levels]
+            rows = [[n] + [_g(by[n][lv]["max"]) for lv in levels] for n in by]
+            parts += ["### max error per dz level", "", _table(head, rows), ""]
+    parts.append("### terms")
+    parts.append("")
+    for e in model.equations:
+        # every digit: an equation with cancelling terms cannot be evaluated from rounded coefficients
+        parts.append(f"- {e.name} = {e.intercept!r} " + " ".join(
+            f"{'-' if c < 0 else '+'} {abs(c)!r} {t.text}" for t, c in zip(e.terms, e.coefficients)))
+    parts.append("")
+    parts.append("### AIC trace")
+    parts.append("")
+    for e in model.equations:
+        steps = info.get(e.name, {}).get("steps")
+        if steps:
+            moves = ", ".join(f"{m} ({a:.1f})" for m, a in steps[1:]) or "no move"
+            parts.append(f"- {e.name}: start {steps[0][1]:.1f}; {moves}")
+    return "\n".join(parts) + "\n"

@@ -1,0 +1,19 @@
+"""Option values every layer parses the same way."""
+
+from __future__ import annotations
+
+from fitgen.base.errors import InputError
+
+
+def parse_assignments(spec: str, allowed, what: str) -> dict[str, float]:
+    """``a=1 b=2`` (space, comma or semicolon separated) into a dict of floats."""
+    out = {}
+    for part in spec.replace(",", " ").replace(";", " ").split():
+        name, sep, value = part.partition("=")
+        if not sep or name not in allowed:
+            raise InputError(f"{what} {spec!r}: expected NAME=NUMBER with NAME in {', '.join(allowed)}")
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise InputError(f"{what} {spec!r}: {value!r} is not a number") from None
+    return out

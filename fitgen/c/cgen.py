@@ -1,0 +1,69 @@
+"""C text helpers: literals that round-trip and identifiers checked against the C keywords.
+
+Nothing from a model file reaches generated C except through these functions.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+
+C_KEYWORDS = frozenset("""
+auto break case char const continue default do double else enum extern float for goto if inline int long
+register restrict return short signed sizeof static struct switch typedef union unsigned void volatile while
+_Bool _Complex _Imaginary _Alignas _Alignof _Atomic _Generic _Noreturn _Static_assert _Thread_local
+bool true false NULL main
+""".split())
+_IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,30}$")
+
+
+def identifier(name: str, what: str = "identifier") -> str:
+    """``name`` if it is a safe C identifier: a letter first, then letters, digits, '_'; at most 31
+    characters; no keyword; no '__' (reserved to the implementation)."""
+    if not isinstance(name, str) or not _IDENT.match(name) or "__" in name:
+        raise InputError(f"{what} {name!r} is not a valid C identifier "
+                         "(a letter, then letters, digits or '_', at most 31 characters, no '__')")
+    if name in C_KEYWORDS or name.lower() in C_KEYWORDS:
+        raise InputError(f"{what} {name!r} is a C keyword")
+    return name
+
+
+def c_double(x: float) -> str:
+    """A double literal that reads back to the same double (17 significant digits)."""
+    x = float(x)
+    if not math.isfinite(x):
+        raise InputError(f"cannot write the non-finite number {x!r} as a C literal")
+    text = repr(x)  # shortest round-trip repr
+    if "e" not in text and "." not in text:
+        text += ".0"
+    return text
+
+
+def c_float(x: float) -> str:
+    """A float literal (``f`` suffix) for the float nearest ``x``, reading back to that float."""
+    f = np.float32(x)
+    if not np.isfinite(f):
+        raise InputError(f"the number {x!r} does not fit in a float")
+    text = np.format_float_scientific(f, unique=True, trim="0") if f != 0 else "0.0"
+    text = text.replace("e+", "e")
+    if "." not in text and "e" not in text:
+        text += ".0"
+    if text.endswith("."):
+        text += "0"
+    text = text.replace(".e", ".0e")
+    return text + "f"
+
+
+def c_real(x: float, precision: str) -> str:
+    return c_float(x) if precision == "float" else c_double(x)
+
+
+def c_string(text: str) -> str:
+    """A C string literal for plain ASCII text (letters, digits, a few symbols) only."""
+    if not re.fullmatch(r"[A-Za-z0-9 _.,:;/+\-=()\[\]]*", text):
+        raise InputError(f"refusing to place {text!r} in a C string")
+    return f'"{text}"'

@@ -1,0 +1,282 @@
+"""From a fitted :class:`Model` to a header-only C99 estimator, through jinja2 templates.
+
+The templates see only a :class:`CModel`: numbers already turned into round-trip
+literals and names already checked as C identifiers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import jinja2
+
+from fitgen import __version__
+from fitgen.c.cgen import c_real, identifier
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import write_in_folder
+from fitgen.equations.model import Model, float_domain
+from fitgen.equations.terms import DISPLACEMENTS, EXPONENTS, monomial_factors
+
+PRECISIONS = ("double", "float", "fixed")  # fixed: integer codes in, int32 out (fitgen/fixedpoint.py)
+STYLES = ("table", "unrolled")
+# C enum names of the exponent kinds, in EXPONENTS order
+EXP_CODE = {"1": "P1", "2": "P2", "3": "P3", "4": "P4", "-1": "M1", "-2": "M2", "-3": "M3", "-4": "M4",
+            "1/2": "R2", "1/3": "R3", "1/4": "R4"}
+# Largest sum of |coefficient * term| allowed anywhere in the domain. float: far enough
+# below FLT_MAX (3.4e38) that no partial sum can overflow. double: past 1e15 a sum in
+# mm or deg keeps no correct digit (eps 2.2e-16); such a model is refused as absurd.
+_LIMIT = {"double": 1e15, "float": 1e30}
+
+
+@dataclass(frozen=True)
+class CTerm:
+    element: int  # 0-based input index, -1 for a bare displacement term, the monomial's index for a harmonic one
+    exp: str  # exponent code (P1..R4), "" for a bare displacement term, "HARM" for a harmonic monomial
+    mult: int  # 0 none, 1 dx, 2 dy, 3 dz
+    coef: str  # C literal
+    text: str  # canonical term text, for comments
+
+
+@dataclass(frozen=True)
+class CHarmonic:
+    name: str  # symbol, a C identifier (hc1, hs1, ...)
+    terms: tuple[tuple[int, str], ...]  # (0-based input, weight literal) for the nonzero weights
+
+
+@dataclass(frozen=True)
+class CMonomial:
+    factors: tuple[str, ...]  # symbols multiplied left to right
+    text: str
+
+
+@dataclass(frozen=True)
+class COutput:
+    name: str
+    index: int
+    unit: str
+    intercept: str
+    terms: tuple[CTerm, ...]
+    d_slot: int  # 1..3 when this output is dx, dy or dz (its value feeds d-terms), else 0
+
+
+@dataclass(frozen=True)
+class CRefine:
+    """The refinement's tables as literals (fitgen.equations.refine)."""
+
+    steps: int
+    cbrt: bool
+    degree: int
+    centre: tuple[str, ...]
+    scale: tuple[str, ...]
+    lo: tuple[str, ...]
+    hi: tuple[str, ...]
+    weights: tuple[str, ...]
+    intercepts: tuple[str, ...]
+    prior: tuple[tuple[str, ...], ...]
+    starts: tuple[int, ...]  # element k's terms: starts[k] .. starts[k + 1] - 1
+    monos: tuple[tuple[int, ...], ...]  # the monomials a step computes (fitgen.equations.refine.Refinement.monomials)
+    table: tuple[tuple[int, ...], ...]  # per term: monomial, then per component (power, derivative's monomial or NONE)
+    terms: tuple[str, ...]  # per term, its coefficient
+    factors: tuple[tuple[tuple[int, int], ...], ...]  # per monomial, its (component, power) with power > 0
+    powers: tuple[str, ...]  # the literal of each power 0 .. 8, as a real
+    none: int
+
+
+@dataclass(frozen=True)
+class CModel:
+    prefix: str
+    upper: str
+    precision: str
+    style: str
+    n_inputs: int
+    outputs: tuple[COutput, ...]
+    input_min: tuple[str, ...]
+    input_max: tuple[str, ...]
+    needed: tuple[tuple[str, ...], ...]  # per input: exponent codes to compute, in EXPONENTS order
+    kinds: tuple[str, ...]  # exponent codes some input needs
+    model_hash: str
+    version: str
+    uses_d: bool
+    input_units: str
+    fma: bool  # each term added by fma(): one rounding instead of two
+    harmonics: tuple[CHarmonic, ...] = ()  # the ring's harmonics the monomials use (hr is always computed)
+    monomials: tuple[CMonomial, ...] = ()  # harmonic monomials, in order of first use
+    refine: CRefine | None = None
+
+
+def term_magnitudes(model: Model) -> dict[str, float]:
+    """Upper bound of |intercept| + sum |coefficient * term| over the input domain, per output.
+
+    Interval arithmetic on the clamped inputs: |v|^p is largest at the domain's end farthest
+    from 0 for p > 0, and at its lower end (> 0 by the model's rule) for p < 0; d-terms use
+    the bound of the displacement output they multiply.
+    """
+    lo, hi = model.input_min, model.input_max
+    bound_d: dict[str, float] = {}
+    bound_h = model.harmonics.bounds(lo, hi) if model.harmonics is not None else {}
+    out = {}
+    for eq in model.equations:
+        total = abs(eq.intercept)
+        for t, c in zip(eq.terms, eq.coefficients):
+            mag = 1.0
+            if t.harm:
+                for f in monomial_factors(t.harm):
+                    mag *= bound_h[f]
+            if t.element:
+                a, b = lo[t.element - 1], hi[t.element - 1]
+                num, _, den = t.exponent.partition("/")
+                p = float(num) / float(den or 1)
+                mag = max(abs(a), abs(b)) ** p if p > 0 else a ** p
+            if t.mult:
+                mag *= bound_d[t.mult]
+            total += abs(c) * mag
+        out[eq.name] = total
+        if eq.name in DISPLACEMENTS:
+            bound_d[eq.name] = total
+    return out
+
+
+def build_cmodel(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",
+                 fma: bool = False) -> CModel:
+    if precision not in PRECISIONS:
+        raise InputError(f"precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
+    if precision == "fixed":
+        raise InputError("fixed point has its own plan: use fitgen.equations.fixedpoint.build_fixed")
+    if style not in STYLES:
+        raise InputError(f"style must be one of {', '.join(STYLES)}, got {style!r}")
+    prefix = identifier(prefix, "prefix")
+    if len(prefix) > 16:
+        raise InputError(f"prefix {prefix!r} is longer than 16 characters")
+    for name, mag in term_magnitudes(model).items():
+        if not mag <= _LIMIT[precision]:
+            raise InputError(f"output {name}: its terms reach {mag:.3g} in the input domain, over the {precision} "
+                             f"limit {_LIMIT[precision]:g} (absurd coefficients, or a sum that could overflow)")
+    domain = float_domain(model) if precision == "float" else (model.input_min, model.input_max)
+    outs = []
+    needed = [set() for _ in range(model.n_inputs)]
+    monomials: list[str] = []
+    for i, eq in enumerate(model.equations):
+        terms = []
+        for t, c in zip(eq.terms, eq.coefficients):
+            if t.harm:
+                if t.harm not in monomials:
+                    monomials.append(t.harm)
+                terms.append(CTerm(monomials.index(t.harm), "HARM", 0, c_real(c, precision), t.text))
+                continue
+            if t.element:
+                needed[t.element - 1].add(t.exponent)
+            terms.append(CTerm(t.element - 1, EXP_CODE[t.exponent] if t.element else "",
+                               DISPLACEMENTS.index(t.mult) + 1 if t.mult else 0, c_real(c, precision), t.text))
+        d_slot = DISPLACEMENTS.index(eq.name) + 1 if eq.name in DISPLACEMENTS else 0
+        outs.append(COutput(identifier(eq.name, "output name"), i, eq.unit, c_real(eq.intercept, precision),
+                            tuple(terms), d_slot))
+    return CModel(
+        prefix=prefix,
+        upper=prefix.upper(),
+        precision=precision,
+        style=style,
+        n_inputs=model.n_inputs,
+        outputs=tuple(outs),
+        input_min=tuple(c_real(x, precision) for x in domain[0]),
+        input_max=tuple(c_real(x, precision) for x in domain[1]),
+        needed=tuple(tuple(EXP_CODE[e] for e in EXPONENTS if e in need) for need in needed),
+        kinds=tuple(EXP_CODE[e] for e in EXPONENTS if any(e in need for need in needed)),
+        model_hash=model.sha256,
+        version=__version__,
+        uses_d=any(e.uses_d for e in model.equations),
+        input_units=model.input_units if model.input_units in ("mT", "V", "codes") else "units",
+        fma=bool(fma),
+        harmonics=_c_harmonics(model, monomials, precision),
+        monomials=tuple(CMonomial(tuple(monomial_factors(h)), h) for h in monomials),
+        refine=_c_refine(model, precision),
+    )
+
+
+NONE = 0xFFFF  # the refinement's "no derivative" index (TM_R_NONE)
+
+
+def _c_refine(model: Model, precision: str) -> CRefine | None:
+    r = model.refine
+    if r is None:
+        return None
+
+    def lits(xs):
+        return tuple(c_real(x, precision) for x in xs)
+
+    starts = [0]
+    for eq in r.forward:
+        starts.append(starts[-1] + len(eq.exponents))
+    monos = r.monomials
+    if max(starts[-1], len(monos)) >= NONE:
+        raise InputError(f"the refinement has {starts[-1]} forward terms and {len(monos)} monomials; "
+                         f"its tables index fewer than {NONE}")
+    exps = [e for eq in r.forward for e in eq.exponents]
+    table = tuple((row[0],) + tuple(x for j in range(5) for x in (e[j], NONE if row[1 + j] < 0 else row[1 + j]))
+                  for e, row in zip(exps, r.term_table()))
+    return CRefine(r.steps, r.transform == "cbrt", r.degree, lits(r.centre), lits(r.scale), lits(r.pose_min),
+                   lits(r.pose_max), lits(r.weights), lits(eq.intercept for eq in r.forward),
+                   tuple(lits(row) for row in r.prior), tuple(starts), monos, table,
+                   lits(c for eq in r.forward for c in eq.coefficients),
+                   tuple(tuple((j, a) for j, a in enumerate(e) if a) for e in monos), lits(range(9)), NONE)
+
+
+def _c_harmonics(model: Model, monomials: list[str], precision: str) -> tuple[CHarmonic, ...]:
+    used = {f for h in monomials for f in monomial_factors(h)}
+    if not monomials:
+        return ()
+    return tuple(CHarmonic(identifier(sym, "harmonic"), tuple((k, c_real(w, precision)) for k, w in enumerate(ws) if w != 0.0))
+                 for sym, ws in model.harmonics.weights if sym in used)
+
+
+def _env() -> jinja2.Environment:
+    loader = jinja2.FileSystemLoader(str(resources.files("firmware_templates")))
+    return jinja2.Environment(loader=loader, undefined=jinja2.StrictUndefined, autoescape=False,
+                              keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True)
+
+
+def _prefix(prefix: str) -> str:
+    prefix = identifier(prefix, "prefix")
+    if len(prefix) > 16:
+        raise InputError(f"prefix {prefix!r} is longer than 16 characters")
+    return prefix
+
+
+def render_fixed_header(fm, prefix: str = "tm") -> str:
+    """The text of ``<prefix>_model.h`` for a fixed-point plan (:class:`fitgen.equations.fixedpoint.FixedModel`)."""
+    prefix = _prefix(prefix)
+    units = fm.input_units if fm.input_units in ("mT", "V", "codes") else "units"
+    return _env().get_template("model_fixed.h.j2").render(
+        m=fm, P=prefix, U=prefix.upper(), input_units=units,
+        input_lsb=c_real(fm.input_lsb, "double"), input_offset=c_real(fm.input_offset, "double"))
+
+
+def render_header(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",
+                  fma: bool = False, input_lsb: float | None = None, input_offset: float | None = None) -> str:
+    """The text of ``<prefix>_model.h``; ``fma`` sums each term with C99 fma()/fmaf().
+
+    ``precision="fixed"``: integer ADC codes in (value = input_offset + input_lsb * code; by
+    default the scale of the model's sensor, see :func:`fitgen.equations.fixedpoint.default_input_scale`),
+    int32 outputs out; ``style`` does not apply (the fixed header is straight-line code).
+    """
+    if precision == "fixed":
+        from fitgen.equations.fixedpoint import plan_at
+
+        if fma:
+            raise InputError("--fma does not apply to fixed point (it has no floating-point multiply-add)")
+        _prefix(prefix)
+        return render_fixed_header(plan_at(model, input_lsb, input_offset)[0], prefix)
+    if input_lsb is not None or input_offset is not None:
+        raise InputError("an input LSB and offset apply to --precision fixed only")
+    cm = build_cmodel(model, precision, style, prefix, fma)
+    if model.n_inputs > 30:
+        raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most 30")
+    return _env().get_template("model.h.j2").render(m=cm, exp_codes=[EXP_CODE[e] for e in EXPONENTS])
+
+
+def write_header(model: Model, folder: str | Path, precision: str = "double", style: str = "table",
+                 prefix: str = "tm", fma: bool = False, input_lsb: float | None = None,
+                 input_offset: float | None = None) -> Path:
+    text = render_header(model, precision, style, prefix, fma, input_lsb, input_offset)
+    return write_in_folder(folder, f"{prefix}_model.h", text)

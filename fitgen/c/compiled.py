@@ -1,0 +1,125 @@
+"""A generated header compiled with a C compiler, evaluated through a pipe: C answers next to numpy's."""
+
+from __future__ import annotations
+
+import shlex
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.c.codegen import _env, render_fixed_header, write_header
+from fitgen.base.errors import InputError
+from fitgen.equations.model import Model
+
+WARNING_FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wdouble-promotion", "-Wfloat-conversion"]
+
+
+def compile_checked(cc: str, sources: list[Path], output: Path, include: Path, extra: list[str] | None = None,
+                    link: bool = True) -> None:
+    """Compile with the project's warning flags; a warning is an error (InputError with the compiler's text)."""
+    cmd = shlex.split(cc) + WARNING_FLAGS + ["-O2", "-I", str(include)] + (extra or [])
+    cmd += [str(s) for s in sources] + (["-o", str(output), "-lm"] if link else ["-c", "-o", str(output)])
+    if shutil.which(shlex.split(cc)[0]) is None:
+        raise InputError(f"compiler {cc!r} not found")
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        first = (proc.stderr.strip().splitlines() or ["(no message)"])[0]
+        raise InputError(f"{cc} failed on the generated code: {first}")
+
+
+class CompiledModel:
+    """The model's header built into a vector-runner binary; ``predict`` pipes inputs through it.
+
+    ``runner`` prefixes the binary's command (e.g. ``qemu-arm``); ``cc`` may be a cross compiler
+    with its flags (e.g. ``arm-linux-gnueabihf-gcc -static``).
+
+    ``precision="fixed"``: the fixed-point header (``self.fixed`` is its
+    :class:`~fitgen.equations.fixedpoint.FixedModel`; ``input_lsb``/``input_offset`` as for codegen);
+    ``predict`` then takes integer codes and answers the integer outputs.
+    """
+
+    def __init__(self, model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",
+                 cc: str = "gcc", runner: str = "", workdir: str | Path | None = None, cflags: list[str] | None = None,
+                 fma: bool = False, input_lsb: float | None = None, input_offset: float | None = None):
+        self.model, self.precision, self.style, self.prefix, self.fma = model, precision, style, prefix, fma
+        self.runner = shlex.split(runner) if runner else []
+        self.fixed = None
+        if precision == "fixed":
+            from fitgen.equations.fixedpoint import plan_at
+
+            if fma:
+                raise InputError("--fma does not apply to fixed point")
+            self.fixed = plan_at(model, input_lsb, input_offset)[0]
+            text = render_fixed_header(self.fixed, prefix)
+        self._tmp = None
+        if workdir is None:
+            self._tmp = tempfile.TemporaryDirectory(prefix="fitgen-c-")
+            workdir = self._tmp.name
+        self.dir = Path(workdir)
+        if self.fixed is not None:
+            self.header = self.dir / f"{prefix}_model.h"
+            self.header.write_text(text)
+        else:
+            self.header = write_header(model, self.dir, precision, style, prefix, fma)
+        runner_template = "vector_main_fixed.c.j2" if self.fixed is not None else "vector_main.c.j2"
+        main = _env().get_template(runner_template).render(P=prefix, U=prefix.upper(),
+                                                           version=model.to_dict()["generator"])
+        src = self.dir / f"{prefix}_vectors.c"
+        src.write_text(main)
+        self.binary = self.dir / f"{prefix}_vectors"
+        compile_checked(cc, [src], self.binary, self.dir, cflags)
+        if self.runner and shutil.which(self.runner[0]) is None:
+            raise InputError(f"runner {self.runner[0]!r} not found")
+
+    def _run(self, text: str, n: int) -> list[list[str]]:
+        proc = subprocess.run(self.runner + [str(self.binary)], input=text, capture_output=True, text=True,
+                              timeout=600)
+        if proc.returncode != 0:
+            raise RuntimeError(f"vector runner failed ({proc.returncode}): {proc.stderr.strip()[:200]}")
+        rows = [ln.split() for ln in proc.stdout.splitlines()]
+        if len(rows) != n:
+            raise RuntimeError(f"vector runner answered {len(rows)} lines for {n} vectors")
+        return rows
+
+    def predict_codes(self, codes) -> tuple[np.ndarray, np.ndarray]:
+        """Fixed point: (integer outputs (n, K) int64, status (n,)) for int32 codes (n, N), exact both ways."""
+        if self.fixed is None:
+            raise InputError("predict_codes needs a fixed-point build (precision='fixed')")
+        self.fixed.clamp_codes(codes)  # whole numbers within int32, the right count per row (InputError otherwise)
+        codes = np.atleast_2d(np.asarray(codes)).astype(np.int64)
+        text = "\n".join(" ".join(str(int(x)) for x in row) for row in codes) + "\n"
+        rows = self._run(text, len(codes))
+        status = np.array([int(r[0]) for r in rows], dtype=np.int64)
+        out = np.array([[int(x) for x in r[1:]] for r in rows], dtype=np.int64).reshape(len(rows), -1)
+        return out, status
+
+    def predict(self, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(outputs (n, K), status (n,)) from the C code, read back exactly (hex floats).
+
+        Fixed point: ``inputs`` are integer codes and the outputs are converted to real values.
+        """
+        if self.fixed is not None:
+            out, status = self.predict_codes(inputs)
+            return self.fixed.to_real(out), status
+        inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
+        text = "\n".join(" ".join(float(x).hex() if np.isfinite(x) else ("nan" if np.isnan(x) else
+                                                                           ("inf" if x > 0 else "-inf"))
+                                  for x in row) for row in inputs) + "\n"
+        rows = self._run(text, len(inputs))
+        status = np.array([int(r[0]) for r in rows])
+        out = np.array([[float.fromhex(x) for x in r[1:]] for r in rows])
+        return out, status
+
+    def close(self):
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -1,0 +1,281 @@
+"""The fitted model: a small typed object that the Python evaluator and the C templates both read.
+
+Model files are JSON (``schema_version`` 1): the input domain (and, for harmonic terms, the
+ring's harmonic weights), per output its terms (canonical text), coefficients and intercept,
+and how and on what it was fitted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fitgen import __version__
+from fitgen.base.errors import InputError, finite_number
+from fitgen.base.fileio import canonical_json, read_text, sha256_hex, write_atomic
+from fitgen.equations.fma import fma as fused_multiply_add
+from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
+from fitgen.equations.refine import Refinement
+from fitgen.equations.terms import DISPLACEMENTS, Harmonics, Term, design_matrix, monomial_factors, parse_term
+
+SCHEMA_VERSION = 1
+STATUS_NONFINITE = -1
+_ROWS = 1 << 15  # rows per block of predict
+
+
+@dataclass(frozen=True)
+class Equation:
+    """One output: ``intercept + sum(coefficients[j] * terms[j])``."""
+
+    name: str
+    intercept: float
+    terms: tuple[Term, ...]
+    coefficients: tuple[float, ...]
+
+    @property
+    def unit(self) -> str:
+        return POSE_UNITS[POSE_NAMES.index(self.name)]
+
+    @property
+    def uses_d(self) -> bool:
+        return any(t.mult for t in self.terms)
+
+
+@dataclass
+class Model:
+    """Equations in output order (displacements before rotations) and the fitted input domain."""
+
+    input_min: np.ndarray
+    input_max: np.ndarray
+    equations: tuple[Equation, ...]
+    input_units: str = "mT"
+    fit_info: dict = field(default_factory=dict)
+    harmonics: Harmonics | None = None  # the ring's, when a term uses them
+    refine: Refinement | None = None  # Gauss-Newton steps on a forward model after the equations (fitgen.equations.refine)
+
+    def __post_init__(self):
+        self.input_min = np.asarray(self.input_min, dtype=float)
+        self.input_max = np.asarray(self.input_max, dtype=float)
+        _validate(self, "model")
+
+    @property
+    def n_inputs(self) -> int:
+        return int(self.input_min.size)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(e.name for e in self.equations)
+
+    def equation(self, name: str) -> Equation:
+        for e in self.equations:
+            if e.name == name:
+                return e
+        raise InputError(f"the model has no output {name!r} (it has {', '.join(self.output_names)})")
+
+    # --- evaluation ------------------------------------------------------------
+
+    def clamp(self, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Inputs clamped into the domain, and the status per row (C's return value).
+
+        Status: 0 inside, bit k-1 set when input k was clamped, -1 for a non-finite input.
+        """
+        v = np.asarray(inputs, dtype=float)
+        if v.ndim == 1:
+            v = v[None, :]
+        if v.shape[1] != self.n_inputs:
+            raise InputError(f"the model takes {self.n_inputs} inputs, got {v.shape[1]}")
+        finite = np.all(np.isfinite(v), axis=1)
+        low, high = v < self.input_min, v > self.input_max
+        bits = (1 << np.arange(self.n_inputs)).astype(np.int64)
+        status = ((low | high) * bits).sum(axis=1)
+        status[~finite] = STATUS_NONFINITE
+        clamped = np.clip(np.where(np.isfinite(v), v, self.input_min), self.input_min, self.input_max)
+        return clamped, status
+
+    def predict(self, inputs: np.ndarray, with_status: bool = False, fma: bool = False,
+                precision: str = "double"):
+        """Outputs (n, n_outputs) for rows of inputs; rows with a non-finite input give 0.
+
+        ``fma``: each term added with one rounding, as C generated with fused multiply-adds does.
+        ``precision="float"``: the float C's arithmetic in numpy float32 (inputs, domain,
+        coefficients, powers and sums rounded as the float header rounds them; no fma).
+        A refinement (fitgen.equations.refine) runs after the equations, without fma in either precision.
+        Rows are taken in blocks, so that memory does not grow with their number.
+        """
+        rows = np.asarray(inputs, dtype=float)
+        if rows.ndim == 2 and rows.shape[0] > _ROWS:
+            parts = [self.predict(rows[lo:lo + _ROWS], True, fma, precision) for lo in range(0, rows.shape[0], _ROWS)]
+            out, status = np.vstack([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+            return (out, status) if with_status else out
+        if precision == "float":
+            if fma:
+                raise InputError("the float emulation has no fused multiply-add")
+            lo, hi = float_domain(self)
+            f32 = np.asarray(inputs, dtype=float).astype(np.float32).astype(float)
+            v, status = dataclasses.replace(self, input_min=lo, input_max=hi, fit_info={}).clamp(f32)
+            dtype = np.float32
+        elif precision == "double":
+            v, status = self.clamp(inputs)
+            dtype = np.float64
+        else:
+            raise InputError(f"predict evaluates in double or float, not {precision!r}")
+        v = v.astype(dtype)
+        out = np.zeros((v.shape[0], len(self.equations)))
+        d = np.zeros((v.shape[0], 3), dtype=dtype)
+        for j, eq in enumerate(self.equations):
+            cols = design_matrix(list(eq.terms), v, d, self.harmonics).astype(dtype, copy=False)
+            # summed term by term in model order, as the generated C does, so that both round alike
+            acc = np.full(v.shape[0], eq.intercept, dtype=dtype)
+            for c, col in zip(np.asarray(eq.coefficients, dtype=dtype), cols.T):
+                acc = fused_multiply_add(c, col, acc) if fma else acc + c * col
+            out[:, j] = acc
+            if eq.name in DISPLACEMENTS:
+                d[:, DISPLACEMENTS.index(eq.name)] = acc
+        if self.refine is not None:
+            out = self.refine.apply(v, out.astype(dtype), dtype).astype(float)
+        out[status < 0] = 0.0
+        return (out, status) if with_status else out
+
+    # --- files -------------------------------------------------------------------
+
+    def with_domain(self, lo, hi) -> "Model":
+        """The same equations (and harmonics) on another input domain, without the fit notes."""
+        return dataclasses.replace(self, input_min=np.asarray(lo, dtype=float), input_max=np.asarray(hi, dtype=float),
+                                   fit_info={})
+
+    def to_dict(self) -> dict:
+        inputs = {
+            "names": [f"v{k}" for k in range(1, self.n_inputs + 1)],
+            "units": self.input_units,
+            "min": self.input_min.tolist(),
+            "max": self.input_max.tolist(),
+        }
+        if self.harmonics is not None:
+            inputs["harmonics"] = self.harmonics.to_dict()
+        out = {
+            "schema_version": SCHEMA_VERSION,
+            "generator": f"fitgen {__version__}",
+            "inputs": inputs,
+            "outputs": [
+                {"name": e.name, "unit": e.unit, "intercept": e.intercept,
+                 "terms": [t.text for t in e.terms], "coefficients": list(e.coefficients)}
+                for e in self.equations
+            ],
+            "fit": self.fit_info,
+        }
+        if self.refine is not None:
+            out["refine"] = self.refine.to_dict()
+        return out
+
+    @property
+    def sha256(self) -> str:
+        """Hash of what the estimate depends on (domain, equations, refinement), not of the fit notes."""
+        d = self.to_dict()
+        return sha256_hex(canonical_json({k: d[k] for k in ("inputs", "outputs", "refine") if k in d}))
+
+    def save(self, path: str | Path) -> Path:
+        try:
+            text = json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n"
+        except ValueError:
+            raise InputError("the model holds a non-finite number; not written") from None
+        return write_atomic(path, text)
+
+
+def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    """The domain as floats, rounded outward so that every double inside it stays inside."""
+    lo = model.input_min.astype(np.float32)
+    hi = model.input_max.astype(np.float32)
+    lo = np.where(lo.astype(float) > model.input_min, np.nextafter(lo, np.float32(-np.inf)), lo)
+    hi = np.where(hi.astype(float) < model.input_max, np.nextafter(hi, np.float32(np.inf)), hi)
+    lo = np.where((model.input_min > 0) & (lo <= 0), np.float32(np.finfo(np.float32).tiny), lo)
+    return lo.astype(float), hi.astype(float)
+
+
+def load_model(path: str | Path) -> Model:
+    origin = f"model file {path}"
+    text = read_text(path, "model file")
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise InputError(f"{origin}: not valid JSON: {exc}") from None
+    return model_from_dict(data, origin)
+
+
+def model_from_dict(data, origin: str = "model") -> Model:
+    if not isinstance(data, dict):
+        raise InputError(f"{origin}: not a model (a JSON object is expected)")
+    ver = data.get("schema_version")
+    if ver != SCHEMA_VERSION:
+        raise InputError(f"{origin}: schema_version {ver!r} is not supported (this fitgen reads {SCHEMA_VERSION})")
+    try:
+        inputs = data["inputs"]
+        lo = [finite_number(x, f"{origin}: inputs.min") for x in inputs["min"]]
+        hi = [finite_number(x, f"{origin}: inputs.max") for x in inputs["max"]]
+        units = inputs.get("units", "mT")
+        harmonics = (None if "harmonics" not in inputs
+                     else Harmonics.from_dict(inputs["harmonics"], len(lo), origin))
+        eqs = []
+        for i, o in enumerate(data["outputs"]):
+            where = f"{origin}: outputs[{i}]"
+            terms = tuple(parse_term(t) for t in o["terms"])
+            coefs = tuple(finite_number(c, f"{where}.coefficients") for c in o["coefficients"])
+            if len(terms) != len(coefs):
+                raise InputError(f"{where}: {len(terms)} terms but {len(coefs)} coefficients")
+            eqs.append(Equation(o["name"], finite_number(o["intercept"], f"{where}.intercept"), terms, coefs))
+    except (KeyError, TypeError) as exc:
+        raise InputError(f"{origin}: malformed model ({type(exc).__name__}: {exc})") from None
+    if not isinstance(units, str):
+        raise InputError(f"{origin}: inputs.units must be a string")
+    fit = data.get("fit", {})
+    refine = None if "refine" not in data else Refinement.from_dict(data["refine"], len(lo), origin)
+    return Model(np.array(lo), np.array(hi), tuple(eqs), units, fit if isinstance(fit, dict) else {}, harmonics, refine)
+
+
+def _validate(m: Model, origin: str) -> None:
+    if m.input_min.ndim != 1 or m.input_min.shape != m.input_max.shape or m.n_inputs < 1:
+        raise InputError(f"{origin}: the input domain must give min and max for each of 1 or more inputs")
+    if not (np.all(np.isfinite(m.input_min)) and np.all(np.isfinite(m.input_max))):
+        raise InputError(f"{origin}: the input domain must be finite")
+    if np.any(m.input_min > m.input_max):
+        k = int(np.argmax(m.input_min > m.input_max)) + 1
+        raise InputError(f"{origin}: input v{k} has min > max")
+    names = [e.name for e in m.equations]
+    if not names:
+        raise InputError(f"{origin}: no outputs")
+    for n in names:
+        if n not in POSE_NAMES:
+            raise InputError(f"{origin}: unknown output {n!r} (outputs are {', '.join(POSE_NAMES)})")
+    if names != sorted(names, key=POSE_NAMES.index) or len(set(names)) != len(names):
+        raise InputError(f"{origin}: outputs must be distinct and in the order {','.join(POSE_NAMES)}")
+    if m.refine is not None:
+        if tuple(names) != POSE_NAMES:
+            raise InputError(f"{origin}: a refinement estimates the whole pose: it needs the outputs "
+                             f"{','.join(POSE_NAMES)}, the model has {','.join(names)}")
+        m.refine.validate(m.n_inputs, f"{origin}: refine")
+    for e in m.equations:
+        if len(set(e.terms)) != len(e.terms):
+            raise InputError(f"{origin}: output {e.name} lists a term twice")
+        for t in e.terms:
+            if t.harm:
+                if m.harmonics is None:
+                    raise InputError(f"{origin}: output {e.name} term {t.text} needs inputs.harmonics")
+                missing = [f for f in monomial_factors(t.harm) if f not in m.harmonics.symbols]
+                if missing:
+                    raise InputError(f"{origin}: output {e.name} term {t.text}: the ring has no {missing[0]}")
+                if not np.sum(m.input_min) > 0:
+                    raise InputError(f"{origin}: output {e.name} term {t.text} needs the inputs' sum > 0, "
+                                     f"but the domain's lowest sum is {float(np.sum(m.input_min))!r}")
+                continue
+            if t.element > m.n_inputs:
+                raise InputError(f"{origin}: output {e.name} term {t.text} refers to input v{t.element}; "
+                                 f"the model has {m.n_inputs}")
+            if t.needs_positive and not m.input_min[t.element - 1] > 0:
+                raise InputError(f"{origin}: output {e.name} term {t.text} needs v{t.element} > 0, "
+                                 f"but its domain starts at {float(m.input_min[t.element - 1])!r}")
+            if t.mult and (t.mult not in names or names.index(t.mult) > names.index(e.name)):
+                raise InputError(f"{origin}: output {e.name} term {t.text} needs output {t.mult} "
+                                 "computed before it")

@@ -1,0 +1,96 @@
+"""The candidate family ``auto``: fit the paper's powers and the harmonics family, keep the one more
+accurate as deployed on validation poses.
+
+Validation poses are random poses in the training box, simulated with the sensor and its noise
+(seed VALIDATION_SEED, not the held-out seed of fitgen.fitting.holdout), evaluated in float as the device
+computes: the figures the model file reports stay held out from this choice. The harmonics family
+wins when the geometric mean over outputs of its noisy RMS error over the powers' is below 1.
+It is not tried when the elements' positions are unknown or the readings' sum is not > 0.
+The two fits share their compressed rows (fitgen.fitting.shared): each family's model is the one it gets
+fitted alone, to rounding, at little more than the cost of the larger family's fit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fitgen.physics.dataset import Dataset
+from fitgen.fitting.fit import FitSettings, fit_model, noise_to_add, ring_harmonics
+from fitgen.fitting.holdout import box_of, held_out_set
+from fitgen.equations.model import Model
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.fitting.shared import SharedRows
+from fitgen.equations.terms import candidate_terms
+
+VALIDATION_SEED = 7919
+VALIDATION_POSES = 1000
+VALIDATION_DRAWS = 2
+CANDIDATES = ("all", "harmonics")
+# fixed point runs neither roots nor harmonic terms (fitgen.equations.fixedpoint): auto chooses among these for it
+FIXED_CANDIDATES = ("no-roots", "integer")
+
+
+def candidates(precision: str | None) -> tuple[str, ...]:
+    """The families ``auto`` compares for a target precision (the first is the fallback)."""
+    return FIXED_CANDIDATES if precision == "fixed" else CANDIDATES
+
+
+def validation_rms(model: Model, sensor, ranges: dict, precision: str = "float") -> dict[str, float]:
+    """Per output: RMS error on noisy validation readings, evaluated as the device computes (float
+    emulation, or fixed point at the sensor's ADC scale)."""
+    val = held_out_set(sensor, ranges, model.output_names, n=VALIDATION_POSES, seed=VALIDATION_SEED,
+                       draws=VALIDATION_DRAWS)
+    if precision == "fixed":
+        from fitgen.equations.fixedpoint import build_fixed, sensor_input_scale
+
+        lsb, offset, _ = sensor_input_scale(sensor)
+        est = build_fixed(model, lsb, offset).predict_values(val.noisy)[0]
+    else:
+        est = model.predict(val.noisy, precision="float")
+    err = est - val.noisy_truth
+    return {o: float(np.sqrt(np.mean(err[:, j] ** 2))) for j, o in enumerate(model.output_names)}
+
+
+def shared_rows(ds: Dataset, families, settings: FitSettings, sensor) -> SharedRows:
+    """The rows the candidate families' fits share (fitgen.fitting.shared): their terms without d have the same
+    data and noise rows, compressed once for all of them."""
+    harmonics, positive = ring_harmonics(ds, sensor), ds.inputs.min(axis=0) > 0
+    scope = [t for f in families for t in candidate_terms(
+        ds.n_inputs, "dx", exponents=settings.with_family(f).exponents, d_terms=False, positive=positive,
+        harmonics=harmonics, harmonic_degree=settings.with_family(f).harmonic_degree)]
+    return SharedRows(ds.inputs, noise_to_add(ds, settings, sensor)["added"], harmonics, scope, ds.targets)
+
+
+def fit_auto(ds: Dataset, outputs, settings: FitSettings, sensor, progress=None) -> tuple[Model, dict]:
+    """The model of the better family, and the record of the choice (``fit_info["family"]``).
+
+    The families compared are those the target precision can run (:func:`candidates`)."""
+    cands = candidates(settings.precision)
+    if sensor is None or sensor.n_elements != ds.n_inputs:
+        return fit_model(ds, outputs, settings.with_family(cands[0]), progress, sensor), {
+            "name": cands[0], "auto": True, "why": "the elements' positions are unknown (no sensor)"}
+    if "harmonics" in cands and not np.sum(ds.inputs.min(axis=0)) > 0:
+        return fit_model(ds, outputs, settings.with_family("all"), progress, sensor), {
+            "name": "all", "auto": True, "why": "the readings' sum is not > 0 over the data's domain"}
+    forward = None
+    if settings.refine:
+        from fitgen.fitting.refine_fit import check_refinable, fit_forward
+
+        # the forward model depends on the data alone: one fit serves both families' refinements
+        wanted = POSE_NAMES if outputs is None else tuple(n for n in POSE_NAMES if n in outputs)
+        check_refinable(ds, wanted, settings.refine, settings.refine_terms)
+        forward = fit_forward(ds, max_terms=settings.refine_terms, progress=progress)
+    shared = shared_rows(ds, cands, settings, sensor)
+    models = {f: fit_model(ds, outputs, settings.with_family(f), progress, sensor, forward, shared) for f in cands}
+    ranges = box_of(ds.poses())
+    precision = "fixed" if settings.precision == "fixed" else "float"
+    rms = {f: validation_rms(m, sensor, ranges, precision) for f, m in models.items()}
+    base, other = cands
+    ratio = float(np.exp(np.mean([np.log(rms[other][o] / rms[base][o]) for o in rms[base]])))
+    name = other if ratio < 1 else base
+    label = {"all": "the powers'", "harmonics": "harmonics'", "no-roots": "no-roots'", "integer": "integer's"}
+    return models[name], {
+        "name": name, "auto": True,
+        "why": f"validation ({VALIDATION_POSES} poses, seed {VALIDATION_SEED}, {VALIDATION_DRAWS} noise draws, "
+               f"{precision}): {label[other]} RMS error {ratio:.3g}x {label[base]} (geometric mean over outputs)",
+        "validation_rms": rms}

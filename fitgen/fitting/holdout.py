@@ -1,0 +1,188 @@
+"""Held-out accuracy of a fitted model, as the device will deliver it (docs/deployed-accuracy.md).
+
+Held out: random poses in the training data's box (a stated seed), never used in fitting,
+simulated with the sensor noise-free and with its noise in several draws. Per precision the
+device can run, per output: the error noise-free and with noise (max, RMS), the largest
+deviation from the double model on noise-free readings, and that deviation's share of the
+model's own held-out max error ("rounding's share"). Float is computed by the numpy float32
+emulation of the float header (Model.predict(precision="float"), bit-identical to the C built
+by gcc on x86-64); fixed point by the numpy model of its integer arithmetic. `tactile-host
+verify` and the HIL suite measure the same share on the real C.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.equations.model import Model
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.simulate import pose_rng, random_poses, simulate
+
+N_POSES = 2000
+SEED = 2026
+NOISE_DRAWS = 5
+PRECISIONS = ("double", "float", "fixed")
+
+
+@dataclass
+class HeldOut:
+    """Held-out readings: ``clean`` (n, N) noise-free, ``noisy`` (draws * n, N); targets per row."""
+
+    clean: np.ndarray
+    truth: np.ndarray
+    noisy: np.ndarray
+    noisy_truth: np.ndarray
+    spec: dict
+
+
+def box_of(poses: np.ndarray) -> dict[str, tuple[float, float]]:
+    """The box the poses span, per component."""
+    return {n: (float(poses[:, j].min()), float(poses[:, j].max())) for j, n in enumerate(POSE_NAMES)}
+
+
+def held_out_set(sensor, ranges: dict, outputs: tuple[str, ...], *, noise: float | None = None, n: int = N_POSES,
+                 seed: int = SEED, draws: int = NOISE_DRAWS, labels: str = "stage") -> HeldOut:
+    """``n`` random poses in ``ranges`` (pose seed ``seed``), simulated with ``sensor``; noise
+    draws with seeds seed + 1 .. seed + draws at ``noise`` (default: the sensor's; ``draws`` 0: none).
+    ``labels``: a unit's targets are the stage's displacements or the magnet's (fitgen.physics.simulate)."""
+    noise = sensor.noise if noise is None else noise
+    poses = random_poses(n, ranges, pose_rng(seed))
+    cols = [POSE_NAMES.index(o) for o in outputs]
+    clean = simulate(sensor, poses, labels=labels).inputs
+    noisy = np.vstack([clean[:0]] + [simulate(sensor, poses, noise=noise, seed=seed + 1 + i, labels=labels).inputs
+                                     for i in range(draws)])
+    truth = poses[:, cols]
+    spec = {"poses": n, "seed": seed, "box": {k: list(v) for k, v in ranges.items()}, "noise": noise, "labels": labels,
+            "noise_draws": draws, "noise_seeds": [seed + 1, seed + draws], "sensor": sensor.name,
+            "sensor_sha256": sensor.sha256, "transfer": sensor.transfer}
+    return HeldOut(clean, truth, noisy, np.tile(truth, (draws, 1)), spec)
+
+
+def _fixed_plan(model: Model, sensor):
+    """The fixed-point plan at the sensor's ADC scale, or the reason there is none."""
+    from fitgen.equations.fixedpoint import build_fixed, sensor_input_scale
+
+    lsb, offset, _ = sensor_input_scale(sensor)
+    try:
+        return build_fixed(model, lsb, offset)
+    except InputError as exc:
+        return str(exc)
+
+
+def deployed_errors(model: Model, held: HeldOut, sensor=None, precisions=PRECISIONS) -> dict:
+    """Per precision, per output: max, rms (noise-free), noisy_max, noisy_rms, deviation (max |this
+    precision - double| noise-free) and share (deviation / the double model's max). Fixed point takes
+    the readings' ADC codes and is compared with double on the codes' values: its share is the
+    arithmetic's, the quantisation stays in its errors. A precision the model cannot be generated in
+    gets {"unavailable": reason}."""
+    double_clean = model.predict(held.clean)
+    model_max = np.abs(double_clean - held.truth).max(axis=0)
+    out = {}
+    for prec in precisions:
+        ref = double_clean
+        if prec == "double":
+            fn = model.predict
+        elif prec == "float":
+            def fn(x):
+                return model.predict(x, precision="float")
+        else:
+            fm = _fixed_plan(model, sensor) if sensor is not None else "no sensor to take the ADC scale from"
+            if isinstance(fm, str):
+                out[prec] = {"unavailable": fm.splitlines()[0]}
+                continue
+
+            def fn(x, fm=fm):
+                return fm.to_real(fm.predict_codes(fm.codes_of(x))[0])
+            ref = model.predict(fm.code_values(fm.codes_of(held.clean)))
+        clean, noisy = fn(held.clean), fn(held.noisy)
+        e, en = np.abs(clean - held.truth), np.abs(noisy - held.noisy_truth)
+        dev = np.abs(clean - ref).max(axis=0)
+        out[prec] = {o: {"max": float(e[:, j].max()), "rms": float(np.sqrt(np.mean(e[:, j] ** 2))),
+                         "noisy_max": float(en[:, j].max()), "noisy_rms": float(np.sqrt(np.mean(en[:, j] ** 2))),
+                         "deviation": float(dev[j]),
+                         "share": float(dev[j] / model_max[j]) if model_max[j] > 0 else 0.0}
+                     for j, o in enumerate(model.output_names)}
+    return out
+
+
+POSTERIOR_UNITS = 8  # units drawn from an identification's posterior to widen the figures
+POSTERIOR_SEED = 2027
+FIGURES = ("max", "rms", "noisy_max", "noisy_rms", "deviation", "share")
+SPREAD_FIGURES = ("max", "rms", "noisy_max", "noisy_rms")  # their range over the posterior's units is recorded
+
+
+def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, n: int = N_POSES,
+             seed: int = SEED, draws: int = NOISE_DRAWS, posterior: dict | None = None,
+             labels: str = "stage") -> dict:
+    """The ``held_out`` record of a model file: how it was made and the errors per precision.
+
+    ``posterior`` (an identified unit's record, fitgen.fitting.identify.save): the figures are held out on
+    POSTERIOR_UNITS units drawn from it instead of on ``sensor`` alone, and each figure is the median
+    over those units (the 90th percentile beside it), so that what the file says includes how well the
+    capture pinned the unit down.
+    """
+    if posterior is None:
+        held = held_out_set(sensor, ranges, model.output_names, noise=noise, n=n, seed=seed, draws=draws,
+                            labels=labels)
+        return {**held.spec, "errors": deployed_errors(model, held, sensor)}
+    units = posterior_units(posterior, sensor, POSTERIOR_UNITS)
+    per_unit, spec = [], None
+    for u in units:
+        held = held_out_set(u, ranges, model.output_names, noise=noise, n=n, seed=seed, draws=draws, labels=labels)
+        spec = spec or held.spec
+        per_unit.append(deployed_errors(model, held, u))
+    errors = {}
+    for prec, rec in per_unit[0].items():
+        if "unavailable" in rec:
+            errors[prec] = rec
+            continue
+        errors[prec] = {o: {**{f: float(np.median([u[prec][o][f] for u in per_unit])) for f in FIGURES},
+                            **{f"{f}_p90": float(np.percentile([u[prec][o][f] for u in per_unit], 90))
+                               for f in ("max", "noisy_max")},
+                            **{f"{f}_{k}": float(fn([u[prec][o][f] for u in per_unit]))
+                               for f in SPREAD_FIGURES for k, fn in (("lo", np.min), ("hi", np.max))}}
+                        for o in rec}
+    return {**spec, "sensor": sensor.name, "sensor_sha256": sensor.sha256, "errors": errors,
+            "posterior": {"units": len(units), "seed": POSTERIOR_SEED,
+                          "statistic": "median over units drawn from the identification's posterior (Laplace); "
+                                       "*_p90: their 90th percentile; *_lo, *_hi: their least and greatest (a unit "
+                                       "is one draw of that spread: bench/identify_bound.py)"}}
+
+
+def posterior_units(record: dict, sensor, k: int) -> list:
+    """``k`` units drawn from an identification's posterior record, in ``sensor``'s transfer."""
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.units import UnitSpace
+
+    try:
+        drawing = load_sensor(record["drawing_spec"]).with_transfer(sensor.transfer)
+        theta = np.asarray(record["theta"], dtype=float)
+        cov = np.asarray(record["covariance"], dtype=float)
+    except (KeyError, TypeError, ValueError):
+        raise InputError("the unit's posterior record is malformed (expected fitgen identify's)") from None
+    space = UnitSpace.of(drawing)
+    if theta.shape != (space.size,) or cov.shape != (space.size, space.size):
+        raise InputError(f"the unit's posterior does not fit its drawing {record.get('drawing_spec')!r}")
+    L = np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov)) + 1e-300 * np.eye(space.size))
+    z = np.random.default_rng(POSTERIOR_SEED).standard_normal((k, space.size))
+    return [space.sensor(theta + L @ zi, f"{sensor.name}-posterior-{i + 1}") for i, zi in enumerate(z)]
+
+
+def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] | None:
+    """The noise-free held-out readings and targets the model file's ``held_out`` record names,
+    simulated again (with ``sensor``, else the preset it names, checked by hash); None when the
+    model has no such record or its sensor cannot be had."""
+    from fitgen.physics.simulate import dataset_sensor
+
+    rec = model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None
+    if not isinstance(rec, dict):
+        return None
+    sensor = sensor or dataset_sensor(rec)
+    if sensor is None:
+        return None
+    held = held_out_set(sensor, {k: tuple(v) for k, v in rec["box"].items()}, model.output_names,
+                        n=int(rec["poses"]), seed=int(rec["seed"]), draws=0, labels=rec.get("labels", "stage"))
+    return held.clean, held.truth

@@ -1,0 +1,377 @@
+"""A unit's physics from a short capture: maximum a posteriori parameters of fitgen.physics.units, their
+uncertainty, and what the capture cannot tell.
+
+The model: each row's readings are the unit's noise-free readings (fitgen.physics.units.UnitSpace.readings)
+at the stage's true displacement, plus the reading noise. The stage's true displacement is the row's
+label plus the rig's own error (errors in variables, ``rig_error`` mm rms per axis); to first order it
+adds J_s J_s^T rig_error^2 to the row's covariance (J_s: the readings' slope by the stage's
+displacement), so each row is whitened by its own covariance. The prior: the drawing's tolerances
+(every parameter 0 +- its spread). Work is in units of the prior's spread (z = theta / sd), where the
+prior is the identity; scipy.optimize.least_squares finds the maximum, with Jacobians by central
+differences over all parameters at once (one batched evaluation of the field).
+
+The capture's Fisher information F (in z) tells what it determines: along an eigenvector with
+eigenvalue >= 1 the data say more than the prior. Directions that no capture could separate (the
+same readings for every pose: a common gain against the polarisation, the whole sensor moved or
+turned) are the null space of the information of a dense three-axis design over the pose box; a
+direction null for this capture but not for the dense design is one this capture starves, and the
+poses of the dense design that carry most information along it are named.
+
+Frames: the outputs are in the drawing's board frame as the prior fixes it (elements at their drawn
+azimuths on average); the stage map M (magnet displacement = M x stage displacement) carries the
+stage's axes into it, so estimates of dx, dy, dz are the stage's, as the capture's labels are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from fitgen.base.errors import InputError
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.sensor import Sensor
+from fitgen.physics.units import UnitSpace
+
+RIG_ERROR = 0.01  # mm rms per axis: a CNC's or a good printer's repeatability
+MIN_ROWS = 10
+MIN_DISTINCT = 6
+CHI2_LIMIT = 3.0  # reduced chi-square above this: the physics does not explain the rows
+_H_THETA = 1e-3  # central-difference step, in prior spreads
+_H_POSE = 1e-4  # mm
+DENSE = {"dx": np.linspace(-2, 2, 5), "dy": np.linspace(-2, 2, 5), "dz": np.linspace(-2, 0, 5)}
+
+
+def dense_design(ranges: dict | None = None) -> np.ndarray:
+    """The three-axis candidate poses: a 5 x 5 x 5 grid over the box's dx, dy, dz (tilt 0)."""
+    levels = {k: (np.linspace(ranges[k][0], ranges[k][1], 5) if ranges else v) for k, v in DENSE.items()}
+    g = np.stack(np.meshgrid(levels["dx"], levels["dy"], levels["dz"], indexing="ij"), axis=-1).reshape(-1, 3)
+    return np.hstack([g, np.zeros((len(g), 2))])
+
+
+@dataclass
+class Problem:
+    """The unit space, the rows and their noise: residuals and Jacobians in prior spreads."""
+
+    space: UnitSpace
+    readings: np.ndarray  # (n, N)
+    poses: np.ndarray  # (n, 5) labels
+    noise: np.ndarray  # (N,) reading noise rms of a row
+    rig_error: float
+    valid: np.ndarray | None = None  # (n, N) False for a clipped reading, which says nothing of the field
+
+    def predict(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
+        return self.space.readings(np.atleast_2d(z) * self.space.prior_sd, self.poses if poses is None else poses)
+
+    def jacobian(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
+        """d readings / d z: (n, N, P), by central differences (one batched evaluation)."""
+        P = self.space.size
+        steps = np.eye(P) * _H_THETA
+        f = self.predict(np.vstack([z + steps, z - steps]), poses)
+        return np.moveaxis((f[:P] - f[P:]) / (2 * _H_THETA), 0, -1)
+
+    def pose_slopes(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
+        """d readings / d stage displacement: (n, N, 3)."""
+        poses = self.poses if poses is None else poses
+        shifted = [poses + sign * _H_POSE * np.eye(5)[a] for a in range(3) for sign in (1.0, -1.0)]
+        f = self.predict(z, np.vstack(shifted))[0].reshape(6, len(poses), -1)
+        return np.stack([(f[2 * a] - f[2 * a + 1]) / (2 * _H_POSE) for a in range(3)], axis=-1)
+
+    def whiteners(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
+        """Per row, L^-1 with L L^T = diag(noise^2) + rig_error^2 J_s J_s^T: (n, N, N)."""
+        js = self.pose_slopes(z, poses)
+        cov = np.einsum("nia,nja->nij", js, js) * self.rig_error**2 + np.diag(self.noise**2)[None]
+        if poses is None and self.valid is not None and not self.valid.all():
+            # a clipped reading weighs nothing: its variance made a million times the noise's square
+            idx = np.nonzero(~self.valid)
+            cov[idx[0], idx[1], idx[1]] += 1e12 * self.noise[idx[1]] ** 2
+        L = np.linalg.cholesky(cov)
+        eye = np.broadcast_to(np.eye(cov.shape[1]), cov.shape)
+        return np.linalg.solve(L, eye)
+
+    def information(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
+        """The Fisher information of the rows (or of ``poses``) about z: (P, P)."""
+        J = np.einsum("nij,njp->nip", self.whiteners(z, poses), self.jacobian(z, poses))
+        J = J.reshape(-1, J.shape[-1])
+        return J.T @ J
+
+
+@dataclass
+class Identification:
+    """What identify found: the unit's parameters (maximum a posteriori) and their posterior."""
+
+    problem: Problem
+    theta: np.ndarray
+    cov: np.ndarray
+    chi2: float
+    dof: float
+    info_eig: np.ndarray  # eigenvalues of the capture's information, in prior spreads
+    gauge: np.ndarray  # (P, g) directions no capture separates (a readable basis)
+    starved: list = field(default_factory=list)  # (direction (P,), poses that pin it (k, 5), their information)
+
+    @property
+    def space(self) -> UnitSpace:
+        return self.problem.space
+
+    @property
+    def sd(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.cov))
+
+    @property
+    def reduced_chi2(self) -> float:
+        return self.chi2 / self.dof
+
+    def unit(self, name: str = "identified-unit", description: str = "") -> Sensor:
+        return self.space.sensor(self.theta, name, description)
+
+    def derived(self) -> dict[str, tuple[float, float]]:
+        """What a capture determines whatever the split: (value, standard error) of the magnet's offset from
+        the elements' centre (mm) and each element's sensitivity (gain x polarisation over the drawing's)."""
+        funcs = derived_quantities(self.space)
+        out = {}
+        for name, fn in funcs.items():
+            h = 1e-6
+            g = np.array([(fn(self.theta + h * e) - fn(self.theta - h * e)) / (2 * h) for e in np.eye(self.space.size)])
+            out[name] = (float(fn(self.theta)), float(np.sqrt(g @ self.cov @ g)))
+        return out
+
+
+def derived_quantities(space: UnitSpace) -> dict:
+    """Functions of the parameters that a capture determines (invariant to the splits it cannot tell)."""
+    n = space.drawing.n_elements
+
+    def centre_offset(axis):
+        def fn(theta):
+            p = space._parts(theta[None])
+            return float(p["rest"][0, axis] - p["pos"][0, :, axis].mean()
+                         - (space.drawing.magnet.rest_center[axis] - space.drawing.positions[:, axis].mean()))
+        return fn
+
+    out = {f"magnet offset from the elements' centre {c} [mm]": centre_offset(i) for i, c in enumerate("xyz")}
+    for k in range(n):
+        j = space.index(f"e{k + 1}.log_gain")
+        out[f"e{k + 1} sensitivity [x drawing]"] = (lambda theta, j=j: float(np.exp(theta[5] + theta[j])))
+    return out
+
+
+def _readable_basis(V: np.ndarray) -> np.ndarray:
+    """A basis of span(V) in which each vector is 1 on one parameter and 0 on the others' pivots."""
+    if V.shape[1] == 0:
+        return V
+    from scipy.linalg import qr
+
+    _, _, piv = qr(V.T, pivoting=True)
+    piv = piv[:V.shape[1]]
+    return V @ np.linalg.inv(V[piv, :])
+
+
+MAX_CLIPPED = 0.1  # share of clipped readings above which a capture is refused
+
+
+def check_capture(space: UnitSpace, readings: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Refuse captures no identification can use (InputError, one line); the mask of readings that are not
+    clipped (a few clipped ones are left out, more than MAX_CLIPPED of them refuse the capture)."""
+    n, N = readings.shape
+    if N != space.drawing.n_elements:
+        raise InputError(f"the capture has {N} readings per row; sensor {space.drawing.name} has "
+                         f"{space.drawing.n_elements} elements")
+    if n < MIN_ROWS:
+        raise InputError(f"the capture has {n} rows; identify needs at least {MIN_ROWS} (fitgen schedule --n 40)")
+    distinct = len(np.unique(np.round(poses, 6), axis=0))
+    if distinct < MIN_DISTINCT:
+        raise InputError(f"the capture visits {distinct} distinct pose(s); identify needs at least {MIN_DISTINCT} "
+                         "(fitgen schedule)")
+    d = space.drawing
+    valid = np.ones(readings.shape, dtype=bool)
+    if d.transfer == "gmr":
+        # a reading on the ADC's rails is clipped (the element's own saturation is in the model: gain x 2 mT)
+        g = d.gmr
+        lsb = (g.adc_max - g.adc_min) / max(2**g.adc_bits - 1, 1)
+        valid = (readings < g.adc_max - 2 * lsb) & (readings > g.adc_min + 2 * lsb)
+        if np.mean(~valid) > MAX_CLIPPED:
+            i, k = np.argwhere(~valid)[0]
+            raise InputError(f"{np.mean(~valid):.0%} of the readings are saturated at the ADC's rails (row {i + 1}: "
+                             f"v{k + 1} = {readings[i, k]:.6g} V, range {g.adc_min:g}..{g.adc_max:g} V): capture within "
+                             "the linear range (fitgen schedule --limits), or lower the amplifier's gain")
+    return valid
+
+
+def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *, rig_error: float = RIG_ERROR,
+             ranges: dict | None = None, progress=None) -> Identification:
+    """The unit of ``drawing`` behind a capture: rows of ``readings`` (n, N) at label ``poses`` (n, 5), with
+    reading noise ``noise`` (rms of a row, per element or one number) and the rig's error ``rig_error``."""
+    space = UnitSpace.of(drawing)
+    readings = np.asarray(readings, dtype=float)
+    poses = np.asarray(poses, dtype=float)
+    valid = check_capture(space, readings, poses)
+    noise = np.broadcast_to(np.asarray(noise, dtype=float), (readings.shape[1],)).copy()
+    if not np.all(noise > 0):
+        raise InputError("identify needs the reading noise > 0 (give --noise, or a sensor file with a noise figure)")
+    if not rig_error >= 0:
+        raise InputError(f"the rig error must be >= 0 mm, got {rig_error}")
+    prob = Problem(space, readings, poses, noise, float(rig_error), valid)
+    P = space.size
+    z = np.zeros(P)
+    for sweep in range(3):  # the rows' covariances depend on the unit: refresh them, fit again
+        W = prob.whiteners(z)
+
+        def residual(zz, W=W):
+            r = np.einsum("nij,nj->ni", W, readings - prob.predict(zz)[0])
+            return np.concatenate([r.ravel(), zz])
+
+        def jac(zz, W=W):
+            J = -np.einsum("nij,njp->nip", W, prob.jacobian(zz)).reshape(-1, P)
+            return np.vstack([J, np.eye(P)])
+
+        z = least_squares(residual, z, jac=jac, method="lm", x_scale=1.0, max_nfev=60).x
+        if progress is not None:
+            progress(sweep + 1, 4, "maximum a posteriori")
+    W = prob.whiteners(z)
+    r = np.einsum("nij,nj->ni", W, readings - prob.predict(z)[0])
+    F = prob.information(z)
+    post = np.linalg.inv(F + np.eye(P))
+    lam, V = np.linalg.eigh(F)
+    r[~valid] = 0.0
+    dof = max(float(valid.sum()) - float(np.trace(F @ post)), 1.0)
+    # what no capture could tell: the null space of a dense three-axis design's information
+    dense = dense_design(ranges)
+    Fd = prob.information(z, dense)
+    lam_d, V_d = np.linalg.eigh(Fd)
+    gauge = V_d[:, lam_d < max(1e-6, 1e-13 * lam_d.max())]  # numerically 0 (differences resolve ~1e-8)
+    # what this capture leaves to the prior beyond that: weak directions outside the gauge
+    starved = []
+    weak = V[:, lam < 1.0]
+    if weak.shape[1]:
+        weak = weak - gauge @ (gauge.T @ weak)
+        u, s, _ = np.linalg.svd(weak, full_matrices=False)
+        Jd = np.einsum("nij,njp->nip", prob.whiteners(z, dense), prob.jacobian(z, dense))
+        for v in u[:, s > 0.5].T:
+            gain = np.sum((Jd @ v) ** 2, axis=1)
+            if gain.max() < 1.0:
+                continue
+            best = np.argsort(gain)[::-1][:3]
+            starved.append((v, dense[best], gain[best]))
+    if progress is not None:
+        progress(4, 4, "uncertainty")
+    sd = space.prior_sd
+    return Identification(prob, z * sd, post * np.outer(sd, sd), float(r.ravel() @ r.ravel()), dof, lam,
+                          _readable_basis(gauge), starved)
+
+
+def describe_direction(space: UnitSpace, v: np.ndarray, top: int = 4) -> str:
+    """A direction in prior spreads as its largest components: '0.71 magnet.log_polarization - 0.70 e1.log_gain'."""
+    order = np.argsort(np.abs(v))[::-1][:top]
+    scale = np.abs(v[order[0]])
+    parts = [f"{v[i] / scale:+.2f} {space.names[i]}" for i in order if abs(v[i]) >= 0.1 * scale]
+    return " ".join(parts).lstrip("+")
+
+
+def report(ident: Identification) -> str:
+    """The identification in words and tables: fit, parameters, what was determined and what was not."""
+    sp = ident.space
+    n, N = ident.problem.readings.shape
+    lines = [f"identify: {n} rows x {N} elements; residual chi-square {ident.chi2:.1f} on {ident.dof:.1f} degrees of "
+             f"freedom (reduced {ident.reduced_chi2:.2f}; 1 when the physics explains the rows to the noise)"]
+    lines.append("")
+    lines.append("| what the capture determines | value | standard error |")
+    lines.append("| --- | --- | --- |")
+    for name, (val, se) in ident.derived().items():
+        lines.append(f"| {name} | {val:.5g} | {se:.2g} |")
+    sd, prior = ident.sd, sp.prior_sd
+    lines += ["", "| parameter | value | standard error | prior spread | share of the prior left |", "| --- | --- | --- | --- | --- |"]
+    for i, name in enumerate(sp.names):
+        lines.append(f"| {name} | {ident.theta[i]:.4g} | {sd[i]:.2g} | {prior[i]:.2g} | {sd[i] / prior[i]:.2f} |")
+    det = int(np.sum(ident.info_eig >= 1.0))
+    lines += ["", f"determined by the capture (information >= the prior's): {det} of {sp.size} directions; "
+                  f"left to the prior: {sp.size - det}"]
+    g = ident.gauge.shape[1]
+    lines.append(f"no capture can separate ({g} directions: the same readings at every pose; the unit file takes the "
+                 "prior's split):")
+    for v in ident.gauge.T:
+        lines.append(f"  {describe_direction(sp, v)}")
+    if ident.starved:
+        lines.append("this capture leaves to the prior (a dense three-axis capture would not):")
+        for v, poses, gain in ident.starved:
+            where = "; ".join(" ".join(f"{c}={p[j]:g}" for j, c in enumerate(POSE_NAMES[:3])) for p in poses)
+            lines.append(f"  {describe_direction(sp, v)}: poses that pin it: {where}")
+    else:
+        lines.append("this capture leaves nothing else to the prior that a three-axis capture could pin")
+    return "\n".join(lines) + "\n"
+
+
+
+# --- captures and files ---------------------------------------------------------------------------
+
+ROW_NOISE_KEY = "row_noise"  # a capture's meta: per element, the measured noise of its averaged rows
+SAMPLES_KEY = "samples_per_row"
+
+
+def row_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[np.ndarray, str]:
+    """The reading noise of a capture's rows, per element, and where it came from: ``noise`` (the device's
+    single-sample noise) over sqrt(samples per row), else the noise the capture measured, else the sensor
+    file's over sqrt(samples)."""
+    n = sensor.n_elements
+    samples = meta.get(SAMPLES_KEY, 1)
+    samples = samples if isinstance(samples, int) and samples >= 1 else 1
+    if noise is not None:
+        return np.full(n, noise / np.sqrt(samples)), f"--noise {noise:g} over sqrt({samples}) samples"
+    measured = meta.get(ROW_NOISE_KEY)
+    if isinstance(measured, list) and len(measured) == n and all(isinstance(x, (int, float)) and x > 0
+                                                                 for x in measured):
+        return np.asarray(measured, dtype=float), "measured by the capture"
+    return (np.full(n, sensor.noise / np.sqrt(samples)),
+            f"sensor {sensor.name}'s {sensor.noise:g} over sqrt({samples}) samples")
+
+
+def save(ident: Identification, path, provenance: dict) -> tuple:
+    """Write the unit file (the maximum a posteriori unit) and beside it ``<stem>.posterior.json``: every
+    parameter with its standard error, the posterior covariance, what was determined and what not."""
+    import json
+    from pathlib import Path
+
+    from fitgen.base.fileio import write_atomic
+    from fitgen.physics.units import write_unit
+
+    path = Path(path)
+    post_path = path.with_suffix(".posterior.json")
+    unit = ident.unit(provenance.get("name", path.stem), f"identified from {provenance.get('capture', 'a capture')}")
+    record = {
+        "drawing": ident.space.drawing.name, "drawing_sha256": ident.space.drawing.sha256,
+        "drawing_spec": provenance.get("drawing_spec", ident.space.drawing.name),
+        "parameters": ident.space.names, "theta": ident.theta.tolist(), "sd": ident.sd.tolist(),
+        "prior_sd": ident.space.prior_sd.tolist(), "covariance": ident.cov.tolist(),
+        "chi2": ident.chi2, "dof": ident.dof, "rows": int(ident.problem.readings.shape[0]),
+        "rig_error": ident.problem.rig_error, "row_noise": ident.problem.noise.tolist(),
+        "derived": {k: {"value": v, "se": s} for k, (v, s) in ident.derived().items()},
+        "determined_directions": int(np.sum(ident.info_eig >= 1.0)),
+        "no_capture_separates": [describe_direction(ident.space, v) for v in ident.gauge.T],
+        "capture_starves": [{"direction": describe_direction(ident.space, v), "poses": p[:, :3].tolist()}
+                            for v, p, _ in ident.starved],
+        **{k: v for k, v in provenance.items() if k != "name"}}
+    write_atomic(post_path, json.dumps(record, indent=1) + "\n")
+    prov = {"source": "fitgen identify", "posterior": post_path.name, "reduced_chi2": round(ident.reduced_chi2, 4),
+            **{k: v for k, v in provenance.items() if isinstance(v, (str, int, float)) and k != "name"}}
+    return write_unit(path, unit, ident.space.drawing.name, prov), post_path
+
+
+def load_posterior(unit_path) -> dict | None:
+    """The posterior record an identified unit file names (``[unit] posterior``), or None."""
+    import json
+    from pathlib import Path
+
+    from fitgen.physics.sensor import tomllib
+
+    unit_path = Path(unit_path)
+    try:
+        doc = tomllib.loads(unit_path.read_text())
+    except (OSError, ValueError):
+        return None
+    name = doc.get("unit", {}).get("posterior") if isinstance(doc.get("unit"), dict) else None
+    if not isinstance(name, str):
+        return None
+    try:
+        rec = json.loads((unit_path.parent / name).read_text())
+    except (OSError, ValueError):
+        raise InputError(f"unit file {unit_path}: its posterior {name} cannot be read") from None
+    return rec

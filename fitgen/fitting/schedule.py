@@ -1,0 +1,115 @@
+"""Capture schedules: the stage poses that pin a unit's parameters best (D-optimal).
+
+Candidates are a grid over the axes the stage moves (the others stay 0) within the limits. Each
+candidate's information about the unit's parameters (fitgen.fitting.identify.Problem, at the drawing, with
+the rig's error) is a rank-N update of the prior's; poses are chosen greedily for the largest
+log det of prior + information (by the matrix determinant lemma, an N x N determinant per
+candidate), then improved by exchange passes (Fedorov): each chosen pose is swapped for the
+candidate that raises the log det most, until no swap does. A pose may be chosen twice.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.fitting.identify import RIG_ERROR, Problem
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.sensor import Sensor
+from fitgen.physics.simulate import DEFAULT_RANGES
+from fitgen.physics.units import UnitSpace
+
+LEVELS = 9  # grid levels per moving axis
+MAX_PASSES = 4
+
+
+def candidates(axes: tuple[str, ...], ranges: dict) -> np.ndarray:
+    """The grid of candidate poses over ``axes`` (others 0), LEVELS per axis."""
+    levels = [np.linspace(*ranges[a], LEVELS) if a in axes else np.zeros(1) for a in POSE_NAMES]
+    mesh = np.meshgrid(*levels, indexing="ij")
+    return np.column_stack([m.ravel() for m in mesh])
+
+
+def _logdet_gain(Finv: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """log det(I + J_c F^-1 J_c^T) for each candidate's whitened rows J_c (C, N, P)."""
+    M = (J @ Finv) @ np.swapaxes(J, 1, 2) + np.eye(J.shape[1])
+    return np.linalg.slogdet(M)[1]
+
+
+def d_optimal(J: np.ndarray, n: int, progress=None) -> tuple[np.ndarray, float]:
+    """Indices of ``n`` candidates (repeats allowed) maximising log det(I + sum J_c^T J_c), and that log det."""
+    P = J.shape[2]
+    info = np.einsum("cnp,cnq->cpq", J, J)
+    F = np.eye(P)
+    chosen = []
+    for i in range(n):
+        c = int(np.argmax(_logdet_gain(np.linalg.inv(F), J)))
+        chosen.append(c)
+        F = F + info[c]
+        if progress is not None:
+            progress(i + 1, n + MAX_PASSES, "greedy")
+    for p in range(MAX_PASSES):
+        improved = False
+        for slot in range(n):
+            rest = F - info[chosen[slot]]
+            gains = _logdet_gain(np.linalg.inv(rest), J)
+            c = int(np.argmax(gains))
+            if c != chosen[slot] and gains[c] > gains[chosen[slot]] + 1e-9:
+                chosen[slot], F, improved = c, rest + info[c], True
+        if progress is not None:
+            progress(n + p + 1, n + MAX_PASSES, "exchange")
+        if not improved:
+            break
+    return np.array(chosen), float(np.linalg.slogdet(F)[1])
+
+
+def stage_order(poses: np.ndarray) -> np.ndarray:
+    """Poses in the order a stage visits them: from the top (dz high) down, rows in a serpentine."""
+    keys = np.lexsort((poses[:, 0], poses[:, 1], -poses[:, 2]))
+    out = poses[keys]
+    # serpentine in dx within each (dz, dy) row: fewer long moves
+    rows = {}
+    for i, p in enumerate(out):
+        rows.setdefault((round(p[2], 6), round(p[1], 6)), []).append(i)
+    order = []
+    for r, (_, idx) in enumerate(rows.items()):
+        order += idx if r % 2 == 0 else idx[::-1]
+    return out[order]
+
+
+def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict | None = None,
+             noise: float | None = None, rig_error: float = RIG_ERROR, progress=None) -> tuple[np.ndarray, dict]:
+    """``n`` stage poses (n, 5) that pin ``drawing``'s units best, and a record of how they were chosen."""
+    axes = tuple(axes)
+    if not axes or any(a not in POSE_NAMES for a in axes) or len(set(axes)) != len(axes):
+        raise InputError(f"--axes takes distinct names of {','.join(POSE_NAMES)}, got {','.join(axes) or 'none'}")
+    if n < 1 or n > 10000:
+        raise InputError(f"--n must be 1..10000, got {n}")
+    ranges = {**DEFAULT_RANGES, **(ranges or {})}
+    for a in axes:
+        lo, hi = ranges[a]
+        if not lo < hi:
+            raise InputError(f"the limits of {a} ({lo:g}..{hi:g}) leave it no room to move")
+    noise = drawing.noise if noise is None else noise
+    if not noise > 0:
+        raise InputError("the schedule needs the reading noise > 0 (give --noise or a sensor file with a noise figure)")
+    space = UnitSpace.of(drawing)
+    cand = candidates(axes, ranges)
+    prob = Problem(space, np.zeros((len(cand), drawing.n_elements)), cand, np.full(drawing.n_elements, noise),
+                   float(rig_error))
+    z = np.zeros(space.size)
+    J = np.einsum("nij,njp->nip", prob.whiteners(z), prob.jacobian(z))
+    idx, logdet = d_optimal(J, n, progress)
+    poses = stage_order(cand[idx])
+    info = {"criterion": "D-optimal (log det of the prior plus the capture's information, in prior spreads)",
+            "log_det": logdet, "candidates": len(cand), "levels_per_axis": LEVELS, "axes": list(axes),
+            "ranges": {a: list(ranges[a]) for a in axes}, "noise": noise, "rig_error": rig_error,
+            "sensor": drawing.name, "distinct_poses": int(len(np.unique(idx)))}
+    return poses, info
+
+
+def schedule_csv(poses: np.ndarray, axes=("dx", "dy", "dz")) -> str:
+    """The schedule as `tactile-host capture --poses` reads it: the moving axes' columns, numbers that round-trip."""
+    names = [a for a in POSE_NAMES if a in axes]
+    rows = [",".join(names)] + [",".join(repr(float(p[POSE_NAMES.index(a)]) + 0.0) for a in names) for p in poses]
+    return "\n".join(rows) + "\n"

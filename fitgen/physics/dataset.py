@@ -1,0 +1,177 @@
+"""Datasets in the shared CSV format: columns v1..vN, then whichever of dx,dy,dz,thx,thy."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import read_text, sha256_hex, write_atomic
+from fitgen.physics.pose import POSE_NAMES
+
+_INPUT_RE = re.compile(r"^v([1-9][0-9]*)$")
+
+
+@dataclass
+class Dataset:
+    """Element readings ``inputs`` (n, N) and pose ``targets`` (n, len(target_names))."""
+
+    inputs: np.ndarray
+    targets: np.ndarray
+    target_names: tuple[str, ...]
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def n_rows(self) -> int:
+        return int(self.inputs.shape[0])
+
+    @property
+    def n_inputs(self) -> int:
+        return int(self.inputs.shape[1])
+
+    @property
+    def columns(self) -> list[str]:
+        return [f"v{k}" for k in range(1, self.n_inputs + 1)] + list(self.target_names)
+
+    def target(self, name: str) -> np.ndarray:
+        if name not in self.target_names:
+            raise InputError(f"dataset has no column {name!r} (it has {', '.join(self.target_names) or 'none'})")
+        return self.targets[:, self.target_names.index(name)]
+
+    def poses(self) -> np.ndarray:
+        """(n, 5) poses, components the dataset lacks set to 0."""
+        out = np.zeros((self.n_rows, 5))
+        for j, name in enumerate(self.target_names):
+            out[:, POSE_NAMES.index(name)] = self.targets[:, j]
+        return out
+
+    def to_csv_text(self) -> str:
+        table = np.hstack([self.inputs, self.targets]) + 0.0  # + 0.0 folds -0.0 into 0.0
+        lines = [",".join(self.columns)]
+        lines += [",".join(map(repr, row)) for row in table.tolist()]
+        return "\n".join(lines) + "\n"
+
+    @property
+    def sha256(self) -> str:
+        """The SHA-256 of :meth:`to_csv_text`; kept for the same values (fit_auto's two fits ask)."""
+        # the key is a hash of the raw values, ~1/100 of the text's cost, so a changed array is never missed
+        key = hashlib.blake2b(b"".join([np.ascontiguousarray(self.inputs).tobytes(),
+                                        np.ascontiguousarray(self.targets).tobytes(),
+                                        repr((self.inputs.shape, self.targets.shape, self.target_names)).encode()]),
+                              digest_size=16).digest()
+        cached = self.__dict__.get("_sha256")
+        if cached is None or cached[0] != key:
+            cached = self.__dict__["_sha256"] = (key, sha256_hex(self.to_csv_text()))
+        return cached[1]
+
+    def save(self, path: str | Path, meta: dict | None = None) -> Path:
+        """Write the CSV and, beside it, ``<path>.meta.json`` with provenance (both atomically)."""
+        text = self.to_csv_text()
+        info = dict(self.meta if meta is None else meta)
+        info["dataset_sha256"] = sha256_hex(text)
+        info["rows"] = self.n_rows
+        info["columns"] = self.columns
+        write_atomic(path, text)
+        write_atomic(meta_path(path), json.dumps(info, indent=2, sort_keys=True) + "\n")
+        return Path(path)
+
+
+def meta_path(path: str | Path) -> Path:
+    return Path(str(path) + ".meta.json")
+
+
+def _header(names: list[str], origin: str) -> tuple[int, tuple[str, ...]]:
+    n_in = 0
+    for name in names:
+        m = _INPUT_RE.match(name)
+        if not m:
+            break
+        n_in += 1
+        if int(m.group(1)) != n_in:
+            raise InputError(f"{origin}: input columns must be v1..vN in order; found {name!r} at position {n_in}")
+    rest = names[n_in:]
+    if n_in == 0:
+        raise InputError(f"{origin}: no input columns (expected v1..vN first, header is {','.join(names)!r})")
+    for name in rest:
+        if name not in POSE_NAMES:
+            raise InputError(f"{origin}: unknown column {name!r} (after v1..v{n_in} only {', '.join(POSE_NAMES)})")
+    if len(set(rest)) != len(rest):
+        raise InputError(f"{origin}: a pose column appears twice")
+    order = [POSE_NAMES.index(n) for n in rest]
+    if order != sorted(order):
+        raise InputError(f"{origin}: pose columns must be in the order {','.join(POSE_NAMES)}")
+    return n_in, tuple(rest)
+
+
+def _find_bad_cell(text: str, names: list[str], origin: str) -> InputError:
+    for lineno, row in enumerate(csv.reader(io.StringIO(text)), start=1):
+        if lineno == 1 or not row:
+            continue
+        if len(row) != len(names):
+            return InputError(f"{origin} line {lineno}: {len(row)} fields, the header has {len(names)}")
+        for name, cell in zip(names, row):
+            try:
+                val = float(cell)
+            except ValueError:
+                return InputError(f"{origin} line {lineno}, column {name}: {cell.strip()!r} is not a number")
+            if not math.isfinite(val):
+                return InputError(f"{origin} line {lineno}, column {name}: {cell.strip()!r} is not a finite number")
+    return InputError(f"{origin}: cannot parse as CSV numbers")
+
+
+def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
+    """Header names and a finite float table from CSV text; errors name line and column."""
+    lines = text.splitlines()
+    if not lines or not lines[0].strip():
+        raise InputError(f"{origin}: empty file")
+    names = [c.strip() for c in next(csv.reader([lines[0]]))]
+    body = [ln for ln in lines[1:] if ln.strip()]
+    if not body:
+        raise InputError(f"{origin}: no data rows")
+    try:
+        table = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2, dtype=float)
+    except ValueError:
+        raise _find_bad_cell(text, names, origin) from None
+    if table.shape[1] != len(names) or not np.all(np.isfinite(table)):
+        raise _find_bad_cell(text, names, origin)
+    return names, table
+
+
+def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
+    """Read and validate a dataset CSV (and its ``.meta.json`` if present)."""
+    origin = f"dataset {path}"
+    names, table = parse_table(read_text(path, "dataset"), origin)
+    n_in, targets = _header(names, origin)
+    if table.shape[0] < min_rows:
+        raise InputError(f"{origin}: {table.shape[0]} data row(s); at least {min_rows} needed")
+    meta = {}
+    mp = meta_path(path)
+    if mp.is_file():
+        try:
+            meta = json.loads(mp.read_text())
+        except (OSError, ValueError):
+            meta = {}
+    return Dataset(table[:, :n_in].copy(), table[:, n_in:].copy(), targets, meta)
+
+
+def load_poses(path: str | Path) -> np.ndarray:
+    """Poses from a CSV with any of the columns dx,dy,dz,thx,thy (others ignored, missing = 0)."""
+    origin = f"poses {path}"
+    names, table = parse_table(read_text(path, "poses"), origin)
+    present = [n for n in names if n in POSE_NAMES]
+    if not present:
+        raise InputError(f"{origin}: none of the columns {','.join(POSE_NAMES)}")
+    out = np.zeros((table.shape[0], 5))
+    for j, name in enumerate(names):
+        if name in POSE_NAMES:
+            out[:, POSE_NAMES.index(name)] = table[:, j]
+    return out
+

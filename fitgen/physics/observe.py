@@ -1,0 +1,172 @@
+"""Observability: the Jacobian of readings by pose, its singular values, and Cramer-Rao bounds."""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from fitgen.physics.pose import POSE_NAMES, POSE_UNITS, as_poses, field_readings
+from fitgen.physics.sensor import Sensor
+from fitgen.physics.transfer import apply_transfer
+
+# central-difference steps (mm, deg): small against the field's length scale (mm),
+# large against rounding (readings ~1 mT, eps ~1e-16)
+_STEP = np.array([1e-4, 1e-4, 1e-4, 1e-3, 1e-3])
+
+
+def jacobian(sensor: Sensor, poses) -> np.ndarray:
+    """d reading / d pose, shape (P, N, 5); pose in mm and deg, readings in the transfer's units.
+
+    The transfer is taken without noise or quantisation (the ideal response).
+    """
+    poses = as_poses(poses)
+    P = len(poses)
+    shifts = np.concatenate([np.diag(_STEP), -np.diag(_STEP)])  # (10, 5)
+    probe = (poses[:, None, :] + shifts[None]).reshape(-1, 5)
+    vals = apply_transfer(sensor, field_readings(sensor, probe), adc_bits=0).reshape(P, 10, -1)
+    # adc_bits=0: no quantisation steps, but the gmr output is still clipped to the ADC range
+    return ((vals[:, :5] - vals[:, 5:]) / (2 * _STEP[None, :, None])).transpose(0, 2, 1)
+
+
+@dataclass
+class PoseObservability:
+    pose: np.ndarray  # (5,)
+    singular_values: np.ndarray  # (5,) descending
+    directions: np.ndarray  # (5, 5) rows: right singular vectors (pose directions)
+    bounds: np.ndarray  # (5,) Cramer-Rao standard deviation per component
+
+
+def _svd_bounds(J: np.ndarray, noise: float):
+    """Batched SVD of J (P, N, C) and the Cramer-Rao standard deviations (P, C); inf where singular."""
+    _, s, vt = np.linalg.svd(J, full_matrices=False)
+    # fewer readings than components: J^T J is singular whatever the values
+    ok = (s[:, -1] > s[:, 0] * 1e-12) & (s.shape[1] == J.shape[2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # (J^T J)^-1 = V diag(1/s^2) V^T, without forming J^T J
+        bounds = noise * np.sqrt(np.sum((vt.transpose(0, 2, 1) / s[:, None, :]) ** 2, axis=2))
+    bounds[~ok] = np.inf
+    full_s = np.zeros((len(J), J.shape[2]))
+    full_s[:, : s.shape[1]] = s
+    return full_s, vt, bounds
+
+
+def cramer_rao(sensor: Sensor, poses, noise: float, components: tuple[str, ...] = POSE_NAMES) -> np.ndarray:
+    """Cramer-Rao standard deviation per pose and component, shape (P, C), for Gaussian noise of rms ``noise``."""
+    cols = [POSE_NAMES.index(c) for c in components]
+    return _svd_bounds(jacobian(sensor, poses)[:, :, cols], noise)[2]
+
+
+def analyse(sensor: Sensor, poses, noise: float, components: tuple[str, ...] = POSE_NAMES) -> list[PoseObservability]:
+    """SVD and Cramer-Rao bound per pose for Gaussian element noise of rms ``noise``.
+
+    Only ``components`` are estimated; the others are taken as known (held fixed).
+    The bound is sqrt(diag((J^T J)^-1)) * noise; infinite where J^T J is singular.
+    """
+    poses = as_poses(poses)
+    cols = [POSE_NAMES.index(c) for c in components]
+    s, vt, bounds = _svd_bounds(jacobian(sensor, poses)[:, :, cols], noise)
+    return [PoseObservability(p, s[i], vt[i], bounds[i]) for i, p in enumerate(poses)]
+
+
+def corner_poses(ranges: dict) -> np.ndarray:
+    """Rest (all zero, clipped into the box) followed by every corner of the pose box (unique)."""
+    rest = np.array([min(max(0.0, ranges[n][0]), ranges[n][1]) for n in POSE_NAMES])
+    corners = {tuple(c) for c in itertools.product(*[sorted(set(ranges[n])) for n in POSE_NAMES])}
+    corners.discard(tuple(rest))
+    return np.vstack([rest] + [np.array(c) for c in sorted(corners)])
+
+
+def describe_direction(vec: np.ndarray, components: tuple[str, ...]) -> str:
+    """A pose direction in words: its largest parts, e.g. '0.71 dy - 0.70 thx'."""
+    order = np.argsort(-np.abs(vec))
+    sign = 1.0 if vec[order[0]] >= 0 else -1.0
+    parts = []
+    for j in order[:3]:
+        if abs(vec[j]) < 1e-4:
+            continue
+        val = sign * vec[j]
+        parts.append(f"{'-' if val < 0 else '+'} {abs(val):.2g} {components[j]}")
+    text = " ".join(parts)
+    return text[2:] if text.startswith("+ ") else text
+
+
+def units_of(components) -> list[str]:
+    return [POSE_UNITS[POSE_NAMES.index(c)] for c in components]
+
+
+DEFAULT_ACCURACY = {"dx": 0.1, "dy": 0.1, "dz": 0.1, "thx": 1.0, "thy": 1.0}
+
+
+@dataclass
+class ObserveReport:
+    components: tuple[str, ...]
+    noise: float
+    units: str
+    accuracy: dict
+    results: list[PoseObservability]
+
+    @property
+    def worst(self) -> np.ndarray:
+        return np.max([r.bounds for r in self.results], axis=0)
+
+    def unresolved(self) -> list[str]:
+        return [c for c, w in zip(self.components, self.worst) if not w <= self.accuracy[c]]
+
+    def table(self) -> str:
+        comps = self.components
+        head = ["pose (dx dy dz thx thy)", "s_min", "s_2nd"] + [f"{c} [{u}]" for c, u in zip(comps, units_of(comps))]
+        rows = []
+        for r in self.results:
+            pose = " ".join(f"{v:g}" for v in r.pose)
+            s = sorted(r.singular_values)
+            second = s[1] if len(s) > 1 else float("nan")
+            rows.append([pose, f"{s[0]:.3g}", f"{second:.3g}"] + [_fmt_bound(b) for b in r.bounds])
+        widths = [max(len(h), *(len(row[i]) for row in rows)) for i, h in enumerate(head)]
+        lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths))]
+        lines.append("  ".join("-" * w for w in widths))
+        lines += ["  ".join(c.ljust(w) for c, w in zip(row, widths)) for row in rows]
+        return "\n".join(lines)
+
+    def verdicts(self) -> list[str]:
+        """One sentence per component: resolvable or not, and where it fails."""
+        out = []
+        for j, c in enumerate(self.components):
+            unit = units_of([c])[0]
+            need = self.accuracy[c]
+            bad = [r for r in self.results if not r.bounds[j] <= need]
+            worst = self.worst[j]
+            if not bad:
+                out.append(f"{c}: resolvable: Cramer-Rao bound at most {worst:.3g} {unit} "
+                           f"(required {need:g} {unit}) at rest and every corner.")
+                continue
+            where = "at rest" if np.all(bad[0].pose == 0) else f"at {' '.join(f'{v:g}' for v in bad[0].pose)}"
+            r = bad[0]
+            # the pose direction that contributes most to this component's bound
+            weight = np.abs(r.directions[:, j]) / np.maximum(r.singular_values, 1e-300)
+            blind = describe_direction(r.directions[int(np.argmax(weight))], self.components)
+            msg = (f"{c}: NOT resolvable to {need:g} {unit} at {len(bad)} of {len(self.results)} poses "
+                   f"(bound {_fmt_bound(r.bounds[j])} {unit} {where}; the readings barely change along {blind}).")
+            out.append(msg)
+        return out
+
+    def text(self) -> str:
+        head = (f"Observability: element noise {self.noise:g} {self.units} rms; bounds are 1-sigma "
+                f"Cramer-Rao limits with {', '.join(self.components)} estimated jointly.\n"
+                f"Singular values of d(readings)/d(pose) in {self.units} per mm or per deg.\n")
+        return head + "\n" + self.table() + "\n\n" + "\n".join(self.verdicts()) + "\n"
+
+
+def _fmt_bound(b: float) -> str:
+    return "inf" if not np.isfinite(b) or b > 1e6 else f"{b:.3g}"
+
+
+def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | None = None,
+            accuracy: dict | None = None) -> ObserveReport:
+    """Observability at rest and at the corners of the pose box ``ranges``."""
+    noise = sensor.noise if noise is None else noise
+    acc = dict(DEFAULT_ACCURACY)
+    acc.update(accuracy or {})
+    results = analyse(sensor, corner_poses(ranges), noise, tuple(components))
+    return ObserveReport(tuple(components), noise, sensor.units, acc, results)

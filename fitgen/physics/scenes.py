@@ -1,0 +1,106 @@
+"""Scenes: which pose components a use needs, and the pose ranges it sees."""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import read_text
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.simulate import DEFAULT_RANGES, grid_poses
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Outputs to estimate, the box of poses the sensor will see, and grid levels per component."""
+
+    name: str
+    outputs: tuple[str, ...]
+    ranges: dict
+    levels: int = 5
+
+    def fixed(self) -> tuple[str, ...]:
+        """Components the scene holds at 0 (range of width 0)."""
+        return tuple(n for n in POSE_NAMES if self.ranges[n][0] == self.ranges[n][1])
+
+    def grid(self) -> dict[str, list[float]]:
+        """Grid levels: ``levels`` evenly spaced values over each range; a held component at its value."""
+        out = {}
+        for n in POSE_NAMES:
+            lo, hi = self.ranges[n]
+            out[n] = [float(lo)] if lo == hi else np.linspace(lo, hi, self.levels).round(12).tolist()
+        return out
+
+    def poses(self) -> np.ndarray:
+        """The scene's full factorial grid of poses (n, 5)."""
+        return grid_poses(self.grid())
+
+
+_ZERO_TILT = {**DEFAULT_RANGES, "thx": (0.0, 0.0), "thy": (0.0, 0.0)}
+PRESETS = {
+    "full": Scene("full", POSE_NAMES, dict(DEFAULT_RANGES)),
+    "slide": Scene("slide", ("dx", "dy", "dz"), dict(_ZERO_TILT)),
+    "press": Scene("press", ("dz",), {**_ZERO_TILT, "dx": (0.0, 0.0), "dy": (0.0, 0.0)}, levels=21),
+}
+
+
+def load_scene(spec: str | None) -> Scene:
+    """A preset name (full, slide, press) or a TOML file with ``outputs``, ``[ranges]``, ``levels``."""
+    if spec is None:
+        return PRESETS["full"]
+    if spec in PRESETS:
+        return PRESETS[spec]
+    path = Path(spec)
+    if not path.is_file():
+        raise InputError(f"scene {spec!r}: no such file, and not a preset ({', '.join(PRESETS)})")
+    origin = f"scene file {spec}"
+    try:
+        data = tomllib.loads(read_text(path, "scene file"))
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{origin}: not valid TOML: {exc}") from None
+    unknown = set(data) - {"name", "outputs", "ranges", "levels"}
+    if unknown:
+        raise InputError(f"{origin}: unknown key {sorted(unknown)[0]!r}")
+    outputs = data.get("outputs")
+    if not isinstance(outputs, list) or not outputs or any(o not in POSE_NAMES for o in outputs):
+        raise InputError(f"{origin}: 'outputs' must be a non-empty list drawn from {', '.join(POSE_NAMES)}")
+    if len(set(outputs)) != len(outputs):
+        raise InputError(f"{origin}: 'outputs' names a component twice")
+    ranges = dict(DEFAULT_RANGES)
+    raw = data.get("ranges", {})
+    if not isinstance(raw, dict):
+        raise InputError(f"{origin}: 'ranges' must be a table")
+    for key, val in raw.items():
+        if key not in POSE_NAMES:
+            raise InputError(f"{origin}: unknown key 'ranges.{key}'")
+        ok = (isinstance(val, list) and len(val) == 2
+              and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in val) and val[0] <= val[1])
+        if not ok:
+            raise InputError(f"{origin}: 'ranges.{key}' must be [low, high] with low <= high")
+        ranges[key] = (float(val[0]), float(val[1]))
+    levels = data.get("levels", 5)
+    if isinstance(levels, bool) or not isinstance(levels, int) or not 2 <= levels <= 101:
+        raise InputError(f"{origin}: 'levels' must be a whole number 2..101")
+    name = data.get("name", path.stem)
+    if not isinstance(name, str):
+        raise InputError(f"{origin}: 'name' must be a string")
+    ordered = tuple(n for n in POSE_NAMES if n in outputs)
+    return Scene(name, ordered, ranges, levels)
+
+
+def unresolved_warnings(sensor, scene: Scene, accuracy: dict | None = None) -> list[str]:
+    """One line per scene output the sensor cannot resolve to the required accuracy (fitgen.physics.observe)."""
+    from fitgen.physics.observe import observe
+
+    report = observe(sensor, scene.ranges, scene.outputs, accuracy=accuracy)
+    bad = set(report.unresolved())
+    return [v for c, v in zip(report.components, report.verdicts()) if c in bad]

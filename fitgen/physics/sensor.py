@@ -1,0 +1,436 @@
+"""Sensor description files (TOML): magnet, board, elements and transfer model, validated."""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import canonical_json, read_text, sha256_hex
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+AXIS_WORDS = ("radial", "tangential", "z", "-z")
+
+
+@dataclass(frozen=True)
+class Magnet:
+    diameter: float  # mm
+    height: float  # mm
+    polarization: float  # T, along the magnet's own +z
+    rest_center: tuple[float, float, float]  # mm (the drawing's centre plus a unit's offset)
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # mm, a unit's rest centre from the drawing's
+    tilt: tuple[float, float] = (0.0, 0.0)  # deg, a unit's rest tilt (thx, thy), applied before a pose's
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """The spreads a maker expects between a built unit and its drawing, as standard deviations
+    (fitgen.physics.units draws them normal, clipped at 3 sigma). Sources: docs/calibration.md."""
+
+    magnet_offset_xy: float = 0.2  # mm, each of x and y: a magnet placed by hand in a cast elastomer
+    magnet_offset_z: float = 0.12  # mm: the casting's thickness
+    magnet_tilt: float = 2.0  # deg, each of thx and thy
+    polarization: float = 0.03  # relative: the magnet grade's remanence band and batch spread
+    element_azimuth: float = 1.0  # deg
+    element_radius: float = 0.08  # mm: hand placement or pick-and-place and solder float
+    element_height: float = 0.04  # mm: solder and board flatness
+    element_axis: float = 2.0  # deg, the sensitive axis turned in the board's plane
+    element_tilt: float = 1.0  # deg, the axis raised out of it (a part not flat on its pads)
+    gain: float = 0.077  # relative: AA003-02 sensitivity 2.0-3.2 mV/V/Oe read as 2.6 +- 3 sigma
+    offset: float = 0.004  # mT, each element's offset after trimming
+    ambient: float = 0.03  # mT, each component of a static ambient field (the Earth's is about 0.05 mT)
+    stage_gain: float = 0.05  # relative, each diagonal entry of the stage-to-magnet map
+    stage_cross: float = 0.02  # each off-diagonal entry: the magnet does not follow quite parallel
+
+    def to_dict(self) -> dict:
+        return dict(vars(self))
+
+
+@dataclass(frozen=True)
+class RawTransfer:
+    noise: float = 0.0  # mT rms
+    full_scale: float = 2.0  # mT
+    adc_bits: int = 0
+
+
+@dataclass(frozen=True)
+class GmrTransfer:
+    supply: float = 5.0  # V
+    sensitivity: float = 2.6  # mV/V/Oe
+    gain: float = 12.0
+    offset: float = 0.0  # V
+    saturation: float = 2.0  # mT
+    adc_min: float = 0.0  # V
+    adc_max: float = 3.3  # V
+    adc_bits: int = 16
+    noise: float = 0.0  # V rms
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A validated sensor: geometry in mm, polarisation in T, element axes as unit vectors."""
+
+    name: str
+    description: str
+    magnet: Magnet
+    board_thickness: float
+    board_gap: float
+    positions: np.ndarray = field(repr=False)  # (N, 3) mm
+    axes: np.ndarray = field(repr=False)  # (N, 3) unit
+    transfer: str = "raw"
+    raw: RawTransfer = RawTransfer()
+    gmr: GmrTransfer = GmrTransfer()
+    source: dict = field(default_factory=dict, repr=False, compare=False)
+    # a built unit's own: per element gain (x the transfer's) and offset (mT, after |B . axis|), a static
+    # ambient field (mT), and the map from the labels' (the stage's) displacement to the magnet's
+    gains: np.ndarray | None = field(default=None, repr=False)
+    offsets: np.ndarray | None = field(default=None, repr=False)
+    ambient: np.ndarray | None = field(default=None, repr=False)
+    stage_map: np.ndarray | None = field(default=None, repr=False)
+    tolerances: Tolerances = field(default=Tolerances(), compare=False)
+
+    def __post_init__(self):
+        n = self.positions.shape[0]
+        for name, default in (("gains", np.ones(n)), ("offsets", np.zeros(n)), ("ambient", np.zeros(3)),
+                              ("stage_map", np.eye(3))):
+            val = getattr(self, name)
+            object.__setattr__(self, name, default if val is None else np.asarray(val, dtype=float))
+
+    @property
+    def n_elements(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def is_drawing(self) -> bool:
+        """True when nothing of a built unit differs from the drawing's defaults."""
+        m = self.magnet
+        return (not any(m.offset) and not any(m.tilt) and np.all(self.gains == 1) and not np.any(self.offsets)
+                and not np.any(self.ambient) and np.array_equal(self.stage_map, np.eye(3)))
+
+    @property
+    def noise(self) -> float:
+        """Element noise (rms) in the output units of the active transfer."""
+        return self.raw.noise if self.transfer == "raw" else self.gmr.noise
+
+    @property
+    def units(self) -> str:
+        return "mT" if self.transfer == "raw" else "V"
+
+    def with_transfer(self, kind: str) -> "Sensor":
+        if kind not in ("raw", "gmr"):
+            raise InputError(f"transfer must be 'raw' or 'gmr', got {kind!r}")
+        from dataclasses import replace
+
+        return replace(self, transfer=kind)
+
+    def to_dict(self) -> dict:
+        """The normalised description: what the hash covers."""
+        return {
+            "name": self.name,
+            "magnet": {
+                "shape": "cylinder",
+                "diameter": self.magnet.diameter,
+                "height": self.magnet.height,
+                "polarization": self.magnet.polarization,
+                "rest_center": list(self.magnet.rest_center),
+            },
+            "board": {"thickness": self.board_thickness, "gap": self.board_gap},
+            "elements": {
+                "positions": self.positions.tolist(),
+                "axes": self.axes.tolist(),
+            },
+            "transfer": {
+                "kind": self.transfer,
+                "raw": vars(self.raw),
+                "gmr": vars(self.gmr),
+            },
+        } | ({} if self.is_drawing else {"unit": {
+            "magnet_tilt": list(self.magnet.tilt),
+            "gains": self.gains.tolist(),
+            "offsets": self.offsets.tolist(),
+            "ambient": self.ambient.tolist(),
+            "stage_map": self.stage_map.tolist(),
+        }})
+
+    @property
+    def sha256(self) -> str:
+        return sha256_hex(canonical_json(self.to_dict()))
+
+
+# --- parsing -----------------------------------------------------------------
+
+
+class _Section:
+    """Reads keys from one TOML table, remembering which were used, naming keys in errors."""
+
+    def __init__(self, data, where: str, origin: str):
+        if not isinstance(data, dict):
+            raise InputError(f"{origin}: '{where}' must be a table")
+        self.data, self.where, self.origin, self.used = data, where, origin, set()
+
+    def _key(self, key: str) -> str:
+        return f"{self.where}.{key}" if self.where else key
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str, default=None, required=False):
+        if key not in self.data:
+            if required:
+                raise InputError(f"{self.origin}: missing key '{self._key(key)}'")
+            return default
+        self.used.add(key)
+        return self.data[key]
+
+    def number(self, key, default=None, *, required=False, positive=False, min_=None, max_=None) -> float:
+        val = self.raw(key, default, required)
+        if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be a finite number, got {val!r}")
+        val = float(val)
+        if positive and val <= 0:
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be > 0, got {val:g}")
+        if min_ is not None and val < min_:
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be >= {min_:g}, got {val:g}")
+        if max_ is not None and val > max_:
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be <= {max_:g}, got {val:g}")
+        return val
+
+    def integer(self, key, default=None, *, min_=None, max_=None) -> int:
+        val = self.raw(key, default)
+        if isinstance(val, bool) or not isinstance(val, int):
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be a whole number, got {val!r}")
+        if (min_ is not None and val < min_) or (max_ is not None and val > max_):
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be in {min_}..{max_}, got {val}")
+        return val
+
+    def string(self, key, default=None, *, required=False, choices=None) -> str:
+        val = self.raw(key, default, required)
+        if not isinstance(val, str):
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be a string, got {val!r}")
+        if choices and val not in choices:
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be one of {', '.join(choices)}, got {val!r}")
+        return val
+
+    def vector(self, key, *, required=True, unit=False) -> np.ndarray:
+        val = self.raw(key, None, required)
+        ok = isinstance(val, list) and len(val) == 3 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in val
+        )
+        if not ok:
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be a list of 3 finite numbers, got {val!r}")
+        vec = np.asarray(val, dtype=float)
+        if unit:
+            norm = np.linalg.norm(vec)
+            if norm == 0:
+                raise InputError(f"{self.origin}: '{self._key(key)}' must not be the zero vector")
+            vec = vec / norm
+        return vec
+
+    def sub(self, key, *, required=True) -> "_Section":
+        val = self.raw(key, None, required)
+        return _Section({} if val is None else val, self._key(key), self.origin)
+
+    def finish(self):
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            raise InputError(f"{self.origin}: unknown key '{self._key(unknown[0])}'")
+
+
+def _ring(sec: _Section) -> tuple[np.ndarray, np.ndarray]:
+    count = sec.integer("count", min_=1, max_=64)
+    radius = sec.number("radius", required=True, positive=True)
+    z = sec.number("z", 0.0)
+    start = sec.number("start", 0.0)
+    axis = sec.string("axis", "radial", choices=AXIS_WORDS)
+    # a part mounted on a wedge: its in-plane axis tilted toward the board's normal
+    elevation = sec.number("elevation", 0.0, min_=-90.0, max_=90.0)
+    if elevation != 0.0 and axis not in ("radial", "tangential"):
+        raise InputError(f"{sec.origin}: '{sec._key('elevation')}' tilts a radial or tangential axis, not '{axis}'")
+    sec.finish()
+    phi = np.deg2rad(start + 360.0 / count * np.arange(count))
+    c, s = np.cos(phi), np.sin(phi)
+    pos = np.column_stack([radius * c, radius * s, np.full(count, z)])
+    axes = {
+        "radial": np.column_stack([c, s, np.zeros(count)]),
+        "tangential": np.column_stack([-s, c, np.zeros(count)]),
+        "z": np.tile([0.0, 0.0, 1.0], (count, 1)),
+        "-z": np.tile([0.0, 0.0, -1.0], (count, 1)),
+    }[axis]
+    if elevation != 0.0:
+        e = math.radians(elevation)
+        axes = math.cos(e) * axes + math.sin(e) * np.array([0.0, 0.0, 1.0])
+    return pos, axes
+
+
+def _table_list(sec: _Section, key: str) -> list:
+    val = sec.raw(key, [])
+    if not isinstance(val, list) or not all(isinstance(v, dict) for v in val):
+        raise InputError(f"{sec.origin}: '{sec._key(key)}' must be an array of tables ([[{sec._key(key)}]])")
+    return val
+
+
+def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
+    """Validate a parsed TOML document and build a :class:`Sensor`."""
+    top = _Section(data, "", origin)
+    name = top.string("name", "unnamed")
+    description = top.string("description", "")
+
+    mag = top.sub("magnet")
+    mag.string("shape", "cylinder", choices=("cylinder",))
+    diameter = mag.number("diameter", required=True, positive=True)
+    height = mag.number("height", required=True, positive=True)
+    pol = mag.number("polarization", 1.32)
+    if pol == 0:
+        raise InputError(f"{origin}: 'magnet.polarization' must not be 0")
+    offset = tuple(mag.vector("offset", required=False)) if mag.has("offset") else (0.0, 0.0, 0.0)
+    tilt = tuple(_numbers(mag, "tilt", 2)) if mag.has("tilt") else (0.0, 0.0)
+    if max(abs(t) for t in tilt) > 45:
+        raise InputError(f"{origin}: 'magnet.tilt' must be within +-45 deg, got {list(tilt)}")
+    mag.finish()
+
+    board = top.sub("board")
+    thickness = board.number("thickness", required=True, min_=0.0)
+    gap = board.number("gap", required=True, positive=True)
+    board.finish()
+    rest_center = tuple(float(c) for c in np.add((0.0, 0.0, thickness + gap + height / 2), offset))
+
+    el = top.sub("elements")
+    positions, axes, gains, offsets = [], [], [], []
+    for i, ring in enumerate(_table_list(el, "ring")):
+        p, a = _ring(_Section(ring, f"elements.ring[{i}]", origin))
+        positions.append(p)
+        axes.append(a)
+        gains += [1.0] * len(p)
+        offsets += [0.0] * len(p)
+    for i, item in enumerate(_table_list(el, "list")):
+        sec = _Section(item, f"elements.list[{i}]", origin)
+        positions.append(sec.vector("position")[None])
+        axes.append(sec.vector("axis", unit=True)[None])
+        gains.append(sec.number("gain", 1.0, positive=True))
+        offsets.append(sec.number("offset", 0.0))
+        sec.finish()
+    el.finish()
+    if not positions:
+        raise InputError(f"{origin}: 'elements' must have at least one [[elements.ring]] or [[elements.list]]")
+    positions = np.vstack(positions)
+    axes = np.vstack(axes)
+
+    amb = top.sub("ambient", required=False)
+    ambient = amb.vector("field", required=False) if amb.has("field") else np.zeros(3)
+    amb.finish()
+    st = top.sub("stage", required=False)
+    stage_map = np.eye(3)
+    if st.has("map"):
+        rows = st.raw("map")
+        if not isinstance(rows, list) or len(rows) != 3:
+            raise InputError(f"{origin}: 'stage.map' must be 3 rows of 3 numbers (magnet displacement = map x "
+                             "stage displacement)")
+        stage_map = np.array([_numbers(_Section({"row": r}, "stage.map", origin), "row", 3) for r in rows])
+        if not abs(np.linalg.det(stage_map)) > 1e-6:
+            raise InputError(f"{origin}: 'stage.map' is singular: the magnet would not follow the stage")
+    st.finish()
+    tol = top.sub("tolerances", required=False)
+    tolerances = Tolerances(**{k: tol.number(k, v, min_=0.0) for k, v in vars(Tolerances()).items()})
+    tol.finish()
+    unit = top.sub("unit", required=False)  # provenance of a unit file (fitgen simulate --unit, fitgen identify)
+    for key in list(unit.data):
+        unit.raw(key)
+    unit.finish()
+
+    radius = diameter / 2
+    for k, p in enumerate(positions, start=1):
+        r = math.hypot(p[0] - rest_center[0], p[1] - rest_center[1])
+        if r <= radius and abs(p[2] - rest_center[2]) <= height / 2:
+            raise InputError(f"{origin}: element {k} at {p.tolist()} lies inside the magnet")
+    dist = np.linalg.norm(positions[:, None] - positions[None], axis=-1) + np.eye(len(positions))
+    if np.any(dist < 1e-9):
+        k = int(np.argwhere(dist < 1e-9)[0][0]) + 1
+        raise InputError(f"{origin}: element {k} shares its position with another element")
+
+    tr = top.sub("transfer")
+    kind = tr.string("kind", "raw", choices=("raw", "gmr"))
+    rs = tr.sub("raw", required=False)
+    raw = RawTransfer(
+        noise=rs.number("noise", 0.0, min_=0.0),
+        full_scale=rs.number("full_scale", 2.0, positive=True),
+        adc_bits=rs.integer("adc_bits", 0, min_=0, max_=32),
+    )
+    rs.finish()
+    gs = tr.sub("gmr", required=False)
+    gmr = GmrTransfer(
+        supply=gs.number("supply", 5.0, positive=True),
+        sensitivity=gs.number("sensitivity", 2.6, positive=True),
+        gain=gs.number("gain", 12.0, positive=True),
+        offset=gs.number("offset", 0.0),
+        saturation=gs.number("saturation", 2.0, positive=True),
+        adc_min=gs.number("adc_min", 0.0),
+        adc_max=gs.number("adc_max", 3.3),
+        adc_bits=gs.integer("adc_bits", 16, min_=0, max_=32),
+        noise=gs.number("noise", 0.0, min_=0.0),
+    )
+    gs.finish()
+    if gmr.adc_max <= gmr.adc_min:
+        raise InputError(f"{origin}: 'transfer.gmr.adc_max' must be greater than 'transfer.gmr.adc_min'")
+    tr.finish()
+    top.finish()
+
+    return Sensor(
+        name=name,
+        description=description,
+        magnet=Magnet(diameter, height, pol, rest_center, offset, tilt),
+        board_thickness=thickness,
+        board_gap=gap,
+        positions=positions,
+        axes=axes,
+        transfer=kind,
+        raw=raw,
+        gmr=gmr,
+        source=data,
+        gains=np.array(gains),
+        offsets=np.array(offsets),
+        ambient=ambient,
+        stage_map=stage_map,
+        tolerances=tolerances,
+    )
+
+
+def _numbers(sec: _Section, key: str, n: int) -> list[float]:
+    val = sec.raw(key, None, True)
+    if not (isinstance(val, list) and len(val) == n and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in val)):
+        raise InputError(f"{sec.origin}: '{sec._key(key)}' must be a list of {n} finite numbers, got {val!r}")
+    return [float(v) for v in val]
+
+
+def preset_names() -> list[str]:
+    return sorted(p.name[:-5] for p in resources.files("fitgen.physics.presets").iterdir() if p.name.endswith(".toml"))
+
+
+def load_sensor(spec: str | Path) -> Sensor:
+    """Load a sensor from a preset name (``paper``) or a TOML file path."""
+    spec = str(spec)
+    if spec in preset_names():
+        text = resources.files("fitgen.physics.presets").joinpath(f"{spec}.toml").read_text()
+        origin = f"preset {spec}"
+    else:
+        path = Path(spec)
+        if not path.is_file():
+            raise InputError(
+                f"sensor {spec!r}: no such file, and not a preset ({', '.join(preset_names())})"
+            )
+        text = read_text(path, "sensor file")
+        origin = f"sensor file {spec}"
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{origin}: not valid TOML: {exc}") from None
+    return parse_sensor(data, origin)

@@ -1,0 +1,166 @@
+"""Pose sets (the paper's grids, regular grids, random poses) and simulated datasets."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from fitgen import __version__
+from fitgen.physics.dataset import Dataset
+from fitgen.base.errors import InputError
+from fitgen.physics.pose import POSE_NAMES, as_poses
+from fitgen.physics.sensor import Sensor
+from fitgen.physics.transfer import readings
+
+PAPER_GRIDS = {
+    # the seed's simulation grid (1,875 poses) and its experiment grid (450 poses)
+    "paper-sim": {"dx": [-2, -1, 0, 1, 2], "dy": [-2, -1, 0, 1, 2], "dz": [0, -1, -2],
+                  "thx": [-5, -2.5, 0, 2.5, 5], "thy": [-5, -2.5, 0, 2.5, 5]},
+    "paper-exp": {"dx": [-2, -1, 0, 1, 2], "dy": [-2, -1, 0, 1, 2], "dz": [-2, -3],
+                  "thx": [-5, 0, 5], "thy": [-5, 0, 5]},
+}
+DEFAULT_RANGES = {"dx": (-2.0, 2.0), "dy": (-2.0, 2.0), "dz": (-2.0, 0.0), "thx": (-5.0, 5.0), "thy": (-5.0, 5.0)}
+
+_NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+
+
+def grid_poses(levels: dict[str, list[float]]) -> np.ndarray:
+    """Full factorial grid; components not named stay 0. Row order: dx slowest, thy fastest."""
+    axes = [np.asarray(levels.get(n, [0.0]), dtype=float) for n in POSE_NAMES]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    return np.column_stack([m.ravel() for m in mesh])
+
+
+def _components(spec: str, what: str) -> dict[str, str]:
+    out = {}
+    for part in re.split(r"[;\s]+", spec.strip()):
+        if not part:
+            continue
+        name, sep, value = part.partition("=")
+        if not sep or name not in POSE_NAMES:
+            raise InputError(f"{what} {spec!r}: each part must be NAME=VALUES with NAME in {','.join(POSE_NAMES)}")
+        if name in out:
+            raise InputError(f"{what} {spec!r}: {name} given twice")
+        out[name] = value
+    if not out:
+        raise InputError(f"{what} is empty")
+    return out
+
+
+def parse_grid(spec: str) -> dict[str, list[float]]:
+    """A paper grid name, or ``dx=-2:2:5 dz=0,-1,-2 ...`` (start:stop:count or a list)."""
+    if spec in PAPER_GRIDS:
+        return PAPER_GRIDS[spec]
+    levels = {}
+    for name, value in _components(spec, "grid").items():
+        m = re.fullmatch(rf"({_NUM}):({_NUM}):(\d+)", value)
+        if m:
+            lo, hi, count = float(m.group(1)), float(m.group(2)), int(m.group(3))
+            if count < 1 or count > 10000:
+                raise InputError(f"grid {spec!r}: {name} count must be 1..10000, got {count}")
+            levels[name] = list(np.linspace(lo, hi, count)) if count > 1 else [lo]
+        elif re.fullmatch(rf"{_NUM}(?:,{_NUM})*", value):
+            levels[name] = [float(v) for v in value.split(",")]
+        else:
+            raise InputError(f"grid {spec!r}: {name}={value!r} is neither START:STOP:COUNT nor a list of numbers")
+    total = int(np.prod([len(v) for v in levels.values()]))
+    if total > 5_000_000:
+        raise InputError(f"grid {spec!r} has {total} poses; at most 5,000,000")
+    return levels
+
+
+def parse_ranges(spec: str | None) -> dict[str, tuple[float, float]]:
+    """``dx=-2:2 thx=-5:5 ...`` (components not named: the paper-sim box)."""
+    ranges = dict(DEFAULT_RANGES)
+    if not spec:
+        return ranges
+    for name, value in _components(spec, "ranges").items():
+        m = re.fullmatch(rf"({_NUM}):({_NUM})", value)
+        if not m or float(m.group(1)) > float(m.group(2)):
+            raise InputError(f"ranges {spec!r}: {name}={value!r} must be LOW:HIGH with LOW <= HIGH")
+        ranges[name] = (float(m.group(1)), float(m.group(2)))
+    return ranges
+
+
+def random_poses(n: int, ranges: dict[str, tuple[float, float]], rng: np.random.Generator) -> np.ndarray:
+    """``n`` poses uniform in the box ``ranges``."""
+    if n < 1:
+        raise InputError(f"number of random poses must be >= 1, got {n}")
+    lo = np.array([ranges[k][0] for k in POSE_NAMES])
+    hi = np.array([ranges[k][1] for k in POSE_NAMES])
+    return lo + (hi - lo) * rng.random((n, 5))
+
+
+def simulate(
+    sensor: Sensor,
+    poses,
+    *,
+    noise: float = 0.0,
+    adc_bits: int | None = None,
+    seed: int = 0,
+    targets: tuple[str, ...] = POSE_NAMES,
+    provenance: dict | None = None,
+    labels: str = "stage",
+) -> Dataset:
+    """Readings for ``poses`` through the sensor's transfer, as a :class:`Dataset`.
+
+    Deterministic: the noise stream is drawn from ``seed``. ``labels``: for a built unit whose magnet
+    does not follow the stage one to one (its stage map), whether the poses and the targets are the
+    stage's displacements (what a capture's labels measure) or the magnet's.
+    """
+    poses = as_poses(poses)
+    if noise < 0:
+        raise InputError(f"noise must be >= 0, got {noise}")
+    if labels not in ("stage", "magnet"):
+        raise InputError(f"labels are the stage's or the magnet's, not {labels!r}")
+    physical = poses
+    if labels == "magnet" and not sensor.is_drawing:
+        physical = poses.copy()
+        physical[:, :3] = np.linalg.solve(sensor.stage_map, poses[:, :3].T).T
+    rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
+    values = readings(sensor, physical, noise=noise, adc_bits=adc_bits, rng=rng)
+    cols = [POSE_NAMES.index(t) for t in targets]
+    meta = {
+        "generator": f"fitgen {__version__}",
+        "sensor": sensor.name,
+        "sensor_sha256": sensor.sha256,
+        "transfer": sensor.transfer,
+        "units": sensor.units,
+        "noise": noise,
+        "adc_bits": adc_bits,
+        "seed": seed,
+    }
+    if not sensor.is_drawing:
+        meta["labels"] = labels
+    meta.update(provenance or {})
+    return Dataset(values, poses[:, cols].copy(), tuple(targets), meta)
+
+
+def pose_rng(seed: int) -> np.random.Generator:
+    """The random stream for pose sampling (independent of the noise stream)."""
+    return np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[0])
+
+
+def dataset_sensor(meta: dict, spec: str | None = None) -> Sensor | None:
+    """The sensor a dataset was simulated with: ``spec`` (a preset or file) if given, else the
+    preset its meta names when the hash matches; None for measured data or an unknown sensor."""
+    from pathlib import Path
+
+    from fitgen.physics.sensor import load_sensor, preset_names
+
+    if spec is None:
+        name = meta.get("sensor")
+        unit_file = meta.get("sensor_file")
+        if isinstance(unit_file, str) and Path(unit_file).is_file():
+            spec = unit_file  # a unit's own sensor file (fitgen simulate --unit, fitgen identify)
+        elif name not in preset_names():
+            return None
+        else:
+            spec = name
+    sensor = load_sensor(spec)
+    if meta.get("transfer") in ("raw", "gmr"):
+        sensor = sensor.with_transfer(meta["transfer"])
+    if spec in (meta.get("sensor"), meta.get("sensor_file")) and meta.get("sensor_sha256") not in (None, sensor.sha256):
+        return None
+    return sensor

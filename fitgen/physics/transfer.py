@@ -1,0 +1,71 @@
+"""Element transfer models: signed field along the sensitive axis -> reading.
+
+``raw``: |B . r_hat| in mT (the paper's simulation); a built unit's element gains and offsets
+act on it (fitgen.physics.units). ``gmr``: the NVE AA003-02's
+omnipolar response in volts, linear in |B . r_hat| up to saturation, amplified,
+offset, and clipped and quantised by the ADC. Noise is added before the ADC.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fitgen.physics.sensor import Sensor
+
+OE_PER_MT = 10.0  # 1 Oe = 0.1 mT in air
+
+
+def quantise(x: np.ndarray, lo: float, hi: float, bits: int) -> np.ndarray:
+    """Clip to [lo, hi] and round to the nearest of 2**bits codes' centres (bits = 0: clip only)."""
+    x = np.clip(x, lo, hi)
+    if bits <= 0:
+        return x
+    lsb = (hi - lo) / (2**bits - 1)
+    return lo + np.round((x - lo) / lsb) * lsb
+
+
+def element_response(sensor: Sensor, mag: np.ndarray) -> np.ndarray:
+    """Each element's field-equivalent output (mT) from |B . axis|: its gain and offset (a unit's; 1 and 0
+    on a drawing)."""
+    if sensor.is_drawing:
+        return mag.copy()
+    return sensor.gains * mag + sensor.offsets
+
+
+def apply_transfer(
+    sensor: Sensor,
+    b_axis: np.ndarray,
+    *,
+    noise: float = 0.0,
+    adc_bits: int | None = None,
+    rng: np.random.Generator | None = None,
+) -> np.ndarray:
+    """Readings from signed fields ``b_axis`` (mT), in the sensor's output units.
+
+    ``noise`` is an rms in output units; ``adc_bits`` overrides the sensor file's
+    (0 turns quantisation off).
+    """
+    mag = np.abs(b_axis)
+    if sensor.transfer == "raw":
+        out = element_response(sensor, mag)
+        bits = sensor.raw.adc_bits if adc_bits is None else adc_bits
+        lo, hi = 0.0, sensor.raw.full_scale
+    else:
+        g = sensor.gmr
+        volts_per_mt = g.supply * g.sensitivity * 1e-3 * OE_PER_MT * g.gain
+        out = g.offset + volts_per_mt * element_response(sensor, np.minimum(mag, g.saturation))
+        bits = g.adc_bits if adc_bits is None else adc_bits
+        lo, hi = g.adc_min, g.adc_max
+    if noise > 0:
+        rng = rng or np.random.default_rng()
+        out = out + rng.normal(0.0, noise, size=out.shape)
+    if bits > 0 or sensor.transfer == "gmr":
+        out = quantise(out, lo, hi, bits)
+    return out
+
+
+def readings(sensor: Sensor, poses, **kw) -> np.ndarray:
+    """Element readings (P, N) for a batch of poses, through the sensor's transfer."""
+    from fitgen.physics.pose import field_readings
+
+    return apply_transfer(sensor, field_readings(sensor, poses), **kw)

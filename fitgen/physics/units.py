@@ -1,0 +1,208 @@
+"""Built units: how one differs from its drawing, as a parameter vector; units drawn within tolerances;
+the readings of many units at once; unit files.
+
+A unit's parameters, relative to its drawing (:class:`UnitSpace`, in this order):
+
+- the magnet's rest offset x, y, z (mm), rest tilt thx, thy (deg), log of its polarisation over the
+  drawing's;
+- per element k: azimuth and radius about the board's centre (deg, mm), height (mm), its sensitive
+  axis turned about the board's normal and raised out of its plane (deg; for an axis along the
+  normal, turned about x and y), log gain, offset (mT, after |B . axis|);
+- a static ambient field x, y, z (mT);
+- the stage-to-magnet map M - I (9, row by row): the magnet moves by M (dx, dy, dz) when the stage,
+  whose displacement the labels record, moves by (dx, dy, dz).
+
+Every parameter is 0 on the drawing. Its spread is the sensor file's ``[tolerances]``
+(:class:`fitgen.physics.sensor.Tolerances`); :func:`draw_unit` draws each normal, clipped at 3 sigma.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.physics.field import cylinder_projection
+from fitgen.base.fileio import write_atomic
+from fitgen.physics.pose import as_poses, rotation_matrices
+from fitgen.physics.sensor import Magnet, Sensor, Tolerances
+from fitgen.physics.transfer import OE_PER_MT
+
+MAGNET = ("magnet.x", "magnet.y", "magnet.z", "magnet.thx", "magnet.thy", "magnet.log_polarization")
+ELEMENT = ("azimuth", "radius", "height", "turn", "tilt", "log_gain", "offset")
+AMBIENT = ("ambient.x", "ambient.y", "ambient.z")
+STAGE = tuple(f"stage.m{i}{j}" for i in range(1, 4) for j in range(1, 4))
+CLIP_SIGMA = 3.0
+
+
+def _axis_bases(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per axis a, unit vectors u1 (turn: about the board's normal) and u2 (tilt: out of the plane)."""
+    z = np.array([0.0, 0.0, 1.0])
+    u1 = np.cross(z, axes)
+    small = np.linalg.norm(u1, axis=1) < 1e-9
+    u1[small] = [1.0, 0.0, 0.0]  # an axis along the normal: turn about x, tilt about y
+    u1 /= np.linalg.norm(u1, axis=1, keepdims=True)
+    u2 = np.cross(axes, u1)
+    return u1, u2
+
+
+@dataclass(frozen=True)
+class UnitSpace:
+    """The units of one drawing: parameter names, their prior spreads, and the readings they give."""
+
+    drawing: Sensor
+    names: tuple[str, ...]
+    prior_sd: np.ndarray
+
+    @classmethod
+    def of(cls, drawing: Sensor, tolerances: Tolerances | None = None) -> "UnitSpace":
+        if not drawing.is_drawing:
+            raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing: give the drawing it was built to")
+        t = tolerances or drawing.tolerances
+        radius = np.hypot(drawing.positions[:, 0], drawing.positions[:, 1])
+        if np.any(radius < 1e-6):
+            k = int(np.argmin(radius)) + 1
+            raise InputError(f"sensor {drawing.name!r}: element {k} sits on the board's centre; a unit's element "
+                             "needs an azimuth")
+        n = drawing.n_elements
+        names = MAGNET + tuple(f"e{k}.{p}" for k in range(1, n + 1) for p in ELEMENT) + AMBIENT + STAGE
+        per_el = [t.element_azimuth, t.element_radius, t.element_height, t.element_axis, t.element_tilt,
+                  math.log1p(t.gain), t.offset]
+        sd = ([t.magnet_offset_xy, t.magnet_offset_xy, t.magnet_offset_z, t.magnet_tilt, t.magnet_tilt,
+               math.log1p(t.polarization)] + per_el * n + [t.ambient] * 3
+              + [t.stage_gain if i == j else t.stage_cross for i in range(3) for j in range(3)])
+        return cls(drawing, names, np.array(sd, dtype=float))
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)
+
+    # --- the unit's geometry from parameters -------------------------------------------------
+
+    def _parts(self, thetas: np.ndarray) -> dict:
+        """Each unit's magnet, elements, ambient field and stage map, batched over rows of thetas (K, P)."""
+        d = self.drawing
+        th = np.atleast_2d(np.asarray(thetas, dtype=float))
+        if th.shape[1] != self.size:
+            raise InputError(f"a unit of {d.name!r} has {self.size} parameters, got {th.shape[1]}")
+        n = d.n_elements
+        el = th[:, 6:6 + 7 * n].reshape(-1, n, 7)
+        r0 = np.hypot(d.positions[:, 0], d.positions[:, 1])
+        phi = np.arctan2(d.positions[:, 1], d.positions[:, 0]) + np.deg2rad(el[..., 0])
+        r = r0 + el[..., 1]
+        pos = np.stack([r * np.cos(phi), r * np.sin(phi), d.positions[:, 2] + el[..., 2]], axis=-1)
+        u1, u2 = _axis_bases(d.axes)
+        ax = (d.axes + np.tan(np.deg2rad(el[..., 3]))[..., None] * u1
+              + np.tan(np.deg2rad(el[..., 4]))[..., None] * u2)
+        ax /= np.linalg.norm(ax, axis=-1, keepdims=True)
+        rest = np.asarray(d.magnet.rest_center) + th[:, 0:3]
+        tail = 6 + 7 * n
+        return {"pos": pos, "axes": ax, "rest": rest, "offset": th[:, 0:3], "tilt": th[:, 3:5],
+                "pol": d.magnet.polarization * np.exp(th[:, 5]), "gain": np.exp(el[..., 5]), "off": el[..., 6],
+                "ambient": th[:, tail:tail + 3], "map": np.eye(3) + th[:, tail + 3:tail + 12].reshape(-1, 3, 3)}
+
+    def sensor(self, theta, name: str | None = None, description: str = "") -> Sensor:
+        """The unit with parameters ``theta`` as a :class:`Sensor` (its readings are :meth:`readings`')."""
+        p = {k: v[0] for k, v in self._parts(np.asarray(theta, dtype=float)[None]).items()}
+        d = self.drawing
+        mag = Magnet(d.magnet.diameter, d.magnet.height, float(p["pol"]), tuple(float(c) for c in p["rest"]),
+                     tuple(float(c) for c in p["offset"]), tuple(float(c) for c in p["tilt"]))
+        return replace(d, name=name or f"{d.name}-unit", description=description, magnet=mag, positions=p["pos"],
+                       axes=p["axes"], gains=p["gain"], offsets=p["off"], ambient=p["ambient"],
+                       stage_map=p["map"], source={})
+
+    def readings(self, thetas: np.ndarray, poses) -> np.ndarray:
+        """Noise-free readings (K, n, N) of K units (rows of ``thetas``) at n poses, in the transfer's units,
+        without the ADC's quantisation (a gmr reading is clipped to the ADC's range)."""
+        d = self.drawing
+        poses = as_poses(poses)
+        p = self._parts(thetas)
+        R = rotation_matrices(poses[:, 3], poses[:, 4])[None] @ rotation_matrices(p["tilt"][:, 0], p["tilt"][:, 1])[:, None]
+        centre = p["rest"][:, None, :] + np.einsum("nj,kij->kni", poses[:, :3], p["map"])
+        rel = p["pos"][:, None, :, :] - centre[:, :, None, :]
+        local = np.einsum("knmj,knjl->knml", rel, R)
+        axes = np.einsum("kmj,knjl->knml", p["axes"], R)
+        b = cylinder_projection(local.reshape(-1, 3), axes.reshape(-1, 3), d.magnet.diameter, d.magnet.height,
+                                1e3).reshape(local.shape[:3])
+        b = b * p["pol"][:, None, None] + np.einsum("kmj,kj->km", p["axes"], p["ambient"])[:, None, :]
+        mag = np.abs(b)
+        if d.transfer == "raw":
+            return p["gain"][:, None, :] * mag + p["off"][:, None, :]
+        g = d.gmr
+        volts_per_mt = g.supply * g.sensitivity * 1e-3 * OE_PER_MT * g.gain
+        out = g.offset + volts_per_mt * (p["gain"][:, None, :] * np.minimum(mag, g.saturation) + p["off"][:, None, :])
+        return np.clip(out, g.adc_min, g.adc_max)
+
+    def draw(self, rng: np.random.Generator) -> np.ndarray:
+        """One unit's parameters: each normal with its prior spread, clipped at 3 sigma."""
+        return np.clip(rng.standard_normal(self.size), -CLIP_SIGMA, CLIP_SIGMA) * self.prior_sd
+
+
+def draw_unit(drawing: Sensor, seed: int) -> tuple[Sensor, np.ndarray]:
+    """A unit of ``drawing`` drawn within its tolerances (seed ``seed``), and its parameters."""
+    space = UnitSpace.of(drawing)
+    theta = space.draw(np.random.default_rng(np.random.SeedSequence([seed, 0x756E6974])))
+    unit = space.sensor(theta, f"{drawing.name}-unit-{seed}",
+                        f"a unit of {drawing.name} drawn within its tolerances (seed {seed})")
+    return unit, theta
+
+
+# --- unit files ----------------------------------------------------------------------------------
+
+
+def _num(x: float) -> str:
+    return repr(float(x))
+
+
+def _vec(v) -> str:
+    return "[" + ", ".join(_num(x) for x in v) + "]"
+
+
+def unit_toml(unit: Sensor, drawing: str, provenance: dict | None = None) -> str:
+    """The sensor file of a built unit: every element as a list entry with its gain and offset, the magnet's
+    offset and tilt, the ambient field, the stage map and the tolerances. Numbers round-trip."""
+    m = unit.magnet
+    lines = [f"# A built unit of the drawing {drawing!r}: fitgen reads it as any sensor file (--sensor).",
+             f"name = {_quote(unit.name)}", f"description = {_quote(unit.description)}", "", "[unit]",
+             f"drawing = {_quote(drawing)}"]
+    for k, v in (provenance or {}).items():
+        lines.append(f"{k} = {_quote(v) if isinstance(v, str) else v if isinstance(v, int) else _num(v)}")
+    lines += ["", "[magnet]", 'shape = "cylinder"', f"diameter = {_num(m.diameter)}", f"height = {_num(m.height)}",
+              f"polarization = {_num(m.polarization)}  # T", f"offset = {_vec(m.offset)}  # mm, rest centre from the drawing's",
+              f"tilt = {_vec(m.tilt)}  # deg, rest thx, thy", "", "[board]", f"thickness = {_num(unit.board_thickness)}",
+              f"gap = {_num(unit.board_gap)}"]
+    for k in range(unit.n_elements):
+        p, a = unit.positions[k], unit.axes[k]
+        az, r = math.degrees(math.atan2(p[1], p[0])), math.hypot(p[0], p[1])
+        lines += ["", f"[[elements.list]]  # element {k + 1}: azimuth {az:.4f} deg, radius {r:.4f} mm",
+                  f"position = {_vec(p)}", f"axis = {_vec(a)}", f"gain = {_num(unit.gains[k])}",
+                  f"offset = {_num(unit.offsets[k])}  # mT"]
+    lines += ["", "[ambient]", f"field = {_vec(unit.ambient)}  # mT", "", "[stage]",
+              "# magnet displacement = map x stage displacement (the labels are the stage's)",
+              "map = [" + ", ".join(_vec(row) for row in unit.stage_map) + "]", "", "[transfer]",
+              f"kind = {_quote(unit.transfer)}", "", "[transfer.raw]"]
+    lines += [f"{k} = {_num(v) if isinstance(v, float) else v}" for k, v in vars(unit.raw).items()]
+    lines += ["", "[transfer.gmr]"]
+    lines += [f"{k} = {_num(v) if isinstance(v, float) else v}" for k, v in vars(unit.gmr).items()]
+    lines += ["", "[tolerances]  # standard deviations (docs/calibration.md)"]
+    lines += [f"{k} = {_num(v)}" for k, v in unit.tolerances.to_dict().items()]
+    return "\n".join(lines) + "\n"
+
+
+def _quote(s: str) -> str:
+    return '"' + str(s).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def unit_path(data_path: str | Path) -> Path:
+    """Where a dataset's unit file goes: beside it, ``<stem>.unit.toml``."""
+    return Path(data_path).with_suffix(".unit.toml")
+
+
+def write_unit(path: str | Path, unit: Sensor, drawing: str, provenance: dict | None = None) -> Path:
+    return write_atomic(path, unit_toml(unit, drawing, provenance))
