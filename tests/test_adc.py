@@ -30,6 +30,16 @@ def rig(spec, sensor, pose=POSE, settings=Settings(), **kw):
     return bus, AdcArray(bus, cmap, clock=clock), clock
 
 
+def ads1115_bus(*volts):
+    """(VirtualClock, SimBus) with one ADS1115 at 0x48, its AIN0, AIN1, ... at ``volts``."""
+    clock = VirtualClock()
+    bus = SimBus(clock)
+    bus.add_ads1115(0x48)
+    for pin, v in enumerate(volts):
+        bus.set_pin(0x48, pin, v)
+    return clock, bus
+
+
 # --- register maps -----------------------------------------------------------------
 
 
@@ -61,9 +71,7 @@ def test_simbus_has_the_smbus2_calls_with_the_same_arguments():
 
 
 def test_ads1115_model_registers_byte_order_and_conversion_time():
-    clock = VirtualClock()
-    bus = SimBus(clock)
-    bus.add_ads1115(0x48)
+    clock, bus = ads1115_bus()
     assert bus.read_i2c_block_data(0x48, 1, 2) == [0x85, 0x83]  # power-on config, MSB first
     assert bus.read_word_data(0x48, 1) == 0x8385  # an SMBus word comes low byte first: swapped
     bus.set_pin(0x48, 0, 1.0)
@@ -95,11 +103,7 @@ def test_single_conversions_through_the_drivers():
 
 
 def test_ads1115_model_pga_clipping_and_negative_differential():
-    clock = VirtualClock()
-    bus = SimBus(clock)
-    bus.add_ads1115(0x48)
-    bus.set_pin(0x48, 0, 2.5)
-    bus.set_pin(0x48, 1, 3.0)
+    clock, bus = ads1115_bus(2.5, 3.0)
 
     def convert(msb, lsb):
         bus.write_i2c_block_data(0x48, 1, [msb, lsb])
@@ -116,11 +120,7 @@ def test_ads1115_model_pga_clipping_and_negative_differential():
 
 
 def test_ads1115_model_continuous_mode_applies_a_new_input_after_the_conversion_under_way():
-    clock = VirtualClock()
-    bus = SimBus(clock)
-    bus.add_ads1115(0x48)
-    bus.set_pin(0x48, 0, 1.0)
-    bus.set_pin(0x48, 1, 2.0)
+    clock, bus = ads1115_bus(1.0, 2.0)
     period = 1 / 860
     bus.write_i2c_block_data(0x48, 1, [0x42, 0xE3])  # continuous, AIN0
     clock.sleep(1.5 * period)
