@@ -125,3 +125,14 @@ def assert_c_equals_python(model, inputs):
             ref, ref_status = model.predict(inputs, with_status=True, precision=precision)
             np.testing.assert_array_equal(status, ref_status)
             np.testing.assert_array_equal(out, ref)
+
+
+def verify_on_arm_linux(model, precision: str, style: str):
+    """verify() of ``model``'s C built for 32-bit ARM Linux, run under qemu-arm on 300 random vectors: it must pass."""
+    from fitgen.c.verify import verify
+
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    res = verify(model, precision, style, cc="arm-linux-gnueabihf-gcc -static", runner="qemu-arm", n_random=300)
+    assert res.ok, res.failures
+    return res

@@ -16,7 +16,7 @@ from fitgen.equations.terms import EXPONENTS, Term
 from fitgen.c.compiled import CompiledModel
 from fitgen.c.verify import verify
 
-from conftest import assert_one_line_error, require_tool, run_cli
+from conftest import assert_one_line_error, require_tool, run_cli, verify_on_arm_linux
 
 
 @pytest.fixture(scope="module")
@@ -149,14 +149,8 @@ def test_verify_catches_a_wrong_compiler_result(paper_model, tmp_path):
 
 
 def test_arm_linux_build_under_qemu(paper_model):
-    require_tool("arm-linux-gnueabihf-gcc")
-    require_tool("qemu-arm")
-    res = verify(paper_model, "float", "table", cc="arm-linux-gnueabihf-gcc -static", runner="qemu-arm",
-                 n_random=300)
-    assert res.ok, res.failures
-    res = verify(paper_model, "double", "unrolled", cc="arm-linux-gnueabihf-gcc -static", runner="qemu-arm",
-                 n_random=300)
-    assert res.ok, res.failures
+    verify_on_arm_linux(paper_model, "float", "table")
+    verify_on_arm_linux(paper_model, "double", "unrolled")
 
 
 @pytest.mark.parametrize("cpu", [["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16"],

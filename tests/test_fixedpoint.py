@@ -19,7 +19,7 @@ from fitgen.equations.terms import FAMILIES, Term
 from fitgen.c.compiled import CompiledModel, compile_checked
 from fitgen.c.verify import make_code_vectors, verify
 
-from conftest import assert_one_line_error, require_tool, run_cli
+from conftest import assert_one_line_error, require_tool, run_cli, verify_on_arm_linux
 
 M0 = ["-mcpu=cortex-m0", "-mthumb", "-mfloat-abi=soft"]
 
@@ -393,11 +393,7 @@ def test_verify_cli(paper_fixed_model, tmp_path):
 
 def test_arm_linux_build_under_qemu(paper_fixed_model):
     """32-bit ARM (its own 64-bit multiply, shift and divide helpers) gives the same integers."""
-    require_tool("arm-linux-gnueabihf-gcc")
-    require_tool("qemu-arm")
-    res = verify(paper_fixed_model, "fixed", "unrolled", cc="arm-linux-gnueabihf-gcc -static", runner="qemu-arm",
-                 n_random=300)
-    assert res.ok, res.failures
+    res = verify_on_arm_linux(paper_fixed_model, "fixed", "unrolled")
     assert np.all(res.max_lsb_diff == 0)
 
 
