@@ -43,7 +43,8 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 
-from host.stage import MACHINE_AXES, STAGE_AXES, AxisMap
+from host.gcode import MACHINE_AXES
+from host.stagesettings import STAGE_AXES, AxisMap
 
 GRBL_VERSION = "1.1h"
 MARLIN_VERSION = "2.1.2.1"
@@ -602,7 +603,9 @@ def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", s
     from host.channelmap import parse_spec
     from host.clock import VirtualClock
     from host.simbus import SimBus
-    from host.stage import AxisMap, GcodeController, PoseStage, StageSettings, parse_approach, parse_ranges
+    from host.gcode import GcodeController
+    from host.stage import PoseStage
+    from host.stagesettings import StageSettings, parse_approach, parse_ranges
 
     contact, start = (12.0, 8.0, 4.0), (10.0, 10.0, 10.0)
     cmap = parse_spec("ads1115@0x48:0-3,ads1115@0x49:0-3")
