@@ -35,6 +35,7 @@ from fitgen.physics.pose import POSE_NAMES, as_poses
 
 from host.adc import AdcArray
 from host.clock import REAL_CLOCK
+from host.prompt import ask_line
 from host.readout import measure
 
 
@@ -188,13 +189,8 @@ def enter_waiter(schedule: Schedule, stdin=None, stderr=None):
     total = len(schedule.poses)
 
     def wait(i: int, pose) -> bool:
-        stderr.write(f"pose {i + 1}/{total}: {schedule.describe(i)}; set it, then press Enter (q to stop) ")
-        stderr.flush()
-        line = stdin.readline()
-        if not line or line.strip().lower() in ("q", "quit"):
-            stderr.write("\n")
-            return False
-        return True
+        prompt = f"pose {i + 1}/{total}: {schedule.describe(i)}; set it, then press Enter (q to stop) "
+        return ask_line(stdin, stderr, prompt) is not None
 
     return wait
 

@@ -30,8 +30,8 @@ class DeviceError(Exception):
         super().__init__(f"the device answered {p.type_name(request_type)} with ERROR {p.error_name(code)}")
 
 
-def _reason(exc: BaseException) -> str:
-    """The OS's words for why a port did not open ("connection refused"), else pyserial's."""
+def port_error(exc: BaseException) -> str:
+    """The OS's words for why a port failed ("connection refused"), else pyserial's first line."""
     for e in (exc.__cause__, exc.__context__, exc):
         if isinstance(e, OSError) and e.strerror:
             return e.strerror[:1].lower() + e.strerror[1:]
@@ -48,7 +48,18 @@ def no_nagle(port) -> None:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
 
-class Device:
+class PortOwner:
+    """Something that holds an open pyserial port as ``port`` until ``close``."""
+
+    def close(self) -> None:
+        if self.port is not None:
+            try:
+                self.port.close()
+            finally:
+                self.port = None
+
+
+class Device(PortOwner):
     """Requests and replies over one open port. Use ``Device.open(url)`` as a context manager."""
 
     def __init__(self, port, timeout: float = 1.0, name: str = ""):
@@ -70,16 +81,9 @@ class Device:
         try:
             port = serial.serial_for_url(url, baudrate=115200, timeout=POLL, write_timeout=max(timeout, POLL))
         except (serial.SerialException, ValueError, OSError) as exc:
-            raise InputError(f"cannot open port {url}: {_reason(exc)}") from None
+            raise InputError(f"cannot open port {url}: {port_error(exc)}") from None
         no_nagle(port)
         return cls(port, timeout, url)
-
-    def close(self) -> None:
-        if self.port is not None:
-            try:
-                self.port.close()
-            finally:
-                self.port = None
 
     def __enter__(self):
         return self
@@ -103,7 +107,7 @@ class Device:
         except serial.SerialTimeoutException:
             raise NoAnswer(f"{self.name}: the device does not take the bytes written to it") from None
         except (serial.SerialException, OSError) as exc:
-            raise InputError(f"{self.name}: {_reason(exc)}") from None
+            raise InputError(f"{self.name}: {port_error(exc)}") from None
 
     def send(self, type: int, seq: int, payload: bytes = b"") -> None:
         self.send_raw(p.encode_frame(type, seq, payload))
@@ -119,7 +123,7 @@ class Device:
             try:
                 data = self._read_some()
             except (serial.SerialException, OSError) as exc:
-                raise InputError(f"{self.name}: {_reason(exc)}") from None
+                raise InputError(f"{self.name}: {port_error(exc)}") from None
             if data:
                 self._backlog += self.reader.feed(data)
                 if self._backlog:

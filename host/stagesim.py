@@ -1,4 +1,4 @@
-"""A simulated G-code stage: a Marlin or GRBL controller on a loopback socket or a pty, moving a simulated sensor.
+"""A simulated G-code stage: a Marlin or GRBL controller moving a simulated sensor (host.stageserver serves it).
 
 ``SimRig`` is the mechanics: the carriage's position (machine coordinates plus
 the offset a reset or homing sets), the tool's true position behind it (a dead
@@ -25,63 +25,31 @@ is the reset button: the carriage stays where it is and its coordinates restart 
 ``inject(kind, at_move)`` makes the controller fail at its ``at_move``-th G1:
 ``error`` (GRBL error:33 / Marlin Error: and a halt), ``alarm`` (GRBL ALARM:1, a hard limit),
 ``silent`` (no answer ever again), ``reset`` (a brown-out).
+
+``simulated_stage_capture`` is a whole ``capture --stage`` run against them.
 """
 
 from __future__ import annotations
 
-import math
-import os
 import re
-import select
-import socket
 import threading
 import time
 from collections import deque
-from pathlib import Path
 
 import numpy as np
 
 from fitgen.base.errors import InputError
 
-from host.stage import MACHINE_AXES, STAGE_AXES, AxisMap
+from host.gcode import MACHINE_AXES
+from host.stageserver import PoseFile, PtyServer, SocketServer, pose_file_motion
+from host.stagesettings import STAGE_AXES, AxisMap
+
+# fitgen/app/host_cli.py imports the serving side's names from here too
+__all__ = ["PoseFile", "PtyServer", "SimController", "SimRig", "SocketServer", "parse_matrix", "pose_file_motion",
+           "simulated_stage_capture"]
 
 GRBL_VERSION = "1.1h"
 MARLIN_VERSION = "2.1.2.1"
-
-
-class PoseFile:
-    """The magnet's pose as one line of five numbers in a file, replaced atomically at every change."""
-
-    def __init__(self, path: str | Path):
-        self.path = Path(path)
-
-    def set_pose(self, pose) -> None:
-        tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        tmp.write_text(",".join(repr(float(x)) for x in pose) + "\n")
-        os.replace(tmp, self.path)
-
-
-def pose_file_motion(path: str | Path):
-    """A ``SensorFeed.motion`` function reading a :class:`PoseFile` (re-read when it changes; rest until it exists)."""
-    path = Path(path)
-    cache = {"key": None, "pose": np.zeros(5)}
-
-    def motion(t: float) -> np.ndarray:
-        try:
-            st = path.stat()
-        except FileNotFoundError:
-            return cache["pose"]
-        key = (st.st_mtime_ns, st.st_size, st.st_ino)
-        if key != cache["key"]:
-            try:
-                vals = [float(x) for x in path.read_text().split(",")]
-            except (OSError, ValueError):
-                return cache["pose"]  # replaced atomically, so this is a file not yet written: keep the last
-            if len(vals) == 5 and all(math.isfinite(v) for v in vals):
-                cache["key"], cache["pose"] = key, np.array(vals)
-        return cache["pose"]
-
-    return motion
 
 
 class SimRig:
@@ -454,129 +422,6 @@ class SimController:
         self._say(f"<{state}|MPos:{pos[0]:.3f},{pos[1]:.3f},{pos[2]:.3f}|FS:{feed or 0:g},0>")
 
 
-# --- transports --------------------------------------------------------------------------------
-
-
-class _Server:
-    def __init__(self, controller: SimController, tick: float = 0.002):
-        self.ctrl, self.tick = controller, tick
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    def start(self):
-        self._thread = threading.Thread(target=self._run, name=f"stage-sim-{self.ctrl.flavor}", daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5)
-        self._close()
-
-    def _close(self) -> None:
-        pass
-
-    def __enter__(self):
-        return self.start()
-
-    def __exit__(self, *exc):
-        self.stop()
-
-
-class SocketServer(_Server):
-    """Serves the controller on 127.0.0.1 (one client at a time, as a serial port): ``url`` is socket://..."""
-
-    def __init__(self, controller: SimController, port: int = 0, host: str = "127.0.0.1", **kw):
-        super().__init__(controller, **kw)
-        self.sock = socket.socket()
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            self.sock.bind((host, port))
-        except OSError as exc:
-            self.sock.close()
-            raise InputError(f"cannot serve on {host}:{port}: {exc.strerror}") from None
-        self.sock.listen(1)
-        self.port = self.sock.getsockname()[1]
-        self.url = f"socket://{host}:{self.port}"
-
-    def _run(self) -> None:
-        conn = None
-        try:
-            while not self._stop.is_set():
-                if conn is None:
-                    r, _, _ = select.select([self.sock], [], [], 0.05)
-                    self.ctrl.step()
-                    self.ctrl.take_output()  # nobody listens: what the controller says is lost, as on a wire
-                    if r:
-                        conn, _ = self.sock.accept()
-                        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                    continue
-                r, _, _ = select.select([conn], [], [], self.tick)
-                if r:
-                    try:
-                        data = conn.recv(4096)
-                    except OSError:
-                        data = b""
-                    if not data:  # the host went away; the controller carries on
-                        conn.close()
-                        conn = None
-                        continue
-                    self.ctrl.receive(data)
-                self.ctrl.step()
-                out = self.ctrl.take_output()
-                if out:
-                    try:
-                        conn.sendall(out)
-                    except OSError:
-                        conn.close()
-                        conn = None
-        finally:
-            if conn is not None:
-                conn.close()
-
-    def _close(self) -> None:
-        self.sock.close()
-
-
-class PtyServer(_Server):
-    """Serves the controller on a pseudo-terminal: ``url`` is the path of its terminal side (/dev/pts/N)."""
-
-    def __init__(self, controller: SimController, **kw):
-        import tty
-
-        super().__init__(controller, **kw)
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)  # no echo, no line editing, until a client sets its own mode
-        self.url = os.ttyname(self.slave)  # keeping the slave open keeps the pty alive between clients
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            r, _, _ = select.select([self.master], [], [], self.tick)
-            if r:
-                try:
-                    data = os.read(self.master, 4096)
-                except OSError:
-                    data = b""
-                if data:
-                    self.ctrl.receive(data)
-            self.ctrl.step()
-            out = self.ctrl.take_output()
-            while out:
-                try:
-                    n = os.write(self.master, out)
-                except OSError:
-                    break
-                out = out[n:]
-
-    def _close(self) -> None:
-        for fd in (self.master, self.slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-
-
 def parse_matrix(spec: str) -> np.ndarray:
     """``a,b,c;d,e,f;g,h,i`` (rows) -> 3x3."""
     try:
@@ -602,7 +447,9 @@ def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", s
     from host.channelmap import parse_spec
     from host.clock import VirtualClock
     from host.simbus import SimBus
-    from host.stage import AxisMap, GcodeController, PoseStage, StageSettings, parse_approach, parse_ranges
+    from host.gcode import GcodeController
+    from host.stage import PoseStage
+    from host.stagesettings import StageSettings, parse_approach, parse_ranges
 
     contact, start = (12.0, 8.0, 4.0), (10.0, 10.0, 10.0)
     cmap = parse_spec("ads1115@0x48:0-3,ads1115@0x49:0-3")

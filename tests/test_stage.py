@@ -21,9 +21,12 @@ from host.capture import capture, load_schedule
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
 from host.simbus import SimBus
-from host.stage import (AxisMap, GcodeController, PoseStage, StageError, StageSettings, StageState, choose_zero,
-                        jog_to_zero, parse_approach, parse_ranges, parse_zero)
-from host.stagesim import PoseFile, PtyServer, SimController, SimRig, SocketServer
+from host.gcode import GcodeController, StageError
+from host.stage import PoseStage, jog_to_zero
+from host.stageserver import PoseFile, PtyServer, SocketServer
+from host.stagesettings import AxisMap, StageSettings, parse_approach, parse_ranges
+from host.stagesim import SimController, SimRig
+from host.stagezero import StageState, choose_zero, parse_zero
 
 from conftest import assert_one_line_error
 

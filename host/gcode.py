@@ -1,0 +1,363 @@
+"""A Marlin or GRBL controller over pyserial: the G-code line protocol and what each dialect says.
+
+``GcodeController`` sends one command at a time, each answered by ``ok`` (or
+``error:N`` / ``Error:`` / ``ALARM:N`` / ``!!``, all faults) within a time limit
+that a Marlin ``busy:`` keepalive extends; every line it reads is length-checked;
+a move is ``G1`` (absolute, ``G90``, with a feed) then a wait for its end (Marlin
+``M400``, GRBL ``G4 P0`` then ``?`` until Idle) and a position check (``M114`` /
+the status report) against the target.
+
+Faults of the controller raise ``StageError`` (the CLI: one line, exit status 1,
+rows kept); bad settings raise ``InputError`` before any motion.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+
+from host.device import PortOwner, no_nagle, port_error
+
+MACHINE_AXES = ("X", "Y", "Z")
+FLAVORS = ("marlin", "grbl")
+MAX_LINE = 256  # longest line accepted from a controller (GRBL's longest report is about 100)
+MAX_COMMAND = 70  # GRBL's line buffer holds 80 characters with the newline; Marlin's 96
+POLL = 0.02  # seconds one read of the port blocks at most
+POSITION_TOL = 0.02  # mm: reported against commanded position (Marlin prints 2 decimals, GRBL steps)
+
+GRBL_BANNER = re.compile(r"^Grbl (\S+)")
+GRBL_ERRORS = {1: "expected command letter", 2: "bad number format", 3: "invalid $ statement",
+               5: "homing is not enabled in the settings", 8: "$ command needs Idle", 9: "G-code locked out "
+               "during alarm or jog", 11: "line too long", 15: "jog target exceeds machine travel",
+               20: "unsupported or invalid G-code command", 22: "feed rate not set", 33: "invalid motion target"}
+GRBL_ALARMS = {1: "hard limit triggered", 2: "soft limit: the target exceeds the machine's travel",
+               3: "reset while in motion, position lost", 4: "probe fail", 5: "probe fail",
+               6: "homing fail: reset during homing", 8: "homing fail: pull-off did not clear the switch",
+               9: "homing fail: no limit switch found"}
+_NUM = r"(-?\d+(?:\.\d*)?)"
+_MARLIN_POS = re.compile(rf"X:{_NUM}\s*Y:{_NUM}\s*Z:{_NUM}")
+
+
+class StageError(RuntimeError):
+    """The controller failed: an error or alarm, a halt, silence, a reset, or a position not the commanded one."""
+
+
+def stage_url(spec: str) -> str:
+    """``gcode:URL`` -> URL (a device path or a pyserial URL such as socket://127.0.0.1:PORT)."""
+    kind, sep, url = spec.partition(":")
+    if not sep or kind != "gcode" or not url.strip():
+        raise InputError(f"--stage {spec!r}: expected gcode:URL, e.g. gcode:/dev/ttyUSB0 or "
+                         "gcode:socket://127.0.0.1:PORT")
+    return url.strip()
+
+
+class GcodeController(PortOwner):
+    """One Marlin or GRBL controller over an open pyserial port: commands, moves, position, homing."""
+
+    def __init__(self, port, name: str = "stage", *, timeout: float = 5.0, log=None):
+        self.port, self.name = port, name
+        self.timeout = float(timeout)
+        self.flavor: str | None = None
+        self.firmware = ""  # the banner or firmware name, as the controller gave it
+        self.banner_seen = False  # a start-up banner since the port opened: the controller has just reset
+        self.alarm = ""  # GRBL's alarm state at connect ("" if none)
+        self.homed = False  # homed during this connection
+        self.wco = np.zeros(3)  # GRBL: work coordinate offset (MPos - WPos)
+        self.log = log  # optional callable(str) for each line in and out
+        self._buf = bytearray()
+
+    @classmethod
+    def open(cls, url: str, *, baud: int = 115200, timeout: float = 5.0, log=None) -> "GcodeController":
+        import serial
+
+        try:
+            port = serial.serial_for_url(url, baudrate=baud, timeout=POLL, write_timeout=timeout)
+        except (serial.SerialException, ValueError, OSError) as exc:
+            raise InputError(f"cannot open stage {url}: {port_error(exc)}") from None
+        no_nagle(port)  # one short line each way
+        return cls(port, url, timeout=timeout, log=log)
+
+    # -- bytes and lines
+
+    def _write(self, data: bytes) -> None:
+        import serial
+
+        if self.log:
+            self.log(f"> {data.decode('ascii', 'replace').rstrip()}")
+        try:
+            self.port.write(data)
+            self.port.flush()
+        except (serial.SerialException, OSError) as exc:
+            raise StageError(f"{self.name}: cannot write to the controller: {port_error(exc)}") from None
+
+    def send(self, line: str) -> None:
+        if len(line) > MAX_COMMAND or not line.isascii() or "\n" in line or "\r" in line:
+            raise InputError(f"G-code line {line!r} is not one ASCII line of at most {MAX_COMMAND} characters")
+        self._write(line.encode("ascii") + b"\n")
+
+    def read_line(self, deadline: float) -> str | None:
+        """The next line (without its end), or None when ``deadline`` (time.monotonic) passes first."""
+        import serial
+
+        while True:
+            k = self._buf.find(b"\n")
+            if k >= 0:
+                raw = bytes(self._buf[:k])
+                del self._buf[:k + 1]
+                if len(raw) > MAX_LINE:
+                    raise StageError(f"{self.name}: a line of {len(raw)} bytes from the controller (limit "
+                                     f"{MAX_LINE}): is it a G-code controller, at the right baud rate?")
+                text = raw.decode("ascii", "replace").strip("\r\x00 \t")
+                if self.log and text:
+                    self.log(f"< {text}")
+                if text:
+                    return text
+                continue
+            if len(self._buf) > MAX_LINE:
+                raise StageError(f"{self.name}: more than {MAX_LINE} bytes from the controller without a line end: "
+                                 "is it a G-code controller, at the right baud rate?")
+            if time.monotonic() >= deadline:
+                return None
+            try:
+                chunk = self.port.read(max(1, getattr(self.port, "in_waiting", 0) or 1))
+            except (serial.SerialException, OSError) as exc:
+                raise StageError(f"{self.name}: the connection to the controller broke: "
+                                 f"{port_error(exc)}") from None
+            self._buf += chunk
+
+    def _fault(self, text: str, what: str) -> StageError | None:
+        """The StageError an unsolicited or answer line means, or None if it is harmless."""
+        low = text.lower()
+        if low.startswith("error:"):
+            code = text[6:].strip()
+            if self.flavor == "marlin" or not code.isdigit():
+                return StageError(f"{self.name}: the controller answered {what} with {text!r}")
+            meaning = GRBL_ERRORS.get(int(code))
+            return StageError(f"{self.name}: the controller answered {what} with error:{code}"
+                              f"{f' ({meaning})' if meaning else ''}")
+        if text.startswith("ALARM:"):
+            code = text[6:].strip()
+            meaning = GRBL_ALARMS.get(int(code)) if code.isdigit() else None
+            return StageError(f"{self.name}: the controller raised ALARM:{code}{f' ({meaning})' if meaning else ''} "
+                              f"during {what}; home it (--home) or unlock it (--unlock), then set the zero again")
+        if text == "!!" or "halted" in low or "kill() called" in low:
+            return StageError(f"{self.name}: the controller halted ({text}) during {what}; reset it, home it and "
+                              "set the zero again")
+        if low.startswith("echo:unknown command"):
+            return StageError(f"{self.name}: the controller does not know {what} ({text})")
+        if GRBL_BANNER.match(text) or text == "start":
+            self.banner_seen = True
+            return StageError(f"{self.name}: the controller reset itself during {what} (it printed {text!r}); "
+                              "its position is lost: set the zero again")
+        return None
+
+    def command(self, line: str, *, timeout: float | None = None, what: str | None = None) -> list[str]:
+        """Send one line and wait for its ``ok``; the lines before it are returned."""
+        what = what or repr(line)
+        limit = self.timeout if timeout is None else timeout
+        self.send(line)
+        deadline = time.monotonic() + limit
+        got = []
+        while True:
+            text = self.read_line(deadline)
+            if text is None:
+                raise StageError(f"{self.name}: no answer to {what} within {limit:g} s; is the controller on, "
+                                 "and is the baud rate right?")
+            if text == "ok" or text.startswith("ok "):
+                return got
+            if "busy:" in text:  # Marlin's host keepalive: still working on a long command
+                deadline = max(deadline, time.monotonic() + self.timeout)
+                continue
+            fault = self._fault(text, what)
+            if fault is not None:
+                raise fault
+            got.append(text)
+
+    # -- start-up
+
+    def connect(self, flavor: str = "auto", *, boot_wait: float = 2.0) -> None:
+        """Read the start-up lines (a board that resets when its port opens prints a banner), then detect
+        or check the flavor and, on GRBL, the state and the work offset."""
+        if flavor not in ("auto",) + FLAVORS:
+            raise InputError(f"--stage-flavor {flavor!r}: one of auto, marlin, grbl")
+        lines = []
+        deadline = time.monotonic() + boot_wait
+        while True:
+            text = self.read_line(deadline)
+            if text is None:
+                break
+            lines.append(text)
+            deadline = time.monotonic() + 0.3  # a banner comes in a burst: stop once it is quiet
+        seen = None
+        for text in lines:
+            m = GRBL_BANNER.match(text)
+            if m:
+                seen, self.firmware = "grbl", text
+            elif text == "start" or text.startswith("echo:Marlin"):
+                seen = "marlin"
+                if text.startswith("echo:Marlin"):
+                    self.firmware = text[5:].strip()
+        self.banner_seen = seen is not None
+        if seen is None:
+            seen = self._probe()
+        if flavor != "auto" and seen != flavor:
+            raise InputError(f"{self.name}: --stage-flavor {flavor}, but the controller is {seen} "
+                             f"({self.firmware or 'by its answers'})")
+        self.flavor = seen
+        if seen == "grbl":
+            self.alarm = "Alarm" if self.status()[0].startswith("Alarm") else ""
+            if not self.alarm:
+                self._work_offset()
+
+    def _probe(self) -> str:
+        """No banner: ask. Marlin answers M115 with its firmware name; GRBL answers it with error:N."""
+        self.send("M115")
+        deadline = time.monotonic() + self.timeout
+        name = ""
+        while True:
+            text = self.read_line(deadline)
+            if text is None:
+                raise StageError(f"{self.name}: no answer to M115 within {self.timeout:g} s; is the controller on, "
+                                 "and is the baud rate right?")
+            if text.startswith("FIRMWARE_NAME:"):
+                name = text[len("FIRMWARE_NAME:"):].split(" SOURCE_CODE_URL")[0].strip()
+            elif text.lower().startswith("error:") and text[6:].strip().isdigit():
+                self.send("$I")  # GRBL: build info, then ok
+                info = self._until_ok("$I")
+                ver = next((t for t in info if t.startswith("[VER:")), "")
+                self.firmware = f"Grbl {ver[5:].split(':')[0]}" if ver else "Grbl"
+                return "grbl"
+            elif text == "ok" or text.startswith("ok "):
+                if "marlin" not in name.lower():
+                    raise InputError(f"{self.name}: the controller answered M115 with firmware {name or 'unnamed'}; "
+                                     "give --stage-flavor marlin or grbl if it speaks one of them")
+                self.firmware = name
+                return "marlin"
+
+    def _until_ok(self, what: str) -> list[str]:
+        deadline = time.monotonic() + self.timeout
+        got = []
+        while True:
+            text = self.read_line(deadline)
+            if text is None:
+                raise StageError(f"{self.name}: no answer to {what} within {self.timeout:g} s")
+            if text == "ok" or text.startswith("ok "):
+                return got
+            if text.lower().startswith("error:"):
+                raise self._fault(text, what)
+            got.append(text)
+
+    def _work_offset(self) -> None:
+        """GRBL reports MPos (or WPos); G1 targets are in work coordinates: WCO = G54 + G92 (+ G43.1 on Z)."""
+        wco = np.zeros(3)
+        for text in self.command("$#"):
+            m = re.match(r"\[(G54|G92|TLO):([^\]]*)\]", text)
+            if m:
+                vals = [float(v) for v in m.group(2).split(",")]
+                if m.group(1) == "TLO":
+                    wco[2] += vals[0]
+                else:
+                    wco += np.array(vals[:3])
+        self.wco = wco
+
+    # -- state and motion
+
+    def status(self) -> tuple[str, np.ndarray]:
+        """GRBL: the real-time ``?`` report: (state, work position)."""
+        self._write(b"?")  # real-time: no line end, answered at once, no ok
+        deadline = time.monotonic() + self.timeout
+        while True:
+            text = self.read_line(deadline)
+            if text is None:
+                raise StageError(f"{self.name}: no status report within {self.timeout:g} s after '?'")
+            if text.startswith("<") and text.endswith(">"):
+                return self._parse_status(text)
+            fault = self._fault(text, "a status query")
+            if fault is not None:
+                raise fault
+
+    def _parse_status(self, text: str) -> tuple[str, np.ndarray]:
+        fields = text[1:-1].split("|")
+        state = fields[0]
+        pos, kind = None, None
+        for f in fields[1:]:
+            name, _, val = f.partition(":")
+            if name in ("MPos", "WPos"):
+                pos, kind = np.array([float(v) for v in val.split(",")[:3]]), name
+            elif name == "WCO":
+                self.wco = np.array([float(v) for v in val.split(",")[:3]])
+        if pos is None:
+            raise StageError(f"{self.name}: a status report without a position: {text!r}")
+        return state, (pos - self.wco if kind == "MPos" else pos)
+
+    def position(self) -> np.ndarray:
+        """X, Y, Z in the coordinates G1 uses, as the controller reports them."""
+        if self.flavor == "grbl":
+            return self.status()[1]
+        for text in self.command("M114"):
+            m = _MARLIN_POS.search(text)
+            if m:
+                return np.array([float(v) for v in m.groups()])
+        raise StageError(f"{self.name}: M114 gave no position")
+
+    def wait_idle(self, timeout: float, what: str) -> None:
+        """Until every queued move has ended (Marlin M400; GRBL G4 P0, then Idle in the status report)."""
+        if self.flavor == "marlin":
+            self.command("M400", timeout=timeout, what=f"M400 after {what}")
+            return
+        self.command("G4 P0", timeout=timeout, what=f"G4 P0 after {what}")
+        deadline = time.monotonic() + self.timeout
+        while True:
+            state, _ = self.status()
+            if state.startswith("Idle"):
+                return
+            if state.startswith("Alarm"):
+                raise StageError(f"{self.name}: the controller went into ALARM during {what}; home it (--home) or "
+                                 "unlock it (--unlock), then set the zero again")
+            if time.monotonic() > deadline:
+                raise StageError(f"{self.name}: still {state} {self.timeout:g} s after {what} ended")
+            time.sleep(POLL)
+
+    def setup(self) -> None:
+        """Millimetres, absolute coordinates, feed per minute; Marlin's steppers on."""
+        self.command("G21")
+        self.command("G90")
+        self.command("M17" if self.flavor == "marlin" else "G94")
+
+    def move(self, target: dict[str, float], feed: float, *, start: np.ndarray | None = None) -> np.ndarray:
+        """G1 to ``target`` (machine axis -> mm) at ``feed`` mm/min, wait for its end, check the position."""
+        words = " ".join(f"{a}{target[a]:.3f}" for a in MACHINE_AXES if a in target)
+        line = f"G1 {words} F{feed:g}"
+        if start is None:
+            start = self.position()  # the move's length sets its time limit
+        travel = math.sqrt(sum((target[a] - start[i]) ** 2 for i, a in enumerate(MACHINE_AXES) if a in target))
+        self.command(line)
+        # the move's own time, twice over (acceleration), plus the answer's time limit
+        self.wait_idle(2.0 * travel / feed * 60.0 + self.timeout, line)
+        pos = self.position()
+        for i, a in enumerate(MACHINE_AXES):
+            if a in target and abs(pos[i] - round(target[a], 3)) > POSITION_TOL:
+                raise StageError(f"{self.name}: after {line!r} the controller reports {a}{pos[i]:g}: a move clamped "
+                                 "by its own software endstops, or lost steps")
+        return pos
+
+    def home(self, timeout: float) -> None:
+        """G28 (Marlin) or $H (GRBL); the time limit is for the whole cycle."""
+        self.command("G28" if self.flavor == "marlin" else "$H", timeout=timeout, what="homing")
+        self.homed = True
+        self.alarm = ""
+        if self.flavor == "grbl":
+            self._work_offset()
+
+    def unlock(self) -> None:
+        """GRBL's $X: out of ALARM without homing (the position is then whatever GRBL believes)."""
+        if self.flavor != "grbl":
+            raise InputError("--unlock is GRBL's $X; a Marlin controller has no alarm lock")
+        self.command("$X", what="$X (unlock)")
+        self.alarm = ""
+        self._work_offset()

@@ -1,0 +1,133 @@
+"""The zero of a stage run and what survives between runs: the state file beside the dataset.
+
+``StageState`` keeps the zero and the last position beside the dataset
+(``<output>.stage.json``) so that a resumed capture knows whether the controller
+was reset meanwhile; ``choose_zero`` keeps that zero while it holds, else takes
+it from ``--zero`` (``parse_zero``) or asks for it again.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import write_atomic
+
+from host.gcode import MACHINE_AXES, POSITION_TOL, GcodeController
+from host.stagesettings import AxisMap
+
+
+@dataclass
+class StageState:
+    """What a resumed capture needs of the stage: the zero, and where the last moves left it."""
+
+    flavor: str
+    axes: str
+    zero: dict  # machine axis -> mm: the pose origin (first contact with the resting sensor)
+    homed: bool  # the zero was taken on a homed machine: it holds after a reset and homing
+    position: list | None = None  # machine X, Y, Z after the last confirmed move
+    pending: list = field(default_factory=list)  # targets sent but not confirmed (a run stopped mid-move)
+
+    @staticmethod
+    def path_for(output: str | Path) -> Path:
+        return Path(str(output) + ".stage.json")
+
+    def save(self, output: str | Path) -> None:
+        write_atomic(self.path_for(output), json.dumps(self.__dict__, indent=2, sort_keys=True) + "\n")
+
+    @classmethod
+    def load(cls, output: str | Path) -> "StageState | None":
+        path = cls.path_for(output)
+        if not path.exists():
+            return None
+        try:
+            d = json.loads(path.read_text())
+            return cls(str(d["flavor"]), str(d["axes"]), {k: float(v) for k, v in d["zero"].items()},
+                       bool(d["homed"]), d.get("position"), list(d.get("pending") or []))
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise InputError(f"{path}: not a stage state ({exc}); remove it to set the zero again") from None
+
+
+def zero_still_valid(state: StageState | None, ctrl: GcodeController, axes: AxisMap, homed_now: bool) -> str:
+    """'' if ``state``'s zero holds for this connection, else why not (one clause)."""
+    if state is None:
+        return "the stage has no zero yet"
+    if state.axes != str(axes):
+        return f"the zero was taken with --stage-axes {state.axes}"
+    if state.flavor != ctrl.flavor:
+        return f"the zero was taken on a {state.flavor} controller"
+    if state.homed and homed_now:
+        return ""  # homing gives the same machine coordinates after any reset
+    if homed_now:
+        return "homing moved the machine since the zero was taken (the zero was set before homing)"
+    if ctrl.banner_seen:
+        return "the controller was reset (it printed its start-up banner on connect)"
+    pos = ctrl.position()
+    known = ([state.position] if state.position is not None else []) + list(state.pending)
+    for p in known:
+        p = np.array([p[a] for a in MACHINE_AXES]) if isinstance(p, dict) else np.asarray(p, dtype=float)
+        want = [MACHINE_AXES.index(m) for m, _, _ in axes.pairs]
+        if np.all(np.abs(pos[want] - p[want]) <= POSITION_TOL):
+            return ""
+    where = " ".join(f"{a}{v:g}" for a, v in zip(MACHINE_AXES, pos))
+    return (f"the controller reports {where}, not where the last run left it: it was reset or moved since the "
+            "zero was taken")
+
+
+def parse_zero(spec: str) -> str | dict[str, float]:
+    """``ask``, ``here``, or machine coordinates ``X=..,Y=..,Z=..`` (or three numbers)."""
+    s = spec.strip().lower()
+    if s in ("ask", "here"):
+        return s
+    from fitgen.base.parse import parse_assignments
+
+    if "=" in s:
+        vals = parse_assignments(spec.upper(), MACHINE_AXES, "--zero")
+    else:
+        try:
+            nums = [float(x) for x in s.replace(",", " ").split()]
+        except ValueError:
+            nums = []
+        if len(nums) != 3:
+            raise InputError(f"--zero {spec!r}: ask, here, or the machine coordinates X,Y,Z (e.g. 120.5,80,12.25)")
+        vals = dict(zip(MACHINE_AXES, nums))
+    if not all(math.isfinite(v) for v in vals.values()):
+        raise InputError(f"--zero {spec!r}: not finite")
+    return vals
+
+
+def choose_zero(ctrl: GcodeController, state: StageState | None, axes: AxisMap, spec, *, rows: int,
+                ask) -> tuple[dict[str, float], str]:
+    """The zero for this run and how it was had: kept from ``state`` while it holds, else from ``spec``
+    (``ask``: ``ask(reason)`` jogs with the user; ``here``: the current position, for a dataset without
+    rows only; or machine coordinates). Raises InputError when none can be had."""
+    reason = zero_still_valid(state, ctrl, axes, ctrl.homed)
+    if isinstance(spec, dict):
+        want = [m for m, _, _ in axes.pairs]
+        missing = [m for m in want if m not in spec]
+        if missing:
+            raise InputError(f"--zero: give {missing[0]} too (it is in --stage-axes {axes})")
+        zero = {m: float(spec[m]) for m in want}
+        if not reason and rows and any(abs(zero[m] - state.zero[m]) > POSITION_TOL for m in want):
+            raise InputError(f"--zero {' '.join(f'{m}{v:g}' for m, v in zero.items())} is not the zero the dataset's "
+                             f"{rows} rows were taken from ({' '.join(f'{m}{v:g}' for m, v in state.zero.items())}); "
+                             "choose another -o for another zero")
+        return zero, "given"
+    if not reason:
+        return dict(state.zero), "kept from the last run"
+    if spec == "here":
+        if rows:
+            raise InputError(f"{reason}; --zero here takes the zero only for a dataset without rows (the stage "
+                             "may stand anywhere now): set it at the prompt (--zero ask) or give --zero X,Y,Z")
+        pos = ctrl.position()
+        return {m: float(pos[MACHINE_AXES.index(m)]) for m, _, _ in axes.pairs}, "here"
+    zero = ask(reason)
+    if zero is None:
+        raise InputError(f"{reason}, and no zero was set: set it at the prompt, or give --zero X,Y,Z "
+                         "(machine coordinates of first contact)")
+    return zero, "set by jogging"
