@@ -325,8 +325,6 @@ def _text(raw: bytes) -> str:
     return raw.split(b"\0", 1)[0].decode("ascii", errors="replace")
 
 
-
-
 @dataclass(frozen=True)
 class DeviceInfo:
     protocol_version: int
@@ -358,8 +356,6 @@ class DeviceInfo:
     @property
     def style_name(self) -> str:
         return {0: "table", 1: "unrolled"}.get(self.style, f"style {self.style}")
-
-
 
 
 def unpack_info(payload: bytes) -> DeviceInfo:
