@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 from benchutil import log, table
+from hil.emulate import stop_process
 
 ROOT = Path(__file__).resolve().parent.parent
 ADC = "ads1115@0x48:0-3,ads1115@0x49:0-3"
@@ -108,12 +109,7 @@ class Version:
                 sys.exit(f"{self.name} {target}: {client.stderr.strip() or client.stdout.strip()}")
             arrivals = [float(x) for x in client.stdout.split()]
         finally:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            stop_process(proc, signal.SIGINT, timeout=20)
         return {"ready": t_ready - t_launch, "first": arrivals[0], "fifth": arrivals[-1],
                 "launch_to_first": t_ready - t_launch + arrivals[0]}
 

@@ -1,5 +1,6 @@
 """The reference firmware (``firmware_templates/firmware/``, protocol in docs/protocol.md) for a model:
-rendered into a folder next to its ``tm_model.h``, and built for a host process or QEMU's mps2-an386."""
+rendered into a folder next to its ``tm_model.h`` and the protocol's ``proto_defs.h`` (host.protocol_c),
+and built for a host process or QEMU's mps2-an386."""
 
 from __future__ import annotations
 
@@ -12,15 +13,17 @@ from pathlib import Path
 import jinja2
 
 from fitgen import __version__
-from fitgen.c.codegen import PRECISIONS, STYLES, write_header
+from fitgen.c.codegen import PRECISIONS, STYLES, render_blob_interpreter, write_header
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
 from fitgen.equations.model import Model
 from fitgen.c.compiled import WARNING_FLAGS
+from host.protocol_c import render_proto_defs
 
 PORTS = ("posix", "mps2", "microbit")
-COMMON_FILES = ("model_api.h", "proto.h", "proto.c", "cal.h", "cal.c", "device.h", "device.c", "hal.h", "adc.h",
-                "inputs.h")
+COMMON_FILES = ("model_api.h", "proto.h", "proto.c", "cal.h", "device.h", "device.c", "hal.h", "adc.h", "inputs.h")
+# written by render_firmware (besides tm_model.h): from the model, host/protocol.py, and cal.c.j2
+RENDERED = ("main.c", "proto_defs.h", "cal.c")
 # where the inputs come from: simulated triangle waves, or the ADC drivers through a channel map
 SIM_FILES = ("inputs_sim.c",)
 ADC_FILES = ("adc.c", "inputs_adc.c", "i2c_bridge.c")
@@ -102,6 +105,8 @@ def render_firmware(model: Model, folder: str | Path, *, precision: str = "float
     inputs = ADC_FILES if cmap is not None else SIM_FILES
     for name in COMMON_FILES + inputs + PORT_FILES[port]:
         write_atomic(folder / name, _source(name))
+    write_atomic(folder / "proto_defs.h", render_proto_defs())
+    write_atomic(folder / "cal.c", render_blob_interpreter())
     for name in (SIM_FILES if cmap is not None else ADC_FILES + ("adc_map.h", "inputs_options.h")) + ("tm_tempcomp.h",):
         (folder / name).unlink(missing_ok=True)  # the other kind of build's, from an earlier render
     if cmap is not None:
@@ -141,7 +146,8 @@ def build_firmware(folder: str | Path, port: str, cc: str | None = None) -> Path
     missing compiler is an InputError with the compiler's first error line."""
     _check_port(port)
     folder = Path(folder)
-    names = ("main.c",) + COMMON_FILES + (ADC_FILES if (folder / "inputs_adc.c").is_file() else SIM_FILES) \
+    names = RENDERED + COMMON_FILES \
+        + (ADC_FILES if (folder / "inputs_adc.c").is_file() else SIM_FILES) \
         + PORT_FILES[port]
     missing = [n for n in names if not (folder / n).is_file()]
     if missing or not (folder / "tm_model.h").is_file():

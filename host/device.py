@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import select
-import struct
 import time
 
 import numpy as np
@@ -228,14 +227,15 @@ class Device(PortOwner):
         for offset in range(0, len(blob), chunk):
             part = blob[offset:offset + chunk]
             reply = self.request(MsgType.CAL_DATA, p.pack_cal_data(offset, part))
-            if len(reply.payload) != 4 or struct.unpack("<I", reply.payload)[0] != offset + len(part):
+            got = reply.payload
+            if len(got) != p.CAL_DATA_REPLY.size or p.CAL_DATA_REPLY.unpack(got)[0] != offset + len(part):
                 raise p.ProtocolError(ErrorCode.BAD_LENGTH, f"CAL_DATA at {offset}: the device reports "
                                                             f"{reply.payload.hex()} received, "
                                                             f"expected {offset + len(part)}")
         reply = self.request(MsgType.CAL_COMMIT)
-        if len(reply.payload) != 32:
+        if len(reply.payload) != p.HASH_SIZE:
             raise p.ProtocolError(ErrorCode.BAD_LENGTH, f"CAL_COMMIT reply of {len(reply.payload)} bytes "
-                                                        "(expected a 32-byte hash)")
+                                                        f"(expected a {p.HASH_SIZE}-byte hash)")
         return reply.payload.hex()
 
     def read_calibration(self, limit: int = 1 << 20) -> bytes:
@@ -262,4 +262,4 @@ class Device(PortOwner):
     def bench(self, n: int, timeout: float | None = None) -> p.BenchResult:
         """``n`` estimates timed on the device: (ticks, tick_hz, n)."""
         wait = self.timeout + n * 1e-4 if timeout is None else timeout
-        return p.unpack_bench(self.request(MsgType.BENCH, struct.pack("<I", n), timeout=wait).payload)
+        return p.unpack_bench(self.request(MsgType.BENCH, p.pack_bench_request(n), timeout=wait).payload)

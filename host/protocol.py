@@ -2,11 +2,13 @@
 
     wire frame = COBS(body) 0x00
     body       = type:u8 seq:u8 len:u16 payload[len] crc:u32   (little-endian, crc = zlib.crc32)
+
+Its numbers and fixed records (:data:`LAYOUTS`) are the one description of the protocol: the firmware
+builds with them, rendered into C by :mod:`host.protocol_c`.
 """
 
 from __future__ import annotations
 
-import struct
 import zlib
 from dataclasses import dataclass
 from enum import IntEnum
@@ -14,17 +16,49 @@ from typing import Iterator, NamedTuple
 
 import numpy as np
 
+from fitgen.base.layout import Layout
+
 PROTOCOL_VERSION = 1
 MAX_PAYLOAD = 256
-HEADER_SIZE = 4  # type, seq, len
-CRC_SIZE = 4
+HEADER = Layout(("type", "B"), ("seq", "B"), ("len", "H"), then="payload[len], crc:u32")
+HEADER_SIZE = HEADER.size  # 4
+CRC = Layout(("crc", "I"))
+CRC_SIZE = CRC.size  # 4
 MIN_BODY = HEADER_SIZE + CRC_SIZE  # 8
 MAX_BODY = MIN_BODY + MAX_PAYLOAD  # 264
 MAX_ENCODED = 267  # the largest encoded frame the device accepts before the delimiter
 CAL_DATA_MAX = 248  # blob bytes per CAL_DATA (plus the 4-byte offset)
 CAL_READ_MAX = 256
-INFO_SIZE = 68
+BENCH_MAX = 1_000_000  # estimates per BENCH
+HASH_SIZE = 32
+SENSOR_ID_SIZE = 16
+FW_VERSION_SIZE = 12
 REPLY = 0x80  # reply type = request type | REPLY
+ADC_COUNTS = ("nack", "timeout", "stuck", "other", "retries", "resets")
+ADC_KINDS = ("ads1115", "ads7828")
+
+# the fixed records of the payloads
+INFO = Layout(("version", "B"), ("precision", "B"), ("n_inputs", "B"), ("n_outputs", "B"), ("cal_source", "B"),
+              ("style", "B"), ("max_payload", "H"), ("hash", f"{HASH_SIZE}s"), ("sensor_id", f"{SENSOR_ID_SIZE}s"),
+              ("fw_version", f"{FW_VERSION_SIZE}s"), then="the ADC block")
+INFO_SIZE = INFO.size  # 68
+ADC_BLOCK = Layout(("chips", "B"), then="chips x ADC_CHIP, then I2C_COUNTS")
+ADC_CHIP = Layout(("kind", "B"), ("address", "B"), ("inputs", "B"), ("pga", "B"), ("rate", "B"), ("mode", "B"))
+I2C_COUNTS = Layout(*((name, "I") for name in ADC_COUNTS))
+EVAL_RESULT = Layout(("status", "i"), then="n_outputs reals")
+STREAM = Layout(("period_ms", "H"), ("count", "H"))
+SAMPLE = Layout(("index", "H"), ("time_ms", "I"), ("status", "i"), then="n_inputs reals, n_outputs reals")
+CAL_BEGIN = Layout(("total", "I"), ("crc", "I"))
+CAL_DATA = Layout(("offset", "I"), then="1..CAL_DATA_MAX blob bytes")
+CAL_DATA_REPLY = Layout(("received", "I"))
+CAL_READ = Layout(("offset", "I"), ("length", "H"))
+BENCH = Layout(("n", "I"))
+BENCH_REPLY = Layout(("ticks", "Q"), ("tick_hz", "I"), ("n", "I"))
+ERROR = Layout(("code", "B"), ("request_type", "B"))
+LAYOUTS = {"HEADER": HEADER, "INFO": INFO, "ADC_BLOCK": ADC_BLOCK, "ADC_CHIP": ADC_CHIP, "I2C_COUNTS": I2C_COUNTS,
+           "EVAL_RESULT": EVAL_RESULT, "STREAM": STREAM, "SAMPLE": SAMPLE, "CAL_BEGIN": CAL_BEGIN,
+           "CAL_DATA": CAL_DATA, "CAL_DATA_REPLY": CAL_DATA_REPLY, "CAL_READ": CAL_READ, "BENCH": BENCH,
+           "BENCH_REPLY": BENCH_REPLY, "ERROR": ERROR}
 
 
 class MsgType(IntEnum):
@@ -157,8 +191,8 @@ class Frame:
 def frame_body(type: int, seq: int, payload: bytes = b"", crc: int | None = None) -> bytes:
     """The unencoded body; no MAX_PAYLOAD check (fuzzers build bad frames with it); ``crc`` overrides."""
     payload = bytes(payload)
-    head = struct.pack("<BBH", type, seq, len(payload)) + payload
-    return head + struct.pack("<I", crc32(head) if crc is None else crc)
+    head = HEADER.pack(type, seq, len(payload)) + payload
+    return head + CRC.pack(crc32(head) if crc is None else crc)
 
 
 def encode_frame(type: int, seq: int, payload: bytes = b"") -> bytes:
@@ -175,10 +209,10 @@ def decode_frame(encoded: bytes) -> Frame:
         raise ProtocolError(ErrorCode.BAD_FRAME, f"frame body of {len(body)} bytes is shorter than {MIN_BODY}")
     if len(body) > MAX_BODY:
         raise ProtocolError(ErrorCode.BAD_FRAME, f"frame body of {len(body)} bytes is longer than {MAX_BODY}")
-    type_, seq, length = struct.unpack_from("<BBH", body)
+    type_, seq, length = HEADER.unpack_from(body)
     if length != len(body) - MIN_BODY:
         raise ProtocolError(ErrorCode.BAD_FRAME, f"len {length} disagrees with a body of {len(body)} bytes")
-    (crc,) = struct.unpack_from("<I", body, len(body) - CRC_SIZE)
+    (crc,) = CRC.unpack_from(body, len(body) - CRC_SIZE)
     if crc != crc32(body[:-CRC_SIZE]):
         raise ProtocolError(ErrorCode.BAD_CRC, f"CRC mismatch: frame says {crc:08x}, "
                                                f"body gives {crc32(body[:-CRC_SIZE]):08x}")
@@ -264,7 +298,8 @@ def pack_eval(inputs: np.ndarray, real_dtype) -> bytes:
 
 
 def _eval_dtype(n_outputs: int, real_dtype) -> np.dtype:
-    return np.dtype([("status", "<i4"), ("out", np.dtype(real_dtype), (n_outputs,))])
+    head = [(name, "<" + code) for name, code in EVAL_RESULT.fields]
+    return np.dtype(head + [("out", np.dtype(real_dtype), (n_outputs,))])
 
 
 def unpack_eval_reply(payload: bytes, n_outputs: int, real_dtype) -> tuple[np.ndarray, np.ndarray]:
@@ -288,9 +323,6 @@ def pack_eval_reply(status, outputs, real_dtype) -> bytes:
 
 def _text(raw: bytes) -> str:
     return raw.split(b"\0", 1)[0].decode("ascii", errors="replace")
-
-
-_INFO = struct.Struct("<BBBBBBH32s16s12s")
 
 
 @dataclass(frozen=True)
@@ -326,41 +358,39 @@ class DeviceInfo:
         return {0: "table", 1: "unrolled"}.get(self.style, f"style {self.style}")
 
 
-ADC_COUNTS = ("nack", "timeout", "stuck", "other", "retries", "resets")
-ADC_KINDS = ("ads1115", "ads7828")
-
-
 def unpack_info(payload: bytes) -> DeviceInfo:
     """INFO's 68 bytes, and the ADC block a firmware that reads ADCs appends (docs/protocol.md)."""
     payload = bytes(payload)
     if len(payload) < INFO_SIZE:
         raise ProtocolError(ErrorCode.BAD_LENGTH, f"INFO reply of {len(payload)} bytes (expected {INFO_SIZE} or more)")
-    ver, prec, n_in, n_out, src, style, maxp, h, sid, fw = _INFO.unpack(payload[:INFO_SIZE])
+    ver, prec, n_in, n_out, src, style, maxp, h, sid, fw = INFO.unpack(payload[:INFO_SIZE])
     if prec >= len(PRECISIONS):
         raise ProtocolError(ErrorCode.BAD_ARG, f"INFO: unknown precision code {prec}")
     chips, counts = (), None
     if len(payload) > INFO_SIZE:
-        n = payload[INFO_SIZE]
-        if len(payload) != INFO_SIZE + 1 + 6 * n + 24:
+        (n,) = ADC_BLOCK.unpack_from(payload, INFO_SIZE)
+        start = INFO_SIZE + ADC_BLOCK.size
+        end = start + ADC_CHIP.size * n
+        if len(payload) != end + I2C_COUNTS.size:
             raise ProtocolError(ErrorCode.BAD_LENGTH, f"INFO reply of {len(payload)} bytes: its ADC block for {n} "
-                                                      f"chips needs {INFO_SIZE + 1 + 6 * n + 24}")
-        raw = payload[INFO_SIZE + 1: INFO_SIZE + 1 + 6 * n]
+                                                      f"chips needs {end + I2C_COUNTS.size}")
         chips = tuple((ADC_KINDS[r[0]] if r[0] < len(ADC_KINDS) else f"kind {r[0]}",) + tuple(r[1:])
-                      for r in (raw[i:i + 6] for i in range(0, 6 * n, 6)))
-        counts = dict(zip(ADC_COUNTS, struct.unpack("<6I", payload[INFO_SIZE + 1 + 6 * n:])))
+                      for r in (ADC_CHIP.unpack_from(payload, i) for i in range(start, end, ADC_CHIP.size)))
+        counts = dict(zip(ADC_COUNTS, I2C_COUNTS.unpack(payload[end:])))
     return DeviceInfo(ver, PRECISIONS[prec], n_in, n_out, src, style, maxp, h.hex(), _text(sid), _text(fw),
                       chips, counts)
 
 
 def pack_info(info: DeviceInfo) -> bytes:
     """The device side of INFO (fake devices and tests); the ADC block when ``adc_counts`` is set."""
-    head = _INFO.pack(info.protocol_version, PRECISIONS.index(info.precision), info.n_inputs, info.n_outputs,
+    head = INFO.pack(info.protocol_version, PRECISIONS.index(info.precision), info.n_inputs, info.n_outputs,
                       info.cal_source, info.style, info.max_payload, bytes.fromhex(info.model_hash),
                       info.sensor_id.encode("ascii"), info.firmware_version.encode("ascii"))
     if info.adc_counts is None:
         return head
-    chips = b"".join(bytes([ADC_KINDS.index(c[0]), *c[1:]]) for c in info.adc_chips)
-    return head + bytes([len(info.adc_chips)]) + chips + struct.pack("<6I", *(info.adc_counts[k] for k in ADC_COUNTS))
+    chips = b"".join(ADC_CHIP.pack(ADC_KINDS.index(c[0]), *c[1:]) for c in info.adc_chips)
+    counts = I2C_COUNTS.pack(*(info.adc_counts[k] for k in ADC_COUNTS))
+    return head + ADC_BLOCK.pack(len(info.adc_chips)) + chips + counts
 
 
 class StreamSample(NamedTuple):
@@ -371,11 +401,8 @@ class StreamSample(NamedTuple):
     outputs: np.ndarray
 
 
-_SAMPLE_HEAD = struct.Struct("<HIi")
-
-
 def stream_sample_size(n_inputs: int, n_outputs: int, real_size: int) -> int:
-    return _SAMPLE_HEAD.size + (n_inputs + n_outputs) * real_size
+    return SAMPLE.size + (n_inputs + n_outputs) * real_size
 
 
 def unpack_stream_sample(payload: bytes, n_inputs: int, n_outputs: int, real_dtype) -> StreamSample:
@@ -383,14 +410,14 @@ def unpack_stream_sample(payload: bytes, n_inputs: int, n_outputs: int, real_dty
     want = stream_sample_size(n_inputs, n_outputs, dt.itemsize)
     if len(payload) != want:
         raise ProtocolError(ErrorCode.BAD_LENGTH, f"STREAM sample of {len(payload)} bytes (expected {want})")
-    index, time_ms, status = _SAMPLE_HEAD.unpack_from(payload)
-    vals = np.frombuffer(bytes(payload), dtype=dt, offset=_SAMPLE_HEAD.size).astype(float)
+    index, time_ms, status = SAMPLE.unpack_from(payload)
+    vals = np.frombuffer(bytes(payload), dtype=dt, offset=SAMPLE.size).astype(float)
     return StreamSample(index, time_ms, status, vals[:n_inputs], vals[n_inputs:])
 
 
 def pack_stream_sample(index: int, time_ms: int, status: int, inputs, outputs, real_dtype) -> bytes:
     vals = np.concatenate([np.ravel(inputs), np.ravel(outputs)]).astype(float).astype(np.dtype(real_dtype))
-    return _SAMPLE_HEAD.pack(index & 0xFFFF, time_ms & 0xFFFFFFFF, status) + vals.tobytes()
+    return SAMPLE.pack(index & 0xFFFF, time_ms & 0xFFFFFFFF, status) + vals.tobytes()
 
 
 class BenchResult(NamedTuple):
@@ -407,41 +434,42 @@ class BenchResult(NamedTuple):
         return 1e6 * self.seconds / self.n if self.n else float("nan")
 
 
-_BENCH = struct.Struct("<QII")
-
-
 def unpack_bench(payload: bytes) -> BenchResult:
-    if len(payload) != _BENCH.size:
-        raise ProtocolError(ErrorCode.BAD_LENGTH, f"BENCH reply of {len(payload)} bytes (expected {_BENCH.size})")
-    return BenchResult(*_BENCH.unpack(bytes(payload)))
+    if len(payload) != BENCH_REPLY.size:
+        raise ProtocolError(ErrorCode.BAD_LENGTH, f"BENCH reply of {len(payload)} bytes (expected {BENCH_REPLY.size})")
+    return BenchResult(*BENCH_REPLY.unpack(bytes(payload)))
 
 
 def pack_bench(ticks: int, tick_hz: int, n: int) -> bytes:
-    return _BENCH.pack(ticks, tick_hz, n)
+    return BENCH_REPLY.pack(ticks, tick_hz, n)
 
 
 # request payloads
 def pack_stream(period_ms: int, count: int) -> bytes:
-    return struct.pack("<HH", period_ms, count)
+    return STREAM.pack(period_ms, count)
 
 
 def pack_cal_begin(size: int, crc: int) -> bytes:
-    return struct.pack("<II", size, crc)
+    return CAL_BEGIN.pack(size, crc)
 
 
 def pack_cal_data(offset: int, chunk: bytes) -> bytes:
-    return struct.pack("<I", offset) + bytes(chunk)
+    return CAL_DATA.pack(offset) + bytes(chunk)
 
 
 def pack_cal_read(offset: int, length: int) -> bytes:
-    return struct.pack("<IH", offset, length)
+    return CAL_READ.pack(offset, length)
+
+
+def pack_bench_request(n: int) -> bytes:
+    return BENCH.pack(n)
 
 
 def pack_error(code: int, request_type: int) -> bytes:
-    return struct.pack("<BB", code, request_type)
+    return ERROR.pack(code, request_type)
 
 
 def unpack_error(payload: bytes) -> tuple[int, int]:
-    if len(payload) != 2:
-        raise ProtocolError(ErrorCode.BAD_LENGTH, f"ERROR reply of {len(payload)} bytes (expected 2)")
-    return payload[0], payload[1]
+    if len(payload) != ERROR.size:
+        raise ProtocolError(ErrorCode.BAD_LENGTH, f"ERROR reply of {len(payload)} bytes (expected {ERROR.size})")
+    return ERROR.unpack(bytes(payload))

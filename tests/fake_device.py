@@ -177,8 +177,8 @@ class FakeDevice:
         return p.pack_eval_reply(status, out, self.dtype)
 
     def _on_stream(self, payload, seq):
-        self._length(payload, 4)
-        period, count = struct.unpack("<HH", payload)
+        self._length(payload, p.STREAM.size)
+        period, count = p.STREAM.unpack(payload)
         if count and not period:
             raise Reject(E.BAD_ARG)
         if count:
@@ -200,8 +200,8 @@ class FakeDevice:
             self.stream_state = None
 
     def _on_cal_begin(self, payload, seq):
-        self._length(payload, 8)
-        size, crc = struct.unpack("<II", payload)
+        self._length(payload, p.CAL_BEGIN.size)
+        size, crc = p.CAL_BEGIN.unpack(payload)
         self.staging = None
         if not 0 < size <= self.capacity:
             raise Reject(E.BAD_ARG)
@@ -209,14 +209,15 @@ class FakeDevice:
         return b""
 
     def _on_cal_data(self, payload, seq):
-        if not 5 <= len(payload) <= 4 + p.CAL_DATA_MAX:
+        head = p.CAL_DATA.size
+        if not head + 1 <= len(payload) <= head + p.CAL_DATA_MAX:
             raise Reject(E.BAD_LENGTH)
-        (offset,) = struct.unpack_from("<I", payload)
+        (offset,) = p.CAL_DATA.unpack_from(payload)
         st = self.staging
-        if st is None or offset != len(st[2]) or offset + len(payload) - 4 > st[0]:
+        if st is None or offset != len(st[2]) or offset + len(payload) - head > st[0]:
             raise Reject(E.CAL_SEQUENCE)
-        st[2] += payload[4:]
-        return struct.pack("<I", len(st[2]))
+        st[2] += payload[head:]
+        return p.CAL_DATA_REPLY.pack(len(st[2]))
 
     def _on_cal_commit(self, payload, seq):
         self._length(payload, 0)
@@ -237,8 +238,8 @@ class FakeDevice:
         return bytes.fromhex(info.model_hash)
 
     def _on_cal_read(self, payload, seq):
-        self._length(payload, 6)
-        offset, length = struct.unpack("<IH", payload)
+        self._length(payload, p.CAL_READ.size)
+        offset, length = p.CAL_READ.unpack(payload)
         if self.active is None:
             raise Reject(E.NO_CAL)
         if not 1 <= length <= p.CAL_READ_MAX:
@@ -254,9 +255,9 @@ class FakeDevice:
         return b""
 
     def _on_bench(self, payload, seq):
-        self._length(payload, 4)
-        (n,) = struct.unpack("<I", payload)
-        if not 1 <= n <= 1_000_000:
+        self._length(payload, p.BENCH.size)
+        (n,) = p.BENCH.unpack(payload)
+        if not 1 <= n <= p.BENCH_MAX:
             raise Reject(E.BAD_ARG)
         m = self.model
         x = m.input_min + (m.input_max - m.input_min) * np.linspace(0.05, 0.95, 16)[:, None]

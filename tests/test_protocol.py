@@ -1,10 +1,11 @@
-"""The serial protocol (docs/protocol.md): COBS, frames, payloads, the Device client against a fake device,
-and ``tactile-host flash``."""
+"""The serial protocol (docs/protocol.md): COBS, frames, payloads, the firmware's proto_defs.h, the Device
+client against a fake device, and ``tactile-host flash``."""
 
 from __future__ import annotations
 
 import socket
 import struct
+import subprocess
 
 import numpy as np
 import pytest
@@ -12,10 +13,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from fitgen.base.errors import InputError
+from fitgen.base.layout import Layout
+from fitgen.c.compiled import compile_checked
 from host import protocol as p
+from host import protocol_c
 from host.protocol import ErrorCode, Frame, MsgType, ProtocolError
 
-from conftest import assert_one_line_error, run_cli
+from conftest import assert_one_line_error, require_tool, run_cli
 
 # --- COBS ---------------------------------------------------------------------------
 
@@ -154,6 +158,42 @@ def test_payloads():
     with pytest.raises(ProtocolError):
         p.unpack_info(raw[:-1])
     assert p.unpack_bench(struct.pack("<QII", 10**9, 10**6, 100)) == (10**9, 10**6, 100)
+
+
+def test_records_are_the_documented_layouts():
+    assert p.INFO.offsets == {"version": 0, "precision": 1, "n_inputs": 2, "n_outputs": 3, "cal_source": 4,
+                              "style": 5, "max_payload": 6, "hash": 8, "sensor_id": 40, "fw_version": 56}
+    assert (p.INFO_SIZE, p.HEADER_SIZE, p.SAMPLE.size, p.BENCH_REPLY.offsets["n"], p.CAL_READ.size) == (68, 4, 10, 12, 6)
+
+
+# --- the firmware's copy: proto_defs.h ------------------------------------------------
+
+
+def test_proto_defs_h_holds_the_python_numbers(tmp_path):
+    """proto_defs.h, compiled warning-free: every constant as host/protocol.py has it."""
+    gcc = require_tool("gcc")
+    defs = protocol_c.defines()
+    expected = {f"PROTO_MSG_{t.name}": int(t) for t in MsgType} | {f"PROTO_{e.name}": int(e) for e in ErrorCode}
+    expected |= {"PROTO_REPLY": p.REPLY, "PROTO_MAX_PAYLOAD": p.MAX_PAYLOAD, "PROTO_MAX_BODY": p.MAX_BODY,
+                 "PROTO_MAX_ENCODED": p.MAX_ENCODED, "PROTO_CAL_DATA_MAX": p.CAL_DATA_MAX,
+                 "PROTO_BENCH_MAX": p.BENCH_MAX, "PROTO_PRECISION_FIXED": p.PRECISIONS.index("fixed")}
+    for record, layout in p.LAYOUTS.items():
+        expected[f"PROTO_{record}_SIZE"] = layout.size
+        expected |= {f"PROTO_{record}_{field.upper()}": at for field, at in layout.offsets.items()}
+    assert expected.items() <= defs.items()
+    (tmp_path / "proto_defs.h").write_text(protocol_c.render_proto_defs())
+    lines = "".join(f'    printf("{name} %lu\\n", (unsigned long){name});\n' for name in defs)
+    (tmp_path / "defs.c").write_text(f'#include <stdio.h>\n#include "proto_defs.h"\nint main(void)\n{{\n{lines}'
+                                     "    return 0;\n}\n")
+    compile_checked(gcc, [tmp_path / "defs.c"], tmp_path / "defs", tmp_path)
+    out = subprocess.run([str(tmp_path / "defs")], capture_output=True, text=True, check=True).stdout
+    assert {name: int(v) for name, v in (ln.split() for ln in out.splitlines())} == defs
+
+
+def test_proto_defs_h_refuses_a_name_twice(monkeypatch):
+    monkeypatch.setitem(p.LAYOUTS, "CAL", Layout(("data_max", "H")))  # PROTO_CAL_DATA_MAX, a limit's name
+    with pytest.raises(ValueError, match="PROTO_CAL_DATA_MAX would be defined twice"):
+        protocol_c.render_proto_defs()
 
 
 # --- the Device client against the fake device ------------------------------------

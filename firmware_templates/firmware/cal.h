@@ -14,7 +14,6 @@
 #define CAL_HASH_OFFSET 8u
 #define CAL_SENSOR_OFFSET 40u
 #define CAL_SENSOR_SIZE 16u
-#define CAL_N_KINDS 11u
 
 #ifndef TM_FIXED_POINT
 typedef struct {

@@ -1,44 +1,24 @@
 /* device.c: see device.h. Every request is answered by one reply or one ERROR; every length
- * field is checked before it is used, so no byte sequence can make the device hang or overrun. */
+ * field is checked before it is used, so no byte sequence can make the device hang or overrun.
+ * The protocol's numbers and offsets are proto_defs.h's (rendered from host/protocol.py). */
 #include "device.h"
 
 #include "hal.h"
 #include "inputs.h"
 
-enum {
-    T_PING = 0x01,
-    T_INFO = 0x02,
-    T_EVAL = 0x03,
-    T_STREAM = 0x04,
-    T_CAL_BEGIN = 0x05,
-    T_CAL_DATA = 0x06,
-    T_CAL_COMMIT = 0x07,
-    T_CAL_READ = 0x08,
-    T_CAL_RESET = 0x09,
-    T_BENCH = 0x0A,
-    T_STREAM_SAMPLE = 0x85,
-    T_ERROR = 0xFF
-};
-
-#define INFO_SIZE 68u
-#define HASH_SIZE 32u
-#define SENSOR_ID_SIZE 16u
-#define FW_VERSION_SIZE 12u
 #define EVAL_IN_SIZE ((size_t)TM_N_INPUTS * FW_INPUT_SIZE)
-#define EVAL_OUT_SIZE (4u + (size_t)TM_N_OUTPUTS * FW_OUTPUT_SIZE)
-#define SAMPLE_SIZE (10u + (size_t)TM_N_INPUTS * FW_INPUT_SIZE + (size_t)TM_N_OUTPUTS * FW_OUTPUT_SIZE)
-#define CAL_DATA_MAX 248u
-#define BENCH_MAX 1000000u
+#define EVAL_OUT_SIZE (PROTO_EVAL_RESULT_SIZE + (size_t)TM_N_OUTPUTS * FW_OUTPUT_SIZE)
+#define SAMPLE_SIZE (PROTO_SAMPLE_SIZE + EVAL_IN_SIZE + (size_t)TM_N_OUTPUTS * FW_OUTPUT_SIZE)
 
 /* one vector in and one result out must fit a frame, and so must INFO with its ADC block */
-typedef char device_assert_info_fits[(INFO_SIZE + INPUTS_INFO_MAX <= PROTO_MAX_PAYLOAD) ? 1 : -1];
+typedef char device_assert_info_fits[(PROTO_INFO_SIZE + INPUTS_INFO_MAX <= PROTO_MAX_PAYLOAD) ? 1 : -1];
 typedef char device_assert_eval_fits[(EVAL_IN_SIZE <= PROTO_MAX_PAYLOAD && EVAL_OUT_SIZE <= PROTO_MAX_PAYLOAD) ? 1 : -1];
 
 static volatile int bench_sink; /* keeps the BENCH loop's work observable */
 
 static uint8_t *reply_payload(device *d)
 {
-    return d->out + PROTO_HEADER;
+    return d->out + PROTO_HEADER_SIZE;
 }
 
 static void send(device *d, uint8_t type, uint8_t seq, size_t len)
@@ -50,9 +30,20 @@ static void send(device *d, uint8_t type, uint8_t seq, size_t len)
 static void send_error(device *d, uint8_t seq, uint8_t code, uint8_t request_type)
 {
     uint8_t *p = reply_payload(d);
-    p[0] = code;
-    p[1] = request_type;
-    send(d, T_ERROR, seq, 2);
+    p[PROTO_ERROR_CODE] = code;
+    p[PROTO_ERROR_REQUEST_TYPE] = request_type;
+    send(d, PROTO_MSG_ERROR, seq, PROTO_ERROR_SIZE);
+}
+
+/* the reply to m: len bytes at reply_payload(d) */
+static void reply(device *d, const proto_msg *m, size_t len)
+{
+    send(d, (uint8_t)(m->type | PROTO_REPLY), m->seq, len);
+}
+
+static void refuse(device *d, const proto_msg *m, int code)
+{
+    send_error(d, m->seq, (uint8_t)code, m->type);
 }
 
 static void put_text(uint8_t *p, const char *s, size_t n)
@@ -93,29 +84,33 @@ void device_init(device *d, const device_config *cfg)
     }
 }
 
+/* The handlers: each runs on a payload whose length lies in its row of `requests` below. */
+
+static void do_ping(device *d, const proto_msg *m)
+{
+    memcpy(reply_payload(d), m->payload, m->len);
+    reply(d, m, m->len);
+}
+
 static void do_info(device *d, const proto_msg *m)
 {
     uint8_t *p = reply_payload(d);
-    if (m->len != 0) {
-        send_error(d, m->seq, PROTO_BAD_LENGTH, m->type);
-        return;
-    }
-    p[0] = PROTO_VERSION;
-    p[1] = FW_PRECISION;
-    p[2] = TM_N_INPUTS;
-    p[3] = TM_N_OUTPUTS;
-    p[4] = d->use_blob;
-    p[5] = d->cfg->style;
-    proto_put_u16(p + 6, PROTO_MAX_PAYLOAD);
+    p[PROTO_INFO_VERSION] = PROTO_VERSION;
+    p[PROTO_INFO_PRECISION] = FW_PRECISION;
+    p[PROTO_INFO_N_INPUTS] = TM_N_INPUTS;
+    p[PROTO_INFO_N_OUTPUTS] = TM_N_OUTPUTS;
+    p[PROTO_INFO_CAL_SOURCE] = d->use_blob;
+    p[PROTO_INFO_STYLE] = d->cfg->style;
+    proto_put_u16(p + PROTO_INFO_MAX_PAYLOAD, PROTO_MAX_PAYLOAD);
     if (d->use_blob) {
-        memcpy(p + 8, d->active_buf + CAL_HASH_OFFSET, HASH_SIZE);
-        memcpy(p + 40, d->active_buf + CAL_SENSOR_OFFSET, SENSOR_ID_SIZE);
+        memcpy(p + PROTO_INFO_HASH, d->active_buf + CAL_HASH_OFFSET, PROTO_HASH_SIZE);
+        memcpy(p + PROTO_INFO_SENSOR_ID, d->active_buf + CAL_SENSOR_OFFSET, PROTO_SENSOR_ID_SIZE);
     } else {
-        memcpy(p + 8, d->cfg->model_hash, HASH_SIZE);
-        put_text(p + 40, d->cfg->sensor_id, SENSOR_ID_SIZE);
+        memcpy(p + PROTO_INFO_HASH, d->cfg->model_hash, PROTO_HASH_SIZE);
+        put_text(p + PROTO_INFO_SENSOR_ID, d->cfg->sensor_id, PROTO_SENSOR_ID_SIZE);
     }
-    put_text(p + 56, d->cfg->fw_version, FW_VERSION_SIZE);
-    send(d, (uint8_t)(m->type | 0x80u), m->seq, INFO_SIZE + inputs_info(p + INFO_SIZE));
+    put_text(p + PROTO_INFO_FW_VERSION, d->cfg->fw_version, PROTO_FW_VERSION_SIZE);
+    reply(d, m, PROTO_INFO_SIZE + inputs_info(p + PROTO_INFO_SIZE));
 }
 
 static void do_eval(device *d, const proto_msg *m)
@@ -123,8 +118,8 @@ static void do_eval(device *d, const proto_msg *m)
     uint8_t *p = reply_payload(d);
     const size_t k = m->len / EVAL_IN_SIZE;
     size_t v;
-    if (m->len == 0 || m->len % EVAL_IN_SIZE != 0 || k * EVAL_OUT_SIZE > PROTO_MAX_PAYLOAD) {
-        send_error(d, m->seq, PROTO_BAD_LENGTH, m->type);
+    if (m->len % EVAL_IN_SIZE != 0 || k * EVAL_OUT_SIZE > PROTO_MAX_PAYLOAD) {
+        refuse(d, m, PROTO_BAD_LENGTH);
         return;
     }
     for (v = 0; v < k; ++v) {
@@ -138,29 +133,23 @@ static void do_eval(device *d, const proto_msg *m)
             in[i] = fw_get_input(src + i * FW_INPUT_SIZE);
         }
         status = estimate(d, in, out);
-        proto_put_u32(dst, (uint32_t)status);
+        proto_put_u32(dst + PROTO_EVAL_RESULT_STATUS, (uint32_t)status);
         for (i = 0; i < TM_N_OUTPUTS; ++i) {
-            fw_put_output(dst + 4 + i * FW_OUTPUT_SIZE, out[i]);
+            fw_put_output(dst + PROTO_EVAL_RESULT_SIZE + i * FW_OUTPUT_SIZE, out[i]);
         }
     }
-    send(d, (uint8_t)(m->type | 0x80u), m->seq, k * EVAL_OUT_SIZE);
+    reply(d, m, k * EVAL_OUT_SIZE);
 }
 
 static void do_stream(device *d, const proto_msg *m)
 {
-    uint16_t period;
-    uint16_t count;
-    if (m->len != 4) {
-        send_error(d, m->seq, PROTO_BAD_LENGTH, m->type);
-        return;
-    }
-    period = proto_get_u16(m->payload);
-    count = proto_get_u16(m->payload + 2);
+    const uint16_t period = proto_get_u16(m->payload + PROTO_STREAM_PERIOD_MS);
+    const uint16_t count = proto_get_u16(m->payload + PROTO_STREAM_COUNT);
     if (count != 0 && (period == 0 || SAMPLE_SIZE > PROTO_MAX_PAYLOAD)) {
-        send_error(d, m->seq, PROTO_BAD_ARG, m->type);
+        refuse(d, m, PROTO_BAD_ARG);
         return;
     }
-    send(d, (uint8_t)(m->type | 0x80u), m->seq, 0);
+    reply(d, m, 0);
     if (count != 0) {
         d->stream_on = 1;
         d->stream_seq = m->seq;
@@ -174,92 +163,74 @@ static void do_stream(device *d, const proto_msg *m)
 static void do_cal_begin(device *d, const proto_msg *m)
 {
     uint32_t size;
-    if (m->len != 8) {
-        send_error(d, m->seq, PROTO_BAD_LENGTH, m->type);
-        return;
-    }
     d->stage_open = 0; /* an unfinished transfer is abandoned, whatever follows */
 #ifdef TM_FIXED_POINT
-    send_error(d, m->seq, PROTO_CAL_INVALID, m->type); /* blobs carry reals: none fits this build */
+    refuse(d, m, PROTO_CAL_INVALID); /* blobs carry reals: none fits this build */
     return;
 #endif
-    size = proto_get_u32(m->payload);
+    size = proto_get_u32(m->payload + PROTO_CAL_BEGIN_TOTAL);
     if (size == 0 || size > CAL_CAPACITY) {
-        send_error(d, m->seq, PROTO_BAD_ARG, m->type);
+        refuse(d, m, PROTO_BAD_ARG);
         return;
     }
     d->stage_open = 1;
     d->stage_size = size;
-    d->stage_crc = proto_get_u32(m->payload + 4);
+    d->stage_crc = proto_get_u32(m->payload + PROTO_CAL_BEGIN_CRC);
     d->stage_received = 0;
-    send(d, (uint8_t)(m->type | 0x80u), m->seq, 0);
+    reply(d, m, 0);
 }
 
 static void do_cal_data(device *d, const proto_msg *m)
 {
-    uint32_t n;
-    if (m->len < 5u || m->len > 4u + CAL_DATA_MAX) {
-        send_error(d, m->seq, PROTO_BAD_LENGTH, m->type);
+    const uint32_t n = (uint32_t)m->len - PROTO_CAL_DATA_SIZE;
+    if (!d->stage_open || proto_get_u32(m->payload + PROTO_CAL_DATA_OFFSET) != d->stage_received ||
+        n > d->stage_size - d->stage_received) {
+        refuse(d, m, PROTO_CAL_SEQUENCE);
         return;
     }
-    n = (uint32_t)m->len - 4u;
-    if (!d->stage_open || proto_get_u32(m->payload) != d->stage_received || n > d->stage_size - d->stage_received) {
-        send_error(d, m->seq, PROTO_CAL_SEQUENCE, m->type);
-        return;
-    }
-    memcpy(d->stage_buf + d->stage_received, m->payload + 4, n);
+    memcpy(d->stage_buf + d->stage_received, m->payload + PROTO_CAL_DATA_SIZE, n);
     d->stage_received += n;
-    proto_put_u32(reply_payload(d), d->stage_received);
-    send(d, (uint8_t)(m->type | 0x80u), m->seq, 4);
+    proto_put_u32(reply_payload(d) + PROTO_CAL_DATA_REPLY_RECEIVED, d->stage_received);
+    reply(d, m, PROTO_CAL_DATA_REPLY_SIZE);
 }
 
 static void do_cal_commit(device *d, const proto_msg *m)
 {
     cal_model check;
     int rc;
-    if (m->len != 0) {
-        send_error(d, m->seq, PROTO_BAD_LENGTH, m->type);
-        return;
-    }
     if (!d->stage_open || d->stage_received != d->stage_size) {
         d->stage_open = 0;
-        send_error(d, m->seq, PROTO_CAL_SEQUENCE, m->type);
+        refuse(d, m, PROTO_CAL_SEQUENCE);
         return;
     }
     d->stage_open = 0; /* whatever the verdict, the next transfer starts with CAL_BEGIN */
     if (proto_crc32(0, d->stage_buf, d->stage_size) != d->stage_crc) {
-        send_error(d, m->seq, PROTO_CAL_CRC, m->type);
+        refuse(d, m, PROTO_CAL_CRC);
         return;
     }
     rc = cal_parse(&check, d->stage_buf, d->stage_size);
     if (rc != 0) {
-        send_error(d, m->seq, (uint8_t)rc, m->type);
+        refuse(d, m, rc);
         return;
     }
     /* only now does the active calibration change */
     memcpy(d->active_buf, d->stage_buf, d->stage_size);
     d->active_size = d->stage_size;
     d->use_blob = cal_parse(&d->active, d->active_buf, d->active_size) == 0;
-    memcpy(reply_payload(d), d->active_buf + CAL_HASH_OFFSET, HASH_SIZE);
-    send(d, (uint8_t)(m->type | 0x80u), m->seq, HASH_SIZE);
+    memcpy(reply_payload(d), d->active_buf + CAL_HASH_OFFSET, PROTO_HASH_SIZE);
+    reply(d, m, PROTO_HASH_SIZE);
 }
 
 static void do_cal_read(device *d, const proto_msg *m)
 {
-    uint32_t offset;
-    uint32_t n;
-    if (m->len != 6) {
-        send_error(d, m->seq, PROTO_BAD_LENGTH, m->type);
-        return;
-    }
-    offset = proto_get_u32(m->payload);
-    n = proto_get_u16(m->payload + 4);
+    const uint32_t offset = proto_get_u32(m->payload + PROTO_CAL_READ_OFFSET);
+    uint32_t n = proto_get_u16(m->payload + PROTO_CAL_READ_LENGTH);
     if (!d->use_blob) {
-        send_error(d, m->seq, PROTO_NO_CAL, m->type);
+        refuse(d, m, PROTO_NO_CAL);
         return;
     }
-    if (n == 0 || n > PROTO_MAX_PAYLOAD) {
-        send_error(d, m->seq, PROTO_BAD_ARG, m->type);
+    if (n == 0 || n > PROTO_CAL_READ_MAX) {
+        refuse(d, m, PROTO_BAD_ARG);
         return;
     }
     if (offset >= d->active_size) {
@@ -270,34 +241,25 @@ static void do_cal_read(device *d, const proto_msg *m)
     if (n != 0) {
         memcpy(reply_payload(d), d->active_buf + offset, n);
     }
-    send(d, (uint8_t)(m->type | 0x80u), m->seq, n);
+    reply(d, m, n);
 }
 
 static void do_cal_reset(device *d, const proto_msg *m)
 {
-    if (m->len != 0) {
-        send_error(d, m->seq, PROTO_BAD_LENGTH, m->type);
-        return;
-    }
     d->use_blob = 0;
-    send(d, (uint8_t)(m->type | 0x80u), m->seq, 0);
+    reply(d, m, 0);
 }
 
 static void do_bench(device *d, const proto_msg *m)
 {
     uint8_t *p = reply_payload(d);
-    uint32_t n;
+    const uint32_t n = proto_get_u32(m->payload + PROTO_BENCH_N);
     uint32_t i;
     uint64_t t0;
     uint64_t t1;
     int acc = 0;
-    if (m->len != 4) {
-        send_error(d, m->seq, PROTO_BAD_LENGTH, m->type);
-        return;
-    }
-    n = proto_get_u32(m->payload);
-    if (n == 0 || n > BENCH_MAX) {
-        send_error(d, m->seq, PROTO_BAD_ARG, m->type);
+    if (n == 0 || n > PROTO_BENCH_MAX) {
+        refuse(d, m, PROTO_BAD_ARG);
         return;
     }
     t0 = hal_ticks();
@@ -306,51 +268,46 @@ static void do_bench(device *d, const proto_msg *m)
     }
     t1 = hal_ticks();
     bench_sink = acc;
-    proto_put_u64(p, t1 - t0);
-    proto_put_u32(p + 8, hal_tick_hz());
-    proto_put_u32(p + 12, n);
-    send(d, (uint8_t)(m->type | 0x80u), m->seq, 16);
+    proto_put_u64(p + PROTO_BENCH_REPLY_TICKS, t1 - t0);
+    proto_put_u32(p + PROTO_BENCH_REPLY_TICK_HZ, hal_tick_hz());
+    proto_put_u32(p + PROTO_BENCH_REPLY_N, n);
+    reply(d, m, PROTO_BENCH_REPLY_SIZE);
 }
+
+/* every request type: the payload lengths it takes (any other: BAD_LENGTH) and its handler */
+static const struct {
+    uint8_t type;
+    uint16_t min_len;
+    uint16_t max_len;
+    void (*run)(device *d, const proto_msg *m);
+} requests[] = {
+    { PROTO_MSG_PING, 0u, PROTO_MAX_PAYLOAD, do_ping },
+    { PROTO_MSG_INFO, 0u, 0u, do_info },
+    { PROTO_MSG_EVAL, 1u, PROTO_MAX_PAYLOAD, do_eval },
+    { PROTO_MSG_STREAM, PROTO_STREAM_SIZE, PROTO_STREAM_SIZE, do_stream },
+    { PROTO_MSG_CAL_BEGIN, PROTO_CAL_BEGIN_SIZE, PROTO_CAL_BEGIN_SIZE, do_cal_begin },
+    { PROTO_MSG_CAL_DATA, PROTO_CAL_DATA_SIZE + 1u, PROTO_CAL_DATA_SIZE + PROTO_CAL_DATA_MAX, do_cal_data },
+    { PROTO_MSG_CAL_COMMIT, 0u, 0u, do_cal_commit },
+    { PROTO_MSG_CAL_READ, PROTO_CAL_READ_SIZE, PROTO_CAL_READ_SIZE, do_cal_read },
+    { PROTO_MSG_CAL_RESET, 0u, 0u, do_cal_reset },
+    { PROTO_MSG_BENCH, PROTO_BENCH_SIZE, PROTO_BENCH_SIZE, do_bench }
+};
 
 static void dispatch(device *d, const proto_msg *m)
 {
+    size_t r;
     d->stream_on = 0; /* any request stops a running stream */
-    switch (m->type) {
-    case T_PING:
-        memcpy(reply_payload(d), m->payload, m->len);
-        send(d, (uint8_t)(m->type | 0x80u), m->seq, m->len);
-        break;
-    case T_INFO:
-        do_info(d, m);
-        break;
-    case T_EVAL:
-        do_eval(d, m);
-        break;
-    case T_STREAM:
-        do_stream(d, m);
-        break;
-    case T_CAL_BEGIN:
-        do_cal_begin(d, m);
-        break;
-    case T_CAL_DATA:
-        do_cal_data(d, m);
-        break;
-    case T_CAL_COMMIT:
-        do_cal_commit(d, m);
-        break;
-    case T_CAL_READ:
-        do_cal_read(d, m);
-        break;
-    case T_CAL_RESET:
-        do_cal_reset(d, m);
-        break;
-    case T_BENCH:
-        do_bench(d, m);
-        break;
-    default:
-        send_error(d, m->seq, PROTO_UNKNOWN_TYPE, m->type);
-        break;
+    for (r = 0; r < sizeof requests / sizeof requests[0]; ++r) {
+        if (requests[r].type == m->type) {
+            if (m->len < requests[r].min_len || m->len > requests[r].max_len) {
+                refuse(d, m, PROTO_BAD_LENGTH);
+            } else {
+                requests[r].run(d, m);
+            }
+            return;
+        }
     }
+    refuse(d, m, PROTO_UNKNOWN_TYPE);
 }
 
 void device_feed(device *d, uint8_t byte)
@@ -394,16 +351,16 @@ void device_tick(device *d)
     } else {
         status = estimate(d, in, out);
     }
-    proto_put_u16(p, d->stream_index);
-    proto_put_u32(p + 2, now);
-    proto_put_u32(p + 6, (uint32_t)status);
+    proto_put_u16(p + PROTO_SAMPLE_INDEX, d->stream_index);
+    proto_put_u32(p + PROTO_SAMPLE_TIME_MS, now);
+    proto_put_u32(p + PROTO_SAMPLE_STATUS, (uint32_t)status);
     for (i = 0; i < TM_N_INPUTS; ++i) {
-        fw_put_input(p + 10 + i * FW_INPUT_SIZE, in[i]);
+        fw_put_input(p + PROTO_SAMPLE_SIZE + i * FW_INPUT_SIZE, in[i]);
     }
     for (i = 0; i < TM_N_OUTPUTS; ++i) {
-        fw_put_output(p + 10 + EVAL_IN_SIZE + i * FW_OUTPUT_SIZE, out[i]);
+        fw_put_output(p + PROTO_SAMPLE_SIZE + EVAL_IN_SIZE + i * FW_OUTPUT_SIZE, out[i]);
     }
-    send(d, T_STREAM_SAMPLE, d->stream_seq, SAMPLE_SIZE);
+    send(d, PROTO_MSG_STREAM_SAMPLE, d->stream_seq, SAMPLE_SIZE);
     if (++d->stream_index >= d->stream_count) {
         d->stream_on = 0;
         return;

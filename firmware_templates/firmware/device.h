@@ -27,7 +27,7 @@ typedef struct {
     const device_config *cfg;
     proto_rx rx;
     uint8_t body[PROTO_MAX_BODY]; /* a decoded request */
-    uint8_t out[PROTO_MAX_BODY];  /* a reply being built (payload at out + PROTO_HEADER) */
+    uint8_t out[PROTO_MAX_BODY];  /* a reply being built (payload at out + PROTO_HEADER_SIZE) */
     uint8_t wire[PROTO_MAX_WIRE];
     /* calibration: the loaded blob when use_blob, else the compiled-in tm_estimate */
     uint8_t use_blob;

@@ -12,8 +12,8 @@
  * chip + 1 in bits 8..15 (0: the general-call reset), and the adc.h status negated in bits 0..7;
  * its inputs and outputs are then 0: the model never sees a stale or made-up reading */
 #define INPUTS_READ_FAILED 0x40000000u
-/* the INFO block's largest size: chips, 6 bytes per chip, 6 counts */
-#define INPUTS_INFO_MAX (1u + 8u * 6u + 24u)
+/* the INFO block's largest size: the chip count, 8 chips, the I2C counts */
+#define INPUTS_INFO_MAX (PROTO_ADC_BLOCK_SIZE + 8u * PROTO_ADC_CHIP_SIZE + PROTO_I2C_COUNTS_SIZE)
 
 /* a sample's inputs: 0, or a negative adc.h status (then in[] holds zeros) */
 int inputs_read(tm_input in[TM_N_INPUTS]);

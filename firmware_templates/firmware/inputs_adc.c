@@ -134,34 +134,26 @@ uint32_t inputs_failure_status(int read_status)
     return INPUTS_READ_FAILED | (chip << 8) | ((uint32_t)(-read_status) & 0xFFu);
 }
 
-static void put_u32(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
-}
-
 size_t inputs_info(uint8_t *p)
 {
     const adc_counts *k = &array.counts;
-    size_t n = 0;
+    size_t n = PROTO_ADC_BLOCK_SIZE;
     unsigned i;
-    p[n++] = ADC_MAP_N_CHIPS;
-    for (i = 0; i < ADC_MAP_N_CHIPS; ++i) {
+    p[PROTO_ADC_BLOCK_CHIPS] = ADC_MAP_N_CHIPS;
+    for (i = 0; i < ADC_MAP_N_CHIPS; ++i, n += PROTO_ADC_CHIP_SIZE) {
         const adc_chip *c = &ADC_MAP[i];
-        p[n++] = c->kind;
-        p[n++] = c->address;
-        p[n++] = c->n_inputs;
-        p[n++] = c->pga;
-        p[n++] = c->rate;
-        p[n++] = c->continuous;
+        p[n + PROTO_ADC_CHIP_KIND] = c->kind;
+        p[n + PROTO_ADC_CHIP_ADDRESS] = c->address;
+        p[n + PROTO_ADC_CHIP_INPUTS] = c->n_inputs;
+        p[n + PROTO_ADC_CHIP_PGA] = c->pga;
+        p[n + PROTO_ADC_CHIP_RATE] = c->rate;
+        p[n + PROTO_ADC_CHIP_MODE] = c->continuous;
     }
-    put_u32(p + n, stage ? k->nack : 0u);
-    put_u32(p + n + 4, stage ? k->timeout : 0u);
-    put_u32(p + n + 8, stage ? k->stuck : 0u);
-    put_u32(p + n + 12, stage ? k->other : 0u);
-    put_u32(p + n + 16, stage ? k->retries : 0u);
-    put_u32(p + n + 20, stage ? k->resets : 0u);
-    return n + 24u;
+    proto_put_u32(p + n + PROTO_I2C_COUNTS_NACK, stage ? k->nack : 0u);
+    proto_put_u32(p + n + PROTO_I2C_COUNTS_TIMEOUT, stage ? k->timeout : 0u);
+    proto_put_u32(p + n + PROTO_I2C_COUNTS_STUCK, stage ? k->stuck : 0u);
+    proto_put_u32(p + n + PROTO_I2C_COUNTS_OTHER, stage ? k->other : 0u);
+    proto_put_u32(p + n + PROTO_I2C_COUNTS_RETRIES, stage ? k->retries : 0u);
+    proto_put_u32(p + n + PROTO_I2C_COUNTS_RESETS, stage ? k->resets : 0u);
+    return n + PROTO_I2C_COUNTS_SIZE;
 }

@@ -23,9 +23,7 @@ uint32_t inputs_failure_status(int read_status)
 
 size_t inputs_info(uint8_t *p)
 {
-    unsigned i;
-    for (i = 0; i < 25u; ++i) {
-        p[i] = 0; /* no chips, no I2C errors */
-    }
-    return 25u;
+    const size_t n = PROTO_ADC_BLOCK_SIZE + PROTO_I2C_COUNTS_SIZE;
+    memset(p, 0, n); /* no chips, no I2C errors */
+    return n;
 }

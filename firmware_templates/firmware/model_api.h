@@ -17,11 +17,11 @@
 #include "proto.h"
 
 #ifdef TM_FIXED_POINT
-#define FW_PRECISION 2u
+#define FW_PRECISION PROTO_PRECISION_FIXED
 #elif TM_PRECISION_FLOAT
-#define FW_PRECISION 1u
+#define FW_PRECISION PROTO_PRECISION_FLOAT
 #else
-#define FW_PRECISION 0u
+#define FW_PRECISION PROTO_PRECISION_DOUBLE
 #endif
 
 #define FW_INPUT_SIZE (sizeof(tm_input))

@@ -78,11 +78,11 @@ size_t proto_finish_frame(uint8_t body[PROTO_MAX_BODY], uint8_t type, uint8_t se
                           uint8_t wire[PROTO_MAX_WIRE])
 {
     size_t n;
-    body[0] = type;
-    body[1] = seq;
-    proto_put_u16(body + 2, (uint16_t)len);
-    proto_put_u32(body + PROTO_HEADER + len, proto_crc32(0, body, PROTO_HEADER + len));
-    n = proto_cobs_encode(body, PROTO_HEADER + len + 4u, wire);
+    body[PROTO_HEADER_TYPE] = type;
+    body[PROTO_HEADER_SEQ] = seq;
+    proto_put_u16(body + PROTO_HEADER_LEN, (uint16_t)len);
+    proto_put_u32(body + PROTO_HEADER_SIZE + len, proto_crc32(0, body, PROTO_HEADER_SIZE + len));
+    n = proto_cobs_encode(body, PROTO_HEADER_SIZE + len + PROTO_CRC_SIZE, wire);
     wire[n++] = 0;
     return n;
 }
@@ -91,18 +91,18 @@ int proto_parse_frame(const uint8_t *enc, size_t n, uint8_t body[PROTO_MAX_BODY]
 {
     const long got = proto_cobs_decode(enc, n, body, PROTO_MAX_BODY);
     size_t size;
-    if (got < (long)(PROTO_HEADER + 4u)) {
+    if (got < (long)(PROTO_HEADER_SIZE + PROTO_CRC_SIZE)) {
         return PROTO_BAD_FRAME;
     }
     size = (size_t)got;
-    msg->type = body[0];
-    msg->seq = body[1];
-    msg->len = proto_get_u16(body + 2);
-    msg->payload = body + PROTO_HEADER;
-    if ((size_t)msg->len != size - PROTO_HEADER - 4u) {
+    msg->type = body[PROTO_HEADER_TYPE];
+    msg->seq = body[PROTO_HEADER_SEQ];
+    msg->len = proto_get_u16(body + PROTO_HEADER_LEN);
+    msg->payload = body + PROTO_HEADER_SIZE;
+    if ((size_t)msg->len != size - PROTO_HEADER_SIZE - PROTO_CRC_SIZE) {
         return PROTO_BAD_FRAME;
     }
-    if (proto_crc32(0, body, size - 4u) != proto_get_u32(body + size - 4u)) {
+    if (proto_crc32(0, body, size - PROTO_CRC_SIZE) != proto_get_u32(body + size - PROTO_CRC_SIZE)) {
         return PROTO_BAD_CRC;
     }
     return 0;

@@ -1,5 +1,7 @@
 /* proto.h: framing of docs/protocol.md: COBS, CRC-32 (zlib's), a byte-wise frame receiver
- * and a frame builder. No allocation; every loop is bounded by a buffer size.
+ * and a frame builder. No allocation; every loop is bounded by a buffer size. The protocol's
+ * numbers (message types, error codes, limits, records' offsets) are proto_defs.h's, rendered
+ * from host/protocol.py with the firmware.
  */
 #ifndef PROTO_H
 #define PROTO_H
@@ -7,26 +9,10 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define PROTO_VERSION 1u
-#define PROTO_MAX_PAYLOAD 256u
-#define PROTO_HEADER 4u                                     /* type, seq, len */
-#define PROTO_MAX_BODY (PROTO_HEADER + PROTO_MAX_PAYLOAD + 4u) /* 264 */
-#define PROTO_MAX_ENCODED 267u                              /* the largest encoded frame (docs/protocol.md) */
-#define PROTO_MAX_WIRE (PROTO_MAX_ENCODED + 1u)             /* plus the delimiter */
+#include "proto_defs.h"
 
-/* error codes of the ERROR reply (type 0xFF) */
-enum {
-    PROTO_BAD_CRC = 1,
-    PROTO_BAD_FRAME = 2,
-    PROTO_OVERSIZE = 3,
-    PROTO_UNKNOWN_TYPE = 4,
-    PROTO_BAD_LENGTH = 5,
-    PROTO_CAL_SEQUENCE = 6,
-    PROTO_CAL_CRC = 7,
-    PROTO_CAL_INVALID = 8,
-    PROTO_NO_CAL = 9,
-    PROTO_BAD_ARG = 10
-};
+#define PROTO_MAX_WIRE (PROTO_MAX_ENCODED + 1u) /* plus the delimiter */
+typedef char proto_assert_body[(PROTO_MAX_BODY == PROTO_HEADER_SIZE + PROTO_MAX_PAYLOAD + PROTO_CRC_SIZE) ? 1 : -1];
 
 /* little-endian fields, at any alignment */
 static inline void proto_put_u16(uint8_t *p, uint16_t v)
@@ -74,7 +60,7 @@ size_t proto_cobs_encode(const uint8_t *in, size_t n, uint8_t *out);
  * input holds a 0x00, a code runs past the end, or the result does not fit */
 long proto_cobs_decode(const uint8_t *in, size_t n, uint8_t *out, size_t cap);
 
-/* body holds a payload of len bytes at body + PROTO_HEADER; fills in the header and CRC, then writes
+/* body holds a payload of len bytes at body + PROTO_HEADER_SIZE; fills in the header and CRC, then writes
  * COBS(body) 0x00 into wire (PROTO_MAX_WIRE bytes). Returns the wire length. len <= PROTO_MAX_PAYLOAD. */
 size_t proto_finish_frame(uint8_t body[PROTO_MAX_BODY], uint8_t type, uint8_t seq, size_t len,
                           uint8_t wire[PROTO_MAX_WIRE]);

@@ -275,6 +275,12 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
     return _env().get_template("model.h.j2").render(m=cm, exp_codes=[EXP_CODE[e] for e in EXPONENTS])
 
 
+def render_blob_interpreter() -> str:
+    """The text of the firmware's ``cal.c`` (firmware/cal.c.j2): the blob interpreter, its clamp, powers and
+    term sums rendered from the macros the table style is (table.j2), so that both round alike."""
+    return _env().get_template("firmware/cal.c.j2").render(kinds=[EXP_CODE[e] for e in EXPONENTS])
+
+
 def write_header(model: Model, folder: str | Path, precision: str = "double", style: str = "table",
                  prefix: str = "tm", fma: bool = False, input_lsb: float | None = None,
                  input_offset: float | None = None) -> Path:
