@@ -88,7 +88,9 @@ def _adc_bridge(args):
     from host.channelmap import channel_map
     from host.clock import VirtualClock
     from host.pi import StandIn
-    from host.simbus import Drift, SimBus, parse_pose
+    from host.motion import parse_pose
+    from host.simbus import simulated_bus
+    from host.simsensor import Drift
     from host.temperature import load_tempcomp, split_channel_map, temperature_input
 
     cmap = channel_map(split_channel_map(args.adc)[0])
@@ -100,13 +102,12 @@ def _adc_bridge(args):
     if args.sim_temperature is not None:
         # the sensor at a steady temperature: typical temperature coefficients, no creep
         drift = Drift.typical(cmap.n_elements, seed=args.seed).steady(args.sim_temperature)
-    sensor = load_sensor(args.sim_sensor).with_transfer("gmr")
-    noise = sensor.noise if args.sim_noise is None else args.sim_noise
-    if not noise >= 0:
+    sensor = load_sensor(args.sim_sensor)
+    if args.sim_noise is not None and not args.sim_noise >= 0:  # NaN too
         raise InputError(f"--sim-noise must be >= 0, got {args.sim_noise}")
     clock = VirtualClock()
-    bus = SimBus.for_channel_map(cmap, sensor, parse_pose(args.simulate), clock=clock, noise=noise, seed=args.seed,
-                                 drift=drift, thermistor=tin)
+    bus = simulated_bus(cmap, sensor, parse_pose(args.simulate), clock=clock, noise=args.sim_noise, seed=args.seed,
+                        drift=drift, thermistor=tin)
     return cmap, StandIn(bus, clock), tin, tempcomp
 
 

@@ -106,12 +106,12 @@ def _channel_map(args):
 
 
 def _open_bus(args, cmap, simulate_pose, *, motion=None, drift=None, thermistor=None):
-    """Bus and clock from the options; with a simulated pose, a SimBus instead of /dev/i2c-N."""
+    """Bus and clock from the options; with a simulated pose, the simulated bus instead of /dev/i2c-N."""
     from fitgen.physics.sensor import load_sensor
 
     from host.adc import open_bus
     from host.clock import REAL_CLOCK
-    from host.simbus import SimBus, parse_fault
+    from host.simbus import simulated_bus
 
     sim_opts = [o for o, v in (("--sim-noise", args.sim_noise), ("--sim-fault", args.sim_fault),
                                ("--sim-offsets", args.sim_offsets)) if v is not None]
@@ -120,23 +120,9 @@ def _open_bus(args, cmap, simulate_pose, *, motion=None, drift=None, thermistor=
             raise InputError(f"{sim_opts[0]} needs --simulate")
         number = args.bus if args.bus is not None else (cmap.bus if cmap.bus is not None else 1)
         return open_bus(number), REAL_CLOCK
-    sensor = load_sensor(args.sensor)
-    noise = sensor.gmr.noise if args.sim_noise is None else args.sim_noise
-    offsets = None
-    if args.sim_offsets:
-        try:
-            offsets = [float(x) for x in args.sim_offsets.replace(",", " ").split()]
-        except ValueError:
-            raise InputError(f"--sim-offsets {args.sim_offsets!r}: not numbers") from None
-        if len(offsets) != sensor.n_elements:
-            raise InputError(f"--sim-offsets: give {sensor.n_elements} numbers (V), got {len(offsets)}")
-    faults = [parse_fault(f) for f in args.sim_fault or ()]
-    if noise < 0:
-        raise InputError(f"--sim-noise must be >= 0 V, got {noise}")
-    bus = SimBus.for_channel_map(cmap, sensor, simulate_pose, clock=REAL_CLOCK, noise=noise, offsets=offsets,
-                                 seed=args.seed, motion=motion, drift=drift, thermistor=thermistor)
-    for f in faults:
-        bus.inject(**f)
+    bus = simulated_bus(cmap, load_sensor(args.sensor), simulate_pose, clock=REAL_CLOCK, noise=args.sim_noise,
+                        offsets=args.sim_offsets, faults=args.sim_fault or (), seed=args.seed, motion=motion,
+                        drift=drift, thermistor=thermistor)
     return bus, REAL_CLOCK
 
 
@@ -181,7 +167,7 @@ def _motion(spec: str):
     """``--simulate``: a pose, or ``motion`` (a slow circular slide with a press every few seconds)."""
     import numpy as np
 
-    from host.simbus import parse_pose
+    from host.motion import parse_pose
 
     if spec.strip().lower() != "motion":
         return parse_pose(spec), None
@@ -196,10 +182,10 @@ def _motion(spec: str):
 
 
 def _sim_drift(spec: str | None, n: int):
-    """``--sim-drift ramp=5,over=300,tau=100,creep=0.002,start=25,seed=0``: host.simbus.Drift."""
+    """``--sim-drift ramp=5,over=300,tau=100,creep=0.002,start=25,seed=0``: host.simsensor.Drift."""
     from fitgen.base.parse import parse_assignments
 
-    from host.simbus import Drift
+    from host.simsensor import Drift
 
     if spec is None:
         return None
@@ -478,7 +464,7 @@ def cmd_capture_temperatures(args) -> int:
 
     from host.adc import AdcArray, DeviceSilent, RetryPolicy
     from host.capture import SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, trigger_waiter
-    from host.simbus import Drift
+    from host.simsensor import Drift
     from host.temperature import Thermometer, fit_tempcomp, temperature_input
 
     temps = _temperatures(args.temperature)

@@ -17,3 +17,11 @@ def parse_assignments(spec: str, allowed, what: str) -> dict[str, float]:
         except ValueError:
             raise InputError(f"{what} {spec!r}: {value!r} is not a number") from None
     return out
+
+
+def parse_numbers(text: str) -> list[float] | None:
+    """Numbers separated by commas or spaces; None when one of them is not a number."""
+    try:
+        return [float(x) for x in text.replace(",", " ").split()]
+    except ValueError:
+        return None
