@@ -1,4 +1,4 @@
-"""What every command-line tool here shares: one-line errors with exit status 2, Ctrl-C."""
+"""What every command-line tool here shares: one-line errors with exit status 2, the entry point, Ctrl-C."""
 
 from __future__ import annotations
 
@@ -31,6 +31,19 @@ def run(main_fn, argv=None, prog: str = "") -> int:
         return 130
     except BrokenPipeError:
         return 0
+
+
+def command_main(build_parser, argv, prog: str, check=None):
+    """A command's entry point: parse ``argv`` with ``build_parser()``, let ``check(args)`` refuse option
+    combinations, call the chosen subcommand's ``func(args)``; exit with its status (:func:`run`)."""
+
+    def main_fn(argv) -> int:
+        args = build_parser().parse_args(argv)
+        if check is not None:
+            check(args)
+        return args.func(args)
+
+    sys.exit(run(main_fn, argv, prog))
 
 
 class StopFlag:

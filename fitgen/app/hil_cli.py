@@ -10,7 +10,7 @@ import signal
 import sys
 import threading
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, run
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main
 from fitgen.base.errors import InputError
 
 
@@ -190,10 +190,5 @@ def build_parser() -> Parser:
     return p
 
 
-def _main(argv) -> int:
-    args = build_parser().parse_args(argv)
-    return args.func(args)
-
-
 def main(argv=None) -> int:
-    sys.exit(run(_main, argv, "tactile-hil"))
+    command_main(build_parser, argv, "tactile-hil")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, run
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, command_main
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_numbers, parse_positive
 
@@ -465,10 +465,5 @@ def build_parser() -> Parser:
     return p
 
 
-def _main(argv) -> int:
-    args = build_parser().parse_args(argv)
-    return args.func(args)
-
-
 def main(argv=None) -> int:
-    sys.exit(run(_main, argv, "tactile-host"))
+    command_main(build_parser, argv, "tactile-host")
