@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.base.parse import parse_assignments
+from fitgen.base.parse import parse_assignments, parse_numbers
 from fitgen.physics.pose import POSE_NAMES
 
 from host.simsensor import Drift
@@ -17,11 +17,10 @@ def parse_pose(spec: str) -> np.ndarray:
         vals = parse_assignments(spec, POSE_NAMES, "--simulate pose")
         pose = np.array([vals.get(n, 0.0) for n in POSE_NAMES])
     else:
-        parts = spec.replace(",", " ").split()
-        try:
-            pose = np.array([float(p) for p in parts])
-        except ValueError:
-            raise InputError(f"--simulate pose {spec!r}: not numbers") from None
+        vals = parse_numbers(spec)
+        if vals is None:
+            raise InputError(f"--simulate pose {spec!r}: not numbers")
+        pose = np.array(vals, dtype=float)
         if pose.size != 5:
             raise InputError(f"--simulate pose {spec!r}: give 5 numbers ({','.join(POSE_NAMES)}) "
                              "or NAME=VALUE parts such as dx=1,dz=-1")
