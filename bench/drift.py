@@ -11,7 +11,7 @@ Set-up (deterministic; the simulated bus on a virtual clock, so time is compress
   (0.5 mV rms), a thermistor (10 k NTC, beta 3950) on a third ADS1115;
 - model: `fit_model` on the paper-sim grid in volts (the default settings), the family chosen as
   `fitgen fit` chooses it (`auto`);
-- drift (host.simbus.Drift.typical, seed 0): offsets about 1 mV/degC and gains -0.1 %/degC per
+- drift (host.simsensor.Drift.typical, seed 0): offsets about 1 mV/degC and gains -0.1 %/degC per
   element, temperature ramping 25 -> 30 degC over the run's first 240 s, creep of about 2 mV
   per element with a 120 s time constant;
 - temperature compensation: fitted from a simulated `capture --temperature 20,25,30` of 3 poses
@@ -47,7 +47,8 @@ from host.channelmap import parse_spec
 from host.clock import VirtualClock
 from host.engine import PythonEngine
 from host.readout import Corrections, LineFormat, Readout, rest_reference, tare
-from host.simbus import Drift, SimBus
+from host.simbus import SimBus
+from host.simsensor import Drift
 from host.temperature import Thermometer, fit_tempcomp, parse_temperature_input
 
 ADC = "ads1115@0x48:0-3,ads1115@0x49:0-3"

@@ -419,7 +419,7 @@ def c_drivers_table(model, sensor) -> None:
     import tempfile
     from pathlib import Path
 
-    from host.cadc import CAdcArray
+    from host.cdrivers import CAdcArray
     from host.pi import render_pi
 
     cm = parse_spec(SPEC)

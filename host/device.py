@@ -263,3 +263,37 @@ class Device(PortOwner):
         """``n`` estimates timed on the device: (ticks, tick_hz, n)."""
         wait = self.timeout + n * 1e-4 if timeout is None else timeout
         return p.unpack_bench(self.request(MsgType.BENCH, p.pack_bench_request(n), timeout=wait).payload)
+
+
+class FlashFailed(RuntimeError):
+    """The device did not take a calibration blob as it was sent."""
+
+
+def flash_model(dev: Device, model, origin: str, *, sensor_id: str = "paper", fma: bool = False):
+    """Load ``model`` (read from ``origin``) into ``dev`` as a calibration blob and read it back: (blob, the
+    device's info, the active model hash it reports). InputError when its build cannot take the model;
+    FlashFailed when the blob is refused, read back otherwise, or another model is active."""
+    from fitgen.c.calblob import to_blob
+
+    try:
+        info = dev.info()
+    except (DeviceError, p.ProtocolError) as exc:
+        raise InputError(f"{dev.name}: INFO failed: {exc}") from None
+    if info.precision == "fixed":
+        raise InputError("the device is a fixed-point build; calibration blobs need a float or double build")
+    if (info.n_inputs, info.n_outputs) != (model.n_inputs, len(model.equations)):
+        raise InputError(f"model {origin} has {model.n_inputs} inputs and {len(model.equations)} outputs; "
+                         f"the device's build has {info.n_inputs} and {info.n_outputs}")
+    blob = to_blob(model, info.precision, sensor_id=sensor_id, fma=fma)
+    try:
+        answer = dev.load_calibration(blob)
+        back = dev.read_calibration()
+    except (DeviceError, p.ProtocolError) as exc:
+        raise FlashFailed(f"calibration not loaded: {exc}") from exc
+    if back != blob:
+        first = next((i for i, (a, b) in enumerate(zip(back, blob)) if a != b), min(len(back), len(blob)))
+        raise FlashFailed(f"read-back differs from the {len(blob)}-byte blob sent ({len(back)} bytes read, first "
+                          f"difference at byte {first})")
+    if answer != model.sha256:
+        raise FlashFailed(f"the device reports active model {answer}, expected {model.sha256}")
+    return blob, info, answer

@@ -25,7 +25,7 @@ from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
 from fitgen.equations.model import Model
 
-from host.cadc import chip_table, smbus_transfer
+from host.cdrivers import chip_table, smbus_transfer
 from host.channelmap import ChannelMap
 from fitgen.c.compiled import WARNING_FLAGS
 

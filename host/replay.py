@@ -12,6 +12,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -115,6 +116,20 @@ class ReplayResult:
         else:
             lines.append("the recorded run has other outputs: no differences computed")
         return "\n".join(lines) + "\n"
+
+    def play(self, publish, stop, hold: bool = False) -> None:
+        """Each sample to ``publish`` at the run's recorded pace, until its end or ``stop()``; with ``hold``,
+        then wait for ``stop()``."""
+        t0, w0 = self.t[0], time.monotonic()
+        for i in range(len(self.t)):
+            if stop():
+                break
+            wait = (self.t[i] - t0) - (time.monotonic() - w0)
+            if wait > 0:
+                time.sleep(wait)
+            publish(self.sample(i))
+        while hold and not stop():
+            time.sleep(0.2)
 
     def save(self, path) -> None:
         """The re-estimated run as a run record (replayable in its turn), written atomically."""

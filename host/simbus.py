@@ -7,18 +7,9 @@ I2C transfer: it takes the time its clock cycles take at ``bus_hz`` (start, addr
 and data bytes with their ACK bits, repeated start, stop) on the bus's clock, then
 the addressed chip acts at the transfer's end.
 
-The chips are modelled as the datasheets describe them: the ADS1115's pointer,
-config (power-on 0x8583) and conversion registers, MSB first; single-shot
-conversions that take 25 us to wake plus 1/DR (times 1 + ``rate_error``) with
-the OS bit reading 0 meanwhile; continuous mode, where a new config applies from
-the conversion after the one under way; PGA full scale and 16-bit clipping; input
-pins clamped to -0.3..VDD+0.3 V; the general-call reset. The ADS7828's command
-byte (its single-ended channel codes interleaved, PD1 switching the 2.5 V internal
-reference), 12-bit results converted inside the read, several results in one read.
-
-Pins are wired to the sensor's elements: ``fitgen.physics.transfer.readings`` for the
-sensor in its ``gmr`` transfer (volts, before any ADC) at the pose set with
-``set_pose``, plus per-element offsets and fresh Gaussian noise per conversion.
+The chips are ``host.simchips``'s register-level models; their pins are wired to the
+elements of a ``host.simsensor.SensorFeed`` (the sensor's physics at a pose, with
+offsets, noise, motion and drift). ``simulated_bus`` builds the bus of ``--simulate``.
 
 Faults: ``inject("nack" | "timeout" | "stuck", address=None, rate=1.0, after=0,
 count=None)``. A NACK raises OSError(EREMOTEIO, 121) as Linux does for a chip
@@ -31,163 +22,21 @@ from __future__ import annotations
 
 import ctypes
 import errno
-import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.physics.pose import POSE_NAMES, as_poses
+from fitgen.base.parse import parse_numbers
 from fitgen.physics.sensor import Sensor
-from fitgen.physics.transfer import readings
 
 from host.channelmap import ADDRESSES, ChannelMap
 from host.clock import VirtualClock
+from host.simchips import ADS1115Model, ADS7828Model
+from host.simsensor import Drift, SensorFeed, ntc_volts
 
-# ADS1115 (independent of the driver's tables on purpose: a driver bug shows as a wrong answer)
-_PGA_FS = (6.144, 4.096, 2.048, 1.024, 0.512, 0.256, 0.256, 0.256)
-_RATES = (8, 16, 32, 64, 128, 250, 475, 860)
-_DIFF_1115 = ((0, 1), (0, 3), (1, 3), (2, 3))
-_CONFIG_RESET = 0x8583
-_WAKE = 25e-6
-# ADS7828, SBAS181 table 1: C2 C1 C0 -> input(s)
-_SINGLE_7828 = {0b000: 0, 0b100: 1, 0b001: 2, 0b101: 3, 0b010: 4, 0b110: 5, 0b011: 6, 0b111: 7}
-_DIFF_7828 = {0b000: (0, 1), 0b001: (2, 3), 0b010: (4, 5), 0b011: (6, 7),
-              0b100: (1, 0), 0b101: (3, 2), 0b110: (5, 4), 0b111: (7, 6)}
 _BLOCK_MAX = 32
 FAULT_KINDS = ("nack", "timeout", "stuck")
-
-
-class ADS1115Model:
-    kind = "ads1115"
-
-    def __init__(self, bus: "SimBus", address: int, *, rate_error: float = 0.0, vdd: float = 3.3):
-        self.bus, self.address, self.rate_error, self.vdd = bus, address, rate_error, vdd
-        self.reset()
-
-    def reset(self) -> None:
-        self.config = _CONFIG_RESET & 0x7FFF  # OS is not stored: reading it reports the state
-        self.pointer = 0
-        self.conversion = 0
-        self.lo_thresh, self.hi_thresh = 0x8000, 0x7FFF
-        self.single_done = None  # completion time of a single-shot conversion under way (inf: stuck)
-        self.single_cfg = 0
-        self.cont_done = None  # continuous mode: completion time of the conversion under way
-        self.cont_cfg = 0  # ... and the config it uses
-        self.conversions = 0
-
-    def period(self, cfg: int) -> float:
-        return (1.0 + self.rate_error) / _RATES[(cfg >> 5) & 7]
-
-    def convert(self, cfg: int) -> int:
-        mux, fs = (cfg >> 12) & 7, _PGA_FS[(cfg >> 9) & 7]
-        pin = self.bus.pin_volts
-        lo, hi = -0.3, self.vdd + 0.3
-        if mux < 4:
-            p, n = _DIFF_1115[mux]
-            v = min(max(pin(self.address, p), lo), hi) - min(max(pin(self.address, n), lo), hi)
-        else:
-            v = min(max(pin(self.address, mux - 4), lo), hi)
-        self.conversions += 1
-        return int(min(max(round(v / fs * 32768.0), -32768), 32767))
-
-    def settle(self, t: float) -> None:
-        """Complete the conversions that have finished by time ``t``."""
-        if self.single_done is not None and t >= self.single_done:
-            self.conversion = self.convert(self.single_cfg)
-            self.single_done = None
-        if self.cont_done is not None and t >= self.cont_done:
-            done, cfg = self.cont_done, self.cont_cfg
-            period = self.period(self.config)
-            if t >= done + period:  # later conversions, all with the current config
-                done += math.floor((t - done) / period) * period
-                cfg = self.config
-            self.conversion = self.convert(cfg)
-            self.cont_cfg = self.config
-            self.cont_done = done + period
-
-    def write(self, data: list[int], t: float) -> None:
-        self.settle(t)
-        self.pointer = data[0] & 0x03
-        if len(data) < 3:
-            return  # a pointer write only (a register changes when both of its bytes arrive)
-        word = (data[1] << 8) | data[2]
-        if self.pointer == 1:
-            self._write_config(word, t)
-        elif self.pointer == 2:
-            self.lo_thresh = word
-        elif self.pointer == 3:
-            self.hi_thresh = word
-
-    def _write_config(self, word: int, t: float) -> None:
-        self.config = word & 0x7FFF
-        if word & 0x0100:  # single-shot mode: power-down, a conversion when OS = 1 and none is under way
-            self.cont_done = None
-            if word & 0x8000 and self.single_done is None:
-                stuck = self.bus.fault_fires("stuck", self.address)
-                self.single_done = math.inf if stuck else t + _WAKE + self.period(word)
-                self.single_cfg = word
-        elif self.cont_done is None:  # into continuous mode
-            stuck = self.bus.fault_fires("stuck", self.address)
-            self.single_done = None
-            self.cont_done = math.inf if stuck else t + _WAKE + self.period(word)
-            self.cont_cfg = word
-        # already continuous: the conversion under way keeps its config; settle() applies the new one after it
-
-    def read(self, n: int, t: float) -> list[int]:
-        self.settle(t)
-        if self.pointer == 0:
-            word = self.conversion & 0xFFFF
-        elif self.pointer == 1:
-            idle = self.single_done is None and self.cont_done is None
-            word = self.config | (0x8000 if idle else 0)
-        else:
-            word = self.lo_thresh if self.pointer == 2 else self.hi_thresh
-        return ([word >> 8, word & 0xFF] * ((n + 1) // 2))[:n]
-
-    def general_call(self, data: list[int], t: float) -> None:
-        if data == [0x06]:
-            self.reset()
-
-
-class ADS7828Model:
-    kind = "ads7828"
-
-    def __init__(self, bus: "SimBus", address: int, *, vref_external: float | None = 3.3, vdd: float = 3.3):
-        self.bus, self.address, self.vref_external, self.vdd = bus, address, vref_external, vdd
-        self.command = None
-        self.conversions = 0
-
-    def settle(self, t: float) -> None:
-        pass
-
-    def write(self, data: list[int], t: float) -> None:
-        self.command = data[0]  # further bytes are not part of the protocol; the chip ignores them
-
-    def read(self, n: int, t: float) -> list[int]:
-        if self.command is None:
-            return [0] * n
-        if self.bus.fault_fires("stuck", self.address):
-            raise OSError(errno.ETIMEDOUT, "Connection timed out")
-        cmd = self.command
-        code_bits = (cmd >> 4) & 7
-        pin = self.bus.pin_volts
-        clamp = lambda v: min(max(v, -0.3), self.vdd + 0.3)  # noqa: E731
-        vref = 2.5 if cmd & 0x08 else self.vref_external
-        out = []
-        for _ in range(max(1, n // 2)):  # each further pair of bytes is a new conversion of the same input
-            if cmd & 0x80:
-                v = clamp(pin(self.address, _SINGLE_7828[code_bits]))
-            else:
-                p, m = _DIFF_7828[code_bits]
-                v = clamp(pin(self.address, p)) - clamp(pin(self.address, m))
-            code = 0 if vref is None else int(min(max(round(v / vref * 4096.0), 0), 4095))
-            self.conversions += 1
-            out += [code >> 8, code & 0xFF]
-        return out[:n]
-
-    def general_call(self, data: list[int], t: float) -> None:
-        pass
 
 
 @dataclass
@@ -199,102 +48,6 @@ class Fault:
     count: int | None = None  # how many times it fires (None: no limit)
     seen: int = 0
     fired: int = 0
-
-
-@dataclass
-class Drift:
-    """What moves a real skin's readings while its pose does not: temperature and creep.
-
-    Element k reads v_k (1 + gain_tc_k (T - t0)) + offset_tc_k (T - t0) + creep_k (1 - exp(-t / creep_tau)),
-    with T = ``temperature(t)`` (degC; t the bus clock's seconds). Defaults are of the order of a GMR
-    bridge's datasheet figures (offset drift about 1 mV/degC after the amplifier, gain -0.1 %/degC) and a
-    silicone skin's creep; ``ramp`` makes T rise linearly by ``ramp_degc`` over ``ramp_s`` seconds.
-    """
-
-    offset_tc: np.ndarray  # V / degC, per element
-    gain_tc: np.ndarray  # 1 / degC, per element
-    creep: np.ndarray  # V, per element, reached after a few creep_tau
-    creep_tau: float = 600.0  # s
-    t0: float = 25.0  # degC at which the sensor reads as calibrated
-    start_degc: float = 25.0
-    ramp_degc: float = 0.0
-    ramp_s: float = 1.0
-
-    @classmethod
-    def typical(cls, n: int, *, seed: int = 0, ramp_degc: float = 5.0, ramp_s: float = 600.0,
-                creep_tau: float = 600.0, start_degc: float = 25.0) -> "Drift":
-        rng = np.random.default_rng(seed)
-        return cls(offset_tc=rng.normal(0.0, 1e-3, n), gain_tc=rng.normal(-1e-3, 3e-4, n),
-                   creep=rng.normal(0.0, 2e-3, n), creep_tau=creep_tau, start_degc=start_degc,
-                   ramp_degc=ramp_degc, ramp_s=ramp_s)
-
-    def steady(self, degc: float) -> "Drift":
-        """The same coefficients at a steady ``degc``: no ramp, no creep (readings that do not depend on time)."""
-        return replace(self, start_degc=float(degc), ramp_degc=0.0, creep=np.zeros_like(self.creep))
-
-    def temperature(self, t: float) -> float:
-        return self.start_degc + self.ramp_degc * min(max(t / self.ramp_s, 0.0), 1.0)
-
-    def apply(self, volts: np.ndarray, t: float) -> np.ndarray:
-        dT = self.temperature(t) - self.t0
-        return volts * (1.0 + self.gain_tc * dT) + self.offset_tc * dT + self.creep * (1.0 - math.exp(-t / self.creep_tau))
-
-
-def ntc_volts(temp_degc: float, *, beta: float = 3950.0, r25: float = 10_000.0, series: float = 10_000.0,
-              vref: float = 3.3) -> float:
-    """The divider's output: an NTC (beta model, r25 at 25 degC) to ground, ``series`` ohms to ``vref``."""
-    r = r25 * math.exp(beta * (1.0 / (temp_degc + 273.15) - 1.0 / 298.15))
-    return vref * r / (r + series)
-
-
-class SensorFeed:
-    """Element voltages of a sensor (its ``gmr`` transfer, no ADC) at a pose, with offsets and noise.
-
-    ``motion``: a function of the bus clock's time (s) giving the pose, evaluated at most every
-    ``motion_step`` seconds; ``drift``: a :class:`Drift` applied to the volts at that time.
-    """
-
-    def __init__(self, sensor: Sensor, pose=None, *, noise: float = 0.0, offsets=None,
-                 rng: np.random.Generator | None = None, motion=None, drift: Drift | None = None,
-                 motion_step: float = 5e-3):
-        self.sensor = sensor.with_transfer("gmr")
-        self.noise = float(noise)
-        if self.noise < 0:
-            raise InputError(f"simulated noise must be >= 0 V, got {noise}")
-        n = self.sensor.n_elements
-        self.offsets = np.zeros(n) if offsets is None else np.asarray(offsets, dtype=float).reshape(n)
-        self.rng = rng or np.random.default_rng(0)
-        self.motion, self.drift, self.motion_step = motion, drift, motion_step
-        self._t_motion = -math.inf
-        self._t_drift = None
-        self.set_pose(np.zeros(5) if pose is None else pose)
-
-    def set_pose(self, pose) -> None:
-        self.pose = as_poses(pose)[0].copy()
-        self.volts = readings(self.sensor, self.pose, adc_bits=0)[0]
-        self._t_drift = None
-
-    def at(self, t: float) -> None:
-        """Move to time ``t``: the motion's pose and the drift there."""
-        if self.motion is not None and abs(t - self._t_motion) >= self.motion_step:
-            self._t_motion = t
-            pose = as_poses(self.motion(t))[0]
-            if not np.array_equal(pose, self.pose):
-                self.set_pose(pose)
-        if self.drift is not None and self._t_drift != t:
-            self._t_drift = t
-            self.drifted = self.drift.apply(self.volts, t)
-
-    def temperature(self, t: float) -> float:
-        return self.drift.temperature(t) if self.drift is not None else 25.0
-
-    def element(self, k: int, t: float | None = None) -> float:
-        if t is not None and (self.motion is not None or self.drift is not None):
-            self.at(t)
-            v = (self.drifted[k] if self.drift is not None else self.volts[k]) + self.offsets[k]
-        else:
-            v = self.volts[k] + self.offsets[k]
-        return v + self.noise * self.rng.standard_normal() if self.noise else v
 
 
 class SimBus:
@@ -528,22 +281,25 @@ def parse_fault(spec: str) -> dict:
                      "or silent:ADDRESS[:AFTER_TRANSFERS], ADDRESS in 0x48..0x4b")
 
 
-def parse_pose(spec: str) -> np.ndarray:
-    """``dx=1,dz=-1`` (components left out are 0) or five numbers ``0.5,0,-1,0,0``."""
-    from fitgen.base.parse import parse_assignments
-
-    if "=" in spec:
-        vals = parse_assignments(spec, POSE_NAMES, "--simulate pose")
-        pose = np.array([vals.get(n, 0.0) for n in POSE_NAMES])
-    else:
-        parts = spec.replace(",", " ").split()
-        try:
-            pose = np.array([float(p) for p in parts])
-        except ValueError:
-            raise InputError(f"--simulate pose {spec!r}: not numbers") from None
-        if pose.size != 5:
-            raise InputError(f"--simulate pose {spec!r}: give 5 numbers ({','.join(POSE_NAMES)}) "
-                             "or NAME=VALUE parts such as dx=1,dz=-1")
-    if not np.all(np.isfinite(pose)):
-        raise InputError(f"--simulate pose {spec!r}: not finite")
-    return pose
+def simulated_bus(cmap: ChannelMap, sensor: Sensor, pose, *, clock, noise: float | None = None,
+                  offsets: str | None = None, faults=(), seed: int = 0, motion=None, drift: Drift | None = None,
+                  thermistor=None) -> SimBus:
+    """The bus ``--simulate`` reads: ``cmap``'s chips wired to ``sensor`` at ``pose`` (:meth:`SimBus.for_channel_map`),
+    element noise ``noise`` V rms (None: the sensor file's), ``offsets`` (``--sim-offsets``: one number per element,
+    V) and the ``faults`` (``--sim-fault`` specs, :func:`parse_fault`) injected."""
+    noise = sensor.gmr.noise if noise is None else noise
+    values = None
+    if offsets:
+        values = parse_numbers(offsets)
+        if values is None:
+            raise InputError(f"--sim-offsets {offsets!r}: not numbers")
+        if len(values) != sensor.n_elements:
+            raise InputError(f"--sim-offsets: give {sensor.n_elements} numbers (V), got {len(values)}")
+    specs = [parse_fault(f) for f in faults]
+    if noise < 0:
+        raise InputError(f"--sim-noise must be >= 0 V, got {noise}")
+    bus = SimBus.for_channel_map(cmap, sensor, pose, clock=clock, noise=noise, offsets=values, seed=seed,
+                                 motion=motion, drift=drift, thermistor=thermistor)
+    for f in specs:
+        bus.inject(**f)
+    return bus

@@ -43,7 +43,7 @@ class TemperatureInput:
     divider: dict = field(default_factory=lambda: dict(DIVIDER_DEFAULTS))
 
     def degc(self, volts: float) -> float:
-        """The temperature of a divider voltage (inverse of host.simbus.ntc_volts)."""
+        """The temperature of a divider voltage (inverse of host.simsensor.ntc_volts)."""
         d = self.divider
         if not 0.0 < volts < d["vref"]:
             return math.nan  # open or shorted thermistor

@@ -15,7 +15,8 @@ from fitgen.physics.transfer import readings
 from host.adc import ADS1115, ADS7828, AdcArray, BusIO, DeviceSilent, ads7828_channel_code
 from host.channelmap import Settings, channel_map, parse_spec
 from host.clock import VirtualClock
-from host.simbus import SimBus, parse_fault, parse_pose
+from host.motion import parse_pose
+from host.simbus import SimBus, parse_fault
 
 from conftest import assert_one_line_error, run_cli
 

@@ -12,7 +12,8 @@ from host.autozero import AutoZero, AutoZeroSettings
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
 from fitgen.c.compiled import compile_checked
-from host.simbus import Drift, SimBus, ntc_volts
+from host.simbus import SimBus
+from host.simsensor import Drift, ntc_volts
 from host.temperature import (TempComp, Thermometer, fit_tempcomp, load_tempcomp, parse_temperature_input,
                               render_c, split_channel_map)
 

@@ -156,7 +156,8 @@ def test_the_firmware_compensates_temperature_as_the_python_readout_does(model, 
     from host.channelmap import parse_spec
     from host.clock import VirtualClock
     from host.readout import Corrections
-    from host.simbus import Drift, SimBus
+    from host.simbus import SimBus
+    from host.simsensor import Drift
     from host.temperature import TempComp, Thermometer, parse_temperature_input
 
     require_tool("gcc")

@@ -122,7 +122,8 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     from fitgen.physics.sensor import load_sensor
     from host.clock import VirtualClock
     from host.readout import Corrections, Readout
-    from host.simbus import Drift, SimBus
+    from host.simbus import SimBus
+    from host.simsensor import Drift
     from host.engine import PythonEngine
     from host.temperature import TempComp, Thermometer, parse_temperature_input
 

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from fitgen import __version__
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, run
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main
 from fitgen.base.parse import parse_assignments
 from fitgen.base.errors import InputError
 from fitgen.physics.pose import POSE_NAMES
@@ -651,12 +651,11 @@ def build_parser() -> Parser:
     return p
 
 
-def _main(argv) -> int:
-    args = build_parser().parse_args(argv)
+def _check(args) -> None:
+    """What argparse cannot check."""
     if getattr(args, "adc_bits", None) is not None and not 0 <= args.adc_bits <= 32:
         raise InputError(f"--adc-bits must be 0..32, got {args.adc_bits}")
-    return args.func(args)
 
 
 def main(argv=None) -> int:
-    sys.exit(run(_main, argv, "fitgen"))
+    command_main(build_parser, argv, "fitgen", _check)

@@ -1,8 +1,9 @@
-"""What every command-line tool here shares: one-line errors with exit status 2."""
+"""What every command-line tool here shares: one-line errors with exit status 2, the entry point, Ctrl-C."""
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 
 from fitgen.base.errors import InputError
@@ -30,3 +31,37 @@ def run(main_fn, argv=None, prog: str = "") -> int:
         return 130
     except BrokenPipeError:
         return 0
+
+
+def command_main(build_parser, argv, prog: str, check=None):
+    """A command's entry point: parse ``argv`` with ``build_parser()``, let ``check(args)`` refuse option
+    combinations, call the chosen subcommand's ``func(args)``; exit with its status (:func:`run`)."""
+
+    def main_fn(argv) -> int:
+        args = build_parser().parse_args(argv)
+        if check is not None:
+            check(args)
+        return args.func(args)
+
+    sys.exit(run(main_fn, argv, prog))
+
+
+class StopFlag:
+    """SIGINT and SIGTERM set a flag a loop checks between steps (the handlers are restored on exit)."""
+
+    def __init__(self):
+        self.stopped = False
+
+    def __call__(self) -> bool:
+        return self.stopped
+
+    def __enter__(self):
+        def handler(signum, frame):
+            self.stopped = True
+
+        self._old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+        return self
+
+    def __exit__(self, *exc):
+        for s, h in self._old.items():
+            signal.signal(s, h)

@@ -10,7 +10,7 @@ import signal
 import sys
 import threading
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, run
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main
 from fitgen.base.errors import InputError
 
 
@@ -80,34 +80,14 @@ def _describe(runner, dev, target: str) -> None:
 
 def _adc_bridge(args):
     """(channel map, stand-in bus, thermistor input, compensation) for --adc, or Nones."""
+    from hil.emulate import adc_bridge
+
     if not args.adc:
         if args.temp_comp or args.thermistor or args.sim_temperature is not None:
             raise InputError("--temp-comp, --thermistor and --sim-temperature go with --adc")
         return None, None, None, None
-    from fitgen.physics.sensor import load_sensor
-    from host.channelmap import channel_map
-    from host.clock import VirtualClock
-    from host.pi import StandIn
-    from host.simbus import Drift, SimBus, parse_pose
-    from host.temperature import load_tempcomp, split_channel_map, temperature_input
-
-    cmap = channel_map(split_channel_map(args.adc)[0])
-    tin = temperature_input(args.adc, cmap, args.thermistor)
-    if tin is None and args.temp_comp:
-        raise InputError("--temp-comp needs the thermistor's input: add temp=CHIP@ADDRESS:INPUT to --adc")
-    tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
-    drift = None
-    if args.sim_temperature is not None:
-        # the sensor at a steady temperature: typical temperature coefficients, no creep
-        drift = Drift.typical(cmap.n_elements, seed=args.seed).steady(args.sim_temperature)
-    sensor = load_sensor(args.sim_sensor).with_transfer("gmr")
-    noise = sensor.noise if args.sim_noise is None else args.sim_noise
-    if not noise >= 0:
-        raise InputError(f"--sim-noise must be >= 0, got {args.sim_noise}")
-    clock = VirtualClock()
-    bus = SimBus.for_channel_map(cmap, sensor, parse_pose(args.simulate), clock=clock, noise=noise, seed=args.seed,
-                                 drift=drift, thermistor=tin)
-    return cmap, StandIn(bus, clock), tin, tempcomp
+    return adc_bridge(args.adc, args.simulate, sensor=args.sim_sensor, noise=args.sim_noise, seed=args.seed,
+                      thermistor=args.thermistor, temp_comp=args.temp_comp, temperature=args.sim_temperature)
 
 
 def cmd_emulate(args) -> int:
@@ -189,10 +169,5 @@ def build_parser() -> Parser:
     return p
 
 
-def _main(argv) -> int:
-    args = build_parser().parse_args(argv)
-    return args.func(args)
-
-
 def main(argv=None) -> int:
-    sys.exit(run(_main, argv, "tactile-hil"))
+    command_main(build_parser, argv, "tactile-hil")

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import sys
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, run
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, command_main
 from fitgen.base.errors import InputError
+from fitgen.base.parse import parse_numbers, parse_positive
 
 from host.channelmap import ADS1115_PGA, ADS1115_RATES, MODES
 
@@ -48,39 +49,17 @@ def cmd_verify(args) -> int:
 
 
 def cmd_flash(args) -> int:
-    from fitgen.c.calblob import to_blob
     from fitgen.equations.model import load_model
 
-    from host.device import Device, DeviceError
-    from host.protocol import ProtocolError
+    from host.device import Device, FlashFailed, flash_model
 
-    timeout = _positive(args.timeout, "--timeout")
+    timeout = parse_positive(args.timeout, "--timeout")
     model = load_model(args.model)
-    with Device.open(args.port, timeout=timeout) as dev:
-        try:
-            info = dev.info()
-        except (DeviceError, ProtocolError) as exc:
-            raise InputError(f"{args.port}: INFO failed: {exc}") from None
-        if info.precision == "fixed":
-            raise InputError("the device is a fixed-point build; calibration blobs need a float or double build")
-        if (info.n_inputs, info.n_outputs) != (model.n_inputs, len(model.equations)):
-            raise InputError(f"model {args.model} has {model.n_inputs} inputs and {len(model.equations)} outputs; "
-                             f"the device's build has {info.n_inputs} and {info.n_outputs}")
-        blob = to_blob(model, info.precision, sensor_id=args.sensor_id, fma=args.fma)
-        try:
-            answer = dev.load_calibration(blob)
-            back = dev.read_calibration()
-        except (DeviceError, ProtocolError) as exc:
-            print(f"tactile-host flash: error: calibration not loaded: {exc}", file=sys.stderr)
-            return EXIT_CHECK_FAILED
-    if back != blob:
-        first = next((i for i, (a, b) in enumerate(zip(back, blob)) if a != b), min(len(back), len(blob)))
-        print(f"tactile-host flash: error: read-back differs from the {len(blob)}-byte blob sent "
-              f"({len(back)} bytes read, first difference at byte {first})", file=sys.stderr)
-        return EXIT_CHECK_FAILED
-    if answer != model.sha256:
-        print(f"tactile-host flash: error: the device reports active model {answer}, expected {model.sha256}",
-              file=sys.stderr)
+    try:
+        with Device.open(args.port, timeout=timeout) as dev:
+            blob, info, answer = flash_model(dev, model, args.model, sensor_id=args.sensor_id, fma=args.fma)
+    except FlashFailed as exc:
+        print(f"tactile-host flash: error: {exc}", file=sys.stderr)
         return EXIT_CHECK_FAILED
     print(f"flashed model {model.sha256} ({len(blob)}-byte {info.precision} blob{', fma' if args.fma else ''}, "
           f"sensor id {args.sensor_id!r}) to {args.port}: the device reports active model {answer}, "
@@ -88,248 +67,12 @@ def cmd_flash(args) -> int:
     return 0
 
 
-def _vref(text: str):
-    if text.lower() == "internal":
-        return "internal"
-    try:
-        return float(text)
-    except ValueError:
-        raise InputError(f"--vref {text!r}: give 'internal' or the external reference in volts") from None
-
-
-def _channel_map(args):
-    from host.channelmap import Settings, channel_map
-    from host.temperature import split_channel_map
-
-    settings = Settings(pga=args.pga, data_rate=args.data_rate, mode=args.mode, vref=_vref(args.vref)).checked("option")
-    return channel_map(split_channel_map(args.adc)[0], settings)
-
-
-def _open_bus(args, cmap, simulate_pose, *, motion=None, drift=None, thermistor=None):
-    """Bus and clock from the options; with a simulated pose, a SimBus instead of /dev/i2c-N."""
-    from fitgen.physics.sensor import load_sensor
-
-    from host.adc import open_bus
-    from host.clock import REAL_CLOCK
-    from host.simbus import SimBus, parse_fault
-
-    sim_opts = [o for o, v in (("--sim-noise", args.sim_noise), ("--sim-fault", args.sim_fault),
-                               ("--sim-offsets", args.sim_offsets)) if v is not None]
-    if simulate_pose is None:
-        if sim_opts:
-            raise InputError(f"{sim_opts[0]} needs --simulate")
-        number = args.bus if args.bus is not None else (cmap.bus if cmap.bus is not None else 1)
-        return open_bus(number), REAL_CLOCK
-    sensor = load_sensor(args.sensor)
-    noise = sensor.gmr.noise if args.sim_noise is None else args.sim_noise
-    offsets = None
-    if args.sim_offsets:
-        try:
-            offsets = [float(x) for x in args.sim_offsets.replace(",", " ").split()]
-        except ValueError:
-            raise InputError(f"--sim-offsets {args.sim_offsets!r}: not numbers") from None
-        if len(offsets) != sensor.n_elements:
-            raise InputError(f"--sim-offsets: give {sensor.n_elements} numbers (V), got {len(offsets)}")
-    faults = [parse_fault(f) for f in args.sim_fault or ()]
-    if noise < 0:
-        raise InputError(f"--sim-noise must be >= 0 V, got {noise}")
-    bus = SimBus.for_channel_map(cmap, sensor, simulate_pose, clock=REAL_CLOCK, noise=noise, offsets=offsets,
-                                 seed=args.seed, motion=motion, drift=drift, thermistor=thermistor)
-    for f in faults:
-        bus.inject(**f)
-    return bus, REAL_CLOCK
-
-
-def _positive(text: str, what: str, *, integer: bool = False, zero: bool = False):
-    import math
-
-    try:
-        val = int(text) if integer else float(text)
-    except ValueError:
-        raise InputError(f"{what} {text!r} is not a{' whole' if integer else ''} number") from None
-    if not math.isfinite(val) or val < 0 or (val == 0 and not zero):
-        raise InputError(f"{what} must be {'>= 0' if zero else '> 0'}, got {text}")
-    return val
-
-
-class _StopFlag:
-    """SIGINT and SIGTERM set a flag the loop checks between samples (restored on exit)."""
-
-    def __init__(self):
-        self.stopped = False
-
-    def __call__(self) -> bool:
-        return self.stopped
-
-    def __enter__(self):
-        import signal
-
-        def handler(signum, frame):
-            self.stopped = True
-
-        self._old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
-        return self
-
-    def __exit__(self, *exc):
-        import signal
-
-        for s, h in self._old.items():
-            signal.signal(s, h)
-
-
-def _motion(spec: str):
-    """``--simulate``: a pose, or ``motion`` (a slow circular slide with a press every few seconds)."""
-    import numpy as np
-
-    from host.simbus import parse_pose
-
-    if spec.strip().lower() != "motion":
-        return parse_pose(spec), None
-
-    def motion(t: float):
-        # 8 s circle of 1 mm radius; every 6 s a 1.5 s press to dz = -1 mm with a little tilt
-        phase = (t % 6.0) / 1.5
-        press = np.sin(np.pi * phase) if phase < 1.0 else 0.0
-        return np.array([np.cos(2 * np.pi * t / 8), np.sin(2 * np.pi * t / 8), -press, 2.0 * press, -1.0 * press])
-
-    return np.zeros(5), motion
-
-
-def _sim_drift(spec: str | None, n: int):
-    """``--sim-drift ramp=5,over=300,tau=100,creep=0.002,start=25,seed=0``: host.simbus.Drift."""
-    from fitgen.base.parse import parse_assignments
-
-    from host.simbus import Drift
-
-    if spec is None:
-        return None
-    keys = ("ramp", "over", "tau", "creep", "start", "seed")
-    vals = parse_assignments(spec, keys, "--sim-drift")
-    over, tau = vals.get("over", 600.0), vals.get("tau", 600.0)
-    if not (over > 0 and tau > 0):
-        raise InputError(f"--sim-drift {spec!r}: over and tau must be > 0 s")
-    d = Drift.typical(n, seed=int(vals.get("seed", 0)), ramp_degc=vals.get("ramp", 5.0), ramp_s=over,
-                      creep_tau=tau, start_degc=vals.get("start", 25.0))
-    if "creep" in vals:
-        d.creep = d.creep / 2e-3 * vals["creep"]
-    return d
-
-
-class _Session:
-    """What ``read`` and ``view`` share: model, channel map, bus (or simulated bus), ADC array, engine and
-    the corrections (tare, auto-zero, temperature), built from the options and closed in one place."""
-
-    def __init__(self, args, prog: str):
-        from fitgen.equations.model import load_model
-
-        from host.adc import AdcArray, RetryPolicy
-        from host.autozero import AutoZero, AutoZeroSettings
-        from host.engine import make_engine
-        from host.readout import Corrections, rest_reference, tare
-        from host.temperature import Thermometer, load_tempcomp, temperature_input
-
-        self.prog = prog
-        self.rate = _positive(args.rate, "--rate") if args.rate is not None else None
-        self.count = _positive(args.count, "--count", integer=True) if args.count is not None else None
-        self.duration = _positive(args.duration, "--duration") if args.duration is not None else None
-        tare_n = _positive(args.tare_samples, "--tare-samples", integer=True)
-        retries = _positive(args.retries, "--retries", integer=True)
-        pose, motion = _motion(args.simulate) if args.simulate is not None else (None, None)
-        cmap0 = _channel_map(args)
-        tin = temperature_input(args.adc, cmap0, args.thermistor)
-        if args.temp_comp and tin is None:
-            raise InputError("--temp-comp needs the temperature: add the thermistor's input to --adc as "
-                             "temp=CHIP@ADDRESS:INPUT (e.g. temp=ads1115@0x4a:0)")
-        tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
-        band = _rest_band(args.rest_band)
-        az_settings = AutoZeroSettings(band_mm=band[0], band_deg=band[1],
-                                       hold=_positive(args.rest_hold, "--rest-hold")).checked()
-        self.model = model = load_model(args.model)
-        if model.input_units != "V":
-            raise InputError(f"model {args.model} takes inputs in {model.input_units}; the ADCs give volts: fit it on "
-                             "a dataset in V (fitgen simulate --transfer gmr, or tactile-host capture)")
-        if tempcomp is not None and tempcomp.n != model.n_inputs:
-            raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
-        self.cmap = cmap = cmap0
-        if cmap.n_elements != model.n_inputs:
-            raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
-        need_ref = args.tare or args.auto_zero
-        reference = rest_reference(args.rest or args.sensor, model.n_inputs) if need_ref else None
-        self.engine = make_engine(args.engine, model, **({"precision": args.precision, "cc": args.cc}
-                                                         if args.engine == "c" else {}))
-        self.bus = None
-        try:
-            drift = _sim_drift(args.sim_drift, cmap.n_elements) if args.simulate is not None else None
-            if args.sim_drift and args.simulate is None:
-                raise InputError("--sim-drift needs --simulate")
-            rest_first = pose is not None and need_ref
-            # a simulated sensor rests during the tare, then moves to its pose, as a real one is pressed after it
-            self.bus, self.clock = _open_bus(args, cmap, None if pose is None else (0 * pose if rest_first else pose),
-                                             motion=None if rest_first else motion, drift=drift, thermistor=tin)
-            self.array = array = AdcArray(self.bus, cmap, clock=self.clock, policy=RetryPolicy(attempts=retries))
-            array.probe()
-            array.setup()
-            self.thermometer = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
-            offsets, noise = None, None
-            if need_ref:
-                t = tare(array, reference, tare_n)
-                print(f"{prog}: {t.describe()}", file=sys.stderr)
-                offsets = t.offsets
-                noise = t.noise_floor(array.lsb)
-                if pose is not None:
-                    self.bus.set_pose(pose)
-                    self.bus.feed.motion = motion
-            autozero = None
-            if args.auto_zero:
-                autozero = AutoZero(reference, noise, model.output_names, zero=offsets, settings=az_settings)
-                autozero.log = lambda text: print(f"{prog}: {text}", file=sys.stderr)
-            self.corrections = Corrections(offsets, tempcomp, autozero)
-            self.reference, self.noise = reference, noise
-        except BaseException:
-            self.close()
-            raise
-        self.source = (f"simulated {args.sensor}: " + ("motion" if motion is not None else
-                                                       ",".join(f"{x:g}" for x in pose))
-                       if pose is not None else f"I2C bus: {cmap.describe()}")
-
-    def record(self, path):
-        from host.readout import RunRecord
-
-        if path is None:
-            return None
-        try:
-            self._record_file = open(path, "w")
-        except OSError as exc:
-            raise InputError(f"cannot write {path}: {exc.strerror}") from None
-        ref = None if self.reference is None else [float(x) for x in self.reference]
-        return RunRecord(self._record_file, {"model": self.model.sha256, "outputs": list(self.model.output_names),
-                                             "n_inputs": self.model.n_inputs, "source": self.source,
-                                             "reference": ref, "noise": self.noise,
-                                             **self.corrections.describe(), "model_file": self.model.to_dict()})
-
-    def close(self):
-        self.engine.close()
-        f = getattr(self, "_record_file", None)
-        if f is not None:
-            f.close()
-        if self.bus is not None:
-            self.bus.close()
-
-
-def _rest_band(text: str) -> tuple[float, float]:
-    parts = text.replace(",", " ").split()
-    try:
-        mm, deg = (float(p) for p in parts)
-    except ValueError:
-        raise InputError(f"--rest-band {text!r}: give MM,DEG, e.g. 0.08,1.5") from None
-    return mm, deg
-
-
 def cmd_read(args) -> int:
     from host.adc import DeviceSilent
     from host.readout import LineFormat, Readout
+    from host.session import ReadoutSession
 
-    s = _Session(args, "tactile-host read")
+    s = ReadoutSession(args, "tactile-host read")
     sink = None
     try:
         fmt = LineFormat(args.format, s.model.n_inputs, s.model.output_names)
@@ -342,7 +85,7 @@ def cmd_read(args) -> int:
         out.write(fmt.header)
         reader = Readout(s.array, s.engine, out, fmt, clock=s.clock, corrections=s.corrections,
                          thermometer=s.thermometer, record=s.record(args.record))
-        with _StopFlag() as stop:
+        with StopFlag() as stop:
             stats = reader.run(rate=s.rate, count=s.count, duration=s.duration, stop=stop)
         how = "stopped" if stop.stopped else "done"
         print(f"tactile-host read: {how}: {stats.summary()}", file=sys.stderr)
@@ -362,12 +105,13 @@ def cmd_view(args) -> int:
     from host.adc import DeviceSilent
     from host.live import LiveHub, LiveServer, view_meta
     from host.readout import LineFormat, Readout
+    from host.session import ReadoutSession
 
     if args.replay:
         return _view_replay(args)
     if args.model is None or args.adc is None:
         raise InputError("view needs --model and --adc (or --replay RUN.jsonl)")
-    s = _Session(args, "tactile-host view")
+    s = ReadoutSession(args, "tactile-host view")
     server = None
     try:
         hub = LiveHub(view_meta(s.model.n_inputs, s.model.output_names, s.model.sha256, s.source, s.rate))
@@ -377,7 +121,7 @@ def cmd_view(args) -> int:
         fmt = LineFormat("csv", s.model.n_inputs, s.model.output_names)
         reader = Readout(s.array, s.engine, None, fmt, clock=s.clock, corrections=s.corrections,
                          thermometer=s.thermometer, observer=hub.publish, record=s.record(args.record))
-        with _StopFlag() as stop:
+        with StopFlag() as stop:
             stats = reader.run(rate=s.rate, count=s.count, duration=s.duration, stop=stop)
         print(f"tactile-host view: {'stopped' if stop.stopped else 'done'}: {stats.summary()}", file=sys.stderr)
         return 0
@@ -391,8 +135,6 @@ def cmd_view(args) -> int:
 
 
 def _view_replay(args) -> int:
-    import time
-
     from host.live import LiveHub, LiveServer, view_meta
     from host.replay import load_run, replay
 
@@ -404,17 +146,8 @@ def _view_replay(args) -> int:
     print(f"tactile-host view: serving {server.url} (replay of {args.replay}, {len(res.t)} samples); Ctrl-C stops",
           file=sys.stderr, flush=True)
     try:
-        with _StopFlag() as stop:
-            t0, w0 = res.t[0], time.monotonic()
-            for i in range(len(res.t)):
-                if stop():
-                    break
-                wait = (res.t[i] - t0) - (time.monotonic() - w0)
-                if wait > 0:
-                    time.sleep(wait)
-                hub.publish(res.sample(i))
-            while args.hold and not stop():
-                time.sleep(0.2)
+        with StopFlag() as stop:
+            res.play(hub.publish, stop, hold=args.hold)
     finally:
         server.stop()
     return 0
@@ -449,266 +182,21 @@ def cmd_replay(args) -> int:
     return 0
 
 
-def _temperatures(text: str) -> list[float]:
-    import math
-
-    try:
-        vals = [float(x) for x in text.replace(",", " ").split()]
-    except ValueError:
-        raise InputError(f"--temperature {text!r}: give temperatures in degC, e.g. 15,25,35") from None
-    if len(vals) < 2 or len(set(vals)) != len(vals) or not all(math.isfinite(v) and -40 <= v <= 125 for v in vals):
-        raise InputError(f"--temperature {text!r}: give two or more different temperatures in -40..125 degC")
-    return vals
-
-
-def _capture_numbers(args) -> tuple:
-    """--samples, --max-spread, --tries, --settle and --retries, checked."""
-    return (_positive(args.samples, "--samples", integer=True), _positive(args.max_spread, "--max-spread"),
-            _positive(args.tries, "--tries", integer=True), _positive(args.settle, "--settle", zero=True),
-            _positive(args.retries, "--retries", integer=True))
-
-
-def cmd_capture_temperatures(args) -> int:
-    """``capture --temperature T1,T2,..``: the schedule at each temperature, then the compensation fitted."""
-    from pathlib import Path
-
-    import numpy as np
-
-    from fitgen.physics.dataset import load_dataset
-
-    from host.adc import AdcArray, DeviceSilent, RetryPolicy
-    from host.capture import SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, trigger_waiter
-    from host.simbus import Drift
-    from host.temperature import Thermometer, fit_tempcomp, temperature_input
-
-    temps = _temperatures(args.temperature)
-    samples, spread, tries, settle, retries = _capture_numbers(args)
-    schedule = load_schedule(args.poses)
-    if len(schedule.poses) < 2:
-        print("tactile-host capture: note: one pose per temperature gives offsets only (gain needs two poses)",
-              file=sys.stderr)
-    cmap = _channel_map(args)
-    tin = temperature_input(args.adc, cmap, args.thermistor)
-    out = Path(args.output)
-    drift = None
-    if args.simulate:
-        drift = (_sim_drift(args.sim_drift, cmap.n_elements) or Drift.typical(cmap.n_elements, seed=args.seed)
-                 ).steady(temps[0])
-    bus, clock = _open_bus(args, cmap, schedule.poses[0] if args.simulate else None, drift=drift, thermistor=tin)
-    rows, pose_ids, row_temps, files = [], [], [], []
-    try:
-        array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
-        array.probe()
-        array.setup()
-        thermo = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
-        for T in temps:
-            path = out.with_name(f"{out.stem}.T{T:g}{out.suffix or '.csv'}")
-            if args.simulate:
-                drift.start_degc = T
-            elif args.trigger:
-                pass
-            else:
-                print(f"tactile-host capture: bring the sensor to {T:g} degC and let it settle, then press Enter",
-                      file=sys.stderr, flush=True)
-                if not sys.stdin.readline():
-                    return 130
-            wait = trigger_waiter(args.trigger, schedule) if args.trigger else None
-            if wait is None and not args.simulate:
-                wait = enter_waiter(schedule)
-            capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
-                    set_pose=bus.set_pose if args.simulate else None, settle=settle, clock=clock,
-                    meta={"adc": cmap.describe(), "temperature_set": T,
-                          "source": f"simulated {args.sensor}" if args.simulate else "hardware"})
-            measured = thermo.read() if thermo is not None else float("nan")
-            ds = load_dataset(path, min_rows=1)
-            rows.append(ds.inputs)
-            pose_ids.append(np.arange(ds.n_rows))
-            row_temps.append(np.full(ds.n_rows, measured if np.isfinite(measured) else T))
-            files.append(str(path))
-            print(f"tactile-host capture: {ds.n_rows} poses at {T:g} degC"
-                  f"{f' (thermistor {measured:.2f} degC)' if np.isfinite(measured) else ''} in {path}", file=sys.stderr)
-    except (DeviceSilent, SpreadTooLarge, TriggerFailed) as exc:
-        print(f"tactile-host capture: error: {exc}; the temperatures done so far are kept: run the same command "
-              "again to resume", file=sys.stderr)
-        return EXIT_CHECK_FAILED
-    finally:
-        bus.close()
-    tc = fit_tempcomp(np.vstack(rows), np.concatenate(pose_ids), np.concatenate(row_temps),
-                      t0=_positive(args.t0, "--t0", zero=True) if args.t0 is not None else None)
-    tc.info["captures"] = files
-    dest = args.temp_comp_output or str(out.with_name(out.stem + ".tempcomp.json"))
-    tc.save(dest)
-    worst = max(tc.info["residual_rms_v"]) * 1e3
-    print(f"tactile-host capture: temperature compensation about {tc.t0:g} degC -> {dest} (offsets up to "
-          f"{np.abs(tc.offset).max() * 1e3:.3g} mV/degC, gains up to {np.abs(tc.gain).max() * 100:.3g} %/degC; "
-          f"residual up to {worst:.3g} mV rms)", file=sys.stderr)
-    return 0
-
-
-_STAGE_OPTIONS = ("stage_flavor", "stage_baud", "stage_axes", "stage_limits", "stage_feed", "stage_approach",
-                  "stage_timeout", "stage_boot_wait", "home", "unlock", "zero")
-
-
-def _stage_settings(args, schedule):
-    """--stage and its options, checked against the schedule before anything moves (None without --stage)."""
-    from host.stage import AxisMap, StageSettings, parse_approach, parse_ranges, parse_zero, stage_url
-
-    given = [o for o in _STAGE_OPTIONS if getattr(args, o) not in (None, False)]
-    if args.stage is None:
-        if given:
-            raise InputError(f"--{given[0].replace('_', '-')} needs --stage gcode:URL")
-        if args.sim_pose_file:
-            raise InputError("--sim-pose-file needs --stage (the simulated sensor follows a simulated stage)")
-        return None
-    if args.trigger:
-        raise InputError("--stage and --trigger both set the poses: give one")
-    if args.temperature is not None:
-        raise InputError("--stage with --temperature is not supported yet: capture each temperature on its own")
-    if args.simulate and not args.sim_pose_file:
-        raise InputError("--simulate with --stage needs --sim-pose-file FILE (the pose file tactile-host stage-sim "
-                         "--pose-file FILE writes), or the simulated sensor would never move")
-    if args.sim_pose_file and not args.simulate:
-        raise InputError("--sim-pose-file needs --simulate")
-    if args.stage_limits is None:
-        raise InputError("--stage needs --stage-limits, e.g. dx=-3:3,dy=-3:3,dz=-2.5:0.5 (mm from the zero): "
-                         "a move outside them is never sent")
-    settings = StageSettings(AxisMap.parse(args.stage_axes or "X=dx,Y=dy,Z=dz"),
-                             parse_ranges(args.stage_limits, "--stage-limits"),
-                             feed=_positive(args.stage_feed or "600", "--stage-feed"),
-                             approach=parse_approach(args.stage_approach or "dx=-0.3,dy=-0.3,dz=0.3")).check()
-    settings.check_schedule(schedule.poses, schedule.describe)
-    return {"url": stage_url(args.stage), "settings": settings, "zero": parse_zero(args.zero or "ask"),
-            "baud": _positive(args.stage_baud or "115200", "--stage-baud", integer=True),
-            "timeout": _positive(args.stage_timeout or "5", "--stage-timeout"),
-            "boot_wait": _positive(args.stage_boot_wait or "2", "--stage-boot-wait", zero=True)}
-
-
-def _open_stage(args, opts, output, rows):
-    """Connect, home or unlock if asked, check the controller's state, and get the zero: (PoseStage, meta)."""
-    from host.stage import GcodeController, PoseStage, StageError, StageState, choose_zero, jog_to_zero
+def cmd_capture(args) -> int:
+    from host.capturerun import CaptureFailed, CaptureInterrupted, run_capture
+    from host.tempcapture import capture_temperatures
 
     prog = "tactile-host capture"
-    ctrl = GcodeController.open(opts["url"], baud=opts["baud"], timeout=opts["timeout"])
     try:
-        ctrl.connect(args.stage_flavor or "auto", boot_wait=opts["boot_wait"])
-        if args.home:
-            print(f"{prog}: homing the stage", file=sys.stderr, flush=True)
-            ctrl.home(timeout=max(120.0, opts["timeout"]))
-        elif args.unlock:
-            ctrl.unlock()
-        if ctrl.alarm:
-            raise StageError(f"{ctrl.name}: the GRBL controller is in ALARM (it starts so after a reset when homing "
-                             "is on): home it (--home) or unlock it (--unlock), then set the zero again")
-        ctrl.setup()
-        # moves a killed run left queued end first: the position that tells a reset must be a standstill's
-        ctrl.wait_idle(60.0 + opts["timeout"], "the moves already queued")
-        settings = opts["settings"]
-        state = StageState.load(output)
-        jogger = PoseStage(ctrl, settings, {})
-
-        def ask(reason):
-            print(f"{prog}: {reason}", file=sys.stderr)
-            return jog_to_zero(jogger, sys.stdin, sys.stderr, prog)
-
-        zero, how = choose_zero(ctrl, state, settings.axes, opts["zero"], rows=rows, ask=ask)
-        homed = ctrl.homed or (how == "kept from the last run" and state.homed)
-        state = StageState(ctrl.flavor, str(settings.axes), zero, homed, None, [])
-        state.save(output)
-        stage = PoseStage(ctrl, settings, zero)
-
-        def on_move(targets):
-            if targets is None:
-                state.position, state.pending = [float(x) for x in stage.position], []
-            else:
-                state.pending = [{k: float(v) for k, v in t.items()} for t in targets]
-            state.save(output)
-
-        stage.on_move = on_move
-        z = " ".join(f"{m}{v:g}" for m, v in zero.items())
-        print(f"{prog}: stage {ctrl.flavor} ({ctrl.firmware or 'firmware unnamed'}) at {opts['url']}, zero {z} "
-              f"({how})", file=sys.stderr, flush=True)
-        meta = {"kind": "gcode", "url": opts["url"], "flavor": ctrl.flavor, "firmware": ctrl.firmware,
-                "zero_machine_mm": zero, "zero_homed": homed, "zero_source": how, **settings.describe()}
-        return stage, meta
-    except BaseException:
-        ctrl.close()
-        raise
-
-
-def cmd_capture(args) -> int:
-    import time
-
-    from fitgen.base.progress import Progress
-
-    if args.temperature is not None and args.stage is None:
-        return cmd_capture_temperatures(args)
-
-    from host.adc import AdcArray, DeviceSilent, RetryPolicy
-    from host.capture import (SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, prepare_output,
-                          trigger_waiter)
-    from host.stage import StageError
-
-    samples, spread, tries, settle, retries = _capture_numbers(args)
-    schedule = load_schedule(args.poses)
-    cmap = _channel_map(args)
-    state = prepare_output(args.output, cmap.n_elements, schedule, write=False)  # checked before any waiting
-    stage_opts = _stage_settings(args, schedule)  # and the stage's settings before anything moves
-    total, pending = len(schedule.poses), int((~state.done).sum())
-    interactive = not args.trigger and not args.simulate and stage_opts is None
-    if args.trigger:
-        wait = trigger_waiter(args.trigger, schedule)
-    elif args.simulate or stage_opts is not None:
-        wait = None  # the stage (simulated or G-code) sets each pose itself
-    else:
-        wait = enter_waiter(schedule)
-    meta = {"adc": cmap.describe(), "source": f"simulated {args.sensor}" if args.simulate else "hardware"}
-    motion = None
-    if args.sim_pose_file:
-        from host.stagesim import pose_file_motion
-
-        motion = pose_file_motion(args.sim_pose_file)
-    bus, clock = _open_bus(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion)
-    if motion is not None:
-        bus.feed.motion_step = 0.0  # follow the stage at every conversion: a move ends between two rows
-    keep = f"the rows written so far are kept in {args.output}: run the same command again to resume"
-    stage = None
-    t0 = time.monotonic()
-    try:
-        array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
-        array.probe()
-        array.setup()
-        set_pose = bus.set_pose if args.simulate else None
-        if stage_opts is not None:
-            stage, meta["stage"] = _open_stage(args, stage_opts, args.output, state.rows)
-            meta["stage"]["settle_s"] = settle
-            set_pose = stage.move_to
-        with Progress("capture", pending) as progress:
-            res = capture(array, schedule, args.output, samples=samples, max_spread=spread, tries=tries,
-                          wait=wait, set_pose=set_pose, settle=settle,
-                          clock=clock, progress=None if interactive else progress, meta=meta)
-    except KeyboardInterrupt:
-        print(f"tactile-host capture: interrupted; {keep}", file=sys.stderr)
+        if args.temperature is not None and args.stage is None:
+            return 130 if capture_temperatures(args, prog) is None else 0
+        run_capture(args, prog)
+    except CaptureInterrupted as exc:
+        print(f"{prog}: interrupted; {exc}", file=sys.stderr)
         return 130
-    except (DeviceSilent, SpreadTooLarge, TriggerFailed, StageError) as exc:
-        from pathlib import Path
-
-        if not Path(args.output).exists():
-            keep = "nothing was written"  # the fault came before the first row's file was made
-        print(f"tactile-host capture: error: {exc}; {keep}", file=sys.stderr)
+    except CaptureFailed as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_CHECK_FAILED
-    finally:
-        if stage is not None:
-            stage.ctrl.close()
-        bus.close()
-    done = res.before + res.captured
-    note = "; dropped an unfinished last line" if res.dropped_partial else ""
-    took = f" in {time.monotonic() - t0:.1f} s" if stage is not None else ""
-    if res.complete:
-        print(f"tactile-host capture: {done}/{total} poses in {args.output} ({res.captured} captured now{took}, "
-              f"{res.before} already there{note})", file=sys.stderr)
-    else:
-        print(f"tactile-host capture: stopped with {done}/{total} poses in {args.output}{note}; run the same "
-              "command again to resume", file=sys.stderr)
     return 0
 
 
@@ -719,24 +207,21 @@ def cmd_stage_sim(args) -> int:
     from host.stagesim import PoseFile, PtyServer, SimController, SimRig, SocketServer, parse_matrix
 
     def triple(text, what):
-        try:
-            vals = [float(x) for x in text.replace(",", " ").split()]
-        except ValueError:
-            vals = []
-        if len(vals) != 3:
+        vals = parse_numbers(text)
+        if vals is None or len(vals) != 3:
             raise InputError(f"{what} {text!r}: three numbers X,Y,Z (mm)")
         return vals
 
     M = parse_matrix(args.map) if args.map else None
-    backlash = _positive(args.backlash, "--backlash", zero=True)
-    rep = _positive(args.repeatability, "--repeatability", zero=True)
+    backlash = parse_positive(args.backlash, "--backlash", zero=True)
+    rep = parse_positive(args.repeatability, "--repeatability", zero=True)
     contact, start = triple(args.contact, "--contact"), triple(args.start, "--start")
     target = PoseFile(args.pose_file) if args.pose_file else None
     rig = SimRig(target, M, axes=args.axes, contact=contact, start=start, backlash=backlash, repeatability=rep,
                  seed=args.seed)
     ctrl = SimController(args.flavor, rig, homing_lock=args.homing)
     server = PtyServer(ctrl) if args.pty else SocketServer(ctrl, port=args.port)
-    with server, _StopFlag() as stop:
+    with server, StopFlag() as stop:
         print(server.url, flush=True)
         first = " ".join(f"{a}{c - s:g}" for a, c, s in zip("XYZ", contact, start))
         print(f"tactile-host stage-sim: {args.flavor} on {server.url}; first contact at machine {first} (until "
@@ -751,10 +236,11 @@ def cmd_pi_build(args) -> int:
     from fitgen.equations.model import load_model
 
     from host.pi import build_pi, render_pi
+    from host.session import channel_map_from_args
     from host.temperature import load_tempcomp, temperature_input
 
     model = load_model(args.model)
-    cmap = _channel_map(args)
+    cmap = channel_map_from_args(args)
     tin = temperature_input(args.adc, cmap, args.thermistor)
     tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
     folder = render_pi(model, cmap, args.output, precision=args.precision, style=args.style, tin=tin,
@@ -979,10 +465,5 @@ def build_parser() -> Parser:
     return p
 
 
-def _main(argv) -> int:
-    args = build_parser().parse_args(argv)
-    return args.func(args)
-
-
 def main(argv=None) -> int:
-    sys.exit(run(_main, argv, "tactile-host"))
+    command_main(build_parser, argv, "tactile-host")

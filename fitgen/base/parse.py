@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from fitgen.base.errors import InputError
 
 
@@ -17,3 +19,22 @@ def parse_assignments(spec: str, allowed, what: str) -> dict[str, float]:
         except ValueError:
             raise InputError(f"{what} {spec!r}: {value!r} is not a number") from None
     return out
+
+
+def parse_numbers(text: str) -> list[float] | None:
+    """Numbers separated by commas or spaces; None when one of them is not a number."""
+    try:
+        return [float(x) for x in text.replace(",", " ").split()]
+    except ValueError:
+        return None
+
+
+def parse_positive(text: str, what: str, *, integer: bool = False, zero: bool = False):
+    """An option's number, > 0 (>= 0 with ``zero``), whole with ``integer``; else InputError naming ``what``."""
+    try:
+        val = int(text) if integer else float(text)
+    except ValueError:
+        raise InputError(f"{what} {text!r} is not a{' whole' if integer else ''} number") from None
+    if not math.isfinite(val) or val < 0 or (val == 0 and not zero):
+        raise InputError(f"{what} must be {'>= 0' if zero else '> 0'}, got {text}")
+    return val

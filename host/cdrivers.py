@@ -6,7 +6,7 @@ shared library and called through ctypes. Its three I2C calls go to the same smb
 Python drivers make (a write of [register, data...] to ``write_i2c_block_data`` or ``write_byte``,
 a register read to ``read_i2c_block_data``), so a ``host.simbus.SimBus`` with its fault
 injection, or a real ``smbus2.SMBus``, answers both languages alike: for the same pose, noise
-seed and faults they give the same codes and the same error counts (tests/test_cadc.py).
+seed and faults they give the same codes and the same error counts (tests/test_cdrivers.py).
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ def library(workdir: str | Path | None = None) -> ctypes.CDLL:
     """adc.c and the shim built by gcc (the project's warning flags) into a shared library, once."""
     global _LIB
     if _LIB is None:
-        folder = Path(workdir or tempfile.mkdtemp(prefix="fitgen-cadc-"))
+        folder = Path(workdir or tempfile.mkdtemp(prefix="fitgen-cdrivers-"))
         src = resources.files("firmware_templates") / "firmware"
         for name in ("adc.h", "adc.c"):
             (folder / name).write_bytes((src / name).read_bytes())

@@ -12,7 +12,7 @@ import pytest
 from fitgen.base.errors import InputError
 from fitgen.physics.sensor import load_sensor
 from host.adc import ADS1115, ADS7828, AdcArray, BusIO, DeviceSilent, RetryPolicy
-from host.cadc import ERR_CONFIG, AdcI2c, AdcPolicy, CAdcArray, chip_table, library
+from host.cdrivers import ERR_CONFIG, AdcI2c, AdcPolicy, CAdcArray, chip_table, library
 from host.channelmap import Settings, parse_spec
 from host.clock import VirtualClock
 from fitgen.c.compiled import WARNING_FLAGS

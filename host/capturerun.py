@@ -1,0 +1,93 @@
+"""A ``capture`` run at one temperature: the options checked, the bus (or simulated bus) and the stage opened,
+every pose of the schedule set at Enter, by a trigger command, by a G-code stage or by the simulation and
+captured (host.capture), then the bus and the stage closed; a fault or Ctrl-C keeps the rows written."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from fitgen.base.parse import parse_positive
+from fitgen.base.progress import Progress
+
+from host.adc import AdcArray, DeviceSilent, RetryPolicy
+from host.capture import (SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, prepare_output,
+                          trigger_waiter)
+from host.session import channel_map_from_args, open_bus_from_args
+from host.stage import StageError
+from host.stagecapture import open_stage, stage_settings
+from host.stagesim import pose_file_motion
+
+
+class CaptureFailed(RuntimeError):
+    """A capture stopped by a fault; the message says which, and what is kept."""
+
+
+class CaptureInterrupted(RuntimeError):
+    """A capture stopped by Ctrl-C; the message says what is kept."""
+
+
+def capture_numbers(args) -> tuple:
+    """--samples, --max-spread, --tries, --settle and --retries, checked."""
+    return (parse_positive(args.samples, "--samples", integer=True), parse_positive(args.max_spread, "--max-spread"),
+            parse_positive(args.tries, "--tries", integer=True), parse_positive(args.settle, "--settle", zero=True),
+            parse_positive(args.retries, "--retries", integer=True))
+
+
+def run_capture(args, prog: str) -> None:
+    """The schedule ``--poses`` into ``--output`` (resumed if it has rows); progress and the summary go to
+    stderr after ``prog``. Raises CaptureFailed or CaptureInterrupted when it stops early."""
+    samples, spread, tries, settle, retries = capture_numbers(args)
+    schedule = load_schedule(args.poses)
+    cmap = channel_map_from_args(args)
+    state = prepare_output(args.output, cmap.n_elements, schedule, write=False)  # checked before any waiting
+    stage_opts = stage_settings(args, schedule)  # and the stage's settings before anything moves
+    total, pending = len(schedule.poses), int((~state.done).sum())
+    interactive = not args.trigger and not args.simulate and stage_opts is None
+    if args.trigger:
+        wait = trigger_waiter(args.trigger, schedule)
+    elif args.simulate or stage_opts is not None:
+        wait = None  # the stage (simulated or G-code) sets each pose itself
+    else:
+        wait = enter_waiter(schedule)
+    meta = {"adc": cmap.describe(), "source": f"simulated {args.sensor}" if args.simulate else "hardware"}
+    motion = pose_file_motion(args.sim_pose_file) if args.sim_pose_file else None
+    bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion)
+    if motion is not None:
+        bus.feed.motion_step = 0.0  # follow the stage at every conversion: a move ends between two rows
+    keep = f"the rows written so far are kept in {args.output}: run the same command again to resume"
+    stage = None
+    t0 = time.monotonic()
+    try:
+        array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
+        array.probe()
+        array.setup()
+        set_pose = bus.set_pose if args.simulate else None
+        if stage_opts is not None:
+            stage, meta["stage"] = open_stage(args, stage_opts, args.output, state.rows, prog)
+            meta["stage"]["settle_s"] = settle
+            set_pose = stage.move_to
+        with Progress("capture", pending) as progress:
+            res = capture(array, schedule, args.output, samples=samples, max_spread=spread, tries=tries,
+                          wait=wait, set_pose=set_pose, settle=settle,
+                          clock=clock, progress=None if interactive else progress, meta=meta)
+    except KeyboardInterrupt:
+        raise CaptureInterrupted(keep) from None
+    except (DeviceSilent, SpreadTooLarge, TriggerFailed, StageError) as exc:
+        if not Path(args.output).exists():
+            keep = "nothing was written"  # the fault came before the first row's file was made
+        raise CaptureFailed(f"{exc}; {keep}") from exc
+    finally:
+        if stage is not None:
+            stage.ctrl.close()
+        bus.close()
+    done = res.before + res.captured
+    note = "; dropped an unfinished last line" if res.dropped_partial else ""
+    took = f" in {time.monotonic() - t0:.1f} s" if stage is not None else ""
+    if res.complete:
+        print(f"{prog}: {done}/{total} poses in {args.output} ({res.captured} captured now{took}, "
+              f"{res.before} already there{note})", file=sys.stderr)
+    else:
+        print(f"{prog}: stopped with {done}/{total} poses in {args.output}{note}; run the same "
+              "command again to resume", file=sys.stderr)

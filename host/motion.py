@@ -1,0 +1,61 @@
+"""What ``--simulate`` and ``--sim-drift`` describe: the simulated sensor's pose or motion, and its drift."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.base.parse import parse_assignments, parse_numbers
+from fitgen.physics.pose import POSE_NAMES
+
+from host.simsensor import Drift
+
+
+def parse_pose(spec: str) -> np.ndarray:
+    """``dx=1,dz=-1`` (components left out are 0) or five numbers ``0.5,0,-1,0,0``."""
+    if "=" in spec:
+        vals = parse_assignments(spec, POSE_NAMES, "--simulate pose")
+        pose = np.array([vals.get(n, 0.0) for n in POSE_NAMES])
+    else:
+        vals = parse_numbers(spec)
+        if vals is None:
+            raise InputError(f"--simulate pose {spec!r}: not numbers")
+        pose = np.array(vals, dtype=float)
+        if pose.size != 5:
+            raise InputError(f"--simulate pose {spec!r}: give 5 numbers ({','.join(POSE_NAMES)}) "
+                             "or NAME=VALUE parts such as dx=1,dz=-1")
+    if not np.all(np.isfinite(pose)):
+        raise InputError(f"--simulate pose {spec!r}: not finite")
+    return pose
+
+
+def pose_or_motion(spec: str):
+    """``--simulate``: (pose, None) for a pose, or (rest pose, motion) for ``motion``: a slow circular slide
+    with a press every few seconds, the pose as a function of the bus clock's seconds."""
+    if spec.strip().lower() != "motion":
+        return parse_pose(spec), None
+
+    def motion(t: float):
+        # 8 s circle of 1 mm radius; every 6 s a 1.5 s press to dz = -1 mm with a little tilt
+        phase = (t % 6.0) / 1.5
+        press = np.sin(np.pi * phase) if phase < 1.0 else 0.0
+        return np.array([np.cos(2 * np.pi * t / 8), np.sin(2 * np.pi * t / 8), -press, 2.0 * press, -1.0 * press])
+
+    return np.zeros(5), motion
+
+
+def parse_drift(spec: str | None, n: int) -> Drift | None:
+    """``--sim-drift ramp=5,over=300,tau=100,creep=0.002,start=25,seed=0``: the drift of ``n`` elements
+    (host.simsensor.Drift.typical, creep scaled to ``creep`` V); None without a spec."""
+    if spec is None:
+        return None
+    keys = ("ramp", "over", "tau", "creep", "start", "seed")
+    vals = parse_assignments(spec, keys, "--sim-drift")
+    over, tau = vals.get("over", 600.0), vals.get("tau", 600.0)
+    if not (over > 0 and tau > 0):
+        raise InputError(f"--sim-drift {spec!r}: over and tau must be > 0 s")
+    d = Drift.typical(n, seed=int(vals.get("seed", 0)), ramp_degc=vals.get("ramp", 5.0), ramp_s=over,
+                      creep_tau=tau, start_degc=vals.get("start", 25.0))
+    if "creep" in vals:
+        d.creep = d.creep / 2e-3 * vals["creep"]
+    return d

@@ -1,0 +1,158 @@
+"""The readout session ``read`` and ``view`` share, and the channel map and bus every command opens from its options.
+
+A session checks the options, loads the model, opens the I2C bus (or, with ``--simulate``, a
+simulated bus), sets up the ADC array, takes the tare, builds the corrections (tare,
+auto-zero, temperature) and the engine, and closes them all in one place.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from fitgen.base.errors import InputError
+from fitgen.base.parse import parse_numbers, parse_positive
+from fitgen.equations.model import load_model
+from fitgen.physics.sensor import load_sensor
+
+from host.adc import AdcArray, RetryPolicy, open_bus
+from host.autozero import AutoZero, AutoZeroSettings
+from host.channelmap import Settings, channel_map
+from host.clock import REAL_CLOCK
+from host.engine import make_engine
+from host.motion import parse_drift, pose_or_motion
+from host.readout import Corrections, RunRecord, rest_reference, tare
+from host.simbus import simulated_bus
+from host.temperature import Thermometer, load_tempcomp, split_channel_map, temperature_input
+
+
+def parse_vref(text: str):
+    """``--vref``: ``internal`` or the external reference in volts."""
+    if text.lower() == "internal":
+        return "internal"
+    try:
+        return float(text)
+    except ValueError:
+        raise InputError(f"--vref {text!r}: give 'internal' or the external reference in volts") from None
+
+
+def channel_map_from_args(args):
+    """The channel map of ``--adc`` (without its thermistor) and the ADS options."""
+    settings = Settings(pga=args.pga, data_rate=args.data_rate, mode=args.mode,
+                        vref=parse_vref(args.vref)).checked("option")
+    return channel_map(split_channel_map(args.adc)[0], settings)
+
+
+def open_bus_from_args(args, cmap, simulate_pose, *, motion=None, drift=None, thermistor=None):
+    """Bus and clock from the options; with a simulated pose, the simulated bus instead of /dev/i2c-N."""
+    sim_opts = [o for o, v in (("--sim-noise", args.sim_noise), ("--sim-fault", args.sim_fault),
+                               ("--sim-offsets", args.sim_offsets)) if v is not None]
+    if simulate_pose is None:
+        if sim_opts:
+            raise InputError(f"{sim_opts[0]} needs --simulate")
+        number = args.bus if args.bus is not None else (cmap.bus if cmap.bus is not None else 1)
+        return open_bus(number), REAL_CLOCK
+    bus = simulated_bus(cmap, load_sensor(args.sensor), simulate_pose, clock=REAL_CLOCK, noise=args.sim_noise,
+                        offsets=args.sim_offsets, faults=args.sim_fault or (), seed=args.seed, motion=motion,
+                        drift=drift, thermistor=thermistor)
+    return bus, REAL_CLOCK
+
+
+def parse_rest_band(text: str) -> tuple[float, float]:
+    """``--rest-band MM,DEG``."""
+    vals = parse_numbers(text)
+    if vals is None or len(vals) != 2:
+        raise InputError(f"--rest-band {text!r}: give MM,DEG, e.g. 0.08,1.5")
+    return vals[0], vals[1]
+
+
+class ReadoutSession:
+    """What ``read`` and ``view`` share: model, channel map, bus (or simulated bus), ADC array, engine and
+    the corrections (tare, auto-zero, temperature), built from the options and closed in one place."""
+
+    def __init__(self, args, prog: str):
+        self.prog = prog
+        self.rate = parse_positive(args.rate, "--rate") if args.rate is not None else None
+        self.count = parse_positive(args.count, "--count", integer=True) if args.count is not None else None
+        self.duration = parse_positive(args.duration, "--duration") if args.duration is not None else None
+        tare_n = parse_positive(args.tare_samples, "--tare-samples", integer=True)
+        retries = parse_positive(args.retries, "--retries", integer=True)
+        pose, motion = pose_or_motion(args.simulate) if args.simulate is not None else (None, None)
+        cmap0 = channel_map_from_args(args)
+        tin = temperature_input(args.adc, cmap0, args.thermistor)
+        if args.temp_comp and tin is None:
+            raise InputError("--temp-comp needs the temperature: add the thermistor's input to --adc as "
+                             "temp=CHIP@ADDRESS:INPUT (e.g. temp=ads1115@0x4a:0)")
+        tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
+        band = parse_rest_band(args.rest_band)
+        az_settings = AutoZeroSettings(band_mm=band[0], band_deg=band[1],
+                                       hold=parse_positive(args.rest_hold, "--rest-hold")).checked()
+        self.model = model = load_model(args.model)
+        if model.input_units != "V":
+            raise InputError(f"model {args.model} takes inputs in {model.input_units}; the ADCs give volts: fit it on "
+                             "a dataset in V (fitgen simulate --transfer gmr, or tactile-host capture)")
+        if tempcomp is not None and tempcomp.n != model.n_inputs:
+            raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
+        self.cmap = cmap = cmap0
+        if cmap.n_elements != model.n_inputs:
+            raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
+        need_ref = args.tare or args.auto_zero
+        reference = rest_reference(args.rest or args.sensor, model.n_inputs) if need_ref else None
+        self.engine = make_engine(args.engine, model, **({"precision": args.precision, "cc": args.cc}
+                                                         if args.engine == "c" else {}))
+        self.bus = None
+        try:
+            drift = parse_drift(args.sim_drift, cmap.n_elements) if args.simulate is not None else None
+            if args.sim_drift and args.simulate is None:
+                raise InputError("--sim-drift needs --simulate")
+            rest_first = pose is not None and need_ref
+            # a simulated sensor rests during the tare, then moves to its pose, as a real one is pressed after it
+            start = None if pose is None else (0 * pose if rest_first else pose)
+            self.bus, self.clock = open_bus_from_args(args, cmap, start, motion=None if rest_first else motion,
+                                                      drift=drift, thermistor=tin)
+            self.array = array = AdcArray(self.bus, cmap, clock=self.clock, policy=RetryPolicy(attempts=retries))
+            array.probe()
+            array.setup()
+            self.thermometer = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
+            offsets, noise = None, None
+            if need_ref:
+                t = tare(array, reference, tare_n)
+                print(f"{prog}: {t.describe()}", file=sys.stderr)
+                offsets = t.offsets
+                noise = t.noise_floor(array.lsb)
+                if pose is not None:
+                    self.bus.set_pose(pose)
+                    self.bus.feed.motion = motion
+            autozero = None
+            if args.auto_zero:
+                autozero = AutoZero(reference, noise, model.output_names, zero=offsets, settings=az_settings)
+                autozero.log = lambda text: print(f"{prog}: {text}", file=sys.stderr)
+            self.corrections = Corrections(offsets, tempcomp, autozero)
+            self.reference, self.noise = reference, noise
+        except BaseException:
+            self.close()
+            raise
+        self.source = (f"simulated {args.sensor}: " + ("motion" if motion is not None else
+                                                       ",".join(f"{x:g}" for x in pose))
+                       if pose is not None else f"I2C bus: {cmap.describe()}")
+
+    def record(self, path):
+        """The run record ``--record`` asks for (None without it), closed with the session."""
+        if path is None:
+            return None
+        try:
+            self._record_file = open(path, "w")
+        except OSError as exc:
+            raise InputError(f"cannot write {path}: {exc.strerror}") from None
+        ref = None if self.reference is None else [float(x) for x in self.reference]
+        return RunRecord(self._record_file, {"model": self.model.sha256, "outputs": list(self.model.output_names),
+                                             "n_inputs": self.model.n_inputs, "source": self.source,
+                                             "reference": ref, "noise": self.noise,
+                                             **self.corrections.describe(), "model_file": self.model.to_dict()})
+
+    def close(self):
+        self.engine.close()
+        f = getattr(self, "_record_file", None)
+        if f is not None:
+            f.close()
+        if self.bus is not None:
+            self.bus.close()

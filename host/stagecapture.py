@@ -1,0 +1,97 @@
+"""The stage side of a capture: ``--stage`` and its options checked against the schedule, the controller
+connected, homed or unlocked, and the zero found (host.stage has the driver, the settings and the zero's rules)."""
+
+from __future__ import annotations
+
+import sys
+
+from fitgen.base.errors import InputError
+from fitgen.base.parse import parse_positive
+
+from host.stage import (AxisMap, GcodeController, PoseStage, StageError, StageSettings, StageState, choose_zero,
+                        jog_to_zero, parse_approach, parse_ranges, parse_zero, stage_url)
+
+STAGE_OPTIONS = ("stage_flavor", "stage_baud", "stage_axes", "stage_limits", "stage_feed", "stage_approach",
+                 "stage_timeout", "stage_boot_wait", "home", "unlock", "zero")
+
+
+def stage_settings(args, schedule):
+    """--stage and its options, checked against the schedule before anything moves (None without --stage)."""
+    given = [o for o in STAGE_OPTIONS if getattr(args, o) not in (None, False)]
+    if args.stage is None:
+        if given:
+            raise InputError(f"--{given[0].replace('_', '-')} needs --stage gcode:URL")
+        if args.sim_pose_file:
+            raise InputError("--sim-pose-file needs --stage (the simulated sensor follows a simulated stage)")
+        return None
+    if args.trigger:
+        raise InputError("--stage and --trigger both set the poses: give one")
+    if args.temperature is not None:
+        raise InputError("--stage with --temperature is not supported yet: capture each temperature on its own")
+    if args.simulate and not args.sim_pose_file:
+        raise InputError("--simulate with --stage needs --sim-pose-file FILE (the pose file tactile-host stage-sim "
+                         "--pose-file FILE writes), or the simulated sensor would never move")
+    if args.sim_pose_file and not args.simulate:
+        raise InputError("--sim-pose-file needs --simulate")
+    if args.stage_limits is None:
+        raise InputError("--stage needs --stage-limits, e.g. dx=-3:3,dy=-3:3,dz=-2.5:0.5 (mm from the zero): "
+                         "a move outside them is never sent")
+    settings = StageSettings(AxisMap.parse(args.stage_axes or "X=dx,Y=dy,Z=dz"),
+                             parse_ranges(args.stage_limits, "--stage-limits"),
+                             feed=parse_positive(args.stage_feed or "600", "--stage-feed"),
+                             approach=parse_approach(args.stage_approach or "dx=-0.3,dy=-0.3,dz=0.3")).check()
+    settings.check_schedule(schedule.poses, schedule.describe)
+    return {"url": stage_url(args.stage), "settings": settings, "zero": parse_zero(args.zero or "ask"),
+            "baud": parse_positive(args.stage_baud or "115200", "--stage-baud", integer=True),
+            "timeout": parse_positive(args.stage_timeout or "5", "--stage-timeout"),
+            "boot_wait": parse_positive(args.stage_boot_wait or "2", "--stage-boot-wait", zero=True)}
+
+
+def open_stage(args, opts, output, rows, prog: str):
+    """Connect, home or unlock if asked, check the controller's state, and get the zero: (PoseStage, meta).
+    ``opts``: :func:`stage_settings`'s; messages go to stderr after ``prog``."""
+    ctrl = GcodeController.open(opts["url"], baud=opts["baud"], timeout=opts["timeout"])
+    try:
+        ctrl.connect(args.stage_flavor or "auto", boot_wait=opts["boot_wait"])
+        if args.home:
+            print(f"{prog}: homing the stage", file=sys.stderr, flush=True)
+            ctrl.home(timeout=max(120.0, opts["timeout"]))
+        elif args.unlock:
+            ctrl.unlock()
+        if ctrl.alarm:
+            raise StageError(f"{ctrl.name}: the GRBL controller is in ALARM (it starts so after a reset when homing "
+                             "is on): home it (--home) or unlock it (--unlock), then set the zero again")
+        ctrl.setup()
+        # moves a killed run left queued end first: the position that tells a reset must be a standstill's
+        ctrl.wait_idle(60.0 + opts["timeout"], "the moves already queued")
+        settings = opts["settings"]
+        state = StageState.load(output)
+        jogger = PoseStage(ctrl, settings, {})
+
+        def ask(reason):
+            print(f"{prog}: {reason}", file=sys.stderr)
+            return jog_to_zero(jogger, sys.stdin, sys.stderr, prog)
+
+        zero, how = choose_zero(ctrl, state, settings.axes, opts["zero"], rows=rows, ask=ask)
+        homed = ctrl.homed or (how == "kept from the last run" and state.homed)
+        state = StageState(ctrl.flavor, str(settings.axes), zero, homed, None, [])
+        state.save(output)
+        stage = PoseStage(ctrl, settings, zero)
+
+        def on_move(targets):
+            if targets is None:
+                state.position, state.pending = [float(x) for x in stage.position], []
+            else:
+                state.pending = [{k: float(v) for k, v in t.items()} for t in targets]
+            state.save(output)
+
+        stage.on_move = on_move
+        z = " ".join(f"{m}{v:g}" for m, v in zero.items())
+        print(f"{prog}: stage {ctrl.flavor} ({ctrl.firmware or 'firmware unnamed'}) at {opts['url']}, zero {z} "
+              f"({how})", file=sys.stderr, flush=True)
+        meta = {"kind": "gcode", "url": opts["url"], "flavor": ctrl.flavor, "firmware": ctrl.firmware,
+                "zero_machine_mm": zero, "zero_homed": homed, "zero_source": how, **settings.describe()}
+        return stage, meta
+    except BaseException:
+        ctrl.close()
+        raise

@@ -1,0 +1,99 @@
+"""``capture --temperature``: the schedule captured at each of several temperatures (the sensor brought there,
+or the simulated one set there), then the per-element compensation fitted from the captures (host.temperature)."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.base.parse import parse_numbers, parse_positive
+from fitgen.physics.dataset import load_dataset
+
+from host.adc import AdcArray, DeviceSilent, RetryPolicy
+from host.capture import SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, trigger_waiter
+from host.capturerun import CaptureFailed, capture_numbers
+from host.motion import parse_drift
+from host.session import channel_map_from_args, open_bus_from_args
+from host.simsensor import Drift
+from host.temperature import Thermometer, fit_tempcomp, temperature_input
+
+
+def parse_temperatures(text: str) -> list[float]:
+    """``--temperature T1,T2,..``: two or more different temperatures in -40..125 degC."""
+    vals = parse_numbers(text)
+    if vals is None:
+        raise InputError(f"--temperature {text!r}: give temperatures in degC, e.g. 15,25,35")
+    if len(vals) < 2 or len(set(vals)) != len(vals) or not all(math.isfinite(v) and -40 <= v <= 125 for v in vals):
+        raise InputError(f"--temperature {text!r}: give two or more different temperatures in -40..125 degC")
+    return vals
+
+
+def capture_temperatures(args, prog: str):
+    """``capture --temperature T1,T2,..``: the schedule at each temperature (one file each), then the compensation
+    fitted and saved; progress goes to stderr after ``prog``. The TempComp, or None when the input closes at a
+    prompt; CaptureFailed when a fault stops it (the temperatures done are kept)."""
+    temps = parse_temperatures(args.temperature)
+    samples, spread, tries, settle, retries = capture_numbers(args)
+    schedule = load_schedule(args.poses)
+    if len(schedule.poses) < 2:
+        print(f"{prog}: note: one pose per temperature gives offsets only (gain needs two poses)", file=sys.stderr)
+    cmap = channel_map_from_args(args)
+    tin = temperature_input(args.adc, cmap, args.thermistor)
+    out = Path(args.output)
+    drift = None
+    if args.simulate:
+        drift = (parse_drift(args.sim_drift, cmap.n_elements) or Drift.typical(cmap.n_elements, seed=args.seed)
+                 ).steady(temps[0])
+    bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, drift=drift,
+                                    thermistor=tin)
+    rows, pose_ids, row_temps, files = [], [], [], []
+    try:
+        array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
+        array.probe()
+        array.setup()
+        thermo = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
+        for T in temps:
+            path = out.with_name(f"{out.stem}.T{T:g}{out.suffix or '.csv'}")
+            if args.simulate:
+                drift.start_degc = T
+            elif args.trigger:
+                pass
+            else:
+                print(f"{prog}: bring the sensor to {T:g} degC and let it settle, then press Enter",
+                      file=sys.stderr, flush=True)
+                if not sys.stdin.readline():
+                    return None
+            wait = trigger_waiter(args.trigger, schedule) if args.trigger else None
+            if wait is None and not args.simulate:
+                wait = enter_waiter(schedule)
+            capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
+                    set_pose=bus.set_pose if args.simulate else None, settle=settle, clock=clock,
+                    meta={"adc": cmap.describe(), "temperature_set": T,
+                          "source": f"simulated {args.sensor}" if args.simulate else "hardware"})
+            measured = thermo.read() if thermo is not None else float("nan")
+            ds = load_dataset(path, min_rows=1)
+            rows.append(ds.inputs)
+            pose_ids.append(np.arange(ds.n_rows))
+            row_temps.append(np.full(ds.n_rows, measured if np.isfinite(measured) else T))
+            files.append(str(path))
+            print(f"{prog}: {ds.n_rows} poses at {T:g} degC"
+                  f"{f' (thermistor {measured:.2f} degC)' if np.isfinite(measured) else ''} in {path}", file=sys.stderr)
+    except (DeviceSilent, SpreadTooLarge, TriggerFailed) as exc:
+        raise CaptureFailed(f"{exc}; the temperatures done so far are kept: run the same command again to "
+                            "resume") from exc
+    finally:
+        bus.close()
+    tc = fit_tempcomp(np.vstack(rows), np.concatenate(pose_ids), np.concatenate(row_temps),
+                      t0=parse_positive(args.t0, "--t0", zero=True) if args.t0 is not None else None)
+    tc.info["captures"] = files
+    dest = args.temp_comp_output or str(out.with_name(out.stem + ".tempcomp.json"))
+    tc.save(dest)
+    worst = max(tc.info["residual_rms_v"]) * 1e3
+    print(f"{prog}: temperature compensation about {tc.t0:g} degC -> {dest} (offsets up to "
+          f"{np.abs(tc.offset).max() * 1e3:.3g} mV/degC, gains up to {np.abs(tc.gain).max() * 100:.3g} %/degC; "
+          f"residual up to {worst:.3g} mV rms)", file=sys.stderr)
+    return tc
