@@ -9,10 +9,10 @@ from fitgen import __version__
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, run
 from fitgen.base.parse import parse_assignments
 from fitgen.base.errors import InputError
+from fitgen.equations.terms import FAMILIES
 from fitgen.physics.pose import POSE_NAMES
 
-# fitgen.equations.terms.FAMILIES (not imported here: the parser stays light)
-FAMILY_CHOICES = ("auto", "all", "no-roots", "integer", "harmonics")
+FAMILY_CHOICES = ("auto", *FAMILIES)
 
 
 def _sensor(args):

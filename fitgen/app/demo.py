@@ -241,9 +241,9 @@ def _print_deployed(paper_model, model, paper_errs: dict, errs: dict, spec: dict
 
 
 def _print_comparison(model, train, test) -> None:
-    from fitgen.app.report import PAPER_EXP_TERMS, PAPER_SIM_MAX_ERROR, evaluate
+    from fitgen.app.report import PAPER_EXP_TERMS, PAPER_SIM_MAX_ERROR, errors_on
 
-    ev_train, ev_test = evaluate(model, train), evaluate(model, test)
+    ev_train, ev_test = errors_on(model, train), errors_on(model, test)
     print(f"   {'output':6} {'terms':>5} {'paper terms*':>12} {'max err (grid)':>15} {'paper max':>10} "
           f"{'max err (random)':>17} {'RMS (random)':>13}")
     for e in model.equations:

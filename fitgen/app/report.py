@@ -13,8 +13,8 @@ PAPER_SIM_MAX_ERROR = {"dx": 0.06, "dz": 0.25, "thx": 1.23}
 PAPER_EXP_TERMS = {"dx": 18, "dz": 21, "thx": 39}
 
 
-def evaluate(model: Model, ds: Dataset) -> dict:
-    """Per output: errors overall and per dz level (when the data has at most 12 dz levels)."""
+def errors_on(model: Model, ds: Dataset) -> dict:
+    """Per output: the model's errors on the rows of ``ds``, overall and per dz level (when it has at most 12)."""
     pred = model.predict(ds.inputs)
     out = {}
     levels = np.unique(ds.target("dz")) if "dz" in ds.target_names else np.array([])
@@ -114,7 +114,7 @@ def format_report(model: Model, ds: Dataset | None = None, title: str = "", pape
         parts.append(deployed)
 
     if ds is not None:
-        ev = evaluate(model, ds)
+        ev = errors_on(model, ds)
         label = f"errors on {ds.n_rows} rows"
         head = ["output", "unit", "max", "RMS", "p95"] + (["paper sim max"] if paper else [])
         rows = []

@@ -17,9 +17,9 @@ from fitgen.c.cgen import c_real, identifier
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
 from fitgen.equations.model import Model, float_domain
+from fitgen.equations.rounding import PRECISIONS
 from fitgen.equations.terms import DISPLACEMENTS, EXPONENTS, monomial_factors
 
-PRECISIONS = ("double", "float", "fixed")  # fixed: integer codes in, int32 out (fitgen/fixedpoint.py)
 STYLES = ("table", "unrolled")
 # C enum names of the exponent kinds, in EXPONENTS order
 EXP_CODE = {"1": "P1", "2": "P2", "3": "P3", "4": "P4", "-1": "M1", "-2": "M2", "-3": "M3", "-4": "M4",

@@ -20,19 +20,17 @@ from fitgen.fitting.holdout import box_of, held_out_set
 from fitgen.equations.model import Model
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.fitting.shared import SharedRows
-from fitgen.equations.terms import candidate_terms
+from fitgen.equations.terms import FIXED_FAMILIES, candidate_terms
 
 VALIDATION_SEED = 7919
 VALIDATION_POSES = 1000
 VALIDATION_DRAWS = 2
 CANDIDATES = ("all", "harmonics")
-# fixed point runs neither roots nor harmonic terms (fitgen.equations.fixedpoint): auto chooses among these for it
-FIXED_CANDIDATES = ("no-roots", "integer")
 
 
 def candidates(precision: str | None) -> tuple[str, ...]:
     """The families ``auto`` compares for a target precision (the first is the fallback)."""
-    return FIXED_CANDIDATES if precision == "fixed" else CANDIDATES
+    return FIXED_FAMILIES if precision == "fixed" else CANDIDATES
 
 
 def validation_rms(model: Model, sensor, ranges: dict, precision: str = "float") -> dict[str, float]:

@@ -18,13 +18,13 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
+from fitgen.equations.rounding import PRECISIONS
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.simulate import pose_rng, random_poses, simulate
 
 N_POSES = 2000
 SEED = 2026
 NOISE_DRAWS = 5
-PRECISIONS = ("double", "float", "fixed")
 
 
 @dataclass
