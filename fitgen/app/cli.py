@@ -449,7 +449,9 @@ def cmd_codegen(args) -> int:
 def cmd_tradeoff(args) -> int:
     from fitgen.base.progress import Progress
     from fitgen.physics.scenes import load_scene
-    from fitgen.app.tradeoff import grid_from, parse_knob_list, parse_target, quick_grid, sweep, write_outputs
+    from fitgen.app.tradeoff import parse_knob_list, parse_target
+    from fitgen.app.tradeoff_report import write_outputs
+    from fitgen.c.tradeoff import grid_from, quick_grid, sweep
 
     knobs = {name: parse_knob_list(name, getattr(args, name)) for name in ("k", "max_terms", "family", "precision",
                                                                          "style", "refine")

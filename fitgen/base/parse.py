@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from fitgen.base.errors import InputError
 
 
@@ -17,3 +19,32 @@ def parse_assignments(spec: str, allowed, what: str) -> dict[str, float]:
         except ValueError:
             raise InputError(f"{what} {spec!r}: {value!r} is not a number") from None
     return out
+
+
+class OutOfRange(ValueError):
+    """A number, but outside the values the option takes."""
+
+
+def parse_penalty(text: str) -> str | float:
+    """A penalty per term: ``aic`` or ``bic`` (as given) or a finite number > 0.
+
+    ValueError when ``text`` is none of these; :class:`OutOfRange` (a ValueError) when it is a
+    number not finite and > 0, so that a caller can word the two apart.
+    """
+    if text in ("aic", "bic"):
+        return text
+    k = float(text)
+    if not (k > 0 and math.isfinite(k)):
+        raise OutOfRange(text)
+    return k
+
+
+def parse_noise(text: str, finite: bool = True) -> float:
+    """A noise figure: a number >= 0, and finite unless ``finite`` is False.
+
+    ValueError when ``text`` is no number; :class:`OutOfRange` when the number is out of range.
+    """
+    noise = float(text)
+    if not (noise >= 0 and (noise != math.inf or not finite)):
+        raise OutOfRange(text)
+    return noise
