@@ -5,8 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from fitgen.base.errors import InputError
-from fitgen.base.fileio import write_atomic
+from fitgen.base.fileio import make_folder, write_atomic
 
 
 def _stage(title: str) -> float:
@@ -24,10 +23,7 @@ def run_demo(out: Path) -> int:
     from fitgen.app.report import format_report
     from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create {out}: {exc.strerror}") from None
+    make_folder(out)
     sensor = load_sensor("paper")
     print(f"fitgen demo: sensor 'paper' ({sensor.n_elements} GMR elements, magnet "
           f"{sensor.magnet.diameter:g} x {sensor.magnet.height:g} mm, {sensor.magnet.polarization:g} T), "

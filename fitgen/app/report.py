@@ -64,6 +64,28 @@ def fit_assumptions(info: dict) -> str:
     return line
 
 
+def fit_summary(model: Model, held_out: int) -> str:
+    """What ``fitgen fit`` says after a fit: per equation its terms, AIC and training errors, what it
+    assumed, a warning when it assumed no noise, and the held-out figures (``held_out``: poses asked)."""
+    lines = []
+    for e in model.equations:
+        i = model.fit_info["outputs"][e.name]
+        err = i["model_training_error"]
+        lines.append(f"{e.name}: {len(e.terms)} terms, AIC {i['aic']:.2f}, training max error {err['max']:.4g} "
+                     f"{e.unit}, RMS {err['rms']:.4g}, condition {i['condition']:.3g}")
+    lines.append(fit_assumptions(model.fit_info))
+    noise = model.fit_info["noise"]
+    if noise["device"] is None and noise["data"] == 0:
+        lines.append("warning: the dataset was simulated without noise and names no sensor this fitgen knows: fitted "
+                     "without the device's noise (give --sensor FILE or --noise X)")
+    text = "\n".join(lines) + "\n"
+    if "held_out" in model.fit_info:
+        return text + deployed_table(model)
+    if held_out:
+        text += "no held-out figures: the dataset names no sensor to simulate held-out poses with (give --sensor)\n"
+    return text
+
+
 def deployed_table(model: Model) -> str:
     """Markdown: held-out errors per precision (the model file's ``held_out`` record), '' without one."""
     rec = model.fit_info.get("held_out")

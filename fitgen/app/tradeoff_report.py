@@ -134,14 +134,9 @@ def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
 def write_outputs(result: TradeoffResult, folder: str | Path) -> tuple[list[Path], str]:
     """DIR/tradeoff.csv, DIR/tradeoff.md and (matplotlib permitting) DIR/tradeoff.png, each
     written atomically; returns the paths and the markdown."""
-    from fitgen.base.fileio import write_atomic
+    from fitgen.base.fileio import make_folder, write_atomic
 
-    folder = Path(folder)
-    if not folder.is_dir():
-        try:
-            folder.mkdir(parents=True)
-        except OSError as exc:
-            raise InputError(f"cannot create {folder}: {exc.strerror}") from None
+    folder = make_folder(folder)
     paths = [write_atomic(folder / "tradeoff.csv", to_csv(result))]
     plot = None
     try:

@@ -48,3 +48,11 @@ def parse_noise(text: str, finite: bool = True) -> float:
     if not (noise >= 0 and (noise != math.inf or not finite)):
         raise OutOfRange(text)
     return noise
+
+
+def parse_names(spec: str, allowed, what: str) -> tuple[str, ...]:
+    """``a,b`` (comma separated) into a tuple of names, at least one, each one of ``allowed``."""
+    names = tuple(x.strip() for x in spec.split(",") if x.strip())
+    if not names or any(n not in allowed for n in names):
+        raise InputError(f"{what} takes names from {','.join(allowed)}, got {spec!r}")
+    return names
