@@ -51,6 +51,8 @@ from pathlib import Path
 
 import numpy as np
 
+from benchutil import table
+
 from fitgen.c.codegen import STYLES
 from fitgen.fitting.fit import FitSettings, fit_model
 from fitgen.equations.model import Model
@@ -242,13 +244,12 @@ def main() -> None:
     print(f"Whole loop: (Ir({N2:,}) - Ir({N1:,})) / {N2 - N1:,} from the totals: line (call, bench loop and "
           f"output sums included). In tm_estimate: the cost lines of tm_estimate and its callees only. "
           f"Repeat: Ir of a second run at N1 minus the first.\n")
-    print("| build | instr/estimate, whole loop | instr/estimate, in tm_estimate | floor 2T+P | "
-          "whole loop / floor | tm_estimate / floor | repeat |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
-    for v in variants:
-        ir = results[v]["ir"]
-        print(f"| {vlabel(v)} | {ir['loop']:.1f} | {ir['fn']:.1f} | {fc['floor']} | "
-              f"{ir['loop'] / fc['floor']:.2f}x | {ir['fn'] / fc['floor']:.2f}x | {ir['repeat']:+d} |")
+    irs = {v: results[v]["ir"] for v in variants}
+    print(table(["build", "instr/estimate, whole loop", "instr/estimate, in tm_estimate", "floor 2T+P",
+                 "whole loop / floor", "tm_estimate / floor", "repeat"],
+                [[vlabel(v), f"{ir['loop']:.1f}", f"{ir['fn']:.1f}", f"{fc['floor']}",
+                  f"{ir['loop'] / fc['floor']:.2f}x", f"{ir['fn'] / fc['floor']:.2f}x", f"{ir['repeat']:+d}"]
+                 for v, ir in irs.items()]))
 
     print("\nInstructions executed inside tm_estimate per estimate, by kind:\n")
     print("| kind | " + " | ".join(vlabel(v) for v in variants) + " |")
@@ -260,12 +261,9 @@ def main() -> None:
     print("| total | " + " | ".join(f"{sum(results[v]['ir']['mix'].values()):.1f}" for v in variants) + " |")
 
     print("\n## Target: unrolled within 1.5x of the floor in instructions\n")
-    print("| build | in tm_estimate / floor | whole loop / floor | within 1.5x |")
-    print("| --- | --- | --- | --- |")
-    for v in variants:
-        ir = results[v]["ir"]
-        r = ir["fn"] / fc["floor"]
-        print(f"| {vlabel(v)} | {r:.2f}x | {ir['loop'] / fc['floor']:.2f}x | {'yes' if r <= 1.5 else 'no'} |")
+    print(table(["build", "in tm_estimate / floor", "whole loop / floor", "within 1.5x"],
+                [[vlabel(v), f"{ir['fn'] / fc['floor']:.2f}x", f"{ir['loop'] / fc['floor']:.2f}x",
+                  "yes" if ir["fn"] / fc["floor"] <= 1.5 else "no"] for v, ir in irs.items()]))
 
     if have_arm:
         print("\n## Cortex-M4F sizes (bytes)\n")

@@ -13,13 +13,13 @@ from fitgen.fitting.fit import FitSettings, fit_model
 # the paper's procedure: the data as given, exact arithmetic (docs/deployed-accuracy.md has the device's figures)
 PAPER_FIT = FitSettings.exact()
 from fitgen.physics.observe import analyse
-from fitgen.physics.pose import rotation_matrices
-from fitgen.app.report import PAPER_EXP_TERMS, PAPER_SIM_MAX_ERROR, evaluate
+from fitgen.physics.pose import POSE_NAMES, rotation_matrices
+from fitgen.app.report import PAPER_EXP_TERMS, PAPER_SIM_MAX_ERROR, errors_on
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 
 SENSOR = load_sensor("paper")
-OUTPUTS = ("dx", "dy", "dz", "thx", "thy")
+OUTPUTS = POSE_NAMES
 
 
 def pivoted(poses: np.ndarray, h: float) -> np.ndarray:
@@ -41,7 +41,7 @@ def main() -> None:
     rand = random_poses(2000, DEFAULT_RANGES, pose_rng(2026))
     train, test = dataset(grid), dataset(rand)
     model = fit_model(train, settings=PAPER_FIT)
-    ev_tr, ev_te = evaluate(model, train), evaluate(model, test)
+    ev_tr, ev_te = errors_on(model, train), errors_on(model, test)
     print("## paper-sim fit (1,875 poses), tilt about the magnet's centre\n")
     print("| output | terms | max err, grid | paper's max err | RMS, grid | max err, 2,000 random | RMS, random |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
@@ -75,7 +75,7 @@ def main() -> None:
     print("| --- | --- | --- | --- |")
     for h in (0.0, 3.0, 6.0):
         m = fit_model(dataset(grid, h), settings=PAPER_FIT)
-        a, b = evaluate(m, dataset(grid, h)), evaluate(m, dataset(rand, h))
+        a, b = errors_on(m, dataset(grid, h)), errors_on(m, dataset(rand, h))
         print(f"| {h:g} | {a['dx']['all']['max']:.3g} / {b['dx']['all']['max']:.3g} | "
               f"{a['dz']['all']['max']:.3g} / {b['dz']['all']['max']:.3g} | "
               f"{a['thx']['all']['max']:.3g} / {b['thx']['all']['max']:.3g} |")

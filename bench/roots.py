@@ -102,6 +102,7 @@ C_ROOTS = r"""
 
 #define NVEC 4096
 static tm_real xs[NVEC];
+""" + cost.C_READ_RAW + r"""
 
 static double run(long n)
 {
@@ -152,12 +153,9 @@ int main(int argc, char **argv)
     tm_real *x;
     if (argc >= 4 && strcmp(argv[2], "count") == 0) {
         static double raw[NVEC];
-        f = fopen(argv[1], "rb");
-        if (f == NULL || fread(raw, sizeof raw, 1, f) != 1) {
-            fprintf(stderr, "cannot read %s\n", argv[1]);
+        if (read_raw(argv[1], raw, NVEC) != 0) {
             return 2;
         }
-        fclose(f);
         for (i = 0; i < NVEC; ++i) {
             xs[i] = (tm_real)raw[i];
         }
@@ -370,6 +368,19 @@ def m4f_counts(model: Model, precision: str, style: str, before: bool, folder: P
     return {"ins": first, "repeat": again - first, "flash": firmware_size(image)["flash"]}
 
 
+def before_after(counts: dict, key: str, fmt: str, roots_per_estimate: int, more) -> list[list[str]]:
+    """Table rows per build (style, precision): ``counts[...][key]`` before and after in format ``fmt``,
+    the difference, per cube root, then the cells ``more(before, after)``."""
+    rows = []
+    for s in ("table", "unrolled"):
+        for p in ("float", "double"):
+            b, a = counts[s, p, True], counts[s, p, False]
+            d = a[key] - b[key]
+            rows.append([f"{s} {p}", format(b[key], fmt), format(a[key], fmt), format(d, "+" + fmt),
+                         format(d / roots_per_estimate, "+" + fmt)] + more(b, a))
+    return rows
+
+
 def cpu_name() -> str:
     try:
         return next(ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name"))
@@ -507,14 +518,8 @@ def main() -> None:
           f"{cost.NVEC:,} inputs uniform in the input box; (Ir({cost.N2:,}) - Ir({cost.N1:,})) / "
           f"{cost.N2 - cost.N1:,}. Before: the same header with TM_CBRT on libm's cbrtf / cbrt. "
           f"Repeat: a second run at {cost.N1:,} estimates minus the first, before / after.\n")
-    rows = []
-    for s in ("table", "unrolled"):
-        for p in ("float", "double"):
-            b, a = est[s, p, True], est[s, p, False]
-            d = a["fn"] - b["fn"]
-            rows.append([f"{s} {p}", f"{b['fn']:.1f}", f"{a['fn']:.1f}", f"{d:+.1f}",
-                         f"{d / roots_per_estimate:+.1f}", f"{b['loop']:.1f}", f"{a['loop']:.1f}",
-                         f"{b['repeat']:+d} / {a['repeat']:+d}"])
+    rows = before_after(est, "fn", ".1f", roots_per_estimate,
+                        lambda b, a: [f"{b['loop']:.1f}", f"{a['loop']:.1f}", f"{b['repeat']:+d} / {a['repeat']:+d}"])
     print(table(["build", "in tm_estimate, before (libm)", "after (ours)", "difference", "per cube root",
                  "whole loop, before", "whole loop, after", "repeat"], rows))
 
@@ -523,14 +528,8 @@ def main() -> None:
         print(f"Reference firmware, {arm_gcc}, -O2, newlib-nano; BENCH at 200 and 2,200 estimates under "
               "-icount shift=0 (a 40-instruction tick, so 0.02 instructions of resolution). Before: newlib's "
               "cbrtf / cbrt. Repeat: a second BENCH pair minus the first, before / after. Flash: the image.\n")
-        rows = []
-        for s in ("table", "unrolled"):
-            for p in ("float", "double"):
-                b, a = m4f[s, p, True], m4f[s, p, False]
-                d = a["ins"] - b["ins"]
-                rows.append([f"{s} {p}", f"{b['ins']:,.1f}", f"{a['ins']:,.1f}", f"{d:+,.1f}",
-                             f"{d / roots_per_estimate:+,.1f}", f"{b['repeat']:+.2f} / {a['repeat']:+.2f}",
-                             f"{b['flash']:,}", f"{a['flash']:,}"])
+        rows = before_after(m4f, "ins", ",.1f", roots_per_estimate, lambda b, a: [
+            f"{b['repeat']:+.2f} / {a['repeat']:+.2f}", f"{b['flash']:,}", f"{a['flash']:,}"])
         print(table(["build", "before (newlib)", "after (ours)", "difference", "per cube root", "repeat",
                      "flash before", "flash after"], rows))
     log("done")

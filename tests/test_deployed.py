@@ -12,6 +12,7 @@ from fitgen.physics.dataset import Dataset
 from fitgen.fitting.fit import FitSettings, _d_jacobian, fit_model, noise_to_add, ring_harmonics
 from fitgen.fitting.holdout import clean_readings, deployed_errors, held_out_set
 from fitgen.equations.model import Model
+from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import DEFAULT_RANGES, grid_poses, pose_rng, random_poses, simulate
 from fitgen.fitting.stepwise import compress, stepwise
@@ -20,7 +21,7 @@ from fitgen.c.compiled import CompiledModel
 
 from conftest import assert_one_line_error, require_tool, run_cli
 
-OUTPUTS = ("dx", "dy", "dz", "thx", "thy")
+OUTPUTS = POSE_NAMES
 # a small grid (675 poses) on which the exact fit's float rounding already exceeds its model error
 GRID = grid_poses({"dx": [-2, -1, 0, 1, 2], "dy": [-2, -1, 0, 1, 2], "dz": [0, -1, -2], "thx": [-5, 0, 5],
                    "thy": [-5, 0, 5]})

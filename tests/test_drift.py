@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from fitgen.base.errors import InputError
+from fitgen.physics.pose import POSE_NAMES
 from host.adc import AdcArray
 from host.autozero import AutoZero, AutoZeroSettings
 from host.channelmap import parse_spec
@@ -19,7 +20,7 @@ from host.temperature import (TempComp, Thermometer, fit_tempcomp, load_tempcomp
 
 from conftest import TWO_CHIPS, assert_one_line_error, require_tool, run_cli
 
-OUTPUTS = ("dx", "dy", "dz", "thx", "thy")
+OUTPUTS = POSE_NAMES
 
 
 def _bus(sensor, drift, *, noise=0.0, pose=np.zeros(5), tin=None, clock=None):

@@ -10,8 +10,8 @@ import pytest
 from conftest import assert_one_line_error, require_tool, run_cli
 
 from fitgen.base.errors import InputError
-from fitgen.app.tradeoff import (Knobs, full_grid, grid_from, parse_knob_list, parse_target, pareto_front, quick_grid,
-                             recommend)
+from fitgen.app.tradeoff import parse_knob_list, parse_target
+from fitgen.c.tradeoff import Knobs, full_grid, grid_from, pareto_front, quick_grid, recommend
 
 # --- the front --------------------------------------------------------------------------------------
 
@@ -120,7 +120,7 @@ def test_integer_family_starts_from_what_it_allows():
 
 
 def test_sweep_needs_valgrind(monkeypatch):
-    import fitgen.app.tradeoff as tradeoff
+    import fitgen.c.tradeoff as tradeoff
     from fitgen.physics.scenes import load_scene
     from fitgen.physics.sensor import load_sensor
 

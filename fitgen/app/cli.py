@@ -7,12 +7,12 @@ from pathlib import Path
 
 from fitgen import __version__
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main
-from fitgen.base.parse import parse_assignments
+from fitgen.base.parse import OutOfRange, parse_assignments, parse_names, parse_noise, parse_penalty
 from fitgen.base.errors import InputError
+from fitgen.equations.terms import FAMILIES
 from fitgen.physics.pose import POSE_NAMES
 
-# fitgen.equations.terms.FAMILIES (not imported here: the parser stays light)
-FAMILY_CHOICES = ("auto", "all", "no-roots", "integer", "harmonics")
+FAMILY_CHOICES = ("auto", *FAMILIES)
 
 
 def _sensor(args):
@@ -28,65 +28,30 @@ def _noise(value: str, sensor) -> float:
     if value == "sensor":
         return sensor.noise
     try:
-        noise = float(value)
+        return parse_noise(value, finite=False)
+    except OutOfRange:
+        raise InputError(f"--noise must be >= 0, got {value}") from None
     except ValueError:
         raise InputError(f"--noise must be a number or 'sensor', got {value!r}") from None
-    if not noise >= 0:
-        raise InputError(f"--noise must be >= 0, got {value}")
-    return noise
 
 
 def cmd_simulate(args) -> int:
-    from fitgen.physics.dataset import load_poses
-    from fitgen.physics.simulate import grid_poses, parse_grid, parse_ranges, pose_rng, random_poses, simulate
-
-    from pathlib import Path
+    from fitgen.physics.posesource import choose_poses
+    from fitgen.physics.simulate import simulate
 
     sensor = _sensor(args)
     # a sensor file (a unit's, say) is named in the meta, so that fit finds it to hold out on
     unit_info = {"sensor_file": str(Path(args.sensor).resolve())} if Path(args.sensor).is_file() else {}
     if args.unit is not None:
-        from fitgen.physics.sensor import load_sensor
-        from fitgen.physics.units import draw_unit, unit_path, write_unit
+        from fitgen.physics.units import unit_beside
 
-        unit, _ = draw_unit(sensor, args.unit)
-        path = write_unit(unit_path(args.output), unit, sensor.name,
-                          {"seed": args.unit, "source": "drawn within the drawing's tolerances (fitgen simulate --unit)"})
-        # simulated with the file as written, so that the data and the file agree to the last bit
-        unit_info = {"sensor_file": str(path.resolve()), "unit_seed": args.unit, "drawing": sensor.name}
-        sensor = load_sensor(path).with_transfer(sensor.transfer)
-        print(f"wrote unit {sensor.name} (a unit of {unit_info['drawing']}) to {path}", file=sys.stderr)
-    chosen = [x for x in (args.grid, args.random, args.poses) if x is not None]
-    if len(chosen) > 1 and not (len(chosen) == 2 and args.poses is None and not args.scene):
-        raise InputError("give one of --grid, --random, --poses (or --grid with --random: the grid, then random poses)")
-    if args.scene and (args.grid or args.poses or args.ranges):
-        raise InputError("--scene sets the poses: give it with --random N or alone, not with --grid, --poses, --ranges")
-    scene_info = {}
-    if args.scene:
-        from fitgen.physics.scenes import load_scene
-
-        scene = load_scene(args.scene)
-        scene_info = {"scene": scene.name, "scene_spec": args.scene, "scene_outputs": list(scene.outputs)}
-    if args.scene and args.random is None:
-        poses, source = scene.poses(), {"scene_grid_levels": scene.levels}
-    elif args.scene:
-        poses = random_poses(args.random, scene.ranges, pose_rng(args.seed))
-        source = {"random": args.random}
-    elif args.poses:
-        poses, source = load_poses(args.poses), {"poses_file": str(args.poses)}
-    elif args.random is not None:
-        poses = random_poses(args.random, parse_ranges(args.ranges), pose_rng(args.seed))
-        source = {"random": args.random, "ranges": args.ranges}
-        if args.grid:
-            # a rig's sweep and random presses between its levels: the grid's poses first
-            import numpy as np
-
-            poses, source = np.vstack([grid_poses(parse_grid(args.grid)), poses]), {**source, "grid": args.grid}
-    else:
-        grid = args.grid or "paper-sim"
-        poses, source = grid_poses(parse_grid(grid)), {"grid": grid}
+        drawing = sensor
+        sensor, path, unit_info = unit_beside(drawing, args.unit, args.output)
+        print(f"wrote unit {sensor.name} (a unit of {drawing.name}) to {path}", file=sys.stderr)
+    poses, source = choose_poses(grid=args.grid, random=args.random, poses=args.poses, ranges=args.ranges,
+                                 scene=args.scene, seed=args.seed)
     ds = simulate(sensor, poses, noise=_noise(args.noise, sensor), adc_bits=args.adc_bits,
-                  seed=args.seed, provenance={**source, **scene_info, **unit_info}, labels=args.labels)
+                  seed=args.seed, provenance={**source, **unit_info}, labels=args.labels)
     ds.save(args.output)
     print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}",
           file=sys.stderr)
@@ -116,151 +81,66 @@ def cmd_observe(args) -> int:
 
 
 def _settings(args):
-    from fitgen.fitting.fit import FitSettings
+    from fitgen.fitting.family import family_settings
 
-    if args.k in ("aic", "bic"):
-        k = 2.0 if args.k == "aic" else "bic"
-    else:
-        try:
-            k = float(args.k)
-        except ValueError:
-            raise InputError(f"--k must be aic, bic or a number > 0, got {args.k!r}") from None
-        if not k > 0 or k != k or k == float("inf"):
-            raise InputError(f"--k must be a finite number > 0, got {args.k}")
+    try:
+        k = parse_penalty(args.k)
+    except OutOfRange:
+        raise InputError(f"--k must be a finite number > 0, got {args.k}") from None
+    except ValueError:
+        raise InputError(f"--k must be aic, bic or a number > 0, got {args.k!r}") from None
+    k = 2.0 if k == "aic" else k
     if args.max_terms is not None and args.max_terms < 1:
         raise InputError(f"--max-terms must be >= 1, got {args.max_terms}")
-    noise = None
-    if args.noise is not None:
-        try:
-            noise = float(args.noise)
-        except ValueError:
-            raise InputError(f"--noise must be a number >= 0 (reading noise rms, input units), got {args.noise!r}") \
-                from None
-        if not (noise >= 0 and noise != float("inf")):
-            raise InputError(f"--noise must be a finite number >= 0, got {args.noise}")
-    # --noise 0 alone is the paper's procedure (what R's step() computes): no rounding term either
-    precision = args.precision or ("exact" if noise == 0 else "float")
-    from fitgen.fitting.family import candidates
-    from fitgen.equations.refine import MAX_STEPS
-
-    # auto: fitgen.fitting.family chooses among what the precision can run
-    family = candidates(precision)[0] if args.family == "auto" else args.family
-    # the rest of --refine's checks (--refine-terms, the data) are fitgen.fitting.refine_fit.check_refinable's
-    if not 0 <= args.refine <= MAX_STEPS:
-        raise InputError(f"--refine takes 0 (none) to {MAX_STEPS} steps, got {args.refine}")
-    if precision == "fixed":
-        if args.refine:
-            raise InputError("fixed point has no refinement (its Gauss-Newton steps run in float or double): "
-                             "drop --refine, or fit for --precision float")
-        if family not in candidates("fixed"):
-            raise InputError(f"fixed point runs no roots and no harmonic terms, which --family {family} offers: "
-                             f"use --family {' or '.join(candidates('fixed'))} (or auto)")
-    return FitSettings.family(family, k=k, max_terms=args.max_terms, d_terms=not args.no_d_terms,
-                              d_source="true" if args.true_d else "estimated", noise=noise,
-                              precision=None if precision == "exact" else precision, refine=args.refine,
-                              refine_terms=args.refine_terms)
-
-
-def _outputs(spec):
-    if spec is None:
-        return None
-    names = tuple(x.strip() for x in spec.split(",") if x.strip())
-    bad = [n for n in names if n not in POSE_NAMES]
-    if bad or not names:
-        raise InputError(f"--outputs takes names from {','.join(POSE_NAMES)}, got {spec!r}")
-    return names
-
-
-def _scene_outputs(args, ds, sensor):
-    """The outputs a scene asks for (--scene, or the scene the dataset was simulated for), after
-    checking that ``sensor`` (the dataset's, or None when unknown) resolves them; None when no scene applies."""
-    from fitgen.physics.scenes import load_scene, unresolved_warnings
-
-    spec = args.scene or ds.meta.get("scene_spec")
-    if spec is None:
-        return None
-    if args.outputs:
-        raise InputError("give --outputs or a scene, not both (the scene names the outputs)")
-    scene = load_scene(spec)
-    missing = [o for o in scene.outputs if o not in ds.target_names]
-    if missing:
-        raise InputError(f"scene {scene.name} asks for {missing[0]}, which dataset {args.data} does not have")
-    if not args.force:
-        if sensor is None:
-            raise InputError("give --sensor (to check that it resolves the scene's outputs) or --force")
-        bad = unresolved_warnings(sensor, scene)
-        if bad:
-            raise InputError(f"scene {scene.name}: sensor {sensor.name} cannot resolve {bad[0]} "
-                             f"Fit anyway with --force, or use a scene without it.")
-    return scene.outputs
+    try:
+        noise = None if args.noise is None else parse_noise(args.noise)
+    except OutOfRange:
+        raise InputError(f"--noise must be a finite number >= 0, got {args.noise}") from None
+    except ValueError:
+        raise InputError(f"--noise must be a number >= 0 (reading noise rms, input units), got {args.noise!r}") \
+            from None
+    return family_settings(args.family, args.precision, noise, args.refine, k=k, max_terms=args.max_terms,
+                           d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated",
+                           refine_terms=args.refine_terms)
 
 
 def cmd_fit(args) -> int:
-    from fitgen.physics.dataset import load_dataset
-    from fitgen.fitting.fit import fit_model
+    from fitgen.app.report import fit_summary
     from fitgen.base.progress import Progress
-    from fitgen.app.report import deployed_table, fit_assumptions
+    from fitgen.fitting.family import auto_compares, fit_family
+    from fitgen.physics.dataset import load_dataset
+    from fitgen.physics.scenes import scene_outputs
     from fitgen.physics.simulate import dataset_sensor
 
     settings = _settings(args)
     ds = load_dataset(args.data)
     sensor = dataset_sensor(ds.meta, args.sensor)
-    outputs = _scene_outputs(args, ds, sensor) or _outputs(args.outputs) or ds.target_names
-    # --noise 0 is the paper's procedure: the paper's power kinds too, unless a family or fixed point is named
-    auto = args.family == "auto" and (settings.noise != 0 or settings.precision == "fixed")
+    # --scene, or the scene the dataset was simulated for, names the outputs
+    scene = args.scene or ds.meta.get("scene_spec")
+    if scene is not None and args.outputs:
+        raise InputError("give --outputs or a scene, not both (the scene names the outputs)")
+    if scene is not None:
+        outputs = scene_outputs(scene, ds, args.data, sensor, args.force)
+    else:
+        outputs = ds.target_names if args.outputs is None else parse_names(args.outputs, POSE_NAMES, "--outputs")
+    auto = auto_compares(args.family, settings)
     steps = len(outputs) + (ds.n_inputs if settings.refine else 0)  # the equations, then the forward model's
     bar = Progress("fit", steps * (2 if auto and sensor is not None else 1))
-    state = {"name": None}
-
-    def progress(name, step, aic, n_terms):
-        if state["name"] != name:
-            if state["name"] is not None:
-                bar.update()
-            state["name"] = name
-        bar.update(0, f"{name}: step {step}, {n_terms} terms, AIC {aic:.1f}")
-
+    progress = bar.per_item(lambda name, step, aic, n_terms: f"{name}: step {step}, {n_terms} terms, AIC {aic:.1f}")
     with bar:
-        if auto:
-            from fitgen.fitting.family import fit_auto
-
-            model, family = fit_auto(ds, outputs, settings, sensor, progress=progress)
-        else:
-            model = fit_model(ds, outputs, settings, progress=progress, sensor=sensor)
-            family = ({"name": args.family, "auto": False} if args.family != "auto" else
-                      {"name": "all", "auto": True, "why": "--noise 0: the paper's procedure"})
+        model, family = fit_family(ds, outputs, settings, sensor, args.family, progress)
     model.fit_info["family"] = family
     model.fit_info["dataset"] = str(args.data)
     if args.held_out and sensor is not None:
-        from fitgen.fitting.holdout import box_of, evaluate
-        from fitgen.fitting.identify import load_posterior
+        from fitgen.fitting.holdout import fitted_held_out
 
-        unit_file = args.sensor or ds.meta.get("sensor_file")
-        posterior = load_posterior(unit_file) if unit_file else None
         with Progress("held-out", 1) as hbar:
-            hbar.update(0, f"{args.held_out} random poses, {model.fit_info['noise']['device'] or 0:g} noise"
-                           + (", units from the identification's posterior" if posterior else ""))
-            model.fit_info["held_out"] = evaluate(model, sensor, box_of(ds.poses()),
-                                                  noise=model.fit_info["noise"]["device"], n=args.held_out,
-                                                  posterior=posterior, labels=ds.meta.get("labels", "stage"))
-            if unit_file and not sensor.is_drawing:
-                model.fit_info["held_out"]["sensor_file"] = str(unit_file)
+            model.fit_info["held_out"] = fitted_held_out(model, sensor, ds, args.held_out,
+                                                         args.sensor or ds.meta.get("sensor_file"),
+                                                         note=lambda text: hbar.update(0, text))
             hbar.update()
     model.save(args.output)
-    for e in model.equations:
-        i = model.fit_info["outputs"][e.name]
-        err = i["model_training_error"]
-        print(f"{e.name}: {len(e.terms)} terms, AIC {i['aic']:.2f}, training max error {err['max']:.4g} {e.unit}, "
-              f"RMS {err['rms']:.4g}, condition {i['condition']:.3g}", file=sys.stderr)
-    print(fit_assumptions(model.fit_info), file=sys.stderr)
-    noise = model.fit_info["noise"]
-    if noise["device"] is None and noise["data"] == 0:
-        print("warning: the dataset was simulated without noise and names no sensor this fitgen knows: fitted "
-              "without the device's noise (give --sensor FILE or --noise X)", file=sys.stderr)
-    if "held_out" in model.fit_info:
-        print(deployed_table(model), end="", file=sys.stderr)
-    elif args.held_out:
-        print("no held-out figures: the dataset names no sensor to simulate held-out poses with (give --sensor)",
-              file=sys.stderr)
+    print(fit_summary(model, args.held_out), end="", file=sys.stderr)
     print(f"wrote {args.output}", file=sys.stderr)
     return 0
 
@@ -268,18 +148,12 @@ def cmd_fit(args) -> int:
 def cmd_predict(args) -> int:
     import numpy as np
 
-    from fitgen.physics.dataset import parse_table
-    from fitgen.base.fileio import read_text
     from fitgen.base.fileio import write_atomic
     from fitgen.equations.model import load_model
+    from fitgen.physics.dataset import estimates_csv, load_inputs
 
     model = load_model(args.model)
-    names, table = parse_table(read_text(args.data, "dataset"), f"dataset {args.data}")
-    cols = [f"v{k}" for k in range(1, model.n_inputs + 1)]
-    missing = [c for c in cols if c not in names]
-    if missing:
-        raise InputError(f"dataset {args.data}: missing column {missing[0]} (the model takes {cols[0]}..{cols[-1]})")
-    inputs = table[:, [names.index(c) for c in cols]]
+    inputs = load_inputs(args.data, model.n_inputs)
     if args.precision == "fixed":
         from fitgen.equations.fixedpoint import plan_at
 
@@ -292,9 +166,7 @@ def cmd_predict(args) -> int:
         if args.codes or args.input_lsb is not None or args.input_offset is not None:
             raise InputError("--codes, --input-lsb and --input-offset apply to --precision fixed only")
         pred, status = model.predict(inputs, with_status=True, precision=args.precision)
-    header = ",".join(list(model.output_names) + ["status"])
-    lines = [header] + [",".join(map(repr, row)) + f",{int(s)}" for row, s in zip(pred.tolist(), status)]
-    write_atomic(args.output, "\n".join(lines) + "\n")
+    write_atomic(args.output, estimates_csv(model.output_names, pred, status))
     clamped = int(np.sum(status > 0))
     print(f"wrote {len(pred)} estimates to {args.output}" + (f" ({clamped} rows clamped into the domain)"
                                                              if clamped else ""), file=sys.stderr)
@@ -316,65 +188,34 @@ def cmd_report(args) -> int:
         print(text, end="")
     if args.plot:
         from fitgen.app import plots
+        from fitgen.base.fileio import make_folder
 
-        folder = Path(args.plot)
-        if not folder.is_dir():
-            try:
-                folder.mkdir(parents=True)
-            except OSError as exc:
-                raise InputError(f"cannot create {folder}: {exc.strerror}") from None
+        folder = make_folder(args.plot)
         if ds is None:
             raise InputError("--plot needs --data (the rows to plot estimates for)")
         paths = plots.estimate_vs_target(model, ds, folder)
         if args.sensor:
-            paths += _sweeps(model, args.sensor, folder)
+            from fitgen.physics.sensor import load_sensor
+
+            paths += plots.rotation_sweeps(model, load_sensor(args.sensor), folder)
         print("plots: " + ", ".join(str(p) for p in paths), file=sys.stderr)
     return 0
 
 
-def _sweeps(model, sensor_spec, folder):
-    import numpy as np
-
-    from fitgen.app import plots
-    from fitgen.physics.sensor import load_sensor
-    from fitgen.physics.simulate import simulate
-
-    sensor = load_sensor(sensor_spec)
-    paths = []
-    for j, name in enumerate(POSE_NAMES[3:], start=3):
-        if name in model.output_names:
-            values = np.round(np.arange(-5.0, 5.0 + 1e-9, 0.1), 10)
-            poses = np.zeros((len(values), 5))
-            poses[:, j] = values
-            paths.append(plots.resolution_sweep(model, simulate(sensor, poses).inputs, values, name, folder))
-    return paths
-
-
 def cmd_identify(args) -> int:
-    import numpy as np
-
-    from fitgen.physics.dataset import load_dataset
-    from fitgen.fitting.identify import CHI2_LIMIT, identify, report, row_noise, save
     from fitgen.base.progress import Progress
+    from fitgen.fitting.identify import check_explained, identify, in_capture_units, report, row_noise, save
+    from fitgen.physics.dataset import load_dataset
 
     ds = load_dataset(args.capture)
-    drawing = _sensor(args)
-    units = ds.meta.get("units")
-    if not args.transfer and units in ("V", "mT"):
-        drawing = drawing.with_transfer("gmr" if units == "V" else "raw")
+    drawing = _sensor(args) if args.transfer else in_capture_units(_sensor(args), ds.meta)
     noise, source = row_noise(ds.meta, drawing, args.noise)
     with Progress("identify", 4) as bar:
         ident = identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
                          progress=lambda i, n, note: bar.update(1, note))
-    if ident.reduced_chi2 > CHI2_LIMIT:
-        rms = float(np.sqrt(ident.reduced_chi2))
-        raise InputError(f"the physics does not explain {args.capture}: residuals {rms:.3g}x the reading noise "
-                         f"({source}); another sensor than {drawing.name}, labels in other units, or a noise figure too "
-                         "low; nothing written")
+    check_explained(ident, args.capture, drawing.name, source)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm", file=sys.stderr)
     print(report(ident), end="")
-    from pathlib import Path
-
     spec = str(Path(args.sensor).resolve()) if Path(args.sensor).is_file() else args.sensor
     unit, post = save(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
                                            "drawing_spec": spec})
@@ -384,14 +225,10 @@ def cmd_identify(args) -> int:
 
 
 def cmd_schedule(args) -> int:
-    import json
-
     import numpy as np
 
-    from fitgen.physics.dataset import meta_path
-    from fitgen.base.fileio import write_atomic
     from fitgen.base.progress import Progress
-    from fitgen.fitting.schedule import schedule, schedule_csv
+    from fitgen.fitting.schedule import schedule, write_schedule
     from fitgen.physics.simulate import parse_ranges
 
     drawing = _sensor(args)
@@ -401,8 +238,7 @@ def cmd_schedule(args) -> int:
         poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits),
                                noise=(drawing.noise if noise is None else noise) / np.sqrt(args.samples),
                                rig_error=args.rig_error, progress=lambda i, n, note: bar.update(1, note))
-    write_atomic(args.output, schedule_csv(poses, axes))
-    write_atomic(meta_path(args.output), json.dumps({**info, "samples_per_row": args.samples}, indent=1) + "\n")
+    write_schedule(args.output, poses, axes, {**info, "samples_per_row": args.samples})
     print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}) to {args.output}",
           file=sys.stderr)
     return 0
@@ -449,7 +285,9 @@ def cmd_codegen(args) -> int:
 def cmd_tradeoff(args) -> int:
     from fitgen.base.progress import Progress
     from fitgen.physics.scenes import load_scene
-    from fitgen.app.tradeoff import grid_from, parse_knob_list, parse_target, quick_grid, sweep, write_outputs
+    from fitgen.app.tradeoff import parse_knob_list, parse_target
+    from fitgen.app.tradeoff_report import write_outputs
+    from fitgen.c.tradeoff import grid_from, quick_grid, sweep
 
     knobs = {name: parse_knob_list(name, getattr(args, name)) for name in ("k", "max_terms", "family", "precision",
                                                                          "style", "refine")
@@ -490,7 +328,12 @@ def build_parser() -> Parser:
     p.add_argument("--version", action="version", version=f"fitgen {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
 
-    s = sub.add_parser("simulate", help="simulate element readings for a pose set")
+    def command(name, func, help_text):
+        parser = sub.add_parser(name, help=help_text)
+        parser.set_defaults(func=func)
+        return parser
+
+    s = command("simulate", cmd_simulate, "simulate element readings for a pose set")
     s.add_argument("--sensor", default="paper", help="preset name or sensor TOML (default: paper)")
     s.add_argument("--grid", help="paper-sim, paper-exp, or 'dx=-2:2:5 dz=0,-1 ...'")
     s.add_argument("--random", type=int, metavar="N",
@@ -509,9 +352,8 @@ def build_parser() -> Parser:
                    help="simulate a built unit of the sensor, drawn within its [tolerances] with this seed; its sensor "
                         "file is written beside the data (<stem>.unit.toml)")
     s.add_argument("-o", "--output", required=True, help="dataset CSV to write")
-    s.set_defaults(func=cmd_simulate)
 
-    o = sub.add_parser("observe", help="observability of each pose component (Jacobian SVD, Cramer-Rao)")
+    o = command("observe", cmd_observe, "observability of each pose component (Jacobian SVD, Cramer-Rao)")
     o.add_argument("sensor_pos", nargs="?", metavar="SENSOR")
     o.add_argument("--sensor", help="preset name or sensor TOML (default: paper)")
     o.add_argument("--scene", help="full, slide, press or a scene TOML (default: full)")
@@ -519,9 +361,8 @@ def build_parser() -> Parser:
     o.add_argument("--noise", help="element noise rms in output units (default: the sensor file's)")
     o.add_argument("--accuracy", help="required 1-sigma accuracy, e.g. 'dx=0.05 thx=0.5'")
     o.add_argument("--transfer", choices=("raw", "gmr"))
-    o.set_defaults(func=cmd_observe)
 
-    f = sub.add_parser("fit", help="choose and fit the estimate equations by stepwise AIC")
+    f = command("fit", cmd_fit, "choose and fit the estimate equations by stepwise AIC")
     f.add_argument("data", metavar="DATA.csv")
     f.add_argument("-o", "--output", required=True, help="model file (JSON) to write")
     f.add_argument("--outputs", help="comma-separated outputs to fit (default: every pose column of the data)")
@@ -553,9 +394,8 @@ def build_parser() -> Parser:
     f.add_argument("--held-out", type=int, default=2000, metavar="N",
                    help="random held-out poses in the data's box for the deployed-accuracy figures (default 2000; "
                         "0: none)")
-    f.set_defaults(func=cmd_fit)
 
-    i = sub.add_parser("identify", help="a built unit's physics from a short capture (its sensor file)")
+    i = command("identify", cmd_identify, "a built unit's physics from a short capture (its sensor file)")
     i.add_argument("capture", metavar="CAPTURE.csv", help="rows of readings with the stage's displacements (dx,dy,dz)")
     i.add_argument("--sensor", default="paper", help="the drawing the unit was built to (preset or TOML; default paper)")
     i.add_argument("--transfer", choices=("raw", "gmr"), help="override the transfer (default: the capture's units)")
@@ -565,9 +405,8 @@ def build_parser() -> Parser:
     i.add_argument("--rig-error", type=_finite, default=0.01, metavar="MM",
                    help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
     i.add_argument("-o", "--output", required=True, metavar="UNIT.toml", help="the unit's sensor file to write")
-    i.set_defaults(func=cmd_identify)
 
-    sc = sub.add_parser("schedule", help="the capture poses that pin a unit's parameters best (D-optimal)")
+    sc = command("schedule", cmd_schedule, "the capture poses that pin a unit's parameters best (D-optimal)")
     sc.add_argument("--sensor", default="paper", help="the drawing (preset or TOML; default paper)")
     sc.add_argument("--transfer", choices=("raw", "gmr"), default="gmr",
                     help="the readings the capture takes (default gmr: volts, as tactile-host capture reads them)")
@@ -578,9 +417,8 @@ def build_parser() -> Parser:
     sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
     sc.add_argument("--rig-error", type=_finite, default=0.01, metavar="MM", help="the stage's error, mm rms")
     sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv")
-    sc.set_defaults(func=cmd_schedule)
 
-    pr = sub.add_parser("predict", help="estimates for the rows of a dataset")
+    pr = command("predict", cmd_predict, "estimates for the rows of a dataset")
     pr.add_argument("model", metavar="MODEL")
     pr.add_argument("data", metavar="DATA.csv")
     pr.add_argument("-o", "--output", required=True, help="CSV of estimates (and status) to write")
@@ -593,18 +431,16 @@ def build_parser() -> Parser:
     pr.add_argument("--input-lsb", type=_finite, metavar="X",
                     help="fixed: the input value of one ADC code, as for codegen (default: the model's sensor's ADC)")
     pr.add_argument("--input-offset", type=_finite, metavar="Y", help="fixed: the input value of code 0")
-    pr.set_defaults(func=cmd_predict)
 
-    r = sub.add_parser("report", help="terms, AIC trace and errors of a model")
+    r = command("report", cmd_report, "terms, AIC trace and errors of a model")
     r.add_argument("model", metavar="MODEL")
     r.add_argument("--data", help="dataset to measure errors on (default: the fit's own figures only)")
     r.add_argument("--paper", action="store_true", help="show the seed paper's figures beside ours")
     r.add_argument("--plot", metavar="DIR", help="write estimate-vs-target PNGs here (needs matplotlib)")
     r.add_argument("--sensor", help="with --plot: also the 0.1-degree rotation sweep on this sensor")
     r.add_argument("-o", "--output", help="write the report here instead of stdout")
-    r.set_defaults(func=cmd_report)
 
-    c = sub.add_parser("codegen", help="generate the header-only C99 estimator of a model")
+    c = command("codegen", cmd_codegen, "generate the header-only C99 estimator of a model")
     c.add_argument("model", metavar="MODEL")
     c.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for <prefix>_model.h")
     c.add_argument("--precision", default="double", choices=("double", "float", "fixed"),
@@ -617,10 +453,9 @@ def build_parser() -> Parser:
                    help="fixed: the input value of one ADC code (default: the model's sensor's ADC, "
                         "or 3.3/65535 for inputs in V)")
     c.add_argument("--input-offset", type=_finite, metavar="Y", help="fixed: the input value of code 0 (default 0)")
-    c.set_defaults(func=cmd_codegen)
 
-    t = sub.add_parser("tradeoff", help="accuracy against cost over penalty, cap, family, precision, style and "
-                                        "refinement")
+    t = command("tradeoff", cmd_tradeoff,
+                "accuracy against cost over penalty, cap, family, precision, style and refinement")
     t.add_argument("sensor", metavar="SENSOR", help="preset name or sensor TOML")
     t.add_argument("--scene", required=True, help="full, slide, press or a scene TOML")
     t.add_argument("--target", help="RMS error with noise to meet, e.g. 'dz=0.1 thx=2' "
@@ -643,11 +478,9 @@ def build_parser() -> Parser:
     t.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
     t.add_argument("-o", "--output", default="tradeoff-out", metavar="DIR",
                    help="folder for tradeoff.csv, .md, .png (default: tradeoff-out)")
-    t.set_defaults(func=cmd_tradeoff)
 
-    d = sub.add_parser("demo", help="the main job end to end on the paper sensor")
+    d = command("demo", cmd_demo, "the main job end to end on the paper sensor")
     d.add_argument("--out", default="demo-out", help="folder for the demo's files (default: demo-out)")
-    d.set_defaults(func=cmd_demo)
     return p
 
 

@@ -5,8 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from fitgen.base.errors import InputError
-from fitgen.base.fileio import write_atomic
+from fitgen.base.fileio import make_folder, write_atomic
 
 
 def _stage(title: str) -> float:
@@ -24,10 +23,7 @@ def run_demo(out: Path) -> int:
     from fitgen.app.report import format_report
     from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create {out}: {exc.strerror}") from None
+    make_folder(out)
     sensor = load_sensor("paper")
     print(f"fitgen demo: sensor 'paper' ({sensor.n_elements} GMR elements, magnet "
           f"{sensor.magnet.diameter:g} x {sensor.magnet.height:g} mm, {sensor.magnet.polarization:g} T), "
@@ -241,9 +237,9 @@ def _print_deployed(paper_model, model, paper_errs: dict, errs: dict, spec: dict
 
 
 def _print_comparison(model, train, test) -> None:
-    from fitgen.app.report import PAPER_EXP_TERMS, PAPER_SIM_MAX_ERROR, evaluate
+    from fitgen.app.report import PAPER_EXP_TERMS, PAPER_SIM_MAX_ERROR, errors_on
 
-    ev_train, ev_test = evaluate(model, train), evaluate(model, test)
+    ev_train, ev_test = errors_on(model, train), errors_on(model, test)
     print(f"   {'output':6} {'terms':>5} {'paper terms*':>12} {'max err (grid)':>15} {'paper max':>10} "
           f"{'max err (random)':>17} {'RMS (random)':>13}")
     for e in model.equations:

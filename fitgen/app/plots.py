@@ -76,6 +76,21 @@ def resolution_sweep(model: Model, sweep_inputs: np.ndarray, sweep_values: np.nd
     return path
 
 
+def rotation_sweeps(model: Model, sensor, folder: Path) -> list[Path]:
+    """:func:`resolution_sweep` of each rotation the model estimates, -5 to 5 deg on ``sensor``."""
+    from fitgen.physics.pose import POSE_NAMES
+    from fitgen.physics.simulate import simulate
+
+    paths = []
+    for j, name in enumerate(POSE_NAMES[3:], start=3):
+        if name in model.output_names:
+            values = np.round(np.arange(-5.0, 5.0 + 1e-9, 0.1), 10)
+            poses = np.zeros((len(values), 5))
+            poses[:, j] = values
+            paths.append(resolution_sweep(model, simulate(sensor, poses).inputs, values, name, folder))
+    return paths
+
+
 def tradeoff(result, path: Path) -> Path:
     """fitgen tradeoff: instructions per estimate against score (log axes), the front joined, the
     target (score 1) dashed, the recommended point ringed; colour by precision, marker by family."""

@@ -13,8 +13,8 @@ PAPER_SIM_MAX_ERROR = {"dx": 0.06, "dz": 0.25, "thx": 1.23}
 PAPER_EXP_TERMS = {"dx": 18, "dz": 21, "thx": 39}
 
 
-def evaluate(model: Model, ds: Dataset) -> dict:
-    """Per output: errors overall and per dz level (when the data has at most 12 dz levels)."""
+def errors_on(model: Model, ds: Dataset) -> dict:
+    """Per output: the model's errors on the rows of ``ds``, overall and per dz level (when it has at most 12)."""
     pred = model.predict(ds.inputs)
     out = {}
     levels = np.unique(ds.target("dz")) if "dz" in ds.target_names else np.array([])
@@ -62,6 +62,28 @@ def fit_assumptions(info: dict) -> str:
                  f"({ref['transform']}, {sum(ref['terms'])} terms over {len(ref['terms'])} elements, at most "
                  f"{max(ref['terms'])} each); prior sd about the equations' estimate: {sd}")
     return line
+
+
+def fit_summary(model: Model, held_out: int) -> str:
+    """What ``fitgen fit`` says after a fit: per equation its terms, AIC and training errors, what it
+    assumed, a warning when it assumed no noise, and the held-out figures (``held_out``: poses asked)."""
+    lines = []
+    for e in model.equations:
+        i = model.fit_info["outputs"][e.name]
+        err = i["model_training_error"]
+        lines.append(f"{e.name}: {len(e.terms)} terms, AIC {i['aic']:.2f}, training max error {err['max']:.4g} "
+                     f"{e.unit}, RMS {err['rms']:.4g}, condition {i['condition']:.3g}")
+    lines.append(fit_assumptions(model.fit_info))
+    noise = model.fit_info["noise"]
+    if noise["device"] is None and noise["data"] == 0:
+        lines.append("warning: the dataset was simulated without noise and names no sensor this fitgen knows: fitted "
+                     "without the device's noise (give --sensor FILE or --noise X)")
+    text = "\n".join(lines) + "\n"
+    if "held_out" in model.fit_info:
+        return text + deployed_table(model)
+    if held_out:
+        text += "no held-out figures: the dataset names no sensor to simulate held-out poses with (give --sensor)\n"
+    return text
 
 
 def deployed_table(model: Model) -> str:
@@ -114,7 +136,7 @@ def format_report(model: Model, ds: Dataset | None = None, title: str = "", pape
         parts.append(deployed)
 
     if ds is not None:
-        ev = evaluate(model, ds)
+        ev = errors_on(model, ds)
         label = f"errors on {ds.n_rows} rows"
         head = ["output", "unit", "max", "RMS", "p95"] + (["paper sim max"] if paper else [])
         rows = []

@@ -38,14 +38,19 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
     return path
 
 
-def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes) -> Path:
-    """:func:`write_atomic` into ``folder/name``, creating ``folder`` (and its parents) when missing."""
+def make_folder(folder: str | os.PathLike) -> Path:
+    """``folder``, created (and its parents) when missing; one line (InputError) when it cannot be."""
     folder = Path(folder)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"cannot create {folder}: {exc.strerror}") from None
-    return write_atomic(folder / name, data)
+    return folder
+
+
+def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes) -> Path:
+    """:func:`write_atomic` into ``folder/name``, creating ``folder`` (and its parents) when missing."""
+    return write_atomic(make_folder(folder) / name, data)
 
 
 def canonical_json(obj) -> str:

@@ -38,3 +38,40 @@ def parse_positive(text: str, what: str, *, integer: bool = False, zero: bool = 
     if not math.isfinite(val) or val < 0 or (val == 0 and not zero):
         raise InputError(f"{what} must be {'>= 0' if zero else '> 0'}, got {text}")
     return val
+
+
+class OutOfRange(ValueError):
+    """A number, but outside the values the option takes."""
+
+
+def parse_penalty(text: str) -> str | float:
+    """A penalty per term: ``aic`` or ``bic`` (as given) or a finite number > 0.
+
+    ValueError when ``text`` is none of these; :class:`OutOfRange` (a ValueError) when it is a
+    number not finite and > 0, so that a caller can word the two apart.
+    """
+    if text in ("aic", "bic"):
+        return text
+    k = float(text)
+    if not (k > 0 and math.isfinite(k)):
+        raise OutOfRange(text)
+    return k
+
+
+def parse_noise(text: str, finite: bool = True) -> float:
+    """A noise figure: a number >= 0, and finite unless ``finite`` is False.
+
+    ValueError when ``text`` is no number; :class:`OutOfRange` when the number is out of range.
+    """
+    noise = float(text)
+    if not (noise >= 0 and (noise != math.inf or not finite)):
+        raise OutOfRange(text)
+    return noise
+
+
+def parse_names(spec: str, allowed, what: str) -> tuple[str, ...]:
+    """``a,b`` (comma separated) into a tuple of names, at least one, each one of ``allowed``."""
+    names = tuple(x.strip() for x in spec.split(",") if x.strip())
+    if not names or any(n not in allowed for n in names):
+        raise InputError(f"{what} takes names from {','.join(allowed)}, got {spec!r}")
+    return names

@@ -26,6 +26,20 @@ class Progress:
         self.stream.write(f"\r{self.label} [{bar:<24}] {self.done}/{self.total} {now - self.start:5.1f}s {note}\033[K")
         self.stream.flush()
 
+    def per_item(self, note):
+        """A callback ``(item, *more)`` for work done one item after another: the bar moves one as
+        each item after the first begins, and shows ``note(item, *more)``."""
+        current = []
+
+        def callback(item, *more):
+            if current != [item]:
+                if current:
+                    self.update()
+                current[:] = [item]
+            self.update(0, note(item, *more))
+
+        return callback
+
     def close(self) -> None:
         if self.enabled:
             self.stream.write("\r\033[K")

@@ -17,9 +17,9 @@ from fitgen.c.cgen import c_real, identifier
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
 from fitgen.equations.model import Model, float_domain
+from fitgen.equations.rounding import PRECISIONS
 from fitgen.equations.terms import DISPLACEMENTS, EXPONENTS, monomial_factors
 
-PRECISIONS = ("double", "float", "fixed")  # fixed: integer codes in, int32 out (fitgen/fixedpoint.py)
 STYLES = ("table", "unrolled")
 # C enum names of the exponent kinds, in EXPONENTS order
 EXP_CODE = {"1": "P1", "2": "P2", "3": "P3", "4": "P4", "-1": "M1", "-2": "M2", "-3": "M3", "-4": "M4",
@@ -28,6 +28,7 @@ EXP_CODE = {"1": "P1", "2": "P2", "3": "P3", "4": "P4", "-1": "M1", "-2": "M2", 
 # below FLT_MAX (3.4e38) that no partial sum can overflow. double: past 1e15 a sum in
 # mm or deg keeps no correct digit (eps 2.2e-16); such a model is refused as absurd.
 _LIMIT = {"double": 1e15, "float": 1e30}
+Literals = tuple[str, ...]  # C literals of reals (cgen.c_real), one per input, component, element or term
 
 
 @dataclass(frozen=True)
@@ -68,19 +69,19 @@ class CRefine:
     steps: int
     cbrt: bool
     degree: int
-    centre: tuple[str, ...]
-    scale: tuple[str, ...]
-    lo: tuple[str, ...]
-    hi: tuple[str, ...]
-    weights: tuple[str, ...]
-    intercepts: tuple[str, ...]
-    prior: tuple[tuple[str, ...], ...]
+    centre: Literals
+    scale: Literals
+    lo: Literals
+    hi: Literals
+    weights: Literals
+    intercepts: Literals
+    prior: tuple[Literals, ...]
     starts: tuple[int, ...]  # element k's terms: starts[k] .. starts[k + 1] - 1
     monos: tuple[tuple[int, ...], ...]  # the monomials a step computes (fitgen.equations.refine.Refinement.monomials)
     table: tuple[tuple[int, ...], ...]  # per term: monomial, then per component (power, derivative's monomial or NONE)
-    terms: tuple[str, ...]  # per term, its coefficient
+    terms: Literals  # per term, its coefficient
     factors: tuple[tuple[tuple[int, int], ...], ...]  # per monomial, its (component, power) with power > 0
-    powers: tuple[str, ...]  # the literal of each power 0 .. 8, as a real
+    powers: Literals  # each power 0 .. 8, as a real
     none: int
 
 
@@ -92,8 +93,8 @@ class CModel:
     style: str
     n_inputs: int
     outputs: tuple[COutput, ...]
-    input_min: tuple[str, ...]
-    input_max: tuple[str, ...]
+    input_min: Literals
+    input_max: Literals
     needed: tuple[tuple[str, ...], ...]  # per input: exponent codes to compute, in EXPONENTS order
     kinds: tuple[str, ...]  # exponent codes some input needs
     model_hash: str
@@ -244,7 +245,7 @@ def _prefix(prefix: str) -> str:
 
 
 def render_fixed_header(fm, prefix: str = "tm") -> str:
-    """The text of ``<prefix>_model.h`` for a fixed-point plan (:class:`fitgen.equations.fixedpoint.FixedModel`)."""
+    """The text of ``<prefix>_model.h`` for a fixed-point plan (:class:`fitgen.equations.fixedmodel.FixedModel`)."""
     prefix = _prefix(prefix)
     units = fm.input_units if fm.input_units in ("mT", "V", "codes") else "units"
     return _env().get_template("model_fixed.h.j2").render(

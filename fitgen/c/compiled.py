@@ -37,7 +37,7 @@ class CompiledModel:
     with its flags (e.g. ``arm-linux-gnueabihf-gcc -static``).
 
     ``precision="fixed"``: the fixed-point header (``self.fixed`` is its
-    :class:`~fitgen.equations.fixedpoint.FixedModel`; ``input_lsb``/``input_offset`` as for codegen);
+    :class:`~fitgen.equations.fixedmodel.FixedModel`; ``input_lsb``/``input_offset`` as for codegen);
     ``predict`` then takes integer codes and answers the integer outputs.
     """
 

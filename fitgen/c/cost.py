@@ -41,6 +41,20 @@ ARM_CORES = {
 }
 ARM_CC = ARM_CORES["cortex-m4f"]
 
+# the input file of the bench programs (this one and bench/roots.py's): ``count`` raw float64 numbers
+C_READ_RAW = r"""
+static int read_raw(const char *path, double *raw, size_t count)
+{
+    FILE *f = fopen(path, "rb");
+    if (f == NULL || fread(raw, sizeof *raw, count, f) != count) {
+        fprintf(stderr, "cannot read %s\n", path);
+        return 2;
+    }
+    fclose(f);
+    return 0;
+}
+"""
+
 C_BENCH = r"""
 #define _POSIX_C_SOURCE 199309L
 #include <stdio.h>
@@ -54,6 +68,7 @@ C_BENCH = r"""
 #define NVEC 4096
 static tm_input inputs[NVEC][TM_N_INPUTS];
 static volatile double sink;
+""" + C_READ_RAW + r"""
 
 static double now_s(void)
 {
@@ -94,7 +109,6 @@ static double timed(long n)
 int main(int argc, char **argv)
 {
     static double raw[NVEC][TM_N_INPUTS];
-    FILE *f;
     int i, j;
     long n;
     double t;
@@ -102,12 +116,9 @@ int main(int argc, char **argv)
         fprintf(stderr, "usage: %s INPUTS calibrate SECONDS | INPUTS time N | INPUTS count N\n", argv[0]);
         return 2;
     }
-    f = fopen(argv[1], "rb");
-    if (f == NULL || fread(raw, sizeof raw, 1, f) != 1) {
-        fprintf(stderr, "cannot read %s\n", argv[1]);
+    if (read_raw(argv[1], &raw[0][0], (size_t)NVEC * TM_N_INPUTS) != 0) {
         return 2;
     }
-    fclose(f);
     for (i = 0; i < NVEC; ++i) {
         for (j = 0; j < TM_N_INPUTS; ++j) {
             inputs[i][j] = (tm_input)raw[i][j];

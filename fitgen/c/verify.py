@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fitgen.c.codegen import float_domain
-from fitgen.equations.fixedpoint import INT32_MAX, INT32_MIN, FixedModel
+from fitgen.equations.fixedmodel import INT32_MAX, INT32_MIN, FixedModel
 from fitgen.equations.model import Model
 from fitgen.equations.rounding import U_DOUBLE, U_FLOAT, error_bound
 

@@ -32,6 +32,8 @@ from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
 from fitgen.equations.terms import DISPLACEMENTS, design_matrix, element_powers, monomial_factors
 
+# the arithmetic the generated C can run in (fixed: integer codes in, int32 out: fitgen.equations.fixedpoint)
+PRECISIONS = ("double", "float", "fixed")
 U_FLOAT = 2.0**-24
 U_DOUBLE = 2.0**-53
 POWER_ROUNDINGS = {"1": 0, "2": 1, "3": 2, "4": 2, "-1": 1, "-2": 2, "-3": 3, "-4": 3,

@@ -25,11 +25,12 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.equations.roots import cbrt
+from fitgen.physics.pose import POSE_NAMES
 
 # the paper's order: v, v^2, v^3, v^4, 1/v, 1/v^2, 1/v^3, 1/v^4, v^1/2, v^1/3, v^1/4
 EXPONENTS: tuple[str, ...] = ("1", "2", "3", "4", "-1", "-2", "-3", "-4", "1/2", "1/3", "1/4")
-DISPLACEMENTS: tuple[str, ...] = ("dx", "dy", "dz")
-ROTATIONS: tuple[str, ...] = ("thx", "thy")
+DISPLACEMENTS: tuple[str, ...] = POSE_NAMES[:3]
+ROTATIONS: tuple[str, ...] = POSE_NAMES[3:]
 
 # candidate exponent families a user may restrict the scope to
 FAMILIES = {
@@ -41,6 +42,8 @@ FAMILIES = {
     "harmonics": EXPONENTS,
 }
 HARMONIC_DEGREE = {"harmonics": 3}  # per family: highest degree of a harmonic monomial (0: none)
+# the families every model of which fixed point can run: no roots, no harmonic terms (fitgen.equations.fixedpoint)
+FIXED_FAMILIES = ("no-roots", "integer")
 
 
 @dataclass(frozen=True, order=True)

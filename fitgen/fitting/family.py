@@ -14,25 +14,24 @@ from __future__ import annotations
 
 import numpy as np
 
+from fitgen.base.errors import InputError
 from fitgen.physics.dataset import Dataset
 from fitgen.fitting.fit import FitSettings, fit_model, noise_to_add, ring_harmonics
 from fitgen.fitting.holdout import box_of, held_out_set
 from fitgen.equations.model import Model
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.fitting.shared import SharedRows
-from fitgen.equations.terms import candidate_terms
+from fitgen.equations.terms import FIXED_FAMILIES, candidate_terms
 
 VALIDATION_SEED = 7919
 VALIDATION_POSES = 1000
 VALIDATION_DRAWS = 2
 CANDIDATES = ("all", "harmonics")
-# fixed point runs neither roots nor harmonic terms (fitgen.equations.fixedpoint): auto chooses among these for it
-FIXED_CANDIDATES = ("no-roots", "integer")
 
 
 def candidates(precision: str | None) -> tuple[str, ...]:
     """The families ``auto`` compares for a target precision (the first is the fallback)."""
-    return FIXED_CANDIDATES if precision == "fixed" else CANDIDATES
+    return FIXED_FAMILIES if precision == "fixed" else CANDIDATES
 
 
 def validation_rms(model: Model, sensor, ranges: dict, precision: str = "float") -> dict[str, float]:
@@ -94,3 +93,45 @@ def fit_auto(ds: Dataset, outputs, settings: FitSettings, sensor, progress=None)
         "why": f"validation ({VALIDATION_POSES} poses, seed {VALIDATION_SEED}, {VALIDATION_DRAWS} noise draws, "
                f"{precision}): {label[other]} RMS error {ratio:.3g}x {label[base]} (geometric mean over outputs)",
         "validation_rms": rms}
+
+
+def family_settings(family: str, precision: str | None, noise: float | None, refine: int = 0,
+                    **more) -> FitSettings:
+    """The settings of a fit with ``family`` (``auto``: the first of :func:`candidates`, which
+    :func:`fit_auto` may replace) for the device's ``precision`` (None: float, or exact arithmetic
+    with ``noise`` 0); ``more``: further FitSettings fields. InputError for a refinement out of
+    range and for what fixed point cannot run."""
+    from fitgen.equations.refine import MAX_STEPS
+
+    # --noise 0 alone is the paper's procedure (what R's step() computes): no rounding term either
+    precision = precision or ("exact" if noise == 0 else "float")
+    name = candidates(precision)[0] if family == "auto" else family
+    # the rest of --refine's checks (--refine-terms, the data) are fitgen.fitting.refine_fit.check_refinable's
+    if not 0 <= refine <= MAX_STEPS:
+        raise InputError(f"--refine takes 0 (none) to {MAX_STEPS} steps, got {refine}")
+    if precision == "fixed":
+        if refine:
+            raise InputError("fixed point has no refinement (its Gauss-Newton steps run in float or double): "
+                             "drop --refine, or fit for --precision float")
+        if name not in candidates("fixed"):
+            raise InputError(f"fixed point runs no roots and no harmonic terms, which --family {name} offers: "
+                             f"use --family {' or '.join(candidates('fixed'))} (or auto)")
+    return FitSettings.family(name, noise=noise, precision=None if precision == "exact" else precision,
+                              refine=refine, **more)
+
+
+def auto_compares(family: str, settings: FitSettings) -> bool:
+    """Whether ``family`` is ``auto`` and compares families: noise 0 alone is the paper's procedure,
+    its power kinds too, unless fixed point is named."""
+    return family == "auto" and (settings.noise != 0 or settings.precision == "fixed")
+
+
+def fit_family(ds: Dataset, outputs, settings: FitSettings, sensor, family: str,
+               progress=None) -> tuple[Model, dict]:
+    """The model fitted with ``family`` (``auto``: :func:`fit_auto` when :func:`auto_compares`), and
+    the record of the family (``fit_info["family"]``)."""
+    if auto_compares(family, settings):
+        return fit_auto(ds, outputs, settings, sensor, progress=progress)
+    model = fit_model(ds, outputs, settings, progress=progress, sensor=sensor)
+    return model, ({"name": family, "auto": False} if family != "auto" else
+                   {"name": "all", "auto": True, "why": "--noise 0: the paper's procedure"})

@@ -18,13 +18,13 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
+from fitgen.equations.rounding import PRECISIONS
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.simulate import pose_rng, random_poses, simulate
 
 N_POSES = 2000
 SEED = 2026
 NOISE_DRAWS = 5
-PRECISIONS = ("double", "float", "fixed")
 
 
 @dataclass
@@ -150,6 +150,25 @@ def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, 
                           "statistic": "median over units drawn from the identification's posterior (Laplace); "
                                        "*_p90: their 90th percentile; *_lo, *_hi: their least and greatest (a unit "
                                        "is one draw of that spread: bench/identify_bound.py)"}}
+
+
+def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None) -> dict:
+    """The ``held_out`` record of a model fitted to dataset ``ds``: :func:`evaluate` on ``n`` poses in
+    the box of its poses, with the device's noise the fit assumed and the dataset's labels; on units
+    drawn from the identification's posterior when ``unit_file`` has one. ``note(text)`` is told what
+    is simulated."""
+    from fitgen.fitting.identify import load_posterior
+
+    posterior = load_posterior(unit_file) if unit_file else None
+    noise = model.fit_info["noise"]["device"]
+    if note:
+        note(f"{n} random poses, {noise or 0:g} noise"
+             + (", units from the identification's posterior" if posterior else ""))
+    record = evaluate(model, sensor, box_of(ds.poses()), noise=noise, n=n, posterior=posterior,
+                      labels=ds.meta.get("labels", "stage"))
+    if unit_file and not sensor.is_drawing:
+        record["sensor_file"] = str(unit_file)
+    return record
 
 
 def posterior_units(record: dict, sensor, k: int) -> list:

@@ -324,6 +324,22 @@ def row_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[n
             f"sensor {sensor.name}'s {sensor.noise:g} over sqrt({samples}) samples")
 
 
+def in_capture_units(drawing: Sensor, meta: dict) -> Sensor:
+    """``drawing`` in the transfer of the units a capture's meta names (V: gmr, mT: raw), else as it is."""
+    units = meta.get("units")
+    return drawing.with_transfer("gmr" if units == "V" else "raw") if units in ("V", "mT") else drawing
+
+
+def check_explained(ident: Identification, capture, drawing: str, source: str) -> None:
+    """InputError when the physics does not explain the capture: reduced chi-square over CHI2_LIMIT
+    (``source``: where the reading noise came from; ``drawing``: the sensor's name)."""
+    if ident.reduced_chi2 > CHI2_LIMIT:
+        rms = float(np.sqrt(ident.reduced_chi2))
+        raise InputError(f"the physics does not explain {capture}: residuals {rms:.3g}x the reading noise "
+                         f"({source}); another sensor than {drawing}, labels in other units, or a noise figure too "
+                         "low; nothing written")
+
+
 def save(ident: Identification, path, provenance: dict) -> tuple:
     """Write the unit file (the maximum a posteriori unit) and beside it ``<stem>.posterior.json``: every
     parameter with its standard error, the posterior covariance, what was determined and what not."""

@@ -10,10 +10,14 @@ candidate that raises the log det most, until no swap does. A pose may be chosen
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from fitgen.base.errors import InputError
+from fitgen.base.fileio import write_atomic
 from fitgen.fitting.identify import RIG_ERROR, Problem
+from fitgen.physics.dataset import meta_path
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
@@ -106,6 +110,12 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
             "ranges": {a: list(ranges[a]) for a in axes}, "noise": noise, "rig_error": rig_error,
             "sensor": drawing.name, "distinct_poses": int(len(np.unique(idx)))}
     return poses, info
+
+
+def write_schedule(path, poses: np.ndarray, axes, info: dict) -> None:
+    """The schedule (:func:`schedule_csv`) at ``path``, and ``info`` in its ``.meta.json`` beside it."""
+    write_atomic(path, schedule_csv(poses, axes))
+    write_atomic(meta_path(path), json.dumps(info, indent=1) + "\n")
 
 
 def schedule_csv(poses: np.ndarray, axes=("dx", "dy", "dz")) -> str:

@@ -162,6 +162,24 @@ def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
     return Dataset(table[:, :n_in].copy(), table[:, n_in:].copy(), targets, meta)
 
 
+def load_inputs(path: str | Path, n_inputs: int) -> np.ndarray:
+    """The columns v1..v<n_inputs> of a CSV (others ignored): the inputs of a model that takes them."""
+    origin = f"dataset {path}"
+    names, table = parse_table(read_text(path, "dataset"), origin)
+    cols = [f"v{k}" for k in range(1, n_inputs + 1)]
+    missing = [c for c in cols if c not in names]
+    if missing:
+        raise InputError(f"{origin}: missing column {missing[0]} (the model takes {cols[0]}..{cols[-1]})")
+    return table[:, [names.index(c) for c in cols]]
+
+
+def estimates_csv(output_names, estimates: np.ndarray, status: np.ndarray) -> str:
+    """Estimates as CSV: a column per output (numbers that round-trip), then the status per row."""
+    header = ",".join(list(output_names) + ["status"])
+    lines = [header] + [",".join(map(repr, row)) + f",{int(s)}" for row, s in zip(estimates.tolist(), status)]
+    return "\n".join(lines) + "\n"
+
+
 def load_poses(path: str | Path) -> np.ndarray:
     """Poses from a CSV with any of the columns dx,dy,dz,thx,thy (others ignored, missing = 0)."""
     origin = f"poses {path}"

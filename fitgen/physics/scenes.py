@@ -97,6 +97,23 @@ def load_scene(spec: str | None) -> Scene:
     return Scene(name, ordered, ranges, levels)
 
 
+def scene_outputs(spec: str, ds, origin: str, sensor, force: bool = False) -> tuple[str, ...]:
+    """The outputs scene ``spec`` asks for, after checking that the dataset ``ds`` (read from
+    ``origin``) has them and, unless ``force``, that ``sensor`` (None: unknown) resolves them."""
+    scene = load_scene(spec)
+    missing = [o for o in scene.outputs if o not in ds.target_names]
+    if missing:
+        raise InputError(f"scene {scene.name} asks for {missing[0]}, which dataset {origin} does not have")
+    if not force:
+        if sensor is None:
+            raise InputError("give --sensor (to check that it resolves the scene's outputs) or --force")
+        bad = unresolved_warnings(sensor, scene)
+        if bad:
+            raise InputError(f"scene {scene.name}: sensor {sensor.name} cannot resolve {bad[0]} "
+                             f"Fit anyway with --force, or use a scene without it.")
+    return scene.outputs
+
+
 def unresolved_warnings(sensor, scene: Scene, accuracy: dict | None = None) -> list[str]:
     """One line per scene output the sensor cannot resolve to the required accuracy (fitgen.physics.observe)."""
     from fitgen.physics.observe import observe

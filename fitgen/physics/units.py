@@ -28,7 +28,7 @@ from fitgen.base.errors import InputError
 from fitgen.physics.field import cylinder_projection
 from fitgen.base.fileio import write_atomic
 from fitgen.physics.pose import as_poses, rotation_matrices
-from fitgen.physics.sensor import Magnet, Sensor, Tolerances
+from fitgen.physics.sensor import Magnet, Sensor, Tolerances, load_sensor
 from fitgen.physics.transfer import OE_PER_MT
 
 MAGNET = ("magnet.x", "magnet.y", "magnet.z", "magnet.thx", "magnet.thy", "magnet.log_polarization")
@@ -206,3 +206,14 @@ def unit_path(data_path: str | Path) -> Path:
 
 def write_unit(path: str | Path, unit: Sensor, drawing: str, provenance: dict | None = None) -> Path:
     return write_atomic(path, unit_toml(unit, drawing, provenance))
+
+
+def unit_beside(drawing: Sensor, seed: int, data_path: str | Path) -> tuple[Sensor, Path, dict]:
+    """A unit of ``drawing`` drawn with ``seed`` for the dataset ``data_path``: written beside it
+    (:func:`unit_path`) and read back, so that data simulated with it and the file agree to the last
+    bit; the unit (in the drawing's transfer), its file and the dataset meta that names it."""
+    unit, _ = draw_unit(drawing, seed)
+    path = write_unit(unit_path(data_path), unit, drawing.name,
+                      {"seed": seed, "source": "drawn within the drawing's tolerances (fitgen simulate --unit)"})
+    info = {"sensor_file": str(path.resolve()), "unit_seed": seed, "drawing": drawing.name}
+    return load_sensor(path).with_transfer(drawing.transfer), path, info

@@ -1,0 +1,151 @@
+"""The trade-off sweep's report (fitgen.c.tradeoff): a CSV of every point, a Markdown page with the
+recommendation and the Pareto front, and the plot."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+from fitgen.base.errors import InputError
+from fitgen.c.tradeoff import ACCURACY_TIE, OP_KINDS, Point, TradeoffResult
+from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
+
+
+def _g(x, digits: int = 3) -> str:
+    return "" if x is None else f"{x:.{digits}g}"
+
+
+def _k(k) -> str:
+    return k if isinstance(k, str) else f"{k:g}"
+
+
+def to_csv(result: TradeoffResult) -> str:
+    outs = result.scene.outputs
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["point", "k", "max_terms", "family", "refine", "precision", "style", "terms"]
+               + [f"terms_{o}" for o in outs] + [f"ops_{k}" for k in OP_KINDS]
+               + ["instructions", "loop_instructions", "flash", "object_flash"]
+               + [f"{o}_{s}" for o in outs for s in ("max", "rms", "noisy_max", "noisy_rms")]
+               + [f"{o}_share" for o in outs] + ["score", "share", "front", "recommended", "model", "note"])
+    for i, p in enumerate(result.points):
+        kn = p.knobs
+        w.writerow([i + 1, _k(kn.k), kn.max_terms or "", kn.family, kn.refine, kn.precision, kn.style, p.terms]
+                   + [p.terms_per_output.get(o, "") for o in outs] + [p.ops.get(k, "") for k in OP_KINDS]
+                   + [_g(p.instructions, 6), _g(p.loop_instructions, 6), _g(p.flash, 9), _g(p.object_flash, 9)]
+                   + [_g(p.errors[o][s], 6) if p.errors else "" for o in outs
+                      for s in ("max", "rms", "noisy_max", "noisy_rms")]
+                   + [_g(p.errors[o]["share"], 6) if p.errors else "" for o in outs]
+                   + [_g(p.score, 6), _g(p.share, 6), int(i in result.front), int(i == result.recommended),
+                      p.model_hash[:12], p.note])
+    return buf.getvalue()
+
+
+def _row(i: int, p: Point, result: TradeoffResult) -> str:
+    kn = p.knobs
+    mark = ("**rec** " if i == result.recommended else "") + ("front" if i in result.front else "")
+    ops = "/".join(str(p.ops.get(k, 0)) for k in OP_KINDS) if p.ops else ""
+    errs = " | ".join(f"{_g(p.errors[o]['rms'])} / {_g(p.errors[o]['noisy_rms'])} / {_g(p.errors[o]['noisy_max'])}"
+                      if p.errors else "" for o in result.scene.outputs)
+    return (f"| {i + 1} | {_k(kn.k)} | {kn.max_terms or '-'} | {kn.method} | {kn.precision} | {kn.style} | {p.terms} | "
+            f"{ops} | {_g(p.instructions, 4)} | {_g(p.flash, 6)} | {errs} | {_g(p.score)} | "
+            f"{'' if p.share is None else f'{p.share:.1%}'} | {mark.strip()} |"
+            + (f" {p.note}" if p.note else ""))
+
+
+def describe(i: int | None, result: TradeoffResult) -> str:
+    if i is None:
+        return "none"
+    p = result.points[i]
+    return (f"point {i + 1} ({p.knobs.label}): {p.terms} terms, {_g(p.instructions, 4)} instructions per estimate, "
+            f"{_g(p.flash, 6) or '?'} bytes of flash, score {_g(p.score)}")
+
+
+def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
+    s, outs = result.setup, result.scene.outputs
+    units = {o: POSE_UNITS[POSE_NAMES.index(o)] for o in outs}
+    lines = [f"# Trade-off: sensor {result.sensor} ({result.transfer}), scene {result.scene.name}", ""]
+    lines.append(f"Training: the scene's grid, {s['training_rows']:,} poses ({s['levels']} levels per moving "
+                 "component), simulated noise-free and fitted for the sensor's noise and float rounding. "
+                 f"Held-out: {s['held_out']:,} random poses in the scene's box (seed "
+                 f"{s['seed']}), noise-free and with the sensor's noise ({s['noise']:g} {s['units']} rms per element, "
+                 f"{s['noise_draws']} draws). {s['fits']} fits, {s['measured']} distinct builds measured.")
+    lines.append("")
+    lines.append("Target (RMS error with noise): " + ", ".join(f"{o} {result.target[o]:g} {units[o]}" for o in outs)
+                 + ". Score = the worst output's RMS error with noise / its target; <= 1 meets the target.")
+    lines.append("")
+    if result.warnings:
+        lines.append(f"Resolvability: sensor {result.sensor} cannot resolve everything scene {result.scene.name} asks "
+                     "for (fitted anyway, as with `fit --force`):")
+        lines += [f"- {w}" for w in result.warnings]
+        lines.append("")
+    for n in result.notes:
+        lines.append(f"Note: {n}.")
+        lines.append("")
+    if result.over_share:
+        lines.append(f"**Rounding check failed** on {len(result.over_share)} point(s): the generated C deviates from "
+                     f"the double model by more than {result.max_share:.0%} of that model's held-out max error "
+                     "(they are left off the front and the recommendation): points "
+                     + ", ".join(str(i + 1) for i in result.over_share) + ".")
+        lines.append("")
+    lines.append("## Recommendation")
+    lines.append("")
+    if result.recommended is None:
+        lines.append("No point could be measured.")
+    elif result.met:
+        lines.append(f"Meets the target with the fewest instructions: {describe(result.recommended, result)}.")
+    else:
+        lines.append(f"No point meets the target. The most accurate (scores within {ACCURACY_TIE:.0%} of the best "
+                     f"taken as equal, then the fewest instructions): {describe(result.recommended, result)}.")
+    lines.append("")
+    lines.append("## Pareto front (instructions per estimate against score)")
+    lines.append("")
+    shown = set()
+    for i in result.front:
+        p = result.points[i]
+        if (p.model_hash, p.knobs.precision, p.knobs.style) in shown:
+            continue
+        shown.add((p.model_hash, p.knobs.precision, p.knobs.style))
+        same = [j + 1 for j in result.front if j != i and result.points[j].model_hash == p.model_hash
+                and (result.points[j].knobs.precision, result.points[j].knobs.style) == (p.knobs.precision, p.knobs.style)]
+        lines.append(f"- {describe(i, result)}" + (f" (the same build: points {', '.join(map(str, same))})"
+                                                    if same else ""))
+    lines.append("")
+    if plot:
+        lines.append(f"![instructions against score]({plot})")
+        lines.append("")
+    lines.append("## All points")
+    lines.append("")
+    lines.append("Ops: mul/add/div/sqrt/cbrt per estimate as the templates write them. Instructions: x86-64, inside "
+                 "tm_estimate, per estimate (callgrind). Flash: bytes the estimator adds to a linked Cortex-M4F "
+                 "(double, float) or Cortex-M0 (fixed) program, library code included. Errors per output: RMS "
+                 "noise-free / RMS with noise / max with noise. Rounding's share: the largest deviation of this "
+                 "precision's C from the double model on the noise-free held-out readings, over the double model's "
+                 "max error there (worst output).")
+    lines.append("")
+    lines.append("| # | k | cap | family | precision | style | terms | ops | instructions | flash | "
+                 + " | ".join(f"{o} [{units[o]}]" for o in outs) + " | score | rounding's share | |")
+    lines.append("|" + " --- |" * (14 + len(outs) - 1))
+    lines += [_row(i, p, result) for i, p in enumerate(result.points)]
+    return "\n".join(lines) + "\n"
+
+
+def write_outputs(result: TradeoffResult, folder: str | Path) -> tuple[list[Path], str]:
+    """DIR/tradeoff.csv, DIR/tradeoff.md and (matplotlib permitting) DIR/tradeoff.png, each
+    written atomically; returns the paths and the markdown."""
+    from fitgen.base.fileio import make_folder, write_atomic
+
+    folder = make_folder(folder)
+    paths = [write_atomic(folder / "tradeoff.csv", to_csv(result))]
+    plot = None
+    try:
+        from fitgen.app import plots
+
+        paths.append(plots.tradeoff(result, folder / "tradeoff.png"))
+        plot = "tradeoff.png"
+    except InputError as exc:
+        result.notes.append(f"no plot: {exc}")
+    text = to_markdown(result, plot)
+    paths.insert(1, write_atomic(folder / "tradeoff.md", text))
+    return paths, text

@@ -1,0 +1,386 @@
+"""The trade-off sweep: accuracy against cost over the knobs a user can turn: penalty per term, cap
+on terms, candidate family, precision, code style and refinement steps (fitgen.equations.refine: swept
+on the harmonics family, in float and double, for scenes that estimate the whole pose).
+
+One fit per (k, cap, family, refinement) on the scene's grid, simulated noise-free with the sensor; every
+precision and style of that fit is then measured on held-out random poses in the scene's box
+(noise-free, and with the sensor's noise in several draws) and in cost: terms, floating-point
+operations by kind as the templates write them, x86-64 instructions per estimate counted by
+callgrind (deterministic), and the flash the estimator adds to a Cortex-M program.
+
+The score of a point is the worst output's RMS error with noise over its target (<= 1 meets the
+target); the Pareto front is taken on (instructions, score) and the recommended point is the
+cheapest in instructions that meets the target (ties: less flash).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import shutil
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.c.codegen import STYLES
+from fitgen.equations.fixedpoint import sensor_input_scale as fixed_scale
+from fitgen.equations.model import Model
+from fitgen.equations.rounding import PRECISIONS
+from fitgen.equations.terms import FAMILIES, HARMONIC_DEGREE
+from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.scenes import Scene, unresolved_warnings
+from fitgen.physics.simulate import pose_rng, random_poses, simulate
+
+K_VALUES = ("aic", "bic", 6.0)
+CAPS = (None, 20, 8)
+FAMILY_NAMES = tuple(FAMILIES)
+# families fixed point cannot generate: their harmonic terms divide (a family with roots may fit without them)
+NO_FIXED = tuple(f for f in FAMILIES if HARMONIC_DEGREE.get(f))
+REFINE_STEPS = (0, 1)
+REFINED_FAMILIES = ("harmonics",)  # the refinement is swept on these (docs/refine.md measures it on them)
+FIXED_STYLE = "-"  # the fixed-point header is straight-line code: the style knob does not apply
+OP_KINDS = ("mul", "add", "div", "sqrt", "cbrt")
+# Cortex-M core whose flash is reported, per precision (see fitgen.c.cost.ARM_CORES)
+CORE_OF = {"double": "cortex-m4f", "float": "cortex-m4f", "fixed": "cortex-m0"}
+ACCURACY_TIE = 0.01  # when no point meets the target: scores within 1 % of the best count as equal
+N_HELD = 1000
+NOISE_DRAWS = 5
+
+
+@dataclass(frozen=True)
+class Knobs:
+    """One point of the sweep. ``k``: "aic", "bic" or a number (penalty per term)."""
+
+    k: str | float
+    max_terms: int | None
+    family: str
+    precision: str
+    style: str
+    refine: int = 0  # Gauss-Newton steps after the equations (fitgen.equations.refine)
+
+    @property
+    def fit_key(self) -> tuple:
+        return (self.k, self.max_terms, self.family, self.refine)
+
+    @property
+    def method(self) -> str:
+        """The family, and the refinement if any: ``harmonics+refine1``."""
+        return self.family + (f"+refine{self.refine}" if self.refine else "")
+
+    @property
+    def label(self) -> str:
+        k = self.k if isinstance(self.k, str) else f"k={self.k:g}"
+        return f"{k} cap={self.max_terms or '-'} {self.method} {self.precision} {self.style}"
+
+    def settings(self) -> FitSettings:
+        k = 2.0 if self.k == "aic" else self.k
+        return FitSettings.family(self.family, k=k, max_terms=self.max_terms, refine=self.refine)
+
+
+def _styles(precision: str) -> tuple[str, ...]:
+    return (FIXED_STYLE,) if precision == "fixed" else STYLES
+
+
+def _possible(points: list[Knobs]) -> list[Knobs]:
+    return [k for k in points if not (k.precision == "fixed" and (k.family in NO_FIXED or k.refine))
+            and not (k.refine and k.family not in REFINED_FAMILIES)]
+
+
+def full_grid() -> list[Knobs]:
+    """Every combination: 3 penalties x 3 caps x (3 families x (double, float in 2 styles; fixed) and
+    harmonics x (double, float in 2 styles) x (no refinement, one step)) = 207 points."""
+    return grid_from()
+
+
+def quick_grid() -> list[Knobs]:
+    """A subset that runs in a few minutes: AIC and BIC x every cap x every family, each in every
+    precision in the unrolled style (the cheaper one); plus the table style and the penalty 6 for
+    the default fit (AIC, no cap, all kinds)."""
+    pts = [Knobs(k, cap, fam, p, _styles(p)[-1])
+           for k, cap, fam, p in itertools.product(("aic", "bic"), CAPS, FAMILY_NAMES, PRECISIONS)]
+    pts += [Knobs("aic", None, "all", p, "table") for p in PRECISIONS if p != "fixed"]
+    pts += [Knobs(6.0, None, fam, p, _styles(p)[-1]) for fam in ("all", "integer") for p in PRECISIONS]
+    pts += [Knobs("aic", None, "harmonics", "float", "unrolled", 1)]
+    return _possible(pts)
+
+
+def grid_from(k=None, max_terms=None, family=None, precision=None, style=None, refine=None) -> list[Knobs]:
+    """The product of the given value lists, each knob not given taking all its values (the
+    refinement only where it is swept: REFINED_FAMILIES, float and double)."""
+    ks, caps = k or K_VALUES, max_terms or CAPS
+    fams, precs, styles = family or FAMILY_NAMES, precision or PRECISIONS, style or STYLES
+    return _possible([Knobs(kk, cap, fam, p, s, r)
+                      for kk, cap, fam, p, r in itertools.product(ks, caps, fams, precs, refine or REFINE_STEPS)
+                      for s in (_styles(p) if p == "fixed" else styles)])
+
+
+def default_target(outputs: tuple[str, ...]) -> dict[str, float]:
+    """The accuracy to meet per output when none is given: fitgen.physics.observe.DEFAULT_ACCURACY."""
+    from fitgen.physics.observe import DEFAULT_ACCURACY
+
+    return {o: DEFAULT_ACCURACY[o] for o in outputs}
+
+
+# --- the front and the recommendation ---------------------------------------------------------------
+
+def pareto_front(cost: list[float], score: list[float]) -> list[int]:
+    """Indices of the points no other point dominates (lower or equal in both, lower in one),
+    in order of cost. Points equal in both are all on the front; a NaN or None is never on it."""
+    ok = [i for i in range(len(cost)) if cost[i] is not None and score[i] is not None
+          and math.isfinite(cost[i]) and math.isfinite(score[i])]
+    front = []
+    for i in ok:
+        dominated = any(cost[j] <= cost[i] and score[j] <= score[i] and (cost[j] < cost[i] or score[j] < score[i])
+                        for j in ok)
+        if not dominated:
+            front.append(i)
+    return sorted(front, key=lambda i: (cost[i], score[i], i))
+
+
+def recommend(cost: list[float], score: list[float], flash: list[float | None],
+              close: float = ACCURACY_TIE) -> tuple[int | None, bool]:
+    """(index, met): the fewest instructions among points with score <= 1 (ties: less flash, then
+    the lower score); if none meets the target, met False and the most accurate point, where scores
+    within a factor ``1 + close`` of the best count as equal (then: fewer instructions, less flash).
+    (None, False) when no point was measured."""
+    def val(x):
+        return math.inf if x is None or not math.isfinite(x) else x
+
+    ok = [i for i in range(len(cost)) if math.isfinite(val(cost[i])) and math.isfinite(val(score[i]))]
+    if not ok:
+        return None, False
+    meet = [i for i in ok if score[i] <= 1.0]
+    if meet:
+        return min(meet, key=lambda i: (cost[i], val(flash[i]), score[i], i)), True
+    best = min(score[i] for i in ok)
+    near = [i for i in ok if score[i] <= best * (1 + close)]
+    return min(near, key=lambda i: (cost[i], val(flash[i]), score[i], i)), False
+
+
+# --- measurements ----------------------------------------------------------------------------------
+
+@dataclass
+class Point:
+    """A measured point: its knobs, cost and accuracy (errors[output] = max, rms, noisy_max, noisy_rms)."""
+
+    knobs: Knobs
+    terms: int = 0
+    terms_per_output: dict = field(default_factory=dict)
+    ops: dict = field(default_factory=dict)
+    instructions: float | None = None  # x86-64, inside tm_estimate, per estimate
+    loop_instructions: float | None = None  # whole bench loop per estimate
+    flash: int | None = None  # bytes the estimator adds to a linked Cortex-M program
+    object_flash: int | None = None  # text + data of the estimator's object file
+    errors: dict = field(default_factory=dict)
+    score: float | None = None
+    share: float | None = None  # rounding's share: worst output's deviation from double / the model's max error
+    model_hash: str = ""
+    note: str = ""
+
+
+@dataclass
+class TradeoffResult:
+    sensor: str
+    transfer: str
+    scene: Scene
+    target: dict
+    points: list[Point]
+    front: list[int]
+    recommended: int | None
+    met: bool
+    warnings: list[str]
+    notes: list[str]
+    setup: dict
+    max_share: float = 0.05
+    over_share: list[int] = field(default_factory=list)  # points whose rounding adds more than max_share
+
+
+def _fixed_backend():
+    """fitgen.equations.fixedpoint when it is there (fixed-point generation), else None."""
+    try:
+        from fitgen.equations import fixedpoint
+    except ImportError:
+        return None
+    return fixedpoint
+
+
+def _errors(pred: np.ndarray, truth: np.ndarray, noisy_pred: np.ndarray, noisy_truth: np.ndarray,
+            outputs: tuple[str, ...], double: np.ndarray, reference: np.ndarray) -> dict:
+    """Per output: errors noise-free and with noise, and rounding's share: the largest deviation from
+    ``reference`` (the double model on the inputs this precision took) over the ``double`` model's
+    own max error."""
+    out = {}
+    for j, o in enumerate(outputs):
+        e, en = np.abs(pred[:, j] - truth[:, j]), np.abs(noisy_pred[:, j] - noisy_truth[:, j])
+        model_max = float(np.abs(double[:, j] - truth[:, j]).max())
+        dev = float(np.abs(pred[:, j] - reference[:, j]).max())
+        out[o] = {"max": float(e.max()), "rms": float(np.sqrt(np.mean(e * e))),
+                  "noisy_max": float(en.max()), "noisy_rms": float(np.sqrt(np.mean(en * en))),
+                  "deviation": dev, "share": dev / model_max if model_max > 0 else 0.0}
+    return out
+
+
+class _Measure:
+    """Measures (model, precision, style) units; shared state: held-out data and tool set-up."""
+
+    def __init__(self, held_inputs, held_truth, noisy_inputs, noisy_truth, outputs, work: Path, have_arm: bool,
+                 scale: tuple[float, float] | None = None):
+        self.X, self.Y, self.Xn, self.Yn = held_inputs, held_truth, noisy_inputs, noisy_truth
+        self.outputs, self.work, self.have_arm, self.scale = outputs, work, have_arm, scale
+
+    def __call__(self, model: Model, precision: str, style: str, tag: str) -> dict:
+        from fitgen.c import cost
+
+        folder = self.work / tag
+        folder.mkdir()
+        both = np.vstack([self.X, self.Xn])
+        header, bench_inputs, ref_inputs = {}, self.X, None
+        if precision == "double":
+            res = {"ops": dict(cost.template_ops(model, style))}
+            pred = model.predict(both)  # rounds as the generated double C does, term by term
+        elif precision == "float":
+            from fitgen.c.compiled import CompiledModel
+
+            res = {"ops": dict(cost.template_ops(model, style))}
+            with CompiledModel(model, "float", style, workdir=folder / "vectors") as cm:
+                pred = cm.predict(both)[0]
+        else:
+            from fitgen.equations.fixedpoint import build_fixed
+
+            lsb, offset = self.scale
+            fm = build_fixed(model, lsb, offset)
+            res = {"ops": fixed_ops(fm)}
+            # the numpy model of the integer arithmetic: the C's integers exactly, on the inputs' codes
+            pred = fm.to_real(fm.predict_codes(fm.codes_of(both))[0])
+            header, bench_inputs = {"input_lsb": lsb, "input_offset": offset}, fm.codes_of(self.X).astype(float)
+            # rounding's share is the arithmetic's: double on the values of the codes the C takes
+            ref_inputs = fm.code_values(fm.codes_of(self.X))
+            style = "table"  # not read by the fixed-point template
+        double = model.predict(self.X)
+        res["errors"] = _errors(pred[: len(self.X)], self.Y, pred[len(self.X):], self.Yn, self.outputs,
+                                double, double if ref_inputs is None else model.predict(ref_inputs))
+        inputs_file = cost.write_inputs(bench_inputs, folder / "inputs.f64")
+        binary = cost.build_bench(model, style, precision, False, folder / "bench", **header)
+        ir = cost.instruction_counts(binary, inputs_file, folder / "bench", mix=False, repeat=False)
+        res["instructions"], res["loop_instructions"] = ir["fn"], ir["loop"]
+        if self.have_arm:
+            a = cost.arm_sizes(model, style, precision, False, folder / "arm", cost.ARM_CORES[CORE_OF[precision]],
+                               **header)
+            res["flash"], res["object_flash"] = a["linked"], a["text"] + a["data"]
+        return res
+
+
+def fixed_ops(fm) -> dict:
+    """Integer operations of a fixed-point plan, by the float kinds: a product (and its shift) is a
+    mul, a reciprocal a div, a term a mul and an add."""
+    kinds = [op.kind for op in fm.ops]
+    return {"mul": kinds.count("mul") + kinds.count("term"), "add": kinds.count("term"), "div": kinds.count("recip"),
+            "sqrt": 0, "cbrt": 0}
+
+
+def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None, seed: int = 0,
+          n_held: int = N_HELD, noise_draws: int = NOISE_DRAWS, jobs: int = 2, progress=None,
+          max_share: float = 0.05) -> TradeoffResult:
+    """Fit, build and measure every point of ``grid`` for ``sensor`` on ``scene``.
+
+    A point whose rounding adds more than ``max_share`` of its model's held-out max error is
+    listed in ``over_share`` and is neither on the front nor recommended.
+
+    ``progress(note)`` is called once per measured point. Needs gcc and valgrind; the flash
+    figures need arm-none-eabi-gcc/size/nm (left empty, with a note, without them).
+    """
+    if shutil.which("valgrind") is None:
+        raise InputError("valgrind not found: the instruction counts need it (apt-get install valgrind)")
+    outputs = scene.outputs
+    target = default_target(outputs) if target is None else dict(target)
+    notes: list[str] = []
+    warnings = unresolved_warnings(sensor, scene, accuracy=target)
+    if tuple(outputs) != POSE_NAMES and any(k.refine for k in grid):
+        notes.append(f"no refinement: it estimates the whole pose, and scene {scene.name} asks for "
+                     f"{','.join(outputs)} only")
+        grid = [k for k in grid if not k.refine]
+        if not grid:
+            raise InputError(f"nothing to sweep: the refinement estimates the whole pose, and scene {scene.name} "
+                             f"asks for {','.join(outputs)} only")
+
+    scale = None
+    if any(k.precision == "fixed" for k in grid):
+        if _fixed_backend() is None:
+            notes.append("fixed point skipped: fitgen.equations.fixedpoint is not available in this build")
+            grid = [k for k in grid if k.precision != "fixed"]
+        else:
+            lsb, offset, text = fixed_scale(sensor)
+            scale = (lsb, offset)
+            notes.append(f"fixed point: int32 input codes, {text}; the held-out inputs are rounded to codes; "
+                         "it takes no roots, so points whose fit uses them are not measured")
+    have_arm = all(shutil.which(t) for t in ("arm-none-eabi-gcc", "arm-none-eabi-size", "arm-none-eabi-nm"))
+    if not have_arm:
+        notes.append("flash sizes skipped: arm-none-eabi-gcc/size/nm not found")
+
+    # training: the scene's grid, noise-free; held-out: random poses in its box, seeded
+    train = simulate(sensor, scene.poses(), provenance={"scene": scene.name})
+    poses = random_poses(n_held, scene.ranges, pose_rng(seed))
+    cols = [POSE_NAMES.index(o) for o in outputs]
+    clean = simulate(sensor, poses, seed=seed)
+    noisy = [simulate(sensor, poses, noise=sensor.noise, seed=seed + 1 + i) for i in range(noise_draws)]
+    X, Y = clean.inputs, poses[:, cols]
+    Xn, Yn = np.vstack([d.inputs for d in noisy]), np.tile(Y, (noise_draws, 1))
+
+    fits: dict[tuple, Model] = {}
+    for kn in grid:
+        if kn.fit_key not in fits:
+            fits[kn.fit_key] = fit_model(train, outputs, kn.settings(), sensor=sensor)
+
+    points = [Point(kn) for kn in grid]
+    units: dict[tuple, list[int]] = {}
+    for i, p in enumerate(points):
+        m = fits[p.knobs.fit_key]
+        p.model_hash = m.sha256
+        p.terms_per_output = {e.name: len(e.terms) for e in m.equations}
+        p.terms = sum(p.terms_per_output.values())
+        units.setdefault((m.sha256, p.knobs.precision, p.knobs.style), []).append(i)
+
+    with tempfile.TemporaryDirectory(prefix="fitgen-tradeoff-") as tmp:
+        measure = _Measure(X, Y, Xn, Yn, outputs, Path(tmp), have_arm, scale)
+
+        def one(item):
+            n, ((_, precision, style), idx) = item
+            model = fits[points[idx[0]].knobs.fit_key]
+            try:
+                return idx, measure(model, precision, style, f"u{n}"), ""
+            except (InputError, RuntimeError) as exc:
+                return idx, None, str(exc).splitlines()[0][:200]
+
+        with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+            for idx, res, err in pool.map(one, enumerate(units.items())):
+                for i in idx:
+                    p = points[i]
+                    if res is None:
+                        p.note = f"not measured: {err}"
+                    else:
+                        for key, val in res.items():
+                            setattr(p, key, val)
+                        p.score = max(p.errors[o]["noisy_rms"] / target[o] for o in outputs)
+                        p.share = max(p.errors[o]["share"] for o in outputs)
+                if progress:
+                    progress(points[idx[0]].knobs.label)
+
+    over = [i for i, p in enumerate(points) if p.share is not None and p.share > max_share]
+    for i in over:
+        worst = max(outputs, key=lambda o: points[i].errors[o]["share"])
+        points[i].note = (f"rounding adds {points[i].share:.1%} of {worst}'s held-out max error "
+                          f"(over {max_share:.0%}): not recommended")
+    cost_ = [p.instructions if p.score is not None and i not in over else None for i, p in enumerate(points)]
+    score = [p.score for p in points]
+    front = pareto_front(cost_, score)
+    rec, met = recommend([math.nan if c is None else c for c in cost_],
+                         [math.nan if s is None else s for s in score], [p.flash for p in points])
+    setup = {"training_rows": train.n_rows, "levels": scene.levels, "held_out": n_held, "noise_draws": noise_draws,
+             "noise": sensor.noise, "units": sensor.units, "seed": seed, "fits": len(fits), "measured": len(units)}
+    return TradeoffResult(sensor.name, sensor.transfer, scene, target, points, front, rec, met, warnings, notes, setup,
+                          max_share, over)

@@ -1,0 +1,43 @@
+"""Where ``fitgen simulate`` takes its poses from: a grid, random poses in a box (after a grid's when
+both are given), a poses file, or a scene's grid or box; with the provenance its dataset records."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.physics.dataset import load_poses
+from fitgen.physics.scenes import load_scene
+from fitgen.physics.simulate import grid_poses, parse_grid, parse_ranges, pose_rng, random_poses
+
+
+def choose_poses(*, grid: str | None = None, random: int | None = None, poses: str | None = None,
+                 ranges: str | None = None, scene: str | None = None, seed: int = 0) -> tuple[np.ndarray, dict]:
+    """(poses, provenance) from the options of ``fitgen simulate``.
+
+    ``scene``: its grid, or ``random`` poses in its box. Otherwise the ``poses`` file, ``random``
+    poses in ``ranges`` (seeded by ``seed``; after the ``grid``'s poses when it is given too), or
+    the ``grid`` (default paper-sim). Any other combination is an InputError.
+    """
+    chosen = [x for x in (grid, random, poses) if x is not None]
+    if len(chosen) > 1 and not (len(chosen) == 2 and poses is None and not scene):
+        raise InputError("give one of --grid, --random, --poses (or --grid with --random: the grid, then random poses)")
+    if scene and (grid or poses or ranges):
+        raise InputError("--scene sets the poses: give it with --random N or alone, not with --grid, --poses, --ranges")
+    if scene:
+        sc = load_scene(scene)
+        scene_info = {"scene": sc.name, "scene_spec": scene, "scene_outputs": list(sc.outputs)}
+        if random is None:
+            return sc.poses(), {"scene_grid_levels": sc.levels, **scene_info}
+        return random_poses(random, sc.ranges, pose_rng(seed)), {"random": random, **scene_info}
+    if poses:
+        return load_poses(poses), {"poses_file": str(poses)}
+    if random is not None:
+        out = random_poses(random, parse_ranges(ranges), pose_rng(seed))
+        source = {"random": random, "ranges": ranges}
+        if grid:
+            # a rig's sweep and random presses between its levels: the grid's poses first
+            return np.vstack([grid_poses(parse_grid(grid)), out]), {**source, "grid": grid}
+        return out, source
+    grid = grid or "paper-sim"
+    return grid_poses(parse_grid(grid)), {"grid": grid}
