@@ -9,6 +9,7 @@ from fitgen import __version__
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main
 from fitgen.base.parse import OutOfRange, parse_assignments, parse_names, parse_noise, parse_penalty
 from fitgen.base.errors import InputError
+from fitgen.c.targets import TARGETS
 from fitgen.equations.terms import FAMILIES
 from fitgen.physics.pose import POSE_NAMES
 
@@ -259,8 +260,10 @@ def _finite(text: str) -> float:
 
 def cmd_codegen(args) -> int:
     from fitgen.c.codegen import write_header
+    from fitgen.c.targets import check_precision
     from fitgen.equations.model import load_model
 
+    check_precision(args.target, args.precision)
     model = load_model(args.model)
     if args.precision == "fixed":
         from fitgen.c.codegen import render_fixed_header
@@ -453,6 +456,8 @@ def build_parser() -> Parser:
                    help="fixed: the input value of one ADC code (default: the model's sensor's ADC, "
                         "or 3.3/65535 for inputs in V)")
     c.add_argument("--input-offset", type=_finite, metavar="Y", help="fixed: the input value of code 0 (default 0)")
+    c.add_argument("--target", choices=tuple(TARGETS), help="the core the header is for (refuses a precision it "
+                   "cannot run: uno takes float or fixed); the header builds for any core")
 
     t = command("tradeoff", cmd_tradeoff,
                 "accuracy against cost over penalty, cap, family, precision, style and refinement")

@@ -14,6 +14,7 @@ import jinja2
 
 from fitgen import __version__
 from fitgen.c.cgen import c_real, identifier
+from fitgen.c.targets import check_precision
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
 from fitgen.equations.model import Model, float_domain
@@ -254,13 +255,18 @@ def render_fixed_header(fm, prefix: str = "tm") -> str:
 
 
 def render_header(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",
-                  fma: bool = False, input_lsb: float | None = None, input_offset: float | None = None) -> str:
+                  fma: bool = False, input_lsb: float | None = None, input_offset: float | None = None,
+                  target: str | None = None) -> str:
     """The text of ``<prefix>_model.h``; ``fma`` sums each term with C99 fma()/fmaf().
+
+    ``target``: a core of fitgen.c.targets.TARGETS; a precision it cannot run is an InputError. The
+    text does not depend on it: one header builds for every core (on AVR its tables go to flash).
 
     ``precision="fixed"``: integer ADC codes in (value = input_offset + input_lsb * code; by
     default the scale of the model's sensor, see :func:`fitgen.equations.fixedpoint.default_input_scale`),
     int32 outputs out; ``style`` does not apply (the fixed header is straight-line code).
     """
+    check_precision(target, precision)
     if precision == "fixed":
         from fitgen.equations.fixedpoint import plan_at
 
@@ -284,6 +290,6 @@ def render_blob_interpreter() -> str:
 
 def write_header(model: Model, folder: str | Path, precision: str = "double", style: str = "table",
                  prefix: str = "tm", fma: bool = False, input_lsb: float | None = None,
-                 input_offset: float | None = None) -> Path:
-    text = render_header(model, precision, style, prefix, fma, input_lsb, input_offset)
+                 input_offset: float | None = None, target: str | None = None) -> Path:
+    text = render_header(model, precision, style, prefix, fma, input_lsb, input_offset, target)
     return write_in_folder(folder, f"{prefix}_model.h", text)

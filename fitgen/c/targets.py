@@ -1,0 +1,54 @@
+"""The cores a generated header can be for, and what each lets a header use: one table.
+
+``fitgen codegen --target NAME`` checks a header against its row; without a target a header
+is for any core with an IEEE double (a double header checks that itself when compiled).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from fitgen.base.errors import InputError
+
+
+@dataclass(frozen=True)
+class Target:
+    name: str
+    core: str  # what the core is, for messages and docs
+    precisions: tuple[str, ...]  # the header precisions it may run
+    fpu: str  # "none", "single" (float in hardware, double in software) or "double"
+    double_bits: int  # sizeof(double) * 8 under the target's compiler
+    ram: int | None  # bytes; None: an operating system's memory, no fixed budget
+    flash: int | None  # bytes of program memory
+    progmem: bool  # const tables must be placed in flash explicitly (PROGMEM) to stay out of RAM
+    why: str = ""  # why a precision is missing, for the refusal
+
+
+TARGETS = {t.name: t for t in (
+    Target("uno", "ATmega328P (Arduino Uno), 8-bit AVR at 16 MHz", ("float", "fixed"), "none", 32,
+           2048, 32768, True,
+           "avr-gcc's double is 32 bits (DBL_MANT_DIG 24), so a double header cannot run there"),
+    Target("microbit", "nRF51822 (BBC micro:bit), Cortex-M0 at 16 MHz", ("fixed",), "none", 64, 16384, 262144,
+           False, "the Cortex-M0 has no FPU: the reference firmware runs fixed point there (hil/firmware.py)"),
+    Target("mps2", "MPS2-AN386, Cortex-M4F", ("double", "float", "fixed"), "single", 64, 4 << 20, 4 << 20, False),
+    Target("pi", "Raspberry Pi (ARMv7/ARMv8 Linux, VFP)", ("double", "float"), "double", 64, None, None, False,
+           "the Pi build (host/pi.py) computes in float or double"),
+)}
+
+
+def get_target(name: str | None) -> Target | None:
+    """The row of ``name``; None for None (no target named)."""
+    if name is None:
+        return None
+    if name not in TARGETS:
+        raise InputError(f"target must be one of {', '.join(TARGETS)}, got {name!r}")
+    return TARGETS[name]
+
+
+def check_precision(target: str | None, precision: str) -> Target | None:
+    """The target's row, or an InputError (one line) when it may not run ``precision``."""
+    t = get_target(target)
+    if t is not None and precision not in t.precisions:
+        raise InputError(f"target {t.name} ({t.core}) takes --precision {' or '.join(t.precisions)}, not "
+                         f"{precision}: {t.why}")
+    return t
