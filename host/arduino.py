@@ -75,11 +75,19 @@ AVR_RAM_START = 0x800100  # the linker's address of the ATmega328P's first RAM b
 _OVERFLOW = re.compile(r"address 0x([0-9a-f]+) of .* section `[^']+' is not within region `(text|data)'")
 
 
+_OVERFLOWED_BY = re.compile(r"region `(text|data)' overflowed by (\d+) bytes")
+REGION = {"text": 32768, "data": 2048}  # the ATmega328P's regions in avr-gcc's device spec
+
+
 def _overflow_size(text: str) -> Size | None:
-    """The sizes a linker's "not within region" errors give (the highest address past each region)."""
+    """The sizes a linker's region errors give ("not within region": the highest address past it;
+    "overflowed by": the region's length and the excess)."""
     ends: dict[str, int] = {}
     for m in _OVERFLOW.finditer(text):
         ends[m[2]] = max(ends.get(m[2], 0), int(m[1], 16))
+    for m in _OVERFLOWED_BY.finditer(text):
+        end = REGION[m[1]] + int(m[2]) + (AVR_RAM_START if m[1] == "data" else 0)
+        ends[m[1]] = max(ends.get(m[1], 0), end)
     if not ends:
         return None
     ram = ends["data"] - AVR_RAM_START if "data" in ends else None
@@ -222,6 +230,9 @@ def build_example(library: str | Path, build_path: str | Path, board: Board = BO
         over = _overflow_size(text)
         if over is not None:
             return over
+        elf = build_path / f"{EXAMPLE}.ino.elf"
+        if elf.is_file() and ("too big" in text or "Not enough memory" in text):
+            return elf_size(elf)  # linked, but past the board's limits (the bootloader's share)
         first = next((ln for ln in text.splitlines() if "error" in ln.lower()), text.strip()[-300:])
         raise InputError(f"building {EXAMPLE} for {board.fqbn} failed: {first.strip()} ({shlex.join(cmd)})")
     return elf_size(build_path / f"{EXAMPLE}.ino.elf")
@@ -240,6 +251,8 @@ def _alternatives(precision: str, style: str):
     if precision == "float":
         yield "float", other, f"--style {other}"
         yield "fixed", style, "--precision fixed"
+    else:  # fixed point's 64-bit products take more flash than float's library on AVR
+        yield "float", "unrolled", "--precision float"
 
 
 def arduino_build(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: str = "float",

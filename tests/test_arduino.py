@@ -97,6 +97,23 @@ def test_a_model_that_does_not_fit_is_refused_naming_a_setting_that_does(model_p
     assert flash <= UNO.flash and ram <= UNO.ram
 
 
+def test_fixed_point_past_the_flash_is_refused_naming_float(sensor, tmp_path):
+    """The paper grid fitted without roots: its fixed-point header (64-bit products) overflows the Uno's
+    flash; float is named and builds."""
+    require_tool("arduino-builder")
+    from fitgen.fitting.fit import FitSettings, fit_model
+    from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
+
+    model = fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])), settings=FitSettings.family("no-roots"))
+    path = str(model.save(tmp_path / "noroots.json"))
+    proc = _build_cli(path, tmp_path / "big", "--precision", "fixed")
+    assert_one_line_error(proc, 2, "does not fit the uno: flash over")
+    assert "--precision float fits" in proc.stderr
+    assert not (tmp_path / "big" / "src").exists()
+    ok = _build_cli(path, tmp_path / "TactilePose", "--precision", "float")
+    assert ok.returncode == 0, ok.stderr
+
+
 def test_double_and_bad_maps_are_refused_in_one_line(model_path, tmp_path):
     assert_one_line_error(_build_cli(model_path, tmp_path / "d", "--precision", "double"), 2, "32 bits")
     proc = run_cli("tactile-host", "arduino-build", "--model", model_path, "--adc", "ads1115@0x48:0-3",
