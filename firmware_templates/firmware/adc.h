@@ -31,8 +31,15 @@ typedef struct {
     void (*sleep_ns)(void *ctx, uint64_t ns);
 } adc_i2c;
 
+#if defined(__AVR__)
+/* an 8-bit core's 2 KB of RAM: four chips (every address the parts take) of four inputs (the array holds
+ * about 550 bytes instead of 990) */
+#define ADC_MAX_CHIPS 4
+#define ADC_MAX_ELEMENTS 16
+#else
 #define ADC_MAX_CHIPS 8
 #define ADC_MAX_ELEMENTS 32
+#endif
 #define ADC_SINGLE_ENDED 0xFFu /* adc_chip.neg[] of a single-ended input */
 
 enum { ADC_ADS1115 = 0, ADC_ADS7828 = 1 };

@@ -251,6 +251,18 @@ def cmd_pi_build(args) -> int:
     return 0
 
 
+def cmd_arduino_build(args) -> int:
+    from fitgen.equations.model import load_model
+    from host.arduino import BOARDS, arduino_build
+    from host.session import channel_map_from_args
+
+    size = arduino_build(load_model(args.model), channel_map_from_args(args), args.output, precision=args.precision,
+                         style=args.style, build=not args.no_build)
+    built = size.describe(BOARDS["uno"]) if size else "not built (no arduino-builder)"
+    print(f"wrote the Arduino library {args.output}; ReadPose for the Uno: {built}", file=sys.stderr)
+    return 0
+
+
 def _map_options(p, required: bool = True) -> None:
     p.add_argument("--adc", required=required, metavar="SPEC|FILE.toml",
                    help="channel map: e.g. ads1115@0x48:0-3,ads1115@0x49:0-3 or ads7828@0x48, or a TOML file; "
@@ -342,6 +354,17 @@ def build_parser() -> Parser:
     pb.add_argument("--temp-comp", metavar="FILE.json", help="temperature compensation before the model (needs "
                     "temp=CHIP@ADDRESS:INPUT in --adc)")
     pb.set_defaults(func=cmd_pi_build)
+
+    ab = sub.add_parser("arduino-build", help="an Arduino library: the model, the ADC drivers over Wire, the channel "
+                                              "map and the ReadPose example; built for the Uno to check it fits")
+    ab.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
+    _map_options(ab)
+    ab.add_argument("--precision", default="float", choices=("float", "fixed", "double"), help="double is refused")
+    ab.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
+    ab.add_argument("--no-build", action="store_true", help="write the library only (default: build it when "
+                                                            "arduino-builder is installed)")
+    ab.add_argument("-o", "--output", required=True, metavar="DIR", help="the library's folder (e.g. TactilePose)")
+    ab.set_defaults(func=cmd_arduino_build)
 
     f = sub.add_parser("flash", help="load a model into a device as a calibration blob and read it back")
     f.add_argument("model", metavar="MODEL")
