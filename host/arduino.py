@@ -28,7 +28,7 @@ from fitgen.c.codegen import write_header
 from fitgen.equations.model import Model
 
 from host.channelmap import ChannelMap
-from host.pi import DRIVER_FILES, render_adc_map
+from host.pi import DRIVER_FILES, check_reads, render_adc_map
 
 LIBRARY_NAME = "TactilePose"  # arduino-lint's strict rule: <= 16 characters, no spaces, not "Arduino"/"library"
 URL = "https://github.com/tactile-magnetics/fitgen"
@@ -165,11 +165,7 @@ def render_arduino(model: Model, cmap: ChannelMap, folder: str | Path, *, precis
         raise InputError("an Arduino's double is 32 bits on AVR (avr-gcc): build the model in float or fixed")
     if precision not in PRECISIONS:
         raise InputError(f"the Arduino library computes in {' or '.join(PRECISIONS)}, not {precision!r}")
-    if model.input_units != "V":
-        raise InputError(f"the model takes inputs in {model.input_units}; the ADCs give volts: fit it on a dataset "
-                         "in V (fitgen simulate --transfer gmr, or tactile-host capture)")
-    if cmap.n_elements != model.n_inputs:
-        raise InputError(f"the channel map reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
+    check_reads(model, cmap)
     folder = Path(folder)
     src, tpl = folder / "src", resources.files("firmware_templates")
     if precision == "fixed":

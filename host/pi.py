@@ -85,6 +85,15 @@ def render_adc_map(cmap: ChannelMap, tin=None) -> str:
         "#endif /* ADC_MAP_H */", ""])
 
 
+def check_reads(model: Model, cmap: ChannelMap) -> None:
+    """InputError unless ``model`` takes volts, one per element ``cmap`` reads."""
+    if model.input_units != "V":
+        raise InputError(f"the model takes inputs in {model.input_units}; the ADCs give volts: fit it on a dataset "
+                         "in V (fitgen simulate --transfer gmr, or tactile-host capture)")
+    if cmap.n_elements != model.n_inputs:
+        raise InputError(f"the channel map reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
+
+
 def render_pi(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: str = "float",
               style: str = "unrolled", tin=None, tempcomp=None) -> Path:
     """Write the Pi program's sources for ``model`` read through ``cmap`` into ``folder``.
@@ -96,11 +105,7 @@ def render_pi(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: 
 
     if precision not in ("float", "double"):
         raise InputError(f"the Pi build computes in float or double, not {precision!r}")
-    if model.input_units != "V":
-        raise InputError(f"the model takes inputs in {model.input_units}; the ADCs give volts: fit it on a dataset "
-                         "in V (fitgen simulate --transfer gmr, or tactile-host capture)")
-    if cmap.n_elements != model.n_inputs:
-        raise InputError(f"the channel map reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
+    check_reads(model, cmap)
     folder = Path(folder)
     write_header(model, folder, precision, style)
     src = resources.files("firmware_templates")
