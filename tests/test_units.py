@@ -97,6 +97,13 @@ def test_bad_unit_files_are_one_line(tmp_path, edit, message):
     assert_one_line_error(proc, contains=message)
 
 
+def test_a_negative_unit_seed_is_one_line_and_writes_nothing(tmp_path):
+    out = tmp_path / "x.csv"
+    proc = run_cli("fitgen", "simulate", "--unit", "-3", "--grid", "dx=0", "-o", str(out))
+    assert_one_line_error(proc, contains="seed must be a whole number >= 0, got -3")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
     out = tmp_path / "u.csv"
     proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "4", "--grid",

@@ -146,6 +146,8 @@ class UnitSpace:
 
 def draw_unit(drawing: Sensor, seed: int) -> tuple[Sensor, np.ndarray]:
     """A unit of ``drawing`` drawn within its tolerances (seed ``seed``), and its parameters."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"a unit's seed must be a whole number >= 0, got {seed!r}")
     space = UnitSpace.of(drawing)
     theta = space.draw(np.random.default_rng(np.random.SeedSequence([seed, 0x756E6974])))
     unit = space.sensor(theta, f"{drawing.name}-unit-{seed}",
