@@ -343,7 +343,7 @@ static int read_round(adc_array *a, const adc_round *r, int32_t codes[])
     }
     for (i = 0; i < r->n_single; ++i) {
         const uint8_t chip = r->single[i].chip;
-        unsigned polls;
+        uint32_t polls; /* MAX_POLLS is past a 16-bit unsigned (AVR) */
         for (polls = 0; polls < MAX_POLLS; ++polls) {
             uint16_t cfg = 0;
             st = read_register(a, chip, REG_CONFIG, &cfg);

@@ -31,6 +31,8 @@ typedef struct {
     void (*sleep_ns)(void *ctx, uint64_t ns);
 } adc_i2c;
 
+/* a build may size the array for its channel map (hil/firmware.py does for the Uno) */
+#ifndef ADC_MAX_CHIPS
 #if defined(__AVR__)
 /* an 8-bit core's 2 KB of RAM: four chips (every address the parts take) of four inputs (the array holds
  * about 550 bytes instead of 990) */
@@ -39,6 +41,7 @@ typedef struct {
 #else
 #define ADC_MAX_CHIPS 8
 #define ADC_MAX_ELEMENTS 32
+#endif
 #endif
 #define ADC_SINGLE_ENDED 0xFFu /* adc_chip.neg[] of a single-ended input */
 

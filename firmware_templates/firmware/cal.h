@@ -8,12 +8,25 @@
 
 #include "model_api.h"
 
-#define CAL_CAPACITY 4096u  /* bytes of a blob the device holds (staging and active each) */
+#define CAL_CAPACITY 4096u  /* the largest blob the format allows a device (calstore.h: what a store holds) */
 #define CAL_HEADER_SIZE 60u /* up to n_terms_total */
 #define CAL_MIN_SIZE (CAL_HEADER_SIZE + 4u)
 #define CAL_HASH_OFFSET 8u
 #define CAL_SENSOR_OFFSET 40u
 #define CAL_SENSOR_SIZE 16u
+
+/* A blob is read where it lies: in RAM, or with CAL_IN_EEPROM (the ATmega328P) at EEPROM addresses, its
+ * pointers then EEPROM addresses as avr-libc's eeprom_read_* take them. */
+#ifdef CAL_IN_EEPROM
+#include <avr/eeprom.h>
+#define CAL_U8(p) eeprom_read_byte(p)
+#else
+#define CAL_U8(p) (*(p))
+#endif
+
+/* n bytes of a blob into RAM; the CRC-32 of a blob's first n bytes (proto_crc32's) */
+void cal_copy(uint8_t *dst, const uint8_t *blob, uint32_t n);
+uint32_t cal_crc32(const uint8_t *blob, uint32_t n);
 
 #ifndef TM_FIXED_POINT
 typedef struct {

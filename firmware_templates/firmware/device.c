@@ -23,8 +23,8 @@ static uint8_t *reply_payload(device *d)
 
 static void send(device *d, uint8_t type, uint8_t seq, size_t len)
 {
-    const size_t n = proto_finish_frame(d->out, type, seq, len, d->wire);
-    hal_write(d->wire, n);
+    /* encoded straight onto the link: no wire buffer (an ATmega328P has 2 KB of RAM) */
+    proto_cobs_emit(d->out, proto_seal_frame(d->out, type, seq, len), hal_write);
 }
 
 static void send_error(device *d, uint8_t seq, uint8_t code, uint8_t request_type)
@@ -76,8 +76,10 @@ void device_init(device *d, const device_config *cfg)
     memset(d, 0, sizeof *d);
     d->cfg = cfg;
     proto_rx_init(&d->rx);
+    d->active_size = calstore_active_size();
+    d->use_blob = d->active_size != 0 && cal_parse(&d->active, calstore_active(), d->active_size) == 0;
     /* BENCH vectors: input i of vector k at (2m + 1) / 32 of its range, m = (k + 5 i) mod 16 */
-    for (k = 0; k < 16u; ++k) {
+    for (k = 0; k < DEVICE_BENCH_VECTORS; ++k) {
         for (i = 0; i < TM_N_INPUTS; ++i) {
             d->bench_in[k][i] = fw_input_at(i, 2u * ((k + 5u * i) % 16u) + 1u, 32u);
         }
@@ -103,10 +105,10 @@ static void do_info(device *d, const proto_msg *m)
     p[PROTO_INFO_STYLE] = d->cfg->style;
     proto_put_u16(p + PROTO_INFO_MAX_PAYLOAD, PROTO_MAX_PAYLOAD);
     if (d->use_blob) {
-        memcpy(p + PROTO_INFO_HASH, d->active_buf + CAL_HASH_OFFSET, PROTO_HASH_SIZE);
-        memcpy(p + PROTO_INFO_SENSOR_ID, d->active_buf + CAL_SENSOR_OFFSET, PROTO_SENSOR_ID_SIZE);
+        cal_copy(p + PROTO_INFO_HASH, calstore_active() + CAL_HASH_OFFSET, PROTO_HASH_SIZE);
+        cal_copy(p + PROTO_INFO_SENSOR_ID, calstore_active() + CAL_SENSOR_OFFSET, PROTO_SENSOR_ID_SIZE);
     } else {
-        memcpy(p + PROTO_INFO_HASH, d->cfg->model_hash, PROTO_HASH_SIZE);
+        PROTO_ROM_COPY(p + PROTO_INFO_HASH, d->cfg->model_hash, PROTO_HASH_SIZE);
         put_text(p + PROTO_INFO_SENSOR_ID, d->cfg->sensor_id, PROTO_SENSOR_ID_SIZE);
     }
     put_text(p + PROTO_INFO_FW_VERSION, d->cfg->fw_version, PROTO_FW_VERSION_SIZE);
@@ -169,7 +171,7 @@ static void do_cal_begin(device *d, const proto_msg *m)
     return;
 #endif
     size = proto_get_u32(m->payload + PROTO_CAL_BEGIN_TOTAL);
-    if (size == 0 || size > CAL_CAPACITY) {
+    if (size == 0 || size > CALSTORE_CAPACITY) {
         refuse(d, m, PROTO_BAD_ARG);
         return;
     }
@@ -188,7 +190,7 @@ static void do_cal_data(device *d, const proto_msg *m)
         refuse(d, m, PROTO_CAL_SEQUENCE);
         return;
     }
-    memcpy(d->stage_buf + d->stage_received, m->payload + PROTO_CAL_DATA_SIZE, n);
+    calstore_stage_write(d->stage_received, m->payload + PROTO_CAL_DATA_SIZE, n);
     d->stage_received += n;
     proto_put_u32(reply_payload(d) + PROTO_CAL_DATA_REPLY_RECEIVED, d->stage_received);
     reply(d, m, PROTO_CAL_DATA_REPLY_SIZE);
@@ -204,20 +206,20 @@ static void do_cal_commit(device *d, const proto_msg *m)
         return;
     }
     d->stage_open = 0; /* whatever the verdict, the next transfer starts with CAL_BEGIN */
-    if (proto_crc32(0, d->stage_buf, d->stage_size) != d->stage_crc) {
+    if (cal_crc32(calstore_staged(), d->stage_size) != d->stage_crc) {
         refuse(d, m, PROTO_CAL_CRC);
         return;
     }
-    rc = cal_parse(&check, d->stage_buf, d->stage_size);
+    rc = cal_parse(&check, calstore_staged(), d->stage_size);
     if (rc != 0) {
         refuse(d, m, rc);
         return;
     }
     /* only now does the active calibration change */
-    memcpy(d->active_buf, d->stage_buf, d->stage_size);
+    calstore_commit(d->stage_size);
     d->active_size = d->stage_size;
-    d->use_blob = cal_parse(&d->active, d->active_buf, d->active_size) == 0;
-    memcpy(reply_payload(d), d->active_buf + CAL_HASH_OFFSET, PROTO_HASH_SIZE);
+    d->use_blob = cal_parse(&d->active, calstore_active(), d->active_size) == 0;
+    cal_copy(reply_payload(d), calstore_active() + CAL_HASH_OFFSET, PROTO_HASH_SIZE);
     reply(d, m, PROTO_HASH_SIZE);
 }
 
@@ -239,7 +241,7 @@ static void do_cal_read(device *d, const proto_msg *m)
         n = d->active_size - offset;
     }
     if (n != 0) {
-        memcpy(reply_payload(d), d->active_buf + offset, n);
+        cal_copy(reply_payload(d), calstore_active() + offset, n);
     }
     reply(d, m, n);
 }
@@ -247,6 +249,8 @@ static void do_cal_read(device *d, const proto_msg *m)
 static void do_cal_reset(device *d, const proto_msg *m)
 {
     d->use_blob = 0;
+    d->active_size = 0;
+    calstore_clear();
     reply(d, m, 0);
 }
 
@@ -264,7 +268,7 @@ static void do_bench(device *d, const proto_msg *m)
     }
     t0 = hal_ticks();
     for (i = 0; i < n; ++i) {
-        acc += estimate(d, d->bench_in[i & 15u], d->bench_out);
+        acc += estimate(d, d->bench_in[i % DEVICE_BENCH_VECTORS], d->bench_out);
     }
     t1 = hal_ticks();
     bench_sink = acc;
@@ -275,12 +279,14 @@ static void do_bench(device *d, const proto_msg *m)
 }
 
 /* every request type: the payload lengths it takes (any other: BAD_LENGTH) and its handler */
-static const struct {
+typedef struct {
     uint8_t type;
     uint16_t min_len;
     uint16_t max_len;
     void (*run)(device *d, const proto_msg *m);
-} requests[] = {
+} request_row;
+
+static const request_row requests[] PROTO_ROM = {
     { PROTO_MSG_PING, 0u, PROTO_MAX_PAYLOAD, do_ping },
     { PROTO_MSG_INFO, 0u, 0u, do_info },
     { PROTO_MSG_EVAL, 1u, PROTO_MAX_PAYLOAD, do_eval },
@@ -298,11 +304,13 @@ static void dispatch(device *d, const proto_msg *m)
     size_t r;
     d->stream_on = 0; /* any request stops a running stream */
     for (r = 0; r < sizeof requests / sizeof requests[0]; ++r) {
-        if (requests[r].type == m->type) {
-            if (m->len < requests[r].min_len || m->len > requests[r].max_len) {
+        request_row row;
+        PROTO_ROM_COPY(&row, &requests[r], sizeof row);
+        if (row.type == m->type) {
+            if (m->len < row.min_len || m->len > row.max_len) {
                 refuse(d, m, PROTO_BAD_LENGTH);
             } else {
-                requests[r].run(d, m);
+                row.run(d, m);
             }
             return;
         }
@@ -317,7 +325,8 @@ void device_feed(device *d, uint8_t byte)
         send_error(d, 0, PROTO_OVERSIZE, 0);
     } else if (r == PROTO_RX_FRAME) {
         proto_msg m;
-        const int rc = proto_parse_frame(d->rx.buf, d->rx.len, d->body, &m);
+        /* decoded in place: COBS decoding never writes ahead of what it reads */
+        const int rc = proto_parse_frame(d->rx.buf, d->rx.len, d->rx.buf, &m);
         if (rc != 0) {
             send_error(d, 0, (uint8_t)rc, 0);
         } else {
@@ -333,7 +342,7 @@ void device_tick(device *d)
     tm_output out[TM_N_OUTPUTS];
     uint32_t now;
     unsigned i;
-    int status;
+    int32_t status; /* a failed read's status word needs 32 bits (int has 16 on AVR) */
     if (!d->stream_on) {
         return;
     }
@@ -344,7 +353,7 @@ void device_tick(device *d)
     status = inputs_read(in);
     if (status < 0) {
         /* a failed read: flagged, and the model is not run on readings it did not get */
-        status = (int)inputs_failure_status(status);
+        status = (int32_t)inputs_failure_status((int)status);
         for (i = 0; i < TM_N_OUTPUTS; ++i) {
             out[i] = 0;
         }

@@ -6,39 +6,33 @@
 #include <stdint.h>
 
 #include "cal.h"
+#include "calstore.h"
 #include "proto.h"
 
 typedef struct {
     const char *sensor_id;      /* at most 16 characters */
     const char *fw_version;     /* at most 12 characters */
-    const uint8_t *model_hash;  /* 32 bytes: the compiled-in model's Model.sha256 */
+    const uint8_t *model_hash;  /* 32 bytes: the compiled-in model's Model.sha256 (PROTO_ROM) */
     uint8_t style;              /* the compiled-in model: 0 table, 1 unrolled */
 } device_config;
 
-#ifdef TM_FIXED_POINT
-/* a fixed-point build refuses every blob at CAL_BEGIN (blobs carry reals): no buffer is ever used,
- * which leaves a Cortex-M0's 16 KB of RAM to the rest */
-#define DEVICE_CAL_BUF 4u
-#else
-#define DEVICE_CAL_BUF CAL_CAPACITY
+/* BENCH cycles through this many fixed vectors (an ATmega328P keeps 2: 16 would take a quarter of its RAM) */
+#ifndef DEVICE_BENCH_VECTORS
+#define DEVICE_BENCH_VECTORS 16u
 #endif
 
 typedef struct {
     const device_config *cfg;
-    proto_rx rx;
-    uint8_t body[PROTO_MAX_BODY]; /* a decoded request */
+    proto_rx rx;                  /* a request arrives here, and is decoded in place */
     uint8_t out[PROTO_MAX_BODY];  /* a reply being built (payload at out + PROTO_HEADER_SIZE) */
-    uint8_t wire[PROTO_MAX_WIRE];
-    /* calibration: the loaded blob when use_blob, else the compiled-in tm_estimate */
+    /* calibration: the store's active blob when use_blob, else the compiled-in tm_estimate */
     uint8_t use_blob;
     cal_model active;
     uint32_t active_size;
-    uint8_t active_buf[DEVICE_CAL_BUF];
     uint8_t stage_open;           /* CAL_BEGIN seen, no COMMIT yet */
     uint32_t stage_size;
     uint32_t stage_crc;
     uint32_t stage_received;
-    uint8_t stage_buf[DEVICE_CAL_BUF];
     /* STREAM */
     uint8_t stream_on;
     uint8_t stream_seq;
@@ -47,7 +41,7 @@ typedef struct {
     uint16_t stream_index;
     uint32_t stream_next_ms;
     /* BENCH: fixed vectors inside the compiled-in domain, and where results go */
-    tm_input bench_in[16][TM_N_INPUTS];
+    tm_input bench_in[DEVICE_BENCH_VECTORS][TM_N_INPUTS];
     tm_output bench_out[TM_N_OUTPUTS];
 } device;
 

@@ -4,10 +4,19 @@
 #include <string.h>
 
 /* CRC-32 of one nibble, reflected polynomial 0xEDB88320: 16 entries instead of 256 */
-static const uint32_t crc_nibble[16] = {
+static const uint32_t crc_nibble[16] PROTO_ROM = {
     0x00000000u, 0x1DB71064u, 0x3B6E20C8u, 0x26D930ACu, 0x76DC4190u, 0x6B6B51F4u, 0x4DB26158u, 0x5005713Cu,
     0xEDB88320u, 0xF00F9344u, 0xD6D6A3E8u, 0xCB61B38Cu, 0x9B64C2B0u, 0x86D3D2D4u, 0xA00AE278u, 0xBDBDF21Cu
 };
+
+static uint32_t nibble(uint32_t crc)
+{
+#ifdef __AVR__
+    return pgm_read_dword(&crc_nibble[crc & 15u]);
+#else
+    return crc_nibble[crc & 15u];
+#endif
+}
 
 uint32_t proto_crc32(uint32_t crc, const uint8_t *p, size_t n)
 {
@@ -15,8 +24,8 @@ uint32_t proto_crc32(uint32_t crc, const uint8_t *p, size_t n)
     crc = ~crc;
     for (i = 0; i < n; ++i) {
         crc ^= p[i];
-        crc = (crc >> 4) ^ crc_nibble[crc & 15u];
-        crc = (crc >> 4) ^ crc_nibble[crc & 15u];
+        crc = (crc >> 4) ^ nibble(crc);
+        crc = (crc >> 4) ^ nibble(crc);
     }
     return ~crc;
 }
@@ -74,15 +83,43 @@ long proto_cobs_decode(const uint8_t *in, size_t n, uint8_t *out, size_t cap)
     return (long)o;
 }
 
-size_t proto_finish_frame(uint8_t body[PROTO_MAX_BODY], uint8_t type, uint8_t seq, size_t len,
-                          uint8_t wire[PROTO_MAX_WIRE])
+size_t proto_seal_frame(uint8_t body[PROTO_MAX_BODY], uint8_t type, uint8_t seq, size_t len)
 {
-    size_t n;
     body[PROTO_HEADER_TYPE] = type;
     body[PROTO_HEADER_SEQ] = seq;
     proto_put_u16(body + PROTO_HEADER_LEN, (uint16_t)len);
     proto_put_u32(body + PROTO_HEADER_SIZE + len, proto_crc32(0, body, PROTO_HEADER_SIZE + len));
-    n = proto_cobs_encode(body, PROTO_HEADER_SIZE + len + PROTO_CRC_SIZE, wire);
+    return PROTO_HEADER_SIZE + len + PROTO_CRC_SIZE;
+}
+
+void proto_cobs_emit(const uint8_t *in, size_t n, proto_emit_fn emit)
+{
+    static const uint8_t delimiter = 0;
+    size_t i = 0;
+    for (;;) {
+        /* one block: up to 254 bytes before the next zero, led by its code byte */
+        size_t run = 0;
+        uint8_t code;
+        while (i + run < n && in[i + run] != 0 && run < 254u) {
+            ++run;
+        }
+        code = (uint8_t)(run + 1u);
+        emit(&code, 1);
+        emit(in + i, run);
+        i += run;
+        if (i < n && run < 254u) {
+            ++i; /* the zero this block stands for */
+        } else if (i >= n) {
+            break; /* canonical: no empty block after a full one at the end */
+        }
+    }
+    emit(&delimiter, 1);
+}
+
+size_t proto_finish_frame(uint8_t body[PROTO_MAX_BODY], uint8_t type, uint8_t seq, size_t len,
+                          uint8_t wire[PROTO_MAX_WIRE])
+{
+    size_t n = proto_cobs_encode(body, proto_seal_frame(body, type, seq, len), wire);
     wire[n++] = 0;
     return n;
 }

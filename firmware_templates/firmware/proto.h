@@ -8,10 +8,21 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "proto_defs.h"
 
 #define PROTO_MAX_WIRE (PROTO_MAX_ENCODED + 1u) /* plus the delimiter */
+
+/* constant tables: in flash on AVR (PROGMEM, read with memcpy_P: 2 KB of RAM), in place elsewhere */
+#ifdef __AVR__
+#include <avr/pgmspace.h>
+#define PROTO_ROM PROGMEM
+#define PROTO_ROM_COPY(dst, src, n) memcpy_P((dst), (src), (n))
+#else
+#define PROTO_ROM
+#define PROTO_ROM_COPY(dst, src, n) memcpy((dst), (src), (n))
+#endif
 typedef char proto_assert_body[(PROTO_MAX_BODY == PROTO_HEADER_SIZE + PROTO_MAX_PAYLOAD + PROTO_CRC_SIZE) ? 1 : -1];
 
 /* little-endian fields, at any alignment */
@@ -59,6 +70,15 @@ size_t proto_cobs_encode(const uint8_t *in, size_t n, uint8_t *out);
 /* COBS-decode n bytes (no delimiter) into out (cap bytes); returns the decoded length, or -1 when the
  * input holds a 0x00, a code runs past the end, or the result does not fit */
 long proto_cobs_decode(const uint8_t *in, size_t n, uint8_t *out, size_t cap);
+
+/* fill in the header and CRC of body, which holds a payload of len bytes at body + PROTO_HEADER_SIZE;
+ * returns the body's length */
+size_t proto_seal_frame(uint8_t body[PROTO_MAX_BODY], uint8_t type, uint8_t seq, size_t len);
+
+/* COBS(in[0 .. n)) and its delimiter handed to emit piece by piece: a frame sent without a wire buffer
+ * (the same bytes proto_cobs_encode gives, then 0x00) */
+typedef void (*proto_emit_fn)(const uint8_t *p, size_t n);
+void proto_cobs_emit(const uint8_t *in, size_t n, proto_emit_fn emit);
 
 /* body holds a payload of len bytes at body + PROTO_HEADER_SIZE; fills in the header and CRC, then writes
  * COBS(body) 0x00 into wire (PROTO_MAX_WIRE bytes). Returns the wire length. len <= PROTO_MAX_PAYLOAD. */
