@@ -1,4 +1,5 @@
-"""Run the reference firmware where the HIL suite can reach it: QEMU's mps2-an386, or the host build on a pty."""
+"""Run the reference firmware where the HIL suite can reach it: QEMU's mps2-an386 or microbit, simavr's
+ATmega328P (the Arduino Uno), or the host build on a pty."""
 
 from __future__ import annotations
 
@@ -16,8 +17,10 @@ from fitgen.base.errors import InputError
 QEMU = "qemu-system-arm"
 # the emulated boards: QEMU machine per target (mps2: Cortex-M4F; microbit: nRF51822, Cortex-M0)
 MACHINES = {"mps2": "mps2-an386", "microbit": "microbit"}
-TARGETS = tuple(MACHINES) + ("host",)
+TARGETS = tuple(MACHINES) + ("uno", "host")
 INSTALL_HINT = "install them with: sudo apt-get install qemu-system-arm gcc-arm-none-eabi"
+AVR_TOOLS = ("avr-gcc", "avr-size", "gcc", "pkg-config")
+AVR_HINT = "install them with: sudo apt-get install gcc-avr avr-libc simavr libsimavr-dev libelf-dev pkg-config"
 # -icount shift=0: the emulated core retires one instruction per ns of virtual time, so the
 # 25 MHz SysTick counts one tick per 40 instructions (docs/hil.md)
 ICOUNT_SHIFT = 0
@@ -203,6 +206,89 @@ class HostFirmware(_Running):
 
 
 
+class UnoEmulator(_Running):
+    """An ATmega328P firmware ELF run by the libsimavr board (firmware_templates/avr/uno_board.c), its USART0
+    on ``socket://127.0.0.1:port``; with ``bridge`` (host.pi.StandIn) the TWI bus carries the bus model's
+    chips. ``eeprom``: a file that keeps the EEPROM from one run to the next (what a board keeps over a
+    reset). ``paint``: the address where RAM above .bss starts; after stop(), ``stack_peak`` holds the
+    deepest the stack reached (bytes), and ``cycles`` the cycles the core ran."""
+
+    def __init__(self, board: str | Path, elf: str | Path, port: int | None = None, *, bridge=None,
+                 paint: int | None = None, eeprom: str | Path | None = None, boot_timeout: float = 10.0):
+        self.board, self.elf, self.bridge, self.paint = Path(board), Path(elf), bridge, paint
+        self.eeprom = eeprom
+        self.port = port if port is not None else free_port()
+        self.boot_timeout = boot_timeout
+        self.stack_peak: int | None = None
+        self.cycles: int | None = None
+        self.proc = None
+
+    @property
+    def url(self) -> str:
+        return f"socket://127.0.0.1:{self.port}"
+
+    def command(self) -> list[str]:
+        return [str(self.board), str(self.elf), str(self.port)] + (["--bridge"] if self.bridge is not None else []) \
+            + (["--eeprom", str(self.eeprom)] if self.eeprom else []) + (["--paint", hex(self.paint)] if self.paint else [])
+
+    def start(self) -> "UnoEmulator":
+        popen = dict(stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        cmd = self.command()
+        self.proc = self.bridge.spawn(cmd, **popen) if self.bridge is not None else subprocess.Popen(cmd, **popen)
+        fd = self.proc.stderr.fileno()
+        deadline = time.monotonic() + self.boot_timeout
+        line = b""
+        while not line.endswith(b"\n"):
+            left = deadline - time.monotonic()
+            chunk = os.read(fd, 1) if left > 0 and select.select([fd], [], [], left)[0] else b""
+            if not chunk:
+                self.stop()
+                raise InputError(f"the simavr board did not start: {line.decode(errors='replace').strip() or 'no message'}")
+            line += chunk
+        if not line.startswith(b"LISTENING"):
+            self.stop()
+            raise InputError(f"the simavr board said {line.decode(errors='replace').strip()!r}")
+        return self
+
+    def stop(self) -> None:
+        if self.proc is not None:
+            stop_process(self.proc)
+            rest = self.proc.stderr.read().decode(errors="replace") if self.proc.stderr else ""
+            for ln in rest.splitlines():
+                key, _, value = ln.partition(" ")
+                if key == "STACK":
+                    self.stack_peak = int(value)
+                elif key == "CYCLES":
+                    self.cycles = int(value)
+        super().stop()
+
+
+def build_uno_board(folder: str | Path) -> Path:
+    """The libsimavr board (firmware_templates/avr/uno_board.c) compiled into ``folder``."""
+    from importlib import resources
+
+    from hil.firmware import _run
+
+    folder = Path(folder)
+    src, binary = folder / "uno_board.c", folder / "uno_board"
+    src.write_bytes((resources.files("firmware_templates") / "avr" / "uno_board.c").read_bytes())
+    flags = _run(["pkg-config", "--cflags", "--libs", "simavr"], "pkg-config simavr").stdout.split()
+    _run(["gcc", "-O2", "-Wall", "-Wextra", "-Werror", str(src), "-o", str(binary)] + flags + ["-lelf"],
+         "building the simavr board")
+    return binary
+
+
+def bss_end(elf: str | Path) -> int:
+    """The first RAM address above .data and .bss of an AVR ELF (where its stack may grow down to)."""
+    from hil.firmware import _run
+
+    for line in _run(["avr-nm", str(elf)], f"reading {elf}'s symbols").stdout.splitlines():
+        parts = line.split()
+        if len(parts) == 3 and parts[2] == "__bss_end":
+            return int(parts[0], 16) & 0xFFFF
+    raise InputError(f"{elf} has no __bss_end symbol")
+
+
 def instructions_per_estimate(ticks_small: int, ticks_large: int, n_small: int, n_large: int, tick_hz: int,
                               shift: int = ICOUNT_SHIFT) -> float:
     """Instructions per estimate from two BENCH runs under ``-icount shift``: the difference cancels the
@@ -213,8 +299,8 @@ def instructions_per_estimate(ticks_small: int, ticks_large: int, n_small: int, 
 
 def bench_instructions(dev, n_small: int = 200, n_large: int = 2200) -> dict:
     """Instructions (emulator, icount) or ns (host build) per estimate of the active calibration, from BENCH."""
-    t1, hz, _ = dev.bench(n_small)
-    t2, hz2, _ = dev.bench(n_large)
+    t1, hz, _ = dev.bench(n_small, timeout=dev.timeout + n_small * 1e-3)
+    t2, hz2, _ = dev.bench(n_large, timeout=dev.timeout + n_large * 1e-3)
     per = (t2 - t1) / (n_large - n_small)
     return {"ticks_per_estimate": per, "tick_hz": hz,
             "instructions": instructions_per_estimate(t1, t2, n_small, n_large, hz) if hz != 1_000_000_000 else None,
@@ -239,6 +325,10 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
         missing = [t for t in (QEMU, "arm-none-eabi-gcc") if shutil.which(t) is None]
         if missing:
             raise InputError(f"{' and '.join(missing)} not found; {INSTALL_HINT}")
+    if target == "uno":
+        missing = [t for t in AVR_TOOLS if shutil.which(t) is None]
+        if missing:
+            raise InputError(f"{' and '.join(missing)} not found; {AVR_HINT}")
     tmp = None
     if workdir is None:
         tmp = tempfile.TemporaryDirectory(prefix="tactile-fw-")
@@ -251,6 +341,10 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
     if target in MACHINES:
         runner = Emulator(image, port, bridge=bridge, machine=MACHINES[target])
         runner.size = firmware_size(image)
+    elif target == "uno":
+        runner = UnoEmulator(build_uno_board(folder), image, port, bridge=bridge, paint=bss_end(image),
+                             eeprom=folder / "eeprom.bin")
+        runner.size = firmware_size(image, "avr-size")
     else:
         runner = HostFirmware(image, bridge=bridge)
         runner.size = None

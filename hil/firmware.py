@@ -1,6 +1,6 @@
 """The reference firmware (``firmware_templates/firmware/``, protocol in docs/protocol.md) for a model:
 rendered into a folder next to its ``tm_model.h`` and the protocol's ``proto_defs.h`` (host.protocol_c),
-and built for a host process or QEMU's mps2-an386."""
+and built for a host process, QEMU's mps2-an386 or microbit, or the Arduino Uno (simavr's ATmega328P)."""
 
 from __future__ import annotations
 
@@ -18,27 +18,39 @@ from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
 from fitgen.equations.model import Model
 from fitgen.c.compiled import WARNING_FLAGS
+from fitgen.c.targets import TARGETS, check_precision
 from host.protocol_c import render_proto_defs
 
-PORTS = ("posix", "mps2", "microbit")
-COMMON_FILES = ("model_api.h", "proto.h", "proto.c", "cal.h", "device.h", "device.c", "hal.h", "adc.h", "inputs.h")
+PORTS = ("posix", "mps2", "microbit", "uno")
+COMMON_FILES = ("model_api.h", "proto.h", "proto.c", "cal.h", "calstore.h", "device.h", "device.c", "hal.h", "adc.h",
+                "inputs.h")
 # written by render_firmware (besides tm_model.h): from the model, host/protocol.py, and cal.c.j2
 RENDERED = ("main.c", "proto_defs.h", "cal.c")
 # where the inputs come from: simulated triangle waves, or the ADC drivers through a channel map
 SIM_FILES = ("inputs_sim.c",)
-ADC_FILES = ("adc.c", "inputs_adc.c", "i2c_bridge.c")
-PORT_FILES = {"posix": ("hal_posix.c",), "mps2": ("hal_mps2.c", "startup.h", "startup_mps2.c", "mps2_an386.ld"),
-              "microbit": ("hal_microbit.c", "startup.h", "startup_microbit.c", "microbit.ld")}
-BINARY = {"posix": "firmware", "mps2": "firmware.elf", "microbit": "firmware.elf"}
-DEFAULT_CC = {"posix": "gcc", "mps2": "arm-none-eabi-gcc", "microbit": "arm-none-eabi-gcc"}
+ADC_FILES = ("adc.c", "inputs_adc.c")
+# the emulated ARM boards and the host build reach the bus model over a byte channel; the Uno has a real
+# TWI driver (hal_uno.c), answered in simavr by the same bus model (firmware_templates/avr/uno_board.c)
+BRIDGE_FILES = ("i2c_bridge.c",)
+PORT_FILES = {"posix": ("hal_posix.c", "calstore_ram.c"),
+              "mps2": ("hal_mps2.c", "calstore_ram.c", "startup.h", "startup_mps2.c", "mps2_an386.ld"),
+              "microbit": ("hal_microbit.c", "calstore_ram.c", "startup.h", "startup_microbit.c", "microbit.ld"),
+              "uno": ("hal_uno.c", "calstore_eeprom.c")}
+BINARY = {"posix": "firmware", "mps2": "firmware.elf", "microbit": "firmware.elf", "uno": "firmware.elf"}
+DEFAULT_CC = {"posix": "gcc", "mps2": "arm-none-eabi-gcc", "microbit": "arm-none-eabi-gcc", "uno": "avr-gcc"}
 LINKER_SCRIPT = {"mps2": "mps2_an386.ld", "microbit": "microbit.ld"}
 _BARE = ["-ffunction-sections", "-fdata-sections", "-nostartfiles", "-Wl,--gc-sections", "-Wl,--fatal-warnings",
          "--specs=nano.specs", "--specs=nosys.specs"]
 MPS2_FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16", "-fno-math-errno"] + _BARE
 # the nRF51's Cortex-M0: ARMv6-M, no FPU, no 32x32->64 multiply (64-bit products are __aeabi_lmul calls)
 MICROBIT_FLAGS = ["-mcpu=cortex-m0", "-mthumb", "-mfloat-abi=soft"] + _BARE
-PORT_FLAGS = {"mps2": MPS2_FLAGS, "microbit": MICROBIT_FLAGS}
+# the Uno: avr-libc's start-up and linker script; blobs in EEPROM (cal.h), 2 BENCH vectors (device.h), and
+# the ADC array sized for the channel map it reads (adc.h, set in adc_map.h's limits below)
+UNO_FLAGS = ["-mmcu=atmega328p", "-DF_CPU=16000000UL", "-DCAL_IN_EEPROM", "-DDEVICE_BENCH_VECTORS=2u",
+             "-ffunction-sections", "-fdata-sections", "-Wl,--gc-sections"]
+PORT_FLAGS = {"mps2": MPS2_FLAGS, "microbit": MICROBIT_FLAGS, "uno": UNO_FLAGS}
 SENSOR_ID_MAX = 16
+BUILD_FLAGS = "build_flags"  # defines a render adds to its build (one line, written by render_firmware)
 
 
 def _check_port(port: str) -> None:
@@ -82,8 +94,8 @@ def render_firmware(model: Model, folder: str | Path, *, precision: str = "float
         raise InputError(f"sensor id must be 1..{SENSOR_ID_MAX} printable ASCII characters without quotes "
                          f"or backslashes, got {sensor_id!r}")
     folder = Path(folder)
-    if port == "microbit" and precision != "fixed":
-        raise InputError("the microbit port (Cortex-M0, no FPU) runs fixed-point firmware: give --precision fixed")
+    if port in TARGETS:
+        check_precision(port, precision)  # what the board's core can run (fitgen/c/targets.py)
     if port == "microbit" and cmap is not None:
         raise InputError("the microbit has one UART: it has no I2C bridge to the bus model (use --target mps2 or "
                          "host for --adc)")
@@ -101,14 +113,25 @@ def render_firmware(model: Model, folder: str | Path, *, precision: str = "float
                          "double build")
     header = {"input_lsb": adc_input_lsb(cmap), "input_offset": 0.0} if cmap is not None and precision == "fixed" \
         else {}
-    write_header(model, folder, precision, style, "tm", fma, **header)  # creates the folder
-    inputs = ADC_FILES if cmap is not None else SIM_FILES
+    write_header(model, folder, precision, style, "tm", fma, target=port if port in TARGETS else None,
+                 **header)  # creates the folder
+    inputs = (ADC_FILES + (() if port == "uno" else BRIDGE_FILES)) if cmap is not None else SIM_FILES
     for name in COMMON_FILES + inputs + PORT_FILES[port]:
         write_atomic(folder / name, _source(name))
     write_atomic(folder / "proto_defs.h", render_proto_defs())
     write_atomic(folder / "cal.c", render_blob_interpreter())
-    for name in (SIM_FILES if cmap is not None else ADC_FILES + ("adc_map.h", "inputs_options.h")) + ("tm_tempcomp.h",):
+    stale = SIM_FILES if cmap is not None else ADC_FILES + BRIDGE_FILES + ("adc_map.h", "inputs_options.h")
+    for name in stale + ("tm_tempcomp.h",):
         (folder / name).unlink(missing_ok=True)  # the other kind of build's, from an earlier render
+    flags = []
+    if cmap is not None and port == "uno":
+        # the ADC array sized for this map: 2 KB of RAM has no room for a 4-chip array's 540 bytes
+        chips = max(len(cmap.chips), 1)
+        flags = [f"-DADC_MAX_CHIPS={chips}", f"-DADC_MAX_ELEMENTS={max(cmap.n_elements, 1)}"]
+    if flags:
+        write_atomic(folder / BUILD_FLAGS, " ".join(flags) + "\n")
+    else:
+        (folder / BUILD_FLAGS).unlink(missing_ok=True)
     if cmap is not None:
         from host.pi import render_adc_map
         from host.temperature import render_c
@@ -147,7 +170,7 @@ def build_firmware(folder: str | Path, port: str, cc: str | None = None) -> Path
     _check_port(port)
     folder = Path(folder)
     names = RENDERED + COMMON_FILES \
-        + (ADC_FILES if (folder / "inputs_adc.c").is_file() else SIM_FILES) \
+        + (ADC_FILES + (() if port == "uno" else BRIDGE_FILES) if (folder / "inputs_adc.c").is_file() else SIM_FILES) \
         + PORT_FILES[port]
     missing = [n for n in names if not (folder / n).is_file()]
     if missing or not (folder / "tm_model.h").is_file():
@@ -155,7 +178,9 @@ def build_firmware(folder: str | Path, port: str, cc: str | None = None) -> Path
     output = folder / BINARY[port]
     cmd = shlex.split(cc or DEFAULT_CC[port]) + WARNING_FLAGS + ["-O2", "-I", str(folder)]
     if port in PORT_FLAGS:
-        cmd += PORT_FLAGS[port] + ["-T", str(folder / LINKER_SCRIPT[port])]
+        cmd += PORT_FLAGS[port] + (["-T", str(folder / LINKER_SCRIPT[port])] if port in LINKER_SCRIPT else [])
+    if (folder / BUILD_FLAGS).is_file():
+        cmd += (folder / BUILD_FLAGS).read_text().split()
     cmd += [str(folder / n) for n in names if n.endswith(".c")] + ["-o", str(output), "-lm"]
     _run(cmd, f"building the {port} firmware")
     return output

@@ -246,6 +246,34 @@ def check_flash(dev: Device, model: Model, new: Model, inputs: np.ndarray, senso
                  figures={"blob_bytes": len(blob)})
 
 
+def fit_store(model: Model, room: int, precision: str, sensor_id: str) -> Model:
+    """``model`` with the first k terms of each equation, k the largest whose blob fits ``room`` bytes."""
+    k = max(len(e.terms) for e in model.equations)
+    while k > 0:
+        eqs = tuple(Equation(e.name, e.intercept, e.terms[:k], e.coefficients[:k]) for e in model.equations)
+        trimmed = dataclasses.replace(model, equations=eqs, fit_info=dict(model.fit_info))
+        if len(to_blob(trimmed, precision, sensor_id)) <= room:
+            return trimmed
+        k -= 1
+    raise ValueError(f"no calibration of this model fits a {room}-byte store")
+
+
+def check_flash_too_big(dev: Device, model: Model, new: Model, room: int, sensor_id: str) -> Check:
+    """A blob larger than the device's store: CAL_BEGIN refused, and the compiled-in model still answers."""
+    from host.device import FlashFailed, flash_model
+
+    size = len(to_blob(new, dev.info().precision, sensor_id))
+    try:
+        flash_model(dev, new, "the flash variant", sensor_id=sensor_id)
+    except FlashFailed as exc:
+        info = dev.info(refresh=True)
+        kept = info.model_hash == model.sha256 and info.cal_source == 0
+        said = f"{size}-byte" in str(exc) and f"{room}-byte" in str(exc)
+        return Check("flash too big", kept and said, f"{str(exc).splitlines()[0]}; compiled-in model "
+                     f"{'kept' if kept else 'LOST'}", figures={"blob_bytes": size, "store_bytes": room})
+    return Check("flash too big", False, f"a {size}-byte blob was taken by a {room}-byte store")
+
+
 def check_corrupt_flash(dev: Device, new: Model, inputs: np.ndarray, sensor_id: str) -> Check:
     """Corrupt, truncated and out-of-order transfers: each refused, the calibration before them kept."""
     info = dev.info()
@@ -429,6 +457,12 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
     elif flash:
         new = flash_variant(model)
         few = inputs[: min(len(inputs), 300)]
+        room = dev.cal_capacity()
+        if len(to_blob(new, dev.info().precision, sensor_id)) > room:
+            # a store smaller than the blob (the Uno's EEPROM): refused and the compiled-in model kept; then
+            # the same checks on a calibration with as many of the terms as the store takes
+            step(check_flash_too_big, dev, model, new, room, sensor_id)
+            new = fit_store(new, room, dev.info().precision, sensor_id)
         step(check_flash, dev, model, new, few, sensor_id)
         step(check_corrupt_flash, dev, new, few, sensor_id)
         dev.reset_calibration()

@@ -255,6 +255,27 @@ class Device(PortOwner):
                 break
         return bytes(out)
 
+    def cal_capacity(self) -> int:
+        """The largest blob the device's calibration store takes (0: none), found by CAL_BEGIN alone: no
+        blob byte is sent, the active calibration is untouched (the staging it opens is abandoned)."""
+        def takes(size: int) -> bool:
+            try:
+                self.request(MsgType.CAL_BEGIN, p.pack_cal_begin(size, 0))
+            except DeviceError as exc:
+                if exc.code in (ErrorCode.BAD_ARG, ErrorCode.CAL_INVALID):
+                    return False
+                raise
+            return True
+
+        lo, hi = 0, p.CAL_MAX_BLOB  # lo: taken (0 trivially), hi + 1: refused
+        if takes(hi):
+            return hi
+        hi -= 1
+        while lo < hi:
+            mid = (lo + hi + 1) // 2
+            lo, hi = (mid, hi) if takes(mid) else (lo, mid - 1)
+        return lo
+
     def reset_calibration(self) -> None:
         self._info = None
         self.request(MsgType.CAL_RESET)
@@ -288,7 +309,15 @@ def flash_model(dev: Device, model, origin: str, *, sensor_id: str = "paper", fm
     try:
         answer = dev.load_calibration(blob)
         back = dev.read_calibration()
-    except (DeviceError, p.ProtocolError) as exc:
+    except DeviceError as exc:
+        if exc.code == ErrorCode.BAD_ARG and exc.request_type == MsgType.CAL_BEGIN:
+            room = dev.cal_capacity()
+            if len(blob) > room:
+                raise FlashFailed(f"the {len(blob)}-byte blob does not fit the device's {room}-byte calibration store: "
+                                  "refused, nothing written; the device keeps the model it runs (fit fewer terms, "
+                                  "e.g. fitgen fit --max-terms)") from exc
+        raise FlashFailed(f"calibration not loaded: {exc}") from exc
+    except p.ProtocolError as exc:
         raise FlashFailed(f"calibration not loaded: {exc}") from exc
     if back != blob:
         first = next((i for i, (a, b) in enumerate(zip(back, blob)) if a != b), min(len(back), len(blob)))

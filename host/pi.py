@@ -168,6 +168,13 @@ class StandIn:
         if op == "S":
             self.clock.sleep(int(parts[1]) * 1e-9)
             return "OK"
+        if op == "T":  # a board's own clock (hil/emulate.py's Uno): the bus model's moves up to it, never back
+            ahead = int(parts[1]) * 1e-9 - self.clock.monotonic()
+            if ahead > 0:
+                self.clock.sleep(ahead)
+            return "OK"
+        if op == "A":  # an address phase on its own (a board's TWI acknowledges before it sees the bytes)
+            return "OK" if self.bus.present(int(parts[1])) else f"E {errno.EREMOTEIO}"
         if op == "R":
             addr, n = int(parts[1]), int(parts[2])
             wr, nr = [], 0

@@ -29,6 +29,7 @@ MAX_BODY = MIN_BODY + MAX_PAYLOAD  # 264
 MAX_ENCODED = 267  # the largest encoded frame the device accepts before the delimiter
 CAL_DATA_MAX = 248  # blob bytes per CAL_DATA (plus the 4-byte offset)
 CAL_READ_MAX = 256
+CAL_MAX_BLOB = 4096  # the largest blob the format lets a device hold (firmware cal.h CAL_CAPACITY)
 BENCH_MAX = 1_000_000  # estimates per BENCH
 HASH_SIZE = 32
 SENSOR_ID_SIZE = 16

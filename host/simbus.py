@@ -203,6 +203,10 @@ class SimBus:
             dev.write(list(wr), t)
         return dev.read(rd, t) if rd else []
 
+    def present(self, address: int) -> bool:
+        """Whether a chip acknowledges ``address`` (the general call: any chip), as an address phase alone."""
+        return bool(self.devices) if address == 0x00 else address in self.devices
+
     # smbus2.SMBus's calls, same names and arguments
 
     def read_byte(self, i2c_addr, force=None):

@@ -127,7 +127,7 @@ def test_fixed_only_on_the_m0_and_no_bridge(paper_model, tmp_path):
     from hil.firmware import render_firmware
     from host.channelmap import parse_spec
 
-    with pytest.raises(InputError, match="fixed-point firmware"):
+    with pytest.raises(InputError, match="takes --precision fixed"):
         render_firmware(paper_model, tmp_path / "a", precision="float", port="microbit")
     with pytest.raises(InputError, match="one UART"):
         render_firmware(paper_model, tmp_path / "b", precision="fixed", port="microbit",

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from fitgen.base.errors import InputError
 from fitgen.base.layout import Layout
+from fitgen.c.calblob import to_blob
 from fitgen.c.compiled import compile_checked
 from host import protocol as p
 from host import protocol_c
@@ -384,7 +385,10 @@ def test_flash_failures(paper_model, paper_model_file):
         assert_one_line_error(proc, 1, "read-back differs")
     with FakeDevice(paper_model, "double", capacity=100) as fake:
         proc = run_cli("tactile-host", "flash", "--port", fake.url, paper_model_file)
-        assert_one_line_error(proc, 1, "BAD_ARG")
+        # the refusal names the blob's size and the store's, found by CAL_BEGIN alone (nothing written)
+        blob = len(to_blob(paper_model, "double"))
+        assert_one_line_error(proc, 1, f"the {blob}-byte blob does not fit the device's 100-byte calibration store")
+        assert fake.active is None
     with FakeDevice(paper_model, "fixed") as fake:
         proc = run_cli("tactile-host", "flash", "--port", fake.url, paper_model_file)
         assert_one_line_error(proc, 2, "fixed-point build")

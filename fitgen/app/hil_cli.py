@@ -67,15 +67,21 @@ def _describe(runner, dev, target: str) -> None:
     from hil.emulate import bench_instructions
 
     info = dev.info()
-    b = bench_instructions(dev)
-    cost = (f"{b['instructions']:.0f} instructions per estimate (icount)" if b["instructions"] is not None
-            else f"{b['ns']:.0f} ns per estimate")
+    if target == "uno":
+        # the Uno's ticks are its CPU cycles (simavr's count); 16 MHz makes thousands of estimates slow
+        b = bench_instructions(dev, 10, 60)
+        cost = f"{b['ticks_per_estimate']:.0f} cycles per estimate (simavr), {b['tick_hz'] / b['ticks_per_estimate']:.0f} " \
+               f"estimates/s at 16 MHz"
+    else:
+        b = bench_instructions(dev)
+        cost = (f"{b['instructions']:.0f} instructions per estimate (icount)" if b["instructions"] is not None
+                else f"{b['ns']:.0f} ns per estimate")
     print(f"{target} firmware: {info.precision}, {info.style_name}, model {info.model_hash[:12]}; {cost}")
     if runner.size:
         print(f"flash {runner.size['flash']} bytes, RAM {runner.size['ram']} bytes")
     if info.adc_chips:
         print("inputs from " + ", ".join(f"{c[0]}@0x{c[1]:02x} ({c[2]} inputs)" for c in info.adc_chips)
-              + " over the I2C bridge to the bus model")
+              + (" on the TWI bus" if target == "uno" else " over the I2C bridge") + ", answered by the bus model")
 
 
 def _adc_bridge(args):
@@ -142,9 +148,10 @@ def build_parser() -> Parser:
     r.set_defaults(func=cmd_run)
 
     e = sub.add_parser("emulate", help="build the firmware with a model and boot it")
-    e.add_argument("--target", default="mps2", choices=("mps2", "microbit", "host"),
+    e.add_argument("--target", default="mps2", choices=("mps2", "microbit", "uno", "host"),
                    help="mps2: Cortex-M4F in qemu-system-arm (default); microbit: Cortex-M0 (nRF51, fixed point "
-                        "only); host: the POSIX build on a pty")
+                        "only); uno: the Arduino Uno's ATmega328P in simavr (float or fixed; --adc puts the chips "
+                        "on its TWI bus); host: the POSIX build on a pty")
     e.add_argument("--port", type=int, help="TCP port of the emulated UART (default: a free one)")
     e.add_argument("--precision", default="float", choices=("float", "double", "fixed"))
     e.add_argument("--style", default="table", choices=("table", "unrolled"))
@@ -152,7 +159,8 @@ def build_parser() -> Parser:
     e.add_argument("--suite", action="store_true", help="run the HIL suite against it, then stop")
     e.add_argument("--adc", metavar="SPEC|FILE.toml",
                    help="the firmware reads its inputs from these ADCs (a channel map, as tactile-host read --adc) "
-                        "over the emulated board's I2C bridge, answered by the bus model of --simulate")
+                        "over the emulated board's I2C (the Uno's TWI, the ARM boards' bridge), answered by the bus "
+                        "model of --simulate")
     e.add_argument("--simulate", metavar="POSE", default="0,0,0,0,0",
                    help="with --adc: the bus model's magnet pose dx,dy,dz,thx,thy (default rest)")
     e.add_argument("--sim-sensor", default="paper", help="with --adc: the simulated sensor (default paper, gmr)")

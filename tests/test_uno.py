@@ -1,0 +1,98 @@
+"""The reference firmware on the Arduino Uno's ATmega328P in simavr (tactile-hil emulate --target uno): two
+ADS1115s on its TWI bus answered by the Python bus model, the HIL suite, EEPROM calibration, RAM and stack."""
+
+import numpy as np
+import pytest
+
+from fitgen.fitting.fit import fit_model
+from fitgen.fitting.holdout import box_of, clean_readings, evaluate
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
+from hil.emulate import adc_bridge, start_target
+from hil.suite import run_suite
+from host.device import Device
+
+from conftest import assert_one_line_error, require_tool, run_cli
+
+ADC = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+UNO_FLASH = 32 * 1024 - 512  # less the bootloader
+UNO_RAM = 2048
+
+
+def _require_avr():
+    for tool in ("avr-gcc", "avr-size", "avr-nm", "pkg-config", "gcc"):
+        require_tool(tool)
+
+
+@pytest.fixture(scope="module")
+def gmr_model():
+    """The default fit of the paper sensor in volts (harmonics included), with its held-out record."""
+    sensor = load_sensor("paper").with_transfer("gmr")
+    ds = simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"]))
+    model = fit_model(ds)
+    model.fit_info["held_out"] = evaluate(model, sensor, box_of(ds.poses()), n=300, draws=1)
+    return model
+
+
+def test_hil_suite_on_the_emulated_uno(gmr_model):
+    """The whole suite through the firmware on the ATmega328P: EVAL, held-out accuracy, a stream of real
+    conversions from two ADS1115s on the TWI bus, flashing into the EEPROM (the model's own blob refused
+    for its size, a smaller one taken), 2,000 fuzz frames; EVAL equal to Python's float bit for bit; the
+    streamed estimate of the simulated pose within 0.15 mm of it; flash, RAM and the stack's peak within
+    the Uno's."""
+    _require_avr()
+    cmap, bridge, _, _ = adc_bridge(ADC, "dx=1,dz=-1")
+    emu = start_target(gmr_model, "uno", precision="float", style="table", cmap=cmap, bridge=bridge)
+    with emu:
+        with Device.open(emu.url, timeout=10) as dev:
+            res = run_suite(dev, gmr_model, url=emu.url, n_vectors=500, n_fuzz=2000, verbose=False,
+                            held_out=clean_readings(gmr_model))
+            rng = np.random.default_rng(3)
+            x = gmr_model.input_min + (gmr_model.input_max - gmr_model.input_min) * rng.uniform(-0.1, 1.1, (300, 8))
+            x = x.astype(np.float32).astype(float)
+            status, out = dev.eval(x)
+            samples = dev.stream(10, 5, timeout=30)
+    assert res.ok, res.table()
+    by_name = {c.name: c for c in res.checks}
+    assert {"held-out accuracy", "stream", "flash too big", "flash", "corrupt flash", "fuzz"} <= set(by_name)
+    assert by_name["fuzz"].figures["frames"] == 2000
+    assert by_name["flash too big"].figures["store_bytes"] == 508 < by_name["flash too big"].figures["blob_bytes"]
+    assert by_name["flash"].figures["blob_bytes"] <= 508
+    want, want_status = gmr_model.predict(x, with_status=True, precision="float")
+    np.testing.assert_array_equal(np.asarray(out), want)
+    np.testing.assert_array_equal(np.asarray(status), want_status)
+    assert np.any(want_status != 0)  # clamped inputs among them
+    est = np.array([s.outputs for s in samples])
+    assert all(s.status == 0 for s in samples)
+    assert np.all(np.abs(est[:, :3] - [1.0, 0.0, -1.0]) <= 0.15), est
+    assert emu.size["flash"] <= UNO_FLASH
+    assert emu.stack_peak is not None and 100 < emu.stack_peak
+    assert emu.size["ram"] + emu.stack_peak <= UNO_RAM
+
+
+def test_calibration_survives_a_reset_in_eeprom(gmr_model, tmp_path):
+    """A blob flashed into the EEPROM is the active calibration after the firmware starts again (the
+    EEPROM image carried over by the board), and CAL_RESET makes the compiled-in model answer again."""
+    _require_avr()
+    from hil.suite import fit_store, flash_variant
+    from host.device import flash_model
+
+    new = fit_store(flash_variant(gmr_model), 508, "float", "paper")
+    with start_target(gmr_model, "uno", precision="float", workdir=tmp_path / "fw") as emu:
+        with Device.open(emu.url, timeout=10) as dev:
+            flash_model(dev, new, "variant")
+            assert dev.info(refresh=True).model_hash == new.sha256
+    # the same image again, in a board that keeps the EEPROM of the last run
+    assert (tmp_path / "fw" / "eeprom.bin").is_file()
+    with start_target(gmr_model, "uno", precision="float", workdir=tmp_path / "fw") as emu:
+        with Device.open(emu.url, timeout=10) as dev:
+            info = dev.info(refresh=True)
+            assert info.model_hash == new.sha256 and info.cal_source == 1
+            dev.reset_calibration()
+            assert dev.info(refresh=True).model_hash == gmr_model.sha256
+
+
+def test_uno_refuses_double_and_bad_options(gmr_model, tmp_path):
+    model_file = gmr_model.save(tmp_path / "m.json")
+    proc = run_cli("tactile-hil", "emulate", "--target", "uno", "--precision", "double", "--model", str(model_file))
+    assert_one_line_error(proc, 2, "target uno")
