@@ -96,3 +96,19 @@ def test_uno_refuses_double_and_bad_options(gmr_model, tmp_path):
     model_file = gmr_model.save(tmp_path / "m.json")
     proc = run_cli("tactile-hil", "emulate", "--target", "uno", "--precision", "double", "--model", str(model_file))
     assert_one_line_error(proc, 2, "target uno")
+
+
+def test_cli_emulate_uno_suite(gmr_model, tmp_path):
+    """`tactile-hil emulate --target uno --adc ... --suite`: the command a user runs, to its JUnit file."""
+    _require_avr()
+    import xml.etree.ElementTree as ET
+
+    model_file = gmr_model.save(tmp_path / "m.json")
+    junit = tmp_path / "hil.xml"
+    proc = run_cli("tactile-hil", "emulate", "--target", "uno", "--model", str(model_file), "--adc", ADC,
+                   "--simulate", "dx=1,dz=-1", "--suite", "--vectors", "200", "--fuzz", "2000", "--junit", str(junit))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "cycles per estimate (simavr)" in proc.stdout and "on the TWI bus" in proc.stdout
+    cases = {c.get("name"): c for c in ET.parse(junit).getroot()}
+    assert {"eval", "held-out accuracy", "stream", "flash too big", "flash", "fuzz"} <= set(cases)
+    assert all(c.find("failure") is None for c in cases.values())
