@@ -65,8 +65,10 @@ def _source(name: str) -> bytes:
 def adc_input_lsb(cmap) -> float:
     """The one value of an ADC code every element of ``cmap`` shares (a fixed-point build needs one)."""
     from host.adc import BusIO, make_driver
+    from host.simbus import SimBus
 
-    lsbs = {make_driver(BusIO(None), chip).lsb for chip in cmap.chips}
+    # a driver binds its bus's calls when made: an idle simulated bus stands in (nothing is transferred)
+    lsbs = {make_driver(BusIO(SimBus()), chip).lsb for chip in cmap.chips}
     if len(lsbs) != 1:
         raise InputError(f"a fixed-point firmware takes one ADC code scale; the channel map {cmap.describe()} mixes "
                          f"{len(lsbs)} (give every chip the same PGA, or the same reference)")
@@ -158,7 +160,9 @@ def _run(cmd: list[str], what: str) -> subprocess.CompletedProcess:
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         lines = proc.stderr.strip().splitlines()
-        first = next((ln for ln in lines if "error" in ln), lines[0] if lines else "(no message)")
+        # the linker's own words when the image does not fit (collect2's "error" line says only that ld failed)
+        first = next((ln for ln in lines if "overflowed" in ln),
+                     next((ln for ln in lines if "error" in ln), lines[0] if lines else "(no message)"))
         raise InputError(f"{what} failed: {first.strip()}")
     return proc
 

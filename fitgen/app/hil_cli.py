@@ -36,7 +36,8 @@ def _check_counts(args) -> None:
         raise InputError("--fuzz must be >= 0")
 
 
-def _suite(url: str, model, data, args) -> int:
+def _suite(url: str, model, data, args, input_lsb: float | None = None) -> int:
+    """The suite against ``url``; ``input_lsb``: a fixed-point firmware's ADC code scale (its channel map's)."""
     from host.device import Device
     from fitgen.c.verify import held_out_from_args
 
@@ -46,7 +47,8 @@ def _suite(url: str, model, data, args) -> int:
     with Device.open(url, timeout=args.timeout) as dev:
         res = run_suite(dev, model, url=url, n_vectors=args.vectors, data=data, n_fuzz=args.fuzz,
                         flash=not args.no_flash, sensor_id=args.sensor_id, fma=args.fma, held_out=held_out,
-                        max_share=args.max_share)
+                        max_share=args.max_share, input_lsb=input_lsb,
+                        input_offset=0.0 if input_lsb is not None else None)
     print(res.table())
     if held_out is None and not args.no_held_out:
         print("note: no held-out accuracy check: the model file has no held_out record or its sensor is unknown "
@@ -110,7 +112,10 @@ def cmd_emulate(args) -> int:
         with Device.open(runner.url, timeout=args.timeout) as dev:
             _describe(runner, dev, args.target)
         if args.suite:
-            return _suite(runner.url, model, data, args)
+            from hil.firmware import adc_input_lsb
+
+            lsb = adc_input_lsb(cmap) if cmap is not None and args.precision == "fixed" else None
+            return _suite(runner.url, model, data, args, lsb)
         print(f"ready: {runner.url} (Ctrl-C stops)", flush=True)
         stop = threading.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
