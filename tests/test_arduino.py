@@ -1,19 +1,23 @@
 """The Arduino library (host/arduino.py): its manifests against the specifications' required fields, its
-headers as C++, and its ReadPose example built for the Uno with Debian's arduino-builder, offline."""
+headers as C++, and its ReadPose example built for the Uno with Debian's arduino-builder, offline, and run on
+the emulated ATmega328P (hil/sketch.py) with two ADS1115s on its TWI bus: what it prints, and RAM with the
+stack's measured peak."""
 
 import json
 import re
 import subprocess
 
+import numpy as np
 import pytest
 
-from host.arduino import BOARDS, build_example, library_properties, render_arduino
+from host.arduino import BOARDS, build_example, example_elf, library_properties, render_arduino
 from host.channelmap import parse_spec
 
 from conftest import TWO_CHIPS, assert_one_line_error, require_tool, run_cli
 
 UNO = BOARDS["uno"]
 SIZE = re.compile(r"flash (\d+) of 32256 B .*, RAM (\d+) of 2048 B")
+POSE = (1.0, 0.0, -1.0)  # the simulated magnet: dx=1, dz=-1
 
 
 @pytest.fixture(scope="module")
@@ -126,3 +130,46 @@ def test_double_and_bad_maps_are_refused_in_one_line(model_path, tmp_path):
     proc = run_cli("tactile-host", "arduino-build", "--model", model_path, "--adc", "ads1115@0x48:0-3",
                    "-o", str(tmp_path / "m"), "--no-build")
     assert_one_line_error(proc, 2, "the channel map reads 4 elements; the model takes 8")
+
+
+def _require_emulator():
+    for tool in ("arduino-builder", "avr-size", "avr-nm", "gcc", "pkg-config"):
+        require_tool(tool)
+
+
+def _assert_rows_show_the_pose(names, rows):
+    assert names == ("t",) + tuple(f"v{k}" for k in range(1, 9)) + ("dx", "dy", "dz", "thx", "thy", "status")
+    assert len(rows) >= 5 and np.all(np.diff(rows[:, 0]) > 0)  # t: seconds since reset, rising
+    assert np.all(rows[:, -1] == 0)
+    assert np.all(np.abs(rows[:, 9:12] - POSE) <= 0.15), rows[:, 9:12]
+
+
+def test_read_pose_runs_on_the_emulated_uno_and_prints_the_pose(sensor, tmp_path):
+    """ReadPose, built by arduino-builder, on simavr's ATmega328P: the real Wire library talks to two ADS1115s
+    of the bus model holding the paper sensor at dx=1, dz=-1. Its volts are ADS1115 codes near the sensor's
+    readings there, its estimate is the Python float model's on those codes, within 0.15 mm of the pose."""
+    _require_emulator()
+    from fitgen.fitting.fit import fit_model
+    from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
+    from hil.sketch import readpose_table, run_sketch
+
+    model = fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])))
+    cmap = parse_spec(TWO_CHIPS)
+    lib = render_arduino(model, cmap, tmp_path / "TactilePose")
+    size = build_example(lib, tmp_path / "build")
+    run = run_sketch(example_elf(tmp_path / "build"), cmap, "dx=1,dz=-1", n_lines=6)
+    names, rows = readpose_table(run.lines)
+    _assert_rows_show_the_pose(names, rows)
+    volts = rows[:, 1:9]
+    lsb = 4.096 / 32768  # the default PGA's volts per code
+    codes = np.round(volts / lsb)
+    assert np.all(np.abs(codes * lsb - volts) <= 1e-6)  # whole codes, printed to the microvolt
+    clean = simulate(sensor, [[*POSE, 0.0, 0.0]]).inputs[0]
+    assert np.all(np.abs(volts - clean) <= 6 * sensor.noise + lsb)
+    # the sketch's float inputs, code * LSB in float, through Python's emulation of the float header
+    x = (codes.astype(np.float32) * np.float32(lsb)).astype(float)
+    want, status = model.predict(x, with_status=True, precision="float")
+    np.testing.assert_allclose(rows[:, 9:14], want, rtol=0, atol=6e-5)  # printed with 4 decimals
+    assert np.all(status == 0)
+    assert 100 < run.stack_peak and size.ram + run.stack_peak <= UNO.ram
+    assert run.cycles > 16_000_000 * rows[-1, 0]  # the last line came after t seconds of 16 MHz cycles
