@@ -16,7 +16,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 
-from host.arduino import BOARDS, Size, arduino_build, example_elf
+from host.arduino import Size, arduino_build, example_elf
 from host.channelmap import ChannelMap
 
 from hil.emulate import AVR_HINT, AVR_TOOLS, UnoEmulator, bss_end, build_uno_board
@@ -34,6 +34,10 @@ class SketchRun:
 
 class StackOverflow(InputError):
     """The stack grew down into static RAM (every painted byte above .bss was overwritten)."""
+
+    def __init__(self, message: str, stack_peak: int):
+        super().__init__(message)
+        self.stack_peak = stack_peak
 
 
 def sim_pose(pose) -> np.ndarray:
@@ -82,8 +86,8 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
             failed = exc
     said = "; ".join(emu.messages[-2:])  # the board's own word, e.g. that the program crashed
     if emu.stack_peak is not None and emu.stack_peak >= RAM_END + 1 - paint:
-        raise StackOverflow(f"its stack ran into static RAM: all {emu.stack_peak} B above .bss were used"
-                            + (f" ({said})" if said else ""))
+        raise StackOverflow(f"the stack ran into static RAM: all {emu.stack_peak} B above .bss were used"
+                            + (f" ({said})" if said else ""), emu.stack_peak)
     if failed is not None:
         raise InputError(f"{failed} ({said})" if said else str(failed))
     if emu.stack_peak is None or emu.cycles is None:
@@ -138,37 +142,26 @@ def build_readpose(model, cmap: ChannelMap, folder: str | Path, pose=None, *, pr
                    style: str = "unrolled", build: bool | None = None, n_lines: int = 6, sensor: str = "paper",
                    noise: float | None = None, seed: int = 0,
                    build_path: str | Path | None = None) -> tuple[Size | None, SketchRun | None]:
-    """``arduino_build`` (which refuses what does not fit the Uno's flash and static RAM): (its size, None).
-    With a ``pose``, ReadPose is also run on the emulated Uno as :func:`run_sketch` runs it: (the size with the
-    stack's measured peak, the run); InputError when ReadPose prints an error line, and, with no ``src/`` left,
-    when static RAM and that peak pass the Uno's RAM (naming --style unrolled when a table build's stack
-    overflows and the unrolled one fits)."""
+    """``arduino_build``: (its size, None). With a ``pose``, ReadPose is also run on the emulated Uno as
+    :func:`run_sketch` runs it, and so is each setting tried when it does not fit: (the size with the stack's
+    measured peak, the run). InputError when ReadPose prints an error line, and when it does not fit (flash,
+    or static RAM and the stack's peak) naming a setting that does."""
     if pose is None:
         return arduino_build(model, cmap, folder, precision=precision, style=style, build=build,
                              build_path=build_path), None
-    uno, pose = BOARDS["uno"], sim_pose(pose)  # a bad pose refused before the build
-    with tempfile.TemporaryDirectory(prefix="tactile-readpose-") as tmp:
-        build_path = Path(tmp) / "build" if build_path is None else Path(build_path)
-        size = arduino_build(model, cmap, folder, precision=precision, style=style, build=True,
-                             build_path=build_path)
+    pose, runs = sim_pose(pose), {}  # a bad pose refused before the build
+
+    def measure(path, size):
         try:
-            run = run_sketch(example_elf(build_path), cmap, pose, n_lines=n_lines, sensor=sensor, noise=noise,
-                             seed=seed)
-            readpose_table(run.lines)  # its own error line, or lines that are not its rows, refused
-            size = replace(size, stack=run.stack_peak)
-            why = None if size.fits(uno) else size.describe(uno)
+            run = run_sketch(example_elf(path), cmap, pose, n_lines=n_lines, sensor=sensor, noise=noise, seed=seed)
         except StackOverflow as exc:
-            why = f"static RAM {size.ram} of {uno.ram} B, and on the emulated Uno {exc}"
-    if why is None:
-        return size, run
-    shutil.rmtree(Path(folder) / "src", ignore_errors=True)  # as arduino_build leaves a model that does not fit
-    hint = "fit fewer terms (fitgen fit --k bic, or --max-terms N)"
-    if style == "table" and precision == "float":  # unrolled code keeps no table of powers on the stack
-        with tempfile.TemporaryDirectory(prefix="tactile-readpose-") as tmp:
-            try:
-                alt, _ = build_readpose(model, cmap, Path(tmp) / "alt", pose, precision=precision, style="unrolled",
-                                        n_lines=n_lines, sensor=sensor, noise=noise, seed=seed)
-                hint = f"--style unrolled fits ({alt.describe(uno)})"
-            except InputError:
-                pass
-    raise InputError(f"ReadPose does not fit the uno's RAM with its stack: {why}; {hint}")
+            return replace(size, stack=exc.stack_peak)
+        readpose_table(run.lines)  # its own error line, or lines that are not its rows, refused
+        runs[Path(path)] = run
+        return replace(size, stack=run.stack_peak)
+
+    with tempfile.TemporaryDirectory(prefix="tactile-readpose-") as tmp:
+        path = Path(tmp) / "build" if build_path is None else Path(build_path)
+        size = arduino_build(model, cmap, folder, precision=precision, style=style, build=True, build_path=path,
+                             measure=measure)
+    return size, runs[path]
