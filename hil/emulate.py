@@ -211,16 +211,20 @@ class UnoEmulator(_Running):
     on ``socket://127.0.0.1:port``; with ``bridge`` (host.pi.StandIn) the TWI bus carries the bus model's
     chips. ``eeprom``: a file that keeps the EEPROM from one run to the next (what a board keeps over a
     reset). ``paint``: the address where RAM above .bss starts; after stop(), ``stack_peak`` holds the
-    deepest the stack reached (bytes), and ``cycles`` the cycles the core ran."""
+    deepest the stack reached (bytes), and ``cycles`` the cycles the core ran. ``hold``: the core starts when
+    the first client connects (as an Uno restarts when a serial monitor opens its port)."""
 
     def __init__(self, board: str | Path, elf: str | Path, port: int | None = None, *, bridge=None,
-                 paint: int | None = None, eeprom: str | Path | None = None, boot_timeout: float = 10.0):
-        self.board, self.elf, self.bridge, self.paint = Path(board), Path(elf), bridge, paint
+                 paint: int | None = None, eeprom: str | Path | None = None, boot_timeout: float = 10.0,
+                 hold: bool = False):
+        self.board, self.elf, self.bridge, self.paint, self.hold = Path(board), Path(elf), bridge, paint, hold
         self.eeprom = eeprom
         self.port = port if port is not None else free_port()
         self.boot_timeout = boot_timeout
         self.stack_peak: int | None = None
         self.cycles: int | None = None
+        self.returncode: int | None = None  # the board's exit status, after stop()
+        self.messages: list[str] = []  # what else it said on stderr, after stop()
         self.proc = None
 
     @property
@@ -229,7 +233,8 @@ class UnoEmulator(_Running):
 
     def command(self) -> list[str]:
         return [str(self.board), str(self.elf), str(self.port)] + (["--bridge"] if self.bridge is not None else []) \
-            + (["--eeprom", str(self.eeprom)] if self.eeprom else []) + (["--paint", hex(self.paint)] if self.paint else [])
+            + (["--eeprom", str(self.eeprom)] if self.eeprom else []) \
+            + (["--paint", hex(self.paint)] if self.paint else []) + (["--hold"] if self.hold else [])
 
     def start(self) -> "UnoEmulator":
         popen = dict(stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -254,12 +259,15 @@ class UnoEmulator(_Running):
         if self.proc is not None:
             stop_process(self.proc)
             rest = self.proc.stderr.read().decode(errors="replace") if self.proc.stderr else ""
+            self.returncode, self.messages = self.proc.returncode, []
             for ln in rest.splitlines():
                 key, _, value = ln.partition(" ")
                 if key == "STACK":
                     self.stack_peak = int(value)
                 elif key == "CYCLES":
                     self.cycles = int(value)
+                elif ln.strip():
+                    self.messages.append(ln.strip())  # e.g. "the AVR program crashed at cycle N"
         super().stop()
 
 

@@ -5,7 +5,8 @@ for PlatformIO; ``src/``; ``examples/ReadPose``, which prints ``tactile-host rea
 Serial). ``build_example`` compiles that example for a board with arduino-builder and reads its
 flash and RAM from avr-size; ``arduino_build`` renders, builds when a builder is installed, and
 refuses a model that does not fit the board in one line naming a setting that does (found by
-building it).
+building it). The stack's peak is measured by running the example on the emulated Uno
+(hil/sketch.py), which a ``Size`` then carries.
 """
 
 from __future__ import annotations
@@ -59,16 +60,32 @@ class Size:
     flash: int | None  # .text + .data (the data's initial values live in flash too); None: not known
     ram: int | None  # .data + .bss: static RAM, before the stack
     overflow: bool = False  # the linker refused it: a figure is where the section ran past its region
+    # the stack's peak measured in an emulator by painting (bytes below RAMEND; None: not run). When it used
+    # every painted byte above .bss it may have run past them into static RAM: that is not a fit.
+    stack: int | None = None
+
+    @property
+    def ram_used(self) -> int | None:
+        """Static RAM plus the stack's measured peak (static RAM alone when it was not measured)."""
+        return None if self.ram is None else self.ram + (self.stack or 0)
 
     def fits(self, board: Board) -> bool:
-        return not self.overflow and self.flash <= board.flash and self.ram <= board.ram
+        if self.overflow or self.flash > board.flash:
+            return False
+        return self.ram <= board.ram if self.stack is None else self.ram_used < board.ram
 
     def describe(self, board: Board) -> str:
         def part(what, used, limit):
             if used is None:
                 return f"{what} ? of {limit} B"
             return f"{what} {'over ' if self.overflow and used > limit else ''}{used} of {limit} B ({100 * used / limit:.0f} %)"
-        return f"{part('flash', self.flash, board.flash)}, {part('RAM', self.ram, board.ram)} before the stack"
+        if self.stack is None or self.ram is None:
+            return f"{part('flash', self.flash, board.flash)}, {part('RAM', self.ram, board.ram)} before the stack"
+        if self.ram_used >= board.ram:
+            return (f"{part('flash', self.flash, board.flash)}, RAM {self.ram} of {board.ram} B and the stack ran "
+                    f"into it (all {self.stack} B above it used)")
+        return (f"{part('flash', self.flash, board.flash)}, RAM {self.ram} + stack peak {self.stack} = "
+                f"{part('', self.ram_used, board.ram).strip()}")
 
 
 AVR_RAM_START = 0x800100  # the linker's address of the ATmega328P's first RAM byte
@@ -217,12 +234,12 @@ def build_example(library: str | Path, build_path: str | Path, board: Board = BO
         over = _overflow_size(text)
         if over is not None:
             return over
-        elf = build_path / f"{EXAMPLE}.ino.elf"
+        elf = example_elf(build_path)
         if elf.is_file() and ("too big" in text or "Not enough memory" in text):
             return elf_size(elf)  # linked, but past the board's limits (the bootloader's share)
         first = next((ln for ln in text.splitlines() if "error" in ln.lower()), text.strip()[-300:])
         raise InputError(f"building {EXAMPLE} for {board.fqbn} failed: {first.strip()} ({shlex.join(cmd)})")
-    return elf_size(build_path / f"{EXAMPLE}.ino.elf")
+    return elf_size(example_elf(build_path))
 
 
 def elf_size(elf: str | Path) -> Size:
@@ -242,25 +259,39 @@ def _alternatives(precision: str, style: str):
         yield "float", "unrolled", "--precision float"
 
 
+def example_elf(build_path: str | Path) -> Path:
+    """The ELF arduino-builder links the example into, in its build path."""
+    return Path(build_path) / f"{EXAMPLE}.ino.elf"
+
+
 def arduino_build(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: str = "float",
-                  style: str = "unrolled", board: str = "uno", build: bool | None = None) -> Size | None:
+                  style: str = "unrolled", board: str = "uno", build: bool | None = None,
+                  build_path: str | Path | None = None, measure=None) -> Size | None:
     """Render the library; when ``build`` (default: when arduino-builder is installed) build its example and
-    refuse a model that does not fit ``board`` (InputError naming a setting that fits, or fewer terms)."""
+    refuse a model that does not fit ``board`` (InputError naming a setting that fits, or fewer terms).
+    ``build_path``: where the example is built and kept (default: a folder removed afterwards). ``measure``:
+    ``measure(build_path, size)`` -> the size with the stack's peak (hil/sketch.py runs the example), for the
+    build and for each setting tried in its place."""
     spec = BOARDS[board]
     render_arduino(model, cmap, folder, precision=precision, style=style)
     if build is None:
         build = find_builder() is not None
     if not build:
         return None
+
+    def built(library, path):
+        size = build_example(library, path, spec)
+        return measure(path, size) if measure is not None and size.fits(spec) else size
+
     with tempfile.TemporaryDirectory() as tmp:
-        size = build_example(folder, Path(tmp) / "build", spec)
+        size = built(folder, Path(tmp) / "build" if build_path is None else build_path)
         if size.fits(spec):
             return size
         hint = "no other precision or style fits: fit fewer terms (fitgen fit --k bic, or --max-terms N)"
         for k, (prec, sty, option) in enumerate(_alternatives(precision, style)):
             try:
                 alt = render_arduino(model, cmap, Path(tmp) / f"alt{k}", precision=prec, style=sty)
-                alt_size = build_example(alt, Path(tmp) / f"build{k}", spec)
+                alt_size = built(alt, Path(tmp) / f"build{k}")
             except InputError:
                 continue  # e.g. a model fixed point cannot plan
             if alt_size.fits(spec):

@@ -225,13 +225,15 @@ class StandIn:
         self.error: list[BaseException] = []
 
         def serve():
-            with os.fdopen(req_r, "r") as requests, os.fdopen(ans_w, "w") as answers:
-                try:
+            # the with inside the try: closing the answers flushes them, which fails the same way when the
+            # program has gone
+            try:
+                with os.fdopen(req_r, "r") as requests, os.fdopen(ans_w, "w") as answers:
                     self.serve(requests, answers)
-                except BrokenPipeError:
-                    pass
-                except BaseException as exc:  # noqa: BLE001 - reported by run()
-                    self.error.append(exc)
+            except BrokenPipeError:
+                pass
+            except BaseException as exc:  # noqa: BLE001 - reported by run()
+                self.error.append(exc)
 
         self.thread = threading.Thread(target=serve, daemon=True)
         self.thread.start()

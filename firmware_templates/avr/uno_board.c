@@ -15,10 +15,12 @@
  * on exit, so that a calibration flashed there survives a restart, as on the board.
  * --paint ADDR: RAM from ADDR (the end of .bss) to RAMEND is painted before the program starts; on exit
  * "STACK n" on stderr gives the deepest the stack reached below RAMEND (bytes no longer painted).
+ * --hold: the core starts when the first client connects, as an Uno restarts when a serial monitor opens
+ * its port (DTR), so that the client sees everything the program prints from its start.
  * UNO_BOARD_TRACE in the environment: each TWI message and bus-model exchange is printed on stderr.
  * Runs until SIGTERM or SIGINT; exits 3 when the program crashes, 4 when the bus model goes away, 5 when
  * the EEPROM image cannot be written.
- * usage: uno_board FILE.elf PORT [--bridge] [--eeprom FILE] [--paint ADDR]
+ * usage: uno_board FILE.elf PORT [--bridge] [--eeprom FILE] [--paint ADDR] [--hold]
  */
 #define _DEFAULT_SOURCE
 #include <errno.h>
@@ -372,11 +374,11 @@ int main(int argc, char **argv)
     unsigned long paint = 0;
     const char *eeprom = NULL;
     unsigned long count = 0;
-    int port, i, state = cpu_Running, code = 0;
+    int port, i, state = cpu_Running, code = 0, hold = 0;
     struct sigaction sa;
 
     if (argc < 3) {
-        fprintf(stderr, "usage: %s FILE.elf PORT [--bridge] [--paint ADDR]\n", argv[0]);
+        fprintf(stderr, "usage: %s FILE.elf PORT [--bridge] [--eeprom FILE] [--paint ADDR] [--hold]\n", argv[0]);
         return 2;
     }
     port = atoi(argv[2]);
@@ -386,6 +388,8 @@ int main(int argc, char **argv)
             bridge = 1;
         } else if (strcmp(argv[i], "--eeprom") == 0 && i + 1 < argc) {
             eeprom = argv[++i];
+        } else if (strcmp(argv[i], "--hold") == 0) {
+            hold = 1;
         } else if (strcmp(argv[i], "--paint") == 0 && i + 1 < argc) {
             paint = strtoul(argv[++i], NULL, 0);
         } else {
@@ -445,6 +449,9 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
     fprintf(stderr, "LISTENING %d\n", port);
+    while (hold && client < 0 && !stopping) {
+        poll_socket((long)SLEEP_MAX_US);
+    }
     while (!stopping) {
         state = avr_run(avr);
         if (state == cpu_Done || state == cpu_Crashed) {

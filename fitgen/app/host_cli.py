@@ -253,11 +253,14 @@ def cmd_pi_build(args) -> int:
 
 def cmd_arduino_build(args) -> int:
     from fitgen.equations.model import load_model
-    from host.arduino import BOARDS, arduino_build
+    from hil.sketch import build_readpose
+    from host.arduino import BOARDS
     from host.session import channel_map_from_args
 
-    size = arduino_build(load_model(args.model), channel_map_from_args(args), args.output, precision=args.precision,
-                         style=args.style, build=not args.no_build)
+    size, run = build_readpose(load_model(args.model), channel_map_from_args(args), args.output, args.emulate,
+                               precision=args.precision, style=args.style, build=not args.no_build,
+                               sensor=args.sim_sensor)
+    sys.stdout.write("".join(ln + "\n" for ln in run.lines) if run else "")  # what a serial monitor would show
     built = size.describe(BOARDS["uno"]) if size else "not built (no arduino-builder)"
     print(f"wrote the Arduino library {args.output}; ReadPose for the Uno: {built}", file=sys.stderr)
     return 0
@@ -361,8 +364,12 @@ def build_parser() -> Parser:
     _map_options(ab)
     ab.add_argument("--precision", default="float", choices=("float", "fixed", "double"), help="double is refused")
     ab.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
-    ab.add_argument("--no-build", action="store_true", help="write the library only (default: build it when "
+    build = ab.add_mutually_exclusive_group()
+    build.add_argument("--no-build", action="store_true", help="write the library only (default: build it when "
                                                             "arduino-builder is installed)")
+    build.add_argument("--emulate", metavar="POSE", help="also run ReadPose on an emulated Uno reading --sim-sensor "
+                       "at POSE (e.g. dx=1,dz=-1): its lines on stdout, RAM with the stack's measured peak")
+    ab.add_argument("--sim-sensor", default="paper", help="with --emulate: the simulated sensor (default paper)")
     ab.add_argument("-o", "--output", required=True, metavar="DIR", help="the library's folder (e.g. TactilePose)")
     ab.set_defaults(func=cmd_arduino_build)
 

@@ -1,0 +1,167 @@
+"""An Arduino sketch run on the emulated Uno (hil/emulate.py's libsimavr board), its I2C chips answered by the
+bus model: the lines it prints over Serial and the stack's peak, from stack painting. ``build_readpose``
+builds the library's ReadPose example (host/arduino.py) and runs it so; ``readpose_table`` reads its lines."""
+
+from __future__ import annotations
+
+import select
+import shutil
+import socket
+import tempfile
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+
+from host.arduino import Size, arduino_build, example_elf
+from host.channelmap import ChannelMap
+
+from hil.emulate import AVR_HINT, AVR_TOOLS, UnoEmulator, bss_end, build_uno_board
+
+RAM_END = 0x8FF  # the ATmega328P's last RAM address (RAMEND)
+LINE_MAX = 1024  # longer than any line ReadPose prints: a line past it is not a sketch's line
+
+
+@dataclass(frozen=True)
+class SketchRun:
+    lines: tuple[str, ...]  # the complete lines printed, in order, from the program's start
+    stack_peak: int  # the deepest the stack reached, bytes below RAMEND (RAM above .bss no longer painted)
+    cycles: int  # the core's cycles over the run (16 MHz)
+
+
+class StackOverflow(InputError):
+    """The stack grew down into static RAM (every painted byte above .bss was overwritten)."""
+
+    def __init__(self, message: str, stack_peak: int):
+        super().__init__(message)
+        self.stack_peak = stack_peak
+
+
+def sim_pose(pose) -> np.ndarray:
+    """The simulated magnet's pose from ``dx=1,dz=-1`` (parts left out are 0), five numbers, or an array."""
+    from host.motion import parse_pose
+
+    if not isinstance(pose, str):
+        return np.asarray(pose, dtype=float)
+    try:
+        return parse_pose(pose)
+    except InputError:
+        raise InputError(f"the simulated pose {pose!r}: give dx=1,dz=-1 (parts left out are 0) or five numbers "
+                         "dx,dy,dz,thx,thy") from None
+
+
+def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: int = 6, sensor: str = "paper",
+               noise: float | None = None, seed: int = 0, timeout: float = 60.0,
+               board: str | Path | None = None) -> SketchRun:
+    """Run an ATmega328P ELF on the emulated Uno with ``cmap``'s chips on its TWI bus, ``sensor`` at ``pose``
+    (``dx=1,dz=-1`` or five numbers) with ``noise`` V rms (None: the sensor's), until it has printed ``n_lines``
+    lines or a line starting ``error:``. InputError when that takes over ``timeout`` s of wall time or the
+    program crashes; :class:`StackOverflow` when its stack ran into static RAM. ``board``: a built
+    hil.emulate board (default: built here)."""
+    from fitgen.physics.sensor import load_sensor
+    from host.clock import VirtualClock
+    from host.pi import StandIn
+    from host.simbus import simulated_bus
+
+    if n_lines < 1:
+        raise InputError(f"n_lines must be >= 1, got {n_lines}")
+    missing = [t for t in AVR_TOOLS + ("avr-nm",) if shutil.which(t) is None]
+    if missing:
+        raise InputError(f"{' and '.join(missing)} not found; {AVR_HINT}")
+    clock = VirtualClock()
+    bus = simulated_bus(cmap, load_sensor(sensor), sim_pose(pose), clock=clock, noise=noise, seed=seed)
+    paint = bss_end(elf)
+    with tempfile.TemporaryDirectory(prefix="tactile-sketch-") as tmp:
+        board = build_uno_board(tmp) if board is None else board
+        # held until the client is there, so that the lines start with the program's first
+        emu = UnoEmulator(board, elf, bridge=StandIn(bus, clock), paint=paint, hold=True)
+        failed = None
+        try:
+            with emu:
+                lines = _read_lines(emu.port, n_lines, timeout)
+        except InputError as exc:
+            failed = exc
+    said = "; ".join(emu.messages[-2:])  # the board's own word, e.g. that the program crashed
+    if emu.stack_peak is not None and emu.stack_peak >= RAM_END + 1 - paint:
+        raise StackOverflow(f"the stack ran into static RAM: all {emu.stack_peak} B above .bss were used"
+                            + (f" ({said})" if said else ""), emu.stack_peak)
+    if failed is not None:
+        raise InputError(f"{failed} ({said})" if said else str(failed))
+    if emu.stack_peak is None or emu.cycles is None:
+        raise InputError(f"the simavr board running {elf} did not report its stack and cycles")
+    return SketchRun(tuple(lines), emu.stack_peak, emu.cycles)
+
+
+def _read_lines(port: int, n_lines: int, timeout: float) -> list[str]:
+    """Up to ``n_lines`` lines from the board's UART (fewer when one starts ``error:``)."""
+    deadline = time.monotonic() + timeout
+    lines, buf = [], b""
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
+        while len(lines) < n_lines and not (lines and lines[-1].startswith("error:")):
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([sock], [], [], left)[0]:
+                raise InputError(f"the sketch printed {len(lines)} of {n_lines} lines within {timeout:g} s"
+                                 + (f" (the last: {lines[-1]!r})" if lines else ""))
+            data = sock.recv(4096)
+            if not data:
+                raise InputError("the simavr board closed its UART")
+            buf += data
+            *done, buf = buf.split(b"\n")
+            lines += [ln.rstrip(b"\r").decode(errors="replace") for ln in done]
+            if len(buf) > LINE_MAX:
+                raise InputError(f"the sketch printed {len(buf)} bytes without a line end")
+    return lines[:n_lines]
+
+
+def readpose_table(lines) -> tuple[tuple[str, ...], np.ndarray]:
+    """ReadPose's lines (a header, then t,v1..vN,outputs,status) as (column names, rows); InputError naming
+    the sketch's own ``error:`` line, or a line that is not one of its rows."""
+    lines = list(lines)
+    err = next((ln for ln in lines if ln.startswith("error:")), None)
+    if err is not None:
+        raise InputError(f"ReadPose stopped: {err}")
+    if not lines or not lines[0].startswith("t,"):
+        raise InputError(f"ReadPose's first line is not its header: {lines[0] if lines else 'no lines'!r}")
+    names = tuple(lines[0].split(","))
+    rows = []
+    for ln in lines[1:]:
+        try:
+            row = [float(x) for x in ln.split(",")]
+        except ValueError:
+            row = []
+        if len(row) != len(names):
+            raise InputError(f"ReadPose printed {ln!r}, not a row of {lines[0]!r}")
+        rows.append(row)
+    return names, np.array(rows, dtype=float).reshape(len(rows), len(names))
+
+
+def build_readpose(model, cmap: ChannelMap, folder: str | Path, pose=None, *, precision: str = "float",
+                   style: str = "unrolled", build: bool | None = None, n_lines: int = 6, sensor: str = "paper",
+                   noise: float | None = None, seed: int = 0,
+                   build_path: str | Path | None = None) -> tuple[Size | None, SketchRun | None]:
+    """``arduino_build``: (its size, None). With a ``pose``, ReadPose is also run on the emulated Uno as
+    :func:`run_sketch` runs it, and so is each setting tried when it does not fit: (the size with the stack's
+    measured peak, the run). InputError when ReadPose prints an error line, and when it does not fit (flash,
+    or static RAM and the stack's peak) naming a setting that does."""
+    if pose is None:
+        return arduino_build(model, cmap, folder, precision=precision, style=style, build=build,
+                             build_path=build_path), None
+    pose, runs = sim_pose(pose), {}  # a bad pose refused before the build
+
+    def measure(path, size):
+        try:
+            run = run_sketch(example_elf(path), cmap, pose, n_lines=n_lines, sensor=sensor, noise=noise, seed=seed)
+        except StackOverflow as exc:
+            return replace(size, stack=exc.stack_peak)
+        readpose_table(run.lines)  # its own error line, or lines that are not its rows, refused
+        runs[Path(path)] = run
+        return replace(size, stack=run.stack_peak)
+
+    with tempfile.TemporaryDirectory(prefix="tactile-readpose-") as tmp:
+        path = Path(tmp) / "build" if build_path is None else Path(build_path)
+        size = arduino_build(model, cmap, folder, precision=precision, style=style, build=True, build_path=path,
+                             measure=measure)
+    return size, runs[path]
