@@ -108,10 +108,11 @@ def test_estimates_in_simavr_equal_python(small_model):
         np.testing.assert_array_equal(run.status, ref_status)
         np.testing.assert_array_equal(run.outputs, ref)
         assert len(run.cycles) == len(x) and np.all(run.cycles > 1000) and fits_uno(run)
-    fm = plan_at(small_model, None, None)[0]
-    codes = np.round(np.clip(x, 0, None) / fm.input_lsb)
-    run = run_on_avr(small_model, codes, "fixed")
-    want, want_status = fm.predict_codes(codes)
-    np.testing.assert_array_equal(run.status, want_status)
-    np.testing.assert_array_equal(run.outputs, want)
-    assert np.all(run.cycles > 1000) and fits_uno(run)
+    for mul_bits in (16, 32):
+        fm = plan_at(small_model, None, None, mul_bits)[0]
+        codes = np.round(np.clip(x, 0, None) / fm.input_lsb)
+        run = run_on_avr(small_model, codes, "fixed", mul_bits=mul_bits)
+        want, want_status = fm.predict_codes(codes)
+        np.testing.assert_array_equal(run.status, want_status)
+        np.testing.assert_array_equal(run.outputs, want)
+        assert np.all(run.cycles > 1000) and fits_uno(run)

@@ -247,10 +247,12 @@ def _prefix(prefix: str) -> str:
 
 def render_fixed_header(fm, prefix: str = "tm") -> str:
     """The text of ``<prefix>_model.h`` for a fixed-point plan (:class:`fitgen.equations.fixedmodel.FixedModel`)."""
+    from fitgen.c.fixedc import avr_path, plan_line
+
     prefix = _prefix(prefix)
     units = fm.input_units if fm.input_units in ("mT", "V", "codes") else "units"
     return _env().get_template("model_fixed.h.j2").render(
-        m=fm, P=prefix, U=prefix.upper(), input_units=units,
+        m=fm, P=prefix, U=prefix.upper(), input_units=units, A=avr_path(fm), plan_line=plan_line(fm),
         input_lsb=c_real(fm.input_lsb, "double"), input_offset=c_real(fm.input_offset, "double"))
 
 
