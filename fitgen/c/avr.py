@@ -81,11 +81,13 @@ def _literals(inputs: np.ndarray, precision: str) -> list[list[str]]:
 
 def run_on_avr(model: Model, inputs, precision: str = "float", style: str = "table",
                input_lsb: float | None = None, input_offset: float | None = None,
-               workdir: str | Path | None = None, mul_bits: int | None = None, portable: bool = False) -> AvrRun:
+               workdir: str | Path | None = None, mul_bits: int | None = None, portable: bool = False,
+               runner: Path | None = None) -> AvrRun:
     """Estimates of ``inputs`` (float: values, rounded to float first; fixed: ADC codes) on the ATmega328P.
 
     Fixed point: the plan for ``mul_bits`` (default the Uno's, fitgen.c.targets); ``portable``: the
-    header's portable C instead of its AVR assembly (TM_PORTABLE_C), for comparison."""
+    header's portable C instead of its AVR assembly (TM_PORTABLE_C), for comparison. ``runner``: a
+    simavr runner already built (:func:`build_runner`), else one is built in the work folder."""
     uno = check_precision("uno", precision)
     inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
     if not 0 < len(inputs) <= MAX_VECTORS or inputs.shape[1] != model.n_inputs:
@@ -117,7 +119,7 @@ def run_on_avr(model: Model, inputs, precision: str = "float", style: str = "tab
         size = _run([_tool("avr-size"), str(elf)], "avr-size").stdout.splitlines()[1].split()
         text, data, bss = (int(x) for x in size[:3])
         limit = CYCLES_PER_VECTOR_LIMIT * (len(inputs) + 1)
-        proc = _run([str(build_runner(folder)), str(elf), str(limit)], "the AVR program in simavr")
+        proc = _run([str(runner or build_runner(folder)), str(elf), str(limit)], "the AVR program in simavr")
     finally:
         if tmp is not None:
             tmp.cleanup()

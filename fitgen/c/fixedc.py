@@ -59,12 +59,13 @@ def avr_path(fm: FixedModel) -> AvrPath:
 
 
 def plan_line(fm: FixedModel) -> str:
-    """The plan in words, for the header's comment."""
+    """The plan in words (the header's comment, the commands' messages)."""
     if fm.mul_bits == 32:
-        return ("32x32->64 products (for cores with a 32-bit multiply; fitgen codegen --precision fixed "
-                "without --target, or a 32-bit target)")
-    narrow = [o.name for o in fm.outputs if o.acc_bits == 32]
-    wide = [o.name for o in fm.outputs if o.acc_bits != 32]
-    where = (f"16x16->32 products for {', '.join(narrow)}" if narrow else "no output within its budget on 16x16->32 "
-             "products") + (f"; 32x32->64 for {', '.join(wide)}" if wide else "")
-    return f"for an 8-bit core with a 16-bit multiply (--target uno): {where}"
+        return "32x32->64 products (for a core with a 32-bit multiply: no --target, or a 32-bit one)"
+    kinds: dict = {}
+    for o in fm.outputs:
+        kind = ("16x16->32 products" if o.acc_bits == 32 else "32x32->64 products, byte-aligned shifts" if o.aligned
+                else "32x32->64 products")
+        kinds.setdefault(kind, []).append(o.name)
+    return ("for a 16-bit multiply (--target uno), each output's error bound within its budget: "
+            + "; ".join(f"{', '.join(names)}: {kind}" for kind, names in kinds.items()))

@@ -36,6 +36,9 @@ TARGETS = {t.name: t for t in (
            "the Pi build (host/pi.py) computes in float or double"),
 )}
 
+# the cores whose cycles per estimate are counted in an emulator (fitgen.c.avr: simavr), for fitgen tradeoff --core
+CYCLE_TARGETS = ("uno",)
+
 
 def get_target(name: str | None) -> Target | None:
     """The row of ``name``; None for None (no target named)."""
