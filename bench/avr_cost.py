@@ -4,8 +4,8 @@ results held against Python's and the fixed-point plans' accuracy against the do
     PYTHONPATH=. python3 bench/avr_cost.py > /tmp/avr.md
 
 The paper sensor in volts (its gmr transfer, as the ADCs read it), fitted as `fitgen fit --family
-no-roots` fits it (noise- and float-aware), and as `fitgen fit --family all` for the float rows with
-roots. 200 random poses in the paper grid's box, with reading noise, are the inputs (float: the
+no-roots` fits it (noise- and float-aware), with `--max-terms 6` too (a model small enough for 16x16->32
+products), and as `fitgen fit --family all` for the float rows with roots. 200 random poses in the paper grid's box, with reading noise, are the inputs (float: the
 volts rounded to float; fixed: the volts rounded to the sensor's ADC codes). Each build runs all 200
 in libsimavr at 16 MHz (fitgen.c.avr.run_on_avr); the cycles are simavr's count between two GPIOR0
 writes around tm_estimate. Fixed point in three builds of the same model: the plan for the Uno's
@@ -33,11 +33,11 @@ from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, random_poses, simul
 
 N = 200
 UNO_BITS = TARGETS["uno"].mul_bits
-# (family, precision, style, the fixed plan's multiply width, portable C)
-BUILDS = [("no-roots", "fixed", "-", UNO_BITS, False), ("no-roots", "fixed", "-", 32, False),
-          ("no-roots", "fixed", "-", 32, True), ("no-roots", "float", "table", None, False),
-          ("no-roots", "float", "unrolled", None, False), ("all", "float", "table", None, False),
-          ("all", "float", "unrolled", None, False)]
+SMALL = "no-roots --max-terms 6"
+# (model, precision, style, the fixed plan's multiply width, portable C)
+BUILDS = [(fam, *b) for fam in ("no-roots", SMALL) for b in (
+    ("fixed", "-", UNO_BITS, False), ("fixed", "-", 32, False), ("fixed", "-", 32, True), ("float", "table", None, False),
+    ("float", "unrolled", None, False))] + [("all", "float", "table", None, False), ("all", "float", "unrolled", None, False)]
 
 
 def _label(precision: str, mul_bits: int | None, portable: bool) -> str:
@@ -47,17 +47,22 @@ def _label(precision: str, mul_bits: int | None, portable: bool) -> str:
     return f"fixed, {plan}, " + ("portable C" if portable else "AVR assembly")
 
 
+def _kind(o) -> str:
+    return "16x16->32" if o.acc_bits == 32 else "32x32->64 byte-aligned" if o.aligned else "32x32->64"
+
+
 def main() -> None:
     sensor = load_sensor("paper").with_transfer("gmr")
     grid = grid_poses(PAPER_GRIDS["paper-sim"])
     ds = simulate(sensor, grid)
     log("fitting the no-roots and all-powers models ...")
     models = {"no-roots": fit_model(ds, settings=FitSettings.family("no-roots")),
+              SMALL: fit_model(ds, settings=FitSettings.family("no-roots", max_terms=6)),
               "all": fit_model(ds, settings=FitSettings.family("all"))}
     rng = np.random.default_rng(0)
     box = {k: (float(grid[:, i].min()), float(grid[:, i].max())) for i, k in enumerate(POSE_NAMES)}
     x = simulate(sensor, random_poses(N, box, rng), noise=sensor.noise, seed=1).inputs
-    rows, acc_rows = [], []
+    rows, acc_rows, plan_rows = [], [], []
     for family, precision, style, mul_bits, portable in BUILDS:
         m = models[family]
         label = _label(precision, mul_bits, portable)
@@ -71,6 +76,9 @@ def main() -> None:
             double = fm.reference_model().predict(fm.code_values(codes))
             check = "`fitgen predict --precision fixed --codes" + (" --target uno`" if mul_bits == UNO_BITS else "`")
             bound = [f"{b:.2g}" for b in fm.error_bound()]
+            if mul_bits == UNO_BITS:
+                plan_rows.append([family] + [f"{_kind(o)}, {o.error_bound:.2g} / {b:.2g}"
+                                             for o, b in zip(fm.outputs, fm.budget)])
         else:
             xf = x.astype(np.float32).astype(float)
             run = run_on_avr(m, x, "float", style)
@@ -87,14 +95,18 @@ def main() -> None:
         acc_rows.append([family, label, style] + [f"{fmt(d)} ({b})" for d, b in zip(dev, bound)])
     print(f"ATmega328P at {F_CPU / 1e6:g} MHz in simavr, {N} estimates per build (avr-gcc -O2, "
           "tables and inputs in flash):\n")
-    print(table(["family", "precision", "style", "terms", "flash without the inputs (B)", "static RAM (B)",
+    print(table(["model", "precision", "style", "terms", "flash without the inputs (B)", "static RAM (B)",
                  "cycles per estimate, mean", "min", "max", "estimates/s at 16 MHz", "results"], rows))
     units = dict(zip(POSE_NAMES, POSE_UNITS))
     print(f"\nLargest deviation from the double model on the same {N} inputs (fixed: the values of the codes the "
           "C took; float: the readings rounded to float), per output, and in brackets the fixed plan's proven "
           "bound on it:\n")
-    print(table(["family", "precision", "style"] + [f"{o} [{units[o]}]" for o in models["no-roots"].output_names],
+    print(table(["model", "precision", "style"] + [f"{o} [{units[o]}]" for o in models["no-roots"].output_names],
                 acc_rows))
+    print("\nThe uno plan, output by output (fitgen.equations.fixednarrow: 16x16->32 products where every bound "
+          "stays within its budget, 1% of the model's max training error; else byte-aligned 32x32->64 sums if they "
+          "do; else the 32-bit plan's):\n")
+    print(table(["model"] + [f"{o}: kind, bound / budget" for o in models["no-roots"].output_names], plan_rows))
 
 
 if __name__ == "__main__":

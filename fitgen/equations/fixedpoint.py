@@ -1,9 +1,11 @@
-"""Fixed-point plans of a model for cores without an FPU (Cortex-M0): integer ADC codes in, int32 out.
+"""Fixed-point plans of a model for cores without an FPU (Cortex-M0, AVR): integer ADC codes in, int32 out.
 
 :func:`build_fixed` turns a :class:`~fitgen.equations.model.Model` into a
 :class:`~fitgen.equations.fixedmodel.FixedModel` (the number format and the operations are described
 there): the Q format of every value, its range proven by interval arithmetic over the code domain,
-and a bound on its error against exact arithmetic. :func:`plan_at` and :func:`sensor_input_scale`
+and a bound on its error against exact arithmetic. For a core with a 16-bit multiply (an 8-bit AVR)
+some outputs run on int16 operands and 16x16->32 products instead, or with byte-aligned shifts, where
+every bound stays within its budget (fitgen.equations.fixednarrow chooses; this module plans). :func:`plan_at` and :func:`sensor_input_scale`
 give the input scale (the value of one ADC code) when the user names none.
 
 Q formats are chosen in evaluation order, each the finest that keeps its value inside its
