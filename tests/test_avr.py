@@ -167,6 +167,14 @@ def test_uno_plan_in_simavr_bit_for_bit(small_model, bench_model):
             np.testing.assert_array_equal(run.status, want_status)
             np.testing.assert_array_equal(run.outputs, want)
             assert np.any(want_status > 0) and np.any(want_status == 0)
+    # as the Arduino IDE builds it (-Os -flto: whole-program optimisation around the naked assembly), and at -O0
+    fm = build_fixed(bench_model, *cases[1][1:], 16)
+    codes = _sample_codes(fm, 80, 9)
+    want, want_status = fm.predict_codes(codes)
+    for opt in (("-Os", "-flto"), ("-O0",)):
+        run = run_on_avr(bench_model, codes, "fixed", mul_bits=16, opt=opt)
+        np.testing.assert_array_equal(run.status, want_status)
+        np.testing.assert_array_equal(run.outputs, want)
 
 
 def test_fixed_on_the_uno_takes_fewer_cycles_than_float(bench_model):

@@ -82,12 +82,13 @@ def _literals(inputs: np.ndarray, precision: str) -> list[list[str]]:
 def run_on_avr(model: Model, inputs, precision: str = "float", style: str = "table",
                input_lsb: float | None = None, input_offset: float | None = None,
                workdir: str | Path | None = None, mul_bits: int | None = None, portable: bool = False,
-               runner: Path | None = None) -> AvrRun:
+               runner: Path | None = None, opt: tuple[str, ...] = ("-O2",)) -> AvrRun:
     """Estimates of ``inputs`` (float: values, rounded to float first; fixed: ADC codes) on the ATmega328P.
 
     Fixed point: the plan for ``mul_bits`` (default the Uno's, fitgen.c.targets); ``portable``: the
     header's portable C instead of its AVR assembly (TM_PORTABLE_C), for comparison. ``runner``: a
-    simavr runner already built (:func:`build_runner`), else one is built in the work folder."""
+    simavr runner already built (:func:`build_runner`), else one is built in the work folder. ``opt``:
+    avr-gcc's optimisation flags (the Arduino IDE's are -Os -flto)."""
     uno = check_precision("uno", precision)
     inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
     if not 0 < len(inputs) <= MAX_VECTORS or inputs.shape[1] != model.n_inputs:
@@ -113,7 +114,7 @@ def run_on_avr(model: Model, inputs, precision: str = "float", style: str = "tab
                                                                  version=__version__)
         (folder / "bench_main.c").write_text(main)
         elf = folder / "bench.elf"
-        _run([_tool(AVR_CC), f"-mmcu={MCU}", f"-DF_CPU={F_CPU}UL", *WARNING_FLAGS, "-O2", "-I", str(folder),
+        _run([_tool(AVR_CC), f"-mmcu={MCU}", f"-DF_CPU={F_CPU}UL", *WARNING_FLAGS, *opt, "-I", str(folder),
               *(["-DTM_PORTABLE_C"] if portable else []),
               str(folder / "bench_main.c"), "-o", str(elf)], "building the AVR program")
         size = _run([_tool("avr-size"), str(elf)], "avr-size").stdout.splitlines()[1].split()
