@@ -10,6 +10,7 @@ narrowing rounds a value to 16 bits and that rounding is carried through like an
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 from fitgen.base.errors import InputError
@@ -25,11 +26,13 @@ def reference_errors(model: Model) -> dict[str, float]:
     none, fitgen.physics.observe.DEFAULT_ACCURACY (0.1 mm, 1 deg)."""
     from fitgen.physics.observe import DEFAULT_ACCURACY
 
-    notes = model.fit_info.get("outputs", {}) if isinstance(model.fit_info, dict) else {}
+    def get(d, key):
+        return d.get(key) if isinstance(d, dict) else None
+
     out = {}
     for eq in model.equations:
-        err = notes.get(eq.name, {}).get("model_training_error", {}).get("max") if isinstance(notes, dict) else None
-        ok = isinstance(err, (int, float)) and err > 0
+        err = get(get(get(get(model.fit_info, "outputs"), eq.name), "model_training_error"), "max")
+        ok = isinstance(err, (int, float)) and math.isfinite(err) and err > 0
         out[eq.name] = float(err) if ok else DEFAULT_ACCURACY.get(eq.name, 0.1)
     return out
 
