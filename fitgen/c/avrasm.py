@@ -1,15 +1,17 @@
 """AVR assembly of the fixed-point header's 32x32->64 products, for the ATmega328P's MUL instruction.
 
 avr-gcc 5.4 computes ``(int64_t)a * b`` with a library call of ~210 cycles, a 64-bit rounding shift
-with another of ~80 and an int64 addition with a third (bench/avr_cost.py measures them). The two
-routines written here do the same integer arithmetic (bit for bit: tests/test_avr.py holds them against
-the portable C on random and extreme operands) in one pass over registers:
+with another of ~80, an int64 addition with a third and the reciprocals' int64 division with a call
+of ~980 (measured in simavr: docs/tradeoff.md). The routines written here do the same integer
+arithmetic in registers (bit for bit: tests/test_avr.py holds them against Python's integers over
+their whole operand ranges, and the header built with them against the numpy model):
 
 - ``dot``: ``acc += round(C * p / 2^s)`` (``s`` <= 0: ``C * p * 2^-s``) for every term of a table in
   flash, the accumulator held in registers throughout;
-- ``mulsh``: ``*out = round(a * b / 2^s)``, 0 <= s <= 62, for the powers and the v*d products.
+- ``mulsh``: ``*out = round(a * b / 2^s)``, 0 <= s <= 62, for the powers and the v*d products;
+- ``divr``: ``*out = round(2^n / den)``, the reciprocals, by long division.
 
-Both are naked functions (the avr-gcc calling convention: arguments from r24 downwards, r2-r17 and
+All are naked functions (the avr-gcc calling convention: arguments from r24 downwards, r2-r17 and
 r28-r29 kept, r1 left 0); the text is rendered into firmware_templates/model_fixed.h.j2 as C string
 literals. A product is the unsigned 4x4-byte product, column by column (each column summed into three
 bytes), then corrected for the signs (a < 0 takes b * 2^32 off, b < 0 takes a * 2^32 off). A right
