@@ -1,8 +1,8 @@
 """AVR assembly of the fixed-point header's 32x32->64 products, for the ATmega328P's MUL instruction.
 
-avr-gcc 5.4 computes ``(int64_t)a * b`` with a library call of ~210 cycles, a 64-bit rounding shift
-with another of ~80, an int64 addition with a third and the reciprocals' int64 division with a call
-of ~980 (measured in simavr: docs/tradeoff.md). The routines written here do the same integer
+avr-gcc 5.4 computes ``(int64_t)a * b`` with a library call of about 225 cycles, the header's 64-bit
+rounding shift with about 100 more, an int64 addition with 40, and the reciprocals' int64 division with
+1,280 (bench/avr_ops.py, in simavr). The routines written here do the same integer
 arithmetic in registers (bit for bit: tests/test_avr.py holds them against Python's integers over
 their whole operand ranges, and the header built with them against the numpy model):
 
