@@ -169,8 +169,8 @@ def render_config(cmap: ChannelMap, precision: str) -> str:
 
 
 def _write_model(model: Model, src: Path, precision: str, style: str, lsb: float | None) -> None:
-    if precision == "fixed":
-        write_header(model, src, "fixed", input_lsb=lsb, input_offset=0.0)
+    if precision == "fixed":  # the plan for the Uno's 16-bit multiply (fitgen.equations.fixednarrow)
+        write_header(model, src, "fixed", input_lsb=lsb, input_offset=0.0, target="uno")
     else:
         write_header(model, src, precision, style)
 
@@ -255,7 +255,7 @@ def _alternatives(precision: str, style: str):
     if precision == "float":
         yield "float", other, f"--style {other}"
         yield "fixed", style, "--precision fixed"
-    else:  # fixed point's 64-bit products take more flash than float's library on AVR
+    else:  # a fixed-point model too big for the flash: float's terms unrolled are its last resort
         yield "float", "unrolled", "--precision float"
 
 

@@ -410,3 +410,144 @@ def test_verify_catches_a_wrong_c_result(paper_fixed_model):
         res = compare_fixed(paper_fixed_model, cm, codes)
     assert not res.ok
     assert any("LSB" in f for f in res.failures)
+
+
+# --- the plan for a 16-bit multiply (--target uno) ----------------------------------------------------
+
+
+def narrow_chain_model() -> Model:
+    """dx small enough for 16-bit products on powers no other output uses (16x16->32 power chains, a
+    reciprocal into 16 bits); dy's cancelling terms need 32 bits; no fit notes (the budget is 1% of
+    fitgen.physics.observe.DEFAULT_ACCURACY)."""
+    lo, hi = np.array([1.0, 0.8]), np.array([2.0, 3.0])
+    dx = Equation("dx", 0.1, (Term(1, "-2"), Term(1, "3"), Term(1, "-4"), Term(1, "1")), (0.01, 0.002, -0.004, 0.03))
+    dy = Equation("dy", -3.0, (Term(2, "-1"), Term(2, "-2"), Term(2, "2"), Term(2, "1")), (400.0, -300.0, 20.0, 0.5))
+    return Model(lo, hi, (dx, dy), "V")
+
+
+@pytest.fixture(scope="module")
+def small_model():
+    """6 terms per output at most: most outputs fit 16-bit products within their budget."""
+    ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
+    return fit_model(ds, settings=FitSettings.exact(exponents=FAMILIES["no-roots"], max_terms=6))
+
+
+def _uno_cases(paper_fixed_model, small_model):
+    lsb, off, _ = default_input_scale(paper_fixed_model)
+    return [(paper_fixed_model, lsb, off), (small_model, lsb, off), (every_kind_model(), 1.7e-4, -0.123456789),
+            (narrow_chain_model(), 1e-4, 0.0)]
+
+
+def test_uno_plan_kinds_and_budgets(paper_fixed_model, small_model):
+    """Each output on 16x16->32 products, or 32x32->64 with byte-aligned shifts, or as in the 32-bit plan,
+    and every bound within its budget: 1% of the model's max training error, never below the 32-bit bound."""
+    from fitgen.equations.fixednarrow import NARROW_SHARE, reference_errors
+
+    seen = set()
+    for model, lsb, off in _uno_cases(paper_fixed_model, small_model):
+        wide, fm = build_fixed(model, lsb, off), build_fixed(model, lsb, off, 16)
+        assert fm.mul_bits == 16 and wide.mul_bits == 32
+        ref = reference_errors(model)
+        for o, w, b in zip(fm.outputs, wide.outputs, fm.budget):
+            assert b == max(w.error_bound, NARROW_SHARE * ref[o.name])
+            assert o.error_bound <= b
+            seen.add("16" if o.acc_bits == 32 else "aligned" if o.aligned else "32")
+            if o.acc_bits == 32:
+                assert {op.bits for op in fm.ops if op.kind in ("init", "term") and op.index == o.index} == {32}
+            if o.aligned:
+                assert all(op.shift % 8 == 0 for op in fm.ops if op.kind == "term" and op.index == o.index)
+        for op in fm.ops:
+            if op.kind in ("init", "term", "out"):  # an int32 accumulator: 16x16->32 products
+                assert (op.prod_bits == 32) == (fm.outputs[op.index].acc_bits == 32)
+            else:
+                assert (op.prod_bits == 32) == (op.kind == "narrow" or (op.kind in ("mul", "recip") and op.bits == 16))
+            if op.kind == "mul" and op.prod_bits == 32:
+                assert all(fm.op(a).bits == 16 for a in op.args)  # 16x16->32
+    assert seen == {"16", "aligned", "32"}
+    kinds = {(op.kind, op.bits) for op in build_fixed(narrow_chain_model(), 1e-4, 0.0, 16).ops}
+    assert {("mul", 16), ("recip", 16), ("narrow", 16)} <= kinds  # a power chain computed in 16 bits
+    assert ("p1_P3" in {op.name for op in build_fixed(narrow_chain_model(), 1e-4, 0.0, 16).ops
+                        if op.bits == 16 and op.kind == "mul"})
+
+
+def test_uno_plan_changes_nothing_without_a_budget(paper_fixed_model, small_model):
+    """With no room for rounding (share 0) the plan for a 16-bit multiply is the 32-bit plan, op for op."""
+    from fitgen.equations import fixedpoint as fp
+    from fitgen.equations.fixednarrow import plan_narrow
+
+    for model, lsb, off in _uno_cases(paper_fixed_model, small_model):
+        L, O = fp._exact(lsb), fp._exact(off)
+        cmin, cmax = fp._code_bounds(model, L, O)
+        fm = plan_narrow(model, lambda n, a: fp._plan(model, L, O, cmin, cmax, n, a), share=0.0)
+        assert fm.ops == build_fixed(model, lsb, off).ops and fm.outputs == build_fixed(model, lsb, off).outputs
+
+
+def test_uno_plan_proof_and_bound(paper_fixed_model, small_model):
+    """The proven ranges hold at the domain's corners and edges (int16 values too, no int64 wrap-around),
+    and the error bound holds against double on the numpy model of the uno plan."""
+    for model, lsb, off in _uno_cases(paper_fixed_model, small_model):
+        fm = build_fixed(model, lsb, off, 16)
+        codes, _ = make_code_vectors(fm, n_random=800, seed=6)
+        _check_trace(fm, codes)
+        for op in fm.ops:
+            if op.bits == 16:
+                assert -INT16 <= op.lo <= op.hi <= INT16
+        out, _ = fm.predict_codes(codes)
+        ref = fm.reference_model().predict(fm.code_values(codes))
+        err = np.abs(fm.to_real(out) - ref).max(axis=0)
+        assert np.all(err <= fm.error_bound()), (err, fm.error_bound())
+
+
+INT16 = 2**15 - 1
+
+
+def test_uno_plan_c_equals_numpy(paper_fixed_model, small_model):
+    """The uno plan's header built natively (its portable C) answers the numpy model's integers exactly."""
+    require_tool("gcc")
+    for model, lsb, off in _uno_cases(paper_fixed_model, small_model):
+        with CompiledModel(model, "fixed", input_lsb=lsb, input_offset=off, mul_bits=16,
+                           cflags=["-Wconversion", "-Wsign-conversion"]) as cm:
+            codes, kinds = make_code_vectors(cm.fixed, n_random=1500, seed=7)
+            assert np.any(codes == INT32_MIN) and np.any(codes == INT32_MAX)
+            out, status = cm.predict_codes(codes)
+            ref, ref_status = cm.fixed.predict_codes(codes)
+            assert np.array_equal(status, ref_status) and np.array_equal(out, ref)
+
+
+def test_uno_codegen_and_predict_cli(small_model, tmp_path):
+    """codegen --target uno writes the uno plan (named in the header) and predict --target uno answers what
+    it computes; without --target both are the 32-bit plan's; a bad --target is one line, exit status 2."""
+    require_tool("gcc")
+    from fitgen.physics.dataset import Dataset
+
+    path = tmp_path / "m.json"
+    small_model.save(path)
+    for target in ("uno", None):
+        extra = ["--target", target] if target else []
+        proc = run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / f"c{target}"), "--precision", "fixed",
+                       *extra)
+        assert proc.returncode == 0, proc.stderr
+        assert ("16-bit multiply" in proc.stderr) == (target == "uno")
+    uno, plain = ((tmp_path / f"c{t}" / "tm_model.h").read_text() for t in ("uno", None))
+    assert " * Plan: for a 16-bit multiply (--target uno)" in uno and "16x16->32 products" in uno
+    assert " * Plan: 32x32->64 products" in plain and uno != plain
+    with CompiledModel(small_model, "fixed", mul_bits=16) as cm:
+        assert cm.header.read_text() == uno
+        rng = np.random.default_rng(8)
+        lo, hi = small_model.input_min, small_model.input_max
+        values = rng.uniform(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo), (300, small_model.n_inputs))
+        c_out, c_status = cm.predict(cm.fixed.codes_of(values))
+    Dataset(values, np.zeros((len(values), 0)), ()).save(tmp_path / "v.csv")
+    for target, same in (("uno", True), (None, False)):
+        proc = run_cli("fitgen", "predict", str(path), str(tmp_path / "v.csv"), "-o", str(tmp_path / "e.csv"),
+                       "--precision", "fixed", *(["--target", target] if target else []))
+        assert proc.returncode == 0, proc.stderr
+        est = np.loadtxt(tmp_path / "e.csv", delimiter=",", skiprows=1, ndmin=2)
+        np.testing.assert_array_equal(est[:, -1].astype(int), c_status)
+        assert np.array_equal(est[:, :-1], c_out) == same
+    for cmd in (["codegen", str(path), "-o", str(tmp_path / "x")],
+                ["predict", str(path), str(tmp_path / "v.csv"), "-o", str(tmp_path / "x.csv")]):
+        assert_one_line_error(run_cli("fitgen", *cmd, "--precision", "fixed", "--target", "z80"), contains="--target")
+        assert_one_line_error(run_cli("fitgen", *cmd, "--precision", "double", "--target", "uno"),
+                              contains="target uno")
+    assert not (tmp_path / "x").exists() and not (tmp_path / "x.csv").exists()

@@ -204,6 +204,26 @@ def test_sweep_fails_when_rounding_exceeds_the_share(tmp_path):
     assert "Rounding check failed" in proc.stdout
 
 
+def test_sweep_on_the_uno_counts_its_cycles(tmp_path):
+    """--core uno: cycles per estimate on the ATmega328P (simavr) are the cost, the AVR program's flash is the
+    flash, fixed point is the uno plan, double (which the Uno cannot run) is left out with its reason."""
+    for tool in ("avr-gcc", "avr-size", "pkg-config"):
+        require_tool(tool)
+    out = tmp_path / "u"
+    proc, rows = _sweep(out, "press", "aic", "none", "integer", "float,fixed,double", "--core", "uno")
+    assert proc.returncode == 0, proc.stderr
+    rows = {r["precision"]: r for r in rows}
+    assert set(rows) == {"float", "fixed"}
+    assert "no double on uno: avr-gcc's double is 32 bits" in proc.stdout and "cycles on uno" in proc.stdout
+    for r in rows.values():
+        assert 1000 < float(r["cycles"]) < 20000 and 500 < int(r["flash"]) < 32256
+        assert float(r["instructions"]) > 0 and float(r["share"]) <= 0.05
+    # the same equations: fixed point (16x16->32 products where the bound allows) costs fewer cycles
+    assert float(rows["fixed"]["cycles"]) < float(rows["float"]["cycles"])
+    rec = [r for r in rows.values() if r["recommended"] == "1"]
+    assert rec == [rows["fixed"]] and "Meets the target with the fewest cycles on uno" in proc.stdout
+
+
 @pytest.mark.parametrize("args,contains", [
     (["--target", "dx=0.1"], "does not estimate"),
     (["--target", "dz=-1"], "> 0"),
@@ -215,6 +235,8 @@ def test_sweep_fails_when_rounding_exceeds_the_share(tmp_path):
     (["--refine", "2"], "nothing to sweep"),
     (["--refine", "1", "--family", "harmonics"], "whole pose"),
     (["--refine", "x"], "--refine"),
+    (["--core", "z80"], "--core"),
+    (["--core", "uno", "--precision", "double"], "nothing to sweep"),
 ])
 def test_bad_options_one_line(args, contains, tmp_path):
     proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "-o", str(tmp_path / "x"), *args)

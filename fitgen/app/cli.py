@@ -6,10 +6,10 @@ import sys
 from pathlib import Path
 
 from fitgen import __version__
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main
+from fitgen.app.cliutil import Parser, command_main
 from fitgen.base.parse import OutOfRange, parse_assignments, parse_names, parse_noise, parse_penalty
 from fitgen.base.errors import InputError
-from fitgen.c.targets import TARGETS
+from fitgen.c.targets import CYCLE_TARGETS, TARGETS
 from fitgen.equations.terms import FAMILIES
 from fitgen.physics.pose import POSE_NAMES
 
@@ -150,19 +150,23 @@ def cmd_predict(args) -> int:
     import numpy as np
 
     from fitgen.base.fileio import write_atomic
+    from fitgen.c.targets import check_precision
     from fitgen.equations.model import load_model
     from fitgen.physics.dataset import estimates_csv, load_inputs
 
+    target = check_precision(args.target, args.precision)
     model = load_model(args.model)
     inputs = load_inputs(args.data, model.n_inputs)
     if args.precision == "fixed":
+        from fitgen.c.fixedc import plan_line
         from fitgen.equations.fixedpoint import plan_at
 
-        fm, source = plan_at(model, args.input_lsb, args.input_offset)
+        fm, source = plan_at(model, args.input_lsb, args.input_offset, target.mul_bits if target else 32)
         pred, status = fm.predict_codes(inputs) if args.codes else fm.predict_values(inputs)
         pred = fm.to_real(pred) if args.codes else pred
         print(f"fixed point: {'ADC codes as given' if args.codes else 'values rounded to ADC codes'}, input LSB "
-              f"{fm.input_lsb:.6g} {model.input_units} from {source}, offset {fm.input_offset:g}", file=sys.stderr)
+              f"{fm.input_lsb:.6g} {model.input_units} from {source}, offset {fm.input_offset:g}; "
+              f"plan: {plan_line(fm)}", file=sys.stderr)
     else:
         if args.codes or args.input_lsb is not None or args.input_offset is not None:
             raise InputError("--codes, --input-lsb and --input-offset apply to --precision fixed only")
@@ -263,19 +267,21 @@ def cmd_codegen(args) -> int:
     from fitgen.c.targets import check_precision
     from fitgen.equations.model import load_model
 
-    check_precision(args.target, args.precision)
+    target = check_precision(args.target, args.precision)
     model = load_model(args.model)
     if args.precision == "fixed":
         from fitgen.c.codegen import render_fixed_header
+        from fitgen.c.fixedc import plan_line
         from fitgen.equations.fixedpoint import plan_at
         from fitgen.base.fileio import write_in_folder
 
         if args.fma:
             raise InputError("--fma does not apply to --precision fixed")
-        fm, source = plan_at(model, args.input_lsb, args.input_offset)
+        fm, source = plan_at(model, args.input_lsb, args.input_offset, target.mul_bits if target else 32)
         path = write_in_folder(args.output, f"{args.prefix}_model.h", render_fixed_header(fm, args.prefix))
         print(f"wrote {path} (fixed point, input LSB {fm.input_lsb:.6g} {model.input_units} from {source}, "
-              f"offset {fm.input_offset:g}; {fm.summary()}; model {model.sha256[:12]})", file=sys.stderr)
+              f"offset {fm.input_offset:g}; plan: {plan_line(fm)}; {fm.summary()}; model {model.sha256[:12]})",
+              file=sys.stderr)
         return 0
     if args.input_lsb is not None or args.input_offset is not None:
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
@@ -286,38 +292,9 @@ def cmd_codegen(args) -> int:
 
 
 def cmd_tradeoff(args) -> int:
-    from fitgen.base.progress import Progress
-    from fitgen.physics.scenes import load_scene
-    from fitgen.app.tradeoff import parse_knob_list, parse_target
-    from fitgen.app.tradeoff_report import write_outputs
-    from fitgen.c.tradeoff import grid_from, quick_grid, sweep
+    from fitgen.app.tradeoff import run_tradeoff
 
-    knobs = {name: parse_knob_list(name, getattr(args, name)) for name in ("k", "max_terms", "family", "precision",
-                                                                         "style", "refine")
-             if getattr(args, name) is not None}
-    if args.jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {args.jobs}")
-    sensor = _sensor(args)
-    scene = load_scene(args.scene)
-    target = parse_target(args.target, scene.outputs)
-    grid = grid_from(**knobs) if args.full or knobs else quick_grid()
-    if not grid:
-        raise InputError("nothing to sweep: fixed point has no harmonics family and no refinement, and the refinement "
-                         "is swept on the harmonics family only (pick other --family, --precision or --refine)")
-    bar = Progress("tradeoff", len(grid))
-    if not 0 < args.max_share < 1e6:
-        raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
-    with bar:
-        result = sweep(sensor, scene, grid, target=target, seed=args.seed, jobs=args.jobs,
-                       progress=lambda note: bar.update(1, note), max_share=args.max_share)
-    paths, text = write_outputs(result, args.output)
-    print(text, end="")
-    print("wrote " + ", ".join(str(p) for p in paths), file=sys.stderr)
-    if result.over_share:
-        print(f"FAIL: rounding adds more than {args.max_share:.0%} of the model's held-out max error at points "
-              + ", ".join(str(i + 1) for i in result.over_share), file=sys.stderr)
-        return EXIT_CHECK_FAILED
-    return 0
+    return run_tradeoff(args, _sensor(args))
 
 
 def cmd_demo(args) -> int:
@@ -434,6 +411,8 @@ def build_parser() -> Parser:
     pr.add_argument("--input-lsb", type=_finite, metavar="X",
                     help="fixed: the input value of one ADC code, as for codegen (default: the model's sensor's ADC)")
     pr.add_argument("--input-offset", type=_finite, metavar="Y", help="fixed: the input value of code 0")
+    pr.add_argument("--target", choices=tuple(TARGETS), help="fixed: the plan codegen --target makes for that core "
+                    "(uno: 16x16->32 products where the error bound allows); refuses a precision it cannot run")
 
     r = command("report", cmd_report, "terms, AIC trace and errors of a model")
     r.add_argument("model", metavar="MODEL")
@@ -481,6 +460,8 @@ def build_parser() -> Parser:
                    help="fail (exit 1) when a point's rounding adds more than this share of its model's held-out "
                         "max error (default 0.05)")
     t.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
+    t.add_argument("--core", choices=CYCLE_TARGETS, help="costs on this core: uno = cycles per estimate on the ATmega328P "
+                   "(simavr), its fixed-point plan, float and fixed only (default: x86 instructions, Cortex-M flash)")
     t.add_argument("-o", "--output", default="tradeoff-out", metavar="DIR",
                    help="folder for tradeoff.csv, .md, .png (default: tradeoff-out)")
 

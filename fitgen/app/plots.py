@@ -92,28 +92,28 @@ def rotation_sweeps(model: Model, sensor, folder: Path) -> list[Path]:
 
 
 def tradeoff(result, path: Path) -> Path:
-    """fitgen tradeoff: instructions per estimate against score (log axes), the front joined, the
-    target (score 1) dashed, the recommended point ringed; colour by precision, marker by family."""
+    """fitgen tradeoff: instructions (or a core's cycles) per estimate against score (log axes), the front
+    joined, the target (score 1) dashed, the recommended point ringed; colour by precision, marker by family."""
     plt = _plt()
     colours = {"double": "tab:blue", "float": "tab:orange", "fixed": "tab:green"}
     markers = {"all": "o", "no-roots": "s", "integer": "^", "harmonics": "D"}
     refined = "P"  # any family with refinement steps
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
-    pts = [(i, p) for i, p in enumerate(result.points) if p.instructions is not None and p.score is not None]
+    pts = [(i, p) for i, p in enumerate(result.points) if result.cost(p) is not None and p.score is not None]
     seen = set()
     for i, p in pts:
         key = (p.knobs.precision, p.knobs.method)
         face = "none" if p.knobs.style == "table" else colours[p.knobs.precision]
-        ax.scatter(p.instructions, p.score, s=36, marker=refined if p.knobs.refine else markers[p.knobs.family],
+        ax.scatter(result.cost(p), p.score, s=36, marker=refined if p.knobs.refine else markers[p.knobs.family],
                    facecolors=face, edgecolors=colours[p.knobs.precision], linewidths=1, alpha=0.85,
                    label=None if key in seen else f"{p.knobs.precision}, {p.knobs.method}")
         seen.add(key)
     front = [result.points[i] for i in result.front]
     if front:
-        ax.plot([p.instructions for p in front], [p.score for p in front], "-", color="k", lw=1, label="Pareto front")
+        ax.plot([result.cost(p) for p in front], [p.score for p in front], "-", color="k", lw=1, label="Pareto front")
     if result.recommended is not None:
         r = result.points[result.recommended]
-        ax.scatter(r.instructions, r.score, s=220, facecolors="none", edgecolors="red", linewidths=1.6,
+        ax.scatter(result.cost(r), r.score, s=220, facecolors="none", edgecolors="red", linewidths=1.6,
                    label="recommended" if result.met else "most accurate (target not met)")
     ax.axhline(1.0, color="red", ls="--", lw=0.8)
     ax.set_xscale("log")
@@ -123,7 +123,8 @@ def tradeoff(result, path: Path) -> Path:
     for axis in (ax.xaxis, ax.yaxis):
         axis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
         axis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if f"{x:g}"[0] in "1235" else ""))
-    ax.set_xlabel("x86-64 instructions per estimate (callgrind)")
+    ax.set_xlabel(f"cycles per estimate on {result.core} (simavr)" if result.core
+                  else "x86-64 instructions per estimate (callgrind)")
     ax.set_ylabel("score: worst RMS error with noise / target")
     ax.set_title(f"sensor {result.sensor}, scene {result.scene.name} (hollow: table style)", fontsize=10)
     ax.grid(True, which="both", lw=0.3, alpha=0.5)

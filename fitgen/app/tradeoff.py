@@ -1,9 +1,10 @@
-"""The arguments of ``fitgen tradeoff``: the knobs' value lists and the accuracy target
+"""``fitgen tradeoff``: its arguments (the knobs' value lists, the accuracy target) and the command
 (the sweep is fitgen.c.tradeoff's, its report fitgen.app.tradeoff_report's)."""
 
 from __future__ import annotations
 
 import math
+import sys
 
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_assignments, parse_penalty
@@ -59,3 +60,38 @@ def parse_target(spec: str | None, outputs: tuple[str, ...]) -> dict[str, float]
                 raise InputError(f"--target {name} must be a finite number > 0, got {value:g}")
             target[name] = value
     return target
+
+
+def run_tradeoff(args, sensor) -> int:
+    """The command: parse the knobs, sweep, write the report; exit status 1 when rounding is over its share."""
+    from fitgen.app.cliutil import EXIT_CHECK_FAILED
+    from fitgen.app.tradeoff_report import write_outputs
+    from fitgen.base.progress import Progress
+    from fitgen.c.tradeoff import grid_from, quick_grid, sweep
+    from fitgen.physics.scenes import load_scene
+
+    knobs = {name: parse_knob_list(name, getattr(args, name)) for name in ("k", "max_terms", "family", "precision",
+                                                                         "style", "refine")
+             if getattr(args, name) is not None}
+    if args.jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {args.jobs}")
+    scene = load_scene(args.scene)
+    target = parse_target(args.target, scene.outputs)
+    grid = grid_from(**knobs) if args.full or knobs else quick_grid()
+    if not grid:
+        raise InputError("nothing to sweep: fixed point has no harmonics family and no refinement, and the refinement "
+                         "is swept on the harmonics family only (pick other --family, --precision or --refine)")
+    if not 0 < args.max_share < 1e6:
+        raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
+    bar = Progress("tradeoff", len(grid))
+    with bar:
+        result = sweep(sensor, scene, grid, target=target, seed=args.seed, jobs=args.jobs,
+                       progress=lambda note: bar.update(1, note), max_share=args.max_share, core=args.core)
+    paths, text = write_outputs(result, args.output)
+    print(text, end="")
+    print("wrote " + ", ".join(str(p) for p in paths), file=sys.stderr)
+    if result.over_share:
+        print(f"FAIL: rounding adds more than {args.max_share:.0%} of the model's held-out max error at points "
+              + ", ".join(str(i + 1) for i in result.over_share), file=sys.stderr)
+        return EXIT_CHECK_FAILED
+    return 0

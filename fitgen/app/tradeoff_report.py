@@ -20,20 +20,26 @@ def _k(k) -> str:
     return k if isinstance(k, str) else f"{k:g}"
 
 
+def cost_name(result: TradeoffResult) -> str:
+    """What the costs count: "instructions", or "cycles on uno"."""
+    return f"cycles on {result.core}" if result.core else "instructions"
+
+
 def to_csv(result: TradeoffResult) -> str:
     outs = result.scene.outputs
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["point", "k", "max_terms", "family", "refine", "precision", "style", "terms"]
                + [f"terms_{o}" for o in outs] + [f"ops_{k}" for k in OP_KINDS]
-               + ["instructions", "loop_instructions", "flash", "object_flash"]
+               + ["instructions", "loop_instructions", "flash", "object_flash", "cycles"]
                + [f"{o}_{s}" for o in outs for s in ("max", "rms", "noisy_max", "noisy_rms")]
                + [f"{o}_share" for o in outs] + ["score", "share", "front", "recommended", "model", "note"])
     for i, p in enumerate(result.points):
         kn = p.knobs
         w.writerow([i + 1, _k(kn.k), kn.max_terms or "", kn.family, kn.refine, kn.precision, kn.style, p.terms]
                    + [p.terms_per_output.get(o, "") for o in outs] + [p.ops.get(k, "") for k in OP_KINDS]
-                   + [_g(p.instructions, 6), _g(p.loop_instructions, 6), _g(p.flash, 9), _g(p.object_flash, 9)]
+                   + [_g(p.instructions, 6), _g(p.loop_instructions, 6), _g(p.flash, 9), _g(p.object_flash, 9),
+                      _g(p.cycles, 7)]
                    + [_g(p.errors[o][s], 6) if p.errors else "" for o in outs
                       for s in ("max", "rms", "noisy_max", "noisy_rms")]
                    + [_g(p.errors[o]["share"], 6) if p.errors else "" for o in outs]
@@ -49,7 +55,8 @@ def _row(i: int, p: Point, result: TradeoffResult) -> str:
     errs = " | ".join(f"{_g(p.errors[o]['rms'])} / {_g(p.errors[o]['noisy_rms'])} / {_g(p.errors[o]['noisy_max'])}"
                       if p.errors else "" for o in result.scene.outputs)
     return (f"| {i + 1} | {_k(kn.k)} | {kn.max_terms or '-'} | {kn.method} | {kn.precision} | {kn.style} | {p.terms} | "
-            f"{ops} | {_g(p.instructions, 4)} | {_g(p.flash, 6)} | {errs} | {_g(p.score)} | "
+            f"{ops} | {_g(p.instructions, 4)} | " + (f"{_g(p.cycles, 5)} | " if result.core else "")
+            + f"{_g(p.flash, 6)} | {errs} | {_g(p.score)} | "
             f"{'' if p.share is None else f'{p.share:.1%}'} | {mark.strip()} |"
             + (f" {p.note}" if p.note else ""))
 
@@ -58,8 +65,10 @@ def describe(i: int | None, result: TradeoffResult) -> str:
     if i is None:
         return "none"
     p = result.points[i]
-    return (f"point {i + 1} ({p.knobs.label}): {p.terms} terms, {_g(p.instructions, 4)} instructions per estimate, "
-            f"{_g(p.flash, 6) or '?'} bytes of flash, score {_g(p.score)}")
+    cost = f"{_g(p.cycles, 5)} cycles per estimate on {result.core}" if result.core else \
+        f"{_g(p.instructions, 4)} instructions per estimate"
+    return f"point {i + 1} ({p.knobs.label}): {p.terms} terms, {cost}, {_g(p.flash, 6) or '?'} bytes of flash, " \
+           f"score {_g(p.score)}"
 
 
 def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
@@ -94,12 +103,12 @@ def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
     if result.recommended is None:
         lines.append("No point could be measured.")
     elif result.met:
-        lines.append(f"Meets the target with the fewest instructions: {describe(result.recommended, result)}.")
+        lines.append(f"Meets the target with the fewest {cost_name(result)}: {describe(result.recommended, result)}.")
     else:
         lines.append(f"No point meets the target. The most accurate (scores within {ACCURACY_TIE:.0%} of the best "
-                     f"taken as equal, then the fewest instructions): {describe(result.recommended, result)}.")
+                     f"taken as equal, then the fewest {cost_name(result)}): {describe(result.recommended, result)}.")
     lines.append("")
-    lines.append("## Pareto front (instructions per estimate against score)")
+    lines.append(f"## Pareto front ({cost_name(result)} per estimate against score)")
     lines.append("")
     shown = set()
     for i in result.front:
@@ -113,20 +122,24 @@ def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
                                                     if same else ""))
     lines.append("")
     if plot:
-        lines.append(f"![instructions against score]({plot})")
+        lines.append(f"![{cost_name(result)} against score]({plot})")
         lines.append("")
     lines.append("## All points")
     lines.append("")
+    flash = ("the AVR program (avr-gcc -O2, the estimator with a loop over its inputs) less its inputs, "
+             f"library code included; cycles: per estimate on {result.core} in simavr" if result.core else
+             "bytes the estimator adds to a linked Cortex-M4F (double, float) or Cortex-M0 (fixed) program, library "
+             "code included")
     lines.append("Ops: mul/add/div/sqrt/cbrt per estimate as the templates write them. Instructions: x86-64, inside "
-                 "tm_estimate, per estimate (callgrind). Flash: bytes the estimator adds to a linked Cortex-M4F "
-                 "(double, float) or Cortex-M0 (fixed) program, library code included. Errors per output: RMS "
+                 f"tm_estimate, per estimate (callgrind). Flash: {flash}. Errors per output: RMS "
                  "noise-free / RMS with noise / max with noise. Rounding's share: the largest deviation of this "
                  "precision's C from the double model on the noise-free held-out readings, over the double model's "
                  "max error there (worst output).")
     lines.append("")
-    lines.append("| # | k | cap | family | precision | style | terms | ops | instructions | flash | "
+    lines.append("| # | k | cap | family | precision | style | terms | ops | instructions | "
+                 + ("cycles | " if result.core else "") + "flash | "
                  + " | ".join(f"{o} [{units[o]}]" for o in outs) + " | score | rounding's share | |")
-    lines.append("|" + " --- |" * (14 + len(outs) - 1))
+    lines.append("|" + " --- |" * (14 + len(outs) - 1 + bool(result.core)))
     lines += [_row(i, p, result) for i, p in enumerate(result.points)]
     return "\n".join(lines) + "\n"
 

@@ -81,16 +81,22 @@ def _literals(inputs: np.ndarray, precision: str) -> list[list[str]]:
 
 def run_on_avr(model: Model, inputs, precision: str = "float", style: str = "table",
                input_lsb: float | None = None, input_offset: float | None = None,
-               workdir: str | Path | None = None) -> AvrRun:
-    """Estimates of ``inputs`` (float: values, rounded to float first; fixed: ADC codes) on the ATmega328P."""
-    check_precision("uno", precision)
+               workdir: str | Path | None = None, mul_bits: int | None = None, portable: bool = False,
+               runner: Path | None = None, opt: tuple[str, ...] = ("-O2",)) -> AvrRun:
+    """Estimates of ``inputs`` (float: values, rounded to float first; fixed: ADC codes) on the ATmega328P.
+
+    Fixed point: the plan for ``mul_bits`` (default the Uno's, fitgen.c.targets); ``portable``: the
+    header's portable C instead of its AVR assembly (TM_PORTABLE_C), for comparison. ``runner``: a
+    simavr runner already built (:func:`build_runner`), else one is built in the work folder. ``opt``:
+    avr-gcc's optimisation flags (the Arduino IDE's are -Os -flto)."""
+    uno = check_precision("uno", precision)
     inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
     if not 0 < len(inputs) <= MAX_VECTORS or inputs.shape[1] != model.n_inputs:
         raise InputError(f"give 1..{MAX_VECTORS} rows of {model.n_inputs} inputs, got {inputs.shape}")
     if precision == "fixed":
         from fitgen.equations.fixedpoint import plan_at
 
-        fm = plan_at(model, input_lsb, input_offset)[0]
+        fm = plan_at(model, input_lsb, input_offset, mul_bits or uno.mul_bits)[0]
         fm.clamp_codes(inputs)  # whole numbers within int32 (InputError otherwise)
     elif not np.all(np.isfinite(inputs)):
         raise InputError("the AVR bench takes finite inputs")
@@ -108,12 +114,13 @@ def run_on_avr(model: Model, inputs, precision: str = "float", style: str = "tab
                                                                  version=__version__)
         (folder / "bench_main.c").write_text(main)
         elf = folder / "bench.elf"
-        _run([_tool(AVR_CC), f"-mmcu={MCU}", f"-DF_CPU={F_CPU}UL", *WARNING_FLAGS, "-O2", "-I", str(folder),
+        _run([_tool(AVR_CC), f"-mmcu={MCU}", f"-DF_CPU={F_CPU}UL", *WARNING_FLAGS, *opt, "-I", str(folder),
+              *(["-DTM_PORTABLE_C"] if portable else []),
               str(folder / "bench_main.c"), "-o", str(elf)], "building the AVR program")
         size = _run([_tool("avr-size"), str(elf)], "avr-size").stdout.splitlines()[1].split()
         text, data, bss = (int(x) for x in size[:3])
         limit = CYCLES_PER_VECTOR_LIMIT * (len(inputs) + 1)
-        proc = _run([str(build_runner(folder)), str(elf), str(limit)], "the AVR program in simavr")
+        proc = _run([str(runner or build_runner(folder)), str(elf), str(limit)], "the AVR program in simavr")
     finally:
         if tmp is not None:
             tmp.cleanup()

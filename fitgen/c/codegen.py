@@ -247,10 +247,12 @@ def _prefix(prefix: str) -> str:
 
 def render_fixed_header(fm, prefix: str = "tm") -> str:
     """The text of ``<prefix>_model.h`` for a fixed-point plan (:class:`fitgen.equations.fixedmodel.FixedModel`)."""
+    from fitgen.c.fixedc import avr_path, plan_line
+
     prefix = _prefix(prefix)
     units = fm.input_units if fm.input_units in ("mT", "V", "codes") else "units"
     return _env().get_template("model_fixed.h.j2").render(
-        m=fm, P=prefix, U=prefix.upper(), input_units=units,
+        m=fm, P=prefix, U=prefix.upper(), input_units=units, A=avr_path(fm), plan_line=plan_line(fm),
         input_lsb=c_real(fm.input_lsb, "double"), input_offset=c_real(fm.input_offset, "double"))
 
 
@@ -259,21 +261,22 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
                   target: str | None = None) -> str:
     """The text of ``<prefix>_model.h``; ``fma`` sums each term with C99 fma()/fmaf().
 
-    ``target``: a core of fitgen.c.targets.TARGETS; a precision it cannot run is an InputError. The
-    text does not depend on it: one header builds for every core (on AVR its tables go to flash).
+    ``target``: a core of fitgen.c.targets.TARGETS; a precision it cannot run is an InputError. A float
+    or double header does not depend on it: one header builds for every core (on AVR its tables go to
+    flash); a fixed-point one is planned for the core's multiply (fitgen.equations.fixedpoint.build_fixed).
 
     ``precision="fixed"``: integer ADC codes in (value = input_offset + input_lsb * code; by
     default the scale of the model's sensor, see :func:`fitgen.equations.fixedpoint.default_input_scale`),
     int32 outputs out; ``style`` does not apply (the fixed header is straight-line code).
     """
-    check_precision(target, precision)
+    t = check_precision(target, precision)
     if precision == "fixed":
         from fitgen.equations.fixedpoint import plan_at
 
         if fma:
             raise InputError("--fma does not apply to fixed point (it has no floating-point multiply-add)")
         _prefix(prefix)
-        return render_fixed_header(plan_at(model, input_lsb, input_offset)[0], prefix)
+        return render_fixed_header(plan_at(model, input_lsb, input_offset, t.mul_bits if t else 32)[0], prefix)
     if input_lsb is not None or input_offset is not None:
         raise InputError("an input LSB and offset apply to --precision fixed only")
     cm = build_cmodel(model, precision, style, prefix, fma)

@@ -37,13 +37,15 @@ class CompiledModel:
     with its flags (e.g. ``arm-linux-gnueabihf-gcc -static``).
 
     ``precision="fixed"``: the fixed-point header (``self.fixed`` is its
-    :class:`~fitgen.equations.fixedmodel.FixedModel`; ``input_lsb``/``input_offset`` as for codegen);
-    ``predict`` then takes integer codes and answers the integer outputs.
+    :class:`~fitgen.equations.fixedmodel.FixedModel`; ``input_lsb``/``input_offset`` as for codegen,
+    ``mul_bits`` the plan's multiply width, fitgen.equations.fixedpoint.build_fixed); ``predict`` then
+    takes integer codes and answers the integer outputs.
     """
 
     def __init__(self, model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",
                  cc: str = "gcc", runner: str = "", workdir: str | Path | None = None, cflags: list[str] | None = None,
-                 fma: bool = False, input_lsb: float | None = None, input_offset: float | None = None):
+                 fma: bool = False, input_lsb: float | None = None, input_offset: float | None = None,
+                 mul_bits: int = 32):
         self.model, self.precision, self.style, self.prefix, self.fma = model, precision, style, prefix, fma
         self.runner = shlex.split(runner) if runner else []
         self.fixed = None
@@ -52,7 +54,7 @@ class CompiledModel:
 
             if fma:
                 raise InputError("--fma does not apply to fixed point")
-            self.fixed = plan_at(model, input_lsb, input_offset)[0]
+            self.fixed = plan_at(model, input_lsb, input_offset, mul_bits)[0]
             text = render_fixed_header(self.fixed, prefix)
         self._tmp = None
         if workdir is None:

@@ -21,19 +21,23 @@ class Target:
     ram: int | None  # bytes; None: an operating system's memory, no fixed budget
     flash: int | None  # bytes of program memory
     progmem: bool  # const tables must be placed in flash explicitly (PROGMEM) to stay out of RAM
+    mul_bits: int  # the core's natural multiply: 16 (8-bit AVR: MUL makes 16x16->32 cheap), 32 (32x32->64)
     why: str = ""  # why a precision is missing, for the refusal
 
 
 TARGETS = {t.name: t for t in (
     Target("uno", "ATmega328P (Arduino Uno), 8-bit AVR at 16 MHz", ("float", "fixed"), "none", 32,
-           2048, 32768, True,
+           2048, 32768, True, 16,
            "avr-gcc's double is 32 bits (DBL_MANT_DIG 24), so a double header cannot run there"),
     Target("microbit", "nRF51822 (BBC micro:bit), Cortex-M0 at 16 MHz", ("fixed",), "none", 64, 16384, 262144,
-           False, "the Cortex-M0 has no FPU: the reference firmware runs fixed point there (hil/firmware.py)"),
-    Target("mps2", "MPS2-AN386, Cortex-M4F", ("double", "float", "fixed"), "single", 64, 4 << 20, 4 << 20, False),
-    Target("pi", "Raspberry Pi (ARMv7/ARMv8 Linux, VFP)", ("double", "float"), "double", 64, None, None, False,
+           False, 32, "the Cortex-M0 has no FPU: the reference firmware runs fixed point there (hil/firmware.py)"),
+    Target("mps2", "MPS2-AN386, Cortex-M4F", ("double", "float", "fixed"), "single", 64, 4 << 20, 4 << 20, False, 32),
+    Target("pi", "Raspberry Pi (ARMv7/ARMv8 Linux, VFP)", ("double", "float"), "double", 64, None, None, False, 32,
            "the Pi build (host/pi.py) computes in float or double"),
 )}
+
+# the cores whose cycles per estimate are counted in an emulator (fitgen.c.avr: simavr), for fitgen tradeoff --core
+CYCLE_TARGETS = ("uno",)
 
 
 def get_target(name: str | None) -> Target | None:

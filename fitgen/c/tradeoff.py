@@ -6,11 +6,14 @@ One fit per (k, cap, family, refinement) on the scene's grid, simulated noise-fr
 precision and style of that fit is then measured on held-out random poses in the scene's box
 (noise-free, and with the sensor's noise in several draws) and in cost: terms, floating-point
 operations by kind as the templates write them, x86-64 instructions per estimate counted by
-callgrind (deterministic), and the flash the estimator adds to a Cortex-M program.
+callgrind (deterministic), and the flash the estimator adds to a Cortex-M program. For a core
+(``core="uno"``): its plans (fixed point: fitgen.c.targets' multiply width), cycles per estimate on the
+ATmega328P in simavr (fitgen.c.avr, N_AVR held-out inputs, each answer held against Python's bit for
+bit) and the AVR program's flash; double, which it cannot run, is left out.
 
 The score of a point is the worst output's RMS error with noise over its target (<= 1 meets the
-target); the Pareto front is taken on (instructions, score) and the recommended point is the
-cheapest in instructions that meets the target (ties: less flash).
+target); the Pareto front is taken on (cost, score), the cost being instructions (cycles on a core),
+and the recommended point is the cheapest that meets the target (ties: less flash).
 """
 
 from __future__ import annotations
@@ -27,7 +30,8 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.c.codegen import STYLES
-from fitgen.equations.fixedpoint import sensor_input_scale as fixed_scale
+from fitgen.c.targets import TARGETS, get_target
+from fitgen.equations.fixedpoint import build_fixed, sensor_input_scale as fixed_scale
 from fitgen.equations.model import Model
 from fitgen.equations.rounding import PRECISIONS
 from fitgen.equations.terms import FAMILIES, HARMONIC_DEGREE
@@ -50,6 +54,7 @@ CORE_OF = {"double": "cortex-m4f", "float": "cortex-m4f", "fixed": "cortex-m0"}
 ACCURACY_TIE = 0.01  # when no point meets the target: scores within 1 % of the best count as equal
 N_HELD = 1000
 NOISE_DRAWS = 5
+N_AVR = 20  # held-out inputs per build in simavr (the cycles vary by well under 1 % between inputs)
 
 
 @dataclass(frozen=True)
@@ -174,7 +179,8 @@ class Point:
     ops: dict = field(default_factory=dict)
     instructions: float | None = None  # x86-64, inside tm_estimate, per estimate
     loop_instructions: float | None = None  # whole bench loop per estimate
-    flash: int | None = None  # bytes the estimator adds to a linked Cortex-M program
+    flash: int | None = None  # bytes the estimator adds to a linked Cortex-M program (core: the AVR program's)
+    cycles: float | None = None  # core: cycles per estimate on it (simavr), the mean over N_AVR inputs
     object_flash: int | None = None  # text + data of the estimator's object file
     errors: dict = field(default_factory=dict)
     score: float | None = None
@@ -198,6 +204,11 @@ class TradeoffResult:
     setup: dict
     max_share: float = 0.05
     over_share: list[int] = field(default_factory=list)  # points whose rounding adds more than max_share
+    core: str | None = None  # the costs are cycles on this core (fitgen.c.targets), else x86 instructions
+
+    def cost(self, p: Point) -> float | None:
+        """The point's cost: cycles per estimate on the core, else instructions."""
+        return p.cycles if self.core else p.instructions
 
 
 def _fixed_backend():
@@ -229,9 +240,11 @@ class _Measure:
     """Measures (model, precision, style) units; shared state: held-out data and tool set-up."""
 
     def __init__(self, held_inputs, held_truth, noisy_inputs, noisy_truth, outputs, work: Path, have_arm: bool,
-                 scale: tuple[float, float] | None = None):
+                 scale: tuple[float, float] | None = None, core: str | None = None, runner: Path | None = None):
         self.X, self.Y, self.Xn, self.Yn = held_inputs, held_truth, noisy_inputs, noisy_truth
         self.outputs, self.work, self.have_arm, self.scale = outputs, work, have_arm, scale
+        self.core, self.runner = core, runner
+        self.mul_bits = TARGETS[core].mul_bits if core else 32
 
     def __call__(self, model: Model, precision: str, style: str, tag: str) -> dict:
         from fitgen.c import cost
@@ -250,14 +263,13 @@ class _Measure:
             with CompiledModel(model, "float", style, workdir=folder / "vectors") as cm:
                 pred = cm.predict(both)[0]
         else:
-            from fitgen.equations.fixedpoint import build_fixed
-
             lsb, offset = self.scale
-            fm = build_fixed(model, lsb, offset)
+            fm = build_fixed(model, lsb, offset, self.mul_bits)
             res = {"ops": fixed_ops(fm)}
             # the numpy model of the integer arithmetic: the C's integers exactly, on the inputs' codes
             pred = fm.to_real(fm.predict_codes(fm.codes_of(both))[0])
-            header, bench_inputs = {"input_lsb": lsb, "input_offset": offset}, fm.codes_of(self.X).astype(float)
+            header, bench_inputs = {"input_lsb": lsb, "input_offset": offset, "target": self.core}, \
+                fm.codes_of(self.X).astype(float)
             # rounding's share is the arithmetic's: double on the values of the codes the C takes
             ref_inputs = fm.code_values(fm.codes_of(self.X))
             style = "table"  # not read by the fixed-point template
@@ -268,11 +280,32 @@ class _Measure:
         binary = cost.build_bench(model, style, precision, False, folder / "bench", **header)
         ir = cost.instruction_counts(binary, inputs_file, folder / "bench", mix=False, repeat=False)
         res["instructions"], res["loop_instructions"] = ir["fn"], ir["loop"]
-        if self.have_arm:
+        if self.core:
+            res["cycles"], res["flash"] = self._on_core(model, precision, style, bench_inputs[:N_AVR], folder / "avr")
+        elif self.have_arm:
             a = cost.arm_sizes(model, style, precision, False, folder / "arm", cost.ARM_CORES[CORE_OF[precision]],
                                **header)
             res["flash"], res["object_flash"] = a["linked"], a["text"] + a["data"]
         return res
+
+
+    def _on_core(self, model, precision, style, inputs, folder) -> tuple[float, int]:
+        """(cycles per estimate, flash of the program less its inputs) on the ATmega328P; a result that is
+        not Python's bit for bit is a RuntimeError (the point is then not measured)."""
+        from fitgen.c.avr import run_on_avr
+
+        if precision == "fixed":
+            lsb, offset = self.scale
+            run = run_on_avr(model, inputs, "fixed", input_lsb=lsb, input_offset=offset, mul_bits=self.mul_bits,
+                             workdir=folder, runner=self.runner)
+            fm = build_fixed(model, lsb, offset, self.mul_bits)
+            want, status = fm.predict_codes(inputs)
+        else:
+            run = run_on_avr(model, inputs, "float", style, workdir=folder, runner=self.runner)
+            want, status = model.predict(inputs.astype(np.float32).astype(float), with_status=True, precision="float")
+        if not (np.array_equal(run.outputs, want) and np.array_equal(run.status, status)):
+            raise RuntimeError(f"the {self.core} build's results differ from Python's")
+        return float(np.mean(run.cycles)), run.flash - 4 * inputs.size
 
 
 def fixed_ops(fm) -> dict:
@@ -285,11 +318,12 @@ def fixed_ops(fm) -> dict:
 
 def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None, seed: int = 0,
           n_held: int = N_HELD, noise_draws: int = NOISE_DRAWS, jobs: int = 2, progress=None,
-          max_share: float = 0.05) -> TradeoffResult:
+          max_share: float = 0.05, core: str | None = None) -> TradeoffResult:
     """Fit, build and measure every point of ``grid`` for ``sensor`` on ``scene``.
 
     A point whose rounding adds more than ``max_share`` of its model's held-out max error is
-    listed in ``over_share`` and is neither on the front nor recommended.
+    listed in ``over_share`` and is neither on the front nor recommended. ``core`` ("uno"): costs in
+    cycles on it, its plans, its precisions only (fitgen.c.targets).
 
     ``progress(note)`` is called once per measured point. Needs gcc and valgrind; the flash
     figures need arm-none-eabi-gcc/size/nm (left empty, with a note, without them).
@@ -308,6 +342,8 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
             raise InputError(f"nothing to sweep: the refinement estimates the whole pose, and scene {scene.name} "
                              f"asks for {','.join(outputs)} only")
 
+    if core is not None:
+        grid = _for_core(core, grid, notes)
     scale = None
     if any(k.precision == "fixed" for k in grid):
         if _fixed_backend() is None:
@@ -319,7 +355,7 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
             notes.append(f"fixed point: int32 input codes, {text}; the held-out inputs are rounded to codes; "
                          "it takes no roots, so points whose fit uses them are not measured")
     have_arm = all(shutil.which(t) for t in ("arm-none-eabi-gcc", "arm-none-eabi-size", "arm-none-eabi-nm"))
-    if not have_arm:
+    if not have_arm and core is None:
         notes.append("flash sizes skipped: arm-none-eabi-gcc/size/nm not found")
 
     # training: the scene's grid, noise-free; held-out: random poses in its box, seeded
@@ -346,7 +382,13 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
         units.setdefault((m.sha256, p.knobs.precision, p.knobs.style), []).append(i)
 
     with tempfile.TemporaryDirectory(prefix="fitgen-tradeoff-") as tmp:
-        measure = _Measure(X, Y, Xn, Yn, outputs, Path(tmp), have_arm, scale)
+        runner = None
+        if core is not None:
+            from fitgen.c.avr import build_runner
+
+            (Path(tmp) / "runner").mkdir()
+            runner = build_runner(Path(tmp) / "runner")
+        measure = _Measure(X, Y, Xn, Yn, outputs, Path(tmp), have_arm, scale, core, runner)
 
         def one(item):
             n, ((_, precision, style), idx) = item
@@ -375,7 +417,8 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
         worst = max(outputs, key=lambda o: points[i].errors[o]["share"])
         points[i].note = (f"rounding adds {points[i].share:.1%} of {worst}'s held-out max error "
                           f"(over {max_share:.0%}): not recommended")
-    cost_ = [p.instructions if p.score is not None and i not in over else None for i, p in enumerate(points)]
+    cost_ = [(p.cycles if core else p.instructions) if p.score is not None and i not in over else None
+             for i, p in enumerate(points)]
     score = [p.score for p in points]
     front = pareto_front(cost_, score)
     rec, met = recommend([math.nan if c is None else c for c in cost_],
@@ -383,4 +426,19 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
     setup = {"training_rows": train.n_rows, "levels": scene.levels, "held_out": n_held, "noise_draws": noise_draws,
              "noise": sensor.noise, "units": sensor.units, "seed": seed, "fits": len(fits), "measured": len(units)}
     return TradeoffResult(sensor.name, sensor.transfer, scene, target, points, front, rec, met, warnings, notes, setup,
-                          max_share, over)
+                          max_share, over, core)
+
+
+def _for_core(core: str, grid: list[Knobs], notes: list[str]) -> list[Knobs]:
+    """The points ``core`` can run (an InputError when none), with a note of what it cannot."""
+    t = get_target(core)
+    left = [k for k in grid if k.precision in t.precisions]
+    dropped = sorted({k.precision for k in grid} - set(t.precisions))
+    if dropped:
+        notes.append(f"no {', '.join(dropped)} on {core}: {t.why}")
+    if not left:
+        raise InputError(f"nothing to sweep: {core} takes --precision {' or '.join(t.precisions)}")
+    notes.append(f"costs on {core} ({t.core}): cycles per estimate in simavr over {N_AVR} held-out inputs, each "
+                 f"answer Python's bit for bit; flash: the AVR program less its inputs"
+                 + ("; fixed point in its plan for a 16-bit multiply" if t.mul_bits == 16 else ""))
+    return left

@@ -22,6 +22,12 @@ of a negative number occurs):
 - ``init``   acc = round(intercept * 2^f_acc)                           int64
 - ``term``   acc += round((int64)C * p / 2^s)    (C: the coefficient in Q(f_c))   int64
 - ``out``    out = round(acc / 2^s)              (Q(f_out), also the d of d-terms) int32
+
+A plan for a core with a 16-bit multiply (``mul_bits`` 16, an 8-bit AVR) has, besides, int16 values
+(``bits`` 16): ``narrow`` p16 = round(p / 2^s), an int32 value's rounded copy; a ``mul`` of two int16
+values is a 16x16->32 product (``prod_bits`` 32) rounded into an int16; a ``recip`` into an int16 takes
+an int32 numerator; an output whose accumulator is int32 (``acc_bits`` 32) sums int16 coefficients
+times int16 values, each a 16x16->32 product. The formulas are the same; only the widths differ.
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ from fitgen import __version__
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
 
+INT16_MAX = 2**15 - 1
 INT32_MAX = 2**31 - 1
 INT32_MIN = -(2**31)
 
@@ -82,6 +89,7 @@ class FixedOp:
     magnitude: float
     text: str
     index: int = -1  # input: the input's index; out: the output's index
+    prod_bits: int = 64  # width of the intermediate (wide_lo..wide_hi): 32 for a 16x16 product or an int32 sum
 
 
 @dataclass(frozen=True)
@@ -95,6 +103,8 @@ class FixedOutput:
     lo: int
     hi: int
     n_terms: int
+    acc_bits: int = 64  # 32: int16 operands and coefficients, 16x16->32 products, an int32 accumulator
+    aligned: bool = False  # every term's shift a multiple of 8 bits (an 8-bit core shifts whole bytes for free)
 
 
 @dataclass(frozen=True)
@@ -112,6 +122,8 @@ class FixedModel:
     model_hash: str
     version: str = __version__
     equations: tuple = field(default=(), repr=False, compare=False)
+    mul_bits: int = 32  # the core's multiply the plan is for: 32 (32x32->64 products) or 16 (fixedpoint.build_fixed)
+    budget: tuple[float, ...] = ()  # mul_bits 16: per output, the error bound its 16-bit products were held within
 
     @property
     def output_names(self) -> tuple[str, ...]:
@@ -170,6 +182,9 @@ class FixedModel:
                 val = wide
             elif op.kind == "mul":
                 wide = vals[op.args[0]] * vals[op.args[1]]
+                val = rshr(wide, op.shift)
+            elif op.kind == "narrow":
+                wide = vals[op.args[0]]
                 val = rshr(wide, op.shift)
             elif op.kind == "recip":
                 a = vals[op.args[0]]

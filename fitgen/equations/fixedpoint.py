@@ -1,9 +1,11 @@
-"""Fixed-point plans of a model for cores without an FPU (Cortex-M0): integer ADC codes in, int32 out.
+"""Fixed-point plans of a model for cores without an FPU (Cortex-M0, AVR): integer ADC codes in, int32 out.
 
 :func:`build_fixed` turns a :class:`~fitgen.equations.model.Model` into a
 :class:`~fitgen.equations.fixedmodel.FixedModel` (the number format and the operations are described
 there): the Q format of every value, its range proven by interval arithmetic over the code domain,
-and a bound on its error against exact arithmetic. :func:`plan_at` and :func:`sensor_input_scale`
+and a bound on its error against exact arithmetic. For a core with a 16-bit multiply (an 8-bit AVR)
+some outputs run on int16 operands and 16x16->32 products instead, or with byte-aligned shifts, where
+every bound stays within its budget (fitgen.equations.fixednarrow chooses; this module plans). :func:`plan_at` and :func:`sensor_input_scale`
 give the input scale (the value of one ADC code) when the user names none.
 
 Q formats are chosen in evaluation order, each the finest that keeps its value inside its
@@ -21,12 +23,13 @@ from fractions import Fraction
 
 from fitgen import __version__
 from fitgen.base.errors import InputError
-from fitgen.equations.fixedmodel import INT32_MAX, INT32_MIN, FixedModel, FixedOp, FixedOutput, rshr
+from fitgen.equations.fixedmodel import (INT16_MAX, INT32_MAX, INT32_MIN, FixedModel, FixedOp, FixedOutput,
+                                         rshr)
 from fitgen.equations.model import Model
 from fitgen.equations.terms import DISPLACEMENTS
 
-BUDGET = {32: INT32_MAX, 64: 2**62}
-MAX_SHIFT = 62
+BUDGET = {16: INT16_MAX, 32: INT32_MAX, 64: 2**62}
+MAX_SHIFT = {32: 30, 64: 62}  # the largest rounding shift of a product of that width
 # exponent text -> (C name suffix, how it is computed)
 POWER_CODE = {"1": "P1", "2": "P2", "3": "P3", "4": "P4", "-1": "M1", "-2": "M2", "-3": "M3", "-4": "M4"}
 # a power's operands: P2 = P1^2, P3 = P2 * P1, P4 = P2^2, M1 = 1/P1, M2 = M1^2, M3 = M2 * M1, M4 = M2^2
@@ -99,7 +102,7 @@ class _Planner:
         self.by_name: dict[str, FixedOp] = {}
 
     def add(self, op: FixedOp) -> FixedOp:
-        if not _fits(op.lo, op.hi, op.bits) or not _fits(op.wide_lo, op.wide_hi, 64):
+        if not _fits(op.lo, op.hi, op.bits) or not _fits(op.wide_lo, op.wide_hi, op.prod_bits):
             raise InputError(f"fixed point: {op.text} cannot be placed in {op.bits} bits")  # pragma: no cover
         self.ops.append(op)
         self.by_name[op.name] = op
@@ -129,8 +132,28 @@ class _Planner:
         return self.add(FixedOp("input", f"u{k + 1}", (), const, -f, f, 32, lo, hi, lo, hi, err, mag,
                                 f"v{k + 1} in codes", k))
 
-    def mul(self, name: str, a: str, b: str, text: str) -> FixedOp:
+    def narrow(self, name: str) -> str:
+        """The name of value ``name`` as an int16: itself when it is one, else its rounded copy (made once)."""
+        A = self.get(name)
+        if A.bits == 16:
+            return name
+        copy = f"{name}_16"
+        if copy not in self.by_name:
+            s = 0
+            while not _fits(rshr(A.lo, s), rshr(A.hi, s), 16):
+                s += 1
+            f = A.frac_bits - s
+            lo, hi = rshr(A.lo, s), rshr(A.hi, s)
+            err = A.error + (math.ldexp(0.5, -f) if s > 0 else 0.0)
+            self.add(FixedOp("narrow", copy, (name,), 0, s, f, 16, lo, hi, A.lo, A.hi, err,
+                             math.ldexp(max(abs(lo), abs(hi)), -f), f"{A.text.split(' ')[0]} in 16 bits",
+                             prod_bits=32))
+        return copy
+
+    def mul(self, name: str, a: str, b: str, text: str, bits: int = 32) -> FixedOp:
+        """a * b rounded into ``bits`` (32, or 16): a 16x16->32 product when both are int16, else 32x32->64."""
         A, B = self.get(a), self.get(b)
+        prod_bits = 32 if A.bits == B.bits == 16 else 64
         if a == b:
             sq = (A.lo * A.lo, A.hi * A.hi)
             wlo = 0 if A.lo <= 0 <= A.hi else min(sq)
@@ -139,21 +162,24 @@ class _Planner:
             prods = [A.lo * B.lo, A.lo * B.hi, A.hi * B.lo, A.hi * B.hi]
             wlo, whi = min(prods), max(prods)
         s = 0
-        while not _fits(rshr(wlo, s), rshr(whi, s), 32):
+        while not _fits(rshr(wlo, s), rshr(whi, s), bits):
             s += 1
         f = A.frac_bits + B.frac_bits - s
         err = (math.ldexp(0.5, -f) if s > 0 else 0.0) + A.magnitude * B.error + (B.magnitude + B.error) * A.error
         lo, hi = rshr(wlo, s), rshr(whi, s)
-        return self.add(FixedOp("mul", name, (a, b), 0, s, f, 32, lo, hi, wlo, whi, err,
-                                math.ldexp(max(abs(lo), abs(hi)), -f), text))
+        return self.add(FixedOp("mul", name, (a, b), 0, s, f, bits, lo, hi, wlo, whi, err,
+                                math.ldexp(max(abs(lo), abs(hi)), -f), text, prod_bits=prod_bits))
 
-    def recip(self, name: str, a: str, text: str, k: int) -> FixedOp:
+    def recip(self, name: str, a: str, text: str, k: int, bits: int = 32) -> FixedOp:
+        """round(2^N / a) into ``bits``: an int64 numerator for 32 bits, an int32 one for 16."""
         A = self.get(a)
         if A.lo <= 0:
             raise InputError(f"fixed point: v{k + 1}^-1 needs v{k + 1} > 0 over the code domain, "
                              f"but its lowest code gives {float(A.lo) * 2.0 ** -A.frac_bits!r} codes")
+        prod_bits = 64 if bits == 32 else 32
         n = 0
-        while n < MAX_SHIFT and divr(1 << (n + 1), A.lo) <= INT32_MAX:
+        while (n < MAX_SHIFT[64] and divr(1 << (n + 1), A.lo) <= BUDGET[bits]
+               and (bits == 32 or _fits(0, (1 << (n + 1)) + A.hi // 2, prod_bits))):
             n += 1
         num = 1 << n
         f = n - A.frac_bits
@@ -162,17 +188,61 @@ class _Planner:
         if not A.error < amin:
             raise InputError(f"fixed point: v{k + 1} is too close to 0 for its reciprocal")  # pragma: no cover
         err = math.ldexp(0.5, -f) + A.error / (amin * (amin - A.error))
-        return self.add(FixedOp("recip", name, (a,), num, 0, f, 32, lo, hi, num + A.lo // 2, num + A.hi // 2,
-                                err, math.ldexp(hi, -f), text))
+        return self.add(FixedOp("recip", name, (a,), num, 0, f, bits, lo, hi, num + A.lo // 2, num + A.hi // 2,
+                                err, math.ldexp(hi, -f), text, prod_bits=prod_bits))
 
 
-def build_fixed(model: Model, input_lsb: float, input_offset: float = 0.0) -> FixedModel:
-    """The fixed-point plan of ``model`` for int32 ADC codes c with value input_offset + input_lsb * c.
+def _operand(t) -> str:
+    """The name of the value a term multiplies (see :func:`_plan`)."""
+    if t.element and not t.mult:
+        code = POWER_CODE[t.exponent]
+        return f"u{t.element}" if code == "P1" else f"p{t.element}_{code}"
+    if t.element:
+        return f"vd{t.element}_{t.mult}"
+    return f"o_{t.mult}"
 
-    Refuses (InputError, one line) roots, domains that hold no code or reach v <= 0 where a
-    negative power needs v > 0, and outputs whose range cannot be held in an int32 with an LSB
-    of at most 1 unit.
-    """
+
+def _parts(name: str) -> tuple[str, ...]:
+    """The values ``name`` is computed from (none for an input or an output)."""
+    if name.startswith("vd"):
+        k, d = name[2:].split("_")
+        return (f"u{k}", f"o_{d}")
+    if name.startswith("p"):
+        k, code = name[1:].split("_")
+        if code == "M1":
+            return (f"u{k}",)
+        return tuple(f"u{k}" if c == "P1" else f"p{k}_{c}" for c in _RECIPE[code])
+    return ()
+
+
+def _needs(model: Model, narrow: frozenset) -> tuple[set, set]:
+    """(values needed as int32, values needed as int16): the terms' operands (int16 for the outputs in
+    ``narrow``) and what they are computed from. A value only needed as an int16 is computed in 16 bits
+    (a reciprocal from its int32 input); one needed both ways is computed in 32 bits and copied."""
+    wide, half = set(), set()
+    for eq in model.equations:
+        for t in eq.terms:
+            (half if eq.name in narrow else wide).add(_operand(t))
+    stack = list(wide)
+    while stack:
+        for w in _parts(stack.pop()):
+            if w not in wide:
+                wide.add(w)
+                stack.append(w)
+    stack = [v for v in half if v not in wide]
+    while stack:
+        v = stack.pop()
+        for w in _parts(v):
+            if v.endswith("_M1"):
+                wide.add(w)  # an input: always computed in 32 bits
+            elif w not in half:
+                half.add(w)
+                if w not in wide:
+                    stack.append(w)
+    return wide, half
+
+
+def _check_model(model: Model, input_lsb, input_offset) -> tuple[float, float]:
     try:
         lsb_f, off_f = float(input_lsb), float(input_offset)
     except (TypeError, ValueError):
@@ -194,75 +264,98 @@ def build_fixed(model: Model, input_lsb: float, input_offset: float = 0.0) -> Fi
             if t.exponent and "/" in t.exponent:
                 raise InputError(f"fixed point takes integer powers only, but output {eq.name} has the root "
                                  f"{t.text}: fit with --family no-roots (or integer)")
+    return lsb_f, off_f
+
+
+def build_fixed(model: Model, input_lsb: float, input_offset: float = 0.0, mul_bits: int = 32) -> FixedModel:
+    """The fixed-point plan of ``model`` for int32 ADC codes c with value input_offset + input_lsb * c.
+
+    ``mul_bits``: the core's natural multiply. 32: every product 32x32->64 (Cortex-M, x86). 16 (an
+    8-bit AVR): the outputs whose error bound stays within :func:`narrow_budget` computed with
+    16x16->32 products and an int32 accumulator (fitgen.equations.fixednarrow), the rest as for 32.
+
+    Refuses (InputError, one line) roots, domains that hold no code or reach v <= 0 where a
+    negative power needs v > 0, and outputs whose range cannot be held in an int32 with an LSB
+    of at most 1 unit.
+    """
+    if mul_bits not in (16, 32):
+        raise InputError(f"the multiply width must be 16 or 32 bits, got {mul_bits!r}")
+    lsb_f, off_f = _check_model(model, input_lsb, input_offset)
     lsb, off = _exact(lsb_f), _exact(off_f)
     cmin, cmax = _code_bounds(model, lsb, off)
-    o = off / lsb
+    if mul_bits == 32:
+        return _plan(model, lsb, off, cmin, cmax)
+    from fitgen.equations.fixednarrow import plan_narrow
 
+    return plan_narrow(model, lambda narrow, aligned: _plan(model, lsb, off, cmin, cmax, narrow, aligned))
+
+
+def _plan(model: Model, lsb: Fraction, off: Fraction, cmin: list[int], cmax: list[int],
+          narrow: frozenset = frozenset(), aligned: frozenset = frozenset()) -> FixedModel:
+    """The plan with the outputs in ``narrow`` on int16 operands and an int32 accumulator, and the terms
+    of the outputs in ``aligned`` shifted by whole bytes (fitgen.equations.fixednarrow)."""
+    o = off / lsb
     pl = _Planner()
-    # which powers each input needs, closed under the recipes
-    needed: dict[int, set[str]] = {}
-    for eq in model.equations:
-        for t in eq.terms:
-            if t.element:
-                needed.setdefault(t.element - 1, set()).add(POWER_CODE[t.exponent])
-    for k in sorted(needed):
-        need = needed[k]
-        for code in ("P4", "P3", "M4", "M3", "M2"):
-            if code in need:
-                need.update(_RECIPE[code])
-        if need & {"M2", "M3", "M4"}:
-            need.add("M1")
+    wide, half = _needs(model, narrow)
+    for k in sorted({int(v[1:].split("_")[0]) - 1 for v in wide | half if v[0] in "up"}):
         pl.input(k, cmin[k], cmax[k], o)
         for code in _POWER_ORDER[1:]:
-            if code not in need:
-                continue
             name = f"p{k + 1}_{code}"
+            if name not in wide and name not in half:
+                continue
             text = f"v{k + 1}^{_EXPONENT_OF[code]}"
+            bits = 32 if name in wide else 16
             if code == "M1":
-                pl.recip(name, f"u{k + 1}", text, k)
+                pl.recip(name, f"u{k + 1}", text, k, bits)
             else:
-                a, b = (f"u{k + 1}" if c == "P1" else f"p{k + 1}_{c}" for c in _RECIPE[code])
-                pl.mul(name, a, b, text)
+                a, b = _parts(name)
+                if bits == 16:
+                    a, b = pl.narrow(a), pl.narrow(b)
+                pl.mul(name, a, b, text, bits)
 
     outputs = []
-    d_name: dict[str, str] = {}
     for j, eq in enumerate(model.equations):
         # each term's operand (a power, v_k * d, or d) and its exact real coefficient (lsb^e folded in)
         operands, coefs = [], []
-        for i, (t, c) in enumerate(zip(eq.terms, eq.coefficients)):
+        for t, c in zip(eq.terms, eq.coefficients):
             c = _exact(c)
+            name = _operand(t)
+            if t.element and t.mult and name not in pl.by_name:
+                u, d = _parts(name)
+                if name in wide:
+                    pl.mul(name, u, d, f"v{t.element}*{t.mult}")
+                else:
+                    pl.mul(name, pl.narrow(u), pl.narrow(d), f"v{t.element}*{t.mult}", 16)
+            operands.append(pl.narrow(name) if eq.name in narrow else name)
             if t.element and not t.mult:
-                code = POWER_CODE[t.exponent]
-                operands.append(f"u{t.element}" if code == "P1" else f"p{t.element}_{code}")
-                coefs.append(c * lsb ** _EXPONENT_OF[code])
+                coefs.append(c * lsb ** _EXPONENT_OF[POWER_CODE[t.exponent]])
             elif t.element:
-                name = f"vd{t.element}_{t.mult}"
-                if name not in pl.by_name:
-                    pl.mul(name, f"u{t.element}", d_name[t.mult], f"v{t.element}*{t.mult}")
-                operands.append(name)
                 coefs.append(c * lsb)
             else:
-                operands.append(d_name[t.mult])
                 coefs.append(c)
-        ops_eq = _plan_output(pl, eq, j, operands, coefs)
-        outputs.append(ops_eq)
-        if eq.name in DISPLACEMENTS:
-            d_name[eq.name] = f"o_{eq.name}"
+        outputs.append(_plan_output(pl, eq, j, operands, coefs, 32 if eq.name in narrow else 64,
+                                    eq.name in aligned))
+    lsb_f, off_f = float(lsb), float(off)
     return FixedModel(model.n_inputs, lsb_f, off_f, model.input_units, tuple(cmin), tuple(cmax), tuple(pl.ops),
                       tuple(outputs), model.sha256, __version__, tuple(model.equations))
 
 
-def _plan_output(pl: _Planner, eq, j: int, operands: list[str], coefs: list[Fraction]) -> FixedOutput:
+def _plan_output(pl: _Planner, eq, j: int, operands: list[str], coefs: list[Fraction], acc_bits: int,
+                 align: bool = False) -> FixedOutput:
+    """The output's terms summed in an int64 accumulator with int32 coefficients (acc_bits 64), or in an
+    int32 one with int16 coefficients on int16 operands (acc_bits 32); ``align``: each term's shift a
+    multiple of 8 bits (its coefficient up to 7 bits coarser)."""
     ops_p = [pl.get(n) for n in operands]
     icpt = _exact(eq.intercept)
     bound = abs(float(icpt)) + sum(abs(_float(c)) * (p.magnitude + p.error) for c, p in zip(coefs, ops_p))
-    if not bound < 2.0**60:
+    top = 2.0**61 if acc_bits == 64 else 2.0**30  # half the accumulator's budget
+    if not bound < top / 2:
         raise InputError(f"output {eq.name}: its terms reach {bound:.3g} {eq.unit} in the input domain; an int32 "
                          f"output would need an LSB over 1 {eq.unit} (fixed point limit)")
-    # the accumulator: the finest Q format whose every partial sum provably stays within 2^62
-    f_acc = min(100, math.floor(math.log2(2.0**61 / bound))) if bound > 0 else 100
+    # the accumulator: the finest Q format whose every partial sum provably stays within its budget
+    f_acc = min(100, math.floor(math.log2(top / bound))) if bound > 0 else 100
     while True:
-        plan = _try_accumulator(eq, j, ops_p, coefs, icpt, f_acc)
+        plan = _try_accumulator(eq, j, ops_p, coefs, icpt, f_acc, acc_bits, align)
         if plan is not None:
             break
         f_acc -= 1
@@ -283,43 +376,47 @@ def _plan_output(pl: _Planner, eq, j: int, operands: list[str], coefs: list[Frac
     lo, hi = rshr(acc_lo, s), rshr(acc_hi, s)
     err = acc_err + (math.ldexp(0.5, -f_out) if s > 0 else 0.0)
     pl.add(FixedOp("out", f"o_{eq.name}", (), 0, s, f_out, 32, lo, hi, acc_lo, acc_hi, err,
-                   math.ldexp(max(abs(lo), abs(hi)), -f_out), f"{eq.name} [{unit}]", j))
-    return FixedOutput(eq.name, unit, j, f_out, f_acc, err, lo, hi, len(eq.terms))
+                   math.ldexp(max(abs(lo), abs(hi)), -f_out), f"{eq.name} [{unit}]", j, prod_bits=acc_bits))
+    return FixedOutput(eq.name, unit, j, f_out, f_acc, err, lo, hi, len(eq.terms), acc_bits, align)
 
 
-def _try_accumulator(eq, j, ops_p, coefs, icpt, f_acc):
+def _try_accumulator(eq, j, ops_p, coefs, icpt, f_acc, acc_bits, align=False):
     """The init and term operations of one output with the accumulator in Q(f_acc), or None when a
-    partial sum could leave the int64 budget."""
+    partial sum could leave the accumulator's budget."""
+    coef_bits, prod_bits = (32, 64) if acc_bits == 64 else (16, 32)
     out = []
     ic = _round(icpt * Fraction(2) ** f_acc)
     lo = hi = ic
-    if not _fits(lo, hi, 64):
+    if not _fits(lo, hi, acc_bits):
         return None
     err = float(abs(Fraction(ic) / Fraction(2) ** f_acc - icpt))
-    out.append(FixedOp("init", f"acc_{eq.name}_0", (), ic, 0, f_acc, 64, lo, hi, lo, hi, err, 0.0,
-                       f"{eq.name} intercept", j))
+    out.append(FixedOp("init", f"acc_{eq.name}_0", (), ic, 0, f_acc, acc_bits, lo, hi, lo, hi, err, 0.0,
+                       f"{eq.name} intercept", j, prod_bits=acc_bits))
     for i, (p, c, t) in enumerate(zip(ops_p, coefs, eq.terms)):
-        # the coefficient's Q format: the finest that fits an int32, at most 62 bits of shift away
+        # the coefficient's Q format: the finest that fits its int, at most MAX_SHIFT bits of shift away
         if c == 0:
             fc = f_acc - p.frac_bits
         else:
-            fc = math.floor(31 - _log2(c)) + 1
-            while abs(_round(c * Fraction(2) ** fc)) > INT32_MAX:
+            fc = math.floor(coef_bits - 1 - _log2(c)) + 1
+            while abs(_round(c * Fraction(2) ** fc)) > BUDGET[coef_bits]:
                 fc -= 1
-            fc = min(fc, f_acc - p.frac_bits + MAX_SHIFT)
+            fc = min(fc, f_acc - p.frac_bits + MAX_SHIFT[prod_bits])
+        if align:
+            fc -= (fc + p.frac_bits - f_acc) % 8
         cq = _round(c * Fraction(2) ** fc)
         s = fc + p.frac_bits - f_acc
         prods = [cq * p.lo, cq * p.hi]
         wlo, whi = min(prods), max(prods)
         tlo, thi = rshr(wlo, s), rshr(whi, s)
         lo, hi = lo + tlo, hi + thi
-        if not (_fits(wlo, whi, 64) and _fits(lo, hi, 64) and _fits(tlo, thi, 64)):
+        if not (_fits(wlo, whi, prod_bits) and _fits(lo, hi, acc_bits) and _fits(tlo, thi, acc_bits)):
             return None
         cerr = float(abs(Fraction(cq) / Fraction(2) ** fc - c))
         cmag = math.ldexp(abs(cq), -fc)
         err += (math.ldexp(0.5, -f_acc) if s > 0 else 0.0) + cmag * p.error + (p.magnitude + p.error) * cerr
-        out.append(FixedOp("term", f"acc_{eq.name}_{i + 1}", (p.name,), cq, s, f_acc, 64, lo, hi, wlo, whi, err,
-                           math.ldexp(max(abs(tlo), abs(thi)), -f_acc), f"{eq.name} += {t.text}", j))
+        out.append(FixedOp("term", f"acc_{eq.name}_{i + 1}", (p.name,), cq, s, f_acc, acc_bits, lo, hi, wlo, whi,
+                           err, math.ldexp(max(abs(tlo), abs(thi)), -f_acc), f"{eq.name} += {t.text}", j,
+                           prod_bits=prod_bits))
     return out, lo, hi, err
 
 
@@ -354,17 +451,19 @@ def default_input_scale(model: Model) -> tuple[float, float, str]:
     raise InputError(f"fixed point needs the value of one ADC code: give --input-lsb (in {model.input_units})")
 
 
-def plan_at(model: Model, input_lsb: float | None = None, input_offset: float | None = None) -> tuple[FixedModel, str]:
+def plan_at(model: Model, input_lsb: float | None = None, input_offset: float | None = None,
+            mul_bits: int = 32) -> tuple[FixedModel, str]:
     """The fixed-point plan at the given input scale, and where the scale came from.
 
     Without ``input_lsb``: the model's own (:func:`default_input_scale`; ``input_offset`` still
-    overrides its offset). With it: that LSB and ``input_offset`` (default 0).
+    overrides its offset). With it: that LSB and ``input_offset`` (default 0). ``mul_bits``: as for
+    :func:`build_fixed` (fitgen.c.targets gives a target's).
     """
     source = "--input-lsb"
     if input_lsb is None:
         input_lsb, default_offset, source = default_input_scale(model)
         input_offset = default_offset if input_offset is None else input_offset
-    return build_fixed(model, input_lsb, input_offset or 0.0), source
+    return build_fixed(model, input_lsb, input_offset or 0.0, mul_bits), source
 
 
 FIXED_BITS = 16  # ADC bits assumed for fixed point when the sensor's transfer does not quantise
