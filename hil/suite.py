@@ -404,14 +404,15 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
               n_fuzz: int = 10_000, flash: bool = True, sensor_id: str = "paper", fma: bool = False,
               seed: int = 0, verbose: bool = True, input_lsb: float | None = None,
               input_offset: float | None = None, held_out: tuple[np.ndarray, np.ndarray] | None = None,
-              max_share: float = MAX_SHARE) -> SuiteResult:
+              max_share: float = MAX_SHARE, mul_bits: int = 32) -> SuiteResult:
     """Every check in turn against the device at ``url`` that runs ``model`` compiled in.
 
     ``held_out``: noise-free held-out (readings, truth) for the rounding's-share check
     (fitgen.fitting.holdout.clean_readings); without it that check is not run.
 
     A fixed-point device (INFO precision 2) gets ADC codes, compared with the numpy model of its
-    integer arithmetic (``input_lsb``/``input_offset`` as given to codegen; default: the model's sensor).
+    integer arithmetic (``input_lsb``/``input_offset`` as given to codegen; default: the model's sensor), planned
+    for the core's multiply width ``mul_bits`` (fitgen.c.targets: 16 for the Uno).
     """
     t_suite = time.perf_counter()
     checks: list[Check] = []
@@ -420,7 +421,7 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
         from fitgen.equations.fixedpoint import build_fixed, default_input_scale
 
         lsb, offset, _ = default_input_scale(model) if input_lsb is None else (input_lsb, input_offset or 0.0, "")
-        fixed = build_fixed(model, lsb, offset if input_offset is None else input_offset)
+        fixed = build_fixed(model, lsb, offset if input_offset is None else input_offset, mul_bits)
         inputs, _ = make_code_vectors(fixed, n_vectors, seed)
         if data is not None:
             inputs = np.vstack([inputs, fixed.codes_of(data)])

@@ -194,12 +194,10 @@ def test_read_pose_runs_on_the_emulated_uno_and_prints_the_pose(sensor, tmp_path
 def test_ram_with_the_stack_fits_in_float_with_harmonics_and_in_fixed_without_roots(tmp_path):
     """The acceptance figures, by arduino-build --emulate: flash <= 32,256 B and static RAM plus the stack's
     peak measured on the emulated Uno <= 2,048 B for the default paper model (harmonic terms) in float, and
-    for a no-roots model in fixed point (capped at 24 terms an output: the uncapped one, 138 terms, overflows
-    the flash with the current fixed-point plan; see test_fixed_point_past_the_flash_is_refused_naming_float)."""
+    for the no-roots model (138 terms) in fixed point (the uno plan); each prints the simulated pose."""
     _require_emulator()
     for name, fit_options, build_options in (("default", (), ("--precision", "float")),
-                                             ("noroots", ("--family", "no-roots", "--max-terms", "24"),
-                                              ("--precision", "fixed"))):
+                                             ("noroots", ("--family", "no-roots"), ("--precision", "fixed"))):
         model_path = _fit_cli(tmp_path, name, *fit_options)
         terms = [t for o in json.loads(open(model_path).read())["outputs"] for t in o["terms"]]
         if name == "default":

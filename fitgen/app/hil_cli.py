@@ -38,6 +38,7 @@ def _check_counts(args) -> None:
 
 def _suite(url: str, model, data, args, input_lsb: float | None = None) -> int:
     """The suite against ``url``; ``input_lsb``: a fixed-point firmware's ADC code scale (its channel map's)."""
+    from fitgen.c.targets import TARGETS
     from host.device import Device
     from fitgen.c.verify import held_out_from_args
 
@@ -48,7 +49,8 @@ def _suite(url: str, model, data, args, input_lsb: float | None = None) -> int:
         res = run_suite(dev, model, url=url, n_vectors=args.vectors, data=data, n_fuzz=args.fuzz,
                         flash=not args.no_flash, sensor_id=args.sensor_id, fma=args.fma, held_out=held_out,
                         max_share=args.max_share, input_lsb=input_lsb,
-                        input_offset=0.0 if input_lsb is not None else None)
+                        input_offset=0.0 if input_lsb is not None else None,
+                        mul_bits=TARGETS[args.target].mul_bits if args.target in TARGETS else 32)
     print(res.table())
     if held_out is None and not args.no_held_out:
         print("note: no held-out accuracy check: the model file has no held_out record or its sensor is unknown "
@@ -149,6 +151,9 @@ def build_parser() -> Parser:
     r = sub.add_parser("run", help="run the HIL suite against a device")
     r.add_argument("--port", required=True, metavar="URL",
                    help="serial device, pty path, or socket://127.0.0.1:PORT (the emulator)")
+    r.add_argument("--target", choices=("uno", "microbit", "mps2", "pi"),
+                   help="the core the firmware was built for: a fixed-point build is compared with its plan "
+                        "(uno: the plan for a 16-bit multiply; default: the 32-bit plan)")
     _suite_options(r)
     r.set_defaults(func=cmd_run)
 
