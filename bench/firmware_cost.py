@@ -1,5 +1,5 @@
 """Cost of the paper model on the emulated Cortex-M4 (QEMU mps2-an386) and Cortex-M0 (QEMU microbit, nRF51),
-both under -icount, and HIL round trips.
+both under -icount, on the Arduino Uno (simavr's ATmega328P, cycles), and HIL round trips.
 
     python bench/firmware_cost.py > /tmp/firmware.md
 
@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import sys
 
+from fitgen.base.errors import InputError
 from fitgen.fitting.fit import FitSettings, fit_model
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
@@ -66,6 +67,7 @@ def main() -> None:
     print("| --- | --- | --- | --- | --- | --- |")
     print(f"| {products} | {divisions} | {m4:,.0f} | {m0:,.0f} | {m0 / m4:.1f}x | "
           f"{(m0 - m4) / max(products + divisions, 1):.0f} |")
+    uno_table(gmr, fixed_model)
     print("\nHost build over a pty (paper model, double, unrolled):\n")
     with start_target(model, "host", precision="double", style="unrolled") as fw:
         with Device.open(fw.url, timeout=5) as dev:
@@ -73,6 +75,35 @@ def main() -> None:
             t = check_timing(dev, model)
     print(f"- {b['ns']:.0f} ns per estimate on the host; EVAL round trip median {t.figures['rtt_ms_median']:.3f} ms, "
           f"batched {t.figures['per_s']:,.0f} estimates/s")
+
+
+def uno_table(gmr, fixed_model) -> None:
+    """The reference firmware on the Arduino Uno (simavr's ATmega328P): cycles per estimate (BENCH's ticks are
+    the CPU's cycles), flash, static RAM and the stack's measured peak, beside the Uno's limits."""
+    default = fit_model(gmr)  # the default fit (harmonics included), as `fitgen fit` gives it
+    builds = [(default, "paper (gmr, default)", "float", "table"), (default, "paper (gmr, default)", "float", "unrolled"),
+              (fixed_model, "paper (gmr, no roots)", "fixed", "-")]
+    print("\nThe Arduino Uno (ATmega328P at 16 MHz in simavr; `tactile-hil emulate --target uno`; flash "
+          "32,256 B once the bootloader has its 512, RAM 2,048 B):\n")
+    print("| model | precision | style | terms | flash (B) | static RAM (B) | stack peak (B) | RAM with stack (B) | "
+          "cycles per estimate | estimates/s at 16 MHz | EVAL round trip, median (ms) |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for m, name, precision, style in builds:
+        print(f"{name} {precision} {style} on the Uno ...", file=sys.stderr)
+        try:
+            emu = start_target(m, "uno", precision=precision, style=style if style != "-" else "table")
+        except InputError as exc:
+            print(f"| {name} | {precision} | {style} | {sum(len(e.terms) for e in m.equations)} | does not build: "
+                  f"{exc} | | | | | | |")
+            continue
+        with emu:
+            with Device.open(emu.url, timeout=10) as dev:
+                b = bench_instructions(dev, 10, 60)
+                t = check_timing(dev, m, n_single=50, n_batch=100, fixed=_fixed(m) if precision == "fixed" else None)
+        cycles = b["ticks_per_estimate"]
+        print(f"| {name} | {precision} | {style} | {sum(len(e.terms) for e in m.equations)} | {emu.size['flash']:,} | "
+              f"{emu.size['ram']:,} | {emu.stack_peak:,} | {emu.size['ram'] + emu.stack_peak:,} | {cycles:,.0f} | "
+              f"{b['tick_hz'] / cycles:,.0f} | {t.figures['rtt_ms_median']:.2f} |")
 
 
 def _fixed(m):
