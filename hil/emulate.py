@@ -271,6 +271,13 @@ class UnoEmulator(_Running):
         super().stop()
 
 
+def uno_emulator_available() -> bool:
+    """Whether the simavr board can be built here (its tools, and libsimavr known to pkg-config)."""
+    if any(shutil.which(t) is None for t in AVR_TOOLS + ("avr-nm",)):
+        return False
+    return subprocess.run(["pkg-config", "--exists", "simavr"], capture_output=True).returncode == 0
+
+
 def build_uno_board(folder: str | Path) -> Path:
     """The libsimavr board (firmware_templates/avr/uno_board.c) compiled into ``folder``."""
     from importlib import resources

@@ -16,12 +16,13 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 
-from host.arduino import Size, arduino_build, example_elf
+from host.arduino import Size, arduino_build, example_elf, find_builder
 from host.channelmap import ChannelMap
 
-from hil.emulate import AVR_HINT, AVR_TOOLS, UnoEmulator, bss_end, build_uno_board
+from hil.emulate import AVR_HINT, AVR_TOOLS, UnoEmulator, bss_end, build_uno_board, uno_emulator_available
 
 RAM_END = 0x8FF  # the ATmega328P's last RAM address (RAMEND)
+REST = "0,0,0,0,0"  # the pose the stack is measured at when none is asked for
 LINE_MAX = 1024  # longer than any line ReadPose prints: a line past it is not a sketch's line
 
 
@@ -145,7 +146,11 @@ def build_readpose(model, cmap: ChannelMap, folder: str | Path, pose=None, *, pr
     """``arduino_build``: (its size, None). With a ``pose``, ReadPose is also run on the emulated Uno as
     :func:`run_sketch` runs it, and so is each setting tried when it does not fit: (the size with the stack's
     measured peak, the run). InputError when ReadPose prints an error line, and when it does not fit (flash,
-    or static RAM and the stack's peak) naming a setting that does."""
+    or static RAM and the stack's peak) naming a setting that does. Without a pose, the stack is still
+    measured (ReadPose run at rest) whenever the example is built and the emulated Uno can be: a setting
+    whose stack overflows is then refused, not suggested."""
+    if pose is None and build is not False and find_builder() is not None and uno_emulator_available():
+        pose = REST
     if pose is None:
         return arduino_build(model, cmap, folder, precision=precision, style=style, build=build,
                              build_path=build_path), None

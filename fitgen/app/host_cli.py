@@ -260,7 +260,7 @@ def cmd_arduino_build(args) -> int:
     size, run = build_readpose(load_model(args.model), channel_map_from_args(args), args.output, args.emulate,
                                precision=args.precision, style=args.style, build=not args.no_build,
                                sensor=args.sim_sensor)
-    sys.stdout.write("".join(ln + "\n" for ln in run.lines) if run else "")  # what a serial monitor would show
+    sys.stdout.write("".join(ln + "\n" for ln in run.lines) if run and args.emulate else "")  # a serial monitor's
     built = size.describe(BOARDS["uno"]) if size else "not built (no arduino-builder)"
     print(f"wrote the Arduino library {args.output}; ReadPose for the Uno: {built}", file=sys.stderr)
     return 0
@@ -368,7 +368,7 @@ def build_parser() -> Parser:
     build.add_argument("--no-build", action="store_true", help="write the library only (default: build it when "
                                                             "arduino-builder is installed)")
     build.add_argument("--emulate", metavar="POSE", help="also run ReadPose on an emulated Uno reading --sim-sensor "
-                       "at POSE (e.g. dx=1,dz=-1): its lines on stdout, RAM with the stack's measured peak")
+                       "at POSE (e.g. dx=1,dz=-1), its lines on stdout (without it: run at rest, for the stack)")
     ab.add_argument("--sim-sensor", default="paper", help="with --emulate: the simulated sensor (default paper)")
     ab.add_argument("-o", "--output", required=True, metavar="DIR", help="the library's folder (e.g. TactilePose)")
     ab.set_defaults(func=cmd_arduino_build)
