@@ -286,7 +286,8 @@ def build_uno_board(folder: str | Path) -> Path:
 
     folder = Path(folder)
     src, binary = folder / "uno_board.c", folder / "uno_board"
-    src.write_bytes((resources.files("firmware_templates") / "avr" / "uno_board.c").read_bytes())
+    for name in ("uno_board.c", "simavr_boot.h"):
+        (folder / name).write_bytes((resources.files("firmware_templates") / "avr" / name).read_bytes())
     flags = _run(["pkg-config", "--cflags", "--libs", "simavr"], "pkg-config simavr").stdout.split()
     _run(["gcc", "-O2", "-Wall", "-Wextra", "-Werror", str(src), "-o", str(binary)] + flags + ["-lelf"],
          "building the simavr board")

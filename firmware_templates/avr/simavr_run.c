@@ -6,8 +6,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <simavr/sim_avr.h>
-#include <simavr/sim_elf.h>
 #include <simavr/sim_io.h>
+
+#include "simavr_boot.h"
 #include <simavr/avr_uart.h>
 
 /* GPIOR0: I/O register 0x1E, data address 0x3E on the ATmega328P (no peripheral behind it) */
@@ -36,7 +37,6 @@ static void uart_out(struct avr_irq_t *irq, uint32_t value, void *param)
 
 int main(int argc, char **argv)
 {
-    elf_firmware_t fw;
     avr_t *avr;
     uint32_t flags = 0;
     unsigned long long limit;
@@ -47,19 +47,10 @@ int main(int argc, char **argv)
         return 2;
     }
     limit = strtoull(argv[2], NULL, 10);
-    if (elf_read_firmware(argv[1], &fw) != 0) {
-        fprintf(stderr, "cannot read %s\n", argv[1]);
-        return 2;
-    }
-    avr = avr_make_mcu_by_name("atmega328p");
+    avr = simavr_boot(argv[1]);
     if (avr == NULL) {
-        fprintf(stderr, "simavr has no atmega328p\n");
         return 2;
     }
-    avr_init(avr);
-    avr->log = 0;
-    avr_load_firmware(avr, &fw);
-    avr->frequency = 16000000;
     /* the bytes come here only, not also as simavr's console lines */
     avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
     flags &= ~(uint32_t)AVR_UART_FLAG_STDIO;

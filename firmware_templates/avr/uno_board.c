@@ -39,10 +39,11 @@
 #include <simavr/avr_twi.h>
 #include <simavr/avr_uart.h>
 #include <simavr/sim_avr.h>
-#include <simavr/sim_elf.h>
 #include <simavr/sim_io.h>
 
-#define F_CPU 16000000u
+#include "simavr_boot.h"
+
+#define F_CPU SIMAVR_BOOT_HZ
 #define RAMEND 0x8FFu
 #define PAINT 0xA5u
 #define POLL_EVERY 2048u     /* instructions between two looks at the socket */
@@ -370,7 +371,6 @@ static int listen_on(int port)
 
 int main(int argc, char **argv)
 {
-    elf_firmware_t fw;
     unsigned long paint = 0;
     const char *eeprom = NULL;
     unsigned long count = 0;
@@ -401,19 +401,10 @@ int main(int argc, char **argv)
         fprintf(stderr, "bad port or paint address\n");
         return 2;
     }
-    if (elf_read_firmware(argv[1], &fw) != 0) {
-        fprintf(stderr, "cannot read %s\n", argv[1]);
-        return 2;
-    }
-    avr = avr_make_mcu_by_name("atmega328p");
+    avr = simavr_boot(argv[1]);
     if (avr == NULL) {
-        fprintf(stderr, "simavr has no atmega328p\n");
         return 2;
     }
-    avr_init(avr);
-    avr->log = 0;
-    avr_load_firmware(avr, &fw);
-    avr->frequency = F_CPU;
     avr->sleep = board_sleep;
     if (eeprom != NULL && eeprom_file(eeprom, 0) != 0) {
         fprintf(stderr, "cannot read the EEPROM image %s\n", eeprom);

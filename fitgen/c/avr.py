@@ -66,7 +66,8 @@ def build_runner(folder: Path) -> Path:
     binary = folder / "simavr_run"
     if not binary.is_file():
         src = folder / "simavr_run.c"
-        src.write_bytes((resources.files("firmware_templates") / "avr" / "simavr_run.c").read_bytes())
+        for name in ("simavr_run.c", "simavr_boot.h"):
+            (folder / name).write_bytes((resources.files("firmware_templates") / "avr" / name).read_bytes())
         flags = _run(["pkg-config", "--cflags", "--libs", "simavr"], "pkg-config simavr").stdout.split()
         _run([_tool(RUNNER_CC), "-O2", "-Wall", "-Wextra", "-Werror", str(src), "-o", str(binary)] + flags + ["-lelf"],
              "building the simavr runner")
