@@ -19,8 +19,8 @@ QEMU = "qemu-system-arm"
 MACHINES = {"mps2": "mps2-an386", "microbit": "microbit"}
 TARGETS = tuple(MACHINES) + ("uno", "host")
 INSTALL_HINT = "install them with: sudo apt-get install qemu-system-arm gcc-arm-none-eabi"
-AVR_TOOLS = ("avr-gcc", "avr-size", "gcc", "pkg-config")
-AVR_HINT = "install them with: sudo apt-get install gcc-avr avr-libc simavr libsimavr-dev libelf-dev pkg-config"
+AVR_TOOLS = ("avr-gcc", "avr-size", "avr-nm", "gcc", "pkg-config")
+AVR_HINT = "install them with: sudo apt-get install gcc-avr binutils-avr avr-libc simavr libsimavr-dev libelf-dev pkg-config"
 # -icount shift=0: the emulated core retires one instruction per ns of virtual time, so the
 # 25 MHz SysTick counts one tick per 40 instructions (docs/hil.md)
 ICOUNT_SHIFT = 0
@@ -271,27 +271,25 @@ class UnoEmulator(_Running):
         super().stop()
 
 
+def require_avr_tools() -> None:
+    """InputError (one line, how to install them) unless the Uno's build and board tools are here."""
+    missing = [t for t in AVR_TOOLS if shutil.which(t) is None]
+    if missing:
+        raise InputError(f"{' and '.join(missing)} not found; {AVR_HINT}")
+
+
 def uno_emulator_available() -> bool:
     """Whether the simavr board can be built here (its tools, and libsimavr known to pkg-config)."""
-    if any(shutil.which(t) is None for t in AVR_TOOLS + ("avr-nm",)):
+    if any(shutil.which(t) is None for t in AVR_TOOLS):
         return False
     return subprocess.run(["pkg-config", "--exists", "simavr"], capture_output=True).returncode == 0
 
 
 def build_uno_board(folder: str | Path) -> Path:
     """The libsimavr board (firmware_templates/avr/uno_board.c) compiled into ``folder``."""
-    from importlib import resources
+    from fitgen.c.avr import build_simavr_program
 
-    from hil.firmware import _run
-
-    folder = Path(folder)
-    src, binary = folder / "uno_board.c", folder / "uno_board"
-    for name in ("uno_board.c", "simavr_boot.h"):
-        (folder / name).write_bytes((resources.files("firmware_templates") / "avr" / name).read_bytes())
-    flags = _run(["pkg-config", "--cflags", "--libs", "simavr"], "pkg-config simavr").stdout.split()
-    _run(["gcc", "-O2", "-Wall", "-Wextra", "-Werror", str(src), "-o", str(binary)] + flags + ["-lelf"],
-         "building the simavr board")
-    return binary
+    return build_simavr_program(folder, "uno_board.c")
 
 
 def bss_end(elf: str | Path) -> int:
@@ -342,9 +340,7 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
         if missing:
             raise InputError(f"{' and '.join(missing)} not found; {INSTALL_HINT}")
     if target == "uno":
-        missing = [t for t in AVR_TOOLS if shutil.which(t) is None]
-        if missing:
-            raise InputError(f"{' and '.join(missing)} not found; {AVR_HINT}")
+        require_avr_tools()
     tmp = None
     if workdir is None:
         tmp = tempfile.TemporaryDirectory(prefix="tactile-fw-")

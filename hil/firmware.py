@@ -53,6 +53,12 @@ SENSOR_ID_MAX = 16
 BUILD_FLAGS = "build_flags"  # defines a render adds to its build (one line, written by render_firmware)
 
 
+def _input_files(port: str, adc: bool) -> tuple[str, ...]:
+    """The sources a sample's inputs come from: the ADC drivers (and, but on the Uno, the I2C bridge), or
+    the simulated ones."""
+    return ADC_FILES + (() if port == "uno" else BRIDGE_FILES) if adc else SIM_FILES
+
+
 def _check_port(port: str) -> None:
     if port not in PORTS:
         raise InputError(f"port must be one of {', '.join(PORTS)}, got {port!r}")
@@ -117,7 +123,7 @@ def render_firmware(model: Model, folder: str | Path, *, precision: str = "float
         else {}
     write_header(model, folder, precision, style, "tm", fma, target=port if port in TARGETS else None,
                  **header)  # creates the folder
-    inputs = (ADC_FILES + (() if port == "uno" else BRIDGE_FILES)) if cmap is not None else SIM_FILES
+    inputs = _input_files(port, cmap is not None)
     for name in COMMON_FILES + inputs + PORT_FILES[port]:
         write_atomic(folder / name, _source(name))
     write_atomic(folder / "proto_defs.h", render_proto_defs())
@@ -174,7 +180,7 @@ def build_firmware(folder: str | Path, port: str, cc: str | None = None) -> Path
     _check_port(port)
     folder = Path(folder)
     names = RENDERED + COMMON_FILES \
-        + (ADC_FILES + (() if port == "uno" else BRIDGE_FILES) if (folder / "inputs_adc.c").is_file() else SIM_FILES) \
+        + _input_files(port, (folder / "inputs_adc.c").is_file()) \
         + PORT_FILES[port]
     missing = [n for n in names if not (folder / n).is_file()]
     if missing or not (folder / "tm_model.h").is_file():

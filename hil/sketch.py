@@ -5,7 +5,6 @@ builds the library's ReadPose example (host/arduino.py) and runs it so; ``readpo
 from __future__ import annotations
 
 import select
-import shutil
 import socket
 import tempfile
 import time
@@ -19,7 +18,7 @@ from fitgen.base.errors import InputError
 from host.arduino import Size, arduino_build, example_elf, find_builder
 from host.channelmap import ChannelMap
 
-from hil.emulate import AVR_HINT, AVR_TOOLS, UnoEmulator, bss_end, build_uno_board, uno_emulator_available
+from hil.emulate import UnoEmulator, bss_end, build_uno_board, require_avr_tools, uno_emulator_available
 
 RAM_END = 0x8FF  # the ATmega328P's last RAM address (RAMEND)
 REST = "0,0,0,0,0"  # the pose the stack is measured at when none is asked for
@@ -69,9 +68,7 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
 
     if n_lines < 1:
         raise InputError(f"n_lines must be >= 1, got {n_lines}")
-    missing = [t for t in AVR_TOOLS + ("avr-nm",) if shutil.which(t) is None]
-    if missing:
-        raise InputError(f"{' and '.join(missing)} not found; {AVR_HINT}")
+    require_avr_tools()
     clock = VirtualClock()
     bus = simulated_bus(cmap, load_sensor(sensor), sim_pose(pose), clock=clock, noise=noise, seed=seed)
     paint = bss_end(elf)

@@ -61,17 +61,23 @@ def _run(cmd: list[str], what: str, timeout: float = 600) -> subprocess.Complete
     return proc
 
 
+def build_simavr_program(folder: str | Path, source: str) -> Path:
+    """A libsimavr program of firmware_templates/avr/ (``source``, with simavr_boot.h) compiled into ``folder``;
+    the binary is named after the source."""
+    folder = Path(folder)
+    src, binary = folder / source, folder / Path(source).stem
+    for name in (source, "simavr_boot.h"):
+        (folder / name).write_bytes((resources.files("firmware_templates") / "avr" / name).read_bytes())
+    flags = _run(["pkg-config", "--cflags", "--libs", "simavr"], "pkg-config simavr").stdout.split()
+    _run([_tool(RUNNER_CC), "-O2", "-Wall", "-Wextra", "-Werror", str(src), "-o", str(binary)] + flags + ["-lelf"],
+         f"building {source}")
+    return binary
+
+
 def build_runner(folder: Path) -> Path:
     """The libsimavr runner, compiled once into ``folder``."""
     binary = folder / "simavr_run"
-    if not binary.is_file():
-        src = folder / "simavr_run.c"
-        for name in ("simavr_run.c", "simavr_boot.h"):
-            (folder / name).write_bytes((resources.files("firmware_templates") / "avr" / name).read_bytes())
-        flags = _run(["pkg-config", "--cflags", "--libs", "simavr"], "pkg-config simavr").stdout.split()
-        _run([_tool(RUNNER_CC), "-O2", "-Wall", "-Wextra", "-Werror", str(src), "-o", str(binary)] + flags + ["-lelf"],
-             "building the simavr runner")
-    return binary
+    return binary if binary.is_file() else build_simavr_program(folder, "simavr_run.c")
 
 
 def _literals(inputs: np.ndarray, precision: str) -> list[list[str]]:
