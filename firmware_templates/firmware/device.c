@@ -76,8 +76,8 @@ void device_init(device *d, const device_config *cfg)
     memset(d, 0, sizeof *d);
     d->cfg = cfg;
     proto_rx_init(&d->rx);
-    d->active_size = calstore_active_size();
-    d->use_blob = d->active_size != 0 && cal_parse(&d->active, calstore_active(), d->active_size) == 0;
+    d->use_blob = calstore_active_size() != 0 &&
+                  cal_parse(&d->active, calstore_active(), calstore_active_size()) == 0;
     /* BENCH vectors: input i of vector k at (2m + 1) / 32 of its range, m = (k + 5 i) mod 16 */
     for (k = 0; k < DEVICE_BENCH_VECTORS; ++k) {
         for (i = 0; i < TM_N_INPUTS; ++i) {
@@ -217,8 +217,7 @@ static void do_cal_commit(device *d, const proto_msg *m)
     }
     /* only now does the active calibration change */
     calstore_commit(d->stage_size);
-    d->active_size = d->stage_size;
-    d->use_blob = cal_parse(&d->active, calstore_active(), d->active_size) == 0;
+    d->use_blob = cal_parse(&d->active, calstore_active(), d->stage_size) == 0;
     cal_copy(reply_payload(d), calstore_active() + CAL_HASH_OFFSET, PROTO_HASH_SIZE);
     reply(d, m, PROTO_HASH_SIZE);
 }
@@ -235,10 +234,10 @@ static void do_cal_read(device *d, const proto_msg *m)
         refuse(d, m, PROTO_BAD_ARG);
         return;
     }
-    if (offset >= d->active_size) {
+    if (offset >= d->active.size) {
         n = 0;
-    } else if (n > d->active_size - offset) {
-        n = d->active_size - offset;
+    } else if (n > d->active.size - offset) {
+        n = d->active.size - offset;
     }
     if (n != 0) {
         cal_copy(reply_payload(d), calstore_active() + offset, n);
@@ -249,7 +248,6 @@ static void do_cal_read(device *d, const proto_msg *m)
 static void do_cal_reset(device *d, const proto_msg *m)
 {
     d->use_blob = 0;
-    d->active_size = 0;
     calstore_clear();
     reply(d, m, 0);
 }

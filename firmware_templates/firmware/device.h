@@ -27,8 +27,7 @@ typedef struct {
     uint8_t out[PROTO_MAX_BODY];  /* a reply being built (payload at out + PROTO_HEADER_SIZE) */
     /* calibration: the store's active blob when use_blob, else the compiled-in tm_estimate */
     uint8_t use_blob;
-    cal_model active;
-    uint32_t active_size;
+    cal_model active;             /* the active blob parsed (its size among it) */
     uint8_t stage_open;           /* CAL_BEGIN seen, no COMMIT yet */
     uint32_t stage_size;
     uint32_t stage_crc;
