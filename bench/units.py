@@ -38,7 +38,7 @@ Set-up (deterministic):
      the family's validation poses: a user has no other).
   3. `direct, 40 three-axis rows`: fitted on the 40-pose capture the 0.01 mm twin is identified from
      (the same rows); they have no tilt labels, so it estimates dx, dy, dz only.
-  4. `twin, n poses, r mm` (n = 40, r = 0.01 on every unit; the others fitted on the first --sweep-units
+  4. `twin, n poses, r mm` (n = 40 and 100, r = 0.01 on every unit; the others fitted on the first --sweep-units
      units and identified on all): fitgen.fitting.identify.identify(drawing, capture, labels, noise/4, rig_error=r),
      saved with fitgen.fitting.identify.save (the unit file and its posterior record), the twin loaded from the
      unit file, simulated on the paper-sim grid + 5,000 random poses, fitted; the model file's
@@ -83,7 +83,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from benchutil import START, fmt, log, table  # noqa: E402
-from fitgen.physics.dataset import Dataset  # noqa: E402
+from fitgen.physics.dataset import Dataset, rows_on_the_skin  # noqa: E402
 from fitgen.base.errors import InputError  # noqa: E402
 from fitgen.fitting.family import fit_auto  # noqa: E402
 from fitgen.fitting.fit import FitSettings, fit_model  # noqa: E402
@@ -92,7 +92,8 @@ from fitgen.fitting.identify import CHI2_LIMIT, derived_quantities, identify, lo
 from fitgen.physics.pose import POSE_NAMES  # noqa: E402
 from fitgen.fitting.schedule import schedule  # noqa: E402
 from fitgen.physics.sensor import load_sensor  # noqa: E402
-from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate  # noqa: E402
+from fitgen.physics.simulate import (DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses,  # noqa: E402
+                                     rig_poses, simulate)
 from fitgen.physics.transfer import quantise  # noqa: E402
 from fitgen.physics.units import UnitSpace, draw_unit  # noqa: E402
 from magpy_truth import magpylib_readings  # noqa: E402
@@ -110,6 +111,8 @@ RIGS = (0.01, 0.03)
 TWIN_NS = (10, 20, 40, 100)
 DIRECT_RIG = 0.01
 HEAD = (40, 0.01)  # the twin the acceptance lines name
+PINNED = (100, 0.01)  # the capture docs/calibration.md recommends for reading the identified physics
+FULL = (HEAD, PINNED)  # twins fitted and held out on every unit (the others on --sweep-units)
 # acceptance
 RATIO_D, RATIO_TH, WORST_D, WORST_TH = 1.25, 1.5, 1.5, 2.0
 OFFSET_MM, SENS_REL, COVER = 0.03, 0.01, (0.55, 0.80)
@@ -178,8 +181,7 @@ def measure(model, unit, seed: int) -> dict:
 def capture(unit, labels: np.ndarray, rig: float, key) -> np.ndarray:
     """Averaged rows of a simulated capture: magpylib's readings where the stage really is, noise over sqrt(16)."""
     rng = np.random.default_rng(key)
-    true = labels.copy()
-    true[:, :3] += rig * rng.standard_normal((len(labels), 3))
+    true = rig_poses(labels, rig, rng)
     y = magpylib_readings(unit, true) + rng.normal(0.0, CTX.noise / np.sqrt(SAMPLES), (len(labels), unit.n_elements))
     return np.clip(y, unit.gmr.adc_min, unit.gmr.adc_max)
 
@@ -223,7 +225,8 @@ def task(spec: tuple) -> tuple[tuple, dict]:
     if kind == "direct40":
         labels = CTX.schedules[(40, DIRECT_RIG)]
         y = capture(unit, labels, DIRECT_RIG, [seed, 40, 3])  # the twin's 40-pose capture at 0.01 mm
-        model = fit_default(capture_dataset(y, labels, ("dx", "dy", "dz")), CTX.drawing)
+        # the rest row reads the magnet at rest, not a contact pose: fitgen fit leaves it out, as here
+        model = fit_default(rows_on_the_skin(capture_dataset(y, labels, ("dx", "dy", "dz")))[0], CTX.drawing)
         return spec, {**measure(model, unit, seed), **summary(model), "seconds": time.monotonic() - t0}
     n, rig, fit = spec[2], spec[3], spec[4]
     labels = CTX.schedules[(n, rig)]
@@ -276,6 +279,11 @@ def workflow_name(spec: tuple) -> str:
     return f"twin, {spec[2]} poses, {spec[3]:g} mm"
 
 
+def full_names(ctx: Ctx) -> list[str]:
+    """The workflows of the twins fitted on every unit, whose acceptance lines are checked."""
+    return [f"twin, {n} poses, {r:g} mm" for n, r in FULL if (n, r) in ctx.twins]
+
+
 def run(ctx: Ctx, seeds: list[int], sweep: int, jobs: int, cache: Path | None) -> tuple[dict, dict]:
     """Every task's result. The headline twin (HEAD) and the direct fits on every unit first; then the other
     twins: identified on every unit, fitted and held out on the first ``sweep`` units."""
@@ -283,7 +291,7 @@ def run(ctx: Ctx, seeds: list[int], sweep: int, jobs: int, cache: Path | None) -
     for s in seeds:
         specs += [("twin", s, *HEAD, True), ("grid", s), ("direct40", s)]
     for s in seeds:
-        specs += [("twin", s, n, r, s <= sweep) for n, r in ctx.twins if (n, r) != HEAD]
+        specs += [("twin", s, n, r, s <= sweep or (n, r) in FULL) for n, r in ctx.twins if (n, r) != HEAD]
     # the drawing's fits, then per unit its headline twin and direct fits, then the sweep's fits unit by unit
     rank = {"drawing": 0, "drawing-all": 0, "twin": 1, "grid": 1, "direct40": 1}
     specs.sort(key=lambda sp: (sp[0] == "twin" and sp[2:4] != HEAD and sp[4], rank[sp[0]]))
@@ -468,8 +476,8 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
                     mw(np.median(sens, axis=1), pct), fmt(np.median(S[:, :3])), pct(float(np.median(S[:, 3:]))),
                     pct(cover), mw(chi, lambda x: f"{x:.2f}"),
                     fmt(np.median([per[wf][s]["determined"] for s in ss])), str(fails)])
-        if wf == head:
-            verdicts["identify"] = (bool(np.all(np.median(off, axis=0) <= OFFSET_MM)
+        if wf in full_names(ctx):
+            verdicts[("identify", wf)] = (bool(np.all(np.median(off, axis=0) <= OFFSET_MM)
                                          and np.median(sens.max(axis=1)) <= SENS_REL
                                          and COVER[0] <= cover <= COVER[1]),
                                     np.median(off, axis=0), float(np.median(sens.max(axis=1))), cover)
@@ -501,9 +509,10 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
         worst_unit = np.max(allf, axis=0)
         row.append(mw(worst_unit))
         rows.append(row)
-        if wf == head:
-            verdicts["file"] = (bool(np.max(worst_unit) <= FILE_FACTOR), float(np.median(worst_unit)),
-                                float(np.max(worst_unit)))
+        if wf in full_names(ctx):
+            deployed = np.max(allf[2:], axis=0)  # the noisy figures: what the device delivers
+            verdicts[("file", wf)] = tuple((bool(np.max(w) <= FILE_FACTOR), float(np.median(w)), float(np.max(w)))
+                                           for w in (worst_unit, deployed))
     print(table(["workflow", "noise-free max", "noise-free RMS", "noisy max", "noisy RMS", "all four"], rows))
     print()
     if head in per:
@@ -539,16 +548,19 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
               + ", ".join(f"{o} {fmt(med[j])}" for j, o in enumerate(outs))
               + " (limits 1.25 / 1.5); worst " + ", ".join(f"{o} {fmt(worst[j])}" for j, o in enumerate(outs))
               + " (limits 1.5 / 2).")
-    if "identify" in verdicts:
-        ok, off, sens, cover = verdicts["identify"]
-        print(f"- **{'PASS' if ok else 'FAIL'}** identify ({head}): median |offset error| "
-              + ", ".join(f"{c} {fmt(off[i])}" for i, c in enumerate('xyz'))
-              + f" mm (limit {OFFSET_MM:g}); the median unit's worst element's sensitivity {pct(sens)} (limit 1 %); "
-              f"coverage of one-sigma intervals {pct(cover)} (55-80 %).")
-    if "file" in verdicts:
-        ok, m, w = verdicts["file"]
-        print(f"- **{'PASS' if ok else 'FAIL'}** model file against the unit ({head}): factor median {fmt(m)}, "
-              f"worst {fmt(w)} (limit {FILE_FACTOR:g}).")
+    for wf in full_names(ctx):
+        if ("identify", wf) in verdicts:
+            ok, off, sens, cover = verdicts[("identify", wf)]
+            print(f"- **{'PASS' if ok else 'FAIL'}** identify ({wf}): median |offset error| "
+                  + ", ".join(f"{c} {fmt(off[i])}" for i, c in enumerate('xyz'))
+                  + f" mm (limit {OFFSET_MM:g}); the median unit's worst element's sensitivity {pct(sens)} (limit "
+                  f"1 %); coverage of one-sigma intervals {pct(cover)} (55-80 %).")
+    for wf in full_names(ctx):
+        if ("file", wf) in verdicts:
+            (ok, m, w), (okd, md, wd) = verdicts[("file", wf)]
+            print(f"- **{'PASS' if ok else 'FAIL'}** model file against the unit ({wf}), all four figures: factor "
+                  f"median {fmt(m)}, worst {fmt(w)} (limit {FILE_FACTOR:g}); **{'PASS' if okd else 'FAIL'}** its "
+                  f"deployed (noisy) figures: median {fmt(md)}, worst {fmt(wd)}.")
     print()
     return verdicts
 
@@ -666,7 +678,7 @@ def main(argv: list[str] | None = None) -> int:
                     help=f"{N_HELD_QUICK} held-out poses, {DRAWS_QUICK} draws, {N_RANDOM_QUICK} random training poses, "
                          "the twins from 40 poses at 0.01 mm and 10 at 0.03 mm only")
     ap.add_argument("--sweep-units", type=int, metavar="M",
-                    help="fit and hold out the twins other than 40 poses at 0.01 mm on the first M units only (default: "
+                    help="fit and hold out the twins other than 40 and 100 poses at 0.01 mm on the first M units only (default: "
                          "all); they are identified on every unit")
     ap.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
     ap.add_argument("--plot", metavar="DIR", help="write units-heldout.png and units-identified.png here")

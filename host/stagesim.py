@@ -39,6 +39,7 @@ from collections import deque
 import numpy as np
 
 from fitgen.base.errors import InputError
+from fitgen.physics.pose import OFF_SKIN_MM
 
 from host.gcode import MACHINE_AXES
 from host.stageserver import PoseFile, PtyServer, SocketServer, pose_file_motion
@@ -56,7 +57,7 @@ class SimRig:
     """Carriage -> tool (backlash, repeatability) -> magnet (contact, map ``M``) -> ``target.set_pose``."""
 
     def __init__(self, target=None, M=None, *, axes: str = "X=dx,Y=dy,Z=dz", contact=(12.0, 8.0, 4.0),
-                 start=(10.0, 10.0, 10.0), backlash=0.03, repeatability=0.002, adhesion=0.05,
+                 start=(10.0, 10.0, 10.0), backlash=0.03, repeatability=0.002, adhesion=OFF_SKIN_MM,
                  travel=((0.0, 200.0),) * 3, seed: int = 0):
         self.target = target
         self.M = np.eye(3) if M is None else np.asarray(M, dtype=float).reshape(3, 3)

@@ -15,9 +15,12 @@ def magpylib_readings(sensor, poses: np.ndarray) -> np.ndarray:
 
     The magnet: magpylib's Cylinder with the unit's polarisation, rest centre + map @ (dx, dy, dz), and
     orientation Ry(thy) Rx(thx) of the pose after the unit's rest tilt; the field along each element's axis
-    plus the ambient field's; then |.|, the element's gain and offset, and the transfer.
+    plus the ambient field's; then |.|, the element's gain and offset, and the transfer. A unit's label more
+    than 0.05 mm above first contact (dz) has lifted the indenter off the skin: the magnet rests.
     """
-    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    poses = np.atleast_2d(np.asarray(poses, dtype=float)).copy()
+    if not sensor.is_drawing:
+        poses[poses[:, 2] > 0.05] = 0.0
     mag = sensor.magnet
     rest = Rotation.from_euler("xy", mag.tilt, degrees=True)
     pose_rot = Rotation.from_euler("xy", poses[:, 3:5], degrees=True)

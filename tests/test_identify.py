@@ -11,6 +11,7 @@ from conftest import assert_one_line_error, run_cli
 from fitgen.fitting.identify import Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
 from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings
 from fitgen.physics.units import UnitSpace, draw_unit
 
@@ -31,8 +32,7 @@ def plan(drawing):
 def capture(unit, poses, seed, rig_error=0.01, samples=SAMPLES):
     """A simulated capture: the stage off its labels by the rig's error, rows averaged over ``samples``."""
     rng = np.random.default_rng(seed)
-    true = poses.copy()
-    true[:, :3] += rng.normal(0.0, rig_error, (len(poses), 3))
+    true = rig_poses(poses, rig_error, rng)
     noise = unit.noise / np.sqrt(samples)
     return readings(unit, true, adc_bits=0) + rng.normal(0.0, noise, (len(poses), unit.n_elements)), noise
 
@@ -97,7 +97,12 @@ def test_a_capture_without_presses_names_what_it_starves(drawing, tmp_path):
 def test_schedule_is_d_optimal_within_limits(drawing, plan):
     poses, info = plan
     assert poses.shape == (40, 5) and np.all(poses[:, 3:] == 0)
-    assert np.all((poses[:, :2] >= -2) & (poses[:, :2] <= 2)) and np.all((poses[:, 2] >= -2) & (poses[:, 2] <= 0))
+    # the rest row: lifted off the skin, first in the stage's order; every other pose within the box
+    rest = poses[:, 2] > 0
+    assert info["rest_rows"] == rest.sum() >= 1 and np.all(poses[rest] == [0, 0, info["rest_lift_mm"], 0, 0])
+    assert np.all(rest[:rest.sum()])
+    inner = poses[~rest]
+    assert np.all((inner[:, :2] >= -2) & (inner[:, :2] <= 2)) and np.all((inner[:, 2] >= -2) & (inner[:, 2] <= 0))
     space = UnitSpace.of(drawing)
     noise = np.full(8, drawing.noise / np.sqrt(SAMPLES))
     logdet = lambda P: np.linalg.slogdet(Problem(space, np.zeros((len(P), 8)), P, noise, 0.01)  # noqa: E731
@@ -108,6 +113,25 @@ def test_schedule_is_d_optimal_within_limits(drawing, plan):
         rnd = np.column_stack([rng.uniform(-2, 2, 40), rng.uniform(-2, 2, 40), rng.uniform(-2, 0, 40),
                                np.zeros(40), np.zeros(40)])
         assert logdet(rnd) < info["log_det"]
+    # the schedule without its rest row(s), those poses pressed at the centre instead, pins less
+    pressed = poses.copy()
+    pressed[rest, 2] = 0.0
+    assert logdet(pressed) < info["log_det"] - 1.0
+
+
+def test_a_row_off_the_skin_carries_the_reading_noise_alone(drawing):
+    """The rig's error moves the stage, not a magnet at rest: a lifted row's covariance is the noise's."""
+    space = UnitSpace.of(drawing)
+    noise = np.full(8, drawing.noise / np.sqrt(SAMPLES))
+    poses = np.array([[0, 0, 0.2, 0, 0], [0, 0, 0.0, 0, 0], [1.0, -1.0, -1.0, 0, 0]])
+    prob = Problem(space, np.zeros((3, 8)), poses, noise, 0.03)
+    z = np.zeros(space.size)
+    slopes = prob.pose_slopes(z)
+    assert np.all(slopes[0] == 0) and np.all(np.abs(slopes[1:]).max(axis=(1, 2)) > 1e-3)  # V/mm
+    W = prob.whiteners(z)
+    np.testing.assert_allclose(W[0], np.diag(1 / noise))
+    # at rest but touching, the rig's error is in the row's covariance: it weighs less
+    assert abs(np.linalg.det(W[1])) < 0.01 * np.linalg.det(W[0])
 
 
 def test_cli_schedule_capture_identify(tmp_path):
@@ -119,6 +143,7 @@ def test_cli_schedule_capture_identify(tmp_path):
     assert header == "dx,dy,dz"
     table = np.loadtxt(sch, delimiter=",", skiprows=1)
     assert table.shape == (30, 3) and np.abs(table[:, :2]).max() <= 1.5 and table[:, 2].min() >= -1.5
+    assert np.all(table[table[:, 2] > 0] == [0, 0, 0.2]) and (table[:, 2] > 0).sum() >= 1  # the rest row
     proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "31", "--poses", str(sch),
                    "--noise", "0.0005", "-o", str(cap))
     assert proc.returncode == 0, proc.stderr

@@ -11,7 +11,8 @@ import pytest
 from conftest import assert_one_line_error, run_cli
 from fitgen.base.errors import InputError
 from fitgen.physics.sensor import load_sensor
-from fitgen.physics.simulate import DEFAULT_RANGES, pose_rng, random_poses
+from fitgen.physics.pose import off_skin
+from fitgen.physics.simulate import DEFAULT_RANGES, pose_rng, random_poses, rig_poses
 from fitgen.physics.transfer import readings
 from fitgen.physics.units import UnitSpace, draw_unit, unit_toml, write_unit
 from magpy_truth import magpylib_readings
@@ -34,6 +35,26 @@ def test_unit_readings_match_magpylib(preset, transfer):
         np.testing.assert_allclose(UnitSpace.of(drawing).readings(theta, POSES)[0], ref, rtol=0, atol=1e-11)
         # and the unit differs from its drawing by far more than the noise
         assert np.abs(ref - readings(drawing, POSES, adc_bits=0)).max() > 50 * drawing.noise
+
+
+def test_a_label_off_the_skin_reads_the_unit_at_rest():
+    """A unit's labels are the stage's: lifted above first contact (dz > 0.05 mm) the indenter leaves the skin
+    and the magnet rests, wherever the stage stands; a drawing's labels are the magnet's own."""
+    drawing = load_sensor("paper").with_transfer("gmr")
+    unit, theta = draw_unit(drawing, 3)
+    lifted = np.array([[0.5, -0.3, 0.2, 2.0, 1.0], [0.0, 0.0, 1.0, 0.0, 0.0]])
+    touching = np.array([[0.0, 0.0, 0.04, 0.0, 0.0], [0.5, -0.3, -0.2, 0.0, 0.0]])
+    rest = np.zeros((2, 5))
+    for read in (lambda P: readings(unit, P, adc_bits=0), lambda P: UnitSpace.of(drawing).readings(theta, P)[0],
+                 lambda P: magpylib_readings(unit, P)):
+        np.testing.assert_array_equal(read(lifted), read(rest))
+        assert np.all(np.abs(read(touching) - read(rest)).max(axis=1) > 10 * drawing.noise)
+    assert np.abs(readings(drawing, lifted, adc_bits=0) - readings(drawing, rest, adc_bits=0)).max() > 0.01
+    # a rig's error moves a stage about its labels, but neither lifts a touching row off nor a lifted one on
+    labels = np.vstack([np.zeros((500, 5)), np.tile([0, 0, 0.2, 0, 0], (500, 1))])
+    true = rig_poses(labels, 0.05, np.random.default_rng(1))
+    assert np.std(true[:500, 0]) == pytest.approx(0.05, rel=0.15) and true[:500, 2].max() == pytest.approx(0.05)
+    np.testing.assert_array_equal(off_skin(true), off_skin(labels))
 
 
 def test_drawing_is_unchanged():

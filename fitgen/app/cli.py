@@ -109,12 +109,15 @@ def cmd_fit(args) -> int:
     from fitgen.app.report import fit_summary
     from fitgen.base.progress import Progress
     from fitgen.fitting.family import auto_compares, fit_family
-    from fitgen.physics.dataset import load_dataset
+    from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.physics.scenes import scene_outputs
     from fitgen.physics.simulate import dataset_sensor
 
     settings = _settings(args)
-    ds = load_dataset(args.data)
+    ds, lifted = rows_on_the_skin(load_dataset(args.data))
+    if lifted:
+        print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, which serves identify; "
+              "their labels are no contact pose", file=sys.stderr)
     sensor = dataset_sensor(ds.meta, args.sensor)
     # --scene, or the scene the dataset was simulated for, names the outputs
     scene = args.scene or ds.meta.get("scene_spec")
@@ -132,6 +135,8 @@ def cmd_fit(args) -> int:
         model, family = fit_family(ds, outputs, settings, sensor, args.family, progress)
     model.fit_info["family"] = family
     model.fit_info["dataset"] = str(args.data)
+    if lifted:
+        model.fit_info["rows_off_skin_left_out"] = lifted
     if args.held_out and sensor is not None:
         from fitgen.fitting.holdout import fitted_held_out
 

@@ -102,7 +102,7 @@ def _unit_stage(out: Path, drawing_model) -> None:
     from fitgen.fitting.fit import FitSettings, fit_model
     from fitgen.fitting.holdout import box_of, evaluate, held_out_set
     from fitgen.fitting.identify import identify, load_posterior, row_noise, save
-    from fitgen.physics.dataset import load_dataset
+    from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.fitting.schedule import schedule, schedule_csv
     from fitgen.physics.sensor import load_sensor
     from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
@@ -140,7 +140,7 @@ def _unit_stage(out: Path, drawing_model) -> None:
     model, _ = fit_auto(train, None, FitSettings(), twin, progress=_fit_progress())
     model.fit_info["held_out"] = evaluate(model, twin, box_of(train.poses()), posterior=load_posterior(twin_file))
     model.save(out / "twin-model.json")
-    direct = fit_model(ds, ("dx", "dy", "dz"), FitSettings.family("no-roots"))
+    direct = fit_model(rows_on_the_skin(ds)[0], ("dx", "dy", "dz"), FitSettings.family("no-roots"))
     print(f"   twin's model -> {out / 'twin-model.json'} ({time.monotonic() - t:.1f} s)")
     held = held_out_set(unit, DEFAULT_RANGES, model.output_names)
     says = model.fit_info["held_out"]["errors"]["float"]

@@ -26,7 +26,6 @@ from fitgen.base.errors import InputError
 from fitgen.equations.fixedmodel import (INT16_MAX, INT32_MAX, INT32_MIN, FixedModel, FixedOp, FixedOutput,
                                          rshr)
 from fitgen.equations.model import Model
-from fitgen.equations.terms import DISPLACEMENTS
 
 BUDGET = {16: INT16_MAX, 32: INT32_MAX, 64: 2**62}
 MAX_SHIFT = {32: 30, 64: 62}  # the largest rounding shift of a product of that width

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from fitgen.base.errors import InputError
-from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.units import UnitSpace
 
@@ -273,6 +273,9 @@ def report(ident: Identification) -> str:
     n, N = ident.problem.readings.shape
     lines = [f"identify: {n} rows x {N} elements; residual chi-square {ident.chi2:.1f} on {ident.dof:.1f} degrees of "
              f"freedom (reduced {ident.reduced_chi2:.2f}; 1 when the physics explains the rows to the noise)"]
+    rest = int(np.sum(off_skin(ident.problem.poses)))
+    lines.append(f"rows off the skin (the magnet at rest, free of the rig's error): {rest}" + (
+        "" if rest else f"; a row with the stage lifted {REST_LIFT_MM:g} mm (fitgen schedule adds it) pins the rest readings"))
     lines.append("")
     lines.append("| what the capture determines | value | standard error |")
     lines.append("| --- | --- | --- |")

@@ -1,6 +1,9 @@
 """Capture schedules: the stage poses that pin a unit's parameters best (D-optimal).
 
-Candidates are a grid over the axes the stage moves (the others stay 0) within the limits. Each
+Candidates are a grid over the axes the stage moves (the others stay 0) within the limits and, when the
+stage moves dz, the rest row: the indenter lifted REST_LIFT_MM above first contact, off the skin, where
+the magnet rests whatever the rig's error (fitgen.physics.pose.contact_poses), so the row carries the
+reading noise alone. Each
 candidate's information about the unit's parameters (fitgen.fitting.identify.Problem, at the drawing, with
 the rig's error) is a rank-N update of the prior's; poses are chosen greedily for the largest
 log det of prior + information (by the matrix determinant lemma, an N x N determinant per
@@ -18,7 +21,7 @@ from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
 from fitgen.fitting.identify import RIG_ERROR, Problem
 from fitgen.physics.dataset import meta_path
-from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
 from fitgen.physics.units import UnitSpace
@@ -28,10 +31,14 @@ MAX_PASSES = 4
 
 
 def candidates(axes: tuple[str, ...], ranges: dict) -> np.ndarray:
-    """The grid of candidate poses over ``axes`` (others 0), LEVELS per axis."""
+    """The grid of candidate poses over ``axes`` (others 0), LEVELS per axis; then the rest row (the stage
+    lifted REST_LIFT_MM off the skin) when ``axes`` has dz."""
     levels = [np.linspace(*ranges[a], LEVELS) if a in axes else np.zeros(1) for a in POSE_NAMES]
     mesh = np.meshgrid(*levels, indexing="ij")
-    return np.column_stack([m.ravel() for m in mesh])
+    grid = np.column_stack([m.ravel() for m in mesh])
+    if "dz" not in axes:
+        return grid
+    return np.vstack([grid, [[0.0, 0.0, REST_LIFT_MM, 0.0, 0.0]]])
 
 
 def _logdet_gain(Finv: np.ndarray, J: np.ndarray) -> np.ndarray:
@@ -108,7 +115,8 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     info = {"criterion": "D-optimal (log det of the prior plus the capture's information, in prior spreads)",
             "log_det": logdet, "candidates": len(cand), "levels_per_axis": LEVELS, "axes": list(axes),
             "ranges": {a: list(ranges[a]) for a in axes}, "noise": noise, "rig_error": rig_error,
-            "sensor": drawing.name, "distinct_poses": int(len(np.unique(idx)))}
+            "sensor": drawing.name, "distinct_poses": int(len(np.unique(idx))),
+            "rest_rows": int(np.sum(off_skin(cand[idx]))), "rest_lift_mm": REST_LIFT_MM}
     return poses, info
 
 

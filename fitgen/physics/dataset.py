@@ -15,7 +15,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import read_text, sha256_hex, write_atomic
-from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.pose import POSE_NAMES, off_skin
 
 _INPUT_RE = re.compile(r"^v([1-9][0-9]*)$")
 
@@ -82,6 +82,24 @@ class Dataset:
         write_atomic(path, text)
         write_atomic(meta_path(path), json.dumps(info, indent=2, sort_keys=True) + "\n")
         return Path(path)
+
+
+def stage_labelled(ds: Dataset) -> bool:
+    """Whether ``ds``'s labels are a stage's displacements: a capture (``samples_per_row`` in its meta) or a
+    built unit simulated with the stage's labels."""
+    return "samples_per_row" in ds.meta or ds.meta.get("labels") == "stage"
+
+
+def rows_on_the_skin(ds: Dataset) -> tuple[Dataset, int]:
+    """``ds`` without the rows its stage lifted off the skin, and how many were left out. Such a row reads the
+    magnet at rest (fitgen.physics.pose.off_skin): it helps identify a unit, but its label is no contact pose
+    for an estimator to learn. A dataset whose labels are not a stage's is returned as it is."""
+    if not stage_labelled(ds) or "dz" not in ds.target_names:
+        return ds, 0
+    keep = ~off_skin(ds.poses())
+    if keep.all():
+        return ds, 0
+    return Dataset(ds.inputs[keep], ds.targets[keep], ds.target_names, dict(ds.meta)), int(np.sum(~keep))
 
 
 def meta_path(path: str | Path) -> Path:

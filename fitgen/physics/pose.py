@@ -14,6 +14,12 @@ from fitgen.physics.sensor import Sensor
 
 POSE_NAMES = ("dx", "dy", "dz", "thx", "thy")
 POSE_UNITS = ("mm", "mm", "mm", "deg", "deg")
+# A stage's label with dz above this (mm above first contact) has lifted the indenter off the skin: the
+# magnet rests whatever the rig's error. The margin is the skin's adhesion when the indenter just lifts.
+OFF_SKIN_MM = 0.05
+# Where a schedule's rest row lifts the stage (mm above first contact): clear of the adhesion with the rig's
+# error, and with a capture's default approach (0.3 mm from above) within a stage limit of dz <= 0.5.
+REST_LIFT_MM = 0.2
 
 
 def as_poses(poses) -> np.ndarray:
@@ -46,13 +52,26 @@ def rotation_matrices(thx_deg: np.ndarray, thy_deg: np.ndarray) -> np.ndarray:
     return R
 
 
+def off_skin(poses: np.ndarray) -> np.ndarray:
+    """Mask of the stage labels (P, 5) that lift the indenter off the skin (dz > OFF_SKIN_MM)."""
+    return np.asarray(poses)[:, 2] > OFF_SKIN_MM
+
+
+def contact_poses(poses: np.ndarray) -> np.ndarray:
+    """Stage labels (P, 5) as the magnet feels them: a row off the skin is the rest pose."""
+    return np.where(off_skin(poses)[:, None], 0.0, poses)
+
+
 def magnet_frame(sensor: Sensor, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Element positions and axes in the magnet's own frame, each (P, N, 3).
 
     For a built unit (fitgen.physics.units) the pose's displacement is the stage's: the magnet moves by
-    ``stage_map @ (dx, dy, dz)``; its tilt is the pose's applied after the unit's rest tilt.
+    ``stage_map @ (dx, dy, dz)``; its tilt is the pose's applied after the unit's rest tilt; a label off the
+    skin (:func:`contact_poses`) leaves it at rest.
     """
     poses = as_poses(poses)
+    if not sensor.is_drawing:
+        poses = contact_poses(poses)
     R = rotation_matrices(poses[:, 3], poses[:, 4])
     if any(sensor.magnet.tilt):
         R = R @ rotation_matrices(*sensor.magnet.tilt)

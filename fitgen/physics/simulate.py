@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 
 import numpy as np
 
 from fitgen import __version__
 from fitgen.physics.dataset import Dataset
 from fitgen.base.errors import InputError
-from fitgen.physics.pose import POSE_NAMES, as_poses
+from fitgen.physics.pose import OFF_SKIN_MM, POSE_NAMES, as_poses, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.transfer import readings
 
@@ -114,12 +115,13 @@ def simulate(
         raise InputError(f"noise must be >= 0, got {noise}")
     if labels not in ("stage", "magnet"):
         raise InputError(f"labels are the stage's or the magnet's, not {labels!r}")
-    physical = poses
+    source = sensor
     if labels == "magnet" and not sensor.is_drawing:
-        physical = poses.copy()
-        physical[:, :3] = np.linalg.solve(sensor.stage_map, poses[:, :3].T).T
+        # the magnet's own displacement: the unit with the identity for its stage map (a magnet label above
+        # first contact still rests: no indenter lifts it)
+        source = replace(sensor, stage_map=np.eye(3))
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
-    values = readings(sensor, physical, noise=noise, adc_bits=adc_bits, rng=rng)
+    values = readings(source, poses, noise=noise, adc_bits=adc_bits, rng=rng)
     cols = [POSE_NAMES.index(t) for t in targets]
     meta = {
         "generator": f"fitgen {__version__}",
@@ -135,6 +137,18 @@ def simulate(
         meta["labels"] = labels
     meta.update(provenance or {})
     return Dataset(values, poses[:, cols].copy(), tuple(targets), meta)
+
+
+def rig_poses(labels: np.ndarray, rig_error: float, rng: np.random.Generator) -> np.ndarray:
+    """Where a stage with ``rig_error`` mm rms per axis stands at stage ``labels`` (n, 5): each displacement off by
+    a normal draw; a row on the skin stays on it (dz at most OFF_SKIN_MM: the skin's adhesion holds the
+    indenter); a row off the skin is left as labelled (the magnet rests wherever the stage stands)."""
+    true = np.array(labels, dtype=float)
+    true[:, :3] += rig_error * rng.standard_normal((len(true), 3))
+    touching = ~off_skin(labels)
+    true[touching, 2] = np.minimum(true[touching, 2], OFF_SKIN_MM)
+    true[~touching] = labels[~touching]
+    return true
 
 
 def pose_rng(seed: int) -> np.random.Generator:

@@ -10,7 +10,8 @@ A unit's parameters, relative to its drawing (:class:`UnitSpace`, in this order)
   normal, turned about x and y), log gain, offset (mT, after |B . axis|);
 - a static ambient field x, y, z (mT);
 - the stage-to-magnet map M - I (9, row by row): the magnet moves by M (dx, dy, dz) when the stage,
-  whose displacement the labels record, moves by (dx, dy, dz).
+  whose displacement the labels record, moves by (dx, dy, dz); a label lifted off the skin
+  (fitgen.physics.pose.contact_poses) leaves the magnet at rest.
 
 Every parameter is 0 on the drawing. Its spread is the sensor file's ``[tolerances]``
 (:class:`fitgen.physics.sensor.Tolerances`); :func:`draw_unit` draws each normal, clipped at 3 sigma.
@@ -27,7 +28,7 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.physics.field import cylinder_projection
 from fitgen.base.fileio import write_atomic
-from fitgen.physics.pose import as_poses, rotation_matrices
+from fitgen.physics.pose import as_poses, contact_poses, rotation_matrices
 from fitgen.physics.sensor import Magnet, Sensor, Tolerances, load_sensor
 from fitgen.physics.transfer import OE_PER_MT
 
@@ -121,7 +122,7 @@ class UnitSpace:
         """Noise-free readings (K, n, N) of K units (rows of ``thetas``) at n poses, in the transfer's units,
         without the ADC's quantisation (a gmr reading is clipped to the ADC's range)."""
         d = self.drawing
-        poses = as_poses(poses)
+        poses = contact_poses(as_poses(poses))
         p = self._parts(thetas)
         R = rotation_matrices(poses[:, 3], poses[:, 4])[None] @ rotation_matrices(p["tilt"][:, 0], p["tilt"][:, 1])[:, None]
         centre = p["rest"][:, None, :] + np.einsum("nj,kij->kni", poses[:, :3], p["map"])
