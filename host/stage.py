@@ -74,6 +74,10 @@ class PoseStage:
             # at least as long as the approach loads the axis too
             need[k] = not ((self.loaded[k] and (abs(step) <= 1e-9 or towards)) or
                            (towards and abs(step) >= abs(a[k]) - 1e-9))
+        if current is not None and np.all(np.abs(target - current) <= 1e-9):
+            # a pose repeated: away to the approach point and back, so the row has its own landing error (a
+            # schedule's repeats are weighed as independent visits), not the last row's again
+            need = np.array([name in self.settings.axes.pose_axes and a[k] != 0 for k, name in enumerate(STAGE_AXES)])
         if not need.any():
             return [target]
         return [np.where(need, target + a, target), target]

@@ -160,6 +160,9 @@ def test_every_pose_is_approached_from_the_same_side():
     rec.sent.clear()
     st.move_to([0.5, 0.5, -1.0, 0, 0])  # dz lifts: from above again
     assert rec.sent == [{"X": 10.5, "Y": 20.5, "Z": 29.3}, {"X": 10.5, "Y": 20.5, "Z": 29.0}]
+    rec.sent.clear()
+    st.move_to([0.5, 0.5, -1.0, 0, 0])  # the same pose again: out to the approach point and back (a fresh landing)
+    assert rec.sent == [{"X": 10.2, "Y": 20.2, "Z": 29.3}, {"X": 10.5, "Y": 20.5, "Z": 29.0}]
     st.settings.approach = np.zeros(3)  # approach off: straight there
     rec.sent.clear()
     st.move_to([0, 0, 0, 0, 0])

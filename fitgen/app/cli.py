@@ -249,7 +249,8 @@ def cmd_schedule(args) -> int:
                                noise=(drawing.noise if noise is None else noise) / np.sqrt(args.samples),
                                rig_error=args.rig_error, progress=lambda i, n, note: bar.update(1, note))
     write_schedule(args.output, poses, axes, {**info, "samples_per_row": args.samples})
-    print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}) to {args.output}",
+    rest = f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"] else ""
+    print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}{rest}) to {args.output}",
           file=sys.stderr)
     return 0
 
@@ -397,7 +398,8 @@ def build_parser() -> Parser:
                     help="the readings the capture takes (default gmr: volts, as tactile-host capture reads them)")
     sc.add_argument("--n", type=int, default=40, help="poses to capture (default 40)")
     sc.add_argument("--axes", default="dx,dy,dz", help="the axes the stage moves (default dx,dy,dz)")
-    sc.add_argument("--limits", help="the stage's limits 'dx=-2:2 dz=-2:0 ...' (default: the sensor's pose box)")
+    sc.add_argument("--limits", help="the stage's limits 'dx=-2:2 dz=-2:0 ...' (default: the sensor's pose box); "
+                    "with dz, a rest row may lift the stage 0.2 mm above first contact besides")
     sc.add_argument("--samples", type=int, default=16, help="samples the capture averages per row (default 16)")
     sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
     sc.add_argument("--rig-error", type=_finite, default=0.01, metavar="MM", help="the stage's error, mm rms")
