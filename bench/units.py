@@ -10,7 +10,7 @@ docs/calibration.md holds its output.
 
 Run:
 
-    python bench/units.py --sweep-units 8 > out.md    # as in docs/calibration.md; 50 min on 2 busy cores
+    python bench/units.py --sweep-units 8 > out.md    # as in docs/calibration.md; 10-50 min on 2 cores
     python bench/units.py > out.md                    # every twin fitted on all 20 units; ~2 h on busy cores
     python bench/units.py --quick > quick.md          # 2 units, 500 held-out poses, 2 draws, 1,000 random
                                                       # training poses, two twins; 0.5-2.5 min
@@ -553,7 +553,7 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
             ok, off, sens, cover = verdicts[("identify", wf)]
             print(f"- **{'PASS' if ok else 'FAIL'}** identify ({wf}): median |offset error| "
                   + ", ".join(f"{c} {fmt(off[i])}" for i, c in enumerate('xyz'))
-                  + f" mm (limit {OFFSET_MM:g}); the median unit's worst element's sensitivity {pct(sens)} (limit "
+                  + f" mm (limit {OFFSET_MM:g}); the median unit's worst element's sensitivity {100 * sens:.3g} % (limit "
                   f"1 %); coverage of one-sigma intervals {pct(cover)} (55-80 %).")
     for wf in full_names(ctx):
         if ("file", wf) in verdicts:
