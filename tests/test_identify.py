@@ -149,6 +149,15 @@ def test_cli_schedule_capture_identify(tmp_path):
     assert proc.returncode == 0, proc.stderr
     proc = run_cli("fitgen", "identify", str(cap), "--sensor", "paper", "--noise", "0.0005", "-o", str(unit_file))
     assert proc.returncode == 0, proc.stderr
+    lifted = int((table[:, 2] > 0).sum())
+    assert f"rows off the skin (the magnet at rest, free of the rig's error): {lifted}" in proc.stdout
+    # a direct fit on the capture leaves the rest rows out: their label is no contact pose
+    fit = run_cli("fitgen", "fit", str(cap), "-o", str(tmp_path / "direct.json"), "--family", "no-roots",
+                  "--outputs", "dx,dy,dz")
+    assert fit.returncode == 0, fit.stderr
+    assert f"left out {lifted} row(s) lifted off the skin" in fit.stderr
+    direct = json.loads((tmp_path / "direct.json").read_text())
+    assert direct["fit"]["rows_off_skin_left_out"] == lifted
     assert "no capture can separate (10 directions" in proc.stdout and "e8 sensitivity" in proc.stdout
     post = json.loads((tmp_path / "unit.posterior.json").read_text())
     assert len(post["theta"]) == len(post["sd"]) == len(post["parameters"]) == 74
