@@ -218,7 +218,7 @@ def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:
              f"static const {real} {P}_tc_offset[{U}_TEMPCOMP_N] = {{ {', '.join(lit(x) for x in tc.offset)} }};",
              f"static const {real} {P}_tc_gain[{U}_TEMPCOMP_N] = {{ {', '.join(lit(x) for x in tc.gain)} }};",
              "",
-             f"/* v[k] = (v[k] - offset[k] (t - t0)) / (1 + gain[k] (t - t0)); a non-finite t leaves v as it is */",
+             "/* v[k] = (v[k] - offset[k] (t - t0)) / (1 + gain[k] (t - t0)); a non-finite t leaves v as it is */",
              f"static void {P}_tempcomp({real} v[{U}_TEMPCOMP_N], {real} temp)",
              "{", "    int k;", f"    const {real} dt = temp - {lit(tc.t0)};", "    if (!isfinite(temp)) {",
              "        return;", "    }", f"    for (k = 0; k < {U}_TEMPCOMP_N; ++k) {{",

@@ -11,7 +11,6 @@ from fitgen.fitting.augment import NoiseGrams, noise_blocks, noise_gram, roundin
 from fitgen.physics.dataset import Dataset
 from fitgen.fitting.fit import FitSettings, _d_jacobian, fit_model, noise_to_add, ring_harmonics
 from fitgen.fitting.holdout import clean_readings, deployed_errors, held_out_set
-from fitgen.equations.model import Model
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import DEFAULT_RANGES, grid_poses, pose_rng, random_poses, simulate

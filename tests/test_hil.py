@@ -4,7 +4,6 @@ import socket
 import threading
 import xml.etree.ElementTree as ET
 
-import numpy as np
 import pytest
 
 from fitgen.fitting.fit import fit_model
