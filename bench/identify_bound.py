@@ -77,7 +77,8 @@ def bound_rows(drawing) -> list[list[str]]:
         sens = np.median(e[:, 3:].max(axis=1))
         se = np.sqrt(np.diag(cov))
         ok = off.max() <= 0.03 and sens <= 0.01
-        rows.append([str(n), f"{rig:g}", str(s), "yes" if with_rest else "no", fmt(off[0]), fmt(off[1]), fmt(off[2]), f"{100 * sens:.2g} %",
+        rows.append([str(n), f"{rig:g}", str(s), "yes" if with_rest else "no", fmt(off[0]), fmt(off[1]), fmt(off[2]),
+                     f"{100 * sens:.2g} %",
                      fmt(se[2]), f"{100 * se[3:].mean():.2g} %", "yes" if ok else "no"])
         log(f"bound: {n} poses, rig {rig:g} mm, {s} samples" + ("" if with_rest else ", no rest row"))
     return rows

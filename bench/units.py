@@ -553,7 +553,8 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
             ok, off, sens, cover = verdicts[("identify", wf)]
             print(f"- **{'PASS' if ok else 'FAIL'}** identify ({wf}): median |offset error| "
                   + ", ".join(f"{c} {fmt(off[i])}" for i, c in enumerate('xyz'))
-                  + f" mm (limit {OFFSET_MM:g}); the median unit's worst element's sensitivity {100 * sens:.3g} % (limit "
+                  + f" mm (limit {OFFSET_MM:g}); the median unit's worst element's sensitivity {100 * sens:.3g} % "
+                  "(limit "
                   f"1 %); coverage of one-sigma intervals {pct(cover)} (55-80 %).")
     for wf in full_names(ctx):
         if ("file", wf) in verdicts:
@@ -678,7 +679,8 @@ def main(argv: list[str] | None = None) -> int:
                     help=f"{N_HELD_QUICK} held-out poses, {DRAWS_QUICK} draws, {N_RANDOM_QUICK} random training poses, "
                          "the twins from 40 poses at 0.01 mm and 10 at 0.03 mm only")
     ap.add_argument("--sweep-units", type=int, metavar="M",
-                    help="fit and hold out the twins other than 40 and 100 poses at 0.01 mm on the first M units only (default: "
+                    help="fit and hold out the twins other than 40 and 100 poses at 0.01 mm on the first M units only "
+                         "(default: "
                          "all); they are identified on every unit")
     ap.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
     ap.add_argument("--plot", metavar="DIR", help="write units-heldout.png and units-identified.png here")

@@ -249,7 +249,8 @@ def cmd_schedule(args) -> int:
                                noise=(drawing.noise if noise is None else noise) / np.sqrt(args.samples),
                                rig_error=args.rig_error, progress=lambda i, n, note: bar.update(1, note))
     write_schedule(args.output, poses, axes, {**info, "samples_per_row": args.samples})
-    rest = f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"] else ""
+    rest = (f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"]
+            else "")
     print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}{rest}) to {args.output}",
           file=sys.stderr)
     return 0

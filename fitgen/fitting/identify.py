@@ -274,8 +274,8 @@ def report(ident: Identification) -> str:
     lines = [f"identify: {n} rows x {N} elements; residual chi-square {ident.chi2:.1f} on {ident.dof:.1f} degrees of "
              f"freedom (reduced {ident.reduced_chi2:.2f}; 1 when the physics explains the rows to the noise)"]
     rest = int(np.sum(off_skin(ident.problem.poses)))
-    lines.append(f"rows off the skin (the magnet at rest, free of the rig's error): {rest}" + (
-        "" if rest else f"; a row with the stage lifted {REST_LIFT_MM:g} mm (fitgen schedule adds it) pins the rest readings"))
+    hint = f"; a row with the stage lifted {REST_LIFT_MM:g} mm (fitgen schedule adds it) pins the rest readings"
+    lines.append(f"rows off the skin (the magnet at rest, free of the rig's error): {rest}" + ("" if rest else hint))
     lines.append("")
     lines.append("| what the capture determines | value | standard error |")
     lines.append("| --- | --- | --- |")
