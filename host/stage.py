@@ -60,13 +60,16 @@ class PoseStage:
         target = np.asarray(pose, dtype=float)[:3].copy()
         a = self.settings.approach
         current = None if self.position is None else self.settings.axes.to_pose(self.zero, self.position)
+        # a pose repeated goes away to the approach point and back, so the row has its own landing error (a
+        # schedule's repeats are weighed as independent visits), not the last row's again
+        repeat = current is not None and bool(np.all(np.abs(target - current) <= 1e-9))
         need = np.zeros(3, dtype=bool)
         for name in self.settings.axes.pose_axes:
             k = STAGE_AXES.index(name)
             if a[k] == 0:
                 continue
-            if current is None:
-                need[k] = True  # where the backlash sits is unknown
+            if current is None or repeat:
+                need[k] = True  # where the backlash sits is unknown, or a fresh landing is wanted
                 continue
             step = target[k] - current[k]
             towards = step * -np.sign(a[k]) > 1e-9  # moving the approach's way
@@ -74,10 +77,6 @@ class PoseStage:
             # at least as long as the approach loads the axis too
             need[k] = not ((self.loaded[k] and (abs(step) <= 1e-9 or towards)) or
                            (towards and abs(step) >= abs(a[k]) - 1e-9))
-        if current is not None and np.all(np.abs(target - current) <= 1e-9):
-            # a pose repeated: away to the approach point and back, so the row has its own landing error (a
-            # schedule's repeats are weighed as independent visits), not the last row's again
-            need = np.array([name in self.settings.axes.pose_axes and a[k] != 0 for k, name in enumerate(STAGE_AXES)])
         if not need.any():
             return [target]
         return [np.where(need, target + a, target), target]
