@@ -16,9 +16,14 @@ def test_demo_runs_end_to_end(tmp_path):
     # three headers verified by gcc, then the HIL suite on the emulated Cortex-M4
     assert text.count("PASS") == 4 and "FAIL" not in text
     assert "HIL suite on the emulated core: PASS" in text
-    # a model in volts, and the line that opens the live view with it
     from fitgen.equations.model import load_model
 
+    # the device's model says what it does on built units, flashed uncalibrated: far worse than on the drawing
+    device = load_model(out / "device-model.json").fit_info["held_out"]
+    assert "units built within the drawing's tolerances, flashed uncalibrated" in text
+    for o, rec in device["uncalibrated"]["errors"].items():
+        assert rec["noisy_max"] > 3 * device["errors"]["float"][o]["noisy_max"], o
+    # a model in volts, and the line that opens the live view with it
     volts = load_model(out / "model-volts.json")
     assert volts.input_units == "V" and volts.fit_info["family"]["auto"]
     assert f"tactile-host view --model {out / 'model-volts.json'} --adc" in text and "--simulate motion" in text

@@ -141,6 +141,44 @@ def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
     assert proc.returncode == 0, proc.stderr
     held = json.loads((tmp_path / "m.json").read_text())["fit"]["held_out"]
     assert held["sensor"] == unit.name and held["sensor_sha256"] == unit.sha256
+    assert "uncalibrated" not in held  # a unit's own model: nothing to say about other units
+
+
+def test_the_drawings_model_file_says_what_it_does_on_built_units(tmp_path):
+    """A model fitted on the drawing records its held-out figures on units built within the drawing's tolerances,
+    flashed uncalibrated: checked unit by unit against magpylib's readings of the same units."""
+    from fitgen.equations.model import load_model
+    from fitgen.fitting.holdout import UNCALIBRATED_UNITS, tolerance_units
+    from fitgen.physics.transfer import quantise
+
+    data = tmp_path / "d.csv"
+    assert run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--grid", "paper-exp",
+                   "-o", str(data)).returncode == 0
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--held-out", "300",
+                   "--family", "no-roots")
+    assert proc.returncode == 0, proc.stderr
+    assert f"flashed uncalibrated into {UNCALIBRATED_UNITS} units" in proc.stderr
+    model = load_model(tmp_path / "m.json")
+    held = model.fit_info["held_out"]
+    unc = held["uncalibrated"]
+    assert unc["units"] == UNCALIBRATED_UNITS and unc["precision"] == "float"
+    drawing = load_sensor("paper").with_transfer("gmr")
+    box = {k: tuple(v) for k, v in held["box"].items()}
+    poses = random_poses(300, box, pose_rng(held["seed"]))
+    g = drawing.gmr
+    per_unit = []
+    for unit in tolerance_units(drawing):
+        x = quantise(magpylib_readings(unit, poses), g.adc_min, g.adc_max, g.adc_bits)
+        err = np.abs(model.predict(x, precision="float")[:, :3] - poses[:, :3])
+        per_unit.append(err.max(axis=0))
+    per_unit = np.array(per_unit)
+    for j, o in enumerate(("dx", "dy", "dz")):
+        rec = unc["errors"][o]
+        np.testing.assert_allclose(np.median(per_unit[:, j]), rec["max"], rtol=1e-3)
+        np.testing.assert_allclose([per_unit[:, j].min(), per_unit[:, j].max()], [rec["max_lo"], rec["max_hi"]],
+                                   rtol=1e-3)
+        # the point of the record: on a built unit the drawing's model errs far more than on the drawing
+        assert rec["max"] > 3 * held["errors"]["float"][o]["max"]
 
 
 def test_labels_are_the_stages_or_the_magnets():

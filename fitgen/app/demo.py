@@ -19,7 +19,7 @@ def run_demo(out: Path) -> int:
     from fitgen.physics.sensor import load_sensor
     from fitgen.fitting.family import fit_auto
     from fitgen.fitting.fit import FitSettings, fit_model
-    from fitgen.fitting.holdout import box_of, deployed_errors, held_out_set
+    from fitgen.fitting.holdout import box_of, deployed_errors, held_out_set, uncalibrated
     from fitgen.app.report import format_report
     from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 
@@ -61,12 +61,19 @@ def run_demo(out: Path) -> int:
     model.fit_info["dataset"] = str(out / "paper-sim.csv")
     held = held_out_set(sensor, box_of(train.poses()), model.output_names)
     model.fit_info["held_out"] = {**held.spec, "errors": deployed_errors(model, held, sensor)}
+    unc = uncalibrated(model, sensor, box_of(train.poses()))
+    if unc is not None:
+        model.fit_info["held_out"]["uncalibrated"] = unc
     model.save(out / "device-model.json")
     write_atomic(out / "device-report.md", format_report(model, test, "2,000 random poses never used in fitting"))
     print(f"   model -> {out / 'device-model.json'}, report -> {out / 'device-report.md'} "
           f"({time.monotonic() - t:.1f} s)")
     _print_deployed(paper_model, model, deployed_errors(paper_model, held, sensor, ("double", "float")),
                     model.fit_info["held_out"]["errors"], held.spec)
+    if unc is not None:
+        print(f"   on {unc['units']} units built within the drawing's tolerances, flashed uncalibrated (median max "
+              "error with noise): " + ", ".join(f"{o} {v['noisy_max']:.3g}" for o, v in unc["errors"].items())
+              + " mm / deg; step 8 calibrates one")
 
     _stage("5. C code generation of the device's model, verified against Python by gcc")
     held_clean = (held.clean, held.truth)

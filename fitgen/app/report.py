@@ -111,7 +111,23 @@ def deployed_table(model: Model) -> str:
             lines.append(f"| {e.name} | {e.unit} | {prec} | {' | '.join(cells)} | {x['share']:.1%} |")
     missing = [f"{p}: {errs['unavailable']}" for p, errs in rec["errors"].items() if "unavailable" in errs]
     lines += [""] + [f"Not available in {m}" for m in missing] + ([""] if missing else [])
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + uncalibrated_lines(model)) + "\n"
+
+
+def uncalibrated_lines(model: Model) -> list[str]:
+    """Markdown lines: what the drawing's model does flashed uncalibrated into built units (the ``uncalibrated``
+    record of its ``held_out``), none without one."""
+    unc = (model.fit_info.get("held_out") or {}).get("uncalibrated")
+    if not isinstance(unc, dict):
+        return []
+    errs = unc["errors"]
+    cells = [f"{e.name} {_g(errs[e.name]['noisy_max'])} {e.unit} ({_g(errs[e.name]['noisy_max_lo'])}"
+             f"-{_g(errs[e.name]['noisy_max_hi'])})" for e in model.equations if e.name in errs]
+    return [f"A built unit is not its drawing: flashed uncalibrated into {unc['units']} units drawn within the "
+            f"drawing's [tolerances] (seed {unc['seed']}, {unc['precision']}), this model's max error with noise is "
+            + ", ".join(cells) + " (the median over the units, their range in brackets). Calibrate each unit: "
+            "fitgen schedule, tactile-host capture --stage, fitgen identify, then fit its twin "
+            "(docs/calibration.md).", ""]
 
 
 def format_report(model: Model, ds: Dataset | None = None, title: str = "", paper: bool = False) -> str:

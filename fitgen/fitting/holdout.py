@@ -152,6 +152,54 @@ def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, 
                                        "is one draw of that spread: bench/identify_bound.py)"}}
 
 
+UNCALIBRATED_UNITS = 8  # units built within a drawing's tolerances, to show what its model does on them uncalibrated
+UNCALIBRATED_SEED = 2029
+
+
+def tolerance_units(drawing, k: int = UNCALIBRATED_UNITS, seed: int = UNCALIBRATED_SEED) -> list:
+    """``k`` units of ``drawing`` drawn within its ``[tolerances]`` (as ``fitgen simulate --unit`` draws one); none
+    when the tolerances are all 0."""
+    from fitgen.physics.units import UnitSpace
+
+    space = UnitSpace.of(drawing)
+    if not np.any(space.prior_sd > 0):
+        return []
+    rng = np.random.default_rng(seed)
+    return [space.sensor(space.draw(rng), f"{drawing.name}-built-{i + 1}",
+                         f"a unit of {drawing.name} drawn within its tolerances") for i in range(k)]
+
+
+def device_precision(model: Model) -> str:
+    """The precision the model was fitted to run in (double for exact arithmetic)."""
+    target = (model.fit_info.get("precision") or {}).get("target") if isinstance(model.fit_info, dict) else None
+    return target if target in PRECISIONS else "double"
+
+
+def uncalibrated(model: Model, drawing, ranges: dict, *, noise: float | None = None, n: int = N_POSES,
+                 seed: int = SEED, draws: int = NOISE_DRAWS) -> dict | None:
+    """The ``uncalibrated`` record of a model fitted on ``drawing``: its held-out figures, in the precision it was
+    fitted for, on UNCALIBRATED_UNITS units built within the drawing's tolerances into which it is flashed as it is
+    (no capture, no identify); per output the median over the units, their least and greatest. Targets are the
+    stage's displacements, as a capture of such a unit labels them. None when the tolerances are all 0."""
+    units = tolerance_units(drawing)
+    if not units:
+        return None
+    prec = device_precision(model)
+    per_unit = []
+    for u in units:
+        held = held_out_set(u, ranges, model.output_names, noise=noise, n=n, seed=seed, draws=draws)
+        per_unit.append(deployed_errors(model, held, u, (prec,))[prec])
+    if "unavailable" in per_unit[0]:
+        return None
+    errors = {o: {**{f: float(np.median([u[o][f] for u in per_unit])) for f in SPREAD_FIGURES},
+                  **{f"{f}_{k}": float(fn([u[o][f] for u in per_unit]))
+                     for f in SPREAD_FIGURES for k, fn in (("lo", np.min), ("hi", np.max))}}
+              for o in model.output_names}
+    return {"units": len(units), "seed": UNCALIBRATED_SEED, "precision": prec, "errors": errors,
+            "statistic": "median over units drawn within the drawing's [tolerances], the model flashed into them "
+                         "uncalibrated; *_lo, *_hi: their least and greatest"}
+
+
 def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None) -> dict:
     """The ``held_out`` record of a model fitted to dataset ``ds``: :func:`evaluate` on ``n`` poses in
     the box of its poses, with the device's noise the fit assumed and the dataset's labels; on units
@@ -168,6 +216,13 @@ def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None)
                       labels=ds.meta.get("labels", "stage"))
     if unit_file and not sensor.is_drawing:
         record["sensor_file"] = str(unit_file)
+    if posterior is None and sensor.is_drawing and ds.meta.get("sensor_sha256") == sensor.sha256:
+        # the drawing's own model: what it does on the units people build from the drawing, if not calibrated
+        if note:
+            note(f"{UNCALIBRATED_UNITS} units built within the drawing's tolerances")
+        unc = uncalibrated(model, sensor, box_of(ds.poses()), noise=noise, n=n)
+        if unc is not None:
+            record["uncalibrated"] = unc
     return record
 
 
