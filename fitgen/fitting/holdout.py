@@ -114,6 +114,16 @@ FIGURES = ("max", "rms", "noisy_max", "noisy_rms", "deviation", "share")
 SPREAD_FIGURES = ("max", "rms", "noisy_max", "noisy_rms")  # their range over the posterior's units is recorded
 
 
+def over_units(values: list[dict], figures, p90=()) -> dict:
+    """One output's figures over units (``values``: each unit's): the median of each of ``figures``, the 90th
+    percentile of ``p90``'s, the least (``*_lo``) and greatest (``*_hi``) of SPREAD_FIGURES."""
+    out = {f: float(np.median([v[f] for v in values])) for f in figures}
+    out.update({f"{f}_p90": float(np.percentile([v[f] for v in values], 90)) for f in p90})
+    out.update({f"{f}_{k}": float(fn([v[f] for v in values]))
+                for f in SPREAD_FIGURES for k, fn in (("lo", np.min), ("hi", np.max))})
+    return out
+
+
 def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, n: int = N_POSES,
              seed: int = SEED, draws: int = NOISE_DRAWS, posterior: dict | None = None,
              labels: str = "stage") -> dict:
@@ -139,11 +149,7 @@ def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, 
         if "unavailable" in rec:
             errors[prec] = rec
             continue
-        errors[prec] = {o: {**{f: float(np.median([u[prec][o][f] for u in per_unit])) for f in FIGURES},
-                            **{f"{f}_p90": float(np.percentile([u[prec][o][f] for u in per_unit], 90))
-                               for f in ("max", "noisy_max")},
-                            **{f"{f}_{k}": float(fn([u[prec][o][f] for u in per_unit]))
-                               for f in SPREAD_FIGURES for k, fn in (("lo", np.min), ("hi", np.max))}}
+        errors[prec] = {o: over_units([u[prec][o] for u in per_unit], FIGURES, p90=("max", "noisy_max"))
                         for o in rec}
     return {**spec, "sensor": sensor.name, "sensor_sha256": sensor.sha256, "errors": errors,
             "posterior": {"units": len(units), "seed": POSTERIOR_SEED,
@@ -191,10 +197,7 @@ def uncalibrated(model: Model, drawing, ranges: dict, *, noise: float | None = N
         per_unit.append(deployed_errors(model, held, u, (prec,))[prec])
     if "unavailable" in per_unit[0]:
         return None
-    errors = {o: {**{f: float(np.median([u[o][f] for u in per_unit])) for f in SPREAD_FIGURES},
-                  **{f"{f}_{k}": float(fn([u[o][f] for u in per_unit]))
-                     for f in SPREAD_FIGURES for k, fn in (("lo", np.min), ("hi", np.max))}}
-              for o in model.output_names}
+    errors = {o: over_units([u[o] for u in per_unit], SPREAD_FIGURES) for o in model.output_names}
     return {"units": len(units), "seed": UNCALIBRATED_SEED, "precision": prec, "errors": errors,
             "statistic": "median over units drawn within the drawing's [tolerances], the model flashed into them "
                          "uncalibrated; *_lo, *_hi: their least and greatest"}
