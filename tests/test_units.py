@@ -179,6 +179,13 @@ def test_the_drawings_model_file_says_what_it_does_on_built_units(tmp_path):
                                    rtol=1e-3)
         # the point of the record: on a built unit the drawing's model errs far more than on the drawing
         assert rec["max"] > 3 * held["errors"]["float"][o]["max"]
+    # fitgen report prints it; a record that is not fitgen's is one line, status 2
+    proc = run_cli("fitgen", "report", str(tmp_path / "m.json"))
+    assert proc.returncode == 0 and f"flashed uncalibrated into {UNCALIBRATED_UNITS} units" in proc.stdout
+    raw = json.loads((tmp_path / "m.json").read_text())
+    del raw["fit"]["held_out"]["uncalibrated"]["errors"]
+    (tmp_path / "bad.json").write_text(json.dumps(raw))
+    assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "bad.json")), 2, "held_out record is malformed")
 
 
 def test_labels_are_the_stages_or_the_magnets():

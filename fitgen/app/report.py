@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fitgen.base.errors import InputError
 from fitgen.physics.dataset import Dataset
 from fitgen.fitting.fit import error_stats
 from fitgen.equations.model import Model
@@ -87,10 +88,19 @@ def fit_summary(model: Model, held_out: int) -> str:
 
 
 def deployed_table(model: Model) -> str:
-    """Markdown: held-out errors per precision (the model file's ``held_out`` record), '' without one."""
+    """Markdown: held-out errors per precision (the model file's ``held_out`` record), '' without one;
+    InputError for a record that is not fitgen's."""
     rec = model.fit_info.get("held_out")
     if not isinstance(rec, dict):
         return ""
+    try:
+        return _deployed_table(model, rec)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise InputError(f"the model file's held_out record is malformed ({type(exc).__name__}: {exc}); fit it "
+                         "again with fitgen fit") from None
+
+
+def _deployed_table(model: Model, rec: dict) -> str:
     post = rec.get("posterior")
     on = (f"on {post['units']} units drawn from the posterior of identified unit {rec.get('sensor', '?')} "
           "(the median of each figure, their range in brackets: the unit is one draw of it)"
