@@ -121,13 +121,13 @@ def _deployed_table(model: Model, rec: dict) -> str:
             lines.append(f"| {e.name} | {e.unit} | {prec} | {' | '.join(cells)} | {x['share']:.1%} |")
     missing = [f"{p}: {errs['unavailable']}" for p, errs in rec["errors"].items() if "unavailable" in errs]
     lines += [""] + [f"Not available in {m}" for m in missing] + ([""] if missing else [])
-    return "\n".join(lines + uncalibrated_lines(model)) + "\n"
+    return "\n".join(lines + uncalibrated_lines(model, rec)) + "\n"
 
 
-def uncalibrated_lines(model: Model) -> list[str]:
+def uncalibrated_lines(model: Model, rec: dict) -> list[str]:
     """Markdown lines: what the drawing's model does flashed uncalibrated into built units (the ``uncalibrated``
-    record of its ``held_out``), none without one."""
-    unc = (model.fit_info.get("held_out") or {}).get("uncalibrated")
+    record of its ``held_out`` record ``rec``), none without one."""
+    unc = rec.get("uncalibrated")
     if not isinstance(unc, dict):
         return []
     errs = unc["errors"]
