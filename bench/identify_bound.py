@@ -9,7 +9,10 @@ each row's covariance as identify weighs it). From it, by Monte Carlo of that Ga
 units that an efficient estimator reaches: |offset error| per axis and the worst of the eight elements'
 sensitivity errors (and, read per element as the offset per axis, the worst element's median). Beside them
 the acceptance limits of issue 21 (0.03 mm, 1 %). The schedule may take the rest row (the stage lifted off
-the skin: the readings at rest, free of the rig's error); two rows show the bound without it. bench/units.py
+the skin: the readings at rest, free of the rig's error); two rows show the bound without it. The last rows
+give the capture's zero an error common to its rows in contact (0.02 mm per axis, identify's default): the
+schedule is the same (its design adds rows up and leaves the zero out), the information has the zero's rank-3
+term as identify weighs it. bench/units.py
 measures identify itself on 20 magpylib units (docs/calibration.md).
 
 Part 2, the spread. For units 1..K (bench/units.py's units, captures and twin, 40 poses, 0.01 mm): the twin's
@@ -34,16 +37,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from benchutil import fmt, log, table  # noqa: E402
 from fitgen.fitting.holdout import box_of, deployed_errors, held_out_set, posterior_units  # noqa: E402
-from fitgen.fitting.identify import Problem, derived_quantities, identify, load_posterior, save  # noqa: E402
+from fitgen.fitting.identify import (ZERO_ERROR, Problem, derived_quantities, identify, load_posterior,  # noqa: E402
+                                     save)
 from fitgen.fitting.schedule import candidates, d_optimal  # noqa: E402
 from fitgen.physics.pose import off_skin  # noqa: E402
 from fitgen.physics.sensor import load_sensor  # noqa: E402
 from fitgen.physics.simulate import DEFAULT_RANGES  # noqa: E402
 from fitgen.physics.units import UnitSpace  # noqa: E402
 
-# (poses, rig error, samples per row, the rest row among the candidates)
-CONFIGS = ([(n, r, s, True) for r in (0.0, 0.01, 0.03) for s in (16, 64) for n in (20, 40, 100)]
-           + [(n, 0.01, 16, False) for n in (40, 100)])
+# (poses, rig error, samples per row, the rest row among the candidates, the zero's error)
+CONFIGS = ([(n, r, s, True, 0.0) for r in (0.0, 0.01, 0.03) for s in (16, 64) for n in (20, 40, 100)]
+           + [(n, 0.01, 16, False, 0.0) for n in (40, 100)]
+           + [(n, r, 16, True, ZERO_ERROR) for r in (0.01, 0.03) for n in (20, 40, 100)])
 MC = 20000
 FIGS = ("max", "rms", "noisy_max", "noisy_rms")
 
@@ -63,15 +68,19 @@ def bound_rows(drawing) -> list[list[str]]:
     z = np.zeros(space.size)
     rng = np.random.default_rng(0)
     rows, Js = [], {}
-    for n, rig, s, with_rest in CONFIGS:
+    for n, rig, s, with_rest, zero in CONFIGS:
         key = (rig, s)
+        noise = np.full(drawing.n_elements, drawing.noise / np.sqrt(s))
         if key not in Js:
-            prob = Problem(space, np.zeros((len(cand), drawing.n_elements)), cand,
-                           np.full(drawing.n_elements, drawing.noise / np.sqrt(s)), rig)
+            prob = Problem(space, np.zeros((len(cand), drawing.n_elements)), cand, noise, rig)
             Js[key] = np.einsum("nij,njp->nip", prob.whiteners(z), prob.jacobian(z))
         J = Js[key] if with_rest else Js[key][~rest]
-        idx, _ = d_optimal(J, n)
+        idx, _ = d_optimal(J, n)  # the schedule's design, which leaves the zero's error out (rows add up)
         F = np.einsum("cnp,cnq->pq", J[idx], J[idx]) + np.eye(space.size)
+        if zero > 0:  # the capture's information with one zero error shared by its rows in contact, as identify has it
+            chosen = (cand if with_rest else cand[~rest])[idx]
+            F = Problem(space, np.zeros((len(chosen), drawing.n_elements)), chosen, noise, rig,
+                        zero_error=zero).information(z) + np.eye(space.size)
         cov = G @ np.linalg.inv(F) @ G.T
         e = np.abs(rng.multivariate_normal(np.zeros(len(G)), cov, MC))
         off = np.median(e[:, :3], axis=0)
@@ -79,10 +88,11 @@ def bound_rows(drawing) -> list[list[str]]:
         per_el = np.median(e[:, 3:], axis=0).max()  # read per element over units, as the offset per axis
         se = np.sqrt(np.diag(cov))
         ok = off.max() <= 0.03 and sens <= 0.01
-        rows.append([str(n), f"{rig:g}", str(s), "yes" if with_rest else "no", fmt(off[0]), fmt(off[1]), fmt(off[2]),
+        rows.append([str(n), f"{rig:g}", f"{zero:g}", str(s), "yes" if with_rest else "no",
+                     fmt(off[0]), fmt(off[1]), fmt(off[2]),
                      f"{100 * sens:.2g} %", f"{100 * per_el:.2g} %",
                      fmt(se[2]), f"{100 * se[3:].mean():.2g} %", "yes" if ok else "no"])
-        log(f"bound: {n} poses, rig {rig:g} mm, {s} samples" + ("" if with_rest else ", no rest row"))
+        log(f"bound: {n} poses, rig {rig:g} mm, zero {zero:g} mm, {s} samples" + ("" if with_rest else ", no rest row"))
     return rows
 
 
@@ -98,7 +108,8 @@ def spread_rows(drawing, seeds: list[int]) -> list[list[str]]:
         unit, _ = U.draw_unit(ctx.drawing, seed)
         labels = ctx.schedules[U.HEAD]
         y = U.capture(unit, labels, U.HEAD[1], [seed, U.HEAD[0], 3])
-        ident = identify(ctx.drawing, y, labels, ctx.noise / np.sqrt(U.SAMPLES), rig_error=U.HEAD[1])
+        ident = identify(ctx.drawing, y, labels, ctx.noise / np.sqrt(U.SAMPLES), rig_error=U.HEAD[1],
+                         zero_error=0.0)  # bench/units.py's headline capture: its zero is exact
         with tempfile.TemporaryDirectory(prefix="fitgen-bound-") as tmp:
             path, _ = save(ident, Path(tmp) / "unit.toml", {"capture": "bench", "drawing_spec": U.PRESET})
             twin, post = load_sensor(path), load_posterior(path)
@@ -130,7 +141,8 @@ def main() -> None:
     print("## The bound: what an efficient estimator recovers from a D-optimal three-axis capture\n")
     print(f"paper in gmr (noise {drawing.noise:g} V per sample); medians over units of a Gaussian posterior "
           f"linearised at the drawing ({MC} draws). Limits (issue 21): offset 0.03 mm, worst element 1 %.\n")
-    print(table(["poses", "rig error [mm]", "samples per row", "rest row", "offset x", "offset y", "offset z",
+    print(table(["poses", "rig error [mm]", "zero error [mm]", "samples per row", "rest row",
+                 "offset x", "offset y", "offset z",
                  "sensitivity, worst element", "sensitivity, per element over units", "offset z se", "sensitivity se",
                  "within the limits"],
                 bound_rows(drawing)))

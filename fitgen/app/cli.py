@@ -221,10 +221,11 @@ def cmd_identify(args) -> int:
     drawing = _sensor(args) if args.transfer else in_capture_units(_sensor(args), ds.meta)
     noise, source = row_noise(ds.meta, drawing, args.noise)
     with Progress("identify", 4) as bar:
-        ident = identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
+        ident = identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error, zero_error=args.zero_error,
                          progress=lambda i, n, note: bar.update(1, note))
     check_explained(ident, args.capture, drawing.name, source)
-    print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm", file=sys.stderr)
+    print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
+          f"{args.zero_error:g} mm", file=sys.stderr)
     print(report(ident), end="")
     spec = str(Path(args.sensor).resolve()) if Path(args.sensor).is_file() else args.sensor
     unit, post = save(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
@@ -391,6 +392,9 @@ def build_parser() -> Parser:
                         "sensor file's), divided by sqrt(samples per row)")
     i.add_argument("--rig-error", type=_finite, default=0.01, metavar="MM",
                    help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
+    i.add_argument("--zero-error", type=_finite, default=0.02, metavar="MM",
+                   help="how far the capture's zero may be from first contact, mm rms per axis, one error shared by "
+                        "every row in contact (default 0.02)")
     i.add_argument("-o", "--output", required=True, metavar="UNIT.toml", help="the unit's sensor file to write")
 
     sc = command("schedule", cmd_schedule, "the capture poses that pin a unit's parameters best (D-optimal)")

@@ -5,7 +5,10 @@ The model: each row's readings are the unit's noise-free readings (fitgen.physic
 at the stage's true displacement, plus the reading noise. The stage's true displacement is the row's
 label plus the rig's own error (errors in variables, ``rig_error`` mm rms per axis); to first order it
 adds J_s J_s^T rig_error^2 to the row's covariance (J_s: the readings' slope by the stage's
-displacement), so each row is whitened by its own covariance. The prior: the drawing's tolerances
+displacement), so each row is whitened by its own covariance. The capture's zero (first contact, set by
+hand) is off by one error common to every row in contact (``zero_error`` mm rms per axis; rows off the skin
+read the rest and do not see it): a rank-3 term J_0 J_0^T zero_error^2 over all rows, whitened through the
+thin SVD of J_0 after the rows' own whitening. The prior: the drawing's tolerances
 (every parameter 0 +- its spread). Work is in units of the prior's spread (z = theta / sd), where the
 prior is the identity; scipy.optimize.least_squares finds the maximum, with Jacobians by central
 differences over all parameters at once (one batched evaluation of the field).
@@ -35,6 +38,9 @@ from fitgen.physics.sensor import Sensor
 from fitgen.physics.units import UnitSpace
 
 RIG_ERROR = 0.01  # mm rms per axis: a CNC's or a good printer's repeatability
+# mm rms per axis: first contact found in 0.02 mm steps, and a jog that ends against the approach on an axis
+# leaves that axis's backlash (host.stage) in the zero
+ZERO_ERROR = 0.02
 MIN_ROWS = 10
 MIN_DISTINCT = 6
 CHI2_LIMIT = 3.0  # reduced chi-square above this: the physics does not explain the rows
@@ -60,6 +66,7 @@ class Problem:
     noise: np.ndarray  # (N,) reading noise rms of a row
     rig_error: float
     valid: np.ndarray | None = None  # (n, N) False for a clipped reading, which says nothing of the field
+    zero_error: float = 0.0  # mm rms per axis, common to the capture's rows in contact (not to other poses)
 
     def predict(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
         return self.space.readings(np.atleast_2d(z) * self.space.prior_sd, self.poses if poses is None else poses)
@@ -78,9 +85,9 @@ class Problem:
         f = self.predict(z, np.vstack(shifted))[0].reshape(6, len(poses), -1)
         return np.stack([(f[2 * a] - f[2 * a + 1]) / (2 * _H_POSE) for a in range(3)], axis=-1)
 
-    def whiteners(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
+    def whiteners(self, z: np.ndarray, poses: np.ndarray | None = None, slopes: np.ndarray | None = None) -> np.ndarray:
         """Per row, L^-1 with L L^T = diag(noise^2) + rig_error^2 J_s J_s^T: (n, N, N)."""
-        js = self.pose_slopes(z, poses)
+        js = self.pose_slopes(z, poses) if slopes is None else slopes
         cov = np.einsum("nia,nja->nij", js, js) * self.rig_error**2 + np.diag(self.noise**2)[None]
         if poses is None and self.valid is not None and not self.valid.all():
             # a clipped reading weighs nothing: its variance made a million times the noise's square
@@ -90,11 +97,38 @@ class Problem:
         eye = np.broadcast_to(np.eye(cov.shape[1]), cov.shape)
         return np.linalg.solve(L, eye)
 
+    def whitening(self, z: np.ndarray, poses: np.ndarray | None = None) -> "Whitening":
+        """The whitening of the rows (or of ``poses``, which share no zero) at z."""
+        js = self.pose_slopes(z, poses)
+        W = self.whiteners(z, poses, js)
+        if poses is not None or self.zero_error <= 0:
+            return Whitening(W)
+        U = np.einsum("nij,nja->nia", W, js).reshape(-1, 3) * self.zero_error
+        phi, s, _ = np.linalg.svd(U, full_matrices=False)
+        return Whitening(W, phi, 1.0 / np.sqrt(1.0 + s**2) - 1.0)
+
     def information(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
         """The Fisher information of the rows (or of ``poses``) about z: (P, P)."""
-        J = np.einsum("nij,njp->nip", self.whiteners(z, poses), self.jacobian(z, poses))
-        J = J.reshape(-1, J.shape[-1])
+        J = self.whitening(z, poses).apply(self.jacobian(z, poses))
         return J.T @ J
+
+
+@dataclass
+class Whitening:
+    """Each row's whitener W (n, N, N), then (I + U U^T)^(-1/2) = I + phi diag(c) phi^T for the zero's rank-3 term
+    U (after W; U = phi s psi^T, c = 1/sqrt(1 + s^2) - 1)."""
+
+    W: np.ndarray
+    phi: np.ndarray | None = None
+    c: np.ndarray | None = None
+
+    def apply(self, a: np.ndarray) -> np.ndarray:
+        """Whitened residuals (n, N) -> (n N,) or Jacobians (n, N, P) -> (n N, P)."""
+        x = np.einsum("nij,nj...->ni...", self.W, a).reshape((-1,) + a.shape[2:])
+        if self.phi is None:
+            return x
+        proj = self.phi.T @ x
+        return x + self.phi @ (self.c.reshape((-1,) + (1,) * (x.ndim - 1)) * proj)
 
 
 @dataclass
@@ -198,9 +232,10 @@ def check_capture(space: UnitSpace, readings: np.ndarray, poses: np.ndarray) -> 
 
 
 def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *, rig_error: float = RIG_ERROR,
-             ranges: dict | None = None, progress=None) -> Identification:
+             zero_error: float = ZERO_ERROR, ranges: dict | None = None, progress=None) -> Identification:
     """The unit of ``drawing`` behind a capture: rows of ``readings`` (n, N) at label ``poses`` (n, 5), with
-    reading noise ``noise`` (rms of a row, per element or one number) and the rig's error ``rig_error``."""
+    reading noise ``noise`` (rms of a row, per element or one number), the rig's error ``rig_error`` per row and
+    the zero's ``zero_error`` common to the rows in contact (mm rms per axis)."""
     space = UnitSpace.of(drawing)
     readings = np.asarray(readings, dtype=float)
     poses = np.asarray(poses, dtype=float)
@@ -208,31 +243,29 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     noise = np.broadcast_to(np.asarray(noise, dtype=float), (readings.shape[1],)).copy()
     if not np.all(noise > 0):
         raise InputError("identify needs the reading noise > 0 (give --noise, or a sensor file with a noise figure)")
-    if not rig_error >= 0:
-        raise InputError(f"the rig error must be >= 0 mm, got {rig_error}")
-    prob = Problem(space, readings, poses, noise, float(rig_error), valid)
+    for name, value in (("rig error", rig_error), ("zero error", zero_error)):
+        if not value >= 0:
+            raise InputError(f"the {name} must be >= 0 mm, got {value}")
+    prob = Problem(space, readings, poses, noise, float(rig_error), valid, float(zero_error))
     P = space.size
     z = np.zeros(P)
     for sweep in range(3):  # the rows' covariances depend on the unit: refresh them, fit again
-        W = prob.whiteners(z)
+        wh = prob.whitening(z)
 
-        def residual(zz, W=W):
-            r = np.einsum("nij,nj->ni", W, readings - prob.predict(zz)[0])
-            return np.concatenate([r.ravel(), zz])
+        def residual(zz, wh=wh):
+            return np.concatenate([wh.apply(readings - prob.predict(zz)[0]), zz])
 
-        def jac(zz, W=W):
-            J = -np.einsum("nij,njp->nip", W, prob.jacobian(zz)).reshape(-1, P)
-            return np.vstack([J, np.eye(P)])
+        def jac(zz, wh=wh):
+            return np.vstack([-wh.apply(prob.jacobian(zz)), np.eye(P)])
 
         z = least_squares(residual, z, jac=jac, method="lm", x_scale=1.0, max_nfev=60).x
         if progress is not None:
             progress(sweep + 1, 4, "maximum a posteriori")
-    W = prob.whiteners(z)
-    r = np.einsum("nij,nj->ni", W, readings - prob.predict(z)[0])
+    # a clipped reading's residual is left out of the chi-square (it weighs nothing in the fit either)
+    r = prob.whitening(z).apply(np.where(valid, readings - prob.predict(z)[0], 0.0))
     F = prob.information(z)
     post = np.linalg.inv(F + np.eye(P))
     lam, V = np.linalg.eigh(F)
-    r[~valid] = 0.0
     dof = max(float(valid.sum()) - float(np.trace(F @ post)), 1.0)
     # what no capture could tell: the null space of a dense three-axis design's information
     dense = dense_design(ranges)
@@ -361,7 +394,8 @@ def save(ident: Identification, path, provenance: dict) -> tuple:
         "parameters": ident.space.names, "theta": ident.theta.tolist(), "sd": ident.sd.tolist(),
         "prior_sd": ident.space.prior_sd.tolist(), "covariance": ident.cov.tolist(),
         "chi2": ident.chi2, "dof": ident.dof, "rows": int(ident.problem.readings.shape[0]),
-        "rig_error": ident.problem.rig_error, "row_noise": ident.problem.noise.tolist(),
+        "rig_error": ident.problem.rig_error, "zero_error": ident.problem.zero_error,
+        "row_noise": ident.problem.noise.tolist(),
         "derived": {k: {"value": v, "se": s} for k, (v, s) in ident.derived().items()},
         "determined_directions": int(np.sum(ident.info_eig >= 1.0)),
         "no_capture_separates": [describe_direction(ident.space, v) for v in ident.gauge.T],
