@@ -216,7 +216,11 @@ def _save_capture(path, y, poses, meta=None):
 def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
     unit, _ = draw_unit(drawing, 25)
     y, noise = capture(unit, plan[0], 25)
+    high = plan[0].copy()  # the zero set 0.08 mm above first contact: the rows at dz 0 read the magnet at rest
+    high[~off_skin(plan[0]), 2] += 0.08
+    y_high = readings(unit, high, adc_bits=0) + np.random.default_rng(25).normal(0.0, noise, y.shape)
     cases = {
+        "zero high": (y_high, plan[0], "a zero above first contact"),
         "few": (y[:6], plan[0][:6], "at least 10"),
         "repeat": (np.repeat(y[:1], 20, axis=0), np.repeat(plan[0][:1], 20, axis=0), "distinct pose"),
         "saturated": (np.where(np.arange(8) < 2, 3.3, y), plan[0], "saturated"),

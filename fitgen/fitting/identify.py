@@ -372,8 +372,8 @@ def check_explained(ident: Identification, capture, drawing: str, source: str) -
     if ident.reduced_chi2 > CHI2_LIMIT:
         rms = float(np.sqrt(ident.reduced_chi2))
         raise InputError(f"the physics does not explain {capture}: residuals {rms:.3g}x the reading noise "
-                         f"({source}); another sensor than {drawing}, labels in other units, or a noise figure too "
-                         "low; nothing written")
+                         f"({source}); another sensor than {drawing}, labels in other units, a zero above first "
+                         "contact (rows at dz 0 off the skin), or a noise figure too low; nothing written")
 
 
 def save(ident: Identification, path, provenance: dict) -> tuple:

@@ -8,7 +8,10 @@ candidate's information about the unit's parameters (fitgen.fitting.identify.Pro
 the rig's error) is a rank-N update of the prior's; poses are chosen greedily for the largest
 log det of prior + information (by the matrix determinant lemma, an N x N determinant per
 candidate), then improved by exchange passes (Fedorov): each chosen pose is swapped for the
-candidate that raises the log det most, until no swap does. A pose may be chosen twice.
+candidate that raises the log det most, until no swap does. A pose may be chosen twice. The zero's error,
+which identify allows for (one error shared by the rows in contact), couples the rows, so the design leaves
+it out: rows add up, as the greedy step and the exchange need (bench/identify_bound.py gives the bound with
+it).
 """
 
 from __future__ import annotations
