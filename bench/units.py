@@ -644,7 +644,7 @@ def plot(per: dict, outdir: Path) -> list[Path]:
     except ImportError:
         raise InputError("--plot needs matplotlib: pip install -e '.[plots]'") from None
     outdir.mkdir(parents=True, exist_ok=True)
-    names = order(per)
+    names = order(per, fitted=True)
     fig, axes = plt.subplots(5, 1, figsize=(10, 15), sharex=True)
     rng = np.random.default_rng(0)
     for j, (ax, o) in enumerate(zip(axes, POSE_NAMES)):
