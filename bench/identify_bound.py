@@ -73,7 +73,7 @@ def bound_rows(drawing) -> list[list[str]]:
         noise = np.full(drawing.n_elements, drawing.noise / np.sqrt(s))
         if key not in Js:
             prob = Problem(space, np.zeros((len(cand), drawing.n_elements)), cand, noise, rig)
-            Js[key] = np.einsum("nij,njp->nip", prob.whiteners(z), prob.jacobian(z))
+            Js[key] = prob.whitened_rows(z)
         J = Js[key] if with_rest else Js[key][~rest]
         idx, _ = d_optimal(J, n)  # the schedule's design, which leaves the zero's error out (rows add up)
         F = np.einsum("cnp,cnq->pq", J[idx], J[idx]) + np.eye(space.size)

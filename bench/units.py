@@ -95,7 +95,7 @@ from fitgen.fitting.fit import FitSettings, fit_model  # noqa: E402
 from fitgen.fitting.holdout import box_of, evaluate  # noqa: E402
 from fitgen.fitting.identify import (CHI2_LIMIT, check_explained, derived_quantities, identify,  # noqa: E402
                                      load_posterior, save)
-from fitgen.physics.pose import POSE_NAMES, off_skin  # noqa: E402
+from fitgen.physics.pose import POSE_NAMES  # noqa: E402
 from fitgen.fitting.schedule import schedule  # noqa: E402
 from fitgen.physics.sensor import load_sensor  # noqa: E402
 from fitgen.physics.simulate import (DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses,  # noqa: E402
@@ -193,9 +193,7 @@ def capture(unit, labels: np.ndarray, rig: float, key, zero: float = 0.0) -> np.
     """Averaged rows of a simulated capture: magpylib's readings where the stage really is, noise over sqrt(16);
     with ``zero`` (mm rms per axis), the zero off first contact by one error shared by the rows in contact."""
     rng = np.random.default_rng(key)
-    true = rig_poses(labels, rig, rng)
-    if zero > 0:
-        true[~off_skin(labels), :3] += np.random.default_rng([*key, 5]).normal(0.0, zero, 3)
+    true = rig_poses(labels, rig, rng, np.random.default_rng([*key, 5]).normal(0.0, zero, 3) if zero > 0 else None)
     y = magpylib_readings(unit, true) + rng.normal(0.0, CTX.noise / np.sqrt(SAMPLES), (len(labels), unit.n_elements))
     return np.clip(y, unit.gmr.adc_min, unit.gmr.adc_max)
 

@@ -10,7 +10,6 @@ import pytest
 from conftest import assert_one_line_error, run_cli
 from fitgen.fitting.identify import Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
-from fitgen.physics.pose import off_skin
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings
@@ -62,8 +61,7 @@ def test_a_zero_off_first_contact_is_allowed_for(drawing, plan, seed):
     parameters go wrong by several standard errors unless identify allows for it (zero_error)."""
     unit, theta = draw_unit(drawing, seed)
     rng = np.random.default_rng(seed)
-    true = rig_poses(plan[0], 0.01, rng)
-    true[~off_skin(plan[0]), :3] += np.array([0.015, -0.015, 0.02])
+    true = rig_poses(plan[0], 0.01, rng, zero=(0.015, -0.015, 0.02))
     y = readings(unit, true, adc_bits=0) + rng.normal(0.0, drawing.noise / np.sqrt(SAMPLES), (len(true), 8))
     rms_z = {}
     for zero_error in (0.0, 0.02):
@@ -216,8 +214,8 @@ def _save_capture(path, y, poses, meta=None):
 def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
     unit, _ = draw_unit(drawing, 25)
     y, noise = capture(unit, plan[0], 25)
-    high = plan[0].copy()  # the zero set 0.08 mm above first contact: the rows at dz 0 read the magnet at rest
-    high[~off_skin(plan[0]), 2] += 0.08
+    # the zero set 0.08 mm above first contact: the rows at dz 0 read the magnet at rest
+    high = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 0.08))
     y_high = readings(unit, high, adc_bits=0) + np.random.default_rng(25).normal(0.0, noise, y.shape)
     cases = {
         "zero high": (y_high, plan[0], "a zero above first contact"),

@@ -107,9 +107,16 @@ class Problem:
         phi, s, _ = np.linalg.svd(U, full_matrices=False)
         return Whitening(W, phi, 1.0 / np.sqrt(1.0 + s**2) - 1.0)
 
-    def information(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
-        """The Fisher information of the rows (or of ``poses``) about z: (P, P)."""
-        J = self.whitening(z, poses).apply(self.jacobian(z, poses))
+    def whitened_rows(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
+        """Each row's Jacobian whitened by its own covariance alone (n, N, P): rows whose information adds up,
+        as a design needs (the zero's shared error left out)."""
+        return np.einsum("nij,njp->nip", self.whiteners(z, poses), self.jacobian(z, poses))
+
+    def information(self, z: np.ndarray, poses: np.ndarray | None = None,
+                    whitening: "Whitening | None" = None) -> np.ndarray:
+        """The Fisher information of the rows (or of ``poses``) about z: (P, P); ``whitening``: theirs at z, if
+        already at hand."""
+        J = (whitening or self.whitening(z, poses)).apply(self.jacobian(z, poses))
         return J.T @ J
 
 
@@ -262,14 +269,16 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
         if progress is not None:
             progress(sweep + 1, 4, "maximum a posteriori")
     # a clipped reading's residual is left out of the chi-square (it weighs nothing in the fit either)
-    r = prob.whitening(z).apply(np.where(valid, readings - prob.predict(z)[0], 0.0))
-    F = prob.information(z)
+    wh = prob.whitening(z)
+    r = wh.apply(np.where(valid, readings - prob.predict(z)[0], 0.0))
+    F = prob.information(z, whitening=wh)
     post = np.linalg.inv(F + np.eye(P))
     lam, V = np.linalg.eigh(F)
     dof = max(float(valid.sum()) - float(np.trace(F @ post)), 1.0)
     # what no capture could tell: the null space of a dense three-axis design's information
     dense = dense_design(ranges)
-    Fd = prob.information(z, dense)
+    Jd = prob.whitened_rows(z, dense)  # the dense design's rows share no zero: their information adds up
+    Fd = Jd.reshape(-1, P).T @ Jd.reshape(-1, P)
     lam_d, V_d = np.linalg.eigh(Fd)
     gauge = V_d[:, lam_d < max(1e-6, 1e-13 * lam_d.max())]  # numerically 0 (differences resolve ~1e-8)
     # what this capture leaves to the prior beyond that: weak directions outside the gauge
@@ -278,7 +287,6 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     if weak.shape[1]:
         weak = weak - gauge @ (gauge.T @ weak)
         u, s, _ = np.linalg.svd(weak, full_matrices=False)
-        Jd = np.einsum("nij,njp->nip", prob.whiteners(z, dense), prob.jacobian(z, dense))
         for v in u[:, s > 0.5].T:
             gain = np.sum((Jd @ v) ** 2, axis=1)
             if gain.max() < 1.0:

@@ -112,7 +112,7 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     prob = Problem(space, np.zeros((len(cand), drawing.n_elements)), cand, np.full(drawing.n_elements, noise),
                    float(rig_error))
     z = np.zeros(space.size)
-    J = np.einsum("nij,njp->nip", prob.whiteners(z), prob.jacobian(z))
+    J = prob.whitened_rows(z)
     idx, logdet = d_optimal(J, n, progress)
     poses = stage_order(cand[idx])
     info = {"criterion": "D-optimal (log det of the prior plus the capture's information, in prior spreads)",

@@ -139,15 +139,19 @@ def simulate(
     return Dataset(values, poses[:, cols].copy(), tuple(targets), meta)
 
 
-def rig_poses(labels: np.ndarray, rig_error: float, rng: np.random.Generator) -> np.ndarray:
+def rig_poses(labels: np.ndarray, rig_error: float, rng: np.random.Generator, zero=None) -> np.ndarray:
     """Where a stage with ``rig_error`` mm rms per axis stands at stage ``labels`` (n, 5): each displacement off by
     a normal draw; a row on the skin stays on it (dz at most OFF_SKIN_MM: the skin's adhesion holds the
-    indenter); a row off the skin is left as labelled (the magnet rests wherever the stage stands)."""
+    indenter); a row off the skin is left as labelled (the magnet rests wherever the stage stands). ``zero``
+    (mm, dx, dy, dz): how far the capture's zero is from first contact, added to every row on the skin after
+    that (a zero above first contact lifts the rows at dz 0 off it)."""
     true = np.array(labels, dtype=float)
     true[:, :3] += rig_error * rng.standard_normal((len(true), 3))
     touching = ~off_skin(labels)
     true[touching, 2] = np.minimum(true[touching, 2], OFF_SKIN_MM)
     true[~touching] = labels[~touching]
+    if zero is not None:
+        true[touching, :3] += np.asarray(zero, dtype=float)
     return true
 
 
