@@ -3,6 +3,7 @@
 import io
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -575,9 +576,20 @@ def test_stage_sim_command_prints_its_url_and_serves(tmp_path):
         assert c.flavor == "marlin"
         c.setup()
         c.move({"X": 2.0, "Y": -2.0, "Z": -7.0}, FEED)  # 1 mm into the skin
-        c.close()
         pose = [float(x) for x in (tmp_path / "p.txt").read_text().split(",")]
         assert pose[2] == pytest.approx(-0.9 * (1 - 0.015), abs=1e-9)  # the default 0.03 mm backlash, from above
+        # the contact it prints for a homed machine is where the indenter touches once homed
+        said = re.search(r"first contact at machine X(\S+) Y(\S+) Z(\S+) \(X(\S+) Y(\S+) Z(\S+) once homed\)",
+                         proc.stderr.readline())
+        assert said, "stage-sim names the first contact before and after homing"
+        homed = [float(v) for v in said.groups()[3:]]
+        c.home(timeout=10)
+        c.move({"X": homed[0], "Y": homed[1], "Z": homed[2] + 1.0}, FEED)
+        c.move({"X": homed[0], "Y": homed[1], "Z": homed[2] - 1.0}, FEED)
+        c.close()
+        pose = [float(x) for x in (tmp_path / "p.txt").read_text().split(",")]
+        # the tool lags the carriage by half the backlash: both came from the switches' side
+        assert pose[:3] == pytest.approx([-0.015, -0.015, -0.9 * (1 - 0.015)], abs=1e-9)
     finally:
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=10)

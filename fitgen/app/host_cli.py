@@ -224,8 +224,9 @@ def cmd_stage_sim(args) -> int:
     with server, StopFlag() as stop:
         print(server.url, flush=True)
         first = " ".join(f"{a}{c - s:g}" for a, c, s in zip("XYZ", contact, start))
-        print(f"tactile-host stage-sim: {args.flavor} on {server.url}; first contact at machine {first} (until "
-              f"homed); {'pose in ' + args.pose_file if args.pose_file else 'no pose file'}; Ctrl-C stops",
+        homed = " ".join(f"{a}{c:g}" for a, c in zip("XYZ", contact))  # homing puts the switches at 0
+        print(f"tactile-host stage-sim: {args.flavor} on {server.url}; first contact at machine {first} ({homed} "
+              f"once homed); {'pose in ' + args.pose_file if args.pose_file else 'no pose file'}; Ctrl-C stops",
               file=sys.stderr, flush=True)
         while not stop():
             time.sleep(0.1)
