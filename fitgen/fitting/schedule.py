@@ -50,14 +50,14 @@ def _logdet_gain(Finv: np.ndarray, J: np.ndarray) -> np.ndarray:
     return np.linalg.slogdet(M)[1]
 
 
-def d_optimal(J: np.ndarray, n: int, progress=None) -> tuple[np.ndarray, float]:
-    """Indices of ``n`` candidates (repeats allowed) maximising log det(I + sum J_c^T J_c), and that log det."""
-    P = J.shape[2]
+def exchange_design(J: np.ndarray, n: int, gain, progress=None) -> np.ndarray:
+    """Indices of ``n`` candidates (repeats allowed), chosen greedily then by exchange passes for the largest
+    ``gain(F^-1, J)`` (per candidate, what its rows J_c add to the criterion at information F = I + sum)."""
     info = np.einsum("cnp,cnq->cpq", J, J)
-    F = np.eye(P)
+    F = np.eye(J.shape[2])
     chosen = []
     for i in range(n):
-        c = int(np.argmax(_logdet_gain(np.linalg.inv(F), J)))
+        c = int(np.argmax(gain(np.linalg.inv(F), J)))
         chosen.append(c)
         F = F + info[c]
         if progress is not None:
@@ -66,7 +66,7 @@ def d_optimal(J: np.ndarray, n: int, progress=None) -> tuple[np.ndarray, float]:
         improved = False
         for slot in range(n):
             rest = F - info[chosen[slot]]
-            gains = _logdet_gain(np.linalg.inv(rest), J)
+            gains = gain(np.linalg.inv(rest), J)
             c = int(np.argmax(gains))
             if c != chosen[slot] and gains[c] > gains[chosen[slot]] + 1e-9:
                 chosen[slot], F, improved = c, rest + info[c], True
@@ -74,7 +74,14 @@ def d_optimal(J: np.ndarray, n: int, progress=None) -> tuple[np.ndarray, float]:
             progress(n + p + 1, n + MAX_PASSES, "exchange")
         if not improved:
             break
-    return np.array(chosen), float(np.linalg.slogdet(F)[1])
+    return np.array(chosen)
+
+
+def d_optimal(J: np.ndarray, n: int, progress=None) -> tuple[np.ndarray, float]:
+    """Indices of ``n`` candidates (repeats allowed) maximising log det(I + sum J_c^T J_c), and that log det."""
+    chosen = exchange_design(J, n, _logdet_gain, progress)
+    F = np.eye(J.shape[2]) + np.einsum("cnp,cnq->pq", J[chosen], J[chosen])
+    return chosen, float(np.linalg.slogdet(F)[1])
 
 
 def stage_order(poses: np.ndarray) -> np.ndarray:
