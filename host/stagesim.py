@@ -88,6 +88,16 @@ class SimRig:
             self.tool = self.nominal + self.rng.normal(0.0, self.repeatability, 3) * (self.repeatability > 0)
             self.publish()
 
+    def carriage_at_contact(self, approach=(-0.3, -0.3, 0.3)) -> np.ndarray:
+        """Where the carriage stands (home frame) when the tool is at first contact and each axis came from its
+        ``approach`` side (pose axes dx, dy, dz; the capture's): the zero a user finds by the documented jog."""
+        c = self.contact.copy()
+        for m, p, s in self.axes.pairs:
+            k, j = MACHINE_AXES.index(m), STAGE_AXES.index(p)
+            if approach[j]:
+                c[k] -= s * np.sign(approach[j]) * self.backlash[k] / 2  # the carriage leads the tool by half
+        return c
+
     def displacement(self) -> np.ndarray:
         """The tool's displacement from first contact along the sensor's dx, dy, dz."""
         d = np.zeros(3)
@@ -442,7 +452,8 @@ def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", s
                             seed: int = 0, progress=None):
     """A capture as `tactile-host capture --stage` makes it, all simulated: two ADS1115s on a simulated bus read
     ``sensor`` (a unit, say, whose file carries its stage map), a simulated ``flavor`` controller moves it through a
-    rig with ``backlash`` and ``repeatability`` (mm), zeroed at first contact. Returns the capture's result."""
+    rig with ``backlash`` and ``repeatability`` (mm), zeroed at first contact as the documented jog finds it (each
+    axis from its approach side, so the backlash is taken up as at every pose). Returns the capture's result."""
     from host.adc import AdcArray
     from host.capture import capture
     from host.channelmap import parse_spec
@@ -466,7 +477,7 @@ def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", s
         try:
             ctrl.connect(boot_wait=0.1)
             ctrl.setup()
-            zero = dict(zip("XYZ", map(float, np.array(contact) - srv.ctrl.offset)))
+            zero = dict(zip("XYZ", map(float, rig.carriage_at_contact(settings.approach) - srv.ctrl.offset)))
             arr = AdcArray(bus, cmap, clock=clock)
             arr.probe()
             arr.setup()

@@ -190,6 +190,23 @@ def test_the_simulated_rig_has_backlash_and_repeatability():
     assert 0.0025 < np.std(ends) < 0.0035
 
 
+@pytest.mark.parametrize("axes", ["X=dx,Y=dy,Z=dz", "X=-dx,Y=-dy,Z=dz", "X=dy,Y=-dx,Z=-dz"])
+def test_the_simulated_rigs_printed_contact_is_the_zero_the_documented_jog_finds(axes):
+    rig = SimRig(None, contact=CONTACT, start=(5, 5, 5), axes=axes, backlash=0.1, repeatability=0.0)
+    at = rig.carriage_at_contact()
+    approach = np.array([-0.3, -0.3, 0.3])
+    delta = np.zeros(3)
+    for m, spec in zip("XYZ", [a.split("=")[1] for a in axes.split(",")]):
+        s, p = (-1.0, spec[1:]) if spec.startswith("-") else (1.0, spec)
+        delta["XYZ".index(m)] = s * approach[["dx", "dy", "dz"].index(p)]
+    rig.move(at + delta)  # the approach point, then the zero: each axis's last move from its approach side
+    rig.move(at)
+    np.testing.assert_allclose(rig.displacement(), 0.0, atol=1e-12)
+    rig.move(at - delta)  # from the other side: the zero would be off by the whole backlash on every axis
+    rig.move(at)
+    np.testing.assert_allclose(np.abs(rig.displacement()), 0.1, atol=1e-12)
+
+
 # --- the protocol ----------------------------------------------------------------------------------------
 
 
@@ -578,18 +595,19 @@ def test_stage_sim_command_prints_its_url_and_serves(tmp_path):
         c.move({"X": 2.0, "Y": -2.0, "Z": -7.0}, FEED)  # 1 mm into the skin
         pose = [float(x) for x in (tmp_path / "p.txt").read_text().split(",")]
         assert pose[2] == pytest.approx(-0.9 * (1 - 0.015), abs=1e-9)  # the default 0.03 mm backlash, from above
-        # the contact it prints for a homed machine is where the indenter touches once homed
-        said = re.search(r"first contact at machine X(\S+) Y(\S+) Z(\S+) \(X(\S+) Y(\S+) Z(\S+) once homed\)",
+        # the contact it prints, homed or not, is where the carriage stands when the indenter touches, each axis
+        # come from the capture's approach side: a zero taken there is exact
+        said = re.search(r"first contact at machine X(\S+) Y(\S+) Z(\S+) \(X(\S+) Y(\S+) Z(\S+) once homed;",
                          proc.stderr.readline())
         assert said, "stage-sim names the first contact before and after homing"
-        homed = [float(v) for v in said.groups()[3:]]
+        unhomed, homed = np.array(said.groups()[:3], float), np.array(said.groups()[3:], float)
+        assert unhomed == pytest.approx([2.015, -1.985, -6.015], abs=1e-9)  # the tool's 2,-2,-6 and half the backlash
         c.home(timeout=10)
-        c.move({"X": homed[0], "Y": homed[1], "Z": homed[2] + 1.0}, FEED)
+        c.move({"X": homed[0], "Y": homed[1], "Z": homed[2] + 1.0}, FEED)  # from the switches: +X, +Y, then down
         c.move({"X": homed[0], "Y": homed[1], "Z": homed[2] - 1.0}, FEED)
         c.close()
         pose = [float(x) for x in (tmp_path / "p.txt").read_text().split(",")]
-        # the tool lags the carriage by half the backlash: both came from the switches' side
-        assert pose[:3] == pytest.approx([-0.015, -0.015, -0.9 * (1 - 0.015)], abs=1e-9)
+        assert pose[:3] == pytest.approx([0.0, 0.0, -0.9], abs=1e-9)
     finally:
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=10)
