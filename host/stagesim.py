@@ -69,6 +69,7 @@ class SimRig:
         self.travel = np.asarray(travel, dtype=float)  # carriage range in the home frame
         self.rng = np.random.default_rng(seed)
         self.carriage = np.asarray(start, dtype=float).copy()  # where the motors put the carriage (home frame)
+        self.start = self.carriage.copy()  # machine 0 until homed
         # the tool lags the carriage by half the backlash, on the side it last came from (unknown at power-on:
         # centred)
         self.nominal = self.carriage.copy()
@@ -97,6 +98,15 @@ class SimRig:
             if approach[j]:
                 c[k] -= s * np.sign(approach[j]) * self.backlash[k] / 2  # the carriage leads the tool by half
         return c
+
+    def contact_note(self) -> str:
+        """Where to jog for the zero (:meth:`carriage_at_contact`, the capture's default approach), in machine
+        coordinates before homing (power-on puts machine 0 at the start) and after it (the switches are 0)."""
+        at = self.carriage_at_contact()
+        first = " ".join(f"{a}{c - s:.6g}" for a, c, s in zip("XYZ", at, self.start))
+        homed = " ".join(f"{a}{c:.6g}" for a, c in zip("XYZ", at))
+        return (f"first contact at machine {first} ({homed} once homed; the carriage, each axis come from the "
+                "capture's approach side: from -dx, -dy, above)")
 
     def displacement(self) -> np.ndarray:
         """The tool's displacement from first contact along the sensor's dx, dy, dz."""

@@ -223,11 +223,7 @@ def cmd_stage_sim(args) -> int:
     server = PtyServer(ctrl) if args.pty else SocketServer(ctrl, port=args.port)
     with server, StopFlag() as stop:
         print(server.url, flush=True)
-        at = rig.carriage_at_contact()  # the capture's default approach: the zero the documented jog finds
-        first = " ".join(f"{a}{c - s:.6g}" for a, c, s in zip("XYZ", at, start))
-        homed = " ".join(f"{a}{c:.6g}" for a, c in zip("XYZ", at))  # homing puts the switches at 0
-        print(f"tactile-host stage-sim: {args.flavor} on {server.url}; first contact at machine {first} ({homed} "
-              "once homed; the carriage, each axis come from the capture's approach side: from -dx, -dy, above); "
+        print(f"tactile-host stage-sim: {args.flavor} on {server.url}; {rig.contact_note()}; "
               f"{'pose in ' + args.pose_file if args.pose_file else 'no pose file'}; Ctrl-C stops",
               file=sys.stderr, flush=True)
         while not stop():
