@@ -75,6 +75,24 @@ def test_a_zero_off_first_contact_is_allowed_for(drawing, plan, seed):
     assert rms_z[0.0] > 2.0 and rms_z[0.02] < 1.6, rms_z
 
 
+def test_standardized_residuals_single_out_a_row_the_physics_does_not_explain(drawing, plan):
+    unit, _ = draw_unit(drawing, 26)
+    y, noise = capture(unit, plan[0], 26)
+    r = identify(drawing, y, plan[0], noise).standardized_residuals()
+    assert r.shape == y.shape and 0.8 < np.sqrt(np.mean(r ** 2)) < 1.25  # each reading within its own spread
+    assert np.abs(r).max() < 4
+    # the indenter slipped 0.2 mm in dx on one row pressed deep (its label says it did not)
+    deep = int(np.nonzero(plan[0][:, 2] == plan[0][:, 2].min())[0][0])
+    true = plan[0].copy()
+    true[deep, 0] += 0.2
+    slipped = y.copy()
+    slipped[deep] = readings(unit, true[deep:deep + 1], adc_bits=0)[0] + (y[deep] - readings(unit, plan[0][deep:deep + 1],
+                                                                                           adc_bits=0)[0])
+    r = identify(drawing, slipped, plan[0], noise).standardized_residuals()
+    worst = np.abs(r).max(axis=1)
+    assert int(np.argmax(worst)) == deep and worst[deep] > 6, worst
+
+
 def test_what_no_capture_separates_comes_from_the_information(drawing, plan):
     """The null space names the common gain against the polarisation and the ambient field against the offsets
     (the omnipolar elements' readings never change sign here), among the moves of the whole sensor."""
@@ -168,8 +186,11 @@ def test_cli_schedule_capture_identify(tmp_path):
     proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "31", "--poses", str(sch),
                    "--noise", "0.0005", "-o", str(cap))
     assert proc.returncode == 0, proc.stderr
-    proc = run_cli("fitgen", "identify", str(cap), "--sensor", "paper", "--noise", "0.0005", "-o", str(unit_file))
+    proc = run_cli("fitgen", "identify", str(cap), "--sensor", "paper", "--noise", "0.0005", "-o", str(unit_file),
+                   "--plot", str(tmp_path / "plots"))
     assert proc.returncode == 0, proc.stderr
+    png = tmp_path / "plots" / "identify.png"
+    assert f"plot: {png}" in proc.stderr and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     lifted = int((table[:, 2] > 0).sum())
     assert f"rows off the skin (the magnet at rest, free of the rig's error): {lifted}" in proc.stdout
     # a direct fit on the capture leaves the rest rows out: their label is no contact pose

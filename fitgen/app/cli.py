@@ -213,10 +213,14 @@ def cmd_report(args) -> int:
 
 
 def cmd_identify(args) -> int:
+    from fitgen.app import plots
+    from fitgen.base.fileio import make_folder
     from fitgen.base.progress import Progress
     from fitgen.fitting.identify import check_explained, identify, in_capture_units, report, row_noise, save
     from fitgen.physics.dataset import load_dataset
 
+    if args.plot:
+        plots.require()  # before the work, not after it
     ds = load_dataset(args.capture)
     drawing = _sensor(args) if args.transfer else in_capture_units(_sensor(args), ds.meta)
     noise, source = row_noise(ds.meta, drawing, args.noise)
@@ -232,6 +236,8 @@ def cmd_identify(args) -> int:
                                            "drawing_spec": spec})
     print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
           "the posterior)", file=sys.stderr)
+    if args.plot:
+        print(f"plot: {plots.identification(ident, make_folder(args.plot) / 'identify.png')}", file=sys.stderr)
     return 0
 
 
@@ -396,6 +402,8 @@ def build_parser() -> Parser:
                    help="how far the capture's zero may be from first contact, mm rms per axis, one error shared by "
                         "every row in contact (default 0.02)")
     i.add_argument("-o", "--output", required=True, metavar="UNIT.toml", help="the unit's sensor file to write")
+    i.add_argument("--plot", metavar="DIR", help="also DIR/identify.png: the residuals by row, the sensitivities and "
+                   "the magnet's offset against the prior (needs matplotlib)")
 
     sc = command("schedule", cmd_schedule, "the capture poses that pin a unit's parameters best (D-optimal)")
     sc.add_argument("--sensor", default="paper", help="the drawing (preset or TOML; default paper)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from fitgen.base.errors import InputError
 from fitgen.base.fileio import make_folder, write_atomic
 
 
@@ -140,6 +141,12 @@ def _unit_stage(out: Path, drawing_model) -> None:
     print(f"   identified -> {twin_file} ({time.monotonic() - t:.1f} s): residuals {ident.reduced_chi2 ** 0.5:.2f}x the "
           f"noise; magnet {off[0]:+.3f}, {off[1]:+.3f} mm off the ring's centre; sensitivities "
           f"{min(sens):.3f}..{max(sens):.3f} x the drawing's; {ident.gauge.shape[1]} combinations no capture separates")
+    try:
+        from fitgen.app.plots import identification
+
+        print(f"   its residuals and what the capture determines -> {identification(ident, out / 'identify.png')}")
+    except InputError as exc:  # matplotlib is an extra: the demo goes on without the figure
+        print(f"   (no figure: {exc})")
     t = time.monotonic()
     twin = ident.unit("twin")
     train = simulate(twin, np.vstack([grid_poses(PAPER_GRIDS["paper-sim"]), random_poses(5000, DEFAULT_RANGES,

@@ -23,6 +23,11 @@ def _plt():
     return plt
 
 
+def require() -> None:
+    """One line and exit status 2 before any work when matplotlib is missing, not after it."""
+    _plt()
+
+
 def _save(fig, path: Path) -> Path:
     import io
 
@@ -129,6 +134,52 @@ def tradeoff(result, path: Path) -> Path:
     ax.set_title(f"sensor {result.sensor}, scene {result.scene.name} (hollow: table style)", fontsize=10)
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    _save(fig, path)
+    plt.close(fig)
+    return path
+
+
+def identification(ident, path: Path) -> Path:
+    """fitgen identify --plot: each reading's standardized residual by row (rows off the skin shaded), and what
+    the capture determines (each element's sensitivity, the magnet's offset from the elements' centre) with
+    its standard error beside the prior's spread about the drawing."""
+    from fitgen.physics.pose import off_skin
+
+    plt = _plt()
+    r = ident.standardized_residuals()
+    n, N = r.shape
+    post = ident.derived()
+    prior = ident.derived(np.diag(ident.space.prior_sd ** 2), np.zeros(ident.space.size))
+    fig, (a, b, c) = plt.subplots(1, 3, figsize=(13, 4.2), gridspec_kw={"width_ratios": [2.4, 1.6, 1]})
+    rows = np.arange(1, n + 1)
+    for i in np.nonzero(off_skin(ident.problem.poses))[0]:
+        a.axvspan(i + 0.5, i + 1.5, color="0.9", lw=0)
+    for k in range(N):
+        a.plot(rows, r[:, k], ".", ms=4, label=f"e{k + 1}")
+    for y in (-3, 3):
+        a.axhline(y, color="k", ls="--", lw=0.7)
+    a.set_xlabel("row of the capture (grey: off the skin)")
+    a.set_ylabel("residual / its standard deviation")
+    a.set_title(f"residuals: reduced chi-square {ident.reduced_chi2:.2f}", fontsize=10)
+    a.legend(fontsize=7, ncol=4, loc="upper right")
+
+    def panel(ax, names, labels, title, unit):
+        x = np.arange(len(names))
+        ax.errorbar(x - 0.12, [prior[k][0] for k in names], [prior[k][1] for k in names], fmt="none", ecolor="0.6",
+                    elinewidth=6, alpha=0.6, label="prior: the drawing, 1 sd")
+        ax.errorbar(x + 0.12, [post[k][0] for k in names], [post[k][1] for k in names], fmt="o", color="k", ms=4,
+                    capsize=3, label="identified, 1 standard error")
+        ax.set_xticks(x, labels)
+        ax.set_ylabel(unit)
+        ax.set_title(title, fontsize=10)
+        ax.grid(True, axis="y", lw=0.3, alpha=0.5)
+
+    sens = [k for k in post if "sensitivity" in k]
+    offs = [k for k in post if "offset" in k]
+    panel(b, sens, [k.split()[0] for k in sens], "element sensitivity (gain x polarisation)", "x the drawing's")
+    b.legend(fontsize=7, loc="best")
+    panel(c, offs, [k.split()[-2] for k in offs], "magnet offset from\nthe elements' centre", "mm")
     fig.tight_layout()
     _save(fig, path)
     plt.close(fig)

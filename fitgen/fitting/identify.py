@@ -166,16 +166,31 @@ class Identification:
     def unit(self, name: str = "identified-unit", description: str = "") -> Sensor:
         return self.space.sensor(self.theta, name, description)
 
-    def derived(self) -> dict[str, tuple[float, float]]:
+    def derived(self, cov: np.ndarray | None = None, theta: np.ndarray | None = None) -> dict[str, tuple[float, float]]:
         """What a capture determines whatever the split: (value, standard error) of the magnet's offset from
-        the elements' centre (mm) and each element's sensitivity (gain x polarisation over the drawing's)."""
+        the elements' centre (mm) and each element's sensitivity (gain x polarisation over the drawing's).
+        ``cov`` and ``theta``: other parameters and covariance to take them at (the prior's: zeros and its
+        spreads squared)."""
+        cov = self.cov if cov is None else cov
+        theta = self.theta if theta is None else theta
         funcs = derived_quantities(self.space)
         out = {}
         for name, fn in funcs.items():
             h = 1e-6
-            g = np.array([(fn(self.theta + h * e) - fn(self.theta - h * e)) / (2 * h) for e in np.eye(self.space.size)])
-            out[name] = (float(fn(self.theta)), float(np.sqrt(g @ self.cov @ g)))
+            g = np.array([(fn(theta + h * e) - fn(theta - h * e)) / (2 * h) for e in np.eye(self.space.size)])
+            out[name] = (float(fn(theta)), float(np.sqrt(g @ cov @ g)))
         return out
+
+    def standardized_residuals(self) -> np.ndarray:
+        """Each reading's residual at the maximum a posteriori over its own standard deviation (n, N): the
+        reading noise and the rig's error through the reading's slopes (the zero's error, one for all rows, is
+        taken up by the fit, not left in a row); NaN for a clipped reading. Rows whose residuals stand out are
+        rows the physics does not explain (a slip, a knock)."""
+        prob, z = self.problem, self.theta / self.space.prior_sd
+        js = prob.pose_slopes(z)
+        var = prob.noise**2 + prob.rig_error**2 * np.sum(js**2, axis=-1)
+        r = (prob.readings - prob.predict(z)[0]) / np.sqrt(var)
+        return r if prob.valid is None else np.where(prob.valid, r, np.nan)
 
 
 def derived_quantities(space: UnitSpace) -> dict:
