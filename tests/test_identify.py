@@ -81,16 +81,22 @@ def test_standardized_residuals_single_out_a_row_the_physics_does_not_explain(dr
     r = identify(drawing, y, plan[0], noise).standardized_residuals()
     assert r.shape == y.shape and 0.8 < np.sqrt(np.mean(r ** 2)) < 1.25  # each reading within its own spread
     assert np.abs(r).max() < 4
-    # the indenter slipped 0.2 mm in dx on one row pressed deep (its label says it did not)
-    deep = int(np.nonzero(plan[0][:, 2] == plan[0][:, 2].min())[0][0])
-    true = plan[0].copy()
-    true[deep, 0] += 0.2
-    slipped = y.copy()
-    slipped[deep] = readings(unit, true[deep:deep + 1], adc_bits=0)[0] + (y[deep] - readings(unit, plan[0][deep:deep + 1],
-                                                                                           adc_bits=0)[0])
-    r = identify(drawing, slipped, plan[0], noise).standardized_residuals()
-    worst = np.abs(r).max(axis=1)
+    deep, slipped = slip(unit, y, plan[0])
+    ident = identify(drawing, slipped, plan[0], noise)
+    worst = np.abs(ident.standardized_residuals()).max(axis=1)
     assert int(np.argmax(worst)) == deep and worst[deep] > 6, worst
+    assert [i for i, _ in ident.outlying_rows()] == [deep]
+
+
+def slip(unit, y, poses, mm=0.2):
+    """The capture ``y`` with the indenter slipped ``mm`` in dx on its first row pressed deepest (its label says it
+    did not): that row's index and the readings."""
+    deep = int(np.nonzero(poses[:, 2] == poses[:, 2].min())[0][0])
+    true = poses[deep:deep + 1].copy()
+    true[0, 0] += mm
+    out = y.copy()
+    out[deep] += readings(unit, true, adc_bits=0)[0] - readings(unit, poses[deep:deep + 1], adc_bits=0)[0]
+    return deep, out
 
 
 def test_what_no_capture_separates_comes_from_the_information(drawing, plan):
@@ -189,6 +195,7 @@ def test_cli_schedule_capture_identify(tmp_path):
     proc = run_cli("fitgen", "identify", str(cap), "--sensor", "paper", "--noise", "0.0005", "-o", str(unit_file),
                    "--plot", str(tmp_path / "plots"))
     assert proc.returncode == 0, proc.stderr
+    assert "stands out" not in proc.stderr  # no row the physics does not explain
     png = tmp_path / "plots" / "identify.png"
     assert f"plot: {png}" in proc.stderr and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     lifted = int((table[:, 2] > 0).sum())
@@ -246,6 +253,15 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
         "other sensor": (readings(load_sensor("tilted-axes").with_transfer("gmr"), plan[0], adc_bits=0), plan[0],
                          "does not explain"),
     }
+    # a row the physics does not explain, in a capture it otherwise does: written, the row named
+    deep, slipped = slip(unit, y, plan[0])
+    _save_capture(tmp_path / "slip.csv", slipped, plan[0], {"samples_per_row": SAMPLES})
+    proc = run_cli("fitgen", "identify", str(tmp_path / "slip.csv"), "--sensor", "paper", "-o", str(tmp_path / "s.toml"))
+    assert proc.returncode == 0, proc.stderr
+    said = [ln for ln in proc.stderr.splitlines() if "stands out" in ln]
+    assert len(said) == 1 and said[0].startswith(f"identify: row {deep + 1} of "), proc.stderr
+    post = json.loads((tmp_path / "s.posterior.json").read_text())
+    assert [r["row"] for r in post["outlying_rows"]] == [deep + 1]
     for name, (yy, pp, message) in cases.items():
         path = tmp_path / f"{name.replace(' ', '_')}.csv"
         _save_capture(path, yy, pp, {"samples_per_row": SAMPLES})
