@@ -183,14 +183,19 @@ class Identification:
         return out
 
     def standardized_residuals(self) -> np.ndarray:
-        """Each reading's residual at the maximum a posteriori over its own standard deviation (n, N): the
-        reading noise and the rig's error through the reading's slopes (the zero's error, one for all rows, is
-        taken up by the fit, not left in a row); NaN for a clipped reading. Rows whose residuals stand out are
-        rows the physics does not explain (a slip, a knock)."""
+        """Each reading's residual at the maximum a posteriori, less the zero's shift the rows share (its
+        posterior mean), over its own standard deviation (n, N): the reading noise and the rig's error through
+        the reading's slopes; NaN for a clipped reading. Rows whose residuals stand out are rows the physics
+        does not explain (a slip, a knock)."""
         prob, z = self.problem, self.theta / self.space.prior_sd
         js = prob.pose_slopes(z)
-        var = prob.noise**2 + prob.rig_error**2 * np.sum(js**2, axis=-1)
-        r = (prob.readings - prob.predict(z)[0]) / np.sqrt(var)
+        r = prob.readings - prob.predict(z)[0]
+        if prob.zero_error > 0:  # the zero is one error of all the rows in contact: estimate it, take it out
+            W = prob.whiteners(z, slopes=js)
+            U = np.einsum("nij,nja->nia", W, js).reshape(-1, 3) * prob.zero_error
+            x = np.einsum("nij,nj->ni", W, r).ravel()
+            r = r - js @ (prob.zero_error * np.linalg.solve(np.eye(3) + U.T @ U, U.T @ x))
+        r = r / np.sqrt(prob.noise**2 + prob.rig_error**2 * np.sum(js**2, axis=-1))
         return r if prob.valid is None else np.where(prob.valid, r, np.nan)
 
     def outlying_rows(self, limit: float = OUTLIER_LIMIT) -> list[tuple[int, float]]:
