@@ -265,6 +265,8 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
     assert len(said) == 1 and said[0].startswith(f"identify: row {deep + 1} of "), proc.stderr
     post = json.loads((tmp_path / "s.posterior.json").read_text())
     assert [r["row"] for r in post["outlying_rows"]] == [deep + 1]
+    # slipped so far that the capture is refused: the refusal's line names the row
+    cases["slipped far"] = (slip(unit, y, plan[0], mm=0.5)[1], plan[0], f"row {deep + 1} stands out most")
     for name, (yy, pp, message) in cases.items():
         path = tmp_path / f"{name.replace(' ', '_')}.csv"
         _save_capture(path, yy, pp, {"samples_per_row": SAMPLES})

@@ -402,6 +402,10 @@ def in_capture_units(drawing: Sensor, meta: dict) -> Sensor:
     return drawing.with_transfer("gmr" if units == "V" else "raw") if units in ("V", "mT") else drawing
 
 
+def _where(ident: Identification, i: int) -> str:
+    return " ".join(f"{a}={v:g}" for a, v in zip(("dx", "dy", "dz"), ident.problem.poses[i]))
+
+
 def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
     """One line per row of ``capture`` the physics does not explain (:meth:`Identification.outlying_rows`)."""
     rows = ident.outlying_rows()
@@ -409,9 +413,9 @@ def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
         return []
     worst = np.nanmax(np.abs(ident.standardized_residuals()), axis=1)
     rest = float(np.delete(worst, [i for i, _ in rows]).max(initial=0.0))
-    lines = [f"row {i + 1} of {capture} (dx={p[0]:g} dy={p[1]:g} dz={p[2]:g}) stands out: residuals up to {r:.3g} "
-             f"standard deviations, the other rows at most {rest:.3g}; a slip, a knock or creep? delete the row and "
-             "resume the capture to take that pose again" for i, r in rows[:top] for p in [ident.problem.poses[i]]]
+    lines = [f"row {i + 1} of {capture} ({_where(ident, i)}) stands out: residuals up to {r:.3g} standard "
+             f"deviations, the other rows at most {rest:.3g}; a slip, a knock or creep? delete the row and resume the "
+             "capture to take that pose again" for i, r in rows[:top]]
     if len(rows) > top:
         lines.append(f"{len(rows) - top} more rows stand out beyond {OUTLIER_LIMIT:g} (the posterior lists them)")
     return lines
@@ -422,9 +426,13 @@ def check_explained(ident: Identification, capture, drawing: str, source: str) -
     (``source``: where the reading noise came from; ``drawing``: the sensor's name)."""
     if ident.reduced_chi2 > CHI2_LIMIT:
         rms = float(np.sqrt(ident.reduced_chi2))
+        rows = ident.outlying_rows()
+        row = "" if not rows else (f"; row {rows[0][0] + 1} stands out most ({_where(ident, rows[0][0])}: residuals up "
+                                   f"to {rows[0][1]:.3g} standard deviations): if it slipped, delete it and resume"
+                                   if len(rows) <= 3 else f"; {len(rows)} rows stand out, not one")
         raise InputError(f"the physics does not explain {capture}: residuals {rms:.3g}x the reading noise "
                          f"({source}); another sensor than {drawing}, labels in other units, a zero above first "
-                         "contact (rows at dz 0 off the skin), or a noise figure too low; nothing written")
+                         f"contact (rows at dz 0 off the skin), or a noise figure too low{row}; nothing written")
 
 
 def save(ident: Identification, path, provenance: dict) -> tuple:
