@@ -265,6 +265,12 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
     assert len(said) == 1 and said[0].startswith(f"identify: row {deep + 1} of "), proc.stderr
     post = json.loads((tmp_path / "s.posterior.json").read_text())
     assert [r["row"] for r in post["outlying_rows"]] == [deep + 1]
+    # a folder for the figure that cannot be made: said before the work, nothing written
+    (tmp_path / "file").write_text("x")
+    proc = run_cli("fitgen", "identify", str(tmp_path / "slip.csv"), "--sensor", "paper", "-o", str(tmp_path / "p.toml"),
+                   "--plot", str(tmp_path / "file" / "sub"))
+    assert_one_line_error(proc, 2, "cannot create")
+    assert not (tmp_path / "p.toml").exists() and not (tmp_path / "p.posterior.json").exists()
     # slipped so far that the capture is refused: the refusal's line names the row
     cases["slipped far"] = (slip(unit, y, plan[0], mm=0.5)[1], plan[0], f"row {deep + 1} stands out most")
     for name, (yy, pp, message) in cases.items():

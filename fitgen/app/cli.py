@@ -214,13 +214,11 @@ def cmd_report(args) -> int:
 
 def cmd_identify(args) -> int:
     from fitgen.app import plots
-    from fitgen.base.fileio import make_folder
     from fitgen.base.progress import Progress
     from fitgen.fitting import identify as idf
     from fitgen.physics.dataset import load_dataset
 
-    if args.plot:
-        plots.require()  # before the work, not after it
+    folder = plots.require(args.plot) if args.plot else None
     ds = load_dataset(args.capture)
     drawing = _sensor(args) if args.transfer else idf.in_capture_units(_sensor(args), ds.meta)
     noise, source = idf.row_noise(ds.meta, drawing, args.noise)
@@ -235,8 +233,8 @@ def cmd_identify(args) -> int:
                                                "drawing_spec": args.sensor})
     print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
           "the posterior)", file=sys.stderr)
-    if args.plot:
-        print(f"plot: {plots.identification(ident, make_folder(args.plot) / 'identify.png')}", file=sys.stderr)
+    if folder is not None:
+        print(f"plot: {plots.identification(ident, folder / 'identify.png')}", file=sys.stderr)
     print("".join(f"identify: {ln}\n" for ln in idf.outlier_lines(ident, args.capture)), end="", file=sys.stderr)
     return 0
 

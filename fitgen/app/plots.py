@@ -23,9 +23,12 @@ def _plt():
     return plt
 
 
-def require() -> None:
-    """One line and exit status 2 before any work when matplotlib is missing, not after it."""
+def require(folder) -> Path:
+    """What a figure needs, checked before any work rather than after it: matplotlib, and ``folder`` (made)."""
+    from fitgen.base.fileio import make_folder
+
     _plt()
+    return make_folder(folder)
 
 
 def _save(fig, path: Path) -> Path:
