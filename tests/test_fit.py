@@ -126,6 +126,15 @@ def test_predict_and_report_cli(paper_fit, tmp_path):
     assert "max error per dz level" in proc.stdout and "paper sim max" in proc.stdout
     assert (tmp_path / "plots" / "estimate_thx.png").stat().st_size > 1000
     assert (tmp_path / "plots" / "sweep_thx.png").exists()
+    # what --plot needs is checked before the report is written: one line, nothing written
+    (tmp_path / "file").write_text("x")
+    for extra, msg in ((["--data", str(folder / "sim.csv"), "--plot", str(tmp_path / "file" / "sub")], "cannot create"),
+                       (["--plot", str(tmp_path / "p2")], "--plot needs --data"),
+                       (["--data", str(folder / "sim.csv"), "--plot", str(tmp_path / "p3"), "--sensor", "nosuch"],
+                        "nosuch")):
+        proc = run_cli("fitgen", "report", str(folder / "m.json"), "-o", str(tmp_path / "r.md"), *extra)
+        assert_one_line_error(proc, 2, msg)
+        assert not (tmp_path / "r.md").exists()
 
 
 @pytest.mark.parametrize("text, msg", [

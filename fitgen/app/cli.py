@@ -184,11 +184,17 @@ def cmd_predict(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from fitgen.physics.dataset import load_dataset
+    from fitgen.app import plots
+    from fitgen.app.report import format_report
     from fitgen.base.fileio import write_atomic
     from fitgen.equations.model import load_model
-    from fitgen.app.report import format_report
+    from fitgen.physics.dataset import load_dataset
+    from fitgen.physics.sensor import load_sensor
 
+    if args.plot and not args.data:  # every check before anything is written
+        raise InputError("--plot needs --data (the rows to plot estimates for)")
+    folder = plots.require(args.plot) if args.plot else None
+    sensor = load_sensor(args.sensor) if folder is not None and args.sensor else None
     model = load_model(args.model)
     ds = load_dataset(args.data) if args.data else None
     text = format_report(model, ds, title=f"Report for {args.model}", paper=args.paper)
@@ -196,18 +202,9 @@ def cmd_report(args) -> int:
         write_atomic(args.output, text)
     else:
         print(text, end="")
-    if args.plot:
-        from fitgen.app import plots
-        from fitgen.base.fileio import make_folder
-
-        folder = make_folder(args.plot)
-        if ds is None:
-            raise InputError("--plot needs --data (the rows to plot estimates for)")
+    if folder is not None:
         paths = plots.estimate_vs_target(model, ds, folder)
-        if args.sensor:
-            from fitgen.physics.sensor import load_sensor
-
-            paths += plots.rotation_sweeps(model, load_sensor(args.sensor), folder)
+        paths += plots.rotation_sweeps(model, sensor, folder) if sensor is not None else []
         print("plots: " + ", ".join(str(p) for p in paths), file=sys.stderr)
     return 0
 
