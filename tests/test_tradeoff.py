@@ -243,6 +243,17 @@ def test_bad_options_one_line(args, contains, tmp_path):
     assert_one_line_error(proc, 2, contains)
 
 
+def test_an_output_folder_that_cannot_be_made_is_said_before_the_sweep(tmp_path, monkeypatch, capsys):
+    import fitgen.c.tradeoff as tradeoff
+    from fitgen.app.cli import main
+
+    monkeypatch.setattr(tradeoff, "sweep", lambda *a, **k: pytest.fail("swept before the output folder was checked"))
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(SystemExit) as stop:
+        main(["tradeoff", "paper", "--scene", "press", "-o", str(tmp_path / "file" / "sub")])
+    assert stop.value.code == 2 and "cannot create" in capsys.readouterr().err
+
+
 def test_bad_scene_and_sensor_one_line(tmp_path):
     assert_one_line_error(run_cli("fitgen", "tradeoff", "paper", "--scene", "nowhere", "-o", str(tmp_path)), 2)
     assert_one_line_error(run_cli("fitgen", "tradeoff", "nosuch", "--scene", "press", "-o", str(tmp_path)), 2)
