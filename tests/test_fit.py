@@ -234,3 +234,22 @@ def test_fit_on_a_capture_adds_the_single_sample_noise_less_the_rows(tmp_path):
         expected = np.sqrt(device**2 - data**2) if data else 0.0
         assert noise["added"] == pytest.approx(expected), noise
         assert noise["why"]
+
+
+@pytest.mark.parametrize("argv, work", [
+    (["fit", "{data}", "-o", "{out}"], "fitgen.app.cli.cmd_fit"),
+    (["identify", "{data}", "-o", "{out}"], "fitgen.app.cli.cmd_identify"),
+    (["schedule", "--n", "10", "-o", "{out}"], "fitgen.app.cli.cmd_schedule"),
+    (["simulate", "--random", "5", "-o", "{out}"], "fitgen.app.cli.cmd_simulate"),
+    (["predict", "{model}", "{data}", "-o", "{out}"], "fitgen.app.cli.cmd_predict"),
+    (["report", "{model}", "-o", "{out}"], "fitgen.app.cli.cmd_report"),
+])
+def test_an_output_in_a_missing_folder_is_said_before_the_work(argv, work, tmp_path, monkeypatch, capsys):
+    from fitgen.app import cli
+
+    # the command must not run (build_parser binds the patched one): its work would come before the write
+    monkeypatch.setattr(cli, work.rsplit(".", 1)[1], lambda args: pytest.fail(f"{work} ran"))
+    names = {"data": str(tmp_path / "d.csv"), "model": str(tmp_path / "m.json"), "out": str(tmp_path / "no" / "x")}
+    with pytest.raises(SystemExit) as stop:
+        cli.main([a.format(**names) for a in argv])
+    assert stop.value.code == 2 and f"folder {tmp_path / 'no'} does not exist" in capsys.readouterr().err

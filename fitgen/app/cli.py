@@ -9,6 +9,7 @@ from fitgen import __version__
 from fitgen.app.cliutil import Parser, command_main
 from fitgen.base.parse import OutOfRange, parse_assignments, parse_names, parse_noise, parse_penalty
 from fitgen.base.errors import InputError
+from fitgen.base.fileio import folder_of
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
 from fitgen.equations.terms import FAMILIES
 from fitgen.physics.pose import POSE_NAMES
@@ -486,9 +487,12 @@ def build_parser() -> Parser:
 
 
 def _check(args) -> None:
-    """What argparse cannot check."""
+    """What argparse cannot check; an output file's folder before the work, not after it."""
     if getattr(args, "adc_bits", None) is not None and not 0 <= args.adc_bits <= 32:
         raise InputError(f"--adc-bits must be 0..32, got {args.adc_bits}")
+    if getattr(args, "output", None) and args.func in (cmd_simulate, cmd_fit, cmd_predict, cmd_report, cmd_identify,
+                                                      cmd_schedule):
+        folder_of(args.output)
 
 
 def main(argv=None) -> int:
