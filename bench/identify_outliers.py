@@ -51,7 +51,7 @@ def main() -> None:
                 ident = identify(ctx.drawing, y, labels, ctx.noise / np.sqrt(U.SAMPLES), rig_error=U.HEAD[1],
                                  zero_error=U.ZERO_SIM if zero else 0.0)
                 refused += ident.reduced_chi2 > CHI2_LIMIT  # refused, it names the row in its one line
-                worst = np.nanmax(np.abs(ident.standardized_residuals()), axis=1)
+                worst = ident.row_worst
                 out = [i for i, _ in ident.outlying_rows()]
                 named += bool(out)
                 right += out[:1] == [deep]

@@ -73,7 +73,7 @@ def test_a_zero_off_first_contact_is_allowed_for(drawing, plan, seed):
         if zero_error:
             assert np.abs(z).max() < 3.0, z
             # the shift the rows share is no row's fault: no row stands out for it
-            r = ident.standardized_residuals()
+            r = ident.standardized_residuals
             assert np.sqrt(np.mean(r ** 2)) < 1.25 and ident.outlying_rows() == []
     assert rms_z[0.0] > 2.0 and rms_z[0.02] < 1.6, rms_z
 
@@ -81,12 +81,12 @@ def test_a_zero_off_first_contact_is_allowed_for(drawing, plan, seed):
 def test_standardized_residuals_single_out_a_row_the_physics_does_not_explain(drawing, plan):
     unit, _ = draw_unit(drawing, 26)
     y, noise = capture(unit, plan[0], 26)
-    r = identify(drawing, y, plan[0], noise).standardized_residuals()
+    r = identify(drawing, y, plan[0], noise).standardized_residuals
     assert r.shape == y.shape and 0.8 < np.sqrt(np.mean(r ** 2)) < 1.25  # each reading within its own spread
     assert np.abs(r).max() < 4
     deep, slipped = slip(unit, y, plan[0])
     ident = identify(drawing, slipped, plan[0], noise)
-    worst = np.abs(ident.standardized_residuals()).max(axis=1)
+    worst = ident.row_worst
     assert int(np.argmax(worst)) == deep and worst[deep] > 6, worst
     assert [i for i, _ in ident.outlying_rows()] == [deep]
 

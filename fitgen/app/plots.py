@@ -150,7 +150,7 @@ def identification(ident, path: Path) -> Path:
     from fitgen.physics.pose import off_skin
 
     plt = _plt()
-    r = ident.standardized_residuals()
+    r = ident.standardized_residuals
     n, N = r.shape
     post = ident.derived()
     prior = ident.derived(np.diag(ident.space.prior_sd ** 2), np.zeros(ident.space.size))

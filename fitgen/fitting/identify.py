@@ -28,6 +28,7 @@ stage's axes into it, so estimates of dx, dy, dz are the stage's, as the capture
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -182,6 +183,7 @@ class Identification:
             out[name] = (float(fn(theta)), float(np.sqrt(g @ cov @ g)))
         return out
 
+    @cached_property
     def standardized_residuals(self) -> np.ndarray:
         """Each reading's residual at the maximum a posteriori, less the zero's shift the rows share (its
         posterior mean), over its own standard deviation (n, N): the reading noise and the rig's error through
@@ -198,10 +200,15 @@ class Identification:
         r = r / np.sqrt(prob.noise**2 + prob.rig_error**2 * np.sum(js**2, axis=-1))
         return r if prob.valid is None else np.where(prob.valid, r, np.nan)
 
+    @cached_property
+    def row_worst(self) -> np.ndarray:
+        """Each row's largest |standardized residual| (n,)."""
+        return np.nanmax(np.abs(self.standardized_residuals), axis=1)
+
     def outlying_rows(self, limit: float = OUTLIER_LIMIT) -> list[tuple[int, float]]:
         """Rows (index, largest |standardized residual|) beyond ``limit``, worst first. 320 readings of a
         good capture pass 5 about once in 5,000 captures; a row that slipped 0.2 mm stands at 11-14."""
-        worst = np.nanmax(np.abs(self.standardized_residuals()), axis=1)
+        worst = self.row_worst
         idx = np.nonzero(worst > limit)[0]
         return [(int(i), float(worst[i])) for i in idx[np.argsort(-worst[idx], kind="stable")]]
 
@@ -411,8 +418,7 @@ def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
     rows = ident.outlying_rows()
     if not rows:
         return []
-    worst = np.nanmax(np.abs(ident.standardized_residuals()), axis=1)
-    rest = float(np.delete(worst, [i for i, _ in rows]).max(initial=0.0))
+    rest = float(np.delete(ident.row_worst, [i for i, _ in rows]).max(initial=0.0))
     lines = [f"row {i + 1} of {capture} ({_where(ident, i)}) stands out: residuals up to {r:.3g} standard "
              f"deviations, the other rows at most {rest:.3g}; a slip, a knock or creep? delete the row and resume the "
              "capture to take that pose again" for i, r in rows[:top]]
