@@ -10,6 +10,7 @@ from fitgen.base.parse import parse_positive
 
 from host.stage import (AxisMap, GcodeController, PoseStage, StageError, StageSettings, StageState, choose_zero,
                         jog_to_zero, parse_approach, parse_ranges, parse_zero, stage_url)
+from host.stagesettings import APPROACH
 
 STAGE_OPTIONS = ("stage_flavor", "stage_baud", "stage_axes", "stage_limits", "stage_feed", "stage_approach",
                  "stage_timeout", "stage_boot_wait", "home", "unlock", "zero")
@@ -39,7 +40,7 @@ def stage_settings(args, schedule):
     settings = StageSettings(AxisMap.parse(args.stage_axes or "X=dx,Y=dy,Z=dz"),
                              parse_ranges(args.stage_limits, "--stage-limits"),
                              feed=parse_positive(args.stage_feed or "600", "--stage-feed"),
-                             approach=parse_approach(args.stage_approach or "dx=-0.3,dy=-0.3,dz=0.3")).check()
+                             approach=parse_approach(args.stage_approach or APPROACH)).check()
     settings.check_schedule(schedule.poses, schedule.describe)
     return {"url": stage_url(args.stage), "settings": settings, "zero": parse_zero(args.zero or "ask"),
             "baud": parse_positive(args.stage_baud or "115200", "--stage-baud", integer=True),

@@ -88,6 +88,9 @@ def parse_ranges(spec: str, what: str) -> dict[str, tuple[float, float]]:
     return out
 
 
+APPROACH = "dx=-0.3,dy=-0.3,dz=0.3"  # every pose from -dx, -dy and above: the last move presses into the skin
+
+
 def parse_approach(spec: str) -> np.ndarray:
     """``dx=-0.3,dy=-0.3,dz=0.3`` -> where the last move to a pose starts from, relative to it (mm)."""
     from fitgen.base.parse import parse_assignments
@@ -104,7 +107,7 @@ class StageSettings:
     axes: AxisMap
     limits: dict  # pose axis -> (lo, hi) mm, from the zero
     feed: float = 600.0  # mm/min
-    approach: np.ndarray = field(default_factory=lambda: np.array([-0.3, -0.3, 0.3]))
+    approach: np.ndarray = field(default_factory=lambda: parse_approach(APPROACH))
     jog_max: float = 5.0  # mm per jog step while the zero is set
 
     def check(self) -> "StageSettings":

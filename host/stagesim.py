@@ -43,7 +43,7 @@ from fitgen.physics.pose import OFF_SKIN_MM
 
 from host.gcode import MACHINE_AXES
 from host.stageserver import PoseFile, PtyServer, SocketServer, pose_file_motion
-from host.stagesettings import STAGE_AXES, AxisMap
+from host.stagesettings import APPROACH, STAGE_AXES, AxisMap, parse_approach
 
 # fitgen/app/host_cli.py imports the serving side's names from here too
 __all__ = ["PoseFile", "PtyServer", "SimController", "SimRig", "SocketServer", "parse_matrix", "pose_file_motion",
@@ -89,10 +89,10 @@ class SimRig:
             self.tool = self.nominal + self.rng.normal(0.0, self.repeatability, 3) * (self.repeatability > 0)
             self.publish()
 
-    def carriage_at_contact(self, approach=(-0.3, -0.3, 0.3)) -> np.ndarray:
+    def carriage_at_contact(self, approach=None) -> np.ndarray:
         """Where the carriage stands (home frame) when the tool is at first contact and each axis came from its
-        ``approach`` side (pose axes dx, dy, dz; the capture's): the zero a user finds by the documented jog."""
-        c = self.contact.copy()
+        ``approach`` side (pose axes; default the capture's): the zero a user finds by the documented jog."""
+        c, approach = self.contact.copy(), parse_approach(APPROACH) if approach is None else approach
         for m, p, s in self.axes.pairs:
             k, j = MACHINE_AXES.index(m), STAGE_AXES.index(p)
             if approach[j]:
@@ -458,7 +458,7 @@ def parse_matrix(spec: str) -> np.ndarray:
 
 def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", samples: int = 16,
                             noise: float = 0.0005, backlash: float = 0.03, repeatability: float = 0.005,
-                            limits: str = "dx=-2.5:2.5,dy=-2.5:2.5,dz=-2.5:1", approach: str = "dx=-0.3,dy=-0.3,dz=0.3",
+                            limits: str = "dx=-2.5:2.5,dy=-2.5:2.5,dz=-2.5:1", approach: str = APPROACH,
                             seed: int = 0, progress=None):
     """A capture as `tactile-host capture --stage` makes it, all simulated: two ADS1115s on a simulated bus read
     ``sensor`` (a unit, say, whose file carries its stage map), a simulated ``flavor`` controller moves it through a
@@ -471,7 +471,7 @@ def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", s
     from host.simbus import SimBus
     from host.gcode import GcodeController
     from host.stage import PoseStage
-    from host.stagesettings import StageSettings, parse_approach, parse_ranges
+    from host.stagesettings import StageSettings, parse_ranges
 
     contact, start = (12.0, 8.0, 4.0), (10.0, 10.0, 10.0)
     cmap = parse_spec("ads1115@0x48:0-3,ads1115@0x49:0-3")
