@@ -99,15 +99,15 @@ class Problem:
         eye = np.broadcast_to(np.eye(cov.shape[1]), cov.shape)
         return np.linalg.solve(L, eye)
 
-    def whitening(self, z: np.ndarray, poses: np.ndarray | None = None) -> "Whitening":
-        """The whitening of the rows (or of ``poses``, which share no zero) at z."""
-        js = self.pose_slopes(z, poses)
+    def whitening(self, z: np.ndarray, poses: np.ndarray | None = None, slopes=None) -> "Whitening":
+        """The whitening of the rows (or of ``poses``, which share no zero) at z; ``slopes``: theirs, if at hand."""
+        js = self.pose_slopes(z, poses) if slopes is None else slopes
         W = self.whiteners(z, poses, js)
         if poses is not None or self.zero_error <= 0:
             return Whitening(W)
         U = np.einsum("nij,nja->nia", W, js).reshape(-1, 3) * self.zero_error
         phi, s, _ = np.linalg.svd(U, full_matrices=False)
-        return Whitening(W, phi, 1.0 / np.sqrt(1.0 + s**2) - 1.0)
+        return Whitening(W, phi, 1.0 / np.sqrt(1.0 + s**2) - 1.0, U)
 
     def whitened_rows(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
         """Each row's Jacobian whitened by its own covariance alone (n, N, P): rows whose information adds up,
@@ -130,6 +130,7 @@ class Whitening:
     W: np.ndarray
     phi: np.ndarray | None = None
     c: np.ndarray | None = None
+    U: np.ndarray | None = None  # the zero's whitened slopes (n N, 3), times zero_error
 
     def apply(self, a: np.ndarray) -> np.ndarray:
         """Whitened residuals (n, N) -> (n N,) or Jacobians (n, N, P) -> (n N, P)."""
@@ -192,10 +193,9 @@ class Identification:
         prob, z = self.problem, self.theta / self.space.prior_sd
         js = prob.pose_slopes(z)
         r = prob.readings - prob.predict(z)[0]
-        if prob.zero_error > 0:  # the zero is one error of all the rows in contact: estimate it, take it out
-            W = prob.whiteners(z, slopes=js)
-            U = np.einsum("nij,nja->nia", W, js).reshape(-1, 3) * prob.zero_error
-            x = np.einsum("nij,nj->ni", W, r).ravel()
+        wh = prob.whitening(z, slopes=js)
+        if wh.U is not None:  # the zero is one error of all the rows in contact: estimate it, take it out
+            x, U = np.einsum("nij,nj->ni", wh.W, r).ravel(), wh.U
             r = r - js @ (prob.zero_error * np.linalg.solve(np.eye(3) + U.T @ U, U.T @ x))
         r = r / np.sqrt(prob.noise**2 + prob.rig_error**2 * np.sum(js**2, axis=-1))
         return r if prob.valid is None else np.where(prob.valid, r, np.nan)
