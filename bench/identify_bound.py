@@ -39,8 +39,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from benchutil import fmt, log, table  # noqa: E402
 from fitgen.fitting.holdout import box_of, deployed_errors, held_out_set, posterior_units  # noqa: E402
-from fitgen.fitting.identify import (ZERO_ERROR, Problem, derived_quantities, identify, load_posterior,  # noqa: E402
-                                     save)
+from fitgen.fitting.identify import ZERO_ERROR, Problem, derived_quantities, identify  # noqa: E402
+from fitgen.fitting.unitrecord import load_posterior, save  # noqa: E402
 from fitgen.fitting.schedule import candidates, d_optimal, exchange_design  # noqa: E402
 from fitgen.physics.pose import off_skin  # noqa: E402
 from fitgen.physics.sensor import load_sensor  # noqa: E402

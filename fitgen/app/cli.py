@@ -213,27 +213,27 @@ def cmd_report(args) -> int:
 def cmd_identify(args) -> int:
     from fitgen.app import plots
     from fitgen.base.progress import Progress
-    from fitgen.fitting import identify as idf
+    from fitgen.fitting import identify as idf, unitrecord as rec
     from fitgen.physics.dataset import load_dataset
 
     folder = plots.require(args.plot) if args.plot else None
     ds = load_dataset(args.capture)
-    drawing = _sensor(args) if args.transfer else idf.in_capture_units(_sensor(args), ds.meta)
-    noise, source = idf.row_noise(ds.meta, drawing, args.noise)
+    drawing = _sensor(args) if args.transfer else rec.in_capture_units(_sensor(args), ds.meta)
+    noise, source = rec.row_noise(ds.meta, drawing, args.noise)
     with Progress("identify", 4) as bar:
         ident = idf.identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
                              zero_error=args.zero_error, progress=lambda i, n, note: bar.update(1, note))
-    idf.check_explained(ident, args.capture, drawing.name, source)
+    rec.check_explained(ident, args.capture, drawing.name, source)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
           f"{args.zero_error:g} mm", file=sys.stderr)
-    print(idf.report(ident), end="")
-    unit, post = idf.save(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
+    print(rec.report(ident), end="")
+    unit, post = rec.save(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
                                                "drawing_spec": args.sensor})
     print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
           "the posterior)", file=sys.stderr)
     if folder is not None:
         print(f"plot: {plots.identification(ident, folder / 'identify.png')}", file=sys.stderr)
-    print("".join(f"identify: {ln}\n" for ln in idf.outlier_lines(ident, args.capture)), end="", file=sys.stderr)
+    print("".join(f"identify: {ln}\n" for ln in rec.outlier_lines(ident, args.capture)), end="", file=sys.stderr)
     return 0
 
 

@@ -109,7 +109,8 @@ def _unit_stage(out: Path, drawing_model) -> None:
     from fitgen.fitting.family import fit_auto
     from fitgen.fitting.fit import FitSettings, fit_model
     from fitgen.fitting.holdout import box_of, evaluate, held_out_set
-    from fitgen.fitting.identify import identify, load_posterior, row_noise, save
+    from fitgen.fitting.identify import identify
+    from fitgen.fitting.unitrecord import load_posterior, row_noise, save
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.fitting.schedule import schedule, schedule_csv
     from fitgen.physics.sensor import load_sensor

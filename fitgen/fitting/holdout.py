@@ -129,7 +129,7 @@ def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, 
              labels: str = "stage") -> dict:
     """The ``held_out`` record of a model file: how it was made and the errors per precision.
 
-    ``posterior`` (an identified unit's record, fitgen.fitting.identify.save): the figures are held out on
+    ``posterior`` (an identified unit's record, fitgen.fitting.unitrecord.save): the figures are held out on
     POSTERIOR_UNITS units drawn from it instead of on ``sensor`` alone, and each figure is the median
     over those units (the 90th percentile beside it), so that what the file says includes how well the
     capture pinned the unit down.
@@ -208,7 +208,7 @@ def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None)
     the box of its poses, with the device's noise the fit assumed and the dataset's labels; on units
     drawn from the identification's posterior when ``unit_file`` has one. ``note(text)`` is told what
     is simulated."""
-    from fitgen.fitting.identify import load_posterior
+    from fitgen.fitting.unitrecord import load_posterior
 
     posterior = load_posterior(unit_file) if unit_file else None
     noise = model.fit_info["noise"]["device"]

@@ -1,0 +1,175 @@
+"""What identify tells and keeps (fitgen.fitting.identify finds it): the identification in words, the rows
+that stand out, the refusal when the physics does not explain a capture, the unit file with its posterior
+record; and what it reads from a capture's meta (the rows' noise, the units)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, Identification
+from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
+from fitgen.physics.sensor import Sensor
+from fitgen.physics.units import UnitSpace
+
+
+def describe_direction(space: UnitSpace, v: np.ndarray, top: int = 4) -> str:
+    """A direction in prior spreads as its largest components: '0.71 magnet.log_polarization - 0.70 e1.log_gain'."""
+    order = np.argsort(np.abs(v))[::-1][:top]
+    scale = np.abs(v[order[0]])
+    parts = [f"{v[i] / scale:+.2f} {space.names[i]}" for i in order if abs(v[i]) >= 0.1 * scale]
+    return " ".join(parts).lstrip("+")
+
+
+def report(ident: Identification) -> str:
+    """The identification in words and tables: fit, parameters, what was determined and what was not."""
+    sp = ident.space
+    n, N = ident.problem.readings.shape
+    lines = [f"identify: {n} rows x {N} elements; residual chi-square {ident.chi2:.1f} on {ident.dof:.1f} degrees of "
+             f"freedom (reduced {ident.reduced_chi2:.2f}; 1 when the physics explains the rows to the noise)"]
+    rest = int(np.sum(off_skin(ident.problem.poses)))
+    hint = f"; a row with the stage lifted {REST_LIFT_MM:g} mm (fitgen schedule adds it) pins the rest readings"
+    lines.append(f"rows off the skin (the magnet at rest, free of the rig's error): {rest}" + ("" if rest else hint))
+    lines.append("")
+    lines.append("| what the capture determines | value | standard error |")
+    lines.append("| --- | --- | --- |")
+    for name, (val, se) in ident.derived().items():
+        lines.append(f"| {name} | {val:.5g} | {se:.2g} |")
+    sd, prior = ident.sd, sp.prior_sd
+    lines += ["", "| parameter | value | standard error | prior spread | share of the prior left |", "| --- | --- | --- | --- | --- |"]
+    for i, name in enumerate(sp.names):
+        lines.append(f"| {name} | {ident.theta[i]:.4g} | {sd[i]:.2g} | {prior[i]:.2g} | {sd[i] / prior[i]:.2f} |")
+    det = int(np.sum(ident.info_eig >= 1.0))
+    lines += ["", f"determined by the capture (information >= the prior's): {det} of {sp.size} directions; "
+                  f"left to the prior: {sp.size - det}"]
+    g = ident.gauge.shape[1]
+    lines.append(f"no capture can separate ({g} directions: the same readings at every pose; the unit file takes the "
+                 "prior's split):")
+    for v in ident.gauge.T:
+        lines.append(f"  {describe_direction(sp, v)}")
+    if ident.starved:
+        lines.append("this capture leaves to the prior (a dense three-axis capture would not):")
+        for v, poses, gain in ident.starved:
+            where = "; ".join(" ".join(f"{c}={p[j]:g}" for j, c in enumerate(POSE_NAMES[:3])) for p in poses)
+            lines.append(f"  {describe_direction(sp, v)}: poses that pin it: {where}")
+    else:
+        lines.append("this capture leaves nothing else to the prior that a three-axis capture could pin")
+    return "\n".join(lines) + "\n"
+
+# --- captures and files ---------------------------------------------------------------------------
+
+ROW_NOISE_KEY = "row_noise"  # a capture's meta: per element, the measured noise of its averaged rows
+SAMPLES_KEY = "samples_per_row"
+
+
+def row_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[np.ndarray, str]:
+    """The reading noise of a capture's rows, per element, and where it came from: ``noise`` (the device's
+    single-sample noise) over sqrt(samples per row), else the noise the capture measured, else the sensor
+    file's over sqrt(samples)."""
+    n = sensor.n_elements
+    samples = meta.get(SAMPLES_KEY, 1)
+    samples = samples if isinstance(samples, int) and samples >= 1 else 1
+    if noise is not None:
+        return np.full(n, noise / np.sqrt(samples)), f"--noise {noise:g} over sqrt({samples}) samples"
+    measured = meta.get(ROW_NOISE_KEY)
+    if isinstance(measured, list) and len(measured) == n and all(isinstance(x, (int, float)) and x > 0
+                                                                 for x in measured):
+        return np.asarray(measured, dtype=float), "measured by the capture"
+    return (np.full(n, sensor.noise / np.sqrt(samples)),
+            f"sensor {sensor.name}'s {sensor.noise:g} over sqrt({samples}) samples")
+
+
+def in_capture_units(drawing: Sensor, meta: dict) -> Sensor:
+    """``drawing`` in the transfer of the units a capture's meta names (V: gmr, mT: raw), else as it is."""
+    units = meta.get("units")
+    return drawing.with_transfer("gmr" if units == "V" else "raw") if units in ("V", "mT") else drawing
+
+
+def _where(ident: Identification, i: int) -> str:
+    return " ".join(f"{a}={v:g}" for a, v in zip(("dx", "dy", "dz"), ident.problem.poses[i]))
+
+
+def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
+    """One line per row of ``capture`` the physics does not explain (:meth:`Identification.outlying_rows`)."""
+    rows = ident.outlying_rows()
+    if not rows:
+        return []
+    rest = float(np.delete(ident.row_worst, [i for i, _ in rows]).max(initial=0.0))
+    lines = [f"row {i + 1} of {capture} ({_where(ident, i)}) stands out: residuals up to {r:.3g} standard "
+             f"deviations, the other rows at most {rest:.3g}; a slip, a knock or creep? delete the row and resume the "
+             "capture to take that pose again" for i, r in rows[:top]]
+    if len(rows) > top:
+        lines.append(f"{len(rows) - top} more rows stand out beyond {OUTLIER_LIMIT:g} (the posterior lists them)")
+    return lines
+
+
+def check_explained(ident: Identification, capture, drawing: str, source: str) -> None:
+    """InputError when the physics does not explain the capture: reduced chi-square over CHI2_LIMIT
+    (``source``: where the reading noise came from; ``drawing``: the sensor's name)."""
+    if ident.reduced_chi2 > CHI2_LIMIT:
+        rms = float(np.sqrt(ident.reduced_chi2))
+        rows = ident.outlying_rows()
+        row = "" if not rows else (f"; row {rows[0][0] + 1} stands out most ({_where(ident, rows[0][0])}: residuals up "
+                                   f"to {rows[0][1]:.3g} standard deviations): if it slipped, delete it and resume"
+                                   if len(rows) <= 3 else f"; {len(rows)} rows stand out, not one")
+        raise InputError(f"the physics does not explain {capture}: residuals {rms:.3g}x the reading noise "
+                         f"({source}); another sensor than {drawing}, labels in other units, a zero above first "
+                         f"contact (rows at dz 0 off the skin), or a noise figure too low{row}; nothing written")
+
+
+def save(ident: Identification, path, provenance: dict) -> tuple:
+    """Write the unit file (the maximum a posteriori unit) and beside it ``<stem>.posterior.json``: every
+    parameter with its standard error, the posterior covariance, what was determined and what not."""
+    import json
+    from pathlib import Path
+
+    from fitgen.base.fileio import write_atomic
+    from fitgen.physics.units import write_unit
+
+    path = Path(path)
+    post_path = path.with_suffix(".posterior.json")
+    spec = provenance.get("drawing_spec")
+    if spec is not None and Path(spec).is_file():  # a sensor file: named so that it is found from anywhere
+        provenance = {**provenance, "drawing_spec": str(Path(spec).resolve())}
+    unit = ident.unit(provenance.get("name", path.stem), f"identified from {provenance.get('capture', 'a capture')}")
+    record = {
+        "drawing": ident.space.drawing.name, "drawing_sha256": ident.space.drawing.sha256,
+        "drawing_spec": provenance.get("drawing_spec", ident.space.drawing.name),
+        "parameters": ident.space.names, "theta": ident.theta.tolist(), "sd": ident.sd.tolist(),
+        "prior_sd": ident.space.prior_sd.tolist(), "covariance": ident.cov.tolist(),
+        "chi2": ident.chi2, "dof": ident.dof, "rows": int(ident.problem.readings.shape[0]),
+        "rig_error": ident.problem.rig_error, "zero_error": ident.problem.zero_error,
+        "row_noise": ident.problem.noise.tolist(),
+        "outlying_rows": [{"row": i + 1, "residual": r} for i, r in ident.outlying_rows()],
+        "derived": {k: {"value": v, "se": s} for k, (v, s) in ident.derived().items()},
+        "determined_directions": int(np.sum(ident.info_eig >= 1.0)),
+        "no_capture_separates": [describe_direction(ident.space, v) for v in ident.gauge.T],
+        "capture_starves": [{"direction": describe_direction(ident.space, v), "poses": p[:, :3].tolist()}
+                            for v, p, _ in ident.starved],
+        **{k: v for k, v in provenance.items() if k != "name"}}
+    write_atomic(post_path, json.dumps(record, indent=1) + "\n")
+    prov = {"source": "fitgen identify", "posterior": post_path.name, "reduced_chi2": round(ident.reduced_chi2, 4),
+            **{k: v for k, v in provenance.items() if isinstance(v, (str, int, float)) and k != "name"}}
+    return write_unit(path, unit, ident.space.drawing.name, prov), post_path
+
+
+def load_posterior(unit_path) -> dict | None:
+    """The posterior record an identified unit file names (``[unit] posterior``), or None."""
+    import json
+    from pathlib import Path
+
+    from fitgen.physics.sensor import tomllib
+
+    unit_path = Path(unit_path)
+    try:
+        doc = tomllib.loads(unit_path.read_text())
+    except (OSError, ValueError):
+        return None
+    name = doc.get("unit", {}).get("posterior") if isinstance(doc.get("unit"), dict) else None
+    if not isinstance(name, str):
+        return None
+    try:
+        rec = json.loads((unit_path.parent / name).read_text())
+    except (OSError, ValueError):
+        raise InputError(f"unit file {unit_path}: its posterior {name} cannot be read") from None
+    return rec
