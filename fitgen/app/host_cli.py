@@ -6,9 +6,10 @@ import sys
 
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, command_main
 from fitgen.base.errors import InputError
-from fitgen.base.parse import parse_numbers, parse_positive
+from fitgen.base.parse import parse_positive
 
 from host.channelmap import ADS1115_PGA, ADS1115_RATES, MODES
+from host.stagesettings import APPROACH
 
 
 def cmd_verify(args) -> int:
@@ -204,18 +205,12 @@ def cmd_stage_sim(args) -> int:
     """``stage-sim``: a simulated Marlin or GRBL on a loopback port or a pty until Ctrl-C."""
     import time
 
-    from host.stagesim import PoseFile, PtyServer, SimController, SimRig, SocketServer, parse_matrix
-
-    def triple(text, what):
-        vals = parse_numbers(text)
-        if vals is None or len(vals) != 3:
-            raise InputError(f"{what} {text!r}: three numbers X,Y,Z (mm)")
-        return vals
+    from host.stagesim import PoseFile, PtyServer, SimController, SimRig, SocketServer, parse_matrix, parse_xyz
 
     M = parse_matrix(args.map) if args.map else None
     backlash = parse_positive(args.backlash, "--backlash", zero=True)
     rep = parse_positive(args.repeatability, "--repeatability", zero=True)
-    contact, start = triple(args.contact, "--contact"), triple(args.start, "--start")
+    contact, start = parse_xyz(args.contact, "--contact"), parse_xyz(args.start, "--start")
     target = PoseFile(args.pose_file) if args.pose_file else None
     rig = SimRig(target, M, axes=args.axes, contact=contact, start=start, backlash=backlash, repeatability=rep,
                  seed=args.seed)
@@ -455,9 +450,9 @@ def build_parser() -> Parser:
                     help="soft limits in mm from the zero for every mapped pose axis (required with --stage); "
                          "checked for every pose and its approach before anything moves")
     st.add_argument("--stage-feed", metavar="MM_MIN", help="feed rate of every move, mm/min (default 600)")
-    st.add_argument("--stage-approach", metavar="dx=-0.3,dy=-0.3,dz=0.3",
+    st.add_argument("--stage-approach", metavar=APPROACH,
                     help="where the last move to each pose starts, relative to it (backlash: every pose approached "
-                         "from the same side; 0 turns it off for an axis; default dx=-0.3,dy=-0.3,dz=0.3)")
+                         f"from the same side; 0 turns it off for an axis; default {APPROACH})")
     st.add_argument("--stage-timeout", metavar="S", help="time limit for each answer of the controller (default 5 s, "
                     "plus each move's own time)")
     st.add_argument("--stage-boot-wait", metavar="S", help="seconds to wait for a start-up banner after opening the "
