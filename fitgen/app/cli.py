@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from fitgen import __version__
-from fitgen.app.cliutil import Parser, command_main
+from fitgen.app.cliutil import Parser, command_main, finite
 from fitgen.base.parse import OutOfRange, parse_assignments, parse_names, parse_noise, parse_penalty
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import folder_of
@@ -259,19 +259,6 @@ def cmd_schedule(args) -> int:
     return 0
 
 
-def _finite(text: str) -> float:
-    import argparse
-    import math
-
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(x):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    return x
-
-
 def cmd_codegen(args) -> int:
     from fitgen.c.codegen import write_header
     from fitgen.c.targets import check_precision
@@ -389,12 +376,12 @@ def build_parser() -> Parser:
     i.add_argument("capture", metavar="CAPTURE.csv", help="rows of readings with the stage's displacements (dx,dy,dz)")
     i.add_argument("--sensor", default="paper", help="the drawing the unit was built to (preset or TOML; default paper)")
     i.add_argument("--transfer", choices=("raw", "gmr"), help="override the transfer (default: the capture's units)")
-    i.add_argument("--noise", type=_finite, metavar="X",
+    i.add_argument("--noise", type=finite, metavar="X",
                    help="the device's single-sample reading noise (default: what the capture measured, else the "
                         "sensor file's), divided by sqrt(samples per row)")
-    i.add_argument("--rig-error", type=_finite, default=0.01, metavar="MM",
+    i.add_argument("--rig-error", type=finite, default=0.01, metavar="MM",
                    help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
-    i.add_argument("--zero-error", type=_finite, default=0.02, metavar="MM",
+    i.add_argument("--zero-error", type=finite, default=0.02, metavar="MM",
                    help="how far the capture's zero may be from first contact, mm rms per axis, one error shared by "
                         "every row in contact (default 0.02)")
     i.add_argument("-o", "--output", required=True, metavar="UNIT.toml", help="the unit's sensor file to write")
@@ -411,7 +398,7 @@ def build_parser() -> Parser:
                     "with dz, a rest row may lift the stage 0.2 mm above first contact besides")
     sc.add_argument("--samples", type=int, default=16, help="samples the capture averages per row (default 16)")
     sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
-    sc.add_argument("--rig-error", type=_finite, default=0.01, metavar="MM", help="the stage's error, mm rms")
+    sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM", help="the stage's error, mm rms")
     sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv")
 
     pr = command("predict", cmd_predict, "estimates for the rows of a dataset")
@@ -424,9 +411,9 @@ def build_parser() -> Parser:
                          "the v columns rounded to ADC codes as the ADC would, or taken as codes with --codes")
     pr.add_argument("--codes", action="store_true",
                     help="fixed: the v columns are the ADC codes the fixed header takes (whole numbers)")
-    pr.add_argument("--input-lsb", type=_finite, metavar="X",
+    pr.add_argument("--input-lsb", type=finite, metavar="X",
                     help="fixed: the input value of one ADC code, as for codegen (default: the model's sensor's ADC)")
-    pr.add_argument("--input-offset", type=_finite, metavar="Y", help="fixed: the input value of code 0")
+    pr.add_argument("--input-offset", type=finite, metavar="Y", help="fixed: the input value of code 0")
     pr.add_argument("--target", choices=tuple(TARGETS), help="fixed: the plan codegen --target makes for that core "
                     "(uno: 16x16->32 products where the error bound allows); refuses a precision it cannot run")
 
@@ -447,10 +434,10 @@ def build_parser() -> Parser:
     c.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
     c.add_argument("--fma", action="store_true",
                    help="sum each term with fma(): fewer instructions on cores with fused multiply-add")
-    c.add_argument("--input-lsb", type=_finite, metavar="X",
+    c.add_argument("--input-lsb", type=finite, metavar="X",
                    help="fixed: the input value of one ADC code (default: the model's sensor's ADC, "
                         "or 3.3/65535 for inputs in V)")
-    c.add_argument("--input-offset", type=_finite, metavar="Y", help="fixed: the input value of code 0 (default 0)")
+    c.add_argument("--input-offset", type=finite, metavar="Y", help="fixed: the input value of code 0 (default 0)")
     c.add_argument("--target", choices=tuple(TARGETS), help="the core the header is for (refuses a precision it "
                    "cannot run: uno takes float or fixed); the header builds for any core")
 
