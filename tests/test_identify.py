@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ import pytest
 from conftest import assert_one_line_error, run_cli
 from fitgen.fitting.identify import Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
+from fitgen.physics import presets
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings
@@ -140,6 +142,44 @@ def test_a_capture_without_presses_names_what_it_starves(drawing, tmp_path):
     ident = identify(drawing, y, poses, noise)
     assert ident.starved, "a capture with no dz leaves something a press would pin"
     assert any(np.any(p[:, 2] < 0) for _, p, _ in ident.starved)
+
+
+def test_a_spread_of_zero_fixes_its_parameter_at_the_drawing(drawing, plan, tmp_path):
+    """A maker who knows a parameter exactly gives it spread 0 in [tolerances]: identify keeps it at the drawing,
+    names it fixed, and counts it neither as determined nor as inseparable (it divided by the 0 before)."""
+    from dataclasses import replace
+
+    from fitgen.base.errors import InputError
+    from fitgen.physics.sensor import Tolerances
+
+    text = (Path(presets.__file__).parent / "paper.toml").read_text().replace('name = "paper"', 'name = "mine"')
+    (tmp_path / "mine.toml").write_text(text + "\n[tolerances]\nstage_cross = 0\nambient = 0\nelement_tilt = 0\n")
+    mine = load_sensor(tmp_path / "mine.toml").with_transfer("gmr")
+    fixed = ~UnitSpace.of(mine).free
+    assert fixed.sum() == 6 + 3 + 8  # the map's cross terms, the ambient field, each element's tilt
+    unit, theta = draw_unit(mine, 27)
+    assert np.all(theta[fixed] == 0)
+    y, noise = capture(unit, plan[0], 27)
+    ident = identify(mine, y, plan[0], noise)
+    assert np.all(np.isfinite(ident.standardized_residuals)) and ident.outlying_rows() == []
+    assert 0.6 < ident.reduced_chi2 < 1.5
+    assert np.all(ident.theta[fixed] == 0) and np.all(ident.sd[fixed] == 0)
+    assert np.all(ident.gauge[fixed] == 0) and len(ident.info_eig) == (~fixed).sum()
+    truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+    for name, (value, se) in ident.derived().items():
+        assert abs(value - truth[name]) < 3.5 * se, (name, value, truth[name], se)
+    _save_capture(tmp_path / "c.csv", y, plan[0], {"samples_per_row": SAMPLES})
+    proc = run_cli("fitgen", "identify", str(tmp_path / "c.csv"), "--sensor", str(tmp_path / "mine.toml"), "-o",
+                   str(tmp_path / "twin.toml"))
+    assert proc.returncode == 0, proc.stderr
+    assert "fixed at the drawing (spread 0 in the sensor file's [tolerances]): 17 parameters" in proc.stdout
+    assert "| ambient.x | 0 | 0 | 0 | fixed |" in proc.stdout and "nan" not in proc.stdout + proc.stderr
+    # every spread 0: every unit is the drawing, nothing to identify
+    as_drawn = replace(mine, tolerances=Tolerances(**{k: 0.0 for k in vars(Tolerances())}))
+    with pytest.raises(InputError, match="nothing to identify"):
+        identify(as_drawn, y, plan[0], noise)
+    with pytest.raises(InputError, match="nothing to identify"):  # nor poses to pin it: all one pose, before
+        schedule(as_drawn, 20)
 
 
 def test_schedule_is_d_optimal_within_limits(drawing, plan):

@@ -191,7 +191,7 @@ class Identification:
         posterior mean), over its own standard deviation (n, N): the reading noise and the rig's error through
         the reading's slopes; NaN for a clipped reading. Rows whose residuals stand out are rows the physics
         does not explain (a slip, a knock)."""
-        prob, z = self.problem, self.theta / self.space.prior_sd
+        prob, z = self.problem, self.space.in_spreads(self.theta)
         js = prob.pose_slopes(z)
         r = prob.readings - prob.predict(z)[0]
         wh = prob.whitening(z, slopes=js)
@@ -246,6 +246,24 @@ def _readable_basis(V: np.ndarray) -> np.ndarray:
 MAX_CLIPPED = 0.1  # share of clipped readings above which a capture is refused
 
 
+def unit_space(drawing: Sensor) -> UnitSpace:
+    """The units of ``drawing`` that identify tells apart; InputError when its tolerances are all 0."""
+    space = UnitSpace.of(drawing)
+    if not np.any(space.free):
+        raise InputError(f"sensor {drawing.name!r}: its [tolerances] are all 0, so every unit is the drawing: there "
+                         "is nothing to identify")
+    return space
+
+
+def _eigh_free(F: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues and vectors of ``F`` over the ``free`` parameters only (a parameter of spread 0 is the
+    drawing's: no direction of it to determine or to call inseparable), the vectors padded with 0."""
+    lam, v = np.linalg.eigh(F[np.ix_(free, free)])
+    V = np.zeros((len(free), len(lam)))
+    V[free] = v
+    return lam, V
+
+
 def check_capture(space: UnitSpace, readings: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """Refuse captures no identification can use (InputError, one line); the mask of readings that are not
     clipped (a few clipped ones are left out, more than MAX_CLIPPED of them refuse the capture)."""
@@ -279,7 +297,7 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     """The unit of ``drawing`` behind a capture: rows of ``readings`` (n, N) at label ``poses`` (n, 5), with
     reading noise ``noise`` (rms of a row, per element or one number), the rig's error ``rig_error`` per row and
     the zero's ``zero_error`` common to the rows in contact (mm rms per axis)."""
-    space = UnitSpace.of(drawing)
+    space = unit_space(drawing)
     readings = np.asarray(readings, dtype=float)
     poses = np.asarray(poses, dtype=float)
     valid = check_capture(space, readings, poses)
@@ -309,13 +327,13 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     r = wh.apply(np.where(valid, readings - prob.predict(z)[0], 0.0))
     F = prob.information(z, whitening=wh)
     post = np.linalg.inv(F + np.eye(P))
-    lam, V = np.linalg.eigh(F)
+    lam, V = _eigh_free(F, space.free)
     dof = max(float(valid.sum()) - float(np.trace(F @ post)), 1.0)
     # what no capture could tell: the null space of a dense three-axis design's information
     dense = dense_design(ranges)
     Jd = prob.whitened_rows(z, dense)  # the dense design's rows share no zero: their information adds up
     Fd = Jd.reshape(-1, P).T @ Jd.reshape(-1, P)
-    lam_d, V_d = np.linalg.eigh(Fd)
+    lam_d, V_d = _eigh_free(Fd, space.free)
     gauge = V_d[:, lam_d < max(1e-6, 1e-13 * lam_d.max())]  # numerically 0 (differences resolve ~1e-8)
     # what this capture leaves to the prior beyond that: weak directions outside the gauge
     starved = []

@@ -22,12 +22,11 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
-from fitgen.fitting.identify import RIG_ERROR, Problem
+from fitgen.fitting.identify import RIG_ERROR, Problem, unit_space
 from fitgen.physics.dataset import meta_path
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
-from fitgen.physics.units import UnitSpace
 
 LEVELS = 9  # grid levels per moving axis
 MAX_PASSES = 4
@@ -114,7 +113,7 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     noise = drawing.noise if noise is None else noise
     if not noise > 0:
         raise InputError("the schedule needs the reading noise > 0 (give --noise or a sensor file with a noise figure)")
-    space = UnitSpace.of(drawing)
+    space = unit_space(drawing)
     cand = candidates(axes, ranges)
     prob = Problem(space, np.zeros((len(cand), drawing.n_elements)), cand, np.full(drawing.n_elements, noise),
                    float(rig_error))

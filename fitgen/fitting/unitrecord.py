@@ -37,11 +37,15 @@ def report(ident: Identification) -> str:
         lines.append(f"| {name} | {val:.5g} | {se:.2g} |")
     sd, prior = ident.sd, sp.prior_sd
     lines += ["", "| parameter | value | standard error | prior spread | share of the prior left |", "| --- | --- | --- | --- | --- |"]
+    share = sp.in_spreads(sd)
     for i, name in enumerate(sp.names):
-        lines.append(f"| {name} | {ident.theta[i]:.4g} | {sd[i]:.2g} | {prior[i]:.2g} | {sd[i] / prior[i]:.2f} |")
-    det = int(np.sum(ident.info_eig >= 1.0))
-    lines += ["", f"determined by the capture (information >= the prior's): {det} of {sp.size} directions; "
-                  f"left to the prior: {sp.size - det}"]
+        left = f"{share[i]:.2f}" if sp.free[i] else "fixed"
+        lines.append(f"| {name} | {ident.theta[i]:.4g} | {sd[i]:.2g} | {prior[i]:.2g} | {left} |")
+    det, free = int(np.sum(ident.info_eig >= 1.0)), int(np.sum(sp.free))
+    lines += ["", f"determined by the capture (information >= the prior's): {det} of {free} directions; "
+                  f"left to the prior: {free - det}"]
+    if free < sp.size:
+        lines.append(f"fixed at the drawing (spread 0 in the sensor file's [tolerances]): {sp.size - free} parameters")
     g = ident.gauge.shape[1]
     lines.append(f"no capture can separate ({g} directions: the same readings at every pose; the unit file takes the "
                  "prior's split):")

@@ -140,6 +140,17 @@ class UnitSpace:
         out = g.offset + volts_per_mt * (p["gain"][:, None, :] * np.minimum(mag, g.saturation) + p["off"][:, None, :])
         return np.clip(out, g.adc_min, g.adc_max)
 
+    @property
+    def free(self) -> np.ndarray:
+        """Which parameters vary between units (spread > 0); one with spread 0 is the drawing's."""
+        return self.prior_sd > 0
+
+    def in_spreads(self, theta: np.ndarray) -> np.ndarray:
+        """``theta`` in units of the prior's spreads; 0 where a spread is 0."""
+        theta = np.asarray(theta, dtype=float)
+        return np.divide(theta, self.prior_sd, out=np.zeros(np.broadcast_shapes(theta.shape, self.prior_sd.shape)),
+                         where=self.free)
+
     def draw(self, rng: np.random.Generator) -> np.ndarray:
         """One unit's parameters: each normal with its prior spread, clipped at 3 sigma."""
         return np.clip(rng.standard_normal(self.size), -CLIP_SIGMA, CLIP_SIGMA) * self.prior_sd
