@@ -134,6 +134,29 @@ def test_what_no_capture_separates_comes_from_the_information(drawing, plan):
     assert not in_span(np.eye(sp.size)[sp.index("magnet.x")])  # the magnet's own offset is seen
 
 
+def test_a_capture_that_tilts_separates_more(drawing):
+    """A five-axis capture's tilt axes fix the frame that a three-axis one leaves to the prior: what "no capture
+    can separate" is measured on a dense design that tilts too, so that it names nothing this capture pinned."""
+    unit, _ = draw_unit(drawing, 28)
+    rng = np.random.default_rng(28)
+    box = np.array([[-2, 2], [-2, 2], [-2, 0], [-5, 5], [-5, 5]], dtype=float)
+    poses = box[:, 0] + rng.random((40, 5)) * (box[:, 1] - box[:, 0])
+    y, noise = capture(unit, poses, 28, rig_error=0.001)
+    ident = identify(drawing, y, poses, noise, rig_error=0.001)
+    F = ident.problem.information(ident.space.in_spreads(ident.theta))
+    G = ident.gauge
+    assert np.diag(G.T @ F @ G).max() < 0.05  # none of them is something this capture determined
+    assert 0 < G.shape[1] < 10  # fewer than a three-axis capture's 10 (test above); the gain split stays
+    scale = np.zeros(ident.space.size)
+    scale[ident.space.index("magnet.log_polarization")] = 1.0
+    for k in range(1, 9):
+        scale[ident.space.index(f"e{k}.log_gain")] = -1.0
+    scale /= ident.space.prior_sd
+    keep = np.array([not (n.startswith("ambient") or n.endswith(".offset")) for n in ident.space.names])  # see above
+    fit = G[keep] @ np.linalg.lstsq(G[keep], scale[keep], rcond=None)[0]
+    assert np.linalg.norm(fit - scale[keep]) < 1e-3 * np.linalg.norm(scale)
+
+
 def test_a_capture_without_presses_names_what_it_starves(drawing, tmp_path):
     poses, _ = schedule(drawing, 30, axes=("dx", "dy"), noise=drawing.noise / 4)
     assert np.all(poses[:, 2] == 0)

@@ -16,9 +16,9 @@ differences over all parameters at once (one batched evaluation of the field).
 The capture's Fisher information F (in z) tells what it determines: along an eigenvector with
 eigenvalue >= 1 the data say more than the prior. Directions that no capture could separate (the
 same readings for every pose: a common gain against the polarisation, the whole sensor moved or
-turned) are the null space of the information of a dense three-axis design over the pose box; a
-direction null for this capture but not for the dense design is one this capture starves, and the
-poses of the dense design that carry most information along it are named.
+turned) are the null space of the information of a dense design over the pose box (three-axis; with tilt
+too when the capture tilts); a direction null for this capture but not for the dense design is one this
+capture starves, and the poses of the dense design that carry most information along it are named.
 
 Frames: the outputs are in the drawing's board frame as the prior fixes it (elements at their drawn
 azimuths on average); the stage map M (magnet displacement = M x stage displacement) carries the
@@ -36,7 +36,9 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from fitgen.base.errors import InputError
+from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import Sensor
+from fitgen.physics.simulate import DEFAULT_RANGES
 from fitgen.physics.units import UnitSpace
 
 RIG_ERROR = 0.01  # mm rms per axis: a CNC's or a good printer's repeatability
@@ -49,14 +51,15 @@ CHI2_LIMIT = 3.0  # reduced chi-square above this: the physics does not explain 
 OUTLIER_LIMIT = 5.0  # a reading's standardized residual beyond this: its row is one the physics does not explain
 _H_THETA = 1e-3  # central-difference step, in prior spreads
 _H_POSE = 1e-4  # mm
-DENSE = {"dx": np.linspace(-2, 2, 5), "dy": np.linspace(-2, 2, 5), "dz": np.linspace(-2, 0, 5)}
 
 
-def dense_design(ranges: dict | None = None) -> np.ndarray:
-    """The three-axis candidate poses: a 5 x 5 x 5 grid over the box's dx, dy, dz (tilt 0)."""
-    levels = {k: (np.linspace(ranges[k][0], ranges[k][1], 5) if ranges else v) for k, v in DENSE.items()}
-    g = np.stack(np.meshgrid(levels["dx"], levels["dy"], levels["dz"], indexing="ij"), axis=-1).reshape(-1, 3)
-    return np.hstack([g, np.zeros((len(g), 2))])
+def dense_design(ranges: dict | None = None, tilt: bool = False) -> np.ndarray:
+    """The candidate poses: a 5 x 5 x 5 grid over the box's dx, dy, dz at tilt 0; with ``tilt``, at each of
+    thx, thy at the box's ends and 0 too (for a capture that tilts: what a dense tilting capture pins)."""
+    box = {**DEFAULT_RANGES, **(ranges or {})}
+    levels = [np.linspace(*box[k], 5) for k in POSE_NAMES[:3]]
+    levels += [np.unique([box[k][0], 0.0, box[k][1]]) if tilt else np.zeros(1) for k in POSE_NAMES[3:]]
+    return np.stack(np.meshgrid(*levels, indexing="ij"), axis=-1).reshape(-1, 5)
 
 
 @dataclass
@@ -329,8 +332,8 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     post = np.linalg.inv(F + np.eye(P))
     lam, V = _eigh_free(F, space.free)
     dof = max(float(valid.sum()) - float(np.trace(F @ post)), 1.0)
-    # what no capture could tell: the null space of a dense three-axis design's information
-    dense = dense_design(ranges)
+    # what no capture could tell: the null space of the information of a dense design over the capture's axes
+    dense = dense_design(ranges, tilt=bool(np.any(poses[:, 3:] != 0)))
     Jd = prob.whitened_rows(z, dense)  # the dense design's rows share no zero: their information adds up
     Fd = Jd.reshape(-1, P).T @ Jd.reshape(-1, P)
     lam_d, V_d = _eigh_free(Fd, space.free)

@@ -52,12 +52,12 @@ def report(ident: Identification) -> str:
     for v in ident.gauge.T:
         lines.append(f"  {describe_direction(sp, v)}")
     if ident.starved:
-        lines.append("this capture leaves to the prior (a dense three-axis capture would not):")
+        lines.append("this capture leaves to the prior (a dense capture over the same axes would not):")
         for v, poses, gain in ident.starved:
             where = "; ".join(" ".join(f"{c}={p[j]:g}" for j, c in enumerate(POSE_NAMES[:3])) for p in poses)
             lines.append(f"  {describe_direction(sp, v)}: poses that pin it: {where}")
     else:
-        lines.append("this capture leaves nothing else to the prior that a three-axis capture could pin")
+        lines.append("this capture leaves nothing else to the prior that a capture over the same axes could pin")
     return "\n".join(lines) + "\n"
 
 # --- captures and files ---------------------------------------------------------------------------
