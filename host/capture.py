@@ -31,7 +31,7 @@ from fitgen import __version__
 from fitgen.physics.dataset import meta_path, parse_table, read_text
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import sha256_hex, write_atomic
-from fitgen.physics.pose import POSE_NAMES, as_poses
+from fitgen.physics.pose import POSE_NAMES, as_poses, off_skin
 
 from host.adc import AdcArray
 from host.clock import REAL_CLOCK
@@ -189,7 +189,8 @@ def enter_waiter(schedule: Schedule, stdin=None, stderr=None):
     total = len(schedule.poses)
 
     def wait(i: int, pose) -> bool:
-        prompt = f"pose {i + 1}/{total}: {schedule.describe(i)}; set it, then press Enter (q to stop) "
+        rest = " (the indenter lifted off the skin: the sensor at rest)" if off_skin(schedule.poses[i:i + 1])[0] else ""
+        prompt = f"pose {i + 1}/{total}: {schedule.describe(i)}{rest}; set it, then press Enter (q to stop) "
         return ask_line(stdin, stderr, prompt) is not None
 
     return wait

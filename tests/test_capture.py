@@ -139,16 +139,18 @@ def test_an_output_from_another_run_is_refused(sensor, tmp_path):
 
 
 def test_enter_and_trigger_waiters(tmp_path):
-    sched = load_schedule(write_schedule(tmp_path / "s.csv", [(1, 0, -1), (2, 0, -1)]))
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", [(1, 0, -1), (2, 0, -1), (0, 0, 0.2)]))
     err = io.StringIO()
-    wait = enter_waiter(sched, io.StringIO("\nq\n"), err)
-    assert wait(0, sched.poses[0]) is True and wait(1, sched.poses[1]) is False
-    assert "pose 1/2: dx=1 dy=0 dz=-1; set it, then press Enter" in err.getvalue()
+    wait = enter_waiter(sched, io.StringIO("\n\nq\n"), err)
+    assert wait(0, sched.poses[0]) is True and wait(2, sched.poses[2]) is True and wait(1, sched.poses[1]) is False
+    assert "pose 1/3: dx=1 dy=0 dz=-1; set it, then press Enter" in err.getvalue()
+    # a schedule's rest row (fitgen schedule) says what it asks of a hand-set stage
+    assert "pose 3/3: dx=0 dy=0 dz=0.2 (the indenter lifted off the skin: the sensor at rest); set it" in err.getvalue()
     assert enter_waiter(sched, io.StringIO(""), err)(0, sched.poses[0]) is False  # end of input stops
     log = tmp_path / "log"
     wait = trigger_waiter(f'echo "$TM_POSE_INDEX/$TM_POSE_COUNT $TM_DX $TM_DZ" >> {shlex.quote(str(log))}', sched)
     assert wait(1, sched.poses[1]) is True
-    assert log.read_text() == "2/2 2.0 -1.0\n"
+    assert log.read_text() == "2/3 2.0 -1.0\n"
 
 
 # --- command line ------------------------------------------------------------------
