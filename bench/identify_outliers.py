@@ -1,4 +1,5 @@
-"""Does identify name the row of a capture that the physics does not explain, and only such a row?
+"""Does identify name the row of a capture that the physics does not explain, and only such a row? Does it refuse a
+capture of a unit with a dead or a miswired element, and only such a capture?
 
 bench/units.py's 20 units and their headline capture (40 D-optimal poses, 0.01 mm rig, rows of 16 samples, the readings
 from magpylib: an independent field model), with an exact zero and with the zero off first contact by 0.02 mm rms;
@@ -7,8 +8,12 @@ its label unchanged. Per kind of capture: how many identify refuses (reduced chi
 rows were named: the baseline), how many name a row (a reading beyond 5 standard deviations,
 fitgen.fitting.identify.OUTLIER_LIMIT; in the refusal's line when refused) and whether it is the slipped one first,
 and the largest standardized residual of the slipped row and of the others (medians and the worst over the units).
+Then the captures with an element that does not respond (element 3 reads a constant, its mean over the capture) and
+with two elements' channels swapped (3 and 6): how many the chi-square refuses, and how many identify refuses
+because only a unit far outside its tolerances explains them (a parameter beyond PRIOR_LIMIT = 5 prior spreads,
+fitgen.fitting.unitrecord.check_explained); for every kind, the largest |parameter| in prior spreads.
 
-    python bench/identify_outliers.py    # about 2 minutes here
+    python bench/identify_outliers.py    # about 6 minutes here
 """
 
 from __future__ import annotations
@@ -22,9 +27,21 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import units as U  # noqa: E402
 from benchutil import fmt, log, table  # noqa: E402
-from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, identify  # noqa: E402
+from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, identify  # noqa: E402
 
 SLIPS = (0.0, 0.05, 0.1, 0.2, 0.5)  # mm in dx on one row
+
+
+def dead(y: np.ndarray) -> np.ndarray:
+    """Element 3 does not respond: it reads one constant (its mean over the capture), not a rail."""
+    y = y.copy()
+    y[:, 2] = y[:, 2].mean()
+    return y
+
+
+def swapped(y: np.ndarray) -> np.ndarray:
+    """Elements 3 and 6 wired to each other's channels."""
+    return y[:, [0, 1, 5, 3, 4, 2, 6, 7]]
 
 
 def main() -> None:
@@ -40,10 +57,12 @@ def main() -> None:
         for seed in range(1, U.N_UNITS + 1):
             unit, _ = U.draw_unit(ctx.drawing, seed)
             caps.append((unit, U.capture(unit, labels, U.HEAD[1], [seed, U.HEAD[0], 3], zero=zero)))
-        for slip in SLIPS:
-            refused, named, right, own, others = 0, 0, 0, [], []
+        faults = [(f"slip {slip:g} mm" if slip else "none", slip, None) for slip in SLIPS]
+        faults += [("element 3 dead", 0.0, dead), ("elements 3 and 6 swapped", 0.0, swapped)] if not zero else []
+        for kind, slip, fault in faults:
+            refused, beyond, named, right, own, others, zmax = 0, 0, 0, 0, [], [], []
             for unit, y in caps:
-                y = y.copy()
+                y = y.copy() if fault is None else fault(y)
                 if slip:
                     shifted[0, 0] = labels[deep, 0] + slip
                     both = U.magpylib_readings(unit, np.vstack([shifted, labels[deep:deep + 1]]))
@@ -51,6 +70,8 @@ def main() -> None:
                 ident = identify(ctx.drawing, y, labels, ctx.noise / np.sqrt(U.SAMPLES), rig_error=U.HEAD[1],
                                  zero_error=U.ZERO_SIM if zero else 0.0)
                 refused += ident.reduced_chi2 > CHI2_LIMIT  # refused, it names the row in its one line
+                beyond += ident.reduced_chi2 <= CHI2_LIMIT and bool(ident.outside_tolerances())  # the next refusal
+                zmax.append(np.abs(ident.space.in_spreads(ident.theta)).max())
                 worst = ident.row_worst
                 out = [i for i, _ in ident.outlying_rows()]
                 named += bool(out)
@@ -58,18 +79,22 @@ def main() -> None:
                 own.append(worst[deep])
                 others.append(np.delete(worst, deep).max())
             n = len(caps)
-            rows.append([f"{zero:g}", f"{slip:g}", f"{refused} of {n}", f"{named} of {n}",
+            rows.append([f"{zero:g}", kind, f"{refused} of {n}", f"{beyond} of {n}",
+                         f"{fmt(np.median(zmax))} / {fmt(np.max(zmax))}", f"{named} of {n}",
                          f"{right} of {n}" if slip else "-", f"{fmt(np.median(own))} / {fmt(np.max(own))}",
                          f"{fmt(np.median(others))} / {fmt(np.max(others))}"])
-            log(f"zero {zero:g} mm, slip {slip:g} mm")
-    print("## Rows the physics does not explain: named by identify, refused by the chi-square\n")
+            log(f"zero {zero:g} mm, {kind}")
+    print("## Captures the physics does not explain: rows named, captures refused\n")
     where = " ".join(f"{a}={v:g}" for a, v in zip(("dx", "dy", "dz"), labels[deep]))
     print(f"{U.N_UNITS} units of `{U.PRESET}` in `{U.TRANSFER}`, the headline capture ({U.HEAD[0]} poses, "
           f"{U.HEAD[1]:g} mm rig, magpylib's readings); the slipped row is row {deep + 1} ({where}). A row is named "
           f"beyond {OUTLIER_LIMIT:g} standard deviations; a capture is refused over a reduced chi-square of "
           f"{CHI2_LIMIT:g} (the baseline, which says nothing of which row; a refusal now names the row that stands out "
-          "most). The largest standardized residual: median / worst over the captures.\n")
-    print(table(["zero off [mm rms]", "slip [mm]", "refused (chi-square)", "captures naming a row",
+          f"most); the captures it passes are refused when a parameter lies beyond {PRIOR_LIMIT:g} prior spreads (a unit "
+          "within its tolerances is drawn within 3). The largest |parameter| in prior spreads and the largest "
+          "standardized residual: median / worst over the captures.\n")
+    print(table(["zero off [mm rms]", "what is wrong", "refused (chi-square)", "refused (beyond the tolerances)",
+                 "largest parameter [prior sd]", "captures naming a row",
                  "naming the slipped row first", f"slipped row {deep + 1}", "every other row"], rows))
 
 

@@ -318,6 +318,8 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
         "saturated": (np.where(np.arange(8) < 2, 3.3, y), plan[0], "saturated"),
         "other sensor": (readings(load_sensor("tilted-axes").with_transfer("gmr"), plan[0], adc_bits=0), plan[0],
                          "does not explain"),
+        # an element that does not respond: the physics explains it, but only with a unit far outside its tolerances
+        "dead element": (np.where(np.arange(8) == 2, y[:, 2].mean(), y), plan[0], "far outside the tolerances"),
     }
     # a row the physics does not explain, in a capture it otherwise does: written, the row named
     deep, slipped = slip(unit, y, plan[0])
@@ -345,3 +347,11 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
         assert not out.exists() and not out.with_suffix(".posterior.json").exists()
     assert_one_line_error(run_cli("fitgen", "schedule", "--axes", "dx,dq", "-o", str(tmp_path / "x.csv")),
                           contains="--axes")
+    # a dead element that the chi-square lets pass (the unit bends to it): far outside the tolerances, refused
+    unit27, _ = draw_unit(drawing, 27)
+    y27, _ = capture(unit27, plan[0], 27)
+    y27[:, 2] = y27[:, 2].mean()
+    _save_capture(tmp_path / "dead.csv", y27, plan[0], {"samples_per_row": SAMPLES})
+    proc = run_cli("fitgen", "identify", str(tmp_path / "dead.csv"), "--sensor", "paper", "-o", str(tmp_path / "d.toml"))
+    assert_one_line_error(proc, contains="only with a unit far outside paper's tolerances (")
+    assert "does not explain" not in proc.stderr and not (tmp_path / "d.toml").exists()

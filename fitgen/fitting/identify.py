@@ -49,6 +49,9 @@ MIN_ROWS = 10
 MIN_DISTINCT = 6
 CHI2_LIMIT = 3.0  # reduced chi-square above this: the physics does not explain the rows
 OUTLIER_LIMIT = 5.0  # a reading's standardized residual beyond this: its row is one the physics does not explain
+# a parameter identified beyond this many prior spreads: not a unit within its tolerances (drawn within 3, and
+# 20 units' captures put none beyond 3.1), but a dead or miswired element, another sensor, or looser tolerances
+PRIOR_LIMIT = 5.0
 _H_THETA = 1e-3  # central-difference step, in prior spreads
 _H_POSE = 1e-4  # mm
 
@@ -187,6 +190,12 @@ class Identification:
             g = np.array([(fn(theta + h * e) - fn(theta - h * e)) / (2 * h) for e in np.eye(self.space.size)])
             out[name] = (float(fn(theta)), float(np.sqrt(g @ cov @ g)))
         return out
+
+    def outside_tolerances(self, limit: float = PRIOR_LIMIT) -> list[tuple[int, float]]:
+        """Parameters (index, value in prior spreads) beyond ``limit`` spreads from the drawing, farthest first."""
+        z = self.space.in_spreads(self.theta)
+        idx = np.nonzero(np.abs(z) > limit)[0]
+        return [(int(i), float(z[i])) for i in idx[np.argsort(-np.abs(z[idx]), kind="stable")]]
 
     @cached_property
     def standardized_residuals(self) -> np.ndarray:

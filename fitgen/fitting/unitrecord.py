@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, Identification
+from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, Identification
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.units import UnitSpace
@@ -108,8 +108,11 @@ def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
 
 
 def check_explained(ident: Identification, capture, drawing: str, source: str) -> None:
-    """InputError when the physics does not explain the capture: reduced chi-square over CHI2_LIMIT
-    (``source``: where the reading noise came from; ``drawing``: the sensor's name)."""
+    """InputError when the physics does not explain the capture (reduced chi-square over CHI2_LIMIT), or does only
+    with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads); ``source``: where the
+    reading noise came from; ``drawing``: the sensor's name."""
+    far = ident.outside_tolerances()
+    names = ", ".join(f"{ident.space.names[i]} at {z:+.3g}" for i, z in far[:3]) + " prior spreads"
     if ident.reduced_chi2 > CHI2_LIMIT:
         rms = float(np.sqrt(ident.reduced_chi2))
         rows = ident.outlying_rows()
@@ -117,8 +120,16 @@ def check_explained(ident: Identification, capture, drawing: str, source: str) -
                                    f"to {rows[0][1]:.3g} standard deviations): if it slipped, delete it and resume"
                                    if len(rows) <= 3 else f"; {len(rows)} rows stand out, not one")
         raise InputError(f"the physics does not explain {capture}: residuals {rms:.3g}x the reading noise "
-                         f"({source}); another sensor than {drawing}, labels in other units, a zero above first "
-                         f"contact (rows at dz 0 off the skin), or a noise figure too low{row}; nothing written")
+                         f"({source}); another sensor than {drawing}, labels in other units, an element that does not "
+                         "respond or elements wired in another order than the drawing's (the channel map), a zero "
+                         f"above first contact (rows at dz 0 off the skin), or a noise figure too low{row}"
+                         + (f"; the nearest unit lies far outside the tolerances ({names})" if far else "")
+                         + "; nothing written")
+    if far:
+        raise InputError(f"the physics explains {capture} only with a unit far outside {drawing}'s tolerances ({names}; "
+                         f"beyond {PRIOR_LIMIT:g} is no unit within them): an element that does not respond or is wired "
+                         f"to another channel, another sensor than {drawing}, or a unit built looser than its "
+                         "[tolerances] say (widen them in the drawing's file); nothing written")
 
 
 def save(ident: Identification, path, provenance: dict) -> tuple:
