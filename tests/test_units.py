@@ -142,6 +142,13 @@ def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
     held = json.loads((tmp_path / "m.json").read_text())["fit"]["held_out"]
     assert held["sensor"] == unit.name and held["sensor_sha256"] == unit.sha256
     assert "uncalibrated" not in held  # a unit's own model: nothing to say about other units
+    # a unit where a drawing belongs: one line naming the drawing its file says it was built to
+    for args in (("simulate", "--sensor", str(tmp_path / "u.unit.toml"), "--unit", "2", "--grid", "dx=0"),
+                 ("schedule", "--sensor", str(tmp_path / "u.unit.toml"), "--n", "20")):
+        proc = run_cli("fitgen", *args, "-o", str(tmp_path / "again.csv"))
+        assert_one_line_error(proc, contains="is a built unit, not a drawing: give the drawing it was built to (paper, "
+                                             "as its [unit] table says)")
+        assert not (tmp_path / "again.csv").exists()
 
 
 def test_the_drawings_model_file_says_what_it_does_on_built_units(tmp_path):

@@ -61,7 +61,11 @@ class UnitSpace:
     @classmethod
     def of(cls, drawing: Sensor, tolerances: Tolerances | None = None) -> "UnitSpace":
         if not drawing.is_drawing:
-            raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing: give the drawing it was built to")
+            unit = drawing.source.get("unit") if isinstance(drawing.source, dict) else None
+            named = (unit.get("drawing_spec") or unit.get("drawing")) if isinstance(unit, dict) else None
+            hint = f" ({named}, as its [unit] table says)" if isinstance(named, str) else ""
+            raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing: give the drawing it was built "
+                             f"to{hint}")
         t = tolerances or drawing.tolerances
         radius = np.hypot(drawing.positions[:, 0], drawing.positions[:, 1])
         if np.any(radius < 1e-6):
