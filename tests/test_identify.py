@@ -11,7 +11,9 @@ import pytest
 from conftest import assert_one_line_error, run_cli
 from fitgen.fitting.identify import Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
+from fitgen.fitting.unitrecord import outlier_lines, report
 from fitgen.physics import presets
+from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings
@@ -155,6 +157,11 @@ def test_a_capture_that_tilts_separates_more(drawing):
     keep = np.array([not (n.startswith("ambient") or n.endswith(".offset")) for n in ident.space.names])  # see above
     fit = G[keep] @ np.linalg.lstsq(G[keep], scale[keep], rcond=None)[0]
     assert np.linalg.norm(fit - scale[keep]) < 1e-3 * np.linalg.norm(scale)
+    assert "the same readings at every pose;" in report(ident)
+    # a row that stands out is named with its tilts
+    y[5, 0] += 60 * noise
+    lines = outlier_lines(identify(drawing, y, poses, noise, rig_error=0.001), "c.csv")
+    assert lines[0].startswith(f"row 6 of c.csv ({' '.join(f'{c}={v:g}' for c, v in zip(POSE_NAMES, poses[5]))})")
 
 
 def test_a_capture_without_presses_names_what_it_starves(drawing, tmp_path):

@@ -56,6 +56,11 @@ _H_THETA = 1e-3  # central-difference step, in prior spreads
 _H_POSE = 1e-4  # mm
 
 
+def tilting(poses: np.ndarray) -> bool:
+    """Whether a capture's label poses (n, 5) tilt: what it can pin, and its poses, then take thx, thy too."""
+    return bool(np.any(np.asarray(poses)[:, 3:] != 0))
+
+
 def dense_design(ranges: dict | None = None, tilt: bool = False) -> np.ndarray:
     """The candidate poses: a 5 x 5 x 5 grid over the box's dx, dy, dz at tilt 0; with ``tilt``, at each of
     thx, thy at the box's ends and 0 too (for a capture that tilts: what a dense tilting capture pins)."""
@@ -342,7 +347,7 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     lam, V = _eigh_free(F, space.free)
     dof = max(float(valid.sum()) - float(np.trace(F @ post)), 1.0)
     # what no capture could tell: the null space of the information of a dense design over the capture's axes
-    dense = dense_design(ranges, tilt=bool(np.any(poses[:, 3:] != 0)))
+    dense = dense_design(ranges, tilt=tilting(poses))
     Jd = prob.whitened_rows(z, dense)  # the dense design's rows share no zero: their information adds up
     Fd = Jd.reshape(-1, P).T @ Jd.reshape(-1, P)
     lam_d, V_d = _eigh_free(Fd, space.free)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, Identification
+from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, Identification, tilting
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.units import UnitSpace
@@ -47,14 +47,15 @@ def report(ident: Identification) -> str:
     if free < sp.size:
         lines.append(f"fixed at the drawing (spread 0 in the sensor file's [tolerances]): {sp.size - free} parameters")
     g = ident.gauge.shape[1]
-    lines.append(f"no capture can separate ({g} directions: the same readings at every pose; the unit file takes the "
+    every = "every pose" if tilting(ident.problem.poses) else "every three-axis pose"
+    lines.append(f"no capture can separate ({g} directions: the same readings at {every}; the unit file takes the "
                  "prior's split):")
     for v in ident.gauge.T:
         lines.append(f"  {describe_direction(sp, v)}")
     if ident.starved:
         lines.append("this capture leaves to the prior (a dense capture over the same axes would not):")
         for v, poses, gain in ident.starved:
-            where = "; ".join(" ".join(f"{c}={p[j]:g}" for j, c in enumerate(POSE_NAMES[:3])) for p in poses)
+            where = "; ".join(_pose_words(ident, p) for p in poses)
             lines.append(f"  {describe_direction(sp, v)}: poses that pin it: {where}")
     else:
         lines.append("this capture leaves nothing else to the prior that a capture over the same axes could pin")
@@ -89,8 +90,13 @@ def in_capture_units(drawing: Sensor, meta: dict) -> Sensor:
     return drawing.with_transfer("gmr" if units == "V" else "raw") if units in ("V", "mT") else drawing
 
 
+def _pose_words(ident: Identification, pose: np.ndarray) -> str:
+    """``dx=.. dy=.. dz=..``, and the tilts when the capture tilts."""
+    return " ".join(f"{c}={v:g}" for c, v in zip(POSE_NAMES[:5 if tilting(ident.problem.poses) else 3], pose))
+
+
 def _where(ident: Identification, i: int) -> str:
-    return " ".join(f"{a}={v:g}" for a, v in zip(("dx", "dy", "dz"), ident.problem.poses[i]))
+    return _pose_words(ident, ident.problem.poses[i])
 
 
 def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
@@ -159,7 +165,7 @@ def save(ident: Identification, path, provenance: dict) -> tuple:
         "derived": {k: {"value": v, "se": s} for k, (v, s) in ident.derived().items()},
         "determined_directions": int(np.sum(ident.info_eig >= 1.0)),
         "no_capture_separates": [describe_direction(ident.space, v) for v in ident.gauge.T],
-        "capture_starves": [{"direction": describe_direction(ident.space, v), "poses": p[:, :3].tolist()}
+        "capture_starves": [{"direction": describe_direction(ident.space, v), "poses": p[:, :5 if tilting(ident.problem.poses) else 3].tolist()}
                             for v, p, _ in ident.starved],
         **{k: v for k, v in provenance.items() if k != "name"}}
     write_atomic(post_path, json.dumps(record, indent=1) + "\n")
