@@ -40,11 +40,11 @@ Set-up (deterministic):
      (the same rows); they have no tilt labels, so it estimates dx, dy, dz only.
   4. `twin, n poses, r mm` (n = 40 and 100, r = 0.01 on every unit; the others fitted on the first --sweep-units
      units and identified on all): fitgen.fitting.identify.identify(drawing, capture, labels, noise/4, rig_error=r,
-     zero_error=0: these captures' zero is exact), refused as fitgen identify refuses (reduced chi-square over 3),
-     saved with fitgen.fitting.unitrecord.save (the unit file and its posterior record), the twin loaded from the
-     unit file, simulated on the paper-sim grid + 5,000 random poses, fitted; the model file's
-     held-out figures computed as `fitgen fit` does (fitgen.fitting.holdout.evaluate with posterior = the
-     record fitgen.fitting.unitrecord.load_posterior reads).
+     zero_error=0: these captures' zero is exact), refused as fitgen identify refuses (check_explained: reduced
+     chi-square over 3, a parameter beyond 5 prior spreads), saved with fitgen.fitting.unitrecord.save (the unit
+     file and its posterior record), the twin loaded from the unit file, simulated on the paper-sim grid + 5,000
+     random poses, fitted; the model file's held-out figures computed as `fitgen fit` does
+     (fitgen.fitting.holdout.evaluate with posterior = the record fitgen.fitting.unitrecord.load_posterior reads).
   5. `twin, 40 poses, 0.01 mm, zero off 0.02 mm, ...`: the 40-pose captures with the zero off first contact by
      one error per unit (normal, 0.02 mm rms per axis, added to the rows in contact), identified with
      zero_error=0.02 (`allowed for`, fitgen identify's default; fitted on the first --sweep-units units) and with

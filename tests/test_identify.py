@@ -359,6 +359,7 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
     y27, _ = capture(unit27, plan[0], 27)
     y27[:, 2] = y27[:, 2].mean()
     _save_capture(tmp_path / "dead.csv", y27, plan[0], {"samples_per_row": SAMPLES})
-    proc = run_cli("fitgen", "identify", str(tmp_path / "dead.csv"), "--sensor", "paper", "-o", str(tmp_path / "d.toml"))
+    proc = run_cli("fitgen", "identify", str(tmp_path / "dead.csv"), "--sensor", "paper", "-o",
+                   str(tmp_path / "d.toml"))
     assert_one_line_error(proc, contains="only with a unit far outside paper's tolerances (")
     assert "does not explain" not in proc.stderr and not (tmp_path / "d.toml").exists()

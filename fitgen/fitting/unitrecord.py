@@ -1,6 +1,6 @@
-"""What identify tells and keeps (fitgen.fitting.identify finds it): the identification in words, the rows
-that stand out, the refusal when the physics does not explain a capture, the unit file with its posterior
-record; and what it reads from a capture's meta (the rows' noise, the units)."""
+"""What identify tells and keeps (fitgen.fitting.identify finds it): the identification in words, the rows that stand
+out, the refusal when the physics does not explain a capture (or does only with a unit far outside its tolerances),
+the unit file with its posterior record; and what it reads from a capture's meta (the rows' noise, the units)."""
 
 from __future__ import annotations
 
@@ -132,10 +132,10 @@ def check_explained(ident: Identification, capture, drawing: str, source: str) -
                          + (f"; the nearest unit lies far outside the tolerances ({names})" if far else "")
                          + "; nothing written")
     if far:
-        raise InputError(f"the physics explains {capture} only with a unit far outside {drawing}'s tolerances ({names}; "
-                         f"beyond {PRIOR_LIMIT:g} is no unit within them): an element that does not respond or is wired "
-                         f"to another channel, another sensor than {drawing}, or a unit built looser than its "
-                         "[tolerances] say (widen them in the drawing's file); nothing written")
+        raise InputError(f"the physics explains {capture} only with a unit far outside {drawing}'s tolerances "
+                         f"({names}; beyond {PRIOR_LIMIT:g} is no unit within them): an element that does not respond "
+                         f"or is wired to another channel, another sensor than {drawing}, or a unit built looser than "
+                         "its [tolerances] say (widen them in the drawing's file); nothing written")
 
 
 def save(ident: Identification, path, provenance: dict) -> tuple:
@@ -165,7 +165,8 @@ def save(ident: Identification, path, provenance: dict) -> tuple:
         "derived": {k: {"value": v, "se": s} for k, (v, s) in ident.derived().items()},
         "determined_directions": int(np.sum(ident.info_eig >= 1.0)),
         "no_capture_separates": [describe_direction(ident.space, v) for v in ident.gauge.T],
-        "capture_starves": [{"direction": describe_direction(ident.space, v), "poses": p[:, :5 if tilting(ident.problem.poses) else 3].tolist()}
+        "capture_starves": [{"direction": describe_direction(ident.space, v),
+                             "poses": p[:, :5 if tilting(ident.problem.poses) else 3].tolist()}
                             for v, p, _ in ident.starved],
         **{k: v for k, v in provenance.items() if k != "name"}}
     write_atomic(post_path, json.dumps(record, indent=1) + "\n")
