@@ -11,13 +11,16 @@ and the largest standardized residual of the slipped row and of the others (medi
 Then the captures with an element that does not respond (element 3 reads a constant, its mean over the capture) and
 with two elements' channels swapped (3 and 6): how many the chi-square refuses, and how many identify refuses
 because only a unit far outside its tolerances explains them (a parameter beyond PRIOR_LIMIT = 5 prior spreads,
-fitgen.fitting.unitrecord.check_explained); for every kind, the largest |parameter| in prior spreads.
+fitgen.fitting.unitrecord.check_explained), and which element a refusal names as the one to blame (the one whose
+readings, left out, leave a capture a unit within its tolerances explains: fitgen.fitting.identify.blame_element);
+for every kind, the largest |parameter| in prior spreads.
 
-    python bench/identify_outliers.py    # about 6 minutes here
+    python bench/identify_outliers.py    # about 7 minutes here
 """
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -27,7 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import units as U  # noqa: E402
 from benchutil import fmt, log, table  # noqa: E402
+from fitgen.base.errors import InputError  # noqa: E402
 from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, identify  # noqa: E402
+from fitgen.fitting.unitrecord import check_explained  # noqa: E402
 
 SLIPS = (0.0, 0.05, 0.1, 0.2, 0.5)  # mm in dx on one row
 
@@ -60,7 +65,7 @@ def main() -> None:
         faults = [(f"slip {slip:g} mm" if slip else "none", slip, None) for slip in SLIPS]
         faults += [("element 3 dead", 0.0, dead), ("elements 3 and 6 swapped", 0.0, swapped)] if not zero else []
         for kind, slip, fault in faults:
-            refused, beyond, named, right, own, others, zmax = 0, 0, 0, 0, [], [], []
+            refused, beyond, blamed, named, right, own, others, zmax = 0, 0, [], 0, 0, [], [], []
             for unit, y in caps:
                 y = y.copy() if fault is None else fault(y)
                 if slip:
@@ -71,6 +76,11 @@ def main() -> None:
                                  zero_error=U.ZERO_SIM if zero else 0.0)
                 refused += ident.reduced_chi2 > CHI2_LIMIT  # refused, it names the row in its one line
                 beyond += ident.reduced_chi2 <= CHI2_LIMIT and bool(ident.outside_tolerances())  # the next refusal
+                try:
+                    check_explained(ident, "the capture", U.PRESET, "the bench's")
+                except InputError as exc:
+                    found = re.search(r"element (\d+) \(v\d+\) alone", str(exc))
+                    blamed += [int(found.group(1))] if found else []
                 zmax.append(np.abs(ident.space.in_spreads(ident.theta)).max())
                 worst = ident.row_worst
                 out = [i for i, _ in ident.outlying_rows()]
@@ -80,6 +90,7 @@ def main() -> None:
                 others.append(np.delete(worst, deep).max())
             n = len(caps)
             rows.append([f"{zero:g}", kind, f"{refused} of {n}", f"{beyond} of {n}",
+                         ", ".join(f"{blamed.count(k)} x element {k}" for k in sorted(set(blamed))) or "none",
                          f"{fmt(np.median(zmax))} / {fmt(np.max(zmax))}", f"{named} of {n}",
                          f"{right} of {n}" if slip else "-", f"{fmt(np.median(own))} / {fmt(np.max(own))}",
                          f"{fmt(np.median(others))} / {fmt(np.max(others))}"])
@@ -94,6 +105,7 @@ def main() -> None:
           "within its tolerances is drawn within 3). The largest |parameter| in prior spreads and the largest "
           "standardized residual: median / worst over the captures.\n")
     print(table(["zero off [mm rms]", "what is wrong", "refused (chi-square)", "refused (beyond the tolerances)",
+                 "refusals naming an element",
                  "largest parameter [prior sd]", "captures naming a row",
                  "naming the slipped row first", f"slipped row {deep + 1}", "every other row"], rows))
 

@@ -29,7 +29,7 @@ fitgen.fitting.unitrecord tells an identification in words and writes its files.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -52,6 +52,7 @@ OUTLIER_LIMIT = 5.0  # a reading's standardized residual beyond this: its row is
 # a parameter identified beyond this many prior spreads: not a unit within its tolerances (drawn within 3, and
 # 20 units' captures put none beyond 3.1), but a dead or miswired element, another sensor, or looser tolerances
 PRIOR_LIMIT = 5.0
+BLAME_NFEV = 20  # function evaluations: a capture with its dead element left out converges in about 7
 _H_THETA = 1e-3  # central-difference step, in prior spreads
 _H_POSE = 1e-4  # mm
 
@@ -309,6 +310,36 @@ def check_capture(space: UnitSpace, readings: np.ndarray, poses: np.ndarray) -> 
     return valid
 
 
+def _maximum_a_posteriori(prob: Problem, sweeps: int = 3, max_nfev: int = 60, progress=None) -> np.ndarray:
+    """The maximum a posteriori in prior spreads, from the drawing (z = 0)."""
+    P = prob.space.size
+    z = np.zeros(P)
+    for sweep in range(sweeps):  # the rows' covariances depend on the unit: refresh them, fit again
+        wh = prob.whitening(z)
+
+        def residual(zz, wh=wh):
+            return np.concatenate([wh.apply(prob.readings - prob.predict(zz)[0]), zz])
+
+        def jac(zz, wh=wh):
+            return np.vstack([-wh.apply(prob.jacobian(zz)), np.eye(P)])
+
+        z = least_squares(residual, z, jac=jac, method="lm", x_scale=1.0, max_nfev=max_nfev).x
+        if progress is not None:
+            progress(sweep + 1, 4, "maximum a posteriori")
+    return z
+
+
+def _chi2(prob: Problem, z: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """At ``z``: the residual chi-square, its degrees of freedom, the capture's information F and the posterior
+    covariance (F + I)^-1, in prior spreads. A clipped reading's residual is left out (it weighs nothing in the fit
+    either)."""
+    wh = prob.whitening(z)
+    r = wh.apply(np.where(prob.valid, prob.readings - prob.predict(z)[0], 0.0))
+    F = prob.information(z, whitening=wh)
+    post = np.linalg.inv(F + np.eye(prob.space.size))
+    return float(r.ravel() @ r.ravel()), max(float(prob.valid.sum()) - float(np.trace(F @ post)), 1.0), F, post
+
+
 def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *, rig_error: float = RIG_ERROR,
              zero_error: float = ZERO_ERROR, ranges: dict | None = None, progress=None) -> Identification:
     """The unit of ``drawing`` behind a capture: rows of ``readings`` (n, N) at label ``poses`` (n, 5), with
@@ -326,26 +357,9 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
             raise InputError(f"the {name} must be >= 0 mm, got {value}")
     prob = Problem(space, readings, poses, noise, float(rig_error), valid, float(zero_error))
     P = space.size
-    z = np.zeros(P)
-    for sweep in range(3):  # the rows' covariances depend on the unit: refresh them, fit again
-        wh = prob.whitening(z)
-
-        def residual(zz, wh=wh):
-            return np.concatenate([wh.apply(readings - prob.predict(zz)[0]), zz])
-
-        def jac(zz, wh=wh):
-            return np.vstack([-wh.apply(prob.jacobian(zz)), np.eye(P)])
-
-        z = least_squares(residual, z, jac=jac, method="lm", x_scale=1.0, max_nfev=60).x
-        if progress is not None:
-            progress(sweep + 1, 4, "maximum a posteriori")
-    # a clipped reading's residual is left out of the chi-square (it weighs nothing in the fit either)
-    wh = prob.whitening(z)
-    r = wh.apply(np.where(valid, readings - prob.predict(z)[0], 0.0))
-    F = prob.information(z, whitening=wh)
-    post = np.linalg.inv(F + np.eye(P))
+    z = _maximum_a_posteriori(prob, progress=progress)
+    chi2, dof, F, post = _chi2(prob, z)
     lam, V = _eigh_free(F, space.free)
-    dof = max(float(valid.sum()) - float(np.trace(F @ post)), 1.0)
     # what no capture could tell: the null space of the information of a dense design over the capture's axes
     dense = dense_design(ranges, tilt=tilting(poses))
     Jd = prob.whitened_rows(z, dense)  # the dense design's rows share no zero: their information adds up
@@ -367,6 +381,24 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     if progress is not None:
         progress(4, 4, "uncertainty")
     sd = space.prior_sd
-    return Identification(prob, z * sd, post * np.outer(sd, sd), float(r.ravel() @ r.ravel()), dof, lam,
-                          _readable_basis(gauge), starved)
+    return Identification(prob, z * sd, post * np.outer(sd, sd), chi2, dof, lam, _readable_basis(gauge), starved)
 
+
+def blame_element(ident: Identification, progress=None) -> int | None:
+    """The one element whose readings, left out, leave a capture that a unit within its tolerances explains to
+    the noise (an element that does not respond, or is wired to another channel); None when none does or more
+    than one. One short fit per element: a capture without its bad element converges at once, in a few steps."""
+    prob = ident.problem
+    n_el = prob.readings.shape[1]
+    found = []
+    for k in range(n_el):
+        if progress is not None:
+            progress(k + 1, n_el, f"v{k + 1} left out")
+        valid = prob.valid.copy()
+        valid[:, k] = False
+        trial = replace(prob, valid=valid)
+        z = _maximum_a_posteriori(trial, sweeps=1, max_nfev=BLAME_NFEV)
+        chi2, dof, _, _ = _chi2(trial, z)
+        if chi2 / dof <= CHI2_LIMIT and np.abs(z).max() <= PRIOR_LIMIT:
+            found.append(k)
+    return found[0] if len(found) == 1 else None

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, Identification, tilting
+from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, Identification, blame_element, tilting
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.units import UnitSpace
@@ -113,29 +113,40 @@ def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
     return lines
 
 
-def check_explained(ident: Identification, capture, drawing: str, source: str) -> None:
+def check_explained(ident: Identification, capture, drawing: str, source: str, progress=None) -> None:
     """InputError when the physics does not explain the capture (reduced chi-square over CHI2_LIMIT), or does only
-    with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads); ``source``: where the
-    reading noise came from; ``drawing``: the sensor's name."""
-    far = ident.outside_tolerances()
+    with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads), with the cause when one
+    element alone is to blame (:func:`blame_element`, ``progress`` its callback) or the stage's axes are;
+    ``source``: where the reading noise came from; ``drawing``: the sensor's name."""
+    far, bad = ident.outside_tolerances(), ident.reduced_chi2 > CHI2_LIMIT
+    if not (bad or far):
+        return
     names = ", ".join(f"{ident.space.names[i]} at {z:+.3g}" for i, z in far[:3]) + " prior spreads"
-    if ident.reduced_chi2 > CHI2_LIMIT:
-        rms = float(np.sqrt(ident.reduced_chi2))
+    k = blame_element(ident, progress)
+    if k is not None:
+        cause = (f"element {k + 1} (v{k + 1}) alone: with its readings left out, the others read as a unit within the "
+                 "tolerances, to the noise; it does not respond, or is wired to another channel (the channel map)")
+    elif far and all(ident.space.names[i].startswith("stage.") for i, _ in far[:3]):
+        cause = ("the stage's axes against the sensor's: a pose axis mirrored, swapped or in other units than mm "
+                 "(the capture's axis map, --stage-axes)")
+    else:
+        cause = None
+    if bad:
         rows = ident.outlying_rows()
         row = "" if not rows else (f"; row {rows[0][0] + 1} stands out most ({_where(ident, rows[0][0])}: residuals up "
                                    f"to {rows[0][1]:.3g} standard deviations): if it slipped, delete it and resume"
                                    if len(rows) <= 3 else f"; {len(rows)} rows stand out, not one")
-        raise InputError(f"the physics does not explain {capture}: residuals {rms:.3g}x the reading noise "
-                         f"({source}); another sensor than {drawing}, labels in other units, an element that does not "
-                         "respond or elements wired in another order than the drawing's (the channel map), a zero "
-                         f"above first contact (rows at dz 0 off the skin), or a noise figure too low{row}"
+        cause = cause or (f"another sensor than {drawing}, labels in other units, an element that does not respond or "
+                          "elements wired in another order than the drawing's (the channel map), a zero above first "
+                          f"contact (rows at dz 0 off the skin), or a noise figure too low{row}")
+        raise InputError(f"the physics does not explain {capture}: residuals {float(np.sqrt(ident.reduced_chi2)):.3g}x "
+                         f"the reading noise ({source}); {cause}"
                          + (f"; the nearest unit lies far outside the tolerances ({names})" if far else "")
                          + "; nothing written")
-    if far:
-        raise InputError(f"the physics explains {capture} only with a unit far outside {drawing}'s tolerances "
-                         f"({names}; beyond {PRIOR_LIMIT:g} is no unit within them): an element that does not respond "
-                         f"or is wired to another channel, another sensor than {drawing}, or a unit built looser than "
-                         "its [tolerances] say (widen them in the drawing's file); nothing written")
+    cause = cause or ("an element that does not respond or is wired to another channel, another sensor than "
+                      f"{drawing}, or a unit built looser than its [tolerances] say (widen them in the drawing's file)")
+    raise InputError(f"the physics explains {capture} only with a unit far outside {drawing}'s tolerances ({names}; "
+                     f"beyond {PRIOR_LIMIT:g} is no unit within them): {cause}; nothing written")
 
 
 def save(ident: Identification, path, provenance: dict) -> tuple:
