@@ -323,6 +323,9 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
         "few": (y[:6], plan[0][:6], "at least 10"),
         "repeat": (np.repeat(y[:1], 20, axis=0), np.repeat(plan[0][:1], 20, axis=0), "distinct pose"),
         "saturated": (np.where(np.arange(8) < 2, 3.3, y), plan[0], "saturated"),
+        "one element on a rail": (np.where(np.arange(8) == 4, 0.0, y), plan[0],
+                                  "v5 reads at the ADC's rail in 100% of the rows (0 V, range 0..3.3 V), the other "
+                                  "elements in 0% of theirs: element 5 does not respond"),
         "other sensor": (readings(load_sensor("tilted-axes").with_transfer("gmr"), plan[0], adc_bits=0), plan[0],
                          "does not explain"),
         # an element that does not respond: the physics explains it, but only with a unit far outside its tolerances

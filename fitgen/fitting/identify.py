@@ -302,6 +302,14 @@ def check_capture(space: UnitSpace, readings: np.ndarray, poses: np.ndarray) -> 
         g = d.gmr
         lsb = (g.adc_max - g.adc_min) / max(2**g.adc_bits - 1, 1)
         valid = (readings < g.adc_max - 2 * lsb) & (readings > g.adc_min + 2 * lsb)
+        stuck = np.nonzero(np.mean(~valid, axis=0) > 0.9)[0]  # one element on a rail, the others not: that element
+        if len(stuck) == 1:
+            k = int(stuck[0])
+            others = float(np.mean(np.delete(~valid, k, axis=1)))
+            raise InputError(f"v{k + 1} reads at the ADC's rail in {np.mean(~valid[:, k]):.0%} of the rows "
+                             f"({np.median(readings[:, k]):.6g} V, range {g.adc_min:g}..{g.adc_max:g} V), the other "
+                             f"elements in {others:.0%} of theirs: element {k + 1} does not respond or is not connected "
+                             "(its supply, its amplifier, its channel in the channel map)")
         if np.mean(~valid) > MAX_CLIPPED:
             i, k = np.argwhere(~valid)[0]
             raise InputError(f"{np.mean(~valid):.0%} of the readings are saturated at the ADC's rails (row {i + 1}: "
