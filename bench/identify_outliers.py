@@ -11,8 +11,9 @@ and the largest standardized residual of the slipped row and of the others (medi
 Then the captures with an element that does not respond (element 3 reads a constant, its mean over the capture) and
 with two elements' channels swapped (3 and 6): how many the chi-square refuses, and how many identify refuses
 because only a unit far outside its tolerances explains them (a parameter beyond PRIOR_LIMIT = 5 prior spreads,
-fitgen.fitting.unitrecord.check_explained), and which element a refusal names as the one to blame (the one whose
-readings, left out, leave a capture a unit within its tolerances explains: fitgen.fitting.identify.blame_element);
+fitgen.fitting.unitrecord.check_explained), and which element or pair of elements a refusal names as the one to
+blame (the one whose readings, left out or exchanged, leave a capture a unit within its tolerances explains:
+fitgen.fitting.identify.blame);
 for every kind, the largest |parameter| in prior spreads.
 
     python bench/identify_outliers.py    # about 7 minutes here
@@ -79,8 +80,8 @@ def main() -> None:
                 try:
                     check_explained(ident, "the capture", U.PRESET, "the bench's")
                 except InputError as exc:
-                    found = re.search(r"element (\d+) \(v\d+\) alone", str(exc))
-                    blamed += [int(found.group(1))] if found else []
+                    found = re.search(r"elements? (\d+)(?: and (\d+))? \(v", str(exc))
+                    blamed += [" and ".join(g for g in found.groups() if g)] if found else []
                 zmax.append(np.abs(ident.space.in_spreads(ident.theta)).max())
                 worst = ident.row_worst
                 out = [i for i, _ in ident.outlying_rows()]
@@ -90,7 +91,7 @@ def main() -> None:
                 others.append(np.delete(worst, deep).max())
             n = len(caps)
             rows.append([f"{zero:g}", kind, f"{refused} of {n}", f"{beyond} of {n}",
-                         ", ".join(f"{blamed.count(k)} x element {k}" for k in sorted(set(blamed))) or "none",
+                         ", ".join(f"{blamed.count(k)} x {k}" for k in sorted(set(blamed))) or "none",
                          f"{fmt(np.median(zmax))} / {fmt(np.max(zmax))}", f"{named} of {n}",
                          f"{right} of {n}" if slip else "-", f"{fmt(np.median(own))} / {fmt(np.max(own))}",
                          f"{fmt(np.median(others))} / {fmt(np.max(others))}"])
@@ -105,7 +106,7 @@ def main() -> None:
           "within its tolerances is drawn within 3). The largest |parameter| in prior spreads and the largest "
           "standardized residual: median / worst over the captures.\n")
     print(table(["zero off [mm rms]", "what is wrong", "refused (chi-square)", "refused (beyond the tolerances)",
-                 "refusals naming an element",
+                 "refusals naming the element(s) to blame",
                  "largest parameter [prior sd]", "captures naming a row",
                  "naming the slipped row first", f"slipped row {deep + 1}", "every other row"], rows))
 

@@ -330,6 +330,8 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
                          "does not explain"),
         # an element that does not respond: the physics explains it, but only with a unit far outside its tolerances
         "dead element": (np.where(np.arange(8) == 2, y[:, 2].mean(), y), plan[0], "element 3 (v3) alone: with its"),
+        # two elements wired to each other's channels: the pair is named
+        "swapped channels": (y[:, [0, 1, 5, 3, 4, 2, 6, 7]], plan[0], "elements 3 and 6 (v3, v6) swapped: with their"),
         # the stage's dx mirrored against the sensor's: the stage map would have to turn it round
         "mirrored dx": (y, plan[0] * [-1, 1, 1, 1, 1], "the stage's axes against the sensor's"),
     }

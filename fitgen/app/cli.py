@@ -223,8 +223,13 @@ def cmd_identify(args) -> int:
     with Progress("identify", 4) as bar:
         ident = idf.identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
                              zero_error=args.zero_error, progress=lambda i, n, note: bar.update(1, note))
-    with Progress("which element", drawing.n_elements) as bar:  # moves only when the capture is refused
-        rec.check_explained(ident, args.capture, drawing.name, source, lambda i, n, note: bar.update(1, note))
+    with Progress("what to blame", drawing.n_elements) as bar:  # moves only when the capture is refused
+
+        def trial(i, n, note):
+            bar.total = n  # the pairs count too when many rows stand out
+            bar.update(1, note)
+
+        rec.check_explained(ident, args.capture, drawing.name, source, trial)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
           f"{args.zero_error:g} mm", file=sys.stderr)
     print(rec.report(ident), end="")

@@ -30,6 +30,7 @@ fitgen.fitting.unitrecord tells an identification in words and writes its files.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from itertools import combinations
 from functools import cached_property
 
 import numpy as np
@@ -392,21 +393,42 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     return Identification(prob, z * sd, post * np.outer(sd, sd), chi2, dof, lam, _readable_basis(gauge), starved)
 
 
-def blame_element(ident: Identification, progress=None) -> int | None:
-    """The one element whose readings, left out, leave a capture that a unit within its tolerances explains to
-    the noise (an element that does not respond, or is wired to another channel); None when none does or more
-    than one. One short fit per element: a capture without its bad element converges at once, in a few steps."""
+def _explained_within(trial: Problem) -> bool:
+    """One short fit of ``trial``: do its rows read as a unit within the tolerances, to the noise?"""
+    z = _maximum_a_posteriori(trial, sweeps=1, max_nfev=BLAME_NFEV)
+    chi2, dof, _, _ = _chi2(trial, z)
+    return chi2 / dof <= CHI2_LIMIT and np.abs(z).max() <= PRIOR_LIMIT
+
+
+def blame(ident: Identification, progress=None) -> tuple[str, tuple[int, ...]] | None:
+    """What to blame for a capture the physics does not explain within the tolerances, when one thing alone is:
+    ``("dead", (k,))``, the one element whose readings, left out, leave rows a unit within its tolerances
+    explains to the noise (it does not respond, or is wired to another channel); else, when more than three rows
+    stand out, ``("swapped", (a, b))``, the one pair of elements whose readings, exchanged, do (their channels
+    wired the other way round); else None. One short fit per trial: with the fault undone a capture converges in
+    a few steps. ``progress(i, n, note)`` after each."""
     prob = ident.problem
     n_el = prob.readings.shape[1]
+    pairs = list(combinations(range(n_el), 2)) if len(ident.outlying_rows()) > 3 else []
+    total, done = n_el + len(pairs), 0
     found = []
     for k in range(n_el):
+        done += 1
         if progress is not None:
-            progress(k + 1, n_el, f"v{k + 1} left out")
+            progress(done, total, f"v{k + 1} left out")
         valid = prob.valid.copy()
         valid[:, k] = False
-        trial = replace(prob, valid=valid)
-        z = _maximum_a_posteriori(trial, sweeps=1, max_nfev=BLAME_NFEV)
-        chi2, dof, _, _ = _chi2(trial, z)
-        if chi2 / dof <= CHI2_LIMIT and np.abs(z).max() <= PRIOR_LIMIT:
+        if _explained_within(replace(prob, valid=valid)):
             found.append(k)
-    return found[0] if len(found) == 1 else None
+    if found:
+        return ("dead", (found[0],)) if len(found) == 1 else None
+    for a, b in pairs:
+        done += 1
+        if progress is not None:
+            progress(done, total, f"v{a + 1} and v{b + 1} exchanged")
+        order = np.arange(n_el)
+        order[[a, b]] = order[[b, a]]
+        if _explained_within(replace(prob, readings=prob.readings[:, order], valid=prob.valid[:, order],
+                                     noise=prob.noise[order])):
+            found.append((a, b))
+    return ("swapped", found[0]) if len(found) == 1 else None

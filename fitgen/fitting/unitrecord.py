@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, Identification, blame_element, tilting
+from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, Identification, blame, tilting
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.units import UnitSpace
@@ -116,16 +116,22 @@ def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
 def check_explained(ident: Identification, capture, drawing: str, source: str, progress=None) -> None:
     """InputError when the physics does not explain the capture (reduced chi-square over CHI2_LIMIT), or does only
     with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads), with the cause when one
-    element alone is to blame (:func:`blame_element`, ``progress`` its callback) or the stage's axes are;
+    element or one swapped pair alone is to blame (:func:`blame`, ``progress`` its callback) or the stage's axes are;
     ``source``: where the reading noise came from; ``drawing``: the sensor's name."""
     far, bad = ident.outside_tolerances(), ident.reduced_chi2 > CHI2_LIMIT
     if not (bad or far):
         return
     names = ", ".join(f"{ident.space.names[i]} at {z:+.3g}" for i, z in far[:3]) + " prior spreads"
-    k = blame_element(ident, progress)
-    if k is not None:
+    culprit = blame(ident, progress)
+    if culprit is not None and culprit[0] == "dead":
+        k = culprit[1][0]
         cause = (f"element {k + 1} (v{k + 1}) alone: with its readings left out, the others read as a unit within the "
                  "tolerances, to the noise; it does not respond, or is wired to another channel (the channel map)")
+    elif culprit is not None:
+        a, b = culprit[1]
+        cause = (f"elements {a + 1} and {b + 1} (v{a + 1}, v{b + 1}) swapped: with their readings exchanged, the capture "
+                 "reads as a unit within the tolerances, to the noise; their channels are wired the other way round "
+                 "(the channel map)")
     elif far and all(ident.space.names[i].startswith("stage.") for i, _ in far[:3]):
         cause = ("the stage's axes against the sensor's: a pose axis mirrored, swapped or in other units than mm "
                  "(the capture's axis map, --stage-axes)")
