@@ -30,8 +30,8 @@ fitgen.fitting.unitrecord tells an identification in words and writes its files.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from itertools import combinations
 from functools import cached_property
+from itertools import combinations
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -200,9 +200,7 @@ class Identification:
 
     def outside_tolerances(self, limit: float = PRIOR_LIMIT) -> list[tuple[int, float]]:
         """Parameters (index, value in prior spreads) beyond ``limit`` spreads from the drawing, farthest first."""
-        z = self.space.in_spreads(self.theta)
-        idx = np.nonzero(np.abs(z) > limit)[0]
-        return [(int(i), float(z[i])) for i in idx[np.argsort(-np.abs(z[idx]), kind="stable")]]
+        return _beyond(self.space.in_spreads(self.theta), limit)
 
     @cached_property
     def standardized_residuals(self) -> np.ndarray:
@@ -263,6 +261,12 @@ def _readable_basis(V: np.ndarray) -> np.ndarray:
 
 
 MAX_CLIPPED = 0.1  # share of clipped readings above which a capture is refused
+
+
+def _beyond(z: np.ndarray, limit: float) -> list[tuple[int, float]]:
+    """Parameters (index, value) of ``z`` (in prior spreads) beyond ``limit``, farthest first."""
+    idx = np.nonzero(np.abs(z) > limit)[0]
+    return [(int(i), float(z[i])) for i in idx[np.argsort(-np.abs(z[idx]), kind="stable")]]
 
 
 def unit_space(drawing: Sensor) -> UnitSpace:
@@ -397,7 +401,7 @@ def _explained_within(trial: Problem) -> bool:
     """One short fit of ``trial``: do its rows read as a unit within the tolerances, to the noise?"""
     z = _maximum_a_posteriori(trial, sweeps=1, max_nfev=BLAME_NFEV)
     chi2, dof, _, _ = _chi2(trial, z)
-    return chi2 / dof <= CHI2_LIMIT and np.abs(z).max() <= PRIOR_LIMIT
+    return chi2 / dof <= CHI2_LIMIT and not _beyond(z, PRIOR_LIMIT)
 
 
 def blame(ident: Identification, progress=None) -> tuple[str, tuple[int, ...]] | None:

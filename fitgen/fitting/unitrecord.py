@@ -61,6 +61,7 @@ def report(ident: Identification) -> str:
         lines.append("this capture leaves nothing else to the prior that a capture over the same axes could pin")
     return "\n".join(lines) + "\n"
 
+
 # --- captures and files ---------------------------------------------------------------------------
 
 ROW_NOISE_KEY = "row_noise"  # a capture's meta: per element, the measured noise of its averaged rows
