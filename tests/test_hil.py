@@ -1,5 +1,6 @@
 """The HIL suite against the real firmware: the emulated Cortex-M4 (QEMU mps2-an386) and the host build on a pty."""
 
+import dataclasses
 import socket
 import threading
 import xml.etree.ElementTree as ET
@@ -142,6 +143,18 @@ def test_suite_fails_when_the_device_runs_another_model(paper_model):
     assert not res.ok
     failed = {c.name for c in res.checks if not c.ok}
     assert failed == {"info", "eval"}
+
+
+def test_suite_fails_not_crashes_when_the_device_runs_fewer_outputs(paper_model):
+    """The device refuses a calibration for five outputs: the flash checks fail, the suite finishes."""
+    require_tool("gcc")
+    dz_only = dataclasses.replace(paper_model, equations=(paper_model.equation("dz"),))
+    with start_target(dz_only, "host", precision="float", style="table") as fw:
+        with Device.open(fw.url, timeout=5) as dev:
+            res = run_suite(dev, paper_model, url=fw.url, n_vectors=50, n_fuzz=0, verbose=False)
+    by_name = {c.name: c for c in res.checks}
+    assert not res.ok and not by_name["flash"].ok
+    assert "ERROR" in by_name["flash"].detail and "corrupt flash" in by_name
 
 
 def test_emulated_instruction_counts(paper_model):
