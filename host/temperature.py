@@ -22,6 +22,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -93,12 +94,25 @@ def temperature_input(adc: str, cmap, thermistor: str | None = None) -> Temperat
     ``[temperature]`` (``cmap.temperature``); None without one (then ``thermistor`` is refused)."""
     spec = split_channel_map(adc)[1]
     if spec is not None:
-        return parse_temperature_input(spec, thermistor)
+        return check_beside(parse_temperature_input(spec, thermistor), cmap)
     if cmap.temperature is not None:
-        return parse_temperature_input(cmap.temperature[0], thermistor, cmap.temperature[1])
+        return check_beside(parse_temperature_input(cmap.temperature[0], thermistor, cmap.temperature[1]), cmap)
     if thermistor:
         raise InputError("--thermistor describes the temperature input: add temp=CHIP@ADDRESS:INPUT to --adc")
     return None
+
+
+def check_beside(tin: TemperatureInput, cmap) -> TemperatureInput:
+    """``tin`` if it can be read beside the elements of ``cmap``: on an input of its own, a chip of one kind,
+    in single-shot mode; InputError otherwise."""
+    for chip, inp in cmap.elements():
+        if chip.address == tin.address and inp == tin.input:
+            raise InputError(f"temp={tin.kind}@0x{tin.address:02x}:{tin.input} is also an element's input in --adc")
+        if chip.address == tin.address and chip.kind != tin.kind:
+            raise InputError(f"temp= in --adc: the chip at 0x{tin.address:02x} is a {chip.kind} elsewhere in --adc")
+        if chip.address == tin.address and chip.settings.mode == "continuous":
+            raise InputError("temp= in --adc on a chip in continuous mode: use single-shot mode or another chip")
+    return tin
 
 
 class Thermometer:
@@ -108,13 +122,7 @@ class Thermometer:
         from host.adc import make_driver
         from host.channelmap import Chip
 
-        for chip, inp in array.cmap.elements():
-            if chip.address == tin.address and inp == tin.input:
-                raise InputError(f"temp={tin.kind}@0x{tin.address:02x}:{tin.input} is also an element's input in --adc")
-            if chip.address == tin.address and chip.kind != tin.kind:
-                raise InputError(f"temp= in --adc: the chip at 0x{tin.address:02x} is a {chip.kind} elsewhere in --adc")
-            if chip.address == tin.address and chip.settings.mode == "continuous":
-                raise InputError("temp= in --adc on a chip in continuous mode: use single-shot mode or another chip")
+        check_beside(tin, array.cmap)
         self.tin, self.clock = tin, array.clock
         self.driver = make_driver(array.io, Chip(tin.kind, tin.address, (tin.input,), cmap_settings))
         self.last_t = -math.inf
@@ -132,6 +140,7 @@ class Thermometer:
 class TempComp:
     """Per-element offset (V/degC) and gain (1/degC) coefficients about ``t0`` (degC)."""
 
+    KIND: ClassVar[str] = "tactile temperature compensation"
     t0: float
     offset: np.ndarray
     gain: np.ndarray
@@ -149,7 +158,7 @@ class TempComp:
         return (raw - self.offset * dT) / (1.0 + self.gain * dT)
 
     def to_dict(self) -> dict:
-        return {"kind": "tactile temperature compensation", "version": 1, "t0": self.t0,
+        return {"kind": self.KIND, "version": 1, "t0": self.t0,
                 "offset_v_per_degc": self.offset.tolist(), "gain_per_degc": self.gain.tolist(), "fit": self.info}
 
     def save(self, path) -> Path:
@@ -160,11 +169,17 @@ def load_tempcomp(path) -> TempComp:
     origin = f"temperature compensation {path}"
     try:
         data = json.loads(read_text(path, "temperature compensation file"))
+        kind = data.get("kind")
         t0 = float(data["t0"])
         off = np.asarray(data["offset_v_per_degc"], dtype=float)
         gain = np.asarray(data["gain_per_degc"], dtype=float)
-    except (ValueError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise InputError(f"{origin}: not a compensation file ({type(exc).__name__}: {exc})") from None
+    if kind != TempComp.KIND:
+        raise InputError(f"{origin}: not a compensation file (its kind is {kind!r}, "
+                         f"not {TempComp.KIND!r})")
+    if off.size == 0:
+        raise InputError(f"{origin}: it compensates no element")
     if off.ndim != 1 or off.shape != gain.shape or not (np.all(np.isfinite(off)) and np.all(np.isfinite(gain))
                                                          and math.isfinite(t0)):
         raise InputError(f"{origin}: offsets and gains must be finite lists of the same length")
@@ -219,7 +234,10 @@ def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:
              f"static const {real} {P}_tc_gain[{U}_TEMPCOMP_N] = {{ {', '.join(lit(x) for x in tc.gain)} }};",
              "",
              "/* v[k] = (v[k] - offset[k] (t - t0)) / (1 + gain[k] (t - t0)); a non-finite t leaves v as it is */",
-             f"static void {P}_tempcomp({real} v[{U}_TEMPCOMP_N], {real} temp)",
+             "#if defined(__GNUC__) || defined(__clang__)",
+             f"#define {U}_TEMPCOMP_API static __attribute__((unused)) /* included, not called: no warning */",
+             "#else", f"#define {U}_TEMPCOMP_API static", "#endif",
+             f"{U}_TEMPCOMP_API void {P}_tempcomp({real} v[{U}_TEMPCOMP_N], {real} temp)",
              "{", "    int k;", f"    const {real} dt = temp - {lit(tc.t0)};", "    if (!isfinite(temp)) {",
              "        return;", "    }", f"    for (k = 0; k < {U}_TEMPCOMP_N; ++k) {{",
              f"        v[k] = (v[k] - {P}_tc_offset[k] * dt) / ({lit(1.0)} + {P}_tc_gain[k] * dt);", "    }", "}", "",

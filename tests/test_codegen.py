@@ -1,5 +1,6 @@
 """Generated C against the Python evaluation, through gcc (and qemu-arm for an ARM Linux build)."""
 
+import dataclasses
 import json
 import subprocess
 
@@ -135,6 +136,47 @@ def test_codegen_and_verify_cli(paper_model, tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.count("PASS") == 4
     assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--cc", "no-such-cc"), contains="not found")
+
+
+@pytest.mark.parametrize("cc", ["gcc", "clang"])
+def test_a_file_that_includes_the_headers_without_calling_them_compiles_warning_free(paper_model, tmp_path, cc):
+    """A second translation unit that needs only TM_N_INPUTS (or the compensation's count) is warning-free."""
+    require_tool(cc)
+    from fitgen.c.compiled import compile_checked
+    from fitgen.equations.fixedpoint import build_fixed
+    from fitgen.c.codegen import render_fixed_header
+    from host.temperature import TempComp, render_c
+
+    (tmp_path / "tm_tempcomp.h").write_text(render_c(TempComp(25.0, np.full(8, 1e-4), np.full(8, 2e-3))))
+    headers = {f"{p}_{s}": render_header(paper_model, p, s) for p in ("double", "float") for s in ("table", "unrolled")}
+    integer = [Equation(e.name, e.intercept, (Term(1, "1"),), (1.0,)) for e in paper_model.equations]
+    fixed = build_fixed(dataclasses.replace(paper_model, equations=tuple(integer)), 1e-4, 0.0, 32)
+    headers["fixed"] = render_fixed_header(fixed, "tm")
+    for name, text in headers.items():
+        (tmp_path / "tm_model.h").write_text(text)
+        src = tmp_path / "count.c"
+        src.write_text('#include "tm_model.h"\n#include "tm_tempcomp.h"\nint n_inputs(void);\n'
+                       "int n_inputs(void) { return TM_N_INPUTS + TM_TEMPCOMP_N; }\n")
+        compile_checked(cc, [src], tmp_path / f"{name}.o", tmp_path, link=False)
+
+
+def test_verify_says_in_one_line_what_is_wrong_with_the_compiler_or_runner(paper_model, tmp_path):
+    require_tool("gcc")
+    require_tool("arm-linux-gnueabihf-gcc")
+    path = paper_model.save(tmp_path / "m.json")
+
+    def verify_with(*opts, contains):
+        assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--vectors", "50", *opts),
+                              contains=contains)
+
+    verify_with("--cc", "", contains="the compiler is empty")
+    verify_with("--cc", "'gcc", contains="No closing quotation")
+    verify_with("--runner", "false", contains="failed (exit status 1")
+    verify_with("--runner", "true", contains="answered 0 lines")
+    verify_with("--cc", "arm-linux-gnueabihf-gcc", contains="cannot run here")
+    verify_with("--cc", "arm-linux-gnueabihf-gcc", "--runner", "qemu-arm", contains="-static in --cc")
+    # the compiler's first lines say where the header was included from; the line shown is the error
+    verify_with("--cc", "gcc -Dfabsf=", contains="error: expected")
 
 
 def test_verify_catches_a_wrong_compiler_result(paper_model, tmp_path):
