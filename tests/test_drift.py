@@ -79,6 +79,18 @@ def test_compensation_undoes_the_drift_in_python_and_in_c(sensor, tmp_path):
     np.testing.assert_array_equal(c_out, back)
 
 
+@pytest.mark.parametrize("content, said", [
+    ({"offset_v_per_degc": [], "gain_per_degc": []}, "no element"),
+    ({"offset_v_per_degc": [1e300], "gain_per_degc": [-1e300]}, "does not fit in a float"),
+    ({"kind": "tactile model", "offset_v_per_degc": [0.0], "gain_per_degc": [0.0]}, "its kind is 'tactile model'"),
+])
+def test_tempcomp_c_refuses_what_would_not_compile_in_one_line(tmp_path, content, said):
+    path = tmp_path / "tc.json"
+    path.write_text(json.dumps({"kind": TempComp.KIND, "version": 1, "t0": 25.0, **content}))
+    assert_one_line_error(run_cli("tactile-host", "tempcomp-c", str(path), "-o", str(tmp_path / "c")), contains=said)
+    assert not (tmp_path / "c").exists() or not list((tmp_path / "c").iterdir())
+
+
 def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
     sched = tmp_path / "s.csv"
     sched.write_text("dx,dz\n0,0\n1,-1\n-1,-0.5\n")

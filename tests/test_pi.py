@@ -1,12 +1,14 @@
 """The Raspberry Pi build (firmware_templates/pi/): the C drivers over i2c-dev, built for ARM Linux and run
 under qemu-arm against a stand-in for the kernel device answered by the bus model (host/simbus.py)."""
 
+import numpy as np
 import pytest
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.channelmap import Settings, parse_spec
 from host.pi import StandIn, build_pi, render_adc_map, render_pi
 from host.readout import LineFormat
+from host.temperature import TempComp
 
 from conftest import TWO_CHIPS, assert_one_line_error, require_tool, run_cli, sim_bus
 
@@ -112,6 +114,25 @@ def test_pi_build_cli_errors(tmp_path, model):
                                   "-o", str(tmp_path / "x")), 2, "reads 4 elements")
     assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "no-such-cc",
                                   "-o", str(tmp_path / "y")), 2, "not found")
+
+
+def test_a_failed_pi_build_leaves_no_program_and_refuses_before_it_writes(model, tmp_path):
+    """A program built from the folder's earlier sources must not stay beside a failed build's new ones."""
+    require_tool("gcc")
+    path = str(model.save(tmp_path / "m.json"))
+    out = tmp_path / "pi"
+    proc = run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc", "-o", str(out))
+    assert proc.returncode == 0 and (out / "tm_pi").is_file(), proc.stderr
+    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc -Dfloat=",
+                                  "-o", str(out)), contains="error")
+    assert not (out / "tm_pi").exists() and not list(out.glob(".tm_pi*"))
+    # refusals come before anything is written: --temp-comp without the thermistor, the thermistor on an element
+    tc = TempComp(25.0, np.zeros(8), np.zeros(8)).save(tmp_path / "tc.json")
+    for adc, said in ((MAP, "--temp-comp needs the temperature"),
+                      (MAP + ",temp=ads1115@0x49:3", "also an element's input")):
+        assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", adc, "--temp-comp",
+                                      str(tc), "--cc", "gcc", "-o", str(tmp_path / "none")), contains=said)
+        assert not (tmp_path / "none").exists()
 
 
 def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_path):

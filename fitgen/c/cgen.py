@@ -45,9 +45,10 @@ def c_double(x: float) -> str:
 
 def c_float(x: float) -> str:
     """A float literal (``f`` suffix) for the float nearest ``x``, reading back to that float."""
-    f = np.float32(x)
-    if not np.isfinite(f):
+    x = float(x)
+    if not math.isfinite(x) or abs(x) > float(np.finfo(np.float32).max):
         raise InputError(f"the number {x!r} does not fit in a float")
+    f = np.float32(x)
     text = np.format_float_scientific(f, unique=True, trim="0") if f != 0 else "0.0"
     text = text.replace("e+", "e")
     if "." not in text and "e" not in text:

@@ -20,14 +20,42 @@ WARNING_FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wdoub
 def compile_checked(cc: str, sources: list[Path], output: Path, include: Path, extra: list[str] | None = None,
                     link: bool = True) -> None:
     """Compile with the project's warning flags; a warning is an error (InputError with the compiler's text)."""
-    cmd = shlex.split(cc) + WARNING_FLAGS + ["-O2", "-I", str(include)] + (extra or [])
+    tool = tool_command(cc, "compiler")
+    cmd = tool + WARNING_FLAGS + ["-O2", "-I", str(include)] + (extra or [])
     cmd += [str(s) for s in sources] + (["-o", str(output), "-lm"] if link else ["-c", "-o", str(output)])
-    if shutil.which(shlex.split(cc)[0]) is None:
-        raise InputError(f"compiler {cc!r} not found")
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = run_tool(cmd, "compiler", None)
     if proc.returncode != 0:
-        first = (proc.stderr.strip().splitlines() or ["(no message)"])[0]
-        raise InputError(f"{cc} failed on the generated code: {first}")
+        raise InputError(f"{cc} failed on the generated code: {first_error(proc.stderr)}")
+
+
+def first_error(stderr: str) -> str:
+    """The compiler's first line that says error (its first lines are often 'In file included from')."""
+    lines = [ln.strip() for ln in stderr.strip().splitlines() if ln.strip()] or ["(no message)"]
+    return next((ln for ln in lines if "error" in ln.lower()), lines[0])
+
+
+def tool_command(text: str, what: str, hint: str = "") -> list[str]:
+    """``text`` split as a shell would, its program found on PATH; InputError (with ``hint``) otherwise."""
+    try:
+        tool = shlex.split(text)
+    except ValueError as exc:
+        raise InputError(f"{what} {text!r}: {exc}") from None
+    if not tool:
+        raise InputError(f"the {what} is empty")
+    if shutil.which(tool[0]) is None:
+        raise InputError(f"{what} {tool[0]!r} not found" + (f" ({hint})" if hint else ""))
+    return tool
+
+
+def run_tool(cmd: list[str], what: str, stdin: str | None, timeout: float = 600) -> subprocess.CompletedProcess:
+    """Run ``cmd``; one line (InputError) when it cannot start or runs past ``timeout`` seconds."""
+    try:
+        return subprocess.run(cmd, input=stdin, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        raise InputError(f"the {what} {cmd[0]} ran past {timeout:g} s") from None
+    except OSError as exc:
+        raise InputError(f"the {what} {cmd[0]} cannot run here ({exc.strerror or exc}); a cross compiler's "
+                         "binaries need a runner (--runner qemu-arm, and -static in --cc)") from None
 
 
 class CompiledModel:
@@ -47,7 +75,7 @@ class CompiledModel:
                  fma: bool = False, input_lsb: float | None = None, input_offset: float | None = None,
                  mul_bits: int = 32):
         self.model, self.precision, self.style, self.prefix, self.fma = model, precision, style, prefix, fma
-        self.runner = shlex.split(runner) if runner else []
+        self.runner = tool_command(runner, "runner") if runner else []
         self.fixed = None
         if precision == "fixed":
             from fitgen.equations.fixedpoint import plan_at
@@ -73,17 +101,18 @@ class CompiledModel:
         src.write_text(main)
         self.binary = self.dir / f"{prefix}_vectors"
         compile_checked(cc, [src], self.binary, self.dir, cflags)
-        if self.runner and shutil.which(self.runner[0]) is None:
-            raise InputError(f"runner {self.runner[0]!r} not found")
 
     def _run(self, text: str, n: int) -> list[list[str]]:
-        proc = subprocess.run(self.runner + [str(self.binary)], input=text, capture_output=True, text=True,
-                              timeout=600)
+        proc = run_tool(self.runner + [str(self.binary)], "vector runner", text)
         if proc.returncode != 0:
-            raise RuntimeError(f"vector runner failed ({proc.returncode}): {proc.stderr.strip()[:200]}")
+            said = " ".join(proc.stderr.split())[:200] or "no message"
+            hint = "; link it statically: -static in --cc" if self.runner and "ld-linux" in said else ""
+            raise InputError(f"the vector runner {' '.join(self.runner + [self.binary.name])} failed "
+                             f"(exit status {proc.returncode}: {said}){hint}")
         rows = [ln.split() for ln in proc.stdout.splitlines()]
         if len(rows) != n:
-            raise RuntimeError(f"vector runner answered {len(rows)} lines for {n} vectors")
+            raise InputError(f"the vector runner {' '.join(self.runner + [self.binary.name])} answered "
+                             f"{len(rows)} lines for {n} vectors")
         return rows
 
     def predict_codes(self, codes) -> tuple[np.ndarray, np.ndarray]:
