@@ -421,7 +421,7 @@ def open_bus(number: int):
         return smbus2.SMBus(number)
     except FileNotFoundError:
         raise InputError(f"I2C bus {number}: {path} does not exist (enable I2C: raspi-config, or dtparam=i2c_arm=on "
-                         "in config.txt; see docs/readout.md), or use --simulate POSE") from None
+                         "in config.txt; see docs/readout.md), or simulate the sensor (--simulate)") from None
     except PermissionError:
         raise InputError(f"I2C bus {number}: permission denied on {path} (add the user to the i2c group: "
                          "sudo adduser $USER i2c, then log in again)") from None

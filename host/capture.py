@@ -297,6 +297,18 @@ def _prior_meta(output) -> dict:
     return meta if isinstance(meta, dict) else {}
 
 
+def check_resume(output: str | Path, rows: int, this: dict) -> None:
+    """Refuse to add to ``output``'s ``rows`` rows taken otherwise: through another channel map, from another
+    source, or averaging another number of samples (the meta speaks for every row with one of each)."""
+    if rows == 0:
+        return
+    prior = _prior_meta(output)
+    for key, option in (("adc", "--adc"), ("source", "a source"), ("samples_per_row", "--samples")):
+        if key in prior and key in this and prior[key] != this[key]:
+            raise InputError(f"output {output}: its {rows} rows were captured with {option} {prior[key]}, this run's "
+                             f"is {this[key]}: resume with the same, or choose another -o")
+
+
 def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples: int = 16,
             max_spread: float = 0.003, tries: int = 3, wait=None, set_pose=None, settle: float = 0.0,
             clock=REAL_CLOCK, progress=None, meta: dict | None = None) -> CaptureResult:

@@ -8,14 +8,14 @@ import sys
 import time
 from pathlib import Path
 
-from fitgen.base.parse import parse_positive
+from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from fitgen.base.progress import Progress
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.capture import (SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, prepare_output,
+from host.capture import (SpreadTooLarge, TriggerFailed, capture, check_resume, enter_waiter, load_schedule, prepare_output,
                           trigger_waiter)
 from host.session import channel_map_from_args, open_bus_from_args
-from host.stage import StageError
+from host.stage import StageError, StageState
 from host.stagecapture import open_stage, stage_settings
 from host.stagesim import pose_file_motion
 
@@ -31,7 +31,8 @@ class CaptureInterrupted(RuntimeError):
 def capture_numbers(args) -> tuple:
     """--samples, --max-spread, --tries, --settle and --retries, checked."""
     return (parse_positive(args.samples, "--samples", integer=True), parse_positive(args.max_spread, "--max-spread"),
-            parse_positive(args.tries, "--tries", integer=True), parse_positive(args.settle, "--settle", zero=True),
+            parse_positive(args.tries, "--tries", integer=True),
+            parse_positive(args.settle, "--settle", zero=True, most=LONGEST_WAIT),
             parse_positive(args.retries, "--retries", integer=True))
 
 
@@ -44,6 +45,11 @@ def run_capture(args, prog: str) -> None:
     state = prepare_output(args.output, cmap.n_elements, schedule, write=False)  # checked before any waiting
     stage_opts = stage_settings(args, schedule)  # and the stage's settings before anything moves
     total, pending = len(schedule.poses), int((~state.done).sum())
+    source = f"simulated {args.sensor}" if args.simulate else "hardware"
+    check_resume(args.output, state.rows, {"adc": cmap.describe(), "source": source, "samples_per_row": samples})
+    if pending == 0:  # the stage and the bus stay shut, the meta as it is
+        print(f"{prog}: {total}/{total} poses in {args.output} already: nothing to capture", file=sys.stderr)
+        return
     interactive = not args.trigger and not args.simulate and stage_opts is None
     if args.trigger:
         wait = trigger_waiter(args.trigger, schedule)
@@ -51,7 +57,7 @@ def run_capture(args, prog: str) -> None:
         wait = None  # the stage (simulated or G-code) sets each pose itself
     else:
         wait = enter_waiter(schedule)
-    meta = {"adc": cmap.describe(), "source": f"simulated {args.sensor}" if args.simulate else "hardware"}
+    meta = {"adc": cmap.describe(), "source": source}
     motion = pose_file_motion(args.sim_pose_file) if args.sim_pose_file else None
     bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion)
     if motion is not None:
@@ -75,6 +81,8 @@ def run_capture(args, prog: str) -> None:
     except KeyboardInterrupt:
         raise CaptureInterrupted(keep) from None
     except (DeviceSilent, SpreadTooLarge, TriggerFailed, StageError) as exc:
+        if getattr(exc, "lost", ""):
+            StageState.mark_lost(args.output, exc.lost)
         if not Path(args.output).exists():
             keep = "nothing was written"  # the fault came before the first row's file was made
         raise CaptureFailed(f"{exc}; {keep}") from exc

@@ -34,6 +34,9 @@ def port_error(exc: BaseException) -> str:
     for e in (exc.__cause__, exc.__context__, exc):
         if isinstance(e, OSError) and e.strerror:
             return e.strerror[:1].lower() + e.strerror[1:]
+        if isinstance(e, (TypeError, KeyError)):
+            # pyserial's URL handlers fail so on a missing or out-of-range port ('<=' not supported ...)
+            return "expected HOST:PORT after the scheme, a port from 1 to 65535 (e.g. socket://127.0.0.1:5000)"
     text = str(exc).strip() or type(exc).__name__
     return text.splitlines()[0]
 

@@ -28,6 +28,7 @@ FLAVORS = ("marlin", "grbl")
 MAX_LINE = 256  # longest line accepted from a controller (GRBL's longest report is about 100)
 MAX_COMMAND = 70  # GRBL's line buffer holds 80 characters with the newline; Marlin's 96
 POLL = 0.02  # seconds one read of the port blocks at most
+QUEUED_WAIT = 60.0  # s a stopped run's queued moves (or homing) may take to end after a new run connects
 POSITION_TOL = 0.02  # mm: reported against commanded position (Marlin prints 2 decimals, GRBL steps)
 
 GRBL_BANNER = re.compile(r"^Grbl (\S+)")
@@ -44,7 +45,18 @@ _MARLIN_POS = re.compile(rf"X:{_NUM}\s*Y:{_NUM}\s*Z:{_NUM}")
 
 
 class StageError(RuntimeError):
-    """The controller failed: an error or alarm, a halt, silence, a reset, or a position not the commanded one."""
+    """The controller failed: an error or alarm, a halt, silence, a reset, or a position not the commanded one.
+
+    ``lost``: why the machine's position can no longer be trusted ('' when it still can): a resumed
+    capture must then not keep the zero (host.stagezero)."""
+
+    def __init__(self, message: str, lost: str = ""):
+        super().__init__(message)
+        self.lost = lost
+
+
+class NoStatus(StageError):
+    """No answer to GRBL's real-time ``?``."""
 
 
 def stage_url(spec: str) -> str:
@@ -144,16 +156,17 @@ class GcodeController(PortOwner):
             code = text[6:].strip()
             meaning = GRBL_ALARMS.get(int(code)) if code.isdigit() else None
             return StageError(f"{self.name}: the controller raised ALARM:{code}{f' ({meaning})' if meaning else ''} "
-                              f"during {what}; home it (--home) or unlock it (--unlock), then set the zero again")
+                              f"during {what}; home it (--home) or unlock it (--unlock), then set the zero again",
+                              lost=f"the controller raised ALARM:{code}")
         if text == "!!" or "halted" in low or "kill() called" in low:
             return StageError(f"{self.name}: the controller halted ({text}) during {what}; reset it, home it and "
-                              "set the zero again")
+                              "set the zero again", lost="the controller halted")
         if low.startswith("echo:unknown command"):
             return StageError(f"{self.name}: the controller does not know {what} ({text})")
         if GRBL_BANNER.match(text) or text == "start":
             self.banner_seen = True
             return StageError(f"{self.name}: the controller reset itself during {what} (it printed {text!r}); "
-                              "its position is lost: set the zero again")
+                              "its position is lost: set the zero again", lost="the controller reset itself")
         return None
 
     def command(self, line: str, *, timeout: float | None = None, what: str | None = None) -> list[str]:
@@ -204,7 +217,7 @@ class GcodeController(PortOwner):
                     self.firmware = text[5:].strip()
         self.banner_seen = seen is not None
         if seen is None:
-            seen = self._probe()
+            seen = self._grbl_at_rest() if flavor == "grbl" else self._probe()
         if flavor != "auto" and seen != flavor:
             raise InputError(f"{self.name}: --stage-flavor {flavor}, but the controller is {seen} "
                              f"({self.firmware or 'by its answers'})")
@@ -214,16 +227,45 @@ class GcodeController(PortOwner):
             if not self.alarm:
                 self._work_offset()
 
+    def _grbl_at_rest(self) -> str:
+        """GRBL named, no banner: its real-time status answers even while a stopped run's last move or homing
+        ends (a line such as M115 waits behind them); wait for that, then ask its build."""
+        try:
+            self.status()
+        except NoStatus:  # not a GRBL: end the '?' as a line (a Marlin answers it ok), and ask who it is
+            self._write(b"\n")
+            return self._probe()
+        deadline = time.monotonic() + QUEUED_WAIT + self.timeout
+        while not (state := self.status()[0]).startswith(("Idle", "Alarm")):
+            if time.monotonic() > deadline:
+                raise StageError(f"{self.name}: the controller is still {state} {QUEUED_WAIT + self.timeout:g} s "
+                                 "after connecting")
+            time.sleep(POLL)
+        self.send("$I")
+        ver = next((t for t in self._until_ok("$I") if t.startswith("[VER:")), "")
+        self.firmware = f"Grbl {ver[5:].split(':')[0]}" if ver else "Grbl"
+        return "grbl"
+
     def _probe(self) -> str:
         """No banner: ask. Marlin answers M115 with its firmware name; GRBL answers it with error:N."""
+        def unnamed(name):
+            return InputError(f"{self.name}: the controller answered M115 with firmware {name or 'unnamed'}; "
+                              "give --stage-flavor marlin or grbl if it speaks one of them")
+
         self.send("M115")
         deadline = time.monotonic() + self.timeout
-        name = ""
+        name, nameless_ok = "", False
         while True:
             text = self.read_line(deadline)
+            if text is None and nameless_ok:
+                raise unnamed(name)
             if text is None:
                 raise StageError(f"{self.name}: no answer to M115 within {self.timeout:g} s; is the controller on, "
-                                 "and is the baud rate right?")
+                                 "and is the baud rate right? (A GRBL still ending a stopped run's move or homing "
+                                 "answers late: give --stage-flavor grbl)")
+            if "busy:" in text:  # Marlin's host keepalive: a stopped run's M400 or homing is still going on
+                deadline = max(deadline, time.monotonic() + self.timeout)
+                continue
             if text.startswith("FIRMWARE_NAME:"):
                 name = text[len("FIRMWARE_NAME:"):].split(" SOURCE_CODE_URL")[0].strip()
             elif text.lower().startswith("error:") and text[6:].strip().isdigit():
@@ -233,11 +275,13 @@ class GcodeController(PortOwner):
                 self.firmware = f"Grbl {ver[5:].split(':')[0]}" if ver else "Grbl"
                 return "grbl"
             elif text == "ok" or text.startswith("ok "):
-                if "marlin" not in name.lower():
-                    raise InputError(f"{self.name}: the controller answered M115 with firmware {name or 'unnamed'}; "
-                                     "give --stage-flavor marlin or grbl if it speaks one of them")
-                self.firmware = name
-                return "marlin"
+                if "marlin" in name.lower():
+                    self.firmware = name
+                    return "marlin"
+                if name or nameless_ok:
+                    raise unnamed(name)
+                nameless_ok = True  # perhaps a stopped run's last answer (its M400's): M115's own comes next
+                deadline = time.monotonic() + self.timeout
 
     def _until_ok(self, what: str) -> list[str]:
         deadline = time.monotonic() + self.timeout
@@ -274,7 +318,7 @@ class GcodeController(PortOwner):
         while True:
             text = self.read_line(deadline)
             if text is None:
-                raise StageError(f"{self.name}: no status report within {self.timeout:g} s after '?'")
+                raise NoStatus(f"{self.name}: no status report within {self.timeout:g} s after '?'")
             if text.startswith("<") and text.endswith(">"):
                 return self._parse_status(text)
             fault = self._fault(text, "a status query")
@@ -318,7 +362,7 @@ class GcodeController(PortOwner):
                 return
             if state.startswith("Alarm"):
                 raise StageError(f"{self.name}: the controller went into ALARM during {what}; home it (--home) or "
-                                 "unlock it (--unlock), then set the zero again")
+                                 "unlock it (--unlock), then set the zero again", lost="the controller went into ALARM")
             if time.monotonic() > deadline:
                 raise StageError(f"{self.name}: still {state} {self.timeout:g} s after {what} ended")
             time.sleep(POLL)
@@ -330,7 +374,8 @@ class GcodeController(PortOwner):
         self.command("M17" if self.flavor == "marlin" else "G94")
 
     def move(self, target: dict[str, float], feed: float, *, start: np.ndarray | None = None) -> np.ndarray:
-        """G1 to ``target`` (machine axis -> mm) at ``feed`` mm/min, wait for its end, check the position."""
+        """G1 to ``target`` (machine axis -> mm) at ``feed`` mm/min, wait for its end, check the position;
+        the position sent (the report's within POSITION_TOL of it)."""
         words = " ".join(f"{a}{target[a]:.3f}" for a in MACHINE_AXES if a in target)
         line = f"G1 {words} F{feed:g}"
         if start is None:
@@ -344,7 +389,9 @@ class GcodeController(PortOwner):
             if a in target and abs(pos[i] - round(target[a], 3)) > POSITION_TOL:
                 raise StageError(f"{self.name}: after {line!r} the controller reports {a}{pos[i]:g}: a move clamped "
                                  "by its own software endstops, or lost steps")
-        return pos
+        # where it was sent, not the report (Marlin's M114 has two decimals): the next move and a repeat's test
+        # count from there, and jog steps below 0.01 mm are not lost to the report's rounding
+        return np.array([round(target[a], 3) if a in target else pos[i] for i, a in enumerate(MACHINE_AXES)])
 
     def home(self, timeout: float) -> None:
         """G28 (Marlin) or $H (GRBL); the time limit is for the whole cycle."""

@@ -31,6 +31,9 @@ __all__ = ["AxisMap", "GcodeController", "PoseStage", "StageError", "StageSettin
            "jog_to_zero", "parse_approach", "parse_ranges", "parse_zero", "stage_url"]
 
 
+SAME = 6e-4  # mm: two displacements this close are one (moves are sent to 0.001 mm)
+
+
 class PoseStage:
     """Moves the controller to poses (dx, dy, dz from the zero), within the limits, each from the same side.
 
@@ -62,7 +65,7 @@ class PoseStage:
         current = None if self.position is None else self.settings.axes.to_pose(self.zero, self.position)
         # a pose repeated goes away to the approach point and back, so the row has its own landing error (a
         # schedule's repeats are weighed as independent visits), not the last row's again
-        repeat = current is not None and bool(np.all(np.abs(target - current) <= 1e-9))
+        repeat = current is not None and bool(np.all(np.abs(target - current) <= SAME))
         need = np.zeros(3, dtype=bool)
         for name in self.settings.axes.pose_axes:
             k = STAGE_AXES.index(name)
@@ -72,11 +75,11 @@ class PoseStage:
                 need[k] = True  # where the backlash sits is unknown, or a fresh landing is wanted
                 continue
             step = target[k] - current[k]
-            towards = step * -np.sign(a[k]) > 1e-9  # moving the approach's way
+            towards = step * -np.sign(a[k]) > SAME  # moving the approach's way
             # loaded and staying or moving on the approach's way: still loaded; a move the approach's way
             # at least as long as the approach loads the axis too
-            need[k] = not ((self.loaded[k] and (abs(step) <= 1e-9 or towards)) or
-                           (towards and abs(step) >= abs(a[k]) - 1e-9))
+            need[k] = not ((self.loaded[k] and (abs(step) <= SAME or towards)) or
+                           (towards and abs(step) >= abs(a[k]) - SAME))
         if not need.any():
             return [target]
         return [np.where(need, target + a, target), target]

@@ -6,10 +6,11 @@ from __future__ import annotations
 import sys
 
 from fitgen.base.errors import InputError
-from fitgen.base.parse import parse_positive
+from fitgen.base.parse import LONGEST_WAIT, parse_positive
 
 from host.stage import (AxisMap, GcodeController, PoseStage, StageError, StageSettings, StageState, choose_zero,
                         jog_to_zero, parse_approach, parse_ranges, parse_zero, stage_url)
+from host.gcode import QUEUED_WAIT
 from host.stagesettings import APPROACH
 
 STAGE_OPTIONS = ("stage_flavor", "stage_baud", "stage_axes", "stage_limits", "stage_feed", "stage_approach",
@@ -39,13 +40,21 @@ def stage_settings(args, schedule):
                          "a move outside them is never sent")
     settings = StageSettings(AxisMap.parse(args.stage_axes or "X=dx,Y=dy,Z=dz"),
                              parse_ranges(args.stage_limits, "--stage-limits"),
-                             feed=parse_positive(args.stage_feed or "600", "--stage-feed"),
+                             feed=parse_feed(args.stage_feed or "600"),
                              approach=parse_approach(args.stage_approach or APPROACH)).check()
     settings.check_schedule(schedule.poses, schedule.describe)
     return {"url": stage_url(args.stage), "settings": settings, "zero": parse_zero(args.zero or "ask"),
             "baud": parse_positive(args.stage_baud or "115200", "--stage-baud", integer=True),
-            "timeout": parse_positive(args.stage_timeout or "5", "--stage-timeout"),
-            "boot_wait": parse_positive(args.stage_boot_wait or "2", "--stage-boot-wait", zero=True)}
+            "timeout": parse_positive(args.stage_timeout or "5", "--stage-timeout", most=LONGEST_WAIT),
+            "boot_wait": parse_positive(args.stage_boot_wait or "2", "--stage-boot-wait", zero=True, most=LONGEST_WAIT)}
+
+
+def parse_feed(text: str) -> float:
+    """--stage-feed in mm/min, 1 to 100,000 (G-code has no exponents: F1e-09 is F1 and a word E)."""
+    feed = parse_positive(text, "--stage-feed", most=1e5)
+    if feed < 1:
+        raise InputError(f"--stage-feed is in mm/min, at least 1, got {text}")
+    return feed
 
 
 def open_stage(args, opts, output, rows, prog: str):
@@ -61,10 +70,11 @@ def open_stage(args, opts, output, rows, prog: str):
             ctrl.unlock()
         if ctrl.alarm:
             raise StageError(f"{ctrl.name}: the GRBL controller is in ALARM (it starts so after a reset when homing "
-                             "is on): home it (--home) or unlock it (--unlock), then set the zero again")
+                             "is on): home it (--home) or unlock it (--unlock), then set the zero again",
+                             lost="the controller was in ALARM when the capture connected")
         ctrl.setup()
         # moves a killed run left queued end first: the position that tells a reset must be a standstill's
-        ctrl.wait_idle(60.0 + opts["timeout"], "the moves already queued")
+        ctrl.wait_idle(QUEUED_WAIT + opts["timeout"], "the moves already queued")
         settings = opts["settings"]
         state = StageState.load(output)
         jogger = PoseStage(ctrl, settings, {})

@@ -81,9 +81,12 @@ def parse_ranges(spec: str, what: str) -> dict[str, tuple[float, float]]:
             lo_v, hi_v = float(lo), float(hi)
         except ValueError:
             lo_v = hi_v = math.nan
-        if not sep or not sep2 or name.strip() not in STAGE_AXES or not (lo_v < hi_v):
-            raise InputError(f"{what} {spec!r}: expected AXIS=LO:HI (mm, LO < HI) for AXIS in dx,dy,dz, "
+        if (not sep or not sep2 or name.strip() not in STAGE_AXES or not (lo_v < hi_v)
+                or not (math.isfinite(lo_v) and math.isfinite(hi_v))):
+            raise InputError(f"{what} {spec!r}: expected AXIS=LO:HI (mm, finite, LO < HI) for AXIS in dx,dy,dz, "
                              "e.g. dx=-3:3,dy=-3:3,dz=-2.5:0.5")
+        if name.strip() in out:
+            raise InputError(f"{what} {spec!r}: {name.strip()} is given twice")
         out[name.strip()] = (lo_v, hi_v)
     return out
 

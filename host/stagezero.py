@@ -32,6 +32,7 @@ class StageState:
     homed: bool  # the zero was taken on a homed machine: it holds after a reset and homing
     position: list | None = None  # machine X, Y, Z after the last confirmed move
     pending: list = field(default_factory=list)  # targets sent but not confirmed (a run stopped mid-move)
+    lost: str = ""  # why a run lost the machine's position (a reset, an alarm, a halt): the zero no longer holds
 
     @staticmethod
     def path_for(output: str | Path) -> Path:
@@ -48,9 +49,17 @@ class StageState:
         try:
             d = json.loads(path.read_text())
             return cls(str(d["flavor"]), str(d["axes"]), {k: float(v) for k, v in d["zero"].items()},
-                       bool(d["homed"]), d.get("position"), list(d.get("pending") or []))
+                       bool(d["homed"]), d.get("position"), list(d.get("pending") or []), str(d.get("lost") or ""))
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise InputError(f"{path}: not a stage state ({exc}); remove it to set the zero again") from None
+
+    @classmethod
+    def mark_lost(cls, output: str | Path, why: str) -> None:
+        """Record beside ``output`` that its run lost the machine's position (``why``), if it had a zero."""
+        state = cls.load(output)
+        if state is not None:
+            state.lost = why
+            state.save(output)
 
 
 def zero_still_valid(state: StageState | None, ctrl: GcodeController, axes: AxisMap, homed_now: bool) -> str:
@@ -63,6 +72,9 @@ def zero_still_valid(state: StageState | None, ctrl: GcodeController, axes: Axis
         return f"the zero was taken on a {state.flavor} controller"
     if state.homed and homed_now:
         return ""  # homing gives the same machine coordinates after any reset
+    if state.lost:
+        # the controller may report the very target the last run sent, reached in coordinates it reset
+        return f"the last run lost the stage's position ({state.lost})"
     if homed_now:
         return "homing moved the machine since the zero was taken (the zero was set before homing)"
     if ctrl.banner_seen:

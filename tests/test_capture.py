@@ -175,8 +175,17 @@ def test_capture_command_killed_midway_resumes_without_loss_or_duplicates(tmp_pa
     # a finished dataset fits: a model in volts
     model = fit_model(load_dataset(out))
     assert model.input_units == "V"
-    proc = run_cli("tactile-host", *args)  # nothing left to do
-    assert proc.returncode == 0 and "(0 captured now, 27 already there)" in proc.stderr
+    meta = (tmp_path / "d.csv.meta.json").read_text()
+    proc = run_cli("tactile-host", *args)  # nothing left to do: the meta stays as the runs that took the rows left it
+    assert proc.returncode == 0 and "27/27 poses in" in proc.stderr and "nothing to capture" in proc.stderr
+    assert (tmp_path / "d.csv.meta.json").read_text() == meta
+    # rows to add, but through another channel map or averaging another number of samples: refused
+    write_schedule(sched, rows + [(0.25, 0.25, -0.25)])
+    other = ["--adc", "ads1115@0x49:0-3,ads1115@0x48:0-3"]
+    for extra, said in ((other, "captured with --adc ads1115@0x48:0,1,2,3,ads1115@0x49:0,1,2,3, this run's is"),
+                        (["--samples", "8"], "captured with --samples 4, this run's is 8")):
+        assert_one_line_error(run_cli("tactile-host", *args, *extra, "--trigger", "true"), 2, said)
+    assert (tmp_path / "d.csv.meta.json").read_text() == meta and len(data_rows(out)[1]) == 27
 
 
 def test_capture_command_a_failing_trigger_is_one_line_status_1_and_rows_are_kept(tmp_path):

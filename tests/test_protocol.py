@@ -362,6 +362,11 @@ def paper_model_file(paper_model, tmp_path_factory):
 def test_flash_absent_port(paper_model_file):
     proc = run_cli("tactile-host", "flash", "--port", "socket://127.0.0.1:1", paper_model_file)
     assert_one_line_error(proc, 2, "cannot open port socket://127.0.0.1:1")
+    for url in ("socket://127.0.0.1", "socket://127.0.0.1:99999"):  # pyserial's own words were a TypeError's
+        assert_one_line_error(run_cli("tactile-host", "flash", "--port", url, paper_model_file), 2,
+                              "expected HOST:PORT after the scheme, a port from 1 to 65535")
+    assert_one_line_error(run_cli("tactile-host", "flash", "--port", "socket://127.0.0.1:1", "--timeout", "1e300",
+                                  paper_model_file), 2, "--timeout must be at most 3600")
 
 
 @pytest.mark.parametrize("precision", ["double", "float"])

@@ -105,9 +105,13 @@ def test_axis_map_limits_and_approach_parse_or_refuse_in_one_line():
         with pytest.raises(InputError, match=msg):
             AxisMap.parse(bad)
     assert parse_ranges("dx=-1:2", "--stage-limits") == {"dx": (-1.0, 2.0)}
-    for bad in ("dx=2:1", "dq=0:1", "dx=0", "dx=a:1"):
+    for bad in ("dx=2:1", "dq=0:1", "dx=0", "dx=a:1", "dz=-inf:inf"):
         with pytest.raises(InputError, match="AXIS=LO:HI"):
             parse_ranges(bad, "--stage-limits")
+    with pytest.raises(InputError, match="dz is given twice"):
+        parse_ranges("dx=-1:1,dz=-2.5:1,dz=-1:1", "--stage-limits")
+    with pytest.raises(InputError, match="X is given twice"):
+        parse_zero("X=1,X=2,Y=0,Z=0")
     np.testing.assert_array_equal(parse_approach("dz=0.5"), [0, 0, 0.5])
     with pytest.raises(InputError):
         parse_approach("dz=20")
@@ -170,6 +174,29 @@ def test_every_pose_is_approached_from_the_same_side():
     assert rec.sent == [{"X": 10.0, "Y": 20.0, "Z": 30.0}]
 
 
+@pytest.mark.parametrize("flavor", ["marlin", "grbl"])
+def test_a_repeat_lands_anew_on_every_axis_and_small_jogs_add_up(flavor):
+    """Marlin reports its position to 0.01 mm: the stage counts from where it sent each move (0.001 mm)."""
+    with server(flavor) as srv:
+        c = connect(srv)
+        c.setup()
+        st = PoseStage(c, settings(), {"X": 2.015, "Y": -1.985, "Z": -6.015})
+        st.move_to([0, 0, 0, 0, 0])
+        n = len(srv.ctrl.lines)
+        st.move_to([0, 0, 0, 0, 0])
+        sent = [ln.rsplit(" F", 1)[0] for ln in srv.ctrl.lines[n:] if ln.startswith("G1")]
+        assert sent == ["G1 X1.715 Y-2.285 Z-5.715", "G1 X2.015 Y-1.985 Z-6.015"]
+        jogger = PoseStage(c, settings(), {})
+        jogger.position = c.position()  # as jog_to_zero starts: the first step counts from the report
+        jogger.jog("dz", -0.004)
+        before = srv.ctrl.machine().copy()
+        for _ in range(4):
+            jogger.jog("dz", -0.004)
+        srv.ctrl.wait_idle()
+        assert srv.ctrl.machine()[2] - before[2] == pytest.approx(-0.016, abs=1e-9)
+        c.close()
+
+
 def test_the_simulated_rig_has_backlash_and_repeatability():
     sink = Sink()
     rig = SimRig(sink, M_RIG, contact=CONTACT, start=(12, 8, 6), backlash=0.1, repeatability=0.0)
@@ -226,6 +253,22 @@ def test_driver_detects_the_flavor_moves_and_reports_position(flavor):
             assert ("M400" in lines) == (flavor == "marlin") and ("G4 P0" in lines) == (flavor == "grbl")
         finally:
             c.close()
+
+
+@pytest.mark.parametrize("flavor", ["marlin", "grbl"])
+def test_connecting_while_a_stopped_runs_long_move_ends(flavor):
+    """A run stopped (Ctrl-C) after sending a slow move and its wait: the next run's connect waits for the end
+    (Marlin's keepalive extends the wait; a GRBL named answers its real-time status), longer than --stage-timeout."""
+    with server(flavor, busy_interval=0.3) as srv:
+        c = connect(srv)
+        c.setup()
+        c.command("G1 X0.05 F1")  # 3 s
+        c.send("M400" if flavor == "marlin" else "G4 P0")
+        c.close()
+        c = GcodeController.open(srv.url, timeout=1.0)
+        c.connect(flavor if flavor == "grbl" else "auto", boot_wait=0.1)
+        assert c.flavor == flavor and c.firmware
+        c.close()
 
 
 def test_a_banner_on_connect_means_a_reset_and_names_the_flavor():
@@ -533,6 +576,36 @@ def test_capture_command_killed_midway_and_reset_between_runs_keeps_every_row(se
     assert "tm_estimate" in render_header(model)
 
 
+@pytest.mark.parametrize("flavor", ["marlin", "grbl"])
+def test_a_reset_the_run_saw_makes_the_next_run_ask_for_the_zero(tmp_path, flavor):
+    """The controller resets as a G1 arrives and then runs that G1 in its fresh coordinates, so it reports the
+    very target the state file holds as pending: the zero must not be kept for that."""
+    sched = write_schedule(tmp_path / "s.csv", grid()[:9])
+    out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
+    with server(flavor, PoseFile(posefile), M=M_RIG) as srv:
+        args = capture_args(sched, out, srv.url, posefile)
+        g1 = []
+
+        def reset_at_the_sixth(line):
+            if line.startswith("G1"):
+                g1.append(line)
+                if len(g1) == 6:
+                    srv.ctrl.reset()
+        srv.ctrl.on_line = reset_at_the_sixth
+        zero = ",".join(f"{v:g}" for v in contact_zero(srv).values())
+        proc = run_host(*args, "--zero", zero)
+        srv.ctrl.on_line = None
+        assert proc.returncode == 1 and ("reset itself" in proc.stderr or "ALARM" in proc.stderr), proc.stderr
+        state = json.loads((tmp_path / "d.csv.stage.json").read_text())
+        assert state["lost"] and state["pending"]
+        before = data_rows(out)
+        assert 1 <= len(before) < 9
+        srv.ctrl.wait_idle()
+        proc = run_host(*args, *(["--unlock"] if flavor == "grbl" else []))
+        assert proc.returncode == 2 and "the last run lost the stage's position" in proc.stderr, proc.stderr
+        assert "kept from the last run" not in proc.stderr and data_rows(out) == before
+
+
 def test_capture_command_alarm_at_start_is_one_line_exit_1_and_home_clears_it(tmp_path):
     sched = write_schedule(tmp_path / "s.csv", grid()[:3])
     out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
@@ -556,6 +629,9 @@ def test_capture_command_alarm_at_start_is_one_line_exit_1_and_home_clears_it(tm
     (["--stage-limits", "dx=-1:1,dy=-2:2,dz=-2:1"], "pose 1/27 (dx=-1.5 dy=-1 dz=0) reaches dx=-1.5, outside"),
     (["--stage-limits", "dx=-2:2,dy=-2:2"], "--stage-limits: give a range for dz"),
     (["--stage-feed", "0"], "--stage-feed must be > 0"),
+    (["--settle", "1e308"], "--settle must be at most 3600"),
+    (["--stage-feed", "1e-9"], "--stage-feed is in mm/min, at least 1"),
+    (["--stage-timeout", "1e12"], "--stage-timeout must be at most 3600"),
     (["--trigger", "true"], "--stage and --trigger both set the poses"),
     (["--zero", "1,2"], "--zero '1,2': ask, here, or the machine coordinates"),
 ])

@@ -31,6 +31,27 @@ def finite(text: str) -> float:
     return x
 
 
+def count(text: str) -> int:
+    """An argparse type: a whole number >= 0."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {n}")
+    return n
+
+
+def seconds(text: str) -> float:
+    """An argparse type: a time limit in seconds, > 0 and at most an hour."""
+    from fitgen.base.parse import LONGEST_WAIT, parse_positive
+
+    try:
+        return parse_positive(text, "seconds", most=LONGEST_WAIT)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("seconds ")) from None
+
+
 def run(main_fn, argv=None, prog: str = "") -> int:
     """Call ``main_fn(argv)``; turn bad input into one line on stderr and exit status 2."""
     try:

@@ -10,7 +10,7 @@ import signal
 import sys
 import threading
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main, seconds
 from fitgen.base.errors import InputError
 
 
@@ -141,7 +141,7 @@ def _suite_options(p) -> None:
     p.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
     p.add_argument("--sensor-id", default="paper", help="sensor id written into flashed blobs (default paper)")
     p.add_argument("--fma", action="store_true", help="the compiled-in model sums terms by fma")
-    p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for each reply (default 2)")
+    p.add_argument("--timeout", type=seconds, default=2.0, help="seconds to wait for each reply (default 2)")
     add_held_out_options(p)
 
 

@@ -6,7 +6,7 @@ import sys
 
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, command_main
 from fitgen.base.errors import InputError
-from fitgen.base.parse import parse_positive
+from fitgen.base.parse import LONGEST_WAIT, parse_positive
 
 from host.channelmap import ADS1115_PGA, ADS1115_RATES, MODES
 from host.stagesettings import APPROACH
@@ -54,7 +54,7 @@ def cmd_flash(args) -> int:
 
     from host.device import Device, FlashFailed, flash_model
 
-    timeout = parse_positive(args.timeout, "--timeout")
+    timeout = parse_positive(args.timeout, "--timeout", most=LONGEST_WAIT)
     model = load_model(args.model)
     try:
         with Device.open(args.port, timeout=timeout) as dev:

@@ -14,6 +14,8 @@ def parse_assignments(spec: str, allowed, what: str) -> dict[str, float]:
         name, sep, value = part.partition("=")
         if not sep or name not in allowed:
             raise InputError(f"{what} {spec!r}: expected NAME=NUMBER with NAME in {', '.join(allowed)}")
+        if name in out:
+            raise InputError(f"{what} {spec!r}: {name} is given twice")
         try:
             out[name] = float(value)
         except ValueError:
@@ -29,14 +31,20 @@ def parse_numbers(text: str) -> list[float] | None:
         return None
 
 
-def parse_positive(text: str, what: str, *, integer: bool = False, zero: bool = False):
-    """An option's number, > 0 (>= 0 with ``zero``), whole with ``integer``; else InputError naming ``what``."""
+LONGEST_WAIT = 3600.0  # s: a time limit or pause beyond an hour is a slip of the keyboard (and 1e300 overflows sleep)
+
+
+def parse_positive(text: str, what: str, *, integer: bool = False, zero: bool = False, most: float | None = None):
+    """An option's number, > 0 (>= 0 with ``zero``, <= ``most`` if given), whole with ``integer``; else
+    InputError naming ``what``."""
     try:
         val = int(text) if integer else float(text)
     except ValueError:
         raise InputError(f"{what} {text!r} is not a{' whole' if integer else ''} number") from None
     if not math.isfinite(val) or val < 0 or (val == 0 and not zero):
         raise InputError(f"{what} must be {'>= 0' if zero else '> 0'}, got {text}")
+    if most is not None and val > most:
+        raise InputError(f"{what} must be at most {most:g}, got {text}")
     return val
 
 
