@@ -136,6 +136,8 @@ def test_model_file_round_trip_and_validation(model, tmp_path):
         (lambda d: d["refine"]["prior_precision"][0].__setitem__(1, 1.0), "symmetric 5x5"),
         (lambda d: d["refine"]["forward"].pop(), "one equation per input"),
         (lambda d: d["refine"]["forward"][0]["exponents"].__setitem__(0, [0, 0, 0, 0, 0]), "not 5 powers"),
+        (lambda d: d["refine"]["forward"][0]["exponents"][0].__setitem__(0, [1]), "not 5 powers"),
+        (lambda d: d["refine"]["prior_precision"].__setitem__(0, []), "symmetric 5x5"),
         (lambda d: d["refine"]["forward"][0]["coefficients"].pop(), "exponents but"),
         (lambda d: d["refine"].__setitem__("pose_max", d["refine"]["pose_min"]), "pose_min < pose_max"),
         (lambda d: d["refine"]["weights"].__setitem__(0, -1.0), "weights must be > 0"),

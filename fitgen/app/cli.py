@@ -6,10 +6,12 @@ import sys
 from pathlib import Path
 
 from fitgen import __version__
-from fitgen.app.cliutil import Parser, command_main, finite
+from fitgen.app.calibrate_cli import cmd_identify, cmd_schedule
+from fitgen.app.cliutil import Parser, command_main, count, finite
+from fitgen.app.options import noise_of, sensor_of
 from fitgen.base.parse import OutOfRange, parse_assignments, parse_names, parse_noise, parse_penalty
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import folder_of
+from fitgen.base.fileio import output_file
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
 from fitgen.equations.terms import FAMILIES
 from fitgen.physics.pose import POSE_NAMES
@@ -17,44 +19,32 @@ from fitgen.physics.pose import POSE_NAMES
 FAMILY_CHOICES = ("auto", *FAMILIES)
 
 
-def _sensor(args):
-    from fitgen.physics.sensor import load_sensor
-
-    sensor = load_sensor(args.sensor)
-    if getattr(args, "transfer", None):
-        sensor = sensor.with_transfer(args.transfer)
-    return sensor
-
-
-def _noise(value: str, sensor) -> float:
-    if value == "sensor":
-        return sensor.noise
-    try:
-        return parse_noise(value, finite=False)
-    except OutOfRange:
-        raise InputError(f"--noise must be >= 0, got {value}") from None
-    except ValueError:
-        raise InputError(f"--noise must be a number or 'sensor', got {value!r}") from None
-
-
 def cmd_simulate(args) -> int:
     from fitgen.physics.posesource import choose_poses
     from fitgen.physics.simulate import simulate
 
-    sensor = _sensor(args)
+    sensor = sensor_of(args)
     # a sensor file (a unit's, say) is named in the meta, so that fit finds it to hold out on
     unit_info = {"sensor_file": str(Path(args.sensor).resolve())} if Path(args.sensor).is_file() else {}
+    poses, source = choose_poses(grid=args.grid, random=args.random, poses=args.poses, ranges=args.ranges,
+                                 scene=args.scene, seed=args.seed)
+    noise = noise_of(args.noise, sensor)
+    unit = None
     if args.unit is not None:
         from fitgen.physics.units import unit_beside
 
         drawing = sensor
-        sensor, path, unit_info = unit_beside(drawing, args.unit, args.output)
-        print(f"wrote unit {sensor.name} (a unit of {drawing.name}) to {path}", file=sys.stderr)
-    poses, source = choose_poses(grid=args.grid, random=args.random, poses=args.poses, ranges=args.ranges,
-                                 scene=args.scene, seed=args.seed)
-    ds = simulate(sensor, poses, noise=_noise(args.noise, sensor), adc_bits=args.adc_bits,
-                  seed=args.seed, provenance={**source, **unit_info}, labels=args.labels)
-    ds.save(args.output)
+        sensor, unit, unit_info = unit_beside(drawing, args.unit, args.output)
+    try:
+        ds = simulate(sensor, poses, noise=noise, adc_bits=args.adc_bits,
+                      seed=args.seed, provenance={**source, **unit_info}, labels=args.labels)
+        ds.save(args.output)
+    except BaseException:
+        if unit is not None:
+            unit.unlink(missing_ok=True)  # no unit file without the data it was drawn for
+        raise
+    if unit is not None:
+        print(f"wrote unit {sensor.name} (a unit of {drawing.name}) to {unit}", file=sys.stderr)
     print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}",
           file=sys.stderr)
     return 0
@@ -68,10 +58,10 @@ def cmd_observe(args) -> int:
     if args.sensor_pos and args.sensor:
         raise InputError("give the sensor once (positional or --sensor)")
     args.sensor = args.sensor_pos or args.sensor or "paper"
-    sensor = _sensor(args)
+    sensor = sensor_of(args)
     scene = load_scene(args.scene)
     ranges = parse_ranges(args.ranges) if args.ranges else scene.ranges
-    noise = None if args.noise is None else _noise(args.noise, sensor)
+    noise = None if args.noise is None else noise_of(args.noise, sensor)
     accuracy = parse_assignments(args.accuracy, POSE_NAMES, "--accuracy") if args.accuracy else None
     report = observe(sensor, ranges, scene.outputs, noise=noise, accuracy=accuracy)
     print(f"sensor {sensor.name} ({sensor.n_elements} elements, {sensor.transfer}), scene {scene.name}")
@@ -119,7 +109,7 @@ def cmd_fit(args) -> int:
     if lifted:
         print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, which serves identify; "
               "their labels are no contact pose", file=sys.stderr)
-    sensor = dataset_sensor(ds.meta, args.sensor)
+    sensor = dataset_sensor(ds.meta, args.sensor, ds.n_inputs)
     # --scene, or the scene the dataset was simulated for, names the outputs
     scene = args.scene or ds.meta.get("scene_spec")
     if scene is not None and args.outputs:
@@ -156,6 +146,7 @@ def cmd_predict(args) -> int:
     import numpy as np
 
     from fitgen.base.fileio import write_atomic
+    from fitgen.c.codegen import check_magnitudes
     from fitgen.c.targets import check_precision
     from fitgen.equations.model import load_model
     from fitgen.physics.dataset import estimates_csv, load_inputs
@@ -176,6 +167,7 @@ def cmd_predict(args) -> int:
     else:
         if args.codes or args.input_lsb is not None or args.input_offset is not None:
             raise InputError("--codes, --input-lsb and --input-offset apply to --precision fixed only")
+        check_magnitudes(model, args.precision)  # as codegen: the C's outputs are always finite
         pred, status = model.predict(inputs, with_status=True, precision=args.precision)
     write_atomic(args.output, estimates_csv(model.output_names, pred, status))
     clamped = int(np.sum(status > 0))
@@ -207,61 +199,6 @@ def cmd_report(args) -> int:
         paths = plots.estimate_vs_target(model, ds, folder)
         paths += plots.rotation_sweeps(model, sensor, folder) if sensor is not None else []
         print("plots: " + ", ".join(str(p) for p in paths), file=sys.stderr)
-    return 0
-
-
-def cmd_identify(args) -> int:
-    from fitgen.app import plots
-    from fitgen.base.progress import Progress
-    from fitgen.fitting import identify as idf, unitrecord as rec
-    from fitgen.physics.dataset import load_dataset
-
-    folder = plots.require(args.plot) if args.plot else None
-    ds = load_dataset(args.capture)
-    drawing = _sensor(args) if args.transfer else rec.in_capture_units(_sensor(args), ds.meta)
-    noise, source = rec.row_noise(ds.meta, drawing, args.noise)
-    with Progress("identify", 4) as bar:
-        ident = idf.identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
-                             zero_error=args.zero_error, progress=lambda i, n, note: bar.update(1, note))
-    with Progress("what to blame", drawing.n_elements) as bar:  # moves only when the capture is refused
-
-        def trial(i, n, note):
-            bar.total = n  # the pairs count too when many rows stand out
-            bar.update(1, note)
-
-        rec.check_explained(ident, args.capture, drawing.name, source, trial)
-    print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
-          f"{args.zero_error:g} mm", file=sys.stderr)
-    print(rec.report(ident), end="")
-    unit, post = rec.save(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
-                                               "drawing_spec": args.sensor})
-    print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
-          "the posterior)", file=sys.stderr)
-    if folder is not None:
-        print(f"plot: {plots.identification(ident, folder / 'identify.png')}", file=sys.stderr)
-    print("".join(f"identify: {ln}\n" for ln in rec.outlier_lines(ident, args.capture)), end="", file=sys.stderr)
-    return 0
-
-
-def cmd_schedule(args) -> int:
-    import numpy as np
-
-    from fitgen.base.progress import Progress
-    from fitgen.fitting.schedule import schedule, write_schedule
-    from fitgen.physics.simulate import parse_ranges
-
-    drawing = _sensor(args)
-    axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
-    noise = None if args.noise is None else _noise(args.noise, drawing)
-    with Progress("schedule", args.n) as bar:
-        poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits),
-                               noise=(drawing.noise if noise is None else noise) / np.sqrt(args.samples),
-                               rig_error=args.rig_error, progress=lambda i, n, note: bar.update(1, note))
-    write_schedule(args.output, poses, axes, {**info, "samples_per_row": args.samples})
-    rest = (f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"]
-            else "")
-    print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}{rest}) to {args.output}",
-          file=sys.stderr)
     return 0
 
 
@@ -297,7 +234,7 @@ def cmd_codegen(args) -> int:
 def cmd_tradeoff(args) -> int:
     from fitgen.app.tradeoff import run_tradeoff
 
-    return run_tradeoff(args, _sensor(args))
+    return run_tradeoff(args, sensor_of(args))
 
 
 def cmd_demo(args) -> int:
@@ -374,7 +311,7 @@ def build_parser() -> Parser:
                         "none). Needs all five pose columns and data that vary in each")
     f.add_argument("--refine-terms", type=int, default=30, metavar="N",
                    help="cap on the forward model's terms per element (default 30)")
-    f.add_argument("--held-out", type=int, default=2000, metavar="N",
+    f.add_argument("--held-out", type=count, default=2000, metavar="N",
                    help="random held-out poses in the data's box for the deployed-accuracy figures (default 2000; "
                         "0: none)")
 
@@ -483,9 +420,10 @@ def _check(args) -> None:
     """What argparse cannot check; an output file's folder before the work, not after it."""
     if getattr(args, "adc_bits", None) is not None and not 0 <= args.adc_bits <= 32:
         raise InputError(f"--adc-bits must be 0..32, got {args.adc_bits}")
-    if getattr(args, "output", None) and args.func in (cmd_simulate, cmd_fit, cmd_predict, cmd_report, cmd_identify,
+    if getattr(args, "output", None) is not None and args.func in (cmd_simulate, cmd_fit, cmd_predict, cmd_report, cmd_identify,
                                                       cmd_schedule):
-        folder_of(args.output)
+        inputs = [getattr(args, name, None) for name in ("data", "model", "capture", "poses", "sensor")]
+        output_file(args.output, [p for p in inputs if isinstance(p, str) and Path(p).is_file()])
 
 
 def main(argv=None) -> int:

@@ -21,6 +21,20 @@ def folder_of(path: str | os.PathLike) -> Path:
     return folder
 
 
+def output_file(path: str | os.PathLike, inputs=()) -> Path:
+    """``path`` checked as a file to write before the work: a name, not a folder, in a folder that exists, and
+    none of the command's ``inputs`` (which it would overwrite); InputError otherwise."""
+    path = Path(path)
+    if path.name in ("", ".", "..") or path.is_dir():
+        raise InputError(f"cannot write {path}: it is a folder; give a file name")
+    folder_of(path)
+    for given in inputs:
+        if given is not None and (Path(given).resolve() == path.resolve()
+                                  or (path.exists() and Path(given).exists() and os.path.samefile(given, path))):
+            raise InputError(f"-o {path} is the input {given}: writing it would destroy it; give another name")
+    return path
+
+
 def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary file in the same folder and a rename."""
     path = Path(path)
@@ -74,7 +88,7 @@ def sha256_hex(data: str | bytes) -> str:
 def read_text(path: str | os.PathLike, what: str) -> str:
     """A text file's content; a missing or unreadable file is an InputError naming ``what``."""
     try:
-        return Path(path).read_text()
+        return Path(path).read_text(encoding="utf-8-sig")  # -sig: the byte-order mark spreadsheets write
     except FileNotFoundError:
         raise InputError(f"{what} {path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:

@@ -140,6 +140,14 @@ def term_magnitudes(model: Model) -> dict[str, float]:
     return out
 
 
+def check_magnitudes(model: Model, precision: str) -> None:
+    """InputError when an output's terms can reach beyond what ``precision`` (float, double) sums safely."""
+    for name, mag in term_magnitudes(model).items():
+        if not mag <= _LIMIT[precision]:
+            raise InputError(f"output {name}: its terms reach {mag:.3g} in the input domain, over the {precision} "
+                             f"limit {_LIMIT[precision]:g} (absurd coefficients, or a sum that could overflow)")
+
+
 def build_cmodel(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",
                  fma: bool = False) -> CModel:
     if precision not in PRECISIONS:
@@ -151,10 +159,7 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
     prefix = identifier(prefix, "prefix")
     if len(prefix) > 16:
         raise InputError(f"prefix {prefix!r} is longer than 16 characters")
-    for name, mag in term_magnitudes(model).items():
-        if not mag <= _LIMIT[precision]:
-            raise InputError(f"output {name}: its terms reach {mag:.3g} in the input domain, over the {precision} "
-                             f"limit {_LIMIT[precision]:g} (absurd coefficients, or a sum that could overflow)")
+    check_magnitudes(model, precision)
     domain = float_domain(model) if precision == "float" else (model.input_min, model.input_max)
     outs = []
     needed = [set() for _ in range(model.n_inputs)]

@@ -235,7 +235,10 @@ class Refinement:
                               ("weights", self.weights, n_inputs)):
             if len(vals) != n:
                 raise InputError(f"{where}.{name} needs {n} numbers, got {len(vals)}")
-        P = np.asarray(self.prior, dtype=float)
+        try:
+            P = np.asarray(self.prior, dtype=float)
+        except (TypeError, ValueError):
+            P = np.zeros(0)
         if P.shape != (5, 5) or not np.all(np.isfinite(P)) or not np.array_equal(P, P.T):
             raise InputError(f"{where}.prior_precision must be a symmetric 5x5 matrix of finite numbers")
         if not all(a < b for a, b in zip(self.pose_min, self.pose_max)):
@@ -245,16 +248,16 @@ class Refinement:
         if len(self.forward) != n_inputs:
             raise InputError(f"{where}.forward needs one equation per input ({n_inputs}), got {len(self.forward)}")
         for k, eq in enumerate(self.forward):
-            if len(eq.exponents) != len(eq.coefficients):
-                raise InputError(f"{where}.forward[{k}]: {len(eq.exponents)} exponents but "
-                                 f"{len(eq.coefficients)} coefficients")
-            if len(set(eq.exponents)) != len(eq.exponents):
-                raise InputError(f"{where}.forward[{k}] lists a monomial twice")
             for e in eq.exponents:
                 if (len(e) != 5 or not all(isinstance(a, int) and not isinstance(a, bool) and 0 <= a <= MAX_DEGREE
                                            for a in e) or sum(e) == 0):
                     raise InputError(f"{where}.forward[{k}]: {list(e)!r} is not 5 powers from 0 to {MAX_DEGREE} "
                                      "(not all 0)")
+            if len(eq.exponents) != len(eq.coefficients):
+                raise InputError(f"{where}.forward[{k}]: {len(eq.exponents)} exponents but "
+                                 f"{len(eq.coefficients)} coefficients")
+            if len(set(eq.exponents)) != len(eq.exponents):
+                raise InputError(f"{where}.forward[{k}] lists a monomial twice")
 
 
 def _cholesky_solve(A: np.ndarray, g: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray]:

@@ -189,7 +189,8 @@ def noise_to_add(ds: Dataset, settings: FitSettings, sensor=None) -> dict:
         added, why = 0.0, ("measured rows with no samples_per_row in their meta: taken as single samples, which "
                            "carry the device's noise")
     else:
-        added = float(np.sqrt(max(device**2 - data**2, 0.0)))
+        # device sqrt(1 - (data/device)^2) is sqrt(device^2 - data^2) without squaring a huge figure
+        added = float(device * np.sqrt(max(1.0 - (data / device) ** 2, 0.0))) if device > data else 0.0
         why = "the device's single-sample noise less the rows' own"
     return {"device": device, "device_source": source, "data": data, "data_source": data_source, "added": added,
             "why": why}
@@ -262,6 +263,12 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
     if harmonics is not None and not np.sum(lo) > 0:
         raise InputError("the harmonics family divides by the readings' sum, which is not > 0 over the data's "
                          f"domain (lowest {float(np.sum(lo)):.4g}): fit another family")
+    y = ds.targets[:, [ds.target_names.index(o) for o in outputs]]
+    still = [o for o, col in zip(outputs, y.T) if np.ptp(col) == 0]
+    if still:
+        varying = ",".join(o for o in outputs if o not in still)
+        raise InputError(f"{still[0]} is {y[0, outputs.index(still[0])]:g} in every row: nothing to fit"
+                         + (f" (fit the outputs that vary: --outputs {varying})" if varying else ""))
 
     fitted: dict[str, FittedOutput] = {}
     if shared is None or not shared.serves(v, noise["added"], harmonics):
@@ -302,7 +309,7 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
         "sensor_sha256": ds.meta.get("sensor_sha256"),
         "outputs": {o: fitted[o].info for o in outputs},
     }
-    units = ds.meta.get("units", "mT")
+    units = ds.meta.get("units") or "mT"
     model = Model(lo, hi, tuple(fitted[o].equation for o in outputs), units, info, harmonics)
     if settings.refine:
         from fitgen.fitting.refine_fit import fit_refinement

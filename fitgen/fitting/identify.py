@@ -366,9 +366,22 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     if not np.all(noise > 0):
         raise InputError("identify needs the reading noise > 0 (give --noise, or a sensor file with a noise figure)")
     for name, value in (("rig error", rig_error), ("zero error", zero_error)):
-        if not value >= 0:
-            raise InputError(f"the {name} must be >= 0 mm, got {value}")
+        if not 0 <= value <= 10:  # a stage that errs by more than the pose box cannot calibrate
+            raise InputError(f"the {name} must be 0..10 mm, got {value}")
     prob = Problem(space, readings, poses, noise, float(rig_error), valid, float(zero_error))
+    try:
+        return _solve(prob, ranges, progress)
+    except (np.linalg.LinAlgError, OverflowError):
+        # covariances no longer positive definite in float: a noise figure tiny against the readings, a rig
+        # error huge against them, or labels far outside the sensor
+        raise InputError(f"the capture cannot be solved for in floating point: check the reading noise "
+                         f"({noise.min():.3g}..{noise.max():.3g} per row), the rig error ({rig_error:g} mm) and "
+                         "the labels (mm and deg from first contact)") from None
+
+
+def _solve(prob: Problem, ranges: dict | None, progress) -> Identification:
+    """:func:`identify`'s work on a checked problem."""
+    space, poses = prob.space, prob.poses
     P = space.size
     z = _maximum_a_posteriori(prob, progress=progress)
     chi2, dof, F, post = _chi2(prob, z)

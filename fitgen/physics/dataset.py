@@ -163,6 +163,9 @@ def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
     return names, table
 
 
+META_TEXT = ("units", "sensor", "sensor_file", "scene_spec", "drawing", "transfer")  # keys read as text (or null)
+
+
 def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
     """Read and validate a dataset CSV (and its ``.meta.json`` if present)."""
     origin = f"dataset {path}"
@@ -174,9 +177,12 @@ def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
     mp = meta_path(path)
     if mp.is_file():
         try:
-            meta = json.loads(mp.read_text())
-        except (OSError, ValueError):
-            meta = {}
+            meta = json.loads(read_text(mp, "dataset meta"))
+        except ValueError as exc:
+            raise InputError(f"{mp}: not JSON ({exc}); repair or remove it") from None
+        if not isinstance(meta, dict) or not all(isinstance(meta.get(k), (str, type(None))) for k in META_TEXT):
+            raise InputError(f"{mp}: not a dataset's meta (an object whose {', '.join(META_TEXT)} are text); "
+                             "repair or remove it")
     return Dataset(table[:, :n_in].copy(), table[:, n_in:].copy(), targets, meta)
 
 
@@ -205,6 +211,9 @@ def load_poses(path: str | Path) -> np.ndarray:
     present = [n for n in names if n in POSE_NAMES]
     if not present:
         raise InputError(f"{origin}: none of the columns {','.join(POSE_NAMES)}")
+    twice = next((n for n in present if present.count(n) > 1), None)
+    if twice:
+        raise InputError(f"{origin}: column {twice} appears twice")
     out = np.zeros((table.shape[0], 5))
     for j, name in enumerate(names):
         if name in POSE_NAMES:

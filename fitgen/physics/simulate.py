@@ -121,7 +121,13 @@ def simulate(
         # first contact still rests: no indenter lifts it)
         source = replace(sensor, stage_map=np.eye(3))
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
-    values = readings(source, poses, noise=noise, adc_bits=adc_bits, rng=rng)
+    with np.errstate(all="ignore"):  # a pose far outside the sensor overflows the field: said below, once
+        values = readings(source, poses, noise=noise, adc_bits=adc_bits, rng=rng)
+    bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
+    if bad.size:
+        pose = " ".join(f"{n}={v:g}" for n, v in zip(POSE_NAMES, poses[bad[0]]))
+        raise InputError(f"pose {bad[0] + 1} ({pose}) gives readings that are not finite numbers ({bad.size} of "
+                         f"{len(poses)} poses do): it lies far outside the sensor")
     cols = [POSE_NAMES.index(t) for t in targets]
     meta = {
         "generator": f"fitgen {__version__}",
@@ -160,9 +166,10 @@ def pose_rng(seed: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[0])
 
 
-def dataset_sensor(meta: dict, spec: str | None = None) -> Sensor | None:
+def dataset_sensor(meta: dict, spec: str | None = None, n_inputs: int | None = None) -> Sensor | None:
     """The sensor a dataset was simulated with: ``spec`` (a preset or file) if given, else the
-    preset its meta names when the hash matches; None for measured data or an unknown sensor."""
+    preset its meta names when the hash matches; None for measured data or an unknown sensor.
+    InputError when it has other than the dataset's ``n_inputs`` elements."""
     from pathlib import Path
 
     from fitgen.physics.sensor import load_sensor, preset_names
@@ -181,4 +188,7 @@ def dataset_sensor(meta: dict, spec: str | None = None) -> Sensor | None:
         sensor = sensor.with_transfer(meta["transfer"])
     if spec in (meta.get("sensor"), meta.get("sensor_file")) and meta.get("sensor_sha256") not in (None, sensor.sha256):
         return None
+    if n_inputs is not None and sensor.n_elements != n_inputs:
+        raise InputError(f"the dataset has {n_inputs} input columns, its sensor {sensor.name} {sensor.n_elements} "
+                         "elements")
     return sensor

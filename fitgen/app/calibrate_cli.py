@@ -1,0 +1,63 @@
+"""The calibration commands of ``fitgen``: ``identify`` (a built unit's physics from a capture) and ``schedule``
+(the capture's poses); thin layers over fitgen.fitting.identify and fitgen.fitting.schedule."""
+
+from __future__ import annotations
+
+import sys
+
+from fitgen.app.options import noise_of, sensor_of
+
+
+def cmd_identify(args) -> int:
+    from fitgen.app import plots
+    from fitgen.base.progress import Progress
+    from fitgen.fitting import identify as idf, unitrecord as rec
+    from fitgen.physics.dataset import load_dataset
+
+    folder = plots.require(args.plot) if args.plot else None
+    ds = load_dataset(args.capture)
+    drawing = sensor_of(args) if args.transfer else rec.in_capture_units(sensor_of(args), ds.meta)
+    noise, source = rec.row_noise(ds.meta, drawing, args.noise)
+    with Progress("identify", 4) as bar:
+        ident = idf.identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
+                             zero_error=args.zero_error, progress=lambda i, n, note: bar.update(1, note))
+    with Progress("what to blame", drawing.n_elements) as bar:  # moves only when the capture is refused
+
+        def trial(i, n, note):
+            bar.total = n  # the pairs count too when many rows stand out
+            bar.update(1, note)
+
+        rec.check_explained(ident, args.capture, drawing.name, source, trial)
+    print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
+          f"{args.zero_error:g} mm", file=sys.stderr)
+    print(rec.report(ident), end="")
+    unit, post = rec.save(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
+                                               "drawing_spec": args.sensor})
+    print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
+          "the posterior)", file=sys.stderr)
+    if folder is not None:
+        print(f"plot: {plots.identification(ident, folder / 'identify.png')}", file=sys.stderr)
+    print("".join(f"identify: {ln}\n" for ln in rec.outlier_lines(ident, args.capture)), end="", file=sys.stderr)
+    return 0
+
+
+def cmd_schedule(args) -> int:
+    import numpy as np
+
+    from fitgen.base.progress import Progress
+    from fitgen.fitting.schedule import schedule, write_schedule
+    from fitgen.physics.simulate import parse_ranges
+
+    drawing = sensor_of(args)
+    axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
+    noise = None if args.noise is None else noise_of(args.noise, drawing)
+    with Progress("schedule", args.n) as bar:
+        poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits),
+                               noise=(drawing.noise if noise is None else noise) / np.sqrt(args.samples),
+                               rig_error=args.rig_error, progress=lambda i, n, note: bar.update(1, note))
+    write_schedule(args.output, poses, axes, {**info, "samples_per_row": args.samples})
+    rest = (f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"]
+            else "")
+    print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}{rest}) to {args.output}",
+          file=sys.stderr)
+    return 0

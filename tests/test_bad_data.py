@@ -1,0 +1,103 @@
+"""Data and options as users get them wrong: each is one line on stderr, exit status 2, and nothing written."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from fitgen.equations.model import Equation, Model
+from fitgen.equations.terms import Term
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES, pose_rng, random_poses, simulate
+
+from conftest import assert_one_line_error, run_cli
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("bad")
+    simulate(load_sensor("paper"), random_poses(60, DEFAULT_RANGES, pose_rng(1))).save(folder / "d.csv")
+    return folder / "d.csv"
+
+
+def files(folder):
+    return sorted(p.name for p in folder.iterdir())
+
+
+def test_an_output_that_is_a_folder_or_an_input_is_refused_before_the_work(data, tmp_path):
+    d = str(data)
+    for argv, said in ((["fit", d, "-o", d], "is the input"),
+                       (["fit", d, "-o", str(tmp_path)], "it is a folder"),
+                       (["identify", d, "-o", "."], "it is a folder"),
+                       (["simulate", "--random", "3", "-o", ""], "it is a folder"),
+                       (["simulate", "--poses", d, "-o", d], "is the input")):
+        before = files(data.parent)
+        assert_one_line_error(run_cli("fitgen", *argv, cwd=tmp_path), contains=said)
+        assert files(data.parent) == before and files(tmp_path) == []
+
+
+def test_a_constant_output_names_the_ones_to_fit(tmp_path):
+    simulate(load_sensor("paper"), random_poses(40, DEFAULT_RANGES, pose_rng(2)) * [1, 1, 1, 0, 0]).save(tmp_path / "flat.csv")
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "flat.csv"), "-o", str(tmp_path / "m.json")),
+                          contains="thx is 0 in every row: nothing to fit (fit the outputs that vary: --outputs "
+                                   "dx,dy,dz)")
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_simulate_leaves_no_unit_file_when_it_fails_and_refuses_poses_outside_the_sensor(tmp_path):
+    assert_one_line_error(run_cli("fitgen", "simulate", "--unit", "3", "--random", "10", "--noise", "-1", "-o",
+                                  str(tmp_path / "u.csv")), contains="--noise must be >= 0")
+    assert_one_line_error(run_cli("fitgen", "simulate", "--grid", "dx=1e200", "-o", str(tmp_path / "far.csv")),
+                          contains="pose 1 (dx=1e+200 dy=0 dz=0 thx=0 thy=0) gives readings that are not finite")
+    assert files(tmp_path) == []
+
+
+def test_pose_files_with_a_byte_order_mark_or_a_column_twice(tmp_path):
+    (tmp_path / "bom.csv").write_bytes(b"\xef\xbb\xbfdx,dy,dz\n1.5,0,-1\n")  # a spreadsheet's "CSV UTF-8"
+    proc = run_cli("fitgen", "simulate", "--poses", str(tmp_path / "bom.csv"), "-o", str(tmp_path / "s.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "s.csv").read_text().splitlines()[1].split(",")[8:11] == ["1.5", "0.0", "-1.0"]
+    (tmp_path / "dup.csv").write_text("dx,dy,dz,dx\n1,0,-1,2\n")
+    assert_one_line_error(run_cli("fitgen", "simulate", "--poses", str(tmp_path / "dup.csv"), "-o",
+                                  str(tmp_path / "t.csv")), contains="column dx appears twice")
+
+
+@pytest.mark.parametrize("meta, said", [([], "not a dataset's meta"), ({"units": 5}, "not a dataset's meta"),
+                                        ("{", "not JSON")])
+def test_a_broken_meta_is_said(data, tmp_path, meta, said):
+    shutil.copy(data, tmp_path / "d.csv")
+    (tmp_path / "d.csv.meta.json").write_text(meta if isinstance(meta, str) else json.dumps(meta))
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json")),
+                          contains=said)
+
+
+def test_fit_options_and_columns_are_checked_before_the_fit(data, tmp_path):
+    assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--held-out", "-1"),
+                          contains="argument --held-out: must be >= 0")
+    lines = [",".join(ln.split(",")[:7] + ln.split(",")[8:]) for ln in data.read_text().splitlines()]
+    (tmp_path / "d7.csv").write_text("\n".join(lines) + "\n")
+    shutil.copy(str(data) + ".meta.json", tmp_path / "d7.csv.meta.json")
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "d7.csv"), "-o", str(tmp_path / "m.json")),
+                          contains="the dataset has 7 input columns, its sensor paper 8 elements")
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_predict_refuses_a_model_whose_float_sum_could_overflow(data, tmp_path):
+    eqs = tuple(Equation(n, 0.0, (Term(1, "1"),), (1e300 if n == "dx" else 1.0,)) for n in ("dx", "dz"))
+    path = Model(np.zeros(8), np.full(8, 2.0), eqs, "mT", {}).save(tmp_path / "m.json")
+    assert_one_line_error(run_cli("fitgen", "predict", str(path), str(data), "-o", str(tmp_path / "e.csv"),
+                                  "--precision", "float"), contains="output dx: its terms reach 2e+300")
+    assert not (tmp_path / "e.csv").exists()
+
+
+def test_identify_refuses_numbers_it_cannot_solve_with(tmp_path):
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dy,dz\n" + "".join(f"{x},{y},{z}\n" for x in (-1, 1) for y in (-1, 1) for z in (0, -1, -2)))
+    assert run_cli("fitgen", "simulate", "--unit", "2", "--poses", str(sched), "--noise", "0.0005", "-o",
+                   str(tmp_path / "cap.csv")).returncode == 0
+    for extra, said in ((["--rig-error", "1e300"], "the rig error must be 0..10 mm"),
+                        (["--noise", "1e-12"], "cannot be solved for in floating point")):
+        assert_one_line_error(run_cli("fitgen", "identify", str(tmp_path / "cap.csv"), "-o",
+                                      str(tmp_path / "u.toml"), *extra), contains=said)
+    assert not (tmp_path / "u.toml").exists() and not (tmp_path / "u.posterior.json").exists()
