@@ -43,7 +43,8 @@ class Run:
 
 def load_run(path) -> Run:
     origin = f"run {path}"
-    lines = [ln for ln in read_text(path, "run record").splitlines() if ln.strip()]
+    numbered = [(i, ln) for i, ln in enumerate(read_text(path, "run record").splitlines(), start=1) if ln.strip()]
+    lines = [ln for _, ln in numbered]
     try:
         header = json.loads(lines[0]) if lines else None
     except ValueError:
@@ -53,7 +54,7 @@ def load_run(path) -> Run:
                          "tactile-host read --record RUN.jsonl)")
     t, raw, temp, out, status = [], [], [], [], []
     n, m = header.get("n_inputs"), len(header.get("outputs", []))
-    for i, ln in enumerate(lines[1:], start=2):
+    for k, (i, ln) in enumerate(numbered[1:], start=2):
         try:
             rec = json.loads(ln)
             row = [float(x) for x in rec["raw"]]
@@ -61,7 +62,7 @@ def load_run(path) -> Run:
             tt, st = float(rec["t"]), int(rec["status"])
             tp = math.nan if rec.get("temp") is None else float(rec["temp"])
         except (ValueError, KeyError, TypeError):
-            if i == len(lines):
+            if k == len(lines):
                 break  # a last line cut short by a stop: drop it
             raise InputError(f"{origin}: line {i} is not a sample") from None
         if len(row) != n or len(o) != m:
@@ -157,6 +158,13 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
             raise InputError("the run does not carry its model: give --model")
     if model.n_inputs != run.n_inputs:
         raise InputError(f"the model takes {model.n_inputs} inputs; the run has {run.n_inputs} readings per sample")
+    try:
+        recorded = _recorded_model(run)
+    except InputError:
+        recorded = None  # a model given replaces it
+    units = recorded.input_units if recorded is not None else "V"  # tactile-host read records ADC volts
+    if model.input_units != units:
+        raise InputError(f"the model takes inputs in {model.input_units}; the run's readings are in {units}")
     same = model.sha256 == h.get("model")
     if temp_comp and no_temp_comp:
         raise InputError("give --temp-comp or --no-temp-comp, not both")

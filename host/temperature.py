@@ -167,8 +167,9 @@ class TempComp:
 
 def load_tempcomp(path) -> TempComp:
     origin = f"temperature compensation {path}"
+    text = read_text(path, "temperature compensation file")
     try:
-        data = json.loads(read_text(path, "temperature compensation file"))
+        data = json.loads(text)
         kind = data.get("kind")
         t0 = float(data["t0"])
         off = np.asarray(data["offset_v_per_degc"], dtype=float)
@@ -221,9 +222,9 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
 
 def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:
     """``<prefix>_tempcomp.h``: the compensation in C99, the operations of :meth:`TempComp.apply`."""
-    from fitgen.c.cgen import c_real, identifier
+    from fitgen.c.cgen import c_real, prefix_identifier
 
-    prefix = identifier(prefix, "prefix")
+    prefix = prefix_identifier(prefix)
     P, U = prefix, prefix.upper()
     real = "float" if precision == "float" else "double"
     lit = lambda x: c_real(float(x), precision)  # noqa: E731

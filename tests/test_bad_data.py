@@ -101,3 +101,13 @@ def test_identify_refuses_numbers_it_cannot_solve_with(tmp_path):
         assert_one_line_error(run_cli("fitgen", "identify", str(tmp_path / "cap.csv"), "-o",
                                       str(tmp_path / "u.toml"), *extra), contains=said)
     assert not (tmp_path / "u.toml").exists() and not (tmp_path / "u.posterior.json").exists()
+
+
+def test_fixed_point_names_a_domain_beyond_int32_codes_plainly(tmp_path):
+    eqs = tuple(Equation(n, 0.0, (Term(1, "1"),), (1.0,)) for n in ("dx", "dz"))
+    path = Model(np.full(8, 0.5), np.full(8, 2.0), eqs, "V", {}).save(tmp_path / "m.json")
+    for lsb, offset in (("1e-10", "0"), ("0.0001", "1e9")):
+        proc = run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "c"), "--precision", "fixed",
+                       "--input-lsb", lsb, "--input-offset", offset)
+        assert_one_line_error(proc, contains="beyond int32")
+        assert "np.float64" not in proc.stderr

@@ -119,8 +119,10 @@ def test_identifiers_and_bad_models_refused(paper_model, tmp_path):
     data["outputs"][0]["name"] = 'dx"; system("rm'
     with pytest.raises(InputError):
         model_from_dict(data)
-    assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "c"), "--prefix", "for"),
-                          contains="keyword")
+    for prefix, said in (("for", "keyword"), ("main", "a name C reserves"), ("a_", "would hold '__'"),
+                         ("p" * 40, "longer than 16 characters")):
+        assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "c"), "--prefix", prefix),
+                              contains=said)
     assert not (tmp_path / "c").exists() or not list((tmp_path / "c").iterdir())
 
 

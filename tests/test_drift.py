@@ -1,6 +1,7 @@
 """Drift and what answers it: the simulated drift and thermistor, temperature compensation (Python and C),
 auto-zero, run records and replay, and the options' bad input."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -177,7 +178,20 @@ def test_read_records_and_replay_reproduces_it_exactly(rest_model_file, tmp_path
     again = run_cli("tactile-host", "replay", str(tmp_path / "off.jsonl"))
     assert again.returncode == 0 and "estimates identical to the recorded ones" in again.stdout
     assert_one_line_error(run_cli("tactile-host", "replay", str(tmp_path / "s.csv")), contains="not a run record")
-    assert_one_line_error(run_cli("tactile-host", "replay", str(run), "--temp-comp", str(tmp_path / "none.json")))
+    assert_one_line_error(run_cli("tactile-host", "replay", str(run), "--temp-comp", str(tmp_path / "none.json")),
+                          contains="none.json: no such file")
+    assert_one_line_error(run_cli("tactile-host", "replay", str(run), "--auto-zero", "--no-auto-zero"),
+                          contains="not both")
+    # a model in mT for readings in volts (read refuses it; so does replay)
+    from fitgen.equations.model import load_model
+
+    mt = dataclasses.replace(load_model(model_file), input_units="mT").save(tmp_path / "mt.json")
+    assert_one_line_error(run_cli("tactile-host", "replay", str(run), "--model", str(mt)),
+                          contains="takes inputs in mT; the run's readings are in V")
+    # a damaged line is named by its place in the file, blank lines counted
+    text = run.read_text().splitlines()
+    (tmp_path / "bad.jsonl").write_text("\n".join([text[0], ""] + text[1:5] + ["garbage"] + text[5:8]) + "\n")
+    assert_one_line_error(run_cli("tactile-host", "replay", str(tmp_path / "bad.jsonl")), contains="line 7 is not")
 
 
 @pytest.mark.parametrize("extra, message", [

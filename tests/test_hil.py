@@ -195,6 +195,12 @@ def test_cli_run_against_a_wrong_model_fails_with_status_1(paper_model, tmp_path
     assert "FAIL" in proc.stdout
 
 
+def test_cli_emulate_refuses_bus_options_without_a_bus(model_file):
+    for extra, said in ((["--simulate", "dx=1"], "go with --adc"), (["--adc", " "], "--adc is empty")):
+        assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", str(model_file), "--target", "host",
+                                      "--suite", *extra), contains=said)
+
+
 def test_cli_bad_ports_and_silent_devices(model_file, tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -92,11 +92,15 @@ def _adc_bridge(args):
     """(channel map, stand-in bus, thermistor input, compensation) for --adc, or Nones."""
     from hil.emulate import adc_bridge
 
+    if args.adc is not None and not args.adc.strip():
+        raise InputError("--adc is empty: give the channel map, e.g. ads1115@0x48:0-3,ads1115@0x49:0-3")
     if not args.adc:
-        if args.temp_comp or args.thermistor or args.sim_temperature is not None:
-            raise InputError("--temp-comp, --thermistor and --sim-temperature go with --adc")
+        if args.temp_comp or args.thermistor or args.sim_temperature is not None or args.simulate is not None:
+            raise InputError("--simulate, --temp-comp, --thermistor and --sim-temperature go with --adc (without it "
+                             "the firmware's inputs come from the serial protocol)")
         return None, None, None, None
-    return adc_bridge(args.adc, args.simulate, sensor=args.sim_sensor, noise=args.sim_noise, seed=args.seed,
+    return adc_bridge(args.adc, args.simulate or "0,0,0,0,0", sensor=args.sim_sensor, noise=args.sim_noise,
+                      seed=args.seed,
                       thermistor=args.thermistor, temp_comp=args.temp_comp, temperature=args.sim_temperature)
 
 
@@ -171,7 +175,7 @@ def build_parser() -> Parser:
                    help="the firmware reads its inputs from these ADCs (a channel map, as tactile-host read --adc) "
                         "over the emulated board's I2C (the Uno's TWI, the ARM boards' bridge), answered by the bus "
                         "model of --simulate")
-    e.add_argument("--simulate", metavar="POSE", default="0,0,0,0,0",
+    e.add_argument("--simulate", metavar="POSE",
                    help="with --adc: the bus model's magnet pose dx,dy,dz,thx,thy (default rest)")
     e.add_argument("--sim-sensor", default="paper", help="with --adc: the simulated sensor (default paper, gmr)")
     e.add_argument("--sim-noise", type=float, help="with --adc: simulated element noise, V rms (default: the sensor's)")

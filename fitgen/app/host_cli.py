@@ -156,6 +156,8 @@ def _view_replay(args) -> int:
 
 def _flag(args):
     """--auto-zero / --no-auto-zero for replay: True, False, or None (as recorded)."""
+    if args.auto_zero and getattr(args, "no_auto_zero", False):
+        raise InputError("give --auto-zero or --no-auto-zero, not both")
     return True if args.auto_zero else (False if getattr(args, "no_auto_zero", False) else None)
 
 

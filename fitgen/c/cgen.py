@@ -28,8 +28,19 @@ def identifier(name: str, what: str = "identifier") -> str:
         raise InputError(f"{what} {name!r} is not a valid C identifier "
                          "(a letter, then letters, digits or '_', at most 31 characters, no '__')")
     if name in C_KEYWORDS or name.lower() in C_KEYWORDS:
-        raise InputError(f"{what} {name!r} is a C keyword")
+        raise InputError(f"{what} {name!r} is a C keyword or a name C reserves")
     return name
+
+
+def prefix_identifier(prefix: str) -> str:
+    """``prefix`` if it starts the generated identifiers safely: an :func:`identifier` of at most 16 characters
+    that does not end in '_' (``<prefix>_model`` would hold '__', reserved in C and C++)."""
+    if isinstance(prefix, str) and len(prefix) > 16:
+        raise InputError(f"prefix {prefix!r} is longer than 16 characters")
+    prefix = identifier(prefix, "prefix")
+    if prefix.endswith("_"):
+        raise InputError(f"prefix {prefix!r} ends in '_': the names it starts would hold '__' (reserved)")
+    return prefix
 
 
 def c_double(x: float) -> str:

@@ -13,7 +13,7 @@ from pathlib import Path
 import jinja2
 
 from fitgen import __version__
-from fitgen.c.cgen import c_real, identifier
+from fitgen.c.cgen import c_real, identifier, prefix_identifier
 from fitgen.c.targets import check_precision
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
@@ -156,9 +156,7 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
         raise InputError("fixed point has its own plan: use fitgen.equations.fixedpoint.build_fixed")
     if style not in STYLES:
         raise InputError(f"style must be one of {', '.join(STYLES)}, got {style!r}")
-    prefix = identifier(prefix, "prefix")
-    if len(prefix) > 16:
-        raise InputError(f"prefix {prefix!r} is longer than 16 characters")
+    prefix = prefix_identifier(prefix)
     check_magnitudes(model, precision)
     domain = float_domain(model) if precision == "float" else (model.input_min, model.input_max)
     outs = []
@@ -244,10 +242,7 @@ def _env() -> jinja2.Environment:
 
 
 def _prefix(prefix: str) -> str:
-    prefix = identifier(prefix, "prefix")
-    if len(prefix) > 16:
-        raise InputError(f"prefix {prefix!r} is longer than 16 characters")
-    return prefix
+    return prefix_identifier(prefix)
 
 
 def render_fixed_header(fm, prefix: str = "tm") -> str:

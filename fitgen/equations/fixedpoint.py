@@ -86,10 +86,14 @@ def _code_bounds(model: Model, lsb: Fraction, off: Fraction) -> tuple[list[int],
         hi = _round(qhi) if abs(qhi - _round(qhi)) <= SNAP else math.floor(qhi)
         if model.input_min[k] > 0 and off + lsb * lo <= 0:
             lo = math.floor(-off / lsb) + 1  # a positive domain keeps positive values (negative powers need them)
-        lo, hi = max(lo, INT32_MIN), min(hi, INT32_MAX)
         if lo > hi:
-            raise InputError(f"input v{k + 1}: its domain [{model.input_min[k]!r}, {model.input_max[k]!r}] "
-                             f"holds no whole ADC code at LSB {float(lsb)!r}, offset {float(off)!r}")
+            raise InputError(f"input v{k + 1}: its domain [{float(model.input_min[k])!r}, "
+                             f"{float(model.input_max[k])!r}] holds no whole ADC code at LSB {float(lsb)!r}, "
+                             f"offset {float(off)!r}")
+        if lo < INT32_MIN or hi > INT32_MAX:
+            raise InputError(f"input v{k + 1}: its domain [{float(model.input_min[k])!r}, "
+                             f"{float(model.input_max[k])!r}] spans codes {lo}..{hi} at LSB {float(lsb)!r}, "
+                             f"offset {float(off)!r}: beyond int32 (a larger LSB, or the offset at the domain)")
         cmin.append(lo)
         cmax.append(hi)
     return cmin, cmax

@@ -187,8 +187,9 @@ class Model:
 
 def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
     """The domain as floats, rounded outward so that every double inside it stays inside."""
-    lo = model.input_min.astype(np.float32)
-    hi = model.input_max.astype(np.float32)
+    with np.errstate(over="ignore"):  # beyond float's range: inf, refused where a literal is written
+        lo = model.input_min.astype(np.float32)
+        hi = model.input_max.astype(np.float32)
     lo = np.where(lo.astype(float) > model.input_min, np.nextafter(lo, np.float32(-np.inf)), lo)
     hi = np.where(hi.astype(float) < model.input_max, np.nextafter(hi, np.float32(np.inf)), hi)
     lo = np.where((model.input_min > 0) & (lo <= 0), np.float32(np.finfo(np.float32).tiny), lo)
