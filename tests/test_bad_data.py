@@ -111,3 +111,22 @@ def test_fixed_point_names_a_domain_beyond_int32_codes_plainly(tmp_path):
                        "--input-lsb", lsb, "--input-offset", offset)
         assert_one_line_error(proc, contains="beyond int32")
         assert "np.float64" not in proc.stderr
+
+
+@pytest.fixture(scope="module")
+def fitted(data):
+    from fitgen.fitting.fit import fit_model
+    from fitgen.physics.dataset import load_dataset
+
+    return fit_model(load_dataset(data)).to_dict()
+
+
+@pytest.mark.parametrize("edit", [lambda f: f["noise"].__setitem__("device", "0.0005"),
+                                  lambda f: f["outputs"]["dx"].__setitem__("steps", "x"),
+                                  lambda f: f.__setitem__("precision", None)])
+def test_report_on_fit_notes_edited_by_hand_is_one_line(fitted, tmp_path, edit):
+    data = json.loads(json.dumps(fitted))
+    edit(data["fit"])
+    (tmp_path / "m.json").write_text(json.dumps(data))
+    assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "m.json")),
+                          contains="its fit notes are not as fitgen fit writes them")

@@ -190,7 +190,13 @@ def cmd_report(args) -> int:
     sensor = load_sensor(args.sensor) if folder is not None and args.sensor else None
     model = load_model(args.model)
     ds = load_dataset(args.data) if args.data else None
-    text = format_report(model, ds, title=f"Report for {args.model}", paper=args.paper)
+    try:
+        text = format_report(model, ds, title=f"Report for {args.model}", paper=args.paper)
+    except InputError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:  # the notes were edited by hand
+        raise InputError(f"model file {args.model}: its fit notes are not as fitgen fit writes them "
+                         f"({type(exc).__name__}: {exc})") from None
     if args.output:
         write_atomic(args.output, text)
     else:
