@@ -130,3 +130,12 @@ def test_report_on_fit_notes_edited_by_hand_is_one_line(fitted, tmp_path, edit):
     (tmp_path / "m.json").write_text(json.dumps(data))
     assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "m.json")),
                           contains="its fit notes are not as fitgen fit writes them")
+
+
+def test_a_huge_cell_is_named_where_it_is(data, tmp_path):
+    lines = data.read_text().splitlines()
+    cells = lines[3].split(",")
+    cells[3] = "1e300"
+    (tmp_path / "d.csv").write_text("\n".join(lines[:3] + [",".join(cells)] + lines[4:]) + "\n")
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json")),
+                          contains="data row 3, column v4, holds 1e+300")

@@ -232,6 +232,9 @@ def ring_harmonics(ds: Dataset, sensor=None) -> Harmonics:
     return Harmonics.from_azimuths(np.arctan2(sensor.positions[:, 1], sensor.positions[:, 0]))
 
 
+HUGE = 1e30  # a reading or label beyond it is a typo or a unit error; its powers would overflow
+
+
 def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: FitSettings = FitSettings(),
               progress=None, sensor=None, forward=None, shared: SharedRows | None = None) -> Model:
     """Fit every requested output (default: all pose columns of the dataset), two stages.
@@ -249,6 +252,11 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
     if settings.d_source not in ("estimated", "true"):
         raise InputError(f"d_source must be 'estimated' or 'true', got {settings.d_source!r}")
     outputs = tuple(n for n in POSE_NAMES if n in outputs)
+    for values, names in ((ds.inputs, [f"v{k + 1}" for k in range(ds.n_inputs)]), (ds.targets, ds.target_names)):
+        big = np.argwhere(np.abs(values) > HUGE)
+        if big.size:  # its powers overflow: said where it is, not as a candidate term that is not finite
+            r, c = big[0]
+            raise InputError(f"data row {r + 1}, column {names[c]}, holds {values[r, c]:g}: beyond any reading or pose")
     if settings.refine:
         from fitgen.fitting.refine_fit import check_refinable
 
