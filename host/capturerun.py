@@ -12,8 +12,8 @@ from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from fitgen.base.progress import Progress
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.capture import (SpreadTooLarge, TriggerFailed, capture, check_resume, enter_waiter, load_schedule, prepare_output,
-                          trigger_waiter)
+from host.capture import (SpreadTooLarge, TriggerFailed, capture, check_resume, enter_waiter, load_schedule,
+                          prepare_output, trigger_waiter)
 from host.session import channel_map_from_args, open_bus_from_args
 from host.stage import StageError, StageState
 from host.stagecapture import open_stage, stage_settings

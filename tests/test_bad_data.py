@@ -38,7 +38,8 @@ def test_an_output_that_is_a_folder_or_an_input_is_refused_before_the_work(data,
 
 
 def test_a_constant_output_names_the_ones_to_fit(tmp_path):
-    simulate(load_sensor("paper"), random_poses(40, DEFAULT_RANGES, pose_rng(2)) * [1, 1, 1, 0, 0]).save(tmp_path / "flat.csv")
+    flat = random_poses(40, DEFAULT_RANGES, pose_rng(2)) * [1, 1, 1, 0, 0]
+    simulate(load_sensor("paper"), flat).save(tmp_path / "flat.csv")
     assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "flat.csv"), "-o", str(tmp_path / "m.json")),
                           contains="thx is 0 in every row: nothing to fit (fit the outputs that vary: --outputs "
                                    "dx,dy,dz)")
@@ -75,6 +76,8 @@ def test_a_broken_meta_is_said(data, tmp_path, meta, said):
 def test_fit_options_and_columns_are_checked_before_the_fit(data, tmp_path):
     assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--held-out", "-1"),
                           contains="argument --held-out: must be >= 0")
+    assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--noise", "1e300"),
+                          contains="a noise figure of 1e+300 is no sensor's")
     lines = [",".join(ln.split(",")[:7] + ln.split(",")[8:]) for ln in data.read_text().splitlines()]
     (tmp_path / "d7.csv").write_text("\n".join(lines) + "\n")
     shutil.copy(str(data) + ".meta.json", tmp_path / "d7.csv.meta.json")

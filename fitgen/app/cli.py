@@ -426,8 +426,8 @@ def _check(args) -> None:
     """What argparse cannot check; an output file's folder before the work, not after it."""
     if getattr(args, "adc_bits", None) is not None and not 0 <= args.adc_bits <= 32:
         raise InputError(f"--adc-bits must be 0..32, got {args.adc_bits}")
-    if getattr(args, "output", None) is not None and args.func in (cmd_simulate, cmd_fit, cmd_predict, cmd_report, cmd_identify,
-                                                      cmd_schedule):
+    writes_a_file = (cmd_simulate, cmd_fit, cmd_predict, cmd_report, cmd_identify, cmd_schedule)
+    if getattr(args, "output", None) is not None and args.func in writes_a_file:
         inputs = [getattr(args, name, None) for name in ("data", "model", "capture", "poses", "sensor")]
         output_file(args.output, [p for p in inputs if isinstance(p, str) and Path(p).is_file()])
 

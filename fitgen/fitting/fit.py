@@ -189,8 +189,11 @@ def noise_to_add(ds: Dataset, settings: FitSettings, sensor=None) -> dict:
         added, why = 0.0, ("measured rows with no samples_per_row in their meta: taken as single samples, which "
                            "carry the device's noise")
     else:
-        # device sqrt(1 - (data/device)^2) is sqrt(device^2 - data^2) without squaring a huge figure
-        added = float(device * np.sqrt(max(1.0 - (data / device) ** 2, 0.0))) if device > data else 0.0
+        try:
+            added = float(np.sqrt(max(device**2 - data**2, 0.0)))
+        except OverflowError:  # a figure near 1e300: a typo, not a sensor's noise
+            raise InputError(f"a noise figure of {max(device, data):g} is no sensor's (--noise, or the meta's)") \
+                from None
         why = "the device's single-sample noise less the rows' own"
     return {"device": device, "device_source": source, "data": data, "data_source": data_source, "added": added,
             "why": why}
