@@ -241,6 +241,10 @@ class GcodeController(PortOwner):
                 raise StageError(f"{self.name}: the controller is still {state} {QUEUED_WAIT + self.timeout:g} s "
                                  "after connecting")
             time.sleep(POLL)
+        return self._grbl_build()
+
+    def _grbl_build(self) -> str:
+        """Ask a GRBL its build ($I) for ``firmware``; 'grbl'."""
         self.send("$I")
         ver = next((t for t in self._until_ok("$I") if t.startswith("[VER:")), "")
         self.firmware = f"Grbl {ver[5:].split(':')[0]}" if ver else "Grbl"
@@ -269,11 +273,7 @@ class GcodeController(PortOwner):
             if text.startswith("FIRMWARE_NAME:"):
                 name = text[len("FIRMWARE_NAME:"):].split(" SOURCE_CODE_URL")[0].strip()
             elif text.lower().startswith("error:") and text[6:].strip().isdigit():
-                self.send("$I")  # GRBL: build info, then ok
-                info = self._until_ok("$I")
-                ver = next((t for t in info if t.startswith("[VER:")), "")
-                self.firmware = f"Grbl {ver[5:].split(':')[0]}" if ver else "Grbl"
-                return "grbl"
+                return self._grbl_build()
             elif text == "ok" or text.startswith("ok "):
                 if "marlin" in name.lower():
                     self.firmware = name

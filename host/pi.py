@@ -135,7 +135,6 @@ def build_pi(folder: str | Path, cc: str = DEFAULT_CC, *, standin: bool = False)
     if missing:
         raise InputError(f"{folder} holds no rendered Pi build (missing {', '.join(missing)})")
     out = folder / "tm_pi"
-    out.unlink(missing_ok=True)
     tool = tool_command(cc, "compiler", "apt-get install gcc-arm-linux-gnueabihf")
     partial = folder / ".tm_pi.partial"
     cmd = tool + WARNING_FLAGS + ["-O2", "-I", str(folder)] + (["-DI2C_STANDIN"] if standin else [])

@@ -152,16 +152,18 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     h, notes = run.header, []
     if isinstance(model, str):
         model = load_model(model)
+    try:
+        recorded = _recorded_model(run)
+    except InputError:
+        if model is None:
+            raise
+        recorded = None  # a model given replaces it
     if model is None:
-        model = _recorded_model(run)
+        model = recorded
         if model is None:
             raise InputError("the run does not carry its model: give --model")
     if model.n_inputs != run.n_inputs:
         raise InputError(f"the model takes {model.n_inputs} inputs; the run has {run.n_inputs} readings per sample")
-    try:
-        recorded = _recorded_model(run)
-    except InputError:
-        recorded = None  # a model given replaces it
     units = recorded.input_units if recorded is not None else "V"  # tactile-host read records ADC volts
     if model.input_units != units:
         raise InputError(f"the model takes inputs in {model.input_units}; the run's readings are in {units}")

@@ -29,8 +29,7 @@ def output_file(path: str | os.PathLike, inputs=()) -> Path:
         raise InputError(f"cannot write {path}: it is a folder; give a file name")
     folder_of(path)
     for given in inputs:
-        if given is not None and (Path(given).resolve() == path.resolve()
-                                  or (path.exists() and Path(given).exists() and os.path.samefile(given, path))):
+        if given is not None and path.exists() and Path(given).exists() and os.path.samefile(given, path):
             raise InputError(f"-o {path} is the input {given}: writing it would destroy it; give another name")
     return path
 

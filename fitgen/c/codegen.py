@@ -241,15 +241,11 @@ def _env() -> jinja2.Environment:
                               keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True)
 
 
-def _prefix(prefix: str) -> str:
-    return prefix_identifier(prefix)
-
-
 def render_fixed_header(fm, prefix: str = "tm") -> str:
     """The text of ``<prefix>_model.h`` for a fixed-point plan (:class:`fitgen.equations.fixedmodel.FixedModel`)."""
     from fitgen.c.fixedc import avr_path, plan_line
 
-    prefix = _prefix(prefix)
+    prefix = prefix_identifier(prefix)
     units = fm.input_units if fm.input_units in ("mT", "V", "codes") else "units"
     return _env().get_template("model_fixed.h.j2").render(
         m=fm, P=prefix, U=prefix.upper(), input_units=units, A=avr_path(fm), plan_line=plan_line(fm),
@@ -275,7 +271,7 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
 
         if fma:
             raise InputError("--fma does not apply to fixed point (it has no floating-point multiply-add)")
-        _prefix(prefix)
+        prefix_identifier(prefix)
         return render_fixed_header(plan_at(model, input_lsb, input_offset, t.mul_bits if t else 32)[0], prefix)
     if input_lsb is not None or input_offset is not None:
         raise InputError("an input LSB and offset apply to --precision fixed only")

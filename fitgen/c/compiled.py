@@ -104,15 +104,14 @@ class CompiledModel:
 
     def _run(self, text: str, n: int) -> list[list[str]]:
         proc = run_tool(self.runner + [str(self.binary)], "vector runner", text)
+        runner = " ".join(self.runner + [self.binary.name])
         if proc.returncode != 0:
             said = " ".join(proc.stderr.split())[:200] or "no message"
             hint = "; link it statically: -static in --cc" if self.runner and "ld-linux" in said else ""
-            raise InputError(f"the vector runner {' '.join(self.runner + [self.binary.name])} failed "
-                             f"(exit status {proc.returncode}: {said}){hint}")
+            raise InputError(f"the vector runner {runner} failed (exit status {proc.returncode}: {said}){hint}")
         rows = [ln.split() for ln in proc.stdout.splitlines()]
         if len(rows) != n:
-            raise InputError(f"the vector runner {' '.join(self.runner + [self.binary.name])} answered "
-                             f"{len(rows)} lines for {n} vectors")
+            raise InputError(f"the vector runner {runner} answered {len(rows)} lines for {n} vectors")
         return rows
 
     def predict_codes(self, codes) -> tuple[np.ndarray, np.ndarray]:

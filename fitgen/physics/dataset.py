@@ -121,8 +121,6 @@ def _header(names: list[str], origin: str) -> tuple[int, tuple[str, ...]]:
     for name in rest:
         if name not in POSE_NAMES:
             raise InputError(f"{origin}: unknown column {name!r} (after v1..v{n_in} only {', '.join(POSE_NAMES)})")
-    if len(set(rest)) != len(rest):
-        raise InputError(f"{origin}: a pose column appears twice")
     order = [POSE_NAMES.index(n) for n in rest]
     if order != sorted(order):
         raise InputError(f"{origin}: pose columns must be in the order {','.join(POSE_NAMES)}")
@@ -146,11 +144,14 @@ def _find_bad_cell(text: str, names: list[str], origin: str) -> InputError:
 
 
 def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
-    """Header names and a finite float table from CSV text; errors name line and column."""
+    """Header names (each once) and a finite float table from CSV text; errors name line and column."""
     lines = text.splitlines()
     if not lines or not lines[0].strip():
         raise InputError(f"{origin}: empty file")
     names = [c.strip() for c in next(csv.reader([lines[0]]))]
+    twice = next((n for n in names if names.count(n) > 1), None)
+    if twice is not None:
+        raise InputError(f"{origin}: column {twice} appears twice")
     body = [ln for ln in lines[1:] if ln.strip()]
     if not body:
         raise InputError(f"{origin}: no data rows")
@@ -211,9 +212,6 @@ def load_poses(path: str | Path) -> np.ndarray:
     present = [n for n in names if n in POSE_NAMES]
     if not present:
         raise InputError(f"{origin}: none of the columns {','.join(POSE_NAMES)}")
-    twice = next((n for n in present if present.count(n) > 1), None)
-    if twice:
-        raise InputError(f"{origin}: column {twice} appears twice")
     out = np.zeros((table.shape[0], 5))
     for j, name in enumerate(names):
         if name in POSE_NAMES:
