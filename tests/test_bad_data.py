@@ -142,3 +142,41 @@ def test_a_huge_cell_is_named_where_it_is(data, tmp_path):
     (tmp_path / "d.csv").write_text("\n".join(lines[:3] + [",".join(cells)] + lines[4:]) + "\n")
     assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json")),
                           contains="data row 3, column v4, holds 1e+300")
+
+
+@pytest.mark.parametrize("edit, said", [
+    (lambda m: m["outputs"][0]["terms"].__setitem__(0, "v99^-1"), "refers to input v99; the model has 8"),
+    (lambda m: m["outputs"][0]["terms"].__setitem__(0, "zz"), "outputs[0].terms: not a term: 'zz'"),
+    (lambda m: m["outputs"][0].__setitem__("terms", "v1"), "outputs[0]: terms and coefficients must be lists"),
+    (lambda m: m["outputs"][0]["terms"].__setitem__(0, 5), "outputs[0].terms: 5 is not a term"),
+    (lambda m: m["inputs"]["min"].__setitem__(0, 99.0), "input v1 has min > max"),
+    (lambda m: m.__setitem__("outputs", []), "no outputs")])
+def test_a_model_file_edited_by_hand_is_named_in_its_refusal(fitted, tmp_path, edit, said):
+    data = json.loads(json.dumps(fitted))
+    edit(data)
+    (tmp_path / "m.json").write_text(json.dumps(data))
+    assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "m.json")),
+                          contains=f"model file {tmp_path / 'm.json'}: ")
+    assert said in run_cli("fitgen", "report", str(tmp_path / "m.json")).stderr
+
+
+def test_report_refuses_data_without_the_outputs_and_leaves_no_plot_folder_when_refused(fitted, data, tmp_path):
+    (tmp_path / "m.json").write_text(json.dumps(fitted))
+    readings = [",".join(line.split(",")[:8]) for line in data.read_text().splitlines()]
+    (tmp_path / "readings.csv").write_text("\n".join(readings) + "\n")
+    model = str(tmp_path / "m.json")
+    assert_one_line_error(run_cli("fitgen", "report", model, "--data", str(tmp_path / "readings.csv")),
+                          contains="readings.csv: no column of the model's outputs (dx, dy, dz, thx, thy)")
+    for argv in (["--data", str(tmp_path / "readings.csv")], ["--data", str(data), "--sensor", "nosuch"]):
+        assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "m.json"), "--plot", str(tmp_path / "P"),
+                                      *argv))
+        assert not (tmp_path / "P").exists()
+    (tmp_path / "F").write_text("")
+    assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "m.json"), "--data", str(data), "--plot",
+                                  str(tmp_path / "F")), contains="not a folder")
+
+
+def test_fit_refuses_to_hold_out_on_another_sensor_than_the_datas(data, tmp_path):
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--sensor", "ring-vertical")
+    assert_one_line_error(proc, contains="simulated with sensor paper, not ring-vertical")
+    assert not (tmp_path / "m.json").exists()

@@ -186,10 +186,13 @@ def cmd_report(args) -> int:
 
     if args.plot and not args.data:  # every check before anything is written
         raise InputError("--plot needs --data (the rows to plot estimates for)")
-    folder = plots.require(args.plot) if args.plot else None
+    folder = plots.require(args.plot) if args.plot else None  # made by its first figure, after every check
     sensor = load_sensor(args.sensor) if folder is not None and args.sensor else None
     model = load_model(args.model)
     ds = load_dataset(args.data) if args.data else None
+    if ds is not None and not set(model.output_names) & set(ds.target_names):
+        raise InputError(f"{args.data}: no column of the model's outputs ({', '.join(model.output_names)}), "
+                         "so no error to report")
     try:
         text = format_report(model, ds, title=f"Report for {args.model}", paper=args.paper)
     except InputError:

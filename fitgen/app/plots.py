@@ -8,7 +8,7 @@ import numpy as np
 
 from fitgen.physics.dataset import Dataset
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import write_atomic
+from fitgen.base.fileio import write_in_folder
 from fitgen.equations.model import Model
 
 
@@ -24,11 +24,21 @@ def _plt():
 
 
 def require(folder) -> Path:
-    """What a figure needs, checked before any work rather than after it: matplotlib, and ``folder`` (made)."""
-    from fitgen.base.fileio import make_folder
+    """What a figure needs, checked before any work rather than after it: matplotlib, and ``folder`` not a file.
 
+    The folder is made by the first figure written into it, so a command refused on its input leaves none behind."""
+    import os
+
+    folder = Path(folder)
     _plt()
-    return make_folder(folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"--plot {folder}: not a folder")
+    base = folder.absolute()
+    while not base.exists():
+        base = base.parent
+    if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
+        raise InputError(f"cannot create {folder}: {base} is {'not a folder' if not base.is_dir() else 'read-only'}")
+    return folder
 
 
 def _save(fig, path: Path) -> Path:
@@ -36,8 +46,7 @@ def _save(fig, path: Path) -> Path:
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110, metadata={"Software": None})
-    write_atomic(path, buf.getvalue())
-    return path
+    return write_in_folder(path.parent, path.name, buf.getvalue())
 
 
 def estimate_vs_target(model: Model, ds: Dataset, folder: Path) -> list[Path]:

@@ -222,7 +222,9 @@ def model_from_dict(data, origin: str = "model") -> Model:
         eqs = []
         for i, o in enumerate(data["outputs"]):
             where = f"{origin}: outputs[{i}]"
-            terms = tuple(parse_term(t) for t in o["terms"])
+            if not isinstance(o["terms"], list) or not isinstance(o["coefficients"], list):
+                raise InputError(f"{where}: terms and coefficients must be lists")
+            terms = tuple(_term(t, where) for t in o["terms"])
             coefs = tuple(finite_number(c, f"{where}.coefficients") for c in o["coefficients"])
             if len(terms) != len(coefs):
                 raise InputError(f"{where}: {len(terms)} terms but {len(coefs)} coefficients")
@@ -233,7 +235,20 @@ def model_from_dict(data, origin: str = "model") -> Model:
         raise InputError(f"{origin}: inputs.units must be a string")
     fit = data.get("fit", {})
     refine = None if "refine" not in data else Refinement.from_dict(data["refine"], len(lo), origin)
-    return Model(np.array(lo), np.array(hi), tuple(eqs), units, fit if isinstance(fit, dict) else {}, harmonics, refine)
+    try:
+        return Model(np.array(lo), np.array(hi), tuple(eqs), units, fit if isinstance(fit, dict) else {}, harmonics,
+                     refine)
+    except InputError as exc:  # the object's own checks name no file
+        raise InputError(f"{origin}: {str(exc).removeprefix('model: ')}") from None
+
+
+def _term(text, where: str) -> Term:
+    if not isinstance(text, str):
+        raise InputError(f"{where}.terms: {text!r} is not a term (a string is expected)")
+    try:
+        return parse_term(text)
+    except InputError as exc:
+        raise InputError(f"{where}.terms: {exc}") from None
 
 
 def _validate(m: Model, origin: str) -> None:

@@ -183,9 +183,14 @@ def dataset_sensor(meta: dict, spec: str | None = None, n_inputs: int | None = N
             return None
         else:
             spec = name
+    given = spec is not None and spec not in (meta.get("sensor"), meta.get("sensor_file"))
     sensor = load_sensor(spec)
     if meta.get("transfer") in ("raw", "gmr"):
         sensor = sensor.with_transfer(meta["transfer"])
+    if given and meta.get("sensor_sha256") not in (None, sensor.sha256):
+        raise InputError(f"the dataset was simulated with sensor {meta.get('sensor_file') or meta.get('sensor')}, "
+                         f"not {spec}: figures held out on another sensor would not be this model's (leave --sensor "
+                         "out)")
     if spec in (meta.get("sensor"), meta.get("sensor_file")) and meta.get("sensor_sha256") not in (None, sensor.sha256):
         return None
     if n_inputs is not None and sensor.n_elements != n_inputs:
