@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from fitgen.base.errors import InputError
+from fitgen.base.fileio import write_atomic
 
 QEMU = "qemu-system-arm"
 # the emulated boards: QEMU machine per target (mps2: Cortex-M4F; microbit: nRF51822, Cortex-M0)
@@ -321,6 +322,16 @@ def bench_instructions(dev, n_small: int = 200, n_large: int = 2200) -> dict:
             "ns": per * 1e9 / hz}
 
 
+def fresh_eeprom(folder: Path, model_hash: str) -> None:
+    """Erase the emulated Uno's EEPROM kept in ``folder`` when the build it was written under compiled in another
+    model: a calibration flashed into the last build would otherwise run in place of the model just built (a real
+    board keeps its EEPROM over a reflash; an emulator started for a model should run that model)."""
+    stamp = folder / "eeprom.model"
+    if not stamp.is_file() or stamp.read_text().strip() != model_hash:
+        (folder / "eeprom.bin").unlink(missing_ok=True)
+    write_atomic(stamp, model_hash + "\n")
+
+
 def start_target(model, target: str = "mps2", *, precision: str = "float", style: str = "table", fma: bool = False,
                  port: int | None = None, workdir: str | Path | None = None, sensor_id: str = "paper",
                  cmap=None, bridge=None, tin=None, tempcomp=None):
@@ -354,6 +365,7 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
         runner = Emulator(image, port, bridge=bridge, machine=MACHINES[target])
         runner.size = firmware_size(image)
     elif target == "uno":
+        fresh_eeprom(folder, model.sha256)
         runner = UnoEmulator(build_uno_board(folder), image, port, bridge=bridge, paint=bss_end(image),
                              eeprom=folder / "eeprom.bin")
         runner.size = firmware_size(image, "avr-size")

@@ -68,6 +68,15 @@ def _source(name: str) -> bytes:
     return (resources.files("firmware_templates") / "firmware" / name).read_bytes()
 
 
+NARROW_TAG = "+uno"  # in INFO's firmware version: the fixed-point plan for the AVR's 16-bit multiply
+
+
+def firmware_version(port: str) -> str:
+    """INFO's firmware version (at most 12 characters): fitgen's, tagged when the port plans fixed point for a
+    16-bit multiply, so that a suite run against the device compares it with that plan."""
+    return __version__ + (NARROW_TAG if port == "uno" else "")
+
+
 def adc_input_lsb(cmap) -> float:
     """The one value of an ADC code every element of ``cmap`` shares (a fixed-point build needs one)."""
     from host.adc import BusIO, make_driver
@@ -154,7 +163,7 @@ def render_firmware(model: Model, folder: str | Path, *, precision: str = "float
     env = jinja2.Environment(undefined=jinja2.StrictUndefined, autoescape=False, keep_trailing_newline=True,
                              trim_blocks=True, lstrip_blocks=True)
     main = env.from_string(_source("main.c.j2").decode()).render(
-        port=port, version=__version__, model_hash=model.sha256, precision=precision, style=style, fma=fma,
+        port=port, version=firmware_version(port), model_hash=model.sha256, precision=precision, style=style, fma=fma,
         n_inputs=model.n_inputs, n_outputs=len(model.equations), hash_rows=rows, sensor_id=sensor_id)
     write_atomic(folder / "main.c", main)
     return folder

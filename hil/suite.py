@@ -16,6 +16,7 @@ from xml.sax.saxutils import escape, quoteattr
 import numpy as np
 
 from fitgen.c.calblob import to_blob
+from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
 from fitgen.equations.model import Equation, Model
 from fitgen.base.progress import Progress
@@ -400,26 +401,45 @@ def check_fuzz(dev: Device, n_frames: int, batch: int = 50, seed: int = 0, progr
                  figures={"frames": sent})
 
 
+def reported_lsb(info) -> float:
+    """The volts of one ADC code of a fixed-point device reading ADS1115s at one PGA, from its INFO; InputError
+    when INFO cannot say (an ADS7828's reference is not in it)."""
+    from host.channelmap import ADS1115_PGA
+
+    pgas = {c[3] for c in info.adc_chips if c[0] == "ads1115"}
+    if len(pgas) != 1 or any(c[0] != "ads1115" for c in info.adc_chips) or min(pgas) >= len(ADS1115_PGA):
+        raise InputError("the device reads ADCs whose code scale its INFO does not give (an ADS7828's reference, or "
+                         "mixed PGAs): run the suite from tactile-hil emulate --suite, which knows the channel map")
+    return ADS1115_PGA[pgas.pop()] / 32768.0
+
+
 def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000, data: np.ndarray | None = None,
               n_fuzz: int = 10_000, flash: bool = True, sensor_id: str = "paper", fma: bool = False,
               seed: int = 0, verbose: bool = True, input_lsb: float | None = None,
               input_offset: float | None = None, held_out: tuple[np.ndarray, np.ndarray] | None = None,
-              max_share: float = MAX_SHARE, mul_bits: int = 32) -> SuiteResult:
+              max_share: float = MAX_SHARE, mul_bits: int | None = None) -> SuiteResult:
     """Every check in turn against the device at ``url`` that runs ``model`` compiled in.
 
     ``held_out``: noise-free held-out (readings, truth) for the rounding's-share check
     (fitgen.fitting.holdout.clean_readings); without it that check is not run.
 
     A fixed-point device (INFO precision 2) gets ADC codes, compared with the numpy model of its
-    integer arithmetic (``input_lsb``/``input_offset`` as given to codegen; default: the model's sensor), planned
-    for the core's multiply width ``mul_bits`` (fitgen.c.targets: 16 for the Uno).
+    integer arithmetic (``input_lsb``/``input_offset`` as given to codegen; default: the ADS1115s' code the device
+    reports reading, else the model's sensor), planned for the core's multiply width ``mul_bits``
+    (fitgen.c.targets: 16 for the Uno; default: as the device's firmware version says).
     """
     t_suite = time.perf_counter()
     checks: list[Check] = []
     fixed = None
-    if dev.info(refresh=True).precision == "fixed":
+    info = dev.info(refresh=True)
+    if info.precision == "fixed":
         from fitgen.equations.fixedpoint import build_fixed, default_input_scale
+        from hil.firmware import NARROW_TAG
 
+        if mul_bits is None:
+            mul_bits = 16 if info.firmware_version.endswith(NARROW_TAG) else 32
+        if input_lsb is None and info.adc_chips:
+            input_lsb, input_offset = reported_lsb(info), 0.0
         lsb, offset, _ = default_input_scale(model) if input_lsb is None else (input_lsb, input_offset or 0.0, "")
         fixed = build_fixed(model, lsb, offset if input_offset is None else input_offset, mul_bits)
         inputs, _ = make_code_vectors(fixed, n_vectors, seed)

@@ -125,7 +125,8 @@ def library_properties() -> str:
                      "map. The ReadPose example prints tactile-host read's CSV lines over Serial.",
         "category": "Sensors",
         "url": URL,
-        "architectures": "*",
+        # the Wire timeout calls (setWireTimeout and its flag) are the AVR core's; other cores lack some
+        "architectures": "avr",
         "includes": "TactilePose.h",
     }
     return "".join(f"{k}={v}\n" for k, v in fields.items())
@@ -143,7 +144,7 @@ def library_json() -> str:
         "authors": [{"name": "fitgen contributors", "maintainer": True}],
         "license": "MIT",
         "frameworks": "arduino",
-        "platforms": "*",
+        "platforms": "atmelavr",
         "headers": "TactilePose.h",
     }, indent=2) + "\n"
 
@@ -272,8 +273,51 @@ def arduino_build(model: Model, cmap: ChannelMap, folder: str | Path, *, precisi
     ``build_path``: where the example is built and kept (default: a folder removed afterwards). ``measure``:
     ``measure(build_path, size)`` -> the size with the stack's peak (hil/sketch.py runs the example), for the
     build and for each setting tried in its place."""
+    spec, folder = BOARDS[board], _library_folder(folder)
+    partial = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".partial", dir=folder.parent))
+    try:  # the library is rendered and built beside the folder, which it replaces only when it fits
+        render_arduino(model, cmap, partial, precision=precision, style=style)
+        size = _build_fitting(model, cmap, partial, precision, style, board, build, build_path, measure)
+        _install(partial, folder)
+        return size
+    finally:
+        shutil.rmtree(partial, ignore_errors=True)
+
+
+def _library_folder(folder: str | Path) -> Path:
+    """``folder`` as the library's (its parents made); InputError when it cannot be one."""
+    path = Path(folder)
+    if not str(folder).strip() or path.name in ("", ".", ".."):
+        raise InputError(f"-o {str(folder)!r}: name the library's folder (e.g. {LIBRARY_NAME})")
+    if path.exists() and not path.is_dir():
+        raise InputError(f"-o {folder}: it is a file; the library is a folder")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create {path.parent}: {exc.strerror}") from None
+    return path
+
+
+INSTALLED = ("src", f"examples/{EXAMPLE}", "library.properties", "library.json")
+
+
+def _install(partial: Path, folder: Path) -> None:
+    """Move the rendered library's parts into ``folder``, each replacing the last build's whole (``src/`` is
+    generated: a file left there would be compiled with it); the folder's other files stay."""
+    (folder / "examples").mkdir(parents=True, exist_ok=True)
+    for part in INSTALLED:
+        old = folder / part
+        if old.is_dir() and not old.is_symlink():
+            shutil.rmtree(old)
+        elif old.exists() or old.is_symlink():
+            old.unlink()
+        (partial / part).replace(old)
+
+
+def _build_fitting(model, cmap, library: Path, precision, style, board, build, build_path, measure) -> Size | None:
+    """Build ``library``'s example when ``build`` (None: when a builder is installed); InputError naming a
+    setting that fits when it does not."""
     spec = BOARDS[board]
-    render_arduino(model, cmap, folder, precision=precision, style=style)
     if build is None:
         build = find_builder() is not None
     if not build:
@@ -284,7 +328,7 @@ def arduino_build(model: Model, cmap: ChannelMap, folder: str | Path, *, precisi
         return measure(path, size) if measure is not None and size.fits(spec) else size
 
     with tempfile.TemporaryDirectory() as tmp:
-        size = built(folder, Path(tmp) / "build" if build_path is None else build_path)
+        size = built(library, Path(tmp) / "build" if build_path is None else build_path)
         if size.fits(spec):
             return size
         hint = "no other precision or style fits: fit fewer terms (fitgen fit --k bic, or --max-terms N)"
@@ -297,5 +341,4 @@ def arduino_build(model: Model, cmap: ChannelMap, folder: str | Path, *, precisi
             if alt_size.fits(spec):
                 hint = f"{option} fits ({alt_size.describe(spec)})"
                 break
-    shutil.rmtree(Path(folder) / "src", ignore_errors=True)  # nothing half-usable is left behind
     raise InputError(f"the model does not fit the {board}: {size.describe(spec)}; {hint}")

@@ -115,6 +115,21 @@ class ChannelMap:
         return ",".join(parts)
 
 
+def check_full_scale(cmap: ChannelMap, low, high) -> None:
+    """InputError when an element's ADC cannot reach readings from ``low`` to ``high`` (volts, per element: a
+    model's fitted domain): each would clip at the full scale, and every estimate with it."""
+    for k, (chip, _) in enumerate(cmap.elements()):
+        if chip.kind == "ads1115":
+            top, how = chip.settings.pga * 32767 / 32768, f"--pga {chip.settings.pga:g}"
+        else:
+            top, how = chip.vref_volts * 4095 / 4096, f"--vref {chip.settings.vref}"
+        reach = max(abs(float(low[k])), abs(float(high[k])))
+        if reach > top:
+            raise InputError(f"element v{k + 1} was fitted on readings up to {reach:.4g} V, beyond its ADC's full "
+                             f"scale {top:.4g} V ({chip.label}, {how}): its readings would clip; choose a larger "
+                             "full scale")
+
+
 # --- parsing -----------------------------------------------------------------------
 
 

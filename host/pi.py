@@ -25,7 +25,7 @@ from fitgen.base.fileio import write_atomic
 from fitgen.equations.model import Model
 
 from host.cdrivers import chip_table, smbus_transfer
-from host.channelmap import ChannelMap
+from host.channelmap import ChannelMap, check_full_scale
 from fitgen.c.compiled import WARNING_FLAGS, first_error, run_tool, tool_command
 
 PI_FILES = ("tm_pi.c", "i2c_linux.h", "i2c_linux.c", "standin.h", "standin.c")
@@ -91,6 +91,8 @@ def check_reads(model: Model, cmap: ChannelMap) -> None:
                          "in V (fitgen simulate --transfer gmr, or tactile-host capture)")
     if cmap.n_elements != model.n_inputs:
         raise InputError(f"the channel map reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
+    check_full_scale(cmap, model.input_min, model.input_max)
+
 
 
 def render_pi(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: str = "float",

@@ -16,7 +16,7 @@ from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, RetryPolicy, open_bus
 from host.autozero import AutoZero, AutoZeroSettings
-from host.channelmap import Settings, channel_map
+from host.channelmap import Settings, channel_map, check_full_scale
 from host.clock import REAL_CLOCK
 from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
@@ -95,6 +95,7 @@ class ReadoutSession:
         self.cmap = cmap = cmap0
         if cmap.n_elements != model.n_inputs:
             raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
+        check_full_scale(cmap, model.input_min, model.input_max)
         need_ref = args.tare or args.auto_zero
         reference = rest_reference(args.rest or args.sensor, model.n_inputs) if need_ref else None
         self.engine = make_engine(args.engine, model, **({"precision": args.precision, "cc": args.cc}

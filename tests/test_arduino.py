@@ -154,6 +154,32 @@ def test_fixed_point_of_the_no_roots_model_fits_the_uno(sensor, tmp_path):
     assert " * Plan: for a 16-bit multiply (--target uno)" in header and "tm_avr_dot" in header
 
 
+def _tree(folder):
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_a_refused_build_leaves_the_library_as_it_was_and_a_new_one_replaces_src(model_path, tmp_path):
+    lib = tmp_path / "TactilePose"
+    assert _build_cli(model_path, lib, "--no-build").returncode == 0
+    (lib / "src" / "extra.h").write_text("/* a file the last build did not write */\n")
+    before = _tree(lib)
+    for extra, said in ((["--pga", "1.024"], "beyond its ADC's full scale 1.024 V (ads1115@0x48, --pga 1.024)"),
+                        (["--sim-sensor", "nosuch"], "sensor 'nosuch'"),
+                        (["--thermistor", "beta=3950"], "no thermistor")):
+        assert_one_line_error(_build_cli(model_path, lib, "--no-build", *extra), 2, said)
+        assert _tree(lib) == before
+    proc = run_cli("tactile-host", "arduino-build", "--model", model_path, "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+                   "-o", str(lib), "--no-build")
+    assert_one_line_error(proc, 2, "no thermistor")
+    assert_one_line_error(run_cli("tactile-host", "arduino-build", "--model", model_path, "--adc", TWO_CHIPS, "-o", "",
+                                  "--no-build", cwd=tmp_path), 2, "name the library's folder")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["TactilePose"]  # nothing else, no partial folder
+    assert _build_cli(model_path, lib, "--no-build").returncode == 0
+    assert not (lib / "src" / "extra.h").exists() and _tree(lib) == {k: v for k, v in before.items()
+                                                                      if k != "src/extra.h"}
+    assert "architectures=avr\n" in (lib / "library.properties").read_text()
+
+
 def test_double_and_bad_maps_are_refused_in_one_line(model_path, tmp_path):
     assert_one_line_error(_build_cli(model_path, tmp_path / "d", "--precision", "double"), 2, "32 bits")
     proc = run_cli("tactile-host", "arduino-build", "--model", model_path, "--adc", "ads1115@0x48:0-3",

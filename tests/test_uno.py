@@ -4,6 +4,7 @@ ADS1115s on its TWI bus answered by the Python bus model, the HIL suite, EEPROM 
 import numpy as np
 import pytest
 
+from fitgen.equations.model import load_model
 from fitgen.fitting.fit import fit_model
 from fitgen.fitting.holdout import box_of, clean_readings, evaluate
 from fitgen.physics.sensor import load_sensor
@@ -90,6 +91,14 @@ def test_calibration_survives_a_reset_in_eeprom(gmr_model, tmp_path):
             assert info.model_hash == new.sha256 and info.cal_source == 1
             dev.reset_calibration()
             assert dev.info(refresh=True).model_hash == gmr_model.sha256
+            flash_model(dev, new, "variant")
+    # a build of another model in the same folder runs that model, not the calibration the last build kept
+    other = flash_variant(new)
+    with start_target(other, "uno", precision="float", workdir=tmp_path / "fw") as emu:
+        with Device.open(emu.url, timeout=10) as dev:
+            info = dev.info(refresh=True)
+            assert info.model_hash == other.sha256 and info.cal_source == 0
+            assert info.firmware_version.endswith("+uno")
 
 
 def test_uno_refuses_double_and_bad_options(gmr_model, tmp_path):
@@ -128,3 +137,12 @@ def test_fixed_point_firmware_reads_the_ads1115s_on_the_uno(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "largest difference from the numpy integer model 0 LSB" in proc.stdout
     assert "| stream | pass |" in proc.stdout and "| flash (fixed point) | pass |" in proc.stdout
+    # the suite run against the board as `tactile-hil run` runs it, told neither the plan nor the code scale:
+    # the firmware's version names the Uno's plan, its INFO the ADS1115s' PGA
+    model = load_model(model_file)
+    cmap, bridge, _, _ = adc_bridge(ADC, "dx=1,dz=-1")
+    with start_target(model, "uno", precision="fixed", cmap=cmap, bridge=bridge) as emu:
+        with Device.open(emu.url, timeout=10) as dev:
+            res = run_suite(dev, model, url=emu.url, n_vectors=300, n_fuzz=0, flash=False, verbose=False)
+    evals = [c for c in res.checks if c.name == "eval"]
+    assert evals and evals[0].ok and evals[0].figures["max_lsb_diff"] == 0, res.table()

@@ -1,7 +1,8 @@
 """tactile-hil: hardware-in-the-loop checks of the reference firmware, on a board or an emulated Cortex-M4.
 
   run       send vectors, calibrations and fuzz frames to a device and compare with Python
-  emulate   build the firmware with a model and boot it (QEMU mps2-an386, or the host build on a pty)
+  emulate   build the firmware with a model and boot it (QEMU's mps2-an386 or micro:bit, simavr's Uno, or the host
+            build on a pty)
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ def _suite(url: str, model, data, args, input_lsb: float | None = None) -> int:
                         flash=not args.no_flash, sensor_id=args.sensor_id, fma=args.fma, held_out=held_out,
                         max_share=args.max_share, input_lsb=input_lsb,
                         input_offset=0.0 if input_lsb is not None else None,
-                        mul_bits=TARGETS[args.target].mul_bits if args.target in TARGETS else 32)
+                        mul_bits=TARGETS[args.target].mul_bits if args.target in TARGETS else None)
     print(res.table())
     if held_out is None and not args.no_held_out:
         print("note: no held-out accuracy check: the model file has no held_out record or its sensor is unknown "
@@ -157,7 +158,7 @@ def build_parser() -> Parser:
                    help="serial device, pty path, or socket://127.0.0.1:PORT (the emulator)")
     r.add_argument("--target", choices=("uno", "microbit", "mps2", "pi"),
                    help="the core the firmware was built for: a fixed-point build is compared with its plan "
-                        "(uno: the plan for a 16-bit multiply; default: the 32-bit plan)")
+                        "(uno: the plan for a 16-bit multiply; default: as the firmware's version in INFO says: +uno for the Uno)")
     _suite_options(r)
     r.set_defaults(func=cmd_run)
 

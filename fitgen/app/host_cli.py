@@ -249,15 +249,22 @@ def cmd_pi_build(args) -> int:
 
 def cmd_arduino_build(args) -> int:
     from fitgen.equations.model import load_model
+    from fitgen.physics.sensor import load_sensor
     from hil.sketch import build_readpose
     from host.arduino import BOARDS
     from host.session import channel_map_from_args
+    from host.temperature import split_channel_map
 
-    size, run = build_readpose(load_model(args.model), channel_map_from_args(args), args.output, args.emulate,
-                               precision=args.precision, style=args.style, build=not args.no_build,
-                               sensor=args.sim_sensor)
+    model, cmap = load_model(args.model), channel_map_from_args(args)
+    if split_channel_map(args.adc)[1] is not None or cmap.temperature is not None or args.thermistor:
+        raise InputError("the Arduino library reads the elements only, no thermistor: drop temp= from --adc and "
+                         "--thermistor (tactile-host read and pi-build read one)")
+    load_sensor(args.sim_sensor)  # a bad one said before the library is written
+    size, run = build_readpose(model, cmap, args.output, args.emulate, precision=args.precision, style=args.style,
+                               build=not args.no_build, sensor=args.sim_sensor)
     sys.stdout.write("".join(ln + "\n" for ln in run.lines) if run and args.emulate else "")  # a serial monitor's
-    built = size.describe(BOARDS["uno"]) if size else "not built (no arduino-builder)"
+    built = (size.describe(BOARDS["uno"]) if size else "not built (--no-build)" if args.no_build
+             else "not built (no arduino-builder)")
     print(f"wrote the Arduino library {args.output}; ReadPose for the Uno: {built}", file=sys.stderr)
     return 0
 
