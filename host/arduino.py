@@ -273,7 +273,7 @@ def arduino_build(model: Model, cmap: ChannelMap, folder: str | Path, *, precisi
     ``build_path``: where the example is built and kept (default: a folder removed afterwards). ``measure``:
     ``measure(build_path, size)`` -> the size with the stack's peak (hil/sketch.py runs the example), for the
     build and for each setting tried in its place."""
-    spec, folder = BOARDS[board], _library_folder(folder)
+    folder = _library_folder(folder)
     partial = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".partial", dir=folder.parent))
     try:  # the library is rendered and built beside the folder, which it replaces only when it fits
         render_arduino(model, cmap, partial, precision=precision, style=style)
