@@ -48,7 +48,7 @@ def test_a_constant_output_names_the_ones_to_fit(tmp_path):
 
 def test_simulate_leaves_no_unit_file_when_it_fails_and_refuses_poses_outside_the_sensor(tmp_path):
     assert_one_line_error(run_cli("fitgen", "simulate", "--unit", "3", "--random", "10", "--noise", "-1", "-o",
-                                  str(tmp_path / "u.csv")), contains="--noise must be >= 0")
+                                  str(tmp_path / "u.csv")), contains="--noise must be a finite number >= 0")
     assert_one_line_error(run_cli("fitgen", "simulate", "--grid", "dx=1e200", "-o", str(tmp_path / "far.csv")),
                           contains="pose 1 (dx=1e+200 dy=0 dz=0 thx=0 thy=0) gives readings that are not finite")
     assert files(tmp_path) == []
@@ -180,3 +180,32 @@ def test_fit_refuses_to_hold_out_on_another_sensor_than_the_datas(data, tmp_path
     proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--sensor", "ring-vertical")
     assert_one_line_error(proc, contains="simulated with sensor paper, not ring-vertical")
     assert not (tmp_path / "m.json").exists()
+
+
+def test_report_sweeps_only_on_the_sensor_the_model_was_fitted_on(fitted, data, tmp_path):
+    (tmp_path / "m.json").write_text(json.dumps(fitted))
+    model = str(tmp_path / "m.json")
+    assert_one_line_error(run_cli("fitgen", "report", model, "--data", str(data), "--plot", str(tmp_path / "p"),
+                                  "--sensor", "two-rings"), contains="--sensor two-rings: the model was fitted on "
+                                                                     "another sensor")
+    assert_one_line_error(run_cli("fitgen", "report", model, "--sensor", "paper"), contains="goes with --plot")
+    assert not (tmp_path / "p").exists()
+
+
+def test_predict_says_which_rows_have_no_estimate_without_numpy_warnings(fitted, data, tmp_path):
+    (tmp_path / "m.json").write_text(json.dumps(fitted))
+    lines = [",".join(ln.split(",")[:8]) for ln in data.read_text().splitlines()[:4]]
+    lines[2] = "1e39," + lines[2].split(",", 1)[1]  # finite in double, beyond float's range
+    (tmp_path / "r.csv").write_text("\n".join(lines) + "\n")
+    proc = run_cli("fitgen", "predict", str(tmp_path / "m.json"), str(tmp_path / "r.csv"), "-o",
+                   str(tmp_path / "p.csv"), "--precision", "float")
+    assert proc.returncode == 0 and proc.stderr.strip().splitlines() == [
+        f"wrote 3 estimates to {tmp_path / 'p.csv'} (1 rows with no estimate (status -1: a reading not finite in "
+        "float))"], proc.stderr
+    assert [ln.rsplit(",", 1)[1] for ln in (tmp_path / "p.csv").read_text().splitlines()[1:]] == ["0", "-1", "0"]
+
+
+def test_fit_refuses_refine_terms_below_five_without_refine_too(data, tmp_path):
+    assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--refine-terms", "3"),
+                          contains="--refine-terms must be >= 5")
+

@@ -230,3 +230,14 @@ def test_auto_fits_the_forward_model_once_and_refines_as_the_chosen_family_would
     with pytest.raises(ValueError, match="other data"):
         refine_fit.fit_refinement(simulate(PAPER, GRID), model, steps=1, noise=0.0005, max_terms=8,
                                   forward=refine_fit.fit_forward(train, max_terms=8))
+
+
+def test_codegen_for_the_uno_refuses_a_refinement_in_one_line(model, tmp_path):
+    """Its forward model's tables and solve do not fit the ATmega328P: refused, not written to fail in avr-gcc."""
+    with pytest.raises(InputError, match="target uno: a refinement's forward model and solve do not fit"):
+        render_header(model, "float", "table", target="uno")
+    render_header(model, "float", "table", target="mps2")  # a core with room: written as ever
+    proc = run_cli("fitgen", "codegen", str(model.save(tmp_path / "r.json")), "-o", str(tmp_path / "u"),
+                   "--target", "uno", "--precision", "float")
+    assert_one_line_error(proc, 2, "fit without --refine")
+    assert not (tmp_path / "u").exists()

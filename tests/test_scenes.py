@@ -80,11 +80,44 @@ def test_simulate_scene_bad_options(tmp_path, args, msg):
     assert_one_line_error(run_cli("fitgen", "simulate", *args, "-o", str(tmp_path / "x.csv")), 2, msg)
 
 
-def test_fit_scene_with_outputs_is_refused(tmp_path):
+def test_fit_scene_with_outputs_is_refused_and_outputs_win_over_the_datas_scene(tmp_path):
     data = tmp_path / "p.csv"
     assert run_cli("fitgen", "simulate", "--scene", "press", "-o", str(data)).returncode == 0
-    assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--outputs", "dx"),
-                          2, "not both")
+    assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--outputs", "dz",
+                                  "--scene", "press"), 2, "not both")
+    # the scene the data were simulated for gives way to --outputs (fit's own advice names them)
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--outputs", "dz")
+    assert proc.returncode == 0, proc.stderr
+    assert [o["name"] for o in json.loads((tmp_path / "m.json").read_text())["outputs"]] == ["dz"]
+
+
+def test_a_scene_file_is_found_from_another_folder_and_a_scene_too_large_or_holding_an_output_is_refused(tmp_path):
+    (tmp_path / "data").mkdir()
+    (tmp_path / "s.toml").write_text('outputs = ["dz"]\nlevels = 30\n[ranges]\ndx = [0, 0]\ndy = [0, 0]\nthx = [0, 0]\n'
+                                     'thy = [0, 0]\n')
+    assert run_cli("fitgen", "simulate", "--scene", "s.toml", "-o", "data/s.csv", cwd=tmp_path).returncode == 0
+    proc = run_cli("fitgen", "fit", "s.csv", "-o", "m.json", "--sensor", "paper", cwd=tmp_path / "data")
+    assert proc.returncode == 0, proc.stderr
+    (tmp_path / "big.toml").write_text('outputs = ["dz"]\nlevels = 101\n')
+    assert_one_line_error(run_cli("fitgen", "simulate", "--scene", str(tmp_path / "big.toml"), "-o",
+                                  str(tmp_path / "b.csv")), 2, "make 10,510,100,501 poses (at most 1,000,000)")
+    (tmp_path / "held.toml").write_text('outputs = ["dx", "dz"]\n[ranges]\ndx = [0, 0]\n')
+    assert_one_line_error(run_cli("fitgen", "observe", "--scene", str(tmp_path / "held.toml")), 2,
+                          "output dx is held at 0")
+    assert_one_line_error(run_cli("fitgen", "simulate", "--scene", "press", "--seed", "-1", "-o",
+                                  str(tmp_path / "b.csv")), 2, "--seed")
+    assert not (tmp_path / "b.csv").exists()
+
+
+def test_observe_ranges_override_the_scenes_box_and_bad_figures_are_refused():
+    proc = run_cli("fitgen", "observe", "--scene", "slide", "--ranges", "dz=-1:0")
+    assert proc.returncode == 0, proc.stderr
+    rows = [ln.split()[:5] for ln in proc.stdout.splitlines() if ln[:1] in "-0123456789" and not ln.startswith("--")
+            and len(ln.split()) > 5]
+    assert rows and {r[3] for r in rows} == {"0"} and {r[2] for r in rows} <= {"0", "-1"}  # no tilt, dz in -1:0
+    for argv, said in ((["--noise", "0"], "--noise must be > 0"), (["--accuracy", "dx=-1"], "finite number > 0"),
+                       (["--accuracy", "dy=nan"], "finite number > 0"), (["--noise", "inf"], "finite number")):
+        assert_one_line_error(run_cli("fitgen", "observe", *argv), 2, said)
 
 
 def test_scene_toml_levels_and_unresolved_check_agree_with_observe(tmp_path):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -60,9 +61,15 @@ def cmd_observe(args) -> int:
     args.sensor = args.sensor_pos or args.sensor or "paper"
     sensor = sensor_of(args)
     scene = load_scene(args.scene)
-    ranges = parse_ranges(args.ranges) if args.ranges else scene.ranges
+    ranges = parse_ranges(args.ranges, scene.ranges)
     noise = None if args.noise is None else noise_of(args.noise, sensor)
+    if noise is not None and not noise > 0:
+        raise InputError("--noise must be > 0 for observe: without noise every pose component is resolved to 0, "
+                         "resolvable or not")
     accuracy = parse_assignments(args.accuracy, POSE_NAMES, "--accuracy") if args.accuracy else None
+    for name, value in (accuracy or {}).items():
+        if not (math.isfinite(value) and value > 0):
+            raise InputError(f"--accuracy {name}={value!r} must be a finite number > 0")
     report = observe(sensor, ranges, scene.outputs, noise=noise, accuracy=accuracy)
     print(f"sensor {sensor.name} ({sensor.n_elements} elements, {sensor.transfer}), scene {scene.name}")
     print(report.text(), end="")
@@ -84,6 +91,8 @@ def _settings(args):
     k = 2.0 if k == "aic" else k
     if args.max_terms is not None and args.max_terms < 1:
         raise InputError(f"--max-terms must be >= 1, got {args.max_terms}")
+    if args.refine_terms < 5:
+        raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {args.refine_terms}")
     try:
         noise = None if args.noise is None else parse_noise(args.noise)
     except OutOfRange:
@@ -111,9 +120,9 @@ def cmd_fit(args) -> int:
               "their labels are no contact pose", file=sys.stderr)
     sensor = dataset_sensor(ds.meta, args.sensor, ds.n_inputs)
     # --scene, or the scene the dataset was simulated for, names the outputs
-    scene = args.scene or ds.meta.get("scene_spec")
-    if scene is not None and args.outputs:
-        raise InputError("give --outputs or a scene, not both (the scene names the outputs)")
+    if args.scene and args.outputs:
+        raise InputError("give --outputs or --scene, not both (the scene names the outputs)")
+    scene = args.scene or (None if args.outputs else ds.meta.get("scene_spec"))  # --outputs over the data's scene
     if scene is not None:
         outputs = scene_outputs(scene, ds, args.data, sensor, args.force)
     else:
@@ -159,7 +168,8 @@ def cmd_predict(args) -> int:
         from fitgen.equations.fixedpoint import plan_at
 
         fm, source = plan_at(model, args.input_lsb, args.input_offset, target.mul_bits if target else 32)
-        pred, status = fm.predict_codes(inputs) if args.codes else fm.predict_values(inputs)
+        with np.errstate(over="ignore", invalid="ignore"):  # a huge reading is a row the C refuses: status -1
+            pred, status = fm.predict_codes(inputs) if args.codes else fm.predict_values(inputs)
         pred = fm.to_real(pred) if args.codes else pred
         print(f"fixed point: {'ADC codes as given' if args.codes else 'values rounded to ADC codes'}, input LSB "
               f"{fm.input_lsb:.6g} {model.input_units} from {source}, offset {fm.input_offset:g}; "
@@ -168,11 +178,14 @@ def cmd_predict(args) -> int:
         if args.codes or args.input_lsb is not None or args.input_offset is not None:
             raise InputError("--codes, --input-lsb and --input-offset apply to --precision fixed only")
         check_magnitudes(model, args.precision)  # as codegen: the C's outputs are always finite
-        pred, status = model.predict(inputs, with_status=True, precision=args.precision)
+        with np.errstate(over="ignore"):  # a reading beyond float's range is inf, as the C's conversion makes it
+            pred, status = model.predict(inputs, with_status=True, precision=args.precision)
     write_atomic(args.output, estimates_csv(model.output_names, pred, status))
-    clamped = int(np.sum(status > 0))
-    print(f"wrote {len(pred)} estimates to {args.output}" + (f" ({clamped} rows clamped into the domain)"
-                                                             if clamped else ""), file=sys.stderr)
+    clamped, refused = int(np.sum(status > 0)), int(np.sum(status < 0))
+    notes = ([f"{clamped} rows clamped into the domain"] if clamped else []) + (
+        [f"{refused} rows with no estimate (status -1: a reading not finite in {args.precision})"] if refused else [])
+    print(f"wrote {len(pred)} estimates to {args.output}" + (f" ({'; '.join(notes)})" if notes else ""),
+          file=sys.stderr)
     return 0
 
 
@@ -187,8 +200,10 @@ def cmd_report(args) -> int:
     if args.plot and not args.data:  # every check before anything is written
         raise InputError("--plot needs --data (the rows to plot estimates for)")
     folder = plots.require(args.plot) if args.plot else None  # made by its first figure, after every check
-    sensor = load_sensor(args.sensor) if folder is not None and args.sensor else None
+    if args.sensor and folder is None:
+        raise InputError("--sensor goes with --plot (the rotation sweep is drawn on it)")
     model = load_model(args.model)
+    sensor = sweep_sensor(load_sensor(args.sensor), model) if folder is not None and args.sensor else None
     ds = load_dataset(args.data) if args.data else None
     if ds is not None and not set(model.output_names) & set(ds.target_names):
         raise InputError(f"{args.data}: no column of the model's outputs ({', '.join(model.output_names)}), "
@@ -209,6 +224,18 @@ def cmd_report(args) -> int:
         paths += plots.rotation_sweeps(model, sensor, folder) if sensor is not None else []
         print("plots: " + ", ".join(str(p) for p in paths), file=sys.stderr)
     return 0
+
+
+def sweep_sensor(sensor, model):
+    """``sensor`` in the transfer that gives ``model``'s units; InputError when the model was fitted on another."""
+    if sensor.units != model.input_units and model.input_units in ("mT", "V"):
+        sensor = sensor.with_transfer("gmr" if model.input_units == "V" else "raw")
+    fitted_on = model.fit_info.get("sensor_sha256")
+    if sensor.units != model.input_units or fitted_on not in (None, sensor.sha256):
+        raise InputError(f"--sensor {sensor.name}: the model was fitted on another sensor "
+                         f"({model.input_units} readings{', sensor ' + str(fitted_on)[:12] if fitted_on else ''}); "
+                         "its sweep on this one would not be the model's")
+    return sensor
 
 
 def cmd_codegen(args) -> int:
@@ -234,7 +261,7 @@ def cmd_codegen(args) -> int:
         return 0
     if args.input_lsb is not None or args.input_offset is not None:
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
-    path = write_header(model, args.output, args.precision, args.style, args.prefix, args.fma)
+    path = write_header(model, args.output, args.precision, args.style, args.prefix, args.fma, target=args.target)
     print(f"wrote {path} ({args.precision}, {args.style}{', fma' if args.fma else ''}, model {model.sha256[:12]})",
           file=sys.stderr)
     return 0
@@ -269,7 +296,7 @@ def build_parser() -> Parser:
                    help="N random poses in --ranges (with --grid: after the grid's poses)")
     s.add_argument("--ranges", help="box for --random: 'dx=-2:2 thx=-5:5 ...' (default: paper-sim box)")
     s.add_argument("--poses", metavar="FILE.csv", help="simulate the poses in this CSV")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=count, default=0)
     s.add_argument("--noise", default="0", help="element noise rms in output units, or 'sensor' (default 0)")
     s.add_argument("--adc-bits", type=int, help="override the transfer's ADC bits (0: no quantisation)")
     s.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
@@ -409,7 +436,7 @@ def build_parser() -> Parser:
     t.add_argument("--style", help="sweep only these code styles (all: table,unrolled; fixed point has one)")
     t.add_argument("--refine", help="sweep only these refinement step counts (all: 0,1; on the harmonics family, "
                                     "float and double, scenes with the whole pose; docs/refine.md)")
-    t.add_argument("--seed", type=int, default=0, help="held-out poses and noise draws (default 0)")
+    t.add_argument("--seed", type=count, default=0, help="held-out poses and noise draws (default 0)")
     t.add_argument("--jobs", type=int, default=2, help="builds measured at once (default 2)")
     t.add_argument("--max-share", type=float, default=0.05, metavar="S",
                    help="fail (exit 1) when a point's rounding adds more than this share of its model's held-out "

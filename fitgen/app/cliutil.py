@@ -42,6 +42,14 @@ def count(text: str) -> int:
     return n
 
 
+def tcp_port(text: str) -> int:
+    """An argparse type: a TCP port number, 1..65535."""
+    n = count(text)
+    if not 0 < n < 65536:
+        raise argparse.ArgumentTypeError(f"{n} is not a TCP port number (1..65535)")
+    return n
+
+
 def seconds(text: str) -> float:
     """An argparse type: a time limit in seconds, > 0 and at most an hour."""
     from fitgen.base.parse import LONGEST_WAIT, parse_positive

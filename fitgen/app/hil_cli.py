@@ -11,7 +11,7 @@ import signal
 import sys
 import threading
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main, seconds
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main, count, seconds, tcp_port
 from fitgen.base.errors import InputError
 
 
@@ -167,7 +167,7 @@ def build_parser() -> Parser:
                    help="mps2: Cortex-M4F in qemu-system-arm (default); microbit: Cortex-M0 (nRF51, fixed point "
                         "only); uno: the Arduino Uno's ATmega328P in simavr (float or fixed; --adc puts the chips "
                         "on its TWI bus); host: the POSIX build on a pty")
-    e.add_argument("--port", type=int, help="TCP port of the emulated UART (default: a free one)")
+    e.add_argument("--port", type=tcp_port, help="TCP port of the emulated UART (default: a free one)")
     e.add_argument("--precision", default="float", choices=("float", "double", "fixed"))
     e.add_argument("--style", default="table", choices=("table", "unrolled"))
     e.add_argument("--build-dir", metavar="DIR", help="keep the firmware sources and image here")
@@ -180,7 +180,7 @@ def build_parser() -> Parser:
                    help="with --adc: the bus model's magnet pose dx,dy,dz,thx,thy (default rest)")
     e.add_argument("--sim-sensor", default="paper", help="with --adc: the simulated sensor (default paper, gmr)")
     e.add_argument("--sim-noise", type=float, help="with --adc: simulated element noise, V rms (default: the sensor's)")
-    e.add_argument("--seed", type=int, default=0, help="with --adc: seed of the simulated noise")
+    e.add_argument("--seed", type=count, default=0, help="with --adc: seed of the simulated noise")
     e.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",
                    help="with temp= in --adc: the thermistor's NTC divider (default beta=3950,r25=10000,series=10000)")
     e.add_argument("--temp-comp", metavar="FILE.json",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, command_main
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, command_main, count
 from fitgen.base.errors import InputError
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 
@@ -324,7 +324,7 @@ def _adc_options(p, required: bool = True) -> None:
     p.add_argument("--sim-offsets", metavar="V1,..,VN", help="simulated offset of each element, V")
     p.add_argument("--sim-fault", action="append", metavar="SPEC",
                    help="simulated fault: nack|timeout|stuck[:ADDR]:RATE or silent:ADDR[:AFTER] (repeatable)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the simulated noise and faults")
+    p.add_argument("--seed", type=count, default=0, help="seed of the simulated noise and faults")
 
 
 def build_parser() -> Parser:
@@ -494,7 +494,7 @@ def build_parser() -> Parser:
     ss.add_argument("--start", default="10,10,10", help="where the carriage stands at power-on, mm from the home "
                     "switches (default 10,10,10; machine coordinates start at 0 there)")
     ss.add_argument("--homing", action="store_true", help="homing on: GRBL starts in ALARM until $H or $X")
-    ss.add_argument("--seed", type=int, default=0)
+    ss.add_argument("--seed", type=count, default=0)
     ss.set_defaults(func=cmd_stage_sim)
     return p
 

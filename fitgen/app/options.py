@@ -21,8 +21,8 @@ def noise_of(value: str, sensor) -> float:
     if value == "sensor":
         return sensor.noise
     try:
-        return parse_noise(value, finite=False)
+        return parse_noise(value)
     except OutOfRange:
-        raise InputError(f"--noise must be >= 0, got {value}") from None
+        raise InputError(f"--noise must be a finite number >= 0, got {value}") from None
     except ValueError:
         raise InputError(f"--noise must be a number or 'sensor', got {value!r}") from None

@@ -266,6 +266,9 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
     int32 outputs out; ``style`` does not apply (the fixed header is straight-line code).
     """
     t = check_precision(target, precision)
+    if t is not None and t.progmem and model.refine is not None:
+        raise InputError(f"target {t.name}: a refinement's forward model and solve do not fit the {t.core} "
+                         "(its tables in RAM, its code past the flash): fit without --refine")
     if precision == "fixed":
         from fitgen.equations.fixedpoint import plan_at
 

@@ -438,6 +438,11 @@ def _for_core(core: str, grid: list[Knobs], notes: list[str]) -> list[Knobs]:
         notes.append(f"no {', '.join(dropped)} on {core}: {t.why}")
     if not left:
         raise InputError(f"nothing to sweep: {core} takes --precision {' or '.join(t.precisions)}")
+    if t.progmem and any(k.refine for k in left):  # as fitgen.c.codegen refuses it for such a core
+        notes.append(f"no refinement on {core}: its forward model and solve do not fit the {t.core}")
+        left = [k for k in left if not k.refine]
+        if not left:
+            raise InputError(f"nothing to sweep: a refinement does not fit the {core}; sweep --refine 0")
     notes.append(f"costs on {core} ({t.core}): cycles per estimate in simavr over {N_AVR} held-out inputs, each "
                  f"answer Python's bit for bit; flash: the AVR program less its inputs"
                  + ("; fixed point in its plan for a 16-bit multiply" if t.mul_bits == 16 else ""))

@@ -3,11 +3,13 @@ both are given), a poses file, or a scene's grid or box; with the provenance its
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.physics.dataset import load_poses
-from fitgen.physics.scenes import load_scene
+from fitgen.physics.scenes import PRESETS, load_scene
 from fitgen.physics.simulate import grid_poses, parse_grid, parse_ranges, pose_rng, random_poses
 
 
@@ -26,7 +28,9 @@ def choose_poses(*, grid: str | None = None, random: int | None = None, poses: s
         raise InputError("--scene sets the poses: give it with --random N or alone, not with --grid, --poses, --ranges")
     if scene:
         sc = load_scene(scene)
-        scene_info = {"scene": sc.name, "scene_spec": scene, "scene_outputs": list(sc.outputs)}
+        # a scene file by its absolute path, so that fit finds it from any folder
+        spec = scene if scene in PRESETS else str(Path(scene).resolve())
+        scene_info = {"scene": sc.name, "scene_spec": spec, "scene_outputs": list(sc.outputs)}
         if random is None:
             return sc.poses(), {"scene_grid_levels": sc.levels, **scene_info}
         return random_poses(random, sc.ranges, pose_rng(seed)), {"random": random, **scene_info}

@@ -53,6 +53,9 @@ PRESETS = {
 }
 
 
+MAX_POSES = 1_000_000  # a scene's grid: 40 MB of poses, about a minute to simulate
+
+
 def load_scene(spec: str | None) -> Scene:
     """A preset name (full, slide, press) or a TOML file with ``outputs``, ``[ranges]``, ``levels``."""
     if spec is None:
@@ -93,6 +96,15 @@ def load_scene(spec: str | None) -> Scene:
     name = data.get("name", path.stem)
     if not isinstance(name, str):
         raise InputError(f"{origin}: 'name' must be a string")
+    held = [o for o in outputs if ranges[o][0] == ranges[o][1]]
+    if held:
+        raise InputError(f"{origin}: output {held[0]} is held at {ranges[held[0]][0]:g}: there is nothing to "
+                         "estimate (give it a range, or leave it out of 'outputs')")
+    n_poses = levels ** sum(lo != hi for lo, hi in ranges.values())
+    if n_poses > MAX_POSES:
+        raise InputError(f"{origin}: {levels} levels over {sum(lo != hi for lo, hi in ranges.values())} varying "
+                         f"components make {n_poses:,} poses (at most {MAX_POSES:,}): fewer levels, or hold "
+                         "components the scene does not move")
     ordered = tuple(n for n in POSE_NAMES if n in outputs)
     return Scene(name, ordered, ranges, levels)
 

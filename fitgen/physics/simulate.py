@@ -71,9 +71,9 @@ def parse_grid(spec: str) -> dict[str, list[float]]:
     return levels
 
 
-def parse_ranges(spec: str | None) -> dict[str, tuple[float, float]]:
-    """``dx=-2:2 thx=-5:5 ...`` (components not named: the paper-sim box)."""
-    ranges = dict(DEFAULT_RANGES)
+def parse_ranges(spec: str | None, base: dict[str, tuple[float, float]] | None = None) -> dict[str, tuple[float, float]]:
+    """``dx=-2:2 thx=-5:5 ...`` (components not named: as in ``base``, default the paper-sim box)."""
+    ranges = dict(DEFAULT_RANGES if base is None else base)
     if not spec:
         return ranges
     for name, value in _components(spec, "ranges").items():
