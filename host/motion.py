@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from fitgen.base.errors import InputError
@@ -51,6 +53,11 @@ def parse_drift(spec: str | None, n: int) -> Drift | None:
         return None
     keys = ("ramp", "over", "tau", "creep", "start", "seed")
     vals = parse_assignments(spec, keys, "--sim-drift")
+    bad = next((k for k, v in vals.items() if not math.isfinite(v)), None)
+    if bad is not None:
+        raise InputError(f"--sim-drift {spec!r}: {bad} must be a finite number")
+    if "seed" in vals and not (vals["seed"] >= 0 and vals["seed"] == int(vals["seed"])):
+        raise InputError(f"--sim-drift {spec!r}: seed must be a whole number >= 0")
     over, tau = vals.get("over", 600.0), vals.get("tau", 600.0)
     if not (over > 0 and tau > 0):
         raise InputError(f"--sim-drift {spec!r}: over and tau must be > 0 s")

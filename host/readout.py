@@ -80,10 +80,17 @@ def rest_reference(spec: str, n_inputs: int) -> np.ndarray:
     """The readings the model expects at rest: a dataset's rows at pose 0 (averaged), or a sensor's
     physics at pose 0 in its ``gmr`` transfer (volts)."""
     if spec.lower().endswith(".csv"):
+        from fitgen.physics.pose import contact_poses
+
         ds = load_dataset(spec, min_rows=1)
-        at_rest = np.all(ds.targets == 0, axis=1)
+        if ds.meta.get("units", "V") != "V":
+            raise InputError(f"--rest {spec}: its readings are in {ds.meta['units']}; the ADCs give volts (a dataset "
+                             "in V: tactile-host capture, or fitgen simulate --transfer gmr)")
+        # pose 0, or a schedule's rest row lifted off the skin (the magnet rests either way)
+        at_rest = np.all(contact_poses(ds.poses()) == 0, axis=1)
         if not at_rest.any():
-            raise InputError(f"--rest {spec}: the dataset has no row at pose 0 (every pose column 0)")
+            raise InputError(f"--rest {spec}: the dataset has no row at rest (every pose column 0, or dz lifted "
+                             "off the skin)")
         ref = ds.inputs[at_rest].mean(axis=0)
     else:
         sensor = load_sensor(spec).with_transfer("gmr")

@@ -170,29 +170,11 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     same = model.sha256 == h.get("model")
     if temp_comp and no_temp_comp:
         raise InputError("give --temp-comp or --no-temp-comp, not both")
-    tc = None
-    if temp_comp:
-        tc = load_tempcomp(temp_comp)
-    elif not no_temp_comp and h.get("temp_comp"):
-        d = h["temp_comp"]
-        tc = TempComp(float(d["t0"]), np.array(d["offset_v_per_degc"]), np.array(d["gain_per_degc"]), d.get("fit", {}))
-    if tc is not None and not np.isfinite(run.temp).any():
-        raise InputError("temperature compensation needs the run's temperatures, and this run recorded none "
-                         "(record with --temperature)")
-    tare = None if h.get("tare") is None else np.array(h["tare"], dtype=float)
-    az_rec = h.get("auto_zero")
-    use_az = bool(az_rec) if auto_zero is None else auto_zero
-    az = None
-    if use_az:
-        ref, noise = h.get("reference"), h.get("noise")
-        if ref is None or noise is None:
-            raise InputError("auto-zero needs the rest readings and the noise floor, which a run records only when "
-                             "it was made with --tare or --auto-zero")
-        settings = AutoZeroSettings(**{k: az_rec[k] for k in AutoZeroSettings.__dataclass_fields__}) if az_rec \
-            else AutoZeroSettings()
-        start = az_rec["start"] if az_rec else (None if tare is None else tare.tolist())
-        az = AutoZero(np.array(ref), float(noise), model.output_names, zero=start, settings=settings)
-    corrections = Corrections(tare, tc, az)
+    try:
+        corrections = _corrections(run, model, temp_comp, no_temp_comp, auto_zero)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:  # a header edited by hand
+        raise InputError(f"the run's header records corrections that are not as tactile-host read writes them "
+                         f"({type(exc).__name__}: {exc})") from None
     header = {**{k: v for k, v in h.items() if k != "run"}, "model": model.sha256,
               "outputs": list(model.output_names), **corrections.describe(), "model_file": model.to_dict()}
     engine = PythonEngine(model)
@@ -206,6 +188,42 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
         v_all[i], out_all[i], st_all[i] = v, out, status
     if not same:
         notes.append(f"the run was recorded with model {str(h.get('model'))[:12]}")
+    az = corrections.autozero
     return ReplayResult(run.t, run.raw, run.temp, v_all, out_all, st_all, run.out,
                         tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes,
                         header)
+
+
+def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zero) -> Corrections:
+    """The corrections to replay ``run`` with: a compensation file or the header's, its tare, its auto-zero."""
+    h, n = run.header, run.n_inputs
+    tc = None
+    if temp_comp:
+        tc = load_tempcomp(temp_comp)
+    elif not no_temp_comp and h.get("temp_comp"):
+        d = h["temp_comp"]
+        tc = TempComp(float(d["t0"]), np.array(d["offset_v_per_degc"], dtype=float),
+                      np.array(d["gain_per_degc"], dtype=float), d.get("fit", {}))
+    if tc is not None and (tc.n != n or tc.gain.shape != tc.offset.shape):
+        raise InputError(f"the temperature compensation has {tc.n} elements; the run has {n} readings per sample")
+    if tc is not None and not np.isfinite(run.temp).any():
+        raise InputError("temperature compensation needs the run's temperatures, and this run recorded none "
+                         "(a thermistor: temp= in read's --adc)")
+    tare = None if h.get("tare") is None else np.array(h["tare"], dtype=float)
+    if tare is not None and tare.shape != (n,):
+        raise InputError(f"the run's header records a tare of {tare.size} offsets for {n} readings")
+    az_rec = h.get("auto_zero")
+    use_az = bool(az_rec) if auto_zero is None else auto_zero
+    az = None
+    if use_az:
+        ref, noise = h.get("reference"), h.get("noise")
+        if ref is None or noise is None:
+            raise InputError("auto-zero needs the rest readings and the noise floor, which a run records only when "
+                             "it was made with --tare or --auto-zero")
+        settings = AutoZeroSettings(**{k: az_rec[k] for k in AutoZeroSettings.__dataclass_fields__}) if az_rec \
+            else AutoZeroSettings()
+        start = az_rec["start"] if az_rec else (None if tare is None else tare.tolist())
+        if np.asarray(ref, dtype=float).shape != (n,):
+            raise InputError(f"the run's header records {np.size(ref)} rest readings for {n} readings")
+        az = AutoZero(np.array(ref, dtype=float), float(noise), model.output_names, zero=start, settings=settings)
+    return Corrections(tare, tc, az)

@@ -295,13 +295,13 @@ def simulated_bus(cmap: ChannelMap, sensor: Sensor, pose, *, clock, noise: float
     values = None
     if offsets:
         values = parse_numbers(offsets)
-        if values is None:
-            raise InputError(f"--sim-offsets {offsets!r}: not numbers")
+        if values is None or not all(np.isfinite(values)):
+            raise InputError(f"--sim-offsets {offsets!r}: not finite numbers")
         if len(values) != sensor.n_elements:
             raise InputError(f"--sim-offsets: give {sensor.n_elements} numbers (V), got {len(values)}")
     specs = [parse_fault(f) for f in faults]
-    if noise < 0:
-        raise InputError(f"--sim-noise must be >= 0 V, got {noise}")
+    if not (np.isfinite(noise) and noise >= 0):
+        raise InputError(f"--sim-noise must be a finite number >= 0 V, got {noise}")
     bus = SimBus.for_channel_map(cmap, sensor, pose, clock=clock, noise=noise, offsets=values, seed=seed,
                                  motion=motion, drift=drift, thermistor=thermistor)
     for f in specs:

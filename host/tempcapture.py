@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.base.parse import parse_numbers, parse_positive
+from fitgen.base.parse import parse_numbers
 from fitgen.physics.dataset import load_dataset
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
@@ -27,9 +27,25 @@ def parse_temperatures(text: str) -> list[float]:
     vals = parse_numbers(text)
     if vals is None:
         raise InputError(f"--temperature {text!r}: give temperatures in degC, e.g. 15,25,35")
-    if len(vals) < 2 or len(set(vals)) != len(vals) or not all(math.isfinite(v) and -40 <= v <= 125 for v in vals):
+    if len(vals) < 2 or not all(math.isfinite(v) and -40 <= v <= 125 for v in vals):
         raise InputError(f"--temperature {text!r}: give two or more different temperatures in -40..125 degC")
+    if len({round(v, 1) for v in vals}) != len(vals):  # the compensation tells levels apart to 0.1 degC
+        raise InputError(f"--temperature {text!r}: give temperatures at least 0.1 degC apart")
     return vals
+
+
+def parse_t0(text: str | None, temps: list[float]) -> float | None:
+    """``--t0``: one of the temperatures captured (the readings there are the compensation's base), or None."""
+    if text is None:
+        return None
+    try:
+        t0 = float(text)
+    except ValueError:
+        t0 = math.nan
+    if not any(math.isfinite(t0) and round(t0, 1) == round(T, 1) for T in temps):
+        raise InputError(f"--t0 {text}: give one of the temperatures captured ({', '.join(f'{T:g}' for T in temps)}):"
+                         " the readings taken there are what the others are compensated to")
+    return t0
 
 
 def capture_temperatures(args, prog: str):
@@ -37,9 +53,12 @@ def capture_temperatures(args, prog: str):
     fitted and saved; progress goes to stderr after ``prog``. The TempComp, or None when the input closes at a
     prompt; CaptureFailed when a fault stops it (the temperatures done are kept)."""
     temps = parse_temperatures(args.temperature)
+    t0 = parse_t0(args.t0, temps)
     samples, spread, tries, settle, retries = capture_numbers(args)
     schedule = load_schedule(args.poses)
-    if len(schedule.poses) < 2:
+    # a pose visited twice is one pose to the compensation: its gain needs two different ones
+    pose_of_row = np.unique(schedule.poses, axis=0, return_inverse=True)[1].ravel()
+    if pose_of_row.max() < 1:
         print(f"{prog}: note: one pose per temperature gives offsets only (gain needs two poses)", file=sys.stderr)
     cmap = channel_map_from_args(args)
     tin = temperature_input(args.adc, cmap, args.thermistor)
@@ -70,14 +89,19 @@ def capture_temperatures(args, prog: str):
             wait = trigger_waiter(args.trigger, schedule) if args.trigger else None
             if wait is None and not args.simulate:
                 wait = enter_waiter(schedule)
+            # read now, at this level (not a value kept from the last one); a level captured by an earlier run
+            # keeps the reading its meta recorded then
+            now = thermo.read(fresh=True) if thermo is not None else float("nan")
             capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
                     set_pose=bus.set_pose if args.simulate else None, settle=settle, clock=clock,
                     meta={"adc": cmap.describe(), "temperature_set": T,
+                          "thermistor_degc": now if np.isfinite(now) else None,
                           "source": f"simulated {args.sensor}" if args.simulate else "hardware"})
-            measured = thermo.read() if thermo is not None else float("nan")
             ds = load_dataset(path, min_rows=1)
+            kept = ds.meta.get("thermistor_degc")
+            measured = float(kept) if isinstance(kept, (int, float)) and thermo is not None else now
             rows.append(ds.inputs)
-            pose_ids.append(np.arange(ds.n_rows))
+            pose_ids.append(pose_of_row[:ds.n_rows])
             row_temps.append(np.full(ds.n_rows, measured if np.isfinite(measured) else T))
             files.append(str(path))
             print(f"{prog}: {ds.n_rows} poses at {T:g} degC"
@@ -87,8 +111,7 @@ def capture_temperatures(args, prog: str):
                             "resume") from exc
     finally:
         bus.close()
-    tc = fit_tempcomp(np.vstack(rows), np.concatenate(pose_ids), np.concatenate(row_temps),
-                      t0=parse_positive(args.t0, "--t0", zero=True) if args.t0 is not None else None)
+    tc = fit_tempcomp(np.vstack(rows), np.concatenate(pose_ids), np.concatenate(row_temps), t0=t0)
     tc.info["captures"] = files
     dest = args.temp_comp_output or str(out.with_name(out.stem + ".tempcomp.json"))
     tc.save(dest)

@@ -128,9 +128,10 @@ class Thermometer:
         self.last_t = -math.inf
         self.value = math.nan
 
-    def read(self) -> float:
+    def read(self, fresh: bool = False) -> float:
+        """Degrees C; the last value when read less than READ_EVERY s ago, unless ``fresh``."""
         now = self.clock.monotonic()
-        if now - self.last_t >= READ_EVERY:
+        if fresh or now - self.last_t >= READ_EVERY:
             self.last_t = now
             self.value = self.tin.degc(self.driver.read(self.tin.input))
         return self.value
@@ -198,6 +199,12 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
     levels = np.unique(np.round(temps, 1))
     if levels.size < 2:
         raise InputError("the capture holds one temperature: capture at two or more (--temperature T1,T2,...)")
+    if t0 is not None:  # the level it names, as measured: the readings there are the compensation's base
+        near = float(levels[np.argmin(np.abs(levels - float(t0)))])
+        if not abs(near - float(t0)) <= 0.5:
+            raise InputError(f"t0 {t0:g} degC is not a temperature of the capture "
+                             f"({', '.join(f'{v:g}' for v in levels)}): the readings there are the compensation's base")
+        t0 = near
     t0 = float(t0) if t0 is not None else float(levels[np.argmin(np.abs(levels - np.median(temps)))])
     n = readings.shape[1]
     base = np.full(readings.shape, np.nan)

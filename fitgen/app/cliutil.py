@@ -42,6 +42,14 @@ def count(text: str) -> int:
     return n
 
 
+def noise_volts(text: str) -> float:
+    """An argparse type: a noise figure, a finite number >= 0."""
+    x = finite(text)
+    if x < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {x:g}")
+    return x
+
+
 def tcp_port(text: str) -> int:
     """An argparse type: a TCP port number, 1..65535."""
     n = count(text)
@@ -106,3 +114,30 @@ class StopFlag:
     def __exit__(self, *exc):
         for s, h in self._old.items():
             signal.signal(s, h)
+
+
+WRITES = ("output", "record", "temp_comp_output")  # the files a command writes
+READS = ("model", "run", "tempcomp", "adc", "temp_comp", "rest", "poses", "data", "replay", "sensor", "sim_sensor",
+         "capture")  # and those it reads: never one of the written
+
+
+def check_written(args, files=()) -> None:
+    """Every file a command writes, checked before the work: no folder, none of its inputs, no two alike.
+    ``files``: the commands whose ``-o`` is a file (for the others it is a folder)."""
+    import os
+    from pathlib import Path
+
+    from fitgen.base.fileio import output_file
+
+    inputs = [p for p in (getattr(args, n, None) for n in READS) if isinstance(p, str) and Path(p).is_file()]
+    written = []
+    for name in WRITES:
+        path = getattr(args, name, None)
+        if not isinstance(path, str) or path == "-" or (name == "output" and args.func not in files):
+            continue
+        flag = "-o" if name == "output" else f"--{name.replace('_', '-')}"
+        output_file(path, inputs, flag)
+        for other_flag, other in written:
+            if os.path.abspath(other) == os.path.abspath(path):
+                raise InputError(f"{other_flag} and {flag} name the same file {path}: give two")
+        written.append((flag, path))

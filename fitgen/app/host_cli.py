@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import sys
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, command_main, count
+from fitgen.app.options import map_options
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, check_written, command_main, count, noise_volts
 from fitgen.base.errors import InputError
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 
-from host.channelmap import ADS1115_PGA, ADS1115_RATES, MODES
 from host.stagesettings import APPROACH
 
 
@@ -73,10 +73,11 @@ def cmd_read(args) -> int:
     from host.readout import LineFormat, Readout
     from host.session import ReadoutSession
 
-    s = ReadoutSession(args, "tactile-host read")
-    sink = None
+    s = sink = None
     try:
+        s = ReadoutSession(args, "tactile-host read")  # a chip silent during its tare: one line, as later
         fmt = LineFormat(args.format, s.model.n_inputs, s.model.output_names)
+        record = s.record(args.record)  # before -o is opened: a record that cannot be made leaves -o as it was
         if args.output:
             try:
                 sink = open(args.output, "w")
@@ -85,7 +86,7 @@ def cmd_read(args) -> int:
         out = sink or sys.stdout
         out.write(fmt.header)
         reader = Readout(s.array, s.engine, out, fmt, clock=s.clock, corrections=s.corrections,
-                         thermometer=s.thermometer, record=s.record(args.record))
+                         thermometer=s.thermometer, record=record)
         with StopFlag() as stop:
             stats = reader.run(rate=s.rate, count=s.count, duration=s.duration, stop=stop)
         how = "stopped" if stop.stopped else "done"
@@ -97,7 +98,8 @@ def cmd_read(args) -> int:
         print(f"tactile-host read: error: {exc}; {where}", file=sys.stderr)
         return EXIT_CHECK_FAILED
     finally:
-        s.close()
+        if s is not None:
+            s.close()
         if sink is not None:
             sink.close()
 
@@ -112,9 +114,9 @@ def cmd_view(args) -> int:
         return _view_replay(args)
     if args.model is None or args.adc is None:
         raise InputError("view needs --model and --adc (or --replay RUN.jsonl)")
-    s = ReadoutSession(args, "tactile-host view")
-    server = None
+    s = server = None
     try:
+        s = ReadoutSession(args, "tactile-host view")
         hub = LiveHub(view_meta(s.model.n_inputs, s.model.output_names, s.model.sha256, s.source, s.rate))
         server = LiveServer(hub, args.host, args.port)
         server.start()
@@ -132,7 +134,8 @@ def cmd_view(args) -> int:
     finally:
         if server is not None:
             server.stop()
-        s.close()
+        if s is not None:
+            s.close()
 
 
 def _view_replay(args) -> int:
@@ -269,20 +272,6 @@ def cmd_arduino_build(args) -> int:
     return 0
 
 
-def _map_options(p, required: bool = True) -> None:
-    p.add_argument("--adc", required=required, metavar="SPEC|FILE.toml",
-                   help="channel map: e.g. ads1115@0x48:0-3,ads1115@0x49:0-3 or ads7828@0x48, or a TOML file; "
-                        "temp=CHIP@ADDRESS:INPUT adds a thermistor, e.g. ...,temp=ads1115@0x4a:0")
-    p.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",
-                   help="the thermistor's NTC divider (default beta=3950,r25=10000,series=10000,vref=3.3)")
-    p.add_argument("--pga", type=float, default=4.096, choices=ADS1115_PGA, metavar="V",
-                   help="ADS1115 full scale +-V: 6.144, 4.096 (default), 2.048, 1.024, 0.512, 0.256")
-    p.add_argument("--data-rate", type=int, default=860, choices=ADS1115_RATES, metavar="SPS",
-                   help="ADS1115 samples per second: 8..860 (default 860)")
-    p.add_argument("--mode", default="single", choices=MODES, help="ADS1115 conversion mode (default single)")
-    p.add_argument("--vref", default="3.3", help="ADS7828 reference: external volts (default 3.3) or 'internal' (2.5 V)")
-
-
 def _readout_options(p) -> None:
     """Options read and view share (beside the ADC's)."""
     p.add_argument("--rate", help="samples per second (default: as fast as the converters allow)")
@@ -315,12 +304,12 @@ def _readout_options(p) -> None:
 
 
 def _adc_options(p, required: bool = True) -> None:
-    _map_options(p, required)
+    map_options(p, required)
     p.add_argument("--bus", type=int, help="I2C bus number: /dev/i2c-N (default 1, or the map file's bus)")
     p.add_argument("--retries", default="5", help="tries per I2C transfer before a chip counts as silent (default 5)")
     p.add_argument("--sensor", default="paper",
                    help="sensor preset or TOML file: what --simulate simulates, and the rest readings for --tare")
-    p.add_argument("--sim-noise", type=float, help="simulated element noise, V rms (default: the sensor file's)")
+    p.add_argument("--sim-noise", type=noise_volts, help="simulated element noise, V rms (default: the sensor file's)")
     p.add_argument("--sim-offsets", metavar="V1,..,VN", help="simulated offset of each element, V")
     p.add_argument("--sim-fault", action="append", metavar="SPEC",
                    help="simulated fault: nack|timeout|stuck[:ADDR]:RATE or silent:ADDR[:AFTER] (repeatable)")
@@ -351,7 +340,7 @@ def build_parser() -> Parser:
     pb = sub.add_parser("pi-build", help="the readout in C for a Raspberry Pi: drivers, channel map and model "
                                          "over i2c-dev, built with arm-linux-gnueabihf-gcc")
     pb.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
-    _map_options(pb)
+    map_options(pb)
     pb.add_argument("--precision", default="float", choices=("float", "double"))
     pb.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
     pb.add_argument("--cc", default="arm-linux-gnueabihf-gcc -static",
@@ -364,7 +353,7 @@ def build_parser() -> Parser:
     ab = sub.add_parser("arduino-build", help="an Arduino library: the model, the ADC drivers over Wire, the channel "
                                               "map and the ReadPose example; built for the Uno to check it fits")
     ab.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
-    _map_options(ab)
+    map_options(ab)
     ab.add_argument("--precision", default="float", choices=("float", "fixed", "double"), help="double is refused")
     ab.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
     build = ab.add_mutually_exclusive_group()
@@ -499,5 +488,10 @@ def build_parser() -> Parser:
     return p
 
 
+def _check(args) -> None:
+    # -o is a file for these; a folder for pi-build, arduino-build and tempcomp-c
+    check_written(args, files=(cmd_read, cmd_view, cmd_replay, cmd_capture))
+
+
 def main(argv=None) -> int:
-    command_main(build_parser, argv, "tactile-host")
+    command_main(build_parser, argv, "tactile-host", _check)

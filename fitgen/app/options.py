@@ -26,3 +26,22 @@ def noise_of(value: str, sensor) -> float:
         raise InputError(f"--noise must be a finite number >= 0, got {value}") from None
     except ValueError:
         raise InputError(f"--noise must be a number or 'sensor', got {value!r}") from None
+
+
+def map_options(p, required: bool = True) -> None:
+    """The channel map's options (--adc and the ADCs' settings), as read, view, capture and the builds take
+    them."""
+    from host.channelmap import ADS1115_PGA, ADS1115_RATES, MODES
+
+    p.add_argument("--adc", required=required, metavar="SPEC|FILE.toml",
+                   help="channel map: e.g. ads1115@0x48:0-3,ads1115@0x49:0-3 or ads7828@0x48, or a TOML file; "
+                        "temp=CHIP@ADDRESS:INPUT adds a thermistor, e.g. ...,temp=ads1115@0x4a:0")
+    p.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",
+                   help="the thermistor's NTC divider (default beta=3950,r25=10000,series=10000,vref=3.3)")
+    p.add_argument("--pga", type=float, default=4.096, choices=ADS1115_PGA, metavar="V",
+                   help="ADS1115 full scale +-V: 6.144, 4.096 (default), 2.048, 1.024, 0.512, 0.256")
+    p.add_argument("--data-rate", type=int, default=860, choices=ADS1115_RATES, metavar="SPS",
+                   help="ADS1115 samples per second: 8..860 (default 860)")
+    p.add_argument("--mode", default="single", choices=MODES, help="ADS1115 conversion mode (default single)")
+    p.add_argument("--vref", default="3.3",
+                   help="ADS7828 reference: external volts (default 3.3) or 'internal' (2.5 V)")

@@ -21,7 +21,7 @@ def folder_of(path: str | os.PathLike) -> Path:
     return folder
 
 
-def output_file(path: str | os.PathLike, inputs=()) -> Path:
+def output_file(path: str | os.PathLike, inputs=(), flag: str = "-o") -> Path:
     """``path`` checked as a file to write before the work: a name, not a folder, in a folder that exists, and
     none of the command's ``inputs`` (which it would overwrite); InputError otherwise."""
     path = Path(path)
@@ -30,7 +30,7 @@ def output_file(path: str | os.PathLike, inputs=()) -> Path:
     folder_of(path)
     for given in inputs:
         if given is not None and path.exists() and Path(given).exists() and os.path.samefile(given, path):
-            raise InputError(f"-o {path} is the input {given}: writing it would destroy it; give another name")
+            raise InputError(f"{flag} {path} is the input {given}: writing it would destroy it; give another name")
     return path
 
 

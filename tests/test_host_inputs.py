@@ -1,0 +1,117 @@
+"""tactile-host as users get it wrong, and the temperature capture's bookkeeping: one line and exit status 2 (1 for
+a device fault), no file destroyed, no compensation fitted from the wrong numbers."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from conftest import TWO_CHIPS, assert_one_line_error, run_cli
+
+WITH_TEMP = TWO_CHIPS + ",temp=ads1115@0x4a:0"
+SCHEDULE = "dx,dy,dz\n0,0,0.2\n2,-2,0\n-2,-2,0\n0,-2,-2\n2,2,-2\n-2,2,-2\n"
+
+
+def read(model_file, *extra, cwd=None):
+    return run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "dx=1",
+                   "--count", "2", *extra, cwd=cwd)
+
+
+def test_no_output_is_an_input_or_another_output(model_file, tmp_path):
+    model = tmp_path / "m.json"
+    shutil.copy(model_file, model)
+    (tmp_path / "s.csv").write_text(SCHEDULE)
+    before = model.read_bytes()
+    for argv, said in ((["-o", str(model)], f"-o {model} is the input"),
+                       (["--record", str(model)], f"--record {model} is the input"),
+                       (["-o", str(tmp_path / "a"), "--record", str(tmp_path / "a")], "-o and --record name the same")):
+        assert_one_line_error(read(str(model), *argv), 2, said)
+    assert model.read_bytes() == before and not (tmp_path / "a").exists()
+    proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", TWO_CHIPS, "--simulate",
+                   "-o", str(tmp_path / "s.csv"))
+    assert_one_line_error(proc, 2, "is the input")
+    assert (tmp_path / "s.csv").read_text() == SCHEDULE
+
+
+def test_a_record_that_cannot_be_made_leaves_the_output_as_it_was(model_file, tmp_path):
+    (tmp_path / "keep.csv").write_text("precious\n")
+    assert_one_line_error(read(model_file, "-o", str(tmp_path / "keep.csv"), "--record",
+                               str(tmp_path / "no" / "r.jsonl")), 2, "does not exist")
+    assert (tmp_path / "keep.csv").read_text() == "precious\n"
+
+
+@pytest.mark.parametrize("option, said", [(["--sim-noise", "nan"], "not a finite number"),
+                                          (["--sim-offsets", "nan,0,0,0,0,0,0,0"], "not finite numbers"),
+                                          (["--sim-drift", "ramp=nan"], "ramp must be a finite number"),
+                                          (["--sim-drift", "seed=-1"], "seed must be a whole number >= 0")])
+def test_simulation_options_that_are_not_numbers_are_one_line(model_file, option, said):
+    assert_one_line_error(read(model_file, *option), 2, said)
+
+
+def test_a_chip_silent_during_the_tare_is_one_line_and_status_1(model_file):
+    proc = read(model_file, "--tare", "--sim-fault", "silent:0x49:40")
+    assert_one_line_error(proc, 1, "ads1115@0x49 stays silent")
+    assert "stopped before the first sample" in proc.stderr
+
+
+def test_rest_readings_come_in_volts_and_from_a_schedules_lifted_row(model_file, tmp_path):
+    assert run_cli("fitgen", "simulate", "--sensor", "paper", "--grid", "dx=0,1", "-o",
+                   str(tmp_path / "mt.csv")).returncode == 0
+    assert_one_line_error(read(model_file, "--tare", "--rest", str(tmp_path / "mt.csv")), 2,
+                          "its readings are in mT; the ADCs give volts")
+    (tmp_path / "s.csv").write_text(SCHEDULE)  # its rest row is lifted 0.2 mm off the skin, no row at pose 0
+    assert run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", TWO_CHIPS, "--simulate",
+                   "-o", str(tmp_path / "lab.csv")).returncode == 0
+    proc = read(model_file, "--tare", "--rest", str(tmp_path / "lab.csv"))
+    assert proc.returncode == 0, proc.stderr
+
+
+@pytest.mark.parametrize("edit", [lambda h: h.__setitem__("auto_zero", True),
+                                  lambda h: h.__setitem__("tare", [0.0, 0.0, 0.0]),
+                                  lambda h: h.__setitem__("temp_comp", {"t0": 25})])
+def test_replay_of_a_header_edited_by_hand_is_one_line(model_file, tmp_path, edit):
+    run = tmp_path / "az.jsonl"
+    assert read(model_file, "--tare", "--auto-zero", "--record", str(run)).returncode == 0
+    lines = run.read_text().splitlines()
+    header = json.loads(lines[0])
+    edit(header)
+    run.write_text("\n".join([json.dumps(header)] + lines[1:]) + "\n")
+    proc = run_cli("tactile-host", "replay", str(run))
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr, \
+        proc.stderr
+
+
+def capture_t(tmp_path, schedule, temps, *extra, out="cap.csv"):
+    (tmp_path / "s.csv").write_text(schedule)
+    return run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", WITH_TEMP, "--simulate",
+                   "--temperature", temps, "-o", str(tmp_path / out), *extra)
+
+
+def test_temperature_options_are_checked_before_the_capture(tmp_path):
+    assert_one_line_error(capture_t(tmp_path, SCHEDULE, "15,25,35", "--t0", "20"), 2,
+                          "--t0 20: give one of the temperatures captured (15, 25, 35)")
+    assert_one_line_error(capture_t(tmp_path, SCHEDULE, "25,25.04"), 2, "at least 0.1 degC apart")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.csv"]
+
+
+def test_a_resumed_level_keeps_its_own_temperature_and_a_pose_twice_is_one_pose(tmp_path):
+    proc = capture_t(tmp_path, SCHEDULE, "15,25,35", "--t0", "35")
+    assert proc.returncode == 0, proc.stderr
+    first = json.loads((tmp_path / "cap.tempcomp.json").read_text())
+    for stale in tmp_path.glob("cap.T35.csv*"):
+        stale.unlink()
+    proc = capture_t(tmp_path, SCHEDULE, "15,25,35", "--t0", "35")
+    assert proc.returncode == 0, proc.stderr
+    assert "6 poses at 25 degC (thermistor 25.00 degC)" in proc.stderr  # not the last level's 15
+    again = json.loads((tmp_path / "cap.tempcomp.json").read_text())
+    assert again["t0"] == first["t0"] == 35
+    # the physics explains the rows as well as on the first run (a level labelled with another's temperature
+    # left 14 mV rms unexplained)
+    assert max(again["fit"]["residual_rms_v"]) < 2 * max(first["fit"]["residual_rms_v"]) < 1e-3
+    # a schedule that visits its one pose twice: offsets only, not a gain fitted from two equal rows
+    proc = capture_t(tmp_path, "dx,dy,dz\n0,0,0.2\n0,0,0.2\n", "15,25", out="tw.csv")
+    assert proc.returncode == 0, proc.stderr
+    tw = json.loads((tmp_path / "tw.tempcomp.json").read_text())
+    assert not tw["fit"]["gain_fitted"] and np.all(np.asarray(tw["gain_per_degc"]) == 0)
+    assert np.max(np.abs(tw["offset_v_per_degc"])) < 0.01
