@@ -107,6 +107,18 @@ def measure(array: AdcArray, n: int) -> np.ndarray:
     return np.vstack([array.read_volts() for _ in range(n)])
 
 
+def _wait(clock, until: float, stop, end: float | None) -> bool:
+    """Sleep until ``until`` in slices, so that a stop or the run's ``end`` ends the wait; False when one did."""
+    while (now := clock.monotonic()) < until:
+        if stop() or (end is not None and now >= end):
+            return False
+        clock.sleep(min(WAIT_SLICE, until - now) if end is None else min(WAIT_SLICE, until - now, end - now))
+    return not stop() and (end is None or clock.monotonic() < end)
+
+
+WAIT_SLICE = 0.1  # s: how late a Ctrl-C during a slow --rate's wait is seen
+
+
 @dataclass
 class Tare:
     measured: np.ndarray  # mean rest readings
@@ -262,9 +274,9 @@ class Readout:
                 if duration is not None and now - t0 >= duration:
                     break
                 if period:
-                    if now < next_t:
-                        clock.sleep(next_t - now)
-                    elif now - next_t > period:
+                    if now < next_t and not _wait(clock, next_t, stop, None if duration is None else t0 + duration):
+                        break  # stopped, or the duration ended, during the wait: no sample after it
+                    if now - next_t > period:
                         st.late += 1
                         next_t = now
                     next_t += period

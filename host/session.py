@@ -65,6 +65,22 @@ def parse_rest_band(text: str) -> tuple[float, float]:
     return vals[0], vals[1]
 
 
+MIN_AUTOZERO_TARE = 5  # samples whose spread is the noise floor auto-zero tests rest against
+
+
+def check_depends(args) -> None:
+    """InputError for an option given without the one it depends on (it would be ignored without a word)."""
+    needs = ((args.precision != "double", "--precision", "--engine c", args.engine == "c"),
+             (args.cc != "gcc", "--cc", "--engine c", args.engine == "c"),
+             (args.rest is not None, "--rest", "--tare or --auto-zero", args.tare or args.auto_zero),
+             (args.tare_samples != "50", "--tare-samples", "--tare or --auto-zero", args.tare or args.auto_zero),
+             (args.rest_band != "0.08,1.5", "--rest-band", "--auto-zero", args.auto_zero),
+             (args.rest_hold != "1", "--rest-hold", "--auto-zero", args.auto_zero))
+    for given, option, needed, present in needs:
+        if given and not present:
+            raise InputError(f"{option} goes with {needed} (without it, it would be ignored)")
+
+
 class ReadoutSession:
     """What ``read`` and ``view`` share: model, channel map, bus (or simulated bus), ADC array, engine and
     the corrections (tare, auto-zero, temperature), built from the options and closed in one place."""
@@ -75,6 +91,10 @@ class ReadoutSession:
         self.count = parse_positive(args.count, "--count", integer=True) if args.count is not None else None
         self.duration = parse_positive(args.duration, "--duration") if args.duration is not None else None
         tare_n = parse_positive(args.tare_samples, "--tare-samples", integer=True)
+        check_depends(args)
+        if args.auto_zero and tare_n < MIN_AUTOZERO_TARE:
+            raise InputError(f"--auto-zero takes its noise floor from the tare's spread: give --tare-samples "
+                             f"{MIN_AUTOZERO_TARE} or more (got {tare_n:g})")
         retries = parse_positive(args.retries, "--retries", integer=True)
         pose, motion = pose_or_motion(args.simulate) if args.simulate is not None else (None, None)
         cmap0 = channel_map_from_args(args)

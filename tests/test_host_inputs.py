@@ -115,3 +115,18 @@ def test_a_resumed_level_keeps_its_own_temperature_and_a_pose_twice_is_one_pose(
     tw = json.loads((tmp_path / "tw.tempcomp.json").read_text())
     assert not tw["fit"]["gain_fitted"] and np.all(np.asarray(tw["gain_per_degc"]) == 0)
     assert np.max(np.abs(tw["offset_v_per_degc"])) < 0.01
+
+
+@pytest.mark.parametrize("option, said", [(["--precision", "float"], "--precision goes with --engine c"),
+                                          (["--rest", "paper"], "--rest goes with --tare or --auto-zero"),
+                                          (["--rest-hold", "5"], "--rest-hold goes with --auto-zero"),
+                                          (["--auto-zero", "--tare-samples", "1"], "--tare-samples 5 or more")])
+def test_an_option_without_the_one_it_needs_is_refused(model_file, option, said):
+    assert_one_line_error(read(model_file, *option), 2, said)
+
+
+def test_a_slow_rate_takes_no_sample_after_the_duration(model_file, tmp_path):
+    proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "dx=1",
+                   "--rate", "0.1", "--duration", "1", "-o", str(tmp_path / "s.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert len((tmp_path / "s.csv").read_text().splitlines()) == 2  # the header and the sample at t = 0 only
