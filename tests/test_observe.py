@@ -1,8 +1,9 @@
 import numpy as np
 from scipy.optimize import least_squares
 
-from fitgen.physics.observe import analyse, cramer_rao, jacobian, observe
-from fitgen.physics.pose import field_readings
+from fitgen.physics.observe import (DEFAULT_ACCURACY, INSIDE, ObserveReport, analyse, corner_poses, cramer_rao,
+                                    jacobian, observe)
+from fitgen.physics.pose import POSE_NAMES, field_readings
 from fitgen.physics.scenes import PRESETS
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.transfer import apply_transfer
@@ -76,13 +77,14 @@ def test_fewer_readings_than_components_have_no_finite_bound():
 
 def test_verdicts_for_the_paper_layout():
     rep = observe(PAPER, PRESETS["full"].ranges)
-    assert len(rep.results) == 33  # rest + 2^5 corners
+    assert len(rep.results) == 33 + INSIDE and rep.inside == INSIDE  # rest + 2^5 corners, poses inside
     assert rep.unresolved() == ["dx", "dy", "thx", "thy"]  # at rest, jointly with tilt
     words = "\n".join(rep.verdicts())
     assert "dz: resolvable" in words and "thx: NOT resolvable" in words
     slide = observe(PAPER, PRESETS["slide"].ranges, ("dx", "dy", "dz"))
     assert slide.unresolved() == []
-    assert len(slide.results) == 9  # rest + 2^3 corners (tilt held at 0)
+    assert len(slide.results) == 9 + INSIDE  # rest + 2^3 corners (tilt held at 0)
+    assert len(slide.table().splitlines()) == 2 + 9  # the corners tabled, the poses inside judged
 
 
 def test_cli_table_and_words():
@@ -94,3 +96,13 @@ def test_cli_table_and_words():
     assert proc.returncode == 0 and "dz: NOT resolvable" in proc.stdout
     assert_one_line_error(run_cli("fitgen", "observe", "--accuracy", "dz=abc"), contains="not a number")
     assert_one_line_error(run_cli("fitgen", "observe", "--scene", "nosuch"), contains="scene")
+
+
+def test_a_layout_blind_inside_the_box_is_not_resolvable_though_every_corner_is():
+    """The two rings in gmr saturate inside the full box (infinite bounds at about a third of random poses there)
+    while every corner sees: the verdict, and fit's scene check with it, must look inside."""
+    two = load_sensor("two-rings").with_transfer("gmr")
+    corners = ObserveReport(POSE_NAMES, two.noise, two.units, dict(DEFAULT_ACCURACY),
+                            analyse(two, corner_poses(PRESETS["full"].ranges), two.noise, POSE_NAMES))
+    assert corners.unresolved() == []
+    assert observe(two, PRESETS["full"].ranges).unresolved() == list(POSE_NAMES)

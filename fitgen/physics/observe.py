@@ -106,6 +106,7 @@ class ObserveReport:
     units: str
     accuracy: dict
     results: list[PoseObservability]
+    inside: int = 0  # the last results: random poses inside the box (judged, not tabled)
 
     @property
     def worst(self) -> np.ndarray:
@@ -118,7 +119,7 @@ class ObserveReport:
         comps = self.components
         head = ["pose (dx dy dz thx thy)", "s_min", "s_2nd"] + [f"{c} [{u}]" for c, u in zip(comps, units_of(comps))]
         rows = []
-        for r in self.results:
+        for r in self.results[:len(self.results) - self.inside]:
             pose = " ".join(f"{v:g}" for v in r.pose)
             s = sorted(r.singular_values)
             second = s[1] if len(s) > 1 else float("nan")
@@ -139,7 +140,8 @@ class ObserveReport:
             worst = self.worst[j]
             if not bad:
                 out.append(f"{c}: resolvable: Cramer-Rao bound at most {worst:.3g} {unit} "
-                           f"(required {need:g} {unit}) at rest and every corner.")
+                           f"(required {need:g} {unit}) at rest and every corner"
+                           + (f", and at {self.inside} random poses inside the box." if self.inside else "."))
                 continue
             where = "at rest" if np.all(bad[0].pose == 0) else f"at {' '.join(f'{v:g}' for v in bad[0].pose)}"
             r = bad[0]
@@ -164,9 +166,16 @@ def _fmt_bound(b: float) -> str:
 
 def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | None = None,
             accuracy: dict | None = None) -> ObserveReport:
-    """Observability at rest and at the corners of the pose box ``ranges``."""
+    """Observability at rest, at the corners of the pose box ``ranges`` and at INSIDE random poses within it (a
+    layout can be blind inside the box where it sees at every corner: a saturating element, say)."""
+    from fitgen.physics.simulate import pose_rng, random_poses
+
     noise = sensor.noise if noise is None else noise
     acc = dict(DEFAULT_ACCURACY)
     acc.update(accuracy or {})
-    results = analyse(sensor, corner_poses(ranges), noise, tuple(components))
-    return ObserveReport(tuple(components), noise, sensor.units, acc, results)
+    poses = np.vstack([corner_poses(ranges), random_poses(INSIDE, ranges, pose_rng(INSIDE_SEED))])
+    results = analyse(sensor, poses, noise, tuple(components))
+    return ObserveReport(tuple(components), noise, sensor.units, acc, results, INSIDE)
+
+
+INSIDE, INSIDE_SEED = 200, 11
