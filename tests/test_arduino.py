@@ -214,6 +214,14 @@ def test_read_pose_runs_on_the_emulated_uno_and_prints_the_pose(sensor, tmp_path
     want, status = model.predict(x, with_status=True, precision="float")
     np.testing.assert_allclose(rows[:, 9:14], want, rtol=0, atol=6e-5)  # printed with 4 decimals
     assert np.all(status == 0)
+    # the same from its printed lines through fitgen predict, as a user checks a device (docs/arduino.md)
+    (tmp_path / "v.csv").write_text("\n".join([",".join(f"v{k}" for k in range(1, 9))]
+                                              + [",".join(f"{v:.6f}" for v in row) for row in volts]) + "\n")
+    proc = run_cli("fitgen", "predict", str(model.save(tmp_path / "m.json")), str(tmp_path / "v.csv"), "-o",
+                   str(tmp_path / "p.csv"), "--precision", "float", "--input-lsb", repr(lsb))
+    assert proc.returncode == 0, proc.stderr
+    got = np.loadtxt(tmp_path / "p.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(got[:, :5], want)
     assert 100 < run.stack_peak and size.ram + run.stack_peak <= UNO.ram
     assert run.cycles > 16_000_000 * rows[-1, 0]  # the last line came after t seconds of 16 MHz cycles
 

@@ -209,3 +209,15 @@ def test_fit_refuses_refine_terms_below_five_without_refine_too(data, tmp_path):
     assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--refine-terms", "3"),
                           contains="--refine-terms must be >= 5")
 
+
+
+def test_fit_takes_the_units_of_data_without_meta_from_units(data, tmp_path):
+    bare = tmp_path / "bare.csv"
+    bare.write_text(data.read_text())  # the rows without their meta file, as a user's own CSV comes
+    proc = run_cli("fitgen", "fit", str(bare), "-o", str(tmp_path / "v.json"), "--outputs", "dz", "--units", "V")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((tmp_path / "v.json").read_text())["inputs"]["units"] == "V"
+    proc = run_cli("fitgen", "fit", str(bare), "-o", str(tmp_path / "m.json"), "--outputs", "dz")
+    assert proc.returncode == 0 and "no meta saying its readings' units: taken as mT" in proc.stderr
+    assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "x.json"), "--units", "V"),
+                          contains="meta says its readings are in mT")

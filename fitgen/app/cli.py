@@ -115,6 +115,13 @@ def cmd_fit(args) -> int:
 
     settings = _settings(args)
     ds, lifted = rows_on_the_skin(load_dataset(args.data))
+    recorded = ds.meta.get("units")
+    if args.units is not None and recorded not in (None, args.units):
+        raise InputError(f"--units {args.units}, but {args.data}'s meta says its readings are in {recorded}")
+    if args.units is None and recorded is None:
+        print(f"note: {args.data} has no meta saying its readings' units: taken as mT (give --units V for volts, "
+              "as an ADC gives them)", file=sys.stderr)
+    ds.meta["units"] = args.units or recorded or "mT"
     if lifted:
         print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, which serves identify; "
               "their labels are no contact pose", file=sys.stderr)
@@ -175,8 +182,16 @@ def cmd_predict(args) -> int:
               f"{fm.input_lsb:.6g} {model.input_units} from {source}, offset {fm.input_offset:g}; "
               f"plan: {plan_line(fm)}", file=sys.stderr)
     else:
-        if args.codes or args.input_lsb is not None or args.input_offset is not None:
-            raise InputError("--codes, --input-lsb and --input-offset apply to --precision fixed only")
+        if args.codes or args.input_offset is not None or (args.input_lsb is not None and args.precision != "float"):
+            raise InputError("--codes and --input-offset apply to --precision fixed only, --input-lsb to fixed and "
+                             "float")
+        if args.input_lsb is not None:  # readings from codes as a device's float code computes them
+            if not (math.isfinite(args.input_lsb) and args.input_lsb > 0):
+                raise InputError(f"--input-lsb must be a finite number > 0, got {args.input_lsb!r}")
+            lsb = np.float32(args.input_lsb)
+            inputs = (np.rint(inputs / args.input_lsb).astype(np.float32) * lsb).astype(float)
+            print(f"float: readings rounded to codes of {float(lsb):.9g} {model.input_units} and taken as the "
+                  "float code * LSB a device computes (an Arduino's ReadPose)", file=sys.stderr)
         check_magnitudes(model, args.precision)  # as codegen: the C's outputs are always finite
         with np.errstate(over="ignore"):  # a reading beyond float's range is inf, as the C's conversion makes it
             pred, status = model.predict(inputs, with_status=True, precision=args.precision)
@@ -347,6 +362,8 @@ def build_parser() -> Parser:
                         "none). Needs all five pose columns and data that vary in each")
     f.add_argument("--refine-terms", type=int, default=30, metavar="N",
                    help="cap on the forward model's terms per element (default 30)")
+    f.add_argument("--units", choices=("mT", "V"), help="the readings' units when the data have no meta file "
+                   "(default mT; V for volts from ADCs: what read, pi-build and arduino-build take)")
     f.add_argument("--held-out", type=count, default=2000, metavar="N",
                    help="random held-out poses in the data's box for the deployed-accuracy figures (default 2000; "
                         "0: none)")
@@ -391,7 +408,9 @@ def build_parser() -> Parser:
     pr.add_argument("--codes", action="store_true",
                     help="fixed: the v columns are the ADC codes the fixed header takes (whole numbers)")
     pr.add_argument("--input-lsb", type=finite, metavar="X",
-                    help="fixed: the input value of one ADC code, as for codegen (default: the model's sensor's ADC)")
+                    help="fixed: the input value of one ADC code, as for codegen (default: the model's sensor's ADC); "
+                    "float: the v columns rounded to such codes and taken as float(code) * float(X), as a device's "
+                    "float code (ReadPose) computes them")
     pr.add_argument("--input-offset", type=finite, metavar="Y", help="fixed: the input value of code 0")
     pr.add_argument("--target", choices=tuple(TARGETS), help="fixed: the plan codegen --target makes for that core "
                     "(uno: 16x16->32 products where the error bound allows); refuses a precision it cannot run")
