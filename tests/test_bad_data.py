@@ -173,7 +173,7 @@ def test_report_refuses_data_without_the_outputs_and_leaves_no_plot_folder_when_
         assert not (tmp_path / "P").exists()
     (tmp_path / "F").write_text("")
     assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "m.json"), "--data", str(data), "--plot",
-                                  str(tmp_path / "F")), contains="not a folder")
+                                  str(tmp_path / "F")), contains="it is a file; give a folder")
 
 
 def test_fit_refuses_to_hold_out_on_another_sensor_than_the_datas(data, tmp_path):

@@ -258,3 +258,11 @@ def test_bad_scene_and_sensor_one_line(tmp_path):
     assert_one_line_error(run_cli("fitgen", "tradeoff", "paper", "--scene", "nowhere", "-o", str(tmp_path)), 2)
     assert_one_line_error(run_cli("fitgen", "tradeoff", "nosuch", "--scene", "press", "-o", str(tmp_path)), 2)
     assert_one_line_error(run_cli("fitgen", "tradeoff", "paper", "-o", str(tmp_path)), 2)
+
+
+def test_a_refused_sweep_leaves_no_output_folder(tmp_path):
+    for argv, said in ((["--core", "uno", "--precision", "double"], "nothing to sweep"), (["--seed", "-1"], "--seed")):
+        proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "-o", str(tmp_path / "t"), *argv)
+        assert_one_line_error(proc, 2, said)
+        assert not (tmp_path / "t").exists()
+    assert_one_line_error(run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "-o", ""), 2, "-o is empty")

@@ -6,7 +6,7 @@ import time
 from pathlib import Path
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import make_folder, write_atomic
+from fitgen.base.fileio import check_folder, make_folder, write_atomic
 
 
 def _stage(title: str) -> float:
@@ -24,6 +24,7 @@ def run_demo(out: Path) -> int:
     from fitgen.app.report import format_report
     from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 
+    check_folder(out, "--out")
     make_folder(out)
     sensor = load_sensor("paper")
     print(f"fitgen demo: sensor 'paper' ({sensor.n_elements} GMR elements, magnet "

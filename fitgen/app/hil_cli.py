@@ -105,6 +105,17 @@ def _adc_bridge(args):
                       thermistor=args.thermistor, temp_comp=args.temp_comp, temperature=args.sim_temperature)
 
 
+def _stopped(runner, args) -> None:
+    """InputError with the board's own last words when the firmware ended before it could be opened."""
+    if runner.proc is None or runner.proc.poll() is None:
+        return
+    runner.stop()
+    said = "; ".join(getattr(runner, "messages", [])[-2:]) or f"exit status {runner.proc.returncode}"
+    hint = ("; a table-style build's stack can overrun the Uno's 2 KB of RAM: try --style unrolled"
+            if args.target == "uno" and args.style == "table" and args.precision != "fixed" else "")
+    raise InputError(f"the {args.target} firmware stopped before answering: {said}{hint}")
+
+
 def cmd_emulate(args) -> int:
     from host.device import Device
 
@@ -116,7 +127,12 @@ def cmd_emulate(args) -> int:
     with start_target(model, args.target, precision=args.precision, style=args.style, fma=args.fma,
                       port=args.port, workdir=args.build_dir, sensor_id=args.sensor_id, cmap=cmap,
                       bridge=bridge, tin=tin, tempcomp=tempcomp) as runner:
-        with Device.open(runner.url, timeout=args.timeout) as dev:
+        try:
+            dev = Device.open(runner.url, timeout=args.timeout)
+        except InputError:
+            _stopped(runner, args)
+            raise
+        with dev:
             _describe(runner, dev, args.target)
         if args.suite:
             from hil.firmware import adc_input_lsb

@@ -24,21 +24,12 @@ def _plt():
 
 
 def require(folder) -> Path:
-    """What a figure needs, checked before any work rather than after it: matplotlib, and ``folder`` not a file.
+    """What a figure needs, checked before any work rather than after it: matplotlib, and ``folder`` that can be
+    made. The folder is made by the first figure written into it, so a command refused on its input leaves none."""
+    from fitgen.base.fileio import check_folder
 
-    The folder is made by the first figure written into it, so a command refused on its input leaves none behind."""
-    import os
-
-    folder = Path(folder)
     _plt()
-    if folder.exists() and not folder.is_dir():
-        raise InputError(f"--plot {folder}: not a folder")
-    base = folder.absolute()
-    while not base.exists():
-        base = base.parent
-    if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
-        raise InputError(f"cannot create {folder}: {base} is {'not a folder' if not base.is_dir() else 'read-only'}")
-    return folder
+    return check_folder(folder, "--plot")
 
 
 def _save(fig, path: Path) -> Path:

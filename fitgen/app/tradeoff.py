@@ -66,7 +66,7 @@ def run_tradeoff(args, sensor) -> int:
     """The command: parse the knobs, sweep, write the report; exit status 1 when rounding is over its share."""
     from fitgen.app.cliutil import EXIT_CHECK_FAILED
     from fitgen.app.tradeoff_report import write_outputs
-    from fitgen.base.fileio import make_folder
+    from fitgen.base.fileio import check_folder
     from fitgen.base.progress import Progress
     from fitgen.c.tradeoff import grid_from, quick_grid, sweep
     from fitgen.physics.scenes import load_scene
@@ -84,7 +84,7 @@ def run_tradeoff(args, sensor) -> int:
                          "is swept on the harmonics family only (pick other --family, --precision or --refine)")
     if not 0 < args.max_share < 1e6:
         raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
-    make_folder(args.output)  # a folder that cannot be made is said before the sweep's minutes, not after them
+    check_folder(args.output)  # said before the sweep's minutes, not after them; made when its files are written
     bar = Progress("tradeoff", len(grid))
     with bar:
         result = sweep(sensor, scene, grid, target=target, seed=args.seed, jobs=args.jobs,

@@ -69,6 +69,22 @@ def make_folder(folder: str | os.PathLike) -> Path:
     return folder
 
 
+def check_folder(folder: str | os.PathLike, flag: str = "-o") -> Path:
+    """``folder`` checked as one a command will make and write into, without making it (so that a command refused
+    later leaves none behind): a name, not a file, under a folder that can be written; InputError otherwise."""
+    path = Path(folder)
+    if not str(folder).strip():
+        raise InputError(f"{flag} is empty: give a folder")
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{flag} {path}: it is a file; give a folder")
+    base = path.absolute()
+    while not base.exists():
+        base = base.parent
+    if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
+        raise InputError(f"cannot create {path}: {base} is {'not a folder' if not base.is_dir() else 'read-only'}")
+    return path
+
+
 def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes) -> Path:
     """:func:`write_atomic` into ``folder/name``, creating ``folder`` (and its parents) when missing."""
     return write_atomic(make_folder(folder) / name, data)
