@@ -146,3 +146,25 @@ def test_fixed_point_firmware_reads_the_ads1115s_on_the_uno(tmp_path):
             res = run_suite(dev, model, url=emu.url, n_vectors=300, n_fuzz=0, flash=False, verbose=False)
     evals = [c for c in res.checks if c.name == "eval"]
     assert evals and evals[0].ok and evals[0].figures["max_lsb_diff"] == 0, res.table()
+
+
+def test_a_board_that_stops_before_answering_is_said_in_its_own_words():
+    """`tactile-hil emulate` on a firmware that crashes at boot (a table-style stack past the Uno's RAM) says the
+    board's line and what to try, not that the port would not open."""
+    from types import SimpleNamespace
+
+    from fitgen.app.hil_cli import _stopped
+    from fitgen.base.errors import InputError
+
+    class Exited:
+        returncode = 1
+
+        def poll(self):
+            return 1
+
+    runner = SimpleNamespace(proc=Exited(), messages=["the AVR program crashed at cycle 12664"], stop=lambda: None)
+    with pytest.raises(InputError, match="stopped before answering: the AVR program crashed at cycle 12664; a "
+                                         "table-style build's stack can overrun"):
+        _stopped(runner, SimpleNamespace(target="uno", style="table", precision="float"))
+    runner.proc = SimpleNamespace(poll=lambda: None)  # still running: the port's own error stands
+    _stopped(runner, SimpleNamespace(target="uno", style="table", precision="float"))
