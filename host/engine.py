@@ -28,12 +28,14 @@ ENGINES = ("python", "c")
 class PythonEngine:
     name = "python"
 
-    def __init__(self, model: Model):
-        self.model = model
+    def __init__(self, model: Model, precision: str = "double"):
+        """``precision`` float: the float header's arithmetic, bit for bit (a run of the C engine in float)."""
+        self.model, self.precision = model, precision
         self.n_inputs, self.n_outputs = model.n_inputs, len(model.equations)
 
     def estimate(self, inputs: np.ndarray) -> tuple[np.ndarray, int]:
-        out, status = self.model.predict(np.asarray(inputs, dtype=float).reshape(1, -1), with_status=True)
+        out, status = self.model.predict(np.asarray(inputs, dtype=float).reshape(1, -1), with_status=True,
+                                         precision=self.precision)
         return out[0], int(status[0])
 
     def close(self) -> None:

@@ -177,7 +177,9 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
                          f"({type(exc).__name__}: {exc})") from None
     header = {**{k: v for k, v in h.items() if k != "run"}, "model": model.sha256,
               "outputs": list(model.output_names), **corrections.describe(), "model_file": model.to_dict()}
-    engine = PythonEngine(model)
+    # the arithmetic the run was estimated in: the C engine's float is the float header's, emulated bit for bit
+    precision = h.get("precision", "double") if h.get("precision") in ("double", "float") else "double"
+    engine = PythonEngine(model, precision)
     n = len(run.t)
     v_all, out_all, st_all = np.empty_like(run.raw), np.empty((n, len(model.equations))), np.empty(n, dtype=int)
     # one sample at a time, as the readout does: auto-zero's state depends on every sample before

@@ -167,6 +167,8 @@ class ReadoutSession:
         ref = None if self.reference is None else [float(x) for x in self.reference]
         return RunRecord(self._record_file, {"model": self.model.sha256, "outputs": list(self.model.output_names),
                                              "n_inputs": self.model.n_inputs, "source": self.source,
+                                             "engine": self.engine.name,
+                                             "precision": getattr(self.engine, "precision", "double"),
                                              "reference": ref, "noise": self.noise,
                                              **self.corrections.describe(), "model_file": self.model.to_dict()})
 

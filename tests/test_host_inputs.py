@@ -130,3 +130,15 @@ def test_a_slow_rate_takes_no_sample_after_the_duration(model_file, tmp_path):
                    "--rate", "0.1", "--duration", "1", "-o", str(tmp_path / "s.csv"))
     assert proc.returncode == 0, proc.stderr
     assert len((tmp_path / "s.csv").read_text().splitlines()) == 2  # the header and the sample at t = 0 only
+
+
+def test_a_run_of_the_c_engine_in_float_replays_exactly(model_file, tmp_path):
+    run = tmp_path / "cf.jsonl"
+    proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "motion",
+                   "--engine", "c", "--precision", "float", "--count", "30", "--record", str(run), "-o",
+                   str(tmp_path / "s.csv"))
+    assert proc.returncode == 0, proc.stderr
+    header = json.loads(run.read_text().splitlines()[0])
+    assert header["engine"] == "c" and header["precision"] == "float"
+    proc = run_cli("tactile-host", "replay", str(run))
+    assert proc.returncode == 0 and "estimates identical to the recorded ones" in proc.stdout, proc.stdout
