@@ -172,7 +172,7 @@ def test_a_refused_build_leaves_the_library_as_it_was_and_a_new_one_replaces_src
                    "-o", str(lib), "--no-build")
     assert_one_line_error(proc, 2, "no thermistor")
     assert_one_line_error(run_cli("tactile-host", "arduino-build", "--model", model_path, "--adc", TWO_CHIPS, "-o", "",
-                                  "--no-build", cwd=tmp_path), 2, "name the library's folder")
+                                  "--no-build", cwd=tmp_path), 2, "-o is empty")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["TactilePose"]  # nothing else, no partial folder
     assert _build_cli(model_path, lib, "--no-build").returncode == 0
     assert not (lib / "src" / "extra.h").exists() and _tree(lib) == {k: v for k, v in before.items()

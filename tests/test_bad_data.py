@@ -30,7 +30,8 @@ def test_an_output_that_is_a_folder_or_an_input_is_refused_before_the_work(data,
     for argv, said in ((["fit", d, "-o", d], "is the input"),
                        (["fit", d, "-o", str(tmp_path)], "it is a folder"),
                        (["identify", d, "-o", "."], "it is a folder"),
-                       (["simulate", "--random", "3", "-o", ""], "it is a folder"),
+                       (["simulate", "--random", "3", "-o", ""], "-o is empty"),
+                       (["observe", ""], "sensor is empty"), (["observe", "--ranges", " "], "--ranges is empty"),
                        (["simulate", "--poses", d, "-o", d], "is the input")):
         before = files(data.parent)
         assert_one_line_error(run_cli("fitgen", *argv, cwd=tmp_path), contains=said)

@@ -171,7 +171,7 @@ def test_verify_says_in_one_line_what_is_wrong_with_the_compiler_or_runner(paper
         assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--vectors", "50", *opts),
                               contains=contains)
 
-    verify_with("--cc", "", contains="the compiler is empty")
+    verify_with("--cc", "", contains="--cc is empty")
     verify_with("--cc", "'gcc", contains="No closing quotation")
     verify_with("--runner", "false", contains="failed (exit status 1")
     verify_with("--runner", "true", contains="answered 0 lines")

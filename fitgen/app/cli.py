@@ -8,7 +8,7 @@ from pathlib import Path
 
 from fitgen import __version__
 from fitgen.app.calibrate_cli import cmd_identify, cmd_schedule
-from fitgen.app.cliutil import Parser, command_main, count, finite
+from fitgen.app.cliutil import Parser, check_not_empty, command_main, count, finite
 from fitgen.app.options import noise_of, sensor_of
 from fitgen.base.parse import OutOfRange, parse_assignments, parse_names, parse_noise, parse_penalty
 from fitgen.base.errors import InputError
@@ -118,9 +118,6 @@ def cmd_fit(args) -> int:
     recorded = ds.meta.get("units")
     if args.units is not None and recorded not in (None, args.units):
         raise InputError(f"--units {args.units}, but {args.data}'s meta says its readings are in {recorded}")
-    if args.units is None and recorded is None:
-        print(f"note: {args.data} has no meta saying its readings' units: taken as mT (give --units V for volts, "
-              "as an ADC gives them)", file=sys.stderr)
     ds.meta["units"] = args.units or recorded or "mT"
     if lifted:
         print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, which serves identify; "
@@ -154,6 +151,9 @@ def cmd_fit(args) -> int:
             hbar.update()
     model.save(args.output)
     print(fit_summary(model, args.held_out), end="", file=sys.stderr)
+    if args.units is None and recorded is None:
+        print(f"note: {args.data} has no meta saying its readings' units: taken as mT (give --units V for volts, "
+              "as an ADC gives them)", file=sys.stderr)
     print(f"wrote {args.output}", file=sys.stderr)
     return 0
 
@@ -473,6 +473,7 @@ def build_parser() -> Parser:
 
 def _check(args) -> None:
     """What argparse cannot check; an output file's folder before the work, not after it."""
+    check_not_empty(args)
     if getattr(args, "adc_bits", None) is not None and not 0 <= args.adc_bits <= 32:
         raise InputError(f"--adc-bits must be 0..32, got {args.adc_bits}")
     writes_a_file = (cmd_simulate, cmd_fit, cmd_predict, cmd_report, cmd_identify, cmd_schedule)

@@ -141,3 +141,12 @@ def check_written(args, files=()) -> None:
             if os.path.abspath(other) == os.path.abspath(path):
                 raise InputError(f"{other_flag} and {flag} name the same file {path}: give two")
         written.append((flag, path))
+
+
+def check_not_empty(args) -> None:
+    """An option given as an empty string is refused (it would otherwise fall back to its default unsaid)."""
+    for name, value in vars(args).items():
+        if isinstance(value, str) and not value.strip():
+            flag = ("-o" if name == "output" else name.removesuffix("_pos") if name.endswith("_pos")
+                    else "--" + name.replace("_", "-"))
+            raise InputError(f"{flag} is empty")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 
 from fitgen.app.options import map_options
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, check_written, command_main, count, noise_volts
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_written, command_main, count, noise_volts
 from fitgen.base.errors import InputError
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 
@@ -489,6 +489,7 @@ def build_parser() -> Parser:
 
 
 def _check(args) -> None:
+    check_not_empty(args)
     # -o is a file for these; a folder for pi-build, arduino-build and tempcomp-c
     check_written(args, files=(cmd_read, cmd_view, cmd_replay, cmd_capture))
 
