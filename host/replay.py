@@ -74,6 +74,18 @@ def load_run(path) -> Run:
     return Run(header, np.array(t), np.array(raw), np.array(temp), np.array(out), np.array(status))
 
 
+def play_times(t: np.ndarray, longest: float = 10.0) -> np.ndarray:
+    """Seconds from the first sample at which to play each: the recorded gaps, except that a gap that runs
+    backwards or is longer than ``longest`` times the median (the wall clock stepped: an NTP sync on a Pi without a
+    real-time clock) is played as the median gap."""
+    gaps = np.diff(np.asarray(t, dtype=float))
+    if gaps.size == 0:
+        return np.zeros(len(t))
+    typical = float(np.median(gaps[gaps > 0])) if np.any(gaps > 0) else 0.0
+    gaps = np.where((gaps < 0) | (gaps > longest * max(typical, 1e-3)), typical, gaps)
+    return np.concatenate([[0.0], np.cumsum(gaps)])
+
+
 @dataclass
 class ReplayResult:
     t: np.ndarray
@@ -121,13 +133,12 @@ class ReplayResult:
     def play(self, publish, stop, hold: bool = False) -> None:
         """Each sample to ``publish`` at the run's recorded pace, until its end or ``stop()``; with ``hold``,
         then wait for ``stop()``."""
-        t0, w0 = self.t[0], time.monotonic()
+        due, w0 = play_times(self.t), time.monotonic()
         for i in range(len(self.t)):
+            while not stop() and (wait := due[i] - (time.monotonic() - w0)) > 0:
+                time.sleep(min(wait, 0.2))  # in slices: Ctrl-C is seen during a long gap
             if stop():
                 break
-            wait = (self.t[i] - t0) - (time.monotonic() - w0)
-            if wait > 0:
-                time.sleep(wait)
             publish(self.sample(i))
         while hold and not stop():
             time.sleep(0.2)

@@ -142,3 +142,16 @@ def test_a_run_of_the_c_engine_in_float_replays_exactly(model_file, tmp_path):
     assert header["engine"] == "c" and header["precision"] == "float"
     proc = run_cli("tactile-host", "replay", str(run))
     assert proc.returncode == 0 and "estimates identical to the recorded ones" in proc.stdout, proc.stdout
+
+
+def test_a_replay_plays_over_a_clock_step_and_view_refuses_readout_options(model_file, tmp_path):
+    from host.replay import play_times
+
+    t = np.array([0.0, 0.1, 0.2, 3600.3, 3600.4, 3600.3, 3600.5])  # an NTP step forward, then one back
+    np.testing.assert_allclose(play_times(t), [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.7], atol=1e-9)
+    run = tmp_path / "r.jsonl"
+    assert read(model_file, "--record", str(run)).returncode == 0
+    for option in (["--count", "5"], ["--duration", "2"], ["--record", str(tmp_path / "x.jsonl")]):
+        assert_one_line_error(run_cli("tactile-host", "view", "--replay", str(run), "--port", "0", *option), 2,
+                              "does not apply to --replay")
+    assert not (tmp_path / "x.jsonl").exists()

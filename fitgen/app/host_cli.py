@@ -142,6 +142,11 @@ def _view_replay(args) -> int:
     from host.live import LiveHub, LiveServer, view_meta
     from host.replay import load_run, replay
 
+    given = [f"--{n.replace('_', '-')}" for n in ("adc", "count", "duration", "rate", "record", "simulate", "rest")
+             if getattr(args, n, None) is not None] + (["--tare"] if args.tare else [])
+    if given:
+        raise InputError(f"{given[0]} does not apply to --replay: the recording sets the samples (it plays to its "
+                         "end; --hold keeps the page up after)")
     run = load_run(args.replay)
     res = replay(run, model=args.model, auto_zero=_flag(args), temp_comp=args.temp_comp)
     hub = LiveHub(view_meta(run.n_inputs, res.outputs, res.model_hash, f"replay of {args.replay}", None))
