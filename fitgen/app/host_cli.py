@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from fitgen.app.options import map_options
+from fitgen.app.options import map_options, refuse_readout_options
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_written, command_main, count, noise_volts
 from fitgen.base.errors import InputError
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
@@ -142,11 +142,7 @@ def _view_replay(args) -> int:
     from host.live import LiveHub, LiveServer, view_meta
     from host.replay import load_run, replay
 
-    given = [f"--{n.replace('_', '-')}" for n in ("adc", "count", "duration", "rate", "record", "simulate", "rest")
-             if getattr(args, n, None) is not None] + (["--tare"] if args.tare else [])
-    if given:
-        raise InputError(f"{given[0]} does not apply to --replay: the recording sets the samples (it plays to its "
-                         "end; --hold keeps the page up after)")
+    refuse_readout_options(args)
     run = load_run(args.replay)
     res = replay(run, model=args.model, auto_zero=_flag(args), temp_comp=args.temp_comp)
     hub = LiveHub(view_meta(run.n_inputs, res.outputs, res.model_hash, f"replay of {args.replay}", None))

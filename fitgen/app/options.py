@@ -45,3 +45,14 @@ def map_options(p, required: bool = True) -> None:
     p.add_argument("--mode", default="single", choices=MODES, help="ADS1115 conversion mode (default single)")
     p.add_argument("--vref", default="3.3",
                    help="ADS7828 reference: external volts (default 3.3) or 'internal' (2.5 V)")
+
+
+def refuse_readout_options(args) -> None:
+    """``view --replay``: the readout's options do not apply (the recording sets the samples); InputError."""
+    from fitgen.base.errors import InputError
+
+    given = [f"--{n.replace('_', '-')}" for n in ("adc", "count", "duration", "rate", "record", "simulate", "rest")
+             if getattr(args, n, None) is not None] + (["--tare"] if args.tare else [])
+    if given:
+        raise InputError(f"{given[0]} does not apply to --replay: the recording sets the samples (it plays to its "
+                         "end; --hold keeps the page up after)")
