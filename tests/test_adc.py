@@ -402,7 +402,7 @@ def test_fault_and_pose_specs():
     (["--adc", TWO_1115, "--simulate", "dx=1,dq=2"], "--simulate pose"),
     (["--adc", "ads1115@0x48:0-3", "--simulate", "0,0,0,0,0"], "reads 4 elements; the model takes 8"),
     (["--adc", TWO_1115, "--pga", "5"], "invalid choice"),
-    (["--adc", TWO_1115, "--simulate", "dx=0", "--rate", "-3"], "--rate must be > 0"),
+    (["--adc", TWO_1115, "--simulate", "dx=0", "--rate", "-3"], "--rate must be a finite number > 0"),
     (["--adc", TWO_1115, "--sim-noise", "0.01"], "--sim-noise needs --simulate"),
     (["--adc", TWO_1115, "--simulate", "dx=0", "--sim-fault", "melt:1"], "--sim-fault"),
 ])

@@ -628,7 +628,7 @@ def test_capture_command_alarm_at_start_is_one_line_exit_1_and_home_clears_it(tm
     (["--stage-axes", "X=dx,Y=dx"], "--stage-axes 'X=dx,Y=dx': dx appears twice"),
     (["--stage-limits", "dx=-1:1,dy=-2:2,dz=-2:1"], "pose 1/27 (dx=-1.5 dy=-1 dz=0) reaches dx=-1.5, outside"),
     (["--stage-limits", "dx=-2:2,dy=-2:2"], "--stage-limits: give a range for dz"),
-    (["--stage-feed", "0"], "--stage-feed must be > 0"),
+    (["--stage-feed", "0"], "--stage-feed must be a finite number > 0"),
     (["--settle", "1e308"], "--settle must be at most 3600"),
     (["--stage-feed", "1e-9"], "--stage-feed is in mm/min, at least 1"),
     (["--stage-timeout", "1e12"], "--stage-timeout must be at most 3600"),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import signal
 import sys
 
@@ -15,6 +16,11 @@ EXIT_CHECK_FAILED = 1
 
 class Parser(argparse.ArgumentParser):
     """argparse with a one-line error (no usage dump) and exit status 2."""
+
+    def __init__(self, *args, **kw):
+        super().__init__(*args, **kw)
+        # argparse takes '-1e-3' for an option (its pattern knows no exponent): '--input-offset -1e-3' failed
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
     def error(self, message):  # noqa: D401 - argparse's hook
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
