@@ -71,8 +71,8 @@ class Settings:
             raise InputError(f"{origin}: mode {self.mode!r} is not one of {', '.join(MODES)}")
         if self.vref != "internal":
             if isinstance(self.vref, bool) or not isinstance(self.vref, (int, float)) or not 0.05 <= self.vref <= 5.5:
-                raise InputError(f"{origin}: vref must be 'internal' or an external reference in 0.05..5.5 V, "
-                                 f"got {self.vref!r}")
+                raise InputError(f"{'--vref' if origin == 'option' else origin + ': vref'} must be 'internal' or an "
+                                 f"external reference in 0.05..5.5 V, got {self.vref!r}")
         return self
 
 

@@ -381,6 +381,10 @@ def test_verify_cli(paper_fixed_model, tmp_path):
     proc = run_cli("tactile-host", "verify", str(path), "--precision", "fixed", "--vectors", "300")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.count("PASS") == 1 and "fixed/" in proc.stdout and "LSB" in proc.stdout
+    # the vectors it counts are the ones it compared, held-out check or not
+    bare = run_cli("tactile-host", "verify", str(path), "--precision", "fixed", "--vectors", "300", "--no-held-out")
+    count = re.compile(r"(\d+) vectors")
+    assert count.search(bare.stdout) and count.search(proc.stdout)[1] == count.search(bare.stdout)[1], proc.stdout
     assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--precision", "fixed", "--fma"),
                           contains="fma")
     # an explicit scale works too; a wrong one (not the sensor's codes) still verifies its own plan

@@ -37,9 +37,15 @@ def cmd_simulate(args) -> int:
         drawing = sensor
         sensor, unit, unit_info = unit_beside(drawing, args.unit, args.output)
     try:
-        ds = simulate(sensor, poses, noise=noise, adc_bits=args.adc_bits,
-                      seed=args.seed, provenance={**source, **unit_info}, labels=args.labels)
-        ds.save(args.output)
+        from fitgen.base.progress import Progress
+
+        with Progress("simulate", 2) as bar:  # seen on a terminal when many poses take seconds
+            bar.update(0, f"{len(poses):,} poses")
+            ds = simulate(sensor, poses, noise=noise, adc_bits=args.adc_bits,
+                          seed=args.seed, provenance={**source, **unit_info}, labels=args.labels)
+            bar.update(1, "writing")
+            ds.save(args.output)
+            bar.update(1, "written")
     except BaseException:
         if unit is not None:
             unit.unlink(missing_ok=True)  # no unit file without the data it was drawn for

@@ -133,13 +133,16 @@ def check_written(args, files=()) -> None:
     import os
     from pathlib import Path
 
-    from fitgen.base.fileio import output_file
+    from fitgen.base.fileio import check_folder, output_file
 
     inputs = [p for p in (getattr(args, n, None) for n in READS) if isinstance(p, str) and Path(p).is_file()]
     written = []
     for name in WRITES:
         path = getattr(args, name, None)
-        if not isinstance(path, str) or path == "-" or (name == "output" and args.func not in files):
+        if not isinstance(path, str) or path == "-":
+            continue
+        if name == "output" and args.func not in files:  # a folder the command makes
+            check_folder(path)
             continue
         flag = "-o" if name == "output" else f"--{name.replace('_', '-')}"
         output_file(path, inputs, flag)

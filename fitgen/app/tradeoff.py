@@ -82,18 +82,19 @@ def run_tradeoff(args, sensor) -> int:
     if not grid:
         raise InputError("nothing to sweep: fixed point has no harmonics family and no refinement, and the refinement "
                          "is swept on the harmonics family only (pick other --family, --precision or --refine)")
-    if not 0 < args.max_share < 1e6:
-        raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
+    if not 0 < args.max_share <= 1:
+        raise InputError(f"--max-share must be a share in (0, 1] of the model's held-out max error, got "
+                         f"{args.max_share:g}")
     check_folder(args.output)  # said before the sweep's minutes, not after them; made when its files are written
     bar = Progress("tradeoff", len(grid))
     with bar:
         result = sweep(sensor, scene, grid, target=target, seed=args.seed, jobs=args.jobs,
-                       progress=lambda note: bar.update(1, note), max_share=args.max_share, core=args.core)
+                       progress=lambda note, total: (setattr(bar, 'total', total), bar.update(1, note)), max_share=args.max_share, core=args.core)
     paths, text = write_outputs(result, args.output)
     print(text, end="")
     print("wrote " + ", ".join(str(p) for p in paths), file=sys.stderr)
     if result.over_share:
-        print(f"FAIL: rounding adds more than {args.max_share:.0%} of the model's held-out max error at points "
+        print(f"FAIL: rounding adds more than {100 * args.max_share:.3g} % of the model's held-out max error at points "
               + ", ".join(str(i + 1) for i in result.over_share), file=sys.stderr)
         return EXIT_CHECK_FAILED
     return 0

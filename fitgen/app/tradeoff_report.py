@@ -94,14 +94,15 @@ def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
         lines.append("")
     if result.over_share:
         lines.append(f"**Rounding check failed** on {len(result.over_share)} point(s): the generated C deviates from "
-                     f"the double model by more than {result.max_share:.0%} of that model's held-out max error "
+                     f"the double model by more than {100 * result.max_share:.3g} % of that model's held-out max error "
                      "(they are left off the front and the recommendation): points "
                      + ", ".join(str(i + 1) for i in result.over_share) + ".")
         lines.append("")
     lines.append("## Recommendation")
     lines.append("")
     if result.recommended is None:
-        lines.append("No point could be measured.")
+        lines.append("No point could be measured." if not result.over_share else "No point left: every measured "
+                     "point failed the rounding check above.")
     elif result.met:
         lines.append(f"Meets the target with the fewest {cost_name(result)}: {describe(result.recommended, result)}.")
     else:

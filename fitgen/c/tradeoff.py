@@ -325,7 +325,8 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
     listed in ``over_share`` and is neither on the front nor recommended. ``core`` ("uno"): costs in
     cycles on it, its plans, its precisions only (fitgen.c.targets).
 
-    ``progress(note)`` is called once per measured point. Needs gcc and valgrind; the flash
+    ``progress(note, total)`` is called once per fit and once per distinct build measured; ``total``: their
+    number (known in full once the fits are done). Needs gcc and valgrind; the flash
     figures need arm-none-eabi-gcc/size/nm (left empty, with a note, without them).
     """
     if shutil.which("valgrind") is None:
@@ -368,9 +369,12 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
     Xn, Yn = np.vstack([d.inputs for d in noisy]), np.tile(Y, (noise_draws, 1))
 
     fits: dict[tuple, Model] = {}
+    n_fits = len({kn.fit_key for kn in grid})
     for kn in grid:
         if kn.fit_key not in fits:
             fits[kn.fit_key] = fit_model(train, outputs, kn.settings(), sensor=sensor)
+            if progress:  # the total grows to the builds once the fits say how many distinct ones there are
+                progress(f"fit {kn.label}", n_fits + len(grid))
 
     points = [Point(kn) for kn in grid]
     units: dict[tuple, list[int]] = {}
@@ -380,6 +384,7 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
         p.terms_per_output = {e.name: len(e.terms) for e in m.equations}
         p.terms = sum(p.terms_per_output.values())
         units.setdefault((m.sha256, p.knobs.precision, p.knobs.style), []).append(i)
+    total = n_fits + len(units)
 
     with tempfile.TemporaryDirectory(prefix="fitgen-tradeoff-") as tmp:
         runner = None
@@ -410,13 +415,13 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
                         p.score = max(p.errors[o]["noisy_rms"] / target[o] for o in outputs)
                         p.share = max(p.errors[o]["share"] for o in outputs)
                 if progress:
-                    progress(points[idx[0]].knobs.label)
+                    progress(f"built {points[idx[0]].knobs.label}", total)
 
     over = [i for i, p in enumerate(points) if p.share is not None and p.share > max_share]
     for i in over:
         worst = max(outputs, key=lambda o: points[i].errors[o]["share"])
         points[i].note = (f"rounding adds {points[i].share:.1%} of {worst}'s held-out max error "
-                          f"(over {max_share:.0%}): not recommended")
+                          f"(over {100 * max_share:.3g} %): not recommended")
     cost_ = [(p.cycles if core else p.instructions) if p.score is not None and i not in over else None
              for i, p in enumerate(points)]
     score = [p.score for p in points]

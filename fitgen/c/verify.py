@@ -302,9 +302,9 @@ def compare_fixed(model: Model, compiled: CompiledModel, codes: np.ndarray, held
     if held_out is not None:
         # the device reads ADC codes: the held-out readings rounded to codes, against double on the readings
         readings, truth = held_out
-        codes = fm.codes_of(readings)
-        chk = held_out_check(model, compiled.predict(codes)[0], readings, truth, max_share, failures,
-                             fm.code_values(codes))
+        held_codes = fm.codes_of(readings)  # not ``codes``: the result counts the vectors compared above
+        chk = held_out_check(model, compiled.predict(held_codes)[0], readings, truth, max_share, failures,
+                             fm.code_values(held_codes))
     return VerifyResult("fixed", compiled.style, len(codes), model.output_names, err.max(axis=0),
                         bound.max(axis=0), ratio.max(axis=0), mism, 0, failures, lsb_diff.max(axis=0), chk)
 
