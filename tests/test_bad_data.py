@@ -222,3 +222,30 @@ def test_fit_takes_the_units_of_data_without_meta_from_units(data, tmp_path):
     assert proc.returncode == 0 and "no meta saying its readings' units: taken as mT" in proc.stderr
     assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "x.json"), "--units", "V"),
                           contains="meta says its readings are in mT")
+
+
+def test_sigterm_cleans_up_as_ctrl_c_does(capsys):
+    """A command stopped by SIGTERM (timeout, systemd, kill) leaves no temporary folder: the signal is raised as
+    an exception where the program is, so that every with-block's cleanup runs."""
+    import os
+    import signal
+    import tempfile
+    from pathlib import Path
+
+    from fitgen.app.cliutil import run
+
+    made = []
+
+    def work(argv):
+        with tempfile.TemporaryDirectory(prefix="fitgen-test-term-") as tmp:
+            made.append(Path(tmp))
+            os.kill(os.getpid(), signal.SIGTERM)
+            for _ in range(1000):  # the handler runs between bytecodes
+                pass
+        return 0
+
+    before = signal.getsignal(signal.SIGTERM)
+    assert run(work, [], "fitgen") == 143
+    assert made and not made[0].exists()
+    assert capsys.readouterr().err.strip() == "fitgen: terminated"
+    assert signal.getsignal(signal.SIGTERM) is before

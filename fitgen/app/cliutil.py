@@ -74,18 +74,37 @@ def seconds(text: str) -> float:
         raise argparse.ArgumentTypeError(str(exc).removeprefix("seconds ")) from None
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that its temporary files and half-written outputs are cleaned up
+    as for Ctrl-C (the default action ends the process with no cleanup at all)."""
+
+
+def _terminate(signum, frame):
+    raise Terminated()
+
+
 def run(main_fn, argv=None, prog: str = "") -> int:
     """Call ``main_fn(argv)``; turn bad input into one line on stderr and exit status 2."""
+    previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
     try:
         return int(main_fn(argv) or 0)
     except InputError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        print(f"{prog}: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
+        return 143 if isinstance(exc, Terminated) else 130
     except BrokenPipeError:
         return 0
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
 
 
 def command_main(build_parser, argv, prog: str, check=None):
