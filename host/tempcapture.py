@@ -15,7 +15,7 @@ from fitgen.physics.dataset import load_dataset
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, trigger_waiter
-from host.capturerun import CaptureFailed, capture_numbers
+from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers
 from host.motion import parse_drift
 from host.session import channel_map_from_args, open_bus_from_args
 from host.simsensor import Drift
@@ -106,6 +106,9 @@ def capture_temperatures(args, prog: str):
             files.append(str(path))
             print(f"{prog}: {ds.n_rows} poses at {T:g} degC"
                   f"{f' (thermistor {measured:.2f} degC)' if np.isfinite(measured) else ''} in {path}", file=sys.stderr)
+    except KeyboardInterrupt:
+        raise CaptureInterrupted("the temperatures and rows done so far are kept: run the same command again to "
+                                 "resume") from None
     except (DeviceSilent, SpreadTooLarge, TriggerFailed) as exc:
         raise CaptureFailed(f"{exc}; the temperatures done so far are kept: run the same command again to "
                             "resume") from exc
