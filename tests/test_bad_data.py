@@ -249,3 +249,15 @@ def test_sigterm_cleans_up_as_ctrl_c_does(capsys):
     assert made and not made[0].exists()
     assert capsys.readouterr().err.strip() == "fitgen: terminated"
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+def test_codes_that_are_not_whole_or_beyond_int32_are_named_by_row_and_column(tmp_path):
+    from fitgen.equations.fixedpoint import build_fixed
+    from fitgen.base.errors import InputError
+
+    model = Model(np.zeros(2) + 1.0, np.zeros(2) + 2.0, (Equation("dz", 0.5, (Term(1, "1"),), (2.0,)),), "V")
+    fm = build_fixed(model, 1e-4, 0.0, 32)
+    with pytest.raises(InputError, match=r"whole numbers \(row 2, v2: 1.5\)"):
+        fm.clamp_codes(np.array([[1.0, 2.0], [3.0, 1.5]]))
+    with pytest.raises(InputError, match=r"int32 \(row 1, v1: 3000000000\)"):
+        fm.clamp_codes(np.array([[3e9, 2.0]]))

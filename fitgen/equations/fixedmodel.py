@@ -146,13 +146,18 @@ class FixedModel:
             c = c[None, :]
         if c.ndim != 2 or c.shape[1] != self.n_inputs:
             raise InputError(f"the model takes {self.n_inputs} input codes per row, got shape {c.shape}")
+        def where(bad) -> str:  # the first offending cell, as a user finds it in the CSV (rows from 1, v1..)
+            r, k = np.argwhere(bad)[0]
+            return f" (row {r + 1}, v{k + 1}: {float(c[r, k]):.17g})"
+
         if c.dtype.kind == "f":
-            if not np.all(np.isfinite(c)) or np.any(c != np.round(c)):
-                raise InputError("input codes must be whole numbers")
+            bad = ~np.isfinite(c) | (c != np.round(c))
+            if np.any(bad):
+                raise InputError("input codes must be whole numbers" + where(bad))
         elif c.dtype.kind not in "iu":
             raise InputError(f"input codes must be integers, got {c.dtype}")
         if c.size and (c.min() < INT32_MIN or c.max() > INT32_MAX):
-            raise InputError("input codes must fit in an int32")
+            raise InputError("input codes must fit in an int32" + where((c < INT32_MIN) | (c > INT32_MAX)))
         c = c.astype(np.int64)
         lo, hi = np.array(self.code_min, dtype=np.int64), np.array(self.code_max, dtype=np.int64)
         bits = (1 << np.arange(self.n_inputs)).astype(np.int64)
