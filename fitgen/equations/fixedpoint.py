@@ -92,7 +92,8 @@ def _code_bounds(model: Model, lsb: Fraction, off: Fraction) -> tuple[list[int],
                              f"offset {float(off)!r}")
         if lo < INT32_MIN or hi > INT32_MAX:
             raise InputError(f"input v{k + 1}: its domain [{float(model.input_min[k])!r}, "
-                             f"{float(model.input_max[k])!r}] spans codes {lo}..{hi} at LSB {float(lsb)!r}, "
+                             f"{float(model.input_max[k])!r}] spans codes {float(lo):.4g}..{float(hi):.4g} at LSB "
+                             f"{float(lsb)!r}, "
                              f"offset {float(off)!r}: beyond int32 (a larger LSB, or the offset at the domain)")
         cmin.append(lo)
         cmax.append(hi)
