@@ -160,6 +160,7 @@ def write_outputs(result: TradeoffResult, folder: str | Path) -> tuple[list[Path
         plot = "tradeoff.png"
     except InputError as exc:
         result.notes.append(f"no plot: {exc}")
+        (folder / "tradeoff.png").unlink(missing_ok=True)  # an earlier run's plot would pass for this run's
     text = to_markdown(result, plot)
     paths.insert(1, write_atomic(folder / "tradeoff.md", text))
     return paths, text
