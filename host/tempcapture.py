@@ -34,6 +34,13 @@ def parse_temperatures(text: str) -> list[float]:
     return vals
 
 
+def check_temperature_options(args) -> None:
+    """InputError for --t0 or --temp-comp-output without --temperature (they would be ignored)."""
+    alone = [o for o, v in (("--t0", args.t0), ("--temp-comp-output", args.temp_comp_output)) if v is not None]
+    if alone and args.temperature is None:
+        raise InputError(f"{alone[0]} goes with --temperature (without it, it would be ignored)")
+
+
 def parse_t0(text: str | None, temps: list[float]) -> float | None:
     """``--t0``: one of the temperatures captured (the readings there are the compensation's base), or None."""
     if text is None:

@@ -155,3 +155,12 @@ def test_a_replay_plays_over_a_clock_step_and_view_refuses_readout_options(model
         assert_one_line_error(run_cli("tactile-host", "view", "--replay", str(run), "--port", "0", *option), 2,
                               "does not apply to --replay")
     assert not (tmp_path / "x.jsonl").exists()
+
+
+def test_temperature_options_without_temperature_are_refused(tmp_path):
+    (tmp_path / "s.csv").write_text(SCHEDULE)
+    for option in (["--t0", "20"], ["--temp-comp-output", str(tmp_path / "tc.json")]):
+        proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", TWO_CHIPS,
+                       "--simulate", "-o", str(tmp_path / "c.csv"), *option)
+        assert_one_line_error(proc, 2, "goes with --temperature")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.csv"]
