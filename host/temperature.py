@@ -96,22 +96,23 @@ def temperature_input(adc: str, cmap, thermistor: str | None = None) -> Temperat
     if spec is not None:
         return check_beside(parse_temperature_input(spec, thermistor), cmap)
     if cmap.temperature is not None:
-        return check_beside(parse_temperature_input(cmap.temperature[0], thermistor, cmap.temperature[1]), cmap)
+        return check_beside(parse_temperature_input(cmap.temperature[0], thermistor, cmap.temperature[1]), cmap,
+                            "the channel map's [temperature]")
     if thermistor:
         raise InputError("--thermistor describes the temperature input: add temp=CHIP@ADDRESS:INPUT to --adc")
     return None
 
 
-def check_beside(tin: TemperatureInput, cmap) -> TemperatureInput:
+def check_beside(tin: TemperatureInput, cmap, where: str = "temp= in --adc") -> TemperatureInput:
     """``tin`` if it can be read beside the elements of ``cmap``: on an input of its own, a chip of one kind,
-    in single-shot mode; InputError otherwise."""
+    in single-shot mode; InputError otherwise (naming ``where`` the input was given)."""
     for chip, inp in cmap.elements():
         if chip.address == tin.address and inp == tin.input:
-            raise InputError(f"temp={tin.kind}@0x{tin.address:02x}:{tin.input} is also an element's input in --adc")
+            raise InputError(f"{where}: {tin.kind}@0x{tin.address:02x}:{tin.input} is also an element's input")
         if chip.address == tin.address and chip.kind != tin.kind:
-            raise InputError(f"temp= in --adc: the chip at 0x{tin.address:02x} is a {chip.kind} elsewhere in --adc")
+            raise InputError(f"{where}: the chip at 0x{tin.address:02x} is a {chip.kind} among the elements")
         if chip.address == tin.address and chip.settings.mode == "continuous":
-            raise InputError("temp= in --adc on a chip in continuous mode: use single-shot mode or another chip")
+            raise InputError(f"{where}: a chip in continuous mode: use single-shot mode or another chip")
     return tin
 
 
