@@ -157,7 +157,7 @@ def test_rest_reference_from_a_dataset(sensor, tmp_path):
     ds.save(tmp_path / "d.csv")
     np.testing.assert_allclose(rest_reference(str(tmp_path / "d.csv"), 8), readings(sensor, np.zeros(5))[0])
     simulate(sensor, grid_poses({"dx": [-1, 1], "dz": [0, -1]})).save(tmp_path / "e.csv")
-    with pytest.raises(InputError, match="no row at pose 0"):
+    with pytest.raises(InputError, match="no row at rest"):
         rest_reference(str(tmp_path / "e.csv"), 8)
     with pytest.raises(InputError, match="model takes 4"):
         rest_reference("paper", 4)
