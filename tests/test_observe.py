@@ -106,3 +106,9 @@ def test_a_layout_blind_inside_the_box_is_not_resolvable_though_every_corner_is(
                             analyse(two, corner_poses(PRESETS["full"].ranges), two.noise, POSE_NAMES))
     assert corners.unresolved() == []
     assert observe(two, PRESETS["full"].ranges).unresolved() == list(POSE_NAMES)
+
+
+def test_a_huge_noise_gives_infinite_bounds_without_numpy_warnings():
+    proc = run_cli("fitgen", "observe", "--noise", "1e300", "--scene", "press")
+    assert proc.returncode == 0 and "RuntimeWarning" not in proc.stderr, proc.stderr
+    assert "dz: NOT resolvable" in proc.stdout

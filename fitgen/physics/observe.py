@@ -43,7 +43,7 @@ def _svd_bounds(J: np.ndarray, noise: float):
     _, s, vt = np.linalg.svd(J, full_matrices=False)
     # fewer readings than components: J^T J is singular whatever the values
     ok = (s[:, -1] > s[:, 0] * 1e-12) & (s.shape[1] == J.shape[2])
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a bound past float's range is inf
         # (J^T J)^-1 = V diag(1/s^2) V^T, without forming J^T J
         bounds = noise * np.sqrt(np.sum((vt.transpose(0, 2, 1) / s[:, None, :]) ** 2, axis=2))
     bounds[~ok] = np.inf
