@@ -23,7 +23,7 @@ from pathlib import Path
 
 from fitgen import __version__
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import write_atomic
+from fitgen.base.fileio import check_folder, write_atomic
 from fitgen.c.cgen import c_real
 from fitgen.c.codegen import write_header
 from fitgen.equations.model import Model
@@ -286,11 +286,9 @@ def arduino_build(model: Model, cmap: ChannelMap, folder: str | Path, *, precisi
 
 def _library_folder(folder: str | Path) -> Path:
     """``folder`` as the library's (its parents made); InputError when it cannot be one."""
-    path = Path(folder)
-    if not str(folder).strip() or path.name in ("", ".", ".."):
+    path = check_folder(folder)
+    if path.name in ("", ".", ".."):
         raise InputError(f"-o {str(folder)!r}: name the library's folder (e.g. {LIBRARY_NAME})")
-    if path.exists() and not path.is_dir():
-        raise InputError(f"-o {folder}: it is a file; the library is a folder")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

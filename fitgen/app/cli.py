@@ -8,11 +8,10 @@ from pathlib import Path
 
 from fitgen import __version__
 from fitgen.app.calibrate_cli import cmd_identify, cmd_schedule
-from fitgen.app.cliutil import Parser, check_not_empty, command_main, count, finite
+from fitgen.app.cliutil import Parser, check_not_empty, check_written, command_main, count, finite
 from fitgen.app.options import noise_of, sensor_of
 from fitgen.base.parse import OutOfRange, parse_assignments, parse_names, parse_noise, parse_penalty
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import output_file
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
 from fitgen.equations.terms import FAMILIES
 from fitgen.physics.pose import POSE_NAMES
@@ -482,10 +481,8 @@ def _check(args) -> None:
     check_not_empty(args)
     if getattr(args, "adc_bits", None) is not None and not 0 <= args.adc_bits <= 32:
         raise InputError(f"--adc-bits must be 0..32, got {args.adc_bits}")
-    writes_a_file = (cmd_simulate, cmd_fit, cmd_predict, cmd_report, cmd_identify, cmd_schedule)
-    if getattr(args, "output", None) is not None and args.func in writes_a_file:
-        inputs = [getattr(args, name, None) for name in ("data", "model", "capture", "poses", "sensor")]
-        output_file(args.output, [p for p in inputs if isinstance(p, str) and Path(p).is_file()])
+    # -o is a file for these; a folder for codegen and tradeoff
+    check_written(args, files=(cmd_simulate, cmd_fit, cmd_predict, cmd_report, cmd_identify, cmd_schedule))
 
 
 def main(argv=None) -> int:
