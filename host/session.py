@@ -76,6 +76,11 @@ def check_depends(args) -> None:
              (args.tare_samples != "50", "--tare-samples", "--tare or --auto-zero", args.tare or args.auto_zero),
              (args.rest_band != "0.08,1.5", "--rest-band", "--auto-zero", args.auto_zero),
              (args.rest_hold != "1", "--rest-hold", "--auto-zero", args.auto_zero))
+    refuse_alone(needs)
+
+
+def refuse_alone(needs) -> None:
+    """InputError for the first (given, option, needed, present) whose option is given without what it needs."""
     for given, option, needed, present in needs:
         if given and not present:
             raise InputError(f"{option} goes with {needed} (without it, it would be ignored)")

@@ -17,7 +17,7 @@ from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, trigger_waiter
 from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers
 from host.motion import parse_drift
-from host.session import channel_map_from_args, open_bus_from_args
+from host.session import channel_map_from_args, open_bus_from_args, refuse_alone
 from host.simsensor import Drift
 from host.temperature import Thermometer, fit_tempcomp, temperature_input
 
@@ -36,9 +36,8 @@ def parse_temperatures(text: str) -> list[float]:
 
 def check_temperature_options(args) -> None:
     """InputError for --t0 or --temp-comp-output without --temperature (they would be ignored)."""
-    alone = [o for o, v in (("--t0", args.t0), ("--temp-comp-output", args.temp_comp_output)) if v is not None]
-    if alone and args.temperature is None:
-        raise InputError(f"{alone[0]} goes with --temperature (without it, it would be ignored)")
+    refuse_alone([(value is not None, option, "--temperature", args.temperature is not None)
+                  for option, value in (("--t0", args.t0), ("--temp-comp-output", args.temp_comp_output))])
 
 
 def parse_t0(text: str | None, temps: list[float]) -> float | None:
