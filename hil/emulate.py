@@ -43,6 +43,29 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def listens(pid: int, port: int) -> bool | None:
+    """Whether process ``pid`` holds the socket listening on 127.0.0.1:``port`` (None where /proc cannot say):
+    a probe must not take another program's listener for the emulator's."""
+    try:
+        owned = set()
+        for fd in os.scandir(f"/proc/{pid}/fd"):
+            try:
+                target = os.readlink(fd.path)
+            except OSError:
+                continue
+            if target.startswith("socket:["):
+                owned.add(target[8:-1])
+        with open("/proc/net/tcp") as table:
+            rows = table.read().splitlines()[1:]
+    except OSError:
+        return None
+    for row in rows:
+        f = row.split()
+        if len(f) > 9 and f[3] == "0A" and int(f[1].rpartition(":")[2], 16) == port and f[9] in owned:
+            return True
+    return False
+
+
 def stop_process(proc: subprocess.Popen | None, sig: int = signal.SIGTERM, timeout: float = 5.0) -> None:
     """Send ``sig`` to a running ``proc`` and wait for it; killed when it has not ended after ``timeout`` s."""
     if proc is None or proc.poll() is not None:
@@ -98,6 +121,7 @@ class Emulator(_Running):
         self.port = port if port is not None else free_port()
         if not 0 < self.port < 65536:
             raise InputError(f"port {self.port} is not a TCP port number")
+        self._chosen = port is None  # ports picked here may be taken before QEMU binds them: picked again
         self.proc: subprocess.Popen | None = None
 
     @property
@@ -122,15 +146,23 @@ class Emulator(_Running):
             cmd += ["-icount", f"shift={ICOUNT_SHIFT}"]
         return cmd
 
-    def start(self) -> "Emulator":
+    def start(self, attempts: int = 3) -> "Emulator":
         self.proc = subprocess.Popen(self.command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                      stderr=subprocess.PIPE, text=True)
         deadline = time.monotonic() + self.boot_timeout
         while True:
             if self.proc.poll() is not None:
                 err = (self.proc.stderr.read() or "").strip().splitlines()
+                if any("Address already in use" in ln for ln in err):
+                    if attempts > 1 and (self._chosen or self.bridge is not None):
+                        self.port = free_port() if self._chosen else self.port
+                        self.bridge_port = free_port() if self.bridge is not None else None
+                        return self.start(attempts - 1)
+                    raise InputError(f"{QEMU} could not listen on 127.0.0.1:{self.port}: another program uses it")
                 raise InputError(f"{QEMU} exited at start: {err[-1] if err else 'no message'}")
             try:
+                if any(listens(self.proc.pid, p) is False for p in (self.port, self.bridge_port) if p is not None):
+                    raise ConnectionRefusedError  # not QEMU's listener yet (or another program's)
                 # QEMU listens once its chardev is up; the probe's connection is closed at once
                 with socket.create_connection(("127.0.0.1", self.port), timeout=0.5) as probe:
                     if self.buffered:
@@ -209,7 +241,8 @@ class HostFirmware(_Running):
 
 class UnoEmulator(_Running):
     """An ATmega328P firmware ELF run by the libsimavr board (firmware_templates/avr/uno_board.c), its USART0
-    on ``socket://127.0.0.1:port``; with ``bridge`` (host.pi.StandIn) the TWI bus carries the bus model's
+    on ``socket://127.0.0.1:port`` (without ``port``, one the board binds itself, known after start());
+    with ``bridge`` (host.pi.StandIn) the TWI bus carries the bus model's
     chips. ``eeprom``: a file that keeps the EEPROM from one run to the next (what a board keeps over a
     reset). ``paint``: the address where RAM above .bss starts; after stop(), ``stack_peak`` holds the
     deepest the stack reached (bytes), and ``cycles`` the cycles the core ran. ``hold``: the core starts when
@@ -220,7 +253,7 @@ class UnoEmulator(_Running):
                  hold: bool = False):
         self.board, self.elf, self.bridge, self.paint, self.hold = Path(board), Path(elf), bridge, paint, hold
         self.eeprom = eeprom
-        self.port = port if port is not None else free_port()
+        self.port = port if port is not None else 0  # 0: the board binds a free port and says which
         self.boot_timeout = boot_timeout
         self.stack_peak: int | None = None
         self.cycles: int | None = None
@@ -251,9 +284,11 @@ class UnoEmulator(_Running):
                 self.stop()
                 raise InputError(f"the simavr board did not start: {line.decode(errors='replace').strip() or 'no message'}")
             line += chunk
-        if not line.startswith(b"LISTENING"):
+        key, _, port = line.decode(errors="replace").strip().partition(" ")
+        if key != "LISTENING" or not port.isdigit():
             self.stop()
             raise InputError(f"the simavr board said {line.decode(errors='replace').strip()!r}")
+        self.port = int(port)
         return self
 
     def stop(self) -> None:

@@ -44,6 +44,31 @@ def test_full_suite_on_emulated_cortex_m4(paper_model):
     _assert_suite(res, 1000, 10_000)
 
 
+def test_a_port_taken_before_qemu_binds_it_is_picked_again(paper_model, monkeypatch):
+    """free_port() chooses a port and lets it go; another process may take it before QEMU binds it. QEMU then
+    fails to bind, and the emulator picks another port instead of failing (a port the user named is not
+    changed: that one fails in one line)."""
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    import hil.emulate as E
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        busy = taken.getsockname()[1]
+        picks = iter([busy])
+        real = E.free_port
+        monkeypatch.setattr(E, "free_port", lambda: next(picks, None) or real())
+        with start_target(paper_model, "mps2") as emu:
+            assert emu.port != busy
+            with Device.open(emu.url, timeout=5) as dev:
+                assert dev.ping(b"moved") == b"moved"
+        from fitgen.base.errors import InputError
+        with pytest.raises(InputError, match=f"could not listen on 127.0.0.1:{busy}: another program uses it"):
+            with start_target(paper_model, "mps2", port=busy):
+                pass
+
+
 def test_emulated_uart_passes_every_byte_and_answers_at_once(paper_model):
     """The mps2 UARTs go through a QEMU mux (a 32-byte buffer, hil/emulate.py) whose escape character is
     put out of reach: every byte value, C-a x (which stops QEMU at the default escape) among them, reaches

@@ -18,6 +18,8 @@
  * --hold: the core starts when the first client connects, as an Uno restarts when a serial monitor opens
  * its port (DTR), so that the client sees everything the program prints from its start.
  * UNO_BOARD_TRACE in the environment: each TWI message and bus-model exchange is printed on stderr.
+ * PORT 0: the system picks a free port (no race with another process between choosing and binding); the
+ * first line on stderr, "LISTENING <port>", says which.
  * Runs until SIGTERM or SIGINT; exits 3 when the program crashes, 4 when the bus model goes away, 5 when
  * the EEPROM image cannot be written.
  * usage: uno_board FILE.elf PORT [--bridge] [--eeprom FILE] [--paint ADDR] [--hold]
@@ -366,7 +368,13 @@ static int listen_on(int port)
     if (bind(listener, (struct sockaddr *)&sa, sizeof sa) != 0 || listen(listener, 4) != 0) {
         return -1;
     }
-    return 0;
+    {
+        socklen_t len = sizeof sa;
+        if (getsockname(listener, (struct sockaddr *)&sa, &len) != 0) {
+            return -1;
+        }
+    }
+    return (int)ntohs(sa.sin_port);
 }
 
 int main(int argc, char **argv)
@@ -397,7 +405,7 @@ int main(int argc, char **argv)
             return 2;
         }
     }
-    if (port <= 0 || port > 65535 || (paint && (paint < 0x100u || paint > RAMEND))) {
+    if (port < 0 || port > 65535 || (paint && (paint < 0x100u || paint > RAMEND))) {
         fprintf(stderr, "bad port or paint address\n");
         return 2;
     }
@@ -410,9 +418,13 @@ int main(int argc, char **argv)
         fprintf(stderr, "cannot read the EEPROM image %s\n", eeprom);
         return 2;
     }
-    if (listen_on(port) != 0) {
-        fprintf(stderr, "cannot listen on 127.0.0.1:%d: %s\n", port, strerror(errno));
-        return 2;
+    {
+        const int bound = listen_on(port);
+        if (bound <= 0) {
+            fprintf(stderr, "cannot listen on 127.0.0.1:%d: %s\n", port, strerror(errno));
+            return 2;
+        }
+        port = bound;
     }
     {
         uint32_t flags = 0;
