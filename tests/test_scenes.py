@@ -98,6 +98,14 @@ def test_a_scene_file_is_found_from_another_folder_and_a_scene_too_large_or_hold
     assert run_cli("fitgen", "simulate", "--scene", "s.toml", "-o", "data/s.csv", cwd=tmp_path).returncode == 0
     proc = run_cli("fitgen", "fit", "s.csv", "-o", "m.json", "--sensor", "paper", cwd=tmp_path / "data")
     assert proc.returncode == 0, proc.stderr
+    # the scene file edited after simulating: the data no longer hold what it names, and fit says so
+    (tmp_path / "s.toml").write_text('outputs = ["dx", "dz"]\nlevels = 30\n[ranges]\ndy = [0, 0]\nthx = [0, 0]\n'
+                                     'thy = [0, 0]\n')
+    assert_one_line_error(run_cli("fitgen", "fit", "s.csv", "-o", "m2.json", "--sensor", "paper",
+                                  cwd=tmp_path / "data"), 2, "names dx,dz now, but s.csv was simulated when it "
+                          "named dz: simulate again, or give --outputs")
+    assert not (tmp_path / "data" / "m2.json").exists()
+    assert run_cli("fitgen", "fit", "s.csv", "-o", "m2.json", "--outputs", "dz", cwd=tmp_path / "data").returncode == 0
     (tmp_path / "big.toml").write_text('outputs = ["dz"]\nlevels = 101\n')
     assert_one_line_error(run_cli("fitgen", "simulate", "--scene", str(tmp_path / "big.toml"), "-o",
                                   str(tmp_path / "b.csv")), 2, "make 10,510,100,501 poses (at most 1,000,000)")

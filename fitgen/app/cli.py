@@ -134,6 +134,10 @@ def cmd_fit(args) -> int:
     scene = args.scene or (None if args.outputs else ds.meta.get("scene_spec"))  # --outputs over the data's scene
     if scene is not None:
         outputs = scene_outputs(scene, ds, args.data, sensor, args.force)
+        recorded_outputs = ds.meta.get("scene_outputs")
+        if not args.scene and recorded_outputs is not None and list(outputs) != list(recorded_outputs):
+            raise InputError(f"scene {scene} names {','.join(outputs)} now, but {args.data} was simulated when it "
+                             f"named {','.join(map(str, recorded_outputs))}: simulate again, or give --outputs")
     else:
         outputs = ds.target_names if args.outputs is None else parse_names(args.outputs, POSE_NAMES, "--outputs")
     auto = auto_compares(args.family, settings)
