@@ -28,6 +28,7 @@ FLAVORS = ("marlin", "grbl")
 MAX_LINE = 256  # longest line accepted from a controller (GRBL's longest report is about 100)
 MAX_COMMAND = 70  # GRBL's line buffer holds 80 characters with the newline; Marlin's 96
 POLL = 0.02  # seconds one read of the port blocks at most
+ASK_WAIT = 1.0  # s a GRBL takes at most to answer '?' (real-time, within milliseconds); a Marlin never does
 QUEUED_WAIT = 60.0  # s a stopped run's queued moves (or homing) may take to end after a new run connects
 POSITION_TOL = 0.02  # mm: reported against commanded position (Marlin prints 2 decimals, GRBL steps)
 
@@ -217,7 +218,9 @@ class GcodeController(PortOwner):
                     self.firmware = text[5:].strip()
         self.banner_seen = seen is not None
         if seen is None:
-            seen = self._grbl_at_rest() if flavor == "grbl" else self._probe()
+            # GRBL answers '?' at once, even behind a stopped run's queued move (M115 would wait behind it)
+            seen = self._grbl_at_rest(self.timeout if flavor == "grbl" else min(self.timeout, ASK_WAIT)) \
+                if flavor != "marlin" else self._probe()
         if flavor != "auto" and seen != flavor:
             raise InputError(f"{self.name}: --stage-flavor {flavor}, but the controller is {seen} "
                              f"({self.firmware or 'by its answers'})")
@@ -227,14 +230,14 @@ class GcodeController(PortOwner):
             if not self.alarm:
                 self._work_offset()
 
-    def _grbl_at_rest(self) -> str:
-        """GRBL named, no banner: its real-time status answers even while a stopped run's last move or homing
-        ends (a line such as M115 waits behind them); wait for that, then ask its build."""
+    def _grbl_at_rest(self, ask: float) -> str:
+        """No banner: a GRBL's real-time status answers within ``ask`` s even while a stopped run's last move or
+        homing ends (a line such as M115 waits behind them); wait for that, then ask its build."""
         try:
-            self.status()
+            self.status(ask)
         except NoStatus:  # not a GRBL: end the '?' as a line (a Marlin answers it ok), and ask who it is
             self._write(b"\n")
-            return self._probe()
+            return self._probe(spare_oks=2)
         deadline = time.monotonic() + QUEUED_WAIT + self.timeout
         while not (state := self.status()[0]).startswith(("Idle", "Alarm")):
             if time.monotonic() > deadline:
@@ -250,23 +253,23 @@ class GcodeController(PortOwner):
         self.firmware = f"Grbl {ver[5:].split(':')[0]}" if ver else "Grbl"
         return "grbl"
 
-    def _probe(self) -> str:
-        """No banner: ask. Marlin answers M115 with its firmware name; GRBL answers it with error:N."""
+    def _probe(self, spare_oks: int = 1) -> str:
+        """No banner: ask. Marlin answers M115 with its firmware name; GRBL answers it with error:N. Up to
+        ``spare_oks`` answers to earlier lines (a stopped run's last, a '?' line) may come before M115's own."""
         def unnamed(name):
             return InputError(f"{self.name}: the controller answered M115 with firmware {name or 'unnamed'}; "
                               "give --stage-flavor marlin or grbl if it speaks one of them")
 
         self.send("M115")
         deadline = time.monotonic() + self.timeout
-        name, nameless_ok = "", False
+        name, nameless_oks = "", 0
         while True:
             text = self.read_line(deadline)
-            if text is None and nameless_ok:
+            if text is None and nameless_oks:
                 raise unnamed(name)
             if text is None:
                 raise StageError(f"{self.name}: no answer to M115 within {self.timeout:g} s; is the controller on, "
-                                 "and is the baud rate right? (A GRBL still ending a stopped run's move or homing "
-                                 "answers late: give --stage-flavor grbl)")
+                                 "and is the baud rate right?")
             if "busy:" in text:  # Marlin's host keepalive: a stopped run's M400 or homing is still going on
                 deadline = max(deadline, time.monotonic() + self.timeout)
                 continue
@@ -278,9 +281,9 @@ class GcodeController(PortOwner):
                 if "marlin" in name.lower():
                     self.firmware = name
                     return "marlin"
-                if name or nameless_ok:
+                if name or nameless_oks >= spare_oks:
                     raise unnamed(name)
-                nameless_ok = True  # perhaps a stopped run's last answer (its M400's): M115's own comes next
+                nameless_oks += 1  # perhaps an earlier line's answer (a stopped run's M400): M115's own comes next
                 deadline = time.monotonic() + self.timeout
 
     def _until_ok(self, what: str) -> list[str]:
@@ -311,14 +314,15 @@ class GcodeController(PortOwner):
 
     # -- state and motion
 
-    def status(self) -> tuple[str, np.ndarray]:
-        """GRBL: the real-time ``?`` report: (state, work position)."""
+    def status(self, timeout: float | None = None) -> tuple[str, np.ndarray]:
+        """GRBL: the real-time ``?`` report: (state, work position), within ``timeout`` s (default the stage's)."""
         self._write(b"?")  # real-time: no line end, answered at once, no ok
-        deadline = time.monotonic() + self.timeout
+        wait = self.timeout if timeout is None else timeout
+        deadline = time.monotonic() + wait
         while True:
             text = self.read_line(deadline)
             if text is None:
-                raise NoStatus(f"{self.name}: no status report within {self.timeout:g} s after '?'")
+                raise NoStatus(f"{self.name}: no status report within {wait:g} s after '?'")
             if text.startswith("<") and text.endswith(">"):
                 return self._parse_status(text)
             fault = self._fault(text, "a status query")

@@ -255,10 +255,12 @@ def test_driver_detects_the_flavor_moves_and_reports_position(flavor):
             c.close()
 
 
-@pytest.mark.parametrize("flavor", ["marlin", "grbl"])
-def test_connecting_while_a_stopped_runs_long_move_ends(flavor):
+@pytest.mark.parametrize("flavor,named", [("marlin", "auto"), ("marlin", "marlin"), ("grbl", "auto"),
+                                          ("grbl", "grbl")])
+def test_connecting_while_a_stopped_runs_long_move_ends(flavor, named):
     """A run stopped (Ctrl-C) after sending a slow move and its wait: the next run's connect waits for the end
-    (Marlin's keepalive extends the wait; a GRBL named answers its real-time status), longer than --stage-timeout."""
+    (Marlin's keepalive extends the wait; a GRBL answers its real-time status, named or detected), longer than
+    --stage-timeout."""
     with server(flavor, busy_interval=0.3) as srv:
         c = connect(srv)
         c.setup()
@@ -266,7 +268,7 @@ def test_connecting_while_a_stopped_runs_long_move_ends(flavor):
         c.send("M400" if flavor == "marlin" else "G4 P0")
         c.close()
         c = GcodeController.open(srv.url, timeout=1.0)
-        c.connect(flavor if flavor == "grbl" else "auto", boot_wait=0.1)
+        c.connect(named, boot_wait=0.1)
         assert c.flavor == flavor and c.firmware
         c.close()
 
