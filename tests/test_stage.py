@@ -242,7 +242,7 @@ def test_driver_detects_the_flavor_moves_and_reports_position(flavor):
     with server(flavor) as srv:
         c = connect(srv)
         try:
-            assert c.flavor == flavor and not c.banner_seen  # no banner on this connection: detected by M115
+            assert c.flavor == flavor and not c.banner_seen  # no banner on this connection: detected by its answers
             assert ("Grbl 1.1h" if flavor == "grbl" else "Marlin 2.1.2.1") in c.firmware
             c.setup()
             pos = c.move({"X": 1.25, "Y": -0.5, "Z": -2.0}, FEED, start=np.zeros(3))
