@@ -45,6 +45,12 @@ _NUM = r"(-?\d+(?:\.\d*)?)"
 _MARLIN_POS = re.compile(rf"X:{_NUM}\s*Y:{_NUM}\s*Z:{_NUM}")
 
 
+def _busy_deadline(deadline: float, start: float, limit: float, timeout: float) -> float:
+    """A Marlin ``busy:`` keepalive moves the answer's deadline to ``timeout`` s from now, but never past
+    ``limit`` or QUEUED_WAIT s after ``start`` (whichever is later): a machine stuck or paused ends the wait."""
+    return min(max(deadline, time.monotonic() + timeout), start + max(limit, QUEUED_WAIT))
+
+
 class StageError(RuntimeError):
     """The controller failed: an error or alarm, a halt, silence, a reset, or a position not the commanded one.
 
@@ -58,6 +64,10 @@ class StageError(RuntimeError):
 
 class NoStatus(StageError):
     """No answer to GRBL's real-time ``?``."""
+
+
+class UnknownCommand(StageError):
+    """The controller does not know a command (Marlin's ``echo:Unknown command``)."""
 
 
 def stage_url(spec: str) -> str:
@@ -81,6 +91,7 @@ class GcodeController(PortOwner):
         self.alarm = ""  # GRBL's alarm state at connect ("" if none)
         self.homed = False  # homed during this connection
         self.wco = np.zeros(3)  # GRBL: work coordinate offset (MPos - WPos)
+        self.max_rates: np.ndarray | None = None  # each axis's top rate, mm/min (setup(); None: not said)
         self.log = log  # optional callable(str) for each line in and out
         self._buf = bytearray()
 
@@ -163,7 +174,7 @@ class GcodeController(PortOwner):
             return StageError(f"{self.name}: the controller halted ({text}) during {what}; reset it, home it and "
                               "set the zero again", lost="the controller halted")
         if low.startswith("echo:unknown command"):
-            return StageError(f"{self.name}: the controller does not know {what} ({text})")
+            return UnknownCommand(f"{self.name}: the controller does not know {what} ({text})")
         if GRBL_BANNER.match(text) or text == "start":
             self.banner_seen = True
             return StageError(f"{self.name}: the controller reset itself during {what} (it printed {text!r}); "
@@ -175,17 +186,21 @@ class GcodeController(PortOwner):
         what = what or repr(line)
         limit = self.timeout if timeout is None else timeout
         self.send(line)
-        deadline = time.monotonic() + limit
+        start = time.monotonic()
+        deadline, busy = start + limit, -math.inf
         got = []
         while True:
             text = self.read_line(deadline)
+            if text is None and time.monotonic() - busy <= self.timeout + POLL:
+                raise StageError(f"{self.name}: {what} still busy {time.monotonic() - start:.0f} s after it was "
+                                 "sent (Marlin's busy: keepalive); is the machine stuck, or paused for the user?")
             if text is None:
                 raise StageError(f"{self.name}: no answer to {what} within {limit:g} s; is the controller on, "
                                  "and is the baud rate right?")
             if text == "ok" or text.startswith("ok "):
                 return got
-            if "busy:" in text:  # Marlin's host keepalive: still working on a long command
-                deadline = max(deadline, time.monotonic() + self.timeout)
+            if "busy:" in text:  # Marlin's host keepalive: still working on a long command, but not for ever
+                deadline, busy = _busy_deadline(deadline, start, limit, self.timeout), time.monotonic()
                 continue
             fault = self._fault(text, what)
             if fault is not None:
@@ -220,7 +235,7 @@ class GcodeController(PortOwner):
         if seen is None:
             # GRBL answers '?' at once, even behind a stopped run's queued move (M115 would wait behind it)
             seen = self._grbl_at_rest(self.timeout if flavor == "grbl" else min(self.timeout, ASK_WAIT)) \
-                if flavor != "marlin" else self._probe()
+                if flavor != "marlin" else self._probe(named=True)
         if flavor != "auto" and seen != flavor:
             raise InputError(f"{self.name}: --stage-flavor {flavor}, but the controller is {seen} "
                              f"({self.firmware or 'by its answers'})")
@@ -253,33 +268,42 @@ class GcodeController(PortOwner):
         self.firmware = f"Grbl {ver[5:].split(':')[0]}" if ver else "Grbl"
         return "grbl"
 
-    def _probe(self, spare_oks: int = 1) -> str:
+    def _probe(self, spare_oks: int = 1, named: bool = False) -> str:
         """No banner: ask. Marlin answers M115 with its firmware name; GRBL answers it with error:N. Up to
-        ``spare_oks`` answers to earlier lines (a stopped run's last, a '?' line) may come before M115's own."""
+        ``spare_oks`` answers to earlier lines (a stopped run's last, a '?' line) may come before M115's own.
+        ``named`` (--stage-flavor marlin): any answer but GRBL's is taken as a Marlin (or a firmware derived
+        from it, such as Prusa's or Klipper's, which name themselves otherwise)."""
         def unnamed(name):
             return InputError(f"{self.name}: the controller answered M115 with firmware {name or 'unnamed'}; "
                               "give --stage-flavor marlin or grbl if it speaks one of them")
 
         self.send("M115")
-        deadline = time.monotonic() + self.timeout
+        start = time.monotonic()
+        deadline = start + self.timeout
         name, nameless_oks = "", 0
         while True:
             text = self.read_line(deadline)
+            if text is None and nameless_oks and named:
+                self.firmware = "unnamed"
+                return "marlin"
             if text is None and nameless_oks:
                 raise unnamed(name)
             if text is None:
                 raise StageError(f"{self.name}: no answer to M115 within {self.timeout:g} s; is the controller on, "
                                  "and is the baud rate right?")
             if "busy:" in text:  # Marlin's host keepalive: a stopped run's M400 or homing is still going on
-                deadline = max(deadline, time.monotonic() + self.timeout)
+                deadline = _busy_deadline(deadline, start, self.timeout, self.timeout)
                 continue
             if text.startswith("FIRMWARE_NAME:"):
                 name = text[len("FIRMWARE_NAME:"):].split(" SOURCE_CODE_URL")[0].strip()
             elif text.lower().startswith("error:") and text[6:].strip().isdigit():
                 return self._grbl_build()
             elif text == "ok" or text.startswith("ok "):
-                if "marlin" in name.lower():
+                if "marlin" in name.lower() or (named and name):
                     self.firmware = name
+                    return "marlin"
+                if (name or nameless_oks >= spare_oks) and named:
+                    self.firmware = name or "unnamed"
                     return "marlin"
                 if name or nameless_oks >= spare_oks:
                     raise unnamed(name)
@@ -304,13 +328,21 @@ class GcodeController(PortOwner):
         wco = np.zeros(3)
         for text in self.command("$#"):
             m = re.match(r"\[(G54|G92|TLO):([^\]]*)\]", text)
-            if m:
-                vals = [float(v) for v in m.group(2).split(",")]
-                if m.group(1) == "TLO":
-                    wco[2] += vals[0]
-                else:
-                    wco += np.array(vals[:3])
+            if m and m.group(1) == "TLO":
+                wco[2] += self._numbers(m.group(2), text, 1)[0]
+            elif m:
+                wco += self._numbers(m.group(2), text, 3)
         self.wco = wco
+
+    def _numbers(self, field: str, text: str, n: int) -> np.ndarray:
+        """The first ``n`` comma-separated numbers of ``field`` (part of the controller's line ``text``)."""
+        try:
+            vals = [float(v) for v in field.split(",")[:n]]
+        except ValueError:
+            vals = []
+        if len(vals) < n or not all(math.isfinite(v) for v in vals):
+            raise StageError(f"{self.name}: a report with fewer than {n} readable numbers: {text!r}")
+        return np.array(vals)
 
     # -- state and motion
 
@@ -336,9 +368,9 @@ class GcodeController(PortOwner):
         for f in fields[1:]:
             name, _, val = f.partition(":")
             if name in ("MPos", "WPos"):
-                pos, kind = np.array([float(v) for v in val.split(",")[:3]]), name
+                pos, kind = self._numbers(val, text, 3), name
             elif name == "WCO":
-                self.wco = np.array([float(v) for v in val.split(",")[:3]])
+                self.wco = self._numbers(val, text, 3)
         if pos is None:
             raise StageError(f"{self.name}: a status report without a position: {text!r}")
         return state, (pos - self.wco if kind == "MPos" else pos)
@@ -372,10 +404,43 @@ class GcodeController(PortOwner):
             time.sleep(POLL)
 
     def setup(self) -> None:
-        """Millimetres, absolute coordinates, feed per minute; Marlin's steppers on."""
+        """Millimetres, absolute coordinates, feed per minute; Marlin's steppers on; the axes' top rates."""
         self.command("G21")
         self.command("G90")
         self.command("M17" if self.flavor == "marlin" else "G94")
+        self.max_rates = self._max_rates()
+
+    def _max_rates(self) -> np.ndarray | None:
+        """Each machine axis's top rate (mm/min) as the controller reports it (GRBL's $110-$112; Marlin's
+        M203, in mm/s, in M503's report), or None where it does not say: a move at a feed above it is slower."""
+        rates = {}
+        try:
+            if self.flavor == "grbl":
+                for text in self.command("$$"):
+                    m = re.fullmatch(rf"\$11([012])={_NUM}", text)
+                    if m:
+                        rates[int(m.group(1))] = float(m.group(2))
+            else:
+                for text in self.command("M503"):
+                    m = re.search(r"M203((?:\s+[A-Z]-?[\d.]+)+)", text)
+                    for axis, value in re.findall(r"([XYZ])(-?[\d.]+)", m.group(1) if m else ""):
+                        rates[MACHINE_AXES.index(axis)] = float(value) * 60.0
+        except UnknownCommand:  # a build without M503
+            return None
+        vals = [rates.get(i, math.nan) for i in range(3)]
+        return np.array(vals) if all(math.isfinite(v) and v > 0 for v in vals) else None
+
+    def move_time(self, delta: np.ndarray, feed: float) -> float:
+        """Seconds a straight move by ``delta`` (mm, X Y Z) takes at ``feed`` mm/min, each axis held to its top
+        rate (the controller slows the whole move so that no axis exceeds it)."""
+        travel = float(np.linalg.norm(delta))
+        if travel == 0.0:
+            return 0.0
+        speed = feed
+        if self.max_rates is not None:
+            share = np.abs(delta) / travel
+            speed = min(speed, float(np.min(self.max_rates[share > 0] / share[share > 0])))
+        return travel / speed * 60.0
 
     def move(self, target: dict[str, float], feed: float, *, start: np.ndarray | None = None) -> np.ndarray:
         """G1 to ``target`` (machine axis -> mm) at ``feed`` mm/min, wait for its end, check the position;
@@ -384,10 +449,10 @@ class GcodeController(PortOwner):
         line = f"G1 {words} F{feed:g}"
         if start is None:
             start = self.position()  # the move's length sets its time limit
-        travel = math.sqrt(sum((target[a] - start[i]) ** 2 for i, a in enumerate(MACHINE_AXES) if a in target))
+        delta = np.array([target[a] - start[i] if a in target else 0.0 for i, a in enumerate(MACHINE_AXES)])
         self.command(line)
         # the move's own time, twice over (acceleration), plus the answer's time limit
-        self.wait_idle(2.0 * travel / feed * 60.0 + self.timeout, line)
+        self.wait_idle(2.0 * self.move_time(delta, feed) + self.timeout, line)
         pos = self.position()
         for i, a in enumerate(MACHINE_AXES):
             if a in target and abs(pos[i] - round(target[a], 3)) > POSITION_TOL:

@@ -57,13 +57,13 @@ class SimController:
 
     def __init__(self, flavor: str, rig: SimRig, *, planner: int = 16, steps_per_mm: float = 400.0,
                  busy_interval: float = 2.0, homing_lock: bool = False, homing_time: float = 0.2,
-                 max_feed: float = 12000.0, clock=time.monotonic):
+                 max_feed=12000.0, clock=time.monotonic):
         if flavor not in ("marlin", "grbl"):
             raise InputError(f"simulated stage flavor {flavor!r}: marlin or grbl")
         self.flavor, self.rig = flavor, rig
         self.planner_size, self.steps_per_mm = planner, steps_per_mm
         self.busy_interval, self.homing_lock, self.homing_time = busy_interval, homing_lock, homing_time
-        self.max_feed = max_feed
+        self.max_feed = np.broadcast_to(np.asarray(max_feed, dtype=float), (3,)).copy()  # per axis, mm/min
         self.clock = clock
         self.lock = threading.RLock()
         self.faults: list[dict] = []
@@ -247,6 +247,9 @@ class SimController:
         elif code == "M115" and self.flavor == "marlin":
             self._say(f"FIRMWARE_NAME:Marlin {MARLIN_VERSION} (sim) SOURCE_CODE_URL:local PROTOCOL_VERSION:1.0 "
                       "MACHINE_TYPE:sim stage EXTRUDER_COUNT:1", "Cap:AUTOREPORT_POS:0", "ok")
+        elif code == "M503" and self.flavor == "marlin":
+            rates = " ".join(f"{a}{v / 60.0:.2f}" for a, v in zip(MACHINE_AXES, self.max_feed))
+            self._say("echo:; Maximum feedrates (units/s):", f"echo:  M203 {rates} E25.00", "ok")
         elif code == "G28" and self.flavor == "marlin":
             self._home(now)
         elif self.flavor == "grbl":
@@ -260,7 +263,7 @@ class SimController:
             if args["F"] <= 0:
                 self._say("error:2" if self.flavor == "grbl" else "Error:feed rate must be positive", "ok")
                 return
-            self.feed = min(args["F"], self.max_feed)
+            self.feed = args["F"]
         if self.feed is None:  # GRBL: G1 needs a feed rate once
             self._say("error:22")
             return
@@ -289,7 +292,10 @@ class SimController:
         start = self.queue[-1].end if self.queue else self.rig.carriage.copy()
         t0 = max(now, self.queue[-1].t1 if self.queue else now)
         dist = float(np.linalg.norm(home_frame - start))
-        self.queue.append(_Move(start, home_frame, t0, t0 + dist / self.feed * 60.0))
+        share = np.abs(home_frame - start) / dist if dist > 0 else np.zeros(3)
+        # the planner slows the whole move until no axis passes its top rate
+        speed = min([self.feed] + [m / s for m, s in zip(self.max_feed, share) if s > 0])
+        self.queue.append(_Move(start, home_frame, t0, t0 + dist / speed * 60.0))
         self.planned = target
         self._say("ok")
 
@@ -346,7 +352,10 @@ class SimController:
                 self._say("error:5")  # homing not enabled in the settings
             else:
                 self._home(now)
-        elif text in ("$", "$$", "$G", "$N"):
+        elif text == "$$":
+            rates = (f"$11{i}={v:.3f}" for i, v in enumerate(self.max_feed))
+            self._say(f"$100={self.steps_per_mm:.3f}", *rates, "ok")
+        elif text in ("$", "$G", "$N"):
             self._say("ok")
         else:
             self._say("error:3")

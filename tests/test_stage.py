@@ -337,6 +337,103 @@ def test_every_wait_has_a_time_limit_and_marlin_busy_extends_it():
             c.close()
 
 
+def test_a_marlin_busy_for_ever_ends_the_wait(monkeypatch):
+    """Marlin's busy: keepalive extends an answer's time limit, but not past a minute (QUEUED_WAIT, shortened
+    here) or the command's own limit: a machine stuck, or paused for the user, is one StageError."""
+    import host.gcode as G
+
+    monkeypatch.setattr(G, "QUEUED_WAIT", 1.0)
+    with server("marlin", busy_interval=0.1) as srv:
+        c = connect(srv, timeout=0.4)
+        try:
+            c.setup()
+            c.command("G1 X15 F1")  # 15 minutes of travel
+            with pytest.raises(StageError, match=r"'M400' still busy 1 s after it was sent .*stuck, or paused"):
+                c.command("M400", timeout=0.4)
+        finally:
+            c.close()
+
+
+def test_a_move_slowed_by_an_axis_top_rate_is_waited_for():
+    """A feed above an axis's top rate (GRBL's $112, Marlin's M203: a printer's Z is often 5 mm/s) makes the
+    controller slow the whole move; the driver reads the rates and waits for the move it will make."""
+    for flavor in ("grbl", "marlin"):
+        with server(flavor, max_feed=(12000.0, 12000.0, 300.0)) as srv:
+            c = connect(srv, timeout=0.5)
+            try:
+                c.setup()
+                np.testing.assert_allclose(c.max_rates, [12000, 12000, 300])
+                assert c.move_time(np.array([0.0, 0.0, 5.0]), FEED) == pytest.approx(1.0)  # not 0.05 s
+                assert c.move_time(np.array([3.0, 0.0, 4.0]), FEED) == pytest.approx(5 / (300 / 0.8) * 60)
+                assert c.move_time(np.array([5.0, 0.0, 0.0]), FEED) == pytest.approx(0.05)
+                c.move({"Z": 5.0}, FEED)  # 1 s: past the 0.5 s + 2 x 0.05 s a 6000 mm/min move would get
+                np.testing.assert_allclose(c.position(), [0, 0, 5], atol=0.01)
+            finally:
+                c.close()
+
+
+def _controller(cls, flavor):
+    rig = SimRig(Sink(), None, contact=CONTACT, start=START, backlash=BACKLASH, repeatability=0.0, seed=1)
+    return (SocketServer if flavor == "grbl" else PtyServer)(cls(flavor, rig))
+
+
+def test_a_status_report_or_offset_it_cannot_read_is_one_stage_error():
+    """Line noise can garble a GRBL report: a position with a letter in it, or two axes, is a StageError
+    naming the line, not a traceback."""
+    for bad in ("<Idle|MPos:1.0,x,3|FS:0,0>", "<Idle|MPos:1.0,2.0|FS:0,0>", "<Idle|MPos:1,2,nan|FS:0,0>"):
+        class Garbled(SimController):
+            def _status(self, now):
+                self._say(bad)
+
+        with _controller(Garbled, "grbl") as srv:
+            c = GcodeController.open(srv.url, timeout=0.5)
+            try:
+                with pytest.raises(StageError, match=re.escape(f"fewer than 3 readable numbers: {bad!r}")):
+                    c.connect("grbl", boot_wait=0.1)
+            finally:
+                c.close()
+
+    class TwoAxisOffsets(SimController):
+        def _grbl_system(self, text, now):
+            self._say("[G54:0.000,0.000]", "ok") if text == "$#" else super()._grbl_system(text, now)
+
+    with _controller(TwoAxisOffsets, "grbl") as srv:
+        c = GcodeController.open(srv.url, timeout=0.5)
+        try:
+            with pytest.raises(StageError, match=re.escape("fewer than 3 readable numbers: '[G54:0.000,0.000]'")):
+                c.connect("grbl", boot_wait=0.1)
+        finally:
+            c.close()
+
+
+def test_a_firmware_speaking_marlins_dialect_under_another_name_is_taken_when_named():
+    """Prusa's firmware says 'based on Marlin' in its M115 and is detected; Klipper does not, and is taken with
+    --stage-flavor marlin, while auto refuses it in one line that says to name it."""
+    for name, detected in [("Prusa-Firmware 3.13.3 based on Marlin FIRMWARE_URL:x", True),
+                           ("Klipper FIRMWARE_VERSION:v0.12.0", False)]:
+        class Other(SimController):
+            def _execute(self, line, now):
+                if line.strip() == "M115":
+                    self._say(f"FIRMWARE_NAME:{name}", "ok")
+                    return True
+                return super()._execute(line, now)
+
+        with _controller(Other, "marlin") as srv:
+            c = GcodeController.open(srv.url, timeout=0.5)
+            try:
+                c.connect("marlin", boot_wait=0.1)
+                assert c.flavor == "marlin" and c.firmware == name
+                if detected:
+                    c.connect("auto", boot_wait=0.1)
+                    assert c.flavor == "marlin"
+                else:
+                    with pytest.raises(InputError, match="answered M115 with firmware Klipper .*give --stage-flavor "
+                                                         "marlin"):
+                        c.connect("auto", boot_wait=0.1)
+            finally:
+                c.close()
+
+
 def test_lines_are_length_checked():
     port = serial.serial_for_url("loop://", timeout=0.02)
     c = GcodeController(port, "loop", timeout=0.5)
