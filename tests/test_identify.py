@@ -304,6 +304,22 @@ def test_cli_schedule_capture_identify(tmp_path):
     for f in ("max", "rms", "noisy_max", "noisy_rms"):
         assert dx[f + "_lo"] <= dx[f] <= dx[f + "_hi"] and dx[f + "_lo"] < dx[f + "_hi"]
     assert f"({dx['noisy_max_lo']:.3g}-{dx['noisy_max_hi']:.3g})" in proc.stderr
+    # a unit edited after identify (or beside another identification's posterior) does not borrow that
+    # posterior's figures: refused, nothing written
+    text = unit_file.read_text()
+    gain = next(ln for ln in text.splitlines() if ln.startswith("gain = "))
+    unit_file.write_text(text.replace(gain, "gain = 1.5", 1))
+    assert run_cli("fitgen", "simulate", "--sensor", str(unit_file), "--grid", "paper-exp", "-o",
+                   str(tmp_path / "e.csv")).returncode == 0
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "e.csv"), "-o", str(tmp_path / "e.json"),
+                                  "--held-out", "50", "--family", "no-roots"), 2,
+                          "its posterior unit.posterior.json was written for another unit")
+    assert not (tmp_path / "e.json").exists()
+    unit_file.write_text(text)
+    (tmp_path / "unit.posterior.json").write_text('{"theta": 1}')
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "t.csv"), "-o", str(tmp_path / "e.json"),
+                                  "--held-out", "50", "--family", "no-roots"), 2,
+                          f"unit file {unit_file}: its posterior unit.posterior.json is malformed")
 
 
 def _save_capture(path, y, poses, meta=None):

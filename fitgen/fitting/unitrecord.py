@@ -163,7 +163,8 @@ def save(ident: Identification, path, provenance: dict) -> tuple:
     from pathlib import Path
 
     from fitgen.base.fileio import write_atomic
-    from fitgen.physics.units import write_unit
+    from fitgen.physics.sensor import parse_sensor, tomllib
+    from fitgen.physics.units import unit_toml
 
     path = Path(path)
     post_path = path.with_suffix(".posterior.json")
@@ -171,7 +172,13 @@ def save(ident: Identification, path, provenance: dict) -> tuple:
     if spec is not None and Path(spec).is_file():  # a sensor file: named so that it is found from anywhere
         provenance = {**provenance, "drawing_spec": str(Path(spec).resolve())}
     unit = ident.unit(provenance.get("name", path.stem), f"identified from {provenance.get('capture', 'a capture')}")
+    prov = {"source": "fitgen identify", "posterior": post_path.name, "reduced_chi2": round(ident.reduced_chi2, 4),
+            **{k: v for k, v in provenance.items() if isinstance(v, (str, int, float)) and k != "name"}}
+    text = unit_toml(unit, ident.space.drawing.name, prov)
     record = {
+        # the unit as its file reads back: a posterior beside another unit's file, or a unit edited by hand, is
+        # refused (load_posterior) rather than widening figures with another unit's uncertainty
+        "unit_sha256": parse_sensor(tomllib.loads(text), str(path)).sha256,
         "drawing": ident.space.drawing.name, "drawing_sha256": ident.space.drawing.sha256,
         "drawing_spec": provenance.get("drawing_spec", ident.space.drawing.name),
         "parameters": ident.space.names, "theta": ident.theta.tolist(), "sd": ident.sd.tolist(),
@@ -188,17 +195,16 @@ def save(ident: Identification, path, provenance: dict) -> tuple:
                             for v, p, _ in ident.starved],
         **{k: v for k, v in provenance.items() if k != "name"}}
     write_atomic(post_path, json.dumps(record, indent=1) + "\n")
-    prov = {"source": "fitgen identify", "posterior": post_path.name, "reduced_chi2": round(ident.reduced_chi2, 4),
-            **{k: v for k, v in provenance.items() if isinstance(v, (str, int, float)) and k != "name"}}
-    return write_unit(path, unit, ident.space.drawing.name, prov), post_path
+    return write_atomic(path, text), post_path
 
 
 def load_posterior(unit_path) -> dict | None:
-    """The posterior record an identified unit file names (``[unit] posterior``), or None."""
+    """The posterior record an identified unit file names (``[unit] posterior``), or None; InputError when
+    it cannot be read or was written for another unit (another identification's, or the unit file edited)."""
     import json
     from pathlib import Path
 
-    from fitgen.physics.sensor import tomllib
+    from fitgen.physics.sensor import load_sensor, tomllib
 
     unit_path = Path(unit_path)
     try:
@@ -212,4 +218,11 @@ def load_posterior(unit_path) -> dict | None:
         rec = json.loads((unit_path.parent / name).read_text())
     except (OSError, ValueError):
         raise InputError(f"unit file {unit_path}: its posterior {name} cannot be read") from None
+    if not (isinstance(rec, dict) and isinstance(rec.get("theta"), list) and isinstance(rec.get("covariance"), list)
+            and isinstance(rec.get("drawing_spec"), str)):
+        raise InputError(f"unit file {unit_path}: its posterior {name} is malformed (expected fitgen identify's)")
+    if "unit_sha256" in rec and rec["unit_sha256"] != load_sensor(unit_path).sha256:
+        raise InputError(f"unit file {unit_path}: its posterior {name} was written for another unit (another "
+                         "identification's, or the unit file was edited since): identify again, or delete the "
+                         "[unit] posterior line to use the unit without its uncertainty")
     return rec
