@@ -280,6 +280,10 @@ def test_cli_schedule_capture_identify(tmp_path):
     assert f"left out {lifted} row(s) lifted off the skin" in fit.stderr
     direct = json.loads((tmp_path / "direct.json").read_text())
     assert direct["fit"]["rows_off_skin_left_out"] == lifted
+    # and so does a report on the capture
+    rep = run_cli("fitgen", "report", str(tmp_path / "direct.json"), "--data", str(cap))
+    assert rep.returncode == 0 and f"left out {lifted} row(s) lifted off the skin" in rep.stderr, rep.stderr
+    assert f"errors on {30 - lifted} rows" in rep.stdout, rep.stdout
     assert "no capture can separate (10 directions" in proc.stdout and "e8 sensitivity" in proc.stdout
     post = json.loads((tmp_path / "unit.posterior.json").read_text())
     assert len(post["theta"]) == len(post["sd"]) == len(post["parameters"]) == 74

@@ -218,7 +218,7 @@ def cmd_report(args) -> int:
     from fitgen.app.report import format_report
     from fitgen.base.fileio import write_atomic
     from fitgen.equations.model import load_model
-    from fitgen.physics.dataset import load_dataset
+    from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.physics.sensor import load_sensor
 
     if args.plot and not args.data:  # every check before anything is written
@@ -228,7 +228,12 @@ def cmd_report(args) -> int:
         raise InputError("--sensor goes with --plot (the rotation sweep is drawn on it)")
     model = load_model(args.model)
     sensor = sweep_sensor(load_sensor(args.sensor), model) if folder is not None and args.sensor else None
-    ds = load_dataset(args.data) if args.data else None
+    ds, lifted = rows_on_the_skin(load_dataset(args.data)) if args.data else (None, 0)
+    if lifted:
+        print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, no contact pose to "
+              "estimate", file=sys.stderr)
+    if ds is not None and not len(ds.inputs):
+        raise InputError(f"{args.data}: every row is lifted off the skin, so no contact pose to report on")
     if ds is not None and not set(model.output_names) & set(ds.target_names):
         raise InputError(f"{args.data}: no column of the model's outputs ({', '.join(model.output_names)}), "
                          "so no error to report")
