@@ -237,6 +237,39 @@ def test_schedule_is_d_optimal_within_limits(drawing, plan):
     assert logdet(pressed) < info["log_det"] - 1.0
 
 
+@pytest.mark.parametrize("args,message", [
+    (["--samples", "0"], "--samples must be a whole number >= 1, got 0"),
+    (["--samples", "-4"], "--samples must be a whole number >= 1, got -4"),
+    (["--n", "9"], "--n must be 10..10000 (identify needs at least 10 rows), got 9"),
+    (["--rig-error", "-0.01"], "the rig error must be 0..10 mm, got -0.01"),
+    (["--limits", "dz=1:2"], "the limits of dz (1..2) leave it no room to move within the sensor's pose box (-2..0)"),
+    (["--axes", "dy,dz", "--limits", "dx=-1:1"], "--limits gives dx, which --axes (dy,dz) does not move"),
+    (["--axes", "dx", "--n", "12"], "the best 12 poses over dx are 4 distinct ones; identify needs at least 6"),
+])
+def test_schedule_refuses_what_identify_could_not_use(tmp_path, args, message):
+    out = tmp_path / "s.csv"
+    assert_one_line_error(run_cli("fitgen", "schedule", *args, "-o", str(out)), 2, message)
+    assert not out.exists() and not Path(str(out) + ".meta.json").exists()
+
+
+def test_schedule_keeps_to_the_pose_box_and_bounds_five_axes():
+    """Stage limits wider than the sensor's pose box give the box's schedule (poses beyond it calibrate nothing
+    the sensor meets); five axes take fewer grid levels, so the candidates stay within MAX_CANDIDATES."""
+    from fitgen.fitting.schedule import MAX_CANDIDATES, candidates, levels_for
+    from fitgen.physics.simulate import DEFAULT_RANGES
+
+    drawing = load_sensor("paper").with_transfer("gmr")
+    wide, info = schedule(drawing, 12, ranges={"dx": (-100.0, 100.0)})
+    boxed, _ = schedule(drawing, 12)
+    np.testing.assert_array_equal(wide, boxed)
+    assert info["ranges"]["dx"] == [-2.0, 2.0]
+    assert levels_for(3) == levels_for(4) == 9 and levels_for(5) == 7
+    assert len(candidates(tuple(POSE_NAMES), DEFAULT_RANGES)) == 7 ** 5 + 1 <= MAX_CANDIDATES + 1
+    steps = []
+    schedule(drawing, 12, progress=lambda done, total, note: steps.append((done, total)))
+    assert steps[0][0] == 0 and all(d <= t for d, t in steps) and steps[-1][0] == steps[-1][1]
+
+
 def test_a_row_off_the_skin_carries_the_reading_noise_alone(drawing):
     """The rig's error moves the stage, not a magnet at rest: a lifted row's covariance is the noise's."""
     space = UnitSpace.of(drawing)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 
 from fitgen.app.options import noise_of, sensor_of
+from fitgen.base.errors import InputError
 
 
 def cmd_identify(args) -> int:
@@ -51,10 +52,17 @@ def cmd_schedule(args) -> int:
     drawing = sensor_of(args)
     axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
     noise = None if args.noise is None else noise_of(args.noise, drawing)
+    if args.samples < 1:
+        raise InputError(f"--samples must be a whole number >= 1, got {args.samples}")
+
+    def step(done, total, note):
+        bar.total = total
+        bar.update(done - bar.done, note)
+
     with Progress("schedule", args.n) as bar:
-        poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits),
+        poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits, {}),
                                noise=(drawing.noise if noise is None else noise) / np.sqrt(args.samples),
-                               rig_error=args.rig_error, progress=lambda i, n, note: bar.update(1, note))
+                               rig_error=args.rig_error, progress=step)
     write_schedule(args.output, poses, axes, {**info, "samples_per_row": args.samples})
     rest = (f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"]
             else "")

@@ -11,7 +11,8 @@ class Progress:
         self.label, self.total = label, max(int(total), 1)
         self.stream = stream or sys.stderr
         self.enabled = hasattr(self.stream, "isatty") and self.stream.isatty()
-        self.start = self.last = time.monotonic()
+        self.start = time.monotonic()
+        self.last = -float("inf")  # the first update shows at once: what a long first step is doing
         self.min_interval = min_interval
         self.done = 0
 

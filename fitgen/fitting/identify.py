@@ -353,6 +353,13 @@ def _chi2(prob: Problem, z: np.ndarray) -> tuple[float, float, np.ndarray, np.nd
     return float(r.ravel() @ r.ravel()), max(float(prob.valid.sum()) - float(np.trace(F @ post)), 1.0), F, post
 
 
+def check_error(name: str, value: float) -> None:
+    """InputError unless a rig's or zero's error is 0..10 mm: one that errs by more than the pose box cannot
+    calibrate."""
+    if not 0 <= value <= 10:
+        raise InputError(f"the {name} must be 0..10 mm, got {value:g}")
+
+
 def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *, rig_error: float = RIG_ERROR,
              zero_error: float = ZERO_ERROR, ranges: dict | None = None, progress=None) -> Identification:
     """The unit of ``drawing`` behind a capture: rows of ``readings`` (n, N) at label ``poses`` (n, 5), with
@@ -365,9 +372,8 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     noise = np.broadcast_to(np.asarray(noise, dtype=float), (readings.shape[1],)).copy()
     if not np.all(noise > 0):
         raise InputError("identify needs the reading noise > 0 (give --noise, or a sensor file with a noise figure)")
-    for name, value in (("rig error", rig_error), ("zero error", zero_error)):
-        if not 0 <= value <= 10:  # a stage that errs by more than the pose box cannot calibrate
-            raise InputError(f"the {name} must be 0..10 mm, got {value}")
+    check_error("rig error", rig_error)
+    check_error("zero error", zero_error)
     prob = Problem(space, readings, poses, noise, float(rig_error), valid, float(zero_error))
     try:
         return _solve(prob, ranges, progress)

@@ -22,20 +22,32 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
-from fitgen.fitting.identify import RIG_ERROR, Problem, unit_space
+from fitgen.fitting.identify import MIN_DISTINCT, MIN_ROWS, RIG_ERROR, Problem, check_error, unit_space
 from fitgen.physics.dataset import meta_path
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
 
 LEVELS = 9  # grid levels per moving axis
+MAX_CANDIDATES = 20_000  # fewer levels where LEVELS ** axes would pass it (five axes: 7 levels, not 59,049 poses)
 MAX_PASSES = 4
+CHUNK = 2048  # candidates whose criterion is computed at once (bounds the memory: CHUNK x N x P numbers)
+
+
+def levels_for(n_axes: int) -> int:
+    """Grid levels per axis for ``n_axes`` moving axes: LEVELS, or the most (odd: the centre is a level) that
+    keep the grid within MAX_CANDIDATES."""
+    k = LEVELS
+    while k > 3 and k ** n_axes > MAX_CANDIDATES:
+        k -= 2
+    return k
 
 
 def candidates(axes: tuple[str, ...], ranges: dict) -> np.ndarray:
-    """The grid of candidate poses over ``axes`` (others 0), LEVELS per axis; then the rest row (the stage
-    lifted REST_LIFT_MM off the skin) when ``axes`` has dz."""
-    levels = [np.linspace(*ranges[a], LEVELS) if a in axes else np.zeros(1) for a in POSE_NAMES]
+    """The grid of candidate poses over ``axes`` (others 0), :func:`levels_for` levels per axis; then the rest
+    row (the stage lifted REST_LIFT_MM off the skin) when ``axes`` has dz."""
+    k = levels_for(len(axes))
+    levels = [np.linspace(*ranges[a], k) if a in axes else np.zeros(1) for a in POSE_NAMES]
     mesh = np.meshgrid(*levels, indexing="ij")
     grid = np.column_stack([m.ravel() for m in mesh])
     if "dz" not in axes:
@@ -49,29 +61,39 @@ def _logdet_gain(Finv: np.ndarray, J: np.ndarray) -> np.ndarray:
     return np.linalg.slogdet(M)[1]
 
 
+def _chunked(gain, Finv: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """``gain(Finv, J)`` over CHUNK candidates at a time: the same numbers, in bounded memory."""
+    return np.concatenate([gain(Finv, J[i:i + CHUNK]) for i in range(0, len(J), CHUNK)])
+
+
 def exchange_design(J: np.ndarray, n: int, gain, progress=None) -> np.ndarray:
     """Indices of ``n`` candidates (repeats allowed), chosen greedily then by exchange passes for the largest
-    ``gain(F^-1, J)`` (per candidate, what its rows J_c add to the criterion at information F = I + sum)."""
-    info = np.einsum("cnp,cnq->cpq", J, J)
+    ``gain(F^-1, J)`` (per candidate, what its rows J_c add to the criterion at information F = I + sum).
+    ``progress(done, total, note)`` after each greedy pick and each pass."""
+    def info(c):  # one candidate's information on demand (all at once: C x P x P numbers, gigabytes at five axes)
+        return np.einsum("np,nq->pq", J[c], J[c])  # einsum, as the whole stack's: the same bits, the same ties
+
     F = np.eye(J.shape[2])
     chosen = []
     for i in range(n):
-        c = int(np.argmax(gain(np.linalg.inv(F), J)))
+        c = int(np.argmax(_chunked(gain, np.linalg.inv(F), J)))
         chosen.append(c)
-        F = F + info[c]
+        F = F + info(c)
         if progress is not None:
             progress(i + 1, n + MAX_PASSES, "greedy")
     for p in range(MAX_PASSES):
         improved = False
         for slot in range(n):
-            rest = F - info[chosen[slot]]
-            gains = gain(np.linalg.inv(rest), J)
+            rest = F - info(chosen[slot])
+            gains = _chunked(gain, np.linalg.inv(rest), J)
             c = int(np.argmax(gains))
             if c != chosen[slot] and gains[c] > gains[chosen[slot]] + 1e-9:
-                chosen[slot], F, improved = c, rest + info[c], True
+                chosen[slot], F, improved = c, rest + info(c), True
         if progress is not None:
             progress(n + p + 1, n + MAX_PASSES, "exchange")
         if not improved:
+            if progress is not None:
+                progress(n + MAX_PASSES, n + MAX_PASSES, "no swap raises it")
             break
     return np.array(chosen)
 
@@ -99,32 +121,48 @@ def stage_order(poses: np.ndarray) -> np.ndarray:
 
 def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict | None = None,
              noise: float | None = None, rig_error: float = RIG_ERROR, progress=None) -> tuple[np.ndarray, dict]:
-    """``n`` stage poses (n, 5) that pin ``drawing``'s units best, and a record of how they were chosen."""
+    """``n`` stage poses (n, 5) that pin ``drawing``'s units best, within ``ranges`` (the stage's limits) and
+    the sensor's pose box, and a record of how they were chosen. ``progress(done, total, note)``."""
     axes = tuple(axes)
     if not axes or any(a not in POSE_NAMES for a in axes) or len(set(axes)) != len(axes):
         raise InputError(f"--axes takes distinct names of {','.join(POSE_NAMES)}, got {','.join(axes) or 'none'}")
-    if n < 1 or n > 10000:
-        raise InputError(f"--n must be 1..10000, got {n}")
+    if n < MIN_ROWS or n > 10000:
+        raise InputError(f"--n must be {MIN_ROWS}..10000 (identify needs at least {MIN_ROWS} rows), got {n}")
+    unmoved = [a for a in (ranges or {}) if a not in axes]
+    if unmoved:
+        raise InputError(f"--limits gives {unmoved[0]}, which --axes ({','.join(axes)}) does not move")
+    check_error("rig error", rig_error)
     ranges = {**DEFAULT_RANGES, **(ranges or {})}
-    for a in axes:
-        lo, hi = ranges[a]
+    for a in axes:  # the stage's limits within the pose box: a schedule beyond it calibrates poses never met
+        lo, hi = max(ranges[a][0], DEFAULT_RANGES[a][0]), min(ranges[a][1], DEFAULT_RANGES[a][1])
         if not lo < hi:
-            raise InputError(f"the limits of {a} ({lo:g}..{hi:g}) leave it no room to move")
+            raise InputError(f"the limits of {a} ({ranges[a][0]:g}..{ranges[a][1]:g}) leave it no room to move "
+                             f"within the sensor's pose box ({DEFAULT_RANGES[a][0]:g}..{DEFAULT_RANGES[a][1]:g})")
+        ranges[a] = (lo, hi)
     noise = drawing.noise if noise is None else noise
     if not noise > 0:
         raise InputError("the schedule needs the reading noise > 0 (give --noise or a sensor file with a noise figure)")
     space = unit_space(drawing)
     cand = candidates(axes, ranges)
+    total = n + MAX_PASSES + 1
+    if progress is not None:
+        progress(0, total, f"the information of {len(cand):,} candidate poses")
     prob = Problem(space, np.zeros((len(cand), drawing.n_elements)), cand, np.full(drawing.n_elements, noise),
                    float(rig_error))
     z = np.zeros(space.size)
     J = prob.whitened_rows(z)
-    idx, logdet = d_optimal(J, n, progress)
+    if progress is not None:
+        progress(1, total, "information")
+    idx, logdet = d_optimal(J, n, None if progress is None else lambda i, m, note: progress(i + 1, total, note))
+    distinct = len(np.unique(idx))
+    if distinct < MIN_DISTINCT:
+        raise InputError(f"the best {n} poses over {','.join(axes)} are {distinct} distinct ones; identify needs at "
+                         f"least {MIN_DISTINCT}: move more axes (--axes dx,dy,dz) or widen the limits")
     poses = stage_order(cand[idx])
     info = {"criterion": "D-optimal (log det of the prior plus the capture's information, in prior spreads)",
-            "log_det": logdet, "candidates": len(cand), "levels_per_axis": LEVELS, "axes": list(axes),
+            "log_det": logdet, "candidates": len(cand), "levels_per_axis": levels_for(len(axes)), "axes": list(axes),
             "ranges": {a: list(ranges[a]) for a in axes}, "noise": noise, "rig_error": rig_error,
-            "sensor": drawing.name, "distinct_poses": int(len(np.unique(idx))),
+            "sensor": drawing.name, "distinct_poses": int(distinct),
             "rest_rows": int(np.sum(off_skin(cand[idx]))), "rest_lift_mm": REST_LIFT_MM}
     return poses, info
 
