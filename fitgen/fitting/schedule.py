@@ -150,7 +150,7 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     prob = Problem(space, np.zeros((len(cand), drawing.n_elements)), cand, np.full(drawing.n_elements, noise),
                    float(rig_error))
     z = np.zeros(space.size)
-    J = prob.whitened_rows(z)
+    J = np.concatenate([prob.whitened_rows(z, cand[i:i + CHUNK]) for i in range(0, len(cand), CHUNK)])
     if progress is not None:
         progress(1, total, "information")
     idx, logdet = d_optimal(J, n, None if progress is None else lambda i, m, note: progress(i + 1, total, note))
