@@ -107,6 +107,9 @@ def test_tolerances_from_the_sensor_file(tmp_path):
     (("map = [[", "map = [[0.0, 0.0, 0.0], ["), "stage.map"),
     (("[tolerances]", "[tolerances]\nbogus = 1.0"), "tolerances.bogus"),
     (("gain = ", "gain = -"), "must be > 0"),
+    # a spread no built unit has: its 3-sigma draw puts the magnet metres away
+    (("magnet_offset_xy = 0.2", "magnet_offset_xy = 1000"), "'tolerances.magnet_offset_xy' must be <= 1, got 1000"),
+    (("\ngain = 0.077", "\ngain = 0.4"), "'tolerances.gain' must be <= 0.25, got 0.4"),
 ])
 def test_bad_unit_files_are_one_line(tmp_path, edit, message):
     unit, _ = draw_unit(load_sensor("paper"), 1)
@@ -149,6 +152,10 @@ def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
         assert_one_line_error(proc, contains="is a built unit, not a drawing: give the drawing it was built to (paper, "
                                              "as its [unit] table says)")
         assert not (tmp_path / "again.csv").exists()
+    # magnet labels on the drawing would be the stage's: said, not written
+    assert_one_line_error(run_cli("fitgen", "simulate", "--labels", "magnet", "--grid", "dx=0", "-o",
+                                  str(tmp_path / "again.csv")), 2, "--labels magnet is for a built unit")
+    assert not (tmp_path / "again.csv").exists()
 
 
 def test_the_drawings_model_file_says_what_it_does_on_built_units(tmp_path):

@@ -29,6 +29,9 @@ def cmd_simulate(args) -> int:
     poses, source = choose_poses(grid=args.grid, random=args.random, poses=args.poses, ranges=args.ranges,
                                  scene=args.scene, seed=args.seed)
     noise = noise_of(args.noise, sensor)
+    if args.labels == "magnet" and args.unit is None and sensor.is_drawing:
+        raise InputError("--labels magnet is for a built unit (--unit SEED, or a unit's file as --sensor): on the "
+                         "drawing the stage moves the magnet one to one, so the labels are the same")
     unit = None
     if args.unit is not None:
         from fitgen.physics.units import unit_beside

@@ -55,6 +55,14 @@ class Tolerances:
         return dict(vars(self))
 
 
+# the largest spread a [tolerances] key takes: past it a 3-sigma unit is no built unit of the drawing (a negative
+# gain or stage map, the magnet out of its pocket, an element's axis turned by a right angle)
+TOLERANCE_MAX = {"magnet_offset_xy": 1.0, "magnet_offset_z": 0.5, "magnet_tilt": 15.0, "polarization": 0.2,
+                 "element_azimuth": 10.0, "element_radius": 0.5, "element_height": 0.3, "element_axis": 15.0,
+                 "element_tilt": 15.0, "gain": 0.25, "offset": 0.2, "ambient": 0.3, "stage_gain": 0.2,
+                 "stage_cross": 0.2}
+
+
 @dataclass(frozen=True)
 class RawTransfer:
     noise: float = 0.0  # mT rms
@@ -339,7 +347,8 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
             raise InputError(f"{origin}: 'stage.map' is singular: the magnet would not follow the stage")
     st.finish()
     tol = top.sub("tolerances", required=False)
-    tolerances = Tolerances(**{k: tol.number(k, v, min_=0.0) for k, v in vars(Tolerances()).items()})
+    tolerances = Tolerances(**{k: tol.number(k, v, min_=0.0, max_=TOLERANCE_MAX[k])
+                               for k, v in vars(Tolerances()).items()})
     tol.finish()
     unit = top.sub("unit", required=False)  # provenance of a unit file (fitgen simulate --unit, fitgen identify)
     for key in list(unit.data):
