@@ -80,8 +80,8 @@ def main() -> None:
 def uno_table(gmr, fixed_model) -> None:
     """The reference firmware on the Arduino Uno (simavr's ATmega328P): cycles per estimate (BENCH's ticks are
     the CPU's cycles), flash, static RAM and the stack's measured peak, beside the Uno's limits."""
-    default = fit_model(gmr)  # the default fit (harmonics included), as `fitgen fit` gives it
-    builds = [(default, "paper (gmr, default)", "float", "table"), (default, "paper (gmr, default)", "float", "unrolled"),
+    default = fit_model(gmr)  # FitSettings(): the 11 power kinds, no harmonics (`fitgen fit --family all`, 155 terms)
+    builds = [(default, "paper (gmr, powers)", "float", "table"), (default, "paper (gmr, powers)", "float", "unrolled"),
               (fixed_model, "paper (gmr, no roots)", "fixed", "-")]
     print("\nThe Arduino Uno (ATmega328P at 16 MHz in simavr; `tactile-hil emulate --target uno`; flash "
           "32,256 B once the bootloader has its 512, RAM 2,048 B):\n")

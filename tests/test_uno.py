@@ -27,7 +27,8 @@ def _require_avr():
 
 @pytest.fixture(scope="module")
 def gmr_model():
-    """The default fit of the paper sensor in volts (harmonics included), with its held-out record."""
+    """The library's default fit (FitSettings(): the paper's power kinds, as `fitgen fit --family all`) of the paper
+    sensor in volts, with its held-out record."""
     sensor = load_sensor("paper").with_transfer("gmr")
     ds = simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"]))
     model = fit_model(ds)
