@@ -218,7 +218,7 @@ def cmd_predict(args) -> int:
 
 def cmd_report(args) -> int:
     from fitgen.app import plots
-    from fitgen.app.report import format_report
+    from fitgen.app.report import format_report, sweep_sensor
     from fitgen.base.fileio import write_atomic
     from fitgen.equations.model import load_model
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
@@ -256,18 +256,6 @@ def cmd_report(args) -> int:
         paths += plots.rotation_sweeps(model, sensor, folder) if sensor is not None else []
         print("plots: " + ", ".join(str(p) for p in paths), file=sys.stderr)
     return 0
-
-
-def sweep_sensor(sensor, model):
-    """``sensor`` in the transfer that gives ``model``'s units; InputError when the model was fitted on another."""
-    if sensor.units != model.input_units and model.input_units in ("mT", "V"):
-        sensor = sensor.with_transfer("gmr" if model.input_units == "V" else "raw")
-    fitted_on = model.fit_info.get("sensor_sha256")
-    if sensor.units != model.input_units or fitted_on not in (None, sensor.sha256):
-        raise InputError(f"--sensor {sensor.name}: the model was fitted on another sensor "
-                         f"({model.input_units} readings{', sensor ' + str(fitted_on)[:12] if fitted_on else ''}); "
-                         "its sweep on this one would not be the model's")
-    return sensor
 
 
 def cmd_codegen(args) -> int:

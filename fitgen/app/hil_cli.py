@@ -178,8 +178,10 @@ def build_parser() -> Parser:
     _suite_options(r)
     r.set_defaults(func=cmd_run)
 
+    from hil.emulate import TARGETS  # a board added there is a target here
+
     e = sub.add_parser("emulate", help="build the firmware with a model and boot it")
-    e.add_argument("--target", default="mps2", choices=("mps2", "microbit", "uno", "host"),
+    e.add_argument("--target", default="mps2", choices=TARGETS,
                    help="mps2: Cortex-M4F in qemu-system-arm (default); microbit: Cortex-M0 (nRF51, fixed point "
                         "only); uno: the Arduino Uno's ATmega328P in simavr (float or fixed; --adc puts the chips "
                         "on its TWI bus); host: the POSIX build on a pty")
