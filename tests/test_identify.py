@@ -365,6 +365,27 @@ def _save_capture(path, y, poses, meta=None):
     Dataset(y, poses[:, :3], ("dx", "dy", "dz"), {"units": "V", **(meta or {})}).save(path)
 
 
+def test_a_capture_read_in_the_wrong_units_is_said_so(drawing, plan, tmp_path):
+    """Volts read as mT (a capture without meta, or --transfer raw against a meta saying V): the transfer
+    that contradicts the meta is refused at once; without meta, the refusal says the other units fit better."""
+    from fitgen.physics.dataset import Dataset
+
+    unit, _ = draw_unit(drawing, 25)
+    y, _ = capture(unit, plan[0], 25)
+    _save_capture(tmp_path / "v.csv", y, plan[0], {"samples_per_row": SAMPLES})
+    assert_one_line_error(run_cli("fitgen", "identify", str(tmp_path / "v.csv"), "--transfer", "raw", "-o",
+                                  str(tmp_path / "u.toml")), 2,
+                          "--transfer raw reads mT, but " + str(tmp_path / "v.csv") + "'s meta says its readings are in V")
+    Dataset(y, plan[0][:, :3], ("dx", "dy", "dz"), {}).save(tmp_path / "bare.csv")
+    (tmp_path / "bare.csv.meta.json").unlink()
+    proc = run_cli("fitgen", "identify", str(tmp_path / "bare.csv"), "--noise", str(drawing.noise), "-o",
+                   str(tmp_path / "u.toml"))
+    assert_one_line_error(proc, 2, "the capture's meta does not give its units: read as mT they fit the drawing")
+    assert "than as V: give --transfer gmr)" in proc.stderr and not (tmp_path / "u.toml").exists()
+    assert run_cli("fitgen", "identify", str(tmp_path / "bare.csv"), "--transfer", "gmr", "--noise",
+                   str(drawing.noise), "-o", str(tmp_path / "u.toml")).returncode == 0
+
+
 def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
     unit, _ = draw_unit(drawing, 25)
     y, noise = capture(unit, plan[0], 25)
@@ -387,6 +408,11 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
         "swapped channels": (y[:, [0, 1, 5, 3, 4, 2, 6, 7]], plan[0], "elements 3 and 6 (v3, v6) swapped: with their"),
         # the stage's dx mirrored against the sensor's: the stage map would have to turn it round
         "mirrored dx": (y, plan[0] * [-1, 1, 1, 1, 1], "the stage's axes against the sensor's"),
+        # impossible volts: not 'saturated', but out of the ADC's range, or no sensor at all
+        "negative volts": (-y, plan[0], "v1 = -"),
+        "megavolts": (y * 1e6, plan[0], "lies outside the ADC's range (0..3.3 V, sensor paper): readings in other "
+                                        "units"),
+        "all zero": (np.zeros_like(y), plan[0], "every reading is 0 V: no sensor answers behind the ADC"),
     }
     # a row the physics does not explain, in a capture it otherwise does: written, the row named
     deep, slipped = slip(unit, y, plan[0])

@@ -17,6 +17,7 @@ def cmd_identify(args) -> int:
 
     folder = plots.require(args.plot) if args.plot else None
     ds = load_dataset(args.capture)
+    rec.check_transfer(args.transfer, ds.meta, args.capture)
     drawing = sensor_of(args) if args.transfer else rec.in_capture_units(sensor_of(args), ds.meta)
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)
     with Progress("identify", 4) as bar:
@@ -28,7 +29,11 @@ def cmd_identify(args) -> int:
             bar.total = n  # the pairs count too when many rows stand out
             bar.update(1, note)
 
-        rec.check_explained(ident, args.capture, drawing.name, source, trial)
+        try:
+            rec.check_explained(ident, args.capture, drawing.name, source, trial)
+        except InputError as exc:
+            hint = "" if args.transfer else rec.units_hint(drawing, ds.inputs, ds.poses(), ds.meta)
+            raise InputError(f"{exc}{hint}") from None
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
           f"{args.zero_error:g} mm", file=sys.stderr)
     print(rec.report(ident), end="")

@@ -306,6 +306,15 @@ def check_capture(space: UnitSpace, readings: np.ndarray, poses: np.ndarray) -> 
         # a reading on the ADC's rails is clipped (the element's own saturation is in the model: gain x 2 mT)
         g = d.gmr
         lsb = (g.adc_max - g.adc_min) / max(2**g.adc_bits - 1, 1)
+        beyond = (readings < g.adc_min - 2 * lsb) | (readings > g.adc_max + 2 * lsb)
+        if beyond.any():
+            i, k = np.argwhere(beyond)[0]
+            raise InputError(f"row {i + 1}: v{k + 1} = {readings[i, k]:.6g} V lies outside the ADC's range "
+                             f"({g.adc_min:g}..{g.adc_max:g} V, sensor {d.name}): readings in other units (mT: give "
+                             "--transfer raw) or from another ADC than the sensor file's [transfer.gmr]")
+        if np.ptp(readings) == 0:
+            raise InputError(f"every reading is {readings[0, 0]:.6g} V: no sensor answers behind the ADC (its supply, "
+                             "its wiring, the channel map)")
         valid = (readings < g.adc_max - 2 * lsb) & (readings > g.adc_min + 2 * lsb)
         stuck = np.nonzero(np.mean(~valid, axis=0) > 0.9)[0]  # one element on a rail, the others not: that element
         if len(stuck) == 1:
@@ -380,7 +389,8 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     except (np.linalg.LinAlgError, OverflowError):
         # covariances no longer positive definite in float: a noise figure tiny against the readings, a rig
         # error huge against them, or labels far outside the sensor
-        raise InputError(f"the capture cannot be solved for in floating point: check the reading noise "
+        raise InputError(f"the capture cannot be solved for in floating point: check the readings "
+                         f"({readings.min():.3g}..{readings.max():.3g} {drawing.units}), the reading noise "
                          f"({noise.min():.3g}..{noise.max():.3g} per row), the rig error ({rig_error:g} mm) and "
                          "the labels (mm and deg from first contact)") from None
 

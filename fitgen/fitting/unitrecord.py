@@ -91,6 +91,30 @@ def in_capture_units(drawing: Sensor, meta: dict) -> Sensor:
     return drawing.with_transfer("gmr" if units == "V" else "raw") if units in ("V", "mT") else drawing
 
 
+def check_transfer(transfer: str | None, meta: dict, capture) -> None:
+    """InputError when ``--transfer`` contradicts the units a capture's meta names."""
+    units = meta.get("units")
+    if transfer is not None and units in ("V", "mT") and units != ("V" if transfer == "gmr" else "mT"):
+        raise InputError(f"--transfer {transfer} reads {'V' if transfer == 'gmr' else 'mT'}, but {capture}'s meta says "
+                         f"its readings are in {units}")
+
+
+def units_hint(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, meta: dict) -> str:
+    """When a capture's meta does not give its units: '' if its readings fit the drawing best in the units they
+    were read in, else a hint naming the other transfer (mT and V differ by a scale and the rails only, so the
+    residual of the drawing in each, not the readings' size, tells them apart)."""
+    from fitgen.physics.transfer import readings as drawn
+
+    if meta.get("units") in ("V", "mT"):
+        return ""
+    other = drawing.with_transfer("raw" if drawing.transfer == "gmr" else "gmr")
+    off = [float(np.sqrt(np.mean((readings - drawn(s, poses, adc_bits=0)) ** 2))) for s in (drawing, other)]
+    if not off[1] * 2 < off[0]:
+        return ""
+    return (f" (the capture's meta does not give its units: read as {drawing.units} they fit the drawing "
+            f"{off[0] / max(off[1], 1e-300):.3g}x worse than as {other.units}: give --transfer {other.transfer})")
+
+
 def _pose_words(ident: Identification, pose: np.ndarray) -> str:
     """``dx=.. dy=.. dz=..``, and the tilts when the capture tilts."""
     return " ".join(f"{c}={v:g}" for c, v in zip(POSE_NAMES[:5 if tilting(ident.problem.poses) else 3], pose))
