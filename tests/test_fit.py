@@ -161,6 +161,27 @@ def test_more_terms_than_rows(tmp_path):
                           contains="rows")
 
 
+def test_terms_near_the_rows_are_said_and_an_unknown_noise_is_said_plainly(tmp_path):
+    """A fit whose equations near the row count (a short capture, single samples, no noise known) says so;
+    the report's line says what is not known in words, not 'unknown rms (unknown)'."""
+    ds = simulate(PAPER, random_poses(37, DEFAULT_RANGES, pose_rng(3)))
+    ds.meta = {"units": "mT", "source": "hardware", "samples_per_row": 1}
+    path = ds.save(tmp_path / "c.csv", ds.meta)
+    proc = run_cli("fitgen", "fit", str(path), "-o", str(tmp_path / "m.json"), "--held-out", "0")
+    assert proc.returncode == 0, proc.stderr
+    model = load_model(tmp_path / "m.json")
+    worst = max(model.equations, key=lambda e: len(e.terms))
+    assert len(worst.terms) + 1 > 37 / 3
+    assert f"note: {worst.name} has {len(worst.terms)} terms on 37 rows" in proc.stderr
+    rep = run_cli("fitgen", "report", str(tmp_path / "m.json"))
+    assert ("fitted for: reading noise unknown (no --noise, no sensor, and the capture did not measure it), data's "
+            "own noise not recorded (the rows taken to carry the device's own), added in expectation 0 (no device "
+            "noise known)") in rep.stdout, rep.stdout
+    big = run_cli("fitgen", "fit", str(tmp_path / "c.csv"), "-o", str(tmp_path / "m2.json"), "--held-out", "0",
+                  "--max-terms", "5")
+    assert big.returncode == 0 and "terms on 37 rows" not in big.stderr
+
+
 def test_bad_model_files(paper_fit, tmp_path):
     folder, _, _ = paper_fit
     data = json.loads((folder / "m.json").read_text())

@@ -166,6 +166,12 @@ def cmd_fit(args) -> int:
     if args.units is None and recorded is None:
         print(f"note: {args.data} has no meta saying its readings' units: taken as mT (give --units V for volts, "
               "as an ADC gives them)", file=sys.stderr)
+    crowded = [e for e in model.equations if len(e.terms) + 1 > len(ds.inputs) / 3]
+    if crowded:  # AIC's penalty is no guard when the terms near the rows: the equation threads the rows' noise
+        e = max(crowded, key=lambda e: len(e.terms))
+        print(f"note: {e.name} has {len(e.terms)} terms on {len(ds.inputs)} rows: it follows the rows' noise more "
+              "than the sensor; more rows, --max-terms, or fit the identified unit's simulated rows (fitgen identify)",
+              file=sys.stderr)
     print(f"wrote {args.output}", file=sys.stderr)
     return 0
 

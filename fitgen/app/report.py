@@ -48,11 +48,15 @@ def fit_assumptions(info: dict) -> str:
     noise, prec = info.get("noise"), info.get("precision", {})
     if not isinstance(noise, dict):
         return "fitted for: not recorded (a model file from before noise-aware fitting)"
-    dev = "unknown" if noise.get("device") is None else f"{noise['device']:g}"
-    data = "measured (carry their own)" if noise.get("data") is None else f"{noise['data']:g}"
+    dev = ("unknown (no --noise, no sensor, and the capture did not measure it)" if noise.get("device") is None
+           else f"{noise['device']:g} rms ({noise.get('device_source', '?')})")
+    data = ("not recorded (the rows taken to carry the device's own)" if noise.get("data") is None
+            else f"{noise['data']:g}")
+    added = noise.get("added", 0)
+    why = f" ({noise['why']})" if not added and noise.get("why") else ""
     target = prec.get("target") or "exact arithmetic"
-    line = (f"fitted for: reading noise {dev} rms ({noise.get('device_source', '?')}), data's own noise {data}, "
-            f"added in expectation {noise.get('added', 0):g}; precision {target}")
+    line = (f"fitted for: reading noise {dev}, data's own noise {data}, added in expectation {added:g}{why}; "
+            f"precision {target}")
     fam = info.get("family")
     if isinstance(fam, dict) and "name" in fam:
         line += f"\ncandidates: family {fam['name']}" + (f" (auto: {fam.get('why', '')})" if fam.get("auto") else "")
