@@ -36,10 +36,18 @@ def parse_vref(text: str):
 
 
 def channel_map_from_args(args):
-    """The channel map of ``--adc`` (without its thermistor) and the ADS options."""
+    """The channel map of ``--adc`` (without its thermistor) and the ADS options; InputError for ``--vref`` when
+    no chip it reads (the thermistor's included) is an ADS7828, the only one it sets."""
     settings = Settings(pga=args.pga, data_rate=args.data_rate, mode=args.mode,
-                        vref=parse_vref(args.vref)).checked("option")
-    return channel_map(split_channel_map(args.adc)[0], settings)
+                        vref=parse_vref(args.vref or "3.3")).checked("option")
+    spec, temp = split_channel_map(args.adc)
+    cmap = channel_map(spec, settings)
+    if args.vref is not None:
+        temp = temp or (cmap.temperature[0] if cmap.temperature is not None else "")
+        if all(c.kind != "ads7828" for c in cmap.chips) and not temp.strip().lower().startswith("ads7828"):
+            raise InputError("--vref sets the ADS7828's reference; no chip in --adc is an ADS7828 (the ADS1115's "
+                             "full scale is --pga): drop --vref")
+    return cmap
 
 
 def open_bus_from_args(args, cmap, simulate_pose, *, motion=None, drift=None, thermistor=None):

@@ -1,6 +1,10 @@
 """The Raspberry Pi build (firmware_templates/pi/): the C drivers over i2c-dev, built for ARM Linux and run
 under qemu-arm against a stand-in for the kernel device answered by the bus model (host/simbus.py)."""
 
+import signal
+import subprocess
+import time
+
 import numpy as np
 import pytest
 
@@ -82,7 +86,8 @@ def test_pi_build_counts_faults_as_python_does_and_stops_on_a_silent_chip(model,
 def test_pi_build_bad_options_and_missing_bus(standin_build):
     require_tool("qemu-arm")
     for args, contains in ((["--count", "-1"], "--count"), (["--format", "xml"], "--format"),
-                           (["--bogus"], "unknown"), (["--bus", "3"], "cannot open /dev/i2c-3")):
+                           (["--bogus"], "unknown"), (["--bus", "3"], "cannot open /dev/i2c-3"),
+                           *((["--rate", r], "--rate") for r in ("0", "-2", "nan", "inf", "2.5Hz", "1e-9"))):
         cmap, bus, clock = _bus()
         res = StandIn(bus, clock).run(["qemu-arm", str(standin_build), *args])
         assert_one_line_error(res, 2, contains)
@@ -192,3 +197,133 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     assert [ln.split(",", 1)[1] for ln in res2.stdout.splitlines()[1:]] != [ln.split(",", 1)[1] for ln in got[1:]]
     assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", str(tmp_path / "m.json"), "--adc", MAP,
                                   "--temp-comp", "x.json", "-o", str(tmp_path / "z")))
+
+
+def _stop_with(stand, args, sig, ready):
+    """tm_pi (``args``) under qemu-arm on ``stand`` until ``ready()``, then ``sig``: (exit status, stdout, stderr,
+    seconds from the signal to the end)."""
+    proc = stand.spawn(["qemu-arm", *args], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 60
+        while not ready() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert ready() and proc.poll() is None, "tm_pi did not get going"
+        sent = time.monotonic()
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=60)
+        return proc.returncode, out.decode(), err.decode(), time.monotonic() - sent
+    finally:
+        proc.kill()
+        stand.thread.join(timeout=10)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_pi_build_stopped_by_a_signal_keeps_every_line_and_prints_its_summary(model, standin_build, sig):
+    """Ctrl-C or SIGTERM ends tm_pi as it ends tactile-host read: after the sample under way, every line whole and
+    none lost in stdout's buffer, the summary, exit status 0."""
+    require_tool("qemu-arm")
+    cmap, bus, clock = _bus()
+    stand = StandIn(bus, clock)
+    code, out, err, _ = _stop_with(stand, [str(standin_build)], sig, lambda: stand.requests > 600)
+    assert code == 0, err
+    summary = err.splitlines()
+    assert len(summary) == 1 and summary[0].startswith("tm_pi: stopped: "), err
+    n = int(summary[0].split("stopped: ")[1].split()[0])
+    lines = out.splitlines(keepends=True)
+    assert n >= 10 and len(lines) == n + 1 and lines[-1].endswith("\n")
+    expected, _ = _python_lines(model, n)
+    assert [ln.split(",", 1)[1] for ln in lines[1:]] == [ln.split(",", 1)[1] for ln in expected]
+
+
+class _SlowSleeps(StandIn):
+    """Sleeps take a tenth of their time for real, so that a wait deaf to signals shows as a late end."""
+
+    waiting = False
+
+    def answer(self, line):
+        if line.startswith("S "):
+            ns = int(line.split()[1])
+            self.waiting |= ns >= 50_000_000  # the drivers' waits are a few ms: this is --rate's
+            time.sleep(ns * 1e-10)
+        return super().answer(line)
+
+
+def test_pi_build_signal_ends_a_rate_wait_at_once(standin_build):
+    """At 0.01 Hz the wait for the second sample is 100 s (10 s here): a SIGTERM in it ends the run within a
+    fraction of a second, with no sample after it."""
+    require_tool("qemu-arm")
+    cmap, bus, clock = _bus()
+    stand = _SlowSleeps(bus, clock)
+    code, out, err, took = _stop_with(stand, [str(standin_build), "--rate", "0.01"], signal.SIGTERM,
+                                      lambda: stand.waiting)
+    assert code == 0 and "tm_pi: stopped: 1 samples" in err, err
+    assert len(out.splitlines()) == 2
+    assert took < 3.0
+
+
+class _Stall(StandIn):
+    """The bus hangs for 1 s at its 300th transfer (in the 10th or so sample; 24 transfers a sample)."""
+
+    transfers = 0
+
+    def answer(self, line):
+        if line.startswith("R "):
+            self.transfers += 1
+            if self.transfers == 300:
+                self.clock.sleep(1.0)
+        return super().answer(line)
+
+
+def test_pi_build_rate_restarts_its_grid_after_a_stall_and_takes_fractions(standin_build):
+    """As tactile-host read paces: a sample more than a period late is counted and the grid restarts from it, so
+    a 1 s stall at 20 Hz is not followed by some 20 samples back to back; and --rate 2.5 is 2.5 Hz."""
+    require_tool("qemu-arm")
+
+    def gaps(res):
+        assert res.returncode == 0, res.stderr
+        return np.diff([float(ln.split(",")[0]) for ln in res.stdout.splitlines()[1:]])
+
+    cmap, bus, clock = _bus()
+    res = _Stall(bus, clock).run(["qemu-arm", str(standin_build), "--count", "40", "--rate", "20"])
+    g = gaps(res)
+    stalled = g > 0.5
+    assert len(g) == 39 and stalled.sum() == 1
+    assert np.allclose(g[~stalled], 0.05, atol=2e-6)  # every other sample on the grid: no burst
+    assert "tm_pi: 40 samples; I2C errors 0" in res.stderr and res.stderr.rstrip().endswith("; 1 late")
+    cmap, bus, clock = _bus()
+    res = StandIn(bus, clock).run(["qemu-arm", str(standin_build), "--count", "4", "--rate", "2.5"])
+    assert np.allclose(gaps(res), 0.4, atol=2e-6) and "late" not in res.stderr
+
+
+def test_pi_build_checks_the_compiler_before_it_writes(model, tmp_path):
+    """A compiler that is not there is said before anything is written: no folder made, an earlier build's kept."""
+    require_tool("gcc")
+    path = str(model.save(tmp_path / "m.json"))
+
+    def pi_build(cc, out, *more):
+        return run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", cc, "-o", str(out), *more)
+
+    assert_one_line_error(pi_build("nosuchcc", tmp_path / "new"), 2, "compiler 'nosuchcc' not found")
+    assert not (tmp_path / "new").exists()
+    out = tmp_path / "pi"
+    assert pi_build("gcc", out).returncode == 0
+    before = {f.name: f.read_bytes() for f in out.iterdir()}
+    assert_one_line_error(pi_build("nosuchcc", out, "--precision", "double"), 2, "not found")
+    assert {f.name: f.read_bytes() for f in out.iterdir()} == before
+
+
+def test_vref_is_refused_without_an_ads7828_and_the_thermistor_is_named(model, tmp_path):
+    """--vref sets the ADS7828's reference only: with ADS1115s alone read and pi-build refuse it, even as the
+    default 3.3 and before --adc; a thermistor on an ADS7828 takes it, and pi-build's summary names it."""
+    path = str(model.save(tmp_path / "m.json"))
+    read = ["read", "--model", path, "--simulate", "dx=0", "--count", "1"]
+    for cmd in (read, ["pi-build", "--model", path, "--cc", "gcc", "-o", str(tmp_path / "x")]):
+        for opts in (["--adc", MAP, "--vref", "3.3"], ["--vref", "internal", "--adc", MAP + ",temp=ads1115@0x4a:2"]):
+            assert_one_line_error(run_cli("tactile-host", *cmd, *opts), 2, "--vref sets the ADS7828's reference")
+    assert not (tmp_path / "x").exists()
+    assert run_cli("tactile-host", *read, "--adc", "ads7828@0x4a", "--vref", "3.3").returncode == 0
+    require_tool("gcc")
+    proc = run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP + ",temp=ads7828@0x4a:0", "--vref",
+                   "3.3", "--cc", "gcc", "-o", str(tmp_path / "t"))
+    assert proc.returncode == 0, proc.stderr
+    assert ", thermistor ads7828@0x4a:0, model" in proc.stderr

@@ -28,6 +28,9 @@ static void send_line(const char *s)
     size_t n = strlen(s), off = 0;
     while (off < n) {
         const ssize_t w = write(REQ_FD, s + off, n - off);
+        if (w < 0 && errno == EINTR) {
+            continue; /* tm_pi's SIGINT/SIGTERM handler ran: the request still goes out whole */
+        }
         if (w <= 0) {
             _exit(3);
         }
@@ -41,7 +44,11 @@ static void receive_line(char *buf)
     size_t n = 0;
     for (;;) {
         char c;
-        if (read(ANS_FD, &c, 1) != 1 || n + 1 >= LINE_MAX_LEN) {
+        const ssize_t r = read(ANS_FD, &c, 1);
+        if (r < 0 && errno == EINTR) {
+            continue;
+        }
+        if (r != 1 || n + 1 >= LINE_MAX_LEN) {
             _exit(3);
         }
         if (c == '\n') {

@@ -7,11 +7,15 @@
  *
  *   tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] [--retries N]
  *
+ * Ctrl-C (SIGINT) or SIGTERM ends the run after the sample under way, as tactile-host read ends: every
+ * line whole, the summary, exit status 0.
+ *
  * Exit status 0, 1 when a chip stays silent (the samples so far are written), 2 for bad options
  * or a bus that cannot be opened (one line on stderr). */
 #define _POSIX_C_SOURCE 200809L
 #include <errno.h>
 #include <limits.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -30,6 +34,18 @@ typedef char tm_pi_assert_tempcomp_fits_model[(TM_TEMPCOMP_N == TM_N_INPUTS) ? 1
 #endif
 
 #define TEMP_EVERY_NS 250000000u /* host/temperature.py READ_EVERY */
+#define WAIT_SLICE_NS 100000000u /* how late a signal during a slow --rate's wait is seen (host/readout.py) */
+/* the period, in ns, must fit the clock's counter with room for the grid: a sample at least every 11.6 days */
+#define RATE_MIN_HZ 1e-6
+#define RATE_MAX_HZ 100000.0
+
+/* set by SIGINT or SIGTERM: the loop ends after the sample under way, so that no line is cut off */
+static volatile sig_atomic_t stop_signal = 0;
+
+static void on_signal(int sig)
+{
+    stop_signal = sig;
+}
 
 typedef char tm_pi_assert_map_fits_model[(ADC_MAP_N_ELEMENTS == TM_N_INPUTS) ? 1 : -1];
 
@@ -52,6 +68,43 @@ static int parse_long(const char *s, long lo, long hi, long *out)
     }
     *out = v;
     return 0;
+}
+
+/* a rate in Hz as tactile-host read takes it (2.5 is fine), within what the ns clock can pace */
+static int parse_rate(const char *s, double *out)
+{
+    char *end;
+    double v;
+    errno = 0;
+    v = strtod(s, &end);
+    if (errno || end == s || *end || !(v >= RATE_MIN_HZ && v <= RATE_MAX_HZ)) { /* !(..) refuses nan too */
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+/* sleep until the monotonic time `until` in slices, so that a signal ends the wait; 0 when one did */
+static int wait_until(const adc_i2c *b, uint64_t until)
+{
+    uint64_t now;
+    while (!stop_signal && (now = b->now_ns(b->ctx)) < until) {
+        const uint64_t left = until - now;
+        b->sleep_ns(b->ctx, left < WAIT_SLICE_NS ? left : WAIT_SLICE_NS);
+    }
+    return !stop_signal;
+}
+
+static void catch_stop_signals(void)
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    /* a write to stdout or a transfer under way completes rather than fail; the pacing wait polls the flag */
+    sa.sa_flags = SA_RESTART;
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
 }
 
 
@@ -84,10 +137,11 @@ static void print_line(int jsonl, double t, const double v[TM_N_INPUTS], const t
 int main(int argc, char **argv)
 {
     static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
-    long bus = 1, count = 0, retries = 5, rate_hz = 0;
+    long bus = 1, count = 0, retries = 5;
+    double rate_hz = 0.0;
     int jsonl = 0, i, st = ADC_OK;
-    long n = 0;
-    char err[200];
+    long n = 0, late = 0;
+    char err[200], late_text[40] = "";
     i2c_linux port;
     adc_i2c i2c;
     adc_array array;
@@ -116,7 +170,7 @@ int main(int argc, char **argv)
         } else if (strcmp(opt, "--count") == 0 && val) {
             if (parse_long(val, 0, LONG_MAX, &count)) return usage("--count must be a whole number >= 0, got", val);
         } else if (strcmp(opt, "--rate") == 0 && val) {
-            if (parse_long(val, 1, 100000, &rate_hz)) return usage("--rate must be 1..100000 Hz, got", val);
+            if (parse_rate(val, &rate_hz)) return usage("--rate must be a number of Hz in 0.000001..100000, got", val);
         } else if (strcmp(opt, "--retries") == 0 && val) {
             if (parse_long(val, 1, 100, &retries)) return usage("--retries must be 1..100, got", val);
         } else {
@@ -125,6 +179,7 @@ int main(int argc, char **argv)
         ++i;
     }
     policy.attempts = (uint8_t)retries;
+    catch_stop_signals();
     if (i2c_linux_open(&port, (int)bus, &i2c, err, sizeof err) != 0) {
         fprintf(stderr, "tm_pi: error: %s\n", err);
         return 2;
@@ -168,11 +223,11 @@ int main(int argc, char **argv)
         }
         printf(",status\n");
     }
-    if (rate_hz) {
-        period = 1000000000u / (uint64_t)rate_hz;
+    if (rate_hz > 0.0) {
+        period = (uint64_t)(1e9 / rate_hz + 0.5);
         next = i2c.now_ns(i2c.ctx);
     }
-    while (count == 0 || n < count) {
+    while ((count == 0 || n < count) && !stop_signal) {
         int32_t codes[TM_N_INPUTS];
         double v[TM_N_INPUTS];
         tm_real in[TM_N_INPUTS], out[TM_N_OUTPUTS];
@@ -180,8 +235,14 @@ int main(int argc, char **argv)
         int status;
         if (period) {
             const uint64_t now = i2c.now_ns(i2c.ctx);
-            if (next > now) {
-                i2c.sleep_ns(i2c.ctx, next - now);
+            if (now < next && !wait_until(&i2c, next)) {
+                break; /* stopped during the wait: no sample after it */
+            }
+            /* as tactile-host read paces: a sample more than a period late restarts the grid from itself,
+             * so that a stall is not caught up with a burst of back-to-back samples */
+            if (now > next && now - next > period) {
+                ++late;
+                next = now;
             }
             next += period;
         }
@@ -233,11 +294,14 @@ int main(int argc, char **argv)
     total.retries += tarray.counts.retries;
     total.resets += tarray.counts.resets;
 #endif
-    fprintf(stderr, "tm_pi: %ld samples; I2C errors %lu (nack %lu, timeout %lu, stuck %lu, other %lu; %lu retries, "
-                    "%lu resets)\n", n,
+    if (late) {
+        snprintf(late_text, sizeof late_text, "; %ld late", late);
+    }
+    fprintf(stderr, "tm_pi: %s%ld samples; I2C errors %lu (nack %lu, timeout %lu, stuck %lu, other %lu; %lu retries, "
+                    "%lu resets)%s\n", stop_signal ? "stopped: " : "", n,
             (unsigned long)(total.nack + total.timeout + total.stuck + total.other),
             (unsigned long)total.nack, (unsigned long)total.timeout, (unsigned long)total.stuck,
-            (unsigned long)total.other, (unsigned long)total.retries, (unsigned long)total.resets);
+            (unsigned long)total.other, (unsigned long)total.retries, (unsigned long)total.resets, late_text);
     if (st != ADC_OK) {
         fprintf(stderr, "tm_pi: error: %s %s; stopped after %ld samples\n",
                 failed ? failed : array.failed_chip >= 0 ? ADC_MAP_LABELS[array.failed_chip] : "general-call reset",

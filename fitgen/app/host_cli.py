@@ -236,19 +236,18 @@ def cmd_stage_sim(args) -> int:
 def cmd_pi_build(args) -> int:
     from fitgen.equations.model import load_model
 
-    from host.pi import build_pi, render_pi
+    from host.pi import build_pi, compiler, describe_reads, render_pi
     from host.session import channel_map_from_args
     from host.temperature import load_tempcomp, temperature_input
 
-    model = load_model(args.model)
-    cmap = channel_map_from_args(args)
+    compiler(args.cc)  # a compiler that is not there is said before the folder is made
+    model, cmap = load_model(args.model), channel_map_from_args(args)
     tin = temperature_input(args.adc, cmap, args.thermistor)
     tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
-    folder = render_pi(model, cmap, args.output, precision=args.precision, style=args.style, tin=tin,
-                       tempcomp=tempcomp)
-    binary = build_pi(folder, args.cc)
-    print(f"wrote {binary} ({cmap.describe()}, model {model.sha256[:12]}, {args.precision}); on the Pi: "
-          f"{binary.name} --bus 1 --format csv", file=sys.stderr)
+    binary = build_pi(render_pi(model, cmap, args.output, precision=args.precision, style=args.style, tin=tin,
+                                tempcomp=tempcomp), args.cc)
+    print(f"wrote {binary} ({describe_reads(cmap, tin, tempcomp)}, model {model.sha256[:12]}, {args.precision}); "
+          f"on the Pi: {binary.name} --bus 1 --format csv", file=sys.stderr)
     return 0
 
 

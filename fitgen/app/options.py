@@ -43,8 +43,7 @@ def map_options(p, required: bool = True) -> None:
     p.add_argument("--data-rate", type=int, default=860, choices=ADS1115_RATES, metavar="SPS",
                    help="ADS1115 samples per second: 8..860 (default 860)")
     p.add_argument("--mode", default="single", choices=MODES, help="ADS1115 conversion mode (default single)")
-    p.add_argument("--vref", default="3.3",
-                   help="ADS7828 reference: external volts (default 3.3) or 'internal' (2.5 V)")
+    p.add_argument("--vref", help="ADS7828 reference: external volts (default 3.3) or 'internal' (2.5 V)")
 
 
 def refuse_readout_options(args) -> None:
