@@ -29,7 +29,7 @@ class SimRig:
                  travel=((0.0, 200.0),) * 3, seed: int = 0):
         self.target = target
         self.M = np.eye(3) if M is None else np.asarray(M, dtype=float).reshape(3, 3)
-        self.axes = AxisMap.parse(axes)  # the rig's true machine -> sensor axes
+        self.axes = AxisMap.parse(axes, "--axes")  # the rig's true machine -> sensor axes
         self.contact = np.asarray(contact, dtype=float)  # carriage position (home frame) at first contact
         self.backlash = np.broadcast_to(np.asarray(backlash, dtype=float), (3,)).copy()
         self.repeatability = float(repeatability)

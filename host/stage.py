@@ -104,7 +104,9 @@ class PoseStage:
         """A relative move along a pose axis while the zero is set (no limits: they count from the zero)."""
         if axis not in self.settings.axes.pose_axes:
             raise InputError(f"{axis} is not moved by --stage-axes {self.settings.axes}")
-        if not (math.isfinite(step) and abs(step) <= self.settings.jog_max):
+        if not math.isfinite(step):
+            raise InputError(f"a jog step is a number of mm, got {step}")
+        if abs(step) > self.settings.jog_max:
             raise InputError(f"a jog step is at most {self.settings.jog_max:g} mm")
         pos = self.position if self.position is not None else self.ctrl.position()
         here = {m: float(pos[MACHINE_AXES.index(m)]) for m, _, _ in self.settings.axes.pairs}

@@ -28,6 +28,9 @@ def stage_settings(args, schedule):
         return None
     if args.trigger:
         raise InputError("--stage and --trigger both set the poses: give one")
+    if args.home and args.unlock:
+        raise InputError("--home and --unlock both leave GRBL's ALARM: give one (--home homes; --unlock trusts the "
+                         "position GRBL believes)")
     if args.temperature is not None:
         raise InputError("--stage with --temperature is not supported yet: capture each temperature on its own")
     if args.simulate and not args.sim_pose_file:

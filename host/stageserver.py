@@ -91,9 +91,9 @@ class SocketServer(_Server):
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             self.sock.bind((host, port))
-        except OSError as exc:
+        except (OSError, OverflowError) as exc:  # OverflowError: a port past 65535
             self.sock.close()
-            raise InputError(f"cannot serve on {host}:{port}: {exc.strerror}") from None
+            raise InputError(f"cannot serve on {host}:{port}: {getattr(exc, 'strerror', None) or exc}") from None
         self.sock.listen(1)
         self.port = self.sock.getsockname()[1]
         self.url = f"socket://{host}:{self.port}"

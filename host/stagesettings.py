@@ -29,8 +29,8 @@ class AxisMap:
     pairs: tuple  # ((machine axis, pose axis, sign), ...)
 
     @classmethod
-    def parse(cls, spec: str) -> "AxisMap":
-        what = f"--stage-axes {spec!r}"
+    def parse(cls, spec: str, flag: str = "--stage-axes") -> "AxisMap":
+        what = f"{flag} {spec!r}"
         pairs, seen_m, seen_p = [], set(), set()
         for part in spec.replace(";", ",").split(","):
             part = part.strip()

@@ -568,9 +568,10 @@ def test_jogging_to_the_zero(tmp_path):
         c.setup()
         st = PoseStage(c, settings(), {})
         err = io.StringIO()
-        zero = jog_to_zero(st, io.StringIO("dx 2\ndy -2\ndz -5\ndz 9\nwhat\ndz -1\n\n"), err, "cap")
+        zero = jog_to_zero(st, io.StringIO("dx 2\ndy -2\ndz -5\ndz 9\ndz nan\nwhat\ndz -1\n\n"), err, "cap")
         assert zero == pytest.approx({"X": 2.0, "Y": -2.0, "Z": -6.0})
         assert "a jog step is at most 5 mm" in err.getvalue() and "type AXIS STEP" in err.getvalue()
+        assert "a jog step is a number of mm, got nan" in err.getvalue()
         assert jog_to_zero(st, io.StringIO("dz 1\nq\n"), io.StringIO(), "cap") is None
         c.close()
 
@@ -733,6 +734,7 @@ def test_capture_command_alarm_at_start_is_one_line_exit_1_and_home_clears_it(tm
     (["--stage-timeout", "1e12"], "--stage-timeout must be at most 3600"),
     (["--trigger", "true"], "--stage and --trigger both set the poses"),
     (["--zero", "1,2"], "--zero '1,2': ask, here, or the machine coordinates"),
+    (["--home", "--unlock"], "--home and --unlock both leave GRBL's ALARM: give one"),
 ])
 def test_capture_command_bad_stage_input_is_one_line_exit_2_before_anything(tmp_path, extra, message):
     sched = write_schedule(tmp_path / "s.csv", grid())
@@ -754,6 +756,20 @@ def test_stage_options_need_stage(tmp_path):
     proc = run_host("capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(tmp_path / "d.csv"), "--simulate",
                     "--home")
     assert_one_line_error(proc, 2, "--home needs --stage gcode:URL")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--port", "70000"], "cannot serve on 127.0.0.1:70000"),
+    (["--port", "-5"], "cannot serve on 127.0.0.1:-5"),
+    (["--pose-file", "{tmp}/missing/p.txt"], "missing"),
+    (["--pose-file", "{tmp}"], "is a folder"),
+    (["--axes", "foo"], "--axes 'foo': 'foo' is not MACHINE=[-]POSE"),
+])
+def test_stage_sim_bad_options_are_one_line(tmp_path, args, message):
+    proc = subprocess.run(host_cmd("stage-sim", *[a.replace("{tmp}", str(tmp_path)) for a in args]),
+                          capture_output=True, text=True, timeout=30)
+    assert_one_line_error(proc, 2, message)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_stage_sim_command_prints_its_url_and_serves(tmp_path):
