@@ -117,6 +117,21 @@ def test_fixed_point_names_a_domain_beyond_int32_codes_plainly(tmp_path):
         assert "np.float64" not in proc.stderr
 
 
+def test_predict_float_from_codes_refuses_an_lsb_no_float_holds_and_keeps_quiet_on_huge_readings(tmp_path):
+    eqs = tuple(Equation(n, 0.0, (Term(1, "1"),), (1.0,)) for n in ("dx", "dz"))
+    path = Model(np.full(8, 0.5), np.full(8, 2.0), eqs, "V", {}).save(tmp_path / "m.json")
+    (tmp_path / "v.csv").write_text(",".join(f"v{k}" for k in range(1, 9)) + "\n" + "1e308" + ",1" * 7 + "\n"
+                                    + "1" * 1 + ",1" * 7 + "\n")
+    for lsb in ("1e-46", "1e-40"):  # 0 and a subnormal in float
+        assert_one_line_error(run_cli("fitgen", "predict", str(path), str(tmp_path / "v.csv"), "-o",
+                                      str(tmp_path / "p.csv"), "--precision", "float", "--input-lsb", lsb), 2,
+                              "is beyond a float's normal range")
+    proc = run_cli("fitgen", "predict", str(path), str(tmp_path / "v.csv"), "-o", str(tmp_path / "p.csv"),
+                   "--precision", "float", "--input-lsb", "3e-5")
+    assert proc.returncode == 0 and "Warning" not in proc.stderr and "1 rows with no estimate" in proc.stderr, \
+        proc.stderr
+
+
 @pytest.fixture(scope="module")
 def fitted(data):
     from fitgen.fitting.fit import fit_model

@@ -182,6 +182,41 @@ def test_terms_near_the_rows_are_said_and_an_unknown_noise_is_said_plainly(tmp_p
     assert big.returncode == 0 and "terms on 37 rows" not in big.stderr
 
 
+def test_a_model_past_floats_range_runs_in_double_only(tmp_path):
+    """Readings a billion times the sensor's give coefficients past float's range: a fit for float refuses them
+    (or auto takes the family that runs in float), predict in float refuses as codegen does, double keeps them;
+    rows edited after their meta was written are not held out on the meta's sensor."""
+    import json
+
+    ds = simulate(PAPER, grid_poses(PAPER_GRIDS["paper-sim"]))
+    path = ds.save(tmp_path / "s.csv")
+    meta = json.loads((tmp_path / "s.csv.meta.json").read_text())
+    ds.inputs = ds.inputs * 1e9
+    big = ds.save(tmp_path / "big.csv")
+    (tmp_path / "big.csv.meta.json").unlink()
+    proc = run_cli("fitgen", "fit", str(big), "-o", str(tmp_path / "m.json"), "--family", "all")
+    assert_one_line_error(proc, 2, "does not fit in a float (|x| <= 3.4e+38): readings on another scale")
+    assert "RuntimeWarning" not in proc.stderr and not (tmp_path / "m.json").exists()
+    assert run_cli("fitgen", "fit", str(big), "-o", str(tmp_path / "d.json"), "--family", "all", "--precision",
+                   "double").returncode == 0
+    for prec, ok in (("float", False), ("double", True)):
+        proc = run_cli("fitgen", "predict", str(tmp_path / "d.json"), str(big), "-o", str(tmp_path / "p.csv"),
+                       "--precision", prec)
+        assert (proc.returncode == 0) == ok and ("does not fit in a float" in proc.stderr) != ok, proc.stderr
+    # auto on the sensor: the family whose equations run in float, and why
+    proc = run_cli("fitgen", "fit", str(big), "-o", str(tmp_path / "a.json"), "--sensor", "paper", "--held-out", "50")
+    assert proc.returncode == 0 and "RuntimeWarning" not in proc.stderr, proc.stderr
+    fam = json.loads((tmp_path / "a.json").read_text())["fit"]["family"]
+    assert fam["name"] == "harmonics" and fam["why"].startswith("the powers' equations cannot run in float")
+    # the simulated meta kept beside rows edited since: its sensor is not taken to hold out on
+    (tmp_path / "big.csv.meta.json").write_text(json.dumps(meta))
+    proc = run_cli("fitgen", "fit", str(big), "-o", str(tmp_path / "e.json"), "--precision", "double")
+    assert proc.returncode == 0 and "big.csv's rows are not the ones its meta was written for" in proc.stderr
+    assert "held_out" not in json.loads((tmp_path / "e.json").read_text())["fit"]
+    assert "rows are not the ones" not in run_cli("fitgen", "fit", str(path), "-o", str(tmp_path / "f.json"),
+                                                  "--held-out", "0", "--family", "all").stderr
+
+
 def test_bad_model_files(paper_fit, tmp_path):
     folder, _, _ = paper_fit
     data = json.loads((folder / "m.json").read_text())

@@ -114,7 +114,7 @@ def _settings(args):
 
 
 def cmd_fit(args) -> int:
-    from fitgen.app.report import fit_summary
+    from fitgen.app.report import fit_notes, fit_summary
     from fitgen.base.progress import Progress
     from fitgen.fitting.family import auto_compares, fit_family
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
@@ -122,7 +122,9 @@ def cmd_fit(args) -> int:
     from fitgen.physics.simulate import dataset_sensor
 
     settings = _settings(args)
-    ds, lifted = rows_on_the_skin(load_dataset(args.data))
+    loaded = load_dataset(args.data)
+    edited = loaded.meta.get("dataset_sha256") not in (None, loaded.sha256)  # rows changed since the meta was written
+    ds, lifted = rows_on_the_skin(loaded)
     recorded = ds.meta.get("units")
     if args.units is not None and recorded not in (None, args.units):
         raise InputError(f"--units {args.units}, but {args.data}'s meta says its readings are in {recorded}")
@@ -131,6 +133,10 @@ def cmd_fit(args) -> int:
         print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, which serves identify; "
               "their labels are no contact pose", file=sys.stderr)
     sensor = dataset_sensor(ds.meta, args.sensor, ds.n_inputs)
+    if edited and sensor is not None and not args.sensor:
+        print(f"note: {args.data}'s rows are not the ones its meta was written for (edited since): its sensor "
+              f"{sensor.name} is not taken to hold out on (give --sensor to)", file=sys.stderr)
+        sensor = None
     # --scene, or the scene the dataset was simulated for, names the outputs
     if args.scene and args.outputs:
         raise InputError("give --outputs or --scene, not both (the scene names the outputs)")
@@ -149,6 +155,8 @@ def cmd_fit(args) -> int:
     progress = bar.per_item(lambda name, step, aic, n_terms: f"{name}: step {step}, {n_terms} terms, AIC {aic:.1f}")
     with bar:
         model, family = fit_family(ds, outputs, settings, sensor, args.family, progress)
+    if settings.precision == "float" and model.float_problem():  # fitted for float, it cannot run there
+        raise InputError(f"{model.float_problem()} (--precision double fits it for double); nothing written")
     model.fit_info["family"] = family
     model.fit_info["dataset"] = str(args.data)
     if lifted:
@@ -163,15 +171,8 @@ def cmd_fit(args) -> int:
             hbar.update()
     model.save(args.output)
     print(fit_summary(model, args.held_out), end="", file=sys.stderr)
-    if args.units is None and recorded is None:
-        print(f"note: {args.data} has no meta saying its readings' units: taken as mT (give --units V for volts, "
-              "as an ADC gives them)", file=sys.stderr)
-    crowded = [e for e in model.equations if len(e.terms) + 1 > len(ds.inputs) / 3]
-    if crowded:  # AIC's penalty is no guard when the terms near the rows: the equation threads the rows' noise
-        e = max(crowded, key=lambda e: len(e.terms))
-        print(f"note: {e.name} has {len(e.terms)} terms on {len(ds.inputs)} rows: it follows the rows' noise more "
-              "than the sensor; more rows, --max-terms, or fit the identified unit's simulated rows (fitgen identify)",
-              file=sys.stderr)
+    print("".join(f"note: {n}\n" for n in fit_notes(model, len(ds.inputs), args.data, args.units or recorded)),
+          end="", file=sys.stderr)
     print(f"wrote {args.output}", file=sys.stderr)
     return 0
 
@@ -207,7 +208,11 @@ def cmd_predict(args) -> int:
             if not (math.isfinite(args.input_lsb) and args.input_lsb > 0):
                 raise InputError(f"--input-lsb must be a finite number > 0, got {args.input_lsb!r}")
             lsb = np.float32(args.input_lsb)
-            inputs = (np.rint(inputs / args.input_lsb).astype(np.float32) * lsb).astype(float)
+            if not np.finfo(np.float32).tiny <= lsb < np.inf:
+                raise InputError(f"--input-lsb {args.input_lsb!r} is beyond a float's normal range: no device's float "
+                                 "holds it")
+            with np.errstate(over="ignore", invalid="ignore"):  # codes past float's range: inf, status -1 as in C
+                inputs = (np.rint(inputs / args.input_lsb).astype(np.float32) * lsb).astype(float)
             print(f"float: readings rounded to codes of {float(lsb):.9g} {model.input_units} and taken as the "
                   "float code * LSB a device computes (an Arduino's ReadPose)", file=sys.stderr)
         check_magnitudes(model, args.precision)  # as codegen: the C's outputs are always finite

@@ -210,3 +210,15 @@ def sweep_sensor(sensor, model):
                          f"({model.input_units} readings{', sensor ' + str(fitted_on)[:12] if fitted_on else ''}); "
                          "its sweep on this one would not be the model's")
     return sensor
+
+
+def fit_notes(model: Model, rows: int, data, units) -> list[str]:
+    """What a user should know of a fit beyond its summary: readings' units assumed, equations near the rows."""
+    notes = [] if units else [f"{data} has no meta saying its readings' units: taken as mT (give --units V for "
+                              "volts, as an ADC gives them)"]
+    crowded = [e for e in model.equations if len(e.terms) + 1 > rows / 3]
+    if crowded:  # AIC's penalty is no guard when the terms near the rows: the equation threads the rows' noise
+        e = max(crowded, key=lambda e: len(e.terms))
+        notes.append(f"{e.name} has {len(e.terms)} terms on {rows} rows: it follows the rows' noise more than the "
+                     "sensor; more rows, --max-terms, or fit the identified unit's simulated rows (fitgen identify)")
+    return notes

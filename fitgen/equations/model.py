@@ -96,6 +96,21 @@ class Model:
         clamped = np.clip(np.where(np.isfinite(v), v, self.input_min), self.input_min, self.input_max)
         return clamped, status
 
+    def float_problem(self) -> str:
+        """Why the model cannot run in float ('' when it can): a number of its equations or domain past float's
+        range, which the float C cannot hold (its literal would be refused) and the float emulation would
+        turn into inf."""
+        top = float(np.finfo(np.float32).max)
+        for eq in self.equations:
+            for x in (eq.intercept, *eq.coefficients):
+                if not abs(x) <= top:
+                    return (f"output {eq.name}: the coefficient {x:.4g} does not fit in a float (|x| <= {top:.3g}): "
+                            "readings on another scale than the sensor's? rescale them, or use double")
+        for x in (*self.input_min, *self.input_max):
+            if not abs(x) <= top:
+                return f"the input domain reaches {x:.4g}, past float's range: rescale the readings, or use double"
+        return ""
+
     def predict(self, inputs: np.ndarray, with_status: bool = False, fma: bool = False,
                 precision: str = "double"):
         """Outputs (n, n_outputs) for rows of inputs; rows with a non-finite input give 0.
@@ -114,6 +129,9 @@ class Model:
         if precision == "float":
             if fma:
                 raise InputError("the float emulation has no fused multiply-add")
+            problem = self.float_problem()
+            if problem:
+                raise InputError(problem)
             lo, hi = float_domain(self)
             f32 = np.asarray(inputs, dtype=float).astype(np.float32).astype(float)
             v, status = dataclasses.replace(self, input_min=lo, input_max=hi, fit_info={}).clamp(f32)

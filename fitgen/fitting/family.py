@@ -44,10 +44,13 @@ def validation_rms(model: Model, sensor, ranges: dict, precision: str = "float")
 
         lsb, offset, _ = sensor_input_scale(sensor)
         est = build_fixed(model, lsb, offset).predict_values(val.noisy)[0]
+    elif model.float_problem():  # it cannot run in float: the other family is chosen (or fit refuses both)
+        return {}
     else:
         est = model.predict(val.noisy, precision="float")
-    err = est - val.noisy_truth
-    return {o: float(np.sqrt(np.mean(err[:, j] ** 2))) for j, o in enumerate(model.output_names)}
+    with np.errstate(over="ignore", invalid="ignore"):  # an equation far off in float: a huge RMS, said as it is
+        err = est - val.noisy_truth
+        return {o: float(np.sqrt(np.mean(err[:, j] ** 2))) for j, o in enumerate(model.output_names)}
 
 
 def shared_rows(ds: Dataset, families, settings: FitSettings, sensor) -> SharedRows:
@@ -85,9 +88,15 @@ def fit_auto(ds: Dataset, outputs, settings: FitSettings, sensor, progress=None)
     precision = "fixed" if settings.precision == "fixed" else "float"
     rms = {f: validation_rms(m, sensor, ranges, precision) for f, m in models.items()}
     base, other = cands
-    ratio = float(np.exp(np.mean([np.log(rms[other][o] / rms[base][o]) for o in rms[base]])))
-    name = other if ratio < 1 else base
     label = {"all": "the powers'", "harmonics": "harmonics'", "no-roots": "no-roots'", "integer": "integer's"}
+    if not (rms[base] and rms[other]):  # an empty record: that family's equations cannot run in float
+        name = other if rms[other] else base
+        lost = base if name == other else other
+        return models[name], {"name": name, "auto": True, "validation_rms": {f: r for f, r in rms.items() if r},
+                              "why": f"{label[lost]} equations cannot run in float ({models[lost].float_problem()})"}
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # an RMS of 0 or one past float's range
+        ratio = float(np.exp(np.mean([np.log(rms[other][o] / rms[base][o]) for o in rms[base]])))
+    name = other if ratio < 1 else base
     return models[name], {
         "name": name, "auto": True,
         "why": f"validation ({VALIDATION_POSES} poses, seed {VALIDATION_SEED}, {VALIDATION_DRAWS} noise draws, "

@@ -86,6 +86,10 @@ def deployed_errors(model: Model, held: HeldOut, sensor=None, precisions=PRECISI
         if prec == "double":
             fn = model.predict
         elif prec == "float":
+            if model.float_problem():
+                out[prec] = {"unavailable": model.float_problem()}
+                continue
+
             def fn(x):
                 return model.predict(x, precision="float")
         else:
