@@ -314,7 +314,18 @@ def test_codegen_cli(paper_fixed_model, tmp_path):
     mt.write_text(json.dumps(data))
     assert_one_line_error(run_cli("fitgen", "codegen", str(mt), "-o", str(tmp_path / "x"), "--precision", "fixed"),
                           contains="--input-lsb")
+    # an LSB so fine that the codes pass float's range: said with the codes, not an OverflowError
+    assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--precision", "fixed",
+                                  "--input-lsb", "1e-310"), 2, "e+310 at LSB 1e-310, offset 0.0: beyond int32")
     assert not (tmp_path / "x").exists()
+    # an output whose coefficients are all near float's least: its accumulator's Q format is the finest allowed
+    data = json.loads(path.read_text())
+    data["outputs"][4]["coefficients"] = [1e-310] * len(data["outputs"][4]["coefficients"])
+    data["outputs"][4]["intercept"] = 0.0
+    tiny = tmp_path / "tiny.json"
+    tiny.write_text(json.dumps(data))
+    proc = run_cli("fitgen", "codegen", str(tiny), "-o", str(tmp_path / "t"), "--precision", "fixed")
+    assert proc.returncode == 0 and "thy Q100" in proc.stderr, proc.stderr
 
 
 def test_predict_cli_fixed_equals_the_c(paper_fixed_model, compiled, plan, tmp_path):

@@ -19,6 +19,7 @@ so each value's interval holds every value the C can compute from clamped codes.
 from __future__ import annotations
 
 import math
+from decimal import Decimal  # formats codes past float's range
 from fractions import Fraction
 
 from fitgen import __version__
@@ -92,7 +93,7 @@ def _code_bounds(model: Model, lsb: Fraction, off: Fraction) -> tuple[list[int],
                              f"offset {float(off)!r}")
         if lo < INT32_MIN or hi > INT32_MAX:
             raise InputError(f"input v{k + 1}: its domain [{float(model.input_min[k])!r}, "
-                             f"{float(model.input_max[k])!r}] spans codes {float(lo):.4g}..{float(hi):.4g} at LSB "
+                             f"{float(model.input_max[k])!r}] spans codes {Decimal(lo):.4g}..{Decimal(hi):.4g} at LSB "
                              f"{float(lsb)!r}, "
                              f"offset {float(off)!r}: beyond int32 (a larger LSB, or the offset at the domain)")
         cmin.append(lo)
@@ -357,7 +358,7 @@ def _plan_output(pl: _Planner, eq, j: int, operands: list[str], coefs: list[Frac
         raise InputError(f"output {eq.name}: its terms reach {bound:.3g} {eq.unit} in the input domain; an int32 "
                          f"output would need an LSB over 1 {eq.unit} (fixed point limit)")
     # the accumulator: the finest Q format whose every partial sum provably stays within its budget
-    f_acc = min(100, math.floor(math.log2(top / bound))) if bound > 0 else 100
+    f_acc = min(100, math.floor(math.log2(top) - math.log2(bound))) if bound > 0 else 100  # top / bound may pass float
     while True:
         plan = _try_accumulator(eq, j, ops_p, coefs, icpt, f_acc, acc_bits, align)
         if plan is not None:
@@ -430,10 +431,11 @@ def _try_accumulator(eq, j, ops_p, coefs, icpt, f_acc, acc_bits, align=False):
 def default_input_scale(model: Model) -> tuple[float, float, str]:
     """(lsb, offset, where from) of the model's input codes when the user gives none.
 
-    From the sensor the model was fitted for, when its fit notes' sensor hash is a preset's
-    (the ADC of its transfer: lsb = (adc_max - adc_min) / (2^bits - 1), offset adc_min, as
-    ``fitgen.physics.transfer.quantise`` codes it); otherwise, for inputs in V, the paper sensor's
-    16-bit ADC over 0..3.3 V; otherwise an InputError asking for ``--input-lsb``.
+    From the sensor the model was fitted for, when its fit notes' sensor hash is a preset's, as the fit's
+    fixed-point figures took it (:func:`sensor_input_scale`: the ADC of its transfer, lsb = (adc_max -
+    adc_min) / (2^bits - 1), offset adc_min, as ``fitgen.physics.transfer.quantise`` codes it; FIXED_BITS over
+    its range when the transfer does not quantise); otherwise, for inputs in V, the paper sensor's 16-bit ADC
+    over 0..3.3 V; otherwise an InputError asking for ``--input-lsb``.
     """
     from fitgen.physics.sensor import load_sensor, preset_names
 
@@ -443,13 +445,9 @@ def default_input_scale(model: Model) -> tuple[float, float, str]:
             base = load_sensor(name)
             for kind in ("gmr", "raw"):
                 s = base.with_transfer(kind)
-                if s.sha256 != sha:
-                    continue
-                if kind == "gmr" and s.gmr.adc_bits > 0:
-                    g = s.gmr
-                    return (g.adc_max - g.adc_min) / (2**g.adc_bits - 1), g.adc_min, f"sensor {name} ({kind} ADC)"
-                if kind == "raw" and s.raw.adc_bits > 0:
-                    return s.raw.full_scale / (2**s.raw.adc_bits - 1), 0.0, f"sensor {name} ({kind} ADC)"
+                if s.sha256 == sha:
+                    lsb, offset, what = sensor_input_scale(s)
+                    return lsb, offset, f"sensor {name} ({kind}: {what})"
     if model.input_units == "V":
         return 3.3 / 65535, 0.0, "default 16-bit ADC over 0..3.3 V"
     raise InputError(f"fixed point needs the value of one ADC code: give --input-lsb (in {model.input_units})")
