@@ -142,18 +142,16 @@ def cmd_fit(args) -> int:
         raise InputError("give --outputs or --scene, not both (the scene names the outputs)")
     scene = args.scene or (None if args.outputs else ds.meta.get("scene_spec"))  # --outputs over the data's scene
     if scene is not None:
-        outputs = scene_outputs(scene, ds, args.data, sensor, args.force)
-        recorded_outputs = ds.meta.get("scene_outputs")
-        if not args.scene and recorded_outputs is not None and list(outputs) != list(recorded_outputs):
-            raise InputError(f"scene {scene} names {','.join(outputs)} now, but {args.data} was simulated when it "
-                             f"named {','.join(map(str, recorded_outputs))}: simulate again, or give --outputs")
+        outputs = scene_outputs(scene, ds, args.data, sensor, args.force,
+                                recorded=None if args.scene else ds.meta.get("scene_outputs"))
     else:
         outputs = ds.target_names if args.outputs is None else parse_names(args.outputs, POSE_NAMES, "--outputs")
     auto = auto_compares(args.family, settings)
     steps = len(outputs) + (ds.n_inputs if settings.refine else 0)  # the equations, then the forward model's
     bar = Progress("fit", steps * (2 if auto and sensor is not None else 1))
     progress = bar.per_item(lambda name, step, aic, n_terms: f"{name}: step {step}, {n_terms} terms, AIC {aic:.1f}")
-    with bar:
+    with bar:  # the first note shows at once: forming the rows' products takes seconds on a large dataset
+        bar.update(0, f"{len(ds.inputs):,} rows: the candidate terms' products")
         model, family = fit_family(ds, outputs, settings, sensor, args.family, progress)
     if settings.precision == "float" and model.float_problem():  # fitted for float, it cannot run there
         raise InputError(f"{model.float_problem()} (--precision double fits it for double); nothing written")

@@ -109,10 +109,14 @@ def load_scene(spec: str | None) -> Scene:
     return Scene(name, ordered, ranges, levels)
 
 
-def scene_outputs(spec: str, ds, origin: str, sensor, force: bool = False) -> tuple[str, ...]:
+def scene_outputs(spec: str, ds, origin: str, sensor, force: bool = False, recorded=None) -> tuple[str, ...]:
     """The outputs scene ``spec`` asks for, after checking that the dataset ``ds`` (read from
-    ``origin``) has them and, unless ``force``, that ``sensor`` (None: unknown) resolves them."""
+    ``origin``) has them and, unless ``force``, that ``sensor`` (None: unknown) resolves them; ``recorded``:
+    the outputs the scene named when ``ds`` was simulated for it (a scene file edited since is refused)."""
     scene = load_scene(spec)
+    if recorded is not None and list(scene.outputs) != list(recorded):
+        raise InputError(f"scene {spec} names {','.join(scene.outputs)} now, but {origin} was simulated when it "
+                         f"named {','.join(map(str, recorded))}: simulate again, or give --outputs")
     missing = [o for o in scene.outputs if o not in ds.target_names]
     if missing:
         raise InputError(f"scene {scene.name} asks for {missing[0]}, which dataset {origin} does not have")
