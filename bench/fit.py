@@ -44,6 +44,7 @@ import subprocess
 import sys
 import time
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import scipy
@@ -51,7 +52,9 @@ from threadpoolctl import threadpool_limits
 
 from fitgen.fitting.fit import FitSettings, fit_model, fit_output
 from fitgen.equations.model import Model
-from rstep import have_r, r_step
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # R's step(), the tests' peer
+from rstep import have_r, r_step  # noqa: E402
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 from fitgen.fitting.stepwise import compress, refit, stepwise, stepwise_reference
