@@ -306,7 +306,9 @@ def check_capture(space: UnitSpace, readings: np.ndarray, poses: np.ndarray) -> 
         # a reading on the ADC's rails is clipped (the element's own saturation is in the model: gain x 2 mT)
         g = d.gmr
         lsb = (g.adc_max - g.adc_min) / max(2**g.adc_bits - 1, 1)
-        beyond = (readings < g.adc_min - 2 * lsb) | (readings > g.adc_max + 2 * lsb)
+        # past the rails by more than noise could put an unquantised reading: no reading of this ADC at all
+        margin = max(2 * lsb, 0.05 * (g.adc_max - g.adc_min))
+        beyond = (readings < g.adc_min - margin) | (readings > g.adc_max + margin)
         if beyond.any():
             i, k = np.argwhere(beyond)[0]
             raise InputError(f"row {i + 1}: v{k + 1} = {readings[i, k]:.6g} V lies outside the ADC's range "
