@@ -167,7 +167,7 @@ def noise_to_add(ds: Dataset, settings: FitSettings, sensor=None) -> dict:
     meta = ds.meta
     data = _number(meta.get("noise"))
     if settings.noise is not None:
-        device, source = float(settings.noise), "given"
+        device, source = float(settings.noise) + 0.0, "given"  # + 0.0: -0 is 0
     else:
         sensor = sensor or dataset_sensor(meta)
         measured = _rms(meta.get("sample_noise"))
