@@ -90,7 +90,9 @@ ROWS = 1 << 14  # rows per block: the candidate columns are never all in memory 
 def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | None, *,
                settings: FitSettings, positive: np.ndarray, progress=None, noise: float = 0.0,
                d_jac=None, harmonics: Harmonics | None = None, shared: SharedRows | None = None) -> FittedOutput:
-    """Choose and fit one output's equation; memory grows with the candidates, not with the rows.
+    """Choose and fit one output's equation. The search's memory grows with the candidates, not with the rows;
+    the training error at the end holds a few numbers per row (its 95th percentile needs them all), which sets
+    the peak past about a million rows (docs/fit-benchmark.md, part 3).
 
     ``noise``: reading noise (rms) to add in expectation (fitgen.fitting.augment); ``d_jac``: a function
     (lo, hi) -> the gradient of the displacement estimates ``d`` by the inputs on those rows, for
