@@ -1,7 +1,10 @@
 """Cycles per estimate on the ATmega328P (Arduino Uno) in simavr, float and fixed point, with the AVR's
 results held against Python's and the fixed-point plans' accuracy against the double model.
 
-    PYTHONPATH=. python3 bench/avr_cost.py > /tmp/avr.md
+    PYTHONPATH=. python3 bench/avr_cost.py > /tmp/avr.md    # about 10 s; progress on stderr
+
+Needs avr-gcc and avr-size (apt: gcc-avr binutils-avr avr-libc), gcc, and libsimavr known to pkg-config
+(simavr libsimavr-dev libelf-dev pkg-config); checked before the fits.
 
 The paper sensor in volts (its gmr transfer, as the ADCs read it), fitted as `fitgen fit --family
 no-roots` fits it (noise- and float-aware), with `--max-terms 6` too (a model small enough for 16x16->32
@@ -22,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from benchutil import fmt, log, table
+from benchutil import fmt, log, need_tools, parse_args, table
 from fitgen.c.avr import F_CPU, run_on_avr
 from fitgen.c.targets import TARGETS
 from fitgen.equations.fixedpoint import plan_at
@@ -52,6 +55,8 @@ def _kind(o) -> str:
 
 
 def main() -> None:
+    parse_args(__doc__)  # no options: one it does not know is refused, not ignored
+    need_tools("avr-gcc", "avr-size", "gcc", libs=("simavr",))
     sensor = load_sensor("paper").with_transfer("gmr")
     grid = grid_poses(PAPER_GRIDS["paper-sim"])
     ds = simulate(sensor, grid)

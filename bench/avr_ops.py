@@ -1,7 +1,10 @@
 """Where a fixed-point estimate's cycles go on the ATmega328P: avr-gcc's int64 operations against the
 header's AVR assembly, one operation at a time, and the uno plan's build with each routine taken out.
 
-    PYTHONPATH=. python3 bench/avr_ops.py > /tmp/ops.md
+    PYTHONPATH=. python3 bench/avr_ops.py > /tmp/ops.md    # a few seconds; progress on stderr
+
+Needs avr-gcc (apt: gcc-avr avr-libc), gcc, and libsimavr known to pkg-config (simavr libsimavr-dev
+libelf-dev pkg-config); checked before anything is built.
 
 Part 1 runs each operation once in simavr at 16 MHz between two GPIOR0 writes (the bracket's own 2
 cycles taken off), its operands from volatile variables and its result stored to one (the loads
@@ -21,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchutil import log, table
+from benchutil import log, need_tools, parse_args, table
 from fitgen import __version__
 from fitgen.c import avrasm
 from fitgen.c.avr import AVR_CC, F_CPU, MCU, _run, build_runner
@@ -111,6 +114,8 @@ def _cycles(runner: Path, elf: Path, n: int) -> np.ndarray:
 
 
 def main() -> None:
+    parse_args(__doc__)  # no options: one it does not know is refused, not ignored
+    need_tools("avr-gcc", "gcc", libs=("simavr",))
     work = Path(tempfile.mkdtemp(prefix="fitgen-avr-ops-"))
     runner = build_runner(work)
     log("one operation at a time ...")

@@ -1,10 +1,15 @@
-"""What the benchmark scripts share: a progress log with elapsed time, number formats, markdown tables.
+"""What the benchmark scripts share: a progress log with elapsed time, number formats, markdown tables, the
+command line's parser and the check for the tools a bench runs.
 
 The scripts run as ``python bench/NAME.py``, so this folder is on their path: ``from benchutil import ...``.
 """
 
 from __future__ import annotations
 
+import argparse
+import os
+import shutil
+import subprocess
 import sys
 import time
 
@@ -16,6 +21,57 @@ START = time.monotonic()
 def log(msg: str) -> None:
     """A progress line on stderr, with the seconds since the script started."""
     print(f"[{time.monotonic() - START:6.1f}s] {msg}", file=sys.stderr, flush=True)
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose refusal is one line: a bench's usage is what --help prints, and a bad option
+    should not look like the start of a run's output."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def parser(doc: str) -> argparse.ArgumentParser:
+    """The parser of a bench whose docstring is ``doc``: --help gives its first paragraph (one sentence in
+    every bench), a bad option or value one line ``NAME.py: error: ...`` on stderr and exit 2."""
+    return _Parser(description=" ".join(doc.strip().split("\n\n")[0].split()))
+
+
+def parse_args(doc: str, add=None, argv: list[str] | None = None) -> argparse.Namespace:
+    """parser(doc), given its options by ``add(parser)`` if any, applied to ``argv`` (default sys.argv[1:]).
+    A bench without options calls it too, so that an option it does not know is refused rather than ignored."""
+    ap = parser(doc)
+    if add is not None:
+        add(ap)
+    return ap.parse_args(argv)
+
+
+# The Debian/Ubuntu packages that bring each tool a bench runs, for the line that says how to install one
+APT = {"gcc": "gcc", "valgrind": "valgrind", "objdump": "binutils", "Rscript": "r-base-core",
+       "pkg-config": "pkg-config", "avr-gcc": "gcc-avr avr-libc", "avr-size": "binutils-avr",
+       "avr-nm": "binutils-avr", "simavr": "simavr libsimavr-dev libelf-dev",
+       "qemu-system-arm": "qemu-system-arm", "qemu-arm": "qemu-user",
+       "arm-none-eabi-gcc": "gcc-arm-none-eabi libnewlib-arm-none-eabi",
+       "arm-none-eabi-size": "binutils-arm-none-eabi", "arm-none-eabi-nm": "binutils-arm-none-eabi",
+       "arm-linux-gnueabihf-gcc": "gcc-arm-linux-gnueabihf"}
+
+
+def need_tools(*tools: str, libs: tuple[str, ...] = ()) -> None:
+    """Exit 2 with one line naming what is missing and how to install it, unless every program in ``tools``
+    is on PATH and every library in ``libs`` is known to pkg-config. Called before the first minute of work,
+    so that a missing tool is not found by a traceback halfway through."""
+    if libs and "pkg-config" not in tools:
+        tools += ("pkg-config",)
+    missing = [t for t in tools if shutil.which(t) is None]
+    if not missing:
+        missing = [lib for lib in libs
+                   if subprocess.run(["pkg-config", "--exists", lib], capture_output=True).returncode != 0]
+    if missing:
+        packages = " ".join(dict.fromkeys(p for t in missing for p in APT.get(t, t).split()))
+        what = ", ".join(t + (" (library, pkg-config)" if t in libs else "") for t in missing)
+        print(f"{os.path.basename(sys.argv[0])}: {what} not found; install with: sudo apt-get install {packages}",
+              file=sys.stderr)
+        sys.exit(2)
 
 
 def fmt(x) -> str:

@@ -56,7 +56,6 @@ fixed-point flows, on a Cortex-M0 (fitgen.c.cost.arm_sizes, linked newlib progra
 
 from __future__ import annotations
 
-import argparse
 import sys
 import tempfile
 import time
@@ -74,7 +73,7 @@ from fitgen.equations.terms import FAMILIES
 from fitgen.equations.fixedpoint import sensor_input_scale as fixed_scale
 from fitgen.c import cost
 from fitgen.c.compiled import CompiledModel
-from benchutil import START, cramer_rao_floor, fmt, log, stats, table
+from benchutil import START, cramer_rao_floor, fmt, log, parser, stats, table
 
 LAYOUTS = ("paper", "two-radii", "ring-vertical", "two-rings")
 TRANSFERS = ("raw", "gmr")
@@ -339,7 +338,7 @@ def report(configs: list[Config], n_held: int, draws: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--quick", action="store_true",
                     help="paper and ring-vertical, raw; 500 held-out poses, 2 noise draws")
     ap.add_argument("--jobs", type=int, default=2, help="parallel C builds and measurements (default 2)")

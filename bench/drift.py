@@ -28,13 +28,12 @@ starts to its end), the mean dz estimate, and any auto-zero update that fell ins
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from benchutil import fmt, log, table
+from benchutil import fmt, log, parser, table
 
 from fitgen.fitting.fit import FitSettings
 from fitgen.fitting.family import fit_auto
@@ -149,7 +148,7 @@ def analyse(res: dict) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--plot", metavar="DIR", help="write drift.png here")
     args = ap.parse_args()
     sensor = load_sensor("paper").with_transfer("gmr")

@@ -51,7 +51,6 @@ through the same bench program and the same link, so its figures are on the same
 
 from __future__ import annotations
 
-import argparse
 import shlex
 import subprocess
 import sys
@@ -84,7 +83,7 @@ from fitgen.equations.terms import DISPLACEMENTS, ROTATIONS, candidate_terms, de
 from fitgen.physics.transfer import apply_transfer
 from fitgen.c import cost
 from fitgen.c.compiled import compile_checked
-from benchutil import START, cramer_rao_floor, fmt, log, stats, table
+from benchutil import START, cramer_rao_floor, fmt, log, parser, stats, table
 
 try:
     from abess.linear import LinearRegression as AbessLinear
@@ -678,7 +677,7 @@ def plot(layouts: list[Layout], folder: Path) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--plot", type=Path, metavar="DIR", help="write DIR/estimators-front.png")
     ap.add_argument("--jobs", type=int, default=2, help="parallel C builds and measurements (default 2)")
     ap.add_argument("--layouts", default=",".join(LAYOUTS), help=f"comma-separated (default {','.join(LAYOUTS)})")

@@ -1,7 +1,7 @@
 """Cost of one estimate: the generated C (both styles, both precisions) beside the Python evaluator.
 
 Run: ``python bench/eval.py > /tmp/eval.md`` (markdown on stdout, progress on stderr; about
-25 s on 2 cores). Needs gcc and valgrind; arm-none-eabi-gcc/size/nm for the Cortex-M4F
+25 s on 2 cores). Needs gcc, valgrind and objdump; arm-none-eabi-gcc/size/nm for the Cortex-M4F
 sizes (that part is skipped when they are missing). Tables and their reading:
 docs/eval-benchmark.md.
 
@@ -51,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchutil import table
+from benchutil import need_tools, parse_args, table
 
 from fitgen.c.codegen import STYLES
 from fitgen.fitting.fit import FitSettings, fit_model
@@ -123,10 +123,9 @@ def median_spread(xs: list[float]) -> tuple[float, float, float]:
 
 
 def main() -> None:
+    parse_args(__doc__)  # no options: one it does not know is refused, not ignored
     t_start = time.perf_counter()
-    for tool in ("gcc", "valgrind", "objdump"):
-        if shutil.which(tool) is None:
-            sys.exit(f"{tool} not found")
+    need_tools("gcc", "valgrind", "objdump")
     flags = next((ln for ln in open("/proc/cpuinfo") if ln.startswith("flags")), "").split()
     have_fma = {"fma", "avx2"} <= set(flags)
     if not have_fma:

@@ -19,7 +19,6 @@ it). Prints a markdown table on stdout, progress on stderr.
 
 from __future__ import annotations
 
-import argparse
 import os
 import platform
 import statistics
@@ -32,6 +31,7 @@ import numpy as np
 import magpylib as magpy
 from scipy.spatial.transform import Rotation
 
+from benchutil import parser
 from fitgen.physics.pose import field_readings
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import PAPER_GRIDS, grid_poses
@@ -83,7 +83,7 @@ def peak_memory(fn, sensor, poses) -> float:
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--repeats", type=int, default=5, help="timed runs for the paper grid (default 5)")
     ap.add_argument("--large-repeats", type=int, default=5, help="timed runs for the large batch (default 5, >= 3)")
     ap.add_argument("--large", type=int, default=200_000, help="poses in the large random batch (default 200000)")

@@ -1,11 +1,18 @@
 """Cost of the paper model on the emulated Cortex-M4 (QEMU mps2-an386) and Cortex-M0 (QEMU microbit, nRF51),
 both under -icount, on the Arduino Uno (simavr's ATmega328P, cycles), and HIL round trips.
 
-    python bench/firmware_cost.py > /tmp/firmware.md
+    python bench/firmware_cost.py > /tmp/firmware.md    # under a minute on 2 cores; progress on stderr
+
+Needs qemu-system-arm and arm-none-eabi-gcc/size with newlib (apt: qemu-system-arm gcc-arm-none-eabi
+libnewlib-arm-none-eabi) for the Cortex-M builds, gcc for the host build, avr-gcc/size/nm and libsimavr
+known to pkg-config (gcc-avr binutils-avr avr-libc simavr libsimavr-dev libelf-dev pkg-config) for the
+Uno; all checked before the fits.
 
 Prints markdown: per build and core, flash and RAM of the firmware image, instructions per estimate
 (BENCH under -icount shift=0: two runs of different length, the difference per estimate), and the
-round trip and batched throughput of EVAL over the emulator's TCP UART and the host build's pty.
+round trip (median of 200 one-vector EVALs) and batched throughput of EVAL over the emulator's TCP UART
+and the host build's pty. The batched figure is one timing of one 400-vector EVAL (hil.suite.check_timing),
+so it moves with the machine's load from run to run; the instruction counts do not.
 The same fixed-point build runs on both cores; a second table counts its 64-bit products and
 divisions (the fixed-point plan's operations), which the M0 computes in library calls
 (__aeabi_lmul, __aeabi_ldivmod) and the M4 in single instructions (SMULL) or a short sequence.
@@ -15,6 +22,7 @@ from __future__ import annotations
 
 import sys
 
+from benchutil import need_tools, parse_args
 from fitgen.base.errors import InputError
 from fitgen.fitting.fit import FitSettings, fit_model
 from fitgen.physics.sensor import load_sensor
@@ -30,6 +38,9 @@ BUILDS = [("float", "table", False), ("float", "unrolled", False), ("float", "un
 
 
 def main() -> None:
+    parse_args(__doc__)  # no options: one it does not know is refused, not ignored
+    need_tools("qemu-system-arm", "arm-none-eabi-gcc", "arm-none-eabi-size", "gcc", "avr-gcc", "avr-size",
+               "avr-nm", libs=("simavr",))
     print("fitting the paper models ...", file=sys.stderr)
     model = fit_model(simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])), settings=FitSettings.exact())
     gmr = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
@@ -52,11 +63,13 @@ def main() -> None:
         rows.append((name, precision, style + (" fma" if fma else ""), CORES[target], terms, emu.size["flash"],
                      emu.size["ram"], b["instructions"], t.figures))
     print("| model | precision | style | core | terms | flash (B) | RAM (B) | instructions per estimate | "
-          "EVAL round trip, median (ms) | batched EVAL (estimates/s) |")
+          "EVAL round trip, median (ms) | batched EVAL, one timing of 400 vectors (estimates/s) |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name, precision, style, core, terms, flash, ram, instr, fig in rows:
         print(f"| {name} | {precision} | {style} | {core} | {terms} | {flash:,} | {ram:,} | {instr:,.0f} | "
               f"{fig['rtt_ms_median']:.2f} | {fig['per_s']:,.0f} |")
+    print("\nRound trip: the median of 200 one-vector EVALs. Batched: one timing of one 400-vector EVAL per build "
+          "(hil.suite.check_timing), which moves with the machine's load; the instruction counts do not.")
     fixed_rows = {core: instr for name, precision, _, core, _, _, _, instr, _ in rows if precision == "fixed"}
     kinds = [op.kind for op in _fixed(fixed_model).ops]
     products, divisions = kinds.count("mul") + kinds.count("term"), kinds.count("recip")
@@ -74,7 +87,7 @@ def main() -> None:
             b = bench_instructions(dev)
             t = check_timing(dev, model)
     print(f"- {b['ns']:.0f} ns per estimate on the host; EVAL round trip median {t.figures['rtt_ms_median']:.3f} ms, "
-          f"batched {t.figures['per_s']:,.0f} estimates/s")
+          f"batched {t.figures['per_s']:,.0f} estimates/s (one timing of one 400-vector EVAL)")
 
 
 def uno_table(gmr, fixed_model) -> None:

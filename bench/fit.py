@@ -1,7 +1,8 @@
 """Benchmark of the stepwise fit: against R's step() and a plain refit loop, and in rows.
 
 Run: ``python bench/fit.py > /tmp/fitbench.md`` (markdown on stdout, progress on stderr;
-about 5-6 minutes on 2 cores, most of it in part 4, R and the plain loop). Needs Rscript.
+about 5-6 minutes on 2 cores, most of it in part 4, R and the plain loop). Needs Rscript (apt: r-base-core)
+for part 1, checked before anything runs; ``--rows-only`` and ``--command-only`` do not.
 
 Part 1, the paper grid (1,875 poses, no noise), outputs dx, dy, dz, thx, thy; the
 rotations get the d-columns from the stage-1 estimates of the exact fit (FitSettings.exact()),
@@ -50,11 +51,12 @@ import numpy as np
 import scipy
 from threadpoolctl import threadpool_limits
 
+from benchutil import need_tools, parser
 from fitgen.fitting.fit import FitSettings, fit_model, fit_output
 from fitgen.equations.model import Model
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # R's step(), the tests' peer
-from rstep import have_r, r_step  # noqa: E402
+from rstep import r_step  # noqa: E402
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 from fitgen.fitting.stepwise import compress, refit, stepwise, stepwise_reference
@@ -599,20 +601,21 @@ def _difference(n: int, base: dict, ours: dict) -> str:
 
 
 def main() -> None:
-    args = sys.argv[1:]
-    baseline = None
-    if "--baseline" in args:  # --baseline DIR: also the default fit of the fitgen tree at DIR (before a change)
-        i = args.index("--baseline")
-        baseline = os.path.abspath(args[i + 1])
-        del args[i:i + 2]
-    if args == ["--rows-only"]:
+    ap = parser(__doc__)
+    alone = ap.add_mutually_exclusive_group()
+    alone.add_argument("--rows-only", action="store_true", help="part 3 alone (rows without limit)")
+    alone.add_argument("--command-only", action="store_true", help="part 4 alone (the fit command)")
+    ap.add_argument("--baseline", metavar="DIR",
+                    help="part 4 also runs both commands with the fitgen source tree at DIR and compares its terms")
+    args = ap.parse_args()
+    baseline = os.path.abspath(args.baseline) if args.baseline else None
+    if args.rows_only:
         print(part_rows_without_limit())
         return
-    if args == ["--command-only"]:
+    if args.command_only:
         print(part_command(baseline))
         return
-    if not have_r():
-        sys.exit("Rscript not found: part 1 compares with R's step()")
+    need_tools("Rscript")  # part 1 compares with R's step()
     load0 = os.getloadavg()
     head = ["# fitgen fit benchmark", "",
             f"python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, "

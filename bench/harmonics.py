@@ -32,7 +32,6 @@ Per layout (paper, ring-vertical, tilted-axes: the layout bench/layout_search.py
 
 from __future__ import annotations
 
-import argparse
 import subprocess
 import sys
 import tempfile
@@ -40,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchutil import fmt, log, table, unbiased_maxima
+from benchutil import fmt, log, parser, table, unbiased_maxima
 
 from fitgen.physics.dataset import load_dataset
 from fitgen.equations.model import load_model
@@ -173,7 +172,7 @@ def run_layout(layout: str, work: Path) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--layouts", default="paper,ring-vertical,tilted-axes")
     args = ap.parse_args()
     print("# Issue 13's acceptance as a user runs it (bench/harmonics.py)\n")

@@ -5,8 +5,15 @@ by side in one run.
     python bench/hil_speed.py --baseline 57aa95d > /tmp/hil_speed.md
 
 Each code version runs from its own files: the baseline is `git archive`d into a temporary folder and run
-with that folder first on PYTHONPATH (its CLI, its firmware sources, its serial client). Runs alternate
-between the versions, so that the load of a shared machine falls on both alike; the table gives medians.
+with that folder first on PYTHONPATH (its CLI, its firmware sources, its serial client). Its CLI is the
+`tactile-hil` entry point of its own pyproject.toml (hil.cli at 57aa95d, fitgen.app.hil_cli since the
+layers), its fit the modules it has (fitgen.fit or fitgen.fitting.fit, ...), and an editable install of
+this tree is kept from filling in the modules the baseline lacks. Runs alternate between the versions, so
+that the load of a shared machine falls on both alike; the table gives medians.
+
+Needs qemu-system-arm and arm-none-eabi-gcc (apt: qemu-system-arm gcc-arm-none-eabi libnewlib-arm-none-eabi)
+for mps2 and the suite, gcc for the host target; checked before anything runs. A quick check of both sides:
+`python bench/hil_speed.py --boots 1 --suites 0 --targets host` (about 10 s).
 
 - first STREAM: `tactile-hil emulate --target T --adc ads1115@0x48:0-3,ads1115@0x49:0-3 --simulate
   dx=1,dz=-1` is started; once it prints `ready`, a client (the version's own host.device) connects and
@@ -19,10 +26,8 @@ between the versions, so that the load of a shared machine falls on both alike; 
 
 from __future__ import annotations
 
-import argparse
 import os
 import re
-import shutil
 import signal
 import statistics
 import subprocess
@@ -31,13 +36,23 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchutil import log, table
+from benchutil import log, need_tools, parser, table
+from fitgen.physics.sensor import tomllib
 from hil.emulate import stop_process
 
 ROOT = Path(__file__).resolve().parent.parent
 ADC = "ads1115@0x48:0-3,ads1115@0x49:0-3"
 POSE = "dx=1,dz=-1"
-CLI = "import sys; from fitgen.app.hil_cli import main; sys.argv[0] = 'tactile-hil'; main()"
+# The first line of every program a version runs: setuptools' editable install of this tree puts a finder on
+# sys.meta_path that answers any module the baseline's folder lacks (fitgen.app.hil_cli, fitgen.fitting, ...)
+# with this tree's file, so that the baseline would run a mix of the two versions; without it, a version's
+# imports find its own files (cwd and PYTHONPATH) and the installed dependencies only.
+ISOLATE = ("import sys; sys.meta_path[:] = [f for f in sys.meta_path "
+           "if not getattr(f, '__module__', '').startswith('__editable__')]\n")
+
+# where the modules FIT imports were before the layers (676fefc): a version without the new file imports the old
+MOVED = {"fitgen.fitting.fit": "fitgen.fit", "fitgen.physics.sensor": "fitgen.sensor",
+         "fitgen.physics.simulate": "fitgen.simulate"}
 
 # fits the two models with the version's own code (its model file format): paper (suite), volts (ADC builds)
 FIT = """
@@ -72,26 +87,39 @@ print(" ".join(f"{a:.4f}" for a in arrivals))
 """
 
 
+def entry_point(root: Path, script: str) -> str:
+    """Code that runs ``script`` as the version at ``root`` installs it (its pyproject.toml's [project.scripts]):
+    the module moved between versions (hil.cli at 57aa95d, fitgen.app.hil_cli later)."""
+    with open(root / "pyproject.toml", "rb") as f:
+        module, _, func = tomllib.load(f)["project"]["scripts"][script].partition(":")
+    return f"import sys; from {module} import {func}; sys.argv[0] = {script!r}; {func}()"
+
+
 class Version:
     def __init__(self, name: str, root: Path, models: Path):
         self.name, self.root, self.models = name, root, models
         self.env = dict(os.environ, PYTHONPATH=f"{root}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
+        self.cli = entry_point(root, "tactile-hil")
+        self.fit_code = FIT
+        for new, old in MOVED.items():
+            if not (root / (new.replace(".", "/") + ".py")).is_file():
+                self.fit_code = self.fit_code.replace(f"from {new} import", f"from {old} import")
 
     def python(self, code: str, *args: str, **kw) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-c", code, *args], env=self.env, cwd=self.root, text=True,
-                              capture_output=True, **kw)
+        return subprocess.run([sys.executable, "-c", ISOLATE + code, *args], env=self.env, cwd=self.root,
+                              text=True, capture_output=True, **kw)
 
     def fit(self) -> None:
         self.models.mkdir(parents=True, exist_ok=True)
-        proc = self.python(FIT, str(self.models / "paper.json"), str(self.models / "volts.json"))
+        proc = self.python(self.fit_code, str(self.models / "paper.json"), str(self.models / "volts.json"))
         if proc.returncode:
             sys.exit(f"{self.name}: fitting failed: {proc.stderr.strip().splitlines()[-1:]}")
 
     def first_stream(self, target: str, limit: float = 120.0) -> dict:
         """Boot emulate --adc, wait for ready, run the client; the times of one boot (s)."""
         t_launch = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, "-c", CLI, "emulate", "--model", str(self.models / "volts.json"),
-                                 "--target", target, "--adc", ADC, "--simulate", POSE],
+        proc = subprocess.Popen([sys.executable, "-c", ISOLATE + self.cli, "emulate", "--model",
+                                 str(self.models / "volts.json"), "--target", target, "--adc", ADC, "--simulate", POSE],
                                 env=self.env, cwd=self.root, text=True, stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE)
         try:
@@ -115,7 +143,7 @@ class Version:
 
     def suite(self) -> dict:
         t0 = time.perf_counter()
-        proc = self.python(CLI, "emulate", "--model", str(self.models / "paper.json"), "--suite", timeout=1800)
+        proc = self.python(self.cli, "emulate", "--model", str(self.models / "paper.json"), "--suite", timeout=1800)
         wall = time.perf_counter() - t0
         if proc.returncode:
             sys.exit(f"{self.name}: the HIL suite failed:\n{proc.stdout}\n{proc.stderr}")
@@ -126,21 +154,27 @@ class Version:
 
 def archive(rev: str, into: Path) -> Path:
     into.mkdir(parents=True)
-    git = subprocess.run(["git", "-C", str(ROOT), "archive", rev], capture_output=True, check=True)
+    git = subprocess.run(["git", "-C", str(ROOT), "archive", rev], capture_output=True)
+    if git.returncode:  # a revision git does not know is a bad option: one line and exit 2, not a traceback
+        print(f"hil_speed.py: error: --baseline {rev}: {git.stderr.decode().strip().splitlines()[-1]}", file=sys.stderr)
+        sys.exit(2)
     subprocess.run(["tar", "-x", "-C", str(into)], input=git.stdout, check=True)
     return into
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = parser(__doc__)
     ap.add_argument("--baseline", default="57aa95d", help="the revision to compare with (default 57aa95d)")
     ap.add_argument("--boots", type=int, default=5, help="boots per target and version (default 5)")
     ap.add_argument("--suites", type=int, default=3, help="suite runs per version (default 3; 0: none)")
     ap.add_argument("--targets", default="mps2,host", help="targets of the first-STREAM runs (default mps2,host)")
     args = ap.parse_args()
     targets = [t for t in args.targets.split(",") if t]
-    if shutil.which("qemu-system-arm") is None or shutil.which("arm-none-eabi-gcc") is None:
-        sys.exit("needs qemu-system-arm and gcc-arm-none-eabi")
+    if args.boots < 1 or args.suites < 0 or not targets:  # the table needs a boot per target to take medians of
+        ap.error("--boots must be >= 1, --suites >= 0 and --targets name a target")
+    # the ARM tools for an emulated Cortex-M (and every suite run: mps2), gcc for the host target
+    need_tools(*(["qemu-system-arm", "arm-none-eabi-gcc"] if args.suites or set(targets) - {"host"} else []),
+               *(["gcc"] if "host" in targets else []))
     with tempfile.TemporaryDirectory(prefix="hil-speed-") as tmp:
         tmp = Path(tmp)
         base = Version(f"baseline {args.baseline}", archive(args.baseline, tmp / "baseline"), tmp / "models-base")

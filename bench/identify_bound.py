@@ -28,7 +28,6 @@ The model file reports the median; the unit is one draw of that spread.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import tempfile
 from pathlib import Path
@@ -37,7 +36,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from benchutil import fmt, log, table  # noqa: E402
+from benchutil import fmt, log, parser, table  # noqa: E402
 from fitgen.fitting.holdout import box_of, deployed_errors, held_out_set, posterior_units  # noqa: E402
 from fitgen.fitting.identify import ZERO_ERROR, Problem, derived_quantities, identify  # noqa: E402
 from fitgen.fitting.unitrecord import load_posterior, save  # noqa: E402
@@ -156,7 +155,7 @@ def spread_rows(drawing, seeds: list[int]) -> list[list[str]]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--units", type=int, default=4, help="units for part 2 (seeds 1..N; 0: part 1 only)")
     args = ap.parse_args()
     drawing = load_sensor("paper").with_transfer("gmr")

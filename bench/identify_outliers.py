@@ -30,7 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import units as U  # noqa: E402
-from benchutil import fmt, log, table  # noqa: E402
+from benchutil import fmt, log, parse_args, table  # noqa: E402
 from fitgen.base.errors import InputError  # noqa: E402
 from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, identify  # noqa: E402
 from fitgen.fitting.unitrecord import check_explained  # noqa: E402
@@ -51,6 +51,7 @@ def swapped(y: np.ndarray) -> np.ndarray:
 
 
 def main() -> None:
+    parse_args(__doc__)  # no options: one it does not know is refused, not ignored
     ctx = U.Ctx(U.N_HELD_QUICK, U.DRAWS, U.N_RANDOM, (U.HEAD,))
     U.CTX = ctx
     ctx.make_schedules()

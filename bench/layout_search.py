@@ -28,7 +28,6 @@ stays within 0.12 deg in thx and thy together.
 
 from __future__ import annotations
 
-import argparse
 import copy
 from pathlib import Path
 
@@ -36,7 +35,7 @@ import numpy as np
 from scipy.optimize import differential_evolution
 from scipy.stats import norm
 
-from benchutil import fmt, log, table, unbiased_maxima
+from benchutil import fmt, log, parser, table, unbiased_maxima
 
 from fitgen.base.errors import InputError
 from fitgen.physics.observe import corner_poses, cramer_rao
@@ -146,7 +145,7 @@ def plot(floors: dict, held: np.ndarray, folder: Path) -> Path:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--plot", type=Path, metavar="DIR", help="also write DIR/layouts-tilt-floor.png")
     ap.add_argument("--no-search", action="store_true", help="only the presets' rows (seconds, not minutes)")
     args = ap.parse_args()

@@ -51,7 +51,7 @@ from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.scenes import PRESETS
 from fitgen.physics.sensor import load_sensor, parse_sensor, tomllib
 from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
-from benchutil import fmt, log, table
+from benchutil import fmt, log, parse_args, table
 
 LAYOUTS = ("paper", "two-rings", "two-radii", "ring-vertical", "tilted-axes")
 N_EVAL = 2000
@@ -158,6 +158,7 @@ def variant(second: dict):
 
 
 def main() -> int:
+    parse_args(__doc__)  # no options: one it does not know is refused, not ignored
     results = {name: study(name) for name in LAYOUTS}
     full, slide = PRESETS["full"], PRESETS["slide"]
 

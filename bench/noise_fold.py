@@ -1,6 +1,6 @@
 """The default fit's noise rows folded as their Gram matrix against the QR fold of the stacked rows.
 
-Run: ``python bench/noise_fold.py > /tmp/noisefold.md`` (about 1-2 minutes on 2 cores). On 20,000
+Run: ``python bench/noise_fold.py > /tmp/noisefold.md`` (about 1-2 minutes on 2 cores; progress on stderr). On 20,000
 random poses of the paper sensor (noise-free, seed 1, as ``fitgen simulate --random 20000 --seed 1``),
 the harmonics family's dz (252 candidates) and thy (279, with d-terms from the stage-1 fit), noise
 0.0005 rms: the triangle of [data rows; rounding rows; noise rows] with the noise rows folded by QR
@@ -9,16 +9,22 @@ the harmonics family's dz (252 candidates) and thy (279, with d-terms from the s
 QR triangle, the Gram fold's relative error in |A x|^2 along each of those singular directions, and
 whether the search chooses alike. With ``--precision exact`` (no rounding rows), the case the fit
 still folds by QR (augment.gram_fold), for comparison.
+
+Timing: after one untimed round, ``--rounds`` rounds (default 9), each timing the QR fold and then the Gram
+fold, so that a change in a shared machine's load falls on both sides alike (timed all QR folds first, then all
+Gram folds, the speed-ups read 2.0x and 2.8x in one run, 3.3x and 3.9x in another). The table gives each fold's
+median time, and the median and the range over the rounds of their ratio: the range is how far one round's
+load can move it.
 """
 
 from __future__ import annotations
 
 import statistics
-import sys
 import time
 
 import numpy as np
 
+from benchutil import log, parser
 from fitgen.fitting.augment import ROUNDING_FACTOR, UNIT_ROUNDOFF, noise_blocks, noise_gram, rounding_rows
 from fitgen.fitting.fit import FitSettings, _d_jacobian, fit_model, ring_harmonics
 from fitgen.physics.sensor import load_sensor
@@ -26,11 +32,18 @@ from fitgen.physics.simulate import DEFAULT_RANGES, pose_rng, random_poses, simu
 from fitgen.fitting.stepwise import compress, stepwise
 from fitgen.equations.terms import Term, candidate_terms, design_matrix
 
-ROWS, SEED, REPEATS = 20_000, 1, 3
+ROWS, SEED = 20_000, 1
 
 
 def main() -> None:
-    exact = sys.argv[1:] == ["--precision", "exact"]
+    ap = parser(__doc__)
+    ap.add_argument("--precision", choices=("float", "exact"), default="float",
+                    help="float: with the float rounding rows, as the default fit (default); exact: none")
+    ap.add_argument("--rounds", type=int, default=9, help="timing rounds, each QR then Gram (default 9)")
+    args = ap.parse_args()
+    if args.rounds < 1:
+        ap.error("--rounds must be >= 1")
+    exact = args.precision == "exact"
     u = 0.0 if exact else ROUNDING_FACTOR * UNIT_ROUNDOFF["float"]
     sensor = load_sensor("paper")
     ds = simulate(sensor, random_poses(ROWS, DEFAULT_RANGES, pose_rng(SEED)))
@@ -54,27 +67,33 @@ def main() -> None:
             return compress(None, y[:0], start=data, extra=extra,
                             gram=noise_gram(terms, v, sigma, dd, ddj, harmonics=harmonics))
 
-        times = {}
-        for name, fn in (("qr", qr_fold), ("gram", gram_fold)):
-            runs = []
-            for _ in range(REPEATS):
+        # QR, Gram, QR, Gram, ...: a change in the machine's load lands on both folds, and each round's ratio
+        # compares two runs a few seconds apart. One untimed round first: the first fold of an output pays for
+        # its first large allocations (up to 1.5x its later times in a trial), which would always fall on QR.
+        qr_fold(), gram_fold()
+        runs, folds = {"qr": [], "gram": []}, {}
+        for k in range(args.rounds):
+            for name, fn in (("qr", qr_fold), ("gram", gram_fold)):
                 t0 = time.perf_counter()
-                R = fn()
-                runs.append(time.perf_counter() - t0)
-            times[name] = (statistics.median(runs), R)
-            print(f"{out}: {name} fold, median {times[name][0]:.2f} s", file=sys.stderr)
-        plain, folded = times["qr"][1], times["gram"][1]
+                folds[name] = fn()
+                runs[name].append(time.perf_counter() - t0)
+            log(f"{out}: round {k + 1}/{args.rounds}: QR fold {runs['qr'][-1]:.2f} s, "
+                f"Gram fold {runs['gram'][-1]:.2f} s")
+        ratios = [q / g for q, g in zip(runs["qr"], runs["gram"])]
+        plain, folded = folds["qr"], folds["gram"]
         scale = np.linalg.norm(plain, axis=0)
         _, sv, vt = np.linalg.svd(plain[:, :-1] / scale[:-1])
         along = np.sum(((folded[:, :-1] / scale[:-1]) @ vt.T) ** 2, axis=0)
         err = np.abs(along - sv**2) / sv**2
         init = [terms.index(Term(k, e)) for k in range(1, 9) for e in ("-1", "-2")]
         a, b = (stepwise(None, y, init, compressed=R, max_terms=ROWS - 2) for R in (plain, folded))
-        rows.append([out, len(terms), f"{times['qr'][0]:.2f}", f"{times['gram'][0]:.2f}",
-                     f"{times['qr'][0] / times['gram'][0]:.1f}x", f"{sv[0]:.2g} .. {sv[-1]:.2g}",
+        rows.append([out, len(terms), f"{statistics.median(runs['qr']):.2f}", f"{statistics.median(runs['gram']):.2f}",
+                     f"{statistics.median(ratios):.1f}x ({min(ratios):.1f}-{max(ratios):.1f})",
+                     f"{sv[0]:.2g} .. {sv[-1]:.2g}",
                      f"{np.median(err):.1e}", f"{err.max():.1e} (at {sv[np.argmax(err)]:.1e})",
                      "yes" if a.selected == b.selected else "no", f"{abs(a.aic - b.aic) / abs(a.aic):.1e}"])
-    head = ["output", "candidates", "QR fold [s]", "Gram fold [s]", "speed-up", "scaled singular values",
+    head = ["output", "candidates", "QR fold [s]", "Gram fold [s]", "speed-up, median (range)",
+            "scaled singular values",
             "Gram's rel. error in |Ax|^2, median", "max (at singular value)", "same choices", "AIC rel. diff."]
     print(f"## Noise rows: QR fold against Gram fold, {ROWS:,} rows, "
           f"{'no rounding rows (--precision exact)' if exact else 'float rounding rows'}\n")
@@ -82,9 +101,11 @@ def main() -> None:
     print("| " + " | ".join("---" for _ in head) + " |")
     for r in rows:
         print("| " + " | ".join(str(c) for c in r) + " |")
-    print(f"\nMedian of {REPEATS} runs of each fold (the noise rows formed and folded into the same data triangle; "
-          f"{'no' if exact else 'with the float'} rounding rows, u = {u:.2g}). Error: | |F x|^2 - |P x|^2 | / |P x|^2 "
-          f"along each right singular vector x of the column-scaled QR triangle P, F the Gram fold's.")
+    print(f"\n{args.rounds} rounds after an untimed one, each timing the QR fold and then the Gram fold (the noise "
+          f"rows formed and folded into the same data triangle; {'no' if exact else 'with the float'} rounding rows, "
+          f"u = {u:.2g}): each fold's median time, and the median and range over the rounds of QR / Gram. Error: "
+          "| |F x|^2 - |P x|^2 | / |P x|^2 along each right singular vector x of the column-scaled QR triangle P, "
+          "F the Gram fold's.")
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from benchutil import parse_args
 from fitgen.physics.dataset import Dataset
 from fitgen.fitting.fit import FitSettings, fit_model
 
@@ -37,6 +38,7 @@ def dataset(poses: np.ndarray, h: float = 0.0, noise: float = 0.0, seed: int = 0
 
 
 def main() -> None:
+    parse_args(__doc__)  # no options: one it does not know is refused, not ignored
     grid = grid_poses(PAPER_GRIDS["paper-sim"])
     rand = random_poses(2000, DEFAULT_RANGES, pose_rng(2026))
     train, test = dataset(grid), dataset(rand)

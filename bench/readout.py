@@ -1,7 +1,9 @@
 """Software time per sample of ``tactile-host read``: drivers, estimate and output line, bus access excluded.
 
-Run: ``python bench/readout.py > /tmp/readout.md`` (markdown on stdout; about 15 s). Needs gcc.
-Figures and their reading: docs/readout.md.
+Run: ``python bench/readout.py > /tmp/readout.md`` (markdown on stdout; about 15 s), or
+``python bench/readout.py --c-only`` for the last table alone (about 5 s). Needs gcc; the last table
+(the C drivers) also valgrind, arm-linux-gnueabihf-gcc and qemu-arm (apt: valgrind gcc-arm-linux-gnueabihf
+qemu-user); all checked before anything runs. Figures and their reading: docs/readout.md.
 
 The model: fit_model on the paper-sim grid (1,875 poses, no noise) of the ``paper`` sensor
 in its ``gmr`` transfer (inputs in V). The channel map: two ADS1115, AIN0-3 single-ended
@@ -47,6 +49,7 @@ import time
 
 import numpy as np
 
+from benchutil import need_tools, parse_args
 from fitgen.fitting.fit import FitSettings, fit_model
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
@@ -463,7 +466,10 @@ def c_drivers_table(model, sensor) -> None:
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] == ["--c-only"]:
+    _args = parse_args(__doc__, lambda ap: ap.add_argument(
+        "--c-only", action="store_true", help="only the last table, the C drivers (about 5 s)"))
+    need_tools("gcc", "valgrind", "arm-linux-gnueabihf-gcc", "qemu-arm")  # every run ends with the C drivers' table
+    if _args.c_only:
         _sensor = load_sensor("paper").with_transfer("gmr")
         c_drivers_table(fit_model(simulate(_sensor, grid_poses(PAPER_GRIDS["paper-sim"])),
                                   settings=FitSettings.exact()), _sensor)

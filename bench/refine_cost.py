@@ -5,6 +5,9 @@ Run:
 
     python bench/refine_cost.py > out.md      # about 1 minute; progress on stderr
 
+Needs qemu-system-arm and arm-none-eabi-gcc/size with newlib (apt: qemu-system-arm gcc-arm-none-eabi
+libnewlib-arm-none-eabi); checked before the fit.
+
 The model: the paper layout, the harmonics family capped at 30 terms, fitted on the paper-sim grid
 followed by 20,000 random poses (seed 1), with `refine=1` (at most 30 forward terms per element),
 as in bench/harmonics.py's `+ refine 1, dense` row; the baseline is the same model with the
@@ -18,7 +21,7 @@ import dataclasses
 
 import numpy as np
 
-from benchutil import log, table
+from benchutil import log, need_tools, parse_args, table
 
 from fitgen.fitting.fit import FitSettings, fit_model
 from fitgen.fitting.holdout import box_of
@@ -29,6 +32,8 @@ from host.device import Device
 
 
 def main() -> None:
+    parse_args(__doc__)  # no options: one it does not know is refused, not ignored
+    need_tools("qemu-system-arm", "arm-none-eabi-gcc", "arm-none-eabi-size")
     sensor = load_sensor("paper")
     grid = grid_poses(PAPER_GRIDS["paper-sim"])
     train = simulate(sensor, np.vstack([grid, random_poses(20000, box_of(grid), pose_rng(1))]))

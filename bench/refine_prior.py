@@ -19,7 +19,7 @@ import dataclasses
 
 import numpy as np
 
-from benchutil import fmt, log, table
+from benchutil import fmt, log, parse_args, table
 
 from fitgen.fitting.family import VALIDATION_DRAWS, VALIDATION_POSES, VALIDATION_SEED
 from fitgen.fitting.fit import FitSettings, fit_model
@@ -58,6 +58,7 @@ def run_layout(layout: str) -> str:
 
 
 def main() -> None:
+    parse_args(__doc__)  # no options: one it does not know is refused, not ignored
     print("# The refinement's prior scale on validation poses (bench/refine_prior.py)\n")
     print(f"Noisy RMS errors (mm, deg) on {VALIDATION_POSES} validation poses x {VALIDATION_DRAWS} noise draws "
           f"(seed {VALIDATION_SEED}), float.\n")

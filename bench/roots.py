@@ -56,7 +56,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchutil import log, table
+from benchutil import log, need_tools, parse_args, table
 
 from fitgen.c.codegen import write_header
 from fitgen.equations.model import Model, load_model
@@ -391,9 +391,8 @@ def cpu_name() -> str:
 # --- main -----------------------------------------------------------------------------------------
 
 def main() -> None:
-    for tool in ("gcc", "valgrind"):
-        if shutil.which(tool) is None:
-            sys.exit(f"{tool} not found")
+    parse_args(__doc__)  # no options: one it does not know is refused, not ignored
+    need_tools("gcc", "valgrind")
     have_m4f = all(shutil.which(t) for t in ("qemu-system-arm", "arm-none-eabi-gcc"))
     rng = np.random.default_rng(SEED)
     with tempfile.TemporaryDirectory(prefix="fitgen-roots-") as tmp, ThreadPoolExecutor(2) as pool:

@@ -75,7 +75,6 @@ import os
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # one BLAS thread per process
     os.environ.setdefault(_var, "1")
 
-import argparse  # noqa: E402
 import multiprocessing as mp  # noqa: E402
 import pickle  # noqa: E402
 import sys  # noqa: E402
@@ -87,7 +86,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-from benchutil import START, fmt, log, table  # noqa: E402
+from benchutil import START, fmt, log, parser, table  # noqa: E402
 from fitgen.physics.dataset import Dataset, rows_on_the_skin  # noqa: E402
 from fitgen.base.errors import InputError  # noqa: E402
 from fitgen.fitting.family import fit_auto  # noqa: E402
@@ -704,7 +703,7 @@ def plot(per: dict, outdir: Path) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--units", type=int, help=f"units (seeds 1..N; default {N_UNITS}, --quick 2)")
     ap.add_argument("--quick", action="store_true",
                     help=f"{N_HELD_QUICK} held-out poses, {DRAWS_QUICK} draws, {N_RANDOM_QUICK} random training poses, "
@@ -717,10 +716,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--plot", metavar="DIR", help="write units-heldout.png and units-identified.png here")
     ap.add_argument("--cache", metavar="DIR", help="keep each task's result here and reuse it on a run again")
     args = ap.parse_args(argv)
-    n_units = args.units or (2 if args.quick else N_UNITS)
+    n_units = args.units if args.units is not None else 2 if args.quick else N_UNITS  # --units 0 is refused below
     if n_units < 1 or args.jobs < 1:
-        print("bench/units.py: --units and --jobs must be >= 1", file=sys.stderr)
-        return 2
+        ap.error("--units and --jobs must be >= 1")
     twins = (HEAD, (10, 0.03)) if args.quick else tuple((n, r) for r in RIGS for n in TWIN_NS)
     ctx = Ctx(N_HELD_QUICK if args.quick else N_HELD, DRAWS_QUICK if args.quick else DRAWS,
               N_RANDOM_QUICK if args.quick else N_RANDOM, twins)
