@@ -454,8 +454,8 @@ def part_rows_without_limit() -> str:
     md.append("Each size in a fresh process that loads the simulated rows (noise 0.0005 mT, as measured data carry "
               "their noise: no noise rows are added, the float rounding rows are) from a file, one warm-up fit on "
               "2,000 rows, then one timed fit_output (candidate columns built 16,384 rows at a time and folded into "
-              "the triangle, search, refit, the training error block by block) and one under tracemalloc. The "
-              "fit's peak is what it allocates above what was live when it started. RSS before the fit: the "
+              "the triangle, search, refit, the training error: predictions block by block, gathered for its "
+              "p95) and one under tracemalloc. The fit's peak is what it allocates above what was live when it started. RSS before the fit: the "
               "process's resident memory with the interpreter, numpy, scipy, BLAS and the rows loaded; peak RSS "
               "during the fit: the high-water mark after resetting it (/proc/self/clear_refs) just before the fit; "
               "their difference is the fit's resident peak, BLAS workspaces included.")
