@@ -153,8 +153,9 @@ def cmd_fit(args) -> int:
     with bar:  # the first note shows at once: forming the rows' products takes seconds on a large dataset
         bar.update(0, f"{len(ds.inputs):,} rows: the candidate terms' products")
         model, family = fit_family(ds, outputs, settings, sensor, args.family, progress)
-    if settings.precision == "float" and model.float_problem():  # fitted for float, it cannot run there
-        raise InputError(f"{model.float_problem()} (--precision double fits it for double); nothing written")
+    problem = model.float_problem() if settings.precision == "float" else ""
+    if problem:  # fitted for float, it cannot run there
+        raise InputError(f"{problem} (--precision double fits it for double); nothing written")
     model.fit_info["family"] = family
     model.fit_info["dataset"] = str(args.data)
     if lifted:

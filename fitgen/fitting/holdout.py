@@ -86,8 +86,9 @@ def deployed_errors(model: Model, held: HeldOut, sensor=None, precisions=PRECISI
         if prec == "double":
             fn = model.predict
         elif prec == "float":
-            if model.float_problem():
-                out[prec] = {"unavailable": model.float_problem()}
+            problem = model.float_problem()
+            if problem:
+                out[prec] = {"unavailable": problem}
                 continue
 
             def fn(x):
