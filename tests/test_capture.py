@@ -199,7 +199,7 @@ def test_capture_command_a_failing_trigger_is_one_line_status_1_and_rows_are_kep
 
 
 @pytest.mark.parametrize("extra, message", [
-    (["--samples", "0"], "--samples must be a finite number > 0"),
+    (["--samples", "0"], "--samples must be a whole number >= 1, got 0"),
     (["--max-spread", "x"], "--max-spread 'x' is not a number"),
     (["--adc", "ads1115@0x48:0-3,ads7829@0x49"], "unknown chip 'ads7829'"),
     (["--bus", "99"], "/dev/i2c-99 does not exist"),

@@ -240,6 +240,7 @@ def test_schedule_is_d_optimal_within_limits(drawing, plan):
 @pytest.mark.parametrize("args,message", [
     (["--samples", "0"], "--samples must be a whole number >= 1, got 0"),
     (["--samples", "-4"], "--samples must be a whole number >= 1, got -4"),
+    (["--samples", "1.5"], "--samples '1.5' is not a whole number"),
     (["--n", "9"], "--n must be 10..10000 (identify needs at least 10 rows), got 9"),
     (["--rig-error", "-0.01"], "the rig error must be 0..10 mm, got -0.01"),
     (["--limits", "dz=1:2"], "the limits of dz (1..2) leave it no room to move within the sensor's pose box (-2..0)"),

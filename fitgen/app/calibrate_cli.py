@@ -7,6 +7,7 @@ import sys
 
 from fitgen.app.options import noise_of, sensor_of
 from fitgen.base.errors import InputError
+from fitgen.base.parse import parse_positive
 
 
 def cmd_identify(args) -> int:
@@ -57,8 +58,7 @@ def cmd_schedule(args) -> int:
     drawing = sensor_of(args)
     axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
     noise = None if args.noise is None else noise_of(args.noise, drawing)
-    if args.samples < 1:
-        raise InputError(f"--samples must be a whole number >= 1, got {args.samples}")
+    samples = parse_positive(args.samples, "--samples", integer=True)
 
     def step(done, total, note):
         bar.total = total
@@ -66,9 +66,9 @@ def cmd_schedule(args) -> int:
 
     with Progress("schedule", args.n) as bar:
         poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits, {}),
-                               noise=(drawing.noise if noise is None else noise) / np.sqrt(args.samples),
+                               noise=(drawing.noise if noise is None else noise) / np.sqrt(samples),
                                rig_error=args.rig_error, progress=step)
-    write_schedule(args.output, poses, axes, {**info, "samples_per_row": args.samples})
+    write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples})
     rest = (f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"]
             else "")
     print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}{rest}) to {args.output}",

@@ -407,7 +407,7 @@ def build_parser() -> Parser:
     sc.add_argument("--axes", default="dx,dy,dz", help="the axes the stage moves (default dx,dy,dz)")
     sc.add_argument("--limits", help="the stage's limits 'dx=-2:2 dz=-2:0 ...' (default: the sensor's pose box); "
                     "with dz, a rest row may lift the stage 0.2 mm above first contact besides")
-    sc.add_argument("--samples", type=int, default=16, help="samples the capture averages per row (default 16)")
+    sc.add_argument("--samples", default="16", help="samples the capture averages per row (default 16)")
     sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
     sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM", help="the stage's error, mm rms")
     sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv")

@@ -42,7 +42,9 @@ def parse_positive(text: str, what: str, *, integer: bool = False, zero: bool = 
     except ValueError:
         raise InputError(f"{what} {text!r} is not a{' whole' if integer else ''} number") from None
     if not math.isfinite(val) or val < 0 or (val == 0 and not zero):
-        raise InputError(f"{what} must be a finite number {'>= 0' if zero else '> 0'}, got {text}")
+        bound = ("a whole number " + (">= 0" if zero else ">= 1")) if integer else \
+            ("a finite number " + (">= 0" if zero else "> 0"))
+        raise InputError(f"{what} must be {bound}, got {text}")
     if most is not None and val > most:
         raise InputError(f"{what} must be at most {most:g}, got {text}")
     return val
