@@ -1,8 +1,8 @@
 """Benchmark of the stepwise fit: against R's step() and a plain refit loop, and in rows.
 
-Run: ``python bench/fit.py > /tmp/fitbench.md`` (markdown on stdout, progress on stderr;
-about 5-6 minutes on 2 cores, most of it in part 4, R and the plain loop). Needs Rscript (apt: r-base-core)
-for part 1, checked before anything runs; ``--rows-only`` and ``--command-only`` do not.
+Run: ``python bench/fit.py > /tmp/fitbench.md`` (markdown on stdout, progress on stderr; about 7 minutes
+on 2 cores, docs/fit-benchmark.md, most of it in part 4, R and the plain loop). Needs Rscript (apt:
+r-base-core) for part 1, checked before anything runs; ``--rows-only`` and ``--command-only`` do not.
 
 Part 1, the paper grid (1,875 poses, no noise), outputs dx, dy, dz, thx, thy; the
 rotations get the d-columns from the stage-1 estimates of the exact fit (FitSettings.exact()),
