@@ -10,7 +10,7 @@ import pytest
 from fitgen.fitting.augment import NoiseGrams, noise_blocks, noise_gram, rounding_rows
 from fitgen.physics.dataset import Dataset
 from fitgen.fitting.fit import FitSettings, _d_jacobian, fit_model, noise_to_add, ring_harmonics
-from fitgen.fitting.holdout import clean_readings, deployed_errors, held_out_set
+from fitgen.fitting.holdout import clean_readings, deployed_errors, held_out_set, unit_sets
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import DEFAULT_RANGES, grid_poses, pose_rng, random_poses, simulate
@@ -264,6 +264,20 @@ def test_clean_readings_needs_a_known_sensor(fitted_files):
     foreign = dataclasses.replace(model, fit_info={"held_out": {**model.fit_info["held_out"], "sensor": "my-own-sensor"}})
     assert clean_readings(foreign) is None
     assert clean_readings(foreign, load_sensor("ring-vertical")) is not None  # named by the user
+
+
+def test_units_held_out_together_share_poses_but_not_noise():
+    """A median over units is a median over noise realisations too: the same poses and noise-free readings
+    for the same sensor, each unit its own draws, none repeated; held_out_set's default seeds for unit 0."""
+    sensor = load_sensor("paper")
+    sets = unit_sets([sensor] * 3, DEFAULT_RANGES, OUTPUTS, noise=None, n=50, seed=7, draws=2)
+    assert [h.spec["noise_seeds"] for h in sets] == [[8, 9], [10, 11], [12, 13]]
+    alone = held_out_set(sensor, DEFAULT_RANGES, OUTPUTS, n=50, seed=7, draws=2)
+    np.testing.assert_array_equal(sets[0].noisy, alone.noisy)
+    for h in sets[1:]:
+        np.testing.assert_array_equal(h.clean, sets[0].clean)
+        np.testing.assert_array_equal(h.truth, sets[0].truth)
+        assert np.mean(h.noisy == sets[0].noisy) < 0.05  # equal only where ADC codes coincide
 
 
 @pytest.mark.parametrize("layout", ["paper", "ring-vertical"])

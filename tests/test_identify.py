@@ -336,6 +336,8 @@ def test_cli_schedule_capture_identify(tmp_path):
     assert "units drawn from the posterior of identified unit" in proc.stderr
     held = json.loads((tmp_path / "t.json").read_text())["fit"]["held_out"]
     assert held["posterior"]["units"] == 8 and held["sensor_file"] == str(unit_file.resolve())
+    # each posterior unit has its own noise draws: the median is over noise realisations too
+    assert held["noise_seeds"] == [held["seed"] + 1, held["seed"] + 8 * held["noise_draws"]]
     dx = held["errors"]["float"]["dx"]
     assert 0 < dx["noisy_max"] <= dx["noisy_max_p90"]
     # the range over the posterior's units is recorded and printed beside each median
