@@ -19,8 +19,9 @@ measures identify itself on 20 magpylib units (docs/calibration.md).
 
 Part 2, the spread. For units 1..K (bench/units.py's units, captures and twin, 40 poses, 0.01 mm): the twin's
 held-out figures (float, noise-free and noisy) on the 8 units the model file draws from the posterior
-(min, median, max) and on the unit itself (fitgen's field; magpylib gives the same noise-free figures).
-The model file reports the median; the unit is one draw of that spread.
+(min, median, max; each unit its own noise draws, as the model file's) and on the unit itself (fitgen's
+field, the first unit's noise seeds; magpylib gives the same noise-free figures). The model file reports
+the median; the unit is one draw of that spread.
 
     python bench/identify_bound.py                # part 1 (1 min) and part 2 on 4 units (3-6 min)
     python bench/identify_bound.py --units 0      # part 1 only
@@ -37,7 +38,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from benchutil import fmt, log, parser, table  # noqa: E402
-from fitgen.fitting.holdout import box_of, deployed_errors, held_out_set, posterior_units  # noqa: E402
+from fitgen.fitting.holdout import (NOISE_DRAWS as DRAWS, SEED, box_of, deployed_errors, held_out_set,  # noqa: E402
+                                    posterior_units, unit_sets)
 from fitgen.fitting.identify import ZERO_ERROR, Problem, derived_quantities, identify  # noqa: E402
 from fitgen.fitting.unitrecord import load_posterior, save  # noqa: E402
 from fitgen.fitting.schedule import candidates, d_optimal, exchange_design  # noqa: E402
@@ -138,13 +140,14 @@ def spread_rows(drawing, seeds: list[int]) -> list[list[str]]:
             model = U.fit_default(ds, twin)
         box = box_of(ds.poses())
 
-        def figures(u):
-            h = held_out_set(u, box, model.output_names, noise=ctx.noise, n=len(ctx.held_poses))
+        def figures(u, h):
             e = deployed_errors(model, h, u, ("float",))["float"]
             return np.array([[e[o][f] for o in model.output_names] for f in FIGS])
 
-        P = np.array([figures(u) for u in posterior_units(post, twin, 8)])
-        T = figures(unit)
+        units = posterior_units(post, twin, 8)  # as the model file: each its own noise draws
+        P = np.array([figures(u, h) for u, h in zip(units, unit_sets(units, box, model.output_names, noise=ctx.noise,
+                                                                       n=len(ctx.held_poses), seed=SEED, draws=DRAWS))])
+        T = figures(unit, held_out_set(unit, box, model.output_names, noise=ctx.noise, n=len(ctx.held_poses)))
         for i, f in enumerate(FIGS):
             lo, med, hi = P[:, i].min(0), np.median(P[:, i], 0), P[:, i].max(0)
             cells = [f"{fmt(lo[j])} / {fmt(med[j])} / {fmt(hi[j])}; {fmt(T[i, j])}" for j in range(len(med))]
