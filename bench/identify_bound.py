@@ -174,7 +174,8 @@ def main() -> None:
     if args.units > 0:
         print("\n## The spread of a twin's held-out figures over its posterior (40 poses, 0.01 mm)\n")
         print("Per unit and figure: min / median / max over the 8 posterior units the model file uses "
-              "(the file reports the median); after ';' the unit's own. mm and deg.\n")
+              "(the file reports the median); after ';' the unit's own. mm and deg. Each posterior unit has its own "
+              "noise draws, as in the model file; the unit's own figures take the first unit's seeds.\n")
         print(table(["unit", "figure", "dx", "dy", "dz", "thx", "thy", "unit inside the spread", "widest max/min"],
                     spread_rows(drawing, list(range(1, args.units + 1)))))
 
