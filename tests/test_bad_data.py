@@ -266,6 +266,27 @@ def test_sigterm_cleans_up_as_ctrl_c_does(capsys):
     assert signal.getsignal(signal.SIGTERM) is before
 
 
+@pytest.mark.parametrize("tool, args", [("fitgen", ["observe", "--sensor", "paper"]), ("fitgen", ["--help"]),
+                                        ("tactile-host", ["read", "--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3",
+                                                          "--simulate", "motion", "--duration", "0.3"])])
+def test_a_standard_output_that_cannot_be_written_is_one_line(tmp_path, tool, args):
+    """A full disk behind standard output (> /dev/full) is said in one line with status 2, not a traceback."""
+    import subprocess
+    import sys
+
+    if tool == "tactile-host":  # a model in volts, as the ADCs give
+        assert run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--grid", "paper-exp", "-o",
+                       str(tmp_path / "d.csv")).returncode == 0
+        assert run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"), "--held-out", "100",
+                       "--family", "no-roots").returncode == 0
+        args = [*args, "--model", str(tmp_path / "m.json")]
+    module = {"fitgen": "fitgen.app.cli", "tactile-host": "fitgen.app.host_cli"}[tool]
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run([sys.executable, "-c", f"import sys; from {module} import main; sys.argv[0] = {tool!r}; "
+                               "main()", *args], stdout=full, stderr=subprocess.PIPE, text=True, timeout=120)
+    assert_one_line_error(proc, 2, f"{tool}: error: cannot write standard output: No space left on device")
+
+
 def test_codes_that_are_not_whole_or_beyond_int32_are_named_by_row_and_column(tmp_path):
     from fitgen.equations.fixedpoint import build_fixed
     from fitgen.base.errors import InputError

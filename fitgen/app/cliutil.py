@@ -83,22 +83,70 @@ def _terminate(signum, frame):
     raise Terminated()
 
 
+class OutputFailed(Exception):
+    """Standard output could not be written (a full disk, a closed terminal): not the program's fault."""
+
+
+class _Stdout:
+    """Standard output whose write failures are told apart from any other OSError (which they look like)."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _guard(self, fn, *args):
+        try:
+            return fn(*args)
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            raise OutputFailed(exc.strerror or str(exc)) from None
+
+    def write(self, text):
+        return self._guard(self._stream.write, text)
+
+    def flush(self):
+        return self._guard(self._stream.flush)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def run(main_fn, argv=None, prog: str = "") -> int:
     """Call ``main_fn(argv)``; turn bad input into one line on stderr and exit status 2."""
     previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
+    stdout = sys.stdout
+    sys.stdout = _Stdout(stdout)
     try:
-        return int(main_fn(argv) or 0)
+        status = int(main_fn(argv) or 0)
+        sys.stdout.flush()  # here, not at exit, so that a full disk is said as one line
+        return status
     except InputError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt as exc:
         print(f"{prog}: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
         return 143 if isinstance(exc, Terminated) else 130
-    except BrokenPipeError:
+    except BrokenPipeError:  # the reader went away (| head): nothing more to say
+        _drop(stdout)
         return 0
+    except OutputFailed as exc:
+        _drop(stdout)
+        print(f"{prog}: error: cannot write standard output: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     finally:
+        sys.stdout = stdout
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _drop(stream) -> None:
+    """Point ``stream``'s file at the null device, so that Python's flush at exit has nothing to fail on."""
+    import os
+
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), stream.fileno())
+    except (OSError, ValueError, AttributeError):  # not a real file (a test's capture): nothing to flush at exit
+        pass
 
 
 def _main_thread() -> bool:
