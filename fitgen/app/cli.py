@@ -9,8 +9,8 @@ from pathlib import Path
 from fitgen import __version__
 from fitgen.app.calibrate_cli import cmd_identify, cmd_schedule
 from fitgen.app.cliutil import Parser, check_not_empty, check_written, command_main, count, finite
-from fitgen.app.options import noise_of, sensor_of
-from fitgen.base.parse import OutOfRange, parse_assignments, parse_names, parse_noise, parse_penalty
+from fitgen.app.options import fit_settings, noise_of, sensor_of
+from fitgen.base.parse import parse_assignments, parse_names
 from fitgen.base.errors import InputError
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
 from fitgen.equations.terms import FAMILIES
@@ -87,32 +87,6 @@ def cmd_observe(args) -> int:
     return 0
 
 
-def _settings(args):
-    from fitgen.fitting.family import family_settings
-
-    try:
-        k = parse_penalty(args.k)
-    except OutOfRange:
-        raise InputError(f"--k must be a finite number > 0, got {args.k}") from None
-    except ValueError:
-        raise InputError(f"--k must be aic, bic or a number > 0, got {args.k!r}") from None
-    k = 2.0 if k == "aic" else k
-    if args.max_terms is not None and args.max_terms < 1:
-        raise InputError(f"--max-terms must be >= 1, got {args.max_terms}")
-    if args.refine_terms < 5:
-        raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {args.refine_terms}")
-    try:
-        noise = None if args.noise is None else parse_noise(args.noise)
-    except OutOfRange:
-        raise InputError(f"--noise must be a finite number >= 0, got {args.noise}") from None
-    except ValueError:
-        raise InputError(f"--noise must be a number >= 0 (reading noise rms, input units), got {args.noise!r}") \
-            from None
-    return family_settings(args.family, args.precision, noise, args.refine, k=k, max_terms=args.max_terms,
-                           d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated",
-                           refine_terms=args.refine_terms)
-
-
 def cmd_fit(args) -> int:
     from fitgen.app.report import fit_notes, fit_summary
     from fitgen.base.progress import Progress
@@ -121,7 +95,7 @@ def cmd_fit(args) -> int:
     from fitgen.physics.scenes import scene_outputs
     from fitgen.physics.simulate import dataset_sensor
 
-    settings = _settings(args)
+    settings = fit_settings(args)
     loaded = load_dataset(args.data)
     edited = loaded.meta.get("dataset_sha256") not in (None, loaded.sha256)  # rows changed since the meta was written
     ds, lifted = rows_on_the_skin(loaded)
