@@ -156,12 +156,13 @@ def cmd_predict(args) -> int:
     from fitgen.base.fileio import write_atomic
     from fitgen.c.codegen import check_magnitudes
     from fitgen.c.targets import check_precision
-    from fitgen.equations.model import load_model
-    from fitgen.physics.dataset import estimates_csv, load_inputs
+    from fitgen.equations.model import check_input_units, load_model
+    from fitgen.physics.dataset import estimates_csv, load_inputs, load_meta
 
     target = check_precision(args.target, args.precision)
     model = load_model(args.model)
     inputs = load_inputs(args.data, model.n_inputs)
+    check_input_units(model, load_meta(args.data).get("units"), f"{args.data}'s readings", f"model {args.model}")
     if args.precision == "fixed":
         from fitgen.c.fixedc import plan_line
         from fitgen.equations.fixedpoint import plan_at
@@ -204,7 +205,7 @@ def cmd_report(args) -> int:
     from fitgen.app import plots
     from fitgen.app.report import format_report, sweep_sensor
     from fitgen.base.fileio import write_atomic
-    from fitgen.equations.model import load_model
+    from fitgen.equations.model import check_input_units, load_model
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.physics.sensor import load_sensor
 
@@ -216,6 +217,8 @@ def cmd_report(args) -> int:
     model = load_model(args.model)
     sensor = sweep_sensor(load_sensor(args.sensor), model) if folder is not None and args.sensor else None
     ds, lifted = rows_on_the_skin(load_dataset(args.data)) if args.data else (None, 0)
+    if ds is not None:
+        check_input_units(model, ds.meta.get("units"), f"{args.data}'s readings", f"model {args.model}")
     if lifted:
         print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, no contact pose to "
               "estimate", file=sys.stderr)
