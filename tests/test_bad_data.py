@@ -205,6 +205,7 @@ def test_report_sweeps_only_on_the_sensor_the_model_was_fitted_on(fitted, data, 
                                   "--sensor", "two-rings"), contains="--sensor two-rings: the model was fitted on "
                                                                      "another sensor")
     assert_one_line_error(run_cli("fitgen", "report", model, "--sensor", "paper"), contains="goes with --plot")
+    assert_one_line_error(run_cli("fitgen", "report", model, "--paper"), contains="--paper goes with --data")
     assert not (tmp_path / "p").exists()
 
 

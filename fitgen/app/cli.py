@@ -211,6 +211,8 @@ def cmd_report(args) -> int:
 
     if args.plot and not args.data:  # every check before anything is written
         raise InputError("--plot needs --data (the rows to plot estimates for)")
+    if args.paper and not args.data:  # the paper's figures stand beside the errors on the data
+        raise InputError("--paper goes with --data (without it, it would be ignored)")
     folder = plots.require(args.plot) if args.plot else None  # made by its first figure, after every check
     if args.sensor and folder is None:
         raise InputError("--sensor goes with --plot (the rotation sweep is drawn on it)")
@@ -410,7 +412,7 @@ def build_parser() -> Parser:
     r = command("report", cmd_report, "terms, AIC trace and errors of a model")
     r.add_argument("model", metavar="MODEL")
     r.add_argument("--data", help="dataset to measure errors on (default: the fit's own figures only)")
-    r.add_argument("--paper", action="store_true", help="show the seed paper's figures beside ours")
+    r.add_argument("--paper", action="store_true", help="with --data: show the seed paper's figures beside ours")
     r.add_argument("--plot", metavar="DIR", help="write estimate-vs-target PNGs here (needs matplotlib)")
     r.add_argument("--sensor", help="with --plot: also the 0.1-degree rotation sweep on this sensor")
     r.add_argument("-o", "--output", help="write the report here instead of stdout")
