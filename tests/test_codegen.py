@@ -67,6 +67,35 @@ def test_every_term_kind_and_extreme_coefficients(precision, style):
     assert res.nonfinite_outputs == 0
 
 
+@pytest.mark.parametrize("precision, style", [("double", "table"), ("double", "unrolled"), ("float", "table"),
+                                              ("float", "unrolled"), ("fixed", "")])
+@pytest.mark.parametrize("kind", ["intercepts", "d-terms"])
+def test_outputs_without_input_powers_compile_warning_free_and_match_python(paper_model, precision, style, kind):
+    """Intercept-only outputs (constants), and bare d-terms only: no term reads an input's power, yet the
+    header compiles under the warning flags (CompiledModel: -Werror, -O2) and answers what Python does."""
+    require_tool("gcc")
+    eqs = [Equation(e.name, e.intercept, (), ()) for e in paper_model.equations]
+    if kind == "d-terms":
+        eqs[3] = Equation("thx", 0.5, (Term(mult="dx"), Term(mult="dz")), (0.25, -2.0))
+    model = dataclasses.replace(paper_model, equations=tuple(eqs))
+    lo, hi = model.input_min, model.input_max
+    rows = np.vstack([lo, hi, (lo + hi) / 2, hi * 3, lo / 2])
+    if precision == "fixed":
+        with CompiledModel(model, "fixed", input_lsb=1e-3) as cm:
+            codes = cm.fixed.codes_of(rows)
+            out, status = cm.predict_codes(codes)
+            ref, ref_status = cm.fixed.predict_codes(codes)
+            assert np.array_equal(out, ref) and np.array_equal(status, ref_status)
+            err = np.abs(cm.fixed.to_real(out) - model.predict(cm.fixed.code_values(codes)))
+            assert np.all(err <= cm.fixed.error_bound())
+        return
+    with CompiledModel(model, precision, style) as cm:
+        out, status = cm.predict(rows)
+    ref, ref_status = model.predict(rows, with_status=True, precision=precision)
+    assert np.array_equal(out, ref), (out, ref)
+    assert status.tolist() == [0, 0, 0, 255, 255] and np.array_equal(status, ref_status)
+
+
 def test_generation_is_deterministic(paper_model, tmp_path):
     for precision in ("double", "float"):
         for style in ("table", "unrolled"):

@@ -1,9 +1,9 @@
-"""Option readers the fitgen commands share: the sensor (and its transfer) and a noise figure."""
+"""Option readers the fitgen commands share: the sensor (and its transfer), a noise figure, fit's settings."""
 
 from __future__ import annotations
 
 from fitgen.base.errors import InputError
-from fitgen.base.parse import OutOfRange, parse_noise
+from fitgen.base.parse import OutOfRange, parse_noise, parse_penalty
 
 
 def sensor_of(args):
@@ -26,6 +26,33 @@ def noise_of(value: str, sensor) -> float:
         raise InputError(f"--noise must be a finite number >= 0, got {value}") from None
     except ValueError:
         raise InputError(f"--noise must be a number or 'sensor', got {value!r}") from None
+
+
+def fit_settings(args):
+    """`fitgen fit`'s options (penalty, caps, noise, family) as fit settings; InputError when one is out of range."""
+    from fitgen.fitting.family import family_settings
+
+    try:
+        k = parse_penalty(args.k)
+    except OutOfRange:
+        raise InputError(f"--k must be a finite number > 0, got {args.k}") from None
+    except ValueError:
+        raise InputError(f"--k must be aic, bic or a number > 0, got {args.k!r}") from None
+    k = 2.0 if k == "aic" else k
+    if args.max_terms is not None and args.max_terms < 1:
+        raise InputError(f"--max-terms must be >= 1, got {args.max_terms}")
+    if args.refine_terms < 5:
+        raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {args.refine_terms}")
+    try:
+        noise = None if args.noise is None else parse_noise(args.noise)
+    except OutOfRange:
+        raise InputError(f"--noise must be a finite number >= 0, got {args.noise}") from None
+    except ValueError:
+        raise InputError(f"--noise must be a number >= 0 (reading noise rms, input units), got {args.noise!r}") \
+            from None
+    return family_settings(args.family, args.precision, noise, args.refine, k=k, max_terms=args.max_terms,
+                           d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated",
+                           refine_terms=args.refine_terms)
 
 
 def map_options(p, required: bool = True) -> None:
