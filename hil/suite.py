@@ -21,6 +21,7 @@ from fitgen.base.fileio import write_atomic
 from fitgen.equations.model import Equation, Model
 from fitgen.base.progress import Progress
 from host import protocol as P
+from hil.fuzz import fuzz_frames
 from host.device import Device, DeviceError, NoAnswer
 from fitgen.c.verify import MAX_SHARE, VerifyResult, compare, compare_fixed, held_out_check, make_code_vectors, make_vectors
 
@@ -100,7 +101,12 @@ def _verify_detail(res: VerifyResult) -> str:
 
 
 def check_info(dev: Device, model: Model) -> Check:
-    info = dev.info(refresh=True)
+    """The counts and model hash are the model's; a loaded calibration (the Uno's outlives a reset) is reset first."""
+    info, was = dev.info(refresh=True), ""
+    if info.cal_source != 0:
+        was = f"; a loaded calibration (model {info.model_hash[:12]}) was active: reset to the compiled-in model"
+        dev.reset_calibration()
+        info = dev.info(refresh=True)
     problems = []
     if info.n_inputs != model.n_inputs or info.n_outputs != len(model.equations):
         problems.append(f"device takes {info.n_inputs} inputs and gives {info.n_outputs} outputs, "
@@ -109,7 +115,7 @@ def check_info(dev: Device, model: Model) -> Check:
         problems.append(f"device runs model {info.model_hash[:12]}, not {model.sha256[:12]}")
     detail = (f"protocol {info.protocol_version}, firmware {info.firmware_version}, {info.precision}, "
               f"{info.style_name}, model {info.model_hash[:12]}, sensor {info.sensor_id}")
-    return Check("info", not problems, "; ".join(problems) or detail)
+    return Check("info", not problems, ("; ".join(problems) or detail) + was)
 
 
 def check_eval(dev: Device, model: Model, inputs: np.ndarray, name: str, fma: bool = False) -> Check:
@@ -325,50 +331,6 @@ def check_corrupt_flash(dev: Device, new: Model, inputs: np.ndarray, sensor_id: 
                  f"{len(refused)} bad transfers refused ({', '.join(refused)}); the old calibration still answers")
 
 
-# the longest encoded frame is MAX_BODY + 2 bytes (COBS); an oversize run overflows the receiver once to three times
-OVERSIZE = (P.MAX_BODY + 4, 3 * (P.MAX_BODY + 3))
-
-
-def fuzz_frames(n: int, seed: int = 0) -> list[bytes]:
-    """Random and mutated wire frames: garbage, bit flips, truncations, wrong lengths, oversize,
-    and well-formed frames of every type with random payloads (arguments that would make the
-    device busy for long, BENCH n and STREAM counts, kept small)."""
-    rng = np.random.default_rng(seed)
-    frames = []
-    types = [int(t) for t in P.MsgType] + [0x00, 0x0B, 0x7F, 0x80, 0xFF]
-    for i in range(n):
-        kind = i % 6
-        t = int(rng.choice(types))
-        payload = rng.bytes(int(rng.integers(0, 300)))
-        if t == P.MsgType.BENCH:
-            payload = int(rng.integers(0, 64)).to_bytes(4, "little")
-        elif t == P.MsgType.STREAM:
-            payload = int(rng.integers(0, 3)).to_bytes(2, "little") + int(rng.integers(0, 3)).to_bytes(2, "little")
-        seq = int(rng.integers(1, 256))
-        body = bytes([t & 0xFF, seq]) + len(payload).to_bytes(2, "little") + payload
-        body += P.crc32(body).to_bytes(4, "little")
-        if kind == 0:  # garbage, delimited
-            frames.append(rng.bytes(int(rng.integers(1, 80))) + b"\x00")
-        elif kind == 1:  # a valid frame with flipped bits
-            enc = bytearray(P.cobs_encode(body))
-            for _ in range(int(rng.integers(1, 4))):
-                enc[int(rng.integers(len(enc)))] ^= 1 << int(rng.integers(8))
-            frames.append(bytes(enc) + b"\x00")
-        elif kind == 2:  # truncated
-            enc = P.cobs_encode(body)
-            frames.append(enc[: int(rng.integers(0, len(enc)))] + b"\x00")
-        elif kind == 3:  # length field disagreeing with the payload, CRC made right
-            wrong = bytearray(body[:-4])
-            wrong[2:4] = int(rng.integers(0, 65536)).to_bytes(2, "little")
-            frames.append(P.cobs_encode(bytes(wrong) + P.crc32(bytes(wrong)).to_bytes(4, "little")) + b"\x00")
-        elif kind == 4:  # oversize: no delimiter for longer than the longest frame, up to three of them
-            size = int(rng.integers(OVERSIZE[0], OVERSIZE[1]))
-            frames.append(bytes(rng.integers(1, 256, size, dtype=np.uint8)) + b"\x00")
-        else:  # well formed, random type and payload (may be refused for its length or arguments)
-            frames.append(P.cobs_encode(body) + b"\x00")
-    return frames
-
-
 def sync(dev: Device, token: bytes, timeout: float | None = None) -> bool:
     """PING with a token no fuzz frame carries and read until its echo: every frame sent before has
     then been answered, so no stale reply is left to be taken for the next request's."""
@@ -471,8 +433,7 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
 
     if not sync(dev, b"hil-start" + bytes(np.random.default_rng().bytes(16))):
         raise NoAnswer(f"{url or 'the device'} does not answer PING")
-    step(check_info, dev, model)
-    dev.reset_calibration()
+    step(check_info, dev, model)  # resets a loaded calibration first
     evaluate(inputs, "eval")
     if held_out is not None:
         step(check_held_out, dev, model, held_out, max_share, fixed)

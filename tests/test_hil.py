@@ -170,6 +170,21 @@ def test_suite_fails_when_the_device_runs_another_model(paper_model):
     assert failed == {"info", "eval"}
 
 
+def test_suite_checks_the_compiled_in_model_when_a_calibration_was_flashed(paper_model):
+    """A device left with a loaded calibration (tactile-host flash; the Uno keeps it in EEPROM) passes info: the
+    suite resets it before it asks the model hash, and says so."""
+    require_tool("gcc")
+    from host.device import flash_model
+
+    with start_target(paper_model, "host", precision="double", style="table") as fw:
+        with Device.open(fw.url, timeout=5) as dev:
+            flash_model(dev, flash_variant(paper_model), "the variant")
+            assert dev.info(refresh=True).cal_source == 1
+            res = run_suite(dev, paper_model, url=fw.url, n_vectors=50, n_fuzz=0, flash=False, verbose=False)
+    assert res.ok, res.table()
+    assert "was active: reset to the compiled-in model" in res.checks[0].detail
+
+
 def test_suite_fails_not_crashes_when_the_device_runs_fewer_outputs(paper_model):
     """The device refuses a calibration for five outputs: the flash checks fail, the suite finishes."""
     require_tool("gcc")
