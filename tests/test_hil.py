@@ -270,6 +270,27 @@ def test_cli_bad_ports_and_silent_devices(model_file, tmp_path):
                           2, "--vectors")
 
 
+def test_cli_checks_junit_and_sensor_id_before_the_device(model_file, tmp_path):
+    """--junit's file and --sensor-id are refused before a port is opened or firmware built, not after the suite."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        nobody = f"socket://127.0.0.1:{s.getsockname()[1]}"  # opening it would fail with "cannot open port"
+    a_file = tmp_path / "g.csv"
+    a_file.write_text("x\n")
+    for extra, said in ((["--junit", str(tmp_path / "no" / "x.xml")], "does not exist"),
+                        (["--junit", str(a_file / "x.xml")], f"{a_file} is a file, not a folder"),
+                        (["--junit", str(tmp_path)], "it is a folder"),
+                        (["--junit", str(model_file)], "is the input"),
+                        (["--sensor-id", "toolongtoolongtoolong"], "longer than 16")):
+        assert_one_line_error(run_cli("tactile-hil", "run", "--port", nobody, "--model", str(model_file), *extra),
+                              2, said)
+    # emulate: refused before the firmware is built
+    proc = run_cli("tactile-hil", "emulate", "--target", "host", "--model", str(model_file), "--suite",
+                   "--vectors", "10", "--fuzz", "0", "--junit", str(a_file / "x.xml"))
+    assert_one_line_error(proc, 2, "is a file, not a folder")
+    assert "firmware" not in proc.stdout
+
+
 def test_cli_emulate_without_qemu_says_how_to_install(model_file, tmp_path, monkeypatch):
     import os
     import shutil

@@ -141,7 +141,7 @@ class StopFlag:
             signal.signal(s, h)
 
 
-WRITES = ("output", "record", "temp_comp_output", "pose_file")  # the files a command writes
+WRITES = ("output", "record", "temp_comp_output", "pose_file", "junit")  # the files a command writes
 READS = ("model", "run", "tempcomp", "adc", "temp_comp", "rest", "poses", "data", "replay", "sensor", "sim_sensor",
          "capture")  # and those it reads: never one of the written
 

@@ -11,7 +11,7 @@ import signal
 import sys
 import threading
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main, count, seconds, tcp_port
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, check_written, command_main, count, seconds, tcp_port
 from fitgen.base.errors import InputError
 
 
@@ -210,5 +210,15 @@ def build_parser() -> Parser:
     return p
 
 
+def _check(args) -> None:
+    """Options checked before a model is loaded, firmware built or a device opened: --junit's file, --sensor-id
+    (as the firmware compiles it in under emulate; as a flashed blob carries it under run)."""
+    from fitgen.c.calblob import check_sensor_id
+    from hil.firmware import check_sensor_id as check_compiled_id
+
+    check_written(args)
+    (check_compiled_id if args.command == "emulate" else check_sensor_id)(args.sensor_id)
+
+
 def main(argv=None) -> int:
-    command_main(build_parser, argv, "tactile-hil")
+    command_main(build_parser, argv, "tactile-hil", _check)
