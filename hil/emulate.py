@@ -412,6 +412,28 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
     return runner
 
 
+def uno_crash_advice(model, precision: str, style: str, **render) -> str:
+    """What to try when a ``style`` build crashed on the Uno before answering (a table build's stack can overrun its
+    2 KB of RAM): ``--style unrolled`` when that build links (checked by building it; ``render``: the rest of
+    ``render_firmware``'s arguments), else fewer terms. Empty for builds the advice is not about."""
+    import tempfile
+
+    from hil.firmware import build_firmware, firmware_size, render_firmware
+
+    if precision == "fixed" or style != "table":
+        return ""
+    why = "a table-style build's stack can overrun the Uno's 2 KB of RAM"
+    try:
+        with tempfile.TemporaryDirectory(prefix="tactile-fw-") as tmp:
+            render_firmware(model, tmp, precision=precision, style="unrolled", port="uno", **render)
+            size = firmware_size(build_firmware(tmp, "uno"), "avr-size")
+    except InputError as exc:
+        said = str(exc).rsplit(": ", 1)[-1]
+        return f"; {why}, and --style unrolled does not build either ({said}): fit fewer terms " \
+               "(fitgen fit --k bic, or --max-terms N)"
+    return f"; {why}: try --style unrolled (it builds: flash {size['flash']} B, static RAM {size['ram']} B)"
+
+
 def adc_bridge(adc: str, pose: str, *, sensor: str = "paper", noise: float | None = None, seed: int = 0,
                thermistor: str | None = None, temp_comp: str | None = None, temperature: float | None = None):
     """What answers the emulated board's I2C bridge for a firmware reading ``adc`` (a channel map, with an

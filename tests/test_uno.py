@@ -166,6 +166,23 @@ def test_a_board_that_stops_before_answering_is_said_in_its_own_words():
     runner = SimpleNamespace(proc=Exited(), messages=["the AVR program crashed at cycle 12664"], stop=lambda: None)
     with pytest.raises(InputError, match="stopped before answering: the AVR program crashed at cycle 12664; a "
                                          "table-style build's stack can overrun"):
-        _stopped(runner, SimpleNamespace(target="uno", style="table", precision="float"))
+        _stopped(runner, SimpleNamespace(target="uno"), lambda: "; a table-style build's stack can overrun it")
     runner.proc = SimpleNamespace(poll=lambda: None)  # still running: the port's own error stands
-    _stopped(runner, SimpleNamespace(target="uno", style="table", precision="float"))
+    _stopped(runner, SimpleNamespace(target="uno"), lambda: "")
+
+
+def test_the_advice_after_a_crash_is_checked_by_building_it(gmr_model, tmp_path):
+    """A table build that crashed: --style unrolled is advised only when it builds; a 382-term model's unrolled
+    code overflows the flash, and the line says so and advises fewer terms (it used to advise unrolled)."""
+    _require_avr()
+    from fitgen.fitting.fit import FitSettings
+    from hil.emulate import uno_crash_advice
+
+    assert "try --style unrolled (it builds: flash" in uno_crash_advice(gmr_model, "float", "table")
+    assert uno_crash_advice(gmr_model, "float", "unrolled") == ""
+    ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
+    huge = fit_model(ds, settings=FitSettings.family("all", k=0.001)).save(tmp_path / "huge.json")
+    proc = run_cli("tactile-hil", "emulate", "--target", "uno", "--model", str(huge), "--suite", "--fuzz", "0")
+    assert_one_line_error(proc, 2, "the AVR program crashed")
+    assert "--style unrolled does not build either (region `text' overflowed" in proc.stderr
+    assert "fit fewer terms" in proc.stderr

@@ -105,21 +105,21 @@ def _adc_bridge(args):
                       thermistor=args.thermistor, temp_comp=args.temp_comp, temperature=args.sim_temperature)
 
 
-def _stopped(runner, args) -> None:
-    """InputError with the board's own last words when the firmware ended before it could be opened."""
+def _stopped(runner, args, advice) -> None:
+    """InputError with the board's own last words when the firmware ended before it could be opened; on the Uno,
+    ``advice()``: what to try (hil.emulate.uno_crash_advice)."""
     if runner.proc is None or runner.proc.poll() is None:
         return
     runner.stop()
     said = "; ".join(getattr(runner, "messages", [])[-2:]) or f"exit status {runner.proc.returncode}"
-    hint = ("; a table-style build's stack can overrun the Uno's 2 KB of RAM: try --style unrolled"
-            if args.target == "uno" and args.style == "table" and args.precision != "fixed" else "")
+    hint = advice() if args.target == "uno" else ""
     raise InputError(f"the {args.target} firmware stopped before answering: {said}{hint}")
 
 
 def cmd_emulate(args) -> int:
     from host.device import Device
 
-    from hil.emulate import start_target
+    from hil.emulate import start_target, uno_crash_advice
 
     _check_counts(args)
     model, data = _load(args)
@@ -130,7 +130,9 @@ def cmd_emulate(args) -> int:
         try:
             dev = Device.open(runner.url, timeout=args.timeout)
         except InputError:
-            _stopped(runner, args)
+            _stopped(runner, args, lambda: uno_crash_advice(model, args.precision, args.style, fma=args.fma,
+                                                            sensor_id=args.sensor_id, cmap=cmap, tin=tin,
+                                                            tempcomp=tempcomp))
             raise
         with dev:
             _describe(runner, dev, args.target)
