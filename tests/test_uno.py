@@ -186,3 +186,22 @@ def test_the_advice_after_a_crash_is_checked_by_building_it(gmr_model, tmp_path)
     assert_one_line_error(proc, 2, "the AVR program crashed")
     assert "--style unrolled does not build either (region `text' overflowed" in proc.stderr
     assert "fit fewer terms" in proc.stderr
+
+
+def test_pkg_config_without_simavr_is_said_with_the_packages(gmr_model, tmp_path):
+    """pkg-config not knowing simavr (libsimavr-dev or libelf-dev missing): one line naming the packages, before
+    the firmware is built."""
+    _require_avr()
+    import os
+
+    model_file = gmr_model.save(tmp_path / "m.json")
+    env = dict(os.environ, PKG_CONFIG_LIBDIR=str(tmp_path / "none"), PKG_CONFIG_PATH="")
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-c", "from fitgen.app.hil_cli import main; main()", "emulate", "--target",
+                           "uno", "--model", str(model_file), "--build-dir", str(tmp_path / "fw")],
+                          capture_output=True, text=True, env=env, timeout=120)
+    assert_one_line_error(proc, 2, "pkg-config simavr failed")
+    assert "apt-get install gcc-avr binutils-avr avr-libc simavr libsimavr-dev libelf-dev" in proc.stderr
+    assert not (tmp_path / "fw").exists()  # refused before the firmware was rendered
