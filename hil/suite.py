@@ -74,12 +74,24 @@ class SuiteResult:
 class DeviceEvaluator:
     """A device seen as ``fitgen.c.verify.compare`` sees a compiled model: precision, style, fma, predict."""
 
-    def __init__(self, device: Device, precision: str, style: str, fma: bool = False):
-        self.device, self.precision, self.style, self.fma = device, precision, style, fma
+    def __init__(self, device: Device, precision: str, style: str, fma: bool = False, progress=None):
+        self.device, self.precision, self.style, self.fma, self.progress = device, precision, style, fma, progress
 
     def predict(self, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        status, out = self.device.eval(inputs)
+        status, out = eval_rows(self.device, inputs, self.progress)
         return np.asarray(out, dtype=float), np.asarray(status)
+
+
+def eval_rows(dev: Device, rows: np.ndarray, progress: Progress | None = None, chunk: int = 64):
+    """``dev.eval`` of ``rows``, ``chunk`` at a time when a ``progress`` bar moves with them (a slow board's
+    thousand vectors take seconds)."""
+    if progress is None:
+        return dev.eval(rows)
+    parts = []
+    for start in range(0, len(rows), chunk):
+        parts.append(dev.eval(rows[start:start + chunk]))
+        progress.update(len(rows[start:start + chunk]))
+    return (np.concatenate([p[0] for p in parts]), np.vstack([p[1] for p in parts])) if parts else dev.eval(rows)
 
 
 def flash_variant(model: Model) -> Model:
@@ -118,9 +130,9 @@ def check_info(dev: Device, model: Model) -> Check:
     return Check("info", not problems, ("; ".join(problems) or detail) + was)
 
 
-def check_eval(dev: Device, model: Model, inputs: np.ndarray, name: str, fma: bool = False) -> Check:
+def check_eval(dev: Device, model: Model, inputs: np.ndarray, name: str, fma: bool = False, progress=None) -> Check:
     info = dev.info()
-    res = compare(model, DeviceEvaluator(dev, info.precision, info.style_name, fma), inputs)
+    res = compare(model, DeviceEvaluator(dev, info.precision, info.style_name, fma, progress), inputs)
     return Check(name, res.ok, _verify_detail(res), figures={"max_error": res.max_error.tolist(),
                                                             "worst_ratio": float(np.max(res.max_ratio))})
 
@@ -130,16 +142,16 @@ class FixedDeviceEvaluator:
 
     style = "unrolled"  # the fixed-point header's one form
 
-    def __init__(self, device: Device, fixed):
-        self.device, self.fixed = device, fixed
+    def __init__(self, device: Device, fixed, progress=None):
+        self.device, self.fixed, self.progress = device, fixed, progress
 
     def predict_codes(self, codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        status, out = self.device.eval(codes)
+        status, out = eval_rows(self.device, codes, self.progress)
         return np.asarray(out, dtype=np.int64), np.asarray(status)
 
 
-def check_eval_fixed(dev: Device, model: Model, fixed, codes: np.ndarray, name: str) -> Check:
-    res = compare_fixed(model, FixedDeviceEvaluator(dev, fixed), codes)
+def check_eval_fixed(dev: Device, model: Model, fixed, codes: np.ndarray, name: str, progress=None) -> Check:
+    res = compare_fixed(model, FixedDeviceEvaluator(dev, fixed, progress), codes)
     lsb = int(np.max(res.max_lsb_diff))
     detail = _verify_detail(res) + f"; largest difference from the numpy integer model {lsb} LSB"
     return Check(name, res.ok, detail, figures={"max_error": res.max_error.tolist(),
@@ -148,7 +160,7 @@ def check_eval_fixed(dev: Device, model: Model, fixed, codes: np.ndarray, name: 
 
 
 def check_held_out(dev: Device, model: Model, held_out: tuple[np.ndarray, np.ndarray], max_share: float,
-                   fixed=None) -> Check:
+                   fixed=None, progress=None) -> Check:
     """The device on noise-free held-out readings: rounding may add at most ``max_share`` of the
     model's own held-out max error (a fixed-point device gets the readings' ADC codes, and is
     compared with double on the codes' values)."""
@@ -156,12 +168,12 @@ def check_held_out(dev: Device, model: Model, held_out: tuple[np.ndarray, np.nda
     c_inputs = None
     if fixed is not None:
         codes = fixed.codes_of(readings)
-        out = fixed.to_real(FixedDeviceEvaluator(dev, fixed).predict_codes(codes)[0])
+        out = fixed.to_real(FixedDeviceEvaluator(dev, fixed, progress).predict_codes(codes)[0])
         c_inputs = fixed.code_values(codes)
     else:
         info = dev.info()
         sent = readings.astype(np.float32).astype(float) if info.precision == "float" else readings
-        out = DeviceEvaluator(dev, info.precision, info.style_name).predict(sent)[0]
+        out = DeviceEvaluator(dev, info.precision, info.style_name, progress=progress).predict(sent)[0]
     failures: list[str] = []
     chk = held_out_check(model, out, readings, truth, max_share, failures, c_inputs)
     detail = f"{len(readings)} held-out readings; rounding's share " + ", ".join(
@@ -412,10 +424,11 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
         if data is not None:
             inputs = np.vstack([inputs, data])
 
-    def evaluate(subset, name):
-        if fixed is not None:
-            return step(check_eval_fixed, dev, model, fixed, subset, name)
-        return step(check_eval, dev, model, subset, name, fma)
+    def evaluate(subset, name):  # a bar on a terminal: thousands of vectors take seconds on a slow board
+        with Progress(name, len(subset)) as prog:
+            if fixed is not None:
+                return step(check_eval_fixed, dev, model, fixed, subset, name, progress=prog)
+            return step(check_eval, dev, model, subset, name, fma, progress=prog)
 
     def step(fn, *args, **kw):
         t0 = time.perf_counter()
@@ -427,6 +440,8 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
             c = Check(fn.__name__.removeprefix("check_").replace("_", " "), False, str(exc))
         c.seconds = time.perf_counter() - t0
         checks.append(c)
+        if kw.get("progress") is not None:
+            kw["progress"].close()  # the bar's line cleared before the check's
         if verbose:
             print(f"  {c.name}: {'pass' if c.ok else 'FAIL'} ({c.seconds:.1f} s)", flush=True)
         return c
@@ -436,7 +451,8 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
     step(check_info, dev, model)  # resets a loaded calibration first
     evaluate(inputs, "eval")
     if held_out is not None:
-        step(check_held_out, dev, model, held_out, max_share, fixed)
+        with Progress("held-out accuracy", len(held_out[0])) as prog:
+            step(check_held_out, dev, model, held_out, max_share, fixed, progress=prog)
     step(check_stream, dev)
     step(check_timing, dev, model, fixed=fixed)
     if flash and fixed is not None:

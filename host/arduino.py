@@ -24,6 +24,7 @@ from pathlib import Path
 from fitgen import __version__
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import check_folder, write_atomic
+from fitgen.base.progress import Progress
 from fitgen.c.cgen import c_real
 from fitgen.c.codegen import write_header
 from fitgen.equations.model import Model
@@ -332,19 +333,24 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
     if not build:
         return None
 
-    def built(library, path):
+    def built(library, path, what):
+        bar.update(0, f"building ReadPose ({what}) with arduino-builder")
         size = build_example(library, path, spec)
-        return measure(path, size) if measure is not None and size.fits(spec) else size
+        if measure is None or not size.fits(spec):
+            return size
+        bar.update(0, f"running ReadPose ({what}) on the emulated Uno for its stack")
+        return measure(path, size)
 
-    with tempfile.TemporaryDirectory() as tmp:
-        size = built(library, Path(tmp) / "build" if build_path is None else build_path)
+    # a bar on a terminal: a build takes 5-9 s, and one that does not fit is tried in other settings
+    with tempfile.TemporaryDirectory() as tmp, Progress("arduino-build", 1) as bar:
+        size = built(library, Path(tmp) / "build" if build_path is None else build_path, f"{precision}, {style}")
         if size.fits(spec):
             return size
         hint = "no other precision or style fits: fit fewer terms (fitgen fit --k bic, or --max-terms N)"
         for k, (prec, sty, option) in enumerate(_alternatives(precision, style)):
             try:
                 alt = render_arduino(model, cmap, Path(tmp) / f"alt{k}", precision=prec, style=sty)
-                alt_size = built(alt, Path(tmp) / f"build{k}")
+                alt_size = built(alt, Path(tmp) / f"build{k}", f"does {option} fit?")
             except InputError:
                 continue  # e.g. a model fixed point cannot plan
             if alt_size.fits(spec):

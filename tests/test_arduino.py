@@ -322,3 +322,29 @@ def test_a_size_the_link_did_not_give_is_said_plainly():
 
     said = Size(flash=35118, ram=None, overflow=True).describe(UNO)
     assert "?" not in said and said == "flash over 35118 of 32256 B (109 %), RAM not known (the link failed first)"
+
+
+def test_the_build_shows_progress_on_a_terminal(device_model, tmp_path, monkeypatch):
+    """A build takes 5-9 s: on a terminal a line says what is being done."""
+    require_tool("arduino-builder")
+    import sys
+
+    from host.arduino import arduino_build
+
+    class Terminal:
+        text = ""
+
+        def isatty(self):
+            return True
+
+        def write(self, text):
+            Terminal.text += text
+
+        def flush(self):
+            pass
+
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    size = arduino_build(device_model, parse_spec(TWO_CHIPS), tmp_path / "TactilePose", build=True)
+    assert size.fits(UNO)
+    assert "\rarduino-build [" in Terminal.text and "building ReadPose (float, unrolled) with arduino-builder" in \
+        Terminal.text

@@ -5,6 +5,7 @@ import socket
 import threading
 import xml.etree.ElementTree as ET
 
+import numpy as np
 import pytest
 
 from fitgen.fitting.fit import fit_model
@@ -305,3 +306,38 @@ def test_cli_emulate_without_qemu_says_how_to_install(model_file, tmp_path, monk
     assert shutil.which("qemu-system-arm") is None
     proc = run_cli("tactile-hil", "emulate", "--model", str(model_file))
     assert_one_line_error(proc, 2, "apt-get install")
+
+
+class _Terminal:
+    """A stderr that says it is a terminal, keeping what is written (fitgen.base.progress.Progress draws on one)."""
+
+    def __init__(self):
+        self.text = ""
+
+    def isatty(self):
+        return True
+
+    def write(self, text):
+        self.text += text
+
+    def flush(self):
+        pass
+
+
+def test_the_suite_shows_progress_through_eval_on_a_terminal(paper_model, monkeypatch):
+    """eval and held-out accuracy take seconds on a slow board (10 s on the Uno): a bar moves through them."""
+    require_tool("gcc")
+    import sys
+
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    rng = np.random.default_rng(0)
+    readings = paper_model.input_min + (paper_model.input_max - paper_model.input_min) * rng.random((200, 8))
+    truth = paper_model.predict(readings)
+    with start_target(paper_model, "host", precision="double", style="table") as fw:
+        with Device.open(fw.url, timeout=5) as dev:
+            res = run_suite(dev, paper_model, url=fw.url, n_vectors=300, n_fuzz=0, flash=False, verbose=False,
+                            held_out=(readings, truth))
+    assert res.ok, res.table()
+    assert "\reval [" in term.text and "] 64/" in term.text  # moved 64 vectors at a time
+    assert "\rheld-out accuracy [" in term.text and "200/200" in term.text

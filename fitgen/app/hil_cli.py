@@ -119,14 +119,22 @@ def _stopped(runner, args, advice) -> None:
 def cmd_emulate(args) -> int:
     from host.device import Device
 
+    from contextlib import ExitStack
+
+    from fitgen.base.progress import Progress
     from hil.emulate import start_target, uno_crash_advice
 
     _check_counts(args)
     model, data = _load(args)
     cmap, bridge, tin, tempcomp = _adc_bridge(args)
-    with start_target(model, args.target, precision=args.precision, style=args.style, fma=args.fma,
-                      port=args.port, workdir=args.build_dir, sensor_id=args.sensor_id, cmap=cmap,
-                      bridge=bridge, tin=tin, tempcomp=tempcomp) as runner:
+    with ExitStack() as stack:
+        with Progress(f"{args.target} firmware", 2) as bar:  # building and booting take seconds
+            bar.update(0, "building")
+            target = start_target(model, args.target, precision=args.precision, style=args.style, fma=args.fma,
+                                  port=args.port, workdir=args.build_dir, sensor_id=args.sensor_id, cmap=cmap,
+                                  bridge=bridge, tin=tin, tempcomp=tempcomp)
+            bar.update(1, "booting")
+            runner = stack.enter_context(target)
         try:
             dev = Device.open(runner.url, timeout=args.timeout)
         except InputError:
