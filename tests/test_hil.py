@@ -341,3 +341,10 @@ def test_the_suite_shows_progress_through_eval_on_a_terminal(paper_model, monkey
     assert res.ok, res.table()
     assert "\reval [" in term.text and "] 64/" in term.text  # moved 64 vectors at a time
     assert "\rheld-out accuracy [" in term.text and "200/200" in term.text
+
+
+def test_cli_emulate_port_numbers_are_refused_alike(model_file):
+    """0 and -1 get the same line: 1..65535, and the option left out picks a free port."""
+    for bad in ("0", "-1", "65536"):
+        assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", str(model_file), "--port", bad), 2,
+                              f"{bad} is not a TCP port number (1..65535; leave --port out for a free one)")
