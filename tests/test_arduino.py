@@ -348,3 +348,11 @@ def test_the_build_shows_progress_on_a_terminal(device_model, tmp_path, monkeypa
     assert size.fits(UNO)
     assert "\rarduino-build [" in Terminal.text and "building ReadPose (float, unrolled) with arduino-builder" in \
         Terminal.text
+
+
+def test_help_says_the_library_reads_no_thermistor():
+    """temp= and --thermistor are refused by arduino-build: its help does not offer them."""
+    proc = run_cli("tactile-host", "arduino-build", "--help")
+    assert proc.returncode == 0
+    assert "adds a thermistor" not in proc.stdout and "--thermistor" not in proc.stdout
+    assert "temp= (a thermistor) is refused" in " ".join(proc.stdout.split())

@@ -354,7 +354,7 @@ def build_parser() -> Parser:
     ab = sub.add_parser("arduino-build", help="an Arduino library: the model, the ADC drivers over Wire, the channel "
                                               "map and the ReadPose example; built for the Uno to check it fits")
     ab.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
-    map_options(ab)
+    map_options(ab, thermistor=False)
     ab.add_argument("--precision", default="float", choices=("float", "fixed", "double"), help="double is refused")
     ab.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
     build = ab.add_mutually_exclusive_group()
