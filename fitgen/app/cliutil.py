@@ -57,10 +57,14 @@ def noise_volts(text: str) -> float:
 
 
 def tcp_port(text: str) -> int:
-    """An argparse type: a TCP port number, 1..65535."""
-    n = count(text)
+    """An argparse type: a TCP port number, 1..65535 (leave the option out for a free one); one message for every
+    number outside it, negative ones too."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
     if not 0 < n < 65536:
-        raise argparse.ArgumentTypeError(f"{n} is not a TCP port number (1..65535)")
+        raise argparse.ArgumentTypeError(f"{n} is not a TCP port number (1..65535; leave --port out for a free one)")
     return n
 
 
@@ -189,7 +193,7 @@ class StopFlag:
             signal.signal(s, h)
 
 
-WRITES = ("output", "record", "temp_comp_output", "pose_file")  # the files a command writes
+WRITES = ("output", "record", "temp_comp_output", "pose_file", "junit")  # the files a command writes
 READS = ("model", "run", "tempcomp", "adc", "temp_comp", "rest", "poses", "data", "replay", "sensor", "sim_sensor",
          "capture")  # and those it reads: never one of the written
 

@@ -265,7 +265,7 @@ def cmd_arduino_build(args) -> int:
                          "--thermistor (tactile-host read and pi-build read one)")
     load_sensor(args.sim_sensor)  # a bad one said before the library is written
     size, run = build_readpose(model, cmap, args.output, args.emulate, precision=args.precision, style=args.style,
-                               build=not args.no_build, sensor=args.sim_sensor)
+                               build=False if args.no_build else None, sensor=args.sim_sensor)
     sys.stdout.write("".join(ln + "\n" for ln in run.lines) if run and args.emulate else "")  # a serial monitor's
     built = (size.describe(BOARDS["uno"]) if size else "not built (--no-build)" if args.no_build
              else "not built (no arduino-builder)")
@@ -354,7 +354,7 @@ def build_parser() -> Parser:
     ab = sub.add_parser("arduino-build", help="an Arduino library: the model, the ADC drivers over Wire, the channel "
                                               "map and the ReadPose example; built for the Uno to check it fits")
     ab.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
-    map_options(ab)
+    map_options(ab, thermistor=False)
     ab.add_argument("--precision", default="float", choices=("float", "fixed", "double"), help="double is refused")
     ab.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
     build = ab.add_mutually_exclusive_group()

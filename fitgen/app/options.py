@@ -55,16 +55,21 @@ def fit_settings(args):
                            refine_terms=args.refine_terms)
 
 
-def map_options(p, required: bool = True) -> None:
+def map_options(p, required: bool = True, thermistor: bool = True) -> None:
     """The channel map's options (--adc and the ADCs' settings), as read, view, capture and the builds take
-    them."""
+    them. ``thermistor=False``: a command that reads the elements only (its help says so; --thermistor is
+    hidden, still parsed so that it is refused in one line)."""
+    import argparse
+
     from host.channelmap import ADS1115_PGA, ADS1115_RATES, MODES
 
+    temp = ("temp=CHIP@ADDRESS:INPUT adds a thermistor, e.g. ...,temp=ads1115@0x4a:0" if thermistor else
+            "the elements only: temp= (a thermistor) is refused")
     p.add_argument("--adc", required=required, metavar="SPEC|FILE.toml",
-                   help="channel map: e.g. ads1115@0x48:0-3,ads1115@0x49:0-3 or ads7828@0x48, or a TOML file; "
-                        "temp=CHIP@ADDRESS:INPUT adds a thermistor, e.g. ...,temp=ads1115@0x4a:0")
+                   help=f"channel map: e.g. ads1115@0x48:0-3,ads1115@0x49:0-3 or ads7828@0x48, or a TOML file; {temp}")
     p.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",
-                   help="the thermistor's NTC divider (default beta=3950,r25=10000,series=10000,vref=3.3)")
+                   help="the thermistor's NTC divider (default beta=3950,r25=10000,series=10000,vref=3.3)"
+                   if thermistor else argparse.SUPPRESS)
     p.add_argument("--pga", type=float, default=4.096, choices=ADS1115_PGA, metavar="V",
                    help="ADS1115 full scale +-V: 6.144, 4.096 (default), 2.048, 1.024, 0.512, 0.256")
     p.add_argument("--data-rate", type=int, default=860, choices=ADS1115_RATES, metavar="SPS",

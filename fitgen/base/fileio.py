@@ -17,7 +17,8 @@ def folder_of(path: str | os.PathLike) -> Path:
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
-        raise InputError(f"cannot write {path}: folder {folder} does not exist")
+        raise InputError(f"cannot write {path}: {folder} is a file, not a folder" if folder.exists()
+                         else f"cannot write {path}: folder {folder} does not exist")
     return folder
 
 
