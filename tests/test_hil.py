@@ -253,6 +253,8 @@ def test_cli_bad_ports_and_silent_devices(model_file, tmp_path):
                           2, "model file")
     assert_one_line_error(run_cli("tactile-hil", "run", "--port", "x", "--model", str(model_file), "--vectors", "-1"),
                           2, "--vectors")
+    assert_one_line_error(run_cli("tactile-hil", "run", "--port", "x", "--model", str(model_file), "--vectors",
+                                  "100000000000"), 2, "from 0 to 100,000")
 
 
 def test_cli_emulate_without_qemu_says_how_to_install(model_file, tmp_path, monkeypatch):

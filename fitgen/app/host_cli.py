@@ -17,8 +17,9 @@ def cmd_verify(args) -> int:
     from fitgen.physics.dataset import load_dataset
     from fitgen.equations.model import load_model
 
-    from fitgen.c.verify import held_out_from_args, verify
+    from fitgen.c.verify import check_vectors, held_out_from_args, verify
 
+    check_vectors(args.vectors)
     model = load_model(args.model)
     precisions = ("double", "float") if args.precision == "both" else (args.precision,)
     styles = STYLES if args.style == "both" else (args.style,)
@@ -32,8 +33,6 @@ def cmd_verify(args) -> int:
         if ds.n_inputs != model.n_inputs:
             raise InputError(f"dataset {args.data} has {ds.n_inputs} inputs; the model takes {model.n_inputs}")
         extra = ds.inputs
-    if args.vectors < 0:
-        raise InputError("--vectors must be >= 0")
     held_out = held_out_from_args(model, args)
     ok = True
     for precision in precisions:
@@ -318,7 +317,7 @@ def _adc_options(p, required: bool = True) -> None:
 
 
 def build_parser() -> Parser:
-    from fitgen.c.verify import add_held_out_options
+    from fitgen.c.verify import MAX_VECTORS, add_held_out_options
 
     p = Parser(prog="tactile-host", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
@@ -330,7 +329,8 @@ def build_parser() -> Parser:
     v.add_argument("--cc", default="gcc", help="C compiler command, with flags if needed (default gcc)")
     v.add_argument("--runner", help="prefix to run the binary with, e.g. qemu-arm")
     v.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
-    v.add_argument("--vectors", type=int, default=2000, help="random vectors inside the domain (default 2000)")
+    v.add_argument("--vectors", type=int, default=2000,
+                   help=f"random vectors inside the domain (default 2000, at most {MAX_VECTORS:,})")
     v.add_argument("--data", help="also run the rows of this dataset")
     v.add_argument("--fma", action="store_true", help="generate with fused multiply-adds (fitgen codegen --fma)")
     v.add_argument("--input-lsb", type=float, metavar="X", help="fixed: the input value of one ADC code")

@@ -20,6 +20,8 @@ DOUBLE_SLACK = 4.0
 MAX_SHARE = 0.05
 # an a-priori bound more than this many times the measured worst case is reported as loose
 LOOSE_BOUND = 10.0
+# random vectors at most: 10^6 took 2.5 GB and 2 minutes for one float build; a typo's 10^11 would be 6 TB
+MAX_VECTORS = 100_000
 
 
 @dataclass
@@ -45,6 +47,15 @@ def add_held_out_options(parser) -> None:
     parser.add_argument("--sensor", help="the model's sensor (preset or TOML) for its held-out poses (default: the "
                                          "preset the model file names)")
     parser.add_argument("--no-held-out", action="store_true", help="skip the held-out rounding check")
+
+
+def check_vectors(n: int, flag: str = "--vectors") -> int:
+    """``n`` if it is a count of random vectors, 0..MAX_VECTORS; else InputError naming ``flag``."""
+    from fitgen.base.errors import InputError
+
+    if not 0 <= n <= MAX_VECTORS:
+        raise InputError(f"{flag} must be a whole number from 0 to {MAX_VECTORS:,}, got {n}")
+    return n
 
 
 def held_out_from_args(model: Model, args) -> tuple[np.ndarray, np.ndarray] | None:
