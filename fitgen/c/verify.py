@@ -61,14 +61,17 @@ def check_vectors(n: int, flag: str = "--vectors") -> int:
 def held_out_from_args(model: Model, args) -> tuple[np.ndarray, np.ndarray] | None:
     """The noise-free held-out (readings, truth) those options ask for; None when skipped or not to be had."""
     from fitgen.base.errors import InputError
-    from fitgen.fitting.holdout import clean_readings
+    from fitgen.fitting.holdout import clean_readings, fitted_sensor
     from fitgen.physics.sensor import load_sensor
 
     if not 0 < args.max_share < 1e6:
         raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
     if args.no_held_out:
         return None
-    return clean_readings(model, load_sensor(args.sensor) if args.sensor else None)
+    # another sensor's readings would measure rounding against errors that are not the model's
+    sensor = (fitted_sensor(load_sensor(args.sensor), model, "its held-out check on this one would not be the "
+                            "model's (give the one it was fitted on, or leave --sensor out)") if args.sensor else None)
+    return clean_readings(model, sensor)
 
 
 def held_out_check(model: Model, c_outputs: np.ndarray, readings: np.ndarray, truth: np.ndarray,
