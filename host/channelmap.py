@@ -50,6 +50,8 @@ ADS1115_PAIRS = ((0, 1), (0, 3), (1, 3), (2, 3))  # the differential pairs the M
 MODES = ("single", "continuous")
 INTERNAL_VREF = 2.5  # V, the ADS7828's internal reference
 N_INPUTS = {"ads1115": 4, "ads7828": 8}
+# what a model in other units than the ADCs' volts is told
+ADC_VOLTS_HINT = ": fit it on a dataset in V (fitgen simulate --transfer gmr, or tactile-host capture)"
 
 
 @dataclass(frozen=True)

@@ -22,10 +22,10 @@ from fitgen import __version__
 from fitgen.c.codegen import render_header
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
-from fitgen.equations.model import Model
+from fitgen.equations.model import Model, check_input_units
 
 from host.cdrivers import chip_table, smbus_transfer
-from host.channelmap import ChannelMap, check_full_scale
+from host.channelmap import ADC_VOLTS_HINT, ChannelMap, check_full_scale
 from fitgen.c.compiled import WARNING_FLAGS, first_error, run_tool, tool_command
 
 PI_FILES = ("tm_pi.c", "i2c_linux.h", "i2c_linux.c", "standin.h", "standin.c")
@@ -87,9 +87,7 @@ def render_adc_map(cmap: ChannelMap, tin=None) -> str:
 
 def check_reads(model: Model, cmap: ChannelMap) -> None:
     """InputError unless ``model`` takes volts, one per element ``cmap`` reads."""
-    if model.input_units != "V":
-        raise InputError(f"the model takes inputs in {model.input_units}; the ADCs give volts: fit it on a dataset "
-                         "in V (fitgen simulate --transfer gmr, or tactile-host capture)")
+    check_input_units(model, "V", "the ADCs' readings", hint=ADC_VOLTS_HINT)
     if cmap.n_elements != model.n_inputs:
         raise InputError(f"the channel map reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
     check_full_scale(cmap, model.input_min, model.input_max)

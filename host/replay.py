@@ -19,7 +19,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import read_text, write_atomic
-from fitgen.equations.model import Model, load_model, model_from_dict
+from fitgen.equations.model import Model, check_input_units, load_model, model_from_dict
 
 from host.autozero import AutoZero, AutoZeroSettings
 from host.engine import PythonEngine
@@ -176,8 +176,7 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     if model.n_inputs != run.n_inputs:
         raise InputError(f"the model takes {model.n_inputs} inputs; the run has {run.n_inputs} readings per sample")
     units = recorded.input_units if recorded is not None else "V"  # tactile-host read records ADC volts
-    if model.input_units != units:
-        raise InputError(f"the model takes inputs in {model.input_units}; the run's readings are in {units}")
+    check_input_units(model, units, "the run's readings")
     same = model.sha256 == h.get("model")
     if temp_comp and no_temp_comp:
         raise InputError("give --temp-comp or --no-temp-comp, not both")

@@ -11,12 +11,12 @@ import sys
 
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_numbers, parse_positive
-from fitgen.equations.model import load_model
+from fitgen.equations.model import check_input_units, load_model
 from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, RetryPolicy, open_bus
 from host.autozero import AutoZero, AutoZeroSettings
-from host.channelmap import Settings, channel_map, check_full_scale
+from host.channelmap import ADC_VOLTS_HINT, Settings, channel_map, check_full_scale
 from host.clock import REAL_CLOCK
 from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
@@ -120,9 +120,7 @@ class ReadoutSession:
         az_settings = AutoZeroSettings(band_mm=band[0], band_deg=band[1],
                                        hold=parse_positive(args.rest_hold, "--rest-hold")).checked()
         self.model = model = load_model(args.model)
-        if model.input_units != "V":
-            raise InputError(f"model {args.model} takes inputs in {model.input_units}; the ADCs give volts: fit it on "
-                             "a dataset in V (fitgen simulate --transfer gmr, or tactile-host capture)")
+        check_input_units(model, "V", "the ADCs' readings", f"model {args.model}", ADC_VOLTS_HINT)
         if tempcomp is not None and tempcomp.n != model.n_inputs:
             raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
         self.cmap = cmap = cmap0

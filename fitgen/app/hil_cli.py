@@ -16,18 +16,11 @@ from fitgen.base.errors import InputError
 
 
 def _load(args):
+    from fitgen.c.verify import data_inputs
     from fitgen.equations.model import load_model
 
     model = load_model(args.model)
-    data = None
-    if getattr(args, "data", None):
-        from fitgen.physics.dataset import load_dataset
-
-        ds = load_dataset(args.data, min_rows=1)
-        if ds.n_inputs != model.n_inputs:
-            raise InputError(f"dataset {args.data} has {ds.n_inputs} inputs; the model takes {model.n_inputs}")
-        data = ds.inputs
-    return model, data
+    return model, (data_inputs(model, args.data) if getattr(args, "data", None) else None)
 
 
 def _check_counts(args) -> None:

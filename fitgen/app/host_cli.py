@@ -14,10 +14,9 @@ from host.stagesettings import APPROACH
 
 def cmd_verify(args) -> int:
     from fitgen.c.codegen import STYLES
-    from fitgen.physics.dataset import load_dataset
     from fitgen.equations.model import load_model
 
-    from fitgen.c.verify import check_vectors, held_out_from_args, verify
+    from fitgen.c.verify import check_vectors, data_inputs, held_out_from_args, verify
 
     check_vectors(args.vectors)
     model = load_model(args.model)
@@ -27,12 +26,7 @@ def cmd_verify(args) -> int:
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
     if args.fma and args.precision == "fixed":
         raise InputError("--fma does not apply to --precision fixed")
-    extra = None
-    if args.data:
-        ds = load_dataset(args.data, min_rows=1)
-        if ds.n_inputs != model.n_inputs:
-            raise InputError(f"dataset {args.data} has {ds.n_inputs} inputs; the model takes {model.n_inputs}")
-        extra = ds.inputs
+    extra = data_inputs(model, args.data) if args.data else None
     held_out = held_out_from_args(model, args)
     ok = True
     for precision in precisions:

@@ -58,6 +58,20 @@ def check_vectors(n: int, flag: str = "--vectors") -> int:
     return n
 
 
+def data_inputs(model: Model, path: str) -> np.ndarray:
+    """The readings of dataset ``path`` (``--data``); InputError unless they are as many, in the units, as
+    ``model`` takes."""
+    from fitgen.base.errors import InputError
+    from fitgen.equations.model import check_input_units
+    from fitgen.physics.dataset import load_dataset
+
+    ds = load_dataset(path, min_rows=1)
+    if ds.n_inputs != model.n_inputs:
+        raise InputError(f"dataset {path} has {ds.n_inputs} inputs; the model takes {model.n_inputs}")
+    check_input_units(model, ds.meta.get("units"), f"dataset {path}'s readings")
+    return ds.inputs
+
+
 def held_out_from_args(model: Model, args) -> tuple[np.ndarray, np.ndarray] | None:
     """The noise-free held-out (readings, truth) those options ask for; None when skipped or not to be had."""
     from fitgen.base.errors import InputError

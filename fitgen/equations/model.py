@@ -214,6 +214,14 @@ def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
     return lo.astype(float), hi.astype(float)
 
 
+def check_input_units(model: Model, units: str | None, readings: str, name: str = "the model",
+                      hint: str = "") -> None:
+    """InputError when ``readings`` (what gives them: "the ADCs' readings", "dataset x.csv's readings") are in
+    other ``units`` than ``model`` (called ``name``) takes, ``hint`` appended; ``units`` None (unrecorded) passes."""
+    if units is not None and units != model.input_units:
+        raise InputError(f"{name} takes inputs in {model.input_units}; {readings} are in {units}{hint}")
+
+
 def load_model(path: str | Path) -> Model:
     origin = f"model file {path}"
     text = read_text(path, "model file")
