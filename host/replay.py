@@ -24,7 +24,7 @@ from fitgen.equations.model import Model, check_input_units, load_model, model_f
 from host.autozero import AutoZero, AutoZeroSettings
 from host.engine import PythonEngine
 from host.readout import Corrections, RunRecord
-from host.temperature import TempComp, load_tempcomp
+from host.temperature import load_tempcomp, tempcomp_from_dict
 
 
 @dataclass
@@ -213,9 +213,7 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
     if temp_comp:
         tc = load_tempcomp(temp_comp)
     elif not no_temp_comp and h.get("temp_comp"):
-        d = h["temp_comp"]
-        tc = TempComp(float(d["t0"]), np.array(d["offset_v_per_degc"], dtype=float),
-                      np.array(d["gain_per_degc"], dtype=float), d.get("fit", {}))
+        tc = tempcomp_from_dict(h["temp_comp"], "the run's header: temp_comp")
     if tc is not None and (tc.n != n or tc.gain.shape != tc.offset.shape):
         raise InputError(f"the temperature compensation has {tc.n} elements; the run has {n} readings per sample")
     if tc is not None and not np.isfinite(run.temp).any():

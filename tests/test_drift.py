@@ -117,6 +117,25 @@ def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
     assert_one_line_error(one, contains="two or more different temperatures")
 
 
+@pytest.mark.parametrize("edit, said", [
+    ({"gain_per_degc": [1e300] + [0.0] * 7}, "gain_per_degc[0] = 1e+300 does not fit in a float"),
+    # 1 - 0.04 (125 - 25) < 0: the readings would be divided by a factor through zero
+    ({"gain_per_degc": [-0.04] + [0.0] * 7}, "gain_per_degc[0] = -0.04 makes the correction's factor"),
+    ({"version": 2}, "version 2 is not one"),
+    ({"t0": "25"}, "t0 must be a finite number, got '25'"),
+    ({"t0": float("nan")}, "t0 must be a finite number, got nan"),
+])
+def test_read_and_tempcomp_c_refuse_the_same_compensation_files(rest_model_file, tmp_path, edit, said):
+    """One validation: the file read --temp-comp applies is checked as tempcomp-c checks it."""
+    path = tmp_path / "tc.json"
+    path.write_text(json.dumps({"kind": TempComp.KIND, "version": 1, "t0": 25.0, "offset_v_per_degc": [1e-4] * 8,
+                                "gain_per_degc": [-1e-3] * 8, **edit}))
+    assert_one_line_error(run_cli("tactile-host", "tempcomp-c", str(path), "-o", str(tmp_path / "c")), contains=said)
+    assert_one_line_error(run_cli("tactile-host", "read", "--model", rest_model_file, "--adc",
+                                  TWO_CHIPS + ",temp=ads1115@0x4a:0", "--simulate", "0,0,0,0,0", "--temp-comp",
+                                  str(path), "--count", "1"), contains=said)
+
+
 def test_auto_zero_follows_drift_at_rest_and_never_during_a_press():
     ref = np.full(8, 1.0)
     az = AutoZero(ref, 5e-4, OUTPUTS, settings=AutoZeroSettings(window=16, hold=0.5))
