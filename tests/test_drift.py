@@ -3,6 +3,7 @@ auto-zero, run records and replay, and the options' bad input."""
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -134,6 +135,18 @@ def test_read_and_tempcomp_c_refuse_the_same_compensation_files(rest_model_file,
     assert_one_line_error(run_cli("tactile-host", "read", "--model", rest_model_file, "--adc",
                                   TWO_CHIPS + ",temp=ads1115@0x4a:0", "--simulate", "0,0,0,0,0", "--temp-comp",
                                   str(path), "--count", "1"), contains=said)
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc (a folder no one can add a file to)")
+def test_capture_checks_where_the_compensation_goes_before_the_temperatures(tmp_path):
+    """--temp-comp-output is written last: a folder that takes no file is said before any temperature."""
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dz\n0,0\n1,-1\n")
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+                   "--simulate", "--temperature", "15,25", "-o", str(tmp_path / "cap.csv"), "--temp-comp-output",
+                   "/proc/tc.json")
+    assert_one_line_error(proc, 2, "cannot write /proc/tc.json")
+    assert not list(tmp_path.glob("cap.*"))
 
 
 def test_auto_zero_follows_drift_at_rest_and_never_during_a_press():
