@@ -419,6 +419,8 @@ def build_parser() -> Parser:
     c.add_argument("--trigger", metavar="CMD",
                    help="shell command run for each pose instead of waiting for Enter; it gets TM_POSE_INDEX, "
                         "TM_DX..TM_THY and must exit 0 once the pose is set")
+    c.add_argument("--trigger-timeout", metavar="S", help="seconds --trigger may take per pose before it is killed and "
+                   "the capture stops, the rows so far kept (default 60)")
     c.add_argument("--settle", default="0", help="seconds to wait after Enter or the trigger (default 0)")
     c.add_argument("--simulate", action="store_true",
                    help="no hardware: a simulated sensor that moves to each scheduled pose by itself")
