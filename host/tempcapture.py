@@ -26,7 +26,8 @@ def parse_temperatures(text: str) -> list[float]:
     """``--temperature T1,T2,..``: two or more different temperatures in -40..125 degC."""
     vals = parse_numbers(text)
     if vals is None:
-        raise InputError(f"--temperature {text!r}: give temperatures in degC, e.g. 15,25,35")
+        raise InputError(f"--temperature {text!r}: give temperatures in degC, one between each two commas, e.g. "
+                         "15,25,35")
     if len(vals) < 2 or not all(math.isfinite(v) and -40 <= v <= 125 for v in vals):
         raise InputError(f"--temperature {text!r}: give two or more different temperatures in -40..125 degC")
     if len({round(v, 1) for v in vals}) != len(vals):  # the compensation tells levels apart to 0.1 degC

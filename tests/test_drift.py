@@ -137,6 +137,20 @@ def test_read_and_tempcomp_c_refuse_the_same_compensation_files(rest_model_file,
                                   str(path), "--count", "1"), contains=said)
 
 
+def test_capture_temperatures_below_zero_and_empty_items(tmp_path):
+    """'--temperature -10,25' is a value, not an unknown option; '15,,35' is refused, not read as 15,35."""
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dz\n0,0\n1,-1\n")
+    args = ["capture", "--poses", str(sched), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0", "--simulate"]
+    proc = run_cli("tactile-host", *args, "--temperature", "-10,25", "-o", str(tmp_path / "cap.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert load_tempcomp(tmp_path / "cap.tempcomp.json").info["temperatures"] == [-10.0, 25.0]
+    for bad in ("15,,35", "-10,", "15,25,"):
+        assert_one_line_error(run_cli("tactile-host", *args, "--temperature", bad, "-o", str(tmp_path / "x.csv")),
+                              contains=f"--temperature {bad!r}: give temperatures in degC, one between each two")
+    assert not list(tmp_path.glob("x.*"))
+
+
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc (a folder no one can add a file to)")
 def test_capture_checks_where_the_compensation_goes_before_the_temperatures(tmp_path):
     """--temp-comp-output is written last: a folder that takes no file is said before any temperature."""
