@@ -272,24 +272,24 @@ def _readout_options(p) -> None:
     p.add_argument("--count", help="stop after this many samples")
     p.add_argument("--duration", help="stop after this many seconds")
     p.add_argument("--tare", action="store_true", help="measure the rest readings first and correct the offsets")
-    p.add_argument("--tare-samples", default="50", help="samples averaged for --tare (default 50)")
+    p.add_argument("--tare-samples", help="samples averaged for --tare (default 50)")
     p.add_argument("--rest", metavar="SENSOR|DATASET.csv",
                    help="the rest readings --tare maps onto: a dataset's rows at pose 0, or a sensor's physics "
                         "(default: --sensor)")
     p.add_argument("--auto-zero", action="store_true",
                    help="tare, then keep re-zeroing slowly while the sensor is at rest (never while touched); "
                         "each update is logged")
-    p.add_argument("--rest-band", default="0.08,1.5", metavar="MM,DEG",
+    p.add_argument("--rest-band", metavar="MM,DEG",
                    help="at rest: every displacement estimate within MM and tilt within DEG (default 0.08,1.5)")
-    p.add_argument("--rest-hold", default="1", metavar="S", help="seconds at rest before an auto-zero update (default 1)")
+    p.add_argument("--rest-hold", metavar="S", help="seconds at rest before an auto-zero update (default 1)")
     p.add_argument("--temp-comp", metavar="FILE.json",
                    help="per-element temperature compensation (tactile-host capture --temperature); needs the "
                         "thermistor's input in --adc (temp=CHIP@ADDRESS:INPUT)")
     p.add_argument("--record", metavar="RUN.jsonl", help="also record the run at full precision for tactile-host replay")
-    p.add_argument("--engine", default="python", choices=("python", "c"),
+    p.add_argument("--engine", choices=("python", "c"),
                    help="python: Model.predict; c: the generated header as a shared library (default python)")
-    p.add_argument("--precision", default="double", choices=("double", "float"), help="C engine precision")
-    p.add_argument("--cc", default="gcc", help="C compiler for --engine c (default gcc)")
+    p.add_argument("--precision", choices=("double", "float"), help="C engine precision (default double)")
+    p.add_argument("--cc", help="C compiler for --engine c (default gcc)")
     p.add_argument("--simulate", metavar="POSE|motion",
                    help="no hardware: a simulated bus with the sensor at POSE (e.g. dx=1,dz=-1 or 0.5,0,-1,0,0), or "
                         "'motion': sliding in a circle and pressed every 6 s")
