@@ -240,6 +240,23 @@ def test_read_records_and_replay_reproduces_it_exactly(rest_model_file, tmp_path
     assert_one_line_error(run_cli("tactile-host", "replay", str(tmp_path / "bad.jsonl")), contains="line 7 is not")
 
 
+def test_a_correction_the_run_cannot_take_names_the_option_typed(model_file, tmp_path):
+    """A run read without a thermistor or a tare: --temp-comp and --auto-zero are the user's, not the header's
+    fault, and the line says so without an exception's name."""
+    run = tmp_path / "r.jsonl"
+    assert run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "dx=1", "--count",
+                   "3", "--record", str(run), "-o", str(tmp_path / "s.csv")).returncode == 0
+    d = Drift.typical(8)
+    TempComp(25.0, d.offset_tc, d.gain_tc).save(tmp_path / "tc.json")
+    for cmd in (["replay", str(run)], ["view", "--replay", str(run), "--port", "0"]):
+        for option, said in ((["--temp-comp", str(tmp_path / "tc.json")], "--temp-comp " + str(tmp_path / "tc.json") +
+                              " needs the run's temperatures, and this run recorded none"),
+                             (["--auto-zero"], "--auto-zero needs the rest readings and the noise floor")):
+            proc = run_cli("tactile-host", *cmd, *option)
+            assert_one_line_error(proc, 2, said)
+            assert "header records" not in proc.stderr and "InputError" not in proc.stderr
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--temp-comp", "tc.json"], "temp=CHIP@ADDRESS:INPUT"),
     (["--thermistor", "beta=3950"], "add temp=CHIP@ADDRESS:INPUT to --adc"),
