@@ -169,6 +169,24 @@ def test_codegen_and_verify_cli(paper_model, tmp_path):
     assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--cc", "no-such-cc"), contains="not found")
 
 
+def test_verify_bounds_the_random_vectors(paper_model, tmp_path):
+    """A count of vectors that could not be held is one line and status 2, not a MemoryError."""
+    path = paper_model.save(tmp_path / "m.json")
+    for n in ("100000000000", "100001", "-1"):
+        assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--vectors", n),
+                              contains="--vectors must be a whole number from 0 to 100,000")
+
+
+def test_verify_refuses_data_in_other_units_than_the_model_takes(paper_model, tmp_path):
+    """--data's readings are checked against the model's units as read --model checks the ADCs' volts."""
+    path = paper_model.save(tmp_path / "m.json")  # mT
+    assert run_cli("fitgen", "simulate", "--transfer", "gmr", "--grid", "dx=0,1", "-o",
+                   str(tmp_path / "v.csv")).returncode == 0
+    assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--data", str(tmp_path / "v.csv")),
+                          contains="the model takes inputs in mT; dataset " + str(tmp_path / "v.csv") +
+                          "'s readings are in V")
+
+
 @pytest.mark.parametrize("cc", ["gcc", "clang"])
 def test_a_file_that_includes_the_headers_without_calling_them_compiles_warning_free(paper_model, tmp_path, cc):
     """A second translation unit that needs only TM_N_INPUTS (or the compensation's count) is warning-free."""

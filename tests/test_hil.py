@@ -269,6 +269,8 @@ def test_cli_bad_ports_and_silent_devices(model_file, tmp_path):
                           2, "model file")
     assert_one_line_error(run_cli("tactile-hil", "run", "--port", "x", "--model", str(model_file), "--vectors", "-1"),
                           2, "--vectors")
+    assert_one_line_error(run_cli("tactile-hil", "run", "--port", "x", "--model", str(model_file), "--vectors",
+                                  "100000000000"), 2, "from 0 to 100,000")
 
 
 def test_cli_checks_junit_and_sensor_id_before_the_device(model_file, tmp_path):

@@ -19,8 +19,10 @@ class Parser(argparse.ArgumentParser):
 
     def __init__(self, *args, **kw):
         super().__init__(*args, **kw)
-        # argparse takes '-1e-3' for an option (its pattern knows no exponent): '--input-offset -1e-3' failed
-        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+        # argparse takes '-1e-3' for an option (its pattern knows no exponent): '--input-offset -1e-3' failed; and
+        # a list led by a negative number too: '--temperature -10,25' failed where '--temperature=-10,25' worked
+        number = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
+        self._negative_number_matcher = re.compile(rf"^-{number}(\s*,\s*(-?{number})?)*$")
 
     def error(self, message):  # noqa: D401 - argparse's hook
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")

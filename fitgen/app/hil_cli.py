@@ -16,23 +16,17 @@ from fitgen.base.errors import InputError
 
 
 def _load(args):
+    from fitgen.c.verify import data_inputs
     from fitgen.equations.model import load_model
 
     model = load_model(args.model)
-    data = None
-    if getattr(args, "data", None):
-        from fitgen.physics.dataset import load_dataset
-
-        ds = load_dataset(args.data, min_rows=1)
-        if ds.n_inputs != model.n_inputs:
-            raise InputError(f"dataset {args.data} has {ds.n_inputs} inputs; the model takes {model.n_inputs}")
-        data = ds.inputs
-    return model, data
+    return model, (data_inputs(model, args.data) if getattr(args, "data", None) else None)
 
 
 def _check_counts(args) -> None:
-    if args.vectors < 0:
-        raise InputError("--vectors must be >= 0")
+    from fitgen.c.verify import check_vectors
+
+    check_vectors(args.vectors)
     if args.fuzz < 0:
         raise InputError("--fuzz must be >= 0")
 
@@ -162,10 +156,11 @@ def cmd_emulate(args) -> int:
 
 
 def _suite_options(p) -> None:
-    from fitgen.c.verify import add_held_out_options
+    from fitgen.c.verify import MAX_VECTORS, add_held_out_options
 
     p.add_argument("--model", required=True, metavar="MODEL", help="the model compiled into the firmware")
-    p.add_argument("--vectors", type=int, default=1000, help="random vectors inside the domain (default 1000)")
+    p.add_argument("--vectors", type=int, default=1000,
+                   help=f"random vectors inside the domain (default 1000, at most {MAX_VECTORS:,})")
     p.add_argument("--data", metavar="CSV", help="also send the rows of this dataset")
     p.add_argument("--fuzz", type=int, default=10_000, help="random or mutated frames to send (default 10000)")
     p.add_argument("--no-flash", action="store_true", help="skip the calibration flashing checks")

@@ -82,8 +82,9 @@ def refuse_readout_options(args) -> None:
     """``view --replay``: the readout's options do not apply (the recording sets the samples); InputError."""
     from fitgen.base.errors import InputError
 
-    given = [f"--{n.replace('_', '-')}" for n in ("adc", "count", "duration", "rate", "record", "simulate", "rest")
+    given = [f"--{n.replace('_', '-')}" for n in ("adc", "count", "duration", "rate", "record", "simulate", "rest",
+                                                  "engine", "precision", "cc", "tare_samples", "rest_band", "rest_hold")
              if getattr(args, n, None) is not None] + (["--tare"] if args.tare else [])
     if given:
-        raise InputError(f"{given[0]} does not apply to --replay: the recording sets the samples (it plays to its "
-                         "end; --hold keeps the page up after)")
+        raise InputError(f"{given[0]} does not apply to --replay: the recording sets the samples and how they were "
+                         "estimated (it plays to its end; --hold keeps the page up after)")
