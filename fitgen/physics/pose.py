@@ -84,10 +84,9 @@ def magnet_frame(sensor: Sensor, poses: np.ndarray) -> tuple[np.ndarray, np.ndar
     ``stage_map @ (dx, dy, dz)``; its tilt is the pose's applied after the unit's rest tilt; a label off the
     skin (:func:`contact_poses`) leaves it at rest.
     """
-    poses = as_poses(poses)
-    centre = check_above_elements(sensor, poses)
-    if not sensor.is_drawing:
-        poses = contact_poses(poses)
+    given = as_poses(poses)
+    poses = given if sensor.is_drawing else contact_poses(given)
+    centre = _above_elements(sensor, _centres(sensor, poses), given)
     R = rotation_matrices(poses[:, 3], poses[:, 4])
     if any(sensor.magnet.tilt):
         R = R @ rotation_matrices(*sensor.magnet.tilt)
@@ -103,9 +102,17 @@ def check_above_elements(sensor: Sensor, poses) -> np.ndarray:
     elements' plane (the lowest element's z, when below the centre at rest): the magnet would be in or
     through the board (in that plane its field is along z, and radial elements read 0)."""
     poses = as_poses(poses)
-    moved = poses if sensor.is_drawing else contact_poses(poses)
+    return _above_elements(sensor, _centres(sensor, poses if sensor.is_drawing else contact_poses(poses)), poses)
+
+
+def _centres(sensor: Sensor, moved: np.ndarray) -> np.ndarray:
+    """The magnet's centre (P, 3) at poses already moved as the sensor moves them (contact_poses for a unit)."""
     shift = moved[:, :3] if sensor.is_drawing else moved[:, :3] @ sensor.stage_map.T
-    centre = np.asarray(sensor.magnet.rest_center) + shift
+    return np.asarray(sensor.magnet.rest_center) + shift
+
+
+def _above_elements(sensor: Sensor, centre: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """``centre``, checked as :func:`check_above_elements` says; ``poses``: the given ones, for the message."""
     centre_z = centre[:, 2]
     rest_z = sensor.magnet.rest_center[2]
     plane = float(sensor.positions[:, 2].min())
