@@ -255,7 +255,9 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
         resid[k] = float(np.sqrt(np.mean((y - X @ coef) ** 2)))
     info = {"rows": int(readings.shape[0]), "temperatures": levels.tolist(), "poses": int(np.unique(pose_ids).size),
             "residual_rms_v": resid.tolist(), "gain_fitted": bool(multi)}
-    return TempComp(t0, off, gain, info)
+    tc = TempComp(t0, off, gain, info)
+    tempcomp_from_dict(tc.to_dict(), "the compensation these captures give")  # nothing saved that read refuses
+    return tc
 
 
 def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:

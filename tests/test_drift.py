@@ -113,6 +113,11 @@ def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
     assert all((tmp_path / f"cap.T{t}.csv").exists() for t in (15, 25, 35))
     with pytest.raises(InputError, match="one temperature"):
         fit_tempcomp(np.ones((3, 8)), np.arange(3), np.full(3, 25.0))
+    # a fit that read --temp-comp would refuse is not saved: gains that turn the correction's factor negative
+    temps = np.repeat([25.0, 35.0], 3)
+    base = np.tile([[1.0] * 8, [2.0] * 8, [3.0] * 8], (2, 1))
+    with pytest.raises(InputError, match=r"the compensation these captures give: gain_per_degc\[0\] = -0.05"):
+        fit_tempcomp(base * (1 - 0.05 * (temps - 25.0))[:, None], np.tile(np.arange(3), 2), temps)
     one = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS, "--simulate", "--temperature",
                   "25", "-o", str(tmp_path / "x.csv"))
     assert_one_line_error(one, contains="two or more different temperatures")
