@@ -21,7 +21,7 @@ MACHINES = {"mps2": "mps2-an386", "microbit": "microbit"}
 TARGETS = tuple(MACHINES) + ("uno", "host")
 INSTALL_HINT = "install them with: sudo apt-get install qemu-system-arm gcc-arm-none-eabi"
 AVR_TOOLS = ("avr-gcc", "avr-size", "avr-nm", "gcc", "pkg-config")
-AVR_HINT = "install them with: sudo apt-get install gcc-avr binutils-avr avr-libc simavr libsimavr-dev libelf-dev pkg-config"
+AVR_HINT = "install the Uno's tools with: sudo apt-get install gcc-avr binutils-avr avr-libc simavr libsimavr-dev libelf-dev pkg-config"
 # -icount shift=0: the emulated core retires one instruction per ns of virtual time, so the
 # 25 MHz SysTick counts one tick per 40 instructions (docs/hil.md)
 ICOUNT_SHIFT = 0
@@ -308,17 +308,30 @@ class UnoEmulator(_Running):
 
 
 def require_avr_tools() -> None:
-    """InputError (one line, how to install them) unless the Uno's build and board tools are here."""
+    """InputError (one line, how to install them) unless the Uno's build and board tools are here, and libsimavr
+    (with libelf, which its pkg-config file requires) is known to pkg-config."""
     missing = [t for t in AVR_TOOLS if shutil.which(t) is None]
     if missing:
         raise InputError(f"{' and '.join(missing)} not found; {AVR_HINT}")
+    said = _pkg_config_simavr()
+    if said is not None:
+        raise InputError(f"pkg-config simavr failed ({said}); {AVR_HINT}")
+
+
+def _pkg_config_simavr() -> str | None:
+    """None when pkg-config knows libsimavr; else its first line."""
+    try:
+        proc = subprocess.run(["pkg-config", "--print-errors", "--exists", "simavr"], capture_output=True,
+                              text=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        return "no answer within 60 s"
+    lines = [ln.strip() for ln in proc.stderr.splitlines() if ln.strip()]
+    return None if proc.returncode == 0 else (lines[0].rstrip(".") if lines else f"exit status {proc.returncode}")
 
 
 def uno_emulator_available() -> bool:
     """Whether the simavr board can be built here (its tools, and libsimavr known to pkg-config)."""
-    if any(shutil.which(t) is None for t in AVR_TOOLS):
-        return False
-    return subprocess.run(["pkg-config", "--exists", "simavr"], capture_output=True).returncode == 0
+    return all(shutil.which(t) is not None for t in AVR_TOOLS) and _pkg_config_simavr() is None
 
 
 def build_uno_board(folder: str | Path) -> Path:
@@ -410,6 +423,28 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
     runner.workdir = folder
     runner._tmp = tmp  # removed with the runner
     return runner
+
+
+def uno_crash_advice(model, precision: str, style: str, **render) -> str:
+    """What to try when a ``style`` build crashed on the Uno before answering (a table build's stack can overrun its
+    2 KB of RAM): ``--style unrolled`` when that build links (checked by building it; ``render``: the rest of
+    ``render_firmware``'s arguments), else fewer terms. Empty for builds the advice is not about."""
+    import tempfile
+
+    from hil.firmware import build_firmware, firmware_size, render_firmware
+
+    if precision == "fixed" or style != "table":
+        return ""
+    why = "a table-style build's stack can overrun the Uno's 2 KB of RAM"
+    try:
+        with tempfile.TemporaryDirectory(prefix="tactile-fw-") as tmp:
+            render_firmware(model, tmp, precision=precision, style="unrolled", port="uno", **render)
+            size = firmware_size(build_firmware(tmp, "uno"), "avr-size")
+    except InputError as exc:
+        said = str(exc).rsplit(": ", 1)[-1]
+        return f"; {why}, and --style unrolled does not build either ({said}): fit fewer terms " \
+               "(fitgen fit --k bic, or --max-terms N)"
+    return f"; {why}: try --style unrolled (it builds: flash {size['flash']} B, static RAM {size['ram']} B)"
 
 
 def adc_bridge(adc: str, pose: str, *, sensor: str = "paper", noise: float | None = None, seed: int = 0,

@@ -90,6 +90,15 @@ def adc_input_lsb(cmap) -> float:
     return lsbs.pop()
 
 
+def check_sensor_id(sensor_id: str) -> str:
+    """``sensor_id`` as the firmware compiles it in (a C string); InputError otherwise."""
+    if not (0 < len(sensor_id) <= SENSOR_ID_MAX and sensor_id.isascii() and sensor_id.isprintable()
+            and '"' not in sensor_id and "\\" not in sensor_id):
+        raise InputError(f"sensor id must be 1..{SENSOR_ID_MAX} printable ASCII characters without quotes "
+                         f"or backslashes, got {sensor_id!r}")
+    return sensor_id
+
+
 def render_firmware(model: Model, folder: str | Path, *, precision: str = "float", style: str = "table",
                     fma: bool = False, port: str = "mps2", sensor_id: str = "paper", cmap=None, tin=None,
                     tempcomp=None) -> Path:
@@ -106,10 +115,7 @@ def render_firmware(model: Model, folder: str | Path, *, precision: str = "float
     if precision not in PRECISIONS or style not in STYLES:
         raise InputError(f"precision must be one of {', '.join(PRECISIONS)} and style one of "
                          f"{', '.join(STYLES)}, got {precision!r}, {style!r}")
-    if not (0 < len(sensor_id) <= SENSOR_ID_MAX and sensor_id.isascii() and sensor_id.isprintable()
-            and '"' not in sensor_id and "\\" not in sensor_id):
-        raise InputError(f"sensor id must be 1..{SENSOR_ID_MAX} printable ASCII characters without quotes "
-                         f"or backslashes, got {sensor_id!r}")
+    check_sensor_id(sensor_id)
     folder = Path(folder)
     if port in TARGETS:
         check_precision(port, precision)  # what the board's core can run (fitgen/c/targets.py)

@@ -15,7 +15,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 
-from host.arduino import Size, arduino_build, example_elf, find_builder
+from host.arduino import Size, arduino_build, example_elf, find_builder, require_builder
 from host.channelmap import ChannelMap
 
 from hil.emulate import UnoEmulator, bss_end, build_uno_board, require_avr_tools, uno_emulator_available
@@ -146,12 +146,16 @@ def build_readpose(model, cmap: ChannelMap, folder: str | Path, pose=None, *, pr
     or static RAM and the stack's peak) naming a setting that does. Without a pose, the stack is still
     measured (ReadPose run at rest) whenever the example is built and the emulated Uno can be: a setting
     whose stack overflows is then refused, not suggested."""
+    asked = pose is not None  # a run asked for needs the builder and the emulator: said before the work
     if pose is None and build is not False and find_builder() is not None and uno_emulator_available():
         pose = REST
     if pose is None:
         return arduino_build(model, cmap, folder, precision=precision, style=style, build=build,
                              build_path=build_path), None
     pose, runs = sim_pose(pose), {}  # a bad pose refused before the build
+    if asked:
+        require_builder()
+        require_avr_tools()
 
     def measure(path, size):
         try:

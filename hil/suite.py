@@ -21,6 +21,7 @@ from fitgen.base.fileio import write_atomic
 from fitgen.equations.model import Equation, Model
 from fitgen.base.progress import Progress
 from host import protocol as P
+from hil.fuzz import fuzz_frames
 from host.device import Device, DeviceError, NoAnswer
 from fitgen.c.verify import MAX_SHARE, VerifyResult, compare, compare_fixed, held_out_check, make_code_vectors, make_vectors
 
@@ -73,12 +74,24 @@ class SuiteResult:
 class DeviceEvaluator:
     """A device seen as ``fitgen.c.verify.compare`` sees a compiled model: precision, style, fma, predict."""
 
-    def __init__(self, device: Device, precision: str, style: str, fma: bool = False):
-        self.device, self.precision, self.style, self.fma = device, precision, style, fma
+    def __init__(self, device: Device, precision: str, style: str, fma: bool = False, progress=None):
+        self.device, self.precision, self.style, self.fma, self.progress = device, precision, style, fma, progress
 
     def predict(self, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        status, out = self.device.eval(inputs)
+        status, out = eval_rows(self.device, inputs, self.progress)
         return np.asarray(out, dtype=float), np.asarray(status)
+
+
+def eval_rows(dev: Device, rows: np.ndarray, progress: Progress | None = None, chunk: int = 64):
+    """``dev.eval`` of ``rows``, ``chunk`` at a time when a ``progress`` bar moves with them (a slow board's
+    thousand vectors take seconds)."""
+    if progress is None:
+        return dev.eval(rows)
+    parts = []
+    for start in range(0, len(rows), chunk):
+        parts.append(dev.eval(rows[start:start + chunk]))
+        progress.update(len(rows[start:start + chunk]))
+    return (np.concatenate([p[0] for p in parts]), np.vstack([p[1] for p in parts])) if parts else dev.eval(rows)
 
 
 def flash_variant(model: Model) -> Model:
@@ -100,7 +113,12 @@ def _verify_detail(res: VerifyResult) -> str:
 
 
 def check_info(dev: Device, model: Model) -> Check:
-    info = dev.info(refresh=True)
+    """The counts and model hash are the model's; a loaded calibration (the Uno's outlives a reset) is reset first."""
+    info, was = dev.info(refresh=True), ""
+    if info.cal_source != 0:
+        was = f"; a loaded calibration (model {info.model_hash[:12]}) was active: reset to the compiled-in model"
+        dev.reset_calibration()
+        info = dev.info(refresh=True)
     problems = []
     if info.n_inputs != model.n_inputs or info.n_outputs != len(model.equations):
         problems.append(f"device takes {info.n_inputs} inputs and gives {info.n_outputs} outputs, "
@@ -109,12 +127,12 @@ def check_info(dev: Device, model: Model) -> Check:
         problems.append(f"device runs model {info.model_hash[:12]}, not {model.sha256[:12]}")
     detail = (f"protocol {info.protocol_version}, firmware {info.firmware_version}, {info.precision}, "
               f"{info.style_name}, model {info.model_hash[:12]}, sensor {info.sensor_id}")
-    return Check("info", not problems, "; ".join(problems) or detail)
+    return Check("info", not problems, ("; ".join(problems) or detail) + was)
 
 
-def check_eval(dev: Device, model: Model, inputs: np.ndarray, name: str, fma: bool = False) -> Check:
+def check_eval(dev: Device, model: Model, inputs: np.ndarray, name: str, fma: bool = False, progress=None) -> Check:
     info = dev.info()
-    res = compare(model, DeviceEvaluator(dev, info.precision, info.style_name, fma), inputs)
+    res = compare(model, DeviceEvaluator(dev, info.precision, info.style_name, fma, progress), inputs)
     return Check(name, res.ok, _verify_detail(res), figures={"max_error": res.max_error.tolist(),
                                                             "worst_ratio": float(np.max(res.max_ratio))})
 
@@ -124,16 +142,16 @@ class FixedDeviceEvaluator:
 
     style = "unrolled"  # the fixed-point header's one form
 
-    def __init__(self, device: Device, fixed):
-        self.device, self.fixed = device, fixed
+    def __init__(self, device: Device, fixed, progress=None):
+        self.device, self.fixed, self.progress = device, fixed, progress
 
     def predict_codes(self, codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        status, out = self.device.eval(codes)
+        status, out = eval_rows(self.device, codes, self.progress)
         return np.asarray(out, dtype=np.int64), np.asarray(status)
 
 
-def check_eval_fixed(dev: Device, model: Model, fixed, codes: np.ndarray, name: str) -> Check:
-    res = compare_fixed(model, FixedDeviceEvaluator(dev, fixed), codes)
+def check_eval_fixed(dev: Device, model: Model, fixed, codes: np.ndarray, name: str, progress=None) -> Check:
+    res = compare_fixed(model, FixedDeviceEvaluator(dev, fixed, progress), codes)
     lsb = int(np.max(res.max_lsb_diff))
     detail = _verify_detail(res) + f"; largest difference from the numpy integer model {lsb} LSB"
     return Check(name, res.ok, detail, figures={"max_error": res.max_error.tolist(),
@@ -142,7 +160,7 @@ def check_eval_fixed(dev: Device, model: Model, fixed, codes: np.ndarray, name: 
 
 
 def check_held_out(dev: Device, model: Model, held_out: tuple[np.ndarray, np.ndarray], max_share: float,
-                   fixed=None) -> Check:
+                   fixed=None, progress=None) -> Check:
     """The device on noise-free held-out readings: rounding may add at most ``max_share`` of the
     model's own held-out max error (a fixed-point device gets the readings' ADC codes, and is
     compared with double on the codes' values)."""
@@ -150,12 +168,12 @@ def check_held_out(dev: Device, model: Model, held_out: tuple[np.ndarray, np.nda
     c_inputs = None
     if fixed is not None:
         codes = fixed.codes_of(readings)
-        out = fixed.to_real(FixedDeviceEvaluator(dev, fixed).predict_codes(codes)[0])
+        out = fixed.to_real(FixedDeviceEvaluator(dev, fixed, progress).predict_codes(codes)[0])
         c_inputs = fixed.code_values(codes)
     else:
         info = dev.info()
         sent = readings.astype(np.float32).astype(float) if info.precision == "float" else readings
-        out = DeviceEvaluator(dev, info.precision, info.style_name).predict(sent)[0]
+        out = DeviceEvaluator(dev, info.precision, info.style_name, progress=progress).predict(sent)[0]
     failures: list[str] = []
     chk = held_out_check(model, out, readings, truth, max_share, failures, c_inputs)
     detail = f"{len(readings)} held-out readings; rounding's share " + ", ".join(
@@ -325,50 +343,6 @@ def check_corrupt_flash(dev: Device, new: Model, inputs: np.ndarray, sensor_id: 
                  f"{len(refused)} bad transfers refused ({', '.join(refused)}); the old calibration still answers")
 
 
-# the longest encoded frame is MAX_BODY + 2 bytes (COBS); an oversize run overflows the receiver once to three times
-OVERSIZE = (P.MAX_BODY + 4, 3 * (P.MAX_BODY + 3))
-
-
-def fuzz_frames(n: int, seed: int = 0) -> list[bytes]:
-    """Random and mutated wire frames: garbage, bit flips, truncations, wrong lengths, oversize,
-    and well-formed frames of every type with random payloads (arguments that would make the
-    device busy for long, BENCH n and STREAM counts, kept small)."""
-    rng = np.random.default_rng(seed)
-    frames = []
-    types = [int(t) for t in P.MsgType] + [0x00, 0x0B, 0x7F, 0x80, 0xFF]
-    for i in range(n):
-        kind = i % 6
-        t = int(rng.choice(types))
-        payload = rng.bytes(int(rng.integers(0, 300)))
-        if t == P.MsgType.BENCH:
-            payload = int(rng.integers(0, 64)).to_bytes(4, "little")
-        elif t == P.MsgType.STREAM:
-            payload = int(rng.integers(0, 3)).to_bytes(2, "little") + int(rng.integers(0, 3)).to_bytes(2, "little")
-        seq = int(rng.integers(1, 256))
-        body = bytes([t & 0xFF, seq]) + len(payload).to_bytes(2, "little") + payload
-        body += P.crc32(body).to_bytes(4, "little")
-        if kind == 0:  # garbage, delimited
-            frames.append(rng.bytes(int(rng.integers(1, 80))) + b"\x00")
-        elif kind == 1:  # a valid frame with flipped bits
-            enc = bytearray(P.cobs_encode(body))
-            for _ in range(int(rng.integers(1, 4))):
-                enc[int(rng.integers(len(enc)))] ^= 1 << int(rng.integers(8))
-            frames.append(bytes(enc) + b"\x00")
-        elif kind == 2:  # truncated
-            enc = P.cobs_encode(body)
-            frames.append(enc[: int(rng.integers(0, len(enc)))] + b"\x00")
-        elif kind == 3:  # length field disagreeing with the payload, CRC made right
-            wrong = bytearray(body[:-4])
-            wrong[2:4] = int(rng.integers(0, 65536)).to_bytes(2, "little")
-            frames.append(P.cobs_encode(bytes(wrong) + P.crc32(bytes(wrong)).to_bytes(4, "little")) + b"\x00")
-        elif kind == 4:  # oversize: no delimiter for longer than the longest frame, up to three of them
-            size = int(rng.integers(OVERSIZE[0], OVERSIZE[1]))
-            frames.append(bytes(rng.integers(1, 256, size, dtype=np.uint8)) + b"\x00")
-        else:  # well formed, random type and payload (may be refused for its length or arguments)
-            frames.append(P.cobs_encode(body) + b"\x00")
-    return frames
-
-
 def sync(dev: Device, token: bytes, timeout: float | None = None) -> bool:
     """PING with a token no fuzz frame carries and read until its echo: every frame sent before has
     then been answered, so no stale reply is left to be taken for the next request's."""
@@ -450,10 +424,11 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
         if data is not None:
             inputs = np.vstack([inputs, data])
 
-    def evaluate(subset, name):
-        if fixed is not None:
-            return step(check_eval_fixed, dev, model, fixed, subset, name)
-        return step(check_eval, dev, model, subset, name, fma)
+    def evaluate(subset, name):  # a bar on a terminal: thousands of vectors take seconds on a slow board
+        with Progress(name, len(subset)) as prog:
+            if fixed is not None:
+                return step(check_eval_fixed, dev, model, fixed, subset, name, progress=prog)
+            return step(check_eval, dev, model, subset, name, fma, progress=prog)
 
     def step(fn, *args, **kw):
         t0 = time.perf_counter()
@@ -465,17 +440,19 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
             c = Check(fn.__name__.removeprefix("check_").replace("_", " "), False, str(exc))
         c.seconds = time.perf_counter() - t0
         checks.append(c)
+        if kw.get("progress") is not None:
+            kw["progress"].close()  # the bar's line cleared before the check's
         if verbose:
             print(f"  {c.name}: {'pass' if c.ok else 'FAIL'} ({c.seconds:.1f} s)", flush=True)
         return c
 
     if not sync(dev, b"hil-start" + bytes(np.random.default_rng().bytes(16))):
         raise NoAnswer(f"{url or 'the device'} does not answer PING")
-    step(check_info, dev, model)
-    dev.reset_calibration()
+    step(check_info, dev, model)  # resets a loaded calibration first
     evaluate(inputs, "eval")
     if held_out is not None:
-        step(check_held_out, dev, model, held_out, max_share, fixed)
+        with Progress("held-out accuracy", len(held_out[0])) as prog:
+            step(check_held_out, dev, model, held_out, max_share, fixed, progress=prog)
     step(check_stream, dev)
     step(check_timing, dev, model, fixed=fixed)
     if flash and fixed is not None:

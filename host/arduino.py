@@ -24,6 +24,7 @@ from pathlib import Path
 from fitgen import __version__
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import check_folder, write_atomic
+from fitgen.base.progress import Progress
 from fitgen.c.cgen import c_real
 from fitgen.c.codegen import write_header
 from fitgen.equations.model import Model
@@ -76,10 +77,12 @@ class Size:
 
     def describe(self, board: Board) -> str:
         def part(what, used, limit):
-            if used is None:
-                return f"{what} ? of {limit} B"
+            if used is None:  # the linker stopped at the other region: this one was never placed
+                return f"{what} not known (the link failed first)"
             return f"{what} {'over ' if self.overflow and used > limit else ''}{used} of {limit} B ({100 * used / limit:.0f} %)"
-        if self.stack is None or self.ram is None:
+        if self.ram is None:
+            return f"{part('flash', self.flash, board.flash)}, {part('RAM', None, board.ram)}"
+        if self.stack is None:
             return f"{part('flash', self.flash, board.flash)}, {part('RAM', self.ram, board.ram)} before the stack"
         if self.ram_used >= board.ram:
             return (f"{part('flash', self.flash, board.flash)}, RAM {self.ram} of {board.ram} B and the stack ran "
@@ -172,8 +175,8 @@ def render_config(cmap: ChannelMap, precision: str) -> str:
 def _write_model(model: Model, src: Path, precision: str, style: str, lsb: float | None) -> None:
     if precision == "fixed":  # the plan for the Uno's 16-bit multiply (fitgen.equations.fixednarrow)
         write_header(model, src, "fixed", input_lsb=lsb, input_offset=0.0, target="uno")
-    else:
-        write_header(model, src, precision, style)
+    else:  # a float header is the same for every core; the Uno's target refuses a refinement up front
+        write_header(model, src, precision, style, target="uno")
 
 
 def render_arduino(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: str = "float",
@@ -212,12 +215,18 @@ def find_builder() -> str | None:
     return shutil.which("arduino-builder")
 
 
-def build_example(library: str | Path, build_path: str | Path, board: Board = BOARDS["uno"]) -> Size:
-    """Build examples/ReadPose against ``library`` with arduino-builder, offline; the ELF's sizes."""
-    library, build_path = Path(library).resolve(), Path(build_path)
+def require_builder() -> str:
+    """arduino-builder's path; InputError (how to install it) when it is not installed."""
     builder = find_builder()
     if builder is None:
         raise InputError("arduino-builder is not installed (apt-get install arduino-builder arduino-core-avr)")
+    return builder
+
+
+def build_example(library: str | Path, build_path: str | Path, board: Board = BOARDS["uno"]) -> Size:
+    """Build examples/ReadPose against ``library`` with arduino-builder, offline; the ELF's sizes."""
+    library, build_path = Path(library).resolve(), Path(build_path)
+    builder = require_builder()
     build_path.mkdir(parents=True, exist_ok=True)
     # the builder takes a folder of libraries: a link named as the library, so that it is found by name
     with tempfile.TemporaryDirectory() as libs:
@@ -274,7 +283,10 @@ def arduino_build(model: Model, cmap: ChannelMap, folder: str | Path, *, precisi
     ``measure(build_path, size)`` -> the size with the stack's peak (hil/sketch.py runs the example), for the
     build and for each setting tried in its place."""
     folder = _library_folder(folder)
-    partial = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".partial", dir=folder.parent))
+    try:
+        partial = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".partial", dir=folder.parent))
+    except OSError as exc:  # e.g. under /proc, which a root user may "write"
+        raise InputError(f"cannot write {folder}: {exc.strerror}") from None
     try:  # the library is rendered and built beside the folder, which it replaces only when it fits
         render_arduino(model, cmap, partial, precision=precision, style=style)
         size = _build_fitting(model, cmap, partial, precision, style, board, build, build_path, measure)
@@ -321,19 +333,24 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
     if not build:
         return None
 
-    def built(library, path):
+    def built(library, path, what):
+        bar.update(0, f"building ReadPose ({what}) with arduino-builder")
         size = build_example(library, path, spec)
-        return measure(path, size) if measure is not None and size.fits(spec) else size
+        if measure is None or not size.fits(spec):
+            return size
+        bar.update(0, f"running ReadPose ({what}) on the emulated Uno for its stack")
+        return measure(path, size)
 
-    with tempfile.TemporaryDirectory() as tmp:
-        size = built(library, Path(tmp) / "build" if build_path is None else build_path)
+    # a bar on a terminal: a build takes 5-9 s, and one that does not fit is tried in other settings
+    with tempfile.TemporaryDirectory() as tmp, Progress("arduino-build", 1) as bar:
+        size = built(library, Path(tmp) / "build" if build_path is None else build_path, f"{precision}, {style}")
         if size.fits(spec):
             return size
         hint = "no other precision or style fits: fit fewer terms (fitgen fit --k bic, or --max-terms N)"
         for k, (prec, sty, option) in enumerate(_alternatives(precision, style)):
             try:
                 alt = render_arduino(model, cmap, Path(tmp) / f"alt{k}", precision=prec, style=sty)
-                alt_size = built(alt, Path(tmp) / f"build{k}")
+                alt_size = built(alt, Path(tmp) / f"build{k}", f"does {option} fit?")
             except InputError:
                 continue  # e.g. a model fixed point cannot plan
             if alt_size.fits(spec):

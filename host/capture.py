@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from collections import Counter
@@ -48,6 +49,9 @@ class SpreadTooLarge(RuntimeError):
 
 class TriggerFailed(RuntimeError):
     """The trigger command did not succeed."""
+
+
+TRIGGER_TIMEOUT = 60.0  # s a trigger may take to set a pose (--trigger-timeout): a hung one must not hang the capture
 
 
 @dataclass(frozen=True)
@@ -196,8 +200,9 @@ def enter_waiter(schedule: Schedule, stdin=None, stderr=None):
     return wait
 
 
-def trigger_waiter(command: str, schedule: Schedule):
-    """Run ``command`` (a shell command line) for each pose; it must exit 0 once the pose is set.
+def trigger_waiter(command: str, schedule: Schedule, timeout: float = TRIGGER_TIMEOUT):
+    """Run ``command`` (a shell command line) for each pose; it must exit 0 once the pose is set, within
+    ``timeout`` seconds (else it is killed, with whatever it started, and TriggerFailed says so).
 
     Its environment has TM_POSE_INDEX (1-based), TM_POSE_COUNT and TM_DX, TM_DY, TM_DZ, TM_THX, TM_THY.
     """
@@ -206,16 +211,34 @@ def trigger_waiter(command: str, schedule: Schedule):
     def wait(i: int, pose) -> bool:
         env = dict(os.environ, TM_POSE_INDEX=str(i + 1), TM_POSE_COUNT=str(total),
                    **{f"TM_{n.upper()}": repr(float(v)) for n, v in zip(POSE_NAMES, pose)})
-        try:
-            proc = subprocess.run(command, shell=True, env=env)
+        try:  # a process group of its own: on expiry the shell and every command it started are killed
+            proc = subprocess.Popen(command, shell=True, env=env, start_new_session=True)
         except OSError as exc:
             raise TriggerFailed(f"trigger {command!r} could not run: {exc.strerror}") from None
-        if proc.returncode != 0:
-            raise TriggerFailed(f"trigger {command!r} failed with exit status {proc.returncode} "
+        try:
+            code = proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            _kill_group(proc)
+            raise TriggerFailed(f"trigger {command!r} did not exit within {timeout:g} s (--trigger-timeout) "
+                                f"at pose {i + 1}/{total} ({schedule.describe(i)})") from None
+        except BaseException:  # Ctrl-C: it no longer gets the terminal's SIGINT in its own group
+            _kill_group(proc)
+            raise
+        if code != 0:
+            raise TriggerFailed(f"trigger {command!r} failed with exit status {code} "
                                 f"at pose {i + 1}/{total} ({schedule.describe(i)})")
         return True
 
     return wait
+
+
+def _kill_group(proc: subprocess.Popen) -> None:
+    """SIGKILL to ``proc``'s process group (it leads one), then reap it."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    proc.wait()
 
 
 @dataclass

@@ -12,9 +12,9 @@ from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from fitgen.base.progress import Progress
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.capture import (SpreadTooLarge, TriggerFailed, capture, check_resume, enter_waiter, load_schedule,
-                          prepare_output, trigger_waiter)
-from host.session import channel_map_from_args, open_bus_from_args
+from host.capture import (TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFailed, capture, check_resume, enter_waiter,
+                          load_schedule, prepare_output, trigger_waiter)
+from host.session import channel_map_from_args, open_bus_from_args, refuse_alone
 from host.stage import StageError, StageState
 from host.stagecapture import open_stage, stage_settings
 from host.stagesim import pose_file_motion
@@ -36,10 +36,19 @@ def capture_numbers(args) -> tuple:
             parse_positive(args.retries, "--retries", integer=True))
 
 
+def trigger_timeout(args) -> float:
+    """--trigger-timeout, checked (> 0, at most an hour; only with --trigger), or its default."""
+    refuse_alone([(args.trigger_timeout is not None, "--trigger-timeout", "--trigger", bool(args.trigger))])
+    if args.trigger_timeout is None:
+        return TRIGGER_TIMEOUT
+    return parse_positive(args.trigger_timeout, "--trigger-timeout", most=LONGEST_WAIT)
+
+
 def run_capture(args, prog: str) -> None:
     """The schedule ``--poses`` into ``--output`` (resumed if it has rows); progress and the summary go to
     stderr after ``prog``. Raises CaptureFailed or CaptureInterrupted when it stops early."""
     samples, spread, tries, settle, retries = capture_numbers(args)
+    timeout = trigger_timeout(args)
     schedule = load_schedule(args.poses)
     cmap = channel_map_from_args(args)
     state = prepare_output(args.output, cmap.n_elements, schedule, write=False)  # checked before any waiting
@@ -52,7 +61,7 @@ def run_capture(args, prog: str) -> None:
         return
     interactive = not args.trigger and not args.simulate and stage_opts is None
     if args.trigger:
-        wait = trigger_waiter(args.trigger, schedule)
+        wait = trigger_waiter(args.trigger, schedule, timeout)
     elif args.simulate or stage_opts is not None:
         wait = None  # the stage (simulated or G-code) sets each pose itself
     else:

@@ -22,7 +22,7 @@ from fitgen import __version__
 from fitgen.c.codegen import render_header
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
-from fitgen.equations.model import Model
+from fitgen.equations.model import Model, check_input_units
 
 from host.cdrivers import chip_table, smbus_transfer
 from host.channelmap import ChannelMap, check_full_scale
@@ -87,9 +87,7 @@ def render_adc_map(cmap: ChannelMap, tin=None) -> str:
 
 def check_reads(model: Model, cmap: ChannelMap) -> None:
     """InputError unless ``model`` takes volts, one per element ``cmap`` reads."""
-    if model.input_units != "V":
-        raise InputError(f"the model takes inputs in {model.input_units}; the ADCs give volts: fit it on a dataset "
-                         "in V (fitgen simulate --transfer gmr, or tactile-host capture)")
+    check_input_units(model, "V", "the ADCs' readings")
     if cmap.n_elements != model.n_inputs:
         raise InputError(f"the channel map reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
     check_full_scale(cmap, model.input_min, model.input_max)

@@ -19,12 +19,12 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import read_text, write_atomic
-from fitgen.equations.model import Model, load_model, model_from_dict
+from fitgen.equations.model import Model, check_input_units, load_model, model_from_dict
 
 from host.autozero import AutoZero, AutoZeroSettings
 from host.engine import PythonEngine
 from host.readout import Corrections, RunRecord
-from host.temperature import TempComp, load_tempcomp
+from host.temperature import load_tempcomp, tempcomp_from_dict
 
 
 @dataclass
@@ -176,13 +176,14 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     if model.n_inputs != run.n_inputs:
         raise InputError(f"the model takes {model.n_inputs} inputs; the run has {run.n_inputs} readings per sample")
     units = recorded.input_units if recorded is not None else "V"  # tactile-host read records ADC volts
-    if model.input_units != units:
-        raise InputError(f"the model takes inputs in {model.input_units}; the run's readings are in {units}")
+    check_input_units(model, units, "the run's readings")
     same = model.sha256 == h.get("model")
     if temp_comp and no_temp_comp:
         raise InputError("give --temp-comp or --no-temp-comp, not both")
     try:
         corrections = _corrections(run, model, temp_comp, no_temp_comp, auto_zero)
+    except InputError:  # already says what is wrong, with the option or the header field
+        raise
     except (KeyError, TypeError, ValueError, AttributeError) as exc:  # a header edited by hand
         raise InputError(f"the run's header records corrections that are not as tactile-host read writes them "
                          f"({type(exc).__name__}: {exc})") from None
@@ -214,14 +215,14 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
     if temp_comp:
         tc = load_tempcomp(temp_comp)
     elif not no_temp_comp and h.get("temp_comp"):
-        d = h["temp_comp"]
-        tc = TempComp(float(d["t0"]), np.array(d["offset_v_per_degc"], dtype=float),
-                      np.array(d["gain_per_degc"], dtype=float), d.get("fit", {}))
+        tc = tempcomp_from_dict(h["temp_comp"], "the run's header: temp_comp")
     if tc is not None and (tc.n != n or tc.gain.shape != tc.offset.shape):
-        raise InputError(f"the temperature compensation has {tc.n} elements; the run has {n} readings per sample")
+        raise InputError(f"{f'--temp-comp {temp_comp}' if temp_comp else 'the header temp_comp'} has {tc.n} "
+                         f"elements; the run has {n} readings per sample")
     if tc is not None and not np.isfinite(run.temp).any():
-        raise InputError("temperature compensation needs the run's temperatures, and this run recorded none "
-                         "(a thermistor: temp= in read's --adc)")
+        who = f"--temp-comp {temp_comp}" if temp_comp else "the run's header names a temperature compensation, but it"
+        raise InputError(f"{who} needs the run's temperatures, and this run recorded none (it was read without a "
+                         "thermistor: temp= in read's --adc)")
     tare = None if h.get("tare") is None else np.array(h["tare"], dtype=float)
     if tare is not None and tare.shape != (n,):
         raise InputError(f"the run's header records a tare of {tare.size} offsets for {n} readings")
@@ -231,8 +232,9 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
     if use_az:
         ref, noise = h.get("reference"), h.get("noise")
         if ref is None or noise is None:
-            raise InputError("auto-zero needs the rest readings and the noise floor, which a run records only when "
-                             "it was made with --tare or --auto-zero")
+            who = "--auto-zero" if auto_zero else "the run's header asks for auto-zero, which"
+            raise InputError(f"{who} needs the rest readings and the noise floor, which a run records only when it "
+                             "was read with --tare or --auto-zero, and this one was not")
         settings = AutoZeroSettings(**{k: az_rec[k] for k in AutoZeroSettings.__dataclass_fields__}) if az_rec \
             else AutoZeroSettings()
         start = az_rec["start"] if az_rec else (None if tare is None else tare.tolist())

@@ -11,7 +11,7 @@ import sys
 
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_numbers, parse_positive
-from fitgen.equations.model import load_model
+from fitgen.equations.model import check_input_units, load_model
 from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, RetryPolicy, open_bus
@@ -76,15 +76,26 @@ def parse_rest_band(text: str) -> tuple[float, float]:
 MIN_AUTOZERO_TARE = 5  # samples whose spread is the noise floor auto-zero tests rest against
 
 
+# the readout's options that default to None, so that one typed (even as its default) is told from one left out
+READOUT_DEFAULTS = {"engine": "python", "precision": "double", "cc": "gcc", "tare_samples": "50",
+                    "rest_band": "0.08,1.5", "rest_hold": "1"}
+
+
 def check_depends(args) -> None:
-    """InputError for an option given without the one it depends on (it would be ignored without a word)."""
-    needs = ((args.precision != "double", "--precision", "--engine c", args.engine == "c"),
-             (args.cc != "gcc", "--cc", "--engine c", args.engine == "c"),
-             (args.rest is not None, "--rest", "--tare or --auto-zero", args.tare or args.auto_zero),
-             (args.tare_samples != "50", "--tare-samples", "--tare or --auto-zero", args.tare or args.auto_zero),
-             (args.rest_band != "0.08,1.5", "--rest-band", "--auto-zero", args.auto_zero),
-             (args.rest_hold != "1", "--rest-hold", "--auto-zero", args.auto_zero))
+    """InputError for an option given without the one it depends on (it would be ignored without a word); then
+    those left out take their READOUT_DEFAULTS."""
+    engine_c, ref = args.engine == "c", args.tare or args.auto_zero
+    needs = ((args.precision is not None, "--precision", "--engine c", engine_c),
+             (args.cc is not None, "--cc", "--engine c", engine_c),
+             (args.rest is not None, "--rest", "--tare or --auto-zero", ref),
+             (args.tare_samples is not None, "--tare-samples", "--tare or --auto-zero", ref),
+             (args.rest_band is not None, "--rest-band", "--auto-zero", args.auto_zero),
+             (args.rest_hold is not None, "--rest-hold", "--auto-zero", args.auto_zero),
+             (getattr(args, "hold", False), "--hold", "--replay", False))  # view --replay never comes here
     refuse_alone(needs)
+    for name, value in READOUT_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
 
 
 def refuse_alone(needs) -> None:
@@ -103,8 +114,8 @@ class ReadoutSession:
         self.rate = parse_positive(args.rate, "--rate") if args.rate is not None else None
         self.count = parse_positive(args.count, "--count", integer=True) if args.count is not None else None
         self.duration = parse_positive(args.duration, "--duration") if args.duration is not None else None
-        tare_n = parse_positive(args.tare_samples, "--tare-samples", integer=True)
         check_depends(args)
+        tare_n = parse_positive(args.tare_samples, "--tare-samples", integer=True)
         if args.auto_zero and tare_n < MIN_AUTOZERO_TARE:
             raise InputError(f"--auto-zero takes its noise floor from the tare's spread: give --tare-samples "
                              f"{MIN_AUTOZERO_TARE} or more (got {tare_n:g})")
@@ -120,9 +131,7 @@ class ReadoutSession:
         az_settings = AutoZeroSettings(band_mm=band[0], band_deg=band[1],
                                        hold=parse_positive(args.rest_hold, "--rest-hold")).checked()
         self.model = model = load_model(args.model)
-        if model.input_units != "V":
-            raise InputError(f"model {args.model} takes inputs in {model.input_units}; the ADCs give volts: fit it on "
-                             "a dataset in V (fitgen simulate --transfer gmr, or tactile-host capture)")
+        check_input_units(model, "V", "the ADCs' readings", f"model {args.model}")
         if tempcomp is not None and tempcomp.n != model.n_inputs:
             raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
         self.cmap = cmap = cmap0

@@ -15,7 +15,7 @@ from fitgen.physics.dataset import load_dataset
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, trigger_waiter
-from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers
+from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers, trigger_timeout
 from host.motion import parse_drift
 from host.session import channel_map_from_args, open_bus_from_args, refuse_alone
 from host.simsensor import Drift
@@ -26,7 +26,8 @@ def parse_temperatures(text: str) -> list[float]:
     """``--temperature T1,T2,..``: two or more different temperatures in -40..125 degC."""
     vals = parse_numbers(text)
     if vals is None:
-        raise InputError(f"--temperature {text!r}: give temperatures in degC, e.g. 15,25,35")
+        raise InputError(f"--temperature {text!r}: give temperatures in degC, one between each two commas, e.g. "
+                         "15,25,35")
     if len(vals) < 2 or not all(math.isfinite(v) and -40 <= v <= 125 for v in vals):
         raise InputError(f"--temperature {text!r}: give two or more different temperatures in -40..125 degC")
     if len({round(v, 1) for v in vals}) != len(vals):  # the compensation tells levels apart to 0.1 degC
@@ -61,6 +62,7 @@ def capture_temperatures(args, prog: str):
     temps = parse_temperatures(args.temperature)
     t0 = parse_t0(args.t0, temps)
     samples, spread, tries, settle, retries = capture_numbers(args)
+    timeout = trigger_timeout(args)
     schedule = load_schedule(args.poses)
     # a pose visited twice is one pose to the compensation: its gain needs two different ones
     pose_of_row = np.unique(schedule.poses, axis=0, return_inverse=True)[1].ravel()
@@ -92,7 +94,7 @@ def capture_temperatures(args, prog: str):
                       file=sys.stderr, flush=True)
                 if not sys.stdin.readline():
                     return None
-            wait = trigger_waiter(args.trigger, schedule) if args.trigger else None
+            wait = trigger_waiter(args.trigger, schedule, timeout) if args.trigger else None
             if wait is None and not args.simulate:
                 wait = enter_waiter(schedule)
             # read now, at this level (not a value kept from the last one); a level captured by an earlier run

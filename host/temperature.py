@@ -26,12 +26,15 @@ from typing import ClassVar
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, finite_number
 from fitgen.base.fileio import read_text, write_atomic
 
 DIVIDER_KEYS = ("beta", "r25", "series", "vref")
 DIVIDER_DEFAULTS = {"beta": 3950.0, "r25": 10_000.0, "series": 10_000.0, "vref": 3.3}
 READ_EVERY = 0.25  # s between thermistor reads: temperature moves slowly, conversions cost bus time
+# degC: an NTC thermistor's usual rated range; a compensation must stay meaningful wherever it can read
+T_RANGE = (-40.0, 125.0)
+FLOAT_MAX = float(np.finfo(np.float32).max)  # tempcomp-c's default header holds every coefficient as a float
 
 
 @dataclass(frozen=True)
@@ -168,25 +171,52 @@ class TempComp:
 
 
 def load_tempcomp(path) -> TempComp:
+    """A compensation file (``capture --temperature``), checked by :func:`tempcomp_from_dict`."""
     origin = f"temperature compensation {path}"
-    text = read_text(path, "temperature compensation file")
     try:
-        data = json.loads(text)
-        kind = data.get("kind")
-        t0 = float(data["t0"])
-        off = np.asarray(data["offset_v_per_degc"], dtype=float)
-        gain = np.asarray(data["gain_per_degc"], dtype=float)
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise InputError(f"{origin}: not a compensation file ({type(exc).__name__}: {exc})") from None
-    if kind != TempComp.KIND:
-        raise InputError(f"{origin}: not a compensation file (its kind is {kind!r}, "
-                         f"not {TempComp.KIND!r})")
+        data = json.loads(read_text(path, "temperature compensation file"))
+    except ValueError as exc:
+        raise InputError(f"{origin}: not a compensation file (not JSON: {exc})") from None
+    return tempcomp_from_dict(data, origin)
+
+
+def tempcomp_from_dict(data, origin: str) -> TempComp:
+    """A compensation from its :meth:`TempComp.to_dict` form; InputError naming the field unless it is version 1,
+    every number finite and within a float (the C header's), t0 and the correction's factor 1 + g (T - t0) > 0
+    at every temperature of T_RANGE."""
+    if not isinstance(data, dict) or data.get("kind") != TempComp.KIND:
+        kind = data.get("kind") if isinstance(data, dict) else None
+        raise InputError(f"{origin}: not a compensation file (its kind is {kind!r}, not {TempComp.KIND!r})")
+    if data.get("version") != 1 or isinstance(data.get("version"), bool):
+        raise InputError(f"{origin}: version {data.get('version')!r} is not one this tactile-host reads (1)")
+    t0 = finite_number(data.get("t0"), f"{origin}: t0")
+    if not T_RANGE[0] <= t0 <= T_RANGE[1]:
+        raise InputError(f"{origin}: t0 {t0:g} degC is outside the thermistor's range ({T_RANGE[0]:g}..{T_RANGE[1]:g})")
+    off, gain = (_coefficients(data.get(key), f"{origin}: {key}") for key in ("offset_v_per_degc", "gain_per_degc"))
     if off.size == 0:
         raise InputError(f"{origin}: it compensates no element")
-    if off.ndim != 1 or off.shape != gain.shape or not (np.all(np.isfinite(off)) and np.all(np.isfinite(gain))
-                                                         and math.isfinite(t0)):
-        raise InputError(f"{origin}: offsets and gains must be finite lists of the same length")
-    return TempComp(t0, off, gain, data.get("fit", {}))
+    if off.shape != gain.shape:
+        raise InputError(f"{origin}: {off.size} offsets but {gain.size} gains")
+    for t in T_RANGE:  # the factor is linear in T: positive at both ends, positive between
+        factor = 1.0 + gain * (t - t0)
+        if not np.all(factor > 0):
+            k = int(np.argmin(factor))
+            raise InputError(f"{origin}: gain_per_degc[{k}] = {gain[k]:g} makes the correction's factor "
+                             f"1 + g (T - t0) = {factor[k]:.3g} at {t:g} degC (it must stay > 0 over the thermistor's "
+                             f"{T_RANGE[0]:g}..{T_RANGE[1]:g} degC)")
+    fit = data.get("fit", {})
+    return TempComp(t0, off, gain, fit if isinstance(fit, dict) else {})
+
+
+def _coefficients(values, where: str) -> np.ndarray:
+    """A list of finite numbers, each within a float (the C header's precision); InputError naming ``where``."""
+    if not isinstance(values, list):
+        raise InputError(f"{where} must be a list of numbers")
+    out = np.array([finite_number(x, f"{where}[{i}]") for i, x in enumerate(values)], dtype=float)
+    big = np.flatnonzero(np.abs(out) > FLOAT_MAX)
+    if big.size:
+        raise InputError(f"{where}[{big[0]}] = {out[big[0]]:g} does not fit in a float")
+    return out
 
 
 def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, t0: float | None = None) -> TempComp:
@@ -225,7 +255,9 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
         resid[k] = float(np.sqrt(np.mean((y - X @ coef) ** 2)))
     info = {"rows": int(readings.shape[0]), "temperatures": levels.tolist(), "poses": int(np.unique(pose_ids).size),
             "residual_rms_v": resid.tolist(), "gain_fitted": bool(multi)}
-    return TempComp(t0, off, gain, info)
+    tc = TempComp(t0, off, gain, info)
+    tempcomp_from_dict(tc.to_dict(), "the compensation these captures give")  # nothing saved that read refuses
+    return tc
 
 
 def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:

@@ -281,3 +281,78 @@ def test_emulate_refuses_no_build_and_a_bad_pose_in_one_line(model_path, tmp_pat
     proc = _build_cli(model_path, tmp_path / "b", "--emulate", "dq=1")
     assert_one_line_error(proc, 2, "the simulated pose 'dq=1'")
     assert not (tmp_path / "b").exists()  # refused before anything was written
+
+
+def test_without_arduino_builder_the_library_is_written_and_said_not_built(model_path, tmp_path, monkeypatch):
+    """The build is done when arduino-builder is installed: without it the library is written and the line says it
+    was not built; --emulate, which asks for a build, is refused in one line before anything is written."""
+    import os
+    import sys
+
+    bindir = tmp_path / "bin"  # a PATH with python but without arduino-builder
+    bindir.mkdir()
+    os.symlink(sys.executable, bindir / "python3")
+    monkeypatch.setenv("PATH", str(bindir))
+    proc = _build_cli(model_path, tmp_path / "TactilePose")
+    assert proc.returncode == 0, proc.stderr
+    assert "not built (no arduino-builder)" in proc.stderr
+    assert (tmp_path / "TactilePose" / "src" / "tm_model.h").is_file()
+    proc = _build_cli(model_path, tmp_path / "E", "--emulate", "dx=1")
+    assert_one_line_error(proc, 2, "arduino-builder is not installed (apt-get install")
+    assert not (tmp_path / "E").exists()
+
+
+def test_an_unwritable_folder_and_a_refinement_are_refused_in_one_line_up_front(sensor, tmp_path):
+    from fitgen.fitting.fit import FitSettings, fit_model
+    from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
+
+    refined = fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])),
+                        settings=FitSettings.family("all", max_terms=12, refine=1, refine_terms=12), sensor=sensor)
+    path = str(refined.save(tmp_path / "refined.json"))
+    # /proc takes no folder (root's access() says it is writable): one line, not mkdtemp's traceback
+    assert_one_line_error(_build_cli(path, "/proc/tactile-no-such", "--no-build"), 2, "/proc/tactile-no-such")
+    # a refinement's solve does not fit the Uno: said before a build, as emulate --target uno says it
+    proc = _build_cli(path, tmp_path / "R")
+    assert_one_line_error(proc, 2, "fit without --refine")
+    assert not (tmp_path / "R").exists()
+
+
+def test_a_size_the_link_did_not_give_is_said_plainly():
+    from host.arduino import Size
+
+    said = Size(flash=35118, ram=None, overflow=True).describe(UNO)
+    assert "?" not in said and said == "flash over 35118 of 32256 B (109 %), RAM not known (the link failed first)"
+
+
+def test_the_build_shows_progress_on_a_terminal(device_model, tmp_path, monkeypatch):
+    """A build takes 5-9 s: on a terminal a line says what is being done."""
+    require_tool("arduino-builder")
+    import sys
+
+    from host.arduino import arduino_build
+
+    class Terminal:
+        text = ""
+
+        def isatty(self):
+            return True
+
+        def write(self, text):
+            Terminal.text += text
+
+        def flush(self):
+            pass
+
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    size = arduino_build(device_model, parse_spec(TWO_CHIPS), tmp_path / "TactilePose", build=True)
+    assert size.fits(UNO)
+    assert "\rarduino-build [" in Terminal.text and "building ReadPose (float, unrolled) with arduino-builder" in \
+        Terminal.text
+
+
+def test_help_says_the_library_reads_no_thermistor():
+    """temp= and --thermistor are refused by arduino-build: its help does not offer them."""
+    proc = run_cli("tactile-host", "arduino-build", "--help")
+    assert proc.returncode == 0
+    assert "adds a thermistor" not in proc.stdout and "--thermistor" not in proc.stdout
+    assert "temp= (a thermistor) is refused" in " ".join(proc.stdout.split())

@@ -205,7 +205,25 @@ def test_report_sweeps_only_on_the_sensor_the_model_was_fitted_on(fitted, data, 
                                   "--sensor", "two-rings"), contains="--sensor two-rings: the model was fitted on "
                                                                      "another sensor")
     assert_one_line_error(run_cli("fitgen", "report", model, "--sensor", "paper"), contains="goes with --plot")
+    assert_one_line_error(run_cli("fitgen", "report", model, "--paper"), contains="--paper goes with --data")
     assert not (tmp_path / "p").exists()
+
+
+def test_readings_in_other_units_than_the_models_are_refused_by_predict_and_report(fitted, data, tmp_path):
+    """The model takes mT; readings whose meta says V are refused in one line (the check tactile-host read makes)."""
+    model = str(tmp_path / "m.json")
+    (tmp_path / "m.json").write_text(json.dumps(fitted))
+    volts = tmp_path / "v.csv"
+    simulate(load_sensor("paper").with_transfer("gmr"), random_poses(20, DEFAULT_RANGES, pose_rng(2))).save(volts)
+    said = f"model {model} takes inputs in mT; {volts}'s readings are in V"
+    assert_one_line_error(run_cli("fitgen", "predict", model, str(volts), "-o", str(tmp_path / "e.csv")), contains=said)
+    assert not (tmp_path / "e.csv").exists()
+    assert_one_line_error(run_cli("fitgen", "report", model, "--data", str(volts)), contains=said)
+    # readings in the model's units pass, and so do readings whose units are not recorded (no meta file)
+    shutil.copy(volts, tmp_path / "bare.csv")
+    for readings in (data, tmp_path / "bare.csv"):
+        assert run_cli("fitgen", "predict", model, str(readings), "-o", str(tmp_path / "e.csv")).returncode == 0
+        assert run_cli("fitgen", "report", model, "--data", str(readings)).returncode == 0
 
 
 def test_predict_says_which_rows_have_no_estimate_without_numpy_warnings(fitted, data, tmp_path):
@@ -264,6 +282,27 @@ def test_sigterm_cleans_up_as_ctrl_c_does(capsys):
     assert made and not made[0].exists()
     assert capsys.readouterr().err.strip() == "fitgen: terminated"
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+@pytest.mark.parametrize("tool, args", [("fitgen", ["observe", "--sensor", "paper"]), ("fitgen", ["--help"]),
+                                        ("tactile-host", ["read", "--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3",
+                                                          "--simulate", "motion", "--duration", "0.3"])])
+def test_a_standard_output_that_cannot_be_written_is_one_line(tmp_path, tool, args):
+    """A full disk behind standard output (> /dev/full) is said in one line with status 2, not a traceback."""
+    import subprocess
+    import sys
+
+    if tool == "tactile-host":  # a model in volts, as the ADCs give
+        assert run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--grid", "paper-exp", "-o",
+                       str(tmp_path / "d.csv")).returncode == 0
+        assert run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"), "--held-out", "100",
+                       "--family", "no-roots").returncode == 0
+        args = [*args, "--model", str(tmp_path / "m.json")]
+    module = {"fitgen": "fitgen.app.cli", "tactile-host": "fitgen.app.host_cli"}[tool]
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run([sys.executable, "-c", f"import sys; from {module} import main; sys.argv[0] = {tool!r}; "
+                               "main()", *args], stdout=full, stderr=subprocess.PIPE, text=True, timeout=120)
+    assert_one_line_error(proc, 2, f"{tool}: error: cannot write standard output: No space left on device")
 
 
 def test_codes_that_are_not_whole_or_beyond_int32_are_named_by_row_and_column(tmp_path):

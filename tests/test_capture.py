@@ -198,6 +198,24 @@ def test_capture_command_a_failing_trigger_is_one_line_status_1_and_rows_are_kep
     assert len(data_rows(out)[1]) == 3
 
 
+def test_capture_command_a_hung_trigger_is_killed_at_its_time_limit_and_rows_are_kept(tmp_path):
+    import time
+
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:5])
+    out = tmp_path / "d.csv"
+    t0 = time.monotonic()
+    # the shell's child too: if it lived on, it would hold the output pipe (and this call) for 30 s
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate",
+                   "--samples", "2", "--trigger", '[ "$TM_POSE_INDEX" -lt 4 ] || { sleep 30; true; }',
+                   "--trigger-timeout", "1")
+    assert time.monotonic() - t0 < 20
+    assert_one_line_error(proc, 1, "did not exit within 1 s (--trigger-timeout) at pose 4/5")
+    assert "run the same command again to resume" in proc.stderr
+    assert len(data_rows(out)[1]) == 3
+    assert_one_line_error(run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out),
+                                  "--simulate", "--trigger-timeout", "5"), 2, "--trigger-timeout goes with --trigger")
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--samples", "0"], "--samples must be a whole number >= 1, got 0"),
     (["--max-spread", "x"], "--max-spread 'x' is not a number"),

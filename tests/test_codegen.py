@@ -67,6 +67,35 @@ def test_every_term_kind_and_extreme_coefficients(precision, style):
     assert res.nonfinite_outputs == 0
 
 
+@pytest.mark.parametrize("precision, style", [("double", "table"), ("double", "unrolled"), ("float", "table"),
+                                              ("float", "unrolled"), ("fixed", "")])
+@pytest.mark.parametrize("kind", ["intercepts", "d-terms"])
+def test_outputs_without_input_powers_compile_warning_free_and_match_python(paper_model, precision, style, kind):
+    """Intercept-only outputs (constants), and bare d-terms only: no term reads an input's power, yet the
+    header compiles under the warning flags (CompiledModel: -Werror, -O2) and answers what Python does."""
+    require_tool("gcc")
+    eqs = [Equation(e.name, e.intercept, (), ()) for e in paper_model.equations]
+    if kind == "d-terms":
+        eqs[3] = Equation("thx", 0.5, (Term(mult="dx"), Term(mult="dz")), (0.25, -2.0))
+    model = dataclasses.replace(paper_model, equations=tuple(eqs))
+    lo, hi = model.input_min, model.input_max
+    rows = np.vstack([lo, hi, (lo + hi) / 2, hi * 3, lo / 2])
+    if precision == "fixed":
+        with CompiledModel(model, "fixed", input_lsb=1e-3) as cm:
+            codes = cm.fixed.codes_of(rows)
+            out, status = cm.predict_codes(codes)
+            ref, ref_status = cm.fixed.predict_codes(codes)
+            assert np.array_equal(out, ref) and np.array_equal(status, ref_status)
+            err = np.abs(cm.fixed.to_real(out) - model.predict(cm.fixed.code_values(codes)))
+            assert np.all(err <= cm.fixed.error_bound())
+        return
+    with CompiledModel(model, precision, style) as cm:
+        out, status = cm.predict(rows)
+    ref, ref_status = model.predict(rows, with_status=True, precision=precision)
+    assert np.array_equal(out, ref), (out, ref)
+    assert status.tolist() == [0, 0, 0, 255, 255] and np.array_equal(status, ref_status)
+
+
 def test_generation_is_deterministic(paper_model, tmp_path):
     for precision in ("double", "float"):
         for style in ("table", "unrolled"):
@@ -138,6 +167,24 @@ def test_codegen_and_verify_cli(paper_model, tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.count("PASS") == 4
     assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--cc", "no-such-cc"), contains="not found")
+
+
+def test_verify_bounds_the_random_vectors(paper_model, tmp_path):
+    """A count of vectors that could not be held is one line and status 2, not a MemoryError."""
+    path = paper_model.save(tmp_path / "m.json")
+    for n in ("100000000000", "100001", "-1"):
+        assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--vectors", n),
+                              contains="--vectors must be a whole number from 0 to 100,000")
+
+
+def test_verify_refuses_data_in_other_units_than_the_model_takes(paper_model, tmp_path):
+    """--data's readings are checked against the model's units as read --model checks the ADCs' volts."""
+    path = paper_model.save(tmp_path / "m.json")  # mT
+    assert run_cli("fitgen", "simulate", "--transfer", "gmr", "--grid", "dx=0,1", "-o",
+                   str(tmp_path / "v.csv")).returncode == 0
+    assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--data", str(tmp_path / "v.csv")),
+                          contains="the model takes inputs in mT; dataset " + str(tmp_path / "v.csv") +
+                          "'s readings are in V")
 
 
 @pytest.mark.parametrize("cc", ["gcc", "clang"])

@@ -242,6 +242,10 @@ def test_verify_fails_when_float_rounding_exceeds_the_share(fitted_files):
     assert loose.returncode == 0, loose.stdout
     assert_one_line_error(run_cli("tactile-host", "verify", str(fitted_files / "exact.json"), "--max-share", "-1"),
                           contains="--max-share")
+    # another sensor's held-out readings are not the model's: refused as fitgen report refuses it
+    assert_one_line_error(run_cli("tactile-host", "verify", str(fitted_files / "default.json"), "--sensor", "two-rings",
+                                  "--precision", "float", "--style", "unrolled"),
+                          contains="--sensor two-rings: the model was fitted on another sensor")
 
 
 def test_deployed_errors_fixed_point_within_share():

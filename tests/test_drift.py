@@ -3,6 +3,7 @@ auto-zero, run records and replay, and the options' bad input."""
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -112,9 +113,59 @@ def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
     assert all((tmp_path / f"cap.T{t}.csv").exists() for t in (15, 25, 35))
     with pytest.raises(InputError, match="one temperature"):
         fit_tempcomp(np.ones((3, 8)), np.arange(3), np.full(3, 25.0))
+    # a fit that read --temp-comp would refuse is not saved: gains that turn the correction's factor negative
+    temps = np.repeat([25.0, 35.0], 3)
+    base = np.tile([[1.0] * 8, [2.0] * 8, [3.0] * 8], (2, 1))
+    with pytest.raises(InputError, match=r"the compensation these captures give: gain_per_degc\[0\] = -0.05"):
+        fit_tempcomp(base * (1 - 0.05 * (temps - 25.0))[:, None], np.tile(np.arange(3), 2), temps)
     one = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS, "--simulate", "--temperature",
                   "25", "-o", str(tmp_path / "x.csv"))
     assert_one_line_error(one, contains="two or more different temperatures")
+
+
+@pytest.mark.parametrize("edit, said", [
+    ({"gain_per_degc": [1e300] + [0.0] * 7}, "gain_per_degc[0] = 1e+300 does not fit in a float"),
+    # 1 - 0.04 (125 - 25) < 0: the readings would be divided by a factor through zero
+    ({"gain_per_degc": [-0.04] + [0.0] * 7}, "gain_per_degc[0] = -0.04 makes the correction's factor"),
+    ({"version": 2}, "version 2 is not one"),
+    ({"t0": "25"}, "t0 must be a finite number, got '25'"),
+    ({"t0": float("nan")}, "t0 must be a finite number, got nan"),
+])
+def test_read_and_tempcomp_c_refuse_the_same_compensation_files(rest_model_file, tmp_path, edit, said):
+    """One validation: the file read --temp-comp applies is checked as tempcomp-c checks it."""
+    path = tmp_path / "tc.json"
+    path.write_text(json.dumps({"kind": TempComp.KIND, "version": 1, "t0": 25.0, "offset_v_per_degc": [1e-4] * 8,
+                                "gain_per_degc": [-1e-3] * 8, **edit}))
+    assert_one_line_error(run_cli("tactile-host", "tempcomp-c", str(path), "-o", str(tmp_path / "c")), contains=said)
+    assert_one_line_error(run_cli("tactile-host", "read", "--model", rest_model_file, "--adc",
+                                  TWO_CHIPS + ",temp=ads1115@0x4a:0", "--simulate", "0,0,0,0,0", "--temp-comp",
+                                  str(path), "--count", "1"), contains=said)
+
+
+def test_capture_temperatures_below_zero_and_empty_items(tmp_path):
+    """'--temperature -10,25' is a value, not an unknown option; '15,,35' is refused, not read as 15,35."""
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dz\n0,0\n1,-1\n")
+    args = ["capture", "--poses", str(sched), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0", "--simulate"]
+    proc = run_cli("tactile-host", *args, "--temperature", "-10,25", "-o", str(tmp_path / "cap.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert load_tempcomp(tmp_path / "cap.tempcomp.json").info["temperatures"] == [-10.0, 25.0]
+    for bad in ("15,,35", "-10,", "15,25,"):
+        assert_one_line_error(run_cli("tactile-host", *args, "--temperature", bad, "-o", str(tmp_path / "x.csv")),
+                              contains=f"--temperature {bad!r}: give temperatures in degC, one between each two")
+    assert not list(tmp_path.glob("x.*"))
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc (a folder no one can add a file to)")
+def test_capture_checks_where_the_compensation_goes_before_the_temperatures(tmp_path):
+    """--temp-comp-output is written last: a folder that takes no file is said before any temperature."""
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dz\n0,0\n1,-1\n")
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+                   "--simulate", "--temperature", "15,25", "-o", str(tmp_path / "cap.csv"), "--temp-comp-output",
+                   "/proc/tc.json")
+    assert_one_line_error(proc, 2, "cannot write /proc/tc.json")
+    assert not list(tmp_path.glob("cap.*"))
 
 
 def test_auto_zero_follows_drift_at_rest_and_never_during_a_press():
@@ -192,6 +243,23 @@ def test_read_records_and_replay_reproduces_it_exactly(rest_model_file, tmp_path
     text = run.read_text().splitlines()
     (tmp_path / "bad.jsonl").write_text("\n".join([text[0], ""] + text[1:5] + ["garbage"] + text[5:8]) + "\n")
     assert_one_line_error(run_cli("tactile-host", "replay", str(tmp_path / "bad.jsonl")), contains="line 7 is not")
+
+
+def test_a_correction_the_run_cannot_take_names_the_option_typed(model_file, tmp_path):
+    """A run read without a thermistor or a tare: --temp-comp and --auto-zero are the user's, not the header's
+    fault, and the line says so without an exception's name."""
+    run = tmp_path / "r.jsonl"
+    assert run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "dx=1", "--count",
+                   "3", "--record", str(run), "-o", str(tmp_path / "s.csv")).returncode == 0
+    d = Drift.typical(8)
+    TempComp(25.0, d.offset_tc, d.gain_tc).save(tmp_path / "tc.json")
+    for cmd in (["replay", str(run)], ["view", "--replay", str(run), "--port", "0"]):
+        for option, said in ((["--temp-comp", str(tmp_path / "tc.json")], "--temp-comp " + str(tmp_path / "tc.json") +
+                              " needs the run's temperatures, and this run recorded none"),
+                             (["--auto-zero"], "--auto-zero needs the rest readings and the noise floor")):
+            proc = run_cli("tactile-host", *cmd, *option)
+            assert_one_line_error(proc, 2, said)
+            assert "header records" not in proc.stderr and "InputError" not in proc.stderr
 
 
 @pytest.mark.parametrize("extra, message", [

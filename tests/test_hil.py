@@ -5,6 +5,7 @@ import socket
 import threading
 import xml.etree.ElementTree as ET
 
+import numpy as np
 import pytest
 
 from fitgen.fitting.fit import fit_model
@@ -170,6 +171,21 @@ def test_suite_fails_when_the_device_runs_another_model(paper_model):
     assert failed == {"info", "eval"}
 
 
+def test_suite_checks_the_compiled_in_model_when_a_calibration_was_flashed(paper_model):
+    """A device left with a loaded calibration (tactile-host flash; the Uno keeps it in EEPROM) passes info: the
+    suite resets it before it asks the model hash, and says so."""
+    require_tool("gcc")
+    from host.device import flash_model
+
+    with start_target(paper_model, "host", precision="double", style="table") as fw:
+        with Device.open(fw.url, timeout=5) as dev:
+            flash_model(dev, flash_variant(paper_model), "the variant")
+            assert dev.info(refresh=True).cal_source == 1
+            res = run_suite(dev, paper_model, url=fw.url, n_vectors=50, n_fuzz=0, flash=False, verbose=False)
+    assert res.ok, res.table()
+    assert "was active: reset to the compiled-in model" in res.checks[0].detail
+
+
 def test_suite_fails_not_crashes_when_the_device_runs_fewer_outputs(paper_model):
     """The device refuses a calibration for five outputs: the flash checks fail, the suite finishes."""
     require_tool("gcc")
@@ -253,6 +269,29 @@ def test_cli_bad_ports_and_silent_devices(model_file, tmp_path):
                           2, "model file")
     assert_one_line_error(run_cli("tactile-hil", "run", "--port", "x", "--model", str(model_file), "--vectors", "-1"),
                           2, "--vectors")
+    assert_one_line_error(run_cli("tactile-hil", "run", "--port", "x", "--model", str(model_file), "--vectors",
+                                  "100000000000"), 2, "from 0 to 100,000")
+
+
+def test_cli_checks_junit_and_sensor_id_before_the_device(model_file, tmp_path):
+    """--junit's file and --sensor-id are refused before a port is opened or firmware built, not after the suite."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        nobody = f"socket://127.0.0.1:{s.getsockname()[1]}"  # opening it would fail with "cannot open port"
+    a_file = tmp_path / "g.csv"
+    a_file.write_text("x\n")
+    for extra, said in ((["--junit", str(tmp_path / "no" / "x.xml")], "does not exist"),
+                        (["--junit", str(a_file / "x.xml")], f"{a_file} is a file, not a folder"),
+                        (["--junit", str(tmp_path)], "it is a folder"),
+                        (["--junit", str(model_file)], "is the input"),
+                        (["--sensor-id", "toolongtoolongtoolong"], "longer than 16")):
+        assert_one_line_error(run_cli("tactile-hil", "run", "--port", nobody, "--model", str(model_file), *extra),
+                              2, said)
+    # emulate: refused before the firmware is built
+    proc = run_cli("tactile-hil", "emulate", "--target", "host", "--model", str(model_file), "--suite",
+                   "--vectors", "10", "--fuzz", "0", "--junit", str(a_file / "x.xml"))
+    assert_one_line_error(proc, 2, "is a file, not a folder")
+    assert "firmware" not in proc.stdout
 
 
 def test_cli_emulate_without_qemu_says_how_to_install(model_file, tmp_path, monkeypatch):
@@ -269,3 +308,45 @@ def test_cli_emulate_without_qemu_says_how_to_install(model_file, tmp_path, monk
     assert shutil.which("qemu-system-arm") is None
     proc = run_cli("tactile-hil", "emulate", "--model", str(model_file))
     assert_one_line_error(proc, 2, "apt-get install")
+
+
+class _Terminal:
+    """A stderr that says it is a terminal, keeping what is written (fitgen.base.progress.Progress draws on one)."""
+
+    def __init__(self):
+        self.text = ""
+
+    def isatty(self):
+        return True
+
+    def write(self, text):
+        self.text += text
+
+    def flush(self):
+        pass
+
+
+def test_the_suite_shows_progress_through_eval_on_a_terminal(paper_model, monkeypatch):
+    """eval and held-out accuracy take seconds on a slow board (10 s on the Uno): a bar moves through them."""
+    require_tool("gcc")
+    import sys
+
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    rng = np.random.default_rng(0)
+    readings = paper_model.input_min + (paper_model.input_max - paper_model.input_min) * rng.random((200, 8))
+    truth = paper_model.predict(readings)
+    with start_target(paper_model, "host", precision="double", style="table") as fw:
+        with Device.open(fw.url, timeout=5) as dev:
+            res = run_suite(dev, paper_model, url=fw.url, n_vectors=300, n_fuzz=0, flash=False, verbose=False,
+                            held_out=(readings, truth))
+    assert res.ok, res.table()
+    assert "\reval [" in term.text and "] 64/" in term.text  # moved 64 vectors at a time
+    assert "\rheld-out accuracy [" in term.text and "200/200" in term.text
+
+
+def test_cli_emulate_port_numbers_are_refused_alike(model_file):
+    """0 and -1 get the same line: 1..65535, and the option left out picks a free port."""
+    for bad in ("0", "-1", "65536"):
+        assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", str(model_file), "--port", bad), 2,
+                              f"{bad} is not a TCP port number (1..65535; leave --port out for a free one)")

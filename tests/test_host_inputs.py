@@ -120,9 +120,19 @@ def test_a_resumed_level_keeps_its_own_temperature_and_a_pose_twice_is_one_pose(
 @pytest.mark.parametrize("option, said", [(["--precision", "float"], "--precision goes with --engine c"),
                                           (["--rest", "paper"], "--rest goes with --tare or --auto-zero"),
                                           (["--rest-hold", "5"], "--rest-hold goes with --auto-zero"),
-                                          (["--auto-zero", "--tare-samples", "1"], "--tare-samples 5 or more")])
+                                          (["--auto-zero", "--tare-samples", "1"], "--tare-samples 5 or more"),
+                                          # typed as their defaults, they are still typed, and would do nothing
+                                          (["--cc", "gcc"], "--cc goes with --engine c"),
+                                          (["--precision", "double"], "--precision goes with --engine c"),
+                                          (["--tare-samples", "50"], "--tare-samples goes with --tare or --auto-zero"),
+                                          (["--rest-band", "0.08,1.5"], "--rest-band goes with --auto-zero")])
 def test_an_option_without_the_one_it_needs_is_refused(model_file, option, said):
     assert_one_line_error(read(model_file, *option), 2, said)
+
+
+def test_view_hold_without_replay_is_refused(model_file):
+    assert_one_line_error(run_cli("tactile-host", "view", "--model", model_file, "--adc", TWO_CHIPS, "--simulate",
+                                  "dx=1", "--count", "1", "--port", "0", "--hold"), 2, "--hold goes with --replay")
 
 
 def test_a_slow_rate_takes_no_sample_after_the_duration(model_file, tmp_path):
@@ -151,7 +161,8 @@ def test_a_replay_plays_over_a_clock_step_and_view_refuses_readout_options(model
     np.testing.assert_allclose(play_times(t), [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.7], atol=1e-9)
     run = tmp_path / "r.jsonl"
     assert read(model_file, "--record", str(run)).returncode == 0
-    for option in (["--count", "5"], ["--duration", "2"], ["--record", str(tmp_path / "x.jsonl")]):
+    for option in (["--count", "5"], ["--duration", "2"], ["--record", str(tmp_path / "x.jsonl")],
+                   ["--engine", "python"], ["--cc", "gcc"], ["--rest-hold", "1"]):
         assert_one_line_error(run_cli("tactile-host", "view", "--replay", str(run), "--port", "0", *option), 2,
                               "does not apply to --replay")
     assert not (tmp_path / "x.jsonl").exists()

@@ -89,6 +89,24 @@ def test_grid_and_range_specs():
         parse_ranges("dx=2:1")
 
 
+def test_poses_keep_the_magnet_above_the_elements_and_boxes_stay_finite(tmp_path):
+    """Every reading goes through the check: the centre may come within a hair of the elements' plane, not onto it;
+    a scene's box is held to the range limits as --ranges is."""
+    from fitgen.physics.pose import check_above_elements, field_readings
+    from fitgen.physics.scenes import load_scene
+
+    paper = load_sensor("paper")
+    assert check_above_elements(paper, [0, 0, -12.99, 0, 0])[0, 2] == pytest.approx(0.01)
+    for dz in (-13.0, -20.0):
+        with pytest.raises(InputError, match="pose 2 .*in or below the elements' plane"):
+            field_readings(paper, [[0, 0, -2, 0, 0], [1, 0, dz, 5, 0]])
+    with pytest.raises(InputError, match="thx must lie within -180..180 deg"):
+        parse_ranges("thx=-181:0")
+    (tmp_path / "far.toml").write_text('outputs = ["dz"]\n[ranges]\ndz = [-inf, 0.0]\n')
+    with pytest.raises(InputError, match="far.toml: dz from -inf to 0 mm"):
+        load_scene(str(tmp_path / "far.toml"))
+
+
 def test_poses_file(tmp_path):
     poses = tmp_path / "p.csv"
     poses.write_text("dz,thx\n-1,0\n-2,5\n")
@@ -118,6 +136,11 @@ def test_grid_then_random_poses(tmp_path):
     (["--grid", "paper-sim", "--poses", "p.csv"], "one of"),
     (["--random", "5", "--poses", "p.csv"], "one of"),
     (["--bogus"], "unrecognized"),
+    # the magnet's centre (13 mm above the elements at rest) on the elements' plane: through the board
+    (["--grid", "dz=-13 dx=0 dy=0"], "in or below the elements' plane (z = 0 mm"),
+    (["--random", "5", "--ranges", "dz=-14:-12"], "in or below the elements' plane"),
+    (["--random", "5", "--ranges", "dx=-1e300:1e300"], "dx must lie within -1000..1000 mm"),
+    (["--random", "5", "--ranges", "thy=-1e999:0"], "thy from -inf to 0 deg"),
 ])
 def test_bad_options_one_line(tmp_path, args, text):
     out = tmp_path / "o.csv"

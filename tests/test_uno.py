@@ -166,6 +166,42 @@ def test_a_board_that_stops_before_answering_is_said_in_its_own_words():
     runner = SimpleNamespace(proc=Exited(), messages=["the AVR program crashed at cycle 12664"], stop=lambda: None)
     with pytest.raises(InputError, match="stopped before answering: the AVR program crashed at cycle 12664; a "
                                          "table-style build's stack can overrun"):
-        _stopped(runner, SimpleNamespace(target="uno", style="table", precision="float"))
+        _stopped(runner, SimpleNamespace(target="uno"), lambda: "; a table-style build's stack can overrun it")
     runner.proc = SimpleNamespace(poll=lambda: None)  # still running: the port's own error stands
-    _stopped(runner, SimpleNamespace(target="uno", style="table", precision="float"))
+    _stopped(runner, SimpleNamespace(target="uno"), lambda: "")
+
+
+def test_the_advice_after_a_crash_is_checked_by_building_it(gmr_model, tmp_path):
+    """A table build that crashed: --style unrolled is advised only when it builds; a 382-term model's unrolled
+    code overflows the flash, and the line says so and advises fewer terms (it used to advise unrolled)."""
+    _require_avr()
+    from fitgen.fitting.fit import FitSettings
+    from hil.emulate import uno_crash_advice
+
+    assert "try --style unrolled (it builds: flash" in uno_crash_advice(gmr_model, "float", "table")
+    assert uno_crash_advice(gmr_model, "float", "unrolled") == ""
+    ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
+    huge = fit_model(ds, settings=FitSettings.family("all", k=0.001)).save(tmp_path / "huge.json")
+    proc = run_cli("tactile-hil", "emulate", "--target", "uno", "--model", str(huge), "--suite", "--fuzz", "0")
+    assert_one_line_error(proc, 2, "the AVR program crashed")
+    assert "--style unrolled does not build either (region `text' overflowed" in proc.stderr
+    assert "fit fewer terms" in proc.stderr
+
+
+def test_pkg_config_without_simavr_is_said_with_the_packages(gmr_model, tmp_path):
+    """pkg-config not knowing simavr (libsimavr-dev or libelf-dev missing): one line naming the packages, before
+    the firmware is built."""
+    _require_avr()
+    import os
+
+    model_file = gmr_model.save(tmp_path / "m.json")
+    env = dict(os.environ, PKG_CONFIG_LIBDIR=str(tmp_path / "none"), PKG_CONFIG_PATH="")
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-c", "from fitgen.app.hil_cli import main; main()", "emulate", "--target",
+                           "uno", "--model", str(model_file), "--build-dir", str(tmp_path / "fw")],
+                          capture_output=True, text=True, env=env, timeout=120)
+    assert_one_line_error(proc, 2, "pkg-config simavr failed")
+    assert "apt-get install gcc-avr binutils-avr avr-libc simavr libsimavr-dev libelf-dev" in proc.stderr
+    assert not (tmp_path / "fw").exists()  # refused before the firmware was rendered

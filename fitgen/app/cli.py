@@ -9,8 +9,8 @@ from pathlib import Path
 from fitgen import __version__
 from fitgen.app.calibrate_cli import cmd_identify, cmd_schedule
 from fitgen.app.cliutil import Parser, check_not_empty, check_written, command_main, count, finite
-from fitgen.app.options import noise_of, sensor_of
-from fitgen.base.parse import OutOfRange, parse_assignments, parse_names, parse_noise, parse_penalty
+from fitgen.app.options import fit_settings, noise_of, sensor_of
+from fitgen.base.parse import parse_assignments, parse_names
 from fitgen.base.errors import InputError
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
 from fitgen.equations.terms import FAMILIES
@@ -87,32 +87,6 @@ def cmd_observe(args) -> int:
     return 0
 
 
-def _settings(args):
-    from fitgen.fitting.family import family_settings
-
-    try:
-        k = parse_penalty(args.k)
-    except OutOfRange:
-        raise InputError(f"--k must be a finite number > 0, got {args.k}") from None
-    except ValueError:
-        raise InputError(f"--k must be aic, bic or a number > 0, got {args.k!r}") from None
-    k = 2.0 if k == "aic" else k
-    if args.max_terms is not None and args.max_terms < 1:
-        raise InputError(f"--max-terms must be >= 1, got {args.max_terms}")
-    if args.refine_terms < 5:
-        raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {args.refine_terms}")
-    try:
-        noise = None if args.noise is None else parse_noise(args.noise)
-    except OutOfRange:
-        raise InputError(f"--noise must be a finite number >= 0, got {args.noise}") from None
-    except ValueError:
-        raise InputError(f"--noise must be a number >= 0 (reading noise rms, input units), got {args.noise!r}") \
-            from None
-    return family_settings(args.family, args.precision, noise, args.refine, k=k, max_terms=args.max_terms,
-                           d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated",
-                           refine_terms=args.refine_terms)
-
-
 def cmd_fit(args) -> int:
     from fitgen.app.report import fit_notes, fit_summary
     from fitgen.base.progress import Progress
@@ -121,7 +95,7 @@ def cmd_fit(args) -> int:
     from fitgen.physics.scenes import scene_outputs
     from fitgen.physics.simulate import dataset_sensor
 
-    settings = _settings(args)
+    settings = fit_settings(args)
     loaded = load_dataset(args.data)
     edited = loaded.meta.get("dataset_sha256") not in (None, loaded.sha256)  # rows changed since the meta was written
     ds, lifted = rows_on_the_skin(loaded)
@@ -182,12 +156,13 @@ def cmd_predict(args) -> int:
     from fitgen.base.fileio import write_atomic
     from fitgen.c.codegen import check_magnitudes
     from fitgen.c.targets import check_precision
-    from fitgen.equations.model import load_model
-    from fitgen.physics.dataset import estimates_csv, load_inputs
+    from fitgen.equations.model import check_input_units, load_model
+    from fitgen.physics.dataset import estimates_csv, load_inputs, load_meta
 
     target = check_precision(args.target, args.precision)
     model = load_model(args.model)
     inputs = load_inputs(args.data, model.n_inputs)
+    check_input_units(model, load_meta(args.data).get("units"), f"{args.data}'s readings", f"model {args.model}")
     if args.precision == "fixed":
         from fitgen.c.fixedc import plan_line
         from fitgen.equations.fixedpoint import plan_at
@@ -230,18 +205,22 @@ def cmd_report(args) -> int:
     from fitgen.app import plots
     from fitgen.app.report import format_report, sweep_sensor
     from fitgen.base.fileio import write_atomic
-    from fitgen.equations.model import load_model
+    from fitgen.equations.model import check_input_units, load_model
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.physics.sensor import load_sensor
 
     if args.plot and not args.data:  # every check before anything is written
         raise InputError("--plot needs --data (the rows to plot estimates for)")
+    if args.paper and not args.data:  # the paper's figures stand beside the errors on the data
+        raise InputError("--paper goes with --data (without it, it would be ignored)")
     folder = plots.require(args.plot) if args.plot else None  # made by its first figure, after every check
     if args.sensor and folder is None:
         raise InputError("--sensor goes with --plot (the rotation sweep is drawn on it)")
     model = load_model(args.model)
     sensor = sweep_sensor(load_sensor(args.sensor), model) if folder is not None and args.sensor else None
     ds, lifted = rows_on_the_skin(load_dataset(args.data)) if args.data else (None, 0)
+    if ds is not None:
+        check_input_units(model, ds.meta.get("units"), f"{args.data}'s readings", f"model {args.model}")
     if lifted:
         print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, no contact pose to "
               "estimate", file=sys.stderr)
@@ -433,7 +412,7 @@ def build_parser() -> Parser:
     r = command("report", cmd_report, "terms, AIC trace and errors of a model")
     r.add_argument("model", metavar="MODEL")
     r.add_argument("--data", help="dataset to measure errors on (default: the fit's own figures only)")
-    r.add_argument("--paper", action="store_true", help="show the seed paper's figures beside ours")
+    r.add_argument("--paper", action="store_true", help="with --data: show the seed paper's figures beside ours")
     r.add_argument("--plot", metavar="DIR", help="write estimate-vs-target PNGs here (needs matplotlib)")
     r.add_argument("--sensor", help="with --plot: also the 0.1-degree rotation sweep on this sensor")
     r.add_argument("-o", "--output", help="write the report here instead of stdout")

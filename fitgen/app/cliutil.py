@@ -19,8 +19,10 @@ class Parser(argparse.ArgumentParser):
 
     def __init__(self, *args, **kw):
         super().__init__(*args, **kw)
-        # argparse takes '-1e-3' for an option (its pattern knows no exponent): '--input-offset -1e-3' failed
-        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+        # argparse takes '-1e-3' for an option (its pattern knows no exponent): '--input-offset -1e-3' failed; and
+        # a list led by a negative number too: '--temperature -10,25' failed where '--temperature=-10,25' worked
+        number = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
+        self._negative_number_matcher = re.compile(rf"^-{number}(\s*,\s*(-?{number})?)*$")
 
     def error(self, message):  # noqa: D401 - argparse's hook
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
@@ -57,10 +59,14 @@ def noise_volts(text: str) -> float:
 
 
 def tcp_port(text: str) -> int:
-    """An argparse type: a TCP port number, 1..65535."""
-    n = count(text)
+    """An argparse type: a TCP port number, 1..65535 (leave the option out for a free one); one message for every
+    number outside it, negative ones too."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
     if not 0 < n < 65536:
-        raise argparse.ArgumentTypeError(f"{n} is not a TCP port number (1..65535)")
+        raise argparse.ArgumentTypeError(f"{n} is not a TCP port number (1..65535; leave --port out for a free one)")
     return n
 
 
@@ -83,22 +89,70 @@ def _terminate(signum, frame):
     raise Terminated()
 
 
+class OutputFailed(Exception):
+    """Standard output could not be written (a full disk, a closed terminal): not the program's fault."""
+
+
+class _Stdout:
+    """Standard output whose write failures are told apart from any other OSError (which they look like)."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _guard(self, fn, *args):
+        try:
+            return fn(*args)
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            raise OutputFailed(exc.strerror or str(exc)) from None
+
+    def write(self, text):
+        return self._guard(self._stream.write, text)
+
+    def flush(self):
+        return self._guard(self._stream.flush)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def run(main_fn, argv=None, prog: str = "") -> int:
     """Call ``main_fn(argv)``; turn bad input into one line on stderr and exit status 2."""
     previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
+    stdout = sys.stdout
+    sys.stdout = _Stdout(stdout)
     try:
-        return int(main_fn(argv) or 0)
+        status = int(main_fn(argv) or 0)
+        sys.stdout.flush()  # here, not at exit, so that a full disk is said as one line
+        return status
     except InputError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt as exc:
         print(f"{prog}: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
         return 143 if isinstance(exc, Terminated) else 130
-    except BrokenPipeError:
+    except BrokenPipeError:  # the reader went away (| head): nothing more to say
+        _drop(stdout)
         return 0
+    except OutputFailed as exc:
+        _drop(stdout)
+        print(f"{prog}: error: cannot write standard output: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     finally:
+        sys.stdout = stdout
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _drop(stream) -> None:
+    """Point ``stream``'s file at the null device, so that Python's flush at exit has nothing to fail on."""
+    import os
+
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), stream.fileno())
+    except (OSError, ValueError, AttributeError):  # not a real file (a test's capture): nothing to flush at exit
+        pass
 
 
 def _main_thread() -> bool:
@@ -141,7 +195,7 @@ class StopFlag:
             signal.signal(s, h)
 
 
-WRITES = ("output", "record", "temp_comp_output", "pose_file")  # the files a command writes
+WRITES = ("output", "record", "temp_comp_output", "pose_file", "junit")  # the files a command writes
 READS = ("model", "run", "tempcomp", "adc", "temp_comp", "rest", "poses", "data", "replay", "sensor", "sim_sensor",
          "capture")  # and those it reads: never one of the written
 

@@ -11,28 +11,22 @@ import signal
 import sys
 import threading
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, command_main, count, seconds, tcp_port
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, check_written, command_main, count, seconds, tcp_port
 from fitgen.base.errors import InputError
 
 
 def _load(args):
+    from fitgen.c.verify import data_inputs
     from fitgen.equations.model import load_model
 
     model = load_model(args.model)
-    data = None
-    if getattr(args, "data", None):
-        from fitgen.physics.dataset import load_dataset
-
-        ds = load_dataset(args.data, min_rows=1)
-        if ds.n_inputs != model.n_inputs:
-            raise InputError(f"dataset {args.data} has {ds.n_inputs} inputs; the model takes {model.n_inputs}")
-        data = ds.inputs
-    return model, data
+    return model, (data_inputs(model, args.data) if getattr(args, "data", None) else None)
 
 
 def _check_counts(args) -> None:
-    if args.vectors < 0:
-        raise InputError("--vectors must be >= 0")
+    from fitgen.c.verify import check_vectors
+
+    check_vectors(args.vectors)
     if args.fuzz < 0:
         raise InputError("--fuzz must be >= 0")
 
@@ -105,32 +99,42 @@ def _adc_bridge(args):
                       thermistor=args.thermistor, temp_comp=args.temp_comp, temperature=args.sim_temperature)
 
 
-def _stopped(runner, args) -> None:
-    """InputError with the board's own last words when the firmware ended before it could be opened."""
+def _stopped(runner, args, advice) -> None:
+    """InputError with the board's own last words when the firmware ended before it could be opened; on the Uno,
+    ``advice()``: what to try (hil.emulate.uno_crash_advice)."""
     if runner.proc is None or runner.proc.poll() is None:
         return
     runner.stop()
     said = "; ".join(getattr(runner, "messages", [])[-2:]) or f"exit status {runner.proc.returncode}"
-    hint = ("; a table-style build's stack can overrun the Uno's 2 KB of RAM: try --style unrolled"
-            if args.target == "uno" and args.style == "table" and args.precision != "fixed" else "")
+    hint = advice() if args.target == "uno" else ""
     raise InputError(f"the {args.target} firmware stopped before answering: {said}{hint}")
 
 
 def cmd_emulate(args) -> int:
     from host.device import Device
 
-    from hil.emulate import start_target
+    from contextlib import ExitStack
+
+    from fitgen.base.progress import Progress
+    from hil.emulate import start_target, uno_crash_advice
 
     _check_counts(args)
     model, data = _load(args)
     cmap, bridge, tin, tempcomp = _adc_bridge(args)
-    with start_target(model, args.target, precision=args.precision, style=args.style, fma=args.fma,
-                      port=args.port, workdir=args.build_dir, sensor_id=args.sensor_id, cmap=cmap,
-                      bridge=bridge, tin=tin, tempcomp=tempcomp) as runner:
+    with ExitStack() as stack:
+        with Progress(f"{args.target} firmware", 2) as bar:  # building and booting take seconds
+            bar.update(0, "building")
+            target = start_target(model, args.target, precision=args.precision, style=args.style, fma=args.fma,
+                                  port=args.port, workdir=args.build_dir, sensor_id=args.sensor_id, cmap=cmap,
+                                  bridge=bridge, tin=tin, tempcomp=tempcomp)
+            bar.update(1, "booting")
+            runner = stack.enter_context(target)
         try:
             dev = Device.open(runner.url, timeout=args.timeout)
         except InputError:
-            _stopped(runner, args)
+            _stopped(runner, args, lambda: uno_crash_advice(model, args.precision, args.style, fma=args.fma,
+                                                            sensor_id=args.sensor_id, cmap=cmap, tin=tin,
+                                                            tempcomp=tempcomp))
             raise
         with dev:
             _describe(runner, dev, args.target)
@@ -152,10 +156,11 @@ def cmd_emulate(args) -> int:
 
 
 def _suite_options(p) -> None:
-    from fitgen.c.verify import add_held_out_options
+    from fitgen.c.verify import MAX_VECTORS, add_held_out_options
 
     p.add_argument("--model", required=True, metavar="MODEL", help="the model compiled into the firmware")
-    p.add_argument("--vectors", type=int, default=1000, help="random vectors inside the domain (default 1000)")
+    p.add_argument("--vectors", type=int, default=1000,
+                   help=f"random vectors inside the domain (default 1000, at most {MAX_VECTORS:,})")
     p.add_argument("--data", metavar="CSV", help="also send the rows of this dataset")
     p.add_argument("--fuzz", type=int, default=10_000, help="random or mutated frames to send (default 10000)")
     p.add_argument("--no-flash", action="store_true", help="skip the calibration flashing checks")
@@ -210,5 +215,15 @@ def build_parser() -> Parser:
     return p
 
 
+def _check(args) -> None:
+    """Options checked before a model is loaded, firmware built or a device opened: --junit's file, --sensor-id
+    (as the firmware compiles it in under emulate; as a flashed blob carries it under run)."""
+    from fitgen.c.calblob import check_sensor_id
+    from hil.firmware import check_sensor_id as check_compiled_id
+
+    check_written(args)
+    (check_compiled_id if args.command == "emulate" else check_sensor_id)(args.sensor_id)
+
+
 def main(argv=None) -> int:
-    command_main(build_parser, argv, "tactile-hil")
+    command_main(build_parser, argv, "tactile-hil", _check)

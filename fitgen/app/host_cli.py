@@ -14,11 +14,11 @@ from host.stagesettings import APPROACH
 
 def cmd_verify(args) -> int:
     from fitgen.c.codegen import STYLES
-    from fitgen.physics.dataset import load_dataset
     from fitgen.equations.model import load_model
 
-    from fitgen.c.verify import held_out_from_args, verify
+    from fitgen.c.verify import check_vectors, data_inputs, held_out_from_args, verify
 
+    check_vectors(args.vectors)
     model = load_model(args.model)
     precisions = ("double", "float") if args.precision == "both" else (args.precision,)
     styles = STYLES if args.style == "both" else (args.style,)
@@ -26,14 +26,7 @@ def cmd_verify(args) -> int:
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
     if args.fma and args.precision == "fixed":
         raise InputError("--fma does not apply to --precision fixed")
-    extra = None
-    if args.data:
-        ds = load_dataset(args.data, min_rows=1)
-        if ds.n_inputs != model.n_inputs:
-            raise InputError(f"dataset {args.data} has {ds.n_inputs} inputs; the model takes {model.n_inputs}")
-        extra = ds.inputs
-    if args.vectors < 0:
-        raise InputError("--vectors must be >= 0")
+    extra = data_inputs(model, args.data) if args.data else None
     held_out = held_out_from_args(model, args)
     ok = True
     for precision in precisions:
@@ -265,7 +258,7 @@ def cmd_arduino_build(args) -> int:
                          "--thermistor (tactile-host read and pi-build read one)")
     load_sensor(args.sim_sensor)  # a bad one said before the library is written
     size, run = build_readpose(model, cmap, args.output, args.emulate, precision=args.precision, style=args.style,
-                               build=not args.no_build, sensor=args.sim_sensor)
+                               build=False if args.no_build else None, sensor=args.sim_sensor)
     sys.stdout.write("".join(ln + "\n" for ln in run.lines) if run and args.emulate else "")  # a serial monitor's
     built = (size.describe(BOARDS["uno"]) if size else "not built (--no-build)" if args.no_build
              else "not built (no arduino-builder)")
@@ -279,24 +272,24 @@ def _readout_options(p) -> None:
     p.add_argument("--count", help="stop after this many samples")
     p.add_argument("--duration", help="stop after this many seconds")
     p.add_argument("--tare", action="store_true", help="measure the rest readings first and correct the offsets")
-    p.add_argument("--tare-samples", default="50", help="samples averaged for --tare (default 50)")
+    p.add_argument("--tare-samples", help="samples averaged for --tare (default 50)")
     p.add_argument("--rest", metavar="SENSOR|DATASET.csv",
                    help="the rest readings --tare maps onto: a dataset's rows at pose 0, or a sensor's physics "
                         "(default: --sensor)")
     p.add_argument("--auto-zero", action="store_true",
                    help="tare, then keep re-zeroing slowly while the sensor is at rest (never while touched); "
                         "each update is logged")
-    p.add_argument("--rest-band", default="0.08,1.5", metavar="MM,DEG",
+    p.add_argument("--rest-band", metavar="MM,DEG",
                    help="at rest: every displacement estimate within MM and tilt within DEG (default 0.08,1.5)")
-    p.add_argument("--rest-hold", default="1", metavar="S", help="seconds at rest before an auto-zero update (default 1)")
+    p.add_argument("--rest-hold", metavar="S", help="seconds at rest before an auto-zero update (default 1)")
     p.add_argument("--temp-comp", metavar="FILE.json",
                    help="per-element temperature compensation (tactile-host capture --temperature); needs the "
                         "thermistor's input in --adc (temp=CHIP@ADDRESS:INPUT)")
     p.add_argument("--record", metavar="RUN.jsonl", help="also record the run at full precision for tactile-host replay")
-    p.add_argument("--engine", default="python", choices=("python", "c"),
+    p.add_argument("--engine", choices=("python", "c"),
                    help="python: Model.predict; c: the generated header as a shared library (default python)")
-    p.add_argument("--precision", default="double", choices=("double", "float"), help="C engine precision")
-    p.add_argument("--cc", default="gcc", help="C compiler for --engine c (default gcc)")
+    p.add_argument("--precision", choices=("double", "float"), help="C engine precision (default double)")
+    p.add_argument("--cc", help="C compiler for --engine c (default gcc)")
     p.add_argument("--simulate", metavar="POSE|motion",
                    help="no hardware: a simulated bus with the sensor at POSE (e.g. dx=1,dz=-1 or 0.5,0,-1,0,0), or "
                         "'motion': sliding in a circle and pressed every 6 s")
@@ -318,7 +311,7 @@ def _adc_options(p, required: bool = True) -> None:
 
 
 def build_parser() -> Parser:
-    from fitgen.c.verify import add_held_out_options
+    from fitgen.c.verify import MAX_VECTORS, add_held_out_options
 
     p = Parser(prog="tactile-host", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
@@ -330,7 +323,8 @@ def build_parser() -> Parser:
     v.add_argument("--cc", default="gcc", help="C compiler command, with flags if needed (default gcc)")
     v.add_argument("--runner", help="prefix to run the binary with, e.g. qemu-arm")
     v.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
-    v.add_argument("--vectors", type=int, default=2000, help="random vectors inside the domain (default 2000)")
+    v.add_argument("--vectors", type=int, default=2000,
+                   help=f"random vectors inside the domain (default 2000, at most {MAX_VECTORS:,})")
     v.add_argument("--data", help="also run the rows of this dataset")
     v.add_argument("--fma", action="store_true", help="generate with fused multiply-adds (fitgen codegen --fma)")
     v.add_argument("--input-lsb", type=float, metavar="X", help="fixed: the input value of one ADC code")
@@ -354,7 +348,7 @@ def build_parser() -> Parser:
     ab = sub.add_parser("arduino-build", help="an Arduino library: the model, the ADC drivers over Wire, the channel "
                                               "map and the ReadPose example; built for the Uno to check it fits")
     ab.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
-    map_options(ab)
+    map_options(ab, thermistor=False)
     ab.add_argument("--precision", default="float", choices=("float", "fixed", "double"), help="double is refused")
     ab.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
     build = ab.add_mutually_exclusive_group()
@@ -425,6 +419,8 @@ def build_parser() -> Parser:
     c.add_argument("--trigger", metavar="CMD",
                    help="shell command run for each pose instead of waiting for Enter; it gets TM_POSE_INDEX, "
                         "TM_DX..TM_THY and must exit 0 once the pose is set")
+    c.add_argument("--trigger-timeout", metavar="S", help="seconds --trigger may take per pose before it is killed and "
+                   "the capture stops, the rows so far kept (default 60)")
     c.add_argument("--settle", default="0", help="seconds to wait after Enter or the trigger (default 0)")
     c.add_argument("--simulate", action="store_true",
                    help="no hardware: a simulated sensor that moves to each scheduled pose by itself")

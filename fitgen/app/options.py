@@ -1,9 +1,9 @@
-"""Option readers the fitgen commands share: the sensor (and its transfer) and a noise figure."""
+"""Option readers the fitgen commands share: the sensor (and its transfer), a noise figure, fit's settings."""
 
 from __future__ import annotations
 
 from fitgen.base.errors import InputError
-from fitgen.base.parse import OutOfRange, parse_noise
+from fitgen.base.parse import OutOfRange, parse_noise, parse_penalty
 
 
 def sensor_of(args):
@@ -28,16 +28,48 @@ def noise_of(value: str, sensor) -> float:
         raise InputError(f"--noise must be a number or 'sensor', got {value!r}") from None
 
 
-def map_options(p, required: bool = True) -> None:
+def fit_settings(args):
+    """`fitgen fit`'s options (penalty, caps, noise, family) as fit settings; InputError when one is out of range."""
+    from fitgen.fitting.family import family_settings
+
+    try:
+        k = parse_penalty(args.k)
+    except OutOfRange:
+        raise InputError(f"--k must be a finite number > 0, got {args.k}") from None
+    except ValueError:
+        raise InputError(f"--k must be aic, bic or a number > 0, got {args.k!r}") from None
+    k = 2.0 if k == "aic" else k
+    if args.max_terms is not None and args.max_terms < 1:
+        raise InputError(f"--max-terms must be >= 1, got {args.max_terms}")
+    if args.refine_terms < 5:
+        raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {args.refine_terms}")
+    try:
+        noise = None if args.noise is None else parse_noise(args.noise)
+    except OutOfRange:
+        raise InputError(f"--noise must be a finite number >= 0, got {args.noise}") from None
+    except ValueError:
+        raise InputError(f"--noise must be a number >= 0 (reading noise rms, input units), got {args.noise!r}") \
+            from None
+    return family_settings(args.family, args.precision, noise, args.refine, k=k, max_terms=args.max_terms,
+                           d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated",
+                           refine_terms=args.refine_terms)
+
+
+def map_options(p, required: bool = True, thermistor: bool = True) -> None:
     """The channel map's options (--adc and the ADCs' settings), as read, view, capture and the builds take
-    them."""
+    them. ``thermistor=False``: a command that reads the elements only (its help says so; --thermistor is
+    hidden, still parsed so that it is refused in one line)."""
+    import argparse
+
     from host.channelmap import ADS1115_PGA, ADS1115_RATES, MODES
 
+    temp = ("temp=CHIP@ADDRESS:INPUT adds a thermistor, e.g. ...,temp=ads1115@0x4a:0" if thermistor else
+            "the elements only: temp= (a thermistor) is refused")
     p.add_argument("--adc", required=required, metavar="SPEC|FILE.toml",
-                   help="channel map: e.g. ads1115@0x48:0-3,ads1115@0x49:0-3 or ads7828@0x48, or a TOML file; "
-                        "temp=CHIP@ADDRESS:INPUT adds a thermistor, e.g. ...,temp=ads1115@0x4a:0")
+                   help=f"channel map: e.g. ads1115@0x48:0-3,ads1115@0x49:0-3 or ads7828@0x48, or a TOML file; {temp}")
     p.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",
-                   help="the thermistor's NTC divider (default beta=3950,r25=10000,series=10000,vref=3.3)")
+                   help="the thermistor's NTC divider (default beta=3950,r25=10000,series=10000,vref=3.3)"
+                   if thermistor else argparse.SUPPRESS)
     p.add_argument("--pga", type=float, default=4.096, choices=ADS1115_PGA, metavar="V",
                    help="ADS1115 full scale +-V: 6.144, 4.096 (default), 2.048, 1.024, 0.512, 0.256")
     p.add_argument("--data-rate", type=int, default=860, choices=ADS1115_RATES, metavar="SPS",
@@ -50,8 +82,9 @@ def refuse_readout_options(args) -> None:
     """``view --replay``: the readout's options do not apply (the recording sets the samples); InputError."""
     from fitgen.base.errors import InputError
 
-    given = [f"--{n.replace('_', '-')}" for n in ("adc", "count", "duration", "rate", "record", "simulate", "rest")
+    given = [f"--{n.replace('_', '-')}" for n in ("adc", "count", "duration", "rate", "record", "simulate", "rest",
+                                                  "engine", "precision", "cc", "tare_samples", "rest_band", "rest_hold")
              if getattr(args, n, None) is not None] + (["--tare"] if args.tare else [])
     if given:
-        raise InputError(f"{given[0]} does not apply to --replay: the recording sets the samples (it plays to its "
-                         "end; --hold keeps the page up after)")
+        raise InputError(f"{given[0]} does not apply to --replay: the recording sets the samples and how they were "
+                         "estimated (it plays to its end; --hold keeps the page up after)")

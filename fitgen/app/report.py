@@ -202,14 +202,9 @@ def format_report(model: Model, ds: Dataset | None = None, title: str = "", pape
 
 def sweep_sensor(sensor, model):
     """``sensor`` in the transfer that gives ``model``'s units; InputError when the model was fitted on another."""
-    if sensor.units != model.input_units and model.input_units in ("mT", "V"):
-        sensor = sensor.with_transfer("gmr" if model.input_units == "V" else "raw")
-    fitted_on = model.fit_info.get("sensor_sha256")
-    if sensor.units != model.input_units or fitted_on not in (None, sensor.sha256):
-        raise InputError(f"--sensor {sensor.name}: the model was fitted on another sensor "
-                         f"({model.input_units} readings{', sensor ' + str(fitted_on)[:12] if fitted_on else ''}); "
-                         "its sweep on this one would not be the model's")
-    return sensor
+    from fitgen.fitting.holdout import fitted_sensor
+
+    return fitted_sensor(sensor, model, "its sweep on this one would not be the model's")
 
 
 def fit_notes(model: Model, rows: int, data, units) -> list[str]:

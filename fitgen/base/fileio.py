@@ -17,17 +17,25 @@ def folder_of(path: str | os.PathLike) -> Path:
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
-        raise InputError(f"cannot write {path}: folder {folder} does not exist")
+        raise InputError(f"cannot write {path}: {folder} is a file, not a folder" if folder.exists()
+                         else f"cannot write {path}: folder {folder} does not exist")
     return folder
 
 
 def output_file(path: str | os.PathLike, inputs=(), flag: str = "-o") -> Path:
-    """``path`` checked as a file to write before the work: a name, not a folder, in a folder that exists, and
-    none of the command's ``inputs`` (which it would overwrite); InputError otherwise."""
+    """``path`` checked as a file to write before the work: a name, not a folder, in a folder that exists and
+    takes a new file, and none of the command's ``inputs`` (which it would overwrite); InputError otherwise."""
     path = Path(path)
     if path.name in ("", ".", "..") or path.is_dir():
         raise InputError(f"cannot write {path}: it is a folder; give a file name")
-    folder_of(path)
+    # a file made and removed as write_atomic will make it: permissions do not tell (root passes os.access, and
+    # /proc refuses new files to root too), and an output written last would fail after all the work
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder_of(path), prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise InputError(f"cannot write {path}: {exc.strerror}") from None
+    os.close(fd)
+    os.unlink(tmp)
     for given in inputs:
         if given is not None and path.exists() and Path(given).exists() and os.path.samefile(given, path):
             raise InputError(f"{flag} {path} is the input {given}: writing it would destroy it; give another name")

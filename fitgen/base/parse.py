@@ -24,7 +24,10 @@ def parse_assignments(spec: str, allowed, what: str) -> dict[str, float]:
 
 
 def parse_numbers(text: str) -> list[float] | None:
-    """Numbers separated by commas or spaces; None when one of them is not a number."""
+    """Numbers separated by commas or spaces; None when one of them is not a number or an item between commas is
+    empty ('15,,35' is a slip, not 15,35)."""
+    if "," in text and any(not part.strip() for part in text.split(",")):
+        return None
     try:
         return [float(x) for x in text.replace(",", " ").split()]
     except ValueError:

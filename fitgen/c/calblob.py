@@ -96,6 +96,15 @@ def rounded_model(model: Model, precision: str = "float") -> Model:
     return Model(lo, hi, eqs, model.input_units, dict(model.fit_info))
 
 
+def check_sensor_id(sensor_id: str) -> str:
+    """``sensor_id`` as a blob carries it (printable ASCII, at most 16 characters); InputError otherwise."""
+    if not isinstance(sensor_id, str) or not all(" " <= ch <= "~" for ch in sensor_id):
+        raise InputError(f"sensor id {sensor_id!r}: printable ASCII characters only")
+    if len(sensor_id) > SENSOR_ID_SIZE:
+        raise InputError(f"sensor id {sensor_id!r} is longer than {SENSOR_ID_SIZE} characters")
+    return sensor_id
+
+
 def to_blob(model: Model, precision: str = "float", sensor_id: str = "paper", fma: bool = False) -> bytes:
     """The calibration blob (format version 1) of ``model`` for a firmware of this precision."""
     if precision not in PRECISION_CODES:
@@ -107,10 +116,7 @@ def to_blob(model: Model, precision: str = "float", sensor_id: str = "paper", fm
     if harm is not None:
         raise InputError(f"the calibration blob format has no harmonic terms ({harm.text}): build the model into the "
                          "firmware with `fitgen codegen`, or fit another family to flash it")
-    if not isinstance(sensor_id, str) or not all(" " <= ch <= "~" for ch in sensor_id):
-        raise InputError(f"sensor id {sensor_id!r}: printable ASCII characters only")
-    if len(sensor_id) > SENSOR_ID_SIZE:
-        raise InputError(f"sensor id {sensor_id!r} is longer than {SENSOR_ID_SIZE} characters")
+    check_sensor_id(sensor_id)
     if model.n_inputs > MAX_INPUTS:
         raise InputError(f"the model takes {model.n_inputs} inputs; a calibration blob holds at most {MAX_INPUTS}")
     total = sum(len(e.terms) for e in model.equations)

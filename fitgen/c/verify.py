@@ -20,6 +20,8 @@ DOUBLE_SLACK = 4.0
 MAX_SHARE = 0.05
 # an a-priori bound more than this many times the measured worst case is reported as loose
 LOOSE_BOUND = 10.0
+# random vectors at most: 10^6 took 2.5 GB and 2 minutes for one float build; a typo's 10^11 would be 6 TB
+MAX_VECTORS = 100_000
 
 
 @dataclass
@@ -47,17 +49,43 @@ def add_held_out_options(parser) -> None:
     parser.add_argument("--no-held-out", action="store_true", help="skip the held-out rounding check")
 
 
+def check_vectors(n: int, flag: str = "--vectors") -> int:
+    """``n`` if it is a count of random vectors, 0..MAX_VECTORS; else InputError naming ``flag``."""
+    from fitgen.base.errors import InputError
+
+    if not 0 <= n <= MAX_VECTORS:
+        raise InputError(f"{flag} must be a whole number from 0 to {MAX_VECTORS:,}, got {n}")
+    return n
+
+
+def data_inputs(model: Model, path: str) -> np.ndarray:
+    """The readings of dataset ``path`` (``--data``); InputError unless they are as many, in the units, as
+    ``model`` takes."""
+    from fitgen.base.errors import InputError
+    from fitgen.equations.model import check_input_units
+    from fitgen.physics.dataset import load_dataset
+
+    ds = load_dataset(path, min_rows=1)
+    if ds.n_inputs != model.n_inputs:
+        raise InputError(f"dataset {path} has {ds.n_inputs} inputs; the model takes {model.n_inputs}")
+    check_input_units(model, ds.meta.get("units"), f"dataset {path}'s readings")
+    return ds.inputs
+
+
 def held_out_from_args(model: Model, args) -> tuple[np.ndarray, np.ndarray] | None:
     """The noise-free held-out (readings, truth) those options ask for; None when skipped or not to be had."""
     from fitgen.base.errors import InputError
-    from fitgen.fitting.holdout import clean_readings
+    from fitgen.fitting.holdout import clean_readings, fitted_sensor
     from fitgen.physics.sensor import load_sensor
 
     if not 0 < args.max_share < 1e6:
         raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
     if args.no_held_out:
         return None
-    return clean_readings(model, load_sensor(args.sensor) if args.sensor else None)
+    # another sensor's readings would measure rounding against errors that are not the model's
+    sensor = (fitted_sensor(load_sensor(args.sensor), model, "its held-out check on this one would not be the "
+                            "model's (give the one it was fitted on, or leave --sensor out)") if args.sensor else None)
+    return clean_readings(model, sensor)
 
 
 def held_out_check(model: Model, c_outputs: np.ndarray, readings: np.ndarray, truth: np.ndarray,

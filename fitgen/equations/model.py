@@ -203,6 +203,23 @@ class Model:
         return write_atomic(path, text)
 
 
+# where readings in these units come from, for the hint of check_input_units
+_UNITS_SOURCE = {"V": " (fitgen simulate --transfer gmr, or tactile-host capture)",
+                 "mT": " (fitgen simulate --transfer raw)"}
+
+
+def check_input_units(model: Model, units: str | None, readings: str, origin: str = "the model") -> None:
+    """InputError (one line) when readings in ``units`` are not in the units ``model`` takes.
+
+    ``units`` None (not recorded: a CSV without a meta file) passes. ``readings`` and ``origin`` name
+    the readings and the model in the message (e.g. "the ADCs' readings", "model m.json").
+    """
+    if units is None or units == model.input_units:
+        return
+    raise InputError(f"{origin} takes inputs in {model.input_units}; {readings} are in {units}: fit it on a dataset "
+                     f"in {units}{_UNITS_SOURCE.get(units, '')}")
+
+
 def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
     """The domain as floats, rounded outward so that every double inside it stays inside."""
     with np.errstate(over="ignore"):  # beyond float's range: inf, refused where a literal is written

@@ -264,6 +264,19 @@ def posterior_units(record: dict, sensor, k: int) -> list:
     return [space.sensor(theta + L @ zi, f"{sensor.name}-posterior-{i + 1}") for i, zi in enumerate(z)]
 
 
+def fitted_sensor(sensor, model: Model, why: str, flag: str = "--sensor"):
+    """``sensor`` in the transfer that gives ``model``'s units; InputError, ending in ``why``, when the model was
+    fitted on another sensor (other units, or another hash than the one its file records)."""
+    if sensor.units != model.input_units and model.input_units in ("mT", "V"):
+        sensor = sensor.with_transfer("gmr" if model.input_units == "V" else "raw")
+    fitted_on = model.fit_info.get("sensor_sha256")
+    if sensor.units != model.input_units or fitted_on not in (None, sensor.sha256):
+        raise InputError(f"{flag} {sensor.name}: the model was fitted on another sensor "
+                         f"({model.input_units} readings{', sensor ' + str(fitted_on)[:12] if fitted_on else ''}); "
+                         f"{why}")
+    return sensor
+
+
 def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] | None:
     """The noise-free held-out readings and targets the model file's ``held_out`` record names,
     simulated again (with ``sensor``, else the preset it names, checked by hash); None when the

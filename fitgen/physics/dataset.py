@@ -174,17 +174,22 @@ def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
     n_in, targets = _header(names, origin)
     if table.shape[0] < min_rows:
         raise InputError(f"{origin}: {table.shape[0]} data row(s); at least {min_rows} needed")
-    meta = {}
+    return Dataset(table[:, :n_in].copy(), table[:, n_in:].copy(), targets, load_meta(path))
+
+
+def load_meta(path: str | Path) -> dict:
+    """The dataset's ``<path>.meta.json`` as written by :meth:`Dataset.save`; {} when there is none."""
     mp = meta_path(path)
-    if mp.is_file():
-        try:
-            meta = json.loads(read_text(mp, "dataset meta"))
-        except ValueError as exc:
-            raise InputError(f"{mp}: not JSON ({exc}); repair or remove it") from None
-        if not isinstance(meta, dict) or not all(isinstance(meta.get(k), (str, type(None))) for k in META_TEXT):
-            raise InputError(f"{mp}: not a dataset's meta (an object whose {', '.join(META_TEXT)} are text); "
-                             "repair or remove it")
-    return Dataset(table[:, :n_in].copy(), table[:, n_in:].copy(), targets, meta)
+    if not mp.is_file():
+        return {}
+    try:
+        meta = json.loads(read_text(mp, "dataset meta"))
+    except ValueError as exc:
+        raise InputError(f"{mp}: not JSON ({exc}); repair or remove it") from None
+    if not isinstance(meta, dict) or not all(isinstance(meta.get(k), (str, type(None))) for k in META_TEXT):
+        raise InputError(f"{mp}: not a dataset's meta (an object whose {', '.join(META_TEXT)} are text); "
+                         "repair or remove it")
+    return meta
 
 
 def load_inputs(path: str | Path, n_inputs: int) -> np.ndarray:

@@ -6,6 +6,8 @@ R = Ry(thy) Rx(thx) about the magnet's own centre, rotation first, then translat
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from fitgen.base.errors import InputError
@@ -20,6 +22,19 @@ OFF_SKIN_MM = 0.05
 # Where a schedule's rest row lifts the stage (mm above first contact): clear of the adhesion with the rig's
 # error, and with a capture's default approach (0.3 mm from above) within a stage limit of dz <= 0.5.
 REST_LIFT_MM = 0.2
+# How far a pose box may reach from rest (mm, deg). A metre away a magnet a few mm across gives the elements
+# nothing to read (its field falls as 1/r^3), and a tilt past 180 deg repeats one within; beyond, the field's
+# arithmetic overflows.
+POSE_LIMITS = (1000.0, 1000.0, 1000.0, 180.0, 180.0)
+
+
+def check_pose_range(name: str, lo: float, hi: float, origin: str) -> None:
+    """InputError naming ``origin`` unless component ``name``'s range lo..hi is finite and within POSE_LIMITS."""
+    limit = POSE_LIMITS[POSE_NAMES.index(name)]
+    if not (math.isfinite(lo) and math.isfinite(hi) and -limit <= lo and hi <= limit):
+        unit = POSE_UNITS[POSE_NAMES.index(name)]
+        raise InputError(f"{origin}: {name} from {lo:g} to {hi:g} {unit}: a pose box's {name} must lie within "
+                         f"-{limit:g}..{limit:g} {unit} (finite numbers)")
 
 
 def as_poses(poses) -> np.ndarray:
@@ -69,19 +84,48 @@ def magnet_frame(sensor: Sensor, poses: np.ndarray) -> tuple[np.ndarray, np.ndar
     ``stage_map @ (dx, dy, dz)``; its tilt is the pose's applied after the unit's rest tilt; a label off the
     skin (:func:`contact_poses`) leaves it at rest.
     """
-    poses = as_poses(poses)
-    if not sensor.is_drawing:
-        poses = contact_poses(poses)
+    given = as_poses(poses)
+    poses = given if sensor.is_drawing else contact_poses(given)
+    centre = _above_elements(sensor, _centres(sensor, poses), given)
     R = rotation_matrices(poses[:, 3], poses[:, 4])
     if any(sensor.magnet.tilt):
         R = R @ rotation_matrices(*sensor.magnet.tilt)
-    shift = poses[:, :3] if sensor.is_drawing else poses[:, :3] @ sensor.stage_map.T
-    centre = np.asarray(sensor.magnet.rest_center) + shift
     rel = sensor.positions[None, :, :] - centre[:, None, :]
     # R^T v for every pose and element: local = rel @ R
     local = np.einsum("pnj,pjk->pnk", rel, R)
     axes = np.einsum("nj,pjk->pnk", sensor.axes, R)
     return local, axes
+
+
+def check_above_elements(sensor: Sensor, poses) -> np.ndarray:
+    """The magnet's centre (P, 3) at each pose; InputError for the first pose that puts it in or below the
+    elements' plane (the lowest element's z, when below the centre at rest): the magnet would be in or
+    through the board (in that plane its field is along z, and radial elements read 0)."""
+    poses = as_poses(poses)
+    return _above_elements(sensor, _centres(sensor, poses if sensor.is_drawing else contact_poses(poses)), poses)
+
+
+def _centres(sensor: Sensor, moved: np.ndarray) -> np.ndarray:
+    """The magnet's centre (P, 3) at poses already moved as the sensor moves them (contact_poses for a unit)."""
+    shift = moved[:, :3] if sensor.is_drawing else moved[:, :3] @ sensor.stage_map.T
+    return np.asarray(sensor.magnet.rest_center) + shift
+
+
+def _above_elements(sensor: Sensor, centre: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """``centre``, checked as :func:`check_above_elements` says; ``poses``: the given ones, for the message."""
+    centre_z = centre[:, 2]
+    rest_z = sensor.magnet.rest_center[2]
+    plane = float(sensor.positions[:, 2].min())
+    if not plane < rest_z:  # no element below the magnet: no board under it to go through
+        return centre
+    low = np.flatnonzero(centre_z <= plane)
+    if low.size:
+        p = int(low[0])
+        pose = " ".join(f"{n}={v:g}" for n, v in zip(POSE_NAMES, poses[p]))
+        raise InputError(f"pose {p + 1} ({pose}) puts the magnet's centre at z = {centre_z[p]:g} mm, in or below "
+                         f"the elements' plane (z = {plane:g} mm; the centre rests {rest_z - plane:g} mm above it): "
+                         "the magnet would be in or through the board")
+    return centre
 
 
 def inside_magnet(sensor: Sensor, local: np.ndarray) -> np.ndarray:

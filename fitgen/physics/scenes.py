@@ -10,7 +10,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import read_text
-from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.pose import POSE_NAMES, check_pose_range
 from fitgen.physics.simulate import DEFAULT_RANGES, grid_poses
 
 if sys.version_info >= (3, 11):
@@ -90,6 +90,7 @@ def load_scene(spec: str | None) -> Scene:
         if not ok:
             raise InputError(f"{origin}: 'ranges.{key}' must be [low, high] with low <= high")
         ranges[key] = (float(val[0]), float(val[1]))
+        check_pose_range(key, *ranges[key], origin)
     levels = data.get("levels", 5)
     if isinstance(levels, bool) or not isinstance(levels, int) or not 2 <= levels <= 101:
         raise InputError(f"{origin}: 'levels' must be a whole number 2..101")

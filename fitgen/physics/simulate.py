@@ -10,7 +10,7 @@ import numpy as np
 from fitgen import __version__
 from fitgen.physics.dataset import Dataset
 from fitgen.base.errors import InputError
-from fitgen.physics.pose import OFF_SKIN_MM, POSE_NAMES, as_poses, off_skin
+from fitgen.physics.pose import OFF_SKIN_MM, POSE_NAMES, as_poses, check_pose_range, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.transfer import readings
 
@@ -81,6 +81,7 @@ def parse_ranges(spec: str | None, base: dict[str, tuple[float, float]] | None =
         if not m or float(m.group(1)) > float(m.group(2)):
             raise InputError(f"ranges {spec!r}: {name}={value!r} must be LOW:HIGH with LOW <= HIGH")
         ranges[name] = (float(m.group(1)), float(m.group(2)))
+        check_pose_range(name, *ranges[name], f"ranges {spec!r}")
     return ranges
 
 
