@@ -31,11 +31,15 @@ def model_file(small_model, tmp_path_factory):
 
 
 def test_uno_refuses_a_double_header(model_file, tmp_path):
-    for args in (["--precision", "double", "--target", "uno"], ["--target", "uno"]):
-        proc = run_cli("fitgen", "codegen", model_file, "-o", str(tmp_path / "x"), *args)
-        assert_one_line_error(proc, contains="target uno")
-        assert "double is 32 bits" in proc.stderr
-        assert not (tmp_path / "x" / "tm_model.h").exists()
+    proc = run_cli("fitgen", "codegen", model_file, "-o", str(tmp_path / "x"), "--precision", "double", "--target", "uno")
+    assert_one_line_error(proc, contains="target uno")
+    assert "double is 32 bits" in proc.stderr
+    assert not (tmp_path / "x" / "tm_model.h").exists()
+    # no --precision: double where the target runs it, else what it runs (this exact model: the target's first)
+    for target, said in (("uno", "(float, table"), ("microbit", "(fixed point"), ("mps2", "(double, table")):
+        proc = run_cli("fitgen", "codegen", model_file, "-o", str(tmp_path / target), "--target", target)
+        assert proc.returncode == 0 and said in proc.stderr, proc.stderr
+    assert "typedef float tm_real;" in (tmp_path / "uno" / "tm_model.h").read_text()
     # the table's other rows: the Cortex-M0 runs fixed point only, the Pi no fixed point, the M4F all three
     assert_one_line_error(run_cli("fitgen", "codegen", model_file, "-o", str(tmp_path / "y"), "--precision", "float",
                                   "--target", "microbit"), contains="target microbit")

@@ -249,11 +249,14 @@ def cmd_report(args) -> int:
 
 def cmd_codegen(args) -> int:
     from fitgen.c.codegen import write_header
-    from fitgen.c.targets import check_precision
+    from fitgen.c.targets import check_precision, default_precision, get_target
     from fitgen.equations.model import load_model
+    from fitgen.fitting.holdout import device_precision
 
-    target = check_precision(args.target, args.precision)
+    get_target(args.target)  # a bad name said before the model is read
     model = load_model(args.model)
+    args.precision = args.precision or default_precision(args.target, device_precision(model))
+    target = check_precision(args.target, args.precision)
     if args.precision == "fixed":
         from fitgen.c.codegen import render_fixed_header
         from fitgen.c.fixedc import plan_line
@@ -420,8 +423,9 @@ def build_parser() -> Parser:
     c = command("codegen", cmd_codegen, "generate the header-only C99 estimator of a model")
     c.add_argument("model", metavar="MODEL")
     c.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for <prefix>_model.h")
-    c.add_argument("--precision", default="double", choices=("double", "float", "fixed"),
-                   help="fixed: integer ADC codes in, int32 outputs, no floating point (Cortex-M0)")
+    c.add_argument("--precision", choices=("double", "float", "fixed"),
+                   help="fixed: integer ADC codes in, int32 outputs, no floating point (Cortex-M0); default double, "
+                        "or on a --target without double the precision the model was fitted for if it runs it")
     c.add_argument("--style", default="table", choices=("table", "unrolled"))
     c.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
     c.add_argument("--fma", action="store_true",

@@ -49,6 +49,15 @@ def get_target(name: str | None) -> Target | None:
     return TARGETS[name]
 
 
+def default_precision(target: str | None, fitted: str) -> str:
+    """The precision codegen writes when none is given: double, unless the target cannot run it; then the
+    precision the model was fitted for (``fitted``) if the target runs that, else the target's first."""
+    t = get_target(target)
+    if t is None or "double" in t.precisions:
+        return "double"
+    return fitted if fitted in t.precisions else t.precisions[0]
+
+
 def check_precision(target: str | None, precision: str) -> Target | None:
     """The target's row, or an InputError (one line) when it may not run ``precision``."""
     t = get_target(target)
