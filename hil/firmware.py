@@ -16,7 +16,7 @@ from fitgen import __version__
 from fitgen.c.codegen import PRECISIONS, STYLES, render_blob_interpreter, write_header
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
-from fitgen.equations.model import Model
+from fitgen.equations.model import Model, check_input_units
 from fitgen.c.compiled import WARNING_FLAGS
 from fitgen.c.targets import TARGETS, check_precision
 from host.protocol_c import render_proto_defs
@@ -124,8 +124,8 @@ def render_firmware(model: Model, folder: str | Path, *, precision: str = "float
                          "host for --adc)")
     if cmap is not None and cmap.n_elements != model.n_inputs:
         raise InputError(f"the channel map reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
-    if cmap is not None and model.input_units != "V" and precision != "fixed":
-        raise InputError(f"the model takes inputs in {model.input_units}; the ADCs give volts")
+    if cmap is not None and precision != "fixed":  # fixed point takes the ADC's codes
+        check_input_units(model, "V", "the ADCs' readings")
     if (tin is not None or tempcomp is not None) and cmap is None:
         raise InputError("a thermistor and a temperature compensation need the ADC inputs (--adc)")
     if tempcomp is not None and tin is None:

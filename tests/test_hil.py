@@ -236,8 +236,11 @@ def test_cli_run_against_a_wrong_model_fails_with_status_1(paper_model, tmp_path
     assert "FAIL" in proc.stdout
 
 
-def test_cli_emulate_refuses_bus_options_without_a_bus(model_file):
-    for extra, said in ((["--simulate", "dx=1"], "go with --adc"), (["--adc", " "], "--adc is empty")):
+def test_cli_emulate_refuses_bus_options_it_cannot_serve(model_file):
+    for extra, said in ((["--simulate", "dx=1"], "go with --adc"), (["--adc", " "], "--adc is empty"),
+                        # a model in mT behind ADCs in volts: the check read, pi-build and replay share
+                        (["--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3"],
+                         "the model takes inputs in mT; the ADCs' readings are in V")):
         assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", str(model_file), "--target", "host",
                                       "--suite", *extra), contains=said)
 
