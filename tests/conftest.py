@@ -32,6 +32,22 @@ def run_cli(*args, input=None, cwd=None):
                           input=input, cwd=cwd, timeout=600)
 
 
+class Terminal:
+    """A stderr that says it is a terminal, keeping what is written (fitgen.base.progress.Progress draws on one)."""
+
+    def __init__(self):
+        self.text = ""
+
+    def isatty(self):
+        return True
+
+    def write(self, text):
+        self.text += text
+
+    def flush(self):
+        pass
+
+
 def assert_one_line_error(proc, status: int = 2, contains: str | None = None):
     assert proc.returncode == status, (proc.returncode, proc.stdout, proc.stderr)
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]

@@ -13,7 +13,7 @@ import pytest
 from host.arduino import BOARDS, build_example, example_elf, library_properties, render_arduino
 from host.channelmap import parse_spec
 
-from conftest import TWO_CHIPS, assert_one_line_error, require_tool, run_cli
+from conftest import TWO_CHIPS, Terminal, assert_one_line_error, require_tool, run_cli
 
 UNO = BOARDS["uno"]
 # flash and static RAM (the stack's peak after them when it was measured, as it is wherever simavr is)
@@ -331,23 +331,11 @@ def test_the_build_shows_progress_on_a_terminal(device_model, tmp_path, monkeypa
 
     from host.arduino import arduino_build
 
-    class Terminal:
-        text = ""
-
-        def isatty(self):
-            return True
-
-        def write(self, text):
-            Terminal.text += text
-
-        def flush(self):
-            pass
-
-    monkeypatch.setattr(sys, "stderr", Terminal())
+    term = Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
     size = arduino_build(device_model, parse_spec(TWO_CHIPS), tmp_path / "TactilePose", build=True)
     assert size.fits(UNO)
-    assert "\rarduino-build [" in Terminal.text and "building ReadPose (float, unrolled) with arduino-builder" in \
-        Terminal.text
+    assert "\rarduino-build [" in term.text and "building ReadPose (float, unrolled) with arduino-builder" in term.text
 
 
 def test_help_says_the_library_reads_no_thermistor():

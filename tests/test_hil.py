@@ -15,7 +15,7 @@ from hil.emulate import bench_instructions, start_target
 from hil.suite import flash_variant, run_suite
 from host.device import Device
 
-from conftest import assert_one_line_error, require_tool, run_cli
+from conftest import Terminal, assert_one_line_error, require_tool, run_cli
 
 
 @pytest.fixture(scope="module")
@@ -313,28 +313,12 @@ def test_cli_emulate_without_qemu_says_how_to_install(model_file, tmp_path, monk
     assert_one_line_error(proc, 2, "apt-get install")
 
 
-class _Terminal:
-    """A stderr that says it is a terminal, keeping what is written (fitgen.base.progress.Progress draws on one)."""
-
-    def __init__(self):
-        self.text = ""
-
-    def isatty(self):
-        return True
-
-    def write(self, text):
-        self.text += text
-
-    def flush(self):
-        pass
-
-
 def test_the_suite_shows_progress_through_eval_on_a_terminal(paper_model, monkeypatch):
     """eval and held-out accuracy take seconds on a slow board (10 s on the Uno): a bar moves through them."""
     require_tool("gcc")
     import sys
 
-    term = _Terminal()
+    term = Terminal()
     monkeypatch.setattr(sys, "stderr", term)
     rng = np.random.default_rng(0)
     readings = paper_model.input_min + (paper_model.input_max - paper_model.input_min) * rng.random((200, 8))
