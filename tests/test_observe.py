@@ -96,10 +96,10 @@ def test_cli_table_and_words():
     assert proc.returncode == 0 and "dz: NOT resolvable" in proc.stdout
     assert_one_line_error(run_cli("fitgen", "observe", "--accuracy", "dz=abc"), contains="not a number")
     assert_one_line_error(run_cli("fitgen", "observe", "--scene", "nosuch"), contains="scene")
-    # a box past reason overflowed the field into a LinAlgError; one below the elements' plane was analysed
+    # a box past reason overflowed the field into a LinAlgError; one through the board was analysed
     assert_one_line_error(run_cli("fitgen", "observe", "--ranges", "dx=-1e300:1e300"), contains="within -1000..1000")
     assert_one_line_error(run_cli("fitgen", "observe", "--ranges", "dz=-20:-10"),
-                          contains="pose 2 (dx=-2 dy=-2 dz=-20 thx=-5 thy=-5) puts the magnet's centre at z = -7 mm")
+                          contains="pose 2 (dx=-2 dy=-2 dz=-20 thx=-5 thy=-5) puts the magnet's lowest point at z = -7.865")
 
 
 def test_a_layout_blind_inside_the_box_is_not_resolvable_though_every_corner_is():

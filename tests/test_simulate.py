@@ -89,17 +89,31 @@ def test_grid_and_range_specs():
         parse_ranges("dx=2:1")
 
 
-def test_poses_keep_the_magnet_above_the_elements_and_boxes_stay_finite(tmp_path):
-    """Every reading goes through the check: the centre may come within a hair of the elements' plane, not onto it;
-    a scene's box is held to the range limits as --ranges is."""
-    from fitgen.physics.pose import check_above_elements, field_readings
+def test_poses_keep_the_magnet_above_the_board_and_boxes_stay_finite(tmp_path):
+    """Every reading goes through the check: the magnet's lowest point, its tilt included, may come within a hair of
+    the board's top face, not onto it; a unit's magnet moves as its stage map says; a scene's box is held to the
+    range limits as --ranges is."""
+    import dataclasses
+
+    from fitgen.physics.pose import check_above_board, field_readings
     from fitgen.physics.scenes import load_scene
 
-    paper = load_sensor("paper")
-    assert check_above_elements(paper, [0, 0, -12.99, 0, 0])[0, 2] == pytest.approx(0.01)
-    for dz in (-13.0, -20.0):
-        with pytest.raises(InputError, match="pose 2 .*in or below the elements' plane"):
-            field_readings(paper, [[0, 0, -2, 0, 0], [1, 0, dz, 5, 0]])
+    paper = load_sensor("paper")  # centre 13 mm above the board's bottom face, 1 mm thick, board 1.5 mm thick
+    assert check_above_board(paper, [0, 0, -10.99, 0, 0])[0, 2] == pytest.approx(2.01)
+    for dz in (-11.0, -13.0, -20.0):
+        with pytest.raises(InputError, match="pose 2 .*on or below the board's top face"):
+            field_readings(paper, [[0, 0, -2, 0, 0], [1, 0, dz, 0, 0]])
+    # tilted 20 deg, the rim drops 3 sin 20 + 0.5 cos 20 = 1.5 mm: 0.5 mm above the face at rest height 2 mm
+    field_readings(paper, [0, 0, -10.5, 0, 0])
+    with pytest.raises(InputError, match=r"pose 1 \(dx=0 dy=0 dz=-10.5 thx=20 thy=0\) puts the magnet's lowest point "
+                                         r"at z = 1.00"):
+        field_readings(paper, [0, 0, -10.5, 20, 0])
+    # a unit's magnet follows the stage by half in z: the stage may press twice as far
+    unit = dataclasses.replace(paper, stage_map=np.diag([1.0, 1.0, 0.5]))
+    assert not unit.is_drawing
+    assert np.all(np.isfinite(field_readings(unit, [0, 0, -21.9, 0, 0])))
+    with pytest.raises(InputError, match="board's top face"):
+        field_readings(unit, [0, 0, -22.0, 0, 0])
     with pytest.raises(InputError, match="thx must lie within -180..180 deg"):
         parse_ranges("thx=-181:0")
     (tmp_path / "far.toml").write_text('outputs = ["dz"]\n[ranges]\ndz = [-inf, 0.0]\n')
@@ -136,9 +150,9 @@ def test_grid_then_random_poses(tmp_path):
     (["--grid", "paper-sim", "--poses", "p.csv"], "one of"),
     (["--random", "5", "--poses", "p.csv"], "one of"),
     (["--bogus"], "unrecognized"),
-    # the magnet's centre (13 mm above the elements at rest) on the elements' plane: through the board
-    (["--grid", "dz=-13 dx=0 dy=0"], "in or below the elements' plane (z = 0 mm"),
-    (["--random", "5", "--ranges", "dz=-14:-12"], "in or below the elements' plane"),
+    # the magnet's bottom face (11 mm above the board at rest) on the board's top face: into the board
+    (["--grid", "dz=-11 dx=0 dy=0"], "on or below the board's top face (z = 1.5 mm"),
+    (["--random", "5", "--ranges", "dz=-14:-12"], "on or below the board's top face"),
     (["--random", "5", "--ranges", "dx=-1e300:1e300"], "dx must lie within -1000..1000 mm"),
     (["--random", "5", "--ranges", "thy=-1e999:0"], "thy from -inf to 0 deg"),
 ])

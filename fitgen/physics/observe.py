@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fitgen.physics.pose import POSE_NAMES, POSE_UNITS, as_poses, check_above_elements, field_readings
+from fitgen.physics.pose import POSE_NAMES, POSE_UNITS, as_poses, check_above_board, field_readings
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.transfer import apply_transfer
 
@@ -22,7 +22,7 @@ def jacobian(sensor: Sensor, poses) -> np.ndarray:
     The transfer is taken without noise or quantisation (the ideal response).
     """
     poses = as_poses(poses)
-    check_above_elements(sensor, poses)  # here, so that a refusal names the pose, not one of its probes
+    check_above_board(sensor, poses)  # here, so that a refusal names the pose, not one of its probes
     P = len(poses)
     shifts = np.concatenate([np.diag(_STEP), -np.diag(_STEP)])  # (10, 5)
     probe = (poses[:, None, :] + shifts[None]).reshape(-1, 5)

@@ -85,11 +85,7 @@ def magnet_frame(sensor: Sensor, poses: np.ndarray) -> tuple[np.ndarray, np.ndar
     skin (:func:`contact_poses`) leaves it at rest.
     """
     given = as_poses(poses)
-    poses = given if sensor.is_drawing else contact_poses(given)
-    centre = _above_elements(sensor, _centres(sensor, poses), given)
-    R = rotation_matrices(poses[:, 3], poses[:, 4])
-    if any(sensor.magnet.tilt):
-        R = R @ rotation_matrices(*sensor.magnet.tilt)
+    centre, R = _placed(sensor, given)
     rel = sensor.positions[None, :, :] - centre[:, None, :]
     # R^T v for every pose and element: local = rel @ R
     local = np.einsum("pnj,pjk->pnk", rel, R)
@@ -97,35 +93,38 @@ def magnet_frame(sensor: Sensor, poses: np.ndarray) -> tuple[np.ndarray, np.ndar
     return local, axes
 
 
-def check_above_elements(sensor: Sensor, poses) -> np.ndarray:
-    """The magnet's centre (P, 3) at each pose; InputError for the first pose that puts it in or below the
-    elements' plane (the lowest element's z, when below the centre at rest): the magnet would be in or
-    through the board (in that plane its field is along z, and radial elements read 0)."""
-    poses = as_poses(poses)
-    return _above_elements(sensor, _centres(sensor, poses if sensor.is_drawing else contact_poses(poses)), poses)
+def check_above_board(sensor: Sensor, poses) -> np.ndarray:
+    """The magnet's centre (P, 3) at each pose; InputError for the first pose that puts any part of the magnet
+    (its tilt included) on or below the board's top face (z = the board's thickness: the frame's origin is the
+    centre of the board's bottom face): the magnet would be in or through the board."""
+    return _placed(sensor, as_poses(poses))[0]
 
 
-def _centres(sensor: Sensor, moved: np.ndarray) -> np.ndarray:
-    """The magnet's centre (P, 3) at poses already moved as the sensor moves them (contact_poses for a unit)."""
+def lowest_point(sensor: Sensor, centre: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """z (P,) of the magnet's lowest point: its centre less the bottom rim's drop, R being its rotation."""
+    m = sensor.magnet
+    return centre[:, 2] - m.diameter / 2 * np.hypot(R[:, 2, 0], R[:, 2, 1]) - m.height / 2 * np.abs(R[:, 2, 2])
+
+
+def _placed(sensor: Sensor, given: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The magnet's centre (P, 3) and rotation (P, 3, 3) at the given poses, checked as
+    :func:`check_above_board` says."""
+    moved = given if sensor.is_drawing else contact_poses(given)
     shift = moved[:, :3] if sensor.is_drawing else moved[:, :3] @ sensor.stage_map.T
-    return np.asarray(sensor.magnet.rest_center) + shift
-
-
-def _above_elements(sensor: Sensor, centre: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """``centre``, checked as :func:`check_above_elements` says; ``poses``: the given ones, for the message."""
-    centre_z = centre[:, 2]
-    rest_z = sensor.magnet.rest_center[2]
-    plane = float(sensor.positions[:, 2].min())
-    if not plane < rest_z:  # no element below the magnet: no board under it to go through
-        return centre
-    low = np.flatnonzero(centre_z <= plane)
-    if low.size:
-        p = int(low[0])
-        pose = " ".join(f"{n}={v:g}" for n, v in zip(POSE_NAMES, poses[p]))
-        raise InputError(f"pose {p + 1} ({pose}) puts the magnet's centre at z = {centre_z[p]:g} mm, in or below "
-                         f"the elements' plane (z = {plane:g} mm; the centre rests {rest_z - plane:g} mm above it): "
-                         "the magnet would be in or through the board")
-    return centre
+    centre = np.asarray(sensor.magnet.rest_center) + shift
+    R = rotation_matrices(moved[:, 3], moved[:, 4])
+    if any(sensor.magnet.tilt):
+        R = R @ rotation_matrices(*sensor.magnet.tilt)
+    low = lowest_point(sensor, centre, R)
+    bad = np.flatnonzero(low <= sensor.board_thickness)
+    if bad.size:
+        p = int(bad[0])
+        pose = " ".join(f"{n}={v:g}" for n, v in zip(POSE_NAMES, given[p]))
+        rest = sensor.magnet.rest_center[2] - sensor.board_thickness
+        raise InputError(f"pose {p + 1} ({pose}) puts the magnet's lowest point at z = {low[p]:g} mm, on or below "
+                         f"the board's top face (z = {sensor.board_thickness:g} mm; at rest the magnet's centre is "
+                         f"{rest:g} mm above it): the magnet would be in or through the board")
+    return centre, R
 
 
 def inside_magnet(sensor: Sensor, local: np.ndarray) -> np.ndarray:
