@@ -11,8 +11,8 @@ Uno; all checked before the fits.
 Prints markdown: per build and core, flash and RAM of the firmware image, instructions per estimate
 (BENCH under -icount shift=0: two runs of different length, the difference per estimate), and the
 round trip (median of 200 one-vector EVALs) and batched throughput of EVAL over the emulator's TCP UART
-and the host build's pty. The batched figure is one timing of one 400-vector EVAL (hil.suite.check_timing),
-so it moves with the machine's load from run to run; the instruction counts do not.
+and the host build's pty. The batched figure is the median of BATCHES timings of one 400-vector EVAL
+(hil.suite.check_timing); it still moves with the machine's load from run to run; the instruction counts do not.
 The same fixed-point build runs on both cores; a second table counts its 64-bit products and
 divisions (the fixed-point plan's operations), which the M0 computes in library calls
 (__aeabi_lmul, __aeabi_ldivmod) and the M4 in single instructions (SMULL) or a short sequence.
@@ -33,6 +33,7 @@ from hil.suite import check_timing
 from host.device import Device
 
 CORES = {"mps2": "Cortex-M4F", "microbit": "Cortex-M0"}
+BATCHES = 7  # timings of one batched EVAL per build: their median is the figure
 BUILDS = [("float", "table", False), ("float", "unrolled", False), ("float", "unrolled", True),
           ("double", "table", False), ("double", "unrolled", False)]
 
@@ -58,18 +59,19 @@ def main() -> None:
         with start_target(m, target, precision=precision, style=style if style != "-" else "table", fma=fma) as emu:
             with Device.open(emu.url, timeout=10) as dev:
                 b = bench_instructions(dev)
-                t = check_timing(dev, m, fixed=_fixed(m) if precision == "fixed" else None)
+                t = check_timing(dev, m, fixed=_fixed(m) if precision == "fixed" else None, batches=BATCHES)
         terms = sum(len(e.terms) for e in m.equations)
         rows.append((name, precision, style + (" fma" if fma else ""), CORES[target], terms, emu.size["flash"],
                      emu.size["ram"], b["instructions"], t.figures))
     print("| model | precision | style | core | terms | flash (B) | RAM (B) | instructions per estimate | "
-          "EVAL round trip, median (ms) | batched EVAL, one timing of 400 vectors (estimates/s) |")
+          f"EVAL round trip, median (ms) | batched EVAL, median of {BATCHES} timings of 400 vectors (estimates/s) |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name, precision, style, core, terms, flash, ram, instr, fig in rows:
         print(f"| {name} | {precision} | {style} | {core} | {terms} | {flash:,} | {ram:,} | {instr:,.0f} | "
               f"{fig['rtt_ms_median']:.2f} | {fig['per_s']:,.0f} |")
-    print("\nRound trip: the median of 200 one-vector EVALs. Batched: one timing of one 400-vector EVAL per build "
-          "(hil.suite.check_timing), which moves with the machine's load; the instruction counts do not.")
+    print(f"\nRound trip: the median of 200 one-vector EVALs. Batched: the median of {BATCHES} timings of one "
+          "400-vector EVAL per build (hil.suite.check_timing), which moves with the machine's load; the instruction "
+          "counts do not.")
     fixed_rows = {core: instr for name, precision, _, core, _, _, _, instr, _ in rows if precision == "fixed"}
     kinds = [op.kind for op in _fixed(fixed_model).ops]
     products, divisions = kinds.count("mul") + kinds.count("term"), kinds.count("recip")
@@ -85,9 +87,9 @@ def main() -> None:
     with start_target(model, "host", precision="double", style="unrolled") as fw:
         with Device.open(fw.url, timeout=5) as dev:
             b = bench_instructions(dev)
-            t = check_timing(dev, model)
+            t = check_timing(dev, model, batches=BATCHES)
     print(f"- {b['ns']:.0f} ns per estimate on the host; EVAL round trip median {t.figures['rtt_ms_median']:.3f} ms, "
-          f"batched {t.figures['per_s']:,.0f} estimates/s (one timing of one 400-vector EVAL)")
+          f"batched {t.figures['per_s']:,.0f} estimates/s (the median of {BATCHES} timings of one 400-vector EVAL)")
 
 
 def uno_table(gmr, fixed_model) -> None:

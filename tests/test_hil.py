@@ -337,3 +337,24 @@ def test_cli_emulate_port_numbers_are_refused_alike(model_file):
     for bad in ("0", "-1", "65536"):
         assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", str(model_file), "--port", bad), 2,
                               f"{bad} is not a TCP port number (1..65535; leave --port out for a free one)")
+
+
+def test_timing_reports_the_median_of_its_batched_evals(model, monkeypatch):
+    """The batched throughput is the median over ``batches`` EVALs of n_batch vectors (bench/firmware_cost.py takes
+    several: one timing moves with the machine's load), each a single EVAL of all the vectors."""
+    import hil.suite
+
+    clock = [0.0]
+    monkeypatch.setattr(hil.suite.time, "perf_counter", lambda: clock[0])
+    batch_seconds = iter([0.5, 0.1, 0.2])  # rates 40, 200, 100 per second: the median is 100
+    sizes = []
+
+    class Device:
+        def eval(self, x):
+            sizes.append(len(x))
+            clock[0] += 0.001 if len(x) == 1 else next(batch_seconds)
+
+    check = hil.suite.check_timing(Device(), model, n_single=5, n_batch=20, batches=3)
+    assert sizes == [1] * 5 + [20] * 3
+    assert check.figures["per_s"] == pytest.approx(100.0)
+    assert check.figures["rtt_ms_median"] == pytest.approx(1.0)
