@@ -26,6 +26,10 @@ def test_demo_runs_end_to_end(tmp_path):
     # a model in volts, and the line that opens the live view with it
     volts = load_model(out / "model-volts.json")
     assert volts.input_units == "V" and volts.fit_info["family"]["auto"]
+    # with its held-out record, as `fitgen fit` writes one: verify and report measure rounding's share on it
+    rec = volts.fit_info["held_out"]
+    assert rec["sensor"] == "paper" and rec["poses"] == 2000
+    assert all(0 < e["max"] for e in rec["errors"]["float"].values())
     assert f"tactile-host view --model {out / 'model-volts.json'} --adc" in text and "--simulate motion" in text
     # a built unit calibrated through the simulated stage: the twin beats the drawing's model on the unit's truth
     import re

@@ -248,6 +248,28 @@ def test_verify_fails_when_float_rounding_exceeds_the_share(fitted_files):
                           contains="--sensor two-rings: the model was fitted on another sensor")
 
 
+def test_verify_says_why_it_measured_no_share(fitted_files, tmp_path):
+    """A model file without a held_out record: verify names that, and refuses a --sensor it could not use."""
+    require_tool("gcc")
+    raw = json.loads((fitted_files / "default.json").read_text())
+    del raw["fit"]["held_out"]
+    bare = tmp_path / "bare.json"
+    bare.write_text(json.dumps(raw))
+    proc = run_cli("tactile-host", "verify", str(bare), "--precision", "float", "--style", "unrolled",
+                   "--vectors", "200")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "rounding's share not measured: the model file has no held_out record" in proc.stdout
+    assert_one_line_error(run_cli("tactile-host", "verify", str(bare), "--sensor", "ring-vertical"),
+                          contains="--sensor ring-vertical: the model file has no held_out record")
+    # the record names a sensor this machine does not have: verify asks for its file
+    raw = json.loads((fitted_files / "default.json").read_text())
+    raw["fit"]["held_out"]["sensor"] = "my-own-sensor"
+    (tmp_path / "foreign.json").write_text(json.dumps(raw))
+    proc = run_cli("tactile-host", "verify", str(tmp_path / "foreign.json"), "--precision", "double", "--style",
+                   "table", "--vectors", "200")
+    assert proc.returncode == 0 and "is not known here (give its file with --sensor)" in proc.stdout
+
+
 def test_deployed_errors_fixed_point_within_share():
     """A no-roots fit for a fixed-point target: its integer arithmetic keeps the share small too."""
     from fitgen.equations.terms import FAMILIES

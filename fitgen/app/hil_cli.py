@@ -35,7 +35,7 @@ def _suite(url: str, model, data, args, input_lsb: float | None = None) -> int:
     """The suite against ``url``; ``input_lsb``: a fixed-point firmware's ADC code scale (its channel map's)."""
     from fitgen.c.targets import TARGETS
     from host.device import Device
-    from fitgen.c.verify import held_out_from_args
+    from fitgen.c.verify import held_out_from_args, no_held_out_note
 
     from hil.suite import run_suite
 
@@ -48,8 +48,7 @@ def _suite(url: str, model, data, args, input_lsb: float | None = None) -> int:
                         mul_bits=TARGETS[args.target].mul_bits if args.target in TARGETS else None)
     print(res.table())
     if held_out is None and not args.no_held_out:
-        print("note: no held-out accuracy check: the model file has no held_out record or its sensor is unknown "
-              "(give --sensor)")
+        print(no_held_out_note(model))
     if args.junit:
         res.write_junit(args.junit)
     print("PASS" if res.ok else "FAIL")

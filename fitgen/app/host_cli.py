@@ -16,7 +16,7 @@ def cmd_verify(args) -> int:
     from fitgen.c.codegen import STYLES
     from fitgen.equations.model import load_model
 
-    from fitgen.c.verify import check_vectors, data_inputs, held_out_from_args, verify
+    from fitgen.c.verify import check_vectors, data_inputs, held_out_from_args, no_held_out_note, verify
 
     check_vectors(args.vectors)
     model = load_model(args.model)
@@ -36,6 +36,8 @@ def cmd_verify(args) -> int:
                          n_random=args.vectors, extra_inputs=extra, fma=args.fma, input_lsb=args.input_lsb,
                          input_offset=args.input_offset, held_out=held_out, max_share=args.max_share)
             print(res.table())
+            if held_out is None and not args.no_held_out:
+                print(no_held_out_note(model))
             print("PASS" if res.ok else "FAIL: " + "; ".join(res.failures))
             print()
             ok &= res.ok

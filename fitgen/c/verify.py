@@ -82,10 +82,22 @@ def held_out_from_args(model: Model, args) -> tuple[np.ndarray, np.ndarray] | No
         raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
     if args.no_held_out:
         return None
+    if args.sensor and not isinstance(model.fit_info.get("held_out"), dict):
+        raise InputError(f"--sensor {args.sensor}: the model file has no held_out record to simulate on it again "
+                         "(`fitgen fit` writes one when it knows the sensor); leave --sensor out")
     # another sensor's readings would measure rounding against errors that are not the model's
     sensor = (fitted_sensor(load_sensor(args.sensor), model, "its held-out check on this one would not be the "
                             "model's (give the one it was fitted on, or leave --sensor out)") if args.sensor else None)
     return clean_readings(model, sensor)
+
+
+def no_held_out_note(model: Model) -> str:
+    """Why a check without held-out readings (:func:`held_out_from_args` gave None) measured no rounding's share."""
+    if not isinstance(model.fit_info.get("held_out"), dict):
+        return ("note: rounding's share not measured: the model file has no held_out record (`fitgen fit` writes "
+                "one when it knows the sensor)")
+    return ("note: rounding's share not measured: the sensor the model file's held_out record names is not known "
+            "here (give its file with --sensor)")
 
 
 def held_out_check(model: Model, c_outputs: np.ndarray, readings: np.ndarray, truth: np.ndarray,
@@ -188,9 +200,6 @@ class VerifyResult:
         if loose:
             lines.append(f"note: the a-priori bound is more than {LOOSE_BOUND:g}x the measured worst case for "
                          f"{', '.join(loose)}: there it says little; the held-out deviation is what counts")
-        if ho is None:
-            lines.append("note: rounding's share not measured: no held-out readings (a model file without a "
-                         "held_out record, or its sensor unknown: give --sensor)")
         return "\n".join(lines)
 
 
