@@ -115,6 +115,10 @@ def cmd_fit(args) -> int:
     if args.scene and args.outputs:
         raise InputError("give --outputs or --scene, not both (the scene names the outputs)")
     scene = args.scene or (None if args.outputs else ds.meta.get("scene_spec"))  # --outputs over the data's scene
+    if args.force and scene is None:
+        raise InputError("--force applies to a scene's outputs (--scene, or the scene the data were simulated for): "
+                         + ("--outputs names them here" if args.outputs else f"{args.data} names no scene")
+                         + ", so it would be ignored")
     if scene is not None:
         outputs = scene_outputs(scene, ds, args.data, sensor, args.force,
                                 recorded=None if args.scene else ds.meta.get("scene_outputs"))
@@ -340,13 +344,15 @@ def build_parser() -> Parser:
                    help="candidates: all 11 power kinds, no-roots, integer (v^1..v^4 only), harmonics (all 11 "
                         "and monomials of the ring's harmonics up to degree 3; needs the sensor), or auto (default: "
                         "all or harmonics, whichever is more accurate on validation poses; all without a sensor)")
-    f.add_argument("--no-d-terms", action="store_true", help="rotations without the displacement terms")
+    f.add_argument("--no-d-terms", action="store_true",
+                   help="rotations without the displacement terms (not with --true-d)")
     f.add_argument("--true-d", action="store_true",
                    help="rotation d-terms from the true displacements instead of the fitted estimates")
     f.add_argument("--scene", help="fit only the outputs of this scene (default: the dataset's scene, if any)")
     f.add_argument("--sensor", help="the dataset's sensor, for its noise, the held-out poses and the scene check "
                                     "(default: the preset the dataset's meta names)")
-    f.add_argument("--force", action="store_true", help="fit a scene's outputs even if the sensor cannot resolve them")
+    f.add_argument("--force", action="store_true", help="fit a scene's outputs (--scene, or the data's scene) even if "
+                   "the sensor cannot resolve them")
     f.add_argument("--noise", metavar="X",
                    help="reading noise rms (input units) the device will see, added in expectation (default: the "
                         "noise figure of the dataset's sensor; measured data carry their own). 0 alone: the data as "
@@ -357,8 +363,8 @@ def build_parser() -> Parser:
                    help="after the equations, STEPS Gauss-Newton steps on a forward model (readings from the pose) "
                         "fitted to the same data, with the equations' estimate as prior (docs/refine.md; default 0: "
                         "none). Needs all five pose columns and data that vary in each")
-    f.add_argument("--refine-terms", type=int, default=30, metavar="N",
-                   help="cap on the forward model's terms per element (default 30)")
+    f.add_argument("--refine-terms", type=int, metavar="N",
+                   help="with --refine: cap on the forward model's terms per element (default 30)")
     f.add_argument("--units", choices=("mT", "V"), help="the readings' units when the data have no meta file "
                    "(default mT; V for volts from ADCs: what read, pi-build and arduino-build take)")
     f.add_argument("--held-out", type=count, default=2000, metavar="N",
