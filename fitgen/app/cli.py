@@ -93,10 +93,11 @@ def cmd_fit(args) -> int:
     from fitgen.fitting.family import auto_compares, fit_family
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.physics.scenes import scene_outputs
-    from fitgen.physics.simulate import dataset_sensor
+    from fitgen.physics.simulate import check_sensor_file, dataset_sensor
 
     settings = fit_settings(args)
     loaded = load_dataset(args.data)
+    check_sensor_file(loaded.meta, args.sensor, str(args.data))  # a unit file gone or changed: said, not fitted without
     edited = loaded.meta.get("dataset_sha256") not in (None, loaded.sha256)  # rows changed since the meta was written
     ds, lifted = rows_on_the_skin(loaded)
     recorded = ds.meta.get("units")
