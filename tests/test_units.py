@@ -199,6 +199,38 @@ def test_data_of_a_preset_file_gone_fit_on_the_preset(tmp_path):
     assert json.loads((tmp_path / "m.json").read_text())["fit"]["held_out"]["sensor"] == "paper"
 
 
+@pytest.mark.parametrize("record, said", [
+    (None, "its posterior u.posterior.json is missing (identify writes it beside the unit file): identify again, "
+           "or delete the [unit] posterior line to use the unit without its uncertainty"),
+    ("{", "its posterior u.posterior.json cannot be read (identify writes it beside the unit file): identify again"),
+    ("negative", "the unit's posterior covariance is not positive definite (expected fitgen identify's)"),
+])
+def test_fit_reads_the_units_posterior_before_fitting(tmp_path, monkeypatch, capsys, record, said):
+    """A missing or bad posterior is said before the fit (which takes minutes on a real twin), not after it."""
+    from fitgen.app.cli import main
+    from fitgen.physics.simulate import grid_poses, simulate
+
+    drawing = load_sensor("paper")
+    path = write_unit(tmp_path / "u.toml", draw_unit(drawing, 4)[0], "paper", {"posterior": "u.posterior.json"})
+    size = UnitSpace.of(drawing).size
+    if record == "negative":
+        record = json.dumps({"theta": [0.0] * size, "covariance": (-np.eye(size)).tolist(), "drawing_spec": "paper"})
+    if record is not None:
+        (tmp_path / "u.posterior.json").write_text(record)
+    simulate(load_sensor(path), grid_poses({"dx": [-1, 0, 1], "dy": [-1, 0, 1], "dz": [0, -1, -2]}),
+             targets=("dx", "dy", "dz"), provenance={"sensor_file": str(path.resolve())}).save(tmp_path / "d.csv")
+
+    def fit_family(*args, **kw):
+        raise AssertionError("fitted before the posterior was read")
+
+    monkeypatch.setattr("fitgen.fitting.family.fit_family", fit_family)
+    with pytest.raises(SystemExit) as exc:
+        main(["fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"), "--held-out", "20"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.count("\n") == 1 and f"error: unit file {path}: " in err and said in err, err
+    assert not (tmp_path / "m.json").exists()
+
+
 def test_the_drawings_model_file_says_what_it_does_on_built_units(tmp_path):
     """A model fitted on the drawing records its held-out figures on units built within the drawing's tolerances,
     flashed uncalibrated: checked unit by unit against magpylib's readings of the same units."""

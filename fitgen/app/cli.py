@@ -125,6 +125,11 @@ def cmd_fit(args) -> int:
                                 recorded=None if args.scene else ds.meta.get("scene_outputs"))
     else:
         outputs = ds.target_names if args.outputs is None else parse_names(args.outputs, POSE_NAMES, "--outputs")
+    unit_file, posterior = args.sensor or ds.meta.get("sensor_file"), None
+    if args.held_out and sensor is not None:
+        from fitgen.fitting.holdout import unit_posterior
+
+        posterior = unit_posterior(unit_file, sensor)  # a missing or bad posterior said now, not after the fit
     auto = auto_compares(args.family, settings)
     steps = len(outputs) + (ds.n_inputs if settings.refine else 0)  # the equations, then the forward model's
     bar = Progress("fit", steps * (2 if auto and sensor is not None else 1))
@@ -143,9 +148,8 @@ def cmd_fit(args) -> int:
         from fitgen.fitting.holdout import fitted_held_out
 
         with Progress("held-out", 1) as hbar:
-            model.fit_info["held_out"] = fitted_held_out(model, sensor, ds, args.held_out,
-                                                         args.sensor or ds.meta.get("sensor_file"),
-                                                         note=lambda text: hbar.update(0, text))
+            model.fit_info["held_out"] = fitted_held_out(model, sensor, ds, args.held_out, unit_file,
+                                                         note=lambda text: hbar.update(0, text), posterior=posterior)
             hbar.update()
     model.save(args.output)
     print(fit_summary(model, args.held_out), end="", file=sys.stderr)
