@@ -91,6 +91,7 @@ def cmd_fit(args) -> int:
     from fitgen.app.report import fit_notes, fit_summary
     from fitgen.base.progress import Progress
     from fitgen.fitting.family import auto_compares, fit_family
+    from fitgen.fitting.holdout import fitted_held_out, unit_posterior
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.physics.scenes import scene_outputs
     from fitgen.physics.simulate import check_sensor_file, dataset_sensor
@@ -127,8 +128,6 @@ def cmd_fit(args) -> int:
         outputs = ds.target_names if args.outputs is None else parse_names(args.outputs, POSE_NAMES, "--outputs")
     unit_file, posterior = args.sensor or ds.meta.get("sensor_file"), None
     if args.held_out and sensor is not None:
-        from fitgen.fitting.holdout import unit_posterior
-
         posterior = unit_posterior(unit_file, sensor)  # a missing or bad posterior said now, not after the fit
     auto = auto_compares(args.family, settings)
     steps = len(outputs) + (ds.n_inputs if settings.refine else 0)  # the equations, then the forward model's
@@ -145,8 +144,6 @@ def cmd_fit(args) -> int:
     if lifted:
         model.fit_info["rows_off_skin_left_out"] = lifted
     if args.held_out and sensor is not None:
-        from fitgen.fitting.holdout import fitted_held_out
-
         with Progress("held-out", 1) as hbar:
             model.fit_info["held_out"] = fitted_held_out(model, sensor, ds, args.held_out, unit_file,
                                                          note=lambda text: hbar.update(0, text), posterior=posterior)
