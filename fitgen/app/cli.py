@@ -161,12 +161,16 @@ def cmd_predict(args) -> int:
 
     from fitgen.base.fileio import write_atomic
     from fitgen.c.codegen import check_magnitudes
-    from fitgen.c.targets import check_precision
+    from fitgen.c.targets import check_precision, default_precision, get_target
     from fitgen.equations.model import check_input_units, load_model
+    from fitgen.fitting.holdout import device_precision
     from fitgen.physics.dataset import estimates_csv, load_inputs, load_meta
 
-    target = check_precision(args.target, args.precision)
+    get_target(args.target)  # a bad name said before the model is read
     model = load_model(args.model)
+    # as codegen picks the header's: what predict computes is what codegen --target writes
+    args.precision = args.precision or default_precision(args.target, device_precision(model))
+    target = check_precision(args.target, args.precision)
     inputs = load_inputs(args.data, model.n_inputs)
     check_input_units(model, load_meta(args.data).get("units"), f"{args.data}'s readings", f"model {args.model}")
     if args.precision == "fixed":
@@ -406,10 +410,12 @@ def build_parser() -> Parser:
     pr.add_argument("model", metavar="MODEL")
     pr.add_argument("data", metavar="DATA.csv")
     pr.add_argument("-o", "--output", required=True, help="CSV of estimates (and status) to write")
-    pr.add_argument("--precision", default="double", choices=("double", "float", "fixed"),
-                    help="the arithmetic of the generated C, bit for bit: double (default) or float, as the "
-                         "header computes them; fixed: the fixed-point header's integers (as real values), from "
-                         "the v columns rounded to ADC codes as the ADC would, or taken as codes with --codes")
+    pr.add_argument("--precision", choices=("double", "float", "fixed"),
+                    help="the arithmetic of the generated C, bit for bit: double or float, as the header computes "
+                         "them; fixed: the fixed-point header's integers (as real values), from the v columns rounded "
+                         "to ADC codes as the ADC would, or taken as codes with --codes. Default as codegen's: "
+                         "double, or on a --target without double the precision the model was fitted for if it "
+                         "runs it")
     pr.add_argument("--codes", action="store_true",
                     help="fixed: the v columns are the ADC codes the fixed header takes (whole numbers)")
     pr.add_argument("--input-lsb", type=finite, metavar="X",
@@ -417,8 +423,9 @@ def build_parser() -> Parser:
                     "float: the v columns rounded to such codes and taken as float(code) * float(X), as a device's "
                     "float code (ReadPose) computes them")
     pr.add_argument("--input-offset", type=finite, metavar="Y", help="fixed: the input value of code 0")
-    pr.add_argument("--target", choices=tuple(TARGETS), help="fixed: the plan codegen --target makes for that core "
-                    "(uno: 16x16->32 products where the error bound allows); refuses a precision it cannot run")
+    pr.add_argument("--target", choices=tuple(TARGETS), help="the core, as codegen --target: its default precision; "
+                    "fixed: the plan it makes for that core (uno: 16x16->32 products where the error bound allows); "
+                    "refuses a precision it cannot run")
 
     r = command("report", cmd_report, "terms, AIC trace and errors of a model")
     r.add_argument("model", metavar="MODEL")
