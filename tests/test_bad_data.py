@@ -244,6 +244,35 @@ def test_fit_refuses_refine_terms_below_five_without_refine_too(data, tmp_path):
                           contains="--refine-terms must be >= 5")
 
 
+@pytest.mark.parametrize("args, said", [
+    (["--refine-terms", "10"], "--refine-terms caps the forward model of --refine STEPS: without --refine it would "
+                               "be ignored"),
+    (["--refine", "0", "--refine-terms", "30"], "without --refine it would be ignored"),
+    (["--true-d", "--no-d-terms"], "--true-d and --no-d-terms contradict each other"),
+    (["--force"], "d.csv names no scene, so it would be ignored"),
+    (["--force", "--outputs", "dx"], "--force applies to a scene's outputs (--scene, or the scene the data were "
+                                     "simulated for): --outputs names them here, so it would be ignored"),
+])
+def test_fit_refuses_options_that_would_be_ignored_or_contradict(data, tmp_path, args, said):
+    assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), *args),
+                          contains=said)
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_fit_settings_fill_the_refine_cap_the_help_states():
+    import argparse
+
+    from fitgen.app.cli import build_parser
+    from fitgen.app.options import fit_settings
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices["fit"]
+    assert "cap on the forward model's terms per element (default 30)" in " ".join(sub.format_help().split())
+    args = sub.parse_args(["d.csv", "-o", "m.json", "--refine", "1"])
+    assert args.refine_terms is None and fit_settings(args).refine_terms == 30
+    assert fit_settings(sub.parse_args(["d.csv", "-o", "m.json", "--refine", "1", "--refine-terms", "9"])
+                        ).refine_terms == 9
+
+
 
 def test_fit_takes_the_units_of_data_without_meta_from_units(data, tmp_path):
     bare = tmp_path / "bare.csv"

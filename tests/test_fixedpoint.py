@@ -566,3 +566,31 @@ def test_uno_codegen_and_predict_cli(small_model, tmp_path):
         assert_one_line_error(run_cli("fitgen", *cmd, "--precision", "double", "--target", "uno"),
                               contains="target uno")
     assert not (tmp_path / "x").exists() and not (tmp_path / "x.csv").exists()
+
+
+def test_predict_on_a_target_defaults_to_the_precision_codegen_writes(small_model, tmp_path):
+    """predict --target without --precision computes in what codegen --target writes (fitgen.c.targets
+    .default_precision): on the uno the precision the model was fitted for if it runs it, else float; double
+    without a target or on one that runs double."""
+    from fitgen.physics.dataset import Dataset
+
+    rng = np.random.default_rng(3)
+    values = rng.uniform(small_model.input_min, small_model.input_max, (200, small_model.n_inputs))
+    Dataset(values, np.zeros((len(values), 0)), ()).save(tmp_path / "v.csv")
+    doc, est = small_model.to_dict(), {}
+    for fitted, target, expect in ((None, "uno", "float"), ("double", "uno", "float"), ("fixed", "uno", "fixed"),
+                                   ("fixed", None, "double"), ("fixed", "pi", "double")):
+        doc["fit"]["precision"]["target"] = fitted
+        path = tmp_path / "m.json"
+        path.write_text(json.dumps(doc))
+        extra = ["--target", target] if target else []
+        proc = run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "c"), *extra)
+        assert proc.returncode == 0 and f"({'fixed point' if expect == 'fixed' else expect}," in proc.stderr, \
+            proc.stderr
+        for name, given in (("default", []), ("given", ["--precision", expect])):
+            proc = run_cli("fitgen", "predict", str(path), str(tmp_path / "v.csv"), "-o", str(tmp_path / f"{name}.csv"),
+                           *extra, *given)
+            assert proc.returncode == 0, proc.stderr
+        est[expect] = (tmp_path / "default.csv").read_text()
+        assert est[expect] == (tmp_path / "given.csv").read_text()
+    assert len(set(est.values())) == 3  # the three precisions' estimates differ: the comparison above tells them apart

@@ -158,6 +158,79 @@ def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
     assert not (tmp_path / "again.csv").exists()
 
 
+def test_fit_refuses_data_whose_unit_file_is_gone_or_changed(tmp_path):
+    """Without the unit file it was simulated with, a fit would run without the device's noise, the harmonics family
+    and the held-out figures, exit 0: refused before the fit, saying which and what to do."""
+    out, unit_file = tmp_path / "u.csv", tmp_path / "u.unit.toml"
+    assert run_cli("fitgen", "simulate", "--unit", "4", "--grid", "paper-exp", "-o", str(out)).returncode == 0
+    fit = ("fitgen", "fit", str(out), "-o", str(tmp_path / "m.json"), "--held-out", "20", "--max-terms", "6")
+    todo = "give the file it was simulated with as --sensor, or simulate the data again"
+    unit_file.rename(tmp_path / "kept.toml")
+    assert_one_line_error(run_cli(*fit), 2, f"{out.name} was simulated with sensor file {unit_file.resolve()}, "
+                                            f"which is missing: {todo}")
+    assert not (tmp_path / "m.json").exists()
+    # identify (or an edit) writing another unit into the file: the data are not that unit's
+    write_unit(unit_file, draw_unit(load_sensor("paper"), 5)[0], "paper")
+    for extra in ((), ("--sensor", str(unit_file.resolve()))):
+        assert_one_line_error(run_cli(*fit, *extra), 2, f"{unit_file.resolve()}, which has changed since the data "
+                                                        f"were simulated (edited, or identify wrote another unit "
+                                                        f"into it): {todo}")
+    assert not (tmp_path / "m.json").exists()
+    # the file it was simulated with, given: fitted with its noise and held out on it
+    proc = run_cli(*fit, "--sensor", str(tmp_path / "kept.toml"))
+    assert proc.returncode == 0, proc.stderr
+    info = json.loads((tmp_path / "m.json").read_text())["fit"]
+    assert info["noise"]["device_source"] == "sensor paper-unit-4" and info["held_out"]["sensor"] == "paper-unit-4"
+    assert "validation_rms" in info["family"]  # auto compared the harmonics family: it had the elements' places
+
+
+def test_data_of_a_preset_file_gone_fit_on_the_preset(tmp_path):
+    """A sensor file that was a preset's copy: the preset the meta names is that sensor, gone file or not."""
+    from importlib import resources
+
+    copy = tmp_path / "p.toml"
+    copy.write_text(resources.files("fitgen.physics.presets").joinpath("paper.toml").read_text())
+    out = tmp_path / "p.csv"
+    assert run_cli("fitgen", "simulate", "--sensor", str(copy), "--grid", "paper-exp", "-o", str(out)).returncode == 0
+    copy.unlink()
+    proc = run_cli("fitgen", "fit", str(out), "-o", str(tmp_path / "m.json"), "--held-out", "20", "--max-terms", "6",
+                   "--family", "no-roots")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((tmp_path / "m.json").read_text())["fit"]["held_out"]["sensor"] == "paper"
+
+
+@pytest.mark.parametrize("record, said", [
+    (None, "its posterior u.posterior.json is missing (identify writes it beside the unit file): identify again, "
+           "or delete the [unit] posterior line to use the unit without its uncertainty"),
+    ("{", "its posterior u.posterior.json cannot be read (identify writes it beside the unit file): identify again"),
+    ("negative", "the unit's posterior covariance is not positive definite (expected fitgen identify's)"),
+])
+def test_fit_reads_the_units_posterior_before_fitting(tmp_path, monkeypatch, capsys, record, said):
+    """A missing or bad posterior is said before the fit (which takes minutes on a real twin), not after it."""
+    from fitgen.app.cli import main
+    from fitgen.physics.simulate import grid_poses, simulate
+
+    drawing = load_sensor("paper")
+    path = write_unit(tmp_path / "u.toml", draw_unit(drawing, 4)[0], "paper", {"posterior": "u.posterior.json"})
+    size = UnitSpace.of(drawing).size
+    if record == "negative":
+        record = json.dumps({"theta": [0.0] * size, "covariance": (-np.eye(size)).tolist(), "drawing_spec": "paper"})
+    if record is not None:
+        (tmp_path / "u.posterior.json").write_text(record)
+    simulate(load_sensor(path), grid_poses({"dx": [-1, 0, 1], "dy": [-1, 0, 1], "dz": [0, -1, -2]}),
+             targets=("dx", "dy", "dz"), provenance={"sensor_file": str(path.resolve())}).save(tmp_path / "d.csv")
+
+    def fit_family(*args, **kw):
+        raise AssertionError("fitted before the posterior was read")
+
+    monkeypatch.setattr("fitgen.fitting.family.fit_family", fit_family)
+    with pytest.raises(SystemExit) as exc:
+        main(["fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"), "--held-out", "20"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.count("\n") == 1 and f"error: unit file {path}: " in err and said in err, err
+    assert not (tmp_path / "m.json").exists()
+
+
 def test_the_drawings_model_file_says_what_it_does_on_built_units(tmp_path):
     """A model fitted on the drawing records its held-out figures on units built within the drawing's tolerances,
     flashed uncalibrated: checked unit by unit against magpylib's readings of the same units."""

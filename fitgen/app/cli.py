@@ -91,12 +91,14 @@ def cmd_fit(args) -> int:
     from fitgen.app.report import fit_notes, fit_summary
     from fitgen.base.progress import Progress
     from fitgen.fitting.family import auto_compares, fit_family
+    from fitgen.fitting.holdout import fitted_held_out, unit_posterior
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.physics.scenes import scene_outputs
-    from fitgen.physics.simulate import dataset_sensor
+    from fitgen.physics.simulate import check_sensor_file, dataset_sensor
 
     settings = fit_settings(args)
     loaded = load_dataset(args.data)
+    check_sensor_file(loaded.meta, args.sensor, str(args.data))  # a unit file gone or changed: said, not fitted without
     edited = loaded.meta.get("dataset_sha256") not in (None, loaded.sha256)  # rows changed since the meta was written
     ds, lifted = rows_on_the_skin(loaded)
     recorded = ds.meta.get("units")
@@ -115,11 +117,18 @@ def cmd_fit(args) -> int:
     if args.scene and args.outputs:
         raise InputError("give --outputs or --scene, not both (the scene names the outputs)")
     scene = args.scene or (None if args.outputs else ds.meta.get("scene_spec"))  # --outputs over the data's scene
+    if args.force and scene is None:
+        raise InputError("--force applies to a scene's outputs (--scene, or the scene the data were simulated for): "
+                         + ("--outputs names them here" if args.outputs else f"{args.data} names no scene")
+                         + ", so it would be ignored")
     if scene is not None:
         outputs = scene_outputs(scene, ds, args.data, sensor, args.force,
                                 recorded=None if args.scene else ds.meta.get("scene_outputs"))
     else:
         outputs = ds.target_names if args.outputs is None else parse_names(args.outputs, POSE_NAMES, "--outputs")
+    unit_file, posterior = args.sensor or ds.meta.get("sensor_file"), None
+    if args.held_out and sensor is not None:
+        posterior = unit_posterior(unit_file, sensor)  # a missing or bad posterior said now, not after the fit
     auto = auto_compares(args.family, settings)
     steps = len(outputs) + (ds.n_inputs if settings.refine else 0)  # the equations, then the forward model's
     bar = Progress("fit", steps * (2 if auto and sensor is not None else 1))
@@ -135,12 +144,9 @@ def cmd_fit(args) -> int:
     if lifted:
         model.fit_info["rows_off_skin_left_out"] = lifted
     if args.held_out and sensor is not None:
-        from fitgen.fitting.holdout import fitted_held_out
-
         with Progress("held-out", 1) as hbar:
-            model.fit_info["held_out"] = fitted_held_out(model, sensor, ds, args.held_out,
-                                                         args.sensor or ds.meta.get("sensor_file"),
-                                                         note=lambda text: hbar.update(0, text))
+            model.fit_info["held_out"] = fitted_held_out(model, sensor, ds, args.held_out, unit_file,
+                                                         note=lambda text: hbar.update(0, text), posterior=posterior)
             hbar.update()
     model.save(args.output)
     print(fit_summary(model, args.held_out), end="", file=sys.stderr)
@@ -155,12 +161,16 @@ def cmd_predict(args) -> int:
 
     from fitgen.base.fileio import write_atomic
     from fitgen.c.codegen import check_magnitudes
-    from fitgen.c.targets import check_precision
+    from fitgen.c.targets import check_precision, default_precision, get_target
     from fitgen.equations.model import check_input_units, load_model
+    from fitgen.fitting.holdout import device_precision
     from fitgen.physics.dataset import estimates_csv, load_inputs, load_meta
 
-    target = check_precision(args.target, args.precision)
+    get_target(args.target)  # a bad name said before the model is read
     model = load_model(args.model)
+    # as codegen picks the header's: what predict computes is what codegen --target writes
+    args.precision = args.precision or default_precision(args.target, device_precision(model))
+    target = check_precision(args.target, args.precision)
     inputs = load_inputs(args.data, model.n_inputs)
     check_input_units(model, load_meta(args.data).get("units"), f"{args.data}'s readings", f"model {args.model}")
     if args.precision == "fixed":
@@ -340,13 +350,15 @@ def build_parser() -> Parser:
                    help="candidates: all 11 power kinds, no-roots, integer (v^1..v^4 only), harmonics (all 11 "
                         "and monomials of the ring's harmonics up to degree 3; needs the sensor), or auto (default: "
                         "all or harmonics, whichever is more accurate on validation poses; all without a sensor)")
-    f.add_argument("--no-d-terms", action="store_true", help="rotations without the displacement terms")
+    f.add_argument("--no-d-terms", action="store_true",
+                   help="rotations without the displacement terms (not with --true-d)")
     f.add_argument("--true-d", action="store_true",
                    help="rotation d-terms from the true displacements instead of the fitted estimates")
     f.add_argument("--scene", help="fit only the outputs of this scene (default: the dataset's scene, if any)")
     f.add_argument("--sensor", help="the dataset's sensor, for its noise, the held-out poses and the scene check "
                                     "(default: the preset the dataset's meta names)")
-    f.add_argument("--force", action="store_true", help="fit a scene's outputs even if the sensor cannot resolve them")
+    f.add_argument("--force", action="store_true", help="fit a scene's outputs (--scene, or the data's scene) even if "
+                   "the sensor cannot resolve them")
     f.add_argument("--noise", metavar="X",
                    help="reading noise rms (input units) the device will see, added in expectation (default: the "
                         "noise figure of the dataset's sensor; measured data carry their own). 0 alone: the data as "
@@ -357,8 +369,8 @@ def build_parser() -> Parser:
                    help="after the equations, STEPS Gauss-Newton steps on a forward model (readings from the pose) "
                         "fitted to the same data, with the equations' estimate as prior (docs/refine.md; default 0: "
                         "none). Needs all five pose columns and data that vary in each")
-    f.add_argument("--refine-terms", type=int, default=30, metavar="N",
-                   help="cap on the forward model's terms per element (default 30)")
+    f.add_argument("--refine-terms", type=int, metavar="N",
+                   help="with --refine: cap on the forward model's terms per element (default 30)")
     f.add_argument("--units", choices=("mT", "V"), help="the readings' units when the data have no meta file "
                    "(default mT; V for volts from ADCs: what read, pi-build and arduino-build take)")
     f.add_argument("--held-out", type=count, default=2000, metavar="N",
@@ -398,10 +410,12 @@ def build_parser() -> Parser:
     pr.add_argument("model", metavar="MODEL")
     pr.add_argument("data", metavar="DATA.csv")
     pr.add_argument("-o", "--output", required=True, help="CSV of estimates (and status) to write")
-    pr.add_argument("--precision", default="double", choices=("double", "float", "fixed"),
-                    help="the arithmetic of the generated C, bit for bit: double (default) or float, as the "
-                         "header computes them; fixed: the fixed-point header's integers (as real values), from "
-                         "the v columns rounded to ADC codes as the ADC would, or taken as codes with --codes")
+    pr.add_argument("--precision", choices=("double", "float", "fixed"),
+                    help="the arithmetic of the generated C, bit for bit: double or float, as the header computes "
+                         "them; fixed: the fixed-point header's integers (as real values), from the v columns rounded "
+                         "to ADC codes as the ADC would, or taken as codes with --codes. Default as codegen's: "
+                         "double, or on a --target without double the precision the model was fitted for if it "
+                         "runs it")
     pr.add_argument("--codes", action="store_true",
                     help="fixed: the v columns are the ADC codes the fixed header takes (whole numbers)")
     pr.add_argument("--input-lsb", type=finite, metavar="X",
@@ -409,8 +423,9 @@ def build_parser() -> Parser:
                     "float: the v columns rounded to such codes and taken as float(code) * float(X), as a device's "
                     "float code (ReadPose) computes them")
     pr.add_argument("--input-offset", type=finite, metavar="Y", help="fixed: the input value of code 0")
-    pr.add_argument("--target", choices=tuple(TARGETS), help="fixed: the plan codegen --target makes for that core "
-                    "(uno: 16x16->32 products where the error bound allows); refuses a precision it cannot run")
+    pr.add_argument("--target", choices=tuple(TARGETS), help="the core, as codegen --target: its default precision; "
+                    "fixed: the plan it makes for that core (uno: 16x16->32 products where the error bound allows); "
+                    "refuses a precision it cannot run")
 
     r = command("report", cmd_report, "terms, AIC trace and errors of a model")
     r.add_argument("model", metavar="MODEL")

@@ -29,7 +29,8 @@ def noise_of(value: str, sensor) -> float:
 
 
 def fit_settings(args):
-    """`fitgen fit`'s options (penalty, caps, noise, family) as fit settings; InputError when one is out of range."""
+    """`fitgen fit`'s options (penalty, caps, noise, family) as fit settings; InputError when one is out of range,
+    would be ignored, or contradicts another."""
     from fitgen.fitting.family import family_settings
 
     try:
@@ -41,8 +42,14 @@ def fit_settings(args):
     k = 2.0 if k == "aic" else k
     if args.max_terms is not None and args.max_terms < 1:
         raise InputError(f"--max-terms must be >= 1, got {args.max_terms}")
-    if args.refine_terms < 5:
+    if args.refine_terms is not None and args.refine_terms < 5:
         raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {args.refine_terms}")
+    if args.refine_terms is not None and not args.refine:
+        raise InputError("--refine-terms caps the forward model of --refine STEPS: without --refine it would be "
+                         "ignored")
+    if args.true_d and args.no_d_terms:
+        raise InputError("--true-d and --no-d-terms contradict each other: --true-d says where the rotations' "
+                         "d-terms come from, --no-d-terms leaves them out; give one")
     try:
         noise = None if args.noise is None else parse_noise(args.noise)
     except OutOfRange:
@@ -50,9 +57,10 @@ def fit_settings(args):
     except ValueError:
         raise InputError(f"--noise must be a number >= 0 (reading noise rms, input units), got {args.noise!r}") \
             from None
+    # --refine-terms given or not: FitSettings' own cap (30, as the help says) when not
+    cap = {} if args.refine_terms is None else {"refine_terms": args.refine_terms}
     return family_settings(args.family, args.precision, noise, args.refine, k=k, max_terms=args.max_terms,
-                           d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated",
-                           refine_terms=args.refine_terms)
+                           d_terms=not args.no_d_terms, d_source="true" if args.true_d else "estimated", **cap)
 
 
 def map_options(p, required: bool = True, thermistor: bool = True) -> None:

@@ -219,14 +219,28 @@ def uncalibrated(model: Model, drawing, ranges: dict, *, noise: float | None = N
                          "draws, the model flashed into them uncalibrated; *_lo, *_hi: their least and greatest"}
 
 
-def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None) -> dict:
-    """The ``held_out`` record of a model fitted to dataset ``ds``: :func:`evaluate` on ``n`` poses in
-    the box of its poses, with the device's noise the fit assumed and the dataset's labels; on units
-    drawn from the identification's posterior when ``unit_file`` has one. ``note(text)`` is told what
-    is simulated."""
+def unit_posterior(unit_file, sensor) -> dict | None:
+    """The posterior record ``unit_file`` names (fitgen.fitting.unitrecord.load_posterior), checked as
+    :func:`posterior_units` draws from it in ``sensor``'s transfer; None when there is none. InputError for
+    one that is missing or bad: read before a fit, so that this is said before the work, not after it."""
     from fitgen.fitting.unitrecord import load_posterior
 
     posterior = load_posterior(unit_file) if unit_file else None
+    if posterior is not None:
+        try:
+            _posterior_draw(posterior, sensor)
+        except InputError as exc:
+            raise InputError(f"unit file {unit_file}: {exc}") from None
+    return posterior
+
+
+def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None, posterior=None) -> dict:
+    """The ``held_out`` record of a model fitted to dataset ``ds``: :func:`evaluate` on ``n`` poses in
+    the box of its poses, with the device's noise the fit assumed and the dataset's labels; on units
+    drawn from the identification's posterior when ``unit_file`` has one (``posterior``: that record as
+    :func:`unit_posterior` read it before the fit; read here when not given). ``note(text)`` is told what
+    is simulated."""
+    posterior = posterior if posterior is not None else unit_posterior(unit_file, sensor)
     noise = model.fit_info["noise"]["device"]
     if note:
         note(f"{n} random poses, {noise or 0:g} noise"
@@ -247,6 +261,14 @@ def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None)
 
 def posterior_units(record: dict, sensor, k: int) -> list:
     """``k`` units drawn from an identification's posterior record, in ``sensor``'s transfer."""
+    space, theta, L = _posterior_draw(record, sensor)
+    z = np.random.default_rng(POSTERIOR_SEED).standard_normal((k, space.size))
+    return [space.sensor(theta + L @ zi, f"{sensor.name}-posterior-{i + 1}") for i, zi in enumerate(z)]
+
+
+def _posterior_draw(record: dict, sensor):
+    """What units are drawn from a posterior record with: its drawing's unit space in ``sensor``'s transfer, the
+    mean and a Cholesky factor of the covariance; InputError when the record cannot give them."""
     from fitgen.physics.sensor import load_sensor
     from fitgen.physics.units import UnitSpace
 
@@ -259,9 +281,12 @@ def posterior_units(record: dict, sensor, k: int) -> list:
     space = UnitSpace.of(drawing)
     if theta.shape != (space.size,) or cov.shape != (space.size, space.size):
         raise InputError(f"the unit's posterior does not fit its drawing {record.get('drawing_spec')!r}")
-    L = np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov)) + 1e-300 * np.eye(space.size))
-    z = np.random.default_rng(POSTERIOR_SEED).standard_normal((k, space.size))
-    return [space.sensor(theta + L @ zi, f"{sensor.name}-posterior-{i + 1}") for i, zi in enumerate(z)]
+    try:
+        L = np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov)) + 1e-300 * np.eye(space.size))
+    except np.linalg.LinAlgError:  # edited by hand: no covariance a draw could come from
+        raise InputError("the unit's posterior covariance is not positive definite (expected fitgen "
+                         "identify's)") from None
+    return space, theta, L
 
 
 def fitted_sensor(sensor, model: Model, why: str, flag: str = "--sensor"):

@@ -238,15 +238,19 @@ def load_posterior(unit_path) -> dict | None:
     name = doc.get("unit", {}).get("posterior") if isinstance(doc.get("unit"), dict) else None
     if not isinstance(name, str):
         return None
+    todo = "identify again, or delete the [unit] posterior line to use the unit without its uncertainty"
+    path = unit_path.parent / name
     try:
-        rec = json.loads((unit_path.parent / name).read_text())
+        rec = json.loads(path.read_text())
     except (OSError, ValueError):
-        raise InputError(f"unit file {unit_path}: its posterior {name} cannot be read") from None
+        why = "is missing" if not path.exists() else "cannot be read"
+        raise InputError(f"unit file {unit_path}: its posterior {name} {why} (identify writes it beside the unit "
+                         f"file): {todo}") from None
     if not (isinstance(rec, dict) and isinstance(rec.get("theta"), list) and isinstance(rec.get("covariance"), list)
             and isinstance(rec.get("drawing_spec"), str)):
-        raise InputError(f"unit file {unit_path}: its posterior {name} is malformed (expected fitgen identify's)")
+        raise InputError(f"unit file {unit_path}: its posterior {name} is malformed (expected fitgen identify's): "
+                         f"{todo}")
     if "unit_sha256" in rec and rec["unit_sha256"] != load_sensor(unit_path).sha256:
         raise InputError(f"unit file {unit_path}: its posterior {name} was written for another unit (another "
-                         "identification's, or the unit file was edited since): identify again, or delete the "
-                         "[unit] posterior line to use the unit without its uncertainty")
+                         f"identification's, or the unit file was edited since): {todo}")
     return rec

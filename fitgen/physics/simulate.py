@@ -198,3 +198,39 @@ def dataset_sensor(meta: dict, spec: str | None = None, n_inputs: int | None = N
         raise InputError(f"the dataset has {n_inputs} input columns, its sensor {sensor.name} {sensor.n_elements} "
                          "elements")
     return sensor
+
+
+def check_sensor_file(meta: dict, spec: str | None = None, origin: str = "the dataset") -> None:
+    """InputError when the sensor file a simulated dataset's meta names (``sensor_file``: a unit's, say) is
+    missing or has changed since the data were simulated, unless ``spec`` (a --sensor) names another: without
+    it :func:`dataset_sensor` finds no sensor, and a fit would lose its noise and held-out figures unsaid.
+    A meta naming no file (a preset's data, measured data) passes, and so does a missing file whose sensor is
+    the preset the meta names."""
+    from pathlib import Path
+
+    from fitgen.physics.sensor import preset_names
+
+    recorded = meta.get("sensor_file")
+    if not isinstance(recorded, str) or (spec is not None and Path(spec).resolve() != Path(recorded).resolve()):
+        return
+    sha, name = meta.get("sensor_sha256"), meta.get("sensor")
+    todo = "give the file it was simulated with as --sensor, or simulate the data again"
+    if not Path(recorded).is_file():
+        if name in preset_names() and sha in (None, _recorded_sensor(name, meta).sha256):
+            return  # the preset it was: dataset_sensor takes that
+        raise InputError(f"{origin} was simulated with sensor file {recorded}, which is missing: {todo}")
+    try:
+        changed = sha not in (None, _recorded_sensor(recorded, meta).sha256)
+    except InputError:  # it no longer reads as a sensor file
+        changed = True
+    if changed:
+        raise InputError(f"{origin} was simulated with sensor file {recorded}, which has changed since the data "
+                         f"were simulated (edited, or identify wrote another unit into it): {todo}")
+
+
+def _recorded_sensor(spec: str, meta: dict) -> Sensor:
+    """Sensor ``spec`` in the transfer a dataset's meta records, as :func:`dataset_sensor` compares it."""
+    from fitgen.physics.sensor import load_sensor
+
+    sensor = load_sensor(spec)
+    return sensor.with_transfer(meta["transfer"]) if meta.get("transfer") in ("raw", "gmr") else sensor
