@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import stat
 import tempfile
 from pathlib import Path
 
@@ -22,16 +23,49 @@ def folder_of(path: str | os.PathLike) -> Path:
     return folder
 
 
+_NOT_FILES = ((stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+              (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISSOCK, "a socket"))
+
+
+def _kind(mode) -> str:
+    if stat.S_ISREG(mode):
+        return "a file"
+    return next((name for test, name in _NOT_FILES if test(mode)), "of no kind known")
+
+
+def _not_a_file(path, mode) -> InputError:
+    kind = _kind(mode)
+    what = f"a symlink to {os.readlink(path)}, {kind}" if os.path.islink(path) else kind
+    return InputError(f"cannot write {path}: it is {what}, not a file; give a file's path")
+
+
+def write_target(path: str | os.PathLike) -> Path:
+    """The file that writing ``path`` replaces: ``path``, or the file its symlinks lead to (written through, the
+    links kept); InputError when that exists and is not a regular file (a device, FIFO, socket or folder)."""
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode  # through every link, /proc/self/fd's too
+    except FileNotFoundError:
+        mode = None
+    except OSError as exc:
+        raise InputError(f"cannot write {path}: {exc.strerror}") from None
+    if mode is not None and not stat.S_ISREG(mode):
+        raise _not_a_file(path, mode)
+    return Path(os.path.realpath(path)) if os.path.islink(path) else path
+
+
 def output_file(path: str | os.PathLike, inputs=(), flag: str = "-o") -> Path:
-    """``path`` checked as a file to write before the work: a name, not a folder, in a folder that exists and
-    takes a new file, and none of the command's ``inputs`` (which it would overwrite); InputError otherwise."""
+    """``path`` checked as a file to write before the work: a name, not a folder, device or FIFO, in a folder that
+    exists and takes a new file, and none of the command's ``inputs`` (which it would overwrite); InputError
+    otherwise."""
     path = Path(path)
     if path.name in ("", ".", "..") or path.is_dir():
         raise InputError(f"cannot write {path}: it is a folder; give a file name")
+    target = write_target(path)
     # a file made and removed as write_atomic will make it: permissions do not tell (root passes os.access, and
     # /proc refuses new files to root too), and an output written last would fail after all the work
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder_of(path), prefix=f".{path.name}.", suffix=".tmp")
+        fd, tmp = tempfile.mkstemp(dir=folder_of(target), prefix=f".{target.name}.", suffix=".tmp")
     except OSError as exc:
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     os.close(fd)
@@ -43,12 +77,14 @@ def output_file(path: str | os.PathLike, inputs=(), flag: str = "-o") -> Path:
 
 
 def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename."""
+    """Write ``data`` to ``path`` (through a symlink, to the file it leads to) by a temporary file in the same
+    folder and a rename; InputError, nothing written, when ``path`` is not a regular file (:func:`write_target`)."""
     path = Path(path)
-    folder = folder_of(path)
+    target = write_target(path)
+    folder = folder_of(target)
     raw = data.encode() if isinstance(data, str) else data
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{target.name}.", suffix=".tmp")
     except OSError as exc:
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     try:
@@ -57,7 +93,7 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
             fh.flush()
             os.fsync(fh.fileno())
         os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
+        os.replace(tmp, target)
     except OSError as exc:
         try:
             os.unlink(tmp)
@@ -65,6 +101,30 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
             pass
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     return path
+
+
+def open_output(path: str | os.PathLike, append: bool = False) -> int:
+    """A descriptor writing ``path`` in place, for a file written as the work goes (rows, a run record): created
+    or emptied, or with ``append`` an existing file added to; InputError when ``path`` is not a regular file."""
+    write_target(path)
+    # O_NONBLOCK: a FIFO made since the check neither blocks the open nor is written; no O_TRUNC before fstat
+    # says it is a file
+    flags = os.O_WRONLY | os.O_NONBLOCK | (os.O_APPEND if append else os.O_CREAT)
+    try:
+        fd = os.open(path, flags, 0o644)
+    except OSError as exc:
+        raise InputError(f"cannot {'append to' if append else 'write'} {path}: {exc.strerror}") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise _not_a_file(path, mode)
+        if not append:
+            os.ftruncate(fd, 0)
+        os.set_blocking(fd, True)
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
 
 
 def make_folder(folder: str | os.PathLike) -> Path:
