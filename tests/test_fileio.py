@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import socket
 import stat
+import types
 from contextlib import contextmanager
 
 import pytest
@@ -141,6 +142,30 @@ def test_open_output_writes_a_file_in_place_and_through_a_symlink(tmp_path):
     assert (tmp_path / "fresh.csv").read_text() == "x\n"
     with pytest.raises(InputError, match="cannot append to .*missing.csv: No such file"):
         open_output(tmp_path / "missing.csv", append=True)
+
+
+def test_a_capture_a_run_record_and_a_pose_file_refuse_a_fifo(tmp_path):
+    import numpy as np
+
+    from host.capture import RowWriter, Schedule, prepare_output
+    from host.session import ReadoutSession
+    from host.stageserver import PoseFile
+
+    with fifo(tmp_path / "rows.csv") as path:
+        for write in (False, True):  # the check before the capture, then the capture's own
+            with pytest.raises(InputError, match="it is a FIFO"):
+                prepare_output(path, 8, Schedule(np.zeros((2, 5)), ("dz",)), write=write)
+        with pytest.raises(InputError, match="it is a FIFO"):
+            RowWriter(path)
+        with pytest.raises(InputError, match="it is a FIFO"):
+            ReadoutSession.record(types.SimpleNamespace(), path)  # refused before the session is looked at
+        with pytest.raises(InputError, match="it is a FIFO"):
+            PoseFile(path)
+        assert stat.S_ISFIFO(os.lstat(path).st_mode)
+    (tmp_path / "pose.txt").symlink_to("real.txt")
+    PoseFile(tmp_path / "pose.txt").set_pose([1, 2, -1, 0, 0])
+    assert os.readlink(tmp_path / "pose.txt") == "real.txt"
+    assert (tmp_path / "real.txt").read_text() == "1.0,2.0,-1.0,0.0,0.0\n"
 
 
 def test_simulate_to_a_fifo_is_one_line_before_the_work(tmp_path):
