@@ -3,6 +3,7 @@ symlink is written through, the link kept."""
 
 from __future__ import annotations
 
+import argparse
 import os
 import socket
 import stat
@@ -166,6 +167,18 @@ def test_a_capture_a_run_record_and_a_pose_file_refuse_a_fifo(tmp_path):
     PoseFile(tmp_path / "pose.txt").set_pose([1, 2, -1, 0, 0])
     assert os.readlink(tmp_path / "pose.txt") == "real.txt"
     assert (tmp_path / "real.txt").read_text() == "1.0,2.0,-1.0,0.0,0.0\n"
+
+
+def test_two_outputs_naming_one_file_through_a_symlink_are_refused(tmp_path):
+    from fitgen.app.cliutil import check_written
+
+    def cmd(args):
+        pass
+
+    (tmp_path / "link.csv").symlink_to("out.csv")
+    args = argparse.Namespace(func=cmd, output=str(tmp_path / "out.csv"), record=str(tmp_path / "link.csv"))
+    with pytest.raises(InputError, match="-o and --record name the same file"):
+        check_written(args, files=(cmd,))
 
 
 def test_simulate_to_a_fifo_is_one_line_before_the_work(tmp_path):
