@@ -14,7 +14,7 @@ import pytest
 from conftest import assert_one_line_error, run_cli
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import open_output, output_file, write_atomic, write_in_folder
+from fitgen.base.fileio import check_folder, open_output, output_file, write_atomic, write_in_folder
 
 
 @contextmanager
@@ -179,6 +179,21 @@ def test_two_outputs_naming_one_file_through_a_symlink_are_refused(tmp_path):
     args = argparse.Namespace(func=cmd, output=str(tmp_path / "out.csv"), record=str(tmp_path / "link.csv"))
     with pytest.raises(InputError, match="-o and --record name the same file"):
         check_written(args, files=(cmd,))
+
+
+def test_check_folder_probes_what_permissions_do_not_tell(tmp_path):
+    if not os.path.isdir("/proc/self"):
+        pytest.skip("no /proc")
+    with pytest.raises(InputError, match=r"^cannot create /proc/x/y: /proc takes no new folder"):
+        check_folder("/proc/x/y")  # root passes os.access there, yet /proc takes no folder
+    with fifo(tmp_path / "pipe"):
+        with pytest.raises(InputError, match=r"-o .*pipe: it is a FIFO \(named pipe\); give a folder"):
+            check_folder(tmp_path / "pipe")
+    (tmp_path / "dangling").symlink_to("nowhere")
+    with pytest.raises(InputError, match="dangling is not a folder"):
+        check_folder(tmp_path / "dangling" / "sub")
+    assert check_folder(tmp_path / "new" / "sub") == tmp_path / "new" / "sub"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling", "pipe"]  # nothing made, no probe left
 
 
 def test_simulate_to_a_fifo_is_one_line_before_the_work(tmp_path):

@@ -139,17 +139,29 @@ def make_folder(folder: str | os.PathLike) -> Path:
 
 def check_folder(folder: str | os.PathLike, flag: str = "-o") -> Path:
     """``folder`` checked as one a command will make and write into, without making it (so that a command refused
-    later leaves none behind): a name, not a file, under a folder that can be written; InputError otherwise."""
+    later leaves none behind): a name, not a file, under a folder that takes a new folder; InputError otherwise."""
     path = Path(folder)
     if not str(folder).strip():
         raise InputError(f"{flag} is empty: give a folder")
     if path.exists() and not path.is_dir():
-        raise InputError(f"{flag} {path}: it is a file; give a folder")
+        raise InputError(f"{flag} {path}: it is {_kind(path.stat().st_mode)}; give a folder")
     base = path.absolute()
-    while not base.exists():
+    while not os.path.lexists(base):  # lexists: a dangling symlink on the way is no folder to make
         base = base.parent
-    if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
-        raise InputError(f"cannot create {path}: {base} is {'not a folder' if not base.is_dir() else 'read-only'}")
+    if not base.is_dir():
+        raise InputError(f"cannot create {path}: {base} is not a folder")
+    # a folder (or, in one that exists, a file) made and removed: permissions do not tell (root passes os.access,
+    # and /proc refuses new folders to root too)
+    try:
+        if base == path.absolute():
+            fd, probe = tempfile.mkstemp(dir=base, prefix=".probe.", suffix=".tmp")
+            os.close(fd)
+            os.unlink(probe)
+        else:
+            os.rmdir(tempfile.mkdtemp(dir=base, prefix=".probe.", suffix=".tmp"))
+    except OSError as exc:
+        raise InputError(f"cannot write in {path}: {exc.strerror}" if base == path.absolute()
+                         else f"cannot create {path}: {base} takes no new folder ({exc.strerror})") from None
     return path
 
 
