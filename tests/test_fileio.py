@@ -120,6 +120,15 @@ def test_write_atomic_through_a_dangling_symlink_makes_the_file_it_names(tmp_pat
     assert leftovers(tmp_path) == leftovers(tmp_path / "data") == []
 
 
+def test_a_path_under_a_file_or_a_missing_folder_is_said_as_before(tmp_path):
+    (tmp_path / "file").write_text("x")
+    for writer in WRITERS.values():
+        with pytest.raises(InputError, match=r"file/x.csv: .*file is a file, not a folder$"):
+            writer(tmp_path / "file" / "x.csv")
+        with pytest.raises(InputError, match="no/x.csv: folder .*no does not exist$"):
+            writer(tmp_path / "no" / "x.csv")
+
+
 def test_symlinks_in_a_loop_are_one_line(tmp_path):
     (tmp_path / "a").symlink_to("b")
     (tmp_path / "b").symlink_to("a")

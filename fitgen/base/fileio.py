@@ -45,8 +45,8 @@ def write_target(path: str | os.PathLike) -> Path:
     path = Path(path)
     try:
         mode = os.stat(path).st_mode  # through every link, /proc/self/fd's too
-    except FileNotFoundError:
-        mode = None
+    except (FileNotFoundError, NotADirectoryError):
+        mode = None  # a new file, or a folder that is not one: folder_of says which
     except OSError as exc:
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     if mode is not None and not stat.S_ISREG(mode):
@@ -106,7 +106,7 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
 def open_output(path: str | os.PathLike, append: bool = False) -> int:
     """A descriptor writing ``path`` in place, for a file written as the work goes (rows, a run record): created
     or emptied, or with ``append`` an existing file added to; InputError when ``path`` is not a regular file."""
-    write_target(path)
+    folder_of(write_target(path))
     # O_NONBLOCK: a FIFO made since the check neither blocks the open nor is written; no O_TRUNC before fstat
     # says it is a file
     flags = os.O_WRONLY | os.O_NONBLOCK | (os.O_APPEND if append else os.O_CREAT)
