@@ -31,7 +31,7 @@ import numpy as np
 from fitgen import __version__
 from fitgen.physics.dataset import meta_path, parse_table, read_text
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import sha256_hex, write_atomic
+from fitgen.base.fileio import open_output, sha256_hex, write_atomic, write_target
 from fitgen.physics.pose import POSE_NAMES, as_poses, off_skin
 
 from host.adc import AdcArray
@@ -111,6 +111,7 @@ def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write
     ``write=False`` only checks: nothing is created or repaired.
     """
     path = Path(path)
+    write_target(path)  # a FIFO's or device's reading would hang or read nothing: no file to resume
     header = header_line(n_inputs, schedule.columns)
     n_poses = len(schedule.poses)
     if not path.exists() or path.stat().st_size == 0:
@@ -168,10 +169,7 @@ class RowWriter:
     """Appends complete lines: one write of the whole line, then fsync."""
 
     def __init__(self, path: str | Path):
-        try:
-            self.fd = os.open(path, os.O_WRONLY | os.O_APPEND)
-        except OSError as exc:
-            raise InputError(f"cannot append to {path}: {exc.strerror}") from None
+        self.fd = open_output(path, append=True)
 
     def append(self, line: str) -> None:
         data = line.encode()

@@ -18,13 +18,15 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError
+from fitgen.base.fileio import write_target
 
 
 class PoseFile:
-    """The magnet's pose as one line of five numbers in a file, replaced atomically at every change."""
+    """The magnet's pose as one line of five numbers in a file, replaced atomically at every change (through a
+    symlink, the file it leads to); InputError when ``path`` is a device, FIFO or socket."""
 
     def __init__(self, path: str | Path):
-        self.path = Path(path)
+        self.path = write_target(path)
 
     def set_pose(self, pose) -> None:
         tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")

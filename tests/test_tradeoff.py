@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 
 import numpy as np
 import pytest
@@ -252,6 +253,35 @@ def test_an_output_folder_that_cannot_be_made_is_said_before_the_sweep(tmp_path,
     with pytest.raises(SystemExit) as stop:
         main(["tradeoff", "paper", "--scene", "press", "-o", str(tmp_path / "file" / "sub")])
     assert stop.value.code == 2 and "cannot create" in capsys.readouterr().err
+
+
+def test_an_output_folder_proc_refuses_is_said_before_the_sweep(monkeypatch, capsys):
+    import fitgen.c.tradeoff as tradeoff
+    from fitgen.app.cli import main
+
+    if not os.path.isdir("/proc/self"):
+        pytest.skip("no /proc")
+    monkeypatch.setattr(tradeoff, "sweep", lambda *a, **k: pytest.fail("swept before the output folder was checked"))
+    with pytest.raises(SystemExit) as stop:  # root may write in /proc by its permissions; it takes no folder
+        main(["tradeoff", "paper", "--scene", "press", "-o", "/proc/x/y"])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and err == "fitgen: error: cannot create /proc/x/y: /proc takes no new folder " \
+                                          "(No such file or directory)\n"
+
+
+def test_run_tradeoff_checks_its_folder_before_the_sweep(tmp_path, monkeypatch, capsys):
+    import fitgen.c.tradeoff as tradeoff
+    from fitgen.app.cli import build_parser
+
+    monkeypatch.setattr(tradeoff, "sweep", lambda *a, **k: pytest.fail("swept before the output folder was checked"))
+    (tmp_path / "file").write_text("x")
+    for out, said in ((tmp_path / "file", "it is a file; give a folder"),
+                      (tmp_path / "file" / "sub", "file is not a folder")):
+        args = build_parser().parse_args(["tradeoff", "paper", "--scene", "press", "-o", str(out)])
+        with pytest.raises(InputError, match=said):
+            args.func(args)  # the command itself, as a caller other than the CLI's check runs it
+        assert capsys.readouterr().err == ""  # no progress of a sweep
+    assert (tmp_path / "file").read_text() == "x"
 
 
 def test_bad_scene_and_sensor_one_line(tmp_path):

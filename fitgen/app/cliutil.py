@@ -220,7 +220,7 @@ def check_written(args, files=()) -> None:
         flag = "-o" if name == "output" else f"--{name.replace('_', '-')}"
         output_file(path, inputs, flag)
         for other_flag, other in written:
-            if os.path.abspath(other) == os.path.abspath(path):
+            if os.path.realpath(other) == os.path.realpath(path):  # realpath: a symlink is written through
                 raise InputError(f"{other_flag} and {flag} name the same file {path}: give two")
         written.append((flag, path))
 

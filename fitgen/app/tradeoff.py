@@ -66,6 +66,7 @@ def run_tradeoff(args, sensor) -> int:
     """The command: parse the knobs, sweep, write the report; exit status 1 when rounding is over its share."""
     from fitgen.app.cliutil import EXIT_CHECK_FAILED
     from fitgen.app.tradeoff_report import write_outputs
+    from fitgen.base.fileio import check_folder
     from fitgen.base.progress import Progress
     from fitgen.c.tradeoff import grid_from, quick_grid, sweep
     from fitgen.physics.scenes import load_scene
@@ -84,6 +85,7 @@ def run_tradeoff(args, sensor) -> int:
     if not 0 < args.max_share <= 1:
         raise InputError(f"--max-share must be a share in (0, 1] of the model's held-out max error, got "
                          f"{args.max_share:g}")
+    check_folder(args.output)  # -o is first written after the sweep, minutes from now
     bar = Progress("tradeoff", len(grid))
     with bar:
         result = sweep(sensor, scene, grid, target=target, seed=args.seed, jobs=args.jobs,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import stat
 import tempfile
 from pathlib import Path
 
@@ -22,16 +23,49 @@ def folder_of(path: str | os.PathLike) -> Path:
     return folder
 
 
+_NOT_FILES = ((stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+              (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISSOCK, "a socket"))
+
+
+def _kind(mode) -> str:
+    if stat.S_ISREG(mode):
+        return "a file"
+    return next((name for test, name in _NOT_FILES if test(mode)), "of no kind known")
+
+
+def _not_a_file(path, mode) -> InputError:
+    kind = _kind(mode)
+    what = f"a symlink to {os.readlink(path)}, {kind}" if os.path.islink(path) else kind
+    return InputError(f"cannot write {path}: it is {what}, not a file; give a file's path")
+
+
+def write_target(path: str | os.PathLike) -> Path:
+    """The file that writing ``path`` replaces: ``path``, or the file its symlinks lead to (written through, the
+    links kept); InputError when that exists and is not a regular file (a device, FIFO, socket or folder)."""
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode  # through every link, /proc/self/fd's too
+    except (FileNotFoundError, NotADirectoryError):
+        mode = None  # a new file, or a folder that is not one: folder_of says which
+    except OSError as exc:
+        raise InputError(f"cannot write {path}: {exc.strerror}") from None
+    if mode is not None and not stat.S_ISREG(mode):
+        raise _not_a_file(path, mode)
+    return Path(os.path.realpath(path)) if os.path.islink(path) else path
+
+
 def output_file(path: str | os.PathLike, inputs=(), flag: str = "-o") -> Path:
-    """``path`` checked as a file to write before the work: a name, not a folder, in a folder that exists and
-    takes a new file, and none of the command's ``inputs`` (which it would overwrite); InputError otherwise."""
+    """``path`` checked as a file to write before the work: a name, not a folder, device or FIFO, in a folder that
+    exists and takes a new file, and none of the command's ``inputs`` (which it would overwrite); InputError
+    otherwise."""
     path = Path(path)
     if path.name in ("", ".", "..") or path.is_dir():
         raise InputError(f"cannot write {path}: it is a folder; give a file name")
+    target = write_target(path)
     # a file made and removed as write_atomic will make it: permissions do not tell (root passes os.access, and
     # /proc refuses new files to root too), and an output written last would fail after all the work
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder_of(path), prefix=f".{path.name}.", suffix=".tmp")
+        fd, tmp = tempfile.mkstemp(dir=folder_of(target), prefix=f".{target.name}.", suffix=".tmp")
     except OSError as exc:
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     os.close(fd)
@@ -43,12 +77,14 @@ def output_file(path: str | os.PathLike, inputs=(), flag: str = "-o") -> Path:
 
 
 def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename."""
+    """Write ``data`` to ``path`` (through a symlink, to the file it leads to) by a temporary file in the same
+    folder and a rename; InputError, nothing written, when ``path`` is not a regular file (:func:`write_target`)."""
     path = Path(path)
-    folder = folder_of(path)
+    target = write_target(path)
+    folder = folder_of(target)
     raw = data.encode() if isinstance(data, str) else data
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{target.name}.", suffix=".tmp")
     except OSError as exc:
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     try:
@@ -57,7 +93,7 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
             fh.flush()
             os.fsync(fh.fileno())
         os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
+        os.replace(tmp, target)
     except OSError as exc:
         try:
             os.unlink(tmp)
@@ -65,6 +101,30 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
             pass
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     return path
+
+
+def open_output(path: str | os.PathLike, append: bool = False) -> int:
+    """A descriptor writing ``path`` in place, for a file written as the work goes (rows, a run record): created
+    or emptied, or with ``append`` an existing file added to; InputError when ``path`` is not a regular file."""
+    folder_of(write_target(path))
+    # O_NONBLOCK: a FIFO made since the check neither blocks the open nor is written; no O_TRUNC before fstat
+    # says it is a file
+    flags = os.O_WRONLY | os.O_NONBLOCK | (os.O_APPEND if append else os.O_CREAT)
+    try:
+        fd = os.open(path, flags, 0o644)
+    except OSError as exc:
+        raise InputError(f"cannot {'append to' if append else 'write'} {path}: {exc.strerror}") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise _not_a_file(path, mode)
+        if not append:
+            os.ftruncate(fd, 0)
+        os.set_blocking(fd, True)
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
 
 
 def make_folder(folder: str | os.PathLike) -> Path:
@@ -79,17 +139,29 @@ def make_folder(folder: str | os.PathLike) -> Path:
 
 def check_folder(folder: str | os.PathLike, flag: str = "-o") -> Path:
     """``folder`` checked as one a command will make and write into, without making it (so that a command refused
-    later leaves none behind): a name, not a file, under a folder that can be written; InputError otherwise."""
+    later leaves none behind): a name, not a file, under a folder that takes a new folder; InputError otherwise."""
     path = Path(folder)
     if not str(folder).strip():
         raise InputError(f"{flag} is empty: give a folder")
     if path.exists() and not path.is_dir():
-        raise InputError(f"{flag} {path}: it is a file; give a folder")
+        raise InputError(f"{flag} {path}: it is {_kind(path.stat().st_mode)}; give a folder")
     base = path.absolute()
-    while not base.exists():
+    while not os.path.lexists(base):  # lexists: a dangling symlink on the way is no folder to make
         base = base.parent
-    if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
-        raise InputError(f"cannot create {path}: {base} is {'not a folder' if not base.is_dir() else 'read-only'}")
+    if not base.is_dir():
+        raise InputError(f"cannot create {path}: {base} is not a folder")
+    # a folder (or, in one that exists, a file) made and removed: permissions do not tell (root passes os.access,
+    # and /proc refuses new folders to root too)
+    try:
+        if base == path.absolute():
+            fd, probe = tempfile.mkstemp(dir=base, prefix=".probe.", suffix=".tmp")
+            os.close(fd)
+            os.unlink(probe)
+        else:
+            os.rmdir(tempfile.mkdtemp(dir=base, prefix=".probe.", suffix=".tmp"))
+    except OSError as exc:
+        raise InputError(f"cannot write in {path}: {exc.strerror}" if base == path.absolute()
+                         else f"cannot create {path}: {base} takes no new folder ({exc.strerror})") from None
     return path
 
 

@@ -1,0 +1,222 @@
+"""fitgen.base.fileio: what an output path may be. A device, FIFO or socket is refused, not replaced by a file; a
+symlink is written through, the link kept."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import socket
+import stat
+import types
+from contextlib import contextmanager
+
+import pytest
+from conftest import assert_one_line_error, run_cli
+
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import check_folder, open_output, output_file, write_atomic, write_in_folder
+
+
+@contextmanager
+def fifo(path):
+    """A FIFO at ``path`` with its read end held open, so that code which wrongly opens it to write does not block."""
+    os.mkfifo(path)
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        yield path
+    finally:
+        os.close(fd)
+
+
+@contextmanager
+def unix_socket(path):
+    sock = socket.socket(socket.AF_UNIX)
+    sock.bind(str(path))
+    try:
+        yield path
+    finally:
+        sock.close()
+
+
+def null_device(path):
+    if os.geteuid() != 0:
+        pytest.skip("os.mknod of a device needs root (CI runs as root)")
+    os.mknod(path, 0o600 | stat.S_IFCHR, os.makedev(1, 3))  # /dev/null's numbers: harmless if written
+    return path
+
+
+def leftovers(folder):
+    return sorted(p.name for p in folder.iterdir() if p.name.endswith(".tmp"))
+
+
+WRITERS = {
+    "output_file": lambda p: output_file(p),
+    "write_atomic": lambda p: write_atomic(p, "new\n"),
+    "open_output": lambda p: os.close(open_output(p)),
+    "open_output append": lambda p: os.close(open_output(p, append=True)),
+}
+
+
+@pytest.mark.parametrize("writer", WRITERS)
+def test_a_fifo_is_refused_and_stays_a_fifo(tmp_path, writer):
+    with fifo(tmp_path / "pipe") as path:
+        with pytest.raises(InputError, match=r"^cannot write .*pipe: it is a FIFO \(named pipe\), not a file; "):
+            WRITERS[writer](path)
+        assert stat.S_ISFIFO(os.lstat(path).st_mode)
+    assert leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("writer", WRITERS)
+def test_a_device_node_is_refused_and_stays_a_device(tmp_path, writer):
+    path = null_device(tmp_path / "null")
+    with pytest.raises(InputError, match=r"^cannot write .*null: it is a character device, not a file; give a file"):
+        WRITERS[writer](path)
+    assert stat.S_ISCHR(os.lstat(path).st_mode)
+    assert leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("writer", WRITERS)
+def test_a_socket_is_refused(tmp_path, writer):
+    with unix_socket(tmp_path / "sock") as path:
+        with pytest.raises(InputError, match="it is a socket, not a file"):
+            WRITERS[writer](path)
+        assert stat.S_ISSOCK(os.lstat(path).st_mode)
+
+
+@pytest.mark.parametrize("writer", WRITERS)
+def test_a_symlink_to_a_fifo_is_refused_and_kept(tmp_path, writer):
+    with fifo(tmp_path / "pipe"):
+        (tmp_path / "link").symlink_to("pipe")
+        with pytest.raises(InputError, match=r"link: it is a symlink to pipe, a FIFO \(named pipe\), not a file"):
+            WRITERS[writer](tmp_path / "link")
+        assert os.readlink(tmp_path / "link") == "pipe" and stat.S_ISFIFO(os.lstat(tmp_path / "pipe").st_mode)
+
+
+def test_write_in_folder_refuses_a_fifo_in_the_folder(tmp_path):
+    with fifo(tmp_path / "model.h"):
+        with pytest.raises(InputError, match="it is a FIFO"):
+            write_in_folder(tmp_path, "model.h", "x")
+        assert stat.S_ISFIFO(os.lstat(tmp_path / "model.h").st_mode)
+
+
+def test_write_atomic_writes_through_a_symlink_and_keeps_it(tmp_path):
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "real.csv").write_text("old\n")
+    (tmp_path / "link.csv").symlink_to("data/real.csv")
+    assert output_file(tmp_path / "link.csv") == tmp_path / "link.csv"
+    assert write_atomic(tmp_path / "link.csv", "new\n") == tmp_path / "link.csv"
+    assert os.readlink(tmp_path / "link.csv") == "data/real.csv"
+    assert (tmp_path / "data" / "real.csv").read_text() == "new\n"
+    assert leftovers(tmp_path) == leftovers(tmp_path / "data") == []
+
+
+def test_write_atomic_through_a_dangling_symlink_makes_the_file_it_names(tmp_path):
+    (tmp_path / "data").mkdir()
+    (tmp_path / "link.csv").symlink_to("data/new.csv")
+    output_file(tmp_path / "link.csv")
+    write_atomic(tmp_path / "link.csv", "new\n")
+    assert os.readlink(tmp_path / "link.csv") == "data/new.csv"
+    assert (tmp_path / "data" / "new.csv").read_text() == "new\n"
+    assert leftovers(tmp_path) == leftovers(tmp_path / "data") == []
+
+
+def test_a_path_under_a_file_or_a_missing_folder_is_said_as_before(tmp_path):
+    (tmp_path / "file").write_text("x")
+    for writer in WRITERS.values():
+        with pytest.raises(InputError, match=r"file/x.csv: .*file is a file, not a folder$"):
+            writer(tmp_path / "file" / "x.csv")
+        with pytest.raises(InputError, match="no/x.csv: folder .*no does not exist$"):
+            writer(tmp_path / "no" / "x.csv")
+
+
+def test_symlinks_in_a_loop_are_one_line(tmp_path):
+    (tmp_path / "a").symlink_to("b")
+    (tmp_path / "b").symlink_to("a")
+    for writer in WRITERS.values():
+        with pytest.raises(InputError, match="cannot write .*a: Too many levels of symbolic links"):
+            writer(tmp_path / "a")
+    assert os.readlink(tmp_path / "a") == "b"
+
+
+def test_open_output_writes_a_file_in_place_and_through_a_symlink(tmp_path):
+    (tmp_path / "rows.csv").write_text("old header\n")
+    (tmp_path / "link.csv").symlink_to("rows.csv")
+    with os.fdopen(open_output(tmp_path / "link.csv", append=True), "w") as fh:
+        fh.write("row\n")
+    assert (tmp_path / "rows.csv").read_text() == "old header\nrow\n"
+    with os.fdopen(open_output(tmp_path / "link.csv"), "w") as fh:  # emptied, not appended to
+        fh.write("new\n")
+    assert (tmp_path / "rows.csv").read_text() == "new\n" and os.path.islink(tmp_path / "link.csv")
+    with os.fdopen(open_output(tmp_path / "fresh.csv"), "w") as fh:
+        fh.write("x\n")
+    assert (tmp_path / "fresh.csv").read_text() == "x\n"
+    with pytest.raises(InputError, match="cannot append to .*missing.csv: No such file"):
+        open_output(tmp_path / "missing.csv", append=True)
+
+
+def test_a_capture_a_run_record_and_a_pose_file_refuse_a_fifo(tmp_path):
+    import numpy as np
+
+    from host.capture import RowWriter, Schedule, prepare_output
+    from host.session import ReadoutSession
+    from host.stageserver import PoseFile
+
+    with fifo(tmp_path / "rows.csv") as path:
+        for write in (False, True):  # the check before the capture, then the capture's own
+            with pytest.raises(InputError, match="it is a FIFO"):
+                prepare_output(path, 8, Schedule(np.zeros((2, 5)), ("dz",)), write=write)
+        with pytest.raises(InputError, match="it is a FIFO"):
+            RowWriter(path)
+        with pytest.raises(InputError, match="it is a FIFO"):
+            ReadoutSession.record(types.SimpleNamespace(), path)  # refused before the session is looked at
+        with pytest.raises(InputError, match="it is a FIFO"):
+            PoseFile(path)
+        assert stat.S_ISFIFO(os.lstat(path).st_mode)
+    (tmp_path / "pose.txt").symlink_to("real.txt")
+    PoseFile(tmp_path / "pose.txt").set_pose([1, 2, -1, 0, 0])
+    assert os.readlink(tmp_path / "pose.txt") == "real.txt"
+    assert (tmp_path / "real.txt").read_text() == "1.0,2.0,-1.0,0.0,0.0\n"
+
+
+def test_two_outputs_naming_one_file_through_a_symlink_are_refused(tmp_path):
+    from fitgen.app.cliutil import check_written
+
+    def cmd(args):
+        pass
+
+    (tmp_path / "link.csv").symlink_to("out.csv")
+    args = argparse.Namespace(func=cmd, output=str(tmp_path / "out.csv"), record=str(tmp_path / "link.csv"))
+    with pytest.raises(InputError, match="-o and --record name the same file"):
+        check_written(args, files=(cmd,))
+
+
+def test_check_folder_probes_what_permissions_do_not_tell(tmp_path):
+    if not os.path.isdir("/proc/self"):
+        pytest.skip("no /proc")
+    with pytest.raises(InputError, match=r"^cannot create /proc/x/y: /proc takes no new folder"):
+        check_folder("/proc/x/y")  # root passes os.access there, yet /proc takes no folder
+    with fifo(tmp_path / "pipe"):
+        with pytest.raises(InputError, match=r"-o .*pipe: it is a FIFO \(named pipe\); give a folder"):
+            check_folder(tmp_path / "pipe")
+    (tmp_path / "dangling").symlink_to("nowhere")
+    with pytest.raises(InputError, match="dangling is not a folder"):
+        check_folder(tmp_path / "dangling" / "sub")
+    assert check_folder(tmp_path / "new" / "sub") == tmp_path / "new" / "sub"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling", "pipe"]  # nothing made, no probe left
+
+
+def test_simulate_to_a_fifo_is_one_line_before_the_work(tmp_path):
+    with fifo(tmp_path / "out.csv") as path:
+        proc = run_cli("fitgen", "simulate", "--random", "5", "-o", str(path))
+        assert_one_line_error(proc, 2, "it is a FIFO (named pipe), not a file; give a file's path")
+        assert stat.S_ISFIFO(os.lstat(path).st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]  # no out.csv.meta.json
+
+
+def test_simulate_through_a_symlink_writes_the_file_and_keeps_the_link(tmp_path):
+    (tmp_path / "real.csv").write_text("old\n")
+    (tmp_path / "link.csv").symlink_to("real.csv")
+    proc = run_cli("fitgen", "simulate", "--random", "5", "-o", str(tmp_path / "link.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert os.readlink(tmp_path / "link.csv") == "real.csv"
+    assert (tmp_path / "real.csv").read_text().startswith("v1,")
