@@ -120,6 +120,21 @@ def test_write_atomic_through_a_dangling_symlink_makes_the_file_it_names(tmp_pat
     assert leftovers(tmp_path) == leftovers(tmp_path / "data") == []
 
 
+@pytest.mark.parametrize("writer", WRITERS)
+def test_a_link_to_an_open_descriptor_is_refused_and_its_file_kept(tmp_path, writer):
+    """/dev/stdout redirected to a file leads there through /proc/self/fd: that file (a log the shell appends to)
+    is not replaced; a link to the descriptor's link is refused the same way."""
+    log = tmp_path / "log.txt"
+    log.write_text("kept\n")
+    with open(log, "a") as fh:
+        (tmp_path / "out").symlink_to(f"/proc/self/fd/{fh.fileno()}")
+        (tmp_path / "out2").symlink_to(tmp_path / "out")
+        for name in ("out", "out2"):
+            with pytest.raises(InputError, match="leads to an open file descriptor"):
+                WRITERS[writer](tmp_path / name)
+    assert log.read_text() == "kept\n" and os.path.islink(tmp_path / "out")
+
+
 def test_a_path_under_a_file_or_a_missing_folder_is_said_as_before(tmp_path):
     (tmp_path / "file").write_text("x")
     for writer in WRITERS.values():

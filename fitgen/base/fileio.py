@@ -51,7 +51,24 @@ def write_target(path: str | os.PathLike) -> Path:
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     if mode is not None and not stat.S_ISREG(mode):
         raise _not_a_file(path, mode)
+    if os.path.islink(path) and _through_descriptor(path):
+        # /dev/stdout redirected to a file: replacing that file would destroy what the shell appends to (>>)
+        raise InputError(f"cannot write {path}: it leads to an open file descriptor (as /dev/stdout does), not a "
+                         "file; give a file's path")
     return Path(os.path.realpath(path)) if os.path.islink(path) else path
+
+
+def _through_descriptor(path: Path) -> bool:
+    """True when ``path``'s chain of symlinks passes through /proc/<pid>/fd/ or /dev/fd/ (a descriptor's link)."""
+    hop = str(path)
+    for _ in range(40):  # the kernel's own limit on links followed
+        if not os.path.islink(hop):
+            return False
+        hop = os.path.normpath(os.path.join(os.path.dirname(hop), os.readlink(hop)))
+        parts = Path(hop).parts
+        if parts[:3] == ("/", "dev", "fd") or (parts[:2] == ("/", "proc") and parts[3:4] == ("fd",)):
+            return True
+    return False
 
 
 def output_file(path: str | os.PathLike, inputs=(), flag: str = "-o") -> Path:
