@@ -13,7 +13,7 @@ from fitgen.base.progress import Progress
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import (TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFailed, capture, check_resume, enter_waiter,
-                          load_schedule, prepare_output, trigger_waiter)
+                          load_schedule, output_lock, prepare_output, trigger_waiter)
 from host.session import channel_map_from_args, open_bus_from_args, refuse_alone
 from host.stage import StageError, StageState
 from host.stagecapture import open_stage, stage_settings
@@ -46,7 +46,14 @@ def trigger_timeout(args) -> float:
 
 def run_capture(args, prog: str) -> None:
     """The schedule ``--poses`` into ``--output`` (resumed if it has rows); progress and the summary go to
-    stderr after ``prog``. Raises CaptureFailed or CaptureInterrupted when it stops early."""
+    stderr after ``prog``. Raises CaptureFailed or CaptureInterrupted when it stops early, InputError when
+    another run holds the output."""
+    # held from before the output is read to after its last row: two runs would interleave their rows
+    with output_lock(args.output):
+        _run_capture(args, prog)
+
+
+def _run_capture(args, prog: str) -> None:
     samples, spread, tries, settle, retries = capture_numbers(args)
     timeout = trigger_timeout(args)
     schedule = load_schedule(args.poses)

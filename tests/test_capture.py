@@ -216,6 +216,67 @@ def test_capture_command_a_hung_trigger_is_killed_at_its_time_limit_and_rows_are
                                   "--simulate", "--trigger-timeout", "5"), 2, "--trigger-timeout goes with --trigger")
 
 
+def test_a_second_capture_on_the_same_output_is_refused_while_the_first_runs(tmp_path):
+    """The first run holds its output from before reading it to after its last row; a second, on the same -o, is
+    one line and exit 2, and the first's rows are neither interleaved nor doubled."""
+    import subprocess
+    import sys
+    import time
+
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:4])
+    out, paused, go = tmp_path / "d.csv", tmp_path / "paused", tmp_path / "go"
+    args = ["capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate", "--samples", "2"]
+    # the first run's trigger holds it at pose 2 until the test says go
+    hold = (f'if [ "$TM_POSE_INDEX" = 2 ]; then touch {shlex.quote(str(paused))}; '
+            f'while [ ! -e {shlex.quote(str(go))} ]; do sleep 0.05; done; fi')
+    code = "import sys; from fitgen.app.host_cli import main; sys.argv[0] = 'tactile-host'; main()"
+    first = subprocess.Popen([sys.executable, "-c", code, *args, "--trigger", hold], stderr=subprocess.PIPE, text=True)
+    try:
+        t0 = time.monotonic()
+        while not paused.exists():
+            assert first.poll() is None and time.monotonic() - t0 < 60, first.stderr.read()
+            time.sleep(0.05)
+        assert_one_line_error(run_cli("tactile-host", *args), 2,
+                              f"output {out}: another capture is writing it (it holds d.csv.lock): let it end, or "
+                              "choose another -o")
+        assert_one_line_error(run_cli("tactile-host", *args, "--temperature", "20,30"), 2, "another capture")
+        assert len(data_rows(out)[1]) == 1
+        go.touch()
+        assert first.wait(timeout=60) == 0, first.stderr.read()
+    finally:
+        if first.poll() is None:
+            first.kill()
+            first.wait()
+    assert [r[8:] for r in data_rows(out)[1]] == [tuple(map(float, r)) for r in grid_rows()[:4]]
+    assert json.loads((tmp_path / "d.csv.meta.json").read_text())["runs"] == 1
+    assert not (tmp_path / "d.csv.lock").exists()  # released and removed with the run
+
+
+def test_a_killed_runs_lock_does_not_block_the_next(tmp_path):
+    """The kernel drops a killed process's flock: the file it leaves is taken over, then removed."""
+    import subprocess
+    import sys
+
+    from host.capture import output_lock
+
+    out = tmp_path / "d.csv"
+    code = (f"import os\nfrom host.capture import output_lock\nwith output_lock({str(out)!r}):\n"
+            "    os.kill(os.getpid(), 9)")
+    assert subprocess.run([sys.executable, "-c", code]).returncode == -9
+    assert (tmp_path / "d.csv.lock").exists()
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:2])
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate",
+                   "--samples", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert len(data_rows(out)[1]) == 2 and not (tmp_path / "d.csv.lock").exists()
+    with output_lock(out):  # held here, as a run in another process holds it
+        with pytest.raises(InputError, match="another capture is writing it"):
+            with output_lock(out):
+                pass
+    with output_lock(out):  # released
+        pass
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--samples", "0"], "--samples must be a whole number >= 1, got 0"),
     (["--max-spread", "x"], "--max-spread 'x' is not a number"),
