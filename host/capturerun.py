@@ -44,6 +44,13 @@ def trigger_timeout(args) -> float:
     return parse_positive(args.trigger_timeout, "--trigger-timeout", most=LONGEST_WAIT)
 
 
+def _kept(output) -> str:
+    """What a run stopped early leaves, for its last line."""
+    if not Path(output).exists():  # stopped before the output was made: at the stage's zero, say
+        return "nothing was written"
+    return f"the rows written so far are kept in {output}: run the same command again to resume"
+
+
 def run_capture(args, prog: str) -> None:
     """The schedule ``--poses`` into ``--output`` (resumed if it has rows); progress and the summary go to
     stderr after ``prog``. Raises CaptureFailed or CaptureInterrupted when it stops early, InputError when
@@ -78,7 +85,6 @@ def _run_capture(args, prog: str) -> None:
     bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion)
     if motion is not None:
         bus.feed.motion_step = 0.0  # follow the stage at every conversion: a move ends between two rows
-    keep = f"the rows written so far are kept in {args.output}: run the same command again to resume"
     stage = None
     t0 = time.monotonic()
     try:
@@ -95,13 +101,11 @@ def _run_capture(args, prog: str) -> None:
                           wait=wait, set_pose=set_pose, settle=settle,
                           clock=clock, progress=None if interactive else progress, meta=meta)
     except KeyboardInterrupt:
-        raise CaptureInterrupted(keep) from None
+        raise CaptureInterrupted(_kept(args.output)) from None
     except (DeviceSilent, SpreadTooLarge, TriggerFailed, StageError) as exc:
         if getattr(exc, "lost", ""):
             StageState.mark_lost(args.output, exc.lost)
-        if not Path(args.output).exists():
-            keep = "nothing was written"  # the fault came before the first row's file was made
-        raise CaptureFailed(f"{exc}; {keep}") from exc
+        raise CaptureFailed(f"{exc}; {_kept(args.output)}") from exc
     finally:
         if stage is not None:
             stage.ctrl.close()

@@ -216,6 +216,17 @@ def test_capture_command_a_hung_trigger_is_killed_at_its_time_limit_and_rows_are
                                   "--simulate", "--trigger-timeout", "5"), 2, "--trigger-timeout goes with --trigger")
 
 
+def test_capture_command_ctrl_c_after_rows_says_they_are_kept(tmp_path):
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:5])
+    out = tmp_path / "d.csv"
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate",
+                   "--samples", "2", "--trigger", 'if [ "$TM_POSE_INDEX" = 3 ]; then kill -INT $PPID; sleep 5; fi')
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.strip() == (f"tactile-host capture: interrupted; the rows written so far are kept in {out}: "
+                                   "run the same command again to resume")
+    assert len(data_rows(out)[1]) == 2
+
+
 def test_a_second_capture_on_the_same_output_is_refused_while_the_first_runs(tmp_path):
     """The first run holds its output from before reading it to after its last row; a second, on the same -o, is
     one line and exit 2, and the first's rows are neither interleaved nor doubled."""
