@@ -153,6 +153,20 @@ def test_enter_and_trigger_waiters(tmp_path):
     assert log.read_text() == "2/3 2.0 -1.0\n"
 
 
+def test_ctrl_c_at_a_prompt_ends_its_line_and_goes_on():
+    """What is written after Ctrl-C at a prompt (the capture's last line) starts a line of its own."""
+    from host.prompt import ask_line
+
+    class Interrupted:
+        def readline(self):
+            raise KeyboardInterrupt
+
+    err = io.StringIO()
+    with pytest.raises(KeyboardInterrupt):
+        ask_line(Interrupted(), err, "pose 1/3: set it, then press Enter ")
+    assert err.getvalue() == "pose 1/3: set it, then press Enter \n"
+
+
 # --- command line ------------------------------------------------------------------
 
 
