@@ -364,10 +364,19 @@ def _prior_meta(output) -> dict:
 
 def check_resume(output: str | Path, rows: int, this: dict) -> None:
     """Refuse to add to ``output``'s ``rows`` rows taken otherwise: through another channel map, from another
-    source, or averaging another number of samples (the meta speaks for every row with one of each)."""
+    source, or averaging another number of samples (the meta speaks for every row with one of each). A simulated
+    sensor is told by its description's hash (``sensor_sha256``) when both runs recorded one: the same unit's
+    file, by another path or moved, is the same source."""
     if rows == 0:
         return
     prior = _prior_meta(output)
+    if "sensor_sha256" in prior and "sensor_sha256" in this:
+        if prior["sensor_sha256"] != this["sensor_sha256"]:
+            raise InputError(f"output {output}: its {rows} rows were captured from {prior.get('source')} (sensor "
+                             f"sha256 {str(prior['sensor_sha256'])[:12]}), this run's {this.get('source')} is "
+                             f"another sensor ({this['sensor_sha256'][:12]}): resume with the same, or choose "
+                             "another -o")
+        prior = {k: v for k, v in prior.items() if k != "source"}  # the paths typed may differ
     for key, option in (("adc", "--adc"), ("source", "a source"), ("samples_per_row", "--samples")):
         if key in prior and key in this and prior[key] != this[key]:
             raise InputError(f"output {output}: its {rows} rows were captured with {option} {prior[key]}, this run's "

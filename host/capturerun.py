@@ -10,6 +10,7 @@ from pathlib import Path
 
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from fitgen.base.progress import Progress
+from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import (TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFailed, capture, check_resume, enter_waiter,
@@ -68,8 +69,10 @@ def _run_capture(args, prog: str) -> None:
     state = prepare_output(args.output, cmap.n_elements, schedule, write=False)  # checked before any waiting
     stage_opts = stage_settings(args, schedule)  # and the stage's settings before anything moves
     total, pending = len(schedule.poses), int((~state.done).sum())
-    source = f"simulated {args.sensor}" if args.simulate else "hardware"
-    check_resume(args.output, state.rows, {"adc": cmap.describe(), "source": source, "samples_per_row": samples})
+    source = {"source": f"simulated {args.sensor}" if args.simulate else "hardware"}
+    if args.simulate:  # the sensor itself, not the path typed for it, tells a resume whether it is the same one
+        source["sensor_sha256"] = load_sensor(args.sensor).sha256
+    check_resume(args.output, state.rows, {"adc": cmap.describe(), **source, "samples_per_row": samples})
     if pending == 0:  # the stage and the bus stay shut, the meta as it is
         print(f"{prog}: {total}/{total} poses in {args.output} already: nothing to capture", file=sys.stderr)
         return
@@ -80,7 +83,7 @@ def _run_capture(args, prog: str) -> None:
         wait = None  # the stage (simulated or G-code) sets each pose itself
     else:
         wait = enter_waiter(schedule)
-    meta = {"adc": cmap.describe(), "source": source}
+    meta = {"adc": cmap.describe(), **source}
     motion = pose_file_motion(args.sim_pose_file) if args.sim_pose_file else None
     bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion)
     if motion is not None:

@@ -302,6 +302,38 @@ def test_a_killed_runs_lock_does_not_block_the_next(tmp_path):
         pass
 
 
+def test_a_simulated_capture_resumes_with_its_units_file_by_any_path_and_not_with_another_unit(tmp_path):
+    """--sensor is compared as the sensor it loads (its description's hash), not as the text typed: the same unit's
+    file by another relative path, or moved, resumes; another unit is refused in one line."""
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.units import draw_unit, write_unit
+
+    drawing = load_sensor("paper").with_transfer("gmr")
+    for seed in (7, 8):
+        write_unit(tmp_path / f"unit{seed}.unit.toml", draw_unit(drawing, seed)[0], "paper", {"seed": seed})
+    (tmp_path / "sub").mkdir()
+    write_schedule(tmp_path / "s.csv", grid_rows()[:6])
+    args = ["capture", "--poses", "s.csv", "--adc", TWO_1115, "-o", "d.csv", "--simulate", "--samples", "2"]
+    stop_at = ["--trigger", '[ "$TM_POSE_INDEX" -lt {} ]']
+    proc = run_cli("tactile-host", *args, "--sensor", "unit7.unit.toml", stop_at[0], stop_at[1].format(3),
+                   cwd=tmp_path)
+    assert proc.returncode == 1 and len(data_rows(tmp_path / "d.csv")[1]) == 2, proc.stderr
+    up = [a.replace("s.csv", "../s.csv").replace("d.csv", "../d.csv") for a in args]
+    proc = run_cli("tactile-host", *up, "--sensor", "../unit7.unit.toml", stop_at[0], stop_at[1].format(5),
+                   cwd=tmp_path / "sub")
+    assert proc.returncode == 1 and "exit status 1 at pose 5/6" in proc.stderr, proc.stderr
+    assert len(data_rows(tmp_path / "d.csv")[1]) == 4
+    assert_one_line_error(run_cli("tactile-host", *up, "--sensor", "../unit8.unit.toml", cwd=tmp_path / "sub"), 2,
+                          "its 4 rows were captured from simulated ../unit7.unit.toml (sensor sha256 ")
+    (tmp_path / "unit7.unit.toml").rename(tmp_path / "sub" / "moved.toml")
+    proc = run_cli("tactile-host", *up, "--sensor", "moved.toml", cwd=tmp_path / "sub")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.strip() == "tactile-host capture: 6/6 poses in ../d.csv (2 captured now, 4 already there)"
+    assert [r[8:] for r in data_rows(tmp_path / "d.csv")[1]] == [tuple(map(float, r)) for r in grid_rows()[:6]]
+    meta = json.loads((tmp_path / "d.csv.meta.json").read_text())
+    assert meta["runs"] == 3 and meta["sensor_sha256"] == load_sensor(tmp_path / "sub" / "moved.toml").sha256
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--samples", "0"], "--samples must be a whole number >= 1, got 0"),
     (["--max-spread", "x"], "--max-spread 'x' is not a number"),
