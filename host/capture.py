@@ -17,12 +17,14 @@ of a run, so a run killed outright loses at most those seconds of figures, never
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import signal
 import subprocess
 import sys
 from collections import Counter
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -163,6 +165,46 @@ def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write
         raise InputError(f"{origin} line {where[extra[0]]}: pose {dict(zip(schedule.columns, extra[0]))} is not "
                          f"(or not that often) in the {schedule.origin}; it belongs to another run (choose another -o)")
     return ResumeState(done, rows, dropped)
+
+
+def lock_path(output: str | Path) -> Path:
+    return Path(str(output) + ".lock")
+
+
+@contextmanager
+def output_lock(output: str | Path):
+    """Hold ``output`` for one capture run; InputError (one line) when another run holds it.
+
+    An exclusive flock on ``<output>.lock`` (the output itself may not exist yet), which the kernel releases
+    when the process ends, however it ends: a killed run leaves at most the empty file, and the next run takes
+    it over. The file is removed at the end, while still held.
+    """
+    path = lock_path(output)
+    while True:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise InputError(f"cannot write {path}: {exc.strerror}") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            os.close(fd)
+            if isinstance(exc, BlockingIOError):
+                raise InputError(f"output {output}: another capture is writing it (it holds {path.name}): let it "
+                                 "end, or choose another -o") from None
+            raise InputError(f"cannot lock {path}: {exc.strerror}") from None
+        try:
+            held, named = os.fstat(fd), os.stat(path)
+        except FileNotFoundError:
+            held = named = None
+        if held is not None and (held.st_dev, held.st_ino) == (named.st_dev, named.st_ino):
+            break
+        os.close(fd)  # the run that held it removed the file between our open and our lock: take a new one
+    try:
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+        os.close(fd)
 
 
 class RowWriter:
@@ -320,10 +362,19 @@ def _prior_meta(output) -> dict:
 
 def check_resume(output: str | Path, rows: int, this: dict) -> None:
     """Refuse to add to ``output``'s ``rows`` rows taken otherwise: through another channel map, from another
-    source, or averaging another number of samples (the meta speaks for every row with one of each)."""
+    source, or averaging another number of samples (the meta speaks for every row with one of each). A simulated
+    sensor is told by its description's hash (``sensor_sha256``) when both runs recorded one: the same unit's
+    file, by another path or moved, is the same source."""
     if rows == 0:
         return
     prior = _prior_meta(output)
+    if "sensor_sha256" in prior and "sensor_sha256" in this:
+        if prior["sensor_sha256"] != this["sensor_sha256"]:
+            raise InputError(f"output {output}: its {rows} rows were captured from {prior.get('source')} (sensor "
+                             f"sha256 {str(prior['sensor_sha256'])[:12]}), this run's {this.get('source')} is "
+                             f"another sensor ({this['sensor_sha256'][:12]}): resume with the same, or choose "
+                             "another -o")
+        prior = {k: v for k, v in prior.items() if k != "source"}  # the paths typed may differ
     for key, option in (("adc", "--adc"), ("source", "a source"), ("samples_per_row", "--samples")):
         if key in prior and key in this and prior[key] != this[key]:
             raise InputError(f"output {output}: its {rows} rows were captured with {option} {prior[key]}, this run's "

@@ -10,10 +10,11 @@ from pathlib import Path
 
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from fitgen.base.progress import Progress
+from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import (TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFailed, capture, check_resume, enter_waiter,
-                          load_schedule, prepare_output, trigger_waiter)
+                          load_schedule, output_lock, prepare_output, trigger_waiter)
 from host.session import channel_map_from_args, open_bus_from_args, refuse_alone
 from host.stage import StageError, StageState
 from host.stagecapture import open_stage, stage_settings
@@ -44,9 +45,23 @@ def trigger_timeout(args) -> float:
     return parse_positive(args.trigger_timeout, "--trigger-timeout", most=LONGEST_WAIT)
 
 
+def _kept(output) -> str:
+    """What a run stopped early leaves, for its last line."""
+    if not Path(output).exists():  # stopped before the output was made: at the stage's zero, say
+        return "nothing was written"
+    return f"the rows written so far are kept in {output}: run the same command again to resume"
+
+
 def run_capture(args, prog: str) -> None:
     """The schedule ``--poses`` into ``--output`` (resumed if it has rows); progress and the summary go to
-    stderr after ``prog``. Raises CaptureFailed or CaptureInterrupted when it stops early."""
+    stderr after ``prog``. Raises CaptureFailed or CaptureInterrupted when it stops early, InputError when
+    another run holds the output."""
+    # held from before the output is read to after its last row: two runs would interleave their rows
+    with output_lock(args.output):
+        _run_capture(args, prog)
+
+
+def _run_capture(args, prog: str) -> None:
     samples, spread, tries, settle, retries = capture_numbers(args)
     timeout = trigger_timeout(args)
     schedule = load_schedule(args.poses)
@@ -54,8 +69,10 @@ def run_capture(args, prog: str) -> None:
     state = prepare_output(args.output, cmap.n_elements, schedule, write=False)  # checked before any waiting
     stage_opts = stage_settings(args, schedule)  # and the stage's settings before anything moves
     total, pending = len(schedule.poses), int((~state.done).sum())
-    source = f"simulated {args.sensor}" if args.simulate else "hardware"
-    check_resume(args.output, state.rows, {"adc": cmap.describe(), "source": source, "samples_per_row": samples})
+    source = {"source": f"simulated {args.sensor}" if args.simulate else "hardware"}
+    if args.simulate:  # the sensor itself, not the path typed for it, tells a resume whether it is the same one
+        source["sensor_sha256"] = load_sensor(args.sensor).sha256
+    check_resume(args.output, state.rows, {"adc": cmap.describe(), **source, "samples_per_row": samples})
     if pending == 0:  # the stage and the bus stay shut, the meta as it is
         print(f"{prog}: {total}/{total} poses in {args.output} already: nothing to capture", file=sys.stderr)
         return
@@ -66,12 +83,11 @@ def run_capture(args, prog: str) -> None:
         wait = None  # the stage (simulated or G-code) sets each pose itself
     else:
         wait = enter_waiter(schedule)
-    meta = {"adc": cmap.describe(), "source": source}
+    meta = {"adc": cmap.describe(), **source}
     motion = pose_file_motion(args.sim_pose_file) if args.sim_pose_file else None
     bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion)
     if motion is not None:
         bus.feed.motion_step = 0.0  # follow the stage at every conversion: a move ends between two rows
-    keep = f"the rows written so far are kept in {args.output}: run the same command again to resume"
     stage = None
     t0 = time.monotonic()
     try:
@@ -88,13 +104,11 @@ def run_capture(args, prog: str) -> None:
                           wait=wait, set_pose=set_pose, settle=settle,
                           clock=clock, progress=None if interactive else progress, meta=meta)
     except KeyboardInterrupt:
-        raise CaptureInterrupted(keep) from None
+        raise CaptureInterrupted(_kept(args.output)) from None
     except (DeviceSilent, SpreadTooLarge, TriggerFailed, StageError) as exc:
         if getattr(exc, "lost", ""):
             StageState.mark_lost(args.output, exc.lost)
-        if not Path(args.output).exists():
-            keep = "nothing was written"  # the fault came before the first row's file was made
-        raise CaptureFailed(f"{exc}; {keep}") from exc
+        raise CaptureFailed(f"{exc}; {_kept(args.output)}") from exc
     finally:
         if stage is not None:
             stage.ctrl.close()

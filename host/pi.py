@@ -22,7 +22,7 @@ from fitgen import __version__
 from fitgen.c.codegen import render_header
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
-from fitgen.equations.model import Model, check_input_units
+from fitgen.equations.model import Model, check_input_units, load_model
 
 from host.cdrivers import chip_table, smbus_transfer
 from host.channelmap import ChannelMap, check_full_scale
@@ -94,15 +94,26 @@ def check_reads(model: Model, cmap: ChannelMap) -> None:
 
 
 
-def render_pi(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: str = "float",
+def pi_precision(model: Model, precision: str | None = None) -> str:
+    """``precision``, or when None the one ``fitgen codegen --target pi`` writes for ``model``
+    (fitgen.c.targets.default_precision: double, which the Pi computes in hardware)."""
+    from fitgen.c.targets import default_precision
+    from fitgen.fitting.holdout import device_precision
+
+    return precision or default_precision("pi", device_precision(model))
+
+
+def render_pi(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: str | None = None,
               style: str = "unrolled", tin=None, tempcomp=None) -> Path:
     """Write the Pi program's sources for ``model`` read through ``cmap`` into ``folder``.
 
-    ``tin``: the thermistor's input (read every 0.25 s, as host/temperature.py does); ``tempcomp``: a
-    :class:`host.temperature.TempComp` applied to the readings before the model (needs ``tin``).
+    ``precision``: float or double (default :func:`pi_precision`'s); ``tin``: the thermistor's input (read every
+    0.25 s, as host/temperature.py does); ``tempcomp``: a :class:`host.temperature.TempComp` applied to the
+    readings before the model (needs ``tin``).
     """
     from host.temperature import render_c
 
+    precision = pi_precision(model, precision)
     if precision not in ("float", "double"):
         raise InputError(f"the Pi build computes in float or double, not {precision!r}")
     check_reads(model, cmap)
@@ -135,6 +146,23 @@ def describe_reads(cmap: ChannelMap, tin=None, tempcomp=None) -> str:
         return cmap.describe()
     return (f"{cmap.describe()}, thermistor {tin.kind}@0x{tin.address:02x}:{tin.input}"
             + (" with temperature compensation" if tempcomp is not None else ""))
+
+
+def pi_build(args) -> str:
+    """``tactile-host pi-build``: the compiler checked before the folder is made, the sources rendered into
+    ``--output`` and built; the line that says what was built."""
+    from host.session import channel_map_from_args
+    from host.temperature import load_tempcomp, temperature_input
+
+    compiler(args.cc)
+    model, cmap = load_model(args.model), channel_map_from_args(args)
+    tin = temperature_input(args.adc, cmap, args.thermistor)
+    tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
+    precision = pi_precision(model, args.precision)
+    binary = build_pi(render_pi(model, cmap, args.output, precision=precision, style=args.style, tin=tin,
+                                tempcomp=tempcomp), args.cc)
+    return (f"wrote {binary} ({describe_reads(cmap, tin, tempcomp)}, model {model.sha256[:12]}, {precision}); "
+            f"on the Pi: {binary.name} --bus 1 --format csv")
 
 
 def compiler(cc: str = DEFAULT_CC) -> list[str]:

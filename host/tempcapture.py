@@ -14,7 +14,8 @@ from fitgen.base.parse import parse_numbers
 from fitgen.physics.dataset import load_dataset
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.capture import SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, trigger_waiter
+from host.capture import (SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, output_lock,
+                          trigger_waiter)
 from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers, trigger_timeout
 from host.motion import parse_drift
 from host.session import channel_map_from_args, open_bus_from_args, refuse_alone
@@ -58,7 +59,13 @@ def parse_t0(text: str | None, temps: list[float]) -> float | None:
 def capture_temperatures(args, prog: str):
     """``capture --temperature T1,T2,..``: the schedule at each temperature (one file each), then the compensation
     fitted and saved; progress goes to stderr after ``prog``. The TempComp, or None when the input closes at a
-    prompt; CaptureFailed when a fault stops it (the temperatures done are kept)."""
+    prompt; CaptureFailed when a fault stops it (the temperatures done are kept); InputError when another run
+    holds the output."""
+    with output_lock(args.output):  # for every temperature's file, named after it: two runs would interleave
+        return _capture_temperatures(args, prog)
+
+
+def _capture_temperatures(args, prog: str):
     temps = parse_temperatures(args.temperature)
     t0 = parse_t0(args.t0, temps)
     samples, spread, tries, settle, retries = capture_numbers(args)

@@ -153,6 +153,20 @@ def test_enter_and_trigger_waiters(tmp_path):
     assert log.read_text() == "2/3 2.0 -1.0\n"
 
 
+def test_ctrl_c_at_a_prompt_ends_its_line_and_goes_on():
+    """What is written after Ctrl-C at a prompt (the capture's last line) starts a line of its own."""
+    from host.prompt import ask_line
+
+    class Interrupted:
+        def readline(self):
+            raise KeyboardInterrupt
+
+    err = io.StringIO()
+    with pytest.raises(KeyboardInterrupt):
+        ask_line(Interrupted(), err, "pose 1/3: set it, then press Enter ")
+    assert err.getvalue() == "pose 1/3: set it, then press Enter \n"
+
+
 # --- command line ------------------------------------------------------------------
 
 
@@ -214,6 +228,110 @@ def test_capture_command_a_hung_trigger_is_killed_at_its_time_limit_and_rows_are
     assert len(data_rows(out)[1]) == 3
     assert_one_line_error(run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out),
                                   "--simulate", "--trigger-timeout", "5"), 2, "--trigger-timeout goes with --trigger")
+
+
+def test_capture_command_ctrl_c_after_rows_says_they_are_kept(tmp_path):
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:5])
+    out = tmp_path / "d.csv"
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate",
+                   "--samples", "2", "--trigger", 'if [ "$TM_POSE_INDEX" = 3 ]; then kill -INT $PPID; sleep 5; fi')
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.strip() == (f"tactile-host capture: interrupted; the rows written so far are kept in {out}: "
+                                   "run the same command again to resume")
+    assert len(data_rows(out)[1]) == 2
+
+
+def test_a_second_capture_on_the_same_output_is_refused_while_the_first_runs(tmp_path):
+    """The first run holds its output from before reading it to after its last row; a second, on the same -o, is
+    one line and exit 2, and the first's rows are neither interleaved nor doubled."""
+    import subprocess
+    import sys
+    import time
+
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:4])
+    out, paused, go = tmp_path / "d.csv", tmp_path / "paused", tmp_path / "go"
+    args = ["capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate", "--samples", "2"]
+    # the first run's trigger holds it at pose 2 until the test says go
+    hold = (f'if [ "$TM_POSE_INDEX" = 2 ]; then touch {shlex.quote(str(paused))}; '
+            f'while [ ! -e {shlex.quote(str(go))} ]; do sleep 0.05; done; fi')
+    code = "import sys; from fitgen.app.host_cli import main; sys.argv[0] = 'tactile-host'; main()"
+    first = subprocess.Popen([sys.executable, "-c", code, *args, "--trigger", hold], stderr=subprocess.PIPE, text=True)
+    try:
+        t0 = time.monotonic()
+        while not paused.exists():
+            assert first.poll() is None and time.monotonic() - t0 < 60, first.stderr.read()
+            time.sleep(0.05)
+        assert_one_line_error(run_cli("tactile-host", *args), 2,
+                              f"output {out}: another capture is writing it (it holds d.csv.lock): let it end, or "
+                              "choose another -o")
+        assert_one_line_error(run_cli("tactile-host", *args, "--temperature", "20,30"), 2, "another capture")
+        assert len(data_rows(out)[1]) == 1
+        go.touch()
+        assert first.wait(timeout=60) == 0, first.stderr.read()
+    finally:
+        if first.poll() is None:
+            first.kill()
+            first.wait()
+    assert [r[8:] for r in data_rows(out)[1]] == [tuple(map(float, r)) for r in grid_rows()[:4]]
+    assert json.loads((tmp_path / "d.csv.meta.json").read_text())["runs"] == 1
+    assert not (tmp_path / "d.csv.lock").exists()  # released and removed with the run
+
+
+def test_a_killed_runs_lock_does_not_block_the_next(tmp_path):
+    """The kernel drops a killed process's flock: the file it leaves is taken over, then removed."""
+    import subprocess
+    import sys
+
+    from host.capture import output_lock
+
+    out = tmp_path / "d.csv"
+    code = (f"import os\nfrom host.capture import output_lock\nwith output_lock({str(out)!r}):\n"
+            "    os.kill(os.getpid(), 9)")
+    assert subprocess.run([sys.executable, "-c", code]).returncode == -9
+    assert (tmp_path / "d.csv.lock").exists()
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:2])
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate",
+                   "--samples", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert len(data_rows(out)[1]) == 2 and not (tmp_path / "d.csv.lock").exists()
+    with output_lock(out):  # held here, as a run in another process holds it
+        with pytest.raises(InputError, match="another capture is writing it"):
+            with output_lock(out):
+                pass
+    with output_lock(out):  # released
+        pass
+
+
+def test_a_simulated_capture_resumes_with_its_units_file_by_any_path_and_not_with_another_unit(tmp_path):
+    """--sensor is compared as the sensor it loads (its description's hash), not as the text typed: the same unit's
+    file by another relative path, or moved, resumes; another unit is refused in one line."""
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.units import draw_unit, write_unit
+
+    drawing = load_sensor("paper").with_transfer("gmr")
+    for seed in (7, 8):
+        write_unit(tmp_path / f"unit{seed}.unit.toml", draw_unit(drawing, seed)[0], "paper", {"seed": seed})
+    (tmp_path / "sub").mkdir()
+    write_schedule(tmp_path / "s.csv", grid_rows()[:6])
+    args = ["capture", "--poses", "s.csv", "--adc", TWO_1115, "-o", "d.csv", "--simulate", "--samples", "2"]
+    stop_at = ["--trigger", '[ "$TM_POSE_INDEX" -lt {} ]']
+    proc = run_cli("tactile-host", *args, "--sensor", "unit7.unit.toml", stop_at[0], stop_at[1].format(3),
+                   cwd=tmp_path)
+    assert proc.returncode == 1 and len(data_rows(tmp_path / "d.csv")[1]) == 2, proc.stderr
+    up = [a.replace("s.csv", "../s.csv").replace("d.csv", "../d.csv") for a in args]
+    proc = run_cli("tactile-host", *up, "--sensor", "../unit7.unit.toml", stop_at[0], stop_at[1].format(5),
+                   cwd=tmp_path / "sub")
+    assert proc.returncode == 1 and "exit status 1 at pose 5/6" in proc.stderr, proc.stderr
+    assert len(data_rows(tmp_path / "d.csv")[1]) == 4
+    assert_one_line_error(run_cli("tactile-host", *up, "--sensor", "../unit8.unit.toml", cwd=tmp_path / "sub"), 2,
+                          "its 4 rows were captured from simulated ../unit7.unit.toml (sensor sha256 ")
+    (tmp_path / "unit7.unit.toml").rename(tmp_path / "sub" / "moved.toml")
+    proc = run_cli("tactile-host", *up, "--sensor", "moved.toml", cwd=tmp_path / "sub")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.strip() == "tactile-host capture: 6/6 poses in ../d.csv (2 captured now, 4 already there)"
+    assert [r[8:] for r in data_rows(tmp_path / "d.csv")[1]] == [tuple(map(float, r)) for r in grid_rows()[:6]]
+    meta = json.loads((tmp_path / "d.csv.meta.json").read_text())
+    assert meta["runs"] == 3 and meta["sensor_sha256"] == load_sensor(tmp_path / "sub" / "moved.toml").sha256
 
 
 @pytest.mark.parametrize("extra, message", [

@@ -226,6 +226,33 @@ def test_cli_emulate_suite_writes_junit(model_file, tmp_path):
     assert root.get("failures") == "0" and int(root.get("tests")) >= 6
 
 
+def test_cli_emulate_refuses_the_suites_options_without_suite(model_file, tmp_path):
+    """Without --suite the suite never runs: each of its options, even typed as its default (--vectors 0 too), is
+    one line before the model is read or the firmware built, and --help says they need --suite."""
+    from fitgen.app.hil_cli import _check, build_parser
+    from fitgen.base.errors import InputError
+
+    for extra in (["--vectors", "0"], ["--vectors", "1000"], ["--data", "d.csv"], ["--fuzz", "5"], ["--no-flash"],
+                  ["--junit", str(tmp_path / "j.xml")], ["--max-share", "0.05"], ["--sensor", "paper"],
+                  ["--no-held-out"]):
+        args = build_parser().parse_args(["emulate", "--model", "m.json", "--target", "host", *extra])
+        with pytest.raises(InputError, match=f"^{extra[0]} goes with --suite "):
+            _check(args)
+    # with --suite, the ones left out take the defaults --help names
+    args = build_parser().parse_args(["emulate", "--model", "m.json", "--suite", "--fuzz", "0"])
+    _check(args)
+    assert (args.vectors, args.fuzz, args.max_share, args.no_flash) == (1000, 0, 0.05, False)
+    proc = run_cli("tactile-hil", "emulate", "--target", "host", "--model", str(tmp_path / "none.json"),
+                   "--junit", str(tmp_path / "j.xml"), "--fuzz", "5", "--no-flash", "--vectors", "0")
+    assert_one_line_error(proc, 2, "--vectors goes with --suite (without it, it would be ignored)")
+    assert not (tmp_path / "j.xml").exists()
+    usage = run_cli("tactile-hil", "emulate", "--help").stdout
+    group = usage[usage.index("only with --suite"):]
+    assert all(f"--{o} " in group for o in ("vectors", "data", "fuzz", "no-flash", "junit", "max-share", "sensor",
+                                             "no-held-out"))
+    assert "--sensor-id" not in group and "--timeout" not in group
+
+
 def test_cli_run_against_a_wrong_model_fails_with_status_1(paper_model, tmp_path):
     require_tool("gcc")
     other = flash_variant(paper_model).save(tmp_path / "other.json")

@@ -121,6 +121,23 @@ def test_pi_build_cli_errors(tmp_path, model):
                                   "-o", str(tmp_path / "y")), 2, "not found")
 
 
+def test_pi_build_defaults_to_the_precision_codegen_writes_for_the_pi(model, tmp_path):
+    """Without --precision pi-build writes the header `fitgen codegen --target pi` writes (double: the Pi computes
+    it in hardware), even for a model fitted for float; its summary and --help say so."""
+    from fitgen.fitting.holdout import device_precision
+
+    require_tool("gcc")
+    assert device_precision(model) == "float"  # where the two rules could part
+    path = str(model.save(tmp_path / "m.json"))
+    proc = run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc", "-o", str(tmp_path / "pi"))
+    assert proc.returncode == 0, proc.stderr
+    assert ", double); on the Pi: tm_pi" in proc.stderr
+    proc = run_cli("fitgen", "codegen", path, "--target", "pi", "--style", "unrolled", "-o", str(tmp_path / "c"))
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "pi" / "tm_model.h").read_text() == (tmp_path / "c" / "tm_model.h").read_text()
+    assert "default double" in " ".join(run_cli("tactile-host", "pi-build", "--help").stdout.split())
+
+
 def test_a_failed_pi_build_leaves_no_program_and_refuses_before_it_writes(model, tmp_path):
     """A program built from the folder's earlier sources must not stay beside a failed build's new ones."""
     require_tool("gcc")

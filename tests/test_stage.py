@@ -722,6 +722,34 @@ def test_capture_command_alarm_at_start_is_one_line_exit_1_and_home_clears_it(tm
         assert srv.ctrl.lines.count("$H") == 1
 
 
+def test_ctrl_c_says_what_is_kept_nothing_before_the_first_row(tmp_path):
+    """Ctrl-C at a new capture's zero prompt: no file was made, and the line says so rather than pointing at rows
+    kept in a file that does not exist."""
+    sched = write_schedule(tmp_path / "s.csv", grid()[:3])
+    out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
+    with server("grbl", PoseFile(posefile)) as srv:
+        proc = subprocess.Popen(host_cmd(*capture_args(sched, out, srv.url, posefile)), stdin=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        try:
+            said = [proc.stderr.readline() for _ in range(2)]
+            assert "set the zero: jog the indenter" in said[-1], said
+            prompt = ""
+            while not prompt.endswith("]> "):  # the jog prompt, its line open, waiting on stdin
+                prompt += proc.stderr.read(1)
+                assert "jog [".startswith(prompt[:5]), prompt
+            proc.send_signal(signal.SIGINT)
+            err = proc.stderr.read()
+            assert proc.wait(timeout=30) == 130, err
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            proc.stdin.close()
+            proc.stderr.close()
+    assert err == "\ntactile-host capture: interrupted; nothing was written\n"  # the prompt's line ended first
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["pose.txt", "s.csv"]
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--stage", "gcode:socket://127.0.0.1:1"], "cannot open stage socket://127.0.0.1:1"),
     (["--stage", "serial:/dev/ttyUSB0"], "expected gcode:URL"),

@@ -154,20 +154,38 @@ def cmd_emulate(args) -> int:
     return 0
 
 
-def _suite_options(p) -> None:
+VECTORS, FUZZ = 1000, 10_000  # the suite's defaults
+
+
+def _suite_options(p, suite=None) -> None:
+    """The options ``run`` and ``emulate`` share; the suite's own go into ``suite`` when given (emulate's group of
+    options that need --suite)."""
     from fitgen.c.verify import MAX_VECTORS, add_held_out_options
 
+    s = suite or p
     p.add_argument("--model", required=True, metavar="MODEL", help="the model compiled into the firmware")
-    p.add_argument("--vectors", type=int, default=1000,
-                   help=f"random vectors inside the domain (default 1000, at most {MAX_VECTORS:,})")
-    p.add_argument("--data", metavar="CSV", help="also send the rows of this dataset")
-    p.add_argument("--fuzz", type=int, default=10_000, help="random or mutated frames to send (default 10000)")
-    p.add_argument("--no-flash", action="store_true", help="skip the calibration flashing checks")
-    p.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
+    s.add_argument("--vectors", type=int, default=VECTORS,
+                   help=f"random vectors inside the domain (default {VECTORS}, at most {MAX_VECTORS:,})")
+    s.add_argument("--data", metavar="CSV", help="also send the rows of this dataset")
+    s.add_argument("--fuzz", type=int, default=FUZZ, help=f"random or mutated frames to send (default {FUZZ})")
+    s.add_argument("--no-flash", action="store_true", help="skip the calibration flashing checks")
+    s.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
     p.add_argument("--sensor-id", default="paper", help="sensor id written into flashed blobs (default paper)")
     p.add_argument("--fma", action="store_true", help="the compiled-in model sums terms by fma")
     p.add_argument("--timeout", type=seconds, default=2.0, help="seconds to wait for each reply (default 2)")
-    add_held_out_options(p)
+    add_held_out_options(s)
+
+
+# emulate's options that only the suite uses: refused without --suite (they would be ignored)
+SUITE_ONLY = ("vectors", "data", "fuzz", "no_flash", "junit", "max_share", "sensor", "no_held_out")
+
+
+def _suite_defaults() -> dict:
+    """The defaults of SUITE_ONLY's options that have one: None in emulate's parser, so that one typed (even as its
+    default) is told from one left out."""
+    from fitgen.c.verify import MAX_SHARE
+
+    return {"vectors": VECTORS, "fuzz": FUZZ, "max_share": MAX_SHARE}
 
 
 def build_parser() -> Parser:
@@ -193,7 +211,8 @@ def build_parser() -> Parser:
     e.add_argument("--precision", default="float", choices=("float", "double", "fixed"))
     e.add_argument("--style", default="table", choices=("table", "unrolled"))
     e.add_argument("--build-dir", metavar="DIR", help="keep the firmware sources and image here")
-    e.add_argument("--suite", action="store_true", help="run the HIL suite against it, then stop")
+    e.add_argument("--suite", action="store_true",
+                   help="run the HIL suite against it (with its own options, below), then stop")
     e.add_argument("--adc", metavar="SPEC|FILE.toml",
                    help="the firmware reads its inputs from these ADCs (a channel map, as tactile-host read --adc) "
                         "over the emulated board's I2C (the Uno's TWI, the ARM boards' bridge), answered by the bus "
@@ -209,19 +228,35 @@ def build_parser() -> Parser:
                    help="with temp= in --adc: temperature compensation before the model (float and double builds)")
     e.add_argument("--sim-temperature", type=float, metavar="DEGC",
                    help="with --adc: the simulated sensor at this temperature (typical coefficients, seed --seed)")
-    _suite_options(e)
-    e.set_defaults(func=cmd_emulate)
+    _suite_options(e, e.add_argument_group("the HIL suite's options (only with --suite: refused without it)"))
+    e.set_defaults(func=cmd_emulate, **dict.fromkeys(_suite_defaults()))
     return p
 
 
 def _check(args) -> None:
-    """Options checked before a model is loaded, firmware built or a device opened: --junit's file, --sensor-id
-    (as the firmware compiles it in under emulate; as a flashed blob carries it under run)."""
+    """Options checked before a model is loaded, firmware built or a device opened: under emulate, the suite's
+    options without --suite; --junit's file, --sensor-id (as the firmware compiles it in under emulate; as a
+    flashed blob carries it under run)."""
     from fitgen.c.calblob import check_sensor_id
     from hil.firmware import check_sensor_id as check_compiled_id
 
+    if args.command == "emulate":
+        _suite_alone(args)
     check_written(args)
     (check_compiled_id if args.command == "emulate" else check_sensor_id)(args.sensor_id)
+
+
+def _suite_alone(args) -> None:
+    """InputError for a suite option given to emulate without --suite; then those left out take their defaults."""
+    from host.session import refuse_alone
+
+    # a flag is given when True, any other option when not None: `--vectors 0` is given too (0 == False)
+    values = [(name, getattr(args, name)) for name in SUITE_ONLY]
+    refuse_alone([(v is not None and v is not False, "--" + name.replace("_", "-"), "--suite", args.suite)
+                  for name, v in values])
+    for name, value in _suite_defaults().items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
 
 
 def main(argv=None) -> int:

@@ -229,20 +229,9 @@ def cmd_stage_sim(args) -> int:
 
 
 def cmd_pi_build(args) -> int:
-    from fitgen.equations.model import load_model
+    from host.pi import pi_build
 
-    from host.pi import build_pi, compiler, describe_reads, render_pi
-    from host.session import channel_map_from_args
-    from host.temperature import load_tempcomp, temperature_input
-
-    compiler(args.cc)  # a compiler that is not there is said before the folder is made
-    model, cmap = load_model(args.model), channel_map_from_args(args)
-    tin = temperature_input(args.adc, cmap, args.thermistor)
-    tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
-    binary = build_pi(render_pi(model, cmap, args.output, precision=args.precision, style=args.style, tin=tin,
-                                tempcomp=tempcomp), args.cc)
-    print(f"wrote {binary} ({describe_reads(cmap, tin, tempcomp)}, model {model.sha256[:12]}, {args.precision}); "
-          f"on the Pi: {binary.name} --bus 1 --format csv", file=sys.stderr)
+    print(pi_build(args), file=sys.stderr)
     return 0
 
 
@@ -338,7 +327,8 @@ def build_parser() -> Parser:
                                          "over i2c-dev, built with arm-linux-gnueabihf-gcc")
     pb.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
     map_options(pb)
-    pb.add_argument("--precision", default="float", choices=("float", "double"))
+    pb.add_argument("--precision", choices=("float", "double"),
+                    help="the model's precision (default double, as fitgen codegen --target pi writes it)")
     pb.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
     pb.add_argument("--cc", default="arm-linux-gnueabihf-gcc -static",
                     help="compiler and flags (default: arm-linux-gnueabihf-gcc -static; gcc on the Pi itself)")
