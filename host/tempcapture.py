@@ -65,6 +65,18 @@ def capture_temperatures(args, prog: str):
         return _capture_temperatures(args, prog)
 
 
+def _temperature_file(out: Path, T: float) -> Path:
+    """The capture at temperature ``T`` of a run whose -o is ``out``."""
+    return out.with_name(f"{out.stem}.T{T:g}{out.suffix or '.csv'}")
+
+
+def _kept(out: Path, temps) -> str:
+    """What a multi-temperature run stopped early leaves, for its last line."""
+    if not any(_temperature_file(out, T).exists() for T in temps):
+        return "nothing was written"  # stopped at the first temperature's prompt, say
+    return "the temperatures and rows done so far are kept: run the same command again to resume"
+
+
 def _capture_temperatures(args, prog: str):
     temps = parse_temperatures(args.temperature)
     t0 = parse_t0(args.t0, temps)
@@ -91,7 +103,7 @@ def _capture_temperatures(args, prog: str):
         array.setup()
         thermo = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
         for T in temps:
-            path = out.with_name(f"{out.stem}.T{T:g}{out.suffix or '.csv'}")
+            path = _temperature_file(out, T)
             if args.simulate:
                 drift.start_degc = T
             elif args.trigger:
@@ -122,11 +134,9 @@ def _capture_temperatures(args, prog: str):
             print(f"{prog}: {ds.n_rows} poses at {T:g} degC"
                   f"{f' (thermistor {measured:.2f} degC)' if np.isfinite(measured) else ''} in {path}", file=sys.stderr)
     except KeyboardInterrupt:
-        raise CaptureInterrupted("the temperatures and rows done so far are kept: run the same command again to "
-                                 "resume") from None
+        raise CaptureInterrupted(_kept(out, temps)) from None
     except (DeviceSilent, SpreadTooLarge, TriggerFailed) as exc:
-        raise CaptureFailed(f"{exc}; the temperatures done so far are kept: run the same command again to "
-                            "resume") from exc
+        raise CaptureFailed(f"{exc}; {_kept(out, temps)}") from exc
     finally:
         bus.close()
     tc = fit_tempcomp(np.vstack(rows), np.concatenate(pose_ids), np.concatenate(row_temps), t0=t0)

@@ -339,3 +339,32 @@ def test_a_toml_channel_map_names_the_thermistor(rest_model_file, tmp_path):
     (tmp_path / "bad.toml").write_text('[[chip]]\ntype = "ads1115"\naddress = 0x48\n[temperature]\nbeta = 1\n')
     assert_one_line_error(run_cli("tactile-host", "read", "--model", rest_model_file, "--adc",
                                   str(tmp_path / "bad.toml"), "--simulate", "0,0,0,0,0"), contains="[temperature]")
+
+
+def test_capture_at_temperatures_stopped_says_what_it_kept(tmp_path, monkeypatch):
+    """Ctrl-C before the first temperature's file says nothing was written, not that temperatures are kept; after
+    one temperature's file, that they are (and a resume takes them)."""
+    import host.tempcapture
+    from fitgen.app.host_cli import build_parser
+    from host.capturerun import CaptureInterrupted
+
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dz\n0,0\n1,-1\n")
+    args = build_parser().parse_args(["capture", "--poses", str(sched), "--adc", TWO_CHIPS, "--simulate",
+                                      "--temperature", "15,25", "-o", str(tmp_path / "cap.csv")])
+    real, calls = host.tempcapture.capture, []
+
+    def stop_at_second(*a, **k):
+        calls.append(a[2])
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(host.tempcapture, "capture", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
+    with pytest.raises(CaptureInterrupted, match="^nothing was written$"):
+        host.tempcapture.capture_temperatures(args, "tactile-host capture")
+    assert not list(tmp_path.glob("cap*.csv"))
+    monkeypatch.setattr(host.tempcapture, "capture", stop_at_second)
+    with pytest.raises(CaptureInterrupted, match="temperatures and rows done so far are kept"):
+        host.tempcapture.capture_temperatures(args, "tactile-host capture")
+    assert (tmp_path / "cap.T15.csv").is_file() and not (tmp_path / "cap.T25.csv").exists()

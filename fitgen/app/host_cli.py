@@ -64,6 +64,9 @@ def cmd_flash(args) -> int:
 
 
 def cmd_read(args) -> int:
+    import os
+
+    from fitgen.base.fileio import open_output
     from host.adc import DeviceSilent
     from host.readout import LineFormat, Readout
     from host.session import ReadoutSession
@@ -74,10 +77,7 @@ def cmd_read(args) -> int:
         fmt = LineFormat(args.format, s.model.n_inputs, s.model.output_names)
         record = s.record(args.record)  # before -o is opened: a record that cannot be made leaves -o as it was
         if args.output:
-            try:
-                sink = open(args.output, "w")
-            except OSError as exc:
-                raise InputError(f"cannot write {args.output}: {exc.strerror}") from None
+            sink = os.fdopen(open_output(args.output), "w")  # a device, FIFO or descriptor's link refused
         out = sink or sys.stdout
         out.write(fmt.header)
         reader = Readout(s.array, s.engine, out, fmt, clock=s.clock, corrections=s.corrections,
