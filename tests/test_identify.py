@@ -11,7 +11,7 @@ import pytest
 from conftest import assert_one_line_error, run_cli
 from fitgen.fitting.identify import Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
-from fitgen.fitting.unitrecord import outlier_lines, report
+from fitgen.fitting.unitrecord import check_explained, outlier_lines, report
 from fitgen.physics import presets
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
@@ -210,6 +210,32 @@ def test_a_spread_of_zero_fixes_its_parameter_at_the_drawing(drawing, plan, tmp_
         identify(as_drawn, y, plan[0], noise)
     with pytest.raises(InputError, match="nothing to identify"):  # nor poses to pin it: all one pose, before
         schedule(as_drawn, 20)
+
+
+def test_a_refusal_with_the_stage_error_set_below_its_default_names_it(drawing, plan, monkeypatch):
+    """A good capture from a stage with its usual error, identified with --rig-error 0 --zero-error 0: the refusal
+    names those options first; with the defaults the same capture is explained."""
+    from fitgen.base.errors import InputError
+    from fitgen.fitting import unitrecord
+
+    unit, _ = draw_unit(drawing, 25)
+    y, noise = capture(unit, plan[0], 25)
+    assert check_explained(identify(drawing, y, plan[0], noise), "c.csv", "paper", "the sensor's") is None
+    # no element or pair to blame here (as blame finds, at a minute's cost): the generic causes follow the hint
+    monkeypatch.setattr(unitrecord, "blame", lambda ident, progress=None: None)
+    for rig, zero, said in ((0.0, 0.0, "--rig-error 0 and --zero-error 0 (below the defaults, 0.01 and 0.02 mm) "
+                                       "leave unexplained: try the defaults"),
+                            (0.0, 0.02, "--rig-error 0 (below the default, 0.01 mm) leaves unexplained")):
+        with pytest.raises(InputError) as refused:
+            check_explained(identify(drawing, y, plan[0], noise, rig_error=rig, zero_error=zero), "c.csv", "paper",
+                            "the sensor's")
+        assert f"; likely the stage's own error, which {said}" in str(refused.value), refused.value
+        assert "; else another sensor than paper" in str(refused.value)
+    # a refusal with the stage's error allowed for as by default: no such hint
+    other = readings(load_sensor("tilted-axes").with_transfer("gmr"), plan[0], adc_bits=0)
+    with pytest.raises(InputError) as refused:
+        check_explained(identify(drawing, other, plan[0], noise), "c.csv", "paper", "the sensor's")
+    assert "does not explain" in str(refused.value) and "stage's own error" not in str(refused.value)
 
 
 def test_schedule_is_d_optimal_within_limits(drawing, plan):

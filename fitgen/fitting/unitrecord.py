@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, Identification, blame, tilting
+from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, RIG_ERROR, ZERO_ERROR, Identification,
+                                     blame, tilting)
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.units import UnitSpace
@@ -138,6 +139,23 @@ def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
     return lines
 
 
+def stage_error_hint(ident: Identification) -> str:
+    """'' when the identification allowed for the stage's error as fitgen identify does by default; else the
+    refusal's first cause: the stage's own error, which a rig or zero error below the default leaves unexplained."""
+    prob = ident.problem
+    given = [(flag, value, default) for flag, value, default in
+             (("--rig-error", prob.rig_error, RIG_ERROR), ("--zero-error", prob.zero_error, ZERO_ERROR))
+             if value < default]
+    if not given:
+        return ""
+    flags = " and ".join(f"{flag} {value:g}" for flag, value, _ in given)
+    defaults = " and ".join(f"{default:g}" for _, _, default in given)
+    both = len(given) > 1
+    return (f"likely the stage's own error, which {flags} (below the default{'s' if both else ''}, {defaults} mm) "
+            f"leave{'' if both else 's'} unexplained: try the default{'s' if both else ''} or the stage's measured "
+            "error; else ")
+
+
 def check_explained(ident: Identification, capture, drawing: str, source: str, progress=None) -> None:
     """InputError when the physics does not explain the capture (reduced chi-square over CHI2_LIMIT), or does only
     with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads), with the cause when one
@@ -167,7 +185,8 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
         row = "" if not rows else (f"; row {rows[0][0] + 1} stands out most ({_where(ident, rows[0][0])}: residuals up "
                                    f"to {rows[0][1]:.3g} standard deviations): if it slipped, delete it and resume"
                                    if len(rows) <= 3 else f"; {len(rows)} rows stand out, not one")
-        cause = cause or (f"another sensor than {drawing}, labels in other units, an element that does not respond or "
+        cause = cause or (stage_error_hint(ident) + f"another sensor than {drawing}, labels in other units, an element "
+                          "that does not respond or "
                           "elements wired in another order than the drawing's (the channel map), a zero above first "
                           f"contact (rows at dz 0 off the skin), or a noise figure too low{row}")
         raise InputError(f"the physics does not explain {capture}: residuals {float(np.sqrt(ident.reduced_chi2)):.3g}x "
