@@ -415,7 +415,7 @@ def test_a_capture_read_in_the_wrong_units_is_said_so(drawing, plan, tmp_path):
                    str(drawing.noise), "-o", str(tmp_path / "u.toml")).returncode == 0
 
 
-def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
+def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypatch, capsys):
     unit, _ = draw_unit(drawing, 25)
     y, noise = capture(unit, plan[0], 25)
     # the zero set 0.08 mm above first contact: the rows at dz 0 read the magnet at rest
@@ -458,6 +458,22 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
                    "--plot", str(tmp_path / "file" / "sub"))
     assert_one_line_error(proc, 2, "cannot create")
     assert not (tmp_path / "p.toml").exists() and not (tmp_path / "p.posterior.json").exists()
+    # a figure that cannot be written, found after the work: the unit's files are not written either
+    (tmp_path / "plots" / "identify.png").mkdir(parents=True)
+    proc = run_cli("fitgen", "identify", str(tmp_path / "slip.csv"), "-o", str(tmp_path / "p.toml"), "--plot",
+                   str(tmp_path / "plots"))
+    assert not (tmp_path / "p.toml").exists() and not (tmp_path / "p.posterior.json").exists()
+    assert_one_line_error(proc, 2, f"cannot write {tmp_path / 'plots' / 'identify.png'}: it is a folder")
+    assert proc.stdout == ""  # nor the report
+    # nor a plot folder that the checks before the work let through but that cannot be made (/proc/x for root)
+    from fitgen.app import cli, plots
+
+    monkeypatch.setattr(plots, "require", lambda folder: Path(folder))
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["identify", str(tmp_path / "slip.csv"), "-o", str(tmp_path / "p.toml"), "--plot",
+                  str(tmp_path / "file" / "sub")])
+    assert not (tmp_path / "p.toml").exists() and not (tmp_path / "p.posterior.json").exists()
+    assert stop.value.code == 2 and f"cannot create {tmp_path / 'file' / 'sub'}" in capsys.readouterr().err
     # slipped so far that the capture is refused: the refusal's line names the row
     cases["slipped far"] = (slip(unit, y, plan[0], mm=0.5)[1], plan[0], f"row {deep + 1} stands out most")
     for name, (yy, pp, message) in cases.items():

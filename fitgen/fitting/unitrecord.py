@@ -202,10 +202,18 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
 def save(ident: Identification, path, provenance: dict) -> tuple:
     """Write the unit file (the maximum a posteriori unit) and beside it ``<stem>.posterior.json``: every
     parameter with its standard error, the posterior covariance, what was determined and what not."""
+    from fitgen.base.fileio import write_atomic
+
+    (unit, text), (post_path, record) = unit_files(ident, path, provenance)
+    write_atomic(post_path, record)
+    return write_atomic(unit, text), post_path
+
+
+def unit_files(ident: Identification, path, provenance: dict) -> list:
+    """What :func:`save` writes, not written: ``[(path, the unit file's text), (<stem>.posterior.json, its text)]``."""
     import json
     from pathlib import Path
 
-    from fitgen.base.fileio import write_atomic
     from fitgen.physics.sensor import parse_sensor, tomllib
     from fitgen.physics.units import unit_toml
 
@@ -237,8 +245,7 @@ def save(ident: Identification, path, provenance: dict) -> tuple:
                              "poses": p[:, :5 if tilting(ident.problem.poses) else 3].tolist()}
                             for v, p, _ in ident.starved],
         **{k: v for k, v in provenance.items() if k != "name"}}
-    write_atomic(post_path, json.dumps(record, indent=1) + "\n")
-    return write_atomic(path, text), post_path
+    return [(path, text), (post_path, json.dumps(record, indent=1) + "\n")]
 
 
 def load_posterior(unit_path) -> dict | None:
