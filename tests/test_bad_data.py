@@ -2,6 +2,7 @@
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -190,6 +191,49 @@ def test_report_refuses_data_without_the_outputs_and_leaves_no_plot_folder_when_
     (tmp_path / "F").write_text("")
     assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "m.json"), "--data", str(data), "--plot",
                                   str(tmp_path / "F")), contains="it is a file; give a folder")
+
+
+def test_report_writes_its_figures_and_the_report_together_or_none(fitted, data, tmp_path, monkeypatch, capsys):
+    """A figure that cannot be written, or a plot folder that cannot be made, leaves no report: neither the file
+    nor the report on standard output."""
+    from fitgen.app import cli, plots
+
+    (tmp_path / "m.json").write_text(json.dumps(fitted))
+    model, report = str(tmp_path / "m.json"), tmp_path / "r.md"
+    (tmp_path / "P" / "estimate_dy.png").mkdir(parents=True)  # the second figure: the first would be written
+    for out in (["-o", str(report)], []):
+        proc = run_cli("fitgen", "report", model, "--data", str(data), "--plot", str(tmp_path / "P"), *out)
+        assert proc.stdout == "" and not report.exists() and files(tmp_path / "P") == ["estimate_dy.png"], out
+        assert_one_line_error(proc, contains=f"cannot write {tmp_path / 'P' / 'estimate_dy.png'}: it is a folder")
+    # a plot folder that the checks before the work let through but that cannot be made (as /proc/x was for
+    # root): no report
+    monkeypatch.setattr(plots, "require", lambda folder: Path(folder))
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["report", model, "--data", str(data), "--plot", str(tmp_path / "file" / "sub"), "-o", str(report)])
+    assert not report.exists()
+    assert stop.value.code == 2 and f"cannot create {tmp_path / 'file' / 'sub'}" in capsys.readouterr().err
+
+
+def test_write_all_writes_every_file_or_none(tmp_path):
+    from fitgen.app.cliutil import write_all
+    from fitgen.base.errors import InputError
+
+    (tmp_path / "old.txt").write_text("before")
+    (tmp_path / "taken").mkdir()
+    with pytest.raises(InputError, match="cannot write .*taken: it is a folder"):
+        write_all([(tmp_path / "old.txt", "after"), (tmp_path / "new" / "sub" / "a.png", b"png"),
+                   (tmp_path / "taken", "x")])
+    # the file there before is as it was, the folders made for the others are gone, no temporary is left
+    assert (tmp_path / "old.txt").read_text() == "before" and files(tmp_path) == ["old.txt", "taken"]
+    paths = write_all([(tmp_path / "old.txt", "after"), (tmp_path / "new" / "sub" / "a.png", b"png")])
+    assert paths == [tmp_path / "old.txt", tmp_path / "new" / "sub" / "a.png"]
+    assert (tmp_path / "old.txt").read_text() == "after" and paths[1].read_bytes() == b"png"
+    assert files(tmp_path) == ["new", "old.txt", "taken"] and files(tmp_path / "new" / "sub") == ["a.png"]
+    # a symlink is written through, as write_atomic writes it: the link stays
+    (tmp_path / "link.txt").symlink_to(tmp_path / "old.txt")
+    write_all([(tmp_path / "link.txt", "through")])
+    assert (tmp_path / "link.txt").is_symlink() and (tmp_path / "old.txt").read_text() == "through"
 
 
 def test_fit_refuses_to_hold_out_on_another_sensor_than_the_datas(data, tmp_path):

@@ -137,6 +137,28 @@ def test_predict_and_report_cli(paper_fit, tmp_path):
         assert not (tmp_path / "r.md").exists()
 
 
+def test_report_shows_progress_through_its_figures_on_a_terminal(paper_fit, tmp_path, monkeypatch):
+    """report --plot draws for seconds (7 figures, about 5 s): on a terminal a bar moves through them, figure by
+    figure, and is cleared at the end."""
+    import sys
+
+    from conftest import Terminal
+    from fitgen.app import cli
+
+    folder = paper_fit[0]
+    argv = ["report", str(folder / "m.json"), "--data", str(folder / "sim.csv"), "--plot", str(tmp_path / "p"),
+            "--sensor", "paper", "-o", str(tmp_path / "r.md")]
+    term = Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    with pytest.raises(SystemExit) as stop:
+        cli.main(argv)
+    assert stop.value.code == 0, term.text
+    bars = [t for t in term.text.split("\r") if t.startswith("plots [")]
+    assert bars and "1/7" in bars[0] and "drawing estimate_dx.png" in bars[0], term.text  # at once: the first is slow
+    assert "7/7" in bars[-1] and "drawing sweep_thy.png" in bars[-1]
+    assert "\r\033[K" in term.text and sorted(p.name for p in (tmp_path / "p").iterdir())[-1] == "sweep_thy.png"
+
+
 @pytest.mark.parametrize("text, msg", [
     ("v1,v2,dx\n1,2,3\n", "at least"),  # a single row
     ("v1,v2,dx\n1,2,3\n1,abc,3\n", "line 3, column v2"),

@@ -11,7 +11,7 @@ import pytest
 from conftest import assert_one_line_error, run_cli
 from fitgen.fitting.identify import Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
-from fitgen.fitting.unitrecord import outlier_lines, report
+from fitgen.fitting.unitrecord import check_explained, outlier_lines, report
 from fitgen.physics import presets
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
@@ -212,6 +212,32 @@ def test_a_spread_of_zero_fixes_its_parameter_at_the_drawing(drawing, plan, tmp_
         schedule(as_drawn, 20)
 
 
+def test_a_refusal_with_the_stage_error_set_below_its_default_names_it(drawing, plan, monkeypatch):
+    """A good capture from a stage with its usual error, identified with --rig-error 0 --zero-error 0: the refusal
+    names those options first; with the defaults the same capture is explained."""
+    from fitgen.base.errors import InputError
+    from fitgen.fitting import unitrecord
+
+    unit, _ = draw_unit(drawing, 25)
+    y, noise = capture(unit, plan[0], 25)
+    assert check_explained(identify(drawing, y, plan[0], noise), "c.csv", "paper", "the sensor's") is None
+    # no element or pair to blame here (as blame finds, at a minute's cost): the generic causes follow the hint
+    monkeypatch.setattr(unitrecord, "blame", lambda ident, progress=None: None)
+    for rig, zero, said in ((0.0, 0.0, "--rig-error 0 and --zero-error 0 (below the defaults, 0.01 and 0.02 mm) "
+                                       "leave unexplained: try the defaults"),
+                            (0.0, 0.02, "--rig-error 0 (below the default, 0.01 mm) leaves unexplained")):
+        with pytest.raises(InputError) as refused:
+            check_explained(identify(drawing, y, plan[0], noise, rig_error=rig, zero_error=zero), "c.csv", "paper",
+                            "the sensor's")
+        assert f"; likely the stage's own error, which {said}" in str(refused.value), refused.value
+        assert "; else another sensor than paper" in str(refused.value)
+    # a refusal with the stage's error allowed for as by default: no such hint
+    other = readings(load_sensor("tilted-axes").with_transfer("gmr"), plan[0], adc_bits=0)
+    with pytest.raises(InputError) as refused:
+        check_explained(identify(drawing, other, plan[0], noise), "c.csv", "paper", "the sensor's")
+    assert "does not explain" in str(refused.value) and "stage's own error" not in str(refused.value)
+
+
 def test_schedule_is_d_optimal_within_limits(drawing, plan):
     poses, info = plan
     assert poses.shape == (40, 5) and np.all(poses[:, 3:] == 0)
@@ -389,7 +415,7 @@ def test_a_capture_read_in_the_wrong_units_is_said_so(drawing, plan, tmp_path):
                    str(drawing.noise), "-o", str(tmp_path / "u.toml")).returncode == 0
 
 
-def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
+def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypatch, capsys):
     unit, _ = draw_unit(drawing, 25)
     y, noise = capture(unit, plan[0], 25)
     # the zero set 0.08 mm above first contact: the rows at dz 0 read the magnet at rest
@@ -432,6 +458,22 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path):
                    "--plot", str(tmp_path / "file" / "sub"))
     assert_one_line_error(proc, 2, "cannot create")
     assert not (tmp_path / "p.toml").exists() and not (tmp_path / "p.posterior.json").exists()
+    # a figure that cannot be written, found after the work: the unit's files are not written either
+    (tmp_path / "plots" / "identify.png").mkdir(parents=True)
+    proc = run_cli("fitgen", "identify", str(tmp_path / "slip.csv"), "-o", str(tmp_path / "p.toml"), "--plot",
+                   str(tmp_path / "plots"))
+    assert not (tmp_path / "p.toml").exists() and not (tmp_path / "p.posterior.json").exists()
+    assert_one_line_error(proc, 2, f"cannot write {tmp_path / 'plots' / 'identify.png'}: it is a folder")
+    assert proc.stdout == ""  # nor the report
+    # nor a plot folder that the checks before the work let through but that cannot be made (/proc/x for root)
+    from fitgen.app import cli, plots
+
+    monkeypatch.setattr(plots, "require", lambda folder: Path(folder))
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["identify", str(tmp_path / "slip.csv"), "-o", str(tmp_path / "p.toml"), "--plot",
+                  str(tmp_path / "file" / "sub")])
+    assert not (tmp_path / "p.toml").exists() and not (tmp_path / "p.posterior.json").exists()
+    assert stop.value.code == 2 and f"cannot create {tmp_path / 'file' / 'sub'}" in capsys.readouterr().err
     # slipped so far that the capture is refused: the refusal's line names the row
     cases["slipped far"] = (slip(unit, y, plan[0], mm=0.5)[1], plan[0], f"row {deep + 1} stands out most")
     for name, (yy, pp, message) in cases.items():

@@ -102,6 +102,20 @@ def test_cli_table_and_words():
                           contains="pose 2 (dx=-2 dy=-2 dz=-20 thx=-5 thy=-5) puts the magnet's lowest point at z = -7.865")
 
 
+def test_a_box_that_leaves_rest_out_says_which_pose_it_examined_for_rest():
+    """corner_poses moves rest into the box: the verdict names that pose, not rest."""
+    ranges = dict(PRESETS["slide"].ranges, dx=(1.0, 2.0), dy=(1.0, 2.0), dz=(-2.0, -1.0))
+    words = "\n".join(observe(PAPER, ranges, ("dx", "dy", "dz")).verdicts())
+    assert "at the box's pose nearest rest (dx=1 dy=1 dz=-1 thx=0 thy=0) and every corner" in words, words
+    assert "at rest" not in words
+    one = dict(ranges, dx=(0.0, 0.0), dy=(0.0, 0.0), dz=(-1.0, -1.0))  # a box of one pose: no other corner
+    words = "\n".join(observe(PAPER, one, ("dz",)).verdicts())
+    assert "at the box's pose nearest rest (dx=0 dy=0 dz=-1 thx=0 thy=0), and at" in words, words
+    # a box with rest in it: as before
+    words = "\n".join(observe(PAPER, PRESETS["slide"].ranges, ("dx", "dy", "dz")).verdicts())
+    assert words.count("at rest and every corner, and at 200 random poses inside the box.") == 3, words
+
+
 def test_a_layout_blind_inside_the_box_is_not_resolvable_though_every_corner_is():
     """The two rings in gmr saturate inside the full box (infinite bounds at about a third of random poses there)
     while every corner sees: the verdict, and fit's scene check with it, must look inside."""

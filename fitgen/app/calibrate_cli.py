@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sys
 
+from fitgen.app.cliutil import write_all
 from fitgen.app.options import noise_of, sensor_of
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_positive
@@ -35,15 +36,18 @@ def cmd_identify(args) -> int:
         except InputError as exc:
             hint = "" if args.transfer else rec.units_hint(drawing, ds.inputs, ds.poses(), ds.meta)
             raise InputError(f"{exc}{hint}") from None
+    files = rec.unit_files(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
+                                                "drawing_spec": args.sensor})
+    if folder is not None:  # drawn first, then written with the unit's files: a failure leaves none of them
+        files.append((folder / "identify.png", plots.identification_png(ident)))
+    unit, post, *png = write_all(files)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
           f"{args.zero_error:g} mm", file=sys.stderr)
     print(rec.report(ident), end="")
-    unit, post = rec.save(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
-                                               "drawing_spec": args.sensor})
     print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
           "the posterior)", file=sys.stderr)
-    if folder is not None:
-        print(f"plot: {plots.identification(ident, folder / 'identify.png')}", file=sys.stderr)
+    if png:
+        print(f"plot: {png[0]}", file=sys.stderr)
     print("".join(f"identify: {ln}\n" for ln in rec.outlier_lines(ident, args.capture)), end="", file=sys.stderr)
     return 0
 

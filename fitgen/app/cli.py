@@ -213,8 +213,8 @@ def cmd_predict(args) -> int:
 
 def cmd_report(args) -> int:
     from fitgen.app import plots
+    from fitgen.app.cliutil import write_all
     from fitgen.app.report import format_report, sweep_sensor
-    from fitgen.base.fileio import write_atomic
     from fitgen.equations.model import check_input_units, load_model
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.physics.sensor import load_sensor
@@ -223,7 +223,7 @@ def cmd_report(args) -> int:
         raise InputError("--plot needs --data (the rows to plot estimates for)")
     if args.paper and not args.data:  # the paper's figures stand beside the errors on the data
         raise InputError("--paper goes with --data (without it, it would be ignored)")
-    folder = plots.require(args.plot) if args.plot else None  # made by its first figure, after every check
+    folder = plots.require(args.plot) if args.plot else None  # made when the figures are written
     if args.sensor and folder is None:
         raise InputError("--sensor goes with --plot (the rotation sweep is drawn on it)")
     model = load_model(args.model)
@@ -246,14 +246,14 @@ def cmd_report(args) -> int:
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:  # the notes were edited by hand
         raise InputError(f"model file {args.model}: its fit notes are not as fitgen fit writes them "
                          f"({type(exc).__name__}: {exc})") from None
-    if args.output:
-        write_atomic(args.output, text)
-    else:
+    # the figures drawn first, then written with the report: a failure leaves none of them
+    figures = plots.report_figures(model, ds, sensor) if folder is not None else {}
+    files = [(args.output, text)] if args.output else []
+    paths = write_all(files + [(folder / name, png) for name, png in figures.items()])
+    if not args.output:
         print(text, end="")
-    if folder is not None:
-        paths = plots.estimate_vs_target(model, ds, folder)
-        paths += plots.rotation_sweeps(model, sensor, folder) if sensor is not None else []
-        print("plots: " + ", ".join(str(p) for p in paths), file=sys.stderr)
+    if figures:
+        print("plots: " + ", ".join(str(p) for p in paths[-len(figures):]), file=sys.stderr)
     return 0
 
 

@@ -232,3 +232,55 @@ def check_not_empty(args) -> None:
             flag = ("-o" if name == "output" else name.removesuffix("_pos") if name.endswith("_pos")
                     else "--" + name.replace("_", "-"))
             raise InputError(f"{flag} is empty")
+
+
+def write_all(files) -> list:
+    """Write every ``(path, data)`` of ``files``, or none of them: each is first written whole under a temporary
+    name beside the file it replaces (through a symlink, as fitgen.base.fileio.write_atomic; its folder made
+    when missing), and renamed into place only when all are. A failure removes the temporaries and the folders
+    made for them: InputError, one line. Returns the paths."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    from fitgen.base.fileio import make_folder, write_target
+
+    files = [(Path(path), data) for path, data in files]
+    staged, made = [], []  # (temporary, the file it replaces, the path given); the folders this call made
+    try:
+        for path, data in files:
+            target = write_target(path)  # a folder, device or FIFO is refused
+            made += [f for f in (target.parent, *target.parent.parents) if not f.exists()]
+            make_folder(target.parent)
+            try:
+                fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+                staged.append((tmp, target, path))
+                with os.fdopen(fd, "wb") as fh:
+                    fh.write(data.encode() if isinstance(data, str) else data)
+                    fh.flush()
+                    os.fsync(fh.fileno())
+                os.chmod(tmp, 0o644)
+            except OSError as exc:
+                raise InputError(f"cannot write {path}: {exc.strerror}") from None
+        while staged:  # each folder took a new file and no target is a folder: a rename fails only in a race
+            tmp, target, path = staged[0]
+            try:
+                os.replace(tmp, target)
+            except OSError as exc:
+                done = [str(p) for p, _ in files[:len(files) - len(staged)]]
+                raise InputError(f"cannot write {path}: {exc.strerror}"
+                                 + (f" ({', '.join(done)} written)" if done else "")) from None
+            staged.pop(0)
+    except InputError:
+        for tmp, _, _ in staged:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+        for folder in sorted(set(made), key=lambda f: len(f.absolute().parts), reverse=True):
+            try:
+                folder.rmdir()  # only when empty: a folder made here holds nothing else
+            except OSError:
+                pass
+        raise
+    return [path for path, _ in files]

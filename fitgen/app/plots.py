@@ -25,26 +25,32 @@ def _plt():
 
 def require(folder) -> Path:
     """What a figure needs, checked before any work rather than after it: matplotlib, and ``folder`` that can be
-    made. The folder is made by the first figure written into it, so a command refused on its input leaves none."""
+    made. The folder is made when the figures are written, so a command refused on its input leaves none."""
     from fitgen.base.fileio import check_folder
 
     _plt()
     return check_folder(folder, "--plot")
 
 
-def _save(fig, path: Path) -> Path:
+def _png(fig) -> bytes:
+    """``fig`` as PNG bytes (no date in them: the same figure gives the same bytes); the figure is closed."""
     import io
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110, metadata={"Software": None})
-    return write_in_folder(path.parent, path.name, buf.getvalue())
+    _plt().close(fig)
+    return buf.getvalue()
 
 
-def estimate_vs_target(model: Model, ds: Dataset, folder: Path) -> list[Path]:
-    """One PNG per output: target and estimate against the row index (rows sorted by target)."""
+def _save(fig, path: Path) -> Path:
+    return write_in_folder(path.parent, path.name, _png(fig))
+
+
+def _estimates(model: Model, ds: Dataset):
+    """(file name, PNG) of each output of ``model`` that ``ds`` has a column of: target and estimate against the
+    row index (rows sorted by target), the error below."""
     plt = _plt()
     pred = model.predict(ds.inputs)
-    paths = []
     for j, eq in enumerate(model.equations):
         if eq.name not in ds.target_names:
             continue
@@ -60,14 +66,15 @@ def estimate_vs_target(model: Model, ds: Dataset, folder: Path) -> list[Path]:
         b.set_ylabel("error")
         b.set_xlabel("data index (sorted by target)")
         fig.tight_layout()
-        paths.append(_save(fig, folder / f"estimate_{eq.name}.png"))
-        plt.close(fig)
-    return paths
+        yield f"estimate_{eq.name}.png", _png(fig)
 
 
-def resolution_sweep(model: Model, sweep_inputs: np.ndarray, sweep_values: np.ndarray, output: str,
-                     folder: Path) -> Path:
-    """The paper's Figure 7: one component stepped 0.1 deg at a time, the others at 0."""
+def estimate_vs_target(model: Model, ds: Dataset, folder: Path) -> list[Path]:
+    """One PNG per output: target and estimate against the row index (rows sorted by target)."""
+    return [write_in_folder(folder, name, png) for name, png in _estimates(model, ds)]
+
+
+def _sweep_png(model: Model, sweep_inputs: np.ndarray, sweep_values: np.ndarray, output: str) -> bytes:
     plt = _plt()
     j = model.output_names.index(output)
     est = model.predict(sweep_inputs)[:, j]
@@ -79,24 +86,57 @@ def resolution_sweep(model: Model, sweep_inputs: np.ndarray, sweep_values: np.nd
     ax.legend()
     ax.set_title(f"{output} in steps of {sweep_values[1] - sweep_values[0]:.2g}, other components 0")
     fig.tight_layout()
-    path = _save(fig, folder / f"sweep_{output}.png")
-    plt.close(fig)
-    return path
+    return _png(fig)
+
+
+def resolution_sweep(model: Model, sweep_inputs: np.ndarray, sweep_values: np.ndarray, output: str,
+                     folder: Path) -> Path:
+    """The paper's Figure 7: one component stepped 0.1 deg at a time, the others at 0."""
+    return write_in_folder(folder, f"sweep_{output}.png", _sweep_png(model, sweep_inputs, sweep_values, output))
+
+
+def _rotations(model: Model) -> list[str]:
+    from fitgen.physics.pose import POSE_NAMES
+
+    return [name for name in POSE_NAMES[3:] if name in model.output_names]
+
+
+def _sweeps(model: Model, sensor):
+    """(file name, PNG) of :func:`resolution_sweep` of each rotation the model estimates, -5 to 5 deg on
+    ``sensor``."""
+    from fitgen.physics.pose import POSE_NAMES
+    from fitgen.physics.simulate import simulate
+
+    for name in _rotations(model):
+        values = np.round(np.arange(-5.0, 5.0 + 1e-9, 0.1), 10)
+        poses = np.zeros((len(values), 5))
+        poses[:, POSE_NAMES.index(name)] = values
+        yield f"sweep_{name}.png", _sweep_png(model, simulate(sensor, poses).inputs, values, name)
 
 
 def rotation_sweeps(model: Model, sensor, folder: Path) -> list[Path]:
     """:func:`resolution_sweep` of each rotation the model estimates, -5 to 5 deg on ``sensor``."""
-    from fitgen.physics.pose import POSE_NAMES
-    from fitgen.physics.simulate import simulate
+    return [write_in_folder(folder, name, png) for name, png in _sweeps(model, sensor)]
 
-    paths = []
-    for j, name in enumerate(POSE_NAMES[3:], start=3):
-        if name in model.output_names:
-            values = np.round(np.arange(-5.0, 5.0 + 1e-9, 0.1), 10)
-            poses = np.zeros((len(values), 5))
-            poses[:, j] = values
-            paths.append(resolution_sweep(model, simulate(sensor, poses).inputs, values, name, folder))
-    return paths
+
+def report_figures(model: Model, ds: Dataset, sensor=None) -> dict[str, bytes]:
+    """fitgen report --plot's figures, file name -> PNG, drawn but not written (the command writes them with its
+    other outputs): :func:`estimate_vs_target`'s, and with ``sensor`` :func:`rotation_sweeps`'s. Seconds of work:
+    a bar on a terminal moves through them."""
+    import itertools
+
+    from fitgen.base.progress import Progress
+
+    names = [f"estimate_{eq.name}.png" for eq in model.equations if eq.name in ds.target_names]
+    names += [f"sweep_{name}.png" for name in _rotations(model)] if sensor is not None else []
+    drawn = itertools.chain(_estimates(model, ds), _sweeps(model, sensor) if sensor is not None else ())
+    out = {}
+    with Progress("plots", len(names)) as bar:
+        for name in names:
+            bar.update(1, f"drawing {name}")  # before: the first figure is as slow as the others
+            name, png = next(drawn)  # drawn here, as it is asked for
+            out[name] = png
+    return out
 
 
 def tradeoff(result, path: Path) -> Path:
@@ -139,14 +179,18 @@ def tradeoff(result, path: Path) -> Path:
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     _save(fig, path)
-    plt.close(fig)
     return path
 
 
 def identification(ident, path: Path) -> Path:
-    """fitgen identify --plot: each reading's standardized residual by row (rows off the skin shaded), and what
-    the capture determines (each element's sensitivity, the magnet's offset from the elements' centre) with
-    its standard error beside the prior's spread about the drawing."""
+    """fitgen identify --plot: :func:`identification_png` written to ``path``."""
+    return write_in_folder(path.parent, path.name, identification_png(ident))
+
+
+def identification_png(ident) -> bytes:
+    """Each reading's standardized residual by row (rows off the skin shaded), and what the capture determines
+    (each element's sensitivity, the magnet's offset from the elements' centre) with its standard error beside
+    the prior's spread about the drawing, as PNG."""
     from fitgen.physics.pose import off_skin
 
     plt = _plt()
@@ -184,6 +228,4 @@ def identification(ident, path: Path) -> Path:
     b.legend(fontsize=7, loc="best")
     panel(c, offs, [k.split()[-2] for k in offs], "magnet offset from\nthe elements' centre", "mm")
     fig.tight_layout()
-    _save(fig, path)
-    plt.close(fig)
-    return path
+    return _png(fig)

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, Identification, blame, tilting
+from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, RIG_ERROR, ZERO_ERROR, Identification,
+                                     blame, tilting)
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.units import UnitSpace
@@ -138,6 +139,23 @@ def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
     return lines
 
 
+def stage_error_hint(ident: Identification) -> str:
+    """'' when the identification allowed for the stage's error as fitgen identify does by default; else the
+    refusal's first cause: the stage's own error, which a rig or zero error below the default leaves unexplained."""
+    prob = ident.problem
+    given = [(flag, value, default) for flag, value, default in
+             (("--rig-error", prob.rig_error, RIG_ERROR), ("--zero-error", prob.zero_error, ZERO_ERROR))
+             if value < default]
+    if not given:
+        return ""
+    flags = " and ".join(f"{flag} {value:g}" for flag, value, _ in given)
+    defaults = " and ".join(f"{default:g}" for _, _, default in given)
+    both = len(given) > 1
+    return (f"likely the stage's own error, which {flags} (below the default{'s' if both else ''}, {defaults} mm) "
+            f"leave{'' if both else 's'} unexplained: try the default{'s' if both else ''} or the stage's measured "
+            "error; else ")
+
+
 def check_explained(ident: Identification, capture, drawing: str, source: str, progress=None) -> None:
     """InputError when the physics does not explain the capture (reduced chi-square over CHI2_LIMIT), or does only
     with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads), with the cause when one
@@ -167,7 +185,8 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
         row = "" if not rows else (f"; row {rows[0][0] + 1} stands out most ({_where(ident, rows[0][0])}: residuals up "
                                    f"to {rows[0][1]:.3g} standard deviations): if it slipped, delete it and resume"
                                    if len(rows) <= 3 else f"; {len(rows)} rows stand out, not one")
-        cause = cause or (f"another sensor than {drawing}, labels in other units, an element that does not respond or "
+        cause = cause or (stage_error_hint(ident) + f"another sensor than {drawing}, labels in other units, an element "
+                          "that does not respond or "
                           "elements wired in another order than the drawing's (the channel map), a zero above first "
                           f"contact (rows at dz 0 off the skin), or a noise figure too low{row}")
         raise InputError(f"the physics does not explain {capture}: residuals {float(np.sqrt(ident.reduced_chi2)):.3g}x "
@@ -183,10 +202,18 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
 def save(ident: Identification, path, provenance: dict) -> tuple:
     """Write the unit file (the maximum a posteriori unit) and beside it ``<stem>.posterior.json``: every
     parameter with its standard error, the posterior covariance, what was determined and what not."""
+    from fitgen.base.fileio import write_atomic
+
+    (unit, text), (post_path, record) = unit_files(ident, path, provenance)
+    write_atomic(post_path, record)
+    return write_atomic(unit, text), post_path
+
+
+def unit_files(ident: Identification, path, provenance: dict) -> list:
+    """What :func:`save` writes, not written: ``[(path, the unit file's text), (<stem>.posterior.json, its text)]``."""
     import json
     from pathlib import Path
 
-    from fitgen.base.fileio import write_atomic
     from fitgen.physics.sensor import parse_sensor, tomllib
     from fitgen.physics.units import unit_toml
 
@@ -218,8 +245,7 @@ def save(ident: Identification, path, provenance: dict) -> tuple:
                              "poses": p[:, :5 if tilting(ident.problem.poses) else 3].tolist()}
                             for v, p, _ in ident.starved],
         **{k: v for k, v in provenance.items() if k != "name"}}
-    write_atomic(post_path, json.dumps(record, indent=1) + "\n")
-    return write_atomic(path, text), post_path
+    return [(path, text), (post_path, json.dumps(record, indent=1) + "\n")]
 
 
 def load_posterior(unit_path) -> dict | None:

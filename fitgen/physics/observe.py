@@ -131,6 +131,16 @@ class ObserveReport:
         lines += ["  ".join(c.ljust(w) for c, w in zip(row, widths)) for row in rows]
         return "\n".join(lines)
 
+    def examined(self) -> str:
+        """The tabled poses in words: 'at rest and every corner', or for a box that leaves rest out 'at the
+        box's pose nearest rest (dx=1 ...) and every corner' (the first result: corner_poses moves rest in)."""
+        first = self.results[0].pose
+        corners = len(self.results) - self.inside > 1
+        if not np.any(first):
+            return "at rest and every corner" if corners else "at rest"
+        nearest = " ".join(f"{n}={v:g}" for n, v in zip(POSE_NAMES, first))
+        return f"at the box's pose nearest rest ({nearest})" + (" and every corner" if corners else "")
+
     def verdicts(self) -> list[str]:
         """One sentence per component: resolvable or not, and where it fails."""
         out = []
@@ -141,7 +151,7 @@ class ObserveReport:
             worst = self.worst[j]
             if not bad:
                 out.append(f"{c}: resolvable: Cramer-Rao bound at most {worst:.3g} {unit} "
-                           f"(required {need:g} {unit}) at rest and every corner"
+                           f"(required {need:g} {unit}) {self.examined()}"
                            + (f", and at {self.inside} random poses inside the box." if self.inside else "."))
                 continue
             where = "at rest" if np.all(bad[0].pose == 0) else f"at {' '.join(f'{v:g}' for v in bad[0].pose)}"
