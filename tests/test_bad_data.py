@@ -216,7 +216,7 @@ def test_report_writes_its_figures_and_the_report_together_or_none(fitted, data,
 
 
 def test_write_all_writes_every_file_or_none(tmp_path):
-    from fitgen.app.cliutil import write_all
+    from fitgen.base.fileio import write_all
     from fitgen.base.errors import InputError
 
     (tmp_path / "old.txt").write_text("before")

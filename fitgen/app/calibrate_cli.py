@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 
-from fitgen.app.cliutil import write_all
+from fitgen.base.fileio import write_all
 from fitgen.app.options import noise_of, sensor_of
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_positive

@@ -213,7 +213,7 @@ def cmd_predict(args) -> int:
 
 def cmd_report(args) -> int:
     from fitgen.app import plots
-    from fitgen.app.cliutil import write_all
+    from fitgen.base.fileio import write_all
     from fitgen.app.report import format_report, sweep_sensor
     from fitgen.equations.model import check_input_units, load_model
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin

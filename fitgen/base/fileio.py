@@ -98,26 +98,74 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
     folder and a rename; InputError, nothing written, when ``path`` is not a regular file (:func:`write_target`)."""
     path = Path(path)
     target = write_target(path)
-    folder = folder_of(target)
-    raw = data.encode() if isinstance(data, str) else data
+    folder_of(target)
+    tmp = _staged(target, data, path)
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{target.name}.", suffix=".tmp")
+        os.replace(tmp, target)
+    except OSError as exc:
+        _remove(tmp)
+        raise InputError(f"cannot write {path}: {exc.strerror}") from None
+    return path
+
+
+def write_all(files) -> list:
+    """Write every ``(path, data)`` of ``files``, or none of them: each is first written whole under a temporary
+    name beside the file it replaces (through a symlink, as :func:`write_atomic`; its folder made when missing),
+    and renamed into place only when all are. A failure removes the temporaries and the folders made for them:
+    InputError, one line. Returns the paths."""
+    files = [(Path(path), data) for path, data in files]
+    staged, made = [], []  # (temporary, the file it replaces, the path given); the folders this call made
+    try:
+        for path, data in files:
+            target = write_target(path)  # a folder, device or FIFO is refused
+            made += [f for f in (target.parent, *target.parent.parents) if not f.exists()]
+            make_folder(target.parent)
+            staged.append((_staged(target, data, path), target, path))
+        while staged:  # each folder took a new file and no target is a folder: a rename fails only in a race
+            tmp, target, path = staged[0]
+            try:
+                os.replace(tmp, target)
+            except OSError as exc:
+                done = [str(p) for p, _ in files[:len(files) - len(staged)]]
+                raise InputError(f"cannot write {path}: {exc.strerror}"
+                                 + (f" ({', '.join(done)} written)" if done else "")) from None
+            staged.pop(0)
+    except InputError:
+        for tmp, _, _ in staged:
+            _remove(tmp)
+        for folder in sorted(set(made), key=lambda f: len(f.absolute().parts), reverse=True):
+            try:
+                folder.rmdir()  # only when empty: a folder made here holds nothing else
+            except OSError:
+                pass
+        raise
+    return [path for path, _ in files]
+
+
+def _staged(target: Path, data: str | bytes, path) -> str:
+    """``data`` written whole and synced to a new temporary file beside ``target``; its name. InputError naming
+    ``path`` (the name the user gave), nothing left, when it cannot be."""
+    try:
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
     except OSError as exc:
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     try:
         with os.fdopen(fd, "wb") as fh:
-            fh.write(raw)
+            fh.write(data.encode() if isinstance(data, str) else data)
             fh.flush()
             os.fsync(fh.fileno())
         os.chmod(tmp, 0o644)
-        os.replace(tmp, target)
     except OSError as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+        _remove(tmp)
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
-    return path
+    return tmp
+
+
+def _remove(tmp: str) -> None:
+    try:
+        os.unlink(tmp)
+    except OSError:
+        pass
 
 
 def open_output(path: str | os.PathLike, append: bool = False) -> int:
