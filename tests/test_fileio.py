@@ -228,6 +228,18 @@ def test_simulate_to_a_fifo_is_one_line_before_the_work(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]  # no out.csv.meta.json
 
 
+def test_a_dataset_and_its_meta_are_written_both_or_neither(tmp_path):
+    """A meta that cannot be written leaves no CSV behind, which fit would read as measured data, nor an old
+    one replaced."""
+    (tmp_path / "old.csv").write_text("old\n")
+    with fifo(tmp_path / "old.csv.meta.json"), fifo(tmp_path / "new.csv.meta.json"):
+        for name in ("old.csv", "new.csv"):
+            proc = run_cli("fitgen", "simulate", "--random", "5", "-o", str(tmp_path / name))
+            assert_one_line_error(proc, 2, f"{name}.meta.json: it is a FIFO (named pipe)")
+    assert (tmp_path / "old.csv").read_text() == "old\n" and not (tmp_path / "new.csv").exists()
+    assert leftovers(tmp_path) == []
+
+
 def test_simulate_through_a_symlink_writes_the_file_and_keeps_the_link(tmp_path):
     (tmp_path / "real.csv").write_text("old\n")
     (tmp_path / "link.csv").symlink_to("real.csv")

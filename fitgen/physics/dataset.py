@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import read_text, sha256_hex, write_atomic
+from fitgen.base.fileio import read_text, sha256_hex, write_all
 from fitgen.physics.pose import POSE_NAMES, off_skin
 
 _INPUT_RE = re.compile(r"^v([1-9][0-9]*)$")
@@ -73,14 +73,14 @@ class Dataset:
         return cached[1]
 
     def save(self, path: str | Path, meta: dict | None = None) -> Path:
-        """Write the CSV and, beside it, ``<path>.meta.json`` with provenance (both atomically)."""
+        """Write the CSV and, beside it, ``<path>.meta.json`` with provenance: both or neither (a CSV whose meta
+        could not be written would be read as measured data)."""
         text = self.to_csv_text()
         info = dict(self.meta if meta is None else meta)
         info["dataset_sha256"] = sha256_hex(text)
         info["rows"] = self.n_rows
         info["columns"] = self.columns
-        write_atomic(path, text)
-        write_atomic(meta_path(path), json.dumps(info, indent=2, sort_keys=True) + "\n")
+        write_all([(path, text), (meta_path(path), json.dumps(info, indent=2, sort_keys=True) + "\n")])
         return Path(path)
 
 
