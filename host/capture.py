@@ -33,7 +33,7 @@ import numpy as np
 from fitgen import __version__
 from fitgen.physics.dataset import meta_path, parse_table, read_text
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import open_output, sha256_hex, write_atomic, write_target
+from fitgen.base.fileio import open_output, real_file, sha256_hex, write_atomic, write_target
 from fitgen.physics.pose import POSE_NAMES, as_poses, off_skin
 
 from host.adc import AdcArray
@@ -168,7 +168,8 @@ def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write
 
 
 def lock_path(output: str | Path) -> Path:
-    return Path(str(output) + ".lock")
+    """``<output>.lock`` beside the file ``output`` is or leads to: two names of one file take one lock."""
+    return Path(str(real_file(output)) + ".lock")
 
 
 @contextmanager

@@ -45,11 +45,28 @@ def trigger_timeout(args) -> float:
     return parse_positive(args.trigger_timeout, "--trigger-timeout", most=LONGEST_WAIT)
 
 
+def kept(outputs, what: str) -> str:
+    """What a run stopped early leaves in its capture files ``outputs``, for its last line; ``what``: the
+    message when they hold rows."""
+    outputs = [Path(p) for p in outputs]
+    if any(written_rows(p) for p in outputs):
+        return what
+    made = [str(p) for p in outputs if p.exists()]
+    # stopped before the first row: at the stage's zero, or at pose 1 once the header was written
+    return f"no row was captured ({', '.join(made)}: the header only)" if made else "nothing was written"
+
+
+def written_rows(path: Path) -> int:
+    """Rows below the header of capture file ``path``; 0 when it does not exist."""
+    try:
+        with open(path) as fh:
+            return max(sum(1 for line in fh if line.strip()) - 1, 0)
+    except OSError:
+        return 0
+
+
 def _kept(output) -> str:
-    """What a run stopped early leaves, for its last line."""
-    if not Path(output).exists():  # stopped before the output was made: at the stage's zero, say
-        return "nothing was written"
-    return f"the rows written so far are kept in {output}: run the same command again to resume"
+    return kept([output], f"the rows written so far are kept in {output}: run the same command again to resume")
 
 
 def run_capture(args, prog: str) -> None:

@@ -16,7 +16,7 @@ from fitgen.physics.dataset import load_dataset
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import (SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, output_lock,
                           trigger_waiter)
-from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers, trigger_timeout
+from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers, kept, trigger_timeout
 from host.motion import parse_drift
 from host.session import channel_map_from_args, open_bus_from_args, refuse_alone
 from host.simsensor import Drift
@@ -72,9 +72,8 @@ def _temperature_file(out: Path, T: float) -> Path:
 
 def _kept(out: Path, temps) -> str:
     """What a multi-temperature run stopped early leaves, for its last line."""
-    if not any(_temperature_file(out, T).exists() for T in temps):
-        return "nothing was written"  # stopped at the first temperature's prompt, say
-    return "the temperatures and rows done so far are kept: run the same command again to resume"
+    return kept([_temperature_file(out, T) for T in temps],
+                "the temperatures and rows done so far are kept: run the same command again to resume")
 
 
 def _capture_temperatures(args, prog: str):
@@ -119,14 +118,15 @@ def _capture_temperatures(args, prog: str):
             # read now, at this level (not a value kept from the last one); a level captured by an earlier run
             # keeps the reading its meta recorded then
             now = thermo.read(fresh=True) if thermo is not None else float("nan")
-            capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
-                    set_pose=bus.set_pose if args.simulate else None, settle=settle, clock=clock,
-                    meta={"adc": cmap.describe(), "temperature_set": T,
-                          "thermistor_degc": now if np.isfinite(now) else None,
-                          "source": f"simulated {args.sensor}" if args.simulate else "hardware"})
+            with output_lock(path):  # a plain capture into this temperature's file is another run too
+                capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
+                        set_pose=bus.set_pose if args.simulate else None, settle=settle, clock=clock,
+                        meta={"adc": cmap.describe(), "temperature_set": T,
+                              "thermistor_degc": now if np.isfinite(now) else None,
+                              "source": f"simulated {args.sensor}" if args.simulate else "hardware"})
             ds = load_dataset(path, min_rows=1)
-            kept = ds.meta.get("thermistor_degc")
-            measured = float(kept) if isinstance(kept, (int, float)) and thermo is not None else now
+            recorded = ds.meta.get("thermistor_degc")
+            measured = float(recorded) if isinstance(recorded, (int, float)) and thermo is not None else now
             rows.append(ds.inputs)
             pose_ids.append(pose_of_row[:ds.n_rows])
             row_temps.append(np.full(ds.n_rows, measured if np.isfinite(measured) else T))

@@ -277,6 +277,36 @@ def test_a_second_capture_on_the_same_output_is_refused_while_the_first_runs(tmp
     assert not (tmp_path / "d.csv.lock").exists()  # released and removed with the run
 
 
+def test_one_file_by_two_names_takes_one_lock_and_a_temperature_run_holds_each_file(tmp_path):
+    """The lock is the file's, not the name's: a link to a file being captured is refused; a --temperature run
+    holds each temperature's file too, so a plain capture into one is another run."""
+    from host.capture import output_lock
+
+    (tmp_path / "real.csv").write_text("")
+    (tmp_path / "link.csv").symlink_to("real.csv")
+    with output_lock(tmp_path / "real.csv"):
+        with pytest.raises(InputError, match="another capture is writing it"):
+            with output_lock(tmp_path / "link.csv"):
+                pass
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:2])
+    with output_lock(tmp_path / "cap.T15.csv"):
+        assert_one_line_error(run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "--simulate",
+                                      "--temperature", "15,25", "-o", str(tmp_path / "cap.csv")), 2,
+                              "another capture is writing it")
+
+
+def test_a_stopped_run_says_what_its_files_hold(tmp_path):
+    """No file: nothing was written; a header written but no row (stopped at pose 1): no row was captured."""
+    from host.capturerun import kept
+
+    out = tmp_path / "d.csv"
+    assert kept([out], "kept") == "nothing was written"
+    out.write_text("v1,v2,dx\n")
+    assert kept([out], "kept") == f"no row was captured ({out}: the header only)"
+    out.write_text("v1,v2,dx\n0.1,0.2,1\n")
+    assert kept([tmp_path / "other.csv", out], "kept") == "kept"
+
+
 def test_a_killed_runs_lock_does_not_block_the_next(tmp_path):
     """The kernel drops a killed process's flock: the file it leaves is taken over, then removed."""
     import subprocess

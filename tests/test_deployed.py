@@ -268,6 +268,10 @@ def test_verify_says_why_it_measured_no_share(fitted_files, tmp_path):
     proc = run_cli("tactile-host", "verify", str(tmp_path / "foreign.json"), "--precision", "double", "--style",
                    "table", "--vectors", "200")
     assert proc.returncode == 0 and "is not known here (give its file with --sensor)" in proc.stdout
+    # the held-out check's own options with --no-held-out would be ignored: refused
+    for extra in (["--sensor", "ring-vertical"], ["--max-share", "0.05"]):
+        assert_one_line_error(run_cli("tactile-host", "verify", str(fitted_files / "default.json"), "--no-held-out",
+                                      *extra), contains=f"{extra[0]} is the held-out check's: with --no-held-out")
 
 
 def test_deployed_errors_fixed_point_within_share():

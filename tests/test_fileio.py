@@ -129,7 +129,7 @@ def test_a_link_to_an_open_descriptor_is_refused_and_its_file_kept(tmp_path, wri
     with open(log, "a") as fh:
         (tmp_path / "out").symlink_to(f"/proc/self/fd/{fh.fileno()}")
         (tmp_path / "out2").symlink_to(tmp_path / "out")
-        for name in ("out", "out2"):
+        for name in ("out", "out2", f"/dev/fd/{fh.fileno()}", f"/proc/self/fd/{fh.fileno()}"):
             with pytest.raises(InputError, match="leads to an open file descriptor"):
                 WRITERS[writer](tmp_path / name)
     assert log.read_text() == "kept\n" and os.path.islink(tmp_path / "out")
@@ -247,3 +247,35 @@ def test_simulate_through_a_symlink_writes_the_file_and_keeps_the_link(tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert os.readlink(tmp_path / "link.csv") == "real.csv"
     assert (tmp_path / "real.csv").read_text().startswith("v1,")
+
+
+def test_files_beside_an_output_go_beside_the_file_a_link_leads_to(tmp_path):
+    """A dataset written through a link has its meta beside the file written, read back by either name."""
+    from fitgen.physics.dataset import load_dataset, meta_path
+
+    (tmp_path / "runs").mkdir()
+    assert run_cli("fitgen", "simulate", "--grid", "dx=0,1", "-o", str(tmp_path / "runs" / "real.csv")).returncode == 0
+    (tmp_path / "latest.csv").symlink_to("runs/real.csv")
+    proc = run_cli("fitgen", "simulate", "--sensor", "ring-vertical", "--grid", "dx=0,1,2", "-o",
+                   str(tmp_path / "latest.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert meta_path(tmp_path / "latest.csv") == meta_path(tmp_path / "runs" / "real.csv")
+    assert not (tmp_path / "latest.csv.meta.json").exists()
+    for name in ("latest.csv", "runs/real.csv"):
+        ds = load_dataset(tmp_path / name)
+        assert ds.n_rows == 3 and ds.meta["sensor"] == "ring-vertical", name
+
+
+def test_ctrl_c_while_writing_leaves_no_temporary_and_no_folder(tmp_path, monkeypatch):
+    from fitgen.base.fileio import write_all
+
+    def interrupted(fd):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(os, "fsync", interrupted)
+    (tmp_path / "old.txt").write_text("old")
+    with pytest.raises(KeyboardInterrupt):
+        write_all([(tmp_path / "new" / "a.png", b"a"), (tmp_path / "old.txt", "new")])
+    with pytest.raises(KeyboardInterrupt):
+        write_atomic(tmp_path / "old.txt", "new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.txt"] and (tmp_path / "old.txt").read_text() == "old"

@@ -347,6 +347,12 @@ def test_cli_schedule_capture_identify(tmp_path):
     assert "no capture can separate (10 directions" in proc.stdout and "e8 sensitivity" in proc.stdout
     post = json.loads((tmp_path / "unit.posterior.json").read_text())
     assert len(post["theta"]) == len(post["sd"]) == len(post["parameters"]) == 74
+    # by a link to the unit file from another folder: its posterior is the one beside the file itself
+    from fitgen.fitting.unitrecord import load_posterior
+
+    (tmp_path / "links").mkdir()
+    (tmp_path / "links" / "latest.toml").symlink_to(unit_file)
+    assert load_posterior(tmp_path / "links" / "latest.toml")["theta"] == post["theta"]
     truth = load_sensor(tmp_path / "c.unit.toml")
     twin = load_sensor(unit_file)
     assert twin.transfer == "gmr" and not twin.is_drawing

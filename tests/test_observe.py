@@ -99,7 +99,11 @@ def test_cli_table_and_words():
     # a box past reason overflowed the field into a LinAlgError; one through the board was analysed
     assert_one_line_error(run_cli("fitgen", "observe", "--ranges", "dx=-1e300:1e300"), contains="within -1000..1000")
     assert_one_line_error(run_cli("fitgen", "observe", "--ranges", "dz=-20:-10"),
-                          contains="pose 2 (dx=-2 dy=-2 dz=-20 thx=-5 thy=-5) puts the magnet's lowest point at z = -7.865")
+                          contains="pose 2 (dx=-2 dy=-2 dz=-20 thx=-5 thy=-5) puts the magnet's lowest point at "
+                                   "z = -7.865")
+    # a box a hair above the board: the pose is legal, its central differences are not; the pose is named
+    assert_one_line_error(run_cli("fitgen", "observe", "--ranges", "dx=0:0 dy=0:0 dz=-10.99995:-5 thx=0:0 thy=0:0"),
+                          contains="pose 2 (dx=0 dy=0 dz=-10.99995 thx=0 thy=0) puts the magnet within 0.0001 mm")
 
 
 def test_a_box_that_leaves_rest_out_says_which_pose_it_examined_for_rest():

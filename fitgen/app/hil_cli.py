@@ -182,10 +182,9 @@ SUITE_ONLY = ("vectors", "data", "fuzz", "no_flash", "junit", "max_share", "sens
 
 def _suite_defaults() -> dict:
     """The defaults of SUITE_ONLY's options that have one: None in emulate's parser, so that one typed (even as its
-    default) is told from one left out."""
-    from fitgen.c.verify import MAX_SHARE
-
-    return {"vectors": VECTORS, "fuzz": FUZZ, "max_share": MAX_SHARE}
+    default) is told from one left out. --max-share's is filled by fitgen.c.verify.held_out_from_args, which
+    refuses it with --no-held-out."""
+    return {"vectors": VECTORS, "fuzz": FUZZ}
 
 
 def build_parser() -> Parser:

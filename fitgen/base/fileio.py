@@ -55,20 +55,28 @@ def write_target(path: str | os.PathLike) -> Path:
         # /dev/stdout redirected to a file: replacing that file would destroy what the shell appends to (>>)
         raise InputError(f"cannot write {path}: it leads to an open file descriptor (as /dev/stdout does), not a "
                          "file; give a file's path")
-    return Path(os.path.realpath(path)) if os.path.islink(path) else path
+    return real_file(path)
 
 
 def _through_descriptor(path: Path) -> bool:
-    """True when ``path``'s chain of symlinks passes through /proc/<pid>/fd/ or /dev/fd/ (a descriptor's link)."""
+    """True when ``path`` or a link on its chain of symlinks is a descriptor's link: an entry of /proc/<pid>/fd
+    (/dev/fd and /proc/self/fd lead there)."""
     hop = str(path)
     for _ in range(40):  # the kernel's own limit on links followed
         if not os.path.islink(hop):
             return False
-        hop = os.path.normpath(os.path.join(os.path.dirname(hop), os.readlink(hop)))
-        parts = Path(hop).parts
-        if parts[:3] == ("/", "dev", "fd") or (parts[:2] == ("/", "proc") and parts[3:4] == ("fd",)):
+        parts = Path(os.path.realpath(os.path.dirname(os.path.abspath(hop)))).parts
+        if parts[:2] == ("/", "proc") and parts[-1] == "fd":
             return True
+        hop = os.path.normpath(os.path.join(os.path.dirname(hop), os.readlink(hop)))
     return False
+
+
+def real_file(path: str | os.PathLike) -> Path:
+    """``path``, or the file its symlinks lead to: where the files written beside it (a meta, a posterior, a
+    lock) belong, so that they are found by either name."""
+    path = Path(path)
+    return Path(os.path.realpath(path)) if os.path.islink(path) else path
 
 
 def output_file(path: str | os.PathLike, inputs=(), flag: str = "-o") -> Path:
@@ -105,6 +113,9 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
     except OSError as exc:
         _remove(tmp)
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
+    except BaseException:  # Ctrl-C between the two: no temporary left
+        _remove(tmp)
+        raise
     return path
 
 
@@ -130,7 +141,7 @@ def write_all(files) -> list:
                 raise InputError(f"cannot write {path}: {exc.strerror}"
                                  + (f" ({', '.join(done)} written)" if done else "")) from None
             staged.pop(0)
-    except InputError:
+    except BaseException:  # an InputError, or Ctrl-C: nothing half-written either way
         for tmp, _, _ in staged:
             _remove(tmp)
         for folder in sorted(set(made), key=lambda f: len(f.absolute().parts), reverse=True):
@@ -155,9 +166,11 @@ def _staged(target: Path, data: str | bytes, path) -> str:
             fh.flush()
             os.fsync(fh.fileno())
         os.chmod(tmp, 0o644)
-    except OSError as exc:
+    except BaseException as exc:  # Ctrl-C too: the temporary goes
         _remove(tmp)
-        raise InputError(f"cannot write {path}: {exc.strerror}") from None
+        if isinstance(exc, OSError):
+            raise InputError(f"cannot write {path}: {exc.strerror}") from None
+        raise
     return tmp
 
 

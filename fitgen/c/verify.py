@@ -41,7 +41,7 @@ class HeldOutCheck:
 
 def add_held_out_options(parser) -> None:
     """The options of the rounding's-share check, shared by `tactile-host verify` and `tactile-hil`."""
-    parser.add_argument("--max-share", type=float, default=MAX_SHARE, metavar="S",
+    parser.add_argument("--max-share", type=float, metavar="S",
                         help="fail when rounding adds more than this share of the model's held-out max error "
                              f"(default {MAX_SHARE:g})")
     parser.add_argument("--sensor", help="the model's sensor (preset or TOML) for its held-out poses (default: the "
@@ -78,10 +78,15 @@ def held_out_from_args(model: Model, args) -> tuple[np.ndarray, np.ndarray] | No
     from fitgen.fitting.holdout import clean_readings, fitted_sensor
     from fitgen.physics.sensor import load_sensor
 
+    if args.no_held_out:
+        given = [flag for flag, value in (("--sensor", args.sensor), ("--max-share", args.max_share))
+                 if value is not None]
+        if given:
+            raise InputError(f"{given[0]} is the held-out check's: with --no-held-out it would be ignored")
+        return None
+    args.max_share = MAX_SHARE if args.max_share is None else args.max_share  # None: not given (see above)
     if not 0 < args.max_share < 1e6:
         raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
-    if args.no_held_out:
-        return None
     if args.sensor and not isinstance(model.fit_info.get("held_out"), dict):
         raise InputError(f"--sensor {args.sensor}: the model file has no held_out record to simulate on it again "
                          "(`fitgen fit` writes one when it knows the sensor); leave --sensor out")

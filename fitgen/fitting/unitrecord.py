@@ -217,8 +217,10 @@ def unit_files(ident: Identification, path, provenance: dict) -> list:
     from fitgen.physics.sensor import parse_sensor, tomllib
     from fitgen.physics.units import unit_toml
 
+    from fitgen.base.fileio import real_file
+
     path = Path(path)
-    post_path = path.with_suffix(".posterior.json")
+    post_path = real_file(path).with_suffix(".posterior.json")  # beside the unit file itself, not a link to it
     spec = provenance.get("drawing_spec")
     if spec is not None and Path(spec).is_file():  # a sensor file: named so that it is found from anywhere
         provenance = {**provenance, "drawing_spec": str(Path(spec).resolve())}
@@ -254,6 +256,7 @@ def load_posterior(unit_path) -> dict | None:
     import json
     from pathlib import Path
 
+    from fitgen.base.fileio import real_file
     from fitgen.physics.sensor import load_sensor, tomllib
 
     unit_path = Path(unit_path)
@@ -265,7 +268,7 @@ def load_posterior(unit_path) -> dict | None:
     if not isinstance(name, str):
         return None
     todo = "identify again, or delete the [unit] posterior line to use the unit without its uncertainty"
-    path = unit_path.parent / name
+    path = real_file(unit_path).parent / name
     try:
         rec = json.loads(path.read_text())
     except (OSError, ValueError):

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import read_text, sha256_hex, write_all
+from fitgen.base.fileio import read_text, real_file, sha256_hex, write_all
 from fitgen.physics.pose import POSE_NAMES, off_skin
 
 _INPUT_RE = re.compile(r"^v([1-9][0-9]*)$")
@@ -103,7 +103,8 @@ def rows_on_the_skin(ds: Dataset) -> tuple[Dataset, int]:
 
 
 def meta_path(path: str | Path) -> Path:
-    return Path(str(path) + ".meta.json")
+    """``<path>.meta.json`` beside the file ``path`` is, or leads to through a symlink (found by either name)."""
+    return Path(str(real_file(path)) + ".meta.json")
 
 
 def _header(names: list[str], origin: str) -> tuple[int, tuple[str, ...]]:

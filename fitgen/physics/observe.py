@@ -7,7 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fitgen.physics.pose import POSE_NAMES, POSE_UNITS, as_poses, check_above_board, field_readings
+from fitgen.base.errors import InputError
+from fitgen.physics.pose import POSE_NAMES, POSE_UNITS, as_poses, board_clearance, check_above_board, field_readings
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.transfer import apply_transfer
 
@@ -26,6 +27,13 @@ def jacobian(sensor: Sensor, poses) -> np.ndarray:
     P = len(poses)
     shifts = np.concatenate([np.diag(_STEP), -np.diag(_STEP)])  # (10, 5)
     probe = (poses[:, None, :] + shifts[None]).reshape(-1, 5)
+    into = np.flatnonzero(board_clearance(sensor, probe) <= 0)
+    if into.size:  # a pose a hair above the board: its differences would reach into it
+        p = int(into[0]) // len(shifts)
+        pose = " ".join(f"{n}={v:.10g}" for n, v in zip(POSE_NAMES, poses[p]))
+        raise InputError(f"pose {p + 1} ({pose}) puts the magnet within {_STEP[2]:g} mm (or {_STEP[3]:g} deg) of "
+                         "the board's top face: the Jacobian's differences there would reach into the board; keep "
+                         "the box further above it")
     vals = apply_transfer(sensor, field_readings(sensor, probe), adc_bits=0).reshape(P, 10, -1)
     # adc_bits=0: no quantisation steps, but the gmr output is still clipped to the ADC range
     return ((vals[:, :5] - vals[:, 5:]) / (2 * _STEP[None, :, None])).transpose(0, 2, 1)
@@ -138,7 +146,7 @@ class ObserveReport:
         corners = len(self.results) - self.inside > 1
         if not np.any(first):
             return "at rest and every corner" if corners else "at rest"
-        nearest = " ".join(f"{n}={v:g}" for n, v in zip(POSE_NAMES, first))
+        nearest = " ".join(f"{n}={v:.10g}" for n, v in zip(POSE_NAMES, first))
         return f"at the box's pose nearest rest ({nearest})" + (" and every corner" if corners else "")
 
     def verdicts(self) -> list[str]:

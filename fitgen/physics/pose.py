@@ -106,20 +106,31 @@ def lowest_point(sensor: Sensor, centre: np.ndarray, R: np.ndarray) -> np.ndarra
     return centre[:, 2] - m.diameter / 2 * np.hypot(R[:, 2, 0], R[:, 2, 1]) - m.height / 2 * np.abs(R[:, 2, 2])
 
 
-def _placed(sensor: Sensor, given: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The magnet's centre (P, 3) and rotation (P, 3, 3) at the given poses, checked as
-    :func:`check_above_board` says."""
+def board_clearance(sensor: Sensor, poses) -> np.ndarray:
+    """How far (mm, P) the magnet's lowest point is above the board's top face at each pose; <= 0: into it."""
+    centre, R = _unchecked(sensor, as_poses(poses))
+    return lowest_point(sensor, centre, R) - sensor.board_thickness
+
+
+def _unchecked(sensor: Sensor, given: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     moved = given if sensor.is_drawing else contact_poses(given)
     shift = moved[:, :3] if sensor.is_drawing else moved[:, :3] @ sensor.stage_map.T
     centre = np.asarray(sensor.magnet.rest_center) + shift
     R = rotation_matrices(moved[:, 3], moved[:, 4])
     if any(sensor.magnet.tilt):
         R = R @ rotation_matrices(*sensor.magnet.tilt)
+    return centre, R
+
+
+def _placed(sensor: Sensor, given: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The magnet's centre (P, 3) and rotation (P, 3, 3) at the given poses, checked as
+    :func:`check_above_board` says."""
+    centre, R = _unchecked(sensor, given)
     low = lowest_point(sensor, centre, R)
     bad = np.flatnonzero(low <= sensor.board_thickness)
     if bad.size:
         p = int(bad[0])
-        pose = " ".join(f"{n}={v:g}" for n, v in zip(POSE_NAMES, given[p]))
+        pose = " ".join(f"{n}={v:.10g}" for n, v in zip(POSE_NAMES, given[p]))
         rest = sensor.magnet.rest_center[2] - sensor.board_thickness
         raise InputError(f"pose {p + 1} ({pose}) puts the magnet's lowest point at z = {low[p]:g} mm, on or below "
                          f"the board's top face (z = {sensor.board_thickness:g} mm; at rest the magnet's centre is "
