@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
 
@@ -21,6 +22,13 @@ def require_tool(name: str) -> str:
             pytest.fail(msg)
         pytest.skip(msg)
     return path
+
+
+# A shell without job control starts a background job (`bash scripts/test &`, nohup) with SIGINT ignored, and its
+# children inherit that: a command under test would never see the Ctrl-C a test sends it. Handled here, SIGINT is
+# back at its default in every child, as under a terminal.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def run_cli(*args, input=None, cwd=None):

@@ -738,8 +738,8 @@ def test_ctrl_c_says_what_is_kept_nothing_before_the_first_row(tmp_path):
                 prompt += proc.stderr.read(1)
                 assert "jog [".startswith(prompt[:5]), prompt
             proc.send_signal(signal.SIGINT)
+            assert proc.wait(timeout=30) == 130
             err = proc.stderr.read()
-            assert proc.wait(timeout=30) == 130, err
         finally:
             if proc.poll() is None:
                 proc.kill()
