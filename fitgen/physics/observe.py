@@ -8,7 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.physics.pose import POSE_NAMES, POSE_UNITS, as_poses, board_clearance, check_above_board, field_readings
+from fitgen.physics.pose import (POSE_NAMES, POSE_UNITS, as_poses, board_clearance, check_above_board, field_readings,
+                                 pose_label)
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.transfer import apply_transfer
 
@@ -30,7 +31,7 @@ def jacobian(sensor: Sensor, poses) -> np.ndarray:
     into = np.flatnonzero(board_clearance(sensor, probe) <= 0)
     if into.size:  # a pose a hair above the board: its differences would reach into it
         p = int(into[0]) // len(shifts)
-        pose = " ".join(f"{n}={v:.10g}" for n, v in zip(POSE_NAMES, poses[p]))
+        pose = pose_label(poses[p])
         raise InputError(f"pose {p + 1} ({pose}) puts the magnet within {_STEP[2]:g} mm (or {_STEP[3]:g} deg) of "
                          "the board's top face: the Jacobian's differences there would reach into the board; keep "
                          "the box further above it")
@@ -146,7 +147,7 @@ class ObserveReport:
         corners = len(self.results) - self.inside > 1
         if not np.any(first):
             return "at rest and every corner" if corners else "at rest"
-        nearest = " ".join(f"{n}={v:.10g}" for n, v in zip(POSE_NAMES, first))
+        nearest = pose_label(first)
         return f"at the box's pose nearest rest ({nearest})" + (" and every corner" if corners else "")
 
     def verdicts(self) -> list[str]:

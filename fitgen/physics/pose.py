@@ -37,6 +37,11 @@ def check_pose_range(name: str, lo: float, hi: float, origin: str) -> None:
                          f"-{limit:g}..{limit:g} {unit} (finite numbers)")
 
 
+def pose_label(pose) -> str:
+    """``dx=.. dy=.. dz=.. thx=.. thy=..`` for messages, each value to 10 significant digits."""
+    return " ".join(f"{n}={float(v):.10g}" for n, v in zip(POSE_NAMES, pose))
+
+
 def as_poses(poses) -> np.ndarray:
     """Check and return an (P, 5) float array of poses."""
     arr = np.asarray(poses, dtype=float)
@@ -130,7 +135,7 @@ def _placed(sensor: Sensor, given: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     bad = np.flatnonzero(low <= sensor.board_thickness)
     if bad.size:
         p = int(bad[0])
-        pose = " ".join(f"{n}={v:.10g}" for n, v in zip(POSE_NAMES, given[p]))
+        pose = pose_label(given[p])
         rest = sensor.magnet.rest_center[2] - sensor.board_thickness
         raise InputError(f"pose {p + 1} ({pose}) puts the magnet's lowest point at z = {low[p]:g} mm, on or below "
                          f"the board's top face (z = {sensor.board_thickness:g} mm; at rest the magnet's centre is "

@@ -10,7 +10,7 @@ import numpy as np
 from fitgen import __version__
 from fitgen.physics.dataset import Dataset
 from fitgen.base.errors import InputError
-from fitgen.physics.pose import OFF_SKIN_MM, POSE_NAMES, as_poses, check_pose_range, off_skin
+from fitgen.physics.pose import OFF_SKIN_MM, POSE_NAMES, as_poses, check_pose_range, off_skin, pose_label
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.transfer import readings
 
@@ -126,7 +126,7 @@ def simulate(
         values = readings(source, poses, noise=noise, adc_bits=adc_bits, rng=rng)
     bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
     if bad.size:
-        pose = " ".join(f"{n}={v:g}" for n, v in zip(POSE_NAMES, poses[bad[0]]))
+        pose = pose_label(poses[bad[0]])
         raise InputError(f"pose {bad[0] + 1} ({pose}) gives readings that are not finite numbers ({bad.size} of "
                          f"{len(poses)} poses do): it lies far outside the sensor")
     cols = [POSE_NAMES.index(t) for t in targets]
