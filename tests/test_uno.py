@@ -205,3 +205,51 @@ def test_pkg_config_without_simavr_is_said_with_the_packages(gmr_model, tmp_path
     assert_one_line_error(proc, 2, "pkg-config simavr failed")
     assert "apt-get install gcc-avr binutils-avr avr-libc simavr libsimavr-dev libelf-dev" in proc.stderr
     assert not (tmp_path / "fw").exists()  # refused before the firmware was rendered
+
+
+LATE_ECHO = r"""
+#include <avr/io.h>
+int main(void)
+{
+    volatile unsigned long n;
+    for (n = 0; n < 100000UL; ++n) {
+    }
+    UCSR0A = (unsigned char)_BV(U2X0);
+    UBRR0L = 1u;
+    UCSR0C = (unsigned char)(_BV(UCSZ01) | _BV(UCSZ00));
+    UCSR0B = (unsigned char)(_BV(RXEN0) | _BV(TXEN0));
+    for (;;) {
+        unsigned char b;
+        loop_until_bit_is_set(UCSR0A, RXC0);
+        b = UDR0;
+        loop_until_bit_is_set(UCSR0A, UDRE0);
+        UDR0 = b;
+    }
+}
+"""
+
+
+def test_bytes_sent_before_the_program_turns_its_receiver_on_wait_for_it(tmp_path):
+    """A client that writes the moment it connects, to a program that turns its UART's receiver on only after a
+    start-up of a million cycles, gets every byte to the program (simavr drops a byte that arrives with the
+    receiver off; the board holds the client's bytes until it is on): the echo comes back whole. The reference
+    firmware's first request was lost that way when the client was quicker than its start-up."""
+    _require_avr()
+    import socket
+    import subprocess
+
+    from hil.emulate import UnoEmulator, build_uno_board
+
+    src, elf = tmp_path / "late_echo.c", tmp_path / "late_echo.elf"
+    src.write_text(LATE_ECHO)
+    subprocess.run(["avr-gcc", "-mmcu=atmega328p", "-Os", "-Wall", "-Werror", str(src), "-o", str(elf)], check=True)
+    # held: the core starts when the client connects, so the client's bytes surely precede the receiver
+    with UnoEmulator(build_uno_board(tmp_path), elf, hold=True) as emu:
+        with socket.create_connection(("127.0.0.1", emu.port), timeout=10) as sock:
+            sock.sendall(b"ping!")
+            got = b""
+            while len(got) < 5:
+                chunk = sock.recv(16)
+                assert chunk, f"the board closed the connection after {got!r}"
+                got += chunk
+    assert got == b"ping!"

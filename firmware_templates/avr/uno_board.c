@@ -2,7 +2,9 @@
  *
  * The ATmega328P at 16 MHz runs FILE.elf. Its USART0 is served on 127.0.0.1:PORT (one client at a time,
  * a new one accepted when the last has gone, as QEMU's socket chardev does), so host tools reach it as
- * socket://127.0.0.1:PORT; bytes go in only while simavr's UART FIFO has room (its XON/XOFF IRQs).
+ * socket://127.0.0.1:PORT; bytes go in only while the program has the receiver on (simavr drops a byte
+ * that arrives before: a client that connects at once would lose its first request to the program's
+ * start-up) and simavr's UART FIFO has room (its XON/XOFF IRQs).
  * With --bridge, the TWI bus carries the chips of the bus model: each I2C transaction becomes a request
  * of the line protocol host.pi.StandIn answers (firmware/i2c_bridge.c's, plus A and T) on fd 3, its answer
  * read from fd 4, so the same Python bus model answers every board:
@@ -56,6 +58,8 @@
 #define READ_CHUNK 2u
 #define SLEEP_MAX_US 2000u   /* the longest wait for the socket while the core sleeps */
 #define EEPROM_BYTES 1024u
+#define UCSR0B_ADDR 0xC1u    /* the ATmega328P's USART0 control register B (data space) */
+#define RXEN0_BIT 4u
 
 static volatile sig_atomic_t stopping;
 static avr_t *avr;
@@ -259,8 +263,14 @@ static void flush_out(void)
     }
 }
 
+/* 1 when the program can take a byte now: its receiver on and the UART's FIFO not full */
+static int rx_ready(void)
+{
+    return !xoff && (avr->data[UCSR0B_ADDR] & (1u << RXEN0_BIT)) != 0;
+}
+
 /* wait up to timeout_us for the socket (0: just look); accept a client, feed its bytes while the UART
- * has room, send what the UART gave */
+ * takes them, send what the UART gave */
 static void poll_socket(long timeout_us)
 {
     fd_set rd;
@@ -272,8 +282,8 @@ static void poll_socket(long timeout_us)
         FD_SET(listener, &rd);
         top = listener;
     } else {
-        if (xoff) {
-            timeout_us = 0; /* the UART's FIFO is full: nothing to take from the client now */
+        if (!rx_ready()) {
+            timeout_us = 0; /* nothing to take from the client now: its bytes wait in the socket */
         } else {
             FD_SET(client, &rd);
         }
@@ -294,7 +304,7 @@ static void poll_socket(long timeout_us)
     }
     if (client >= 0 && FD_ISSET(client, &rd)) {
         avr_irq_t *in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
-        while (!xoff) {
+        while (rx_ready()) {
             uint8_t b;
             const ssize_t k = recv(client, &b, 1, MSG_DONTWAIT);
             if (k == 1) {
