@@ -14,6 +14,10 @@ from host.protocol import DeviceInfo, ErrorCode, Frame, MsgType
 
 POLL = 0.02  # seconds one read of the port blocks at most
 READ_CHUNK = 4096  # bytes taken from a socket at once
+# a board that restarts when its port opens (an Uno: DTR resets it) runs its bootloader first (optiboot
+# waits 1 s for an upload): the CLIs give a board this long to answer its first PING
+BOOT_WAIT = 3.0
+PING_EVERY = 0.25  # seconds between two PINGs while a board starts
 
 
 class NoAnswer(InputError):
@@ -77,7 +81,8 @@ class Device(PortOwner):
         self._sock = getattr(port, "_socket", None)
 
     @classmethod
-    def open(cls, url: str, timeout: float = 1.0) -> "Device":
+    def open(cls, url: str, timeout: float = 1.0, ready: float = 0.0) -> "Device":
+        """The device at ``url``; with ``ready`` > 0, once it has answered a PING (:meth:`wait_ready`)."""
         import serial
 
         try:
@@ -85,7 +90,14 @@ class Device(PortOwner):
         except (serial.SerialException, ValueError, OSError) as exc:
             raise InputError(f"cannot open port {url}: {port_error(exc)}") from None
         no_nagle(port)
-        return cls(port, timeout, url)
+        dev = cls(port, timeout, url)
+        if ready > 0:
+            try:
+                dev.wait_ready(ready)
+            except BaseException:
+                dev.close()
+                raise
+        return dev
 
     def __enter__(self):
         return self
@@ -171,6 +183,20 @@ class Device(PortOwner):
 
     def ping(self, data: bytes = b"") -> bytes:
         return self.request(MsgType.PING, data).payload
+
+    def wait_ready(self, limit: float) -> None:
+        """PING every PING_EVERY s until one is answered (what reaches a board while it starts is lost, and its
+        bootloader may take a second); NoAnswer after ``limit`` s. A running board answers the first at once."""
+        deadline = time.monotonic() + limit
+        while True:
+            left = deadline - time.monotonic()
+            try:
+                self.request(MsgType.PING, b"ready", timeout=max(0.0, min(PING_EVERY, left)))
+                return
+            except NoAnswer:
+                if time.monotonic() >= deadline:
+                    raise NoAnswer(f"{self.name}: no answer to PING within {limit:g} s: is the firmware running, "
+                                   "and is this its port?") from None
 
     def info(self, refresh: bool = False) -> DeviceInfo:
         if self._info is None or refresh:

@@ -33,7 +33,8 @@ class Reject(Exception):
 
 class FakeDevice:
     def __init__(self, model, precision: str = "double", *, transport: str = "pty", sensor_id: str = "paper",
-                 capacity: int = 16384, mute: bool = False, stale: bool = False, corrupt_read: bool = False):
+                 capacity: int = 16384, mute: bool = False, stale: bool = False, corrupt_read: bool = False,
+                 boot: float = 0.0):
         self.precision = precision
         self.dtype = p.real_dtype(precision)
         self.compiled = model if precision != "float" else rounded_model(model, "float")
@@ -41,6 +42,9 @@ class FakeDevice:
         self.sensor_id = sensor_id
         self.capacity = capacity
         self.mute = mute  # never answer
+        # what comes within boot s of the host's connecting (a socket) or of the start (a pty) is lost, as on an
+        # Uno, whose port's opening resets it into its bootloader
+        self.boot = boot
         self.stale = stale  # send a stale reply (another seq) and garbage before every reply
         self.corrupt_read = corrupt_read  # flip a bit of CAL_READ replies
         self.n_inputs, self.n_outputs = model.n_inputs, len(model.equations)
@@ -96,6 +100,7 @@ class FakeDevice:
             if self._conn is None:
                 return
             self._fd = self._conn.fileno()
+        booted = time.monotonic() + self.boot
         while not self._stop.is_set():
             ready, _, _ = select.select([self._fd], [], [], 0.005)
             if ready:
@@ -105,6 +110,8 @@ class FakeDevice:
                     data = b""
                 if not data and self._listener is not None:
                     return  # the host closed the socket
+                if time.monotonic() < booted:
+                    continue
                 for ev in self.reader.events(data):
                     if self.mute:
                         continue

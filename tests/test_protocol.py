@@ -19,6 +19,7 @@ from fitgen.c.compiled import compile_checked
 from host import protocol as p
 from host import protocol_c
 from host.protocol import ErrorCode, Frame, MsgType, ProtocolError
+from host.device import BOOT_WAIT, Device, NoAnswer
 
 from conftest import assert_one_line_error, require_tool, run_cli
 
@@ -382,6 +383,27 @@ def test_flash_loads_and_reads_back(paper_model, paper_model_file, precision):
         assert fake.active[1].precision == precision
 
 
+def test_a_board_that_restarts_when_its_port_opens_is_waited_for(paper_model, paper_model_file):
+    """A board that loses what comes in its first 0.8 s after the port opens (an Uno's bootloader, after the
+    reset DTR gives it): a request sent at once goes unanswered, while `tactile-host flash` and
+    Device.open(ready=) PING until it answers, and then talk to it."""
+    from fake_device import FakeDevice
+
+    with FakeDevice(paper_model, "double", transport="socket", boot=0.8) as fake:
+        with Device.open(fake.url, timeout=0.3) as dev:
+            with pytest.raises(NoAnswer, match="no answer to INFO within 0.3 s"):
+                dev.info()
+    with FakeDevice(paper_model, "double", transport="socket", boot=0.8) as fake:
+        with Device.open(fake.url, timeout=0.3, ready=BOOT_WAIT) as dev:
+            assert dev.info().n_inputs == paper_model.n_inputs
+        pings = [f for f in fake.requests if f.type == MsgType.PING]
+        assert len(pings) == 1, "the PINGs sent while it started were lost; only the answered one arrived"
+    with FakeDevice(paper_model, "double", transport="socket", boot=0.8) as fake:
+        proc = run_cli("tactile-host", "flash", "--port", fake.url, "--timeout", "0.3", paper_model_file)
+        assert proc.returncode == 0, proc.stderr
+        assert fake.active is not None
+
+
 def test_flash_failures(paper_model, paper_model_file):
     from fake_device import FakeDevice
 
@@ -399,6 +421,6 @@ def test_flash_failures(paper_model, paper_model_file):
         assert_one_line_error(proc, 2, "fixed-point build")
     with FakeDevice(paper_model, mute=True) as fake:
         proc = run_cli("tactile-host", "flash", "--port", fake.url, "--timeout", "0.3", paper_model_file)
-        assert_one_line_error(proc, 2, "no answer to INFO")
+        assert_one_line_error(proc, 2, f"no answer to PING within {BOOT_WAIT:g} s: is the firmware running")
     proc = run_cli("tactile-host", "flash", "--port", "socket://127.0.0.1:1", "--sensor-id", "é", paper_model_file)
     assert proc.returncode == 2

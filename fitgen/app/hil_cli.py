@@ -34,13 +34,13 @@ def _check_counts(args) -> None:
 def _suite(url: str, model, data, args, input_lsb: float | None = None) -> int:
     """The suite against ``url``; ``input_lsb``: a fixed-point firmware's ADC code scale (its channel map's)."""
     from fitgen.c.targets import TARGETS
-    from host.device import Device
+    from host.device import BOOT_WAIT, Device
     from fitgen.c.verify import held_out_from_args, no_held_out_note
 
     from hil.suite import run_suite
 
     held_out = held_out_from_args(model, args)
-    with Device.open(url, timeout=args.timeout) as dev:
+    with Device.open(url, timeout=args.timeout, ready=BOOT_WAIT) as dev:
         res = run_suite(dev, model, url=url, n_vectors=args.vectors, data=data, n_fuzz=args.fuzz,
                         flash=not args.no_flash, sensor_id=args.sensor_id, fma=args.fma, held_out=held_out,
                         max_share=args.max_share, input_lsb=input_lsb,

@@ -47,12 +47,12 @@ def cmd_verify(args) -> int:
 def cmd_flash(args) -> int:
     from fitgen.equations.model import load_model
 
-    from host.device import Device, FlashFailed, flash_model
+    from host.device import BOOT_WAIT, Device, FlashFailed, flash_model
 
     timeout = parse_positive(args.timeout, "--timeout", most=LONGEST_WAIT)
     model = load_model(args.model)
     try:
-        with Device.open(args.port, timeout=timeout) as dev:
+        with Device.open(args.port, timeout=timeout, ready=BOOT_WAIT) as dev:
             blob, info, answer = flash_model(dev, model, args.model, sensor_id=args.sensor_id, fma=args.fma)
     except FlashFailed as exc:
         print(f"tactile-host flash: error: {exc}", file=sys.stderr)
