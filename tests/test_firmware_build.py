@@ -343,7 +343,10 @@ def test_posix_stream(paper_model, posix_device):
     assert time.monotonic() - t0 >= 0.07
     assert [s.index for s in samples] == [0, 1, 2, 3]
     times = [s.time_ms for s in samples]
-    assert all(15 <= b - a <= 200 for a, b in zip(times, times[1:])), times
+    # on the 20 ms grid: a sample the OS woke late (by less than a period) shortens the gap after it, never
+    # two in a row (a burst would); one late by more restarts the grid
+    assert all(1 <= b - a <= 1000 for a, b in zip(times, times[1:])), times
+    assert all(c - a >= 20 for a, c in zip(times, times[2:])), times
     x = np.array([s.inputs for s in samples])
     assert np.all((x >= paper_model.input_min - 1e-6) & (x <= paper_model.input_max + 1e-6))
     with CompiledModel(paper_model, precision, style) as cm:
@@ -425,29 +428,14 @@ def test_posix_pty(paper_model, tmp_path_factory):
 # --- the Cortex-M4 build in QEMU --------------------------------------------------------
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_mps2_in_qemu(paper_model, tmp_path_factory):
-    qemu = require_tool("qemu-system-arm")
+    require_tool("qemu-system-arm")
+    from hil.emulate import Emulator
+
     elf = built(paper_model, tmp_path_factory, "mps2", "float", "table")
-    port = _free_port()
-    proc = subprocess.Popen([qemu, "-M", "mps2-an386", "-nographic", "-monitor", "none",
-                             "-serial", f"tcp:127.0.0.1:{port},server=on,wait=off", "-kernel", str(elf)],
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    sock = None
-    try:
-        deadline = time.monotonic() + 10
-        while sock is None:
-            try:
-                sock = socket.create_connection(("127.0.0.1", port), timeout=1)
-            except OSError:
-                assert proc.poll() is None, proc.stderr.read().decode()
-                assert time.monotonic() < deadline, "QEMU did not open its serial port"
-                time.sleep(0.1)
+    # the raw UART, real time; Emulator picks the port again if another program takes it before QEMU binds it
+    with Emulator(elf, icount=False, buffered=False) as emu, \
+            socket.create_connection(("127.0.0.1", emu.port), timeout=10) as sock:
         link = Link(sock.fileno(), sock.fileno())
         assert link.ok(T.PING, 1, b"m4\0f") == b"m4\0f"
         info = P.unpack_info(link.ok(T.INFO, 2))
@@ -473,12 +461,6 @@ def test_mps2_in_qemu(paper_model, tmp_path_factory):
         link.send_raw(b"\x55" * 400 + b"\0")
         assert link.receive() == P.Frame(T.ERROR, 0, P.pack_error(E.OVERSIZE, 0))
         assert link.ok(T.PING, 4, b"ok") == b"ok"
-    finally:
-        if sock is not None:
-            sock.close()
-        proc.kill()
-        proc.wait()
-        proc.stderr.close()
 
 
 # --- fixed point ------------------------------------------------------------------------

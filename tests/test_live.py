@@ -453,7 +453,7 @@ def test_page_follows_tactile_host_view(browser, device_model, tmp_path):
 
 
 def test_page_reconnects_and_loses_nothing(browser, served):
-    hub, srv = served()
+    hub, srv = served(backlog=1 << 17)  # the gap lasts seconds on a loaded machine: the ring must outlast it
     port = srv._httpd.server_address[1]
     browser.get(srv.url)
     page_wait(browser, lambda d: text(d, "conn") == "live", what="the stream")

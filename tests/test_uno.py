@@ -116,7 +116,8 @@ def test_cli_emulate_uno_suite(gmr_model, tmp_path):
     model_file = gmr_model.save(tmp_path / "m.json")
     junit = tmp_path / "hil.xml"
     proc = run_cli("tactile-hil", "emulate", "--target", "uno", "--model", str(model_file), "--adc", ADC,
-                   "--simulate", "dx=1,dz=-1", "--suite", "--vectors", "200", "--fuzz", "2000", "--junit", str(junit))
+                   "--simulate", "dx=1,dz=-1", "--suite", "--vectors", "200", "--fuzz", "2000", "--junit", str(junit),
+                   "--timeout", "10")  # simavr on a loaded machine is slower than the board
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "cycles per estimate (simavr)" in proc.stdout and "on the TWI bus" in proc.stdout
     cases = {c.get("name"): c for c in ET.parse(junit).getroot()}
@@ -134,7 +135,8 @@ def test_fixed_point_firmware_reads_the_ads1115s_on_the_uno(tmp_path):
     ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
     model_file = fit_model(ds, settings=FitSettings.exact(exponents=FAMILIES["no-roots"])).save(tmp_path / "m.json")
     proc = run_cli("tactile-hil", "emulate", "--target", "uno", "--precision", "fixed", "--model", str(model_file),
-                   "--adc", ADC, "--simulate", "dx=1,dz=-1", "--suite", "--vectors", "300", "--fuzz", "2000")
+                   "--adc", ADC, "--simulate", "dx=1,dz=-1", "--suite", "--vectors", "300", "--fuzz", "2000",
+                   "--timeout", "10")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "largest difference from the numpy integer model 0 LSB" in proc.stdout
     assert "| stream | pass |" in proc.stdout and "| flash (fixed point) | pass |" in proc.stdout
