@@ -29,6 +29,9 @@ def require_tool(name: str) -> str:
 # back at its default in every child, as under a terminal.
 if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
+# Likewise SIGCHLD: inherited as ignored, children are reaped unasked and every exit status reads 0.
+if signal.getsignal(signal.SIGCHLD) == signal.SIG_IGN:
+    signal.signal(signal.SIGCHLD, signal.SIG_DFL)
 
 
 def run_cli(*args, input=None, cwd=None):

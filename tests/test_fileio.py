@@ -41,7 +41,10 @@ def unix_socket(path):
 def null_device(path):
     if os.geteuid() != 0:
         pytest.skip("os.mknod of a device needs root (CI runs as root)")
-    os.mknod(path, 0o600 | stat.S_IFCHR, os.makedev(1, 3))  # /dev/null's numbers: harmless if written
+    try:
+        os.mknod(path, 0o600 | stat.S_IFCHR, os.makedev(1, 3))  # /dev/null's numbers: harmless if written
+    except PermissionError:
+        pytest.skip("os.mknod of a device needs CAP_MKNOD, which this container's root lacks")
     return path
 
 

@@ -9,7 +9,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fitgen.base.errors import InputError
@@ -48,6 +48,7 @@ def test_cobs_known_vectors(raw, encoded):
     assert p.cobs_decode(encoded) == raw
 
 
+@settings(deadline=None)  # a stall of the machine is not a failure
 @given(st.binary(max_size=600))
 def test_cobs_round_trip(data):
     enc = p.cobs_encode(data)
@@ -56,6 +57,7 @@ def test_cobs_round_trip(data):
     assert p.cobs_decode(enc) == data
 
 
+@settings(deadline=None)
 @given(st.binary(max_size=600))
 def test_cobs_decode_raises_only_protocol_error(data):
     try:
@@ -75,6 +77,7 @@ def test_cobs_decode_rejects_malformed(bad):
 # --- frames -------------------------------------------------------------------------
 
 
+@settings(deadline=None)
 @given(st.integers(0, 255), st.integers(0, 255), st.binary(max_size=p.MAX_PAYLOAD))
 def test_frame_round_trip(type_, seq, payload):
     wire = p.encode_frame(type_, seq, payload)
@@ -83,6 +86,7 @@ def test_frame_round_trip(type_, seq, payload):
     assert p.decode_frame(wire[:-1]) == Frame(type_, seq, payload)
 
 
+@settings(deadline=None)
 @given(st.binary(max_size=300))
 def test_decode_frame_raises_only_protocol_error(data):
     try:
@@ -343,10 +347,10 @@ def test_device_no_answer_and_bad_port(paper_model):
         with pytest.raises(NoAnswer, match="no answer to PING"):
             dev.ping()
     with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]  # nothing listens on it
-    with pytest.raises(InputError, match=f"cannot open port socket://127.0.0.1:{port}: connection refused"):
-        Device.open(f"socket://127.0.0.1:{port}")
+        s.bind(("127.0.0.1", 0))  # bound, not listening: a connect is refused, and no other program can take it
+        port = s.getsockname()[1]
+        with pytest.raises(InputError, match=f"cannot open port socket://127.0.0.1:{port}: connection refused"):
+            Device.open(f"socket://127.0.0.1:{port}")
     for url in ("/dev/nonexistent-tty", "bogus://x"):
         with pytest.raises(InputError, match="cannot open port"):
             Device.open(url)
@@ -394,12 +398,13 @@ def test_a_board_that_restarts_when_its_port_opens_is_waited_for(paper_model, pa
             with pytest.raises(NoAnswer, match="no answer to INFO within 0.3 s"):
                 dev.info()
     with FakeDevice(paper_model, "double", transport="socket", boot=0.8) as fake:
-        with Device.open(fake.url, timeout=0.3, ready=BOOT_WAIT) as dev:
+        with Device.open(fake.url, timeout=2, ready=BOOT_WAIT) as dev:
             assert dev.info().n_inputs == paper_model.n_inputs
-        pings = [f for f in fake.requests if f.type == MsgType.PING]
-        assert len(pings) == 1, "the PINGs sent while it started were lost; only the answered one arrived"
+        pings = [f.seq for f in fake.requests if f.type == MsgType.PING]
+        # the first PING, sent at once, was lost in the boot; the fake answered one after it (two if it stalled)
+        assert pings and pings[0] > 1 and len(pings) <= 2, pings
     with FakeDevice(paper_model, "double", transport="socket", boot=0.8) as fake:
-        proc = run_cli("tactile-host", "flash", "--port", fake.url, "--timeout", "0.3", paper_model_file)
+        proc = run_cli("tactile-host", "flash", "--port", fake.url, "--timeout", "2", paper_model_file)
         assert proc.returncode == 0, proc.stderr
         assert fake.active is not None
 
