@@ -159,10 +159,18 @@ class Corrections:
 
     def __call__(self, raw: np.ndarray, temp: float) -> tuple[np.ndarray, np.ndarray]:
         """(compensated readings before the zero, readings for the model)."""
-        v = self.tempcomp.apply(raw, temp) if self.tempcomp is not None else raw
+        v = self.compensated(raw, temp)
+        return v, self.zeroed(v)
+
+    def compensated(self, raw: np.ndarray, temp: np.ndarray) -> np.ndarray:
+        """Rows of readings compensated for their temperatures, the zero not yet taken off."""
+        return self.tempcomp.apply(raw, temp) if self.tempcomp is not None else raw
+
+    def zeroed(self, comp: np.ndarray) -> np.ndarray:
+        """Compensated rows with the current zero taken off: what the model takes."""
         if self.autozero is not None:
-            return v, self.autozero.correct(v)
-        return v, (v - self.offsets if self.offsets is not None else v)
+            return self.autozero.correct(comp)
+        return comp - self.offsets if self.offsets is not None else comp
 
     def observe(self, t: float, comp: np.ndarray, out: np.ndarray, status: int):
         if self.autozero is not None:

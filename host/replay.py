@@ -22,9 +22,10 @@ from fitgen.base.fileio import read_text, write_atomic
 from fitgen.equations.model import Model, check_input_units, load_model, model_from_dict
 
 from host.autozero import AutoZero, AutoZeroSettings
-from host.engine import PythonEngine
 from host.readout import Corrections, RunRecord
 from host.temperature import load_tempcomp, tempcomp_from_dict
+
+BLOCK = 2048  # samples estimated at once: the model's per-call overhead spread, the memory bounded
 
 
 @dataclass
@@ -158,8 +159,9 @@ def _recorded_model(run: Run) -> Model | None:
 
 
 def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None = None,
-           temp_comp: str | None = None, no_temp_comp: bool = False) -> ReplayResult:
-    """Re-estimate ``run``; ``auto_zero`` / temperature compensation None: as recorded."""
+           temp_comp: str | None = None, no_temp_comp: bool = False, progress=None) -> ReplayResult:
+    """Re-estimate ``run``; ``auto_zero`` / temperature compensation None: as recorded. ``progress``: a
+    fitgen.base.progress.Progress over the samples."""
     h, notes = run.header, []
     if isinstance(model, str):
         model = load_model(model)
@@ -191,21 +193,39 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
               "outputs": list(model.output_names), **corrections.describe(), "model_file": model.to_dict()}
     # the arithmetic the run was estimated in: the C engine's float is the float header's, emulated bit for bit
     precision = h.get("precision", "double") if h.get("precision") in ("double", "float") else "double"
-    engine = PythonEngine(model, precision)
-    n = len(run.t)
-    v_all, out_all, st_all = np.empty_like(run.raw), np.empty((n, len(model.equations))), np.empty(n, dtype=int)
-    # one sample at a time, as the readout does: auto-zero's state depends on every sample before
-    for i in range(n):
-        comp, v = corrections(run.raw[i].copy(), run.temp[i])
-        out, status = engine.estimate(v)
-        corrections.observe(run.t[i], comp, out, status)
-        v_all[i], out_all[i], st_all[i] = v, out, status
+    v_all, out_all, st_all = _estimate(run, model, precision, corrections, progress)
     if not same:
         notes.append(f"the run was recorded with model {str(h.get('model'))[:12]}")
     az = corrections.autozero
     return ReplayResult(run.t, run.raw, run.temp, v_all, out_all, st_all, run.out,
                         tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes,
                         header)
+
+
+def _estimate(run: Run, model: Model, precision: str, corrections: Corrections, progress):
+    """(model inputs, estimates, statuses) of every sample, as the readout made them one at a time, in blocks:
+    the model's arithmetic is row by row, so a block gives each row's bits; auto-zero sees every sample in
+    order, and the block after an update starts again from the next sample with the new zero."""
+    n = len(run.t)
+    comp = corrections.compensated(run.raw, run.temp)
+    v_all, out_all, st_all = np.empty_like(run.raw), np.empty((n, len(model.equations))), np.empty(n, dtype=int)
+    az = corrections.autozero
+    i = 0
+    while i < n:
+        j = min(n, i + BLOCK)
+        v = corrections.zeroed(comp[i:j])
+        out, status = model.predict(v, with_status=True, precision=precision)
+        k = j
+        if az is not None:
+            for r in range(i, j):
+                if corrections.observe(run.t[r], comp[r], out[r - i], int(status[r - i])) is not None:
+                    k = r + 1  # the zero moved: the samples after this one are estimated again
+                    break
+        v_all[i:k], out_all[i:k], st_all[i:k] = v[:k - i], out[:k - i], status[:k - i]
+        if progress is not None:
+            progress.update(k - i)
+        i = k
+    return v_all, out_all, st_all
 
 
 def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zero) -> Corrections:

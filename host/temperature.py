@@ -155,12 +155,19 @@ class TempComp:
     def n(self) -> int:
         return int(self.offset.size)
 
-    def apply(self, raw: np.ndarray, temp: float) -> np.ndarray:
-        """Compensated readings; a non-finite temperature leaves them as they are."""
-        if not math.isfinite(temp):
-            return raw
-        dT = temp - self.t0
-        return (raw - self.offset * dT) / (1.0 + self.gain * dT)
+    def apply(self, raw: np.ndarray, temp) -> np.ndarray:
+        """Compensated readings (one row, or rows with a temperature each); a non-finite temperature leaves its
+        row as it is."""
+        if np.ndim(temp) == 0:
+            if not math.isfinite(temp):
+                return raw
+            dT = temp - self.t0
+            return (raw - self.offset * dT) / (1.0 + self.gain * dT)
+        temp = np.asarray(temp, dtype=float)
+        dT = (temp - self.t0)[:, None]
+        with np.errstate(invalid="ignore"):  # rows without a temperature are taken as they are below
+            out = (raw - self.offset * dT) / (1.0 + self.gain * dT)
+        return np.where(np.isfinite(temp)[:, None], out, raw)
 
     def to_dict(self) -> dict:
         return {"kind": self.KIND, "version": 1, "t0": self.t0,

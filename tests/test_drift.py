@@ -282,6 +282,28 @@ def test_sim_drift_needs_simulate(model_file):
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
 
 
+def test_a_replay_in_small_blocks_is_the_readout_sample_by_sample(rest_model_file, tmp_path, monkeypatch):
+    """The replay estimates in blocks and starts the block again after each auto-zero update: in blocks of 7
+    samples, across several updates and a temperature each sample, its estimates are the recorded ones bit for
+    bit, and so are its updates; without auto-zero, in one block, too."""
+    import host.replay as R
+
+    run = tmp_path / "run.jsonl"
+    proc = run_cli("tactile-host", "read", "--model", rest_model_file, "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+                   "--simulate", "0,0,0,0,0", "--sim-drift", "ramp=5,over=20,tau=10,creep=0.004", "--auto-zero",
+                   "--rest-hold", "0.1", "--count", "400", "--record", str(run), "-o", str(tmp_path / "s.csv"))
+    assert proc.returncode == 0, proc.stderr
+    n_updates = proc.stderr.count("auto-zero update ")
+    assert n_updates >= 2, proc.stderr
+    monkeypatch.setattr(R, "BLOCK", 7)
+    res = R.replay(R.load_run(str(run)))
+    assert res.exact and np.array_equal(res.out, res.recorded) and len(res.updates) == n_updates
+    off = R.replay(R.load_run(str(run)), auto_zero=False)
+    monkeypatch.setattr(R, "BLOCK", 1)
+    one = R.replay(R.load_run(str(run)), auto_zero=False)
+    assert np.array_equal(off.out, one.out) and np.array_equal(off.status, one.status) and not off.updates
+
+
 def test_view_replays_a_recorded_run_in_the_page(rest_model_file, tmp_path):
     """view --replay serves the run's samples, re-estimated, as the live stream does."""
     import subprocess
