@@ -34,6 +34,7 @@ STATIC_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; ch
                 ".css": "text/css; charset=utf-8", ".png": "image/png", ".svg": "image/svg+xml",
                 ".txt": "text/plain; charset=utf-8"}
 LIMIT = 512  # samples in one write to a viewer (about 340 kB)
+DRAIN = 2.0  # s the streams have, when a run ends, to send the samples they have not yet
 _NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]*\Z")  # one file name: no '/', no '..' prefix, no '%'
 
 
@@ -227,6 +228,8 @@ class _Handler(BaseHTTPRequestHandler):
                     quiet_until = time.monotonic() + live.keepalive
                     if hub.seq - last >= LIMIT:
                         continue  # catching up, in pieces of LIMIT samples; otherwise one write per poll
+                elif live.finishing.is_set() and last >= hub.seq:
+                    break  # the run has ended and this viewer has every sample of it
                 if time.monotonic() >= quiet_until:
                     write(b": keep-alive\n\n")  # lets the page, and proxies, see the stream is alive
                     quiet_until = time.monotonic() + live.keepalive
@@ -269,13 +272,13 @@ class LiveServer:
     """The page, its assets, ``/meta`` and ``/events`` for a ``LiveHub``, on ``host``:``port`` (0: any free port).
 
     Binds at construction, so a port in use or an address this machine lacks is an
-    ``InputError`` before the readout starts. ``write_timeout`` (s): a viewer that accepts
+    ``InputError`` before the readout starts (``hub`` may be set after, before :meth:`start`). ``write_timeout`` (s): a viewer that accepts
     nothing for that long is dropped; ``keepalive`` (s): comment lines on an idle stream;
     ``poll`` (s): how often a viewer's thread looks for new samples (each look sends all
     that is new in one write); ``max_clients``: event streams served at once.
     """
 
-    def __init__(self, hub: LiveHub, host: str = "127.0.0.1", port: int = 8765, *, write_timeout: float = 10.0,
+    def __init__(self, hub: LiveHub | None, host: str = "127.0.0.1", port: int = 8765, *, write_timeout: float = 10.0,
                  keepalive: float = 5.0, poll: float = 0.02, max_clients: int = 32):
         if not host:
             raise InputError("--host is empty: give an address such as 127.0.0.1 (this machine) or 0.0.0.0 "
@@ -286,6 +289,7 @@ class LiveServer:
         self.max_clients = max_clients
         self.assets = _load_assets()
         self.stopping = threading.Event()
+        self.finishing = threading.Event()  # the run has ended: streams close once they have sent all of it
         self._clients: set = set()
         self._clients_lock = threading.Lock()
         self._thread = None
@@ -330,14 +334,21 @@ class LiveServer:
             self._clients.discard(conn)
 
     def start(self) -> None:
-        """Serve in a daemon thread (each connection in its own daemon thread)."""
+        """Serve in a daemon thread (each connection in its own daemon thread); the hub must be set by now."""
+        if self.hub is None:
+            raise ValueError("LiveServer.start: no hub to serve")
         if self._thread is None:
             self._thread = threading.Thread(target=self._httpd.serve_forever, kwargs={"poll_interval": 0.2},
                                             name="live-server", daemon=True)
             self._thread.start()
 
-    def stop(self) -> None:
-        """Close every stream and the listening socket; returns within about a poll interval."""
+    def stop(self, drain: float = 0.0) -> None:
+        """Close every stream and the listening socket; returns within about a poll interval. ``drain`` (s): first
+        let each stream send the samples it has not yet (the end of a run that ended), for up to that long."""
+        self.finishing.set()
+        deadline = time.monotonic() + drain
+        while self.clients and time.monotonic() < deadline:
+            time.sleep(self.poll)
         self.stopping.set()
         with self._clients_lock:
             conns = list(self._clients)

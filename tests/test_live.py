@@ -350,6 +350,29 @@ def test_a_port_in_use_or_a_bad_address_is_one_sentence(served, model_file):
     assert_one_line_error(proc, 2, f"port {port}")
 
 
+def test_a_run_that_ends_reaches_its_viewer_whole(model_file):
+    """`view --count N`: a viewer connected during the run gets all N samples, the last included, and then the
+    end of the stream (the server used to stop before the last poll sent it)."""
+    code = "import sys; from fitgen.app.host_cli import main; sys.argv[0] = 'tactile-host'; main()"
+    proc = subprocess.Popen([sys.executable, "-c", code, "view", "--model", model_file, "--adc", TWO_CHIPS,
+                             "--simulate", "motion", "--port", "0", "--rate", "50", "--count", "100"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        match = re.search(r"http://127\.0\.0\.1:(\d+)/", proc.stderr.readline())
+        assert match
+        ids = []
+        with socket.create_connection(("127.0.0.1", int(match.group(1))), timeout=30) as s:
+            s.sendall(b"GET /events?since=0 HTTP/1.0\r\nHost: x\r\n\r\n")
+            data = b""
+            while chunk := s.recv(65536):  # to the stream's end
+                data += chunk
+        ids = [int(x) for x in re.findall(rb"^id: (\d+)$", data, flags=re.M)]
+        assert ids == list(range(1, 101)), ids[-3:]
+    finally:
+        _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0 and "done: 100 samples" in err, err
+
+
 def test_the_page_ships_with_the_package():
     from importlib import resources
 

@@ -101,7 +101,7 @@ def cmd_read(args) -> int:
 
 def cmd_view(args) -> int:
     from host.adc import DeviceSilent
-    from host.live import LiveHub, LiveServer, view_meta
+    from host.live import DRAIN, LiveHub, LiveServer, view_meta
     from host.readout import LineFormat, Readout
     from host.session import ReadoutSession
 
@@ -110,10 +110,11 @@ def cmd_view(args) -> int:
     if args.model is None or args.adc is None:
         raise InputError("view needs --model and --adc (or --replay RUN.jsonl)")
     s = server = None
+    ended = False
     try:
+        server = LiveServer(None, args.host, args.port)  # bound first: a port in use is said before tare and build
         s = ReadoutSession(args, "tactile-host view")
-        hub = LiveHub(view_meta(s.model.n_inputs, s.model.output_names, s.model.sha256, s.source, s.rate))
-        server = LiveServer(hub, args.host, args.port)
+        server.hub = hub = LiveHub(view_meta(s.model.n_inputs, s.model.output_names, s.model.sha256, s.source, s.rate))
         server.start()
         print(f"tactile-host view: serving {server.url} ({s.source}); Ctrl-C stops", file=sys.stderr, flush=True)
         fmt = LineFormat("csv", s.model.n_inputs, s.model.output_names)
@@ -121,6 +122,7 @@ def cmd_view(args) -> int:
                          thermometer=s.thermometer, observer=hub.publish, record=s.record(args.record))
         with StopFlag() as stop:
             stats = reader.run(rate=s.rate, count=s.count, duration=s.duration, stop=stop)
+        ended = not stop.stopped
         print(f"tactile-host view: {'stopped' if stop.stopped else 'done'}: {stats.summary()}", file=sys.stderr)
         return 0
     except DeviceSilent as exc:
@@ -128,29 +130,41 @@ def cmd_view(args) -> int:
         return EXIT_CHECK_FAILED
     finally:
         if server is not None:
-            server.stop()
+            server.stop(drain=DRAIN if ended else 0.0)  # a run that ended reaches its viewers whole
         if s is not None:
             s.close()
 
 
 def _view_replay(args) -> int:
-    from host.live import LiveHub, LiveServer, view_meta
-    from host.replay import load_run, replay
+    from host.live import DRAIN, LiveHub, LiveServer, view_meta
+    from host.replay import load_run
 
     refuse_readout_options(args)
     run = load_run(args.replay)
-    res = replay(run, model=args.model, auto_zero=_flag(args), temp_comp=args.temp_comp)
-    hub = LiveHub(view_meta(run.n_inputs, res.outputs, res.model_hash, f"replay of {args.replay}", None))
-    server = LiveServer(hub, args.host, args.port)
-    server.start()
-    print(f"tactile-host view: serving {server.url} (replay of {args.replay}, {len(res.t)} samples); Ctrl-C stops",
-          file=sys.stderr, flush=True)
+    server, ended = LiveServer(None, args.host, args.port), False
     try:
+        res = _replayed(run, args)
+        server.hub = hub = LiveHub(view_meta(run.n_inputs, res.outputs, res.model_hash, f"replay of {args.replay}",
+                                             None))
+        server.start()
+        print(f"tactile-host view: serving {server.url} (replay of {args.replay}, {len(res.t)} samples); Ctrl-C "
+              "stops", file=sys.stderr, flush=True)
         with StopFlag() as stop:
             res.play(hub.publish, stop, hold=args.hold)
+        ended = not stop.stopped
     finally:
-        server.stop()
+        server.stop(drain=DRAIN if ended else 0.0)
     return 0
+
+
+def _replayed(run, args):
+    """``run`` re-estimated as the options say, with a progress bar over its samples."""
+    from fitgen.base.progress import Progress
+    from host.replay import replay
+
+    with Progress("replay", len(run.t)) as bar:
+        return replay(run, model=args.model, auto_zero=_flag(args), temp_comp=args.temp_comp,
+                      no_temp_comp=getattr(args, "no_temp_comp", False), progress=bar)
 
 
 def _flag(args):
@@ -173,11 +187,10 @@ def cmd_tempcomp_c(args) -> int:
 
 
 def cmd_replay(args) -> int:
-    from host.replay import load_run, replay
+    from host.replay import load_run
 
     run = load_run(args.run)
-    res = replay(run, model=args.model, auto_zero=_flag(args), temp_comp=args.temp_comp,
-                 no_temp_comp=args.no_temp_comp)
+    res = _replayed(run, args)
     if args.output:
         res.save(args.output)
     print(res.report(), end="")
