@@ -11,7 +11,7 @@ import types
 from contextlib import contextmanager
 
 import pytest
-from conftest import assert_one_line_error, run_cli
+from conftest import TWO_CHIPS, assert_one_line_error, run_cli
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import check_folder, open_output, output_file, write_atomic, write_in_folder
@@ -282,3 +282,21 @@ def test_ctrl_c_while_writing_leaves_no_temporary_and_no_folder(tmp_path, monkey
     with pytest.raises(KeyboardInterrupt):
         write_atomic(tmp_path / "old.txt", "new")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["old.txt"] and (tmp_path / "old.txt").read_text() == "old"
+
+
+def test_a_dash_is_stdout_where_the_command_writes_there_and_refused_elsewhere(model_file, tmp_path):
+    """`-o -` is the command's stdout where -o left out is (read, report); elsewhere, and for --record, it is one
+    line, never a file named '-' in the working folder."""
+    sim = ("--adc", TWO_CHIPS, "--simulate", "dx=1", "--count", "3")
+    proc = run_cli("tactile-host", "read", "--model", model_file, *sim, "-o", "-", cwd=tmp_path)
+    assert proc.returncode == 0 and len(proc.stdout.splitlines()) == 4, proc.stdout + proc.stderr
+    proc = run_cli("fitgen", "report", model_file, "-o", "-", cwd=tmp_path)
+    assert proc.returncode == 0 and proc.stdout.startswith("## Report"), proc.stderr
+    run = tmp_path / "run.jsonl"
+    assert run_cli("tactile-host", "read", "--model", model_file, *sim, "--record", str(run), "-o",
+                   str(tmp_path / "s.csv")).returncode == 0
+    assert_one_line_error(run_cli("tactile-host", "replay", str(run), "-o", "-", cwd=tmp_path), 2,
+                          "-o -: give a file name")
+    assert_one_line_error(run_cli("tactile-host", "read", "--model", model_file, *sim, "--record", "-",
+                                  cwd=tmp_path), 2, "--record -: give a file name")
+    assert not (tmp_path / "-").exists()

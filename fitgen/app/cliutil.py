@@ -200,6 +200,9 @@ READS = ("model", "run", "tempcomp", "adc", "temp_comp", "rest", "poses", "data"
          "capture")  # and those it reads: never one of the written
 
 
+STDOUT_DEFAULT = ("cmd_read", "cmd_report")  # commands whose -o, left out, is stdout: there "-o -" says so too
+
+
 def check_written(args, files=()) -> None:
     """Every file a command writes, checked before the work: no folder, none of its inputs, no two alike.
     ``files``: the commands whose ``-o`` is a file (for the others it is a folder)."""
@@ -212,12 +215,17 @@ def check_written(args, files=()) -> None:
     written = []
     for name in WRITES:
         path = getattr(args, name, None)
-        if not isinstance(path, str) or path == "-":
+        if not isinstance(path, str):
             continue
+        flag = "-o" if name == "output" else f"--{name.replace('_', '-')}"
+        if path == "-":
+            if name == "output" and getattr(args.func, "__name__", "") in STDOUT_DEFAULT:
+                args.output = None  # the command's own stdout
+                continue
+            raise InputError(f"{flag} -: give a file name (this command writes nothing to stdout)")
         if name == "output" and args.func not in files:  # a folder the command makes
             check_folder(path)
             continue
-        flag = "-o" if name == "output" else f"--{name.replace('_', '-')}"
         output_file(path, inputs, flag)
         for other_flag, other in written:
             if os.path.realpath(other) == os.path.realpath(path):  # realpath: a symlink is written through
