@@ -123,13 +123,13 @@ def test_predict_float_from_codes_refuses_an_lsb_no_float_holds_and_keeps_quiet_
     path = Model(np.full(8, 0.5), np.full(8, 2.0), eqs, "V", {}).save(tmp_path / "m.json")
     (tmp_path / "v.csv").write_text(",".join(f"v{k}" for k in range(1, 9)) + "\n" + "1e308" + ",1" * 7 + "\n"
                                     + "1" * 1 + ",1" * 7 + "\n")
-    for lsb in ("1e-46", "1e-40"):  # 0 and a subnormal in float
+    for lsb in ("1e-46", "1e-40", "1e300"):  # 0, a subnormal and inf in float
         assert_one_line_error(run_cli("fitgen", "predict", str(path), str(tmp_path / "v.csv"), "-o",
                                       str(tmp_path / "p.csv"), "--precision", "float", "--input-lsb", lsb), 2,
                               "is beyond a float's normal range")
     proc = run_cli("fitgen", "predict", str(path), str(tmp_path / "v.csv"), "-o", str(tmp_path / "p.csv"),
                    "--precision", "float", "--input-lsb", "3e-5")
-    assert proc.returncode == 0 and "Warning" not in proc.stderr and "1 rows with no estimate" in proc.stderr, \
+    assert proc.returncode == 0 and "Warning" not in proc.stderr and "1 row with no estimate" in proc.stderr, \
         proc.stderr
 
 
@@ -278,7 +278,7 @@ def test_predict_says_which_rows_have_no_estimate_without_numpy_warnings(fitted,
     proc = run_cli("fitgen", "predict", str(tmp_path / "m.json"), str(tmp_path / "r.csv"), "-o",
                    str(tmp_path / "p.csv"), "--precision", "float")
     assert proc.returncode == 0 and proc.stderr.strip().splitlines() == [
-        f"wrote 3 estimates to {tmp_path / 'p.csv'} (1 rows with no estimate (status -1: a reading not finite in "
+        f"wrote 3 estimates to {tmp_path / 'p.csv'} (1 row with no estimate (status -1: a reading not finite in "
         "float))"], proc.stderr
     assert [ln.rsplit(",", 1)[1] for ln in (tmp_path / "p.csv").read_text().splitlines()[1:]] == ["0", "-1", "0"]
 

@@ -299,6 +299,12 @@ def test_codegen_cli(paper_fixed_model, tmp_path):
                                   "--input-lsb", "0"), contains="LSB")
     assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--precision", "fixed",
                                   "--input-lsb", "abc"), contains="not a number")
+    # an LSB in the wrong unit (V for mV) leaves each input a code or two: the header would give one pose
+    span = float(np.min(paper_fixed_model.input_max - paper_fixed_model.input_min))
+    proc = run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--precision", "fixed",
+                   "--input-lsb", repr(span / 8))
+    assert_one_line_error(proc, 2, "fewer than 16: every reading would give one of a handful of poses")
+    assert not (tmp_path / "x").exists()
     assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--input-lsb", "1e-4"),
                           contains="fixed only")
     data = json.loads(path.read_text())

@@ -191,7 +191,8 @@ def cmd_predict(args) -> int:
         if args.input_lsb is not None:  # readings from codes as a device's float code computes them
             if not (math.isfinite(args.input_lsb) and args.input_lsb > 0):
                 raise InputError(f"--input-lsb must be a finite number > 0, got {args.input_lsb!r}")
-            lsb = np.float32(args.input_lsb)
+            with np.errstate(over="ignore"):  # past float's range: inf, refused below in one line
+                lsb = np.float32(args.input_lsb)
             if not np.finfo(np.float32).tiny <= lsb < np.inf:
                 raise InputError(f"--input-lsb {args.input_lsb!r} is beyond a float's normal range: no device's float "
                                  "holds it")
@@ -204,9 +205,11 @@ def cmd_predict(args) -> int:
             pred, status = model.predict(inputs, with_status=True, precision=args.precision)
     write_atomic(args.output, estimates_csv(model.output_names, pred, status))
     clamped, refused = int(np.sum(status > 0)), int(np.sum(status < 0))
-    notes = ([f"{clamped} rows clamped into the domain"] if clamped else []) + (
-        [f"{refused} rows with no estimate (status -1: a reading not finite in {args.precision})"] if refused else [])
-    print(f"wrote {len(pred)} estimates to {args.output}" + (f" ({'; '.join(notes)})" if notes else ""),
+    notes = ([f"{clamped} row{'s' * (clamped != 1)} clamped into the domain"] if clamped else []) + (
+        [f"{refused} row{'s' * (refused != 1)} with no estimate (status -1: a reading not finite in "
+         f"{args.precision})"] if refused else [])
+    print(f"wrote {len(pred)} estimate{'s' * (len(pred) != 1)} to {args.output}"
+          + (f" ({'; '.join(notes)})" if notes else ""),
           file=sys.stderr)
     return 0
 

@@ -39,6 +39,7 @@ _POWER_ORDER = ("P1", "P2", "P3", "P4", "M1", "M2", "M3", "M4")
 _EXPONENT_OF = {"P1": 1, "P2": 2, "P3": 3, "P4": 4, "M1": -1, "M2": -2, "M3": -3, "M4": -4}
 # a domain bound within this many codes of a whole code is taken as that code
 SNAP = Fraction(1, 10**6)
+MIN_CODES = 16  # an input's domain must span at least this many ADC codes (4 bits) to be worth estimating from
 
 
 def divr(num, den):
@@ -91,6 +92,11 @@ def _code_bounds(model: Model, lsb: Fraction, off: Fraction) -> tuple[list[int],
             raise InputError(f"input v{k + 1}: its domain [{float(model.input_min[k])!r}, "
                              f"{float(model.input_max[k])!r}] holds no whole ADC code at LSB {float(lsb)!r}, "
                              f"offset {float(off)!r}")
+        if hi - lo + 1 < MIN_CODES:
+            raise InputError(f"input v{k + 1}: its domain [{float(model.input_min[k])!r}, "
+                             f"{float(model.input_max[k])!r}] holds {hi - lo + 1} ADC code"
+                             f"{'s' if hi - lo else ''} at LSB {float(lsb)!r}, fewer than {MIN_CODES}: every "
+                             "reading would give one of a handful of poses (an LSB in the wrong unit?)")
         if lo < INT32_MIN or hi > INT32_MAX:
             raise InputError(f"input v{k + 1}: its domain [{float(model.input_min[k])!r}, "
                              f"{float(model.input_max[k])!r}] spans codes {Decimal(lo):.4g}..{Decimal(hi):.4g} at LSB "
