@@ -397,7 +397,7 @@ def test_verify_cli(paper_fixed_model, tmp_path):
     paper_fixed_model.save(path)
     proc = run_cli("tactile-host", "verify", str(path), "--precision", "fixed", "--vectors", "300")
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert proc.stdout.count("PASS") == 1 and "fixed/" in proc.stdout and "LSB" in proc.stdout
+    assert proc.stdout.count("PASS") == 1 and "\nfixed: " in "\n" + proc.stdout and "LSB" in proc.stdout
     # the vectors it counts are the ones it compared, held-out check or not
     bare = run_cli("tactile-host", "verify", str(path), "--precision", "fixed", "--vectors", "300", "--no-held-out")
     count = re.compile(r"(\d+) vectors")

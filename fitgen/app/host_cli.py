@@ -5,43 +5,12 @@ from __future__ import annotations
 import sys
 
 from fitgen.app.options import map_options, refuse_readout_options
+from fitgen.app.verify_cmd import cmd_verify
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_written, command_main, count, noise_volts
 from fitgen.base.errors import InputError
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 
 from host.stagesettings import APPROACH
-
-
-def cmd_verify(args) -> int:
-    from fitgen.c.codegen import STYLES
-    from fitgen.equations.model import load_model
-
-    from fitgen.c.verify import check_vectors, data_inputs, held_out_from_args, no_held_out_note, verify
-
-    check_vectors(args.vectors)
-    model = load_model(args.model)
-    precisions = ("double", "float") if args.precision == "both" else (args.precision,)
-    styles = STYLES if args.style == "both" else (args.style,)
-    if (args.input_lsb is not None or args.input_offset is not None) and args.precision != "fixed":
-        raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
-    if args.fma and args.precision == "fixed":
-        raise InputError("--fma does not apply to --precision fixed")
-    extra = data_inputs(model, args.data) if args.data else None
-    held_out = held_out_from_args(model, args)
-    ok = True
-    for precision in precisions:
-        # the fixed-point header has one form (straight-line code): checked once
-        for style in (("unrolled",) if precision == "fixed" else styles):
-            res = verify(model, precision, style, cc=args.cc, runner=args.runner or "", prefix=args.prefix,
-                         n_random=args.vectors, extra_inputs=extra, fma=args.fma, input_lsb=args.input_lsb,
-                         input_offset=args.input_offset, held_out=held_out, max_share=args.max_share)
-            print(res.table())
-            if held_out is None and not args.no_held_out:
-                print(no_held_out_note(model))
-            print("PASS" if res.ok else "FAIL: " + "; ".join(res.failures))
-            print()
-            ok &= res.ok
-    return 0 if ok else EXIT_CHECK_FAILED
 
 
 def cmd_flash(args) -> int:

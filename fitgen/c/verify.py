@@ -85,8 +85,9 @@ def held_out_from_args(model: Model, args) -> tuple[np.ndarray, np.ndarray] | No
             raise InputError(f"{given[0]} is the held-out check's: with --no-held-out it would be ignored")
         return None
     args.max_share = MAX_SHARE if args.max_share is None else args.max_share  # None: not given (see above)
-    if not 0 < args.max_share < 1e6:
-        raise InputError(f"--max-share must be a number > 0, got {args.max_share}")
+    if not 0 < args.max_share <= 1:  # as tradeoff's
+        raise InputError(f"--max-share must be a share in (0, 1] of the model's held-out max error, got "
+                         f"{args.max_share:g}")
     if args.sensor and not isinstance(model.fit_info.get("held_out"), dict):
         raise InputError(f"--sensor {args.sensor}: the model file has no held_out record to simulate on it again "
                          "(`fitgen fit` writes one when it knows the sensor); leave --sensor out")
@@ -188,7 +189,8 @@ class VerifyResult:
 
     def table(self) -> str:
         lsb, ho = self.max_lsb_diff is not None, self.held_out
-        lines = [f"{self.precision}/{self.style}: {self.n_vectors} vectors, status mismatches "
+        build = self.precision if self.precision == "fixed" else f"{self.precision}/{self.style}"  # fixed: one form
+        lines = [f"{build}: {self.n_vectors} vectors, status mismatches "
                  f"{self.status_mismatches}, non-finite outputs {self.nonfinite_outputs}",
                  "| output | max abs error | bound (max) | bound / error |" +
                  (" C - numpy model (LSB) |" if lsb else "") +
@@ -342,7 +344,8 @@ def compare_fixed(model: Model, compiled: CompiledModel, codes: np.ndarray, held
                          failures)
     chk = None
     if held_out is not None:
-        # the device reads ADC codes: the held-out readings rounded to codes, against double on the readings
+        # the device reads ADC codes: the held-out readings rounded to codes, against double on those codes'
+        # values (the rounding to codes stays in the deployed error, with the noise)
         readings, truth = held_out
         held_codes = fm.codes_of(readings)  # not ``codes``: the result counts the vectors compared above
         chk = held_out_check(model, compiled.predict(held_codes)[0], readings, truth, max_share, failures,
