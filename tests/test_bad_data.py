@@ -388,3 +388,18 @@ def test_codes_that_are_not_whole_or_beyond_int32_are_named_by_row_and_column(tm
         fm.clamp_codes(np.array([[1.0, 2.0], [3.0, 1.5]]))
     with pytest.raises(InputError, match=r"int32 \(row 1, v1: 3000000000\)"):
         fm.clamp_codes(np.array([[3e9, 2.0]]))
+
+
+@pytest.mark.parametrize("script,prog", [("fitgen", "fitgen"), ("tactile_host", "tactile-host"),
+                                         ("tactile_hil", "tactile-hil")])
+def test_a_ctrl_c_while_a_command_starts_is_one_line(script, prog):
+    """The console scripts (fitgen.app.entry): a Ctrl-C while the command's modules are imported (numpy's import
+    takes a moment) is 'interrupted' and status 130, as at any other time, not a traceback."""
+    import subprocess
+    import sys
+
+    code = ("import fitgen.app.entry as e\n"
+            "def interrupted(name):\n    raise KeyboardInterrupt\n"
+            f"e.import_module = interrupted\ne.{script}()\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert_one_line_error(proc, 130, f"{prog}: interrupted")
