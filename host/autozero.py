@@ -51,9 +51,11 @@ class ZeroUpdate:
     t: float
     number: int
     shift: np.ndarray  # V, per element
+    since: float = 0.0  # s from the first sample auto-zero saw (t itself is a clock's: an epoch on a live run)
 
     def describe(self) -> str:
-        return (f"auto-zero update {self.number} at t={self.t:.3f}: max shift {np.abs(self.shift).max() * 1e3:.3f} mV "
+        return (f"auto-zero update {self.number} at {self.since:.3f} s: max shift "
+                f"{np.abs(self.shift).max() * 1e3:.3f} mV "
                 f"(element {int(np.argmax(np.abs(self.shift))) + 1})")
 
 
@@ -79,6 +81,7 @@ class AutoZero:
         self._band = np.array([self.settings.band_mm if m else self.settings.band_deg for m in lin])
         self._window: deque = deque(maxlen=self.settings.window)
         self._since: float | None = None
+        self._first: float | None = None  # the first sample's t
 
     def correct(self, readings: np.ndarray) -> np.ndarray:
         """The readings with the current zero taken off."""
@@ -87,6 +90,7 @@ class AutoZero:
     def observe(self, t: float, readings: np.ndarray, estimate: np.ndarray, status: int) -> ZeroUpdate | None:
         """Feed one sample (readings before the zero is taken off, and the estimate made from it)."""
         s = self.settings
+        self._first = t if self._first is None else self._first
         at_rest = status >= 0 and bool(np.all(np.abs(estimate) <= self._band))
         if not at_rest:
             self._window.clear()
@@ -108,7 +112,7 @@ class AutoZero:
         target = block.mean(axis=0) - self.reference
         shift = s.rate * (target - self.zero)
         self.zero = self.zero + shift
-        up = ZeroUpdate(t, len(self.updates) + 1, shift)
+        up = ZeroUpdate(t, len(self.updates) + 1, shift, t - self._first)
         self.updates.append(up)
         self._window.clear()
         self._since = None

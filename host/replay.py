@@ -113,7 +113,7 @@ class ReplayResult:
         return {"t": float(self.t[i]), "v": self.v[i].tolist(), "raw": self.raw[i].tolist(),
                 "out": {o: float(x) for o, x in zip(self.outputs, self.out[i])}, "status": int(self.status[i]),
                 "temp": None if not math.isfinite(self.temp[i]) else float(self.temp[i]), "rate": None,
-                "errors": {}, "zero": {"updates": n_up, "last": self.updates[n_up - 1].describe() if n_up else None}}
+                "errors": None, "zero": {"updates": n_up, "last": self.updates[n_up - 1].describe() if n_up else None}}
 
     def report(self) -> str:
         lines = [f"replayed {len(self.t)} samples with model {self.model_hash[:12]}"

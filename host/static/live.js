@@ -142,12 +142,12 @@
       const which = meta.inputs.filter((_, k) => s.status & (1 << k));
       dom.textContent = "clamped: " + which.join(", "); dom.className = "warn";
     }
-    const e = s.errors || {};
+    const e = s.errors;  // null: a replay, whose run record keeps no bus counts
     const errs = $("errors");
-    errs.textContent = `${e.total ?? 0} (nack ${e.nack ?? 0}, timeout ${e.timeout ?? 0}, stuck ${e.stuck ?? 0}, ` +
-                       `other ${e.other ?? 0})`;
-    errs.className = e.total ? "warn" : "";
-    $("retries").textContent = `${e.retries ?? 0}, ${e.resets ?? 0}`;
+    errs.textContent = e ? `${e.total ?? 0} (nack ${e.nack ?? 0}, timeout ${e.timeout ?? 0}, stuck ${e.stuck ?? 0}, ` +
+                           `other ${e.other ?? 0})` : "not recorded";
+    errs.className = e && e.total ? "warn" : "";
+    $("retries").textContent = e ? `${e.retries ?? 0}, ${e.resets ?? 0}` : "-";
     const z = s.zero || {};
     $("zero").textContent = z.updates ? `${z.updates} update${z.updates === 1 ? "" : "s"}; last: ${z.last ?? "-"}`
                                       : "no update";
