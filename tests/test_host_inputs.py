@@ -168,6 +168,21 @@ def test_a_replay_plays_over_a_clock_step_and_view_refuses_readout_options(model
     assert not (tmp_path / "x.jsonl").exists()
 
 
+def test_view_replay_refuses_every_bus_and_simulation_option(model_file, tmp_path):
+    """An option a replay would ignore is refused, even typed as its default; those it takes still play."""
+    run = tmp_path / "r.jsonl"
+    assert read(model_file, "--record", str(run)).returncode == 0
+    for option in (["--sim-drift", "ramp=5"], ["--sim-noise", "0.01"], ["--sim-fault", "nack:0.5"],
+                   ["--sim-offsets", "0,0,0,0,0,0,0,0"], ["--thermistor", "beta=3950"], ["--bus", "3"],
+                   ["--vref", "internal"], ["--mode", "single"], ["--pga", "4.096"], ["--data-rate", "860"],
+                   ["--seed", "0"], ["--sensor", "paper"], ["--retries", "5"]):
+        assert_one_line_error(run_cli("tactile-host", "view", "--replay", str(run), "--port", "0", *option), 2,
+                              f"{option[0]} does not apply to --replay")
+    proc = run_cli("tactile-host", "view", "--replay", str(run), "--model", model_file, "--host", "127.0.0.1",
+                   "--port", "0")
+    assert proc.returncode == 0 and "replay of" in proc.stderr, proc.stderr
+
+
 def test_temperature_options_without_temperature_are_refused(tmp_path):
     (tmp_path / "s.csv").write_text(SCHEDULE)
     for option in (["--t0", "20"], ["--temp-comp-output", str(tmp_path / "tc.json")]):

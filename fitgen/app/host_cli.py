@@ -291,14 +291,16 @@ def _readout_options(p) -> None:
 def _adc_options(p, required: bool = True) -> None:
     map_options(p, required)
     p.add_argument("--bus", type=int, help="I2C bus number: /dev/i2c-N (default 1, or the map file's bus)")
-    p.add_argument("--retries", default="5", help="tries per I2C transfer before a chip counts as silent (default 5)")
-    p.add_argument("--sensor", default="paper",
-                   help="sensor preset or TOML file: what --simulate simulates, and the rest readings for --tare")
+    # --retries, --sensor, --seed: no argparse defaults, so that view --replay tells one typed from one left out
+    # (host.session.ADC_DEFAULTS fills them in)
+    p.add_argument("--retries", help="tries per I2C transfer before a chip counts as silent (default 5)")
+    p.add_argument("--sensor", help="sensor preset or TOML file: what --simulate simulates, and the rest readings for "
+                                    "--tare (default paper)")
     p.add_argument("--sim-noise", type=noise_volts, help="simulated element noise, V rms (default: the sensor file's)")
     p.add_argument("--sim-offsets", metavar="V1,..,VN", help="simulated offset of each element, V")
     p.add_argument("--sim-fault", action="append", metavar="SPEC",
                    help="simulated fault: nack|timeout|stuck[:ADDR]:RATE or silent:ADDR[:AFTER] (repeatable)")
-    p.add_argument("--seed", type=count, default=0, help="seed of the simulated noise and faults")
+    p.add_argument("--seed", type=count, help="seed of the simulated noise and faults (default 0)")
 
 
 def build_parser() -> Parser:
