@@ -2,7 +2,9 @@
 a device fault), no file destroyed, no compensation fitted from the wrong numbers."""
 
 import json
+import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -181,6 +183,13 @@ def test_view_replay_refuses_every_bus_and_simulation_option(model_file, tmp_pat
     proc = run_cli("tactile-host", "view", "--replay", str(run), "--model", model_file, "--host", "127.0.0.1",
                    "--port", "0")
     assert proc.returncode == 0 and "replay of" in proc.stderr, proc.stderr
+
+
+def test_view_help_says_what_port_0_does_and_gives_the_docs_drift_example():
+    text = " ".join(run_cli("tactile-host", "view", "--help").stdout.split())  # argparse wraps at any width
+    assert "TCP port (default 8765; 0 picks a free one)" in text
+    example = re.search(r"--sim-drift ([\w=.,]+)", text).group(1)
+    assert f"`--sim-drift {example}`" in (Path(__file__).resolve().parent.parent / "docs" / "live.md").read_text()
 
 
 def test_temperature_options_without_temperature_are_refused(tmp_path):

@@ -284,8 +284,9 @@ def _readout_options(p) -> None:
     p.add_argument("--simulate", metavar="POSE|motion",
                    help="no hardware: a simulated bus with the sensor at POSE (e.g. dx=1,dz=-1 or 0.5,0,-1,0,0), or "
                         "'motion': sliding in a circle and pressed every 6 s")
-    p.add_argument("--sim-drift", metavar="ramp=5,over=300,tau=100,creep=0.002",
-                   help="simulated drift: a temperature ramp (degC over s), creep (V, time constant s)")
+    p.add_argument("--sim-drift", metavar="ramp=5,over=300,tau=120,creep=0.002",
+                   help="simulated drift: a temperature ramp (degC over s), creep (V, time constant s); also "
+                        "start=DEGC, seed=N (default ramp=5,over=600,tau=600,creep=0.002,start=25,seed=0)")
 
 
 def _adc_options(p, required: bool = True) -> None:
@@ -378,7 +379,7 @@ def build_parser() -> Parser:
     _readout_options(w)
     w.add_argument("--host", default="127.0.0.1",
                    help="address to serve on (default 127.0.0.1: this machine only; 0.0.0.0 serves the network)")
-    w.add_argument("--port", type=int, default=8765, help="TCP port (default 8765)")
+    w.add_argument("--port", type=int, default=8765, help="TCP port (default 8765; 0 picks a free one)")
     w.add_argument("--replay", metavar="RUN.jsonl", help="play a recorded run (read/view --record) in the page")
     w.add_argument("--hold", action="store_true", help="with --replay: keep serving after the run's end")
     w.set_defaults(func=cmd_view)
