@@ -192,6 +192,17 @@ def test_view_help_says_what_port_0_does_and_gives_the_docs_drift_example():
     assert f"`--sim-drift {example}`" in (Path(__file__).resolve().parent.parent / "docs" / "live.md").read_text()
 
 
+def test_view_names_the_option_it_misses_and_a_port_in_host_points_at_port(model_file):
+    for given, said in ((["--model", model_file], "view needs --adc (or --replay RUN.jsonl)"),
+                        (["--adc", TWO_CHIPS], "view needs --model (or --replay RUN.jsonl)"),
+                        ([], "view needs --model and --adc (or --replay RUN.jsonl)")):
+        assert_one_line_error(run_cli("tactile-host", "view", "--port", "0", *given), 2, said)
+    for host, said in (("127.0.0.1:8765", "the port goes in --port (--host 127.0.0.1 --port 8765)"),
+                       ("[::1]:8765", "the port goes in --port (--host ::1 --port 8765)")):
+        assert_one_line_error(run_cli("tactile-host", "view", "--model", model_file, "--adc", TWO_CHIPS, "--simulate",
+                                      "dx=1", "--count", "1", "--host", host), 2, said)
+
+
 def test_temperature_options_without_temperature_are_refused(tmp_path):
     (tmp_path / "s.csv").write_text(SCHEDULE)
     for option in (["--t0", "20"], ["--temp-comp-output", str(tmp_path / "tc.json")]):

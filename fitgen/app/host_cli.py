@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from fitgen.app.options import map_options, refuse_readout_options
+from fitgen.app.options import check_host, map_options, refuse_readout_options
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_written, command_main, count, noise_volts
 from fitgen.base.errors import InputError
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
@@ -107,8 +107,9 @@ def cmd_view(args) -> int:
 
     if args.replay:
         return _view_replay(args)
-    if args.model is None or args.adc is None:
-        raise InputError("view needs --model and --adc (or --replay RUN.jsonl)")
+    missing = [option for option, value in (("--model", args.model), ("--adc", args.adc)) if value is None]
+    if missing:
+        raise InputError(f"view needs {' and '.join(missing)} (or --replay RUN.jsonl)")
     s = server = None
     try:
         s = ReadoutSession(args, "tactile-host view")
@@ -482,6 +483,8 @@ def build_parser() -> Parser:
 
 def _check(args) -> None:
     check_not_empty(args)
+    if args.func is cmd_view:
+        check_host(args.host)
     # -o is a file for these; a folder for pi-build, arduino-build and tempcomp-c
     check_written(args, files=(cmd_read, cmd_view, cmd_replay, cmd_capture))
 

@@ -1,4 +1,5 @@
-"""Option readers the fitgen commands share: the sensor (and its transfer), a noise figure, fit's settings."""
+"""Option readers the commands share: the sensor (and its transfer), a noise figure, fit's settings, the channel map's
+options, view's checks of --replay and --host."""
 
 from __future__ import annotations
 
@@ -99,3 +100,14 @@ def refuse_readout_options(args) -> None:
     if given:
         raise InputError(f"{given[0]} does not apply to --replay: the recording sets the samples and how they were "
                          "estimated (it plays to its end; --hold keeps the page up after)")
+
+
+def check_host(host: str) -> None:
+    """``view --host``: InputError for ADDRESS:PORT (no address has one colon, IPv6 has two or more, nor brackets)."""
+    import re
+
+    m = re.fullmatch(r"\[(.*)\]:(\d+)|([^:]*):(\d+)", host)
+    if m:
+        address, port = m.group(1) or m.group(3), m.group(2) or m.group(4)
+        raise InputError(f"--host {host}: the address only; the port goes in --port (--host {address or '127.0.0.1'} "
+                         f"--port {port})")
