@@ -15,7 +15,7 @@ from fitgen.physics.sensor import load_sensor
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import (TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFailed, capture, check_resume, enter_waiter,
                           load_schedule, output_lock, prepare_output, trigger_waiter)
-from host.session import channel_map_from_args, open_bus_from_args, refuse_alone
+from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.stage import StageError, StageState
 from host.stagecapture import open_stage, stage_settings
 from host.stagesim import pose_file_motion
@@ -79,6 +79,7 @@ def run_capture(args, prog: str) -> None:
 
 
 def _run_capture(args, prog: str) -> None:
+    adc_defaults(args)
     samples, spread, tries, settle, retries = capture_numbers(args)
     timeout = trigger_timeout(args)
     schedule = load_schedule(args.poses)

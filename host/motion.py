@@ -47,7 +47,7 @@ def pose_or_motion(spec: str):
 
 
 def parse_drift(spec: str | None, n: int) -> Drift | None:
-    """``--sim-drift ramp=5,over=300,tau=100,creep=0.002,start=25,seed=0``: the drift of ``n`` elements
+    """``--sim-drift ramp=5,over=300,tau=120,creep=0.002,start=25,seed=0``: the drift of ``n`` elements
     (host.simsensor.Drift.typical, creep scaled to ``creep`` V); None without a spec."""
     if spec is None:
         return None

@@ -40,8 +40,8 @@ def parse_vref(text: str):
 def channel_map_from_args(args):
     """The channel map of ``--adc`` (without its thermistor) and the ADS options; InputError for ``--vref`` when
     no chip it reads (the thermistor's included) is an ADS7828, the only one it sets."""
-    settings = Settings(pga=args.pga, data_rate=args.data_rate, mode=args.mode,
-                        vref=parse_vref(args.vref or "3.3")).checked("option")
+    chosen = {k: getattr(args, k) for k in ("pga", "data_rate", "mode") if getattr(args, k) is not None}
+    settings = Settings(**chosen, vref=parse_vref(args.vref or "3.3")).checked("option")  # Settings' defaults
     spec, temp = split_channel_map(args.adc)
     cmap = channel_map(spec, settings)
     if args.vref is not None:
@@ -50,6 +50,17 @@ def channel_map_from_args(args):
             raise InputError("--vref sets the ADS7828's reference; no chip in --adc is an ADS7828 (the ADS1115's "
                              "full scale is --pga): drop --vref")
     return cmap
+
+
+# the bus options read, view and capture take with no argparse default (view --replay refuses one typed)
+ADC_DEFAULTS = {"retries": "5", "sensor": "paper", "seed": 0}
+
+
+def adc_defaults(args) -> None:
+    """The options of ADC_DEFAULTS that were left out take their defaults."""
+    for name, value in ADC_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
 
 
 def open_bus_from_args(args, cmap, simulate_pose, *, motion=None, drift=None, thermistor=None):
@@ -117,6 +128,7 @@ class ReadoutSession:
         self.count = parse_positive(args.count, "--count", integer=True) if args.count is not None else None
         self.duration = parse_positive(args.duration, "--duration") if args.duration is not None else None
         check_depends(args)
+        adc_defaults(args)
         tare_n = parse_positive(args.tare_samples, "--tare-samples", integer=True)
         if args.auto_zero and tare_n < MIN_AUTOZERO_TARE:
             raise InputError(f"--auto-zero takes its noise floor from the tare's spread: give --tare-samples "

@@ -18,7 +18,7 @@ from host.capture import (SpreadTooLarge, TriggerFailed, capture, enter_waiter, 
                           trigger_waiter)
 from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers, kept, trigger_timeout
 from host.motion import parse_drift
-from host.session import channel_map_from_args, open_bus_from_args, refuse_alone
+from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.simsensor import Drift
 from host.temperature import Thermometer, fit_tempcomp, temperature_input
 
@@ -77,6 +77,7 @@ def _kept(out: Path, temps) -> str:
 
 
 def _capture_temperatures(args, prog: str):
+    adc_defaults(args)
     temps = parse_temperatures(args.temperature)
     t0 = parse_t0(args.t0, temps)
     samples, spread, tries, settle, retries = capture_numbers(args)

@@ -180,8 +180,9 @@ class TempComp:
 def load_tempcomp(path) -> TempComp:
     """A compensation file (``capture --temperature``), checked by :func:`tempcomp_from_dict`."""
     origin = f"temperature compensation {path}"
+    text = read_text(path, "temperature compensation file")  # its InputError is a ValueError: said as it is
     try:
-        data = json.loads(read_text(path, "temperature compensation file"))
+        data = json.loads(text)
     except ValueError as exc:
         raise InputError(f"{origin}: not a compensation file (not JSON: {exc})") from None
     return tempcomp_from_dict(data, origin)

@@ -143,6 +143,18 @@ def test_read_and_tempcomp_c_refuse_the_same_compensation_files(rest_model_file,
                                   str(path), "--count", "1"), contains=said)
 
 
+def test_a_missing_compensation_file_is_said_once(rest_model_file, tmp_path):
+    """A --temp-comp file that is not there: that, in one line, not also 'not JSON'."""
+    gone = tmp_path / "nothere.json"
+    said = f"tactile-host: error: temperature compensation file {gone}: no such file"
+    for argv in (["tempcomp-c", str(gone), "-o", str(tmp_path / "c")],
+                 ["read", "--model", rest_model_file, "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0", "--simulate",
+                  "0,0,0,0,0", "--temp-comp", str(gone), "--count", "1"]):
+        proc = run_cli("tactile-host", *argv)
+        assert_one_line_error(proc)
+        assert proc.stderr.strip() == said
+
+
 def test_capture_temperatures_below_zero_and_empty_items(tmp_path):
     """'--temperature -10,25' is a value, not an unknown option; '15,,35' is refused, not read as 15,35."""
     sched = tmp_path / "s.csv"

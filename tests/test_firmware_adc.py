@@ -2,6 +2,14 @@
 channel map, over the emulated board's I2C bridge to the bus model (host/simbus.py); STREAM carries
 estimates from those readings, and a failed read is flagged instead of fed to the model."""
 
+import os
+import re
+import shlex
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -206,3 +214,32 @@ def test_emulate_temperature_options_need_the_thermistor(model, tmp_path):
                                   "tc.json"), contains="go with --adc")
     assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc", MAP,
                                   "--temp-comp", "tc.json"), contains="temp=CHIP@ADDRESS:INPUT")
+
+
+def test_the_drift_sections_emulate_command_runs_as_written(model, tmp_path):
+    """docs/live.md's tactile-hil emulate with a compensation, typed as the doc has it: the firmware comes up."""
+    from host.simsensor import Drift
+    from host.temperature import TempComp
+
+    require_tool("gcc")
+    root = Path(__file__).resolve().parent.parent
+    found = re.search(r"^ +(tactile-hil emulate [^\n]*\\\n[^\n]*)$", (root / "docs" / "live.md").read_text(), re.M)
+    assert found, "no tactile-hil emulate command block in docs/live.md"
+    argv = shlex.split(found.group(1).replace("\\\n", " "))
+    model.save(tmp_path / "model.json")
+    d = Drift.typical(8)
+    TempComp(25.0, d.offset_tc, d.gain_tc).save(tmp_path / "cap.tempcomp.json")
+    code = "import sys; from fitgen.app.hil_cli import main; sys.argv[0] = 'tactile-hil'; main()"
+    # run in the doc's folder, the fitgen of this checkout (not an installed one)
+    proc = subprocess.Popen([sys.executable, "-c", code, *argv[1:]], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(root)})
+    watchdog = threading.Timer(300, proc.kill)  # a firmware that never comes up fails the test, not hangs it
+    watchdog.start()
+    try:
+        lines = [proc.stdout.readline() for _ in range(3)]
+        assert lines[-1].startswith("ready: "), (lines, proc.poll() is not None and proc.stderr.read())
+        assert "over the I2C bridge" in lines[1], lines
+    finally:
+        watchdog.cancel()
+        proc.terminate()
+        proc.wait(timeout=30)

@@ -2,7 +2,9 @@
 a device fault), no file destroyed, no compensation fitted from the wrong numbers."""
 
 import json
+import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -166,6 +168,39 @@ def test_a_replay_plays_over_a_clock_step_and_view_refuses_readout_options(model
         assert_one_line_error(run_cli("tactile-host", "view", "--replay", str(run), "--port", "0", *option), 2,
                               "does not apply to --replay")
     assert not (tmp_path / "x.jsonl").exists()
+
+
+def test_view_replay_refuses_every_bus_and_simulation_option(model_file, tmp_path):
+    """An option a replay would ignore is refused, even typed as its default; those it takes still play."""
+    run = tmp_path / "r.jsonl"
+    assert read(model_file, "--record", str(run)).returncode == 0
+    for option in (["--sim-drift", "ramp=5"], ["--sim-noise", "0.01"], ["--sim-fault", "nack:0.5"],
+                   ["--sim-offsets", "0,0,0,0,0,0,0,0"], ["--thermistor", "beta=3950"], ["--bus", "3"],
+                   ["--vref", "internal"], ["--mode", "single"], ["--pga", "4.096"], ["--data-rate", "860"],
+                   ["--seed", "0"], ["--sensor", "paper"], ["--retries", "5"]):
+        assert_one_line_error(run_cli("tactile-host", "view", "--replay", str(run), "--port", "0", *option), 2,
+                              f"{option[0]} does not apply to --replay")
+    proc = run_cli("tactile-host", "view", "--replay", str(run), "--model", model_file, "--host", "127.0.0.1",
+                   "--port", "0")
+    assert proc.returncode == 0 and "replay of" in proc.stderr, proc.stderr
+
+
+def test_view_help_says_what_port_0_does_and_gives_the_docs_drift_example():
+    text = " ".join(run_cli("tactile-host", "view", "--help").stdout.split())  # argparse wraps at any width
+    assert "TCP port (default 8765; 0 picks a free one)" in text
+    example = re.search(r"--sim-drift ([\w=.,]+)", text).group(1)
+    assert f"`--sim-drift {example}`" in (Path(__file__).resolve().parent.parent / "docs" / "live.md").read_text()
+
+
+def test_view_names_the_option_it_misses_and_a_port_in_host_points_at_port(model_file):
+    for given, said in ((["--model", model_file], "view needs --adc (or --replay RUN.jsonl)"),
+                        (["--adc", TWO_CHIPS], "view needs --model (or --replay RUN.jsonl)"),
+                        ([], "view needs --model and --adc (or --replay RUN.jsonl)")):
+        assert_one_line_error(run_cli("tactile-host", "view", "--port", "0", *given), 2, said)
+    for host, said in (("127.0.0.1:8765", "the port goes in --port (--host 127.0.0.1 --port 8765)"),
+                       ("[::1]:8765", "the port goes in --port (--host ::1 --port 8765)")):
+        assert_one_line_error(run_cli("tactile-host", "view", "--model", model_file, "--adc", TWO_CHIPS, "--simulate",
+                                      "dx=1", "--count", "1", "--host", host), 2, said)
 
 
 def test_temperature_options_without_temperature_are_refused(tmp_path):

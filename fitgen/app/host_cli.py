@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from fitgen.app.options import map_options, refuse_readout_options
+from fitgen.app.options import check_host, map_options, refuse_readout_options
 from fitgen.app.verify_cmd import cmd_verify
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_written, command_main, count, noise_volts
 from fitgen.base.errors import InputError
@@ -76,8 +76,9 @@ def cmd_view(args) -> int:
 
     if args.replay:
         return _view_replay(args)
-    if args.model is None or args.adc is None:
-        raise InputError("view needs --model and --adc (or --replay RUN.jsonl)")
+    missing = [option for option, value in (("--model", args.model), ("--adc", args.adc)) if value is None]
+    if missing:
+        raise InputError(f"view needs {' and '.join(missing)} (or --replay RUN.jsonl)")
     s = server = None
     ended = False
     try:
@@ -266,21 +267,24 @@ def _readout_options(p) -> None:
     p.add_argument("--simulate", metavar="POSE|motion",
                    help="no hardware: a simulated bus with the sensor at POSE (e.g. dx=1,dz=-1 or 0.5,0,-1,0,0), or "
                         "'motion': sliding in a circle and pressed every 6 s")
-    p.add_argument("--sim-drift", metavar="ramp=5,over=300,tau=100,creep=0.002",
-                   help="simulated drift: a temperature ramp (degC over s), creep (V, time constant s)")
+    p.add_argument("--sim-drift", metavar="ramp=5,over=300,tau=120,creep=0.002",
+                   help="simulated drift: a temperature ramp (degC over s), creep (V, time constant s); also "
+                        "start=DEGC, seed=N (default ramp=5,over=600,tau=600,creep=0.002,start=25,seed=0)")
 
 
 def _adc_options(p, required: bool = True) -> None:
     map_options(p, required)
     p.add_argument("--bus", type=int, help="I2C bus number: /dev/i2c-N (default 1, or the map file's bus)")
-    p.add_argument("--retries", default="5", help="tries per I2C transfer before a chip counts as silent (default 5)")
-    p.add_argument("--sensor", default="paper",
-                   help="sensor preset or TOML file: what --simulate simulates, and the rest readings for --tare")
+    # --retries, --sensor, --seed: no argparse defaults, so that view --replay tells one typed from one left out
+    # (host.session.ADC_DEFAULTS fills them in)
+    p.add_argument("--retries", help="tries per I2C transfer before a chip counts as silent (default 5)")
+    p.add_argument("--sensor", help="sensor preset or TOML file: what --simulate simulates, and the rest readings for "
+                                    "--tare (default paper)")
     p.add_argument("--sim-noise", type=noise_volts, help="simulated element noise, V rms (default: the sensor file's)")
     p.add_argument("--sim-offsets", metavar="V1,..,VN", help="simulated offset of each element, V")
     p.add_argument("--sim-fault", action="append", metavar="SPEC",
                    help="simulated fault: nack|timeout|stuck[:ADDR]:RATE or silent:ADDR[:AFTER] (repeatable)")
-    p.add_argument("--seed", type=count, default=0, help="seed of the simulated noise and faults")
+    p.add_argument("--seed", type=count, help="seed of the simulated noise and faults (default 0)")
 
 
 def build_parser() -> Parser:
@@ -358,7 +362,7 @@ def build_parser() -> Parser:
     _readout_options(w)
     w.add_argument("--host", default="127.0.0.1",
                    help="address to serve on (default 127.0.0.1: this machine only; 0.0.0.0 serves the network)")
-    w.add_argument("--port", type=int, default=8765, help="TCP port (default 8765)")
+    w.add_argument("--port", type=int, default=8765, help="TCP port (default 8765; 0 picks a free one)")
     w.add_argument("--replay", metavar="RUN.jsonl", help="play a recorded run (read/view --record) in the page")
     w.add_argument("--hold", action="store_true", help="with --replay: keep serving after the run's end")
     w.set_defaults(func=cmd_view)
@@ -461,6 +465,8 @@ def build_parser() -> Parser:
 
 def _check(args) -> None:
     check_not_empty(args)
+    if args.func is cmd_view:
+        check_host(args.host)
     # -o is a file for these; a folder for pi-build, arduino-build and tempcomp-c
     check_written(args, files=(cmd_read, cmd_view, cmd_replay, cmd_capture))
 

@@ -1,4 +1,5 @@
-"""Option readers the fitgen commands share: the sensor (and its transfer), a noise figure, fit's settings."""
+"""Option readers the commands share: the sensor (and its transfer), a noise figure, fit's settings, the channel map's
+options, view's checks of --replay and --host."""
 
 from __future__ import annotations
 
@@ -78,21 +79,35 @@ def map_options(p, required: bool = True, thermistor: bool = True) -> None:
     p.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",
                    help="the thermistor's NTC divider (default beta=3950,r25=10000,series=10000,vref=3.3)"
                    if thermistor else argparse.SUPPRESS)
-    p.add_argument("--pga", type=float, default=4.096, choices=ADS1115_PGA, metavar="V",
+    # no argparse defaults: view --replay tells one typed from one left out (channel_map_from_args fills them in)
+    p.add_argument("--pga", type=float, choices=ADS1115_PGA, metavar="V",
                    help="ADS1115 full scale +-V: 6.144, 4.096 (default), 2.048, 1.024, 0.512, 0.256")
-    p.add_argument("--data-rate", type=int, default=860, choices=ADS1115_RATES, metavar="SPS",
+    p.add_argument("--data-rate", type=int, choices=ADS1115_RATES, metavar="SPS",
                    help="ADS1115 samples per second: 8..860 (default 860)")
-    p.add_argument("--mode", default="single", choices=MODES, help="ADS1115 conversion mode (default single)")
+    p.add_argument("--mode", choices=MODES, help="ADS1115 conversion mode (default single)")
     p.add_argument("--vref", help="ADS7828 reference: external volts (default 3.3) or 'internal' (2.5 V)")
 
 
-def refuse_readout_options(args) -> None:
-    """``view --replay``: the readout's options do not apply (the recording sets the samples); InputError."""
-    from fitgen.base.errors import InputError
+# view's options that a replay takes; the others (readout, bus, simulation) would be ignored by it
+REPLAY_OPTIONS = ("model", "temp_comp", "auto_zero", "host", "port", "replay", "hold")
 
-    given = [f"--{n.replace('_', '-')}" for n in ("adc", "count", "duration", "rate", "record", "simulate", "rest",
-                                                  "engine", "precision", "cc", "tare_samples", "rest_band", "rest_hold")
-             if getattr(args, n, None) is not None] + (["--tare"] if args.tare else [])
+
+def refuse_readout_options(args) -> None:
+    """``view --replay``: InputError for the first option given that a replay would ignore (the readout's, the
+    bus's, the simulation's: the recording sets the samples)."""
+    given = [f"--{n.replace('_', '-')}" for n, value in vars(args).items()  # command, func: argparse's, no options
+             if n not in REPLAY_OPTIONS + ("command", "func") and value is not None and value is not False]
     if given:
         raise InputError(f"{given[0]} does not apply to --replay: the recording sets the samples and how they were "
                          "estimated (it plays to its end; --hold keeps the page up after)")
+
+
+def check_host(host: str) -> None:
+    """``view --host``: InputError for ADDRESS:PORT (no address has one colon, IPv6 has two or more, nor brackets)."""
+    import re
+
+    m = re.fullmatch(r"\[(.*)\]:(\d+)|([^:]*):(\d+)", host)
+    if m:
+        address, port = m.group(1) or m.group(3), m.group(2) or m.group(4)
+        raise InputError(f"--host {host}: the address only; the port goes in --port (--host {address or '127.0.0.1'} "
+                         f"--port {port})")
