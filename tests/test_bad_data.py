@@ -67,12 +67,14 @@ def test_pose_files_with_a_byte_order_mark_or_a_column_twice(tmp_path):
 
 
 @pytest.mark.parametrize("meta, said", [([], "not a dataset's meta"), ({"units": 5}, "not a dataset's meta"),
-                                        ("{", "not JSON")])
+                                        ("{", "not JSON"), (b"{\xff}", "cannot read: 'utf-8' codec")])
 def test_a_broken_meta_is_said(data, tmp_path, meta, said):
     shutil.copy(data, tmp_path / "d.csv")
-    (tmp_path / "d.csv.meta.json").write_text(meta if isinstance(meta, str) else json.dumps(meta))
-    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json")),
-                          contains=said)
+    mp = tmp_path / "d.csv.meta.json"
+    mp.write_bytes(meta) if isinstance(meta, bytes) else mp.write_text(meta if isinstance(meta, str) else json.dumps(meta))
+    proc = run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"))
+    assert_one_line_error(proc, contains=said)
+    assert "not JSON" not in proc.stderr or said == "not JSON"
 
 
 def test_fit_options_and_columns_are_checked_before_the_fit(data, tmp_path):

@@ -183,8 +183,9 @@ def load_meta(path: str | Path) -> dict:
     mp = meta_path(path)
     if not mp.is_file():
         return {}
+    text = read_text(mp, "dataset meta")  # its InputError is a ValueError: said as it is, not as JSON's
     try:
-        meta = json.loads(read_text(mp, "dataset meta"))
+        meta = json.loads(text)
     except ValueError as exc:
         raise InputError(f"{mp}: not JSON ({exc}); repair or remove it") from None
     if not isinstance(meta, dict) or not all(isinstance(meta.get(k), (str, type(None))) for k in META_TEXT):
