@@ -71,7 +71,7 @@ def test_pose_files_with_a_byte_order_mark_or_a_column_twice(tmp_path):
 def test_a_broken_meta_is_said(data, tmp_path, meta, said):
     shutil.copy(data, tmp_path / "d.csv")
     mp = tmp_path / "d.csv.meta.json"
-    mp.write_bytes(meta) if isinstance(meta, bytes) else mp.write_text(meta if isinstance(meta, str) else json.dumps(meta))
+    mp.write_bytes(meta if isinstance(meta, bytes) else (meta if isinstance(meta, str) else json.dumps(meta)).encode())
     proc = run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"))
     assert_one_line_error(proc, contains=said)
     assert "not JSON" not in proc.stderr or said == "not JSON"
