@@ -272,10 +272,11 @@ class LiveServer:
     """The page, its assets, ``/meta`` and ``/events`` for a ``LiveHub``, on ``host``:``port`` (0: any free port).
 
     Binds at construction, so a port in use or an address this machine lacks is an
-    ``InputError`` before the readout starts (``hub`` may be set after, before :meth:`start`). ``write_timeout`` (s): a viewer that accepts
-    nothing for that long is dropped; ``keepalive`` (s): comment lines on an idle stream;
-    ``poll`` (s): how often a viewer's thread looks for new samples (each look sends all
-    that is new in one write); ``max_clients``: event streams served at once.
+    ``InputError`` before the readout starts (``hub`` may be set after, before :meth:`start`).
+    ``write_timeout`` (s): a viewer that accepts nothing for that long is dropped; ``keepalive``
+    (s): comment lines on an idle stream; ``poll`` (s): how often a viewer's thread looks for
+    new samples (each look sends all that is new in one write); ``max_clients``: event streams
+    served at once.
     """
 
     def __init__(self, hub: LiveHub | None, host: str = "127.0.0.1", port: int = 8765, *, write_timeout: float = 10.0,

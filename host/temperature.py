@@ -158,16 +158,15 @@ class TempComp:
     def apply(self, raw: np.ndarray, temp) -> np.ndarray:
         """Compensated readings (one row, or rows with a temperature each); a non-finite temperature leaves its
         row as it is."""
-        if np.ndim(temp) == 0:
-            if not math.isfinite(temp):
-                return raw
-            dT = temp - self.t0
-            return (raw - self.offset * dT) / (1.0 + self.gain * dT)
+        if np.ndim(temp) == 0:  # the readout's one sample: no array work on its hot path
+            return self._at(raw, temp - self.t0) if math.isfinite(temp) else raw
         temp = np.asarray(temp, dtype=float)
-        dT = (temp - self.t0)[:, None]
         with np.errstate(invalid="ignore"):  # rows without a temperature are taken as they are below
-            out = (raw - self.offset * dT) / (1.0 + self.gain * dT)
+            out = self._at(raw, (temp - self.t0)[:, None])
         return np.where(np.isfinite(temp)[:, None], out, raw)
+
+    def _at(self, raw: np.ndarray, dT) -> np.ndarray:
+        return (raw - self.offset * dT) / (1.0 + self.gain * dT)
 
     def to_dict(self) -> dict:
         return {"kind": self.KIND, "version": 1, "t0": self.t0,
