@@ -157,6 +157,10 @@ class _Handler(BaseHTTPRequestHandler):
     def log_message(self, format, *args):  # the command prints its own lines; no access log on stderr
         pass
 
+    def do_HEAD(self):  # what GET would answer, without the body (curl -I, link checkers)
+        self._head = True
+        self.do_GET()
+
     def do_GET(self):
         live = self.server.live
         url = urlsplit(self.path)
@@ -179,7 +183,8 @@ class _Handler(BaseHTTPRequestHandler):
         self.send_header("Cache-Control", "no-cache")
         self.send_header("X-Content-Type-Options", "nosniff")
         self.end_headers()
-        self.wfile.write(body)
+        if not getattr(self, "_head", False):
+            self.wfile.write(body)
 
     def _static(self, name: str):
         asset = self.server.live.assets.get(name) if _NAME.match(name) else None
@@ -216,6 +221,8 @@ class _Handler(BaseHTTPRequestHandler):
             self.send_header("Content-Type", "text/event-stream")
             self.send_header("Cache-Control", "no-cache")
             self.end_headers()
+            if getattr(self, "_head", False):
+                return
             write, hub, stopping = self.wfile.write, live.hub, live.stopping
             # reconnect after 1 s, not the browser's default 3 s; hello: which hub, how far it is
             write(b"retry: 1000\n\n" + _event("hello", {"hub": hub.token, "head": hub.seq, "backlog": hub.backlog,

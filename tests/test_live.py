@@ -137,11 +137,11 @@ def served():
         srv.stop()
 
 
-def raw_get(srv: LiveServer, path: str) -> tuple[int, dict, bytes]:
+def raw_get(srv: LiveServer, path: str, method: str = "GET") -> tuple[int, dict, bytes]:
     """GET with the path sent byte for byte (http.client and browsers would normalise '..')."""
     host, port = srv._httpd.server_address[:2]
     with socket.create_connection((host, port), timeout=10) as s:
-        s.sendall(f"GET {path} HTTP/1.0\r\nHost: x\r\n\r\n".encode())
+        s.sendall(f"{method} {path} HTTP/1.0\r\nHost: x\r\n\r\n".encode())
         data = b""
         while chunk := s.recv(65536):
             data += chunk
@@ -304,6 +304,18 @@ def test_assets_are_served_and_nothing_escapes_the_static_folder(served):
         assert b"LiveHub" not in body
     meta = json.loads(raw_get(srv, "/meta")[2])
     assert meta == META
+
+
+def test_head_answers_as_get_without_a_body(served):
+    hub, srv = served()
+    hub.publish(sample(0))
+    for path in ("/", "/static/live.js", "/meta", "/nothing"):
+        status, headers, body = raw_get(srv, path)
+        h_status, h_headers, h_body = raw_get(srv, path, "HEAD")
+        assert (h_status, h_headers["Content-Type"], h_body) == (status, headers["Content-Type"], b""), path
+        assert int(h_headers["Content-Length"]) == len(body), path
+    status, headers, body = raw_get(srv, "/events", "HEAD")  # the stream's headers, then the end: no events
+    assert (status, headers["Content-Type"], body) == (200, "text/event-stream", b"")
 
 
 def test_non_finite_values_reach_the_page_as_null(served):
@@ -502,3 +514,47 @@ def test_page_reconnects_and_loses_nothing(browser, served):
         pub.halt.set()
         if again is not None:
             again.stop()
+
+
+def test_page_follows_a_restarted_readout_from_its_first_sample(browser, served):
+    hub, srv = served()
+    for i in range(300):
+        hub.publish(sample(i))
+    port = srv._httpd.server_address[1]
+    browser.get(srv.url)
+    page_wait(browser, lambda d: int(text(d, "count")) == 300, what="the first readout's samples")
+    srv.stop()
+    page_wait(browser, lambda d: text(d, "conn") == "reconnecting", 10, "the page to notice")
+    # the new readout is further on than the page's Last-Event-ID (300): resuming by it would skip 300 samples
+    again = LiveHub(META)
+    for i in range(1000):
+        again.publish(sample(i))
+    new = LiveServer(again, "127.0.0.1", port)
+    new.start()
+    try:
+        page_wait(browser, lambda d: int(text(d, "count")) == 1300, 15, "every sample of the new readout")
+        assert text(browser, "note") == "the readout was restarted" and text(browser, "conn") == "live"
+        assert float(text(browser, "dx")) == 999
+    finally:
+        new.stop()
+
+
+def test_page_reloads_for_a_restarted_readout_with_other_outputs(browser, served):
+    hub, srv = served()
+    hub.publish(sample(0))
+    port = srv._httpd.server_address[1]
+    browser.get(srv.url)
+    page_wait(browser, lambda d: int(text(d, "count")) == 1, what="a sample")
+    srv.stop()
+    page_wait(browser, lambda d: text(d, "conn") == "reconnecting", 10, "the page to notice")
+    again = LiveHub({**META, "outputs": ["dz"], "units": ["mm"]})
+    for i in range(5):
+        again.publish(sample(i))
+    new = LiveServer(again, "127.0.0.1", port)
+    new.start()
+    try:
+        page_wait(browser, lambda d: d.execute_script("return document.getElementById('dx') === null;")
+                  and text(d, "count") == "5", 15, "the page rebuilt for dz alone")
+        assert text(browser, "dz") and text(browser, "conn") == "live"
+    finally:
+        new.stop()

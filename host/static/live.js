@@ -103,6 +103,7 @@
     ring.push(s.t, row);
     latest = s; latestAt = performance.now();
   }
+  function layout(m) { return JSON.stringify([m.outputs, m.units, m.inputs, m.input_units]); }
   function connect() {
     // EventSource reconnects by itself and sends Last-Event-ID, so the server resumes after our last sample
     es = new EventSource("/events");
@@ -111,8 +112,18 @@
     es.onmessage = onSample;
     es.addEventListener("hello", (ev) => {
       const h = JSON.parse(ev.data);
-      if (hub !== null && h.hub !== hub) { ring.clear(); $("note").textContent = "the readout was restarted"; }
+      const restarted = hub !== null && h.hub !== hub;
       hub = h.hub;
+      if (restarted) {
+        // a restarted readout numbers its samples anew, so our Last-Event-ID would skip its first ones: a new
+        // EventSource sends none and gets all the new readout holds (events queued on the old one are dropped)
+        es.close(); ring.clear(); setConn("reconnecting");
+        fetch("/meta").then((r) => { if (!r.ok) throw new Error(r.status); return r.json(); }).then((m) => {
+          if (layout(m) !== layout(meta)) { location.reload(); return; }  // another model: other rows and plots
+          meta = m; $("source").textContent = m.source || ""; $("model").textContent = m.model || "-";
+          $("note").textContent = "the readout was restarted"; connect();
+        }).catch(() => connect());  // gone again: the new stream retries by itself
+      }
     });
     es.addEventListener("dropped", (ev) => { lost += JSON.parse(ev.data).dropped; });
     es.addEventListener("reset", () => ring.clear());
