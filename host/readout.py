@@ -100,11 +100,16 @@ def rest_reference(spec: str, n_inputs: int) -> np.ndarray:
     return ref
 
 
-def measure(array: AdcArray, n: int) -> np.ndarray:
-    """``n`` samples (n, N) in volts."""
+def measure(array: AdcArray, n: int, step=None) -> np.ndarray:
+    """``n`` samples (n, N) in volts; ``step()`` after each (a progress bar's)."""
     if n < 1:
         raise InputError(f"the number of samples must be >= 1, got {n}")
-    return np.vstack([array.read_volts() for _ in range(n)])
+    rows = []
+    for _ in range(n):
+        rows.append(array.read_volts())
+        if step is not None:
+            step()
+    return np.vstack(rows)
 
 
 def _wait(clock, until: float, stop, end: float | None) -> bool:
@@ -139,9 +144,9 @@ class Tare:
         return f"tare: offsets [mV] {mv} (spread up to {self.spread.max() * 1e3:.2f} mV rms)"
 
 
-def tare(array: AdcArray, reference: np.ndarray, n: int = 50) -> Tare:
+def tare(array: AdcArray, reference: np.ndarray, n: int = 50, step=None) -> Tare:
     """Rest readings averaged over ``n`` samples; subtracting ``offsets`` maps them onto ``reference``."""
-    block = measure(array, n)
+    block = measure(array, n, step)
     return Tare(block.mean(axis=0), np.asarray(reference, dtype=float), block.std(axis=0))
 
 

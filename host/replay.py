@@ -131,18 +131,20 @@ class ReplayResult:
             lines.append("the recorded run has other outputs: no differences computed")
         return "\n".join(lines) + "\n"
 
-    def play(self, publish, stop, hold: bool = False) -> None:
+    def play(self, publish, stop, hold: bool = False) -> int:
         """Each sample to ``publish`` at the run's recorded pace, until its end or ``stop()``; with ``hold``,
-        then wait for ``stop()``."""
-        due, w0 = play_times(self.t), time.monotonic()
+        then wait for ``stop()``. The number of samples published."""
+        due, w0, played = play_times(self.t), time.monotonic(), 0
         for i in range(len(self.t)):
             while not stop() and (wait := due[i] - (time.monotonic() - w0)) > 0:
                 time.sleep(min(wait, 0.2))  # in slices: Ctrl-C is seen during a long gap
             if stop():
                 break
             publish(self.sample(i))
+            played += 1
         while hold and not stop():
             time.sleep(0.2)
+        return played
 
     def save(self, path) -> None:
         """The re-estimated run as a run record (replayable in its turn), written atomically."""

@@ -13,6 +13,7 @@ import sys
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output
 from fitgen.base.parse import parse_numbers, parse_positive
+from fitgen.base.progress import Progress
 from fitgen.equations.model import check_input_units, load_model
 from fitgen.physics.sensor import load_sensor
 
@@ -172,7 +173,8 @@ class ReadoutSession:
             self.thermometer = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
             offsets, noise = None, None
             if need_ref:
-                t = tare(array, reference, tare_n)
+                with Progress(f"{prog}: tare", tare_n) as bar:  # seconds at a low data rate: say so
+                    t = tare(array, reference, tare_n, bar.update)
                 print(f"{prog}: {t.describe()}", file=sys.stderr)
                 offsets = t.offsets
                 noise = t.noise_floor(array.lsb)

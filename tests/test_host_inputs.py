@@ -183,6 +183,7 @@ def test_view_replay_refuses_every_bus_and_simulation_option(model_file, tmp_pat
     proc = run_cli("tactile-host", "view", "--replay", str(run), "--model", model_file, "--host", "127.0.0.1",
                    "--port", "0")
     assert proc.returncode == 0 and "replay of" in proc.stderr, proc.stderr
+    assert re.search(r"tactile-host view: done: played (\d+) of \1 samples$", proc.stderr.strip()), proc.stderr
 
 
 def test_view_help_says_what_port_0_does_and_gives_the_docs_drift_example():

@@ -2,6 +2,7 @@
 
 import io
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -20,7 +21,7 @@ from host.engine import CEngine, PythonEngine
 from host.readout import LineFormat, Readout, rest_reference, tare
 from host.simbus import SimBus
 
-from conftest import assert_one_line_error, require_tool, run_cli
+from conftest import Terminal, assert_one_line_error, require_tool, run_cli
 
 TWO_1115 = "ads1115@0x48:0-3,ads1115@0x49:0-3"
 POSE = np.array([1.0, 0.5, -1.0, 0.0, 0.0])
@@ -214,12 +215,36 @@ def test_read_command_with_the_c_engine_to_a_jsonl_file(model_file, tmp_path):
     assert np.all(np.diff([r["t"] for r in recs]) > 0)
 
 
+def test_the_tare_shows_progress_on_a_terminal(model_file, tmp_path, monkeypatch):
+    """A tare of many samples at a low data rate takes seconds: on a terminal a bar counts them."""
+    from fitgen.app.host_cli import main
+
+    term = Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    with pytest.raises(SystemExit) as done:
+        main(["read", "--model", model_file, "--adc", TWO_1115, "--simulate", "dz=-1", "--tare",
+              "--tare-samples", "120", "--count", "2", "-o", str(tmp_path / "out.csv")])
+    assert done.value.code == 0, term.text
+    bars = re.findall(r"\rtactile-host read: tare \[[# ]*\] (\d+)/120", term.text)
+    assert bars and bars[-1] == "120", term.text
+    assert "\r\033[K" + "tactile-host read: tare: offsets [mV]" in term.text  # the bar is cleared before the line
+
+
 def test_read_command_ends_on_a_silent_chip_with_one_line_and_status_1(model_file):
     proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_1115, "--simulate", "dz=-1",
                    "--sim-fault", "silent:0x48:100", "--count", "1000")
     assert_one_line_error(proc, 1, "ads1115@0x48 stays silent: Remote I/O error (errno 121) on all 5 tries; "
                                    "stopped after")
     assert len(proc.stdout.splitlines()) >= 5  # the samples before it are all there, whole
+
+
+def test_view_ends_on_a_silent_chip_saying_how_far_it_read(model_file):
+    proc = run_cli("tactile-host", "view", "--model", model_file, "--adc", TWO_1115, "--simulate", "dz=-1",
+                   "--sim-fault", "silent:0x48:100", "--count", "1000", "--port", "0")
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    last = proc.stderr.strip().splitlines()[-1]
+    assert re.fullmatch(r"tactile-host view: error: ads1115@0x48 stays silent: .*; stopped after \d+ samples .*",
+                        last), last
 
 
 def test_read_command_stops_cleanly_on_ctrl_c(model_file):

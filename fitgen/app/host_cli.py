@@ -57,10 +57,7 @@ def cmd_read(args) -> int:
         print(f"tactile-host read: {how}: {stats.summary()}", file=sys.stderr)
         return 0
     except DeviceSilent as exc:
-        done = getattr(exc, "stats", None)
-        where = f"stopped after {done.summary()}" if done is not None else "stopped before the first sample"
-        print(f"tactile-host read: error: {exc}; {where}", file=sys.stderr)
-        return EXIT_CHECK_FAILED
+        return _silent("tactile-host read", exc)
     finally:
         if s is not None:
             s.close()
@@ -96,13 +93,20 @@ def cmd_view(args) -> int:
         print(f"tactile-host view: {'stopped' if stop.stopped else 'done'}: {stats.summary()}", file=sys.stderr)
         return 0
     except DeviceSilent as exc:
-        print(f"tactile-host view: error: {exc}", file=sys.stderr)
-        return EXIT_CHECK_FAILED
+        return _silent("tactile-host view", exc)
     finally:
         if server is not None:
             server.stop(drain=DRAIN if ended else 0.0)  # a run that ended reaches its viewers whole
         if s is not None:
             s.close()
+
+
+def _silent(prog: str, exc) -> int:
+    """A chip that stopped answering: one line with what was read before it, exit status 1."""
+    done = getattr(exc, "stats", None)
+    where = f"stopped after {done.summary()}" if done is not None else "stopped before the first sample"
+    print(f"{prog}: error: {exc}; {where}", file=sys.stderr)
+    return EXIT_CHECK_FAILED
 
 
 def _view_replay(args) -> int:
@@ -120,8 +124,10 @@ def _view_replay(args) -> int:
         print(f"tactile-host view: serving {server.url} (replay of {args.replay}, {len(res.t)} samples); Ctrl-C "
               "stops", file=sys.stderr, flush=True)
         with StopFlag() as stop:
-            res.play(hub.publish, stop, hold=args.hold)
+            played = res.play(hub.publish, stop, hold=args.hold)
         ended = not stop.stopped
+        print(f"tactile-host view: {'done' if ended else 'stopped'}: played {played} of {len(res.t)} samples",
+              file=sys.stderr)
     finally:
         server.stop(drain=DRAIN if ended else 0.0)
     return 0
