@@ -247,12 +247,19 @@ def test_bad_model_files(paper_fit, tmp_path):
         "term": ({**data, "outputs": [{**data["outputs"][0], "terms": ["v9^7"] + data["outputs"][0]["terms"][1:]}]},
                  "not a term"),
         "nan": ({**data, "outputs": [{**data["outputs"][0], "intercept": "NaN"}]}, "finite"),
+        "units": ({**data, "inputs": {**data["inputs"], "units": "furlongs"}}, "inputs.units must be mT or V"),
+        "meta": (json.loads((folder / "sim.csv.meta.json").read_text()), "not a model but a dataset's meta file"),
     }
     for name, (content, msg) in cases.items():
         path = tmp_path / f"{name}.json"
         path.write_text(json.dumps(content))
         assert_one_line_error(run_cli("fitgen", "predict", str(path), str(folder / "sim.csv"), "-o",
                                       str(tmp_path / "p.csv")), contains=msg)
+    # the wrong file in each place: a folder for a model, a model for a dataset
+    assert_one_line_error(run_cli("fitgen", "predict", str(folder), str(folder / "sim.csv"), "-o",
+                                  str(tmp_path / "p.csv")), contains=f"model file {folder}: a folder, not a file")
+    assert_one_line_error(run_cli("fitgen", "fit", str(folder / "m.json"), "-o", str(tmp_path / "x.json")),
+                          contains="m.json: JSON, not CSV (a model or meta file?)")
     (tmp_path / "junk.json").write_text("{not json")
     assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "junk.json")), contains="not valid JSON")
     with pytest.raises(InputError, match="needs v1 > 0"):

@@ -307,6 +307,10 @@ def test_codegen_cli(paper_fixed_model, tmp_path):
     assert not (tmp_path / "x").exists()
     assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--input-lsb", "1e-4"),
                           contains="fixed only")
+    for option in (["--style", "unrolled"], ["--style", "table"], ["--fma"]):  # fixed point has one layout
+        assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--precision",
+                                      "fixed", *option), 2, f"{option[0]} does not apply to --precision fixed")
+    assert not (tmp_path / "x").exists()
     data = json.loads(path.read_text())
     data["outputs"][0]["terms"][0] = "v1^1/2"
     roots = tmp_path / "roots.json"

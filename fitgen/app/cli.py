@@ -139,8 +139,7 @@ def cmd_fit(args) -> int:
     problem = model.float_problem() if settings.precision == "float" else ""
     if problem:  # fitted for float, it cannot run there
         raise InputError(f"{problem} (--precision double fits it for double); nothing written")
-    model.fit_info["family"] = family
-    model.fit_info["dataset"] = str(args.data)
+    model.fit_info.update(family=family, dataset=str(args.data))
     if lifted:
         model.fit_info["rows_off_skin_left_out"] = lifted
     if args.held_out and sensor is not None:
@@ -276,8 +275,8 @@ def cmd_codegen(args) -> int:
         from fitgen.equations.fixedpoint import plan_at
         from fitgen.base.fileio import write_in_folder
 
-        if args.fma:
-            raise InputError("--fma does not apply to --precision fixed")
+        if args.fma or args.style:  # fixed point has one layout and no floating point to fuse
+            raise InputError(f"{'--fma' if args.fma else '--style'} does not apply to --precision fixed")
         fm, source = plan_at(model, args.input_lsb, args.input_offset, target.mul_bits if target else 32)
         path = write_in_folder(args.output, f"{args.prefix}_model.h", render_fixed_header(fm, args.prefix))
         print(f"wrote {path} (fixed point, input LSB {fm.input_lsb:.6g} {model.input_units} from {source}, "
@@ -286,6 +285,7 @@ def cmd_codegen(args) -> int:
         return 0
     if args.input_lsb is not None or args.input_offset is not None:
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
+    args.style = args.style or "table"
     path = write_header(model, args.output, args.precision, args.style, args.prefix, args.fma, target=args.target)
     print(f"wrote {path} ({args.precision}, {args.style}{', fma' if args.fma else ''}, model {model.sha256[:12]})",
           file=sys.stderr)
@@ -444,7 +444,7 @@ def build_parser() -> Parser:
     c.add_argument("--precision", choices=("double", "float", "fixed"),
                    help="fixed: integer ADC codes in, int32 outputs, no floating point (Cortex-M0); default double, "
                         "or on a --target without double the precision the model was fitted for if it runs it")
-    c.add_argument("--style", default="table", choices=("table", "unrolled"))
+    c.add_argument("--style", choices=("table", "unrolled"), help="default table; not with --precision fixed")
     c.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
     c.add_argument("--fma", action="store_true",
                    help="sum each term with fma(): fewer instructions on cores with fused multiply-add")

@@ -264,5 +264,7 @@ def read_text(path: str | os.PathLike, what: str) -> str:
         return Path(path).read_text(encoding="utf-8-sig")  # -sig: the byte-order mark spreadsheets write
     except FileNotFoundError:
         raise InputError(f"{what} {path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{what} {path}: a folder, not a file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{what} {path}: cannot read: {exc}") from None

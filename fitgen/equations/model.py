@@ -231,6 +231,9 @@ def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
     return lo.astype(float), hi.astype(float)
 
 
+INPUT_UNITS = ("mT", "V")  # the field at the elements (transfer raw) or their voltages (gmr)
+
+
 def load_model(path: str | Path) -> Model:
     origin = f"model file {path}"
     text = read_text(path, "model file")
@@ -245,6 +248,9 @@ def model_from_dict(data, origin: str = "model") -> Model:
     if not isinstance(data, dict):
         raise InputError(f"{origin}: not a model (a JSON object is expected)")
     ver = data.get("schema_version")
+    if ver is None and "outputs" not in data:  # another JSON file: a dataset's meta, a blob, a report
+        what = "a dataset's meta file" if "columns" in data else "JSON without a model's schema_version and outputs"
+        raise InputError(f"{origin}: not a model but {what}; `fitgen fit DATA.csv -o MODEL.json` writes a model")
     if ver != SCHEMA_VERSION:
         raise InputError(f"{origin}: schema_version {ver!r} is not supported (this fitgen reads {SCHEMA_VERSION})")
     try:
@@ -266,8 +272,8 @@ def model_from_dict(data, origin: str = "model") -> Model:
             eqs.append(Equation(o["name"], finite_number(o["intercept"], f"{where}.intercept"), terms, coefs))
     except (KeyError, TypeError) as exc:
         raise InputError(f"{origin}: malformed model ({type(exc).__name__}: {exc})") from None
-    if not isinstance(units, str):
-        raise InputError(f"{origin}: inputs.units must be a string")
+    if units not in INPUT_UNITS:
+        raise InputError(f"{origin}: inputs.units must be {' or '.join(INPUT_UNITS)}, got {units!r}")
     fit = data.get("fit", {})
     refine = None if "refine" not in data else Refinement.from_dict(data["refine"], len(lo), origin)
     try:

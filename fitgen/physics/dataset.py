@@ -149,6 +149,9 @@ def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
     lines = text.splitlines()
     if not lines or not lines[0].strip():
         raise InputError(f"{origin}: empty file")
+    if lines[0].lstrip().startswith(("{", "[")):
+        raise InputError(f"{origin}: JSON, not CSV (a model or meta file?); a dataset is a CSV with the header "
+                         "v1,...,vN,dx,dy,dz,thx,thy")
     names = [c.strip() for c in next(csv.reader([lines[0]]))]
     twice = next((n for n in names if names.count(n) > 1), None)
     if twice is not None:
