@@ -95,11 +95,18 @@ def test_a_symlink_to_a_fifo_is_refused_and_kept(tmp_path, writer):
         assert os.readlink(tmp_path / "link") == "pipe" and stat.S_ISFIFO(os.lstat(tmp_path / "pipe").st_mode)
 
 
-def test_write_in_folder_refuses_a_fifo_in_the_folder(tmp_path):
+def test_write_in_folder_refuses_what_is_in_the_way_and_says_the_folder_was_right(tmp_path):
+    """The user named the folder; the file's name is the tool's: the advice is to clear the way, not to name a file."""
     with fifo(tmp_path / "model.h"):
-        with pytest.raises(InputError, match="it is a FIFO"):
+        with pytest.raises(InputError, match="a FIFO \\(named pipe\\) of that name is in the way; move it or give "
+                                             "another folder"):
             write_in_folder(tmp_path, "model.h", "x")
         assert stat.S_ISFIFO(os.lstat(tmp_path / "model.h").st_mode)
+    (tmp_path / "sub" / "model.h").mkdir(parents=True)
+    with pytest.raises(InputError, match="model.h: a folder of that name is in the way") as info:
+        write_in_folder(tmp_path / "sub", "model.h", "x")
+    assert "give a file's path" not in str(info.value) and not os.listdir(tmp_path / "sub" / "model.h")
+    assert write_in_folder(tmp_path / "new" / "deeper", "model.h", "x").read_text() == "x"
 
 
 def test_write_atomic_writes_through_a_symlink_and_keeps_it(tmp_path):

@@ -245,7 +245,15 @@ def check_folder(folder: str | os.PathLike, flag: str = "-o") -> Path:
 
 def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes) -> Path:
     """:func:`write_atomic` into ``folder/name``, creating ``folder`` (and its parents) when missing."""
-    return write_atomic(make_folder(folder) / name, data)
+    path = make_folder(folder) / name
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        mode = None  # nothing there (write_atomic says what else is wrong)
+    if mode is not None and not stat.S_ISREG(mode):  # the user named the folder: the name inside is ours
+        raise InputError(f"cannot write {path}: {_kind(mode)} of that name is in the way; move it or give "
+                         "another folder")
+    return write_atomic(path, data)
 
 
 def canonical_json(obj) -> str:
