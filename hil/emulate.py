@@ -12,6 +12,7 @@ import subprocess
 import time
 from pathlib import Path
 
+from fitgen.base.children import tied
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
 
@@ -148,7 +149,7 @@ class Emulator(_Running):
 
     def start(self, attempts: int = 3) -> "Emulator":
         self.proc = subprocess.Popen(self.command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.PIPE, text=True)
+                                     stderr=subprocess.PIPE, text=True, preexec_fn=tied())
         deadline = time.monotonic() + self.boot_timeout
         while True:
             if self.proc.poll() is not None:
@@ -218,7 +219,8 @@ class HostFirmware(_Running):
         popen = dict(stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         cmd = [str(self.binary), "--pty"]
         # with a bridge (host.pi.StandIn) the firmware's I2C requests go out on fd 3, answers come on fd 4
-        self.proc = self.bridge.spawn(cmd, **popen) if self.bridge is not None else subprocess.Popen(cmd, **popen)
+        self.proc = (self.bridge.spawn(cmd, **popen) if self.bridge is not None
+                     else subprocess.Popen(cmd, preexec_fn=tied(), **popen))
         fd = self.proc.stderr.fileno()
         buf = b""
         deadline = time.monotonic() + self.boot_timeout
@@ -273,7 +275,8 @@ class UnoEmulator(_Running):
     def start(self) -> "UnoEmulator":
         popen = dict(stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         cmd = self.command()
-        self.proc = self.bridge.spawn(cmd, **popen) if self.bridge is not None else subprocess.Popen(cmd, **popen)
+        self.proc = (self.bridge.spawn(cmd, **popen) if self.bridge is not None
+                     else subprocess.Popen(cmd, preexec_fn=tied(), **popen))
         fd = self.proc.stderr.fileno()
         deadline = time.monotonic() + self.boot_timeout
         line = b""
@@ -441,7 +444,7 @@ def uno_crash_advice(model, precision: str, style: str, **render) -> str:
             render_firmware(model, tmp, precision=precision, style="unrolled", port="uno", **render)
             size = firmware_size(build_firmware(tmp, "uno"), "avr-size")
     except InputError as exc:
-        said = str(exc).rsplit(": ", 1)[-1]
+        said = str(exc).split(" failed: ", 1)[-1]
         return f"; {why}, and --style unrolled does not build either ({said}): fit fewer terms " \
                "(fitgen fit --k bic, or --max-terms N)"
     return f"; {why}: try --style unrolled (it builds: flash {size['flash']} B, static RAM {size['ram']} B)"

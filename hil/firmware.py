@@ -4,6 +4,7 @@ and built for a host process, QEMU's mps2-an386 or microbit, or the Arduino Uno 
 
 from __future__ import annotations
 
+import re
 import shlex
 import shutil
 import subprocess
@@ -184,6 +185,10 @@ def _run(cmd: list[str], what: str) -> subprocess.CompletedProcess:
         # the linker's own words when the image does not fit (collect2's "error" line says only that ld failed)
         first = next((ln for ln in lines if "overflowed" in ln),
                      next((ln for ln in lines if "error" in ln), lines[0] if lines else "(no message)"))
+        over = re.search(r"region `(\w+)' overflowed by (\d+) bytes?", first)
+        if over:  # ld's region name (avr: text, data; the ARM scripts: FLASH, RAM) in a user's words
+            memory = "RAM" if over.group(1).lower() in ("data", "ram") else "flash"
+            raise InputError(f"{what} failed: it does not fit, {over.group(2)} bytes over the {memory}")
         raise InputError(f"{what} failed: {first.strip()}")
     return proc
 

@@ -289,7 +289,7 @@ def check_flash_too_big(dev: Device, model: Model, new: Model, room: int, sensor
     size = len(to_blob(new, dev.info().precision, sensor_id))
     try:
         flash_model(dev, new, "the flash variant", sensor_id=sensor_id)
-    except FlashFailed as exc:
+    except (FlashFailed, InputError) as exc:  # InputError: the store's refusal, said as the model's fault
         info = dev.info(refresh=True)
         kept = info.model_hash == model.sha256 and info.cal_source == 0
         said = f"{size}-byte" in str(exc) and f"{room}-byte" in str(exc)

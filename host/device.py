@@ -324,6 +324,7 @@ def flash_model(dev: Device, model, origin: str, *, sensor_id: str = "paper", fm
     device's info, the active model hash it reports). InputError when its build cannot take the model;
     FlashFailed when the blob is refused, read back otherwise, or another model is active."""
     from fitgen.c.calblob import to_blob
+    from fitgen.equations.model import check_input_units
 
     try:
         info = dev.info()
@@ -334,6 +335,8 @@ def flash_model(dev: Device, model, origin: str, *, sensor_id: str = "paper", fm
     if (info.n_inputs, info.n_outputs) != (model.n_inputs, len(model.equations)):
         raise InputError(f"model {origin} has {model.n_inputs} inputs and {len(model.equations)} outputs; "
                          f"the device's build has {info.n_inputs} and {info.n_outputs}")
+    if info.adc_chips:  # its inputs are its ADCs' volts, whatever the blob says
+        check_input_units(model, "V", "the device's ADC readings", f"model {origin}")
     blob = to_blob(model, info.precision, sensor_id=sensor_id, fma=fma)
     try:
         answer = dev.load_calibration(blob)
@@ -341,8 +344,8 @@ def flash_model(dev: Device, model, origin: str, *, sensor_id: str = "paper", fm
     except DeviceError as exc:
         if exc.code == ErrorCode.BAD_ARG and exc.request_type == MsgType.CAL_BEGIN:
             room = dev.cal_capacity()
-            if len(blob) > room:
-                raise FlashFailed(f"the {len(blob)}-byte blob does not fit the device's {room}-byte calibration store: "
+            if len(blob) > room:  # the model, not the device, is at fault: bad input, exit status 2
+                raise InputError(f"the {len(blob)}-byte blob does not fit the device's {room}-byte calibration store: "
                                   "refused, nothing written; the device keeps the model it runs (fit fewer terms, "
                                   "e.g. fitgen fit --max-terms)") from exc
         raise FlashFailed(f"calibration not loaded: {exc}") from exc

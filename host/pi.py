@@ -20,6 +20,7 @@ from pathlib import Path
 
 from fitgen import __version__
 from fitgen.c.codegen import render_header
+from fitgen.base.children import tied
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
 from fitgen.equations.model import Model, check_input_units, load_model
@@ -263,8 +264,8 @@ class StandIn:
         child = [fcntl.fcntl(fd, fcntl.F_DUPFD, 10) for fd in (req_w, ans_r)]
         for fd in (req_w, ans_r):
             os.close(fd)
-        proc = subprocess.Popen(cmd, pass_fds=(3, 4), preexec_fn=lambda: (os.dup2(child[0], 3), os.dup2(child[1], 4)),
-                                **popen)
+        proc = subprocess.Popen(cmd, pass_fds=(3, 4), **popen,
+                                preexec_fn=tied(lambda: (os.dup2(child[0], 3), os.dup2(child[1], 4))))
         for fd in child:
             os.close(fd)
         self.error: list[BaseException] = []

@@ -34,13 +34,14 @@ class Reject(Exception):
 class FakeDevice:
     def __init__(self, model, precision: str = "double", *, transport: str = "pty", sensor_id: str = "paper",
                  capacity: int = 16384, mute: bool = False, stale: bool = False, corrupt_read: bool = False,
-                 boot: float = 0.0):
+                 boot: float = 0.0, adc_chips: tuple = ()):
         self.precision = precision
         self.dtype = p.real_dtype(precision)
         self.compiled = model if precision != "float" else rounded_model(model, "float")
         self.compiled_hash = model.sha256
         self.sensor_id = sensor_id
         self.capacity = capacity
+        self.adc_chips = adc_chips  # INFO's ADC block: a firmware that reads its inputs from these chips
         self.mute = mute  # never answer
         # what comes within boot s of the host's connecting (a socket) or of the start (a pty) is lost, as on an
         # Uno, whose port's opening resets it into its bootloader
@@ -166,7 +167,9 @@ class FakeDevice:
         info = p.DeviceInfo(p.PROTOCOL_VERSION, self.precision, self.n_inputs, self.n_outputs,
                             1 if self.active else 0, 0, p.MAX_PAYLOAD,
                             self.active[1].model_hash if self.active else self.compiled_hash,
-                            self.active[1].sensor_id if self.active else self.sensor_id, "fake-0.1")
+                            self.active[1].sensor_id if self.active else self.sensor_id, "fake-0.1",
+                            self.adc_chips, dict.fromkeys(p.ADC_COUNTS, 0)
+                            if self.adc_chips else None)
         return p.pack_info(info)
 
     def _estimate(self, x: np.ndarray):

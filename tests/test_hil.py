@@ -226,6 +226,41 @@ def test_cli_emulate_suite_writes_junit(model_file, tmp_path):
     assert root.get("failures") == "0" and int(root.get("tests")) >= 6
 
 
+def test_the_emulator_ends_with_emulate_even_when_it_is_killed(model_file):
+    """kill -9 leaves emulate no chance to stop QEMU: the kernel sends it SIGTERM (PR_SET_PDEATHSIG), so its port
+    is free again and no QEMU is left running."""
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    import re
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    code = "import sys; from fitgen.app.hil_cli import main; sys.argv[0] = 'tactile-hil'; main()"
+    proc = subprocess.Popen([sys.executable, "-c", code, "emulate", "--target", "mps2", "--model", str(model_file)],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        lines = []
+        while not (lines and lines[-1].startswith("ready: ")):
+            line = proc.stdout.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+        port = int(re.search(r"socket://127\.0\.0\.1:(\d+)", lines[-1]).group(1))
+        socket.create_connection(("127.0.0.1", port), timeout=5).close()  # QEMU serves it
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+    deadline = time.monotonic() + 20
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+        except OSError:
+            break  # refused: QEMU is gone
+        assert time.monotonic() < deadline, f"QEMU still serves port {port} after emulate was killed"
+        time.sleep(0.1)
+
+
 def test_cli_emulate_refuses_the_suites_options_without_suite(model_file, tmp_path):
     """Without --suite the suite never runs: each of its options, even typed as its default (--vectors 0 too), is
     one line before the model is read or the firmware built, and --help says they need --suite."""

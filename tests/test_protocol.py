@@ -419,7 +419,13 @@ def test_flash_failures(paper_model, paper_model_file):
         proc = run_cli("tactile-host", "flash", "--port", fake.url, paper_model_file)
         # the refusal names the blob's size and the store's, found by CAL_BEGIN alone (nothing written)
         blob = len(to_blob(paper_model, "double"))
-        assert_one_line_error(proc, 1, f"the {blob}-byte blob does not fit the device's 100-byte calibration store")
+        assert_one_line_error(proc, 2, f"the {blob}-byte blob does not fit the device's 100-byte calibration store")
+        assert fake.active is None
+    # a firmware that reads ADCs takes volts: a model fitted in mT would flash, read back and answer nonsense
+    assert paper_model.input_units == "mT"
+    with FakeDevice(paper_model, "double", adc_chips=(("ads1115", 0x48, 4, 1, 4, 0),) * 2) as fake:
+        proc = run_cli("tactile-host", "flash", "--port", fake.url, paper_model_file)
+        assert_one_line_error(proc, 2, "takes inputs in mT; the device's ADC readings are in V")
         assert fake.active is None
     with FakeDevice(paper_model, "fixed") as fake:
         proc = run_cli("tactile-host", "flash", "--port", fake.url, paper_model_file)

@@ -72,10 +72,11 @@ def test_hil_suite_on_the_emulated_uno(gmr_model):
     assert emu.size["ram"] + emu.stack_peak <= UNO_RAM
 
 
-def test_calibration_survives_a_reset_in_eeprom(gmr_model, tmp_path):
+def test_calibration_survives_a_reset_in_eeprom(gmr_model, tmp_path, capsys):
     """A blob flashed into the EEPROM is the active calibration after the firmware starts again (the
     EEPROM image carried over by the board), and CAL_RESET makes the compiled-in model answer again."""
     _require_avr()
+    from fitgen.app.hil_cli import _describe
     from hil.suite import fit_store, flash_variant
     from host.device import flash_model
 
@@ -90,6 +91,12 @@ def test_calibration_survives_a_reset_in_eeprom(gmr_model, tmp_path):
         with Device.open(emu.url, timeout=10) as dev:
             info = dev.info(refresh=True)
             assert info.model_hash == new.sha256 and info.cal_source == 1
+            # what emulate prints: the flashed model is the one measured, and it is said to be a calibration
+            _describe(emu, dev, "uno", gmr_model.sha256)
+            said = capsys.readouterr().out
+            assert f"model {new.sha256[:12]}; " in said and "cycles per estimate" in said
+            assert f"(model {new.sha256[:12]} is a calibration flashed earlier, kept in {tmp_path / 'fw'}" in said
+            assert f"remove it to run the compiled-in model {gmr_model.sha256[:12]})" in said
             dev.reset_calibration()
             assert dev.info(refresh=True).model_hash == gmr_model.sha256
             flash_model(dev, new, "variant")
@@ -185,9 +192,26 @@ def test_the_advice_after_a_crash_is_checked_by_building_it(gmr_model, tmp_path)
     ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
     huge = fit_model(ds, settings=FitSettings.family("all", k=0.001)).save(tmp_path / "huge.json")
     proc = run_cli("tactile-hil", "emulate", "--target", "uno", "--model", str(huge), "--suite", "--fuzz", "0")
-    assert_one_line_error(proc, 2, "the AVR program crashed")
-    assert "--style unrolled does not build either (region `text' overflowed" in proc.stderr
+    assert_one_line_error(proc, 2, "the uno firmware stopped before answering: the AVR program crashed")
+    assert "--style unrolled does not build either (it does not fit, " in proc.stderr
     assert "fit fewer terms" in proc.stderr
+
+
+def test_a_stack_that_overruns_ram_after_boot_is_caught_when_it_happens(tmp_path):
+    """The harmonics model read from the ADCs boots and answers INFO, then its first estimate takes the stack
+    into .bss: the board watches the stack pointer and stops there, and emulate says so with the advice (it
+    printed a negative cycle count and 'ready', and the suite then blamed the port)."""
+    _require_avr()
+    from fitgen.fitting.fit import FitSettings
+
+    ds = simulate(load_sensor("paper").with_transfer("gmr"), grid_poses(PAPER_GRIDS["paper-sim"]))
+    model = fit_model(ds, settings=FitSettings.family("harmonics")).save(tmp_path / "harmonics.json")
+    proc = run_cli("tactile-hil", "emulate", "--target", "uno", "--model", str(model), "--adc",
+                   "ads1115@0x48:0-3,ads1115@0x49:0-3", "--simulate", "dx=1,dz=-1")
+    assert_one_line_error(proc, 2, "the uno firmware stopped: the stack ran into static RAM (SP 0x")
+    assert "cycles per estimate" not in proc.stdout and "ready" not in proc.stdout
+    assert "--style unrolled does not build either (it does not fit, " in proc.stderr
+    assert "bytes over the flash): fit fewer terms" in proc.stderr
 
 
 def test_pkg_config_without_simavr_is_said_with_the_packages(gmr_model, tmp_path):

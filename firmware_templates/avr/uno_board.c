@@ -16,14 +16,17 @@
  * --eeprom FILE: the EEPROM's 1 KB loaded from FILE when it exists, and written back to it (atomically)
  * on exit, so that a calibration flashed there survives a restart, as on the board.
  * --paint ADDR: RAM from ADDR (the end of .bss) to RAMEND is painted before the program starts; on exit
- * "STACK n" on stderr gives the deepest the stack reached below RAMEND (bytes no longer painted).
+ * "STACK n" on stderr gives the deepest the stack reached below RAMEND (bytes no longer painted). The
+ * stack pointer is also watched after every instruction: once it is below ADDR the stack has run into
+ * static RAM (a frame may skip the painted bytes it reserves), the board says so, reports the whole span
+ * as used and exits 6, before the program goes on with corrupted variables.
  * --hold: the core starts when the first client connects, as an Uno restarts when a serial monitor opens
  * its port (DTR), so that the client sees everything the program prints from its start.
  * UNO_BOARD_TRACE in the environment: each TWI message and bus-model exchange is printed on stderr.
  * PORT 0: the system picks a free port (no race with another process between choosing and binding); the
  * first line on stderr, "LISTENING <port>", says which.
  * Runs until SIGTERM or SIGINT; exits 3 when the program crashes, 4 when the bus model goes away, 5 when
- * the EEPROM image cannot be written.
+ * the EEPROM image cannot be written, 6 when the stack runs into static RAM (with --paint).
  * usage: uno_board FILE.elf PORT [--bridge] [--eeprom FILE] [--paint ADDR] [--hold]
  */
 #define _DEFAULT_SOURCE
@@ -474,6 +477,11 @@ int main(int argc, char **argv)
             code = 4;
             break;
         }
+        /* SP is the next free byte: the stack holds SP+1..RAMEND, so SP+1 < paint is a byte of .bss in it */
+        if (paint && (unsigned long)(avr->data[R_SPL] | (avr->data[R_SPH] << 8)) + 1u < paint) {
+            code = 6;
+            break;
+        }
         if (++count % POLL_EVERY == 0) {
             poll_socket(0);
         }
@@ -488,13 +496,16 @@ int main(int argc, char **argv)
         while (a <= RAMEND && avr->data[a] == PAINT) {
             ++a;
         }
-        fprintf(stderr, "STACK %lu\n", RAMEND + 1u - a);
+        fprintf(stderr, "STACK %lu\n", code == 6 ? RAMEND + 1u - paint : RAMEND + 1u - a);
     }
     if (state == cpu_Crashed) {
         fprintf(stderr, "the AVR program crashed at cycle %llu\n", (unsigned long long)avr->cycle);
         code = 3;
     } else if (code == 4) {
         fprintf(stderr, "the bus model went away\n");
+    } else if (code == 6) {
+        fprintf(stderr, "the stack ran into static RAM (SP 0x%04x, .bss ends at 0x%04lx) at cycle %llu\n",
+                avr->data[R_SPL] | (avr->data[R_SPH] << 8), paint, (unsigned long long)avr->cycle);
     }
     fprintf(stderr, "CYCLES %llu\n", (unsigned long long)avr->cycle);
     return code;

@@ -10,6 +10,7 @@ from __future__ import annotations
 import signal
 import sys
 import threading
+import time
 
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, check_written, command_main, count, seconds, tcp_port
 from fitgen.base.errors import InputError
@@ -61,7 +62,7 @@ def cmd_run(args) -> int:
     return _suite(args.port, model, data, args)
 
 
-def _describe(runner, dev, target: str) -> None:
+def _describe(runner, dev, target: str, compiled: str = "") -> None:
     from hil.emulate import bench_instructions
 
     info = dev.info()
@@ -75,6 +76,10 @@ def _describe(runner, dev, target: str) -> None:
         cost = (f"{b['instructions']:.0f} instructions per estimate (icount)" if b["instructions"] is not None
                 else f"{b['ns']:.0f} ns per estimate")
     print(f"{target} firmware: {info.precision}, {info.style_name}, model {info.model_hash[:12]}; {cost}")
+    if info.cal_source == 1:  # the Uno's EEPROM kept a calibration flashed in an earlier run of this build folder
+        where = getattr(runner, "eeprom", None)
+        print(f"  (model {info.model_hash[:12]} is a calibration flashed earlier, kept in {where or 'EEPROM'}: "
+              f"remove it to run the compiled-in model {compiled[:12]})")
     if runner.size:
         print(f"flash {runner.size['flash']} bytes, RAM {runner.size['ram']} bytes")
     if info.adc_chips:
@@ -98,15 +103,15 @@ def _adc_bridge(args):
                       thermistor=args.thermistor, temp_comp=args.temp_comp, temperature=args.sim_temperature)
 
 
-def _stopped(runner, args, advice) -> None:
-    """InputError with the board's own last words when the firmware ended before it could be opened; on the Uno,
-    ``advice()``: what to try (hil.emulate.uno_crash_advice)."""
+def _stopped(runner, args, advice, before: bool = True) -> None:
+    """InputError with the board's own last words when the firmware ended (``before`` it could be opened, or
+    while it was being measured); on the Uno, ``advice()``: what to try (hil.emulate.uno_crash_advice)."""
     if runner.proc is None or runner.proc.poll() is None:
         return
     runner.stop()
     said = "; ".join(getattr(runner, "messages", [])[-2:]) or f"exit status {runner.proc.returncode}"
     hint = advice() if args.target == "uno" else ""
-    raise InputError(f"the {args.target} firmware stopped before answering: {said}{hint}")
+    raise InputError(f"the {args.target} firmware stopped{' before answering' if before else ''}: {said}{hint}")
 
 
 def cmd_emulate(args) -> int:
@@ -128,15 +133,22 @@ def cmd_emulate(args) -> int:
                                   bridge=bridge, tin=tin, tempcomp=tempcomp)
             bar.update(1, "booting")
             runner = stack.enter_context(target)
+        def advice():
+            return uno_crash_advice(model, args.precision, args.style, fma=args.fma, sensor_id=args.sensor_id,
+                                    cmap=cmap, tin=tin, tempcomp=tempcomp)
+
         try:
             dev = Device.open(runner.url, timeout=args.timeout)
         except InputError:
-            _stopped(runner, args, lambda: uno_crash_advice(model, args.precision, args.style, fma=args.fma,
-                                                            sensor_id=args.sensor_id, cmap=cmap, tin=tin,
-                                                            tempcomp=tempcomp))
+            _stopped(runner, args, advice)
             raise
         with dev:
-            _describe(runner, dev, args.target)
+            try:  # its first estimates: a stack that overruns the Uno's RAM ends the board here, not at boot
+                _describe(runner, dev, args.target, model.sha256)
+            except InputError:
+                time.sleep(0.2)  # the board's exit and the host's time-out race: let the board's word come first
+                _stopped(runner, args, advice, before=False)
+                raise
         if args.suite:
             from hil.firmware import adc_input_lsb
 
