@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen import __version__
-from fitgen.physics.dataset import meta_path, parse_table, read_text
+from fitgen.physics.dataset import meta_path, pose_table, read_text
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output, real_file, sha256_hex, write_atomic, write_target
 from fitgen.physics.pose import POSE_NAMES, as_poses, off_skin
@@ -72,18 +72,10 @@ class Schedule:
 
 
 def load_schedule(path: str | Path) -> Schedule:
-    """A CSV with any of the columns dx,dy,dz,thx,thy (other columns ignored); missing components are 0."""
+    """A CSV with any of the columns dx,dy,dz,thx,thy (fitgen.physics.dataset.pose_table); missing components are
+    0."""
     origin = f"schedule {path}"
-    names, table = parse_table(read_text(path, "schedule"), origin)
-    columns = tuple(n for n in POSE_NAMES if n in names)
-    if not columns:
-        raise InputError(f"{origin}: none of the columns {','.join(POSE_NAMES)}")
-    if len(set(names)) != len(names):
-        raise InputError(f"{origin}: a column appears twice")
-    poses = np.zeros((table.shape[0], 5))
-    for j, name in enumerate(names):
-        if name in POSE_NAMES:
-            poses[:, POSE_NAMES.index(name)] = table[:, j]
+    poses, columns = pose_table(read_text(path, "schedule"), origin)
     return Schedule(as_poses(poses), columns, origin)
 
 

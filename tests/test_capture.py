@@ -384,3 +384,19 @@ def test_capture_command_missing_schedule(tmp_path):
     proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "none.csv"), "--adc", TWO_1115,
                    "-o", str(tmp_path / "d.csv"), "--simulate")
     assert_one_line_error(proc, 2, "no such file")
+
+
+@pytest.mark.parametrize("header, said", [("dx,dy,dzz", "unknown column 'dzz' (did you mean dz?)"),
+                                          ("dx,dy,DZ", "unknown column 'DZ' (did you mean dz?)"),
+                                          ("row,dx,dz", "unknown column 'row'; pose columns are dx,dy,dz,thx,thy")])
+def test_a_schedule_column_that_is_no_pose_is_refused_not_held_at_0(tmp_path, header, said):
+    """A misspelt dz was dropped: the stage never pressed and the capture said it was done."""
+    sched = tmp_path / "s.csv"
+    sched.write_text(header + "\n0,0,0\n1,0,-1\n")
+    for cmd in (["tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(tmp_path / "d.csv"),
+                 "--simulate"], ["fitgen", "simulate", "--poses", str(sched), "-o", str(tmp_path / "d.csv")]):
+        assert_one_line_error(run_cli(*cmd), 2, said)
+        assert not (tmp_path / "d.csv").exists()
+    data = tmp_path / "data.csv"  # a dataset's inputs v1.. are passed over: its poses are read
+    data.write_text("v1,v2,dx,dz\n1.0,2.0,0.5,-1\n")
+    assert load_schedule(data).columns == ("dx", "dz") and load_schedule(data).poses[0, 2] == -1

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import difflib
 import hashlib
 import io
 import json
@@ -215,16 +216,26 @@ def estimates_csv(output_names, estimates: np.ndarray, status: np.ndarray) -> st
     return "\n".join(lines) + "\n"
 
 
-def load_poses(path: str | Path) -> np.ndarray:
-    """Poses from a CSV with any of the columns dx,dy,dz,thx,thy (others ignored, missing = 0)."""
-    origin = f"poses {path}"
-    names, table = parse_table(read_text(path, "poses"), origin)
-    present = [n for n in names if n in POSE_NAMES]
-    if not present:
+def pose_table(text: str, origin: str) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Poses (P, 5) from CSV text with any of the columns dx,dy,dz,thx,thy (missing = 0) and the ones it names,
+    in that order. Input columns v1.. (a dataset's) are passed over; any other column is refused, so that a
+    misspelt one (dzz, DZ) is not read as a pose held at 0."""
+    names, table = parse_table(text, origin)
+    for name in names:
+        if name not in POSE_NAMES and not re.fullmatch(r"v[1-9]\d*", name):
+            close = difflib.get_close_matches(name.lower(), POSE_NAMES, n=1, cutoff=0.6)
+            raise InputError(f"{origin}: unknown column {name!r}" + (f" (did you mean {close[0]}?)" if close else "")
+                             + f"; pose columns are {','.join(POSE_NAMES)}")
+    columns = tuple(n for n in POSE_NAMES if n in names)
+    if not columns:
         raise InputError(f"{origin}: none of the columns {','.join(POSE_NAMES)}")
     out = np.zeros((table.shape[0], 5))
-    for j, name in enumerate(names):
-        if name in POSE_NAMES:
-            out[:, POSE_NAMES.index(name)] = table[:, j]
-    return out
+    for name in columns:
+        out[:, POSE_NAMES.index(name)] = table[:, names.index(name)]
+    return out, columns
+
+
+def load_poses(path: str | Path) -> np.ndarray:
+    """Poses from a CSV with any of the columns dx,dy,dz,thx,thy (:func:`pose_table`)."""
+    return pose_table(read_text(path, "poses"), f"poses {path}")[0]
 
