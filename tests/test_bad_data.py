@@ -33,10 +33,15 @@ def test_an_output_that_is_a_folder_or_an_input_is_refused_before_the_work(data,
                        (["identify", d, "-o", "."], "it is a folder"),
                        (["simulate", "--random", "3", "-o", ""], "-o is empty"),
                        (["observe", ""], "sensor is empty"), (["observe", "--ranges", " "], "--ranges is empty"),
-                       (["simulate", "--poses", d, "-o", d], "is the input")):
+                       (["simulate", "--poses", d, "-o", d], "is the input"),
+                       # the dataset's meta is read with it: an identify or fit written over it lost the capture's
+                       # noise figures, and the capture could not be read again
+                       (["identify", d, "-o", d + ".meta.json"], f"is the input {d}.meta.json"),
+                       (["fit", d, "-o", d + ".meta.json"], f"is the input {d}.meta.json")):
         before = files(data.parent)
         assert_one_line_error(run_cli("fitgen", *argv, cwd=tmp_path), contains=said)
         assert files(data.parent) == before and files(tmp_path) == []
+    assert json.loads(Path(d + ".meta.json").read_text())["columns"][0] == "v1"
 
 
 def test_a_constant_output_names_the_ones_to_fit(tmp_path):

@@ -210,8 +210,10 @@ def check_written(args, files=()) -> None:
     from pathlib import Path
 
     from fitgen.base.fileio import check_folder, output_file
+    from fitgen.physics.dataset import meta_path
 
     inputs = [p for p in (getattr(args, n, None) for n in READS) if isinstance(p, str) and Path(p).is_file()]
+    inputs += [str(m) for m in map(meta_path, inputs) if m.is_file()]  # a dataset's meta is read with it
     written = []
     for name in WRITES:
         path = getattr(args, name, None)
