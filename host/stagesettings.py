@@ -69,9 +69,10 @@ class AxisMap:
 
 
 def parse_ranges(spec: str, what: str) -> dict[str, tuple[float, float]]:
-    """``dx=-3:3,dz=-2:0.5`` -> {axis: (lo, hi)} over dx, dy, dz."""
+    """``dx=-3:3,dz=-2:0.5`` (or separated by spaces, as ``fitgen schedule --limits``) -> {axis: (lo, hi)} over
+    dx, dy, dz."""
     out = {}
-    for part in spec.replace(";", ",").split(","):
+    for part in re.split(r"[,;]|\s+(?=[A-Za-z]\w*\s*=)", spec):
         part = part.strip()
         if not part:
             continue

@@ -319,6 +319,11 @@ def test_cli_schedule_capture_identify(tmp_path):
     assert proc.returncode == 0, proc.stderr
     header = sch.read_text().splitlines()[0]
     assert header == "dx,dy,dz"
+    # --stage-limits' commas give the same schedule
+    comma = tmp_path / "comma.csv"
+    assert run_cli("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "30", "--limits",
+                   "dx=-1.5:1.5,dy=-1.5:1.5,dz=-1.5:0", "-o", str(comma)).returncode == 0
+    assert comma.read_text() == sch.read_text()
     table = np.loadtxt(sch, delimiter=",", skiprows=1)
     assert table.shape == (30, 3) and np.abs(table[:, :2]).max() <= 1.5 and table[:, 2].min() >= -1.5
     assert np.all(table[table[:, 2] > 0] == [0, 0, 0.2]) and (table[:, 2] > 0).sum() >= 1  # the rest row

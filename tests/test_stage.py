@@ -114,6 +114,9 @@ def test_axis_map_limits_and_approach_parse_or_refuse_in_one_line():
         with pytest.raises(InputError, match=msg):
             AxisMap.parse(bad)
     assert parse_ranges("dx=-1:2", "--stage-limits") == {"dx": (-1.0, 2.0)}
+    # the separators of fitgen schedule --limits (spaces) work too: the two options of one workflow
+    assert parse_ranges("dx=-1:2 dz=-2:0.5", "l") == parse_ranges("dx=-1:2, dz=-2:0.5", "l") == \
+        {"dx": (-1.0, 2.0), "dz": (-2.0, 0.5)}
     for bad in ("dx=2:1", "dq=0:1", "dx=0", "dx=a:1", "dz=-inf:inf"):
         with pytest.raises(InputError, match="AXIS=LO:HI"):
             parse_ranges(bad, "--stage-limits")

@@ -72,11 +72,12 @@ def parse_grid(spec: str) -> dict[str, list[float]]:
 
 
 def parse_ranges(spec: str | None, base: dict[str, tuple[float, float]] | None = None) -> dict[str, tuple[float, float]]:
-    """``dx=-2:2 thx=-5:5 ...`` (components not named: as in ``base``, default the paper-sim box)."""
+    """``dx=-2:2 thx=-5:5 ...``, or separated by commas as ``--stage-limits`` takes them (components not named: as in
+    ``base``, default the paper-sim box)."""
     ranges = dict(DEFAULT_RANGES if base is None else base)
     if not spec:
         return ranges
-    for name, value in _components(spec, "ranges").items():
+    for name, value in _components(re.sub(r",\s*(?=[A-Za-z]\w*\s*=)", " ", spec), "ranges").items():
         m = re.fullmatch(rf"({_NUM}):({_NUM})", value)
         if not m or float(m.group(1)) > float(m.group(2)):
             raise InputError(f"ranges {spec!r}: {name}={value!r} must be LOW:HIGH with LOW <= HIGH")
