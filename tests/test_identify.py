@@ -11,7 +11,7 @@ import pytest
 from conftest import assert_one_line_error, run_cli
 from fitgen.fitting.identify import Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
-from fitgen.fitting.unitrecord import check_explained, outlier_lines, report
+from fitgen.fitting.unitrecord import check_explained, outlier_lines, report, row_noise
 from fitgen.physics import presets
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
@@ -505,3 +505,19 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
                    str(tmp_path / "d.toml"))
     assert_one_line_error(proc, contains="only with a unit far outside paper's tolerances (")
     assert "element 3 (v3) alone" in proc.stderr and not (tmp_path / "d.toml").exists()
+
+
+def test_the_rows_noise_says_where_it_comes_from_with_its_figure():
+    """A capture's measured noise is what identify weighs by; its first line shows the figure, as the sensor's
+    fallback line does."""
+    sensor = load_sensor("paper").with_transfer("gmr")
+    measured = [1.2e-4, 1.3e-4, 1.1e-4, 1.25e-4, 1.3e-4, 1.2e-4, 1.4e-4, 1.15e-4]
+    noise, said = row_noise({"row_noise": measured, "samples_per_row": 16, "units": "V"}, sensor)
+    np.testing.assert_array_equal(noise, measured)
+    assert said == "measured by the capture (median over the elements 0.000122 V)"
+    noise, said = row_noise({"samples_per_row": 16, "units": "V"}, sensor)
+    np.testing.assert_allclose(noise, sensor.noise / 4)
+    assert said == f"sensor paper's {sensor.noise:g} over sqrt(16) samples"
+    noise, said = row_noise({"row_noise": measured, "samples_per_row": 16}, sensor, noise=0.002)
+    np.testing.assert_allclose(noise, 0.0005)
+    assert said == "--noise 0.002 over sqrt(16) samples"

@@ -81,7 +81,9 @@ def row_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[n
     measured = meta.get(ROW_NOISE_KEY)
     if isinstance(measured, list) and len(measured) == n and all(isinstance(x, (int, float)) and x > 0
                                                                  for x in measured):
-        return np.asarray(measured, dtype=float), "measured by the capture"
+        units = f" {meta['units']}" if isinstance(meta.get("units"), str) else ""
+        return (np.asarray(measured, dtype=float),
+                f"measured by the capture (median over the elements {np.median(measured):.3g}{units})")
     return (np.full(n, sensor.noise / np.sqrt(samples)),
             f"sensor {sensor.name}'s {sensor.noise:g} over sqrt({samples}) samples")
 
