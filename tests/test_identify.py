@@ -486,7 +486,17 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
     assert not (tmp_path / "p.toml").exists() and not (tmp_path / "p.posterior.json").exists()
     assert stop.value.code == 2 and f"cannot create {tmp_path / 'file' / 'sub'}" in capsys.readouterr().err
     # slipped so far that the capture is refused: the refusal's line names the row
-    cases["slipped far"] = (slip(unit, y, plan[0], mm=0.5)[1], plan[0], f"row {deep + 1} stands out most")
+    cases["slipped far"] = (slip(unit, y, plan[0], mm=0.5)[1], plan[0], f"row {deep + 1} (")
+    # one glitched reading: the row is named, not its element (left out, the element took the glitch with it)
+    glitch = y.copy()
+    glitch[deep, 2] += 0.01
+    where = " ".join(f"{c}={v:g}" for c, v in zip("dx dy dz".split(), plan[0][deep]))
+    cases["glitch"] = (glitch, plan[0], f"row {deep + 1} ({where}) alone: with it left out, the others read as a unit")
+    # the zero 3 mm above first contact: the indenter never reaches the skin, every row reads the rest
+    above = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 3.0))
+    cases["zero far above"] = (readings(unit, above, adc_bits=0) + np.random.default_rng(2).normal(0.0, noise, y.shape),
+                               plan[0], "reads as the rows at rest (within 5 noise sd), down to dz=-2: the readings do "
+                                        "not follow the stage; the indenter never reached the skin")
     for name, (yy, pp, message) in cases.items():
         path = tmp_path / f"{name.replace(' ', '_')}.csv"
         _save_capture(path, yy, pp, {"samples_per_row": SAMPLES})

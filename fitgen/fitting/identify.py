@@ -37,6 +37,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from fitgen.base.errors import InputError
+from fitgen.fitting.capturecheck import check_capture, check_contact, check_error
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
@@ -46,13 +47,12 @@ RIG_ERROR = 0.01  # mm rms per axis: a CNC's or a good printer's repeatability
 # mm rms per axis: first contact found in 0.02 mm steps, and a jog that ends against the approach on an axis
 # leaves that axis's backlash (host.stage) in the zero
 ZERO_ERROR = 0.02
-MIN_ROWS = 10
-MIN_DISTINCT = 6
 CHI2_LIMIT = 3.0  # reduced chi-square above this: the physics does not explain the rows
 OUTLIER_LIMIT = 5.0  # a reading's standardized residual beyond this: its row is one the physics does not explain
 # a parameter identified beyond this many prior spreads: not a unit within its tolerances (drawn within 3, and
 # 20 units' captures put none beyond 3.1), but a dead or miswired element, another sensor, or looser tolerances
 PRIOR_LIMIT = 5.0
+ROW_SUSPECTS, ROW_SHARE = 3, 0.1  # rows tried left out before elements: at most 3, each a tenth of the chi-square
 BLAME_NFEV = 20  # function evaluations: a capture with its dead element left out converges in about 7
 _H_THETA = 1e-3  # central-difference step, in prior spreads
 _H_POSE = 1e-4  # mm
@@ -219,6 +219,15 @@ class Identification:
         return r if prob.valid is None else np.where(prob.valid, r, np.nan)
 
     @cached_property
+    def row_chi2(self) -> np.ndarray:
+        """Each row's share of the residual chi-square, its readings whitened together (n,): a reading off on its
+        own, against the others' co-moving with the pose, stands out here where its own residual may not."""
+        prob, z = self.problem, self.space.in_spreads(self.theta)
+        r = np.where(prob.valid, prob.readings - prob.predict(z)[0], 0.0)
+        chi2 = np.sum(np.einsum("nij,nj->ni", prob.whiteners(z), r) ** 2, axis=1)
+        return chi2 / max(float(chi2.sum()), 1e-300)
+
+    @cached_property
     def row_worst(self) -> np.ndarray:
         """Each row's largest |standardized residual| (n,)."""
         return np.nanmax(np.abs(self.standardized_residuals), axis=1)
@@ -260,9 +269,6 @@ def _readable_basis(V: np.ndarray) -> np.ndarray:
     return V @ np.linalg.inv(V[piv, :])
 
 
-MAX_CLIPPED = 0.1  # share of clipped readings above which a capture is refused
-
-
 def _beyond(z: np.ndarray, limit: float) -> list[tuple[int, float]]:
     """Parameters (index, value) of ``z`` (in prior spreads) beyond ``limit``, farthest first."""
     idx = np.nonzero(np.abs(z) > limit)[0]
@@ -285,53 +291,6 @@ def _eigh_free(F: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     V = np.zeros((len(free), len(lam)))
     V[free] = v
     return lam, V
-
-
-def check_capture(space: UnitSpace, readings: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """Refuse captures no identification can use (InputError, one line); the mask of readings that are not
-    clipped (a few clipped ones are left out, more than MAX_CLIPPED of them refuse the capture)."""
-    n, N = readings.shape
-    if N != space.drawing.n_elements:
-        raise InputError(f"the capture has {N} readings per row; sensor {space.drawing.name} has "
-                         f"{space.drawing.n_elements} elements")
-    if n < MIN_ROWS:
-        raise InputError(f"the capture has {n} rows; identify needs at least {MIN_ROWS} (fitgen schedule --n 40)")
-    distinct = len(np.unique(np.round(poses, 6), axis=0))
-    if distinct < MIN_DISTINCT:
-        raise InputError(f"the capture visits {distinct} distinct pose(s); identify needs at least {MIN_DISTINCT} "
-                         "(fitgen schedule)")
-    d = space.drawing
-    valid = np.ones(readings.shape, dtype=bool)
-    if d.transfer == "gmr":
-        # a reading on the ADC's rails is clipped (the element's own saturation is in the model: gain x 2 mT)
-        g = d.gmr
-        lsb = (g.adc_max - g.adc_min) / max(2**g.adc_bits - 1, 1)
-        # past the rails by more than noise could put an unquantised reading: no reading of this ADC at all
-        margin = max(2 * lsb, 0.05 * (g.adc_max - g.adc_min))
-        beyond = (readings < g.adc_min - margin) | (readings > g.adc_max + margin)
-        if beyond.any():
-            i, k = np.argwhere(beyond)[0]
-            raise InputError(f"row {i + 1}: v{k + 1} = {readings[i, k]:.6g} V lies outside the ADC's range "
-                             f"({g.adc_min:g}..{g.adc_max:g} V, sensor {d.name}): readings in other units (mT: give "
-                             "--transfer raw) or from another ADC than the sensor file's [transfer.gmr]")
-        if np.ptp(readings) == 0:
-            raise InputError(f"every reading is {readings[0, 0]:.6g} V: no sensor answers behind the ADC (its supply, "
-                             "its wiring, the channel map)")
-        valid = (readings < g.adc_max - 2 * lsb) & (readings > g.adc_min + 2 * lsb)
-        stuck = np.nonzero(np.mean(~valid, axis=0) > 0.9)[0]  # one element on a rail, the others not: that element
-        if len(stuck) == 1:
-            k = int(stuck[0])
-            others = float(np.mean(np.delete(~valid, k, axis=1)))
-            raise InputError(f"v{k + 1} reads at the ADC's rail in {np.mean(~valid[:, k]):.0%} of the rows "
-                             f"({np.median(readings[:, k]):.6g} V, range {g.adc_min:g}..{g.adc_max:g} V), the other "
-                             f"elements in {others:.0%} of theirs: element {k + 1} does not respond or is not connected "
-                             "(its supply, its amplifier, its channel in the channel map)")
-        if np.mean(~valid) > MAX_CLIPPED:
-            i, k = np.argwhere(~valid)[0]
-            raise InputError(f"{np.mean(~valid):.0%} of the readings are saturated at the ADC's rails (row {i + 1}: "
-                             f"v{k + 1} = {readings[i, k]:.6g} V, range {g.adc_min:g}..{g.adc_max:g} V): capture within "
-                             "the linear range (fitgen schedule --limits), or lower the amplifier's gain")
-    return valid
 
 
 def _maximum_a_posteriori(prob: Problem, sweeps: int = 3, max_nfev: int = 60, progress=None) -> np.ndarray:
@@ -364,13 +323,6 @@ def _chi2(prob: Problem, z: np.ndarray) -> tuple[float, float, np.ndarray, np.nd
     return float(r.ravel() @ r.ravel()), max(float(prob.valid.sum()) - float(np.trace(F @ post)), 1.0), F, post
 
 
-def check_error(name: str, value: float) -> None:
-    """InputError unless a rig's or zero's error is 0..10 mm: one that errs by more than the pose box cannot
-    calibrate."""
-    if not 0 <= value <= 10:
-        raise InputError(f"the {name} must be 0..10 mm, got {value:g}")
-
-
 def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *, rig_error: float = RIG_ERROR,
              zero_error: float = ZERO_ERROR, ranges: dict | None = None, progress=None) -> Identification:
     """The unit of ``drawing`` behind a capture: rows of ``readings`` (n, N) at label ``poses`` (n, 5), with
@@ -385,6 +337,7 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
         raise InputError("identify needs the reading noise > 0 (give --noise, or a sensor file with a noise figure)")
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
+    check_contact(readings, poses, noise)
     prob = Problem(space, readings, poses, noise, float(rig_error), valid, float(zero_error))
     try:
         return _solve(prob, ranges, progress)
@@ -437,15 +390,27 @@ def _explained_within(trial: Problem) -> bool:
 
 def blame(ident: Identification, progress=None) -> tuple[str, tuple[int, ...]] | None:
     """What to blame for a capture the physics does not explain within the tolerances, when one thing alone is:
-    ``("dead", (k,))``, the one element whose readings, left out, leave rows a unit within its tolerances
-    explains to the noise (it does not respond, or is wired to another channel); else, when more than three rows
-    stand out, ``("swapped", (a, b))``, the one pair of elements whose readings, exchanged, do (their channels
-    wired the other way round); else None. One short fit per trial: with the fault undone a capture converges in
-    a few steps. ``progress(i, n, note)`` after each."""
+    ``("rows", (i, ...))``, the one to three rows that stand out, when the others without them read as a unit
+    within its tolerances to the noise (a slip, a glitch: tried first, as one bad reading also leaves its element
+    to blame); else ``("dead", (k,))``, the one element whose readings, left out, do (it does not respond, or is
+    wired to another channel); else, when more than three rows stand out, ``("swapped", (a, b))``, the one pair of
+    elements whose readings, exchanged, do (their channels wired the other way round); else None. One short fit
+    per trial: with the fault undone a capture converges in a few steps. ``progress(i, n, note)`` after each."""
     prob = ident.problem
     n_el = prob.readings.shape[1]
     pairs = list(combinations(range(n_el), 2)) if len(ident.outlying_rows()) > 3 else []
-    total, done = n_el + len(pairs), 0
+    share = ident.row_chi2
+    top = [int(i) for i in np.argsort(-share, kind="stable")[:ROW_SUSPECTS] if share[i] >= ROW_SHARE]
+    trials = [top[:1], top] if len(top) > 1 else [top] if top else []
+    total, done = n_el + len(pairs) + len(trials), 0
+    for rows in trials:
+        done += 1
+        if progress is not None:
+            progress(done, total, f"row{'s' * (len(rows) > 1)} {', '.join(str(i + 1) for i in rows)} left out")
+        valid = prob.valid.copy()
+        valid[rows] = False
+        if _explained_within(replace(prob, valid=valid)):
+            return ("rows", tuple(rows))
     found = []
     for k in range(n_el):
         done += 1

@@ -22,7 +22,8 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
-from fitgen.fitting.identify import MIN_DISTINCT, MIN_ROWS, RIG_ERROR, Problem, check_error, unit_space
+from fitgen.fitting.capturecheck import MIN_DISTINCT, MIN_ROWS, check_error
+from fitgen.fitting.identify import RIG_ERROR, Problem, unit_space
 from fitgen.physics.dataset import meta_path
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor

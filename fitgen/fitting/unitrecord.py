@@ -168,7 +168,13 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
         return
     names = ", ".join(f"{ident.space.names[i]} at {z:+.3g}" for i, z in far[:3]) + " prior spreads"
     culprit = blame(ident, progress)
-    if culprit is not None and culprit[0] == "dead":
+    if culprit is not None and culprit[0] == "rows":
+        rows = culprit[1]
+        said = "; ".join(f"row {i + 1} ({_where(ident, i)})" for i in rows)
+        cause = (f"{said} alone: with {'it' if len(rows) == 1 else 'them'} left out, the others read as a unit within "
+                 f"the tolerances, to the noise; if {'it' if len(rows) == 1 else 'they'} slipped or glitched, delete "
+                 f"{'it' if len(rows) == 1 else 'them'} and resume the capture (it takes the pose again)")
+    elif culprit is not None and culprit[0] == "dead":
         k = culprit[1][0]
         cause = (f"element {k + 1} (v{k + 1}) alone: with its readings left out, the others read as a unit within the "
                  "tolerances, to the noise; it does not respond, or is wired to another channel (the channel map)")
@@ -184,8 +190,11 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
         cause = None
     if bad:
         rows = ident.outlying_rows()
+        at_rest = bool(rows) and bool(off_skin(ident.problem.poses[rows[0][0]][None])[0])
         row = "" if not rows else (f"; row {rows[0][0] + 1} stands out most ({_where(ident, rows[0][0])}: residuals up "
-                                   f"to {rows[0][1]:.3g} standard deviations): if it slipped, delete it and resume"
+                                   f"to {rows[0][1]:.3g} standard deviations)" + (
+                                       ", a row at rest that no stage error moves: the rows in contact disagree with "
+                                       "it" if at_rest else ": if it slipped, delete it and resume")
                                    if len(rows) <= 3 else f"; {len(rows)} rows stand out, not one")
         cause = cause or (stage_error_hint(ident) + f"another sensor than {drawing}, labels in other units, an element "
                           "that does not respond or "
