@@ -73,6 +73,21 @@ def test_fewer_readings_than_components_have_no_finite_bound():
 
     four = parse_sensor(d)
     assert np.all(np.isinf(cramer_rao(four, np.array([[0.5, 0.5, -1, 1, 1]]), 0.0005)))
+    # and the verdicts say so, each with a direction the readings cannot see (they raised a shape error)
+    for count in (1, 3, 4):
+        words = observe(parse_sensor(PAPER.source | {"elements": {"ring": [{"count": count, "radius": 10.0}]}}),
+                        PRESETS["full"].ranges).verdicts()
+        assert len(words) == 5 and all("NOT resolvable" in w and "(bound inf" in w for w in words), words
+        assert all("the readings barely change along " in w for w in words)
+
+
+def test_a_verdict_quotes_the_worst_pose_not_the_first():
+    rep = observe(PAPER, PRESETS["full"].ranges, noise=0.05)
+    j = rep.components.index("dz")
+    worst = max(rep.results, key=lambda r: r.bounds[j])
+    words = next(w for w in rep.verdicts() if w.startswith("dz:"))
+    assert f"bound {worst.bounds[j]:.3g} mm at {' '.join(f'{v:g}' for v in worst.pose)};" in words
+    assert worst.bounds[j] > 5 * rep.results[0].bounds[j]  # at rest dz is seen best: the first pose is not it
 
 
 def test_verdicts_for_the_paper_layout():

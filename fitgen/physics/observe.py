@@ -50,12 +50,14 @@ class PoseObservability:
 
 def _svd_bounds(J: np.ndarray, noise: float):
     """Batched SVD of J (P, N, C) and the Cramer-Rao standard deviations (P, C); inf where singular."""
-    _, s, vt = np.linalg.svd(J, full_matrices=False)
+    # full V: with fewer readings than components its last rows are the directions the readings cannot see
+    _, s, vt = np.linalg.svd(J, full_matrices=True)
+    k = s.shape[1]
     # fewer readings than components: J^T J is singular whatever the values
-    ok = (s[:, -1] > s[:, 0] * 1e-12) & (s.shape[1] == J.shape[2])
+    ok = (s[:, -1] > s[:, 0] * 1e-12) & (k == J.shape[2])
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a bound past float's range is inf
         # (J^T J)^-1 = V diag(1/s^2) V^T, without forming J^T J
-        bounds = noise * np.sqrt(np.sum((vt.transpose(0, 2, 1) / s[:, None, :]) ** 2, axis=2))
+        bounds = noise * np.sqrt(np.sum((vt[:, :k].transpose(0, 2, 1) / s[:, None, :]) ** 2, axis=2))
     bounds[~ok] = np.inf
     full_s = np.zeros((len(J), J.shape[2]))
     full_s[:, : s.shape[1]] = s
@@ -163,8 +165,8 @@ class ObserveReport:
                            f"(required {need:g} {unit}) {self.examined()}"
                            + (f", and at {self.inside} random poses inside the box." if self.inside else "."))
                 continue
-            where = "at rest" if np.all(bad[0].pose == 0) else f"at {' '.join(f'{v:g}' for v in bad[0].pose)}"
-            r = bad[0]
+            r = max(bad, key=lambda b: b.bounds[j])  # the worst pose, as the table's worst column
+            where = "at rest" if np.all(r.pose == 0) else f"at {' '.join(f'{v:g}' for v in r.pose)}"
             # the pose direction that contributes most to this component's bound
             weight = np.abs(r.directions[:, j]) / np.maximum(r.singular_values, 1e-300)
             blind = describe_direction(r.directions[int(np.argmax(weight))], self.components)
