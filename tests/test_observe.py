@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -149,3 +151,17 @@ def test_a_huge_noise_gives_infinite_bounds_without_numpy_warnings():
     proc = run_cli("fitgen", "observe", "--noise", "1e300", "--scene", "press")
     assert proc.returncode == 0 and "RuntimeWarning" not in proc.stderr, proc.stderr
     assert "dz: NOT resolvable" in proc.stdout
+
+
+def test_a_sensor_file_without_a_noise_figure_is_not_judged_noise_free(tmp_path):
+    """A file that leaves noise out reads 0, and every component came out 'resolvable: bound at most 0 mm'."""
+    import re
+
+    text = (Path(__file__).resolve().parents[1] / "fitgen" / "physics" / "presets" / "paper.toml").read_text()
+    quiet = tmp_path / "quiet.toml"
+    quiet.write_text(re.sub(r"(?m)^noise\s*=.*\n", "", text))
+    assert_one_line_error(run_cli("fitgen", "observe", "--sensor", str(quiet)), 2,
+                          "sensor paper gives no noise figure for its raw transfer (noise missing or 0 in "
+                          "[transfer.raw])")
+    proc = run_cli("fitgen", "observe", "--sensor", str(quiet), "--noise", "0.0005")
+    assert proc.returncode == 0 and "dx: NOT resolvable" in proc.stdout  # the ring is blind to dx at rest

@@ -192,6 +192,10 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
     layout can be blind inside the box where it sees at every corner: a saturating element, say)."""
     from fitgen.physics.simulate import pose_rng, random_poses
 
+    if noise is None and not sensor.noise > 0:  # a file without one reads 0: every bound would be 0
+        raise InputError(f"sensor {sensor.name} gives no noise figure for its {sensor.transfer} transfer (noise "
+                         f"missing or 0 in [transfer.{sensor.transfer}]): add it to the file (observe also takes "
+                         "--noise); without noise every pose component is resolved to 0, resolvable or not")
     noise = sensor.noise if noise is None else noise
     acc = dict(DEFAULT_ACCURACY)
     acc.update(accuracy or {})
