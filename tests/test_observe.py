@@ -104,7 +104,7 @@ def test_verdicts_for_the_paper_layout():
     assert len(slide.table().splitlines()) == 2 + 9  # the corners tabled, the poses inside judged
 
 
-def test_cli_table_and_words():
+def test_cli_table_and_words(tmp_path):
     proc = run_cli("fitgen", "observe", "--sensor", "paper")
     assert proc.returncode == 0, proc.stderr
     assert "s_min" in proc.stdout and "thx [deg]" in proc.stdout
@@ -115,9 +115,15 @@ def test_cli_table_and_words():
     assert_one_line_error(run_cli("fitgen", "observe", "--scene", "nosuch"), contains="scene")
     # a box past reason overflowed the field into a LinAlgError; one through the board was analysed
     assert_one_line_error(run_cli("fitgen", "observe", "--ranges", "dx=-1e300:1e300"), contains="within -1000..1000")
+    # a box the user gave that reaches the board is said of the box, not of a pose number in it
     assert_one_line_error(run_cli("fitgen", "observe", "--ranges", "dz=-20:-10"),
-                          contains="pose 2 (dx=-2 dy=-2 dz=-20 thx=-5 thy=-5) puts the magnet's lowest point at "
-                                   "z = -7.865")
+                          contains="observe: the pose box reaches the board: at its corner dx=-2 dy=-2 dz=-20 thx=-5 "
+                                   "thy=-5 the magnet's lowest point is 9.37 mm into it")
+    proc = run_cli("fitgen", "simulate", "--ranges", "dz=-30:0", "--random", "10", "-o", str(tmp_path / "x.csv"))
+    assert_one_line_error(proc, 2, "--ranges 'dz=-30:0': the pose box reaches the board: at its corner dx=-2 dy=-2 "
+                                   "dz=-30 thx=-5 thy=-5")
+    assert_one_line_error(run_cli("fitgen", "observe", "--ranges", "dx=-inf:2"),
+                          contains="dx='-inf:2': LOW and HIGH must be finite numbers")
     # a box a hair above the board: the pose is legal, its central differences are not; the pose is named
     assert_one_line_error(run_cli("fitgen", "observe", "--ranges", "dx=0:0 dy=0:0 dz=-10.99995:-5 thx=0:0 thy=0:0"),
                           contains="pose 2 (dx=0 dy=0 dz=-10.99995 thx=0 thy=0) puts the magnet within 0.0001 mm")

@@ -152,7 +152,7 @@ def test_grid_then_random_poses(tmp_path):
     (["--bogus"], "unrecognized"),
     # the magnet's bottom face (11 mm above the board at rest) on the board's top face: into the board
     (["--grid", "dz=-11 dx=0 dy=0"], "on or below the board's top face (z = 1.5 mm"),
-    (["--random", "5", "--ranges", "dz=-14:-12"], "on or below the board's top face"),
+    (["--random", "5", "--ranges", "dz=-14:-12"], "the pose box reaches the board: at its corner"),
     (["--random", "5", "--ranges", "dx=-1e300:1e300"], "dx must lie within -1000..1000 mm"),
     (["--random", "5", "--ranges", "thy=-1e999:0"], "thy from -inf to 0 deg"),
 ])

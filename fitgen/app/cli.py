@@ -27,7 +27,7 @@ def cmd_simulate(args) -> int:
     # a sensor file (a unit's, say) is named in the meta, so that fit finds it to hold out on
     unit_info = {"sensor_file": str(Path(args.sensor).resolve())} if Path(args.sensor).is_file() else {}
     poses, source = choose_poses(grid=args.grid, random=args.random, poses=args.poses, ranges=args.ranges,
-                                 scene=args.scene, seed=args.seed)
+                                 scene=args.scene, seed=args.seed, sensor=sensor)
     noise = noise_of(args.noise, sensor)
     if args.labels == "magnet" and args.unit is None and sensor.is_drawing:
         raise InputError("--labels magnet is for a built unit (--unit SEED, or a unit's file as --sensor): on the "

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.physics.pose import (POSE_NAMES, POSE_UNITS, as_poses, board_clearance, check_above_board, field_readings,
-                                 pose_label)
+from fitgen.physics.pose import (POSE_NAMES, POSE_UNITS, as_poses, board_clearance, check_above_board, check_box,
+                                 field_readings, pose_label)
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.transfer import apply_transfer
 
@@ -196,6 +196,7 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
         raise InputError(f"sensor {sensor.name} gives no noise figure for its {sensor.transfer} transfer (noise "
                          f"missing or 0 in [transfer.{sensor.transfer}]): add it to the file (observe also takes "
                          "--noise); without noise every pose component is resolved to 0, resolvable or not")
+    check_box(sensor, ranges, "observe")
     noise = sensor.noise if noise is None else noise
     acc = dict(DEFAULT_ACCURACY)
     acc.update(accuracy or {})

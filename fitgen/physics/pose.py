@@ -6,6 +6,7 @@ R = Ry(thy) Rx(thx) about the magnet's own centre, rotation first, then translat
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -115,6 +116,20 @@ def board_clearance(sensor: Sensor, poses) -> np.ndarray:
     """How far (mm, P) the magnet's lowest point is above the board's top face at each pose; <= 0: into it."""
     centre, R = _unchecked(sensor, as_poses(poses))
     return lowest_point(sensor, centre, R) - sensor.board_thickness
+
+
+def check_box(sensor: Sensor, ranges: dict, origin: str) -> None:
+    """InputError when the pose box ``ranges`` takes the magnet into the board (at its lowest corner), said of the
+    box the user gave rather than of a pose drawn in it."""
+    corners = np.array(list(itertools.product(*[ranges[n] for n in POSE_NAMES])), dtype=float)
+    clear = board_clearance(sensor, corners)
+    if np.all(clear > 0):
+        return
+    worst = corners[int(np.argmin(clear))]
+    room = float(board_clearance(sensor, np.zeros((1, 5)))[0])
+    raise InputError(f"{origin}: the pose box reaches the board: at its corner {pose_label(worst)} the magnet's lowest "
+                     f"point is {-clear.min():.3g} mm into it (at rest it is {room:.3g} mm above the board's top face): "
+                     "narrow the box's dz (or tilt) range")
 
 
 def _unchecked(sensor: Sensor, given: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

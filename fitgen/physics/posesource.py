@@ -9,13 +9,16 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.physics.dataset import load_poses
+from fitgen.physics.pose import check_box
 from fitgen.physics.scenes import PRESETS, load_scene
 from fitgen.physics.simulate import grid_poses, parse_grid, parse_ranges, pose_rng, random_poses
 
 
 def choose_poses(*, grid: str | None = None, random: int | None = None, poses: str | None = None,
-                 ranges: str | None = None, scene: str | None = None, seed: int = 0) -> tuple[np.ndarray, dict]:
-    """(poses, provenance) from the options of ``fitgen simulate``.
+                 ranges: str | None = None, scene: str | None = None, seed: int = 0,
+                 sensor=None) -> tuple[np.ndarray, dict]:
+    """(poses, provenance) from the options of ``fitgen simulate``; with ``sensor``, a box that reaches its board is
+    refused as a box.
 
     ``scene``: its grid, or ``random`` poses in its box. Otherwise the ``poses`` file, ``random``
     poses in ``ranges`` (seeded by ``seed``; after the ``grid``'s poses when it is given too), or
@@ -33,11 +36,16 @@ def choose_poses(*, grid: str | None = None, random: int | None = None, poses: s
         scene_info = {"scene": sc.name, "scene_spec": spec, "scene_outputs": list(sc.outputs)}
         if random is None:
             return sc.poses(), {"scene_grid_levels": sc.levels, **scene_info}
+        if sensor is not None:
+            check_box(sensor, sc.ranges, f"scene {sc.name}")
         return random_poses(random, sc.ranges, pose_rng(seed)), {"random": random, **scene_info}
     if poses:
         return load_poses(poses), {"poses_file": str(poses)}
     if random is not None:
-        out = random_poses(random, parse_ranges(ranges), pose_rng(seed))
+        box = parse_ranges(ranges)
+        if sensor is not None:
+            check_box(sensor, box, f"--ranges {ranges!r}" if ranges else "the default pose box")
+        out = random_poses(random, box, pose_rng(seed))
         source = {"random": random, "ranges": ranges}
         if grid:
             # a rig's sweep and random presses between its levels: the grid's poses first

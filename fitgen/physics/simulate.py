@@ -79,6 +79,8 @@ def parse_ranges(spec: str | None, base: dict[str, tuple[float, float]] | None =
         return ranges
     for name, value in _components(re.sub(r",\s*(?=[A-Za-z]\w*\s*=)", " ", spec), "ranges").items():
         m = re.fullmatch(rf"({_NUM}):({_NUM})", value)
+        if not m and re.fullmatch(r"[-+]?(inf|infinity|nan)\s*:.*|.*:\s*[-+]?(inf|infinity|nan)", value, re.I):
+            raise InputError(f"ranges {spec!r}: {name}={value!r}: LOW and HIGH must be finite numbers")
         if not m or float(m.group(1)) > float(m.group(2)):
             raise InputError(f"ranges {spec!r}: {name}={value!r} must be LOW:HIGH with LOW <= HIGH")
         ranges[name] = (float(m.group(1)), float(m.group(2)))
