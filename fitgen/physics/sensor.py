@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import math
 import sys
 from dataclasses import dataclass, field
@@ -194,7 +195,9 @@ class _Section:
     def raw(self, key: str, default=None, required=False):
         if key not in self.data:
             if required:
-                raise InputError(f"{self.origin}: missing key '{self._key(key)}'")
+                near = difflib.get_close_matches(key, [k for k in self.data if isinstance(k, str)], n=1, cutoff=0.6)
+                raise InputError(f"{self.origin}: missing key '{self._key(key)}'"
+                                 + (f" (is '{self._key(near[0])}' a misspelling of it?)" if near else ""))
             return default
         self.used.add(key)
         return self.data[key]
@@ -213,7 +216,7 @@ class _Section:
         return val
 
     def integer(self, key, default=None, *, min_=None, max_=None) -> int:
-        val = self.raw(key, default)
+        val = self.raw(key, default, required=default is None)
         if isinstance(val, bool) or not isinstance(val, int):
             raise InputError(f"{self.origin}: '{self._key(key)}' must be a whole number, got {val!r}")
         if (min_ is not None and val < min_) or (max_ is not None and val > max_):
