@@ -161,7 +161,7 @@ def test_a_capture_that_tilts_separates_more(drawing):
     # a row that stands out is named with its tilts
     y[5, 0] += 60 * noise
     lines = outlier_lines(identify(drawing, y, poses, noise, rig_error=0.001), "c.csv")
-    assert lines[0].startswith(f"row 6 of c.csv ({' '.join(f'{c}={v:g}' for c, v in zip(POSE_NAMES, poses[5]))})")
+    assert lines[0].startswith(f"row 6 of c.csv (line 7: {' '.join(f'{c}={v:g}' for c, v in zip(POSE_NAMES, poses[5]))})")
 
 
 def test_a_capture_without_presses_names_what_it_starves(drawing, tmp_path):
@@ -491,7 +491,8 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
     glitch = y.copy()
     glitch[deep, 2] += 0.01
     where = " ".join(f"{c}={v:g}" for c, v in zip("dx dy dz".split(), plan[0][deep]))
-    cases["glitch"] = (glitch, plan[0], f"row {deep + 1} ({where}) alone: with it left out, the others read as a unit")
+    cases["glitch"] = (glitch, plan[0], f"row {deep + 1} (line {deep + 2}: {where}) alone: with it left out, the "
+                                        "others read as a unit")
     # the zero 3 mm above first contact: the indenter never reaches the skin, every row reads the rest
     above = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 3.0))
     cases["zero far above"] = (readings(unit, above, adc_bits=0) + np.random.default_rng(2).normal(0.0, noise, y.shape),
@@ -531,3 +532,12 @@ def test_the_rows_noise_says_where_it_comes_from_with_its_figure():
     noise, said = row_noise({"row_noise": measured, "samples_per_row": 16}, sensor, noise=0.002)
     np.testing.assert_allclose(noise, 0.0005)
     assert said == "--noise 0.002 over sqrt(16) samples"
+
+
+def test_a_capture_without_pose_columns_is_said_so(tmp_path):
+    """Readings without labels read as one pose visited 40 times ('visits 1 distinct pose'): the cause is named."""
+    rows = "\n".join(",".join(["1.5"] * 8) for _ in range(40))
+    (tmp_path / "bare.csv").write_text(",".join(f"v{k}" for k in range(1, 9)) + "\n" + rows + "\n")
+    proc = run_cli("fitgen", "identify", str(tmp_path / "bare.csv"), "--transfer", "gmr", "-o", str(tmp_path / "u.toml"))
+    assert_one_line_error(proc, 2, "bare.csv has readings but no pose columns (dx,dy,dz,...)")
+    assert not (tmp_path / "u.toml").exists()

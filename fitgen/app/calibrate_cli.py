@@ -19,6 +19,9 @@ def cmd_identify(args) -> int:
 
     folder = plots.require(args.plot) if args.plot else None
     ds = load_dataset(args.capture)
+    if not ds.target_names:
+        raise InputError(f"{args.capture} has readings but no pose columns (dx,dy,dz,...): identify needs each row's "
+                         "stage displacement from the zero, as tactile-host capture writes it")
     rec.check_transfer(args.transfer, ds.meta, args.capture)
     drawing = sensor_of(args) if args.transfer else rec.in_capture_units(sensor_of(args), ds.meta)
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)

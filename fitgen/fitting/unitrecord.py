@@ -124,7 +124,8 @@ def _pose_words(ident: Identification, pose: np.ndarray) -> str:
 
 
 def _where(ident: Identification, i: int) -> str:
-    return _pose_words(ident, ident.problem.poses[i])
+    """Row ``i``'s line in the capture's file (the header is line 1), where an editor finds it, and its pose."""
+    return f"line {i + 2}: {_pose_words(ident, ident.problem.poses[i])}"
 
 
 def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
@@ -191,7 +192,7 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
     if bad:
         rows = ident.outlying_rows()
         at_rest = bool(rows) and bool(off_skin(ident.problem.poses[rows[0][0]][None])[0])
-        row = "" if not rows else (f"; row {rows[0][0] + 1} stands out most ({_where(ident, rows[0][0])}: residuals up "
+        row = "" if not rows else (f"; row {rows[0][0] + 1} stands out most ({_where(ident, rows[0][0])}; residuals up "
                                    f"to {rows[0][1]:.3g} standard deviations)" + (
                                        ", a row at rest that no stage error moves: the rows in contact disagree with "
                                        "it" if at_rest else ": if it slipped, delete it and resume")
