@@ -420,8 +420,12 @@ def test_a_capture_read_in_the_wrong_units_is_said_so(drawing, plan, tmp_path):
     (tmp_path / "bare.csv.meta.json").unlink()
     proc = run_cli("fitgen", "identify", str(tmp_path / "bare.csv"), "--noise", str(drawing.noise), "-o",
                    str(tmp_path / "u.toml"))
-    assert_one_line_error(proc, 2, "the capture's meta does not give its units: read as mT they fit the drawing")
-    assert "than as V: give --transfer gmr)" in proc.stderr and not (tmp_path / "u.toml").exists()
+    # the likely cause first: the meta left behind (the physics' own refusal follows)
+    assert_one_line_error(proc, 2, "fitgen: error: the capture's meta does not give its units (is its .meta.json, "
+                                   "which also records the noise it measured, left behind?): read as mT they fit the "
+                                   "drawing")
+    assert "than as V: give --transfer gmr; read as mT, the physics" in proc.stderr
+    assert not (tmp_path / "u.toml").exists()
     assert run_cli("fitgen", "identify", str(tmp_path / "bare.csv"), "--transfer", "gmr", "--noise",
                    str(drawing.noise), "-o", str(tmp_path / "u.toml")).returncode == 0
 

@@ -38,7 +38,7 @@ def cmd_identify(args) -> int:
             rec.check_explained(ident, args.capture, drawing.name, source, trial)
         except InputError as exc:
             hint = "" if args.transfer else rec.units_hint(drawing, ds.inputs, ds.poses(), ds.meta)
-            raise InputError(f"{exc}{hint}") from None
+            raise InputError(f"{hint}; read as {drawing.units}, {exc}" if hint else str(exc)) from None
     files = rec.unit_files(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
                                                 "drawing_spec": args.sensor})
     if folder is not None:  # drawn first, then written with the unit's files: a failure leaves none of them

@@ -104,7 +104,7 @@ def check_transfer(transfer: str | None, meta: dict, capture) -> None:
 
 def units_hint(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, meta: dict) -> str:
     """When a capture's meta does not give its units: '' if its readings fit the drawing best in the units they
-    were read in, else a hint naming the other transfer (mT and V differ by a scale and the rails only, so the
+    were read in, else the refusal's first cause, naming the other transfer (mT and V differ by a scale and the rails only, so the
     residual of the drawing in each, not the readings' size, tells them apart)."""
     from fitgen.physics.transfer import readings as drawn
 
@@ -114,8 +114,9 @@ def units_hint(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, meta: d
     off = [float(np.sqrt(np.mean((readings - drawn(s, poses, adc_bits=0)) ** 2))) for s in (drawing, other)]
     if not off[1] * 2 < off[0]:
         return ""
-    return (f" (the capture's meta does not give its units: read as {drawing.units} they fit the drawing "
-            f"{off[0] / max(off[1], 1e-300):.3g}x worse than as {other.units}: give --transfer {other.transfer})")
+    return (f"the capture's meta does not give its units (is its .meta.json, which also records the noise it "
+            f"measured, left behind?): read as {drawing.units} they fit the drawing {off[0] / max(off[1], 1e-300):.3g}x "
+            f"worse than as {other.units}: give --transfer {other.transfer}")
 
 
 def _pose_words(ident: Identification, pose: np.ndarray) -> str:
