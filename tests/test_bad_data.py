@@ -108,7 +108,9 @@ def test_identify_refuses_numbers_it_cannot_solve_with(tmp_path):
     sched.write_text("dx,dy,dz\n" + "".join(f"{x},{y},{z}\n" for x in (-1, 1) for y in (-1, 1) for z in (0, -1, -2)))
     assert run_cli("fitgen", "simulate", "--unit", "2", "--poses", str(sched), "--noise", "0.0005", "-o",
                    str(tmp_path / "cap.csv")).returncode == 0
-    for extra, said in ((["--rig-error", "1e300"], "the rig error must be 0..10 mm"),
+    for extra, said in ((["--rig-error", "1e300"], "the rig error must be 0..0.5 mm (a printer's is 0.01-0.1)"),
+                        (["--rig-error", "2"], "the rig error must be 0..0.5 mm"),
+                        (["--zero-error", "5"], "the zero error must be 0..0.5 mm"),
                         (["--noise", "1e-12"], "cannot be solved for in floating point")):
         assert_one_line_error(run_cli("fitgen", "identify", str(tmp_path / "cap.csv"), "-o",
                                       str(tmp_path / "u.toml"), *extra), contains=said)

@@ -545,3 +545,17 @@ def test_a_capture_without_pose_columns_is_said_so(tmp_path):
     proc = run_cli("fitgen", "identify", str(tmp_path / "bare.csv"), "--transfer", "gmr", "-o", str(tmp_path / "u.toml"))
     assert_one_line_error(proc, 2, "bare.csv has readings but no pose columns (dx,dy,dz,...)")
     assert not (tmp_path / "u.toml").exists()
+
+
+def test_residuals_far_below_the_noise_are_remarked(drawing, plan, tmp_path):
+    """Noise-free rows, or a noise figure far too large: the unit is written, with a line that the standard errors
+    are too wide (it said 'reduced 0.00' and nothing else)."""
+    unit, _ = draw_unit(drawing, 26)
+    y, noise = capture(unit, plan[0], 26)
+    _save_capture(tmp_path / "c.csv", y, plan[0], {"samples_per_row": SAMPLES})
+    proc = run_cli("fitgen", "identify", str(tmp_path / "c.csv"), "-o", str(tmp_path / "u.toml"), "--noise", "0.02")
+    assert proc.returncode == 0, proc.stderr
+    said = [ln for ln in proc.stderr.splitlines() if "what the reading noise" in ln]
+    assert len(said) == 1 and said[0].startswith("identify: the residuals are 0.") and "too wide" in said[0]
+    proc = run_cli("fitgen", "identify", str(tmp_path / "c.csv"), "-o", str(tmp_path / "v.toml"))
+    assert proc.returncode == 0 and "what the reading noise" not in proc.stderr, proc.stderr

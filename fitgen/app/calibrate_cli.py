@@ -51,7 +51,8 @@ def cmd_identify(args) -> int:
           "the posterior)", file=sys.stderr)
     if png:
         print(f"plot: {png[0]}", file=sys.stderr)
-    print("".join(f"identify: {ln}\n" for ln in rec.outlier_lines(ident, args.capture)), end="", file=sys.stderr)
+    notes = rec.outlier_lines(ident, args.capture) + rec.low_residual_line(ident, source)
+    print("".join(f"identify: {ln}\n" for ln in notes), end="", file=sys.stderr)
     return 0
 
 

@@ -406,7 +406,7 @@ def build_parser() -> Parser:
                     "with dz, a rest row may lift the stage 0.2 mm above first contact besides")
     sc.add_argument("--samples", default="16", help="samples the capture averages per row (default 16)")
     sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
-    sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM", help="the stage's error, mm rms")
+    sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM", help="stage error, mm rms (default 0.01)")
     sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv")
 
     pr = command("predict", cmd_predict, "estimates for the rows of a dataset")

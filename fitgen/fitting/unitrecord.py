@@ -143,6 +143,19 @@ def outlier_lines(ident: Identification, capture, top: int = 3) -> list[str]:
     return lines
 
 
+LOW_CHI2 = 0.3  # reduced chi-square below this: the errors the rows were weighed with are set too large
+
+
+def low_residual_line(ident: Identification, source: str) -> list[str]:
+    """A line when the residuals are far below what the noise figure and the stage's errors predict: one of those is
+    set too large (or the rows carry no noise), and every standard error is too wide with it."""
+    if ident.reduced_chi2 >= LOW_CHI2:
+        return []
+    return [f"the residuals are {float(np.sqrt(ident.reduced_chi2)):.2g}x what the reading noise ({source}) and the "
+            "stage's errors predict: one of them is set too large (--noise, --rig-error, --zero-error), or the rows "
+            "carry no noise, so the standard errors are too wide"]
+
+
 def stage_error_hint(ident: Identification) -> str:
     """'' when the identification allowed for the stage's error as fitgen identify does by default; else the
     refusal's first cause: the stage's own error, which a rig or zero error below the default leaves unexplained."""
