@@ -45,6 +45,18 @@ def port_error(exc: BaseException) -> str:
     return text.splitlines()[0]
 
 
+def url_hint(url: str) -> str:
+    """What a port URL that failed to open probably meant: '' or '; ...' (a TCP port without its scheme, a file)."""
+    import os
+    import re
+
+    if re.fullmatch(r"[\w.-]+:\d{1,5}", url) and not os.path.exists(url):
+        return f"; a TCP port is given as socket://{url}"
+    if os.path.isfile(url):
+        return "; it is a regular file, not a serial device (/dev/tty...) or a URL such as socket://HOST:PORT"
+    return ""
+
+
 def no_nagle(port) -> None:
     """On a pyserial socket:// port, send small frames at once: no Nagle wait (40 ms with delayed ACKs)."""
     sock = getattr(port, "_socket", None)
@@ -88,7 +100,7 @@ class Device(PortOwner):
         try:
             port = serial.serial_for_url(url, baudrate=115200, timeout=POLL, write_timeout=max(timeout, POLL))
         except (serial.SerialException, ValueError, OSError) as exc:
-            raise InputError(f"cannot open port {url}: {port_error(exc)}") from None
+            raise InputError(f"cannot open port {url}: {port_error(exc)}{url_hint(url)}") from None
         no_nagle(port)
         dev = cls(port, timeout, url)
         if ready > 0:

@@ -21,7 +21,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 
-from host.device import PortOwner, no_nagle, port_error
+from host.device import PortOwner, no_nagle, port_error, url_hint
 
 MACHINE_AXES = ("X", "Y", "Z")
 FLAVORS = ("marlin", "grbl")
@@ -102,7 +102,7 @@ class GcodeController(PortOwner):
         try:
             port = serial.serial_for_url(url, baudrate=baud, timeout=POLL, write_timeout=timeout)
         except (serial.SerialException, ValueError, OSError) as exc:
-            raise InputError(f"cannot open stage {url}: {port_error(exc)}") from None
+            raise InputError(f"cannot open stage {url}: {port_error(exc)}{url_hint(url)}") from None
         no_nagle(port)  # one short line each way
         return cls(port, url, timeout=timeout, log=log)
 

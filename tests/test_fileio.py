@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import socket
 import stat
 import types
@@ -307,3 +308,14 @@ def test_a_dash_is_stdout_where_the_command_writes_there_and_refused_elsewhere(m
     assert_one_line_error(run_cli("tactile-host", "read", "--model", model_file, *sim, "--record", "-",
                                   cwd=tmp_path), 2, "--record -: give a file name")
     assert not (tmp_path / "-").exists()
+
+
+def test_make_folder_names_the_file_in_its_way(tmp_path):
+    from fitgen.base.fileio import make_folder
+
+    (tmp_path / "afile").write_text("x")
+    for folder in (tmp_path / "afile", tmp_path / "afile" / "sub"):
+        with pytest.raises(InputError, match=f"^cannot create {re.escape(str(folder))}: "
+                                             f"{re.escape(str(tmp_path / 'afile'))} is a file; give a folder$"):
+            make_folder(folder)
+    assert (tmp_path / "afile").read_text() == "x"

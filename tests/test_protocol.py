@@ -354,6 +354,11 @@ def test_device_no_answer_and_bad_port(paper_model):
     for url in ("/dev/nonexistent-tty", "bogus://x"):
         with pytest.raises(InputError, match="cannot open port"):
             Device.open(url)
+    # what the user meant, said: a TCP port without its scheme, a file that is no serial device
+    with pytest.raises(InputError, match=r"no such file or directory; a TCP port is given as socket://127\.0\.0\.1:9$"):
+        Device.open("127.0.0.1:9")
+    with pytest.raises(InputError, match="it is a regular file, not a serial device"):
+        Device.open(__file__)
 
 
 # --- tactile-host flash -------------------------------------------------------------

@@ -210,6 +210,9 @@ def make_folder(folder: str | os.PathLike) -> Path:
     folder = Path(folder)
     try:
         folder.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):  # a file where the folder goes, or on the way to it
+        where = next(p for p in [folder, *folder.parents] if p.exists() and not p.is_dir())
+        raise InputError(f"cannot create {folder}: {where} is {_kind(where.stat().st_mode)}; give a folder") from None
     except OSError as exc:
         raise InputError(f"cannot create {folder}: {exc.strerror}") from None
     return folder
