@@ -363,6 +363,8 @@ def test_channel_map_toml(tmp_path):
 @pytest.mark.parametrize("spec, message", [
     ("ads1015@0x48:0-3", "unknown chip 'ads1015'"),
     ("ads1115@0x50:0-3", "address 0x50"),
+    ("ads1115@48:0-3", "address 48 is decimal 48 (0x30); I2C addresses are given in hex: 0x48"),
+    ("ads1115@4b:0-3", "address 4b is not a number"),
     ("ads1115@0x48:0-3,ads1115@0x48:0-3", "given twice"),
     ("ads1115@0x48:0-4", "must lie in 0-3"),
     ("ads1115@0x48:d0-2", "not a pair the ADS1115 offers"),
