@@ -139,15 +139,16 @@ def _address(text, origin: str) -> int:
     if isinstance(text, int):
         addr = text
     else:
+        meant = int(str(text), 16) if re.fullmatch(r"[0-9a-fA-F]{2}", str(text)) else None
         try:
             addr = int(str(text), 0)
         except ValueError:
-            raise InputError(f"{origin}: address {text!r} is not a number (use 0x48..0x4b)") from None
-    if addr not in ADDRESSES:
-        meant = int(str(text), 16) if isinstance(text, str) and re.fullmatch(r"[0-9a-fA-F]{2}", text) else None
-        if meant in ADDRESSES:  # 48 typed for 0x48: read as decimal, it is 0x30
+            hint = f"0x{meant:02x}?" if meant in ADDRESSES else "use 0x48..0x4b"
+            raise InputError(f"{origin}: address {text!r} is not a number ({hint})") from None
+        if meant in ADDRESSES and addr not in ADDRESSES:  # 48 typed for 0x48: read as decimal, it is 0x30
             raise InputError(f"{origin}: address {text} is decimal {addr} (0x{addr:02x}); I2C addresses are given in "
                              f"hex: 0x{meant:02x}")
+    if addr not in ADDRESSES:
         raise InputError(f"{origin}: address 0x{addr:02x} is not one an ADS1115 or ADS7828 can take "
                          "(0x48..0x4b, set by the ADDR or A1/A0 pins)")
     return addr
