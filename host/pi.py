@@ -168,7 +168,7 @@ def pi_build(args) -> str:
 
 def compiler(cc: str = DEFAULT_CC) -> list[str]:
     """``cc`` as a command whose program is on PATH; InputError otherwise (pi-build asks before it writes)."""
-    return tool_command(cc, "compiler", CC_HINT)
+    return tool_command(cc, "compiler", CC_HINT if cc == DEFAULT_CC else "")  # the hint is the default's package
 
 
 def build_pi(folder: str | Path, cc: str = DEFAULT_CC, *, standin: bool = False) -> Path:

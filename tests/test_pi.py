@@ -320,7 +320,9 @@ def test_pi_build_checks_the_compiler_before_it_writes(model, tmp_path):
     def pi_build(cc, out, *more):
         return run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", cc, "-o", str(out), *more)
 
-    assert_one_line_error(pi_build("nosuchcc", tmp_path / "new"), 2, "compiler 'nosuchcc' not found")
+    proc = pi_build("nosuchcc", tmp_path / "new")
+    assert_one_line_error(proc, 2, "compiler 'nosuchcc' not found")
+    assert "gcc-arm-linux-gnueabihf" not in proc.stderr  # the default compiler's package is no advice for another
     assert not (tmp_path / "new").exists()
     out = tmp_path / "pi"
     assert pi_build("gcc", out).returncode == 0
