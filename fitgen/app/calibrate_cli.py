@@ -27,7 +27,7 @@ def cmd_identify(args) -> int:
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)
     with Progress("identify", 4) as bar:
         ident = idf.identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
-                             zero_error=args.zero_error, progress=lambda i, n, note: bar.update(1, note))
+                             zero_error=args.zero_error, progress=lambda i, n, note: bar.update(i - bar.done, note))
     with Progress("what to blame", drawing.n_elements) as bar:  # moves only when the capture is refused
 
         def trial(i, n, note):

@@ -294,7 +294,8 @@ def _eigh_free(F: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 
 def _maximum_a_posteriori(prob: Problem, sweeps: int = 3, max_nfev: int = 60, progress=None) -> np.ndarray:
-    """The maximum a posteriori in prior spreads, from the drawing (z = 0)."""
+    """The maximum a posteriori in prior spreads, from the drawing (z = 0); ``progress(done, 4, note)``, ``done``
+    counted from the start (it repeats while a pass takes its steps)."""
     P = prob.space.size
     z = np.zeros(P)
     for sweep in range(sweeps):  # the rows' covariances depend on the unit: refresh them, fit again
@@ -303,7 +304,10 @@ def _maximum_a_posteriori(prob: Problem, sweeps: int = 3, max_nfev: int = 60, pr
         def residual(zz, wh=wh):
             return np.concatenate([wh.apply(prob.readings - prob.predict(zz)[0]), zz])
 
-        def jac(zz, wh=wh):
+        def jac(zz, wh=wh, sweep=sweep, steps=[0]):
+            steps[0] += 1  # a step's Jacobian is the costly part (seconds on a capture of thousands of rows): say it
+            if progress is not None:
+                progress(sweep, 4, f"maximum a posteriori, pass {sweep + 1} of {sweeps}, step {steps[0]}")
             return np.vstack([-wh.apply(prob.jacobian(zz)), np.eye(P)])
 
         z = least_squares(residual, z, jac=jac, method="lm", x_scale=1.0, max_nfev=max_nfev).x
@@ -355,6 +359,8 @@ def _solve(prob: Problem, ranges: dict | None, progress) -> Identification:
     space, poses = prob.space, prob.poses
     P = space.size
     z = _maximum_a_posteriori(prob, progress=progress)
+    if progress is not None:
+        progress(3, 4, "the uncertainty, and what the capture cannot tell")
     chi2, dof, F, post = _chi2(prob, z)
     lam, V = _eigh_free(F, space.free)
     # what no capture could tell: the null space of the information of a dense design over the capture's axes
