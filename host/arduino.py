@@ -83,7 +83,8 @@ class Size:
         if self.ram is None:
             return f"{part('flash', self.flash, board.flash)}, {part('RAM', None, board.ram)}"
         if self.stack is None:
-            return f"{part('flash', self.flash, board.flash)}, {part('RAM', self.ram, board.ram)} before the stack"
+            return (f"{part('flash', self.flash, board.flash)}, {part('RAM', self.ram, board.ram)} before the stack "
+                    "(not measured: simavr runs the sketch to measure it; a table build's may overrun the RAM)")
         if self.ram_used >= board.ram:
             return (f"{part('flash', self.flash, board.flash)}, RAM {self.ram} of {board.ram} B and the stack ran "
                     f"into it (all {self.stack} B above it used)")

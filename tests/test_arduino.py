@@ -322,6 +322,10 @@ def test_a_size_the_link_did_not_give_is_said_plainly():
 
     said = Size(flash=35118, ram=None, overflow=True).describe(UNO)
     assert "?" not in said and said == "flash over 35118 of 32256 B (109 %), RAM not known (the link failed first)"
+    # without simavr the stack is not measured: the line says so and what it risks
+    said = Size(flash=25186, ram=1167).describe(UNO)
+    assert said == ("flash 25186 of 32256 B (78 %), RAM 1167 of 2048 B (57 %) before the stack (not measured: simavr "
+                    "runs the sketch to measure it; a table build's may overrun the RAM)")
 
 
 def test_the_build_shows_progress_on_a_terminal(device_model, tmp_path, monkeypatch):
