@@ -112,6 +112,8 @@ def test_cli_table_and_words(tmp_path):
     proc = run_cli("fitgen", "observe", "paper", "--scene", "press", "--accuracy", "dz=0.0001")
     assert proc.returncode == 0 and "dz: NOT resolvable" in proc.stdout
     assert_one_line_error(run_cli("fitgen", "observe", "--accuracy", "dz=abc"), contains="not a number")
+    assert_one_line_error(run_cli("fitgen", "observe", "--scene", "slide", "--accuracy", "thx=0.5"),
+                          contains="an accuracy is asked for thx, which is not among the outputs estimated (dx,dy,dz)")
     assert_one_line_error(run_cli("fitgen", "observe", "--scene", "nosuch"), contains="scene")
     # a box past reason overflowed the field into a LinAlgError; one through the board was analysed
     assert_one_line_error(run_cli("fitgen", "observe", "--ranges", "dx=-1e300:1e300"), contains="within -1000..1000")

@@ -105,3 +105,5 @@ def test_bad_sensor_file_cli(tmp_path):
     bad.write_text("this is = = not toml")
     assert_one_line_error(run_cli("fitgen", "observe", str(bad)), contains="not valid TOML")
     assert_one_line_error(run_cli("fitgen", "observe", "--sensor", "nope"), contains="not a preset")
+    assert_one_line_error(run_cli("fitgen", "observe", "--sensor", str(tmp_path)),
+                          contains=f"sensor {str(tmp_path)!r}: a folder, not a sensor file")

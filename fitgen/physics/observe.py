@@ -197,6 +197,10 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
                          f"missing or 0 in [transfer.{sensor.transfer}]): add it to the file (observe also takes "
                          "--noise); without noise every pose component is resolved to 0, resolvable or not")
     check_box(sensor, ranges, "observe")
+    extra = [c for c in (accuracy or {}) if c not in components]
+    if extra:  # it would be ignored: say so rather than judge without it
+        raise InputError(f"an accuracy is asked for {extra[0]}, which is not among the outputs estimated "
+                         f"({','.join(components)}): give the scene that estimates it, or leave it out")
     noise = sensor.noise if noise is None else noise
     acc = dict(DEFAULT_ACCURACY)
     acc.update(accuracy or {})

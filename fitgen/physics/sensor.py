@@ -435,6 +435,9 @@ def load_sensor(spec: str | Path) -> Sensor:
         origin = f"preset {spec}"
     else:
         path = Path(spec)
+        if path.is_dir():
+            raise InputError(f"sensor {spec!r}: a folder, not a sensor file (a TOML file, or a preset: "
+                             f"{', '.join(preset_names())})")
         if not path.is_file():
             raise InputError(
                 f"sensor {spec!r}: no such file, and not a preset ({', '.join(preset_names())})"
