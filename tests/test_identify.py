@@ -457,6 +457,8 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
         "megavolts": (y * 1e6, plan[0], "lies outside the ADC's range (0..3.3 V, sensor paper): readings in other "
                                         "units"),
         "all zero": (np.zeros_like(y), plan[0], "every reading is 0 V: no sensor answers behind the ADC"),
+        # labels in um: refused as labels, before a fit blames the unit
+        "microns": (y, plan[0] * 1000, "the capture's labels reach d"),
     }
     # a row the physics does not explain, in a capture it otherwise does: written, the row named
     deep, slipped = slip(unit, y, plan[0])

@@ -11,6 +11,7 @@ from fitgen.physics.pose import off_skin
 
 MIN_ROWS = 10
 MIN_DISTINCT = 6
+FARTHEST = 20.0  # mm: a label beyond this is no displacement of the skin from first contact
 MAX_CLIPPED = 0.1  # share of clipped readings above which a capture is refused
 PRESSED = 0.3  # mm: a row pressed this deep moves the magnet far past the noise (a zero a little high is allowed
 # for by identify's zero error: rows at dz 0 may miss the skin)
@@ -27,6 +28,12 @@ def check_capture(space, readings: np.ndarray, poses: np.ndarray) -> np.ndarray:
                          f"{space.drawing.n_elements} elements")
     if n < MIN_ROWS:
         raise InputError(f"the capture has {n} rows; identify needs at least {MIN_ROWS} (fitgen schedule --n 40)")
+    far = np.abs(poses[:, :3]).max(axis=0)
+    if far.max() > FARTHEST:  # the magnet sits 11 mm above the board: no press moves the surface this far
+        axis = "xyz"[int(np.argmax(far))]
+        raise InputError(f"the capture's labels reach d{axis} = {far.max():g} mm, beyond any press of a sensor "
+                         f"(identify takes labels within {FARTHEST:g} mm of the zero): labels in um, or machine "
+                         "coordinates rather than mm from the zero at first contact?")
     distinct = len(np.unique(np.round(poses, 6), axis=0))
     if distinct < MIN_DISTINCT:
         raise InputError(f"the capture visits {distinct} distinct pose(s); identify needs at least {MIN_DISTINCT} "
