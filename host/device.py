@@ -207,8 +207,10 @@ class Device(PortOwner):
                 return
             except NoAnswer:
                 if time.monotonic() >= deadline:
+                    busy = (" (an emulator serves one client at a time: is another program connected to it?)"
+                            if self.name.startswith("socket://") else "")
                     raise NoAnswer(f"{self.name}: no answer to PING within {limit:g} s: is the firmware running, "
-                                   "and is this its port?") from None
+                                   f"and is this its port?{busy}") from None
 
     def info(self, refresh: bool = False) -> DeviceInfo:
         if self._info is None or refresh:

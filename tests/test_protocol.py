@@ -438,5 +438,10 @@ def test_flash_failures(paper_model, paper_model_file):
     with FakeDevice(paper_model, mute=True) as fake:
         proc = run_cli("tactile-host", "flash", "--port", fake.url, "--timeout", "0.3", paper_model_file)
         assert_one_line_error(proc, 2, f"no answer to PING within {BOOT_WAIT:g} s: is the firmware running")
+        assert "one client at a time" not in proc.stderr  # a serial port: no emulator to share
+    with FakeDevice(paper_model, mute=True, transport="socket") as fake:  # as QEMU with another client connected
+        proc = run_cli("tactile-host", "flash", "--port", fake.url, "--timeout", "0.3", paper_model_file)
+        assert_one_line_error(proc, 2, "is this its port? (an emulator serves one client at a time: is another "
+                                       "program connected to it?)")
     proc = run_cli("tactile-host", "flash", "--port", "socket://127.0.0.1:1", "--sensor-id", "é", paper_model_file)
     assert proc.returncode == 2
