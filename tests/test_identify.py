@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import assert_one_line_error, run_cli
+from fitgen.base.errors import InputError
 from fitgen.fitting.identify import Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
 from fitgen.fitting.unitrecord import check_explained, outlier_lines, report, row_noise
@@ -561,3 +562,24 @@ def test_residuals_far_below_the_noise_are_remarked(drawing, plan, tmp_path):
     assert len(said) == 1 and said[0].startswith("identify: the residuals are 0.") and "too wide" in said[0]
     proc = run_cli("fitgen", "identify", str(tmp_path / "c.csv"), "-o", str(tmp_path / "v.toml"))
     assert proc.returncode == 0 and "what the reading noise" not in proc.stderr, proc.stderr
+
+
+def test_a_zero_above_first_contact_is_said_with_its_depth(drawing):
+    """The zero 1.2 mm above the skin: rows pressed less than that read the rest, and the line says down to which
+    depth (a zero 0.02 mm high is identify's zero error, allowed for: rows at dz 0 only)."""
+    from fitgen.fitting.capturecheck import check_contact
+
+    unit, _ = draw_unit(drawing, 5)
+    levels = [(x, y, z, 0.0, 0.0) for x in (-1, 0, 1) for y in (-1, 1) for z in (0.0, -0.5, -1.0, -1.5, -2.0)]
+    poses = np.array([(0, 0, 0.2, 0, 0)] * 3 + levels)
+    noise = np.full(8, drawing.noise / 4)
+    rng = np.random.default_rng(5)
+    for above, said in ((1.2, "12 of the 24 rows pressed 0.3 mm or more read as the rows at rest"),
+                        (0.02, None)):
+        true = rig_poses(poses, 0.0, rng, zero=(0.0, 0.0, above))
+        y = readings(unit, true, adc_bits=0) + rng.normal(0.0, noise, (len(poses), 8))
+        if said is None:
+            check_contact(y, poses, noise)
+            continue
+        with pytest.raises(InputError, match=said + r" \(within 5 noise sd\), down to dz=-1: the zero is about 1 mm"):
+            check_contact(y, poses, noise)
