@@ -14,7 +14,10 @@ give the capture's zero an error common to its rows in contact (0.02 mm per axis
 schedule is the same (its design adds rows up and leaves the zero out), the information has the zero's rank-3
 term as identify weighs it. Two rows (design "A") replace the schedule's D-optimal design by one aimed at what
 identify reports: A-optimal on those quantities, each over its limit (the least sum of their posterior variances
-in units of 0.03 mm and 1 %), chosen as the schedule chooses (greedy, then exchange passes). bench/units.py
+in units of 0.03 mm and 1 %), chosen as the schedule chooses (greedy, then exchange passes). The candidates are
+the schedule's (fitgen.fitting.schedule.capture_candidates: the sensor's travel, 3 mm each way and 3 mm deep on
+paper, within the elements' linear range); the rows of box "working" take the working pose box alone (2 mm, 2 mm
+deep), as the schedule did before it took the travel. bench/units.py
 measures identify itself on 20 magpylib units (docs/calibration.md).
 
 Part 2, the spread. For units 1..K (bench/units.py's units, captures and twin, 40 poses, 0.01 mm): the twin's
@@ -31,6 +34,7 @@ from __future__ import annotations
 
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -42,17 +46,18 @@ from fitgen.fitting.holdout import (NOISE_DRAWS as DRAWS, SEED, box_of, deployed
                                     posterior_units, unit_sets)
 from fitgen.fitting.identify import ZERO_ERROR, Problem, derived_quantities, identify  # noqa: E402
 from fitgen.fitting.unitrecord import load_posterior, save  # noqa: E402
-from fitgen.fitting.schedule import candidates, d_optimal, exchange_design  # noqa: E402
+from fitgen.fitting.schedule import capture_candidates, d_optimal, exchange_design  # noqa: E402
 from fitgen.physics.pose import off_skin  # noqa: E402
 from fitgen.physics.sensor import load_sensor  # noqa: E402
-from fitgen.physics.simulate import DEFAULT_RANGES  # noqa: E402
 from fitgen.physics.units import UnitSpace  # noqa: E402
 
-# (poses, rig error, samples per row, the rest row among the candidates, the zero's error, the design)
-CONFIGS = ([(n, r, s, True, 0.0, "D") for r in (0.0, 0.01, 0.03) for s in (16, 64) for n in (20, 40, 100)]
-           + [(n, 0.01, 16, False, 0.0, "D") for n in (40, 100)]
-           + [(n, r, 16, True, ZERO_ERROR, "D") for r in (0.01, 0.03) for n in (20, 40, 100)]
-           + [(n, 0.01, 16, True, 0.0, "A") for n in (40, 100)])
+# (poses, rig error, samples per row, the rest row among the candidates, the zero's error, the design, the box:
+# the sensor's travel, as fitgen schedule takes it, or the working pose box alone, as it took it before)
+CONFIGS = ([(n, r, s, True, 0.0, "D", "travel") for r in (0.0, 0.01, 0.03) for s in (16, 64) for n in (20, 40, 100)]
+           + [(n, 0.01, 16, False, 0.0, "D", "travel") for n in (40, 100)]
+           + [(n, r, 16, True, ZERO_ERROR, "D", "travel") for r in (0.01, 0.03) for n in (20, 40, 100)]
+           + [(n, 0.01, 16, True, 0.0, "A", "travel") for n in (40, 100)]
+           + [(n, 0.01, 16, True, z, "D", "working") for z in (0.0, ZERO_ERROR) for n in (40, 100)])
 LIMITS = (0.03,) * 3 + (0.01,) * 8  # issue 21's: the offsets (mm), the sensitivities (relative)
 MC = 20000
 FIGS = ("max", "rms", "noisy_max", "noisy_rms")
@@ -81,13 +86,14 @@ def a_optimal(J: np.ndarray, n: int, Gs: np.ndarray) -> np.ndarray:
 def bound_rows(drawing) -> list[list[str]]:
     space = UnitSpace.of(drawing)
     G = derived_gradients(space)
-    cand = candidates(("dx", "dy", "dz"), DEFAULT_RANGES)
-    rest = off_skin(cand)
+    boxes = {"travel": capture_candidates(drawing)[0], "working": capture_candidates(replace(drawing, travel={}))[0]}
     z = np.zeros(space.size)
     rng = np.random.default_rng(0)
     rows, Js = [], {}
-    for n, rig, s, with_rest, zero, design in CONFIGS:
-        key = (rig, s)
+    for n, rig, s, with_rest, zero, design, box in CONFIGS:
+        key = (rig, s, box)
+        cand = boxes[box]
+        rest = off_skin(cand)
         noise = np.full(drawing.n_elements, drawing.noise / np.sqrt(s))
         if key not in Js:
             prob = Problem(space, np.zeros((len(cand), drawing.n_elements)), cand, noise, rig)
@@ -109,12 +115,12 @@ def bound_rows(drawing) -> list[list[str]]:
         per_el = np.median(e[:, 3:], axis=0).max()  # read per element over units, as the offset per axis
         se = np.sqrt(np.diag(cov))
         ok = off.max() <= LIMITS[0] and sens <= LIMITS[-1]
-        rows.append([str(n), design, f"{rig:g}", f"{zero:g}", str(s), "yes" if with_rest else "no",
+        rows.append([str(n), design, box, f"{rig:g}", f"{zero:g}", str(s), "yes" if with_rest else "no",
                      str(len(np.unique(idx))),
                      fmt(off[0]), fmt(off[1]), fmt(off[2]),
                      f"{100 * sens:.2g} %", f"{100 * per_el:.2g} %",
                      fmt(se[2]), f"{100 * se[3:].mean():.2g} %", "yes" if ok else "no"])
-        log(f"bound: {n} poses ({design}-optimal), rig {rig:g} mm, zero {zero:g} mm, {s} samples"
+        log(f"bound: {n} poses ({design}-optimal, {box} box), rig {rig:g} mm, zero {zero:g} mm, {s} samples"
             + ("" if with_rest else ", no rest row"))
     return rows
 
@@ -166,7 +172,7 @@ def main() -> None:
           "D-optimal; A: A-optimal on what identify reports)\n")
     print(f"paper in gmr (noise {drawing.noise:g} V per sample); medians over units of a Gaussian posterior "
           f"linearised at the drawing ({MC} draws). Limits (issue 21): offset 0.03 mm, worst element 1 %.\n")
-    print(table(["poses", "design", "rig error [mm]", "zero error [mm]", "samples per row", "rest row", "distinct poses",
+    print(table(["poses", "design", "box", "rig error [mm]", "zero error [mm]", "samples per row", "rest row", "distinct poses",
                  "offset x", "offset y", "offset z",
                  "sensitivity, worst element", "sensitivity, per element over units", "offset z se", "sensitivity se",
                  "within the limits"],

@@ -27,7 +27,10 @@ Set-up (deterministic):
   over sqrt(16) (each row averages 16 samples), clipped to the ADC's range; meta units V,
   samples_per_row 16 (so fit adds the rest of the device's noise, fitgen.fitting.fit.noise_to_add).
 - Schedules: fitgen.fitting.schedule.schedule(drawing, n, noise=drawing.noise/4, rig_error=r) for
-  n = 10, 20, 40, 100 and the rig error r simulated (0.01 mm, a CNC; 0.03 mm, a printer).
+  n = 10, 20, 40, 100 and the rig error r simulated (0.01 mm, a CNC; 0.03 mm, a printer), within the sensor's
+  travel (paper.toml: 3 mm each way, 3 mm deep) and the elements' linear range; and the headline one (40 poses,
+  0.01 mm) within the working pose box alone (2 mm, 2 mm deep: the drawing without its [travel]), as the schedule
+  took it before, for `twin, 40 poses, 0.01 mm, working box`.
 - Workflows (each fitted the default way, fit_auto with FitSettings(): noise-aware, float, the powers'
   and the harmonics family compared on validation poses, as `fitgen fit` does):
   1. `drawing`: one model for every unit, fitted on the drawing's simulated paper-sim grid and 5,000
@@ -49,6 +52,9 @@ Set-up (deterministic):
      one error per unit (normal, 0.02 mm rms per axis, added to the rows in contact), identified with
      zero_error=0.02 (`allowed for`, fitgen identify's default; fitted on the first --sweep-units units) and with
      zero_error=0 (`assumed exact`; identification only).
+  6. `twin, 40 poses, 0.01 mm, working box`: as the headline twin, from a capture scheduled within the working
+     pose box alone (identified on every unit, fitted on the first --sweep-units): what the travel's longer lever
+     is worth.
 - Held out, per unit: 2,000 random poses (pose seed 2026) in fitgen.physics.simulate.DEFAULT_RANGES, all five
   components; readings: magpylib's of the unit, quantised by fitgen.physics.transfer.quantise to the 16-bit
   ADC (noise-free), and with the device's noise before the ADC (noisy: 8 realisations of 5 draws each,
@@ -82,6 +88,7 @@ import pickle  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
+from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -128,6 +135,7 @@ FULL = (HEAD, PINNED)  # twins fitted and held out on every unit (the others on 
 # not (--zero-error 0: identification only)
 ZERO_SIM = 0.02
 ZERO_TWINS = ((ZERO_SIM, ZERO_SIM, True), (ZERO_SIM, 0.0, False))  # (simulated, allowed for, fitted)
+WORKING = "working"  # the headline capture scheduled within the working pose box alone (the schedule before travel)
 # acceptance
 RATIO_D, RATIO_TH, WORST_D, WORST_TH = 1.25, 1.5, 1.5, 2.0
 OFFSET_MM, SENS_REL, COVER = 0.03, 0.01, (0.55, 0.80)
@@ -158,13 +166,14 @@ class Ctx:
         self.schedules: dict = {}
 
     def make_schedules(self) -> None:
-        need = set(self.twins) | {(40, DIRECT_RIG)}
-        for n, rig in sorted(need):
+        need = [(n, rig) for n, rig in sorted(set(self.twins) | {(40, DIRECT_RIG)})] + [(*HEAD, WORKING)]
+        for key in need:
+            n, rig = key[:2]
             t = time.monotonic()
-            self.schedules[(n, rig)], info = schedule(self.drawing, n, noise=self.noise / np.sqrt(SAMPLES),
-                                                      rig_error=rig)
-            log(f"schedule: {n} poses for a rig error of {rig:g} mm ({info['distinct_poses']} distinct) in "
-                f"{time.monotonic() - t:.1f} s")
+            drawing = replace(self.drawing, travel={}) if WORKING in key else self.drawing
+            self.schedules[key], info = schedule(drawing, n, noise=self.noise / np.sqrt(SAMPLES), rig_error=rig)
+            log(f"schedule: {n} poses for a rig error of {rig:g} mm{' in the working box' * (WORKING in key)} "
+                f"({info['distinct_poses']} distinct) in {time.monotonic() - t:.1f} s")
 
 
 CTX: Ctx | None = None
@@ -258,7 +267,7 @@ def task(spec: tuple) -> tuple[tuple, dict]:
         return spec, {**measure(model, unit, seed), **summary(model), "seconds": time.monotonic() - t0}
     n, rig, fit = spec[2], spec[3], spec[4]
     zero_sim, zero_id = spec[5:7] if len(spec) > 5 else (0.0, 0.0)
-    labels = CTX.schedules[(n, rig)]
+    labels = CTX.schedules[(n, rig, *spec[7:])]
     y = capture(unit, labels, rig, [seed, n, 3], zero_sim)  # the same draws at both rig errors, scaled
     res: dict = {}
     try:
@@ -306,14 +315,14 @@ def workflow_name(spec: tuple) -> str:
         return "direct, 1,875-pose grid"
     if spec[0] == "direct40":
         return "direct, 40 three-axis rows"
-    return twin_name(*spec[2:4], *spec[5:7])
+    return twin_name(*spec[2:4], *spec[5:])
 
 
-def twin_name(n: int, rig: float, zero_sim: float = 0.0, zero_id: float = 0.0) -> str:
+def twin_name(n: int, rig: float, zero_sim: float = 0.0, zero_id: float = 0.0, box: str = "") -> str:
     name = f"twin, {n} poses, {rig:g} mm"
     if zero_sim > 0:
         name += f", zero off {zero_sim:g} mm" + (", allowed for" if zero_id > 0 else ", assumed exact")
-    return name
+    return name + (", working box" if box == WORKING else "")
 
 
 def full_names(ctx: Ctx) -> list[str]:
@@ -330,6 +339,7 @@ def run(ctx: Ctx, seeds: list[int], sweep: int, jobs: int, cache: Path | None) -
     for s in seeds:
         specs += [("twin", s, n, r, s <= sweep or (n, r) in FULL) for n, r in ctx.twins if (n, r) != HEAD]
         specs += [("twin", s, *HEAD, fit and s <= sweep, zs, zi) for zs, zi, fit in ZERO_TWINS]
+        specs += [("twin", s, *HEAD, s <= sweep, 0.0, 0.0, WORKING)]
     # the drawing's fits, then per unit its headline twin and direct fits, then the sweep's fits unit by unit
     rank = {"drawing": 0, "drawing-all": 0, "twin": 1, "grid": 1, "direct40": 1}
     specs.sort(key=lambda sp: (sp[0] == "twin" and sp[2:4] != HEAD and sp[4], rank[sp[0]]))
@@ -389,7 +399,7 @@ def order(per: dict, fitted: bool = False) -> list[str]:
     """The workflows in the tables' order (``fitted``: those with held-out figures on some unit)."""
     names = ["drawing", "drawing, powers' family", "direct, 1,875-pose grid", "direct, 40 three-axis rows"]
     names += [f"twin, {n} poses, {r:g} mm" for r in RIGS for n in TWIN_NS]
-    names += [twin_name(*HEAD, zs, zi) for zs, zi, _ in ZERO_TWINS]
+    names += [twin_name(*HEAD, zs, zi) for zs, zi, _ in ZERO_TWINS] + [twin_name(*HEAD, box=WORKING)]
     return [n for n in names if n in per and (not fitted or ok_units(per, n))]
 
 
@@ -588,11 +598,12 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
           f"per move, {SETTLE_S:g} s to settle, {SAMPLES} samples of 8 elements on two ADS1115 at 860 SPS "
           f"({1e3 * SAMPLES * SAMPLE_S:.0f} ms).\n")
     rows = []
-    for (n, r) in sorted(ctx.schedules):
-        p = ctx.schedules[(n, r)]
-        rows.append([str(n), f"{r:g}", str(len(np.unique(np.round(p, 6), axis=0))), f"{capture_time(p) / 60:.1f} min"])
-    rows.append(["1,875 (the paper-sim grid; needs tilt)", "-", "1875", f"{capture_time(ctx.grid) / 60:.0f} min"])
-    print(table(["poses", "scheduled for rig error [mm]", "distinct", "duration"], rows))
+    for key in sorted(ctx.schedules, key=lambda k: (len(k), k)):
+        p = ctx.schedules[key]
+        rows.append([str(key[0]), f"{key[1]:g}", "working pose box" if WORKING in key else "travel",
+                     str(len(np.unique(np.round(p, 6), axis=0))), f"{capture_time(p) / 60:.1f} min"])
+    rows.append(["1,875 (the paper-sim grid; needs tilt)", "-", "-", "1875", f"{capture_time(ctx.grid) / 60:.0f} min"])
+    print(table(["poses", "scheduled for rig error [mm]", "box", "distinct", "duration"], rows))
     print()
 
     # acceptance

@@ -39,7 +39,7 @@ def stage_settings(args, schedule):
     if args.sim_pose_file and not args.simulate:
         raise InputError("--sim-pose-file needs --simulate")
     if args.stage_limits is None:
-        raise InputError("--stage needs --stage-limits, e.g. dx=-3:3,dy=-3:3,dz=-2.5:0.5 (mm from the zero): "
+        raise InputError("--stage needs --stage-limits, e.g. dx=-3.5:3.5,dy=-3.5:3.5,dz=-3.5:0.5 (mm from the zero): "
                          "a move outside them is never sent")
     settings = StageSettings(AxisMap.parse(args.stage_axes or "X=dx,Y=dy,Z=dz"),
                              parse_ranges(args.stage_limits, "--stage-limits"),

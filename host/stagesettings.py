@@ -85,7 +85,7 @@ def parse_ranges(spec: str, what: str) -> dict[str, tuple[float, float]]:
         if (not sep or not sep2 or name.strip() not in STAGE_AXES or not (lo_v < hi_v)
                 or not (math.isfinite(lo_v) and math.isfinite(hi_v))):
             raise InputError(f"{what} {spec!r}: expected AXIS=LO:HI (mm, finite, LO < HI) for AXIS in dx,dy,dz, "
-                             "e.g. dx=-3:3,dy=-3:3,dz=-2.5:0.5")
+                             "e.g. dx=-3.5:3.5,dy=-3.5:3.5,dz=-3.5:0.5")
         if name.strip() in out:
             raise InputError(f"{what} {spec!r}: {name.strip()} is given twice")
         out[name.strip()] = (lo_v, hi_v)

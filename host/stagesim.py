@@ -394,7 +394,7 @@ def parse_xyz(text: str, what: str) -> list[float]:
 
 def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", samples: int = 16,
                             noise: float = 0.0005, backlash: float = 0.03, repeatability: float = 0.005,
-                            limits: str = "dx=-2.5:2.5,dy=-2.5:2.5,dz=-2.5:1", approach: str = APPROACH,
+                            limits: str = "dx=-3.5:3.5,dy=-3.5:3.5,dz=-3.5:1", approach: str = APPROACH,
                             seed: int = 0, progress=None):
     """A capture as `tactile-host capture --stage` makes it, all simulated: two ADS1115s on a simulated bus read
     ``sensor`` (a unit, say, whose file carries its stage map), a simulated ``flavor`` controller moves it through a

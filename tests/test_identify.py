@@ -247,7 +247,9 @@ def test_schedule_is_d_optimal_within_limits(drawing, plan):
     assert info["rest_rows"] == rest.sum() >= 1 and np.all(poses[rest] == [0, 0, info["rest_lift_mm"], 0, 0])
     assert np.all(rest[:rest.sum()])
     inner = poses[~rest]
-    assert np.all((inner[:, :2] >= -2) & (inner[:, :2] <= 2)) and np.all((inner[:, 2] >= -2) & (inner[:, 2] <= 0))
+    # within the sensor's travel (paper.toml: 3 mm each way, 3 mm deep), past the working box's 2 mm
+    assert np.all((inner[:, :2] >= -3) & (inner[:, :2] <= 3)) and np.all((inner[:, 2] >= -3) & (inner[:, 2] <= 0))
+    assert np.abs(inner[:, :2]).max() > 2
     space = UnitSpace.of(drawing)
     noise = np.full(8, drawing.noise / np.sqrt(SAMPLES))
     logdet = lambda P: np.linalg.slogdet(Problem(space, np.zeros((len(P), 8)), P, noise, 0.01)  # noqa: E731
@@ -270,9 +272,10 @@ def test_schedule_is_d_optimal_within_limits(drawing, plan):
     (["--samples", "1.5"], "--samples '1.5' is not a whole number"),
     (["--n", "9"], "--n must be 10..10000 (identify needs at least 10 rows), got 9"),
     (["--rig-error", "-0.01"], "the rig error must be 0..0.5 mm (a printer's is 0.01-0.1), got -0.01"),
-    (["--limits", "dz=1:2"], "the limits of dz (1..2) leave it no room to move within the sensor's pose box (-2..0)"),
+    (["--limits", "dz=1:2"], "the limits of dz (1..2) leave it no room to move within the sensor's travel (-3..0)"),
     (["--axes", "dy,dz", "--limits", "dx=-1:1"], "--limits gives dx, which --axes (dy,dz) does not move"),
-    (["--axes", "dx", "--n", "12"], "the best 12 poses over dx are 4 distinct ones; identify needs at least 6"),
+    (["--axes", "dx", "--n", "12", "--limits", "dx=-2:2"],
+     "the best 12 poses over dx are 4 distinct ones; identify needs at least 6"),
 ])
 def test_schedule_refuses_what_identify_could_not_use(tmp_path, args, message):
     out = tmp_path / "s.csv"
@@ -280,9 +283,9 @@ def test_schedule_refuses_what_identify_could_not_use(tmp_path, args, message):
     assert not out.exists() and not Path(str(out) + ".meta.json").exists()
 
 
-def test_schedule_keeps_to_the_pose_box_and_bounds_five_axes():
-    """Stage limits wider than the sensor's pose box give the box's schedule (poses beyond it calibrate nothing
-    the sensor meets); five axes take fewer grid levels, so the candidates stay within MAX_CANDIDATES."""
+def test_schedule_keeps_to_the_travel_and_bounds_five_axes():
+    """Stage limits wider than the sensor's travel give the travel's schedule (the skin goes no further); five
+    axes take fewer grid levels, so the candidates stay within MAX_CANDIDATES."""
     from fitgen.fitting.schedule import MAX_CANDIDATES, candidates, levels_for
     from fitgen.physics.simulate import DEFAULT_RANGES
 
@@ -290,12 +293,46 @@ def test_schedule_keeps_to_the_pose_box_and_bounds_five_axes():
     wide, info = schedule(drawing, 12, ranges={"dx": (-100.0, 100.0)})
     boxed, _ = schedule(drawing, 12)
     np.testing.assert_array_equal(wide, boxed)
-    assert info["ranges"]["dx"] == [-2.0, 2.0]
+    assert info["ranges"]["dx"] == [-3.0, 3.0]
     assert levels_for(3) == levels_for(4) == 9 and levels_for(5) == 7
     assert len(candidates(tuple(POSE_NAMES), DEFAULT_RANGES)) == 7 ** 5 + 1 <= MAX_CANDIDATES + 1
     steps = []
     schedule(drawing, 12, progress=lambda done, total, note: steps.append((done, total)))
     assert steps[0][0] == 0 and all(d <= t for d, t in steps) and steps[-1][0] == steps[-1][1]
+
+
+def test_schedule_keeps_every_element_within_its_linear_range():
+    """No scheduled pose drives an element past LINEAR_SHARE of its linear range: checked with magpylib's field
+    (tests/magpy_truth.py) on two-rings, whose inner ring saturates 2 mm deep, and on paper, whose travel reaches
+    past the range at its deep corners."""
+    from fitgen.fitting.schedule import LINEAR_SHARE
+    from fitgen.physics.transfer import volts_per_mt
+    from magpy_truth import magpylib_readings
+
+    for name in ("two-rings", "paper"):
+        drawing = load_sensor(name).with_transfer("gmr")
+        poses, info = schedule(drawing, 30, noise=drawing.noise / 4)
+        assert info["beyond_linear_range"] > 0 and info["linear_share"] == LINEAR_SHARE
+        g = drawing.gmr
+        volts = magpylib_readings(drawing, poses)
+        assert volts.max() <= g.offset + volts_per_mt(g) * LINEAR_SHARE * g.saturation * 1.001, name
+        # the box's deepest centre reads past the range: the filter had something to do
+        deep = magpylib_readings(drawing, np.array([[0, 0, drawing.travel["dz"][0], 0, 0],
+                                                    [drawing.travel["dx"][1], 0, drawing.travel["dz"][0], 0, 0]]))
+        assert deep.max() > g.offset + volts_per_mt(g) * LINEAR_SHARE * g.saturation, name
+
+
+def test_a_sensor_without_travel_schedules_within_the_working_box(tmp_path):
+    text = (Path(presets.__file__).parent / "paper.toml").read_text()
+    start = text.index("[travel]")
+    bare = tmp_path / "bare.toml"
+    bare.write_text(text[:start] + text[text.index("[[elements.ring]]"):])
+    drawing = load_sensor(bare).with_transfer("gmr")
+    assert drawing.travel == {}
+    poses, info = schedule(drawing, 20, noise=drawing.noise / 4)
+    assert info["ranges"] == {"dx": [-2.0, 2.0], "dy": [-2.0, 2.0], "dz": [-2.0, 0.0]}
+    inner = poses[poses[:, 2] <= 0]
+    assert np.abs(inner[:, :2]).max() <= 2 and inner[:, 2].min() >= -2
 
 
 def test_a_row_off_the_skin_carries_the_reading_noise_alone(drawing):
@@ -500,10 +537,10 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
     where = " ".join(f"{c}={v:g}" for c, v in zip("dx dy dz".split(), plan[0][deep]))
     cases["glitch"] = (glitch, plan[0], f"row {deep + 1} (line {deep + 2}: {where}) alone: with it left out, the "
                                         "others read as a unit")
-    # the zero 3 mm above first contact: the indenter never reaches the skin, every row reads the rest
-    above = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 3.0))
+    # the zero 3.5 mm above first contact: the indenter never reaches the skin (the travel goes 3 mm deep)
+    above = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 3.5))
     cases["zero far above"] = (readings(unit, above, adc_bits=0) + np.random.default_rng(2).normal(0.0, noise, y.shape),
-                               plan[0], "reads as the rows at rest (within 5 noise sd), down to dz=-2: the readings do "
+                               plan[0], "reads as the rows at rest (within 5 noise sd), down to dz=-3: the readings do "
                                         "not follow the stage; the indenter never reached the skin")
     for name, (yy, pp, message) in cases.items():
         path = tmp_path / f"{name.replace(' ', '_')}.csv"

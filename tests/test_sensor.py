@@ -56,6 +56,14 @@ def test_hash_is_stable_and_sensitive():
          "missing key 'elements.ring[0].count' (is 'elements.ring[0].cont' a misspelling of it?)"),
         (lambda d: d["magnet"].__setitem__("hieght", d["magnet"].pop("height")),
          "missing key 'magnet.height' (is 'magnet.hieght' a misspelling of it?)"),
+        # [travel]: per stage axis [lo, hi] mm from first contact, 0 between them; dz never above the skin
+        (lambda d: d["travel"].__setitem__("dx", [3.0, -3.0]), "'travel.dx' must be [lo, hi]"),
+        (lambda d: d["travel"].__setitem__("dx", [1.0, 3.0]), "'travel.dx' must be [lo, hi]"),
+        (lambda d: d["travel"].__setitem__("dy", [-30.0, 3.0]), "both within 20 mm"),
+        (lambda d: d["travel"].__setitem__("dy", [-3.0]), "'travel.dy' must be a list of 2 finite numbers"),
+        (lambda d: d["travel"].__setitem__("dz", [-3.0, 0.5]), "'travel.dz' must lie within (-11, 0] mm"),
+        (lambda d: d["travel"].__setitem__("dz", [-11.0, 0.0]), "at -11 the magnet meets the board"),
+        (lambda d: d["travel"].__setitem__("thx", [-5.0, 5.0]), "unknown key 'travel.thx'"),
     ],
 )
 def test_bad_sensor_files_name_the_key(mutate, key):
@@ -107,3 +115,21 @@ def test_bad_sensor_file_cli(tmp_path):
     assert_one_line_error(run_cli("fitgen", "observe", "--sensor", "nope"), contains="not a preset")
     assert_one_line_error(run_cli("fitgen", "observe", "--sensor", str(tmp_path)),
                           contains=f"sensor {str(tmp_path)!r}: a folder, not a sensor file")
+
+
+def test_travel_is_read_written_and_left_out_of_the_hash(tmp_path):
+    """[travel] says where a capture may move the skin: a unit's file keeps it (a twin schedules as its drawing
+    does), and, being no physics, it leaves the sensor's hash as it is."""
+    from fitgen.physics.units import draw_unit, write_unit
+
+    paper = load_sensor("paper")
+    assert paper.travel == {"dx": (-3.0, 3.0), "dy": (-3.0, 3.0), "dz": (-3.0, 0.0)}
+    d = paper_dict()
+    d["travel"] = {"dz": [-1.5, 0.0]}
+    narrow = parse_sensor(d)
+    assert narrow.travel == {"dz": (-1.5, 0.0)} and narrow.sha256 == paper.sha256
+    del d["travel"]
+    assert parse_sensor(d).travel == {}
+    unit, _ = draw_unit(narrow, 3)
+    back = load_sensor(write_unit(tmp_path / "u.toml", unit, "paper"))
+    assert back.travel == narrow.travel and back.sha256 == unit.sha256

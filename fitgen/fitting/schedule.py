@@ -1,9 +1,15 @@
 """Capture schedules: the stage poses that pin a unit's parameters best (D-optimal).
 
-Candidates are a grid over the axes the stage moves (the others stay 0) within the limits and, when the
+Candidates are a grid over the axes the stage moves (the others stay 0) within the capture box and, when the
 stage moves dz, the rest row: the indenter lifted REST_LIFT_MM above first contact, off the skin, where
 the magnet rests whatever the rig's error (fitgen.physics.pose.contact_poses), so the row carries the
-reading noise alone. Each
+reading noise alone. The capture box is the sensor's travel (its file's ``[travel]``: how far a capture may
+move the skin; the working pose box where it gives none) within the stage's limits: wider than the box the
+estimator works in, since the field's shape over a longer lever pins the unit's geometry (the magnet's
+height against the stage's gain) where the working box alone leaves it to the prior (bench/identify_bound.py).
+A candidate that drives an element of the drawing past LINEAR_SHARE of its linear range (saturation, or the
+ADC's rail) is left out: a unit within its tolerances reads up to about a fifth more there, and rows at the
+kink leave the fit without a slope to follow (20 units' captures failed at 0.9 where none did at 0.8). Each
 candidate's information about the unit's parameters (fitgen.fitting.identify.Problem, at the drawing, with
 the rig's error) is a rank-N update of the prior's; poses are chosen greedily for the largest
 log det of prior + information (by the matrix determinant lemma, an N x N determinant per
@@ -25,14 +31,16 @@ from fitgen.base.fileio import write_atomic
 from fitgen.fitting.capturecheck import MIN_DISTINCT, MIN_ROWS, check_error
 from fitgen.fitting.identify import RIG_ERROR, Problem, unit_space
 from fitgen.physics.dataset import meta_path
-from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
-from fitgen.physics.sensor import Sensor
+from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, field_readings, off_skin
+from fitgen.physics.sensor import TRAVEL_AXES, Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
+from fitgen.physics.transfer import linear_top
 
 LEVELS = 9  # grid levels per moving axis
 MAX_CANDIDATES = 20_000  # fewer levels where LEVELS ** axes would pass it (five axes: 7 levels, not 59,049 poses)
 MAX_PASSES = 4
 CHUNK = 2048  # candidates whose criterion is computed at once (bounds the memory: CHUNK x N x P numbers)
+LINEAR_SHARE = 0.8  # of an element's linear range (fitgen.physics.transfer.linear_top) a candidate may use
 
 
 def levels_for(n_axes: int) -> int:
@@ -54,6 +62,44 @@ def candidates(axes: tuple[str, ...], ranges: dict) -> np.ndarray:
     if "dz" not in axes:
         return grid
     return np.vstack([grid, [[0.0, 0.0, REST_LIFT_MM, 0.0, 0.0]]])
+
+
+def capture_box(drawing: Sensor, axes, limits: dict | None = None) -> dict:
+    """Per pose component, the range a capture's candidates span: for each of ``axes`` the sensor's travel (dx, dy,
+    dz; the working box DEFAULT_RANGES where its file gives none, and for the tilts) within the stage's
+    ``limits``; the others 0. InputError for an axis the limits leave no room."""
+    travel = {**DEFAULT_RANGES, **drawing.travel}
+    box = {a: (0.0, 0.0) for a in POSE_NAMES}
+    for a in axes:
+        lim = (limits or {}).get(a, travel[a])
+        lo, hi = max(lim[0], travel[a][0]), min(lim[1], travel[a][1])
+        if not lo < hi:
+            what = "travel" if a in TRAVEL_AXES else "pose box"
+            raise InputError(f"the limits of {a} ({lim[0]:g}..{lim[1]:g}) leave it no room to move within the "
+                             f"sensor's {what} ({travel[a][0]:g}..{travel[a][1]:g})")
+        box[a] = (lo, hi)
+    return box
+
+
+def within_linear_range(drawing: Sensor, poses: np.ndarray) -> np.ndarray:
+    """Whether every element of ``drawing`` reads at most LINEAR_SHARE of its linear range at each pose (P,)."""
+    top = linear_top(drawing)
+    if not np.isfinite(top):
+        return np.ones(len(poses), dtype=bool)
+    return np.abs(field_readings(drawing, poses)).max(axis=1) <= LINEAR_SHARE * top
+
+
+def capture_candidates(drawing: Sensor, axes=("dx", "dy", "dz"), limits: dict | None = None
+                       ) -> tuple[np.ndarray, dict, int]:
+    """The candidate poses of a capture (:func:`candidates` over :func:`capture_box`, the rest row kept) less those
+    beyond the linear range (:func:`within_linear_range`); the box; how many were left out."""
+    box = capture_box(drawing, axes, limits)
+    cand = candidates(tuple(axes), box)
+    keep = within_linear_range(drawing, cand) | off_skin(cand)
+    if not keep.any():
+        raise InputError(f"every candidate pose drives an element of {drawing.name} past {LINEAR_SHARE:.0%} of its "
+                         f"linear range (saturation {linear_top(drawing):g} mT): check the sensor file's transfer")
+    return cand[keep], box, int(np.sum(~keep))
 
 
 def _logdet_gain(Finv: np.ndarray, J: np.ndarray) -> np.ndarray:
@@ -122,8 +168,9 @@ def stage_order(poses: np.ndarray) -> np.ndarray:
 
 def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict | None = None,
              noise: float | None = None, rig_error: float = RIG_ERROR, progress=None) -> tuple[np.ndarray, dict]:
-    """``n`` stage poses (n, 5) that pin ``drawing``'s units best, within ``ranges`` (the stage's limits) and
-    the sensor's pose box, and a record of how they were chosen. ``progress(done, total, note)``."""
+    """``n`` stage poses (n, 5) that pin ``drawing``'s units best, within ``ranges`` (the stage's limits), the
+    sensor's travel and its elements' linear range (:func:`capture_candidates`), and a record of how they were
+    chosen. ``progress(done, total, note)``."""
     axes = tuple(axes)
     if not axes or any(a not in POSE_NAMES for a in axes) or len(set(axes)) != len(axes):
         raise InputError(f"--axes takes distinct names of {','.join(POSE_NAMES)}, got {','.join(axes) or 'none'}")
@@ -133,18 +180,11 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     if unmoved:
         raise InputError(f"--limits gives {unmoved[0]}, which --axes ({','.join(axes)}) does not move")
     check_error("rig error", rig_error)
-    ranges = {**DEFAULT_RANGES, **(ranges or {})}
-    for a in axes:  # the stage's limits within the pose box: a schedule beyond it calibrates poses never met
-        lo, hi = max(ranges[a][0], DEFAULT_RANGES[a][0]), min(ranges[a][1], DEFAULT_RANGES[a][1])
-        if not lo < hi:
-            raise InputError(f"the limits of {a} ({ranges[a][0]:g}..{ranges[a][1]:g}) leave it no room to move "
-                             f"within the sensor's pose box ({DEFAULT_RANGES[a][0]:g}..{DEFAULT_RANGES[a][1]:g})")
-        ranges[a] = (lo, hi)
     noise = drawing.noise if noise is None else noise
     if not noise > 0:
         raise InputError("the schedule needs the reading noise > 0 (give --noise or a sensor file with a noise figure)")
     space = unit_space(drawing)
-    cand = candidates(axes, ranges)
+    cand, ranges, beyond = capture_candidates(drawing, axes, ranges)
     total = n + MAX_PASSES + 1
     if progress is not None:
         progress(0, total, f"the information of {len(cand):,} candidate poses")
@@ -163,6 +203,7 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     info = {"criterion": "D-optimal (log det of the prior plus the capture's information, in prior spreads)",
             "log_det": logdet, "candidates": len(cand), "levels_per_axis": levels_for(len(axes)), "axes": list(axes),
             "ranges": {a: list(ranges[a]) for a in axes}, "noise": noise, "rig_error": rig_error,
+            "beyond_linear_range": beyond, "linear_share": LINEAR_SHARE,
             "sensor": drawing.name, "distinct_poses": int(distinct),
             "rest_rows": int(np.sum(off_skin(cand[idx]))), "rest_lift_mm": REST_LIFT_MM}
     return poses, info

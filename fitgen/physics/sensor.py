@@ -106,6 +106,9 @@ class Sensor:
     ambient: np.ndarray | None = field(default=None, repr=False)
     stage_map: np.ndarray | None = field(default=None, repr=False)
     tolerances: Tolerances = field(default=Tolerances(), compare=False)
+    # how far a calibration capture may move the skin from first contact, per stage axis (dx, dy, dz: (lo, hi) mm);
+    # empty: the working pose box (fitgen.physics.simulate.DEFAULT_RANGES). Not physics: not in the hash
+    travel: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self):
         n = self.positions.shape[0]
@@ -353,6 +356,7 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
     tolerances = Tolerances(**{k: tol.number(k, v, min_=0.0, max_=TOLERANCE_MAX[k])
                                for k, v in vars(Tolerances()).items()})
     tol.finish()
+    travel = _travel(top.sub("travel", required=False), gap)
     unit = top.sub("unit", required=False)  # provenance of a unit file (fitgen simulate --unit, fitgen identify)
     for key in list(unit.data):
         unit.raw(key)
@@ -412,7 +416,34 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
         ambient=ambient,
         stage_map=stage_map,
         tolerances=tolerances,
+        travel=travel,
     )
+
+
+TRAVEL_AXES = ("dx", "dy", "dz")
+TRAVEL_MAX = 20.0  # mm: as far as identify takes a capture's labels (fitgen.fitting.capturecheck.FARTHEST)
+
+
+def _travel(sec: _Section, gap: float) -> dict:
+    """``[travel]``: per stage axis a ``[lo, hi]`` in mm from first contact that holds 0; dz at most 0 (above
+    first contact the indenter leaves the skin: the schedule's rest row is its own) and above -gap (the magnet
+    would reach the board)."""
+    out = {}
+    for a in TRAVEL_AXES:
+        if not sec.has(a):
+            continue
+        lo, hi = _numbers(sec, a, 2)
+        where = f"{sec.origin}: 'travel.{a}'"
+        if not (lo < hi and lo <= 0.0 <= hi and max(-lo, hi) <= TRAVEL_MAX):
+            raise InputError(f"{where} must be [lo, hi] in mm from first contact with lo < hi, 0 between them and "
+                             f"both within {TRAVEL_MAX:g} mm, got {[lo, hi]}")
+        if a == "dz" and (hi > 0.0 or lo <= -gap):
+            raise InputError(f"{where} must lie within ({-gap:g}, 0] mm: above 0 the indenter is off the skin "
+                             f"(the schedule lifts its rest row by itself), at -{gap:g} the magnet meets the board; "
+                             f"got {[lo, hi]}")
+        out[a] = (lo, hi)
+    sec.finish()
+    return out
 
 
 def _numbers(sec: _Section, key: str, n: int) -> list[float]:

@@ -24,6 +24,21 @@ def quantise(x: np.ndarray, lo: float, hi: float, bits: int) -> np.ndarray:
     return lo + np.round((x - lo) / lsb) * lsb
 
 
+def volts_per_mt(g) -> float:
+    """The gmr transfer's slope: volts out per mT of |B . axis| (supply x sensitivity x amplifier gain)."""
+    return g.supply * g.sensitivity * 1e-3 * OE_PER_MT * g.gain
+
+
+def linear_top(sensor: Sensor) -> float:
+    """The least |B . axis| (mT) at which a drawing's reading stops following the field: the element's saturation
+    or the ADC's top rail, whichever comes first (gmr); the raw transfer's full scale when it is quantised, else
+    infinity."""
+    if sensor.transfer == "raw":
+        return sensor.raw.full_scale if sensor.raw.adc_bits > 0 else float("inf")
+    g = sensor.gmr
+    return min(g.saturation, (g.adc_max - g.offset) / volts_per_mt(g))
+
+
 def element_response(sensor: Sensor, mag: np.ndarray) -> np.ndarray:
     """Each element's field-equivalent output (mT) from |B . axis|: its gain and offset (a unit's; 1 and 0
     on a drawing)."""
@@ -52,8 +67,7 @@ def apply_transfer(
         lo, hi = 0.0, sensor.raw.full_scale
     else:
         g = sensor.gmr
-        volts_per_mt = g.supply * g.sensitivity * 1e-3 * OE_PER_MT * g.gain
-        out = g.offset + volts_per_mt * element_response(sensor, np.minimum(mag, g.saturation))
+        out = g.offset + volts_per_mt(g) * element_response(sensor, np.minimum(mag, g.saturation))
         bits = g.adc_bits if adc_bits is None else adc_bits
         lo, hi = g.adc_min, g.adc_max
     if noise > 0:

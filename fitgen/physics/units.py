@@ -30,7 +30,7 @@ from fitgen.physics.field import cylinder_projection
 from fitgen.base.fileio import write_atomic
 from fitgen.physics.pose import as_poses, contact_poses, rotation_matrices
 from fitgen.physics.sensor import Magnet, Sensor, Tolerances, load_sensor
-from fitgen.physics.transfer import OE_PER_MT
+from fitgen.physics.transfer import volts_per_mt
 
 MAGNET = ("magnet.x", "magnet.y", "magnet.z", "magnet.thx", "magnet.thy", "magnet.log_polarization")
 ELEMENT = ("azimuth", "radius", "height", "turn", "tilt", "log_gain", "offset")
@@ -140,8 +140,7 @@ class UnitSpace:
         if d.transfer == "raw":
             return p["gain"][:, None, :] * mag + p["off"][:, None, :]
         g = d.gmr
-        volts_per_mt = g.supply * g.sensitivity * 1e-3 * OE_PER_MT * g.gain
-        out = g.offset + volts_per_mt * (p["gain"][:, None, :] * np.minimum(mag, g.saturation) + p["off"][:, None, :])
+        out = g.offset + volts_per_mt(g) * (p["gain"][:, None, :] * np.minimum(mag, g.saturation) + p["off"][:, None, :])
         return np.clip(out, g.adc_min, g.adc_max)
 
     @property
@@ -184,7 +183,7 @@ def _vec(v) -> str:
 
 def unit_toml(unit: Sensor, drawing: str, provenance: dict | None = None) -> str:
     """The sensor file of a built unit: every element as a list entry with its gain and offset, the magnet's
-    offset and tilt, the ambient field, the stage map and the tolerances. Numbers round-trip."""
+    offset and tilt, the ambient field, the stage map, the tolerances and the travel. Numbers round-trip."""
     m = unit.magnet
     lines = [f"# A built unit of the drawing {drawing!r}: fitgen reads it as any sensor file (--sensor).",
              f"name = {_quote(unit.name)}", f"description = {_quote(unit.description)}", "", "[unit]",
@@ -210,6 +209,9 @@ def unit_toml(unit: Sensor, drawing: str, provenance: dict | None = None) -> str
     lines += [f"{k} = {_num(v) if isinstance(v, float) else v}" for k, v in vars(unit.gmr).items()]
     lines += ["", "[tolerances]  # standard deviations (docs/calibration.md)"]
     lines += [f"{k} = {_num(v)}" for k, v in unit.tolerances.to_dict().items()]
+    if unit.travel:
+        lines += ["", "[travel]  # mm from first contact: how far a calibration capture may move the skin"]
+        lines += [f"{k} = {_vec(v)}" for k, v in unit.travel.items()]
     return "\n".join(lines) + "\n"
 
 
