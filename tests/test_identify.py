@@ -355,6 +355,8 @@ def test_cli_schedule_capture_identify(tmp_path):
     proc = run_cli("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "30", "--limits",
                    "dx=-1.5:1.5 dy=-1.5:1.5 dz=-1.5:0", "-o", str(sch))
     assert proc.returncode == 0, proc.stderr
+    # the box it kept to, said so that the stage's limits can give it room
+    assert "within dx -1.5..1.5, dy -1.5..1.5, dz -1.5..0 mm from first contact" in proc.stderr
     header = sch.read_text().splitlines()[0]
     assert header == "dx,dy,dz"
     # --stage-limits' commas give the same schedule

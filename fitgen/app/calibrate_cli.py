@@ -81,4 +81,9 @@ def cmd_schedule(args) -> int:
             else "")
     print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}{rest}) to {args.output}",
           file=sys.stderr)
+    box = ", ".join(f"{a} {lo:g}..{hi:g}" for a, (lo, hi) in info["ranges"].items())
+    left = (f"; {info['beyond_linear_range']} of its grid poses left out, past {100 * info['linear_share']:g} % of an "
+            "element's linear range" if info["beyond_linear_range"] else "")
+    print(f"within {box} mm from first contact (the sensor's travel within --limits{left}): give the stage "
+          "room for them and their approach (--stage-limits)", file=sys.stderr)
     return 0
