@@ -402,10 +402,8 @@ def build_parser() -> Parser:
                     help="the readings the capture takes (default gmr: volts, as tactile-host capture reads them)")
     sc.add_argument("--n", type=int, default=40, help="poses to capture (default 40)")
     sc.add_argument("--axes", default="dx,dy,dz", help="the axes the stage moves (default dx,dy,dz)")
-    sc.add_argument("--limits", help="the stage's limits 'dx=-2:2 dz=-2:0 ...' (default: the sensor's travel, its "
-                    "file's [travel]: 3 mm each way and 3 mm deep on paper); poses that drive an element past 80 %% of "
-                    "its linear range are left out; with dz, a rest row may lift the stage 0.2 mm above first contact "
-                    "besides")
+    sc.add_argument("--limits", help="the stage's limits 'dx=-2:2 dz=-2:0 ...' (default: the sensor's [travel]); "
+                    "with dz, a rest row lifts the stage 0.2 mm off the skin besides (docs/calibration.md)")
     sc.add_argument("--samples", default="16", help="samples the capture averages per row (default 16)")
     sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
     sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM", help="stage error, mm rms (default 0.01)")
