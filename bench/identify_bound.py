@@ -226,8 +226,8 @@ def main() -> None:
           "D-optimal; A: A-optimal on what identify reports)\n")
     print(f"paper in gmr (noise {drawing.noise:g} V per sample); medians over units of a Gaussian posterior "
           f"linearised at the drawing ({MC} draws). Limits (issue 21): offset 0.03 mm, worst element 1 %.\n")
-    print(table(["poses", "design", "box", "rig error [mm]", "zero error [mm]", "samples per row", "rest row", "distinct poses",
-                 "offset x", "offset y", "offset z",
+    print(table(["poses", "design", "box", "rig error [mm]", "zero error [mm]", "samples per row", "rest row",
+                 "distinct poses", "offset x", "offset y", "offset z",
                  "sensitivity, worst element", "sensitivity, per element over units", "offset z se", "sensitivity se",
                  "within the limits"],
                 bound_rows(drawing)))

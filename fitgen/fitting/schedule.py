@@ -97,8 +97,8 @@ def capture_candidates(drawing: Sensor, axes=("dx", "dy", "dz"), limits: dict | 
     cand = candidates(tuple(axes), box)
     keep = within_linear_range(drawing, cand) | off_skin(cand)
     if not keep.any():
-        raise InputError(f"every candidate pose drives an element of {drawing.name} past {100 * LINEAR_SHARE:g} % of its "
-                         f"linear range (saturation {linear_top(drawing):g} mT): check the sensor file's transfer")
+        raise InputError(f"every candidate pose drives an element of {drawing.name} past {100 * LINEAR_SHARE:g} % "
+                         f"of its linear range (saturation {linear_top(drawing):g} mT): check the sensor file's transfer")
     return cand[keep], box, int(np.sum(~keep))
 
 

@@ -140,7 +140,8 @@ class UnitSpace:
         if d.transfer == "raw":
             return p["gain"][:, None, :] * mag + p["off"][:, None, :]
         g = d.gmr
-        out = g.offset + volts_per_mt(g) * (p["gain"][:, None, :] * np.minimum(mag, g.saturation) + p["off"][:, None, :])
+        field = p["gain"][:, None, :] * np.minimum(mag, g.saturation) + p["off"][:, None, :]
+        out = g.offset + volts_per_mt(g) * field
         return np.clip(out, g.adc_min, g.adc_max)
 
     @property
