@@ -36,6 +36,7 @@ the median; the unit is one draw of that spread.
 
 from __future__ import annotations
 
+import functools
 import sys
 import tempfile
 from dataclasses import replace
@@ -133,6 +134,7 @@ ODDS_SEED = 101  # the first unit of part 3: bench/units.py draws seeds 1..20, t
 SET = 20  # units per set, as the acceptance line counts them
 
 
+@functools.cache  # parts 2 and 3 share bench/units.py's context (its schedules take seconds)
 def _units_module():
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
     import units as U  # bench/units.py: the same units, captures and schedules

@@ -166,7 +166,7 @@ class Ctx:
         self.schedules: dict = {}
 
     def make_schedules(self) -> None:
-        need = [(n, rig) for n, rig in sorted(set(self.twins) | {(40, DIRECT_RIG)})] + [(*HEAD, WORKING)]
+        need = sorted(set(self.twins) | {(40, DIRECT_RIG)}) + [(*HEAD, WORKING)]
         for key in need:
             n, rig = key[:2]
             t = time.monotonic()

@@ -8,10 +8,11 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.physics.pose import off_skin
+from fitgen.physics.sensor import TRAVEL_MAX
 
 MIN_ROWS = 10
 MIN_DISTINCT = 6
-FARTHEST = 20.0  # mm: a label beyond this is no displacement of the skin from first contact
+FARTHEST = TRAVEL_MAX  # mm: a label beyond this is no displacement of the skin from first contact
 MAX_CLIPPED = 0.1  # share of clipped readings above which a capture is refused
 PRESSED = 0.3  # mm: a row pressed this deep moves the magnet far past the noise (a zero a little high is allowed
 # for by identify's zero error: rows at dz 0 may miss the skin)

@@ -421,7 +421,7 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
 
 
 TRAVEL_AXES = ("dx", "dy", "dz")
-TRAVEL_MAX = 20.0  # mm: as far as identify takes a capture's labels (fitgen.fitting.capturecheck.FARTHEST)
+TRAVEL_MAX = 20.0  # mm: no press moves the skin further (identify refuses labels beyond it, capturecheck.FARTHEST)
 
 
 def _travel(sec: _Section, gap: float) -> dict:
