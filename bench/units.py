@@ -16,6 +16,8 @@ Run:
                                                       # training poses, two twins; 0.5-2.5 min
     python bench/units.py --units 5 --plot docs/img   # the first N seeds; PNGs docs/img/units-*.png
     python bench/units.py --cache /tmp/units-cache    # keep each task's result; a run again reuses them
+    python bench/units.py --sweep-units 0 --element-radius 0.04   # a ring known to 0.04 mm per element: drawn,
+                                                      # scheduled and identified so (docs/calibration.md)
 
 Tables on stdout, progress on stderr. --jobs N processes (default 2; one BLAS thread each).
 
@@ -154,8 +156,12 @@ SAMPLE_S = 4 * (1 / 860 * 1.1 + 0.0005)  # 8 elements on two ADS1115 at 860 SPS:
 class Ctx:
     """What every task needs; built once in the parent, inherited by the workers."""
 
-    def __init__(self, n_held: int, draws: int, n_random: int, twins: tuple, realisations: int = REALISATIONS):
+    def __init__(self, n_held: int, draws: int, n_random: int, twins: tuple, realisations: int = REALISATIONS,
+                 element_radius: float | None = None):
         self.drawing = load_sensor(PRESET).with_transfer(TRANSFER)
+        if element_radius is not None:  # a ring known better (or worse) than the preset says: drawn and identified so
+            self.drawing = replace(self.drawing, tolerances=replace(self.drawing.tolerances,
+                                                                    element_radius=element_radius))
         self.noise = self.drawing.noise
         self.held_poses = random_poses(n_held, DEFAULT_RANGES, pose_rng(POSE_SEED))
         self.draws = draws
@@ -430,7 +436,8 @@ def capture_time(poses: np.ndarray) -> float:
     legs = np.linalg.norm(np.diff(np.vstack([np.zeros(3), p]), axis=0), axis=1)
     approach = np.full(len(p), 2 * APPROACH_MM * np.sqrt(3))  # out to the approach point and back in
     moves = 3 * len(p)  # the pose, its approach point, back: each its own command round
-    return float(legs.sum() + approach.sum()) / SPEED_MM_S + moves * MOVE_OVERHEAD_S + len(p) * (SETTLE_S + SAMPLES * SAMPLE_S)
+    travel = float(legs.sum() + approach.sum()) / SPEED_MM_S
+    return travel + moves * MOVE_OVERHEAD_S + len(p) * (SETTLE_S + SAMPLES * SAMPLE_S)
 
 
 def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
@@ -438,7 +445,10 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
     verdicts = {}
     print("# Built units: held out on each unit's own truth (bench/units.py)\n")
     print(f"{len(seeds)} units of `{PRESET}` in `{TRANSFER}` (seeds {seeds[0]}..{seeds[-1]}), drawn by "
-          "fitgen.physics.units.draw_unit within the default tolerances. Held out: "
+          "fitgen.physics.units.draw_unit within the default tolerances"
+          + ("" if ctx.drawing.tolerances.element_radius == load_sensor(PRESET).tolerances.element_radius else
+             f", but each element's radius within {ctx.drawing.tolerances.element_radius:g} mm (--element-radius)")
+          + ". Held out: "
           f"{len(ctx.held_poses)} random poses in the default box (pose seed {POSE_SEED}), all five components, "
           f"readings from magpylib (the unit's truth) quantised to the 16-bit ADC; noisy: {ctx.draws} draws of the "
           f"device's {1e3 * ctx.noise:g} mV rms before the ADC, each noisy figure the median over "
@@ -751,16 +761,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
     ap.add_argument("--plot", metavar="DIR", help="write units-heldout.png and units-identified.png here")
     ap.add_argument("--cache", metavar="DIR", help="keep each task's result here and reuse it on a run again")
+    ap.add_argument("--element-radius", type=float, metavar="MM",
+                    help="the drawing's element_radius tolerance: units drawn within it, scheduled and identified "
+                         "with it (default: the preset's, 0.08 mm)")
     args = ap.parse_args(argv)
     n_units = args.units if args.units is not None else 2 if args.quick else N_UNITS  # --units 0 is refused below
     if n_units < 1 or args.jobs < 1:
         ap.error("--units and --jobs must be >= 1")
+    if args.element_radius is not None and not 0 <= args.element_radius <= 0.5:
+        ap.error("--element-radius must be within 0..0.5 mm")
     twins = (HEAD, (10, 0.03)) if args.quick else tuple((n, r) for r in RIGS for n in TWIN_NS)
     ctx = Ctx(N_HELD_QUICK if args.quick else N_HELD, DRAWS_QUICK if args.quick else DRAWS,
-              N_RANDOM_QUICK if args.quick else N_RANDOM, twins, REALISATIONS_QUICK if args.quick else REALISATIONS)
+              N_RANDOM_QUICK if args.quick else N_RANDOM, twins, REALISATIONS_QUICK if args.quick else REALISATIONS,
+              args.element_radius)
     cache = None
     if args.cache:
-        cache = Path(args.cache) / ("quick" if args.quick else "full")
+        ring = "" if args.element_radius is None else f"-radius{args.element_radius:g}"
+        cache = Path(args.cache) / (("quick" if args.quick else "full") + ring)
         cache.mkdir(parents=True, exist_ok=True)
     ctx.make_schedules()
     seeds = list(range(1, n_units + 1))

@@ -10,9 +10,9 @@ import pytest
 
 from conftest import assert_one_line_error, run_cli
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import Problem, derived_quantities, identify
+from fitgen.fitting.identify import PINNABLE, RIG, Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
-from fitgen.fitting.unitrecord import check_explained, outlier_lines, report, row_noise
+from fitgen.fitting.unitrecord import check_explained, outlier_lines, report, row_noise, what_pins_more
 from fitgen.physics import presets
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
@@ -173,6 +173,39 @@ def test_a_capture_without_presses_names_what_it_starves(drawing, tmp_path):
     ident = identify(drawing, y, poses, noise)
     assert ident.starved, "a capture with no dz leaves something a press would pin"
     assert any(np.any(p[:, 2] < 0) for _, p, _ in ident.starved)
+
+
+def test_what_would_pin_more_agrees_with_identifying_it_known(drawing, plan):
+    """identify's 'had this been known exactly': the posterior conditioned on a part (or on where the stage was)
+    never widens, and it agrees with the other path to the same answer, identify run with that part known (its
+    spread 0 in the drawing's tolerances; the rig's and the zero's error 0 on a capture whose stage was exact)."""
+    from dataclasses import replace
+
+    unit, _ = draw_unit(drawing, 22)
+    y, noise = capture(unit, plan[0], 22, rig_error=0.0)  # so that identify with rig error 0 explains it too
+    ident = identify(drawing, y, plan[0], noise)
+    base = ident.derived()
+    names = list(base)
+    for _, part in PINNABLE:
+        pinned = ident.derived(ident.pinned(part))
+        assert all(pinned[k][1] <= base[k][1] * (1 + 1e-9) for k in names), part
+    known = {".radius": identify(replace(drawing, tolerances=replace(drawing.tolerances, element_radius=0.0)),
+                                 y, plan[0], noise),
+             RIG: identify(drawing, y, plan[0], noise, rig_error=0.0, zero_error=0.0)}
+    for part, other in known.items():
+        pinned, direct = ident.derived(ident.pinned(part)), other.derived()
+        for k in names:
+            assert pinned[k][1] == pytest.approx(direct[k][1], rel=0.06), (part, k)  # 1.00-1.04 here
+    # the ring's scale: the magnet's height over the ring trades against every element's radius
+    z = "magnet offset from the elements' centre z [mm]"
+    assert ident.derived(ident.pinned(".radius"))[z][1] < 0.8 * base[z][1]
+    table = what_pins_more(ident)
+    assert len(table) == 2 + 1 + len(PINNABLE) and table[3].startswith("| where the stage really is")
+    assert "| every element's radius (the ring's size) |" in report(ident)
+    with pytest.raises(ValueError, match="no free parameter"):
+        known[".radius"].pinned(".radius")  # fixed already: nothing to condition on
+    assert not any("radius" in line for line in what_pins_more(known[".radius"]))
+    assert not any("where the stage" in line for line in what_pins_more(known[RIG]))
 
 
 def test_a_spread_of_zero_fixes_its_parameter_at_the_drawing(drawing, plan, tmp_path):

@@ -55,6 +55,13 @@ PRIOR_LIMIT = 5.0
 ROW_SUSPECTS, ROW_SHARE = 3, 0.1  # rows tried left out before elements: at most 3, each a tenth of the chi-square
 BLAME_NFEV = 20  # function evaluations: a capture with its dead element left out converges in about 7
 RESWEEP = 10.0  # a trial's chi-square within this many CHI2_LIMITs after one sweep gets a second (_explained_within)
+# what a maker can pin outside a capture (identify's report: what each would buy): a part of the unit, by the
+# parameter names it covers, or RIG for a stage that reports where it really is (the rig's and the zero's error 0)
+RIG = "rig"
+PINNABLE = (("where the stage really is (an encoder)", RIG),
+            ("every element's radius (the ring's size)", ".radius"),
+            ("every element's height", ".height"),
+            ("the stage-to-magnet map", "stage."))
 _H_THETA = 1e-3  # central-difference step, in prior spreads
 _H_POSE = 1e-4  # mm
 
@@ -190,14 +197,28 @@ class Identification:
         ``cov`` and ``theta``: other parameters and covariance to take them at (the prior's: zeros and its
         spreads squared)."""
         cov = self.cov if cov is None else cov
-        theta = self.theta if theta is None else theta
-        funcs = derived_quantities(self.space)
-        out = {}
-        for name, fn in funcs.items():
-            h = 1e-6
-            g = np.array([(fn(theta + h * e) - fn(theta - h * e)) / (2 * h) for e in np.eye(self.space.size)])
-            out[name] = (float(fn(theta)), float(np.sqrt(g @ cov @ g)))
-        return out
+        slopes = self._derived_slopes if theta is None else _derived_slopes(self.space, theta)
+        return {name: (value, float(np.sqrt(g @ cov @ g))) for name, (value, g) in slopes.items()}
+
+    @cached_property
+    def _derived_slopes(self) -> dict[str, tuple[float, np.ndarray]]:
+        return _derived_slopes(self.space, self.theta)
+
+    def pinned(self, part: str) -> np.ndarray:
+        """The posterior covariance (physical units) had ``part`` been known exactly: the parameters whose names
+        contain it conditioned out, or with ``RIG`` a capture whose stage was where its labels say (the information
+        at the same parameters without the rig's and the zero's error)."""
+        if part == RIG:
+            prob = replace(self.problem, rig_error=0.0, zero_error=0.0)
+            z = self.space.in_spreads(self.theta)
+            post = np.linalg.inv(prob.information(z) + np.eye(self.space.size))
+            return post * np.outer(self.space.prior_sd, self.space.prior_sd)
+        known = np.array([part in name for name in self.space.names]) & self.space.free
+        if not known.any():
+            raise ValueError(f"no free parameter of this unit space is named like {part!r}")
+        C, k = self.cov, known
+        # a Gaussian conditioned on some of its variables: the Schur complement of their block
+        return C - C[:, k] @ np.linalg.solve(C[np.ix_(k, k)], C[k, :])
 
     def outside_tolerances(self, limit: float = PRIOR_LIMIT) -> list[tuple[int, float]]:
         """Parameters (index, value in prior spreads) beyond ``limit`` spreads from the drawing, farthest first."""
@@ -256,6 +277,15 @@ def derived_quantities(space: UnitSpace) -> dict:
     for k in range(n):
         j = space.index(f"e{k + 1}.log_gain")
         out[f"e{k + 1} sensitivity [x drawing]"] = (lambda theta, j=j: float(np.exp(theta[5] + theta[j])))
+    return out
+
+
+def _derived_slopes(space: UnitSpace, theta: np.ndarray) -> dict[str, tuple[float, np.ndarray]]:
+    """Per derived quantity, its value and gradient (central differences) at ``theta``."""
+    h, out = 1e-6, {}
+    for name, fn in derived_quantities(space).items():
+        g = np.array([(fn(theta + h * e) - fn(theta - h * e)) / (2 * h) for e in np.eye(space.size)])
+        out[name] = (float(fn(theta)), g)
     return out
 
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, RIG_ERROR, ZERO_ERROR, Identification,
-                                     blame, tilting)
+from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PINNABLE, PRIOR_LIMIT, RIG, RIG_ERROR, ZERO_ERROR,
+                                     Identification, blame, tilting)
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.units import UnitSpace
@@ -36,6 +36,7 @@ def report(ident: Identification) -> str:
     lines.append("| --- | --- | --- |")
     for name, (val, se) in ident.derived().items():
         lines.append(f"| {name} | {val:.5g} | {se:.2g} |")
+    lines += [""] + what_pins_more(ident)
     sd, prior = ident.sd, sp.prior_sd
     lines += ["", "| parameter | value | standard error | prior spread | share of the prior left |", "| --- | --- | --- | --- | --- |"]
     share = sp.in_spreads(sd)
@@ -61,6 +62,26 @@ def report(ident: Identification) -> str:
     else:
         lines.append("this capture leaves nothing else to the prior that a capture over the same axes could pin")
     return "\n".join(lines) + "\n"
+
+
+def what_pins_more(ident: Identification) -> list[str]:
+    """A table: the standard errors of what the capture determines had one part of the unit (or where the stage
+    was) been known exactly, beside this capture's: what a maker would gain by measuring it."""
+    sp, prob = ident.space, ident.problem
+    rows = [("nothing more (this capture)", ident.cov)]
+    for words, part in PINNABLE:
+        if part == RIG and prob.rig_error == 0 and prob.zero_error == 0:
+            continue  # the capture already took its stage as exact
+        if part != RIG and not any(part in name for name, free in zip(sp.names, sp.free) if free):
+            continue  # fixed at the drawing already (spread 0)
+        rows.append((words, ident.pinned(part)))
+    lines = ["| standard error, had this been known exactly | offset x [mm] | offset y [mm] | offset z [mm] | "
+             "sensitivity, worst element |", "| --- | --- | --- | --- | --- |"]
+    for words, cov in rows:
+        d = list(ident.derived(cov).values())
+        sens = max(se / val for val, se in d[3:])
+        lines.append(f"| {words} | " + " | ".join(f"{se:.2g}" for _, se in d[:3]) + f" | {100 * sens:.2g} % |")
+    return lines
 
 
 # --- captures and files ---------------------------------------------------------------------------
