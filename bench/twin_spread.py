@@ -1,0 +1,114 @@
+"""What spreads a twin's noise-free held-out figures over its posterior, and how much knowing the stage map would
+narrow them.
+
+For units 1..K of bench/units.py (its headline capture: 40 poses, 0.01 mm, magpylib readings, an exact zero):
+identify, fit the twin as `fitgen fit` does, then hold the twin's model out (float, noise-free, 2,000 of
+bench/units.py's held-out poses) on DRAWS units drawn from the identification's posterior (fitgen's field). Per
+output the 5th, 50th and 95th percentile of the RMS error over those units and the ratio 95th / 5th, beside the same
+with the posterior conditioned on the stage map (fitgen.fitting.identify.Identification.pinned: the map from the
+stage's displacement to the magnet's known exactly), and where the unit's own figure falls among the draws. The
+posterior parameter whose draws go most with dz's RMS (the correlation of its squared draw, in prior spreads, with
+dz's RMS squared) closes each unit's row. The model file reports the median of such a spread over 8 draws
+(docs/calibration.md, "The twin's model file against what the unit delivers"); a spread wider than 1.3^2 = 1.69
+from 5th to 95th percentile leaves some units beyond 1.3x of any one figure.
+
+    python bench/twin_spread.py               # 4 units, 300 draws each: 3 minutes here on 2 cores (175 s)
+    python bench/twin_spread.py --units 8 --draws 500
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from benchutil import fmt, log, parser, table  # noqa: E402
+from identify_bound import _units_module  # noqa: E402
+from fitgen.fitting.identify import identify  # noqa: E402
+from fitgen.fitting.unitrecord import load_posterior, save  # noqa: E402
+from fitgen.physics.pose import POSE_NAMES  # noqa: E402
+from fitgen.physics.sensor import load_sensor  # noqa: E402
+from fitgen.physics.transfer import readings  # noqa: E402
+
+HELD = 2000
+DRAW_SEED = 5
+
+
+def rms_errors(model, R: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """The model's RMS error per output on readings R (K, n, N) at ``poses``: (K, outputs)."""
+    cols = [POSE_NAMES.index(o) for o in model.output_names]
+    K, n, N = R.shape
+    est = model.predict(R.reshape(K * n, N), precision="float").reshape(K, n, -1)
+    return np.sqrt(np.mean((est - poses[None, :, cols]) ** 2, axis=1))
+
+
+def spread(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per column the 5th, 50th, 95th percentile (3, C) and the ratio 95th / 5th (C,)."""
+    q = np.quantile(x, [0.05, 0.5, 0.95], axis=0)
+    return q, q[2] / q[0]
+
+
+def draw_params(theta: np.ndarray, cov: np.ndarray, Z: np.ndarray) -> np.ndarray:
+    """Parameters (K, P) drawn around ``theta`` with covariance ``cov`` from standard normal ``Z`` (K, P); a
+    symmetric square root, since a covariance conditioned on some parameters is singular (no Cholesky)."""
+    w, V = np.linalg.eigh((cov + cov.T) / 2)
+    return theta[None] + Z @ (V * np.sqrt(np.clip(w, 0.0, None))).T
+
+
+def unit_rows(seed: int, draws: int) -> list[list[str]]:
+    U, ctx = _units_module()
+    unit, _ = U.draw_unit(ctx.drawing, seed)
+    labels = ctx.schedules[U.HEAD]
+    y = U.capture(unit, labels, U.HEAD[1], [seed, U.HEAD[0], 3])
+    ident = identify(ctx.drawing, y, labels, ctx.noise / np.sqrt(U.SAMPLES), rig_error=U.HEAD[1], zero_error=0.0)
+    with tempfile.TemporaryDirectory(prefix="fitgen-spread-") as tmp:
+        path, _ = save(ident, Path(tmp) / "unit.toml", {"capture": "bench", "drawing_spec": U.PRESET})
+        twin, post = load_sensor(path), load_posterior(path)
+        model = U.fit_default(U.simulate(twin, ctx.train, provenance={"sensor_file": str(path)}), twin)
+    poses = ctx.held_poses[:HELD]
+    space = ident.space
+    Z = np.random.default_rng([DRAW_SEED, seed]).standard_normal((draws, space.size))
+    thetas = draw_params(ident.theta, ident.cov, Z)
+    free = rms_errors(model, space.readings(thetas, poses), poses)
+    known = rms_errors(model, space.readings(draw_params(ident.theta, ident.pinned("stage."), Z), poses), poses)
+    own = rms_errors(model, readings(unit, poses)[None], poses)[0]
+    (q, ratio), (qk, ratio_k) = spread(free), spread(known)
+    dz = model.output_names.index("dz")
+    in_sd = space.in_spreads(thetas - ident.theta)
+    cor = np.array([np.corrcoef(free[:, dz] ** 2, in_sd[:, i] ** 2)[0, 1] if np.std(in_sd[:, i]) > 0 else 0.0
+                    for i in range(space.size)])
+    top = int(np.nanargmax(cor))
+    rows = []
+    for j, o in enumerate(model.output_names):
+        rows.append([str(seed), o, f"{fmt(q[0, j])} / {fmt(q[1, j])} / {fmt(q[2, j])}", f"{ratio[j]:.2f}",
+                     f"{fmt(qk[0, j])} / {fmt(qk[1, j])} / {fmt(qk[2, j])}", f"{ratio_k[j]:.2f}", fmt(own[j]),
+                     f"{100 * np.mean(free[:, j] < own[j]):.0f}",
+                     f"{space.names[top]} ({cor[top]:.2f})" if o == "dz" else ""])
+    log(f"unit {seed}: spread of dz's RMS {ratio[dz]:.2f}, {ratio_k[dz]:.2f} with the stage map known")
+    return rows
+
+
+def main() -> None:
+    ap = parser(__doc__)
+    ap.add_argument("--units", type=int, default=4, help="units (bench/units.py's seeds 1..N; default 4)")
+    ap.add_argument("--draws", type=int, default=300, help="posterior draws per unit (default 300)")
+    args = ap.parse_args()
+    if args.units < 1 or args.draws < 20:
+        ap.error("--units must be >= 1 and --draws >= 20")
+    rows = [r for seed in range(1, args.units + 1) for r in unit_rows(seed, args.draws)]
+    print("## What spreads a twin's noise-free RMS error over its posterior (40 poses, 0.01 mm)\n")
+    print(f"Per unit and output: the RMS error (mm, deg; float, noise-free, {HELD} held-out poses) over {args.draws} "
+          "units drawn from the identification's posterior, its 5th / 50th / 95th percentile and the ratio 95th / "
+          "5th; the same with the stage map known exactly (the posterior conditioned on it); the unit's own figure "
+          "and its percentile among the draws. Last column: the parameter whose squared draw goes most with dz's "
+          "RMS squared (correlation).\n")
+    print(table(["unit", "output", "RMS over the posterior, 5 / 50 / 95 %", "95 / 5", "stage map known, 5 / 50 / 95 %",
+                 "95 / 5, stage map known", "the unit's own", "its percentile", "drives dz's spread most"], rows))
+
+
+if __name__ == "__main__":
+    main()
