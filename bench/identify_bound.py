@@ -164,20 +164,27 @@ def _units_module():
     return U, ctx
 
 
-def spread_rows(drawing, seeds: list[int]) -> list[list[str]]:
+def headline_twin(seed: int):
+    """Unit ``seed`` of bench/units.py identified from its headline capture (40 poses, 0.01 mm, magpylib readings,
+    an exact zero) and its twin fitted as `fitgen fit` fits it: (unit, identification, twin, posterior record,
+    the twin's data, model)."""
     U, ctx = _units_module()
+    unit, _ = U.draw_unit(ctx.drawing, seed)
+    labels = ctx.schedules[U.HEAD]
+    y = U.capture(unit, labels, U.HEAD[1], [seed, U.HEAD[0], 3])
+    ident = identify(ctx.drawing, y, labels, ctx.noise / np.sqrt(U.SAMPLES), rig_error=U.HEAD[1], zero_error=0.0)
+    with tempfile.TemporaryDirectory(prefix="fitgen-bound-") as tmp:
+        path, _ = save(ident, Path(tmp) / "unit.toml", {"capture": "bench", "drawing_spec": U.PRESET})
+        twin, post = load_sensor(path), load_posterior(path)
+        ds = U.simulate(twin, ctx.train, provenance={"sensor_file": str(path)})
+        return unit, ident, twin, post, ds, U.fit_default(ds, twin)
+
+
+def spread_rows(drawing, seeds: list[int]) -> list[list[str]]:
+    _, ctx = _units_module()
     rows = []
     for seed in seeds:
-        unit, _ = U.draw_unit(ctx.drawing, seed)
-        labels = ctx.schedules[U.HEAD]
-        y = U.capture(unit, labels, U.HEAD[1], [seed, U.HEAD[0], 3])
-        ident = identify(ctx.drawing, y, labels, ctx.noise / np.sqrt(U.SAMPLES), rig_error=U.HEAD[1],
-                         zero_error=0.0)  # bench/units.py's headline capture: its zero is exact
-        with tempfile.TemporaryDirectory(prefix="fitgen-bound-") as tmp:
-            path, _ = save(ident, Path(tmp) / "unit.toml", {"capture": "bench", "drawing_spec": U.PRESET})
-            twin, post = load_sensor(path), load_posterior(path)
-            ds = U.simulate(twin, ctx.train, provenance={"sensor_file": str(path)})
-            model = U.fit_default(ds, twin)
+        unit, _, twin, post, ds, model = headline_twin(seed)
         box = box_of(ds.poses())
 
         def figures(u, h):

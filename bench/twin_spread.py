@@ -19,7 +19,6 @@ from 5th to 95th percentile leaves some units beyond 1.3x of any one figure.
 from __future__ import annotations
 
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -27,11 +26,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from benchutil import fmt, log, parser, table  # noqa: E402
-from identify_bound import _units_module  # noqa: E402
-from fitgen.fitting.identify import identify  # noqa: E402
-from fitgen.fitting.unitrecord import load_posterior, save  # noqa: E402
+from identify_bound import _units_module, headline_twin  # noqa: E402
 from fitgen.physics.pose import POSE_NAMES  # noqa: E402
-from fitgen.physics.sensor import load_sensor  # noqa: E402
 from fitgen.physics.transfer import readings  # noqa: E402
 
 HELD = 2000
@@ -60,15 +56,8 @@ def draw_params(theta: np.ndarray, cov: np.ndarray, Z: np.ndarray) -> np.ndarray
 
 
 def unit_rows(seed: int, draws: int) -> list[list[str]]:
-    U, ctx = _units_module()
-    unit, _ = U.draw_unit(ctx.drawing, seed)
-    labels = ctx.schedules[U.HEAD]
-    y = U.capture(unit, labels, U.HEAD[1], [seed, U.HEAD[0], 3])
-    ident = identify(ctx.drawing, y, labels, ctx.noise / np.sqrt(U.SAMPLES), rig_error=U.HEAD[1], zero_error=0.0)
-    with tempfile.TemporaryDirectory(prefix="fitgen-spread-") as tmp:
-        path, _ = save(ident, Path(tmp) / "unit.toml", {"capture": "bench", "drawing_spec": U.PRESET})
-        twin, post = load_sensor(path), load_posterior(path)
-        model = U.fit_default(U.simulate(twin, ctx.train, provenance={"sensor_file": str(path)}), twin)
+    _, ctx = _units_module()
+    unit, ident, _, _, _, model = headline_twin(seed)
     poses = ctx.held_poses[:HELD]
     space = ident.space
     Z = np.random.default_rng([DRAW_SEED, seed]).standard_normal((draws, space.size))

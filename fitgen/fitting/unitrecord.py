@@ -67,14 +67,15 @@ def report(ident: Identification) -> str:
 def what_pins_more(ident: Identification) -> list[str]:
     """A table: the standard errors of what the capture determines had one part of the unit (or where the stage
     was) been known exactly, beside this capture's: what a maker would gain by measuring it."""
-    sp, prob = ident.space, ident.problem
+    prob = ident.problem
     rows = [("nothing more (this capture)", ident.cov)]
     for words, part in PINNABLE:
         if part == RIG and prob.rig_error == 0 and prob.zero_error == 0:
             continue  # the capture already took its stage as exact
-        if part != RIG and not any(part in name for name, free in zip(sp.names, sp.free) if free):
+        try:
+            rows.append((words, ident.pinned(part)))
+        except ValueError:
             continue  # fixed at the drawing already (spread 0)
-        rows.append((words, ident.pinned(part)))
     lines = ["| standard error, had this been known exactly | offset x [mm] | offset y [mm] | offset z [mm] | "
              "sensitivity, worst element |", "| --- | --- | --- | --- | --- |"]
     for words, cov in rows:
