@@ -52,7 +52,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from benchutil import fmt, log, parser, table  # noqa: E402
 from fitgen.fitting.holdout import (NOISE_DRAWS as DRAWS, SEED, box_of, deployed_errors, held_out_set,  # noqa: E402
                                     posterior_units, unit_sets)
-from fitgen.fitting.identify import ZERO_ERROR, Problem, derived_quantities, identify  # noqa: E402
+from fitgen.fitting.identify import ZERO_ERROR, Problem, derived_quantities, derived_slopes, identify  # noqa: E402
 from fitgen.fitting.unitrecord import load_posterior, save  # noqa: E402
 from fitgen.fitting.schedule import capture_candidates, d_optimal, exchange_design, schedule  # noqa: E402
 from fitgen.physics.pose import off_skin  # noqa: E402
@@ -82,9 +82,8 @@ FIGS = ("max", "rms", "noisy_max", "noisy_rms")
 
 def derived_gradients(space: UnitSpace) -> np.ndarray:
     """d(derived quantity)/dz at the drawing, z in prior spreads: (11, P)."""
-    z, h, sd = np.zeros(space.size), 1e-6, space.prior_sd
-    return np.array([[(fn((z + h * e) * sd) - fn((z - h * e) * sd)) / (2 * h) for e in np.eye(space.size)]
-                     for fn in derived_quantities(space).values()])
+    slopes = derived_slopes(space, np.zeros(space.size))
+    return np.array([g for _, g in slopes.values()]) * space.prior_sd
 
 
 def _a_gain(Finv: np.ndarray, J: np.ndarray, Gs: np.ndarray) -> np.ndarray:
@@ -107,7 +106,10 @@ def with_ring(drawing, ring: float | None):
 
 def bound_rows(drawing) -> list[list[str]]:
     boxes = {"travel": capture_candidates(drawing)[0], "working": capture_candidates(replace(drawing, travel={}))[0]}
-    rng = np.random.default_rng(0)
+    # one set of standard normal draws for every row (common random numbers: rows differ by their covariance
+    # alone), through each covariance's Cholesky factor, so a last-bit change in a covariance moves the medians
+    # by as little (an SVD's signs and order would follow rounding)
+    std = np.random.default_rng(0).standard_normal((MC, len(LIMITS)))
     rows, Js, spaces = [], {}, {}
     for n, rig, s, with_rest, zero, design, box, ring in CONFIGS:
         if ring not in spaces:
@@ -133,7 +135,7 @@ def bound_rows(drawing) -> list[list[str]]:
             F = Problem(space, np.zeros((len(chosen), drawing.n_elements)), chosen, noise, rig,
                         zero_error=zero).information(z) + np.eye(space.size)
         cov = G @ np.linalg.inv(F) @ G.T
-        e = np.abs(rng.multivariate_normal(np.zeros(len(G)), cov, MC))
+        e = np.abs(std @ np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov))).T)
         off = np.median(e[:, :3], axis=0)
         sens = np.median(e[:, 3:].max(axis=1))
         per_el = np.median(e[:, 3:], axis=0).max()  # read per element over units, as the offset per axis

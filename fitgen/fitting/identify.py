@@ -197,12 +197,12 @@ class Identification:
         ``cov`` and ``theta``: other parameters and covariance to take them at (the prior's: zeros and its
         spreads squared)."""
         cov = self.cov if cov is None else cov
-        slopes = self._derived_slopes if theta is None else _derived_slopes(self.space, theta)
+        slopes = self._derived_slopes if theta is None else derived_slopes(self.space, theta)
         return {name: (value, float(np.sqrt(g @ cov @ g))) for name, (value, g) in slopes.items()}
 
     @cached_property
     def _derived_slopes(self) -> dict[str, tuple[float, np.ndarray]]:
-        return _derived_slopes(self.space, self.theta)
+        return derived_slopes(self.space, self.theta)
 
     def pinned(self, part: str) -> np.ndarray:
         """The posterior covariance (physical units) had ``part`` been known exactly: the parameters whose names
@@ -280,7 +280,7 @@ def derived_quantities(space: UnitSpace) -> dict:
     return out
 
 
-def _derived_slopes(space: UnitSpace, theta: np.ndarray) -> dict[str, tuple[float, np.ndarray]]:
+def derived_slopes(space: UnitSpace, theta: np.ndarray) -> dict[str, tuple[float, np.ndarray]]:
     """Per derived quantity, its value and gradient (central differences) at ``theta``."""
     h, out = 1e-6, {}
     for name, fn in derived_quantities(space).items():
