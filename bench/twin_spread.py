@@ -17,6 +17,7 @@ acceptance line counts.
 
     python bench/twin_spread.py               # 4 units, 300 draws each: 3 minutes here on 2 cores (175 s)
     python bench/twin_spread.py --units 8 --draws 500
+    python bench/twin_spread.py --units 2 --mixture 8    # also a twin fitted on 8 posterior units
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from benchutil import fmt, log, parser, table  # noqa: E402
 from identify_bound import _units_module, headline_twin  # noqa: E402
+from fitgen.fitting.holdout import posterior_units  # noqa: E402
+from fitgen.physics.dataset import Dataset  # noqa: E402
 from fitgen.physics.pose import POSE_NAMES  # noqa: E402
 from fitgen.physics.transfer import readings  # noqa: E402
 
@@ -75,14 +78,26 @@ def odds(free: np.ndarray, seed: int, limit: float = LIMIT, tries: int = 4000) -
     return within(files), within(np.median(free, axis=0)[None])
 
 
-def unit_rows(seed: int, draws: int) -> tuple[list[list[str]], tuple[float, ...]]:
+def mixture_twin(twin, post: dict, ds: Dataset, k: int):
+    """The twin fitted as `fitgen fit` fits it, but on ``k`` units drawn from the posterior (the training poses
+    dealt out among them) instead of on the identified unit alone."""
+    U, ctx = _units_module()
+    parts = [U.simulate(u, ctx.train[c]) for u, c in zip(posterior_units(post, twin, k),
+                                                         np.array_split(np.arange(len(ctx.train)), k))]
+    mix = Dataset(np.vstack([d.inputs for d in parts]), np.vstack([d.targets for d in parts]), parts[0].target_names,
+                  ds.meta)
+    return U.fit_default(mix, twin)
+
+
+def unit_rows(seed: int, draws: int, mixture: int = 0) -> tuple[list[list[str]], tuple[float, ...], list[list[str]]]:
     _, ctx = _units_module()
-    unit, ident, _, _, _, model = headline_twin(seed)
+    unit, ident, twin, post, ds, model = headline_twin(seed)
     poses = ctx.held_poses[:HELD]
     space = ident.space
     Z = np.random.default_rng([DRAW_SEED, seed]).standard_normal((draws, space.size))
     thetas = draw_params(ident.theta, ident.cov, Z)
-    free, free_max = errors(model, space.readings(thetas, poses), poses)
+    R = space.readings(thetas, poses)
+    free, free_max = errors(model, R, poses)
     known = errors(model, space.readings(draw_params(ident.theta, ident.pinned("stage."), Z), poses), poses)[0]
     own = errors(model, readings(unit, poses)[None], poses)[0][0]
     (q, ratio), (qk, ratio_k) = spread(free), spread(known)
@@ -98,18 +113,27 @@ def unit_rows(seed: int, draws: int) -> tuple[list[list[str]], tuple[float, ...]
                      f"{100 * np.mean(free[:, j] < own[j]):.0f}",
                      f"{space.names[top]} ({cor[top]:.2f})" if o == "dz" else ""])
     log(f"unit {seed}: spread of dz's RMS {ratio[dz]:.2f}, {ratio_k[dz]:.2f} with the stage map known")
-    return rows, odds(free, seed) + odds(np.hstack([free, free_max]), seed)
+    mixed = []
+    if mixture:
+        m = mixture_twin(twin, post, ds, mixture)
+        (qm, ratio_m), own_m = spread(errors(m, R, poses)[0]), errors(m, readings(unit, poses)[None], poses)[0][0]
+        mixed = [[str(seed), o, f"{fmt(q[1, j])} ({ratio[j]:.2f}); {fmt(own[j])}",
+                  f"{fmt(qm[1, j])} ({ratio_m[j]:.2f}); {fmt(own_m[j])}"] for j, o in enumerate(model.output_names)]
+        log(f"unit {seed}: the twin fitted on {mixture} posterior units")
+    return rows, odds(free, seed) + odds(np.hstack([free, free_max]), seed), mixed
 
 
 def main() -> None:
     ap = parser(__doc__)
     ap.add_argument("--units", type=int, default=4, help="units (bench/units.py's seeds 1..N; default 4)")
     ap.add_argument("--draws", type=int, default=300, help="posterior draws per unit (default 300)")
+    ap.add_argument("--mixture", type=int, default=0, metavar="K",
+                    help="also fit each twin on K posterior units instead of the identified one (0: not)")
     args = ap.parse_args()
-    if args.units < 1 or args.draws < 20:
-        ap.error("--units must be >= 1 and --draws >= 20")
-    per = {seed: unit_rows(seed, args.draws) for seed in range(1, args.units + 1)}
-    rows = [row for unit, _ in per.values() for row in unit]
+    if args.units < 1 or args.draws < 20 or not 0 <= args.mixture <= 64:
+        ap.error("--units must be >= 1, --draws >= 20 and --mixture 0..64")
+    per = {seed: unit_rows(seed, args.draws, args.mixture) for seed in range(1, args.units + 1)}
+    rows = [row for unit, _, _ in per.values() for row in unit]
     print("## What spreads a twin's noise-free RMS error over its posterior (40 poses, 0.01 mm)\n")
     print(f"Per unit and output: the RMS error (mm, deg; float, noise-free, {HELD} held-out poses) over {args.draws} "
           "units drawn from the identification's posterior, its 5th / 50th / 95th percentile and the ratio 95th / "
@@ -124,11 +148,19 @@ def main() -> None:
           f"4,000 such pairs with every output's noise-free RMS (and, in the last two columns, its max too) within "
           f"{LIMIT:g}x. The last row: the mean over these units, and its power {SET}, the odds that every unit of a "
           f"set of {SET} units like them meets it.\n")
-    p = np.array([o for _, o in per.values()])
-    out = [[str(seed)] + [f"{100 * x:.0f} %" for x in o] for seed, (_, o) in per.items()]
+    p = np.array([o for _, o, _ in per.values()])
+    out = [[str(seed)] + [f"{100 * x:.0f} %" for x in o] for seed, (_, o, _) in per.items()]
     out.append([f"{SET} units like these"] + [f"{100 * m ** SET:.0f} % (mean {100 * m:.0f} %)" for m in p.mean(0)])
     print(table(["unit", f"RMS; file: median of {FILE_DRAWS} draws", "RMS; file: the posterior's median",
                  f"RMS and max; median of {FILE_DRAWS}", "RMS and max; the posterior's median"], out))
+    if args.mixture:
+        print(f"\n## A twin fitted on {args.mixture} posterior units instead of the identified one\n")
+        print(f"Per unit and output: the noise-free RMS (float) over the same {args.draws} posterior draws, its median "
+              "(the ratio 95th / 5th percentile); after ';' the unit's own. A twin fitted across the posterior "
+              "would narrow the spread only if part of it were the equations' to absorb.\n")
+        print(table(["unit", "output", "the twin (identified unit)", f"fitted on {args.mixture} posterior units"],
+                    [row for _, _, mixed in per.values() for row in mixed]))
+
 
 if __name__ == "__main__":
     main()
