@@ -179,6 +179,16 @@ def _units_module():
     return U, ctx
 
 
+def twin_of(ident):
+    """identify's unit as `fitgen fit` fits its twin: (twin sensor, posterior record, the twin's data, model)."""
+    U, ctx = _units_module()
+    with tempfile.TemporaryDirectory(prefix="fitgen-bound-") as tmp:
+        path, _ = save(ident, Path(tmp) / "unit.toml", {"capture": "bench", "drawing_spec": U.PRESET})
+        twin, post = load_sensor(path), load_posterior(path)
+        ds = U.simulate(twin, ctx.train, provenance={"sensor_file": str(path)})
+        return twin, post, ds, U.fit_default(ds, twin)
+
+
 def headline_twin(seed: int):
     """Unit ``seed`` of bench/units.py identified from its headline capture (40 poses, 0.01 mm, magpylib readings,
     an exact zero) and its twin fitted as `fitgen fit` fits it: (unit, identification, twin, posterior record,
@@ -188,11 +198,7 @@ def headline_twin(seed: int):
     labels = ctx.schedules[U.HEAD]
     y = U.capture(unit, labels, U.HEAD[1], [seed, U.HEAD[0], 3])
     ident = identify(ctx.drawing, y, labels, ctx.noise / np.sqrt(U.SAMPLES), rig_error=U.HEAD[1], zero_error=0.0)
-    with tempfile.TemporaryDirectory(prefix="fitgen-bound-") as tmp:
-        path, _ = save(ident, Path(tmp) / "unit.toml", {"capture": "bench", "drawing_spec": U.PRESET})
-        twin, post = load_sensor(path), load_posterior(path)
-        ds = U.simulate(twin, ctx.train, provenance={"sensor_file": str(path)})
-        return unit, ident, twin, post, ds, U.fit_default(ds, twin)
+    return (unit, ident) + twin_of(ident)
 
 
 def spread_rows(drawing, seeds: list[int]) -> list[list[str]]:
