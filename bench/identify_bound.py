@@ -19,10 +19,11 @@ the schedule's (fitgen.fitting.schedule.capture_candidates: the sensor's travel,
 paper, within the elements' linear range); the rows of box "working" take the working pose box alone (2 mm, 2 mm
 deep), as the schedule did before it took the travel. The last rows give the drawing a ring whose size is known
 better than its default tolerance says (each element's radius to 0.04 or 0.02 mm, not 0.08): the magnet's height
-over the ring trades against the ring's scale, which no three-axis capture pins well. The last column cuts the
-draws into sets of 20 units and reads each as part 3 reads a set: the odds that a fresh set meets issue 21's
-identification line for an estimator at the bound whose posterior is right. bench/units.py measures identify itself
-on 20 magpylib units (docs/calibration.md).
+over the ring trades against the ring's scale, which no three-axis capture pins well; the two after them allow for
+an elastomer that stiffens (`stiffening` 0.01 /mm, bench/stiffening.py), as identify then estimates it. The last
+column cuts the draws into sets of 20 units and reads each as part 3 reads a set: the odds that a fresh set meets
+issue 21's identification line for an estimator at the bound whose posterior is right. bench/units.py measures
+identify itself on 20 magpylib units (docs/calibration.md).
 
 Part 3, the odds. Issue 21's identification line is a median over 20 units, and a median of 20 moves by about a
 quarter from one set of units to the next: how many fresh sets of 20 units meet it, with the capture scheduled
@@ -61,21 +62,26 @@ from fitgen.physics.pose import off_skin  # noqa: E402
 from fitgen.physics.sensor import load_sensor  # noqa: E402
 from fitgen.physics.units import UnitSpace  # noqa: E402
 
+# the ring's scale: the magnet's height over the ring trades against the ring's mean radius (the field's shape is
+# the same for a ring and magnet scaled together, the polarisation making up the strength), so what a capture
+# pins of the height and the sensitivities rests on the drawing's element_radius tolerance (0.08 mm per element:
+# hand placement); a board placed by machine, or measured, knows it to a few hundredths
+RING = 0.04
+# an elastomer allowed to stiffen (fitgen.physics.pose.pressed): what allowing for it costs what identify reports
+STIFF = 0.01
 # (poses, rig error, samples per row, the rest row among the candidates, the zero's error, the design, the box:
 # the sensor's travel, as fitgen schedule takes it, or the working pose box alone, as it took it before; the
-# elements' radius tolerance, mm: None the drawing's, else a ring whose size is known better, see RING)
+# drawing's tolerances changed, as (key, value) pairs: a ring whose size is known better, see RING; an elastomer
+# allowed to stiffen, see STIFF)
 CONFIGS = ([(n, r, s, True, 0.0, "D", "travel", None) for r in (0.0, 0.01, 0.03) for s in (16, 64)
             for n in (20, 40, 100)]
            + [(n, 0.01, 16, False, 0.0, "D", "travel", None) for n in (40, 100)]
            + [(n, r, 16, True, ZERO_ERROR, "D", "travel", None) for r in (0.01, 0.03) for n in (20, 40, 100)]
            + [(n, 0.01, 16, True, 0.0, "A", "travel", None) for n in (40, 100)]
            + [(n, 0.01, 16, True, z, "D", "working", None) for z in (0.0, ZERO_ERROR) for n in (40, 100)]
-           + [(40, r, 16, True, 0.0, "D", "travel", ring) for r in (0.01, 0.03) for ring in (0.04, 0.02)])
-# the ring's scale: the magnet's height over the ring trades against the ring's mean radius (the field's shape is
-# the same for a ring and magnet scaled together, the polarisation making up the strength), so what a capture
-# pins of the height and the sensitivities rests on the drawing's element_radius tolerance (0.08 mm per element:
-# hand placement); a board placed by machine, or measured, knows it to a few hundredths
-RING = 0.04
+           + [(40, r, 16, True, 0.0, "D", "travel", (("element_radius", ring),)) for r in (0.01, 0.03)
+              for ring in (0.04, 0.02)]
+           + [(n, 0.01, 16, True, 0.0, "D", "travel", (("stiffening", STIFF),)) for n in (40, 100)])
 PINNED_POSES = 100  # part 3's longer capture: is its posterior as wide as its errors?
 LIMITS = (0.03,) * 3 + (0.01,) * 8  # issue 21's: the offsets (mm), the sensitivities (relative)
 MC = 20000
@@ -103,9 +109,9 @@ def a_optimal(J: np.ndarray, n: int, Gs: np.ndarray) -> np.ndarray:
     return exchange_design(J, n, lambda Finv, J: _a_gain(Finv, J, Gs))
 
 
-def with_ring(drawing, ring: float | None):
-    """The drawing with its elements' radius tolerance at ``ring`` mm (None: as drawn)."""
-    return drawing if ring is None else replace(drawing, tolerances=replace(drawing.tolerances, element_radius=ring))
+def with_tolerances(drawing, changes=None):
+    """The drawing with the tolerances in ``changes`` ((key, value) pairs; None: as drawn)."""
+    return drawing if not changes else replace(drawing, tolerances=replace(drawing.tolerances, **dict(changes)))
 
 
 def line_odds(e: np.ndarray, se: np.ndarray) -> float:
@@ -128,7 +134,7 @@ def bound_rows(drawing) -> list[list[str]]:
     rows, Js, spaces = [], {}, {}
     for n, rig, s, with_rest, zero, design, box, ring in CONFIGS:
         if ring not in spaces:
-            space = UnitSpace.of(with_ring(drawing, ring))
+            space = UnitSpace.of(with_tolerances(drawing, ring))
             spaces[ring] = space, derived_gradients(space)
         space, G = spaces[ring]
         z = np.zeros(space.size)
@@ -157,13 +163,14 @@ def bound_rows(drawing) -> list[list[str]]:
         se = np.sqrt(np.diag(cov))
         ok = off.max() <= LIMITS[0] and sens <= LIMITS[-1]
         odds = line_odds(e, np.sqrt(np.diag(cov)))
-        rows.append([str(n), design, box, f"{space.drawing.tolerances.element_radius:g}", f"{rig:g}", f"{zero:g}",
+        t = space.drawing.tolerances
+        rows.append([str(n), design, box, f"{t.element_radius:g}", f"{t.stiffening:g}", f"{rig:g}", f"{zero:g}",
                      str(s), "yes" if with_rest else "no", str(len(np.unique(idx))),
                      fmt(off[0]), fmt(off[1]), fmt(off[2]),
                      f"{100 * sens:.2g} %", f"{100 * per_el:.2g} %",
                      fmt(se[2]), f"{100 * se[3:].mean():.2g} %", "yes" if ok else "no", f"{100 * odds:.0f} %"])
         log(f"bound: {n} poses ({design}-optimal, {box} box), rig {rig:g} mm, zero {zero:g} mm, {s} samples"
-            + ("" if with_rest else ", no rest row") + ("" if ring is None else f", ring known to {ring:g} mm"))
+            + ("" if with_rest else ", no rest row") + "".join(f", {k} {v:g}" for k, v in ring or ()))
     return rows
 
 
@@ -234,7 +241,7 @@ def odds_rows(sets: int) -> list[list[str]]:
     (rms: 1 for a posterior as wide as the errors)."""
     U, ctx = _units_module()
     rig, noise = U.HEAD[1], ctx.noise / np.sqrt(U.SAMPLES)
-    ringed = with_ring(ctx.drawing, RING)
+    ringed = with_tolerances(ctx.drawing, (("element_radius", RING),))
     rows = []
     for box, drawing, labels in (("travel", ctx.drawing, ctx.schedules[U.HEAD]),
                                  ("working", ctx.drawing, ctx.schedules[(*U.HEAD, U.WORKING)]),
@@ -286,7 +293,8 @@ def main() -> None:
           f"`sets of {SET} meeting the line`: the same draws cut into {MC // SET} sets of {SET} units, the share that "
           "meets issue 21's identification line as part 3 reads it (strict, coverage included): the odds of a fresh "
           "set for an estimator at the bound.\n")
-    print(table(["poses", "design", "box", "element radius sd [mm]", "rig error [mm]", "zero error [mm]",
+    print(table(["poses", "design", "box", "element radius sd [mm]", "stiffening sd [1/mm]", "rig error [mm]",
+                 "zero error [mm]",
                  "samples per row", "rest row",
                  "distinct poses", "offset x", "offset y", "offset z",
                  "sensitivity, worst element", "sensitivity, per element over units", "offset z se", "sensitivity se",

@@ -13,7 +13,8 @@ OE_PER_MT = 10.0
 def magpylib_readings(sensor, poses: np.ndarray) -> np.ndarray:
     """Readings (P, N) of ``sensor`` (a drawing or a unit) at label poses, noise-free, no ADC quantisation.
 
-    The magnet: magpylib's Cylinder with the unit's polarisation, rest centre + map @ (dx, dy, dz), and
+    The magnet: magpylib's Cylinder with the unit's polarisation, rest centre + map @ (dx, dy, dz) (a press dz
+    shortened to dz (1 - stiffening |dz|)), and
     orientation Ry(thy) Rx(thx) of the pose after the unit's rest tilt; the field along each element's axis
     plus the ambient field's; then |.|, the element's gain and offset, and the transfer. A unit's label more
     than 0.05 mm above first contact (dz) has lifted the indenter off the skin: the magnet rests.
@@ -21,6 +22,8 @@ def magpylib_readings(sensor, poses: np.ndarray) -> np.ndarray:
     poses = np.atleast_2d(np.asarray(poses, dtype=float)).copy()
     if not sensor.is_drawing:
         poses[poses[:, 2] > 0.05] = 0.0
+        press = poses[:, 2] < 0  # an elastomer that stiffens: the magnet follows a press less the deeper it goes
+        poses[press, 2] *= 1.0 + getattr(sensor, "stiffening", 0.0) * poses[press, 2]
     mag = sensor.magnet
     rest = Rotation.from_euler("xy", mag.tilt, degrees=True)
     pose_rot = Rotation.from_euler("xy", poses[:, 3:5], degrees=True)

@@ -4,6 +4,7 @@ and `fitgen simulate --unit`."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from conftest import assert_one_line_error, run_cli
 from fitgen.base.errors import InputError
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.pose import off_skin
-from fitgen.physics.simulate import DEFAULT_RANGES, pose_rng, random_poses, rig_poses
+from fitgen.physics.simulate import DEFAULT_RANGES, pose_rng, random_poses, rig_poses, simulate
 from fitgen.physics.transfer import readings
 from fitgen.physics.units import UnitSpace, draw_unit, unit_toml, write_unit
 from magpy_truth import magpylib_readings
@@ -55,6 +56,40 @@ def test_a_label_off_the_skin_reads_the_unit_at_rest():
     true = rig_poses(labels, 0.05, np.random.default_rng(1))
     assert np.std(true[:500, 0]) == pytest.approx(0.05, rel=0.15) and true[:500, 2].max() == pytest.approx(0.05)
     np.testing.assert_array_equal(off_skin(true), off_skin(labels))
+
+
+def _stiffening_drawing(sd: float = 0.01):
+    d = load_sensor("paper").with_transfer("gmr")
+    return replace(d, tolerances=replace(d.tolerances, stiffening=sd))
+
+
+def test_an_elastomer_that_stiffens_matches_magpylib_and_round_trips(tmp_path):
+    """A unit whose magnet follows a press less the deeper it goes (the drawing's tolerance allows for it): fitgen's
+    readings, the batched ones identify uses and magpylib's agree; the file keeps it; a drawing that does not allow
+    for it has the parameter space it had."""
+    drawing = _stiffening_drawing()
+    assert UnitSpace.of(drawing).size == UnitSpace.of(load_sensor("paper")).size + 1
+    unit, theta = draw_unit(drawing, 2)
+    stiff = replace(unit, stiffening=0.03)
+    theta = np.append(theta[:-1], 0.03)
+    ref = magpylib_readings(stiff, POSES)
+    np.testing.assert_allclose(readings(stiff, POSES, adc_bits=0), ref, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(UnitSpace.of(drawing).readings(theta, POSES)[0], ref, rtol=0, atol=1e-11)
+    deep = POSES[:, 2] < -1.0
+    assert np.abs(ref - magpylib_readings(replace(unit, stiffening=0.0), POSES))[deep].max() > 10 * drawing.noise
+    # a lifted or a shear-only row is untouched
+    flat = POSES.copy()
+    flat[:, 2] = 0.0
+    np.testing.assert_array_equal(readings(stiff, flat, adc_bits=0), readings(replace(stiff, stiffening=0.0), flat,
+                                                                             adc_bits=0))
+    again = load_sensor(write_unit(tmp_path / "u.toml", stiff, "paper"))
+    assert again.stiffening == 0.03 and again.tolerances.stiffening == 0.01
+    assert again.to_dict()["unit"]["stiffening"] == 0.03  # in the hash
+    assert "stiffening" not in unit_toml(draw_unit(load_sensor("paper"), 2)[0], "paper")  # nor in files without it
+    np.testing.assert_allclose(readings(again, POSES, adc_bits=0), ref, rtol=0, atol=1e-11)
+    # the magnet's own displacement as labels: no stage map, no stiffening between them
+    mag = simulate(stiff, POSES, labels="magnet").inputs
+    np.testing.assert_allclose(mag, simulate(replace(stiff, stage_map=np.eye(3), stiffening=0.0), POSES).inputs)
 
 
 def test_drawing_is_unchanged():
@@ -110,6 +145,8 @@ def test_tolerances_from_the_sensor_file(tmp_path):
     # a spread no built unit has: its 3-sigma draw puts the magnet metres away
     (("magnet_offset_xy = 0.2", "magnet_offset_xy = 1000"), "'tolerances.magnet_offset_xy' must be <= 1, got 1000"),
     (("\ngain = 0.077", "\ngain = 0.4"), "'tolerances.gain' must be <= 0.25, got 0.4"),
+    (("\n[transfer]", "stiffening = 0.5\n\n[transfer]"), "'stage.stiffening' must be <= 0.1, got 0.5"),
+    (("[tolerances]", "[tolerances]\nstiffening = -0.01"), "'tolerances.stiffening' must be >= 0"),
 ])
 def test_bad_unit_files_are_one_line(tmp_path, edit, message):
     unit, _ = draw_unit(load_sensor("paper"), 1)

@@ -78,6 +78,15 @@ def off_skin(poses: np.ndarray) -> np.ndarray:
     return np.asarray(poses)[:, 2] > OFF_SKIN_MM
 
 
+def pressed(shift: np.ndarray, stiffening) -> np.ndarray:
+    """Stage displacements (..., 3) as they reach the magnet of an elastomer that stiffens: a press (dz < 0)
+    shortened by ``stiffening`` (1/mm, per unit: broadcast against shift[..., 0]) times its depth."""
+    dz = shift[..., 2]
+    out = np.array(shift, dtype=float)
+    out[..., 2] = dz * (1.0 - np.asarray(stiffening) * np.abs(np.minimum(dz, 0.0)))
+    return out
+
+
 def contact_poses(poses: np.ndarray) -> np.ndarray:
     """Stage labels (P, 5) as the magnet feels them: a row off the skin is the rest pose."""
     return np.where(off_skin(poses)[:, None], 0.0, poses)
@@ -87,7 +96,7 @@ def magnet_frame(sensor: Sensor, poses: np.ndarray) -> tuple[np.ndarray, np.ndar
     """Element positions and axes in the magnet's own frame, each (P, N, 3).
 
     For a built unit (fitgen.physics.units) the pose's displacement is the stage's: the magnet moves by
-    ``stage_map @ (dx, dy, dz)``; its tilt is the pose's applied after the unit's rest tilt; a label off the
+    ``stage_map @ (dx, dy, dz)``, a press shortened by the elastomer's stiffening (:func:`pressed`); its tilt is the pose's applied after the unit's rest tilt; a label off the
     skin (:func:`contact_poses`) leaves it at rest.
     """
     given = as_poses(poses)
@@ -134,7 +143,7 @@ def check_box(sensor: Sensor, ranges: dict, origin: str) -> None:
 
 def _unchecked(sensor: Sensor, given: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     moved = given if sensor.is_drawing else contact_poses(given)
-    shift = moved[:, :3] if sensor.is_drawing else moved[:, :3] @ sensor.stage_map.T
+    shift = moved[:, :3] if sensor.is_drawing else pressed(moved[:, :3], sensor.stiffening) @ sensor.stage_map.T
     centre = np.asarray(sensor.magnet.rest_center) + shift
     R = rotation_matrices(moved[:, 3], moved[:, 4])
     if any(sensor.magnet.tilt):

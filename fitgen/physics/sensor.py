@@ -51,17 +51,22 @@ class Tolerances:
     ambient: float = 0.03  # mT, each component of a static ambient field (the Earth's is about 0.05 mT)
     stage_gain: float = 0.05  # relative, each diagonal entry of the stage-to-magnet map
     stage_cross: float = 0.02  # each off-diagonal entry: the magnet does not follow quite parallel
+    # 1/mm: an elastomer that stiffens as it is pressed (a press dz reaches the magnet as dz (1 - c |dz|)). 0 by
+    # default, the magnet following the stage linearly; docs/calibration.md says when to allow for it
+    stiffening: float = 0.0
 
     def to_dict(self) -> dict:
-        return dict(vars(self))
+        return {k: v for k, v in vars(self).items() if k != "stiffening" or v}
 
 
+# the greatest stiffening (1/mm) a unit may have: 3 mm deep the magnet follows a press by 70 %
+STIFFENING_MAX = 0.1
 # the largest spread a [tolerances] key takes: past it a 3-sigma unit is no built unit of the drawing (a negative
 # gain or stage map, the magnet out of its pocket, an element's axis turned by a right angle)
 TOLERANCE_MAX = {"magnet_offset_xy": 1.0, "magnet_offset_z": 0.5, "magnet_tilt": 15.0, "polarization": 0.2,
                  "element_azimuth": 10.0, "element_radius": 0.5, "element_height": 0.3, "element_axis": 15.0,
                  "element_tilt": 15.0, "gain": 0.25, "offset": 0.2, "ambient": 0.3, "stage_gain": 0.2,
-                 "stage_cross": 0.2}
+                 "stage_cross": 0.2, "stiffening": STIFFENING_MAX / 3}
 
 
 @dataclass(frozen=True)
@@ -105,6 +110,7 @@ class Sensor:
     offsets: np.ndarray | None = field(default=None, repr=False)
     ambient: np.ndarray | None = field(default=None, repr=False)
     stage_map: np.ndarray | None = field(default=None, repr=False)
+    stiffening: float = 0.0  # 1/mm: a press dz reaches the magnet as dz (1 - stiffening |dz|), before the map
     tolerances: Tolerances = field(default=Tolerances(), compare=False)
     # how far a calibration capture may move the skin from first contact, per stage axis (dx, dy, dz: (lo, hi) mm);
     # empty: the working pose box (fitgen.physics.simulate.DEFAULT_RANGES). Not physics: not in the hash
@@ -126,7 +132,7 @@ class Sensor:
         """True when nothing of a built unit differs from the drawing's defaults."""
         m = self.magnet
         return (not any(m.offset) and not any(m.tilt) and np.all(self.gains == 1) and not np.any(self.offsets)
-                and not np.any(self.ambient) and np.array_equal(self.stage_map, np.eye(3)))
+                and not np.any(self.ambient) and np.array_equal(self.stage_map, np.eye(3)) and not self.stiffening)
 
     @property
     def noise(self) -> float:
@@ -171,7 +177,7 @@ class Sensor:
             "offsets": self.offsets.tolist(),
             "ambient": self.ambient.tolist(),
             "stage_map": self.stage_map.tolist(),
-        }})
+        } | ({"stiffening": self.stiffening} if self.stiffening else {})})
 
     @property
     def sha256(self) -> str:
@@ -351,6 +357,7 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
         stage_map = np.array([_numbers(_Section({"row": r}, "stage.map", origin), "row", 3) for r in rows])
         if not abs(np.linalg.det(stage_map)) > 1e-6:
             raise InputError(f"{origin}: 'stage.map' is singular: the magnet would not follow the stage")
+    stiffening = st.number("stiffening", 0.0, min_=-STIFFENING_MAX, max_=STIFFENING_MAX)
     st.finish()
     tol = top.sub("tolerances", required=False)
     tolerances = Tolerances(**{k: tol.number(k, v, min_=0.0, max_=TOLERANCE_MAX[k])
@@ -415,6 +422,7 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
         offsets=np.array(offsets),
         ambient=ambient,
         stage_map=stage_map,
+        stiffening=stiffening,
         tolerances=tolerances,
         travel=travel,
     )

@@ -121,9 +121,9 @@ def simulate(
         raise InputError(f"labels are the stage's or the magnet's, not {labels!r}")
     source = sensor
     if labels == "magnet" and not sensor.is_drawing:
-        # the magnet's own displacement: the unit with the identity for its stage map (a magnet label above
-        # first contact still rests: no indenter lifts it)
-        source = replace(sensor, stage_map=np.eye(3))
+        # the magnet's own displacement: the unit with the identity for its stage map and no stiffening (a
+        # magnet label above first contact still rests: no indenter lifts it)
+        source = replace(sensor, stage_map=np.eye(3), stiffening=0.0)
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
     with np.errstate(all="ignore"):  # a pose far outside the sensor overflows the field: said below, once
         values = readings(source, poses, noise=noise, adc_bits=adc_bits, rng=rng)

@@ -11,7 +11,9 @@ A unit's parameters, relative to its drawing (:class:`UnitSpace`, in this order)
 - a static ambient field x, y, z (mT);
 - the stage-to-magnet map M - I (9, row by row): the magnet moves by M (dx, dy, dz) when the stage,
   whose displacement the labels record, moves by (dx, dy, dz); a label lifted off the skin
-  (fitgen.physics.pose.contact_poses) leaves the magnet at rest.
+  (fitgen.physics.pose.contact_poses) leaves the magnet at rest;
+- where the drawing's tolerances allow for it, the elastomer's stiffening c (1/mm): a press dz reaches the
+  magnet as dz (1 - c |dz|) before M (fitgen.physics.pose.pressed).
 
 Every parameter is 0 on the drawing. Its spread is the sensor file's ``[tolerances]``
 (:class:`fitgen.physics.sensor.Tolerances`); :func:`draw_unit` draws each normal, clipped at 3 sigma.
@@ -28,7 +30,7 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.physics.field import cylinder_projection
 from fitgen.base.fileio import write_atomic
-from fitgen.physics.pose import as_poses, contact_poses, rotation_matrices
+from fitgen.physics.pose import as_poses, contact_poses, pressed, rotation_matrices
 from fitgen.physics.sensor import Magnet, Sensor, Tolerances, load_sensor
 from fitgen.physics.transfer import volts_per_mt
 
@@ -36,6 +38,7 @@ MAGNET = ("magnet.x", "magnet.y", "magnet.z", "magnet.thx", "magnet.thy", "magne
 ELEMENT = ("azimuth", "radius", "height", "turn", "tilt", "log_gain", "offset")
 AMBIENT = ("ambient.x", "ambient.y", "ambient.z")
 STAGE = tuple(f"stage.m{i}{j}" for i in range(1, 4) for j in range(1, 4))
+STIFFENING = "stage.stiffening"  # a parameter only where the drawing's tolerance allows for it (not 0)
 CLIP_SIGMA = 3.0
 
 
@@ -73,12 +76,14 @@ class UnitSpace:
             raise InputError(f"sensor {drawing.name!r}: element {k} sits on the board's centre; a unit's element "
                              "needs an azimuth")
         n = drawing.n_elements
-        names = MAGNET + tuple(f"e{k}.{p}" for k in range(1, n + 1) for p in ELEMENT) + AMBIENT + STAGE
+        stiff = (STIFFENING,) if t.stiffening > 0 else ()  # absent, the space (and its records) are as before
+        names = MAGNET + tuple(f"e{k}.{p}" for k in range(1, n + 1) for p in ELEMENT) + AMBIENT + STAGE + stiff
         per_el = [t.element_azimuth, t.element_radius, t.element_height, t.element_axis, t.element_tilt,
                   math.log1p(t.gain), t.offset]
         sd = ([t.magnet_offset_xy, t.magnet_offset_xy, t.magnet_offset_z, t.magnet_tilt, t.magnet_tilt,
                math.log1p(t.polarization)] + per_el * n + [t.ambient] * 3
-              + [t.stage_gain if i == j else t.stage_cross for i in range(3) for j in range(3)])
+              + [t.stage_gain if i == j else t.stage_cross for i in range(3) for j in range(3)]
+              + [t.stiffening] * len(stiff))
         return cls(drawing, names, np.array(sd, dtype=float))
 
     @property
@@ -110,7 +115,8 @@ class UnitSpace:
         tail = 6 + 7 * n
         return {"pos": pos, "axes": ax, "rest": rest, "offset": th[:, 0:3], "tilt": th[:, 3:5],
                 "pol": d.magnet.polarization * np.exp(th[:, 5]), "gain": np.exp(el[..., 5]), "off": el[..., 6],
-                "ambient": th[:, tail:tail + 3], "map": np.eye(3) + th[:, tail + 3:tail + 12].reshape(-1, 3, 3)}
+                "ambient": th[:, tail:tail + 3], "map": np.eye(3) + th[:, tail + 3:tail + 12].reshape(-1, 3, 3),
+                "stiffening": th[:, tail + 12] if self.size > tail + 12 else np.zeros(len(th))}
 
     def sensor(self, theta, name: str | None = None, description: str = "") -> Sensor:
         """The unit with parameters ``theta`` as a :class:`Sensor` (its readings are :meth:`readings`')."""
@@ -120,7 +126,7 @@ class UnitSpace:
                      tuple(float(c) for c in p["offset"]), tuple(float(c) for c in p["tilt"]))
         return replace(d, name=name or f"{d.name}-unit", description=description, magnet=mag, positions=p["pos"],
                        axes=p["axes"], gains=p["gain"], offsets=p["off"], ambient=p["ambient"],
-                       stage_map=p["map"], source={})
+                       stage_map=p["map"], stiffening=float(p["stiffening"]), source={})
 
     def readings(self, thetas: np.ndarray, poses) -> np.ndarray:
         """Noise-free readings (K, n, N) of K units (rows of ``thetas``) at n poses, in the transfer's units,
@@ -129,7 +135,11 @@ class UnitSpace:
         poses = contact_poses(as_poses(poses))
         p = self._parts(thetas)
         R = rotation_matrices(poses[:, 3], poses[:, 4])[None] @ rotation_matrices(p["tilt"][:, 0], p["tilt"][:, 1])[:, None]
-        centre = p["rest"][:, None, :] + np.einsum("nj,kij->kni", poses[:, :3], p["map"])
+        if np.any(p["stiffening"]):
+            shift = pressed(np.broadcast_to(poses[:, :3], (len(p["map"]), len(poses), 3)), p["stiffening"][:, None])
+            centre = p["rest"][:, None, :] + np.einsum("knj,kij->kni", shift, p["map"])
+        else:  # the sum as it always was: a unit space that does not stiffen reads as before to the last bit
+            centre = p["rest"][:, None, :] + np.einsum("nj,kij->kni", poses[:, :3], p["map"])
         rel = p["pos"][:, None, :, :] - centre[:, :, None, :]
         local = np.einsum("knmj,knjl->knml", rel, R)
         axes = np.einsum("kmj,knjl->knml", p["axes"], R)
@@ -203,7 +213,10 @@ def unit_toml(unit: Sensor, drawing: str, provenance: dict | None = None) -> str
                   f"offset = {_num(unit.offsets[k])}  # mT"]
     lines += ["", "[ambient]", f"field = {_vec(unit.ambient)}  # mT", "", "[stage]",
               "# magnet displacement = map x stage displacement (the labels are the stage's)",
-              "map = [" + ", ".join(_vec(row) for row in unit.stage_map) + "]", "", "[transfer]",
+              "map = [" + ", ".join(_vec(row) for row in unit.stage_map) + "]"]
+    if unit.stiffening:
+        lines.append(f"stiffening = {_num(unit.stiffening)}  # 1/mm: a press dz reaches the magnet as dz (1 - c |dz|)")
+    lines += ["", "[transfer]",
               f"kind = {_quote(unit.transfer)}", "", "[transfer.raw]"]
     lines += [f"{k} = {_num(v) if isinstance(v, float) else v}" for k, v in vars(unit.raw).items()]
     lines += ["", "[transfer.gmr]"]
