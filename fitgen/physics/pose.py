@@ -96,8 +96,8 @@ def magnet_frame(sensor: Sensor, poses: np.ndarray) -> tuple[np.ndarray, np.ndar
     """Element positions and axes in the magnet's own frame, each (P, N, 3).
 
     For a built unit (fitgen.physics.units) the pose's displacement is the stage's: the magnet moves by
-    ``stage_map @ (dx, dy, dz)``, a press shortened by the elastomer's stiffening (:func:`pressed`); its tilt is the pose's applied after the unit's rest tilt; a label off the
-    skin (:func:`contact_poses`) leaves it at rest.
+    ``stage_map @ (dx, dy, dz)``, a press shortened by the elastomer's stiffening (:func:`pressed`); its tilt is
+    the pose's applied after the unit's rest tilt; a label off the skin (:func:`contact_poses`) leaves it at rest.
     """
     given = as_poses(poses)
     centre, R = _placed(sensor, given)
