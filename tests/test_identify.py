@@ -194,6 +194,8 @@ def test_an_elastomer_that_stiffens_is_identified_where_the_drawing_allows_for_i
                 i = ident.space.index("stage.stiffening")
                 est, se = ident.theta[i], np.sqrt(ident.cov[i, i])
                 assert se < 0.003 and abs(est - c) < 3 * se, (c, est, se)
+            # the report says whether the magnet was taken to follow linearly
+            assert ("stiffening = 0.01 unless" in report(ident)) == (name == "linear")
     assert abs(height["linear", 0.01][0] - height["linear", 0.0][0]) > 0.035
     assert abs(height["allows", 0.01][0] - height["allows", 0.0][0]) < 0.01
     assert height["allows", 0.0][1] < 1.1 * height["linear", 0.0][1]

@@ -11,7 +11,7 @@ from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PINNABLE, PRIOR_
                                      Identification, blame, tilting)
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
-from fitgen.physics.units import UnitSpace
+from fitgen.physics.units import STIFFENING, UnitSpace
 
 
 def describe_direction(space: UnitSpace, v: np.ndarray, top: int = 4) -> str:
@@ -31,6 +31,12 @@ def report(ident: Identification) -> str:
     rest = int(np.sum(off_skin(ident.problem.poses)))
     hint = f"; a row with the stage lifted {REST_LIFT_MM:g} mm (fitgen schedule adds it) pins the rest readings"
     lines.append(f"rows off the skin (the magnet at rest, free of the rig's error): {rest}" + ("" if rest else hint))
+    if STIFFENING not in sp.names and np.any(ident.problem.poses[:, 2] < 0):
+        # it hides: the unit's other parameters bend to it and the chi-square barely moves (bench/stiffening.py)
+        lines.append("the magnet is taken to follow the stage linearly (the drawing's [tolerances] stiffening is 0): "
+                     "an elastomer that stiffens as it is pressed would put the magnet's height off without raising "
+                     "the chi-square; give the drawing stiffening = 0.01 unless the elastomer is known to be linear "
+                     "over the travel (docs/calibration.md)")
     lines.append("")
     lines.append("| what the capture determines | value | standard error |")
     lines.append("| --- | --- | --- |")
