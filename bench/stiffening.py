@@ -15,6 +15,7 @@ held-out poses, magpylib, float): dz's noise-free RMS and noisy max (5 draws of 
 
     python bench/stiffening.py                  # 10 units, twins on 3: about 8 minutes here on 2 cores
     python bench/stiffening.py --units 4 --twins 0
+    python bench/stiffening.py --plot docs/img       # and docs/img/stiffening.png
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from benchutil import fmt, log, parser, table  # noqa: E402
 from identify_bound import _units_module, twin_of  # noqa: E402
 from fitgen.fitting.identify import CHI2_LIMIT, derived_quantities, identify  # noqa: E402
+from fitgen.base.fileio import write_in_folder  # noqa: E402
 from fitgen.fitting.schedule import schedule  # noqa: E402
 from fitgen.physics.pose import POSE_NAMES  # noqa: E402
 from fitgen.physics.simulate import rig_poses  # noqa: E402
@@ -66,7 +68,8 @@ def held_dz(model, unit, seed: int) -> tuple[float, float]:
     return float(rms[DZ]), float(mx[DZ])
 
 
-def rows(units: int, twins: int) -> list[list[str]]:
+def rows(units: int, twins: int, found_by: dict | None = None) -> list[list[str]]:
+    """The table's rows; ``found_by`` (if given) gets per schedule and c the medians (height, the twin's dz RMS)."""
     U, ctx = _units_module()
     rig, noise = U.HEAD[1], ctx.noise / np.sqrt(U.SAMPLES)
     allows = allowing(ctx.drawing)
@@ -94,6 +97,8 @@ def rows(units: int, twins: int) -> list[list[str]]:
                     dz.append(held_dz(twin_of(ident)[3], unit, seed))
             log(f"{box}, c = {c:g}/mm: reduced chi-square {np.median(chi):.2f}, height {np.median(height):.3f} mm")
             dz = np.array(dz).reshape(-1, 2)
+            if found_by is not None:
+                found_by.setdefault(box, []).append((c, np.median(height), np.median(dz[:, 0]) if len(dz) else np.nan))
             out.append([box, f"{c:g}", f"{100 * c * 3:.1f} % / {100 * c * 2:.1f} %",
                         f"{np.median(chi):.2f} ({np.max(chi):.2f})", f"{int(np.sum(np.array(chi) > CHI2_LIMIT))}",
                         f"{np.median(found):.4f}" if found else "-", fmt(np.median(height)),
@@ -102,13 +107,47 @@ def rows(units: int, twins: int) -> list[list[str]]:
     return out
 
 
+def plot(found_by: dict, folder: str) -> Path:
+    """stiffening.png in ``folder``: the magnet's height and the twin's dz against c, per schedule."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for box, pts in found_by.items():
+        c, h, dz = np.array(pts).T
+        a.plot(c, h, "o-", label=box)
+        b.plot(c, dz, "o-", label=box)
+    a.axhline(0.03, color="k", lw=0.8, ls="--", label="issue 21's line")
+    a.set(xlabel="stiffening c [1/mm]", ylabel="median |error| of the magnet's height [mm]", ylim=(0, None))
+    b.set(xlabel="stiffening c [1/mm]", ylabel="the twin's dz, noise-free RMS [mm] (median)", ylim=(0, None))
+    a.legend(fontsize=8)
+    a.set_title("identify: the height")
+    b.set_title("the twin, held out on the unit")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
+    plt.close(fig)
+    return write_in_folder(folder, "stiffening.png", buf.getvalue())
+
+
 def main() -> None:
     ap = parser(__doc__)
     ap.add_argument("--units", type=int, default=10, help="units (bench/units.py's seeds 1..N; default 10)")
     ap.add_argument("--twins", type=int, default=3, help="of them, the first K get a twin held out (default 3)")
+    ap.add_argument("--plot", metavar="DIR", help="also write stiffening.png here (needs matplotlib)")
     args = ap.parse_args()
     if args.units < 1 or not 0 <= args.twins <= args.units:
         ap.error("--units must be >= 1 and --twins 0..units")
+    if args.plot:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            ap.error("--plot needs matplotlib: pip install -e '.[plots]'")
+    found_by = {}
     _, ctx = _units_module()
     print("## An elastomer that stiffens: identify and the twin on units whose magnet follows dz less the deeper\n")
     print(f"{args.units} units (bench/units.py's seeds 1..{args.units}), each captured at 40 poses with a 0.01 mm rig "
@@ -120,7 +159,10 @@ def main() -> None:
           f"RMS and noisy max ({ctx.draws} draws), mm, on the stiffening unit itself, {HELD} held-out poses.\n")
     print(table(["schedule", "c [1/mm]", "dz lost at 3 / 2 mm", "reduced chi-square", "refused",
                  "c identified (median)", "height [mm]",
-                 "worst element", "twin's dz RMS, noise-free", "twin's dz noisy max"], rows(args.units, args.twins)))
+                 "worst element", "twin's dz RMS, noise-free", "twin's dz noisy max"],
+                rows(args.units, args.twins, found_by)))
+    if args.plot:
+        log(f"wrote {plot(found_by, args.plot)}")
 
 
 if __name__ == "__main__":
