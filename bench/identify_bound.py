@@ -132,13 +132,13 @@ def bound_rows(drawing) -> list[list[str]]:
     # by as little (an SVD's signs and order would follow rounding)
     std = np.random.default_rng(0).standard_normal((MC, len(LIMITS)))
     rows, Js, spaces = [], {}, {}
-    for n, rig, s, with_rest, zero, design, box, ring in CONFIGS:
-        if ring not in spaces:
-            space = UnitSpace.of(with_tolerances(drawing, ring))
-            spaces[ring] = space, derived_gradients(space)
-        space, G = spaces[ring]
+    for n, rig, s, with_rest, zero, design, box, changes in CONFIGS:
+        if changes not in spaces:
+            space = UnitSpace.of(with_tolerances(drawing, changes))
+            spaces[changes] = space, derived_gradients(space)
+        space, G = spaces[changes]
         z = np.zeros(space.size)
-        key = (rig, s, box, ring)
+        key = (rig, s, box, changes)
         cand = boxes[box]
         rest = off_skin(cand)
         noise = np.full(drawing.n_elements, drawing.noise / np.sqrt(s))
@@ -162,7 +162,7 @@ def bound_rows(drawing) -> list[list[str]]:
         per_el = np.median(e[:, 3:], axis=0).max()  # read per element over units, as the offset per axis
         se = np.sqrt(np.diag(cov))
         ok = off.max() <= LIMITS[0] and sens <= LIMITS[-1]
-        odds = line_odds(e, np.sqrt(np.diag(cov)))
+        odds = line_odds(e, se)
         t = space.drawing.tolerances
         rows.append([str(n), design, box, f"{t.element_radius:g}", f"{t.stiffening:g}", f"{rig:g}", f"{zero:g}",
                      str(s), "yes" if with_rest else "no", str(len(np.unique(idx))),
@@ -170,7 +170,7 @@ def bound_rows(drawing) -> list[list[str]]:
                      f"{100 * sens:.2g} %", f"{100 * per_el:.2g} %",
                      fmt(se[2]), f"{100 * se[3:].mean():.2g} %", "yes" if ok else "no", f"{100 * odds:.0f} %"])
         log(f"bound: {n} poses ({design}-optimal, {box} box), rig {rig:g} mm, zero {zero:g} mm, {s} samples"
-            + ("" if with_rest else ", no rest row") + "".join(f", {k} {v:g}" for k, v in ring or ()))
+            + ("" if with_rest else ", no rest row") + "".join(f", {k} {v:g}" for k, v in changes or ()))
     return rows
 
 

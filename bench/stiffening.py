@@ -7,9 +7,10 @@ dz (1 - c |dz|) before the unit's stage map (c in 1/mm; c = 0.01: 3 % less at 3 
 2 mm). For bench/units.py's units 1..N, each given a stiffening c, their headline capture (40 poses, 0.01 mm rig
 error, magpylib readings, an exact zero) identified three ways: over the sensor's travel and within the working
 box alone by a drawing that takes the magnet to follow linearly (the default), and over the travel by a drawing
-that allows for stiffening (its `[tolerances] stiffening`, ALLOW; scheduled with it). Per c: identify's reduced
-chi-square (median, greatest; how many captures it refuses), the stiffening it finds, its errors in the magnet's
-height and in the worst element's sensitivity (medians over the units; issue 21's line reads 0.03 mm and 1 %); for
+that allows for stiffening (its `[tolerances] stiffening`, bench/identify_bound.py's STIFF; scheduled with it).
+Per c: identify's reduced chi-square (median, greatest; how many captures it refuses), the stiffening it finds, its
+errors in the magnet's height and in the worst element's sensitivity (medians over the units; issue 21's line reads
+0.03 mm and 1 %); for
 units 1..K the twin fitted as `fitgen fit` fits it, held out on the unit itself (2,000 of bench/units.py's
 held-out poses, magpylib, float): dz's noise-free RMS and noisy max (5 draws of the sensor's noise), the median.
 
@@ -29,32 +30,16 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from benchutil import fmt, log, parser, table  # noqa: E402
-from identify_bound import _units_module, twin_of  # noqa: E402
+from identify_bound import STIFF as ALLOW, _units_module, twin_of, with_tolerances  # noqa: E402
 from fitgen.fitting.identify import CHI2_LIMIT, derived_quantities, identify  # noqa: E402
 from fitgen.base.fileio import write_in_folder  # noqa: E402
 from fitgen.fitting.schedule import schedule  # noqa: E402
 from fitgen.physics.pose import POSE_NAMES  # noqa: E402
-from fitgen.physics.simulate import rig_poses  # noqa: E402
-from fitgen.physics.units import STIFFENING as STIFF  # noqa: E402
+from fitgen.physics.units import STIFFENING as PARAM  # noqa: E402
 
 STIFFENING = (0.0, 0.005, 0.01, 0.02)  # c, 1/mm
-ALLOW = 0.01  # 1/mm: the drawing's tolerance when it allows for stiffening
 HELD = 2000
 DZ = POSE_NAMES.index("dz")
-
-
-def allowing(drawing):
-    """The drawing with a stiffening tolerance of ALLOW: identify estimates it, the schedule pins it."""
-    return replace(drawing, tolerances=replace(drawing.tolerances, stiffening=ALLOW))
-
-
-def capture(unit, labels: np.ndarray, key) -> np.ndarray:
-    """bench/units.py's capture (the rig's error, magpylib, noise over sqrt(16)), of a unit that may stiffen."""
-    U, ctx = _units_module()
-    rng = np.random.default_rng(key)
-    true = rig_poses(labels, U.HEAD[1], rng)
-    noise = rng.normal(0.0, ctx.noise / np.sqrt(U.SAMPLES), (len(true), unit.n_elements))
-    return np.clip(U.magpylib_readings(unit, true) + noise, unit.gmr.adc_min, unit.gmr.adc_max)
 
 
 def held_dz(model, unit, seed: int) -> tuple[float, float]:
@@ -72,7 +57,7 @@ def rows(units: int, twins: int, found_by: dict | None = None) -> list[list[str]
     """The table's rows; ``found_by`` (if given) gets per schedule and c the medians (height, the twin's dz RMS)."""
     U, ctx = _units_module()
     rig, noise = U.HEAD[1], ctx.noise / np.sqrt(U.SAMPLES)
-    allows = allowing(ctx.drawing)
+    allows = with_tolerances(ctx.drawing, (("stiffening", ALLOW),))
     out = []
     for box, drawing, labels in (("travel", ctx.drawing, ctx.schedules[U.HEAD]),
                                  ("working", ctx.drawing, ctx.schedules[(*U.HEAD, U.WORKING)]),
@@ -83,11 +68,11 @@ def rows(units: int, twins: int, found_by: dict | None = None) -> list[list[str]
             for seed in range(1, units + 1):
                 plain, theta = U.draw_unit(ctx.drawing, seed)
                 unit = replace(plain, stiffening=c)
-                ident = identify(drawing, capture(unit, labels, [seed, len(labels), 3]), labels, noise,
-                                 rig_error=rig, zero_error=0.0)
+                y = U.capture(unit, labels, rig, [seed, len(labels), 3])  # magpylib models the stiffening
+                ident = identify(drawing, y, labels, noise, rig_error=rig, zero_error=0.0)
                 if ident.space.size > len(theta):
                     theta = np.append(theta, c)
-                    found.append(ident.theta[ident.space.index(STIFF)])
+                    found.append(ident.theta[ident.space.index(PARAM)])
                 truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
                 e, _, _ = U.derived_errors({"derived": ident.derived(), "derived_truth": truth})
                 chi.append(ident.reduced_chi2)

@@ -30,7 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from benchutil import fmt, log, parser, table  # noqa: E402
-from identify_bound import _units_module, headline_twin  # noqa: E402
+from identify_bound import SET, _units_module, headline_twin  # noqa: E402
 from fitgen.fitting.holdout import posterior_units  # noqa: E402
 from fitgen.physics.dataset import Dataset  # noqa: E402
 from fitgen.physics.pose import POSE_NAMES  # noqa: E402
@@ -40,7 +40,6 @@ HELD = 2000
 DRAW_SEED = 5
 LIMIT = 1.3  # issue 21: the model file's held-out figures within 1.3x of what the unit delivers
 FILE_DRAWS = 8  # posterior units behind the model file's figures (fitgen.fitting.holdout)
-SET = 20  # units, as the acceptance line counts them
 
 
 def errors(model, R: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
