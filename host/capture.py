@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen import __version__
-from fitgen.physics.dataset import meta_path, pose_table, read_text
+from fitgen.physics.dataset import load_meta, meta_path, pose_table, read_text
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output, real_file, sha256_hex, write_atomic, write_target
 from fitgen.physics.pose import POSE_NAMES, as_poses, off_skin
@@ -53,6 +53,7 @@ class TriggerFailed(RuntimeError):
     """The trigger command did not succeed."""
 
 
+SAMPLES = 16  # samples averaged per row when neither --samples nor the schedule names a number
 TRIGGER_TIMEOUT = 60.0  # s a trigger may take to set a pose (--trigger-timeout): a hung one must not hang the capture
 
 
@@ -69,6 +70,18 @@ class Schedule:
 
     def describe(self, i: int) -> str:
         return " ".join(f"{c}={v:g}" for c, v in zip(self.columns, self.values[i]))
+
+
+def designed_samples(path: str | Path) -> int | None:
+    """The samples per row schedule ``path`` was designed for (``samples_per_row`` in the meta `fitgen schedule`
+    writes beside it), or None when it names none."""
+    n = load_meta(path).get("samples_per_row")
+    if n is None:
+        return None
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise InputError(f"{meta_path(path)}: samples_per_row must be a whole number >= 1, got {n!r}; repair it, or "
+                         "give --samples")
+    return n
 
 
 def load_schedule(path: str | Path) -> Schedule:

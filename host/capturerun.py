@@ -13,8 +13,8 @@ from fitgen.base.progress import Progress
 from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.capture import (TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFailed, capture, check_resume, enter_waiter,
-                          load_schedule, output_lock, prepare_output, trigger_waiter)
+from host.capture import (SAMPLES, TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFailed, capture, check_resume,
+                          designed_samples, enter_waiter, load_schedule, output_lock, prepare_output, trigger_waiter)
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.stage import StageError, StageState
 from host.stagecapture import open_stage, stage_settings
@@ -29,9 +29,18 @@ class CaptureInterrupted(RuntimeError):
     """A capture stopped by Ctrl-C; the message says what is kept."""
 
 
+def capture_samples(args) -> int:
+    """--samples, checked; without it the samples per row the schedule --poses was designed for (`fitgen
+    schedule --samples`), else SAMPLES."""
+    if args.samples is not None:
+        return parse_positive(args.samples, "--samples", integer=True)
+    designed = designed_samples(args.poses)
+    return SAMPLES if designed is None else designed
+
+
 def capture_numbers(args) -> tuple:
-    """--samples, --max-spread, --tries, --settle and --retries, checked."""
-    return (parse_positive(args.samples, "--samples", integer=True), parse_positive(args.max_spread, "--max-spread"),
+    """--samples (capture_samples), --max-spread, --tries, --settle and --retries, checked."""
+    return (capture_samples(args), parse_positive(args.max_spread, "--max-spread"),
             parse_positive(args.tries, "--tries", integer=True),
             parse_positive(args.settle, "--settle", zero=True, most=LONGEST_WAIT),
             parse_positive(args.retries, "--retries", integer=True))

@@ -364,6 +364,29 @@ def test_a_simulated_capture_resumes_with_its_units_file_by_any_path_and_not_wit
     assert meta["runs"] == 3 and meta["sensor_sha256"] == load_sensor(tmp_path / "sub" / "moved.toml").sha256
 
 
+def test_capture_averages_as_many_samples_as_the_schedule_was_made_for(tmp_path):
+    """`fitgen schedule --samples S` designs its poses for rows averaged over S samples and says so in its meta:
+    capture takes S unless --samples says otherwise, and 16 for a schedule that names none."""
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:2])
+    args = ["capture", "--poses", str(sched), "--adc", TWO_1115, "--simulate"]
+
+    def samples_of(out, *extra):
+        proc = run_cli("tactile-host", *args, "-o", str(tmp_path / out), *extra)
+        assert proc.returncode == 0, proc.stderr
+        return json.loads((tmp_path / f"{out}.meta.json").read_text())["samples_per_row"]
+
+    assert samples_of("plain.csv") == 16
+    (tmp_path / "s.csv.meta.json").write_text(json.dumps({"samples_per_row": 5, "distinct_poses": 2}))
+    assert samples_of("designed.csv") == 5
+    assert samples_of("given.csv", "--samples", "3") == 3
+    for bad in ("5", 0, 2.5, True):
+        (tmp_path / "s.csv.meta.json").write_text(json.dumps({"samples_per_row": bad}))
+        assert_one_line_error(run_cli("tactile-host", *args, "-o", str(tmp_path / "bad.csv")), 2,
+                              f"samples_per_row must be a whole number >= 1, got {bad!r}; repair it, or give --samples")
+        assert not (tmp_path / "bad.csv").exists()
+    assert samples_of("given-anyway.csv", "--samples", "2") == 2  # what the user gives is not the meta's to refuse
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--samples", "0"], "--samples must be a whole number >= 1, got 0"),
     (["--max-spread", "x"], "--max-spread 'x' is not a number"),

@@ -462,6 +462,8 @@ def test_cli_schedule_capture_identify(tmp_path):
     assert "within dx -1.5..1.5, dy -1.5..1.5, dz -1.5..0 mm from first contact" in proc.stderr
     header = sch.read_text().splitlines()[0]
     assert header == "dx,dy,dz"
+    # the samples it was designed for, which tactile-host capture then averages (tests/test_capture.py)
+    assert json.loads((tmp_path / "s.csv.meta.json").read_text())["samples_per_row"] == 16
     # --stage-limits' commas give the same schedule
     comma = tmp_path / "comma.csv"
     assert run_cli("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "30", "--limits",

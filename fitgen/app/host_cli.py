@@ -396,7 +396,8 @@ def build_parser() -> Parser:
     _adc_options(c)
     c.add_argument("-o", "--output", required=True, metavar="DATASET.csv",
                    help="dataset to write; an existing one is resumed")
-    c.add_argument("--samples", default="16", help="samples averaged per pose (default 16)")
+    c.add_argument("--samples", help="samples averaged per pose (default: as many as the schedule was made for, "
+                   "fitgen schedule --samples; else 16)")
     c.add_argument("--max-spread", default="0.003", metavar="V",
                    help="largest standard deviation of an element over the samples, V (default 0.003)")
     c.add_argument("--tries", default="3", help="measurements of a pose before giving up on its spread (default 3)")
