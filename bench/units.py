@@ -18,6 +18,7 @@ Run:
     python bench/units.py --cache /tmp/units-cache    # keep each task's result; a run again reuses them
     python bench/units.py --sweep-units 0 --element-radius 0.04   # a ring known to 0.04 mm per element: drawn,
                                                       # scheduled and identified so (docs/calibration.md)
+    python bench/units.py --sweep-units 0 --samples 128   # every capture's row averaged over 128 samples
 
 Tables on stdout, progress on stderr. --jobs N processes (default 2; one BLAS thread each).
 
@@ -26,8 +27,8 @@ Set-up (deterministic):
 - Units: fitgen.physics.units.draw_unit(paper in gmr, seed) for seeds 1..N (N = 20).
 - A simulated capture of a unit at label poses: the stage off its labels by the rig's error (normal,
   per axis dx, dy, dz; tilts exact), magpylib's readings of the unit there, plus the device's noise
-  over sqrt(16) (each row averages 16 samples), clipped to the ADC's range; meta units V,
-  samples_per_row 16 (so fit adds the rest of the device's noise, fitgen.fitting.fit.noise_to_add).
+  over sqrt(S) (each row averages S samples: 16, or --samples), clipped to the ADC's range; meta units V,
+  samples_per_row S (so fit adds the rest of the device's noise, fitgen.fitting.fit.noise_to_add).
 - Schedules: fitgen.fitting.schedule.schedule(drawing, n, noise=drawing.noise/4, rig_error=r) for
   n = 10, 20, 40, 100 and the rig error r simulated (0.01 mm, a CNC; 0.03 mm, a printer), within the sensor's
   travel (paper.toml: 3 mm each way, 3 mm deep) and the elements' linear range; and the headline one (40 poses,
@@ -220,12 +221,14 @@ def measure(model, unit, seed: int) -> dict:
     return out
 
 
-def capture(unit, labels: np.ndarray, rig: float, key, zero: float = 0.0) -> np.ndarray:
-    """Averaged rows of a simulated capture: magpylib's readings where the stage really is, noise over sqrt(16);
-    with ``zero`` (mm rms per axis), the zero off first contact by one error shared by the rows in contact."""
+def capture(unit, labels: np.ndarray, rig: float, key, zero: float = 0.0, samples: int | None = None) -> np.ndarray:
+    """Averaged rows of a simulated capture: magpylib's readings where the stage really is, noise over
+    sqrt(samples) (default SAMPLES); with ``zero`` (mm rms per axis), the zero off first contact by one error
+    shared by the rows in contact."""
+    samples = SAMPLES if samples is None else samples
     rng = np.random.default_rng(key)
     true = rig_poses(labels, rig, rng, np.random.default_rng([*key, 5]).normal(0.0, zero, 3) if zero > 0 else None)
-    y = magpylib_readings(unit, true) + rng.normal(0.0, CTX.noise / np.sqrt(SAMPLES), (len(labels), unit.n_elements))
+    y = magpylib_readings(unit, true) + rng.normal(0.0, CTX.noise / np.sqrt(samples), (len(labels), unit.n_elements))
     return np.clip(y, unit.gmr.adc_min, unit.gmr.adc_max)
 
 
@@ -453,7 +456,8 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
           f"readings from magpylib (the unit's truth) quantised to the 16-bit ADC; noisy: {ctx.draws} draws of the "
           f"device's {1e3 * ctx.noise:g} mV rms before the ADC, each noisy figure the median over "
           f"{ctx.realisations} such realisations. Estimates: Model.predict(precision=\"float\"), the "
-          "float C's arithmetic bit for bit. Captures: rows averaged over 16 samples (noise / 4), the stage off its "
+          f"float C's arithmetic bit for bit. Captures: rows averaged over {SAMPLES} samples (noise / "
+          f"{np.sqrt(SAMPLES):.3g}), the stage off its "
           "labels by the rig's error; `zero off` rows: the headline captures with the zero off first contact by one "
           f"error per unit (normal, {ZERO_SIM:g} mm rms per axis) shared by the rows in contact, identified allowing "
           "for it (fitgen identify's default) or taking the zero as exact (--zero-error 0). "
@@ -749,6 +753,7 @@ def plot(per: dict, outdir: Path) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    global SAMPLES
     ap = parser(__doc__)
     ap.add_argument("--units", type=int, help=f"units (seeds 1..N; default {N_UNITS}, --quick 2)")
     ap.add_argument("--quick", action="store_true",
@@ -761,6 +766,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
     ap.add_argument("--plot", metavar="DIR", help="write units-heldout.png and units-identified.png here")
     ap.add_argument("--cache", metavar="DIR", help="keep each task's result here and reuse it on a run again")
+    ap.add_argument("--samples", type=int, default=SAMPLES,
+                    help=f"samples averaged per captured row, scheduled and identified for (default {SAMPLES})")
     ap.add_argument("--element-radius", type=float, metavar="MM",
                     help="the drawing's element_radius tolerance: units drawn within it, scheduled and identified "
                          "with it (default: the preset's, 0.08 mm)")
@@ -770,6 +777,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--units and --jobs must be >= 1")
     if args.element_radius is not None and not 0 <= args.element_radius <= 0.5:
         ap.error("--element-radius must be within 0..0.5 mm")
+    if args.samples < 1:
+        ap.error("--samples must be >= 1")
+    SAMPLES = args.samples  # before the context and the workers it forks: every capture, schedule and identify
     twins = (HEAD, (10, 0.03)) if args.quick else tuple((n, r) for r in RIGS for n in TWIN_NS)
     ctx = Ctx(N_HELD_QUICK if args.quick else N_HELD, DRAWS_QUICK if args.quick else DRAWS,
               N_RANDOM_QUICK if args.quick else N_RANDOM, twins, REALISATIONS_QUICK if args.quick else REALISATIONS,
@@ -777,6 +787,7 @@ def main(argv: list[str] | None = None) -> int:
     cache = None
     if args.cache:
         ring = "" if args.element_radius is None else f"-radius{args.element_radius:g}"
+        ring += "" if SAMPLES == 16 else f"-samples{SAMPLES}"
         cache = Path(args.cache) / (("quick" if args.quick else "full") + ring)
         cache.mkdir(parents=True, exist_ok=True)
     ctx.make_schedules()
