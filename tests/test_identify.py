@@ -270,7 +270,13 @@ def test_what_would_pin_more_agrees_with_identifying_it_known(drawing, plan):
     z = "magnet offset from the elements' centre z [mm]"
     assert ident.derived(ident.pinned(".radius"))[z][1] < 0.8 * base[z][1]
     table = what_pins_more(ident)
-    assert len(table) == 2 + 1 + len(PINNABLE) and table[3].startswith("| where the stage really is")
+    assert len(table) == 2 + 1 + len(PINNABLE) + 1 and table[3].startswith("| where the stage really is")
+    # rows of 8x the samples: the same capture's information with the noise over sqrt(8), as identify of such
+    # rows has it; the rig's error, which averaging leaves, keeps the gain under sqrt(8)
+    height = ident.derived(ident.posterior_for(replace(ident.problem, noise=ident.problem.noise / np.sqrt(8))))[z][1]
+    assert height == pytest.approx(identify(drawing, y, plan[0], noise / np.sqrt(8)).derived()[z][1], rel=0.06)
+    assert height < 0.9 * base[z][1]
+    assert table[-1].startswith("the same poses, rows of 8x the samples") and f"/ {height:.2g} mm" in table[-1]
     assert "| every element's radius (the ring's size) |" in report(ident)
     with pytest.raises(ValueError, match="no free parameter"):
         known[".radius"].pinned(".radius")  # fixed already: nothing to condition on

@@ -209,16 +209,18 @@ class Identification:
         contain it conditioned out, or with ``RIG`` a capture whose stage was where its labels say (the information
         at the same parameters without the rig's and the zero's error)."""
         if part == RIG:
-            prob = replace(self.problem, rig_error=0.0, zero_error=0.0)
-            z = self.space.in_spreads(self.theta)
-            post = np.linalg.inv(prob.information(z) + np.eye(self.space.size))
-            return post * np.outer(self.space.prior_sd, self.space.prior_sd)
+            return self.posterior_for(replace(self.problem, rig_error=0.0, zero_error=0.0))
         known = np.array([part in name for name in self.space.names]) & self.space.free
         if not known.any():
             raise ValueError(f"no free parameter of this unit space is named like {part!r}")
         C, k = self.cov, known
         # a Gaussian conditioned on some of its variables: the Schur complement of their block
         return C - C[:, k] @ np.linalg.solve(C[np.ix_(k, k)], C[k, :])
+
+    def posterior_for(self, prob: Problem) -> np.ndarray:
+        """The posterior covariance (physical units) that capture ``prob`` would give at these parameters."""
+        post = np.linalg.inv(prob.information(self.space.in_spreads(self.theta)) + np.eye(self.space.size))
+        return post * np.outer(self.space.prior_sd, self.space.prior_sd)
 
     def outside_tolerances(self, limit: float = PRIOR_LIMIT) -> list[tuple[int, float]]:
         """Parameters (index, value in prior spreads) beyond ``limit`` spreads from the drawing, farthest first."""
