@@ -88,7 +88,8 @@ CONFIGS = ([(n, r, s, True, 0.0, "D", "travel", None) for r in (0.0, 0.01, 0.03)
            + [(n, 0.01, 16, True, 0.0, "D", "travel", (("stiffening", STIFF),)) for n in (40, 100)]
            + [(40, 0.01, s, True, 0.0, d, "travel", None) for d in ("D", "A") for s in (32, 64, 128, 256)
               if (d, s) != ("D", 64)]
-           + [(40, 0.01, MANY_SAMPLES, True, ZERO_ERROR, "D", "travel", None)])
+           + [(40, 0.01, MANY_SAMPLES, True, ZERO_ERROR, "D", "travel", None),
+              (40, 0.03, MANY_SAMPLES, True, 0.0, "D", "travel", None)])
 PINNED_POSES = 100  # part 3's longer capture: is its posterior as wide as its errors?
 LIMITS = (0.03,) * 3 + (0.01,) * 8  # issue 21's: the offsets (mm), the sensitivities (relative)
 MC = 20000
