@@ -387,7 +387,7 @@ def check_resume(output: str | Path, rows: int, this: dict) -> None:
                              f"is {this[key]}: resume with the same, or choose another -o")
 
 
-def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples: int = 16,
+def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples: int = SAMPLES,
             max_spread: float = 0.003, tries: int = 3, wait=None, set_pose=None, settle: float = 0.0,
             clock=REAL_CLOCK, progress=None, meta: dict | None = None) -> CaptureResult:
     """Capture every pose of ``schedule`` not yet in ``output``.

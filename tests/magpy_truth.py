@@ -23,7 +23,7 @@ def magpylib_readings(sensor, poses: np.ndarray) -> np.ndarray:
     if not sensor.is_drawing:
         poses[poses[:, 2] > 0.05] = 0.0
         press = poses[:, 2] < 0  # an elastomer that stiffens: the magnet follows a press less the deeper it goes
-        poses[press, 2] *= 1.0 + getattr(sensor, "stiffening", 0.0) * poses[press, 2]
+        poses[press, 2] *= 1.0 + sensor.stiffening * poses[press, 2]
     mag = sensor.magnet
     rest = Rotation.from_euler("xy", mag.tilt, degrees=True)
     pose_rot = Rotation.from_euler("xy", poses[:, 3:5], degrees=True)

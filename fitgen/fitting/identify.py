@@ -351,12 +351,6 @@ def _maximum_a_posteriori(prob: Problem, sweeps: int = 3, max_nfev: int = 60, pr
     return z
 
 
-def _posterior_cost(prob: Problem, z: np.ndarray) -> float:
-    """What the maximum a posteriori minimises at ``z``: the whitened residuals' and the prior's squares."""
-    r = prob.whitening(z).apply(np.where(prob.valid, prob.readings - prob.predict(z)[0], 0.0))
-    return float(r.ravel() @ r.ravel() + z @ z)
-
-
 def _chi2(prob: Problem, z: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray]:
     """At ``z``: the residual chi-square, its degrees of freedom, the capture's information F and the posterior
     covariance (F + I)^-1, in prior spreads. A clipped reading's residual is left out (it weighs nothing in the fit
@@ -408,9 +402,9 @@ def _solve(prob: Problem, ranges: dict | None, progress) -> Identification:
         if progress is not None:
             progress(3, 4, "the rows unexplained: a second start")
         z2 = _maximum_a_posteriori(prob, max_nfev=BLAME_NFEV, method="trf")  # converges in about 20
-        if _posterior_cost(prob, z2) < _posterior_cost(prob, z):
-            z = z2
-            chi2, dof, F, post = _chi2(prob, z)
+        second = _chi2(prob, z2)
+        if second[0] + z2 @ z2 < chi2 + z @ z:  # the better of the two by what both minimise (residuals and prior)
+            z, (chi2, dof, F, post) = z2, second
     if progress is not None:
         progress(3, 4, "the uncertainty, and what the capture cannot tell")
     lam, V = _eigh_free(F, space.free)
