@@ -33,7 +33,7 @@ from fitgen.physics.sensor import Sensor
 from host.channelmap import ADDRESSES, ChannelMap
 from host.clock import VirtualClock
 from host.simchips import ADS1115Model, ADS7828Model
-from host.simsensor import Drift, SensorFeed, ntc_volts
+from host.simsensor import Drift, Flicker, SensorFeed, ntc_volts
 
 _BLOCK_MAX = 32
 FAULT_KINDS = ("nack", "timeout", "stuck")
@@ -110,20 +110,23 @@ class SimBus:
     def for_channel_map(cls, cmap: ChannelMap, sensor: Sensor, pose=None, *, clock=None, noise: float = 0.0,
                         offsets=None, seed: int = 0, common_mode: float = 0.0, rate_error: float = 0.0,
                         bus_hz: float = 400_000.0, motion=None, drift: Drift | None = None,
-                        thermistor=None) -> "SimBus":
+                        thermistor=None, flicker: float = 0.0) -> "SimBus":
         """The chips of ``cmap``, wired as it says to ``sensor``'s elements, the magnet at ``pose``.
 
         A differential pair's negative input sits at ``common_mode`` volts and its
         positive input at the element's voltage above it. ``motion`` and ``drift``: see
         :class:`SensorFeed`. ``thermistor``: a :class:`host.temperature.TemperatureInput` whose
         pin reads the NTC divider at the drift's temperature (its chip is added if the map has none there).
+        ``flicker``: V, the level of each element's 1/f noise (:class:`host.simsensor.Flicker`).
         """
         if cmap.n_elements != sensor.n_elements:
             raise InputError(f"the channel map reads {cmap.n_elements} elements; the simulated sensor "
                              f"{sensor.name!r} has {sensor.n_elements}")
         bus = cls(clock, bus_hz=bus_hz, seed=seed)
+        # the flicker's own generator: the white noise draws what it draws without flicker
+        fl = Flicker(float(flicker), sensor.n_elements, np.random.default_rng(seed + 2)) if flicker else None
         bus.feed = SensorFeed(sensor, pose, noise=noise, offsets=offsets, rng=np.random.default_rng(seed + 1),
-                              motion=motion, drift=drift)
+                              motion=motion, drift=drift, flicker=fl)
         for chip in cmap.chips:
             if chip.kind == "ads1115":
                 bus.add_ads1115(chip.address, rate_error=rate_error)
@@ -287,10 +290,11 @@ def parse_fault(spec: str) -> dict:
 
 def simulated_bus(cmap: ChannelMap, sensor: Sensor, pose, *, clock, noise: float | None = None,
                   offsets: str | None = None, faults=(), seed: int = 0, motion=None, drift: Drift | None = None,
-                  thermistor=None) -> SimBus:
+                  thermistor=None, flicker: float | None = None) -> SimBus:
     """The bus ``--simulate`` reads: ``cmap``'s chips wired to ``sensor`` at ``pose`` (:meth:`SimBus.for_channel_map`),
     element noise ``noise`` V rms (None: the sensor file's), ``offsets`` (``--sim-offsets``: one number per element,
-    V) and the ``faults`` (``--sim-fault`` specs, :func:`parse_fault`) injected."""
+    V), 1/f noise of Allan deviation ``flicker`` V (``--sim-flicker``) and the ``faults`` (``--sim-fault`` specs,
+    :func:`parse_fault`) injected."""
     noise = sensor.gmr.noise if noise is None else noise
     values = None
     if offsets:
@@ -302,8 +306,10 @@ def simulated_bus(cmap: ChannelMap, sensor: Sensor, pose, *, clock, noise: float
     specs = [parse_fault(f) for f in faults]
     if not (np.isfinite(noise) and noise >= 0):
         raise InputError(f"--sim-noise must be a finite number >= 0 V, got {noise}")
+    if flicker is not None and not (np.isfinite(flicker) and flicker >= 0):
+        raise InputError(f"--sim-flicker must be a finite number >= 0 V, got {flicker}")
     bus = SimBus.for_channel_map(cmap, sensor, pose, clock=clock, noise=noise, offsets=values, seed=seed,
-                                 motion=motion, drift=drift, thermistor=thermistor)
+                                 motion=motion, drift=drift, thermistor=thermistor, flicker=flicker or 0.0)
     for f in specs:
         bus.inject(**f)
     return bus

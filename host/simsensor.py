@@ -59,6 +59,48 @@ class Drift:
         return volts * (1.0 + self.gain_tc * dT) + self.offset_tc * dT + self.creep * (1.0 - math.exp(-t / self.creep_tau))
 
 
+FLICKER_TAUS = (0.1, 1.0, 10.0, 100.0, 1000.0)  # s: one Gauss-Markov process a decade apart gives 1/f between
+
+
+def _ou_allan_var(T: np.ndarray, tau: float) -> np.ndarray:
+    """Allan variance at averaging time ``T`` of a unit-variance first-order Gauss-Markov process with time constant
+    ``tau``: (4 V(T) - V(2T)) / (2 T^2), V(T) = 2 (tau T - tau^2 (1 - exp(-T / tau))) the variance of its integral."""
+    def v(t):
+        return 2.0 * (tau * t - tau * tau * -np.expm1(-t / tau))
+    return (4.0 * v(T) - v(2.0 * T)) / (2.0 * T * T)
+
+
+@dataclass
+class Flicker:
+    """Flicker (1/f) noise per element: a sum of first-order Gauss-Markov processes with FLICKER_TAUS, scaled so
+    that its Allan deviation is about ``level`` volts from 0.3 s to 100 s (within 15 %). It does not average
+    down: a row of S samples keeps about ``level`` whatever S."""
+
+    level: float  # V
+    n: int
+    rng: np.random.Generator
+    taus: tuple[float, ...] = FLICKER_TAUS
+
+    def __post_init__(self):
+        if not (np.isfinite(self.level) and self.level >= 0):
+            raise InputError(f"simulated flicker must be a finite number >= 0 V, got {self.level}")
+        t = np.geomspace(0.3, 100.0, 50)
+        unit = np.mean(sum(_ou_allan_var(t, tau) for tau in self.taus))
+        self.scale = self.level / math.sqrt(unit)  # each process's standard deviation
+        self.state = self.scale * self.rng.standard_normal((len(self.taus), self.n))  # stationary from the start
+        self.t = None
+        self._tau = np.asarray(self.taus, dtype=float)[:, None]
+
+    def at(self, t: float) -> np.ndarray:
+        """The flicker of every element at time ``t`` (s; exact transitions over any step, forward in time)."""
+        if self.t is not None and t > self.t:
+            a = np.exp(-(t - self.t) / self._tau)
+            self.state = a * self.state + self.scale * np.sqrt(1.0 - a * a) * self.rng.standard_normal(self.state.shape)
+        if self.t is None or t > self.t:
+            self.t = t
+        return self.state.sum(axis=0)
+
+
 def ntc_volts(temp_degc: float, *, beta: float = 3950.0, r25: float = 10_000.0, series: float = 10_000.0,
               vref: float = 3.3) -> float:
     """The divider's output: an NTC (beta model, r25 at 25 degC) to ground, ``series`` ohms to ``vref``."""
@@ -70,12 +112,13 @@ class SensorFeed:
     """Element voltages of a sensor (its ``gmr`` transfer, no ADC) at a pose, with offsets and noise.
 
     ``motion``: a function of the bus clock's time (s) giving the pose, evaluated at most every
-    ``motion_step`` seconds; ``drift``: a :class:`Drift` applied to the volts at that time.
+    ``motion_step`` seconds; ``drift``: a :class:`Drift` applied to the volts at that time; ``flicker``: a
+    :class:`Flicker` added at the time of each conversion.
     """
 
     def __init__(self, sensor: Sensor, pose=None, *, noise: float = 0.0, offsets=None,
                  rng: np.random.Generator | None = None, motion=None, drift: Drift | None = None,
-                 motion_step: float = 5e-3):
+                 motion_step: float = 5e-3, flicker: Flicker | None = None):
         self.sensor = sensor.with_transfer("gmr")
         self.noise = float(noise)
         if self.noise < 0:
@@ -86,6 +129,7 @@ class SensorFeed:
         self.motion, self.drift, self.motion_step = motion, drift, motion_step
         self._t_motion = -math.inf
         self._t_drift = None
+        self.flicker = flicker
         self.set_pose(np.zeros(5) if pose is None else pose)
 
     def set_pose(self, pose) -> None:
@@ -113,4 +157,6 @@ class SensorFeed:
             v = (self.drifted[k] if self.drift is not None else self.volts[k]) + self.offsets[k]
         else:
             v = self.volts[k] + self.offsets[k]
+        if self.flicker is not None and t is not None:
+            v += self.flicker.at(t)[k]
         return v + self.noise * self.rng.standard_normal() if self.noise else v

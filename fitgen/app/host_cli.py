@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 
 from fitgen.app.options import check_host, map_options, refuse_readout_options
+from fitgen.app.noise_cli import add_noise, cmd_noise
 from fitgen.app.verify_cmd import cmd_verify
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_written, command_main, count, noise_volts
 from fitgen.base.errors import InputError
@@ -287,6 +288,7 @@ def _adc_options(p, required: bool = True) -> None:
     p.add_argument("--sensor", help="sensor preset or TOML file: what --simulate simulates, and the rest readings for "
                                     "--tare (default paper)")
     p.add_argument("--sim-noise", type=noise_volts, help="simulated element noise, V rms (default: the sensor file's)")
+    p.add_argument("--sim-flicker", type=noise_volts, help="simulated 1/f noise per element: its Allan deviation, V")
     p.add_argument("--sim-offsets", metavar="V1,..,VN", help="simulated offset of each element, V")
     p.add_argument("--sim-fault", action="append", metavar="SPEC",
                    help="simulated fault: nack|timeout|stuck[:ADDR]:RATE or silent:ADDR[:AFTER] (repeatable)")
@@ -448,6 +450,7 @@ def build_parser() -> Parser:
                     help="with --simulate --stage: the simulated sensor follows the pose tactile-host stage-sim "
                          "--pose-file FILE writes")
     c.set_defaults(func=cmd_capture)
+    add_noise(sub, _adc_options)
 
     ss = sub.add_parser("stage-sim", help="a simulated Marlin or GRBL stage on a loopback port or a pty, moving a "
                                           "simulated sensor through a pose file")
@@ -476,7 +479,7 @@ def _check(args) -> None:
     if args.func is cmd_view:
         check_host(args.host)
     # -o is a file for these; a folder for pi-build, arduino-build and tempcomp-c
-    check_written(args, files=(cmd_read, cmd_view, cmd_replay, cmd_capture))
+    check_written(args, files=(cmd_read, cmd_view, cmd_replay, cmd_capture, cmd_noise))
 
 
 def main(argv=None) -> int:

@@ -229,3 +229,25 @@ def identification_png(ident) -> bytes:
     panel(c, offs, [k.split()[-2] for k in offs], "magnet offset from\nthe elements' centre", "mm")
     fig.tight_layout()
     return _png(fig)
+
+
+def allan(av, path: Path) -> Path:
+    """tactile-host noise --plot: each element's overlapping Allan deviation against the row's reading time, beside
+    white noise's (the one-sample deviation over sqrt(S)), the candidates marked, as PNG."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    t = av.curve_m / av.rate
+    for k in range(av.curve.shape[1]):
+        line, = ax.loglog(t, 1e3 * av.curve[:, k], lw=1, label=f"e{k + 1}")
+        ax.loglog(t, 1e3 * av.single[k] / np.sqrt(av.curve_m), ls=":", lw=0.8, color=line.get_color())
+    for s, r in zip(av.candidates, av.worst):
+        ax.axvline(s / av.rate, color="0.7", lw=0.6)
+        ax.annotate(f"{s}: {r:.2f}x", (s / av.rate, ax.get_ylim()[1]), fontsize=7, rotation=90, va="top", ha="right")
+    ax.set_xlabel("reading time of a row [s] (samples per row / sample rate)")
+    ax.set_ylabel("Allan deviation [mV]")
+    ax.set_title(f"rest noise, {av.samples} samples at {av.rate:.0f}/s: solid measured, dotted white noise; "
+                 "candidates with the worst element's ratio", fontsize=8)
+    ax.grid(True, which="both", lw=0.3, alpha=0.5)
+    ax.legend(fontsize=7, ncol=4, loc="lower left")
+    fig.tight_layout()
+    return write_in_folder(path.parent, path.name, _png(fig))

@@ -1,0 +1,44 @@
+"""``tactile-host noise``: does the resting sensor's noise average down, and over how many samples per row?
+A thin layer over host.noiserun and host.allan."""
+
+from __future__ import annotations
+
+import sys
+
+from fitgen.app.cliutil import StopFlag
+
+
+def cmd_noise(args) -> int:
+    from fitgen.app import plots
+    from host.noiserun import run_noise, save, table, verdict
+
+    folder = plots.require(args.plot) if args.plot else None
+    with StopFlag() as stop:
+        av, _ = run_noise(args, stop)
+    if stop.stopped:
+        print(f"tactile-host noise: stopped: {av.samples} samples so far", file=sys.stderr)
+    print(f"tactile-host noise: {av.samples} samples of every element in {av.samples / av.rate:.1f} s "
+          f"({av.rate:.0f} per s), the sensor at rest")
+    print(table(av))
+    print(verdict(av))
+    if args.output:
+        save(av, args.output, f"simulated {args.sensor}" if args.simulate else "hardware")
+        print(f"wrote {args.output}", file=sys.stderr)
+    if folder is not None:
+        print(f"wrote {plots.allan(av, folder / 'allan.png')}", file=sys.stderr)
+    return 0
+
+
+def add_noise(sub, adc_options) -> None:
+    """The ``noise`` subcommand under ``sub``; ``adc_options(parser)`` adds the bus options read and capture take."""
+    from host.noiserun import SECONDS
+
+    n = sub.add_parser("noise", help="read the resting sensor for a while: does its noise average down, and over "
+                                     "how many samples per row (the Allan deviation, the flicker floor)?")
+    adc_options(n)
+    n.add_argument("--seconds", default=str(SECONDS), help=f"how long to read, s (default {SECONDS:g}: at two "
+                   "ADS1115s' rate, long enough to tell 128 samples per row safe where the noise is white)")
+    n.add_argument("--simulate", action="store_true", help="no hardware: the simulated sensor at rest")
+    n.add_argument("-o", "--output", metavar="NOISE.json", help="write the Allan deviations and the verdict here")
+    n.add_argument("--plot", metavar="FOLDER", help="write allan.png here: each element's Allan deviation")
+    n.set_defaults(func=cmd_noise)

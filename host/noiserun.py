@@ -1,0 +1,99 @@
+"""``tactile-host noise``: the resting sensor read for a while, the Allan deviation of its readings, and the
+samples per row a capture can average before its rows read better than they are (host.allan)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import write_atomic
+from fitgen.base.parse import LONGEST_WAIT, parse_positive
+from fitgen.base.progress import Progress
+
+from host.adc import AdcArray, RetryPolicy
+from host.allan import CANDIDATES, EXCESS, SURE, WHITE_RATIO, Averaging, averaging, needed_samples
+from host.session import adc_defaults, channel_map_from_args, open_bus_from_args
+
+# at two ADS1115s' 140 samples per second white noise's flicker floor is read to about 6e-6 mV^2, so that 128 and
+# 256 samples per row can be told safe (host.allan.EXCESS); at 300 s 1 in 3 white recordings is told 64
+SECONDS = 600.0
+
+
+def record(array: AdcArray, seconds: float, clock, stop=lambda: False, progress=None) -> tuple[np.ndarray, float]:
+    """Samples of every element for ``seconds`` on ``clock`` (or until ``stop()``), back to back: (samples, rate
+    in samples per second)."""
+    rows = []
+    t0 = clock.monotonic()
+    while (now := clock.monotonic()) - t0 < seconds and not stop():
+        rows.append(array.read_volts())
+        if progress is not None:  # the bar counts tenths of a second
+            progress.update(min(int(10 * (now - t0)), progress.total) - progress.done, f"{len(rows)} samples")
+    elapsed = clock.monotonic() - t0
+    if progress is not None and not stop():
+        progress.update(progress.total - progress.done, f"{len(rows)} samples")
+    if len(rows) < 3 or elapsed <= 0:
+        raise InputError(f"recorded {len(rows)} samples in {elapsed:.2f} s: too few to measure the noise")
+    return np.vstack(rows), len(rows) / elapsed
+
+
+def run_noise(args, stop=lambda: False) -> tuple[Averaging, np.ndarray]:
+    """The rest recording of the options' bus (or of a simulated sensor at rest) and its Averaging."""
+    adc_defaults(args)
+    seconds = parse_positive(args.seconds, "--seconds", most=LONGEST_WAIT)
+    retries = parse_positive(args.retries, "--retries", integer=True)
+    cmap = channel_map_from_args(args)
+    bus, clock = open_bus_from_args(args, cmap, np.zeros(5) if args.simulate else None)
+    try:
+        array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
+        array.probe()
+        array.setup()
+        with Progress("noise", int(10 * seconds)) as progress:
+            x, rate = record(array, seconds, clock, stop, progress)
+    finally:
+        bus.close()
+    return averaging(x, rate), x
+
+
+def table(av: Averaging) -> str:
+    """The recording's verdict per candidate, as Markdown."""
+    lines = ["| samples per row | reading time | Allan deviation, worst element [mV] | white noise's [mV] | "
+             "real / recorded noise of a row, worst element | flicker / a row's white noise (variance, upper) |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    for i, s in enumerate(av.candidates):
+        k = int(np.argmax(av.ratio[i]))
+        white = av.single[k] / np.sqrt(s)
+        lines.append(f"| {s} | {s / av.rate:.2f} s | {1e3 * av.adev[i].max():.4g} | {1e3 * white:.4g} | "
+                     f"{av.ratio[i, k]:.2f} (e{k + 1}) | {av.flicker_share(s):.3f} |")
+    for s in av.too_short:
+        lines.append(f"| {s} | {s / av.rate:.2f} s | record {needed_samples(s) / av.rate:.0f} s to read it | | | |")
+    return "\n".join(lines)
+
+
+def verdict(av: Averaging) -> str:
+    """One line: the samples per row the recording supports, and what to give fitgen schedule."""
+    if not av.candidates:
+        return (f"too short to read {CANDIDATES[0]} samples per row: record at least "
+                f"{needed_samples(CANDIDATES[0]) / av.rate:.0f} s (--seconds)")
+    f2, se = av.flicker
+    floor = (f"the flicker read at {av.longest / av.rate:.1f} s: {1e3 * np.sqrt(max(f2, 0.0)):.3g} mV, at most "
+             f"{1e3 * np.sqrt(max(f2 + SURE * se, 0.0)):.3g}")
+    if not av.averages_at_all:
+        k = int(np.argmax(av.ratio[0]))
+        return (f"the noise does not average down even over {av.candidates[0]} samples (e{k + 1}'s rows would carry "
+                f"{av.ratio[0, k]:.2f}x the noise the capture records, more than {WHITE_RATIO}; {floor}): identify's "
+                "reduced chi-square will read above 1; find what drifts (a longer --settle, the supply, the "
+                "temperature)")
+    best = av.recommended()
+    if best == CANDIDATES[0]:
+        nxt = CANDIDATES[1]
+        return (f"keep {best} samples per row ({floor}; at {nxt} samples its variance could reach "
+                f"{av.flicker_share(nxt):.3f} of a row's white noise, more than {EXCESS}: it wanders over a capture "
+                "and identify would read its posterior too narrow; a longer --seconds reads it closer)")
+    return (f"the noise averages down up to {best} samples per row ({floor}: at most {av.flicker_share(best):.3f} of a "
+            f"row's white noise there, within {EXCESS}): fitgen schedule ... --samples {best}")
+
+
+def save(av: Averaging, path, source: str) -> None:
+    write_atomic(path, json.dumps({"source": source, **av.meta()}, indent=2, sort_keys=True) + "\n")

@@ -1,0 +1,162 @@
+"""tactile-host noise and host.allan: the Allan deviation of rest readings against allantools (a peer no one here
+wrote), white noise read as averaging down, flicker as not, and the command's bad input."""
+
+from __future__ import annotations
+
+import json
+
+import allantools
+import numpy as np
+import pytest
+
+from fitgen.base.errors import InputError
+from fitgen.base.progress import Progress
+from fitgen.physics.sensor import load_sensor
+from host.adc import AdcArray
+from host.allan import CANDIDATES, EXCESS, MIN_AVERAGES, averaging, overlapping_adev
+from host.channelmap import parse_spec
+from host.clock import VirtualClock
+from host.noiserun import SECONDS, record, verdict
+from host.simbus import SimBus
+from host.simsensor import Flicker
+
+from conftest import TWO_CHIPS, Terminal, assert_one_line_error, run_cli
+
+NOISE = 5e-4  # V: the paper's sensor file's white noise per sample
+
+
+def _rest(seconds: float, *, flicker: float = 0.0, seed: int = 0, progress=None):
+    clock = VirtualClock()
+    bus = SimBus.for_channel_map(parse_spec(TWO_CHIPS), load_sensor("paper").with_transfer("gmr"), np.zeros(5),
+                                 clock=clock, noise=NOISE, flicker=flicker, seed=seed)
+    array = AdcArray(bus, parse_spec(TWO_CHIPS), clock=clock)
+    array.probe()
+    array.setup()
+    return record(array, seconds, clock, progress=progress)
+
+
+@pytest.mark.parametrize("kind", ["white", "random walk", "offset"])
+def test_overlapping_allan_deviation_is_allantools(kind):
+    rng = np.random.default_rng(3)
+    x = rng.normal(0.0, 1e-3, (4000, 3))
+    if kind == "random walk":
+        x = np.cumsum(x, axis=0)
+    if kind == "offset":  # a reading far from 0 with a tiny noise: the running sums must not lose it
+        x = 2.5 + 1e-7 * x
+    ms = np.array([1, 2, 7, 64, 333, 1999])
+    ours = overlapping_adev(x, ms)
+    for k in range(3):
+        _, theirs, _, _ = allantools.oadev(x[:, k], rate=10.0, data_type="freq", taus=ms / 10.0)
+        np.testing.assert_allclose(ours[:, k], theirs, rtol=1e-9)
+
+
+def test_the_simulated_bus_reads_its_white_noise_as_white():
+    x, rate = _rest(MIN_AVERAGES * 64 / 125.0)
+    av = averaging(x, rate)
+    assert av.candidates[:3] == (16, 32, 64)
+    np.testing.assert_allclose(av.single, NOISE, rtol=0.05)
+    assert np.all(np.abs(av.ratio - 1.0) < 0.2)
+    assert av.averages_at_all
+
+
+RATE = 141.0  # samples per second: two ADS1115s' single-shot rounds
+
+
+def _stream(level: float, seconds: float = SECONDS, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    x = rng.normal(0.0, NOISE, (int(seconds * RATE), 8))
+    if level:
+        f = Flicker(level, 8, np.random.default_rng(seed + 1))
+        x += np.array([f.at(i / RATE) for i in range(len(x))])
+    return x
+
+
+def test_white_noise_read_for_the_default_time_is_told_to_average_128_samples():
+    av = averaging(_stream(0.0), RATE)
+    assert av.candidates == CANDIDATES
+    assert av.recommended() == 256
+    assert av.flicker_share(128) <= EXCESS
+    assert f"--samples {av.recommended()}" in verdict(av)
+
+
+def test_a_short_recording_cannot_tell_128_samples_safe():
+    av = averaging(_stream(0.0, 120.0), RATE)
+    assert av.recommended() < 128  # the flicker floor, read to 4x the variance, could be what 128 cannot stand
+
+
+@pytest.mark.parametrize("level,told", [(0.01e-3, 32), (0.025e-3, 16)])
+def test_flicker_too_small_to_see_in_a_row_keeps_the_rows_short(level, told):
+    """Flicker of 2-5 % of the white noise: a row of 128 carries only 1-15 % more noise than it records, yet
+    bench/noise_averaging.py shows such flicker costs 128 samples all they gain. Its floor is read, and fewer
+    samples per row are told: the most whose share is within EXCESS, else the default 16."""
+    av = averaging(_stream(level), RATE)
+    assert np.sqrt(av.flicker[0]) == pytest.approx(level, rel=0.25)
+    assert av.averages_at_all  # no row shows it: the ratio at 16 is within WHITE_RATIO
+    assert av.recommended() == told
+    assert (av.flicker_share(told) <= EXCESS or told == 16) and av.flicker_share(2 * told) > EXCESS
+    assert f"--samples {told}" in verdict(av) if told > 16 else "keep 16 samples per row" in verdict(av)
+
+
+def test_flicker_keeps_its_level_whatever_the_averaging():
+    """The simulated 1/f noise: its Allan deviation stays near its level from 0.3 s to 100 s (allantools reads it)."""
+    level, dt = 1e-4, 0.05
+    f = Flicker(level, 4, np.random.default_rng(1))
+    x = np.array([f.at(i * dt) for i in range(60_000)])  # 50 minutes
+    taus = np.array([0.3, 1.0, 10.0, 100.0])
+    for k in range(4):
+        _, dev, _, _ = allantools.oadev(x[:, k], rate=1 / dt, data_type="freq", taus=taus)
+        assert np.all(np.abs(dev / level - 1.0) < 0.3), dev / level
+
+
+def test_flicker_on_the_simulated_bus_does_not_average_down():
+    """--sim-flicker at half the white noise: even rows of 16 carry more noise than they record, and the verdict
+    says so."""
+    x, rate = _rest(MIN_AVERAGES * 16 / 125.0, flicker=NOISE / 2)
+    av = averaging(x, rate, candidates=(16,))
+    assert not av.averages_at_all
+    assert av.recommended() == 16
+    assert "does not average down even over 16 samples" in verdict(av)
+
+
+def test_the_recording_shows_its_progress_on_a_terminal():
+    term = Terminal()
+    with Progress("noise", 20, stream=term, min_interval=0.0) as bar:
+        x, _ = _rest(2.0, progress=bar)
+    assert "noise [" in term.text and f"{len(x)} samples" in term.text
+    assert "20/20" in term.text  # the bar counts tenths of a second: full when the time is up
+
+
+@pytest.mark.parametrize("x,rate,what", [
+    (np.ones((100, 8)), 100.0, "element 1, 2, 3, 4, 5, 6, 7, 8 reads the same value"),
+    (np.zeros((2, 8)), 100.0, "at least 3 samples"),
+    (np.full((100, 8), np.nan), 100.0, "not finite"),
+    (np.random.default_rng(0).normal(size=(100, 8)), 0.0, "sample rate"),
+])
+def test_a_recording_that_cannot_be_read_is_refused(x, rate, what):
+    with pytest.raises(InputError, match=what):
+        averaging(x, rate)
+
+
+def test_the_command_writes_its_verdict_and_plot(tmp_path):
+    out, plots = tmp_path / "noise.json", tmp_path / "img"
+    r = run_cli("tactile-host", "noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "3", "-o", str(out),
+                "--plot", str(plots))
+    assert r.returncode == 0, r.stderr
+    meta = json.loads(out.read_text())
+    assert meta["source"] == "simulated paper" and meta["samples"] > 100
+    assert meta["too_short"] == [s for s in CANDIDATES if s not in meta["candidates"]]
+    assert "| samples per row |" in r.stdout and "record" in r.stdout
+    assert (plots / "allan.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("args,what", [
+    (["--seconds", "0"], "--seconds"),
+    (["--seconds", "nan"], "--seconds"),
+    (["--sim-flicker", "0.0001"], "--sim-flicker needs --simulate"),
+    (["--simulate", "--sim-flicker", "-1"], "--sim-flicker"),
+])
+def test_bad_input_is_one_line_and_nothing_written(tmp_path, args, what):
+    out = tmp_path / "noise.json"
+    r = run_cli("tactile-host", "noise", "--adc", TWO_CHIPS, "--bus", "99", "-o", str(out), *args)
+    assert_one_line_error(r, contains=what)
+    assert not out.exists()
