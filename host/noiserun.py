@@ -22,17 +22,23 @@ SECONDS = 600.0
 
 
 def record(array: AdcArray, seconds: float, clock, stop=lambda: False, progress=None) -> tuple[np.ndarray, float]:
-    """Samples of every element for ``seconds`` on ``clock`` (or until ``stop()``), back to back: (samples, rate
-    in samples per second)."""
+    """Samples of every element for ``seconds`` on ``clock`` (or until ``stop()``), back to back, so nearly evenly
+    spaced: (samples, rate in samples per second). InputError when an input sat at its converter's full scale."""
     rows = []
+    clipped = np.zeros(array.n, dtype=int)
     t0 = clock.monotonic()
     while (now := clock.monotonic()) - t0 < seconds and not stop():
         rows.append(array.read_volts())
+        clipped += array.clipped
         if progress is not None:  # the bar counts tenths of a second
             progress.update(min(int(10 * (now - t0)), progress.total) - progress.done, f"{len(rows)} samples")
     elapsed = clock.monotonic() - t0
     if progress is not None and not stop():
         progress.update(progress.total - progress.done, f"{len(rows)} samples")
+    if clipped.any():
+        k = int(np.argmax(clipped))
+        raise InputError(f"element {k + 1} read at its converter's full scale in {clipped[k]} of {len(rows)} samples: "
+                         "a clipped input's noise is not the sensor's (a wider --pga, or the magnet too close)")
     if len(rows) < 3 or elapsed <= 0:
         raise InputError(f"recorded {len(rows)} samples in {elapsed:.2f} s: too few to measure the noise")
     return np.vstack(rows), len(rows) / elapsed

@@ -160,3 +160,19 @@ def test_bad_input_is_one_line_and_nothing_written(tmp_path, args, what):
     r = run_cli("tactile-host", "noise", "--adc", TWO_CHIPS, "--bus", "99", "-o", str(out), *args)
     assert_one_line_error(r, contains=what)
     assert not out.exists()
+
+
+def test_a_clipped_input_is_refused_in_one_line(tmp_path):
+    out = tmp_path / "noise.json"
+    r = run_cli("tactile-host", "noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "1", "-o", str(out),
+                "--pga", "2.048", "--sim-offsets", "0,0,1,0,0,0,0,0")  # 1.5 V at rest, 1 V more: past 2.048
+    assert_one_line_error(r, contains="element 3 read at its converter's full scale")
+    assert not out.exists()
+
+
+def test_a_chip_that_falls_silent_ends_the_recording_in_one_line(tmp_path):
+    out = tmp_path / "noise.json"
+    r = run_cli("tactile-host", "noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "5", "-o", str(out),
+                "--sim-fault", "silent:0x49:200")
+    assert_one_line_error(r, status=1, contains="nothing written")
+    assert not out.exists()

@@ -5,16 +5,21 @@ from __future__ import annotations
 
 import sys
 
-from fitgen.app.cliutil import StopFlag
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, StopFlag
 
 
 def cmd_noise(args) -> int:
     from fitgen.app import plots
+    from host.adc import DeviceSilent
     from host.noiserun import run_noise, save, table, verdict
 
     folder = plots.require(args.plot) if args.plot else None
-    with StopFlag() as stop:
-        av, _ = run_noise(args, stop)
+    try:
+        with StopFlag() as stop:
+            av, _ = run_noise(args, stop)
+    except DeviceSilent as exc:
+        print(f"tactile-host noise: error: {exc}; nothing written", file=sys.stderr)
+        return EXIT_CHECK_FAILED
     if stop.stopped:
         print(f"tactile-host noise: stopped: {av.samples} samples so far", file=sys.stderr)
     print(f"tactile-host noise: {av.samples} samples of every element in {av.samples / av.rate:.1f} s "
