@@ -30,6 +30,7 @@ EXCESS = 0.02
 SURE = 2.0  # standard errors above the flicker floor's estimate it is taken to be, for a recommendation
 FLOOR_AVERAGES = 20  # the flicker floor is read at averages of a twentieth of the recording: its error ~ 1 / samples
 MIN_AVERAGES = 50  # independent S-sample means a candidate S needs before its ratio is read (about 8 % error)
+CAPTURE_S = 120.0  # s: a 40-pose capture on a printer (calibration.md), over which a drift moves the offsets
 
 
 def overlapping_adev(x: np.ndarray, ms) -> np.ndarray:
@@ -68,6 +69,12 @@ class Averaging:
     curve: np.ndarray | None = None  # (len(curve_m), k) V
     longest: int = 1  # the longest averaging the recording reads (samples): where the flicker is read
     excess: np.ndarray | None = None  # (k,) V^2: Allan variance there beyond white noise's, per element
+    drift: np.ndarray | None = None  # (k,) V/s: each element's straight-line slope over the recording
+
+    def drifts(self) -> bool:
+        """True when some element drifts by more than a row of the smallest candidate's white noise over CAPTURE_S:
+        a capture then reads an offset that moves under it (a sensor still warming up)."""
+        return bool(np.any(np.abs(self.drift) * CAPTURE_S > self.single / np.sqrt(CANDIDATES[0])))
 
     @property
     def flicker(self) -> tuple[float, float]:
@@ -107,7 +114,8 @@ class Averaging:
                 "ratio": self.ratio.tolist(), "white_ratio_limit": WHITE_RATIO, "longest_samples": self.longest,
                 "flicker_v2": list(self.flicker),
                 "flicker_share": {str(s): self.flicker_share(s) for s in self.candidates},
-                "excess_limit": EXCESS, "recommended": self.recommended()}
+                "excess_limit": EXCESS, "drift_v_per_s": self.drift.tolist(), "drifts": self.drifts(),
+                "recommended": self.recommended()}
 
 
 def averaging(x: np.ndarray, rate: float, candidates=CANDIDATES) -> Averaging:
@@ -131,8 +139,10 @@ def averaging(x: np.ndarray, rate: float, candidates=CANDIDATES) -> Averaging:
         raise InputError(f"element {', '.join(map(str, dead))} reads the same value in every sample: no noise to "
                          "average (a dead channel, or an ADC too coarse for the noise)")
     excess = dev[-1] ** 2 - dev[0] ** 2 / longest
+    t = (np.arange(n) - (n - 1) / 2.0) / rate  # centred: the slope is the least-squares one, vectorised over elements
+    drift = t @ (x - x.mean(axis=0)) / (t @ t)
     return Averaging(float(rate), n, ok, dev[0], dev[1:-1], short, curve_m, overlapping_adev(x, curve_m), longest,
-                     excess)
+                     excess, drift)
 
 
 def needed_samples(s: int) -> int:

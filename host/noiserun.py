@@ -13,7 +13,7 @@ from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from fitgen.base.progress import Progress
 
 from host.adc import AdcArray, RetryPolicy
-from host.allan import CANDIDATES, EXCESS, SURE, WHITE_RATIO, Averaging, averaging, needed_samples
+from host.allan import CANDIDATES, CAPTURE_S, EXCESS, SURE, WHITE_RATIO, Averaging, averaging, needed_samples
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args
 
 # at two ADS1115s' 140 samples per second white noise's flicker floor is read to about 6e-6 mV^2, so that 128 and
@@ -78,7 +78,8 @@ def table(av: Averaging) -> str:
 
 
 def verdict(av: Averaging) -> str:
-    """One line: the samples per row the recording supports, and what to give fitgen schedule."""
+    """One line: the samples per row the recording supports, and what to give fitgen schedule; or that even rows
+    of 16 do not average, or that the readings drift."""
     if not av.candidates:
         return (f"too short to read {CANDIDATES[0]} samples per row: record at least "
                 f"{needed_samples(CANDIDATES[0]) / av.rate:.0f} s (--seconds)")
@@ -91,6 +92,13 @@ def verdict(av: Averaging) -> str:
                 f"{av.ratio[0, k]:.2f}x the noise the capture records, more than {WHITE_RATIO}; {floor}): identify's "
                 "reduced chi-square will read above 1; find what drifts (a longer --settle, the supply, the "
                 "temperature)")
+    if av.drifts():
+        k = int(np.argmax(np.abs(av.drift)))
+        return (f"the readings drift: e{k + 1} by {1e3 * av.drift[k] * 60:+.3g} mV per minute, "
+                f"{1e3 * abs(av.drift[k]) * CAPTURE_S:.2g} mV over a {CAPTURE_S / 60:g}-minute capture, more than a "
+                f"row's noise at {CANDIDATES[0]} samples ({1e3 * av.single[k] / np.sqrt(CANDIDATES[0]):.2g} mV): "
+                "identify would read a moving offset as the unit's physics; let the sensor warm up (power on, the "
+                "room's temperature) and run again")
     best = av.recommended()
     if best == CANDIDATES[0]:
         nxt = CANDIDATES[1]

@@ -18,7 +18,7 @@ from host.channelmap import parse_spec
 from host.clock import VirtualClock
 from host.noiserun import SECONDS, record, verdict
 from host.simbus import SimBus
-from host.simsensor import Flicker
+from host.simsensor import Drift, Flicker
 
 from conftest import TWO_CHIPS, Terminal, assert_one_line_error, run_cli
 
@@ -176,3 +176,20 @@ def test_a_chip_that_falls_silent_ends_the_recording_in_one_line(tmp_path):
                 "--sim-fault", "silent:0x49:200")
     assert_one_line_error(r, status=1, contains="nothing written")
     assert not out.exists()
+
+
+def test_a_sensor_still_warming_up_is_told_to_wait():
+    """The simulated drift (host.simsensor.Drift.typical: about 1 mV/degC per element, 5 degC over 10 minutes) moves
+    the offsets by more than a row's noise over a capture: the verdict says so before anything about averaging."""
+    clock = VirtualClock()
+    cmap = parse_spec(TWO_CHIPS)
+    bus = SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), np.zeros(5), clock=clock,
+                                 noise=NOISE, drift=Drift.typical(8, creep_tau=60.0))
+    array = AdcArray(bus, cmap, clock=clock)
+    array.probe()
+    array.setup()
+    av = averaging(*record(array, 30.0, clock))
+    assert av.drifts()
+    assert verdict(av).startswith("the readings drift: e")
+    steady = averaging(_stream(0.0, 120.0), RATE)
+    assert not steady.drifts() and not verdict(steady).startswith("the readings drift")
