@@ -10,8 +10,10 @@ from scipy.spatial.transform import Rotation
 OE_PER_MT = 10.0
 
 
-def magpylib_readings(sensor, poses: np.ndarray) -> np.ndarray:
-    """Readings (P, N) of ``sensor`` (a drawing or a unit) at label poses, noise-free, no ADC quantisation.
+def magpylib_readings(sensor, poses: np.ndarray, stage_field=None) -> np.ndarray:
+    """Readings (P, N) of ``sensor`` (a drawing or a unit) at label poses, noise-free, no ADC quantisation;
+    ``stage_field`` (3, 3; mT/mm): a field that moves with the stage, its value stage_field @ (dx, dy, dz) of the
+    label (where the stage is, a lifted indenter too) added to the ambient field.
 
     The magnet: magpylib's Cylinder with the unit's polarisation, rest centre + map @ (dx, dy, dz) (a press dz
     shortened to dz (1 - stiffening |dz|)), and
@@ -20,6 +22,7 @@ def magpylib_readings(sensor, poses: np.ndarray) -> np.ndarray:
     than 0.05 mm above first contact (dz) has lifted the indenter off the skin: the magnet rests.
     """
     poses = np.atleast_2d(np.asarray(poses, dtype=float)).copy()
+    carried = None if stage_field is None else poses[:, :3] @ np.asarray(stage_field, dtype=float).T
     if not sensor.is_drawing:
         poses[poses[:, 2] > 0.05] = 0.0
         press = poses[:, 2] < 0  # an elastomer that stiffens: the magnet follows a press less the deeper it goes
@@ -35,6 +38,8 @@ def magpylib_readings(sensor, poses: np.ndarray) -> np.ndarray:
     )
     B = cyl.getB(magpy.Sensor(pixel=sensor.positions)) * 1e3  # (P, N, 3) mT
     b = np.einsum("pnj,nj->pn", B, sensor.axes) + sensor.axes @ sensor.ambient
+    if carried is not None:
+        b = b + carried @ sensor.axes.T
     m = np.abs(b)
     if sensor.transfer == "raw":
         return sensor.gains * m + sensor.offsets

@@ -128,6 +128,47 @@ def test_a_capture_of_128_samples_per_row_that_stalled_the_first_pass_is_identif
     _explained_and_recovered(identify(drawing, y, poses, noise, rig_error=rig, zero_error=0.0), theta)
 
 
+def test_a_field_the_stage_carries_is_fitted_where_the_drawing_allows_for_it(drawing, tmp_path):
+    """A printer's motors carry a field with the stage: 0.002 mT/mm, 3 mm of travel moving it by tens of times a
+    row's noise. Taken for a static ambient field, identify cannot explain the rows; with `stage_field` in the drawing's
+    tolerances it fits the field, explains the rows and recovers what the capture determines, and the report
+    names the field's parameters like any other."""
+    from magpy_truth import magpylib_readings
+
+    rig, noise = 0.01, drawing.noise / np.sqrt(SAMPLES)
+    allowing = replace(drawing, tolerances=replace(drawing.tolerances, stage_field=0.003))
+    poses, _ = schedule(allowing, 40, noise=noise, rig_error=rig)
+    unit, theta = draw_unit(drawing, 28)
+    field = np.random.default_rng(5).normal(size=(3, 3))
+    field *= 0.002 / np.sqrt(np.mean(field ** 2))
+    rng = np.random.default_rng([28, 40, 3])
+    y = magpylib_readings(unit, rig_poses(poses, rig, rng), stage_field=field) + rng.normal(0.0, noise, (40, 8))
+    static = identify(drawing, y, poses, noise, rig_error=rig, zero_error=0.0)
+    assert static.reduced_chi2 > 3.0
+    with pytest.raises(InputError, match=r"a field that moves with the stage .* stage_field = 0.003"):
+        check_explained(static, "the capture", "paper", "the test's")
+    ident = identify(allowing, y, poses, noise, rig_error=rig, zero_error=0.0)
+    _explained_and_recovered(ident, np.concatenate([theta, field.ravel()]))
+    assert "stage_field.x_dx" in report(ident) and len(what_pins_more(ident)) > 3
+    # the same through the commands, the drawing's file allowing for it: the twin carries no field, and its model
+    # file's figures come from its posterior
+    text = (Path(presets.__file__).parent / "paper.toml").read_text().replace('name = "paper"', 'name = "mine"')
+    (tmp_path / "mine.toml").write_text(text + "\n[tolerances]\nstage_field = 0.003\n")
+    _save_capture(tmp_path / "c.csv", y, poses, {"samples_per_row": SAMPLES})
+    proc = run_cli("fitgen", "identify", str(tmp_path / "c.csv"), "--sensor", str(tmp_path / "mine.toml"), "-o",
+                   str(tmp_path / "twin.toml"), "--rig-error", str(rig), "--zero-error", "0")
+    assert proc.returncode == 0, proc.stderr
+    twin = load_sensor(tmp_path / "twin.toml")
+    np.testing.assert_allclose(readings(twin, poses, adc_bits=0), magpylib_readings(twin, poses), rtol=0, atol=1e-11)
+    for args in (("simulate", "--sensor", str(tmp_path / "twin.toml"), "--grid", "paper-exp", "-o",
+                  str(tmp_path / "t.csv")),
+                 ("fit", str(tmp_path / "t.csv"), "--held-out", "100", "--family", "no-roots", "-o",
+                  str(tmp_path / "m.json"))):
+        proc = run_cli("fitgen", *args)
+        assert proc.returncode == 0, proc.stderr
+    assert json.loads((tmp_path / "m.json").read_text())["fit"]["held_out"]["posterior"]["units"] == 8
+
+
 def test_standardized_residuals_single_out_a_row_the_physics_does_not_explain(drawing, plan):
     unit, _ = draw_unit(drawing, 26)
     y, noise = capture(unit, plan[0], 26)

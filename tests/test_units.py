@@ -63,6 +63,29 @@ def _stiffening_drawing(sd: float = 0.01):
     return replace(d, tolerances=replace(d.tolerances, stiffening=sd))
 
 
+def test_a_field_the_stage_carries_matches_magpylib_and_stays_out_of_the_unit(tmp_path):
+    """A drawing that allows for a field moving with the stage (its motors, a steel bed): the batched readings
+    identify fits add it where the stage is, lifted rows too, as magpylib does; the unit itself (the twin, its
+    file) has none; a drawing that does not allow for it has the parameter space it had."""
+    d = load_sensor("paper").with_transfer("gmr")
+    drawing = replace(d, tolerances=replace(d.tolerances, stage_field=0.003))
+    space = UnitSpace.of(drawing)
+    assert space.size == UnitSpace.of(d).size + 9 and space.moving_field and not UnitSpace.of(d).moving_field
+    unit, theta = draw_unit(drawing, 3)
+    G = theta[-9:].reshape(3, 3)
+    lifted = POSES.copy()
+    lifted[:20, 2] = 0.5  # the indenter off the skin: the magnet rests, the stage's field moves on
+    ref = magpylib_readings(unit, lifted, stage_field=G)
+    np.testing.assert_allclose(space.readings(theta, lifted)[0], ref, rtol=0, atol=1e-11)
+    assert np.abs(ref - magpylib_readings(unit, lifted))[:20].max() > 10 * drawing.noise  # it shows at rest too
+    np.testing.assert_allclose(readings(unit, lifted, adc_bits=0), magpylib_readings(unit, lifted), rtol=0, atol=1e-11)
+    again = load_sensor(write_unit(tmp_path / "u.toml", unit, "paper"))
+    assert again.tolerances.stage_field == 0.003
+    np.testing.assert_allclose(readings(again, lifted, adc_bits=0), magpylib_readings(unit, lifted), rtol=0,
+                               atol=1e-11)
+    assert "stage_field" not in unit_toml(draw_unit(d, 3)[0], "paper")
+
+
 def test_an_elastomer_that_stiffens_matches_magpylib_and_round_trips(tmp_path):
     """A unit whose magnet follows a press less the deeper it goes (the drawing's tolerance allows for it): fitgen's
     readings, the batched ones identify uses and magpylib's agree; the file keeps it; a drawing that does not allow

@@ -54,6 +54,7 @@ OUTLIER_LIMIT = 5.0  # a reading's standardized residual beyond this: its row is
 PRIOR_LIMIT = 5.0
 ROW_SUSPECTS, ROW_SHARE = 3, 0.1  # rows tried left out before elements: at most 3, each a tenth of the chi-square
 BLAME_NFEV = 20  # function evaluations: a capture with its dead element left out converges in about 7
+FIELD_TRY = 0.003  # mT/mm: blame's trial of a field the stage carries (bench/stage_field.py)
 RESWEEP = 10.0  # a trial's chi-square within this many CHI2_LIMITs after one sweep gets a second (_explained_within)
 # what a maker can pin outside a capture (identify's report: what each would buy): a part of the unit, by the
 # parameter names it covers, or RIG for a stage that reports where it really is (the rig's and the zero's error 0)
@@ -450,7 +451,8 @@ def blame(ident: Identification, progress=None) -> tuple[str, tuple[int, ...]] |
     ``("rows", (i, ...))``, the one to three rows that stand out, when the others without them read as a unit
     within its tolerances to the noise (a slip, a glitch: tried first, as one bad reading also leaves its element
     to blame); else ``("dead", (k,))``, the one element whose readings, left out, do (it does not respond, or is
-    wired to another channel); else, when more than three rows stand out, ``("swapped", (a, b))``, the one pair of
+    wired to another channel); else ``("field", ())`` when they do with a field the stage carries allowed for (its
+    motors, a steel bed); else, when more than three rows stand out, ``("swapped", (a, b))``, the one pair of
     elements whose readings, exchanged, do (their channels wired the other way round); else None. One short fit
     per trial: with the fault undone a capture converges in a few steps. ``progress(i, n, note)`` after each."""
     prob = ident.problem
@@ -459,7 +461,7 @@ def blame(ident: Identification, progress=None) -> tuple[str, tuple[int, ...]] |
     share = ident.row_chi2
     top = [int(i) for i in np.argsort(-share, kind="stable")[:ROW_SUSPECTS] if share[i] >= ROW_SHARE]
     trials = [top[:1], top] if len(top) > 1 else [top] if top else []
-    total, done = n_el + len(pairs) + len(trials), 0
+    total, done = n_el + len(pairs) + len(trials) + 1, 0
     for rows in trials:
         done += 1
         if progress is not None:
@@ -479,6 +481,12 @@ def blame(ident: Identification, progress=None) -> tuple[str, tuple[int, ...]] |
             found.append(k)
     if found:
         return ("dead", (found[0],)) if len(found) == 1 else None
+    d, done = prob.space.drawing, done + 1
+    if progress is not None:
+        progress(done, total, "a field the stage carries")
+    if not prob.space.moving_field and _explained_within(replace(prob, space=UnitSpace.of(
+            d, replace(d.tolerances, stage_field=FIELD_TRY)))):
+        return ("field", ())
     for a, b in pairs:
         done += 1
         if progress is not None:

@@ -9,8 +9,8 @@ from dataclasses import replace
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PINNABLE, PRIOR_LIMIT, RIG, RIG_ERROR, ZERO_ERROR,
-                                     Identification, blame, tilting)
+from fitgen.fitting.identify import (CHI2_LIMIT, FIELD_TRY, OUTLIER_LIMIT, PINNABLE, PRIOR_LIMIT, RIG, RIG_ERROR,
+                                     ZERO_ERROR, Identification, blame, tilting)
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.units import STIFFENING, UnitSpace
@@ -235,6 +235,10 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
         k = culprit[1][0]
         cause = (f"element {k + 1} (v{k + 1}) alone: with its readings left out, the others read as a unit within the "
                  "tolerances, to the noise; it does not respond, or is wired to another channel (the channel map)")
+    elif culprit is not None and culprit[0] == "field":
+        cause = (f"a field that moves with the stage (its motors, a steel bed): allowed for ([tolerances] stage_field "
+                 f"= {FIELD_TRY:g} mT/mm in the drawing's file), the capture reads as a unit within the tolerances, to "
+                 "the noise; give the drawing that tolerance, schedule and identify with it (docs/calibration.md)")
     elif culprit is not None:
         a, b = culprit[1]
         cause = (f"elements {a + 1} and {b + 1} (v{a + 1}, v{b + 1}) swapped: with their readings exchanged, the capture "

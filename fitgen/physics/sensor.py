@@ -54,9 +54,12 @@ class Tolerances:
     # 1/mm: an elastomer that stiffens as it is pressed (a press dz reaches the magnet as dz (1 - c |dz|)). 0 by
     # default, the magnet following the stage linearly; docs/calibration.md says when to allow for it
     stiffening: float = 0.0
+    # mT/mm, each entry of a field the stage carries (its motors, a steel bed): the capture's, not the unit's. 0 by
+    # default; docs/calibration.md says when to allow for it
+    stage_field: float = 0.0
 
     def to_dict(self) -> dict:
-        return {k: v for k, v in vars(self).items() if k != "stiffening" or v}
+        return {k: v for k, v in vars(self).items() if k not in ("stiffening", "stage_field") or v}
 
 
 # the greatest stiffening (1/mm) a unit may have: 3 mm deep the magnet follows a press by 70 %
@@ -66,7 +69,7 @@ STIFFENING_MAX = 0.1
 TOLERANCE_MAX = {"magnet_offset_xy": 1.0, "magnet_offset_z": 0.5, "magnet_tilt": 15.0, "polarization": 0.2,
                  "element_azimuth": 10.0, "element_radius": 0.5, "element_height": 0.3, "element_axis": 15.0,
                  "element_tilt": 15.0, "gain": 0.25, "offset": 0.2, "ambient": 0.3, "stage_gain": 0.2,
-                 "stage_cross": 0.2, "stiffening": STIFFENING_MAX / 3}
+                 "stage_cross": 0.2, "stiffening": STIFFENING_MAX / 3, "stage_field": 0.1}
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,9 @@ ELEMENT = ("azimuth", "radius", "height", "turn", "tilt", "log_gain", "offset")
 AMBIENT = ("ambient.x", "ambient.y", "ambient.z")
 STAGE = tuple(f"stage.m{i}{j}" for i in range(1, 4) for j in range(1, 4))
 STIFFENING = "stage.stiffening"  # a parameter only where the drawing's tolerance allows for it (not 0)
+# mT/mm: the field the stage carries, component c per mm of its move along a; the capture's, not the unit's (its
+# sensor() leaves it out); parameters only where the drawing's tolerance allows for it
+FIELD = tuple(f"stage_field.{c}_d{a}" for c in "xyz" for a in "xyz")
 CLIP_SIGMA = 3.0
 
 
@@ -77,13 +80,15 @@ class UnitSpace:
                              "needs an azimuth")
         n = drawing.n_elements
         stiff = (STIFFENING,) if t.stiffening > 0 else ()  # absent, the space (and its records) are as before
-        names = MAGNET + tuple(f"e{k}.{p}" for k in range(1, n + 1) for p in ELEMENT) + AMBIENT + STAGE + stiff
+        moving = FIELD if t.stage_field > 0 else ()
+        names = (MAGNET + tuple(f"e{k}.{p}" for k in range(1, n + 1) for p in ELEMENT) + AMBIENT + STAGE + stiff
+                 + moving)
         per_el = [t.element_azimuth, t.element_radius, t.element_height, t.element_axis, t.element_tilt,
                   math.log1p(t.gain), t.offset]
         sd = ([t.magnet_offset_xy, t.magnet_offset_xy, t.magnet_offset_z, t.magnet_tilt, t.magnet_tilt,
                math.log1p(t.polarization)] + per_el * n + [t.ambient] * 3
               + [t.stage_gain if i == j else t.stage_cross for i in range(3) for j in range(3)]
-              + [t.stiffening] * len(stiff))
+              + [t.stiffening] * len(stiff) + [t.stage_field] * len(moving))
         return cls(drawing, names, np.array(sd, dtype=float))
 
     @property
@@ -113,13 +118,22 @@ class UnitSpace:
         ax /= np.linalg.norm(ax, axis=-1, keepdims=True)
         rest = np.asarray(d.magnet.rest_center) + th[:, 0:3]
         tail = 6 + 7 * n
+        stiff = STIFFENING in self.names
+        k = tail + 12 + stiff
         return {"pos": pos, "axes": ax, "rest": rest, "offset": th[:, 0:3], "tilt": th[:, 3:5],
                 "pol": d.magnet.polarization * np.exp(th[:, 5]), "gain": np.exp(el[..., 5]), "off": el[..., 6],
                 "ambient": th[:, tail:tail + 3], "map": np.eye(3) + th[:, tail + 3:tail + 12].reshape(-1, 3, 3),
-                "stiffening": th[:, tail + 12] if self.size > tail + 12 else np.zeros(len(th))}
+                "stiffening": th[:, tail + 12] if stiff else np.zeros(len(th)),
+                "field": th[:, k:k + 9].reshape(-1, 3, 3) if self.moving_field else np.zeros((len(th), 3, 3))}
+
+    @property
+    def moving_field(self) -> bool:
+        """Whether the space holds a field the stage carries (the drawing's tolerance allows for one)."""
+        return FIELD[0] in self.names
 
     def sensor(self, theta, name: str | None = None, description: str = "") -> Sensor:
-        """The unit with parameters ``theta`` as a :class:`Sensor` (its readings are :meth:`readings`')."""
+        """The unit with parameters ``theta`` as a :class:`Sensor`: its readings are :meth:`readings`' less the field
+        the stage carries, which is the capture's, not the unit's."""
         p = {k: v[0] for k, v in self._parts(np.asarray(theta, dtype=float)[None]).items()}
         d = self.drawing
         mag = Magnet(d.magnet.diameter, d.magnet.height, float(p["pol"]), tuple(float(c) for c in p["rest"]),
@@ -132,6 +146,7 @@ class UnitSpace:
         """Noise-free readings (K, n, N) of K units (rows of ``thetas``) at n poses, in the transfer's units,
         without the ADC's quantisation (a gmr reading is clipped to the ADC's range)."""
         d = self.drawing
+        stage = as_poses(poses)[:, :3]  # where the stage is, a lifted indenter's rows too: the field it carries
         poses = contact_poses(as_poses(poses))
         p = self._parts(thetas)
         R = rotation_matrices(poses[:, 3], poses[:, 4])[None] @ rotation_matrices(p["tilt"][:, 0], p["tilt"][:, 1])[:, None]
@@ -146,6 +161,8 @@ class UnitSpace:
         b = cylinder_projection(local.reshape(-1, 3), axes.reshape(-1, 3), d.magnet.diameter, d.magnet.height,
                                 1e3).reshape(local.shape[:3])
         b = b * p["pol"][:, None, None] + np.einsum("kmj,kj->km", p["axes"], p["ambient"])[:, None, :]
+        if self.moving_field:
+            b = b + np.einsum("kmi,kij,nj->knm", p["axes"], p["field"], stage)
         mag = np.abs(b)
         if d.transfer == "raw":
             return p["gain"][:, None, :] * mag + p["off"][:, None, :]
