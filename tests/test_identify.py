@@ -13,7 +13,7 @@ from conftest import assert_one_line_error, run_cli
 from fitgen.base.errors import InputError
 from fitgen.fitting.identify import PINNABLE, RIG, Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
-from fitgen.fitting.unitrecord import check_explained, outlier_lines, report, row_noise, what_pins_more
+from fitgen.fitting.unitrecord import check_explained, field_line, outlier_lines, report, row_noise, what_pins_more
 from fitgen.physics import presets
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
@@ -167,6 +167,30 @@ def test_a_field_the_stage_carries_is_fitted_where_the_drawing_allows_for_it(dra
         proc = run_cli("fitgen", *args)
         assert proc.returncode == 0, proc.stderr
     assert json.loads((tmp_path / "m.json").read_text())["fit"]["held_out"]["posterior"]["units"] == 8
+
+
+def test_an_accepted_capture_a_field_explains_better_gets_a_line(drawing, plan):
+    """0.3 uT/mm, bench/stage_field.py's silent zone: identify accepts the capture taken as static (a reduced
+    chi-square between 1.3 and 3) and its notes say a field that moves with the stage explains it; a capture whose
+    chi-square sits as high for a slipped row gets no such line."""
+    from magpy_truth import magpylib_readings
+
+    noise = drawing.noise / np.sqrt(SAMPLES)
+    unit, _ = draw_unit(drawing, 28)
+    field = np.random.default_rng(5).normal(size=(3, 3))
+    field *= 0.0003 / np.sqrt(np.mean(field ** 2))
+    rng = np.random.default_rng([28, 40, 3])
+    y = magpylib_readings(unit, rig_poses(plan[0], 0.01, rng), stage_field=field) + rng.normal(0.0, noise, (40, 8))
+    ident = identify(drawing, y, plan[0], noise, rig_error=0.01, zero_error=0.0)
+    assert 1.3 < ident.reduced_chi2 < 3.0
+    check_explained(ident, "c.csv", "paper", "the test's")  # accepted
+    [line] = field_line(ident)
+    assert "explains the rows better" in line and "stage_field = 0.003" in line
+    unit, _ = draw_unit(drawing, 26)
+    y, noise = capture(unit, plan[0], 26)
+    ident = identify(drawing, slip(unit, y, plan[0], 0.15)[1], plan[0], noise)
+    assert 1.3 < ident.reduced_chi2 < 3.0
+    assert field_line(ident) == []
 
 
 def test_standardized_residuals_single_out_a_row_the_physics_does_not_explain(drawing, plan):

@@ -51,7 +51,9 @@ def cmd_identify(args) -> int:
           "the posterior)", file=sys.stderr)
     if png:
         print(f"plot: {png[0]}", file=sys.stderr)
-    notes = rec.outlier_lines(ident, args.capture) + rec.low_residual_line(ident, source)
+    with Progress("a field the stage carries?", 4) as bar:  # moves only when the chi-square sits high
+        field = rec.field_line(ident, lambda i, n, note: bar.update(i - bar.done, note))
+    notes = rec.outlier_lines(ident, args.capture) + rec.low_residual_line(ident, source) + field
     print("".join(f"identify: {ln}\n" for ln in notes), end="", file=sys.stderr)
     return 0
 
