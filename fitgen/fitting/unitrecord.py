@@ -94,8 +94,8 @@ def what_pins_more(ident: Identification) -> list[str]:
     # the rig's error binds three of a row's directions; averaging lowers the noise along the rest
     more = _offsets_worst(ident, ident.posterior_for(replace(prob, noise=prob.noise / np.sqrt(MORE_SAMPLES))))
     lines.append(f"the same poses, rows of {MORE_SAMPLES}x the samples (if the noise averages down that far: "
-                 f"tactile-host noise tells; docs/calibration.md): offset {more[0]:.2g} / {more[1]:.2g} / {more[2]:.2g} mm, worst element "
-                 f"{100 * more[3]:.2g} %")
+                 f"tactile-host noise tells; docs/calibration.md): offset {more[0]:.2g} / {more[1]:.2g} / "
+                 f"{more[2]:.2g} mm, worst element {100 * more[3]:.2g} %")
     return lines
 
 
