@@ -64,12 +64,12 @@ class Averaging:
     candidates: tuple[int, ...]  # those the recording is long enough to read
     single: np.ndarray  # (k,) V: the Allan deviation at one sample (white noise's standard deviation)
     adev: np.ndarray  # (len(candidates), k) V
-    too_short: tuple[int, ...] = ()  # candidates the recording is too short for
-    curve_m: np.ndarray | None = None  # averaging factors, log-spaced, for a plot
-    curve: np.ndarray | None = None  # (len(curve_m), k) V
-    longest: int = 1  # the longest averaging the recording reads (samples): where the flicker is read
-    excess: np.ndarray | None = None  # (k,) V^2: Allan variance there beyond white noise's, per element
-    drift: np.ndarray | None = None  # (k,) V/s: each element's straight-line slope over the recording
+    too_short: tuple[int, ...]  # candidates the recording is too short for
+    curve_m: np.ndarray  # averaging factors, log-spaced, for a plot
+    curve: np.ndarray  # (len(curve_m), k) V
+    longest: int  # the longest averaging the recording reads (samples): where the flicker is read
+    excess: np.ndarray  # (k,) V^2: Allan variance there beyond white noise's, per element
+    drift: np.ndarray  # (k,) V/s: each element's straight-line slope over the recording
 
     def drifts(self) -> bool:
         """True when some element drifts by more than a row of the smallest candidate's white noise over CAPTURE_S:

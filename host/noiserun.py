@@ -44,7 +44,7 @@ def record(array: AdcArray, seconds: float, clock, stop=lambda: False, progress=
     return np.vstack(rows), len(rows) / elapsed
 
 
-def run_noise(args, stop=lambda: False) -> tuple[Averaging, np.ndarray]:
+def run_noise(args, stop=lambda: False) -> Averaging:
     """The rest recording of the options' bus (or of a simulated sensor at rest) and its Averaging."""
     adc_defaults(args)
     seconds = parse_positive(args.seconds, "--seconds", most=LONGEST_WAIT)
@@ -59,7 +59,7 @@ def run_noise(args, stop=lambda: False) -> tuple[Averaging, np.ndarray]:
             x, rate = record(array, seconds, clock, stop, progress)
     finally:
         bus.close()
-    return averaging(x, rate), x
+    return averaging(x, rate)
 
 
 def table(av: Averaging) -> str:

@@ -68,7 +68,7 @@ def open_bus_from_args(args, cmap, simulate_pose, *, motion=None, drift=None, th
     """Bus and clock from the options; with a simulated pose, the simulated bus instead of /dev/i2c-N."""
     sim_opts = [o for o, v in (("--sim-noise", args.sim_noise), ("--sim-fault", args.sim_fault),
                                ("--sim-offsets", args.sim_offsets),
-                               ("--sim-flicker", getattr(args, "sim_flicker", None))) if v is not None]
+                               ("--sim-flicker", args.sim_flicker)) if v is not None]
     if simulate_pose is None:
         if sim_opts:
             raise InputError(f"{sim_opts[0]} needs --simulate")
@@ -76,7 +76,7 @@ def open_bus_from_args(args, cmap, simulate_pose, *, motion=None, drift=None, th
         return open_bus(number), REAL_CLOCK
     bus = simulated_bus(cmap, load_sensor(args.sensor), simulate_pose, clock=REAL_CLOCK, noise=args.sim_noise,
                         offsets=args.sim_offsets, faults=args.sim_fault or (), seed=args.seed, motion=motion,
-                        drift=drift, thermistor=thermistor, flicker=getattr(args, "sim_flicker", None))
+                        drift=drift, thermistor=thermistor, flicker=args.sim_flicker)
     return bus, REAL_CLOCK
 
 

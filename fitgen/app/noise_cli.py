@@ -16,7 +16,7 @@ def cmd_noise(args) -> int:
     folder = plots.require(args.plot) if args.plot else None
     try:
         with StopFlag() as stop:
-            av, _ = run_noise(args, stop)
+            av = run_noise(args, stop)
     except DeviceSilent as exc:
         print(f"tactile-host noise: error: {exc}; nothing written", file=sys.stderr)
         return EXIT_CHECK_FAILED
