@@ -155,21 +155,27 @@ def cmd_fit(args) -> int:
     return 0
 
 
+def _model_and_target(args):
+    """predict's and codegen's model and target, args.precision set to the header's: predict computes what it runs."""
+    from fitgen.c.targets import check_precision, default_precision, get_target
+    from fitgen.equations.model import load_model
+    from fitgen.fitting.holdout import device_precision
+
+    get_target(args.target)  # a bad name said before the model is read
+    model = load_model(args.model)
+    args.precision = args.precision or default_precision(args.target, device_precision(model))
+    return model, check_precision(args.target, args.precision)
+
+
 def cmd_predict(args) -> int:
     import numpy as np
 
     from fitgen.base.fileio import write_atomic
     from fitgen.c.codegen import check_magnitudes
-    from fitgen.c.targets import check_precision, default_precision, get_target
-    from fitgen.equations.model import check_input_units, load_model
-    from fitgen.fitting.holdout import device_precision
+    from fitgen.equations.model import check_input_units
     from fitgen.physics.dataset import estimates_csv, load_inputs, load_meta
 
-    get_target(args.target)  # a bad name said before the model is read
-    model = load_model(args.model)
-    # as codegen picks the header's: what predict computes is what codegen --target writes
-    args.precision = args.precision or default_precision(args.target, device_precision(model))
-    target = check_precision(args.target, args.precision)
+    model, target = _model_and_target(args)
     inputs = load_inputs(args.data, model.n_inputs)
     check_input_units(model, load_meta(args.data).get("units"), f"{args.data}'s readings", f"model {args.model}")
     if args.precision == "fixed":
@@ -261,14 +267,8 @@ def cmd_report(args) -> int:
 
 def cmd_codegen(args) -> int:
     from fitgen.c.codegen import write_header
-    from fitgen.c.targets import check_precision, default_precision, get_target
-    from fitgen.equations.model import load_model
-    from fitgen.fitting.holdout import device_precision
 
-    get_target(args.target)  # a bad name said before the model is read
-    model = load_model(args.model)
-    args.precision = args.precision or default_precision(args.target, device_precision(model))
-    target = check_precision(args.target, args.precision)
+    model, target = _model_and_target(args)
     if args.precision == "fixed":
         from fitgen.c.codegen import render_fixed_header
         from fitgen.c.fixedc import plan_line
