@@ -156,7 +156,7 @@ def cmd_fit(args) -> int:
 
 
 def _model_and_target(args):
-    """predict's and codegen's model and target, args.precision set to the header's: predict computes what it runs."""
+    """predict's and codegen's model and target; args.precision the header's: predict computes what codegen writes."""
     from fitgen.c.targets import check_precision, default_precision, get_target
     from fitgen.equations.model import load_model
     from fitgen.fitting.holdout import device_precision
