@@ -111,3 +111,32 @@ def verdict(av: Averaging) -> str:
 
 def save(av: Averaging, path, source: str) -> None:
     write_atomic(path, json.dumps({"source": source, **av.meta()}, indent=2, sort_keys=True) + "\n")
+
+
+def told(path) -> tuple[int, np.ndarray]:
+    """What a record ``save`` wrote tells a capture: the samples per row it recommends and each element's
+    single-sample noise, V. InputError when the file is no such record, or when its recording recommends
+    no rows (too short to read one, readings that do not average down or that drift: verdict's order)."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            rec = json.load(f)
+        samples, single = int(rec["recommended"]), np.asarray(rec["single_v"], dtype=float)
+        candidates, ratio, drifts = list(rec["candidates"]), np.asarray(rec["ratio"], dtype=float), rec["drifts"]
+    except OSError as exc:
+        raise InputError(f"cannot read the noise record {path}: {exc.strerror or exc}") from None
+    except (ValueError, TypeError, KeyError) as exc:
+        raise InputError(f"{path} is not a record tactile-host noise -o wrote ({type(exc).__name__}: {exc})") from None
+    sane = single.ndim == 1 and single.size and np.all(np.isfinite(single) & (single > 0))
+    if samples not in CANDIDATES or not sane or not isinstance(drifts, bool):
+        raise InputError(f"{path} is not a record tactile-host noise -o wrote (its recommendation, noise or drift "
+                         "is off)")
+    if not candidates:
+        raise InputError(f"{path}: its recording was too short to read {CANDIDATES[0]} samples per row: record "
+                         "longer (tactile-host noise --seconds)")
+    if ratio.ndim != 2 or not ratio.size or ratio[0].max() > WHITE_RATIO:
+        raise InputError(f"{path}: its noise does not average down even over {CANDIDATES[0]} samples per row: find "
+                         "what drifts (a longer --settle, the supply, the temperature) and record again")
+    if drifts:
+        raise InputError(f"{path}: its readings drift, and a capture would read a moving offset as the unit's "
+                         "physics: let the sensor warm up and record again")
+    return samples, single

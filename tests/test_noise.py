@@ -1,5 +1,6 @@
 """tactile-host noise and host.allan: the Allan deviation of rest readings against allantools (a peer no one here
-wrote), white noise read as averaging down, flicker as not, and the command's bad input."""
+wrote), white noise read as averaging down, flicker as not, the command's bad input, and its record as
+fitgen schedule --samples reads it."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from host.adc import AdcArray
 from host.allan import CANDIDATES, EXCESS, MIN_AVERAGES, averaging, overlapping_adev
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
-from host.noiserun import SECONDS, record, verdict
+from host.noiserun import SECONDS, record, save, told, verdict
 from host.simbus import SimBus
 from host.simsensor import Drift, Flicker
 
@@ -193,3 +194,59 @@ def test_a_sensor_still_warming_up_is_told_to_wait():
     assert verdict(av).startswith("the readings drift: e")
     steady = averaging(_stream(0.0, 120.0), RATE)
     assert not steady.drifts() and not verdict(steady).startswith("the readings drift")
+
+
+def _record(tmp_path, x, name="noise.json"):
+    path = tmp_path / name
+    save(averaging(x, RATE), path, "test")
+    return path
+
+
+def test_a_schedule_is_made_for_what_the_record_tells(tmp_path):
+    """`fitgen schedule --samples noise.json`: the samples per row the recording recommends and the noise it
+    measured, the same schedule as when both are given by hand, and the meta says where they came from."""
+    rec = _record(tmp_path, _stream(0.0, seed=3))
+    told_s, single = told(rec)
+    sigma = float(np.sqrt(np.mean(single ** 2)))
+    assert told_s == averaging(_stream(0.0, seed=3), RATE).recommended() == 256
+    assert sigma == pytest.approx(NOISE, rel=0.02)
+    common = ("--sensor", "paper", "--n", "12", "--limits", "dx=-1:1 dy=-1:1 dz=-1:0")
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    r = run_cli("fitgen", "schedule", *common, "--samples", str(rec), "-o", str(a))
+    assert r.returncode == 0, r.stderr
+    assert f"made for 256 samples per row (told by {rec}) and {sigma:.3g} V rms per sample" in r.stderr
+    assert run_cli("fitgen", "schedule", *common, "--samples", "256", "--noise", repr(sigma),
+                   "-o", str(b)).returncode == 0
+    assert a.read_text() == b.read_text()
+    meta = json.loads((tmp_path / "a.csv.meta.json").read_text())
+    assert meta["samples_per_row"] == 256 and meta["samples_from"] == str(rec)
+    assert meta["noise_per_sample"] == pytest.approx(sigma, rel=1e-12)
+    # --noise given beside the record wins over the record's noise
+    c = tmp_path / "c.csv"
+    r = run_cli("fitgen", "schedule", *common, "--samples", str(rec), "--noise", "0.002", "-o", str(c))
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "c.csv.meta.json").read_text())["noise_per_sample"] == 0.002
+
+
+def _edited(tmp_path, **changes):
+    path = _record(tmp_path, _stream(0.0, 120.0))  # long enough that its slope reads no drift
+    rec = json.loads(path.read_text())
+    path.write_text(json.dumps({**rec, **changes}))
+    return path
+
+
+@pytest.mark.parametrize("make,extra,what", [
+    (lambda p: _record(p, _stream(0.0, 3.0)), (), "too short to read 16 samples per row"),
+    (lambda p: _record(p, _stream(0.0, 60.0) + 2e-5 * np.arange(int(60 * RATE))[:, None] / RATE), (),
+     "its readings drift"),
+    (lambda p: _record(p, _stream(NOISE, 60.0)), (), "does not average down even over 16 samples"),
+    (lambda p: _edited(p, single_v=[NOISE] * 4), (), "records 4 elements, the sensor paper has 8"),
+    (lambda p: _edited(p, recommended=None), (), "is not a record tactile-host noise -o wrote"),
+    (lambda p: _record(p, _stream(0.0, 120.0)), ("--transfer", "raw"), "measured volts and the schedule is for mT"),
+    (lambda p: p / "absent.json", (), "cannot read the noise record"),
+])
+def test_a_record_that_tells_no_rows_is_refused(tmp_path, make, extra, what):
+    out = tmp_path / "s.csv"
+    r = run_cli("fitgen", "schedule", "--n", "12", "--samples", str(make(tmp_path)), *extra, "-o", str(out))
+    assert_one_line_error(r, 2, what)
+    assert not out.exists() and not (tmp_path / "s.csv.meta.json").exists()

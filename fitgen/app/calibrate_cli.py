@@ -58,6 +58,29 @@ def cmd_identify(args) -> int:
     return 0
 
 
+def samples_of(args, drawing) -> tuple[int, float, dict]:
+    """``--samples`` and ``--noise``: the samples per row and the single-sample noise the schedule is made for, and
+    what the schedule's meta records of a noise record they came from. ``--samples`` is a count, or the record
+    ``tactile-host noise -o`` wrote: its recommendation and, unless ``--noise`` is given, its measured noise."""
+    noise = drawing.noise if args.noise is None else noise_of(args.noise, drawing)
+    if not args.samples.lower().endswith(".json"):
+        return parse_positive(args.samples, "--samples", integer=True), noise, {}
+    import numpy as np
+
+    from host.noiserun import told
+
+    samples, single = told(args.samples)
+    if single.size != drawing.n_elements:
+        raise InputError(f"{args.samples} records {single.size} elements, the sensor {drawing.name} has "
+                         f"{drawing.n_elements}: a record of another sensor")
+    if args.noise is None:
+        if drawing.units != "V":
+            raise InputError(f"{args.samples} measured volts and the schedule is for {drawing.units} (--transfer "
+                             "raw): give --noise in mT as well, or schedule for gmr")
+        noise = float(np.sqrt(np.mean(single ** 2)))
+    return samples, noise, {"samples_from": str(args.samples), "noise_per_sample": noise}
+
+
 def cmd_schedule(args) -> int:
     import numpy as np
 
@@ -67,8 +90,7 @@ def cmd_schedule(args) -> int:
 
     drawing = sensor_of(args)
     axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
-    noise = None if args.noise is None else noise_of(args.noise, drawing)
-    samples = parse_positive(args.samples, "--samples", integer=True)
+    samples, noise, told = samples_of(args, drawing)
 
     def step(done, total, note):
         bar.total = total
@@ -76,11 +98,13 @@ def cmd_schedule(args) -> int:
 
     with Progress("schedule", args.n) as bar:
         poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits, {}),
-                               noise=(drawing.noise if noise is None else noise) / np.sqrt(samples),
-                               rig_error=args.rig_error, progress=step)
-    write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples})
+                               noise=noise / np.sqrt(samples), rig_error=args.rig_error, progress=step)
+    write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples, **told})
     rest = (f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"]
             else "")
+    if told:
+        print(f"made for {samples} samples per row (told by {args.samples}) and {noise:.3g} {drawing.units} rms per "
+              "sample", file=sys.stderr)
     print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}{rest}) to {args.output}",
           file=sys.stderr)
     box = ", ".join(f"{a} {lo:g}..{hi:g}" for a, (lo, hi) in info["ranges"].items())

@@ -404,7 +404,7 @@ def build_parser() -> Parser:
     sc.add_argument("--axes", default="dx,dy,dz", help="the axes the stage moves (default dx,dy,dz)")
     sc.add_argument("--limits", help="the stage's limits 'dx=-2:2 dz=-2:0 ...' (default: the sensor's [travel]); "
                     "with dz, a rest row lifts the stage 0.2 mm off the skin besides (docs/calibration.md)")
-    sc.add_argument("--samples", default="16", help="samples the capture averages per row (default 16)")
+    sc.add_argument("--samples", default="16", help="samples per row (default 16), or NOISE.json: what it tells")
     sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
     sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM", help="stage error, mm rms (default 0.01)")
     sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv")
