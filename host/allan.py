@@ -28,6 +28,9 @@ WHITE_RATIO = 1.2
 # posterior reads too narrow (bench/noise_averaging.py: 0.05 costs 128 samples all they gain).
 EXCESS = 0.02
 SURE = 2.0  # standard errors above the flicker floor's estimate it is taken to be, for a recommendation
+# standard errors below its estimate a slope is taken to be: white noise alone then reads as drift in 1-2 of 100
+# recordings of eight elements, however short (in 34 of 40 of 30 s when the slope was taken as read)
+DRIFT_SURE = 3.0
 FLOOR_AVERAGES = 20  # the flicker floor is read at averages of a twentieth of the recording: its error ~ 1 / samples
 MIN_AVERAGES = 50  # independent S-sample means a candidate S needs before its ratio is read (about 8 % error)
 CAPTURE_S = 120.0  # s: a 40-pose capture on a printer (calibration.md), over which a drift moves the offsets
@@ -71,10 +74,18 @@ class Averaging:
     excess: np.ndarray  # (k,) V^2: Allan variance there beyond white noise's, per element
     drift: np.ndarray  # (k,) V/s: each element's straight-line slope over the recording
 
+    @property
+    def drift_se(self) -> np.ndarray:
+        """(k,) V/s: the standard error white noise alone gives each element's slope over the recording."""
+        n = self.samples
+        return self.single * self.rate * np.sqrt(12.0 / (n * max(n * n - 1.0, 1.0)))
+
     def drifts(self) -> bool:
-        """True when some element drifts by more than a row of the smallest candidate's white noise over CAPTURE_S:
-        a capture then reads an offset that moves under it (a sensor still warming up)."""
-        return bool(np.any(np.abs(self.drift) * CAPTURE_S > self.single / np.sqrt(CANDIDATES[0])))
+        """True when some element drifts by more than a row of the smallest candidate's white noise over CAPTURE_S,
+        its slope taken DRIFT_SURE standard errors low: a capture then reads an offset that moves under it (a sensor
+        still warming up), and a short recording's white noise alone does not read as drift."""
+        slope = np.abs(self.drift) - DRIFT_SURE * self.drift_se
+        return bool(np.any(slope * CAPTURE_S > self.single / np.sqrt(CANDIDATES[0])))
 
     @property
     def flicker(self) -> tuple[float, float]:
