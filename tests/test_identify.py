@@ -342,6 +342,8 @@ def test_what_would_pin_more_agrees_with_identifying_it_known(drawing, plan):
     assert height == pytest.approx(identify(drawing, y, plan[0], noise / np.sqrt(8)).derived()[z][1], rel=0.06)
     assert height < 0.9 * base[z][1]
     assert table[-1].startswith("the same poses, rows of 8x the samples") and f"/ {height:.2g} mm" in table[-1]
+    # a capture whose meta gives its samples per row is told in samples
+    assert what_pins_more(ident, 16)[-1] == table[-1].replace("8x the samples", "128 samples instead of 16")
     assert "| every element's radius (the ring's size) |" in report(ident)
     with pytest.raises(ValueError, match="no free parameter"):
         known[".radius"].pinned(".radius")  # fixed already: nothing to condition on

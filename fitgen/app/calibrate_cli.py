@@ -46,7 +46,8 @@ def cmd_identify(args) -> int:
     unit, post, *png = write_all(files)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
           f"{args.zero_error:g} mm", file=sys.stderr)
-    print(rec.report(ident), end="")
+    samples = ds.meta.get(rec.SAMPLES_KEY)
+    print(rec.report(ident, samples if isinstance(samples, int) and samples > 0 else None), end="")
     print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
           "the posterior)", file=sys.stderr)
     if png:

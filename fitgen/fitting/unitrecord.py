@@ -26,8 +26,9 @@ def describe_direction(space: UnitSpace, v: np.ndarray, top: int = 4) -> str:
     return " ".join(parts).lstrip("+")
 
 
-def report(ident: Identification) -> str:
-    """The identification in words and tables: fit, parameters, what was determined and what was not."""
+def report(ident: Identification, samples: int | None = None) -> str:
+    """The identification in words and tables: fit, parameters, what was determined and what was not;
+    ``samples``: the capture's samples per row, when its meta says."""
     sp = ident.space
     n, N = ident.problem.readings.shape
     lines = [f"identify: {n} rows x {N} elements; residual chi-square {ident.chi2:.1f} on {ident.dof:.1f} degrees of "
@@ -46,7 +47,7 @@ def report(ident: Identification) -> str:
     lines.append("| --- | --- | --- |")
     for name, (val, se) in ident.derived().items():
         lines.append(f"| {name} | {val:.5g} | {se:.2g} |")
-    lines += [""] + what_pins_more(ident)
+    lines += [""] + what_pins_more(ident, samples)
     sd, prior = ident.sd, sp.prior_sd
     lines += ["", "| parameter | value | standard error | prior spread | share of the prior left |", "| --- | --- | --- | --- | --- |"]
     share = sp.in_spreads(sd)
@@ -74,9 +75,10 @@ def report(ident: Identification) -> str:
     return "\n".join(lines) + "\n"
 
 
-def what_pins_more(ident: Identification) -> list[str]:
+def what_pins_more(ident: Identification, samples: int | None = None) -> list[str]:
     """A table: the standard errors of what the capture determines had one part of the unit (or where the stage
-    was) been known exactly, beside this capture's: what a maker would gain by measuring it."""
+    was) been known exactly, beside this capture's: what a maker would gain by measuring it; then what rows of
+    MORE_SAMPLES times the ``samples`` per row would pin."""
     prob = ident.problem
     rows = [("nothing more (this capture)", ident.cov)]
     for words, part in PINNABLE:
@@ -93,7 +95,8 @@ def what_pins_more(ident: Identification) -> list[str]:
         lines.append(f"| {words} | " + " | ".join(f"{se:.2g}" for se in offset) + f" | {100 * worst:.2g} % |")
     # the rig's error binds three of a row's directions; averaging lowers the noise along the rest
     more = _offsets_worst(ident, ident.posterior_for(replace(prob, noise=prob.noise / np.sqrt(MORE_SAMPLES))))
-    lines.append(f"the same poses, rows of {MORE_SAMPLES}x the samples (if the noise averages down that far: "
+    rows = f"{MORE_SAMPLES * samples} samples instead of {samples}" if samples else f"{MORE_SAMPLES}x the samples"
+    lines.append(f"the same poses, rows of {rows} (if the noise averages down that far: "
                  f"tactile-host noise tells; docs/calibration.md): offset {more[0]:.2g} / {more[1]:.2g} / "
                  f"{more[2]:.2g} mm, worst element {100 * more[3]:.2g} %")
     return lines
