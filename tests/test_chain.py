@@ -45,6 +45,10 @@ def test_schedule_capture_identify_simulate_fit_codegen(tmp_path):
     assert proc.returncode == 0, proc.stderr
     post = json.loads((tmp_path / "twin.posterior.json").read_text())
     assert 0.3 < post["chi2"] / post["dof"] < 2.0  # the capture's own noise (measured) explains the residuals
+    # the unit's single-sample noise, as the capture measured it, is the twin's
+    sample_noise = json.loads((tmp_path / "capture.csv.meta.json").read_text())["sample_noise"]
+    unit_noise = load_sensor(tmp_path / "twin.toml").noise
+    assert unit_noise == np.sqrt(np.mean(np.square(sample_noise))) and abs(unit_noise / 0.0005 - 1) < 0.05
     # the twin's data: the stage's box (a three-axis scene, so no tilt), a grid and random poses
     proc = run_cli("fitgen", "simulate", "--sensor", str(tmp_path / "twin.toml"), "--grid",
                    "dx=-1.5:1.5:7 dy=-1.5:1.5:7 dz=-1.5:0:4", "--random", "1500", "--ranges",
@@ -58,6 +62,8 @@ def test_schedule_capture_identify_simulate_fit_codegen(tmp_path):
         proc = run_cli("fitgen", "fit", str(tmp_path / data), "-o", str(tmp_path / f"{name}.json"), "--family",
                        "no-roots", "--outputs", "dx,dy,dz", "--held-out", "200")
         assert proc.returncode == 0, proc.stderr
+    twin_fit = load_model(tmp_path / "twin.json").fit_info
+    assert twin_fit["noise"]["device"] == unit_noise and twin_fit["noise"]["device_source"] == "sensor twin"
     proc = run_cli("fitgen", "codegen", str(tmp_path / "twin.json"), "--precision", "float", "-o", str(tmp_path / "c"))
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "c" / "tm_model.h").is_file()

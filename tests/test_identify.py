@@ -800,3 +800,31 @@ def test_a_zero_above_first_contact_is_said_with_its_depth(drawing):
             continue
         with pytest.raises(InputError, match=said + r" \(within 5 noise sd\), down to dz=-1: the zero is about 1 mm"):
             check_contact(y, poses, noise)
+
+
+def test_the_unit_file_carries_the_units_own_reading_noise(tmp_path):
+    """A built unit's noise is its own, not its drawing's: identify writes the single-sample noise the capture
+    measured (its meta's sample_noise, rms over the elements) into the unit file, so that the twin's fit adds
+    that noise and holds out with it (tests/test_chain.py follows it there); --noise wins; a capture that
+    measured none keeps the drawing's."""
+    sch, cap, unit_file = tmp_path / "s.csv", tmp_path / "c.csv", tmp_path / "unit.toml"
+    assert run_cli("fitgen", "schedule", "--n", "30", "-o", str(sch)).returncode == 0
+    proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "57", "--poses", str(sch),
+                   "--noise", "0.0002", "-o", str(cap))
+    assert proc.returncode == 0, proc.stderr
+    meta_file = tmp_path / "c.csv.meta.json"
+    simulated = json.loads(meta_file.read_text())
+    measured = [0.0007, 0.0009] * 4  # V: what a capture of 16 samples per row would have measured, rms 0.0008062
+    as_captured = {**simulated, "samples_per_row": 16, "row_noise": [0.0002] * 8, "sample_noise": measured}
+    for meta, extra, noise, source in ((as_captured, (), float(np.sqrt(np.mean(np.square(measured)))),
+                                        "measured by the capture"),
+                                       (as_captured, ("--noise", "0.0006"), 0.0006, "--noise"),
+                                       ({**simulated, "samples_per_row": 16, "row_noise": [0.0002] * 8}, (), 0.0005,
+                                        "the drawing paper's")):
+        meta_file.write_text(json.dumps(meta))
+        proc = run_cli("fitgen", "identify", str(cap), "--sensor", "paper", "-o", str(unit_file), *extra)
+        assert proc.returncode == 0, proc.stderr
+        assert f"the unit's reading noise per sample: {noise:.3g} V ({source}), in {unit_file}" in proc.stderr
+        unit = load_sensor(unit_file)
+        assert unit.transfer == "gmr" and unit.noise == pytest.approx(noise, rel=1e-12)
+        assert unit.raw.noise == load_sensor("paper").raw.noise  # the transfer the capture did not read: as drawn

@@ -39,8 +39,9 @@ def cmd_identify(args) -> int:
         except InputError as exc:
             hint = "" if args.transfer else rec.units_hint(drawing, ds.inputs, ds.poses(), ds.meta)
             raise InputError(f"{hint}; read as {drawing.units}, {exc}" if hint else str(exc)) from None
+    unit_noise, unit_source = rec.device_noise(ds.meta, drawing, args.noise)
     files = rec.unit_files(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
-                                                "drawing_spec": args.sensor})
+                                                "drawing_spec": args.sensor}, unit_noise)
     if folder is not None:  # drawn first, then written with the unit's files: a failure leaves none of them
         files.append((folder / "identify.png", plots.identification_png(ident)))
     unit, post, *png = write_all(files)
@@ -50,6 +51,8 @@ def cmd_identify(args) -> int:
     print(rec.report(ident, samples if isinstance(samples, int) and samples > 0 else None), end="")
     print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
           "the posterior)", file=sys.stderr)
+    print(f"the unit's reading noise per sample: {unit_noise:.3g} {drawing.units} ({unit_source}), in {unit}: the "
+          "twin's fit adds it in expectation and holds out with it", file=sys.stderr)
     if png:
         print(f"plot: {png[0]}", file=sys.stderr)
     with Progress("a field the stage carries?", 4) as bar:  # moves only when the chi-square sits high

@@ -116,7 +116,7 @@ def _unit_stage(out: Path, drawing_model) -> None:
     from fitgen.fitting.fit import FitSettings, fit_model
     from fitgen.fitting.holdout import box_of, evaluate, held_out_set
     from fitgen.fitting.identify import identify
-    from fitgen.fitting.unitrecord import load_posterior, row_noise, save
+    from fitgen.fitting.unitrecord import device_noise, load_posterior, row_noise, save
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.fitting.schedule import schedule, schedule_csv
     from fitgen.physics.sensor import load_sensor
@@ -141,7 +141,8 @@ def _unit_stage(out: Path, drawing_model) -> None:
     ds = load_dataset(cap)
     noise, _ = row_noise(ds.meta, drawing)
     ident = identify(drawing, ds.inputs, ds.poses(), noise, rig_error=0.01)
-    twin_file, _ = save(ident, out / "twin.toml", {"capture": str(cap), "drawing_spec": "paper"})
+    unit_noise, _ = device_noise(ds.meta, drawing)
+    twin_file, _ = save(ident, out / "twin.toml", {"capture": str(cap), "drawing_spec": "paper"}, unit_noise)
     d = ident.derived()
     sens = [v for k, (v, _) in d.items() if "sensitivity" in k]
     off = [v for k, (v, _) in d.items() if "magnet offset" in k]
@@ -155,7 +156,7 @@ def _unit_stage(out: Path, drawing_model) -> None:
     except InputError as exc:  # matplotlib is an extra: the demo goes on without the figure
         print(f"   (no figure: {exc})")
     t = time.monotonic()
-    twin = ident.unit("twin")
+    twin = ident.unit("twin").with_noise(unit_noise)
     train = simulate(twin, np.vstack([grid_poses(PAPER_GRIDS["paper-sim"]), random_poses(5000, DEFAULT_RANGES,
                                                                                           pose_rng(1))]))
     model, _ = fit_auto(train, None, FitSettings(), twin, progress=_fit_progress())

@@ -112,6 +112,7 @@ def _offsets_worst(ident: Identification, cov: np.ndarray) -> tuple[float, float
 
 ROW_NOISE_KEY = "row_noise"  # a capture's meta: per element, the measured noise of its averaged rows
 SAMPLES_KEY = "samples_per_row"
+SAMPLE_NOISE_KEY = "sample_noise"  # a capture's meta: per element, one sample's measured noise
 
 
 def row_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[np.ndarray, str]:
@@ -131,6 +132,19 @@ def row_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[n
                 f"measured by the capture (median over the elements {np.median(measured):.3g}{units})")
     return (np.full(n, sensor.noise / np.sqrt(samples)),
             f"sensor {sensor.name}'s {sensor.noise:g} over sqrt({samples}) samples")
+
+
+def device_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[float, str]:
+    """The unit's single-sample reading noise in ``sensor``'s units, and where it came from: ``noise`` (the
+    device's, given), else what the capture measured (the rms over the elements of one sample's spread,
+    ``sample_noise`` in its meta), else the drawing's."""
+    if noise is not None:
+        return float(noise), "--noise"
+    measured = meta.get(SAMPLE_NOISE_KEY)
+    if isinstance(measured, list) and len(measured) == sensor.n_elements and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x > 0 for x in measured):
+        return float(np.sqrt(np.mean(np.square(measured)))), "measured by the capture"
+    return sensor.noise, f"the drawing {sensor.name}'s"
 
 
 def in_capture_units(drawing: Sensor, meta: dict) -> Sensor:
@@ -294,18 +308,19 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
                      f"beyond {PRIOR_LIMIT:g} is no unit within them): {cause}; nothing written")
 
 
-def save(ident: Identification, path, provenance: dict) -> tuple:
+def save(ident: Identification, path, provenance: dict, noise: float | None = None) -> tuple:
     """Write the unit file (the maximum a posteriori unit) and beside it ``<stem>.posterior.json``: every
     parameter with its standard error, the posterior covariance, what was determined and what not."""
     from fitgen.base.fileio import write_atomic
 
-    (unit, text), (post_path, record) = unit_files(ident, path, provenance)
+    (unit, text), (post_path, record) = unit_files(ident, path, provenance, noise)
     write_atomic(post_path, record)
     return write_atomic(unit, text), post_path
 
 
-def unit_files(ident: Identification, path, provenance: dict) -> list:
-    """What :func:`save` writes, not written: ``[(path, the unit file's text), (<stem>.posterior.json, its text)]``."""
+def unit_files(ident: Identification, path, provenance: dict, noise: float | None = None) -> list:
+    """What :func:`save` writes, not written: ``[(path, the unit file's text), (<stem>.posterior.json, its text)]``;
+    ``noise``: the unit's single-sample reading noise (:func:`device_noise`), else the drawing's."""
     import json
     from pathlib import Path
 
@@ -320,6 +335,8 @@ def unit_files(ident: Identification, path, provenance: dict) -> list:
     if spec is not None and Path(spec).is_file():  # a sensor file: named so that it is found from anywhere
         provenance = {**provenance, "drawing_spec": str(Path(spec).resolve())}
     unit = ident.unit(provenance.get("name", path.stem), f"identified from {provenance.get('capture', 'a capture')}")
+    if noise is not None:  # the twin is simulated and fitted for the unit's own noise, not the drawing's
+        unit = unit.with_noise(noise)
     prov = {"source": "fitgen identify", "posterior": post_path.name, "reduced_chi2": round(ident.reduced_chi2, 4),
             **{k: v for k, v in provenance.items() if isinstance(v, (str, int, float)) and k != "name"}}
     text = unit_toml(unit, ident.space.drawing.name, prov)

@@ -146,6 +146,12 @@ class Sensor:
     def units(self) -> str:
         return "mT" if self.transfer == "raw" else "V"
 
+    def with_noise(self, noise: float) -> "Sensor":
+        """The sensor with ``noise`` (rms, in its units) as its active transfer's reading noise."""
+        from dataclasses import replace
+
+        return replace(self, **{self.transfer: replace(getattr(self, self.transfer), noise=float(noise))})
+
     def with_transfer(self, kind: str) -> "Sensor":
         if kind not in ("raw", "gmr"):
             raise InputError(f"transfer must be 'raw' or 'gmr', got {kind!r}")
