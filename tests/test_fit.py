@@ -294,7 +294,8 @@ def test_fit_by_blocks_of_rows_is_the_fit_of_all_rows(monkeypatch):
 
 def test_fit_on_a_capture_adds_the_single_sample_noise_less_the_rows(tmp_path):
     """Rows averaged over S samples carry the device's noise over sqrt(S): the fit adds what they lack, says
-    why in the model file, and honours --noise."""
+    why in the model file, and honours --noise; the device's noise is what the capture measured per sample,
+    also when a drawing with another figure is given."""
     import json
 
     from conftest import run_cli
@@ -306,7 +307,9 @@ def test_fit_on_a_capture_adds_the_single_sample_noise_less_the_rows(tmp_path):
                "sample_noise": [0.0005] * 8}
     cases = [(capture, [], 0.0005, 0.000125), (capture, ["--noise", "0.001"], 0.001, 0.000125),
              ({k: v for k, v in capture.items() if k != "row_noise"}, [], 0.0005, 0.0005 / 4),
-             ({"units": "V", "source": "hardware"}, ["--noise", "0.001"], 0.001, None)]
+             ({"units": "V", "source": "hardware"}, ["--noise", "0.001"], 0.001, None),
+             # a unit noisier than its drawing: what the capture measured wins over the drawing's figure
+             ({**capture, "sample_noise": [0.001] * 8}, ["--sensor", "paper"], 0.001, 0.000125)]
     for i, (meta, extra, device, data) in enumerate(cases):
         ds.meta = dict(meta)
         path = ds.save(tmp_path / f"c{i}.csv", meta)
@@ -319,6 +322,8 @@ def test_fit_on_a_capture_adds_the_single_sample_noise_less_the_rows(tmp_path):
         expected = np.sqrt(device**2 - data**2) if data else 0.0
         assert noise["added"] == pytest.approx(expected), noise
         assert noise["why"]
+        if "sample_noise" in meta and not extra[:1] == ["--noise"]:
+            assert noise["device_source"] == "measured by the capture (single samples)"
 
 
 @pytest.mark.parametrize("argv, work", [

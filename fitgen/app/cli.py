@@ -363,8 +363,8 @@ def build_parser() -> Parser:
     f.add_argument("--force", action="store_true", help="fit a scene's outputs (--scene, or the data's scene) even if "
                    "the sensor cannot resolve them")
     f.add_argument("--noise", metavar="X",
-                   help="reading noise rms (input units) the device will see, added in expectation (default: the "
-                        "noise figure of the dataset's sensor; measured data carry their own). 0 alone: the data as "
+                   help="reading noise rms (input units) the device will see, added in expectation (default: what "
+                        "a capture measured per sample, else the sensor's figure). 0 alone: the data as "
                         "given and exact arithmetic, the paper's procedure (R's step())")
     f.add_argument("--precision", choices=("float", "double", "fixed", "exact"),
                    help="arithmetic the equations must survive on the device (default float; exact with --noise 0)")

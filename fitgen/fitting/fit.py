@@ -155,8 +155,8 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
 def noise_to_add(ds: Dataset, settings: FitSettings, sensor=None) -> dict:
     """The reading noise the fit adds in expectation, and where the figures come from.
 
-    device: ``settings.noise``, else the noise figure of ``sensor`` or of the sensor named in a
-    simulated dataset's meta, else the single-sample noise a capture measured. data: the noise a
+    device: ``settings.noise``, else the single-sample noise a capture measured (the unit's own), else
+    the noise figure of ``sensor`` or of the sensor named in a simulated dataset's meta. data: the noise a
     simulated dataset was made with; for a capture (``samples_per_row`` in its meta), the noise its
     averaged rows carry: what it measured per row, else the device's over sqrt(samples). Measured
     rows with no such record are taken as single samples that carry the device's own noise.
@@ -173,10 +173,10 @@ def noise_to_add(ds: Dataset, settings: FitSettings, sensor=None) -> dict:
     else:
         sensor = sensor or dataset_sensor(meta)
         measured = _rms(meta.get("sample_noise"))
-        if sensor is not None:
-            device, source = sensor.noise, f"sensor {sensor.name}"
-        elif measured is not None:
+        if measured:  # the unit's own noise: a drawing's figure is another sensor's
             device, source = measured, "measured by the capture (single samples)"
+        elif sensor is not None:
+            device, source = sensor.noise, f"sensor {sensor.name}"
         else:
             device, source = None, "unknown"
     samples = meta.get("samples_per_row")
