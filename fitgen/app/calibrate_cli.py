@@ -47,8 +47,7 @@ def cmd_identify(args) -> int:
     unit, post, *png = write_all(files)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
           f"{args.zero_error:g} mm", file=sys.stderr)
-    samples = ds.meta.get(rec.SAMPLES_KEY)
-    print(rec.report(ident, samples if isinstance(samples, int) and samples > 0 else None), end="")
+    print(rec.report(ident, rec.samples_per_row(ds.meta)), end="")
     print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
           "the posterior)", file=sys.stderr)
     print(f"the unit's reading noise per sample: {unit_noise:.3g} {drawing.units} ({unit_source}), in {unit}: the "

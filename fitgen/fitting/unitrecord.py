@@ -115,18 +115,30 @@ SAMPLES_KEY = "samples_per_row"
 SAMPLE_NOISE_KEY = "sample_noise"  # a capture's meta: per element, one sample's measured noise
 
 
+def samples_per_row(meta: dict) -> int | None:
+    """The samples a capture averaged per row, when its meta says (a whole number >= 1)."""
+    samples = meta.get(SAMPLES_KEY)
+    return samples if isinstance(samples, int) and samples >= 1 else None
+
+
+def _measured(meta: dict, key: str, n: int) -> list[float] | None:
+    """A capture's per-element noise figures under ``key``, when its meta holds ``n`` finite ones > 0."""
+    values = meta.get(key)
+    ok = isinstance(values, list) and len(values) == n and all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x > 0 for x in values)
+    return values if ok else None
+
+
 def row_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[np.ndarray, str]:
     """The reading noise of a capture's rows, per element, and where it came from: ``noise`` (the device's
     single-sample noise) over sqrt(samples per row), else the noise the capture measured, else the sensor
     file's over sqrt(samples)."""
     n = sensor.n_elements
-    samples = meta.get(SAMPLES_KEY, 1)
-    samples = samples if isinstance(samples, int) and samples >= 1 else 1
+    samples = samples_per_row(meta) or 1
     if noise is not None:
         return np.full(n, noise / np.sqrt(samples)), f"--noise {noise:g} over sqrt({samples}) samples"
-    measured = meta.get(ROW_NOISE_KEY)
-    if isinstance(measured, list) and len(measured) == n and all(isinstance(x, (int, float)) and x > 0
-                                                                 for x in measured):
+    measured = _measured(meta, ROW_NOISE_KEY, n)
+    if measured is not None:
         units = f" {meta['units']}" if isinstance(meta.get("units"), str) else ""
         return (np.asarray(measured, dtype=float),
                 f"measured by the capture (median over the elements {np.median(measured):.3g}{units})")
@@ -140,9 +152,8 @@ def device_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tupl
     ``sample_noise`` in its meta), else the drawing's."""
     if noise is not None:
         return float(noise), "--noise"
-    measured = meta.get(SAMPLE_NOISE_KEY)
-    if isinstance(measured, list) and len(measured) == sensor.n_elements and all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x > 0 for x in measured):
+    measured = _measured(meta, SAMPLE_NOISE_KEY, sensor.n_elements)
+    if measured is not None:
         return float(np.sqrt(np.mean(np.square(measured)))), "measured by the capture"
     return sensor.noise, f"the drawing {sensor.name}'s"
 
