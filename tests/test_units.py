@@ -15,7 +15,7 @@ from fitgen.physics.sensor import load_sensor
 from fitgen.physics.pose import off_skin
 from fitgen.physics.simulate import DEFAULT_RANGES, pose_rng, random_poses, rig_poses, simulate
 from fitgen.physics.transfer import readings
-from fitgen.physics.units import UnitSpace, draw_unit, unit_toml, write_unit
+from fitgen.physics.units import UnitSpace, draw_unit, symmetries, unit_toml, write_unit
 from magpy_truth import magpylib_readings
 
 POSES = random_poses(300, DEFAULT_RANGES, pose_rng(11))
@@ -122,6 +122,28 @@ def test_drawing_is_unchanged():
     space = UnitSpace.of(d)
     np.testing.assert_allclose(space.readings(np.zeros(space.size), POSES)[0], readings(d, POSES, adc_bits=0),
                                rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("preset, count", [("paper", 15), ("two-rings", 7), ("tilted-axes", 7)])
+def test_a_drawings_symmetries_give_the_readings_of_the_sensor_so_turned(preset, count):
+    """Each symmetry's order takes the drawing's readings at a pose to its readings at the pose turned or mirrored,
+    as magpylib draws them; a built unit has none."""
+    d = load_sensor(preset)
+    found = symmetries(d)
+    assert len(found) == count and len({tuple(o) for _, o in found}) == count
+    rng = np.random.default_rng(3)
+    poses = np.column_stack([rng.uniform(-2, 2, (6, 2)), rng.uniform(-2, 0, 6), np.zeros((6, 2))])
+    for what, order in found:
+        assert sorted(order.tolist()) == list(range(d.n_elements))
+        a = np.deg2rad(float(what.split(" by ")[1].split()[0]) if "turned" in what
+                       else 2 * float(what.split("line at ")[1].split()[0]))
+        c, s = np.cos(a), np.sin(a)
+        m = np.array([[c, s], [s, -c]]) if what.startswith("mirrored") else np.array([[c, -s], [s, c]])
+        moved = poses.copy()
+        moved[:, :2] = poses[:, :2] @ m.T
+        np.testing.assert_allclose(magpylib_readings(d, moved)[:, order], magpylib_readings(d, poses), rtol=1e-9,
+                                   atol=1e-12)
+    assert symmetries(draw_unit(d, 4)[0]) == []
 
 
 def test_unit_file_round_trips(tmp_path):
