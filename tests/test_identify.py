@@ -668,6 +668,12 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
         "dead element": (np.where(np.arange(8) == 2, y[:, 2].mean(), y), plan[0], "element 3 (v3) alone: with its"),
         # two elements wired to each other's channels: the pair is named
         "swapped channels": (y[:, [0, 1, 5, 3, 4, 2, 6, 7]], plan[0], "elements 3 and 6 (v3, v6) swapped: with their"),
+        # neighbours exchanged: explained to the noise by a unit whose two elements sit on each other's places, far
+        # outside the tolerances; the pair is named all the same
+        "swapped neighbours": (y[:, [0, 1, 3, 2, 4, 5, 6, 7]], plan[0], "elements 3 and 4 (v3, v4) swapped: with"),
+        # the two ADCs' channels exchanged: the ring read turned by half, the order that undoes it named
+        "ADCs exchanged": (y[:, [4, 5, 6, 7, 0, 1, 2, 3]], plan[0], "taken in the order v5, v6, v7, v8, v1, v2, v3, v4 "
+                                                                   "as elements 1-8 (the ring turned by 180 deg about z"),
         # the stage's dx mirrored against the sensor's: the stage map would have to turn it round
         "mirrored dx": (y, plan[0] * [-1, 1, 1, 1, 1], "the stage's axes against the sensor's"),
         # impossible volts: not 'saturated', but out of the ADC's range, or no sensor at all

@@ -31,7 +31,7 @@ def cmd_identify(args) -> int:
     with Progress("what to blame", drawing.n_elements) as bar:  # moves only when the capture is refused
 
         def trial(i, n, note):
-            bar.total = n  # the pairs count too when many rows stand out
+            bar.total = n  # the ring's turns and the pairs count too when they are tried
             bar.update(1, note)
 
         try:

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from itertools import combinations
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -52,10 +51,8 @@ OUTLIER_LIMIT = 5.0  # a reading's standardized residual beyond this: its row is
 # a parameter identified beyond this many prior spreads: not a unit within its tolerances (drawn within 3, and
 # 20 units' captures put none beyond 3.1), but a dead or miswired element, another sensor, or looser tolerances
 PRIOR_LIMIT = 5.0
-ROW_SUSPECTS, ROW_SHARE = 3, 0.1  # rows tried left out before elements: at most 3, each a tenth of the chi-square
 BLAME_NFEV = 20  # function evaluations: a capture with its dead element left out converges in about 7
-FIELD_TRY = 0.003  # mT/mm: blame's trial of a field the stage carries (bench/stage_field.py)
-RESWEEP = 10.0  # a trial's chi-square within this many CHI2_LIMITs after one sweep gets a second (_explained_within)
+RESWEEP = 10.0  # a trial's chi-square within this many CHI2_LIMITs after one sweep gets a second (explained_within)
 # what a maker can pin outside a capture (identify's report: what each would buy): a part of the unit, by the
 # parameter names it covers, or RIG for a stage that reports where it really is (the rig's and the zero's error 0)
 RIG = "rig"
@@ -433,7 +430,7 @@ def _solve(prob: Problem, ranges: dict | None, progress) -> Identification:
     return Identification(prob, z * sd, post * np.outer(sd, sd), chi2, dof, lam, _readable_basis(gauge), starved)
 
 
-def _explained_within(trial: Problem) -> bool:
+def explained_within(trial: Problem) -> bool:
     """A short fit of ``trial``: do its rows read as a unit within the tolerances, to the noise? One sweep, and a
     second when the chi-square lands within RESWEEP x CHI2_LIMIT: the rows' whitening at the drawing can leave it 3x
     high on a capture the unit explains (seen at 3.2, 0.98 after the second sweep; which side of the limit it fell
@@ -444,56 +441,3 @@ def _explained_within(trial: Problem) -> bool:
         z = _maximum_a_posteriori(trial, sweeps=1, max_nfev=BLAME_NFEV, start=z)
         chi2, dof, _, _ = _chi2(trial, z)
     return chi2 / dof <= CHI2_LIMIT and not _beyond(z, PRIOR_LIMIT)
-
-
-def blame(ident: Identification, progress=None) -> tuple[str, tuple[int, ...]] | None:
-    """What to blame for a capture the physics does not explain within the tolerances, when one thing alone is:
-    ``("rows", (i, ...))``, the one to three rows that stand out, when the others without them read as a unit
-    within its tolerances to the noise (a slip, a glitch: tried first, as one bad reading also leaves its element
-    to blame); else ``("dead", (k,))``, the one element whose readings, left out, do (it does not respond, or is
-    wired to another channel); else ``("field", ())`` when they do with a field the stage carries allowed for (its
-    motors, a steel bed); else, when more than three rows stand out, ``("swapped", (a, b))``, the one pair of
-    elements whose readings, exchanged, do (their channels wired the other way round); else None. One short fit
-    per trial: with the fault undone a capture converges in a few steps. ``progress(i, n, note)`` after each."""
-    prob = ident.problem
-    n_el = prob.readings.shape[1]
-    pairs = list(combinations(range(n_el), 2)) if len(ident.outlying_rows()) > 3 else []
-    share = ident.row_chi2
-    top = [int(i) for i in np.argsort(-share, kind="stable")[:ROW_SUSPECTS] if share[i] >= ROW_SHARE]
-    trials = [top[:1], top] if len(top) > 1 else [top] if top else []
-    total, done = n_el + len(pairs) + len(trials) + 1, 0
-    for rows in trials:
-        done += 1
-        if progress is not None:
-            progress(done, total, f"row{'s' * (len(rows) > 1)} {', '.join(str(i + 1) for i in rows)} left out")
-        valid = prob.valid.copy()
-        valid[rows] = False
-        if _explained_within(replace(prob, valid=valid)):
-            return ("rows", tuple(rows))
-    found = []
-    for k in range(n_el):
-        done += 1
-        if progress is not None:
-            progress(done, total, f"v{k + 1} left out")
-        valid = prob.valid.copy()
-        valid[:, k] = False
-        if _explained_within(replace(prob, valid=valid)):
-            found.append(k)
-    if found:
-        return ("dead", (found[0],)) if len(found) == 1 else None
-    d, done = prob.space.drawing, done + 1
-    if progress is not None:
-        progress(done, total, "a field the stage carries")
-    if not prob.space.moving_field and _explained_within(replace(prob, space=UnitSpace.of(
-            d, replace(d.tolerances, stage_field=FIELD_TRY)))):
-        return ("field", ())
-    for a, b in pairs:
-        done += 1
-        if progress is not None:
-            progress(done, total, f"v{a + 1} and v{b + 1} exchanged")
-        order = np.arange(n_el)
-        order[[a, b]] = order[[b, a]]
-        if _explained_within(replace(prob, readings=prob.readings[:, order], valid=prob.valid[:, order],
-                                     noise=prob.noise[order])):
-            found.append((a, b))
-    return ("swapped", found[0]) if len(found) == 1 else None

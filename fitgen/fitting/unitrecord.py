@@ -9,11 +9,12 @@ from dataclasses import replace
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import (CHI2_LIMIT, FIELD_TRY, OUTLIER_LIMIT, PINNABLE, PRIOR_LIMIT, RIG, RIG_ERROR,
-                                     ZERO_ERROR, Identification, blame, identify, tilting)
+from fitgen.fitting.blame import FIELD_TRY, blame
+from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PINNABLE, PRIOR_LIMIT, RIG, RIG_ERROR, ZERO_ERROR,
+                                     Identification, identify, tilting)
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
-from fitgen.physics.units import STIFFENING, UnitSpace
+from fitgen.physics.units import STIFFENING, UnitSpace, symmetries
 
 MORE_SAMPLES = 8  # identify's report: what rows of this many times the samples would pin (16 -> 128)
 
@@ -287,6 +288,17 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
         cause = (f"a field that moves with the stage (its motors, a steel bed): allowed for ([tolerances] stage_field "
                  f"= {FIELD_TRY:g} mT/mm in the drawing's file), the capture reads as a unit within the tolerances, to "
                  "the noise; give the drawing that tolerance, schedule and identify with it (docs/calibration.md)")
+    elif culprit is not None and culprit[0] == "ring":
+        order = culprit[1]
+        what = dict((tuple(o.tolist()), w) for w, o in symmetries(ident.space.drawing))[order]
+        taken = ", ".join(f"v{k + 1}" for k in order)
+        cause = (f"the channels against the ring, or the stage's axes against the sensor's: taken in the order {taken} "
+                 f"as elements 1-{len(order)} (the ring {what}), the readings are a unit within the tolerances, to "
+                 "the noise; the elements are wired in that order (the channel map"
+                 + ("; two ADCs of four exchanged turn a ring of eight by 180 deg"
+                    if "by 180 deg" in what and len(order) == 8 else "")
+                 + "), or the sensor sits turned on the stage or a pose axis is mirrored or swapped (the capture's "
+                 "axis map, --stage-axes)")
     elif culprit is not None:
         a, b = culprit[1]
         cause = (f"elements {a + 1} and {b + 1} (v{a + 1}, v{b + 1}) swapped: with their readings exchanged, the capture "
