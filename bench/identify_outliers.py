@@ -9,14 +9,16 @@ rows were named: the baseline), how many name a row (a reading beyond 5 standard
 fitgen.fitting.identify.OUTLIER_LIMIT; in the refusal's line when refused) and whether it is the slipped one first,
 and the largest standardized residual of the slipped row and of the others (medians and the worst over the units).
 Then the captures with an element that does not respond (element 3 reads a constant, its mean over the capture) and
-with two elements' channels swapped (3 and 6): how many the chi-square refuses, and how many identify refuses
+with two elements' channels swapped (3 and 6; 3 and 4, neighbours) or the two ADCs exchanged (v5-v8 read in v1-v4
+and the other way round): how many the chi-square refuses, and how many identify refuses
 because only a unit far outside its tolerances explains them (a parameter beyond PRIOR_LIMIT = 5 prior spreads,
-fitgen.fitting.unitrecord.check_explained), and which element or pair of elements a refusal names as the one to
-blame (the one whose readings, left out or exchanged, leave a capture a unit within its tolerances explains:
-fitgen.fitting.identify.blame);
-for every kind, the largest |parameter| in prior spreads.
+fitgen.fitting.unitrecord.check_explained), and what a refusal names as the one thing to blame: the element or pair
+of elements whose readings, left out or exchanged, or the turn of the ring whose order, leave a capture that a unit
+within its tolerances explains (fitgen.fitting.blame.blame). Before 2026-11-29 blame tried no turn of the ring, and
+pairs only on captures with more than three rows standing out (the column beside it), so that neighbours swapped
+and ADCs exchanged were refused without a cause. For every kind, the largest |parameter| in prior spreads.
 
-    python bench/identify_outliers.py    # about 17 minutes here (1034 s on 2 cores)
+    python bench/identify_outliers.py    # 47 minutes here sharing 2 cores with the test suite (2805 s)
 """
 
 from __future__ import annotations
@@ -50,6 +52,16 @@ def swapped(y: np.ndarray) -> np.ndarray:
     return y[:, [0, 1, 5, 3, 4, 2, 6, 7]]
 
 
+def neighbours(y: np.ndarray) -> np.ndarray:
+    """Elements 3 and 4, neighbours on the ring, wired to each other's channels."""
+    return y[:, [0, 1, 3, 2, 4, 5, 6, 7]]
+
+
+def adcs(y: np.ndarray) -> np.ndarray:
+    """The two ADCs exchanged: elements 1-4 read in v5-v8 and 5-8 in v1-v4, the ring read turned by half."""
+    return y[:, [4, 5, 6, 7, 0, 1, 2, 3]]
+
+
 def main() -> None:
     parse_args(__doc__)  # no options: one it does not know is refused, not ignored
     ctx = U.Ctx(U.N_HELD_QUICK, U.DRAWS, U.N_RANDOM, (U.HEAD,))
@@ -65,9 +77,10 @@ def main() -> None:
             unit, _ = U.draw_unit(ctx.drawing, seed)
             caps.append((unit, U.capture(unit, labels, U.HEAD[1], [seed, U.HEAD[0], 3], zero=zero)))
         faults = [(f"slip {slip:g} mm" if slip else "none", slip, None) for slip in SLIPS]
-        faults += [("element 3 dead", 0.0, dead), ("elements 3 and 6 swapped", 0.0, swapped)] if not zero else []
+        faults += [("element 3 dead", 0.0, dead), ("elements 3 and 6 swapped", 0.0, swapped),
+                   ("elements 3 and 4 swapped", 0.0, neighbours), ("two ADCs exchanged", 0.0, adcs)] if not zero else []
         for kind, slip, fault in faults:
-            refused, beyond, blamed, named, right, own, others, zmax = 0, 0, [], 0, 0, [], [], []
+            refused, beyond, blamed, named, right, own, others, zmax, many = 0, 0, [], 0, 0, [], [], [], 0
             for unit, y in caps:
                 y = y.copy() if fault is None else fault(y)
                 if slip:
@@ -82,17 +95,21 @@ def main() -> None:
                     check_explained(ident, "the capture", U.PRESET, "the bench's")
                 except InputError as exc:
                     found = re.search(r"elements? (\d+)(?: and (\d+))? \(v", str(exc))
-                    blamed += [" and ".join(g for g in found.groups() if g)] if found else []
+                    turned = re.search(r"\(the ring ([^)]*)\)", str(exc))
+                    blamed += ([" and ".join(g for g in found.groups() if g)] if found
+                               else [f"the ring {turned.group(1)}"] if turned else [])
                 zmax.append(np.abs(ident.space.in_spreads(ident.theta)).max())
                 worst = ident.row_worst
                 out = [i for i, _ in ident.outlying_rows()]
                 named += bool(out)
+                many += len(out) > 3  # before 2026-11-29 blame tried pairs only then
                 right += out[:1] == [deep]
                 own.append(worst[deep])
                 others.append(np.delete(worst, deep).max())
             n = len(caps)
             rows.append([f"{zero:g}", kind, f"{refused} of {n}", f"{beyond} of {n}",
                          ", ".join(f"{blamed.count(k)} x {k}" for k in sorted(set(blamed))) or "none",
+                         f"{many} of {n}",
                          f"{fmt(np.median(zmax))} / {fmt(np.max(zmax))}", f"{named} of {n}",
                          f"{right} of {n}" if slip else "-", f"{fmt(np.median(own))} / {fmt(np.max(own))}",
                          f"{fmt(np.median(others))} / {fmt(np.max(others))}"])
@@ -107,7 +124,7 @@ def main() -> None:
           "within its tolerances is drawn within 3). The largest |parameter| in prior spreads and the largest "
           "standardized residual: median / worst over the captures.\n")
     print(table(["zero off [mm rms]", "what is wrong", "refused (chi-square)", "refused (beyond the tolerances)",
-                 "refusals naming the element(s) to blame",
+                 "refusals naming what to blame", "more than 3 rows standing out",
                  "largest parameter [prior sd]", "captures naming a row",
                  "naming the slipped row first", f"slipped row {deep + 1}", "every other row"], rows))
 
