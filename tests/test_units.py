@@ -144,6 +144,9 @@ def test_a_drawings_symmetries_give_the_readings_of_the_sensor_so_turned(preset,
         np.testing.assert_allclose(magpylib_readings(d, moved)[:, order], magpylib_readings(d, poses), rtol=1e-9,
                                    atol=1e-12)
     assert symmetries(draw_unit(d, 4)[0]) == []
+    # places and axes written to a few decimals, as in a sensor file's list of elements: the same symmetries
+    rounded = replace(d, positions=np.round(d.positions, 3), axes=np.round(d.axes, 4))
+    assert [(w, o.tolist()) for w, o in symmetries(rounded)] == [(w, o.tolist()) for w, o in found]
 
 
 def test_unit_file_round_trips(tmp_path):

@@ -266,9 +266,10 @@ def stage_error_hint(ident: Identification) -> str:
 
 def check_explained(ident: Identification, capture, drawing: str, source: str, progress=None) -> None:
     """InputError when the physics does not explain the capture (reduced chi-square over CHI2_LIMIT), or does only
-    with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads), with the cause when one
-    element or one swapped pair alone is to blame (:func:`blame`, ``progress`` its callback) or the stage's axes are;
-    ``source``: where the reading noise came from; ``drawing``: the sensor's name."""
+    with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads), with the cause when one thing
+    alone is to blame (rows, an element, a field the stage carries, the ring's order, a swapped pair:
+    :func:`fitgen.fitting.blame.blame`, ``progress`` its callback) or the stage's axes are; ``source``: where the
+    reading noise came from; ``drawing``: the sensor's name."""
     far, bad = ident.outside_tolerances(), ident.reduced_chi2 > CHI2_LIMIT
     if not (bad or far):
         return
@@ -290,7 +291,7 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
                  "the noise; give the drawing that tolerance, schedule and identify with it (docs/calibration.md)")
     elif culprit is not None and culprit[0] == "ring":
         order = culprit[1]
-        what = dict((tuple(o.tolist()), w) for w, o in symmetries(ident.space.drawing))[order]
+        what = {tuple(o.tolist()): w for w, o in symmetries(ident.space.drawing)}[order]
         taken = ", ".join(f"v{k + 1}" for k in order)
         cause = (f"the channels against the ring, or the stage's axes against the sensor's: taken in the order {taken} "
                  f"as elements 1-{len(order)} (the ring {what}), the readings are a unit within the tolerances, to "

@@ -204,7 +204,8 @@ def draw_unit(drawing: Sensor, seed: int) -> tuple[Sensor, np.ndarray]:
 def symmetries(drawing: Sensor) -> list[tuple[str, np.ndarray]]:
     """The drawing's symmetries about its axis as element orders: (what it is, ``order``), the identity left out;
     the turn or mirror through z carries element k onto the place of element ``order[k]``, with its axis (either
-    sign: the elements are omnipolar), gain and offset. Readings ``y[:, order]`` are the sensor's so turned."""
+    sign: the elements are omnipolar), gain and offset, to 1e-3 of the ring's size (a sensor file's places written
+    to a few decimals). Readings ``y[:, order]`` are the sensor's so turned."""
     pos, n = drawing.positions, drawing.n_elements
     scale = max(float(np.abs(pos).max()), 1.0)
     out = []
@@ -214,11 +215,11 @@ def symmetries(drawing: Sensor) -> list[tuple[str, np.ndarray]]:
             c, s = math.cos(a), math.sin(a)
             m = np.array([[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, 1.0]] if mirror
                          else [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-            near = np.linalg.norm((pos @ m.T)[:, None] - pos[None], axis=2) < 1e-9 * scale
+            near = np.linalg.norm((pos @ m.T)[:, None] - pos[None], axis=2) < 1e-3 * scale
             order = np.argmax(near, axis=1)
-            same = (np.allclose(np.abs(np.sum((drawing.axes @ m.T) * drawing.axes[order], axis=1)), 1.0, atol=1e-9)
-                    and np.array_equal(drawing.gains[order], drawing.gains)
-                    and np.array_equal(drawing.offsets[order], drawing.offsets))
+            same = (np.allclose(np.abs(np.sum((drawing.axes @ m.T) * drawing.axes[order], axis=1)), 1.0, atol=1e-3)
+                    and np.allclose(drawing.gains[order], drawing.gains, rtol=1e-6)
+                    and np.allclose(drawing.offsets[order], drawing.offsets, rtol=1e-6, atol=1e-9))
             if (near.sum(axis=1) == 1).all() and len(set(order.tolist())) == n and same:
                 deg = math.degrees(a)
                 out.append((f"mirrored across the line at {deg / 2:g} deg from +x" if mirror
