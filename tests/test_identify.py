@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -746,6 +747,36 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
                    str(tmp_path / "d.toml"))
     assert_one_line_error(proc, contains="only with a unit far outside paper's tolerances (")
     assert "element 3 (v3) alone" in proc.stderr and not (tmp_path / "d.toml").exists()
+
+
+def test_a_sensor_turned_on_the_stage_is_named_and_the_axis_map_it_names_fixes_it(drawing, plan, tmp_path):
+    """The sensor sits turned by 90 deg on the stage's bed: the refusal names the ring's turn and what to put in the
+    axis map; the capture taken again with that map (each pose component from the machine's axes as the new map
+    says) is a unit's."""
+    from host.stagesettings import AxisMap
+
+    unit, _ = draw_unit(drawing, 24)
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # the stage's +x moves the magnet along +y
+    machine = plan[0][:, :3]  # mm along X, Y, Z, as the schedule asked with --stage-axes X=dx,Y=dy,Z=dz
+    y, _ = capture(unit, np.column_stack([machine @ turn.T, plan[0][:, 3:]]), 24)
+    _save_capture(tmp_path / "turned.csv", y, plan[0], {"samples_per_row": SAMPLES})
+    proc = run_cli("fitgen", "identify", str(tmp_path / "turned.csv"), "--sensor", "paper", "-o",
+                   str(tmp_path / "t.toml"))
+    assert_one_line_error(proc, contains="(the ring turned by 90 deg about z)")
+    fix = dict((old, new) for new, old in re.findall(r"(-?d[xy]) for (d[xy])", proc.stderr))
+    assert fix, proc.stderr
+    parts = []
+    for m, p, sign in AxisMap.parse("X=dx,Y=dy,Z=dz").pairs:
+        new = fix.get(p, p)
+        parts.append(f"{m}={'-' if (sign < 0) != new.startswith('-') else ''}{new.lstrip('-')}")
+    again = AxisMap.parse(",".join(parts))
+    labels = plan[0].copy()
+    for m, p, sign in again.pairs:
+        labels[:, "dx dy dz".split().index(p)] = sign * machine[:, "XYZ".index(m)]
+    _save_capture(tmp_path / "again.csv", y, labels, {"samples_per_row": SAMPLES})
+    proc = run_cli("fitgen", "identify", str(tmp_path / "again.csv"), "--sensor", "paper", "-o",
+                   str(tmp_path / "a.toml"))
+    assert proc.returncode == 0, proc.stderr
 
 
 def test_the_rows_noise_says_where_it_comes_from_with_its_figure():

@@ -73,10 +73,10 @@ def blame(ident: Identification, progress=None) -> tuple[str, tuple[int, ...]] |
     if not prob.space.moving_field and explained_within(replace(prob, space=UnitSpace.of(
             d, replace(d.tolerances, stage_field=FIELD_TRY)))):
         return ("field", ())
-    for what, order in turns:
-        trying(f"the ring {what}")
-        if explained_within(_reordered(prob, order)):
-            found.append(tuple(int(k) for k in order))
+    for turn in turns:
+        trying(f"the ring {turn.what}")
+        if explained_within(_reordered(prob, turn.order)):
+            found.append(tuple(int(k) for k in turn.order))
     if found:
         return ("ring", found[0]) if len(found) == 1 else None
     for a, b in pairs:

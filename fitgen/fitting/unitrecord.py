@@ -264,6 +264,18 @@ def stage_error_hint(ident: Identification) -> str:
             "error; else ")
 
 
+def axis_fix(m: np.ndarray) -> str:
+    """What the capture's axis map needs for poses turned by ``m`` (a symmetry's matrix) to be the labels: each
+    pose axis written for another, signed; or why no axis map can (a turn that is no multiple of 90 deg)."""
+    cols = np.round(m[:2, :2]).astype(int)
+    if not np.allclose(m[:2, :2], cols, atol=1e-9):
+        return "no axis map turns or mirrors the stage's axes so: turn the sensor on the stage, or fix the channel map"
+    names = ("dx", "dy")
+    said = [f"{'-' if cols[:, j].sum() < 0 else ''}{names[int(np.abs(cols[:, j]).argmax())]} for {names[j]}"
+            for j in range(2) if not (cols[j, j] == 1)]
+    return f"in the capture's axis map, --stage-axes, put {' and '.join(said)}, signs multiplying, and capture again"
+
+
 def check_explained(ident: Identification, capture, drawing: str, source: str, progress=None) -> None:
     """InputError when the physics does not explain the capture (reduced chi-square over CHI2_LIMIT), or does only
     with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads), with the cause when one thing
@@ -291,15 +303,14 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
                  "the noise; give the drawing that tolerance, schedule and identify with it (docs/calibration.md)")
     elif culprit is not None and culprit[0] == "ring":
         order = culprit[1]
-        what = {tuple(o.tolist()): w for w, o in symmetries(ident.space.drawing)}[order]
+        what, _, m = {tuple(t.order.tolist()): t for t in symmetries(ident.space.drawing)}[order]
         taken = ", ".join(f"v{k + 1}" for k in order)
         cause = (f"the channels against the ring, or the stage's axes against the sensor's: taken in the order {taken} "
                  f"as elements 1-{len(order)} (the ring {what}), the readings are a unit within the tolerances, to "
                  "the noise; the elements are wired in that order (the channel map"
                  + ("; two ADCs of four exchanged turn a ring of eight by 180 deg"
                     if "by 180 deg" in what and len(order) == 8 else "")
-                 + "), or the sensor sits turned on the stage or a pose axis is mirrored or swapped (the capture's "
-                 "axis map, --stage-axes)")
+                 + "), or the sensor sits turned on the stage or a pose axis is mirrored or swapped (" + axis_fix(m) + ")")
     elif culprit is not None:
         a, b = culprit[1]
         cause = (f"elements {a + 1} and {b + 1} (v{a + 1}, v{b + 1}) swapped: with their readings exchanged, the capture "

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -201,11 +202,19 @@ def draw_unit(drawing: Sensor, seed: int) -> tuple[Sensor, np.ndarray]:
 # --- unit files ----------------------------------------------------------------------------------
 
 
-def symmetries(drawing: Sensor) -> list[tuple[str, np.ndarray]]:
-    """The drawing's symmetries about its axis as element orders: (what it is, ``order``), the identity left out;
-    the turn or mirror through z carries element k onto the place of element ``order[k]``, with its axis (either
-    sign: the elements are omnipolar), gain and offset, to 1e-3 of the ring's size (a sensor file's places written
-    to a few decimals). Readings ``y[:, order]`` are the sensor's so turned."""
+class Symmetry(NamedTuple):
+    """A turn or mirror through the drawing's axis that carries every element onto another's place."""
+
+    what: str  # e.g. "turned by 90 deg about z", "mirrored across the line at 45 deg from +x"
+    order: np.ndarray  # (N,): element k goes onto the place of element order[k]
+    matrix: np.ndarray  # (3, 3): the turn or mirror, acting on positions and on poses' displacements
+
+
+def symmetries(drawing: Sensor) -> list[Symmetry]:
+    """The drawing's symmetries about its axis, the identity left out: every turn about z and mirror through z
+    that carries each element onto another's place, axis (either sign: the elements are omnipolar), gain and
+    offset, to 1e-3 of the ring's size (a sensor file's places written to a few decimals). The drawing's readings
+    at a pose whose displacement is turned by ``matrix``, taken as ``y[:, order]``, are its readings at the pose."""
     pos, n = drawing.positions, drawing.n_elements
     scale = max(float(np.abs(pos).max()), 1.0)
     out = []
@@ -222,8 +231,8 @@ def symmetries(drawing: Sensor) -> list[tuple[str, np.ndarray]]:
                     and np.allclose(drawing.offsets[order], drawing.offsets, rtol=1e-6, atol=1e-9))
             if (near.sum(axis=1) == 1).all() and len(set(order.tolist())) == n and same:
                 deg = math.degrees(a)
-                out.append((f"mirrored across the line at {deg / 2:g} deg from +x" if mirror
-                            else f"turned by {deg:g} deg about z", order))
+                out.append(Symmetry(f"mirrored across the line at {deg / 2:g} deg from +x" if mirror
+                                    else f"turned by {deg:g} deg about z", order, m))
     return out
 
 
