@@ -25,14 +25,14 @@ def _reordered(prob: Problem, order) -> Problem:
     return replace(prob, readings=prob.readings[:, order], valid=prob.valid[:, order], noise=prob.noise[order])
 
 
-def blame(ident: Identification, progress=None) -> tuple[str, tuple[int, ...]] | None:
+def blame(ident: Identification, progress=None) -> tuple[str, tuple] | None:
     """What to blame for a capture the physics does not explain within the tolerances, when one thing alone is:
     ``("rows", (i, ...))``, the one to three rows that stand out, when the others without them read as a unit
     within its tolerances to the noise (a slip, a glitch: tried first, as one bad reading also leaves its element
     to blame); else ``("dead", (k,))``, the one element whose readings, left out, do (it does not respond, or is
     wired to another channel); else ``("field", ())`` when they do with a field the stage carries allowed for (its
-    motors, a steel bed); else ``("ring", order)``, the one symmetry of the drawing (turn or mirror,
-    fitgen.physics.units.symmetries) whose element order does, tried when more than three rows stand out or the
+    motors, a steel bed); else ``("ring", symmetry)``, the one symmetry of the drawing (turn or mirror,
+    fitgen.physics.units.Symmetry) whose element order does, tried when more than three rows stand out or the
     stage map lies far out (a ring read turned reads as a sensor turned on the stage: the same readings); else
     ``("swapped", (a, b))``, the one pair of elements whose readings, exchanged, do (their channels wired the other
     way round), tried when more than three rows stand out, or among the elements that lie far out (neighbours
@@ -76,7 +76,7 @@ def blame(ident: Identification, progress=None) -> tuple[str, tuple[int, ...]] |
     for turn in turns:
         trying(f"the ring {turn.what}")
         if explained_within(_reordered(prob, turn.order)):
-            found.append(tuple(int(k) for k in turn.order))
+            found.append(turn)
     if found:
         return ("ring", found[0]) if len(found) == 1 else None
     for a, b in pairs:

@@ -14,7 +14,7 @@ from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PINNABLE, PRIOR_
                                      Identification, identify, tilting)
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
-from fitgen.physics.units import STIFFENING, UnitSpace, symmetries
+from fitgen.physics.units import STIFFENING, UnitSpace
 
 MORE_SAMPLES = 8  # identify's report: what rows of this many times the samples would pin (16 -> 128)
 
@@ -272,7 +272,7 @@ def axis_fix(m: np.ndarray) -> str:
         return "no axis map turns or mirrors the stage's axes so: turn the sensor on the stage, or fix the channel map"
     names = ("dx", "dy")
     said = [f"{'-' if cols[:, j].sum() < 0 else ''}{names[int(np.abs(cols[:, j]).argmax())]} for {names[j]}"
-            for j in range(2) if not (cols[j, j] == 1)]
+            for j in range(2) if cols[j, j] != 1]
     return f"in the capture's axis map, --stage-axes, put {' and '.join(said)}, signs multiplying, and capture again"
 
 
@@ -302,14 +302,13 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
                  f"= {FIELD_TRY:g} mT/mm in the drawing's file), the capture reads as a unit within the tolerances, to "
                  "the noise; give the drawing that tolerance, schedule and identify with it (docs/calibration.md)")
     elif culprit is not None and culprit[0] == "ring":
-        order = culprit[1]
-        what, _, m = {tuple(t.order.tolist()): t for t in symmetries(ident.space.drawing)}[order]
+        what, order, m = culprit[1]
         taken = ", ".join(f"v{k + 1}" for k in order)
         cause = (f"the channels against the ring, or the stage's axes against the sensor's: taken in the order {taken} "
                  f"as elements 1-{len(order)} (the ring {what}), the readings are a unit within the tolerances, to "
                  "the noise; the elements are wired in that order (the channel map"
                  + ("; two ADCs of four exchanged turn a ring of eight by 180 deg"
-                    if "by 180 deg" in what and len(order) == 8 else "")
+                    if np.allclose(m, np.diag([-1.0, -1.0, 1.0])) and len(order) == 8 else "")
                  + "), or the sensor sits turned on the stage or a pose axis is mirrored or swapped (" + axis_fix(m) + ")")
     elif culprit is not None:
         a, b = culprit[1]

@@ -199,9 +199,6 @@ def draw_unit(drawing: Sensor, seed: int) -> tuple[Sensor, np.ndarray]:
     return unit, theta
 
 
-# --- unit files ----------------------------------------------------------------------------------
-
-
 class Symmetry(NamedTuple):
     """A turn or mirror through the drawing's axis that carries every element onto another's place."""
 
@@ -234,6 +231,9 @@ def symmetries(drawing: Sensor) -> list[Symmetry]:
                 out.append(Symmetry(f"mirrored across the line at {deg / 2:g} deg from +x" if mirror
                                     else f"turned by {deg:g} deg about z", order, m))
     return out
+
+
+# --- unit files ----------------------------------------------------------------------------------
 
 
 def _num(x: float) -> str:
