@@ -115,6 +115,7 @@ def _run_capture(args, prog: str) -> None:
     bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion)
     if motion is not None:
         bus.feed.motion_step = 0.0  # follow the stage at every conversion: a move ends between two rows
+        bus.feed.touching = True  # the simulated rig decided contact on the tool (host.simrig.SimRig.publish)
     stage = None
     t0 = time.monotonic()
     try:

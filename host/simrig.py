@@ -4,7 +4,9 @@
 position behind it (a dead band of ``backlash`` mm per axis, then a fresh Gaussian ``repeatability`` error at the
 end of every move), and the magnet's pose: while the tool is in contact (its pose-dz at most ``adhesion`` above
 first contact), magnet displacement = ``M @`` tool displacement from first contact (in the sensor's axes, through
-the true axis map); otherwise the magnet rests. It hands the pose to ``target.set_pose``: a
+the true axis map); otherwise the magnet rests. The contact is decided here, on the tool: a ``SensorFeed`` driven
+by a rig is set ``touching`` so that a built unit does not judge the magnet's dz as a label's again (its own map
+then acts after ``M``). It hands the pose to ``target.set_pose``: a
 ``host.simbus.SensorFeed`` or ``SimBus`` in the same process, or a ``PoseFile`` that a capture in another process
 follows (``capture --simulate --sim-pose-file``).
 """

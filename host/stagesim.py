@@ -413,6 +413,7 @@ def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", s
     cmap = parse_spec("ads1115@0x48:0-3,ads1115@0x49:0-3")
     clock = VirtualClock()
     bus = SimBus.for_channel_map(cmap, sensor.with_transfer("gmr"), None, clock=clock, noise=noise, seed=seed)
+    bus.feed.touching = True  # the rig decides contact on the tool
     rig = SimRig(bus.feed, None, contact=contact, start=start, backlash=backlash, repeatability=repeatability,
                  seed=seed + 1)
     settings = StageSettings(AxisMap.parse("X=dx,Y=dy,Z=dz"), parse_ranges(limits, "--stage-limits"), feed=6000.0,

@@ -471,6 +471,65 @@ def sim_rig_and_bus(sensor, flavor, *, M=M_RIG, seed=0, **kw):
     return srv, bus, AdcArray(bus, cmap, clock=clock), clock
 
 
+# a rig whose indenter lifts the magnet as it shears it: 1.6 mm of dx raises it 0.064 mm while the tool is in contact
+M_LIFT = np.array([[0.95, 0.0, 0.0], [0.0, 0.95, 0.0], [0.04, 0.0, 0.92]])
+
+
+def unit_file(path, seed=5):
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.units import draw_unit, write_unit
+
+    drawing = load_sensor("paper").with_transfer("gmr")
+    write_unit(path, draw_unit(drawing, seed)[0], "paper", {"seed": seed})
+    return load_sensor(path).with_transfer("gmr")
+
+
+def composed(unit, M):
+    """The unit as it reads behind a rig of map M: its own map after the rig's."""
+    from dataclasses import replace
+
+    return replace(unit, stage_map=unit.stage_map @ M)
+
+
+def test_a_rig_that_lifts_the_magnet_in_contact_leaves_a_unit_in_contact(tmp_path):
+    """The rig decides contact on the tool's height; a built unit's own off-skin test, which reads a label's dz,
+    must not judge the magnet's displacement again (it read the magnet 0.08 mm up as a lifted tool: the rest)."""
+    from host.simsensor import SensorFeed
+
+    unit = unit_file(tmp_path / "u.toml")
+    feed = SensorFeed(unit)
+    feed.touching = True
+    rig = SimRig(feed, M_LIFT, contact=CONTACT, start=START, backlash=0.0, repeatability=0.0)
+    rest = readings(unit, np.zeros((1, 5)), adc_bits=0)[0]
+    rig.move(np.array(CONTACT) + [2.0, 0.0, 0.0])  # sheared 2 mm at first contact
+    assert rig.pose[2] > 0.05  # the magnet lifted past the off-skin height, the tool in contact
+    want = readings(composed(unit, M_LIFT), [[2.0, 0.0, 0.0, 0.0, 0.0]], adc_bits=0)[0]
+    np.testing.assert_allclose(feed.volts, want, rtol=0, atol=1e-12)
+    assert np.abs(want - rest).max() > 0.05  # far from the rest it was read as before
+    rig.move(np.array(CONTACT) + [2.0, 0.0, 0.3])  # the tool lifted off the skin: the magnet rests
+    np.testing.assert_allclose(feed.volts, rest, rtol=0, atol=1e-12)
+
+
+def test_a_capture_command_of_a_unit_follows_a_rig_that_lifts_the_magnet(tmp_path):
+    """The same through `capture --simulate --sensor unit.toml --sim-pose-file`, the rig in another process's
+    place (stage-sim's): every row reads the unit behind the rig's map, those sheared far at dz 0 included."""
+    unit = unit_file(tmp_path / "u.toml")
+    rows = [(dx, 0.0, dz) for dz in (0.0, -1.0) for dx in (-1.6, 0.0, 1.6)]
+    sched = write_schedule(tmp_path / "s.csv", rows)
+    out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
+    with server("grbl", PoseFile(posefile), M=M_LIFT, backlash=0.0) as srv:
+        proc = run_host(*capture_args(sched, out, srv.url, posefile, "--sensor", str(tmp_path / "u.toml"),
+                                      "--sim-noise", "0"), input=jog_lines(srv))
+    assert proc.returncode == 0, proc.stderr
+    got = np.array(data_rows(out))
+    poses = np.zeros((len(rows), 5))
+    poses[:, :3] = rows
+    want = readings(composed(unit, M_LIFT), poses, adc_bits=0)
+    assert np.abs(got[:, :8] - want).max() < 2e-4  # the ADC's LSB (0.125 mV)
+    rest = readings(unit, np.zeros((1, 5)), adc_bits=0)[0]
+    assert np.abs(got[2, :8] - rest).max() > 0.05  # dx 1.6 at dz 0, which read the rest before
+
+
 @pytest.mark.parametrize("flavor", ["grbl", "marlin"])
 def test_capture_through_the_stage_gives_the_magnet_poses_of_the_rig(sensor, tmp_path, flavor):
     sched = load_schedule(write_schedule(tmp_path / "s.csv", grid()))

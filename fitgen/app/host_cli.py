@@ -459,8 +459,8 @@ def build_parser() -> Parser:
     ss.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal instead (prints its path)")
     ss.add_argument("--pose-file", metavar="FILE", help="write the magnet's pose here (capture --sim-pose-file FILE)")
     ss.add_argument("--map", metavar="a,b,c;d,e,f;g,h,i",
-                    help="stage-to-magnet displacement map M, rows (default: identity); one that starts with a minus "
-                         "goes after an equals sign: --map=-1,0,0;0,1,0;0,0,1")
+                    help="stage-to-magnet displacement map M, rows (default: identity; a built unit's own map acts "
+                         "after it); one that starts with a minus goes after an equals sign: --map=-1,0,0;0,1,0;0,0,1")
     ss.add_argument("--axes", default="X=dx,Y=dy,Z=dz", help="the rig's true machine -> sensor axes")
     ss.add_argument("--backlash", default="0.03", help="lost motion per axis on reversal, mm (default 0.03)")
     ss.add_argument("--repeatability", default="0.002", help="random error at the end of each move, mm rms "

@@ -92,15 +92,16 @@ def contact_poses(poses: np.ndarray) -> np.ndarray:
     return np.where(off_skin(poses)[:, None], 0.0, poses)
 
 
-def magnet_frame(sensor: Sensor, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def magnet_frame(sensor: Sensor, poses: np.ndarray, touching: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Element positions and axes in the magnet's own frame, each (P, N, 3).
 
     For a built unit (fitgen.physics.units) the pose's displacement is the stage's: the magnet moves by
     ``stage_map @ (dx, dy, dz)``, a press shortened by the elastomer's stiffening (:func:`pressed`); its tilt is
-    the pose's applied after the unit's rest tilt; a label off the skin (:func:`contact_poses`) leaves it at rest.
+    the pose's applied after the unit's rest tilt; a label off the skin (:func:`contact_poses`) leaves it at rest,
+    unless ``touching`` says every pose is in contact (a simulated rig that decided it on the tool's own height).
     """
     given = as_poses(poses)
-    centre, R = _placed(sensor, given)
+    centre, R = _placed(sensor, given, touching)
     rel = sensor.positions[None, :, :] - centre[:, None, :]
     # R^T v for every pose and element: local = rel @ R
     local = np.einsum("pnj,pjk->pnk", rel, R)
@@ -141,8 +142,8 @@ def check_box(sensor: Sensor, ranges: dict, origin: str) -> None:
                      "narrow the box's dz (or tilt) range")
 
 
-def _unchecked(sensor: Sensor, given: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    moved = given if sensor.is_drawing else contact_poses(given)
+def _unchecked(sensor: Sensor, given: np.ndarray, touching: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    moved = given if sensor.is_drawing or touching else contact_poses(given)
     shift = moved[:, :3] if sensor.is_drawing else pressed(moved[:, :3], sensor.stiffening) @ sensor.stage_map.T
     centre = np.asarray(sensor.magnet.rest_center) + shift
     R = rotation_matrices(moved[:, 3], moved[:, 4])
@@ -151,10 +152,10 @@ def _unchecked(sensor: Sensor, given: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return centre, R
 
 
-def _placed(sensor: Sensor, given: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _placed(sensor: Sensor, given: np.ndarray, touching: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The magnet's centre (P, 3) and rotation (P, 3, 3) at the given poses, checked as
     :func:`check_above_board` says."""
-    centre, R = _unchecked(sensor, given)
+    centre, R = _unchecked(sensor, given, touching)
     low = lowest_point(sensor, centre, R)
     bad = np.flatnonzero(low <= sensor.board_thickness)
     if bad.size:
@@ -173,10 +174,11 @@ def inside_magnet(sensor: Sensor, local: np.ndarray) -> np.ndarray:
     return (r <= sensor.magnet.diameter / 2) & (np.abs(local[..., 2]) <= sensor.magnet.height / 2)
 
 
-def field_readings(sensor: Sensor, poses) -> np.ndarray:
-    """Signed B . axis_k in mT at every element for every pose, shape (P, N)."""
+def field_readings(sensor: Sensor, poses, touching: bool = False) -> np.ndarray:
+    """Signed B . axis_k in mT at every element for every pose, shape (P, N); ``touching``: see
+    :func:`magnet_frame`."""
     poses = as_poses(poses)
-    local, axes = magnet_frame(sensor, poses)
+    local, axes = magnet_frame(sensor, poses, touching)
     bad = inside_magnet(sensor, local)
     if np.any(bad):
         p, k = np.argwhere(bad)[0]

@@ -78,8 +78,9 @@ def apply_transfer(
     return out
 
 
-def readings(sensor: Sensor, poses, **kw) -> np.ndarray:
-    """Element readings (P, N) for a batch of poses, through the sensor's transfer."""
+def readings(sensor: Sensor, poses, touching: bool = False, **kw) -> np.ndarray:
+    """Element readings (P, N) for a batch of poses, through the sensor's transfer; ``touching``: every pose in
+    contact whatever its dz (fitgen.physics.pose.magnet_frame)."""
     from fitgen.physics.pose import field_readings
 
-    return apply_transfer(sensor, field_readings(sensor, poses), **kw)
+    return apply_transfer(sensor, field_readings(sensor, poses, touching), **kw)
