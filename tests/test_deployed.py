@@ -248,6 +248,45 @@ def test_verify_fails_when_float_rounding_exceeds_the_share(fitted_files):
                           contains="--sensor two-rings: the model was fitted on another sensor")
 
 
+def test_a_units_default_fit_passes_verifys_rounding_gate(tmp_path, monkeypatch):
+    """A built unit's equations take three times the drawing's terms, and with the drawing's rounding noise their
+    float rounding passed verify's 5 % gate (unit 2: thx). The default fit takes such a fit again with the rounding
+    noise doubled (fitgen.fitting.family.rounding_checked): gcc's float C of the model it writes passes the gate."""
+    require_tool("gcc")
+    import fitgen.fitting.family as family
+    from fitgen.physics.dataset import load_dataset
+
+    data, out = tmp_path / "u.csv", tmp_path / "u.json"
+    proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "2", "--grid",
+                   "paper-sim", "--random", "5000", "-o", str(data))
+    assert proc.returncode == 0, proc.stderr
+    unit = load_sensor(tmp_path / "u.unit.toml")
+    ds = load_dataset(data)
+    held = held_out_set(unit, DEFAULT_RANGES, OUTPUTS, n=2000, draws=0)
+
+    def c_share(model):
+        with CompiledModel(model, "float", "unrolled") as cm:
+            clean = cm.predict(held.clean.astype(np.float32).astype(float))[0]
+        ref = model.predict(held.clean)
+        return np.abs(clean - ref).max(axis=0) / np.abs(ref - held.truth).max(axis=0)
+
+    monkeypatch.setattr(family, "ROUNDING_RETRIES", 0)  # the fit as it was: the drawing's rounding noise alone
+    before, record = family.fit_auto(ds, None, FitSettings(), unit)
+    assert "rounding" not in record
+    assert c_share(before).max() > 0.05, c_share(before)
+    monkeypatch.undo()
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert "rounding: the float rounding's share" in proc.stderr
+    info = json.loads(out.read_text())["fit"]
+    assert info["family"]["rounding"]["factor"] >= 16 and info["precision"]["rounding_noise"] >= 16 * 2.0**-24
+    from fitgen.equations.model import load_model
+
+    assert c_share(load_model(out)).max() <= 0.05
+    proc = run_cli("tactile-host", "verify", str(out), "--precision", "float", "--style", "unrolled")
+    assert proc.returncode == 0, proc.stdout
+
+
 def test_verify_says_why_it_measured_no_share(fitted_files, tmp_path):
     """A model file without a held_out record: verify names that, and refuses a --sensor it could not use."""
     require_tool("gcc")

@@ -131,13 +131,13 @@ def cmd_fit(args) -> int:
         posterior = unit_posterior(unit_file, sensor)  # a missing or bad posterior said now, not after the fit
     auto = auto_compares(args.family, settings)
     steps = len(outputs) + (ds.n_inputs if settings.refine else 0)  # the equations, then the forward model's
-    bar = Progress("fit", steps * (2 if auto and sensor is not None else 1))
+    bar = Progress("fit", per_fit := steps * (2 if auto and sensor is not None else 1))
     progress = bar.per_item(lambda name, step, aic, n_terms: f"{name}: step {step}, {n_terms} terms, AIC {aic:.1f}")
     with bar:  # the first note shows at once: forming the rows' products takes seconds on a large dataset
         bar.update(0, f"{len(ds.inputs):,} rows: the candidate terms' products")
-        model, family = fit_family(ds, outputs, settings, sensor, args.family, progress)
-    problem = model.float_problem() if settings.precision == "float" else ""
-    if problem:  # fitted for float, it cannot run there
+        model, family = fit_family(ds, outputs, settings, sensor, args.family, progress, again=lambda f: bar.grow(
+            per_fit, f"rounding would matter on the device: fitted again for {f:g} unit roundoffs"))
+    if problem := model.float_problem() if settings.precision == "float" else "":  # fitted for float, not runnable
         raise InputError(f"{problem} (--precision double fits it for double); nothing written")
     model.fit_info.update(family=family, dataset=str(args.data))
     if lifted:

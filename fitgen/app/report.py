@@ -60,6 +60,8 @@ def fit_assumptions(info: dict) -> str:
     fam = info.get("family")
     if isinstance(fam, dict) and "name" in fam:
         line += f"\ncandidates: family {fam['name']}" + (f" (auto: {fam.get('why', '')})" if fam.get("auto") else "")
+        if isinstance(fam.get("rounding"), dict):
+            line += f"\nrounding: {fam['rounding'].get('why', '')}"
     ref = info.get("refine")
     if isinstance(ref, dict) and "steps" in ref:
         sd = ", ".join(f"{k} {v:.3g}" for k, v in ref.get("prior_sd", {}).items())

@@ -27,6 +27,11 @@ class Progress:
         self.stream.write(f"\r{self.label} [{bar:<24}] {self.done}/{self.total} {now - self.start:5.1f}s {note}\033[K")
         self.stream.flush()
 
+    def grow(self, steps: int, note: str = "") -> None:
+        """More work than the total said (a fit taken again): ``steps`` more, shown with ``note``."""
+        self.total += max(int(steps), 0)
+        self.update(0, note)
+
     def per_item(self, note):
         """A callback ``(item, *more)`` for work done one item after another: the bar moves one as
         each item after the first begins, and shows ``note(item, *more)``."""

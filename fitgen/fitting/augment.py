@@ -41,7 +41,8 @@ UNIT_ROUNDOFF = {"float": 2.0**-24, "fixed": 2.0**-24, "double": 2.0**-53}
 # Rounding noise is taken ROUNDING_FACTOR times the unit roundoff. A term costs up to 3 + 3
 # roundings (coefficient, product, sum; up to 3 for 1/v^4) and the error that matters is the
 # largest over the held-out poses, not the RMS the fit weighs: 8 keeps the float C's deviation
-# under 5 % of the model's held-out error on every layout of docs/deployed-accuracy.md.
+# under 5 % of the model's held-out error on every layout of docs/deployed-accuracy.md. A built unit's
+# equations, with three times the terms, can need more: fitgen.fitting.family.rounding_checked doubles it there.
 ROUNDING_FACTOR = 8.0
 _ROWS = 2048  # data rows per block of noise rows (each gives n_inputs rows)
 GRAM_FLOOR = 1e-7  # the least rounding noise (ROUNDING_FACTOR * u) under which the noise rows fold as a Gram

@@ -41,6 +41,9 @@ class FitSettings:
     noise: float | None = None
     # the precision the equations must survive (fitgen.fitting.augment.UNIT_ROUNDOFF); None: exact arithmetic
     precision: str | None = "float"
+    # its rounding taken as noise of this many unit roundoffs per term (fitgen.fitting.family raises it where the
+    # device's rounding would matter on validation poses)
+    rounding_factor: float = ROUNDING_FACTOR
     harmonic_degree: int = 0
     # Gauss-Newton steps on a fitted forward model after the equations (fitgen.equations.refine; 0: none), and
     # the cap on that model's terms per element
@@ -127,7 +130,7 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     extra = []
     if settings.precision is not None:
         # from the data's own triangle, before the noise rows: rounding scales with the terms' sizes
-        extra.append([rounding_rows(A, ROUNDING_FACTOR * UNIT_ROUNDOFF[settings.precision])])
+        extra.append([rounding_rows(A, settings.rounding_factor * UNIT_ROUNDOFF[settings.precision])])
     gram = None
     if noise > 0 and gram_fold(settings.precision):
         gram = (shared or SharedRows(inputs, noise, harmonics)).gram(cands, d, d_jac)
@@ -315,7 +318,7 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
         "noise": noise,
         "precision": {"target": settings.precision,
                       "rounding_noise": None if settings.precision is None
-                      else ROUNDING_FACTOR * UNIT_ROUNDOFF[settings.precision]},
+                      else settings.rounding_factor * UNIT_ROUNDOFF[settings.precision]},
         "d_terms": "none" if d is None else settings.d_source,
         "dataset_sha256": ds.sha256,
         "dataset_rows": ds.n_rows,
