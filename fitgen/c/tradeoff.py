@@ -35,6 +35,7 @@ from fitgen.equations.fixedpoint import build_fixed, sensor_input_scale as fixed
 from fitgen.equations.model import Model
 from fitgen.equations.rounding import PRECISIONS
 from fitgen.equations.terms import FAMILIES, HARMONIC_DEGREE
+from fitgen.fitting.family import rounding_checked
 from fitgen.fitting.fit import FitSettings, fit_model
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.scenes import Scene, unresolved_warnings
@@ -372,7 +373,11 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
     n_fits = len({kn.fit_key for kn in grid})
     for kn in grid:
         if kn.fit_key not in fits:
-            fits[kn.fit_key] = fit_model(train, outputs, kn.settings(), sensor=sensor)
+            # what `fitgen fit` gives with these knobs: fitted again where its rounding would matter on the device
+            fits[kn.fit_key], record = rounding_checked(lambda s: (fit_model(train, outputs, s, sensor=sensor), {}),
+                                                        train, kn.settings(), sensor)
+            if "rounding" in record:
+                notes.append(f"fit {kn.label.rsplit(' ', 2)[0]}: {record['rounding']['why']}")
             if progress:  # the total grows to the builds once the fits say how many distinct ones there are
                 progress(f"fit {kn.label}", n_fits + len(grid))
 
