@@ -347,7 +347,8 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
         size = built(library, Path(tmp) / "build" if build_path is None else build_path, f"{precision}, {style}")
         if size.fits(spec):
             return size
-        hint = "no other precision or style fits: fit fewer terms (fitgen fit --k bic, or --max-terms N)"
+        hint = ("no other precision or style fits: fit fewer terms (fitgen fit --k bic, or --max-terms N; `fitgen "
+                f"tradeoff SENSOR --scene full --core {board}` measures which fit and what they cost in accuracy)")
         for k, (prec, sty, option) in enumerate(_alternatives(precision, style)):
             try:
                 alt = render_arduino(model, cmap, Path(tmp) / f"alt{k}", precision=prec, style=sty)

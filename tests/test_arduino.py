@@ -136,6 +136,28 @@ def test_a_model_that_does_not_fit_is_refused_naming_a_setting_that_does(tmp_pat
     assert named[0] + " (" in proc.stderr and RAM_STACK.search(proc.stderr.split(named[0])[-1])
 
 
+def test_a_units_twin_that_fits_no_setting_is_told_how_to_find_one_that_does(tmp_path):
+    """A built unit's equations take about three times the drawing's terms: the default fit of a unit's dense
+    simulation (harmonics, no fixed point) fits the Uno in no precision or style. The line says to fit fewer terms
+    and names the sweep that measures which fit; a twin capped as that sweep finds builds."""
+    require_tool("arduino-builder")
+    data = tmp_path / "twin.csv"
+    proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "2", "--grid",
+                   "paper-sim", "--random", "5000", "-o", str(data))
+    assert proc.returncode == 0, proc.stderr
+    for name, extra in (("twin", []), ("capped", ["--max-terms", "40"])):
+        proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / f"{name}.json"), "--held-out", "0", *extra)
+        assert proc.returncode == 0, proc.stderr
+    proc = _build_cli(str(tmp_path / "twin.json"), tmp_path / "big")
+    assert_one_line_error(proc, 2, "does not fit the uno: flash over")
+    assert "no other precision or style fits: fit fewer terms" in proc.stderr
+    assert "`fitgen tradeoff SENSOR --scene full --core uno` measures which fit" in proc.stderr
+    ok = _build_cli(str(tmp_path / "capped.json"), tmp_path / "TactilePose")
+    assert ok.returncode == 0, ok.stderr
+    flash, ram = map(int, SIZE.search(ok.stderr).groups())
+    assert flash <= UNO.flash and ram <= UNO.ram
+
+
 def test_fixed_point_of_the_no_roots_model_fits_the_uno(sensor, tmp_path):
     """The paper grid fitted without roots (138 terms) in fixed point fits the Uno (the issue's acceptance): its
     header is the plan for the Uno's 16-bit multiply, its 32x32->64 products in AVR assembly (fitgen/c/avrasm.py;
