@@ -375,3 +375,27 @@ def test_labels_are_the_stages_or_the_magnets():
     np.testing.assert_allclose(magnet.targets, magnet_poses, rtol=0, atol=0)
     assert stage.meta["labels"] == "stage" and magnet.meta["labels"] == "magnet"
     assert np.abs(magnet.targets[:, :3] - stage.targets[:, :3]).max() > 0.01
+
+
+def test_predict_says_when_the_drawings_model_reads_a_built_unit(tmp_path):
+    """The drawing's model on a unit's readings estimates poses far outside the box it was fitted in, while
+    the domain status says nothing (the readings lie inside each element's fitted range): predict says so in
+    its line; on the drawing's own readings it does not."""
+    def cli(*args):
+        proc = run_cli("fitgen", *args)
+        assert proc.returncode == 0, proc.stderr
+        return proc.stderr
+
+    cli("simulate", "--sensor", "paper", "--transfer", "gmr", "--grid", "paper-sim", "-o", str(tmp_path / "d.csv"))
+    cli("fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"))
+    for name, extra in (("unit", ["--unit", "3"]), ("own", [])):
+        cli("simulate", "--sensor", "paper", "--transfer", "gmr", *extra, "--random", "300", "--seed", "4",
+            "--noise", "0.0005", "-o", str(tmp_path / f"{name}.csv"))
+    said = cli("predict", str(tmp_path / "m.json"), str(tmp_path / "unit.csv"), "-o", str(tmp_path / "e.csv"))
+    est = np.loadtxt(tmp_path / "e.csv", delimiter=",", skiprows=1)
+    far = np.any(np.abs(est[:, :5]) > [6, 6, 4, 15, 15], axis=1) | (est[:, 2] > 2)  # the box's width past it
+    assert far.sum() > 100  # the model is no calibration of the unit
+    assert f"{int((far & (est[:, 5] >= 0)).sum())} rows estimated outside the pose box the model was fitted in" in said
+    assert "a built unit needs its own calibration" in said
+    own = cli("predict", str(tmp_path / "m.json"), str(tmp_path / "own.csv"), "-o", str(tmp_path / "o.csv"))
+    assert "outside the pose box" not in own

@@ -170,6 +170,7 @@ def _model_and_target(args):
 def cmd_predict(args) -> int:
     import numpy as np
 
+    from fitgen.app.report import predict_notes
     from fitgen.base.fileio import write_atomic
     from fitgen.c.codegen import check_magnitudes
     from fitgen.equations.model import check_input_units
@@ -209,10 +210,7 @@ def cmd_predict(args) -> int:
         with np.errstate(over="ignore"):  # a reading beyond float's range is inf, as the C's conversion makes it
             pred, status = model.predict(inputs, with_status=True, precision=args.precision)
     write_atomic(args.output, estimates_csv(model.output_names, pred, status))
-    clamped, refused = int(np.sum(status > 0)), int(np.sum(status < 0))
-    notes = ([f"{clamped} row{'s' * (clamped != 1)} clamped into the domain"] if clamped else []) + (
-        [f"{refused} row{'s' * (refused != 1)} with no estimate (status -1: a reading not finite in "
-         f"{args.precision})"] if refused else [])
+    notes = predict_notes(model, pred, status, args.precision)
     print(f"wrote {len(pred)} estimate{'s' * (len(pred) != 1)} to {args.output}"
           + (f" ({'; '.join(notes)})" if notes else ""),
           file=sys.stderr)

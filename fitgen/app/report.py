@@ -219,3 +219,28 @@ def fit_notes(model: Model, rows: int, data, units) -> list[str]:
         notes.append(f"{e.name} has {len(e.terms)} terms on {rows} rows: it follows the rows' noise more than the "
                      "sensor; more rows, --max-terms, or fit the identified unit's simulated rows (fitgen identify)")
     return notes
+
+
+def predict_notes(model: Model, pred: np.ndarray, status: np.ndarray, precision: str) -> list[str]:
+    """What `fitgen predict` says of its rows beyond the estimates: rows clamped into the domain, rows with no
+    estimate, and rows whose estimate lies outside the pose box the model was fitted in (its held-out record's)
+    by more than the box's width: readings of another sensor, as the drawing's model reads a built unit's."""
+    clamped, refused = int(np.sum(status > 0)), int(np.sum(status < 0))
+    notes = ([f"{clamped} row{'s' * (clamped != 1)} clamped into the domain"] if clamped else []) + (
+        [f"{refused} row{'s' * (refused != 1)} with no estimate (status -1: a reading not finite in "
+         f"{precision})"] if refused else [])
+    box = (model.fit_info.get("held_out") or {}).get("box") or {}
+    cols = [(j, o) for j, o in enumerate(model.output_names) if o in box]
+    if cols and len(pred):
+        lo = np.array([box[o][0] for _, o in cols])
+        hi = np.array([box[o][1] for _, o in cols])
+        est = pred[:, [j for j, _ in cols]]
+        with np.errstate(invalid="ignore"):
+            far = np.any((est < lo - (hi - lo)) | (est > hi + (hi - lo)), axis=1) & (status >= 0)
+        if n := int(far.sum()):
+            where = ", ".join(f"{o} {lo[i]:g}..{hi[i]:g}" for i, (_, o) in enumerate(cols))
+            notes.append(f"{n} row{'s' * (n != 1)} estimated outside the pose box the model "
+                         f"was fitted in ({where}) by more than its width: readings of another sensor than the "
+                         "model's? a built unit needs its own calibration (docs/calibration.md)")
+    return notes
+
