@@ -42,6 +42,11 @@ def test_demo_runs_end_to_end(tmp_path):
     assert set(rows) == {"dx", "dy", "dz", "thx", "thy"}, text[-1500:]
     for name, (drawing, twin) in rows.items():
         assert twin < drawing / 5, (name, drawing, twin)
+    # the twin's model file says how it was fitted, as `fitgen fit` writes it: the family, and the rounding noise
+    # where the fit's check raised it
+    fam = load_model(out / "twin-model.json").fit_info["family"]
+    assert fam["auto"] and fam["name"] in ("all", "harmonics")
+    assert "rounding" not in fam or fam["rounding"]["factor"] > 8
 
 
 def test_demo_bad_output_folder(tmp_path):

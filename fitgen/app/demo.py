@@ -159,7 +159,8 @@ def _unit_stage(out: Path, drawing_model) -> None:
     twin = ident.unit("twin").with_noise(unit_noise)
     train = simulate(twin, np.vstack([grid_poses(PAPER_GRIDS["paper-sim"]), random_poses(5000, DEFAULT_RANGES,
                                                                                           pose_rng(1))]))
-    model, _ = fit_auto(train, None, FitSettings(), twin, progress=_fit_progress())
+    model, family = fit_auto(train, None, FitSettings(), twin, progress=_fit_progress())
+    model.fit_info["family"] = family  # the family chosen, and the rounding noise where it was raised
     model.fit_info["held_out"] = evaluate(model, twin, box_of(train.poses()), posterior=load_posterior(twin_file))
     model.save(out / "twin-model.json")
     direct = fit_model(rows_on_the_skin(ds)[0], ("dx", "dy", "dz"), FitSettings.family("no-roots"))
