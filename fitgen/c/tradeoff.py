@@ -79,9 +79,14 @@ class Knobs:
         return self.family + (f"+refine{self.refine}" if self.refine else "")
 
     @property
-    def label(self) -> str:
+    def fit_label(self) -> str:
+        """The knobs of the fit alone (:attr:`fit_key`'s): ``aic cap=- harmonics``."""
         k = self.k if isinstance(self.k, str) else f"k={self.k:g}"
-        return f"{k} cap={self.max_terms or '-'} {self.method} {self.precision} {self.style}"
+        return f"{k} cap={self.max_terms or '-'} {self.method}"
+
+    @property
+    def label(self) -> str:
+        return f"{self.fit_label} {self.precision} {self.style}"
 
     def settings(self) -> FitSettings:
         k = 2.0 if self.k == "aic" else self.k
@@ -377,7 +382,7 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
             fits[kn.fit_key], record = rounding_checked(lambda s: (fit_model(train, outputs, s, sensor=sensor), {}),
                                                         train, kn.settings(), sensor)
             if "rounding" in record:
-                notes.append(f"fit {kn.label.rsplit(' ', 2)[0]}: {record['rounding']['why']}")
+                notes.append(f"fit {kn.fit_label}: {record['rounding']['why']}")
             if progress:  # the total grows to the builds once the fits say how many distinct ones there are
                 progress(f"fit {kn.label}", n_fits + len(grid))
 

@@ -16,12 +16,12 @@ max error to an output, it is fitted again with the rounding noise doubled (at m
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.physics.dataset import Dataset
-from dataclasses import replace
-
 from fitgen.fitting.fit import FitSettings, fit_model, noise_to_add, ring_harmonics
 from fitgen.fitting.holdout import N_POSES, box_of, deployed_errors, held_out_set
 from fitgen.equations.model import Model
