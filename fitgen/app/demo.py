@@ -156,7 +156,7 @@ def _unit_stage(out: Path, drawing_model) -> None:
     except InputError as exc:  # matplotlib is an extra: the demo goes on without the figure
         print(f"   (no figure: {exc})")
     t = time.monotonic()
-    twin = ident.unit("twin").with_noise(unit_noise)
+    twin = load_sensor(str(twin_file))  # as `fitgen simulate --sensor twin.toml` reads it: report --sensor takes it
     train = simulate(twin, np.vstack([grid_poses(PAPER_GRIDS["paper-sim"]), random_poses(5000, DEFAULT_RANGES,
                                                                                           pose_rng(1))]))
     model, family = fit_auto(train, None, FitSettings(), twin, progress=_fit_progress())
