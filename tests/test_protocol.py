@@ -392,6 +392,25 @@ def test_flash_loads_and_reads_back(paper_model, paper_model_file, precision):
         assert fake.active[1].precision == precision
 
 
+def test_flash_names_the_unit_a_model_was_fitted_for(paper_model, tmp_path):
+    """Without --sensor-id the blob carries the name of the sensor the model's held-out figures are for: a unit
+    file's (identify -o unit-042.toml), so a device says which unit's calibration it holds; 'paper' before."""
+    import dataclasses
+
+    from fake_device import FakeDevice
+
+    def with_sensor(name):
+        held = {**(paper_model.fit_info.get("held_out") or {}), "sensor": name}
+        m = dataclasses.replace(paper_model, fit_info={**paper_model.fit_info, "held_out": held})
+        return str(m.save(tmp_path / f"{len(name)}.json"))
+
+    for name, carried in (("unit-042", "unit-042"), ("a-unit-named-at-length", "paper")):
+        with FakeDevice(paper_model, "double", transport="tcp") as fake:
+            proc = run_cli("tactile-host", "flash", "--port", fake.url, with_sensor(name))
+            assert proc.returncode == 0, proc.stderr
+            assert fake.active[1].sensor_id == carried and f"sensor id {carried!r}" in proc.stdout
+
+
 def test_a_board_that_restarts_when_its_port_opens_is_waited_for(paper_model, paper_model_file):
     """A board that loses what comes in its first 0.8 s after the port opens (an Uno's bootloader, after the
     reset DTR gives it): a request sent at once goes unanswered, while `tactile-host flash` and

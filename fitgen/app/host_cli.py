@@ -15,20 +15,22 @@ from host.stagesettings import APPROACH
 
 
 def cmd_flash(args) -> int:
+    from fitgen.c.calblob import model_sensor_id
     from fitgen.equations.model import load_model
 
     from host.device import BOOT_WAIT, Device, FlashFailed, flash_model
 
     timeout = parse_positive(args.timeout, "--timeout", most=LONGEST_WAIT)
     model = load_model(args.model)
+    sensor_id = model_sensor_id(model) if args.sensor_id is None else args.sensor_id
     try:
         with Device.open(args.port, timeout=timeout, ready=BOOT_WAIT) as dev:
-            blob, info, answer = flash_model(dev, model, args.model, sensor_id=args.sensor_id, fma=args.fma)
+            blob, info, answer = flash_model(dev, model, args.model, sensor_id=sensor_id, fma=args.fma)
     except FlashFailed as exc:
         print(f"tactile-host flash: error: {exc}", file=sys.stderr)
         return EXIT_CHECK_FAILED
     print(f"flashed model {model.sha256} ({len(blob)}-byte {info.precision} blob{', fma' if args.fma else ''}, "
-          f"sensor id {args.sensor_id!r}) to {args.port}: the device reports active model {answer}, "
+          f"sensor id {sensor_id!r}) to {args.port}: the device reports active model {answer}, "
           "read-back identical")
     return 0
 
@@ -350,8 +352,9 @@ def build_parser() -> Parser:
     f.add_argument("model", metavar="MODEL")
     f.add_argument("--port", required=True, metavar="URL",
                    help="serial port: /dev/ttyACM0, /dev/pts/N or socket://HOST:PORT")
-    f.add_argument("--sensor-id", default="paper", help="sensor id stored in the blob (ASCII, <= 16 bytes; "
-                                                       "default paper)")
+    f.add_argument("--sensor-id", help="sensor id stored in the blob (ASCII, <= 16 bytes; default: the name of "
+                                       "the sensor the model's held-out figures are for, such as a unit file's, "
+                                       "else paper)")
     f.add_argument("--fma", action="store_true", help="the device sums the terms by fused multiply-add")
     f.add_argument("--timeout", default="2", help="seconds to wait for each answer (default 2)")
     f.set_defaults(func=cmd_flash)

@@ -105,6 +105,17 @@ def check_sensor_id(sensor_id: str) -> str:
     return sensor_id
 
 
+def model_sensor_id(model: Model, fallback: str = "paper") -> str:
+    """The sensor id a blob of ``model`` carries unless told: the name of the sensor its held-out figures are
+    for (a unit file's, as identify names it: ``-o unit-042.toml`` gives ``unit-042``), where it is one a blob
+    can carry; else ``fallback``."""
+    name = (model.fit_info.get("held_out") or {}).get("sensor")
+    try:
+        return check_sensor_id(name) if isinstance(name, str) and name else fallback
+    except InputError:
+        return fallback
+
+
 def to_blob(model: Model, precision: str = "float", sensor_id: str = "paper", fma: bool = False) -> bytes:
     """The calibration blob (format version 1) of ``model`` for a firmware of this precision."""
     if precision not in PRECISION_CODES:
