@@ -1,6 +1,7 @@
 """The HIL suite against the real firmware: the emulated Cortex-M4 (QEMU mps2-an386) and the host build on a pty."""
 
 import dataclasses
+import re
 import socket
 import threading
 import xml.etree.ElementTree as ET
@@ -224,6 +225,18 @@ def test_cli_emulate_suite_writes_junit(model_file, tmp_path):
     assert "PASS" in proc.stdout and "ns per estimate" in proc.stdout
     root = ET.parse(junit).getroot()
     assert root.get("failures") == "0" and int(root.get("tests")) >= 6
+
+
+def test_emulate_compiles_in_the_name_of_the_unit_the_model_is_for(model, tmp_path):
+    """Without --sensor-id the firmware says which sensor's calibration it holds: the name the model's held-out
+    figures are for (a unit file's), as tactile-host flash writes it; before, every build said 'paper'."""
+    require_tool("gcc")
+    held = {**(model.fit_info.get("held_out") or {}), "sensor": "unit-042"}
+    path = dataclasses.replace(model, fit_info={**model.fit_info, "held_out": held}).save(tmp_path / "u.json")
+    proc = run_cli("tactile-hil", "emulate", "--target", "host", "--model", str(path), "--suite", "--vectors", "50",
+                   "--fuzz", "0", "--no-held-out")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert re.search(r"\| info \| pass \|.*, sensor unit-042 \|", proc.stdout), proc.stdout
 
 
 def test_the_emulator_ends_with_emulate_even_when_it_is_killed(model_file):

@@ -17,10 +17,18 @@ from fitgen.base.errors import InputError
 
 
 def _load(args):
+    from fitgen.c.calblob import model_sensor_id
     from fitgen.c.verify import data_inputs
     from fitgen.equations.model import load_model
+    from hil.firmware import check_sensor_id as check_compiled_id
 
     model = load_model(args.model)
+    if args.sensor_id is None:  # the model's sensor, where the firmware can compile it in and a blob carry it
+        args.sensor_id = model_sensor_id(model)
+        try:
+            check_compiled_id(args.sensor_id)
+        except InputError:
+            args.sensor_id = "paper"
     return model, (data_inputs(model, args.data) if getattr(args, "data", None) else None)
 
 
@@ -182,7 +190,8 @@ def _suite_options(p, suite=None) -> None:
     s.add_argument("--fuzz", type=int, default=FUZZ, help=f"random or mutated frames to send (default {FUZZ})")
     s.add_argument("--no-flash", action="store_true", help="skip the calibration flashing checks")
     s.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
-    p.add_argument("--sensor-id", default="paper", help="sensor id written into flashed blobs (default paper)")
+    p.add_argument("--sensor-id", help="sensor id compiled in and written into flashed blobs (default: the name of "
+                                       "the sensor the model's held-out figures are for, a unit file's; else paper)")
     p.add_argument("--fma", action="store_true", help="the compiled-in model sums terms by fma")
     p.add_argument("--timeout", type=seconds, default=2.0, help="seconds to wait for each reply (default 2)")
     add_held_out_options(s)
@@ -254,7 +263,8 @@ def _check(args) -> None:
     if args.command == "emulate":
         _suite_alone(args)
     check_written(args)
-    (check_compiled_id if args.command == "emulate" else check_sensor_id)(args.sensor_id)
+    if args.sensor_id is not None:
+        (check_compiled_id if args.command == "emulate" else check_sensor_id)(args.sensor_id)
 
 
 def _suite_alone(args) -> None:
