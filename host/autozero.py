@@ -2,17 +2,23 @@
 
 The zero is the offset subtracted from each (temperature-compensated) reading so that the
 sensor at rest reads as the model's rest readings (``reference``). ``--tare`` measures it once;
-:class:`AutoZero` keeps measuring it. A sample counts as at rest when every estimate lies inside
-the rest band (|dx|, |dy|, |dz| <= ``band_mm``, |thx|, |thy| <= ``band_deg``) and the readings
-are quiet: over the last ``window`` samples each element's spread stays within ``spread_factor``
-times the noise floor. After ``hold`` seconds of rest without a break, the zero moves a fraction
-``rate`` of the way to the window's mean offset (an exponential follower, so one odd window moves it
-little), the update is logged and the hold starts again. Any sample outside the band or with a loud
-window restarts the hold: a press, even a light steady one, is never averaged into the zero unless
-its estimate stays inside the rest band.
+:class:`AutoZero` keeps measuring it. The sensor counts as at rest over the last ``window``
+samples when the readings are quiet (each element's spread within ``spread_factor`` times the
+noise floor) and their mean estimate lies inside the rest band (``band_mm`` for dx, dy, dz;
+``band_deg`` for thx, thy) about what the model estimates at rest. The mean, not each sample: a
+built unit's twin barely sees tilt at rest and the paper's procedure amplifies noise, so their
+single estimates at rest scatter past any useful band (:func:`rest_estimates`); where even the
+mean scatters past the band, the band is ``SCATTER_SIGMAS`` times the mean's scatter.
 
-Deterministic: the state depends only on the samples' times, readings and estimates, so a
-recorded run replays to the same zeros (``tactile-host replay``).
+After ``hold`` seconds of rest without a break, the zero moves a fraction ``rate`` of the way to
+the window's mean offset (an exponential follower, so one odd window moves it little), the update
+is logged and the hold starts again. A press moves the mean out of the band or makes the window
+loud, and restarts the hold: a press, even a light steady one, is never averaged into the zero
+unless its mean estimate stays inside the rest band.
+
+Deterministic: the state depends only on the samples' times, readings and estimates, and the band
+only on the model, the rest readings and the noise floor, so a recorded run replays to the same
+zeros (``tactile-host replay``).
 """
 
 from __future__ import annotations
@@ -23,6 +29,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fitgen.base.errors import InputError
+
+SCATTER_SIGMAS = 5.0  # band floor, in standard deviations of the window's mean estimate at rest
+SCATTER_DRAWS = 2000  # noisy rest readings the scatter is measured on
 
 
 @dataclass(frozen=True)
@@ -44,6 +53,20 @@ class AutoZeroSettings:
         if self.window < 4:
             raise InputError(f"auto-zero window must be >= 4 samples, got {self.window}")
         return self
+
+
+def rest_estimates(predict, reference: np.ndarray, noise: float,
+                   draws: int = SCATTER_DRAWS) -> tuple[np.ndarray, np.ndarray]:
+    """Each output's mean and standard deviation over single estimates at rest: ``predict`` (rows of readings in,
+    rows of estimates out) on the rest readings with the noise floor's Gaussian noise added (a fixed seed: a run
+    and its replay get the same band)."""
+    ref = np.asarray(reference, dtype=float)
+    rows = ref + np.random.default_rng(0).normal(0.0, noise, (draws, ref.size))
+    est = np.asarray(predict(rows), dtype=float)
+    est = est[np.all(np.isfinite(est), axis=1)]
+    if not len(est):  # no noisy rest reading has a finite estimate: the band stays about 0, as given
+        return np.zeros(est.shape[1]), np.zeros(est.shape[1])
+    return est.mean(axis=0), est.std(axis=0)
 
 
 @dataclass
@@ -68,6 +91,8 @@ class AutoZero:
     outputs: tuple[str, ...]
     zero: np.ndarray = None  # current offsets (start: the tare's, or 0)
     settings: AutoZeroSettings = AutoZeroSettings()
+    rest: np.ndarray = None  # each output's mean estimate at rest, the band's centre (rest_estimates; 0 without)
+    scatter: np.ndarray = None  # each output's standard deviation over single estimates at rest (rest_estimates)
     updates: list[ZeroUpdate] = field(default_factory=list)
     log = None  # callable(str) for each update
 
@@ -78,10 +103,23 @@ class AutoZero:
         if not self.noise > 0:
             raise InputError(f"auto-zero needs the noise floor (V rms) > 0, got {self.noise}")
         lin = [o in ("dx", "dy", "dz") for o in self.outputs]
-        self._band = np.array([self.settings.band_mm if m else self.settings.band_deg for m in lin])
+        given = np.array([self.settings.band_mm if m else self.settings.band_deg for m in lin])
+        mean_sd = (np.zeros(len(lin)) if self.scatter is None else np.asarray(self.scatter, dtype=float)) \
+            / np.sqrt(self.settings.window)
+        self.band = np.maximum(given, SCATTER_SIGMAS * mean_sd)
+        self.rest = np.zeros(len(lin)) if self.rest is None else np.asarray(self.rest, dtype=float)
+        self.widened = tuple(o for o, b, g in zip(self.outputs, self.band, given) if b > g)
         self._window: deque = deque(maxlen=self.settings.window)
+        self._estimates: deque = deque(maxlen=self.settings.window)
         self._since: float | None = None
         self._first: float | None = None  # the first sample's t
+
+    @classmethod
+    def for_model(cls, model, reference: np.ndarray, noise: float, **kw) -> "AutoZero":
+        """An AutoZero whose band is centred and widened for ``model`` (a :class:`fitgen.equations.model.Model`)
+        at these rest readings and noise floor."""
+        rest, scatter = rest_estimates(model.predict, reference, noise)
+        return cls(reference, noise, model.output_names, rest=rest, scatter=scatter, **kw)
 
     def correct(self, readings: np.ndarray) -> np.ndarray:
         """The readings with the current zero taken off."""
@@ -91,19 +129,16 @@ class AutoZero:
         """Feed one sample (readings before the zero is taken off, and the estimate made from it)."""
         s = self.settings
         self._first = t if self._first is None else self._first
-        at_rest = status >= 0 and bool(np.all(np.abs(estimate) <= self._band))
-        if not at_rest:
-            self._window.clear()
-            self._since = None
-            return None
+        if status < 0 or not np.all(np.isfinite(estimate)):
+            return self._restart()
         self._window.append(np.array(readings, dtype=float))
+        self._estimates.append(np.array(estimate, dtype=float))
         if len(self._window) < s.window:
             return None
         block = np.asarray(self._window)
-        if np.any(block.std(axis=0) > s.spread_factor * self.noise):
-            self._window.clear()
-            self._since = None
-            return None
+        if np.any(block.std(axis=0) > s.spread_factor * self.noise) or \
+                np.any(np.abs(np.mean(self._estimates, axis=0) - self.rest) > self.band):
+            return self._restart()
         if self._since is None:
             self._since = t
             return None
@@ -114,8 +149,23 @@ class AutoZero:
         self.zero = self.zero + shift
         up = ZeroUpdate(t, len(self.updates) + 1, shift, t - self._first)
         self.updates.append(up)
-        self._window.clear()
-        self._since = None
+        self._restart()
         if self.log is not None:
             self.log(up.describe())
         return up
+
+    def _restart(self) -> None:
+        self._window.clear()
+        self._estimates.clear()
+        self._since = None
+
+    def describe_band(self) -> str:
+        """The band's widened outputs and why, or '' when none is."""
+        if not self.widened:
+            return ""
+        units = {o: ("mm" if o in ("dx", "dy", "dz") else "deg") for o in self.outputs}
+        parts = [f"{o} {self.scatter[i]:.3g} {units[o]}" for i, o in enumerate(self.outputs) if o in self.widened]
+        bands = [f"{o} +-{self.band[i]:.3g} {units[o]}" for i, o in enumerate(self.outputs) if o in self.widened]
+        return (f"auto-zero: this model's single estimates at rest scatter by {', '.join(parts)} rms; the "
+                f"{self.settings.window}-sample mean's rest band is {', '.join(bands)} "
+                f"({SCATTER_SIGMAS:g} sigma of that mean, wider than --rest-band)")

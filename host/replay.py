@@ -262,5 +262,6 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
         start = az_rec["start"] if az_rec else (None if tare is None else tare.tolist())
         if np.asarray(ref, dtype=float).shape != (n,):
             raise InputError(f"the run's header records {np.size(ref)} rest readings for {n} readings")
-        az = AutoZero(np.array(ref, dtype=float), float(noise), model.output_names, zero=start, settings=settings)
+        ref = np.array(ref, dtype=float)
+        az = AutoZero.for_model(model, ref, float(noise), zero=start, settings=settings)
     return Corrections(tare, tc, az)

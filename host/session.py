@@ -184,7 +184,9 @@ class ReadoutSession:
                     self.bus.feed.motion = motion
             autozero = None
             if args.auto_zero:
-                autozero = AutoZero(reference, noise, model.output_names, zero=offsets, settings=az_settings)
+                autozero = AutoZero.for_model(model, reference, noise, zero=offsets, settings=az_settings)
+                if autozero.widened:
+                    print(f"{prog}: {autozero.describe_band()}", file=sys.stderr)
                 autozero.log = lambda text: print(f"{prog}: {text}", file=sys.stderr)
             self.corrections = Corrections(offsets, tempcomp, autozero)
             self.reference, self.noise = reference, noise

@@ -207,6 +207,52 @@ def test_auto_zero_follows_drift_at_rest_and_never_during_a_press():
             AutoZeroSettings(**bad).checked()
 
 
+def test_auto_zero_tests_the_windows_mean_where_single_estimates_scatter_past_the_band():
+    # a built unit's twin reads tilt at rest within about 1 deg rms a sample: past the 1.5 deg band one sample
+    # in eight, so a test of every sample never held 1 s; the window's mean scatters by an eighth of that
+    ref = np.full(8, 1.0)
+    rng = np.random.default_rng(2)
+    offset = np.linspace(-2e-3, 2e-3, 8)
+    scatter = np.array([0.002, 0.002, 0.004, 1.0, 0.5])
+    az = AutoZero(ref, 5e-4, OUTPUTS, settings=AutoZeroSettings(window=16, hold=0.5),
+                  rest=np.array([0, 0, -0.01, 0.03, 0.01]),
+                  scatter=scatter)
+    assert not az.widened and az.describe_band() == ""
+    t = 0.0
+    for _ in range(400):
+        t += 0.05
+        az.observe(t, ref + offset + rng.normal(0, 5e-4, 8), az.rest + scatter * rng.normal(size=5), 0)
+    assert len(az.updates) >= 8
+    np.testing.assert_allclose(az.zero, offset, atol=3e-4)
+    n = len(az.updates)
+    for _ in range(400):  # a steady press of 0.2 mm: the mean leaves the band although single samples are quiet
+        t += 0.05
+        press = np.array([0, 0, -0.2, 0, 0])
+        az.observe(t, ref + offset + rng.normal(0, 5e-4, 8), press + scatter * rng.normal(size=5), 0)
+    assert len(az.updates) == n
+    # the paper's procedure reads dz at rest within 0.35 mm a sample: the mean's 5 sigma is wider than 0.08 mm
+    wide = AutoZero(ref, 5e-4, OUTPUTS, scatter=np.array([0.01, 0.01, 0.35, 0.7, 1.6]))
+    assert wide.widened == ("dz",) and wide.band[2] == pytest.approx(5 * 0.35 / 8)
+    assert "dz 0.35 mm rms" in wide.describe_band() and "dz +-0.219 mm" in wide.describe_band()
+
+
+def test_auto_zero_runs_with_a_model_whose_estimates_at_rest_are_noisy(model_file, tmp_path):
+    """The paper's procedure (no noise in the fit) reads dz at rest within 0.35 mm a sample: auto-zero updated
+    never with it, and now does at rest, centred on what the model reads at rest, and still not in a press."""
+    run = tmp_path / "run.jsonl"
+    common = ["--model", model_file, "--adc", TWO_CHIPS, "--auto-zero", "--rest-hold", "0.2", "--count", "400"]
+    proc = run_cli("tactile-host", "read", *common, "--simulate", "0,0,0,0,0", "--record", str(run),
+                   "-o", str(tmp_path / "rest.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert re.search(r"single estimates at rest scatter by dz 0\.3\d+ mm rms; the 64-sample mean's rest band is "
+                     r"dz \+-0\.2\d\d mm", proc.stderr), proc.stderr
+    assert len(re.findall(r"auto-zero update \d+ at", proc.stderr)) >= 2, proc.stderr
+    rep = run_cli("tactile-host", "replay", str(run))
+    assert rep.returncode == 0 and "estimates identical to the recorded ones" in rep.stdout, rep.stdout + rep.stderr
+    pressed = run_cli("tactile-host", "read", *common, "--simulate", "0,0,-1,0,0", "-o", str(tmp_path / "p.csv"))
+    assert pressed.returncode == 0 and "auto-zero update" not in pressed.stderr, pressed.stderr
+
+
 @pytest.fixture(scope="module")
 def rest_model_file(sensor, tmp_path_factory):
     """A model whose noisy estimates at rest stay inside the rest band: the paper ring cannot see tilt at

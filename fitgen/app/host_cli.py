@@ -263,7 +263,8 @@ def _readout_options(p) -> None:
                    help="tare, then keep re-zeroing slowly while the sensor is at rest (never while touched); "
                         "each update is logged")
     p.add_argument("--rest-band", metavar="MM,DEG",
-                   help="at rest: every displacement estimate within MM and tilt within DEG (default 0.08,1.5)")
+                   help="at rest: the last 64 samples' mean displacement estimate within MM and tilt within DEG "
+                        "of what the model reads at rest (default 0.08,1.5; wider where that mean scatters more)")
     p.add_argument("--rest-hold", metavar="S", help="seconds at rest before an auto-zero update (default 1)")
     p.add_argument("--temp-comp", metavar="FILE.json",
                    help="per-element temperature compensation (tactile-host capture --temperature); needs the "
