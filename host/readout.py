@@ -124,6 +124,27 @@ def _wait(clock, until: float, stop, end: float | None) -> bool:
 WAIT_SLICE = 0.1  # s: how late a Ctrl-C during a slow --rate's wait is seen
 
 
+REST_SHARE = 0.25  # of the fitted box's width: how far from rest a model may read the tare's target
+
+
+def check_rest_reference(model, reference: np.ndarray, spec: str) -> None:
+    """InputError when ``model`` reads the rest readings ``reference`` (from ``spec``) as a pose far from rest, by
+    more than a quarter of its fitted box's width (0.5 mm, 2.5 deg without a box): another sensor's rest, as the
+    drawing's is to a unit's twin, which a tare would map every reading onto."""
+    est = np.asarray(model.predict(np.asarray(reference, dtype=float)[None]), dtype=float)[0]
+    box = (model.fit_info.get("held_out") or {}).get("box") or {}
+    far = []
+    for j, o in enumerate(model.output_names):
+        lo, hi = box.get(o, (-2.0, 2.0) if o.startswith("d") else (-5.0, 5.0))
+        if not abs(est[j]) <= REST_SHARE * (hi - lo):  # NaN too
+            far.append(f"{o} {est[j]:.3g} {'mm' if o.startswith('d') else 'deg'}")
+    if far:
+        raise InputError(f"the model reads the rest readings of {spec} as {', '.join(far)}, far from rest: they are "
+                         "another sensor's, and a tare onto them would bend every estimate; give --rest the sensor "
+                         "file the model was fitted on (a unit's twin: the unit file identify wrote) or a dataset of "
+                         "this sensor's own with rows at rest")
+
+
 @dataclass
 class Tare:
     measured: np.ndarray  # mean rest readings

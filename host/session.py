@@ -23,7 +23,7 @@ from host.channelmap import Settings, channel_map, check_full_scale
 from host.clock import REAL_CLOCK
 from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
-from host.readout import Corrections, RunRecord, rest_reference, tare
+from host.readout import Corrections, RunRecord, check_rest_reference, rest_reference, tare
 from host.simbus import simulated_bus
 from host.temperature import Thermometer, load_tempcomp, split_channel_map, temperature_input
 
@@ -156,6 +156,8 @@ class ReadoutSession:
         check_full_scale(cmap, model.input_min, model.input_max)
         need_ref = args.tare or args.auto_zero
         reference = rest_reference(args.rest or args.sensor, model.n_inputs) if need_ref else None
+        if need_ref:
+            check_rest_reference(model, reference, f"--rest {args.rest}" if args.rest else f"--sensor {args.sensor}")
         self.engine = make_engine(args.engine, model, **({"precision": args.precision, "cc": args.cc}
                                                          if args.engine == "c" else {}))
         self.bus = None

@@ -18,7 +18,7 @@ from host.adc import AdcArray, DeviceSilent
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
 from host.engine import CEngine, PythonEngine
-from host.readout import LineFormat, Readout, rest_reference, tare
+from host.readout import LineFormat, Readout, check_rest_reference, rest_reference, tare
 from host.simbus import SimBus
 
 from conftest import Terminal, assert_one_line_error, require_tool, run_cli
@@ -162,6 +162,23 @@ def test_rest_reference_from_a_dataset(sensor, tmp_path):
         rest_reference(str(tmp_path / "e.csv"), 8)
     with pytest.raises(InputError, match="model takes 4"):
         rest_reference("paper", 4)
+
+
+def test_a_tare_onto_another_sensors_rest_is_refused(model, model_file, sensor, tmp_path):
+    """A unit's readings tared onto the drawing's rest (or the drawing's model tared onto a unit's) bent every
+    estimate silently: the model reads the target itself far from rest, and the readout says so before it starts."""
+    from fitgen.physics.units import draw_unit, write_unit
+
+    unit = write_unit(tmp_path / "unit-7.toml", draw_unit(sensor, 7)[0], "paper")
+    with pytest.raises(InputError, match=r"reads the rest readings of --rest u as .*far from rest"):
+        check_rest_reference(model, rest_reference(str(unit), 8), "--rest u")
+    check_rest_reference(model, rest_reference("paper", 8), "--sensor paper")  # its own: quiet
+    for extra in (["--tare", "--rest", str(unit)], ["--auto-zero", "--sensor", str(unit), "--simulate", "0,0,0,0,0"]):
+        proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_1115, "--count", "3",
+                       "-o", str(tmp_path / "out.csv"), *extra, *(["--simulate", "0,0,0,0,0"] if "--tare" in extra
+                                                                    else []))
+        assert_one_line_error(proc, contains="far from rest: they are another sensor's")
+        assert not (tmp_path / "out.csv").exists()
 
 
 def test_transient_errors_are_retried_and_counted_without_losing_samples(sensor, model, c_engine):
