@@ -125,6 +125,7 @@ WAIT_SLICE = 0.1  # s: how late a Ctrl-C during a slow --rate's wait is seen
 
 
 REST_SHARE = 0.25  # of the fitted box's width: how far from rest a model may read the tare's target
+REST_FLOOR = {"mm": 0.1, "deg": 0.5}  # ... and at least this, were a box's width 0
 
 
 def check_rest_reference(model, reference: np.ndarray, spec: str) -> None:
@@ -135,9 +136,10 @@ def check_rest_reference(model, reference: np.ndarray, spec: str) -> None:
     box = (model.fit_info.get("held_out") or {}).get("box") or {}
     far = []
     for j, o in enumerate(model.output_names):
-        lo, hi = box.get(o, (-2.0, 2.0) if o.startswith("d") else (-5.0, 5.0))
-        if not abs(est[j]) <= REST_SHARE * (hi - lo):  # NaN too
-            far.append(f"{o} {est[j]:.3g} {'mm' if o.startswith('d') else 'deg'}")
+        unit = "mm" if o.startswith("d") else "deg"
+        lo, hi = box.get(o, (-2.0, 2.0) if unit == "mm" else (-5.0, 5.0))
+        if not abs(est[j]) <= max(REST_SHARE * (hi - lo), REST_FLOOR[unit]):  # NaN too
+            far.append(f"{o} {est[j]:.3g} {unit}")
     if far:
         raise InputError(f"the model reads the rest readings of {spec} as {', '.join(far)}, far from rest: they are "
                          "another sensor's, and a tare onto them would bend every estimate; give --rest the sensor "
