@@ -53,6 +53,13 @@ def test_demo_runs_end_to_end(tmp_path):
                   "--plot", str(tmp_path / "plots"), "--sensor", str(out / "twin.toml"))
     assert rep.returncode == 0, rep.stderr
     assert (tmp_path / "plots" / "sweep_thx.png").is_file()
+    # and it names the unit file, as `fitgen fit` does: verify and the HIL suite simulate its held-out readings again
+    # (without the file's path they could not, and said the rounding's share was not measured)
+    from fitgen.fitting.holdout import clean_readings
+
+    twin_model = load_model(out / "twin-model.json")
+    assert twin_model.fit_info["held_out"]["sensor_file"] == str((out / "twin.toml").resolve())
+    assert clean_readings(twin_model) is not None
 
 
 def test_demo_bad_output_folder(tmp_path):

@@ -114,9 +114,9 @@ def _unit_stage(out: Path, drawing_model) -> None:
 
     from fitgen.fitting.family import fit_auto
     from fitgen.fitting.fit import FitSettings, fit_model
-    from fitgen.fitting.holdout import box_of, evaluate, held_out_set
+    from fitgen.fitting.holdout import N_POSES, fitted_held_out, held_out_set
     from fitgen.fitting.identify import identify
-    from fitgen.fitting.unitrecord import device_noise, load_posterior, row_noise, save
+    from fitgen.fitting.unitrecord import device_noise, row_noise, save
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.fitting.schedule import schedule, schedule_csv
     from fitgen.physics.sensor import load_sensor
@@ -161,7 +161,8 @@ def _unit_stage(out: Path, drawing_model) -> None:
                                                                                           pose_rng(1))]))
     model, family = fit_auto(train, None, FitSettings(), twin, progress=_fit_progress())
     model.fit_info["family"] = family  # the family chosen, and the rounding noise where it was raised
-    model.fit_info["held_out"] = evaluate(model, twin, box_of(train.poses()), posterior=load_posterior(twin_file))
+    # as `fitgen fit` records it: with the unit file's path, so that verify and the HIL suite find the twin again
+    model.fit_info["held_out"] = fitted_held_out(model, twin, train, N_POSES, Path(twin_file).resolve())
     model.save(out / "twin-model.json")
     direct = fit_model(rows_on_the_skin(ds)[0], ("dx", "dy", "dz"), FitSettings.family("no-roots"))
     print(f"   twin's model -> {out / 'twin-model.json'} ({time.monotonic() - t:.1f} s)")
