@@ -27,11 +27,12 @@ starts to its end), the mean dz estimate, and any auto-zero update that fell ins
 
 Second table, auto-zero's rest test on models whose single estimates at rest scatter: the same run
 (drift, presses; no compensation) with auto-zero testing every sample against the rest band
-(`before`, the rule until the window's mean was tested) and testing the window's mean, centred and
-widened as `tactile-host read` builds it (`now`, `AutoZero.for_model`), against `tare only`. Models:
-the default fit above; the paper's procedure (`--noise 0`) on the drawing; and unit 7 of the drawing
-(`fitgen simulate --unit 7`) read through its own equations (fitted as `fitgen fit` fits them, on
-the unit's own simulation: the twin of an exact identification).
+(`before`, the rule until the window's mean was tested: `AutoZeroSettings(test="sample")`, as replay
+zeroes a run recorded then) and testing the window's mean, centred and widened as `tactile-host
+read` builds it (`now`, `AutoZero.for_model`), against `tare only`. Models: the default fit above;
+the paper's procedure (`--noise 0`) on the drawing; and unit 7 of the drawing (`fitgen simulate
+--unit 7`) read through its own equations (fitted as `fitgen fit` fits them, on the unit's own
+simulation: the twin of an exact identification).
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, ran
 from fitgen.physics.transfer import readings
 from fitgen.physics.units import draw_unit
 from host.adc import AdcArray
-from host.autozero import AutoZero
+from host.autozero import AutoZero, AutoZeroSettings
 from host.capture import Schedule, capture
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
@@ -120,15 +121,6 @@ class Collect:
         self.out.append(list(sample["out"].values()))
 
 
-class PerSample(AutoZero):
-    """Auto-zero as it was: every sample's estimate inside the band about 0 as given, then the window's test."""
-
-    def observe(self, t, readings, estimate, status):
-        if status < 0 or np.any(np.abs(estimate) > self.band):
-            return self._restart()
-        return super().observe(t, readings, estimate, status)
-
-
 def run_flow(flow: str, sensor, model, cmap, tin, tc, reference=None) -> dict:
     clock = VirtualClock()
     d = None if flow == "noise only" else drift()
@@ -146,7 +138,8 @@ def run_flow(flow: str, sensor, model, cmap, tin, tc, reference=None) -> dict:
     if flow in ("auto-zero", "both", "now"):
         az = AutoZero.for_model(model, reference, noise, zero=t0.offsets)
     elif flow == "before":
-        az = PerSample(reference, noise, model.output_names, zero=t0.offsets)
+        az = AutoZero(reference, noise, model.output_names, zero=t0.offsets,
+                      settings=AutoZeroSettings(test="sample"))
     comp = tc if flow in ("temperature compensation", "both") else None
     corrections = Corrections(t0.offsets, comp, az)
     col = Collect()

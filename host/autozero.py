@@ -42,6 +42,9 @@ class AutoZeroSettings:
     window: int = 64  # samples whose spread must be at the noise floor
     spread_factor: float = 3.0
     rate: float = 0.5  # fraction of the way to the measured offset per update
+    # "mean": the window's mean estimate about the model's rest; "sample": every estimate about 0, as a run
+    # recorded before the mean was tested (its header names no test) was zeroed, so that it replays exactly
+    test: str = "mean"
 
     def checked(self) -> "AutoZeroSettings":
         for name in ("band_mm", "band_deg", "hold", "spread_factor"):
@@ -52,6 +55,8 @@ class AutoZeroSettings:
             raise InputError(f"auto-zero rate must be in (0, 1], got {self.rate}")
         if self.window < 4:
             raise InputError(f"auto-zero window must be >= 4 samples, got {self.window}")
+        if self.test not in ("mean", "sample"):
+            raise InputError(f"auto-zero test must be 'mean' or 'sample', got {self.test!r}")
         return self
 
 
@@ -104,10 +109,11 @@ class AutoZero:
             raise InputError(f"auto-zero needs the noise floor (V rms) > 0, got {self.noise}")
         lin = [o in ("dx", "dy", "dz") for o in self.outputs]
         given = np.array([self.settings.band_mm if m else self.settings.band_deg for m in lin])
-        mean_sd = (np.zeros(len(lin)) if self.scatter is None else np.asarray(self.scatter, dtype=float)) \
+        sample = self.settings.test == "sample"
+        mean_sd = (np.zeros(len(lin)) if self.scatter is None or sample else np.asarray(self.scatter, dtype=float)) \
             / np.sqrt(self.settings.window)
         self.band = np.maximum(given, SCATTER_SIGMAS * mean_sd)
-        self.rest = np.zeros(len(lin)) if self.rest is None else np.asarray(self.rest, dtype=float)
+        self.rest = np.zeros(len(lin)) if self.rest is None or sample else np.asarray(self.rest, dtype=float)
         self.widened = tuple(o for o, b, g in zip(self.outputs, self.band, given) if b > g)
         self._window: deque = deque(maxlen=self.settings.window)
         self._estimates: deque = deque(maxlen=self.settings.window)
@@ -129,7 +135,8 @@ class AutoZero:
         """Feed one sample (readings before the zero is taken off, and the estimate made from it)."""
         s = self.settings
         self._first = t if self._first is None else self._first
-        if status < 0 or not np.all(np.isfinite(estimate)):
+        if status < 0 or not np.all(np.isfinite(estimate)) or \
+                (s.test == "sample" and np.any(np.abs(estimate) > self.band)):
             return self._restart()
         self._window.append(np.array(readings, dtype=float))
         self._estimates.append(np.array(estimate, dtype=float))

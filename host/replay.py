@@ -257,8 +257,8 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
             who = "--auto-zero" if auto_zero else "the run's header asks for auto-zero, which"
             raise InputError(f"{who} needs the rest readings and the noise floor, which a run records only when it "
                              "was read with --tare or --auto-zero, and this one was not")
-        settings = AutoZeroSettings(**{k: az_rec[k] for k in AutoZeroSettings.__dataclass_fields__}) if az_rec \
-            else AutoZeroSettings()
+        settings = AutoZeroSettings(**{k: az_rec[k] for k in AutoZeroSettings.__dataclass_fields__ if k != "test"},
+                                    test=az_rec.get("test", "sample")) if az_rec else AutoZeroSettings()
         start = az_rec["start"] if az_rec else (None if tare is None else tare.tolist())
         if np.asarray(ref, dtype=float).shape != (n,):
             raise InputError(f"the run's header records {np.size(ref)} rest readings for {n} readings")

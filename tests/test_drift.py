@@ -249,6 +249,15 @@ def test_auto_zero_runs_with_a_model_whose_estimates_at_rest_are_noisy(model_fil
     assert len(re.findall(r"auto-zero update \d+ at", proc.stderr)) >= 2, proc.stderr
     rep = run_cli("tactile-host", "replay", str(run))
     assert rep.returncode == 0 and "estimates identical to the recorded ones" in rep.stdout, rep.stdout + rep.stderr
+    assert json.loads(run.read_text().splitlines()[0])["auto_zero"]["test"] == "mean"
+    # a run recorded before the mean was tested names no test: replayed as it was zeroed, every sample tested,
+    # which with this model never updates
+    lines = run.read_text().splitlines()
+    head = json.loads(lines[0])
+    del head["auto_zero"]["test"]
+    (tmp_path / "old.jsonl").write_text("\n".join([json.dumps(head)] + lines[1:]) + "\n")
+    old = run_cli("tactile-host", "replay", str(tmp_path / "old.jsonl"))
+    assert old.returncode == 0 and "auto-zero updates 0" in old.stdout, old.stdout + old.stderr
     pressed = run_cli("tactile-host", "read", *common, "--simulate", "0,0,-1,0,0", "-o", str(tmp_path / "p.csv"))
     assert pressed.returncode == 0 and "auto-zero update" not in pressed.stderr, pressed.stderr
 
