@@ -260,7 +260,8 @@ def rest_test(sensor, model, cmap, tin, results: dict) -> dict:
     log("fitting the paper's procedure (noise 0) and unit 7's own equations")
     paper = fit_model(simulate(sensor, grid_poses(PAPER_GRIDS["paper-sim"])), settings=FitSettings.exact())
     unit = draw_unit(sensor, 7)[0].with_transfer("gmr")
-    poses = np.vstack([grid_poses(PAPER_GRIDS["paper-sim"]), random_poses(5000, DEFAULT_RANGES, np.random.default_rng(0))])
+    poses = np.vstack([grid_poses(PAPER_GRIDS["paper-sim"]),
+                       random_poses(5000, DEFAULT_RANGES, np.random.default_rng(0))])
     unit_model = fit_auto(simulate(unit, poses), None, FitSettings(), unit)[0]
     unit_ref = readings(unit, np.zeros(5), adc_bits=0)[0]
     cases = (("default fit, the drawing", sensor, model, None), ("paper's procedure, the drawing", sensor, paper, None),

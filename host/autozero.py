@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fitgen.base.errors import InputError
+from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
 
 SCATTER_SIGMAS = 5.0  # band floor, in standard deviations of the window's mean estimate at rest
 SCATTER_DRAWS = 2000  # noisy rest readings the scatter is measured on
@@ -107,13 +108,13 @@ class AutoZero:
         self.settings = self.settings.checked()
         if not self.noise > 0:
             raise InputError(f"auto-zero needs the noise floor (V rms) > 0, got {self.noise}")
-        lin = [o in ("dx", "dy", "dz") for o in self.outputs]
-        given = np.array([self.settings.band_mm if m else self.settings.band_deg for m in lin])
+        self._units = [POSE_UNITS[POSE_NAMES.index(o)] for o in self.outputs]
+        given = np.array([self.settings.band_mm if u == "mm" else self.settings.band_deg for u in self._units])
         sample = self.settings.test == "sample"
-        mean_sd = (np.zeros(len(lin)) if self.scatter is None or sample else np.asarray(self.scatter, dtype=float)) \
+        mean_sd = (np.zeros(len(given)) if self.scatter is None or sample else np.asarray(self.scatter, dtype=float)) \
             / np.sqrt(self.settings.window)
         self.band = np.maximum(given, SCATTER_SIGMAS * mean_sd)
-        self.rest = np.zeros(len(lin)) if self.rest is None or sample else np.asarray(self.rest, dtype=float)
+        self.rest = np.zeros(len(given)) if self.rest is None or sample else np.asarray(self.rest, dtype=float)
         self.widened = tuple(o for o, b, g in zip(self.outputs, self.band, given) if b > g)
         self._window: deque = deque(maxlen=self.settings.window)
         self._estimates: deque = deque(maxlen=self.settings.window)
@@ -123,7 +124,9 @@ class AutoZero:
     @classmethod
     def for_model(cls, model, reference: np.ndarray, noise: float, **kw) -> "AutoZero":
         """An AutoZero whose band is centred and widened for ``model`` (a :class:`fitgen.equations.model.Model`)
-        at these rest readings and noise floor."""
+        at these rest readings and noise floor (the every-sample test of older runs takes neither)."""
+        if kw.get("settings", AutoZeroSettings()).test == "sample":
+            return cls(reference, noise, model.output_names, **kw)
         rest, scatter = rest_estimates(model.predict, reference, noise)
         return cls(reference, noise, model.output_names, rest=rest, scatter=scatter, **kw)
 
@@ -170,9 +173,9 @@ class AutoZero:
         """The band's widened outputs and why, or '' when none is."""
         if not self.widened:
             return ""
-        units = {o: ("mm" if o in ("dx", "dy", "dz") else "deg") for o in self.outputs}
-        parts = [f"{o} {self.scatter[i]:.3g} {units[o]}" for i, o in enumerate(self.outputs) if o in self.widened]
-        bands = [f"{o} +-{self.band[i]:.3g} {units[o]}" for i, o in enumerate(self.outputs) if o in self.widened]
+        out = [(i, o, u) for i, (o, u) in enumerate(zip(self.outputs, self._units)) if o in self.widened]
+        parts = [f"{o} {self.scatter[i]:.3g} {u}" for i, o, u in out]
+        bands = [f"{o} +-{self.band[i]:.3g} {u}" for i, o, u in out]
         return (f"auto-zero: this model's single estimates at rest scatter by {', '.join(parts)} rms; the "
                 f"{self.settings.window}-sample mean's rest band is {', '.join(bands)} "
                 f"({SCATTER_SIGMAS:g} sigma of that mean, wider than --rest-band)")

@@ -21,6 +21,7 @@ import numpy as np
 from fitgen.physics.dataset import load_dataset
 from fitgen.base.errors import InputError
 from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES
 from fitgen.physics.transfer import readings
 
 from host.adc import AdcArray, DeviceSilent, ErrorCounts
@@ -130,16 +131,15 @@ REST_FLOOR = {"mm": 0.1, "deg": 0.5}  # ... and at least this, were a box's widt
 
 def check_rest_reference(model, reference: np.ndarray, spec: str) -> None:
     """InputError when ``model`` reads the rest readings ``reference`` (from ``spec``) as a pose far from rest, by
-    more than a quarter of its fitted box's width (0.5 mm, 2.5 deg without a box): another sensor's rest, as the
+    more than a quarter of its fitted box's width (the default box's without one): another sensor's rest, as the
     drawing's is to a unit's twin, which a tare would map every reading onto."""
     est = np.asarray(model.predict(np.asarray(reference, dtype=float)[None]), dtype=float)[0]
-    box = (model.fit_info.get("held_out") or {}).get("box") or {}
+    box = {**DEFAULT_RANGES, **model.held_out_box}
     far = []
-    for j, o in enumerate(model.output_names):
-        unit = "mm" if o.startswith("d") else "deg"
-        lo, hi = box.get(o, (-2.0, 2.0) if unit == "mm" else (-5.0, 5.0))
-        if not abs(est[j]) <= max(REST_SHARE * (hi - lo), REST_FLOOR[unit]):  # NaN too
-            far.append(f"{o} {est[j]:.3g} {unit}")
+    for j, e in enumerate(model.equations):
+        lo, hi = box[e.name]
+        if not abs(est[j]) <= max(REST_SHARE * (hi - lo), REST_FLOOR[e.unit]):  # NaN too
+            far.append(f"{e.name} {est[j]:.3g} {e.unit}")
     if far:
         raise InputError(f"the model reads the rest readings of {spec} as {', '.join(far)}, far from rest: they are "
                          "another sensor's, and a tare onto them would bend every estimate; give --rest the sensor "

@@ -260,8 +260,8 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
         settings = AutoZeroSettings(**{k: az_rec[k] for k in AutoZeroSettings.__dataclass_fields__ if k != "test"},
                                     test=az_rec.get("test", "sample")) if az_rec else AutoZeroSettings()
         start = az_rec["start"] if az_rec else (None if tare is None else tare.tolist())
-        if np.asarray(ref, dtype=float).shape != (n,):
-            raise InputError(f"the run's header records {np.size(ref)} rest readings for {n} readings")
         ref = np.array(ref, dtype=float)
+        if ref.shape != (n,):
+            raise InputError(f"the run's header records {ref.size} rest readings for {n} readings")
         az = AutoZero.for_model(model, ref, float(noise), zero=start, settings=settings)
     return Corrections(tare, tc, az)

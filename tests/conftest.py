@@ -126,6 +126,15 @@ def model_file(model, tmp_path_factory):
     return str(model.save(tmp_path_factory.mktemp("model") / "model.json"))
 
 
+def model_for_sensor(model, name: str, path) -> str:
+    """``model`` saved to ``path`` with its held-out record naming sensor ``name`` (a unit file's, as identify
+    names it): what flash and emulate take the device's sensor id from."""
+    import dataclasses
+
+    held = {**(model.fit_info.get("held_out") or {}), "sensor": name}
+    return str(dataclasses.replace(model, fit_info={**model.fit_info, "held_out": held}).save(path))
+
+
 def emulated_suite(model, held_out, style: str, n: int = 500):
     """The whole HIL suite against ``model`` built (float, ``style``) into the emulated Cortex-M4 (mps2)."""
     require_tool("qemu-system-arm")

@@ -16,7 +16,7 @@ from hil.emulate import bench_instructions, start_target
 from hil.suite import flash_variant, run_suite
 from host.device import Device
 
-from conftest import Terminal, assert_one_line_error, require_tool, run_cli
+from conftest import Terminal, assert_one_line_error, model_for_sensor, require_tool, run_cli
 
 
 @pytest.fixture(scope="module")
@@ -231,9 +231,8 @@ def test_emulate_compiles_in_the_name_of_the_unit_the_model_is_for(model, tmp_pa
     """Without --sensor-id the firmware says which sensor's calibration it holds: the name the model's held-out
     figures are for (a unit file's), as tactile-host flash writes it; before, every build said 'paper'."""
     require_tool("gcc")
-    held = {**(model.fit_info.get("held_out") or {}), "sensor": "unit-042"}
-    path = dataclasses.replace(model, fit_info={**model.fit_info, "held_out": held}).save(tmp_path / "u.json")
-    proc = run_cli("tactile-hil", "emulate", "--target", "host", "--model", str(path), "--suite", "--vectors", "50",
+    path = model_for_sensor(model, "unit-042", tmp_path / "u.json")
+    proc = run_cli("tactile-hil", "emulate", "--target", "host", "--model", path, "--suite", "--vectors", "50",
                    "--fuzz", "0", "--no-held-out")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert re.search(r"\| info \| pass \|.*, sensor unit-042 \|", proc.stdout), proc.stdout

@@ -21,7 +21,7 @@ from host import protocol_c
 from host.protocol import ErrorCode, Frame, MsgType, ProtocolError
 from host.device import BOOT_WAIT, Device, NoAnswer
 
-from conftest import assert_one_line_error, require_tool, run_cli
+from conftest import assert_one_line_error, model_for_sensor, require_tool, run_cli
 
 # --- COBS ---------------------------------------------------------------------------
 
@@ -395,18 +395,12 @@ def test_flash_loads_and_reads_back(paper_model, paper_model_file, precision):
 def test_flash_names_the_unit_a_model_was_fitted_for(paper_model, tmp_path):
     """Without --sensor-id the blob carries the name of the sensor the model's held-out figures are for: a unit
     file's (identify -o unit-042.toml), so a device says which unit's calibration it holds; 'paper' before."""
-    import dataclasses
-
     from fake_device import FakeDevice
-
-    def with_sensor(name):
-        held = {**(paper_model.fit_info.get("held_out") or {}), "sensor": name}
-        m = dataclasses.replace(paper_model, fit_info={**paper_model.fit_info, "held_out": held})
-        return str(m.save(tmp_path / f"{len(name)}.json"))
 
     for name, carried in (("unit-042", "unit-042"), ("a-unit-named-at-length", "paper")):
         with FakeDevice(paper_model, "double", transport="tcp") as fake:
-            proc = run_cli("tactile-host", "flash", "--port", fake.url, with_sensor(name))
+            proc = run_cli("tactile-host", "flash", "--port", fake.url,
+                           model_for_sensor(paper_model, name, tmp_path / f"{len(name)}.json"))
             assert proc.returncode == 0, proc.stderr
             assert fake.active[1].sensor_id == carried and f"sensor id {carried!r}" in proc.stdout
 

@@ -21,7 +21,7 @@ def run_demo(out: Path) -> int:
     from fitgen.fitting.family import fit_auto
     from fitgen.fitting.fit import FitSettings, fit_model
     from fitgen.base.progress import Progress
-    from fitgen.fitting.holdout import box_of, deployed_errors, fitted_held_out, held_out_set, uncalibrated
+    from fitgen.fitting.holdout import N_POSES, box_of, deployed_errors, fitted_held_out, held_out_set, uncalibrated
     from fitgen.app.report import format_report
     from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 
@@ -93,7 +93,7 @@ def run_demo(out: Path) -> int:
     vmodel.fit_info["family"] = vfamily
     vmodel.fit_info["dataset"] = str(out / "paper-sim-volts.csv")
     with Progress("   held-out", 1) as hbar:  # as `fitgen fit` records it: verify and report measure against it
-        vmodel.fit_info["held_out"] = fitted_held_out(vmodel, volts, vtrain, 2000,
+        vmodel.fit_info["held_out"] = fitted_held_out(vmodel, volts, vtrain, N_POSES,
                                                       note=lambda text: hbar.update(0, text))
         hbar.update()
     vmodel.save(out / "model-volts.json")

@@ -24,11 +24,7 @@ def _load(args):
 
     model = load_model(args.model)
     if args.sensor_id is None:  # the model's sensor, where the firmware can compile it in and a blob carry it
-        args.sensor_id = model_sensor_id(model)
-        try:
-            check_compiled_id(args.sensor_id)
-        except InputError:
-            args.sensor_id = "paper"
+        args.sensor_id = model_sensor_id(model, also=check_compiled_id)
     return model, (data_inputs(model, args.data) if getattr(args, "data", None) else None)
 
 

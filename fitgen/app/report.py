@@ -229,7 +229,7 @@ def predict_notes(model: Model, pred: np.ndarray, status: np.ndarray, precision:
     notes = ([f"{clamped} row{'s' * (clamped != 1)} clamped into the domain"] if clamped else []) + (
         [f"{refused} row{'s' * (refused != 1)} with no estimate (status -1: a reading not finite in "
          f"{precision})"] if refused else [])
-    box = (model.fit_info.get("held_out") or {}).get("box") or {}
+    box = model.held_out_box
     cols = [(j, o) for j, o in enumerate(model.output_names) if o in box]
     if cols and len(pred):
         lo = np.array([box[o][0] for _, o in cols])

@@ -105,15 +105,20 @@ def check_sensor_id(sensor_id: str) -> str:
     return sensor_id
 
 
-def model_sensor_id(model: Model, fallback: str = "paper") -> str:
+def model_sensor_id(model: Model, fallback: str = "paper", also=None) -> str:
     """The sensor id a blob of ``model`` carries unless told: the name of the sensor its held-out figures are
     for (a unit file's, as identify names it: ``-o unit-042.toml`` gives ``unit-042``), where it is one a blob
-    can carry; else ``fallback``."""
+    can carry (and ``also(name)``, a firmware's own check, raises no InputError); else ``fallback``."""
     name = (model.fit_info.get("held_out") or {}).get("sensor")
+    if not isinstance(name, str) or not name:
+        return fallback
     try:
-        return check_sensor_id(name) if isinstance(name, str) and name else fallback
+        check_sensor_id(name)
+        if also is not None:
+            also(name)
     except InputError:
         return fallback
+    return name
 
 
 def to_blob(model: Model, precision: str = "float", sensor_id: str = "paper", fma: bool = False) -> bytes:

@@ -70,6 +70,13 @@ class Model:
     def output_names(self) -> tuple[str, ...]:
         return tuple(e.name for e in self.equations)
 
+    @property
+    def held_out_box(self) -> dict[str, tuple[float, float]]:
+        """The pose box the model was fitted and held out in, per output its record names (its ``held_out``
+        record's ``box``); empty without one."""
+        box = (self.fit_info.get("held_out") or {}).get("box") or {}
+        return {o: (float(box[o][0]), float(box[o][1])) for o in self.output_names if o in box}
+
     def equation(self, name: str) -> Equation:
         for e in self.equations:
             if e.name == name:
