@@ -397,6 +397,9 @@ def test_flash_names_the_unit_a_model_was_fitted_for(paper_model, tmp_path):
     file's (identify -o unit-042.toml), so a device says which unit's calibration it holds; 'paper' before."""
     from fake_device import FakeDevice
 
+    # a bad id given is said before any port is opened (this one refuses connections)
+    assert_one_line_error(run_cli("tactile-host", "flash", "--port", "socket://127.0.0.1:1", "--sensor-id", "capteur-é",
+                                  model_for_sensor(paper_model, "paper", tmp_path / "p.json")), contains="sensor id")
     for name, carried in (("unit-042", "unit-042"), ("a-unit-named-at-length", "paper")):
         with FakeDevice(paper_model, "double", transport="tcp") as fake:
             proc = run_cli("tactile-host", "flash", "--port", fake.url,
