@@ -81,6 +81,30 @@ def test_fewer_readings_than_components_have_no_finite_bound():
                         PRESETS["full"].ranges).verdicts()
         assert len(words) == 5 and all("NOT resolvable" in w and "(bound inf" in w for w in words), words
         assert all("the readings barely change along " in w for w in words)
+        assert all(f"{count} readings cannot pin 5 pose components at once" in w for w in words), words
+    # three of them can be pinned by four readings: no such words where they are not resolved
+    four_slide = observe(four, PRESETS["slide"].ranges, ("dx", "dy", "dz")).verdicts()
+    assert not any("cannot pin" in w for w in four_slide), four_slide
+
+
+def test_a_verdict_names_the_elements_past_their_linear_range():
+    """Elements saturated at rest read the same whatever the pose: the verdict said only that the readings barely
+    change along dx, which reads as a layout's blind direction; it names the saturated elements."""
+    from fitgen.physics.sensor import parse_sensor
+    from fitgen.physics.transfer import linear_top
+
+    gmr = PAPER.with_transfer("gmr")
+    near = parse_sensor(PAPER.source | {"board": dict(PAPER.source["board"], gap=6.0),  # the magnet 5 mm nearer
+                                        "transfer": dict(PAPER.source["transfer"], kind="gmr")})
+    rest = field_readings(near, np.zeros((1, 5)))
+    assert np.all(np.abs(rest) > linear_top(near))  # the premise: every element saturated at rest
+    rep = observe(near, PRESETS["press"].ranges, ("dz",))
+    rest_result = rep.results[0]
+    assert not np.any(rest_result.pose) and rest_result.past_linear == 8
+    words = rep.verdicts()[0]
+    assert "dz: NOT resolvable" in words and "8 of 8 elements there are past their linear range" in words, words
+    # the drawing's own ring in gmr: no element past it at rest, and no such words
+    assert observe(gmr, PRESETS["press"].ranges, ("dz",)).results[0].past_linear == 0
 
 
 def test_a_verdict_quotes_the_worst_pose_not_the_first():

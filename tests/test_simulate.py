@@ -1,3 +1,6 @@
+from dataclasses import replace
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -8,6 +11,8 @@ from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, parse_grid, pose_rn
 from fitgen.physics.transfer import quantise
 
 from conftest import assert_one_line_error, run_cli
+
+PAPER_TOML = Path(__file__).resolve().parents[1] / "fitgen" / "physics" / "presets" / "paper.toml"
 
 
 def test_paper_grids_sizes_and_levels():
@@ -66,6 +71,42 @@ def test_gmr_transfer_quantises_and_saturates():
     raw = simulate(load_sensor("paper"), grid_poses(PAPER_GRIDS["paper-sim"])).inputs
     k = g.supply * g.sensitivity * 1e-3 * 10 * g.gain
     np.testing.assert_allclose(ds.inputs, g.offset + k * np.minimum(raw, g.saturation), atol=lsb)
+
+
+def test_past_linear_is_where_the_reading_stops_following_the_field():
+    """past_linear against the transfer itself: a reading it calls linear moves when |B| grows a little, one it
+    calls past does not (saturated, or on the ADC's top rail; a unit's gains and offsets included)."""
+    from fitgen.physics.transfer import apply_transfer, past_linear
+    from fitgen.physics.units import draw_unit
+
+    paper = load_sensor("paper")
+    gmr = paper.with_transfer("gmr")
+    low_rail = replace(gmr, gmr=replace(gmr.gmr, adc_max=2.5))  # the rail below saturation's 3.1 V
+    b = -np.linspace(0.01, 3.0, 600)[:, None] * np.ones((1, 8))
+    for s in (gmr, low_rail, draw_unit(gmr, 3)[0]):
+        past = past_linear(s, b)
+        moved = apply_transfer(s, b * 1.001, adc_bits=0) != apply_transfer(s, b, adc_bits=0)
+        assert past.any() and (~past).any()
+        np.testing.assert_array_equal(past, ~moved)
+    assert not past_linear(paper, b).any()  # raw and not quantised: it follows any field
+
+
+def test_simulate_and_fit_say_where_the_readings_do_not_carry_the_pose(tmp_path):
+    """A layout of one's own whose elements saturate at rest: simulate and fit wrote their files and said nothing
+    (a 2 mm model that a held-out table alone shows); each says it, and the drawing's own press says nothing."""
+    near = tmp_path / "near.toml"  # the paper's ring with the magnet 5 mm nearer: 3.5 mT at rest, past 2
+    near.write_text(PAPER_TOML.read_text().replace("gap = 11.0", "gap = 6.0"))
+    for sensor, says in ((str(near), True), ("paper", False)):
+        data, model = tmp_path / "d.csv", tmp_path / "m.json"
+        proc = run_cli("fitgen", "simulate", "--sensor", sensor, "--transfer", "gmr", "--scene", "press",
+                       "-o", str(data))
+        assert proc.returncode == 0, proc.stderr
+        assert ("note: 21 of 21 rows (100%) have an element past its linear range" in proc.stderr) == says, \
+            proc.stderr
+        proc = run_cli("fitgen", "fit", str(data), "-o", str(model), "--force")
+        assert proc.returncode == 0, proc.stderr
+        assert ("dz's equation leaves" in proc.stderr and "the readings barely carry dz" in proc.stderr) == says, \
+            proc.stderr
 
 
 def test_quantise_is_within_half_lsb():

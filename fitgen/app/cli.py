@@ -20,6 +20,7 @@ FAMILY_CHOICES = ("auto", *FAMILIES)
 
 
 def cmd_simulate(args) -> int:
+    from fitgen.app.report import simulate_notes
     from fitgen.physics.posesource import choose_poses
     from fitgen.physics.simulate import simulate
 
@@ -54,8 +55,9 @@ def cmd_simulate(args) -> int:
         raise
     if unit is not None:
         print(f"wrote unit {sensor.name} (a unit of {drawing.name}) to {unit}", file=sys.stderr)
-    print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}",
-          file=sys.stderr)
+    notes = "".join(f"note: {n}\n" for n in simulate_notes(sensor, poses, args.labels, args.sensor))
+    print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}\n"
+          + notes, end="", file=sys.stderr)
     return 0
 
 
@@ -149,8 +151,7 @@ def cmd_fit(args) -> int:
             hbar.update()
     model.save(args.output)
     print(fit_summary(model, args.held_out), end="", file=sys.stderr)
-    print("".join(f"note: {n}\n" for n in fit_notes(model, len(ds.inputs), args.data, args.units or recorded)),
-          end="", file=sys.stderr)
+    print("".join(f"note: {n}\n" for n in fit_notes(model, ds, args.data, args.units or recorded)), end="", file=sys.stderr)
     print(f"wrote {args.output}", file=sys.stderr)
     return 0
 

@@ -108,10 +108,11 @@ def deployed_table(model: Model) -> str:
 
 def _deployed_table(model: Model, rec: dict) -> str:
     post = rec.get("posterior")
+    unit_file = None if rec.get("drawing") else rec.get("sensor_file")  # a drawing's own file is recorded too
     on = (f"on {post['units']} units drawn from the posterior of identified unit {rec.get('sensor', '?')} "
           "(the median of each figure, their range in brackets: the unit is one draw of it)"
           if isinstance(post, dict) else
-          f"on unit {rec.get('sensor', '?')} ({rec['sensor_file']})" if rec.get("sensor_file") else
+          f"on unit {rec.get('sensor', '?')} ({unit_file})" if unit_file else
           f"on the drawing {rec.get('sensor', '?')}: a built unit differs from it (fitgen identify)")
     lines = [f"### deployed accuracy, held out ({rec['poses']} random poses in the training box, seed {rec['seed']}; "
              f"noise {rec['noise']:g} rms, {rec['noise_draws']} draws), {on}", "",
@@ -209,10 +210,33 @@ def sweep_sensor(sensor, model):
     return fitted_sensor(sensor, model, "its sweep on this one would not be the model's")
 
 
-def fit_notes(model: Model, rows: int, data, units) -> list[str]:
-    """What a user should know of a fit beyond its summary: readings' units assumed, equations near the rows."""
+BLIND_SHARE = 0.5  # a training RMS past this share of an output's own spread: its readings barely carry it
+
+
+def simulate_notes(sensor, poses, labels: str, spec: str) -> list[str]:
+    """What `fitgen simulate` says of its rows beyond their count: rows where an element's reading no longer
+    follows the pose (``spec``: the --sensor given, for the command that tells more)."""
+    from fitgen.physics.simulate import rows_past_linear
+
+    if not (clipped := int(rows_past_linear(sensor, poses, labels).sum())):
+        return []
+    return [f"{clipped} of {len(poses)} rows ({clipped / len(poses):.0%}) have an element past its linear range "
+            f"(saturated, or on the ADC's rails), whose reading there no longer follows the pose; `fitgen observe "
+            f"--sensor {spec}` tells whether the others still resolve it"]
+
+
+def fit_notes(model: Model, ds, data, units) -> list[str]:
+    """What a user should know of a fit to dataset ``ds`` beyond its summary: readings' units assumed, equations
+    near the rows, outputs the readings barely carry."""
+    rows = len(ds.inputs)
     notes = [] if units else [f"{data} has no meta saying its readings' units: taken as mT (give --units V for "
                               "volts, as an ADC gives them)"]
+    for e in model.equations:
+        rms, sd = model.fit_info["outputs"][e.name]["model_training_error"]["rms"], float(ds.target(e.name).std())
+        if sd > 0 and rms > BLIND_SHARE * sd:  # the fit is near a constant: AIC took what little there was
+            notes.append(f"{e.name}'s equation leaves {rms / sd:.0%} of its spread over the rows (training RMS "
+                         f"{rms:.3g} of {sd:.3g} {e.unit}): the readings barely carry {e.name} here, as elements past "
+                         "their linear range or fewer elements than outputs make it (fitgen observe)")
     crowded = [e for e in model.equations if len(e.terms) + 1 > rows / 3]
     if crowded:  # AIC's penalty is no guard when the terms near the rows: the equation threads the rows' noise
         e = max(crowded, key=lambda e: len(e.terms))

@@ -11,7 +11,7 @@ from fitgen.base.errors import InputError
 from fitgen.physics.pose import (POSE_NAMES, POSE_UNITS, as_poses, board_clearance, check_above_board, check_box,
                                  field_readings, pose_label)
 from fitgen.physics.sensor import Sensor
-from fitgen.physics.transfer import apply_transfer
+from fitgen.physics.transfer import apply_transfer, past_linear
 
 # central-difference steps (mm, deg): small against the field's length scale (mm),
 # large against rounding (readings ~1 mT, eps ~1e-16)
@@ -46,6 +46,7 @@ class PoseObservability:
     singular_values: np.ndarray  # (5,) descending
     directions: np.ndarray  # (5, 5) rows: right singular vectors (pose directions)
     bounds: np.ndarray  # (5,) Cramer-Rao standard deviation per component
+    past_linear: int = 0  # elements whose reading no longer follows the field here (saturated, on a rail)
 
 
 def _svd_bounds(J: np.ndarray, noise: float):
@@ -79,7 +80,8 @@ def analyse(sensor: Sensor, poses, noise: float, components: tuple[str, ...] = P
     poses = as_poses(poses)
     cols = [POSE_NAMES.index(c) for c in components]
     s, vt, bounds = _svd_bounds(jacobian(sensor, poses)[:, :, cols], noise)
-    return [PoseObservability(p, s[i], vt[i], bounds[i]) for i, p in enumerate(poses)]
+    clipped = past_linear(sensor, field_readings(sensor, poses)).sum(axis=1)
+    return [PoseObservability(p, s[i], vt[i], bounds[i], int(clipped[i])) for i, p in enumerate(poses)]
 
 
 def corner_poses(ranges: dict) -> np.ndarray:
@@ -119,6 +121,7 @@ class ObserveReport:
     accuracy: dict
     results: list[PoseObservability]
     inside: int = 0  # the last results: random poses inside the box (judged, not tabled)
+    n_elements: int = 0
 
     @property
     def worst(self) -> np.ndarray:
@@ -170,8 +173,15 @@ class ObserveReport:
             # the pose direction that contributes most to this component's bound
             weight = np.abs(r.directions[:, j]) / np.maximum(r.singular_values, 1e-300)
             blind = describe_direction(r.directions[int(np.argmax(weight))], self.components)
+            # a reading that stopped following the field is why, more often than the layout's geometry
+            why = (f"; {r.past_linear} of {self.n_elements} elements there are past their linear range, saturated "
+                   "or on the ADC's rails" if r.past_linear else "")
+            if 0 < self.n_elements < len(self.components):
+                why += (f"; {self.n_elements} readings cannot pin {len(self.components)} pose components at once: "
+                        f"a scene of at most {self.n_elements} outputs (--scene slide, press, or a scene file)")
             msg = (f"{c}: NOT resolvable to {need:g} {unit} at {len(bad)} of {len(self.results)} poses "
-                   f"(bound {_fmt_bound(r.bounds[j])} {unit} {where}; the readings barely change along {blind}).")
+                   f"(bound {_fmt_bound(r.bounds[j])} {unit} {where}; the readings barely change along {blind}"
+                   f"{why}).")
             out.append(msg)
         return out
 
@@ -206,7 +216,7 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
     acc.update(accuracy or {})
     poses = np.vstack([corner_poses(ranges), random_poses(INSIDE, ranges, pose_rng(INSIDE_SEED))])
     results = analyse(sensor, poses, noise, tuple(components))
-    return ObserveReport(tuple(components), noise, sensor.units, acc, results, INSIDE)
+    return ObserveReport(tuple(components), noise, sensor.units, acc, results, INSIDE, sensor.n_elements)
 
 
 INSIDE, INSIDE_SEED = 200, 11

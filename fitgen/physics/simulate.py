@@ -10,9 +10,10 @@ import numpy as np
 from fitgen import __version__
 from fitgen.physics.dataset import Dataset
 from fitgen.base.errors import InputError
-from fitgen.physics.pose import OFF_SKIN_MM, POSE_NAMES, as_poses, check_pose_range, off_skin, pose_label
+from fitgen.physics.pose import (OFF_SKIN_MM, POSE_NAMES, as_poses, check_pose_range, field_readings, off_skin,
+                                 pose_label)
 from fitgen.physics.sensor import Sensor
-from fitgen.physics.transfer import readings
+from fitgen.physics.transfer import past_linear, readings
 
 PAPER_GRIDS = {
     # the seed's simulation grid (1,875 poses) and its experiment grid (450 poses)
@@ -119,11 +120,7 @@ def simulate(
         raise InputError(f"noise must be >= 0, got {noise}")
     if labels not in ("stage", "magnet"):
         raise InputError(f"labels are the stage's or the magnet's, not {labels!r}")
-    source = sensor
-    if labels == "magnet" and not sensor.is_drawing:
-        # the magnet's own displacement: the unit with the identity for its stage map and no stiffening (a
-        # magnet label above first contact still rests: no indenter lifts it)
-        source = replace(sensor, stage_map=np.eye(3), stiffening=0.0)
+    source = _labelled(sensor, labels)
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
     with np.errstate(all="ignore"):  # a pose far outside the sensor overflows the field: said below, once
         values = readings(source, poses, noise=noise, adc_bits=adc_bits, rng=rng)
@@ -147,6 +144,21 @@ def simulate(
         meta["labels"] = labels
     meta.update(provenance or {})
     return Dataset(values, poses[:, cols].copy(), tuple(targets), meta)
+
+
+def _labelled(sensor: Sensor, labels: str) -> Sensor:
+    """The sensor whose poses are ``labels``: for the magnet's own displacement, a unit with the identity for its
+    stage map and no stiffening (a magnet label above first contact still rests: no indenter lifts it)."""
+    if labels == "magnet" and not sensor.is_drawing:
+        return replace(sensor, stage_map=np.eye(3), stiffening=0.0)
+    return sensor
+
+
+def rows_past_linear(sensor: Sensor, poses, labels: str = "stage") -> np.ndarray:
+    """Per pose (bool): some element's reading there no longer follows the field (fitgen.physics.transfer.
+    past_linear), noise-free, as :func:`simulate` draws the pose."""
+    with np.errstate(all="ignore"):
+        return past_linear(sensor, field_readings(_labelled(sensor, labels), as_poses(poses))).any(axis=1)
 
 
 def rig_poses(labels: np.ndarray, rig_error: float, rng: np.random.Generator, zero=None) -> np.ndarray:

@@ -39,6 +39,20 @@ def linear_top(sensor: Sensor) -> float:
     return min(g.saturation, (g.adc_max - g.offset) / volts_per_mt(g))
 
 
+def past_linear(sensor: Sensor, b_axis: np.ndarray) -> np.ndarray:
+    """Where a reading has stopped following its field (bool, the shape of ``b_axis``, signed fields in mT): the
+    element saturated, or its output on the ADC's rails; a raw transfer only where it is quantised, past its
+    full scale."""
+    mag = np.abs(b_axis)
+    if sensor.transfer == "raw":
+        if sensor.raw.adc_bits <= 0:
+            return np.zeros(mag.shape, dtype=bool)
+        return element_response(sensor, mag) >= sensor.raw.full_scale
+    g = sensor.gmr
+    out = g.offset + volts_per_mt(g) * element_response(sensor, np.minimum(mag, g.saturation))
+    return (mag >= g.saturation) | (out >= g.adc_max) | (out <= g.adc_min)
+
+
 def element_response(sensor: Sensor, mag: np.ndarray) -> np.ndarray:
     """Each element's field-equivalent output (mT) from |B . axis|: its gain and offset (a unit's; 1 and 0
     on a drawing)."""
