@@ -3,6 +3,7 @@ the float emulation against gcc, held-out figures in the model file, and verify'
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -363,3 +364,30 @@ def test_float_bound_holds_and_is_within_10x_of_the_measured_worst_case(layout):
     assert np.all(res.max_ratio <= 1.0)
     assert np.all(res.tightness() <= 10.0), res.tightness()
     assert any(t.mult for e in model.equations for t in e.terms)  # the d-terms are there
+
+
+def test_a_drawing_of_ones_own_is_found_again_by_verify(tmp_path):
+    """A layout in the user's own sensor file: the model recorded its name but not its file, so verify, the HIL
+    suite and flash's sensor id could not simulate its held-out readings again without --sensor. The file is
+    recorded (and the report still says drawing); a file since changed is not taken."""
+    require_tool("gcc")
+    mine = tmp_path / "mine.toml"
+    mine.write_text((Path(__file__).resolve().parents[1] / "fitgen/physics/presets/paper.toml").read_text()
+                    .replace('name = "paper"', 'name = "mine"'))
+    data, model = tmp_path / "press.csv", tmp_path / "press.json"
+    for args in (("simulate", "--sensor", str(mine), "--scene", "press", "-o", str(data)),
+                 ("fit", str(data), "-o", str(model))):
+        proc = run_cli("fitgen", *args)
+        assert proc.returncode == 0, proc.stderr
+    held = json.loads(model.read_text())["fit"]["held_out"]
+    assert held["sensor_file"] == str(mine.resolve()) and held["drawing"] is True
+    verify = ("tactile-host", "verify", str(model), "--precision", "float", "--vectors", "200")
+    proc = run_cli(*verify, cwd=Path(__file__).resolve().parents[1])  # from another folder than the file's
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "rounding's share" in proc.stdout and "not measured" not in proc.stdout, proc.stdout
+    proc = run_cli("fitgen", "report", str(model))
+    assert "on the drawing mine: a built unit differs from it" in proc.stdout, proc.stdout
+    mine.write_text(mine.read_text().replace("radius = 10.0", "radius = 10.5"))  # another sensor now
+    proc = run_cli(*verify)
+    assert proc.returncode == 0 and "rounding's share not measured: the sensor the model file's held_out record " \
+        "names is not known here" in proc.stdout, proc.stdout

@@ -13,6 +13,7 @@ verify` and the HIL suite measure the same share on the real C.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -247,8 +248,10 @@ def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None,
              + (", units from the identification's posterior" if posterior else ""))
     record = evaluate(model, sensor, box_of(ds.poses()), noise=noise, n=n, posterior=posterior,
                       labels=ds.meta.get("labels", "stage"))
-    if unit_file and not sensor.is_drawing:
-        record["sensor_file"] = str(unit_file)
+    if unit_file and Path(unit_file).is_file():  # a unit's, or a drawing of the user's own: verify finds it again
+        record["sensor_file"] = str(Path(unit_file).resolve())
+        if sensor.is_drawing:  # a record without it, with a file, is a unit's (as models fitted before it say)
+            record["drawing"] = True
     if posterior is None and sensor.is_drawing and ds.meta.get("sensor_sha256") == sensor.sha256:
         # the drawing's own model: what it does on the units people build from the drawing, if not calibrated
         if note:
