@@ -15,6 +15,7 @@ from fitgen.base.fileio import open_output
 from fitgen.base.parse import parse_numbers, parse_positive
 from fitgen.base.progress import Progress
 from fitgen.equations.model import check_input_units, load_model
+from fitgen.fitting.holdout import fitted_sensor_spec
 from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, RetryPolicy, open_bus
@@ -130,6 +131,7 @@ class ReadoutSession:
         self.count = parse_positive(args.count, "--count", integer=True) if args.count is not None else None
         self.duration = parse_positive(args.duration, "--duration") if args.duration is not None else None
         check_depends(args)
+        sensor_given = args.sensor is not None
         adc_defaults(args)
         tare_n = parse_positive(args.tare_samples, "--tare-samples", integer=True)
         if args.auto_zero and tare_n < MIN_AUTOZERO_TARE:
@@ -147,6 +149,8 @@ class ReadoutSession:
         az_settings = AutoZeroSettings(band_mm=band[0], band_deg=band[1],
                                        hold=parse_positive(args.rest_hold, "--rest-hold")).checked()
         self.model = model = load_model(args.model)
+        if not sensor_given:  # what --simulate simulates and --tare rests on: the model's own sensor, where found
+            args.sensor = fitted_sensor_spec(model) or args.sensor
         check_input_units(model, "V", "the ADCs' readings", f"model {args.model}")
         if tempcomp is not None and tempcomp.n != model.n_inputs:
             raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")

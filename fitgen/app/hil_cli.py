@@ -20,11 +20,14 @@ def _load(args):
     from fitgen.c.calblob import model_sensor_id
     from fitgen.c.verify import data_inputs
     from fitgen.equations.model import load_model
+    from fitgen.fitting.holdout import fitted_sensor_spec
     from hil.firmware import check_sensor_id as check_compiled_id
 
     model = load_model(args.model)
     if args.sensor_id is None:  # the model's sensor, where the firmware can compile it in and a blob carry it
         args.sensor_id = model_sensor_id(model, also=check_compiled_id)
+    if getattr(args, "sim_sensor", "") is None:  # emulate's: the model's own sensor, where its file is found
+        args.sim_sensor = fitted_sensor_spec(model) or "paper"
     return model, (data_inputs(model, args.data) if getattr(args, "data", None) else None)
 
 
@@ -235,7 +238,8 @@ def build_parser() -> Parser:
                         "model of --simulate")
     e.add_argument("--simulate", metavar="POSE",
                    help="with --adc: the bus model's magnet pose dx,dy,dz,thx,thy (default rest)")
-    e.add_argument("--sim-sensor", default="paper", help="with --adc: the simulated sensor (default paper, gmr)")
+    e.add_argument("--sim-sensor", help="with --adc: the simulated sensor, gmr (default: the sensor the model was "
+                                        "fitted on where its file is found, else paper)")
     e.add_argument("--sim-noise", type=float, help="with --adc: simulated element noise, V rms (default: the sensor's)")
     e.add_argument("--seed", type=count, default=0, help="with --adc: seed of the simulated noise")
     e.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",

@@ -230,6 +230,7 @@ def cmd_pi_build(args) -> int:
 
 def cmd_arduino_build(args) -> int:
     from fitgen.equations.model import load_model
+    from fitgen.fitting.holdout import fitted_sensor_spec
     from fitgen.physics.sensor import load_sensor
     from hil.sketch import build_readpose
     from host.arduino import BOARDS
@@ -237,6 +238,7 @@ def cmd_arduino_build(args) -> int:
     from host.temperature import split_channel_map
 
     model, cmap = load_model(args.model), channel_map_from_args(args)
+    args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"
     if split_channel_map(args.adc)[1] is not None or cmap.temperature is not None or args.thermistor:
         raise InputError("the Arduino library reads the elements only, no thermistor: drop temp= from --adc and "
                          "--thermistor (tactile-host read and pi-build read one)")
@@ -290,7 +292,8 @@ def _adc_options(p, required: bool = True) -> None:
     # (host.session.ADC_DEFAULTS fills them in)
     p.add_argument("--retries", help="tries per I2C transfer before a chip counts as silent (default 5)")
     p.add_argument("--sensor", help="sensor preset or TOML file: what --simulate simulates, and the rest readings for "
-                                    "--tare (default paper)")
+                                    "--tare (default paper; with --model, the sensor the model was fitted on where "
+                                    "its file is found)")
     p.add_argument("--sim-noise", type=noise_volts, help="simulated element noise, V rms (default: the sensor file's)")
     p.add_argument("--sim-flicker", type=noise_volts, help="simulated 1/f noise per element: its Allan deviation, V")
     p.add_argument("--sim-offsets", metavar="V1,..,VN", help="simulated offset of each element, V")
@@ -346,7 +349,8 @@ def build_parser() -> Parser:
                                                             "arduino-builder is installed)")
     build.add_argument("--emulate", metavar="POSE", help="also run ReadPose on an emulated Uno reading --sim-sensor "
                        "at POSE (e.g. dx=1,dz=-1), its lines on stdout (without it: run at rest, for the stack)")
-    ab.add_argument("--sim-sensor", default="paper", help="with --emulate: the simulated sensor (default paper)")
+    ab.add_argument("--sim-sensor", help="with --emulate: the simulated sensor (default: the sensor the model was "
+                                         "fitted on where its file is found, else paper)")
     ab.add_argument("-o", "--output", required=True, metavar="DIR", help="the library's folder (e.g. TactilePose)")
     ab.set_defaults(func=cmd_arduino_build)
 

@@ -305,6 +305,23 @@ def fitted_sensor(sensor, model: Model, why: str, flag: str = "--sensor"):
     return sensor
 
 
+def fitted_sensor_spec(model: Model) -> str | None:
+    """The preset name or sensor file of the sensor ``model``'s held-out figures are for, where it is found here
+    and is still that sensor (by hash); else None."""
+    from fitgen.physics.simulate import dataset_sensor
+
+    rec = model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None
+    if not isinstance(rec, dict):
+        return None
+    try:
+        if dataset_sensor(rec) is None:
+            return None
+    except InputError:  # a recorded file that no longer reads as a sensor
+        return None
+    path = rec.get("sensor_file")
+    return path if isinstance(path, str) and Path(path).is_file() else rec.get("sensor")
+
+
 def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] | None:
     """The noise-free held-out readings and targets the model file's ``held_out`` record names,
     simulated again (with ``sensor``, else the preset it names, checked by hash); None when the

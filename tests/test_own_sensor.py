@@ -1,0 +1,70 @@
+"""A sensor of one's own (a file, not a preset, of other than eight elements) past the fit: the tools that simulate
+its readings (read and view, arduino-build, emulate --adc) simulated the paper's eight elements unless told, so a
+four-element model was refused ("the simulated sensor 'paper' has 8") and a tare rested on the paper's rest."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import require_tool, run_cli
+
+PRESET = Path(__file__).resolve().parents[1] / "fitgen" / "physics" / "presets" / "paper.toml"
+ONE_CHIP = "ads1115@0x48:0-3"
+POSE = (1.0, 0.0, -1.0)
+
+
+@pytest.fixture(scope="module")
+def four(tmp_path_factory):
+    """(model, sensor file): the paper's ring with four elements, in volts, fitted on the slide scene."""
+    d = tmp_path_factory.mktemp("four")
+    sensor = d / "four.toml"
+    sensor.write_text(PRESET.read_text().replace('name = "paper"', 'name = "four"')
+                      .replace("count = 8", "count = 4").replace('kind = "raw"', 'kind = "gmr"'))
+    data, model = d / "slide.csv", d / "four.json"
+    for args in (("simulate", "--sensor", str(sensor), "--scene", "slide", "-o", str(data)),
+                 ("fit", str(data), "-o", str(model), "--family", "all")):
+        proc = run_cli("fitgen", *args)
+        assert proc.returncode == 0, proc.stderr
+    assert json.loads(model.read_text())["fit"]["held_out"]["sensor_file"] == str(sensor.resolve())
+    return str(model), str(sensor)
+
+
+def _estimates(lines: str, names=("dx", "dy", "dz")) -> np.ndarray:
+    rows = [ln.split(",") for ln in lines.splitlines() if ln and ln[0] in "0123456789"]
+    head = next(ln.split(",") for ln in lines.splitlines() if ln.startswith("t,"))
+    return np.array([[float(r[head.index(n)]) for n in names] for r in rows])
+
+
+def test_read_simulates_and_tares_onto_the_models_own_sensor(four):
+    model, _ = four
+    proc = run_cli("tactile-host", "read", "--model", model, "--adc", ONE_CHIP, "--simulate", "dx=1,dz=-1",
+                   "--tare", "--count", "20")
+    assert proc.returncode == 0, proc.stderr
+    est = _estimates(proc.stdout)
+    assert len(est) == 20 and np.all(np.abs(est - POSE) < 0.05), est
+    # told another sensor, it is that one: the paper's eight elements against a map of four
+    proc = run_cli("tactile-host", "read", "--model", model, "--adc", ONE_CHIP, "--simulate", "dx=1,dz=-1",
+                   "--count", "3", "--sensor", "paper")
+    assert proc.returncode == 2 and "the simulated sensor 'paper' has 8" in proc.stderr, proc.stderr
+
+
+def test_arduino_build_measures_its_stack_on_the_models_own_sensor(four, tmp_path):
+    for tool in ("arduino-builder", "avr-size", "avr-nm", "gcc", "pkg-config"):
+        require_tool(tool)
+    model, _ = four
+    proc = run_cli("tactile-host", "arduino-build", "--model", model, "--adc", ONE_CHIP, "-o",
+                   str(tmp_path / "TactilePose"), "--emulate", "dx=1,dz=-1")
+    assert proc.returncode == 0, proc.stderr
+    est = _estimates(proc.stdout)
+    assert len(est) >= 3 and np.all(np.abs(est - POSE) < 0.05), proc.stdout
+
+
+def test_emulate_reads_the_models_own_sensor_over_i2c(four):
+    require_tool("gcc")
+    model, _ = four
+    proc = run_cli("tactile-hil", "emulate", "--model", model, "--target", "host", "--adc", ONE_CHIP,
+                   "--simulate", "dx=1,dz=-1", "--suite", "--vectors", "50", "--fuzz", "100")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "| stream | pass |" in proc.stdout and "sensor four" in proc.stdout, proc.stdout
