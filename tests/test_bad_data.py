@@ -412,3 +412,15 @@ def test_a_ctrl_c_while_a_command_starts_is_one_line(script, prog):
             f"e.import_module = interrupted\ne.{script}()\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert_one_line_error(proc, 130, f"{prog}: interrupted")
+
+
+@pytest.mark.parametrize("sep", [";", "\t"])
+def test_a_spreadsheets_export_with_another_separator_is_named(data, tmp_path, sep):
+    """A locale whose decimal point is a comma exports ';' (or tabs): it read as 'line 2: 14 fields, the header
+    has 1', which names neither the separator nor the fix."""
+    other = tmp_path / "other.csv"
+    other.write_text(data.read_text().replace(",", sep))
+    for argv in (["fit", str(other), "-o", str(tmp_path / "m.json")],
+                 ["identify", str(other), "-o", str(tmp_path / "u.toml")]):
+        assert_one_line_error(run_cli("fitgen", *argv), contains=f"its header is separated by {sep!r}, not commas")
+    assert files(tmp_path) == ["other.csv"]

@@ -154,6 +154,10 @@ def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
         raise InputError(f"{origin}: JSON, not CSV (a model or meta file?); a dataset is a CSV with the header "
                          "v1,...,vN,dx,dy,dz,thx,thy")
     names = [c.strip() for c in next(csv.reader([lines[0]]))]
+    sep = next((s for s in ";\t" if len(names) == 1 and s in lines[0]), None)
+    if sep is not None:  # a spreadsheet's export in a locale whose decimal point is a comma
+        raise InputError(f"{origin}: its header is separated by {sep!r}, not commas: a dataset is comma-separated "
+                         "with '.' as the decimal point (export it so, e.g. as 'CSV UTF-8 (comma delimited)')")
     twice = next((n for n in names if names.count(n) > 1), None)
     if twice is not None:
         raise InputError(f"{origin}: column {twice} appears twice")
