@@ -149,8 +149,9 @@ class ReadoutSession:
         az_settings = AutoZeroSettings(band_mm=band[0], band_deg=band[1],
                                        hold=parse_positive(args.rest_hold, "--rest-hold")).checked()
         self.model = model = load_model(args.model)
-        if not sensor_given:  # what --simulate simulates and --tare rests on: the model's own sensor, where found
-            args.sensor = fitted_sensor_spec(model) or args.sensor
+        own = None if sensor_given else fitted_sensor_spec(model)
+        if own:  # what --simulate simulates and --tare rests on: the model's own sensor, where found
+            args.sensor = own
         check_input_units(model, "V", "the ADCs' readings", f"model {args.model}")
         if tempcomp is not None and tempcomp.n != model.n_inputs:
             raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
@@ -159,9 +160,14 @@ class ReadoutSession:
             raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
         check_full_scale(cmap, model.input_min, model.input_max)
         need_ref = args.tare or args.auto_zero
-        reference = rest_reference(args.rest or args.sensor, model.n_inputs) if need_ref else None
+        # without a file to rest on, the rest readings the model recorded from its own sensor
+        recorded = None if args.rest or sensor_given or own or not need_ref else model.held_out_rest
+        reference, target = None, (f"--rest {args.rest}" if args.rest else "the model's own record"
+                                   if recorded is not None else f"--sensor {args.sensor}"
+                                   + (" (the model's)" if own else ""))
         if need_ref:
-            check_rest_reference(model, reference, f"--rest {args.rest}" if args.rest else f"--sensor {args.sensor}")
+            reference = recorded if recorded is not None else rest_reference(args.rest or args.sensor, model.n_inputs)
+            check_rest_reference(model, reference, target)
         self.engine = make_engine(args.engine, model, **({"precision": args.precision, "cc": args.cc}
                                                          if args.engine == "c" else {}))
         self.bus = None
@@ -182,7 +188,7 @@ class ReadoutSession:
             if need_ref:
                 with Progress(f"{prog}: tare", tare_n) as bar:  # seconds at a low data rate: say so
                     t = tare(array, reference, tare_n, bar.update)
-                print(f"{prog}: {t.describe()}", file=sys.stderr)
+                print(f"{prog}: {t.describe()}, onto the rest readings of {target}", file=sys.stderr)
                 offsets = t.offsets
                 noise = t.noise_floor(array.lsb)
                 if pose is not None:

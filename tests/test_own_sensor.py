@@ -68,3 +68,31 @@ def test_emulate_reads_the_models_own_sensor_over_i2c(four):
                    "--simulate", "dx=1,dz=-1", "--suite", "--vectors", "50", "--fuzz", "100")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "| stream | pass |" in proc.stdout and "sensor four" in proc.stdout, proc.stdout
+
+
+def test_a_twin_copied_alone_tares_onto_the_rest_it_recorded(tmp_path):
+    """A twin's model copied to a Pi without its unit file: the tare rested on the drawing's rest (--sensor's
+    default), and was refused or bent every estimate. The model records its sensor's rest readings and a tare with
+    no file to rest on takes them."""
+    from fitgen.equations.model import load_model
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.transfer import readings
+
+    data, unit, model = tmp_path / "u.csv", tmp_path / "u.unit.toml", tmp_path / "twin.json"
+    for args in (("simulate", "--sensor", "paper", "--unit", "3", "--transfer", "gmr", "--scene", "slide", "-o",
+                  str(data)), ("fit", str(data), "-o", str(model), "--family", "all")):
+        proc = run_cli("fitgen", *args)
+        assert proc.returncode == 0, proc.stderr
+    own_rest = readings(load_sensor(str(unit)).with_transfer("gmr"), np.zeros(5), adc_bits=0)[0]
+    np.testing.assert_array_equal(load_model(model).held_out_rest, own_rest)
+    unit.rename(tmp_path / "elsewhere.toml")  # not on the Pi
+    proc = run_cli("tactile-host", "read", "--model", str(model), "--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3",
+                   "--simulate", "0,0,0,0,0", "--tare", "--tare-samples", "64", "--count", "2")
+    assert proc.returncode == 0, proc.stderr
+    line = next(ln for ln in proc.stderr.splitlines() if "tare: offsets" in ln)
+    assert line.endswith("onto the rest readings of the model's own record"), line
+    # the simulated sensor is the drawing (no file says otherwise): the offsets are the drawing's rest less the unit's
+    paper_rest = readings(load_sensor("paper").with_transfer("gmr"), np.zeros(5), adc_bits=0)[0]
+    offsets = np.array([float(x) for x in line.split("[mV] ")[1].split(" (")[0].split()])
+    np.testing.assert_allclose(offsets, (paper_rest - own_rest) * 1e3, atol=0.3)
+    assert np.abs(offsets).max() > 3  # a unit's rest is not the drawing's: the test tells them apart

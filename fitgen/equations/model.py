@@ -77,6 +77,16 @@ class Model:
         box = (self.fit_info.get("held_out") or {}).get("box") or {}
         return {o: (float(box[o][0]), float(box[o][1])) for o in self.output_names if o in box}
 
+    @property
+    def held_out_rest(self) -> np.ndarray | None:
+        """The readings the model's sensor gives at rest, noise-free (its ``held_out`` record's ``rest``, one per
+        input); None without one."""
+        rest = (self.fit_info.get("held_out") or {}).get("rest")
+        if not isinstance(rest, list) or len(rest) != self.n_inputs:
+            return None
+        out = np.array(rest, dtype=float)
+        return out if np.all(np.isfinite(out)) else None
+
     def equation(self, name: str) -> Equation:
         for e in self.equations:
             if e.name == name:

@@ -22,6 +22,7 @@ from fitgen.equations.model import Model
 from fitgen.equations.rounding import PRECISIONS
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.simulate import pose_rng, random_poses, simulate
+from fitgen.physics.transfer import readings
 
 N_POSES = 2000
 SEED = 2026
@@ -248,6 +249,8 @@ def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None,
              + (", units from the identification's posterior" if posterior else ""))
     record = evaluate(model, sensor, box_of(ds.poses()), noise=noise, n=n, posterior=posterior,
                       labels=ds.meta.get("labels", "stage"))
+    # what a tare rests on where the sensor's file is not at hand (the model alone copied to a Pi)
+    record["rest"] = readings(sensor, np.zeros(5), adc_bits=0)[0].tolist()
     if unit_file and Path(unit_file).is_file():  # a unit's, or a drawing of the user's own: verify finds it again
         record["sensor_file"] = str(Path(unit_file).resolve())
         if sensor.is_drawing:  # a record without it, with a file, is a unit's (as models fitted before it say)
