@@ -62,6 +62,7 @@ class Schedule:
     poses: np.ndarray  # (P, 5)
     columns: tuple[str, ...]  # the pose columns the schedule names, in the order dx,dy,dz,thx,thy
     origin: str = "schedule"
+    drawing: dict | None = None  # the drawing `fitgen schedule` made it for: sensor, sensor_file, sha256, transfer
 
     @property
     def values(self) -> np.ndarray:
@@ -89,7 +90,9 @@ def load_schedule(path: str | Path) -> Schedule:
     0."""
     origin = f"schedule {path}"
     poses, columns = pose_table(read_text(path, "schedule"), origin)
-    return Schedule(as_poses(poses), columns, origin)
+    meta = load_meta(path)
+    drawing = {k: meta[k] for k in ("sensor", "sensor_file", "sensor_sha256", "transfer") if k in meta}
+    return Schedule(as_poses(poses), columns, origin, drawing if "sensor" in drawing else None)
 
 
 def header_line(n_inputs: int, columns: tuple[str, ...]) -> str:
@@ -416,7 +419,7 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
         before_s, runs = 0.0, 1
     t_start = clock.monotonic()
     info = {"schedule": schedule.origin, "samples_per_row": samples, "max_spread_volts": max_spread,
-            **(meta or {})}
+            **({"schedule_drawing": schedule.drawing} if schedule.drawing else {}), **(meta or {})}
 
     def refresh():
         info.update(noise.meta(), duration_s=before_s + (clock.monotonic() - t_start), runs=runs)

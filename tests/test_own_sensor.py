@@ -96,3 +96,34 @@ def test_a_twin_copied_alone_tares_onto_the_rest_it_recorded(tmp_path):
     offsets = np.array([float(x) for x in line.split("[mV] ")[1].split(" (")[0].split()])
     np.testing.assert_allclose(offsets, (paper_rest - own_rest) * 1e3, atol=0.3)
     assert np.abs(offsets).max() > 3  # a unit's rest is not the drawing's: the test tells them apart
+
+
+def test_identify_takes_the_drawing_the_capture_was_scheduled_for(tmp_path):
+    """A drawing of one's own through schedule and capture: identify defaulted to paper, and refused the capture as
+    'a unit far outside paper's tolerances'. The schedule records its drawing, the capture passes it on, and identify
+    takes it unless told; told another, or with the file changed since, it says so."""
+    drawing = tmp_path / "r9.toml"
+    drawing.write_text(PRESET.read_text().replace('name = "paper"', 'name = "r9"')
+                       .replace("radius = 10.0 ", "radius = 9.0 ").replace('kind = "raw"', 'kind = "gmr"'))
+    sched, units, cap = tmp_path / "s.csv", tmp_path / "u.csv", tmp_path / "c.csv"
+    for tool, *args in (("fitgen", "schedule", "--sensor", str(drawing), "--n", "40", "-o", str(sched)),
+                        ("fitgen", "simulate", "--sensor", str(drawing), "--unit", "2", "--random", "3", "-o",
+                         str(units)),
+                        ("tactile-host", "capture", "--poses", str(sched), "--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3",
+                         "--sensor", str(tmp_path / "u.unit.toml"), "--simulate", "-o", str(cap))):
+        proc = run_cli(tool, *args)
+        assert proc.returncode == 0, proc.stderr
+    made = json.loads((tmp_path / "c.csv.meta.json").read_text())["schedule_drawing"]
+    assert made["sensor"] == "r9" and made["sensor_file"] == str(drawing.resolve())
+    proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "unit.toml"))
+    assert proc.returncode == 0, proc.stderr
+    assert f"the drawing: {drawing.resolve()}, as the capture's schedule names it" in proc.stderr
+    unit = (tmp_path / "unit.toml").read_text()
+    assert 'drawing = "r9"' in unit and f'drawing_spec = "{drawing.resolve()}"' in unit, unit
+    proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "p.toml"), "--sensor", "paper")
+    assert proc.returncode == 2 and f"note: the capture's schedule was made for {drawing.resolve()}; identifying " \
+        "against --sensor paper" in proc.stderr, proc.stderr
+    drawing.write_text(drawing.read_text().replace("radius = 9.0 ", "radius = 9.5 "))
+    proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "q.toml"))
+    assert proc.returncode == 2 and "note: the capture's schedule was made for sensor r9, whose file is not here as " \
+        "it was; identifying against paper" in proc.stderr, proc.stderr

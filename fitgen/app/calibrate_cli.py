@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from fitgen.base.fileio import write_all
 from fitgen.app.options import noise_of, sensor_of
@@ -19,6 +20,9 @@ def cmd_identify(args) -> int:
 
     folder = plots.require(args.plot) if args.plot else None
     ds = load_dataset(args.capture)
+    args.sensor, said = rec.drawing_for(args.sensor, ds.meta)  # the one the capture's schedule was made for
+    if said:
+        print(said, file=sys.stderr)
     if not ds.target_names:
         raise InputError(f"{args.capture} has readings but no pose columns (dx,dy,dz,...): identify needs each row's "
                          "stage displacement from the zero, as tactile-host capture writes it")
@@ -102,7 +106,10 @@ def cmd_schedule(args) -> int:
     with Progress("schedule", args.n) as bar:
         poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits, {}),
                                noise=noise / np.sqrt(samples), rig_error=args.rig_error, progress=step)
-    write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples, **told})
+    # the drawing's file and hash: capture passes them on, and identify takes that drawing unless told
+    own = {"sensor_file": str(Path(args.sensor).resolve())} if Path(args.sensor).is_file() else {}
+    write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples, **told, **own,
+                                              "sensor_sha256": drawing.sha256, "transfer": drawing.transfer})
     rest = (f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"]
             else "")
     if told:

@@ -381,7 +381,8 @@ def build_parser() -> Parser:
 
     i = command("identify", cmd_identify, "a built unit's physics from a short capture (its sensor file)")
     i.add_argument("capture", metavar="CAPTURE.csv", help="rows of readings with the stage's displacements (dx,dy,dz)")
-    i.add_argument("--sensor", default="paper", help="the drawing the unit was built to (preset or TOML; default paper)")
+    i.add_argument("--sensor", help="the drawing the unit was built to (preset or TOML; default: the one the "
+                                    "capture's schedule was made for, else paper)")
     i.add_argument("--transfer", choices=("raw", "gmr"), help="override the transfer (default: the capture's units)")
     i.add_argument("--noise", type=finite, metavar="X",
                    help="the device's single-sample reading noise (default: what the capture measured, else the "

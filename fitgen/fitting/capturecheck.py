@@ -26,7 +26,7 @@ def check_capture(space, readings: np.ndarray, poses: np.ndarray) -> np.ndarray:
     n, N = readings.shape
     if N != space.drawing.n_elements:
         raise InputError(f"the capture has {N} readings per row; sensor {space.drawing.name} has "
-                         f"{space.drawing.n_elements} elements")
+                         f"{space.drawing.n_elements} elements: give the drawing the unit was built to (--sensor)")
     if n < MIN_ROWS:
         raise InputError(f"the capture has {n} rows; identify needs at least {MIN_ROWS} (fitgen schedule --n 40)")
     far = np.abs(poses[:, :3]).max(axis=0)

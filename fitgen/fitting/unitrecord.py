@@ -5,6 +5,7 @@ the unit file with its posterior record; and what it reads from a capture's meta
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -14,6 +15,7 @@ from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PINNABLE, PRIOR_
                                      Identification, identify, tilting)
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
+from fitgen.physics.simulate import dataset_sensor
 from fitgen.physics.units import STIFFENING, UnitSpace
 
 MORE_SAMPLES = 8  # identify's report: what rows of this many times the samples would pin (16 -> 128)
@@ -157,6 +159,39 @@ def device_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tupl
     if measured is not None:
         return float(np.sqrt(np.mean(np.square(measured)))), "measured by the capture"
     return sensor.noise, f"the drawing {sensor.name}'s"
+
+
+def schedule_drawing(meta: dict) -> str | None:
+    """The drawing (its file, or a preset's name) the schedule of a capture with ``meta`` was made for, as `fitgen
+    schedule` recorded it and `tactile-host capture` passed it on; None where unrecorded, not found here or changed
+    since (by hash)."""
+    rec = meta.get("schedule_drawing")
+    if not isinstance(rec, dict) or not isinstance(rec.get("sensor"), str):
+        return None
+    try:
+        if dataset_sensor(rec) is None:
+            return None
+    except InputError:  # a recorded file that no longer reads as a sensor
+        return None
+    path = rec.get("sensor_file")
+    return path if isinstance(path, str) and Path(path).is_file() else rec["sensor"]
+
+
+def drawing_for(given: str | None, meta: dict) -> tuple[str, str]:
+    """The drawing identify takes for a capture with ``meta`` (``given``: --sensor, else the one its schedule was
+    made for, else paper), and a line saying so where that is not plain (else '')."""
+    recorded, made = schedule_drawing(meta), meta.get("schedule_drawing")
+    if given is not None:
+        if recorded is not None and Path(given).name != Path(recorded).name:
+            return given, f"note: the capture's schedule was made for {recorded}; identifying against --sensor {given}"
+        return given, ""
+    if recorded is not None:
+        return recorded, ("" if recorded == "paper" else
+                          f"the drawing: {recorded}, as the capture's schedule names it (--sensor to say another)")
+    if isinstance(made, dict):
+        return "paper", (f"note: the capture's schedule was made for sensor {made.get('sensor')}, whose file is not "
+                         "here as it was; identifying against paper (--sensor to say which)")
+    return "paper", ""
 
 
 def in_capture_units(drawing: Sensor, meta: dict) -> Sensor:
