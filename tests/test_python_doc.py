@@ -1,0 +1,182 @@
+"""docs/python.md runs as written: its ```python blocks, in order in one namespace in a fresh folder, make what the
+document says they make; its ```sh lines, the commands each block mirrors, make the same model, estimates and
+header; and the header computes the float estimates the document shows, bit for bit."""
+
+import contextlib
+import io
+import json
+import re
+import shlex
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import require_tool, run_cli
+
+DOC = Path(__file__).resolve().parents[1] / "docs" / "python.md"
+STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wdouble-promotion", "-Wfloat-conversion"]
+# the document's own bar for a resolvable component (fitgen.physics.observe.DEFAULT_ACCURACY: 0.1 mm)
+SANE_MM = 0.1
+
+
+def _blocks(lang: str) -> list[str]:
+    return re.findall(rf"^```{lang}\n(.*?)^```[ \t]*$", DOC.read_text(), re.S | re.M)
+
+
+def _sections() -> list[str]:
+    return re.split(r"^## ", DOC.read_text(), flags=re.M)[1:]
+
+
+@pytest.fixture(scope="module")
+def doc(tmp_path_factory):
+    """(namespace, folder, stdout per block) after running the document's python blocks in order."""
+    folder = tmp_path_factory.mktemp("python-doc")
+    ns = {"__name__": "docs_python"}
+    printed = []
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(folder)
+        for i, code in enumerate(_blocks("python"), start=1):
+            out = io.StringIO()
+            with contextlib.redirect_stdout(out):
+                exec(compile(code, f"{DOC}: python block {i}", "exec"), ns)
+            printed.append(out.getvalue())
+    return ns, folder, printed
+
+
+def test_the_document_has_one_python_block_per_section():
+    blocks = _blocks("python")
+    assert len(blocks) >= 5, f"{DOC} has {len(blocks)} python blocks"
+    assert [s.count("```python") for s in _sections()] == [1] * len(blocks)
+    # no other way of marking Python code that the test would not run
+    assert DOC.read_text().count("```") == 2 * (len(blocks) + len(_blocks("sh")))
+
+
+def test_the_sensor_is_the_file_written_in_volts(doc):
+    from fitgen.physics.sensor import load_sensor
+
+    ns, folder, printed = doc
+    sensor = ns["sensor"]
+    assert load_sensor(folder / "mine.toml").sha256 == sensor.sha256
+    assert sensor.transfer == "gmr" and sensor.units == "V" and sensor.noise > 0
+    assert ns["paper"].name == "paper" and ns["paper"].units == "V"
+    assert f"{sensor.name}: {sensor.n_elements} elements, transfer gmr" in printed[0]
+
+
+def test_observe_says_what_the_prose_says(doc):
+    ns, _, printed = doc
+    assert ns["reports"]["full"].unresolved()  # a single ring does not tell tilt from slide
+    assert ns["reports"]["slide"].unresolved() == []
+    assert ns["scene"].name == "slide"
+    assert "scene slide: cannot resolve nothing" in printed[1]
+
+
+def test_the_model_is_fitted_for_the_device_and_saved(doc):
+    from fitgen.equations.model import load_model
+
+    ns, folder, printed = doc
+    model, sensor = ns["model"], ns["sensor"]
+    assert load_model(folder / "slide.json").sha256 == model.sha256
+    assert model.input_units == "V" and model.output_names == ns["scene"].outputs
+    info = model.fit_info
+    assert info["noise"]["device"] == sensor.noise and info["precision"]["target"] == "float"
+    assert info["family"]["auto"] and info["family"]["name"] in ("all", "harmonics")
+    held = info["held_out"]
+    assert held["poses"] == 500 and held["noise"] == sensor.noise
+    assert held["sensor_sha256"] == sensor.sha256
+    for o in model.output_names:
+        e = held["errors"]["float"][o]["noisy_max"]
+        assert 0 < e < SANE_MM, (o, e)
+        assert f"{o}: max error {e:.3g} mm with noise, float" in printed[2]
+
+
+def test_the_estimates_are_the_float_models_on_new_poses(doc):
+    from fitgen.equations.model import load_model
+
+    ns, folder, printed = doc
+    model, test, est = ns["model"], ns["test"], ns["est"]
+    assert est.shape == (test.n_rows, len(model.output_names)) and test.n_rows >= 100
+    assert np.array_equal(est, model.predict(test.inputs, precision="float"))
+    assert np.array_equal(est, load_model(folder / "slide.json").predict(test.inputs, precision="float"))
+    assert not np.array_equal(est, model.predict(test.inputs))  # float, not double
+    train_poses = {tuple(p) for p in ns["train"].poses()}
+    assert not any(tuple(p) in train_poses for p in test.poses())
+    held = model.fit_info["held_out"]["errors"]["float"]
+    for j, o in enumerate(model.output_names):
+        e = ns["max_err"][o]
+        assert e == np.abs(est[:, j] - test.target(o)).max()
+        assert np.isfinite(e) and 0 < e < SANE_MM, (o, e)
+        # the same kind of figure as the held-out record's, on other poses and noise draws: the same order
+        assert held[o]["noisy_max"] / 4 < e < 4 * held[o]["noisy_max"], (o, e, held[o]["noisy_max"])
+        assert f"{o}: max error {e:.3g} mm" in printed[3]
+
+
+def test_the_header_compiles_and_computes_the_float_estimates(doc, tmp_path):
+    gcc = require_tool("gcc")
+    ns, folder, _ = doc
+    header = folder / "c" / "tm_model.h"
+    assert folder / ns["header"] == header and header.is_file()  # written where the notebook runs
+    assert ns["model"].sha256 in header.read_text()
+    proc = subprocess.run([gcc, *STRICT, "-fsyntax-only", "-x", "c", str(header)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    # the header's promise (and the document's): fitgen predict --precision float, bit for bit
+    main = tmp_path / "main.c"
+    main.write_text(f'#include "{header}"\n#include <stdio.h>\n#include <stdlib.h>\n'
+                    "int main(void) {\n  double x; tm_real in[TM_N_INPUTS], out[TM_N_OUTPUTS];\n"
+                    "  for (;;) {\n    for (int k = 0; k < TM_N_INPUTS; k++) {\n"
+                    "      if (scanf(\"%lf\", &x) != 1) return 0;\n      in[k] = (tm_real)x;\n    }\n"
+                    "    tm_estimate(in, out);\n"
+                    "    for (int j = 0; j < TM_N_OUTPUTS; j++) printf(\"%.9g \", (double)out[j]);\n"
+                    "    printf(\"\\n\");\n  }\n}\n")
+    exe = tmp_path / "est"
+    proc = subprocess.run([gcc, "-std=c99", "-O2", str(main), "-o", str(exe), "-lm"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    text = "\n".join(" ".join(repr(float(v)) for v in row) for row in ns["test"].inputs) + "\n"
+    run = subprocess.run([str(exe)], input=text, capture_output=True, text=True, timeout=60)
+    c_est = np.array([[float(v) for v in line.split()] for line in run.stdout.splitlines()])
+    assert np.array_equal(c_est.astype(np.float32), ns["est"].astype(np.float32))
+
+
+def test_a_built_unit_is_far_worse_served_than_the_drawing(doc):
+    ns, _, printed = doc
+    model, held = ns["model"], ns["model"].fit_info["held_out"]
+    assert not ns["unit"].is_drawing and ns["unit"].sha256 != ns["sensor"].sha256
+    assert np.array_equal(ns["on_unit"].poses(), ns["test"].poses())
+    for j, o in enumerate(model.output_names):
+        unit, drawing = ns["unit_err"][o], ns["max_err"][o]
+        assert unit == np.abs(ns["unit_est"][:, j] - ns["on_unit"].target(o)).max()
+        assert np.isfinite(unit) and unit > 5 * drawing, (o, unit, drawing)
+        # the record's units say so too
+        assert held["uncalibrated"]["errors"][o]["noisy_max"] > 5 * held["errors"]["float"][o]["noisy_max"], o
+        assert f"{o}: max error {unit:.3g} on unit 7, {drawing:.3g} on the drawing" in printed[5]
+
+
+def _estimates(path: Path) -> np.ndarray:
+    lines = path.read_text().splitlines()
+    return np.array([[float(v) for v in line.split(",")[:-1]] for line in lines[1:]])
+
+
+def test_the_sh_lines_make_the_same(doc, tmp_path):
+    """The commands the document says each block mirrors, run as written, make the same model (by hash), held-out
+    figures, estimates and header; and `fitgen fit` on the dataset the python wrote finds its sensor and scene."""
+    from fitgen.equations.model import load_model
+
+    ns, folder, _ = doc
+    shutil.copy(folder / "mine.toml", tmp_path / "mine.toml")
+    lines = [ln.strip() for block in _blocks("sh") for ln in block.splitlines() if ln.strip()]
+    assert len(lines) >= 5 and all(ln.startswith("fitgen ") for ln in lines), lines
+    for line in lines:
+        proc = run_cli(*shlex.split(line), cwd=tmp_path)
+        assert proc.returncode == 0, f"{line}: {proc.stderr}"
+    model = load_model(tmp_path / "slide.json")
+    assert model.sha256 == ns["model"].sha256
+    assert json.dumps(model.fit_info["held_out"]["errors"]) == json.dumps(ns["model"].fit_info["held_out"]["errors"])
+    assert model.fit_info["family"] == ns["model"].fit_info["family"]
+    assert np.array_equal(_estimates(tmp_path / "est.csv"), ns["est"])
+    assert np.array_equal(_estimates(tmp_path / "unit7-est.csv"), ns["unit_est"])
+    assert (tmp_path / "c" / "tm_model.h").read_text() == (folder / "c" / "tm_model.h").read_text()
+    proc = run_cli("fitgen", "fit", str(folder / "slide.csv"), "-o", str(tmp_path / "again.json"), "--held-out", "0")
+    assert proc.returncode == 0, proc.stderr
+    assert load_model(tmp_path / "again.json").sha256 == ns["model"].sha256
