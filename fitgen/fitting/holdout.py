@@ -311,18 +311,9 @@ def fitted_sensor(sensor, model: Model, why: str, flag: str = "--sensor"):
 def fitted_sensor_spec(model: Model) -> str | None:
     """The preset name or sensor file of the sensor ``model``'s held-out figures are for, where it is found here
     and is still that sensor (by hash); else None."""
-    from fitgen.physics.simulate import dataset_sensor
+    from fitgen.physics.simulate import recorded_spec
 
-    rec = model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None
-    if not isinstance(rec, dict):
-        return None
-    try:
-        if dataset_sensor(rec) is None:
-            return None
-    except InputError:  # a recorded file that no longer reads as a sensor
-        return None
-    path = rec.get("sensor_file")
-    return path if isinstance(path, str) and Path(path).is_file() else rec.get("sensor")
+    return recorded_spec(model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None)
 
 
 def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] | None:

@@ -15,7 +15,7 @@ from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PINNABLE, PRIOR_
                                      Identification, identify, tilting)
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
-from fitgen.physics.simulate import dataset_sensor
+from fitgen.physics.simulate import recorded_spec
 from fitgen.physics.units import STIFFENING, UnitSpace
 
 MORE_SAMPLES = 8  # identify's report: what rows of this many times the samples would pin (16 -> 128)
@@ -165,16 +165,7 @@ def schedule_drawing(meta: dict) -> str | None:
     """The drawing (its file, or a preset's name) the schedule of a capture with ``meta`` was made for, as `fitgen
     schedule` recorded it and `tactile-host capture` passed it on; None where unrecorded, not found here or changed
     since (by hash)."""
-    rec = meta.get("schedule_drawing")
-    if not isinstance(rec, dict) or not isinstance(rec.get("sensor"), str):
-        return None
-    try:
-        if dataset_sensor(rec) is None:
-            return None
-    except InputError:  # a recorded file that no longer reads as a sensor
-        return None
-    path = rec.get("sensor_file")
-    return path if isinstance(path, str) and Path(path).is_file() else rec["sensor"]
+    return recorded_spec(meta.get("schedule_drawing"))
 
 
 def drawing_for(given: str | None, meta: dict) -> tuple[str, str]:

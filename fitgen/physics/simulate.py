@@ -215,6 +215,23 @@ def dataset_sensor(meta: dict, spec: str | None = None, n_inputs: int | None = N
     return sensor
 
 
+def recorded_spec(rec) -> str | None:
+    """The sensor file or preset name a record names (``sensor``, ``sensor_file``, ``sensor_sha256``, ``transfer``: a
+    dataset's meta, a model's held-out record, a schedule's drawing), where it is found here and is still that
+    sensor (by hash); else None."""
+    from pathlib import Path
+
+    if not isinstance(rec, dict) or not isinstance(rec.get("sensor"), str):
+        return None
+    try:
+        if dataset_sensor(rec) is None:
+            return None
+    except InputError:  # a recorded file that no longer reads as a sensor
+        return None
+    path = rec.get("sensor_file")
+    return path if isinstance(path, str) and Path(path).is_file() else rec["sensor"]
+
+
 def check_sensor_file(meta: dict, spec: str | None = None, origin: str = "the dataset") -> None:
     """InputError when the sensor file a simulated dataset's meta names (``sensor_file``: a unit's, say) is
     missing or has changed since the data were simulated, unless ``spec`` (a --sensor) names another: without
