@@ -1,10 +1,12 @@
 """Model files, the fit's two stages, predict and report, and bad input on every path."""
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 
+from fitgen.app.report import format_report
 from fitgen.base.errors import InputError
 from fitgen.fitting.fit import FitSettings, fit_model
 from fitgen.equations.model import load_model, model_from_dict
@@ -124,6 +126,9 @@ def test_predict_and_report_cli(paper_fit, tmp_path):
                    "--plot", str(tmp_path / "plots"), "--sensor", "paper")
     assert proc.returncode == 0, proc.stderr
     assert "max error per dz level" in proc.stdout and "paper sim max" in proc.stdout
+    assert f"Model {model.sha256[:12]}: 5 outputs, 8 inputs (mT)" in proc.stdout
+    one = dataclasses.replace(model, equations=model.equations[:1], fit_info={})  # said in the singular
+    assert f"Model {one.sha256[:12]}: 1 output, 8 inputs" in format_report(one)
     assert (tmp_path / "plots" / "estimate_thx.png").stat().st_size > 1000
     assert (tmp_path / "plots" / "sweep_thx.png").exists()
     # what --plot needs is checked before the report is written: one line, nothing written

@@ -151,7 +151,8 @@ def format_report(model: Model, ds: Dataset | None = None, title: str = "", pape
     """Markdown: terms and fit figures per output; errors on ``ds`` (default: the fit's training errors)."""
     info = model.fit_info.get("outputs", {})
     parts = [f"## {title}" if title else "## Model", ""]
-    parts.append(f"Model {model.sha256[:12]}: {len(model.equations)} outputs, {model.n_inputs} inputs "
+    n = len(model.equations)
+    parts.append(f"Model {model.sha256[:12]}: {n} output{'s' * (n != 1)}, {model.n_inputs} inputs "
                  f"({model.input_units}); fitted on {model.fit_info.get('dataset_rows', '?')} rows, "
                  f"d-terms: {model.fit_info.get('d_terms', '?')}.")
     parts.append("")
