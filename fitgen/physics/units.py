@@ -5,7 +5,8 @@ A unit's parameters, relative to its drawing (:class:`UnitSpace`, in this order)
 
 - the magnet's rest offset x, y, z (mm), rest tilt thx, thy (deg), log of its polarisation over the
   drawing's;
-- per element k: azimuth and radius about the board's centre (deg, mm), height (mm), its sensitive
+- per element k: azimuth and radius about the board's centre (deg, mm; on the centre itself, shifts along
+  y and x, mm, both with the radius's spread), height (mm), its sensitive
   axis turned about the board's normal and raised out of its plane (deg; for an axis along the
   normal, turned about x and y), log gain, offset (mT, after |B . axis|);
 - a static ambient field x, y, z (mT);
@@ -44,6 +45,12 @@ STIFFENING = "stage.stiffening"  # a parameter only where the drawing's toleranc
 # sensor() leaves it out); parameters only where the drawing's tolerance allows for it
 FIELD = tuple(f"stage_field.{c}_d{a}" for c in "xyz" for a in "xyz")
 CLIP_SIGMA = 3.0
+CENTRE_MM = 1e-6  # an element this near the board's centre has no azimuth (its places: x and y shifts)
+
+
+def _on_centre(drawing: Sensor) -> np.ndarray:
+    """Per element (bool): on the board's centre, where a place has no azimuth."""
+    return np.hypot(drawing.positions[:, 0], drawing.positions[:, 1]) < CENTRE_MM
 
 
 def _axis_bases(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -74,20 +81,15 @@ class UnitSpace:
             raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing: give the drawing it was built "
                              f"to{hint}")
         t = tolerances or drawing.tolerances
-        radius = np.hypot(drawing.positions[:, 0], drawing.positions[:, 1])
-        if np.any(radius < 1e-6):
-            k = int(np.argmin(radius)) + 1
-            raise InputError(f"sensor {drawing.name!r}: element {k} sits on the board's centre; a unit's element "
-                             "needs an azimuth")
         n = drawing.n_elements
         stiff = (STIFFENING,) if t.stiffening > 0 else ()  # absent, the space (and its records) are as before
         moving = FIELD if t.stage_field > 0 else ()
         names = (MAGNET + tuple(f"e{k}.{p}" for k in range(1, n + 1) for p in ELEMENT) + AMBIENT + STAGE + stiff
                  + moving)
-        per_el = [t.element_azimuth, t.element_radius, t.element_height, t.element_axis, t.element_tilt,
-                  math.log1p(t.gain), t.offset]
+        per_el = [[t.element_radius if c else t.element_azimuth, t.element_radius, t.element_height, t.element_axis,
+                   t.element_tilt, math.log1p(t.gain), t.offset] for c in _on_centre(drawing)]
         sd = ([t.magnet_offset_xy, t.magnet_offset_xy, t.magnet_offset_z, t.magnet_tilt, t.magnet_tilt,
-               math.log1p(t.polarization)] + per_el * n + [t.ambient] * 3
+               math.log1p(t.polarization)] + [x for el in per_el for x in el] + [t.ambient] * 3
               + [t.stage_gain if i == j else t.stage_cross for i in range(3) for j in range(3)]
               + [t.stiffening] * len(stiff) + [t.stage_field] * len(moving))
         return cls(drawing, names, np.array(sd, dtype=float))
@@ -112,7 +114,11 @@ class UnitSpace:
         r0 = np.hypot(d.positions[:, 0], d.positions[:, 1])
         phi = np.arctan2(d.positions[:, 1], d.positions[:, 0]) + np.deg2rad(el[..., 0])
         r = r0 + el[..., 1]
-        pos = np.stack([r * np.cos(phi), r * np.sin(phi), d.positions[:, 2] + el[..., 2]], axis=-1)
+        # an element on the board's centre has no azimuth: its two places are shifts along x and y (mm)
+        centre = _on_centre(d)
+        x = np.where(centre, d.positions[:, 0] + el[..., 1], r * np.cos(phi))
+        y = np.where(centre, d.positions[:, 1] + el[..., 0], r * np.sin(phi))
+        pos = np.stack([x, y, d.positions[:, 2] + el[..., 2]], axis=-1)
         u1, u2 = _axis_bases(d.axes)
         ax = (d.axes + np.tan(np.deg2rad(el[..., 3]))[..., None] * u1
               + np.tan(np.deg2rad(el[..., 4]))[..., None] * u2)
