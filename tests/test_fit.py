@@ -209,6 +209,26 @@ def test_terms_near_the_rows_are_said_and_an_unknown_noise_is_said_plainly(tmp_p
     assert big.returncode == 0 and "terms on 37 rows" not in big.stderr
 
 
+def test_a_sensor_file_without_noise_is_said_not_fitted_silently_for_none(tmp_path):
+    """A sensor file that leaves its noise out reads 0: the fit was the paper's noise-free procedure without a word,
+    and its equations amplify the device's noise. It warns; --noise 0, which means it, does not."""
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "fitgen" / "physics" / "presets" / "paper.toml").read_text()
+    quiet = tmp_path / "quiet.toml"
+    quiet.write_text(re.sub(r"(?m)^noise\s*=.*\n", "", text).replace('name = "paper"', 'name = "quiet"'))
+    data = tmp_path / "g.csv"
+    proc = run_cli("fitgen", "simulate", "--sensor", str(quiet), "--grid", "dx=-2:2:5 dy=-2:2:5 dz=0,-1,-2", "-o",
+                   str(data))
+    assert proc.returncode == 0, proc.stderr
+    fit = ("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--outputs", "dx,dy,dz", "--held-out", "0")
+    proc = run_cli(*fit)
+    assert proc.returncode == 0 and "warning: sensor quiet gives no noise figure" in proc.stderr, proc.stderr
+    proc = run_cli(*fit, "--noise", "0")
+    assert proc.returncode == 0 and "warning" not in proc.stderr, proc.stderr
+
+
 def test_a_model_past_floats_range_runs_in_double_only(tmp_path):
     """Readings a billion times the sensor's give coefficients past float's range: a fit for float refuses them
     (or auto takes the family that runs in float), predict in float refuses as codegen does, double keeps them;

@@ -85,6 +85,11 @@ def fit_summary(model: Model, held_out: int) -> str:
     if noise["device"] is None and noise["data"] == 0:
         lines.append("warning: the dataset was simulated without noise and names no sensor this fitgen knows: fitted "
                      "without the device's noise (give --sensor FILE or --noise X)")
+    elif noise["device"] == 0 and str(noise.get("device_source", "")).startswith("sensor "):
+        # a file that leaves its noise out reads 0; --noise 0 (the paper's procedure) says so on purpose
+        lines.append(f"warning: {noise['device_source']} gives no noise figure (noise missing or 0 in its transfer's "
+                     "table): fitted without the device's noise, so the equations may amplify it and the held-out "
+                     "figures are noise-free (add the noise to the file, or give --noise X; --noise 0 to mean it)")
     text = "\n".join(lines) + "\n"
     if "held_out" in model.fit_info:
         return text + deployed_table(model)
