@@ -92,8 +92,7 @@ def cmd_observe(args) -> int:
 def cmd_fit(args) -> int:
     from fitgen.app.report import fit_notes, fit_summary
     from fitgen.base.progress import Progress
-    from fitgen.fitting.family import auto_compares, fit_family
-    from fitgen.fitting.holdout import fitted_held_out, unit_posterior
+    from fitgen.fitting.family import auto_compares, fit_device
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.physics.scenes import scene_outputs
     from fitgen.physics.simulate import check_sensor_file, dataset_sensor
@@ -128,27 +127,21 @@ def cmd_fit(args) -> int:
                                 recorded=None if args.scene else ds.meta.get("scene_outputs"))
     else:
         outputs = ds.target_names if args.outputs is None else parse_names(args.outputs, POSE_NAMES, "--outputs")
-    unit_file, posterior = args.sensor or ds.meta.get("sensor_file"), None
-    if args.held_out and sensor is not None:
-        posterior = unit_posterior(unit_file, sensor)  # a missing or bad posterior said now, not after the fit
-    auto = auto_compares(args.family, settings)
+    unit_file = args.sensor or ds.meta.get("sensor_file")
+    auto, hold = auto_compares(args.family, settings), int(bool(args.held_out) and sensor is not None)
     steps = len(outputs) + (ds.n_inputs if settings.refine else 0)  # the equations, then the forward model's
-    bar = Progress("fit", per_fit := steps * (2 if auto and sensor is not None else 1))
+    bar = Progress("fit", (per_fit := steps * (2 if auto and sensor is not None else 1)) + hold)
     progress = bar.per_item(lambda name, step, aic, n_terms: f"{name}: step {step}, {n_terms} terms, AIC {aic:.1f}")
     with bar:  # the first note shows at once: forming the rows' products takes seconds on a large dataset
         bar.update(0, f"{len(ds.inputs):,} rows: the candidate terms' products")
-        model, family = fit_family(ds, outputs, settings, sensor, args.family, progress, again=lambda f: bar.grow(
-            per_fit, f"rounding would matter on the device: fitted again for {f:g} unit roundoffs"))
-    if problem := model.float_problem() if settings.precision == "float" else "":  # fitted for float, not runnable
-        raise InputError(f"{problem} (--precision double fits it for double); nothing written")
-    model.fit_info.update(family=family, dataset=str(args.data))
+        model = fit_device(ds, outputs, settings, sensor, args.family, held_out=args.held_out, unit_file=unit_file,
+                           progress=progress, note=lambda text: bar.update(0, f"held-out: {text}"),
+                           again=lambda f: bar.grow(per_fit, "rounding would matter on the device: fitted again for "
+                                                    f"{f:g} unit roundoffs"))
+        bar.update(hold)
+    model.fit_info["dataset"] = str(args.data)
     if lifted:
         model.fit_info["rows_off_skin_left_out"] = lifted
-    if args.held_out and sensor is not None:
-        with Progress("held-out", 1) as hbar:
-            model.fit_info["held_out"] = fitted_held_out(model, sensor, ds, args.held_out, unit_file,
-                                                         note=lambda text: hbar.update(0, text), posterior=posterior)
-            hbar.update()
     model.save(args.output)
     print(fit_summary(model, args.held_out), end="", file=sys.stderr)
     print("".join(f"note: {n}\n" for n in fit_notes(model, ds, args.data, args.units or recorded)), end="", file=sys.stderr)

@@ -202,3 +202,24 @@ def fit_family(ds: Dataset, outputs, settings: FitSettings, sensor, family: str,
               {"name": "all", "auto": True, "why": "--noise 0: the paper's procedure"})
     return rounding_checked(lambda s: (fit_model(ds, outputs, s, progress=progress, sensor=sensor), record), ds,
                             settings, sensor, again)
+
+
+def fit_device(ds: Dataset, outputs, settings: FitSettings, sensor, family: str = "auto", *, held_out: int = N_POSES,
+               unit_file=None, progress=None, again=None, note=None) -> Model:
+    """The model `fitgen fit` writes for dataset ``ds``: :func:`fit_family`'s equations and its record of the family;
+    where ``sensor`` is known and ``held_out`` > 0, the held-out record on that many poses
+    (fitgen.fitting.holdout.fitted_held_out: on units drawn from the identification's posterior when ``unit_file``
+    has one; ``note(text)`` is told what it simulates). A bad posterior is an InputError before the fit, and so is
+    a float fit that float cannot run, after it."""
+    from fitgen.fitting.holdout import fitted_held_out, unit_posterior
+
+    hold = bool(held_out) and sensor is not None
+    posterior = unit_posterior(unit_file, sensor) if hold else None  # said before the fit's seconds, not after
+    model, record = fit_family(ds, outputs, settings, sensor, family, progress, again=again)
+    if problem := model.float_problem() if settings.precision == "float" else "":
+        raise InputError(f"{problem} (--precision double fits it for double); nothing written")
+    model.fit_info["family"] = record
+    if hold:
+        model.fit_info["held_out"] = fitted_held_out(model, sensor, ds, held_out, unit_file, note=note,
+                                                     posterior=posterior)
+    return model
