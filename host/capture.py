@@ -95,6 +95,15 @@ def load_schedule(path: str | Path) -> Schedule:
     return Schedule(as_poses(poses), columns, origin, drawing if "sensor" in drawing else None)
 
 
+def simulated_sensor(args, schedule: Schedule) -> None:
+    """Without ``--sensor``, a simulated capture simulates the drawing its schedule was made for, where its file is
+    here unchanged (else ADC_DEFAULTS' paper): a four-element schedule of one's own simulated eight elements."""
+    from fitgen.physics.simulate import recorded_spec
+
+    if args.sensor is None and args.simulate:
+        args.sensor = recorded_spec(schedule.drawing)
+
+
 def header_line(n_inputs: int, columns: tuple[str, ...]) -> str:
     return ",".join([f"v{k}" for k in range(1, n_inputs + 1)] + list(columns)) + "\n"
 

@@ -14,7 +14,8 @@ from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import (SAMPLES, TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFailed, capture, check_resume,
-                          designed_samples, enter_waiter, load_schedule, output_lock, prepare_output, trigger_waiter)
+                          designed_samples, enter_waiter, load_schedule, output_lock, prepare_output, simulated_sensor,
+                          trigger_waiter)
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.stage import StageError, StageState
 from host.stagecapture import open_stage, stage_settings
@@ -88,10 +89,11 @@ def run_capture(args, prog: str) -> None:
 
 
 def _run_capture(args, prog: str) -> None:
+    schedule = load_schedule(args.poses)
+    simulated_sensor(args, schedule)
     adc_defaults(args)
     samples, spread, tries, settle, retries = capture_numbers(args)
     timeout = trigger_timeout(args)
-    schedule = load_schedule(args.poses)
     cmap = channel_map_from_args(args)
     state = prepare_output(args.output, cmap.n_elements, schedule, write=False)  # checked before any waiting
     stage_opts = stage_settings(args, schedule)  # and the stage's settings before anything moves

@@ -15,7 +15,7 @@ from fitgen.physics.dataset import load_dataset
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import (SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, output_lock,
-                          trigger_waiter)
+                          simulated_sensor, trigger_waiter)
 from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers, kept, trigger_timeout
 from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
@@ -77,12 +77,13 @@ def _kept(out: Path, temps) -> str:
 
 
 def _capture_temperatures(args, prog: str):
+    schedule = load_schedule(args.poses)
+    simulated_sensor(args, schedule)
     adc_defaults(args)
     temps = parse_temperatures(args.temperature)
     t0 = parse_t0(args.t0, temps)
     samples, spread, tries, settle, retries = capture_numbers(args)
     timeout = trigger_timeout(args)
-    schedule = load_schedule(args.poses)
     # a pose visited twice is one pose to the compensation: its gain needs two different ones
     pose_of_row = np.unique(schedule.poses, axis=0, return_inverse=True)[1].ravel()
     if pose_of_row.max() < 1:

@@ -127,3 +127,16 @@ def test_identify_takes_the_drawing_the_capture_was_scheduled_for(tmp_path):
     proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "q.toml"))
     assert proc.returncode == 2 and "note: the capture's schedule was made for sensor r9, whose file is not here as " \
         "it was; identifying against paper" in proc.stderr, proc.stderr
+
+
+def test_a_simulated_capture_simulates_the_drawing_its_schedule_was_made_for(four, tmp_path):
+    """`capture --simulate` without --sensor simulated the paper's eight elements, so a schedule of a four-element
+    layout was refused ('the simulated sensor paper has 8')."""
+    _, sensor = four
+    sched, cap = tmp_path / "s.csv", tmp_path / "c.csv"
+    proc = run_cli("fitgen", "schedule", "--sensor", sensor, "--n", "12", "-o", str(sched))
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", ONE_CHIP, "--simulate", "-o", str(cap))
+    assert proc.returncode == 0, proc.stderr
+    meta = json.loads((tmp_path / "c.csv.meta.json").read_text())
+    assert meta["source"] == f"simulated {Path(sensor).resolve()}" and meta["schedule_drawing"]["sensor"] == "four"

@@ -292,8 +292,8 @@ def _adc_options(p, required: bool = True) -> None:
     # (host.session.ADC_DEFAULTS fills them in)
     p.add_argument("--retries", help="tries per I2C transfer before a chip counts as silent (default 5)")
     p.add_argument("--sensor", help="sensor preset or TOML file: what --simulate simulates, and the rest readings for "
-                                    "--tare (default paper; with --model, the sensor the model was fitted on where "
-                                    "its file is found)")
+                                    "--tare (default paper; with --model, the sensor the model was fitted on, and for "
+                                    "capture the drawing its schedule was made for, where the file is found)")
     p.add_argument("--sim-noise", type=noise_volts, help="simulated element noise, V rms (default: the sensor file's)")
     p.add_argument("--sim-flicker", type=noise_volts, help="simulated 1/f noise per element: its Allan deviation, V")
     p.add_argument("--sim-offsets", metavar="V1,..,VN", help="simulated offset of each element, V")
