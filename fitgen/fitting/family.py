@@ -209,8 +209,8 @@ def fit_device(ds: Dataset, outputs, settings: FitSettings, sensor, family: str 
     """The model `fitgen fit` writes for dataset ``ds``: :func:`fit_family`'s equations and its record of the family;
     where ``sensor`` is known and ``held_out`` > 0, the held-out record on that many poses
     (fitgen.fitting.holdout.fitted_held_out: on units drawn from the identification's posterior when ``unit_file``
-    has one; ``note(text)`` is told what it simulates). A bad posterior is an InputError before the fit, and so is
-    a float fit that float cannot run, after it."""
+    has one; ``note(text)`` is told what it simulates). InputError: a bad posterior, before the fit; a float fit
+    that float cannot run, after it."""
     from fitgen.fitting.holdout import fitted_held_out, unit_posterior
 
     hold = bool(held_out) and sensor is not None
