@@ -20,14 +20,11 @@ def _load(args):
     from fitgen.c.calblob import model_sensor_id
     from fitgen.c.verify import data_inputs
     from fitgen.equations.model import load_model
-    from fitgen.fitting.holdout import fitted_sensor_spec
     from hil.firmware import check_sensor_id as check_compiled_id
 
     model = load_model(args.model)
     if args.sensor_id is None:  # the model's sensor, where the firmware can compile it in and a blob carry it
         args.sensor_id = model_sensor_id(model, also=check_compiled_id)
-    if getattr(args, "sim_sensor", "") is None:  # emulate's: the model's own sensor, where its file is found
-        args.sim_sensor = fitted_sensor_spec(model) or "paper"
     return model, (data_inputs(model, args.data) if getattr(args, "data", None) else None)
 
 
@@ -127,10 +124,12 @@ def cmd_emulate(args) -> int:
     from contextlib import ExitStack
 
     from fitgen.base.progress import Progress
+    from fitgen.fitting.holdout import fitted_sensor_spec
     from hil.emulate import start_target, uno_crash_advice
 
     _check_counts(args)
     model, data = _load(args)
+    args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"  # the model's own, where found
     cmap, bridge, tin, tempcomp = _adc_bridge(args)
     with ExitStack() as stack:
         with Progress(f"{args.target} firmware", 2) as bar:  # building and booting take seconds

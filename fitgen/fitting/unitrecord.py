@@ -161,17 +161,12 @@ def device_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tupl
     return sensor.noise, f"the drawing {sensor.name}'s"
 
 
-def schedule_drawing(meta: dict) -> str | None:
-    """The drawing (its file, or a preset's name) the schedule of a capture with ``meta`` was made for, as `fitgen
-    schedule` recorded it and `tactile-host capture` passed it on; None where unrecorded, not found here or changed
-    since (by hash)."""
-    return recorded_spec(meta.get("schedule_drawing"))
-
-
 def drawing_for(given: str | None, meta: dict) -> tuple[str, str]:
     """The drawing identify takes for a capture with ``meta`` (``given``: --sensor, else the one its schedule was
-    made for, else paper), and a line saying so where that is not plain (else '')."""
-    recorded, made = schedule_drawing(meta), meta.get("schedule_drawing")
+    made for, as `fitgen schedule` recorded it and `tactile-host capture` passed it on, where its file is here
+    unchanged; else paper), and a line saying so where that is not plain (else '')."""
+    made = meta.get("schedule_drawing")
+    recorded = recorded_spec(made)
     if given is not None:
         if recorded is not None and Path(given).name != Path(recorded).name:
             return given, f"note: the capture's schedule was made for {recorded}; identifying against --sensor {given}"

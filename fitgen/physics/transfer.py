@@ -49,8 +49,14 @@ def past_linear(sensor: Sensor, b_axis: np.ndarray) -> np.ndarray:
             return np.zeros(mag.shape, dtype=bool)
         return element_response(sensor, mag) >= sensor.raw.full_scale
     g = sensor.gmr
-    out = g.offset + volts_per_mt(g) * element_response(sensor, np.minimum(mag, g.saturation))
+    out = _gmr_volts(sensor, mag)
     return (mag >= g.saturation) | (out >= g.adc_max) | (out <= g.adc_min)
+
+
+def _gmr_volts(sensor: Sensor, mag: np.ndarray) -> np.ndarray:
+    """The gmr transfer's volts for |B . axis| ``mag`` (mT), saturated, before noise and the ADC."""
+    g = sensor.gmr
+    return g.offset + volts_per_mt(g) * element_response(sensor, np.minimum(mag, g.saturation))
 
 
 def element_response(sensor: Sensor, mag: np.ndarray) -> np.ndarray:
@@ -81,7 +87,7 @@ def apply_transfer(
         lo, hi = 0.0, sensor.raw.full_scale
     else:
         g = sensor.gmr
-        out = g.offset + volts_per_mt(g) * element_response(sensor, np.minimum(mag, g.saturation))
+        out = _gmr_volts(sensor, mag)
         bits = g.adc_bits if adc_bits is None else adc_bits
         lo, hi = g.adc_min, g.adc_max
     if noise > 0:
