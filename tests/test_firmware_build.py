@@ -329,6 +329,45 @@ def test_posix_fma_blob(paper_model, posix_device):
     assert np.array_equal(status, ref_status) and np.array_equal(out, ref)
 
 
+@pytest.mark.parametrize("precision", ["float", "double"])
+def test_posix_built_with_ofast_answers_as_built_with_o2(paper_model, tmp_path_factory, precision):
+    """A firmware built with -Ofast (the build's flags file comes after -O2): the header's and cal.c's pragmas
+    keep the estimates' bits, -1 for non-finite readings, and the refusal of a blob with a NaN coefficient."""
+    folder = tmp_path_factory.mktemp(f"fw-ofast-{precision}")
+    render_firmware(paper_model, folder, precision=precision, style="table", port="posix")
+    (folder / "build_flags").write_text("-Ofast\n")
+    x = vectors_for(paper_model, seed=7)
+    blob = to_blob(paper_model, precision)
+    real = "<f" if precision == "float" else "<d"
+    at = blob.find(struct.pack(real, paper_model.equations[0].intercept))
+    assert at > 0
+    nan_blob = bytearray(blob[:-4])
+    nan_blob[at:at + struct.calcsize(real)] = struct.pack(real, float("nan"))
+    nan_blob += struct.pack("<I", P.crc32(bytes(nan_blob)))  # a sound trailer: the check is the interpreter's
+    answers = []
+    for fw in (built(paper_model, tmp_path_factory, "posix", precision, "table"), build_firmware(folder, "posix")):
+        proc = subprocess.Popen([str(fw)], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        try:
+            link = Link(proc.stdout.fileno(), proc.stdin.fileno())
+            compiled = eval_on(link, paper_model, precision, x)
+            load_blob(link, blob)
+            loaded = eval_on(link, paper_model, precision, x)
+            link.ok(T.CAL_BEGIN, 90, P.pack_cal_begin(len(nan_blob), P.crc32(bytes(nan_blob))))
+            for off in range(0, len(nan_blob), P.CAL_DATA_MAX):
+                link.ok(T.CAL_DATA, 91, P.pack_cal_data(off, bytes(nan_blob[off:off + P.CAL_DATA_MAX])))
+            assert link.error(T.CAL_COMMIT, 92) == E.CAL_INVALID
+            answers.append((compiled, loaded))
+        finally:
+            proc.kill()
+            proc.wait()
+            proc.stdin.close()
+            proc.stdout.close()
+    (o2, o2_blob), (fast, fast_blob) = answers
+    assert np.all(o2[0][-3:] == -1) and np.all(o2[1][-3:] == 0)
+    for got in (fast, fast_blob, o2_blob):
+        assert np.array_equal(got[0], o2[0]) and np.array_equal(got[1], o2[1])
+
+
 @pytest.mark.parametrize("posix_device", [("float", "unrolled")], indirect=True)
 def test_posix_stream(paper_model, posix_device):
     link, precision, style = posix_device

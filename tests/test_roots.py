@@ -242,10 +242,35 @@ def test_the_header_turns_contraction_off_itself(two_radii, cc):
     from fitgen.c.compiled import CompiledModel
 
     folder, model, v = two_radii
-    require_tool(cc.split()[0])
-    cc += " -march=x86-64-v3" if _has_fma() else ""  # where the CPU can run fused multiply-adds
+    tool, *flags = cc.split()
+    require_tool(tool)
+    flags += ["-march=x86-64-v3"] if _has_fma() else []  # where the CPU can run fused multiply-adds
     for precision in ("float", "double"):
         ref, _ = _predicted(folder, precision)
-        with CompiledModel(model, precision, "unrolled", cc=cc) as cm:
+        # as cflags, after the project's -std=c99, which would otherwise replace gnu99
+        with CompiledModel(model, precision, "unrolled", cc=tool, cflags=flags) as cm:
             out, _ = cm.predict(v)
         np.testing.assert_array_equal(out, ref)
+
+
+@pytest.mark.bitexact
+@pytest.mark.parametrize("cc", ["gcc", "clang"])
+def test_the_header_keeps_its_bits_and_its_guard_under_fast_math(two_radii, cc):
+    """A firmware built with -Ofast: without the header's pragmas the sums are reordered, clang approximates
+    the square root, and isfinite() folds to 1, so that a NaN reading came out as an estimate with status 0 (gcc)
+    or 255 (clang). With them the header answers Python's bits, and -1 with zeros for a non-finite reading."""
+    from fitgen.c.compiled import CompiledModel
+
+    folder, model, v = two_radii
+    require_tool(cc)
+    flags = ["-Ofast"] + (["-march=x86-64-v3"] if _has_fma() else [])
+    bad = np.tile(v[:1], (3, 1))
+    bad[0, 0], bad[1, 3], bad[2, 7] = np.nan, np.inf, -np.inf
+    for precision in ("float", "double"):
+        ref, ref_status = _predicted(folder, precision)
+        for style in ("table", "unrolled"):
+            with CompiledModel(model, precision, style, cc=cc, cflags=flags) as cm:
+                out, status = cm.predict(np.vstack([v, bad]))
+            np.testing.assert_array_equal(out[:len(v)], ref, err_msg=f"{precision} {style}")
+            np.testing.assert_array_equal(status[:len(v)], ref_status)
+            assert np.all(status[len(v):] == -1) and np.all(out[len(v):] == 0), (precision, style, status[len(v):])
