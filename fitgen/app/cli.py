@@ -144,7 +144,7 @@ def cmd_fit(args) -> int:
         model.fit_info["rows_off_skin_left_out"] = lifted
     model.save(args.output)
     print(fit_summary(model, args.held_out), end="", file=sys.stderr)
-    print("".join(f"note: {n}\n" for n in fit_notes(model, ds, args.data, args.units or recorded)), end="", file=sys.stderr)
+    print("".join(f"note: {n}\n" for n in fit_notes(model, ds, args.data, args.units or recorded, sensor)), end="", file=sys.stderr)
     print(f"wrote {args.output}", file=sys.stderr)
     return 0
 

@@ -216,7 +216,8 @@ def sweep_sensor(sensor, model):
     return fitted_sensor(sensor, model, "its sweep on this one would not be the model's")
 
 
-BLIND_SHARE = 0.5  # a training RMS past this share of an output's own spread: its readings barely carry it
+BLIND_SHARE = 0.5  # a training RMS past this share of an output's own spread, where a cause is found
+NEAR_CONSTANT = 0.8  # past this share the equation is near a constant, cause found or not
 
 
 def simulate_notes(sensor, poses, labels: str, spec: str) -> list[str]:
@@ -231,18 +232,43 @@ def simulate_notes(sensor, poses, labels: str, spec: str) -> list[str]:
             f"--sensor {spec}` tells whether the others still resolve it"]
 
 
-def fit_notes(model: Model, ds, data, units) -> list[str]:
-    """What a user should know of a fit to dataset ``ds`` beyond its summary: readings' units assumed, equations
-    near the rows, outputs the readings barely carry."""
+def _blind_causes(model: Model, ds, sensor) -> list[str]:
+    """What keeps the readings from carrying an output, of what can be checked here: fewer elements than outputs,
+    rows with an element past its linear range (where ``sensor``, the rows' own, is known)."""
+    causes = []
+    if ds.n_inputs < len(model.equations):
+        causes.append(f"{ds.n_inputs} elements for {len(model.equations)} outputs")
+    if sensor is not None:
+        from fitgen.physics.simulate import rows_past_linear
+
+        past = float(rows_past_linear(sensor, ds.poses(), ds.meta.get("labels", "stage")).mean())
+        if past >= 0.05:
+            causes.append(f"an element past its linear range in {past:.0%} of the rows")
+    return causes
+
+
+def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
+    """What a user should know of a fit to dataset ``ds`` (``sensor``: its rows' own, where known) beyond its
+    summary: readings' units assumed, equations near the rows, outputs the readings barely carry and why."""
     rows = len(ds.inputs)
     notes = [] if units else [f"{data} has no meta saying its readings' units: taken as mT (give --units V for "
                               "volts, as an ADC gives them)"]
+    causes, noise = None, (model.fit_info.get("noise") or {}).get("added") or 0.0
     for e in model.equations:
         rms, sd = model.fit_info["outputs"][e.name]["model_training_error"]["rms"], float(ds.target(e.name).std())
-        if sd > 0 and rms > BLIND_SHARE * sd:  # the fit is near a constant: AIC took what little there was
-            notes.append(f"{e.name}'s equation leaves {rms / sd:.0%} of its spread over the rows (training RMS "
-                         f"{rms:.3g} of {sd:.3g} {e.unit}): the readings barely carry {e.name} here, as elements past "
-                         "their linear range or fewer elements than outputs make it (fitgen observe)")
+        if not (sd > 0 and rms > BLIND_SHARE * sd):
+            continue
+        causes = _blind_causes(model, ds, sensor) if causes is None else causes
+        said = f"{e.name}'s equation leaves {rms / sd:.0%} of its spread over the rows (training RMS {rms:.3g} of " \
+               f"{sd:.3g} {e.unit})"
+        if causes:
+            notes.append(f"{said}: the readings barely carry {e.name} here ({'; '.join(causes)}); `fitgen observe` "
+                         "tells how well each output can be seen")
+        elif rms > NEAR_CONSTANT * sd:  # no cause found; the paper's tilts, fitted its way, leave about half
+            notes.append(f"{said}: it is close to a constant"
+                         + (f"; against the {noise:.3g} {model.input_units} rms of reading noise it is fitted for, "
+                            f"the readings barely carry {e.name} here" if noise > 0 else "")
+                         + "; `fitgen observe` tells how well each output can be seen")
     crowded = [e for e in model.equations if len(e.terms) + 1 > rows / 3]
     if crowded:  # AIC's penalty is no guard when the terms near the rows: the equation threads the rows' noise
         e = max(crowded, key=lambda e: len(e.terms))
