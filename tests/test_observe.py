@@ -197,3 +197,33 @@ def test_a_sensor_file_without_a_noise_figure_is_not_judged_noise_free(tmp_path)
                           "[transfer.raw])")
     proc = run_cli("fitgen", "observe", "--sensor", str(quiet), "--noise", "0.0005")
     assert proc.returncode == 0 and "dx: NOT resolvable" in proc.stdout  # the ring is blind to dx at rest
+
+
+def test_the_adcs_steps_count_as_reading_noise():
+    """A 10-bit converter's steps (3.2 mV, 0.93 mV rms) outweigh the elements' 0.5 mV: the bound counts both, as
+    the scatter of least-squares estimates over nearby poses (the rounding differs pose to pose) shows; the
+    elements' noise alone promised half that."""
+    from dataclasses import replace
+
+    gmr = PAPER.with_transfer("gmr")
+    coarse = replace(gmr, gmr=replace(gmr.gmr, adc_bits=10))
+    report = observe(coarse, PRESETS["full"].ranges)
+    lsb = (coarse.gmr.adc_max - coarse.gmr.adc_min) / 1023
+    assert report.noise == np.hypot(coarse.gmr.noise, lsb / np.sqrt(12)) and report.noise > 2 * coarse.gmr.noise
+    pose = np.array([-2.0, -2.0, -2.0, -5.0, -5.0])
+    bound = analyse(coarse, pose, report.noise)[0].bounds
+    rng = np.random.default_rng(9)
+    errors = []
+    for _ in range(300):
+        truth = pose + rng.uniform(-1, 1, 5) * [0.2, 0.2, 0.2, 0.5, 0.5]
+        meas = apply_transfer(coarse, field_readings(coarse, truth), noise=coarse.gmr.noise, rng=rng)[0]
+        fit = least_squares(lambda p: apply_transfer(coarse, field_readings(coarse, p), adc_bits=0)[0] - meas,
+                            truth, x_scale=[0.01, 0.01, 0.01, 0.3, 0.3])
+        errors.append(fit.x - truth)
+    rms = np.sqrt(np.mean(np.square(errors), axis=0))
+    np.testing.assert_allclose(rms, bound, rtol=0.25)
+    assert np.all(rms > 1.6 * analyse(coarse, pose, coarse.gmr.noise)[0].bounds)
+    # and the CLI says what it counted
+    proc = run_cli("fitgen", "observe", "--sensor", "paper", "--transfer", "gmr")
+    assert proc.returncode == 0 and "reading noise 0.0005 V rms (element noise 0.0005 and the ADC's 5.04e-05 V " \
+        "steps, 1.45e-05 rms)" in proc.stdout, proc.stdout

@@ -11,7 +11,7 @@ from fitgen.base.errors import InputError
 from fitgen.physics.pose import (POSE_NAMES, POSE_UNITS, as_poses, board_clearance, check_above_board, check_box,
                                  field_readings, pose_label)
 from fitgen.physics.sensor import Sensor
-from fitgen.physics.transfer import apply_transfer, past_linear
+from fitgen.physics.transfer import apply_transfer, past_linear, step_rms
 
 # central-difference steps (mm, deg): small against the field's length scale (mm),
 # large against rounding (readings ~1 mT, eps ~1e-16)
@@ -122,6 +122,8 @@ class ObserveReport:
     results: list[PoseObservability]
     inside: int = 0  # the last results: random poses inside the box (judged, not tabled)
     n_elements: int = 0
+    lsb: float = 0.0  # the ADC's step; its rounding, lsb / sqrt(12), is part of ``noise``
+    element_noise: float = 0.0
 
     @property
     def worst(self) -> np.ndarray:
@@ -186,7 +188,10 @@ class ObserveReport:
         return out
 
     def text(self) -> str:
-        head = (f"Observability: element noise {self.noise:g} {self.units} rms; bounds are 1-sigma "
+        noise = f"element noise {self.noise:g} {self.units} rms" if not self.lsb else (
+            f"reading noise {self.noise:.3g} {self.units} rms (element noise {self.element_noise:g} and the ADC's "
+            f"{self.lsb:.3g} {self.units} steps, {self.lsb / np.sqrt(12):.3g} rms)")
+        head = (f"Observability: {noise}; bounds are 1-sigma "
                 f"Cramer-Rao limits with {', '.join(self.components)} estimated jointly.\n"
                 f"Singular values of d(readings)/d(pose) in {self.units} per mm or per deg.\n")
         return head + "\n" + self.table() + "\n\n" + "\n".join(self.verdicts()) + "\n"
@@ -211,12 +216,17 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
     if extra:  # it would be ignored: say so rather than judge without it
         raise InputError(f"an accuracy is asked for {extra[0]}, which is not among the outputs estimated "
                          f"({','.join(components)}): give the scene that estimates it, or leave it out")
-    noise = sensor.noise if noise is None else noise
+    element = sensor.noise if noise is None else noise
+    # the ADC's rounding is noise the readings carry too: a coarse converter (or volts typed as millivolts)
+    # bounds what they resolve more than the elements do
+    lsb, step = step_rms(sensor)
+    noise = float(np.hypot(element, step))
     acc = dict(DEFAULT_ACCURACY)
     acc.update(accuracy or {})
     poses = np.vstack([corner_poses(ranges), random_poses(INSIDE, ranges, pose_rng(INSIDE_SEED))])
     results = analyse(sensor, poses, noise, tuple(components))
-    return ObserveReport(tuple(components), noise, sensor.units, acc, results, INSIDE, sensor.n_elements)
+    return ObserveReport(tuple(components), noise, sensor.units, acc, results, INSIDE, sensor.n_elements, lsb,
+                         element)
 
 
 INSIDE, INSIDE_SEED = 200, 11

@@ -24,6 +24,19 @@ def quantise(x: np.ndarray, lo: float, hi: float, bits: int) -> np.ndarray:
     return lo + np.round((x - lo) / lsb) * lsb
 
 
+def step_rms(sensor: Sensor) -> tuple[float, float]:
+    """The active transfer's ADC step (LSB, in its units) and its rounding as noise, LSB / sqrt(12); (0, 0) where
+    it does not quantise."""
+    if sensor.transfer == "raw":
+        bits, span = sensor.raw.adc_bits, sensor.raw.full_scale
+    else:
+        bits, span = sensor.gmr.adc_bits, sensor.gmr.adc_max - sensor.gmr.adc_min
+    if bits <= 0:
+        return 0.0, 0.0
+    lsb = span / (2**bits - 1)
+    return lsb, lsb / np.sqrt(12.0)
+
+
 def volts_per_mt(g) -> float:
     """The gmr transfer's slope: volts out per mT of |B . axis| (supply x sensitivity x amplifier gain)."""
     return g.supply * g.sensitivity * 1e-3 * OE_PER_MT * g.gain
