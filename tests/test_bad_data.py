@@ -53,6 +53,24 @@ def test_a_constant_output_names_the_ones_to_fit(tmp_path):
     assert not (tmp_path / "m.json").exists()
 
 
+def test_a_dead_element_in_the_rows_is_said_by_fit(data, tmp_path):
+    """A column that reads one value on every row (a broken wire: 0 V, or a rail) was fitted in silence: the model
+    took it, domain and all, and the device clamps it there whatever it reads later."""
+    from fitgen.physics.dataset import load_dataset
+
+    ds = load_dataset(data)
+    for k, value in ((2, 0.0), (6, 3.3)):
+        rows = ds.inputs.copy()
+        rows[:, k] = value
+        type(ds)(rows, ds.targets, ds.target_names).save(tmp_path / "dead.csv")  # no meta: a measured file
+        proc = run_cli("fitgen", "fit", str(tmp_path / "dead.csv"), "-o", str(tmp_path / "m.json"))
+        assert proc.returncode == 0, proc.stderr
+        assert f"note: v{k + 1} reads {value:g} mT on every row: a dead element, a broken wire" in proc.stderr, \
+            proc.stderr
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"))
+    assert proc.returncode == 0 and "on every row" not in proc.stderr, proc.stderr
+
+
 def test_simulate_leaves_no_unit_file_when_it_fails_and_refuses_poses_outside_the_sensor(tmp_path):
     assert_one_line_error(run_cli("fitgen", "simulate", "--unit", "3", "--random", "10", "--noise", "-1", "-o",
                                   str(tmp_path / "u.csv")), contains="--noise must be a finite number >= 0")

@@ -253,6 +253,16 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
     rows = len(ds.inputs)
     notes = [] if units else [f"{data} has no meta saying its readings' units: taken as mT (give --units V for "
                               "volts, as an ADC gives them)"]
+    flat = [k for k in range(ds.n_inputs) if np.ptp(ds.inputs[:, k]) == 0]
+    if len(flat) == 1:  # its domain is that one value: the device clamps every reading of it there, whatever it reads
+        notes.append(f"v{flat[0] + 1} reads {ds.inputs[0, flat[0]]:g} {model.input_units} on every row: a dead "
+                     "element, a broken wire, an empty ADC channel, or an element saturated throughout; the equations "
+                     "learn nothing from it, and the device will clamp it to that value")
+    elif flat:
+        notes.append(f"{', '.join(f'v{k + 1}' for k in flat)} each read one value on every row (v{flat[0] + 1}: "
+                     f"{ds.inputs[0, flat[0]]:g} {model.input_units}): dead elements, broken wires, empty ADC "
+                     "channels, or elements saturated throughout; the equations learn nothing from them, and the "
+                     "device will clamp them to those values")
     causes, noise = None, (model.fit_info.get("noise") or {}).get("added") or 0.0
     for e in model.equations:
         rms, sd = model.fit_info["outputs"][e.name]["model_training_error"]["rms"], float(ds.target(e.name).std())
