@@ -53,6 +53,27 @@ def test_a_constant_output_names_the_ones_to_fit(tmp_path):
     assert not (tmp_path / "m.json").exists()
 
 
+def test_quoted_numbers_read_as_numbers_and_an_unnamed_column_is_named(data, tmp_path):
+    """An export that quotes every cell ("1.5") was refused as "cannot parse as CSV numbers", naming no line; one
+    whose lines end in a comma (an empty last column) as "column : '' is not a number"."""
+    from fitgen.physics.dataset import load_dataset
+
+    head, *rows = data.read_text().splitlines()
+    quoted = tmp_path / "quoted.csv"
+    quoted.write_text("\n".join([head] + [",".join(f'"{c}"' for c in r.split(",")) for r in rows]) + "\n")
+    assert np.array_equal(load_dataset(quoted).inputs, load_dataset(data).inputs)
+    quoted.write_text(quoted.read_text().replace(rows[3].split(",")[1], "1,5", 1))
+    assert_one_line_error(run_cli("fitgen", "fit", str(quoted), "-o", str(tmp_path / "m.json")),
+                          contains="line 5, column v2: '1,5' is not a number")
+    trailing = tmp_path / "trailing.csv"
+    trailing.write_text("\n".join(ln + "," for ln in [head] + rows) + "\n")
+    for argv in (["fit", str(trailing)], ["simulate", "--poses", str(trailing)]):
+        assert_one_line_error(run_cli("fitgen", *argv, "-o", str(tmp_path / "m.json")),
+                              contains=f"column {len(head.split(',')) + 1} of the header has no name (the line "
+                                       "ends in a comma)")
+    assert not (tmp_path / "m.json").exists()
+
+
 def test_a_dead_element_in_the_rows_is_said_by_fit(data, tmp_path):
     """A column that reads one value on every row (a broken wire: 0 V, or a rail) was fitted in silence: the model
     took it, domain and all, and the device clamps it there whatever it reads later."""

@@ -158,6 +158,11 @@ def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
     if sep is not None:  # a spreadsheet's export in a locale whose decimal point is a comma
         raise InputError(f"{origin}: its header is separated by {sep!r}, not commas: a dataset is comma-separated "
                          "with '.' as the decimal point (export it so, e.g. as 'CSV UTF-8 (comma delimited)')")
+    if "" in names:  # a spreadsheet's export with a trailing comma, or an index column without a name
+        k = names.index("")
+        raise InputError(f"{origin}: column {k + 1} of the header has no name"
+                         + (" (the line ends in a comma)" if k == len(names) - 1 else "")
+                         + ": remove the empty column, or name it")
     twice = next((n for n in names if names.count(n) > 1), None)
     if twice is not None:
         raise InputError(f"{origin}: column {twice} appears twice")
@@ -165,7 +170,8 @@ def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
     if not body:
         raise InputError(f"{origin}: no data rows")
     try:
-        table = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2, dtype=float)
+        # quoted numbers ("1.5"), as some exporters write every cell, read as the csv module reads them
+        table = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2, dtype=float, quotechar='"')
     except ValueError:
         raise _find_bad_cell(text, names, origin) from None
     if table.shape[1] != len(names) or not np.all(np.isfinite(table)):
