@@ -7,6 +7,7 @@ from __future__ import annotations
 import select
 import socket
 import tempfile
+import threading
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -55,12 +56,14 @@ def sim_pose(pose) -> np.ndarray:
 
 def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: int = 6, sensor: str = "paper",
                noise: float | None = None, seed: int = 0, timeout: float = 60.0,
-               board: str | Path | None = None) -> SketchRun:
+               board: str | Path | None = None, rest_first: bool = False, offsets: str | None = None) -> SketchRun:
     """Run an ATmega328P ELF on the emulated Uno with ``cmap``'s chips on its TWI bus, ``sensor`` at ``pose``
     (``dx=1,dz=-1`` or five numbers) with ``noise`` V rms (None: the sensor's), until it has printed ``n_lines``
     lines or a line starting ``error:``. InputError when that takes over ``timeout`` s of wall time or the
     program crashes; :class:`StackOverflow` when its stack ran into static RAM. ``board``: a built
-    hil.emulate board (default: built here)."""
+    hil.emulate board (default: built here). ``rest_first``: the sensor rests until the sketch prints its header
+    (ReadPose's tare comes before it), then moves to ``pose``, as a real one is pressed after power-up.
+    ``offsets``: each element's offset in volts (host.simbus.simulated_bus's), a drift the tare takes out."""
     from fitgen.physics.sensor import load_sensor
     from host.clock import VirtualClock
     from host.pi import StandIn
@@ -69,8 +72,12 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
     if n_lines < 1:
         raise InputError(f"n_lines must be >= 1, got {n_lines}")
     require_avr_tools()
-    clock = VirtualClock()
-    bus = simulated_bus(cmap, load_sensor(sensor), sim_pose(pose), clock=clock, noise=noise, seed=seed)
+    clock, target, pressed = VirtualClock(), sim_pose(pose), threading.Event()
+    # the feed asks the motion for its pose at each conversion, in the bridge's thread: an event set here is the
+    # one thing the two threads share
+    motion = (lambda t: target if pressed.is_set() else 0 * target) if rest_first else None
+    bus = simulated_bus(cmap, load_sensor(sensor), target, clock=clock, noise=noise, seed=seed, motion=motion,
+                        offsets=offsets)
     paint = bss_end(elf)
     with tempfile.TemporaryDirectory(prefix="tactile-sketch-") as tmp:
         board = build_uno_board(tmp) if board is None else board
@@ -79,7 +86,7 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
         failed = None
         try:
             with emu:
-                lines = _read_lines(emu.port, n_lines, timeout)
+                lines = _read_lines(emu.port, n_lines, timeout, on_header=pressed.set)
         except InputError as exc:
             failed = exc
     said = "; ".join(emu.messages[-2:])  # the board's own word, e.g. that the program crashed
@@ -93,8 +100,9 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
     return SketchRun(tuple(lines), emu.stack_peak, emu.cycles)
 
 
-def _read_lines(port: int, n_lines: int, timeout: float) -> list[str]:
-    """Up to ``n_lines`` lines from the board's UART (fewer when one starts ``error:``)."""
+def _read_lines(port: int, n_lines: int, timeout: float, on_header=None) -> list[str]:
+    """Up to ``n_lines`` lines from the board's UART (fewer when one starts ``error:``); ``on_header()`` once a
+    line starts ``t,``."""
     deadline = time.monotonic() + timeout
     lines, buf = [], b""
     with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
@@ -109,15 +117,18 @@ def _read_lines(port: int, n_lines: int, timeout: float) -> list[str]:
             buf += data
             *done, buf = buf.split(b"\n")
             lines += [ln.rstrip(b"\r").decode(errors="replace") for ln in done]
+            if on_header is not None and any(ln.startswith("t,") for ln in lines):
+                on_header()
             if len(buf) > LINE_MAX:
                 raise InputError(f"the sketch printed {len(buf)} bytes without a line end")
     return lines[:n_lines]
 
 
 def readpose_table(lines) -> tuple[tuple[str, ...], np.ndarray]:
-    """ReadPose's lines (a header, then t,v1..vN,outputs,status) as (column names, rows); InputError naming
-    the sketch's own ``error:`` line, or a line that is not one of its rows."""
-    lines = list(lines)
+    """ReadPose's lines (a header, then t,v1..vN,outputs,status; its tare's line, ``# tare: ...``, before them)
+    as (column names, rows); InputError naming the sketch's own ``error:`` line, or a line that is not one of its
+    rows."""
+    lines = [ln for ln in lines if not ln.startswith("#")]
     err = next((ln for ln in lines if ln.startswith("error:")), None)
     if err is not None:
         raise InputError(f"ReadPose stopped: {err}")
@@ -138,20 +149,21 @@ def readpose_table(lines) -> tuple[tuple[str, ...], np.ndarray]:
 
 def build_readpose(model, cmap: ChannelMap, folder: str | Path, pose=None, *, precision: str = "float",
                    style: str = "unrolled", build: bool | None = None, n_lines: int = 6, sensor: str = "paper",
-                   noise: float | None = None, seed: int = 0,
-                   build_path: str | Path | None = None) -> tuple[Size | None, SketchRun | None]:
+                   noise: float | None = None, seed: int = 0, build_path: str | Path | None = None,
+                   rest=None, offsets: str | None = None) -> tuple[Size | None, SketchRun | None]:
     """``arduino_build``: (its size, None). With a ``pose``, ReadPose is also run on the emulated Uno as
     :func:`run_sketch` runs it, and so is each setting tried when it does not fit: (the size with the stack's
     measured peak, the run). InputError when ReadPose prints an error line, and when it does not fit (flash,
     or static RAM and the stack's peak) naming a setting that does. Without a pose, the stack is still
     measured (ReadPose run at rest) whenever the example is built and the emulated Uno can be: a setting
-    whose stack overflows is then refused, not suggested."""
+    whose stack overflows is then refused, not suggested. ``rest``: the tare's rest readings (render_arduino's);
+    with them the simulated sensor rests through the tare, then moves to ``pose``; ``offsets``: run_sketch's."""
     asked = pose is not None  # a run asked for needs the builder and the emulator: said before the work
     if pose is None and build is not False and find_builder() is not None and uno_emulator_available():
         pose = REST
     if pose is None:
         return arduino_build(model, cmap, folder, precision=precision, style=style, build=build,
-                             build_path=build_path), None
+                             build_path=build_path, rest=rest), None
     pose, runs = sim_pose(pose), {}  # a bad pose refused before the build
     if asked:
         require_builder()
@@ -159,7 +171,8 @@ def build_readpose(model, cmap: ChannelMap, folder: str | Path, pose=None, *, pr
 
     def measure(path, size):
         try:
-            run = run_sketch(example_elf(path), cmap, pose, n_lines=n_lines, sensor=sensor, noise=noise, seed=seed)
+            run = run_sketch(example_elf(path), cmap, pose, n_lines=n_lines, sensor=sensor, noise=noise, seed=seed,
+                             rest_first=rest is not None, offsets=offsets)
         except StackOverflow as exc:
             return replace(size, stack=exc.stack_peak)
         readpose_table(run.lines)  # its own error line, or lines that are not its rows, refused
@@ -169,5 +182,5 @@ def build_readpose(model, cmap: ChannelMap, folder: str | Path, pose=None, *, pr
     with tempfile.TemporaryDirectory(prefix="tactile-readpose-") as tmp:
         path = Path(tmp) / "build" if build_path is None else Path(build_path)
         size = arduino_build(model, cmap, folder, precision=precision, style=style, build=True, build_path=path,
-                             measure=measure)
+                             measure=measure, rest=rest)
     return size, runs[path]

@@ -101,6 +101,25 @@ def rest_reference(spec: str, n_inputs: int) -> np.ndarray:
     return ref
 
 
+def model_rest(model, rest: str | None = None) -> tuple[np.ndarray, str]:
+    """The rest readings a tare maps onto for ``model``, and whose they are: ``rest`` (a sensor or a dataset, as
+    --rest takes it), else the sensor file the model was fitted on where it is found here unchanged, else the rest
+    the model recorded. InputError when there is none, or when the model reads them as a pose far from rest."""
+    from fitgen.fitting.holdout import fitted_sensor_spec
+
+    own = None if rest else fitted_sensor_spec(model)
+    if rest or own:
+        reference, target = rest_reference(rest or own, model.n_inputs), f"--rest {rest}" if rest else own
+    elif (reference := model.held_out_rest) is not None:
+        target = "the model's own record"
+    else:
+        raise InputError("the model records no rest readings and names no sensor file found here (fitted on data "
+                         "without a sensor): give --rest, the sensor file or a dataset of this sensor with rows at "
+                         "rest")
+    check_rest_reference(model, reference, target)
+    return reference, target
+
+
 def measure(array: AdcArray, n: int, step=None) -> np.ndarray:
     """``n`` samples (n, N) in volts; ``step()`` after each (a progress bar's)."""
     if n < 1:

@@ -248,6 +248,51 @@ def test_read_pose_runs_on_the_emulated_uno_and_prints_the_pose(sensor, tmp_path
     assert run.cycles > 16_000_000 * rows[-1, 0]  # the last line came after t seconds of 16 MHz cycles
 
 
+@pytest.mark.parametrize("precision", ["float", "fixed"])
+def test_read_pose_tares_at_start_onto_the_models_rest(device_model, sensor, tmp_path, precision):
+    """--tare: ReadPose averages 50 readings of the untouched sensor and maps them onto the model's rest, as read
+    --tare does. Elements up to 30 mV off (a drift since the fit) tilt the untared estimate of a press at dx=1,
+    dz=-1 by degrees; tared, it reads what the model reads from the sensor without drift (within 0.1 mm and
+    1 deg: the noise), and the tare's line gives the offsets."""
+    _require_emulator()
+    from fitgen.fitting.fit import FitSettings, fit_model
+    from fitgen.physics.simulate import grid_poses, simulate
+    from hil.sketch import build_readpose, readpose_table
+    from host.readout import model_rest
+
+    model = device_model
+    if precision == "fixed":  # fixed point takes integer powers only
+        grid = {"dx": [-2, -1, 0, 1, 2], "dy": [-2, -1, 0, 1, 2], "dz": [0, -1, -2], "thx": [-5, 0, 5],
+                "thy": [-5, 0, 5]}
+        model = fit_model(simulate(sensor, grid_poses(grid)), settings=FitSettings.family("no-roots"))
+    cmap = parse_spec(TWO_CHIPS)
+    rest, onto = model_rest(model, "paper")
+    assert onto == "--rest paper"
+    drift = np.linspace(-0.03, 0.03, 8)  # V
+    runs = {}
+    for tare in (False, True):
+        runs[tare] = build_readpose(model, cmap, tmp_path / f"lib{int(tare)}", "dx=1,dz=-1", precision=precision,
+                                    n_lines=9, rest=rest if tare else None,
+                                    offsets=",".join(repr(float(x)) for x in drift))[1].lines
+    _, untared = readpose_table(runs[False])
+    clean = model.predict(simulate(sensor, [[*POSE, 0.0, 0.0]]).inputs)[0]  # the model's own, without drift
+    assert np.min(np.abs(untared[1:, 12:14] - clean[3:]).max(axis=1)) > 3  # thx or thy, deg
+    said = runs[True][0]
+    assert said.startswith("# tare: offsets [mV] "), runs[True]
+    np.testing.assert_allclose([float(x) for x in said.split()[4:]], drift * 1e3, atol=0.2)  # noise, LSB
+    names, rows = readpose_table(runs[True])
+    # the first row may straddle the press: the simulated sensor moves once the header is out
+    _assert_rows_show_the_pose(names, rows[1:])
+    assert np.all(np.abs(rows[1:, 9:14] - clean) <= [0.1, 0.1, 0.1, 1.0, 1.0]), (rows[1:, 9:14], clean)
+    if precision == "float":  # the printed (tared) volts are what the model took (printed to the microvolt)
+        want = model.predict(rows[1:, 1:9].astype(np.float32).astype(float), precision="float")
+        np.testing.assert_allclose(rows[1:, 9:14], want, rtol=0, atol=1e-2)
+    proc = _build_cli(str(model.save(tmp_path / "m.json")), tmp_path / "TP", "--rest", "paper", "--no-build")
+    assert_one_line_error(proc, contains="--rest names what --tare maps the rest readings onto: give --tare too")
+    assert_one_line_error(_build_cli(str(tmp_path / "m.json"), tmp_path / "TP", "--tare", "--no-build"),
+                          contains="the model records no rest readings and names no sensor file found here")
+
+
 def test_ram_with_the_stack_fits_in_float_with_harmonics_and_in_fixed_without_roots(tmp_path):
     """The acceptance figures, by arduino-build --emulate: flash <= 32,256 B and static RAM plus the stack's
     peak measured on the emulated Uno <= 2,048 B for the default paper model (harmonic terms) in float, and

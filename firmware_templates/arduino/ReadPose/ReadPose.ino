@@ -6,13 +6,23 @@
  * the model's outputs (mm, deg; 4 decimals) and its status (0 inside the fitted domain). The channel map,
  * its PGA and data rate are the library's (tactile_config.h, adc_map.h: tactile-host arduino-build --adc,
  * --pga, --data-rate); Wire runs at TACTILE_WIRE_CLOCK_HZ. A chip that does not answer stops the
- * readout with one line starting "error:". */
+ * readout with one line starting "error:". A library built with --tare (TACTILE_TARE) first averages
+ * TACTILE_TARE_SAMPLES readings of the untouched sensor and maps them onto the model's rest readings
+ * (TACTILE_REST), as tactile-host read --tare does; it prints one line before the header, "# tare: offsets
+ * [mV] ...", and every line after carries the tared volts. Leave the skin untouched at power-up. */
 #include <Wire.h>
 #include <TactilePose.h>
 
 static adc_i2c bus;
 static adc_array adcs;
 static bool running;
+#if TACTILE_TARE
+#if TACTILE_FIXED_POINT
+static int32_t offset_codes[TM_N_INPUTS]; /* added to each code: the model takes codes */
+#else
+static float offset_volts[TM_N_INPUTS]; /* added to each reading */
+#endif
+#endif
 
 static void print_error(int st)
 {
@@ -22,6 +32,44 @@ static void print_error(int st)
                    : st == ADC_ERR_STUCK ? F(" never completes a conversion")
                    : F(" does not answer: check SDA (A4), SCL (A5), power and its ADDR pin"));
 }
+
+#if TACTILE_TARE
+/* the mean of TACTILE_TARE_SAMPLES readings onto TACTILE_REST; false (the error said) when a chip fails */
+static bool tare()
+{
+    int32_t codes[TM_N_INPUTS], sum[TM_N_INPUTS];
+    int k, n, st;
+    for (k = 0; k < TM_N_INPUTS; ++k) {
+        sum[k] = 0;
+    }
+    for (n = 0; n < TACTILE_TARE_SAMPLES; ++n) {
+        st = adc_read_codes(&adcs, codes);
+        if (st != ADC_OK) {
+            print_error(st);
+            return false;
+        }
+        for (k = 0; k < TM_N_INPUTS; ++k) {
+            sum[k] += codes[k]; /* 50 codes of at most 16 bits: far inside an int32 */
+        }
+    }
+    Serial.print(F("# tare: offsets [mV]"));
+    for (k = 0; k < TM_N_INPUTS; ++k) {
+        const float mean = (float)sum[k] / (float)TACTILE_TARE_SAMPLES;
+        float shift;
+#if TACTILE_FIXED_POINT
+        offset_codes[k] = (int32_t)lroundf(TACTILE_REST[k] / TACTILE_LSB[k] - mean);
+        shift = (float)offset_codes[k] * TACTILE_LSB[k];
+#else
+        offset_volts[k] = TACTILE_REST[k] - mean * TACTILE_LSB[k];
+        shift = offset_volts[k];
+#endif
+        Serial.print(' ');
+        Serial.print(-1000.0f * shift, 2); /* as read prints them: measured less the rest */
+    }
+    Serial.println();
+    return true;
+}
+#endif
 
 void setup()
 {
@@ -43,6 +91,11 @@ void setup()
         print_error(st);
         return;
     }
+#if TACTILE_TARE
+    if (!tare()) {
+        return;
+    }
+#endif
     Serial.print('t');
     for (k = 1; k <= TM_N_INPUTS; ++k) {
         Serial.print(F(",v"));
@@ -54,6 +107,16 @@ void setup()
     }
     Serial.println(F(",status"));
     running = true;
+}
+
+/* element k's volts from its code: what the line prints and, in float, what the model takes */
+static float volts(const int32_t *codes, int k)
+{
+#if TACTILE_TARE && !TACTILE_FIXED_POINT
+    return (float)codes[k] * TACTILE_LSB[k] + offset_volts[k];
+#else
+    return (float)codes[k] * TACTILE_LSB[k];
+#endif
 }
 
 void loop()
@@ -73,6 +136,11 @@ void loop()
         running = false;
         return;
     }
+#if TACTILE_TARE && TACTILE_FIXED_POINT
+    for (k = 0; k < TM_N_INPUTS; ++k) {
+        codes[k] += offset_codes[k];
+    }
+#endif
     /* t as whole seconds and microseconds: a float would lose the microseconds after a few minutes */
     Serial.print((unsigned long)(ns / 1000000000u));
     frac = (uint32_t)((ns % 1000000000u) / 1000u);
@@ -80,7 +148,7 @@ void loop()
     Serial.print(buf);
     for (k = 0; k < TM_N_INPUTS; ++k) {
         Serial.print(',');
-        Serial.print((float)codes[k] * TACTILE_LSB[k], 6);
+        Serial.print(volts(codes, k), 6);
     }
     {
 #if TACTILE_FIXED_POINT
@@ -95,7 +163,7 @@ void loop()
         tm_real in[TM_N_INPUTS], out[TM_N_OUTPUTS];
         int status;
         for (k = 0; k < TM_N_INPUTS; ++k) {
-            in[k] = (tm_real)codes[k] * TACTILE_LSB[k];
+            in[k] = volts(codes, k);
         }
         status = tm_estimate(in, out);
         for (k = 0; k < TM_N_OUTPUTS; ++k) {

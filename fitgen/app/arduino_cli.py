@@ -1,0 +1,60 @@
+"""``tactile-host arduino-build``: an Arduino library for a model, the ReadPose example built for the Uno and, on
+request, run on the emulated one. A thin layer over host.arduino and hil.sketch."""
+
+from __future__ import annotations
+
+import sys
+
+from fitgen.app.options import map_options
+from fitgen.base.errors import InputError
+
+
+def cmd_arduino_build(args) -> int:
+    from fitgen.equations.model import load_model
+    from fitgen.fitting.holdout import fitted_sensor_spec
+    from fitgen.physics.sensor import load_sensor
+    from hil.sketch import build_readpose
+    from host.arduino import BOARDS
+    from host.readout import model_rest
+    from host.session import channel_map_from_args
+    from host.temperature import split_channel_map
+
+    model, cmap = load_model(args.model), channel_map_from_args(args)
+    args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"
+    if split_channel_map(args.adc)[1] is not None or cmap.temperature is not None or args.thermistor:
+        raise InputError("the Arduino library reads the elements only, no thermistor: drop temp= from --adc and "
+                         "--thermistor (tactile-host read and pi-build read one)")
+    load_sensor(args.sim_sensor)  # a bad one said before the library is written
+    if args.rest and not args.tare:
+        raise InputError("--rest names what --tare maps the rest readings onto: give --tare too")
+    rest, onto = model_rest(model, args.rest) if args.tare else (None, None)
+    size, run = build_readpose(model, cmap, args.output, args.emulate, precision=args.precision, style=args.style,
+                               build=False if args.no_build else None, sensor=args.sim_sensor, rest=rest)
+    sys.stdout.write("".join(ln + "\n" for ln in run.lines) if run and args.emulate else "")  # a serial monitor's
+    built = (size.describe(BOARDS["uno"]) if size else "not built (--no-build)" if args.no_build
+             else "not built (no arduino-builder)")
+    print(f"wrote the Arduino library {args.output}; ReadPose for the Uno: {built}"
+          + (f"; it tares at start onto the rest readings of {onto}" if onto else ""), file=sys.stderr)
+    return 0
+
+
+def add_arduino_build(sub) -> None:
+    """The ``arduino-build`` subcommand under ``sub``."""
+    ab = sub.add_parser("arduino-build", help="an Arduino library: the model, the ADC drivers over Wire, the channel "
+                                              "map and the ReadPose example; built for the Uno to check it fits")
+    ab.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
+    map_options(ab, thermistor=False)
+    ab.add_argument("--precision", default="float", choices=("float", "fixed", "double"), help="double is refused")
+    ab.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
+    build = ab.add_mutually_exclusive_group()
+    build.add_argument("--no-build", action="store_true", help="write the library only (default: build it when "
+                                                            "arduino-builder is installed)")
+    build.add_argument("--emulate", metavar="POSE", help="also run ReadPose on an emulated Uno reading --sim-sensor "
+                       "at POSE (e.g. dx=1,dz=-1), its lines on stdout (without it: run at rest, for the stack)")
+    ab.add_argument("--sim-sensor", help="with --emulate: the simulated sensor (default: the sensor the model was "
+                                         "fitted on where its file is found, else paper)")
+    ab.add_argument("--tare", action="store_true", help="ReadPose tares at start, onto the model's rest readings")
+    ab.add_argument("--rest", metavar="SENSOR|DATASET.csv", help="with --tare: the rest readings it maps onto "
+                    "(default: the model's own sensor file where found, else the rest the model recorded)")
+    ab.add_argument("-o", "--output", required=True, metavar="DIR", help="the library's folder (e.g. TactilePose)")
+    ab.set_defaults(func=cmd_arduino_build)
