@@ -101,10 +101,11 @@ def rest_reference(spec: str, n_inputs: int) -> np.ndarray:
     return ref
 
 
-def model_rest(model, rest: str | None = None) -> tuple[np.ndarray, str]:
+def model_rest(model, rest: str | None = None, required: bool = True) -> tuple[np.ndarray, str] | None:
     """The rest readings a tare maps onto for ``model``, and whose they are: ``rest`` (a sensor or a dataset, as
     --rest takes it), else the sensor file the model was fitted on where it is found here unchanged, else the rest
-    the model recorded. InputError when there is none, or when the model reads them as a pose far from rest."""
+    the model recorded. InputError when the model reads them as a pose far from rest, and when there are none
+    (None then, unless ``required``)."""
     from fitgen.fitting.holdout import fitted_sensor_spec
 
     own = None if rest else fitted_sensor_spec(model)
@@ -112,6 +113,8 @@ def model_rest(model, rest: str | None = None) -> tuple[np.ndarray, str]:
         reference, target = rest_reference(rest or own, model.n_inputs), f"--rest {rest}" if rest else own
     elif (reference := model.held_out_rest) is not None:
         target = "the model's own record"
+    elif not required:
+        return None
     else:
         raise InputError("the model records no rest readings and names no sensor file found here (fitted on data "
                          "without a sensor): give --rest, the sensor file or a dataset of this sensor with rows at "

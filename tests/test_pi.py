@@ -54,6 +54,34 @@ def _python_lines(model, n, faults=()):
     return lines, arr.counts
 
 
+def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=None):
+    """tactile-host read's CSV lines (header first) for ``bus``, and its tare (None without ``rest``): the Python
+    drivers, a tare onto ``rest`` and ``tempcomp`` (with the thermistor at ``tin``), then Python's emulation of
+    the float header, as tm_pi's float build computes them."""
+    import io
+
+    from host.engine import PythonEngine
+    from host.readout import Corrections, Readout, tare
+    from host.temperature import Thermometer
+
+    class FloatEngine(PythonEngine):
+        def estimate(self, inputs):
+            out, status = self.model.predict(np.asarray(inputs).reshape(1, -1), with_status=True, precision="float")
+            return out[0], int(status[0])
+
+    cmap = parse_spec(MAP)
+    arr = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy())
+    arr.probe()
+    arr.setup()
+    t = None if rest is None else tare(arr, rest, 50)
+    sink, fmt = io.StringIO(), LineFormat("csv", model.n_inputs, model.output_names)
+    sink.write(fmt.header)
+    Readout(arr, FloatEngine(model), sink, fmt, clock=clock,
+            corrections=Corrections(None if t is None else t.offsets, tempcomp),
+            thermometer=Thermometer(arr, tin, cmap.chips[0].settings) if tin else None).run(count=count)
+    return sink.getvalue().splitlines(), t
+
+
 def test_pi_build_under_qemu_gives_the_python_readout(model, standin_build):
     require_tool("qemu-arm")
     cmap, bus, clock = _bus()
@@ -164,11 +192,9 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
 
     from fitgen.physics.sensor import load_sensor
     from host.clock import VirtualClock
-    from host.readout import Corrections, Readout
     from host.simbus import SimBus
     from host.simsensor import Drift
-    from host.engine import PythonEngine
-    from host.temperature import TempComp, Thermometer, parse_temperature_input
+    from host.temperature import TempComp, parse_temperature_input
 
     require_tool("arm-linux-gnueabihf-gcc")
     require_tool("qemu-arm")
@@ -188,23 +214,8 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     res = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", "8"])
     assert res.returncode == 0, res.stderr
 
-    class FloatEngine(PythonEngine):
-        def estimate(self, inputs):
-            out, status = self.model.predict(np.asarray(inputs).reshape(1, -1), with_status=True, precision="float")
-            return out[0], int(status[0])
-
-    import io
-
     b, clock = bus()
-    arr = AdcArray(b, cmap, clock=clock, policy=RetryPolicy())
-    arr.probe()
-    arr.setup()
-    sink = io.StringIO()
-    fmt = LineFormat("csv", model.n_inputs, model.output_names)
-    sink.write(fmt.header)
-    Readout(arr, FloatEngine(model), sink, fmt, clock=clock, corrections=Corrections(None, tc),
-            thermometer=Thermometer(arr, tin, cmap.chips[0].settings)).run(count=8)
-    expected = sink.getvalue().splitlines()
+    expected, _ = _python_readout(model, b, clock, 8, tempcomp=tc, tin=tin)
     got = res.stdout.splitlines()
     assert [ln.split(",", 1)[1] for ln in got[1:]] == [ln.split(",", 1)[1] for ln in expected[1:]]
     # and the compensation did something: without it the readings differ
@@ -214,6 +225,46 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     assert [ln.split(",", 1)[1] for ln in res2.stdout.splitlines()[1:]] != [ln.split(",", 1)[1] for ln in got[1:]]
     assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", str(tmp_path / "m.json"), "--adc", MAP,
                                   "--temp-comp", "x.json", "-o", str(tmp_path / "z")))
+
+
+def test_pi_build_tares_as_the_python_readout_does(model, tmp_path):
+    """tm_pi --tare averages 50 samples and maps them onto the rest readings pi-build compiled in, as read --tare
+    does: on a bus whose elements drift by up to 30 mV, the same offsets line and the same lines to every printed
+    digit, and lines that differ from the untared ones. A build without rest readings refuses --tare in one line."""
+    from fitgen.physics.sensor import load_sensor
+    from host.clock import VirtualClock
+    from host.readout import model_rest
+    from host.simbus import SimBus
+
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    cmap = parse_spec(MAP)
+    drift = np.linspace(-0.03, 0.03, 8)
+
+    def bus():
+        clock = VirtualClock()
+        return SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), [0.5, 0.2, -1.0, 1.0, 0.0],
+                                      clock=clock, noise=0.0005, seed=3, offsets=drift), clock
+
+    rest = model_rest(model, "paper")
+    binary = build_pi(render_pi(model, cmap, tmp_path / "pi", precision="float", rest=rest), standin=True)
+    b, clock = bus()
+    res = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", "6", "--tare"])
+    assert res.returncode == 0, res.stderr
+
+    b, clock = bus()
+    expected, tared = _python_readout(model, b, clock, 6, rest=rest[0])
+    assert f"tm_pi: {tared.describe()}, onto the rest readings of --rest paper\n" in res.stderr, res.stderr
+    got = res.stdout.splitlines()
+    assert got == expected[:1] + got[1:] and len(got) == len(expected) == 7
+    assert [ln.split(",", 1)[1] for ln in got[1:]] == [ln.split(",", 1)[1] for ln in expected[1:]]
+    b, clock = bus()
+    plain = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", "6"]).stdout.splitlines()
+    assert [ln.split(",", 1)[1] for ln in plain[1:]] != [ln.split(",", 1)[1] for ln in got[1:]]
+    bare = build_pi(render_pi(model, cmap, tmp_path / "bare", precision="float"), standin=True)
+    b, clock = bus()
+    assert_one_line_error(StandIn(b, clock).run(["qemu-arm", str(bare), "--tare"]), 2,
+                          "--tare: this build has no rest readings to map onto")
 
 
 def _stop_with(stand, args, sig, ready):

@@ -5,7 +5,11 @@
  * every 0.25 s after the elements, and with PI_TEMPCOMP the readings are compensated (tm_tempcomp.h)
  * before the model, as `tactile-host read --temp-comp` does.
  *
- *   tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] [--retries N]
+ *   tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] [--retries N] [--tare [--tare-samples N]]
+ *
+ * --tare averages N (default 50) samples of the untouched sensor first and maps them onto the rest readings
+ * pi-build compiled in (PI_REST), as `tactile-host read --tare` does: its line on stderr, then every
+ * reading less the offsets (after the temperature compensation, as read takes them).
  *
  * Ctrl-C (SIGINT) or SIGTERM ends the run after the sample under way, as tactile-host read ends: every
  * line whole, the summary, exit status 0.
@@ -25,9 +29,7 @@
 #include "i2c_linux.h"
 #include "pi_options.h"
 #include "tm_model.h"
-#if ADC_HAS_TEMPERATURE
-#include <math.h> /* NAN */
-#endif
+#include <math.h> /* NAN, sqrt */
 #if PI_TEMPCOMP
 #include "tm_tempcomp.h"
 typedef char tm_pi_assert_tempcomp_fits_model[(TM_TEMPCOMP_N == TM_N_INPUTS) ? 1 : -1];
@@ -52,7 +54,7 @@ typedef char tm_pi_assert_map_fits_model[(ADC_MAP_N_ELEMENTS == TM_N_INPUTS) ? 1
 static int usage(const char *msg, const char *arg)
 {
     fprintf(stderr, "tm_pi: error: %s%s%s (usage: tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] "
-                    "[--retries N])\n", msg, arg ? ": " : "", arg ? arg : "");
+                    "[--retries N] [--tare [--tare-samples N]])\n", msg, arg ? ": " : "", arg ? arg : "");
     return 2;
 }
 
@@ -108,6 +110,36 @@ static void catch_stop_signals(void)
 }
 
 
+/* the mean of n samples' volts and how far they are from the rest: offsets[k] = mean - rest (read's Tare);
+ * ADC_OK, or the error that stopped it */
+static int tare(adc_array *array, const double lsb[TM_N_INPUTS], long n, double offsets[TM_N_INPUTS])
+{
+    double sum[TM_N_INPUTS] = {0}, sumsq[TM_N_INPUTS] = {0}, spread = 0.0;
+    long s;
+    int k, st;
+    for (s = 0; s < n; ++s) {
+        int32_t codes[TM_N_INPUTS];
+        st = adc_read_codes(array, codes);
+        if (st != ADC_OK) {
+            return st;
+        }
+        for (k = 0; k < TM_N_INPUTS; ++k) {
+            const double v = codes[k] * lsb[k];
+            sum[k] += v;
+            sumsq[k] += v * v;
+        }
+    }
+    fprintf(stderr, "tm_pi: tare: offsets [mV]");
+    for (k = 0; k < TM_N_INPUTS; ++k) {
+        const double mean = sum[k] / (double)n, var = sumsq[k] / (double)n - mean * mean;
+        offsets[k] = mean - PI_REST[k];
+        spread = var > spread * spread ? sqrt(var) : spread;
+        fprintf(stderr, " %+.2f", offsets[k] * 1e3);
+    }
+    fprintf(stderr, " (spread up to %.2f mV rms), onto the rest readings of %s\n", spread * 1e3, PI_REST_FROM);
+    return ADC_OK;
+}
+
 static void print_line(int jsonl, double t, const double v[TM_N_INPUTS], const tm_real out[TM_N_OUTPUTS], int status)
 {
     static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
@@ -137,7 +169,9 @@ static void print_line(int jsonl, double t, const double v[TM_N_INPUTS], const t
 int main(int argc, char **argv)
 {
     static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
-    long bus = 1, count = 0, retries = 5;
+    long bus = 1, count = 0, retries = 5, tare_n = 50;
+    int tared = 0;
+    double offsets[TM_N_INPUTS] = {0};
     double rate_hz = 0.0;
     int jsonl = 0, i, st = ADC_OK;
     long n = 0, late = 0;
@@ -173,10 +207,20 @@ int main(int argc, char **argv)
             if (parse_rate(val, &rate_hz)) return usage("--rate must be a number of Hz in 0.000001..100000, got", val);
         } else if (strcmp(opt, "--retries") == 0 && val) {
             if (parse_long(val, 1, 100, &retries)) return usage("--retries must be 1..100, got", val);
+        } else if (strcmp(opt, "--tare") == 0) {
+            tared = 1;
+            continue; /* a flag: no value */
+        } else if (strcmp(opt, "--tare-samples") == 0 && val) {
+            if (parse_long(val, 1, 100000, &tare_n)) return usage("--tare-samples must be 1..100000, got", val);
         } else {
             return usage("unknown or incomplete option", opt);
         }
         ++i;
+    }
+    if (tared && !PI_HAS_REST) {
+        fprintf(stderr, "tm_pi: error: --tare: this build has no rest readings to map onto (tactile-host pi-build "
+                        "--rest SENSOR|DATASET.csv)\n");
+        return 2;
     }
     policy.attempts = (uint8_t)retries;
     catch_stop_signals();
@@ -213,6 +257,13 @@ int main(int argc, char **argv)
         return 2;
     }
 #endif
+    if (tared && (st = tare(&array, lsb, tare_n, offsets)) != ADC_OK) {
+        fprintf(stderr, "tm_pi: error: %s %s during the tare\n", array.failed_chip >= 0 ?
+                ADC_MAP_LABELS[array.failed_chip] : "general-call reset",
+                st == ADC_ERR_STUCK ? "never completes a conversion" : "stays silent");
+        i2c_linux_close(&port);
+        return 1;
+    }
     if (!jsonl) {
         printf("t");
         for (i = 1; i <= TM_N_INPUTS; ++i) {
@@ -276,6 +327,11 @@ int main(int argc, char **argv)
 #elif ADC_HAS_TEMPERATURE
         (void)degc; /* read as the Python readout reads it (same transfers), not applied */
 #endif
+        if (tared) {
+            for (i = 0; i < TM_N_INPUTS; ++i) {
+                v[i] -= offsets[i];
+            }
+        }
         for (i = 0; i < TM_N_INPUTS; ++i) {
             in[i] = (tm_real)v[i];
         }

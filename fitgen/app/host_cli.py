@@ -313,6 +313,8 @@ def build_parser() -> Parser:
     pb.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the sources and tm_pi")
     pb.add_argument("--temp-comp", metavar="FILE.json", help="temperature compensation before the model (needs "
                     "temp=CHIP@ADDRESS:INPUT in --adc)")
+    pb.add_argument("--rest", metavar="SENSOR|DATASET.csv", help="the rest readings tm_pi --tare maps onto (default: "
+                    "the model's own sensor file where found, else the rest the model recorded)")
     pb.set_defaults(func=cmd_pi_build)
 
     add_arduino_build(sub)
