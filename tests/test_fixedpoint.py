@@ -604,3 +604,24 @@ def test_predict_on_a_target_defaults_to_the_precision_codegen_writes(small_mode
         est[expect] = (tmp_path / "default.csv").read_text()
         assert est[expect] == (tmp_path / "given.csv").read_text()
     assert len(set(est.values())) == 3  # the three precisions' estimates differ: the comparison above tells them apart
+
+
+def test_codegen_says_when_the_adcs_rounding_is_large_beside_the_noise_fitted_for(tmp_path):
+    """A 12-bit converter over 3.3 V (0.81 mV codes) rounds each reading by 0.23 mV rms, about half the 0.5 mV the
+    model was fitted for: codegen wrote its header without a word. The sensor's own 16-bit codes stay quiet."""
+    from conftest import run_cli
+
+    data, model = tmp_path / "d.csv", tmp_path / "m.json"
+    for argv in (("simulate", "--sensor", "paper", "--transfer", "gmr", "--random", "300", "-o", str(data)),
+                 ("fit", str(data), "--family", "integer", "--precision", "fixed", "-o", str(model))):
+        proc = run_cli("fitgen", *argv)
+        assert proc.returncode == 0, proc.stderr
+    noise = load_sensor("paper").gmr.noise
+    for lsb, said in ((3.3 / 4095, True), (None, False), (0.000125, False)):
+        proc = run_cli("fitgen", "codegen", str(model), "-o", str(tmp_path / "c"), "--precision", "fixed",
+                       *(("--input-lsb", repr(lsb)) if lsb else ()))
+        assert proc.returncode == 0, proc.stderr
+        line = (f"note: codes of {lsb:.3g} V round each reading by {lsb / np.sqrt(12):.3g} V rms, "
+                f"{lsb / np.sqrt(12) / noise:.0%} of the {noise:.3g} V rms of reading noise the model was fitted for"
+                if lsb else "note:")
+        assert (line in proc.stderr) == said, proc.stderr

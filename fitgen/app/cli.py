@@ -262,6 +262,7 @@ def cmd_codegen(args) -> int:
 
     model, target = _model_and_target(args)
     if args.precision == "fixed":
+        from fitgen.app.report import rounding_note
         from fitgen.c.codegen import render_fixed_header
         from fitgen.c.fixedc import plan_line
         from fitgen.equations.fixedpoint import plan_at
@@ -271,9 +272,10 @@ def cmd_codegen(args) -> int:
             raise InputError(f"{'--fma' if args.fma else '--style'} does not apply to --precision fixed")
         fm, source = plan_at(model, args.input_lsb, args.input_offset, target.mul_bits if target else 32)
         path = write_in_folder(args.output, f"{args.prefix}_model.h", render_fixed_header(fm, args.prefix))
+        note = rounding_note(model, fm.input_lsb)
         print(f"wrote {path} (fixed point, input LSB {fm.input_lsb:.6g} {model.input_units} from {source}, "
-              f"offset {fm.input_offset:g}; plan: {plan_line(fm)}; {fm.summary()}; model {model.sha256[:12]})",
-              file=sys.stderr)
+              f"offset {fm.input_offset:g}; plan: {plan_line(fm)}; {fm.summary()}; model {model.sha256[:12]})"
+              + ("" if note is None else f"\nnote: {note}"), file=sys.stderr)
         return 0
     if args.input_lsb is not None or args.input_offset is not None:
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")

@@ -287,6 +287,22 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
     return notes
 
 
+ROUNDING_NOTE = 0.25  # of the noise the model was fitted for: an ADC's rounding past it is worth a word
+
+
+def rounding_note(model: Model, lsb: float) -> str | None:
+    """What codegen says of codes of ``lsb`` (a --input-lsb) whose rounding, lsb / sqrt(12), is large beside the
+    reading noise the model was fitted for: neither the fit nor the model file's figures count it."""
+    noise = (model.fit_info.get("noise") or {}).get("device") if isinstance(model.fit_info, dict) else None
+    if not isinstance(noise, (int, float)) or not noise > 0 or not lsb / np.sqrt(12) > ROUNDING_NOTE * noise:
+        return None
+    q, units = lsb / np.sqrt(12), model.input_units
+    return (f"codes of {lsb:.3g} {units} round each reading by {q:.3g} {units} rms, {q / noise:.0%} of the "
+            f"{noise:.3g} {units} rms of reading noise the model was fitted for: neither the fit nor the model "
+            "file's figures count it; simulate the rows with this ADC (adc_bits, adc_min, adc_max in the sensor "
+            "file's [transfer.gmr]) and fit again to have it counted")
+
+
 def predict_notes(model: Model, pred: np.ndarray, status: np.ndarray, precision: str) -> list[str]:
     """What `fitgen predict` says of its rows beyond the estimates: rows clamped into the domain, rows with no
     estimate, and rows whose estimate lies outside the pose box the model was fitted in (its held-out record's)
