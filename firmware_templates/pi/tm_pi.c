@@ -169,7 +169,7 @@ static void print_line(int jsonl, double t, const double v[TM_N_INPUTS], const t
 int main(int argc, char **argv)
 {
     static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
-    long bus = 1, count = 0, retries = 5, tare_n = 50;
+    long bus = 1, count = 0, retries = 5, tare_n = 0;
     int tared = 0;
     double offsets[TM_N_INPUTS] = {0};
     double rate_hz = 0.0;
@@ -217,6 +217,10 @@ int main(int argc, char **argv)
         }
         ++i;
     }
+    if (tare_n && !tared) {
+        return usage("--tare-samples needs", "--tare");
+    }
+    tare_n = tare_n ? tare_n : 50;
     if (tared && !PI_HAS_REST) {
         fprintf(stderr, "tm_pi: error: --tare: this build has no rest readings to map onto (tactile-host pi-build "
                         "--rest SENSOR|DATASET.csv)\n");
