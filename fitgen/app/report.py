@@ -263,7 +263,7 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
                      f"{ds.inputs[0, flat[0]]:g} {model.input_units}): dead elements, broken wires, empty ADC "
                      "channels, or elements saturated throughout; the equations learn nothing from them, and the "
                      "device will clamp them to those values")
-    causes, noise = None, (model.fit_info.get("noise") or {}).get("added") or 0.0
+    causes, noise = None, (model.fit_info.get("noise") or {}).get("device") or 0.0  # single samples
     for e in model.equations:
         rms, sd = model.fit_info["outputs"][e.name]["model_training_error"]["rms"], float(ds.target(e.name).std())
         if not (sd > 0 and rms > BLIND_SHARE * sd):
