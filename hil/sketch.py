@@ -56,14 +56,16 @@ def sim_pose(pose) -> np.ndarray:
 
 def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: int = 6, sensor: str = "paper",
                noise: float | None = None, seed: int = 0, timeout: float = 60.0,
-               board: str | Path | None = None, rest_first: bool = False, offsets: str | None = None) -> SketchRun:
+               board: str | Path | None = None, rest_first: bool = False, offsets: str | None = None,
+               send: dict | None = None) -> SketchRun:
     """Run an ATmega328P ELF on the emulated Uno with ``cmap``'s chips on its TWI bus, ``sensor`` at ``pose``
     (``dx=1,dz=-1`` or five numbers) with ``noise`` V rms (None: the sensor's), until it has printed ``n_lines``
     lines or a line starting ``error:``. InputError when that takes over ``timeout`` s of wall time or the
     program crashes; :class:`StackOverflow` when its stack ran into static RAM. ``board``: a built
     hil.emulate board (default: built here). ``rest_first``: the sensor rests until the sketch prints its header
     (ReadPose's tare comes before it), then moves to ``pose``, as a real one is pressed after power-up.
-    ``offsets``: each element's offset in volts (host.simbus.simulated_bus's), a drift the tare takes out."""
+    ``offsets``: each element's offset in volts (host.simbus.simulated_bus's), a drift the tare takes out.
+    ``send``: {k: bytes} sent to its Serial once it has printed k lines."""
     from fitgen.physics.sensor import load_sensor
     from host.clock import VirtualClock
     from host.pi import StandIn
@@ -86,7 +88,7 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
         failed = None
         try:
             with emu:
-                lines = _read_lines(emu.port, n_lines, timeout, on_header=pressed.set)
+                lines = _read_lines(emu.port, n_lines, timeout, on_header=pressed.set, send=send)
         except InputError as exc:
             failed = exc
     said = "; ".join(emu.messages[-2:])  # the board's own word, e.g. that the program crashed
@@ -100,11 +102,11 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
     return SketchRun(tuple(lines), emu.stack_peak, emu.cycles)
 
 
-def _read_lines(port: int, n_lines: int, timeout: float, on_header=None) -> list[str]:
+def _read_lines(port: int, n_lines: int, timeout: float, on_header=None, send=None) -> list[str]:
     """Up to ``n_lines`` lines from the board's UART (fewer when one starts ``error:``); ``on_header()`` once a
-    line starts ``t,``."""
+    line starts ``t,``; ``send``: {k: bytes} written to the UART once k lines are in."""
     deadline = time.monotonic() + timeout
-    lines, buf = [], b""
+    lines, buf, send = [], b"", dict(send or {})
     with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
         while len(lines) < n_lines and not (lines and lines[-1].startswith("error:")):
             left = deadline - time.monotonic()
@@ -119,6 +121,8 @@ def _read_lines(port: int, n_lines: int, timeout: float, on_header=None) -> list
             lines += [ln.rstrip(b"\r").decode(errors="replace") for ln in done]
             if on_header is not None and any(ln.startswith("t,") for ln in lines):
                 on_header()
+            for k in [k for k in send if len(lines) >= k]:
+                sock.sendall(send.pop(k))
             if len(buf) > LINE_MAX:
                 raise InputError(f"the sketch printed {len(buf)} bytes without a line end")
     return lines[:n_lines]

@@ -116,9 +116,9 @@ def model_rest(model, rest: str | None = None, required: bool = True) -> tuple[n
     elif not required:
         return None
     else:
-        raise InputError("the model records no rest readings and names no sensor file found here (fitted on data "
-                         "without a sensor): give --rest, the sensor file or a dataset of this sensor with rows at "
-                         "rest")
+        raise InputError("the model records no rest readings and names no sensor file found here: give --rest, the "
+                         "sensor file it was fitted on (a twin: the unit file identify wrote) or a dataset of this "
+                         "sensor with rows at rest")
     check_rest_reference(model, reference, target)
     return reference, target
 

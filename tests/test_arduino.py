@@ -257,7 +257,7 @@ def test_read_pose_tares_at_start_onto_the_models_rest(device_model, sensor, tmp
     _require_emulator()
     from fitgen.fitting.fit import FitSettings, fit_model
     from fitgen.physics.simulate import grid_poses, simulate
-    from hil.sketch import build_readpose, readpose_table
+    from hil.sketch import build_readpose, readpose_table, run_sketch
     from host.readout import model_rest
 
     model = device_model
@@ -272,8 +272,16 @@ def test_read_pose_tares_at_start_onto_the_models_rest(device_model, sensor, tmp
     runs = {}
     for tare in (False, True):
         runs[tare] = build_readpose(model, cmap, tmp_path / f"lib{int(tare)}", "dx=1,dz=-1", precision=precision,
-                                    n_lines=9, rest=rest if tare else None,
+                                    n_lines=9, rest=rest if tare else None, build_path=tmp_path / f"build{int(tare)}",
                                     offsets=",".join(repr(float(x)) for x in drift))[1].lines
+    # a 't' over Serial tares again: here while pressed, so that the rows after it read the press as rest
+    again = run_sketch(example_elf(tmp_path / "build1"), cmap, "dx=1,dz=-1", n_lines=12, rest_first=True,
+                       send={6: b"t"}, offsets=",".join(repr(float(x)) for x in drift)).lines
+    said = [k for k, ln in enumerate(again) if ln.startswith("# tare:")]
+    assert len(said) == 2 and said[0] == 0 and 6 <= said[1] < 10, again
+    _, after = readpose_table([again[1], *again[said[1] + 1:]])
+    at_rest = model.predict(rest[None])[0]
+    assert np.all(np.abs(after[:, 9:14] - at_rest) <= [0.1, 0.1, 0.1, 1.0, 1.0]), (after[:, 9:14], at_rest)
     _, untared = readpose_table(runs[False])
     clean = model.predict(simulate(sensor, [[*POSE, 0.0, 0.0]]).inputs)[0]  # the model's own, without drift
     assert np.min(np.abs(untared[1:, 12:14] - clean[3:]).max(axis=1)) > 3  # thx or thy, deg

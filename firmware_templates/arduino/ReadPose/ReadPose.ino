@@ -9,7 +9,8 @@
  * readout with one line starting "error:". A library built with --tare (TACTILE_TARE) first averages
  * TACTILE_TARE_SAMPLES readings of the untouched sensor and maps them onto the model's rest readings
  * (TACTILE_REST), as tactile-host read --tare does; it prints one line before the header, "# tare: offsets
- * [mV] ...", and every line after carries the tared volts. Leave the skin untouched at power-up. */
+ * [mV] ...", and every line after carries the tared volts. Leave the skin untouched at power-up; a 't' sent
+ * over Serial (the serial monitor's input line) tares again, its line printed among the rows. */
 #include <Wire.h>
 #include <TactilePose.h>
 
@@ -129,6 +130,12 @@ void loop()
     if (!running) {
         return;
     }
+#if TACTILE_TARE
+    if (Serial.available() > 0 && Serial.read() == 't') { /* the skin untouched again: a new tare */
+        running = tare();
+        return;
+    }
+#endif
     ns = bus.now_ns(bus.ctx);
     st = adc_read_codes(&adcs, codes);
     if (st != ADC_OK) {
