@@ -64,8 +64,8 @@ static bool tare()
         offset_volts[k] = TACTILE_REST[k] - mean * TACTILE_LSB[k];
         shift = offset_volts[k];
 #endif
-        Serial.print(' ');
-        Serial.print(-1000.0f * shift, 2); /* as read prints them: measured less the rest */
+        Serial.print(-shift >= 0.0f ? F(" +") : F(" ")); /* as read prints them: measured less the rest, signed */
+        Serial.print(-1000.0f * shift, 2);
     }
     Serial.println();
     return true;
