@@ -360,8 +360,12 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
         size = built(library, Path(tmp) / "build" if build_path is None else build_path, f"{precision}, {style}")
         if size.fits(spec):
             return size
-        hint = ("no other precision or style fits: fit fewer terms (fitgen fit --k bic, or --max-terms N; `fitgen "
-                f"tradeoff SENSOR --scene full --core {board}` measures which fit and what they cost in accuracy)")
+        terms = sum(len(e.terms) for e in model.equations)
+        penalty = (model.fit_info.get("settings") or {}).get("k") if isinstance(model.fit_info, dict) else None
+        fewer = ("fitgen fit --max-terms N, per output" if isinstance(penalty, (int, float)) and penalty > 2.0
+                 else "fitgen fit --k bic, or --max-terms N")  # a model fitted with BIC already: only the cap is left
+        hint = (f"no other precision or style fits: fit fewer terms than its {terms} ({fewer}; `fitgen tradeoff "
+                f"SENSOR --scene full --core {board}` measures which fit and what they cost in accuracy)")
         for k, (prec, sty, option) in enumerate(_alternatives(precision, style)):
             try:
                 alt = render_arduino(model, cmap, Path(tmp) / f"alt{k}", precision=prec, style=sty, rest=rest)

@@ -145,13 +145,18 @@ def test_a_units_twin_that_fits_no_setting_is_told_how_to_find_one_that_does(tmp
     proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "2", "--grid",
                    "paper-sim", "--random", "5000", "-o", str(data))
     assert proc.returncode == 0, proc.stderr
-    for name, extra in (("twin", []), ("capped", ["--max-terms", "40"])):
+    for name, extra in (("twin", []), ("capped", ["--max-terms", "40"]), ("bic", ["--k", "bic"])):
         proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / f"{name}.json"), "--held-out", "0", *extra)
         assert proc.returncode == 0, proc.stderr
     proc = _build_cli(str(tmp_path / "twin.json"), tmp_path / "big")
     assert_one_line_error(proc, 2, "does not fit the uno: flash over")
-    assert "no other precision or style fits: fit fewer terms" in proc.stderr
+    assert "no other precision or style fits: fit fewer terms than its " in proc.stderr
+    assert "(fitgen fit --k bic, or --max-terms N;" in proc.stderr
     assert "`fitgen tradeoff SENSOR --scene full --core uno` measures which fit" in proc.stderr
+    # fitted with BIC already, and still too big: BIC is not offered again
+    proc = _build_cli(str(tmp_path / "bic.json"), tmp_path / "big")
+    assert_one_line_error(proc, 2, "does not fit the uno: flash over")
+    assert "(fitgen fit --max-terms N, per output;" in proc.stderr and "--k bic" not in proc.stderr
     ok = _build_cli(str(tmp_path / "capped.json"), tmp_path / "TactilePose")
     assert ok.returncode == 0, ok.stderr
     flash, ram = map(int, SIZE.search(ok.stderr).groups())
