@@ -59,6 +59,9 @@ def test_arduino_build_measures_its_stack_on_the_models_own_sensor(four, tmp_pat
     assert proc.returncode == 0, proc.stderr
     est = _estimates(proc.stdout)
     assert len(est) >= 3 and np.all(np.abs(est - POSE) < 0.05), proc.stdout
+    # its manifest counts the model's elements, not the paper's eight
+    assert "sentence=Pose of a magnetic tactile sensor from 4 GMR elements read by" in \
+        (tmp_path / "TactilePose" / "library.properties").read_text()
 
 
 def test_emulate_reads_the_models_own_sensor_over_i2c(four):
