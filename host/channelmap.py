@@ -115,6 +115,29 @@ class ChannelMap:
         return ",".join(parts)
 
 
+def reordered_spec(spec, order) -> str | None:
+    """The ``--adc`` spec that reads as element j+1 what ``spec`` reads as element ``order[j]`` + 1 (0-based), where
+    a spec can say so: None where a chip's inputs would not stay together (a spec lists each chip once), and for
+    a map file or a spec that does not parse."""
+    if not isinstance(spec, str) or spec.endswith(".toml"):
+        return None
+    try:
+        elements = parse_spec(spec).elements()
+    except InputError:
+        return None
+    if sorted(order) != list(range(len(elements))):
+        return None
+    chips, inputs = [], []
+    for chip, inp in (elements[k] for k in order):
+        if not chips or chips[-1] is not chip:
+            if any(c is chip for c in chips):
+                return None
+            chips.append(chip)
+            inputs.append([])
+        inputs[-1].append(inp)
+    return ChannelMap(tuple(replace(c, inputs=tuple(i)) for c, i in zip(chips, inputs))).describe()
+
+
 def check_full_scale(cmap: ChannelMap, low, high) -> None:
     """InputError when an element's ADC cannot reach readings from ``low`` to ``high`` (volts, per element: a
     model's fitted domain): each would clip at the full scale, and every estimate with it."""

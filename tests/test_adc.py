@@ -348,6 +348,21 @@ def test_channel_map_specs():
     assert m.describe() == "ads1115@0x48:0,1,2,3,ads1115@0x49:d0-1,d2-3,ads7828@0x4a:5,0"
 
 
+def test_a_spec_rewritten_to_read_in_another_order():
+    """What identify offers when the channels read the ring in another order: the spec whose element j+1 is the
+    old spec's element order[j]+1; none where a chip's inputs would part (a spec lists each chip once)."""
+    from host.channelmap import reordered_spec
+
+    spec = "ads1115@0x48:0-3,ads1115@0x49:d0-1,d2-3,ads7828@0x4a:5,0"
+    for order in ([4, 5, 0, 1, 2, 3, 6, 7], [7, 6, 5, 4, 0, 1, 2, 3], [0, 1, 2, 3, 4, 5, 6, 7]):
+        fixed = reordered_spec(spec, order)
+        old, new = parse_spec(spec).elements(), parse_spec(fixed).elements()
+        assert [(c.label, i) for c, i in new] == [(old[k][0].label, old[k][1]) for k in order], fixed
+    assert reordered_spec(spec, [0, 4, 1, 2, 3, 5, 6, 7]) is None  # 0x48's inputs parted by one of 0x49's
+    assert reordered_spec(spec, [0, 1]) is None and reordered_spec("map.toml", [0]) is None
+    assert reordered_spec("ads1115@0x99:0", [0]) is None  # no address a chip takes
+
+
 def test_channel_map_toml(tmp_path):
     f = tmp_path / "map.toml"
     f.write_text('bus = 3\n[[chip]]\ntype = "ads1115"\naddress = 0x49\ninputs = ["d0-1", "d2-3"]\npga = 2.048\n'

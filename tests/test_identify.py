@@ -618,6 +618,9 @@ def test_cli_schedule_capture_identify(tmp_path):
                           f"unit file {unit_file}: its posterior unit.posterior.json is malformed")
 
 
+TWO_ADCS = "ads1115@0x48:0,1,2,3,ads1115@0x49:0,1,2,3"
+
+
 def _save_capture(path, y, poses, meta=None):
     from fitgen.physics.dataset import Dataset
 
@@ -675,6 +678,7 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
         # the two ADCs' channels exchanged: the ring read turned by half, the order that undoes it named
         "ADCs exchanged": (y[:, [4, 5, 6, 7, 0, 1, 2, 3]], plan[0], "taken in the order v5, v6, v7, v8, v1, v2, v3, v4 "
                                                                    "as elements 1-8 (the ring turned by 180 deg about z"),
+
         # the stage's dx mirrored against the sensor's: the stage map would have to turn it round
         "mirrored dx": (y, plan[0] * [-1, 1, 1, 1, 1], "the stage's axes against the sensor's"),
         # impossible volts: not 'saturated', but out of the ADC's range, or no sensor at all
@@ -731,10 +735,18 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
                                         "not follow the stage; the indenter never reached the skin")
     for name, (yy, pp, message) in cases.items():
         path = tmp_path / f"{name.replace(' ', '_')}.csv"
-        _save_capture(path, yy, pp, {"samples_per_row": SAMPLES})
-        out = tmp_path / f"{name.replace(' ', '_')}.toml"
+        # the capture's channel map, as tactile-host capture records it
+        _save_capture(path, yy, pp, {"samples_per_row": SAMPLES, "adc": TWO_ADCS})
+        out = path.with_suffix(".toml")
         proc = run_cli("fitgen", "identify", str(path), "--sensor", "paper", "-o", str(out))
         assert_one_line_error(proc, contains=message)
+        # the capture's --adc map rewritten to read in the order named, where a spec can say it; for a pair on two
+        # chips (swapped channels) none can: a spec lists each chip once
+        fixed = {"ADCs exchanged": "ads1115@0x49:0,1,2,3,ads1115@0x48:0,1,2,3",
+                 "swapped neighbours": "ads1115@0x48:0,1,3,2,ads1115@0x49:0,1,2,3"}.get(name)
+        said = (f"; if the channels are the cause, capture again with --adc {fixed} (the capture's map, {TWO_ADCS}, "
+                "with its inputs in that order); nothing written")
+        assert (said in proc.stderr if fixed else "capture again with --adc" not in proc.stderr), (name, proc.stderr)
         assert not out.exists() and not out.with_suffix(".posterior.json").exists()
     assert_one_line_error(run_cli("fitgen", "schedule", "--axes", "dx,dq", "-o", str(tmp_path / "x.csv")),
                           contains="--axes")

@@ -42,7 +42,8 @@ def cmd_identify(args) -> int:
             rec.check_explained(ident, args.capture, drawing.name, source, trial)
         except InputError as exc:
             hint = "" if args.transfer else rec.units_hint(drawing, ds.inputs, ds.poses(), ds.meta)
-            raise InputError(f"{hint}; read as {drawing.units}, {exc}" if hint else str(exc)) from None
+            text = f"{hint}; read as {drawing.units}, {exc}" if hint else str(exc)
+            raise InputError(_with_map(text, getattr(exc, "order", None), ds.meta.get("adc"))) from None
     unit_noise, unit_source = rec.device_noise(ds.meta, drawing, args.noise)
     files = rec.unit_files(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
                                                 "drawing_spec": args.sensor}, unit_noise)
@@ -63,6 +64,19 @@ def cmd_identify(args) -> int:
     notes = rec.outlier_lines(ident, args.capture) + rec.low_residual_line(ident, source) + field
     print("".join(f"identify: {ln}\n" for ln in notes), end="", file=sys.stderr)
     return 0
+
+
+def _with_map(text: str, order, spec) -> str:
+    """A refusal that names the channels' order, with the capture's --adc map rewritten to read in it where a
+    spec can say so."""
+    from host.channelmap import reordered_spec
+
+    fixed = reordered_spec(spec, order) if order is not None else None
+    end = "; nothing written"
+    if fixed is None or not text.endswith(end):
+        return text
+    return (text[:-len(end)] + f"; if the channels are the cause, capture again with --adc {fixed} (the capture's "
+            f"map, {spec}, with its inputs in that order)" + end)
 
 
 def samples_of(args, drawing) -> tuple[int, float, dict]:

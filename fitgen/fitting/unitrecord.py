@@ -297,6 +297,15 @@ def axis_fix(m: np.ndarray) -> str:
     return f"in the capture's axis map, --stage-axes, put {' and '.join(said)}, signs multiplying, and capture again"
 
 
+class ChannelOrderError(InputError):
+    """A refusal that names the order the capture's channels read the ring in: ``order[j]`` is the column that
+    reads as element j+1 (0-based), so that the layer that knows the capture's channel map can write it so."""
+
+    def __init__(self, message: str, order):
+        super().__init__(message)
+        self.order = tuple(int(k) for k in order)
+
+
 def check_explained(ident: Identification, capture, drawing: str, source: str, progress=None) -> None:
     """InputError when the physics does not explain the capture (reduced chi-square over CHI2_LIMIT), or does only
     with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads), with the cause when one thing
@@ -308,6 +317,7 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
         return
     names = ", ".join(f"{ident.space.names[i]} at {z:+.3g}" for i, z in far[:3]) + " prior spreads"
     culprit = blame(ident, progress)
+    order = None  # the columns' order that explains the capture, where blame found the channels in another
     if culprit is not None and culprit[0] == "rows":
         rows = culprit[1]
         said = "; ".join(f"row {i + 1} ({_where(ident, i)})" for i in rows)
@@ -333,6 +343,7 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
                  + "), or the sensor sits turned on the stage or a pose axis is mirrored or swapped (" + axis_fix(m) + ")")
     elif culprit is not None:
         a, b = culprit[1]
+        order = [b if k == a else a if k == b else k for k in range(ident.space.drawing.n_elements)]
         cause = (f"elements {a + 1} and {b + 1} (v{a + 1}, v{b + 1}) swapped: with their readings exchanged, the capture "
                  "reads as a unit within the tolerances, to the noise; their channels are wired the other way round "
                  "(the channel map)")
@@ -353,14 +364,18 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
                           "that does not respond or "
                           "elements wired in another order than the drawing's (the channel map), a zero above first "
                           f"contact (rows at dz 0 off the skin), or a noise figure too low{row}")
-        raise InputError(f"the physics does not explain {capture}: residuals {float(np.sqrt(ident.reduced_chi2)):.3g}x "
-                         f"the reading noise ({source}); {cause}"
-                         + (f"; the nearest unit lies far outside the tolerances ({names})" if far else "")
-                         + "; nothing written")
+        raise _refusal(f"the physics does not explain {capture}: residuals {float(np.sqrt(ident.reduced_chi2)):.3g}x "
+                       f"the reading noise ({source}); {cause}"
+                       + (f"; the nearest unit lies far outside the tolerances ({names})" if far else "")
+                       + "; nothing written", order)
     cause = cause or ("an element that does not respond or is wired to another channel, another sensor than "
                       f"{drawing}, or a unit built looser than its [tolerances] say (widen them in the drawing's file)")
-    raise InputError(f"the physics explains {capture} only with a unit far outside {drawing}'s tolerances ({names}; "
-                     f"beyond {PRIOR_LIMIT:g} is no unit within them): {cause}; nothing written")
+    raise _refusal(f"the physics explains {capture} only with a unit far outside {drawing}'s tolerances ({names}; "
+                   f"beyond {PRIOR_LIMIT:g} is no unit within them): {cause}; nothing written", order)
+
+
+def _refusal(message: str, order) -> InputError:
+    return InputError(message) if order is None else ChannelOrderError(message, order)
 
 
 def save(ident: Identification, path, provenance: dict, noise: float | None = None) -> tuple:
