@@ -311,7 +311,8 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
     with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads), with the cause when one thing
     alone is to blame (rows, an element, a field the stage carries, the ring's order, a swapped pair:
     :func:`fitgen.fitting.blame.blame`, ``progress`` its callback) or the stage's axes are; ``source``: where the
-    reading noise came from; ``drawing``: the sensor's name."""
+    reading noise came from; ``drawing``: the sensor's name. Where the channels' order is to blame, the error is a
+    :class:`ChannelOrderError`, carrying the order."""
     far, bad = ident.outside_tolerances(), ident.reduced_chi2 > CHI2_LIMIT
     if not (bad or far):
         return
