@@ -31,6 +31,7 @@ from fitgen.equations.model import Model
 
 from host.channelmap import ChannelMap
 from host.pi import DRIVER_FILES, check_reads, render_adc_map
+from host.readout import TARE_SAMPLES
 
 LIBRARY_NAME = "TactilePose"  # arduino-lint's strict rule: <= 16 characters, no spaces, not "Arduino"/"library"
 URL = "https://github.com/tactile-magnetics/fitgen"
@@ -157,9 +158,6 @@ def library_json() -> str:
 def _lsb_volts(chip) -> float:
     """Volts per code, as adc.c's adc_lsb_volts computes it."""
     return chip.settings.pga / 32768.0 if chip.kind == "ads1115" else chip.vref_volts / 4096.0
-
-
-TARE_SAMPLES = 50  # as tactile-host read --tare averages by default
 
 
 def render_config(cmap: ChannelMap, precision: str, rest=None) -> str:

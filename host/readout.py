@@ -189,7 +189,10 @@ class Tare:
         return f"tare: offsets [mV] {mv} (spread up to {self.spread.max() * 1e3:.2f} mV rms)"
 
 
-def tare(array: AdcArray, reference: np.ndarray, n: int = 50, step=None) -> Tare:
+TARE_SAMPLES = 50  # samples a tare averages by default: read's, tm_pi's and the Arduino ReadPose's
+
+
+def tare(array: AdcArray, reference: np.ndarray, n: int = TARE_SAMPLES, step=None) -> Tare:
     """Rest readings averaged over ``n`` samples; subtracting ``offsets`` maps them onto ``reference``."""
     block = measure(array, n, step)
     return Tare(block.mean(axis=0), np.asarray(reference, dtype=float), block.std(axis=0))

@@ -24,7 +24,7 @@ from host.channelmap import Settings, channel_map, check_full_scale
 from host.clock import REAL_CLOCK
 from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
-from host.readout import Corrections, RunRecord, check_rest_reference, rest_reference, tare
+from host.readout import TARE_SAMPLES, Corrections, RunRecord, check_rest_reference, rest_reference, tare
 from host.simbus import simulated_bus
 from host.temperature import Thermometer, load_tempcomp, split_channel_map, temperature_input
 
@@ -93,7 +93,8 @@ MIN_AUTOZERO_TARE = 5  # samples whose spread is the noise floor auto-zero tests
 
 
 # the readout's options that default to None, so that one typed (even as its default) is told from one left out
-READOUT_DEFAULTS = {"engine": "python", "precision": "double", "cc": "gcc", "tare_samples": "50",
+READOUT_DEFAULTS = {"engine": "python", "precision": "double", "cc": "gcc",
+                    "tare_samples": str(TARE_SAMPLES),
                     "rest_band": "0.08,1.5", "rest_hold": "1"}
 
 

@@ -7,7 +7,7 @@
  *
  *   tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] [--retries N] [--tare [--tare-samples N]]
  *
- * --tare averages N (default 50) samples of the untouched sensor first and maps them onto the rest readings
+ * --tare averages N (default PI_TARE_SAMPLES, as read's) samples of the untouched sensor first and maps them onto the rest readings
  * pi-build compiled in (PI_REST), as `tactile-host read --tare` does: its line on stderr, then every
  * reading less the offsets (after the temperature compensation, as read takes them).
  *
@@ -220,7 +220,7 @@ int main(int argc, char **argv)
     if (tare_n && !tared) {
         return usage("--tare-samples needs", "--tare");
     }
-    tare_n = tare_n ? tare_n : 50;
+    tare_n = tare_n ? tare_n : PI_TARE_SAMPLES;
     if (tared && !PI_HAS_REST) {
         fprintf(stderr, "tm_pi: error: --tare: this build has no rest readings to map onto (tactile-host pi-build "
                         "--rest SENSOR|DATASET.csv)\n");
