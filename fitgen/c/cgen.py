@@ -79,3 +79,22 @@ def c_string(text: str) -> str:
     if not re.fullmatch(r"[A-Za-z0-9 _.,:;/+\-=()\[\]]*", text):
         raise InputError(f"refusing to place {text!r} in a C string")
     return f'"{text}"'
+
+
+# a header's floating point as written under any flags (docs/codegen.md): no contraction into fused multiply-adds
+# and none of -ffast-math. GCC takes it for the whole file; clang, whose file-scope float_control is refused off x86,
+# at the start of each function body, where the scope macro stands
+GCC_FP = '#pragma GCC optimize("fp-contract=off", "no-fast-math")'
+CLANG_FP = ("clang fp contract(off)", "clang fp reassociate(off)", "clang fp exceptions(strict)")
+
+
+def fp_guard(scope: str) -> tuple[str, str]:
+    """The lines before and after a header's code that keep its floating point as written, ``scope`` the macro each
+    of its function bodies starts with: clang's contract(off), and under -ffast-math reassociate(off) and strict
+    exceptions (no rsqrt for sqrt, no reciprocal, a real isfinite()); GCC's push, GCC_FP and pop."""
+    before = ["#if defined(__clang__)", "#if defined(__FAST_MATH__)",
+              f"#define {scope} " + " ".join(f'_Pragma("{p}")' for p in CLANG_FP), "#else",
+              f'#define {scope} _Pragma("{CLANG_FP[0]}")', "#endif", "#else", f"#define {scope}",
+              "#if defined(__GNUC__)", "#pragma GCC push_options", GCC_FP, "#endif", "#endif"]
+    after = ["#if !defined(__clang__) && defined(__GNUC__)", "#pragma GCC pop_options", "#endif"]
+    return "\n".join(before), "\n".join(after)

@@ -13,7 +13,7 @@ from pathlib import Path
 import jinja2
 
 from fitgen import __version__
-from fitgen.c.cgen import c_real, identifier, prefix_identifier
+from fitgen.c.cgen import GCC_FP, c_real, fp_guard, identifier, prefix_identifier
 from fitgen.c.targets import check_precision
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
@@ -281,13 +281,15 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
     cm = build_cmodel(model, precision, style, prefix, fma)
     if model.n_inputs > 30:
         raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most 30")
-    return _env().get_template("model.h.j2").render(m=cm, exp_codes=[EXP_CODE[e] for e in EXPONENTS])
+    fp_before, fp_after = fp_guard(f"{cm.upper}_FP_SCOPE")
+    return _env().get_template("model.h.j2").render(m=cm, exp_codes=[EXP_CODE[e] for e in EXPONENTS],
+                                                     fp_before=fp_before, fp_after=fp_after)
 
 
 def render_blob_interpreter() -> str:
     """The text of the firmware's ``cal.c`` (firmware/cal.c.j2): the blob interpreter, its clamp, powers and
     term sums rendered from the macros the table style is (table.j2), so that both round alike."""
-    return _env().get_template("firmware/cal.c.j2").render(kinds=[EXP_CODE[e] for e in EXPONENTS])
+    return _env().get_template("firmware/cal.c.j2").render(kinds=[EXP_CODE[e] for e in EXPONENTS], gcc_fp=GCC_FP)
 
 
 def write_header(model: Model, folder: str | Path, precision: str = "double", style: str = "table",
