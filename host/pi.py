@@ -13,7 +13,6 @@ from __future__ import annotations
 import errno
 import fcntl
 import os
-import re
 import subprocess
 import threading
 from importlib import resources
@@ -153,8 +152,7 @@ def _rest_block(model: Model, rest) -> str:
     volts, whose = rest
     if len(volts) != model.n_inputs:
         raise InputError(f"{len(volts)} rest readings for a model of {model.n_inputs} inputs")
-    # a file's name may hold what no C string should: shown with '?' in its place
-    whose = c_string(re.sub(r"[^A-Za-z0-9 _.,:;/+\-=()\[\]]", "?", whose))
+    whose = c_string(whose, lossy=True)
     return (f"#define PI_HAS_REST 1\n/* V: the readings the model expects at rest */\nstatic const double "
             f"PI_REST[{model.n_inputs}] = {{ {', '.join(c_real(float(x), 'double') for x in volts)} }};\n"
             f"#define PI_REST_FROM {whose}\n")

@@ -263,3 +263,16 @@ def test_cortex_m_builds_warning_free(paper_model, tmp_path, cpu, precision):
         size = subprocess.run(["arm-none-eabi-size", str(obj)], capture_output=True, text=True, check=True)
         text_bytes = int(size.stdout.splitlines()[1].split()[0])
         assert 100 < text_bytes < 64000
+
+
+def test_c_strings_take_plain_text_and_a_lossy_one_shows_the_rest_as_question_marks():
+    """pi-build compiles the rest readings' source into tm_pi's tare line: a file's name may hold what no C string
+    should (a quote, a backslash, a newline). Its '?' stand-in was itself refused, so a --rest path with a '~' or
+    a quote stopped pi-build."""
+    from fitgen.c.cgen import c_string
+
+    assert c_string("--rest paper") == '"--rest paper"'
+    for bad in ('a"b', "a\\b", "line\nbreak", "caf\u00e9"):
+        with pytest.raises(InputError):
+            c_string(bad)
+    assert c_string('/tmp/my "unit"\\1~.toml', lossy=True) == '"/tmp/my _unit__1_.toml"'

@@ -74,9 +74,15 @@ def c_real(x: float, precision: str) -> str:
     return c_float(x) if precision == "float" else c_double(x)
 
 
-def c_string(text: str) -> str:
-    """A C string literal for plain ASCII text (letters, digits, a few symbols) only."""
-    if not re.fullmatch(r"[A-Za-z0-9 _.,:;/+\-=()\[\]]*", text):
+_NOT_PLAIN = re.compile(r"[^A-Za-z0-9 _.,:;/+\-=()\[\]]")
+
+
+def c_string(text: str, lossy: bool = False) -> str:
+    """A C string literal for plain ASCII text (letters, digits, a few symbols) only; ``lossy``: any other
+    character shown as '_', not refused (a file's name, say; not '?', which C99's trigraphs may read)."""
+    if lossy:
+        text = _NOT_PLAIN.sub("_", text)
+    if _NOT_PLAIN.search(text):
         raise InputError(f"refusing to place {text!r} in a C string")
     return f'"{text}"'
 
