@@ -502,6 +502,23 @@ def test_a_unit_file_is_refused_as_a_drawing_and_an_element_on_the_axis_moves_al
                                                           theta[space.index(f"e{k}.azimuth")]], atol=1e-15)
 
 
+def test_a_drawing_written_with_a_units_keys_is_told_which_keys_make_it_one():
+    from fitgen.physics.units import UnitSpace
+
+    data = tomllib.loads(_example())
+    assert UnitSpace.of(parse_sensor(copy.deepcopy(data), "example"))  # the document's own: a drawing
+    k = sum(r["count"] for r in data["elements"].get("ring", [])) + 1  # the first list entry's element number
+    data["elements"]["list"][0]["gain"] = 1.1
+    data["ambient"] = {"field": [0.0, 0.0, 0.05]}
+    mine = parse_sensor(data, "example")
+    assert mine.unit_traits() == [f"element {k}'s gain 1.1", "ambient.field"]
+    with pytest.raises(InputError) as err:
+        UnitSpace.of(mine)
+    msg = str(err.value)
+    assert f"is a built unit, not a drawing (element {k}'s gain 1.1; ambient.field;" in msg
+    assert "leave those keys out" in msg and "\n" not in msg
+
+
 @pytest.fixture(scope="module")
 def ran(tmp_path_factory):
     """(folder, {command's first words: completed process}) after the document's commands on its example."""

@@ -17,7 +17,7 @@ A unit's parameters, relative to its drawing (:class:`UnitSpace`, in this order)
   magnet as dz (1 - c |dz|) before M (fitgen.physics.pose.pressed).
 
 Every parameter is 0 on the drawing. Its spread is the sensor file's ``[tolerances]``
-(:class:`fitgen.physics.sensor.Tolerances`); :func:`draw_unit` draws each normal, clipped at 3 sigma.
+(:class:`fitgen.physics.tolerances.Tolerances`); :func:`draw_unit` draws each normal, clipped at 3 sigma.
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ from fitgen.base.errors import InputError
 from fitgen.physics.field import cylinder_projection
 from fitgen.base.fileio import write_atomic
 from fitgen.physics.pose import as_poses, contact_poses, pressed, rotation_matrices
-from fitgen.physics.sensor import Magnet, Sensor, Tolerances, load_sensor
+from fitgen.physics.sensor import Magnet, Sensor, load_sensor
+from fitgen.physics.tolerances import Tolerances
 from fitgen.physics.transfer import volts_per_mt
 
 MAGNET = ("magnet.x", "magnet.y", "magnet.z", "magnet.thx", "magnet.thy", "magnet.log_polarization")
@@ -77,9 +78,14 @@ class UnitSpace:
         if not drawing.is_drawing:
             unit = drawing.source.get("unit") if isinstance(drawing.source, dict) else None
             named = (unit.get("drawing_spec") or unit.get("drawing")) if isinstance(unit, dict) else None
-            hint = f" ({named}, as its [unit] table says)" if isinstance(named, str) else ""
-            raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing: give the drawing it was built "
-                             f"to{hint}")
+            if isinstance(named, str):
+                raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing: give the drawing it was "
+                                 f"built to ({named}, as its [unit] table says)")
+            # no [unit] table: most likely a drawing written with a unit's keys
+            raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing ({'; '.join(drawing.unit_traits())}"
+                             "; a drawing's elements have gain 1 and offset 0, and it has no magnet offset or tilt, "
+                             "ambient field or stage map): give the drawing it was built to, or leave those keys out, "
+                             "which a unit draws within [tolerances]")
         t = tolerances or drawing.tolerances
         n = drawing.n_elements
         stiff = (STIFFENING,) if t.stiffening > 0 else ()  # absent, the space (and its records) are as before
