@@ -32,7 +32,7 @@ ASK_WAIT = 1.0  # s a GRBL takes at most to answer '?' (real-time, within millis
 QUEUED_WAIT = 60.0  # s a stopped run's queued moves (or homing) may take to end after a new run connects
 POSITION_TOL = 0.02  # mm: reported against commanded position (Marlin prints 2 decimals, GRBL steps)
 
-GRBL_BANNER = re.compile(r"^Grbl (\S+)")
+GRBL_BANNER = re.compile(r"^Grbl(?:HAL)? (\S+)")  # GRBL, FluidNC ("Grbl 3.7 [FluidNC ..."), grblHAL
 GRBL_ERRORS = {1: "expected command letter", 2: "bad number format", 3: "invalid $ statement",
                5: "homing is not enabled in the settings", 8: "$ command needs Idle", 9: "G-code locked out "
                "during alarm or jog", 11: "line too long", 15: "jog target exceeds machine travel",
@@ -40,7 +40,8 @@ GRBL_ERRORS = {1: "expected command letter", 2: "bad number format", 3: "invalid
 GRBL_ALARMS = {1: "hard limit triggered", 2: "soft limit: the target exceeds the machine's travel",
                3: "reset while in motion, position lost", 4: "probe fail", 5: "probe fail",
                6: "homing fail: reset during homing", 8: "homing fail: pull-off did not clear the switch",
-               9: "homing fail: no limit switch found"}
+               9: "homing fail: no limit switch found", 11: "homing required (grblHAL)",
+               12: "a limit switch engaged (grblHAL)"}
 _NUM = r"(-?\d+(?:\.\d*)?)"
 _MARLIN_POS = re.compile(rf"X:{_NUM}\s*Y:{_NUM}\s*Z:{_NUM}")
 
@@ -362,7 +363,16 @@ class GcodeController(PortOwner):
                 raise fault
 
     def _parse_status(self, text: str) -> tuple[str, np.ndarray]:
-        fields = text[1:-1].split("|")
+        body = text[1:-1]
+        if "|" in body:
+            fields = body.split("|")
+        else:  # GRBL 0.9: <Idle,MPos:x,y,z,WPos:x,y,z>: a field starts at each name
+            fields = []
+            for part in body.split(","):
+                if fields and ":" not in part:
+                    fields[-1] += "," + part
+                else:
+                    fields.append(part)
         state = fields[0]
         pos, kind = None, None
         for f in fields[1:]:
@@ -417,7 +427,7 @@ class GcodeController(PortOwner):
         try:
             if self.flavor == "grbl":
                 for text in self.command("$$"):
-                    m = re.fullmatch(rf"\$11([012])={_NUM}", text)
+                    m = re.fullmatch(rf"\$11([012])={_NUM}(?:\s*\(.*\))?", text)  # 0.9 adds (a comment)
                     if m:
                         rates[int(m.group(1))] = float(m.group(2))
             else:

@@ -42,6 +42,7 @@ __all__ = ["PoseFile", "PtyServer", "SimController", "SimRig", "SocketServer", "
            "pose_file_motion", "simulated_stage_capture"]
 
 GRBL_VERSION = "1.1h"
+GRBL_WELCOME = f"Grbl {GRBL_VERSION} ['$' for help]"  # grblHAL says "GrblHAL 1.1f ['$' or '$HELP' for help]"
 MARLIN_VERSION = "2.1.2.1"
 
 
@@ -73,6 +74,7 @@ class SimController:
         self._inbuf = bytearray()
         self._out = bytearray()
         self.silent = False
+        self.welcome = GRBL_WELCOME  # GRBL's start-up line (a test may give grblHAL's)
         self._power_on()
 
     # -- state
@@ -105,7 +107,7 @@ class SimController:
             self.silent = False
             self._inbuf.clear()
             if self.flavor == "grbl":
-                self._say("", f"Grbl {GRBL_VERSION} ['$' for help]")
+                self._say("", self.welcome)
                 if moving:
                     self.alarm = True
                     self._say("ALARM:3")
@@ -283,7 +285,7 @@ class SimController:
             if outside and self.flavor == "grbl":  # soft limits: alarm, and GRBL resets itself
                 self.queue.clear()
                 self._say("ALARM:2")
-                self._say(f"Grbl {GRBL_VERSION} ['$' for help]", "[MSG:'$H'|'$X' to unlock]")
+                self._say(self.welcome, "[MSG:'$H'|'$X' to unlock]")
                 self.alarm = True
                 self.pending.clear()
                 return

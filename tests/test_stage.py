@@ -294,6 +294,61 @@ def test_a_banner_on_connect_means_a_reset_and_names_the_flavor():
             GcodeController.open(srv.url, timeout=1).connect("grbl", boot_wait=0.1)
 
 
+GRBLHAL_WELCOME = "GrblHAL 1.1f ['$' or '$HELP' for help]"  # grblHAL's start-up line (grblHAL/core, grbl.h)
+
+
+def test_grblhals_start_up_line_is_a_reset_too():
+    """grblHAL (Teensy, STM32 and ESP32 boards) names itself GrblHAL: its start-up line on connect, or in the
+    middle of a capture, is a reset as GRBL's is; taken for a harmless line, a reset between moves would let the
+    capture go on in coordinates that restarted at 0."""
+    with server("grbl", transport=PtyServer) as srv:  # a pty keeps what is said before the host listens
+        srv.ctrl.welcome = GRBLHAL_WELCOME
+        c = connect_after_reset(srv)
+        try:
+            assert c.flavor == "grbl" and c.banner_seen
+            c.setup()
+            c.move({"X": 1.0}, FEED, start=np.zeros(3))
+            srv.ctrl.inject("reset", 1)
+            with pytest.raises(StageError, match="reset itself") as err:
+                c.move({"X": 2.0}, FEED)
+            assert err.value.lost
+        finally:
+            c.close()
+
+
+def test_grbl_0_9_reports_and_settings_are_read():
+    """GRBL 0.9 (older CNC 3018 and laser boards) reports <Idle,MPos:x,y,z,WPos:x,y,z> and comments its
+    settings ($110=500.000 (x max rate, mm/min)): the position and the top rates are read as 1.1's."""
+    class Grbl09(SimController):
+        def _status(self, now):
+            state = "Run" if self.queue else "Idle"
+            m = np.round((self._where(now) - self.offset) * self.steps_per_mm) / self.steps_per_mm
+            self._say(f"<{state},MPos:{m[0]:.3f},{m[1]:.3f},{m[2]:.3f},WPos:{m[0]:.3f},{m[1]:.3f},{m[2]:.3f},"
+                      f"Buf:{len(self.queue)},RX:0,Lim:000>")  # $10=31: every field 0.9 has
+
+        def _grbl_system(self, text, now):
+            if text == "$$":
+                self._say("$100=400.000 (x, step/mm)", "$110=500.000 (x max rate, mm/min)",
+                          "$111=600.000 (y max rate, mm/min)", "$112=300.000 (z max rate, mm/min)", "ok")
+            elif text == "$I":
+                self._say("[0.9j.20160726:]", "ok")
+            else:
+                super()._grbl_system(text, now)
+
+    with _controller(Grbl09, "grbl") as srv:
+        c = connect(srv)
+        try:
+            assert c.flavor == "grbl"
+            c.setup()
+            np.testing.assert_allclose(c.max_rates, [500.0, 600.0, 300.0])
+            np.testing.assert_allclose(c.position(), [0.0, 0.0, 0.0])
+            np.testing.assert_allclose(c.move({"X": 0.5, "Z": -1.0}, FEED), [0.5, 0.0, -1.0])
+            np.testing.assert_allclose(c.position(), [0.5, 0.0, -1.0])
+            np.testing.assert_allclose(srv.ctrl.machine(), [0.5, 0.0, -1.0])
+        finally:
+            c.close()
+
+
 def test_grbl_after_reset_with_homing_is_in_alarm_until_homed():
     with server("grbl", homing_lock=True) as srv:
         c = connect(srv)
