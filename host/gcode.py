@@ -1,7 +1,7 @@
 """A Marlin or GRBL controller over pyserial: the G-code line protocol and what each dialect says.
 
 ``GcodeController`` sends one command at a time, each answered by ``ok`` (or
-``error:N`` / ``Error:`` / ``ALARM:N`` / ``!!``, all faults) within a time limit
+``error:N`` / ``Error:`` / ``ALARM:N`` / ``!!`` / Klipper's ``!! why``, all faults) within a time limit
 that a Marlin ``busy:`` keepalive extends; every line it reads is length-checked;
 a move is ``G1`` (absolute, ``G90``, with a feed) then a wait for its end (Marlin
 ``M400``, GRBL ``G4 P0`` then ``?`` until Idle) and a position check (``M114`` /
@@ -171,6 +171,11 @@ class GcodeController(PortOwner):
             return StageError(f"{self.name}: the controller raised ALARM:{code}{f' ({meaning})' if meaning else ''} "
                               f"during {what}; home it (--home) or unlock it (--unlock), then set the zero again",
                               lost=f"the controller raised ALARM:{code}")
+        if text.startswith("!! "):  # Klipper's error line (then its ok): the command was refused
+            shut = "shutdown" in low
+            return StageError(f"{self.name}: the controller answered {what} with {text!r}"
+                              + ("; restart it (FIRMWARE_RESTART), home it and set the zero again" if shut else ""),
+                              lost="the controller shut down" if shut else "")
         if text == "!!" or "halted" in low or "kill() called" in low:
             return StageError(f"{self.name}: the controller halted ({text}) during {what}; reset it, home it and "
                               "set the zero again", lost="the controller halted")

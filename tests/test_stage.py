@@ -502,6 +502,29 @@ def test_a_firmware_speaking_marlins_dialect_under_another_name_is_taken_when_na
                 c.close()
 
 
+def test_klippers_error_line_is_the_commands_fault_not_a_clamped_move():
+    """Klipper answers a command it refuses with '!! why' and then ok: the capture stops on the why (an unhomed
+    axis, a move out of range), not on the position check's 'clamped ... or lost steps' after it."""
+    class Klipper(SimController):
+        def _execute(self, line, now):
+            if line.startswith("G1") and "X9" in line:
+                self._say("!! Move out of range: 9.000 0.000 0.000 [0.000]", "ok")
+                return True
+            return super()._execute(line, now)
+
+    with _controller(Klipper, "marlin") as srv:
+        c = GcodeController.open(srv.url, timeout=2.0)
+        try:
+            c.connect("marlin", boot_wait=0.1)
+            c.setup()
+            c.move({"X": 1.0}, FEED, start=np.zeros(3))
+            with pytest.raises(StageError, match=re.escape("with '!! Move out of range: 9.000")) as err:
+                c.move({"X": 9.0}, FEED)
+            assert not err.value.lost  # a refused move: the position still holds
+        finally:
+            c.close()
+
+
 def test_lines_are_length_checked():
     port = serial.serial_for_url("loop://", timeout=0.02)
     c = GcodeController(port, "loop", timeout=0.5)
