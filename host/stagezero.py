@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -92,21 +93,28 @@ def zero_still_valid(state: StageState | None, ctrl: GcodeController, axes: Axis
 
 
 def parse_zero(spec: str) -> str | dict[str, float]:
-    """``ask``, ``here``, or machine coordinates ``X=..,Y=..,Z=..`` (or three numbers)."""
+    """``ask``, ``here``, or machine coordinates ``X=..,Y=..,Z=..``, G-code words ``X.. Y.. Z..`` (as M114 and
+    stage-sim print them) or three numbers."""
     s = spec.strip().lower()
     if s in ("ask", "here"):
         return s
     from fitgen.base.parse import parse_assignments
 
-    if "=" in s:
-        vals = parse_assignments(spec.upper(), MACHINE_AXES, "--zero")
+    words = re.fullmatch(r"(?:\s*[xyz]\s*[-+.\d][^\s,;xyz]*[\s,;]*)+", s) if "=" not in s else None
+    if "=" in s or words:
+        text = (re.sub(r"([xyz])\s*(?=[-+.\d])", r"\1=", s) if words else s).upper()
+        try:
+            vals = parse_assignments(text, MACHINE_AXES, "--zero")
+        except InputError as exc:  # said of the words as given
+            raise InputError(str(exc).replace(repr(text), repr(spec), 1)) from None
     else:
         try:
             nums = [float(x) for x in s.replace(",", " ").split()]
         except ValueError:
             nums = []
         if len(nums) != 3:
-            raise InputError(f"--zero {spec!r}: ask, here, or the machine coordinates X,Y,Z (e.g. 120.5,80,12.25)")
+            raise InputError(f"--zero {spec!r}: ask, here, or the machine coordinates X,Y,Z (e.g. 120.5,80,12.25 or "
+                             "X120.5 Y80 Z12.25)")
         vals = dict(zip(MACHINE_AXES, nums))
     if not all(math.isfinite(v) for v in vals.values()):
         raise InputError(f"--zero {spec!r}: not finite")

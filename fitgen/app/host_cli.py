@@ -419,7 +419,8 @@ def build_parser() -> Parser:
     st.add_argument("--unlock", action="store_true", help="GRBL: leave ALARM by $X without homing")
     st.add_argument("--zero", metavar="ask|here|X,Y,Z",
                     help="the stage's zero, first contact with the resting sensor, when the last one does not hold: "
-                         "ask (default: jog to it at a prompt), here (new datasets only), or machine coordinates")
+                         "ask (default: jog to it at a prompt), here (new datasets only), or machine coordinates "
+                         "(120.5,80,12.25 or X120.5 Y80 Z12.25)")
     st.add_argument("--sim-pose-file", metavar="FILE",
                     help="with --simulate --stage: the simulated sensor follows the pose tactile-host stage-sim "
                          "--pose-file FILE writes")
