@@ -179,6 +179,9 @@ class GcodeController(PortOwner):
         if text == "!!" or "halted" in low or "kill() called" in low:
             return StageError(f"{self.name}: the controller halted ({text}) during {what}; reset it, home it and "
                               "set the zero again", lost="the controller halted")
+        if re.search(r"home [xyz]+ first", low):  # Marlin built with NO_MOTION_BEFORE_HOMING: the move is ignored
+            return StageError(f"{self.name}: the controller refused {what} until it is homed ({text}); home it "
+                              "(--home) if its homing keeps clear of the sensor, then set the zero again")
         if low.startswith("echo:unknown command"):
             return UnknownCommand(f"{self.name}: the controller does not know {what} ({text})")
         if GRBL_BANNER.match(text) or text == "start":

@@ -508,25 +508,30 @@ def test_a_firmware_speaking_marlins_dialect_under_another_name_is_taken_when_na
                 c.close()
 
 
-def test_klippers_error_line_is_the_commands_fault_not_a_clamped_move():
-    """Klipper answers a command it refuses with '!! why' and then ok: the capture stops on the why (an unhomed
-    axis, a move out of range), not on the position check's 'clamped ... or lost steps' after it."""
-    class Klipper(SimController):
+@pytest.mark.parametrize("answer, message, lost", [
+    ("!! Move out of range: 9.000 0.000 0.000 [0.000]", "with '!! Move out of range: 9.000", False),  # Klipper
+    ("echo:Home XYZ first", r"refused 'G1 X9.000 F6000' until it is homed .*home it \(--home\)", False),  # Marlin
+])
+def test_a_refused_move_stops_on_the_controllers_words_not_on_a_clamped_move(answer, message, lost):
+    """Klipper answers a command it refuses with '!! why' then ok, and a Marlin built with NO_MOTION_BEFORE_HOMING
+    says 'echo:Home XYZ first' then ok: the capture stops on those words, not on the position check's 'clamped
+    ... or lost steps' after them."""
+    class Refusing(SimController):
         def _execute(self, line, now):
             if line.startswith("G1") and "X9" in line:
-                self._say("!! Move out of range: 9.000 0.000 0.000 [0.000]", "ok")
+                self._say(answer, "ok")
                 return True
             return super()._execute(line, now)
 
-    with _controller(Klipper, "marlin") as srv:
+    with _controller(Refusing, "marlin") as srv:
         c = GcodeController.open(srv.url, timeout=2.0)
         try:
             c.connect("marlin", boot_wait=0.1)
             c.setup()
             c.move({"X": 1.0}, FEED, start=np.zeros(3))
-            with pytest.raises(StageError, match=re.escape("with '!! Move out of range: 9.000")) as err:
+            with pytest.raises(StageError, match=message) as err:
                 c.move({"X": 9.0}, FEED)
-            assert not err.value.lost  # a refused move: the position still holds
+            assert bool(err.value.lost) == lost  # a refused move: the position still holds
         finally:
             c.close()
 
