@@ -308,6 +308,20 @@ def arduino_build(model: Model, cmap: ChannelMap, folder: str | Path, *, precisi
         shutil.rmtree(partial, ignore_errors=True)
 
 
+LIBRARY_FOLDER = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,62}")  # the library specification's root folder name
+
+
+def folder_name_note(folder: str | Path) -> str:
+    """'' when ``folder``'s name is one the Arduino library specification allows for a library's root folder, else
+    a note that says why the IDE will not list it and what to name it."""
+    name = Path(folder).name
+    if LIBRARY_FOLDER.fullmatch(name):
+        return ""
+    return (f"note: the folder name {name!r} is not one the Arduino library specification allows (a letter or "
+            "digit, then letters, digits, '_', '.' or '-', at most 63): the IDE will not list it as a library; "
+            f"name the folder {LIBRARY_NAME}")
+
+
 def _library_folder(folder: str | Path) -> Path:
     """``folder`` as the library's (its parents made); InputError when it cannot be one."""
     path = check_folder(folder)

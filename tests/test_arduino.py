@@ -207,6 +207,21 @@ def test_a_refused_build_leaves_the_library_as_it_was_and_a_new_one_replaces_src
     assert "architectures=avr\n" in (lib / "library.properties").read_text()
 
 
+def test_a_folder_name_the_ide_would_not_list_is_noted(model_path, tmp_path):
+    """The library specification allows a root folder name of letters, digits, '_', '.' and '-' that starts with a
+    letter or digit: another is written, and a note says the IDE will not list it and what to name it."""
+    for name, noted in (("Tactile Pose", True), ("_hidden", True), ("unit-7_v1.2", False), ("TactilePose", False)):
+        proc = _build_cli(model_path, tmp_path / name, "--no-build")
+        assert proc.returncode == 0, proc.stderr
+        assert (tmp_path / name / "src" / "TactilePose.h").is_file()
+        note = [ln for ln in proc.stderr.splitlines() if ln.startswith("note:")]
+        assert bool(note) == noted, (name, proc.stderr)
+        if noted:
+            assert note == [f"note: the folder name {name!r} is not one the Arduino library specification allows "
+                            "(a letter or digit, then letters, digits, '_', '.' or '-', at most 63): the IDE will "
+                            "not list it as a library; name the folder TactilePose"]
+
+
 def test_double_and_bad_maps_are_refused_in_one_line(model_path, tmp_path):
     assert_one_line_error(_build_cli(model_path, tmp_path / "d", "--precision", "double"), 2, "32 bits")
     proc = run_cli("tactile-host", "arduino-build", "--model", model_path, "--adc", "ads1115@0x48:0-3",

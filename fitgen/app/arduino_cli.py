@@ -14,7 +14,7 @@ def cmd_arduino_build(args) -> int:
     from fitgen.fitting.holdout import fitted_sensor_spec
     from fitgen.physics.sensor import load_sensor
     from hil.sketch import build_readpose
-    from host.arduino import BOARDS
+    from host.arduino import BOARDS, folder_name_note
     from host.readout import model_rest
     from host.session import channel_map_from_args
     from host.temperature import split_channel_map
@@ -35,6 +35,9 @@ def cmd_arduino_build(args) -> int:
              else "not built (no arduino-builder)")
     print(f"wrote the Arduino library {args.output}; ReadPose for the Uno: {built}"
           + (f"; it tares at start onto the rest readings of {onto}" if onto else ""), file=sys.stderr)
+    note = folder_name_note(args.output)
+    if note:
+        print(note, file=sys.stderr)
     return 0
 
 
