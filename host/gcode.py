@@ -94,6 +94,7 @@ class GcodeController(PortOwner):
         self.wco = np.zeros(3)  # GRBL: work coordinate offset (MPos - WPos)
         self.max_rates: np.ndarray | None = None  # each axis's top rate, mm/min (setup(); None: not said)
         self.log = log  # optional callable(str) for each line in and out
+        self.last_ok = ""  # the last command's ok line, as the controller gave it
         self._buf = bytearray()
 
     @classmethod
@@ -207,6 +208,7 @@ class GcodeController(PortOwner):
                 raise StageError(f"{self.name}: no answer to {what} within {limit:g} s; is the controller on, "
                                  "and is the baud rate right?")
             if text == "ok" or text.startswith("ok "):
+                self.last_ok = text  # Smoothieware and Teacup answer M114 on it: "ok C: X:.. Y:.. Z:.."
                 return got
             if "busy:" in text:  # Marlin's host keepalive: still working on a long command, but not for ever
                 deadline, busy = _busy_deadline(deadline, start, limit, self.timeout), time.monotonic()
@@ -397,7 +399,7 @@ class GcodeController(PortOwner):
         """X, Y, Z in the coordinates G1 uses, as the controller reports them."""
         if self.flavor == "grbl":
             return self.status()[1]
-        for text in self.command("M114"):
+        for text in self.command("M114") + [self.last_ok]:
             m = _MARLIN_POS.search(text)
             if m:
                 return np.array([float(v) for v in m.groups()])

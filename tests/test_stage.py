@@ -1,5 +1,6 @@
 """capture --stage: the G-code driver against simulated Marlin and GRBL controllers that move a simulated sensor."""
 
+import contextlib
 import io
 import json
 import os
@@ -508,6 +509,33 @@ def test_a_firmware_speaking_marlins_dialect_under_another_name_is_taken_when_na
                 c.close()
 
 
+def _answering(answers):
+    """A simulated Marlin whose answer to a line is ``answers(controller, line)`` where that gives one (a list of
+    lines to say), its own otherwise."""
+    class Answering(SimController):
+        def _execute(self, line, now):
+            said = answers(self, line.strip())
+            if said is None:
+                return super()._execute(line, now)
+            self._say(*said)
+            return True
+
+    return Answering
+
+
+@contextlib.contextmanager
+def _set_up_marlin(cls):
+    """A controller of class ``cls`` on a pty, connected as a Marlin and set up (mm, absolute)."""
+    with _controller(cls, "marlin") as srv:
+        c = GcodeController.open(srv.url, timeout=2.0)
+        try:
+            c.connect("marlin", boot_wait=0.1)
+            c.setup()
+            yield c
+        finally:
+            c.close()
+
+
 @pytest.mark.parametrize("answer, message, lost", [
     ("!! Move out of range: 9.000 0.000 0.000 [0.000]", "with '!! Move out of range: 9.000", False),  # Klipper
     ("echo:Home XYZ first", r"refused 'G1 X9.000 F6000' until it is homed .*home it \(--home\)", False),  # Marlin
@@ -516,24 +544,24 @@ def test_a_refused_move_stops_on_the_controllers_words_not_on_a_clamped_move(ans
     """Klipper answers a command it refuses with '!! why' then ok, and a Marlin built with NO_MOTION_BEFORE_HOMING
     says 'echo:Home XYZ first' then ok: the capture stops on those words, not on the position check's 'clamped
     ... or lost steps' after them."""
-    class Refusing(SimController):
-        def _execute(self, line, now):
-            if line.startswith("G1") and "X9" in line:
-                self._say(answer, "ok")
-                return True
-            return super()._execute(line, now)
+    refusing = _answering(lambda ctrl, line: [answer, "ok"] if line.startswith("G1 X9") else None)
+    with _set_up_marlin(refusing) as c:
+        c.move({"X": 1.0}, FEED, start=np.zeros(3))
+        with pytest.raises(StageError, match=message) as err:
+            c.move({"X": 9.0}, FEED)
+        assert bool(err.value.lost) == lost  # a refused move: the position still holds
 
-    with _controller(Refusing, "marlin") as srv:
-        c = GcodeController.open(srv.url, timeout=2.0)
-        try:
-            c.connect("marlin", boot_wait=0.1)
-            c.setup()
-            c.move({"X": 1.0}, FEED, start=np.zeros(3))
-            with pytest.raises(StageError, match=message) as err:
-                c.move({"X": 9.0}, FEED)
-            assert bool(err.value.lost) == lost  # a refused move: the position still holds
-        finally:
-            c.close()
+
+def test_a_position_on_the_ok_line_is_read():
+    """Smoothieware and Teacup answer M114 on the ok line itself ('ok C: X:1.2500 Y:0.0000 Z:-2.0000'), with no
+    line before it: the position is read there."""
+    def m114(ctrl, line):
+        m = ctrl.machine()
+        return [f"ok C: X:{m[0]:.4f} Y:{m[1]:.4f} Z:{m[2]:.4f} E:0.0000"] if line == "M114" else None
+
+    with _set_up_marlin(_answering(m114)) as c:
+        np.testing.assert_allclose(c.move({"X": 1.25, "Z": -2.0}, FEED), [1.25, 0.0, -2.0])
+        np.testing.assert_allclose(c.position(), [1.25, 0.0, -2.0])
 
 
 def test_lines_are_length_checked():
