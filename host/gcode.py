@@ -1,4 +1,4 @@
-"""A Marlin or GRBL controller over pyserial: the G-code line protocol and what each dialect says.
+"""A Marlin or GRBL controller over pyserial: the G-code line protocol (what its lines mean: host.gcodereplies).
 
 ``GcodeController`` sends one command at a time, each answered by ``ok`` (or
 ``error:N`` / ``Error:`` / ``ALARM:N`` / ``!!`` / Klipper's ``!! why``, all faults) within a time limit
@@ -22,6 +22,10 @@ import numpy as np
 from fitgen.base.errors import InputError
 
 from host.device import PortOwner, no_nagle, port_error, url_hint
+from host.gcodereplies import GRBL_BANNER, NoStatus, StageError, UnknownCommand, fault
+
+__all__ = ["GcodeController", "MACHINE_AXES", "NoStatus", "POSITION_TOL", "QUEUED_WAIT", "StageError",
+           "UnknownCommand", "stage_url"]
 
 MACHINE_AXES = ("X", "Y", "Z")
 FLAVORS = ("marlin", "grbl")
@@ -32,16 +36,6 @@ ASK_WAIT = 1.0  # s a GRBL takes at most to answer '?' (real-time, within millis
 QUEUED_WAIT = 60.0  # s a stopped run's queued moves (or homing) may take to end after a new run connects
 POSITION_TOL = 0.02  # mm: reported against commanded position (Marlin prints 2 decimals, GRBL steps)
 
-GRBL_BANNER = re.compile(r"^Grbl(?:HAL)? (\S+)")  # GRBL, FluidNC ("Grbl 3.7 [FluidNC ..."), grblHAL
-GRBL_ERRORS = {1: "expected command letter", 2: "bad number format", 3: "invalid $ statement",
-               5: "homing is not enabled in the settings", 8: "$ command needs Idle", 9: "G-code locked out "
-               "during alarm or jog", 11: "line too long", 15: "jog target exceeds machine travel",
-               20: "unsupported or invalid G-code command", 22: "feed rate not set", 33: "invalid motion target"}
-GRBL_ALARMS = {1: "hard limit triggered", 2: "soft limit: the target exceeds the machine's travel",
-               3: "reset while in motion, position lost", 4: "probe fail", 5: "probe fail",
-               6: "homing fail: reset during homing", 8: "homing fail: pull-off did not clear the switch",
-               9: "homing fail: no limit switch found", 11: "homing required (grblHAL)",
-               12: "a limit switch engaged (grblHAL)"}
 _NUM = r"(-?\d+(?:\.\d*)?)"
 _MARLIN_POS = re.compile(rf"X:{_NUM}\s*Y:{_NUM}\s*Z:{_NUM}")
 
@@ -50,25 +44,6 @@ def _busy_deadline(deadline: float, start: float, limit: float, timeout: float) 
     """A Marlin ``busy:`` keepalive moves the answer's deadline to ``timeout`` s from now, but never past
     ``limit`` or QUEUED_WAIT s after ``start`` (whichever is later): a machine stuck or paused ends the wait."""
     return min(max(deadline, time.monotonic() + timeout), start + max(limit, QUEUED_WAIT))
-
-
-class StageError(RuntimeError):
-    """The controller failed: an error or alarm, a halt, silence, a reset, or a position not the commanded one.
-
-    ``lost``: why the machine's position can no longer be trusted ('' when it still can): a resumed
-    capture must then not keep the zero (host.stagezero)."""
-
-    def __init__(self, message: str, lost: str = ""):
-        super().__init__(message)
-        self.lost = lost
-
-
-class NoStatus(StageError):
-    """No answer to GRBL's real-time ``?``."""
-
-
-class UnknownCommand(StageError):
-    """The controller does not know a command (Marlin's ``echo:Unknown command``)."""
 
 
 def stage_url(spec: str) -> str:
@@ -157,39 +132,11 @@ class GcodeController(PortOwner):
             self._buf += chunk
 
     def _fault(self, text: str, what: str) -> StageError | None:
-        """The StageError an unsolicited or answer line means, or None if it is harmless."""
-        low = text.lower()
-        if low.startswith("error:"):
-            code = text[6:].strip()
-            if self.flavor == "marlin" or not code.isdigit():
-                return StageError(f"{self.name}: the controller answered {what} with {text!r}")
-            meaning = GRBL_ERRORS.get(int(code))
-            return StageError(f"{self.name}: the controller answered {what} with error:{code}"
-                              f"{f' ({meaning})' if meaning else ''}")
-        if text.startswith("ALARM:"):
-            code = text[6:].strip()
-            meaning = GRBL_ALARMS.get(int(code)) if code.isdigit() else None
-            return StageError(f"{self.name}: the controller raised ALARM:{code}{f' ({meaning})' if meaning else ''} "
-                              f"during {what}; home it (--home) or unlock it (--unlock), then set the zero again",
-                              lost=f"the controller raised ALARM:{code}")
-        if text.startswith("!! "):  # Klipper's error line (then its ok): the command was refused
-            shut = "shutdown" in low
-            return StageError(f"{self.name}: the controller answered {what} with {text!r}"
-                              + ("; restart it (FIRMWARE_RESTART), home it and set the zero again" if shut else ""),
-                              lost="the controller shut down" if shut else "")
-        if text == "!!" or "halted" in low or "kill() called" in low:
-            return StageError(f"{self.name}: the controller halted ({text}) during {what}; reset it, home it and "
-                              "set the zero again", lost="the controller halted")
-        if re.search(r"home [xyz]+ first", low):  # Marlin built with NO_MOTION_BEFORE_HOMING: the move is ignored
-            return StageError(f"{self.name}: the controller refused {what} until it is homed ({text}); home it "
-                              "(--home) if its homing keeps clear of the sensor, then set the zero again")
-        if low.startswith("echo:unknown command"):
-            return UnknownCommand(f"{self.name}: the controller does not know {what} ({text})")
+        """The StageError an unsolicited or answer line means (host.gcodereplies.fault), or None; a start-up banner
+        also marks the controller as just reset."""
         if GRBL_BANNER.match(text) or text == "start":
             self.banner_seen = True
-            return StageError(f"{self.name}: the controller reset itself during {what} (it printed {text!r}); "
-                              "its position is lost: set the zero again", lost="the controller reset itself")
-        return None
+        return fault(text, what, self.name, self.flavor)
 
     def command(self, line: str, *, timeout: float | None = None, what: str | None = None) -> list[str]:
         """Send one line and wait for its ``ok``; the lines before it are returned."""
@@ -432,7 +379,8 @@ class GcodeController(PortOwner):
 
     def _max_rates(self) -> np.ndarray | None:
         """Each machine axis's top rate (mm/min) as the controller reports it (GRBL's $110-$112; Marlin's
-        M203, in mm/s, in M503's report), or None where it does not say: a move at a feed above it is slower."""
+        M203, in mm/s, in M503's report; RepRapFirmware's, in mm/min), or None where it does not say: a move at a
+        feed above it is slower."""
         rates = {}
         try:
             if self.flavor == "grbl":
@@ -441,10 +389,12 @@ class GcodeController(PortOwner):
                     if m:
                         rates[int(m.group(1))] = float(m.group(2))
             else:
+                # M203 is in mm/s on Marlin, in mm/min on RepRapFirmware (whose M503 prints its config.g)
+                per_min = 1.0 if "reprapfirmware" in self.firmware.lower() else 60.0
                 for text in self.command("M503"):
                     m = re.search(r"M203((?:\s+[A-Z]-?[\d.]+)+)", text)
                     for axis, value in re.findall(r"([XYZ])(-?[\d.]+)", m.group(1) if m else ""):
-                        rates[MACHINE_AXES.index(axis)] = float(value) * 60.0
+                        rates[MACHINE_AXES.index(axis)] = float(value) * per_min
         except UnknownCommand:  # a build without M503
             return None
         vals = [rates.get(i, math.nan) for i in range(3)]

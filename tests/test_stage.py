@@ -564,6 +564,24 @@ def test_a_position_on_the_ok_line_is_read():
         np.testing.assert_allclose(c.position(), [1.25, 0.0, -2.0])
 
 
+def test_reprapfirmwares_top_rates_are_in_mm_per_minute():
+    """RepRapFirmware (Duet boards) names itself in M115 and prints its config.g for M503, where M203 is in mm/min,
+    not Marlin's mm/s: a Z at 180 mm/min is read as 180, not 10,800, so a long Z move is waited for."""
+    name = "RepRapFirmware for Duet 3 MB6HC FIRMWARE_VERSION: 3.4.5"
+
+    def rrf(ctrl, line):
+        if line == "M115":
+            return [f"FIRMWARE_NAME: {name}", "ok"]
+        if line == "M503":
+            return ["; config.g", "M203 X6000.00 Y6000.00 Z180.00 E1200.00 ; maximum speeds (mm/min)", "ok"]
+        return None
+
+    with _set_up_marlin(_answering(rrf)) as c:
+        assert c.firmware == name
+        np.testing.assert_allclose(c.max_rates, [6000.0, 6000.0, 180.0])
+        assert c.move_time(np.array([0.0, 0.0, 3.0]), 600.0) == pytest.approx(1.0)  # 3 mm at Z's 180 mm/min
+
+
 def test_lines_are_length_checked():
     port = serial.serial_for_url("loop://", timeout=0.02)
     c = GcodeController(port, "loop", timeout=0.5)
