@@ -20,6 +20,7 @@ from host.session import adc_defaults, channel_map_from_args, open_bus_from_args
 from host.stage import StageError, StageState
 from host.stagecapture import open_stage, stage_settings
 from host.stagesim import pose_file_motion
+from host.temperature import Thermometer, temperature_input
 
 
 class CaptureFailed(RuntimeError):
@@ -114,7 +115,9 @@ def _run_capture(args, prog: str) -> None:
         wait = enter_waiter(schedule)
     meta = {"adc": cmap.describe(), **source}
     motion = pose_file_motion(args.sim_pose_file) if args.sim_pose_file else None
-    bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion)
+    tin = temperature_input(args.adc, cmap, args.thermistor)
+    bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion,
+                                    thermistor=tin)
     if motion is not None:
         bus.feed.motion_step = 0.0  # follow the stage at every conversion: a move ends between two rows
         bus.feed.touching = True  # the simulated rig decided contact on the tool (host.simrig.SimRig.publish)
@@ -124,6 +127,8 @@ def _run_capture(args, prog: str) -> None:
         array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
         array.probe()
         array.setup()
+        if tin is not None:  # the unit's readings are of this temperature: identify records it (--temp-comp's t0)
+            meta["thermistor_degc"] = Thermometer(array, tin, cmap.chips[0].settings).read(fresh=True)
         set_pose = bus.set_pose if args.simulate else None
         if stage_opts is not None:
             stage, meta["stage"] = open_stage(args, stage_opts, args.output, state.rows, prog)

@@ -171,7 +171,7 @@ def pi_build(args) -> str:
     ``--output`` and built; the line that says what was built."""
     from host.readout import model_rest
     from host.session import channel_map_from_args
-    from host.temperature import load_tempcomp, temperature_input
+    from host.temperature import capture_temperature_note, load_tempcomp, temperature_input
 
     compiler(args.cc)
     model, cmap = load_model(args.model), channel_map_from_args(args)
@@ -181,11 +181,12 @@ def pi_build(args) -> str:
     rest = model_rest(model, args.rest, required=False)
     binary = build_pi(render_pi(model, cmap, args.output, precision=precision, style=args.style, tin=tin,
                                 tempcomp=tempcomp, rest=rest), args.cc)
+    note = capture_temperature_note(model, tempcomp, f"{binary.name} --tare") if tempcomp is not None else ""
     return (f"wrote {binary} ({describe_reads(cmap, tin, tempcomp)}, model {model.sha256[:12]}, {precision}); "
             f"on the Pi: {binary.name} --bus 1 --format csv"
             + (f" [--tare: onto the rest readings of {rest[1]}]" if rest else
                " (no rest readings for --tare: the model records none and names no sensor file found here; "
-               "give --rest)"))
+               "give --rest)") + (f"\n{note}" if note else ""))
 
 
 

@@ -26,7 +26,8 @@ from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
 from host.readout import TARE_SAMPLES, Corrections, RunRecord, check_rest_reference, rest_reference, tare
 from host.simbus import simulated_bus
-from host.temperature import Thermometer, load_tempcomp, split_channel_map, temperature_input
+from host.temperature import (Thermometer, capture_temperature_note, load_tempcomp, split_channel_map,
+                              temperature_input)
 
 
 def parse_vref(text: str):
@@ -161,6 +162,10 @@ class ReadoutSession:
             raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
         check_full_scale(cmap, model.input_min, model.input_max)
         need_ref = args.tare or args.auto_zero
+        if tempcomp is not None and not need_ref:
+            note = capture_temperature_note(model, tempcomp)
+            if note:
+                print(f"{prog}: {note}", file=sys.stderr)
         # without a file to rest on, the rest readings the model recorded from its own sensor
         recorded = None if args.rest or sensor_given or own or not need_ref else model.held_out_rest
         reference, target = None, (f"--rest {args.rest}" if args.rest else "the model's own record"

@@ -296,3 +296,30 @@ def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:
              f"        v[k] = (v[k] - {P}_tc_offset[k] * dt) / ({lit(1.0)} + {P}_tc_gain[k] * dt);", "    }", "}", "",
              fp_after, "", f"#endif /* {U}_TEMPCOMP_H */", ""]
     return "\n".join(lines)
+
+
+CAPTURE_DEGC_TOL = 1.0  # degC between a unit's capture and a compensation's t0 that goes without a note
+
+
+def capture_temperature_note(model, tempcomp: "TempComp", tare: str = "--tare") -> str:
+    """A note when ``model``'s unit (its sensor file, fitgen.fitting.holdout.fitted_sensor_spec) was identified from a
+    capture more than CAPTURE_DEGC_TOL from ``tempcomp``'s t0: the compensation maps readings to t0, the model was
+    fitted for the capture's; '' otherwise, or when the file records no capture temperature. ``tare``: the option
+    that takes the offsets off at start, which the note suggests."""
+    from fitgen.fitting.holdout import fitted_sensor_spec
+    from fitgen.physics.sensor import load_sensor
+
+    spec = fitted_sensor_spec(model)
+    try:
+        source = load_sensor(spec).source if spec else {}
+    except InputError:
+        return ""
+    unit = source.get("unit") if isinstance(source, dict) else None
+    degc = unit.get("capture_degc") if isinstance(unit, dict) else None
+    if isinstance(degc, bool) or not isinstance(degc, (int, float)) or not abs(degc - tempcomp.t0) > CAPTURE_DEGC_TOL:
+        return ""
+    shift = float(np.max(np.abs(tempcomp.offset))) * abs(degc - tempcomp.t0) * 1e3
+    return (f"note: the model's unit ({spec}) was identified from a capture at {degc:.1f} degC, and the compensation "
+            f"maps readings to its t0, {tempcomp.t0:g} degC: they reach the model up to {shift:.2g} mV off what it "
+            f"was fitted for; tare at start ({tare}), or capture the unit at {tempcomp.t0:g} degC")
+

@@ -464,3 +464,48 @@ def test_capture_at_temperatures_stopped_says_what_it_kept(tmp_path, monkeypatch
     with pytest.raises(CaptureInterrupted, match="temperatures and rows done so far are kept"):
         host.tempcapture.capture_temperatures(args, "tactile-host capture")
     assert (tmp_path / "cap.T15.csv").is_file() and not (tmp_path / "cap.T25.csv").exists()
+
+
+def test_a_units_capture_temperature_is_recorded_and_a_compensation_about_another_is_noted(tmp_path):
+    """A capture read with a thermistor records its temperature, identify writes it into the unit file, and a
+    readout that compensates to another t0 says so in one note (unless it tares at start): the compensation maps
+    readings to t0, while the unit's twin was fitted for the capture's temperature."""
+    from fitgen.equations.model import load_model
+    from fitgen.physics.dataset import load_dataset
+    from fitgen.physics.sensor import load_sensor
+    from host.temperature import capture_temperature_note
+
+    def ok(*args):
+        proc = run_cli(*args)
+        assert proc.returncode == 0, proc.stderr
+        return proc
+
+    ok("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "3", "--grid", "dx=0",
+       "-o", str(tmp_path / "u.csv"))
+    ok("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "24", "-o", str(tmp_path / "s.csv"))
+    ok("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+       "--simulate", "--sensor", str(tmp_path / "u.unit.toml"), "-o", str(tmp_path / "cap.csv"))
+    # the simulated thermistor reads the drift's steady 25 degC, to its ADC's step
+    assert load_dataset(tmp_path / "cap.csv").meta["thermistor_degc"] == pytest.approx(25.0, abs=0.05)
+    ok("fitgen", "identify", str(tmp_path / "cap.csv"), "--sensor", "paper", "-o", str(tmp_path / "twin.toml"))
+    twin = tmp_path / "twin.toml"
+    assert load_sensor(twin).source["unit"]["capture_degc"] == pytest.approx(25.0, abs=0.05)
+    # the same unit captured on a colder day: the [unit] table is provenance, outside the sensor's hash
+    twin.write_text(re.sub(r"(?m)^capture_degc = .*$", "capture_degc = 18.0", twin.read_text()))
+    ok("fitgen", "simulate", "--sensor", str(twin), "--grid", "paper-sim", "-o", str(tmp_path / "twin.csv"))
+    ok("fitgen", "fit", str(tmp_path / "twin.csv"), "--held-out", "50", "--family", "no-roots",
+       "-o", str(tmp_path / "twin.json"))
+    d = Drift.typical(8)
+    TempComp(25.0, d.offset_tc, d.gain_tc).save(tmp_path / "tc.json")
+    shift = np.abs(d.offset_tc).max() * 7.0 * 1e3
+    read = ["tactile-host", "read", "--model", str(tmp_path / "twin.json"), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+            "--temp-comp", str(tmp_path / "tc.json"), "--simulate", "dx=0.5", "--count", "2"]
+    notes = [ln for ln in ok(*read).stderr.splitlines() if "note:" in ln]
+    assert notes == [f"tactile-host read: note: the model's unit ({twin}) was identified from a capture at 18.0 degC, "
+                     "and the compensation maps readings to its t0, 25 degC: they reach the model up to "
+                     f"{shift:.2g} mV off what it was fitted for; tare at start (--tare), or capture the unit at "
+                     "25 degC"]
+    assert "note:" not in ok(*read, "--tare").stderr  # the tare takes the offsets off at start
+    model = load_model(tmp_path / "twin.json")
+    assert "(tm_pi --tare)" in capture_temperature_note(model, TempComp(25.0, d.offset_tc, d.gain_tc), "tm_pi --tare")
+    assert capture_temperature_note(model, TempComp(18.5, d.offset_tc, d.gain_tc)) == ""  # within 1 degC

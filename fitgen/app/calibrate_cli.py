@@ -46,7 +46,8 @@ def cmd_identify(args) -> int:
             raise InputError(_with_map(text, getattr(exc, "order", None), ds.meta.get("adc"))) from None
     unit_noise, unit_source = rec.device_noise(ds.meta, drawing, args.noise)
     files = rec.unit_files(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
-                                                "drawing_spec": args.sensor}, unit_noise)
+                                                "drawing_spec": args.sensor, **rec.capture_temperature(ds.meta)},
+                           unit_noise)
     if folder is not None:  # drawn first, then written with the unit's files: a failure leaves none of them
         files.append((folder / "identify.png", plots.identification_png(ident)))
     unit, post, *png = write_all(files)

@@ -4,6 +4,8 @@ the unit file with its posterior record; and what it reads from a capture's meta
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import replace
 from pathlib import Path
 
@@ -377,6 +379,15 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
 
 def _refusal(message: str, order) -> InputError:
     return InputError(message) if order is None else ChannelOrderError(message, order)
+
+
+def capture_temperature(meta: dict) -> dict:
+    """``{"capture_degc": T}`` when a capture's meta holds its thermistor's reading (tactile-host capture with a
+    temp= input), else {}: the unit's readings are of that temperature, which a temperature compensation's t0
+    should be (host.temperature.capture_temperature_note)."""
+    t = meta.get("thermistor_degc")
+    ok = isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t)
+    return {"capture_degc": float(t)} if ok else {}
 
 
 def save(ident: Identification, path, provenance: dict, noise: float | None = None) -> tuple:
