@@ -285,3 +285,13 @@ def test_read_command_stops_cleanly_on_ctrl_c(model_file):
     assert len(body) == n >= 5
     assert all(len(ln.split(",")) == 15 for ln in body)  # every line whole
     assert " Hz)" in summary[0] and "I2C errors 0" in summary[0]
+
+
+def test_the_tare_samples_help_gives_the_default_the_readout_takes():
+    """The help's default is written as a literal (the parser stays light); it is the constant read and view use."""
+    from host.readout import TARE_SAMPLES
+
+    for cmd in ("read", "view"):
+        proc = run_cli("tactile-host", cmd, "--help")
+        assert proc.returncode == 0, proc.stderr
+        assert f"(default {TARE_SAMPLES})" in " ".join(proc.stdout.split()), cmd
