@@ -102,7 +102,7 @@ def parse_zero(spec: str) -> str | dict[str, float]:
 
     words = re.fullmatch(r"(?:\s*[xyz]\s*[-+.\d][^\s,;xyz]*[\s,;]*)+", s) if "=" not in s else None
     if "=" in s or words:
-        text = (re.sub(r"([xyz])\s*(?=[-+.\d])", r"\1=", s) if words else s).upper()
+        text = (re.sub(r"([xyz])\s*(?=[-+.\d])", r" \1=", s) if words else s).upper()  # X1Y2Z3 too
         try:
             vals = parse_assignments(text, MACHINE_AXES, "--zero")
         except InputError as exc:  # said of the words as given
