@@ -119,14 +119,14 @@ def _scoped(key_path: str) -> set[tuple[str, str]]:
 
 
 def _doc_keys(rows: dict) -> set[tuple[str, str]]:
-    """Every (table, key) the document's tables name, [unit]'s own keys left out."""
-    keys = set()
+    """Every (table, key) the document's tables name, [unit]'s own keys left out but the ones the parser checks."""
+    keys, checked = set(), set(_source_keys())
     for scope, table in rows.items():
         for row in table:
             name = _table_name(row["key"])
             if name is not None:
                 keys |= _scoped(name)
-            elif scope != "unit":
+            elif scope != "unit" or row["key"] in checked:
                 keys.add((scope, row["key"]))
     return keys
 
@@ -335,6 +335,12 @@ def test_every_table_but_unit_refuses_a_key_it_does_not_know():
             assert why and "unknown key" in why and "no_such_key" in why, (scope, why)
 
 
+def test_a_units_capture_temperature_is_a_number_of_degrees():
+    assert _parses(_with("unit", "capture_degc", 21.5)) is None
+    for bad, said in (("hot", "must be a finite number, got 'hot'"), (400.0, "must be <= 125, got 400")):
+        assert f"'unit.capture_degc' {said}" in _parses(_with("unit", "capture_degc", bad))
+
+
 def test_the_unit_keys_are_the_ones_fitgen_writes(tmp_path):
     from fitgen.physics.units import unit_beside
 
@@ -347,6 +353,8 @@ def test_the_unit_keys_are_the_ones_fitgen_writes(tmp_path):
     prov = next(n.value for n in ast.walk(func) if isinstance(n, ast.Assign)
                 and any(isinstance(t, ast.Name) and t.id == "prov" for t in n.targets))
     written |= {k.value for k in prov.keys if isinstance(k, ast.Constant)}
+    temp = next(n for n in ast.walk(rec) if isinstance(n, ast.FunctionDef) and n.name == "capture_temperature")
+    written |= {k.value for d in ast.walk(temp) if isinstance(d, ast.Dict) for k in d.keys if isinstance(k, ast.Constant)}
     cli = ast.parse((ROOT / "fitgen" / "app" / "calibrate_cli.py").read_text())
     call = next(n for n in ast.walk(cli) if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute)
                 and n.func.attr == "unit_files")

@@ -354,6 +354,8 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
     tol.finish()
     travel = _travel(top.sub("travel", required=False), gap)
     unit = top.sub("unit", required=False)  # provenance of a unit file (fitgen simulate --unit, fitgen identify)
+    if unit.has("capture_degc"):  # read by the readouts against a temperature compensation's t0
+        unit.number("capture_degc", min_=-40.0, max_=125.0)
     for key in list(unit.data):
         unit.raw(key)
     unit.finish()
