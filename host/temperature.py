@@ -321,5 +321,6 @@ def capture_temperature_note(model, tempcomp: "TempComp", tare: str = "--tare") 
     shift = float(np.max(np.abs(tempcomp.offset))) * abs(degc - tempcomp.t0) * 1e3
     return (f"note: the model's unit ({spec}) was identified from a capture at {degc:.1f} degC, and the compensation "
             f"maps readings to its t0, {tempcomp.t0:g} degC: they reach the model up to {shift:.2g} mV off what it "
-            f"was fitted for; tare at start ({tare}), or capture the unit at {tempcomp.t0:g} degC")
+            f"was fitted for; tare at start ({tare}), or identify the unit with --temp-comp (its capture mapped to "
+            f"{tempcomp.t0:g} degC)")
 

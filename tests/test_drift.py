@@ -473,6 +473,7 @@ def test_a_units_capture_temperature_is_recorded_and_a_compensation_about_anothe
     from fitgen.equations.model import load_model
     from fitgen.physics.dataset import load_dataset
     from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.transfer import readings
     from host.temperature import capture_temperature_note
 
     def ok(*args):
@@ -503,9 +504,28 @@ def test_a_units_capture_temperature_is_recorded_and_a_compensation_about_anothe
     notes = [ln for ln in ok(*read).stderr.splitlines() if "note:" in ln]
     assert notes == [f"tactile-host read: note: the model's unit ({twin}) was identified from a capture at 18.0 degC, "
                      "and the compensation maps readings to its t0, 25 degC: they reach the model up to "
-                     f"{shift:.2g} mV off what it was fitted for; tare at start (--tare), or capture the unit at "
-                     "25 degC"]
+                     f"{shift:.2g} mV off what it was fitted for; tare at start (--tare), or identify the unit "
+                     "with --temp-comp (its capture mapped to 25 degC)"]
     assert "note:" not in ok(*read, "--tare").stderr  # the tare takes the offsets off at start
     model = load_model(tmp_path / "twin.json")
     assert "(tm_pi --tare)" in capture_temperature_note(model, TempComp(25.0, d.offset_tc, d.gain_tc), "tm_pi --tare")
     assert capture_temperature_note(model, TempComp(18.5, d.offset_tc, d.gain_tc)) == ""  # within 1 degC
+    # identify --temp-comp maps the capture from its 25 degC to the compensation's t0 first: the unit at t0
+    cold = TempComp(18.0, d.offset_tc, d.gain_tc)
+    cold.save(tmp_path / "tc18.json")
+    ok("fitgen", "identify", str(tmp_path / "cap.csv"), "--sensor", "paper", "--temp-comp", str(tmp_path / "tc18.json"),
+       "-o", str(tmp_path / "twin18.toml"))
+    at18, at25 = load_sensor(tmp_path / "twin18.toml"), load_sensor(tmp_path / "twin.toml")
+    assert at18.source["unit"]["capture_degc"] == 18.0
+    assert at18.source["unit"]["compensated_from_degc"] == pytest.approx(25.0, abs=0.05)
+    rest18, rest25 = readings(at18, np.zeros((1, 5)))[0], readings(at25, np.zeros((1, 5)))[0]
+    moved = cold.apply(rest25, at18.source["unit"]["compensated_from_degc"]) - rest25  # what the map moves rest by
+    assert np.abs(moved).max() > 5e-3  # millivolts: far above what identify resolves
+    np.testing.assert_allclose(rest18 - rest25, moved, atol=3e-4)
+    no_temp = tmp_path / "plain.csv"
+    ok("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", TWO_CHIPS, "--simulate", "--sensor",
+       str(tmp_path / "u.unit.toml"), "-o", str(no_temp))
+    assert_one_line_error(run_cli("fitgen", "identify", str(no_temp), "--sensor", "paper", "--temp-comp",
+                                  str(tmp_path / "tc18.json"), "-o", str(tmp_path / "x.toml")),
+                          contains="records no temperature")
+    assert not (tmp_path / "x.toml").exists()

@@ -20,6 +20,10 @@ def cmd_identify(args) -> int:
 
     folder = plots.require(args.plot) if args.plot else None
     ds = load_dataset(args.capture)
+    sha = ds.sha256  # the capture's as written, before a compensation
+    temperature = rec.capture_temperature(ds.meta)
+    if args.temp_comp:
+        ds, temperature = _at_t0(ds, args.temp_comp, args.capture)
     args.sensor, said = rec.drawing_for(args.sensor, ds.meta)  # the one the capture's schedule was made for
     if said:
         print(said, file=sys.stderr)
@@ -45,9 +49,8 @@ def cmd_identify(args) -> int:
             text = f"{hint}; read as {drawing.units}, {exc}" if hint else str(exc)
             raise InputError(_with_map(text, getattr(exc, "order", None), ds.meta.get("adc"))) from None
     unit_noise, unit_source = rec.device_noise(ds.meta, drawing, args.noise)
-    files = rec.unit_files(ident, args.output, {"capture": str(args.capture), "capture_sha256": ds.sha256,
-                                                "drawing_spec": args.sensor, **rec.capture_temperature(ds.meta)},
-                           unit_noise)
+    files = rec.unit_files(ident, args.output, {"capture": str(args.capture), "capture_sha256": sha,
+                                                "drawing_spec": args.sensor, **temperature}, unit_noise)
     if folder is not None:  # drawn first, then written with the unit's files: a failure leaves none of them
         files.append((folder / "identify.png", plots.identification_png(ident)))
     unit, post, *png = write_all(files)
@@ -65,6 +68,28 @@ def cmd_identify(args) -> int:
     notes = rec.outlier_lines(ident, args.capture) + rec.low_residual_line(ident, source) + field
     print("".join(f"identify: {ln}\n" for ln in notes), end="", file=sys.stderr)
     return 0
+
+
+def _at_t0(ds, path: str, capture: str):
+    """``ds``'s readings mapped to temperature compensation ``path``'s t0 from the temperature its capture recorded,
+    and the unit file's record of it: the twin is then the unit at t0, as a readout with the compensation sees it."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from fitgen.fitting import unitrecord as rec
+    from host.temperature import load_tempcomp
+
+    tc = load_tempcomp(path)
+    degc = rec.capture_temperature(ds.meta).get("capture_degc")
+    if degc is None:
+        raise InputError(f"--temp-comp {path}: {capture} records no temperature (thermistor_degc: its channel map "
+                         "had no thermistor, temp= in --adc), so there is nothing to compensate from")
+    if ds.meta.get("units", "V") != "V" or tc.n != ds.n_inputs:
+        raise InputError(f"--temp-comp {path} compensates {tc.n} elements in V; {capture} has {ds.n_inputs} in "
+                         f"{ds.meta.get('units')}")
+    out = replace(ds, inputs=tc.apply(ds.inputs, np.full(ds.n_rows, degc)))
+    return out, {"capture_degc": tc.t0, "compensated_from_degc": degc}
 
 
 def _with_map(text: str, order, spec) -> str:

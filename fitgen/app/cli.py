@@ -387,6 +387,8 @@ def build_parser() -> Parser:
     i.add_argument("--zero-error", type=finite, default=0.02, metavar="MM",
                    help="how far the capture's zero may be from first contact, mm rms per axis, one error shared by "
                         "every row in contact (default 0.02)")
+    i.add_argument("--temp-comp", metavar="FILE.json", help="map the capture's readings from the temperature it "
+                   "recorded to this compensation's t0 first: the unit at t0, as read --temp-comp sees it")
     i.add_argument("-o", "--output", required=True, metavar="UNIT.toml", help="the unit's sensor file to write")
     i.add_argument("--plot", metavar="DIR", help="also DIR/identify.png: the residuals by row, the sensitivities and "
                    "the magnet's offset against the prior (needs matplotlib)")
