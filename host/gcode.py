@@ -22,7 +22,7 @@ import numpy as np
 from fitgen.base.errors import InputError
 
 from host.device import PortOwner, no_nagle, port_error, url_hint
-from host.gcodereplies import GRBL_BANNER, NoStatus, StageError, UnknownCommand, fault
+from host.gcodereplies import GRBL_BANNER, NoStatus, StageError, UnknownCommand, line_fault
 
 __all__ = ["GcodeController", "MACHINE_AXES", "NoStatus", "POSITION_TOL", "QUEUED_WAIT", "StageError",
            "UnknownCommand", "stage_url"]
@@ -132,11 +132,11 @@ class GcodeController(PortOwner):
             self._buf += chunk
 
     def _fault(self, text: str, what: str) -> StageError | None:
-        """The StageError an unsolicited or answer line means (host.gcodereplies.fault), or None; a start-up banner
-        also marks the controller as just reset."""
+        """The StageError an unsolicited or answer line means (host.gcodereplies.line_fault), or None; a start-up
+        banner also marks the controller as just reset."""
         if GRBL_BANNER.match(text) or text == "start":
             self.banner_seen = True
-        return fault(text, what, self.name, self.flavor)
+        return line_fault(text, what, self.name, self.flavor)
 
     def command(self, line: str, *, timeout: float | None = None, what: str | None = None) -> list[str]:
         """Send one line and wait for its ``ok``; the lines before it are returned."""

@@ -36,7 +36,7 @@ class UnknownCommand(StageError):
     """The controller does not know a command (Marlin's ``echo:Unknown command``)."""
 
 
-def fault(text: str, what: str, name: str, flavor: str | None) -> StageError | None:
+def line_fault(text: str, what: str, name: str, flavor: str | None) -> StageError | None:
     """The StageError a controller's line ``text`` means while it answers ``what`` (``name``: the port; ``flavor``:
     marlin, grbl or None before it is known), or None when the line is harmless."""
     low = text.lower()
