@@ -370,7 +370,8 @@ class NoiseStats:
                 "row_noise": [float(x) for x in np.sqrt(self.sum_var_row / self.rows)]}
 
 
-def _prior_meta(output) -> dict:
+def prior_meta(output) -> dict:
+    """The meta of ``output``'s rows so far ({} when there is none, or it cannot be read)."""
     try:
         meta = json.loads(meta_path(output).read_text())
     except (OSError, ValueError):
@@ -385,7 +386,7 @@ def check_resume(output: str | Path, rows: int, this: dict) -> None:
     file, by another path or moved, is the same source."""
     if rows == 0:
         return
-    prior = _prior_meta(output)
+    prior = prior_meta(output)
     if "sensor_sha256" in prior and "sensor_sha256" in this:
         if prior["sensor_sha256"] != this["sensor_sha256"]:
             raise InputError(f"output {output}: its {rows} rows were captured from {prior.get('source')} (sensor "
@@ -420,7 +421,7 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
         raise InputError(f"--settle must be >= 0 s, got {settle}")
     state = prepare_output(output, array.n, schedule)
     res = CaptureResult(len(schedule.poses), int(state.done.sum()), dropped_partial=state.dropped_partial)
-    prior = _prior_meta(output) if state.rows > 0 else {}  # rows from earlier runs: pool on from their figures
+    prior = prior_meta(output) if state.rows > 0 else {}  # rows from earlier runs: pool on from their figures
     noise = res.noise = NoiseStats.from_meta(prior, array.n)
     try:
         before_s, runs = float(prior.get("duration_s", 0.0)), int(prior.get("runs", 0)) + 1

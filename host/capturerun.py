@@ -4,23 +4,26 @@ captured (host.capture), then the bus and the stage closed; a fault or Ctrl-C ke
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from pathlib import Path
 
+from fitgen.base.errors import InputError
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from fitgen.base.progress import Progress
+from fitgen.physics.dataset import thermistor_degc
 from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import (SAMPLES, TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFailed, capture, check_resume,
-                          designed_samples, enter_waiter, load_schedule, output_lock, prepare_output, simulated_sensor,
-                          trigger_waiter)
+                          designed_samples, enter_waiter, load_schedule, output_lock, prepare_output, prior_meta,
+                          simulated_sensor, trigger_waiter)
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.stage import StageError, StageState
 from host.stagecapture import open_stage, stage_settings
 from host.stagesim import pose_file_motion
-from host.temperature import Thermometer, temperature_input
+from host.temperature import CAPTURE_DEGC_TOL, Thermometer, temperature_input
 
 
 class CaptureFailed(RuntimeError):
@@ -80,6 +83,17 @@ def _kept(output) -> str:
     return kept([output], f"the rows written so far are kept in {output}: run the same command again to resume")
 
 
+def same_temperature(output, rows: int, degc: float) -> float:
+    """``degc``, the thermistor's reading as a run starts; InputError when ``output``'s ``rows`` rows were taken more
+    than CAPTURE_DEGC_TOL away from it (the meta speaks for every row with one temperature)."""
+    before = thermistor_degc(prior_meta(output)) if rows else None
+    if before is not None and math.isfinite(degc) and abs(degc - before) > CAPTURE_DEGC_TOL:
+        raise InputError(f"the {rows} rows in {output} were captured at {before:.1f} degC and the thermistor reads "
+                         f"{degc:.1f} degC now: let the sensor come back within {CAPTURE_DEGC_TOL:g} degC of it, or "
+                         "choose another -o (identify takes one temperature for every row)")
+    return degc
+
+
 def run_capture(args, prog: str) -> None:
     """The schedule ``--poses`` into ``--output`` (resumed if it has rows); progress and the summary go to
     stderr after ``prog``. Raises CaptureFailed or CaptureInterrupted when it stops early, InputError when
@@ -128,7 +142,8 @@ def _run_capture(args, prog: str) -> None:
         array.probe()
         array.setup()
         if tin is not None:  # the unit's readings are of this temperature: identify records it (--temp-comp's t0)
-            meta["thermistor_degc"] = Thermometer(array, tin, cmap.chips[0].settings).read(fresh=True)
+            meta["thermistor_degc"] = same_temperature(args.output, state.rows,
+                                                       Thermometer(array, tin, cmap.chips[0].settings).read(fresh=True))
         set_pose = bus.set_pose if args.simulate else None
         if stage_opts is not None:
             stage, meta["stage"] = open_stage(args, stage_opts, args.output, state.rows, prog)

@@ -529,3 +529,14 @@ def test_a_units_capture_temperature_is_recorded_and_a_compensation_about_anothe
                                   str(tmp_path / "tc18.json"), "-o", str(tmp_path / "x.toml")),
                           contains="records no temperature")
     assert not (tmp_path / "x.toml").exists()
+    # a capture stopped at 18 degC, resumed at 25: refused before a row, the rows and their meta as they were
+    cap, meta_path = tmp_path / "cap.csv", tmp_path / "cap.csv.meta.json"
+    cap.write_text("".join(cap.read_text().splitlines(keepends=True)[:11]))
+    meta = json.loads(meta_path.read_text())
+    meta_path.write_text(json.dumps({**meta, "thermistor_degc": 18.0}))
+    before = cap.read_text(), meta_path.read_text()
+    assert_one_line_error(run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc",
+                                  TWO_CHIPS + ",temp=ads1115@0x4a:0", "--simulate", "--sensor",
+                                  str(tmp_path / "u.unit.toml"), "-o", str(cap)),
+                          contains=f"the 10 rows in {cap} were captured at 18.0 degC and the thermistor reads 25.0 degC")
+    assert (cap.read_text(), meta_path.read_text()) == before

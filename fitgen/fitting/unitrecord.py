@@ -4,8 +4,6 @@ the unit file with its posterior record; and what it reads from a capture's meta
 
 from __future__ import annotations
 
-import math
-
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,6 +13,7 @@ from fitgen.base.errors import InputError
 from fitgen.fitting.blame import FIELD_TRY, blame
 from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PINNABLE, PRIOR_LIMIT, RIG, RIG_ERROR, ZERO_ERROR,
                                      Identification, identify, tilting)
+from fitgen.physics.dataset import thermistor_degc
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.simulate import recorded_spec
@@ -385,9 +384,8 @@ def capture_temperature(meta: dict) -> dict:
     """``{"capture_degc": T}`` when a capture's meta holds its thermistor's reading (tactile-host capture with a
     temp= input), else {}: the unit's readings are of that temperature, which a temperature compensation's t0
     should be (host.temperature.capture_temperature_note)."""
-    t = meta.get("thermistor_degc")
-    ok = isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t)
-    return {"capture_degc": float(t)} if ok else {}
+    t = thermistor_degc(meta)
+    return {} if t is None else {"capture_degc": t}
 
 
 def save(ident: Identification, path, provenance: dict, noise: float | None = None) -> tuple:

@@ -249,3 +249,11 @@ def load_poses(path: str | Path) -> np.ndarray:
     """Poses from a CSV with any of the columns dx,dy,dz,thx,thy (:func:`pose_table`)."""
     return pose_table(read_text(path, "poses"), f"poses {path}")[0]
 
+
+def thermistor_degc(meta: dict) -> float | None:
+    """The temperature a capture's rows were taken at, as its meta records it (``thermistor_degc``: tactile-host
+    capture with a thermistor in its channel map), or None."""
+    t = meta.get("thermistor_degc") if isinstance(meta, dict) else None
+    ok = isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t)
+    return float(t) if ok else None
+
