@@ -94,28 +94,30 @@ class Sensor:
     @property
     def is_drawing(self) -> bool:
         """True when nothing of a built unit differs from the drawing's defaults."""
-        return not self.unit_traits()
+        return next(self._traits(), None) is None  # the first difference settles it (readings ask on every call)
 
     def unit_traits(self) -> list[str]:
         """What makes this a built unit rather than a drawing, as the sensor file names it (empty on a drawing):
         the magnet's offset or tilt, an element's gain other than 1 or offset other than 0, an ambient field, a
         stage map other than the identity, a stiffening."""
-        m, out = self.magnet, []
+        return list(self._traits())
+
+    def _traits(self):
+        m = self.magnet
         for key, val in (("magnet.offset", m.offset), ("magnet.tilt", m.tilt)):
             if any(val):
-                out.append(f"{key} {[float(v) for v in val]}")
+                yield f"{key} {[float(v) for v in val]}"
         for key, vals, plain in (("gain", self.gains, 1.0), ("offset", self.offsets, 0.0)):
             odd = np.flatnonzero(vals != plain)
             if odd.size:
                 more = f" (and {odd.size - 1} more)" if odd.size > 1 else ""
-                out.append(f"element {odd[0] + 1}'s {key} {float(vals[odd[0]]):g}{more}")
+                yield f"element {odd[0] + 1}'s {key} {float(vals[odd[0]]):g}{more}"
         if np.any(self.ambient):
-            out.append("ambient.field")
+            yield "ambient.field"
         if not np.array_equal(self.stage_map, np.eye(3)):
-            out.append("stage.map")
+            yield "stage.map"
         if self.stiffening:
-            out.append("stage.stiffening")
-        return out
+            yield "stage.stiffening"
 
     @property
     def noise(self) -> float:
