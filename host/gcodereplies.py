@@ -70,4 +70,3 @@ def line_fault(text: str, what: str, name: str, flavor: str | None) -> StageErro
         return StageError(f"{name}: the controller reset itself during {what} (it printed {text!r}); "
                           "its position is lost: set the zero again", lost="the controller reset itself")
     return None
-

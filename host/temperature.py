@@ -315,12 +315,11 @@ def capture_temperature_note(model, tempcomp: "TempComp", tare: str = "--tare") 
     except InputError:
         return ""
     unit = source.get("unit") if isinstance(source, dict) else None
-    degc = unit.get("capture_degc") if isinstance(unit, dict) else None
-    if isinstance(degc, bool) or not isinstance(degc, (int, float)) or not abs(degc - tempcomp.t0) > CAPTURE_DEGC_TOL:
+    degc = unit.get("capture_degc") if isinstance(unit, dict) else None  # a number of degC: the parser checked it
+    if degc is None or abs(degc - tempcomp.t0) <= CAPTURE_DEGC_TOL:
         return ""
     shift = float(np.max(np.abs(tempcomp.offset))) * abs(degc - tempcomp.t0) * 1e3
     return (f"note: the model's unit ({spec}) was identified from a capture at {degc:.1f} degC, and the compensation "
             f"maps readings to its t0, {tempcomp.t0:g} degC: they reach the model up to {shift:.2g} mV off what it "
             f"was fitted for; tare at start ({tare}), or identify the unit with --temp-comp (its capture mapped to "
             f"{tempcomp.t0:g} degC)")
-

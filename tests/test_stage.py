@@ -131,7 +131,8 @@ def test_axis_map_limits_and_approach_parse_or_refuse_in_one_line():
     assert parse_zero("ask") == "ask" and parse_zero("1,2,3") == {"X": 1.0, "Y": 2.0, "Z": 3.0}
     assert parse_zero("z=-4.5,x=1,y=2") == {"X": 1.0, "Y": 2.0, "Z": -4.5}
     # G-code words, as M114 and stage-sim print a position, pasted as they are
-    for words in ("X1 Y2 Z-4.5", "X1,Y2,Z-4.5", "x1 y2 z-4.5", "Z-4.5 X1 Y2", "X 1 Y 2 Z -4.5", "X1. Y2. Z-4.5", "X1Y2Z-4.5"):
+    for words in ("X1 Y2 Z-4.5", "X1,Y2,Z-4.5", "x1 y2 z-4.5", "Z-4.5 X1 Y2", "X 1 Y 2 Z -4.5", "X1. Y2. Z-4.5",
+                  "X1Y2Z-4.5"):
         assert parse_zero(words) == {"X": 1.0, "Y": 2.0, "Z": -4.5}, words
     for bad in ("X1 Y2 Q3", "X1 Y-- Z3", "X1 X2 Z3"):
         with pytest.raises(InputError, match=re.escape(f"--zero {bad!r}: ")):

@@ -77,11 +77,11 @@ def _at_t0(ds, path: str, capture: str):
 
     import numpy as np
 
-    from fitgen.fitting import unitrecord as rec
+    from fitgen.physics.dataset import thermistor_degc
     from host.temperature import load_tempcomp
 
     tc = load_tempcomp(path)
-    degc = rec.capture_temperature(ds.meta).get("capture_degc")
+    degc = thermistor_degc(ds.meta)
     if degc is None:
         raise InputError(f"--temp-comp {path}: {capture} records no temperature (thermistor_degc: its channel map "
                          "had no thermistor, temp= in --adc), so there is nothing to compensate from")

@@ -256,4 +256,3 @@ def thermistor_degc(meta: dict) -> float | None:
     t = meta.get("thermistor_degc") if isinstance(meta, dict) else None
     ok = isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t)
     return float(t) if ok else None
-

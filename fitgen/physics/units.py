@@ -82,10 +82,11 @@ class UnitSpace:
                 raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing: give the drawing it was "
                                  f"built to ({named}, as its [unit] table says)")
             # no [unit] table: most likely a drawing written with a unit's keys
-            raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing ({'; '.join(drawing.unit_traits())}"
-                             "; a drawing's elements have gain 1 and offset 0, and it has no magnet offset or tilt, "
-                             "ambient field or stage map): give the drawing it was built to, or leave those keys out, "
-                             "which a unit draws within [tolerances]")
+            traits = "; ".join(drawing.unit_traits())
+            raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing ({traits}; a drawing's elements "
+                             "have gain 1 and offset 0, and it has no magnet offset or tilt, ambient field or stage "
+                             "map): give the drawing it was built to, or leave those keys out, which a unit draws "
+                             "within [tolerances]")
         t = tolerances or drawing.tolerances
         n = drawing.n_elements
         stiff = (STIFFENING,) if t.stiffening > 0 else ()  # absent, the space (and its records) are as before
