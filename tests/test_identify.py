@@ -805,6 +805,29 @@ def test_the_rows_noise_says_where_it_comes_from_with_its_figure():
     noise, said = row_noise({"row_noise": measured, "samples_per_row": 16}, sensor, noise=0.002)
     np.testing.assert_allclose(noise, 0.0005)
     assert said == "--noise 0.002 over sqrt(16) samples"
+    # a capture made by `fitgen simulate --noise X`: its rows carry X, which fitgen fit reads from the same key
+    noise, said = row_noise({"noise": 1.25e-4, "units": "V"}, sensor)
+    np.testing.assert_array_equal(noise, np.full(8, 1.25e-4))
+    assert said == "the noise the rows were simulated with (0.000125 V)"
+    assert row_noise({"noise": 1.25e-4, "row_noise": measured}, sensor)[0].tolist() == measured
+    for free in (0.0, None, True, float("nan")):  # no noise to weigh by: the sensor's, as before
+        assert row_noise({"noise": free}, sensor)[1] == f"sensor paper's {sensor.noise:g} over sqrt(1) samples"
+
+
+def test_a_simulated_capture_is_weighed_by_the_noise_it_was_made_with(tmp_path):
+    """`fitgen simulate --unit --poses schedule.csv --noise X` makes rows that carry X: identify weighs them by X,
+    not by the drawing's single-sample figure, so the chi-square reads near its degrees of freedom and no line
+    calls the noise too large (it weighed them by 4x their noise: reduced 0.05, standard errors 4x too wide)."""
+    assert run_cli("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "40", "-o",
+                   str(tmp_path / "s.csv")).returncode == 0
+    assert run_cli("fitgen", "simulate", "--transfer", "gmr", "--unit", "7", "--poses", str(tmp_path / "s.csv"),
+                   "--noise", "0.000125", "--seed", "2", "-o", str(tmp_path / "cap.csv")).returncode == 0
+    proc = run_cli("fitgen", "identify", str(tmp_path / "cap.csv"), "-o", str(tmp_path / "u.toml"))
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.startswith("reading noise per row: the noise the rows were simulated with (0.000125 V);")
+    assert "too wide" not in proc.stderr
+    reduced = float(re.search(r"\(reduced ([0-9.]+);", proc.stdout + proc.stderr).group(1))
+    assert 0.3 < reduced < 1.5, reduced  # the stage's assumed 0.01 mm error, absent here, keeps it under 1
 
 
 def test_a_capture_without_pose_columns_is_said_so(tmp_path):

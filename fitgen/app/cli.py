@@ -380,8 +380,8 @@ def build_parser() -> Parser:
                                     "capture's schedule was made for, else paper)")
     i.add_argument("--transfer", choices=("raw", "gmr"), help="override the transfer (default: the capture's units)")
     i.add_argument("--noise", type=finite, metavar="X",
-                   help="the device's single-sample reading noise (default: what the capture measured, else the "
-                        "sensor file's), divided by sqrt(samples per row)")
+                   help="the device's single-sample reading noise (default: what the capture measured or was "
+                        "simulated with, else the sensor file's), divided by sqrt(samples per row)")
     i.add_argument("--rig-error", type=finite, default=0.01, metavar="MM",
                    help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
     i.add_argument("--zero-error", type=finite, default=0.02, metavar="MM",

@@ -117,6 +117,7 @@ def _offsets_worst(ident: Identification, cov: np.ndarray) -> tuple[float, float
 ROW_NOISE_KEY = "row_noise"  # a capture's meta: per element, the measured noise of its averaged rows
 SAMPLES_KEY = "samples_per_row"
 SAMPLE_NOISE_KEY = "sample_noise"  # a capture's meta: per element, one sample's measured noise
+SIMULATED_NOISE_KEY = "noise"  # fitgen simulate's meta: the noise each row was made with, as fitgen fit reads it
 
 
 def samples_per_row(meta: dict) -> int | None:
@@ -135,17 +136,21 @@ def _measured(meta: dict, key: str, n: int) -> list[float] | None:
 
 def row_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[np.ndarray, str]:
     """The reading noise of a capture's rows, per element, and where it came from: ``noise`` (the device's
-    single-sample noise) over sqrt(samples per row), else the noise the capture measured, else the sensor
-    file's over sqrt(samples)."""
+    single-sample noise) over sqrt(samples per row), else the noise the capture measured, else the noise a
+    simulated capture was made with (``fitgen simulate --noise``), else the sensor file's over sqrt(samples)."""
     n = sensor.n_elements
     samples = samples_per_row(meta) or 1
     if noise is not None:
         return np.full(n, noise / np.sqrt(samples)), f"--noise {noise:g} over sqrt({samples}) samples"
+    units = f" {meta['units']}" if isinstance(meta.get("units"), str) else ""
     measured = _measured(meta, ROW_NOISE_KEY, n)
     if measured is not None:
-        units = f" {meta['units']}" if isinstance(meta.get("units"), str) else ""
         return (np.asarray(measured, dtype=float),
                 f"measured by the capture (median over the elements {np.median(measured):.3g}{units})")
+    simulated = meta.get(SIMULATED_NOISE_KEY)
+    if (isinstance(simulated, (int, float)) and not isinstance(simulated, bool) and np.isfinite(simulated)
+            and simulated > 0):  # noise-free rows fall through: identify weighs rows by a noise > 0
+        return np.full(n, float(simulated)), f"the noise the rows were simulated with ({simulated:g}{units})"
     return (np.full(n, sensor.noise / np.sqrt(samples)),
             f"sensor {sensor.name}'s {sensor.noise:g} over sqrt({samples}) samples")
 
