@@ -153,6 +153,39 @@ def test_a_built_unit_is_far_worse_served_than_the_drawing(doc):
         assert f"{o}: max error {unit:.3g} on unit 7, {drawing:.3g} on the drawing" in printed[5]
 
 
+def test_the_twin_of_a_short_capture_serves_the_unit_as_its_file_says(doc):
+    """Section 7: the capture is explained to its noise, the magnet's offset is found within its standard errors,
+    and the twin's model errs on unit 7 by a tenth of the drawing's model or less, no worse than its file says."""
+    from fitgen.fitting.identify import derived_quantities
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.units import draw_unit
+
+    ns, folder, printed = doc
+    ident, sensor = ns["ident"], ns["sensor"]
+    assert ns["stage_poses"].shape == (40, 5) and not ns["stage_poses"][:, 3:].any()  # three axes, no tilt
+    assert ident.chi2 < 2 * ident.dof
+    assert f"residual chi-square {ident.chi2:.1f} on {ident.dof:.1f} degrees of freedom" in printed[6]
+    _, theta = draw_unit(sensor, 7)
+    truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+    offsets = [(n, v, se) for n, (v, se) in ident.derived().items() if "offset" in n]
+    assert len(offsets) == 3
+    for name, value, se in offsets:
+        assert abs(value - truth[name]) < 3.5 * se, (name, value, truth[name], se)
+        assert f"{name}: {value:+.3f} +- {se:.3f}" in printed[6]
+    twin = load_sensor(folder / "twin.toml")
+    assert twin.sha256 == ns["twin"].sha256 and not twin.is_drawing
+    assert (folder / "twin.posterior.json").is_file() and folder / ns["posterior_file"] == folder / "twin.posterior.json"
+    held = ns["twin_model"].fit_info["held_out"]
+    assert held["sensor_sha256"] == twin.sha256 and "posterior" in held  # widened by the identification
+    for j, o in enumerate(ns["model"].output_names):
+        got, says = ns["twin_err"][o], held["errors"]["float"][o]["noisy_max"]
+        assert got == np.abs(ns["twin_est"][:, j] - ns["on_unit"].target(o)).max()
+        assert got < ns["unit_err"][o] / 10, (o, got, ns["unit_err"][o])
+        assert got < 1.3 * says, (o, got, says)
+        assert f"{o}: max error {got:.3g} on unit 7 with its twin's model (the twin's file says {says:.3g})" \
+            in printed[6]
+
+
 def _estimates(path: Path) -> np.ndarray:
     lines = path.read_text().splitlines()
     return np.array([[float(v) for v in line.split(",")[:-1]] for line in lines[1:]])
@@ -177,6 +210,14 @@ def test_the_sh_lines_make_the_same(doc, tmp_path):
     assert np.array_equal(_estimates(tmp_path / "est.csv"), ns["est"])
     assert np.array_equal(_estimates(tmp_path / "unit7-est.csv"), ns["unit_est"])
     assert (tmp_path / "c" / "tm_model.h").read_text() == (folder / "c" / "tm_model.h").read_text()
+    # section 7: the same capture, the same twin (the unit files differ in provenance only), the same estimates
+    from fitgen.physics.dataset import load_dataset
+
+    assert np.array_equal(load_dataset(tmp_path / "capture.csv").inputs, ns["capture"].inputs)
+    twin = load_model(tmp_path / "twin.json")
+    assert twin.sha256 == ns["twin_model"].sha256
+    assert json.dumps(twin.fit_info["held_out"]["errors"]) == json.dumps(ns["twin_model"].fit_info["held_out"]["errors"])
+    assert np.array_equal(_estimates(tmp_path / "twin-est.csv"), ns["twin_est"])
     proc = run_cli("fitgen", "fit", str(folder / "slide.csv"), "-o", str(tmp_path / "again.json"), "--held-out", "0")
     assert proc.returncode == 0, proc.stderr
     assert load_model(tmp_path / "again.json").sha256 == ns["model"].sha256
