@@ -652,6 +652,37 @@ def test_a_capture_read_in_the_wrong_units_is_said_so(drawing, plan, tmp_path):
                    str(drawing.noise), "-o", str(tmp_path / "u.toml")).returncode == 0
 
 
+def test_a_printers_capture_identified_for_a_tighter_stage_names_the_rig_error(drawing, plan, tmp_path):
+    """A stage as loose as a 3D printer (0.03 mm rms per axis) identified with the default --rig-error 0.01: the
+    refusal names the stage's error and the flag that explains the capture (it named other sensors, units, wiring
+    and a zero above first contact, and took 20 s trying each); with the flag, the capture is identified. A printer
+    that also lost the skin at one shear pose at dz 0 (the tool lifted by its error: the magnet at rest) has that
+    row named with it, and without the row the capture is identified too."""
+    unit, _ = draw_unit(drawing, 20)
+    y, noise = capture(unit, plan[0], 20, rig_error=0.03)
+    lifted = next(i for i, p in enumerate(plan[0]) if p[2] == 0.0 and abs(p[0]) + abs(p[1]) > 0)
+    off = y.copy()
+    off[lifted] = readings(unit, np.zeros((1, 5)), adc_bits=0)[0] + np.random.default_rng(1).normal(0.0, noise, 8)
+    where = " ".join(f"{c}={v:g}" for c, v in zip("dx dy dz".split(), plan[0][lifted]))
+    for name, yy, said in (("loose", y, "; give --rig-error 0.03, or the stage's measured repeatability; nothing"),
+                           ("lifted", off, f", with row {lifted + 1} (line {lifted + 2}: {where}) left out; give "
+                                           "--rig-error 0.03, or the stage's measured repeatability, and delete it")):
+        path = tmp_path / f"{name}.csv"
+        _save_capture(path, yy, plan[0], {"samples_per_row": SAMPLES})
+        proc = run_cli("fitgen", "identify", str(path), "-o", str(tmp_path / "u.toml"))
+        assert_one_line_error(proc, contains="the stage's own error: allowed for as 0.03 mm rms per axis (a 3D "
+                                             "printer's) instead of 0.01, the capture reads as a unit within the "
+                                             "tolerances, to the noise" + said)
+        assert not (tmp_path / "u.toml").exists()
+    assert run_cli("fitgen", "identify", str(tmp_path / "loose.csv"), "-o", str(tmp_path / "u.toml"), "--rig-error",
+                   "0.03").returncode == 0
+    keep = np.arange(len(off)) != lifted
+    _save_capture(tmp_path / "kept.csv", off[keep], plan[0][keep], {"samples_per_row": SAMPLES})
+    proc = run_cli("fitgen", "identify", str(tmp_path / "kept.csv"), "-o", str(tmp_path / "k.toml"), "--rig-error",
+                   "0.03")
+    assert proc.returncode == 0, proc.stderr
+
+
 def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypatch, capsys):
     unit, _ = draw_unit(drawing, 25)
     y, noise = capture(unit, plan[0], 25)

@@ -331,6 +331,14 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
         cause = (f"{said} alone: with {'it' if len(rows) == 1 else 'them'} left out, the others read as a unit within "
                  f"the tolerances, to the noise; if {'it' if len(rows) == 1 else 'they'} slipped or glitched, delete "
                  f"{'it' if len(rows) == 1 else 'them'} and resume the capture (it takes the pose again)")
+    elif culprit is not None and culprit[0] == "rig":
+        rig, rows = culprit[1]
+        said = "; ".join(f"row {i + 1} ({_where(ident, i)})" for i in rows)
+        cause = (f"the stage's own error: allowed for as {rig:g} mm rms per axis (a 3D printer's) instead of "
+                 f"{ident.problem.rig_error:g}, the capture reads as a unit within the tolerances, to the noise"
+                 + (f", with {said} left out" if rows else "") + f"; give --rig-error {rig:g}, or the stage's "
+                 "measured repeatability" + (f", and delete {'it' if len(rows) == 1 else 'them'} and resume the "
+                                             "capture (it takes the pose again)" if rows else ""))
     elif culprit is not None and culprit[0] == "dead":
         k = culprit[1][0]
         cause = (f"element {k + 1} (v{k + 1}) alone: with its readings left out, the others read as a unit within the "
