@@ -12,7 +12,7 @@ Then the captures with an element that does not respond (element 3 reads a const
 with two elements' channels swapped (3 and 6; 3 and 4, neighbours) or the two ADCs exchanged (v5-v8 read in v1-v4
 and the other way round): how many the chi-square refuses, and how many identify refuses
 because only a unit far outside its tolerances explains them (a parameter beyond PRIOR_LIMIT = 5 prior spreads,
-fitgen.fitting.unitrecord.check_explained), and what a refusal names as the one thing to blame: the element or pair
+fitgen.fitting.verdict.check_explained), and what a refusal names as the one thing to blame: the element or pair
 of elements whose readings, left out or exchanged, or the turn of the ring whose order, leave a capture that a unit
 within its tolerances explains (fitgen.fitting.blame.blame). Before 2026-11-29 blame tried no turn of the ring, and
 pairs only on captures with more than three rows standing out (the column beside it), so that neighbours swapped
@@ -35,7 +35,7 @@ import units as U  # noqa: E402
 from benchutil import fmt, log, parse_args, table  # noqa: E402
 from fitgen.base.errors import InputError  # noqa: E402
 from fitgen.fitting.identify import CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, identify  # noqa: E402
-from fitgen.fitting.unitrecord import check_explained  # noqa: E402
+from fitgen.fitting.verdict import check_explained  # noqa: E402
 
 SLIPS = (0.0, 0.05, 0.1, 0.2, 0.5)  # mm in dx on one row
 

@@ -37,7 +37,7 @@ from benchutil import fmt, log, parser, table  # noqa: E402
 from fitgen.base.errors import InputError  # noqa: E402
 from fitgen.fitting.identify import CHI2_LIMIT, derived_quantities, identify  # noqa: E402
 from fitgen.fitting.schedule import schedule  # noqa: E402
-from fitgen.fitting.unitrecord import check_explained  # noqa: E402
+from fitgen.fitting.verdict import check_explained  # noqa: E402
 from fitgen.physics.simulate import rig_poses  # noqa: E402
 from host.allan import CANDIDATES, averaging  # noqa: E402
 from host.noiserun import SECONDS  # noqa: E402

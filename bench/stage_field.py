@@ -35,7 +35,8 @@ from benchutil import fmt, log, parser, table  # noqa: E402
 from fitgen.base.errors import InputError  # noqa: E402
 from fitgen.fitting.identify import derived_quantities, identify  # noqa: E402
 from fitgen.fitting.schedule import schedule  # noqa: E402
-from fitgen.fitting.unitrecord import check_explained, save  # noqa: E402
+from fitgen.fitting.unitrecord import save  # noqa: E402
+from fitgen.fitting.verdict import check_explained  # noqa: E402
 from fitgen.physics.pose import POSE_NAMES  # noqa: E402
 from fitgen.physics.simulate import rig_poses, simulate  # noqa: E402
 

@@ -105,7 +105,8 @@ from fitgen.fitting.family import fit_auto  # noqa: E402
 from fitgen.fitting.fit import FitSettings, fit_model  # noqa: E402
 from fitgen.fitting.holdout import box_of, evaluate  # noqa: E402
 from fitgen.fitting.identify import CHI2_LIMIT, derived_quantities, identify  # noqa: E402
-from fitgen.fitting.unitrecord import check_explained, load_posterior, save  # noqa: E402
+from fitgen.fitting.unitrecord import load_posterior, save  # noqa: E402
+from fitgen.fitting.verdict import check_explained  # noqa: E402
 from fitgen.physics.pose import POSE_NAMES  # noqa: E402
 from fitgen.fitting.schedule import schedule  # noqa: E402
 from fitgen.physics.sensor import load_sensor  # noqa: E402

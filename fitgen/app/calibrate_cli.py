@@ -15,7 +15,7 @@ from fitgen.base.parse import parse_positive
 def cmd_identify(args) -> int:
     from fitgen.app import plots
     from fitgen.base.progress import Progress
-    from fitgen.fitting import identify as idf, unitrecord as rec
+    from fitgen.fitting import identify as idf, unitrecord as rec, verdict
     from fitgen.physics.dataset import load_dataset
 
     folder = plots.require(args.plot) if args.plot else None
@@ -43,7 +43,7 @@ def cmd_identify(args) -> int:
             bar.update(1, note)
 
         try:
-            rec.check_explained(ident, args.capture, drawing.name, source, trial)
+            verdict.check_explained(ident, args.capture, drawing.name, source, trial)
         except InputError as exc:
             hint = "" if args.transfer else rec.units_hint(drawing, ds.inputs, ds.poses(), ds.meta)
             text = f"{hint}; read as {drawing.units}, {exc}" if hint else str(exc)
@@ -63,9 +63,12 @@ def cmd_identify(args) -> int:
           "twin's fit adds it in expectation and holds out with it", file=sys.stderr)
     if png:
         print(f"plot: {png[0]}", file=sys.stderr)
-    with Progress("a field the stage carries?", 4) as bar:  # moves only when the chi-square sits high
-        field = rec.field_line(ident, lambda i, n, note: bar.update(i - bar.done, note))
-    notes = rec.outlier_lines(ident, args.capture) + rec.low_residual_line(ident, source) + field
+    with Progress("a looser stage?", 4) as bar:  # each moves only when the chi-square sits high
+        field = verdict.looser_stage_line(ident, lambda i, n, note: bar.update(i - bar.done, note))
+    with Progress("a field the stage carries?", 4) as bar:
+        field = field or verdict.field_line(ident, lambda i, n, note: bar.update(i - bar.done, note))
+    # a cause every row shares first: under it, the rows that stand out may not
+    notes = field + verdict.outlier_lines(ident, args.capture) + verdict.low_residual_line(ident, source)
     print("".join(f"identify: {ln}\n" for ln in notes), end="", file=sys.stderr)
     return 0
 

@@ -1,7 +1,7 @@
-"""What to blame for a capture the physics does not explain within the tolerances, when one thing alone is: rows
-that slipped or glitched, a stage looser than the rig error allowed, an element that does not respond, a field the
-stage carries, the ring read turned or mirrored (the channels in another order than the drawing's, or the sensor turned against the stage's axes), two
-elements' channels exchanged. Each trial undoes one fault and fits again, briefly
+"""What to blame for a capture the physics does not explain within the tolerances, when one thing alone is: rows that
+slipped or glitched, a stage looser than the rig error allowed, an element that does not respond, a field the stage
+carries, the ring read turned or mirrored (the channels in another order than the drawing's, or the sensor turned
+against the stage's axes), two elements' channels exchanged. Each trial undoes one fault and fits again, briefly
 (fitgen.fitting.identify.explained_within); a fault is named only when it alone of its kind explains the capture.
 """
 
@@ -28,19 +28,19 @@ def _reordered(prob: Problem, order) -> Problem:
 
 def blame(ident: Identification, progress=None) -> tuple[str, tuple] | None:
     """What to blame for a capture the physics does not explain within the tolerances, when one thing alone is:
-    ``("rows", (i, ...))``, the one to three rows that stand out, when the others without them read as a unit
-    within its tolerances to the noise (a slip, a glitch: tried first, as one bad reading also leaves its element
-    to blame); else ``("rig", (PRINTER_RIG, rows))`` when they do with a printer's rig error, for a capture
-    identified with a smaller one (the stage is looser than it was taken for), all of them or without the ``rows``
-    that stand out (a loose stage also slips); else ``("dead", (k,))``, the one element whose readings, left out, do (it does not respond, or is
-    wired to another channel); else ``("field", ())`` when they do with a field the stage carries allowed for (its
-    motors, a steel bed); else ``("ring", symmetry)``, the one symmetry of the drawing (turn or mirror,
-    fitgen.physics.units.Symmetry) whose element order does, tried when more than three rows stand out or the
+    ``("rows", (i, ...))``, the one to three rows that stand out, when the others without them read as a unit within
+    its tolerances to the noise (a slip, a glitch: tried first, as one bad reading also leaves its element to blame);
+    else ``("rig", (PRINTER_RIG, rows))`` when they do with a printer's rig error, for a capture identified with a
+    smaller one (the stage is looser than it was taken for), all of them or without the ``rows`` that stand out (a
+    loose stage also slips); else ``("dead", (k,))``, the one element whose readings, left out, do (it does not
+    respond, or is wired to another channel); else ``("field", ())`` when they do with a field the stage carries
+    allowed for (its motors, a steel bed); else ``("ring", symmetry)``, the one symmetry of the drawing (turn or
+    mirror, fitgen.physics.units.Symmetry) whose element order does, tried when more than three rows stand out or the
     stage map lies far out (a ring read turned reads as a sensor turned on the stage: the same readings); else
     ``("swapped", (a, b))``, the one pair of elements whose readings, exchanged, do (their channels wired the other
     way round), tried when more than three rows stand out, or among the elements that lie far out (neighbours
-    exchanged read to the noise as two elements on each other's places); else None. One short fit per trial: with
-    the fault undone a capture converges in a few steps. ``progress(i, n, note)`` before each."""
+    exchanged read to the noise as two elements on each other's places); else None. One short fit per trial: with the
+    fault undone a capture converges in a few steps. ``progress(i, n, note)`` before each."""
     prob = ident.problem
     n_el = prob.readings.shape[1]
     far = {ident.space.names[i].partition(".")[0] for i, _ in ident.outside_tolerances()}
