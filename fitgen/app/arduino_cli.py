@@ -48,7 +48,9 @@ def add_arduino_build(sub) -> None:
     ab.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
     map_options(ab, thermistor=False)
     ab.add_argument("--precision", default="float", choices=("float", "fixed", "double"), help="double is refused")
-    ab.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
+    ab.add_argument("--style", default="unrolled", choices=("table", "unrolled"),
+                    help="the C's form: table (coefficient arrays and a loop) or unrolled (straight-line code; "
+                         "default)")
     build = ab.add_mutually_exclusive_group()
     build.add_argument("--no-build", action="store_true", help="write the library only (default: build it when "
                                                             "arduino-builder is installed)")

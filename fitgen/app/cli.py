@@ -315,7 +315,7 @@ def build_parser() -> Parser:
                    help="N random poses in --ranges (with --grid: after the grid's poses)")
     s.add_argument("--ranges", help="box for --random: 'dx=-2:2 thx=-5:5 ...' (default: paper-sim box)")
     s.add_argument("--poses", metavar="FILE.csv", help="simulate the poses in this CSV")
-    s.add_argument("--seed", type=count, default=0)
+    s.add_argument("--seed", type=count, default=0, help="seed of --random's poses and the noise (default 0)")
     s.add_argument("--noise", default="0", help="element noise rms in output units, or 'sensor' (default 0)")
     s.add_argument("--adc-bits", type=int, help="override the transfer's ADC bits (0: no quantisation)")
     s.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
@@ -329,16 +329,16 @@ def build_parser() -> Parser:
     s.add_argument("-o", "--output", required=True, help="dataset CSV to write")
 
     o = command("observe", cmd_observe, "observability of each pose component (Jacobian SVD, Cramer-Rao)")
-    o.add_argument("sensor_pos", nargs="?", metavar="SENSOR")
+    o.add_argument("sensor_pos", nargs="?", metavar="SENSOR", help="the same as --sensor")
     o.add_argument("--sensor", help="preset name or sensor TOML (default: paper)")
     o.add_argument("--scene", help="full, slide, press or a scene TOML (default: full)")
     o.add_argument("--ranges", help="pose box 'dx=-2:2 ...' overriding the scene's")
     o.add_argument("--noise", help="element noise rms in output units (default: the sensor file's)")
     o.add_argument("--accuracy", help="required 1-sigma accuracy, e.g. 'dx=0.05 thx=0.5'")
-    o.add_argument("--transfer", choices=("raw", "gmr"))
+    o.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
 
     f = command("fit", cmd_fit, "choose and fit the estimate equations by stepwise AIC")
-    f.add_argument("data", metavar="DATA.csv")
+    f.add_argument("data", metavar="DATA.csv", help="readings and poses (fitgen simulate, tactile-host capture)")
     f.add_argument("-o", "--output", required=True, help="model file (JSON) to write")
     f.add_argument("--outputs", help="comma-separated outputs to fit (default: every pose column of the data)")
     f.add_argument("--k", default="aic", help="penalty per term: aic (2), bic (log n) or a number")
@@ -404,11 +404,11 @@ def build_parser() -> Parser:
     sc.add_argument("--samples", default="16", help="samples per row (default 16), or NOISE.json: what it tells")
     sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
     sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM", help="stage error, mm rms (default 0.01)")
-    sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv")
+    sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv", help="the poses, for capture --poses")
 
     pr = command("predict", cmd_predict, "estimates for the rows of a dataset")
-    pr.add_argument("model", metavar="MODEL")
-    pr.add_argument("data", metavar="DATA.csv")
+    pr.add_argument("model", metavar="MODEL", help="model file (fitgen fit)")
+    pr.add_argument("data", metavar="DATA.csv", help="the readings to estimate from (other columns ignored)")
     pr.add_argument("-o", "--output", required=True, help="CSV of estimates (and status) to write")
     pr.add_argument("--precision", choices=("double", "float", "fixed"),
                     help="the arithmetic of the generated C, bit for bit: double or float, as the header computes "
@@ -428,7 +428,7 @@ def build_parser() -> Parser:
                     "refuses a precision it cannot run")
 
     r = command("report", cmd_report, "terms, AIC trace and errors of a model")
-    r.add_argument("model", metavar="MODEL")
+    r.add_argument("model", metavar="MODEL", help="model file (fitgen fit)")
     r.add_argument("--data", help="dataset to measure errors on (default: the fit's own figures only)")
     r.add_argument("--paper", action="store_true", help="with --data: show the seed paper's figures beside ours")
     r.add_argument("--plot", metavar="DIR", help="write estimate-vs-target PNGs here (needs matplotlib)")
@@ -436,7 +436,7 @@ def build_parser() -> Parser:
     r.add_argument("-o", "--output", help="write the report here instead of stdout")
 
     c = command("codegen", cmd_codegen, "generate the header-only C99 estimator of a model")
-    c.add_argument("model", metavar="MODEL")
+    c.add_argument("model", metavar="MODEL", help="model file (fitgen fit)")
     c.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for <prefix>_model.h")
     c.add_argument("--precision", choices=("double", "float", "fixed"),
                    help="fixed: integer ADC codes in, int32 outputs, no floating point (Cortex-M0); default double, "

@@ -226,8 +226,11 @@ def build_parser() -> Parser:
                         "only); uno: the Arduino Uno's ATmega328P in simavr (float or fixed; --adc puts the chips "
                         "on its TWI bus); host: the POSIX build on a pty")
     e.add_argument("--port", type=tcp_port, help="TCP port of the emulated UART (default: a free one)")
-    e.add_argument("--precision", default="float", choices=("float", "double", "fixed"))
-    e.add_argument("--style", default="table", choices=("table", "unrolled"))
+    e.add_argument("--precision", default="float", choices=("float", "double", "fixed"),
+                   help="the firmware's arithmetic (default float)")
+    e.add_argument("--style", default="table", choices=("table", "unrolled"),
+                   help="the C's form: table (coefficient arrays and a loop; default) or unrolled (straight-line "
+                        "code)")
     e.add_argument("--build-dir", metavar="DIR", help="keep the firmware sources and image here")
     e.add_argument("--suite", action="store_true",
                    help="run the HIL suite against it (with its own options, below), then stop")

@@ -285,10 +285,12 @@ def build_parser() -> Parser:
     p = Parser(prog="tactile-host", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     v = sub.add_parser("verify", help="compile the generated C and compare it with the Python evaluation")
-    v.add_argument("model", metavar="MODEL")
+    v.add_argument("model", metavar="MODEL", help="model file (fitgen fit)")
     v.add_argument("--precision", default="both", choices=("double", "float", "fixed", "both"),
                    help="both: double and float; fixed: the integer header against its numpy model and double")
-    v.add_argument("--style", default="both", choices=("table", "unrolled", "both"))
+    v.add_argument("--style", default="both", choices=("table", "unrolled", "both"),
+                   help="the C's form: table (coefficient arrays and a loop), unrolled (straight-line code), "
+                        "or both (default)")
     v.add_argument("--cc", default="gcc", help="C compiler command, with flags if needed (default gcc)")
     v.add_argument("--runner", help="prefix to run the binary with, e.g. qemu-arm")
     v.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
@@ -307,7 +309,9 @@ def build_parser() -> Parser:
     map_options(pb)
     pb.add_argument("--precision", choices=("float", "double"),
                     help="the model's precision (default double, as fitgen codegen --target pi writes it)")
-    pb.add_argument("--style", default="unrolled", choices=("table", "unrolled"))
+    pb.add_argument("--style", default="unrolled", choices=("table", "unrolled"),
+                    help="the C's form: table (coefficient arrays and a loop) or unrolled (straight-line code; "
+                         "default)")
     pb.add_argument("--cc", default="arm-linux-gnueabihf-gcc -static",
                     help="compiler and flags (default: arm-linux-gnueabihf-gcc -static; gcc on the Pi itself)")
     pb.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the sources and tm_pi")
@@ -320,7 +324,7 @@ def build_parser() -> Parser:
     add_arduino_build(sub)
 
     f = sub.add_parser("flash", help="load a model into a device as a calibration blob and read it back")
-    f.add_argument("model", metavar="MODEL")
+    f.add_argument("model", metavar="MODEL", help="model file (fitgen fit)")
     f.add_argument("--port", required=True, metavar="URL",
                    help="serial port: /dev/ttyACM0, /dev/pts/N or socket://HOST:PORT")
     f.add_argument("--sensor-id", help="sensor id stored in the blob (ASCII, <= 16 bytes; default: the name of "
@@ -334,7 +338,7 @@ def build_parser() -> Parser:
     r.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
     _adc_options(r)
     _readout_options(r)
-    r.add_argument("--format", default="csv", choices=("csv", "jsonl"))
+    r.add_argument("--format", default="csv", choices=("csv", "jsonl"), help="one line per reading (default csv)")
     r.add_argument("-o", "--output", metavar="FILE", help="write the stream here instead of stdout")
     r.set_defaults(func=cmd_read)
 
@@ -350,7 +354,7 @@ def build_parser() -> Parser:
     w.set_defaults(func=cmd_view)
 
     rp = sub.add_parser("replay", help="re-estimate a recorded run (--record) with another model or corrections")
-    rp.add_argument("run", metavar="RUN.jsonl")
+    rp.add_argument("run", metavar="RUN.jsonl", help="a run recorded with --record (read, view)")
     rp.add_argument("--model", metavar="MODEL", help="model to re-estimate with (default: the run's own, if given "
                     "as the file whose hash the run names)")
     rp.add_argument("--auto-zero", action="store_true", help="re-zero at rest (default: as recorded)")
@@ -362,8 +366,8 @@ def build_parser() -> Parser:
 
     tcc = sub.add_parser("tempcomp-c", help="the temperature compensation as a C99 header (<prefix>_tempcomp.h)")
     tcc.add_argument("tempcomp", metavar="FILE.json", help="from tactile-host capture --temperature")
-    tcc.add_argument("-o", "--output", required=True, metavar="DIR")
-    tcc.add_argument("--precision", default="float", choices=("float", "double"))
+    tcc.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for <prefix>_tempcomp.h")
+    tcc.add_argument("--precision", default="float", choices=("float", "double"), help="C arithmetic (default float)")
     tcc.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
     tcc.set_defaults(func=cmd_tempcomp_c)
 
@@ -429,7 +433,7 @@ def build_parser() -> Parser:
 
     ss = sub.add_parser("stage-sim", help="a simulated Marlin or GRBL stage on a loopback port or a pty, moving a "
                                           "simulated sensor through a pose file")
-    ss.add_argument("--flavor", default="grbl", choices=("grbl", "marlin"))
+    ss.add_argument("--flavor", default="grbl", choices=("grbl", "marlin"), help="the controller (default grbl)")
     ss.add_argument("--port", type=int, default=0, help="TCP port on 127.0.0.1 (default 0: any free one)")
     ss.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal instead (prints its path)")
     ss.add_argument("--pose-file", metavar="FILE", help="write the magnet's pose here (capture --sim-pose-file FILE)")
@@ -444,7 +448,7 @@ def build_parser() -> Parser:
     ss.add_argument("--start", default="10,10,10", help="where the carriage stands at power-on, mm from the home "
                     "switches (default 10,10,10; machine coordinates start at 0 there)")
     ss.add_argument("--homing", action="store_true", help="homing on: GRBL starts in ALARM until $H or $X")
-    ss.add_argument("--seed", type=count, default=0)
+    ss.add_argument("--seed", type=count, default=0, help="seed of the rig's repeatability errors (default 0)")
     ss.set_defaults(func=cmd_stage_sim)
     return p
 
