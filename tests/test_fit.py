@@ -353,17 +353,23 @@ def test_fit_on_a_capture_adds_the_single_sample_noise_less_the_rows(tmp_path):
 
 @pytest.mark.parametrize("argv, work", [
     (["fit", "{data}", "-o", "{out}"], "fitgen.app.cli.cmd_fit"),
-    (["identify", "{data}", "-o", "{out}"], "fitgen.app.cli.cmd_identify"),
-    (["schedule", "--n", "10", "-o", "{out}"], "fitgen.app.cli.cmd_schedule"),
+    (["identify", "{data}", "-o", "{out}"], "fitgen.app.calibrate_cli.cmd_identify"),
+    (["schedule", "--n", "10", "-o", "{out}"], "fitgen.app.calibrate_cli.cmd_schedule"),
     (["simulate", "--random", "5", "-o", "{out}"], "fitgen.app.cli.cmd_simulate"),
     (["predict", "{model}", "{data}", "-o", "{out}"], "fitgen.app.cli.cmd_predict"),
     (["report", "{model}", "-o", "{out}"], "fitgen.app.cli.cmd_report"),
 ])
 def test_an_output_in_a_missing_folder_is_said_before_the_work(argv, work, tmp_path, monkeypatch, capsys):
+    from importlib import import_module
+
     from fitgen.app import cli
 
-    # the command must not run (build_parser binds the patched one): its work would come before the write
-    monkeypatch.setattr(cli, work.rsplit(".", 1)[1], lambda args: pytest.fail(f"{work} ran"))
+    # the command must not run (build_parser binds the patched one, where it is defined and where cli's check of
+    # the output names it): its work would come before the write
+    module, name = work.rsplit(".", 1)
+    ran = lambda args: pytest.fail(f"{work} ran")  # noqa: E731
+    for where in {import_module(module), cli}:
+        monkeypatch.setattr(where, name, ran)
     names = {"data": str(tmp_path / "d.csv"), "model": str(tmp_path / "m.json"), "out": str(tmp_path / "no" / "x")}
     with pytest.raises(SystemExit) as stop:
         cli.main([a.format(**names) for a in argv])

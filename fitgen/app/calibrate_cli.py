@@ -1,13 +1,15 @@
-"""The calibration commands of ``fitgen``: ``identify`` (a built unit's physics from a capture) and ``schedule``
-(the capture's poses); thin layers over fitgen.fitting.identify and fitgen.fitting.schedule."""
+"""The calibration commands of ``fitgen``: ``identify`` (a built unit's physics from a capture), ``schedule`` (the
+capture's poses) and ``check`` (a calibrated model on a check capture of its unit); thin layers over
+fitgen.fitting.identify, fitgen.fitting.schedule and fitgen.fitting.check."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
-from fitgen.base.fileio import write_all
+from fitgen.app.cliutil import count, finite
 from fitgen.app.options import noise_of, sensor_of
+from fitgen.base.fileio import write_all
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_positive
 
@@ -141,6 +143,8 @@ def cmd_schedule(args) -> int:
     drawing = sensor_of(args)
     axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
     samples, noise, told = samples_of(args, drawing)
+    if args.check is not None:
+        return _check_schedule(args, drawing, axes, samples)
 
     def step(done, total, note):
         bar.total = total
@@ -166,3 +170,114 @@ def cmd_schedule(args) -> int:
     print(f"within {box} mm from first contact (the sensor's travel within --limits{left}): give the stage "
           "room for them and their approach (--stage-limits)", file=sys.stderr)
     return 0
+
+
+def _check_schedule(args, drawing, axes, samples: int) -> int:
+    """``schedule --check N``: random poses in the working box, for a check capture."""
+    from fitgen.fitting.schedule import check_schedule, write_schedule
+    from fitgen.physics.simulate import parse_ranges
+
+    poses, info = check_schedule(drawing, args.check, axes=axes, ranges=parse_ranges(args.limits, {}), seed=args.seed)
+    write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples, "sensor_sha256": drawing.sha256,
+                                              "transfer": drawing.transfer})
+    box = ", ".join(f"{a} {lo:g}..{hi:g}" for a, (lo, hi) in info["ranges"].items())
+    print(f"wrote {len(poses)} random check poses ({box} mm from first contact, seed {args.seed}) to {args.output}: "
+          "capture them as the calibration's capture, then fitgen check MODEL CHECK.csv", file=sys.stderr)
+    return 0
+
+
+def cmd_check(args) -> int:
+    """``check``: the measured errors on a check capture beside the ones the unit's identification predicts."""
+    from fitgen.equations.model import check_input_units, load_model
+    from fitgen.fitting.check import DRAWS, TOO_FAR, check
+    from fitgen.fitting.holdout import device_precision, fitted_sensor, fitted_sensor_spec, unit_posterior
+    from fitgen.fitting.unitrecord import row_noise
+    from fitgen.physics.dataset import load_dataset
+    from fitgen.physics.sensor import load_sensor
+
+    model = load_model(args.model)
+    ds = load_dataset(args.capture)
+    check_input_units(model, ds.meta.get("units"), f"{args.capture}'s readings", f"model {args.model}")
+    if not set(ds.target_names) & {"dx", "dy", "dz"}:
+        raise InputError(f"{args.capture} has no stage displacement (dx, dy, dz): a check needs each row's pose")
+    spec = args.sensor or fitted_sensor_spec(model)
+    if spec is None:
+        raise InputError(f"model {args.model}: the sensor its held-out figures were made on is not found here (or "
+                         "has changed): give the unit's file as --sensor")
+    sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on")
+    posterior = unit_posterior(spec, sensor) if Path(spec).is_file() else None
+    noise, source = row_noise(ds.meta, sensor)
+    result = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior, rig_error=args.rig_error,
+                   precision=args.precision or device_precision(model))
+    where = (f"{result.units} units drawn from the posterior of {sensor.name}" if posterior is not None
+             else f"{sensor.name} (no posterior: its noise and the stage's error alone)")
+    print(f"check: {result.rows} rows of {args.capture} in contact, estimated in {result.precision}; predicted on "
+          f"{where}, {DRAWS} draws each of the stage's error ({result.rig_error:g} mm) and the rows' noise "
+          f"({source})\n")
+    print("| output | unit | max error | predicted max: median (least-greatest) | RMS error | predicted RMS | |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for o in result.outputs:
+        unit = model.equation(o).unit
+        (mm, ml, mh), (rm, rl, rh) = result.predicted(o, "max"), result.predicted(o, "rms")
+        beyond = result.beyond(o)
+        said = "as predicted" if beyond <= 1 else f"{beyond:.2g}x the greatest"
+        print(f"| {o} | {unit} | {result.measured[o]['max']:.3g} | {mm:.3g} ({ml:.3g}-{mh:.3g}) | "
+              f"{result.measured[o]['rms']:.3g} | {rm:.3g} ({rl:.3g}-{rh:.3g}) | {said} |")
+    failed = result.failed()
+    if failed:
+        print(f"\ncheck: {', '.join(failed)} err beyond {TOO_FAR:g}x every prediction: the model does not describe "
+              "this unit as it is now (a knock, the sensor moved on its bed, another unit's file, the temperature); "
+              "capture, identify and fit again", file=sys.stderr)
+        return 1
+    print("\ncheck: every output within what the identification predicts", file=sys.stderr)
+    return 0
+
+
+def add_calibration_commands(command) -> None:
+    """identify, schedule and check on ``command(name, func, help)``, fitgen.app.cli's maker of a subcommand."""
+    i = command("identify", cmd_identify, "a built unit's physics from a short capture (its sensor file)")
+    i.add_argument("capture", metavar="CAPTURE.csv", help="rows of readings with the stage's displacements (dx,dy,dz)")
+    i.add_argument("--sensor", help="the drawing the unit was built to (preset or TOML; default: the one the "
+                                    "capture's schedule was made for, else paper)")
+    i.add_argument("--transfer", choices=("raw", "gmr"), help="override the transfer (default: the capture's units)")
+    i.add_argument("--noise", type=finite, metavar="X",
+                   help="the device's single-sample reading noise (default: what the capture measured or was "
+                        "simulated with, else the sensor file's), divided by sqrt(samples per row)")
+    i.add_argument("--rig-error", type=finite, default=0.01, metavar="MM",
+                   help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
+    i.add_argument("--zero-error", type=finite, default=0.02, metavar="MM",
+                   help="how far the capture's zero may be from first contact, mm rms per axis, one error shared by "
+                        "every row in contact (default 0.02)")
+    i.add_argument("--temp-comp", metavar="FILE.json", help="map the capture's readings from the temperature it "
+                   "recorded to this compensation's t0 first: the unit at t0, as read --temp-comp sees it")
+    i.add_argument("-o", "--output", required=True, metavar="UNIT.toml", help="the unit's sensor file to write")
+    i.add_argument("--plot", metavar="DIR", help="also DIR/identify.png: the residuals by row, the sensitivities and "
+                   "the magnet's offset against the prior (needs matplotlib)")
+
+    sc = command("schedule", cmd_schedule, "the capture poses that pin a unit's parameters best (D-optimal)")
+    sc.add_argument("--sensor", default="paper", help="the drawing (preset or TOML; default paper)")
+    sc.add_argument("--transfer", choices=("raw", "gmr"), default="gmr",
+                    help="the readings the capture takes (default gmr: volts, as tactile-host capture reads them)")
+    sc.add_argument("--n", type=int, default=40, help="poses to capture (default 40)")
+    sc.add_argument("--axes", default="dx,dy,dz", help="the axes the stage moves (default dx,dy,dz)")
+    sc.add_argument("--limits", help="the stage's limits 'dx=-2:2 dz=-2:0 ...' (default: the sensor's [travel]); "
+                    "with dz, a rest row lifts the stage 0.2 mm off the skin besides (docs/calibration.md)")
+    sc.add_argument("--samples", default="16", help="samples per row (default 16), or NOISE.json: what it tells")
+    sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
+    sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM", help="stage error, mm rms (default 0.01)")
+    sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv", help="the poses, for capture --poses")
+    sc.add_argument("--check", type=count, metavar="N",
+                    help="N random poses in the working pose box instead, not D-optimal and no rest row: a check "
+                         "capture of a calibrated unit, for fitgen check")
+    sc.add_argument("--seed", type=count, default=0, help="with --check: the random poses' seed (default 0)")
+
+    ch = command("check", cmd_check, "a calibrated model on a check capture of its unit, against what its "
+                 "identification predicts at those poses")
+    ch.add_argument("model", metavar="MODEL", help="model file (fitgen fit on the unit's twin)")
+    ch.add_argument("capture", metavar="CHECK.csv",
+                    help="a capture of the unit at poses never used to calibrate it (fitgen schedule --check)")
+    ch.add_argument("--sensor", help="the unit's file (default: the one the model's held-out figures were made on)")
+    ch.add_argument("--rig-error", type=finite, default=0.01, metavar="MM",
+                    help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
+    ch.add_argument("--precision", choices=("double", "float", "fixed"),
+                    help="the arithmetic to estimate in (default: the one the model was fitted for)")

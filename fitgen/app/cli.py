@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from fitgen import __version__
-from fitgen.app.calibrate_cli import cmd_identify, cmd_schedule
+from fitgen.app.calibrate_cli import add_calibration_commands, cmd_identify, cmd_schedule
 from fitgen.app.cliutil import Parser, check_not_empty, check_written, command_main, count, finite
 from fitgen.app.options import fit_settings, noise_of, sensor_of
 from fitgen.base.parse import parse_assignments, parse_names
@@ -374,37 +374,7 @@ def build_parser() -> Parser:
                    help="random held-out poses in the data's box for the deployed-accuracy figures (default 2000; "
                         "0: none)")
 
-    i = command("identify", cmd_identify, "a built unit's physics from a short capture (its sensor file)")
-    i.add_argument("capture", metavar="CAPTURE.csv", help="rows of readings with the stage's displacements (dx,dy,dz)")
-    i.add_argument("--sensor", help="the drawing the unit was built to (preset or TOML; default: the one the "
-                                    "capture's schedule was made for, else paper)")
-    i.add_argument("--transfer", choices=("raw", "gmr"), help="override the transfer (default: the capture's units)")
-    i.add_argument("--noise", type=finite, metavar="X",
-                   help="the device's single-sample reading noise (default: what the capture measured or was "
-                        "simulated with, else the sensor file's), divided by sqrt(samples per row)")
-    i.add_argument("--rig-error", type=finite, default=0.01, metavar="MM",
-                   help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
-    i.add_argument("--zero-error", type=finite, default=0.02, metavar="MM",
-                   help="how far the capture's zero may be from first contact, mm rms per axis, one error shared by "
-                        "every row in contact (default 0.02)")
-    i.add_argument("--temp-comp", metavar="FILE.json", help="map the capture's readings from the temperature it "
-                   "recorded to this compensation's t0 first: the unit at t0, as read --temp-comp sees it")
-    i.add_argument("-o", "--output", required=True, metavar="UNIT.toml", help="the unit's sensor file to write")
-    i.add_argument("--plot", metavar="DIR", help="also DIR/identify.png: the residuals by row, the sensitivities and "
-                   "the magnet's offset against the prior (needs matplotlib)")
-
-    sc = command("schedule", cmd_schedule, "the capture poses that pin a unit's parameters best (D-optimal)")
-    sc.add_argument("--sensor", default="paper", help="the drawing (preset or TOML; default paper)")
-    sc.add_argument("--transfer", choices=("raw", "gmr"), default="gmr",
-                    help="the readings the capture takes (default gmr: volts, as tactile-host capture reads them)")
-    sc.add_argument("--n", type=int, default=40, help="poses to capture (default 40)")
-    sc.add_argument("--axes", default="dx,dy,dz", help="the axes the stage moves (default dx,dy,dz)")
-    sc.add_argument("--limits", help="the stage's limits 'dx=-2:2 dz=-2:0 ...' (default: the sensor's [travel]); "
-                    "with dz, a rest row lifts the stage 0.2 mm off the skin besides (docs/calibration.md)")
-    sc.add_argument("--samples", default="16", help="samples per row (default 16), or NOISE.json: what it tells")
-    sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
-    sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM", help="stage error, mm rms (default 0.01)")
-    sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv", help="the poses, for capture --poses")
+    add_calibration_commands(command)
 
     pr = command("predict", cmd_predict, "estimates for the rows of a dataset")
     pr.add_argument("model", metavar="MODEL", help="model file (fitgen fit)")

@@ -87,6 +87,25 @@ def _fixed_plan(model: Model, sensor):
         return str(exc)
 
 
+def estimator(model: Model, precision: str, sensor=None):
+    """``model``'s estimates in ``precision`` as the device computes them, a function of readings (n, N); or the
+    reason it cannot run in it (fixed point takes the readings' codes at ``sensor``'s ADC scale)."""
+    return _estimator(model, precision, sensor)[0]
+
+
+def _estimator(model: Model, precision: str, sensor=None):
+    """:func:`estimator`, and the fixed-point plan it runs (None for double and float)."""
+    if precision == "double":
+        return model.predict, None
+    if precision == "float":
+        problem = model.float_problem()
+        return problem or (lambda x: model.predict(x, precision="float")), None
+    fm = _fixed_plan(model, sensor) if sensor is not None else "no sensor to take the ADC scale from"
+    if isinstance(fm, str):
+        return fm.splitlines()[0], None
+    return (lambda x: fm.to_real(fm.predict_codes(fm.codes_of(x))[0])), fm
+
+
 def deployed_errors(model: Model, held: HeldOut, sensor=None, precisions=PRECISIONS) -> dict:
     """Per precision, per output: max, rms (noise-free), noisy_max, noisy_rms, deviation (max |this
     precision - double| noise-free) and share (deviation / the double model's max). Fixed point takes
@@ -97,26 +116,12 @@ def deployed_errors(model: Model, held: HeldOut, sensor=None, precisions=PRECISI
     model_max = np.abs(double_clean - held.truth).max(axis=0)
     out = {}
     for prec in precisions:
-        ref = double_clean
-        if prec == "double":
-            fn = model.predict
-        elif prec == "float":
-            problem = model.float_problem()
-            if problem:
-                out[prec] = {"unavailable": problem}
-                continue
-
-            def fn(x):
-                return model.predict(x, precision="float")
-        else:
-            fm = _fixed_plan(model, sensor) if sensor is not None else "no sensor to take the ADC scale from"
-            if isinstance(fm, str):
-                out[prec] = {"unavailable": fm.splitlines()[0]}
-                continue
-
-            def fn(x, fm=fm):
-                return fm.to_real(fm.predict_codes(fm.codes_of(x))[0])
-            ref = model.predict(fm.code_values(fm.codes_of(held.clean)))
+        fn, fm = _estimator(model, prec, sensor)
+        if isinstance(fn, str):
+            out[prec] = {"unavailable": fn}
+            continue
+        # fixed point against double on the codes' values: the arithmetic's share, the quantisation's left out
+        ref = double_clean if fm is None else model.predict(fm.code_values(fm.codes_of(held.clean)))
         clean, noisy = fn(held.clean), fn(held.noisy)
         e, en = np.abs(clean - held.truth), np.abs(noisy - held.noisy_truth)
         dev = np.abs(clean - ref).max(axis=0)

@@ -209,6 +209,40 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     return poses, info
 
 
+CHECK_TRIES = 8  # random poses drawn per pose wanted, before those past the linear range are left out
+
+
+def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict | None = None,
+                   seed: int = 0) -> tuple[np.ndarray, dict]:
+    """``n`` random stage poses (n, 5) for a check capture (fitgen.fitting.check): uniform over the working pose
+    box (DEFAULT_RANGES, where estimators are fitted and held out) within ``ranges`` (the stage's limits) in
+    ``axes``, the others 0, in contact and within the elements' linear range; and a record of how they were drawn.
+    Random, not chosen: a check measures the estimator where it is used, not where it learns most."""
+    if not 1 <= n <= 10000:
+        raise InputError(f"--check must be 1..10000 poses, got {n}")
+    unmoved = [a for a in (ranges or {}) if a not in axes]
+    if unmoved:
+        raise InputError(f"--limits gives {unmoved[0]}, which --axes ({','.join(axes)}) does not move")
+    box = {a: (0.0, 0.0) for a in POSE_NAMES}
+    for a in axes:
+        lo, hi = (ranges or {}).get(a, DEFAULT_RANGES[a])
+        lo, hi = max(lo, DEFAULT_RANGES[a][0]), min(hi, DEFAULT_RANGES[a][1])
+        if not lo < hi:
+            raise InputError(f"the limits of {a} leave it no room within the working pose box "
+                             f"({DEFAULT_RANGES[a][0]:g}..{DEFAULT_RANGES[a][1]:g})")
+        box[a] = (lo, hi)
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x636865636B]))
+    cand = np.zeros((CHECK_TRIES * n, len(POSE_NAMES)))
+    for a in axes:
+        cand[:, POSE_NAMES.index(a)] = rng.uniform(*box[a], len(cand))
+    cand = cand[within_linear_range(drawing, cand)][:n]
+    if len(cand) < n:
+        raise InputError(f"the working box drives {drawing.name}'s elements past {100 * LINEAR_SHARE:g} % of their "
+                         "linear range almost everywhere: check the sensor file's transfer")
+    return stage_order(cand), {"check": True, "seed": seed, "axes": list(axes), "sensor": drawing.name,
+                               "ranges": {a: list(box[a]) for a in axes}, "linear_share": LINEAR_SHARE}
+
+
 def write_schedule(path, poses: np.ndarray, axes, info: dict) -> None:
     """The schedule (:func:`schedule_csv`) at ``path``, and ``info`` in its ``.meta.json`` beside it."""
     write_atomic(path, schedule_csv(poses, axes))

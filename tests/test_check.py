@@ -1,0 +1,163 @@
+"""`fitgen schedule --check` and `fitgen check`: a calibrated unit's model on a check capture at random poses never
+used to calibrate it, against what the unit's identification predicts there. A six-element ring in the slide scene
+keeps the twin's fit to a second."""
+
+import numpy as np
+import pytest
+
+from conftest import assert_one_line_error, run_cli
+from fitgen.equations.model import load_model
+from fitgen.fitting.check import TOO_FAR, check
+from fitgen.fitting.family import fit_device
+from fitgen.fitting.fit import FitSettings
+from fitgen.fitting.holdout import unit_posterior
+from fitgen.fitting.identify import identify
+from fitgen.fitting.schedule import check_schedule, schedule, within_linear_range
+from fitgen.fitting.unitrecord import save
+from fitgen.physics.dataset import Dataset, load_dataset
+from fitgen.physics.pose import POSE_NAMES, off_skin
+from fitgen.physics.posesource import choose_poses
+from fitgen.physics.scenes import PRESETS
+from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import DEFAULT_RANGES, rig_poses, simulate
+from fitgen.physics.transfer import readings
+from fitgen.physics.units import draw_unit
+
+RING = """name = "ring6"
+[magnet]
+diameter = 5.0
+height = 1.0
+polarization = 1.45
+[board]
+thickness = 1.5
+gap = 10.0
+[[elements.ring]]
+count = 6
+radius = 9.0
+axis = "radial"
+[transfer]
+kind = "gmr"
+[transfer.gmr]
+noise = 0.0005
+"""
+ROW_NOISE = 0.0005 / 4  # rows of 16 samples
+RIG = 0.01
+
+
+def _capture(unit, poses, seed, rig=RIG):
+    """A capture of ``unit`` at stage ``poses``: the stage off its labels by ``rig``, rows of 16 samples."""
+    rng = np.random.default_rng(seed)
+    y = readings(unit, rig_poses(poses, rig, rng), adc_bits=0)
+    return y + rng.normal(0.0, ROW_NOISE, y.shape)
+
+
+def _save(path, y, poses):
+    Dataset(y, poses[:, :3], ("dx", "dy", "dz"), {"units": "V", "samples_per_row": 16}).save(path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def twin(tmp_path_factory):
+    """Unit 7 of the ring calibrated as the chain does it: schedule, capture, identify, the twin's fit."""
+    folder = tmp_path_factory.mktemp("check")
+    (folder / "ring.toml").write_text(RING)
+    drawing = load_sensor(folder / "ring.toml")
+    unit, _ = draw_unit(drawing, 7)
+    plan, _ = schedule(drawing, 40, noise=ROW_NOISE)
+    ident = identify(drawing, _capture(unit, plan, 1), plan, ROW_NOISE)
+    unit_file, _ = save(ident, folder / "twin.toml", {"drawing_spec": str(folder / "ring.toml")})
+    sensor = load_sensor(unit_file)
+    poses, source = choose_poses(scene="slide", sensor=sensor)
+    train = simulate(sensor, poses, provenance={**source, "sensor_file": str(unit_file)})
+    model = fit_device(train, PRESETS["slide"].outputs, FitSettings(), sensor, "auto", held_out=200,
+                       unit_file=unit_file)
+    model.save(folder / "twin.json")
+    return folder, drawing, unit, sensor, model
+
+
+def test_check_poses_are_random_in_the_working_box_in_contact_and_within_the_linear_range(tmp_path):
+    drawing = load_sensor("paper").with_transfer("gmr")
+    poses, info = check_schedule(drawing, 30, seed=3)
+    assert poses.shape == (30, 5) and not poses[:, 3:].any()
+    for j, a in enumerate(("dx", "dy", "dz")):
+        lo, hi = DEFAULT_RANGES[a]
+        assert lo <= poses[:, j].min() and poses[:, j].max() <= hi and np.ptp(poses[:, j]) > (hi - lo) / 2
+    assert not off_skin(poses).any() and within_linear_range(drawing, poses).all()
+    assert len({tuple(p) for p in poses}) == 30  # random, not a grid the D-optimal schedule would repeat
+    assert np.array_equal(check_schedule(drawing, 30, seed=3)[0], poses)
+    assert not np.array_equal(check_schedule(drawing, 30, seed=4)[0], poses)
+    narrow, _ = check_schedule(drawing, 30, ranges={"dz": (-1.0, 0.0)}, seed=3)
+    assert narrow[:, 2].min() >= -1.0
+    assert info["ranges"]["dz"] == [DEFAULT_RANGES["dz"][0], DEFAULT_RANGES["dz"][1]]
+    # the command writes it as capture reads a schedule, and says what it is
+    proc = run_cli("fitgen", "schedule", "--check", "30", "--seed", "3", "-o", str(tmp_path / "c.csv"))
+    assert proc.returncode == 0 and "30 random check poses" in proc.stderr, proc.stderr
+    from host.capture import load_schedule
+
+    assert np.array_equal(load_schedule(tmp_path / "c.csv").poses, poses)
+    for bad, said in ((["--check", "0"], "--check must be 1..10000"),
+                      (["--check", "5", "--limits", "dz=1:2"], "leave it no room")):
+        assert_one_line_error(run_cli("fitgen", "schedule", *bad, "-o", str(tmp_path / "x.csv")), contains=said)
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_the_twin_on_its_unit_reads_as_predicted_and_on_another_unit_fails(twin):
+    """20 check captures of unit 7 (30 poses, the stage's 0.01 mm): none beyond the greatest prediction; a check
+    capture of unit 8 through unit 7's model: every output far beyond it."""
+    folder, drawing, unit, sensor, model = twin
+    posterior = unit_posterior(folder / "twin.toml", sensor)
+    worst = 0.0
+    for seed in range(20):
+        poses, _ = check_schedule(drawing, 30, seed=seed)
+        c = check(model, _capture(unit, poses, 100 + seed), poses, sensor, ROW_NOISE, posterior=posterior)
+        assert c.rows == 30 and c.units == 8 and c.outputs == ("dx", "dy", "dz")
+        assert c.failed() == []
+        worst = max(worst, *(c.beyond(o) for o in c.outputs))
+        for o in c.outputs:  # the rig's error dominates both: the same order
+            assert c.predicted(o, "max")[0] / 3 < c.measured[o]["max"] < 3 * c.predicted(o, "max")[0]
+    assert worst < 1.0, worst
+    other, _ = draw_unit(drawing, 8)
+    poses, _ = check_schedule(drawing, 30, seed=0)
+    c = check(model, _capture(other, poses, 100), poses, sensor, ROW_NOISE, posterior=posterior)
+    assert c.failed() == list(c.outputs) and min(c.beyond(o) for o in c.outputs) > 5 * TOO_FAR
+    # the measured figures are the model's own errors on these rows
+    est = model.predict(_capture(other, poses, 100), precision="float")
+    assert c.measured["dx"]["max"] == float(np.abs(est[:, 0] - poses[:, 0]).max())
+
+
+def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_unit(twin, tmp_path):
+    folder, drawing, unit, _, model = twin
+    poses, _ = check_schedule(drawing, 30, seed=0)
+    ok = _save(tmp_path / "ok.csv", _capture(unit, poses, 100), poses)
+    proc = run_cli("fitgen", "check", str(folder / "twin.json"), str(ok))
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("check: 30 rows of ") and "8 units drawn from the posterior of twin" in proc.stdout
+    rows = [ln for ln in proc.stdout.splitlines() if ln.startswith("| d")]
+    assert len(rows) == 3 and all(ln.endswith("| as predicted |") for ln in rows)
+    assert proc.stderr.strip().endswith("check: every output within what the identification predicts")
+    other, _ = draw_unit(drawing, 8)
+    bad = _save(tmp_path / "bad.csv", _capture(other, poses, 100), poses)
+    proc = run_cli("fitgen", "check", str(folder / "twin.json"), str(bad))
+    assert proc.returncode == 1
+    assert "check: dx, dy, dz err beyond 1.5x every prediction: the model does not describe this unit" in proc.stderr
+    assert all("x the greatest |" in ln for ln in proc.stdout.splitlines() if ln.startswith("| d"))
+    # a printer's check: its stage error given, the prediction widens with it
+    loose = run_cli("fitgen", "check", str(folder / "twin.json"), str(ok), "--rig-error", "0.03")
+    assert loose.returncode == 0 and "stage's error (0.03 mm)" in loose.stdout
+    # bad input: one line, status 2
+    (tmp_path / "bare.csv").write_text("v1,v2,v3,v4,v5,v6\n" + "1,1,1,1,1,1\n" * 3)
+    lifted = _save(tmp_path / "lifted.csv", _capture(unit, poses, 1)[:3], np.tile([0, 0, 0.2, 0, 0], (3, 1)))
+    wrong = Dataset(np.ones((3, 6)), np.zeros((3, 3)), ("dx", "dy", "dz"), {"units": "mT"})
+    wrong.save(tmp_path / "mT.csv")
+    for data, said in ((tmp_path / "bare.csv", "no stage displacement (dx, dy, dz)"),
+                       (lifted, "every row of the check capture is lifted off the skin"),
+                       (tmp_path / "mT.csv", "mT"), (tmp_path / "none.csv", "no such file")):
+        assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(data)), contains=said)
+    drawing_model = tmp_path / "m.json"
+    load_model(folder / "twin.json").save(drawing_model)
+    (folder / "twin.toml").rename(folder / "gone.toml")
+    try:
+        assert_one_line_error(run_cli("fitgen", "check", str(drawing_model), str(ok)), contains="give the unit's file")
+    finally:
+        (folder / "gone.toml").rename(folder / "twin.toml")
+    assert load_dataset(ok).n_rows == 30 and POSE_NAMES[:3] == ("dx", "dy", "dz")
