@@ -182,7 +182,8 @@ def _check_schedule(args, drawing, axes, samples: int) -> int:
                                               "transfer": drawing.transfer})
     box = ", ".join(f"{a} {lo:g}..{hi:g}" for a, (lo, hi) in info["ranges"].items())
     print(f"wrote {len(poses)} random check poses ({box} mm from first contact, seed {args.seed}) to {args.output}: "
-          "capture them as the calibration's capture, then fitgen check MODEL CHECK.csv", file=sys.stderr)
+          "capture them as for the calibration (tactile-host capture --poses), then fitgen check MODEL CHECK.csv",
+          file=sys.stderr)
     return 0
 
 
