@@ -42,6 +42,13 @@ def test_demo_runs_end_to_end(tmp_path):
     assert set(rows) == {"dx", "dy", "dz", "thx", "thy"}, text[-1500:]
     for name, (drawing, twin) in rows.items():
         assert twin < drawing / 5, (name, drawing, twin)
+    # a check capture through the same stage: the twin as predicted there, the drawing's model far beyond it
+    [twin_line] = [ln for ln in text.splitlines() if ln.startswith("   twin's model  ")]
+    [drawing_line] = [ln for ln in text.splitlines() if ln.startswith("   drawing's model ")]
+    assert twin_line.endswith(": as predicted") and drawing_line.endswith("it does not describe this unit")
+    from fitgen.physics.dataset import load_dataset
+
+    assert load_dataset(out / "check.csv").n_rows == 30
     # the twin's model file says how it was fitted, as `fitgen fit` writes it: the family, and the rounding noise
     # where the fit's check raised it
     fam = load_model(out / "twin-model.json").fit_info["family"]

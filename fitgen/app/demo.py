@@ -183,6 +183,41 @@ def _unit_stage(out: Path, drawing_model) -> None:
               f"{says[o]['noisy_max']:15.3g}  {unit_of}")
     print("   the direct fit has no tilt labels (a three-axis stage); the twin's file: the median over units drawn "
           "from the identification's posterior (docs/calibration.md)")
+    _check_stage(out, drawing, unit, {"twin's model": (model, twin, twin_file),
+                                      "drawing's model": (drawing_model, drawing, None)})
+
+
+def _check_stage(out: Path, drawing, unit, models: dict) -> None:
+    """A check capture of the unit through the same stage, and `fitgen check` of each model on it: ``models`` maps a
+    name to the model, the sensor it was fitted on and that sensor's unit file (None for the drawing)."""
+    from fitgen.fitting.check import check
+    from fitgen.fitting.holdout import unit_posterior
+    from fitgen.fitting.schedule import check_schedule, write_schedule
+    from fitgen.fitting.unitrecord import row_noise
+    from fitgen.physics.dataset import load_dataset
+    from host.capture import load_schedule
+    from host.stagesim import simulated_stage_capture
+
+    t = time.monotonic()
+    poses, info = check_schedule(drawing, 30, seed=7)
+    write_schedule(out / "check-poses.csv", poses, ("dx", "dy", "dz"), info)
+    cap = out / "check.csv"
+    for stale in (cap, Path(f"{cap}.meta.json")):
+        stale.unlink(missing_ok=True)
+    simulated_stage_capture(unit, load_schedule(out / "check-poses.csv"), cap, flavor="grbl", seed=8)
+    ds = load_dataset(cap)
+    noise, _ = row_noise(ds.meta, drawing)
+    print(f"   a check: 30 random poses in the working box, captured through the same stage -> {cap}; `fitgen check "
+          f"MODEL {cap.name}`: each model's max error there, and the greatest that the sensor it was fitted on "
+          "predicts (the twin: units from its identification's posterior):")
+    for name, (model, sensor, unit_file) in models.items():
+        posterior = unit_posterior(unit_file, sensor) if unit_file else None
+        c = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior)
+        said = ", ".join(f"{o} {c.measured[o]['max']:.3g} (up to {c.predicted(o, 'max')[2]:.3g})" for o in c.outputs)
+        verdict = ("as predicted" if not c.failed() else
+                   f"{max(c.beyond(o) for o in c.outputs):.2g}x the greatest: it does not describe this unit")
+        print(f"   {name:16} {said}: {verdict}")
+    print(f"   ({time.monotonic() - t:.1f} s)")
 
 
 def _codegen_stage(model, out: Path, held_out) -> int:
