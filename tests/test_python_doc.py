@@ -186,6 +186,19 @@ def test_the_twin_of_a_short_capture_serves_the_unit_as_its_file_says(doc):
             in printed[6]
 
 
+def test_the_check_passes_the_twin_and_fails_the_drawings_model(doc):
+    """Section 8: the twin's model on unit 7's check capture within what its identification predicts, the drawing's
+    model beyond every prediction in each output."""
+    ns, _, printed = doc
+    twin, drawing = ns["checks"]["twin's"], ns["checks"]["drawing's"]
+    assert twin.rows == 30 and twin.units == 8 and drawing.units == 1
+    assert twin.failed() == [] and drawing.failed() == list(drawing.outputs)
+    for o in twin.outputs:
+        assert twin.measured[o]["max"] < twin.predicted(o, "max")[2] < drawing.measured[o]["max"] / 3
+        assert f"twin's model, {o}: max error {twin.measured[o]['max']:.3g}, predicted up to " in printed[7]
+    assert "twin's model: as predicted" in printed[7] and "drawing's model: fails on dx, dy, dz" in printed[7]
+
+
 def _estimates(path: Path) -> np.ndarray:
     lines = path.read_text().splitlines()
     return np.array([[float(v) for v in line.split(",")[:-1]] for line in lines[1:]])
@@ -218,6 +231,8 @@ def test_the_sh_lines_make_the_same(doc, tmp_path):
     assert twin.sha256 == ns["twin_model"].sha256
     assert json.dumps(twin.fit_info["held_out"]["errors"]) == json.dumps(ns["twin_model"].fit_info["held_out"]["errors"])
     assert np.array_equal(_estimates(tmp_path / "twin-est.csv"), ns["twin_est"])
+    # section 8: the same check poses and rows; `fitgen check` passes (status 0 above) and prints the twin's figures
+    assert np.array_equal(load_dataset(tmp_path / "check.csv").inputs, ns["check_capture"].inputs)
     proc = run_cli("fitgen", "fit", str(folder / "slide.csv"), "-o", str(tmp_path / "again.json"), "--held-out", "0")
     assert proc.returncode == 0, proc.stderr
     assert load_model(tmp_path / "again.json").sha256 == ns["model"].sha256
