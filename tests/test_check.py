@@ -2,6 +2,8 @@
 used to calibrate it, against what the unit's identification predicts there. A six-element ring in the slide scene
 keeps the twin's fit to a second."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -141,9 +143,18 @@ def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_u
     assert proc.returncode == 1
     assert "check: dx, dy, dz err beyond 1.5x every prediction: the model does not describe this unit" in proc.stderr
     assert all("x the greatest |" in ln for ln in proc.stdout.splitlines() if ln.startswith("| d"))
-    # a printer's check: its stage error given, the prediction widens with it
+    # a printer's check: its stage error given, the prediction widens with it; by default, the error the unit was
+    # identified with (the posterior records it), so a unit identified on a printer is checked as on one
     loose = run_cli("fitgen", "check", str(folder / "twin.json"), str(ok), "--rig-error", "0.03")
     assert loose.returncode == 0 and "stage's error (0.03 mm)" in loose.stdout
+    assert "stage's error (0.01 mm)" in proc.stdout  # the unit 8 run's, by default: unit 7 was identified at 0.01
+    record = json.loads((folder / "twin.posterior.json").read_text())
+    try:
+        (folder / "twin.posterior.json").write_text(json.dumps({**record, "rig_error": 0.03}))
+        printer = run_cli("fitgen", "check", str(folder / "twin.json"), str(ok))
+        assert printer.returncode == 0 and "stage's error (0.03 mm)" in printer.stdout, printer.stdout
+    finally:
+        (folder / "twin.posterior.json").write_text(json.dumps(record))
     # bad input: one line, status 2
     (tmp_path / "bare.csv").write_text("v1,v2,v3,v4,v5,v6\n" + "1,1,1,1,1,1\n" * 3)
     lifted = _save(tmp_path / "lifted.csv", _capture(unit, poses, 1)[:3], np.tile([0, 0, 0.2, 0, 0], (3, 1)))
@@ -153,6 +164,9 @@ def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_u
                        (lifted, "every row of the check capture is lifted off the skin"),
                        (tmp_path / "mT.csv", "mT"), (tmp_path / "none.csv", "no such file")):
         assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(data)), contains=said)
+    for rig in ("-1", "1e300"):  # as identify takes it
+        assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(ok), f"--rig-error={rig}"),
+                              contains="the rig error must be 0..0.5 mm")
     drawing_model = tmp_path / "m.json"
     load_model(folder / "twin.json").save(drawing_model)
     (folder / "twin.toml").rename(folder / "gone.toml")

@@ -192,6 +192,7 @@ def cmd_check(args) -> int:
     from fitgen.equations.model import check_input_units, load_model
     from fitgen.fitting.check import DRAWS, TOO_FAR, check
     from fitgen.fitting.holdout import device_precision, fitted_sensor, fitted_sensor_spec, unit_posterior
+    from fitgen.fitting.identify import RIG_ERROR
     from fitgen.fitting.unitrecord import row_noise
     from fitgen.physics.dataset import load_dataset
     from fitgen.physics.sensor import load_sensor
@@ -208,7 +209,10 @@ def cmd_check(args) -> int:
     sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on")
     posterior = unit_posterior(spec, sensor) if Path(spec).is_file() else None
     noise, source = row_noise(ds.meta, sensor)
-    result = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior, rig_error=args.rig_error,
+    rig = args.rig_error if args.rig_error is not None else (posterior or {}).get("rig_error", RIG_ERROR)
+    if not isinstance(rig, (int, float)) or isinstance(rig, bool):
+        raise InputError(f"{spec}'s posterior records a rig error of {rig!r}: give --rig-error")
+    result = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior, rig_error=rig,
                    precision=args.precision or device_precision(model))
     where = (f"{result.units} units drawn from the posterior of {sensor.name}" if posterior is not None
              else f"{sensor.name} (no posterior: its noise and the stage's error alone)")
@@ -278,7 +282,8 @@ def add_calibration_commands(command) -> None:
     ch.add_argument("capture", metavar="CHECK.csv",
                     help="a capture of the unit at poses never used to calibrate it (fitgen schedule --check)")
     ch.add_argument("--sensor", help="the unit's file (default: the one the model's held-out figures were made on)")
-    ch.add_argument("--rig-error", type=finite, default=0.01, metavar="MM",
-                    help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
+    ch.add_argument("--rig-error", type=finite, metavar="MM",
+                    help="the stage's own position error, mm rms per axis (default: the one the unit was identified "
+                         "with, else 0.01; a 3D printer 0.03)")
     ch.add_argument("--precision", choices=("double", "float", "fixed"),
                     help="the arithmetic to estimate in (default: the one the model was fitted for)")

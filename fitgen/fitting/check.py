@@ -13,6 +13,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
+from fitgen.fitting.capturecheck import check_error
 from fitgen.fitting.holdout import POSTERIOR_UNITS, estimator, posterior_units
 from fitgen.fitting.identify import RIG_ERROR
 from fitgen.physics.pose import POSE_NAMES, off_skin
@@ -64,6 +65,7 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
     noise ``row_noise`` (per element or one number): predicted on ``units`` units drawn from ``posterior`` (an
     identified unit's record) or on ``sensor`` alone, each read ``draws`` times at the labels moved by ``rig_error``
     (mm rms per axis) with that noise, estimated in ``precision``. Rows off the skin are left out."""
+    check_error("rig error", rig_error)
     inputs, labels = np.asarray(inputs, dtype=float), np.asarray(labels, dtype=float)
     keep = ~off_skin(labels)
     inputs, labels = inputs[keep], labels[keep]
