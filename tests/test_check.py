@@ -139,8 +139,14 @@ def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_u
     assert proc.stderr.strip().endswith("check: every output within what the identification predicts")
     other, _ = draw_unit(drawing, 8)
     bad = _save(tmp_path / "bad.csv", _capture(other, poses, 100), poses)
-    proc = run_cli("fitgen", "check", str(folder / "twin.json"), str(bad))
+    proc = run_cli("fitgen", "check", str(folder / "twin.json"), str(bad), "--plot", str(tmp_path / "plots"))
     assert proc.returncode == 1
+    assert f"plot: {tmp_path / 'plots' / 'check.png'}" in proc.stderr
+    assert (tmp_path / "plots" / "check.png").read_bytes()[:4] == b"\x89PNG"
+    # a refused check writes no figure
+    assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(tmp_path / "none.csv"), "--plot",
+                                  str(tmp_path / "no-plots")), contains="no such file")
+    assert not (tmp_path / "no-plots").exists()
     assert "check: dx, dy, dz err beyond 1.5x every prediction: the model does not describe this unit" in proc.stderr
     assert all("x the greatest |" in ln for ln in proc.stdout.splitlines() if ln.startswith("| d"))
     # a printer's check: its stage error given, the prediction widens with it; by default, the error the unit was

@@ -197,6 +197,9 @@ def cmd_check(args) -> int:
     from fitgen.physics.dataset import load_dataset
     from fitgen.physics.sensor import load_sensor
 
+    from fitgen.app import plots
+
+    folder = plots.require(args.plot) if args.plot else None
     model = load_model(args.model)
     ds = load_dataset(args.capture)
     check_input_units(model, ds.meta.get("units"), f"{args.capture}'s readings", f"model {args.model}")
@@ -228,6 +231,10 @@ def cmd_check(args) -> int:
         said = "as predicted" if beyond <= 1 else f"{beyond:.2g}x the greatest"
         print(f"| {o} | {unit} | {result.measured[o]['max']:.3g} | {mm:.3g} ({ml:.3g}-{mh:.3g}) | "
               f"{result.measured[o]['rms']:.3g} | {rm:.3g} ({rl:.3g}-{rh:.3g}) | {said} |")
+    if folder is not None:
+        [png] = write_all([(folder / "check.png",
+                            plots.check_png(result, {o: model.equation(o).unit for o in result.outputs}))])
+        print(f"plot: {png}", file=sys.stderr)
     failed = result.failed()
     if failed:
         print(f"\ncheck: {', '.join(failed)} err beyond {TOO_FAR:g}x every prediction: the model does not describe "
@@ -287,3 +294,5 @@ def add_calibration_commands(command) -> None:
                          "with, else 0.01; a 3D printer 0.03)")
     ch.add_argument("--precision", choices=("double", "float", "fixed"),
                     help="the arithmetic to estimate in (default: the one the model was fitted for)")
+    ch.add_argument("--plot", metavar="DIR", help="also DIR/check.png: the measured errors beside the predicted ones "
+                    "(needs matplotlib)")

@@ -251,3 +251,28 @@ def allan(av, path: Path) -> Path:
     ax.legend(fontsize=7, ncol=4, loc="lower left")
     fig.tight_layout()
     return write_in_folder(path.parent, path.name, _png(fig))
+
+
+def check_png(result, units: dict) -> bytes:
+    """fitgen check --plot: per output, the measured max and RMS error on the check capture beside the figures
+    drawn from the prediction (one per unit and draw), as PNG; ``units``: each output's unit."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(result.outputs), figsize=(2.3 * len(result.outputs) + 1, 3.6), squeeze=False)
+    jitter = np.random.default_rng(0).uniform(-0.12, 0.12, len(next(iter(result.drawn.values()))["max"]))
+    for ax, o in zip(axes[0], result.outputs):
+        for x, figure in enumerate(("max", "rms")):
+            ax.plot(x + jitter, result.drawn[o][figure], ".", color="0.6", ms=4,
+                    label="predicted (a draw of the stage's error and the noise on each unit)" if x == 0 else None)
+            ax.plot([x], [result.measured[o][figure]], "D", color="C3" if o in result.failed() else "C2", ms=7,
+                    label="measured on the unit" if x == 0 else None)
+        ax.set_xticks([0, 1], ["max", "RMS"])
+        ax.set_xlim(-0.5, 1.5)
+        ax.set_yscale("log")
+        ax.set_title(f"{o} [{units[o]}]", fontsize=10)
+        ax.grid(True, axis="y", which="both", lw=0.3, alpha=0.5)
+    axes[0][0].set_ylabel("error: estimate - stage label")
+    fig.legend(*axes[0][0].get_legend_handles_labels(), loc="lower center", ncol=2, fontsize=8)
+    fig.suptitle(f"check: {result.rows} rows; red: beyond every prediction by more than the check allows",
+                 fontsize=9)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    return _png(fig)
