@@ -189,6 +189,7 @@ def _check_schedule(args, drawing, axes, samples: int) -> int:
 
 def cmd_check(args) -> int:
     """``check``: the measured errors on a check capture beside the ones the unit's identification predicts."""
+    from fitgen.app import plots
     from fitgen.equations.model import check_input_units, load_model
     from fitgen.fitting.check import DRAWS, TOO_FAR, check
     from fitgen.fitting.holdout import device_precision, fitted_sensor, fitted_sensor_spec, unit_posterior
@@ -196,8 +197,6 @@ def cmd_check(args) -> int:
     from fitgen.fitting.unitrecord import row_noise
     from fitgen.physics.dataset import load_dataset
     from fitgen.physics.sensor import load_sensor
-
-    from fitgen.app import plots
 
     folder = plots.require(args.plot) if args.plot else None
     model = load_model(args.model)
@@ -241,7 +240,8 @@ def cmd_check(args) -> int:
               "this unit as it is now (a knock, the sensor moved on its bed, another unit's file, the temperature); "
               "capture, identify and fit again", file=sys.stderr)
         return 1
-    print("\ncheck: every output within what the identification predicts", file=sys.stderr)
+    print(f"\ncheck: every output within what {'the identification' if posterior else 'sensor ' + sensor.name} "
+          "predicts", file=sys.stderr)
     return 0
 
 
