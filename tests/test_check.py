@@ -104,20 +104,21 @@ def test_check_poses_are_random_in_the_working_box_in_contact_and_within_the_lin
 
 
 def test_the_twin_on_its_unit_reads_as_predicted_and_on_another_unit_fails(twin):
-    """20 check captures of unit 7 (30 poses, the stage's 0.01 mm): none beyond the greatest prediction; a check
-    capture of unit 8 through unit 7's model: every output far beyond it."""
+    """20 check captures of unit 7 (30 poses, the stage's 0.01 mm): none fails, and hardly an output errs beyond the
+    greatest of the 40 predictions (none here: at most 0.96 of it); a check capture of unit 8 through unit 7's
+    model: every output far beyond it (14-34x)."""
     folder, drawing, unit, sensor, model = twin
     posterior = unit_posterior(folder / "twin.toml", sensor)
-    worst = 0.0
+    beyond = []
     for seed in range(20):
         poses, _ = check_schedule(drawing, 30, seed=seed)
         c = check(model, _capture(unit, poses, 100 + seed), poses, sensor, ROW_NOISE, posterior=posterior)
         assert c.rows == 30 and c.units == 8 and c.outputs == ("dx", "dy", "dz")
         assert c.failed() == []
-        worst = max(worst, *(c.beyond(o) for o in c.outputs))
+        beyond += [c.beyond(o) for o in c.outputs]
         for o in c.outputs:  # the rig's error dominates both: the same order
             assert c.predicted(o, "max")[0] / 3 < c.measured[o]["max"] < 3 * c.predicted(o, "max")[0]
-    assert worst < 1.0, worst
+    assert sum(b > 1 for b in beyond) <= 3, sorted(beyond)[-5:]  # 1 in 41 each, by chance alone
     other, _ = draw_unit(drawing, 8)
     poses, _ = check_schedule(drawing, 30, seed=0)
     c = check(model, _capture(other, poses, 100), poses, sensor, ROW_NOISE, posterior=posterior)
@@ -125,6 +126,23 @@ def test_the_twin_on_its_unit_reads_as_predicted_and_on_another_unit_fails(twin)
     # the measured figures are the model's own errors on these rows
     est = model.predict(_capture(other, poses, 100), precision="float")
     assert c.measured["dx"]["max"] == float(np.abs(est[:, 0] - poses[:, 0]).max())
+
+
+def test_a_sensor_moved_on_its_bed_fails_the_check_from_about_005_mm(twin):
+    """The sensor moved in x on the stage's bed after calibration (every label off by the same d): at the stage's
+    0.01 mm, 0.1 mm fails every one of 10 checks, 0.05 mm nearly every one, 0.02 mm none (the labels' own error
+    hides it), as docs/calibration.md says."""
+    folder, drawing, unit, sensor, model = twin
+    posterior = unit_posterior(folder / "twin.toml", sensor)
+    failed = {}
+    for d in (0.02, 0.05, 0.1):
+        failed[d] = 0
+        for seed in range(10):
+            poses, _ = check_schedule(drawing, 30, seed=seed)
+            y = _capture(unit, poses, 100 + seed)
+            c = check(model, y, poses + [d, 0, 0, 0, 0], sensor, ROW_NOISE, posterior=posterior)
+            failed[d] += bool(c.failed())
+    assert failed[0.02] == 0 and failed[0.05] >= 8 and failed[0.1] == 10, failed
 
 
 def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_unit(twin, tmp_path):
