@@ -97,8 +97,11 @@ def test_check_poses_are_random_in_the_working_box_in_contact_and_within_the_lin
     from host.capture import load_schedule
 
     assert np.array_equal(load_schedule(tmp_path / "c.csv").poses, poses)
+    proc = run_cli("fitgen", "schedule", "--check", "5", "--axes", "dx,thx", "-o", str(tmp_path / "t.csv"))
+    assert proc.returncode == 0 and "(dx -2..2 mm, thx -5..5 deg from first contact" in proc.stderr, proc.stderr
     for bad, said in ((["--check", "0"], "--check must be 1..10000"),
-                      (["--check", "5", "--limits", "dz=1:2"], "leave it no room")):
+                      (["--check", "5", "--limits", "dz=1:2"], "leave it no room"),
+                      (["--seed", "3"], "--seed goes with --check")):
         assert_one_line_error(run_cli("fitgen", "schedule", *bad, "-o", str(tmp_path / "x.csv")), contains=said)
     assert not (tmp_path / "x.csv").exists()
 

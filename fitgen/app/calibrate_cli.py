@@ -140,6 +140,8 @@ def cmd_schedule(args) -> int:
     from fitgen.fitting.schedule import schedule, write_schedule
     from fitgen.physics.simulate import parse_ranges
 
+    if args.seed and args.check is None:
+        raise InputError("--seed goes with --check (the D-optimal schedule draws nothing at random)")
     drawing = sensor_of(args)
     axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
     samples, noise, told = samples_of(args, drawing)
@@ -180,8 +182,9 @@ def _check_schedule(args, drawing, axes, samples: int) -> int:
     poses, info = check_schedule(drawing, args.check, axes=axes, ranges=parse_ranges(args.limits, {}), seed=args.seed)
     write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples, "sensor_sha256": drawing.sha256,
                                               "transfer": drawing.transfer})
-    box = ", ".join(f"{a} {lo:g}..{hi:g}" for a, (lo, hi) in info["ranges"].items())
-    print(f"wrote {len(poses)} random check poses ({box} mm from first contact, seed {args.seed}) to {args.output}: "
+    box = ", ".join(f"{a} {lo:g}..{hi:g} {'deg' if a.startswith('th') else 'mm'}"
+                    for a, (lo, hi) in info["ranges"].items())
+    print(f"wrote {len(poses)} random check poses ({box} from first contact, seed {args.seed}) to {args.output}: "
           "capture them as for the calibration (tactile-host capture --poses), then fitgen check MODEL CHECK.csv",
           file=sys.stderr)
     return 0
