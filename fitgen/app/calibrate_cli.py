@@ -194,10 +194,8 @@ def cmd_check(args) -> int:
     """``check``: the measured errors on a check capture beside the ones the unit's identification predicts."""
     from fitgen.app import plots
     from fitgen.equations.model import check_input_units, load_model
-    from fitgen.fitting.check import DRAWS, TOO_FAR, check
-    from fitgen.fitting.holdout import device_precision, fitted_sensor, fitted_sensor_spec, unit_posterior
-    from fitgen.fitting.identify import RIG_ERROR
-    from fitgen.fitting.unitrecord import row_noise
+    from fitgen.fitting.check import DRAWS, TOO_FAR, check_capture
+    from fitgen.fitting.holdout import fitted_sensor, fitted_sensor_spec
     from fitgen.physics.dataset import load_dataset
     from fitgen.physics.sensor import load_sensor
 
@@ -212,14 +210,8 @@ def cmd_check(args) -> int:
         raise InputError(f"model {args.model}: the sensor its held-out figures were made on is not found here (or "
                          "has changed): give the unit's file as --sensor")
     sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on")
-    posterior = unit_posterior(spec, sensor) if Path(spec).is_file() else None
-    noise, source = row_noise(ds.meta, sensor)
-    rig = args.rig_error if args.rig_error is not None else (posterior or {}).get("rig_error", RIG_ERROR)
-    if not isinstance(rig, (int, float)) or isinstance(rig, bool):
-        raise InputError(f"{spec}'s posterior records a rig error of {rig!r}: give --rig-error")
-    result = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior, rig_error=rig,
-                   precision=args.precision or device_precision(model))
-    where = (f"{result.units} units drawn from the posterior of {sensor.name}" if posterior is not None
+    result, source = check_capture(model, ds, sensor, spec, rig_error=args.rig_error, precision=args.precision)
+    where = (f"{result.units} units drawn from the posterior of {sensor.name}" if result.identified
              else f"{sensor.name} (no posterior: its noise and the stage's error alone)")
     print(f"check: {result.rows} rows of {args.capture} in contact, estimated in {result.precision}; predicted on "
           f"{where}, {DRAWS} draws each of the stage's error ({result.rig_error:g} mm) and the rows' noise "
@@ -243,7 +235,7 @@ def cmd_check(args) -> int:
               "this unit as it is now (a knock, the sensor moved on its bed, another unit's file, the temperature); "
               "capture, identify and fit again", file=sys.stderr)
         return 1
-    print(f"\ncheck: every output within what {'the identification' if posterior else 'sensor ' + sensor.name} "
+    print(f"\ncheck: every output within what {'the identification' if result.identified else 'sensor ' + sensor.name} "
           "predicts", file=sys.stderr)
     return 0
 

@@ -190,10 +190,8 @@ def _unit_stage(out: Path, drawing_model) -> None:
 def _check_stage(out: Path, drawing, unit, models: dict) -> None:
     """A check capture of the unit through the same stage, and `fitgen check` of each model on it: ``models`` maps a
     name to the model, the sensor it was fitted on and that sensor's unit file (None for the drawing)."""
-    from fitgen.fitting.check import check
-    from fitgen.fitting.holdout import unit_posterior
+    from fitgen.fitting.check import check_capture
     from fitgen.fitting.schedule import check_schedule, write_schedule
-    from fitgen.fitting.unitrecord import row_noise
     from fitgen.physics.dataset import load_dataset
     from host.capture import load_schedule
     from host.stagesim import simulated_stage_capture
@@ -206,13 +204,11 @@ def _check_stage(out: Path, drawing, unit, models: dict) -> None:
         stale.unlink(missing_ok=True)
     simulated_stage_capture(unit, load_schedule(out / "check-poses.csv"), cap, flavor="grbl", seed=8)
     ds = load_dataset(cap)
-    noise, _ = row_noise(ds.meta, drawing)
     print(f"   a check: 30 random poses in the working box, captured through the same stage -> {cap}; `fitgen check "
           f"MODEL {cap.name}`: each model's max error there, and the greatest that the sensor it was fitted on "
           "predicts (the twin: units from its identification's posterior):")
     for name, (model, sensor, unit_file) in models.items():
-        posterior = unit_posterior(unit_file, sensor) if unit_file else None
-        c = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior)
+        c, _ = check_capture(model, ds, sensor, unit_file)
         said = ", ".join(f"{o} {c.measured[o]['max']:.3g} (up to {c.predicted(o, 'max')[2]:.3g})" for o in c.outputs)
         verdict = ("as predicted" if not c.failed() else
                    f"{max(c.beyond(o) for o in c.outputs):.2g}x the greatest: it does not describe this unit")

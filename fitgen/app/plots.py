@@ -259,11 +259,12 @@ def check_png(result, units: dict) -> bytes:
     plt = _plt()
     fig, axes = plt.subplots(1, len(result.outputs), figsize=(2.3 * len(result.outputs) + 1, 3.6), squeeze=False)
     jitter = np.random.default_rng(0).uniform(-0.12, 0.12, len(next(iter(result.drawn.values()))["max"]))
+    failed = result.failed()
     for ax, o in zip(axes[0], result.outputs):
         for x, figure in enumerate(("max", "rms")):
             ax.plot(x + jitter, result.drawn[o][figure], ".", color="0.6", ms=4,
                     label="predicted (a draw of the stage's error and the noise on each unit)" if x == 0 else None)
-            ax.plot([x], [result.measured[o][figure]], "D", color="C3" if o in result.failed() else "C2", ms=7,
+            ax.plot([x], [result.measured[o][figure]], "D", color="C3" if o in failed else "C2", ms=7,
                     label="measured on the unit" if x == 0 else None)
         ax.set_xticks([0, 1], ["max", "RMS"])
         ax.set_xlim(-0.5, 1.5)

@@ -8,14 +8,16 @@ does reads within the spread of the draws."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
 from fitgen.fitting.capturecheck import check_error
-from fitgen.fitting.holdout import POSTERIOR_UNITS, estimator, posterior_units
+from fitgen.fitting.holdout import POSTERIOR_UNITS, device_precision, estimator, posterior_units, unit_posterior
 from fitgen.fitting.identify import RIG_ERROR
+from fitgen.fitting.unitrecord import row_noise
 from fitgen.physics.pose import POSE_NAMES, off_skin
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings
@@ -39,6 +41,7 @@ class Check:
     units: int
     draws: int
     rig_error: float
+    identified: bool  # the units were drawn from an identification's posterior (else the model's sensor alone)
 
     def predicted(self, output: str, figure: str) -> tuple[float, float, float]:
         """The median, least and greatest of the drawn ``figure`` of ``output``."""
@@ -90,4 +93,22 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
             y = np.clip(y + rng.normal(0.0, 1.0, y.shape) * noise, lo, hi)
             sims.append(_figures(fn(y)[:, cols] - truth))
     drawn = {o: {f: np.array([s[f][j] for s in sims]) for f in FIGURES} for j, o in enumerate(outputs)}
-    return Check(outputs, len(labels), precision, measured, drawn, len(pool), draws, float(rig_error))
+    return Check(outputs, len(labels), precision, measured, drawn, len(pool), draws, float(rig_error),
+                 posterior is not None)
+
+
+def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float | None = None,
+                  precision: str | None = None) -> tuple[Check, str]:
+    """:func:`check` of ``model`` on the check capture ``ds`` (a dataset), as fitgen check runs it: the rows' noise
+    as its meta says (fitgen.fitting.unitrecord.row_noise), units drawn from the posterior of ``unit_file`` where it
+    has one, the stage's error ``rig_error`` or else the one the unit was identified with (RIG_ERROR without a
+    record), in ``precision`` or else the one the model was fitted for; and where the rows' noise came from."""
+    posterior = unit_posterior(unit_file, sensor) if unit_file and Path(unit_file).is_file() else None
+    if rig_error is None:
+        rig_error = (posterior or {}).get("rig_error", RIG_ERROR)
+        if not isinstance(rig_error, (int, float)) or isinstance(rig_error, bool):
+            raise InputError(f"{unit_file}'s posterior records a rig error of {rig_error!r}: give --rig-error")
+    noise, source = row_noise(ds.meta, sensor)
+    result = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior, rig_error=rig_error,
+                   precision=precision or device_precision(model))
+    return result, source

@@ -432,10 +432,10 @@ def _solve(prob: Problem, ranges: dict | None, progress) -> Identification:
 
 def explained_within(trial: Problem, start: np.ndarray | None = None, resweep: float = RESWEEP) -> bool:
     """A short fit of ``trial`` from ``start`` (parameters in physical units; default the drawing): do its rows read
-    as a unit within the tolerances, to the noise? One sweep, and a
-    second when the chi-square lands within RESWEEP x CHI2_LIMIT: the rows' whitening at the drawing can leave it 3x
-    high on a capture the unit explains (seen at 3.2, 0.98 after the second sweep; which side of the limit it fell
-    hung on the machine's rounding), while a wrong trial lands in the thousands."""
+    as a unit within the tolerances, to the noise? One sweep, and a second when the chi-square lands within
+    ``resweep`` x CHI2_LIMIT: the rows' whitening at the drawing can leave it 3x high on a capture the unit explains
+    (seen at 3.2, 0.98 after the second sweep; which side of the limit it fell hung on the machine's rounding), while
+    a wrong trial lands in the thousands."""
     sd = trial.space.prior_sd
     z0 = None if start is None else np.divide(start, sd, out=np.zeros_like(sd), where=sd > 0)
     z = _maximum_a_posteriori(trial, sweeps=1, max_nfev=BLAME_NFEV, start=z0)

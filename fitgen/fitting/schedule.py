@@ -64,17 +64,30 @@ def candidates(axes: tuple[str, ...], ranges: dict) -> np.ndarray:
     return np.vstack([grid, [[0.0, 0.0, REST_LIFT_MM, 0.0, 0.0]]])
 
 
-def capture_box(drawing: Sensor, axes, limits: dict | None = None) -> dict:
+def checked_axes(axes, ranges: dict | None) -> tuple[str, ...]:
+    """``axes`` as a tuple; InputError unless they are distinct pose names and ``ranges`` (the stage's limits) limit
+    none of the others."""
+    axes = tuple(axes)
+    if not axes or any(a not in POSE_NAMES for a in axes) or len(set(axes)) != len(axes):
+        raise InputError(f"--axes takes distinct names of {','.join(POSE_NAMES)}, got {','.join(axes) or 'none'}")
+    unmoved = [a for a in (ranges or {}) if a not in axes]
+    if unmoved:
+        raise InputError(f"--limits gives {unmoved[0]}, which --axes ({','.join(axes)}) does not move")
+    return axes
+
+
+def capture_box(drawing: Sensor, axes, limits: dict | None = None, working: bool = False) -> dict:
     """Per pose component, the range a capture's candidates span: for each of ``axes`` the sensor's travel (dx, dy,
-    dz; the working box DEFAULT_RANGES where its file gives none, and for the tilts) within the stage's
-    ``limits``; the others 0. InputError for an axis the limits leave no room."""
-    travel = {**DEFAULT_RANGES, **drawing.travel}
+    dz; the working box DEFAULT_RANGES where its file gives none, and for the tilts), or with ``working`` the
+    working box alone, within the stage's ``limits``; the others 0. InputError for an axis the limits leave no
+    room."""
+    travel = DEFAULT_RANGES if working else {**DEFAULT_RANGES, **drawing.travel}
     box = {a: (0.0, 0.0) for a in POSE_NAMES}
     for a in axes:
         lim = (limits or {}).get(a, travel[a])
         lo, hi = max(lim[0], travel[a][0]), min(lim[1], travel[a][1])
         if not lo < hi:
-            what = "travel" if a in TRAVEL_AXES else "pose box"
+            what = "working pose box" if working else "travel" if a in TRAVEL_AXES else "pose box"
             raise InputError(f"the limits of {a} ({lim[0]:g}..{lim[1]:g}) leave it no room to move within the "
                              f"sensor's {what} ({travel[a][0]:g}..{travel[a][1]:g})")
         box[a] = (lo, hi)
@@ -171,14 +184,9 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     """``n`` stage poses (n, 5) that pin ``drawing``'s units best, within ``ranges`` (the stage's limits), the
     sensor's travel and its elements' linear range (:func:`capture_candidates`), and a record of how they were
     chosen. ``progress(done, total, note)``."""
-    axes = tuple(axes)
-    if not axes or any(a not in POSE_NAMES for a in axes) or len(set(axes)) != len(axes):
-        raise InputError(f"--axes takes distinct names of {','.join(POSE_NAMES)}, got {','.join(axes) or 'none'}")
+    axes = checked_axes(axes, ranges)
     if n < MIN_ROWS or n > 10000:
         raise InputError(f"--n must be {MIN_ROWS}..10000 (identify needs at least {MIN_ROWS} rows), got {n}")
-    unmoved = [a for a in (ranges or {}) if a not in axes]
-    if unmoved:
-        raise InputError(f"--limits gives {unmoved[0]}, which --axes ({','.join(axes)}) does not move")
     check_error("rig error", rig_error)
     noise = drawing.noise if noise is None else noise
     if not noise > 0:
@@ -218,19 +226,10 @@ def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: 
     box (DEFAULT_RANGES, where estimators are fitted and held out) within ``ranges`` (the stage's limits) in
     ``axes``, the others 0, in contact and within the elements' linear range; and a record of how they were drawn.
     Random, not chosen: a check measures the estimator where it is used, not where it learns most."""
+    axes = checked_axes(axes, ranges)
     if not 1 <= n <= 10000:
         raise InputError(f"--check must be 1..10000 poses, got {n}")
-    unmoved = [a for a in (ranges or {}) if a not in axes]
-    if unmoved:
-        raise InputError(f"--limits gives {unmoved[0]}, which --axes ({','.join(axes)}) does not move")
-    box = {a: (0.0, 0.0) for a in POSE_NAMES}
-    for a in axes:
-        lo, hi = (ranges or {}).get(a, DEFAULT_RANGES[a])
-        lo, hi = max(lo, DEFAULT_RANGES[a][0]), min(hi, DEFAULT_RANGES[a][1])
-        if not lo < hi:
-            raise InputError(f"the limits of {a} leave it no room within the working pose box "
-                             f"({DEFAULT_RANGES[a][0]:g}..{DEFAULT_RANGES[a][1]:g})")
-        box[a] = (lo, hi)
+    box = capture_box(drawing, axes, ranges, working=True)
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x636865636B]))
     cand = np.zeros((CHECK_TRIES * n, len(POSE_NAMES)))
     for a in axes:

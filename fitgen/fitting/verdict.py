@@ -48,23 +48,30 @@ def low_residual_line(ident: Identification, source: str) -> list[str]:
             "carry no noise, so the standard errors are too wide"]
 
 
-FIELD_HINT_CHI2 = 1.3  # an accepted capture's reduced chi-square above this: does a field the stage carries explain it?
+# an accepted capture's reduced chi-square above this: does a looser stage, or a field the stage carries, explain it?
+FIELD_HINT_CHI2 = 1.3
 # a row carrying this share of the chi-square or more: the excess is that row's (a slip: its line names it), not
 # every row's, as a looser stage's is (a stage of 0.025 mm taken for 0.01: at most 0.09; a row slipped 0.15 mm: 0.4)
-ONE_ROWS = 0.2
+ONE_ROW_SHARE = 0.2
+
+
+def _halves_excess(ident: Identification, again: Identification) -> bool:
+    """Whether ``again`` (the capture identified once more, allowing for one more cause) brings the reduced
+    chi-square's excess over 1 down by half or more."""
+    return again.reduced_chi2 <= 1.0 + (ident.reduced_chi2 - 1.0) / 2.0
 
 
 def looser_stage_line(ident: Identification, progress=None) -> list[str]:
     """A line when an accepted capture's reduced chi-square sits above FIELD_HINT_CHI2 spread over its rows (none
-    carries ONE_ROWS of it), its rig error is under a printer's (PRINTER_RIG) and a printer's halves the excess over
-    1: the stage is looser than it was taken for, and the standard errors, and the twin's figures they widen, are
-    too narrow. One more identification, only then."""
+    carries ONE_ROW_SHARE of it), its rig error is under a printer's (PRINTER_RIG) and a printer's halves the excess
+    over 1: the stage is looser than it was taken for, and the standard errors, and the twin's figures they widen,
+    are too narrow. One more identification, only then."""
     prob = ident.problem
-    if prob.rig_error >= PRINTER_RIG or ident.reduced_chi2 <= FIELD_HINT_CHI2 or ident.row_chi2.max() >= ONE_ROWS:
+    if prob.rig_error >= PRINTER_RIG or ident.reduced_chi2 <= FIELD_HINT_CHI2 or ident.row_chi2.max() >= ONE_ROW_SHARE:
         return []
     again = identify(prob.space.drawing, prob.readings, prob.poses, prob.noise, rig_error=PRINTER_RIG,
                      zero_error=prob.zero_error, progress=progress)
-    if again.reduced_chi2 > 1.0 + (ident.reduced_chi2 - 1.0) / 2.0:
+    if not _halves_excess(ident, again):
         return []
     return [f"the stage's own error explains the rows better allowed for as {PRINTER_RIG:g} mm rms per axis (a 3D "
             f"printer's) than as {prob.rig_error:g}: reduced chi-square {again.reduced_chi2:.2f} against "
@@ -82,7 +89,7 @@ def field_line(ident: Identification, progress=None) -> list[str]:
     d = prob.space.drawing
     again = identify(replace(d, tolerances=replace(d.tolerances, stage_field=FIELD_TRY)), prob.readings, prob.poses,
                      prob.noise, rig_error=prob.rig_error, zero_error=prob.zero_error, progress=progress)
-    if again.reduced_chi2 > 1.0 + (ident.reduced_chi2 - 1.0) / 2.0:
+    if not _halves_excess(ident, again):
         return []
     return [f"a field that moves with the stage (its motors, a steel bed) explains the rows better: reduced "
             f"chi-square {again.reduced_chi2:.2f} against {ident.reduced_chi2:.2f}; give the drawing [tolerances] "
