@@ -59,6 +59,14 @@ class Terminal:
         pass
 
 
+def save_capture(path, y, poses, meta=None):
+    """Readings ``y`` at stage poses (their dx, dy, dz) saved as a capture in volts, with ``meta`` besides; the path."""
+    from fitgen.physics.dataset import Dataset
+
+    Dataset(y, poses[:, :3], ("dx", "dy", "dz"), {"units": "V", **(meta or {})}).save(path)
+    return path
+
+
 def assert_one_line_error(proc, status: int = 2, contains: str | None = None):
     assert proc.returncode == status, (proc.returncode, proc.stdout, proc.stderr)
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]

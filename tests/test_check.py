@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from conftest import assert_one_line_error, run_cli
+from conftest import assert_one_line_error, run_cli, save_capture
 from fitgen.equations.model import load_model
 from fitgen.fitting.check import TOO_FAR, check
 from fitgen.fitting.family import fit_device
@@ -16,7 +16,7 @@ from fitgen.fitting.holdout import unit_posterior
 from fitgen.fitting.identify import identify
 from fitgen.fitting.schedule import check_schedule, schedule, within_linear_range
 from fitgen.fitting.unitrecord import save
-from fitgen.physics.dataset import Dataset, load_dataset
+from fitgen.physics.dataset import load_dataset
 from fitgen.physics.pose import POSE_NAMES, off_skin
 from fitgen.physics.posesource import choose_poses
 from fitgen.physics.scenes import PRESETS
@@ -43,6 +43,7 @@ kind = "gmr"
 noise = 0.0005
 """
 ROW_NOISE = 0.0005 / 4  # rows of 16 samples
+ROWS_META = {"samples_per_row": 16}
 RIG = 0.01
 
 
@@ -51,11 +52,6 @@ def _capture(unit, poses, seed, rig=RIG):
     rng = np.random.default_rng(seed)
     y = readings(unit, rig_poses(poses, rig, rng), adc_bits=0)
     return y + rng.normal(0.0, ROW_NOISE, y.shape)
-
-
-def _save(path, y, poses):
-    Dataset(y, poses[:, :3], ("dx", "dy", "dz"), {"units": "V", "samples_per_row": 16}).save(path)
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -101,7 +97,9 @@ def test_check_poses_are_random_in_the_working_box_in_contact_and_within_the_lin
     assert proc.returncode == 0 and "(dx -2..2 mm, thx -5..5 deg from first contact" in proc.stderr, proc.stderr
     for bad, said in ((["--check", "0"], "--check must be 1..10000"),
                       (["--check", "5", "--limits", "dz=1:2"], "leave it no room"),
-                      (["--seed", "3"], "--seed goes with --check")):
+                      (["--seed", "3"], "--seed goes with --check"),
+                      (["--check", "5", "--axes", "dq"], "--axes takes distinct names"),  # a traceback before
+                      (["--check", "5", "--axes", "dx,dx"], "--axes takes distinct names")):
         assert_one_line_error(run_cli("fitgen", "schedule", *bad, "-o", str(tmp_path / "x.csv")), contains=said)
     assert not (tmp_path / "x.csv").exists()
 
@@ -151,7 +149,7 @@ def test_a_sensor_moved_on_its_bed_fails_the_check_from_about_005_mm(twin):
 def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_unit(twin, tmp_path):
     folder, drawing, unit, _, model = twin
     poses, _ = check_schedule(drawing, 30, seed=0)
-    ok = _save(tmp_path / "ok.csv", _capture(unit, poses, 100), poses)
+    ok = save_capture(tmp_path / "ok.csv", _capture(unit, poses, 100), poses, ROWS_META)
     proc = run_cli("fitgen", "check", str(folder / "twin.json"), str(ok))
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("check: 30 rows of ") and "8 units drawn from the posterior of twin" in proc.stdout
@@ -159,7 +157,7 @@ def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_u
     assert len(rows) == 3 and all(ln.endswith("| as predicted |") for ln in rows)
     assert proc.stderr.strip().endswith("check: every output within what the identification predicts")
     other, _ = draw_unit(drawing, 8)
-    bad = _save(tmp_path / "bad.csv", _capture(other, poses, 100), poses)
+    bad = save_capture(tmp_path / "bad.csv", _capture(other, poses, 100), poses, ROWS_META)
     proc = run_cli("fitgen", "check", str(folder / "twin.json"), str(bad), "--plot", str(tmp_path / "plots"))
     assert proc.returncode == 1
     assert f"plot: {tmp_path / 'plots' / 'check.png'}" in proc.stderr
@@ -184,9 +182,9 @@ def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_u
         (folder / "twin.posterior.json").write_text(json.dumps(record))
     # bad input: one line, status 2
     (tmp_path / "bare.csv").write_text("v1,v2,v3,v4,v5,v6\n" + "1,1,1,1,1,1\n" * 3)
-    lifted = _save(tmp_path / "lifted.csv", _capture(unit, poses, 1)[:3], np.tile([0, 0, 0.2, 0, 0], (3, 1)))
-    wrong = Dataset(np.ones((3, 6)), np.zeros((3, 3)), ("dx", "dy", "dz"), {"units": "mT"})
-    wrong.save(tmp_path / "mT.csv")
+    lifted = save_capture(tmp_path / "lifted.csv", _capture(unit, poses, 1)[:3], np.tile([0, 0, 0.2, 0, 0], (3, 1)),
+                          ROWS_META)
+    save_capture(tmp_path / "mT.csv", np.ones((3, 6)), np.zeros((3, 5)), {"units": "mT"})
     for data, said in ((tmp_path / "bare.csv", "no stage displacement (dx, dy, dz)"),
                        (lifted, "every row of the check capture is lifted off the skin"),
                        (tmp_path / "mT.csv", "mT"), (tmp_path / "none.csv", "no such file")):

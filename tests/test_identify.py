@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import assert_one_line_error, run_cli
+from conftest import assert_one_line_error, run_cli, save_capture
 from fitgen.base.errors import InputError
 from fitgen.fitting.identify import PINNABLE, RIG, Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
@@ -156,7 +156,7 @@ def test_a_field_the_stage_carries_is_fitted_where_the_drawing_allows_for_it(dra
     # file's figures come from its posterior
     text = (Path(presets.__file__).parent / "paper.toml").read_text().replace('name = "paper"', 'name = "mine"')
     (tmp_path / "mine.toml").write_text(text + "\n[tolerances]\nstage_field = 0.003\n")
-    _save_capture(tmp_path / "c.csv", y, poses, {"samples_per_row": SAMPLES})
+    save_capture(tmp_path / "c.csv", y, poses, {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "c.csv"), "--sensor", str(tmp_path / "mine.toml"), "-o",
                    str(tmp_path / "twin.toml"), "--rig-error", str(rig), "--zero-error", "0")
     assert proc.returncode == 0, proc.stderr
@@ -398,7 +398,7 @@ def test_a_spread_of_zero_fixes_its_parameter_at_the_drawing(drawing, plan, tmp_
     truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
     for name, (value, se) in ident.derived().items():
         assert abs(value - truth[name]) < 3.5 * se, (name, value, truth[name], se)
-    _save_capture(tmp_path / "c.csv", y, plan[0], {"samples_per_row": SAMPLES})
+    save_capture(tmp_path / "c.csv", y, plan[0], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "c.csv"), "--sensor", str(tmp_path / "mine.toml"), "-o",
                    str(tmp_path / "twin.toml"))
     assert proc.returncode == 0, proc.stderr
@@ -643,12 +643,6 @@ def test_cli_schedule_capture_identify(tmp_path):
 TWO_ADCS = "ads1115@0x48:0,1,2,3,ads1115@0x49:0,1,2,3"
 
 
-def _save_capture(path, y, poses, meta=None):
-    from fitgen.physics.dataset import Dataset
-
-    Dataset(y, poses[:, :3], ("dx", "dy", "dz"), {"units": "V", **(meta or {})}).save(path)
-
-
 def test_a_capture_read_in_the_wrong_units_is_said_so(drawing, plan, tmp_path):
     """Volts read as mT (a capture without meta, or --transfer raw against a meta saying V): the transfer
     that contradicts the meta is refused at once; without meta, the refusal says the other units fit better."""
@@ -656,7 +650,7 @@ def test_a_capture_read_in_the_wrong_units_is_said_so(drawing, plan, tmp_path):
 
     unit, _ = draw_unit(drawing, 25)
     y, _ = capture(unit, plan[0], 25)
-    _save_capture(tmp_path / "v.csv", y, plan[0], {"samples_per_row": SAMPLES})
+    save_capture(tmp_path / "v.csv", y, plan[0], {"samples_per_row": SAMPLES})
     assert_one_line_error(run_cli("fitgen", "identify", str(tmp_path / "v.csv"), "--transfer", "raw", "-o",
                                   str(tmp_path / "u.toml")), 2,
                           "--transfer raw reads mT, but " + str(tmp_path / "v.csv") + "'s meta says its readings are in V")
@@ -690,7 +684,7 @@ def test_a_printers_capture_identified_for_a_tighter_stage_names_the_rig_error(d
                            ("lifted", off, f", with row {lifted + 1} (line {lifted + 2}: {where}) left out; give "
                                            "--rig-error 0.03, or the stage's measured repeatability, and delete it")):
         path = tmp_path / f"{name}.csv"
-        _save_capture(path, yy, plan[0], {"samples_per_row": SAMPLES})
+        save_capture(path, yy, plan[0], {"samples_per_row": SAMPLES})
         proc = run_cli("fitgen", "identify", str(path), "-o", str(tmp_path / "u.toml"))
         assert_one_line_error(proc, contains="the stage's own error: allowed for as 0.03 mm rms per axis (a 3D "
                                              "printer's) instead of 0.01, the capture reads as a unit within the "
@@ -699,7 +693,7 @@ def test_a_printers_capture_identified_for_a_tighter_stage_names_the_rig_error(d
     assert run_cli("fitgen", "identify", str(tmp_path / "loose.csv"), "-o", str(tmp_path / "u.toml"), "--rig-error",
                    "0.03").returncode == 0
     keep = np.arange(len(off)) != lifted
-    _save_capture(tmp_path / "kept.csv", off[keep], plan[0][keep], {"samples_per_row": SAMPLES})
+    save_capture(tmp_path / "kept.csv", off[keep], plan[0][keep], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "kept.csv"), "-o", str(tmp_path / "k.toml"), "--rig-error",
                    "0.03")
     assert proc.returncode == 0, proc.stderr
@@ -744,7 +738,7 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
     }
     # a row the physics does not explain, in a capture it otherwise does: written, the row named
     deep, slipped = slip(unit, y, plan[0])
-    _save_capture(tmp_path / "slip.csv", slipped, plan[0], {"samples_per_row": SAMPLES})
+    save_capture(tmp_path / "slip.csv", slipped, plan[0], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "slip.csv"), "--sensor", "paper", "-o", str(tmp_path / "s.toml"))
     assert proc.returncode == 0, proc.stderr
     said = [ln for ln in proc.stderr.splitlines() if "stands out" in ln]
@@ -789,7 +783,7 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
     for name, (yy, pp, message) in cases.items():
         path = tmp_path / f"{name.replace(' ', '_')}.csv"
         # the capture's channel map, as tactile-host capture records it
-        _save_capture(path, yy, pp, {"samples_per_row": SAMPLES, "adc": TWO_ADCS})
+        save_capture(path, yy, pp, {"samples_per_row": SAMPLES, "adc": TWO_ADCS})
         out = path.with_suffix(".toml")
         proc = run_cli("fitgen", "identify", str(path), "--sensor", "paper", "-o", str(out))
         assert_one_line_error(proc, contains=message)
@@ -807,7 +801,7 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
     unit27, _ = draw_unit(drawing, 27)
     y27, _ = capture(unit27, plan[0], 27)
     y27[:, 2] = y27[:, 2].mean()
-    _save_capture(tmp_path / "dead.csv", y27, plan[0], {"samples_per_row": SAMPLES})
+    save_capture(tmp_path / "dead.csv", y27, plan[0], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "dead.csv"), "--sensor", "paper", "-o",
                    str(tmp_path / "d.toml"))
     assert_one_line_error(proc, contains="only with a unit far outside paper's tolerances (")
@@ -824,7 +818,7 @@ def test_a_sensor_turned_on_the_stage_is_named_and_the_axis_map_it_names_fixes_i
     turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # the stage's +x moves the magnet along +y
     machine = plan[0][:, :3]  # mm along X, Y, Z, as the schedule asked with --stage-axes X=dx,Y=dy,Z=dz
     y, _ = capture(unit, np.column_stack([machine @ turn.T, plan[0][:, 3:]]), 24)
-    _save_capture(tmp_path / "turned.csv", y, plan[0], {"samples_per_row": SAMPLES})
+    save_capture(tmp_path / "turned.csv", y, plan[0], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "turned.csv"), "--sensor", "paper", "-o",
                    str(tmp_path / "t.toml"))
     assert_one_line_error(proc, contains="(the ring turned by 90 deg about z)")
@@ -838,7 +832,7 @@ def test_a_sensor_turned_on_the_stage_is_named_and_the_axis_map_it_names_fixes_i
     labels = plan[0].copy()
     for m, p, sign in again.pairs:
         labels[:, "dx dy dz".split().index(p)] = sign * machine[:, "XYZ".index(m)]
-    _save_capture(tmp_path / "again.csv", y, labels, {"samples_per_row": SAMPLES})
+    save_capture(tmp_path / "again.csv", y, labels, {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "again.csv"), "--sensor", "paper", "-o",
                    str(tmp_path / "a.toml"))
     assert proc.returncode == 0, proc.stderr
@@ -897,7 +891,7 @@ def test_residuals_far_below_the_noise_are_remarked(drawing, plan, tmp_path):
     are too wide (it said 'reduced 0.00' and nothing else)."""
     unit, _ = draw_unit(drawing, 26)
     y, noise = capture(unit, plan[0], 26)
-    _save_capture(tmp_path / "c.csv", y, plan[0], {"samples_per_row": SAMPLES})
+    save_capture(tmp_path / "c.csv", y, plan[0], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "c.csv"), "-o", str(tmp_path / "u.toml"), "--noise", "0.02")
     assert proc.returncode == 0, proc.stderr
     said = [ln for ln in proc.stderr.splitlines() if "what the reading noise" in ln]
