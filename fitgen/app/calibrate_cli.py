@@ -169,9 +169,16 @@ def cmd_schedule(args) -> int:
     box = ", ".join(f"{a} {lo:g}..{hi:g}" for a, (lo, hi) in info["ranges"].items())
     left = (f"; {info['beyond_linear_range']} of its grid poses left out, past {100 * info['linear_share']:g} % of an "
             "element's linear range" if info["beyond_linear_range"] else "")
-    print(f"within {box} mm from first contact (the sensor's travel within --limits{left}): give the stage "
-          "room for them and their approach (--stage-limits)", file=sys.stderr)
+    print(f"within {box} mm from first contact (the sensor's travel within --limits{left}{_pressed(info)}): give the "
+          "stage room for them and their approach (--stage-limits)", file=sys.stderr)
     return 0
+
+
+def _pressed(info: dict) -> str:
+    """The schedule line's clause when its rows in contact are pressed below first contact, or ''."""
+    top = info["ranges"].get("dz", (0.0, 0.0))[1]
+    return (f"; rows in contact pressed at least {-top:g} mm, which a stage off by {info['rig_error']:g} mm rms does "
+            "not lift off the skin" if top < 0 else "")
 
 
 def _check_schedule(args, drawing, axes, samples: int) -> int:
@@ -179,14 +186,15 @@ def _check_schedule(args, drawing, axes, samples: int) -> int:
     from fitgen.fitting.schedule import check_schedule, write_schedule
     from fitgen.physics.simulate import parse_ranges
 
-    poses, info = check_schedule(drawing, args.check, axes=axes, ranges=parse_ranges(args.limits, {}), seed=args.seed)
+    poses, info = check_schedule(drawing, args.check, axes=axes, ranges=parse_ranges(args.limits, {}), seed=args.seed,
+                                 rig_error=args.rig_error)
     write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples, "sensor_sha256": drawing.sha256,
                                               "transfer": drawing.transfer})
     box = ", ".join(f"{a} {lo:g}..{hi:g} {'deg' if a.startswith('th') else 'mm'}"
                     for a, (lo, hi) in info["ranges"].items())
-    print(f"wrote {len(poses)} random check poses ({box} from first contact, seed {args.seed}) to {args.output}: "
-          "capture them as for the calibration (tactile-host capture --poses), then fitgen check MODEL CHECK.csv",
-          file=sys.stderr)
+    print(f"wrote {len(poses)} random check poses ({box} from first contact, seed {args.seed}{_pressed(info)}) to "
+          f"{args.output}: capture them as for the calibration (tactile-host capture --poses), then fitgen check "
+          "MODEL CHECK.csv", file=sys.stderr)
     return 0
 
 

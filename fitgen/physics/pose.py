@@ -20,6 +20,10 @@ POSE_UNITS = ("mm", "mm", "mm", "deg", "deg")
 # A stage's label with dz above this (mm above first contact) has lifted the indenter off the skin: the
 # magnet rests whatever the rig's error. The margin is the skin's adhesion when the indenter just lifts.
 OFF_SKIN_MM = 0.05
+# A schedule's rows in contact stand this many rig errors (rms, mm) below the adhesion's edge, so that the stage's
+# own error lifts about one row in 700 off the skin (at a printer's 0.03 mm: dz -0.04 instead of 0, where one in 20
+# lifted off and read the magnet at rest under a label that moves it).
+HOLD_SIGMAS = 3.0
 # Where a schedule's rest row lifts the stage (mm above first contact): clear of the adhesion with the rig's
 # error, and with a capture's default approach (0.3 mm from above) within a stage limit of dz <= 0.5.
 REST_LIFT_MM = 0.2
@@ -76,6 +80,13 @@ def rotation_matrices(thx_deg: np.ndarray, thy_deg: np.ndarray) -> np.ndarray:
 def off_skin(poses: np.ndarray) -> np.ndarray:
     """Mask of the stage labels (P, 5) that lift the indenter off the skin (dz > OFF_SKIN_MM)."""
     return np.asarray(poses)[:, 2] > OFF_SKIN_MM
+
+
+def contact_top(rig_error: float) -> float:
+    """The highest dz (mm) a scheduled row in contact takes on a stage with ``rig_error`` mm rms per axis: first
+    contact (0), or lower where the stage's error would lift it past the skin's adhesion (OFF_SKIN_MM) within
+    HOLD_SIGMAS; to the micrometre, as a stage takes it."""
+    return min(0.0, round(OFF_SKIN_MM - HOLD_SIGMAS * float(rig_error), 3))
 
 
 def pressed(shift: np.ndarray, stiffening) -> np.ndarray:

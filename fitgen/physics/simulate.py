@@ -10,8 +10,7 @@ import numpy as np
 from fitgen import __version__
 from fitgen.physics.dataset import Dataset
 from fitgen.base.errors import InputError
-from fitgen.physics.pose import (OFF_SKIN_MM, POSE_NAMES, as_poses, check_pose_range, field_readings, off_skin,
-                                 pose_label)
+from fitgen.physics.pose import POSE_NAMES, as_poses, check_pose_range, field_readings, off_skin, pose_label
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.transfer import past_linear, readings
 
@@ -163,14 +162,14 @@ def rows_past_linear(sensor: Sensor, poses, labels: str = "stage") -> np.ndarray
 
 def rig_poses(labels: np.ndarray, rig_error: float, rng: np.random.Generator, zero=None) -> np.ndarray:
     """Where a stage with ``rig_error`` mm rms per axis stands at stage ``labels`` (n, 5): each displacement off by
-    a normal draw; a row on the skin stays on it (dz at most OFF_SKIN_MM: the skin's adhesion holds the
-    indenter); a row off the skin is left as labelled (the magnet rests wherever the stage stands). ``zero``
-    (mm, dx, dy, dz): how far the capture's zero is from first contact, added to every row on the skin after
-    that (a zero above first contact lifts the rows at dz 0 off it)."""
+    a normal draw. A row labelled on the skin that the error lifts past the adhesion (dz above OFF_SKIN_MM) leaves
+    it, and the magnet rests, as on host.simrig's stage (fitgen.physics.pose.contact_top: how far a schedule
+    presses so that this stays rare); a row labelled off the skin is left as labelled (the magnet rests wherever
+    the stage stands). ``zero`` (mm, dx, dy, dz): how far the capture's zero is from first contact, added to every
+    row labelled on the skin (a zero above first contact lifts the rows at dz 0 off it)."""
     true = np.array(labels, dtype=float)
     true[:, :3] += rig_error * rng.standard_normal((len(true), 3))
     touching = ~off_skin(labels)
-    true[touching, 2] = np.minimum(true[touching, 2], OFF_SKIN_MM)
     true[~touching] = labels[~touching]
     if zero is not None:
         true[touching, :3] += np.asarray(zero, dtype=float)
