@@ -236,10 +236,10 @@ def main() -> None:
     row = [str(sum(c[k] for k in arith)) for _, c in cols]
     row += [f"{sum(exe[v][k] for k in ('FP multiply', 'FP add/sub', 'FP divide', 'FP sqrt')) + 2 * exe[v][FMA_KIND]:.0f}"
             for v in variants]
-    print(f"| fused multiply-add | 0 | 0 | 0 | " + " | ".join(f"{exe[v][FMA_KIND]:.0f}" for v in variants) + " |")
+    print("| fused multiply-add | 0 | 0 | 0 | " + " | ".join(f"{exe[v][FMA_KIND]:.0f}" for v in variants) + " |")
     print("| arithmetic total (mul+add+div+sqrt+cbrt, an fma counted as 2) | " + " | ".join(row) + " |")
 
-    print(f"\n## Instructions per estimate (callgrind, x86-64)\n")
+    print("\n## Instructions per estimate (callgrind, x86-64)\n")
     print(f"Whole loop: (Ir({N2:,}) - Ir({N1:,})) / {N2 - N1:,} from the totals: line (call, bench loop and "
           f"output sums included). In tm_estimate: the cost lines of tm_estimate and its callees only. "
           f"Repeat: Ir of a second run at N1 minus the first.\n")

@@ -318,7 +318,7 @@ def part_rows() -> str:
         rss_sim = max_rss()
         log(f"rows {n}: simulated in {t_sim:.2f} s (not timed)")
         _fit(ds)  # warm-up at this size (page faults of the first large allocations)
-        t, times, fo = median_time(lambda: _fit(ds), SCALING_REPEATS)
+        t, times, fo = median_time(lambda ds=ds: _fit(ds), SCALING_REPEATS)
         log(f"rows {n}: fit_output {SCALING_OUTPUT} median {t:.3f} s (runs {', '.join(f'{x:.3f}' for x in times)})")
         ph = _phases(ds)
         log(f"rows {n}: phases " + ", ".join(f"{k} {v:.3f} s" for k, v in ph.items()))

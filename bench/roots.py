@@ -477,7 +477,7 @@ def main() -> None:
           f"{platform.machine()}, {cpu_name()}.\n")
 
     print("## Accuracy (ulp of the correctly rounded root)\n")
-    names = {"ours": "ours", "libm": f"glibc {{}}", "numpy": "numpy np.cbrt"}
+    names = {"ours": "ours", "libm": "glibc {}", "numpy": "numpy np.cbrt"}
     rows = []
     for label, key, prec in (("float32, every float in [1, 8)", "f32 [1, 8)", "float"),
                              ("float32, random bit patterns", "f32 random", "float")):
@@ -510,7 +510,7 @@ def main() -> None:
             rows.append([p, name, f"{per[p, f]:.1f}", f"{per[p, f] - base:.1f}"])
     print(table(["precision", "routine", "instructions per root, loop included", "net"], rows))
 
-    print(f"\n## Instructions per estimate (callgrind, x86-64)\n")
+    print("\n## Instructions per estimate (callgrind, x86-64)\n")
     print(f"Model: {SENSOR} fitted the paper's way (paper-sim grid, `fitgen fit --noise 0`), {model.n_inputs} inputs, "
           f"{len(model.equations)} outputs, {n_terms} terms, {n_cbrt} cube-root terms, {roots_per_estimate} cube "
           f"roots per estimate; model {model.sha256[:12]}. C_BENCH, gcc -O2 {' '.join(WARNING_FLAGS)}, "

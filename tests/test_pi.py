@@ -190,8 +190,6 @@ def test_a_failed_pi_build_leaves_no_program_and_refuses_before_it_writes(model,
 def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_path):
     """A thermistor in the map and a compensation: tm_pi reads it after the elements every 0.25 s and applies
     tm_tempcomp.h before the model; the lines equal tactile-host read --temp-comp's to every printed digit."""
-    import numpy as np
-
     from fitgen.physics.sensor import load_sensor
     from host.clock import VirtualClock
     from host.simbus import SimBus
