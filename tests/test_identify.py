@@ -473,7 +473,7 @@ def test_schedule_is_d_optimal_within_limits(drawing, plan):
     (["--rig-error", "-0.01"], "the rig error must be 0..0.5 mm (a printer's is 0.01-0.1), got -0.01"),
     (["--limits", "dz=1:2"], "the limits of dz (1..2) leave it no room to move within the sensor's travel (-3..0)"),
     (["--axes", "dy,dz", "--limits", "dx=-1:1"], "--limits gives dx, which --axes (dy,dz) does not move"),
-    (["--rig-error", "0.03", "--limits", "dz=-0.03:0"], "the limits of dz (-0.03..0) leave no row below -0.04 mm, "
+    (["--rig-error", "0.03", "--limits", "dz=-0.03:0"], "the limits of dz (-0.03..0) leave no row below -0.07 mm, "
      "where a stage off by 0.03 mm rms keeps the indenter on the skin: allow a deeper press"),
     (["--axes", "dx", "--n", "12", "--limits", "dx=-2:2"],
      "the best 12 poses over dx are 4 distinct ones; identify needs at least 6"),
@@ -554,7 +554,7 @@ def test_a_row_off_the_skin_carries_the_reading_noise_alone(drawing):
 def test_a_printers_schedule_presses_its_rows_so_that_the_stage_keeps_them_on_the_skin(drawing, plan, tmp_path):
     """A stage off by 0.03 mm rms lifts a row at first contact past the skin's adhesion (0.05 mm) about one time in
     20, and the magnet rests under a label that moves it (rig_poses and host.simrig's stage agree on that:
-    tests/test_units.py). A schedule for such a stage presses its rows in contact by 0.04 mm, and almost none
+    tests/test_units.py). A schedule for such a stage presses its rows in contact by 0.07 mm, and almost none
     leaves the skin; one for 0.01 mm keeps first contact, which that stage leaves one time in three million."""
     from fitgen.fitting.schedule import check_schedule
     from fitgen.physics.pose import off_skin
@@ -562,21 +562,21 @@ def test_a_printers_schedule_presses_its_rows_so_that_the_stage_keeps_them_on_th
     tight = plan[0]
     loose, info = schedule(drawing, 40, noise=drawing.noise / np.sqrt(SAMPLES), rig_error=0.03)
     assert tight[~off_skin(tight), 2].max() == 0.0
-    assert loose[~off_skin(loose), 2].max() == -0.04 and info["ranges"]["dz"][1] == -0.04
+    assert loose[~off_skin(loose), 2].max() == -0.07 and info["ranges"]["dz"][1] == -0.07
     rng = np.random.default_rng(5)
 
     def lost(poses):  # the share of rows in contact that a 0.03 mm stage lifts off the skin
         return off_skin(rig_poses(np.repeat(poses[~off_skin(poses)], 500, axis=0), 0.03, rng)).mean()
 
-    assert lost(tight) > 0.01 and lost(loose) < 0.004
+    assert lost(tight) > 0.01 and lost(loose) < 0.001
     checks, check_info = check_schedule(drawing, 30, rig_error=0.03)
-    assert checks[:, 2].max() <= -0.04 and check_info["rig_error"] == 0.03
+    assert checks[:, 2].max() <= -0.07 and check_info["rig_error"] == 0.03
     out = tmp_path / "s.csv"
     proc = run_cli("fitgen", "schedule", "--rig-error", "0.03", "--n", "12", "-o", str(out))
     assert proc.returncode == 0, proc.stderr
-    assert "dz -3..-0.04 mm" in proc.stderr and "rows in contact pressed at least 0.04 mm" in proc.stderr
+    assert "dz -3..-0.07 mm" in proc.stderr and "rows in contact pressed at least 0.07 mm" in proc.stderr
     dz = np.loadtxt(out, delimiter=",", skiprows=1)[:, 2]
-    assert dz[dz <= 0.05].max() == -0.04 and ",-0.04\n" in out.read_text()
+    assert dz[dz <= 0.05].max() == -0.07 and ",-0.07\n" in out.read_text()
 
 
 def test_cli_schedule_capture_identify(tmp_path):

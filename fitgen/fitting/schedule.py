@@ -7,7 +7,7 @@ reading noise alone. The capture box is the sensor's travel (its file's ``[trave
 move the skin; the working pose box where it gives none) within the stage's limits: wider than the box the
 estimator works in, since the field's shape over a longer lever pins the unit's geometry (the magnet's
 height against the stage's gain) where the working box alone leaves it to the prior (bench/identify_bound.py).
-Rows in contact stand no higher than fitgen.physics.pose.contact_top of the rig's error: pressed 0.04 mm on a
+Rows in contact stand no higher than fitgen.physics.pose.contact_top of the rig's error: pressed 0.07 mm on a
 printer's 0.03 mm, where rows at first contact lifted off the skin one in 20 and read the magnet at rest.
 A candidate that drives an element of the drawing past LINEAR_SHARE of its linear range (saturation, or the
 ADC's rail) is left out: a unit within its tolerances reads up to about a fifth more there, and rows at the

@@ -21,9 +21,10 @@ POSE_UNITS = ("mm", "mm", "mm", "deg", "deg")
 # magnet rests whatever the rig's error. The margin is the skin's adhesion when the indenter just lifts.
 OFF_SKIN_MM = 0.05
 # A schedule's rows in contact stand this many rig errors (rms, mm) below the adhesion's edge, so that the stage's
-# own error lifts about one row in 700 off the skin (at a printer's 0.03 mm: dz -0.04 instead of 0, where one in 20
-# lifted off and read the magnet at rest under a label that moves it).
-HOLD_SIGMAS = 3.0
+# own error lifts about one row in 30,000 off the skin (at a printer's 0.03 mm: dz -0.07 instead of 0, where one in
+# 20 lifted off and read the magnet at rest under a label that moves it; at 3, one in 700 did, and one of 20
+# 100-pose captures in bench/units.py was refused for it).
+HOLD_SIGMAS = 4.0
 # Where a schedule's rest row lifts the stage (mm above first contact): clear of the adhesion with the rig's
 # error, and with a capture's default approach (0.3 mm from above) within a stage limit of dz <= 0.5.
 REST_LIFT_MM = 0.2
