@@ -16,7 +16,8 @@ term as identify weighs it. Two rows (design "A") replace the schedule's D-optim
 identify reports: A-optimal on those quantities, each over its limit (the least sum of their posterior variances
 in units of 0.03 mm and 1 %), chosen as the schedule chooses (greedy, then exchange passes). The candidates are
 the schedule's (fitgen.fitting.schedule.capture_candidates: the sensor's travel, 3 mm each way and 3 mm deep on
-paper, within the elements' linear range); the rows of box "working" take the working pose box alone (2 mm, 2 mm
+paper, within the elements' linear range, the rows in contact pressed as the row's rig error asks:
+fitgen.physics.pose.contact_top); the rows of box "working" take the working pose box alone (2 mm, 2 mm
 deep), as the schedule did before it took the travel. The last rows give the drawing a ring whose size is known
 better than its default tolerance says (each element's radius to 0.04 or 0.02 mm, not 0.08): the magnet's height
 over the ring trades against the ring's scale, which no three-axis capture pins well; the two after them allow for
@@ -134,7 +135,7 @@ def line_odds(e: np.ndarray, se: np.ndarray) -> float:
 
 
 def bound_rows(drawing) -> list[list[str]]:
-    boxes = {"travel": capture_candidates(drawing)[0], "working": capture_candidates(replace(drawing, travel={}))[0]}
+    boxes = {}  # (box, rig error) -> the schedule's candidates, which press the rows in contact on a looser stage
     # one set of standard normal draws for every row (common random numbers: rows differ by their covariance
     # alone), through each covariance's Cholesky factor, so a last-bit change in a covariance moves the medians
     # by as little (an SVD's signs and order would follow rounding)
@@ -147,7 +148,10 @@ def bound_rows(drawing) -> list[list[str]]:
         space, G = spaces[changes]
         z = np.zeros(space.size)
         key = (rig, s, box, changes)
-        cand = boxes[box]
+        if (box, rig) not in boxes:
+            boxes[box, rig] = capture_candidates(drawing if box == "travel" else replace(drawing, travel={}),
+                                                 rig_error=rig)[0]
+        cand = boxes[box, rig]
         rest = off_skin(cand)
         noise = np.full(drawing.n_elements, drawing.noise / np.sqrt(s))
         if key not in Js:
