@@ -1,0 +1,120 @@
+"""A printer's stage and the schedule made for it: captures through a simulated G-code stage whose repeatability
+lifts rows at first contact off the skin, from the default schedule (made for 0.01 mm) and from one made for the
+stage (`fitgen schedule --rig-error R`, whose rows in contact stand fitgen.physics.pose.contact_top below it).
+
+Units of paper in gmr (fitgen.physics.units.draw_unit, seeds 11..), each captured at 40 poses through
+host.stagesim.simulated_stage_capture (GRBL on a socket, a rig with R mm rms repeatability per axis and 0.1 mm
+backlash, zeroed at first contact as the documented jog finds it; 16 samples per row), from both schedules, and
+identified as `fitgen identify --rig-error R` does (fitgen.fitting.identify.identify, then
+fitgen.fitting.verdict.check_explained's refusal). Per schedule: the rows in contact that read as the rest rows
+(the stage's error lifted the indenter past the skin's adhesion, and the magnet rested: within 5 noise sd of the
+rest rows' mean on every element), the captures with such a row, the captures refused, what the refusals named,
+the reduced chi-square of those accepted.
+
+    python bench/printer_schedule.py              # about 4 minutes here on 2 cores
+    python bench/printer_schedule.py --units 5    # a quick look
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from benchutil import log, parser, table  # noqa: E402
+from fitgen.base.errors import InputError  # noqa: E402
+from fitgen.fitting.identify import identify  # noqa: E402
+from fitgen.fitting.schedule import schedule, write_schedule  # noqa: E402
+from fitgen.fitting.unitrecord import row_noise  # noqa: E402
+from fitgen.fitting.verdict import check_explained  # noqa: E402
+from fitgen.physics.dataset import load_dataset  # noqa: E402
+from fitgen.physics.pose import off_skin  # noqa: E402
+from fitgen.physics.sensor import load_sensor  # noqa: E402
+from fitgen.physics.units import draw_unit  # noqa: E402
+from host.capture import load_schedule  # noqa: E402
+from host.stagesim import simulated_stage_capture  # noqa: E402
+
+N_POSES, SAMPLES, BACKLASH, FIRST_SEED = 40, 16, 0.1, 11
+REST_SD = 5.0  # a row in contact within this many noise sd of the rest rows on every element read as at rest
+
+
+def lost_rows(inputs: np.ndarray, labels: np.ndarray, noise: np.ndarray) -> int:
+    """Rows labelled in contact whose readings are the rest rows' (the magnet did not move)."""
+    rest = off_skin(labels)
+    at_rest = np.all(np.abs(inputs - inputs[rest].mean(axis=0)) <= REST_SD * noise, axis=1)
+    return int(np.sum(at_rest & ~rest))
+
+
+def one(drawing, unit, plan: Path, rig: float, seed: int, folder: Path) -> dict:
+    """One capture of ``unit`` from the schedule at ``plan`` through the simulated stage, and its identification."""
+    cap = folder / f"capture-{seed}-{plan.stem}.csv"
+    simulated_stage_capture(unit, load_schedule(plan), cap, flavor="grbl", samples=SAMPLES, backlash=BACKLASH,
+                            repeatability=rig, seed=seed)
+    ds = load_dataset(cap)
+    noise, source = row_noise(ds.meta, drawing, None)
+    out = {"lost": lost_rows(ds.inputs, ds.poses(), noise)}
+    ident = identify(drawing, ds.inputs, ds.poses(), noise, rig_error=rig)
+    try:
+        check_explained(ident, str(cap), drawing.name, source)
+        out["chi2"] = ident.reduced_chi2
+    except InputError as exc:
+        named = re.search(r"row \d+ \(line \d+: [^)]*\)", str(exc))
+        out["refused"] = named.group(0) if named else "no single row"
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = parser(__doc__)
+    ap.add_argument("--units", type=int, default=20, help="units (seeds 11..; default 20)")
+    ap.add_argument("--rig-error", type=float, default=0.03, help="the stage's repeatability, mm rms (default 0.03)")
+    args = ap.parse_args(argv)
+    if args.units < 1 or not 0 < args.rig_error <= 0.1:
+        ap.error("--units must be >= 1 and --rig-error within 0..0.1 mm")
+    drawing = load_sensor("paper").with_transfer("gmr")
+    plans = {}
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for made_for in (0.01, args.rig_error):
+            poses, info = schedule(drawing, N_POSES, noise=drawing.noise / np.sqrt(SAMPLES), rig_error=made_for)
+            plans[made_for] = (folder / f"for-{made_for:g}.csv", poses)
+            write_schedule(plans[made_for][0], poses, ("dx", "dy", "dz"), {**info, "samples_per_row": SAMPLES})
+            results[made_for] = []
+        for i, seed in enumerate(range(FIRST_SEED, FIRST_SEED + args.units)):
+            unit, _ = draw_unit(drawing, seed)
+            for made_for, (plan, _) in plans.items():
+                r = one(drawing, unit, plan, args.rig_error, seed, folder)
+                results[made_for].append(r)
+                log(f"[{i + 1}/{args.units}] unit {seed}, schedule for {made_for:g} mm: {r['lost']} row(s) off the "
+                    f"skin, " + (f"refused ({r['refused']})" if "refused" in r else f"chi2/dof {r['chi2']:.2f}"))
+    rows = []
+    for made_for, (_, poses) in plans.items():
+        res = results[made_for]
+        contact = poses[~off_skin(poses)]
+        chi = [r["chi2"] for r in res if "chi2" in r]
+        refused = [r["refused"] for r in res if "refused" in r]
+        rows.append([f"{made_for:g} mm{' (the default)' * (made_for == 0.01)}", f"{contact[:, 2].max():g}",
+                     str(int(np.sum(contact[:, 2] == contact[:, 2].max()))),
+                     f"{sum(r['lost'] for r in res)} of {len(res) * len(contact)}",
+                     f"{sum(r['lost'] > 0 for r in res)} of {len(res)}", f"{len(refused)} of {len(res)}",
+                     f"{sum(x != 'no single row' for x in refused)}",
+                     f"{np.median(chi):.2f} ({min(chi):.2f}-{max(chi):.2f})" if chi else "-"])
+    print("# A printer's stage and the schedule made for it (bench/printer_schedule.py)\n")
+    print(f"paper in gmr, units seeds {FIRST_SEED}..{FIRST_SEED + args.units - 1}, {N_POSES} D-optimal poses, captured "
+          f"through host.stagesim's GRBL with {args.rig_error:g} mm rms repeatability and {BACKLASH:g} mm backlash "
+          f"({SAMPLES} samples per row), identified with --rig-error {args.rig_error:g}. `off the skin`: rows in "
+          f"contact reading as the rest rows (within {REST_SD:g} noise sd on every element). `refused`: fitgen "
+          "identify's checks; `naming a row`: the refusal names the row to delete. chi2/dof: median (least-greatest) "
+          "of the captures accepted.\n")
+    print(table(["schedule made for", "highest dz in contact [mm]", "rows there", "rows off the skin",
+                 "captures with one", "captures refused", "naming a row", "chi2/dof accepted"], rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
