@@ -15,7 +15,7 @@ from fitgen.base.errors import InputError
 from fitgen.fitting.identify import PINNABLE, RIG, Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
 from fitgen.fitting.unitrecord import report, row_noise, what_pins_more
-from fitgen.fitting.verdict import check_explained, field_line, looser_stage_line, outlier_lines
+from fitgen.fitting.verdict import check_explained, field_line, lifted_rows_line, looser_stage_line, outlier_lines
 from fitgen.physics import presets
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
@@ -569,6 +569,8 @@ def test_a_printers_schedule_presses_its_rows_so_that_the_stage_keeps_them_on_th
         return off_skin(rig_poses(np.repeat(poses[~off_skin(poses)], 500, axis=0), 0.03, rng)).mean()
 
     assert lost(tight) > 0.01 and lost(loose) < 0.001
+    # identify says so of the default schedule's rows on such a stage, and of none on the stage it was made for
+    assert lifted_rows_line(tight, 0.03) and not lifted_rows_line(loose, 0.03) and not lifted_rows_line(tight, 0.01)
     checks, check_info = check_schedule(drawing, 30, rig_error=0.03)
     assert checks[:, 2].max() <= -0.07 and check_info["rig_error"] == 0.03
     out = tmp_path / "s.csv"
@@ -720,8 +722,14 @@ def test_a_printers_capture_identified_for_a_tighter_stage_names_the_rig_error(d
                                              "printer's) instead of 0.01, the capture reads as a unit within the "
                                              "tolerances, to the noise" + said)
         assert not (tmp_path / "u.toml").exists()
-    assert run_cli("fitgen", "identify", str(tmp_path / "loose.csv"), "-o", str(tmp_path / "u.toml"), "--rig-error",
-                   "0.03").returncode == 0
+    proc = run_cli("fitgen", "identify", str(tmp_path / "loose.csv"), "-o", str(tmp_path / "u.toml"), "--rig-error",
+                   "0.03")
+    assert proc.returncode == 0, proc.stderr
+    # and says what to schedule next: the rows at first contact are within that stage's reach of the skin's edge
+    at_top = int(np.sum(plan[0][:, 2] == 0.0))
+    assert (f"identify: {at_top} rows in contact stand at dz up to 0 mm, where a stage off by 0.03 mm rms lifts about "
+            "one in 21 past the skin's adhesion (0.05 mm) and the magnet reads at rest; a schedule made for this stage "
+            "(fitgen schedule --rig-error 0.03) presses them to -0.07 mm") in proc.stderr
     keep = np.arange(len(off)) != lifted
     save_capture(tmp_path / "kept.csv", off[keep], plan[0][keep], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "kept.csv"), "-o", str(tmp_path / "k.toml"), "--rig-error",

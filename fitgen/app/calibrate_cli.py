@@ -35,6 +35,8 @@ def cmd_identify(args) -> int:
     rec.check_transfer(args.transfer, ds.meta, args.capture)
     drawing = sensor_of(args) if args.transfer else rec.in_capture_units(sensor_of(args), ds.meta)
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)
+    for line in verdict.lifted_rows_line(ds.poses(), args.rig_error):  # before a refusal, which may name such a row
+        print(f"identify: {line}", file=sys.stderr)
     with Progress("identify", 4) as bar:
         ident = idf.identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
                              zero_error=args.zero_error, progress=lambda i, n, note: bar.update(i - bar.done, note))

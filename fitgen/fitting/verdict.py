@@ -1,9 +1,10 @@
-"""What identify says of a capture: the rows that stand out, residuals far below the noise, a stage looser than it
-was taken for or a field it carries; and the refusal, in one line, of a capture the physics does not explain (or does
+"""What identify says of a capture: rows the stage's error may have lifted off the skin, the rows that stand out,
+residuals far below the noise, a stage looser than it was taken for or a field it carries; and the refusal, in one line, of a capture the physics does not explain (or does
 only with a unit far outside its tolerances), naming what to blame (fitgen.fitting.blame) where one thing alone is."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -13,7 +14,24 @@ from fitgen.fitting.blame import FIELD_TRY, PRINTER_RIG, blame
 from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, RIG_ERROR, ZERO_ERROR, Identification,
                                      identify)
 from fitgen.fitting.unitrecord import pose_words
-from fitgen.physics.pose import off_skin
+from fitgen.physics.pose import OFF_SKIN_MM, contact_top, off_skin
+
+
+def lifted_rows_line(poses: np.ndarray, rig_error: float) -> list[str]:
+    """A line when rows in contact stand higher than a stage off by ``rig_error`` mm rms keeps on the skin
+    (fitgen.physics.pose.contact_top): how many, how often that stage lifts the highest past the adhesion (the
+    magnet then reads at rest under a label that moves it), and the schedule that presses them."""
+    poses = np.asarray(poses)
+    top = contact_top(rig_error)
+    high = ~off_skin(poses) & (poses[:, 2] > top)
+    if rig_error <= 0 or not high.any():
+        return []
+    worst = float(poses[high, 2].max())
+    odds = 0.5 * math.erfc((OFF_SKIN_MM - worst) / (rig_error * math.sqrt(2.0)))
+    return [f"{int(high.sum())} rows in contact stand at dz up to {worst:g} mm, where a stage off by {rig_error:g} mm "
+            f"rms lifts about one in {1.0 / odds:,.0f} past the skin's adhesion ({OFF_SKIN_MM:g} mm) and the magnet "
+            f"reads at rest; a schedule made for this stage (fitgen schedule --rig-error {rig_error:g}) presses them "
+            f"to {top:g} mm"]
 
 
 def _where(ident: Identification, i: int) -> str:
