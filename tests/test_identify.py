@@ -579,6 +579,11 @@ def test_a_printers_schedule_presses_its_rows_so_that_the_stage_keeps_them_on_th
     assert "dz -3..-0.07 mm" in proc.stderr and "rows in contact pressed at least 0.07 mm" in proc.stderr
     dz = np.loadtxt(out, delimiter=",", skiprows=1)[:, 2]
     assert dz[dz <= 0.05].max() == -0.07 and ",-0.07\n" in out.read_text()
+    # a stage that does not move dz cannot press: its schedule says what that costs on such a stage
+    proc = run_cli("fitgen", "schedule", "--axes", "dx,dy", "--rig-error", "0.03", "--n", "12", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert ("every row at first contact (dz 0, which --axes does not move), where a stage off by 0.03 mm rms lifts "
+            "about one in 21 off the skin: with dz among --axes the rows are pressed to -0.07 mm") in proc.stderr
 
 
 def test_cli_schedule_capture_identify(tmp_path):
@@ -729,7 +734,7 @@ def test_a_printers_capture_identified_for_a_tighter_stage_names_the_rig_error(d
     at_top = int(np.sum(plan[0][:, 2] == 0.0))
     assert (f"identify: {at_top} rows in contact stand at dz up to 0 mm, where a stage off by 0.03 mm rms lifts about "
             "one in 21 past the skin's adhesion (0.05 mm) and the magnet reads at rest; a schedule made for this stage "
-            "(fitgen schedule --rig-error 0.03) presses them to -0.07 mm") in proc.stderr
+            "that moves dz (fitgen schedule --rig-error 0.03) presses them to -0.07 mm") in proc.stderr
     keep = np.arange(len(off)) != lifted
     save_capture(tmp_path / "kept.csv", off[keep], plan[0][keep], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "kept.csv"), "-o", str(tmp_path / "k.toml"), "--rig-error",

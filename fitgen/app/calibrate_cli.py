@@ -177,10 +177,18 @@ def cmd_schedule(args) -> int:
 
 
 def _pressed(info: dict) -> str:
-    """The schedule line's clause when its rows in contact are pressed below first contact, or ''."""
+    """The schedule line's clause when its rows in contact are pressed below first contact, or when they stand at
+    first contact on a stage that lifts some off the skin (--axes without dz); else ''."""
+    from fitgen.physics.pose import contact_top, lift_odds
+
+    rig = info["rig_error"]
+    if "dz" not in info["ranges"] and contact_top(rig) < 0:
+        return (f"; every row at first contact (dz 0, which --axes does not move), where a stage off by {rig:g} mm rms "
+                f"lifts about one in {1.0 / lift_odds(0.0, rig):,.0f} off the skin: with dz among --axes the rows "
+                f"are pressed to {contact_top(rig):g} mm")
     top = info["ranges"].get("dz", (0.0, 0.0))[1]
-    return (f"; rows in contact pressed at least {-top:g} mm, which a stage off by {info['rig_error']:g} mm rms does "
-            "not lift off the skin" if top < 0 else "")
+    return (f"; rows in contact pressed at least {-top:g} mm, which a stage off by {rig:g} mm rms does not lift off "
+            "the skin" if top < 0 else "")
 
 
 def _check_schedule(args, drawing, axes, samples: int) -> int:

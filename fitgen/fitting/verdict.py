@@ -4,7 +4,6 @@ only with a unit far outside its tolerances), naming what to blame (fitgen.fitti
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -14,7 +13,7 @@ from fitgen.fitting.blame import FIELD_TRY, PRINTER_RIG, blame
 from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, RIG_ERROR, ZERO_ERROR, Identification,
                                      identify)
 from fitgen.fitting.unitrecord import pose_words
-from fitgen.physics.pose import OFF_SKIN_MM, contact_top, off_skin
+from fitgen.physics.pose import OFF_SKIN_MM, contact_top, lift_odds, off_skin
 
 
 def lifted_rows_line(poses: np.ndarray, rig_error: float) -> list[str]:
@@ -27,11 +26,10 @@ def lifted_rows_line(poses: np.ndarray, rig_error: float) -> list[str]:
     if rig_error <= 0 or not high.any():
         return []
     worst = float(poses[high, 2].max())
-    odds = 0.5 * math.erfc((OFF_SKIN_MM - worst) / (rig_error * math.sqrt(2.0)))
     return [f"{int(high.sum())} rows in contact stand at dz up to {worst:g} mm, where a stage off by {rig_error:g} mm "
-            f"rms lifts about one in {1.0 / odds:,.0f} past the skin's adhesion ({OFF_SKIN_MM:g} mm) and the magnet "
-            f"reads at rest; a schedule made for this stage (fitgen schedule --rig-error {rig_error:g}) presses them "
-            f"to {top:g} mm"]
+            f"rms lifts about one in {1.0 / lift_odds(worst, rig_error):,.0f} past the skin's adhesion "
+            f"({OFF_SKIN_MM:g} mm) and the magnet reads at rest; a schedule made for this stage that moves dz (fitgen "
+            f"schedule --rig-error {rig_error:g}) presses them to {top:g} mm"]
 
 
 def _where(ident: Identification, i: int) -> str:

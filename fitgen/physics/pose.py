@@ -90,6 +90,14 @@ def contact_top(rig_error: float) -> float:
     return min(0.0, round(OFF_SKIN_MM - HOLD_SIGMAS * float(rig_error), 3))
 
 
+def lift_odds(dz: float, rig_error: float) -> float:
+    """The chance that a stage off by ``rig_error`` mm rms lifts a row labelled at ``dz`` (mm, in contact) past the
+    skin's adhesion (OFF_SKIN_MM)."""
+    if rig_error <= 0:
+        return float(dz > OFF_SKIN_MM)
+    return 0.5 * math.erfc((OFF_SKIN_MM - dz) / (rig_error * math.sqrt(2.0)))
+
+
 def pressed(shift: np.ndarray, stiffening) -> np.ndarray:
     """Stage displacements (..., 3) as they reach the magnet of an elastomer that stiffens: a press (dz < 0)
     shortened by ``stiffening`` (1/mm, per unit: broadcast against shift[..., 0]) times its depth."""
