@@ -63,7 +63,8 @@ def test_a_label_off_the_skin_reads_the_unit_at_rest():
     assert 0.1 < left.mean() < 0.22  # one in six: the error's tail past one sigma
     np.testing.assert_array_equal(true[500:], labels[500:])
     read = readings(unit, true, adc_bits=0)
-    np.testing.assert_array_equal(read[:500][left], np.broadcast_to(readings(unit, rest[:1], adc_bits=0), (left.sum(), 8)))
+    at_rest = readings(unit, rest[:1], adc_bits=0)
+    np.testing.assert_array_equal(read[:500][left], np.broadcast_to(at_rest, (left.sum(), 8)))
     assert np.all(np.abs(read[:500][~left] - read[500]).max(axis=1) > 10 * drawing.noise)
     rig = SimRig(contact=(12.0, 8.0, 4.0))
     for d, gone in zip(true[:500:25, :3], left[::25]):

@@ -1,6 +1,7 @@
 """What identify says of a capture: rows the stage's error may have lifted off the skin, the rows that stand out,
-residuals far below the noise, a stage looser than it was taken for or a field it carries; and the refusal, in one line, of a capture the physics does not explain (or does
-only with a unit far outside its tolerances), naming what to blame (fitgen.fitting.blame) where one thing alone is."""
+residuals far below the noise, a stage looser than it was taken for or a field it carries; and the refusal, in one
+line, of a capture the physics does not explain (or does only with a unit far outside its tolerances), naming what to
+blame (fitgen.fitting.blame) where one thing alone is."""
 
 from __future__ import annotations
 
