@@ -11,6 +11,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.fitting.blame import FIELD_TRY, PRINTER_RIG, blame
+from fitgen.fitting.capturecheck import check_error
 from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, RIG_ERROR, ZERO_ERROR, Identification,
                                      identify)
 from fitgen.fitting.unitrecord import pose_words
@@ -20,7 +21,9 @@ from fitgen.physics.pose import OFF_SKIN_MM, contact_top, lift_odds, off_skin
 def lifted_rows_line(poses: np.ndarray, rig_error: float) -> list[str]:
     """A line when rows in contact stand higher than a stage off by ``rig_error`` mm rms keeps on the skin
     (fitgen.physics.pose.contact_top): how many, how often that stage lifts the highest past the adhesion (the
-    magnet then reads at rest under a label that moves it), and the schedule that presses them."""
+    magnet then reads at rest under a label that moves it), and the schedule that presses them. InputError for a
+    rig error identify refuses (fitgen.fitting.capturecheck.check_error)."""
+    check_error("rig error", rig_error)
     poses = np.asarray(poses)
     top = contact_top(rig_error)
     high = ~off_skin(poses) & (poses[:, 2] > top)
