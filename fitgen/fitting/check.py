@@ -87,10 +87,8 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
     rng = np.random.default_rng(seed)
     sims = []
     for unit in pool:
-        lo, hi = (unit.gmr.adc_min, unit.gmr.adc_max) if unit.transfer == "gmr" else (-np.inf, np.inf)
         for _ in range(draws):
-            y = readings(unit, rig_poses(labels, rig_error, rng), adc_bits=0)
-            y = np.clip(y + rng.normal(0.0, 1.0, y.shape) * noise, lo, hi)
+            y = readings(unit, rig_poses(labels, rig_error, rng), adc_bits=0, noise=noise, rng=rng)
             sims.append(_figures(fn(y)[:, cols] - truth))
     drawn = {o: {f: np.array([s[f][j] for s in sims]) for f in FIGURES} for j, o in enumerate(outputs)}
     return Check(outputs, len(labels), precision, measured, drawn, len(pool), draws, float(rig_error),

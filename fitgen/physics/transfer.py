@@ -84,14 +84,14 @@ def apply_transfer(
     sensor: Sensor,
     b_axis: np.ndarray,
     *,
-    noise: float = 0.0,
+    noise: float | np.ndarray = 0.0,
     adc_bits: int | None = None,
     rng: np.random.Generator | None = None,
 ) -> np.ndarray:
     """Readings from signed fields ``b_axis`` (mT), in the sensor's output units.
 
-    ``noise`` is an rms in output units; ``adc_bits`` overrides the sensor file's
-    (0 turns quantisation off).
+    ``noise`` is an rms in output units, one number or one per element, added before the ADC;
+    ``adc_bits`` overrides the sensor file's (0 turns quantisation off, not the ADC's range).
     """
     mag = np.abs(b_axis)
     if sensor.transfer == "raw":
@@ -103,7 +103,7 @@ def apply_transfer(
         out = _gmr_volts(sensor, mag)
         bits = g.adc_bits if adc_bits is None else adc_bits
         lo, hi = g.adc_min, g.adc_max
-    if noise > 0:
+    if np.any(np.asarray(noise) > 0):
         rng = rng or np.random.default_rng()
         out = out + rng.normal(0.0, noise, size=out.shape)
     if bits > 0 or sensor.transfer == "gmr":
