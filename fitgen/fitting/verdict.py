@@ -169,18 +169,15 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
     order = None  # the columns' order that explains the capture, where blame found the channels in another
     if culprit is not None and culprit[0] == "rows":
         rows = culprit[1]
-        said = "; ".join(f"row {i + 1} ({_where(ident, i)})" for i in rows)
-        cause = (f"{said} alone: with {'it' if len(rows) == 1 else 'them'} left out, the others read as a unit within "
-                 f"the tolerances, to the noise; if {'it' if len(rows) == 1 else 'they'} slipped or glitched, delete "
-                 f"{'it' if len(rows) == 1 else 'them'} and resume the capture (it takes the pose again)")
+        it, they = ("it", "it") if len(rows) == 1 else ("them", "they")
+        cause = (f"{_rows(ident, rows)} alone: with {it} left out, the others read as a unit within the tolerances, to "
+                 f"the noise; if {they} slipped or glitched, {_delete(rows)}")
     elif culprit is not None and culprit[0] == "rig":
         rig, rows = culprit[1]
-        said = "; ".join(f"row {i + 1} ({_where(ident, i)})" for i in rows)
         cause = (f"the stage's own error: allowed for as {rig:g} mm rms per axis (a 3D printer's) instead of "
                  f"{ident.problem.rig_error:g}, the capture reads as a unit within the tolerances, to the noise"
-                 + (f", with {said} left out" if rows else "") + f"; give --rig-error {rig:g}, or the stage's "
-                 "measured repeatability" + (f", and delete {'it' if len(rows) == 1 else 'them'} and resume the "
-                                             "capture (it takes the pose again)" if rows else ""))
+                 + (f", with {_rows(ident, rows)} left out" if rows else "") + f"; give --rig-error {rig:g}, or the "
+                 "stage's measured repeatability" + (f", and {_delete(rows)}" if rows else ""))
     elif culprit is not None and culprit[0] == "dead":
         k = culprit[1][0]
         cause = (f"element {k + 1} (v{k + 1}) alone: with its readings left out, the others read as a unit within the "
@@ -229,6 +226,16 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
                       f"{drawing}, or a unit built looser than its [tolerances] say (widen them in the drawing's file)")
     raise _refusal(f"the physics explains {capture} only with a unit far outside {drawing}'s tolerances ({names}; "
                    f"beyond {PRIOR_LIMIT:g} is no unit within them): {cause}; nothing written", order)
+
+
+def _rows(ident: Identification, rows) -> str:
+    """``rows`` (0-based) as a refusal names them: number, line and pose."""
+    return "; ".join(f"row {i + 1} ({_where(ident, i)})" for i in rows)
+
+
+def _delete(rows) -> str:
+    """What to do with rows a refusal names as slipped or lifted."""
+    return f"delete {'it' if len(rows) == 1 else 'them'} and resume the capture (it takes the pose again)"
 
 
 def _refusal(message: str, order) -> InputError:
