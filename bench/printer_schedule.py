@@ -7,8 +7,8 @@ host.stagesim.simulated_stage_capture (GRBL on a socket, a rig with R mm rms rep
 backlash, zeroed at first contact as the documented jog finds it; 16 samples per row), from both schedules, and
 identified as `fitgen identify --rig-error R` does (fitgen.fitting.identify.identify, then
 fitgen.fitting.verdict.check_explained's refusal). Per schedule: the rows in contact that read as the rest rows
-(the stage's error lifted the indenter past the skin's adhesion, and the magnet rested: within 5 noise sd of the
-rest rows' mean on every element), the captures with such a row, the captures refused, what the refusals named,
+(the stage's error lifted the indenter past the skin's adhesion, and the magnet rested:
+fitgen.fitting.capturecheck.reads_at_rest), the captures with such a row, the captures refused, what the refusals named,
 the reduced chi-square of those accepted.
 
     python bench/printer_schedule.py              # about 4 minutes here on 2 cores
@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from benchutil import log, parser, table  # noqa: E402
 from fitgen.base.errors import InputError  # noqa: E402
+from fitgen.fitting.capturecheck import REST_LIKE, reads_at_rest  # noqa: E402
 from fitgen.fitting.identify import identify  # noqa: E402
 from fitgen.fitting.schedule import schedule, write_schedule  # noqa: E402
 from fitgen.fitting.unitrecord import row_noise  # noqa: E402
@@ -40,14 +41,6 @@ from host.capture import load_schedule  # noqa: E402
 from host.stagesim import simulated_stage_capture  # noqa: E402
 
 N_POSES, SAMPLES, BACKLASH, FIRST_SEED = 40, 16, 0.1, 11
-REST_SD = 5.0  # a row in contact within this many noise sd of the rest rows on every element read as at rest
-
-
-def lost_rows(inputs: np.ndarray, labels: np.ndarray, noise: np.ndarray) -> int:
-    """Rows labelled in contact whose readings are the rest rows' (the magnet did not move)."""
-    rest = off_skin(labels)
-    at_rest = np.all(np.abs(inputs - inputs[rest].mean(axis=0)) <= REST_SD * noise, axis=1)
-    return int(np.sum(at_rest & ~rest))
 
 
 def one(drawing, unit, plan: Path, rig: float, seed: int, folder: Path) -> dict:
@@ -57,7 +50,7 @@ def one(drawing, unit, plan: Path, rig: float, seed: int, folder: Path) -> dict:
                             repeatability=rig, seed=seed)
     ds = load_dataset(cap)
     noise, source = row_noise(ds.meta, drawing, None)
-    out = {"lost": lost_rows(ds.inputs, ds.poses(), noise)}
+    out = {"lost": int(reads_at_rest(ds.inputs, ds.poses(), noise).sum())}
     ident = identify(drawing, ds.inputs, ds.poses(), noise, rig_error=rig)
     try:
         check_explained(ident, str(cap), drawing.name, source)
@@ -108,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"paper in gmr, units seeds {FIRST_SEED}..{FIRST_SEED + args.units - 1}, {N_POSES} D-optimal poses, captured "
           f"through host.stagesim's GRBL with {args.rig_error:g} mm rms repeatability and {BACKLASH:g} mm backlash "
           f"({SAMPLES} samples per row), identified with --rig-error {args.rig_error:g}. `off the skin`: rows in "
-          f"contact reading as the rest rows (within {REST_SD:g} noise sd on every element). `refused`: fitgen "
+          f"contact reading as the rest rows (within {REST_LIKE:g} noise sd on every element). `refused`: fitgen "
           "identify's checks; `naming a row`: the refusal names the row to delete. chi2/dof: median (least-greatest) "
           "of the captures accepted.\n")
     print(table(["schedule made for", "highest dz in contact [mm]", "rows there", "rows off the skin",

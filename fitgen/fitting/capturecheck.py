@@ -73,17 +73,26 @@ def check_capture(space, readings: np.ndarray, poses: np.ndarray) -> np.ndarray:
     return valid
 
 
-def check_contact(readings: np.ndarray, poses: np.ndarray, noise: np.ndarray) -> None:
-    """InputError when rows pressed PRESSED mm or more read as the rows off the skin (the rest rows): a zero set
-    well above first contact (the indenter met the skin only in the deepest rows, or never), or readings that are
-    not the sensor's under the stage. ``noise``: per element, a row's rms. No rest rows: nothing to compare
-    with."""
+def reads_at_rest(readings: np.ndarray, poses: np.ndarray, noise: np.ndarray) -> np.ndarray | None:
+    """Per row: labelled in contact, yet within REST_LIKE noise sd of the rest rows' mean on every element (the
+    magnet did not move: the indenter missed the skin, or left it). ``noise``: per element, a row's rms. None
+    without rest rows to compare with."""
     off = off_skin(poses)
-    pressed = ~off & (poses[:, 2] <= -PRESSED)
-    if not off.any() or not pressed.any():
-        return
+    if not off.any():
+        return None
     sd = noise * np.sqrt(1.0 + 1.0 / off.sum())
-    still = np.max(np.abs(readings[pressed] - readings[off].mean(axis=0)) / sd, axis=1) < REST_LIKE
+    return ~off & (np.max(np.abs(readings - readings[off].mean(axis=0)) / sd, axis=1) < REST_LIKE)
+
+
+def check_contact(readings: np.ndarray, poses: np.ndarray, noise: np.ndarray) -> None:
+    """InputError when rows pressed PRESSED mm or more read as the rows off the skin (the rest rows,
+    :func:`reads_at_rest`): a zero set well above first contact (the indenter met the skin only in the deepest rows,
+    or never), or readings that are not the sensor's under the stage. No rest rows: nothing to compare with."""
+    pressed = ~off_skin(poses) & (poses[:, 2] <= -PRESSED)
+    at_rest = reads_at_rest(readings, poses, noise)
+    if at_rest is None or not pressed.any():
+        return
+    still = at_rest[pressed]
     if still.mean() < STILL_SHARE:
         return
     depth = float(-poses[pressed][still, 2].min())
