@@ -59,6 +59,20 @@ class Terminal:
         pass
 
 
+def simulated_capture(unit, poses, seed, rig_error=0.01, samples=16):
+    """A simulated capture of ``unit`` at stage ``poses``: the stage off its labels by the rig's error, rows averaged
+    over ``samples`` (the unit's noise over sqrt(samples)); the readings and that noise."""
+    import numpy as np
+
+    from fitgen.physics.simulate import rig_poses
+    from fitgen.physics.transfer import readings
+
+    rng = np.random.default_rng(seed)
+    true = rig_poses(poses, rig_error, rng)
+    noise = unit.noise / np.sqrt(samples)
+    return readings(unit, true, adc_bits=0) + rng.normal(0.0, noise, (len(poses), unit.n_elements)), noise
+
+
 def save_capture(path, y, poses, meta=None):
     """Readings ``y`` at stage poses (their dx, dy, dz) saved as a capture in volts, with ``meta`` besides; the path."""
     from fitgen.physics.dataset import Dataset

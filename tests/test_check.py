@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from conftest import assert_one_line_error, run_cli, save_capture
+from conftest import assert_one_line_error, run_cli, save_capture, simulated_capture
 from fitgen.equations.model import load_model
 from fitgen.fitting.check import TOO_FAR, check
 from fitgen.fitting.family import fit_device
@@ -21,8 +21,7 @@ from fitgen.physics.pose import POSE_NAMES, off_skin
 from fitgen.physics.posesource import choose_poses
 from fitgen.physics.scenes import PRESETS
 from fitgen.physics.sensor import load_sensor
-from fitgen.physics.simulate import DEFAULT_RANGES, rig_poses, simulate
-from fitgen.physics.transfer import readings
+from fitgen.physics.simulate import DEFAULT_RANGES, simulate
 from fitgen.physics.units import draw_unit
 
 RING = """name = "ring6"
@@ -47,11 +46,11 @@ ROWS_META = {"samples_per_row": 16}
 RIG = 0.01
 
 
-def _capture(unit, poses, seed, rig=RIG):
-    """A capture of ``unit`` at stage ``poses``: the stage off its labels by ``rig``, rows of 16 samples."""
-    rng = np.random.default_rng(seed)
-    y = readings(unit, rig_poses(poses, rig, rng), adc_bits=0)
-    return y + rng.normal(0.0, ROW_NOISE, y.shape)
+def _capture(unit, poses, seed):
+    """A capture of ``unit`` at stage ``poses``: the stage off its labels by RIG, rows of 16 samples."""
+    y, noise = simulated_capture(unit, poses, seed, RIG)
+    assert noise == ROW_NOISE
+    return y
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import assert_one_line_error, run_cli, save_capture
+from conftest import assert_one_line_error, run_cli, save_capture, simulated_capture
 from fitgen.base.errors import InputError
 from fitgen.fitting.identify import PINNABLE, RIG, Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
@@ -37,18 +37,10 @@ def plan(drawing):
     return poses, info
 
 
-def capture(unit, poses, seed, rig_error=0.01, samples=SAMPLES):
-    """A simulated capture: the stage off its labels by the rig's error, rows averaged over ``samples``."""
-    rng = np.random.default_rng(seed)
-    true = rig_poses(poses, rig_error, rng)
-    noise = unit.noise / np.sqrt(samples)
-    return readings(unit, true, adc_bits=0) + rng.normal(0.0, noise, (len(poses), unit.n_elements)), noise
-
-
 @pytest.mark.parametrize("seed", [21, 22, 23])
 def test_identify_recovers_what_a_capture_determines(drawing, plan, seed):
     unit, theta = draw_unit(drawing, seed)
-    y, noise = capture(unit, plan[0], seed)
+    y, noise = simulated_capture(unit, plan[0], seed)
     ident = identify(drawing, y, plan[0], noise)
     assert 0.6 < ident.reduced_chi2 < 1.5  # the physics explains the rows to the noise
     truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
@@ -100,7 +92,7 @@ def test_a_first_pass_stalled_down_the_rings_scale_gets_a_second_start(drawing, 
     from fitgen.fitting import identify as ident_mod
 
     unit, theta = draw_unit(drawing, 21)
-    y, noise = capture(unit, plan[0], 21)
+    y, noise = simulated_capture(unit, plan[0], 21)
     space = UnitSpace.of(drawing)
     stalled = np.zeros(space.size)
     stalled[[i for i, n in enumerate(space.names) if n.endswith(".radius")]] = -10.0
@@ -190,7 +182,7 @@ def test_an_accepted_capture_a_field_explains_better_gets_a_line(drawing, plan):
     assert "explains the rows better" in line and "stage_field = 0.003" in line
     assert looser_stage_line(ident) == []  # tried first: a printer's rig error does not explain a field
     unit, _ = draw_unit(drawing, 26)
-    y, noise = capture(unit, plan[0], 26)
+    y, noise = simulated_capture(unit, plan[0], 26)
     ident = identify(drawing, slip(unit, y, plan[0], 0.15)[1], plan[0], noise)
     assert 1.3 < ident.reduced_chi2 < 3.0
     assert field_line(ident) == [] and looser_stage_line(ident) == []
@@ -201,7 +193,7 @@ def test_an_accepted_capture_from_a_looser_stage_gets_a_line(drawing, plan):
     chi-square between 1.3 and 3), with standard errors too narrow for it (the magnet's height's by a quarter); the
     notes say a printer's 0.03 explains the rows, and give the flag. With it, no line."""
     unit, _ = draw_unit(drawing, 21)
-    y, noise = capture(unit, plan[0], 21, rig_error=0.025)
+    y, noise = simulated_capture(unit, plan[0], 21, rig_error=0.025)
     ident = identify(drawing, y, plan[0], noise)
     assert 1.3 < ident.reduced_chi2 < 3.0
     check_explained(ident, "c.csv", "paper", "the test's")  # accepted
@@ -218,7 +210,7 @@ def test_an_accepted_capture_from_a_looser_stage_gets_a_line(drawing, plan):
 
 def test_standardized_residuals_single_out_a_row_the_physics_does_not_explain(drawing, plan):
     unit, _ = draw_unit(drawing, 26)
-    y, noise = capture(unit, plan[0], 26)
+    y, noise = simulated_capture(unit, plan[0], 26)
     r = identify(drawing, y, plan[0], noise).standardized_residuals
     assert r.shape == y.shape and 0.8 < np.sqrt(np.mean(r ** 2)) < 1.25  # each reading within its own spread
     assert np.abs(r).max() < 4
@@ -244,7 +236,7 @@ def test_what_no_capture_separates_comes_from_the_information(drawing, plan):
     """The null space names the common gain against the polarisation and the ambient field against the offsets
     (the omnipolar elements' readings never change sign here), among the moves of the whole sensor."""
     unit, _ = draw_unit(drawing, 21)
-    y, noise = capture(unit, plan[0], 21)
+    y, noise = simulated_capture(unit, plan[0], 21)
     ident = identify(drawing, y, plan[0], noise)
     sp = ident.space
     G = ident.gauge
@@ -277,7 +269,7 @@ def test_a_capture_that_tilts_separates_more(drawing):
     rng = np.random.default_rng(28)
     box = np.array([[-2, 2], [-2, 2], [-2, 0], [-5, 5], [-5, 5]], dtype=float)
     poses = box[:, 0] + rng.random((40, 5)) * (box[:, 1] - box[:, 0])
-    y, noise = capture(unit, poses, 28, rig_error=0.001)
+    y, noise = simulated_capture(unit, poses, 28, rig_error=0.001)
     ident = identify(drawing, y, poses, noise, rig_error=0.001)
     F = ident.problem.information(ident.space.in_spreads(ident.theta))
     G = ident.gauge
@@ -302,7 +294,7 @@ def test_a_capture_without_presses_names_what_it_starves(drawing, tmp_path):
     poses, _ = schedule(drawing, 30, axes=("dx", "dy"), noise=drawing.noise / 4)
     assert np.all(poses[:, 2] == 0)
     unit, _ = draw_unit(drawing, 24)
-    y, noise = capture(unit, poses, 24)
+    y, noise = simulated_capture(unit, poses, 24)
     ident = identify(drawing, y, poses, noise)
     assert ident.starved, "a capture with no dz leaves something a press would pin"
     assert any(np.any(p[:, 2] < 0) for _, p, _ in ident.starved)
@@ -319,7 +311,7 @@ def test_an_elastomer_that_stiffens_is_identified_where_the_drawing_allows_for_i
     height = {}
     for c in (0.0, 0.01):
         for name, drw, poses in (("linear", drawing, plan[0]), ("allows", allows, plan_s)):
-            y, noise = capture(replace(unit, stiffening=c), poses, 24)
+            y, noise = simulated_capture(replace(unit, stiffening=c), poses, 24)
             ident = identify(drw, y, poses, noise, rig_error=0.01, zero_error=0.0)
             height[name, c] = list(ident.derived().values())[2]
             if name == "allows":
@@ -340,7 +332,7 @@ def test_what_would_pin_more_agrees_with_identifying_it_known(drawing, plan):
     from dataclasses import replace
 
     unit, _ = draw_unit(drawing, 22)
-    y, noise = capture(unit, plan[0], 22, rig_error=0.0)  # so that identify with rig error 0 explains it too
+    y, noise = simulated_capture(unit, plan[0], 22, rig_error=0.0)  # so that identify with rig error 0 explains it too
     ident = identify(drawing, y, plan[0], noise)
     base = ident.derived()
     names = list(base)
@@ -389,7 +381,7 @@ def test_a_spread_of_zero_fixes_its_parameter_at_the_drawing(drawing, plan, tmp_
     assert fixed.sum() == 6 + 3 + 8  # the map's cross terms, the ambient field, each element's tilt
     unit, theta = draw_unit(mine, 27)
     assert np.all(theta[fixed] == 0)
-    y, noise = capture(unit, plan[0], 27)
+    y, noise = simulated_capture(unit, plan[0], 27)
     ident = identify(mine, y, plan[0], noise)
     assert np.all(np.isfinite(ident.standardized_residuals)) and ident.outlying_rows() == []
     assert 0.6 < ident.reduced_chi2 < 1.5
@@ -419,7 +411,7 @@ def test_a_refusal_with_the_stage_error_set_below_its_default_names_it(drawing, 
     from fitgen.fitting import verdict
 
     unit, _ = draw_unit(drawing, 25)
-    y, noise = capture(unit, plan[0], 25)
+    y, noise = simulated_capture(unit, plan[0], 25)
     assert check_explained(identify(drawing, y, plan[0], noise), "c.csv", "paper", "the sensor's") is None
     # no element or pair to blame here (as blame finds, at a minute's cost): the generic causes follow the hint
     monkeypatch.setattr(verdict, "blame", lambda ident, progress=None: None)
@@ -686,7 +678,7 @@ def test_a_capture_read_in_the_wrong_units_is_said_so(drawing, plan, tmp_path):
     from fitgen.physics.dataset import Dataset
 
     unit, _ = draw_unit(drawing, 25)
-    y, _ = capture(unit, plan[0], 25)
+    y, _ = simulated_capture(unit, plan[0], 25)
     save_capture(tmp_path / "v.csv", y, plan[0], {"samples_per_row": SAMPLES})
     assert_one_line_error(run_cli("fitgen", "identify", str(tmp_path / "v.csv"), "--transfer", "raw", "-o",
                                   str(tmp_path / "u.toml")), 2,
@@ -712,7 +704,7 @@ def test_a_printers_capture_identified_for_a_tighter_stage_names_the_rig_error(d
     that also lost the skin at one shear pose at dz 0 (the tool lifted by its error: the magnet at rest) has that
     row named with it, and without the row the capture is identified too."""
     unit, _ = draw_unit(drawing, 20)
-    y, noise = capture(unit, plan[0], 20, rig_error=0.03)
+    y, noise = simulated_capture(unit, plan[0], 20, rig_error=0.03)
     lifted = next(i for i, p in enumerate(plan[0]) if p[2] == 0.0 and abs(p[0]) + abs(p[1]) > 0)
     off = y.copy()
     off[lifted] = readings(unit, np.zeros((1, 5)), adc_bits=0)[0] + np.random.default_rng(1).normal(0.0, noise, 8)
@@ -744,7 +736,7 @@ def test_a_printers_capture_identified_for_a_tighter_stage_names_the_rig_error(d
 
 def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypatch, capsys):
     unit, _ = draw_unit(drawing, 25)
-    y, noise = capture(unit, plan[0], 25)
+    y, noise = simulated_capture(unit, plan[0], 25)
     # the zero set 0.08 mm above first contact: the rows at dz 0 read the magnet at rest
     high = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 0.08))
     y_high = readings(unit, high, adc_bits=0) + np.random.default_rng(25).normal(0.0, noise, y.shape)
@@ -842,7 +834,7 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
                           contains="--axes")
     # a dead element that the chi-square lets pass (the unit bends to it): far outside the tolerances, refused
     unit27, _ = draw_unit(drawing, 27)
-    y27, _ = capture(unit27, plan[0], 27)
+    y27, _ = simulated_capture(unit27, plan[0], 27)
     y27[:, 2] = y27[:, 2].mean()
     save_capture(tmp_path / "dead.csv", y27, plan[0], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "dead.csv"), "--sensor", "paper", "-o",
@@ -860,7 +852,7 @@ def test_a_sensor_turned_on_the_stage_is_named_and_the_axis_map_it_names_fixes_i
     unit, _ = draw_unit(drawing, 24)
     turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # the stage's +x moves the magnet along +y
     machine = plan[0][:, :3]  # mm along X, Y, Z, as the schedule asked with --stage-axes X=dx,Y=dy,Z=dz
-    y, _ = capture(unit, np.column_stack([machine @ turn.T, plan[0][:, 3:]]), 24)
+    y, _ = simulated_capture(unit, np.column_stack([machine @ turn.T, plan[0][:, 3:]]), 24)
     save_capture(tmp_path / "turned.csv", y, plan[0], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "turned.csv"), "--sensor", "paper", "-o",
                    str(tmp_path / "t.toml"))
@@ -933,7 +925,7 @@ def test_residuals_far_below_the_noise_are_remarked(drawing, plan, tmp_path):
     """Noise-free rows, or a noise figure far too large: the unit is written, with a line that the standard errors
     are too wide (it said 'reduced 0.00' and nothing else)."""
     unit, _ = draw_unit(drawing, 26)
-    y, noise = capture(unit, plan[0], 26)
+    y, noise = simulated_capture(unit, plan[0], 26)
     save_capture(tmp_path / "c.csv", y, plan[0], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "c.csv"), "-o", str(tmp_path / "u.toml"), "--noise", "0.02")
     assert proc.returncode == 0, proc.stderr
