@@ -147,11 +147,11 @@ def bound_rows(drawing) -> list[list[str]]:
             spaces[changes] = space, derived_gradients(space)
         space, G = spaces[changes]
         z = np.zeros(space.size)
-        key = (rig, s, box, changes)
-        if (box, rig) not in boxes:
-            boxes[box, rig] = capture_candidates(drawing if box == "travel" else replace(drawing, travel={}),
-                                                 rig_error=rig)[0]
-        cand = boxes[box, rig]
+        key = (rig, zero, s, box, changes)
+        if (box, rig, zero) not in boxes:  # as fitgen schedule presses for the rig's and the zero's error
+            boxes[box, rig, zero] = capture_candidates(drawing if box == "travel" else replace(drawing, travel={}),
+                                                       rig_error=rig, zero_error=zero)[0]
+        cand = boxes[box, rig, zero]
         rest = off_skin(cand)
         noise = np.full(drawing.n_elements, drawing.noise / np.sqrt(s))
         if key not in Js:
@@ -259,12 +259,12 @@ def odds_rows(sets: int) -> list[list[str]]:
     for box, drawing, labels, samples in (
             ("travel", ctx.drawing, ctx.schedules[U.HEAD], U.SAMPLES),
             ("working", ctx.drawing, ctx.schedules[(*U.HEAD, U.WORKING)], U.SAMPLES),
-            (f"travel, ring known to {RING:g} mm", ringed, schedule(ringed, U.HEAD[0], noise=noise, rig_error=rig)[0],
-             U.SAMPLES),
+            (f"travel, ring known to {RING:g} mm", ringed, schedule(ringed, U.HEAD[0], noise=noise, rig_error=rig,
+                                                                zero_error=0.0)[0], U.SAMPLES),
             (f"travel, {PINNED_POSES} poses", ctx.drawing,
-             schedule(ctx.drawing, PINNED_POSES, noise=noise, rig_error=rig)[0], U.SAMPLES),
+             schedule(ctx.drawing, PINNED_POSES, noise=noise, rig_error=rig, zero_error=0.0)[0], U.SAMPLES),
             (f"travel, {MANY_SAMPLES} samples per row", ctx.drawing,
-             schedule(ctx.drawing, U.HEAD[0], noise=many, rig_error=rig)[0], MANY_SAMPLES)):
+             schedule(ctx.drawing, U.HEAD[0], noise=many, rig_error=rig, zero_error=0.0)[0], MANY_SAMPLES)):
         err, se, chi2 = [], [], []
         for seed in range(ODDS_SEED, ODDS_SEED + sets * SET):
             unit, theta = U.draw_unit(drawing, seed)

@@ -116,7 +116,8 @@ def main() -> None:
     args = ap.parse_args()
     drawing = U.load_sensor(U.PRESET).with_transfer(U.TRANSFER)
     sigma = drawing.noise
-    labels = {s: schedule(drawing, N_POSES, noise=sigma / np.sqrt(s), rig_error=RIG)[0] for s in CANDIDATES}
+    labels = {s: schedule(drawing, N_POSES, noise=sigma / np.sqrt(s), rig_error=RIG, zero_error=0.0)[0]
+              for s in CANDIDATES}
     base = U.capture_time(labels[U.SAMPLES]) / N_POSES - U.SAMPLES * U.SAMPLE_S  # move and settle, per row
     ctx = {"drawing": drawing, "sigma": sigma, "labels": labels, "base": base}
     if args.flicker:

@@ -83,7 +83,7 @@ def main() -> None:
     args = ap.parse_args()
     ctx = U.Ctx(U.N_HELD, U.DRAWS, U.N_RANDOM, (U.HEAD,))
     ctx.allowing = replace(ctx.drawing, tolerances=replace(ctx.drawing.tolerances, stage_field=ALLOW))
-    ctx.labels = {a: schedule(d, N, noise=ctx.noise / np.sqrt(U.SAMPLES), rig_error=RIG)[0]
+    ctx.labels = {a: schedule(d, N, noise=ctx.noise / np.sqrt(U.SAMPLES), rig_error=RIG, zero_error=0.0)[0]
                   for a, d in ((False, ctx.drawing), (True, ctx.allowing))}
     U.CTX = ctx
     seeds = list(range(1, args.units + 1))

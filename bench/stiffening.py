@@ -62,7 +62,7 @@ def rows(units: int, twins: int, found_by: dict | None = None) -> list[list[str]
     for box, drawing, labels in (("travel", ctx.drawing, ctx.schedules[U.HEAD]),
                                  ("working", ctx.drawing, ctx.schedules[(*U.HEAD, U.WORKING)]),
                                  (f"travel, allowing {ALLOW:g}/mm", allows,
-                                  schedule(allows, U.HEAD[0], noise=noise, rig_error=rig)[0])):
+                                  schedule(allows, U.HEAD[0], noise=noise, rig_error=rig, zero_error=0.0)[0])):
         for c in STIFFENING:
             chi, height, worst, dz, found = [], [], [], [], []
             for seed in range(1, units + 1):

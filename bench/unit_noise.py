@@ -82,7 +82,8 @@ def main() -> None:
     ap.add_argument("--units", type=int, default=8, help="bench/units.py's units 1..N (default 8)")
     args = ap.parse_args()
     ctx = U.Ctx(U.N_HELD, U.DRAWS, U.N_RANDOM, (U.HEAD,))
-    ctx.labels = schedule(ctx.drawing, N, noise=ctx.noise / np.sqrt(U.SAMPLES), rig_error=RIG)[0]
+    ctx.labels = schedule(ctx.drawing, N, noise=ctx.noise / np.sqrt(U.SAMPLES), rig_error=RIG,
+                           zero_error=0.0)[0]
     U.CTX = ctx
     seeds = list(range(1, args.units + 1))
     specs = [(lv, v, s) for lv in LEVELS for v in VARIANTS for s in seeds]

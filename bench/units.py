@@ -29,7 +29,9 @@ Set-up (deterministic):
   per axis dx, dy, dz; tilts exact), magpylib's readings of the unit there, plus the device's noise
   over sqrt(S) (each row averages S samples: 16, or --samples), clipped to the ADC's range; meta units V,
   samples_per_row S (so fit adds the rest of the device's noise, fitgen.fitting.fit.noise_to_add).
-- Schedules: fitgen.fitting.schedule.schedule(drawing, n, noise=drawing.noise/4, rig_error=r) for
+- Schedules: fitgen.fitting.schedule.schedule(drawing, n, noise=drawing.noise/4, rig_error=r, zero_error=0)
+  (`fitgen schedule --zero-error 0`: the zero of these captures is exact, so rows in contact stand at first
+  contact where the rig alone keeps them on the skin) for
   n = 10, 20, 40, 100 and the rig error r simulated (0.01 mm, a CNC; 0.03 mm, a printer), within the sensor's
   travel (paper.toml: 3 mm each way, 3 mm deep) and the elements' linear range; and the headline one (40 poses,
   0.01 mm) within the working pose box alone (2 mm, 2 mm deep: the drawing without its [travel]), as the schedule
@@ -53,8 +55,9 @@ Set-up (deterministic):
      (fitgen.fitting.holdout.evaluate with posterior = the record fitgen.fitting.unitrecord.load_posterior reads).
   5. `twin, 40 poses, 0.01 mm, zero off 0.02 mm, ...`: the 40-pose captures with the zero off first contact by
      one error per unit (normal, 0.02 mm rms per axis, added to the rows in contact), identified with
-     zero_error=0.02 (`allowed for`, fitgen identify's default; fitted on the first --sweep-units units) and with
-     zero_error=0 (`assumed exact`; identification only).
+     zero_error=0.02 (`allowed for`, fitgen identify's default; fitted on the first --sweep-units units), the
+     capture scheduled as `fitgen schedule` schedules by default (zero_error=0.02: rows in contact pressed 0.039
+     mm), and with zero_error=0 (`assumed exact`; identification only), the capture scheduled for an exact zero.
   6. `twin, 40 poses, 0.01 mm, working box`: as the headline twin, from a capture scheduled within the working
      pose box alone (identified on every unit, fitted on the first --sweep-units): what the travel's longer lever
      is worth.
@@ -140,6 +143,7 @@ FULL = (HEAD, PINNED)  # twins fitted and held out on every unit (the others on 
 ZERO_SIM = 0.02
 ZERO_TWINS = ((ZERO_SIM, ZERO_SIM, True), (ZERO_SIM, 0.0, False))  # (simulated, allowed for, fitted)
 WORKING = "working"  # the headline capture scheduled within the working pose box alone (the schedule before travel)
+ZEROED = "zeroed"  # the headline capture scheduled for a zero off by ZERO_SIM (fitgen schedule's default)
 # acceptance
 RATIO_D, RATIO_TH, WORST_D, WORST_TH = 1.25, 1.5, 1.5, 2.0
 OFFSET_MM, SENS_REL, COVER = 0.03, 0.01, (0.55, 0.80)
@@ -174,14 +178,17 @@ class Ctx:
         self.schedules: dict = {}
 
     def make_schedules(self) -> None:
-        need = sorted(set(self.twins) | {(40, DIRECT_RIG)}) + [(*HEAD, WORKING)]
+        need = sorted(set(self.twins) | {(40, DIRECT_RIG)}) + [(*HEAD, WORKING), (*HEAD, ZEROED)]
         for key in need:
             n, rig = key[:2]
             t = time.monotonic()
             drawing = replace(self.drawing, travel={}) if WORKING in key else self.drawing
-            self.schedules[key], info = schedule(drawing, n, noise=self.noise / np.sqrt(SAMPLES), rig_error=rig)
-            log(f"schedule: {n} poses for a rig error of {rig:g} mm{' in the working box' * (WORKING in key)} "
-                f"({info['distinct_poses']} distinct) in {time.monotonic() - t:.1f} s")
+            zero = ZERO_SIM if ZEROED in key else 0.0
+            self.schedules[key], info = schedule(drawing, n, noise=self.noise / np.sqrt(SAMPLES), rig_error=rig,
+                                                 zero_error=zero)
+            log(f"schedule: {n} poses for a rig error of {rig:g} mm, a zero error of {zero:g} mm"
+                f"{' in the working box' * (WORKING in key)} ({info['distinct_poses']} distinct) in "
+                f"{time.monotonic() - t:.1f} s")
 
 
 CTX: Ctx | None = None
@@ -277,7 +284,7 @@ def task(spec: tuple) -> tuple[tuple, dict]:
         return spec, {**measure(model, unit, seed), **summary(model), "seconds": time.monotonic() - t0}
     n, rig, fit = spec[2], spec[3], spec[4]
     zero_sim, zero_id = spec[5:7] if len(spec) > 5 else (0.0, 0.0)
-    labels = CTX.schedules[(n, rig, *spec[7:])]
+    labels = CTX.schedules[(n, rig, *spec[7:], *((ZEROED,) if zero_id > 0 else ()))]  # as scheduled for the zero
     y = capture(unit, labels, rig, [seed, n, 3], zero_sim)  # the same draws at both rig errors, scaled
     res: dict = {}
     try:
@@ -615,7 +622,9 @@ def report(ctx: Ctx, per: dict, seeds: list[int], quick: bool) -> dict:
     rows = []
     for key in sorted(ctx.schedules, key=lambda k: (len(k), k)):
         p = ctx.schedules[key]
-        rows.append([str(key[0]), f"{key[1]:g}", "working pose box" if WORKING in key else "travel",
+        box = ("working pose box" if WORKING in key else f"travel, zero error {ZERO_SIM:g} mm" if ZEROED in key
+               else "travel")
+        rows.append([str(key[0]), f"{key[1]:g}", box,
                      str(len(np.unique(np.round(p, 6), axis=0))), f"{capture_time(p) / 60:.1f} min"])
     rows.append(["1,875 (the paper-sim grid; needs tilt)", "-", "-", "1875", f"{capture_time(ctx.grid) / 60:.0f} min"])
     print(table(["poses", "scheduled for rig error [mm]", "box", "distinct", "duration"], rows))

@@ -85,7 +85,9 @@ def test_check_poses_are_random_in_the_working_box_in_contact_and_within_the_lin
     assert not np.array_equal(check_schedule(drawing, 30, seed=4)[0], poses)
     narrow, _ = check_schedule(drawing, 30, ranges={"dz": (-1.0, 0.0)}, seed=3)
     assert narrow[:, 2].min() >= -1.0
-    assert info["ranges"]["dz"] == [DEFAULT_RANGES["dz"][0], DEFAULT_RANGES["dz"][1]]
+    # in contact as a stage of the default rig and zero errors keeps it: pressed 0.039 mm (0, exact)
+    assert info["ranges"]["dz"] == [DEFAULT_RANGES["dz"][0], -0.039] and poses[:, 2].max() <= -0.039
+    assert check_schedule(drawing, 30, seed=3, zero_error=0.0)[1]["ranges"]["dz"] == [DEFAULT_RANGES["dz"][0], 0.0]
     # the command writes it as capture reads a schedule, and says what it is
     proc = run_cli("fitgen", "schedule", "--check", "30", "--seed", "3", "-o", str(tmp_path / "c.csv"))
     assert proc.returncode == 0 and "30 random check poses" in proc.stderr, proc.stderr

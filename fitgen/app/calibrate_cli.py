@@ -35,7 +35,8 @@ def cmd_identify(args) -> int:
     rec.check_transfer(args.transfer, ds.meta, args.capture)
     drawing = sensor_of(args) if args.transfer else rec.in_capture_units(sensor_of(args), ds.meta)
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)
-    for line in verdict.lifted_rows_line(ds.poses(), args.rig_error):  # before a refusal, which may name such a row
+    # before a refusal, which may name such a row
+    for line in verdict.lifted_rows_line(ds.poses(), args.rig_error, args.zero_error):
         print(f"identify: {line}", file=sys.stderr)
     with Progress("identify", 4) as bar:
         ident = idf.identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
@@ -156,7 +157,8 @@ def cmd_schedule(args) -> int:
 
     with Progress("schedule", args.n) as bar:
         poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits, {}),
-                               noise=noise / np.sqrt(samples), rig_error=args.rig_error, progress=step)
+                               noise=noise / np.sqrt(samples), rig_error=args.rig_error, zero_error=args.zero_error,
+                               progress=step)
     # the drawing's file and hash: capture passes them on, and identify takes that drawing unless told
     own = {"sensor_file": str(Path(args.sensor).resolve())} if Path(args.sensor).is_file() else {}
     write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples, **told, **own,
@@ -181,14 +183,16 @@ def _pressed(info: dict) -> str:
     first contact on a stage that lifts some off the skin (--axes without dz); else ''."""
     from fitgen.physics.pose import contact_top, lift_odds
 
-    rig = info["rig_error"]
-    if "dz" not in info["ranges"] and contact_top(rig) < 0:
-        return (f"; every row at first contact (dz 0, which --axes does not move), where a stage off by {rig:g} mm rms "
-                f"lifts about one in {1.0 / lift_odds(0.0, rig):,.0f} off the skin: with dz among --axes the rows "
-                f"are pressed to {contact_top(rig):g} mm")
+    rig, zero = info["rig_error"], info["zero_error"]
+    stage = f"a stage off by {rig:g} mm rms, zeroed within {zero:g} mm,"
+    if "dz" not in info["ranges"] and contact_top(rig, zero) < 0:
+        return (f"; every row at first contact (dz 0, which --axes does not move), where {stage} lifts about one in "
+                f"{1.0 / lift_odds(0.0, rig, zero):,.0f} off the skin: with dz among --axes the rows are pressed to "
+                f"{contact_top(rig, zero):g} mm")
     top = info["ranges"].get("dz", (0.0, 0.0))[1]
-    return (f"; rows in contact pressed at least {-top:g} mm, which a stage off by {rig:g} mm rms does not lift off "
-            "the skin" if top < 0 else "")
+    if top >= 0:
+        return ""
+    return f"; rows in contact pressed at least {-top:g} mm, which {stage} does not lift off the skin"
 
 
 def _check_schedule(args, drawing, axes, samples: int) -> int:
@@ -197,7 +201,7 @@ def _check_schedule(args, drawing, axes, samples: int) -> int:
     from fitgen.physics.simulate import parse_ranges
 
     poses, info = check_schedule(drawing, args.check, axes=axes, ranges=parse_ranges(args.limits, {}), seed=args.seed,
-                                 rig_error=args.rig_error)
+                                 rig_error=args.rig_error, zero_error=args.zero_error)
     write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples, "sensor_sha256": drawing.sha256,
                                               "transfer": drawing.transfer})
     box = ", ".join(f"{a} {lo:g}..{hi:g} {'deg' if a.startswith('th') else 'mm'}"
@@ -289,7 +293,11 @@ def add_calibration_commands(command) -> None:
                     "with dz, a rest row lifts the stage 0.2 mm off the skin besides (docs/calibration.md)")
     sc.add_argument("--samples", default="16", help="samples per row (default 16), or NOISE.json: what it tells")
     sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
-    sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM", help="stage error, mm rms (default 0.01)")
+    sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM",
+                    help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
+    sc.add_argument("--zero-error", type=finite, default=0.02, metavar="MM",
+                    help="how far the capture's zero may be from first contact, mm rms per axis (default 0.02): with "
+                         "the rig's error, how deep rows in contact press so that none lifts off the skin")
     sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv", help="the poses, for capture --poses")
     sc.add_argument("--check", type=count, metavar="N",
                     help="N random poses in the working pose box instead, not D-optimal and no rest row: a check "

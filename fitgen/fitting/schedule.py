@@ -7,8 +7,9 @@ reading noise alone. The capture box is the sensor's travel (its file's ``[trave
 move the skin; the working pose box where it gives none) within the stage's limits: wider than the box the
 estimator works in, since the field's shape over a longer lever pins the unit's geometry (the magnet's
 height against the stage's gain) where the working box alone leaves it to the prior (bench/identify_bound.py).
-Rows in contact stand no higher than fitgen.physics.pose.contact_top of the rig's error: pressed 0.07 mm on a
-printer's 0.03 mm, where rows at first contact lifted off the skin one in 20 and read the magnet at rest.
+Rows in contact stand no higher than fitgen.physics.pose.contact_top of the rig's and the zero's error: pressed
+0.039 mm at the defaults (a 0.01 mm rig, a zero set by hand to 0.02 mm), where one capture in 17 lost a row at first
+contact off the skin, its magnet read at rest; 0.094 mm on a printer's 0.03 mm.
 A candidate that drives an element of the drawing past LINEAR_SHARE of its linear range (saturation, or the
 ADC's rail) is left out: a unit within its tolerances reads up to about a fifth more there, and rows at the
 kink leave the fit without a slope to follow (20 units' captures failed at 0.9 where none did at 0.8). Each
@@ -31,7 +32,7 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
 from fitgen.fitting.capturecheck import MIN_DISTINCT, MIN_ROWS, check_error
-from fitgen.fitting.identify import RIG_ERROR, Problem, unit_space
+from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR, Problem, unit_space
 from fitgen.physics.dataset import meta_path
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, contact_top, field_readings, off_skin
 from fitgen.physics.sensor import TRAVEL_AXES, Sensor
@@ -79,25 +80,26 @@ def checked_axes(axes, ranges: dict | None) -> tuple[str, ...]:
 
 
 def capture_box(drawing: Sensor, axes, limits: dict | None = None, working: bool = False,
-                rig_error: float = RIG_ERROR) -> dict:
+                rig_error: float = RIG_ERROR, zero_error: float = ZERO_ERROR) -> dict:
     """Per pose component, the range a capture's candidates span: for each of ``axes`` the sensor's travel (dx, dy,
     dz; the working box DEFAULT_RANGES where its file gives none, and for the tilts), or with ``working`` the
-    working box alone, within the stage's ``limits``, dz in contact no higher than a stage of ``rig_error`` keeps
-    on the skin (fitgen.physics.pose.contact_top); the others 0. InputError for an axis the limits leave no
-    room."""
+    working box alone, within the stage's ``limits``, dz in contact no higher than a stage of ``rig_error`` zeroed
+    within ``zero_error`` keeps on the skin (fitgen.physics.pose.contact_top); the others 0. InputError for an axis
+    the limits leave no room."""
     travel = DEFAULT_RANGES if working else {**DEFAULT_RANGES, **drawing.travel}
     box = {a: (0.0, 0.0) for a in POSE_NAMES}
     for a in axes:
         lim = (limits or {}).get(a, travel[a])
         lo, hi = max(lim[0], travel[a][0]), min(lim[1], travel[a][1])
-        top = contact_top(rig_error) if a == "dz" else hi
+        top = contact_top(rig_error, zero_error) if a == "dz" else hi
         if not lo < hi:
             what = "working pose box" if working else "travel" if a in TRAVEL_AXES else "pose box"
             raise InputError(f"the limits of {a} ({lim[0]:g}..{lim[1]:g}) leave it no room to move within the "
                              f"sensor's {what} ({travel[a][0]:g}..{travel[a][1]:g})")
         if not lo < top:
             raise InputError(f"the limits of dz ({lim[0]:g}..{lim[1]:g}) leave no row below {top:g} mm, where a stage "
-                             f"off by {rig_error:g} mm rms keeps the indenter on the skin: allow a deeper press")
+                             f"off by {rig_error:g} mm rms, zeroed within {zero_error:g} mm, keeps the indenter on the "
+                             "skin: allow a deeper press")
         hi = min(hi, top)
         box[a] = (lo, hi)
     return box
@@ -112,10 +114,10 @@ def within_linear_range(drawing: Sensor, poses: np.ndarray) -> np.ndarray:
 
 
 def capture_candidates(drawing: Sensor, axes=("dx", "dy", "dz"), limits: dict | None = None,
-                       rig_error: float = RIG_ERROR) -> tuple[np.ndarray, dict, int]:
+                       rig_error: float = RIG_ERROR, zero_error: float = ZERO_ERROR) -> tuple[np.ndarray, dict, int]:
     """The candidate poses of a capture (:func:`candidates` over :func:`capture_box`, the rest row kept) less those
     beyond the linear range (:func:`within_linear_range`); the box; how many were left out."""
-    box = capture_box(drawing, axes, limits, rig_error=rig_error)
+    box = capture_box(drawing, axes, limits, rig_error=rig_error, zero_error=zero_error)
     cand = candidates(tuple(axes), box)
     keep = within_linear_range(drawing, cand) | off_skin(cand)
     if not keep.any():
@@ -189,19 +191,22 @@ def stage_order(poses: np.ndarray) -> np.ndarray:
 
 
 def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict | None = None,
-             noise: float | None = None, rig_error: float = RIG_ERROR, progress=None) -> tuple[np.ndarray, dict]:
+             noise: float | None = None, rig_error: float = RIG_ERROR, zero_error: float = ZERO_ERROR,
+             progress=None) -> tuple[np.ndarray, dict]:
     """``n`` stage poses (n, 5) that pin ``drawing``'s units best, within ``ranges`` (the stage's limits), the
-    sensor's travel and its elements' linear range (:func:`capture_candidates`), and a record of how they were
-    chosen. ``progress(done, total, note)``."""
+    sensor's travel and its elements' linear range, in contact as a stage of ``rig_error`` zeroed within
+    ``zero_error`` keeps it (:func:`capture_candidates`), and a record of how they were chosen.
+    ``progress(done, total, note)``."""
     axes = checked_axes(axes, ranges)
     if n < MIN_ROWS or n > 10000:
         raise InputError(f"--n must be {MIN_ROWS}..10000 (identify needs at least {MIN_ROWS} rows), got {n}")
     check_error("rig error", rig_error)
+    check_error("zero error", zero_error)
     noise = drawing.noise if noise is None else noise
     if not noise > 0:
         raise InputError("the schedule needs the reading noise > 0 (give --noise or a sensor file with a noise figure)")
     space = unit_space(drawing)
-    cand, ranges, beyond = capture_candidates(drawing, axes, ranges, rig_error)
+    cand, ranges, beyond = capture_candidates(drawing, axes, ranges, rig_error, zero_error)
     total = n + MAX_PASSES + 1
     if progress is not None:
         progress(0, total, f"the information of {len(cand):,} candidate poses")
@@ -220,7 +225,7 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     info = {"criterion": "D-optimal (log det of the prior plus the capture's information, in prior spreads)",
             "log_det": logdet, "candidates": len(cand), "levels_per_axis": levels_for(len(axes)), "axes": list(axes),
             "ranges": {a: list(ranges[a]) for a in axes}, "noise": noise, "rig_error": rig_error,
-            "beyond_linear_range": beyond, "linear_share": LINEAR_SHARE,
+            "zero_error": zero_error, "beyond_linear_range": beyond, "linear_share": LINEAR_SHARE,
             "sensor": drawing.name, "distinct_poses": int(distinct),
             "rest_rows": int(np.sum(off_skin(cand[idx]))), "rest_lift_mm": REST_LIFT_MM}
     return poses, info
@@ -230,17 +235,20 @@ CHECK_TRIES = 8  # random poses drawn per pose wanted, before those past the lin
 
 
 def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict | None = None,
-                   seed: int = 0, rig_error: float = RIG_ERROR) -> tuple[np.ndarray, dict]:
+                   seed: int = 0, rig_error: float = RIG_ERROR,
+                   zero_error: float = ZERO_ERROR) -> tuple[np.ndarray, dict]:
     """``n`` random stage poses (n, 5) for a check capture (fitgen.fitting.check): uniform over the working pose
     box (DEFAULT_RANGES, where estimators are fitted and held out) within ``ranges`` (the stage's limits) in
-    ``axes``, the others 0, in contact on a stage of ``rig_error`` (:func:`capture_box`) and within the elements'
+    ``axes``, the others 0, in contact on a stage of ``rig_error`` zeroed within ``zero_error``
+    (:func:`capture_box`) and within the elements'
     linear range; and a record of how they were drawn.
     Random, not chosen: a check measures the estimator where it is used, not where it learns most."""
     axes = checked_axes(axes, ranges)
     if not 1 <= n <= 10000:
         raise InputError(f"--check must be 1..10000 poses, got {n}")
     check_error("rig error", rig_error)
-    box = capture_box(drawing, axes, ranges, working=True, rig_error=rig_error)
+    check_error("zero error", zero_error)
+    box = capture_box(drawing, axes, ranges, working=True, rig_error=rig_error, zero_error=zero_error)
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x636865636B]))
     cand = np.zeros((CHECK_TRIES * n, len(POSE_NAMES)))
     for a in axes:
@@ -251,7 +259,7 @@ def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: 
                          "linear range almost everywhere: check the sensor file's transfer")
     return stage_order(cand), {"check": True, "seed": seed, "axes": list(axes), "sensor": drawing.name,
                                "ranges": {a: list(box[a]) for a in axes}, "linear_share": LINEAR_SHARE,
-                               "rig_error": rig_error}
+                               "rig_error": rig_error, "zero_error": zero_error}
 
 
 def write_schedule(path, poses: np.ndarray, axes, info: dict) -> None:

@@ -18,22 +18,24 @@ from fitgen.fitting.unitrecord import pose_words
 from fitgen.physics.pose import OFF_SKIN_MM, contact_top, lift_odds, off_skin
 
 
-def lifted_rows_line(poses: np.ndarray, rig_error: float) -> list[str]:
-    """A line when rows in contact stand higher than a stage off by ``rig_error`` mm rms keeps on the skin
-    (fitgen.physics.pose.contact_top): how many, how often that stage lifts the highest past the adhesion (the
-    magnet then reads at rest under a label that moves it), and the schedule that presses them. InputError for a
-    rig error identify refuses (fitgen.fitting.capturecheck.check_error)."""
+def lifted_rows_line(poses: np.ndarray, rig_error: float, zero_error: float = 0.0) -> list[str]:
+    """A line when rows in contact stand higher than a stage off by ``rig_error`` mm rms, zeroed within
+    ``zero_error`` mm rms, keeps on the skin (fitgen.physics.pose.contact_top): how many, how often that stage lifts
+    the highest past the adhesion (the magnet then reads at rest under a label that moves it), and the schedule that
+    presses them. InputError for a rig or zero error identify refuses (fitgen.fitting.capturecheck.check_error)."""
     check_error("rig error", rig_error)
+    check_error("zero error", zero_error)
     poses = np.asarray(poses)
-    top = contact_top(rig_error)
+    top = contact_top(rig_error, zero_error)
     high = ~off_skin(poses) & (poses[:, 2] > top)
-    if rig_error <= 0 or not high.any():
-        return []
+    if not high.any() or top == 0 and not lift_odds(float(poses[high, 2].max()), rig_error, zero_error) > 0:
+        return []  # none high, or a stage that errs nowhere
     worst = float(poses[high, 2].max())
     return [f"{int(high.sum())} rows in contact stand at dz up to {worst:g} mm, where a stage off by {rig_error:g} mm "
-            f"rms lifts about one in {1.0 / lift_odds(worst, rig_error):,.0f} past the skin's adhesion "
-            f"({OFF_SKIN_MM:g} mm) and the magnet reads at rest; a schedule made for this stage that moves dz (fitgen "
-            f"schedule --rig-error {rig_error:g}) presses them to {top:g} mm"]
+            f"rms, zeroed within {zero_error:g} mm, lifts about one in "
+            f"{1.0 / lift_odds(worst, rig_error, zero_error):,.0f} past the skin's adhesion ({OFF_SKIN_MM:g} mm) and "
+            f"the magnet reads at rest; a schedule made for this stage that moves dz (fitgen schedule --rig-error "
+            f"{rig_error:g} --zero-error {zero_error:g}) presses them to {top:g} mm"]
 
 
 def _where(ident: Identification, i: int) -> str:

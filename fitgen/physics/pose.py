@@ -20,10 +20,11 @@ POSE_UNITS = ("mm", "mm", "mm", "deg", "deg")
 # A stage's label with dz above this (mm above first contact) has lifted the indenter off the skin: the
 # magnet rests whatever the rig's error. The margin is the skin's adhesion when the indenter just lifts.
 OFF_SKIN_MM = 0.05
-# A schedule's rows in contact stand this many rig errors (rms, mm) below the adhesion's edge, so that the stage's
-# own error lifts about one row in 30,000 off the skin (at a printer's 0.03 mm: dz -0.07 instead of 0, where one in
-# 20 lifted off and read the magnet at rest under a label that moves it; at 3, one in 700 did, and one of 20
-# 100-pose captures in bench/units.py was refused for it).
+# A schedule's rows in contact stand this many stage errors (rms, mm: the rig's and the zero's together) below the
+# adhesion's edge, so that the stage lifts about one row in 30,000 off the skin (at a printer's 0.03 mm and an exact
+# zero: dz -0.07 instead of 0, where one in 20 lifted off and read the magnet at rest under a label that moves it; at
+# 3, one in 700 did, and one of 20 100-pose captures in bench/units.py was refused for it; with a zero off by 0.02
+# mm at a 0.01 mm rig, one capture in 17 lost a row at dz 0, one in 3,000 at -0.039).
 HOLD_SIGMAS = 4.0
 # Where a schedule's rest row lifts the stage (mm above first contact): clear of the adhesion with the rig's
 # error, and with a capture's default approach (0.3 mm from above) within a stage limit of dz <= 0.5.
@@ -83,19 +84,20 @@ def off_skin(poses: np.ndarray) -> np.ndarray:
     return np.asarray(poses)[:, 2] > OFF_SKIN_MM
 
 
-def contact_top(rig_error: float) -> float:
-    """The highest dz (mm) a scheduled row in contact takes on a stage with ``rig_error`` mm rms per axis: first
-    contact (0), or lower where the stage's error would lift it past the skin's adhesion (OFF_SKIN_MM) within
-    HOLD_SIGMAS; to the micrometre, as a stage takes it."""
-    return min(0.0, round(OFF_SKIN_MM - HOLD_SIGMAS * float(rig_error), 3))
+def contact_top(rig_error: float, zero_error: float = 0.0) -> float:
+    """The highest dz (mm) a scheduled row in contact takes on a stage with ``rig_error`` mm rms per axis whose zero
+    is off first contact by ``zero_error`` mm rms per axis: first contact (0), or lower where the two would lift it
+    past the skin's adhesion (OFF_SKIN_MM) within HOLD_SIGMAS; to the micrometre, as a stage takes it."""
+    return min(0.0, round(OFF_SKIN_MM - HOLD_SIGMAS * math.hypot(rig_error, zero_error), 3))
 
 
-def lift_odds(dz: float, rig_error: float) -> float:
-    """The chance that a stage off by ``rig_error`` mm rms lifts a row labelled at ``dz`` (mm, in contact) past the
-    skin's adhesion (OFF_SKIN_MM)."""
-    if rig_error <= 0:
+def lift_odds(dz: float, rig_error: float, zero_error: float = 0.0) -> float:
+    """The chance that a stage off by ``rig_error`` mm rms, zeroed ``zero_error`` mm rms off first contact, lifts a
+    row labelled at ``dz`` (mm, in contact) past the skin's adhesion (OFF_SKIN_MM)."""
+    sd = math.hypot(rig_error, zero_error)
+    if sd <= 0:
         return float(dz > OFF_SKIN_MM)
-    return 0.5 * math.erfc((OFF_SKIN_MM - dz) / (rig_error * math.sqrt(2.0)))
+    return 0.5 * math.erfc((OFF_SKIN_MM - dz) / (sd * math.sqrt(2.0)))
 
 
 def pressed(shift: np.ndarray, stiffening) -> np.ndarray:
