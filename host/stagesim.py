@@ -397,11 +397,12 @@ def parse_xyz(text: str, what: str) -> list[float]:
 def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", samples: int = 16,
                             noise: float = 0.0005, backlash: float = 0.03, repeatability: float = 0.005,
                             limits: str = "dx=-3.5:3.5,dy=-3.5:3.5,dz=-3.5:1", approach: str = APPROACH,
-                            seed: int = 0, progress=None):
+                            seed: int = 0, zero_off=(0.0, 0.0, 0.0), progress=None):
     """A capture as `tactile-host capture --stage` makes it, all simulated: two ADS1115s on a simulated bus read
     ``sensor`` (a unit, say, whose file carries its stage map), a simulated ``flavor`` controller moves it through a
     rig with ``backlash`` and ``repeatability`` (mm), zeroed at first contact as the documented jog finds it (each
-    axis from its approach side, so the backlash is taken up as at every pose). Returns the capture's result."""
+    axis from its approach side, so the backlash is taken up as at every pose), or ``zero_off`` (mm, dx, dy, dz)
+    from it, as a zero set by hand is. Returns the capture's result."""
     from host.adc import AdcArray
     from host.capture import capture
     from host.channelmap import parse_spec
@@ -426,7 +427,8 @@ def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", s
         try:
             ctrl.connect(boot_wait=0.1)
             ctrl.setup()
-            zero = dict(zip("XYZ", map(float, rig.carriage_at_contact(settings.approach) - srv.ctrl.offset)))
+            found = rig.carriage_at_contact(settings.approach) - srv.ctrl.offset + np.asarray(zero_off, dtype=float)
+            zero = dict(zip("XYZ", map(float, found)))
             arr = AdcArray(bus, cmap, clock=clock)
             arr.probe()
             arr.setup()

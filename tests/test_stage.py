@@ -254,6 +254,29 @@ def test_the_simulated_rigs_printed_contact_is_the_zero_the_documented_jog_finds
     np.testing.assert_allclose(np.abs(rig.displacement()), 0.1, atol=1e-12)
 
 
+def test_a_zero_set_above_first_contact_lifts_the_rows_at_first_contact_off_the_skin(tmp_path):
+    """simulated_stage_capture's zero_off: the zero a hand sets, off the one the documented jog finds. Set 0.1 mm
+    high, the rows labelled at first contact stand past the skin's adhesion and read the magnet at rest
+    (fitgen.fitting.capturecheck.reads_at_rest); pressed 0.2 mm they still press; set where the jog finds it, none
+    reads at rest."""
+    from fitgen.fitting.capturecheck import reads_at_rest
+    from fitgen.fitting.schedule import write_schedule
+    from fitgen.physics.sensor import load_sensor
+    from host.stagesim import simulated_stage_capture
+
+    poses = np.array([[0, 0, 0.2, 0, 0]] * 2 + [[1, 0, 0, 0, 0], [0, 1, 0, 0, 0], [1, 1, -0.2, 0, 0],
+                                                 [-1, 0, -0.2, 0, 0]], dtype=float)
+    plan = tmp_path / "s.csv"
+    write_schedule(plan, poses, ("dx", "dy", "dz"), {"samples_per_row": 4})
+    unit = load_sensor("paper").with_transfer("gmr")
+    for off, at_rest in ((0.0, [False] * 4), (0.1, [True, True, False, False])):
+        cap = tmp_path / f"c{off:g}.csv"
+        simulated_stage_capture(unit, load_schedule(plan), cap, samples=4, repeatability=0.0, zero_off=(0, 0, off))
+        ds = load_dataset(cap)
+        noise = np.full(8, 0.0005 / 2)
+        assert reads_at_rest(ds.inputs, ds.poses(), noise)[2:].tolist() == at_rest, off
+
+
 # --- the protocol ----------------------------------------------------------------------------------------
 
 
