@@ -63,6 +63,7 @@ class Schedule:
     columns: tuple[str, ...]  # the pose columns the schedule names, in the order dx,dy,dz,thx,thy
     origin: str = "schedule"
     drawing: dict | None = None  # the drawing `fitgen schedule` made it for: sensor, sensor_file, sha256, transfer
+    stage: dict | None = None  # the stage it was made for: rig_error, zero_error (mm), as `fitgen schedule` took them
 
     @property
     def values(self) -> np.ndarray:
@@ -92,7 +93,8 @@ def load_schedule(path: str | Path) -> Schedule:
     poses, columns = pose_table(read_text(path, "schedule"), origin)
     meta = load_meta(path)
     drawing = {k: meta[k] for k in ("sensor", "sensor_file", "sensor_sha256", "transfer") if k in meta}
-    return Schedule(as_poses(poses), columns, origin, drawing if "sensor" in drawing else None)
+    stage = {k: meta[k] for k in ("rig_error", "zero_error") if k in meta}
+    return Schedule(as_poses(poses), columns, origin, drawing if "sensor" in drawing else None, stage or None)
 
 
 def simulated_sensor(args, schedule: Schedule) -> None:
@@ -429,7 +431,8 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
         before_s, runs = 0.0, 1
     t_start = clock.monotonic()
     info = {"schedule": schedule.origin, "samples_per_row": samples, "max_spread_volts": max_spread,
-            **({"schedule_drawing": schedule.drawing} if schedule.drawing else {}), **(meta or {})}
+            **({"schedule_drawing": schedule.drawing} if schedule.drawing else {}),
+            **({"schedule_stage": schedule.stage} if schedule.stage else {}), **(meta or {})}
 
     def refresh():
         info.update(noise.meta(), duration_s=before_s + (clock.monotonic() - t_start), runs=runs)

@@ -144,7 +144,7 @@ def test_predict_refuses_a_model_whose_float_sum_could_overflow(data, tmp_path):
 
 def test_identify_refuses_numbers_it_cannot_solve_with(tmp_path):
     sched = tmp_path / "s.csv"
-    sched.write_text("dx,dy,dz\n" + "".join(f"{x},{y},{z}\n" for x in (-1, 1) for y in (-1, 1) for z in (0, -1, -2)))
+    sched.write_text("dx,dy,dz\n" + "".join(f"{x},{y},{z}\n" for x in (-1, 1) for y in (-1, 1) for z in (-0.1, -1, -2)))
     assert run_cli("fitgen", "simulate", "--unit", "2", "--poses", str(sched), "--noise", "0.0005", "-o",
                    str(tmp_path / "cap.csv")).returncode == 0
     for extra, said in ((["--rig-error", "1e300"], "the rig error must be 0..0.5 mm (a printer's is 0.01-0.1)"),

@@ -14,7 +14,7 @@ from conftest import assert_one_line_error, run_cli, save_capture, simulated_cap
 from fitgen.base.errors import InputError
 from fitgen.fitting.identify import PINNABLE, RIG, Problem, derived_quantities, identify
 from fitgen.fitting.schedule import schedule
-from fitgen.fitting.unitrecord import report, row_noise, what_pins_more
+from fitgen.fitting.unitrecord import report, row_noise, stage_errors, what_pins_more
 from fitgen.fitting.verdict import check_explained, field_line, lifted_rows_line, looser_stage_line, outlier_lines
 from fitgen.physics import presets
 from fitgen.physics.pose import POSE_NAMES
@@ -597,6 +597,38 @@ def test_a_schedule_presses_its_rows_so_that_the_stage_and_its_zero_keep_them_on
     assert ("every row at first contact (dz 0, which --axes does not move), where a stage off by 0.03 mm rms, zeroed "
             "within 0.02 mm, lifts about one in 12 off the skin: with dz among --axes the rows are pressed to -0.094 "
             "mm") in proc.stderr
+
+
+def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, tmp_path):
+    """A printer's schedule (--rig-error 0.03) left identify at its default 0.01 mm, which refused the capture and
+    named the flag the user had given the schedule already. The schedule records the stage's errors, the capture
+    passes them on, and identify takes them unless told; a recorded one identify refuses ends in one line naming
+    the meta."""
+    from host.capture import load_schedule
+    from host.stagesim import simulated_stage_capture
+
+    sch, cap = tmp_path / "s.csv", tmp_path / "c.csv"
+    proc = run_cli("fitgen", "schedule", "--n", "20", "--rig-error", "0.03", "--zero-error", "0.03", "-o", str(sch))
+    assert proc.returncode == 0, proc.stderr
+    unit, _ = draw_unit(drawing, 12)
+    simulated_stage_capture(unit, load_schedule(sch), cap, repeatability=0.03, seed=3)
+    meta = json.loads((tmp_path / "c.csv.meta.json").read_text())
+    assert meta["schedule_stage"] == {"rig_error": 0.03, "zero_error": 0.03}
+    proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "u.toml"))
+    assert proc.returncode == 0, proc.stderr
+    assert ("rig error 0.03 mm per row, zero error 0.03 mm (rig error and zero error as the capture's schedule was "
+            "made for)") in proc.stderr
+    assert json.loads((tmp_path / "u.posterior.json").read_text())["rig_error"] == 0.03
+    # a flag wins over the record; without a record, the defaults
+    assert stage_errors(None, 0.01, meta, "c.csv") == (0.03, 0.01, " (rig error as the capture's schedule was made "
+                                                                  "for)")
+    assert stage_errors(0.05, 0.0, meta, "c.csv") == (0.05, 0.0, "")
+    assert stage_errors(None, None, {}, "c.csv") == (0.01, 0.02, "")
+    (tmp_path / "c.csv.meta.json").write_text(json.dumps({**meta, "schedule_stage": {"rig_error": "fast"}}))
+    assert_one_line_error(run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "v.toml")), 2,
+                          "c.csv's meta: schedule_stage.rig_error must be 0..0.5 mm, got 'fast'; repair it, or give "
+                          "--rig-error")
+    assert not (tmp_path / "v.toml").exists()
 
 
 def test_cli_schedule_capture_identify(tmp_path):

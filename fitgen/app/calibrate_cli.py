@@ -35,6 +35,7 @@ def cmd_identify(args) -> int:
     rec.check_transfer(args.transfer, ds.meta, args.capture)
     drawing = sensor_of(args) if args.transfer else rec.in_capture_units(sensor_of(args), ds.meta)
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)
+    args.rig_error, args.zero_error, stage = rec.stage_errors(args.rig_error, args.zero_error, ds.meta, args.capture)
     # before a refusal, which may name such a row
     for line in verdict.lifted_rows_line(ds.poses(), args.rig_error, args.zero_error):
         print(f"identify: {line}", file=sys.stderr)
@@ -60,7 +61,7 @@ def cmd_identify(args) -> int:
         files.append((folder / "identify.png", plots.identification_png(ident)))
     unit, post, *png = write_all(files)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
-          f"{args.zero_error:g} mm", file=sys.stderr)
+          f"{args.zero_error:g} mm{stage}", file=sys.stderr)
     print(rec.report(ident, rec.samples_per_row(ds.meta)), end="")
     print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
           "the posterior)", file=sys.stderr)
@@ -272,11 +273,12 @@ def add_calibration_commands(command) -> None:
     i.add_argument("--noise", type=finite, metavar="X",
                    help="the device's single-sample reading noise (default: what the capture measured or was "
                         "simulated with, else the sensor file's), divided by sqrt(samples per row)")
-    i.add_argument("--rig-error", type=finite, default=0.01, metavar="MM",
-                   help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
-    i.add_argument("--zero-error", type=finite, default=0.02, metavar="MM",
+    i.add_argument("--rig-error", type=finite, metavar="MM",
+                   help="the stage's own position error, mm rms per axis (default: the one the capture's schedule "
+                        "was made for, else 0.01; a 3D printer 0.03)")
+    i.add_argument("--zero-error", type=finite, metavar="MM",
                    help="how far the capture's zero may be from first contact, mm rms per axis, one error shared by "
-                        "every row in contact (default 0.02)")
+                        "every row in contact (default: the one the capture's schedule was made for, else 0.02)")
     i.add_argument("--temp-comp", metavar="FILE.json", help="map the capture's readings from the temperature it "
                    "recorded to this compensation's t0 first: the unit at t0, as read --temp-comp sees it")
     i.add_argument("-o", "--output", required=True, metavar="UNIT.toml", help="the unit's sensor file to write")

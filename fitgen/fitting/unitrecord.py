@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import PINNABLE, RIG, Identification, tilting
+from fitgen.fitting.capturecheck import MAX_STAGE_ERROR
+from fitgen.fitting.identify import PINNABLE, RIG, RIG_ERROR, ZERO_ERROR, Identification, tilting
 from fitgen.physics.dataset import thermistor_degc
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
@@ -182,6 +183,27 @@ def drawing_for(given: str | None, meta: dict) -> tuple[str, str]:
         return "paper", (f"note: the capture's schedule was made for sensor {made.get('sensor')}, whose file is not "
                          "here as it was; identifying against paper (--sensor to say which)")
     return "paper", ""
+
+
+def stage_errors(rig: float | None, zero: float | None, meta: dict, capture) -> tuple[float, float, str]:
+    """The rig's and the zero's error identify takes for a capture with ``meta`` (mm rms per axis): ``rig`` and
+    ``zero`` (--rig-error, --zero-error) where given, else those its schedule was made for (`fitgen schedule`
+    recorded them, `tactile-host capture` passed them on as ``schedule_stage``), else RIG_ERROR and ZERO_ERROR; and
+    where they came from, for the report. InputError naming ``capture``'s meta for a recorded one identify
+    refuses (fitgen.fitting.capturecheck.check_error)."""
+    made = meta.get("schedule_stage")
+    made = made if isinstance(made, dict) else {}
+    out, recorded = [], []
+    for value, key, flag, default in ((rig, "rig_error", "--rig-error", RIG_ERROR),
+                                      (zero, "zero_error", "--zero-error", ZERO_ERROR)):
+        if value is None and key in made:
+            value = made[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= MAX_STAGE_ERROR:
+                raise InputError(f"{capture}'s meta: schedule_stage.{key} must be 0..{MAX_STAGE_ERROR:g} mm, got "
+                                 f"{value!r}; repair it, or give {flag}")
+            recorded.append(key.replace("_", " "))
+        out.append(float(default if value is None else value))
+    return out[0], out[1], (f" ({' and '.join(recorded)} as the capture's schedule was made for)" if recorded else "")
 
 
 def in_capture_units(drawing: Sensor, meta: dict) -> Sensor:
