@@ -47,6 +47,10 @@ def test_hash_is_stable_and_sensitive():
         (lambda d: d["elements"]["ring"][0].__setitem__("radius", "ten"), "elements.ring[0].radius"),
         (lambda d: d["elements"]["ring"][0].__setitem__("axis", "sideways"), "elements.ring[0].axis"),
         (lambda d: d["transfer"]["gmr"].__setitem__("adc_max", -1.0), "adc_max"),
+        # volts past any amplifier's: the ADC's step overflowed downstream
+        (lambda d: d["transfer"]["gmr"].__setitem__("adc_max", 1e308), "'transfer.gmr.adc_max' must be <= 100"),
+        (lambda d: d["transfer"]["gmr"].__setitem__("adc_min", -1e308), "'transfer.gmr.adc_min' must be >= -100"),
+        (lambda d: d["transfer"]["gmr"].__setitem__("offset", 1e300), "'transfer.gmr.offset' must be <= 100"),
         (lambda d: d["elements"]["ring"][0].__setitem__("elevation", 95.0), "elements.ring[0].elevation"),
         (lambda d: d["elements"]["ring"][0].update(axis="z", elevation=10.0), "elements.ring[0].elevation"),
         (lambda d: d.__setitem__("colour", "red"), "colour"),

@@ -21,6 +21,9 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 AXIS_WORDS = ("radial", "tangential", "z", "-z")
+# V: the most an amplifier's output or an ADC's range may reach from 0 (a GMR bridge's amplifier runs on a few
+# volts; past this a file's volts are in other units, and an ADC's span past it overflows its step)
+MAX_VOLTS = 100.0
 
 
 @dataclass(frozen=True)
@@ -386,10 +389,10 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
         supply=gs.number("supply", 5.0, positive=True),
         sensitivity=gs.number("sensitivity", 2.6, positive=True),
         gain=gs.number("gain", 12.0, positive=True),
-        offset=gs.number("offset", 0.0),
+        offset=gs.number("offset", 0.0, min_=-MAX_VOLTS, max_=MAX_VOLTS),
         saturation=gs.number("saturation", 2.0, positive=True),
-        adc_min=gs.number("adc_min", 0.0),
-        adc_max=gs.number("adc_max", 3.3),
+        adc_min=gs.number("adc_min", 0.0, min_=-MAX_VOLTS, max_=MAX_VOLTS),
+        adc_max=gs.number("adc_max", 3.3, min_=-MAX_VOLTS, max_=MAX_VOLTS),
         adc_bits=gs.integer("adc_bits", 16, min_=0, max_=32),
         noise=gs.number("noise", 0.0, min_=0.0),
     )
