@@ -2,7 +2,8 @@
 capture of a unit with a dead or a miswired element, and only such a capture?
 
 bench/units.py's 20 units and their headline capture (40 D-optimal poses, 0.01 mm rig, rows of 16 samples, the readings
-from magpylib: an independent field model), with an exact zero and with the zero off first contact by 0.02 mm rms;
+from magpylib: an independent field model), with an exact zero (scheduled for one) and with the zero off first contact
+by 0.02 mm rms (scheduled as `fitgen schedule` does by default, its rows in contact pressed for that zero);
 then the same captures with the indenter slipped in dx on one row (the first pressed deepest) by 0.05 to 0.5 mm,
 its label unchanged. Per kind of capture: how many identify refuses (reduced chi-square over 3, the check before
 rows were named: the baseline), how many name a row (a reading beyond 5 standard deviations,
@@ -67,11 +68,13 @@ def main() -> None:
     ctx = U.Ctx(U.N_HELD_QUICK, U.DRAWS, U.N_RANDOM, (U.HEAD,))
     U.CTX = ctx
     ctx.make_schedules()
-    labels = ctx.schedules[U.HEAD]
-    deep = int(np.nonzero(labels[:, 2] == labels[:, 2].min())[0][0])
-    shifted = labels[deep:deep + 1].copy()
-    rows = []
+    rows, slipped = [], []
     for zero in (0.0, U.ZERO_SIM):
+        labels = ctx.schedules[(*U.HEAD, U.ZEROED) if zero else U.HEAD]  # scheduled for the zero it has
+        deep = int(np.nonzero(labels[:, 2] == labels[:, 2].min())[0][0])
+        shifted = labels[deep:deep + 1].copy()
+        slipped.append(f"row {deep + 1} (" + " ".join(f"{a}={v:g}" for a, v in zip(("dx", "dy", "dz"), labels[deep]))
+                       + f") with the zero {'off' if zero else 'exact'}")
         caps = []
         for seed in range(1, U.N_UNITS + 1):
             unit, _ = U.draw_unit(ctx.drawing, seed)
@@ -115,9 +118,10 @@ def main() -> None:
                          f"{fmt(np.median(others))} / {fmt(np.max(others))}"])
             log(f"zero {zero:g} mm, {kind}")
     print("## Captures the physics does not explain: rows named, captures refused\n")
-    where = " ".join(f"{a}={v:g}" for a, v in zip(("dx", "dy", "dz"), labels[deep]))
     print(f"{U.N_UNITS} units of `{U.PRESET}` in `{U.TRANSFER}`, the headline capture ({U.HEAD[0]} poses, "
-          f"{U.HEAD[1]:g} mm rig, magpylib's readings); the slipped row is row {deep + 1} ({where}). A row is named "
+          f"{U.HEAD[1]:g} mm rig, magpylib's readings), scheduled for the zero it has (exact, or off by "
+          f"{U.ZERO_SIM:g} mm rms: fitgen schedule's default); the slipped row is {' and '.join(slipped)}. "
+          f"A row is named "
           f"beyond {OUTLIER_LIMIT:g} standard deviations; a capture is refused over a reduced chi-square of "
           f"{CHI2_LIMIT:g} (the baseline, which says nothing of which row; a refusal now names the row that stands out "
           f"most); the captures it passes are refused when a parameter lies beyond {PRIOR_LIMIT:g} prior spreads (a unit "
@@ -126,7 +130,7 @@ def main() -> None:
     print(table(["zero off [mm rms]", "what is wrong", "refused (chi-square)", "refused (beyond the tolerances)",
                  "refusals naming what to blame", "more than 3 rows standing out",
                  "largest parameter [prior sd]", "captures naming a row",
-                 "naming the slipped row first", f"slipped row {deep + 1}", "every other row"], rows))
+                 "naming the slipped row first", "the slipped row", "every other row"], rows))
 
 
 if __name__ == "__main__":
