@@ -21,7 +21,8 @@ from fitgen.physics.pose import POSE_NAMES, off_skin
 from fitgen.physics.posesource import choose_poses
 from fitgen.physics.scenes import PRESETS
 from fitgen.physics.sensor import load_sensor
-from fitgen.physics.simulate import DEFAULT_RANGES, simulate
+from fitgen.physics.simulate import DEFAULT_RANGES, rig_poses, simulate
+from fitgen.physics.transfer import readings
 from fitgen.physics.units import draw_unit
 
 RING = """name = "ring6"
@@ -147,6 +148,30 @@ def test_a_sensor_moved_on_its_bed_fails_the_check_from_about_005_mm(twin):
     assert failed[0.02] == 0 and failed[0.05] >= 8 and failed[0.1] == 10, failed
 
 
+def test_a_check_zeroed_anew_allows_for_its_zero_and_still_catches_a_sensor_moved_far(twin):
+    """A check capture whose zero was set anew by hand is off the calibration's by one error shared by its rows
+    (0.02 mm rms per axis): zero_error draws it in the prediction, which widens, so no such capture fails (by
+    default, one in 20 did: docs/calibration.md, step 7), while a sensor moved 0.1 mm on its bed still fails every
+    time."""
+    folder, drawing, unit, sensor, model = twin
+    posterior = unit_posterior(folder / "twin.toml", sensor)
+    rng = np.random.default_rng(11)
+    for seed in range(10):
+        poses, _ = check_schedule(drawing, 30, seed=seed)
+        draws = np.random.default_rng(100 + seed)
+        true = rig_poses(poses, RIG, draws, rng.normal(0.0, 0.02, 3))
+        y = readings(unit, true, adc_bits=0) + draws.normal(0.0, ROW_NOISE, (len(poses), unit.n_elements))
+        wide = check(model, y, poses, sensor, ROW_NOISE, posterior=posterior, zero_error=0.02)
+        assert wide.failed() == [] and wide.zero_error == 0.02, seed
+        if seed == 0:  # the same rows predicted without the zero's error: narrower in every output
+            narrow = check(model, y, poses, sensor, ROW_NOISE, posterior=posterior)
+            assert all(wide.predicted(o, "max")[0] > narrow.predicted(o, "max")[0] for o in wide.outputs)
+        if seed < 5:
+            moved = check(model, _capture(unit, poses, 100 + seed), poses + [0.1, 0, 0, 0, 0], sensor, ROW_NOISE,
+                          posterior=posterior, zero_error=0.02)
+            assert moved.failed(), seed
+
+
 def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_unit(twin, tmp_path):
     folder, drawing, unit, _, model = twin
     poses, _ = check_schedule(drawing, 30, seed=0)
@@ -172,7 +197,9 @@ def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_u
     # a printer's check: its stage error given, the prediction widens with it; by default, the error the unit was
     # identified with (the posterior records it), so a unit identified on a printer is checked as on one
     loose = run_cli("fitgen", "check", str(folder / "twin.json"), str(ok), "--rig-error", "0.03")
-    assert loose.returncode == 0 and "stage's error (0.03 mm)" in loose.stdout
+    assert loose.returncode == 0 and "stage's error (0.03 mm) and the rows' noise" in loose.stdout
+    anew = run_cli("fitgen", "check", str(folder / "twin.json"), str(ok), "--zero-error", "0.02")
+    assert anew.returncode == 0 and "stage's error (0.01 mm), the zero's (0.02 mm) and the rows' noise" in anew.stdout
     assert "stage's error (0.01 mm)" in proc.stdout  # the unit 8 run's, by default: unit 7 was identified at 0.01
     record = json.loads((folder / "twin.posterior.json").read_text())
     try:
@@ -193,6 +220,8 @@ def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_u
     for rig in ("-1", "1e300"):  # as identify takes it
         assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(ok), f"--rig-error={rig}"),
                               contains="the rig error must be 0..0.5 mm")
+    assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(ok), "--zero-error=0.6"),
+                          contains="the zero error must be 0..0.5 mm")
     drawing_model = tmp_path / "m.json"
     load_model(folder / "twin.json").save(drawing_model)
     (folder / "twin.toml").rename(folder / "gone.toml")

@@ -233,12 +233,14 @@ def cmd_check(args) -> int:
         raise InputError(f"model {args.model}: the sensor its held-out figures were made on is not found here (or "
                          "has changed): give the unit's file as --sensor")
     sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on")
-    result, source = check_capture(model, ds, sensor, spec, rig_error=args.rig_error, precision=args.precision)
+    result, source = check_capture(model, ds, sensor, spec, rig_error=args.rig_error, zero_error=args.zero_error,
+                                   precision=args.precision)
     where = (f"{result.units} units drawn from the posterior of {sensor.name}" if result.identified
              else f"{sensor.name} (no posterior: its noise and the stage's error alone)")
     print(f"check: {result.rows} rows of {args.capture} in contact, estimated in {result.precision}; predicted on "
-          f"{where}, {DRAWS} draws each of the stage's error ({result.rig_error:g} mm) and the rows' noise "
-          f"({source})\n")
+          f"{where}, {DRAWS} draws each of the stage's error ({result.rig_error:g} mm)"
+          + (f", the zero's ({result.zero_error:g} mm)" if result.zero_error else "")
+          + f" and the rows' noise ({source})\n")
     print("| output | unit | max error | predicted max: median (least-greatest) | RMS error | predicted RMS | |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for o in result.outputs:
@@ -315,6 +317,10 @@ def add_calibration_commands(command) -> None:
     ch.add_argument("--rig-error", type=finite, metavar="MM",
                     help="the stage's own position error, mm rms per axis (default: the one the unit was identified "
                          "with, else 0.01; a 3D printer 0.03)")
+    ch.add_argument("--zero-error", type=finite, default=0.0, metavar="MM",
+                    help="how far the check capture's zero may be from the calibration's, mm rms per axis (default "
+                         "0: the calibration's zero reused; 0.02 for a zero set anew by hand, which widens the "
+                         "prediction and hides a sensor moved on its bed by as much)")
     ch.add_argument("--precision", choices=("double", "float", "fixed"),
                     help="the arithmetic to estimate in (default: the one the model was fitted for)")
     ch.add_argument("--plot", metavar="DIR", help="also DIR/check.png: the measured errors beside the predicted ones "

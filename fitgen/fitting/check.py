@@ -42,6 +42,7 @@ class Check:
     draws: int
     rig_error: float
     identified: bool  # the units were drawn from an identification's posterior (else the model's sensor alone)
+    zero_error: float = 0.0  # mm rms per axis: the check capture's zero off the calibration's, one draw per draw
 
     def predicted(self, output: str, figure: str) -> tuple[float, float, float]:
         """The median, least and greatest of the drawn ``figure`` of ``output``."""
@@ -62,13 +63,15 @@ def _figures(err: np.ndarray) -> dict:
 
 
 def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_noise, *, posterior: dict | None = None,
-          rig_error: float = RIG_ERROR, precision: str = "float", units: int = POSTERIOR_UNITS, draws: int = DRAWS,
-          seed: int = SEED) -> Check:
+          rig_error: float = RIG_ERROR, zero_error: float = 0.0, precision: str = "float",
+          units: int = POSTERIOR_UNITS, draws: int = DRAWS, seed: int = SEED) -> Check:
     """:class:`Check` of ``model`` on a capture's ``inputs`` (n, N) at stage ``labels`` (n, 5), the rows' reading
     noise ``row_noise`` (per element or one number): predicted on ``units`` units drawn from ``posterior`` (an
     identified unit's record) or on ``sensor`` alone, each read ``draws`` times at the labels moved by ``rig_error``
-    (mm rms per axis) with that noise, estimated in ``precision``. Rows off the skin are left out."""
+    (mm rms per axis) and, where the check capture's zero was set anew, by one ``zero_error`` draw shared by its rows
+    (mm rms per axis), with that noise, estimated in ``precision``. Rows off the skin are left out."""
     check_error("rig error", rig_error)
+    check_error("zero error", zero_error)
     inputs, labels = np.asarray(inputs, dtype=float), np.asarray(labels, dtype=float)
     keep = ~off_skin(labels)
     inputs, labels = inputs[keep], labels[keep]
@@ -88,19 +91,21 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
     sims = []
     for unit in pool:
         for _ in range(draws):
-            y = readings(unit, rig_poses(labels, rig_error, rng), adc_bits=0, noise=noise, rng=rng)
+            zero = rng.normal(0.0, zero_error, 3) if zero_error > 0 else None  # none drawn: the same stream as before
+            y = readings(unit, rig_poses(labels, rig_error, rng, zero), adc_bits=0, noise=noise, rng=rng)
             sims.append(_figures(fn(y)[:, cols] - truth))
     drawn = {o: {f: np.array([s[f][j] for s in sims]) for f in FIGURES} for j, o in enumerate(outputs)}
     return Check(outputs, len(labels), precision, measured, drawn, len(pool), draws, float(rig_error),
-                 posterior is not None)
+                 posterior is not None, float(zero_error))
 
 
 def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float | None = None,
-                  precision: str | None = None) -> tuple[Check, str]:
+                  zero_error: float = 0.0, precision: str | None = None) -> tuple[Check, str]:
     """:func:`check` of ``model`` on the check capture ``ds`` (a dataset), as fitgen check runs it: the rows' noise
     as its meta says (fitgen.fitting.unitrecord.row_noise), units drawn from the posterior of ``unit_file`` where it
     has one, the stage's error ``rig_error`` or else the one the unit was identified with (RIG_ERROR without a
-    record), in ``precision`` or else the one the model was fitted for; and where the rows' noise came from."""
+    record), the zero's ``zero_error`` (0: the calibration's zero, reused), in ``precision`` or else the one the model
+    was fitted for; and where the rows' noise came from."""
     posterior = unit_posterior(unit_file, sensor) if unit_file and Path(unit_file).is_file() else None
     if rig_error is None:
         rig_error = (posterior or {}).get("rig_error", RIG_ERROR)
@@ -108,5 +113,5 @@ def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float 
             raise InputError(f"{unit_file}'s posterior records a rig error of {rig_error!r}: give --rig-error")
     noise, source = row_noise(ds.meta, sensor)
     result = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior, rig_error=rig_error,
-                   precision=precision or device_precision(model))
+                   zero_error=zero_error, precision=precision or device_precision(model))
     return result, source
