@@ -39,12 +39,8 @@ def main(argv: list[str] | None = None) -> int:
     import test_check as T  # the tests' twin: the ring, its unit 7 and how it is calibrated
 
     with tempfile.TemporaryDirectory() as tmp:
-        class Folder:
-            def mktemp(self, name):
-                return Path(tmp)
-
         log("the twin: schedule, capture, identify, fit")
-        folder, drawing, unit, sensor, model = T.twin.__wrapped__(Folder())
+        folder, drawing, unit, sensor, model = T.make_twin(Path(tmp))
         posterior = unit_posterior(folder / "twin.toml", sensor)
         zeros = np.random.default_rng(11)
         rows = []

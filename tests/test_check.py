@@ -56,8 +56,12 @@ def _capture(unit, poses, seed):
 
 @pytest.fixture(scope="module")
 def twin(tmp_path_factory):
-    """Unit 7 of the ring calibrated as the chain does it: schedule, capture, identify, the twin's fit."""
-    folder = tmp_path_factory.mktemp("check")
+    return make_twin(tmp_path_factory.mktemp("check"))
+
+
+def make_twin(folder):
+    """Unit 7 of the ring calibrated in ``folder`` as the chain does it: schedule, capture, identify, the twin's fit
+    (bench/check_zero.py checks it too)."""
     (folder / "ring.toml").write_text(RING)
     drawing = load_sensor(folder / "ring.toml")
     unit, _ = draw_unit(drawing, 7)

@@ -186,10 +186,11 @@ def _pressed(info: dict) -> str:
 
     rig, zero = info["rig_error"], info["zero_error"]
     stage = f"a stage off by {rig:g} mm rms, zeroed within {zero:g} mm,"
-    if "dz" not in info["ranges"] and contact_top(rig, zero) < 0:
+    press = contact_top(rig, zero)
+    if "dz" not in info["ranges"] and press < 0:
         return (f"; every row at first contact (dz 0, which --axes does not move), where {stage} lifts about one in "
                 f"{1.0 / lift_odds(0.0, rig, zero):,.0f} off the skin: with dz among --axes the rows are pressed to "
-                f"{contact_top(rig, zero):g} mm")
+                f"{press:g} mm")
     top = info["ranges"].get("dz", (0.0, 0.0))[1]
     if top >= 0:
         return ""

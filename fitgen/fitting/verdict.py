@@ -28,14 +28,16 @@ def lifted_rows_line(poses: np.ndarray, rig_error: float, zero_error: float = 0.
     poses = np.asarray(poses)
     top = contact_top(rig_error, zero_error)
     high = ~off_skin(poses) & (poses[:, 2] > top)
-    if not high.any() or top == 0 and not lift_odds(float(poses[high, 2].max()), rig_error, zero_error) > 0:
-        return []  # none high, or a stage that errs nowhere
+    if not high.any():
+        return []
     worst = float(poses[high, 2].max())
+    odds = lift_odds(worst, rig_error, zero_error)
+    if odds <= 0:  # a stage that errs nowhere keeps every row where it stands
+        return []
     return [f"{int(high.sum())} rows in contact stand at dz up to {worst:g} mm, where a stage off by {rig_error:g} mm "
-            f"rms, zeroed within {zero_error:g} mm, lifts about one in "
-            f"{1.0 / lift_odds(worst, rig_error, zero_error):,.0f} past the skin's adhesion ({OFF_SKIN_MM:g} mm) and "
-            f"the magnet reads at rest; a schedule made for this stage that moves dz (fitgen schedule --rig-error "
-            f"{rig_error:g} --zero-error {zero_error:g}) presses them to {top:g} mm"]
+            f"rms, zeroed within {zero_error:g} mm, lifts about one in {1.0 / odds:,.0f} past the skin's adhesion "
+            f"({OFF_SKIN_MM:g} mm) and the magnet reads at rest; a schedule made for this stage that moves dz (fitgen "
+            f"schedule --rig-error {rig_error:g} --zero-error {zero_error:g}) presses them to {top:g} mm"]
 
 
 def _where(ident: Identification, i: int) -> str:
