@@ -435,6 +435,9 @@ def simulated_stage_capture(sensor, schedule, output, *, flavor: str = "grbl", s
             return capture(arr, schedule, output, samples=samples, set_pose=PoseStage(ctrl, settings, zero).move_to,
                            clock=clock, progress=progress,
                            meta={"adc": cmap.describe(), "source": f"simulated {sensor.name} on a simulated "
-                                 f"{flavor} stage", "stage": {"flavor": ctrl.flavor, "simulated": True}})
+                                 f"{flavor} stage", "stage": {"flavor": ctrl.flavor, "simulated": True,
+                                                               # its coordinates never move, as a homed machine's
+                                                               "zero_machine_mm": zero, "zero_homed": True,
+                                                               "axes": str(settings.axes)}})
         finally:
             ctrl.close()

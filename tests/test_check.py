@@ -9,7 +9,8 @@ import pytest
 
 from conftest import assert_one_line_error, run_cli, save_capture, simulated_capture
 from fitgen.equations.model import load_model
-from fitgen.fitting.check import TOO_FAR, check
+from fitgen.base.errors import InputError
+from fitgen.fitting.check import TOO_FAR, check, check_zero
 from fitgen.fitting.family import fit_device
 from fitgen.fitting.fit import FitSettings
 from fitgen.fitting.holdout import unit_posterior
@@ -174,6 +175,76 @@ def test_a_check_zeroed_anew_allows_for_its_zero_and_still_catches_a_sensor_move
             moved = check(model, _capture(unit, poses, 100 + seed), poses + [0.1, 0, 0, 0, 0], sensor, ROW_NOISE,
                           posterior=posterior, zero_error=0.02)
             assert moved.failed(), seed
+
+
+AXES = "X=dx,Y=dy,Z=dz"
+CAL_ZERO = {"machine_mm": {"X": 12.0, "Y": 8.0, "Z": 4.0}, "homed": True, "axes": AXES}
+
+
+def _stage(x=12.0, homed=True, axes=AXES, **more):
+    """A check capture's meta whose stage moved from zero X``x`` Y8 Z4 (tactile-host capture --stage records it)."""
+    return {**ROWS_META, **more,
+            "stage": {"zero_machine_mm": {"X": x, "Y": 8.0, "Z": 4.0}, "zero_homed": homed, "axes": axes}}
+
+
+def test_check_zero_tells_a_zero_reused_from_one_set_anew_by_the_captures_stage_records():
+    """The calibration's zero (the posterior's capture_zero) against the check capture's: the same machine coordinates
+    on a homed machine, 0; another zero, or one a machine not homed gives, or another axis map: both zeros' errors
+    in quadrature; a capture without a record: 0, and the line says which record is missing."""
+    post = {"capture_zero": CAL_ZERO, "zero_error": 0.02}
+    assert check_zero(post, _stage(12.004), "c.csv") == (0.0, "the calibration's zero, reused (X12.004 Y8 Z4 on a "
+                                                              "homed machine)")
+    err, said = check_zero(post, _stage(12.05), "c.csv")
+    assert err == pytest.approx(0.02 * np.sqrt(2), rel=1e-12)
+    assert said == ("a zero set anew (X12.05 Y8 Z4, the calibration's X12 Y8 Z4): its error and the calibration's, "
+                    "0.02 and 0.02 mm, in quadrature")
+    # the check's zero as its schedule was made for (a touch probe's 0), the calibration's as identified
+    assert check_zero({**post, "zero_error": 0.03}, _stage(12.05, schedule_stage={"zero_error": 0.0}),
+                      "c.csv")[0] == pytest.approx(0.03, rel=1e-12)
+    err, said = check_zero(post, _stage(homed=False), "c.csv")
+    assert err == pytest.approx(0.02 * np.sqrt(2), rel=1e-12) and "on a machine not homed" in said
+    err, said = check_zero(post, _stage(axes="X=-dx,Y=dy,Z=dz"), "c.csv")
+    assert err > 0.02 and "its axis map X=-dx,Y=dy,Z=dz is not the calibration's X=dx,Y=dy,Z=dz" in said
+    assert check_zero(post, ROWS_META, "c.csv") == (0.0, "the calibration's zero taken as reused (the check capture "
+                                                         "records no stage zero); give --zero-error 0.02 for a zero "
+                                                         "set anew by hand")
+    assert "(the unit's posterior records no stage zero)" in check_zero({}, _stage(), "c.csv")[1]
+    with pytest.raises(InputError, match="^c.csv's meta: the stage's zero must be machine coordinates"):
+        check_zero(post, _stage(x="twelve"), "c.csv")
+    with pytest.raises(InputError, match=r"^the unit's posterior \(capture_zero; give --zero-error"):
+        check_zero({"capture_zero": {**CAL_ZERO, "homed": "yes"}}, _stage(), "c.csv")
+
+
+def test_fitgen_check_takes_the_zero_error_from_the_stage_records(twin, tmp_path):
+    """The same rows, taken with the stage's zero 0.05 mm off the calibration's in x: where the check capture's
+    meta says so, fitgen check predicts with both zeros' errors and passes; where it says the calibration's zero
+    was reused, or records no zero, with none, and the labels' 0.05 mm fail the check (status 1)."""
+    folder, drawing, unit, _, model = twin
+    poses, _ = check_schedule(drawing, 30, seed=0)
+    y = _capture(unit, poses + [0.05, 0, 0, 0, 0], 100)  # the labels: from a zero 0.05 mm short in x
+    record = json.loads((folder / "twin.posterior.json").read_text())
+    try:
+        (folder / "twin.posterior.json").write_text(json.dumps({**record, "capture_zero": CAL_ZERO}))
+        runs = {}
+        for name, meta in (("anew", _stage(12.05)), ("reused", _stage()), ("unrecorded", ROWS_META)):
+            data = save_capture(tmp_path / f"{name}.csv", y, poses, meta)
+            runs[name] = run_cli("fitgen", "check", str(folder / "twin.json"), str(data))
+        given = run_cli("fitgen", "check", str(folder / "twin.json"), str(tmp_path / "anew.csv"), "--zero-error", "0")
+    finally:
+        (folder / "twin.posterior.json").write_text(json.dumps(record))
+    assert runs["anew"].returncode == 0, runs["anew"].stdout + runs["anew"].stderr
+    assert "the zero's (0.0283 mm)" in runs["anew"].stdout
+    assert "check: zero error 0.0283 mm: a zero set anew (X12.05 Y8 Z4, the calibration's X12 Y8 Z4)" in \
+        runs["anew"].stderr
+    for name in ("reused", "unrecorded"):
+        assert runs[name].returncode == 1 and "the zero's" not in runs[name].stdout, name
+    assert "check: zero error 0 mm: the calibration's zero, reused (X12 Y8 Z4 on a homed machine)" in \
+        runs["reused"].stderr
+    assert "(the check capture records no stage zero)" in runs["unrecorded"].stderr
+    assert given.returncode == 1 and "check: zero error 0 mm: as given" in given.stderr  # a flag wins
+    bad = save_capture(tmp_path / "bad.csv", y, poses, _stage(homed="yes"))
+    assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(bad)),
+                          contains="bad.csv's meta: the stage's zero must be machine coordinates")
 
 
 def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_unit(twin, tmp_path):

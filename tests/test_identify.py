@@ -618,7 +618,12 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
     assert proc.returncode == 0, proc.stderr
     assert ("rig error 0.03 mm per row, zero error 0.03 mm (rig error and zero error as the capture's schedule was "
             "made for)") in proc.stderr
-    assert json.loads((tmp_path / "u.posterior.json").read_text())["rig_error"] == 0.03
+    post = json.loads((tmp_path / "u.posterior.json").read_text())
+    assert post["rig_error"] == 0.03
+    # the stage's zero, which fitgen check compares a check capture's with (tests/test_check.py)
+    assert post["capture_zero"] == {"machine_mm": meta["stage"]["zero_machine_mm"], "homed": True,
+                                    "axes": "X=dx,Y=dy,Z=dz"}
+    assert set(post["capture_zero"]["machine_mm"]) == {"X", "Y", "Z"}
     # a flag wins over the record; without a record, the defaults
     assert stage_errors(None, 0.01, meta, "c.csv") == (0.03, 0.01, " (rig error as the capture's schedule was made "
                                                                   "for)")

@@ -36,6 +36,7 @@ def cmd_identify(args) -> int:
     drawing = sensor_of(args) if args.transfer else rec.in_capture_units(sensor_of(args), ds.meta)
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)
     args.rig_error, args.zero_error, stage = rec.stage_errors(args.rig_error, args.zero_error, ds.meta, args.capture)
+    zero = rec.stage_zero(ds.meta, args.capture)  # recorded, so that fitgen check tells a zero reused from one set anew
     # before a refusal, which may name such a row
     for line in verdict.lifted_rows_line(ds.poses(), args.rig_error, args.zero_error):
         print(f"identify: {line}", file=sys.stderr)
@@ -56,7 +57,8 @@ def cmd_identify(args) -> int:
             raise InputError(_with_map(text, getattr(exc, "order", None), ds.meta.get("adc"))) from None
     unit_noise, unit_source = rec.device_noise(ds.meta, drawing, args.noise)
     files = rec.unit_files(ident, args.output, {"capture": str(args.capture), "capture_sha256": sha,
-                                                "drawing_spec": args.sensor, **temperature}, unit_noise)
+                                                "drawing_spec": args.sensor, **temperature,
+                                                **({"capture_zero": zero} if zero else {})}, unit_noise)
     if folder is not None:  # drawn first, then written with the unit's files: a failure leaves none of them
         files.append((folder / "identify.png", plots.identification_png(ident)))
     unit, post, *png = write_all(files)
@@ -235,12 +237,13 @@ def cmd_check(args) -> int:
                          "has changed): give the unit's file as --sensor")
     sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on")
     result, source = check_capture(model, ds, sensor, spec, rig_error=args.rig_error, zero_error=args.zero_error,
-                                   precision=args.precision)
+                                   precision=args.precision, capture=args.capture)
+    print(f"check: zero error {result.zero_error:.3g} mm: {result.zero_said}", file=sys.stderr)
     where = (f"{result.units} units drawn from the posterior of {sensor.name}" if result.identified
              else f"{sensor.name} (no posterior: its noise and the stage's error alone)")
     print(f"check: {result.rows} rows of {args.capture} in contact, estimated in {result.precision}; predicted on "
           f"{where}, {DRAWS} draws each of the stage's error ({result.rig_error:g} mm)"
-          + (f", the zero's ({result.zero_error:g} mm)" if result.zero_error else "")
+          + (f", the zero's ({result.zero_error:.3g} mm)" if result.zero_error else "")
           + f" and the rows' noise ({source})\n")
     print("| output | unit | max error | predicted max: median (least-greatest) | RMS error | predicted RMS | |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
@@ -318,10 +321,11 @@ def add_calibration_commands(command) -> None:
     ch.add_argument("--rig-error", type=finite, metavar="MM",
                     help="the stage's own position error, mm rms per axis (default: the one the unit was identified "
                          "with, else 0.01; a 3D printer 0.03)")
-    ch.add_argument("--zero-error", type=finite, default=0.0, metavar="MM",
-                    help="how far the check capture's zero may be from the calibration's, mm rms per axis (default "
-                         "0: the calibration's zero reused; 0.02 for a zero set anew by hand, which widens the "
-                         "prediction and hides a sensor moved on its bed by as much)")
+    ch.add_argument("--zero-error", type=finite, metavar="MM",
+                    help="how far the check capture's zero may be from the calibration's, mm rms per axis (default: "
+                         "from the captures' stage records, 0 where the check moved from the calibration's zero on a "
+                         "homed machine, both zeros' errors in quadrature where it moved from one set anew, which "
+                         "widens the prediction and hides a sensor moved on its bed by as much; 0 without records)")
     ch.add_argument("--precision", choices=("double", "float", "fixed"),
                     help="the arithmetic to estimate in (default: the one the model was fitted for)")
     ch.add_argument("--plot", metavar="DIR", help="also DIR/check.png: the measured errors beside the predicted ones "

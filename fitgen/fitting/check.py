@@ -7,17 +7,17 @@ does reads within the spread of the draws."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
-from fitgen.fitting.capturecheck import check_error
+from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, check_error
 from fitgen.fitting.holdout import POSTERIOR_UNITS, device_precision, estimator, posterior_units, unit_posterior
-from fitgen.fitting.identify import RIG_ERROR
-from fitgen.fitting.unitrecord import row_noise
+from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR
+from fitgen.fitting.unitrecord import row_noise, stage_zero, zero_record
 from fitgen.physics.pose import POSE_NAMES, off_skin
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings
@@ -26,6 +26,7 @@ DRAWS = 5  # the stage's error and the rows' noise drawn this many times per uni
 SEED = 2031
 FIGURES = ("max", "rms")
 TOO_FAR = 1.5  # a measured max this many times the greatest drawn one: the twin does not describe the unit
+SAME_ZERO = 0.005  # mm: machine coordinates this close are one zero (a zero copied as printed keeps 6 digits)
 
 
 @dataclass
@@ -43,6 +44,7 @@ class Check:
     rig_error: float
     identified: bool  # the units were drawn from an identification's posterior (else the model's sensor alone)
     zero_error: float = 0.0  # mm rms per axis: the check capture's zero off the calibration's, one draw per draw
+    zero_said: str = ""  # why that zero error (fitgen check's line)
 
     def predicted(self, output: str, figure: str) -> tuple[float, float, float]:
         """The median, least and greatest of the drawn ``figure`` of ``output``."""
@@ -99,19 +101,62 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
                  posterior is not None, float(zero_error))
 
 
+def _words(zero: dict) -> str:
+    return " ".join(f"{k}{v:g}" for k, v in sorted(zero["machine_mm"].items()))
+
+
+def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str]:
+    """The zero error (mm rms per axis) a check capture with ``meta`` is predicted with, and why: 0 where its stage
+    moved from the calibration capture's zero (the same machine coordinates on a homed machine, with the same axis
+    map, which ``posterior`` records as ``capture_zero``); where it moved from another zero, each set by hand, the
+    two zeros' errors added in quadrature (the calibration's as identified, the check's as its schedule was made
+    for, else the same); 0 as well where either capture records no stage zero, said so."""
+    mine = stage_zero(meta, capture)
+    theirs = (posterior or {}).get("capture_zero")
+    if mine is None or not isinstance(theirs, dict):
+        which = "the check capture" if mine is None else "the unit's posterior"
+        return 0.0, (f"the calibration's zero taken as reused ({which} records no stage zero); give --zero-error 0.02 "
+                     "for a zero set anew by hand")
+    theirs = zero_record(theirs.get("machine_mm"), theirs.get("homed"), theirs.get("axes"),
+                         "the unit's posterior (capture_zero; give --zero-error to check without it):")
+    keys = set(mine["machine_mm"]) | set(theirs["machine_mm"])
+    same = (mine["axes"] == theirs["axes"] and set(mine["machine_mm"]) == set(theirs["machine_mm"])
+            and all(abs(mine["machine_mm"][k] - theirs["machine_mm"][k]) <= SAME_ZERO for k in keys))
+    if same and mine["homed"] and theirs["homed"]:
+        return 0.0, f"the calibration's zero, reused ({_words(mine)} on a homed machine)"
+    ours = (posterior or {}).get("zero_error", ZERO_ERROR)
+    ours = ours if isinstance(ours, (int, float)) and not isinstance(ours, bool) else ZERO_ERROR
+    made = meta.get("schedule_stage") if isinstance(meta.get("schedule_stage"), dict) else {}
+    new = made.get("zero_error", ours)
+    new = new if isinstance(new, (int, float)) and not isinstance(new, bool) else ours
+    error = min(float(np.hypot(ours, new)), MAX_STAGE_ERROR)
+    if mine["axes"] != theirs["axes"]:
+        why = f"its axis map {mine['axes']} is not the calibration's {theirs['axes']}"
+    elif not same:
+        why = f"{_words(mine)}, the calibration's {_words(theirs)}"
+    else:
+        why = (f"{_words(mine)} as the calibration's, but on a machine not homed, whose coordinates do not tell one "
+               "zero from another; give --zero-error 0 if the controller was not reset since")
+    return error, f"a zero set anew ({why}): its error and the calibration's, {new:g} and {ours:g} mm, in quadrature"
+
+
 def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float | None = None,
-                  zero_error: float = 0.0, precision: str | None = None) -> tuple[Check, str]:
+                  zero_error: float | None = None, precision: str | None = None,
+                  capture="the check capture") -> tuple[Check, str]:
     """:func:`check` of ``model`` on the check capture ``ds`` (a dataset), as fitgen check runs it: the rows' noise
     as its meta says (fitgen.fitting.unitrecord.row_noise), units drawn from the posterior of ``unit_file`` where it
     has one, the stage's error ``rig_error`` or else the one the unit was identified with (RIG_ERROR without a
-    record), the zero's ``zero_error`` (0: the calibration's zero, reused), in ``precision`` or else the one the model
-    was fitted for; and where the rows' noise came from."""
+    record), the zero's ``zero_error`` or else :func:`check_zero`'s, in ``precision`` or else the one the model was
+    fitted for; and where the rows' noise came from."""
     posterior = unit_posterior(unit_file, sensor) if unit_file and Path(unit_file).is_file() else None
     if rig_error is None:
         rig_error = (posterior or {}).get("rig_error", RIG_ERROR)
         if not isinstance(rig_error, (int, float)) or isinstance(rig_error, bool):
             raise InputError(f"{unit_file}'s posterior records a rig error of {rig_error!r}: give --rig-error")
+    said = "as given"
+    if zero_error is None:
+        zero_error, said = check_zero(posterior, ds.meta, capture)
     noise, source = row_noise(ds.meta, sensor)
     result = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior, rig_error=rig_error,
                    zero_error=zero_error, precision=precision or device_precision(model))
-    return result, source
+    return replace(result, zero_said=said), source

@@ -206,6 +206,28 @@ def stage_errors(rig: float | None, zero: float | None, meta: dict, capture) -> 
     return out[0], out[1], (f" ({' and '.join(recorded)} as the capture's schedule was made for)" if recorded else "")
 
 
+def stage_zero(meta: dict, capture) -> dict | None:
+    """The zero a capture's stage moved from, as `tactile-host capture --stage` records it in its meta:
+    :func:`zero_record`'s, or None when its meta records none (a stage moved by hand, an older capture)."""
+    st = meta.get("stage")
+    if not isinstance(st, dict) or "zero_machine_mm" not in st:
+        return None
+    return zero_record(st["zero_machine_mm"], st.get("zero_homed"), st.get("axes"), f"{capture}'s meta:")
+
+
+def zero_record(zero, homed, axes, where: str) -> dict:
+    """``{"machine_mm": {axis: mm}, "homed": bool, "axes": str}``: a stage's zero in machine coordinates, whether the
+    machine was homed, and the axis map; InputError after ``where`` when they are not those."""
+    import math
+
+    if (not isinstance(zero, dict) or not zero or not isinstance(homed, bool) or not isinstance(axes, str)
+            or not all(isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
+                       and math.isfinite(v) for k, v in zero.items())):
+        raise InputError(f"{where} the stage's zero must be machine coordinates in mm, whether the machine was homed "
+                         f"(true or false) and its axis map, got {zero!r}, {homed!r}, {axes!r}")
+    return {"machine_mm": {k: float(v) for k, v in zero.items()}, "homed": homed, "axes": axes}
+
+
 def in_capture_units(drawing: Sensor, meta: dict) -> Sensor:
     """``drawing`` in the transfer of the units a capture's meta names (V: gmr, mT: raw), else as it is."""
     units = meta.get("units")
