@@ -33,6 +33,7 @@ from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
 
 SCATTER_SIGMAS = 5.0  # band floor, in standard deviations of the window's mean estimate at rest
 SCATTER_DRAWS = 2000  # noisy rest readings the scatter is measured on
+SCATTER_NOISE = 0.0005  # V rms: the noise pi-build measures the scatter per volt at (a GMR element's, per sample)
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,15 @@ def rest_estimates(predict, reference: np.ndarray, noise: float,
     if not len(est):  # no noisy rest reading has a finite estimate: the band stays about 0, as given
         return np.zeros(est.shape[1]), np.zeros(est.shape[1])
     return est.mean(axis=0), est.std(axis=0)
+
+
+def rest_response(predict, reference: np.ndarray, noise: float = SCATTER_NOISE) -> tuple[np.ndarray, np.ndarray]:
+    """Each output's mean single estimate at rest and its scatter per volt of noise, both measured at ``noise``
+    (:func:`rest_estimates`): what tactile-host pi-build compiles in for tm_pi --auto-zero, which scales the
+    scatter by the tare's noise floor (small noise moves an estimate linearly) instead of estimating rest
+    readings thousands of times on the Pi."""
+    rest, scatter = rest_estimates(predict, reference, noise)
+    return rest, scatter / noise
 
 
 @dataclass

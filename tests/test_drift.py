@@ -540,3 +540,21 @@ def test_a_units_capture_temperature_is_recorded_and_a_compensation_about_anothe
                                   str(tmp_path / "u.unit.toml"), "-o", str(cap)),
                           contains=f"the 10 rows in {cap} were captured at 18.0 degC and the thermistor reads 25.0 degC")
     assert (cap.read_text(), meta_path.read_text()) == before
+
+
+def test_the_scatter_at_rest_per_volt_scales_to_other_noise_floors(device_model):
+    """tm_pi --auto-zero scales the scatter pi-build measured per volt (host.autozero.rest_response, at 0.5 mV) by
+    the tare's noise floor instead of estimating the rest readings thousands of times: on the device model that is
+    within 1 % of the scatter measured at a quarter of that noise and at four times it, and the band's centre moves
+    by under 0.005 mm or deg."""
+    from host.autozero import SCATTER_NOISE, rest_estimates, rest_response
+    from host.readout import model_rest
+
+    rest = np.asarray(model_rest(device_model, "paper")[0])
+    predict = lambda rows: device_model.predict(rows, precision="float")  # noqa: E731
+    centre, per_volt = rest_response(predict, rest)
+    assert np.all(per_volt > 0) and SCATTER_NOISE == 0.0005
+    for noise in (0.000125, 0.002):
+        mean, scatter = rest_estimates(predict, rest, noise)
+        np.testing.assert_allclose(per_volt * noise, scatter, rtol=0.01)
+        assert np.abs(mean - centre).max() < 0.005

@@ -54,10 +54,11 @@ def _python_lines(model, n, faults=()):
     return lines, arr.counts
 
 
-def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=None):
+def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=None, autozero=None):
     """tactile-host read's CSV lines (header first) for ``bus``, and its tare (None without ``rest``): the Python
     drivers, a tare onto ``rest`` and ``tempcomp`` (with the thermistor at ``tin``), then Python's emulation of
-    the float header, as tm_pi's float build computes them."""
+    the float header, as tm_pi's float build computes them; ``autozero(tare, lsb)``: an AutoZero that follows
+    the tare."""
     import io
 
     from host.engine import PythonEngine
@@ -77,7 +78,8 @@ def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=N
     sink, fmt = io.StringIO(), LineFormat("csv", model.n_inputs, model.output_names)
     sink.write(fmt.header)
     Readout(arr, FloatEngine(model), sink, fmt, clock=clock,
-            corrections=Corrections(None if t is None else t.offsets, tempcomp),
+            corrections=Corrections(None if t is None else t.offsets, tempcomp,
+                                    None if autozero is None else autozero(t, arr.lsb)),
             thermometer=Thermometer(arr, tin, cmap.chips[0].settings) if tin else None).run(count=count)
     return sink.getvalue().splitlines(), t
 
@@ -265,6 +267,83 @@ def test_pi_build_tares_as_the_python_readout_does(model, tmp_path):
     b, clock = bus()
     assert_one_line_error(StandIn(b, clock).run(["qemu-arm", str(bare), "--tare"]), 2,
                           "--tare: this build has no rest readings to map onto")
+
+
+def test_pi_build_auto_zeroes_as_the_python_readout_does(model, tmp_path):
+    """tm_pi --auto-zero follows a sensor whose elements creep by a few mV within seconds, at rest but for a
+    0.6 s press: the same rest band, the same update lines (when, how far, which element; none from the press)
+    and the same readings and estimates to every printed digit as tactile-host read's AutoZero, given the numbers
+    pi-build compiled in (each output's estimate at rest and its scatter per volt, scaled by the tare's noise
+    floor); with --tare alone the drift stays in the estimates. Its options go together as read's do, in one
+    line."""
+    from fitgen.physics.sensor import load_sensor
+    from host.autozero import AutoZero, AutoZeroSettings
+    from host.clock import VirtualClock
+    from host.pi import pi_autozero
+    from host.readout import model_rest
+    from host.simbus import SimBus
+    from host.simsensor import Drift
+
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    cmap = parse_spec(MAP)
+    n, hold, press = 500, 0.3, (1.5, 2.1)  # s of the bus clock
+
+    def bus():
+        clock = VirtualClock()
+        drift = Drift(offset_tc=np.zeros(8), gain_tc=np.zeros(8), creep=np.linspace(-0.004, 0.006, 8), creep_tau=1.5)
+        return SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), [0, 0, 0, 0, 0], clock=clock,
+                                      noise=0.0005, seed=5, drift=drift,
+                                      motion=lambda t: np.array([0, 0, -0.3 * (press[0] <= t < press[1]), 0, 0])), clock
+
+    rest = model_rest(model, "paper")
+    binary = build_pi(render_pi(model, cmap, tmp_path / "pi", precision="float", rest=rest), standin=True)
+    b, clock = bus()
+    res = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", str(n), "--auto-zero", "--rest-hold", str(hold)])
+    assert res.returncode == 0, res.stderr
+
+    # read's AutoZero with the build's numbers, on the same bus from the same tare
+    b, clock = bus()
+    centre, per_volt = pi_autozero(model, rest, "float")
+    updates, made = [], []
+
+    class Built(AutoZero):  # the band from pi-build's scatter per volt, as tm_pi scales it
+        @classmethod
+        def at(cls, tared, lsb):
+            noise = tared.noise_floor(lsb)
+            az = cls(rest[0], noise, model.output_names, zero=tared.offsets, rest=centre, scatter=per_volt * noise,
+                     settings=AutoZeroSettings(hold=hold))
+            az.log = updates.append
+            made.append(az)
+            return az
+
+    expected, tared = _python_readout(model, b, clock, n, rest=rest[0], autozero=Built.at)
+    want = [f"tm_pi: {u}" for u in updates]
+    got = [ln for ln in res.stderr.splitlines() if "auto-zero update" in ln]
+    assert len(want) >= 3 and got == want, (got, want)
+    at = [u.t - clock.epoch for u in made[0].updates]  # bus seconds
+    assert not any(press[0] <= t <= press[1] + hold for t in at) and any(t > press[1] for t in at), at
+    assert [ln.split(",", 1)[1] for ln in res.stdout.splitlines()[1:]] == [ln.split(",", 1)[1] for ln in expected[1:]]
+    band = next(ln for ln in res.stderr.splitlines() if "rest band" in ln)
+    assert band.startswith("tm_pi: auto-zero: noise floor 0.") and "dx +-0.08 mm, dy +-0.08 mm, dz +-0.08 mm" in band
+    # the zero followed the creep: the last estimates sit at the estimate at rest, as they do not without it
+    last = np.array([[float(x) for x in ln.split(",")[9:12]] for ln in res.stdout.splitlines()[-50:]])
+    b, clock = bus()
+    tared_only = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", str(n), "--tare"]).stdout.splitlines()
+    drifted = np.array([[float(x) for x in ln.split(",")[9:12]] for ln in tared_only[-50:]])
+    off, off_tared = np.abs(last.mean(axis=0) - centre[:3]), np.abs(drifted.mean(axis=0) - centre[:3])
+    assert off.max() < off_tared.max() / 2, (off, off_tared)
+    for args, said in ((["--rest-hold", "1"], "--rest-hold needs: --auto-zero"),
+                       (["--auto-zero", "--rest-band", "0.08"], "--rest-band must be MM,DEG"),
+                       (["--auto-zero", "--rest-band", "0.08,-1"], "--rest-band must be MM,DEG"),
+                       (["--auto-zero", "--rest-hold", "nan"], "--rest-hold must be seconds"),
+                       (["--auto-zero", "--tare-samples", "3"], "give --tare-samples 5 or more (got 3)")):
+        b, clock = bus()
+        assert_one_line_error(StandIn(b, clock).run(["qemu-arm", str(binary), *args]), 2, said)
+    bare = build_pi(render_pi(model, cmap, tmp_path / "bare", precision="float"), standin=True)
+    b, clock = bus()
+    assert_one_line_error(StandIn(b, clock).run(["qemu-arm", str(bare), "--auto-zero"]), 2,
+                          "--auto-zero: this build has no rest readings to map onto")
 
 
 def _stop_with(stand, args, sig, ready):

@@ -6,10 +6,15 @@
  * before the model, as `tactile-host read --temp-comp` does.
  *
  *   tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] [--retries N] [--tare [--tare-samples N]]
+ *         [--auto-zero [--rest-band MM,DEG] [--rest-hold S]]
  *
  * --tare averages N (default PI_TARE_SAMPLES, as read's) samples of the untouched sensor first and maps them onto the rest readings
  * pi-build compiled in (PI_REST), as `tactile-host read --tare` does: its line on stderr, then every
  * reading less the offsets (after the temperature compensation, as read takes them).
+ *
+ * --auto-zero tares, then keeps the zero following slow drift while the sensor is at rest (autozero.h), as
+ * `tactile-host read --auto-zero` does, with its --rest-band (default PI_AZ_BAND_MM,PI_AZ_BAND_DEG) and
+ * --rest-hold (default PI_AZ_HOLD_S s); each update is a line on stderr, read's line.
  *
  * Ctrl-C (SIGINT) or SIGTERM ends the run after the sample under way, as tactile-host read ends: every
  * line whole, the summary, exit status 0.
@@ -29,7 +34,8 @@
 #include "i2c_linux.h"
 #include "pi_options.h"
 #include "tm_model.h"
-#include <math.h> /* NAN, sqrt */
+#include <math.h> /* NAN, sqrt, fabs, isfinite */
+#include "autozero.h"
 #if PI_TEMPCOMP
 #include "tm_tempcomp.h"
 typedef char tm_pi_assert_tempcomp_fits_model[(TM_TEMPCOMP_N == TM_N_INPUTS) ? 1 : -1];
@@ -54,7 +60,8 @@ typedef char tm_pi_assert_map_fits_model[(ADC_MAP_N_ELEMENTS == TM_N_INPUTS) ? 1
 static int usage(const char *msg, const char *arg)
 {
     fprintf(stderr, "tm_pi: error: %s%s%s (usage: tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] "
-                    "[--retries N] [--tare [--tare-samples N]])\n", msg, arg ? ": " : "", arg ? arg : "");
+                    "[--retries N] [--tare [--tare-samples N]] [--auto-zero [--rest-band MM,DEG] [--rest-hold S]])\n",
+            msg, arg ? ": " : "", arg ? arg : "");
     return 2;
 }
 
@@ -86,6 +93,27 @@ static int parse_rate(const char *s, double *out)
     return 0;
 }
 
+/* a number > 0 and at most 1e6 (--rest-hold; each of --rest-band's), up to `stop` (a ',' or the end) */
+static int parse_positive(const char *s, char stop, double *out)
+{
+    char *end;
+    double v;
+    errno = 0;
+    v = strtod(s, &end);
+    if (errno || end == s || *end != stop || !(v > 0.0 && v <= 1e6)) {
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+/* --rest-band MM,DEG */
+static int parse_band(const char *s, double *mm, double *deg)
+{
+    const char *comma = strchr(s, ',');
+    return comma && !parse_positive(s, ',', mm) && !parse_positive(comma + 1, '\0', deg) ? 0 : -1;
+}
+
 /* sleep until the monotonic time `until` in slices, so that a signal ends the wait; 0 when one did */
 static int wait_until(const adc_i2c *b, uint64_t until)
 {
@@ -112,7 +140,8 @@ static void catch_stop_signals(void)
 
 /* the mean of n samples' volts and how far they are from the rest: offsets[k] = mean - rest (read's Tare);
  * ADC_OK, or the error that stopped it */
-static int tare(adc_array *array, const double lsb[TM_N_INPUTS], long n, double offsets[TM_N_INPUTS])
+static int tare(adc_array *array, const double lsb[TM_N_INPUTS], long n, double offsets[TM_N_INPUTS],
+                double spreads[TM_N_INPUTS])
 {
     double sum[TM_N_INPUTS] = {0}, sumsq[TM_N_INPUTS] = {0}, spread = 0.0;
     long s;
@@ -133,11 +162,57 @@ static int tare(adc_array *array, const double lsb[TM_N_INPUTS], long n, double 
     for (k = 0; k < TM_N_INPUTS; ++k) {
         const double mean = sum[k] / (double)n, var = sumsq[k] / (double)n - mean * mean;
         offsets[k] = mean - PI_REST[k];
-        spread = var > spread * spread ? sqrt(var) : spread;
+        spreads[k] = var > 0.0 ? sqrt(var) : 0.0;
+        spread = spreads[k] > spread ? spreads[k] : spread;
         fprintf(stderr, " %+.2f", offsets[k] * 1e3);
     }
     fprintf(stderr, " (spread up to %.2f mV rms), onto the rest readings of %s\n", spread * 1e3, PI_REST_FROM);
     return ADC_OK;
+}
+
+/* auto-zero's noise floor (host/readout.py Tare.noise_floor): the median element's tare spread, at least the
+ * ADC's quantisation (the largest LSB / sqrt(12)) */
+static double noise_floor(const double spreads[TM_N_INPUTS], const double lsb[TM_N_INPUTS])
+{
+    double s[TM_N_INPUTS], q = 0.0, median;
+    int i, j;
+    for (i = 0; i < TM_N_INPUTS; ++i) { /* insertion sort: a handful of elements */
+        const double x = spreads[i];
+        for (j = i; j > 0 && s[j - 1] > x; --j) {
+            s[j] = s[j - 1];
+        }
+        s[j] = x;
+        q = lsb[i] > q ? lsb[i] : q;
+    }
+    median = TM_N_INPUTS % 2 ? s[TM_N_INPUTS / 2] : (s[TM_N_INPUTS / 2 - 1] + s[TM_N_INPUTS / 2]) / 2.0;
+    q /= sqrt(12.0);
+    return median > q ? median : q;
+}
+
+/* read's update line (host/autozero.py ZoneUpdate.describe) */
+static void print_update(const az_state *az, double t, const double shift[TM_N_INPUTS])
+{
+    int k, top = 0;
+    for (k = 1; k < TM_N_INPUTS; ++k) {
+        if (fabs(shift[k]) > fabs(shift[top])) {
+            top = k;
+        }
+    }
+    fprintf(stderr, "tm_pi: auto-zero update %ld at %.3f s: max shift %.3f mV (element %d)\n", az->updates,
+            t - az->first, fabs(shift[top]) * 1e3, top + 1);
+}
+
+/* the band auto-zero tests the window's mean estimate against, and the noise floor */
+static void print_band(const az_state *az)
+{
+    static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
+    int k;
+    fprintf(stderr, "tm_pi: auto-zero: noise floor %.3f mV; the %d-sample mean's rest band", az->noise * 1e3,
+            PI_AZ_WINDOW);
+    for (k = 0; k < TM_N_OUTPUTS; ++k) {
+        fprintf(stderr, "%s %s +-%.3g %s", k ? "," : "", names[k], az->band[k], PI_AZ_DEG[k] ? "deg" : "mm");
+    }
+    fprintf(stderr, "\n");
 }
 
 static void print_line(int jsonl, double t, const double v[TM_N_INPUTS], const tm_real out[TM_N_OUTPUTS], int status)
@@ -170,8 +245,10 @@ int main(int argc, char **argv)
 {
     static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
     long bus = 1, count = 0, retries = 5, tare_n = 0;
-    int tared = 0;
-    double offsets[TM_N_INPUTS] = {0};
+    int tared = 0, auto_zero = 0, band_given = 0, hold_given = 0;
+    double offsets[TM_N_INPUTS] = {0}, spreads[TM_N_INPUTS] = {0};
+    double band_mm = PI_AZ_BAND_MM, band_deg = PI_AZ_BAND_DEG, hold_s = PI_AZ_HOLD_S;
+    static az_state az; /* the window: a few kB, not on the stack */
     double rate_hz = 0.0;
     int jsonl = 0, i, st = ADC_OK;
     long n = 0, late = 0;
@@ -212,20 +289,45 @@ int main(int argc, char **argv)
             continue; /* a flag: no value */
         } else if (strcmp(opt, "--tare-samples") == 0 && val) {
             if (parse_long(val, 1, 100000, &tare_n)) return usage("--tare-samples must be 1..100000, got", val);
+        } else if (strcmp(opt, "--auto-zero") == 0) {
+            auto_zero = 1;
+            continue;
+        } else if (strcmp(opt, "--rest-band") == 0 && val) {
+            if (parse_band(val, &band_mm, &band_deg)) {
+                return usage("--rest-band must be MM,DEG, each in (0, 1e6], e.g. 0.08,1.5, got", val);
+            }
+            band_given = 1;
+        } else if (strcmp(opt, "--rest-hold") == 0 && val) {
+            if (parse_positive(val, '\0', &hold_s)) return usage("--rest-hold must be seconds in (0, 1e6], got", val);
+            hold_given = 1;
         } else {
             return usage("unknown or incomplete option", opt);
         }
         ++i;
     }
-    if (tare_n && !tared) {
-        return usage("--tare-samples needs", "--tare");
+    if (tare_n && !tared && !auto_zero) {
+        return usage("--tare-samples needs", "--tare or --auto-zero");
+    }
+    if ((band_given || hold_given) && !auto_zero) {
+        return usage(band_given ? "--rest-band needs" : "--rest-hold needs", "--auto-zero");
     }
     tare_n = tare_n ? tare_n : PI_TARE_SAMPLES;
-    if (tared && !PI_HAS_REST) {
-        fprintf(stderr, "tm_pi: error: --tare: this build has no rest readings to map onto (tactile-host pi-build "
-                        "--rest SENSOR|DATASET.csv)\n");
+    if (auto_zero && tare_n < PI_AZ_MIN_TARE) { /* read's MIN_AUTOZERO_TARE, and its words */
+        fprintf(stderr, "tm_pi: error: --auto-zero takes its noise floor from the tare's spread: give --tare-samples "
+                        "%d or more (got %ld)\n", PI_AZ_MIN_TARE, tare_n);
         return 2;
     }
+    if ((tared || auto_zero) && !PI_HAS_REST) {
+        fprintf(stderr, "tm_pi: error: %s: this build has no rest readings to map onto (tactile-host pi-build "
+                        "--rest SENSOR|DATASET.csv)\n", auto_zero ? "--auto-zero" : "--tare");
+        return 2;
+    }
+    if (auto_zero && !PI_HAS_AUTOZERO) {
+        fprintf(stderr, "tm_pi: error: --auto-zero: the model's outputs are not all a pose's (dx, dy, dz, thx, thy): "
+                        "no rest band to test them against\n");
+        return 2;
+    }
+    tared = tared || auto_zero;
     policy.attempts = (uint8_t)retries;
     catch_stop_signals();
     if (i2c_linux_open(&port, (int)bus, &i2c, err, sizeof err) != 0) {
@@ -261,12 +363,16 @@ int main(int argc, char **argv)
         return 2;
     }
 #endif
-    if (tared && (st = tare(&array, lsb, tare_n, offsets)) != ADC_OK) {
+    if (tared && (st = tare(&array, lsb, tare_n, offsets, spreads)) != ADC_OK) {
         fprintf(stderr, "tm_pi: error: %s %s during the tare\n", array.failed_chip >= 0 ?
                 ADC_MAP_LABELS[array.failed_chip] : "general-call reset",
                 st == ADC_ERR_STUCK ? "never completes a conversion" : "stays silent");
         i2c_linux_close(&port);
         return 1;
+    }
+    if (auto_zero) {
+        az_init(&az, offsets, noise_floor(spreads, lsb), band_mm, band_deg, hold_s);
+        print_band(&az);
     }
     if (!jsonl) {
         printf("t");
@@ -284,7 +390,7 @@ int main(int argc, char **argv)
     }
     while ((count == 0 || n < count) && !stop_signal) {
         int32_t codes[TM_N_INPUTS];
-        double v[TM_N_INPUTS];
+        double v[TM_N_INPUTS], comp[TM_N_INPUTS], shift[TM_N_INPUTS];
         tm_real in[TM_N_INPUTS], out[TM_N_OUTPUTS];
         double t;
         int status;
@@ -331,15 +437,19 @@ int main(int argc, char **argv)
 #elif ADC_HAS_TEMPERATURE
         (void)degc; /* read as the Python readout reads it (same transfers), not applied */
 #endif
-        if (tared) {
-            for (i = 0; i < TM_N_INPUTS; ++i) {
-                v[i] -= offsets[i];
+        for (i = 0; i < TM_N_INPUTS; ++i) {
+            comp[i] = v[i];
+            if (tared) {
+                v[i] -= auto_zero ? az.zero[i] : offsets[i];
             }
         }
         for (i = 0; i < TM_N_INPUTS; ++i) {
             in[i] = (tm_real)v[i];
         }
         status = tm_estimate(in, out);
+        if (auto_zero && az_observe(&az, t, comp, out, status, shift)) {
+            print_update(&az, t, shift);
+        }
         print_line(jsonl, t, v, out, status);
         ++n;
     }
