@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+import math
 import os
 import signal
 import subprocess
@@ -381,6 +382,19 @@ def prior_meta(output) -> dict:
     return meta if isinstance(meta, dict) else {}
 
 
+def prior_row_degc(prior: dict, rows: int) -> list | None:
+    """The temperatures an earlier run recorded for the ``rows`` rows kept (a row it recorded but did not finish
+    dropped), to append to; [] without rows, None when they are not recorded for every row (rows of an older
+    capture, or of a run without a thermistor), so that no list speaks for rows it does not cover."""
+    if rows == 0:
+        return []
+    got = prior.get("row_degc")
+    if not isinstance(got, list) or len(got) < rows or not all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in got[:rows]):
+        return None
+    return [float(x) for x in got[:rows]]
+
+
 def check_resume(output: str | Path, rows: int, this: dict) -> None:
     """Refuse to add to ``output``'s ``rows`` rows taken otherwise: through another channel map, from another
     source, or averaging another number of samples (the meta speaks for every row with one of each). A simulated
@@ -404,14 +418,15 @@ def check_resume(output: str | Path, rows: int, this: dict) -> None:
 
 def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples: int = SAMPLES,
             max_spread: float = 0.003, tries: int = 3, wait=None, set_pose=None, settle: float = 0.0,
-            clock=REAL_CLOCK, progress=None, meta: dict | None = None) -> CaptureResult:
+            clock=REAL_CLOCK, progress=None, meta: dict | None = None, temperature=None) -> CaptureResult:
     """Capture every pose of ``schedule`` not yet in ``output``.
 
     Per pose: ``set_pose(pose)`` (a stage that moves itself: simulated, or
     ``host.stage.PoseStage.move_to``), ``wait(i, pose)`` (Enter or a
     trigger; False stops), ``settle`` seconds, then ``samples`` readings averaged;
     when some element's standard deviation exceeds ``max_spread`` volts the pose is
-    measured again, up to ``tries`` times, then ``SpreadTooLarge``.
+    measured again, up to ``tries`` times, then ``SpreadTooLarge``. ``temperature()`` (degC, a thermistor's):
+    read before and after each row's samples, their mean recorded per row as the meta's ``row_degc``.
     """
     if samples < 1:
         raise InputError(f"--samples must be >= 1, got {samples}")
@@ -433,6 +448,9 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
     info = {"schedule": schedule.origin, "samples_per_row": samples, "max_spread_volts": max_spread,
             **({"schedule_drawing": schedule.drawing} if schedule.drawing else {}),
             **({"schedule_stage": schedule.stage} if schedule.stage else {}), **(meta or {})}
+    row_degc = prior_row_degc(prior, state.rows) if temperature is not None else None
+    if row_degc is not None:
+        info["row_degc"] = row_degc
 
     def refresh():
         info.update(noise.meta(), duration_s=before_s + (clock.monotonic() - t_start), runs=runs)
@@ -452,6 +470,7 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
                 break
             clock.sleep(settle)
             for attempt in range(tries):
+                before = temperature() if row_degc is not None else None
                 block = measure(array, samples)
                 spread = block.std(axis=0)
                 if spread.max() <= max_spread:
@@ -461,6 +480,9 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
                 raise SpreadTooLarge(f"pose {i + 1}/{res.total} ({schedule.describe(i)}): v{k + 1} spreads "
                                      f"{spread[k] * 1e3:.3g} mV rms over {samples} samples (limit "
                                      f"{max_spread * 1e3:.3g} mV) in {tries} tries; is the sensor still moving?")
+            if row_degc is not None:  # in the meta before the row: a run killed between the two keeps them aligned
+                row_degc.append(round(0.5 * (before + temperature()), 4))
+                last_meta = refresh()
             writer.append(row_line(block.mean(axis=0), values[i]))
             noise.add(block)
             res.captured += 1

@@ -19,6 +19,7 @@ from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import (SAMPLES, TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFailed, capture, check_resume,
                           designed_samples, enter_waiter, load_schedule, output_lock, prepare_output, prior_meta,
                           simulated_sensor, trigger_waiter)
+from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.stage import StageError, StageState
 from host.stagecapture import open_stage, stage_settings
@@ -104,6 +105,8 @@ def run_capture(args, prog: str) -> None:
 
 
 def _run_capture(args, prog: str) -> None:
+    if args.sim_drift is not None and not args.simulate:
+        raise InputError("--sim-drift goes with --simulate (without it, it would be ignored)")
     schedule = load_schedule(args.poses)
     simulated_sensor(args, schedule)
     adc_defaults(args)
@@ -130,8 +133,9 @@ def _run_capture(args, prog: str) -> None:
     meta = {"adc": cmap.describe(), **source}
     motion = pose_file_motion(args.sim_pose_file) if args.sim_pose_file else None
     tin = temperature_input(args.adc, cmap, args.thermistor)
+    drift = parse_drift(args.sim_drift, cmap.n_elements) if args.simulate else None
     bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion,
-                                    thermistor=tin)
+                                    drift=drift, thermistor=tin)
     if motion is not None:
         bus.feed.motion_step = 0.0  # follow the stage at every conversion: a move ends between two rows
         bus.feed.touching = True  # the simulated rig decided contact on the tool (host.simrig.SimRig.publish)
@@ -141,9 +145,9 @@ def _run_capture(args, prog: str) -> None:
         array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
         array.probe()
         array.setup()
+        thermometer = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
         if tin is not None:  # the unit's readings are of this temperature: identify records it (--temp-comp's t0)
-            meta["thermistor_degc"] = same_temperature(args.output, state.rows,
-                                                       Thermometer(array, tin, cmap.chips[0].settings).read(fresh=True))
+            meta["thermistor_degc"] = same_temperature(args.output, state.rows, thermometer.read(fresh=True))
         set_pose = bus.set_pose if args.simulate else None
         if stage_opts is not None:
             stage, meta["stage"] = open_stage(args, stage_opts, args.output, state.rows, prog)
@@ -152,7 +156,8 @@ def _run_capture(args, prog: str) -> None:
         with Progress("capture", pending) as progress:
             res = capture(array, schedule, args.output, samples=samples, max_spread=spread, tries=tries,
                           wait=wait, set_pose=set_pose, settle=settle,
-                          clock=clock, progress=None if interactive else progress, meta=meta)
+                          clock=clock, progress=None if interactive else progress, meta=meta,
+                          temperature=None if thermometer is None else lambda: thermometer.read(fresh=True))
     except KeyboardInterrupt:
         raise CaptureInterrupted(_kept(args.output)) from None
     except (DeviceSilent, SpreadTooLarge, TriggerFailed, StageError) as exc:

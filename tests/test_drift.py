@@ -558,3 +558,61 @@ def test_the_scatter_at_rest_per_volt_scales_to_other_noise_floors(device_model)
         mean, scatter = rest_estimates(predict, rest, noise)
         np.testing.assert_allclose(per_volt * noise, scatter, rtol=0.01)
         assert np.abs(mean - centre).max() < 0.005
+
+
+def test_a_capture_records_each_rows_temperature_and_identify_takes_each_row_from_its_own(tmp_path):
+    """A unit warming by 4 degC over 8 s while it is captured (its elements' offsets drift by about 1 mV/degC,
+    several times a row's noise): the capture records each row's temperature (the thermistor before and after its
+    samples), identify notes how far apart they are and, given the drift's own compensation, takes each row from
+    its own temperature, which the physics then explains; the same compensation from the temperature the capture
+    started at leaves four times the residual chi-square. A resumed capture appends to the record for the rows it kept; one whose earlier
+    rows have none records none. --sim-drift goes with --simulate."""
+    from fitgen.physics.dataset import load_dataset
+    from host.motion import parse_drift
+
+    def run(*args):
+        proc = run_cli(*args)
+        assert proc.returncode == 0, proc.stderr
+        return proc
+
+    drift = "ramp=4,over=8,creep=0"
+    run("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "3", "--grid", "dx=0",
+        "-o", str(tmp_path / "u.csv"))
+    run("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "24", "-o", str(tmp_path / "s.csv"))
+    capture = ["tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+               "--simulate", "--sensor", str(tmp_path / "u.unit.toml"), "--sim-drift", drift]
+    cap = tmp_path / "cap.csv"
+    run(*capture, "-o", str(cap))
+    meta = load_dataset(cap).meta
+    temps = np.array(meta["row_degc"])
+    assert len(temps) == 24 and np.all(np.diff(temps) > 0) and temps[0] > 25 and temps[-1] - temps[0] > 1.0
+    assert meta["thermistor_degc"] < temps[0]  # read as the run started, before the first row
+    d = parse_drift(drift, 8)
+    TempComp(25.0, d.offset_tc, d.gain_tc).save(tmp_path / "tc.json")
+    identify = ["fitgen", "identify", str(cap), "--sensor", "paper", "-o", str(tmp_path / "twin.toml")]
+    plain = run_cli(*identify)
+    assert (f"identify: note: the capture's rows were read from {temps.min():.2f} to {temps.max():.2f} degC"
+            in plain.stderr)
+    each = run(*identify, "--temp-comp", str(tmp_path / "tc.json"))
+    assert "note: the capture's rows" not in each.stderr
+    chi2 = float(re.search(r"\(reduced ([0-9.]+);", each.stdout).group(1))
+    assert chi2 < 2.0, each.stdout
+    # the same rows compensated from the temperature the capture started at, as a capture without the record was
+    meta_file = tmp_path / "cap.csv.meta.json"
+    meta_file.write_text(json.dumps({k: v for k, v in meta.items() if k != "row_degc"}))
+    start = run_cli(*identify[:-1], str(tmp_path / "start.toml"), "--temp-comp", str(tmp_path / "tc.json"))
+    assert start.returncode == 0, start.stderr
+    worse = float(re.search(r"\(reduced ([0-9.]+);", start.stdout).group(1))
+    assert worse > 3 * chi2, (worse, chi2)  # 2.35 against 0.58 here
+    # resumed: the record covers the rows kept and the ones added; rows recorded without it keep none
+    meta_file.write_text(json.dumps(meta))
+    cap.write_text("".join(cap.read_text().splitlines(keepends=True)[:11]))  # the header and 10 rows
+    run(*capture, "-o", str(cap))
+    again = load_dataset(cap).meta["row_degc"]
+    assert len(again) == 24 and again[:10] == meta["row_degc"][:10] and again[10] < again[9]  # the ramp began anew
+    cap.write_text("".join(cap.read_text().splitlines(keepends=True)[:11]))
+    meta_file.write_text(json.dumps({k: v for k, v in meta.items() if k != "row_degc"}))
+    run(*capture, "-o", str(cap))
+    assert "row_degc" not in load_dataset(cap).meta and load_dataset(cap).n_rows == 24
+    assert_one_line_error(run_cli(*[a for a in capture if a != "--simulate"], "-o", str(tmp_path / "x.csv")),
+                          contains="--sim-drift goes with --simulate")

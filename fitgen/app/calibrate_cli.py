@@ -23,9 +23,11 @@ def cmd_identify(args) -> int:
     folder = plots.require(args.plot) if args.plot else None
     ds = load_dataset(args.capture)
     sha = ds.sha256  # the capture's as written, before a compensation
-    temperature = rec.capture_temperature(ds.meta)
+    temperature = rec.capture_temperature(ds.meta, ds.n_rows)
     if args.temp_comp:
         ds, temperature = _at_t0(ds, args.temp_comp, args.capture)
+    elif span := rec.temperature_span_line(ds.meta, ds.n_rows):  # before a refusal, which it may explain
+        print(f"identify: {span}", file=sys.stderr)
     args.sensor, said = rec.drawing_for(args.sensor, ds.meta)  # the one the capture's schedule was made for
     if said:
         print(said, file=sys.stderr)
@@ -88,19 +90,20 @@ def _at_t0(ds, path: str, capture: str):
 
     import numpy as np
 
-    from fitgen.physics.dataset import thermistor_degc
+    from fitgen.physics.dataset import row_degc, thermistor_degc
     from host.temperature import load_tempcomp
 
     tc = load_tempcomp(path)
-    degc = thermistor_degc(ds.meta)
-    if degc is None:
+    degc, rows = thermistor_degc(ds.meta), row_degc(ds.meta, ds.n_rows)
+    if degc is None and rows is None:
         raise InputError(f"--temp-comp {path}: {capture} records no temperature (thermistor_degc: its channel map "
                          "had no thermistor, temp= in --adc), so there is nothing to compensate from")
     if ds.meta.get("units", "V") != "V" or tc.n != ds.n_inputs:
         raise InputError(f"--temp-comp {path} compensates {tc.n} elements in V; {capture} has {ds.n_inputs} in "
                          f"{ds.meta.get('units')}")
-    out = replace(ds, inputs=tc.apply(ds.inputs, np.full(ds.n_rows, degc)))
-    return out, {"capture_degc": tc.t0, "compensated_from_degc": degc}
+    temps = rows if rows is not None else np.full(ds.n_rows, degc)  # each row at its own, where recorded
+    out = replace(ds, inputs=tc.apply(ds.inputs, temps))
+    return out, {"capture_degc": tc.t0, "compensated_from_degc": round(float(np.median(temps)), 4)}
 
 
 def _with_map(text: str, order, spec) -> str:

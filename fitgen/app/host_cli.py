@@ -396,7 +396,9 @@ def build_parser() -> Parser:
                    "nearest the median)")
     c.add_argument("--temp-comp-output", metavar="FILE.json", help="with --temperature: where the compensation goes")
     c.add_argument("--sim-drift", metavar="ramp=..,over=..,tau=..,creep=..,seed=..",
-                   help="with --simulate --temperature: the simulated drift's coefficients (default: typical, seed --seed)")
+                   help="with --simulate: the simulated sensor drifts so (ramp degC over `over` s, creep V with time "
+                        "constant tau s); with --temperature too: the drift's coefficients (default: typical, seed "
+                        "--seed)")
     st = c.add_argument_group("a stage that moves itself (docs/calibration.md)")
     st.add_argument("--stage", metavar="gcode:URL",
                     help="drive a Marlin or GRBL machine: gcode:/dev/ttyUSB0, gcode:socket://127.0.0.1:PORT "

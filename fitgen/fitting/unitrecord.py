@@ -12,12 +12,13 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR
 from fitgen.fitting.identify import PINNABLE, RIG, RIG_ERROR, ZERO_ERROR, Identification, tilting
-from fitgen.physics.dataset import thermistor_degc
+from fitgen.physics.dataset import row_degc, thermistor_degc
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.simulate import recorded_spec
 from fitgen.physics.units import STIFFENING, UnitSpace
 
+SPAN_NOTE_DEGC = 0.5  # a capture's rows this far apart in temperature: identify says so
 MORE_SAMPLES = 8  # identify's report: what rows of this many times the samples would pin (16 -> 128)
 
 
@@ -265,12 +266,26 @@ def pose_words(ident: Identification, pose: np.ndarray) -> str:
 
 
 
-def capture_temperature(meta: dict) -> dict:
-    """``{"capture_degc": T}`` when a capture's meta holds its thermistor's reading (tactile-host capture with a
-    temp= input), else {}: the unit's readings are of that temperature, which a temperature compensation's t0
-    should be (host.temperature.capture_temperature_note)."""
-    t = thermistor_degc(meta)
+def capture_temperature(meta: dict, rows: int) -> dict:
+    """``{"capture_degc": T}`` when a capture's meta holds its thermistor's readings (tactile-host capture with a
+    temp= input): the median of its ``rows`` rows' where it records each's, else the one read as it started;
+    else {}. The unit's readings are of that temperature, which a temperature compensation's t0 should be
+    (host.temperature.capture_temperature_note)."""
+    each = row_degc(meta, rows)
+    t = round(float(np.median(each)), 4) if each is not None else thermistor_degc(meta)
     return {} if t is None else {"capture_degc": t}
+
+
+def temperature_span_line(meta: dict, rows: int) -> str:
+    """A note when a capture's ``rows`` rows were read SPAN_NOTE_DEGC or more apart in temperature (its meta's
+    ``row_degc``), else ''."""
+    each = row_degc(meta, rows)
+    if each is None or each.max() - each.min() < SPAN_NOTE_DEGC:
+        return ""
+    return (f"note: the capture's rows were read from {each.min():.2f} to {each.max():.2f} degC, and its elements' "
+            "offsets and gains drift with temperature, which the unit's physics does not model: --temp-comp TC.json "
+            "(tactile-host capture --temperature fits one) takes each row from its own temperature to the "
+            "compensation's t0")
 
 
 def save(ident: Identification, path, provenance: dict, noise: float | None = None) -> tuple:
