@@ -274,8 +274,8 @@ def test_pi_build_auto_zeroes_as_the_python_readout_does(model, tmp_path):
     0.6 s press: the same rest band, the same update lines (when, how far, which element; none from the press)
     and the same readings and estimates to every printed digit as tactile-host read's AutoZero, given the numbers
     pi-build compiled in (each output's estimate at rest and its scatter per volt, scaled by the tare's noise
-    floor); with --tare alone the drift stays in the estimates. Its options go together as read's do, in one
-    line."""
+    floor); a wall clock set back mid-run changes nothing (the hold runs on the monotonic clock); with --tare
+    alone the drift stays in the estimates. Its options go together as read's do, in one line."""
     from fitgen.physics.sensor import load_sensor
     from host.autozero import AutoZero, AutoZeroSettings
     from host.clock import VirtualClock
@@ -289,8 +289,12 @@ def test_pi_build_auto_zeroes_as_the_python_readout_does(model, tmp_path):
     cmap = parse_spec(MAP)
     n, hold, press = 500, 0.3, (1.5, 2.1)  # s of the bus clock
 
-    def bus():
-        clock = VirtualClock()
+    class Jumping(VirtualClock):  # the wall clock set back an hour at 1 s, as the network sets a Pi's after boot
+        def time(self):
+            return super().time() - 3600.0 * (self.t > 1.0)
+
+    def bus(clock_type=VirtualClock):
+        clock = clock_type()
         drift = Drift(offset_tc=np.zeros(8), gain_tc=np.zeros(8), creep=np.linspace(-0.004, 0.006, 8), creep_tau=1.5)
         return SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), [0, 0, 0, 0, 0], clock=clock,
                                       noise=0.0005, seed=5, drift=drift,
@@ -323,6 +327,10 @@ def test_pi_build_auto_zeroes_as_the_python_readout_does(model, tmp_path):
     assert len(want) >= 3 and got == want, (got, want)
     at = [u.t - clock.epoch for u in made[0].updates]  # bus seconds
     assert not any(press[0] <= t <= press[1] + hold for t in at) and any(t > press[1] for t in at), at
+    # the hold runs on the monotonic clock: a wall clock set back mid-run changes no update
+    b, clock = bus(Jumping)
+    jumped = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", str(n), "--auto-zero", "--rest-hold", str(hold)])
+    assert [ln for ln in jumped.stderr.splitlines() if "auto-zero update" in ln] == got
     assert [ln.split(",", 1)[1] for ln in res.stdout.splitlines()[1:]] == [ln.split(",", 1)[1] for ln in expected[1:]]
     band = next(ln for ln in res.stderr.splitlines() if "rest band" in ln)
     assert band.startswith("tm_pi: auto-zero: noise floor 0.") and "dx +-0.08 mm, dy +-0.08 mm, dz +-0.08 mm" in band

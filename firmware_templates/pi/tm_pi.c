@@ -392,7 +392,7 @@ int main(int argc, char **argv)
         int32_t codes[TM_N_INPUTS];
         double v[TM_N_INPUTS], comp[TM_N_INPUTS], shift[TM_N_INPUTS];
         tm_real in[TM_N_INPUTS], out[TM_N_OUTPUTS];
-        double t;
+        double t, t_mono;
         int status;
         if (period) {
             const uint64_t now = i2c.now_ns(i2c.ctx);
@@ -408,6 +408,9 @@ int main(int argc, char **argv)
             next += period;
         }
         t = (double)i2c_linux_realtime_ns() * 1e-9;
+        /* auto-zero's hold runs on the monotonic clock: a Pi without a clock battery sets its wall clock from
+         * the network after boot, a jump of months that would end a hold at once or stall it */
+        t_mono = (double)i2c.now_ns(i2c.ctx) * 1e-9;
         st = adc_read_codes(&array, codes);
         if (st != ADC_OK) {
             break;
@@ -447,8 +450,8 @@ int main(int argc, char **argv)
             in[i] = (tm_real)v[i];
         }
         status = tm_estimate(in, out);
-        if (auto_zero && az_observe(&az, t, comp, out, status, shift)) {
-            print_update(&az, t, shift);
+        if (auto_zero && az_observe(&az, t_mono, comp, out, status, shift)) {
+            print_update(&az, t_mono, shift);
         }
         print_line(jsonl, t, v, out, status);
         ++n;
