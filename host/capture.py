@@ -484,8 +484,8 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
                 row_degc.append(round(0.5 * (before + temperature()), 4))
                 last_meta = refresh()
             writer.append(row_line(block.mean(axis=0), values[i]))
-            noise.add(block)
             res.captured += 1
+            noise.add(block)
             res.spreads.append(float(spread.max()))
             if progress is not None:
                 progress.update(1)
@@ -493,5 +493,7 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
                 last_meta = refresh()
     finally:
         writer.close()
+        if row_degc is not None:  # a run stopped after a row's temperature but before its row: the rows written
+            del row_degc[state.rows + res.captured:]
         refresh()
     return res

@@ -22,6 +22,7 @@ from host.capture import (SAMPLES, TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFaile
 from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.stage import StageError, StageState
+from host.stagezero import run_zeros
 from host.stagecapture import open_stage, stage_settings
 from host.stagesim import pose_file_motion
 from host.temperature import CAPTURE_DEGC_TOL, Thermometer, temperature_input
@@ -104,9 +105,12 @@ def run_capture(args, prog: str) -> None:
         _run_capture(args, prog)
 
 
+def check_simulation_options(args) -> None:
+    """InputError for --sim-drift without --simulate (with or without --temperature: it would be ignored)."""
+    refuse_alone([(args.sim_drift is not None, "--sim-drift", "--simulate", bool(args.simulate))])
+
+
 def _run_capture(args, prog: str) -> None:
-    if args.sim_drift is not None and not args.simulate:
-        raise InputError("--sim-drift goes with --simulate (without it, it would be ignored)")
     schedule = load_schedule(args.poses)
     simulated_sensor(args, schedule)
     adc_defaults(args)
@@ -152,6 +156,8 @@ def _run_capture(args, prog: str) -> None:
         if stage_opts is not None:
             stage, meta["stage"] = open_stage(args, stage_opts, args.output, state.rows, prog)
             meta["stage"]["settle_s"] = settle
+            meta["stage"]["zeros_machine_mm"] = run_zeros(prior_meta(args.output) if state.rows else {},
+                                                          meta["stage"]["zero_machine_mm"])
             set_pose = stage.move_to
         with Progress("capture", pending) as progress:
             res = capture(array, schedule, args.output, samples=samples, max_spread=spread, tries=tries,

@@ -151,3 +151,17 @@ def choose_zero(ctrl: GcodeController, state: StageState | None, axes: AxisMap, 
         raise InputError(f"{reason}, and no zero was set: set it at the prompt, or give --zero X,Y,Z "
                          "(machine coordinates of first contact)")
     return zero, "set by jogging"
+
+
+def run_zeros(prior: dict, zero: dict[str, float]) -> list[dict]:
+    """Every zero a capture's runs moved from, as its meta records them (``prior``: the meta of its rows so far,
+    {} without rows), with this run's ``zero`` last: one entry while the zero holds, more when a run had to set it
+    again (a controller reset), which fitgen identify and fitgen check then say."""
+    st = prior.get("stage") if isinstance(prior.get("stage"), dict) else {}
+    old = st.get("zeros_machine_mm")
+    if not isinstance(old, list):
+        old = [st["zero_machine_mm"]] if "zero_machine_mm" in st else []
+    old = [z for z in old if isinstance(z, dict)]
+    if not old or any(old[-1].get(k) != v for k, v in zero.items()):  # kept from the last run: the same numbers
+        old = old + [dict(zero)]
+    return old

@@ -112,6 +112,35 @@ def test_an_interruption_loses_and_doubles_no_row(sensor, tmp_path):
     assert np.max(np.abs(np.array(got)[:, :8] - truth)) < 0.002
 
 
+def test_each_rows_temperature_stays_with_its_row_when_a_run_is_stopped(sensor, tmp_path, monkeypatch):
+    """The meta takes a row's temperature before the row is written; a run stopped between the two keeps one per
+    row written, and a resumed run appends to them."""
+    from fitgen.physics.dataset import load_dataset, row_degc
+    from host import capture as cap
+
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid_rows()[:8]))
+    out = tmp_path / "d.csv"
+    bus, arr, clock = rig(sensor)
+    degc = iter(np.arange(20.0, 40.0, 0.25))
+    real, appended = cap.RowWriter.append, []
+
+    def append(self, line):
+        if len(appended) == 5:
+            raise KeyboardInterrupt  # after the sixth row's temperature went into the meta
+        appended.append(line)
+        real(self, line)
+
+    monkeypatch.setattr(cap.RowWriter, "append", append)
+    with pytest.raises(KeyboardInterrupt):
+        capture(arr, sched, out, samples=4, set_pose=bus.set_pose, clock=clock, temperature=lambda: next(degc))
+    ds = load_dataset(out)
+    assert ds.n_rows == 5 and row_degc(ds.meta, 5).tolist() == [20.125, 20.625, 21.125, 21.625, 22.125]
+    monkeypatch.setattr(cap.RowWriter, "append", real)
+    capture(arr, sched, out, samples=4, set_pose=bus.set_pose, clock=clock, temperature=lambda: next(degc))
+    ds = load_dataset(out)
+    assert ds.n_rows == 8 and row_degc(ds.meta, 8).tolist()[5:] == [23.125, 23.625, 24.125]
+
+
 def test_a_pose_scheduled_twice_is_captured_twice(sensor, tmp_path):
     rows = [(0, 0, 0), (1, 0, -1), (0, 0, 0), (1, 0, -1)]
     sched = load_schedule(write_schedule(tmp_path / "s.csv", rows))

@@ -205,12 +205,23 @@ def test_check_zero_tells_a_zero_reused_from_one_set_anew_by_the_captures_stage_
     assert err == pytest.approx(0.02 * np.sqrt(2), rel=1e-12) and "on a machine not homed" in said
     err, said = check_zero(post, _stage(axes="X=-dx,Y=dy,Z=dz"), "c.csv")
     assert err > 0.02 and "its axis map X=-dx,Y=dy,Z=dz is not the calibration's X=dx,Y=dy,Z=dz" in said
+    # rows from two zeros (a run set it again after a controller reset), on either side: not one zero reused
+    two = _stage()
+    two["stage"]["zeros_machine_mm"] = [{"X": 11.0, "Y": 8.0, "Z": 4.0}, {"X": 12.0, "Y": 8.0, "Z": 4.0}]
+    err, said = check_zero(post, two, "c.csv")
+    assert err > 0.02 and "(the check capture's rows were taken from 2 zeros, a run having set it again)" in said
+    err, said = check_zero({**post, "capture_zero": {**CAL_ZERO, "zeros": 3}}, _stage(), "c.csv")
+    assert err > 0.02 and "the calibration capture's rows were taken from 3 zeros" in said
     assert check_zero(post, ROWS_META, "c.csv") == (0.0, "the calibration's zero taken as reused (the check capture "
                                                          "records no stage zero); give --zero-error 0.02 for a zero "
                                                          "set anew by hand")
     assert "(the unit's posterior records no stage zero)" in check_zero({}, _stage(), "c.csv")[1]
     with pytest.raises(InputError, match="^c.csv's meta: the stage's zero must be machine coordinates"):
         check_zero(post, _stage(x="twelve"), "c.csv")
+    with pytest.raises(InputError, match=r"^c.csv's meta: schedule_stage.zero_error must be 0..0.5 mm, got nan"):
+        check_zero(post, _stage(12.05, schedule_stage={"zero_error": float("nan")}), "c.csv")
+    with pytest.raises(InputError, match=r"^the unit's posterior: zero_error must be 0..0.5 mm, got -1"):
+        check_zero({**post, "zero_error": -1}, _stage(12.05), "c.csv")
     with pytest.raises(InputError, match=r"^the unit's posterior \(capture_zero; give --zero-error"):
         check_zero({"capture_zero": {**CAL_ZERO, "homed": "yes"}}, _stage(), "c.csv")
 

@@ -614,5 +614,6 @@ def test_a_capture_records_each_rows_temperature_and_identify_takes_each_row_fro
     meta_file.write_text(json.dumps({k: v for k, v in meta.items() if k != "row_degc"}))
     run(*capture, "-o", str(cap))
     assert "row_degc" not in load_dataset(cap).meta and load_dataset(cap).n_rows == 24
-    assert_one_line_error(run_cli(*[a for a in capture if a != "--simulate"], "-o", str(tmp_path / "x.csv")),
-                          contains="--sim-drift goes with --simulate")
+    for more in ([], ["--temperature", "20,30"]):  # at one temperature or at several
+        assert_one_line_error(run_cli(*[a for a in capture if a != "--simulate"], *more, "-o", str(tmp_path / "x.csv")),
+                              contains="--sim-drift goes with --simulate")

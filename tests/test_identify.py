@@ -622,7 +622,8 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
     assert post["rig_error"] == 0.03
     # the stage's zero, which fitgen check compares a check capture's with (tests/test_check.py)
     assert post["capture_zero"] == {"machine_mm": meta["stage"]["zero_machine_mm"], "homed": True,
-                                    "axes": "X=dx,Y=dy,Z=dz"}
+                                    "axes": "X=dx,Y=dy,Z=dz", "zeros": 1}
+    assert "zeros (a run set it again" not in proc.stderr
     assert set(post["capture_zero"]["machine_mm"]) == {"X", "Y", "Z"}
     # a flag wins over the record; without a record, the defaults
     assert stage_errors(None, 0.01, meta, "c.csv") == (0.03, 0.01, " (rig error as the capture's schedule was made "
@@ -634,6 +635,14 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
                           "c.csv's meta: schedule_stage.rig_error must be 0..0.5 mm, got 'fast'; repair it, or give "
                           "--rig-error")
     assert not (tmp_path / "v.toml").exists()
+    # rows from two zeros (a run set it again after a controller reset): said, and recorded for fitgen check
+    two = {**meta, "stage": {**meta["stage"], "zeros_machine_mm": [{"X": 0.0, "Y": 0.0, "Z": 0.0},
+                                                                    meta["stage"]["zero_machine_mm"]]}}
+    (tmp_path / "c.csv.meta.json").write_text(json.dumps(two))
+    proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "w.toml"))
+    assert proc.returncode == 0, proc.stderr
+    assert "identify: note: the capture's rows were taken from 2 zeros (a run set it again" in proc.stderr
+    assert json.loads((tmp_path / "w.posterior.json").read_text())["capture_zero"]["zeros"] == 2
 
 
 def test_cli_schedule_capture_identify(tmp_path):

@@ -312,11 +312,13 @@ def test_pi_build_auto_zeroes_as_the_python_readout_does(model, tmp_path):
     updates, made = [], []
 
     class Built(AutoZero):  # the band from pi-build's scatter per volt, as tm_pi scales it
+        settings_given = AutoZeroSettings(hold=hold)
+
         @classmethod
         def at(cls, tared, lsb):
             noise = tared.noise_floor(lsb)
             az = cls(rest[0], noise, model.output_names, zero=tared.offsets, rest=centre, scatter=per_volt * noise,
-                     settings=AutoZeroSettings(hold=hold))
+                     settings=cls.settings_given)
             az.log = updates.append
             made.append(az)
             return az
@@ -334,6 +336,20 @@ def test_pi_build_auto_zeroes_as_the_python_readout_does(model, tmp_path):
     assert [ln.split(",", 1)[1] for ln in res.stdout.splitlines()[1:]] == [ln.split(",", 1)[1] for ln in expected[1:]]
     band = next(ln for ln in res.stderr.splitlines() if "rest band" in ln)
     assert band.startswith("tm_pi: auto-zero: noise floor 0.") and "dx +-0.08 mm, dy +-0.08 mm, dz +-0.08 mm" in band
+    # a band given narrower than the window mean's scatter at rest widens to 5 of its standard deviations, as
+    # read's does: the same band and the same updates
+    b, clock = bus()
+    narrow = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", str(n), "--auto-zero", "--rest-hold", str(hold),
+                                    "--rest-band", "0.001,0.01"])
+    b, clock = bus()
+    updates.clear()
+    Built.settings_given = AutoZeroSettings(band_mm=0.001, band_deg=0.01, hold=hold)
+    _python_readout(model, b, clock, n, rest=rest[0], autozero=Built.at)
+    assert made[-1].widened == model.output_names
+    units = ["deg" if o.startswith("th") else "mm" for o in model.output_names]
+    assert (", ".join(f"{o} +-{w:.3g} {u}" for o, w, u in zip(model.output_names, made[-1].band, units))
+            in narrow.stderr), narrow.stderr
+    assert [ln for ln in narrow.stderr.splitlines() if "auto-zero update" in ln] == [f"tm_pi: {u}" for u in updates]
     # the zero followed the creep: the last estimates sit at the estimate at rest, as they do not without it
     last = np.array([[float(x) for x in ln.split(",")[9:12]] for ln in res.stdout.splitlines()[-50:]])
     b, clock = bus()

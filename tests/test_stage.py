@@ -17,6 +17,7 @@ from fitgen.c.codegen import render_header
 from fitgen.physics.dataset import load_dataset
 from fitgen.base.errors import InputError
 from fitgen.fitting.fit import fit_model
+from fitgen.fitting.unitrecord import stage_zero
 from fitgen.physics.transfer import readings
 from host.adc import AdcArray
 from host.capture import capture, load_schedule
@@ -900,6 +901,10 @@ def test_capture_command_killed_midway_and_reset_between_runs_keeps_every_row(se
     meta = json.loads((tmp_path / "d.csv.meta.json").read_text())
     assert meta["runs"] == 3 and meta["rows"] == 27  # the run without a zero captured nothing and 0 < meta["noise_rows"] <= 27
     assert meta["stage"]["flavor"] == flavor and meta["stage"]["axes"] == "X=dx,Y=dy,Z=dz"
+    # the zero kept, then set again after the reset: two zeros, which identify and check say (tests/test_check.py)
+    zeros = meta["stage"]["zeros_machine_mm"]
+    assert len(zeros) == 2 and zeros[-1] == meta["stage"]["zero_machine_mm"] and zeros[0] != zeros[1]
+    assert stage_zero(meta, "d.csv")["zeros"] == 2
     # the dataset fits, and the model becomes C: a model in volts
     model = fit_model(load_dataset(out))
     assert model.input_units == "V" and model.output_names == ("dx", "dy", "dz")

@@ -40,7 +40,8 @@ static void az_restart(az_state *az)
 
 /* the zero starts at `zero` (the tare's offsets), the spread test at `noise` (its floor); the band: band_mm
  * for dx, dy, dz and band_deg for thx, thy, or PI_AZ_SIGMAS standard deviations of the window's mean
- * estimate at rest, whichever is wider (host/autozero.py AutoZero.__post_init__, operation for operation) */
+ * estimate at rest, whichever is wider (host/autozero.py AutoZero.__post_init__ with scatter =
+ * PI_AZ_SCATTER_PER_V x noise, operation for operation; its centre, PI_AZ_REST_EST, pi-build measured) */
 static void az_init(az_state *az, const double zero[TM_N_INPUTS], double noise, double band_mm, double band_deg,
                     double hold_s)
 {

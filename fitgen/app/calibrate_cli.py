@@ -39,6 +39,10 @@ def cmd_identify(args) -> int:
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)
     args.rig_error, args.zero_error, stage = rec.stage_errors(args.rig_error, args.zero_error, ds.meta, args.capture)
     zero = rec.stage_zero(ds.meta, args.capture)  # recorded, so that fitgen check tells a zero reused from one set anew
+    if zero and zero["zeros"] > 1:
+        print(f"identify: note: the capture's rows were taken from {zero['zeros']} zeros (a run set it again, after a "
+              "controller reset), and identify allows for one zero's error shared by every row: rows from another "
+              "zero may stand out; capture them again from one zero if they do", file=sys.stderr)
     # before a refusal, which may name such a row
     for line in verdict.lifted_rows_line(ds.poses(), args.rig_error, args.zero_error):
         print(f"identify: {line}", file=sys.stderr)

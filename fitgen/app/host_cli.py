@@ -179,11 +179,12 @@ def cmd_replay(args) -> int:
 
 
 def cmd_capture(args) -> int:
-    from host.capturerun import CaptureFailed, CaptureInterrupted, run_capture
+    from host.capturerun import CaptureFailed, CaptureInterrupted, check_simulation_options, run_capture
     from host.tempcapture import capture_temperatures, check_temperature_options
 
     prog = "tactile-host capture"
     check_temperature_options(args)
+    check_simulation_options(args)
     try:
         if args.temperature is not None and args.stage is None:
             return 130 if capture_temperatures(args, prog) is None else 0

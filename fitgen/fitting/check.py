@@ -105,10 +105,17 @@ def _words(zero: dict) -> str:
     return " ".join(f"{k}{v:g}" for k, v in sorted(zero["machine_mm"].items()))
 
 
+def _zero_error(value, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= MAX_STAGE_ERROR:
+        raise InputError(f"{where} must be 0..{MAX_STAGE_ERROR:g} mm, got {value!r}; repair it, or give --zero-error")
+    return float(value)
+
+
 def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str]:
     """The zero error (mm rms per axis) a check capture with ``meta`` is predicted with, and why: 0 where its stage
     moved from the calibration capture's zero (the same machine coordinates on a homed machine, with the same axis
-    map, which ``posterior`` records as ``capture_zero``); where it moved from another zero, each set by hand, the
+    map, which ``posterior`` records as ``capture_zero``, and each capture's rows from that one zero); where it
+    moved from another zero, each set by hand, the
     two zeros' errors added in quadrature (the calibration's as identified, the check's as its schedule was made
     for, else the same); 0 as well where either capture records no stage zero, said so."""
     mine = stage_zero(meta, capture)
@@ -117,20 +124,23 @@ def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str]
         which = "the check capture" if mine is None else "the unit's posterior"
         return 0.0, (f"the calibration's zero taken as reused ({which} records no stage zero); give --zero-error 0.02 "
                      "for a zero set anew by hand")
+    zeros = {"check capture": mine["zeros"], "calibration capture": theirs.get("zeros", 1)}
     theirs = zero_record(theirs.get("machine_mm"), theirs.get("homed"), theirs.get("axes"),
                          "the unit's posterior (capture_zero; give --zero-error to check without it):")
     keys = set(mine["machine_mm"]) | set(theirs["machine_mm"])
     same = (mine["axes"] == theirs["axes"] and set(mine["machine_mm"]) == set(theirs["machine_mm"])
             and all(abs(mine["machine_mm"][k] - theirs["machine_mm"][k]) <= SAME_ZERO for k in keys))
-    if same and mine["homed"] and theirs["homed"]:
+    mixed = [f"the {which}'s rows were taken from {n} zeros" for which, n in zeros.items()
+             if isinstance(n, int) and n > 1]
+    if same and mine["homed"] and theirs["homed"] and not mixed:
         return 0.0, f"the calibration's zero, reused ({_words(mine)} on a homed machine)"
-    ours = (posterior or {}).get("zero_error", ZERO_ERROR)
-    ours = ours if isinstance(ours, (int, float)) and not isinstance(ours, bool) else ZERO_ERROR
+    ours = _zero_error((posterior or {}).get("zero_error", ZERO_ERROR), "the unit's posterior: zero_error")
     made = meta.get("schedule_stage") if isinstance(meta.get("schedule_stage"), dict) else {}
-    new = made.get("zero_error", ours)
-    new = new if isinstance(new, (int, float)) and not isinstance(new, bool) else ours
+    new = _zero_error(made.get("zero_error", ours), f"{capture}'s meta: schedule_stage.zero_error")
     error = min(float(np.hypot(ours, new)), MAX_STAGE_ERROR)
-    if mine["axes"] != theirs["axes"]:
+    if mixed:  # a run set the zero again (a controller reset): some rows are from another zero
+        why = f"{' and '.join(mixed)}, a run having set it again"
+    elif mine["axes"] != theirs["axes"]:
         why = f"its axis map {mine['axes']} is not the calibration's {theirs['axes']}"
     elif not same:
         why = f"{_words(mine)}, the calibration's {_words(theirs)}"

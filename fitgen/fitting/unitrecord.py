@@ -209,11 +209,15 @@ def stage_errors(rig: float | None, zero: float | None, meta: dict, capture) -> 
 
 def stage_zero(meta: dict, capture) -> dict | None:
     """The zero a capture's stage moved from, as `tactile-host capture --stage` records it in its meta:
-    :func:`zero_record`'s, or None when its meta records none (a stage moved by hand, an older capture)."""
+    :func:`zero_record`'s (the last run's) with ``zeros``, how many its runs moved from; or None when its meta
+    records none (a stage moved by hand, an older capture)."""
     st = meta.get("stage")
     if not isinstance(st, dict) or "zero_machine_mm" not in st:
         return None
-    return zero_record(st["zero_machine_mm"], st.get("zero_homed"), st.get("axes"), f"{capture}'s meta:")
+    runs = st.get("zeros_machine_mm")  # every zero its runs moved from: more than one after a controller reset
+    zeros = len(runs) if isinstance(runs, list) and runs else 1
+    return {**zero_record(st["zero_machine_mm"], st.get("zero_homed"), st.get("axes"), f"{capture}'s meta:"),
+            "zeros": zeros}
 
 
 def zero_record(zero, homed, axes, where: str) -> dict:
