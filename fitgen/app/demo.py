@@ -116,7 +116,7 @@ def _unit_stage(out: Path, drawing_model) -> None:
     from fitgen.fitting.fit import FitSettings, fit_model
     from fitgen.fitting.holdout import N_POSES, fitted_held_out, held_out_set
     from fitgen.fitting.identify import identify
-    from fitgen.fitting.unitrecord import device_noise, row_noise, save
+    from fitgen.fitting.unitrecord import device_noise, row_noise, save, stage_zero
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.fitting.schedule import schedule, schedule_csv
     from fitgen.physics.sensor import load_sensor
@@ -142,7 +142,9 @@ def _unit_stage(out: Path, drawing_model) -> None:
     noise, _ = row_noise(ds.meta, drawing)
     ident = identify(drawing, ds.inputs, ds.poses(), noise, rig_error=0.01)
     unit_noise, _ = device_noise(ds.meta, drawing)
-    twin_file, _ = save(ident, out / "twin.toml", {"capture": str(cap), "drawing_spec": "paper"}, unit_noise)
+    zero = stage_zero(ds.meta, cap)  # as fitgen identify keeps it: the check below tells it reused
+    twin_file, _ = save(ident, out / "twin.toml", {"capture": str(cap), "drawing_spec": "paper",
+                                                   **({"capture_zero": zero} if zero else {})}, unit_noise)
     d = ident.derived()
     sens = [v for k, (v, _) in d.items() if "sensitivity" in k]
     off = [v for k, (v, _) in d.items() if "magnet offset" in k]
@@ -213,6 +215,8 @@ def _check_stage(out: Path, drawing, unit, models: dict) -> None:
         verdict = ("as predicted" if not c.failed() else
                    f"{max(c.beyond(o) for o in c.outputs):.2g}x the greatest: it does not describe this unit")
         print(f"   {name:16} {said}: {verdict}")
+        if c.identified:
+            print(f"   {'':16} zero error {c.zero_error:.3g} mm: {c.zero_said}")
     print(f"   ({time.monotonic() - t:.1f} s)")
 
 
