@@ -1,7 +1,7 @@
 """Software time per sample of ``tactile-host read``: drivers, estimate and output line, bus access excluded.
 
 Run: ``python bench/readout.py > /tmp/readout.md`` (markdown on stdout; about 15 s), or
-``python bench/readout.py --c-only`` for the last table alone (about 5 s). Needs gcc; the last table
+``python bench/readout.py --c-only`` for the last table alone (about 10 s). Needs gcc; the last table
 (the C drivers) also valgrind, arm-linux-gnueabihf-gcc and qemu-arm (apt: valgrind gcc-arm-linux-gnueabihf
 qemu-user); all checked before anything runs. Figures and their reading: docs/readout.md.
 
@@ -280,6 +280,9 @@ C_REPLAY = r"""
 #include "replay.h"
 #define TM_API static __attribute__((noinline, noclone))
 #include "tm_model.h"
+#include <math.h>
+#include "pi_options.h"
+#include "autozero.h"
 
 static unsigned pos;
 static uint64_t t_ns;
@@ -324,6 +327,9 @@ int main(int argc, char **argv)
     double lsb[TM_N_INPUTS];
     volatile double sink = 0;
     const int bus_only = argc > 1 && strcmp(argv[1], "bus") == 0;
+    const int with_az = argc > 1 && strcmp(argv[1], "az") == 0; /* tm_pi --auto-zero */
+    static az_state az;
+    double zero0[TM_N_INPUTS] = {0}, comp[TM_N_INPUTS], shift[TM_N_INPUTS];
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     const int timed = argc > 3;
     long i;
@@ -335,6 +341,9 @@ int main(int argc, char **argv)
     for (k = 0; k < TM_N_INPUTS; ++k) {
         lsb[k] = adc_lsb_volts(&ADC_MAP[0]);
     }
+    /* a noise floor of 1 V, a band of 1e6 and a hold of 1e9 s: once the window is full every sample runs all of
+     * its tests and none moves the zero, auto-zero's most work a sample */
+    az_init(&az, zero0, 1.0, 1e6, 1e6, 1e9);
     t0 = now_s();
     for (i = 0; i < n; ++i) {
         if (bus_only) {
@@ -351,9 +360,13 @@ int main(int argc, char **argv)
                 return 3;
             }
             for (k = 0; k < TM_N_INPUTS; ++k) {
-                in[k] = (tm_real)((double)codes[k] * lsb[k]);
+                comp[k] = (double)codes[k] * lsb[k];
+                in[k] = (tm_real)(comp[k] - (with_az ? az.zero[k] : 0.0));
             }
             tm_estimate(in, out);
+            if (with_az) {
+                sink = sink + az_observe(&az, (double)i, comp, out, 0, shift);
+            }
             sink = sink + (double)out[0];
         }
     }
@@ -422,6 +435,7 @@ def c_drivers_table(model, sensor) -> None:
     import tempfile
     from pathlib import Path
 
+    from fitgen.physics.transfer import readings
     from host.cdrivers import CAdcArray
     from host.pi import render_pi
 
@@ -436,38 +450,42 @@ def c_drivers_table(model, sensor) -> None:
     arr.read_codes()
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        render_pi(model, cm, work, precision="float")
+        rest = (readings(sensor, np.zeros((1, 5)))[0], sensor.name)  # tm_pi --auto-zero needs rest readings
+        render_pi(model, cm, work, precision="float", rest=rest)
         (work / "replay.h").write_text(_replay_header(rec.log))
         (work / "bench.c").write_text(C_REPLAY)
         flags = ["-std=c99", "-O2", "-I", str(work), str(work / "bench.c"), str(work / "adc.c"), "-lm"]
         subprocess.run(["gcc", *flags, "-DREPLAY_CHECK", "-o", str(work / "check")], check=True)
-        if subprocess.run([str(work / "check"), "full", "100"]).returncode != 0:
-            raise SystemExit("the C replay does not see the recorded transfers")
+        for mode in ("full", "az"):
+            if subprocess.run([str(work / "check"), mode, "100"]).returncode != 0:
+                raise SystemExit("the C replay does not see the recorded transfers")
         subprocess.run(["gcc", *flags, "-o", str(work / "x86")], check=True)
         subprocess.run(["arm-linux-gnueabihf-gcc", "-static", *flags, "-o", str(work / "arm")], check=True)
         n1, n2 = 200, 2200
+        modes = ("full", "az", "bus")
         ns = {m: statistics.median(float(subprocess.run([str(work / "x86"), m, "200000", "t"], capture_output=True,
-                                                        text=True).stdout) for _ in range(5)) for m in ("full", "bus")}
+                                                        text=True).stdout) for _ in range(5)) for m in modes}
+        # past the window's first 64 samples in both counts: auto-zero's full window, each sample
         ir = {m: (_callgrind_ir(work / "x86", [m, str(n2)]) - _callgrind_ir(work / "x86", [m, str(n1)])) / (n2 - n1)
-              for m in ("full", "bus")}
-        q1, q2 = 20, 120
+              for m in modes}
+        q1, q2 = 80, 180
         arm = {m: (_qemu_instructions(work / "arm", [m, str(q2)], work)
-                   - _qemu_instructions(work / "arm", [m, str(q1)], work)) / (q2 - q1) for m in ("full", "bus")}
+                   - _qemu_instructions(work / "arm", [m, str(q1)], work)) / (q2 - q1) for m in modes}
     print(f"\nThe C drivers (tm_pi's loop: firmware_templates/firmware/adc.c through the channel map, code x LSB, "
           f"the float estimate), one 8-element sample from the same record ({len(rec.log)} transfers), replayed "
           "in C on a virtual clock; the replay's own cost subtracted:\n")
-    print("| where | sample, replay bus | replay alone | software, bus excluded |")
-    print("| --- | --- | --- | --- |")
-    print(f"| x86-64, time (median of 5 runs of 200,000) | {ns['full']:.0f} ns | {ns['bus']:.0f} ns | "
-          f"{ns['full'] - ns['bus']:.0f} ns |")
-    print(f"| x86-64, instructions (callgrind) | {ir['full']:.0f} | {ir['bus']:.0f} | {ir['full'] - ir['bus']:.0f} |")
-    print(f"| ARMv7 Linux (qemu-arm), instructions | {arm['full']:.0f} | {arm['bus']:.0f} | "
-          f"{arm['full'] - arm['bus']:.0f} |")
+    print("| where | sample, replay bus | replay alone | software, bus excluded | with --auto-zero (its share) |")
+    print("| --- | --- | --- | --- | --- |")
+    for where, got, unit in (("x86-64, time (median of 5 runs of 200,000)", ns, " ns"),
+                             ("x86-64, instructions (callgrind)", ir, ""),
+                             ("ARMv7 Linux (qemu-arm), instructions", arm, "")):
+        print(f"| {where} | {got['full']:.0f}{unit} | {got['bus']:.0f}{unit} | {got['full'] - got['bus']:.0f}{unit} | "
+              f"{got['az'] - got['bus']:.0f}{unit} ({got['az'] - got['full']:.0f}{unit}) |")
 
 
 if __name__ == "__main__":
     _args = parse_args(__doc__, lambda ap: ap.add_argument(
-        "--c-only", action="store_true", help="only the last table, the C drivers (about 5 s)"))
+        "--c-only", action="store_true", help="only the last table, the C drivers (about 10 s)"))
     need_tools("gcc", "valgrind", "arm-linux-gnueabihf-gcc", "qemu-arm")  # every run ends with the C drivers' table
     if _args.c_only:
         _sensor = load_sensor("paper").with_transfer("gmr")

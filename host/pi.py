@@ -150,8 +150,9 @@ def render_pi(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: 
 
 def _rest_block(model: Model, rest) -> str:
     """pi_options.h's rest readings for --tare (PI_HAS_REST 0 without them)."""
-    if rest is None:
-        return "#define PI_HAS_REST 0\nstatic const double PI_REST[1] = { 0.0 };\n#define PI_REST_FROM \"\"\n"
+    if rest is None:  # as long as the model's inputs all the same: auto-zero's code reads them all, never run
+        return (f"#define PI_HAS_REST 0\nstatic const double PI_REST[{model.n_inputs}] = {{ 0.0 }};\n"
+                "#define PI_REST_FROM \"\"\n")
     volts, whose = rest
     if len(volts) != model.n_inputs:
         raise InputError(f"{len(volts)} rest readings for a model of {model.n_inputs} inputs")
