@@ -110,6 +110,40 @@ def _at_t0(ds, path: str, capture: str):
     return out, {"capture_degc": tc.t0, "compensated_from_degc": round(float(np.median(temps)), 4)}
 
 
+def _check_temperature(ds, sensor, temp_comp: str | None, capture: str):
+    """A check capture and a line on its temperature against the unit's (the unit file's ``capture_degc``): with
+    ``temp_comp``, its rows taken from their own temperatures to the compensation's t0, which must be the unit's;
+    without, a note when it was read more than CAPTURE_DEGC_TOL from the unit's, which the prediction does not
+    draw; '' when there is nothing to say."""
+    import numpy as np
+
+    from fitgen.physics.dataset import row_degc, thermistor_degc
+    from host.temperature import CAPTURE_DEGC_TOL
+
+    unit = sensor.source.get("unit") if isinstance(sensor.source, dict) else None
+    theirs = unit.get("capture_degc") if isinstance(unit, dict) else None
+    rows = row_degc(ds.meta, ds.n_rows)
+    mine = float(np.median(rows)) if rows is not None else thermistor_degc(ds.meta)
+    if temp_comp:
+        if theirs is None:
+            raise InputError(f"--temp-comp {temp_comp}: the unit file ({sensor.name}) records no temperature it was "
+                             "identified at (capture_degc: its capture had no thermistor), so there is none to take "
+                             "the check's rows to")
+        ds, info = _at_t0(ds, temp_comp, capture)
+        t0 = info["capture_degc"]
+        if abs(t0 - theirs) > CAPTURE_DEGC_TOL:
+            raise InputError(f"--temp-comp {temp_comp} takes the check's rows to {t0:g} degC, but the unit was "
+                             f"identified at {theirs:.1f} degC (capture_degc): identify it with --temp-comp {temp_comp} "
+                             "too, or give a compensation about its temperature")
+        return ds, (f"check: the rows taken from {info['compensated_from_degc']:.2f} degC (their median) to {t0:g} "
+                    "degC, the unit's, by the compensation")
+    if mine is not None and theirs is not None and abs(mine - theirs) > CAPTURE_DEGC_TOL:
+        return ds, (f"check: note: the check capture was read at {mine:.1f} degC and the unit identified at "
+                    f"{theirs:.1f} degC; its elements' offsets and gains drift with temperature, which the prediction "
+                    "does not draw: --temp-comp TC.json takes the check's rows to the unit's temperature")
+    return ds, ""
+
+
 def _with_map(text: str, order, spec) -> str:
     """A refusal that names the channels' order, with the capture's --adc map rewritten to read in it where a
     spec can say so."""
@@ -243,6 +277,9 @@ def cmd_check(args) -> int:
         raise InputError(f"model {args.model}: the sensor its held-out figures were made on is not found here (or "
                          "has changed): give the unit's file as --sensor")
     sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on")
+    ds, said = _check_temperature(ds, sensor, args.temp_comp, args.capture)
+    if said:
+        print(said, file=sys.stderr)
     result, source = check_capture(model, ds, sensor, spec, rig_error=args.rig_error, zero_error=args.zero_error,
                                    precision=args.precision, capture=args.capture)
     print(f"check: zero error {result.zero_error:.3g} mm: {result.zero_said}", file=sys.stderr)
@@ -333,6 +370,9 @@ def add_calibration_commands(command) -> None:
                          "from the captures' stage records, 0 where the check moved from the calibration's zero on a "
                          "homed machine, both zeros' errors in quadrature where it moved from one set anew, which "
                          "widens the prediction and hides a sensor moved on its bed by as much; 0 without records)")
+    ch.add_argument("--temp-comp", metavar="FILE.json",
+                    help="take the check capture's rows from the temperatures it recorded to the compensation's t0, "
+                         "which must be the one the unit was identified at (tactile-host capture --temperature fits one)")
     ch.add_argument("--precision", choices=("double", "float", "fixed"),
                     help="the arithmetic to estimate in (default: the one the model was fitted for)")
     ch.add_argument("--plot", metavar="DIR", help="also DIR/check.png: the measured errors beside the predicted ones "
