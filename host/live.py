@@ -225,8 +225,11 @@ class _Handler(BaseHTTPRequestHandler):
                 return
             write, hub, stopping = self.wfile.write, live.hub, live.stopping
             # reconnect after 1 s, not the browser's default 3 s; hello: which hub, how far it is
-            write(b"retry: 1000\n\n" + _event("hello", {"hub": hub.token, "head": hub.seq, "backlog": hub.backlog,
+            head = hub.seq
+            write(b"retry: 1000\n\n" + _event("hello", {"hub": hub.token, "head": head, "backlog": hub.backlog,
                                                          "resume": last}))
+            if last is None:  # a new viewer gets what the ring held at hello; later losses it is told of
+                last = max(0, head - hub.backlog)
             quiet_until = time.monotonic() + live.keepalive
             while not stopping.is_set():
                 chunk, last = hub.collect(last)

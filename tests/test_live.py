@@ -237,6 +237,32 @@ def test_a_viewer_behind_the_backlog_is_told_what_it_lost(served):
     assert status == 400 and b"not a sample number" in body
 
 
+def test_a_new_viewer_is_told_of_samples_the_ring_lost_after_it_connected(served):
+    """A new viewer gets what the ring held when it was greeted; a viewer whose thread first looks after the ring
+    has lapped (a loaded machine) is told of the samples lost since, not given the ring's oldest silently."""
+    hub, srv = served(backlog=16)
+    first_look, go = threading.Event(), threading.Event()
+    collect = hub.collect
+
+    def late_collect(last, *a, **kw):
+        if not first_look.is_set():
+            first_look.set()
+            go.wait(10)  # the readout publishes meanwhile
+        return collect(last, *a, **kw)
+
+    hub.collect = late_collect
+    reader = SSE(srv)
+    assert reader.next()["event"] == "hello"
+    assert first_look.wait(10)
+    for i in range(100):
+        hub.publish(sample(i))
+    go.set()
+    got = [reader.next(), reader.next()]
+    assert got[0]["event"] == "dropped" and got[0]["data"] == {"dropped": 84, "from": 1, "to": 84}, got
+    assert got[1]["event"] == "message" and got[1]["data"]["seq"] == 85
+    reader.close()
+
+
 def test_a_stalled_viewer_does_not_slow_publish_and_is_dropped(served):
     hub, srv = served(write_timeout=3.0)
     host, port = srv._httpd.server_address[:2]
