@@ -31,6 +31,12 @@ typedef struct {
     long updates;
 } az_state;
 
+/* the slot of the window's i-th sample, oldest first */
+static int az_slot(const az_state *az, int i)
+{
+    return az->oldest + i < PI_AZ_WINDOW ? az->oldest + i : az->oldest + i - PI_AZ_WINDOW;
+}
+
 static void az_restart(az_state *az)
 {
     az->filled = 0;
@@ -62,11 +68,11 @@ static void az_init(az_state *az, const double zero[TM_N_INPUTS], double noise, 
 
 /* one sample at time t (s): `comp` before the zero is taken off, `out` and `status` the model's on comp less
  * the zero. 1 when the zero moved (`shift`: by how much, V per element), else 0. Sums run from the oldest
- * sample to the newest, as numpy's reductions over the window's rows do. */
+ * sample to the newest, row by row, as numpy's reductions over the window's rows do. */
 static int az_observe(az_state *az, double t, const double comp[TM_N_INPUTS], const tm_real out[TM_N_OUTPUTS],
                       int status, double shift[TM_N_INPUTS])
 {
-    double mean[TM_N_INPUTS];
+    double mean[TM_N_INPUTS], sum[TM_N_INPUTS] = {0}, sq[TM_N_INPUTS] = {0}, est[TM_N_OUTPUTS] = {0};
     int i, k, s;
     if (!az->started) {
         az->started = 1;
@@ -96,27 +102,37 @@ static int az_observe(az_state *az, double t, const double comp[TM_N_INPUTS], co
     if (az->filled < PI_AZ_WINDOW) {
         return 0;
     }
+    /* row by row, oldest first, each element's sum in that order (numpy's reduction over the window's rows) */
+    for (i = 0; i < PI_AZ_WINDOW; ++i) {
+        const double *row = az->readings[az_slot(az, i)];
+        for (k = 0; k < TM_N_INPUTS; ++k) {
+            sum[k] += row[k];
+        }
+    }
     for (k = 0; k < TM_N_INPUTS; ++k) {
-        double sum = 0.0, sq = 0.0;
-        for (i = 0; i < PI_AZ_WINDOW; ++i) {
-            sum += az->readings[(az->oldest + i) % PI_AZ_WINDOW][k];
+        mean[k] = sum[k] / (double)PI_AZ_WINDOW;
+    }
+    for (i = 0; i < PI_AZ_WINDOW; ++i) {
+        const double *row = az->readings[az_slot(az, i)];
+        for (k = 0; k < TM_N_INPUTS; ++k) {
+            const double d = row[k] - mean[k];
+            sq[k] += d * d;
         }
-        mean[k] = sum / (double)PI_AZ_WINDOW;
-        for (i = 0; i < PI_AZ_WINDOW; ++i) {
-            const double d = az->readings[(az->oldest + i) % PI_AZ_WINDOW][k] - mean[k];
-            sq += d * d;
-        }
-        if (sqrt(sq / (double)PI_AZ_WINDOW) > PI_AZ_SPREAD * az->noise) {
+    }
+    for (k = 0; k < TM_N_INPUTS; ++k) {
+        if (sqrt(sq[k] / (double)PI_AZ_WINDOW) > PI_AZ_SPREAD * az->noise) {
             az_restart(az);
             return 0;
         }
     }
-    for (k = 0; k < TM_N_OUTPUTS; ++k) {
-        double sum = 0.0;
-        for (i = 0; i < PI_AZ_WINDOW; ++i) {
-            sum += az->estimates[(az->oldest + i) % PI_AZ_WINDOW][k];
+    for (i = 0; i < PI_AZ_WINDOW; ++i) {
+        const double *row = az->estimates[az_slot(az, i)];
+        for (k = 0; k < TM_N_OUTPUTS; ++k) {
+            est[k] += row[k];
         }
-        if (fabs(sum / (double)PI_AZ_WINDOW - PI_AZ_REST_EST[k]) > az->band[k]) {
+    }
+    for (k = 0; k < TM_N_OUTPUTS; ++k) {
+        if (fabs(est[k] / (double)PI_AZ_WINDOW - PI_AZ_REST_EST[k]) > az->band[k]) {
             az_restart(az);
             return 0;
         }
