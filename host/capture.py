@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import fcntl
 import json
-import math
 import os
 import signal
 import subprocess
@@ -32,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen import __version__
-from fitgen.physics.dataset import load_meta, meta_path, pose_table, read_text
+from fitgen.physics.dataset import load_meta, meta_path, pose_table, read_text, row_degc
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output, real_file, sha256_hex, write_atomic, write_target
 from fitgen.physics.pose import POSE_NAMES, as_poses, off_skin
@@ -389,10 +388,8 @@ def prior_row_degc(prior: dict, rows: int) -> list | None:
     if rows == 0:
         return []
     got = prior.get("row_degc")
-    if not isinstance(got, list) or len(got) < rows or not all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in got[:rows]):
-        return None
-    return [float(x) for x in got[:rows]]
+    kept = row_degc({"row_degc": got[:rows]}, rows) if isinstance(got, list) else None
+    return None if kept is None else kept.tolist()
 
 
 def check_resume(output: str | Path, rows: int, this: dict) -> None:
@@ -448,9 +445,9 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
     info = {"schedule": schedule.origin, "samples_per_row": samples, "max_spread_volts": max_spread,
             **({"schedule_drawing": schedule.drawing} if schedule.drawing else {}),
             **({"schedule_stage": schedule.stage} if schedule.stage else {}), **(meta or {})}
-    row_degc = prior_row_degc(prior, state.rows) if temperature is not None else None
-    if row_degc is not None:
-        info["row_degc"] = row_degc
+    temps = prior_row_degc(prior, state.rows) if temperature is not None else None
+    if temps is not None:
+        info["row_degc"] = temps
 
     def refresh():
         info.update(noise.meta(), duration_s=before_s + (clock.monotonic() - t_start), runs=runs)
@@ -470,7 +467,7 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
                 break
             clock.sleep(settle)
             for attempt in range(tries):
-                before = temperature() if row_degc is not None else None
+                before = temperature() if temps is not None else None
                 block = measure(array, samples)
                 spread = block.std(axis=0)
                 if spread.max() <= max_spread:
@@ -480,8 +477,8 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
                 raise SpreadTooLarge(f"pose {i + 1}/{res.total} ({schedule.describe(i)}): v{k + 1} spreads "
                                      f"{spread[k] * 1e3:.3g} mV rms over {samples} samples (limit "
                                      f"{max_spread * 1e3:.3g} mV) in {tries} tries; is the sensor still moving?")
-            if row_degc is not None:  # in the meta before the row: a run killed between the two keeps them aligned
-                row_degc.append(round(0.5 * (before + temperature()), 4))
+            if temps is not None:  # in the meta before the row: a run killed between the two keeps them aligned
+                temps.append(round(0.5 * (before + temperature()), 4))
                 last_meta = refresh()
             writer.append(row_line(block.mean(axis=0), values[i]))
             res.captured += 1
@@ -493,7 +490,7 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
                 last_meta = refresh()
     finally:
         writer.close()
-        if row_degc is not None:  # a run stopped after a row's temperature but before its row: the rows written
-            del row_degc[state.rows + res.captured:]
+        if temps is not None:  # a run stopped after a row's temperature but before its row: the rows written
+            del temps[state.rows + res.captured:]
         refresh()
     return res

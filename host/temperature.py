@@ -301,6 +301,13 @@ def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:
 CAPTURE_DEGC_TOL = 1.0  # degC between a unit's capture and a compensation's t0 that goes without a note
 
 
+def unit_capture_degc(source) -> float | None:
+    """The temperature a unit file's unit was identified at (its ``[unit] capture_degc``, from the capture's
+    thermistor), given the file's parsed ``source``; None when it records none."""
+    unit = source.get("unit") if isinstance(source, dict) else None
+    return unit.get("capture_degc") if isinstance(unit, dict) else None  # a number of degC: the parser checked it
+
+
 def capture_temperature_note(model, tempcomp: "TempComp", tare: str = "--tare") -> str:
     """A note when ``model``'s unit (its sensor file, fitgen.fitting.holdout.fitted_sensor_spec) was identified from a
     capture more than CAPTURE_DEGC_TOL from ``tempcomp``'s t0: the compensation maps readings to t0, the model was
@@ -311,11 +318,9 @@ def capture_temperature_note(model, tempcomp: "TempComp", tare: str = "--tare") 
 
     spec = fitted_sensor_spec(model)
     try:
-        source = load_sensor(spec).source if spec else {}
+        degc = unit_capture_degc(load_sensor(spec).source) if spec else None
     except InputError:
         return ""
-    unit = source.get("unit") if isinstance(source, dict) else None
-    degc = unit.get("capture_degc") if isinstance(unit, dict) else None  # a number of degC: the parser checked it
     if degc is None or abs(degc - tempcomp.t0) <= CAPTURE_DEGC_TOL:
         return ""
     shift = float(np.max(np.abs(tempcomp.offset))) * abs(degc - tempcomp.t0) * 1e3

@@ -17,13 +17,17 @@
 #ifndef TM_PI_AUTOZERO_H
 #define TM_PI_AUTOZERO_H
 
+typedef struct { /* one sample of the window */
+    double readings[TM_N_INPUTS];   /* compensated, the zero not taken off */
+    double estimates[TM_N_OUTPUTS];
+} az_sample;
+
 typedef struct {
     double zero[TM_N_INPUTS];   /* V: taken off each compensated reading */
     double band[TM_N_OUTPUTS];  /* the window's mean estimate may lie this far from PI_AZ_REST_EST */
     double noise;               /* V rms: the tare's noise floor */
     double hold_s;
-    double readings[PI_AZ_WINDOW][TM_N_INPUTS]; /* compensated, the zero not taken off */
-    double estimates[PI_AZ_WINDOW][TM_N_OUTPUTS];
+    az_sample window[PI_AZ_WINDOW];
     int filled, oldest;         /* samples in the window; the oldest one's slot */
     int resting;                /* the window was at rest at `since` */
     double since, first;        /* s: when the rest began; the first sample's time */
@@ -94,26 +98,29 @@ static int az_observe(az_state *az, double t, const double comp[TM_N_INPUTS], co
         az->oldest = (az->oldest + 1) % PI_AZ_WINDOW;
     }
     for (k = 0; k < TM_N_INPUTS; ++k) {
-        az->readings[s][k] = comp[k];
+        az->window[s].readings[k] = comp[k];
     }
     for (k = 0; k < TM_N_OUTPUTS; ++k) {
-        az->estimates[s][k] = (double)out[k];
+        az->window[s].estimates[k] = (double)out[k];
     }
     if (az->filled < PI_AZ_WINDOW) {
         return 0;
     }
     /* row by row, oldest first, each element's sum in that order (numpy's reduction over the window's rows) */
     for (i = 0; i < PI_AZ_WINDOW; ++i) {
-        const double *row = az->readings[az_slot(az, i)];
+        const az_sample *row = &az->window[az_slot(az, i)];
         for (k = 0; k < TM_N_INPUTS; ++k) {
-            sum[k] += row[k];
+            sum[k] += row->readings[k];
+        }
+        for (k = 0; k < TM_N_OUTPUTS; ++k) {
+            est[k] += row->estimates[k];
         }
     }
     for (k = 0; k < TM_N_INPUTS; ++k) {
         mean[k] = sum[k] / (double)PI_AZ_WINDOW;
     }
     for (i = 0; i < PI_AZ_WINDOW; ++i) {
-        const double *row = az->readings[az_slot(az, i)];
+        const double *row = az->window[az_slot(az, i)].readings;
         for (k = 0; k < TM_N_INPUTS; ++k) {
             const double d = row[k] - mean[k];
             sq[k] += d * d;
@@ -123,12 +130,6 @@ static int az_observe(az_state *az, double t, const double comp[TM_N_INPUTS], co
         if (sqrt(sq[k] / (double)PI_AZ_WINDOW) > PI_AZ_SPREAD * az->noise) {
             az_restart(az);
             return 0;
-        }
-    }
-    for (i = 0; i < PI_AZ_WINDOW; ++i) {
-        const double *row = az->estimates[az_slot(az, i)];
-        for (k = 0; k < TM_N_OUTPUTS; ++k) {
-            est[k] += row[k];
         }
     }
     for (k = 0; k < TM_N_OUTPUTS; ++k) {

@@ -115,15 +115,11 @@ def _check_temperature(ds, sensor, temp_comp: str | None, capture: str):
     ``temp_comp``, its rows taken from their own temperatures to the compensation's t0, which must be the unit's;
     without, a note when it was read more than CAPTURE_DEGC_TOL from the unit's, which the prediction does not
     draw; '' when there is nothing to say."""
-    import numpy as np
+    from fitgen.fitting.unitrecord import capture_temperature
+    from host.temperature import CAPTURE_DEGC_TOL, unit_capture_degc
 
-    from fitgen.physics.dataset import row_degc, thermistor_degc
-    from host.temperature import CAPTURE_DEGC_TOL
-
-    unit = sensor.source.get("unit") if isinstance(sensor.source, dict) else None
-    theirs = unit.get("capture_degc") if isinstance(unit, dict) else None
-    rows = row_degc(ds.meta, ds.n_rows)
-    mine = float(np.median(rows)) if rows is not None else thermistor_degc(ds.meta)
+    theirs = unit_capture_degc(sensor.source)
+    mine = capture_temperature(ds.meta, ds.n_rows).get("capture_degc")  # as identify takes a capture's
     if temp_comp:
         if theirs is None:
             raise InputError(f"--temp-comp {temp_comp}: the unit file ({sensor.name}) records no temperature it was "

@@ -254,15 +254,18 @@ def thermistor_degc(meta: dict) -> float | None:
     """The temperature a capture's rows were taken at, as its meta records it (``thermistor_degc``: tactile-host
     capture with a thermistor in its channel map), or None."""
     t = meta.get("thermistor_degc") if isinstance(meta, dict) else None
-    ok = isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t)
-    return float(t) if ok else None
+    return float(t) if _finite(t) else None
 
 
 def row_degc(meta: dict, rows: int) -> np.ndarray | None:
     """Each of a capture's ``rows`` rows' temperature as its meta records it (``row_degc``: tactile-host capture
     reads its thermistor about every row), or None where it records none for some row."""
     t = meta.get("row_degc") if isinstance(meta, dict) else None
-    if not isinstance(t, list) or len(t) != rows or not all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in t):
+    if not isinstance(t, list) or len(t) != rows or not all(_finite(x) for x in t):
         return None
     return np.asarray(t, dtype=float)
+
+
+def _finite(x) -> bool:
+    """A finite JSON number (not a bool)."""
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
