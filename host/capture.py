@@ -63,7 +63,8 @@ class Schedule:
     columns: tuple[str, ...]  # the pose columns the schedule names, in the order dx,dy,dz,thx,thy
     origin: str = "schedule"
     drawing: dict | None = None  # the drawing `fitgen schedule` made it for: sensor, sensor_file, sha256, transfer
-    stage: dict | None = None  # the stage it was made for: rig_error, zero_error (mm), as `fitgen schedule` took them
+    stage: dict | None = None  # the stage it was made for: rig_error, zero_error (mm), as `fitgen schedule` took them,
+    # and rig_error_given: whether it was told the rig's error (fitgen check takes a check schedule's only then)
 
     @property
     def values(self) -> np.ndarray:
@@ -93,7 +94,7 @@ def load_schedule(path: str | Path) -> Schedule:
     poses, columns = pose_table(read_text(path, "schedule"), origin)
     meta = load_meta(path)
     drawing = {k: meta[k] for k in ("sensor", "sensor_file", "sensor_sha256", "transfer") if k in meta}
-    stage = {k: meta[k] for k in ("rig_error", "zero_error") if k in meta}
+    stage = {k: meta[k] for k in ("rig_error", "rig_error_given", "zero_error") if k in meta}
     return Schedule(as_poses(poses), columns, origin, drawing if "sensor" in drawing else None, stage or None)
 
 

@@ -10,7 +10,7 @@ import pytest
 from conftest import assert_one_line_error, run_cli, save_capture, simulated_capture
 from fitgen.equations.model import load_model
 from fitgen.base.errors import InputError
-from fitgen.fitting.check import TOO_FAR, check, check_zero
+from fitgen.fitting.check import TOO_FAR, check, check_rig, check_zero
 from fitgen.fitting.family import fit_device
 from fitgen.fitting.fit import FitSettings
 from fitgen.fitting.holdout import unit_posterior
@@ -226,6 +226,34 @@ def test_check_zero_tells_a_zero_reused_from_one_set_anew_by_the_captures_stage_
         check_zero({"capture_zero": {**CAL_ZERO, "homed": "yes"}}, _stage(), "c.csv")
 
 
+def test_check_rig_takes_a_check_schedule_s_rig_error_only_where_it_was_given(tmp_path):
+    """A check schedule told --rig-error speaks for the check's stage; one left at its default says nothing, so the
+    error the unit was identified with stands; a flag to fitgen check wins over both (check_capture)."""
+    post = {"rig_error": 0.03}
+    told = {"schedule_stage": {"rig_error": 0.01, "rig_error_given": True, "zero_error": 0.02}}
+    default = {"schedule_stage": {"rig_error": 0.01, "rig_error_given": False, "zero_error": 0.02}}
+    older = {"schedule_stage": {"rig_error": 0.01, "zero_error": 0.02}}  # a schedule from before the record
+    assert check_rig(post, told, "c.csv", "u.toml") == (0.01, "as the check capture's schedule was made for")
+    for meta in (default, older, ROWS_META):
+        assert check_rig(post, meta, "c.csv", "u.toml") == (0.03, "as the unit was identified with")
+    assert check_rig(None, told, "c.csv", None)[0] == 0.01
+    assert check_rig(None, default, "c.csv", None)[1].startswith("the default: neither")
+    with pytest.raises(InputError, match=r"^c.csv's meta: schedule_stage.rig_error must be 0..0.5 mm, got 'x'; "
+                                         r"repair it, or give --rig-error$"):
+        check_rig(post, {"schedule_stage": {"rig_error": "x", "rig_error_given": True}}, "c.csv", "u.toml")
+    with pytest.raises(InputError, match=r"^u.toml's posterior: rig_error must be 0..0.5 mm, got True"):
+        check_rig({"rig_error": True}, ROWS_META, "c.csv", "u.toml")
+    # fitgen schedule records whether it was told, and capture's schedule reader passes it on
+    from host.capture import load_schedule
+
+    for flags, given, rig in (((), False, 0.01), (("--rig-error", "0.03"), True, 0.03)):
+        for kind in ((), ("--check", "5")):
+            out = tmp_path / f"s{len(flags)}{len(kind)}.csv"
+            proc = run_cli("fitgen", "schedule", "--n", "12", *kind, *flags, "-o", str(out))
+            assert proc.returncode == 0, proc.stderr
+            assert load_schedule(out).stage == {"rig_error": rig, "rig_error_given": given, "zero_error": 0.02}
+
+
 def test_fitgen_check_takes_the_zero_error_from_the_stage_records(twin, tmp_path):
     """The same rows, taken with the stage's zero 0.05 mm off the calibration's in x: where the check capture's
     meta says so, fitgen check predicts with both zeros' errors and passes; where it says the calibration's zero
@@ -283,15 +311,17 @@ def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_u
     # a printer's check: its stage error given, the prediction widens with it; by default, the error the unit was
     # identified with (the posterior records it), so a unit identified on a printer is checked as on one
     loose = run_cli("fitgen", "check", str(folder / "twin.json"), str(ok), "--rig-error", "0.03")
-    assert loose.returncode == 0 and "stage's error (0.03 mm) and the rows' noise" in loose.stdout
+    assert loose.returncode == 0 and "stage's error (0.03 mm, as given) and the rows' noise" in loose.stdout
     anew = run_cli("fitgen", "check", str(folder / "twin.json"), str(ok), "--zero-error", "0.02")
-    assert anew.returncode == 0 and "stage's error (0.01 mm), the zero's (0.02 mm) and the rows' noise" in anew.stdout
-    assert "stage's error (0.01 mm)" in proc.stdout  # the unit 8 run's, by default: unit 7 was identified at 0.01
+    assert anew.returncode == 0 and ("stage's error (0.01 mm, as the unit was identified with), the zero's (0.02 mm) "
+                                     "and the rows' noise") in anew.stdout
+    # the unit 8 run's, by default: unit 7 was identified at 0.01
+    assert "stage's error (0.01 mm, as the unit was identified with)" in proc.stdout
     record = json.loads((folder / "twin.posterior.json").read_text())
     try:
         (folder / "twin.posterior.json").write_text(json.dumps({**record, "rig_error": 0.03}))
         printer = run_cli("fitgen", "check", str(folder / "twin.json"), str(ok))
-        assert printer.returncode == 0 and "stage's error (0.03 mm)" in printer.stdout, printer.stdout
+        assert printer.returncode == 0 and "stage's error (0.03 mm, as the unit" in printer.stdout, printer.stdout
     finally:
         (folder / "twin.posterior.json").write_text(json.dumps(record))
     # bad input: one line, status 2

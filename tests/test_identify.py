@@ -613,7 +613,7 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
     unit, _ = draw_unit(drawing, 12)
     simulated_stage_capture(unit, load_schedule(sch), cap, repeatability=0.03, seed=3)
     meta = json.loads((tmp_path / "c.csv.meta.json").read_text())
-    assert meta["schedule_stage"] == {"rig_error": 0.03, "zero_error": 0.03}
+    assert meta["schedule_stage"] == {"rig_error": 0.03, "rig_error_given": True, "zero_error": 0.03}
     proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "u.toml"))
     assert proc.returncode == 0, proc.stderr
     assert ("rig error 0.03 mm per row, zero error 0.03 mm (rig error and zero error as the capture's schedule was "

@@ -188,8 +188,13 @@ def cmd_schedule(args) -> int:
     drawing = sensor_of(args)
     axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
     samples, noise, told = samples_of(args, drawing)
+    # recorded so that fitgen check can tell a check stage's error the user gave from the default
+    given = {"rig_error_given": args.rig_error is not None}
+    if args.rig_error is None:
+        from fitgen.fitting.identify import RIG_ERROR
+        args.rig_error = RIG_ERROR
     if args.check is not None:
-        return _check_schedule(args, drawing, axes, samples)
+        return _check_schedule(args, drawing, axes, samples, given)
 
     def step(done, total, note):
         bar.total = total
@@ -201,7 +206,7 @@ def cmd_schedule(args) -> int:
                                progress=step)
     # the drawing's file and hash: capture passes them on, and identify takes that drawing unless told
     own = {"sensor_file": str(Path(args.sensor).resolve())} if Path(args.sensor).is_file() else {}
-    write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples, **told, **own,
+    write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples, **told, **own,
                                               "sensor_sha256": drawing.sha256, "transfer": drawing.transfer})
     rest = (f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"]
             else "")
@@ -236,15 +241,15 @@ def _pressed(info: dict) -> str:
     return f"; rows in contact pressed at least {-top:g} mm, which {stage} does not lift off the skin"
 
 
-def _check_schedule(args, drawing, axes, samples: int) -> int:
+def _check_schedule(args, drawing, axes, samples: int, given: dict) -> int:
     """``schedule --check N``: random poses in the working box, for a check capture."""
     from fitgen.fitting.schedule import check_schedule, write_schedule
     from fitgen.physics.simulate import parse_ranges
 
     poses, info = check_schedule(drawing, args.check, axes=axes, ranges=parse_ranges(args.limits, {}), seed=args.seed,
                                  rig_error=args.rig_error, zero_error=args.zero_error)
-    write_schedule(args.output, poses, axes, {**info, "samples_per_row": samples, "sensor_sha256": drawing.sha256,
-                                              "transfer": drawing.transfer})
+    write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples,
+                                              "sensor_sha256": drawing.sha256, "transfer": drawing.transfer})
     box = ", ".join(f"{a} {lo:g}..{hi:g} {'deg' if a.startswith('th') else 'mm'}"
                     for a, (lo, hi) in info["ranges"].items())
     print(f"wrote {len(poses)} random check poses ({box} from first contact, seed {args.seed}{_pressed(info)}) to "
@@ -282,7 +287,7 @@ def cmd_check(args) -> int:
     where = (f"{result.units} units drawn from the posterior of {sensor.name}" if result.identified
              else f"{sensor.name} (no posterior: its noise and the stage's error alone)")
     print(f"check: {result.rows} rows of {args.capture} in contact, estimated in {result.precision}; predicted on "
-          f"{where}, {DRAWS} draws each of the stage's error ({result.rig_error:g} mm)"
+          f"{where}, {DRAWS} draws each of the stage's error ({result.rig_error:g} mm, {result.rig_said})"
           + (f", the zero's ({result.zero_error:.3g} mm)" if result.zero_error else "")
           + f" and the rows' noise ({source})\n")
     print("| output | unit | max error | predicted max: median (least-greatest) | RMS error | predicted RMS | |")
@@ -341,8 +346,9 @@ def add_calibration_commands(command) -> None:
                     "with dz, a rest row lifts the stage 0.2 mm off the skin besides (docs/calibration.md)")
     sc.add_argument("--samples", default="16", help="samples per row (default 16), or NOISE.json: what it tells")
     sc.add_argument("--noise", help="single-sample reading noise (default: the sensor file's)")
-    sc.add_argument("--rig-error", type=finite, default=0.01, metavar="MM",
-                    help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03)")
+    sc.add_argument("--rig-error", type=finite, metavar="MM",
+                    help="the stage's own position error, mm rms per axis (default 0.01; a 3D printer 0.03); "
+                         "recorded as given, so that fitgen check takes a check schedule's over the unit's")
     sc.add_argument("--zero-error", type=finite, default=0.02, metavar="MM",
                     help="how far the capture's zero may be from first contact, mm rms per axis (default 0.02): with "
                          "the rig's error, how deep rows in contact press so that none lifts off the skin")
@@ -359,8 +365,9 @@ def add_calibration_commands(command) -> None:
                     help="a capture of the unit at poses never used to calibrate it (fitgen schedule --check)")
     ch.add_argument("--sensor", help="the unit's file (default: the one the model's held-out figures were made on)")
     ch.add_argument("--rig-error", type=finite, metavar="MM",
-                    help="the stage's own position error, mm rms per axis (default: the one the unit was identified "
-                         "with, else 0.01; a 3D printer 0.03)")
+                    help="the stage's own position error, mm rms per axis (default: the one the check capture's "
+                         "schedule was made for where fitgen schedule --check was given --rig-error, else the one the "
+                         "unit was identified with, else 0.01; a 3D printer 0.03)")
     ch.add_argument("--zero-error", type=finite, metavar="MM",
                     help="how far the check capture's zero may be from the calibration's, mm rms per axis (default: "
                          "from the captures' stage records, 0 where the check moved from the calibration's zero on a "

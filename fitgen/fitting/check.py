@@ -45,6 +45,7 @@ class Check:
     identified: bool  # the units were drawn from an identification's posterior (else the model's sensor alone)
     zero_error: float = 0.0  # mm rms per axis: the check capture's zero off the calibration's, one draw per draw
     zero_said: str = ""  # why that zero error (fitgen check's line)
+    rig_said: str = ""  # where the rig error came from (fitgen check's line)
 
     def predicted(self, output: str, figure: str) -> tuple[float, float, float]:
         """The median, least and greatest of the drawn ``figure`` of ``output``."""
@@ -105,10 +106,26 @@ def _words(zero: dict) -> str:
     return " ".join(f"{k}{v:g}" for k, v in sorted(zero["machine_mm"].items()))
 
 
-def _zero_error(value, where: str) -> float:
+def _stage_error(value, where: str, flag: str = "--zero-error") -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= MAX_STAGE_ERROR:
-        raise InputError(f"{where} must be 0..{MAX_STAGE_ERROR:g} mm, got {value!r}; repair it, or give --zero-error")
+        raise InputError(f"{where} must be 0..{MAX_STAGE_ERROR:g} mm, got {value!r}; repair it, or give {flag}")
     return float(value)
+
+
+def check_rig(posterior: dict | None, meta: dict, capture, unit_file) -> tuple[float, str]:
+    """The rig error (mm rms per axis) a check capture with ``meta`` is predicted with, and where it came from: the
+    one its schedule was made for where `fitgen schedule --check` was told it (``rig_error_given``, which
+    `tactile-host capture` passes on in ``schedule_stage``), else the one the unit was identified with (its
+    ``posterior``), else RIG_ERROR. A schedule's default says nothing of the stage, so it does not override the
+    identification's."""
+    made = meta.get("schedule_stage") if isinstance(meta.get("schedule_stage"), dict) else {}
+    if made.get("rig_error_given") is True and "rig_error" in made:
+        return (_stage_error(made["rig_error"], f"{capture}'s meta: schedule_stage.rig_error", "--rig-error"),
+                "as the check capture's schedule was made for")
+    if posterior and "rig_error" in posterior:
+        return (_stage_error(posterior["rig_error"], f"{unit_file}'s posterior: rig_error", "--rig-error"),
+                "as the unit was identified with")
+    return RIG_ERROR, "the default: neither the unit's file nor the check capture's schedule records one"
 
 
 def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str]:
@@ -134,9 +151,9 @@ def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str]
              if isinstance(n, int) and n > 1]
     if same and mine["homed"] and theirs["homed"] and not mixed:
         return 0.0, f"the calibration's zero, reused ({_words(mine)} on a homed machine)"
-    ours = _zero_error((posterior or {}).get("zero_error", ZERO_ERROR), "the unit's posterior: zero_error")
+    ours = _stage_error((posterior or {}).get("zero_error", ZERO_ERROR), "the unit's posterior: zero_error")
     made = meta.get("schedule_stage") if isinstance(meta.get("schedule_stage"), dict) else {}
-    new = _zero_error(made.get("zero_error", ours), f"{capture}'s meta: schedule_stage.zero_error")
+    new = _stage_error(made.get("zero_error", ours), f"{capture}'s meta: schedule_stage.zero_error")
     error = min(float(np.hypot(ours, new)), MAX_STAGE_ERROR)
     if mixed:  # a run set the zero again (a controller reset): some rows are from another zero
         why = f"{' and '.join(mixed)}, a run having set it again"
@@ -155,18 +172,16 @@ def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float 
                   capture="the check capture") -> tuple[Check, str]:
     """:func:`check` of ``model`` on the check capture ``ds`` (a dataset), as fitgen check runs it: the rows' noise
     as its meta says (fitgen.fitting.unitrecord.row_noise), units drawn from the posterior of ``unit_file`` where it
-    has one, the stage's error ``rig_error`` or else the one the unit was identified with (RIG_ERROR without a
-    record), the zero's ``zero_error`` or else :func:`check_zero`'s, in ``precision`` or else the one the model was
+    has one, the stage's error ``rig_error`` or else :func:`check_rig`'s, the zero's ``zero_error`` or else
+    :func:`check_zero`'s, in ``precision`` or else the one the model was
     fitted for; and where the rows' noise came from."""
     posterior = unit_posterior(unit_file, sensor) if unit_file and Path(unit_file).is_file() else None
+    rig_said = said = "as given"
     if rig_error is None:
-        rig_error = (posterior or {}).get("rig_error", RIG_ERROR)
-        if not isinstance(rig_error, (int, float)) or isinstance(rig_error, bool):
-            raise InputError(f"{unit_file}'s posterior records a rig error of {rig_error!r}: give --rig-error")
-    said = "as given"
+        rig_error, rig_said = check_rig(posterior, ds.meta, capture, unit_file)
     if zero_error is None:
         zero_error, said = check_zero(posterior, ds.meta, capture)
     noise, source = row_noise(ds.meta, sensor)
     result = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior, rig_error=rig_error,
                    zero_error=zero_error, precision=precision or device_precision(model))
-    return replace(result, zero_said=said), source
+    return replace(result, zero_said=said, rig_said=rig_said), source
