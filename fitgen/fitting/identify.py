@@ -438,9 +438,13 @@ def explained_within(trial: Problem, start: np.ndarray | None = None, resweep: f
     a wrong trial lands in the thousands."""
     sd = trial.space.prior_sd
     z0 = None if start is None else np.divide(start, sd, out=np.zeros_like(sd), where=sd > 0)
-    z = _maximum_a_posteriori(trial, sweeps=1, max_nfev=BLAME_NFEV, start=z0)
-    chi2, dof, _, _ = _chi2(trial, z)
-    if CHI2_LIMIT < chi2 / dof <= resweep * CHI2_LIMIT:
-        z = _maximum_a_posteriori(trial, sweeps=1, max_nfev=BLAME_NFEV, start=z)
+    try:
+        z = _maximum_a_posteriori(trial, sweeps=1, max_nfev=BLAME_NFEV, start=z0)
         chi2, dof, _, _ = _chi2(trial, z)
+        if CHI2_LIMIT < chi2 / dof <= resweep * CHI2_LIMIT:
+            z = _maximum_a_posteriori(trial, sweeps=1, max_nfev=BLAME_NFEV, start=z)
+            chi2, dof, _, _ = _chi2(trial, z)
+    except (np.linalg.LinAlgError, OverflowError):
+        # covariances not positive definite in float (a noise figure tiny against a looser rig's): not explained
+        return False
     return chi2 / dof <= CHI2_LIMIT and not _beyond(z, PRIOR_LIMIT)
