@@ -286,6 +286,34 @@ def test_fitgen_check_takes_the_zero_error_from_the_stage_records(twin, tmp_path
                           contains="bad.csv's meta: the stage's zero must be machine coordinates")
 
 
+def test_fitgen_check_reads_the_model_only_where_it_was_fitted_and_never_on_the_identification_s_capture(twin,
+                                                                                                      tmp_path):
+    """Rows outside the pose box the model was fitted in are left out, said so (a calibration capture over the
+    travel read 20 mm and 667 deg errors there "as predicted"); a capture with none inside, and the capture the unit
+    was identified on, are refused in one line."""
+    folder, drawing, unit, _, _ = twin
+    poses, _ = check_schedule(drawing, 30, seed=0)
+    wide = np.vstack([poses, np.tile([2.8, 0, -1.0, 0, 0], (4, 1)), np.tile([0, -2.9, -0.5, 0, 0], (2, 1))])
+    data = save_capture(tmp_path / "wide.csv", _capture(unit, wide, 100), wide, ROWS_META)
+    proc = run_cli("fitgen", "check", str(folder / "twin.json"), str(data))
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("check: 30 rows of ")
+    assert (f"check: 6 rows of {data} lie outside the pose box the model was fitted in (dx -2..2, dy -2..2, dz -2..0)"
+            ", where it makes no claim: left out") in proc.stderr
+    beyond = save_capture(tmp_path / "beyond.csv", _capture(unit, wide[30:], 100), wide[30:], ROWS_META)
+    assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(beyond)),
+                          contains="none of the check capture's 6 rows in contact lies in the pose box the model was "
+                                   "fitted in (dx -2..2, dy -2..2, dz -2..0)")
+    record = json.loads((folder / "twin.posterior.json").read_text())
+    try:
+        (folder / "twin.posterior.json").write_text(json.dumps({**record,
+                                                                "capture_sha256": load_dataset(data).sha256}))
+        assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(data)),
+                              contains=f"{data} is the capture {folder / 'twin.toml'} was identified on")
+    finally:
+        (folder / "twin.posterior.json").write_text(json.dumps(record))
+
+
 def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_unit(twin, tmp_path):
     folder, drawing, unit, _, model = twin
     poses, _ = check_schedule(drawing, 30, seed=0)

@@ -262,7 +262,7 @@ def cmd_check(args) -> int:
     """``check``: the measured errors on a check capture beside the ones the unit's identification predicts."""
     from fitgen.app import plots
     from fitgen.equations.model import check_input_units, load_model
-    from fitgen.fitting.check import DRAWS, TOO_FAR, check_capture
+    from fitgen.fitting.check import DRAWS, TOO_FAR, box_words, check_capture
     from fitgen.fitting.holdout import fitted_sensor, fitted_sensor_spec
     from fitgen.physics.dataset import load_dataset
     from fitgen.physics.sensor import load_sensor
@@ -278,12 +278,16 @@ def cmd_check(args) -> int:
         raise InputError(f"model {args.model}: the sensor its held-out figures were made on is not found here (or "
                          "has changed): give the unit's file as --sensor")
     sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on")
+    sha = ds.sha256  # the capture's as written, before a compensation
     ds, said = _check_temperature(ds, sensor, args.temp_comp, args.capture)
     if said:
         print(said, file=sys.stderr)
     result, source = check_capture(model, ds, sensor, spec, rig_error=args.rig_error, zero_error=args.zero_error,
-                                   precision=args.precision, capture=args.capture)
+                                   precision=args.precision, capture=args.capture, sha256=sha)
     print(f"check: zero error {result.zero_error:.3g} mm: {result.zero_said}", file=sys.stderr)
+    if result.outside:
+        print(f"check: {result.outside} rows of {args.capture} lie outside the pose box the model was fitted in "
+              f"({box_words(model.held_out_box)}), where it makes no claim: left out", file=sys.stderr)
     where = (f"{result.units} units drawn from the posterior of {sensor.name}" if result.identified
              else f"{sensor.name} (no posterior: its noise and the stage's error alone)")
     print(f"check: {result.rows} rows of {args.capture} in contact, estimated in {result.precision}; predicted on "

@@ -46,6 +46,7 @@ class Check:
     zero_error: float = 0.0  # mm rms per axis: the check capture's zero off the calibration's, one draw per draw
     zero_said: str = ""  # why that zero error (fitgen check's line)
     rig_said: str = ""  # where the rig error came from (fitgen check's line)
+    outside: int = 0  # rows in contact left out: outside the pose box the model was fitted in
 
     def predicted(self, output: str, figure: str) -> tuple[float, float, float]:
         """The median, least and greatest of the drawn ``figure`` of ``output``."""
@@ -72,7 +73,8 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
     noise ``row_noise`` (per element or one number): predicted on ``units`` units drawn from ``posterior`` (an
     identified unit's record) or on ``sensor`` alone, each read ``draws`` times at the labels moved by ``rig_error``
     (mm rms per axis) and, where the check capture's zero was set anew, by one ``zero_error`` draw shared by its rows
-    (mm rms per axis), with that noise, estimated in ``precision``. Rows off the skin are left out."""
+    (mm rms per axis), with that noise, estimated in ``precision``. Rows off the skin are left out, and so are rows
+    outside the pose box the model was fitted in (its held-out record's): it makes no claim there."""
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
     inputs, labels = np.asarray(inputs, dtype=float), np.asarray(labels, dtype=float)
@@ -80,6 +82,12 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
     inputs, labels = inputs[keep], labels[keep]
     if not len(labels):
         raise InputError("every row of the check capture is lifted off the skin: no contact pose to check")
+    inside = within_box(labels, model.held_out_box)
+    if not inside.any():
+        raise InputError(f"none of the check capture's {len(labels)} rows in contact lies in the pose box the model "
+                         f"was fitted in ({box_words(model.held_out_box)}): check it at fitgen schedule --check's "
+                         "poses")
+    inputs, labels = inputs[inside], labels[inside]
     fn = estimator(model, precision, sensor)
     if isinstance(fn, str):
         raise InputError(f"the model cannot run in {precision}: {fn}")
@@ -99,7 +107,22 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
             sims.append(_figures(fn(y)[:, cols] - truth))
     drawn = {o: {f: np.array([s[f][j] for s in sims]) for f in FIGURES} for j, o in enumerate(outputs)}
     return Check(outputs, len(labels), precision, measured, drawn, len(pool), draws, float(rig_error),
-                 posterior is not None, float(zero_error))
+                 posterior is not None, float(zero_error), outside=int(np.sum(~inside)))
+
+
+def within_box(labels: np.ndarray, box: dict) -> np.ndarray:
+    """Per row, whether its pose ``labels`` (n, 5) lie in ``box`` ({pose name: (low, high)}; a bound's last bits
+    given)."""
+    inside = np.ones(len(labels), bool)
+    for name, (lo, hi) in box.items():
+        if name in POSE_NAMES:
+            v, slack = labels[:, POSE_NAMES.index(name)], 1e-9 * max(abs(lo), abs(hi), 1.0)
+            inside &= (v >= lo - slack) & (v <= hi + slack)
+    return inside
+
+
+def box_words(box: dict) -> str:
+    return ", ".join(f"{k} {lo:g}..{hi:g}" for k, (lo, hi) in box.items())
 
 
 def _words(zero: dict) -> str:
@@ -169,13 +192,17 @@ def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str]
 
 def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float | None = None,
                   zero_error: float | None = None, precision: str | None = None,
-                  capture="the check capture") -> tuple[Check, str]:
+                  capture="the check capture", sha256: str | None = None) -> tuple[Check, str]:
     """:func:`check` of ``model`` on the check capture ``ds`` (a dataset), as fitgen check runs it: the rows' noise
     as its meta says (fitgen.fitting.unitrecord.row_noise), units drawn from the posterior of ``unit_file`` where it
     has one, the stage's error ``rig_error`` or else :func:`check_rig`'s, the zero's ``zero_error`` or else
     :func:`check_zero`'s, in ``precision`` or else the one the model was
-    fitted for; and where the rows' noise came from."""
+    fitted for; and where the rows' noise came from. InputError where the capture (``sha256``: its file's, before a
+    temperature compensation; default ``ds``'s) is the one the unit was identified on."""
     posterior = unit_posterior(unit_file, sensor) if unit_file and Path(unit_file).is_file() else None
+    if posterior and posterior.get("capture_sha256") == (sha256 or ds.sha256):
+        raise InputError(f"{capture} is the capture {unit_file} was identified on: its rows are not held out, so they "
+                         "check nothing; capture fitgen schedule --check's poses")
     rig_said = said = "as given"
     if rig_error is None:
         rig_error, rig_said = check_rig(posterior, ds.meta, capture, unit_file)
