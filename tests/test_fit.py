@@ -285,6 +285,15 @@ def test_bad_model_files(paper_fit, tmp_path):
                                   str(tmp_path / "p.csv")), contains=f"model file {folder}: a folder, not a file")
     assert_one_line_error(run_cli("fitgen", "fit", str(folder / "m.json"), "-o", str(tmp_path / "x.json")),
                           contains="m.json: JSON, not CSV (a model or meta file?)")
+    # a sensor or unit file for a dataset: fitgen simulate --unit writes one beside its data, which opens with a comment
+    unit = tmp_path / "u.unit.toml"
+    assert run_cli("fitgen", "simulate", "--unit", "3", "--n", "5", "-o", str(tmp_path / "u.csv")).returncode == 0
+    for arg in (unit, "paper_bare.toml"):
+        if arg == "paper_bare.toml":  # a table first, as a hand-written sensor file may open
+            arg = tmp_path / arg
+            arg.write_text('[magnet]\ndiameter = 5.0\n')
+        assert_one_line_error(run_cli("fitgen", "fit", str(arg), "-o", str(tmp_path / "x.json")),
+                              contains=f"{arg}: TOML, not CSV (a sensor or unit file? those go to --sensor)")
     (tmp_path / "junk.json").write_text("{not json")
     assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "junk.json")), contains="not valid JSON")
     with pytest.raises(InputError, match="needs v1 > 0"):
