@@ -421,6 +421,8 @@ def test_capture_averages_as_many_samples_as_the_schedule_was_made_for(tmp_path)
     (["--max-spread", "x"], "--max-spread 'x' is not a number"),
     (["--adc", "ads1115@0x48:0-3,ads7829@0x49"], "unknown chip 'ads7829'"),
     (["--bus", "99"], "/dev/i2c-99 does not exist"),
+    (["--adc", "ads1115@0x48:0-3"], "the channel map reads 4 elements; the simulated sensor 'paper' has 8: give the "
+                                    "sensor file whose elements the map reads (tactile-host's --sensor;"),
 ])
 def test_capture_command_bad_input_is_one_line_exit_2(tmp_path, extra, message):
     sched = write_schedule(tmp_path / "s.csv", grid_rows()[:2])
