@@ -156,8 +156,9 @@ def _run_capture(args, prog: str) -> None:
         if stage_opts is not None:
             stage, meta["stage"] = open_stage(args, stage_opts, args.output, state.rows, prog)
             meta["stage"]["settle_s"] = settle
-            meta["stage"]["zeros_machine_mm"] = run_zeros(prior_meta(args.output) if state.rows else {},
-                                                          meta["stage"]["zero_machine_mm"])
+            st = meta["stage"]
+            st["zeros_machine_mm"] = run_zeros(prior_meta(args.output) if state.rows else {}, st["zero_machine_mm"],
+                                               st["zero_source"])
             set_pose = stage.move_to
         with Progress("capture", pending) as progress:
             res = capture(array, schedule, args.output, samples=samples, max_spread=spread, tries=tries,

@@ -127,6 +127,9 @@ def jog_to_zero(stage: PoseStage, stdin, stderr, prog: str) -> dict[str, float] 
                  "the zero here; q stops.\n")
     origin = stage.ctrl.position()
     stage.position = origin
+    # the steps are from here: a recipe of steps written for another start lands elsewhere by the difference
+    stderr.write(f"{prog}: the carriage stands at machine {' '.join(f'{m}{v:g}' for m, v in zip(MACHINE_AXES, origin))}"
+                 "\n")
     moved = np.zeros(3)
     while True:
         line = ask_line(stdin, stderr, f"jog [{' '.join(f'{a}{v:+.3f}' for a, v in zip(STAGE_AXES, moved))}]> ")

@@ -11,6 +11,7 @@ from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from host.stage import (AxisMap, GcodeController, PoseStage, StageError, StageSettings, StageState, choose_zero,
                         jog_to_zero, parse_approach, parse_ranges, parse_zero, stage_url)
 from host.gcode import QUEUED_WAIT
+from host.stagezero import KEPT
 from host.stagesettings import APPROACH
 
 STAGE_OPTIONS = ("stage_flavor", "stage_baud", "stage_axes", "stage_limits", "stage_feed", "stage_approach",
@@ -87,7 +88,7 @@ def open_stage(args, opts, output, rows, prog: str):
             return jog_to_zero(jogger, sys.stdin, sys.stderr, prog)
 
         zero, how = choose_zero(ctrl, state, settings.axes, opts["zero"], rows=rows, ask=ask)
-        homed = ctrl.homed or (how == "kept from the last run" and state.homed)
+        homed = ctrl.homed or (how == KEPT and state.homed)
         state = StageState(ctrl.flavor, str(settings.axes), zero, homed, None, [])
         state.save(output)
         stage = PoseStage(ctrl, settings, zero)

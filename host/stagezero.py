@@ -63,6 +63,9 @@ class StageState:
             state.save(output)
 
 
+KEPT = "kept from the last run"  # choose_zero's word for a zero that holds
+
+
 def zero_still_valid(state: StageState | None, ctrl: GcodeController, axes: AxisMap, homed_now: bool) -> str:
     """'' if ``state``'s zero holds for this connection, else why not (one clause)."""
     if state is None:
@@ -137,9 +140,10 @@ def choose_zero(ctrl: GcodeController, state: StageState | None, axes: AxisMap, 
             raise InputError(f"--zero {' '.join(f'{m}{v:g}' for m, v in zero.items())} is not the zero the dataset's "
                              f"{rows} rows were taken from ({' '.join(f'{m}{v:g}' for m, v in state.zero.items())}); "
                              "choose another -o for another zero")
-        return zero, "given"
+        # the same numbers after a reset need not be the same place (a machine not homed counts from where it woke)
+        return zero, (f"given again: {reason}" if reason and rows else "given")
     if not reason:
-        return dict(state.zero), "kept from the last run"
+        return dict(state.zero), KEPT
     if spec == "here":
         if rows:
             raise InputError(f"{reason}; --zero here takes the zero only for a dataset without rows (the stage "
@@ -153,15 +157,17 @@ def choose_zero(ctrl: GcodeController, state: StageState | None, axes: AxisMap, 
     return zero, "set by jogging"
 
 
-def run_zeros(prior: dict, zero: dict[str, float]) -> list[dict]:
+def run_zeros(prior: dict, zero: dict[str, float], how: str = KEPT) -> list[dict]:
     """Every zero a capture's runs moved from, as its meta records them (``prior``: the meta of its rows so far,
     {} without rows), with this run's ``zero`` last: one entry while the zero holds, more when a run had to set it
-    again (a controller reset), which fitgen identify and fitgen check then say."""
+    again (a controller reset; ``how``: :func:`choose_zero`'s word, so that the same numbers given again count),
+    which fitgen identify and fitgen check then say."""
     st = prior.get("stage") if isinstance(prior.get("stage"), dict) else {}
     old = st.get("zeros_machine_mm")
     if not isinstance(old, list):
         old = [st["zero_machine_mm"]] if "zero_machine_mm" in st else []
     old = [z for z in old if isinstance(z, dict)]
-    if not old or any(old[-1].get(k) != v for k, v in zero.items()):  # kept from the last run: the same numbers
+    again = how not in (KEPT, "given")  # set again by jogging, "here" or given again after the zero was lost
+    if not old or again or any(old[-1].get(k) != v for k, v in zero.items()):
         old = old + [dict(zero)]
     return old
