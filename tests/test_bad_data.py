@@ -150,7 +150,9 @@ def test_identify_refuses_numbers_it_cannot_solve_with(tmp_path):
     for extra, said in ((["--rig-error", "1e300"], "the rig error must be 0..0.5 mm (a printer's is 0.01-0.1)"),
                         (["--rig-error", "2"], "the rig error must be 0..0.5 mm"),
                         (["--zero-error", "5"], "the zero error must be 0..0.5 mm"),
-                        (["--noise", "1e-12"], "cannot be solved for in floating point")):
+                        (["--noise", "1e-12"], "cannot be solved for in floating point"),
+                        (["--noise", "0"], "--noise must be a finite number > 0, got 0"),
+                        (["--noise=-1"], "--noise must be a finite number > 0, got -1")):
         assert_one_line_error(run_cli("fitgen", "identify", str(tmp_path / "cap.csv"), "-o",
                                       str(tmp_path / "u.toml"), *extra), contains=said)
     assert not (tmp_path / "u.toml").exists() and not (tmp_path / "u.posterior.json").exists()

@@ -247,11 +247,15 @@ def test_check_rig_takes_a_check_schedule_s_rig_error_only_where_it_was_given(tm
     from host.capture import load_schedule
 
     for flags, given, rig in (((), False, 0.01), (("--rig-error", "0.03"), True, 0.03)):
-        for kind in ((), ("--check", "5")):
-            out = tmp_path / f"s{len(flags)}{len(kind)}.csv"
-            proc = run_cli("fitgen", "schedule", "--n", "12", *kind, *flags, "-o", str(out))
+        for kind in (("--n", "12"), ("--check", "5")):
+            out = tmp_path / f"s{len(flags)}{kind[0]}.csv"
+            proc = run_cli("fitgen", "schedule", *kind, *flags, "-o", str(out))
             assert proc.returncode == 0, proc.stderr
             assert load_schedule(out).stage == {"rig_error": rig, "rig_error_given": given, "zero_error": 0.02}
+    # --n is the D-optimal schedule's; with --check it was passed over without a word
+    assert_one_line_error(run_cli("fitgen", "schedule", "--check", "5", "--n", "10", "-o", str(tmp_path / "n.csv")),
+                          contains="--n goes with the D-optimal schedule; --check 5 says how many check poses")
+    assert not (tmp_path / "n.csv").exists()
 
 
 def test_fitgen_check_takes_the_zero_error_from_the_stage_records(twin, tmp_path):

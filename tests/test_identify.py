@@ -725,6 +725,16 @@ def test_cli_schedule_capture_identify(tmp_path):
     # the twin's estimator: its held-out figures come from units drawn from the identification's posterior
     proc = run_cli("fitgen", "simulate", "--sensor", str(unit_file), "--grid", "paper-exp", "-o", str(tmp_path / "t.csv"))
     assert proc.returncode == 0, proc.stderr
+    assert "posterior" not in proc.stderr
+    # the unit file copied alone: simulate says before the fit that fit will refuse the twin's rows
+    (tmp_path / "alone").mkdir()
+    (tmp_path / "alone" / "unit.toml").write_text(unit_file.read_text())
+    alone = run_cli("fitgen", "simulate", "--sensor", str(tmp_path / "alone" / "unit.toml"), "--random", "5", "-o",
+                    str(tmp_path / "alone" / "t.csv"))
+    assert alone.returncode == 0 and alone.stderr.strip().splitlines()[-1] == (
+        f"note: unit file {tmp_path / 'alone' / 'unit.toml'}: its posterior unit.posterior.json is missing (identify "
+        "writes it beside the unit file): identify again, or delete the [unit] posterior line to use the unit without "
+        "its uncertainty; fitgen fit refuses these rows until then"), alone.stderr
     proc = run_cli("fitgen", "fit", str(tmp_path / "t.csv"), "-o", str(tmp_path / "t.json"), "--held-out", "200",
                    "--family", "no-roots")
     assert proc.returncode == 0, proc.stderr
@@ -831,7 +841,7 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
     high = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 0.12))
     y_high = readings(unit, high, adc_bits=0) + np.random.default_rng(25).normal(0.0, noise, y.shape)
     cases = {
-        "zero high": (y_high, plan[0], "a zero above first contact"),
+        "zero high": (y_high, plan[0], "a zero off first contact (above it, the rows at dz 0 off the skin"),
         "few": (y[:6], plan[0][:6], "at least 10"),
         "repeat": (np.repeat(y[:1], 20, axis=0), np.repeat(plan[0][:1], 20, axis=0), "distinct pose"),
         "saturated": (np.where(np.arange(8) < 2, 3.3, y), plan[0], "saturated"),

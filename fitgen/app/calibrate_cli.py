@@ -20,6 +20,8 @@ def cmd_identify(args) -> int:
     from fitgen.fitting import identify as idf, unitrecord as rec, verdict
     from fitgen.physics.dataset import load_dataset
 
+    if args.noise is not None and not args.noise > 0:  # identify weighs each reading by it
+        raise InputError(f"--noise must be a finite number > 0, got {args.noise:g}")
     folder = plots.require(args.plot) if args.plot else None
     ds = load_dataset(args.capture)
     sha = ds.sha256  # the capture's as written, before a compensation
@@ -185,6 +187,9 @@ def cmd_schedule(args) -> int:
 
     if args.seed and args.check is None:
         raise InputError("--seed goes with --check (the D-optimal schedule draws nothing at random)")
+    if args.check is not None and args.n is not None:
+        raise InputError(f"--n goes with the D-optimal schedule; --check {args.check} says how many check poses")
+    args.n = 40 if args.n is None else args.n
     drawing = sensor_of(args)
     axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
     samples, noise, told = samples_of(args, drawing)
@@ -344,7 +349,7 @@ def add_calibration_commands(command) -> None:
     sc.add_argument("--sensor", default="paper", help="the drawing (preset or TOML; default paper)")
     sc.add_argument("--transfer", choices=("raw", "gmr"), default="gmr",
                     help="the readings the capture takes (default gmr: volts, as tactile-host capture reads them)")
-    sc.add_argument("--n", type=int, default=40, help="poses to capture (default 40)")
+    sc.add_argument("--n", type=int, help="poses to capture (default 40)")
     sc.add_argument("--axes", default="dx,dy,dz", help="the axes the stage moves (default dx,dy,dz)")
     sc.add_argument("--limits", help="the stage's limits 'dx=-2:2 dz=-2:0 ...' (default: the sensor's [travel]); "
                     "with dz, a rest row lifts the stage 0.2 mm off the skin besides (docs/calibration.md)")
@@ -357,7 +362,7 @@ def add_calibration_commands(command) -> None:
                     help="how far the capture's zero may be from first contact, mm rms per axis (default 0.02): with "
                          "the rig's error, how deep rows in contact press so that none lifts off the skin")
     sc.add_argument("-o", "--output", required=True, metavar="SCHEDULE.csv", help="the poses, for capture --poses")
-    sc.add_argument("--check", type=count, metavar="N",
+    sc.add_argument("--check", type=int, metavar="N",
                     help="N random poses in the working pose box instead, not D-optimal and no rest row: a check "
                          "capture of a calibrated unit, for fitgen check")
     sc.add_argument("--seed", type=count, default=0, help="with --check: the random poses' seed (default 0)")

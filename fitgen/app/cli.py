@@ -55,10 +55,25 @@ def cmd_simulate(args) -> int:
         raise
     if unit is not None:
         print(f"wrote unit {sensor.name} (a unit of {drawing.name}) to {unit}", file=sys.stderr)
-    notes = "".join(f"note: {n}\n" for n in simulate_notes(sensor, poses, args.labels, args.sensor))
+    notes = "".join(f"note: {n}\n" for n in simulate_notes(sensor, poses, args.labels, args.sensor)
+                    + _posterior_note(args.sensor if args.unit is None else None))
     print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}\n"
           + notes, end="", file=sys.stderr)
     return 0
+
+
+def _posterior_note(spec) -> list[str]:
+    """A unit file whose posterior is not beside it (copied alone): fit would refuse the twin's rows, so simulate
+    says so before the user fits."""
+    if spec is None or not Path(spec).is_file():
+        return []
+    from fitgen.fitting.unitrecord import load_posterior
+
+    try:
+        load_posterior(spec)
+    except InputError as exc:
+        return [f"{exc}; fitgen fit refuses these rows until then"]
+    return []
 
 
 def cmd_observe(args) -> int:

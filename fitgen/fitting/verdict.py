@@ -220,8 +220,9 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
                                    if len(rows) <= 3 else f"; {len(rows)} rows stand out, not one")
         cause = cause or (stage_error_hint(ident) + f"another sensor than {drawing}, labels in other units, an element "
                           "that does not respond or "
-                          "elements wired in another order than the drawing's (the channel map), a zero above first "
-                          f"contact (rows at dz 0 off the skin), or a noise figure too low{row}")
+                          "elements wired in another order than the drawing's (the channel map), a zero off first "
+                          "contact (above it, the rows at dz 0 off the skin; below it or aside, every row pressed or "
+                          f"slid by as much), or a noise figure too low{row}")
         raise _refusal(f"the physics does not explain {capture}: residuals {float(np.sqrt(ident.reduced_chi2)):.3g}x "
                        f"the reading noise ({source}); {cause}"
                        + (f"; the nearest unit lies far outside the tolerances ({names})" if far else "")
