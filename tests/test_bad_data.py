@@ -465,3 +465,15 @@ def test_a_spreadsheets_export_with_another_separator_is_named(data, tmp_path, s
                  ["identify", str(other), "-o", str(tmp_path / "u.toml")]):
         assert_one_line_error(run_cli("fitgen", *argv), contains=f"its header is separated by {sep!r}, not commas")
     assert files(tmp_path) == ["other.csv"]
+
+
+@pytest.mark.parametrize("cmd", [("fitgen", "simulate", "--n", "20"),  # --noise's prefix: 20 V of noise, unsaid
+                                 ("fitgen", "schedule", "--check", "5", "--se", "1"),
+                                 ("tactile-host", "capture", "--simulate", "--adc", "ads1115@0x48:0-3", "--poses",
+                                  "s.csv", "--samp", "3"),
+                                 ("tactile-hil", "emulate", "--model", "m.json", "--sim", "paper")])
+def test_a_long_option_shortened_is_refused_not_read_as_the_one_it_begins(cmd, tmp_path):
+    out = tmp_path / "out.csv"
+    proc = run_cli(*cmd, "-o", str(out))
+    assert_one_line_error(proc, contains=f"unrecognized arguments: {cmd[-2]} {cmd[-1]}")
+    assert not out.exists()

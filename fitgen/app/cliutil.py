@@ -15,9 +15,11 @@ EXIT_CHECK_FAILED = 1
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse with a one-line error (no usage dump) and exit status 2."""
+    """argparse with a one-line error (no usage dump) and exit status 2, and no abbreviated long options."""
 
     def __init__(self, *args, **kw):
+        # no prefixes of long options: `fitgen simulate --n 20` was read as --noise 20 (volts), without a word
+        kw.setdefault("allow_abbrev", False)
         super().__init__(*args, **kw)
         # argparse takes '-1e-3' for an option (its pattern knows no exponent): '--input-offset -1e-3' failed; and
         # a list led by a negative number too: '--temperature -10,25' failed where '--temperature=-10,25' worked
