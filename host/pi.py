@@ -13,7 +13,9 @@ from __future__ import annotations
 import errno
 import fcntl
 import os
+import shutil
 import subprocess
+import tempfile
 import threading
 from importlib import resources
 from pathlib import Path
@@ -24,7 +26,7 @@ from fitgen import __version__
 from fitgen.c.codegen import render_header
 from fitgen.base.children import tied
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import write_in_folder
+from fitgen.base.fileio import check_folder, make_folder, write_in_folder
 from fitgen.equations.model import Model, check_input_units, load_model
 
 from host.cdrivers import chip_table, smbus_transfer
@@ -224,8 +226,18 @@ def pi_build(args) -> str:
     tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
     precision = pi_precision(model, args.precision)
     rest = model_rest(model, args.rest, required=False)
-    binary = build_pi(render_pi(model, cmap, args.output, precision=precision, style=args.style, tin=tin,
-                                tempcomp=tempcomp, rest=rest), args.cc)
+    folder = check_folder(args.output)
+    make_folder(folder.parent)
+    try:
+        partial = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".partial", dir=folder.parent))
+    except OSError as exc:
+        raise InputError(f"cannot write {folder}: {exc.strerror}") from None
+    try:  # rendered and built beside the folder, which takes the new files only once they built
+        build_pi(render_pi(model, cmap, partial, precision=precision, style=args.style, tin=tin, tempcomp=tempcomp,
+                           rest=rest), args.cc)
+        binary = _install(partial, folder)
+    finally:
+        shutil.rmtree(partial, ignore_errors=True)
     note = capture_temperature_note(model, tempcomp, f"{binary.name} --tare") if tempcomp is not None else ""
     return (f"wrote {binary} ({describe_reads(cmap, tin, tempcomp)}, model {model.sha256[:12]}, {precision}); "
             f"on the Pi: {binary.name} --bus 1 --format csv"
@@ -234,6 +246,19 @@ def pi_build(args) -> str:
                "here; "
                "give --rest)") + (f"\n{note}" if note else ""))
 
+
+
+def _install(partial: Path, folder: Path) -> Path:
+    """Move a built folder's files into ``folder`` (made if missing), the program last, so that it never stands
+    beside sources it was not built from; the folder's other files stay, but for a compensation the new build has
+    none of. The program's path."""
+    make_folder(folder)
+    if not (partial / "tm_tempcomp.h").exists():
+        (folder / "tm_tempcomp.h").unlink(missing_ok=True)
+    (folder / "tm_pi").unlink(missing_ok=True)
+    for path in sorted(partial.iterdir(), key=lambda p: p.name == "tm_pi"):
+        os.replace(path, folder / path.name)
+    return folder / "tm_pi"
 
 
 def compiler(cc: str = DEFAULT_CC) -> list[str]:

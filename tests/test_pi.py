@@ -2,6 +2,7 @@
 under qemu-arm against a stand-in for the kernel device answered by the bus model (host/simbus.py)."""
 
 import signal
+from dataclasses import replace
 import subprocess
 import time
 
@@ -170,16 +171,34 @@ def test_pi_build_defaults_to_the_precision_codegen_writes_for_the_pi(model, tmp
     assert "default double" in " ".join(run_cli("tactile-host", "pi-build", "--help").stdout.split())
 
 
-def test_a_failed_pi_build_leaves_no_program_and_refuses_before_it_writes(model, tmp_path):
-    """A program built from the folder's earlier sources must not stay beside a failed build's new ones."""
+def test_pi_build_compiles_warning_free_under_clang(model, tmp_path):
+    """clang warns where gcc does not: glibc's NAN is a float, and returning it from a double function is a
+    -Wdouble-promotion error under clang (pi-build --cc clang failed on its own adc.c)."""
+    require_tool("clang")
+    path = str(model.save(tmp_path / "m.json"))
+    proc = run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP + ",temp=ads1115@0x4a:0", "--cc", "clang",
+                   "-o", str(tmp_path / "pi"))
+    assert proc.returncode == 0 and (tmp_path / "pi" / "tm_pi").is_file(), proc.stderr
+
+
+def test_a_failed_pi_build_leaves_the_folder_as_it_was_and_refuses_before_it_writes(model, tmp_path):
+    """A failed build changes nothing: the folder keeps the last build's sources and the program built from them
+    (it was left with a new model's sources and no program), and no partial folder stays beside it."""
     require_tool("gcc")
     path = str(model.save(tmp_path / "m.json"))
     out = tmp_path / "pi"
     proc = run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc", "-o", str(out))
     assert proc.returncode == 0 and (out / "tm_pi").is_file(), proc.stderr
-    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc -Dfloat=",
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    other = str(replace(model, input_min=model.input_min * 0.99).save(tmp_path / "other.json"))
+    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", other, "--adc", MAP, "--cc", "gcc -Dfloat=",
                                   "-o", str(out)), contains="error")
-    assert not (out / "tm_pi").exists() and not list(out.glob(".tm_pi*"))
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.json", "other.json", "pi"]
+    # a failed first build makes no folder
+    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc -Dfloat=",
+                                  "-o", str(tmp_path / "new")), contains="error")
+    assert not (tmp_path / "new").exists()
     # refusals come before anything is written: --temp-comp without the thermistor, the thermistor on an element
     tc = TempComp(25.0, np.zeros(8), np.zeros(8)).save(tmp_path / "tc.json")
     for adc, said in ((MAP, "--temp-comp needs the temperature"),

@@ -46,7 +46,7 @@ double adc_ntc_degc(double volts, double beta, double r25, double series, double
 {
     double r;
     if (!(volts > 0.0 && volts < vref)) {
-        return NAN;
+        return (double)NAN; /* NAN is a float: widened on purpose, not by -Wdouble-promotion's implicit rule */
     }
     r = series * volts / (vref - volts);
     return 1.0 / (1.0 / 298.15 + log(r / r25) / beta) - 273.15;

@@ -26,7 +26,7 @@ static int stage; /* 0: nothing done, 1: array planned, 2: chips probed and set 
 #if ADC_HAS_TEMPERATURE
 #define TEMP_EVERY_NS 250000000u /* host/temperature.py READ_EVERY */
 static adc_array tarray;
-static double degc = NAN;
+static double degc = (double)NAN;
 static uint64_t t_last;
 static int t_read;
 

@@ -263,7 +263,7 @@ int main(int argc, char **argv)
     adc_counts total;
 #if ADC_HAS_TEMPERATURE
     adc_array tarray;
-    double degc = NAN;
+    double degc = (double)NAN;
     uint64_t t_last = 0;
     int t_read = 0;
 #endif
