@@ -225,6 +225,7 @@ def pi_build(args) -> str:
     tin = temperature_input(args.adc, cmap, args.thermistor)
     tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
     precision = pi_precision(model, args.precision)
+    check_reads(model, cmap)  # before the rest readings, which a model in other units reads far from rest
     rest = model_rest(model, args.rest, required=False)
     folder = check_folder(args.output)
     make_folder(folder.parent)

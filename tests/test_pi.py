@@ -152,6 +152,16 @@ def test_pi_build_cli_errors(tmp_path, model):
                                   "-o", str(tmp_path / "x")), 2, "reads 4 elements")
     assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "no-such-cc",
                                   "-o", str(tmp_path / "y")), 2, "not found")
+    # a model in mT is refused for its units, as read refuses it, not for rest readings it reads far from rest
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.transfer import readings
+
+    # the paper's rest in mT, as a model fitted in mT records it: far from rest for these equations in V
+    held = {"held_out": {"rest": readings(load_sensor("paper").with_transfer("raw"), np.zeros((1, 5)))[0].tolist()}}
+    mt = str(replace(model, input_units="mT", fit_info={**model.fit_info, **held}).save(tmp_path / "mt.json"))
+    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", mt, "--adc", MAP, "-o", str(tmp_path / "z")),
+                          2, "the model takes inputs in mT; the ADCs' readings are in V")
+    assert not (tmp_path / "z").exists()
 
 
 def test_pi_build_defaults_to_the_precision_codegen_writes_for_the_pi(model, tmp_path):
