@@ -20,7 +20,7 @@ from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, RetryPolicy, open_bus
 from host.autozero import AutoZero, AutoZeroSettings
-from host.channelmap import Settings, channel_map, check_full_scale
+from host.channelmap import CHIPS, Settings, channel_map, check_full_scale
 from host.clock import REAL_CLOCK
 from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
@@ -42,16 +42,21 @@ def parse_vref(text: str):
 
 def channel_map_from_args(args):
     """The channel map of ``--adc`` (without its thermistor) and the ADS options; InputError for ``--vref`` when
-    no chip it reads (the thermistor's included) is an ADS7828, the only one it sets."""
+    no chip it reads (the thermistor's included) is an ADS7828, the only one it sets, and for ``--pga``,
+    ``--data-rate`` or ``--mode`` when none is an ADS1115, the only one they set."""
     chosen = {k: getattr(args, k) for k in ("pga", "data_rate", "mode") if getattr(args, k) is not None}
     settings = Settings(**chosen, vref=parse_vref(args.vref or "3.3")).checked("option")  # Settings' defaults
     spec, temp = split_channel_map(args.adc)
     cmap = channel_map(spec, settings)
-    if args.vref is not None:
-        temp = temp or (cmap.temperature[0] if cmap.temperature is not None else "")
-        if all(c.kind != "ads7828" for c in cmap.chips) and not temp.strip().lower().startswith("ads7828"):
-            raise InputError("--vref sets the ADS7828's reference; no chip in --adc is an ADS7828 (the ADS1115's "
-                             "full scale is --pga): drop --vref")
+    temp = temp or (cmap.temperature[0] if cmap.temperature is not None else "")
+    kinds = {c.kind for c in cmap.chips} | {k for k in CHIPS if temp.strip().lower().startswith(k)}
+    if args.vref is not None and "ads7828" not in kinds:
+        raise InputError("--vref sets the ADS7828's reference; no chip in --adc is an ADS7828 (the ADS1115's "
+                         "full scale is --pga): drop --vref")
+    if chosen and "ads1115" not in kinds:  # the ADS7828 has one range (--vref), one rate and no continuous mode
+        flag = "--" + next(iter(chosen)).replace("_", "-")
+        raise InputError(f"{flag} sets the ADS1115's conversions; no chip in --adc is an ADS1115 (the ADS7828's full "
+                         f"scale is --vref): drop {flag}")
     return cmap
 
 

@@ -529,3 +529,16 @@ def test_vref_is_refused_without_an_ads7828_and_the_thermistor_is_named(model, t
                    "3.3", "--cc", "gcc", "-o", str(tmp_path / "t"))
     assert proc.returncode == 0, proc.stderr
     assert ", thermistor ads7828@0x4a:0, model" in proc.stderr
+
+
+def test_the_ads1115_s_options_are_refused_without_an_ads1115(model, tmp_path):
+    """--pga, --data-rate and --mode set the ADS1115's conversions only: with ADS7828s alone they did nothing and
+    were taken without a word, as --vref is refused without an ADS7828; a thermistor on an ADS1115 takes them."""
+    path = str(model.save(tmp_path / "m.json"))
+    read = ["read", "--model", path, "--simulate", "dx=0", "--count", "1"]
+    for cmd in (read, ["pi-build", "--model", path, "--cc", "gcc", "-o", str(tmp_path / "x")]):
+        for flag, value in (("--pga", "2.048"), ("--data-rate", "128"), ("--mode", "continuous")):
+            assert_one_line_error(run_cli("tactile-host", *cmd, "--adc", "ads7828@0x4a", flag, value), 2,
+                                  f"{flag} sets the ADS1115's conversions; no chip in --adc is an ADS1115")
+    assert not (tmp_path / "x").exists()
+    assert run_cli("tactile-host", *read, "--adc", "ads7828@0x4a,temp=ads1115@0x48:0", "--pga", "4.096").returncode == 0
