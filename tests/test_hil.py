@@ -424,6 +424,9 @@ def test_cli_emulate_port_numbers_are_refused_alike(model_file):
     for bad in ("0", "-1", "65536"):
         assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", str(model_file), "--port", bad), 2,
                               f"{bad} is not a TCP port number (1..65535; leave --port out for a free one)")
+    # the host target's UART is a pseudo-terminal: a port given was passed over without a word
+    assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", str(model_file), "--target", "host", "--port",
+                                  "5555", "--suite"), 2, "the host target has none (its UART is a pseudo-terminal)")
 
 
 def test_timing_reports_the_median_of_its_batched_evals(model, monkeypatch):

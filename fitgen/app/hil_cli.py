@@ -128,6 +128,9 @@ def cmd_emulate(args) -> int:
     from hil.emulate import start_target, uno_crash_advice
 
     _check_counts(args)
+    if args.target == "host" and args.port is not None:  # its UART is a pseudo-terminal, not a TCP port
+        raise InputError("--port is the emulated UART's TCP port, and the host target has none (its UART is a "
+                         "pseudo-terminal): drop --port")
     model, data = _load(args)
     args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"  # the model's own, where found
     cmap, bridge, tin, tempcomp = _adc_bridge(args)
