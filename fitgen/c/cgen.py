@@ -18,15 +18,18 @@ register restrict return short signed sizeof static struct switch typedef union 
 _Bool _Complex _Imaginary _Alignas _Alignof _Atomic _Generic _Noreturn _Static_assert _Thread_local
 bool true false NULL main
 """.split())
-_IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,30}$")
+_IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+# macro names the C standard library reserves (C11 7.31, future library directions), as the upper-case prefix and
+# '_' start every macro of a generated header: errno.h, locale.h, signal.h, fenv.h, inttypes.h, time.h, stdatomic.h
+_RESERVED_MACROS = re.compile(r"^(E[0-9A-Z]|LC_[A-Z]|SIG[A-Z_]|FE_[A-Z]|(PRI|SCN)X|TIME_[A-Z]|ATOMIC_[A-Z])")
 
 
-def identifier(name: str, what: str = "identifier") -> str:
-    """``name`` if it is a safe C identifier: a letter first, then letters, digits, '_'; at most 31
+def identifier(name: str, what: str = "identifier", longest: int = 31) -> str:
+    """``name`` if it is a safe C identifier: a letter first, then letters, digits, '_'; at most ``longest``
     characters; no keyword; no '__' (reserved to the implementation)."""
-    if not isinstance(name, str) or not _IDENT.match(name) or "__" in name:
+    if not isinstance(name, str) or not _IDENT.match(name) or "__" in name or len(name) > longest:
         raise InputError(f"{what} {name!r} is not a valid C identifier "
-                         "(a letter, then letters, digits or '_', at most 31 characters, no '__')")
+                         f"(a letter, then letters, digits or '_', at most {longest} characters, no '__')")
     if name in C_KEYWORDS or name.lower() in C_KEYWORDS:
         raise InputError(f"{what} {name!r} is a C keyword or a name C reserves")
     return name
@@ -34,12 +37,15 @@ def identifier(name: str, what: str = "identifier") -> str:
 
 def prefix_identifier(prefix: str) -> str:
     """``prefix`` if it starts the generated identifiers safely: an :func:`identifier` of at most 16 characters
-    that does not end in '_' (``<prefix>_model`` would hold '__', reserved in C and C++)."""
-    if isinstance(prefix, str) and len(prefix) > 16:
-        raise InputError(f"prefix {prefix!r} is longer than 16 characters")
-    prefix = identifier(prefix, "prefix")
+    that does not end in '_' (``<prefix>_model`` would hold '__', reserved in C and C++) and whose upper case does
+    not start a macro name the C library reserves (``SIG_N_INPUTS``: signal.h's)."""
+    prefix = identifier(prefix, "prefix", 16)
     if prefix.endswith("_"):
         raise InputError(f"prefix {prefix!r} ends in '_': the names it starts would hold '__' (reserved)")
+    if _RESERVED_MACROS.match(prefix.upper() + "_X"):
+        raise InputError(f"prefix {prefix!r}: the header's macros ({prefix.upper()}_N_INPUTS, ...) would start as "
+                         "names the C library reserves (E and a digit or capital: errno.h; LC_, SIG, FE_, PRIX, "
+                         "SCNX, TIME_, ATOMIC_); choose another")
     return prefix
 
 
