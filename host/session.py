@@ -92,6 +92,8 @@ def parse_rest_band(text: str) -> tuple[float, float]:
     vals = parse_numbers(text)
     if vals is None or len(vals) != 2:
         raise InputError(f"--rest-band {text!r}: give MM,DEG, e.g. 0.08,1.5")
+    if not all(0 < v < float("inf") for v in vals):  # said of the option, not of AutoZeroSettings' fields
+        raise InputError(f"--rest-band {text!r}: both must be finite numbers > 0 (mm, then deg)")
     return vals[0], vals[1]
 
 

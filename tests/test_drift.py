@@ -339,6 +339,7 @@ def test_a_correction_the_run_cannot_take_names_the_option_typed(model_file, tmp
     (["--temp-comp", "tc.json"], "temp=CHIP@ADDRESS:INPUT"),
     (["--thermistor", "beta=3950"], "add temp=CHIP@ADDRESS:INPUT to --adc"),
     (["--rest-band", "0.1"], "--rest-band"),
+    (["--auto-zero", "--rest-band", "0,0"], "--rest-band '0,0': both must be finite numbers > 0 (mm, then deg)"),
     (["--rest-hold", "-1"], "--rest-hold"),
     (["--sim-drift", "ramp=5,over=0"], "over and tau must be > 0"),
     (["--sim-drift", "warp=9"], "--sim-drift"),
