@@ -296,6 +296,14 @@ def test_pi_build_tares_as_the_python_readout_does(model, tmp_path):
     b, clock = bus()
     assert_one_line_error(StandIn(b, clock).run(["qemu-arm", str(bare), "--tare"]), 2,
                           "--tare: this build has no rest readings to map onto")
+    # --help is an answer, not an unknown option (it was one, with status 2)
+    b, clock = bus()
+    helped = StandIn(b, clock).run(["qemu-arm", str(bare), "--help"])
+    assert helped.returncode == 0 and helped.stdout.startswith("usage: tm_pi [--bus N] [--count N]") and \
+        "--count 0, the default: until Ctrl-C" in helped.stdout and not helped.stderr
+    b, clock = bus()
+    assert_one_line_error(StandIn(b, clock).run(["qemu-arm", str(bare), "--hlep"]), 2,
+                          "tm_pi: error: unknown or incomplete option: --hlep (usage: tm_pi [--bus N]")
 
 
 def test_pi_build_auto_zeroes_as_the_python_readout_does(model, tmp_path):

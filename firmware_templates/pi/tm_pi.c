@@ -57,11 +57,12 @@ static void on_signal(int sig)
 
 typedef char tm_pi_assert_map_fits_model[(ADC_MAP_N_ELEMENTS == TM_N_INPUTS) ? 1 : -1];
 
+#define TM_PI_USAGE "tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] [--retries N] " \
+                    "[--tare [--tare-samples N]] [--auto-zero [--rest-band MM,DEG] [--rest-hold S]]"
+
 static int usage(const char *msg, const char *arg)
 {
-    fprintf(stderr, "tm_pi: error: %s%s%s (usage: tm_pi [--bus N] [--count N] [--rate HZ] [--format csv|jsonl] "
-                    "[--retries N] [--tare [--tare-samples N]] [--auto-zero [--rest-band MM,DEG] [--rest-hold S]])\n",
-            msg, arg ? ": " : "", arg ? arg : "");
+    fprintf(stderr, "tm_pi: error: %s%s%s (usage: " TM_PI_USAGE ")\n", msg, arg ? ": " : "", arg ? arg : "");
     return 2;
 }
 
@@ -300,6 +301,11 @@ int main(int argc, char **argv)
         } else if (strcmp(opt, "--rest-hold") == 0 && val) {
             if (parse_positive(val, '\0', &hold_s)) return usage("--rest-hold must be seconds in (0, 1e6], got", val);
             hold_given = 1;
+        } else if (strcmp(opt, "--help") == 0 || strcmp(opt, "-h") == 0) {
+            printf("usage: " TM_PI_USAGE "\n"
+                   "Reads the sensor's ADCs over /dev/i2c-N and prints the model's estimate per sample (--count 0, "
+                   "the default: until Ctrl-C); see docs/readout.md.\n");
+            return 0;
         } else {
             return usage("unknown or incomplete option", opt);
         }
