@@ -187,7 +187,8 @@ def test_verify_refuses_data_in_other_units_than_the_model_takes(paper_model, tm
                    str(tmp_path / "v.csv")).returncode == 0
     assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--data", str(tmp_path / "v.csv")),
                           contains="the model takes inputs in mT; dataset " + str(tmp_path / "v.csv") +
-                          "'s readings are in V")
+                          "'s readings are in V: fit it on a dataset in V (fitgen simulate --transfer gmr, or "
+                          "tactile-host capture), or give readings in mT")
 
 
 @pytest.mark.parametrize("cc", ["gcc", "clang"])

@@ -160,7 +160,10 @@ def test_pi_build_cli_errors(tmp_path, model):
     held = {"held_out": {"rest": readings(load_sensor("paper").with_transfer("raw"), np.zeros((1, 5)))[0].tolist()}}
     mt = str(replace(model, input_units="mT", fit_info={**model.fit_info, **held}).save(tmp_path / "mt.json"))
     assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", mt, "--adc", MAP, "-o", str(tmp_path / "z")),
-                          2, "the model takes inputs in mT; the ADCs' readings are in V")
+                          2, "the model takes inputs in mT; the ADCs' readings are in V: fit it on a dataset in V "
+                             "(fitgen simulate --transfer gmr, or tactile-host capture)")
+    assert "give readings" not in run_cli("tactile-host", "pi-build", "--model", mt, "--adc", MAP, "-o",
+                                          str(tmp_path / "z")).stderr  # the ADCs' are what they are
     assert not (tmp_path / "z").exists()
 
 

@@ -233,8 +233,9 @@ def check_input_units(model: Model, units: str | None, readings: str, origin: st
     """
     if units is None or units == model.input_units:
         return
+    other = "" if "ADC" in readings else f", or give readings in {model.input_units}"  # a device's are what they are
     raise InputError(f"{origin} takes inputs in {model.input_units}; {readings} are in {units}: fit it on a dataset "
-                     f"in {units}{_UNITS_SOURCE.get(units, '')}")
+                     f"in {units}{_UNITS_SOURCE.get(units, '')}{other}")
 
 
 def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
