@@ -63,7 +63,8 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
     lines or a line starting ``error:``. InputError when that takes over ``timeout`` s of wall time or the
     program crashes; :class:`StackOverflow` when its stack ran into static RAM. ``board``: a built
     hil.emulate board (default: built here). ``rest_first``: the sensor rests until the sketch prints its header
-    (ReadPose's tare comes before it), then moves to ``pose``, as a real one is pressed after power-up.
+    (ReadPose's tare comes before it), then moves to ``pose`` at the start of a sample, as a real one is pressed
+    after power-up.
     ``offsets``: each element's offset in volts (host.simbus.simulated_bus's), a drift the tare takes out.
     ``send``: {k: bytes} sent to its Serial once it has printed k lines."""
     from fitgen.physics.sensor import load_sensor
@@ -76,10 +77,22 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
     require_avr_tools()
     clock, target, pressed = VirtualClock(), sim_pose(pose), threading.Event()
     # the feed asks the motion for its pose at each conversion, in the bridge's thread: an event set here is the
-    # one thing the two threads share
-    motion = (lambda t: target if pressed.is_set() else 0 * target) if rest_first else None
+    # one thing the two threads share; the press lands on a sample's first conversion, so that no row straddles it
+    # (a row read half at rest and half pressed is no pose at all, yet its status is 0)
+    gate = {"first": None, "on": False}
+    motion = (lambda t: target if gate["on"] else 0 * target) if rest_first else None
     bus = simulated_bus(cmap, load_sensor(sensor), target, clock=clock, noise=noise, seed=seed, motion=motion,
                         offsets=offsets)
+    if rest_first:
+        feed, element = bus.feed, bus.feed.element
+        feed.motion_step = 0.0  # the pose asked at every conversion: it changes only where the gate opens
+
+        def gated(k: int, t: float | None = None) -> float:
+            gate["first"] = k if gate["first"] is None else gate["first"]  # the tare's first: a sample's first
+            gate["on"] = gate["on"] or (k == gate["first"] and pressed.is_set())
+            return element(k, t)
+
+        feed.element = gated
     paint = bss_end(elf)
     with tempfile.TemporaryDirectory(prefix="tactile-sketch-") as tmp:
         board = build_uno_board(tmp) if board is None else board
