@@ -87,6 +87,16 @@ def open_bus_from_args(args, cmap, simulate_pose, *, motion=None, drift=None, th
     return bus, REAL_CLOCK
 
 
+def _lost_sensor(model) -> str | None:
+    """The sensor the model's held-out record names where it is not the default paper (a unit's file, another
+    preset) and was not found here unchanged: what a simulation without --sensor does not simulate."""
+    rec = model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None
+    if not isinstance(rec, dict):
+        return None
+    name = rec.get("sensor_file") or rec.get("sensor")
+    return name if isinstance(name, str) and name != ADC_DEFAULTS["sensor"] else None
+
+
 def parse_rest_band(text: str) -> tuple[float, float]:
     """``--rest-band MM,DEG``."""
     vals = parse_numbers(text)
@@ -161,6 +171,9 @@ class ReadoutSession:
         own = None if sensor_given else fitted_sensor_spec(model)
         if own:  # what --simulate simulates and --tare rests on: the model's own sensor, where found
             args.sensor = own
+        elif not sensor_given and args.simulate is not None and (lost := _lost_sensor(model)):
+            print(f"{prog}: note: the model was fitted on {lost}, not found here as it was: simulating "
+                  f"{args.sensor}; give --sensor", file=sys.stderr)
         check_input_units(model, "V", "the ADCs' readings", f"model {args.model}")
         if tempcomp is not None and tempcomp.n != model.n_inputs:
             raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")

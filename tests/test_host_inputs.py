@@ -227,3 +227,18 @@ def test_every_option_and_argument_says_what_it_is_in_help(module):
             bare += [f"{name} {'/'.join(a.option_strings) or a.metavar or a.dest}" for a in parser._actions
                      if not isinstance(a, argparse._HelpAction) and not (a.help or "").strip()]
     assert bare == []
+
+
+def test_a_simulated_read_says_when_the_model_s_own_sensor_is_not_here(model_file, tmp_path):
+    """A twin whose unit file was moved away: read --simulate simulated the paper drawing in its place, without a
+    word, and its estimates were degrees off; a note says so. The drawing's own model simulates it unsaid."""
+    data = json.loads(Path(model_file).read_text())
+    assert "note:" not in read(model_file).stderr
+    gone = str(tmp_path / "gone" / "unit.toml")
+    data.setdefault("fit", {}).setdefault("held_out", {}).update({"sensor": "unit", "sensor_file": gone})
+    (tmp_path / "twin.json").write_text(json.dumps(data))
+    proc = read(str(tmp_path / "twin.json"))
+    assert proc.returncode == 0, proc.stderr
+    assert (f"tactile-host read: note: the model was fitted on {gone}, not found here as it was: simulating paper; "
+            "give --sensor") in proc.stderr
+    assert "note:" not in read(str(tmp_path / "twin.json"), "--sensor", "paper").stderr  # said: no note
