@@ -310,6 +310,9 @@ def test_codegen_cli(paper_fixed_model, tmp_path):
     for option in (["--style", "unrolled"], ["--style", "table"], ["--fma"]):  # fixed point has one layout
         assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--precision",
                                       "fixed", *option), 2, f"{option[0]} does not apply to --precision fixed")
+        # verify too: it took --style with fixed and passed it over
+        assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--precision", "fixed", *option), 2,
+                              f"{option[0]} does not apply to --precision fixed")
     assert not (tmp_path / "x").exists()
     data = json.loads(path.read_text())
     data["outputs"][0]["terms"][0] = "v1^1/2"

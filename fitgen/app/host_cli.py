@@ -289,9 +289,9 @@ def build_parser() -> Parser:
     v.add_argument("model", metavar="MODEL", help="model file (fitgen fit)")
     v.add_argument("--precision", default="both", choices=("double", "float", "fixed", "both"),
                    help="both: double and float; fixed: the integer header against its numpy model and double")
-    v.add_argument("--style", default="both", choices=("table", "unrolled", "both"),
+    v.add_argument("--style", choices=("table", "unrolled", "both"),
                    help="the C's form: table (coefficient arrays and a loop), unrolled (straight-line code), "
-                        "or both (default)")
+                        "or both (default; not with --precision fixed, which has one form)")
     v.add_argument("--cc", default="gcc", help="C compiler command, with flags if needed (default gcc)")
     v.add_argument("--runner", help="prefix to run the binary with, e.g. qemu-arm")
     v.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")

@@ -17,7 +17,9 @@ def cmd_verify(args) -> int:
     check_vectors(args.vectors)
     model = load_model(args.model)
     precisions = ("double", "float") if args.precision == "both" else (args.precision,)
-    styles = STYLES if args.style == "both" else (args.style,)
+    if args.style is not None and args.precision == "fixed":  # as codegen refuses it
+        raise InputError("--style does not apply to --precision fixed (its header is straight-line code)")
+    styles = STYLES if args.style in (None, "both") else (args.style,)
     if (args.input_lsb is not None or args.input_offset is not None) and args.precision != "fixed":
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
     if args.fma and args.precision == "fixed":
