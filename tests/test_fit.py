@@ -287,7 +287,7 @@ def test_bad_model_files(paper_fit, tmp_path):
                           contains="m.json: JSON, not CSV (a model or meta file?)")
     # a sensor or unit file for a dataset: fitgen simulate --unit writes one beside its data, which opens with a comment
     unit = tmp_path / "u.unit.toml"
-    assert run_cli("fitgen", "simulate", "--unit", "3", "--n", "5", "-o", str(tmp_path / "u.csv")).returncode == 0
+    assert run_cli("fitgen", "simulate", "--unit", "3", "--random", "5", "-o", str(tmp_path / "u.csv")).returncode == 0
     for arg in (unit, "paper_bare.toml"):
         if arg == "paper_bare.toml":  # a table first, as a hand-written sensor file may open
             arg = tmp_path / arg
