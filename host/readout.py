@@ -149,13 +149,27 @@ WAIT_SLICE = 0.1  # s: how late a Ctrl-C during a slow --rate's wait is seen
 
 REST_SHARE = 0.25  # of the fitted box's width: how far from rest a model may read the tare's target
 REST_FLOOR = {"mm": 0.1, "deg": 0.5}  # ... and at least this, were a box's width 0
+REST_DOMAIN_SHARE = 0.1  # of an input's fitted span: how far outside it the tare's target may lie
 
 
 def check_rest_reference(model, reference: np.ndarray, spec: str) -> None:
-    """InputError when ``model`` reads the rest readings ``reference`` (from ``spec``) as a pose far from rest, by
-    more than a quarter of its fitted box's width (the default box's without one): another sensor's rest, as the
-    drawing's is to a unit's twin, which a tare would map every reading onto."""
-    est = np.asarray(model.predict(np.asarray(reference, dtype=float)[None]), dtype=float)[0]
+    """InputError when the rest readings ``reference`` (from ``spec``) lie outside the inputs ``model`` was fitted on
+    by more than REST_DOMAIN_SHARE of their span, or when it reads them as a pose far from rest, by more than a
+    quarter of its fitted box's width (the default box's without one): another sensor's rest, as the drawing's is
+    to a unit's twin, which a tare would map every reading onto."""
+    ref = np.asarray(reference, dtype=float)
+    span = model.input_max - model.input_min
+    # the estimate of clamped inputs can look like rest (a two-ring model at the paper's rest: dz -0.28 mm), so the
+    # readings themselves are held to the domain too, with room for a unit's own rest at its edge
+    out = [k + 1 for k in np.flatnonzero(~((ref >= model.input_min - REST_DOMAIN_SHARE * span)
+                                           & (ref <= model.input_max + REST_DOMAIN_SHARE * span)))]
+    if out:
+        raise InputError(f"the rest readings of {spec} lie outside the readings the model was fitted on (v"
+                         f"{', v'.join(map(str, out))} beyond {REST_DOMAIN_SHARE:.0%} of their span): they are another "
+                         "sensor's, and a tare onto them would bend every estimate; give --rest the sensor file the "
+                         "model was fitted on (a unit's twin: the unit file identify wrote) or a dataset of this "
+                         "sensor's own with rows at rest")
+    est = np.asarray(model.predict(ref[None]), dtype=float)[0]
     box = {**DEFAULT_RANGES, **model.held_out_box}
     far = []
     for j, e in enumerate(model.equations):

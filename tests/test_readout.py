@@ -173,6 +173,15 @@ def test_a_tare_onto_another_sensors_rest_is_refused(model, model_file, sensor, 
     with pytest.raises(InputError, match=r"reads the rest readings of --rest u as .*far from rest"):
         check_rest_reference(model, rest_reference(str(unit), 8), "--rest u")
     check_rest_reference(model, rest_reference("paper", 8), "--sensor paper")  # its own: quiet
+    # readings outside the fitted inputs are clamped, and their estimate may read as rest (a two-ring model at the
+    # paper's rest read dz -0.28 mm, with four inputs clamped): the readings are held to the domain too
+    from fitgen.equations.model import Equation, Model
+
+    flat = Model(np.full(8, 1.0), np.full(8, 2.0), tuple(Equation(o, 0.0, (), ()) for o in ("dx", "dz")), "V", {})
+    check_rest_reference(flat, np.r_[np.full(4, 1.5), np.full(4, 0.95)], "--rest near")  # within 10 % of the span
+    with pytest.raises(InputError, match=r"^the rest readings of --rest far lie outside the readings the model was "
+                                         r"fitted on \(v5, v6, v7, v8 beyond 10% of their span\)"):
+        check_rest_reference(flat, np.r_[np.full(4, 1.5), np.full(4, 0.8)], "--rest far")
     for extra in (["--tare", "--rest", str(unit)], ["--auto-zero", "--sensor", str(unit)]):
         proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_1115, "--count", "3",
                        "--simulate", "0,0,0,0,0", "-o", str(tmp_path / "out.csv"), *extra)
