@@ -107,6 +107,7 @@ def parse_rest_band(text: str) -> tuple[float, float]:
     return vals[0], vals[1]
 
 
+MAX_TARE_SAMPLES = 100_000  # as tm_pi takes them
 MIN_AUTOZERO_TARE = 5  # samples whose spread is the noise floor auto-zero tests rest against
 
 
@@ -153,6 +154,8 @@ class ReadoutSession:
         sensor_given = args.sensor is not None
         adc_defaults(args)
         tare_n = parse_positive(args.tare_samples, "--tare-samples", integer=True)
+        if tare_n > MAX_TARE_SAMPLES:  # tm_pi's limit: at 860 SPS a tare of more would keep the sensor still for hours
+            raise InputError(f"--tare-samples must be 1..{MAX_TARE_SAMPLES}, got {int(tare_n)}")
         if args.auto_zero and tare_n < MIN_AUTOZERO_TARE:
             raise InputError(f"--auto-zero takes its noise floor from the tare's spread: give --tare-samples "
                              f"{MIN_AUTOZERO_TARE} or more (got {tare_n:g})")

@@ -340,6 +340,7 @@ def test_a_correction_the_run_cannot_take_names_the_option_typed(model_file, tmp
     (["--thermistor", "beta=3950"], "add temp=CHIP@ADDRESS:INPUT to --adc"),
     (["--rest-band", "0.1"], "--rest-band"),
     (["--auto-zero", "--rest-band", "0,0"], "--rest-band '0,0': both must be finite numbers > 0 (mm, then deg)"),
+    (["--tare", "--tare-samples", "100000000"], "--tare-samples must be 1..100000, got 100000000"),
     (["--rest-hold", "-1"], "--rest-hold"),
     (["--sim-drift", "ramp=5,over=0"], "over and tau must be > 0"),
     (["--sim-drift", "warp=9"], "--sim-drift"),
