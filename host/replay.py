@@ -102,6 +102,7 @@ class ReplayResult:
     updates: list
     notes: list
     header: dict  # the re-estimation's run-record header: its model and the corrections at the start
+    recorded_outputs: tuple = ()  # the names of the recorded estimates' columns (the run's header's)
 
     @property
     def exact(self) -> bool:
@@ -119,13 +120,18 @@ class ReplayResult:
         lines = [f"replayed {len(self.t)} samples with model {self.model_hash[:12]}"
                  f"{' (the recording model)' if self.same_model else ''}; auto-zero updates {len(self.updates)}"]
         lines += [f"note: {n}" for n in self.notes]
+        rec = tuple(self.recorded_outputs) if len(self.recorded_outputs) == self.recorded.shape[1] else ()
+        shared = [o for o in self.outputs if o in rec] if self.out.shape != self.recorded.shape else list(self.outputs)
         if self.exact:
             lines.append("estimates identical to the recorded ones")
-        elif self.out.shape == self.recorded.shape:
-            d = self.out - self.recorded
+        elif shared and len(self.out) == len(self.recorded):
+            if self.out.shape != self.recorded.shape:  # another model's outputs: the ones both have, by name
+                lines.append(f"the recorded run has outputs {', '.join(rec)}: differences in {', '.join(shared)}")
+            mine = self.out[:, [self.outputs.index(o) for o in shared]]
+            d = mine - (self.recorded[:, [rec.index(o) for o in shared]] if rec else self.recorded)
             lines.append("| output | max abs difference | RMS difference |")
             lines.append("| --- | --- | --- |")
-            for j, o in enumerate(self.outputs):
+            for j, o in enumerate(shared):
                 lines.append(f"| {o} | {np.abs(d[:, j]).max():.4g} | {np.sqrt(np.mean(d[:, j] ** 2)):.4g} |")
         else:
             lines.append("the recorded run has other outputs: no differences computed")
@@ -201,7 +207,7 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     az = corrections.autozero
     return ReplayResult(run.t, run.raw, run.temp, v_all, out_all, st_all, run.out,
                         tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes,
-                        header)
+                        header, tuple(o for o in h.get("outputs", ()) if isinstance(o, str)))
 
 
 def _estimate(run: Run, model: Model, precision: str, corrections: Corrections, progress):

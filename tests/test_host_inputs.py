@@ -242,3 +242,19 @@ def test_a_simulated_read_says_when_the_model_s_own_sensor_is_not_here(model_fil
     assert (f"tactile-host read: note: the model was fitted on {gone}, not found here as it was: simulating paper; "
             "give --sensor") in proc.stderr
     assert "note:" not in read(str(tmp_path / "twin.json"), "--sensor", "paper").stderr  # said: no note
+
+
+def test_a_replay_with_a_model_of_fewer_outputs_compares_the_ones_both_have(model, model_file, tmp_path):
+    """A run recorded with dx..thy replayed with a model of dx, dy, dz: it said "other outputs: no differences
+    computed" though three are shared; the shared ones are compared by name."""
+    import dataclasses
+
+    run = tmp_path / "r.jsonl"
+    assert read(model_file, "--record", str(run)).returncode == 0
+    three = dataclasses.replace(model, equations=model.equations[:3]).save(tmp_path / "three.json")
+    proc = run_cli("tactile-host", "replay", str(run), "--model", str(three))
+    assert proc.returncode == 0, proc.stderr
+    assert f"the recorded run has outputs {', '.join(model.output_names)}: differences in dx, dy, dz" in proc.stdout
+    rows = [ln for ln in proc.stdout.splitlines() if ln.startswith("| d")]
+    assert [ln.split(" | ")[0] for ln in rows] == ["| dx", "| dy", "| dz"]
+    assert all(float(ln.split(" | ")[1]) == 0.0 for ln in rows), rows  # the same equations: no difference
