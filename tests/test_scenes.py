@@ -137,3 +137,20 @@ def test_scene_toml_levels_and_unresolved_check_agree_with_observe(tmp_path):
 
     assert unresolved_warnings(load_sensor("paper"), PRESETS["slide"]) == []
     assert len(unresolved_warnings(load_sensor("paper"), s)) == 4
+
+
+def test_fit_checks_the_scene_at_the_noise_it_is_given(tmp_path):
+    """A sensor file without a noise figure: fit's check that the sensor resolves the scene refused it and pointed
+    at observe, though --noise was given to fit; it now takes --noise, and says to give it."""
+    (tmp_path / "ring.toml").write_text('name = "ring6"\n[magnet]\ndiameter = 5.0\nheight = 1.0\npolarization = 1.45\n'
+                                        '[board]\nthickness = 1.5\ngap = 10.0\n[[elements.ring]]\ncount = 6\n'
+                                        'radius = 9.0\naxis = "radial"\n[transfer]\nkind = "gmr"\n')
+    data = tmp_path / "d.csv"
+    assert run_cli("fitgen", "simulate", "--sensor", str(tmp_path / "ring.toml"), "--scene", "press", "-o",
+                   str(data)).returncode == 0
+    assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json")), 2,
+                          "sensor ring6 gives no noise figure for its gmr transfer (noise missing or 0 in "
+                          "[transfer.gmr]): add it to the file, or give --noise;")
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--noise", "0.0005")
+    assert proc.returncode == 0, proc.stderr
+    assert load_model(tmp_path / "m.json").output_names == ("dz",)

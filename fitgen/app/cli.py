@@ -139,7 +139,7 @@ def cmd_fit(args) -> int:
                          + ", so it would be ignored")
     if scene is not None:
         outputs = scene_outputs(scene, ds, args.data, sensor, args.force,
-                                recorded=None if args.scene else ds.meta.get("scene_outputs"))
+                                recorded=None if args.scene else ds.meta.get("scene_outputs"), noise=settings.noise)
     else:
         outputs = ds.target_names if args.outputs is None else parse_names(args.outputs, POSE_NAMES, "--outputs")
     unit_file = args.sensor or ds.meta.get("sensor_file")

@@ -209,8 +209,8 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
 
     if noise is None and not sensor.noise > 0:  # a file without one reads 0: every bound would be 0
         raise InputError(f"sensor {sensor.name} gives no noise figure for its {sensor.transfer} transfer (noise "
-                         f"missing or 0 in [transfer.{sensor.transfer}]): add it to the file (observe also takes "
-                         "--noise); without noise every pose component is resolved to 0, resolvable or not")
+                         f"missing or 0 in [transfer.{sensor.transfer}]): add it to the file, or give --noise; "
+                         "without noise every pose component is resolved to 0, resolvable or not")
     check_box(sensor, ranges, "observe")
     extra = [c for c in (accuracy or {}) if c not in components]
     if extra:  # it would be ignored: say so rather than judge without it

@@ -110,7 +110,8 @@ def load_scene(spec: str | None) -> Scene:
     return Scene(name, ordered, ranges, levels)
 
 
-def scene_outputs(spec: str, ds, origin: str, sensor, force: bool = False, recorded=None) -> tuple[str, ...]:
+def scene_outputs(spec: str, ds, origin: str, sensor, force: bool = False, recorded=None,
+                  noise: float | None = None) -> tuple[str, ...]:
     """The outputs scene ``spec`` asks for, after checking that the dataset ``ds`` (read from
     ``origin``) has them and, unless ``force``, that ``sensor`` (None: unknown) resolves them; ``recorded``:
     the outputs the scene named when ``ds`` was simulated for it (a scene file edited since is refused)."""
@@ -124,17 +125,18 @@ def scene_outputs(spec: str, ds, origin: str, sensor, force: bool = False, recor
     if not force:
         if sensor is None:
             raise InputError("give --sensor (to check that it resolves the scene's outputs) or --force")
-        bad = unresolved_warnings(sensor, scene)
+        bad = unresolved_warnings(sensor, scene, noise=noise)
         if bad:
             raise InputError(f"scene {scene.name}: sensor {sensor.name} cannot resolve {bad[0]} "
                              f"Fit anyway with --force, or use a scene without it.")
     return scene.outputs
 
 
-def unresolved_warnings(sensor, scene: Scene, accuracy: dict | None = None) -> list[str]:
-    """One line per scene output the sensor cannot resolve to the required accuracy (fitgen.physics.observe)."""
+def unresolved_warnings(sensor, scene: Scene, accuracy: dict | None = None, noise: float | None = None) -> list[str]:
+    """One line per scene output the sensor cannot resolve to the required accuracy (fitgen.physics.observe) at the
+    reading noise ``noise`` (default: the sensor's)."""
     from fitgen.physics.observe import observe
 
-    report = observe(sensor, scene.ranges, scene.outputs, accuracy=accuracy)
+    report = observe(sensor, scene.ranges, scene.outputs, noise=noise, accuracy=accuracy)
     bad = set(report.unresolved())
     return [v for c, v in zip(report.components, report.verdicts()) if c in bad]
