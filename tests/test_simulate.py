@@ -104,10 +104,25 @@ def test_simulate_and_fit_say_where_the_readings_do_not_carry_the_pose(tmp_path)
         assert proc.returncode == 0, proc.stderr
         assert ("note: 21 of 21 rows (100%) have an element past its linear range" in proc.stderr) == says, \
             proc.stderr
+        assert ("`fitgen observe --sensor " + sensor + " --transfer gmr` tells" in proc.stderr) == says, proc.stderr
         proc = run_cli("fitgen", "fit", str(data), "-o", str(model), "--force")
         assert proc.returncode == 0, proc.stderr
         assert ("dz's equation leaves" in proc.stderr and "the readings barely carry dz here (an element past its "
                 "linear range in 100% of the rows" in proc.stderr) == says, proc.stderr
+
+
+def test_simulate_says_when_adc_bits_give_a_raw_transfer_a_full_scale_its_readings_clip_at(tmp_path):
+    """--adc-bits on the raw transfer gives it a converter whose full scale (2 mT) a magnet 5 mm nearer passes at
+    rest: every row was clipped there without a word, as the gmr transfer's rails are said."""
+    near = tmp_path / "near.toml"
+    near.write_text(PAPER_TOML.read_text().replace("gap = 11.0", "gap = 6.0"))
+    args = ["fitgen", "simulate", "--sensor", str(near), "--transfer", "raw", "--scene", "press"]
+    proc = run_cli(*args, "--adc-bits", "10", "-o", str(tmp_path / "q.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert "note: 21 of 21 rows (100%) have an element past its linear range" in proc.stderr, proc.stderr
+    assert f"`fitgen observe --sensor {near} --transfer raw` tells" in proc.stderr
+    quiet = run_cli(*args, "-o", str(tmp_path / "r.csv"))
+    assert quiet.returncode == 0 and "past its linear range" not in quiet.stderr  # not quantised: follows any field
 
 
 def test_the_fit_note_names_causes_that_hold(tmp_path):

@@ -220,16 +220,21 @@ BLIND_SHARE = 0.5  # a training RMS past this share of an output's own spread, w
 NEAR_CONSTANT = 0.8  # past this share the equation is near a constant, cause found or not
 
 
-def simulate_notes(sensor, poses, labels: str, spec: str) -> list[str]:
+def simulate_notes(sensor, poses, labels: str, spec: str, adc_bits: int | None = None) -> list[str]:
     """What `fitgen simulate` says of its rows beyond their count: rows where an element's reading no longer
-    follows the pose (``spec``: the --sensor given, for the command that tells more)."""
+    follows the pose (``spec``: the --sensor given, for the command that tells more; ``adc_bits``: --adc-bits,
+    which gives a raw transfer a converter and so a full scale its readings clip at)."""
+    import dataclasses
+
     from fitgen.physics.simulate import rows_past_linear
 
+    if adc_bits is not None and sensor.transfer == "raw":
+        sensor = dataclasses.replace(sensor, raw=dataclasses.replace(sensor.raw, adc_bits=adc_bits))
     if not (clipped := int(rows_past_linear(sensor, poses, labels).sum())):
         return []
     return [f"{clipped} of {len(poses)} rows ({clipped / len(poses):.0%}) have an element past its linear range "
             f"(saturated, or on the ADC's rails), whose reading there no longer follows the pose; `fitgen observe "
-            f"--sensor {spec}` tells whether the others still resolve it"]
+            f"--sensor {spec} --transfer {sensor.transfer}` tells whether the others still resolve it"]
 
 
 def _blind_causes(model: Model, ds, sensor) -> list[str]:
