@@ -72,6 +72,17 @@ def test_observe_warns_for_unresolvable_scene_outputs():
     assert proc.returncode == 0 and "warning" not in proc.stderr
 
 
+def test_too_few_elements_are_pointed_at_scenes_they_can_pin(tmp_path):
+    """One element cannot pin slide's three outputs: the advice offered slide itself among the scenes to use."""
+    one = tmp_path / "one.toml"
+    one.write_text('name = "one"\n[magnet]\ndiameter = 5.0\nheight = 1.0\npolarization = 1.45\n[board]\n'
+                   'thickness = 1.5\ngap = 10.0\n[[elements.ring]]\ncount = 1\nradius = 9.0\naxis = "radial"\n'
+                   '[transfer]\nkind = "gmr"\n[transfer.gmr]\nnoise = 0.0005\n')
+    proc = run_cli("fitgen", "observe", str(one), "--scene", "slide")
+    assert "1 readings cannot pin 3 pose components at once: a scene of at most 1 outputs (--scene press, a scene " \
+           "file)" in proc.stdout + proc.stderr, proc.stdout + proc.stderr
+
+
 @pytest.mark.parametrize("args, msg", [
     (["--scene", "press", "--grid", "paper-sim"], "--scene sets the poses"),
     (["--scene", "nope"], "not a preset"),

@@ -179,8 +179,11 @@ class ObserveReport:
             why = (f"; {r.past_linear} of {self.n_elements} elements there are past their linear range, saturated "
                    "or on the ADC's rails" if r.past_linear else "")
             if 0 < self.n_elements < len(self.components):
+                from fitgen.physics.scenes import PRESETS  # here: scenes reads observe's verdicts
+
+                fits = [f"--scene {n}" for n, sc in PRESETS.items() if len(sc.outputs) <= self.n_elements]
                 why += (f"; {self.n_elements} readings cannot pin {len(self.components)} pose components at once: "
-                        f"a scene of at most {self.n_elements} outputs (--scene slide, press, or a scene file)")
+                        f"a scene of at most {self.n_elements} outputs ({', '.join(fits + ['a scene file'])})")
             msg = (f"{c}: NOT resolvable to {need:g} {unit} at {len(bad)} of {len(self.results)} poses "
                    f"(bound {_fmt_bound(r.bounds[j])} {unit} {where}; the readings barely change along {blind}"
                    f"{why}).")
