@@ -234,6 +234,10 @@ def test_sweep_on_the_uno_counts_its_cycles(tmp_path):
     (["--jobs", "0"], "--jobs"),
     (["--max-share", "0"], "--max-share"),
     (["--refine", "2"], "nothing to sweep"),
+    # the rule that applies, not every rule (it spoke of fixed point where none was asked for)
+    (["--family", "integer", "--precision", "float", "--refine", "1"],
+     "nothing to sweep: the refinement is swept on the harmonics family only (pick"),
+    (["--family", "harmonics", "--precision", "fixed"], "nothing to sweep: fixed point has no harmonics family (pick"),
     (["--refine", "1", "--family", "harmonics"], "whole pose"),
     (["--refine", "x"], "--refine"),
     (["--core", "z80"], "--core"),

@@ -62,6 +62,23 @@ def parse_target(spec: str | None, outputs: tuple[str, ...]) -> dict[str, float]
     return target
 
 
+def _why_empty(knobs: dict) -> str:
+    """Why the given knobs leave no point to sweep (fitgen.c.tradeoff._possible's rules), naming the one that
+    applies rather than every rule."""
+    from fitgen.c.tradeoff import NO_FIXED, REFINED_FAMILIES
+
+    fams, precs = knobs.get("family") or (), knobs.get("precision") or ()
+    why = []
+    if any(knobs.get("refine") or ()) and fams and not set(fams) & set(REFINED_FAMILIES):
+        why.append(f"the refinement is swept on the {' and '.join(REFINED_FAMILIES)} family only")
+    if precs and set(precs) <= {"fixed"}:
+        if fams and set(fams) <= set(NO_FIXED):
+            why.append(f"fixed point has no {' and '.join(sorted(set(fams)))} family")
+        if all(knobs.get("refine") or (0,)):
+            why.append("fixed point has no refinement")
+    return "; ".join(why) or "no combination of the values given is one the sweep runs"
+
+
 def run_tradeoff(args, sensor) -> int:
     """The command: parse the knobs, sweep, write the report; exit status 1 when rounding is over its share."""
     from fitgen.app.cliutil import EXIT_CHECK_FAILED
@@ -80,8 +97,7 @@ def run_tradeoff(args, sensor) -> int:
     target = parse_target(args.target, scene.outputs)
     grid = grid_from(**knobs) if args.full or knobs else quick_grid()
     if not grid:
-        raise InputError("nothing to sweep: fixed point has no harmonics family and no refinement, and the refinement "
-                         "is swept on the harmonics family only (pick other --family, --precision or --refine)")
+        raise InputError(f"nothing to sweep: {_why_empty(knobs)} (pick other --family, --precision or --refine)")
     if not 0 < args.max_share <= 1:
         raise InputError(f"--max-share must be a share in (0, 1] of the model's held-out max error, got "
                          f"{args.max_share:g}")
