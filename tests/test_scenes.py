@@ -165,3 +165,27 @@ def test_fit_checks_the_scene_at_the_noise_it_is_given(tmp_path):
     proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--noise", "0.0005")
     assert proc.returncode == 0, proc.stderr
     assert load_model(tmp_path / "m.json").output_names == ("dz",)
+
+
+def test_a_scene_grid_grows_to_the_rows_a_fit_of_its_sensor_needs(tmp_path):
+    """press holds 21 rows, and a ring of ten elements has 20 initial terms: simulate --scene press wrote rows fit
+    refused ("give at least 23 rows"), and tradeoff, which takes no row count, could not run. The grid's levels grow
+    to the rows needed; the presets' sensors (eight elements) keep their grids."""
+    from fitgen.fitting.fit import rows_needed
+
+    press, slide = PRESETS["press"], PRESETS["slide"]
+    assert press.with_rows(rows_needed(8)) is press and len(press.poses()) == 21
+    assert press.with_rows(rows_needed(10)).levels == 23 == rows_needed(10)
+    assert slide.with_rows(126).levels == 6 and slide.with_rows(125) is slide  # 6^3 free poses
+    ten = tmp_path / "ten.toml"
+    ten.write_text('name = "ten"\n[magnet]\ndiameter = 5.0\nheight = 1.0\npolarization = 1.45\n[board]\n'
+                   'thickness = 1.5\ngap = 10.0\n[[elements.ring]]\ncount = 10\nradius = 9.0\naxis = "radial"\n'
+                   '[transfer]\nkind = "gmr"\n[transfer.gmr]\nnoise = 0.0005\n')
+    data = tmp_path / "d.csv"
+    proc = run_cli("fitgen", "simulate", "--sensor", str(ten), "--scene", "press", "-o", str(data))
+    assert proc.returncode == 0 and "wrote 23 rows" in proc.stderr, proc.stderr
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"))
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli("fitgen", "tradeoff", str(ten), "--scene", "press", "--family", "integer", "--precision", "float",
+                   "--k", "aic", "--max-terms", "6", "--style", "unrolled", "-o", str(tmp_path / "t"))
+    assert proc.returncode == 0 and (tmp_path / "t" / "tradeoff.csv").is_file(), proc.stderr

@@ -21,6 +21,7 @@ FAMILY_CHOICES = ("auto", *FAMILIES)
 
 def cmd_simulate(args) -> int:
     from fitgen.app.report import simulate_notes
+    from fitgen.fitting.fit import rows_needed
     from fitgen.physics.posesource import choose_poses
     from fitgen.physics.simulate import simulate
 
@@ -28,7 +29,8 @@ def cmd_simulate(args) -> int:
     # a sensor file (a unit's, say) is named in the meta, so that fit finds it to hold out on
     unit_info = {"sensor_file": str(Path(args.sensor).resolve())} if Path(args.sensor).is_file() else {}
     poses, source = choose_poses(grid=args.grid, random=args.random, poses=args.poses, ranges=args.ranges,
-                                 scene=args.scene, seed=args.seed, sensor=sensor)
+                                 scene=args.scene, seed=args.seed, sensor=sensor,
+                                 min_rows=rows_needed(sensor.n_elements))  # a scene's grid that a fit can carry
     noise = noise_of(args.noise, sensor)
     if args.labels == "magnet" and args.unit is None and sensor.is_drawing:
         raise InputError("--labels magnet is for a built unit (--unit SEED, or a unit's file as --sensor): on the "
@@ -78,7 +80,7 @@ def _posterior_note(spec) -> list[str]:
 
 def cmd_observe(args) -> int:
     from fitgen.physics.observe import observe
-    from fitgen.physics.scenes import load_scene
+    from fitgen.physics.scenes import load_scene, preset_sizes
     from fitgen.physics.simulate import parse_ranges
 
     if args.sensor_pos and args.sensor:
@@ -95,7 +97,7 @@ def cmd_observe(args) -> int:
     for name, value in (accuracy or {}).items():
         if not (math.isfinite(value) and value > 0):
             raise InputError(f"--accuracy {name}={value!r} must be a finite number > 0")
-    report = observe(sensor, ranges, scene.outputs, noise=noise, accuracy=accuracy)
+    report = observe(sensor, ranges, scene.outputs, noise=noise, accuracy=accuracy, scenes=preset_sizes())
     print(f"sensor {sensor.name} ({sensor.n_elements} elements, {sensor.transfer}), scene {scene.name}")
     print(report.text(), end="")
     for c in report.unresolved():

@@ -36,7 +36,7 @@ from fitgen.equations.model import Model
 from fitgen.equations.rounding import PRECISIONS
 from fitgen.equations.terms import FAMILIES, HARMONIC_DEGREE
 from fitgen.fitting.family import rounding_checked
-from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.fitting.fit import FitSettings, fit_model, rows_needed
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.scenes import Scene, unresolved_warnings
 from fitgen.physics.simulate import pose_rng, random_poses, simulate
@@ -366,7 +366,8 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
         notes.append("flash sizes skipped: arm-none-eabi-gcc/size/nm not found")
 
     # training: the scene's grid, noise-free; held-out: random poses in its box, seeded
-    train = simulate(sensor, scene.poses(), provenance={"scene": scene.name})
+    taught = scene.with_rows(rows_needed(sensor.n_elements))  # a ring of ten elements: more than press's 21 levels
+    train = simulate(sensor, taught.poses(), provenance={"scene": scene.name})
     poses = random_poses(n_held, scene.ranges, pose_rng(seed))
     cols = [POSE_NAMES.index(o) for o in outputs]
     clean = simulate(sensor, poses, seed=seed)

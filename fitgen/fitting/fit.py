@@ -90,6 +90,12 @@ class FittedOutput:
 ROWS = 1 << 14  # rows per block: the candidate columns are never all in memory at once
 
 
+def rows_needed(n_inputs: int, settings: FitSettings | None = None) -> int:
+    """The rows :func:`fit_output` asks for at least: the initial equation's coefficients and residual degrees of
+    freedom."""
+    return len(initial_terms(n_inputs, (settings or FitSettings()).exponents)) + 3
+
+
 def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | None, *,
                settings: FitSettings, positive: np.ndarray, progress=None, noise: float = 0.0,
                d_jac=None, harmonics: Harmonics | None = None, shared: SharedRows | None = None) -> FittedOutput:

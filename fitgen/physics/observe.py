@@ -124,6 +124,7 @@ class ObserveReport:
     n_elements: int = 0
     lsb: float = 0.0  # the ADC's step; its rounding, lsb / sqrt(12), is part of ``noise``
     element_noise: float = 0.0
+    scenes: tuple = ()  # (name, outputs) of the scenes to point a sensor of too few elements at
 
     @property
     def worst(self) -> np.ndarray:
@@ -179,9 +180,7 @@ class ObserveReport:
             why = (f"; {r.past_linear} of {self.n_elements} elements there are past their linear range, saturated "
                    "or on the ADC's rails" if r.past_linear else "")
             if 0 < self.n_elements < len(self.components):
-                from fitgen.physics.scenes import PRESETS  # here: scenes reads observe's verdicts
-
-                fits = [f"--scene {n}" for n, sc in PRESETS.items() if len(sc.outputs) <= self.n_elements]
+                fits = [f"--scene {n}" for n, k in self.scenes if k <= self.n_elements]
                 why += (f"; {self.n_elements} readings cannot pin {len(self.components)} pose components at once: "
                         f"a scene of at most {self.n_elements} outputs ({', '.join(fits + ['a scene file'])})")
             msg = (f"{c}: NOT resolvable to {need:g} {unit} at {len(bad)} of {len(self.results)} poses "
@@ -205,9 +204,10 @@ def _fmt_bound(b: float) -> str:
 
 
 def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | None = None,
-            accuracy: dict | None = None) -> ObserveReport:
+            accuracy: dict | None = None, scenes: tuple = ()) -> ObserveReport:
     """Observability at rest, at the corners of the pose box ``ranges`` and at INSIDE random poses within it (a
-    layout can be blind inside the box where it sees at every corner: a saturating element, say)."""
+    layout can be blind inside the box where it sees at every corner: a saturating element, say). ``scenes``:
+    (name, number of outputs) of the scenes a verdict may point a sensor of too few elements at."""
     from fitgen.physics.simulate import pose_rng, random_poses
 
     if noise is None and not sensor.noise > 0:  # a file without one reads 0: every bound would be 0
@@ -229,7 +229,7 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
     poses = np.vstack([corner_poses(ranges), random_poses(INSIDE, ranges, pose_rng(INSIDE_SEED))])
     results = analyse(sensor, poses, noise, tuple(components))
     return ObserveReport(tuple(components), noise, sensor.units, acc, results, INSIDE, sensor.n_elements, lsb,
-                         element)
+                         element, tuple(scenes))
 
 
 INSIDE, INSIDE_SEED = 200, 11

@@ -16,11 +16,12 @@ from fitgen.physics.simulate import grid_poses, parse_grid, parse_ranges, pose_r
 
 def choose_poses(*, grid: str | None = None, random: int | None = None, poses: str | None = None,
                  ranges: str | None = None, scene: str | None = None, seed: int = 0,
-                 sensor=None) -> tuple[np.ndarray, dict]:
+                 sensor=None, min_rows: int = 0) -> tuple[np.ndarray, dict]:
     """(poses, provenance) from the options of ``fitgen simulate``; with ``sensor``, a box that reaches its board is
     refused as a box.
 
-    ``scene``: its grid, or ``random`` poses in its box. Otherwise the ``poses`` file, ``random``
+    ``scene``: its grid (its levels raised where it holds fewer than ``min_rows`` poses), or ``random`` poses in
+    its box. Otherwise the ``poses`` file, ``random``
     poses in ``ranges`` (seeded by ``seed``; after the ``grid``'s poses when it is given too), or
     the ``grid`` (default paper-sim). Any other combination is an InputError.
     """
@@ -35,6 +36,7 @@ def choose_poses(*, grid: str | None = None, random: int | None = None, poses: s
         spec = scene if scene in PRESETS else str(Path(scene).resolve())
         scene_info = {"scene": sc.name, "scene_spec": spec, "scene_outputs": list(sc.outputs)}
         if random is None:
+            sc = sc.with_rows(min_rows)
             return sc.poses(), {"scene_grid_levels": sc.levels, **scene_info}
         if sensor is not None:
             check_box(sensor, sc.ranges, f"scene {sc.name}")

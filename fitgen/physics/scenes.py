@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +44,14 @@ class Scene:
         """The scene's full factorial grid of poses (n, 5)."""
         return grid_poses(self.grid())
 
+    def with_rows(self, rows: int) -> "Scene":
+        """This scene with its levels raised until its grid holds at least ``rows`` poses; itself where it holds
+        them (a one-axis grid of 21 rows cannot carry the first equation of a ring of ten elements)."""
+        free, levels = len(POSE_NAMES) - len(self.fixed()), self.levels
+        while free and levels ** free < rows:
+            levels += 1
+        return self if levels == self.levels else replace(self, levels=levels)
+
 
 _ZERO_TILT = {**DEFAULT_RANGES, "thx": (0.0, 0.0), "thy": (0.0, 0.0)}
 PRESETS = {
@@ -54,6 +62,11 @@ PRESETS = {
 
 
 MAX_POSES = 1_000_000  # a scene's grid: 40 MB of poses, about a minute to simulate
+
+
+def preset_sizes() -> tuple[tuple[str, int], ...]:
+    """(name, number of outputs) of each preset scene: where observe points a sensor of too few elements."""
+    return tuple((name, len(sc.outputs)) for name, sc in PRESETS.items())
 
 
 def load_scene(spec: str | None) -> Scene:
@@ -137,6 +150,6 @@ def unresolved_warnings(sensor, scene: Scene, accuracy: dict | None = None, nois
     reading noise ``noise`` (default: the sensor's)."""
     from fitgen.physics.observe import observe
 
-    report = observe(sensor, scene.ranges, scene.outputs, noise=noise, accuracy=accuracy)
+    report = observe(sensor, scene.ranges, scene.outputs, noise=noise, accuracy=accuracy, scenes=preset_sizes())
     bad = set(report.unresolved())
     return [v for c, v in zip(report.components, report.verdicts()) if c in bad]
