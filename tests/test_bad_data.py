@@ -92,6 +92,21 @@ def test_a_dead_element_in_the_rows_is_said_by_fit(data, tmp_path):
     assert proc.returncode == 0 and "on every row" not in proc.stderr, proc.stderr
 
 
+def test_rows_repeated_exactly_are_said_by_fit(data, tmp_path):
+    """Every row twice was fitted in silence, though AIC then counts each repeat as a measurement of its own."""
+    from fitgen.physics.dataset import load_dataset
+
+    ds = load_dataset(data)
+    twice = type(ds)(np.vstack([ds.inputs, ds.inputs[:7]]), np.vstack([ds.targets, ds.targets[:7]]), ds.target_names)
+    twice.save(tmp_path / "twice.csv")  # no meta: a measured file
+    proc = run_cli("fitgen", "fit", str(tmp_path / "twice.csv"), "-o", str(tmp_path / "m.json"))
+    assert proc.returncode == 0, proc.stderr
+    assert f"note: 7 of {ds.n_rows + 7} rows repeat another row exactly: the fit counts each as a measurement of " \
+           "its own" in proc.stderr, proc.stderr
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"))
+    assert proc.returncode == 0 and "repeat another row" not in proc.stderr, proc.stderr
+
+
 def test_simulate_leaves_no_unit_file_when_it_fails_and_refuses_poses_outside_the_sensor(tmp_path):
     assert_one_line_error(run_cli("fitgen", "simulate", "--unit", "3", "--random", "10", "--noise", "-1", "-o",
                                   str(tmp_path / "u.csv")), contains="--noise must be a finite number >= 0")

@@ -254,7 +254,8 @@ def _blind_causes(model: Model, ds, sensor) -> list[str]:
 
 def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
     """What a user should know of a fit to dataset ``ds`` (``sensor``: its rows' own, where known) beyond its
-    summary: readings' units assumed, equations near the rows, outputs the readings barely carry and why."""
+    summary: readings' units assumed, dead elements, rows repeated, equations near the rows, outputs the readings
+    barely carry and why."""
     rows = len(ds.inputs)
     notes = [] if units else [f"{data} has no meta saying its readings' units: taken as mT (give --units V for "
                               "volts, as an ADC gives them)"]
@@ -268,6 +269,12 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
                      f"{ds.inputs[0, flat[0]]:g} {model.input_units}): dead elements, broken wires, empty ADC "
                      "channels, or elements saturated throughout; the equations learn nothing from them, and the "
                      "device will clamp them to those values")
+    table = np.ascontiguousarray(np.hstack([ds.inputs, ds.targets]))
+    repeats = rows - np.unique(table.view(np.dtype((np.void, table.itemsize * table.shape[1])))).size
+    if repeats:  # a row counted twice weighs twice and adds to n in AIC: terms are admitted on less evidence
+        notes.append(f"{repeats} of {rows} rows repeat another row exactly: the fit counts each as a measurement of "
+                     "its own, so AIC admits terms on less evidence than the data hold; drop the repeats, or average "
+                     "repeated readings of one pose into one row")
     causes, noise = None, (model.fit_info.get("noise") or {}).get("device") or 0.0  # single samples
     for e in model.equations:
         rms, sd = model.fit_info["outputs"][e.name]["model_training_error"]["rms"], float(ds.target(e.name).std())
