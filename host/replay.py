@@ -120,15 +120,16 @@ class ReplayResult:
         lines = [f"replayed {len(self.t)} samples with model {self.model_hash[:12]}"
                  f"{' (the recording model)' if self.same_model else ''}; auto-zero updates {len(self.updates)}"]
         lines += [f"note: {n}" for n in self.notes]
-        rec = tuple(self.recorded_outputs) if len(self.recorded_outputs) == self.recorded.shape[1] else ()
-        shared = [o for o in self.outputs if o in rec] if self.out.shape != self.recorded.shape else list(self.outputs)
+        # the recorded columns' names: the run's header's, else (a header without them) the model's where as many
+        rec = (tuple(self.recorded_outputs) if len(self.recorded_outputs) == self.recorded.shape[1]
+               else self.outputs if self.out.shape == self.recorded.shape else ())
+        shared = [o for o in self.outputs if o in rec]
         if self.exact:
             lines.append("estimates identical to the recorded ones")
         elif shared and len(self.out) == len(self.recorded):
-            if self.out.shape != self.recorded.shape:  # another model's outputs: the ones both have, by name
+            if rec != self.outputs:  # another model's outputs: the ones both have, by name
                 lines.append(f"the recorded run has outputs {', '.join(rec)}: differences in {', '.join(shared)}")
-            mine = self.out[:, [self.outputs.index(o) for o in shared]]
-            d = mine - (self.recorded[:, [rec.index(o) for o in shared]] if rec else self.recorded)
+            d = self.out[:, [self.outputs.index(o) for o in shared]] - self.recorded[:, [rec.index(o) for o in shared]]
             lines.append("| output | max abs difference | RMS difference |")
             lines.append("| --- | --- | --- |")
             for j, o in enumerate(shared):

@@ -258,3 +258,16 @@ def test_a_replay_with_a_model_of_fewer_outputs_compares_the_ones_both_have(mode
     rows = [ln for ln in proc.stdout.splitlines() if ln.startswith("| d")]
     assert [ln.split(" | ")[0] for ln in rows] == ["| dx", "| dy", "| dz"]
     assert all(float(ln.split(" | ")[1]) == 0.0 for ln in rows), rows  # the same equations: no difference
+
+
+def test_a_replay_report_matches_outputs_by_name_when_as_many_differ():
+    """A model of as many outputs as the run's, other ones: the report took the recorded columns by the model's
+    names and failed on a name the run lacks; it compares the shared ones by name."""
+    from host.replay import ReplayResult
+
+    z = np.zeros((3, 3))
+    res = ReplayResult(np.arange(3.0), z, z[:, 0], z, np.ones((3, 3)), np.zeros(3, int), np.zeros((3, 3)),
+                       ("dx", "dz", "thx"), "0" * 64, False, [], [], {}, ("dx", "dy", "dz"))
+    text = res.report()
+    assert "the recorded run has outputs dx, dy, dz: differences in dx, dz" in text
+    assert [ln.split(" | ")[0] for ln in text.splitlines() if ln.startswith("| d")] == ["| dx", "| dz"]
