@@ -17,7 +17,7 @@ from fitgen.equations.model import Model
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, check_error
 from fitgen.fitting.holdout import POSTERIOR_UNITS, device_precision, estimator, posterior_units, unit_posterior
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR
-from fitgen.fitting.unitrecord import row_noise, stage_zero, zero_record
+from fitgen.fitting.unitrecord import row_noise, schedule_stage, stage_zero, zero_record
 from fitgen.physics.pose import POSE_NAMES, off_skin
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings
@@ -141,7 +141,7 @@ def check_rig(posterior: dict | None, meta: dict, capture, unit_file) -> tuple[f
     `tactile-host capture` passes on in ``schedule_stage``), else the one the unit was identified with (its
     ``posterior``), else RIG_ERROR. A schedule's default says nothing of the stage, so it does not override the
     identification's."""
-    made = meta.get("schedule_stage") if isinstance(meta.get("schedule_stage"), dict) else {}
+    made = schedule_stage(meta)
     if made.get("rig_error_given") is True and "rig_error" in made:
         return (_stage_error(made["rig_error"], f"{capture}'s meta: schedule_stage.rig_error", "--rig-error"),
                 "as the check capture's schedule was made for")
@@ -175,7 +175,7 @@ def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str]
     if same and mine["homed"] and theirs["homed"] and not mixed:
         return 0.0, f"the calibration's zero, reused ({_words(mine)} on a homed machine)"
     ours = _stage_error((posterior or {}).get("zero_error", ZERO_ERROR), "the unit's posterior: zero_error")
-    made = meta.get("schedule_stage") if isinstance(meta.get("schedule_stage"), dict) else {}
+    made = schedule_stage(meta)
     new = _stage_error(made.get("zero_error", ours), f"{capture}'s meta: schedule_stage.zero_error")
     error = min(float(np.hypot(ours, new)), MAX_STAGE_ERROR)
     if mixed:  # a run set the zero again (a controller reset): some rows are from another zero
@@ -196,9 +196,9 @@ def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float 
     """:func:`check` of ``model`` on the check capture ``ds`` (a dataset), as fitgen check runs it: the rows' noise
     as its meta says (fitgen.fitting.unitrecord.row_noise), units drawn from the posterior of ``unit_file`` where it
     has one, the stage's error ``rig_error`` or else :func:`check_rig`'s, the zero's ``zero_error`` or else
-    :func:`check_zero`'s, in ``precision`` or else the one the model was
-    fitted for; and where the rows' noise came from. InputError where the capture (``sha256``: its file's, before a
-    temperature compensation; default ``ds``'s) is the one the unit was identified on."""
+    :func:`check_zero`'s, in ``precision`` or else the one the model was fitted for; and where the rows' noise came
+    from. InputError where the capture (``sha256``: its file's, before a temperature compensation; default ``ds``'s)
+    is the one the unit was identified on."""
     posterior = unit_posterior(unit_file, sensor) if unit_file and Path(unit_file).is_file() else None
     if posterior and posterior.get("capture_sha256") == (sha256 or ds.sha256):
         raise InputError(f"{capture} is the capture {unit_file} was identified on: its rows are not held out, so they "

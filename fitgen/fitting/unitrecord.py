@@ -186,14 +186,20 @@ def drawing_for(given: str | None, meta: dict) -> tuple[str, str]:
     return "paper", ""
 
 
+def schedule_stage(meta: dict) -> dict:
+    """The stage a capture's schedule was made for, as `tactile-host capture` copies it into the meta
+    (``schedule_stage``: rig_error, zero_error, rig_error_given); {} where it records none."""
+    made = meta.get("schedule_stage")
+    return made if isinstance(made, dict) else {}
+
+
 def stage_errors(rig: float | None, zero: float | None, meta: dict, capture) -> tuple[float, float, str]:
     """The rig's and the zero's error identify takes for a capture with ``meta`` (mm rms per axis): ``rig`` and
     ``zero`` (--rig-error, --zero-error) where given, else those its schedule was made for (`fitgen schedule`
     recorded them, `tactile-host capture` passed them on as ``schedule_stage``), else RIG_ERROR and ZERO_ERROR; and
     where they came from, for the report. InputError naming ``capture``'s meta for a recorded one identify
     refuses (fitgen.fitting.capturecheck.check_error)."""
-    made = meta.get("schedule_stage")
-    made = made if isinstance(made, dict) else {}
+    made = schedule_stage(meta)
     out, recorded = [], []
     for value, key, flag, default in ((rig, "rig_error", "--rig-error", RIG_ERROR),
                                       (zero, "zero_error", "--zero-error", ZERO_ERROR)):

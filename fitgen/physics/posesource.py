@@ -21,9 +21,8 @@ def choose_poses(*, grid: str | None = None, random: int | None = None, poses: s
     refused as a box.
 
     ``scene``: its grid (its levels raised where it holds fewer than ``min_rows`` poses), or ``random`` poses in
-    its box. Otherwise the ``poses`` file, ``random``
-    poses in ``ranges`` (seeded by ``seed``; after the ``grid``'s poses when it is given too), or
-    the ``grid`` (default paper-sim). Any other combination is an InputError.
+    its box. Otherwise the ``poses`` file, ``random`` poses in ``ranges`` (seeded by ``seed``; after the ``grid``'s
+    poses when it is given too), or the ``grid`` (default paper-sim). Any other combination is an InputError.
     """
     chosen = [x for x in (grid, random, poses) if x is not None]
     if len(chosen) > 1 and not (len(chosen) == 2 and poses is None and not scene):
