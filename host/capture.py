@@ -299,7 +299,15 @@ def _kill_group(proc: subprocess.Popen) -> None:
         os.killpg(proc.pid, signal.SIGKILL)
     except ProcessLookupError:
         pass
-    proc.wait()
+    if proc.returncode is not None:
+        return
+    # waitpid itself, not proc.wait(): a Ctrl-C that lands just after Popen.wait's non-blocking acquire of its
+    # internal lock leaves that lock held, and a second wait() would block on it for ever (one CI run hung so)
+    try:
+        _, status = os.waitpid(proc.pid, 0)
+    except ChildProcessError:  # reaped already, by the interrupted wait
+        status = 0
+    proc.returncode = os.waitstatus_to_exitcode(status)
 
 
 @dataclass

@@ -182,6 +182,27 @@ def test_enter_and_trigger_waiters(tmp_path):
     assert log.read_text() == "2/3 2.0 -1.0\n"
 
 
+def test_a_trigger_is_killed_and_reaped_even_when_an_interrupted_wait_left_popens_lock_held():
+    """A Ctrl-C landing just after Popen.wait's non-blocking acquire of its internal lock leaves the lock held
+    (CPython's subprocess); killing the trigger's group must still reap it at once, not block on that lock."""
+    import subprocess
+    import threading
+
+    from host.capture import _kill_group
+
+    proc = subprocess.Popen(["sleep", "30"], start_new_session=True)
+    assert proc._waitpid_lock.acquire(False)  # as the interrupted wait left it
+    done = threading.Thread(target=_kill_group, args=(proc,), daemon=True)
+    done.start()
+    done.join(20)
+    alive = done.is_alive()
+    proc._waitpid_lock.release()
+    if alive:
+        proc.kill()
+    assert not alive, "_kill_group blocked on Popen's wait lock"
+    assert proc.returncode == -9 and proc.poll() == -9
+
+
 def test_ctrl_c_at_a_prompt_ends_its_line_and_goes_on():
     """What is written after Ctrl-C at a prompt (the capture's last line) starts a line of its own."""
     from host.prompt import ask_line
