@@ -140,6 +140,12 @@ def test_predict_and_report_cli(paper_fit, tmp_path):
         proc = run_cli("fitgen", "report", str(folder / "m.json"), "-o", str(tmp_path / "r.md"), *extra)
         assert_one_line_error(proc, 2, msg)
         assert not (tmp_path / "r.md").exists()
+    # a model of no rotation has no sweep to draw: --sensor would be ignored
+    dataclasses.replace(model, equations=model.equations[:3]).save(tmp_path / "d.json")
+    proc = run_cli("fitgen", "report", str(tmp_path / "d.json"), "--data", str(folder / "sim.csv"), "--plot",
+                   str(tmp_path / "p4"), "--sensor", "paper", "-o", str(tmp_path / "r.md"))
+    assert_one_line_error(proc, 2, "estimates no rotation (dx, dy, dz): leave --sensor out")
+    assert not (tmp_path / "r.md").exists() and not (tmp_path / "p4").exists()
 
 
 def test_report_shows_progress_through_its_figures_on_a_terminal(paper_fit, tmp_path, monkeypatch):
