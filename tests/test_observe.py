@@ -126,6 +126,10 @@ def test_verdicts_for_the_paper_layout():
     assert slide.unresolved() == []
     assert len(slide.results) == 9 + INSIDE  # rest + 2^3 corners (tilt held at 0)
     assert len(slide.table().splitlines()) == 2 + 9  # the corners tabled, the poses inside judged
+    # one component has one singular value: no second column to fill with nan, and nothing estimated jointly
+    press = observe(PAPER, PRESETS["press"].ranges, ("dz",))
+    assert press.table().splitlines()[0].split() == ["pose", "(dx", "dy", "dz", "thx", "thy)", "s_min", "dz", "[mm]"]
+    assert "nan" not in press.text() and "dz estimated alone" in press.text()
 
 
 def test_cli_table_and_words(tmp_path):

@@ -135,13 +135,14 @@ class ObserveReport:
 
     def table(self) -> str:
         comps = self.components
-        head = ["pose (dx dy dz thx thy)", "s_min", "s_2nd"] + [f"{c} [{u}]" for c, u in zip(comps, units_of(comps))]
+        single = len(comps) == 1  # one singular value: no second smallest to table
+        head = (["pose (dx dy dz thx thy)", "s_min"] + ([] if single else ["s_2nd"])
+                + [f"{c} [{u}]" for c, u in zip(comps, units_of(comps))])
         rows = []
         for r in self.results[:len(self.results) - self.inside]:
             pose = " ".join(f"{v:g}" for v in r.pose)
             s = sorted(r.singular_values)
-            second = s[1] if len(s) > 1 else float("nan")
-            rows.append([pose, f"{s[0]:.3g}", f"{second:.3g}"] + [_fmt_bound(b) for b in r.bounds])
+            rows.append([pose] + [f"{v:.3g}" for v in s[:1 if single else 2]] + [_fmt_bound(b) for b in r.bounds])
         widths = [max(len(h), *(len(row[i]) for row in rows)) for i, h in enumerate(head)]
         lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths))]
         lines.append("  ".join("-" * w for w in widths))
@@ -194,7 +195,8 @@ class ObserveReport:
             f"reading noise {self.noise:.3g} {self.units} rms (element noise {self.element_noise:g} and the ADC's "
             f"{self.lsb:.3g} {self.units} steps, {self.lsb / np.sqrt(12):.3g} rms)")
         head = (f"Observability: {noise}; bounds are 1-sigma "
-                f"Cramer-Rao limits with {', '.join(self.components)} estimated jointly.\n"
+                f"Cramer-Rao limits with {', '.join(self.components)} estimated "
+                f"{'jointly' if len(self.components) > 1 else 'alone'}.\n"
                 f"Singular values of d(readings)/d(pose) in {self.units} per mm or per deg.\n")
         return head + "\n" + self.table() + "\n\n" + "\n".join(self.verdicts()) + "\n"
 
