@@ -406,6 +406,15 @@ def test_flash_names_the_unit_a_model_was_fitted_for(paper_model, tmp_path):
                            model_for_sensor(paper_model, name, tmp_path / f"{len(name)}.json"))
             assert proc.returncode == 0, proc.stderr
             assert fake.active[1].sensor_id == carried and f"sensor id {carried!r}" in proc.stdout
+            assert ("note" in proc.stderr) == (carried != "paper")  # the fake starts with the drawing's id
+    # over a unit's own calibration, the drawing's model is flashed with a note that it is another sensor's
+    with FakeDevice(paper_model, "double", transport="tcp", sensor_id="unit-042") as fake:
+        proc = run_cli("tactile-host", "flash", "--port", fake.url,
+                       model_for_sensor(paper_model, "paper", tmp_path / "paper.json"))
+        assert proc.returncode == 0, proc.stderr
+        assert proc.stderr.strip() == ("tactile-host flash: note: the device held a model for sensor 'unit-042' and "
+                                       "now holds one for 'paper'; a model fitted for another sensor errs on this "
+                                       "unit (if it is the same unit, give --sensor-id)")
 
 
 def test_a_board_that_restarts_when_its_port_opens_is_waited_for(paper_model, paper_model_file):

@@ -34,6 +34,10 @@ def cmd_flash(args) -> int:
     print(f"flashed model {model.sha256} ({len(blob)}-byte {info.precision} blob{', fma' if args.fma else ''}, "
           f"sensor id {sensor_id!r}) to {args.port}: the device reports active model {answer}, "
           "read-back identical")
+    if info.sensor_id and info.sensor_id != sensor_id:  # the drawing's model on a calibrated unit errs by millimetres
+        print(f"tactile-host flash: note: the device held a model for sensor {info.sensor_id!r} and now holds one for "
+              f"{sensor_id!r}; a model fitted for another sensor errs on this unit (if it is the same unit, give "
+              "--sensor-id)", file=sys.stderr)
     return 0
 
 
