@@ -23,7 +23,7 @@ from pathlib import Path
 
 from fitgen import __version__
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import check_folder, write_atomic
+from fitgen.base.fileio import check_folder, staged_beside, write_atomic
 from fitgen.base.progress import Progress
 from fitgen.c.cgen import c_real
 from fitgen.c.codegen import write_header
@@ -295,17 +295,11 @@ def arduino_build(model: Model, cmap: ChannelMap, folder: str | Path, *, precisi
     ``measure(build_path, size)`` -> the size with the stack's peak (hil/sketch.py runs the example), for the
     build and for each setting tried in its place. ``rest``: as for :func:`render_arduino`."""
     folder = _library_folder(folder)
-    try:
-        partial = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".partial", dir=folder.parent))
-    except OSError as exc:  # e.g. under /proc, which a root user may "write"
-        raise InputError(f"cannot write {folder}: {exc.strerror}") from None
-    try:  # the library is rendered and built beside the folder, which it replaces only when it fits
+    with staged_beside(folder) as partial:  # the library replaces the folder's only when it fits
         render_arduino(model, cmap, partial, precision=precision, style=style, rest=rest)
         size = _build_fitting(model, cmap, partial, precision, style, board, build, build_path, measure, rest)
         _install(partial, folder)
         return size
-    finally:
-        shutil.rmtree(partial, ignore_errors=True)
 
 
 LIBRARY_FOLDER = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,62}")  # the library specification's root folder name

@@ -20,9 +20,6 @@ from __future__ import annotations
 import fcntl
 import json
 import os
-import signal
-import subprocess
-import sys
 from collections import Counter
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -34,11 +31,10 @@ from fitgen import __version__
 from fitgen.physics.dataset import load_meta, meta_path, pose_table, read_text, row_degc
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output, real_file, sha256_hex, write_atomic, write_target
-from fitgen.physics.pose import POSE_NAMES, as_poses, off_skin
+from fitgen.physics.pose import POSE_NAMES, as_poses
 
 from host.adc import AdcArray
 from host.clock import REAL_CLOCK
-from host.prompt import ask_line
 from host.readout import measure
 
 
@@ -49,12 +45,7 @@ class SpreadTooLarge(RuntimeError):
     """The readings of a pose kept moving more than allowed."""
 
 
-class TriggerFailed(RuntimeError):
-    """The trigger command did not succeed."""
-
-
 SAMPLES = 16  # samples averaged per row when neither --samples nor the schedule names a number
-TRIGGER_TIMEOUT = 60.0  # s a trigger may take to set a pose (--trigger-timeout): a hung one must not hang the capture
 
 
 @dataclass(frozen=True)
@@ -245,69 +236,6 @@ class RowWriter:
         if self.fd is not None:
             os.close(self.fd)
             self.fd = None
-
-
-def enter_waiter(schedule: Schedule, stdin=None, stderr=None):
-    """Wait for Enter on ``stdin``; 'q' or the end of input stops."""
-    stdin = stdin or sys.stdin
-    stderr = stderr or sys.stderr
-    total = len(schedule.poses)
-
-    def wait(i: int, pose) -> bool:
-        rest = " (the indenter lifted off the skin: the sensor at rest)" if off_skin(schedule.poses[i:i + 1])[0] else ""
-        prompt = f"pose {i + 1}/{total}: {schedule.describe(i)}{rest}; set it, then press Enter (q to stop) "
-        return ask_line(stdin, stderr, prompt) is not None
-
-    return wait
-
-
-def trigger_waiter(command: str, schedule: Schedule, timeout: float = TRIGGER_TIMEOUT):
-    """Run ``command`` (a shell command line) for each pose; it must exit 0 once the pose is set, within
-    ``timeout`` seconds (else it is killed, with whatever it started, and TriggerFailed says so).
-
-    Its environment has TM_POSE_INDEX (1-based), TM_POSE_COUNT and TM_DX, TM_DY, TM_DZ, TM_THX, TM_THY.
-    """
-    total = len(schedule.poses)
-
-    def wait(i: int, pose) -> bool:
-        env = dict(os.environ, TM_POSE_INDEX=str(i + 1), TM_POSE_COUNT=str(total),
-                   **{f"TM_{n.upper()}": repr(float(v)) for n, v in zip(POSE_NAMES, pose)})
-        try:  # a process group of its own: on expiry the shell and every command it started are killed
-            proc = subprocess.Popen(command, shell=True, env=env, start_new_session=True)
-        except OSError as exc:
-            raise TriggerFailed(f"trigger {command!r} could not run: {exc.strerror}") from None
-        try:
-            code = proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            _kill_group(proc)
-            raise TriggerFailed(f"trigger {command!r} did not exit within {timeout:g} s (--trigger-timeout) "
-                                f"at pose {i + 1}/{total} ({schedule.describe(i)})") from None
-        except BaseException:  # Ctrl-C: it no longer gets the terminal's SIGINT in its own group
-            _kill_group(proc)
-            raise
-        if code != 0:
-            raise TriggerFailed(f"trigger {command!r} failed with exit status {code} "
-                                f"at pose {i + 1}/{total} ({schedule.describe(i)})")
-        return True
-
-    return wait
-
-
-def _kill_group(proc: subprocess.Popen) -> None:
-    """SIGKILL to ``proc``'s process group (it leads one), then reap it."""
-    try:
-        os.killpg(proc.pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
-    if proc.returncode is not None:
-        return
-    # waitpid itself, not proc.wait(): a Ctrl-C that lands just after Popen.wait's non-blocking acquire of its
-    # internal lock leaves that lock held, and a second wait() would block on it for ever (one CI run hung so)
-    try:
-        _, status = os.waitpid(proc.pid, 0)
-    except ChildProcessError:  # reaped already, by the interrupted wait
-        status = 0
-    proc.returncode = os.waitstatus_to_exitcode(status)
 
 
 @dataclass

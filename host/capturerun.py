@@ -16,9 +16,9 @@ from fitgen.physics.dataset import thermistor_degc
 from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.capture import (SAMPLES, TRIGGER_TIMEOUT, SpreadTooLarge, TriggerFailed, capture, check_resume,
-                          designed_samples, enter_waiter, load_schedule, output_lock, prepare_output, prior_meta,
-                          simulated_sensor, trigger_waiter)
+from host.capture import (SAMPLES, SpreadTooLarge, capture, check_resume, designed_samples, load_schedule,
+                          output_lock, prepare_output, prior_meta, simulated_sensor)
+from host.posewait import TRIGGER_TIMEOUT, TriggerFailed, enter_waiter, trigger_waiter
 from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.stage import StageError, StageState

@@ -13,9 +13,7 @@ from __future__ import annotations
 import errno
 import fcntl
 import os
-import shutil
 import subprocess
-import tempfile
 import threading
 from importlib import resources
 from pathlib import Path
@@ -26,7 +24,7 @@ from fitgen import __version__
 from fitgen.c.codegen import render_header
 from fitgen.base.children import tied
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import check_folder, make_folder, write_in_folder
+from fitgen.base.fileio import check_folder, make_folder, staged_beside, write_in_folder
 from fitgen.equations.model import Model, check_input_units, load_model
 
 from host.cdrivers import chip_table, smbus_transfer
@@ -229,16 +227,10 @@ def pi_build(args) -> str:
     rest = model_rest(model, args.rest, required=False)
     folder = check_folder(args.output)
     make_folder(folder.parent)
-    try:
-        partial = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".partial", dir=folder.parent))
-    except OSError as exc:
-        raise InputError(f"cannot write {folder}: {exc.strerror}") from None
-    try:  # rendered and built beside the folder, which takes the new files only once they built
+    with staged_beside(folder) as partial:  # the folder takes the new files only once they built
         build_pi(render_pi(model, cmap, partial, precision=precision, style=args.style, tin=tin, tempcomp=tempcomp,
                            rest=rest), args.cc)
         binary = _install(partial, folder)
-    finally:
-        shutil.rmtree(partial, ignore_errors=True)
     note = capture_temperature_note(model, tempcomp, f"{binary.name} --tare") if tempcomp is not None else ""
     return (f"wrote {binary} ({describe_reads(cmap, tin, tempcomp)}, model {model.sha256[:12]}, {precision}); "
             f"on the Pi: {binary.name} --bus 1 --format csv"

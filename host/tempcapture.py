@@ -14,8 +14,8 @@ from fitgen.base.parse import parse_numbers
 from fitgen.physics.dataset import load_dataset
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.capture import (SpreadTooLarge, TriggerFailed, capture, enter_waiter, load_schedule, output_lock,
-                          simulated_sensor, trigger_waiter)
+from host.capture import SpreadTooLarge, capture, load_schedule, output_lock, simulated_sensor
+from host.posewait import TriggerFailed, enter_waiter, trigger_waiter
 from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers, kept, trigger_timeout
 from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone

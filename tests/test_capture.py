@@ -12,8 +12,8 @@ from fitgen.base.errors import InputError
 from fitgen.fitting.fit import fit_model
 from fitgen.physics.transfer import readings
 from host.adc import AdcArray
-from host.capture import (SpreadTooLarge, capture, enter_waiter, header_line, load_schedule, prepare_output,
-                          trigger_waiter)
+from host.capture import SpreadTooLarge, capture, header_line, load_schedule, prepare_output
+from host.posewait import enter_waiter, trigger_waiter
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
 from host.simbus import SimBus
@@ -188,7 +188,7 @@ def test_a_trigger_is_killed_and_reaped_even_when_an_interrupted_wait_left_popen
     import subprocess
     import threading
 
-    from host.capture import _kill_group
+    from host.posewait import _kill_group
 
     proc = subprocess.Popen(["sleep", "30"], start_new_session=True)
     assert proc._waitpid_lock.acquire(False)  # as the interrupted wait left it

@@ -5,8 +5,10 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import stat
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
 from fitgen.base.errors import InputError
@@ -279,3 +281,18 @@ def read_text(path: str | os.PathLike, what: str) -> str:
         raise InputError(f"{what} {path}: a folder, not a file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{what} {path}: cannot read: {exc}") from None
+
+
+@contextmanager
+def staged_beside(folder: Path):
+    """A new hidden folder beside ``folder`` (on its file system, so that what is built in it renames into
+    ``folder`` whole), removed on exit with whatever is left in it; InputError naming ``folder`` when it cannot
+    be made."""
+    try:
+        partial = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".partial", dir=folder.parent))
+    except OSError as exc:  # e.g. under /proc, which a root user may "write"
+        raise InputError(f"cannot write {folder}: {exc.strerror}") from None
+    try:
+        yield partial
+    finally:
+        shutil.rmtree(partial, ignore_errors=True)
