@@ -238,6 +238,7 @@ def test_sweep_on_the_uno_counts_its_cycles(tmp_path):
     (["--family", "integer", "--precision", "float", "--refine", "1"],
      "nothing to sweep: the refinement is swept on the harmonics family only (pick"),
     (["--family", "harmonics", "--precision", "fixed"], "nothing to sweep: fixed point has no harmonics family (pick"),
+    (["--family", "all", "--precision", "fixed", "--refine", "1"], "nothing to sweep: fixed point has no refinement (pick"),
     (["--refine", "1", "--family", "harmonics"], "whole pose"),
     (["--refine", "x"], "--refine"),
     (["--core", "z80"], "--core"),

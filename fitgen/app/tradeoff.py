@@ -63,20 +63,12 @@ def parse_target(spec: str | None, outputs: tuple[str, ...]) -> dict[str, float]
 
 
 def _why_empty(knobs: dict) -> str:
-    """Why the given knobs leave no point to sweep (fitgen.c.tradeoff._possible's rules), naming the one that
-    applies rather than every rule."""
-    from fitgen.c.tradeoff import NO_FIXED, REFINED_FAMILIES
+    """Why the given knobs leave no point to sweep: the rules (fitgen.c.tradeoff.left_out) that left their
+    combinations out, each once, rather than every rule."""
+    from fitgen.c.tradeoff import combinations, left_out
 
-    fams, precs = knobs.get("family") or (), knobs.get("precision") or ()
-    why = []
-    if any(knobs.get("refine") or ()) and fams and not set(fams) & set(REFINED_FAMILIES):
-        why.append(f"the refinement is swept on the {' and '.join(REFINED_FAMILIES)} family only")
-    if precs and set(precs) <= {"fixed"}:
-        if fams and set(fams) <= set(NO_FIXED):
-            why.append(f"fixed point has no {' and '.join(sorted(set(fams)))} family")
-        if all(knobs.get("refine") or (0,)):
-            why.append("fixed point has no refinement")
-    return "; ".join(why) or "no combination of the values given is one the sweep runs"
+    why = dict.fromkeys(left_out(k) for k in combinations(**knobs))
+    return "; ".join(w for w in why if w) or "no combination of the values given is one the sweep runs"
 
 
 def run_tradeoff(args, sensor) -> int:

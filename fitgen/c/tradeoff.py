@@ -97,9 +97,19 @@ def _styles(precision: str) -> tuple[str, ...]:
     return (FIXED_STYLE,) if precision == "fixed" else STYLES
 
 
+def left_out(k: Knobs) -> str:
+    """The rule that leaves ``k`` out of every sweep, in words; '' when a sweep can run it."""
+    if k.precision == "fixed" and k.family in NO_FIXED:
+        return f"fixed point has no {k.family} family"
+    if k.precision == "fixed" and k.refine:
+        return "fixed point has no refinement"
+    if k.refine and k.family not in REFINED_FAMILIES:
+        return f"the refinement is swept on the {' and '.join(REFINED_FAMILIES)} family only"
+    return ""
+
+
 def _possible(points: list[Knobs]) -> list[Knobs]:
-    return [k for k in points if not (k.precision == "fixed" and (k.family in NO_FIXED or k.refine))
-            and not (k.refine and k.family not in REFINED_FAMILIES)]
+    return [k for k in points if not left_out(k)]
 
 
 def full_grid() -> list[Knobs]:
@@ -123,11 +133,16 @@ def quick_grid() -> list[Knobs]:
 def grid_from(k=None, max_terms=None, family=None, precision=None, style=None, refine=None) -> list[Knobs]:
     """The product of the given value lists, each knob not given taking all its values (the
     refinement only where it is swept: REFINED_FAMILIES, float and double)."""
+    return _possible(combinations(k, max_terms, family, precision, style, refine))
+
+
+def combinations(k=None, max_terms=None, family=None, precision=None, style=None, refine=None) -> list[Knobs]:
+    """:func:`grid_from`'s points before the rules (:func:`left_out`) leave any out."""
     ks, caps = k or K_VALUES, max_terms or CAPS
     fams, precs, styles = family or FAMILY_NAMES, precision or PRECISIONS, style or STYLES
-    return _possible([Knobs(kk, cap, fam, p, s, r)
-                      for kk, cap, fam, p, r in itertools.product(ks, caps, fams, precs, refine or REFINE_STEPS)
-                      for s in (_styles(p) if p == "fixed" else styles)])
+    return [Knobs(kk, cap, fam, p, s, r)
+            for kk, cap, fam, p, r in itertools.product(ks, caps, fams, precs, refine or REFINE_STEPS)
+            for s in (_styles(p) if p == "fixed" else styles)]
 
 
 def default_target(outputs: tuple[str, ...]) -> dict[str, float]:
