@@ -672,7 +672,7 @@ def test_cli_schedule_capture_identify(tmp_path):
                    "dx=-1.5:1.5 dy=-1.5:1.5 dz=-1.5:0", "-o", str(sch))
     assert proc.returncode == 0, proc.stderr
     # the box it kept to, said so that the stage's limits can give it room
-    assert "within dx -1.5..1.5, dy -1.5..1.5, dz -1.5..-0.039 mm from first contact" in proc.stderr
+    assert "within dx -1.5..1.5 mm, dy -1.5..1.5 mm, dz -1.5..-0.039 mm from first contact" in proc.stderr
     header = sch.read_text().splitlines()[0]
     assert header == "dx,dy,dz"
     # the samples it was designed for, which tactile-host capture then averages (tests/test_capture.py)

@@ -220,12 +220,18 @@ def cmd_schedule(args) -> int:
               "sample", file=sys.stderr)
     print(f"wrote {len(poses)} poses ({info['distinct_poses']} distinct, {','.join(axes)}{rest}) to {args.output}",
           file=sys.stderr)
-    box = ", ".join(f"{a} {lo:g}..{hi:g}" for a, (lo, hi) in info["ranges"].items())
     left = (f"; {info['beyond_linear_range']} of its grid poses left out, past {100 * info['linear_share']:g} % of an "
             "element's linear range" if info["beyond_linear_range"] else "")
-    print(f"within {box} mm from first contact (the sensor's travel within --limits{left}{_pressed(info)}): give the "
+    print(f"within {_box(info)} from first contact (the sensor's travel within --limits{left}{_pressed(info)}): give the "
           "stage room for them and their approach (--stage-limits)", file=sys.stderr)
     return 0
+
+
+def _box(info: dict) -> str:
+    """A schedule's pose box in words, each axis in its unit: 'dx -1.5..1.5 mm, ..., thx -5..5 deg'."""
+    from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
+
+    return ", ".join(f"{a} {lo:g}..{hi:g} {POSE_UNITS[POSE_NAMES.index(a)]}" for a, (lo, hi) in info["ranges"].items())
 
 
 def _pressed(info: dict) -> str:
@@ -255,9 +261,7 @@ def _check_schedule(args, drawing, axes, samples: int, given: dict) -> int:
                                  rig_error=args.rig_error, zero_error=args.zero_error)
     write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples,
                                               "sensor_sha256": drawing.sha256, "transfer": drawing.transfer})
-    box = ", ".join(f"{a} {lo:g}..{hi:g} {'deg' if a.startswith('th') else 'mm'}"
-                    for a, (lo, hi) in info["ranges"].items())
-    print(f"wrote {len(poses)} random check poses ({box} from first contact, seed {args.seed}{_pressed(info)}) to "
+    print(f"wrote {len(poses)} random check poses ({_box(info)} from first contact, seed {args.seed}{_pressed(info)}) to "
           f"{args.output}: capture them as for the calibration (tactile-host capture --poses), then fitgen check "
           "MODEL CHECK.csv", file=sys.stderr)
     return 0

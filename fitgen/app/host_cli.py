@@ -262,7 +262,7 @@ def _readout_options(p) -> None:
     p.add_argument("--simulate", metavar="POSE|motion",
                    help="no hardware: a simulated bus with the sensor at POSE (e.g. dx=1,dz=-1 or 0.5,0,-1,0,0), or "
                         "'motion': sliding in a circle and pressed every 6 s")
-    p.add_argument("--sim-drift", metavar="ramp=5,over=300,tau=120,creep=0.002",
+    p.add_argument("--sim-drift", metavar="ramp=..,over=..,tau=..,creep=..",
                    help="simulated drift: a temperature ramp (degC over s), creep (V, time constant s); also "
                         "start=DEGC, seed=N (default ramp=5,over=600,tau=600,creep=0.002,start=25,seed=0)")
 
