@@ -228,6 +228,7 @@ def test_verify_says_in_one_line_what_is_wrong_with_the_compiler_or_runner(paper
     verify_with("--runner", "true", contains="answered 0 lines")
     verify_with("--cc", "arm-linux-gnueabihf-gcc", contains="cannot run here")
     verify_with("--cc", "arm-linux-gnueabihf-gcc", "--runner", "qemu-arm", contains="-static in --cc")
+    verify_with("--runner", "qemu-arm", contains="with a cross-compiler, e.g. --cc 'arm-linux-gnueabihf-gcc -static'")
     # the compiler's first lines say where the header was included from; the line shown is the error
     verify_with("--cc", "gcc -Dfabsf=", contains="error: expected")
 

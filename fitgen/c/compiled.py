@@ -107,7 +107,10 @@ class CompiledModel:
         runner = " ".join(self.runner + [self.binary.name])
         if proc.returncode != 0:
             said = " ".join(proc.stderr.split())[:200] or "no message"
-            hint = "; link it statically: -static in --cc" if self.runner and "ld-linux" in said else ""
+            hint = ("; link it statically: -static in --cc" if self.runner and "ld-linux" in said else
+                    # the runner emulates another machine and --cc built for this one
+                    "; build for the runner's machine with a cross-compiler, e.g. --cc 'arm-linux-gnueabihf-gcc "
+                    "-static' for qemu-arm" if self.runner and "Invalid ELF image" in said else "")
             raise InputError(f"the vector runner {runner} failed (exit status {proc.returncode}: {said}){hint}")
         rows = [ln.split() for ln in proc.stdout.splitlines()]
         if len(rows) != n:
