@@ -57,6 +57,7 @@ class ReadoutStats:
     late: int = 0  # samples that started later than the pace by more than a period
     clipped: int = 0  # samples with an input at its converter's full scale
     outside: int = 0  # samples with an input outside the model's fitted domain (status > 0)
+    far: int = 0  # samples estimated outside the model's fitted pose box by more than its width
     errors: ErrorCounts = field(default_factory=ErrorCounts)
 
     @property
@@ -74,6 +75,9 @@ class ReadoutStats:
             text += f"; {self.clipped} with a clipped input"
         if self.outside:
             text += f"; {self.outside} outside the model's domain"
+        if self.far:
+            text += (f"; {self.far} estimated outside the pose box the model was fitted in by more than its width: "
+                     "another sensor than the model's? a built unit needs its own calibration (docs/calibration.md)")
         return text
 
 
@@ -287,6 +291,7 @@ class Readout:
         self.corrections = corrections or Corrections(None if offsets is None else np.asarray(offsets, dtype=float))
         self.thermometer, self.observer, self.record = thermometer, observer, record
         self.stats = ReadoutStats(errors=array.counts)
+        self._far_cols, self._far_lo, self._far_hi = engine.model.far_bounds()  # as fitgen predict counts them
         self._write = sink.write if sink is not None else None
         self._flush = getattr(sink, "flush", None)
         self._rate_t, self._rate_n, self.rate = None, 0, 0.0
@@ -306,6 +311,9 @@ class Readout:
         st.samples += 1
         if status:
             st.outside += 1
+        if status >= 0 and self._far_cols:
+            est = np.asarray(out, dtype=float)[self._far_cols]
+            st.far += bool(np.any((est < self._far_lo) | (est > self._far_hi)))
         if self.array.clipped.any():
             st.clipped += 1
         if self.observer is not None:

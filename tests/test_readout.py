@@ -117,6 +117,24 @@ def test_readout_streams_timestamped_estimates_at_a_rate(sensor, model, c_engine
     assert np.all(table[:, -1] == 0)
 
 
+def test_estimates_far_outside_the_fitted_pose_box_are_counted_as_predict_counts_them(sensor, model):
+    """A sample estimated outside the model's fitted pose box by more than its width (the drawing's model on a built
+    unit reads so) is counted and said in the summary, as `fitgen predict` says it of a dataset's rows."""
+    import dataclasses
+
+    def boxed(dx):
+        return dataclasses.replace(model, fit_info={**model.fit_info, "held_out": {"box": {"dx": dx, "dz": [-2, 0]}}})
+
+    for dx, far in (([-2, 2], False), ([0, 0.2], True)):  # POSE's dx 1 lies 0.8 past a box 0.2 wide
+        bus, arr, clock = rig(sensor)
+        m = boxed(dx)
+        sink = io.StringIO()
+        stats = Readout(arr, PythonEngine(m), sink, LineFormat("csv", 8, m.output_names), clock=clock).run(count=10)
+        _, table = parse_csv(LineFormat("csv", 8, m.output_names).header + sink.getvalue())
+        assert stats.far == (10 if far else 0) == int(m.far_outside(table[:, 9:14]).sum())
+        assert ("estimated outside the pose box the model was fitted in" in stats.summary()) == far
+
+
 def test_a_rate_above_what_the_converters_allow_counts_late_samples(sensor, model):
     bus, arr, clock = rig(sensor)
     reader = Readout(arr, PythonEngine(model), io.StringIO(), LineFormat("csv", 8, model.output_names), clock=clock)

@@ -324,15 +324,10 @@ def predict_notes(model: Model, pred: np.ndarray, status: np.ndarray, precision:
         [f"{refused} row{'s' * (refused != 1)} with no estimate (status -1: a reading not finite in "
          f"{precision})"] if refused else [])
     box = model.held_out_box
-    cols = [(j, o) for j, o in enumerate(model.output_names) if o in box]
-    if cols and len(pred):
-        lo = np.array([box[o][0] for _, o in cols])
-        hi = np.array([box[o][1] for _, o in cols])
-        est = pred[:, [j for j, _ in cols]]
-        with np.errstate(invalid="ignore"):
-            far = np.any((est < lo - (hi - lo)) | (est > hi + (hi - lo)), axis=1) & (status >= 0)
+    if box and len(pred):
+        far = model.far_outside(pred) & (status >= 0)
         if n := int(far.sum()):
-            where = ", ".join(f"{o} {lo[i]:g}..{hi[i]:g}" for i, (_, o) in enumerate(cols))
+            where = ", ".join(f"{o} {lo:g}..{hi:g}" for o, (lo, hi) in box.items())
             notes.append(f"{n} row{'s' * (n != 1)} estimated outside the pose box the model "
                          f"was fitted in ({where}) by more than its width: readings of another sensor than the "
                          "model's? a built unit needs its own calibration (docs/calibration.md)")

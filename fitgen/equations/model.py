@@ -77,6 +77,24 @@ class Model:
         box = (self.fit_info.get("held_out") or {}).get("box") or {}
         return {o: (float(box[o][0]), float(box[o][1])) for o in self.output_names if o in box}
 
+    def far_bounds(self) -> tuple[list[int], np.ndarray, np.ndarray]:
+        """(output columns, low, high): an estimate below low or above high lies outside :attr:`held_out_box` by
+        more than the box's width, as readings of another sensor do (the drawing's model on a built unit's). No
+        columns without a box."""
+        box = self.held_out_box
+        cols = [j for j, o in enumerate(self.output_names) if o in box]
+        lo = np.array([box[self.output_names[j]][0] for j in cols])
+        hi = np.array([box[self.output_names[j]][1] for j in cols])
+        return cols, lo - (hi - lo), hi + (hi - lo)
+
+    def far_outside(self, pred: np.ndarray) -> np.ndarray:
+        """Per row of estimates ``pred`` (rows x outputs), whether one lies beyond :meth:`far_bounds`; a
+        non-finite estimate is not counted."""
+        pred = np.atleast_2d(np.asarray(pred, dtype=float))
+        cols, lo, hi = self.far_bounds()
+        with np.errstate(invalid="ignore"):
+            return np.any((pred[:, cols] < lo) | (pred[:, cols] > hi), axis=1)
+
     @property
     def held_out_rest(self) -> np.ndarray | None:
         """The readings the model's sensor gives at rest, noise-free (its ``held_out`` record's ``rest``, one per
