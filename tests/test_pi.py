@@ -95,7 +95,27 @@ def test_pi_build_under_qemu_gives_the_python_readout(model, standin_build):
     expected, _ = _python_lines(model, 6)
     # the same readings from the same conversions, the same float estimates, to every printed digit
     assert [ln.split(",", 1)[1] for ln in lines[1:]] == [ln.split(",", 1)[1] for ln in expected]
-    assert "6 samples; I2C errors 0" in res.stderr
+    assert "6 samples; I2C errors 0" in res.stderr and "estimated outside" not in res.stderr
+
+
+def test_pi_build_counts_estimates_far_outside_the_fitted_box_as_read_does(model, tmp_path):
+    """tm_pi's summary counts the samples estimated outside the model's fitted pose box by more than its width,
+    by the bounds tactile-host read and fitgen predict use (Model.far_bounds): here a box dx -0.1..0.1 that
+    GMR_POSE's dx 0.5 lies 0.4 past, on every sample."""
+    import dataclasses
+
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    boxed = dataclasses.replace(model, fit_info={**model.fit_info, "held_out": {"box": {"dx": [-0.1, 0.1],
+                                                                                      "dz": [-2, 0]}}})
+    build = build_pi(render_pi(boxed, parse_spec(MAP), tmp_path, precision="float"), standin=True)
+    cmap, bus, clock = _bus()
+    res = StandIn(bus, clock).run(["qemu-arm", str(build), "--count", "6"])
+    assert res.returncode == 0, res.stderr
+    est = np.array([[float(x) for x in ln.split(",")[1 + model.n_inputs:-1]] for ln in res.stdout.splitlines()[1:]])
+    assert int(boxed.far_outside(est).sum()) == 6
+    assert res.stderr.rstrip().endswith("; 6 estimated outside the pose box the model was fitted in by more than "
+                                        "its width: another sensor than the model's?")
 
 
 def test_pi_build_counts_faults_as_python_does_and_stops_on_a_silent_chip(model, standin_build):

@@ -216,6 +216,20 @@ static void print_band(const az_state *az)
     fprintf(stderr, "\n");
 }
 
+/* 1 when an estimate lies outside the model's fitted pose box by more than its width (PI_FAR_*), as
+ * tactile-host read counts it: readings of another sensor than the model's */
+static int far_outside(const tm_real out[TM_N_OUTPUTS])
+{
+    int j;
+    for (j = 0; j < PI_FAR_N; ++j) {
+        const double x = (double)out[PI_FAR_COL[j]];
+        if (x < PI_FAR_LO[j] || x > PI_FAR_HI[j]) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
 static void print_line(int jsonl, double t, const double v[TM_N_INPUTS], const tm_real out[TM_N_OUTPUTS], int status)
 {
     static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
@@ -252,8 +266,8 @@ int main(int argc, char **argv)
     static az_state az; /* the window: a few kB, not on the stack */
     double rate_hz = 0.0;
     int jsonl = 0, i, st = ADC_OK;
-    long n = 0, late = 0;
-    char err[200], late_text[40] = "";
+    long n = 0, late = 0, far = 0;
+    char err[200], late_text[40] = "", far_text[200] = "";
     i2c_linux port;
     adc_i2c i2c;
     adc_array array;
@@ -460,6 +474,9 @@ int main(int argc, char **argv)
             print_update(&az, t_mono, shift);
         }
         print_line(jsonl, t, v, out, status);
+        if (status >= 0 && far_outside(out)) {
+            ++far;
+        }
         ++n;
     }
     fflush(stdout);
@@ -476,11 +493,16 @@ int main(int argc, char **argv)
     if (late) {
         snprintf(late_text, sizeof late_text, "; %ld late", late);
     }
+    if (far) {
+        snprintf(far_text, sizeof far_text, "; %ld estimated outside the pose box the model was fitted in by more "
+                 "than its width: another sensor than the model's?", far);
+    }
     fprintf(stderr, "tm_pi: %s%ld samples; I2C errors %lu (nack %lu, timeout %lu, stuck %lu, other %lu; %lu retries, "
-                    "%lu resets)%s\n", stop_signal ? "stopped: " : "", n,
+                    "%lu resets)%s%s\n", stop_signal ? "stopped: " : "", n,
             (unsigned long)(total.nack + total.timeout + total.stuck + total.other),
             (unsigned long)total.nack, (unsigned long)total.timeout, (unsigned long)total.stuck,
-            (unsigned long)total.other, (unsigned long)total.retries, (unsigned long)total.resets, late_text);
+            (unsigned long)total.other, (unsigned long)total.retries, (unsigned long)total.resets, late_text,
+            far_text);
     if (st != ADC_OK) {
         fprintf(stderr, "tm_pi: error: %s %s; stopped after %ld samples\n",
                 failed ? failed : array.failed_chip >= 0 ? ADC_MAP_LABELS[array.failed_chip] : "general-call reset",
