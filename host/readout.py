@@ -311,15 +311,17 @@ class Readout:
         st.samples += 1
         if status:
             st.outside += 1
+        far = False
         if status >= 0 and self._far_cols:
             est = np.asarray(out, dtype=float)[self._far_cols]
-            st.far += bool(np.any((est < self._far_lo) | (est > self._far_hi)))
+            far = bool(np.any((est < self._far_lo) | (est > self._far_hi)))
+            st.far += far
         if self.array.clipped.any():
             st.clipped += 1
         if self.observer is not None:
-            self._publish(t, raw, v, out, status, temp)
+            self._publish(t, raw, v, out, status, temp, far)
 
-    def _publish(self, t, raw, v, out, status, temp) -> None:
+    def _publish(self, t, raw, v, out, status, temp, far=False) -> None:
         now = self.clock.monotonic()
         if self._rate_t is None:
             self._rate_t = now
@@ -329,7 +331,7 @@ class Readout:
         az = self.corrections.autozero
         self.observer({
             "t": t, "v": [float(x) for x in v], "raw": [float(x) for x in raw],
-            "out": {o: float(x) for o, x in zip(self.fmt.outputs, out)}, "status": int(status), "temp": _num(temp),
+            "out": {o: float(x) for o, x in zip(self.fmt.outputs, out)}, "status": int(status), "far": far, "temp": _num(temp),
             "rate": self.rate, "errors": {**self.array.counts.as_dict(), "total": self.array.counts.total},
             "zero": {"updates": 0 if az is None else len(az.updates),
                      "last": None if az is None or not az.updates else az.updates[-1].describe()}})

@@ -103,6 +103,7 @@ class ReplayResult:
     notes: list
     header: dict  # the re-estimation's run-record header: its model and the corrections at the start
     recorded_outputs: tuple = ()  # the names of the recorded estimates' columns (the run's header's)
+    far: np.ndarray | None = None  # per sample: estimated far outside the model's fitted pose box (Model.far_outside)
 
     @property
     def exact(self) -> bool:
@@ -113,6 +114,7 @@ class ReplayResult:
         n_up = sum(1 for u in self.updates if u.t <= self.t[i])
         return {"t": float(self.t[i]), "v": self.v[i].tolist(), "raw": self.raw[i].tolist(),
                 "out": {o: float(x) for o, x in zip(self.outputs, self.out[i])}, "status": int(self.status[i]),
+                "far": bool(self.far is not None and self.far[i]),
                 "temp": None if not math.isfinite(self.temp[i]) else float(self.temp[i]), "rate": None,
                 "errors": None, "zero": {"updates": n_up, "last": self.updates[n_up - 1].describe() if n_up else None}}
 
@@ -208,7 +210,8 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     az = corrections.autozero
     return ReplayResult(run.t, run.raw, run.temp, v_all, out_all, st_all, run.out,
                         tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes,
-                        header, tuple(o for o in h.get("outputs", ()) if isinstance(o, str)))
+                        header, tuple(o for o in h.get("outputs", ()) if isinstance(o, str)),
+                        model.far_outside(out_all) & (st_all >= 0))
 
 
 def _estimate(run: Run, model: Model, precision: str, corrections: Corrections, progress):

@@ -374,6 +374,15 @@ def test_a_replay_in_small_blocks_is_the_readout_sample_by_sample(rest_model_fil
     res = R.replay(R.load_run(str(run)))
     assert res.exact and np.array_equal(res.out, res.recorded) and len(res.updates) == n_updates
     assert res.sample(0)["errors"] is None  # the page says "not recorded", not counts of 0
+    assert not any(res.sample(i)["far"] for i in range(len(res.t)))  # at rest, inside the model's box
+    import dataclasses
+
+    from fitgen.equations.model import load_model
+    m = load_model(rest_model_file)  # a box of dx 5..5.2 that rest's dx 0 lies 4.8 below: every sample far
+    boxed = dataclasses.replace(m, fit_info={**m.fit_info, "held_out": {**m.fit_info.get("held_out", {}),
+                                                                      "box": {"dx": [5.0, 5.2]}}})
+    far = R.replay(R.load_run(str(run)), model=boxed)
+    assert all(far.sample(i)["far"] for i in range(len(far.t)))
     off = R.replay(R.load_run(str(run)), auto_zero=False)
     monkeypatch.setattr(R, "BLOCK", 1)
     one = R.replay(R.load_run(str(run)), auto_zero=False)

@@ -513,6 +513,21 @@ def test_page_follows_tactile_host_view(browser, device_model, tmp_path):
     assert "stopped" in err
 
 
+def test_page_says_when_the_estimate_lies_far_outside_the_fitted_box(browser, served):
+    """Every reading inside its range (status 0) and the estimate far outside the model's fitted pose box (the
+    drawing's model on a built unit): the domain cell says so, as a warning; a sample back inside clears it."""
+    hub, srv = served()
+    hub.publish({**sample(0), "far": True})
+    browser.get(srv.url)
+    page_wait(browser, lambda d: int(text(d, "count")) == 1, what="the sample")
+    dom = browser.find_element("id", "domain")
+    assert dom.text == "inside; estimate far outside the fitted pose box: another sensor than the model's?"
+    assert dom.get_attribute("class") == "warn"
+    hub.publish({**sample(1), "far": False})
+    page_wait(browser, lambda d: text(d, "domain") == "inside", what="the domain cleared")
+    assert browser.find_element("id", "domain").get_attribute("class") == "ok"
+
+
 def test_page_reconnects_and_loses_nothing(browser, served):
     hub, srv = served(backlog=1 << 17)  # the gap lasts seconds on a loaded machine: the ring must outlast it
     port = srv._httpd.server_address[1]

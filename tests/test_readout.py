@@ -128,10 +128,12 @@ def test_estimates_far_outside_the_fitted_pose_box_are_counted_as_predict_counts
     for dx, far in (([-2, 2], False), ([0, 0.2], True)):  # POSE's dx 1 lies 0.8 past a box 0.2 wide
         bus, arr, clock = rig(sensor)
         m = boxed(dx)
-        sink = io.StringIO()
-        stats = Readout(arr, PythonEngine(m), sink, LineFormat("csv", 8, m.output_names), clock=clock).run(count=10)
+        sink, seen = io.StringIO(), []
+        stats = Readout(arr, PythonEngine(m), sink, LineFormat("csv", 8, m.output_names), clock=clock,
+                        observer=seen.append).run(count=10)
         _, table = parse_csv(LineFormat("csv", 8, m.output_names).header + sink.getvalue())
         assert stats.far == (10 if far else 0) == int(m.far_outside(table[:, 9:14]).sum())
+        assert [s["far"] for s in seen] == [far] * 10  # what the live page warns of
         assert ("estimated outside the pose box the model was fitted in" in stats.summary()) == far
 
 

@@ -147,7 +147,10 @@
     });
     $("rate").textContent = s.rate === null || s.rate === undefined ? "-" : s.rate.toFixed(1);
     const dom = $("domain");
-    if (s.status === 0) { dom.textContent = "inside"; dom.className = "ok"; }
+    if (s.status === 0 && s.far) {  // every reading in its range, the estimate not: another sensor's readings
+      dom.textContent = "inside; estimate far outside the fitted pose box: another sensor than the model's?";
+      dom.className = "warn";
+    } else if (s.status === 0) { dom.textContent = "inside"; dom.className = "ok"; }
     else if (s.status < 0) { dom.textContent = "non-finite reading"; dom.className = "bad"; }
     else {
       const which = meta.inputs.filter((_, k) => s.status & (1 << k));
