@@ -60,15 +60,22 @@ class ReadoutStats:
     far: int = 0  # samples estimated outside the model's fitted pose box by more than its width
     errors: ErrorCounts = field(default_factory=ErrorCounts)
 
+    first: float = 0.0  # s (monotonic): when the first sample began
+    last: float = 0.0  # and the last
+
     @property
     def rate(self) -> float:
-        return self.samples / self.elapsed if self.elapsed > 0 else 0.0
+        """Samples per second from the first sample's start to the last's: n - 1 intervals, not n samples over
+        the run, which would count the last sample's pace twice (2 samples at --rate 1 read 2 Hz)."""
+        span = self.last - self.first
+        return (self.samples - 1) / span if self.samples > 1 and span > 0 else 0.0
 
     def summary(self) -> str:
         e = self.errors
         errs = (f"I2C errors {e.total} (nack {e.nack}, timeout {e.timeout}, stuck {e.stuck}, other {e.other}; "
                 f"{e.retries} retries, {e.resets} resets)")
-        text = f"{self.samples} samples in {self.elapsed:.2f} s ({self.rate:.1f} Hz); {errs}"
+        pace = f" ({self.rate:.1f} Hz)" if self.samples > 1 else ""
+        text = f"{self.samples} samples in {self.elapsed:.2f} s{pace}; {errs}"
         if self.late:
             text += f"; {self.late} late"
         if self.clipped:
@@ -365,6 +372,9 @@ class Readout:
                         st.late += 1
                         next_t = now
                     next_t += period
+                st.last = clock.monotonic()
+                if not st.samples:
+                    st.first = st.last
                 self.step()
                 if self._flush is not None and clock.monotonic() - last_flush >= flush_every:
                     self._flush()

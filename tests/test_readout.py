@@ -137,6 +137,19 @@ def test_estimates_far_outside_the_fitted_pose_box_are_counted_as_predict_counts
         assert ("estimated outside the pose box the model was fitted in" in stats.summary()) == far
 
 
+def test_the_rate_achieved_is_the_samples_pace_not_samples_over_the_run(sensor, model):
+    """n samples paced at R Hz span n - 1 periods: the rate the summary reports is R, however few the samples
+    (2 samples at 1 Hz read 2.0 Hz when counted over the run); one sample has no rate to report."""
+    for rate, count in ((1.0, 2), (2.0, 5), (10.0, 10)):
+        bus, arr, clock = rig(sensor)
+        reader = Readout(arr, PythonEngine(model), io.StringIO(), LineFormat("csv", 8, model.output_names),
+                         clock=clock)
+        stats = reader.run(rate=rate, count=count)
+        assert stats.rate == pytest.approx(rate, rel=1e-6) and f"({rate:.1f} Hz)" in stats.summary()
+    stats = reader.run(count=1)
+    assert stats.rate == 0 and "Hz" not in stats.summary()
+
+
 def test_a_rate_above_what_the_converters_allow_counts_late_samples(sensor, model):
     bus, arr, clock = rig(sensor)
     reader = Readout(arr, PythonEngine(model), io.StringIO(), LineFormat("csv", 8, model.output_names), clock=clock)
