@@ -26,6 +26,7 @@ from fitgen.physics.transfer import readings
 
 from host.adc import AdcArray, DeviceSilent, ErrorCounts
 from host.clock import REAL_CLOCK
+from host.temperature import T_RANGE
 
 FORMATS = ("csv", "jsonl")
 
@@ -50,6 +51,11 @@ class LineFormat:
         return self._fmt % (t, *volts, *outputs, status)
 
 
+UNCOMPENSATED = "not compensated for temperature: the thermistor read none (is it connected?)"
+TEMP_OUTSIDE = (f"at a temperature outside {T_RANGE[0]:g}..{T_RANGE[1]:g} degC, where the compensation is "
+                "extrapolated (a thermistor off its divider's range?)")
+
+
 @dataclass
 class ReadoutStats:
     samples: int = 0
@@ -58,6 +64,8 @@ class ReadoutStats:
     clipped: int = 0  # samples with an input at its converter's full scale
     outside: int = 0  # samples with an input outside the model's fitted domain (status > 0)
     far: int = 0  # samples estimated outside the model's fitted pose box by more than its width
+    uncompensated: int = 0  # samples a temperature compensation was given for and the thermistor read none
+    temp_outside: int = 0  # samples whose temperature lies outside the range a compensation is checked over
     errors: ErrorCounts = field(default_factory=ErrorCounts)
 
     first: float = 0.0  # s (monotonic): when the first sample began
@@ -82,6 +90,10 @@ class ReadoutStats:
             text += f"; {self.clipped} with a clipped input"
         if self.outside:
             text += f"; {self.outside} outside the model's domain"
+        if self.uncompensated:
+            text += f"; {self.uncompensated} {UNCOMPENSATED}"
+        if self.temp_outside:
+            text += f"; {self.temp_outside} {TEMP_OUTSIDE}"
         if self.far:
             text += (f"; {self.far} estimated outside the pose box the model was fitted in by more than its width: "
                      "another sensor than the model's? a built unit needs its own calibration (docs/calibration.md)")
@@ -291,12 +303,12 @@ class Readout:
 
     def __init__(self, array: AdcArray, engine, sink, fmt: LineFormat, *, clock=REAL_CLOCK,
                  offsets: np.ndarray | None = None, corrections: Corrections | None = None, thermometer=None,
-                 observer=None, record: RunRecord | None = None):
+                 observer=None, record: RunRecord | None = None, warn=None):
         if engine.n_inputs != array.n:
             raise InputError(f"the channel map reads {array.n} elements; the model takes {engine.n_inputs}")
         self.array, self.engine, self.sink, self.fmt, self.clock = array, engine, sink, fmt, clock
         self.corrections = corrections or Corrections(None if offsets is None else np.asarray(offsets, dtype=float))
-        self.thermometer, self.observer, self.record = thermometer, observer, record
+        self.thermometer, self.observer, self.record, self.warn = thermometer, observer, record, warn
         self.stats = ReadoutStats(errors=array.counts)
         self._far_cols, self._far_lo, self._far_hi = engine.model.far_bounds()  # as fitgen predict counts them
         self._write = sink.write if sink is not None else None
@@ -325,8 +337,24 @@ class Readout:
             st.far += far
         if self.array.clipped.any():
             st.clipped += 1
+        if self.corrections.tempcomp is not None:
+            self._check_temperature(temp)
         if self.observer is not None:
             self._publish(t, raw, v, out, status, temp, far)
+
+    def _check_temperature(self, temp: float) -> None:
+        """Count a sample the compensation did not apply to, or applied outside its range; the first of each kind
+        is said at once (``warn``): a live run's estimates are off from then on, not at its end."""
+        st = self.stats
+        if not math.isfinite(temp):
+            st.uncompensated += 1
+            if st.uncompensated == 1 and self.warn is not None:
+                self.warn(f"sample {st.samples} {UNCOMPENSATED}; the summary counts every such sample")
+        elif not T_RANGE[0] <= temp <= T_RANGE[1]:
+            st.temp_outside += 1
+            if st.temp_outside == 1 and self.warn is not None:
+                self.warn(f"sample {st.samples} {TEMP_OUTSIDE}: {temp:.1f} degC; the summary counts every such "
+                          "sample")
 
     def _publish(self, t, raw, v, out, status, temp, far=False) -> None:
         now = self.clock.monotonic()

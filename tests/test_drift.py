@@ -147,6 +147,28 @@ def test_read_and_tempcomp_c_refuse_the_same_compensation_files(rest_model_file,
                                   str(path), "--count", "1"), contains=said)
 
 
+def test_read_says_at_once_when_its_compensation_cannot_apply(rest_model_file, tmp_path):
+    """A thermistor that reads nothing (its divider at the rail: open or shorted) leaves the readings
+    uncompensated, and one outside the range a compensation is checked over extrapolates it: each is a warning
+    at its first sample and a count in the summary; a thermistor in range, neither."""
+    path = tmp_path / "tc.json"
+    path.write_text(json.dumps({"kind": TempComp.KIND, "version": 1, "t0": 25.0, "offset_v_per_degc": [1e-5] * 8,
+                                "gain_per_degc": [-1e-4] * 8}))
+    for start, said in (("-200", "not compensated for temperature: the thermistor read none (is it connected?)"),
+                        ("140", "at a temperature outside -40..125 degC, where the compensation is extrapolated"),
+                        ("25", None)):
+        proc = run_cli("tactile-host", "read", "--model", rest_model_file, "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+                       "--simulate", "0,0,0,0,0", "--sim-drift", f"start={start},ramp=0", "--temp-comp", str(path),
+                       "--count", "5")
+        assert proc.returncode == 0, proc.stderr
+        lines = proc.stderr.splitlines()
+        if said is None:
+            assert len(lines) == 1 and "compensat" not in proc.stderr, proc.stderr
+            continue
+        assert lines[0].startswith(f"tactile-host read: warning: sample 1 {said}") and len(lines) == 2, proc.stderr
+        assert f"; 5 {said}" in lines[1]
+
+
 def test_a_missing_compensation_file_is_said_once(rest_model_file, tmp_path):
     """A --temp-comp file that is not there: that, in one line, not also 'not JSON'."""
     gone = tmp_path / "nothere.json"

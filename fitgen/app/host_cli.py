@@ -41,6 +41,11 @@ def cmd_flash(args) -> int:
     return 0
 
 
+def _warn(prog: str):
+    """A readout's warning as one line on stderr, at once."""
+    return lambda text: print(f"{prog}: warning: {text}", file=sys.stderr, flush=True)
+
+
 def cmd_read(args) -> int:
     import os
 
@@ -59,7 +64,7 @@ def cmd_read(args) -> int:
         out = sink or sys.stdout
         out.write(fmt.header)
         reader = Readout(s.array, s.engine, out, fmt, clock=s.clock, corrections=s.corrections,
-                         thermometer=s.thermometer, record=record)
+                         thermometer=s.thermometer, record=record, warn=_warn("tactile-host read"))
         with StopFlag() as stop:
             stats = reader.run(rate=s.rate, count=s.count, duration=s.duration, stop=stop)
         how = "stopped" if stop.stopped else "done"
@@ -95,7 +100,8 @@ def cmd_view(args) -> int:
         print(f"tactile-host view: serving {server.url} ({s.source}); Ctrl-C stops", file=sys.stderr, flush=True)
         fmt = LineFormat("csv", s.model.n_inputs, s.model.output_names)
         reader = Readout(s.array, s.engine, None, fmt, clock=s.clock, corrections=s.corrections,
-                         thermometer=s.thermometer, observer=hub.publish, record=s.record(args.record))
+                         thermometer=s.thermometer, observer=hub.publish, record=s.record(args.record),
+                         warn=_warn("tactile-host view"))
         with StopFlag() as stop:
             stats = reader.run(rate=s.rate, count=s.count, duration=s.duration, stop=stop)
         ended = not stop.stopped
