@@ -65,7 +65,8 @@ ADC_DEFAULTS = {"retries": "5", "sensor": "paper", "seed": 0}
 
 
 def adc_defaults(args) -> None:
-    """The options of ADC_DEFAULTS that were left out take their defaults."""
+    """The options of ADC_DEFAULTS that were left out take their defaults (``args.adc_given``: those typed)."""
+    args.adc_given = {name for name in ADC_DEFAULTS if getattr(args, name) is not None}
     for name, value in ADC_DEFAULTS.items():
         if getattr(args, name) is None:
             setattr(args, name, value)
@@ -76,11 +77,15 @@ def open_bus_from_args(args, cmap, simulate_pose, *, motion=None, drift=None, th
     sim_opts = [o for o, v in (("--sim-noise", args.sim_noise), ("--sim-fault", args.sim_fault),
                                ("--sim-offsets", args.sim_offsets),
                                ("--sim-flicker", args.sim_flicker)) if v is not None]
+    if "seed" in getattr(args, "adc_given", ()):
+        sim_opts.append("--seed")
     if simulate_pose is None:
         if sim_opts:
             raise InputError(f"{sim_opts[0]} needs --simulate")
         number = args.bus if args.bus is not None else (cmap.bus if cmap.bus is not None else 1)
         return open_bus(number), REAL_CLOCK
+    if getattr(args, "bus", None) is not None:
+        raise InputError("--bus does not go with --simulate, which opens no bus (without it, it would be ignored)")
     bus = simulated_bus(cmap, load_sensor(args.sensor), simulate_pose, clock=REAL_CLOCK, noise=args.sim_noise,
                         offsets=args.sim_offsets, faults=args.sim_fault or (), seed=args.seed, motion=motion,
                         drift=drift, thermistor=thermistor, flicker=args.sim_flicker)
@@ -152,6 +157,8 @@ class ReadoutSession:
         self.duration = parse_positive(args.duration, "--duration") if args.duration is not None else None
         check_depends(args)
         sensor_given = args.sensor is not None
+        refuse_alone([(sensor_given, "--sensor", "--simulate, --tare or --auto-zero",
+                       args.simulate is not None or args.tare or args.auto_zero)])
         adc_defaults(args)
         tare_n = parse_positive(args.tare_samples, "--tare-samples", integer=True)
         if tare_n > MAX_TARE_SAMPLES:  # tm_pi's limit: at 860 SPS a tare of more would keep the sensor still for hours

@@ -422,6 +422,11 @@ def test_fault_and_pose_specs():
     (["--adc", TWO_1115, "--pga", "5"], "invalid choice"),
     (["--adc", TWO_1115, "--simulate", "dx=0", "--rate", "-3"], "--rate must be a finite number > 0"),
     (["--adc", TWO_1115, "--sim-noise", "0.01"], "--sim-noise needs --simulate"),
+    # each would be ignored: the seed without a simulation, a bus that a simulation opens no more than a sensor
+    # file read neither for a simulation nor for a tare's rest
+    (["--adc", TWO_1115, "--seed", "3"], "--seed needs --simulate"),
+    (["--adc", TWO_1115, "--simulate", "dx=1", "--bus", "5"], "--bus does not go with --simulate"),
+    (["--adc", TWO_1115, "--sensor", "paper"], "--sensor goes with --simulate, --tare or --auto-zero"),
     (["--adc", TWO_1115, "--simulate", "dx=0", "--sim-fault", "melt:1"], "--sim-fault"),
 ])
 def test_read_bad_input_is_one_line_exit_2(model_file, args, message):

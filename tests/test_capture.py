@@ -442,6 +442,8 @@ def test_capture_averages_as_many_samples_as_the_schedule_was_made_for(tmp_path)
     (["--max-spread", "x"], "--max-spread 'x' is not a number"),
     (["--adc", "ads1115@0x48:0-3,ads7829@0x49"], "unknown chip 'ads7829'"),
     (["--bus", "99"], "/dev/i2c-99 does not exist"),
+    (["--bus", "99", "--seed", "2"], "--seed needs --simulate"),
+    (["--simulate", "--bus", "99"], "--bus does not go with --simulate"),
     (["--adc", "ads1115@0x48:0-3"], "the channel map reads 4 elements; the simulated sensor 'paper' has 8: give the "
                                     "sensor file whose elements the map reads (tactile-host's --sensor;"),
 ])

@@ -270,7 +270,8 @@ def _readout_options(p) -> None:
                         "'motion': sliding in a circle and pressed every 6 s")
     p.add_argument("--sim-drift", metavar="ramp=..,over=..,tau=..,creep=..",
                    help="simulated drift: a temperature ramp (degC over s), creep (V, time constant s); also "
-                        "start=DEGC, seed=N (default ramp=5,over=600,tau=600,creep=0.002,start=25,seed=0)")
+                        "start=DEGC, seed=N (default ramp=5,over=600,tau=600,creep=0.002,start=25,seed=0; a faster "
+                        "one: ramp=5,over=300,tau=120,creep=0.002)")
 
 
 def _adc_options(p, required: bool = True) -> None:
