@@ -85,7 +85,7 @@ def verdict(av: Averaging) -> str:
                 f"{needed_samples(CANDIDATES[0]) / av.rate:.0f} s (--seconds)")
     f2, se = av.flicker
     floor = (f"the flicker read at {av.longest / av.rate:.1f} s: {1e3 * np.sqrt(max(f2, 0.0)):.3g} mV, at most "
-             f"{1e3 * np.sqrt(max(f2 + SURE * se, 0.0)):.3g}")
+             f"{1e3 * np.sqrt(max(f2 + SURE * se, 0.0)):.3g} mV")
     if not av.averages_at_all:
         k = int(np.argmax(av.ratio[0]))
         return (f"the noise does not average down even over {av.candidates[0]} samples (e{k + 1}'s rows would carry "

@@ -274,15 +274,16 @@ def _readout_options(p) -> None:
                         "one: ramp=5,over=300,tau=120,creep=0.002)")
 
 
-def _adc_options(p, required: bool = True) -> None:
+def _adc_options(p, required: bool = True, sensor_help: str | None = None) -> None:
     map_options(p, required)
     p.add_argument("--bus", type=int, help="I2C bus number: /dev/i2c-N (default 1, or the map file's bus)")
     # --retries, --sensor, --seed: no argparse defaults, so that view --replay tells one typed from one left out
     # (host.session.ADC_DEFAULTS fills them in)
     p.add_argument("--retries", help="tries per I2C transfer before a chip counts as silent (default 5)")
-    p.add_argument("--sensor", help="sensor preset or TOML file: what --simulate simulates, and the rest readings for "
-                                    "--tare (default paper; with --model, the sensor the model was fitted on, and for "
-                                    "capture the drawing its schedule was made for, where the file is found)")
+    p.add_argument("--sensor", help=sensor_help or (
+        "sensor preset or TOML file: what --simulate simulates, and the rest readings for --tare (default paper; "
+        "with --model, the sensor the model was fitted on, and for capture the drawing its schedule was made for, "
+        "where the file is found)"))
     p.add_argument("--sim-noise", type=noise_volts, help="simulated element noise, V rms (default: the sensor file's)")
     p.add_argument("--sim-flicker", type=noise_volts, help="simulated 1/f noise per element: its Allan deviation, V")
     p.add_argument("--sim-offsets", metavar="V1,..,VN", help="simulated offset of each element, V")
