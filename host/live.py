@@ -329,6 +329,11 @@ class LiveServer:
         return f"http://[{host}]:{port}/" if ":" in host else f"http://{host}:{port}/"
 
     @property
+    def every_interface(self) -> bool:
+        """It listens on every interface (--host 0.0.0.0 or ::): other machines reach it too."""
+        return self._httpd.server_address[0] in ("0.0.0.0", "::")
+
+    @property
     def clients(self) -> int:
         """Event streams open now."""
         return len(self._clients)

@@ -411,6 +411,19 @@ def test_a_run_that_ends_reaches_its_viewer_whole(model_file):
     assert proc.returncode == 0 and "done: 100 samples" in err, err
 
 
+def test_view_on_every_interface_says_the_network_can_see_it(model_file):
+    """--host 0.0.0.0 listens beyond this machine: the serving line says so (the URL it prints is this
+    machine's), and on 127.0.0.1 it says only the URL."""
+    for host, wide in (("0.0.0.0", True), ("127.0.0.1", False)):
+        proc = run_cli("tactile-host", "view", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "dx=1",
+                       "--host", host, "--port", "0", "--count", "2")
+        assert proc.returncode == 0, proc.stderr
+        first = proc.stderr.splitlines()[0]
+        assert re.match(r"tactile-host view: serving http://127\.0\.0\.1:\d+/ ", first), first
+        assert ("and on every interface (from another machine: this one's address, the same port; anyone on the "
+                "network can see it)" in first) == wide, first
+
+
 def test_the_page_ships_with_the_package():
     from importlib import resources
 

@@ -41,6 +41,14 @@ def cmd_flash(args) -> int:
     return 0
 
 
+def _where(server) -> str:
+    """The page's address, and when it listens on every interface, that other machines reach it too."""
+    if not server.every_interface:
+        return server.url
+    return (f"{server.url} and on every interface (from another machine: this one's address, the same port; anyone "
+            "on the network can see it)")
+
+
 def _warn(prog: str):
     """A readout's warning as one line on stderr, at once."""
     return lambda text: print(f"{prog}: warning: {text}", file=sys.stderr, flush=True)
@@ -97,7 +105,7 @@ def cmd_view(args) -> int:
         s = ReadoutSession(args, "tactile-host view")
         server.hub = hub = LiveHub(view_meta(s.model.n_inputs, s.model.output_names, s.model.sha256, s.source, s.rate))
         server.start()
-        print(f"tactile-host view: serving {server.url} ({s.source}); Ctrl-C stops", file=sys.stderr, flush=True)
+        print(f"tactile-host view: serving {_where(server)} ({s.source}); Ctrl-C stops", file=sys.stderr, flush=True)
         fmt = LineFormat("csv", s.model.n_inputs, s.model.output_names)
         reader = Readout(s.array, s.engine, None, fmt, clock=s.clock, corrections=s.corrections,
                          thermometer=s.thermometer, observer=hub.publish, record=s.record(args.record),
@@ -136,7 +144,7 @@ def _view_replay(args) -> int:
         server.hub = hub = LiveHub(view_meta(run.n_inputs, res.outputs, res.model_hash, f"replay of {args.replay}",
                                              None))
         server.start()
-        print(f"tactile-host view: serving {server.url} (replay of {args.replay}, {len(res.t)} samples); Ctrl-C "
+        print(f"tactile-host view: serving {_where(server)} (replay of {args.replay}, {len(res.t)} samples); Ctrl-C "
               "stops", file=sys.stderr, flush=True)
         with StopFlag() as stop:
             played = res.play(hub.publish, stop, hold=args.hold)
