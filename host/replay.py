@@ -36,6 +36,7 @@ class Run:
     temp: np.ndarray
     out: np.ndarray
     status: np.ndarray
+    torn: int = 0  # the number of a last line cut short by a stop, dropped (0: none)
 
     @property
     def n_inputs(self) -> int:
@@ -53,7 +54,7 @@ def load_run(path) -> Run:
     if not isinstance(header, dict) or header.get("run") != 1:
         raise InputError(f"{origin}: not a run record (its first line must be the run's header; record one with "
                          "tactile-host read --record RUN.jsonl)")
-    t, raw, temp, out, status = [], [], [], [], []
+    t, raw, temp, out, status, torn = [], [], [], [], [], 0
     n, m = header.get("n_inputs"), len(header.get("outputs", []))
     for k, (i, ln) in enumerate(numbered[1:], start=2):
         try:
@@ -64,7 +65,8 @@ def load_run(path) -> Run:
             tp = math.nan if rec.get("temp") is None else float(rec["temp"])
         except (ValueError, KeyError, TypeError):
             if k == len(lines):
-                break  # a last line cut short by a stop: drop it
+                torn = i  # a last line cut short by a stop: dropped, and said
+                break
             raise InputError(f"{origin}: line {i} is not a sample") from None
         if len(row) != n or len(o) != m:
             raise InputError(f"{origin}: line {i} has {len(row)} readings and {len(o)} outputs; the header says {n} "
@@ -72,7 +74,7 @@ def load_run(path) -> Run:
         t.append(tt), raw.append(row), temp.append(tp), out.append(o), status.append(st)
     if not t:
         raise InputError(f"{origin}: no samples")
-    return Run(header, np.array(t), np.array(raw), np.array(temp), np.array(out), np.array(status))
+    return Run(header, np.array(t), np.array(raw), np.array(temp), np.array(out), np.array(status), torn)
 
 
 def play_times(t: np.ndarray, longest: float = 10.0) -> np.ndarray:
@@ -207,6 +209,8 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     v_all, out_all, st_all = _estimate(run, model, precision, corrections, progress)
     if not same:
         notes.append(f"the run was recorded with model {str(h.get('model'))[:12]}")
+    if run.torn:
+        notes.append(f"its last line (line {run.torn}) was cut short, as a stopped run leaves one: left out")
     az = corrections.autozero
     return ReplayResult(run.t, run.raw, run.temp, v_all, out_all, st_all, run.out,
                         tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes,

@@ -156,6 +156,26 @@ def test_a_run_of_the_c_engine_in_float_replays_exactly(model_file, tmp_path):
     assert proc.returncode == 0 and "estimates identical to the recorded ones" in proc.stdout, proc.stdout
 
 
+def test_a_replay_says_it_left_out_a_last_line_cut_short(model_file, tmp_path):
+    """A run stopped mid-write leaves its last line unfinished: replay leaves it out and says so; a line cut
+    short before the last is refused."""
+    run = tmp_path / "r.jsonl"
+    assert read(model_file, "--record", str(run)).returncode == 0
+    lines = run.read_text().splitlines()
+    run.write_text("\n".join(lines) + "\n" + lines[-1][:25])
+    proc = run_cli("tactile-host", "replay", str(run))
+    assert proc.returncode == 0, proc.stderr
+    assert "replayed 2 samples" in proc.stdout
+    assert f"note: its last line (line {len(lines) + 1}) was cut short, as a stopped run leaves one: left out" in \
+        proc.stdout
+    whole = tmp_path / "whole.jsonl"
+    whole.write_text("\n".join(lines) + "\n")
+    proc = run_cli("tactile-host", "replay", str(whole))
+    assert proc.returncode == 0 and "replayed 2 samples" in proc.stdout and "cut short" not in proc.stdout
+    run.write_text("\n".join(lines[:-1] + [lines[-1][:25], lines[-1]]) + "\n")
+    assert_one_line_error(run_cli("tactile-host", "replay", str(run)), 2, f"line {len(lines)} is not a sample")
+
+
 def test_a_replay_plays_over_a_clock_step_and_view_refuses_readout_options(model_file, tmp_path):
     from host.replay import play_times
 
