@@ -207,6 +207,27 @@ def test_a_refused_build_leaves_the_library_as_it_was_and_a_new_one_replaces_src
     assert "architectures=avr\n" in (lib / "library.properties").read_text()
 
 
+def test_a_folder_that_holds_another_library_is_refused_untouched(model_path, tmp_path):
+    """The build replaces src/ and the example whole: pointed at a library it did not write (another's
+    library.properties, or sources without one), it would delete that library's sources; it refuses, in one line,
+    and leaves the folder as it was. Its own library it replaces."""
+    other = tmp_path / "OtherLib"
+    (other / "src").mkdir(parents=True)
+    (other / "src" / "helper.cpp").write_text("int helper;\n")
+    for props in ("name=OtherLib\nparagraph=Someone else's.\n", None):
+        if props is None:
+            (other / "library.properties").unlink()
+        else:
+            (other / "library.properties").write_text(props)
+        before = _tree(other)
+        assert_one_line_error(_build_cli(model_path, other, "--no-build"), 2,
+                              f"-o {other} holds a library arduino-build did not write")
+        assert _tree(other) == before
+    ours = tmp_path / "TactilePose"
+    assert _build_cli(model_path, ours, "--no-build").returncode == 0
+    assert _build_cli(model_path, ours, "--no-build").returncode == 0
+
+
 def test_a_folder_name_the_ide_would_not_list_is_noted(model_path, tmp_path):
     """The library specification allows a root folder name of letters, digits, '_', '.' and '-' that starts with a
     letter or digit: another is written, and a note says the IDE will not list it and what to name it."""
