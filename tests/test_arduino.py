@@ -191,7 +191,7 @@ def test_a_refused_build_leaves_the_library_as_it_was_and_a_new_one_replaces_src
     (lib / "src" / "extra.h").write_text("/* a file the last build did not write */\n")
     before = _tree(lib)
     for extra, said in ((["--pga", "1.024"], "beyond its ADC's full scale 1.024 V (ads1115@0x48, --pga 1.024)"),
-                        (["--sim-sensor", "nosuch"], "sensor 'nosuch'"),
+                        (["--sim-sensor", "nosuch"], "--sim-sensor goes with --emulate"),
                         (["--thermistor", "beta=3950"], "no thermistor")):
         assert_one_line_error(_build_cli(model_path, lib, "--no-build", *extra), 2, said)
         assert _tree(lib) == before
@@ -205,6 +205,22 @@ def test_a_refused_build_leaves_the_library_as_it_was_and_a_new_one_replaces_src
     assert not (lib / "src" / "extra.h").exists() and _tree(lib) == {k: v for k, v in before.items()
                                                                       if k != "src/extra.h"}
     assert "architectures=avr\n" in (lib / "library.properties").read_text()
+
+
+def test_a_build_too_big_for_a_smaller_avr_board_says_so_and_options_that_would_be_ignored_are_refused(
+        model_path, tmp_path):
+    """The manifests say architectures=avr, and the fit is checked on the Uno: flash past a Leonardo's or an old
+    Nano's room is noted; --style with fixed point, and --sim-sensor without --emulate, would be ignored."""
+    from host.arduino import smaller_boards_note
+
+    assert smaller_boards_note(27348) == "" and smaller_boards_note(None) == ""
+    assert smaller_boards_note(29984) == (
+        "note: 29,984 B of flash is more than a Leonardo or Micro's 28,672 B: the build was checked on the Uno, "
+        "and on another AVR board it may not fit (fewer terms, fitgen fit --max-terms, or --precision fixed)")
+    assert "a Leonardo or Micro's 28,672 B or a Nano with the old bootloader's 30,720 B" in smaller_boards_note(31000)
+    assert_one_line_error(_build_cli(model_path, tmp_path / "L", "--no-build", "--precision", "fixed", "--style",
+                                     "table"), 2, "--style does not apply to --precision fixed")
+    assert not (tmp_path / "L").exists()
 
 
 def test_a_folder_that_holds_another_library_is_refused_untouched(model_path, tmp_path):

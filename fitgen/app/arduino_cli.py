@@ -14,11 +14,16 @@ def cmd_arduino_build(args) -> int:
     from fitgen.fitting.holdout import fitted_sensor_spec
     from fitgen.physics.sensor import load_sensor
     from hil.sketch import build_readpose
-    from host.arduino import BOARDS, folder_name_note
+    from host.arduino import BOARDS, folder_name_note, smaller_boards_note
     from host.readout import model_rest
     from host.session import channel_map_from_args
     from host.temperature import split_channel_map
 
+    if args.sim_sensor and not args.emulate:
+        raise InputError("--sim-sensor goes with --emulate (without it, it would be ignored)")
+    if args.style and args.precision == "fixed":  # fixed point has one layout, as codegen says
+        raise InputError("--style does not apply to --precision fixed")
+    args.style = args.style or "unrolled"
     model, cmap = load_model(args.model), channel_map_from_args(args)
     args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"
     if split_channel_map(args.adc)[1] is not None or cmap.temperature is not None or args.thermistor:
@@ -38,6 +43,9 @@ def cmd_arduino_build(args) -> int:
     note = folder_name_note(args.output)
     if note:
         print(note, file=sys.stderr)
+    board_note = smaller_boards_note(size.flash if size else None)  # the IDE offers it for every AVR board
+    if board_note:
+        print(board_note, file=sys.stderr)
     return 0
 
 
@@ -48,7 +56,7 @@ def add_arduino_build(sub) -> None:
     ab.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
     map_options(ab, thermistor=False)
     ab.add_argument("--precision", default="float", choices=("float", "fixed", "double"), help="double is refused")
-    ab.add_argument("--style", default="unrolled", choices=("table", "unrolled"),
+    ab.add_argument("--style", choices=("table", "unrolled"),
                     help="the C's form: table (coefficient arrays and a loop) or unrolled (straight-line code; "
                          "default)")
     build = ab.add_mutually_exclusive_group()
