@@ -399,7 +399,8 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
         fewer = ("fitgen fit --max-terms N, per output" if isinstance(penalty, (int, float)) and penalty > 2.0
                  else "fitgen fit --k bic, or --max-terms N")  # a model fitted with BIC already: only the cap is left
         hint = (f"no other precision or style fits: fit fewer terms than its {terms} ({fewer}; `fitgen tradeoff "
-                f"SENSOR --scene full --core {board}` measures which fit and what they cost in accuracy)")
+                f"SENSOR --transfer gmr --scene full --core {board}` ranks term caps by the estimator's flash alone, "
+                "about 13-14 kB short of ReadPose's, and by accuracy: build the one chosen to see that it fits)")
         for k, (prec, sty, option) in enumerate(_alternatives(precision, style)):
             try:
                 alt = render_arduino(model, cmap, Path(tmp) / f"alt{k}", precision=prec, style=sty, rest=rest)

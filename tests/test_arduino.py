@@ -139,7 +139,7 @@ def test_a_model_that_does_not_fit_is_refused_naming_a_setting_that_does(tmp_pat
 def test_a_units_twin_that_fits_no_setting_is_told_how_to_find_one_that_does(tmp_path):
     """A built unit's equations take about three times the drawing's terms: the default fit of a unit's dense
     simulation (harmonics, no fixed point) fits the Uno in no precision or style. The line says to fit fewer terms
-    and names the sweep that measures which fit; a twin capped as that sweep finds builds."""
+    and names the sweep that ranks term caps; a twin capped as that sweep finds builds."""
     require_tool("arduino-builder")
     data = tmp_path / "twin.csv"
     proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "2", "--grid",
@@ -152,7 +152,8 @@ def test_a_units_twin_that_fits_no_setting_is_told_how_to_find_one_that_does(tmp
     assert_one_line_error(proc, 2, "does not fit the uno: flash over")
     assert "no other precision or style fits: fit fewer terms than its " in proc.stderr
     assert "(fitgen fit --k bic, or --max-terms N;" in proc.stderr
-    assert "`fitgen tradeoff SENSOR --scene full --core uno` measures which fit" in proc.stderr
+    assert ("`fitgen tradeoff SENSOR --transfer gmr --scene full --core uno` ranks term caps by the estimator's "
+            "flash alone, about 13-14 kB short of ReadPose's") in proc.stderr
     # fitted with BIC already, and still too big: BIC is not offered again
     proc = _build_cli(str(tmp_path / "bic.json"), tmp_path / "big")
     assert_one_line_error(proc, 2, "does not fit the uno: flash over")
