@@ -299,7 +299,8 @@ def cmd_codegen(args) -> int:
         return 0
     if args.input_lsb is not None or args.input_offset is not None:
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
-    args.style = args.style or "table"
+    # a table's coefficient arrays are data the Uno copies into its 2 kB of RAM: arduino-build's default there too
+    args.style = args.style or ("unrolled" if args.target == "uno" else "table")
     path = write_header(model, args.output, args.precision, args.style, args.prefix, args.fma, target=args.target)
     print(f"wrote {path} ({args.precision}, {args.style}{', fma' if args.fma else ''}, model {model.sha256[:12]})",
           file=sys.stderr)
@@ -431,7 +432,8 @@ def build_parser() -> Parser:
     c.add_argument("--precision", choices=("double", "float", "fixed"),
                    help="fixed: integer ADC codes in, int32 outputs, no floating point (Cortex-M0); default double, "
                         "or on a --target without double the precision the model was fitted for if it runs it")
-    c.add_argument("--style", choices=("table", "unrolled"), help="default table; not with --precision fixed")
+    c.add_argument("--style", choices=("table", "unrolled"),
+                   help="default table (unrolled with --target uno, as arduino-build); not with --precision fixed")
     c.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
     c.add_argument("--fma", action="store_true",
                    help="sum each term with fma(): fewer instructions on cores with fused multiply-add")
