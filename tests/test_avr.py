@@ -36,7 +36,7 @@ def test_uno_refuses_a_double_header(model_file, tmp_path):
     assert "double is 32 bits" in proc.stderr
     assert not (tmp_path / "x" / "tm_model.h").exists()
     # no --precision: double where the target runs it, else what it runs (this exact model: the target's first);
-    # no --style: on the Uno unrolled, as arduino-build (a table's arrays are data its 2 kB of RAM holds)
+    # no --style: on the Uno unrolled, as arduino-build (a table evaluation's arrays on the stack overrun its RAM)
     for target, said in (("uno", "(float, unrolled"), ("microbit", "(fixed point"), ("mps2", "(double, table")):
         proc = run_cli("fitgen", "codegen", model_file, "-o", str(tmp_path / target), "--target", target)
         assert proc.returncode == 0 and said in proc.stderr, proc.stderr

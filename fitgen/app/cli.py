@@ -299,7 +299,8 @@ def cmd_codegen(args) -> int:
         return 0
     if args.input_lsb is not None or args.input_offset is not None:
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
-    # a table's coefficient arrays are data the Uno copies into its 2 kB of RAM: arduino-build's default there too
+    # a table evaluation keeps every power and harmonic monomial in arrays on the stack, past the Uno's 2 kB of RAM
+    # for the default harmonics model (docs/arduino.md): arduino-build's default there too
     args.style = args.style or ("unrolled" if args.target == "uno" else "table")
     path = write_header(model, args.output, args.precision, args.style, args.prefix, args.fma, target=args.target)
     print(f"wrote {path} ({args.precision}, {args.style}{', fma' if args.fma else ''}, model {model.sha256[:12]})",
