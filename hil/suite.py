@@ -245,7 +245,8 @@ def check_timing(dev: Device, model: Model, n_single: int = 200, n_batch: int = 
     rate = statistics.median(rates)
     med = statistics.median(rtt) * 1e3
     return Check("timing", True, f"round trip median {med:.2f} ms (min {min(rtt) * 1e3:.2f}), "
-                 f"throughput {rate:,.0f} estimates/s batched",
+                 f"throughput {rate:,.0f} estimates/s batched (on the host's clock: through an emulator, its "
+                 "pace, not the chip's)",
                  figures={"rtt_ms_median": med, "rtt_ms_min": min(rtt) * 1e3, "per_s": rate})
 
 
