@@ -224,6 +224,21 @@ def test_a_build_too_big_for_a_smaller_avr_board_says_so_and_options_that_would_
     assert not (tmp_path / "L").exists()
 
 
+def test_the_config_names_each_chips_settings_in_the_maps_order(tmp_path):
+    """tactile_config.h's comment gives the ADS1115s' PGA and rate once when they agree, else per chip in the map's
+    order (it gave the set of them sorted as text, whichever chip each was)."""
+    from host.arduino import render_config
+    from host.channelmap import Settings, channel_map
+
+    f = tmp_path / "map.toml"
+    f.write_text('[[chip]]\ntype = "ads1115"\naddress = 0x48\ninputs = ["0-3"]\npga = 6.144\n'
+                 '[[chip]]\ntype = "ads1115"\naddress = 0x49\ninputs = ["0-3"]\n')
+    mixed = render_config(channel_map(str(f), Settings()), "float")
+    assert "; ADS1115 at 0x48: PGA +-6.144 V, 860 SPS; at 0x49: PGA +-4.096 V, 860 SPS */" in mixed
+    same = render_config(parse_spec(TWO_CHIPS, Settings()), "float")
+    assert "; ADS1115 PGA +-4.096 V, 860 SPS */" in same
+
+
 def test_a_folder_that_holds_another_library_is_refused_untouched(model_path, tmp_path):
     """The build replaces src/ and the example whole: pointed at a library it did not write (another's
     library.properties, or sources without one), it would delete that library's sources; it refuses, in one line,
