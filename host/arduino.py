@@ -167,7 +167,7 @@ def library_json() -> str:
     }, indent=2) + "\n"
 
 
-def _lsb_volts(chip) -> float:
+def lsb_volts(chip) -> float:
     """Volts per code, as adc.c's adc_lsb_volts computes it."""
     return chip.settings.pga / 32768.0 if chip.kind == "ads1115" else chip.vref_volts / 4096.0
 
@@ -175,7 +175,7 @@ def _lsb_volts(chip) -> float:
 def render_config(cmap: ChannelMap, precision: str, rest=None) -> str:
     """``tactile_config.h``: the precision, the Wire settings, each element's volts per code, and with ``rest``
     (volts, the readings the model expects at rest) the tare ReadPose takes at start."""
-    lsb = [_lsb_volts(chip) for chip, _ in cmap.elements()]
+    lsb = [lsb_volts(chip) for chip, _ in cmap.elements()]
     tare = [] if rest is None else [
         f"#define TACTILE_TARE_SAMPLES {TARE_SAMPLES}",
         "/* V: the readings the model expects at rest, which the tare maps the untouched sensor's onto */",
@@ -216,7 +216,7 @@ def render_arduino(model: Model, cmap: ChannelMap, folder: str | Path, *, precis
     folder = Path(folder)
     src, tpl = folder / "src", resources.files("firmware_templates")
     if precision == "fixed":
-        lsbs = {_lsb_volts(chip) for chip, _ in cmap.elements()}
+        lsbs = {lsb_volts(chip) for chip, _ in cmap.elements()}
         if len(lsbs) != 1:
             raise InputError("fixed point takes one volts-per-code for every element; the channel map mixes "
                              f"{len(lsbs)}: read every element with the same chip type and PGA, or use float")

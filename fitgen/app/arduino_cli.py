@@ -14,7 +14,8 @@ def cmd_arduino_build(args) -> int:
     from fitgen.fitting.holdout import fitted_sensor_spec
     from fitgen.physics.sensor import load_sensor
     from hil.sketch import build_readpose
-    from host.arduino import BOARDS, folder_name_note, smaller_boards_note
+    from fitgen.app.report import rounding_note
+    from host.arduino import BOARDS, folder_name_note, lsb_volts, smaller_boards_note
     from host.readout import model_rest
     from host.session import channel_map_from_args
     from host.temperature import split_channel_map
@@ -46,6 +47,9 @@ def cmd_arduino_build(args) -> int:
     board_note = smaller_boards_note(size.flash if size else None)  # the IDE offers it for every AVR board
     if board_note:
         print(board_note, file=sys.stderr)
+    coarse = rounding_note(model, max(lsb_volts(chip) for chip, _ in cmap.elements()))  # a 12-bit ADS7828's
+    if coarse:
+        print(f"note: {coarse}", file=sys.stderr)
     return 0
 
 
