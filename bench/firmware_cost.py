@@ -95,7 +95,8 @@ def main() -> None:
 def uno_table(gmr, fixed_model) -> None:
     """The reference firmware on the Arduino Uno (simavr's ATmega328P): cycles per estimate (BENCH's ticks are
     the CPU's cycles), flash, static RAM and the stack's measured peak, beside the Uno's limits."""
-    default = fit_model(gmr)  # FitSettings(): the 11 power kinds, no harmonics (`fitgen fit --family all`, 155 terms)
+    # FitSettings(): the 11 power kinds, no harmonics (`fitgen fit --family all`: 160 terms with AVX-512, else 155)
+    default = fit_model(gmr)
     builds = [(default, "paper (gmr, powers)", "float", "table"), (default, "paper (gmr, powers)", "float", "unrolled"),
               (fixed_model, "paper (gmr, no roots)", "fixed", "-")]
     print("\nThe Arduino Uno (ATmega328P at 16 MHz in simavr; `tactile-hil emulate --target uno`; flash "
