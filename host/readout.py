@@ -66,10 +66,9 @@ class ReadoutStats:
     far: int = 0  # samples estimated outside the model's fitted pose box by more than its width
     uncompensated: int = 0  # samples a temperature compensation was given for and the thermistor read none
     temp_outside: int = 0  # samples whose temperature lies outside the range a compensation is checked over
-    errors: ErrorCounts = field(default_factory=ErrorCounts)
-
     first: float = 0.0  # s (monotonic): when the first sample began
     last: float = 0.0  # and the last
+    errors: ErrorCounts = field(default_factory=ErrorCounts)
 
     @property
     def rate(self) -> float:
@@ -366,7 +365,8 @@ class Readout:
         az = self.corrections.autozero
         self.observer({
             "t": t, "v": [float(x) for x in v], "raw": [float(x) for x in raw],
-            "out": {o: float(x) for o, x in zip(self.fmt.outputs, out)}, "status": int(status), "far": far, "temp": _num(temp),
+            "out": {o: float(x) for o, x in zip(self.fmt.outputs, out)}, "status": int(status), "far": far,
+            "temp": _num(temp),
             "rate": self.rate, "errors": {**self.array.counts.as_dict(), "total": self.array.counts.total},
             "zero": {"updates": 0 if az is None else len(az.updates),
                      "last": None if az is None or not az.updates else az.updates[-1].describe()}})

@@ -222,8 +222,8 @@ def cmd_schedule(args) -> int:
           file=sys.stderr)
     left = (f"; {info['beyond_linear_range']} of its grid poses left out, past {100 * info['linear_share']:g} % of an "
             "element's linear range" if info["beyond_linear_range"] else "")
-    print(f"within {_box(info)} from first contact (the sensor's travel within --limits{left}{_pressed(info)}): give the "
-          "stage room for them and their approach (--stage-limits)", file=sys.stderr)
+    print(f"within {_box(info)} from first contact (the sensor's travel within --limits{left}{_pressed(info)}): "
+          "give the stage room for them and their approach (--stage-limits)", file=sys.stderr)
     return 0
 
 
@@ -261,8 +261,8 @@ def _check_schedule(args, drawing, axes, samples: int, given: dict) -> int:
                                  rig_error=args.rig_error, zero_error=args.zero_error)
     write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples,
                                               "sensor_sha256": drawing.sha256, "transfer": drawing.transfer})
-    print(f"wrote {len(poses)} random check poses ({_box(info)} from first contact, seed {args.seed}{_pressed(info)}) to "
-          f"{args.output}: capture them as for the calibration (tactile-host capture --poses), then fitgen check "
+    print(f"wrote {len(poses)} random check poses ({_box(info)} from first contact, seed {args.seed}"
+          f"{_pressed(info)}) to {args.output}: capture them as for the calibration (tactile-host capture --poses), then fitgen check "
           "MODEL CHECK.csv", file=sys.stderr)
     return 0
 
