@@ -54,14 +54,6 @@ BOARDS = {"uno": Board("arduino:avr:uno", 32256, 2048)}
 # other AVR boards the manifests' architectures=avr lets the IDE offer, with less room than the Uno's
 SMALLER_AVR = (("a Leonardo or Micro", 28672), ("a Nano with the old bootloader", 30720))
 
-
-def smaller_boards_note(flash: int | None) -> str:
-    """'' when ``flash`` bytes fit every board of SMALLER_AVR too, else a note naming those it does not."""
-    tight = [f"{name}'s {room:,} B" for name, room in SMALLER_AVR if flash and flash > room]
-    if not tight:
-        return ""
-    return (f"note: {flash:,} B of flash is more than {' or '.join(tight)}: the build was checked on the Uno, and "
-            "on another AVR board it may not fit (fewer terms, fitgen fit --max-terms, or --precision fixed)")
 # Debian's arduino-builder and arduino-core-avr: the builder's own platform.txt adds the ctags recipe the
 # packaged core lacks; the define stands in for a newer compiler's (the core's headers expect it)
 HARDWARE = ("/usr/share/arduino-builder", "/usr/share/arduino/hardware")
@@ -126,6 +118,15 @@ def _overflow_size(text: str) -> Size | None:
         return None
     ram = ends["data"] - AVR_RAM_START if "data" in ends else None
     return Size(flash=ends.get("text"), ram=ram, overflow=True)
+
+
+def smaller_boards_note(flash: int | None) -> str:
+    """'' when ``flash`` bytes fit every board of SMALLER_AVR too, else a note naming those it does not."""
+    tight = [f"{name}'s {room:,} B" for name, room in SMALLER_AVR if flash and flash > room]
+    if not tight:
+        return ""
+    return (f"note: {flash:,} B of flash is more than {' or '.join(tight)}: the build was checked on the Uno, and "
+            "on another AVR board it may not fit (fewer terms, fitgen fit --max-terms, or --precision fixed)")
 
 
 def library_properties(n_elements: int = 8) -> str:
