@@ -289,6 +289,37 @@ def test_double_and_bad_maps_are_refused_in_one_line(model_path, tmp_path):
     assert_one_line_error(proc, 2, "the channel map reads 4 elements; the model takes 8")
 
 
+def test_read_pose_notes_once_an_estimate_far_outside_the_fitted_box(tmp_path):
+    """The drawing's model on a built unit: every reading inside its domain (status 0), the estimate millimetres
+    off. ReadPose follows the first such row with one '# note:' line, by the header's tm_far_outside, as predict
+    flags the same rows; on the drawing itself, none."""
+    _require_emulator()
+    import dataclasses
+
+    from fitgen.equations.model import load_model
+
+    fitted = load_model(_fit_cli(tmp_path, "h"))  # the default family, fitted without its held-out record
+    box = {"dx": [-2, 2], "dy": [-2, 2], "dz": [-2, 0], "thx": [-5, 5], "thy": [-5, 5]}  # paper-sim's
+    model = str(dataclasses.replace(fitted, fit_info={**fitted.fit_info, "held_out": {"box": box}}).save(
+        tmp_path / "boxed.json"))
+    proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "3", "--random", "1",
+                   "-o", str(tmp_path / "u.csv"))
+    assert proc.returncode == 0, proc.stderr
+    note = ("# note: an estimate far outside the pose box the model was fitted in: another sensor than the model's? "
+            "calibrate this unit (docs/calibration.md)")
+    for sensor, far in ((str(tmp_path / "u.unit.toml"), True), ("paper", False)):
+        proc = _build_cli(model, tmp_path / f"L{far}", "--emulate", "dx=1,dz=-1", "--sim-sensor", sensor)
+        assert proc.returncode == 0, proc.stderr
+        lines = proc.stdout.splitlines()
+        assert lines.count(note) == int(far), proc.stdout
+        rows = np.array([[float(x) for x in ln.split(",")] for ln in lines[1:] if not ln.startswith("#")])
+        assert np.all(rows[:, -1] == 0)  # the domain's status sees nothing either way
+        flagged = load_model(model).far_outside(rows[:, 9:14])
+        assert flagged.all() if far else not flagged.any()
+        if far:
+            assert lines.index(note) == 2  # right after the first row, which is far already
+
+
 def test_read_pose_runs_on_the_emulated_uno_and_prints_the_pose(sensor, tmp_path):
     """ReadPose, built by arduino-builder, on simavr's ATmega328P: the real Wire library talks to two ADS1115s
     of the bus model holding the paper sensor at dx=1, dz=-1. Its volts are ADS1115 codes near the sensor's

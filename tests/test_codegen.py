@@ -213,6 +213,52 @@ def test_a_file_that_includes_the_headers_without_calling_them_compiles_warning_
         compile_checked(cc, [src], tmp_path / f"{name}.o", tmp_path, link=False)
 
 
+def test_far_outside_in_c_flags_the_estimates_python_does(paper_model, tmp_path):
+    """tm_far_outside(out), in the float, double and fixed-point headers, is 1 exactly for the estimates
+    Model.far_outside flags (outside the fitted pose box by more than its width), at the bounds too in fixed
+    point (an int32 out against a real bound: ceil below, floor above); without a box it is always 0."""
+    require_tool("gcc")
+    from fitgen.c.codegen import render_fixed_header
+    from fitgen.c.compiled import compile_checked
+    from fitgen.equations.fixedpoint import build_fixed
+
+    box = {"dx": [-2.0, 2.1], "dz": [-2.0, 0.0], "thx": [-5.0, 5.0]}  # dy, thy: no box, never flagged
+    boxed = dataclasses.replace(paper_model, fit_info={**paper_model.fit_info, "held_out": {"box": box}})
+    integer = [Equation(e.name, e.intercept, (Term(1, "1"),), (1.0,)) for e in boxed.equations]
+    fm = build_fixed(dataclasses.replace(boxed, equations=tuple(integer)), 1e-4, 0.0, 32)
+    _, lo, hi = boxed.far_bounds()
+    rng = np.random.default_rng(8)
+    est = rng.uniform(-20, 20, (400, 5))
+    est = est[np.all(np.abs(est[:, [0, 2, 3]][:, :, None] - np.stack([lo, hi], 1)[None]) > 1e-3, axis=(1, 2))]
+    scale = 2.0 ** np.array(fm.out_frac_bits)
+    codes = np.clip(np.round(est * scale), 1 - 2**31, 2**31 - 1).astype(np.int64)  # what an int32 out can hold
+    edges = np.zeros((6, 5), dtype=np.int64)  # each bound's code and its neighbours, in dx
+    edges[:, 0] = [np.ceil(lo[0] * scale[0]) - 1, np.ceil(lo[0] * scale[0]), np.ceil(lo[0] * scale[0]) + 1,
+                   np.floor(hi[0] * scale[0]) - 1, np.floor(hi[0] * scale[0]), np.floor(hi[0] * scale[0]) + 1]
+    codes = np.vstack([codes, edges])
+    for name, text, rows, fmt, want in (
+            ("float", render_header(boxed, "float"), est, "%f", boxed.far_outside(est)),
+            ("double", render_header(boxed, "double"), est, "%lf", boxed.far_outside(est)),
+            ("fixed", render_fixed_header(fm), codes, "%ld", boxed.far_outside(codes / scale)),
+            ("nobox", render_header(paper_model, "double"), est, "%lf", np.zeros(len(est), bool))):
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "tm_model.h").write_text(text)
+        kind = "long" if name == "fixed" else "double" if fmt == "%lf" else "float"
+        (folder / "far.c").write_text(
+            '#include <stdio.h>\n#include "tm_model.h"\nint main(void)\n{\n'
+            f"    {kind} x[TM_N_OUTPUTS];\n    tm_output out[TM_N_OUTPUTS];\n    int k;\n"
+            f'    while (scanf("{fmt} {fmt} {fmt} {fmt} {fmt}", &x[0], &x[1], &x[2], &x[3], &x[4]) == 5) {{\n'
+            f"        for (k = 0; k < TM_N_OUTPUTS; ++k) {{\n            out[k] = (tm_output)x[k];\n        }}\n"
+            '        printf("%d\\n", tm_far_outside(out));\n    }\n    return 0;\n}\n')
+        compile_checked("gcc", [folder / "far.c"], folder / "far", folder)
+        lines = "".join(" ".join(repr(int(v)) if name == "fixed" else repr(float(v)) for v in r) + "\n" for r in rows)
+        got = subprocess.run([str(folder / "far")], input=lines, capture_output=True, text=True, check=True).stdout
+        assert np.array_equal(np.array(got.split(), dtype=int).astype(bool), want), name
+        assert want.any() == (name != "nobox") and not want.all()
+        assert (f"#define TM_HAS_POSE_BOX {int(name != 'nobox')}") in text
+
+
 def test_verify_says_in_one_line_what_is_wrong_with_the_compiler_or_runner(paper_model, tmp_path):
     require_tool("gcc")
     require_tool("arm-linux-gnueabihf-gcc")

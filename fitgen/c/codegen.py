@@ -106,6 +106,7 @@ class CModel:
     harmonics: tuple[CHarmonic, ...] = ()  # the ring's harmonics the monomials use (hr is always computed)
     monomials: tuple[CMonomial, ...] = ()  # harmonic monomials, in order of first use
     refine: CRefine | None = None
+    far: tuple = ()  # per output, (low, high) literals past which it lies far outside the fitted pose box, or None
 
 
 def term_magnitudes(model: Model) -> dict[str, float]:
@@ -196,6 +197,8 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
         harmonics=_c_harmonics(model, monomials, precision),
         monomials=tuple(CMonomial(tuple(monomial_factors(h)), h) for h in monomials),
         refine=_c_refine(model, precision),
+        far=tuple(None if b is None else (c_real(b[0], precision), c_real(b[1], precision))
+                  for b in model.far_per_output()),
     )
 
 
@@ -241,6 +244,18 @@ def _env() -> jinja2.Environment:
                               keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True)
 
 
+def _fixed_far(fm) -> tuple:
+    """Per output, the int32 bounds (low, high) of FixedModel.far in the output's Q format, or None: an
+    integer out lies below x (a real) exactly when it lies below ceil(x), and above y exactly when above floor(y)."""
+    import math
+
+    def q(x: float, frac_bits: int, rnd) -> int:
+        return int(min(max(rnd(x * 2.0**frac_bits), 1 - 2**31), 2**31 - 1))  # INT32_C(-2^31) is no int32 literal
+
+    return tuple(None if b is None else (q(b[0], o.frac_bits, math.ceil), q(b[1], o.frac_bits, math.floor))
+                 for o, b in zip(fm.outputs, fm.far or (None,) * len(fm.outputs)))
+
+
 def render_fixed_header(fm, prefix: str = "tm") -> str:
     """The text of ``<prefix>_model.h`` for a fixed-point plan (:class:`fitgen.equations.fixedmodel.FixedModel`)."""
     from fitgen.c.fixedc import avr_path, plan_line
@@ -249,6 +264,7 @@ def render_fixed_header(fm, prefix: str = "tm") -> str:
     units = fm.input_units if fm.input_units in ("mT", "V", "codes") else "units"
     return _env().get_template("model_fixed.h.j2").render(
         m=fm, P=prefix, U=prefix.upper(), input_units=units, A=avr_path(fm), plan_line=plan_line(fm),
+        far=_fixed_far(fm),
         input_lsb=c_real(fm.input_lsb, "double"), input_offset=c_real(fm.input_offset, "double"))
 
 

@@ -124,6 +124,9 @@ class FixedModel:
     equations: tuple = field(default=(), repr=False, compare=False)
     mul_bits: int = 32  # the core's multiply the plan is for: 32 (32x32->64 products) or 16 (fixedpoint.build_fixed)
     budget: tuple[float, ...] = ()  # mul_bits 16: per output, the error bound its 16-bit products were held within
+    # per output, the bounds past which an estimate lies far outside the model's fitted pose box (Model.far_bounds),
+    # None for an output the box does not name
+    far: tuple = ()
 
     @property
     def output_names(self) -> tuple[str, ...]:

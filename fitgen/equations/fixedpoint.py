@@ -348,7 +348,7 @@ def _plan(model: Model, lsb: Fraction, off: Fraction, cmin: list[int], cmax: lis
                                     eq.name in aligned))
     lsb_f, off_f = float(lsb), float(off)
     return FixedModel(model.n_inputs, lsb_f, off_f, model.input_units, tuple(cmin), tuple(cmax), tuple(pl.ops),
-                      tuple(outputs), model.sha256, __version__, tuple(model.equations))
+                      tuple(outputs), model.sha256, __version__, tuple(model.equations), far=model.far_per_output())
 
 
 def _plan_output(pl: _Planner, eq, j: int, operands: list[str], coefs: list[Fraction], acc_bits: int,

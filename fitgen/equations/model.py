@@ -87,6 +87,12 @@ class Model:
         hi = np.array([box[self.output_names[j]][1] for j in cols])
         return cols, lo - (hi - lo), hi + (hi - lo)
 
+    def far_per_output(self) -> tuple:
+        """:meth:`far_bounds` per output in order: (low, high), or None for an output the box does not name."""
+        cols, lo, hi = self.far_bounds()
+        by = {j: (float(a), float(b)) for j, a, b in zip(cols, lo, hi)}
+        return tuple(by.get(j) for j in range(len(self.equations)))
+
     def far_outside(self, pred: np.ndarray) -> np.ndarray:
         """Per row of estimates ``pred`` (rows x outputs), whether one lies beyond :meth:`far_bounds`; a
         non-finite estimate is not counted."""

@@ -10,13 +10,16 @@
  * TACTILE_TARE_SAMPLES readings of the untouched sensor and maps them onto the model's rest readings
  * (TACTILE_REST), as tactile-host read --tare does; it prints one line before the header, "# tare: offsets
  * [mV] ...", and every line after carries the tared volts. Leave the skin untouched at power-up; a 't' sent
- * over Serial (the serial monitor's input line) tares again, its line printed among the rows. */
+ * over Serial (the serial monitor's input line) tares again, its line printed among the rows. The first
+ * estimate far outside the pose box the model was fitted in (tm_far_outside) is followed by one line
+ * starting "# note:": readings of another sensor than the model's, as tactile-host read counts them. */
 #include <Wire.h>
 #include <TactilePose.h>
 
 static adc_i2c bus;
 static adc_array adcs;
 static bool running;
+static bool said_far; /* the note on estimates far outside the fitted pose box: once per reset */
 #if TACTILE_TARE
 #if TACTILE_FIXED_POINT
 static int32_t offset_codes[TM_N_INPUTS]; /* added to each code: the model takes codes */
@@ -180,5 +183,14 @@ void loop()
 #endif
         Serial.print(',');
         Serial.println(status);
+#if TM_HAS_POSE_BOX
+        /* readings inside the domain, the estimate far outside the box the model was fitted in: another
+         * sensor's readings (the drawing's model on a built unit), which the status cannot tell */
+        if (status >= 0 && !said_far && tm_far_outside(out)) {
+            said_far = true;
+            Serial.println(F("# note: an estimate far outside the pose box the model was fitted in: "
+                             "another sensor than the model's? calibrate this unit (docs/calibration.md)"));
+        }
+#endif
     }
 }
