@@ -394,7 +394,7 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
         bar.update(0, f"running ReadPose ({what}) on the emulated Uno for its stack")
         return measure(path, size)
 
-    # a bar on a terminal: a build takes 5-9 s, and one that does not fit is tried in other settings
+    # a bar on a terminal: a build takes 2-9 s, and one that does not fit is tried in other settings
     with tempfile.TemporaryDirectory() as tmp, Progress("arduino-build", 1) as bar:
         size = built(library, Path(tmp) / "build" if build_path is None else build_path, f"{precision}, {style}")
         if size.fits(spec):
