@@ -400,10 +400,9 @@ class Readout:
                         st.late += 1
                         next_t = now
                     next_t += period
-                st.last = clock.monotonic()
-                if not st.samples:
-                    st.first = st.last
-                self.step()
+                started = clock.monotonic()
+                self.step()  # a chip gone silent raises here: a sample never counted is no part of the pace
+                st.first, st.last = (started if st.samples == 1 else st.first), started
                 if self._flush is not None and clock.monotonic() - last_flush >= flush_every:
                     self._flush()
                     last_flush = clock.monotonic()

@@ -245,9 +245,10 @@ def test_a_chip_that_goes_silent_ends_the_run_with_the_statistics(sensor, model)
     bus.inject("nack", address=0x49, after=12 * 10)  # 12 transfers to 0x49 a sample: gone during the 11th
     reader = Readout(arr, PythonEngine(model), io.StringIO(), LineFormat("csv", 8, model.output_names), clock=clock)
     with pytest.raises(DeviceSilent, match="ads1115@0x49 stays silent") as info:
-        reader.run(count=100)
+        reader.run(count=100, rate=2.0)
     assert info.value.stats.samples == 10
-    assert "10 samples" in info.value.stats.summary()
+    # the pace of the 10 samples written, not of 11 begun: the last was never counted
+    assert info.value.stats.rate == pytest.approx(2.0, rel=1e-6) and "10 samples" in info.value.stats.summary()
 
 
 # --- command line ------------------------------------------------------------------
