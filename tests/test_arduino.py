@@ -192,7 +192,7 @@ def test_a_refused_build_leaves_the_library_as_it_was_and_a_new_one_replaces_src
     (lib / "src" / "extra.h").write_text("/* a file the last build did not write */\n")
     before = _tree(lib)
     for extra, said in ((["--pga", "1.024"], "beyond its ADC's full scale 1.024 V (ads1115@0x48, --pga 1.024)"),
-                        (["--sim-sensor", "nosuch"], "--sim-sensor goes with --emulate"),
+                        (["--sim-sensor", "nosuch"], "sensor 'nosuch'"),
                         (["--thermistor", "beta=3950"], "no thermistor")):
         assert_one_line_error(_build_cli(model_path, lib, "--no-build", *extra), 2, said)
         assert _tree(lib) == before
@@ -211,13 +211,15 @@ def test_a_refused_build_leaves_the_library_as_it_was_and_a_new_one_replaces_src
 def test_a_build_too_big_for_a_smaller_avr_board_says_so_and_options_that_would_be_ignored_are_refused(
         model_path, tmp_path):
     """The manifests say architectures=avr, and the fit is checked on the Uno: flash past a Leonardo's or an old
-    Nano's room is noted; --style with fixed point, and --sim-sensor without --emulate, would be ignored."""
+    Nano's room is noted; --style with fixed point would be ignored."""
     from host.arduino import smaller_boards_note
 
     assert smaller_boards_note(27348) == "" and smaller_boards_note(None) == ""
     assert smaller_boards_note(29984) == (
         "note: 29,984 B of flash is more than a Leonardo or Micro's 28,672 B: the build was checked on the Uno, "
-        "and on another AVR board it may not fit (fewer terms, fitgen fit --max-terms, or --precision fixed)")
+        "and on another AVR board it may not fit (fewer terms: fitgen fit --max-terms)")
+    assert smaller_boards_note(29984, fixed_too=True).endswith("(fewer terms: fitgen fit --max-terms; or --precision "
+                                                              "fixed)")
     assert "a Leonardo or Micro's 28,672 B or a Nano with the old bootloader's 30,720 B" in smaller_boards_note(31000)
     assert_one_line_error(_build_cli(model_path, tmp_path / "L", "--no-build", "--precision", "fixed", "--style",
                                      "table"), 2, "--style does not apply to --precision fixed")
@@ -253,15 +255,23 @@ def test_a_folder_that_holds_another_library_is_refused_untouched(model_path, tm
     other = tmp_path / "OtherLib"
     (other / "src").mkdir(parents=True)
     (other / "src" / "helper.cpp").write_text("int helper;\n")
-    for props in ("name=OtherLib\nparagraph=Someone else's.\n", None):
-        if props is None:
+    pio = tmp_path / "PioLib"  # PlatformIO's manifest and old-layout sources at the root, no library.properties
+    pio.mkdir()
+    (pio / "library.json").write_text('{"name": "OtherPio", "version": "1.0.0"}\n')
+    (pio / "other.cpp").write_text("int other;\n")
+    old = tmp_path / "OldLib"  # sources at the root alone
+    old.mkdir()
+    (old / "old.h").write_text("#define OLD 1\n")
+    for folder, props in ((other, "name=OtherLib\nparagraph=Someone else's.\n"), (other, None), (pio, None),
+                          (old, None)):
+        if folder is other and props is None:
             (other / "library.properties").unlink()
-        else:
-            (other / "library.properties").write_text(props)
-        before = _tree(other)
-        assert_one_line_error(_build_cli(model_path, other, "--no-build"), 2,
-                              f"-o {other} holds a library arduino-build did not write")
-        assert _tree(other) == before
+        elif props is not None:
+            (folder / "library.properties").write_text(props)
+        before = _tree(folder)
+        assert_one_line_error(_build_cli(model_path, folder, "--no-build"), 2,
+                              f"-o {folder} holds a library arduino-build did not write")
+        assert _tree(folder) == before
     ours = tmp_path / "TactilePose"
     assert _build_cli(model_path, ours, "--no-build").returncode == 0
     assert _build_cli(model_path, ours, "--no-build").returncode == 0

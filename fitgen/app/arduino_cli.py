@@ -20,8 +20,6 @@ def cmd_arduino_build(args) -> int:
     from host.session import channel_map_from_args
     from host.temperature import split_channel_map
 
-    if args.sim_sensor and not args.emulate:
-        raise InputError("--sim-sensor goes with --emulate (without it, it would be ignored)")
     if args.style and args.precision == "fixed":  # fixed point has one layout, as codegen says
         raise InputError("--style does not apply to --precision fixed")
     args.style = args.style or "unrolled"
@@ -44,7 +42,10 @@ def cmd_arduino_build(args) -> int:
     note = folder_name_note(args.output)
     if note:
         print(note, file=sys.stderr)
-    board_note = smaller_boards_note(size.flash if size else None)  # the IDE offers it for every AVR board
+    # fixed point takes no harmonic terms, no roots and no refinement (fitgen.equations.fixedpoint)
+    fixed_too = args.precision == "float" and model.refine is None and not any(
+        t.harm or "/" in t.exponent for e in model.equations for t in e.terms)
+    board_note = smaller_boards_note(size.flash if size else None, fixed_too)  # the IDE offers every AVR board
     if board_note:
         print(board_note, file=sys.stderr)
     coarse = rounding_note(model, max(lsb_volts(chip) for chip, _ in cmap.elements()))  # a 12-bit ADS7828's
@@ -68,8 +69,9 @@ def add_arduino_build(sub) -> None:
                                                             "arduino-builder is installed)")
     build.add_argument("--emulate", metavar="POSE", help="also run ReadPose on an emulated Uno reading --sim-sensor "
                        "at POSE (e.g. dx=1,dz=-1), its lines on stdout (without it: run at rest, for the stack)")
-    ab.add_argument("--sim-sensor", help="with --emulate: the simulated sensor (default: the sensor the model was "
-                                         "fitted on where its file is found, else paper)")
+    ab.add_argument("--sim-sensor", help="the simulated sensor of the emulated runs: --emulate's, and the run at "
+                                         "rest that measures the stack whenever simavr is installed (default: the "
+                                         "sensor the model was fitted on where its file is found, else paper)")
     ab.add_argument("--tare", action="store_true", help="ReadPose tares at start, onto the model's rest readings")
     ab.add_argument("--rest", metavar="SENSOR|DATASET.csv", help="with --tare: the rest readings it maps onto "
                     "(default: the model's own sensor file where found, else the rest the model recorded)")

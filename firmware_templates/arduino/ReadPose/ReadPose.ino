@@ -19,7 +19,9 @@
 static adc_i2c bus;
 static adc_array adcs;
 static bool running;
+#if TM_HAS_POSE_BOX
 static bool said_far; /* the note on estimates far outside the fitted pose box: once per reset */
+#endif
 #if TACTILE_TARE
 #if TACTILE_FIXED_POINT
 static int32_t offset_codes[TM_N_INPUTS]; /* added to each code: the model takes codes */
@@ -184,8 +186,8 @@ void loop()
         Serial.print(',');
         Serial.println(status);
 #if TM_HAS_POSE_BOX
-        /* readings inside the domain, the estimate far outside the box the model was fitted in: another
-         * sensor's readings (the drawing's model on a built unit), which the status cannot tell */
+        /* the estimate far outside the box the model was fitted in, clamped readings or not: another sensor's
+         * readings (the drawing's model on a built unit), which the status cannot tell */
         if (status >= 0 && !said_far && tm_far_outside(out)) {
             said_far = true;
             Serial.println(F("# note: an estimate far outside the pose box the model was fitted in: "
