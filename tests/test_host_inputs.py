@@ -172,6 +172,8 @@ def test_a_replay_says_it_left_out_a_last_line_cut_short(model_file, tmp_path):
     whole.write_text("\n".join(lines) + "\n")
     proc = run_cli("tactile-host", "replay", str(whole))
     assert proc.returncode == 0 and "replayed 2 samples" in proc.stdout and "cut short" not in proc.stdout
+    proc = run_cli("tactile-host", "view", "--replay", str(run), "--port", "0")  # the page's replay says it too
+    assert proc.returncode == 0 and "tactile-host view: note: its last line" in proc.stderr, proc.stderr
     run.write_text("\n".join(lines[:-1] + [lines[-1][:25], lines[-1]]) + "\n")
     assert_one_line_error(run_cli("tactile-host", "replay", str(run)), 2, f"line {len(lines)} is not a sample")
 

@@ -146,6 +146,8 @@ def _view_replay(args) -> int:
         server.start()
         print(f"tactile-host view: serving {_where(server)} (replay of {args.replay}, {len(res.t)} samples); Ctrl-C "
               "stops", file=sys.stderr, flush=True)
+        for note in res.notes:  # what replay's report says of the run: another model, a last line cut short
+            print(f"tactile-host view: note: {note}", file=sys.stderr, flush=True)
         with StopFlag() as stop:
             played = res.play(hub.publish, stop, hold=args.hold)
         ended = not stop.stopped
