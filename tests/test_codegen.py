@@ -257,6 +257,13 @@ def test_far_outside_in_c_flags_the_estimates_python_does(paper_model, tmp_path)
         assert np.array_equal(np.array(got.split(), dtype=int).astype(bool), want), name
         assert want.any() == (name != "nobox") and not want.all()
         assert (f"#define TM_HAS_POSE_BOX {int(name != 'nobox')}") in text
+    # a bound no int32 in the output's Q format can pass: that side's test is left out, not clamped into range
+    from fitgen.c.codegen import _fixed_far
+
+    wide = dataclasses.replace(boxed, fit_info={"held_out": {"box": {**box, "thx": [-1e6, 1e6]}}})
+    fw = build_fixed(dataclasses.replace(wide, equations=tuple(integer)), 1e-4, 0.0, 32)
+    assert _fixed_far(fw)[3] == (None, None) and _fixed_far(fw)[0] == _fixed_far(fm)[0]
+    assert "/* thx */" not in render_fixed_header(fw) and "/* dx */" in render_fixed_header(fw)
 
 
 def test_verify_says_in_one_line_what_is_wrong_with_the_compiler_or_runner(paper_model, tmp_path):

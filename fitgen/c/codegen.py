@@ -246,13 +246,20 @@ def _env() -> jinja2.Environment:
 
 def _fixed_far(fm) -> tuple:
     """Per output, the int32 bounds (low, high) of FixedModel.far in the output's Q format, or None: an
-    integer out lies below x (a real) exactly when it lies below ceil(x), and above y exactly when above floor(y)."""
+    integer out lies below x (a real) exactly when it lies below ceil(x), and above y exactly when above floor(y).
+    A side no int32 can pass (its bound past the format's range) is None: that test is left out."""
     import math
 
-    def q(x: float, frac_bits: int, rnd) -> int:
-        return int(min(max(rnd(x * 2.0**frac_bits), 1 - 2**31), 2**31 - 1))  # INT32_C(-2^31) is no int32 literal
+    top = 2**31 - 1
 
-    return tuple(None if b is None else (q(b[0], o.frac_bits, math.ceil), q(b[1], o.frac_bits, math.floor))
+    def side(x: float, frac_bits: int, rnd, below: bool):
+        b = rnd(x * 2.0**frac_bits)
+        if (b <= -top - 1) if below else (b >= top):
+            return None
+        return int(min(max(b, -top), top))
+
+    return tuple(None if b is None else (side(b[0], o.frac_bits, math.ceil, True),
+                                         side(b[1], o.frac_bits, math.floor, False))
                  for o, b in zip(fm.outputs, fm.far or (None,) * len(fm.outputs)))
 
 
