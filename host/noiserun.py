@@ -14,7 +14,7 @@ from fitgen.base.progress import Progress
 
 from host.adc import AdcArray, RetryPolicy
 from host.allan import CANDIDATES, CAPTURE_S, EXCESS, SURE, WHITE_RATIO, Averaging, averaging, needed_samples
-from host.session import adc_defaults, channel_map_from_args, open_bus_from_args
+from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 
 # at two ADS1115s' 140 samples per second white noise's flicker floor is read to about 6e-6 mV^2, so that 128 and
 # 256 samples per row can be told safe (host.allan.EXCESS); at 300 s 1 in 3 white recordings is told 64
@@ -47,6 +47,7 @@ def record(array: AdcArray, seconds: float, clock, stop=lambda: False, progress=
 def run_noise(args, stop=lambda: False) -> Averaging:
     """The rest recording of the options' bus (or of a simulated sensor at rest) and its Averaging."""
     adc_defaults(args)
+    refuse_alone([("sensor" in args.adc_given, "--sensor", "--simulate", args.simulate)])  # what it simulates
     seconds = parse_positive(args.seconds, "--seconds", most=LONGEST_WAIT)
     retries = parse_positive(args.retries, "--retries", integer=True)
     cmap = channel_map_from_args(args)

@@ -157,8 +157,9 @@ class ReadoutSession:
         self.duration = parse_positive(args.duration, "--duration") if args.duration is not None else None
         check_depends(args)
         sensor_given = args.sensor is not None
-        refuse_alone([(sensor_given, "--sensor", "--simulate, --tare or --auto-zero",
-                       args.simulate is not None or args.tare or args.auto_zero)])
+        # the sensor is what a simulation simulates, or what a tare rests on when --rest names nothing else
+        refuse_alone([(sensor_given, "--sensor", "--simulate, or --tare or --auto-zero without --rest",
+                       args.simulate is not None or ((args.tare or args.auto_zero) and not args.rest))])
         adc_defaults(args)
         tare_n = parse_positive(args.tare_samples, "--tare-samples", integer=True)
         if tare_n > MAX_TARE_SAMPLES:  # tm_pi's limit: at 860 SPS a tare of more would keep the sensor still for hours

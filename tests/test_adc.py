@@ -426,7 +426,9 @@ def test_fault_and_pose_specs():
     # file read neither for a simulation nor for a tare's rest
     (["--adc", TWO_1115, "--seed", "3"], "--seed needs --simulate"),
     (["--adc", TWO_1115, "--simulate", "dx=1", "--bus", "5"], "--bus does not go with --simulate"),
-    (["--adc", TWO_1115, "--sensor", "paper"], "--sensor goes with --simulate, --tare or --auto-zero"),
+    (["--adc", TWO_1115, "--sensor", "paper"], "--sensor goes with --simulate, or --tare or --auto-zero without "
+                                               "--rest"),
+    (["--adc", TWO_1115, "--tare", "--rest", "paper", "--sensor", "paper"], "--sensor goes with --simulate, or"),
     (["--adc", TWO_1115, "--simulate", "dx=0", "--sim-fault", "melt:1"], "--sim-fault"),
 ])
 def test_read_bad_input_is_one_line_exit_2(model_file, args, message):

@@ -154,6 +154,8 @@ def test_the_command_writes_its_verdict_and_plot(tmp_path):
     (["--seconds", "0"], "--seconds"),
     (["--seconds", "nan"], "--seconds"),
     (["--sim-flicker", "0.0001"], "--sim-flicker needs --simulate"),
+    (["--sensor", "paper"], "--sensor goes with --simulate"),  # it names what a simulation simulates, no more
+    (["--seed", "3"], "--seed needs --simulate"),
     (["--simulate", "--sim-flicker", "-1"], "--sim-flicker"),
 ])
 def test_bad_input_is_one_line_and_nothing_written(tmp_path, args, what):
