@@ -75,5 +75,5 @@ def _kill_group(proc: subprocess.Popen) -> None:
     # the lock held, and a second wait() blocks on it for ever (one CI run hung so)
     try:
         proc.returncode = os.waitstatus_to_exitcode(os.waitpid(proc.pid, 0)[1])
-    except ChildProcessError:  # reaped already, by the interrupted wait
+    except ChildProcessError:  # reaped already, by the interrupted wait: its status is lost, and no caller reads it
         proc.returncode = 0 if proc.returncode is None else proc.returncode

@@ -262,8 +262,8 @@ def _check_schedule(args, drawing, axes, samples: int, given: dict) -> int:
     write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples,
                                               "sensor_sha256": drawing.sha256, "transfer": drawing.transfer})
     print(f"wrote {len(poses)} random check poses ({_box(info)} from first contact, seed {args.seed}"
-          f"{_pressed(info)}) to {args.output}: capture them as for the calibration (tactile-host capture --poses), then fitgen check "
-          "MODEL CHECK.csv", file=sys.stderr)
+          f"{_pressed(info)}) to {args.output}: capture them as for the calibration (tactile-host capture "
+          "--poses), then fitgen check MODEL CHECK.csv", file=sys.stderr)
     return 0
 
 
