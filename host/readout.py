@@ -52,6 +52,8 @@ class LineFormat:
 
 
 UNCOMPENSATED = "not compensated for temperature: the thermistor read none (is it connected?)"
+FAR_OUTSIDE = ("estimated outside the pose box the model was fitted in by more than its width: another sensor than "
+               "the model's? a built unit needs its own calibration (docs/calibration.md)")
 TEMP_OUTSIDE = (f"at a temperature outside {T_RANGE[0]:g}..{T_RANGE[1]:g} degC, where the compensation is "
                 "extrapolated (a thermistor off its divider's range?)")
 
@@ -94,8 +96,7 @@ class ReadoutStats:
         if self.temp_outside:
             text += f"; {self.temp_outside} {TEMP_OUTSIDE}"
         if self.far:
-            text += (f"; {self.far} estimated outside the pose box the model was fitted in by more than its width: "
-                     "another sensor than the model's? a built unit needs its own calibration (docs/calibration.md)")
+            text += f"; {self.far} {FAR_OUTSIDE}"
         return text
 
 
@@ -334,6 +335,8 @@ class Readout:
             est = np.asarray(out, dtype=float)[self._far_cols]
             far = bool(np.any((est < self._far_lo) | (est > self._far_hi)))
             st.far += far
+            if far and st.far == 1 and self.warn is not None:  # a run may last hours: said now, not at its end
+                self.warn(f"sample {st.samples} {FAR_OUTSIDE}; the summary counts every such sample")
         if self.array.clipped.any():
             st.clipped += 1
         if self.corrections.tempcomp is not None:
