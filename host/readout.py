@@ -56,6 +56,9 @@ FAR_OUTSIDE = ("estimated outside the pose box the model was fitted in by more t
                "the model's? a built unit needs its own calibration (docs/calibration.md)")
 TEMP_OUTSIDE = (f"at a temperature outside {T_RANGE[0]:g}..{T_RANGE[1]:g} degC, where the compensation is "
                 "extrapolated (a thermistor off its divider's range?)")
+# ReadoutStats' counts of samples whose estimates are off while the run goes on: each said at its first sample
+# (Readout.warn) and in the summary
+WARNED = {"uncompensated": UNCOMPENSATED, "temp_outside": TEMP_OUTSIDE, "far": FAR_OUTSIDE}
 
 
 @dataclass
@@ -91,12 +94,9 @@ class ReadoutStats:
             text += f"; {self.clipped} with a clipped input"
         if self.outside:
             text += f"; {self.outside} outside the model's domain"
-        if self.uncompensated:
-            text += f"; {self.uncompensated} {UNCOMPENSATED}"
-        if self.temp_outside:
-            text += f"; {self.temp_outside} {TEMP_OUTSIDE}"
-        if self.far:
-            text += f"; {self.far} {FAR_OUTSIDE}"
+        for kind, said in WARNED.items():
+            if getattr(self, kind):
+                text += f"; {getattr(self, kind)} {said}"
         return text
 
 
@@ -334,9 +334,8 @@ class Readout:
         if status >= 0 and self._far_cols:
             est = np.asarray(out, dtype=float)[self._far_cols]
             far = bool(np.any((est < self._far_lo) | (est > self._far_hi)))
-            st.far += far
-            if far and st.far == 1 and self.warn is not None:  # a run may last hours: said now, not at its end
-                self.warn(f"sample {st.samples} {FAR_OUTSIDE}; the summary counts every such sample")
+            if far:
+                self._count("far")
         if self.array.clipped.any():
             st.clipped += 1
         if self.corrections.tempcomp is not None:
@@ -345,18 +344,19 @@ class Readout:
             self._publish(t, raw, v, out, status, temp, far)
 
     def _check_temperature(self, temp: float) -> None:
-        """Count a sample the compensation did not apply to, or applied outside its range; the first of each kind
-        is said at once (``warn``): a live run's estimates are off from then on, not at its end."""
-        st = self.stats
+        """Count a sample the compensation did not apply to, or applied outside its range."""
         if not math.isfinite(temp):
-            st.uncompensated += 1
-            if st.uncompensated == 1 and self.warn is not None:
-                self.warn(f"sample {st.samples} {UNCOMPENSATED}; the summary counts every such sample")
+            self._count("uncompensated")
         elif not T_RANGE[0] <= temp <= T_RANGE[1]:
-            st.temp_outside += 1
-            if st.temp_outside == 1 and self.warn is not None:
-                self.warn(f"sample {st.samples} {TEMP_OUTSIDE}: {temp:.1f} degC; the summary counts every such "
-                          "sample")
+            self._count("temp_outside", f": {temp:.1f} degC")
+
+    def _count(self, kind: str, detail: str = "") -> None:
+        """One more sample of a WARNED ``kind``; the first is said at once (``warn``): a run may last hours, and
+        its estimates are off from then on, not at its end."""
+        st = self.stats
+        setattr(st, kind, getattr(st, kind) + 1)
+        if getattr(st, kind) == 1 and self.warn is not None:
+            self.warn(f"sample {st.samples} {WARNED[kind]}{detail}; the summary counts every such sample")
 
     def _publish(self, t, raw, v, out, status, temp, far=False) -> None:
         now = self.clock.monotonic()
