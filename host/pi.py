@@ -166,15 +166,15 @@ def _far_block(model: Model) -> str:
     """pi_options.h's bounds past which an estimate lies outside the model's fitted pose box by more than its
     width (Model.far_bounds: what tactile-host read and fitgen predict count); PI_FAR_N 0 without a box."""
     cols, lo, hi = model.far_bounds()
-    n = max(len(cols), 1)  # C has no array of length 0
-
-    def table(kind: str, name: str, vals) -> str:
-        return f"static const {kind} {name}[{n}] = {{ {', '.join(vals) or '0'} }};\n"
-
     return (f"/* outputs whose estimate is checked against the fitted pose box, and their bounds */\n"
-            f"#define PI_FAR_N {len(cols)}\n" + table("int", "PI_FAR_COL", [str(j) for j in cols])
-            + table("double", "PI_FAR_LO", [c_real(float(x), "double") for x in lo])
-            + table("double", "PI_FAR_HI", [c_real(float(x), "double") for x in hi]))
+            f"#define PI_FAR_N {len(cols)}\n" + _c_table("int", "PI_FAR_COL", [str(j) for j in cols])
+            + _c_table("double", "PI_FAR_LO", [c_real(float(x), "double") for x in lo])
+            + _c_table("double", "PI_FAR_HI", [c_real(float(x), "double") for x in hi]))
+
+
+def _c_table(kind: str, name: str, vals: list[str]) -> str:
+    """A pi_options.h array of ``vals``; one 0 where there are none (C has no array of length 0)."""
+    return f"static const {kind} {name}[{max(len(vals), 1)}] = {{ {', '.join(vals) or '0'} }};\n"
 
 
 def pi_autozero(model: Model, rest, precision: str) -> tuple | None:
@@ -201,9 +201,6 @@ def _autozero_block(model: Model, rest, precision: str) -> str:
     centre, per_volt = found if found is not None else (np.zeros(n), np.zeros(n))
     deg = [int(o in POSE_NAMES and POSE_UNITS[POSE_NAMES.index(o)] == "deg") for o in model.output_names]
 
-    def table(kind: str, name: str, vals) -> str:
-        return f"static const {kind} {name}[{n}] = {{ {', '.join(vals)} }};\n"
-
     def real(x) -> str:
         return c_real(float(x), "double")
 
@@ -213,9 +210,9 @@ def _autozero_block(model: Model, rest, precision: str) -> str:
             f"#define PI_AZ_BAND_MM {real(s.band_mm)}\n#define PI_AZ_BAND_DEG {real(s.band_deg)}\n"
             f"#define PI_AZ_HOLD_S {real(s.hold)}\n#define PI_AZ_MIN_TARE {MIN_AUTOZERO_TARE}\n"
             "/* each output's mean single estimate at rest, and their scatter per volt of noise */\n"
-            + table("double", "PI_AZ_REST_EST", [real(x) for x in centre])
-            + table("double", "PI_AZ_SCATTER_PER_V", [real(x) for x in per_volt])
-            + table("unsigned char", "PI_AZ_DEG", [str(d) for d in deg]))
+            + _c_table("double", "PI_AZ_REST_EST", [real(x) for x in centre])
+            + _c_table("double", "PI_AZ_SCATTER_PER_V", [real(x) for x in per_volt])
+            + _c_table("unsigned char", "PI_AZ_DEG", [str(d) for d in deg]))
 
 
 def describe_reads(cmap: ChannelMap, tin=None, tempcomp=None) -> str:
