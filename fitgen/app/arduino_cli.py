@@ -15,6 +15,7 @@ def cmd_arduino_build(args) -> int:
     from fitgen.physics.sensor import load_sensor
     from hil.sketch import build_readpose
     from fitgen.app.report import rounding_note
+    from fitgen.equations.fixedpoint import fixed_refusal
     from host.arduino import BOARDS, folder_name_note, lsb_volts, smaller_boards_note
     from host.readout import model_rest
     from host.session import channel_map_from_args
@@ -42,9 +43,7 @@ def cmd_arduino_build(args) -> int:
     note = folder_name_note(args.output)
     if note:
         print(note, file=sys.stderr)
-    # fixed point takes no harmonic terms, no roots and no refinement (fitgen.equations.fixedpoint)
-    fixed_too = args.precision == "float" and model.refine is None and not any(
-        t.harm or "/" in t.exponent for e in model.equations for t in e.terms)
+    fixed_too = args.precision == "float" and not fixed_refusal(model)
     board_note = smaller_boards_note(size.flash if size else None, fixed_too)  # the IDE offers every AVR board
     if board_note:
         print(board_note, file=sys.stderr)

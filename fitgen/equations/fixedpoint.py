@@ -264,18 +264,25 @@ def _check_model(model: Model, input_lsb, input_offset) -> tuple[float, float]:
         raise InputError(f"the input offset must be a finite number, got {input_offset!r}")
     if model.n_inputs > 30:
         raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most 30")
+    if refused := fixed_refusal(model):
+        raise InputError(refused)
+    return lsb_f, off_f
+
+
+def fixed_refusal(model: Model) -> str:
+    """Why fixed point cannot evaluate ``model`` (a refinement, a harmonic term, a root); '' when it can."""
     if model.refine is not None:
-        raise InputError("fixed point has no refinement (its Gauss-Newton steps run in float or double): "
-                         "fit without --refine for fixed point")
+        return ("fixed point has no refinement (its Gauss-Newton steps run in float or double): fit without --refine "
+                "for fixed point")
     for eq in model.equations:
         for t in eq.terms:
             if t.harm:
-                raise InputError(f"fixed point has no harmonic terms (they divide by the readings' sum), but output "
-                                 f"{eq.name} has {t.text}: fit with --family no-roots (or integer)")
+                return (f"fixed point has no harmonic terms (they divide by the readings' sum), but output {eq.name} "
+                        f"has {t.text}: fit with --family no-roots (or integer)")
             if t.exponent and "/" in t.exponent:
-                raise InputError(f"fixed point takes integer powers only, but output {eq.name} has the root "
-                                 f"{t.text}: fit with --family no-roots (or integer)")
-    return lsb_f, off_f
+                return (f"fixed point takes integer powers only, but output {eq.name} has the root {t.text}: fit "
+                        "with --family no-roots (or integer)")
+    return ""
 
 
 def build_fixed(model: Model, input_lsb: float, input_offset: float = 0.0, mul_bits: int = 32) -> FixedModel:
