@@ -216,20 +216,6 @@ static void print_band(const az_state *az)
     fprintf(stderr, "\n");
 }
 
-/* 1 when an estimate lies outside the model's fitted pose box by more than its width (PI_FAR_*), as
- * tactile-host read counts it: readings of another sensor than the model's */
-static int far_outside(const tm_real out[TM_N_OUTPUTS])
-{
-    int j;
-    for (j = 0; j < PI_FAR_N; ++j) {
-        const double x = (double)out[PI_FAR_COL[j]];
-        if (x < PI_FAR_LO[j] || x > PI_FAR_HI[j]) {
-            return 1;
-        }
-    }
-    return 0;
-}
-
 static void print_line(int jsonl, double t, const double v[TM_N_INPUTS], const tm_real out[TM_N_OUTPUTS], int status)
 {
     static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
@@ -474,7 +460,7 @@ int main(int argc, char **argv)
             print_update(&az, t_mono, shift);
         }
         print_line(jsonl, t, v, out, status);
-        if (status >= 0 && far_outside(out)) {
+        if (status >= 0 && tm_far_outside(out)) { /* the header's test: read's bounds */
             ++far;
         }
         ++n;
