@@ -16,6 +16,7 @@ from fitgen.base.parse import parse_numbers, parse_positive
 from fitgen.base.progress import Progress
 from fitgen.equations.model import check_input_units, load_model
 from fitgen.fitting.holdout import fitted_sensor_spec
+from fitgen.physics.pose import check_above_board
 from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, RetryPolicy, open_bus
@@ -186,6 +187,8 @@ class ReadoutSession:
             print(f"{prog}: note: the model was fitted on {lost}, not found here as it was: simulating "
                   f"{args.sensor}; give --sensor", file=sys.stderr)
         check_input_units(model, "V", "the ADCs' readings", f"model {args.model}")
+        if motion is None and pose is not None:  # said of the option here; the simulated bus would say "pose 1"
+            check_above_board(load_sensor(args.sensor), pose[None], name=f"--simulate {args.simulate}")
         if tempcomp is not None and tempcomp.n != model.n_inputs:
             raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
         self.cmap = cmap = cmap0

@@ -132,6 +132,16 @@ def test_an_option_without_the_one_it_needs_is_refused(model_file, option, said)
     assert_one_line_error(read(model_file, *option), 2, said)
 
 
+@pytest.mark.parametrize("option", [[], ["--tare"]])
+def test_a_simulated_pose_through_the_board_is_named_as_given(model_file, option):
+    """One pose from --simulate was called "pose 1", as if from a list; it is named as the option gave it, before
+    a tare rests on the sensor."""
+    proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "dx=1,dz=-100",
+                   "--count", "1", *option)
+    assert_one_line_error(proc, 2, "--simulate dx=1,dz=-100 (dx=1 dy=0 dz=-100")
+    assert "pose 1" not in proc.stderr and "tare" not in proc.stderr
+
+
 def test_view_hold_without_replay_is_refused(model_file):
     assert_one_line_error(run_cli("tactile-host", "view", "--model", model_file, "--adc", TWO_CHIPS, "--simulate",
                                   "dx=1", "--count", "1", "--port", "0", "--hold"), 2, "--hold goes with --replay")

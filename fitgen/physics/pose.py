@@ -131,11 +131,12 @@ def magnet_frame(sensor: Sensor, poses: np.ndarray, touching: bool = False) -> t
     return local, axes
 
 
-def check_above_board(sensor: Sensor, poses) -> np.ndarray:
+def check_above_board(sensor: Sensor, poses, name: str | None = None) -> np.ndarray:
     """The magnet's centre (P, 3) at each pose; InputError for the first pose that puts any part of the magnet
     (its tilt included) on or below the board's top face (z = the board's thickness: the frame's origin is the
-    centre of the board's bottom face): the magnet would be in or through the board."""
-    return _placed(sensor, as_poses(poses))[0]
+    centre of the board's bottom face): the magnet would be in or through the board. ``name`` calls the pose
+    what the user gave (an option) where there is one pose, in place of "pose 1"."""
+    return _placed(sensor, as_poses(poses), name=name)[0]
 
 
 def lowest_point(sensor: Sensor, centre: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -174,7 +175,8 @@ def _unchecked(sensor: Sensor, given: np.ndarray, touching: bool = False) -> tup
     return centre, R
 
 
-def _placed(sensor: Sensor, given: np.ndarray, touching: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def _placed(sensor: Sensor, given: np.ndarray, touching: bool = False,
+            name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The magnet's centre (P, 3) and rotation (P, 3, 3) at the given poses, checked as
     :func:`check_above_board` says."""
     centre, R = _unchecked(sensor, given, touching)
@@ -184,7 +186,7 @@ def _placed(sensor: Sensor, given: np.ndarray, touching: bool = False) -> tuple[
         p = int(bad[0])
         pose = pose_label(given[p])
         rest = sensor.magnet.rest_center[2] - sensor.board_thickness
-        raise InputError(f"pose {p + 1} ({pose}) puts the magnet's lowest point at z = {low[p]:g} mm, on or below "
+        raise InputError(f"{name or f'pose {p + 1}'} ({pose}) puts the magnet's lowest point at z = {low[p]:g} mm, on or below "
                          f"the board's top face (z = {sensor.board_thickness:g} mm; at rest the magnet's centre is "
                          f"{rest:g} mm above it): the magnet would be in or through the board")
     return centre, R
