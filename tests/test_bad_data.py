@@ -440,7 +440,17 @@ def test_a_standard_output_that_cannot_be_written_is_one_line(tmp_path, tool, ar
     with open("/dev/full", "w") as full:
         proc = subprocess.run([sys.executable, "-c", f"import sys; from {module} import main; sys.argv[0] = {tool!r}; "
                                "main()", *args], stdout=full, stderr=subprocess.PIPE, text=True, timeout=120)
-    assert_one_line_error(proc, 2, f"{tool}: error: cannot write standard output: No space left on device")
+    prog = tool if args[0].startswith("-") else f"{tool} {args[0]}"  # the subcommand's name, once parsed
+    assert_one_line_error(proc, 2, f"{prog}: error: cannot write standard output: No space left on device")
+
+
+@pytest.mark.parametrize("args", [["fit", "nothere.csv", "-o", "m.json"], ["fit", "--k"],
+                                  ["simulate", "--sensor", "nothere.toml", "-o", "d.csv"]])
+def test_every_error_line_of_a_subcommand_starts_with_its_name(args, tmp_path):
+    """argparse's lines said "fitgen fit: error:" and the command's own "fitgen: error:"; both now name it."""
+    proc = run_cli("fitgen", *args, cwd=tmp_path)
+    assert_one_line_error(proc, 2)
+    assert proc.stderr.startswith(f"fitgen {args[0]}: error: "), proc.stderr
 
 
 def test_codes_that_are_not_whole_or_beyond_int32_are_named_by_row_and_column(tmp_path):

@@ -172,13 +172,13 @@ def test_read_says_at_once_when_its_compensation_cannot_apply(rest_model_file, t
 def test_a_missing_compensation_file_is_said_once(rest_model_file, tmp_path):
     """A --temp-comp file that is not there: that, in one line, not also 'not JSON'."""
     gone = tmp_path / "nothere.json"
-    said = f"tactile-host: error: temperature compensation file {gone}: no such file"
+    said = "error: temperature compensation file {gone}: no such file"
     for argv in (["tempcomp-c", str(gone), "-o", str(tmp_path / "c")],
                  ["read", "--model", rest_model_file, "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0", "--simulate",
                   "0,0,0,0,0", "--temp-comp", str(gone), "--count", "1"]):
         proc = run_cli("tactile-host", *argv)
         assert_one_line_error(proc)
-        assert proc.stderr.strip() == said
+        assert proc.stderr.strip() == f"tactile-host {argv[0]}: " + said.format(gone=gone)
 
 
 def test_capture_temperatures_below_zero_and_empty_items(tmp_path):

@@ -786,7 +786,7 @@ def test_a_capture_read_in_the_wrong_units_is_said_so(drawing, plan, tmp_path):
     proc = run_cli("fitgen", "identify", str(tmp_path / "bare.csv"), "--noise", str(drawing.noise), "-o",
                    str(tmp_path / "u.toml"))
     # the likely cause first: the meta left behind (the physics' own refusal follows)
-    assert_one_line_error(proc, 2, "fitgen: error: the capture's meta does not give its units (is its .meta.json, "
+    assert_one_line_error(proc, 2, "fitgen identify: error: the capture's meta does not give its units (is its .meta.json, "
                                    "which also records the noise it measured, left behind?): read as mT they fit the "
                                    "drawing")
     assert "than as V: give --transfer gmr; read as mT, the physics" in proc.stderr

@@ -893,7 +893,7 @@ def test_capture_command_killed_midway_and_reset_between_runs_keeps_every_row(se
         proc = run_host(*args)
         assert proc.returncode == 2, proc.stderr
         assert "was reset" in proc.stderr and "set the zero:" in proc.stderr
-        assert proc.stderr.strip().splitlines()[-1].startswith("tactile-host: error: ")
+        assert proc.stderr.strip().splitlines()[-1].startswith("tactile-host capture: error: ")
         assert "no zero was set" in proc.stderr.strip().splitlines()[-1]
         assert not any(ln.startswith("G1") for ln in srv.ctrl.lines[moves:])
         assert data_rows(out) == second

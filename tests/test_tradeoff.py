@@ -271,7 +271,7 @@ def test_an_output_folder_proc_refuses_is_said_before_the_sweep(monkeypatch, cap
     with pytest.raises(SystemExit) as stop:  # root may write in /proc by its permissions; it takes no folder
         main(["tradeoff", "paper", "--scene", "press", "-o", "/proc/x/y"])
     err = capsys.readouterr().err
-    assert stop.value.code == 2 and err == "fitgen: error: cannot create /proc/x/y: /proc takes no new folder " \
+    assert stop.value.code == 2 and err == "fitgen tradeoff: error: cannot create /proc/x/y: /proc takes no new folder " \
                                           "(No such file or directory)\n"
 
 

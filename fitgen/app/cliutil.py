@@ -119,8 +119,9 @@ class _Stdout:
         return getattr(self._stream, name)
 
 
-def run(main_fn, argv=None, prog: str = "") -> int:
-    """Call ``main_fn(argv)``; turn bad input into one line on stderr and exit status 2."""
+def run(main_fn, argv=None, prog="") -> int:
+    """Call ``main_fn(argv)``; turn bad input into one line on stderr and exit status 2. ``prog``: the name the
+    line starts with, or a function giving it (the subcommand's, once parsed)."""
     previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
     stdout = sys.stdout
     sys.stdout = _Stdout(stdout)
@@ -129,22 +130,26 @@ def run(main_fn, argv=None, prog: str = "") -> int:
         sys.stdout.flush()  # here, not at exit, so that a full disk is said as one line
         return status
     except InputError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{_name(prog)}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt as exc:
-        print(f"{prog}: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
+        print(f"{_name(prog)}: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
         return 143 if isinstance(exc, Terminated) else 130
     except BrokenPipeError:  # the reader went away (| head): nothing more to say
         _drop(stdout)
         return 0
     except OutputFailed as exc:
         _drop(stdout)
-        print(f"{prog}: error: cannot write standard output: {exc}", file=sys.stderr)
+        print(f"{_name(prog)}: error: cannot write standard output: {exc}", file=sys.stderr)
         return EXIT_USAGE
     finally:
         sys.stdout = stdout
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _name(prog) -> str:
+    return prog() if callable(prog) else prog
 
 
 def _drop(stream) -> None:
@@ -167,13 +172,16 @@ def command_main(build_parser, argv, prog: str, check=None):
     """A command's entry point: parse ``argv`` with ``build_parser()``, let ``check(args)`` refuse option
     combinations, call the chosen subcommand's ``func(args)``; exit with its status (:func:`run`)."""
 
+    name = [prog]  # the subcommand's once parsed, so that every line of it starts alike (as argparse's do)
+
     def main_fn(argv) -> int:
         args = build_parser().parse_args(argv)
+        name[0] = f"{prog} {args.command}"
         if check is not None:
             check(args)
         return args.func(args)
 
-    sys.exit(run(main_fn, argv, prog))
+    sys.exit(run(main_fn, argv, lambda: name[0]))
 
 
 class StopFlag:
