@@ -248,12 +248,14 @@ class UnoEmulator(_Running):
     chips. ``eeprom``: a file that keeps the EEPROM from one run to the next (what a board keeps over a
     reset). ``paint``: the address where RAM above .bss starts; after stop(), ``stack_peak`` holds the
     deepest the stack reached (bytes), and ``cycles`` the cycles the core ran. ``hold``: the core starts when
-    the first client connects (as an Uno restarts when a serial monitor opens its port)."""
+    the first client connects (as an Uno restarts when a serial monitor opens its port). ``mcu``: simavr's
+    name of the core (another board's sketch: the Mega's atmega2560)."""
 
     def __init__(self, board: str | Path, elf: str | Path, port: int | None = None, *, bridge=None,
                  paint: int | None = None, eeprom: str | Path | None = None, boot_timeout: float = 10.0,
-                 hold: bool = False):
+                 hold: bool = False, mcu: str = "atmega328p"):
         self.board, self.elf, self.bridge, self.paint, self.hold = Path(board), Path(elf), bridge, paint, hold
+        self.mcu = mcu
         self.eeprom = eeprom
         self.port = port if port is not None else 0  # 0: the board binds a free port and says which
         self.boot_timeout = boot_timeout
@@ -270,7 +272,8 @@ class UnoEmulator(_Running):
     def command(self) -> list[str]:
         return [str(self.board), str(self.elf), str(self.port)] + (["--bridge"] if self.bridge is not None else []) \
             + (["--eeprom", str(self.eeprom)] if self.eeprom else []) \
-            + (["--paint", hex(self.paint)] if self.paint else []) + (["--hold"] if self.hold else [])
+            + (["--paint", hex(self.paint)] if self.paint else []) + (["--hold"] if self.hold else []) \
+            + (["--mcu", self.mcu] if self.mcu != "atmega328p" else [])
 
     def start(self) -> "UnoEmulator":
         popen = dict(stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)

@@ -16,12 +16,14 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 
+from host.boards import BOARDS
 from host.arduino import Size, arduino_build, example_elf, find_builder, require_builder
 from host.channelmap import ChannelMap
 
 from hil.emulate import UnoEmulator, bss_end, build_uno_board, require_avr_tools, uno_emulator_available
 
-RAM_END = 0x8FF  # the ATmega328P's last RAM address (RAMEND)
+# the cores the simavr board runs: each one's last RAM address (RAMEND; 0x8FF on the ATmega328P)
+RAM_END = {b.mcu: (b.ram_start & 0xFFFF) + b.ram - 1 for b in BOARDS.values() if b.emulated}
 REST = "0,0,0,0,0"  # the pose the stack is measured at when none is asked for
 LINE_MAX = 1024  # longer than any line ReadPose prints: a line past it is not a sketch's line
 
@@ -57,8 +59,8 @@ def sim_pose(pose) -> np.ndarray:
 def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: int = 6, sensor: str = "paper",
                noise: float | None = None, seed: int = 0, timeout: float = 60.0,
                board: str | Path | None = None, rest_first: bool = False, offsets: str | None = None,
-               send: dict | None = None) -> SketchRun:
-    """Run an ATmega328P ELF on the emulated Uno with ``cmap``'s chips on its TWI bus, ``sensor`` at ``pose``
+               send: dict | None = None, mcu: str = "atmega328p") -> SketchRun:
+    """Run an ATmega328P ELF (``mcu``: another core of RAM_END's) on the emulated Uno with ``cmap``'s chips on its TWI bus, ``sensor`` at ``pose``
     (``dx=1,dz=-1`` or five numbers) with ``noise`` V rms (None: the sensor's), until it has printed ``n_lines``
     lines or a line starting ``error:``. InputError when that takes over ``timeout`` s of wall time or the
     program crashes; :class:`StackOverflow` when its stack ran into static RAM. ``board``: a built
@@ -97,7 +99,7 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
     with tempfile.TemporaryDirectory(prefix="tactile-sketch-") as tmp:
         board = build_uno_board(tmp) if board is None else board
         # held until the client is there, so that the lines start with the program's first
-        emu = UnoEmulator(board, elf, bridge=StandIn(bus, clock), paint=paint, hold=True)
+        emu = UnoEmulator(board, elf, bridge=StandIn(bus, clock), paint=paint, hold=True, mcu=mcu)
         failed = None
         try:
             with emu:
@@ -105,7 +107,7 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
         except InputError as exc:
             failed = exc
     said = "; ".join(emu.messages[-2:])  # the board's own word, e.g. that the program crashed
-    if emu.stack_peak is not None and emu.stack_peak >= RAM_END + 1 - paint:
+    if emu.stack_peak is not None and emu.stack_peak >= RAM_END[mcu] + 1 - paint:
         raise StackOverflow(f"the stack ran into static RAM: all {emu.stack_peak} B above .bss were used"
                             + (f" ({said})" if said else ""), emu.stack_peak)
     if failed is not None:
@@ -167,8 +169,9 @@ def readpose_table(lines) -> tuple[tuple[str, ...], np.ndarray]:
 def build_readpose(model, cmap: ChannelMap, folder: str | Path, pose=None, *, precision: str = "float",
                    style: str = "unrolled", build: bool | None = None, n_lines: int = 6, sensor: str = "paper",
                    noise: float | None = None, seed: int = 0, build_path: str | Path | None = None,
-                   rest=None, offsets: str | None = None) -> tuple[Size | None, SketchRun | None]:
-    """``arduino_build``: (its size, None). With a ``pose``, ReadPose is also run on the emulated Uno as
+                   rest=None, offsets: str | None = None, board: str = "uno") -> tuple[Size | None, SketchRun | None]:
+    """``arduino_build`` for ``board`` (host.arduino.BOARDS): (its size, None). With a ``pose``, ReadPose is also
+    run on the emulated Uno (on a Mega's core for the Mega; a board whose core is not emulated is refused) as
     :func:`run_sketch` runs it, and so is each setting tried when it does not fit: (the size with the stack's
     measured peak, the run). InputError when ReadPose prints an error line, and when it does not fit (flash,
     or static RAM and the stack's peak) naming a setting that does. Without a pose, the stack is still
@@ -176,11 +179,17 @@ def build_readpose(model, cmap: ChannelMap, folder: str | Path, pose=None, *, pr
     whose stack overflows is then refused, not suggested. ``rest``: the tare's rest readings (render_arduino's);
     with them the simulated sensor rests through the tare, then moves to ``pose``; ``offsets``: run_sketch's."""
     asked = pose is not None  # a run asked for needs the builder and the emulator: said before the work
-    if pose is None and build is not False and find_builder() is not None and uno_emulator_available():
+    spec = BOARDS[board]
+    if asked and not spec.emulated:
+        emulated = ", ".join(k for k, b in BOARDS.items() if b.emulated)
+        raise InputError(f"the {spec.label}'s {spec.mcu} is not emulated here: --emulate runs ReadPose with --board "
+                         f"{emulated}; without --emulate the {spec.label}'s build is checked for flash and static RAM")
+    if pose is None and build is not False and spec.emulated and find_builder() is not None \
+            and uno_emulator_available():
         pose = REST
     if pose is None:
         return arduino_build(model, cmap, folder, precision=precision, style=style, build=build,
-                             build_path=build_path, rest=rest), None
+                             build_path=build_path, rest=rest, board=board), None
     pose, runs = sim_pose(pose), {}  # a bad pose refused before the build
     if asked:
         require_builder()
@@ -189,7 +198,7 @@ def build_readpose(model, cmap: ChannelMap, folder: str | Path, pose=None, *, pr
     def measure(path, size):
         try:
             run = run_sketch(example_elf(path), cmap, pose, n_lines=n_lines, sensor=sensor, noise=noise, seed=seed,
-                             rest_first=rest is not None, offsets=offsets)
+                             rest_first=rest is not None, offsets=offsets, mcu=spec.mcu)
         except StackOverflow as exc:
             return replace(size, stack=exc.stack_peak)
         readpose_table(run.lines)  # its own error line, or lines that are not its rows, refused
@@ -199,5 +208,5 @@ def build_readpose(model, cmap: ChannelMap, folder: str | Path, pose=None, *, pr
     with tempfile.TemporaryDirectory(prefix="tactile-readpose-") as tmp:
         path = Path(tmp) / "build" if build_path is None else Path(build_path)
         size = arduino_build(model, cmap, folder, precision=precision, style=style, build=True, build_path=path,
-                             measure=measure, rest=rest)
+                             measure=measure, rest=rest, board=board)
     return size, runs[path]

@@ -29,6 +29,7 @@ from fitgen.c.cgen import c_real
 from fitgen.c.codegen import write_header
 from fitgen.equations.model import Model
 
+from host.boards import BOARDS, Board
 from host.channelmap import ChannelMap
 from host.pi import DRIVER_FILES, check_reads, render_adc_map
 from host.readout import TARE_SAMPLES
@@ -42,17 +43,6 @@ PRECISIONS = ("float", "fixed")
 WIRE_CLOCK_HZ = 400000  # both ADCs take I2C fast mode
 WIRE_TIMEOUT_US = 25000  # one transaction of a few bytes takes < 1 ms at 100 kHz
 
-
-@dataclass(frozen=True)
-class Board:
-    fqbn: str
-    flash: int  # bytes a sketch may take (the bootloader's excluded)
-    ram: int
-
-
-BOARDS = {"uno": Board("arduino:avr:uno", 32256, 2048)}
-# other AVR boards the manifests' architectures=avr lets the IDE offer, with less room than the Uno's
-SMALLER_AVR = (("a Leonardo or Micro", 28672), ("a Nano with the old bootloader", 30720))
 
 # Debian's arduino-builder and arduino-core-avr: the builder's own platform.txt adds the ctags recipe the
 # packaged core lacks; the define stands in for a newer compiler's (the core's headers expect it)
@@ -88,8 +78,10 @@ class Size:
         if self.ram is None:
             return f"{part('flash', self.flash, board.flash)}, {part('RAM', None, board.ram)}"
         if self.stack is None:
+            why = ("simavr runs the sketch to measure it" if board.emulated
+                   else f"the emulated board runs no {board.mcu}, this board's core")
             return (f"{part('flash', self.flash, board.flash)}, {part('RAM', self.ram, board.ram)} before the stack "
-                    "(not measured: simavr runs the sketch to measure it; a table build's may overrun the RAM)")
+                    f"(not measured: {why}; a table build's may overrun the RAM)")
         if self.ram_used >= board.ram:
             return (f"{part('flash', self.flash, board.flash)}, RAM {self.ram} of {board.ram} B and the stack ran "
                     f"into it (all {self.stack} B above it used)")
@@ -97,38 +89,49 @@ class Size:
                 f"{part('', self.ram_used, board.ram).strip()}")
 
 
-AVR_RAM_START = 0x800100  # the linker's address of the ATmega328P's first RAM byte
 _OVERFLOW = re.compile(r"address 0x([0-9a-f]+) of .* section `[^']+' is not within region `(text|data)'")
 
 
 _OVERFLOWED_BY = re.compile(r"region `(text|data)' overflowed by (\d+) bytes")
-REGION = {"text": 32768, "data": 2048}  # the ATmega328P's regions in avr-gcc's device spec
 
 
-def _overflow_size(text: str) -> Size | None:
+def _overflow_size(text: str, board: Board = BOARDS["uno"]) -> Size | None:
     """The sizes a linker's region errors give ("not within region": the highest address past it;
-    "overflowed by": the region's length and the excess)."""
+    "overflowed by": the region's length and the excess), on ``board``'s core."""
     ends: dict[str, int] = {}
     for m in _OVERFLOW.finditer(text):
         ends[m[2]] = max(ends.get(m[2], 0), int(m[1], 16))
+    region = dict(zip(("text", "data"), board.regions))
     for m in _OVERFLOWED_BY.finditer(text):
-        end = REGION[m[1]] + int(m[2]) + (AVR_RAM_START if m[1] == "data" else 0)
+        end = region[m[1]] + int(m[2]) + (board.ram_start if m[1] == "data" else 0)
         ends[m[1]] = max(ends.get(m[1], 0), end)
     if not ends:
         return None
-    ram = ends["data"] - AVR_RAM_START if "data" in ends else None
+    ram = ends["data"] - board.ram_start if "data" in ends else None
     return Size(flash=ends.get("text"), ram=ram, overflow=True)
 
 
-def smaller_boards_note(flash: int | None, fixed_too: bool = False) -> str:
-    """'' when ``flash`` bytes fit every board of SMALLER_AVR too, else a note naming those it does not;
-    ``fixed_too``: fixed point is another way to fit (a float build of a model fixed point takes)."""
-    tight = [f"{name}'s {room:,} B" for name, room in SMALLER_AVR if flash and flash > room]
+def smaller_boards_note(size: Size | None, board: str = "uno", fixed_too: bool = False) -> str:
+    """'' when ``size`` (built for ``board``) fits every other board of BOARDS too, else a note naming those it
+    does not (by flash, or static RAM) and how to check one; ``fixed_too``: fixed point is another way to fit (a
+    float build of a model fixed point takes)."""
+    if size is None or size.flash is None:
+        return ""
+    ram = size.ram or 0
+    tight: dict[tuple[int, int], list[str]] = {}  # boards of the same room named together
+    for key, b in BOARDS.items():
+        if key != board and (size.flash > b.flash or ram > b.ram):
+            tight.setdefault((b.flash, b.ram), []).append(key)
     if not tight:
         return ""
-    return (f"note: {flash:,} B of flash is more than {' or '.join(tight)}: the build was checked on the Uno, and "
-            f"on another AVR board it may not fit (fewer terms: fitgen fit --max-terms"
-            f"{'; or --precision fixed' if fixed_too else ''})")
+    room = []
+    for (flash, ram_room), keys in tight.items():
+        over = [f"{flash:,} B of flash"] * (size.flash > flash) + [f"{ram_room:,} B of RAM"] * (ram > ram_room)
+        room.append(f"the {' or '.join(BOARDS[k].label for k in keys)}'s {' and '.join(over)}")
+    first = next(iter(tight.values()))[0]
+    return (f"note: the build ({size.flash:,} B of flash, {ram:,} B of static RAM) is more than {' or '.join(room)}: "
+            f"it was checked on the {BOARDS[board].label}; give --board {first} (or the board you flash) to check it "
+            f"there (fewer terms: fitgen fit --max-terms{'; or --precision fixed' if fixed_too else ''})")
 
 
 def library_properties(n_elements: int = 8) -> str:
@@ -272,7 +275,7 @@ def build_example(library: str | Path, build_path: str | Path, board: Board = BO
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     if proc.returncode != 0:
         text = proc.stdout + proc.stderr
-        over = _overflow_size(text)
+        over = _overflow_size(text, board)
         if over is not None:
             return over
         elf = example_elf(build_path)
@@ -290,11 +293,13 @@ def elf_size(elf: str | Path) -> Size:
     return Size(flash=sec.get(".text", 0) + sec.get(".data", 0), ram=sec.get(".data", 0) + sec.get(".bss", 0))
 
 
-def _alternatives(precision: str, style: str):
-    """Settings to try when a build does not fit, in the order a user would rather have them."""
+def _alternatives(precision: str, style: str, measured: bool = True):
+    """Settings to try when a build does not fit, in the order a user would rather have them; without
+    ``measured`` (a board whose stack is not measured) no table build, whose stack may overrun the RAM."""
     other = "table" if style == "unrolled" else "unrolled"
     if precision == "float":
-        yield "float", other, f"--style {other}"
+        if measured or other != "table":
+            yield "float", other, f"--style {other}"
         yield "fixed", style, "--precision fixed"
     else:  # a fixed-point model too big for the flash: float's terms unrolled are its last resort
         yield "float", "unrolled", "--precision float"
@@ -398,9 +403,9 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
     def built(library, path, what):
         bar.update(0, f"building ReadPose ({what}) with arduino-builder")
         size = build_example(library, path, spec)
-        if measure is None or not size.fits(spec):
+        if measure is None or not spec.emulated or not size.fits(spec):
             return size
-        bar.update(0, f"running ReadPose ({what}) on the emulated Uno for its stack")
+        bar.update(0, f"running ReadPose ({what}) on the emulated {spec.mcu} for its stack")
         return measure(path, size)
 
     # a bar on a terminal: a build takes 2-9 s, and one that does not fit is tried in other settings
@@ -413,9 +418,9 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
         fewer = ("fitgen fit --max-terms N, per output" if isinstance(penalty, (int, float)) and penalty > 2.0
                  else "fitgen fit --k bic, or --max-terms N")  # a model fitted with BIC already: only the cap is left
         hint = (f"no other precision or style fits: fit fewer terms than its {terms} ({fewer}; `fitgen tradeoff "
-                f"SENSOR --transfer gmr --scene full --core {board}` ranks term caps by the estimator's flash alone, "
+                f"SENSOR --transfer gmr --scene full --core uno` ranks term caps by the estimator's flash alone, "
                 "about 13-14 kB short of ReadPose's, and by accuracy: build the one chosen to see that it fits)")
-        for k, (prec, sty, option) in enumerate(_alternatives(precision, style)):
+        for k, (prec, sty, option) in enumerate(_alternatives(precision, style, spec.emulated)):
             try:
                 alt = render_arduino(model, cmap, Path(tmp) / f"alt{k}", precision=prec, style=sty, rest=rest)
                 alt_size = built(alt, Path(tmp) / f"build{k}", f"does {option} fit?")
@@ -424,4 +429,4 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
             if alt_size.fits(spec):
                 hint = f"{option} fits ({alt_size.describe(spec)})"
                 break
-    raise InputError(f"the model does not fit the {board}: {size.describe(spec)}; {hint}")
+    raise InputError(f"the model does not fit the {spec.label}: {size.describe(spec)}; {hint}")

@@ -6,11 +6,13 @@ stack's measured peak."""
 import json
 import re
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from host.arduino import BOARDS, build_example, example_elf, library_properties, render_arduino
+from host.arduino import HARDWARE, build_example, example_elf, library_properties, render_arduino
+from host.boards import BOARDS
 from host.channelmap import parse_spec
 
 from conftest import TWO_CHIPS, Terminal, assert_one_line_error, require_tool, run_cli
@@ -123,7 +125,7 @@ def test_a_model_that_does_not_fit_is_refused_naming_a_setting_that_does(tmp_pat
     # terms the table's monomials and powers overflow the stack: see the test after the next)
     model_path = _fit_cli(tmp_path, "big", "--family", "all", "--k", "0.01")
     proc = _build_cli(model_path, tmp_path / "big", "--style", "unrolled")
-    assert_one_line_error(proc, 2, "does not fit the uno: flash over")
+    assert_one_line_error(proc, 2, "does not fit the Uno: flash over")
     named = re.search(r"; (--style \w+|--precision \w+) fits", proc.stderr)
     assert named, proc.stderr
     ok = _build_cli(model_path, tmp_path / "TactilePose", *named[1].split())
@@ -132,7 +134,7 @@ def test_a_model_that_does_not_fit_is_refused_naming_a_setting_that_does(tmp_pat
     assert flash <= UNO.flash and ram <= UNO.ram
     # the setting named when the stack is measured too, and its lines
     proc = _build_cli(model_path, tmp_path / "big", "--style", "unrolled", "--emulate", "dx=1,dz=-1")
-    assert_one_line_error(proc, 2, "does not fit the uno: flash over")
+    assert_one_line_error(proc, 2, "does not fit the Uno: flash over")
     assert named[0] + " (" in proc.stderr and RAM_STACK.search(proc.stderr.split(named[0])[-1])
 
 
@@ -149,14 +151,14 @@ def test_a_units_twin_that_fits_no_setting_is_told_how_to_find_one_that_does(tmp
         proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / f"{name}.json"), "--held-out", "0", *extra)
         assert proc.returncode == 0, proc.stderr
     proc = _build_cli(str(tmp_path / "twin.json"), tmp_path / "big")
-    assert_one_line_error(proc, 2, "does not fit the uno: flash over")
+    assert_one_line_error(proc, 2, "does not fit the Uno: flash over")
     assert "no other precision or style fits: fit fewer terms than its " in proc.stderr
     assert "(fitgen fit --k bic, or --max-terms N;" in proc.stderr
     assert ("`fitgen tradeoff SENSOR --transfer gmr --scene full --core uno` ranks term caps by the estimator's "
             "flash alone, about 13-14 kB short of ReadPose's") in proc.stderr
     # fitted with BIC already, and still too big: BIC is not offered again
     proc = _build_cli(str(tmp_path / "bic.json"), tmp_path / "big")
-    assert_one_line_error(proc, 2, "does not fit the uno: flash over")
+    assert_one_line_error(proc, 2, "does not fit the Uno: flash over")
     assert "(fitgen fit --max-terms N, per output;" in proc.stderr and "--k bic" not in proc.stderr
     ok = _build_cli(str(tmp_path / "capped.json"), tmp_path / "TactilePose")
     assert ok.returncode == 0, ok.stderr
@@ -210,17 +212,23 @@ def test_a_refused_build_leaves_the_library_as_it_was_and_a_new_one_replaces_src
 
 def test_a_build_too_big_for_a_smaller_avr_board_says_so_and_options_that_would_be_ignored_are_refused(
         model_path, tmp_path):
-    """The manifests say architectures=avr, and the fit is checked on the Uno: flash past a Leonardo's or an old
-    Nano's room is noted; --style with fixed point would be ignored."""
-    from host.arduino import smaller_boards_note
+    """The manifests say architectures=avr, and the fit is checked on one board: flash or RAM past another's room
+    is noted, with the option that checks it there; --style with fixed point would be ignored."""
+    from host.arduino import Size, smaller_boards_note
 
-    assert smaller_boards_note(27348) == "" and smaller_boards_note(None) == ""
-    assert smaller_boards_note(29984) == (
-        "note: 29,984 B of flash is more than a Leonardo or Micro's 28,672 B: the build was checked on the Uno, "
-        "and on another AVR board it may not fit (fewer terms: fitgen fit --max-terms)")
-    assert smaller_boards_note(29984, fixed_too=True).endswith("(fewer terms: fitgen fit --max-terms; or --precision "
-                                                              "fixed)")
-    assert "a Leonardo or Micro's 28,672 B or a Nano with the old bootloader's 30,720 B" in smaller_boards_note(31000)
+    assert smaller_boards_note(Size(27348, 1168)) == "" and smaller_boards_note(None) == ""
+    assert smaller_boards_note(Size(29984, 1168)) == (
+        "note: the build (29,984 B of flash, 1,168 B of static RAM) is more than the Leonardo or Micro's 28,672 B of "
+        "flash: it was checked on the Uno; give --board leonardo (or the board you flash) to check it there (fewer "
+        "terms: fitgen fit --max-terms)")
+    assert smaller_boards_note(Size(29984, 1168), fixed_too=True).endswith(
+        "(fewer terms: fitgen fit --max-terms; or --precision fixed)")
+    assert "than the Nano's 30,720 B of flash or the Leonardo or Micro's 28,672 B of flash:" in \
+        smaller_boards_note(Size(31000, 1168))
+    # built for the Mega: its 8 kB of RAM is past the others'
+    said = smaller_boards_note(Size(40000, 2100), "mega")
+    assert "the Uno's 32,256 B of flash and 2,048 B of RAM" in said and "checked on the Mega 2560; give --board uno" \
+        in said and "the Leonardo or Micro's 28,672 B of flash:" in said
     assert_one_line_error(_build_cli(model_path, tmp_path / "L", "--no-build", "--precision", "fixed", "--style",
                                      "table"), 2, "--style does not apply to --precision fixed")
     assert not (tmp_path / "L").exists()
@@ -369,6 +377,30 @@ def test_read_pose_runs_on_the_emulated_uno_and_prints_the_pose(sensor, tmp_path
     assert run.cycles > 16_000_000 * rows[-1, 0]  # the last line came after t seconds of 16 MHz cycles
 
 
+def test_read_pose_on_the_nano_and_the_mega_prints_what_it_prints_on_the_uno(model_path, tmp_path):
+    """--board: the Nano's build (the Uno's core, less flash) and the Mega's (an ATmega2560, run on simavr's) read
+    the same simulated sensor and print the same rows as the Uno's, each checked against its own board's room;
+    the Leonardo's ATmega32U4 is built and checked, not emulated, and no table build (whose stack could not be
+    measured there) is offered in its place."""
+    _require_emulator()
+    rows, limits = {}, {"uno": (32256, 2048), "nano": (30720, 2048), "mega": (253952, 8192)}
+    for board, label in (("uno", "Uno"), ("nano", "Nano"), ("mega", "Mega 2560")):
+        proc = _build_cli(model_path, tmp_path / board, "--board", board, "--emulate", "dx=1,dz=-1")
+        assert proc.returncode == 0, proc.stderr
+        flash, ram = limits[board]
+        assert re.search(rf"ReadPose for the {label}: flash \d+ of {flash} B .*, RAM \d+ \+ stack peak \d+ = \d+ of "
+                         rf"{ram} B", proc.stderr), proc.stderr
+        rows[board] = [ln.split(",", 1)[1] for ln in proc.stdout.splitlines()[1:] if not ln.startswith("#")]
+    assert len(rows["uno"]) >= 5 and rows["nano"] == rows["uno"] and rows["mega"] == rows["uno"]
+    assert_one_line_error(_build_cli(model_path, tmp_path / "L", "--board", "leonardo", "--emulate", "dx=1"), 2,
+                          "the Leonardo's atmega32u4 is not emulated here")
+    proc = _build_cli(model_path, tmp_path / "L", "--board", "leonardo")
+    said = proc.stderr.strip().splitlines()[0]
+    assert ("ReadPose for the Leonardo: flash" in said and "of 28672 B" in said and "not measured" in said
+            if proc.returncode == 0 else "does not fit the Leonardo" in said and "--style table fits" not in said), \
+        proc.stderr
+
+
 @pytest.mark.parametrize("precision", ["float", "fixed"])
 def test_read_pose_tares_at_start_onto_the_models_rest(device_model, sensor, tmp_path, precision):
     """--tare: ReadPose averages 50 readings of the untouched sensor and maps them onto the model's rest, as read
@@ -463,7 +495,7 @@ def test_a_table_build_whose_stack_overflows_is_refused_naming_unrolled(tmp_path
     assert_one_line_error(plain, 2, "and the stack ran into it")
     assert "; --style unrolled fits (" in plain.stderr and plain.stdout == ""
     proc = _build_cli(model_path, tmp_path / "TactilePose", "--style", "table", "--emulate", "dx=1,dz=-1")
-    assert_one_line_error(proc, 2, "does not fit the uno: flash ")
+    assert_one_line_error(proc, 2, "does not fit the Uno: flash ")
     assert re.search(r"RAM (\d+) of 2048 B and the stack ran into it \(all (\d+) B above it used\)", proc.stderr)
     assert not (tmp_path / "TactilePose" / "src").exists()
     named = RAM_STACK.search(proc.stderr.split("; --style unrolled fits")[-1])
@@ -515,6 +547,22 @@ def test_an_unwritable_folder_and_a_refinement_are_refused_in_one_line_up_front(
     proc = _build_cli(path, tmp_path / "R")
     assert_one_line_error(proc, 2, "fit without --refine")
     assert not (tmp_path / "R").exists()
+
+
+def test_the_boards_are_the_installed_cores_boards_txt():
+    """Each board's FQBN, flash and RAM for a sketch, and core, against Debian's arduino-core-avr (the IDE's own
+    boards.txt), read here independently of host/boards.py."""
+    text = (Path(HARDWARE[-1]) / "arduino" / "avr" / "boards.txt").read_text()
+    props = dict(ln.split("=", 1) for ln in text.splitlines() if "=" in ln and not ln.startswith("#"))
+    for key, board in BOARDS.items():
+        _, _, board_id, *menu = board.fqbn.split(":")
+        prefix = [board_id] + [f"menu.cpu.{m.split('=')[1]}" for m in menu]
+
+        def get(name):  # a menu's value where it has one, else the board's
+            return props.get(".".join(prefix + [name]), props.get(f"{board_id}.{name}"))
+
+        assert (int(get("upload.maximum_size")), int(get("upload.maximum_data_size")), get("build.mcu")) == \
+            (board.flash, board.ram, board.mcu), key
 
 
 def test_a_size_the_link_did_not_give_is_said_plainly():

@@ -1,5 +1,5 @@
-/* simavr_boot.h: an ATmega328P at 16 MHz in libsimavr with an ELF loaded, for the two programs that run
- * one (simavr_run.c: the header's cycles; uno_board.c: the board the HIL tools talk to). */
+/* simavr_boot.h: an AVR at 16 MHz in libsimavr with an ELF loaded, for the two programs that run one
+ * (simavr_run.c: the header's cycles, on the ATmega328P; uno_board.c: the board the HIL tools talk to). */
 #ifndef SIMAVR_BOOT_H
 #define SIMAVR_BOOT_H
 
@@ -10,8 +10,9 @@
 
 #define SIMAVR_BOOT_HZ 16000000u
 
-/* the core with the ELF at path loaded, simavr's own log off; NULL (said on stderr) when it cannot be */
-static avr_t *simavr_boot(const char *path)
+/* the core mcu (simavr's name, e.g. atmega328p) with the ELF at path loaded, simavr's own log off; NULL (said
+ * on stderr) when it cannot be */
+static avr_t *simavr_boot(const char *path, const char *mcu)
 {
     static elf_firmware_t fw;
     avr_t *avr;
@@ -19,9 +20,9 @@ static avr_t *simavr_boot(const char *path)
         fprintf(stderr, "cannot read %s\n", path);
         return NULL;
     }
-    avr = avr_make_mcu_by_name("atmega328p");
+    avr = avr_make_mcu_by_name(mcu);
     if (avr == NULL) {
-        fprintf(stderr, "simavr has no atmega328p\n");
+        fprintf(stderr, "simavr has no %s\n", mcu);
         return NULL;
     }
     avr_init(avr);

@@ -47,7 +47,7 @@ int main(int argc, char **argv)
         return 2;
     }
     limit = strtoull(argv[2], NULL, 10);
-    avr = simavr_boot(argv[1]);
+    avr = simavr_boot(argv[1], "atmega328p");
     if (avr == NULL) {
         return 2;
     }

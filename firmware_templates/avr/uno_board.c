@@ -1,6 +1,7 @@
 /* uno_board.c: an Arduino Uno in libsimavr for the HIL tools (hil/emulate.py builds and starts it).
  *
- * The ATmega328P at 16 MHz runs FILE.elf. Its USART0 is served on 127.0.0.1:PORT (one client at a time,
+ * The ATmega328P at 16 MHz runs FILE.elf (with --mcu, another AVR whose USART0 and TWI are at the same
+ * addresses, as the Mega's ATmega2560: the sketch of another board). Its USART0 is served on 127.0.0.1:PORT (one client at a time,
  * a new one accepted when the last has gone, as QEMU's socket chardev does), so host tools reach it as
  * socket://127.0.0.1:PORT; bytes go in only while the program has the receiver on (simavr drops a byte
  * that arrives before: a client that connects at once would lose its first request to the program's
@@ -27,7 +28,7 @@
  * first line on stderr, "LISTENING <port>", says which.
  * Runs until SIGTERM or SIGINT; exits 3 when the program crashes, 4 when the bus model goes away, 5 when
  * the EEPROM image cannot be written, 6 when the stack runs into static RAM (with --paint).
- * usage: uno_board FILE.elf PORT [--bridge] [--eeprom FILE] [--paint ADDR] [--hold]
+ * usage: uno_board FILE.elf PORT [--bridge] [--eeprom FILE] [--paint ADDR] [--hold] [--mcu NAME]
  */
 #define _DEFAULT_SOURCE
 #include <errno.h>
@@ -51,7 +52,6 @@
 #include "simavr_boot.h"
 
 #define F_CPU SIMAVR_BOOT_HZ
-#define RAMEND 0x8FFu
 #define PAINT 0xA5u
 #define POLL_EVERY 2048u     /* instructions between two looks at the socket */
 #define OUT_MAX 4096u        /* UART bytes held for the client */
@@ -61,11 +61,12 @@
 #define READ_CHUNK 2u
 #define SLEEP_MAX_US 2000u   /* the longest wait for the socket while the core sleeps */
 #define EEPROM_BYTES 1024u
-#define UCSR0B_ADDR 0xC1u    /* the ATmega328P's USART0 control register B (data space) */
+#define UCSR0B_ADDR 0xC1u    /* USART0's control register B (data space), on the ATmega328P and ATmega2560 */
 #define RXEN0_BIT 4u
 
 static volatile sig_atomic_t stopping;
 static avr_t *avr;
+static unsigned long ramend;       /* the core's last RAM address */
 static int listener = -1, client = -1;
 static int xoff;
 static uint8_t out_buf[OUT_MAX];
@@ -394,12 +395,14 @@ int main(int argc, char **argv)
 {
     unsigned long paint = 0;
     const char *eeprom = NULL;
+    const char *mcu = "atmega328p";
     unsigned long count = 0;
     int port, i, state = cpu_Running, code = 0, hold = 0;
     struct sigaction sa;
 
     if (argc < 3) {
-        fprintf(stderr, "usage: %s FILE.elf PORT [--bridge] [--eeprom FILE] [--paint ADDR] [--hold]\n", argv[0]);
+        fprintf(stderr, "usage: %s FILE.elf PORT [--bridge] [--eeprom FILE] [--paint ADDR] [--hold] [--mcu NAME]\n",
+                argv[0]);
         return 2;
     }
     port = atoi(argv[2]);
@@ -411,6 +414,8 @@ int main(int argc, char **argv)
             eeprom = argv[++i];
         } else if (strcmp(argv[i], "--hold") == 0) {
             hold = 1;
+        } else if (strcmp(argv[i], "--mcu") == 0 && i + 1 < argc) {
+            mcu = argv[++i];
         } else if (strcmp(argv[i], "--paint") == 0 && i + 1 < argc) {
             paint = strtoul(argv[++i], NULL, 0);
         } else {
@@ -418,12 +423,17 @@ int main(int argc, char **argv)
             return 2;
         }
     }
-    if (port < 0 || port > 65535 || (paint && (paint < 0x100u || paint > RAMEND))) {
-        fprintf(stderr, "bad port or paint address\n");
+    if (port < 0 || port > 65535) {
+        fprintf(stderr, "bad port\n");
         return 2;
     }
-    avr = simavr_boot(argv[1]);
+    avr = simavr_boot(argv[1], mcu);
     if (avr == NULL) {
+        return 2;
+    }
+    ramend = avr->ramend;
+    if (paint && (paint < 0x100u || paint > ramend)) {
+        fprintf(stderr, "bad paint address\n");
         return 2;
     }
     avr->sleep = board_sleep;
@@ -457,7 +467,7 @@ int main(int argc, char **argv)
         avr_connect_irq(avr_io_getirq(avr, AVR_IOCTL_TWI_GETIRQ(0), TWI_IRQ_OUTPUT), twi_irq + TWI_IRQ_OUTPUT);
     }
     if (paint) {
-        memset(avr->data + paint, PAINT, RAMEND + 1u - paint);
+        memset(avr->data + paint, PAINT, ramend + 1u - paint);
     }
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = on_signal;
@@ -493,10 +503,10 @@ int main(int argc, char **argv)
     }
     if (paint) {
         unsigned long a = paint;
-        while (a <= RAMEND && avr->data[a] == PAINT) {
+        while (a <= ramend && avr->data[a] == PAINT) {
             ++a;
         }
-        fprintf(stderr, "STACK %lu\n", code == 6 ? RAMEND + 1u - paint : RAMEND + 1u - a);
+        fprintf(stderr, "STACK %lu\n", code == 6 ? ramend + 1u - paint : ramend + 1u - a);
     }
     if (state == cpu_Crashed) {
         fprintf(stderr, "the AVR program crashed at cycle %llu\n", (unsigned long long)avr->cycle);

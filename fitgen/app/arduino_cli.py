@@ -1,5 +1,5 @@
-"""``tactile-host arduino-build``: an Arduino library for a model, the ReadPose example built for the Uno and, on
-request, run on the emulated one. A thin layer over host.arduino and hil.sketch."""
+"""``tactile-host arduino-build``: an Arduino library for a model, the ReadPose example built for an AVR board (the
+Uno by default) and, on request, run on the emulated one. A thin layer over host.arduino and hil.sketch."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import sys
 
 from fitgen.app.options import map_options
 from fitgen.base.errors import InputError
+from host.boards import BOARDS
 
 
 def cmd_arduino_build(args) -> int:
@@ -16,7 +17,7 @@ def cmd_arduino_build(args) -> int:
     from hil.sketch import build_readpose
     from fitgen.app.report import rounding_note
     from fitgen.equations.fixedpoint import fixed_refusal
-    from host.arduino import BOARDS, folder_name_note, lsb_volts, smaller_boards_note
+    from host.arduino import folder_name_note, lsb_volts, smaller_boards_note
     from host.readout import model_rest
     from host.session import channel_map_from_args
     from host.temperature import split_channel_map
@@ -34,17 +35,19 @@ def cmd_arduino_build(args) -> int:
         raise InputError("--rest names what --tare maps the rest readings onto: give --tare too")
     rest, onto = model_rest(model, args.rest) if args.tare else (None, None)
     size, run = build_readpose(model, cmap, args.output, args.emulate, precision=args.precision, style=args.style,
-                               build=False if args.no_build else None, sensor=args.sim_sensor, rest=rest)
+                               build=False if args.no_build else None, sensor=args.sim_sensor, rest=rest,
+                               board=args.board)
     sys.stdout.write("".join(ln + "\n" for ln in run.lines) if run and args.emulate else "")  # a serial monitor's
-    built = (size.describe(BOARDS["uno"]) if size else "not built (--no-build)" if args.no_build
+    board = BOARDS[args.board]
+    built = (size.describe(board) if size else "not built (--no-build)" if args.no_build
              else "not built (no arduino-builder)")
-    print(f"wrote the Arduino library {args.output}; ReadPose for the Uno: {built}"
+    print(f"wrote the Arduino library {args.output}; ReadPose for the {board.label}: {built}"
           + (f"; it tares at start onto the rest readings of {onto}" if onto else ""), file=sys.stderr)
     note = folder_name_note(args.output)
     if note:
         print(note, file=sys.stderr)
     fixed_too = args.precision == "float" and not fixed_refusal(model)
-    board_note = smaller_boards_note(size.flash if size else None, fixed_too)  # the IDE offers every AVR board
+    board_note = smaller_boards_note(size, args.board, fixed_too)  # the IDE offers every AVR board
     if board_note:
         print(board_note, file=sys.stderr)
     coarse = rounding_note(model, max(lsb_volts(chip) for chip, _ in cmap.elements()))  # a 12-bit ADS7828's
@@ -56,7 +59,8 @@ def cmd_arduino_build(args) -> int:
 def add_arduino_build(sub) -> None:
     """The ``arduino-build`` subcommand under ``sub``."""
     ab = sub.add_parser("arduino-build", help="an Arduino library: the model, the ADC drivers over Wire, the channel "
-                                              "map and the ReadPose example; built for the Uno to check it fits")
+                                              "map and the ReadPose example; built for an AVR board (the Uno by "
+                                              "default) to check it fits")
     ab.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
     map_options(ab, thermistor=False)
     ab.add_argument("--precision", default="float", choices=("float", "fixed", "double"), help="double is refused")
@@ -66,11 +70,15 @@ def add_arduino_build(sub) -> None:
     build = ab.add_mutually_exclusive_group()
     build.add_argument("--no-build", action="store_true", help="write the library only (default: build it when "
                                                             "arduino-builder is installed)")
-    build.add_argument("--emulate", metavar="POSE", help="also run ReadPose on an emulated Uno reading --sim-sensor "
+    build.add_argument("--emulate", metavar="POSE", help="also run ReadPose on the emulated board reading --sim-sensor "
                        "at POSE (e.g. dx=1,dz=-1), its lines on stdout (without it: run at rest, for the stack)")
     ab.add_argument("--sim-sensor", help="the simulated sensor of the emulated runs: --emulate's, and the run at "
                                          "rest that measures the stack whenever simavr is installed (default: the "
                                          "sensor the model was fitted on where its file is found, else paper)")
+    ab.add_argument("--board", default="uno", choices=tuple(BOARDS),
+                    help="the board ReadPose is built for and checked against (its flash and RAM as the IDE's "
+                         "boards.txt gives them; the stack measured on the emulated ATmega328P or, for the Mega, "
+                         "ATmega2560; not on the Leonardo's and Micro's ATmega32U4): default uno")
     ab.add_argument("--tare", action="store_true", help="ReadPose tares at start, onto the model's rest readings")
     ab.add_argument("--rest", metavar="SENSOR|DATASET.csv", help="with --tare: the rest readings it maps onto "
                     "(default: the model's own sensor file where found, else the rest the model recorded)")
