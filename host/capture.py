@@ -31,6 +31,7 @@ from fitgen import __version__
 from fitgen.physics.dataset import load_meta, meta_path, pose_table, read_text, row_degc
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output, real_file, sha256_hex, write_atomic, write_target
+from fitgen.base.parse import MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, as_poses
 
 from host.adc import AdcArray
@@ -75,6 +76,9 @@ def designed_samples(path: str | Path) -> int | None:
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise InputError(f"{meta_path(path)}: samples_per_row must be a whole number >= 1, got {n!r}; repair it, or "
                          "give --samples")
+    if n > MAX_ROW_SAMPLES:  # a row would take hours
+        raise InputError(f"{meta_path(path)}: samples_per_row must be at most {MAX_ROW_SAMPLES}, got {n}; repair it, "
+                         "or give --samples")
     return n
 
 

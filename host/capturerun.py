@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from fitgen.base.errors import InputError
-from fitgen.base.parse import LONGEST_WAIT, parse_positive
+from fitgen.base.parse import LONGEST_WAIT, MAX_ROW_SAMPLES, parse_positive
 from fitgen.base.progress import Progress
 from fitgen.physics.dataset import thermistor_degc
 from fitgen.physics.sensor import load_sensor
@@ -40,7 +40,7 @@ def capture_samples(args) -> int:
     """--samples, checked; without it the samples per row the schedule --poses was designed for (`fitgen
     schedule --samples`), else SAMPLES."""
     if args.samples is not None:
-        return parse_positive(args.samples, "--samples", integer=True)
+        return parse_positive(args.samples, "--samples", integer=True, most=MAX_ROW_SAMPLES)
     designed = designed_samples(args.poses)
     return SAMPLES if designed is None else designed
 

@@ -4,6 +4,7 @@ connected, homed or unlocked, and the zero found (host.stage has the driver, the
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from fitgen.base.errors import InputError
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
@@ -39,6 +40,10 @@ def stage_settings(args, schedule):
                          "--pose-file FILE writes), or the simulated sensor would never move")
     if args.sim_pose_file and not args.simulate:
         raise InputError("--sim-pose-file needs --simulate")
+    if args.sim_pose_file and not Path(args.sim_pose_file).is_file():  # stage-sim writes it from its start
+        raise InputError(f"--sim-pose-file {args.sim_pose_file}: no such file; give the one `tactile-host stage-sim "
+                         "--pose-file FILE` writes (it is there while the simulated stage runs), or the simulated "
+                         "sensor would rest whatever the stage does")
     if args.stage_limits is None:
         raise InputError("--stage needs --stage-limits, e.g. dx=-3.5:3.5,dy=-3.5:3.5,dz=-3.5:0.5 (mm from the zero): "
                          "a move outside them is never sent")
@@ -65,6 +70,8 @@ def open_stage(args, opts, output, rows, prog: str):
     """Connect, home or unlock if asked, check the controller's state, and get the zero: (PoseStage, meta).
     ``opts``: :func:`stage_settings`'s; messages go to stderr after ``prog``."""
     ctrl = GcodeController.open(opts["url"], baud=opts["baud"], timeout=opts["timeout"])
+    if sys.stderr.isatty():  # seconds pass before the controller's first answer (its start-up lines): shown
+        print(f"{prog}: connecting to the stage at {opts['url']}", file=sys.stderr, flush=True)
     try:
         ctrl.connect(args.stage_flavor or "auto", boot_wait=opts["boot_wait"])
         if args.home:
@@ -88,6 +95,9 @@ def open_stage(args, opts, output, rows, prog: str):
             return jog_to_zero(jogger, sys.stdin, sys.stderr, prog)
 
         zero, how = choose_zero(ctrl, state, settings.axes, opts["zero"], rows=rows, ask=ask)
+        if how == KEPT and opts["zero"] == "here":
+            print(f"{prog}: note: --zero here not taken: the zero this dataset's rows were taken from still holds, "
+                  "and is kept", file=sys.stderr)
         homed = ctrl.homed or (how == KEPT and state.homed)
         state = StageState(ctrl.flavor, str(settings.axes), zero, homed, None, [])
         state.save(output)

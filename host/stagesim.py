@@ -383,6 +383,10 @@ def parse_matrix(spec: str) -> np.ndarray:
     if M.shape != (3, 3) or not np.all(np.isfinite(M)):
         raise InputError(f"--map {spec!r}: three rows of three numbers, rows split by ';' "
                          "(e.g. 0.95,0.05,0;-0.05,0.95,0;0,0,0.9)")
+    # the magnet follows the tool by a fraction: a map that leaves a direction unmoved is no elastomer's
+    if np.linalg.svd(M, compute_uv=False)[-1] < 1e-3:
+        raise InputError(f"--map {spec!r} leaves the magnet unmoved along some direction of the stage (singular); "
+                         "an elastomer's map is near a scaled identity, e.g. 0.95,0.05,0;-0.05,0.95,0;0,0,0.9")
     return M
 
 

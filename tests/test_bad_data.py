@@ -217,6 +217,71 @@ def test_report_on_fit_notes_edited_by_hand_is_one_line(fitted, tmp_path, edit):
                           contains="its fit notes are not as fitgen fit writes them")
 
 
+@pytest.mark.parametrize("edit, said", [
+    (lambda f: f.__setitem__("held_out", "none"), "fit.held_out must be an object, got 'none'"),
+    (lambda f: f.__setitem__("precision", "float"), "fit.precision must be an object, got 'float'"),
+    (lambda f: f.__setitem__("held_out", {"box": {"dx": [2, -2]}}), "fit.held_out.box.dx must be [low, high]"),
+    (lambda f: f.__setitem__("held_out", {"rest": 1.5}), "fit.held_out.rest must be a list of readings")])
+def test_fit_notes_edited_where_commands_read_them_are_refused_as_the_model_is_loaded(fitted, data, tmp_path, edit,
+                                                                                       said):
+    """Notes that predict, codegen and the readouts read (the held-out box, the precision) were read as tables far
+    from the file: a traceback, after predict had written its output. Refused where the file is read, in one line."""
+    model = json.loads(json.dumps(fitted))
+    edit(model["fit"])
+    (tmp_path / "m.json").write_text(json.dumps(model))
+    for argv in (["predict", str(tmp_path / "m.json"), str(data), "-o", str(tmp_path / "e.csv")],
+                 ["codegen", str(tmp_path / "m.json"), "-o", str(tmp_path / "c")]):
+        assert_one_line_error(run_cli("fitgen", *argv), 2, said)
+        assert "its fit notes are not as fitgen fit writes them" in run_cli("fitgen", *argv).stderr
+    assert files(tmp_path) == ["m.json"]
+
+
+def test_a_models_input_names_that_are_not_its_inputs_are_refused(fitted, data, tmp_path):
+    model = json.loads(json.dumps(fitted))
+    model["inputs"]["names"] = ["a", "b"]
+    (tmp_path / "m.json").write_text(json.dumps(model))
+    assert_one_line_error(run_cli("fitgen", "predict", str(tmp_path / "m.json"), str(data), "-o",
+                                  str(tmp_path / "e.csv")), 2, "inputs.names must be v1..v8 for its 8 inputs")
+
+
+@pytest.mark.parametrize("edit, said", [
+    ({"units": "furlongs"}, "units must be mT or V, got 'furlongs'"),
+    ({"noise": -1}, "noise must be a noise figure >= 0 (or one per element), got -1"),
+    ({"row_noise": [0.001]}, "row_noise gives 1 figures for 8 elements"),
+    ({"samples_per_row": 0}, "samples_per_row must be a whole number 1..10,000, got 0")])
+def test_a_meta_figure_the_fit_reads_that_is_not_as_written_is_refused(data, tmp_path, edit, said):
+    """A meta edited by hand was fitted on without a word: a model in 'furlongs' no other command would read, or
+    a noise of -1 recorded as the data's own."""
+    shutil.copy(data, tmp_path / "d.csv")
+    meta = json.loads(Path(f"{data}.meta.json").read_text())
+    (tmp_path / "d.csv.meta.json").write_text(json.dumps({**meta, **edit}))
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json")), 2,
+                          said)
+    assert not (tmp_path / "m.json").exists()
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["simulate", "--random", "5000001", "-o", "d.csv"], "--random must be at most 5,000,000 poses"),
+    (["fit", "D", "-o", "m.json", "--held-out", "5000001"], "--held-out must be at most 5,000,000 poses"),
+    (["simulate", "--grid", "paper-sim", "--ranges", "dx=-1:1", "-o", "d.csv"],
+     "--ranges is the box of --random poses: give --random N with it"),
+    (["simulate", "--random", "10", "--noise", "1e300", "-o", "d.csv"], "--noise 1e300 is no sensor's reading noise"),
+    (["schedule", "--samples", "1000000000", "-o", "s.csv"], "--samples must be at most 10000")])
+def test_counts_past_any_machines_memory_or_patience_are_refused_before_the_work(data, tmp_path, argv, said):
+    """A count of 1e12 poses ran out of memory in a traceback; 1e9 samples per row made a capture that never ends."""
+    proc = run_cli("fitgen", *[str(data) if a == "D" else a for a in argv], cwd=tmp_path)
+    assert_one_line_error(proc, 2, said)
+    assert files(tmp_path) == []
+
+
+def test_absurd_coefficients_are_refused_in_one_line_without_numpys_warning(fitted, data, tmp_path):
+    model = json.loads(json.dumps(fitted))
+    model["outputs"][0]["coefficients"][:2] = [1e308, 1e308]
+    (tmp_path / "m.json").write_text(json.dumps(model))
+    proc = run_cli("fitgen", "predict", str(tmp_path / "m.json"), str(data), "-o", str(tmp_path / "e.csv"))
+    assert_one_line_error(proc, 2, "its terms reach inf in the input domain")
+
+
 def test_a_huge_cell_is_named_where_it_is(data, tmp_path):
     lines = data.read_text().splitlines()
     cells = lines[3].split(",")

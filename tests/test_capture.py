@@ -429,10 +429,11 @@ def test_capture_averages_as_many_samples_as_the_schedule_was_made_for(tmp_path)
     (tmp_path / "s.csv.meta.json").write_text(json.dumps({"samples_per_row": 5, "distinct_poses": 2}))
     assert samples_of("designed.csv") == 5
     assert samples_of("given.csv", "--samples", "3") == 3
-    for bad in ("5", 0, 2.5, True):
+    for bad in ("5", 0, 2.5, True, 10 ** 9):
         (tmp_path / "s.csv.meta.json").write_text(json.dumps({"samples_per_row": bad}))
         assert_one_line_error(run_cli("tactile-host", *args, "-o", str(tmp_path / "bad.csv")), 2,
-                              f"samples_per_row must be a whole number >= 1, got {bad!r}; repair it, or give --samples")
+                              f"samples_per_row must be {'at most 10000' if bad == 10 ** 9 else 'a whole number >= 1'}, "
+                              f"got {bad!r}; repair it, or give --samples")
         assert not (tmp_path / "bad.csv").exists()
     assert samples_of("given-anyway.csv", "--samples", "2") == 2  # what the user gives is not the meta's to refuse
 

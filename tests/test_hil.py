@@ -361,6 +361,9 @@ def test_cli_bad_ports_and_silent_devices(model_file, tmp_path):
                           2, "--vectors")
     assert_one_line_error(run_cli("tactile-hil", "run", "--port", "x", "--model", str(model_file), "--vectors",
                                   "100000000000"), 2, "from 0 to 100,000")
+    # frames without bound ran until killed
+    assert_one_line_error(run_cli("tactile-hil", "run", "--port", "x", "--model", str(model_file), "--fuzz",
+                                  "1000000000000"), 2, "--fuzz must be a whole number from 0 to 1,000,000")
 
 
 def test_cli_checks_junit_and_sensor_id_before_the_device(model_file, tmp_path):

@@ -51,6 +51,10 @@ def test_hash_is_stable_and_sensitive():
         (lambda d: d["transfer"]["gmr"].__setitem__("adc_max", 1e308), "'transfer.gmr.adc_max' must be <= 100"),
         (lambda d: d["transfer"]["gmr"].__setitem__("adc_min", -1e308), "'transfer.gmr.adc_min' must be >= -100"),
         (lambda d: d["transfer"]["gmr"].__setitem__("offset", 1e300), "'transfer.gmr.offset' must be <= 100"),
+        # lengths and a polarization past any sensor's: observe's SVD failed in a traceback on z = 1e200
+        (lambda d: d["elements"]["ring"][0].__setitem__("z", 1e200), "the elements' places must be within +-1000 mm"),
+        (lambda d: d["elements"]["ring"][0].__setitem__("radius", 1e308), "must be within +-1000 mm, got 1e+308"),
+        (lambda d: d["magnet"].__setitem__("polarization", 1e30), "'magnet.polarization' must be within +-10 T"),
         (lambda d: d["elements"]["ring"][0].__setitem__("elevation", 95.0), "elements.ring[0].elevation"),
         (lambda d: d["elements"]["ring"][0].update(axis="z", elevation=10.0), "elements.ring[0].elevation"),
         (lambda d: d.__setitem__("colour", "red"), "colour"),

@@ -1049,6 +1049,11 @@ def test_stage_options_need_stage(tmp_path):
     proc = run_host("capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(tmp_path / "d.csv"), "--simulate",
                     "--home")
     assert_one_line_error(proc, 2, "--home needs --stage gcode:URL")
+    # a pose file no stage writes: every row read the sensor at rest under the stage's labels, exit 0
+    proc = run_host(*capture_args(sched, tmp_path / "d.csv", "socket://127.0.0.1:9", tmp_path / "nope.txt",
+                                  "--zero", "here"))
+    assert_one_line_error(proc, 2, f"--sim-pose-file {tmp_path / 'nope.txt'}: no such file")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.csv"]
 
 
 @pytest.mark.parametrize("args, message", [
@@ -1057,6 +1062,9 @@ def test_stage_options_need_stage(tmp_path):
     (["--pose-file", "{tmp}/missing/p.txt"], "missing"),
     (["--pose-file", "{tmp}"], "is a folder"),
     (["--axes", "foo"], "--axes 'foo': 'foo' is not MACHINE=[-]POSE"),
+    # the port of a socket it does not open, and a map under which the magnet never moves: both were taken
+    (["--pty", "--port", "5000"], "--port is the loopback socket's; with --pty there is none"),
+    (["--map", "0,0,0;0,0,0;0,0,0"], "leaves the magnet unmoved along some direction of the stage (singular)"),
 ])
 def test_stage_sim_bad_options_are_one_line(tmp_path, args, message):
     proc = subprocess.run(host_cmd("stage-sim", *[a.replace("{tmp}", str(tmp_path)) for a in args]),

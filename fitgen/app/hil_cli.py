@@ -32,8 +32,8 @@ def _check_counts(args) -> None:
     from fitgen.c.verify import check_vectors
 
     check_vectors(args.vectors)
-    if args.fuzz < 0:
-        raise InputError("--fuzz must be >= 0")
+    if not 0 <= args.fuzz <= MAX_FUZZ:
+        raise InputError(f"--fuzz must be a whole number from 0 to {MAX_FUZZ:,}, got {args.fuzz}")
 
 
 def _suite(url: str, model, data, args, input_lsb: float | None = None) -> int:
@@ -176,6 +176,7 @@ def cmd_emulate(args) -> int:
 
 
 VECTORS, FUZZ = 1000, 10_000  # the suite's defaults
+MAX_FUZZ = 1_000_000  # frames: about an hour through an emulator
 
 
 def _suite_options(p, suite=None) -> None:
@@ -188,7 +189,7 @@ def _suite_options(p, suite=None) -> None:
     s.add_argument("--vectors", type=int, default=VECTORS,
                    help=f"random vectors inside the domain (default {VECTORS}, at most {MAX_VECTORS:,})")
     s.add_argument("--data", metavar="CSV", help="also send the rows of this dataset")
-    s.add_argument("--fuzz", type=int, default=FUZZ, help=f"random or mutated frames to send (default {FUZZ})")
+    s.add_argument("--fuzz", type=int, default=FUZZ, help=f"random or mutated frames to send (default {FUZZ}, at most {MAX_FUZZ:,})")
     s.add_argument("--no-flash", action="store_true", help="skip the calibration flashing checks")
     s.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
     p.add_argument("--sensor-id", help="sensor id compiled in and written into flashed blobs (default: the name of "

@@ -224,6 +224,8 @@ def cmd_stage_sim(args) -> int:
 
     from host.stagesim import PoseFile, PtyServer, SimController, SimRig, SocketServer, parse_matrix, parse_xyz
 
+    if args.pty and args.port is not None:
+        raise InputError("--port is the loopback socket's; with --pty there is none (without it, it would be ignored)")
     M = parse_matrix(args.map) if args.map else None
     backlash = parse_positive(args.backlash, "--backlash", zero=True)
     rep = parse_positive(args.repeatability, "--repeatability", zero=True)
@@ -232,7 +234,7 @@ def cmd_stage_sim(args) -> int:
     rig = SimRig(target, M, axes=args.axes, contact=contact, start=start, backlash=backlash, repeatability=rep,
                  seed=args.seed)
     ctrl = SimController(args.flavor, rig, homing_lock=args.homing)
-    server = PtyServer(ctrl) if args.pty else SocketServer(ctrl, port=args.port)
+    server = PtyServer(ctrl) if args.pty else SocketServer(ctrl, port=args.port or 0)
     with server, StopFlag() as stop:
         print(server.url, flush=True)
         print(f"tactile-host stage-sim: {args.flavor} on {server.url}; {rig.contact_note()}; "
@@ -459,7 +461,7 @@ def build_parser() -> Parser:
     ss = sub.add_parser("stage-sim", help="a simulated Marlin or GRBL stage on a loopback port or a pty, moving a "
                                           "simulated sensor through a pose file")
     ss.add_argument("--flavor", default="grbl", choices=("grbl", "marlin"), help="the controller (default grbl)")
-    ss.add_argument("--port", type=int, default=0, help="TCP port on 127.0.0.1 (default 0: any free one)")
+    ss.add_argument("--port", type=int, help="TCP port on 127.0.0.1 (default 0: any free one)")
     ss.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal instead (prints its path)")
     ss.add_argument("--pose-file", metavar="FILE", help="write the magnet's pose here (capture --sim-pose-file FILE)")
     ss.add_argument("--map", metavar="a,b,c;d,e,f;g,h,i",

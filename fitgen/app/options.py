@@ -17,16 +17,23 @@ def sensor_of(args):
     return sensor
 
 
+MAX_NOISE = 1000.0  # V or mT rms: past every reading a sensor gives (a slip of the exponent)
+
+
 def noise_of(value: str, sensor) -> float:
-    """``--noise``: a figure >= 0, or ``sensor`` for the sensor's own."""
+    """``--noise``: a figure 0..MAX_NOISE, or ``sensor`` for the sensor's own."""
     if value == "sensor":
         return sensor.noise
     try:
-        return parse_noise(value)
+        x = parse_noise(value)
     except OutOfRange:
         raise InputError(f"--noise must be a finite number >= 0, got {value}") from None
     except ValueError:
         raise InputError(f"--noise must be a number or 'sensor', got {value!r}") from None
+    if x > MAX_NOISE:
+        raise InputError(f"--noise {value} is no sensor's reading noise (at most {MAX_NOISE:g}, in the readings' "
+                         "units: V or mT)")
+    return x
 
 
 def fit_settings(args):

@@ -35,6 +35,9 @@ def parse_numbers(text: str) -> list[float] | None:
 
 
 LONGEST_WAIT = 3600.0  # s: a time limit or pause beyond an hour is a slip of the keyboard (and 1e300 overflows sleep)
+# samples averaged per captured row: 10,000 is a minute a row at the ADCs' fastest, far past where flicker stops the
+# gain (tactile-host noise); beyond it a capture would never finish a row
+MAX_ROW_SAMPLES = 10_000
 
 
 def parse_positive(text: str, what: str, *, integer: bool = False, zero: bool = False, most: float | None = None):

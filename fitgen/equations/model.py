@@ -18,6 +18,7 @@ from fitgen import __version__
 from fitgen.base.errors import InputError, finite_number
 from fitgen.base.fileio import canonical_json, read_text, sha256_hex, write_atomic
 from fitgen.equations.fma import fma as fused_multiply_add
+from fitgen.physics.dataset import READING_UNITS
 from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
 from fitgen.equations.refine import Refinement
 from fitgen.equations.terms import DISPLACEMENTS, Harmonics, Term, design_matrix, monomial_factors, parse_term
@@ -273,7 +274,7 @@ def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
     return lo.astype(float), hi.astype(float)
 
 
-INPUT_UNITS = ("mT", "V")  # the field at the elements (transfer raw) or their voltages (gmr)
+INPUT_UNITS = READING_UNITS
 
 
 def load_model(path: str | Path) -> Model:
@@ -316,13 +317,47 @@ def model_from_dict(data, origin: str = "model") -> Model:
         raise InputError(f"{origin}: malformed model ({type(exc).__name__}: {exc})") from None
     if units not in INPUT_UNITS:
         raise InputError(f"{origin}: inputs.units must be {' or '.join(INPUT_UNITS)}, got {units!r}")
+    named = [f"v{k}" for k in range(1, len(lo) + 1)]  # the columns the model reads, as to_dict writes them
+    if inputs.get("names", named) != named:
+        raise InputError(f"{origin}: inputs.names must be {named[0]}..{named[-1]} for its {len(lo)} inputs, got "
+                         f"{inputs['names']!r:.60}")
     fit = data.get("fit", {})
+    _check_fit_notes(fit, origin)
     refine = None if "refine" not in data else Refinement.from_dict(data["refine"], len(lo), origin)
     try:
-        return Model(np.array(lo), np.array(hi), tuple(eqs), units, fit if isinstance(fit, dict) else {}, harmonics,
-                     refine)
+        return Model(np.array(lo), np.array(hi), tuple(eqs), units, fit, harmonics, refine)
     except InputError as exc:  # the object's own checks name no file
         raise InputError(f"{origin}: {str(exc).removeprefix('model: ')}") from None
+
+
+# the fit notes' parts the tools read (the rest is a record for people): each an object where present
+_NOTE_TABLES = ("settings", "noise", "precision", "outputs", "family", "held_out")
+_HELD_OUT_TABLES = ("box", "errors", "posterior", "uncalibrated")
+
+
+def _check_fit_notes(fit, origin: str) -> None:
+    """InputError (one line) when the fit notes' parts that commands read are not as ``fitgen fit`` writes them
+    (an edit by hand): read later, they would fail far from the file."""
+    def refuse(where: str, what: str, got) -> None:
+        raise InputError(f"{origin}: fit{where} must be {what}, got {got!r:.60}: its fit notes are not as fitgen "
+                         "fit writes them (fit the model again, or restore the file)")
+
+    if not isinstance(fit, dict):
+        refuse("", "an object", fit)
+    for key in _NOTE_TABLES:
+        if key in fit and not isinstance(fit[key], dict):
+            refuse(f".{key}", "an object", fit[key])
+    held = fit.get("held_out", {})
+    for key in _HELD_OUT_TABLES:
+        if key in held and not isinstance(held[key], dict):
+            refuse(f".held_out.{key}", "an object", held[key])
+    for name, pair in held.get("box", {}).items():
+        ok = (isinstance(pair, list) and len(pair) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                                 and np.isfinite(x) for x in pair) and pair[0] <= pair[1])
+        if not ok:
+            refuse(f".held_out.box.{name}", "[low, high] (finite, low <= high)", pair)
+    if "rest" in held and not isinstance(held["rest"], list):
+        refuse(".held_out.rest", "a list of readings", held["rest"])
 
 
 def _term(text, where: str) -> Term:

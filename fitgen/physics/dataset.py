@@ -16,6 +16,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import read_text, real_file, sha256_hex, write_all
+from fitgen.base.parse import MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, off_skin
 
 _INPUT_RE = re.compile(r"^v([1-9][0-9]*)$")
@@ -197,6 +198,9 @@ def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
 
 
 META_TEXT = ("units", "sensor", "sensor_file", "scene_spec", "drawing", "transfer")  # keys read as text (or null)
+READING_UNITS = ("mT", "V")  # the field at the elements (transfer raw) or their voltages (gmr)
+# noise figures the fit reads from a meta (V or mT): one number, or one per element
+META_NOISE = ("noise", "row_noise", "sample_noise")
 
 
 def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
@@ -206,7 +210,13 @@ def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
     n_in, targets = _header(names, origin)
     if table.shape[0] < min_rows:
         raise InputError(f"{origin}: {table.shape[0]} data row(s); at least {min_rows} needed")
-    return Dataset(table[:, :n_in].copy(), table[:, n_in:].copy(), targets, load_meta(path))
+    meta = load_meta(path)
+    _check_meta_numbers(meta, meta_path(path))  # what fit, identify and check read: a schedule's is capture's
+    for key in META_NOISE:
+        if isinstance(meta.get(key), list) and len(meta[key]) != n_in:
+            raise InputError(f"{meta_path(path)}: {key} gives {len(meta[key])} figures for {n_in} elements; "
+                             "repair or remove it")
+    return Dataset(table[:, :n_in].copy(), table[:, n_in:].copy(), targets, meta)
 
 
 def load_meta(path: str | Path) -> dict:
@@ -225,6 +235,26 @@ def load_meta(path: str | Path) -> dict:
     return meta
 
 
+def _check_meta_numbers(meta: dict, mp) -> None:
+    """InputError (one line) for a meta figure the fit and identify read that is not as the tools write it."""
+    def refuse(key: str, what: str) -> None:
+        raise InputError(f"{mp}: {key} must be {what}, got {meta[key]!r:.60}; repair or remove it")
+
+    if meta.get("units") not in (None, *READING_UNITS):
+        refuse("units", " or ".join(READING_UNITS))
+
+    def figure(x) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and x >= 0
+
+    for key in META_NOISE:
+        x = meta.get(key)
+        if x is not None and not (figure(x) or isinstance(x, list) and x and all(figure(v) for v in x)):
+            refuse(key, "a noise figure >= 0 (or one per element)")
+    n = meta.get("samples_per_row")
+    if n is not None and not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_ROW_SAMPLES):
+        refuse("samples_per_row", f"a whole number 1..{MAX_ROW_SAMPLES:,}")
+
+
 def load_inputs(path: str | Path, n_inputs: int) -> np.ndarray:
     """The columns v1..v<n_inputs> of a CSV (others ignored): the inputs of a model that takes them."""
     origin = f"dataset {path}"
@@ -234,6 +264,12 @@ def load_inputs(path: str | Path, n_inputs: int) -> np.ndarray:
     if missing:
         raise InputError(f"{origin}: missing column {missing[0]} (the model takes {cols[0]}..{cols[-1]})")
     return table[:, [names.index(c) for c in cols]]
+
+
+def load_labels(path: str | Path) -> dict[str, np.ndarray]:
+    """The pose columns (dx..thy) a CSV has, by name (others ignored; {} for none): a dataset's labels."""
+    names, table = parse_table(read_text(path, "dataset"), f"dataset {path}")
+    return {n: table[:, names.index(n)] for n in POSE_NAMES if n in names}
 
 
 def estimates_csv(output_names, estimates: np.ndarray, status: np.ndarray) -> str:

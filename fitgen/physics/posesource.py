@@ -29,6 +29,9 @@ def choose_poses(*, grid: str | None = None, random: int | None = None, poses: s
         raise InputError("give one of --grid, --random, --poses (or --grid with --random: the grid, then random poses)")
     if scene and (grid or poses or ranges):
         raise InputError("--scene sets the poses: give it with --random N or alone, not with --grid, --poses, --ranges")
+    if ranges is not None and random is None:
+        raise InputError("--ranges is the box of --random poses: give --random N with it (without it, it would be "
+                         "ignored)")
     if scene:
         sc = load_scene(scene)
         # a scene file by its absolute path, so that fit finds it from any folder

@@ -285,6 +285,9 @@ def _ring(sec: _Section) -> tuple[np.ndarray, np.ndarray]:
     return pos, axes
 
 
+MAX_MM, MAX_POLARIZATION, MAX_GAIN, MAX_OFFSET_MT = 1000.0, 10.0, 1000.0, 1000.0
+
+
 def _table_list(sec: _Section, key: str) -> list:
     val = sec.raw(key, [])
     if not isinstance(val, list) or not all(isinstance(v, dict) for v in val):
@@ -337,6 +340,14 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
         raise InputError(f"{origin}: 'elements' must have at least one [[elements.ring]] or [[elements.list]]")
     positions = np.vstack(positions)
     axes = np.vstack(axes)
+    # past these no sensor is described, and the field's arithmetic overflows (a slip of the exponent)
+    for what, values, limit, unit in (
+            ("the magnet's size, the board's and the elements' places", [diameter, height, thickness, gap, *offset,
+                                                                         *positions.ravel()], MAX_MM, " mm"),
+            ("'magnet.polarization'", [pol], MAX_POLARIZATION, " T"), ("each element's gain", gains, MAX_GAIN, ""),
+            ("each element's offset", offsets, MAX_OFFSET_MT, " mT")):
+        if (worst := float(np.max(np.abs(values)))) > limit:
+            raise InputError(f"{origin}: {what} must be within +-{limit:g}{unit}, got {worst:g}")
 
     amb = top.sub("ambient", required=False)
     ambient = amb.vector("field", required=False) if amb.has("field") else np.zeros(3)

@@ -26,6 +26,9 @@ DEFAULT_RANGES = {"dx": (-2.0, 2.0), "dy": (-2.0, 2.0), "dz": (-2.0, 0.0), "thx"
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 
 
+MAX_POSES = 5_000_000  # a grid's or a random draw's: beyond it the readings' arrays outgrow a machine's memory
+
+
 def grid_poses(levels: dict[str, list[float]]) -> np.ndarray:
     """Full factorial grid; components not named stay 0. Row order: dx slowest, thy fastest."""
     axes = [np.asarray(levels.get(n, [0.0]), dtype=float) for n in POSE_NAMES]
@@ -66,8 +69,8 @@ def parse_grid(spec: str) -> dict[str, list[float]]:
         else:
             raise InputError(f"grid {spec!r}: {name}={value!r} is neither START:STOP:COUNT nor a list of numbers")
     total = int(np.prod([len(v) for v in levels.values()]))
-    if total > 5_000_000:
-        raise InputError(f"grid {spec!r} has {total} poses; at most 5,000,000")
+    if total > MAX_POSES:
+        raise InputError(f"grid {spec!r} has {total} poses; at most {MAX_POSES:,}")
     return levels
 
 
@@ -90,8 +93,8 @@ def parse_ranges(spec: str | None, base: dict[str, tuple[float, float]] | None =
 
 def random_poses(n: int, ranges: dict[str, tuple[float, float]], rng: np.random.Generator) -> np.ndarray:
     """``n`` poses uniform in the box ``ranges``."""
-    if n < 1:
-        raise InputError(f"number of random poses must be >= 1, got {n}")
+    if not 1 <= n <= MAX_POSES:
+        raise InputError(f"number of random poses must be 1..{MAX_POSES:,}, got {n}")
     lo = np.array([ranges[k][0] for k in POSE_NAMES])
     hi = np.array([ranges[k][1] for k in POSE_NAMES])
     return lo + (hi - lo) * rng.random((n, 5))
