@@ -4,6 +4,7 @@ samples per row a capture can average before its rows read better than they are 
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 
@@ -20,6 +21,12 @@ from host.session import adc_defaults, channel_map_from_args, open_bus_from_args
 # 256 samples per row can be told safe (host.allan.EXCESS); at 300 s 1 in 3 white recordings is told 64
 SECONDS = 600.0
 
+
+
+def _seconds(samples: int, rate: float) -> int:
+    """Whole seconds a recording at ``rate`` takes to hold ``samples``: rounded up, so that the time said is
+    enough (8.4 s said as 8 was too short)."""
+    return math.ceil(samples / rate)
 
 def record(array: AdcArray, seconds: float, clock, stop=lambda: False, progress=None) -> tuple[np.ndarray, float]:
     """Samples of every element for ``seconds`` on ``clock`` (or until ``stop()``), back to back, so nearly evenly
@@ -74,7 +81,7 @@ def table(av: Averaging) -> str:
         lines.append(f"| {s} | {s / av.rate:.2f} s | {1e3 * av.adev[i].max():.4g} | {1e3 * white:.4g} | "
                      f"{av.ratio[i, k]:.2f} (e{k + 1}) | {av.flicker_share(s):.3f} |")
     for s in av.too_short:
-        lines.append(f"| {s} | {s / av.rate:.2f} s | record {needed_samples(s) / av.rate:.0f} s to read it | | | |")
+        lines.append(f"| {s} | {s / av.rate:.2f} s | record {_seconds(needed_samples(s), av.rate)} s to read it | | | |")
     return "\n".join(lines)
 
 
@@ -83,7 +90,7 @@ def verdict(av: Averaging) -> str:
     of 16 do not average, or that the readings drift."""
     if not av.candidates:
         return (f"too short to read {CANDIDATES[0]} samples per row: record at least "
-                f"{needed_samples(CANDIDATES[0]) / av.rate:.0f} s (--seconds)")
+                f"{_seconds(needed_samples(CANDIDATES[0]), av.rate)} s (--seconds)")
     f2, se = av.flicker
     floor = (f"the flicker read at {av.longest / av.rate:.1f} s: {1e3 * np.sqrt(max(f2, 0.0)):.3g} mV, at most "
              f"{1e3 * np.sqrt(max(f2 + SURE * se, 0.0)):.3g} mV")

@@ -378,3 +378,45 @@ def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_u
     finally:
         (folder / "gone.toml").rename(folder / "twin.toml")
     assert load_dataset(ok).n_rows == 30 and POSE_NAMES[:3] == ("dx", "dy", "dz")
+
+
+def test_the_unit_file_a_model_records_is_its_own_as_read_or_in_the_models_transfer():
+    """A fit straight on a capture records the simulated unit's hash as its file was read (mT); check took the
+    file to volts first and refused it as "another sensor", naming that very file's hash."""
+    from fitgen.equations.model import Equation, Model
+    from fitgen.fitting.holdout import fitted_sensor
+
+    paper = load_sensor("paper")
+    assert paper.units == "mT"
+    volts = paper.with_transfer("gmr")
+    for recorded in (paper.sha256, volts.sha256):
+        model = Model(np.full(8, 0.1), np.full(8, 3.0), (Equation("dx", 0.0, (), ()),), "V",
+                      {"sensor_sha256": recorded})
+        assert fitted_sensor(paper, model, "why").sha256 == volts.sha256
+    model = Model(np.full(8, 0.1), np.full(8, 3.0), (Equation("dx", 0.0, (), ()),), "V",
+                  {"sensor_sha256": load_sensor("two-rings").sha256})
+    with pytest.raises(InputError, match="the model was fitted on another sensor"):
+        fitted_sensor(paper, model, "why")
+
+
+def test_check_on_a_model_with_no_held_out_figures_says_why_it_names_no_unit(twin, tmp_path):
+    folder, drawing, unit, _, model = twin
+    data = model.to_dict()
+    data["fit"].pop("held_out")
+    (tmp_path / "direct.json").write_text(json.dumps(data))
+    poses, _ = check_schedule(drawing, 10, seed=0)
+    capture = save_capture(tmp_path / "c.csv", _capture(unit, poses, 100), poses, ROWS_META)
+    assert_one_line_error(run_cli("fitgen", "check", str(tmp_path / "direct.json"), str(capture)), 2,
+                          "it has no held-out figures, so it names no unit (a fit straight on a capture names none): "
+                          "give the unit's file as --sensor")
+
+
+def test_a_simulation_of_the_models_own_unit_file_is_refused_as_a_check(twin, tmp_path):
+    """The twin's training rows, or any simulation of its unit file, agree with the twin by construction: check
+    passed them "as predicted"."""
+    folder = twin[0]
+    proc = run_cli("fitgen", "simulate", "--sensor", str(folder / "twin.toml"), "--random", "20", "--ranges",
+                   "dx=-1:1 dy=-1:1 dz=-1:0", "-o", str(tmp_path / "sim.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(tmp_path / "sim.csv")), 2,
+                          "was simulated (fitgen simulate) on the unit file the model was fitted on, not captured")

@@ -319,6 +319,12 @@ def test_a_capture_without_presses_names_what_it_starves(drawing, tmp_path):
     ident = identify(drawing, y, poses, noise)
     assert ident.starved, "a capture with no dz leaves something a press would pin"
     assert any(np.any(p[:, 2] < 0) for _, p, _ in ident.starved)
+    # the poses named press, which this capture never does: the report says so, not "over the same axes"
+    from fitgen.fitting.unitrecord import report
+
+    said = report(ident)
+    assert "(a dense capture over dx, dy and dz would not; this one does not move dz, which the poses below do):" \
+        in said and "same axes would not" not in said
 
 
 def test_an_elastomer_that_stiffens_is_identified_where_the_drawing_allows_for_it(drawing, plan):
@@ -738,7 +744,7 @@ def test_cli_schedule_capture_identify(tmp_path):
     proc = run_cli("fitgen", "fit", str(tmp_path / "t.csv"), "-o", str(tmp_path / "t.json"), "--held-out", "200",
                    "--family", "no-roots")
     assert proc.returncode == 0, proc.stderr
-    assert "units drawn from the posterior of identified unit" in proc.stderr
+    assert "units drawn from the posterior of the identified unit (" in proc.stderr
     held = json.loads((tmp_path / "t.json").read_text())["fit"]["held_out"]
     assert held["posterior"]["units"] == 8 and held["sensor_file"] == str(unit_file.resolve())
     # each posterior unit has its own noise draws: the median is over noise realisations too

@@ -260,3 +260,15 @@ def test_a_record_that_tells_no_rows_is_refused(tmp_path, make, extra, what):
     r = run_cli("fitgen", "schedule", "--n", "12", "--samples", str(make(tmp_path)), *extra, "-o", str(out))
     assert_one_line_error(r, 2, what)
     assert not out.exists() and not (tmp_path / "s.csv.meta.json").exists()
+
+
+def test_the_time_told_to_record_is_enough_to_read_the_rows():
+    """"record at least 8 s" after 8 s at 95 samples a second: the time was rounded to the nearest second, not up,
+    and a recording of the time said was still too short."""
+    from host.allan import CANDIDATES, needed_samples
+    from host.noiserun import _seconds
+
+    for rate in (95.0, 95.1, 107.5, 215.0, 860.0):
+        for s in CANDIDATES:
+            told = _seconds(needed_samples(s), rate)
+            assert told * rate >= needed_samples(s) and (told - 1) * rate < needed_samples(s)

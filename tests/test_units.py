@@ -450,3 +450,22 @@ def test_predict_says_when_the_drawings_model_reads_a_built_unit(tmp_path):
     assert "a built unit needs its own calibration" in said
     own = cli("predict", str(tmp_path / "m.json"), str(tmp_path / "own.csv"), "-o", str(tmp_path / "o.csv"))
     assert "outside the pose box" not in own
+
+
+def test_predict_tells_rows_labelled_outside_the_box_from_another_sensors():
+    """A unit's own calibration capture, labelled out to its travel past the box the twin was fitted in, read as
+    "readings of another sensor than the model's?": rows labelled outside the box are said to be so."""
+    from fitgen.app.report import predict_notes
+    from fitgen.equations.model import Equation, Model
+
+    model = Model(np.zeros(8), np.ones(8), (Equation("dx", 0.0, (), ()),), "V", {"held_out": {"box": {"dx": [-2, 2]}}})
+    pred, status = np.array([[10.0], [-9.0], [0.5]]), np.zeros(3, dtype=int)
+    said = predict_notes(model, pred, status, "float", {"dx": np.array([3.0, -3.0, 0.5])})
+    assert said == ["2 rows estimated outside the pose box the model was fitted in (dx -2..2) by more than its "
+                    "width, all labelled outside it too: poses the model makes no claim for"]
+    said = predict_notes(model, pred, status, "float", {"dx": np.array([3.0, 0.0, 0.5])})[0]
+    assert said.endswith("(1 labelled outside it too, where it makes no claim; the others: readings of another sensor "
+                         "than the model's? a built unit needs its own calibration (docs/calibration.md))")
+    assert predict_notes(model, pred, status, "float")[0].endswith(
+        "by more than its width: readings of another sensor than the model's? a built unit needs its own "
+        "calibration (docs/calibration.md)")

@@ -11,7 +11,7 @@ from fitgen.app.cliutil import count, finite
 from fitgen.app.options import noise_of, sensor_of
 from fitgen.base.fileio import write_all
 from fitgen.base.errors import InputError
-from fitgen.base.parse import parse_positive
+from fitgen.base.parse import MAX_ROW_SAMPLES, parse_positive
 
 
 def cmd_identify(args) -> int:
@@ -161,7 +161,7 @@ def samples_of(args, drawing) -> tuple[int, float, dict]:
     ``tactile-host noise -o`` wrote: its recommendation and, unless ``--noise`` is given, its measured noise."""
     noise = drawing.noise if args.noise is None else noise_of(args.noise, drawing)
     if not args.samples.lower().endswith(".json"):
-        return parse_positive(args.samples, "--samples", integer=True), noise, {}
+        return parse_positive(args.samples, "--samples", integer=True, most=MAX_ROW_SAMPLES), noise, {}
     import numpy as np
 
     from host.noiserun import told
@@ -284,8 +284,11 @@ def cmd_check(args) -> int:
         raise InputError(f"{args.capture} has no stage displacement (dx, dy, dz): a check needs each row's pose")
     spec = args.sensor or fitted_sensor_spec(model)
     if spec is None:
-        raise InputError(f"model {args.model}: the sensor its held-out figures were made on is not found here (or "
-                         "has changed): give the unit's file as --sensor")
+        why = ("the sensor its held-out figures were made on is not found here (or has changed)"
+               if model.fit_info.get("held_out") else "it has no held-out figures, so it names no unit (a fit "
+               "straight on a capture names none)")
+        raise InputError(f"model {args.model}: {why}: give the unit's file as --sensor (fitgen identify writes it), "
+                         "or check the twin's model (identify, simulate --sensor unit.toml, fit)")
     sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on")
     sha = ds.sha256  # the capture's as written, before a compensation
     ds, said = _check_temperature(ds, sensor, args.temp_comp, args.capture)

@@ -15,6 +15,7 @@ from fitgen.base.errors import InputError
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
 from fitgen.equations.terms import FAMILIES
 from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.simulate import MAX_POSES
 
 FAMILY_CHOICES = ("auto", *FAMILIES)
 
@@ -185,7 +186,7 @@ def cmd_predict(args) -> int:
     from fitgen.base.fileio import write_atomic
     from fitgen.c.codegen import check_magnitudes
     from fitgen.equations.model import check_input_units
-    from fitgen.physics.dataset import estimates_csv, load_inputs, load_meta
+    from fitgen.physics.dataset import estimates_csv, load_inputs, load_labels, load_meta
 
     model, target = _model_and_target(args)
     inputs = load_inputs(args.data, model.n_inputs)
@@ -221,7 +222,7 @@ def cmd_predict(args) -> int:
         with np.errstate(over="ignore"):  # a reading beyond float's range is inf, as the C's conversion makes it
             pred, status = model.predict(inputs, with_status=True, precision=args.precision)
     write_atomic(args.output, estimates_csv(model.output_names, pred, status))
-    notes = predict_notes(model, pred, status, args.precision)
+    notes = predict_notes(model, pred, status, args.precision, load_labels(args.data))
     print(f"wrote {len(pred)} estimate{'s' * (len(pred) != 1)} to {args.output}"
           + (f" ({'; '.join(notes)})" if notes else ""),
           file=sys.stderr)
@@ -482,8 +483,14 @@ def _check(args) -> None:
     check_not_empty(args)
     if getattr(args, "adc_bits", None) is not None and not 0 <= args.adc_bits <= 32:
         raise InputError(f"--adc-bits must be 0..32, got {args.adc_bits}")
+    for flag in ("held_out", "random"):  # said before the work, not after a fit
+        n = getattr(args, flag, None)
+        if n is not None and n > MAX_POSES:
+            raise InputError(f"--{flag.replace('_', '-')} must be at most {MAX_POSES:,} poses, got {n}")
     # -o is a file for these; a folder for codegen and tradeoff
     check_written(args, files=(cmd_simulate, cmd_fit, cmd_predict, cmd_report, cmd_identify, cmd_schedule))
+    if args.func is cmd_identify and Path(args.output).suffix.lower() in (".csv", ".json"):  # said before the work
+        raise InputError(f"-o {args.output}: the unit file is a sensor file in TOML: name it .toml (e.g. unit.toml)")
 
 
 def main(argv=None) -> int:

@@ -114,7 +114,7 @@ def deployed_table(model: Model) -> str:
 def _deployed_table(model: Model, rec: dict) -> str:
     post = rec.get("posterior")
     unit_file = None if rec.get("drawing") else rec.get("sensor_file")  # a drawing's own file is recorded too
-    on = (f"on {post['units']} units drawn from the posterior of identified unit {rec.get('sensor', '?')} "
+    on = (f"on {post['units']} units drawn from the posterior of the identified unit ({rec.get('sensor', '?')}) "
           "(the median of each figure, their range in brackets: the unit is one draw of it)"
           if isinstance(post, dict) else
           f"on unit {rec.get('sensor', '?')} ({unit_file})" if unit_file else
@@ -315,10 +315,12 @@ def rounding_note(model: Model, lsb: float) -> str | None:
             "file's [transfer.gmr]) and fit again to have it counted")
 
 
-def predict_notes(model: Model, pred: np.ndarray, status: np.ndarray, precision: str) -> list[str]:
+def predict_notes(model: Model, pred: np.ndarray, status: np.ndarray, precision: str,
+                  labels: dict | None = None) -> list[str]:
     """What `fitgen predict` says of its rows beyond the estimates: rows clamped into the domain, rows with no
     estimate, and rows whose estimate lies outside the pose box the model was fitted in (its held-out record's)
-    by more than the box's width: readings of another sensor, as the drawing's model reads a built unit's."""
+    by more than the box's width: readings of another sensor, as the drawing's model reads a built unit's, unless
+    the rows' ``labels`` (pose columns by name) lie outside the box too (a calibration capture's travel)."""
     clamped, refused = int(np.sum(status > 0)), int(np.sum(status < 0))
     notes = ([f"{clamped} row{'s' * (clamped != 1)} clamped into the domain"] if clamped else []) + (
         [f"{refused} row{'s' * (refused != 1)} with no estimate (status -1: a reading not finite in "
@@ -328,8 +330,16 @@ def predict_notes(model: Model, pred: np.ndarray, status: np.ndarray, precision:
         far = model.far_outside(pred) & (status >= 0)
         if n := int(far.sum()):
             where = ", ".join(f"{o} {lo:g}..{hi:g}" for o, (lo, hi) in box.items())
-            notes.append(f"{n} row{'s' * (n != 1)} estimated outside the pose box the model "
-                         f"was fitted in ({where}) by more than its width: readings of another sensor than the "
-                         "model's? a built unit needs its own calibration (docs/calibration.md)")
+            beyond = np.zeros(len(pred), dtype=bool)  # rows labelled outside the box: estimates that extrapolate
+            for o, (lo, hi) in box.items():
+                if o in (labels or {}):
+                    beyond |= (labels[o] < lo) | (labels[o] > hi)
+            m = int((far & beyond).sum())
+            notes.append(f"{n} row{'s' * (n != 1)} estimated outside the pose box the model was fitted in ({where}) by "
+                         "more than its width" + (
+                             ", all labelled outside it too: poses the model makes no claim for" if m == n else
+                             f" ({m} labelled outside it too, where it makes no claim; the others:" if m else ":")
+                         + ("" if m == n else " readings of another sensor than the model's? a built unit needs its own "
+                            "calibration (docs/calibration.md)" + (")" if m else "")))
     return notes
 

@@ -194,7 +194,8 @@ class VerifyResult:
                  f"{self.status_mismatches}, non-finite outputs {self.nonfinite_outputs}",
                  "| output | max abs error | bound (max) | bound / error |" +
                  (" C - numpy model (LSB) |" if lsb else "") +
-                 (" held-out deviation | model's held-out max error | rounding's share |" if ho else ""),
+                 (" held-out deviation | double model's max error on those readings | rounding's share |"
+                  if ho else ""),
                  "| --- | --- | --- | --- |" + (" --- |" if lsb else "") + (" --- | --- | --- |" if ho else "")]
         tight = self.tightness()
         for j, name in enumerate(self.outputs):

@@ -19,6 +19,7 @@ from fitgen.fitting.holdout import POSTERIOR_UNITS, device_precision, estimator,
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR
 from fitgen.fitting.unitrecord import row_noise, schedule_stage, stage_zero, zero_record
 from fitgen.physics.pose import POSE_NAMES, off_skin
+from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings
 
@@ -200,6 +201,11 @@ def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float 
     from. InputError where the capture (``sha256``: its file's, before a temperature compensation; default ``ds``'s)
     is the one the unit was identified on."""
     posterior = unit_posterior(unit_file, sensor) if unit_file and Path(unit_file).is_file() else None
+    if "samples_per_row" not in ds.meta and ds.meta.get("generator") and \
+            ds.meta.get("sensor_sha256") in (sensor.sha256, *([load_sensor(unit_file).sha256] if unit_file else [])):
+        raise InputError(f"{capture} was simulated (fitgen simulate) on the unit file the model was fitted on, not "
+                         "captured on the unit: it can only agree with it, so it checks nothing; capture fitgen "
+                         "schedule --check's poses")
     if posterior and posterior.get("capture_sha256") == (sha256 or ds.sha256):
         raise InputError(f"{capture} is the capture {unit_file} was identified on: its rows are not held out, so they "
                          "check nothing; capture fitgen schedule --check's poses")

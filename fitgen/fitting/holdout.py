@@ -302,11 +302,13 @@ def _posterior_draw(record: dict, sensor):
 
 def fitted_sensor(sensor, model: Model, why: str, flag: str = "--sensor"):
     """``sensor`` in the transfer that gives ``model``'s units; InputError, ending in ``why``, when the model was
-    fitted on another sensor (other units, or another hash than the one its file records)."""
+    fitted on another sensor (other units, or another hash than the one its file records: the file's as read, or in
+    the model's transfer, as a capture records the one it simulated and a simulation the one it read through)."""
+    as_read = sensor.sha256
     if sensor.units != model.input_units and model.input_units in ("mT", "V"):
         sensor = sensor.with_transfer("gmr" if model.input_units == "V" else "raw")
     fitted_on = model.fit_info.get("sensor_sha256")
-    if sensor.units != model.input_units or fitted_on not in (None, sensor.sha256):
+    if sensor.units != model.input_units or fitted_on not in (None, sensor.sha256, as_read):
         raise InputError(f"{flag} {sensor.name}: the model was fitted on another sensor "
                          f"({model.input_units} readings{', sensor ' + str(fitted_on)[:12] if fitted_on else ''}); "
                          f"{why}")

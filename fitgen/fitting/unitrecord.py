@@ -70,7 +70,11 @@ def report(ident: Identification, samples: int | None = None) -> str:
     for v in ident.gauge.T:
         lines.append(f"  {describe_direction(sp, v)}")
     if ident.starved:
-        lines.append("this capture leaves to the prior (a dense capture over the same axes would not):")
+        # the dense design moves dx, dy and dz (and tilts where the capture does): said so where this one does not
+        unmoved = [n for j, n in enumerate(POSE_NAMES[:3]) if np.ptp(ident.problem.poses[:, j]) == 0]
+        lines.append("this capture leaves to the prior (a dense capture over dx, dy and dz would not" +
+                     (f"; this one does not move {' or '.join(unmoved)}, which the poses below do" if unmoved else "")
+                     + "):")
         for v, poses, gain in ident.starved:
             where = "; ".join(pose_words(ident, p) for p in poses)
             lines.append(f"  {describe_direction(sp, v)}: poses that pin it: {where}")
