@@ -60,8 +60,8 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
                noise: float | None = None, seed: int = 0, timeout: float = 60.0,
                board: str | Path | None = None, rest_first: bool = False, offsets: str | None = None,
                send: dict | None = None, mcu: str = "atmega328p") -> SketchRun:
-    """Run an ATmega328P ELF (``mcu``: another core of RAM_END's) on the emulated Uno with ``cmap``'s chips on its TWI bus, ``sensor`` at ``pose``
-    (``dx=1,dz=-1`` or five numbers) with ``noise`` V rms (None: the sensor's), until it has printed ``n_lines``
+    """Run an ATmega328P ELF (``mcu``: another core of RAM_END's) on the emulated Uno with ``cmap``'s chips on its
+    TWI bus, ``sensor`` at ``pose`` (``dx=1,dz=-1`` or five numbers) with ``noise`` V rms (None: the sensor's), until it has printed ``n_lines``
     lines or a line starting ``error:``. InputError when that takes over ``timeout`` s of wall time or the
     program crashes; :class:`StackOverflow` when its stack ran into static RAM. ``board``: a built
     hil.emulate board (default: built here). ``rest_first``: the sensor rests until the sketch prints its header

@@ -28,6 +28,7 @@ from fitgen.base.progress import Progress
 from fitgen.c.cgen import c_real
 from fitgen.c.codegen import write_header
 from fitgen.equations.model import Model
+from fitgen.fitting.holdout import fitted_sensor_spec
 
 from host.boards import BOARDS, Board
 from host.channelmap import ChannelMap
@@ -42,6 +43,9 @@ EXAMPLE = "ReadPose"
 PRECISIONS = ("float", "fixed")
 WIRE_CLOCK_HZ = 400000  # both ADCs take I2C fast mode
 WIRE_TIMEOUT_US = 25000  # one transaction of a few bytes takes < 1 ms at 100 kHz
+# RAM a build should leave above its stack's measured peak: that is one run's, and an interrupt's frame at the
+# deepest point would add to it (the builds in docs/arduino.md that fit leave 274 B or more)
+STACK_MARGIN = 128
 
 
 # Debian's arduino-builder and arduino-core-avr: the builder's own platform.txt adds the ctags recipe the
@@ -74,11 +78,12 @@ class Size:
         def part(what, used, limit):
             if used is None:  # the linker stopped at the other region: this one was never placed
                 return f"{what} not known (the link failed first)"
-            return f"{what} {'over ' if self.overflow and used > limit else ''}{used} of {limit} B ({100 * used / limit:.0f} %)"
+            return f"{what} {'over ' if used > limit else ''}{used} of {limit} B ({100 * used / limit:.0f} %)"
         if self.ram is None:
             return f"{part('flash', self.flash, board.flash)}, {part('RAM', None, board.ram)}"
         if self.stack is None:
-            why = ("simavr runs the sketch to measure it" if board.emulated
+            why = ("it does not fit the flash, so it was not run" if self.flash > board.flash
+                   else "simavr runs the sketch to measure it" if board.emulated
                    else f"the emulated board runs no {board.mcu}, this board's core")
             return (f"{part('flash', self.flash, board.flash)}, {part('RAM', self.ram, board.ram)} before the stack "
                     f"(not measured: {why}; a table build's may overrun the RAM)")
@@ -113,25 +118,36 @@ def _overflow_size(text: str, board: Board = BOARDS["uno"]) -> Size | None:
 
 def smaller_boards_note(size: Size | None, board: str = "uno", fixed_too: bool = False) -> str:
     """'' when ``size`` (built for ``board``) fits every other board of BOARDS too, else a note naming those it
-    does not (by flash, or static RAM) and how to check one; ``fixed_too``: fixed point is another way to fit (a
-    float build of a model fixed point takes)."""
+    does not (by flash, taken to another board's core by their ``core_flash``, or static RAM) and how to check one;
+    ``fixed_too``: fixed point is another way to fit (a float build of a model fixed point takes)."""
     if size is None or size.flash is None:
         return ""
     ram = size.ram or 0
-    tight: dict[tuple[int, int], list[str]] = {}  # boards of the same room named together
+    tight: dict[tuple[int, int, int], list[str]] = {}  # boards of the same room and core named together
     for key, b in BOARDS.items():
-        if key != board and (size.flash > b.flash or ram > b.ram):
-            tight.setdefault((b.flash, b.ram), []).append(key)
+        there = size.flash - BOARDS[board].core_flash + b.core_flash
+        if key != board and (there > b.flash or ram > b.ram):
+            tight.setdefault((b.flash, b.ram, there), []).append(key)
     if not tight:
         return ""
     room = []
-    for (flash, ram_room), keys in tight.items():
-        over = [f"{flash:,} B of flash"] * (size.flash > flash) + [f"{ram_room:,} B of RAM"] * (ram > ram_room)
+    for (flash, ram_room, there), keys in tight.items():
+        over = ([f"{flash:,} B of flash" + (f" (about {there:,} B there, with its core)" if there != size.flash else "")]
+                * (there > flash) + [f"{ram_room:,} B of RAM"] * (ram > ram_room))
         room.append(f"the {' or '.join(BOARDS[k].label for k in keys)}'s {' and '.join(over)}")
     first = next(iter(tight.values()))[0]
     return (f"note: the build ({size.flash:,} B of flash, {ram:,} B of static RAM) is more than {' or '.join(room)}: "
             f"it was checked on the {BOARDS[board].label}; give --board {first} (or the board you flash) to check it "
             f"there (fewer terms: fitgen fit --max-terms{'; or --precision fixed' if fixed_too else ''})")
+
+
+def headroom_note(size: Size | None, board: Board) -> str:
+    """'' unless ``size`` leaves less than STACK_MARGIN of ``board``'s RAM above its stack's measured peak."""
+    if size is None or size.stack is None or board.ram - size.ram_used >= STACK_MARGIN:
+        return ""
+    return (f"note: {board.ram - size.ram_used} B of RAM left above the stack's measured peak: it is one run's peak, "
+            "not a bound (an interrupt at the deepest point adds its frame); fewer terms, or the other precision or "
+            "style, leave more")
 
 
 def library_properties(n_elements: int = 8) -> str:
@@ -293,13 +309,11 @@ def elf_size(elf: str | Path) -> Size:
     return Size(flash=sec.get(".text", 0) + sec.get(".data", 0), ram=sec.get(".data", 0) + sec.get(".bss", 0))
 
 
-def _alternatives(precision: str, style: str, measured: bool = True):
-    """Settings to try when a build does not fit, in the order a user would rather have them; without
-    ``measured`` (a board whose stack is not measured) no table build, whose stack may overrun the RAM."""
+def _alternatives(precision: str, style: str):
+    """Settings to try when a build does not fit, in the order a user would rather have them."""
     other = "table" if style == "unrolled" else "unrolled"
     if precision == "float":
-        if measured or other != "table":
-            yield "float", other, f"--style {other}"
+        yield "float", other, f"--style {other}"
         yield "fixed", style, "--precision fixed"
     else:  # a fixed-point model too big for the flash: float's terms unrolled are its last resort
         yield "float", "unrolled", "--precision float"
@@ -417,10 +431,11 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
         penalty = (model.fit_info.get("settings") or {}).get("k") if isinstance(model.fit_info, dict) else None
         fewer = ("fitgen fit --max-terms N, per output" if isinstance(penalty, (int, float)) and penalty > 2.0
                  else "fitgen fit --k bic, or --max-terms N")  # a model fitted with BIC already: only the cap is left
+        sensor = fitted_sensor_spec(model) or "SENSOR"  # the model's own where its file is here
         hint = (f"no other precision or style fits: fit fewer terms than its {terms} ({fewer}; `fitgen tradeoff "
-                f"SENSOR --transfer gmr --scene full --core uno` ranks term caps by the estimator's flash alone, "
-                "about 13-14 kB short of ReadPose's, and by accuracy: build the one chosen to see that it fits)")
-        for k, (prec, sty, option) in enumerate(_alternatives(precision, style, spec.emulated)):
+                f"{sensor} --transfer gmr --scene full --core uno` ranks term caps by the estimator's flash alone, "
+                "about 13-14 kB short of ReadPose's on the Uno, and by accuracy: build the one chosen to see that it fits)")
+        for k, (prec, sty, option) in enumerate(_alternatives(precision, style)):
             try:
                 alt = render_arduino(model, cmap, Path(tmp) / f"alt{k}", precision=prec, style=sty, rest=rest)
                 alt_size = built(alt, Path(tmp) / f"build{k}", f"does {option} fit?")
@@ -429,4 +444,8 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
             if alt_size.fits(spec):
                 hint = f"{option} fits ({alt_size.describe(spec)})"
                 break
+        else:
+            mega = BOARDS["mega"]
+            if board != "mega" and size.flash and size.flash - spec.core_flash + mega.core_flash <= mega.flash:
+                hint += f"; or build for a board with more room: --board mega ({mega.flash:,} B of flash)"
     raise InputError(f"the model does not fit the {spec.label}: {size.describe(spec)}; {hint}")

@@ -22,11 +22,11 @@ from host.session import adc_defaults, channel_map_from_args, open_bus_from_args
 SECONDS = 600.0
 
 
-
 def _seconds(samples: int, rate: float) -> int:
     """Whole seconds a recording at ``rate`` takes to hold ``samples``: rounded up, so that the time said is
     enough (8.4 s said as 8 was too short)."""
     return math.ceil(samples / rate)
+
 
 def record(array: AdcArray, seconds: float, clock, stop=lambda: False, progress=None) -> tuple[np.ndarray, float]:
     """Samples of every element for ``seconds`` on ``clock`` (or until ``stop()``), back to back, so nearly evenly

@@ -1,5 +1,6 @@
 """The header on the ATmega328P (Arduino Uno): codegen --target, avr-gcc builds, estimates in simavr against Python."""
 
+import shlex
 import subprocess
 
 import numpy as np
@@ -325,3 +326,18 @@ def test_avr_assembly_equals_python(tmp_path):
     want = ([rshr(a * b, s) % 2**32 for a, b, s in mul] + [(2**n + d // 2) // d for d, n in div]
             + [w for _, _, acc in dots for w in ((acc % 2**64) >> 32, acc % 2**32)])
     assert got == want
+
+
+def test_a_link_past_the_flash_says_by_how_much_not_collect2s_line():
+    """tradeoff --core uno read "building the AVR program failed: collect2: error: ld returned 1 exit status" for a
+    model past the ATmega328P's flash: the linker's own line says why."""
+    from fitgen.base.errors import InputError
+    from fitgen.c.avr import _run
+
+    said = ("/usr/bin/avr-ld: bench.elf section `.text' will not fit in region `text'\n"
+            "/usr/bin/avr-ld: region `text' overflowed by 4321 bytes\n"
+            "collect2: error: ld returned 1 exit status")
+    with pytest.raises(InputError, match="^linking failed: over the ATmega328P's flash by 4,321 B$"):
+        _run(["sh", "-c", f"printf '%s\\n' {shlex.quote(said)} >&2; exit 1"], "linking")
+    with pytest.raises(InputError, match="^linking failed: collect2: error: ld returned 1 exit status$"):
+        _run(["sh", "-c", "echo 'collect2: error: ld returned 1 exit status' >&2; exit 1"], "linking")

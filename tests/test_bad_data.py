@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fitgen.base.errors import InputError
 from fitgen.equations.model import Equation, Model
 from fitgen.equations.terms import Term
 from fitgen.physics.sensor import load_sensor
@@ -221,7 +222,9 @@ def test_report_on_fit_notes_edited_by_hand_is_one_line(fitted, tmp_path, edit):
     (lambda f: f.__setitem__("held_out", "none"), "fit.held_out must be an object, got 'none'"),
     (lambda f: f.__setitem__("precision", "float"), "fit.precision must be an object, got 'float'"),
     (lambda f: f.__setitem__("held_out", {"box": {"dx": [2, -2]}}), "fit.held_out.box.dx must be [low, high]"),
-    (lambda f: f.__setitem__("held_out", {"rest": 1.5}), "fit.held_out.rest must be a list of readings")])
+    (lambda f: f.__setitem__("held_out", {"rest": 1.5}), "fit.held_out.rest must be a list of readings"),
+    # JSON holds integers past float's range: float() of one raised, a traceback
+    (lambda f: f.__setitem__("held_out", {"box": {"dx": [0, 10 ** 400]}}), "fit.held_out.box.dx must be [low, high]")])
 def test_fit_notes_edited_where_commands_read_them_are_refused_as_the_model_is_loaded(fitted, data, tmp_path, edit,
                                                                                        said):
     """Notes that predict, codegen and the readouts read (the held-out box, the precision) were read as tables far
@@ -236,6 +239,28 @@ def test_fit_notes_edited_where_commands_read_them_are_refused_as_the_model_is_l
     assert files(tmp_path) == ["m.json"]
 
 
+def test_predict_reads_its_data_once_so_a_pipe_works(fitted, data, tmp_path):
+    """The rows' labels were read in a second pass after the estimates were written: from a pipe it found nothing,
+    exit 2 with the output on disk."""
+    (tmp_path / "m.json").write_text(json.dumps(fitted))
+    proc = run_cli("fitgen", "predict", str(tmp_path / "m.json"), "/dev/stdin", "-o", str(tmp_path / "e.csv"),
+                   input=data.read_text())
+    assert proc.returncode == 0, proc.stderr
+    assert len((tmp_path / "e.csv").read_text().splitlines()) == len(data.read_text().splitlines())
+
+
+def test_comment_lines_before_the_header_are_skipped_as_in_the_body(data, tmp_path):
+    """ReadPose's tared output starts with "# tare: ..."; it was read as the header ("15 fields, the header has 1")
+    while a comment in the body was skipped. A bad cell is still named by its line in the file."""
+    from fitgen.physics.dataset import parse_table
+
+    text = data.read_text()
+    names, table = parse_table("# tare: offsets [mV] -0.04\n" + text, "d")
+    assert names == parse_table(text, "d")[0] and table.shape == parse_table(text, "d")[1].shape
+    with pytest.raises(InputError, match="d line 4, column v2: 'x' is not a number"):
+        parse_table("# a\n# b\nv1,v2\n1,x\n", "d")
+
+
 def test_a_models_input_names_that_are_not_its_inputs_are_refused(fitted, data, tmp_path):
     model = json.loads(json.dumps(fitted))
     model["inputs"]["names"] = ["a", "b"]
@@ -247,8 +272,9 @@ def test_a_models_input_names_that_are_not_its_inputs_are_refused(fitted, data, 
 @pytest.mark.parametrize("edit, said", [
     ({"units": "furlongs"}, "units must be mT or V, got 'furlongs'"),
     ({"noise": -1}, "noise must be a noise figure >= 0 (or one per element), got -1"),
-    ({"row_noise": [0.001]}, "row_noise gives 1 figures for 8 elements"),
-    ({"samples_per_row": 0}, "samples_per_row must be a whole number 1..10,000, got 0")])
+    ({"row_noise": [0.001]}, "row_noise gives 1 figure(s) for 8 elements"),
+    ({"samples_per_row": 0}, "samples_per_row must be a whole number 1..10000, got 0"),
+    ({"noise": 10 ** 400}, "noise must be a noise figure >= 0 (or one per element)")])
 def test_a_meta_figure_the_fit_reads_that_is_not_as_written_is_refused(data, tmp_path, edit, said):
     """A meta edited by hand was fitted on without a word: a model in 'furlongs' no other command would read, or
     a noise of -1 recorded as the data's own."""

@@ -463,7 +463,7 @@ def test_predict_tells_rows_labelled_outside_the_box_from_another_sensors():
     said = predict_notes(model, pred, status, "float", {"dx": np.array([3.0, -3.0, 0.5])})
     assert said == ["2 rows estimated outside the pose box the model was fitted in (dx -2..2) by more than its "
                     "width, all labelled outside it too: poses the model makes no claim for"]
-    said = predict_notes(model, pred, status, "float", {"dx": np.array([3.0, 0.0, 0.5])})[0]
+    said = predict_notes(model, pred, status, "float", {"dx": np.array([3.0, 2.01, 0.5])})[0]  # just past: no excuse
     assert said.endswith("(1 labelled outside it too, where it makes no claim; the others: readings of another sensor "
                          "than the model's? a built unit needs its own calibration (docs/calibration.md))")
     assert predict_notes(model, pred, status, "float")[0].endswith(

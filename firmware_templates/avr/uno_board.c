@@ -1,9 +1,9 @@
 /* uno_board.c: an Arduino Uno in libsimavr for the HIL tools (hil/emulate.py builds and starts it).
  *
  * The ATmega328P at 16 MHz runs FILE.elf (with --mcu, another AVR whose USART0 and TWI are at the same
- * addresses, as the Mega's ATmega2560: the sketch of another board). Its USART0 is served on 127.0.0.1:PORT (one client at a time,
- * a new one accepted when the last has gone, as QEMU's socket chardev does), so host tools reach it as
- * socket://127.0.0.1:PORT; bytes go in only while the program has the receiver on (simavr drops a byte
+ * addresses, as the Mega's ATmega2560: another board's sketch; --eeprom stays the ATmega328P's).
+ * Its USART0 is served on 127.0.0.1:PORT (one client at a time, a new one accepted when the last has gone,
+ * as QEMU's socket chardev does), so host tools reach it as socket://127.0.0.1:PORT; bytes go in only while the program has the receiver on (simavr drops a byte
  * that arrives before: a client that connects at once would lose its first request to the program's
  * start-up) and simavr's UART FIFO has room (its XON/XOFF IRQs).
  * With --bridge, the TWI bus carries the chips of the bus model: each I2C transaction becomes a request
@@ -427,12 +427,16 @@ int main(int argc, char **argv)
         fprintf(stderr, "bad port\n");
         return 2;
     }
+    if (eeprom != NULL && strcmp(mcu, "atmega328p") != 0) { /* its image is the ATmega328P's 1 KB */
+        fprintf(stderr, "--eeprom is the ATmega328P's, not %s's\n", mcu);
+        return 2;
+    }
     avr = simavr_boot(argv[1], mcu);
     if (avr == NULL) {
         return 2;
     }
     ramend = avr->ramend;
-    if (paint && (paint < 0x100u || paint > ramend)) {
+    if (paint && (paint <= avr->ioend || paint > ramend)) { /* RAM only: below it, the I/O registers */
         fprintf(stderr, "bad paint address\n");
         return 2;
     }

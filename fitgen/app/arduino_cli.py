@@ -12,20 +12,23 @@ from host.boards import BOARDS
 
 def cmd_arduino_build(args) -> int:
     from fitgen.equations.model import load_model
-    from fitgen.fitting.holdout import fitted_sensor_spec
+    from fitgen.fitting.holdout import device_precision, fitted_sensor_spec
     from fitgen.physics.sensor import load_sensor
     from hil.sketch import build_readpose
     from fitgen.app.report import rounding_note
     from fitgen.equations.fixedpoint import fixed_refusal
-    from host.arduino import folder_name_note, lsb_volts, smaller_boards_note
+    from host.arduino import folder_name_note, headroom_note, lsb_volts, smaller_boards_note
     from host.readout import model_rest
     from host.session import channel_map_from_args
     from host.temperature import split_channel_map
 
-    if args.style and args.precision == "fixed":  # fixed point has one layout, as codegen says
-        raise InputError("--style does not apply to --precision fixed")
-    args.style = args.style or "unrolled"
     model, cmap = load_model(args.model), channel_map_from_args(args)
+    fitted = device_precision(model)  # as codegen --target uno: the precision fitted for, where an AVR runs it
+    args.precision = args.precision or (fitted if fitted in ("float", "fixed") else "float")
+    if args.style and args.precision == "fixed":  # fixed point has one layout, as codegen says
+        raise InputError("--style does not apply to --precision fixed" + (
+            " (the model was fitted for it: give --precision float to build it in float)" if fitted == "fixed" else ""))
+    args.style = args.style or "unrolled"
     args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"
     if split_channel_map(args.adc)[1] is not None or cmap.temperature is not None or args.thermistor:
         raise InputError("the Arduino library reads the elements only, no thermistor: drop temp= from --adc and "
@@ -36,20 +39,19 @@ def cmd_arduino_build(args) -> int:
     rest, onto = model_rest(model, args.rest) if args.tare else (None, None)
     size, run = build_readpose(model, cmap, args.output, args.emulate, precision=args.precision, style=args.style,
                                build=False if args.no_build else None, sensor=args.sim_sensor, rest=rest,
-                               board=args.board)
+                               board=args.board or "uno")
     sys.stdout.write("".join(ln + "\n" for ln in run.lines) if run and args.emulate else "")  # a serial monitor's
-    board = BOARDS[args.board]
+    board = BOARDS[args.board or "uno"]
     built = (size.describe(board) if size else "not built (--no-build)" if args.no_build
              else "not built (no arduino-builder)")
     print(f"wrote the Arduino library {args.output}; ReadPose for the {board.label}: {built}"
           + (f"; it tares at start onto the rest readings of {onto}" if onto else ""), file=sys.stderr)
-    note = folder_name_note(args.output)
-    if note:
-        print(note, file=sys.stderr)
     fixed_too = args.precision == "float" and not fixed_refusal(model)
-    board_note = smaller_boards_note(size, args.board, fixed_too)  # the IDE offers every AVR board
-    if board_note:
-        print(board_note, file=sys.stderr)
+    # the IDE offers every AVR board: where none was named, those the build would not fit
+    board_note = "" if args.board else smaller_boards_note(size, "uno", fixed_too)
+    for note in (folder_name_note(args.output), board_note, headroom_note(size, board)):
+        if note:
+            print(note, file=sys.stderr)
     coarse = rounding_note(model, max(lsb_volts(chip) for chip, _ in cmap.elements()))  # a 12-bit ADS7828's
     if coarse:
         print(f"note: {coarse}", file=sys.stderr)
@@ -63,7 +65,9 @@ def add_arduino_build(sub) -> None:
                                               "default) to check it fits")
     ab.add_argument("--model", required=True, metavar="MODEL", help="model file (inputs in V)")
     map_options(ab, thermistor=False)
-    ab.add_argument("--precision", default="float", choices=("float", "fixed", "double"), help="double is refused")
+    ab.add_argument("--precision", choices=("float", "fixed", "double"),
+                    help="default: the one the model was fitted for where an AVR runs it (float or fixed), else "
+                         "float; double is refused")
     ab.add_argument("--style", choices=("table", "unrolled"),
                     help="the C's form: table (coefficient arrays and a loop) or unrolled (straight-line code; "
                          "default)")
@@ -75,10 +79,11 @@ def add_arduino_build(sub) -> None:
     ab.add_argument("--sim-sensor", help="the simulated sensor of the emulated runs: --emulate's, and the run at "
                                          "rest that measures the stack whenever simavr is installed (default: the "
                                          "sensor the model was fitted on where its file is found, else paper)")
-    ab.add_argument("--board", default="uno", choices=tuple(BOARDS),
+    ab.add_argument("--board", choices=tuple(BOARDS),
                     help="the board ReadPose is built for and checked against (its flash and RAM as the IDE's "
                          "boards.txt gives them; the stack measured on the emulated ATmega328P or, for the Mega, "
-                         "ATmega2560; not on the Leonardo's and Micro's ATmega32U4): default uno")
+                         "ATmega2560; not on the Leonardo's and Micro's ATmega32U4); default: uno, and a build "
+                         "past another board's room is noted")
     ab.add_argument("--tare", action="store_true", help="ReadPose tares at start, onto the model's rest readings")
     ab.add_argument("--rest", metavar="SENSOR|DATASET.csv", help="with --tare: the rest readings it maps onto "
                     "(default: the model's own sensor file where found, else the rest the model recorded)")

@@ -186,10 +186,10 @@ def cmd_predict(args) -> int:
     from fitgen.base.fileio import write_atomic
     from fitgen.c.codegen import check_magnitudes
     from fitgen.equations.model import check_input_units
-    from fitgen.physics.dataset import estimates_csv, load_inputs, load_labels, load_meta
+    from fitgen.physics.dataset import estimates_csv, load_inputs_and_labels, load_meta
 
     model, target = _model_and_target(args)
-    inputs = load_inputs(args.data, model.n_inputs)
+    inputs, labels = load_inputs_and_labels(args.data, model.n_inputs)
     check_input_units(model, load_meta(args.data).get("units"), f"{args.data}'s readings", f"model {args.model}")
     if args.precision == "fixed":
         from fitgen.c.fixedc import plan_line
@@ -222,7 +222,7 @@ def cmd_predict(args) -> int:
         with np.errstate(over="ignore"):  # a reading beyond float's range is inf, as the C's conversion makes it
             pred, status = model.predict(inputs, with_status=True, precision=args.precision)
     write_atomic(args.output, estimates_csv(model.output_names, pred, status))
-    notes = predict_notes(model, pred, status, args.precision, load_labels(args.data))
+    notes = predict_notes(model, pred, status, args.precision, labels)
     print(f"wrote {len(pred)} estimate{'s' * (len(pred) != 1)} to {args.output}"
           + (f" ({'; '.join(notes)})" if notes else ""),
           file=sys.stderr)

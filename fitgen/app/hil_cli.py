@@ -189,7 +189,8 @@ def _suite_options(p, suite=None) -> None:
     s.add_argument("--vectors", type=int, default=VECTORS,
                    help=f"random vectors inside the domain (default {VECTORS}, at most {MAX_VECTORS:,})")
     s.add_argument("--data", metavar="CSV", help="also send the rows of this dataset")
-    s.add_argument("--fuzz", type=int, default=FUZZ, help=f"random or mutated frames to send (default {FUZZ}, at most {MAX_FUZZ:,})")
+    s.add_argument("--fuzz", type=int, default=FUZZ, help="random or mutated frames to send "
+                   f"(default {FUZZ}, at most {MAX_FUZZ:,})")
     s.add_argument("--no-flash", action="store_true", help="skip the calibration flashing checks")
     s.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
     p.add_argument("--sensor-id", help="sensor id compiled in and written into flashed blobs (default: the name of "

@@ -315,12 +315,16 @@ def rounding_note(model: Model, lsb: float) -> str | None:
             "file's [transfer.gmr]) and fit again to have it counted")
 
 
+LABEL_MARGIN = 0.1  # of the box's width: a label past it lies clearly outside the box
+
+
 def predict_notes(model: Model, pred: np.ndarray, status: np.ndarray, precision: str,
                   labels: dict | None = None) -> list[str]:
     """What `fitgen predict` says of its rows beyond the estimates: rows clamped into the domain, rows with no
     estimate, and rows whose estimate lies outside the pose box the model was fitted in (its held-out record's)
     by more than the box's width: readings of another sensor, as the drawing's model reads a built unit's, unless
-    the rows' ``labels`` (pose columns by name) lie outside the box too (a calibration capture's travel)."""
+    the rows' ``labels`` (pose columns by name) lie clearly outside the box too (past a tenth of its width beyond
+    it: a calibration capture's travel; one just past its edge still reads as the estimate's fault)."""
     clamped, refused = int(np.sum(status > 0)), int(np.sum(status < 0))
     notes = ([f"{clamped} row{'s' * (clamped != 1)} clamped into the domain"] if clamped else []) + (
         [f"{refused} row{'s' * (refused != 1)} with no estimate (status -1: a reading not finite in "
@@ -333,7 +337,8 @@ def predict_notes(model: Model, pred: np.ndarray, status: np.ndarray, precision:
             beyond = np.zeros(len(pred), dtype=bool)  # rows labelled outside the box: estimates that extrapolate
             for o, (lo, hi) in box.items():
                 if o in (labels or {}):
-                    beyond |= (labels[o] < lo) | (labels[o] > hi)
+                    margin = LABEL_MARGIN * (hi - lo)
+                    beyond |= (labels[o] < lo - margin) | (labels[o] > hi + margin)
             m = int((far & beyond).sum())
             notes.append(f"{n} row{'s' * (n != 1)} estimated outside the pose box the model was fitted in ({where}) by "
                          "more than its width" + (

@@ -8,6 +8,7 @@ cycles simavr counted for each estimate.
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import tempfile
@@ -56,6 +57,10 @@ def _run(cmd: list[str], what: str, timeout: float = 600) -> subprocess.Complete
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
     if proc.returncode != 0:
         lines = (proc.stderr.strip() or proc.stdout.strip() or "(no message)").splitlines()
+        over = re.search(r"region `(text|data)' overflowed by (\d+) bytes", proc.stderr)
+        if over:  # the linker's reason, not collect2's "ld returned 1 exit status" that follows it
+            raise InputError(f"{what} failed: over the ATmega328P's {'flash' if over[1] == 'text' else 'RAM'} by "
+                             f"{int(over[2]):,} B")
         first = next((ln for ln in lines if "error" in ln), lines[0])
         raise InputError(f"{what} failed: {first.strip()}")
     return proc

@@ -16,7 +16,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import read_text, real_file, sha256_hex, write_all
-from fitgen.base.parse import MAX_ROW_SAMPLES
+from fitgen.base.parse import MAX_ROW_SAMPLES, float_or_inf
 from fitgen.physics.pose import POSE_NAMES, off_skin
 
 _INPUT_RE = re.compile(r"^v([1-9][0-9]*)$")
@@ -131,8 +131,12 @@ def _header(names: list[str], origin: str) -> tuple[int, tuple[str, ...]]:
 
 
 def _find_bad_cell(text: str, names: list[str], origin: str) -> InputError:
+    header = None
     for lineno, row in enumerate(csv.reader(io.StringIO(text)), start=1):
-        if lineno == 1 or not row:
+        if not row or row[0].lstrip().startswith("#"):  # blank, or a comment (skipped as the table's reader does)
+            continue
+        if header is None:
+            header = lineno
             continue
         if len(row) != len(names):
             return InputError(f"{origin} line {lineno}: {len(row)} fields, the header has {len(names)}")
@@ -171,6 +175,9 @@ def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
     if lines[0].lstrip().startswith(("{", "[")):
         raise InputError(f"{origin}: JSON, not CSV (a model or meta file?); a dataset is a CSV with the header "
                          "v1,...,vN,dx,dy,dz,thx,thy")
+    # comment lines before the header are skipped as those in the body are (an Arduino's "# tare: ..." line)
+    lines = lines[next((k for k, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")),
+                       len(lines) - 1):]
     names = [c.strip() for c in next(csv.reader([lines[0]]))]
     sep = next((s for s in ";\t" if len(names) == 1 and s in lines[0]), None)
     if sep is not None:  # a spreadsheet's export in a locale whose decimal point is a comma
@@ -214,7 +221,7 @@ def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
     _check_meta_numbers(meta, meta_path(path))  # what fit, identify and check read: a schedule's is capture's
     for key in META_NOISE:
         if isinstance(meta.get(key), list) and len(meta[key]) != n_in:
-            raise InputError(f"{meta_path(path)}: {key} gives {len(meta[key])} figures for {n_in} elements; "
+            raise InputError(f"{meta_path(path)}: {key} gives {len(meta[key])} figure(s) for {n_in} elements; "
                              "repair or remove it")
     return Dataset(table[:, :n_in].copy(), table[:, n_in:].copy(), targets, meta)
 
@@ -244,7 +251,7 @@ def _check_meta_numbers(meta: dict, mp) -> None:
         refuse("units", " or ".join(READING_UNITS))
 
     def figure(x) -> bool:
-        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and x >= 0
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(float_or_inf(x)) and x >= 0
 
     for key in META_NOISE:
         x = meta.get(key)
@@ -252,24 +259,24 @@ def _check_meta_numbers(meta: dict, mp) -> None:
             refuse(key, "a noise figure >= 0 (or one per element)")
     n = meta.get("samples_per_row")
     if n is not None and not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_ROW_SAMPLES):
-        refuse("samples_per_row", f"a whole number 1..{MAX_ROW_SAMPLES:,}")
+        refuse("samples_per_row", f"a whole number 1..{MAX_ROW_SAMPLES}")
 
 
 def load_inputs(path: str | Path, n_inputs: int) -> np.ndarray:
     """The columns v1..v<n_inputs> of a CSV (others ignored): the inputs of a model that takes them."""
+    return load_inputs_and_labels(path, n_inputs)[0]
+
+
+def load_inputs_and_labels(path: str | Path, n_inputs: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """:func:`load_inputs`, and the pose columns (dx..thy) the CSV has by name ({} for none), from one read (a pipe
+    reads once)."""
     origin = f"dataset {path}"
     names, table = parse_table(read_text(path, "dataset"), origin)
     cols = [f"v{k}" for k in range(1, n_inputs + 1)]
     missing = [c for c in cols if c not in names]
     if missing:
         raise InputError(f"{origin}: missing column {missing[0]} (the model takes {cols[0]}..{cols[-1]})")
-    return table[:, [names.index(c) for c in cols]]
-
-
-def load_labels(path: str | Path) -> dict[str, np.ndarray]:
-    """The pose columns (dx..thy) a CSV has, by name (others ignored; {} for none): a dataset's labels."""
-    names, table = parse_table(read_text(path, "dataset"), f"dataset {path}")
-    return {n: table[:, names.index(n)] for n in POSE_NAMES if n in names}
+    return table[:, [names.index(c) for c in cols]], {n: table[:, names.index(n)] for n in POSE_NAMES if n in names}
 
 
 def estimates_csv(output_names, estimates: np.ndarray, status: np.ndarray) -> str:
