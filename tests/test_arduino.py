@@ -621,7 +621,7 @@ def test_help_says_the_library_reads_no_thermistor():
 def test_the_precision_defaults_to_the_one_the_model_was_fitted_for(device_model, tmp_path):
     """A model fitted for fixed point was built in float without a word, while codegen --target uno wrote it in
     fixed point; --style, which fixed point does not take, is then refused saying how to build it in float."""
-    model = device_model.to_dict()
+    model = json.loads(json.dumps(device_model.to_dict()))  # a copy: the fixture is the session's
     model["fit"]["precision"] = {"target": "fixed"}
     (tmp_path / "f.json").write_text(json.dumps(model))
     proc = _build_cli(str(tmp_path / "f.json"), tmp_path / "F", "--no-build")

@@ -9,7 +9,7 @@ from pathlib import Path
 from fitgen import __version__
 from fitgen.app.calibrate_cli import add_calibration_commands, cmd_identify, cmd_schedule
 from fitgen.app.cliutil import Parser, check_not_empty, check_written, command_main, count, finite
-from fitgen.app.options import fit_settings, noise_of, sensor_of
+from fitgen.app.options import MAX_NOISE, fit_settings, noise_of, sensor_of
 from fitgen.base.parse import parse_assignments, parse_names
 from fitgen.base.errors import InputError
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
@@ -32,7 +32,7 @@ def cmd_simulate(args) -> int:
     poses, source = choose_poses(grid=args.grid, random=args.random, poses=args.poses, ranges=args.ranges,
                                  scene=args.scene, seed=args.seed, sensor=sensor,
                                  min_rows=rows_needed(sensor.n_elements))  # a scene's grid that a fit can carry
-    noise = noise_of(args.noise, sensor)
+    noise = noise_of(args.noise, sensor, most=MAX_NOISE)  # readings of more overflow (observe takes any: its bounds)
     if args.labels == "magnet" and args.unit is None and sensor.is_drawing:
         raise InputError("--labels magnet is for a built unit (--unit SEED, or a unit's file as --sensor): on the "
                          "drawing the stage moves the magnet one to one, so the labels are the same")

@@ -17,11 +17,11 @@ def sensor_of(args):
     return sensor
 
 
-MAX_NOISE = 1000.0  # V or mT rms: past every reading a sensor gives (a slip of the exponent)
+MAX_NOISE = 1000.0  # V or mT rms: past every reading a sensor gives (a slip of the exponent): readings of it overflow
 
 
-def noise_of(value: str, sensor) -> float:
-    """``--noise``: a figure 0..MAX_NOISE, or ``sensor`` for the sensor's own."""
+def noise_of(value: str, sensor, most: float | None = None) -> float:
+    """``--noise``: a figure >= 0 (at most ``most``), or ``sensor`` for the sensor's own."""
     if value == "sensor":
         return sensor.noise
     try:
@@ -30,8 +30,8 @@ def noise_of(value: str, sensor) -> float:
         raise InputError(f"--noise must be a finite number >= 0, got {value}") from None
     except ValueError:
         raise InputError(f"--noise must be a number or 'sensor', got {value!r}") from None
-    if x > MAX_NOISE:
-        raise InputError(f"--noise {value} is no sensor's reading noise (at most {MAX_NOISE:g}, in the readings' "
+    if most is not None and x > most:
+        raise InputError(f"--noise {value} is no sensor's reading noise (at most {most:g}, in the readings' "
                          "units: V or mT)")
     return x
 
