@@ -323,6 +323,8 @@ def test_a_huge_cell_is_named_where_it_is(data, tmp_path):
     (lambda m: m["outputs"][0].__setitem__("terms", "v1"), "outputs[0]: terms and coefficients must be lists"),
     (lambda m: m["outputs"][0]["terms"].__setitem__(0, 5), "outputs[0].terms: 5 is not a term"),
     (lambda m: m["inputs"]["min"].__setitem__(0, 99.0), "input v1 has min > max"),
+    # an integer past float's range: math.isfinite raised OverflowError, a traceback
+    (lambda m: m["inputs"]["min"].__setitem__(0, 10 ** 400), "inputs.min must be a finite number, got 1000"),
     (lambda m: m.__setitem__("outputs", []), "no outputs")])
 def test_a_model_file_edited_by_hand_is_named_in_its_refusal(fitted, tmp_path, edit, said):
     data = json.loads(json.dumps(fitted))

@@ -7,8 +7,19 @@ class InputError(ValueError):
     """Bad input from a user: a file, an option or a value. The message is shown as is."""
 
 
+def is_finite_number(val) -> bool:
+    """Whether ``val`` is a finite JSON number (not a bool); an integer past float's range is not (JSON holds any,
+    and float() of it raises)."""
+    if isinstance(val, bool) or not isinstance(val, (int, float)):
+        return False
+    try:
+        return math.isfinite(val)
+    except OverflowError:
+        return False
+
+
 def finite_number(val, where: str) -> float:
     """``val`` as a float if it is a finite JSON number (not a bool); else InputError naming ``where``."""
-    if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+    if not is_finite_number(val):
         raise InputError(f"{where} must be a finite number, got {val!r}")
     return float(val)

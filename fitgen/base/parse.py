@@ -56,15 +56,6 @@ def parse_positive(text: str, what: str, *, integer: bool = False, zero: bool = 
     return val
 
 
-def float_or_inf(x) -> float:
-    """``float(x)``, or inf for an integer past float's range (JSON holds any): so that a finiteness test says no
-    where float() would raise."""
-    try:
-        return float(x)
-    except OverflowError:
-        return math.inf
-
-
 class OutOfRange(ValueError):
     """A number, but outside the values the option takes."""
 

@@ -15,9 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from fitgen import __version__
-from fitgen.base.errors import InputError, finite_number
+from fitgen.base.errors import InputError, finite_number, is_finite_number
 from fitgen.base.fileio import canonical_json, read_text, sha256_hex, write_atomic
-from fitgen.base.parse import float_or_inf
 from fitgen.equations.fma import fma as fused_multiply_add
 from fitgen.physics.dataset import READING_UNITS
 from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
@@ -353,9 +352,7 @@ def _check_fit_notes(fit, origin: str) -> None:
         if key in held and not isinstance(held[key], dict):
             refuse(f".held_out.{key}", "an object", held[key])
     for name, pair in held.get("box", {}).items():
-        ok = (isinstance(pair, list) and len(pair) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                                 and np.isfinite(float_or_inf(x)) for x in pair)
-              and pair[0] <= pair[1])
+        ok = isinstance(pair, list) and len(pair) == 2 and all(map(is_finite_number, pair)) and pair[0] <= pair[1]
         if not ok:
             refuse(f".held_out.box.{name}", "[low, high] (finite, low <= high)", pair)
     if "rest" in held and not isinstance(held["rest"], list):

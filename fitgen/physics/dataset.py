@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, is_finite_number
 from fitgen.base.fileio import read_text, real_file, sha256_hex, write_all
-from fitgen.base.parse import MAX_ROW_SAMPLES, float_or_inf
+from fitgen.base.parse import MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, off_skin
 
 _INPUT_RE = re.compile(r"^v([1-9][0-9]*)$")
@@ -251,7 +251,7 @@ def _check_meta_numbers(meta: dict, mp) -> None:
         refuse("units", " or ".join(READING_UNITS))
 
     def figure(x) -> bool:
-        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(float_or_inf(x)) and x >= 0
+        return is_finite_number(x) and x >= 0
 
     for key in META_NOISE:
         x = meta.get(key)
@@ -314,18 +314,15 @@ def thermistor_degc(meta: dict) -> float | None:
     """The temperature a capture's rows were taken at, as its meta records it (``thermistor_degc``: tactile-host
     capture with a thermistor in its channel map), or None."""
     t = meta.get("thermistor_degc") if isinstance(meta, dict) else None
-    return float(t) if _finite(t) else None
+    return float(t) if is_finite_number(t) else None
 
 
 def row_degc(meta: dict, rows: int) -> np.ndarray | None:
     """Each of a capture's ``rows`` rows' temperature as its meta records it (``row_degc``: tactile-host capture
     reads its thermistor about every row), or None where it records none for some row."""
     t = meta.get("row_degc") if isinstance(meta, dict) else None
-    if not isinstance(t, list) or len(t) != rows or not all(_finite(x) for x in t):
+    if not isinstance(t, list) or len(t) != rows or not all(is_finite_number(x) for x in t):
         return None
     return np.asarray(t, dtype=float)
 
 
-def _finite(x) -> bool:
-    """A finite JSON number (not a bool)."""
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
