@@ -15,11 +15,11 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, check_error
-from fitgen.fitting.holdout import POSTERIOR_UNITS, device_precision, estimator, posterior_units, unit_posterior
+from fitgen.fitting.holdout import (POSTERIOR_UNITS, device_precision, estimator, posterior_units, sensor_hashes,
+                                     unit_posterior)
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR
 from fitgen.fitting.unitrecord import row_noise, schedule_stage, stage_zero, zero_record
 from fitgen.physics.pose import POSE_NAMES, off_skin
-from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings
 
@@ -202,7 +202,7 @@ def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float 
     is the one the unit was identified on."""
     posterior = unit_posterior(unit_file, sensor) if unit_file and Path(unit_file).is_file() else None
     if "samples_per_row" not in ds.meta and ds.meta.get("generator") and \
-            ds.meta.get("sensor_sha256") in (sensor.sha256, *([load_sensor(unit_file).sha256] if unit_file else [])):
+            ds.meta.get("sensor_sha256") in sensor_hashes(sensor):
         raise InputError(f"{capture} was simulated (fitgen simulate) on the unit file the model was fitted on, not "
                          "captured on the unit: it can only agree with it, so it checks nothing; capture fitgen "
                          "schedule --check's poses")

@@ -300,15 +300,20 @@ def _posterior_draw(record: dict, sensor):
     return space, theta, L
 
 
+def sensor_hashes(sensor) -> set[str]:
+    """The sensor's hash in either transfer: a record may hold either for the same sensor (a capture the file's as
+    read, a simulation the one it read through)."""
+    return {sensor.with_transfer(kind).sha256 for kind in ("raw", "gmr")}
+
+
 def fitted_sensor(sensor, model: Model, why: str, flag: str = "--sensor"):
     """``sensor`` in the transfer that gives ``model``'s units; InputError, ending in ``why``, when the model was
-    fitted on another sensor (other units, or another hash than the one its file records: the file's as read, or in
-    the model's transfer, as a capture records the one it simulated and a simulation the one it read through)."""
-    as_read = sensor.sha256
+    fitted on another sensor (other units, or a hash in neither transfer, :func:`sensor_hashes`, the one its file
+    records)."""
     if sensor.units != model.input_units and model.input_units in ("mT", "V"):
         sensor = sensor.with_transfer("gmr" if model.input_units == "V" else "raw")
     fitted_on = model.fit_info.get("sensor_sha256")
-    if sensor.units != model.input_units or fitted_on not in (None, sensor.sha256, as_read):
+    if sensor.units != model.input_units or (fitted_on is not None and fitted_on not in sensor_hashes(sensor)):
         raise InputError(f"{flag} {sensor.name}: the model was fitted on another sensor "
                          f"({model.input_units} readings{', sensor ' + str(fitted_on)[:12] if fitted_on else ''}); "
                          f"{why}")
