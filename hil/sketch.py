@@ -61,10 +61,10 @@ def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: 
                board: str | Path | None = None, rest_first: bool = False, offsets: str | None = None,
                send: dict | None = None, mcu: str = "atmega328p") -> SketchRun:
     """Run an ATmega328P ELF (``mcu``: another core of RAM_END's) on the emulated Uno with ``cmap``'s chips on its
-    TWI bus, ``sensor`` at ``pose`` (``dx=1,dz=-1`` or five numbers) with ``noise`` V rms (None: the sensor's), until it has printed ``n_lines``
-    lines or a line starting ``error:``. InputError when that takes over ``timeout`` s of wall time or the
-    program crashes; :class:`StackOverflow` when its stack ran into static RAM. ``board``: a built
-    hil.emulate board (default: built here). ``rest_first``: the sensor rests until the sketch prints its header
+    TWI bus, ``sensor`` at ``pose`` (``dx=1,dz=-1`` or five numbers) with ``noise`` V rms (None: the sensor's),
+    until it has printed ``n_lines`` lines or a line starting ``error:``. InputError when that takes over
+    ``timeout`` s of wall time or the program crashes; :class:`StackOverflow` when its stack ran into static RAM.
+    ``board``: a built hil.emulate board (default: built here). ``rest_first``: the sensor rests until the sketch prints its header
     (ReadPose's tare comes before it), then moves to ``pose`` at the start of a sample, as a real one is pressed
     after power-up.
     ``offsets``: each element's offset in volts (host.simbus.simulated_bus's), a drift the tare takes out.

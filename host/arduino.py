@@ -125,7 +125,7 @@ def smaller_boards_note(size: Size | None, board: str = "uno", fixed_too: bool =
     ram = size.ram or 0
     tight: dict[tuple[int, int, int], list[str]] = {}  # boards of the same room and core named together
     for key, b in BOARDS.items():
-        there = size.flash - BOARDS[board].core_flash + b.core_flash
+        there = b.flash_of(size.flash, BOARDS[board])
         if key != board and (there > b.flash or ram > b.ram):
             tight.setdefault((b.flash, b.ram, there), []).append(key)
     if not tight:
@@ -446,6 +446,6 @@ def _build_fitting(model, cmap, library: Path, precision, style, board, build, b
                 break
         else:
             mega = BOARDS["mega"]
-            if board != "mega" and size.flash and size.flash - spec.core_flash + mega.core_flash <= mega.flash:
+            if board != "mega" and size.flash and mega.flash_of(size.flash, spec) <= mega.flash:
                 hint += f"; or build for a board with more room: --board mega ({mega.flash:,} B of flash)"
     raise InputError(f"the model does not fit the {spec.label}: {size.describe(spec)}; {hint}")

@@ -21,6 +21,10 @@ class Board:
     # a build checked on one board tells another's
     core_flash: int = 0
 
+    def flash_of(self, flash: int, built: "Board") -> int:
+        """About the flash a build of ``flash`` B for ``built`` takes on this board (its core's share taken)."""
+        return flash - built.core_flash + self.core_flash
+
 
 BOARDS = {
     "uno": Board("arduino:avr:uno", 32256, 2048, "Uno"),

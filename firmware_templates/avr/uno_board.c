@@ -3,9 +3,10 @@
  * The ATmega328P at 16 MHz runs FILE.elf (with --mcu, another AVR whose USART0 and TWI are at the same
  * addresses, as the Mega's ATmega2560: another board's sketch; --eeprom stays the ATmega328P's).
  * Its USART0 is served on 127.0.0.1:PORT (one client at a time, a new one accepted when the last has gone,
- * as QEMU's socket chardev does), so host tools reach it as socket://127.0.0.1:PORT; bytes go in only while the program has the receiver on (simavr drops a byte
- * that arrives before: a client that connects at once would lose its first request to the program's
- * start-up) and simavr's UART FIFO has room (its XON/XOFF IRQs).
+ * as QEMU's socket chardev does), so host tools reach it as socket://127.0.0.1:PORT; bytes go in only
+ * while the program has the receiver on (simavr drops a byte that arrives before: a client that connects
+ * at once would lose its first request to the program's start-up) and simavr's UART FIFO has room (its
+ * XON/XOFF IRQs).
  * With --bridge, the TWI bus carries the chips of the bus model: each I2C transaction becomes a request
  * of the line protocol host.pi.StandIn answers (firmware/i2c_bridge.c's, plus A and T) on fd 3, its answer
  * read from fd 4, so the same Python bus model answers every board:

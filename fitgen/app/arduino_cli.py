@@ -37,11 +37,12 @@ def cmd_arduino_build(args) -> int:
     if args.rest and not args.tare:
         raise InputError("--rest names what --tare maps the rest readings onto: give --tare too")
     rest, onto = model_rest(model, args.rest) if args.tare else (None, None)
+    key = args.board or "uno"  # the note on other boards is for a build none was named for
     size, run = build_readpose(model, cmap, args.output, args.emulate, precision=args.precision, style=args.style,
                                build=False if args.no_build else None, sensor=args.sim_sensor, rest=rest,
-                               board=args.board or "uno")
+                               board=key)
     sys.stdout.write("".join(ln + "\n" for ln in run.lines) if run and args.emulate else "")  # a serial monitor's
-    board = BOARDS[args.board or "uno"]
+    board = BOARDS[key]
     built = (size.describe(board) if size else "not built (--no-build)" if args.no_build
              else "not built (no arduino-builder)")
     print(f"wrote the Arduino library {args.output}; ReadPose for the {board.label}: {built}"
