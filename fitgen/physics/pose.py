@@ -186,8 +186,8 @@ def _placed(sensor: Sensor, given: np.ndarray, touching: bool = False,
         p = int(bad[0])
         pose = pose_label(given[p])
         rest = sensor.magnet.rest_center[2] - sensor.board_thickness
-        raise InputError(f"{name or f'pose {p + 1}'} ({pose}) puts the magnet's lowest point at z = {low[p]:g} mm, on or below "
-                         f"the board's top face (z = {sensor.board_thickness:g} mm; at rest the magnet's centre is "
+        raise InputError(f"{name or f'pose {p + 1}'} ({pose}) puts the magnet's lowest point at z = {low[p]:g} mm, "
+                         f"on or below the board's top face (z = {sensor.board_thickness:g} mm; at rest the magnet's centre is "
                          f"{rest:g} mm above it): the magnet would be in or through the board")
     return centre, R
 
