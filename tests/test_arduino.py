@@ -398,13 +398,17 @@ def test_read_pose_on_the_nano_and_the_mega_prints_what_it_prints_on_the_uno(mod
     assert len(rows["uno"]) >= 5 and rows["nano"] == rows["uno"] and rows["mega"] == rows["uno"]
     assert_one_line_error(_build_cli(model_path, tmp_path / "L", "--board", "leonardo", "--emulate", "dx=1"), 2,
                           "the Leonardo's atmega32u4 is not emulated here")
-    # what the Uno's build notes of the Leonardo (its flash taken to the Leonardo's USB core) is what building for
-    # it finds; a setting it suggests there says its stack is not measured
-    uno_noted = "the Leonardo or Micro's" in _build_cli(model_path, tmp_path / "U").stderr
+    # the Uno's build takes its flash to the Leonardo's USB core to note it: that estimate is what building for it
+    # finds, within 100 B (the core's share measured 2,196-2,202 B); a setting suggested there says its stack is
+    # not measured. Compared by size, not by the note alone, so that a model near the room's edge cannot flake.
+    uno = _build_cli(model_path, tmp_path / "U").stderr
+    uno_flash = int(re.search(r"ReadPose for the Uno: flash (\d+) of", uno)[1])
+    assert ("the Leonardo or Micro's" in uno) == (uno_flash + BOARDS["leonardo"].core_flash > 28672), uno
     proc = _build_cli(model_path, tmp_path / "L", "--board", "leonardo")
     said = proc.stderr.strip().splitlines()[0]
-    assert (proc.returncode != 0) == uno_noted, proc.stderr
-    assert "of 28672 B" in said and "not measured: the emulated board runs no atmega32u4" in said, said
+    leonardo_flash = int(re.search(r"the Leonardo: flash (?:over )?(\d+) of 28672 B", said)[1])  # fits or not
+    assert abs(leonardo_flash - (uno_flash + BOARDS["leonardo"].core_flash)) <= 100, (uno, said)
+    assert "not measured: the emulated board runs no atmega32u4" in said, said
 
 
 @pytest.mark.parametrize("precision", ["float", "fixed"])
