@@ -12,7 +12,7 @@ import sys
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output
-from fitgen.base.parse import parse_numbers, parse_positive
+from fitgen.base.parse import LONGEST_WAIT, parse_numbers, parse_positive
 from fitgen.base.progress import Progress
 from fitgen.equations.model import check_input_units, load_model
 from fitgen.fitting.holdout import fitted_sensor_spec
@@ -147,13 +147,22 @@ def refuse_alone(needs) -> None:
             raise InputError(f"{option} goes with {needed} (without it, it would be ignored)")
 
 
+def parse_rate(text: str) -> float:
+    """--rate in Hz: > 0, and a sample at least every LONGEST_WAIT seconds (a slower pace is a slip, and
+    would wait between samples for years)."""
+    rate = parse_positive(text, "--rate")
+    if rate < 1.0 / LONGEST_WAIT:
+        raise InputError(f"--rate must be at least 1/{LONGEST_WAIT:g} (a sample an hour), got {text}")
+    return rate
+
+
 class ReadoutSession:
     """What ``read`` and ``view`` share: model, channel map, bus (or simulated bus), ADC array, engine and
     the corrections (tare, auto-zero, temperature), built from the options and closed in one place."""
 
     def __init__(self, args, prog: str):
         self.prog = prog
-        self.rate = parse_positive(args.rate, "--rate") if args.rate is not None else None
+        self.rate = parse_rate(args.rate) if args.rate is not None else None
         self.count = parse_positive(args.count, "--count", integer=True) if args.count is not None else None
         self.duration = parse_positive(args.duration, "--duration") if args.duration is not None else None
         check_depends(args)

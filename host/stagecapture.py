@@ -12,6 +12,7 @@ from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from host.stage import (AxisMap, GcodeController, PoseStage, StageError, StageSettings, StageState, choose_zero,
                         jog_to_zero, parse_approach, parse_ranges, parse_zero, stage_url)
 from host.gcode import QUEUED_WAIT
+from host.prompt import ask_line
 from host.stagezero import KEPT
 from host.stagesettings import APPROACH
 
@@ -75,6 +76,12 @@ def open_stage(args, opts, output, rows, prog: str):
     try:
         ctrl.connect(args.stage_flavor or "auto", boot_wait=opts["boot_wait"])
         if args.home:
+            if ctrl.flavor == "marlin":  # most printers home Z down to the bed, where the sensor sits
+                answer = ask_line(sys.stdin, sys.stderr, f"{prog}: this Marlin printer will home (G28), which on most "
+                                  "printers drives Z down to the bed: is the indenter clear of the sensor? [y/N] ")
+                if (answer or "").strip().lower() not in ("y", "yes"):
+                    raise InputError("--home not confirmed: the stage was not moved; leave --home out on a printer "
+                                     "that homes Z down with the sensor mounted (the zero is then asked for)")
             print(f"{prog}: homing the stage", file=sys.stderr, flush=True)
             ctrl.home(timeout=max(120.0, opts["timeout"]))
         elif args.unlock:

@@ -154,6 +154,15 @@ def test_a_slow_rate_takes_no_sample_after_the_duration(model_file, tmp_path):
     assert len((tmp_path / "s.csv").read_text().splitlines()) == 2  # the header and the sample at t = 0 only
 
 
+def test_a_rate_slower_than_a_sample_an_hour_is_refused(model_file, tmp_path):
+    """1e-9 Hz would read one sample and then wait 30 years for the next."""
+    out = tmp_path / "s.csv"
+    assert_one_line_error(run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate",
+                                  "dx=1", "--rate", "1e-9", "--count", "2", "-o", str(out)), 2,
+                          "--rate must be at least 1/3600 (a sample an hour), got 1e-9")
+    assert not out.exists()
+
+
 def test_a_run_of_the_c_engine_in_float_replays_exactly(model_file, tmp_path):
     run = tmp_path / "cf.jsonl"
     proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "motion",

@@ -966,6 +966,24 @@ def test_capture_command_alarm_at_start_is_one_line_exit_1_and_home_clears_it(tm
         assert srv.ctrl.lines.count("$H") == 1
 
 
+def test_home_on_marlin_asks_first_and_a_no_moves_nothing(tmp_path):
+    """Most printers home Z down to the bed, where the sensor sits: G28 is sent only on a yes."""
+    sched = write_schedule(tmp_path / "s.csv", grid()[:2])
+    out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
+    with server("marlin", PoseFile(posefile)) as srv:
+        zero = ",".join(f"{v:g}" for v in CONTACT)  # homed: machine coordinates are the home frame's
+        args = capture_args(sched, out, srv.url, posefile, "--home", "--zero", zero)
+        for answer in ("", "n\n", "no\n"):
+            proc = run_host(*args, input=answer)
+            assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+            assert "is the indenter clear of the sensor? [y/N]" in proc.stderr
+            assert "error: --home not confirmed: the stage was not moved" in proc.stderr.splitlines()[-1]
+            assert not out.exists() and not any(ln.startswith(("G28", "G1")) for ln in srv.ctrl.lines)
+        proc = run_host(*args, input="y\n")
+        assert proc.returncode == 0, proc.stderr
+        assert srv.ctrl.lines.count("G28") == 1 and len(data_rows(out)) == 2
+
+
 def blocked_reading(proc, timeout: float = 10.0) -> None:
     """Wait until ``proc`` sleeps in a pipe read (its stdin's). A signal that lands between the prompt's flush and
     the read sets CPython's flag, and the read then blocks without looking at it (signals are checked on EINTR,

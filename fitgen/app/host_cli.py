@@ -446,7 +446,7 @@ def build_parser() -> Parser:
                     "port (boards that reset on connect print one; default 2)")
     st.add_argument("--home", action="store_true", help="home the machine first (G28 / $H): a zero taken on a homed "
                     "machine holds across resets. Not on a printer that homes Z down to its bed with the sensor "
-                    "mounted: the indenter would hit it (docs/calibration.md)")
+                    "mounted: the indenter would hit it; on Marlin it asks first (docs/calibration.md)")
     st.add_argument("--unlock", action="store_true", help="GRBL: leave ALARM by $X without homing")
     st.add_argument("--zero", metavar="ask|here|X,Y,Z",
                     help="the stage's zero, first contact with the resting sensor, when the last one does not hold: "
