@@ -652,6 +652,16 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
                                     "axes": "X=dx,Y=dy,Z=dz", "zeros": 1}
     assert "zeros (a run set it again" not in proc.stderr
     assert set(post["capture_zero"]["machine_mm"]) == {"X", "Y", "Z"}
+    # identify is deterministic: run again, it writes the same unit without a word; told otherwise, it says that
+    # the unit a twin may have been fitted on is gone
+    before = (tmp_path / "u.toml").read_text()
+    proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "u.toml"))
+    assert proc.returncode == 0 and "held another unit" not in proc.stderr, proc.stderr
+    assert (tmp_path / "u.toml").read_text() == before
+    proc = run_cli("fitgen", "identify", str(cap), "--rig-error", "0.05", "-o", str(tmp_path / "u.toml"))
+    assert proc.returncode == 0, proc.stderr
+    assert (f"identify: note: {tmp_path / 'u.toml'} held another unit, now replaced: a twin fitted on it no longer "
+            "matches this file") in proc.stderr and (tmp_path / "u.toml").read_text() != before
     # a flag wins over the record; without a record, the defaults
     assert stage_errors(None, 0.01, meta, "c.csv") == (0.03, 0.01, " (rig error as the capture's schedule was made "
                                                                   "for)")

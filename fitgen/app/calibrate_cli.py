@@ -69,6 +69,7 @@ def cmd_identify(args) -> int:
                                                 **({"capture_zero": zero} if zero else {})}, unit_noise)
     if folder is not None:  # drawn first, then written with the unit's files: a failure leaves none of them
         files.append((folder / "identify.png", plots.identification_png(ident)))
+    replaced = _replaces_another(files[0])
     unit, post, *png = write_all(files)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
           f"{args.zero_error:g} mm{stage}", file=sys.stderr)
@@ -77,6 +78,9 @@ def cmd_identify(args) -> int:
           "the posterior)", file=sys.stderr)
     print(f"the unit's reading noise per sample: {unit_noise:.3g} {drawing.units} ({unit_source}), in {unit}: the "
           "twin's fit adds it in expectation and holds out with it", file=sys.stderr)
+    if replaced:
+        print(f"identify: note: {unit} held another unit, now replaced: a twin fitted on it no longer matches "
+              f"this file (fitgen check refuses it); simulate --sensor {unit} and fit again", file=sys.stderr)
     if png:
         print(f"plot: {png[0]}", file=sys.stderr)
     with Progress("a looser stage?", 4) as bar:  # each moves only when the chi-square sits high
@@ -87,6 +91,17 @@ def cmd_identify(args) -> int:
     notes = field + verdict.outlier_lines(ident, args.capture) + verdict.low_residual_line(ident, source)
     print("".join(f"identify: {ln}\n" for ln in notes), end="", file=sys.stderr)
     return 0
+
+
+def _replaces_another(file) -> bool:
+    """Whether writing ``(path, text)`` replaces a file that says something else (a unit a twin may be fitted on)."""
+    from pathlib import Path
+
+    path, text = file
+    try:
+        return Path(path).read_text() != text
+    except (OSError, UnicodeDecodeError):  # none there (or not a text file: the write says what it says)
+        return False
 
 
 def _at_t0(ds, path: str, capture: str):
