@@ -140,7 +140,7 @@ def test_pi_build_bad_options_and_missing_bus(standin_build):
                            (["--bogus"], "unknown"), (["--bus", "3"], "cannot open /dev/i2c-3"),
                            (["--tare-samples", "10"], "--tare-samples needs: --tare"),
                            (["--tare", "--tare-samples", "0"], "--tare-samples must be 1..100000"),
-                           *((["--rate", r], "--rate") for r in ("0", "-2", "nan", "inf", "2.5Hz", "1e-9"))):
+                           *((["--rate", r], "--rate") for r in ("0", "-2", "nan", "inf", "2.5Hz", "1e-9", "1e-4"))):
         cmap, bus, clock = _bus()
         res = StandIn(bus, clock).run(["qemu-arm", str(standin_build), *args])
         assert_one_line_error(res, 2, contains)

@@ -44,7 +44,7 @@ typedef char tm_pi_assert_tempcomp_fits_model[(TM_TEMPCOMP_N == TM_N_INPUTS) ? 1
 #define TEMP_EVERY_NS 250000000u /* host/temperature.py READ_EVERY */
 #define WAIT_SLICE_NS 100000000u /* how late a signal during a slow --rate's wait is seen (host/readout.py) */
 /* the period, in ns, must fit the clock's counter with room for the grid: a sample at least every 11.6 days */
-#define RATE_MIN_HZ 1e-6
+#define RATE_MIN_HZ (1.0 / 3600.0) /* a sample an hour, as tactile-host read (LONGEST_WAIT) */
 #define RATE_MAX_HZ 100000.0
 
 /* set by SIGINT or SIGTERM: the loop ends after the sample under way, so that no line is cut off */
@@ -282,7 +282,9 @@ int main(int argc, char **argv)
         } else if (strcmp(opt, "--count") == 0 && val) {
             if (parse_long(val, 0, LONG_MAX, &count)) return usage("--count must be a whole number >= 0, got", val);
         } else if (strcmp(opt, "--rate") == 0 && val) {
-            if (parse_rate(val, &rate_hz)) return usage("--rate must be a number of Hz in 0.000001..100000, got", val);
+            if (parse_rate(val, &rate_hz)) {
+                return usage("--rate must be a number of Hz in 1/3600 (a sample an hour)..100000, got", val);
+            }
         } else if (strcmp(opt, "--retries") == 0 && val) {
             if (parse_long(val, 1, 100, &retries)) return usage("--retries must be 1..100, got", val);
         } else if (strcmp(opt, "--tare") == 0) {
