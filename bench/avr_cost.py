@@ -28,7 +28,7 @@ import numpy as np
 from benchutil import fmt, log, need_tools, parse_args, table
 from fitgen.c.avr import F_CPU, run_on_avr
 from fitgen.c.targets import TARGETS
-from fitgen.equations.fixedpoint import plan_at
+from fitgen.equations.inputscale import plan_at
 from fitgen.fitting.fit import FitSettings, fit_model
 from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
 from fitgen.physics.sensor import load_sensor

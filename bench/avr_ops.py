@@ -30,7 +30,7 @@ from fitgen.c import avrasm
 from fitgen.c.avr import AVR_CC, F_CPU, MCU, _run, build_runner
 from fitgen.c.codegen import _env, render_fixed_header
 from fitgen.c.compiled import WARNING_FLAGS
-from fitgen.equations.fixedpoint import plan_at
+from fitgen.equations.inputscale import plan_at
 from fitgen.fitting.fit import FitSettings, fit_model
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate

@@ -39,7 +39,7 @@ Measured, per flow x precision x output:
 - model error: Model.predict (double Python) on the noise-free held-out readings, max and RMS.
 - C deviation: the largest |generated C - Model.predict| on the noise-free held-out readings
   (gcc -O2, fitgen.c.compiled.CompiledModel; style unrolled; float: inputs rounded to float32 first;
-  fixed: inputs turned into the ADC codes of fitgen.equations.fixedpoint.sensor_input_scale). Rounding's share:
+  fixed: inputs turned into the ADC codes of fitgen.equations.inputscale.sensor_input_scale). Rounding's share:
   that deviation over the model's held-out max error.
 - deployed error: the C on the noisy held-out readings (all draws pooled) against the true
   poses, RMS and max; its RMS over the `replicas` flow's double-C noisy RMS.
@@ -70,7 +70,7 @@ from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 from fitgen.equations.terms import FAMILIES
-from fitgen.equations.fixedpoint import sensor_input_scale as fixed_scale
+from fitgen.equations.inputscale import sensor_input_scale as fixed_scale
 from fitgen.c import cost
 from fitgen.c.compiled import CompiledModel
 from benchutil import START, cramer_rao_floor, fmt, log, parser, stats, table

@@ -123,7 +123,8 @@ def uno_table(gmr, fixed_model) -> None:
 
 
 def _fixed(m):
-    from fitgen.equations.fixedpoint import build_fixed, default_input_scale
+    from fitgen.equations.fixedpoint import build_fixed
+    from fitgen.equations.inputscale import default_input_scale
 
     lsb, off, _ = default_input_scale(m)
     return build_fixed(m, lsb, off)

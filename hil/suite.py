@@ -413,7 +413,8 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
     fixed = None
     info = dev.info(refresh=True)
     if info.precision == "fixed":
-        from fitgen.equations.fixedpoint import build_fixed, default_input_scale
+        from fitgen.equations.fixedpoint import build_fixed
+        from fitgen.equations.inputscale import default_input_scale
         from hil.firmware import NARROW_TAG
 
         if mul_bits is None:

@@ -102,7 +102,7 @@ def test_estimates_in_simavr_equal_python(small_model):
     for tool in ("avr-gcc", "avr-size", "gcc", "pkg-config"):
         require_tool(tool)
     from fitgen.c.avr import fits_uno, run_on_avr
-    from fitgen.equations.fixedpoint import plan_at
+    from fitgen.equations.inputscale import plan_at
 
     rng = np.random.default_rng(5)
     lo, hi = small_model.input_min, small_model.input_max
@@ -158,7 +158,8 @@ def test_uno_plan_in_simavr_bit_for_bit(small_model, bench_model):
     for tool in ("avr-gcc", "avr-size", "gcc", "pkg-config"):
         require_tool(tool)
     from fitgen.c.avr import run_on_avr
-    from fitgen.equations.fixedpoint import build_fixed, default_input_scale
+    from fitgen.equations.fixedpoint import build_fixed
+    from fitgen.equations.inputscale import default_input_scale
     from test_fixedpoint import every_kind_model, narrow_chain_model
 
     lsb, off, _ = default_input_scale(bench_model)
@@ -190,7 +191,7 @@ def test_fixed_on_the_uno_takes_fewer_cycles_than_float(bench_model):
     for tool in ("avr-gcc", "avr-size", "gcc", "pkg-config"):
         require_tool(tool)
     from fitgen.c.avr import fits_uno, run_on_avr
-    from fitgen.equations.fixedpoint import plan_at
+    from fitgen.equations.inputscale import plan_at
 
     rng = np.random.default_rng(9)
     lo, hi = bench_model.input_min, bench_model.input_max

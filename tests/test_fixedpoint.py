@@ -11,7 +11,8 @@ import pytest
 from fitgen.c.codegen import render_fixed_header, render_header, write_header
 from fitgen.base.errors import InputError
 from fitgen.fitting.fit import FitSettings, fit_model
-from fitgen.equations.fixedpoint import BUDGET, INT32_MAX, INT32_MIN, build_fixed, default_input_scale
+from fitgen.equations.fixedpoint import BUDGET, INT32_MAX, INT32_MIN, build_fixed
+from fitgen.equations.inputscale import default_input_scale
 from fitgen.equations.model import Equation, Model
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import require_tool, run_cli
+from conftest import assert_one_line_error, require_tool, run_cli
 
 PRESET = Path(__file__).resolve().parents[1] / "fitgen" / "physics" / "presets" / "paper.toml"
 ONE_CHIP = "ads1115@0x48:0-3"
@@ -143,3 +143,36 @@ def test_a_simulated_capture_simulates_the_drawing_its_schedule_was_made_for(fou
     assert proc.returncode == 0, proc.stderr
     meta = json.loads((tmp_path / "c.csv.meta.json").read_text())
     assert meta["source"] == f"simulated {Path(sensor).resolve()}" and meta["schedule_drawing"]["sensor"] == "four"
+
+
+def test_fixed_point_takes_the_adc_of_the_models_own_sensor_file(tmp_path):
+    """A file with an Uno's ADC (10 bits over 0..5 V): the fit held its fixed-point figures out at those codes, and
+    codegen, predict and verify took the paper's 16-bit ADC over 0..3.3 V unless given --input-lsb, so the header
+    clamped every 10-bit code a user fed it. They take the file's ADC now; a file changed since is not guessed."""
+    sensor = tmp_path / "uno.toml"
+    sensor.write_text(PRESET.read_text().replace('name = "paper"', 'name = "uno"').replace('kind = "raw"', 'kind = "gmr"')
+                      .replace("adc_max = 3.3 ", "adc_max = 5.0 ").replace("adc_bits = 16 ", "adc_bits = 10 ")
+                      .replace("noise = 0.0005        # V", "noise = 0.003        # V"))
+    data, model = tmp_path / "slide.csv", tmp_path / "uno.json"
+    for args in (("simulate", "--sensor", str(sensor), "--scene", "slide", "-o", str(data)),
+                 ("fit", str(data), "-o", str(model), "--precision", "fixed")):
+        proc = run_cli("fitgen", *args)
+        assert proc.returncode == 0, proc.stderr
+    lsb = 5.0 / 1023
+    proc = run_cli("fitgen", "codegen", str(model), "--precision", "fixed", "-o", str(tmp_path / "c"))
+    assert proc.returncode == 0, proc.stderr
+    assert f"input LSB {lsb:g} V from sensor {sensor.resolve()} (gmr: 10-bit codes over 0..5 V" in proc.stderr
+    define = next(ln for ln in (tmp_path / "c" / "tm_model.h").read_text().splitlines() if ln.startswith("#define TM_INPUT_LSB "))
+    assert float(define.split()[-1]) == lsb
+    proc = run_cli("fitgen", "predict", str(model), str(data), "--precision", "fixed", "-o", str(tmp_path / "p.csv"))
+    assert proc.returncode == 0 and f"input LSB {lsb:g} V from sensor {sensor.resolve()}" in proc.stderr, proc.stderr
+    assert "clamped" not in proc.stderr
+    # the ADC the fit counted gets no word on its rounding; a coarser one does
+    for given, said in ((f"{lsb:.6f}", False), (f"{2 * lsb:.6f}", True)):
+        proc = run_cli("fitgen", "codegen", str(model), "--precision", "fixed", "--input-lsb", given, "-o",
+                       str(tmp_path / "d"))
+        assert proc.returncode == 0 and ("neither the fit nor the model file's figures count it" in proc.stderr) == said
+    sensor.write_text(sensor.read_text().replace("adc_bits = 10 ", "adc_bits = 12 "))
+    assert_one_line_error(run_cli("fitgen", "codegen", str(model), "--precision", "fixed", "-o", str(tmp_path / "e")),
+                          2, f"the model was fitted on sensor {sensor.resolve()}, not found here as it was; give "
+                          "--input-lsb (in V)")

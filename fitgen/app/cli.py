@@ -193,7 +193,7 @@ def cmd_predict(args) -> int:
     check_input_units(model, load_meta(args.data).get("units"), f"{args.data}'s readings", f"model {args.model}")
     if args.precision == "fixed":
         from fitgen.c.fixedc import plan_line
-        from fitgen.equations.fixedpoint import plan_at
+        from fitgen.equations.inputscale import plan_at
 
         fm, source = plan_at(model, args.input_lsb, args.input_offset, target.mul_bits if target else 32)
         with np.errstate(over="ignore", invalid="ignore"):  # a huge reading is a row the C refuses: status -1
@@ -286,7 +286,7 @@ def cmd_codegen(args) -> int:
         from fitgen.app.report import rounding_note
         from fitgen.c.codegen import render_fixed_header
         from fitgen.c.fixedc import plan_line
-        from fitgen.equations.fixedpoint import plan_at
+        from fitgen.equations.inputscale import plan_at
         from fitgen.base.fileio import write_in_folder
 
         if args.fma or args.style:  # fixed point has one layout and no floating point to fuse

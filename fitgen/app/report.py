@@ -304,9 +304,14 @@ ROUNDING_NOTE = 0.25  # of the noise the model was fitted for: an ADC's rounding
 
 def rounding_note(model: Model, lsb: float) -> str | None:
     """What codegen says of codes of ``lsb`` (a --input-lsb) whose rounding, lsb / sqrt(12), is large beside the
-    reading noise the model was fitted for: neither the fit nor the model file's figures count it."""
+    reading noise the model was fitted for, and coarser than the ADC the fit took (whose rounding it counts)."""
+    from fitgen.equations.inputscale import fitted_input_scale
+
     noise = (model.fit_info.get("noise") or {}).get("device") if isinstance(model.fit_info, dict) else None
     if not isinstance(noise, (int, float)) or not noise > 0 or not lsb / np.sqrt(12) > ROUNDING_NOTE * noise:
+        return None
+    fitted = fitted_input_scale(model)
+    if fitted is not None and lsb <= fitted[0] * 1.001:  # an LSB typed to a few digits is the same ADC
         return None
     q, units = lsb / np.sqrt(12), model.input_units
     return (f"codes of {lsb:.3g} {units} round each reading by {q:.3g} {units} rms, {q / noise:.0%} of the "

@@ -106,7 +106,7 @@ def run_on_avr(model: Model, inputs, precision: str = "float", style: str = "tab
     if not 0 < len(inputs) <= MAX_VECTORS or inputs.shape[1] != model.n_inputs:
         raise InputError(f"give 1..{MAX_VECTORS} rows of {model.n_inputs} inputs, got {inputs.shape}")
     if precision == "fixed":
-        from fitgen.equations.fixedpoint import plan_at
+        from fitgen.equations.inputscale import plan_at
 
         fm = plan_at(model, input_lsb, input_offset, mul_bits or uno.mul_bits)[0]
         fm.clamp_codes(inputs)  # whole numbers within int32 (InputError otherwise)

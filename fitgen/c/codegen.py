@@ -287,7 +287,7 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
     flash); a fixed-point one is planned for the core's multiply (fitgen.equations.fixedpoint.build_fixed).
 
     ``precision="fixed"``: integer ADC codes in (value = input_offset + input_lsb * code; by
-    default the scale of the model's sensor, see :func:`fitgen.equations.fixedpoint.default_input_scale`),
+    default the scale of the model's sensor, see :func:`fitgen.equations.inputscale.default_input_scale`),
     int32 outputs out; ``style`` does not apply (the fixed header is straight-line code).
     """
     t = check_precision(target, precision)
@@ -295,7 +295,7 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
         raise InputError(f"target {t.name}: a refinement's forward model and solve do not fit the {t.core} "
                          "(its tables in RAM, its code past the flash): fit without --refine")
     if precision == "fixed":
-        from fitgen.equations.fixedpoint import plan_at
+        from fitgen.equations.inputscale import plan_at
 
         if fma:
             raise InputError("--fma does not apply to fixed point (it has no floating-point multiply-add)")

@@ -78,7 +78,7 @@ class CompiledModel:
         self.runner = tool_command(runner, "runner") if runner else []
         self.fixed = None
         if precision == "fixed":
-            from fitgen.equations.fixedpoint import plan_at
+            from fitgen.equations.inputscale import plan_at
 
             if fma:
                 raise InputError("--fma does not apply to fixed point")

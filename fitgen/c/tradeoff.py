@@ -31,7 +31,8 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.c.codegen import STYLES
 from fitgen.c.targets import TARGETS, get_target
-from fitgen.equations.fixedpoint import build_fixed, sensor_input_scale as fixed_scale
+from fitgen.equations.fixedpoint import build_fixed
+from fitgen.equations.inputscale import sensor_input_scale as fixed_scale
 from fitgen.equations.model import Model
 from fitgen.equations.rounding import PRECISIONS
 from fitgen.equations.terms import FAMILIES, HARMONIC_DEGREE

@@ -5,8 +5,8 @@
 there): the Q format of every value, its range proven by interval arithmetic over the code domain,
 and a bound on its error against exact arithmetic. For a core with a 16-bit multiply (an 8-bit AVR)
 some outputs run on int16 operands and 16x16->32 products instead, or with byte-aligned shifts, where
-every bound stays within its budget (fitgen.equations.fixednarrow chooses; this module plans). :func:`plan_at` and :func:`sensor_input_scale`
-give the input scale (the value of one ADC code) when the user names none.
+every bound stays within its budget (fitgen.equations.fixednarrow chooses; this module plans).
+fitgen.equations.inputscale gives the input scale (the value of one ADC code) when the user names none.
 
 Q formats are chosen in evaluation order, each the finest that keeps its value inside its
 budget (|x| <= 2^31 - 1 for int32 values, |x| <= 2^62 for int64 values and for the int64
@@ -436,65 +436,3 @@ def _try_accumulator(eq, j, ops_p, coefs, icpt, f_acc, acc_bits, align=False):
                            err, math.ldexp(max(abs(tlo), abs(thi)), -f_acc), f"{eq.name} += {t.text}", j,
                            prod_bits=prod_bits))
     return out, lo, hi, err
-
-
-# --- the default input scale ----------------------------------------------------------------------
-
-
-def default_input_scale(model: Model) -> tuple[float, float, str]:
-    """(lsb, offset, where from) of the model's input codes when the user gives none.
-
-    From the sensor the model was fitted for, when its fit notes' sensor hash is a preset's, as the fit's
-    fixed-point figures took it (:func:`sensor_input_scale`: the ADC of its transfer, lsb = (adc_max -
-    adc_min) / (2^bits - 1), offset adc_min, as ``fitgen.physics.transfer.quantise`` codes it; FIXED_BITS over
-    its range when the transfer does not quantise); otherwise, for inputs in V, the paper sensor's 16-bit ADC
-    over 0..3.3 V; otherwise an InputError asking for ``--input-lsb``.
-    """
-    from fitgen.physics.sensor import load_sensor, preset_names
-
-    sha = model.fit_info.get("sensor_sha256") if isinstance(model.fit_info, dict) else None
-    if isinstance(sha, str):
-        for name in preset_names():
-            base = load_sensor(name)
-            for kind in ("gmr", "raw"):
-                s = base.with_transfer(kind)
-                if s.sha256 == sha:
-                    lsb, offset, what = sensor_input_scale(s)
-                    return lsb, offset, f"sensor {name} ({kind}: {what})"
-    if model.input_units == "V":
-        return 3.3 / 65535, 0.0, "default 16-bit ADC over 0..3.3 V"
-    raise InputError(f"fixed point needs the value of one ADC code: give --input-lsb (in {model.input_units})")
-
-
-def plan_at(model: Model, input_lsb: float | None = None, input_offset: float | None = None,
-            mul_bits: int = 32) -> tuple[FixedModel, str]:
-    """The fixed-point plan at the given input scale, and where the scale came from.
-
-    Without ``input_lsb``: the model's own (:func:`default_input_scale`; ``input_offset`` still
-    overrides its offset). With it: that LSB and ``input_offset`` (default 0). ``mul_bits``: as for
-    :func:`build_fixed` (fitgen.c.targets gives a target's).
-    """
-    source = "--input-lsb"
-    if input_lsb is None:
-        input_lsb, default_offset, source = default_input_scale(model)
-        input_offset = default_offset if input_offset is None else input_offset
-    return build_fixed(model, input_lsb, input_offset or 0.0, mul_bits), source
-
-
-FIXED_BITS = 16  # ADC bits assumed for fixed point when the sensor's transfer does not quantise
-
-
-def sensor_input_scale(sensor) -> tuple[float, float, str]:
-    """(lsb, offset, description) of the input codes for fixed point: the ADC of the sensor's
-    transfer, or FIXED_BITS bits over its range when the transfer does not quantise."""
-    if sensor.transfer == "gmr":
-        g = sensor.gmr
-        bits = g.adc_bits or FIXED_BITS
-        lsb, offset, span = (g.adc_max - g.adc_min) / (2**bits - 1), g.adc_min, f"{g.adc_min:g}..{g.adc_max:g} V"
-    else:
-        r = sensor.raw
-        bits = r.adc_bits or FIXED_BITS
-        lsb, offset, span = r.full_scale / (2**bits - 1), 0.0, f"0..{r.full_scale:g} mT"
-    src = "the transfer's ADC" if (sensor.gmr.adc_bits if sensor.transfer == "gmr" else sensor.raw.adc_bits) \
-        else "assumed: the transfer has no ADC"
-    return lsb, offset, f"{bits}-bit codes over {span} (LSB {lsb:.4g} {sensor.units}; {src})"

@@ -53,7 +53,8 @@ def validation_rms(model: Model, sensor, ranges: dict, precision: str = "float")
     val = held_out_set(sensor, ranges, model.output_names, n=VALIDATION_POSES, seed=VALIDATION_SEED,
                        draws=VALIDATION_DRAWS)
     if precision == "fixed":
-        from fitgen.equations.fixedpoint import build_fixed, sensor_input_scale
+        from fitgen.equations.fixedpoint import build_fixed
+        from fitgen.equations.inputscale import sensor_input_scale
 
         lsb, offset, _ = sensor_input_scale(sensor)
         est = build_fixed(model, lsb, offset).predict_values(val.noisy)[0]

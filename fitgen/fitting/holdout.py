@@ -78,7 +78,8 @@ def unit_sets(units: list, ranges: dict, outputs: tuple[str, ...], *, noise: flo
 
 def _fixed_plan(model: Model, sensor):
     """The fixed-point plan at the sensor's ADC scale, or the reason there is none."""
-    from fitgen.equations.fixedpoint import build_fixed, sensor_input_scale
+    from fitgen.equations.fixedpoint import build_fixed
+    from fitgen.equations.inputscale import sensor_input_scale
 
     lsb, offset, _ = sensor_input_scale(sensor)
     try:
