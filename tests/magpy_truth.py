@@ -18,13 +18,13 @@ def magpylib_readings(sensor, poses: np.ndarray, stage_field=None) -> np.ndarray
     The magnet: magpylib's Cylinder with the unit's polarisation, rest centre + map @ (dx, dy, dz) (a press dz
     shortened to dz (1 - stiffening |dz|)), and
     orientation Ry(thy) Rx(thx) of the pose after the unit's rest tilt; the field along each element's axis
-    plus the ambient field's; then |.|, the element's gain and offset, and the transfer. A unit's label more
-    than 0.05 mm above first contact (dz) has lifted the indenter off the skin: the magnet rests.
+    plus the ambient field's; then |.|, the element's gain and offset, and the transfer. A label (a unit's or a
+    drawing's) more than 0.05 mm above first contact (dz) has lifted the indenter off the skin: the magnet rests.
     """
     poses = np.atleast_2d(np.asarray(poses, dtype=float)).copy()
     carried = None if stage_field is None else poses[:, :3] @ np.asarray(stage_field, dtype=float).T
+    poses[poses[:, 2] > 0.05] = 0.0
     if not sensor.is_drawing:
-        poses[poses[:, 2] > 0.05] = 0.0
         press = poses[:, 2] < 0  # an elastomer that stiffens: the magnet follows a press less the deeper it goes
         poses[press, 2] *= 1.0 + sensor.stiffening * poses[press, 2]
     mag = sensor.magnet

@@ -119,8 +119,9 @@ def magnet_frame(sensor: Sensor, poses: np.ndarray, touching: bool = False) -> t
 
     For a built unit (fitgen.physics.units) the pose's displacement is the stage's: the magnet moves by
     ``stage_map @ (dx, dy, dz)``, a press shortened by the elastomer's stiffening (:func:`pressed`); its tilt is
-    the pose's applied after the unit's rest tilt; a label off the skin (:func:`contact_poses`) leaves it at rest,
-    unless ``touching`` says every pose is in contact (a simulated rig that decided it on the tool's own height).
+    the pose's applied after the unit's rest tilt. On a drawing and a unit alike a label off the skin
+    (:func:`contact_poses`) leaves it at rest, unless ``touching`` says every pose is in contact (a simulated rig
+    that decided it on the tool's own height).
     """
     given = as_poses(poses)
     centre, R = _placed(sensor, given, touching)
@@ -166,7 +167,7 @@ def check_box(sensor: Sensor, ranges: dict, origin: str) -> None:
 
 
 def _unchecked(sensor: Sensor, given: np.ndarray, touching: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    moved = given if sensor.is_drawing or touching else contact_poses(given)
+    moved = given if touching else contact_poses(given)  # a drawing too: no indenter lifts the magnet
     shift = moved[:, :3] if sensor.is_drawing else pressed(moved[:, :3], sensor.stiffening) @ sensor.stage_map.T
     centre = np.asarray(sensor.magnet.rest_center) + shift
     R = rotation_matrices(moved[:, 3], moved[:, 4])
