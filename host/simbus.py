@@ -311,6 +311,10 @@ def simulated_bus(cmap: ChannelMap, sensor: Sensor, pose, *, clock, noise: float
         raise InputError(f"--sim-flicker must be a finite number >= 0 V, got {flicker}")
     bus = SimBus.for_channel_map(cmap, sensor, pose, clock=clock, noise=noise, offsets=values, seed=seed,
                                  motion=motion, drift=drift, thermistor=thermistor, flicker=flicker or 0.0)
-    for f in specs:
+    for spec, f in zip(faults, specs):
+        if f["address"] is not None and not bus.present(f["address"]):  # it would never fire
+            held = ", ".join(f"0x{a:02x}" for a in ADDRESSES if bus.present(a))
+            raise InputError(f"--sim-fault {spec!r}: no chip at 0x{f['address']:02x} on the simulated bus (it has "
+                             f"{held})")
         bus.inject(**f)
     return bus

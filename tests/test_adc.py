@@ -430,6 +430,11 @@ def test_fault_and_pose_specs():
                                                "--rest"),
     (["--adc", TWO_1115, "--tare", "--rest", "paper", "--sensor", "paper"], "--sensor goes with --simulate, or"),
     (["--adc", TWO_1115, "--simulate", "dx=0", "--sim-fault", "melt:1"], "--sim-fault"),
+    # a fault at a chip the map does not have would never fire
+    (["--adc", TWO_1115, "--simulate", "dx=0", "--sim-fault", "nack:0x4b:0.9"], "--sim-fault 'nack:0x4b:0.9': no chip "
+                                                                               "at 0x4b on the simulated bus (it has "
+                                                                               "0x48, 0x49)"),
+    (["--adc", TWO_1115, "--simulate", "dx=0", "--sim-fault", "silent:0x4a:20"], "no chip at 0x4a"),
 ])
 def test_read_bad_input_is_one_line_exit_2(model_file, args, message):
     proc = run_cli("tactile-host", "read", "--model", model_file, *args)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.channelmap import Settings, parse_spec
+from host.channelmap import Settings, load_map_file, parse_spec
 from host.pi import StandIn, build_pi, render_adc_map, render_pi
 from host.readout import LineFormat
 from host.temperature import TempComp
@@ -187,6 +187,30 @@ def test_pi_build_cli_errors(tmp_path, model):
     assert not (tmp_path / "z").exists()
 
 
+def test_tm_pi_opens_the_bus_the_map_file_names(model, tmp_path):
+    """A TOML map's `bus = 3` is read's bus unless --bus; tm_pi opened /dev/i2c-1 whatever the map said, and pi-build
+    told the user to run it with --bus 1."""
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    toml = tmp_path / "map.toml"
+    toml.write_text("bus = 3\n" + "".join(f'[[chip]]\ntype = "ads1115"\naddress = {a}\ninputs = [0, 1, 2, 3]\n'
+                                          for a in ("0x48", "0x49")))
+    path = str(model.save(tmp_path / "m.json"))
+    proc = run_cli("tactile-host", "pi-build", "--model", path, "--adc", str(toml), "--cc", "gcc", "-o",
+                   str(tmp_path / "pi"))
+    assert proc.returncode == 0 and "on the Pi: tm_pi --format csv (I2C bus 3 unless --bus N)" in proc.stderr, \
+        proc.stderr
+    folder = render_pi(model, load_map_file(toml), tmp_path / "standin", precision="float")
+    binary = build_pi(folder, standin=True)
+    for args, device in (([], "/dev/i2c-3"), (["--bus", "4"], "/dev/i2c-4")):
+        cmap, bus, clock = _bus()
+        assert_one_line_error(StandIn(bus, clock).run(["qemu-arm", str(binary), "--count", "1", *args]), 2,
+                              f"cannot open {device}")
+    cmap, bus, clock = _bus()
+    res = StandIn(bus, clock, device="/dev/i2c-3").run(["qemu-arm", str(binary), "--count", "2"])
+    assert res.returncode == 0 and len(res.stdout.splitlines()) == 3, res.stderr
+
+
 def test_pi_build_defaults_to_the_precision_codegen_writes_for_the_pi(model, tmp_path):
     """Without --precision pi-build writes the header `fitgen codegen --target pi` writes (double: the Pi computes
     it in hardware), even for a model fitted for float; its summary and --help say so."""
@@ -197,7 +221,7 @@ def test_pi_build_defaults_to_the_precision_codegen_writes_for_the_pi(model, tmp
     path = str(model.save(tmp_path / "m.json"))
     proc = run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc", "-o", str(tmp_path / "pi"))
     assert proc.returncode == 0, proc.stderr
-    assert ", double); on the Pi: tm_pi" in proc.stderr
+    assert ", double); on the Pi: tm_pi --format csv (I2C bus 1 unless --bus N)" in proc.stderr
     proc = run_cli("fitgen", "codegen", path, "--target", "pi", "--style", "unrolled", "-o", str(tmp_path / "c"))
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "pi" / "tm_model.h").read_text() == (tmp_path / "c" / "tm_model.h").read_text()

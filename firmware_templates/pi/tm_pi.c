@@ -16,6 +16,8 @@
  * `tactile-host read --auto-zero` does, with its --rest-band (default PI_AZ_BAND_MM,PI_AZ_BAND_DEG) and
  * --rest-hold (default PI_AZ_HOLD_S s); each update is a line on stderr, read's line.
  *
+ * --bus N opens /dev/i2c-N; without it, the bus of the map file pi-build was given (`bus = N`), else 1.
+ *
  * Ctrl-C (SIGINT) or SIGTERM ends the run after the sample under way, as tactile-host read ends: every
  * line whole, the summary, exit status 0.
  *
@@ -245,7 +247,7 @@ static void print_line(int jsonl, double t, const double v[TM_N_INPUTS], const t
 int main(int argc, char **argv)
 {
     static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
-    long bus = 1, count = 0, retries = 5, tare_n = 0;
+    long bus = PI_DEFAULT_BUS, count = 0, retries = 5, tare_n = 0;
     int tared = 0, auto_zero = 0, band_given = 0, hold_given = 0;
     double offsets[TM_N_INPUTS] = {0}, spreads[TM_N_INPUTS] = {0};
     double band_mm = PI_AZ_BAND_MM, band_deg = PI_AZ_BAND_DEG, hold_s = PI_AZ_HOLD_S;
