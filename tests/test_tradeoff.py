@@ -12,7 +12,8 @@ from conftest import assert_one_line_error, require_tool, run_cli
 
 from fitgen.base.errors import InputError
 from fitgen.app.tradeoff import parse_knob_list, parse_target
-from fitgen.c.tradeoff import Knobs, full_grid, grid_from, pareto_front, quick_grid, recommend
+from fitgen.c.tradeoff import Knobs, full_grid, grid_from, quick_grid
+from fitgen.c.tradeoff_choice import pareto_front, recommend
 
 # --- the front --------------------------------------------------------------------------------------
 
@@ -168,6 +169,35 @@ def test_tiny_sweep_through_the_cli(tmp_path):
     for r in rows:  # rounding's share beside the model's own error, within the default 5 %
         assert float(r["share"]) == pytest.approx(float(r["dz_share"]))
         assert 0 <= float(r["share"]) <= 0.05
+
+
+def test_a_point_that_leaves_an_output_a_constant_is_not_recommended(tmp_path):
+    """BIC capped at 8 terms on the whole pose gives the tilts no terms; a constant on +-5 deg is 2.9 deg rms, so it
+    met a 3 deg target and was recommended while estimating no tilt."""
+    from fitgen.c.tradeoff_choice import constant_outputs
+
+    out = tmp_path / "c"
+    proc, rows = _sweep(out, "full", "bic", "8,20", "integer", "float", "--target", "thx=3 thy=3")
+    assert proc.returncode == 0, proc.stderr
+    rows = {r["max_terms"]: r for r in rows}
+    flat, fitted = rows["8"], rows["20"]
+    assert int(flat["terms_thx"]) == 0 and float(flat["score"]) <= 1  # it meets the target, as a constant
+    assert flat["recommended"] == "0" and flat["front"] == "0" and "thx has no terms (a constant)" in flat["note"]
+    assert int(fitted["terms_thx"]) > 0 and fitted["recommended"] == "1"
+    assert "**No better than a constant** at 1 point(s)" in proc.stdout
+    # an output with terms whose error is no less than the truth's spread counts as a constant too
+    truth = np.column_stack([np.linspace(-1, 1, 101), np.linspace(-5, 5, 101)])
+
+    class P:
+        score, note = 1.0, ""
+
+        def __init__(self, terms, rms):
+            self.terms_per_output = {"dz": 3, "thx": terms}
+            self.errors = {"dz": {"noisy_rms": 0.01}, "thx": {"noisy_rms": rms}}
+
+    points = [P(4, 2.0), P(4, 3.0), P(0, 0.1), P(4, 3.0)]
+    assert constant_outputs(points, ("dz", "thx"), truth, skip=[3]) == [1, 2]
+    assert "does no better than a constant: RMS 3 with noise against its spread 2.92" in points[1].note
 
 
 def test_a_harmonics_sweep_is_plotted(tmp_path):

@@ -8,7 +8,8 @@ import io
 from pathlib import Path
 
 from fitgen.base.errors import InputError
-from fitgen.c.tradeoff import ACCURACY_TIE, OP_KINDS, Point, TradeoffResult
+from fitgen.c.tradeoff import OP_KINDS, Point, TradeoffResult
+from fitgen.c.tradeoff_choice import ACCURACY_TIE
 from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
 
 
@@ -98,11 +99,19 @@ def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
                      "(they are left off the front and the recommendation): points "
                      + ", ".join(str(i + 1) for i in result.over_share) + ".")
         lines.append("")
+    if result.constant:
+        lines.append(f"**No better than a constant** at {len(result.constant)} point(s): an output whose equation has "
+                     "no terms, or whose RMS error with noise is no less than its spread over the held-out poses "
+                     "(the constant at its mean does as well), is not estimated, whatever its score (they are left "
+                     "off the front and the recommendation): points "
+                     + ", ".join(str(i + 1) for i in result.constant) + ".")
+        lines.append("")
     lines.append("## Recommendation")
     lines.append("")
     if result.recommended is None:
-        lines.append("No point could be measured." if not result.over_share else "No point left: every measured "
-                     "point failed the rounding check above.")
+        lines.append("No point could be measured." if not (result.over_share or result.constant) else
+                     "No point left: every measured point failed the rounding check or estimates an output no "
+                     "better than a constant (above).")
     elif result.met:
         lines.append(f"Meets the target with the fewest {cost_name(result)}: {describe(result.recommended, result)}.")
     else:

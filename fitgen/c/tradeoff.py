@@ -13,7 +13,8 @@ bit) and the AVR program's flash; double, which it cannot run, is left out.
 
 The score of a point is the worst output's RMS error with noise over its target (<= 1 meets the
 target); the Pareto front is taken on (cost, score), the cost being instructions (cycles on a core),
-and the recommended point is the cheapest that meets the target (ties: less flash).
+and the recommended point is the cheapest that meets the target (ties: less flash); fitgen.c.tradeoff_choice
+chooses, and leaves out points that estimate an output no better than a constant.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.c.codegen import STYLES
 from fitgen.c.targets import TARGETS, get_target
+from fitgen.c.tradeoff_choice import constant_outputs, pareto_front, recommend
 from fitgen.equations.fixedpoint import build_fixed
 from fitgen.equations.inputscale import sensor_input_scale as fixed_scale
 from fitgen.equations.model import Model
@@ -53,7 +55,6 @@ FIXED_STYLE = "-"  # the fixed-point header is straight-line code: the style kno
 OP_KINDS = ("mul", "add", "div", "sqrt", "cbrt")
 # Cortex-M core whose flash is reported, per precision (see fitgen.c.cost.ARM_CORES)
 CORE_OF = {"double": "cortex-m4f", "float": "cortex-m4f", "fixed": "cortex-m0"}
-ACCURACY_TIE = 0.01  # when no point meets the target: scores within 1 % of the best count as equal
 N_HELD = 1000
 NOISE_DRAWS = 5
 N_AVR = 20  # held-out inputs per build in simavr (the cycles vary by well under 1 % between inputs)
@@ -153,42 +154,6 @@ def default_target(outputs: tuple[str, ...]) -> dict[str, float]:
     return {o: DEFAULT_ACCURACY[o] for o in outputs}
 
 
-# --- the front and the recommendation ---------------------------------------------------------------
-
-def pareto_front(cost: list[float], score: list[float]) -> list[int]:
-    """Indices of the points no other point dominates (lower or equal in both, lower in one),
-    in order of cost. Points equal in both are all on the front; a NaN or None is never on it."""
-    ok = [i for i in range(len(cost)) if cost[i] is not None and score[i] is not None
-          and math.isfinite(cost[i]) and math.isfinite(score[i])]
-    front = []
-    for i in ok:
-        dominated = any(cost[j] <= cost[i] and score[j] <= score[i] and (cost[j] < cost[i] or score[j] < score[i])
-                        for j in ok)
-        if not dominated:
-            front.append(i)
-    return sorted(front, key=lambda i: (cost[i], score[i], i))
-
-
-def recommend(cost: list[float], score: list[float], flash: list[float | None],
-              close: float = ACCURACY_TIE) -> tuple[int | None, bool]:
-    """(index, met): the fewest instructions among points with score <= 1 (ties: less flash, then
-    the lower score); if none meets the target, met False and the most accurate point, where scores
-    within a factor ``1 + close`` of the best count as equal (then: fewer instructions, less flash).
-    (None, False) when no point was measured."""
-    def val(x):
-        return math.inf if x is None or not math.isfinite(x) else x
-
-    ok = [i for i in range(len(cost)) if math.isfinite(val(cost[i])) and math.isfinite(val(score[i]))]
-    if not ok:
-        return None, False
-    meet = [i for i in ok if score[i] <= 1.0]
-    if meet:
-        return min(meet, key=lambda i: (cost[i], val(flash[i]), score[i], i)), True
-    best = min(score[i] for i in ok)
-    near = [i for i in ok if score[i] <= best * (1 + close)]
-    return min(near, key=lambda i: (cost[i], val(flash[i]), score[i], i)), False
-
-
 # --- measurements ----------------------------------------------------------------------------------
 
 @dataclass
@@ -227,6 +192,7 @@ class TradeoffResult:
     max_share: float = 0.05
     over_share: list[int] = field(default_factory=list)  # points whose rounding adds more than max_share
     core: str | None = None  # the costs are cycles on this core (fitgen.c.targets), else x86 instructions
+    constant: list[int] = field(default_factory=list)  # points that estimate some output no better than a constant
 
     def cost(self, p: Point) -> float | None:
         """The point's cost: cycles per estimate on the core, else instructions."""
@@ -449,7 +415,8 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
         worst = max(outputs, key=lambda o: points[i].errors[o]["share"])
         points[i].note = (f"rounding adds {points[i].share:.1%} of {worst}'s held-out max error "
                           f"(over {100 * max_share:.3g} %): not recommended")
-    cost_ = [(p.cycles if core else p.instructions) if p.score is not None and i not in over else None
+    constant = constant_outputs(points, outputs, Y, over)
+    cost_ = [(p.cycles if core else p.instructions) if p.score is not None and i not in over + constant else None
              for i, p in enumerate(points)]
     score = [p.score for p in points]
     front = pareto_front(cost_, score)
@@ -458,7 +425,7 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
     setup = {"training_rows": train.n_rows, "levels": scene.levels, "held_out": n_held, "noise_draws": noise_draws,
              "noise": sensor.noise, "units": sensor.units, "seed": seed, "fits": len(fits), "measured": len(units)}
     return TradeoffResult(sensor.name, sensor.transfer, scene, target, points, front, rec, met, warnings, notes, setup,
-                          max_share, over, core)
+                          max_share, over, core, constant)
 
 
 def _for_core(core: str, grid: list[Knobs], notes: list[str]) -> list[Knobs]:
