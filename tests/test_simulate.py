@@ -145,6 +145,13 @@ def test_the_fit_note_names_causes_that_hold(tmp_path):
     assert said[()] and all("close to a constant; against the " f"{noise:.3g} V rms of reading noise it is fitted "
                             "for, the readings barely carry" in ln for ln in said[()]), said
     assert said[("--noise", "0")] and not any("noise" in ln for ln in said[("--noise", "0")]), said
+    assert "without the displacement terms" not in proc.stderr
+    # a tilt fitted without dx, dy and dz has no displacement terms: said, and its near-constant blamed on that
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(model), "--family", "integer", "--outputs", "dy,thx")
+    assert proc.returncode == 0, proc.stderr
+    assert ("note: thx fitted without the displacement terms eq. 1 gives a tilt (they take dx, dy and dz from their "
+            "own equations, and the fit has no dx, dz): fit --outputs dx,dy,dz,thx to have them") in proc.stderr
+    assert "barely carry" not in proc.stderr
     # the paper's procedure on its grid: its tilts leave about half their spread, as the paper's do; no note
     for argv in (("simulate", "--sensor", "paper", "--grid", "paper-sim", "-o", str(data)),
                  ("fit", str(data), "--noise", "0", "-o", str(model))):

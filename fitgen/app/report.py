@@ -275,6 +275,8 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
         notes.append(f"{repeats} of {rows} rows repeat another row exactly: the fit counts each as a measurement of "
                      "its own, so AIC admits terms on less evidence than the data hold; drop the repeats, or average "
                      "repeated readings of one pose into one row")
+    no_d = _d_terms_note(model)
+    notes += no_d
     causes, noise = None, (model.fit_info.get("noise") or {}).get("device") or 0.0  # single samples
     for e in model.equations:
         rms, sd = model.fit_info["outputs"][e.name]["model_training_error"]["rms"], float(ds.target(e.name).std())
@@ -286,6 +288,8 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
         if causes:
             notes.append(f"{said}: the readings barely carry {e.name} here ({'; '.join(causes)}); `fitgen observe` "
                          "tells how well each output can be seen")
+        elif rms > NEAR_CONSTANT * sd and no_d and e.name in ("thx", "thy"):
+            notes.append(f"{said}: it is close to a constant, fitted without the displacement terms (above)")
         elif rms > NEAR_CONSTANT * sd:  # no cause found; the paper's tilts, fitted its way, leave about half
             notes.append(f"{said}: it is close to a constant"
                          + (f"; against the {noise:.3g} {model.input_units} rms of reading noise it is fitted for, "
@@ -297,6 +301,21 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
         notes.append(f"{e.name} has {len(e.terms)} terms on {rows} rows: it follows the rows' noise more than the "
                      "sensor; more rows, --max-terms, or fit the identified unit's simulated rows (fitgen identify)")
     return notes
+
+
+def _d_terms_note(model: Model) -> list[str]:
+    """A tilt fitted without the displacement terms eq. 1 gives it (d from dx, dy and dz's own equations), because
+    the fit did not take all three: why its equation may leave more than with them."""
+    from fitgen.equations.terms import DISPLACEMENTS, ROTATIONS
+
+    names = model.output_names
+    tilts, missing = [o for o in names if o in ROTATIONS], [o for o in DISPLACEMENTS if o not in names]
+    settings = model.fit_info.get("settings") if isinstance(model.fit_info, dict) else None
+    if not tilts or not missing or not (isinstance(settings, dict) and settings.get("d_terms")):
+        return []
+    return [f"{' and '.join(tilts)} fitted without the displacement terms eq. 1 gives a tilt (they take dx, dy and "
+            f"dz from their own equations, and the fit has no {', '.join(missing)}): fit --outputs "
+            f"{','.join([*DISPLACEMENTS, *tilts])} to have them"]
 
 
 ROUNDING_NOTE = 0.25  # of the noise the model was fitted for: an ADC's rounding past it is worth a word
