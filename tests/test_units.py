@@ -455,6 +455,11 @@ def test_predict_says_when_the_drawings_model_reads_a_built_unit(tmp_path):
     assert "a built unit needs its own calibration" in said
     own = cli("predict", str(tmp_path / "m.json"), str(tmp_path / "own.csv"), "-o", str(tmp_path / "o.csv"))
     assert "outside the pose box" not in own
+    # report --data printed the unit's errors as the model's own, without a word
+    said = cli("report", str(tmp_path / "m.json"), "--data", str(tmp_path / "unit.csv"))
+    assert f"note: {int((far & (est[:, 5] >= 0)).sum())} rows estimated outside the pose box" in said
+    assert "a built unit needs its own calibration" in said
+    assert "outside the pose box" not in cli("report", str(tmp_path / "m.json"), "--data", str(tmp_path / "own.csv"))
 
 
 def test_predict_tells_rows_labelled_outside_the_box_from_another_sensors():

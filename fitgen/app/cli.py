@@ -232,7 +232,7 @@ def cmd_predict(args) -> int:
 def cmd_report(args) -> int:
     from fitgen.app import plots
     from fitgen.base.fileio import write_all
-    from fitgen.app.report import format_report, sweep_sensor
+    from fitgen.app.report import data_notes, format_report, sweep_sensor
     from fitgen.equations.model import check_input_units, load_model
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.physics.sensor import load_sensor
@@ -267,6 +267,8 @@ def cmd_report(args) -> int:
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:  # the notes were edited by hand
         raise InputError(f"model file {args.model}: its fit notes are not as fitgen fit writes them "
                          f"({type(exc).__name__}: {exc})") from None
+    if ds is not None:  # another sensor's errors would read as the model's own: said as predict says it
+        print("".join(f"note: {n}\n" for n in data_notes(model, ds)), end="", file=sys.stderr)
     # the figures drawn first, then written with the report: a failure leaves none of them
     figures = plots.report_figures(model, ds, sensor) if folder is not None else {}
     files = [(args.output, text)] if args.output else []

@@ -342,6 +342,14 @@ def rounding_note(model: Model, lsb: float) -> str | None:
 LABEL_MARGIN = 0.1  # of the box's width: a label past it lies clearly outside the box
 
 
+def data_notes(model: Model, ds: Dataset) -> list[str]:
+    """What `fitgen report --data` says of the rows beside its errors: :func:`predict_notes` of the double model's
+    estimates (rows clamped, rows estimated far outside the fitted box: readings of another sensor)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        pred, status = model.predict(ds.inputs, with_status=True)
+    return predict_notes(model, pred, status, "double", {n: ds.target(n) for n in ds.target_names})
+
+
 def predict_notes(model: Model, pred: np.ndarray, status: np.ndarray, precision: str,
                   labels: dict | None = None) -> list[str]:
     """What `fitgen predict` says of its rows beyond the estimates: rows clamped into the domain, rows with no
