@@ -145,6 +145,22 @@ def _sweep(out, scene, k, cap, family, precision="float", *more):
     return proc, rows
 
 
+def reproduced(proc, rows, folder):
+    """Run the commands the recommendation prints, in ``folder``: its model is the recommended point's."""
+    from fitgen.equations.model import load_model
+
+    text = proc.stdout.split("Its model and C:", 1)[1].split("##", 1)[0]
+    commands = [ln.split() for ln in text.splitlines() if ln.startswith("    fitgen ")]
+    assert len(commands) == 3, text
+    folder.mkdir()
+    for argv in commands:
+        done = run_cli(*argv, cwd=folder)
+        assert done.returncode == 0, (argv, done.stderr)
+    rec = next(r for r in rows if r["recommended"] == "1")
+    assert load_model(folder / "model.json").sha256[:12] == rec["model"]
+    return commands
+
+
 def test_tiny_sweep_through_the_cli(tmp_path):
     out = tmp_path / "t"
     proc, rows = _sweep(out, "press", "aic", "none,2", "integer")
@@ -169,6 +185,9 @@ def test_tiny_sweep_through_the_cli(tmp_path):
     for r in rows:  # rounding's share beside the model's own error, within the default 5 %
         assert float(r["share"]) == pytest.approx(float(r["dz_share"]))
         assert 0 <= float(r["share"]) <= 0.05
+    # the commands it prints give the recommended point's model and header
+    commands = reproduced(proc, rows, tmp_path / "again")
+    assert "--force" not in commands[1] and (tmp_path / "again" / "c" / "tm_model.h").is_file()
 
 
 def test_a_point_that_leaves_an_output_a_constant_is_not_recommended(tmp_path):
@@ -185,6 +204,7 @@ def test_a_point_that_leaves_an_output_a_constant_is_not_recommended(tmp_path):
     assert flat["recommended"] == "0" and flat["front"] == "0" and "thx has no terms (a constant)" in flat["note"]
     assert int(fitted["terms_thx"]) > 0 and fitted["recommended"] == "1"
     assert "**No better than a constant** at 1 point(s)" in proc.stdout
+    assert "--force" in reproduced(proc, list(rows.values()), tmp_path / "again")[1]  # paper cannot resolve it all
     # an output with terms whose error is no less than the truth's spread counts as a constant too
     truth = np.column_stack([np.linspace(-1, 1, 101), np.linspace(-5, 5, 101)])
 

@@ -72,6 +72,24 @@ def describe(i: int | None, result: TradeoffResult) -> str:
            f"score {_g(p.score)}"
 
 
+def reproduce(i: int, result: TradeoffResult) -> list[str]:
+    """The fitgen commands that give point ``i``'s model and C: the scene's grid simulated, fitted as the sweep fits
+    it (the sensor's noise, float rounding; --force where the sensor cannot resolve the scene), then generated."""
+    from shlex import quote
+
+    kn = result.points[i].knobs
+    scene = result.scene.name
+    k = kn.k if isinstance(kn.k, str) else f"{kn.k:g}"
+    fit = (f"fitgen fit {scene}.csv --k {k} --max-terms {kn.max_terms or 'none'} --family {kn.family}"
+           + (f" --refine {kn.refine}" if kn.refine else "") + (" --force" if result.warnings else "")
+           + " -o model.json")
+    gen = (f"fitgen codegen model.json --precision {kn.precision}"
+           + (f" --style {kn.style}" if kn.precision != "fixed" else "")
+           + (f" --target {result.core}" if result.core else "") + " -o c")
+    return [f"fitgen simulate --sensor {' '.join(quote(x) for x in result.given or (result.sensor,))} "
+            f"--scene {scene} -o {scene}.csv", fit, gen]
+
+
 def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
     s, outs = result.setup, result.scene.outputs
     units = {o: POSE_UNITS[POSE_NAMES.index(o)] for o in outs}
@@ -117,6 +135,8 @@ def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
     else:
         lines.append(f"No point meets the target. The most accurate (scores within {ACCURACY_TIE:.0%} of the best "
                      f"taken as equal, then the fewest {cost_name(result)}): {describe(result.recommended, result)}.")
+    if result.recommended is not None:
+        lines += ["", "Its model and C:", ""] + [f"    {c}" for c in reproduce(result.recommended, result)]
     lines.append("")
     lines.append(f"## Pareto front ({cost_name(result)} per estimate against score)")
     lines.append("")

@@ -193,6 +193,7 @@ class TradeoffResult:
     over_share: list[int] = field(default_factory=list)  # points whose rounding adds more than max_share
     core: str | None = None  # the costs are cycles on this core (fitgen.c.targets), else x86 instructions
     constant: list[int] = field(default_factory=list)  # points that estimate some output no better than a constant
+    given: tuple = ()  # the command's sensor options as typed (--sensor's value, --transfer ...), to reproduce a point
 
     def cost(self, p: Point) -> float | None:
         """The point's cost: cycles per estimate on the core, else instructions."""
