@@ -538,12 +538,15 @@ def test_a_standard_output_that_cannot_be_written_is_one_line(tmp_path, tool, ar
 
 
 @pytest.mark.parametrize("args", [["fit", "nothere.csv", "-o", "m.json"], ["fit", "--k"],
-                                  ["simulate", "--sensor", "nothere.toml", "-o", "d.csv"]])
+                                  ["simulate", "--sensor", "nothere.toml", "-o", "d.csv"],
+                                  ["fit", "d.csv", "-o", "m.json", "--bogus", "x"]])
 def test_every_error_line_of_a_subcommand_starts_with_its_name(args, tmp_path):
     """argparse's lines said "fitgen fit: error:" and the command's own "fitgen: error:"; both now name it."""
     proc = run_cli("fitgen", *args, cwd=tmp_path)
     assert_one_line_error(proc, 2)
     assert proc.stderr.startswith(f"fitgen {args[0]}: error: "), proc.stderr
+    if "--bogus" in args:  # the top parser said these, after its own name alone
+        assert proc.stderr.strip() == "fitgen fit: error: unrecognized arguments: --bogus x"
 
 
 def test_codes_that_are_not_whole_or_beyond_int32_are_named_by_row_and_column(tmp_path):

@@ -175,8 +175,12 @@ def command_main(build_parser, argv, prog: str, check=None):
     name = [prog]  # the subcommand's once parsed, so that every line of it starts alike (as argparse's do)
 
     def main_fn(argv) -> int:
-        args = build_parser().parse_args(argv)
+        parser = build_parser()
+        args, extra = parser.parse_known_args(argv)
         name[0] = f"{prog} {args.command}"
+        if extra:  # said by the subcommand's parser, so that the line starts with its name as its other errors do
+            sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+            sub.choices[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
         if check is not None:
             check(args)
         return args.func(args)
