@@ -1,6 +1,7 @@
 """The Raspberry Pi build (firmware_templates/pi/): the C drivers over i2c-dev, built for ARM Linux and run
 under qemu-arm against a stand-in for the kernel device answered by the bus model (host/simbus.py)."""
 
+import re
 import signal
 from dataclasses import replace
 import subprocess
@@ -95,7 +96,8 @@ def test_pi_build_under_qemu_gives_the_python_readout(model, standin_build):
     expected, _ = _python_lines(model, 6)
     # the same readings from the same conversions, the same float estimates, to every printed digit
     assert [ln.split(",", 1)[1] for ln in lines[1:]] == [ln.split(",", 1)[1] for ln in expected]
-    assert "6 samples; I2C errors 0" in res.stderr and "estimated outside" not in res.stderr
+    assert re.search(r"tm_pi: 6 samples in \d+\.\d\d s \(\d+\.\d Hz\); I2C errors 0", res.stderr), res.stderr
+    assert "estimated outside" not in res.stderr
 
 
 def test_pi_build_counts_estimates_far_outside_the_fitted_box_as_read_does(model, tmp_path):
@@ -136,7 +138,8 @@ def test_pi_build_counts_faults_as_python_does_and_stops_on_a_silent_chip(model,
 
 def test_pi_build_bad_options_and_missing_bus(standin_build):
     require_tool("qemu-arm")
-    for args, contains in ((["--count", "-1"], "--count"), (["--format", "xml"], "--format"),
+    for args, contains in ((["--count", "-1"], "--count"), (["--count", "0"], "--count must be a whole number >= 1"),
+                           (["--format", "xml"], "--format"),
                            (["--bogus"], "unknown"), (["--bus", "3"], "cannot open /dev/i2c-3"),
                            (["--tare-samples", "10"], "--tare-samples needs: --tare"),
                            (["--tare", "--tare-samples", "0"], "--tare-samples must be 1..100000"),
@@ -347,7 +350,7 @@ def test_pi_build_tares_as_the_python_readout_does(model, tmp_path):
     b, clock = bus()
     helped = StandIn(b, clock).run(["qemu-arm", str(bare), "--help"])
     assert helped.returncode == 0 and helped.stdout.startswith("usage: tm_pi [--bus N] [--count N]") and \
-        "--count 0, the default: until Ctrl-C" in helped.stdout and not helped.stderr
+        "without --count, until Ctrl-C" in helped.stdout and not helped.stderr
     b, clock = bus()
     assert_one_line_error(StandIn(b, clock).run(["qemu-arm", str(bare), "--hlep"]), 2,
                           "tm_pi: error: unknown or incomplete option: --hlep (usage: tm_pi [--bus N]")
@@ -544,10 +547,13 @@ def test_pi_build_rate_restarts_its_grid_after_a_stall_and_takes_fractions(stand
     stalled = g > 0.5
     assert len(g) == 39 and stalled.sum() == 1
     assert np.allclose(g[~stalled], 0.05, atol=2e-6)  # every other sample on the grid: no burst
-    assert "tm_pi: 40 samples; I2C errors 0" in res.stderr and res.stderr.rstrip().endswith("; 1 late")
+    assert "tm_pi: 40 samples in " in res.stderr and res.stderr.rstrip().endswith("; 1 late")
     cmap, bus, clock = _bus()
     res = StandIn(bus, clock).run(["qemu-arm", str(standin_build), "--count", "4", "--rate", "2.5"])
     assert np.allclose(gaps(res), 0.4, atol=2e-6) and "late" not in res.stderr
+    # read's summary: the time from the start, and the pace from the first sample's start to the last's
+    took, hz = re.search(r"tm_pi: 4 samples in (\d+\.\d\d) s \((\d+\.\d) Hz\); I2C errors 0", res.stderr).groups()
+    assert hz == "2.5" and 1.2 <= float(took) < 1.3, res.stderr
 
 
 def test_pi_build_checks_the_compiler_before_it_writes(model, tmp_path):

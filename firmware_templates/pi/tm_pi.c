@@ -255,7 +255,9 @@ int main(int argc, char **argv)
     double rate_hz = 0.0;
     int jsonl = 0, i, st = ADC_OK;
     long n = 0, late = 0, far = 0;
-    char err[200], late_text[40] = "", far_text[200] = "";
+    char err[200], late_text[40] = "", far_text[200] = "", pace_text[40] = "";
+    uint64_t start_ns = 0, began_ns = 0, first_ns = 0, last_ns = 0;
+    double elapsed;
     i2c_linux port;
     adc_i2c i2c;
     adc_array array;
@@ -282,7 +284,7 @@ int main(int argc, char **argv)
         } else if (strcmp(opt, "--bus") == 0 && val) {
             if (parse_long(val, 0, 255, &bus)) return usage("--bus must be 0..255, got", val);
         } else if (strcmp(opt, "--count") == 0 && val) {
-            if (parse_long(val, 0, LONG_MAX, &count)) return usage("--count must be a whole number >= 0, got", val);
+            if (parse_long(val, 1, LONG_MAX, &count)) return usage("--count must be a whole number >= 1, got", val);
         } else if (strcmp(opt, "--rate") == 0 && val) {
             if (parse_rate(val, &rate_hz)) {
                 return usage("--rate must be a number of Hz in 1/3600 (a sample an hour)..100000, got", val);
@@ -307,8 +309,8 @@ int main(int argc, char **argv)
             hold_given = 1;
         } else if (strcmp(opt, "--help") == 0 || strcmp(opt, "-h") == 0) {
             printf("usage: " TM_PI_USAGE "\n"
-                   "Reads the sensor's ADCs over /dev/i2c-N and prints the model's estimate per sample (--count 0, "
-                   "the default: until Ctrl-C); see docs/readout.md.\n");
+                   "Reads the sensor's ADCs over /dev/i2c-N and prints the model's estimate per sample (without "
+                   "--count, until Ctrl-C); see docs/readout.md.\n");
             return 0;
         } else {
             return usage("unknown or incomplete option", opt);
@@ -394,9 +396,10 @@ int main(int argc, char **argv)
         }
         printf(",status\n");
     }
+    start_ns = i2c.now_ns(i2c.ctx);
     if (rate_hz > 0.0) {
         period = (uint64_t)(1e9 / rate_hz + 0.5);
-        next = i2c.now_ns(i2c.ctx);
+        next = start_ns;
     }
     while ((count == 0 || n < count) && !stop_signal) {
         int32_t codes[TM_N_INPUTS];
@@ -420,7 +423,8 @@ int main(int argc, char **argv)
         t = (double)i2c_linux_realtime_ns() * 1e-9;
         /* auto-zero's hold runs on the monotonic clock: a Pi without a clock battery sets its wall clock from
          * the network after boot, a jump of months that would end a hold at once or stall it */
-        t_mono = (double)i2c.now_ns(i2c.ctx) * 1e-9;
+        began_ns = i2c.now_ns(i2c.ctx);
+        t_mono = (double)began_ns * 1e-9;
         st = adc_read_codes(&array, codes);
         if (st != ADC_OK) {
             break;
@@ -467,8 +471,11 @@ int main(int argc, char **argv)
         if (status >= 0 && tm_far_outside(out)) { /* the header's test: read's bounds */
             ++far;
         }
+        first_ns = n == 0 ? began_ns : first_ns; /* read's pace: from the first sample's start to the last's */
+        last_ns = began_ns;
         ++n;
     }
+    elapsed = (double)(i2c.now_ns(i2c.ctx) - start_ns) * 1e-9;
     fflush(stdout);
     total = array.counts;
 #if ADC_HAS_TEMPERATURE
@@ -487,8 +494,11 @@ int main(int argc, char **argv)
         snprintf(far_text, sizeof far_text, "; %ld estimated outside the pose box the model was fitted in by more "
                  "than its width: another sensor than the model's?", far);
     }
-    fprintf(stderr, "tm_pi: %s%ld samples; I2C errors %lu (nack %lu, timeout %lu, stuck %lu, other %lu; %lu retries, "
-                    "%lu resets)%s%s\n", stop_signal ? "stopped: " : "", n,
+    if (n > 1 && last_ns > first_ns) {
+        snprintf(pace_text, sizeof pace_text, " (%.1f Hz)", (double)(n - 1) / ((double)(last_ns - first_ns) * 1e-9));
+    }
+    fprintf(stderr, "tm_pi: %s%ld samples in %.2f s%s; I2C errors %lu (nack %lu, timeout %lu, stuck %lu, other %lu; "
+                    "%lu retries, %lu resets)%s%s\n", stop_signal ? "stopped: " : "", n, elapsed, pace_text,
             (unsigned long)(total.nack + total.timeout + total.stuck + total.other),
             (unsigned long)total.nack, (unsigned long)total.timeout, (unsigned long)total.stuck,
             (unsigned long)total.other, (unsigned long)total.retries, (unsigned long)total.resets, late_text,
