@@ -294,6 +294,7 @@ def test_sweep_on_the_uno_counts_its_cycles(tmp_path):
     (["--refine", "x"], "--refine"),
     (["--core", "z80"], "--core"),
     (["--core", "uno", "--precision", "double"], "nothing to sweep"),
+    (["--precision", "fixed", "--style", "table"], "--style does not apply to --precision fixed"),
 ])
 def test_bad_options_one_line(args, contains, tmp_path):
     proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "-o", str(tmp_path / "x"), *args)

@@ -85,6 +85,9 @@ def run_tradeoff(args, sensor) -> int:
              if getattr(args, name) is not None}
     if args.jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {args.jobs}")
+    if "style" in knobs and knobs.get("precision") == ["fixed"]:  # it would be swept in its one style, unsaid
+        raise InputError("--style does not apply to --precision fixed (its header is straight-line code): leave "
+                         "--style out")
     scene = load_scene(args.scene)
     target = parse_target(args.target, scene.outputs)
     grid = grid_from(**knobs) if args.full or knobs else quick_grid()
