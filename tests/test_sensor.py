@@ -120,6 +120,11 @@ def test_bad_sensor_file_cli(tmp_path):
     assert not (tmp_path / "o.csv").exists()
     bad.write_text("this is = = not toml")
     assert_one_line_error(run_cli("fitgen", "observe", str(bad)), contains="not valid TOML")
+    # a model or a dataset given for the sensor: named as what it is
+    for text, said in (('{"schema_version": 1}\n', "JSON (a model or meta file?), not a sensor file (TOML)"),
+                       ("v1,v2,dz\n1,2,3\n", "CSV (a dataset?), not a sensor file (TOML)")):
+        bad.write_text(text)
+        assert_one_line_error(run_cli("fitgen", "observe", str(bad)), contains=f"sensor file {bad}: {said}")
     assert_one_line_error(run_cli("fitgen", "observe", "--sensor", "nope"), contains="not a preset")
     assert_one_line_error(run_cli("fitgen", "observe", "--sensor", str(tmp_path)),
                           contains=f"sensor {str(tmp_path)!r}: a folder, not a sensor file")

@@ -493,5 +493,8 @@ def load_sensor(spec: str | Path) -> Sensor:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{origin}: not valid TOML: {exc}") from None
+        first = text.lstrip().partition("\n")[0]
+        seen = "JSON (a model or meta file?)" if first.startswith("{") else "CSV (a dataset?)" if "," in first else ""
+        raise InputError(f"{origin}: " + (f"{seen}, not a sensor file (TOML)" if seen else f"not valid TOML: {exc}")
+                         ) from None
     return parse_sensor(data, origin)
