@@ -176,7 +176,7 @@ def format_report(model: Model, ds: Dataset | None = None, title: str = "", pape
 
     if ds is not None:
         ev = errors_on(model, ds)
-        label = f"errors on {ds.n_rows} rows"
+        label = f"errors on {ds.n_rows} rows (the model in double; fitgen predict --precision gives the device's)"
         head = ["output", "unit", "max", "RMS", "p95"] + (["paper sim max"] if paper else [])
         rows = []
         for e in model.equations:
@@ -376,7 +376,7 @@ def predict_notes(model: Model, pred: np.ndarray, status: np.ndarray, precision:
                          "more than its width" + (
                              ", all labelled outside it too: poses the model makes no claim for" if m == n else
                              f" ({m} labelled outside it too, where it makes no claim; the others:" if m else ":")
-                         + ("" if m == n else " readings of another sensor than the model's? a built unit needs its own "
-                            "calibration (docs/calibration.md)" + (")" if m else "")))
+                         + ("" if m == n else " readings of another sensor than the model's? a built unit needs its "
+                            "own calibration (docs/calibration.md)" + (")" if m else "")))
     return notes
 
