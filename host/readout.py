@@ -133,7 +133,8 @@ def model_rest(model, rest: str | None = None, required: bool = True) -> tuple[n
 
     own = None if rest else fitted_sensor_spec(model)
     if rest or own:
-        reference, target = rest_reference(rest or own, model.n_inputs), f"--rest {rest}" if rest else own
+        reference = rest_reference(rest or own, model.n_inputs)
+        target = f"--rest {rest}" if rest else f"{own} (the model's)"  # as read says it of its --sensor
     elif (reference := model.held_out_rest) is not None:
         target = "the model's own record"
     elif not required:
