@@ -230,9 +230,13 @@ class Tare:
 TARE_SAMPLES = 50  # samples a tare averages by default: read's, tm_pi's and the Arduino ReadPose's
 
 
-def tare(array: AdcArray, reference: np.ndarray, n: int = TARE_SAMPLES, step=None) -> Tare:
-    """Rest readings averaged over ``n`` samples; subtracting ``offsets`` maps them onto ``reference``."""
+def tare(array: AdcArray, reference: np.ndarray, n: int = TARE_SAMPLES, step=None, compensate=None) -> Tare:
+    """Rest readings averaged over ``n`` samples; subtracting ``offsets`` maps them onto ``reference``.
+    ``compensate`` (rows -> rows): the temperature compensation the readout applies before it takes the offsets
+    off, applied to the tare's rows too, so that the offsets are the compensated rest's."""
     block = measure(array, n, step)
+    if compensate is not None:
+        block = compensate(block)
     return Tare(block.mean(axis=0), np.asarray(reference, dtype=float), block.std(axis=0))
 
 

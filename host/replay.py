@@ -211,6 +211,12 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
         notes.append(f"the run was recorded with model {str(h.get('model'))[:12]}")
     if run.torn:
         notes.append(f"its last line (line {run.torn}) was cut short, as a stopped run leaves one: left out")
+    now = None if corrections.tempcomp is None else corrections.tempcomp.to_dict()
+    if (h.get("tare") is not None or h.get("auto_zero")) and now != h.get("temp_comp"):
+        notes.append(f"the run's tare was taken {'through its' if h.get('temp_comp') else 'without a'} temperature "
+                     f"compensation, and is replayed {'with another' if now else 'without one'}: away from the "
+                     "compensation's t0 its offsets no longer map the rest onto the model's (a tare of its own, as "
+                     "read --tare --temp-comp takes, would)")
     az = corrections.autozero
     return ReplayResult(run.t, run.raw, run.temp, v_all, out_all, st_all, run.out,
                         tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes,

@@ -235,8 +235,14 @@ class ReadoutSession:
             self.thermometer = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
             offsets, noise = None, None
             if need_ref:
+                compensate = None
+                if tempcomp is not None and self.thermometer is not None:  # the offsets are taken off compensated
+                    at = self.thermometer.read(fresh=True)  # readings: a tare away from t0 is compensated too
+
+                    def compensate(rows):
+                        return tempcomp.apply(rows, at)
                 with Progress(f"{prog}: tare", tare_n) as bar:  # seconds at a low data rate: say so
-                    t = tare(array, reference, tare_n, bar.update)
+                    t = tare(array, reference, tare_n, bar.update, compensate)
                 print(f"{prog}: {t.describe()}, onto the rest readings of {target}", file=sys.stderr)
                 offsets = t.offsets
                 noise = t.noise_floor(array.lsb)

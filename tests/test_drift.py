@@ -169,6 +169,35 @@ def test_read_says_at_once_when_its_compensation_cannot_apply(rest_model_file, t
         assert f"; 5 {said}" in lines[1]
 
 
+@pytest.mark.parametrize("zero", ["--tare", "--auto-zero"])
+def test_a_tare_away_from_t0_maps_the_compensated_rest_onto_the_models(rest_model_file, tmp_path, zero):
+    """The tare averaged the raw readings while the offsets are taken off compensated ones: at 40 degC, 15 degC from
+    the compensation's t0, every reading at rest came out shifted by the compensation's 15 mV, the estimates off
+    the rest by millimetres, and auto-zero, starting there, never saw the sensor at rest."""
+    from host.readout import rest_reference
+
+    path = tmp_path / "tc.json"
+    path.write_text(json.dumps({"kind": TempComp.KIND, "version": 1, "t0": 25.0, "offset_v_per_degc": [1e-3] * 8,
+                                "gain_per_degc": [-1e-3] * 8}))
+    out = tmp_path / "r.csv"
+    proc = run_cli("tactile-host", "read", "--model", rest_model_file, "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+                   "--simulate", "0,0,0,0,0", "--sim-noise", "0", "--sim-drift", "start=40,ramp=0,creep=0",
+                   "--temp-comp", str(path), zero, "--count", "20", "-o", str(out), "--record",
+                   str(tmp_path / "r.jsonl"))
+    assert proc.returncode == 0, proc.stderr
+    # its replay is the run; replayed without the compensation, the tare no longer fits, and it says so
+    again = run_cli("tactile-host", "replay", str(tmp_path / "r.jsonl"))
+    assert "estimates identical to the recorded ones" in again.stdout and "tare was taken" not in again.stdout
+    other = run_cli("tactile-host", "replay", str(tmp_path / "r.jsonl"), "--no-temp-comp")
+    assert ("note: the run's tare was taken through its temperature compensation, and is replayed without one"
+            in other.stdout), other.stdout + other.stderr
+    rows = np.loadtxt(out, delimiter=",", skiprows=1)
+    reference = rest_reference("paper", 8)  # read's --sensor
+    # the readings the model takes at rest are its rest readings (the compensation moved them by 15 mV before)
+    np.testing.assert_allclose(rows[:, 1:9], np.tile(reference, (len(rows), 1)), atol=1e-5)
+    assert np.abs(rows[:, 9:12]).max() < 0.05  # at rest, in mm
+
+
 def test_a_missing_compensation_file_is_said_once(rest_model_file, tmp_path):
     """A --temp-comp file that is not there: that, in one line, not also 'not JSON'."""
     gone = tmp_path / "nothere.json"

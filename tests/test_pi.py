@@ -76,13 +76,20 @@ def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=N
     arr = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy())
     arr.probe()
     arr.setup()
-    t = None if rest is None else tare(arr, rest, 50)
+    thermometer = Thermometer(arr, tin, cmap.chips[0].settings) if tin else None
+    compensate = None
+    if rest is not None and tempcomp is not None:  # as read: the tare's rows compensated at the temperature first
+        at = thermometer.read(fresh=True)
+
+        def compensate(rows):
+            return tempcomp.apply(rows, at)
+    t = None if rest is None else tare(arr, rest, 50, compensate=compensate)
     sink, fmt = io.StringIO(), LineFormat("csv", model.n_inputs, model.output_names)
     sink.write(fmt.header)
     Readout(arr, FloatEngine(model), sink, fmt, clock=clock,
             corrections=Corrections(None if t is None else t.offsets, tempcomp,
                                     None if autozero is None else autozero(t, arr.lsb)),
-            thermometer=Thermometer(arr, tin, cmap.chips[0].settings) if tin else None).run(count=count)
+            thermometer=thermometer).run(count=count)
     return sink.getvalue().splitlines(), t
 
 
@@ -275,6 +282,7 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     from host.clock import VirtualClock
     from host.simbus import SimBus
     from host.simsensor import Drift
+    from host.readout import model_rest
     from host.temperature import TempComp, parse_temperature_input
 
     require_tool("arm-linux-gnueabihf-gcc")
@@ -304,6 +312,18 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     b, clock = bus()
     res2 = StandIn(b, clock).run(["qemu-arm", str(build_pi(plain, standin=True)), "--count", "8"])
     assert [ln.split(",", 1)[1] for ln in res2.stdout.splitlines()[1:]] != [ln.split(",", 1)[1] for ln in got[1:]]
+    # a tare at 33 degC, 8 from t0: its rows compensated as read compensates them (it averaged raw readings, so
+    # every reading after it stayed off by the compensation's shift); the same lines to every printed digit
+    rest = model_rest(model, "paper")
+    tared = build_pi(render_pi(model, cmap, tmp_path / "tared", precision="float", tin=tin, tempcomp=tc, rest=rest),
+                     standin=True)
+    b, clock = bus()
+    res3 = StandIn(b, clock).run(["qemu-arm", str(tared), "--tare", "--count", "8"])
+    assert res3.returncode == 0, res3.stderr
+    b, clock = bus()
+    expected, t = _python_readout(model, b, clock, 8, tempcomp=tc, tin=tin, rest=rest[0])
+    assert f"tm_pi: {t.describe()}" in res3.stderr, res3.stderr
+    assert [ln.split(",", 1)[1] for ln in res3.stdout.splitlines()[1:]] == [ln.split(",", 1)[1] for ln in expected[1:]]
     assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", str(tmp_path / "m.json"), "--adc", MAP,
                                   "--temp-comp", "x.json", "-o", str(tmp_path / "z")))
 

@@ -143,7 +143,7 @@ static void catch_stop_signals(void)
 
 /* the mean of n samples' volts and how far they are from the rest: offsets[k] = mean - rest (read's Tare);
  * ADC_OK, or the error that stopped it */
-static int tare(adc_array *array, const double lsb[TM_N_INPUTS], long n, double offsets[TM_N_INPUTS],
+static int tare(adc_array *array, const double lsb[TM_N_INPUTS], long n, double degc, double offsets[TM_N_INPUTS],
                 double spreads[TM_N_INPUTS])
 {
     double sum[TM_N_INPUTS] = {0}, sumsq[TM_N_INPUTS] = {0}, spread = 0.0;
@@ -151,14 +151,22 @@ static int tare(adc_array *array, const double lsb[TM_N_INPUTS], long n, double 
     int k, st;
     for (s = 0; s < n; ++s) {
         int32_t codes[TM_N_INPUTS];
+        double v[TM_N_INPUTS];
         st = adc_read_codes(array, codes);
         if (st != ADC_OK) {
             return st;
         }
         for (k = 0; k < TM_N_INPUTS; ++k) {
-            const double v = codes[k] * lsb[k];
-            sum[k] += v;
-            sumsq[k] += v * v;
+            v[k] = codes[k] * lsb[k];
+        }
+#if PI_TEMPCOMP
+        tm_tempcomp(v, degc); /* the offsets are taken off compensated readings: the rest's are compensated too */
+#else
+        (void)degc;
+#endif
+        for (k = 0; k < TM_N_INPUTS; ++k) {
+            sum[k] += v[k];
+            sumsq[k] += v[k] * v[k];
         }
     }
     fprintf(stderr, "tm_pi: tare: offsets [mV]");
@@ -266,9 +274,9 @@ int main(int argc, char **argv)
     uint64_t next = 0, period = 0;
     const char *failed = NULL; /* the chip that stopped the readout, when the map's table does not name it */
     adc_counts total;
+    double degc = (double)NAN; /* the thermistor's last reading */
 #if ADC_HAS_TEMPERATURE
     adc_array tarray;
-    double degc = (double)NAN;
     uint64_t t_last = 0;
     int t_read = 0;
 #endif
@@ -375,7 +383,21 @@ int main(int argc, char **argv)
         return 2;
     }
 #endif
-    if (tared && (st = tare(&array, lsb, tare_n, offsets, spreads)) != ADC_OK) {
+#if PI_TEMPCOMP
+    if (tared) { /* the tare's temperature, read first as read reads it (host/session.py) */
+        int32_t tcode;
+        t_last = i2c.now_ns(i2c.ctx);
+        t_read = 1;
+        if (adc_read_codes(&tarray, &tcode) != ADC_OK) {
+            fprintf(stderr, "tm_pi: error: the thermistor %s stays silent before the tare\n", ADC_TEMP_LABEL);
+            i2c_linux_close(&port);
+            return 1;
+        }
+        degc = adc_ntc_degc(tcode * adc_lsb_volts(&ADC_TEMP_CHIP[0]), ADC_TEMP_BETA, ADC_TEMP_R25, ADC_TEMP_SERIES,
+                            ADC_TEMP_VREF);
+    }
+#endif
+    if (tared && (st = tare(&array, lsb, tare_n, degc, offsets, spreads)) != ADC_OK) {
         fprintf(stderr, "tm_pi: error: %s %s during the tare\n", array.failed_chip >= 0 ?
                 ADC_MAP_LABELS[array.failed_chip] : "general-call reset",
                 st == ADC_ERR_STUCK ? "never completes a conversion" : "stays silent");
