@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import sys
+from functools import partial
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output
@@ -237,10 +238,7 @@ class ReadoutSession:
             if need_ref:
                 compensate = None
                 if tempcomp is not None and self.thermometer is not None:  # the offsets are taken off compensated
-                    at = self.thermometer.read(fresh=True)  # readings: a tare away from t0 is compensated too
-
-                    def compensate(rows):
-                        return tempcomp.apply(rows, at)
+                    compensate = partial(tempcomp.apply, temp=self.thermometer.read(fresh=True))  # readings too
                 with Progress(f"{prog}: tare", tare_n) as bar:  # seconds at a low data rate: say so
                     t = tare(array, reference, tare_n, bar.update, compensate)
                 print(f"{prog}: {t.describe()}, onto the rest readings of {target}", file=sys.stderr)

@@ -4,6 +4,7 @@ under qemu-arm against a stand-in for the kernel device answered by the bus mode
 import re
 import signal
 from dataclasses import replace
+from functools import partial
 import subprocess
 import time
 
@@ -79,10 +80,7 @@ def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=N
     thermometer = Thermometer(arr, tin, cmap.chips[0].settings) if tin else None
     compensate = None
     if rest is not None and tempcomp is not None:  # as read: the tare's rows compensated at the temperature first
-        at = thermometer.read(fresh=True)
-
-        def compensate(rows):
-            return tempcomp.apply(rows, at)
+        compensate = partial(tempcomp.apply, temp=thermometer.read(fresh=True))
     t = None if rest is None else tare(arr, rest, 50, compensate=compensate)
     sink, fmt = io.StringIO(), LineFormat("csv", model.n_inputs, model.output_names)
     sink.write(fmt.header)
