@@ -655,6 +655,18 @@ def test_a_capture_records_each_rows_temperature_and_identify_takes_each_row_fro
     plain = run_cli(*identify)
     assert (f"identify: note: the capture's rows were read from {temps.min():.2f} to {temps.max():.2f} degC"
             in plain.stderr)
+    # a refusal that blames rows to delete names the temperature first (a steeper warming than this one is refused
+    # so: here one row spoiled by hand stands for it)
+    lines = cap.read_text().splitlines(keepends=True)
+    cells = lines[5].split(",")
+    cells[0] = f"{float(cells[0]) + 0.02:.6f}"
+    spoiled = tmp_path / "spoiled.csv"
+    spoiled.write_text("".join(lines[:5] + [",".join(cells)] + lines[6:]))
+    (tmp_path / "spoiled.csv.meta.json").write_text((tmp_path / "cap.csv.meta.json").read_text())
+    refused = run_cli("fitgen", "identify", str(spoiled), "--sensor", "paper", "-o", str(tmp_path / "no.toml"))
+    assert refused.returncode == 2 and refused.stderr.rstrip().endswith(
+        "; the rows' temperatures spread (the note above): give --temp-comp before deleting rows; nothing written"), \
+        refused.stderr
     each = run(*identify, "--temp-comp", str(tmp_path / "tc.json"))
     assert "note: the capture's rows" not in each.stderr
     chi2 = float(re.search(r"\(reduced ([0-9.]+);", each.stdout).group(1))

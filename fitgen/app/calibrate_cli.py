@@ -26,6 +26,7 @@ def cmd_identify(args) -> int:
     ds = load_dataset(args.capture)
     sha = ds.sha256  # the capture's as written, before a compensation
     temperature = rec.capture_temperature(ds.meta, ds.n_rows)
+    span = ""
     if args.temp_comp:
         ds, temperature = _at_t0(ds, args.temp_comp, args.capture)
     elif span := rec.temperature_span_line(ds.meta, ds.n_rows):  # before a refusal, which it may explain
@@ -62,6 +63,10 @@ def cmd_identify(args) -> int:
         except InputError as exc:
             hint = "" if args.transfer else rec.units_hint(drawing, ds.inputs, ds.poses(), ds.meta)
             text = f"{hint}; read as {drawing.units}, {exc}" if hint else str(exc)
+            if span:  # drift the physics does not model reads as rows that stand out
+                head, sep, tail = text.rpartition("; nothing written")
+                text = (head if sep else text) + ("; the rows' temperatures spread (the note above): give --temp-comp "
+                                                  "before deleting rows") + sep + tail
             raise InputError(_with_map(text, getattr(exc, "order", None), ds.meta.get("adc"))) from None
     unit_noise, unit_source = rec.device_noise(ds.meta, drawing, args.noise)
     files = rec.unit_files(ident, args.output, {"capture": str(args.capture), "capture_sha256": sha,
