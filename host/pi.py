@@ -222,7 +222,7 @@ def pi_build(args) -> str:
     ``--output`` and built; the line that says what was built."""
     from host.readout import model_rest
     from host.session import channel_map_from_args
-    from host.temperature import capture_temperature_note, load_tempcomp, temperature_input
+    from host.temperature import capture_temperature_note, channel_map_note, load_tempcomp, temperature_input
 
     compiler(args.cc)
     model, cmap = load_model(args.model), channel_map_from_args(args)
@@ -237,7 +237,9 @@ def pi_build(args) -> str:
         build_pi(render_pi(model, cmap, partial, precision=precision, style=args.style, tin=tin, tempcomp=tempcomp,
                            rest=rest), args.cc)
         binary = _install(partial, folder)
-    note = capture_temperature_note(model, tempcomp, f"{binary.name} --tare") if tempcomp is not None else ""
+    note = "\n".join(n for n in (channel_map_note(tempcomp, cmap, f"--temp-comp {args.temp_comp}"),
+                                  capture_temperature_note(model, tempcomp, f"{binary.name} --tare")) if n) \
+        if tempcomp is not None else ""
     return (f"wrote {binary} ({describe_reads(cmap, tin, tempcomp)}, model {model.sha256[:12]}, {precision}); "
             f"on the Pi: {binary.name} --format csv (I2C bus {default_bus(cmap)} unless --bus N)"
             + (f" [--tare or --auto-zero: onto the rest readings of {rest[1]}]" if rest else

@@ -56,9 +56,12 @@ FAR_OUTSIDE = ("estimated outside the pose box the model was fitted in by more t
                "the model's? a built unit needs its own calibration (docs/calibration.md)")
 TEMP_OUTSIDE = (f"at a temperature outside {T_RANGE[0]:g}..{T_RANGE[1]:g} degC, where the compensation is "
                 "extrapolated (a thermistor off its divider's range?)")
+TEMP_BEYOND = "at a temperature the compensation was not fitted near, where it is extrapolated"
+BEYOND_DEGC = 5.0  # past the compensation's fitted temperatures by this much, its linear drift is a guess
 # ReadoutStats' counts of samples whose estimates are off while the run goes on: each said at its first sample
 # (Readout.warn) and in the summary
-WARNED = {"uncompensated": UNCOMPENSATED, "temp_outside": TEMP_OUTSIDE, "far": FAR_OUTSIDE}
+WARNED = {"uncompensated": UNCOMPENSATED, "temp_outside": TEMP_OUTSIDE, "temp_beyond": TEMP_BEYOND,
+          "far": FAR_OUTSIDE}
 
 
 @dataclass
@@ -71,6 +74,7 @@ class ReadoutStats:
     far: int = 0  # samples estimated outside the model's fitted pose box by more than its width
     uncompensated: int = 0  # samples a temperature compensation was given for and the thermistor read none
     temp_outside: int = 0  # samples whose temperature lies outside the range a compensation is checked over
+    temp_beyond: int = 0  # samples more than BEYOND_DEGC past the temperatures a compensation was fitted at
     first: float = 0.0  # s (monotonic): when the first sample began
     last: float = 0.0  # and the last
     errors: ErrorCounts = field(default_factory=ErrorCounts)
@@ -354,6 +358,9 @@ class Readout:
             self._count("uncompensated")
         elif not T_RANGE[0] <= temp <= T_RANGE[1]:
             self._count("temp_outside", f": {temp:.1f} degC")
+        elif (fitted := self.corrections.tempcomp.fitted_range) is not None and \
+                not fitted[0] - BEYOND_DEGC <= temp <= fitted[1] + BEYOND_DEGC:
+            self._count("temp_beyond", f" ({temp:.1f} degC; fitted at {fitted[0]:g}..{fitted[1]:g})")
 
     def _count(self, kind: str, detail: str = "") -> None:
         """One more sample of a WARNED ``kind``; the first is said at once (``warn``): a run may last hours, and

@@ -28,8 +28,8 @@ from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
 from host.readout import TARE_SAMPLES, Corrections, RunRecord, check_rest_reference, rest_reference, tare
 from host.simbus import simulated_bus
-from host.temperature import (Thermometer, capture_temperature_note, load_tempcomp, split_channel_map,
-                              temperature_input)
+from host.temperature import (Thermometer, capture_temperature_note, channel_map_note, load_tempcomp,
+                              split_channel_map, temperature_input)
 
 
 def parse_vref(text: str):
@@ -201,6 +201,8 @@ class ReadoutSession:
             check_above_board(load_sensor(args.sensor), pose[None], name=f"--simulate {args.simulate}")
         if tempcomp is not None and tempcomp.n != model.n_inputs:
             raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
+        if tempcomp is not None and (note := channel_map_note(tempcomp, cmap0, f"--temp-comp {args.temp_comp}")):
+            print(f"{prog}: {note}", file=sys.stderr)
         self.cmap = cmap = cmap0
         if cmap.n_elements != model.n_inputs:
             raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")

@@ -143,6 +143,7 @@ def _capture_temperatures(args, prog: str):
         bus.close()
     tc = fit_tempcomp(np.vstack(rows), np.concatenate(pose_ids), np.concatenate(row_temps), t0=t0)
     tc.info["captures"] = files
+    tc.info["adc"] = cmap.describe()  # the elements each coefficient is for: read and pi-build compare their map
     dest = args.temp_comp_output or str(out.with_name(out.stem + ".tempcomp.json"))
     tc.save(dest)
     worst = max(tc.info["residual_rms_v"]) * 1e3

@@ -26,7 +26,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from fitgen.base.errors import InputError, finite_number
+from fitgen.base.errors import InputError, finite_number, is_finite_number
 from fitgen.base.fileio import read_text, write_atomic
 
 DIVIDER_KEYS = ("beta", "r25", "series", "vref")
@@ -154,6 +154,15 @@ class TempComp:
     @property
     def n(self) -> int:
         return int(self.offset.size)
+
+    @property
+    def fitted_range(self) -> tuple[float, float] | None:
+        """(lowest, highest) of the temperatures the compensation was fitted at (its ``fit.temperatures``), where
+        it records two or more; else None."""
+        temps = self.info.get("temperatures")
+        if not isinstance(temps, list) or len(temps) < 2 or not all(is_finite_number(t) for t in temps):
+            return None
+        return float(min(temps)), float(max(temps))
 
     def apply(self, raw: np.ndarray, temp) -> np.ndarray:
         """Compensated readings (one row, or rows with a temperature each); a non-finite temperature leaves its
@@ -306,6 +315,18 @@ def unit_capture_degc(source) -> float | None:
     thermistor), given the file's parsed ``source``; None when it records none."""
     unit = source.get("unit") if isinstance(source, dict) else None
     return unit.get("capture_degc") if isinstance(unit, dict) else None  # a number of degC: the parser checked it
+
+
+def channel_map_note(tempcomp: "TempComp", cmap, option: str) -> str:
+    """A note when ``tempcomp`` was fitted on readings through another channel map than ``cmap`` (its
+    ``fit.adc``, which tactile-host capture --temperature records): each element then takes the coefficients
+    fitted for the one in its place; '' otherwise, or when the file records none."""
+    theirs = tempcomp.info.get("adc")
+    if not isinstance(theirs, str) or theirs == cmap.describe():
+        return ""
+    return (f"note: {option} was fitted on the elements read through {theirs}, and this reads {cmap.describe()}: "
+            "each element takes the coefficients fitted for the one in its place (a compensation of this map: "
+            "tactile-host capture --temperature)")
 
 
 def capture_temperature_note(model, tempcomp: "TempComp", tare: str = "--tare") -> str:

@@ -106,7 +106,8 @@ def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
     assert proc.returncode == 0, proc.stderr
     tc = load_tempcomp(tmp_path / "cap.tempcomp.json")
     truth = Drift.typical(8, seed=0)
-    assert tc.t0 == 25.0 and tc.info["gain_fitted"]
+    assert tc.t0 == 25.0 and tc.info["gain_fitted"] and tc.fitted_range == (15.0, 35.0)
+    assert tc.info["adc"] == "ads1115@0x48:0,1,2,3,ads1115@0x49:0,1,2,3"  # the elements the coefficients are for
     # within what the 16-bit ADC's 0.125 mV steps leave over 3 poses and 10 degC steps (coefficients ~1e-3)
     np.testing.assert_allclose(tc.offset, truth.offset_tc, atol=1e-4)
     np.testing.assert_allclose(tc.gain, truth.gain_tc, atol=1e-4)
@@ -196,6 +197,30 @@ def test_a_tare_away_from_t0_maps_the_compensated_rest_onto_the_models(rest_mode
     # the readings the model takes at rest are its rest readings (the compensation moved them by 15 mV before)
     np.testing.assert_allclose(rows[:, 1:9], np.tile(reference, (len(rows), 1)), atol=1e-5)
     assert np.abs(rows[:, 9:12]).max() < 0.05  # at rest, in mm
+
+
+def test_a_compensation_of_another_map_or_far_from_its_temperatures_is_said(rest_model_file, tmp_path):
+    """A compensation applied through another channel map gives each element another's coefficients, and one read
+    far from the temperatures it was fitted at extrapolates a linear drift: both went without a word."""
+    path = tmp_path / "tc.json"
+    TempComp(25.0, np.full(8, 1e-4), np.full(8, -1e-4), {"temperatures": [15.0, 25.0, 35.0],
+                                                          "adc": "ads1115@0x49:0,1,2,3,ads1115@0x48:0,1,2,3"}).save(path)
+    for start, beyond in (("30", False), ("60", True)):
+        proc = run_cli("tactile-host", "read", "--model", rest_model_file, "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+                       "--simulate", "0,0,0,0,0", "--sim-drift", f"start={start},ramp=0", "--temp-comp", str(path),
+                       "--count", "5", "-o", str(tmp_path / "r.csv"))
+        assert proc.returncode == 0, proc.stderr
+        assert (f"read: note: --temp-comp {path} was fitted on the elements read through ads1115@0x49:0,1,2,3,"
+                "ads1115@0x48:0,1,2,3, and this reads ads1115@0x48:0,1,2,3,ads1115@0x49:0,1,2,3: each element takes "
+                "the coefficients fitted for the one in its place") in proc.stderr
+        said = "at a temperature the compensation was not fitted near, where it is extrapolated"
+        assert (f"warning: sample 1 {said} (60.0 degC; fitted at 15..35)" in proc.stderr) == beyond, proc.stderr
+        assert (f"; 5 {said}" in proc.stderr) == beyond
+    # the map it was fitted through: no note
+    proc = run_cli("tactile-host", "read", "--model", rest_model_file, "--adc",
+                   "ads1115@0x49:0-3,ads1115@0x48:0-3,temp=ads1115@0x4a:0", "--simulate", "0,0,0,0,0", "--temp-comp",
+                   str(path), "--count", "2", "-o", str(tmp_path / "r.csv"))
+    assert proc.returncode == 0 and "note" not in proc.stderr, proc.stderr
 
 
 def test_a_missing_compensation_file_is_said_once(rest_model_file, tmp_path):
