@@ -328,6 +328,11 @@ def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_u
     rows = [ln for ln in proc.stdout.splitlines() if ln.startswith("| d")]
     assert len(rows) == 3 and all(ln.endswith("| as predicted |") for ln in rows)
     assert proc.stderr.strip().endswith("check: every output within what the identification predicts")
+    assert "say little" not in proc.stderr
+    few = save_capture(tmp_path / "few.csv", _capture(unit, poses[:4], 100), poses[:4], ROWS_META)
+    proc = run_cli("fitgen", "check", str(folder / "twin.json"), str(few))
+    assert proc.returncode == 0 and ("check: note: 4 rows say little of a unit's errors over its box; fitgen schedule "
+                                     "--check 30 gives a check capture") in proc.stderr, proc.stderr
     other, _ = draw_unit(drawing, 8)
     bad = save_capture(tmp_path / "bad.csv", _capture(other, poses, 100), poses, ROWS_META)
     proc = run_cli("fitgen", "check", str(folder / "twin.json"), str(bad), "--plot", str(tmp_path / "plots"))

@@ -752,6 +752,8 @@ def test_fitgen_check_takes_a_warmer_check_capture_to_the_units_temperature(tmp_
     plain = run(*check, status=1)
     assert ("check: note: the check capture was read at 30.0 degC and the unit identified at 25.0 degC; its "
             "elements' offsets and gains drift with temperature") in plain.stderr
+    assert plain.stderr.rstrip().endswith("check again with --temp-comp (the note above) before you capture, "
+                                          "identify and fit again")  # not only: capture it all again
     taken = run(*check, "--temp-comp", str(tmp_path / "tc.json"))
     assert "check: the rows taken from 30.00 degC (their median) to 25 degC, the unit's" in taken.stderr
     assert "note:" not in taken.stderr and all(ln.endswith("| as predicted |") for ln in taken.stdout.splitlines()

@@ -287,6 +287,9 @@ def _check_schedule(args, drawing, axes, samples: int, given: dict) -> int:
     return 0
 
 
+FEW_CHECK_ROWS = 10  # a check capture of fewer rows in contact gets a word: its max errors are a handful's
+
+
 def cmd_check(args) -> int:
     """``check``: the measured errors on a check capture beside the ones the unit's identification predicts."""
     from fitgen.app import plots
@@ -311,9 +314,9 @@ def cmd_check(args) -> int:
                          "or check the twin's model (identify, simulate --sensor unit.toml, fit)")
     sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on")
     sha = ds.sha256  # the capture's as written, before a compensation
-    ds, said = _check_temperature(ds, sensor, args.temp_comp, args.capture)
-    if said:
-        print(said, file=sys.stderr)
+    ds, heat = _check_temperature(ds, sensor, args.temp_comp, args.capture)
+    if heat:
+        print(heat, file=sys.stderr)
     result, source = check_capture(model, ds, sensor, spec, rig_error=args.rig_error, zero_error=args.zero_error,
                                    precision=args.precision, capture=args.capture, sha256=sha)
     print(f"check: zero error {result.zero_error:.3g} mm: {result.zero_said}", file=sys.stderr)
@@ -325,7 +328,11 @@ def cmd_check(args) -> int:
     print(f"check: {result.rows} rows of {args.capture} in contact, estimated in {result.precision}; predicted on "
           f"{where}, {DRAWS} draws each of the stage's error ({result.rig_error:g} mm, {result.rig_said})"
           + (f", the zero's ({result.zero_error:.3g} mm)" if result.zero_error else "")
-          + f" and the rows' noise ({source})\n")
+          + f" and the rows' noise ({source})")
+    if result.rows < FEW_CHECK_ROWS:  # each max is then the max of a handful: a verdict on little
+        print(f"check: note: {result.rows} rows say little of a unit's errors over its box; fitgen schedule --check 30 "
+              "gives a check capture", file=sys.stderr)
+    print()
     print("| output | unit | max error | predicted max: median (least-greatest) | RMS error | predicted RMS | |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for o in result.outputs:
@@ -341,9 +348,11 @@ def cmd_check(args) -> int:
         print(f"plot: {png}", file=sys.stderr)
     failed = result.failed()
     if failed:
+        warmer = heat.startswith("check: note:")  # read away from the unit's temperature, not compensated
         print(f"\ncheck: {', '.join(failed)} err beyond {TOO_FAR:g}x every prediction: the model does not describe "
               "this unit as it is now (a knock, the sensor moved on its bed, another unit's file, the temperature); "
-              "capture, identify and fit again", file=sys.stderr)
+              + ("check again with --temp-comp (the note above) before you " if warmer else "")
+              + "capture, identify and fit again", file=sys.stderr)
         return 1
     print(f"\ncheck: every output within what {'the identification' if result.identified else 'sensor ' + sensor.name} "
           "predicts", file=sys.stderr)
