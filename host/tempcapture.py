@@ -150,4 +150,9 @@ def _capture_temperatures(args, prog: str):
     print(f"{prog}: temperature compensation about {tc.t0:g} degC -> {dest} (offsets up to "
           f"{np.abs(tc.offset).max() * 1e3:.3g} mV/degC, gains up to {np.abs(tc.gain).max() * 100:.3g} %/degC; "
           f"residual up to {worst:.3g} mV rms)", file=sys.stderr)
+    if tin is None:  # the levels as set, not as the sensor reached them: a chamber off by a degree is fitted so
+        print(f"{prog}: note: no thermistor (temp=CHIP@ADDRESS:INPUT in --adc): each level was taken at the "
+              "temperature given, not one measured, and read cannot compensate without one", file=sys.stderr)
+    if args.simulate and args.sim_drift and "ramp" in args.sim_drift:  # each level is held steady
+        print(f"{prog}: note: --sim-drift's ramp was not simulated: each level held its temperature", file=sys.stderr)
     return tc

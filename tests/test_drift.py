@@ -104,6 +104,7 @@ def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
     proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
                    "--simulate", "--temperature", "15,25,35", "--sim-noise", "0", "-o", str(tmp_path / "cap.csv"))
     assert proc.returncode == 0, proc.stderr
+    assert "no thermistor" not in proc.stderr
     tc = load_tempcomp(tmp_path / "cap.tempcomp.json")
     truth = Drift.typical(8, seed=0)
     assert tc.t0 == 25.0 and tc.info["gain_fitted"] and tc.fitted_range == (15.0, 35.0)
@@ -127,6 +128,12 @@ def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
     one = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS, "--simulate", "--temperature",
                   "25", "-o", str(tmp_path / "x.csv"))
     assert_one_line_error(one, contains="two or more different temperatures")
+    # without a thermistor each level is the temperature given: said, as a ramp the levels do not simulate is
+    blind = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS, "--simulate", "--temperature",
+                    "15,35", "--sim-drift", "ramp=5,over=10", "-o", str(tmp_path / "b.csv"))
+    assert blind.returncode == 0, blind.stderr
+    assert "note: no thermistor (temp=CHIP@ADDRESS:INPUT in --adc): each level was taken at the temperature given" \
+        in blind.stderr and "note: --sim-drift's ramp was not simulated" in blind.stderr
 
 
 @pytest.mark.parametrize("edit, said", [
