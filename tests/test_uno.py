@@ -72,6 +72,24 @@ def test_hil_suite_on_the_emulated_uno(gmr_model):
     assert emu.size["ram"] + emu.stack_peak <= UNO_RAM
 
 
+def test_simulated_inputs_on_the_uno_sweep_the_models_domain(gmr_model):
+    """Without ADCs the firmware streams inputs swept across the model's domain, and BENCH times vectors inside it:
+    on the Uno both read the domain's bounds from RAM at the flash tables' addresses, so every streamed input was
+    the stack paint's 0xA5A5A5A5 (status 254) and BENCH's cycles were those of clamped inputs."""
+    from hil.suite import check_stream
+
+    _require_avr()
+    with start_target(gmr_model, "uno", precision="float", style="table") as emu:
+        with Device.open(emu.url, timeout=10) as dev:
+            samples = dev.stream(10, 5, timeout=30)
+            check = check_stream(dev)
+    inputs = np.array([s.inputs for s in samples])
+    assert all(s.status == 0 for s in samples), [hex(s.status) for s in samples]
+    assert np.all((inputs >= gmr_model.input_min.astype(np.float32) - 1e-6)
+                  & (inputs <= gmr_model.input_max.astype(np.float32) + 1e-6)), inputs
+    assert check.ok, check.detail
+
+
 def test_calibration_survives_a_reset_in_eeprom(gmr_model, tmp_path, capsys):
     """A blob flashed into the EEPROM is the active calibration after the firmware starts again (the
     EEPROM image carried over by the board), and CAL_RESET makes the compiled-in model answer again."""

@@ -42,11 +42,12 @@ static inline tm_input fw_get_input(const uint8_t *p)
 
 #define fw_put_output fw_put_input
 
-/* num/den of the way from input i's minimum to its maximum (num <= den) */
+/* num/den of the way from input i's minimum to its maximum (num <= den); the bounds through TM_RD_I32: on AVR
+ * they live in flash, where a plain load reads RAM at the same address */
 static inline tm_input fw_input_at(unsigned i, uint32_t num, uint32_t den)
 {
-    const int64_t span = (int64_t)tm_input_max[i] - (int64_t)tm_input_min[i];
-    return (tm_input)(tm_input_min[i] + span * (int64_t)num / (int64_t)den);
+    const int64_t lo = TM_RD_I32(&tm_input_min[i]), span = (int64_t)TM_RD_I32(&tm_input_max[i]) - lo;
+    return (tm_input)(lo + span * (int64_t)num / (int64_t)den);
 }
 #else
 #define FW_REAL_SIZE (sizeof(tm_real))
@@ -82,11 +83,12 @@ static inline tm_real fw_get_real(const uint8_t *p)
 #define fw_get_input fw_get_real
 #define fw_put_output fw_put_real
 
-/* num/den of the way from input i's minimum to its maximum (num <= den) */
+/* num/den of the way from input i's minimum to its maximum (num <= den); the bounds through TM_RD_REAL (flash
+ * on AVR) */
 static inline tm_input fw_input_at(unsigned i, uint32_t num, uint32_t den)
 {
-    const tm_real frac = (tm_real)num / (tm_real)den;
-    return tm_input_min[i] + (tm_input_max[i] - tm_input_min[i]) * frac;
+    const tm_real frac = (tm_real)num / (tm_real)den, lo = TM_RD_REAL(&tm_input_min[i]);
+    return lo + (TM_RD_REAL(&tm_input_max[i]) - lo) * frac;
 }
 #endif
 
