@@ -6,6 +6,7 @@ runs them in order and stops early only when the device stops answering.
 
 from __future__ import annotations
 
+import contextlib
 import statistics
 import time
 import dataclasses
@@ -480,13 +481,18 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
         new = flash_variant(model)
         few = inputs[: min(len(inputs), 300)]
         room = dev.cal_capacity()
-        if len(to_blob(new, dev.info().precision, sensor_id)) > room:
-            # a store smaller than the blob (the Uno's EEPROM): refused and the compiled-in model kept; then
-            # the same checks on a calibration with as many of the terms as the store takes
-            step(check_flash_too_big, dev, model, new, room, sensor_id)
-            new = fit_store(new, room, dev.info().precision, sensor_id)
-        step(check_flash, dev, model, new, few, sensor_id)
-        step(check_corrupt_flash, dev, new, few, sensor_id)
+        try:
+            if len(to_blob(new, dev.info().precision, sensor_id)) > room:
+                # a store smaller than the blob (the Uno's EEPROM): refused and the compiled-in model kept; then
+                # the same checks on a calibration with as many of the terms as the store takes
+                step(check_flash_too_big, dev, model, new, room, sensor_id)
+                new = fit_store(new, room, dev.info().precision, sensor_id)
+            step(check_flash, dev, model, new, few, sensor_id)
+            step(check_corrupt_flash, dev, new, few, sensor_id)
+        except BaseException:  # Ctrl-C or a lost device mid-way: the suite's variant must not outlive it (an EEPROM
+            with contextlib.suppress(Exception):  # keeps it across resets); at best effort, the first error stands
+                dev.reset_calibration()
+            raise
         dev.reset_calibration()
     if n_fuzz:
         with Progress("fuzz frames", n_fuzz) as prog:

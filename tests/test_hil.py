@@ -187,6 +187,23 @@ def test_suite_checks_the_compiled_in_model_when_a_calibration_was_flashed(paper
     assert "was active: reset to the compiled-in model" in res.checks[0].detail
 
 
+def test_a_suite_stopped_while_it_flashes_leaves_the_compiled_in_model(paper_model, monkeypatch):
+    """Ctrl-C during the flash checks left the suite's variant loaded (on the Uno, in EEPROM: the next boot ran it)."""
+    require_tool("gcc")
+    import hil.suite as S
+
+    def stopped(dev, *args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(S, "check_corrupt_flash", stopped)
+    with start_target(paper_model, "host", precision="double", style="table") as fw:
+        with Device.open(fw.url, timeout=5) as dev:
+            with pytest.raises(KeyboardInterrupt):
+                run_suite(dev, paper_model, url=fw.url, n_vectors=50, n_fuzz=0, verbose=False)
+            info = dev.info(refresh=True)
+    assert info.cal_source == 0 and info.model_hash == paper_model.sha256
+
+
 def test_suite_fails_not_crashes_when_the_device_runs_fewer_outputs(paper_model):
     """The device refuses a calibration for five outputs: the flash checks fail, the suite finishes."""
     require_tool("gcc")
