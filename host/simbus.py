@@ -122,7 +122,8 @@ class SimBus:
         if cmap.n_elements != sensor.n_elements:
             raise InputError(f"the channel map reads {cmap.n_elements} elements; the simulated sensor "
                              f"{sensor.name!r} has {sensor.n_elements}: give the sensor file whose elements the map reads "
-                             "(tactile-host's --sensor; --sim-sensor to tactile-hil and fitgen arduino)")
+                             "(tactile-host's --sensor; --sim-sensor to tactile-hil emulate and tactile-host "
+                             "arduino-build)")
         bus = cls(clock, bus_hz=bus_hz, seed=seed)
         # the flicker's own generator: the white noise draws what it draws without flicker
         fl = Flicker(float(flicker), sensor.n_elements, np.random.default_rng(seed + 2)) if flicker else None

@@ -349,6 +349,18 @@ def test_cli_emulate_refuses_bus_options_it_cannot_serve(model_file):
                                       "--suite", *extra), contains=said)
 
 
+def test_cli_emulate_takes_the_targets_precision_and_refuses_a_style_fixed_point_ignores(model_file):
+    """The microbit runs fixed point alone: emulate asked for --precision fixed there, as codegen does not; and
+    --style with fixed point was built unrolled without a word."""
+    proc = run_cli("tactile-hil", "emulate", "--model", str(model_file), "--target", "microbit", "--suite",
+                   "--vectors", "5", "--fuzz", "0")  # a suite ends, whether the model runs in fixed point or not
+    assert "not float" not in proc.stderr, proc.stderr
+    # planned for fixed point: refused for a term it has not (a root), or built and run so
+    assert "fixed point" in proc.stderr or "microbit firmware: fixed" in proc.stdout, proc.stdout + proc.stderr
+    assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", str(model_file), "--precision", "fixed",
+                                  "--style", "table"), 2, "--style does not apply to --precision fixed")
+
+
 def test_cli_bad_ports_and_silent_devices(model_file, tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -128,6 +128,10 @@ def cmd_emulate(args) -> int:
     from hil.emulate import start_target, uno_crash_advice
 
     _check_counts(args)
+    args.precision = args.precision or ("fixed" if args.target == "microbit" else "float")  # as codegen's --target
+    if args.precision == "fixed" and args.style is not None:  # as codegen refuses it: it would be ignored
+        raise InputError("--style does not apply to --precision fixed (its header is straight-line code)")
+    args.style = args.style or "table"
     if args.target == "host" and args.port is not None:  # its UART is a pseudo-terminal, not a TCP port
         raise InputError("--port is the emulated UART's TCP port, and the host target has none (its UART is a "
                          "pseudo-terminal): drop --port")
@@ -231,11 +235,11 @@ def build_parser() -> Parser:
                         "only); uno: the Arduino Uno's ATmega328P in simavr (float or fixed; --adc puts the chips "
                         "on its TWI bus); host: the POSIX build on a pty")
     e.add_argument("--port", type=tcp_port, help="TCP port of the emulated UART (default: a free one)")
-    e.add_argument("--precision", default="float", choices=("float", "double", "fixed"),
-                   help="the firmware's arithmetic (default float)")
-    e.add_argument("--style", default="table", choices=("table", "unrolled"),
+    e.add_argument("--precision", choices=("float", "double", "fixed"),
+                   help="the firmware's arithmetic (default float; on the microbit fixed, its only one)")
+    e.add_argument("--style", choices=("table", "unrolled"),
                    help="the C's form: table (coefficient arrays and a loop; default) or unrolled (straight-line "
-                        "code)")
+                        "code); not with --precision fixed, whose header is straight-line code")
     e.add_argument("--build-dir", metavar="DIR", help="keep the firmware sources and image here")
     e.add_argument("--suite", action="store_true",
                    help="run the HIL suite against it (with its own options, below), then stop")
