@@ -31,10 +31,15 @@ def parse_pose(spec: str) -> np.ndarray:
     return pose
 
 
+PRESS_EVERY = 20.0  # s between the starts of ``presses``' presses: rest between them, for auto-zero's hold
+
+
 def pose_or_motion(spec: str):
-    """``--simulate``: (pose, None) for a pose, or (rest pose, motion) for ``motion``: a slow circular slide
-    with a press every few seconds, the pose as a function of the bus clock's seconds."""
-    if spec.strip().lower() != "motion":
+    """``--simulate``: (pose, None) for a pose, or (rest pose, motion) for ``motion`` (a slow circular slide with a
+    press every few seconds) or ``presses`` (at rest, pressed to dz -1 mm for 1.5 s every PRESS_EVERY s: drift and
+    auto-zero's updates between), the pose as a function of the bus clock's seconds."""
+    kind = spec.strip().lower()
+    if kind not in ("motion", "presses"):
         return parse_pose(spec), None
 
     def motion(t: float):
@@ -43,7 +48,11 @@ def pose_or_motion(spec: str):
         press = np.sin(np.pi * phase) if phase < 1.0 else 0.0
         return np.array([np.cos(2 * np.pi * t / 8), np.sin(2 * np.pi * t / 8), -press, 2.0 * press, -1.0 * press])
 
-    return np.zeros(5), motion
+    def presses(t: float):
+        phase = (t % PRESS_EVERY) / 1.5
+        return np.array([0.0, 0.0, -np.sin(np.pi * phase) if phase < 1.0 else 0.0, 0.0, 0.0])
+
+    return np.zeros(5), motion if kind == "motion" else presses
 
 
 def parse_drift(spec: str | None, n: int) -> Drift | None:

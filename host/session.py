@@ -260,7 +260,7 @@ class ReadoutSession:
         except BaseException:
             self.close()
             raise
-        self.source = (f"simulated {args.sensor}: " + ("motion" if motion is not None else
+        self.source = (f"simulated {args.sensor}: " + (args.simulate.strip().lower() if motion is not None else
                                                        ",".join(f"{x:g}" for x in pose))
                        if pose is not None else f"I2C bus: {cmap.describe()}")
 

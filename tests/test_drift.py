@@ -230,6 +230,23 @@ def test_a_compensation_of_another_map_or_far_from_its_temperatures_is_said(rest
     assert proc.returncode == 0 and "note" not in proc.stderr, proc.stderr
 
 
+def test_simulated_presses_rest_between_so_that_auto_zero_can_follow_drift():
+    """`--simulate motion` slides all the time: a simulated run never rested, and auto-zero never moved. `presses`
+    rests, pressed to dz -1 mm for 1.5 s every 20 s."""
+    from host.motion import PRESS_EVERY, pose_or_motion
+
+    rest, presses = pose_or_motion(" Presses ")
+    assert np.array_equal(rest, np.zeros(5))
+    t = np.arange(0.0, 3 * PRESS_EVERY, 0.05)
+    poses = np.array([presses(x) for x in t])
+    pressed = poses[:, 2] < 0
+    assert np.all(poses[:, [0, 1, 3, 4]] == 0) and poses[:, 2].min() == pytest.approx(-1.0, abs=1e-3)
+    assert pressed.mean() == pytest.approx(1.5 / PRESS_EVERY, abs=0.01)  # at rest 92 % of the time
+    assert np.all(~pressed[(t % PRESS_EVERY) > 1.5])
+    _, motion = pose_or_motion("motion")
+    assert all(np.any(motion(x) != 0) for x in t)  # the slide never rests
+
+
 def test_a_missing_compensation_file_is_said_once(rest_model_file, tmp_path):
     """A --temp-comp file that is not there: that, in one line, not also 'not JSON'."""
     gone = tmp_path / "nothere.json"

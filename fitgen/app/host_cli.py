@@ -277,9 +277,10 @@ def _readout_options(p) -> None:
                    help="python: Model.predict; c: the generated header as a shared library (default python)")
     p.add_argument("--precision", choices=("double", "float"), help="C engine precision (default double)")
     p.add_argument("--cc", help="C compiler for --engine c (default gcc)")
-    p.add_argument("--simulate", metavar="POSE|motion",
-                   help="no hardware: a simulated bus with the sensor at POSE (e.g. dx=1,dz=-1 or 0.5,0,-1,0,0), or "
-                        "'motion': sliding in a circle and pressed every 6 s")
+    p.add_argument("--simulate", metavar="POSE|motion|presses",
+                   help="no hardware: a simulated bus with the sensor at POSE (e.g. dx=1,dz=-1 or 0.5,0,-1,0,0), "
+                        "'motion': sliding in a circle and pressed every 6 s, or 'presses': at rest, pressed for "
+                        "1.5 s every 20 s (to watch drift and auto-zero)")
     p.add_argument("--sim-drift", metavar="ramp=..,over=..,tau=..,creep=..",
                    help="simulated drift: a temperature ramp (degC over s), creep (V, time constant s); also "
                         "start=DEGC, seed=N (default ramp=5,over=600,tau=600,creep=0.002,start=25,seed=0; a faster "
