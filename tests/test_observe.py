@@ -1,6 +1,7 @@
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy.optimize import least_squares
 
 from fitgen.physics.observe import (DEFAULT_ACCURACY, INSIDE, ObserveReport, analyse, corner_poses, cramer_rao,
@@ -85,6 +86,28 @@ def test_fewer_readings_than_components_have_no_finite_bound():
     # three of them can be pinned by four readings: no such words where they are not resolved
     four_slide = observe(four, PRESETS["slide"].ranges, ("dx", "dy", "dz")).verdicts()
     assert not any("cannot pin" in w for w in four_slide), four_slide
+
+
+def test_a_component_clear_of_the_blind_directions_keeps_its_bound():
+    """A ring of six at rest cannot tell slides from tilts (two zero singular values), yet sees a press: every
+    bound was inf there, and dz was called not resolvable along a direction with no dz in it. dz's bound is the
+    pseudo-inverse's, as a Fisher information singular elsewhere allows; the blind components stay inf."""
+    from fitgen.physics.sensor import parse_sensor
+
+    six = parse_sensor(PAPER.source | {"magnet": {"diameter": 5.0, "height": 2.0, "polarization": 1.2},
+                                       "board": {"thickness": 1.5, "gap": 9.0},
+                                       "elements": {"ring": [{"count": 6, "radius": 8.0}]}})
+    rest = np.zeros((1, 5))
+    J = jacobian(six, rest)[0]
+    s = np.linalg.svd(J, compute_uv=False)
+    assert s[-1] < 1e-12 * s[0] and s[-2] < 1e-10 * s[0] and s[-3] > 1e-3 * s[0]  # blind in two directions
+    bound = cramer_rao(six, rest, 0.0005)[0]
+    assert np.all(np.isinf(bound[[0, 1, 3, 4]]))
+    fisher = J.T @ J
+    want = 0.0005 * np.sqrt(np.linalg.pinv(fisher, rcond=1e-12)[2, 2])  # the seen directions' s^2 > 1e-6 s0^2
+    assert np.isfinite(bound[2]) and bound[2] == pytest.approx(want, rel=1e-6)
+    words = observe(six, PRESETS["full"].ranges).verdicts()
+    assert not any(w.startswith("dz: NOT resolvable") for w in words), words
 
 
 def test_a_verdict_names_the_elements_past_their_linear_range():

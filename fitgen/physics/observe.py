@@ -49,17 +49,29 @@ class PoseObservability:
     past_linear: int = 0  # elements whose reading no longer follows the field here (saturated, on a rail)
 
 
+NULL_SHARE = 1e-6  # a component whose unit vector has more than this in the readings' null space is not seen
+# A singular value below this share of the largest is zero: the central differences' rounding leaves the directions
+# a symmetric layout cannot see at 1e-12..1e-11 of it (the paper's ring at rest: 2.2e-11), which read as seen at
+# 1e-12 and gave bounds of 1e5 mm or inf by the luck of the rounding; a direction seen at 1e-9 bounds 1e6 noise/s.
+ZERO_SHARE = 1e-9
+
+
 def _svd_bounds(J: np.ndarray, noise: float):
-    """Batched SVD of J (P, N, C) and the Cramer-Rao standard deviations (P, C); inf where singular."""
+    """Batched SVD of J (P, N, C) and the Cramer-Rao standard deviations (P, C): inf for a component with a share
+    in the null space of J (where J^T J is singular); the others by the pseudo-inverse, which a component clear of
+    that space is bounded by (a symmetric ring at rest cannot tell a slide from a tilt, yet sees a press)."""
     # full V: with fewer readings than components its last rows are the directions the readings cannot see
     _, s, vt = np.linalg.svd(J, full_matrices=True)
     k = s.shape[1]
-    # fewer readings than components: J^T J is singular whatever the values
-    ok = (s[:, -1] > s[:, 0] * 1e-12) & (k == J.shape[2])
+    seen = s > s[:, :1] * ZERO_SHARE  # (P, k): the singular values that are not zero in floating point
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a bound past float's range is inf
-        # (J^T J)^-1 = V diag(1/s^2) V^T, without forming J^T J
-        bounds = noise * np.sqrt(np.sum((vt[:, :k].transpose(0, 2, 1) / s[:, None, :]) ** 2, axis=2))
-    bounds[~ok] = np.inf
+        # (J^T J)^+ = V diag(1/s^2) V^T over the seen directions, without forming J^T J
+        terms = np.where(seen[:, None, :], (vt[:, :k].transpose(0, 2, 1) / s[:, None, :]) ** 2, 0.0)
+        bounds = noise * np.sqrt(np.sum(terms, axis=2))
+    # the unseen rows of V: those of zero singular values, and with fewer readings than components the rest
+    unseen = np.concatenate([~seen, np.ones((len(J), J.shape[2] - k), dtype=bool)], axis=1)
+    share = np.sqrt(np.sum(np.where(unseen[:, :, None], vt, 0.0) ** 2, axis=1))  # (P, C)
+    bounds[share > NULL_SHARE] = np.inf
     full_s = np.zeros((len(J), J.shape[2]))
     full_s[:, : s.shape[1]] = s
     return full_s, vt, bounds
