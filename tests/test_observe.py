@@ -110,6 +110,27 @@ def test_a_component_clear_of_the_blind_directions_keeps_its_bound():
     assert not any(w.startswith("dz: NOT resolvable") for w in words), words
 
 
+def test_a_raw_transfers_adc_clips_what_observe_differentiates():
+    """observe takes readings without the ADC's rounding (adc_bits=0), which in the raw transfer also dropped the
+    ADC's range: a file whose readings pass its full scale was called resolvable where simulate and fit saw every
+    element on the rail."""
+    from fitgen.physics.sensor import parse_sensor
+
+    small = parse_sensor(PAPER.source | {"transfer": {"kind": "raw", "raw": {"noise": 0.0005, "full_scale": 0.5,
+                                                                               "adc_bits": 8}}})
+    poses = np.array([[0.0, 0.0, -2.0, 0.0, 0.0]])
+    raw = field_readings(small, poses)
+    assert np.abs(raw).max() > 0.5  # past the ADC's range
+    clipped = apply_transfer(small, raw, adc_bits=0)
+    assert clipped.max() == 0.5 and np.all(clipped <= 0.5)
+    J = jacobian(small, poses)[0]
+    assert np.all(J[np.abs(raw[0]) > 0.5 + 1e-3] == 0)  # a railed element reads nothing of the pose
+    words = observe(small, {"dx": (0.0, 0.0), "dy": (0.0, 0.0), "dz": (-2.0, -2.0), "thx": (0.0, 0.0),
+                            "thy": (0.0, 0.0)}, ("dz",)).verdicts()
+    assert words[0].startswith("dz: NOT resolvable") and "8 of 8 elements there are past their linear range" \
+        in words[0], words
+
+
 def test_a_verdict_names_the_elements_past_their_linear_range():
     """Elements saturated at rest read the same whatever the pose: the verdict said only that the readings barely
     change along dx, which reads as a layout's blind direction; it names the saturated elements."""

@@ -106,7 +106,8 @@ def apply_transfer(
     if np.any(np.asarray(noise) > 0):
         rng = rng or np.random.default_rng()
         out = out + rng.normal(0.0, noise, size=out.shape)
-    if bits > 0 or sensor.transfer == "gmr":
+    # an ADC clips to its range whatever the rounding: the gmr transfer always has one, raw when its file gives bits
+    if bits > 0 or sensor.transfer == "gmr" or sensor.raw.adc_bits > 0:
         out = quantise(out, lo, hi, bits)
     return out
 
