@@ -254,6 +254,24 @@ def test_the_papers_procedure_is_held_out_with_the_sensors_noise(tmp_path):
         assert e["noisy_rms"] > 1.02 * e["rms"], (o, e)  # held out with none, the two were equal
 
 
+def test_rows_without_a_meta_are_held_out_on_the_sensor_in_their_units(tmp_path):
+    """Readings in volts with no meta, --sensor paper --units V: the fit held them out on the paper preset's raw
+    transfer (mT), and printed errors of metres and thousands of degrees; the data's units say which transfer."""
+    import json
+
+    data = tmp_path / "v.csv"
+    proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--grid", "paper-sim", "-o",
+                   str(data))
+    assert proc.returncode == 0, proc.stderr
+    (tmp_path / "v.csv.meta.json").unlink()
+    proc = run_cli("fitgen", "fit", str(data), "--sensor", "paper", "--units", "V", "-o", str(tmp_path / "m.json"),
+                   "--held-out", "200", "--outputs", "dx,dy,dz")
+    assert proc.returncode == 0, proc.stderr
+    rec = json.loads((tmp_path / "m.json").read_text())["fit"]["held_out"]
+    assert rec["transfer"] == "gmr" and rec["noise"] == load_sensor("paper").with_transfer("gmr").noise
+    assert all(e["max"] < 0.5 for e in rec["errors"]["double"].values()), rec["errors"]["double"]
+
+
 def test_a_model_past_floats_range_runs_in_double_only(tmp_path):
     """Readings a billion times the sensor's give coefficients past float's range: a fit for float refuses them
     (or auto takes the family that runs in float), predict in float refuses as codegen does, double keeps them;

@@ -205,6 +205,8 @@ def dataset_sensor(meta: dict, spec: str | None = None, n_inputs: int | None = N
     sensor = load_sensor(spec)
     if meta.get("transfer") in ("raw", "gmr"):
         sensor = sensor.with_transfer(meta["transfer"])
+    elif meta.get("units") in ("mT", "V") and sensor.units != meta["units"]:  # measured rows: their units say which
+        sensor = sensor.with_transfer("raw" if meta["units"] == "mT" else "gmr")
     if given and meta.get("sensor_sha256") not in (None, sensor.sha256):
         raise InputError(f"the dataset was simulated with sensor {meta.get('sensor_file') or meta.get('sensor')}, "
                          f"not {spec}: figures held out on another sensor would not be this model's (leave --sensor "
