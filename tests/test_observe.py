@@ -245,6 +245,12 @@ def test_a_sensor_file_without_a_noise_figure_is_not_judged_noise_free(tmp_path)
                           "[transfer.raw])")
     proc = run_cli("fitgen", "observe", "--sensor", str(quiet), "--noise", "0.0005")
     assert proc.returncode == 0 and "dx: NOT resolvable" in proc.stdout  # the ring is blind to dx at rest
+    # simulate's "the sensor's noise" of such a file added none without a word
+    out = tmp_path / "r.csv"
+    assert_one_line_error(run_cli("fitgen", "simulate", "--sensor", str(quiet), "--noise", "sensor", "--random", "5",
+                                  "-o", str(out)), 2,
+                          "--noise sensor: sensor paper gives no noise figure for its raw transfer")
+    assert not out.exists()
 
 
 def test_the_adcs_steps_count_as_reading_noise():

@@ -21,8 +21,13 @@ MAX_NOISE = 1000.0  # V or mT rms: past every reading a sensor gives (a slip of 
 
 
 def noise_of(value: str, sensor, most: float | None = None) -> float:
-    """``--noise``: a figure >= 0 (at most ``most``), or ``sensor`` for the sensor's own."""
+    """``--noise``: a figure >= 0 (at most ``most``), or ``sensor`` for the sensor's own (which must be > 0: a file
+    that leaves it out reads 0, and 'the sensor's noise' would then add none without a word)."""
     if value == "sensor":
+        if not sensor.noise > 0:
+            raise InputError(f"--noise sensor: sensor {sensor.name} gives no noise figure for its {sensor.transfer} "
+                             f"transfer (missing or 0 in [transfer.{sensor.transfer}]): add it to the file, or give "
+                             "--noise a figure")
         return sensor.noise
     try:
         x = parse_noise(value)
