@@ -47,6 +47,23 @@ def test_uno_refuses_a_double_header(model_file, tmp_path):
                                   "--target", "microbit"), contains="target microbit")
     assert_one_line_error(run_cli("fitgen", "codegen", model_file, "-o", str(tmp_path / "y"), "--precision", "fixed",
                                   "--target", "pi"), contains="target pi")
+    # a model fixed point cannot run, on the target that runs nothing else: said as the target's, in one line
+    # (it said "fixed point has no harmonic terms" to a user who never asked for fixed point)
+    import dataclasses
+
+    from fitgen.equations.model import Equation, load_model
+    from fitgen.equations.terms import Term
+
+    m = load_model(model_file)
+    rooted = dataclasses.replace(m, equations=tuple(
+        Equation(e.name, e.intercept, (*e.terms, Term(1, "1/2")), (*e.coefficients, 1e-9)) if e.name == "dz" else e
+        for e in m.equations))
+    path = rooted.save(tmp_path / "rooted.json")
+    for cmd in (["codegen", str(path), "-o", str(tmp_path / "r")],
+                ["predict", str(path), str(path), "-o", str(tmp_path / "r.csv")]):
+        assert_one_line_error(run_cli("fitgen", *cmd, "--target", "microbit"), 2,
+                              "runs fixed point only, and fixed point takes integer powers only, but output dz has "
+                              "the root")
     for precision, target in (("float", "uno"), ("fixed", "uno"), ("double", "mps2"), ("double", "pi")):
         proc = run_cli("fitgen", "codegen", model_file, "-o", str(tmp_path / precision), "--precision", precision,
                        "--target", target)

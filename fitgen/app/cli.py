@@ -169,13 +169,12 @@ def cmd_fit(args) -> int:
 
 def _model_and_target(args):
     """predict's and codegen's model and target; args.precision the header's: predict computes what codegen writes."""
-    from fitgen.c.targets import check_precision, default_precision, get_target
+    from fitgen.c.targets import check_precision, get_target, header_precision
     from fitgen.equations.model import load_model
-    from fitgen.fitting.holdout import device_precision
 
     get_target(args.target)  # a bad name said before the model is read
     model = load_model(args.model)
-    args.precision = args.precision or default_precision(args.target, device_precision(model))
+    args.precision = header_precision(args.target, args.precision, model)
     return model, check_precision(args.target, args.precision)
 
 

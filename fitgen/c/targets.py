@@ -58,6 +58,22 @@ def default_precision(target: str | None, fitted: str) -> str:
     return fitted if fitted in t.precisions else t.precisions[0]
 
 
+def header_precision(target: str | None, given: str | None, model) -> str:
+    """``given`` (--precision), else :func:`default_precision` for ``model``; InputError when that default is
+    fixed point, the target's only arithmetic, and the model has what fixed point cannot run (said as the
+    target's, not as a precision the user never asked for)."""
+    from fitgen.equations.fixedpoint import fixed_refusal
+    from fitgen.fitting.holdout import device_precision
+
+    if given:
+        return given
+    chosen = default_precision(target, device_precision(model))
+    if chosen == "fixed" and (why := fixed_refusal(model)):
+        t = get_target(target)
+        raise InputError(f"target {t.name} ({t.core}) runs fixed point only, and {why}")
+    return chosen
+
+
 def check_precision(target: str | None, precision: str) -> Target | None:
     """The target's row, or an InputError (one line) when it may not run ``precision``."""
     t = get_target(target)
