@@ -188,10 +188,9 @@ READ_FAILED = 0x40000000  # STREAM_SAMPLE status bit of a failed read (docs/prot
 
 
 def check_stream(dev: Device, n: int = 5, period_ms: int = 10) -> Check:
-    """STREAM ``n`` samples: every read succeeds, and each sample's outputs are what the device's own
-    EVAL gives for the inputs it read (the stream runs the same estimator on what it read). Reports when
-    the first and the last sample arrived after the request (under ``tactile-hil emulate --suite``, the
-    first STREAM after boot: the firmware probes and sets up its ADCs on that first read)."""
+    """STREAM ``n`` samples: every read succeeds, simulated inputs lie in the domain, and each sample's outputs are
+    what the device's own EVAL gives for its inputs. Reports when the first and the last sample arrived after the
+    request (under ``emulate --suite``, the first STREAM after boot: the firmware sets up its ADCs on it)."""
     arrivals: list[float] = []
     samples = dev.stream(period_ms, n, timeout=60.0, arrivals=arrivals)
     failed = [s.status for s in samples if s.status > 0 and s.status & READ_FAILED]
@@ -202,8 +201,7 @@ def check_stream(dev: Device, n: int = 5, period_ms: int = 10) -> Check:
     info = dev.info(refresh=True)
     source = (f"inputs from {len(info.adc_chips)} ADC chips, I2C counts "
               + ", ".join(f"{k} {v}" for k, v in info.adc_counts.items()) if info.adc_chips else "simulated inputs")
-    # simulated inputs sweep the model's domain from within: a status there is a domain read wrong (the Uno
-    # read its bounds from RAM at the flash tables' addresses, and streamed its RAM's paint)
+    # simulated inputs sweep the domain from within: a status is a domain misread (the Uno's, from RAM once)
     outside = [s.status for s in samples if s.status] if not info.adc_chips else []
     problems = ([f"{len(failed)} reads failed (first status 0x{failed[0]:08x})"] if failed else []) + \
         ([] if same else ["a sample's outputs differ from EVAL of its inputs"]) + \
@@ -485,8 +483,7 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
         room = dev.cal_capacity()
         try:
             if len(to_blob(new, dev.info().precision, sensor_id)) > room:
-                # a store smaller than the blob (the Uno's EEPROM): refused and the compiled-in model kept; then
-                # the same checks on a calibration with as many of the terms as the store takes
+                # a store smaller than the blob (the Uno's EEPROM): refused, then the checks on the terms it takes
                 step(check_flash_too_big, dev, model, new, room, sensor_id)
                 new = fit_store(new, room, dev.info().precision, sensor_id)
             step(check_flash, dev, model, new, few, sensor_id)
