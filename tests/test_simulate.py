@@ -1,4 +1,5 @@
 import json
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -152,6 +153,12 @@ def test_the_fit_note_names_causes_that_hold(tmp_path):
     assert ("note: thx fitted without the displacement terms eq. 1 gives a tilt (they take dx, dy and dz from their "
             "own equations, and the fit has no dx, dz): fit --outputs dx,dy,dz,thx to have them") in proc.stderr
     assert "barely carry" not in proc.stderr
+    # a penalty that admits no term leaves the tilts constant: that is said, not blamed on the readings
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(model), "--family", "integer", "--k", "bic",
+                   "--held-out", "0")
+    assert proc.returncode == 0, proc.stderr
+    assert re.search(r"note: thx's equation leaves 100% of its spread .*: it has no terms, as the penalty per term "
+                     r"\(k = 5\.7\) admitted none; a smaller --k \(aic: 2\) may admit some", proc.stderr), proc.stderr
     # the paper's procedure on its grid: its tilts leave about half their spread, as the paper's do; no note
     for argv in (("simulate", "--sensor", "paper", "--grid", "paper-sim", "-o", str(data)),
                  ("fit", str(data), "--noise", "0", "-o", str(model))):

@@ -288,6 +288,9 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
         if causes:
             notes.append(f"{said}: the readings barely carry {e.name} here ({'; '.join(causes)}); `fitgen observe` "
                          "tells how well each output can be seen")
+        elif not e.terms and isinstance(k := (model.fit_info.get("settings") or {}).get("k"), (int, float)) and k > 2:
+            notes.append(f"{said}: it has no terms, as the penalty per term (k = {k:.3g}) admitted none; a smaller "
+                         "--k (aic: 2) may admit some")
         elif rms > NEAR_CONSTANT * sd and no_d and e.name in ("thx", "thy"):
             notes.append(f"{said}: it is close to a constant, fitted without the displacement terms (above)")
         elif rms > NEAR_CONSTANT * sd:  # no cause found; the paper's tilts, fitted its way, leave about half
