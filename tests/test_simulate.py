@@ -182,6 +182,8 @@ def test_grid_and_range_specs():
         parse_grid("dq=1:2:3")
     with pytest.raises(InputError):
         parse_grid("dx=1:2")
+    with pytest.raises(InputError, match=r"grid 'paper-simm': not a preset \(paper-sim, paper-exp\)"):
+        parse_grid("paper-simm")  # a preset's name mistyped: the names there are
     r = parse_ranges("dz=-3:0")
     p = random_poses(1000, r, pose_rng(0))
     assert p[:, 2].min() >= -3 and p[:, 2].max() <= 0

@@ -56,6 +56,9 @@ def parse_grid(spec: str) -> dict[str, list[float]]:
     """A paper grid name, or ``dx=-2:2:5 dz=0,-1,-2 ...`` (start:stop:count or a list)."""
     if spec in PAPER_GRIDS:
         return PAPER_GRIDS[spec]
+    if "=" not in spec:  # a name: the presets are the names there are
+        raise InputError(f"grid {spec!r}: not a preset ({', '.join(PAPER_GRIDS)}) nor NAME=VALUES parts such as "
+                         "'dx=-2:2:5 dz=0,-1,-2'")
     levels = {}
     for name, value in _components(spec, "grid").items():
         m = re.fullmatch(rf"({_NUM}):({_NUM}):(\d+)", value)
