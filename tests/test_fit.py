@@ -339,6 +339,12 @@ def test_bad_model_files(paper_fit, tmp_path):
                               contains=f"{arg}: TOML, not CSV (a sensor or unit file? those go to --sensor)")
     (tmp_path / "junk.json").write_text("{not json")
     assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "junk.json")), contains="not valid JSON")
+    # a dataset or a sensor file given where the model goes (predict's arguments swapped): named as what it is
+    (tmp_path / "d.csv").write_text("v1,v2,dz\n1,2,3\n")
+    (tmp_path / "s.toml").write_text("# a sensor, a comment with, commas\n[magnet]\ndiameter = 5.0\n")
+    for name, said in (("d.csv", "CSV (a dataset?)"), ("s.toml", "TOML (a sensor file?)")):
+        assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / name)), 2,
+                              f"model file {tmp_path / name}: {said}, not a model (JSON, as fitgen fit writes it)")
     with pytest.raises(InputError, match="needs v1 > 0"):
         bad = json.loads(json.dumps(data))
         bad["inputs"]["min"][0] = 0.0

@@ -283,7 +283,12 @@ def load_model(path: str | Path) -> Model:
     try:
         data = json.loads(text)
     except ValueError as exc:
-        raise InputError(f"{origin}: not valid JSON: {exc}") from None
+        # a dataset or a sensor file given for the model: named as such (a TOML file's comments skipped)
+        first = next((ln.strip() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
+        seen = ("TOML (a sensor file?)" if first.startswith("[") or "=" in first else
+                "CSV (a dataset?)" if "," in first else "")
+        raise InputError(f"{origin}: " + (f"{seen}, not a model (JSON, as fitgen fit writes it)" if seen else
+                                          f"not valid JSON: {exc}")) from None
     return model_from_dict(data, origin)
 
 
