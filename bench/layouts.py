@@ -7,8 +7,8 @@ Layouts: the sensor presets ``paper`` (the reference: 8 radial elements, r = 10 
 ``two-rings`` (4 radial at r = 10 mm on the board's bottom face, 4 radial at r = 6 mm on its
 top face), ``two-radii`` (the same two rings, both on the bottom face: the planar control) and
 ``ring-vertical`` (the paper's 8 positions, 4 radial and 4 with a +z axis) and ``tilted-axes``
-(two rings of 4 whose radial axes are raised toward +z by 37 and 17 deg, on the two faces;
-bench/layout_search.py found it). All share the
+(two rings of 4, at r = 8.5 mm radial on the bottom face and at r = 8.1 mm on the top face with their radial
+axes raised 25 deg toward +z; bench/layout_search.py found it). All share the
 magnet, board, element noise (0.5 uT rms) and the ``raw`` transfer (|B . axis| in mT).
 
 1. Readings: the smallest and largest reading over the training grid and the evaluation
