@@ -504,6 +504,20 @@ def test_schedule_refuses_what_identify_could_not_use(tmp_path, args, message):
     assert not out.exists() and not Path(str(out) + ".meta.json").exists()
 
 
+def test_a_schedule_for_a_file_without_the_transfers_noise_names_where_it_goes(tmp_path):
+    """A file giving the raw transfer's noise alone: the schedule reads gmr (an ADC's), whose noise it left out, and
+    its refusal asked for 'a sensor file with a noise figure', which it was."""
+    import re
+
+    text = (Path(__file__).resolve().parents[1] / "fitgen" / "physics" / "presets" / "paper.toml").read_text()
+    mine = tmp_path / "mine.toml"
+    mine.write_text(re.sub(r"(?m)^noise\s*=\s*0\.0005\s*# V rms.*\n", "", text).replace('"paper"', '"mine"'))
+    assert_one_line_error(run_cli("fitgen", "schedule", "--sensor", str(mine), "--n", "20", "-o",
+                                  str(tmp_path / "s.csv")), 2,
+                          "sensor mine gives none for its gmr transfer (noise in [transfer.gmr]); add it, or give "
+                          "--noise (or --transfer")
+
+
 def test_schedule_keeps_to_the_travel_and_bounds_five_axes():
     """Stage limits wider than the sensor's travel give the travel's schedule (the skin goes no further); five
     axes take fewer grid levels, so the candidates stay within MAX_CANDIDATES."""

@@ -204,7 +204,9 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     check_error("zero error", zero_error)
     noise = drawing.noise if noise is None else noise
     if not noise > 0:
-        raise InputError("the schedule needs the reading noise > 0 (give --noise or a sensor file with a noise figure)")
+        raise InputError(f"the schedule needs the reading noise > 0: sensor {drawing.name} gives none for its "
+                         f"{drawing.transfer} transfer (noise in [transfer.{drawing.transfer}]); add it, or give "
+                         "--noise (or --transfer, for the transfer whose noise the file gives)")
     space = unit_space(drawing)
     cand, ranges, beyond = capture_candidates(drawing, axes, ranges, rig_error, zero_error)
     total = n + MAX_PASSES + 1
