@@ -504,6 +504,18 @@ def test_schedule_refuses_what_identify_could_not_use(tmp_path, args, message):
     assert not out.exists() and not Path(str(out) + ".meta.json").exists()
 
 
+def test_a_drawing_saturated_at_rest_is_told_so_not_to_move_more_axes(tmp_path):
+    """Every pose in contact past the linear range left the rest rows alone, and the schedule asked for more axes
+    or wider limits, which could not help: the drawing saturates at rest."""
+    text = (Path(__file__).resolve().parents[1] / "fitgen" / "physics" / "presets" / "paper.toml").read_text()
+    hot = tmp_path / "hot.toml"
+    hot.write_text(text.replace("saturation = 2.0 ", "saturation = 1.0 ").replace('"paper"', '"hot"'))
+    assert_one_line_error(run_cli("fitgen", "schedule", "--sensor", str(hot), "--n", "20", "-o",
+                                  str(tmp_path / "s.csv")), 2,
+                          "every candidate pose drives an element of hot past 80 % of its linear range (saturation 1 "
+                          "mT; at rest it reads 0.948 mT): move the elements out or the magnet up")
+
+
 def test_a_schedule_for_a_file_without_the_transfers_noise_names_where_it_goes(tmp_path):
     """A file giving the raw transfer's noise alone: the schedule reads gmr (an ADC's), whose noise it left out, and
     its refusal asked for 'a sensor file with a noise figure', which it was."""

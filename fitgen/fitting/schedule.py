@@ -119,10 +119,13 @@ def capture_candidates(drawing: Sensor, axes=("dx", "dy", "dz"), limits: dict | 
     beyond the linear range (:func:`within_linear_range`); the box; how many were left out."""
     box = capture_box(drawing, axes, limits, rig_error=rig_error, zero_error=zero_error)
     cand = candidates(tuple(axes), box)
-    keep = within_linear_range(drawing, cand) | off_skin(cand)
-    if not keep.any():
+    linear, lifted = within_linear_range(drawing, cand), off_skin(cand)
+    keep = linear | lifted
+    if not np.any(linear & ~lifted):  # the rest rows alone, whatever the limits: the drawing saturates at rest
+        rest = float(np.abs(field_readings(drawing, np.zeros((1, 5)))).max())
         raise InputError(f"every candidate pose drives an element of {drawing.name} past {100 * LINEAR_SHARE:g} % "
-                         f"of its linear range (saturation {linear_top(drawing):g} mT): check the sensor file's transfer")
+                         f"of its linear range (saturation {linear_top(drawing):g} mT; at rest it reads {rest:.3g} "
+                         "mT): move the elements out or the magnet up, or check the sensor file's transfer")
     return cand[keep], box, int(np.sum(~keep))
 
 
