@@ -197,6 +197,21 @@ def test_cli_needs_the_sensor_and_a_positive_sum(tmp_path):
                   settings=FitSettings.family("harmonics"), sensor=RING)
 
 
+def test_an_element_on_the_axis_weighs_in_no_harmonic():
+    """arctan2(0, 0) is 0: an element at the ring's centre took the weights of one at +x (1 in hc1 and hc2)."""
+    from fitgen.fitting.fit import ring_harmonics
+    from fitgen.physics.sensor import parse_sensor
+    from fitgen.physics.simulate import simulate
+
+    paper = load_sensor("paper")
+    sensor = parse_sensor(paper.source | {"elements": {**paper.source["elements"], "list": [
+        {"position": [0.0, 0.0, 0.0], "axis": [1.0, 0.0, 0.0]}]}})
+    ds = simulate(sensor, np.zeros((1, 5)))
+    weights = dict(ring_harmonics(ds, sensor).weights)
+    assert weights and all(w[8] == 0.0 for w in weights.values()), weights
+    assert weights["hc1"][0] == 1.0  # the ring's own, as before
+
+
 def test_full_suite_on_emulated_cortex_m4(harmonic_model, held_out):
     res = emulated_suite(harmonic_model, held_out, "unrolled", n=500)
     assert res.ok, res.table()

@@ -150,8 +150,9 @@ class Harmonics:
     """The ring's harmonics: per symbol (hc_m, hs_m) its weight on each input, in order.
 
     Weights are cos(m phi_k) and sin(m phi_k) of each element's azimuth phi_k, snapped to 0 below
-    1e-12 so that exactly-zero weights are skipped alike by Python and C; a symbol whose
-    weights are all 0 is dropped. ``hr`` (1 / the ring's sum) needs no weights.
+    1e-12 so that exactly-zero weights are skipped alike by Python and C (an azimuth of NaN, an
+    element on the axis, weighs 0); a symbol whose weights are all 0 is dropped. ``hr`` (1 / the
+    ring's sum) needs no weights.
     """
 
     weights: tuple[tuple[str, tuple[float, ...]], ...]
@@ -162,8 +163,9 @@ class Harmonics:
         out = []
         for m in range(1, phi.size // 2 + 1):
             for kind, fn in (("c", np.cos), ("s", np.sin)):
-                w = fn(m * phi)
-                w = np.where(np.abs(w) < 1e-12, 0.0, w)
+                with np.errstate(invalid="ignore"):
+                    w = fn(m * phi)
+                w = np.where(np.isnan(w) | (np.abs(w) < 1e-12), 0.0, w)
                 if np.any(w):
                     out.append((f"h{kind}{m}", tuple(float(x) for x in w)))
         return cls(tuple(out))

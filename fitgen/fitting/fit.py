@@ -243,7 +243,9 @@ def ring_harmonics(ds: Dataset, sensor=None) -> Harmonics:
         raise InputError("the harmonics family needs the elements' positions: give --sensor (a preset or a TOML file)")
     if sensor.n_elements != ds.n_inputs:
         raise InputError(f"sensor {sensor.name} has {sensor.n_elements} elements; the data have {ds.n_inputs} inputs")
-    return Harmonics.from_azimuths(np.arctan2(sensor.positions[:, 1], sensor.positions[:, 0]))
+    x, y = sensor.positions[:, 0], sensor.positions[:, 1]
+    # an element on the axis has no azimuth (arctan2(0, 0) is 0, as if it sat at +x): it weighs in no harmonic
+    return Harmonics.from_azimuths(np.where(np.hypot(x, y) < 1e-9, np.nan, np.arctan2(y, x)))
 
 
 HUGE = 1e30  # a reading or label beyond it is a typo or a unit error; its powers would overflow
