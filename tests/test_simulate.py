@@ -175,6 +175,20 @@ def test_quantise_is_within_half_lsb():
     assert len(np.unique(q)) == 256
 
 
+def test_rows_above_first_contact_are_said_to_read_the_sensor_at_rest(tmp_path):
+    """A grid reaching above first contact wrote readings at rest under labels that move, without a word."""
+    out = tmp_path / "up.csv"
+    proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--grid", "dz=0,0.5,1 dx=0,1", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert ("note: 4 of 6 rows lie above first contact (dz > 0.05 mm): the indenter is off the skin there, and they "
+            "read the sensor at rest (fitgen fit leaves them out)") in proc.stderr
+    rows = load_dataset(out)
+    up = rows.poses()[:, 2] > 0
+    assert np.all(rows.inputs[up] == rows.inputs[~up & (rows.poses()[:, 0] == 0)][0])
+    assert "above first contact" not in run_cli("fitgen", "simulate", "--sensor", "paper", "--grid", "dz=0,-1",
+                                                "-o", str(tmp_path / "down.csv")).stderr
+
+
 def test_grid_and_range_specs():
     lv = parse_grid("dx=-1:1:3 dz=0,-1")
     assert grid_poses(lv).shape == (6, 5)

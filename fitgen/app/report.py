@@ -228,13 +228,20 @@ def simulate_notes(sensor, poses, labels: str, spec: str, adc_bits: int | None =
 
     from fitgen.physics.simulate import rows_past_linear
 
+    from fitgen.physics.pose import off_skin
+
     if adc_bits is not None and sensor.transfer == "raw":
         sensor = dataclasses.replace(sensor, raw=dataclasses.replace(sensor.raw, adc_bits=adc_bits))
-    if not (clipped := int(rows_past_linear(sensor, poses, labels).sum())):
-        return []
-    return [f"{clipped} of {len(poses)} rows ({clipped / len(poses):.0%}) have an element past its linear range "
-            f"(saturated, or on the ADC's rails), whose reading there no longer follows the pose; `fitgen observe "
-            f"--sensor {spec} --transfer {sensor.transfer}` tells whether the others still resolve it"]
+    notes = []
+    if lifted := int(off_skin(poses).sum()):  # a schedule's rest rows; in a grid or a box, labels that read as rest
+        notes.append(f"{lifted} of {len(poses)} rows lie above first contact (dz > 0.05 mm): the indenter is off the "
+                     "skin there, and they read the sensor at rest (fitgen fit leaves them out)")
+    if clipped := int(rows_past_linear(sensor, poses, labels).sum()):
+        notes.append(f"{clipped} of {len(poses)} rows ({clipped / len(poses):.0%}) have an element past its linear "
+                     "range (saturated, or on the ADC's rails), whose reading there no longer follows the pose; "
+                     f"`fitgen observe --sensor {spec} --transfer {sensor.transfer}` tells whether the others still "
+                     "resolve it")
+    return notes
 
 
 def _blind_causes(model: Model, ds, sensor) -> list[str]:
