@@ -549,6 +549,18 @@ def test_every_error_line_of_a_subcommand_starts_with_its_name(args, tmp_path):
         assert proc.stderr.strip() == "fitgen fit: error: unrecognized arguments: --bogus x"
 
 
+@pytest.mark.parametrize("args, said", [
+    (["simulate", "--random", "5", "-o", "d.json"], "-o d.json: simulate writes a dataset in CSV: name it .csv"),
+    (["simulate", "--random", "5", "-o", "d.toml"], "-o d.toml: simulate writes a dataset in CSV"),
+    (["fit", "nothere.csv", "-o", "m.csv"], "-o m.csv: fit writes a model in JSON: name it .json"),
+    (["identify", "nothere.csv", "-o", "u.json"], "-o u.json: the unit file is a sensor file in TOML: name it .toml"),
+])
+def test_an_output_named_as_another_kind_of_file_is_refused_before_the_work(args, said, tmp_path):
+    """simulate -o x.json wrote CSV into a .json file without a word (identify refused a .csv unit file already)."""
+    assert_one_line_error(run_cli("fitgen", *args, cwd=tmp_path), 2, said)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_codes_that_are_not_whole_or_beyond_int32_are_named_by_row_and_column(tmp_path):
     from fitgen.equations.fixedpoint import build_fixed
     from fitgen.base.errors import InputError

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from fitgen import __version__
 from fitgen.app.calibrate_cli import add_calibration_commands, cmd_identify, cmd_schedule
-from fitgen.app.cliutil import Parser, check_not_empty, check_written, command_main, count, finite
+from fitgen.app.cliutil import Parser, check_not_empty, check_output_kind, check_written, command_main, count, finite
 from fitgen.app.options import MAX_NOISE, fit_settings, noise_of, sensor_of
 from fitgen.base.parse import parse_assignments, parse_names
 from fitgen.base.errors import InputError
@@ -490,8 +490,7 @@ def _check(args) -> None:
             raise InputError(f"--{flag.replace('_', '-')} must be at most {MAX_POSES:,} poses, got {n}")
     # -o is a file for these; a folder for codegen and tradeoff
     check_written(args, files=(cmd_simulate, cmd_fit, cmd_predict, cmd_report, cmd_identify, cmd_schedule))
-    if args.func is cmd_identify and Path(args.output).suffix.lower() in (".csv", ".json"):  # said before the work
-        raise InputError(f"-o {args.output}: the unit file is a sensor file in TOML: name it .toml (e.g. unit.toml)")
+    check_output_kind(args)  # said before the work
 
 
 def main(argv=None) -> int:

@@ -249,6 +249,22 @@ def check_written(args, files=()) -> None:
         written.append((flag, path))
 
 
+# per command, the suffixes of another kind of file than its -o writes, and what it writes
+OUTPUT_KINDS = {"identify": ((".csv", ".json"), "the unit file is a sensor file in TOML: name it .toml (e.g. unit.toml)"),
+                "simulate": ((".json", ".toml"), "simulate writes a dataset in CSV: name it .csv (its meta goes "
+                             "beside it)"),
+                "fit": ((".csv", ".toml"), "fit writes a model in JSON: name it .json (e.g. model.json)")}
+
+
+def check_output_kind(args) -> None:
+    """InputError when ``-o`` is named as another kind of file than the command writes (a dataset called .json)."""
+    from pathlib import Path
+
+    kind = OUTPUT_KINDS.get(getattr(args, "command", None))
+    if kind and isinstance(args.output, str) and Path(args.output).suffix.lower() in kind[0]:
+        raise InputError(f"-o {args.output}: {kind[1]}")
+
+
 def check_not_empty(args) -> None:
     """An option given as an empty string is refused (it would otherwise fall back to its default unsaid)."""
     for name, value in vars(args).items():
