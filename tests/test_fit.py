@@ -127,6 +127,8 @@ def test_predict_and_report_cli(paper_fit, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "max error per dz level" in proc.stdout and "paper sim max" in proc.stdout
     assert f"Model {model.sha256[:12]}: 5 outputs, 8 inputs (mT)" in proc.stdout
+    written = run_cli("fitgen", "report", str(folder / "m.json"), "-o", str(tmp_path / "w.md"))  # said, as by the rest
+    assert written.returncode == 0 and written.stderr.strip() == f"wrote {tmp_path / 'w.md'}" and not written.stdout
     one = dataclasses.replace(model, equations=model.equations[:1], fit_info={})  # said in the singular
     assert f"Model {one.sha256[:12]}: 1 output, 8 inputs" in format_report(one)
     assert (tmp_path / "plots" / "estimate_thx.png").stat().st_size > 1000

@@ -272,7 +272,9 @@ def cmd_report(args) -> int:
     figures = plots.report_figures(model, ds, sensor) if folder is not None else {}
     files = [(args.output, text)] if args.output else []
     paths = write_all(files + [(folder / name, png) for name, png in figures.items()])
-    if not args.output:
+    if args.output:
+        print(f"wrote {paths[0]}", file=sys.stderr)  # as every command that writes says
+    else:
         print(text, end="")
     if figures:
         print("plots: " + ", ".join(str(p) for p in paths[-len(figures):]), file=sys.stderr)
