@@ -549,6 +549,14 @@ def test_every_error_line_of_a_subcommand_starts_with_its_name(args, tmp_path):
         assert proc.stderr.strip() == "fitgen fit: error: unrecognized arguments: --bogus x"
 
 
+@pytest.mark.parametrize("tool, command", [("fitgen", "simulate"), ("tactile-host", "read"), ("tactile-hil", "emulate")])
+def test_a_command_given_nothing_lists_its_subcommands(tool, command):
+    """`fitgen` alone said one line, "the following arguments are required: command", and named none."""
+    proc = run_cli(tool)
+    assert proc.returncode == 2 and proc.stderr.startswith(f"usage: {tool}") and command in proc.stderr, proc.stderr
+    assert "thin layer" not in proc.stderr  # the module's docstring is not the command's description
+
+
 @pytest.mark.parametrize("args, said", [
     (["simulate", "--random", "5", "-o", "d.json"], "-o d.json: simulate writes a dataset in CSV: name it .csv"),
     (["simulate", "--random", "5", "-o", "d.toml"], "-o d.toml: simulate writes a dataset in CSV"),

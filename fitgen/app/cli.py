@@ -325,7 +325,8 @@ def cmd_demo(args) -> int:
 
 
 def build_parser() -> Parser:
-    p = Parser(prog="fitgen", description=__doc__)
+    p = Parser(prog="fitgen", description="A magnetic tactile sensor's estimate equations: simulate its readings, "
+               "fit the equations, calibrate a built unit from a capture, and generate C (README.md; docs/)")
     p.add_argument("--version", action="version", version=f"fitgen {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
 

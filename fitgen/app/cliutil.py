@@ -176,6 +176,9 @@ def command_main(build_parser, argv, prog: str, check=None):
 
     def main_fn(argv) -> int:
         parser = build_parser()
+        if not (sys.argv[1:] if argv is None else argv):  # nothing asked: the commands there are, not one error
+            parser.print_help(sys.stderr)
+            return EXIT_USAGE
         args, extra = parser.parse_known_args(argv)
         name[0] = f"{prog} {args.command}"
         if extra:  # said by the subcommand's parser, so that the line starts with its name as its other errors do

@@ -308,7 +308,8 @@ def _adc_options(p, required: bool = True, sensor_help: str | None = None) -> No
 def build_parser() -> Parser:
     from fitgen.c.verify import MAX_VECTORS, add_held_out_options
 
-    p = Parser(prog="tactile-host", description=__doc__)
+    p = Parser(prog="tactile-host", description="Tools beside the sensor's hardware: read it live over I2C (or a "
+               "simulated bus), capture calibration rows, build and flash firmware (docs/readout.md)")
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     v = sub.add_parser("verify", help="compile the generated C and compare it with the Python evaluation")
     v.add_argument("model", metavar="MODEL", help="model file (fitgen fit)")
