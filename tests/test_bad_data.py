@@ -68,11 +68,11 @@ def test_quoted_numbers_read_as_numbers_and_an_unnamed_column_is_named(data, tmp
                           contains="line 5, column v2: '1,5' is not a number")
     trailing = tmp_path / "trailing.csv"
     trailing.write_text("\n".join(ln + "," for ln in [head] + rows) + "\n")
-    for argv in (["fit", str(trailing)], ["simulate", "--poses", str(trailing)]):
-        assert_one_line_error(run_cli("fitgen", *argv, "-o", str(tmp_path / "m.json")),
+    for argv, out in ((["fit", str(trailing)], "m.json"), (["simulate", "--poses", str(trailing)], "d.csv")):
+        assert_one_line_error(run_cli("fitgen", *argv, "-o", str(tmp_path / out)),
                               contains=f"column {len(head.split(',')) + 1} of the header has no name (the line "
                                        "ends in a comma)")
-    assert not (tmp_path / "m.json").exists()
+        assert not (tmp_path / out).exists()
 
 
 def test_a_dead_element_in_the_rows_is_said_by_fit(data, tmp_path):
