@@ -271,6 +271,29 @@ def sha256_hex(data: str | bytes) -> str:
     return hashlib.sha256(raw).hexdigest()
 
 
+def text_kind(text: str) -> str:
+    """What a text a loader could not read reads as, for the refusal to name it: "toml" (keys in TOML: a sensor or
+    unit file), "json" (a model or a meta file), "csv" (a comma in its first line, comments and blank lines
+    skipped: a dataset), or "" for none of these."""
+    import sys
+
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+
+    first = next((ln.strip() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
+    if first.startswith("[") or "=" in first:
+        try:
+            if tomllib.loads(text):
+                return "toml"
+        except ValueError:  # TOMLDecodeError is one
+            pass
+    if first.startswith(("{", "[")):
+        return "json"
+    return "csv" if "," in first else ""
+
+
 def read_text(path: str | os.PathLike, what: str) -> str:
     """A text file's content; a missing or unreadable file is an InputError naming ``what``."""
     try:

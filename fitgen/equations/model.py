@@ -16,7 +16,7 @@ import numpy as np
 
 from fitgen import __version__
 from fitgen.base.errors import InputError, finite_number, is_finite_number
-from fitgen.base.fileio import canonical_json, read_text, sha256_hex, write_atomic
+from fitgen.base.fileio import canonical_json, read_text, sha256_hex, text_kind, write_atomic
 from fitgen.equations.fma import fma as fused_multiply_add
 from fitgen.physics.dataset import READING_UNITS
 from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
@@ -283,10 +283,8 @@ def load_model(path: str | Path) -> Model:
     try:
         data = json.loads(text)
     except ValueError as exc:
-        # a dataset or a sensor file given for the model: named as such (a TOML file's comments skipped)
-        first = next((ln.strip() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
-        seen = ("TOML (a sensor file?)" if first.startswith("[") or "=" in first else
-                "CSV (a dataset?)" if "," in first else "")
+        # a dataset or a sensor file given for the model: named as such
+        seen = {"toml": "TOML (a sensor file?)", "csv": "CSV (a dataset?)"}.get(text_kind(text))
         raise InputError(f"{origin}: " + (f"{seen}, not a model (JSON, as fitgen fit writes it)" if seen else
                                           f"not valid JSON: {exc}")) from None
     return model_from_dict(data, origin)

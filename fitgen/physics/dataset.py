@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError, is_finite_number
-from fitgen.base.fileio import read_text, real_file, sha256_hex, write_all
+from fitgen.base.fileio import read_text, real_file, sha256_hex, text_kind, write_all
 from fitgen.base.parse import MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, off_skin
 
@@ -150,29 +150,16 @@ def _find_bad_cell(text: str, names: list[str], origin: str) -> InputError:
     return InputError(f"{origin}: cannot parse as CSV numbers")
 
 
-def _is_toml(first: str, text: str) -> bool:
-    """Whether ``text``, whose first line is ``first``, reads as a TOML file of keys (a sensor file): only tried
-    where that line could open one (a comment, a table, a key) and is no CSV header (a comma)."""
-    import tomllib
-
-    head = first.strip()
-    if not (head.startswith(("#", "[")) or "=" in head) or "," in head.split("#")[0]:
-        return False
-    try:
-        return bool(tomllib.loads(text))
-    except tomllib.TOMLDecodeError:
-        return False
-
-
 def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
     """Header names (each once) and a finite float table from CSV text; errors name line and column."""
     lines = text.splitlines()
     if not lines or not lines[0].strip():
         raise InputError(f"{origin}: empty file")
-    if _is_toml(lines[0], text):
+    kind = text_kind(text)
+    if kind == "toml":
         raise InputError(f"{origin}: TOML, not CSV (a sensor or unit file? those go to --sensor); a dataset is a CSV "
                          "with the header v1,...,vN,dx,dy,dz,thx,thy")
-    if lines[0].lstrip().startswith(("{", "[")):
+    if kind == "json":
         raise InputError(f"{origin}: JSON, not CSV (a model or meta file?); a dataset is a CSV with the header "
                          "v1,...,vN,dx,dy,dz,thx,thy")
     # comment lines before the header are skipped as those in the body are (an Arduino's "# tare: ..." line)

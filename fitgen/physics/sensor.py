@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import canonical_json, read_text, sha256_hex
+from fitgen.base.fileio import canonical_json, read_text, sha256_hex, text_kind
 from fitgen.physics.tolerances import STIFFENING_MAX, TOLERANCE_MAX, Tolerances
 
 if sys.version_info >= (3, 11):
@@ -493,8 +493,7 @@ def load_sensor(spec: str | Path) -> Sensor:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        first = text.lstrip().partition("\n")[0]
-        seen = "JSON (a model or meta file?)" if first.startswith("{") else "CSV (a dataset?)" if "," in first else ""
+        seen = {"json": "JSON (a model or meta file?)", "csv": "CSV (a dataset?)"}.get(text_kind(text))
         raise InputError(f"{origin}: " + (f"{seen}, not a sensor file (TOML)" if seen else f"not valid TOML: {exc}")
                          ) from None
     return parse_sensor(data, origin)
