@@ -526,8 +526,8 @@ def test_a_schedule_for_a_file_without_the_transfers_noise_names_where_it_goes(t
     mine.write_text(re.sub(r"(?m)^noise\s*=\s*0\.0005\s*# V rms.*\n", "", text).replace('"paper"', '"mine"'))
     assert_one_line_error(run_cli("fitgen", "schedule", "--sensor", str(mine), "--n", "20", "-o",
                                   str(tmp_path / "s.csv")), 2,
-                          "sensor mine gives none for its gmr transfer (noise in [transfer.gmr]); add it, or give "
-                          "--noise (or --transfer")
+                          "sensor mine gives no noise figure for its gmr transfer (noise missing or 0 in "
+                          "[transfer.gmr]): add it to the file, or give --noise (or --transfer")
 
 
 def test_schedule_keeps_to_the_travel_and_bounds_five_axes():

@@ -25,9 +25,9 @@ def noise_of(value: str, sensor, most: float | None = None) -> float:
     that leaves it out reads 0, and 'the sensor's noise' would then add none without a word)."""
     if value == "sensor":
         if not sensor.noise > 0:
-            raise InputError(f"--noise sensor: sensor {sensor.name} gives no noise figure for its {sensor.transfer} "
-                             f"transfer (missing or 0 in [transfer.{sensor.transfer}]): add it to the file, or give "
-                             "--noise a figure")
+            from fitgen.physics.transfer import missing_noise
+
+            raise InputError(f"--noise sensor: {missing_noise(sensor)}: add it to the file, or give --noise a figure")
         return sensor.noise
     try:
         x = parse_noise(value)

@@ -37,7 +37,7 @@ from fitgen.physics.dataset import meta_path
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, contact_top, field_readings, off_skin
 from fitgen.physics.sensor import TRAVEL_AXES, Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
-from fitgen.physics.transfer import linear_top
+from fitgen.physics.transfer import linear_top, missing_noise
 
 LEVELS = 9  # grid levels per moving axis
 MAX_CANDIDATES = 20_000  # fewer levels where LEVELS ** axes would pass it (five axes: 7 levels, not 59,049 poses)
@@ -207,9 +207,8 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     check_error("zero error", zero_error)
     noise = drawing.noise if noise is None else noise
     if not noise > 0:
-        raise InputError(f"the schedule needs the reading noise > 0: sensor {drawing.name} gives none for its "
-                         f"{drawing.transfer} transfer (noise in [transfer.{drawing.transfer}]); add it, or give "
-                         "--noise (or --transfer, for the transfer whose noise the file gives)")
+        raise InputError(f"the schedule needs the reading noise > 0: {missing_noise(drawing)}: add it to the file, "
+                         "or give --noise (or --transfer, for the transfer whose noise the file gives)")
     space = unit_space(drawing)
     cand, ranges, beyond = capture_candidates(drawing, axes, ranges, rig_error, zero_error)
     total = n + MAX_PASSES + 1

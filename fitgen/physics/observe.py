@@ -11,7 +11,7 @@ from fitgen.base.errors import InputError
 from fitgen.physics.pose import (POSE_NAMES, POSE_UNITS, as_poses, board_clearance, check_above_board, check_box,
                                  field_readings, pose_label)
 from fitgen.physics.sensor import Sensor
-from fitgen.physics.transfer import apply_transfer, past_linear, step_rms
+from fitgen.physics.transfer import apply_transfer, missing_noise, past_linear, step_rms
 
 # central-difference steps (mm, deg): small against the field's length scale (mm),
 # large against rounding (readings ~1 mT, eps ~1e-16)
@@ -225,9 +225,8 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
     from fitgen.physics.simulate import pose_rng, random_poses
 
     if noise is None and not sensor.noise > 0:  # a file without one reads 0: every bound would be 0
-        raise InputError(f"sensor {sensor.name} gives no noise figure for its {sensor.transfer} transfer (noise "
-                         f"missing or 0 in [transfer.{sensor.transfer}]): add it to the file, or give --noise; "
-                         "without noise every pose component is resolved to 0, resolvable or not")
+        raise InputError(f"{missing_noise(sensor)}: add it to the file, or give --noise; without noise every pose "
+                         "component is resolved to 0, resolvable or not")
     check_box(sensor, ranges, "observe")
     extra = [c for c in (accuracy or {}) if c not in components]
     if extra:  # it would be ignored: say so rather than judge without it

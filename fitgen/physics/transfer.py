@@ -24,6 +24,12 @@ def quantise(x: np.ndarray, lo: float, hi: float, bits: int) -> np.ndarray:
     return lo + np.round((x - lo) / lsb) * lsb
 
 
+def missing_noise(sensor: Sensor) -> str:
+    """The words for a sensor whose active transfer gives no reading noise (a file that leaves it out reads 0)."""
+    return (f"sensor {sensor.name} gives no noise figure for its {sensor.transfer} transfer (noise missing or 0 in "
+            f"[transfer.{sensor.transfer}])")
+
+
 def step_rms(sensor: Sensor) -> tuple[float, float]:
     """The active transfer's ADC step (LSB, in its units) and its rounding as noise, LSB / sqrt(12); (0, 0) where
     it does not quantise."""
