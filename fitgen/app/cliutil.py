@@ -252,6 +252,8 @@ def check_written(args, files=()) -> None:
         written.append((flag, path))
 
 
+STYLE_WITH_FIXED = "--style does not apply to --precision fixed (its header is straight-line code)"
+
 # per command, the suffixes of another kind of file than its -o writes, and what it writes
 OUTPUT_KINDS = {"identify": ((".csv", ".json"), "the unit file is a sensor file in TOML: name it .toml (e.g. unit.toml)"),
                 "simulate": ((".json", ".toml"), "simulate writes a dataset in CSV: name it .csv (its meta goes "

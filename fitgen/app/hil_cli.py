@@ -12,7 +12,8 @@ import sys
 import threading
 import time
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, check_written, command_main, count, seconds, tcp_port
+from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, check_written, command_main, count, seconds,
+                               tcp_port)
 from fitgen.base.errors import InputError
 
 
@@ -130,7 +131,7 @@ def cmd_emulate(args) -> int:
     _check_counts(args)
     args.precision = args.precision or ("fixed" if args.target == "microbit" else "float")  # as codegen's --target
     if args.precision == "fixed" and args.style is not None:  # as codegen refuses it: it would be ignored
-        raise InputError("--style does not apply to --precision fixed (its header is straight-line code)")
+        raise InputError(STYLE_WITH_FIXED)
     args.style = args.style or "table"
     if args.target == "host" and args.port is not None:  # its UART is a pseudo-terminal, not a TCP port
         raise InputError("--port is the emulated UART's TCP port, and the host target has none (its UART is a "

@@ -73,7 +73,7 @@ def _why_empty(knobs: dict) -> str:
 
 def run_tradeoff(args, sensor) -> int:
     """The command: parse the knobs, sweep, write the report; exit status 1 when rounding is over its share."""
-    from fitgen.app.cliutil import EXIT_CHECK_FAILED
+    from fitgen.app.cliutil import EXIT_CHECK_FAILED, STYLE_WITH_FIXED
     from fitgen.app.tradeoff_report import write_outputs
     from fitgen.base.fileio import check_folder
     from fitgen.base.progress import Progress
@@ -86,8 +86,7 @@ def run_tradeoff(args, sensor) -> int:
     if args.jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {args.jobs}")
     if "style" in knobs and knobs.get("precision") == ["fixed"]:  # it would be swept in its one style, unsaid
-        raise InputError("--style does not apply to --precision fixed (its header is straight-line code): leave "
-                         "--style out")
+        raise InputError(f"{STYLE_WITH_FIXED}: leave --style out")
     scene = load_scene(args.scene)
     target = parse_target(args.target, scene.outputs)
     grid = grid_from(**knobs) if args.full or knobs else quick_grid()

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fitgen.app.cliutil import EXIT_CHECK_FAILED
+from fitgen.app.cliutil import EXIT_CHECK_FAILED, STYLE_WITH_FIXED
 from fitgen.base.errors import InputError
 from fitgen.base.progress import Progress
 
@@ -18,7 +18,7 @@ def cmd_verify(args) -> int:
     model = load_model(args.model)
     precisions = ("double", "float") if args.precision == "both" else (args.precision,)
     if args.style is not None and args.precision == "fixed":  # as codegen refuses it
-        raise InputError("--style does not apply to --precision fixed (its header is straight-line code)")
+        raise InputError(STYLE_WITH_FIXED)
     styles = STYLES if args.style in (None, "both") else (args.style,)
     if (args.input_lsb is not None or args.input_offset is not None) and args.precision != "fixed":
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
