@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -281,3 +282,59 @@ def test_the_header_keeps_its_bits_and_its_guard_under_fast_math(two_radii, cc):
             np.testing.assert_array_equal(out[:len(v)], ref, err_msg=f"{precision} {style} {flags}")
             np.testing.assert_array_equal(status[:len(v)], ref_status)
             assert np.all(status[len(v):] == -1) and np.all(out[len(v):] == 0), (precision, style, status[len(v):])
+
+
+FUSED_AT_O3 = Path(__file__).resolve().parent / "data" / "model_gcc_fuses_at_O3.json"  # the paper, no roots
+
+
+def _fused(header_dir: Path, flags: list[str], tmp: Path) -> int:
+    """Fused multiply-add instructions gcc puts into tm_estimate's object with ``flags``."""
+    src = tmp / "call.c"
+    src.write_text('#include "tm_model.h"\nint call(const tm_real *i, tm_real *o);\n'
+                   "int call(const tm_real *i, tm_real *o) { return tm_estimate(i, o); }\n")
+    obj = tmp / "call.o"
+    proc = subprocess.run(["gcc", "-std=c99", *flags, "-I", str(header_dir), "-c", str(src), "-o", str(obj)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    dump = subprocess.run([require_tool("objdump"), "-d", str(obj)], capture_output=True, text=True).stdout
+    return sum(bool(re.search(r"\svfn?m", line)) for line in dump.splitlines())
+
+
+@pytest.mark.bitexact
+def test_gcc_at_O3_does_not_fuse_what_its_vectoriser_pairs(tmp_path):
+    """GCC 12's basic-block vectoriser at -O3 (and -Ofast) on a core with an FMA paired an add with a subtract in
+    this model's double unrolled header and fused them with a product (vfmsubadd), fp-contract=off or not: 43 of
+    2,500 held-out outputs differed from Model.predict. The header turns that vectoriser off; `tactile-host verify
+    --cc "gcc -O3 ..."` builds at -O3 (it built at -O2 whatever --cc said) and finds the bits Python's."""
+    from fitgen.c.cgen import GCC_FP
+    from fitgen.equations.model import load_model
+
+    require_tool("gcc")
+    model = load_model(FUSED_AT_O3)
+    header = write_header(model, tmp_path / "h", precision="double", style="unrolled")
+    flags = ["-O3", "-march=x86-64-v3"]  # compiled only: any x86-64 can build for an FMA
+    assert _fused(header.parent, flags, tmp_path) == 0
+    if subprocess.run(["gcc", "-dumpversion"], capture_output=True, text=True).stdout.strip().split(".")[0] == "12":
+        # the version the docs name: without the vectoriser off, the fused instruction is there
+        old = GCC_FP.replace(', "no-tree-slp-vectorize"', "")
+        assert old != GCC_FP
+        header.write_text(header.read_text().replace(GCC_FP, old))
+        assert _fused(header.parent, flags, tmp_path) > 0
+    if _has_fma():  # where the build can run: verify at the user's -O3 and -Ofast
+        for cc in ("gcc -O3 -march=x86-64-v3", "gcc -Ofast -march=x86-64-v3"):
+            proc = run_cli("tactile-host", "verify", str(FUSED_AT_O3), "--precision", "double", "--style",
+                           "unrolled", "--cc", cc, "--vectors", "500")
+            assert proc.returncode == 0, (cc, proc.stdout[-1500:], proc.stderr[-500:])
+
+
+def test_the_users_compiler_flags_come_after_the_projects(monkeypatch, tmp_path):
+    """--cc "gcc -O3 -std=gnu99": the build checked is the one the user asked for, not the project's -O2 c99."""
+    from fitgen.c import compiled
+
+    seen = []
+    monkeypatch.setattr(compiled, "run_tool", lambda cmd, *a, **k: seen.append(cmd) or
+                        subprocess.CompletedProcess(cmd, 0, "", ""))
+    compiled.compile_checked("gcc -O3 -std=gnu99", [tmp_path / "a.c"], tmp_path / "a", tmp_path)
+    cmd = seen[0]
+    assert cmd[0] == "gcc"
+    assert cmd.index("-O3") > cmd.index("-O2") and cmd.index("-std=gnu99") > cmd.index("-std=c99"), cmd

@@ -21,7 +21,8 @@ def compile_checked(cc: str, sources: list[Path], output: Path, include: Path, e
                     link: bool = True) -> None:
     """Compile with the project's warning flags; a warning is an error (InputError with the compiler's text)."""
     tool = tool_command(cc, "compiler")
-    cmd = tool + WARNING_FLAGS + ["-O2", "-I", str(include)] + (extra or [])
+    # the flags in `cc` after the project's, so that the user's -O3 or -std=gnu99 is the build that is checked
+    cmd = tool[:1] + WARNING_FLAGS + ["-O2"] + tool[1:] + ["-I", str(include)] + (extra or [])
     cmd += [str(s) for s in sources] + (["-o", str(output), "-lm"] if link else ["-c", "-o", str(output)])
     proc = run_tool(cmd, "compiler", None)
     if proc.returncode != 0:
