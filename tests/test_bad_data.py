@@ -93,6 +93,24 @@ def test_a_dead_element_in_the_rows_is_said_by_fit(data, tmp_path):
     assert proc.returncode == 0 and "on every row" not in proc.stderr, proc.stderr
 
 
+def test_a_channel_read_twice_is_said_by_fit(data, tmp_path):
+    """v2 equal to v1 on every row (a channel map that lists one channel twice) was fitted in silence, both
+    columns' terms kept side by side with equal weights."""
+    from fitgen.physics.dataset import load_dataset
+
+    ds = load_dataset(data)
+    rows = ds.inputs.copy()
+    rows[:, 1] = rows[:, 0]
+    type(ds)(rows, ds.targets, ds.target_names).save(tmp_path / "twice.csv")
+    proc = run_cli("fitgen", "fit", str(tmp_path / "twice.csv"), "-o", str(tmp_path / "m.json"))
+    assert proc.returncode == 0, proc.stderr
+    assert "note: v2 reads what v1 reads on every row: one ADC channel read twice" in proc.stderr, proc.stderr
+    rows[:, 1] = rows[:, 0] * 2  # proportional, not the same: another element
+    type(ds)(rows, ds.targets, ds.target_names).save(tmp_path / "twice.csv")
+    proc = run_cli("fitgen", "fit", str(tmp_path / "twice.csv"), "-o", str(tmp_path / "m.json"))
+    assert proc.returncode == 0 and "reads what" not in proc.stderr, proc.stderr
+
+
 def test_rows_repeated_exactly_are_said_by_fit(data, tmp_path):
     """Every row twice was fitted in silence, though AIC then counts each repeat as a measurement of its own."""
     from fitgen.physics.dataset import load_dataset

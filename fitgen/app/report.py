@@ -276,6 +276,13 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
                      f"{ds.inputs[0, flat[0]]:g} {model.input_units}): dead elements, broken wires, empty ADC "
                      "channels, or elements saturated throughout; the equations learn nothing from them, and the "
                      "device will clamp them to those values")
+    copies = {j: i for j in range(ds.n_inputs) for i in reversed(range(j))
+              if j not in flat and np.array_equal(ds.inputs[:, i], ds.inputs[:, j])}
+    if copies:  # its terms and the original's are one column to the fit: both stay in, weighed against each other
+        said = ", ".join(f"v{j + 1} reads what v{i + 1} reads" for j, i in copies.items())
+        notes.append(f"{said} on every row: one ADC channel read twice (a channel map that lists it twice) or two "
+                     "elements wired together; the fit learns nothing from the copy, and on a device that reads them "
+                     "apart the estimates will be off by however much they differ")
     table = np.ascontiguousarray(np.hstack([ds.inputs, ds.targets]))
     repeats = rows - np.unique(table.view(np.dtype((np.void, table.itemsize * table.shape[1])))).size
     if repeats:  # a row counted twice weighs twice and adds to n in AIC: terms are admitted on less evidence
