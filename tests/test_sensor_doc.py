@@ -345,8 +345,8 @@ def test_the_unit_keys_are_the_ones_fitgen_writes(tmp_path):
     from fitgen.physics.units import unit_beside
 
     doc = {r["key"] for r in _doc_rows()["unit"]}
-    _, path, _ = unit_beside(load_sensor("paper"), 1, tmp_path / "d.csv")  # fitgen simulate --unit's
-    written = set(tomllib.loads(path.read_text())["unit"])
+    _, _, text, _ = unit_beside(load_sensor("paper"), 1, tmp_path / "d.csv")  # fitgen simulate --unit's
+    written = set(tomllib.loads(text)["unit"])
     # fitgen identify's: unit_files' own provenance (prov = {...}) and what calibrate_cli hands it
     rec = ast.parse((ROOT / "fitgen" / "fitting" / "unitrecord.py").read_text())
     func = next(n for n in ast.walk(rec) if isinstance(n, ast.FunctionDef) and n.name == "unit_files")

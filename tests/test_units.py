@@ -295,6 +295,13 @@ def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
         assert_one_line_error(proc, contains="is a built unit, not a drawing: give the drawing it was built to (paper, "
                                              "as its [unit] table says)")
         assert not (tmp_path / "again.csv").exists()
+    # a refusal again into the same name keeps the first run's files, the unit's too (it was deleted: the data's
+    # meta then named a missing file, and fit refused them)
+    before = {f.name: f.read_bytes() for f in tmp_path.iterdir()}
+    proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "2", "--grid", "dz=-20",
+                   "-o", str(out))
+    assert_one_line_error(proc, contains="in or through the board")
+    assert {f.name: f.read_bytes() for f in tmp_path.iterdir()} == before
     # magnet labels on the drawing would be the stage's: said, not written
     assert_one_line_error(run_cli("fitgen", "simulate", "--labels", "magnet", "--grid", "dx=0", "-o",
                                   str(tmp_path / "again.csv")), 2, "--labels magnet is for a built unit")

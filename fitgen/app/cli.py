@@ -36,26 +36,22 @@ def cmd_simulate(args) -> int:
     if args.labels == "magnet" and args.unit is None and sensor.is_drawing:
         raise InputError("--labels magnet is for a built unit (--unit SEED, or a unit's file as --sensor): on the "
                          "drawing the stage moves the magnet one to one, so the labels are the same")
-    unit = None
+    unit, beside = None, []
     if args.unit is not None:
         from fitgen.physics.units import unit_beside
 
         drawing = sensor
-        sensor, unit, unit_info = unit_beside(drawing, args.unit, args.output)
-    try:
-        from fitgen.base.progress import Progress
+        sensor, unit, text, unit_info = unit_beside(drawing, args.unit, args.output)
+        beside = [(unit, text)]  # written with the data or not at all: a refusal keeps an earlier run's
+    from fitgen.base.progress import Progress
 
-        with Progress("simulate", 2) as bar:  # seen on a terminal when many poses take seconds
-            bar.update(0, f"{len(poses):,} poses")
-            ds = simulate(sensor, poses, noise=noise, adc_bits=args.adc_bits,
-                          seed=args.seed, provenance={**source, **unit_info}, labels=args.labels)
-            bar.update(1, "writing")
-            ds.save(args.output)
-            bar.update(1, "written")
-    except BaseException:
-        if unit is not None:
-            unit.unlink(missing_ok=True)  # no unit file without the data it was drawn for
-        raise
+    with Progress("simulate", 2) as bar:  # seen on a terminal when many poses take seconds
+        bar.update(0, f"{len(poses):,} poses")
+        ds = simulate(sensor, poses, noise=noise, adc_bits=args.adc_bits,
+                      seed=args.seed, provenance={**source, **unit_info}, labels=args.labels)
+        bar.update(1, "writing")
+        ds.save(args.output, beside=beside)
+        bar.update(1, "written")
     if unit is not None:
         print(f"wrote unit {sensor.name} (a unit of {drawing.name}) to {unit}", file=sys.stderr)
     notes = "".join(f"note: {n}\n" for n in simulate_notes(sensor, poses, args.labels, args.sensor, args.adc_bits)

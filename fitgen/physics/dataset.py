@@ -74,15 +74,16 @@ class Dataset:
             cached = self.__dict__["_sha256"] = (key, sha256_hex(self.to_csv_text()))
         return cached[1]
 
-    def save(self, path: str | Path, meta: dict | None = None) -> Path:
-        """Write the CSV and, beside it, ``<path>.meta.json`` with provenance: both or neither (a CSV whose meta
-        could not be written would be read as measured data)."""
+    def save(self, path: str | Path, meta: dict | None = None, beside=()) -> Path:
+        """Write the CSV and, beside it, ``<path>.meta.json`` with provenance, and every ``(path, text)`` of
+        ``beside`` (a unit's file): all or none (a CSV whose meta could not be written would be read as measured
+        data)."""
         text = self.to_csv_text()
         info = dict(self.meta if meta is None else meta)
         info["dataset_sha256"] = sha256_hex(text)
         info["rows"] = self.n_rows
         info["columns"] = self.columns
-        write_all([(path, text), (meta_path(path), json.dumps(info, indent=2, sort_keys=True) + "\n")])
+        write_all([(path, text), (meta_path(path), json.dumps(info, indent=2, sort_keys=True) + "\n"), *beside])
         return Path(path)
 
 

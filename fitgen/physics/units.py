@@ -33,7 +33,7 @@ from fitgen.base.errors import InputError
 from fitgen.physics.field import cylinder_projection
 from fitgen.base.fileio import write_atomic
 from fitgen.physics.pose import as_poses, contact_poses, pressed, rotation_matrices
-from fitgen.physics.sensor import Magnet, Sensor, load_sensor
+from fitgen.physics.sensor import Magnet, Sensor, load_sensor, parse_sensor, tomllib
 from fitgen.physics.tolerances import Tolerances
 from fitgen.physics.transfer import volts_per_mt
 
@@ -307,12 +307,14 @@ def write_unit(path: str | Path, unit: Sensor, drawing: str, provenance: dict | 
     return write_atomic(path, unit_toml(unit, drawing, provenance))
 
 
-def unit_beside(drawing: Sensor, seed: int, data_path: str | Path) -> tuple[Sensor, Path, dict]:
-    """A unit of ``drawing`` drawn with ``seed`` for the dataset ``data_path``: written beside it
-    (:func:`unit_path`) and read back, so that data simulated with it and the file agree to the last
-    bit; the unit (in the drawing's transfer), its file and the dataset meta that names it."""
+def unit_beside(drawing: Sensor, seed: int, data_path: str | Path) -> tuple[Sensor, Path, str, dict]:
+    """A unit of ``drawing`` drawn with ``seed`` for the dataset ``data_path``: read back from its file's text,
+    so that data simulated with it and the file agree to the last bit; the unit (in the drawing's transfer), the
+    file's path beside the data (:func:`unit_path`), its text, and the dataset meta that names it. Nothing is
+    written: the file goes with the data (``Dataset.save(..., beside=...)``), so that a refusal keeps the old."""
     unit, _ = draw_unit(drawing, seed)
-    path = write_unit(unit_path(data_path), unit, drawing.name,
-                      {"seed": seed, "source": "drawn within the drawing's tolerances (fitgen simulate --unit)"})
+    path = unit_path(data_path)
+    text = unit_toml(unit, drawing.name,
+                     {"seed": seed, "source": "drawn within the drawing's tolerances (fitgen simulate --unit)"})
     info = {"sensor_file": str(path.resolve()), "unit_seed": seed, "drawing": drawing.name}
-    return load_sensor(path).with_transfer(drawing.transfer), path, info
+    return parse_sensor(tomllib.loads(text), f"sensor file {path}").with_transfer(drawing.transfer), path, text, info
