@@ -636,3 +636,21 @@ def test_a_long_option_shortened_is_refused_not_read_as_the_one_it_begins(cmd, t
     proc = run_cli(*cmd, "-o", str(out))
     assert_one_line_error(proc, contains=f"unrecognized arguments: {cmd[-2]} {cmd[-1]}")
     assert not out.exists()
+
+
+def test_a_file_name_too_long_and_brackets_nested_too_deep_are_one_line(tmp_path):
+    """Path.is_file() raises on a name over 255 bytes (it returns False for a missing file), and the JSON and TOML
+    parsers recurse per bracket: both came out as tracebacks, in every command that takes a file."""
+    long = tmp_path / ("a" * 300 + ".csv")
+    for argv in (("fitgen", "simulate", "--sensor", "paper", "--grid", "paper-exp", "-o", str(long)),
+                 ("fitgen", "fit", str(long), "-o", str(tmp_path / "m.json"))):
+        assert_one_line_error(run_cli(*argv), contains="a file name is too long for this system")
+    (tmp_path / "deep.json").write_text("[" * 100000 + "]" * 100000)
+    (tmp_path / "deep.toml").write_text("a = " + "[" * 100000 + "]" * 100000)
+    for argv in (("fitgen", "codegen", str(tmp_path / "deep.json"), "-o", str(tmp_path / "c")),
+                 ("fitgen", "simulate", "--sensor", str(tmp_path / "deep.toml"), "--grid", "dx=0", "-o",
+                  str(tmp_path / "d.csv")),
+                 ("tactile-host", "replay", str(tmp_path / "deep.json")),
+                 ("tactile-hil", "run", "--port", "socket://127.0.0.1:9", "--model", str(tmp_path / "deep.json"))):
+        assert_one_line_error(run_cli(*argv), contains="an input file nests brackets too deeply to read")
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["deep.json", "deep.toml"]

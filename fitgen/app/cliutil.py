@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import math
 import re
 import signal
@@ -141,6 +142,16 @@ def run(main_fn, argv=None, prog="") -> int:
     except OutputFailed as exc:
         _drop(stdout)
         print(f"{_name(prog)}: error: cannot write standard output: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:  # Path.is_file() and its kin raise this one where they return False for a missing file
+        if exc.errno != errno.ENAMETOOLONG:
+            raise
+        name = str(exc.filename or "")
+        print(f"{_name(prog)}: error: a file name is too long for this system ({name[:40]}...)", file=sys.stderr)
+        return EXIT_USAGE
+    except RecursionError:  # the JSON and TOML parsers recurse per bracket: no file fitgen writes nests so
+        print(f"{_name(prog)}: error: an input file nests brackets too deeply to read: not a file fitgen or "
+              "tactile-host wrote", file=sys.stderr)
         return EXIT_USAGE
     finally:
         sys.stdout = stdout
