@@ -654,3 +654,25 @@ def test_a_file_name_too_long_and_brackets_nested_too_deep_are_one_line(tmp_path
                  ("tactile-hil", "run", "--port", "socket://127.0.0.1:9", "--model", str(tmp_path / "deep.json"))):
         assert_one_line_error(run_cli(*argv), contains="an input file nests brackets too deeply to read")
     assert sorted(f.name for f in tmp_path.iterdir()) == ["deep.json", "deep.toml"]
+
+
+def test_a_huge_reading_is_one_line_in_identify_and_check(data, model_file, tmp_path):
+    """fit refused a reading beyond 1e30 where it is; identify gave a traceback from least_squares (residuals not
+    finite) or warnings and 'residuals infx the noise', check a cast's overflow warning before its verdict."""
+    from fitgen.physics.dataset import load_dataset
+
+    ds = load_dataset(data)
+    rows = ds.inputs.copy()
+    rows[3, 1] = 1e308
+    type(ds)(rows, ds.targets, ds.target_names).save(tmp_path / "huge.csv")
+    for argv in (("identify", str(tmp_path / "huge.csv"), "--sensor", "paper", "-o", str(tmp_path / "u.toml")),
+                 ("check", model_file, str(tmp_path / "huge.csv")),
+                 ("fit", str(tmp_path / "huge.csv"), "-o", str(tmp_path / "m.json"))):
+        assert_one_line_error(run_cli("fitgen", *argv), contains="data row 4, column v2, holds 1e+308: beyond any "
+                                                                 "reading or pose")
+    assert files(tmp_path) == ["huge.csv", "huge.csv.meta.json"]
+    # a reading too close to 0 for a negative power: one line naming term and row (numpy's warnings came first)
+    rows[3, 1] = 1e-320
+    type(ds)(rows, ds.targets, ds.target_names).save(tmp_path / "huge.csv")
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "huge.csv"), "-o", str(tmp_path / "m.json")),
+                          contains="candidate term v2^-1 for dx is not finite on data row 4 (an input too close to 0?)")

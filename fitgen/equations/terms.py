@@ -350,6 +350,20 @@ def design_matrix(terms: list[Term], inputs: np.ndarray, d: np.ndarray | None = 
     return cols
 
 
+def finite_design_matrix(terms: list[Term], inputs: np.ndarray, d: np.ndarray | None, harmonics: Harmonics | None,
+                         first_row: int, what: str = "") -> np.ndarray:
+    """:func:`design_matrix` of data rows ``first_row`` + 1.. for a fit; InputError naming the first term and row
+    that are not finite (a reading too close to 0 for a negative power), without numpy's warnings before it."""
+    with np.errstate(all="ignore"):
+        cols = design_matrix(terms, inputs, d, harmonics)
+    bad = np.argwhere(~np.isfinite(cols))
+    if bad.size:
+        r, c = bad[0]
+        raise InputError(f"candidate term {terms[c].text}{what} is not finite on data row {first_row + r + 1} (an "
+                         "input too close to 0?)")
+    return cols
+
+
 def element_power_slopes(v: np.ndarray, exponent: str) -> np.ndarray:
     """d(v ** exponent) / dv."""
     p = float(Fraction(exponent))

@@ -14,14 +14,14 @@ import numpy as np
 
 from fitgen import __version__
 from fitgen.fitting.augment import ROUNDING_FACTOR, UNIT_ROUNDOFF, gram_fold, noise_blocks, rounding_rows
-from fitgen.physics.dataset import Dataset
+from fitgen.physics.dataset import Dataset, refuse_huge
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Equation, Model
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.fitting.shared import SharedRows
 from fitgen.fitting.stepwise import compress, refit, stepwise
 from fitgen.equations.terms import (DISPLACEMENTS, EXPONENTS, FAMILIES, HARMONIC_DEGREE, ROTATIONS, Harmonics, candidate_terms,
-                    design_jacobian, design_matrix, initial_terms)
+                    design_jacobian, finite_design_matrix, initial_terms)
 
 
 @dataclass(frozen=True)
@@ -118,10 +118,8 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
                          f"for {name} with residual degrees of freedom; give at least {len(init) + 3} rows")
 
     def columns(lo, hi, terms=cands):
-        X = design_matrix(terms, inputs[lo:hi], None if d is None else d[lo:hi], harmonics)
-        if not np.all(np.isfinite(X)):
-            raise InputError(f"a candidate term for {name} is not finite on the data (an input too close to 0?)")
-        return X
+        return finite_design_matrix(terms, inputs[lo:hi], None if d is None else d[lo:hi], harmonics, lo,
+                                    f" for {name}")
 
     # keep at least one residual degree of freedom, so that RSS > 0 and AIC is finite
     cap = n - 2 if settings.max_terms is None else min(settings.max_terms, n - 2)
@@ -248,9 +246,6 @@ def ring_harmonics(ds: Dataset, sensor=None) -> Harmonics:
     return Harmonics.from_azimuths(np.where(np.hypot(x, y) < 1e-9, np.nan, np.arctan2(y, x)))
 
 
-HUGE = 1e30  # a reading or label beyond it is a typo or a unit error; its powers would overflow
-
-
 def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: FitSettings = FitSettings(),
               progress=None, sensor=None, forward=None, shared: SharedRows | None = None) -> Model:
     """Fit every requested output (default: all pose columns of the dataset), two stages.
@@ -268,11 +263,7 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
     if settings.d_source not in ("estimated", "true"):
         raise InputError(f"d_source must be 'estimated' or 'true', got {settings.d_source!r}")
     outputs = tuple(n for n in POSE_NAMES if n in outputs)
-    for values, names in ((ds.inputs, [f"v{k + 1}" for k in range(ds.n_inputs)]), (ds.targets, ds.target_names)):
-        big = np.argwhere(np.abs(values) > HUGE)
-        if big.size:  # its powers overflow: said where it is, not as a candidate term that is not finite
-            r, c = big[0]
-            raise InputError(f"data row {r + 1}, column {names[c]}, holds {values[r, c]:g}: beyond any reading or pose")
+    refuse_huge(ds)  # its powers overflow: said where it is, not as a candidate term that is not finite
     if settings.refine:
         from fitgen.fitting.refine_fit import check_refinable
 

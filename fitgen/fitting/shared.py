@@ -15,9 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from fitgen.fitting.augment import NoiseGrams
-from fitgen.base.errors import InputError
 from fitgen.fitting.stepwise import compress, triangle
-from fitgen.equations.terms import Term, design_matrix
+from fitgen.equations.terms import Term, finite_design_matrix
 
 ROWS = 1 << 14  # rows per block of the compressing QR, as fitgen.fitting.fit's
 
@@ -70,9 +69,7 @@ class SharedRows:
         t = self.targets
 
         def columns(lo, hi):
-            X = design_matrix(terms, self.inputs[lo:hi], None if d is None else d[lo:hi], self.harmonics)
-            if not np.all(np.isfinite(X)):
-                raise InputError("a candidate term is not finite on the data (an input too close to 0?)")
+            X = finite_design_matrix(terms, self.inputs[lo:hi], None if d is None else d[lo:hi], self.harmonics, lo)
             return np.hstack([X, t[lo:hi, :-1]])
 
         return {term: i + 1 for i, term in enumerate(terms)}, compress(columns, t[:, -1], block=ROWS)

@@ -87,6 +87,19 @@ class Dataset:
         return Path(path)
 
 
+HUGE = 1e30  # a reading or label beyond it is a typo or a unit error; its powers would overflow
+
+
+def refuse_huge(ds: Dataset) -> None:
+    """InputError naming the first reading or label beyond HUGE, where it is (not as a term that is not finite,
+    a cast's overflow or a residual that is not)."""
+    for values, names in ((ds.inputs, [f"v{k + 1}" for k in range(ds.n_inputs)]), (ds.targets, ds.target_names)):
+        big = np.argwhere(np.abs(values) > HUGE)
+        if big.size:
+            r, c = big[0]
+            raise InputError(f"data row {r + 1}, column {names[c]}, holds {values[r, c]:g}: beyond any reading or pose")
+
+
 def stage_labelled(ds: Dataset) -> bool:
     """Whether ``ds``'s labels are a stage's displacements: a capture (``samples_per_row`` in its meta) or a
     built unit simulated with the stage's labels."""
