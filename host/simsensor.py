@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.physics.pose import as_poses
+from fitgen.physics.pose import as_poses, pose_label
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.transfer import readings
 
@@ -137,7 +137,11 @@ class SensorFeed:
 
     def set_pose(self, pose) -> None:
         self.pose = as_poses(pose)[0].copy()
-        self.volts = readings(self.sensor, self.pose, touching=self.touching, adc_bits=0)[0]
+        with np.errstate(all="ignore"):  # a pose far outside the sensor overflows the field: said below
+            self.volts = readings(self.sensor, self.pose, touching=self.touching, adc_bits=0)[0]
+        if not np.all(np.isfinite(self.volts)):
+            raise InputError(f"the simulated pose {pose_label(self.pose)} gives readings that are not finite numbers: "
+                             "it lies far outside the sensor")
         self._t_drift = None
 
     def at(self, t: float) -> None:

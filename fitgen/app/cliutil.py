@@ -54,10 +54,13 @@ def count(text: str) -> int:
 
 
 def noise_volts(text: str) -> float:
-    """An argparse type: a noise figure, a finite number >= 0."""
+    """An argparse type: a noise figure in volts, a finite number >= 0 and at most MAX_NOISE (past every reading:
+    a slip of the exponent, whose readings overflow)."""
+    from fitgen.app.options import MAX_NOISE
+
     x = finite(text)
-    if x < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {x:g}")
+    if not 0 <= x <= MAX_NOISE:
+        raise argparse.ArgumentTypeError(f"must be >= 0 and at most {MAX_NOISE:g} V, got {x:g}")
     return x
 
 
