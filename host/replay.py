@@ -54,8 +54,12 @@ def load_run(path) -> Run:
     if not isinstance(header, dict) or header.get("run") != 1:
         raise InputError(f"{origin}: not a run record (its first line must be the run's header; record one with "
                          "tactile-host read --record RUN.jsonl)")
+    n, outputs = header.get("n_inputs"), header.get("outputs", [])
+    if type(n) is not int or n < 1 or not isinstance(outputs, list) or not all(isinstance(o, str) for o in outputs):
+        raise InputError(f"{origin}: its header's n_inputs ({n!r}) or outputs ({outputs!r}) are not as tactile-host "
+                         "read writes them (a whole number >= 1; a list of names)")
     t, raw, temp, out, status, torn = [], [], [], [], [], 0
-    n, m = header.get("n_inputs"), len(header.get("outputs", []))
+    m = len(outputs)
     for k, (i, ln) in enumerate(numbered[1:], start=2):
         try:
             rec = json.loads(ln)
