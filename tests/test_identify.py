@@ -528,6 +528,9 @@ def test_a_schedule_for_a_file_without_the_transfers_noise_names_where_it_goes(t
                                   str(tmp_path / "s.csv")), 2,
                           "sensor mine gives no noise figure for its gmr transfer (noise missing or 0 in "
                           "[transfer.gmr]): add it to the file, or give --noise (or --transfer")
+    # --noise 0 is the option's, not the file's (it was blamed on the paper file, which gives 0.0005)
+    assert_one_line_error(run_cli("fitgen", "schedule", "--sensor", "paper", "--n", "20", "--noise", "0", "-o",
+                                  str(tmp_path / "s.csv")), 2, "--noise must be a finite number > 0, got 0")
 
 
 def test_schedule_keeps_to_the_travel_and_bounds_five_axes():
