@@ -181,6 +181,9 @@ def samples_of(args, drawing) -> tuple[int, float, dict]:
     what the schedule's meta records of a noise record they came from. ``--samples`` is a count, or the record
     ``tactile-host noise -o`` wrote: its recommendation and, unless ``--noise`` is given, its measured noise."""
     noise = drawing.noise if args.noise is None else noise_of(args.noise, drawing)
+    if args.noise is not None and not noise > 0:  # the option's, not the file's
+        raise InputError(f"--noise must be a finite number > 0, got {args.noise} (the schedule weighs each reading by "
+                         "it)")
     if not args.samples.lower().endswith(".json"):
         return parse_positive(args.samples, "--samples", integer=True, most=MAX_ROW_SAMPLES), noise, {}
     import numpy as np

@@ -205,8 +205,6 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
         raise InputError(f"--n must be {MIN_ROWS}..10000 (identify needs at least {MIN_ROWS} rows), got {n}")
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
-    if noise is not None and not noise > 0:
-        raise InputError(f"--noise must be a finite number > 0, got {noise:g} (the schedule weighs each reading by it)")
     noise = drawing.noise if noise is None else noise
     if not noise > 0:
         raise InputError(f"the schedule needs the reading noise > 0: {missing_noise(drawing)}: add it to the file, "
