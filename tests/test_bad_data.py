@@ -343,7 +343,9 @@ def test_a_huge_cell_is_named_where_it_is(data, tmp_path):
     (lambda m: m["inputs"]["min"].__setitem__(0, 99.0), "input v1 has min > max"),
     # an integer past float's range: math.isfinite raised OverflowError, a traceback
     (lambda m: m["inputs"]["min"].__setitem__(0, 10 ** 400), "inputs.min must be a finite number, got 1000"),
-    (lambda m: m.__setitem__("outputs", []), "no outputs")])
+    (lambda m: m.__setitem__("outputs", []), "no outputs"),
+    # it said inputs.names must be v1..v7 for its 7 inputs, of names that were right
+    (lambda m: m["inputs"]["min"].pop(), "inputs.min has 7 values and inputs.max 8: one per input")])
 def test_a_model_file_edited_by_hand_is_named_in_its_refusal(fitted, tmp_path, edit, said):
     data = json.loads(json.dumps(fitted))
     edit(data)

@@ -320,6 +320,8 @@ def model_from_dict(data, origin: str = "model") -> Model:
         raise InputError(f"{origin}: malformed model ({type(exc).__name__}: {exc})") from None
     if units not in INPUT_UNITS:
         raise InputError(f"{origin}: inputs.units must be {' or '.join(INPUT_UNITS)}, got {units!r}")
+    if len(hi) != len(lo):  # said before the names, which are checked against min's length
+        raise InputError(f"{origin}: inputs.min has {len(lo)} values and inputs.max {len(hi)}: one per input")
     named = [f"v{k}" for k in range(1, len(lo) + 1)]  # the columns the model reads, as to_dict writes them
     if inputs.get("names", named) != named:
         raise InputError(f"{origin}: inputs.names must be {named[0]}..{named[-1]} for its {len(lo)} inputs, got "
