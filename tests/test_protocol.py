@@ -464,6 +464,9 @@ def test_flash_failures(paper_model, paper_model_file):
         proc = run_cli("tactile-host", "flash", "--port", fake.url, "--timeout", "0.3", paper_model_file)
         assert_one_line_error(proc, 2, f"no answer to PING within {BOOT_WAIT:g} s: is the firmware running")
         assert "one client at a time" not in proc.stderr  # a serial port: no emulator to share
+        # a longer --timeout is the first PING's too (it waited BOOT_WAIT whatever --timeout said)
+        proc = run_cli("tactile-host", "flash", "--port", fake.url, "--timeout", "4", paper_model_file)
+        assert_one_line_error(proc, 2, "no answer to PING within 4 s: is the firmware running")
     with FakeDevice(paper_model, mute=True, transport="socket") as fake:  # as QEMU with another client connected
         proc = run_cli("tactile-host", "flash", "--port", fake.url, "--timeout", "0.3", paper_model_file)
         assert_one_line_error(proc, 2, "is this its port? (an emulator serves one client at a time: is another "

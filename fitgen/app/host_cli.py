@@ -26,7 +26,7 @@ def cmd_flash(args) -> int:
     # a bad id said before the port is opened, not after the device answered
     sensor_id = model_sensor_id(model) if args.sensor_id is None else check_sensor_id(args.sensor_id)
     try:
-        with Device.open(args.port, timeout=timeout, ready=BOOT_WAIT) as dev:
+        with Device.open(args.port, timeout=timeout, ready=max(BOOT_WAIT, timeout)) as dev:
             blob, info, answer = flash_model(dev, model, args.model, sensor_id=sensor_id, fma=args.fma)
     except FlashFailed as exc:
         print(f"tactile-host flash: error: {exc}", file=sys.stderr)
@@ -358,7 +358,8 @@ def build_parser() -> Parser:
                                        "the sensor the model's held-out figures are for, such as a unit file's, "
                                        "else paper)")
     f.add_argument("--fma", action="store_true", help="the device sums the terms by fused multiply-add")
-    f.add_argument("--timeout", default="2", help="seconds to wait for each answer (default 2)")
+    f.add_argument("--timeout", default="2", help="seconds to wait for each answer (default 2); the first PING "
+                   "waits at least 3 s, for a board that restarts when its port opens (an Uno's bootloader)")
     f.set_defaults(func=cmd_flash)
 
     r = sub.add_parser("read", help="stream readings and pose estimates from I2C ADCs")
