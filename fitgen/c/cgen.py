@@ -96,9 +96,12 @@ def c_string(text: str, lossy: bool = False) -> str:
 # a header's floating point as written under any flags (docs/codegen.md): no contraction into fused multiply-adds
 # and none of -ffast-math. GCC takes it for the whole file; clang, whose file-scope float_control is refused off x86,
 # at the start of each function body, where the scope macro stands. GCC 12's basic-block vectoriser at -O3 pairs an
-# add with a subtract and fuses them with a product (vfmsubadd) whatever fp-contract says, so it is off too; at -O2
-# it left every header tried unchanged, instruction for instruction
-GCC_FP = '#pragma GCC optimize("fp-contract=off", "no-fast-math", "no-tree-slp-vectorize")'
+# add with a subtract and fuses them with a product (vfmsubadd) whatever fp-contract says, so it is off wherever the
+# target may have a fused multiply-add; x86 without one cannot fuse, and keeps it (its code, and the instruction
+# counts the docs quote, unchanged)
+GCC_FP = "\n".join(['#if defined(__FMA__) || !(defined(__x86_64__) || defined(__i386__))',
+                     '#pragma GCC optimize("fp-contract=off", "no-fast-math", "no-tree-slp-vectorize")', "#else",
+                     '#pragma GCC optimize("fp-contract=off", "no-fast-math")', "#endif"])
 CLANG_FP = ("clang fp contract(off)", "clang fp reassociate(off)", "clang fp exceptions(strict)")
 
 
