@@ -678,3 +678,17 @@ def test_a_huge_reading_is_one_line_in_identify_and_check(data, model_file, tmp_
     type(ds)(rows, ds.targets, ds.target_names).save(tmp_path / "huge.csv")
     assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "huge.csv"), "-o", str(tmp_path / "m.json")),
                           contains="candidate term v2^-1 for dx is not finite on data row 4 (an input too close to 0?)")
+
+
+def test_more_inputs_than_the_c_status_holds_are_said_by_fit(tmp_path):
+    """31 elements fitted without a word; codegen then refused the model (the status mask holds 30 bits)."""
+    from fitgen.physics.dataset import Dataset
+
+    rng = np.random.default_rng(0)
+    v = rng.uniform(1, 2, (300, 31))
+    Dataset(v, (v[:, 0] - v[:, 1])[:, None], ("dz",)).save(tmp_path / "w.csv")
+    proc = run_cli("fitgen", "fit", str(tmp_path / "w.csv"), "--family", "integer", "-o", str(tmp_path / "m.json"))
+    assert proc.returncode == 0, proc.stderr
+    assert "note: 31 inputs: the generated C's status holds one bit per input, at most 30" in proc.stderr
+    assert_one_line_error(run_cli("fitgen", "codegen", str(tmp_path / "m.json"), "-o", str(tmp_path / "c")),
+                          contains="the status bit mask holds at most 30")

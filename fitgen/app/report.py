@@ -8,6 +8,7 @@ from fitgen.base.errors import InputError
 from fitgen.physics.dataset import Dataset
 from fitgen.fitting.fit import error_stats
 from fitgen.equations.model import Model
+from fitgen.c.calblob import MAX_INPUTS
 
 # the seed paper's figures (simulation study on paper-sim, and experiment term counts)
 PAPER_SIM_MAX_ERROR = {"dx": 0.06, "dz": 0.25, "thx": 1.23}
@@ -276,6 +277,9 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
                      f"{ds.inputs[0, flat[0]]:g} {model.input_units}): dead elements, broken wires, empty ADC "
                      "channels, or elements saturated throughout; the equations learn nothing from them, and the "
                      "device will clamp them to those values")
+    if ds.n_inputs > MAX_INPUTS:  # said now, not after the fit when codegen refuses it
+        notes.append(f"{ds.n_inputs} inputs: the generated C's status holds one bit per input, at most {MAX_INPUTS}, "
+                     "so codegen, verify and flash refuse this model; Model.predict and fitgen predict take it")
     copies = {j: i for j in range(ds.n_inputs) for i in reversed(range(j))
               if j not in flat and np.array_equal(ds.inputs[:, i], ds.inputs[:, j])}
     if copies:  # its terms and the original's are one column to the fit: both stay in, weighed against each other
