@@ -692,3 +692,18 @@ def test_more_inputs_than_the_c_status_holds_are_said_by_fit(tmp_path):
     assert "note: 31 inputs: the generated C's status holds one bit per input, at most 30" in proc.stderr
     assert_one_line_error(run_cli("fitgen", "codegen", str(tmp_path / "m.json"), "-o", str(tmp_path / "c")),
                           contains="the status bit mask holds at most 30")
+
+
+def test_a_pose_column_removed_since_the_meta_is_refused_by_identify_and_check(data, model_file, tmp_path):
+    """A capture whose dz column was cut (the meta kept) read as dz 0 on every row: identify refused it as physics
+    it cannot explain after a minute of fault trials, check told the user to calibrate a unit that was fine."""
+    shutil.copy(str(data) + ".meta.json", tmp_path / "cut.csv.meta.json")
+    header = data.read_text().splitlines()[0].split(",")
+    keep = [i for i, c in enumerate(header) if c != "dz"]
+    (tmp_path / "cut.csv").write_text("".join(",".join(line.split(",")[i] for i in keep) + "\n"
+                                              for line in data.read_text().splitlines()))
+    for argv in (("identify", str(tmp_path / "cut.csv"), "--sensor", "paper", "-o", str(tmp_path / "u.toml")),
+                 ("check", model_file, str(tmp_path / "cut.csv"))):
+        assert_one_line_error(run_cli("fitgen", *argv), contains=f"{tmp_path / 'cut.csv'} has no dz column, which "
+                                                                 "its meta records")
+    assert files(tmp_path) == ["cut.csv", "cut.csv.meta.json"]

@@ -100,6 +100,16 @@ def refuse_huge(ds: Dataset) -> None:
             raise InputError(f"data row {r + 1}, column {names[c]}, holds {values[r, c]:g}: beyond any reading or pose")
 
 
+def check_pose_columns_kept(ds: Dataset, path) -> None:
+    """InputError when ``ds``'s meta records pose columns its CSV no longer has: identify and check read a pose
+    column left out as that axis at 0 on every row, and blamed the physics or the unit for it."""
+    recorded = ds.meta.get("columns")
+    gone = [c for c in recorded if c in POSE_NAMES and c not in ds.target_names] if isinstance(recorded, list) else []
+    if gone:
+        raise InputError(f"{path} has no {', '.join(gone)} column, which its meta records: a pose column removed "
+                         "since it was written reads as that axis at 0 on every row; use the file as it was written")
+
+
 def stage_labelled(ds: Dataset) -> bool:
     """Whether ``ds``'s labels are a stage's displacements: a capture (``samples_per_row`` in its meta) or a
     built unit simulated with the stage's labels."""
