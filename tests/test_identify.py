@@ -1127,3 +1127,24 @@ def test_the_unit_file_carries_the_units_own_reading_noise(tmp_path):
         unit = load_sensor(unit_file)
         assert unit.transfer == "gmr" and unit.noise == pytest.approx(noise, rel=1e-12)
         assert unit.raw.noise == load_sensor("paper").raw.noise  # the transfer the capture did not read: as drawn
+
+
+def test_a_stage_axis_the_nearest_unit_moves_against_is_named_as_mirrored():
+    """A capture through --stage-axes Z=-dz (the machine's Z the wrong way round) was refused with causes that did
+    not name the axis map, though its nearest unit's magnet moved against the stage along dz (stage.m33 at -37
+    prior spreads: a gain of -0.86). A gain below 0 among the far parameters names the axis; one far but still
+    positive (the magnet moving less than the stage) does not."""
+    from types import SimpleNamespace
+
+    from fitgen.fitting.verdict import mirrored_axes
+    from fitgen.physics.units import STAGE
+
+    def ident(diag):
+        unit = SimpleNamespace(stage_map=np.diag(diag))
+        return SimpleNamespace(unit=lambda: unit, space=SimpleNamespace(names=("magnet.x",) + STAGE))
+
+    far = [(1 + STAGE.index("stage.m33"), -37.1), (1 + STAGE.index("stage.m11"), -14.8)]
+    assert mirrored_axes(ident([0.3, 1.0, -0.86]), far) == ["dz"]
+    assert mirrored_axes(ident([-0.9, 1.0, -0.86]), far) == ["dx", "dz"]
+    assert mirrored_axes(ident([0.3, 1.0, 0.25]), far) == []  # far, but along the stage
+    assert mirrored_axes(ident([1.0, -1.0, 1.0]), far) == []  # dy not among the far parameters

@@ -149,6 +149,14 @@ def axis_fix(m: np.ndarray) -> str:
     return f"in the capture's axis map, --stage-axes, put {' and '.join(said)}, signs multiplying, and capture again"
 
 
+def mirrored_axes(ident: Identification, far) -> list[str]:
+    """The pose axes along which the nearest unit's magnet moves against the stage (a diagonal of its stage map
+    below 0, among the parameters ``far`` outside the tolerances): a stage axis mirrored in the capture's map."""
+    diag = np.diag(ident.unit().stage_map)
+    named = {ident.space.names[i] for i, _ in far}
+    return [a for k, a in enumerate(("dx", "dy", "dz")) if diag[k] < 0 and f"stage.m{k + 1}{k + 1}" in named]
+
+
 class ChannelOrderError(InputError):
     """A refusal that names the order the capture's channels read the ring in: ``order[j]`` is the column that
     reads as element j+1 (0-based), so that the layer that knows the capture's channel map can write it so."""
@@ -205,6 +213,11 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
         cause = (f"elements {a + 1} and {b + 1} (v{a + 1}, v{b + 1}) swapped: with their readings exchanged, the capture "
                  "reads as a unit within the tolerances, to the noise; their channels are wired the other way round "
                  "(the channel map)")
+    elif flipped := mirrored_axes(ident, far):
+        cause = (f"the stage's {' and '.join(flipped)} against the sensor's: the nearest unit moves its magnet against "
+                 "the stage along " + ("it" if len(flipped) == 1 else "them") + "; in the capture's axis map, "
+                 f"--stage-axes, put {' and '.join(f'-{a} for {a}' for a in flipped)}, signs multiplying, and capture "
+                 "again")
     elif far and all(ident.space.names[i].startswith("stage.") for i, _ in far[:3]):
         cause = ("the stage's axes against the sensor's: a pose axis mirrored, swapped or in other units than mm "
                  "(the capture's axis map, --stage-axes)")
