@@ -95,6 +95,9 @@ def zero_still_valid(state: StageState | None, ctrl: GcodeController, axes: Axis
             "zero was taken")
 
 
+MAX_COORD = 2000.0  # mm: past the travel of any machine this drives (printers, desk CNCs: under a metre)
+
+
 def parse_zero(spec: str) -> str | dict[str, float]:
     """``ask``, ``here``, or machine coordinates ``X=..,Y=..,Z=..``, G-code words ``X.. Y.. Z..`` (as M114 and
     stage-sim print them) or three numbers."""
@@ -121,6 +124,11 @@ def parse_zero(spec: str) -> str | dict[str, float]:
         vals = dict(zip(MACHINE_AXES, nums))
     if not all(math.isfinite(v) for v in vals.values()):
         raise InputError(f"--zero {spec!r}: not finite")
+    far = [f"{m}{v:g}" for m, v in vals.items() if abs(v) > MAX_COORD]
+    if far:  # said before anything moves: the machine would drive for its end, its move's time limit years away
+        raise InputError(f"--zero {spec!r}: {' '.join(far)} lies over {MAX_COORD:g} mm from the machine's origin, past "
+                         "any printer's or desk CNC's travel: a slipped decimal point? (machine coordinates in mm, as "
+                         "M114 or GRBL's ? report them)")
     return vals
 
 

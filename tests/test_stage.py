@@ -140,6 +140,11 @@ def test_axis_map_limits_and_approach_parse_or_refuse_in_one_line():
             parse_zero(bad)
     with pytest.raises(InputError, match="ask, here, or the machine coordinates"):
         parse_zero("1,2")
+    # metres from the origin: the capture drove for it, its move's time limit years away
+    with pytest.raises(InputError, match=re.escape("--zero '1e9,0,0': X1e+09 lies over 2000 mm from the machine's "
+                                                   "origin")):
+        parse_zero("1e9,0,0")
+    assert parse_zero("-1999,0,250") == {"X": -1999.0, "Y": 0.0, "Z": 250.0}
     with pytest.raises(InputError, match="give a range for dz"):
         StageSettings(AxisMap.parse("X=dx,Z=dz"), parse_ranges("dx=-1:1", "l")).check()
 
