@@ -81,8 +81,9 @@ def written_rows(path: Path) -> int:
         return 0
 
 
-def _kept(output) -> str:
-    return kept([output], f"the rows written so far are kept in {output}: run the same command again to resume")
+def _kept(output, resume: str = "") -> str:
+    return kept([output], f"the rows written so far are kept in {output}: "
+                + (resume or "run the same command again to resume"))
 
 
 def same_temperature(output, rows: int, degc: float) -> float:
@@ -170,7 +171,7 @@ def _run_capture(args, prog: str) -> None:
     except (DeviceSilent, SpreadTooLarge, TriggerFailed, StageError) as exc:
         if getattr(exc, "lost", ""):
             StageState.mark_lost(args.output, exc.lost)
-        raise CaptureFailed(f"{exc}; {_kept(args.output)}") from exc
+        raise CaptureFailed(f"{exc}; {_kept(args.output, getattr(exc, 'resume', ''))}") from exc
     finally:
         if stage is not None:
             stage.ctrl.close()

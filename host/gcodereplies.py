@@ -21,11 +21,13 @@ class StageError(RuntimeError):
     """The controller failed: an error or alarm, a halt, silence, a reset, or a position not the commanded one.
 
     ``lost``: why the machine's position can no longer be trusted ('' when it still can): a resumed
-    capture must then not keep the zero (host.stagezero)."""
+    capture must then not keep the zero (host.stagezero). ``resume``: how to resume, where the same command
+    would fail the same way ('' when it would not)."""
 
-    def __init__(self, message: str, lost: str = ""):
+    def __init__(self, message: str, lost: str = "", resume: str = ""):
         super().__init__(message)
         self.lost = lost
+        self.resume = resume
 
 
 class NoStatus(StageError):

@@ -88,8 +88,10 @@ def open_stage(args, opts, output, rows, prog: str):
             ctrl.unlock()
         if ctrl.alarm:
             raise StageError(f"{ctrl.name}: the GRBL controller is in ALARM (it starts so after a reset when homing "
-                             "is on): home it (--home) or unlock it (--unlock), then set the zero again",
-                             lost="the controller was in ALARM when the capture connected")
+                             "is on): home it (--home; a zero taken on the homed machine holds) or unlock it "
+                             "(--unlock; the zero is then set again)",
+                             lost="the controller was in ALARM when the capture connected",
+                             resume="run the command again with --home or --unlock to resume")
         ctrl.setup()
         # moves a killed run left queued end first: the position that tells a reset must be a standstill's
         ctrl.wait_idle(QUEUED_WAIT + opts["timeout"], "the moves already queued")

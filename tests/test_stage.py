@@ -961,8 +961,9 @@ def test_capture_command_alarm_at_start_is_one_line_exit_1_and_home_clears_it(tm
     with server("grbl", PoseFile(posefile), homing_lock=True) as srv:
         args = capture_args(sched, out, srv.url, posefile)
         proc = run_host(*args)
-        assert_one_line_error(proc, 1, "is in ALARM (it starts so after a reset when homing is on): home it (--home) "
-                                       "or unlock it (--unlock)")
+        assert_one_line_error(proc, 1, "is in ALARM (it starts so after a reset when homing is on): home it (--home; "
+                                       "a zero taken on the homed machine holds) or unlock it (--unlock; the zero is "
+                                       "then set again)")
         assert proc.stderr.strip().endswith("; nothing was written") and not out.exists()
         zero = ",".join(f"{v:g}" for v in CONTACT)  # homed: machine coordinates are the home frame's
         proc = run_host(*args, "--home", "--zero", zero)
