@@ -886,7 +886,7 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
     high = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 0.12))
     y_high = readings(unit, high, adc_bits=0) + np.random.default_rng(25).normal(0.0, noise, y.shape)
     cases = {
-        "zero high": (y_high, plan[0], "a zero off first contact (above it, the rows at dz 0 off the skin"),
+        "zero high": (y_high, plan[0], "a zero off first contact (above it, the rows pressed least off the skin"),
         "few": (y[:6], plan[0][:6], "at least 10"),
         "repeat": (np.repeat(y[:1], 20, axis=0), np.repeat(plan[0][:1], 20, axis=0), "distinct pose"),
         "saturated": (np.where(np.arange(8) < 2, 3.3, y), plan[0], "saturated"),

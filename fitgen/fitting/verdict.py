@@ -234,7 +234,7 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
         cause = cause or (stage_error_hint(ident) + f"another sensor than {drawing}, labels in other units, an element "
                           "that does not respond or "
                           "elements wired in another order than the drawing's (the channel map), a zero off first "
-                          "contact (above it, the rows at dz 0 off the skin; below it or aside, every row pressed or "
+                          "contact (above it, the rows pressed least off the skin; below it or aside, every row pressed or "
                           f"slid by as much), or a noise figure too low{row}")
         raise _refusal(f"the physics does not explain {capture}: residuals {float(np.sqrt(ident.reduced_chi2)):.3g}x "
                        f"the reading noise ({source}); {cause}"
