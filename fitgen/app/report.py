@@ -319,8 +319,9 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
     crowded = [e for e in model.equations if len(e.terms) + 1 > rows / 3]
     if crowded:  # AIC's penalty is no guard when the terms near the rows: the equation threads the rows' noise
         e = max(crowded, key=lambda e: len(e.terms))
-        notes.append(f"{e.name} has {len(e.terms)} terms on {rows} rows: it follows the rows' noise more than the "
-                     "sensor; more rows, --max-terms, or fit the identified unit's simulated rows (fitgen identify)")
+        notes.append(f"{e.name} has {len(e.terms)} terms on {rows} rows: it threads these rows (and their noise, "
+                     "where they have some) more than it follows the sensor, and errs between them; more rows, "
+                     "--max-terms, or fit the identified unit's simulated rows (fitgen identify)")
     return notes
 
 
