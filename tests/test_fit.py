@@ -105,6 +105,28 @@ def test_cap_and_bic_give_smaller_models():
     assert bic.fit_info["settings"]["k"] == pytest.approx(np.log(800))
 
 
+def test_a_cap_below_eq1_starts_from_its_best_terms_not_its_first():
+    """--max-terms 6 cut eq. 1 to its first six terms (elements 1-3 alone) and, at the cap, the search could not
+    move: dx never saw elements 4-8. The cap now drops eq. 1's terms one at a time, each the one whose removal
+    raises the RSS least, and the equation starts from what is left."""
+    from fitgen.equations.terms import design_matrix, initial_terms
+
+    ds = simulate(PAPER, random_poses(800, DEFAULT_RANGES, pose_rng(4)), noise=0.0005, seed=4)
+    m = fit_model(ds, ("dx",), FitSettings.exact(max_terms=6))
+    info = m.fit_info["outputs"]["dx"]
+    assert len(info["initial_over_cap"]) == 10
+    eq1 = initial_terms(8)
+    kept = [t for t in eq1 if t.text not in info["initial_over_cap"]]
+    assert len(kept) == 6 and {t.element for t in kept} - {1, 2, 3}  # not the first three elements'
+    # the first six of eq. 1 fit the rows worse than the six the cap kept, and worse than the equation chosen
+    y = ds.target("dx")
+    first = design_matrix(eq1[:6], ds.inputs)
+    rss_first = float(np.sum((y - np.c_[np.ones(len(y)), first] @ np.linalg.lstsq(
+        np.c_[np.ones(len(y)), first], y, rcond=None)[0]) ** 2))
+    rss_chosen = float(np.sum((m.predict(ds.inputs)[:, 0] - y) ** 2))
+    assert rss_chosen < 0.5 * rss_first, (rss_chosen, rss_first)
+
+
 def test_true_d_option(tmp_path):
     ds = simulate(PAPER, random_poses(400, DEFAULT_RANGES, pose_rng(8)))
     m = fit_model(ds, settings=FitSettings(d_source="true"))

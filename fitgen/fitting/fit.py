@@ -123,8 +123,6 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
 
     # keep at least one residual degree of freedom, so that RSS > 0 and AIC is finite
     cap = n - 2 if settings.max_terms is None else min(settings.max_terms, n - 2)
-    if len(init) > cap:
-        init = init[:cap]
     k = settings.penalty(n)
     if shared is not None and not shared.serves(inputs, noise, harmonics):
         shared = None
@@ -142,6 +140,7 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
         extra.append(noise_blocks(cands, inputs, noise, d, d_jac, rows=ROWS // 8, harmonics=harmonics))
     if extra or gram is not None:
         A = compress(None, y[:0], extra=itertools.chain(*extra), start=A, gram=gram)
+    init, capped = within_cap(A, init, cap)
     res = stepwise(None, y, init, names=[t.text for t in cands], k=k, max_terms=cap, compressed=A, progress=progress)
     terms = [cands[j] for j in res.selected]
     intercept, coefs, rss, cond = refit(A, res.selected)
@@ -153,10 +152,22 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
         "rss": rss,
         "condition": cond,
         "aliased_skipped": [cands[j].text for j in res.aliased],
+        "initial_over_cap": [cands[j].text for j in capped],  # dropped from eq. 1 to start within the cap
         "steps": [[s.move, s.aic] for s in res.trace],
         "training_error": error_stats(pred - y),
     }
     return FittedOutput(Equation(name, intercept, tuple(terms), tuple(float(c) for c in coefs)), info)
+
+
+def within_cap(A: np.ndarray, init: list[int], cap: int) -> tuple[list[int], list[int]]:
+    """The initial equation reduced to ``cap`` terms, and the terms dropped in order: one at a time, the term
+    whose removal raises the RSS least (backward elimination on the compressed rows ``A``), so that a cap below
+    eq. 1's size starts the search from eq. 1's best terms, not from its first elements."""
+    init, dropped = list(init), []
+    while len(init) > cap:
+        rss = [refit(A, [j for j in init if j != drop])[2] for drop in init]
+        dropped.append(init.pop(int(np.argmin(rss))))
+    return init, dropped
 
 
 def noise_to_add(ds: Dataset, settings: FitSettings, sensor=None) -> dict:
