@@ -114,8 +114,9 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     init_terms = [t for t in initial_terms(n_in, settings.exponents) if t in set(cands)]
     init = [cands.index(t) for t in init_terms]
     if n < len(init) + 3:
-        raise InputError(f"{n} rows cannot fit the {len(init) + 1} coefficients of the initial equation "
-                         f"for {name} with residual degrees of freedom; give at least {len(init) + 3} rows")
+        raise InputError(f"{n} rows cannot fit the {len(init) + 1} coefficients of the initial equation for {name} "
+                         "and leave the two residual degrees of freedom the search starts with; give at least "
+                         f"{len(init) + 3} rows")
 
     def columns(lo, hi, terms=cands):
         return finite_design_matrix(terms, inputs[lo:hi], None if d is None else d[lo:hi], harmonics, lo,
