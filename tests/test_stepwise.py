@@ -76,6 +76,20 @@ def test_aliased_columns_are_never_added_and_ties_take_candidate_order():
     assert 1 in res.aliased
 
 
+def test_a_start_with_aliased_terms_records_r_s_aic_at_every_step():
+    """Two channels alike (v2 = v1): eq. 1 starts with aliased terms. The trace recorded their start with the RSS
+    a QR's arbitrary column for the aliased one took up, and the penalty of every term: AICs below R's, rising
+    over the forced drops where R's stay level. The end was right; now the whole trace is R's."""
+    require_tool("Rscript")
+    ds = simulate(PAPER, random_poses(300, DEFAULT_RANGES, pose_rng(11)))
+    ds.inputs[:, 1] = ds.inputs[:, 0]
+    cands, X, y, init = _problem(ds, "dz")
+    ours = stepwise(X, y, init)
+    ref = r_step(X, y, init)
+    assert len(ours.aliased) >= 2 and sorted(ours.selected) == sorted(ref["selected"])
+    np.testing.assert_allclose([t.aic for t in ours.trace], ref["trace"], rtol=0, atol=1e-6)
+
+
 def test_compress_preserves_inner_products():
     rng = np.random.default_rng(1)
     X = rng.normal(size=(50000, 7)) * np.logspace(-3, 3, 7)

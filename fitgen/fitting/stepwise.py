@@ -196,9 +196,17 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> Stepwise
         r = r - Q @ (Q.T @ r)
         return float(r @ r), Q, R, r
 
-    rss, Q, R, r = rss_of(current)
-    aic = aic_of(rss, n, len(current), k)
-    trace = [Step("", aic, rss, len(current))]
+    def scored(cols):
+        """rss_of, and the AIC of ``cols`` as R's extractAIC takes it: on the columns' rank, the RSS of the columns
+        that are not aliased (a QR's column for an aliased one is arbitrary, and took up residual)."""
+        rss, Q, R, r = rss_of(cols)
+        dead = _aliased_in(A, cols, R)
+        live = [c for c in cols if c not in dead]
+        rss_live = rss_of(live)[0] if dead else rss
+        return rss, Q, R, r, aic_of(rss_live, n, len(live), k), rss_live
+
+    rss, Q, R, r, aic, shown = scored(current)
+    trace = [Step("", aic, shown, len(current))]
     aliased_seen: set[int] = set()
     for _ in range(max_steps):
         # R first drops a term of the current model that is aliased with the others (Df 0), the last one first
@@ -206,9 +214,8 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> Stepwise
         if dead:
             current.remove(dead[-1])
             aliased_seen.add(dead[-1])
-            rss, Q, R, r = rss_of(current)
-            aic = aic_of(rss, n, len(current), k)
-            trace.append(Step(f"- {names[dead[-1]]}", aic, rss, len(current)))
+            rss, Q, R, r, aic, shown = scored(current)
+            trace.append(Step(f"- {names[dead[-1]]}", aic, shown, len(current)))
             continue
         # row 0: stay; then removals in model order; then additions in candidate order
         scores, outside = [np.array([aic])], np.zeros(0, dtype=int)
