@@ -486,3 +486,26 @@ def test_predict_tells_rows_labelled_outside_the_box_from_another_sensors():
     assert predict_notes(model, pred, status, "float")[0].endswith(
         "by more than its width: readings of another sensor than the model's? a built unit needs its own "
         "calibration (docs/calibration.md)")
+
+
+def test_predict_takes_no_labels_from_a_readouts_lines(tmp_path):
+    """ReadPose's and read's lines carry the device's estimates under dx..thy: predict took them for labels, so an
+    uncalibrated unit's estimates far outside the box were excused as 'labelled outside it too' and the note to
+    calibrate never came."""
+    from fitgen.equations.model import Equation, Model
+
+    model = Model(np.zeros(8), np.ones(8), (Equation("dx", 10.0, (), ()),), "V", {"held_out": {"box": {"dx": [-2, 2]}}})
+    model.save(tmp_path / "m.json")
+    rows = "".join(f"{0.1 * i:.6f},{','.join(['0.5'] * 8)},10.0000,0\n" for i in range(3))
+    head = "v1,v2,v3,v4,v5,v6,v7,v8,dx"
+    (tmp_path / "lines.csv").write_text(f"t,{head},status\n{rows}")
+    (tmp_path / "poses.csv").write_text(f"{head}\n" + "".join(r.split(",", 1)[1].rsplit(",", 1)[0] + "\n"
+                                                             for r in rows.splitlines()))
+    said = {}
+    for name in ("lines", "poses"):
+        proc = run_cli("fitgen", "predict", str(tmp_path / "m.json"), str(tmp_path / f"{name}.csv"), "-o",
+                       str(tmp_path / f"{name}-est.csv"))
+        assert proc.returncode == 0, proc.stderr
+        said[name] = proc.stderr
+    assert "readings of another sensor than the model's?" in said["lines"] and "labelled" not in said["lines"]
+    assert "all labelled outside it too" in said["poses"]  # a dataset's pose columns are its labels still

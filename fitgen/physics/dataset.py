@@ -280,14 +280,16 @@ def load_inputs(path: str | Path, n_inputs: int) -> np.ndarray:
 
 def load_inputs_and_labels(path: str | Path, n_inputs: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """:func:`load_inputs`, and the pose columns (dx..thy) the CSV has by name ({} for none), from one read (a pipe
-    reads once)."""
+    reads once). A readout's lines (a ``status`` column: ``tactile-host read``'s, ReadPose's) carry a device's
+    estimates under those names, not poses: no labels then."""
     origin = f"dataset {path}"
     names, table = parse_table(read_text(path, "dataset"), origin)
     cols = [f"v{k}" for k in range(1, n_inputs + 1)]
     missing = [c for c in cols if c not in names]
     if missing:
         raise InputError(f"{origin}: missing column {missing[0]} (the model takes {cols[0]}..{cols[-1]})")
-    return table[:, [names.index(c) for c in cols]], {n: table[:, names.index(n)] for n in POSE_NAMES if n in names}
+    labels = {} if "status" in names else {n: table[:, names.index(n)] for n in POSE_NAMES if n in names}
+    return table[:, [names.index(c) for c in cols]], labels
 
 
 def estimates_csv(output_names, estimates: np.ndarray, status: np.ndarray) -> str:
