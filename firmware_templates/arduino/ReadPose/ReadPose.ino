@@ -30,13 +30,22 @@ static float offset_volts[TM_N_INPUTS]; /* added to each reading */
 #endif
 #endif
 
+/* the board's I2C pins, as its silkscreen names them */
+#if defined(__AVR_ATmega2560__)
+#define I2C_PINS "20), SCL (21"
+#elif defined(__AVR_ATmega32U4__)
+#define I2C_PINS "D2), SCL (D3"
+#else
+#define I2C_PINS "A4), SCL (A5"
+#endif
+
 static void print_error(int st)
 {
     Serial.print(F("error: "));
     Serial.print(adcs.failed_chip >= 0 ? ADC_MAP_LABELS[adcs.failed_chip] : "general-call reset");
     Serial.println(st == ADC_ERR_NOT_CHIP ? F(" answers as another part: is the chip type in the channel map right?")
                    : st == ADC_ERR_STUCK ? F(" never completes a conversion")
-                   : F(" does not answer: check SDA (A4), SCL (A5), power and its ADDR pin"));
+                   : F(" does not answer: check SDA (" I2C_PINS "), power and its ADDR pin"));
 }
 
 #if TACTILE_TARE
@@ -82,6 +91,12 @@ void setup()
     static const char *const names[TM_N_OUTPUTS] = TM_OUTPUT_NAMES;
     int st, k;
     Serial.begin(115200);
+#if defined(USBCON)
+    /* Serial is USB here (Leonardo, Micro): what is written before the port is opened is lost, and the board does
+     * not restart when it opens; wait for it up to 3 s, then go on (a board on its own runs without a host) */
+    while (!Serial && millis() < 3000u) {
+    }
+#endif
     Wire.begin();
     Wire.setClock(TACTILE_WIRE_CLOCK_HZ);
     tactile_wire_bus(&bus, TACTILE_WIRE_TIMEOUT_US);
