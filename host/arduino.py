@@ -378,6 +378,18 @@ def check_replaceable(folder: Path) -> None:
     (library.properties, PlatformIO's library.json), or sources without its manifest (in src/, the example, or at
     the root as an old-layout library keeps them). The build replaces its manifests, src/ and the example whole."""
     props, pio = folder / "library.properties", folder / "library.json"
+    if folder.is_dir() and not props.is_file():
+        subs = [p for p in folder.iterdir() if p.is_dir()]
+        kinds = [k for k, hit in (("libraries", any((p / "library.properties").is_file() for p in subs)),
+                                  ("sketches", any((p / f"{p.name}.ino").is_file() for p in subs)),
+                                  ("a libraries folder", (folder / "libraries").is_dir())) if hit]
+        if kinds:  # the library would land beside them, its src/ and examples/ read as libraries of those names
+            raise InputError(f"-o {folder} holds {' and '.join(kinds)} of its own: a sketchbook or its libraries "
+                             f"folder, not a library's; give a new folder inside it, e.g. -o {folder / 'TactilePose'}; "
+                             "nothing written")
+        if (folder / f"{folder.name}.ino").is_file():
+            raise InputError(f"-o {folder} is a sketch (it holds {folder.name}.ino), not a library's folder: choose "
+                             "another -o; nothing written")
     if props.is_file():
         ours = f"paragraph={GENERATED_BY}" in props.read_text(errors="replace")
     else:

@@ -287,6 +287,20 @@ def test_a_folder_that_holds_another_library_is_refused_untouched(model_path, tm
     ours = tmp_path / "TactilePose"
     assert _build_cli(model_path, ours, "--no-build").returncode == 0
     assert _build_cli(model_path, ours, "--no-build").returncode == 0
+    # the sketchbook's libraries folder (a natural -o: "copy it into libraries/"), the sketchbook, a sketch: the
+    # library landed beside the others, its src/ and examples/ read by the IDE as libraries of those names
+    book = tmp_path / "Arduino"
+    (book / "Blink").mkdir(parents=True)
+    (book / "Blink" / "Blink.ino").write_text("void setup() {}\nvoid loop() {}\n")
+    (book / "libraries" / "Foo").mkdir(parents=True)
+    (book / "libraries" / "Foo" / "library.properties").write_text("name=Foo\n")
+    for folder, said in ((book / "libraries", "holds libraries of its own"),
+                         (book, "holds sketches and a libraries folder of its own"),
+                         (book / "Blink", "is a sketch (it holds Blink.ino)")):
+        before = _tree(book)
+        assert_one_line_error(_build_cli(model_path, folder, "--no-build"), 2, f"-o {folder} {said}")
+        assert _tree(book) == before
+    assert _build_cli(model_path, book / "libraries" / "TactilePose", "--no-build").returncode == 0
 
 
 def test_a_folder_name_the_ide_would_not_list_is_noted(model_path, tmp_path):
