@@ -391,6 +391,13 @@ def test_read_pose_runs_on_the_emulated_uno_and_prints_the_pose(sensor, tmp_path
     assert proc.returncode == 0, proc.stderr
     got = np.loadtxt(tmp_path / "p.csv", delimiter=",", skiprows=1)
     np.testing.assert_array_equal(got[:, :5], want)
+    assert "not whole codes" not in proc.stderr
+    # a tared board's volts carry the tare's offsets: rounding them to codes is not what it computed, and is said
+    (tmp_path / "t.csv").write_text("\n".join([",".join(f"v{k}" for k in range(1, 9))]
+                                              + [",".join(f"{v + 3.3e-5:.6f}" for v in row) for row in volts]) + "\n")
+    proc = run_cli("fitgen", "predict", str(tmp_path / "m.json"), str(tmp_path / "t.csv"), "-o",
+                   str(tmp_path / "p.csv"), "--precision", "float", "--input-lsb", repr(lsb))
+    assert proc.returncode == 0 and "they are not whole codes (a tared ReadPose's lines" in proc.stderr, proc.stderr
     assert 100 < run.stack_peak and size.ram + run.stack_peak <= UNO.ram
     assert run.cycles > 16_000_000 * rows[-1, 0]  # the last line came after t seconds of 16 MHz cycles
 

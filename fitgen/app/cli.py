@@ -210,9 +210,13 @@ def cmd_predict(args) -> int:
                 raise InputError(f"--input-lsb {args.input_lsb!r} is beyond a float's normal range: no device's float "
                                  "holds it")
             with np.errstate(over="ignore", invalid="ignore"):  # codes past float's range: inf, status -1 as in C
-                inputs = (np.rint(inputs / args.input_lsb).astype(np.float32) * lsb).astype(float)
+                codes = inputs / args.input_lsb
+                inputs = (np.rint(codes).astype(np.float32) * lsb).astype(float)
+            apart = "" if not np.nanmax(np.abs(codes - np.rint(codes)), initial=0.0) > 0.05 else (
+                "; they are not whole codes (a tared ReadPose's lines carry the tare's offsets): rounded, they are "
+                "not what the board computed, so leave --input-lsb out for them")
             print(f"float: readings rounded to codes of {float(lsb):.9g} {model.input_units} and taken as the "
-                  "float code * LSB a device computes (an Arduino's ReadPose)", file=sys.stderr)
+                  f"float code * LSB a device computes (an Arduino's ReadPose){apart}", file=sys.stderr)
         check_magnitudes(model, args.precision)  # as codegen: the C's outputs are always finite
         with np.errstate(over="ignore"):  # a reading beyond float's range is inf, as the C's conversion makes it
             pred, status = model.predict(inputs, with_status=True, precision=args.precision)
