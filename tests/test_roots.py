@@ -338,3 +338,40 @@ def test_the_users_compiler_flags_come_after_the_projects(monkeypatch, tmp_path)
     cmd = seen[0]
     assert cmd[0] == "gcc"
     assert cmd.index("-O3") > cmd.index("-O2") and cmd.index("-std=gnu99") > cmd.index("-std=c99"), cmd
+
+
+@pytest.mark.parametrize("cc", ["clang", "gcc"])
+def test_a_nan_reading_is_refused_behind_a_function_under_finite_math(two_radii, tmp_path, cc):
+    """clang under -Ofast, -ffast-math or -ffinite-math-only took the range test's comparisons as ordered: a NaN
+    reading passed it, and tm_estimate answered NaN with status 0, once the header sat behind an ordinary function
+    (the vector runner inlines it, where the layout happened to hold). The reading's bits are tested first there."""
+    from fitgen.c.compiled import WARNING_FLAGS as WARNING
+
+    require_tool(cc)
+    _, model, v = two_radii
+    for precision in ("float", "double"):
+        for style in ("table", "unrolled"):
+            h = write_header(model, tmp_path / f"h-{precision}-{style}", precision=precision, style=style)
+            lib, main = tmp_path / "lib.c", tmp_path / "main.c"
+            lib.write_text('#include "tm_model.h"\nint run(const tm_real *in, tm_real *out);\n'
+                           "int run(const tm_real *in, tm_real *out) { return tm_estimate(in, out); }\n")
+            real = precision
+            row = ", ".join(repr(float(x)) for x in v[0])
+            main.write_text(f"#include <math.h>\n#include <stdio.h>\nint run(const {real} *in, {real} *out);\n"
+                            f"int main(void) {{\n    {real} in[{model.n_inputs}] = {{ {row} }}, out[5];\n"
+                            "    int k, st;\n    for (k = 0; k < 3; ++k) {\n"
+                            "        in[k] = k == 0 ? NAN : k == 1 ? INFINITY : -INFINITY;\n"
+                            "        st = run(in, out);\n"
+                            "        printf(\"%d %g %g\\n\", st, (double)out[0], (double)out[4]);\n"
+                            f"        in[k] = ({real}){float(v[0][0])!r};\n    }}\n    return 0;\n}}\n")
+            for flags in (["-Ofast"], ["-O2", "-ffast-math"], ["-O2", "-ffinite-math-only"]):
+                exe = tmp_path / "t"
+                for src, obj, extra in ((lib, tmp_path / "lib.o", WARNING + flags + ["-I", str(h.parent)]),
+                                        (main, tmp_path / "main.o", ["-O0"])):
+                    proc = subprocess.run([cc, *extra, "-c", str(src), "-o", str(obj)], capture_output=True,
+                                          text=True)
+                    assert proc.returncode == 0, proc.stderr
+                subprocess.run([cc, str(tmp_path / "lib.o"), str(tmp_path / "main.o"), "-o", str(exe), "-lm"],
+                               check=True)
+                lines = subprocess.run([str(exe)], capture_output=True, text=True).stdout.split()
+                assert lines == ["-1", "0", "0"] * 3, (precision, style, flags, lines)

@@ -105,11 +105,25 @@ GCC_FP = "\n".join(['#if defined(__FMA__) || !(defined(__x86_64__) || defined(__
 CLANG_FP = ("clang fp contract(off)", "clang fp reassociate(off)", "clang fp exceptions(strict)")
 
 
+FINITE_ONLY = "(defined(__FINITE_MATH_ONLY__) && __FINITE_MATH_ONLY__)"  # -ffinite-math-only, -ffast-math, -Ofast
+
+
+def nonfinite_test(name: str, macro: str, real: str, otherwise: str) -> str:
+    """C lines defining ``macro(v)``: under -ffinite-math-only a test of ``v``'s exponent bits (``name``, a static
+    inline function of a ``real``), else ``otherwise`` (the macro's text then, of v). A compiler told there are no
+    NaNs may take every comparison as ordered: clang let a NaN reading through a range test and gave estimates
+    of NaN with status 0; isfinite() may fold to 1."""
+    bits, mask = ("uint32_t", "0x7f800000u") if real == "float" else ("uint64_t", "UINT64_C(0x7ff0000000000000)")
+    return "\n".join([f"#if {FINITE_ONLY}", f"static inline int {name}({real} v)", "{", f"    {bits} b;",
+                      "    memcpy(&b, &v, sizeof b);", f"    return (b & {mask}) == {mask};", "}",
+                      f"#define {macro}(v) {name}(v)", "#else", f"#define {macro}(v) {otherwise}", "#endif"])
+
+
 def fp_guard(scope: str) -> tuple[str, str]:
     """The lines before and after a header's code that keep its floating point as written, ``scope`` the macro each
     of its function bodies starts with: clang's contract(off), and under -ffast-math reassociate(off) and strict
     exceptions (no rsqrt for sqrt, no reciprocal, a real isfinite()); GCC's push, GCC_FP and pop."""
-    before = ["#if defined(__clang__)", "#if defined(__FAST_MATH__)",
+    before = ["#if defined(__clang__)", f"#if defined(__FAST_MATH__) || {FINITE_ONLY}",
               f"#define {scope} " + " ".join(f'_Pragma("{p}")' for p in CLANG_FP), "#else",
               f'#define {scope} _Pragma("{CLANG_FP[0]}")', "#endif", "#else", f"#define {scope}",
               "#if defined(__GNUC__)", "#pragma GCC push_options", GCC_FP, "#endif", "#endif"]

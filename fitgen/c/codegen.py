@@ -14,7 +14,7 @@ import jinja2
 import numpy as np
 
 from fitgen import __version__
-from fitgen.c.cgen import GCC_FP, c_real, fp_guard, identifier, prefix_identifier
+from fitgen.c.cgen import GCC_FP, c_real, fp_guard, identifier, nonfinite_test, prefix_identifier
 from fitgen.c.targets import check_precision
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
@@ -307,8 +307,9 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
     if model.n_inputs > 30:
         raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most 30")
     fp_before, fp_after = fp_guard(f"{cm.upper}_FP_SCOPE")
+    nonfinite = nonfinite_test(f"{cm.prefix}_nonfinite", f"{cm.upper}_NONFINITE", precision, "0")
     return _env().get_template("model.h.j2").render(m=cm, exp_codes=[EXP_CODE[e] for e in EXPONENTS],
-                                                     fp_before=fp_before, fp_after=fp_after)
+                                                     fp_before=fp_before, fp_after=fp_after, nonfinite=nonfinite)
 
 
 def render_blob_interpreter() -> str:
