@@ -150,9 +150,11 @@ def test_identifiers_and_bad_models_refused(paper_model, tmp_path):
         model_from_dict(data)
     for prefix, said in (("for", "keyword"), ("main", "a name C reserves"), ("a_", "would hold '__'"),
                          ("p" * 17, "at most 16 characters"), ("p-q", "at most 16 characters"),
-                         ("sig", "(SIG_N_INPUTS, ...) would start as names the C library reserves"),
-                         ("Enc", "(ENC_N_INPUTS, ...)"), ("e1", "(E1_N_INPUTS"), ("lc", "(LC_N_INPUTS"),
-                         ("fe", "(FE_N_INPUTS"), ("sigma", "(SIGMA_N_INPUTS"), ("priX", "(PRIX_N_INPUTS")):
+                         ("sig", "(SIG_...) would start as names the C library reserves"),
+                         ("enc", "(ENC_...)"), ("e1", "(E1_..."), ("lc", "(LC_..."),
+                         ("fe", "(FE_..."), ("sigma", "(SIGMA_..."), ("prix", "(PRIX_..."),
+                         # Tm's macros and include guard were tm's: the second header compiled to nothing
+                         ("Tm", "give it in lower case ('tm')"), ("priX", "give it in lower case")):
         assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "c"), "--prefix", prefix),
                               contains=said)
     assert not (tmp_path / "c").exists() or not list((tmp_path / "c").iterdir())

@@ -40,10 +40,14 @@ def prefix_identifier(prefix: str) -> str:
     that does not end in '_' (``<prefix>_model`` would hold '__', reserved in C and C++) and whose upper case does
     not start a macro name the C library reserves (``SIG_N_INPUTS``: signal.h's)."""
     prefix = identifier(prefix, "prefix", 16)
+    if prefix != prefix.lower():  # its macros and include guard are its upper case: Tm's would be tm's
+        raise InputError(f"prefix {prefix!r}: give it in lower case ({prefix.lower()!r}); the header's macros and "
+                         f"include guard take its upper case, so {prefix!r} and {prefix.lower()!r} would define the "
+                         "same ones and the second header would compile to nothing")
     if prefix.endswith("_"):
         raise InputError(f"prefix {prefix!r} ends in '_': the names it starts would hold '__' (reserved)")
     if _RESERVED_MACROS.match(prefix.upper() + "_X"):
-        raise InputError(f"prefix {prefix!r}: the header's macros ({prefix.upper()}_N_INPUTS, ...) would start as "
+        raise InputError(f"prefix {prefix!r}: the header's macros ({prefix.upper()}_...) would start as "
                          "names the C library reserves (E and a digit or capital: errno.h; LC_, SIG, FE_, PRIX, "
                          "SCNX, TIME_, ATOMIC_); choose another")
     return prefix
