@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -336,3 +337,28 @@ def test_c_strings_take_plain_text_and_a_lossy_one_shows_the_rest_as_question_ma
         with pytest.raises(InputError):
             c_string(bad)
     assert c_string('/tmp/my "unit"\\1~.toml', lossy=True) == '"/tmp/my _unit__1_.toml"'
+
+
+@pytest.mark.parametrize("precision", ["double", "float", "fixed"])
+def test_an_exported_estimator_has_a_prototype_and_links_as_c_from_cpp(paper_model, tmp_path, precision):
+    """With TM_API defined empty (readout.md's way to export it) -Wmissing-prototypes failed the build: there was
+    no declaration before the definition; and C++ mangled the name, so a C file calling it did not link."""
+    from fitgen.equations.model import load_model
+
+    require_tool("gcc")
+    require_tool("g++")
+    model = load_model(Path(__file__).parent / "data" / "model_gcc_fuses_at_O3.json") if precision == "fixed" \
+        else paper_model  # the paper model has roots; the stored one (no-roots) has none
+    write_header(model, tmp_path, precision=precision)
+    (tmp_path / "ext.c").write_text('#define TM_API\n#include "tm_model.h"\n')
+    (tmp_path / "ext.cpp").write_text('#define TM_API\n#include "tm_model.h"\n')
+    strict = ["-Wall", "-Wextra", "-Werror", "-I", str(tmp_path), "-c"]
+    for cmd in (["gcc", "-std=c99", "-pedantic", "-Wmissing-prototypes", "-Wredundant-decls", *strict,
+                 str(tmp_path / "ext.c"), "-o", str(tmp_path / "c.o")],
+                ["g++", "-std=c++17", "-Wmissing-declarations", "-Wredundant-decls", *strict, str(tmp_path / "ext.cpp"),
+                 "-o", str(tmp_path / "cpp.o")]):
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+    for obj in ("c.o", "cpp.o"):
+        symbols = subprocess.run(["nm", str(tmp_path / obj)], capture_output=True, text=True).stdout.split()
+        assert "tm_estimate" in symbols, (obj, symbols)
