@@ -4,6 +4,7 @@ auto-zero, run records and replay, and the options' bad input."""
 import dataclasses
 import json
 import re
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +88,20 @@ def test_compensation_undoes_the_drift_in_python_and_in_c(sensor, tmp_path):
         proc = subprocess.run([str(tmp_path / "tc")], input=text, capture_output=True, text=True, check=True)
         c_out = np.array([[float(x) for x in ln.split()] for ln in proc.stdout.splitlines()])
         np.testing.assert_array_equal(c_out, np.vstack([back, raw[0]]), err_msg=cc)
+
+
+def test_the_tempcomp_functions_linkage_can_be_chosen(tmp_path):
+    """TM_TEMPCOMP_API was defined whatever the includer had defined: exporting the function (as TM_API does for
+    the model) was a macro redefinition."""
+    require_tool("gcc")
+    d = Drift.typical(8, seed=3)
+    (tmp_path / "tm_tempcomp.h").write_text(render_c(TempComp(d.t0, d.offset_tc, d.gain_tc)))
+    (tmp_path / "ext.c").write_text('#define TM_TEMPCOMP_API\n#include "tm_tempcomp.h"\n'
+                                    "void tm_tempcomp(float v[TM_TEMPCOMP_N], float temp);\n")
+    proc = subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-I", str(tmp_path), "-c",
+                           str(tmp_path / "ext.c"), "-o", str(tmp_path / "ext.o")], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "tm_tempcomp" in subprocess.run(["nm", str(tmp_path / "ext.o")], capture_output=True, text=True).stdout
 
 
 @pytest.mark.parametrize("content, said", [
