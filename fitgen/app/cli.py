@@ -211,10 +211,10 @@ def cmd_predict(args) -> int:
                                  "holds it")
             with np.errstate(over="ignore", invalid="ignore"):  # codes past float's range: inf, status -1 as in C
                 codes = inputs / args.input_lsb
+                off = np.abs(codes - np.rint(codes))[np.isfinite(codes)].max(initial=0.0)  # an infinite code's: none
                 inputs = (np.rint(codes).astype(np.float32) * lsb).astype(float)
-            apart = "" if not np.nanmax(np.abs(codes - np.rint(codes)), initial=0.0) > 0.05 else (
-                "; they are not whole codes (a tared ReadPose's lines carry the tare's offsets): rounded, they are "
-                "not what the board computed, so leave --input-lsb out for them")
+            apart = "" if not off > 0.05 else ("; they are not whole codes (a tared ReadPose's lines): rounded, they "
+                                               "are not what the board computed; leave --input-lsb out for them")
             print(f"float: readings rounded to codes of {float(lsb):.9g} {model.input_units} and taken as the "
                   f"float code * LSB a device computes (an Arduino's ReadPose){apart}", file=sys.stderr)
         check_magnitudes(model, args.precision)  # as codegen: the C's outputs are always finite
