@@ -30,17 +30,11 @@ TOML file (per-chip settings; anything left out takes the command-line value)::
 from __future__ import annotations
 
 import re
-import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import read_text
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+from fitgen.base.fileio import read_text, tomllib
 
 CHIPS = ("ads1115", "ads7828")
 ADDRESSES = (0x48, 0x49, 0x4A, 0x4B)  # both chips: 1001 0xx, set by the ADDR / A1 A0 pins

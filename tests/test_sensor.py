@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from fitgen.base.errors import InputError
-from fitgen.physics.sensor import load_sensor, parse_sensor, preset_names, tomllib
+from fitgen.base.fileio import tomllib
+from fitgen.physics.sensor import load_sensor, parse_sensor, preset_names
 from importlib import resources
 
 from conftest import assert_one_line_error, run_cli

@@ -7,9 +7,15 @@ import json
 import os
 import shutil
 import stat
+import sys
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
+
+if sys.version_info >= (3, 11):  # the one place the TOML parser is chosen: the loaders import it from here
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
 
 from fitgen.base.errors import InputError
 
@@ -275,13 +281,6 @@ def text_kind(text: str) -> str:
     """What a text a loader could not read reads as, for the refusal to name it: "toml" (keys in TOML: a sensor or
     unit file), "json" (a model or a meta file), "csv" (a comma in its first line, comments and blank lines
     skipped: a dataset), or "" for none of these."""
-    import sys
-
-    if sys.version_info >= (3, 11):
-        import tomllib
-    else:  # pragma: no cover
-        import tomli as tomllib
-
     first = next((ln.strip() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
     if first.startswith("[") or "=" in first:
         try:

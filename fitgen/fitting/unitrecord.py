@@ -318,7 +318,8 @@ def unit_files(ident: Identification, path, provenance: dict, noise: float | Non
     import json
     from pathlib import Path
 
-    from fitgen.physics.sensor import parse_sensor, tomllib
+    from fitgen.base.fileio import tomllib
+    from fitgen.physics.sensor import parse_sensor
     from fitgen.physics.units import unit_toml
 
     from fitgen.base.fileio import real_file
@@ -363,7 +364,8 @@ def load_posterior(unit_path) -> dict | None:
     from pathlib import Path
 
     from fitgen.base.fileio import real_file
-    from fitgen.physics.sensor import load_sensor, tomllib
+    from fitgen.base.fileio import tomllib
+    from fitgen.physics.sensor import load_sensor
 
     unit_path = Path(unit_path)
     try:

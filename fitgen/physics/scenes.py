@@ -2,21 +2,15 @@
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import read_text
+from fitgen.base.fileio import read_text, tomllib
 from fitgen.physics.pose import POSE_NAMES, check_pose_range
 from fitgen.physics.simulate import DEFAULT_RANGES, grid_poses
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 
 @dataclass(frozen=True)

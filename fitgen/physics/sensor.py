@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import difflib
 import math
-import sys
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -12,13 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import canonical_json, read_text, sha256_hex, text_kind
+from fitgen.base.fileio import canonical_json, read_text, sha256_hex, text_kind, tomllib
 from fitgen.physics.tolerances import STIFFENING_MAX, TOLERANCE_MAX, Tolerances
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 AXIS_WORDS = ("radial", "tangential", "z", "-z")
 # V: the most an amplifier's output or an ADC's range may reach from 0 (a GMR bridge's amplifier runs on a few
