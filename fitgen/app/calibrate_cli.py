@@ -18,14 +18,12 @@ def cmd_identify(args) -> int:
     from fitgen.app import plots
     from fitgen.base.progress import Progress
     from fitgen.fitting import identify as idf, unitrecord as rec, verdict
-    from fitgen.physics.dataset import check_pose_columns_kept, load_dataset, refuse_huge
+    from fitgen.physics.dataset import load_capture
 
     if args.noise is not None and not args.noise > 0:  # identify weighs each reading by it
         raise InputError(f"--noise must be a finite number > 0, got {args.noise:g}")
     folder = plots.require(args.plot) if args.plot else None
-    ds = load_dataset(args.capture)
-    refuse_huge(ds)  # the residuals would not be finite
-    check_pose_columns_kept(ds, args.capture)
+    ds = load_capture(args.capture)
     sha = ds.sha256  # the capture's as written, before a compensation
     temperature = rec.capture_temperature(ds.meta, ds.n_rows)
     span = ""
@@ -301,14 +299,12 @@ def cmd_check(args) -> int:
     from fitgen.equations.model import check_input_units, load_model
     from fitgen.fitting.check import DRAWS, TOO_FAR, box_words, check_capture
     from fitgen.fitting.holdout import fitted_sensor, fitted_sensor_spec
-    from fitgen.physics.dataset import check_pose_columns_kept, load_dataset, refuse_huge
+    from fitgen.physics.dataset import load_capture
     from fitgen.physics.sensor import load_sensor
 
     folder = plots.require(args.plot) if args.plot else None
     model = load_model(args.model)
-    ds = load_dataset(args.capture)
-    refuse_huge(ds)
-    check_pose_columns_kept(ds, args.capture)
+    ds = load_capture(args.capture)
     check_input_units(model, ds.meta.get("units"), f"{args.capture}'s readings", f"model {args.model}")
     if not set(ds.target_names) & {"dx", "dy", "dz"}:
         raise InputError(f"{args.capture} has no stage displacement (dx, dy, dz): a check needs each row's pose")

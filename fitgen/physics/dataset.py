@@ -100,14 +100,19 @@ def refuse_huge(ds: Dataset) -> None:
             raise InputError(f"data row {r + 1}, column {names[c]}, holds {values[r, c]:g}: beyond any reading or pose")
 
 
-def check_pose_columns_kept(ds: Dataset, path) -> None:
-    """InputError when ``ds``'s meta records pose columns its CSV no longer has: identify and check read a pose
-    column left out as that axis at 0 on every row, and blamed the physics or the unit for it."""
+def load_capture(path: str | Path) -> Dataset:
+    """:func:`load_dataset` for identify and check, which read a capture's rows as the unit's physics: a reading
+    or label beyond HUGE refused where it is (:func:`refuse_huge`), and a pose column its meta records but its CSV
+    no longer has (they read a column left out as that axis at 0 on every row, and blamed the physics or the unit
+    for it)."""
+    ds = load_dataset(path)
+    refuse_huge(ds)
     recorded = ds.meta.get("columns")
     gone = [c for c in recorded if c in POSE_NAMES and c not in ds.target_names] if isinstance(recorded, list) else []
     if gone:
         raise InputError(f"{path} has no {', '.join(gone)} column, which its meta records: a pose column removed "
                          "since it was written reads as that axis at 0 on every row; use the file as it was written")
+    return ds
 
 
 def stage_labelled(ds: Dataset) -> bool:
