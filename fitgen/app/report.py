@@ -8,7 +8,7 @@ from fitgen.base.errors import InputError
 from fitgen.physics.dataset import Dataset
 from fitgen.fitting.fit import error_stats
 from fitgen.equations.model import Model
-from fitgen.c.calblob import MAX_INPUTS
+from fitgen.equations.model import MAX_INPUTS
 
 # the seed paper's figures (simulation study on paper-sim, and experiment term counts)
 PAPER_SIM_MAX_ERROR = {"dx": 0.06, "dz": 0.25, "thx": 1.23}

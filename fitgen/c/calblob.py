@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.equations.model import Equation, Model
+from fitgen.equations.model import MAX_INPUTS, Equation, Model
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.equations.terms import DISPLACEMENTS, EXPONENTS, Term
 
@@ -27,7 +27,6 @@ FLAG_FMA = 0x01
 HEADER_SIZE = 60  # magic .. n_terms_total; the domain follows
 TRAILER_SIZE = 4  # crc
 SENSOR_ID_SIZE = 16
-MAX_INPUTS = 30
 MAX_OUTPUTS = len(POSE_NAMES)
 MAX_TERMS = 0xFFFF
 _HEADER = struct.Struct("<4sHBB32s16sBBH")

@@ -18,7 +18,7 @@ from fitgen.c.cgen import GCC_FP, c_real, fp_guard, identifier, nonfinite_test, 
 from fitgen.c.targets import check_precision
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
-from fitgen.equations.model import Model, float_domain
+from fitgen.equations.model import MAX_INPUTS, Model, float_domain
 from fitgen.equations.rounding import PRECISIONS
 from fitgen.equations.terms import DISPLACEMENTS, EXPONENTS, monomial_factors
 
@@ -304,8 +304,8 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
     if input_lsb is not None or input_offset is not None:
         raise InputError("an input LSB and offset apply to --precision fixed only")
     cm = build_cmodel(model, precision, style, prefix, fma)
-    if model.n_inputs > 30:
-        raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most 30")
+    if model.n_inputs > MAX_INPUTS:
+        raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most {MAX_INPUTS}")
     fp_before, fp_after = fp_guard(f"{cm.upper}_FP_SCOPE")
     nonfinite = nonfinite_test(f"{cm.prefix}_nonfinite", f"{cm.upper}_NONFINITE", precision, "0")
     return _env().get_template("model.h.j2").render(m=cm, exp_codes=[EXP_CODE[e] for e in EXPONENTS],

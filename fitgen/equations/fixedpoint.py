@@ -26,7 +26,7 @@ from fitgen import __version__
 from fitgen.base.errors import InputError
 from fitgen.equations.fixedmodel import (INT16_MAX, INT32_MAX, INT32_MIN, FixedModel, FixedOp, FixedOutput,
                                          rshr)
-from fitgen.equations.model import Model
+from fitgen.equations.model import MAX_INPUTS, Model
 
 BUDGET = {16: INT16_MAX, 32: INT32_MAX, 64: 2**62}
 MAX_SHIFT = {32: 30, 64: 62}  # the largest rounding shift of a product of that width
@@ -262,8 +262,8 @@ def _check_model(model: Model, input_lsb, input_offset) -> tuple[float, float]:
         raise InputError(f"the input LSB must be a finite number > 0, got {input_lsb!r}")
     if not math.isfinite(off_f):
         raise InputError(f"the input offset must be a finite number, got {input_offset!r}")
-    if model.n_inputs > 30:
-        raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most 30")
+    if model.n_inputs > MAX_INPUTS:
+        raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most {MAX_INPUTS}")
     if refused := fixed_refusal(model):
         raise InputError(refused)
     return lsb_f, off_f

@@ -25,6 +25,7 @@ from fitgen.equations.terms import DISPLACEMENTS, Harmonics, Term, design_matrix
 
 SCHEMA_VERSION = 1
 STATUS_NONFINITE = -1
+MAX_INPUTS = 30  # the C status is a positive int with one bit per input (the headers assert it)
 _ROWS = 1 << 15  # rows per block of predict
 
 
