@@ -222,7 +222,7 @@ def render_config(cmap: ChannelMap, precision: str, rest=None) -> str:
 def _write_model(model: Model, src: Path, precision: str, style: str, lsb: float | None) -> None:
     if precision == "fixed":  # the plan for the Uno's 16-bit multiply (fitgen.equations.fixednarrow)
         write_header(model, src, "fixed", input_lsb=lsb, input_offset=0.0, target="uno")
-    else:  # a float header is the same for every core; the Uno's target refuses a refinement up front
+    else:  # a float header is the same for every core
         write_header(model, src, precision, style, target="uno")
 
 
@@ -234,6 +234,9 @@ def render_arduino(model: Model, cmap: ChannelMap, folder: str | Path, *, precis
         raise InputError("an Arduino's double is 32 bits on AVR (avr-gcc): build the model in float or fixed")
     if precision not in PRECISIONS:
         raise InputError(f"the Arduino library computes in {' or '.join(PRECISIONS)}, not {precision!r}")
+    if model.refine is not None:  # said for every board: the target's own wording names the Uno's core alone
+        raise InputError("an Arduino library runs no refinement: its AVR header reads its tables from flash, and a "
+                         "refinement's forward model and solve read theirs from RAM: fit without --refine")
     check_reads(model, cmap)
     folder = Path(folder)
     src, tpl = folder / "src", resources.files("firmware_templates")

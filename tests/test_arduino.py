@@ -578,6 +578,11 @@ def test_an_unwritable_folder_and_a_refinement_are_refused_in_one_line_up_front(
     proc = _build_cli(path, tmp_path / "R")
     assert_one_line_error(proc, 2, "fit without --refine")
     assert not (tmp_path / "R").exists()
+    # the Mega's refusal named the Uno's target and core
+    proc = _build_cli(path, tmp_path / "M", "--board", "mega")
+    assert_one_line_error(proc, 2, "fit without --refine")
+    assert "uno" not in proc.stderr.lower() and "ATmega328P" not in proc.stderr
+    assert not (tmp_path / "M").exists()
 
 
 def test_a_build_with_little_ram_above_its_stacks_peak_is_noted():
