@@ -281,3 +281,22 @@ def test_families_sharing_their_rows_fit_as_each_family_alone(monkeypatch):
             np.testing.assert_allclose(a.coefficients, b.coefficients, rtol=1e-6, err_msg=f"{f} {a.name}")
     kept, family = fit_auto(ds, None, settings, PAPER)
     assert [e.terms for e in kept.equations] == [e.terms for e in alone[family["name"]].equations]
+
+
+def test_fit_device_fits_the_family_it_names_and_refuses_an_unknown_one():
+    """fit_device's family argument is the family fitted, not a label: it fitted the settings' family (all) and
+    recorded the one named (harmonics, integer, or any text)."""
+    from fitgen.base.errors import InputError
+    from fitgen.fitting.family import fit_device
+    from fitgen.fitting.fit import FitSettings
+    from fitgen.physics.simulate import grid_poses, simulate
+
+    ds = simulate(PAPER, grid_poses({"dx": [-1, -0.5, 0, 0.5, 1], "dy": [-1, 0, 1], "dz": [0, -1]}))
+    model = fit_device(ds, ("dx",), FitSettings(), PAPER, "integer", held_out=0)
+    assert model.fit_info["family"] == {"name": "integer", "auto": False}
+    exps = {t.exponent for eq in model.equations for t in eq.terms if t.element}
+    assert exps and exps <= {"1", "2", "3", "4"}, exps
+    as_named = fit_device(ds, ("dx",), FitSettings.family("integer"), PAPER, "integer", held_out=0)
+    assert as_named.sha256 == model.sha256
+    with pytest.raises(InputError, match="unknown family 'autoo'"):
+        fit_device(ds, ("dx",), FitSettings(), PAPER, "autoo", held_out=0)

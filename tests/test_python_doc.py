@@ -236,3 +236,16 @@ def test_the_sh_lines_make_the_same(doc, tmp_path):
     proc = run_cli("fitgen", "fit", str(folder / "slide.csv"), "-o", str(tmp_path / "again.json"), "--held-out", "0")
     assert proc.returncode == 0, proc.stderr
     assert load_model(tmp_path / "again.json").sha256 == ns["model"].sha256
+
+
+def test_the_twin_saved_from_python_refuses_its_own_capture_as_a_check(doc):
+    """The unit file section 7 saves knows its capture as the CLI's does: `fitgen check` on the capture the twin was
+    identified on is refused (it passed, the capture's hash missing from a unit file saved from Python)."""
+    from conftest import assert_one_line_error
+    from fitgen.physics.dataset import load_dataset
+
+    _, folder, _ = doc
+    record = json.loads((folder / "twin.posterior.json").read_text())
+    assert record["capture_sha256"] == load_dataset(folder / "capture.csv").sha256
+    proc = run_cli("fitgen", "check", "twin.json", "capture.csv", cwd=folder)
+    assert_one_line_error(proc, 2, "capture.csv is the capture")

@@ -201,6 +201,8 @@ def fit_family(ds: Dataset, outputs, settings: FitSettings, sensor, family: str,
         return fit_auto(ds, outputs, settings, sensor, progress=progress, again=again)
     record = ({"name": family, "auto": False} if family != "auto" else
               {"name": "all", "auto": True, "why": "--noise 0: the paper's procedure"})
+    # the family named is the one fitted and recorded (an unknown one refused), whatever ``settings`` held
+    settings = settings.with_family(record["name"])
     return rounding_checked(lambda s: (fit_model(ds, outputs, s, progress=progress, sensor=sensor), record), ds,
                             settings, sensor, again)
 

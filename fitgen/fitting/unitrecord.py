@@ -304,7 +304,9 @@ def temperature_span_line(meta: dict, rows: int) -> str:
 
 def save(ident: Identification, path, provenance: dict, noise: float | None = None) -> tuple:
     """Write the unit file (the maximum a posteriori unit) and beside it ``<stem>.posterior.json``: every
-    parameter with its standard error, the posterior covariance, what was determined and what not."""
+    parameter with its standard error, the posterior covariance, what was determined and what not.
+    ``provenance``: strings recorded in both (``capture``: the capture's file, whose hash the record keeps
+    unless ``capture_sha256`` gives it)."""
     from fitgen.base.fileio import write_atomic
 
     (unit, text), (post_path, record) = unit_files(ident, path, provenance, noise)
@@ -329,6 +331,12 @@ def unit_files(ident: Identification, path, provenance: dict, noise: float | Non
     spec = provenance.get("drawing_spec")
     if spec is not None and Path(spec).is_file():  # a sensor file: named so that it is found from anywhere
         provenance = {**provenance, "drawing_spec": str(Path(spec).resolve())}
+    capture = provenance.get("capture")
+    if capture is not None and "capture_sha256" not in provenance and Path(capture).is_file():
+        # what `fitgen check` knows the capture by, to refuse it as a check of its own identification
+        from fitgen.physics.dataset import load_dataset
+
+        provenance = {**provenance, "capture_sha256": load_dataset(capture).sha256}
     unit = ident.unit(provenance.get("name", path.stem), f"identified from {provenance.get('capture', 'a capture')}")
     if noise is not None:  # the twin is simulated and fitted for the unit's own noise, not the drawing's
         unit = unit.with_noise(noise)
