@@ -26,7 +26,7 @@ from fitgen.physics.transfer import readings
 
 from host.adc import AdcArray, DeviceSilent, ErrorCounts
 from host.clock import REAL_CLOCK
-from host.temperature import T_RANGE
+from host.temperature import BEYOND_DEGC, T_RANGE
 
 FORMATS = ("csv", "jsonl")
 
@@ -57,7 +57,6 @@ FAR_OUTSIDE = ("estimated outside the pose box the model was fitted in by more t
 TEMP_OUTSIDE = (f"at a temperature outside {T_RANGE[0]:g}..{T_RANGE[1]:g} degC, where the compensation is "
                 "extrapolated (a thermistor off its divider's range?)")
 TEMP_BEYOND = "at a temperature the compensation was not fitted near, where it is extrapolated"
-BEYOND_DEGC = 5.0  # past the compensation's fitted temperatures by this much, its linear drift is a guess
 # ReadoutStats' counts of samples whose estimates are off while the run goes on: each said at its first sample
 # (Readout.warn) and in the summary
 WARNED = {"uncompensated": UNCOMPENSATED, "temp_outside": TEMP_OUTSIDE, "temp_beyond": TEMP_BEYOND,

@@ -309,6 +309,7 @@ def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:
     return "\n".join(lines)
 
 
+BEYOND_DEGC = 5.0  # past the compensation's fitted temperatures by this much, its linear drift is a guess
 CAPTURE_DEGC_TOL = 1.0  # degC between a unit's capture and a compensation's t0 that goes without a note
 
 
@@ -321,14 +322,34 @@ def unit_capture_degc(source) -> float | None:
 
 def channel_map_note(tempcomp: "TempComp", cmap, option: str) -> str:
     """A note when ``tempcomp`` was fitted on readings through another channel map than ``cmap`` (its
-    ``fit.adc``, which tactile-host capture --temperature records): each element then takes the coefficients
-    fitted for the one in its place; '' otherwise, or when the file records none."""
+    ``fit.adc``, which tactile-host capture --temperature records; ``cmap`` a map, or the text of one as a
+    capture's meta records it): each element then takes the coefficients fitted for the one in its place; ''
+    otherwise, or when either records none."""
     theirs = tempcomp.info.get("adc")
-    if not isinstance(theirs, str) or theirs == cmap.describe():
+    mine = cmap if isinstance(cmap, str) or cmap is None else cmap.describe()
+    if not isinstance(theirs, str) or not isinstance(mine, str) or theirs == mine:
         return ""
-    return (f"note: {option} was fitted on the elements read through {theirs}, and this reads {cmap.describe()}: "
+    return (f"note: {option} was fitted on the elements read through {theirs}, and this reads {mine}: "
             "each element takes the coefficients fitted for the one in its place (a compensation of this map: "
             "tactile-host capture --temperature)")
+
+
+def beyond_note(tempcomp: "TempComp", temps, option: str, what: str) -> str:
+    """A note when any of ``temps`` (degC, NaN for none) lies more than BEYOND_DEGC past the temperatures
+    ``tempcomp`` was fitted at, where it is extrapolated (as the readout counts such samples); ''
+    otherwise, or when the file records no range."""
+    fitted = tempcomp.fitted_range
+    t = np.asarray(temps, dtype=float)
+    t = t[np.isfinite(t)]
+    if fitted is None or not t.size:
+        return ""
+    lo, hi = float(t.min()), float(t.max())
+    if fitted[0] - BEYOND_DEGC <= lo and hi <= fitted[1] + BEYOND_DEGC:
+        return ""
+    at = f"{lo:.1f} degC" if lo == hi else f"{lo:.1f}..{hi:.1f} degC"
+    return (f"note: {what} were read at {at}, and {option} was fitted at {fitted[0]:g}..{fitted[1]:g} degC: "
+            f"beyond it by more than {BEYOND_DEGC:g} degC its linear drift is extrapolated (a compensation "
+            "fitted across these temperatures: tactile-host capture --temperature)")
 
 
 def capture_temperature_note(model, tempcomp: "TempComp", tare: str = "--tare") -> str:

@@ -671,6 +671,67 @@ def test_a_units_capture_temperature_is_recorded_and_a_compensation_about_anothe
     assert (cap.read_text(), meta_path.read_text()) == before
 
 
+def test_identify_and_check_note_a_compensation_extrapolated_or_fitted_through_another_map(tmp_path):
+    """identify --temp-comp and check --temp-comp say what read --temp-comp says: rows read more than BEYOND_DEGC
+    past the temperatures the compensation was fitted at, and a compensation fitted through another channel map
+    (both went without a word); and a row_degc that no longer holds a temperature per row is noted, not dropped
+    in silence."""
+    from host.temperature import BEYOND_DEGC
+
+    def ok(*args):
+        proc = run_cli(*args)
+        assert proc.returncode == 0, proc.stderr
+        return proc
+
+    ok("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "3", "--grid", "dx=0",
+       "-o", str(tmp_path / "u.csv"))
+    ok("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "24", "-o", str(tmp_path / "s.csv"))
+    ok("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+       "--simulate", "--sensor", str(tmp_path / "u.unit.toml"), "-o", str(tmp_path / "cap.csv"))
+    d = Drift.typical(8)
+    cap = str(tmp_path / "cap.csv")
+    identify = ["fitgen", "identify", cap, "--sensor", "paper", "-o", str(tmp_path / "twin.toml"), "--temp-comp"]
+
+    def notes(path):
+        return [ln for ln in ok(*identify, str(path)).stderr.splitlines() if "note:" in ln]
+
+    # fitted at 40..60 degC: the capture's 25 degC lies 15 below, beyond the readout's 5
+    far = TempComp(25.0, d.offset_tc, d.gain_tc, {"temperatures": [40.0, 50.0, 60.0],
+                                                  "adc": "ads1115@0x48:0,1,2,3,ads1115@0x49:0,1,2,3"})
+    far.save(tmp_path / "far.json")
+    said = notes(tmp_path / "far.json")
+    assert len(said) == 1 and said[0].startswith(f"identify: note: {cap}'s rows were read at 25.0 degC") \
+        and f"fitted at 40..60 degC: beyond it by more than {BEYOND_DEGC:g} degC" in said[0], said
+    near = TempComp(25.0, d.offset_tc, d.gain_tc, {**far.info, "temperatures": [15.0, 25.0, 35.0]})
+    near.save(tmp_path / "near.json")
+    assert notes(tmp_path / "near.json") == []
+    swapped = TempComp(25.0, d.offset_tc, d.gain_tc, {**near.info,
+                                                      "adc": "ads1115@0x49:0,1,2,3,ads1115@0x48:0,1,2,3"})
+    swapped.save(tmp_path / "swapped.json")
+    said = notes(tmp_path / "swapped.json")
+    assert len(said) == 1 and "was fitted on the elements read through ads1115@0x49:0,1,2,3," in said[0], said
+    # check says the same of its capture
+    ok("fitgen", "simulate", "--sensor", str(tmp_path / "twin.toml"), "--grid", "paper-sim",
+       "-o", str(tmp_path / "twin.csv"))
+    ok("fitgen", "fit", str(tmp_path / "twin.csv"), "--held-out", "50", "--family", "no-roots",
+       "-o", str(tmp_path / "twin.json"))
+    ok("fitgen", "schedule", "--check", "12", "-o", str(tmp_path / "cs.csv"))
+    ok("tactile-host", "capture", "--poses", str(tmp_path / "cs.csv"), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+       "--simulate", "--sensor", str(tmp_path / "u.unit.toml"), "-o", str(tmp_path / "c.csv"))
+    proc = run_cli("fitgen", "check", str(tmp_path / "twin.json"), str(tmp_path / "c.csv"), "--temp-comp",
+                   str(tmp_path / "far.json"))
+    assert proc.returncode in (0, 1), proc.stderr
+    assert "check: note: " + str(tmp_path / "c.csv") + "'s rows were read at 25.0 degC" in proc.stderr
+    # a row_degc edited or cut short: noted, each row then compensated from the capture's first reading
+    meta_path = tmp_path / "cap.csv.meta.json"
+    meta = json.loads(meta_path.read_text())
+    assert len(meta["row_degc"]) == 24
+    meta_path.write_text(json.dumps({**meta, "row_degc": [None] + meta["row_degc"][1:]}))
+    said = notes(tmp_path / "near.json")
+    assert len(said) == 1 and "has a row_degc that does not hold one finite temperature for each of its 24 rows" \
+        in said[0], said
+
+
 def test_the_scatter_at_rest_per_volt_scales_to_other_noise_floors(device_model):
     """tm_pi --auto-zero scales the scatter pi-build measured per volt (host.autozero.rest_response, at 0.5 mV) by
     the tare's noise floor instead of estimating the rest readings thousands of times: on the device model that is

@@ -28,7 +28,7 @@ def cmd_identify(args) -> int:
     temperature = rec.capture_temperature(ds.meta, ds.n_rows)
     span = ""
     if args.temp_comp:
-        ds, temperature = _at_t0(ds, args.temp_comp, args.capture)
+        ds, temperature = _at_t0(ds, args.temp_comp, args.capture, "identify")
     elif span := rec.temperature_span_line(ds.meta, ds.n_rows):  # before a refusal, which it may explain
         print(f"identify: {span}", file=sys.stderr)
     args.sensor, said = rec.drawing_for(args.sensor, ds.meta)  # the one the capture's schedule was made for
@@ -109,15 +109,17 @@ def _replaces_another(file) -> bool:
         return False
 
 
-def _at_t0(ds, path: str, capture: str):
+def _at_t0(ds, path: str, capture: str, command: str):
     """``ds``'s readings mapped to temperature compensation ``path``'s t0 from the temperature its capture recorded,
-    and the unit file's record of it: the twin is then the unit at t0, as a readout with the compensation sees it."""
+    and the unit file's record of it: the twin is then the unit at t0, as a readout with the compensation sees it.
+    Notes on ``command``'s stderr, as a readout's: rows read where the compensation is extrapolated, and a
+    compensation fitted through another channel map than the capture's."""
     from dataclasses import replace
 
     import numpy as np
 
     from fitgen.physics.dataset import row_degc, thermistor_degc
-    from host.temperature import load_tempcomp
+    from host.temperature import beyond_note, channel_map_note, load_tempcomp
 
     tc = load_tempcomp(path)
     degc, rows = thermistor_degc(ds.meta), row_degc(ds.meta, ds.n_rows)
@@ -128,6 +130,14 @@ def _at_t0(ds, path: str, capture: str):
         raise InputError(f"--temp-comp {path} compensates {tc.n} elements in V; {capture} has {ds.n_inputs} in "
                          f"{ds.meta.get('units')}")
     temps = rows if rows is not None else np.full(ds.n_rows, degc)  # each row at its own, where recorded
+    damaged = ("" if rows is not None or "row_degc" not in ds.meta else
+               f"note: {capture}'s meta has a row_degc that does not hold one finite temperature for each of its "
+               f"{ds.n_rows} rows (a capture stopped between a row and its meta, or edited): every row is compensated "
+               f"from thermistor_degc, {degc:g} degC, read as the capture started")
+    for note in (damaged, beyond_note(tc, temps, f"--temp-comp {path}", f"{capture}'s rows"),
+                 channel_map_note(tc, ds.meta.get("adc"), f"--temp-comp {path}")):
+        if note:
+            print(f"{command}: {note}", file=sys.stderr)
     out = replace(ds, inputs=tc.apply(ds.inputs, temps))
     return out, {"capture_degc": tc.t0, "compensated_from_degc": round(float(np.median(temps)), 4)}
 
@@ -147,7 +157,7 @@ def _check_temperature(ds, sensor, temp_comp: str | None, capture: str):
             raise InputError(f"--temp-comp {temp_comp}: the unit file ({sensor.name}) records no temperature it was "
                              "identified at (capture_degc: its capture had no thermistor), so there is none to take "
                              "the check's rows to")
-        ds, info = _at_t0(ds, temp_comp, capture)
+        ds, info = _at_t0(ds, temp_comp, capture, "check")
         t0 = info["capture_degc"]
         if abs(t0 - theirs) > CAPTURE_DEGC_TOL:
             raise InputError(f"--temp-comp {temp_comp} takes the check's rows to {t0:g} degC, but the unit was "
