@@ -595,6 +595,23 @@ def test_capture_at_temperatures_stopped_says_what_it_kept(tmp_path, monkeypatch
     assert (tmp_path / "cap.T15.csv").is_file() and not (tmp_path / "cap.T25.csv").exists()
 
 
+def _ok(*args):
+    proc = run_cli(*args)
+    assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+def _unit_captured_with_a_thermistor(tmp_path):
+    """Unit 3 (u.unit.toml) captured on a 24-pose schedule (s.csv) through a map with a thermistor at the simulated
+    drift's steady 25 degC (cap.csv); returns the runner that asserts status 0."""
+    _ok("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "3", "--grid", "dx=0",
+        "-o", str(tmp_path / "u.csv"))
+    _ok("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "24", "-o", str(tmp_path / "s.csv"))
+    _ok("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+        "--simulate", "--sensor", str(tmp_path / "u.unit.toml"), "-o", str(tmp_path / "cap.csv"))
+    return _ok
+
+
 def test_a_units_capture_temperature_is_recorded_and_a_compensation_about_another_is_noted(tmp_path):
     """A capture read with a thermistor records its temperature, identify writes it into the unit file, and a
     readout that compensates to another t0 says so in one note (unless it tares at start): the compensation maps
@@ -605,16 +622,7 @@ def test_a_units_capture_temperature_is_recorded_and_a_compensation_about_anothe
     from fitgen.physics.transfer import readings
     from host.temperature import capture_temperature_note
 
-    def ok(*args):
-        proc = run_cli(*args)
-        assert proc.returncode == 0, proc.stderr
-        return proc
-
-    ok("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "3", "--grid", "dx=0",
-       "-o", str(tmp_path / "u.csv"))
-    ok("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "24", "-o", str(tmp_path / "s.csv"))
-    ok("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
-       "--simulate", "--sensor", str(tmp_path / "u.unit.toml"), "-o", str(tmp_path / "cap.csv"))
+    ok = _unit_captured_with_a_thermistor(tmp_path)
     # the simulated thermistor reads the drift's steady 25 degC, to its ADC's step
     assert load_dataset(tmp_path / "cap.csv").meta["thermistor_degc"] == pytest.approx(25.0, abs=0.05)
     ok("fitgen", "identify", str(tmp_path / "cap.csv"), "--sensor", "paper", "-o", str(tmp_path / "twin.toml"))
@@ -678,16 +686,7 @@ def test_identify_and_check_note_a_compensation_extrapolated_or_fitted_through_a
     in silence."""
     from host.temperature import BEYOND_DEGC
 
-    def ok(*args):
-        proc = run_cli(*args)
-        assert proc.returncode == 0, proc.stderr
-        return proc
-
-    ok("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "3", "--grid", "dx=0",
-       "-o", str(tmp_path / "u.csv"))
-    ok("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "24", "-o", str(tmp_path / "s.csv"))
-    ok("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
-       "--simulate", "--sensor", str(tmp_path / "u.unit.toml"), "-o", str(tmp_path / "cap.csv"))
+    ok = _unit_captured_with_a_thermistor(tmp_path)
     d = Drift.typical(8)
     cap = str(tmp_path / "cap.csv")
     identify = ["fitgen", "identify", cap, "--sensor", "paper", "-o", str(tmp_path / "twin.toml"), "--temp-comp"]
