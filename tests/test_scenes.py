@@ -189,3 +189,23 @@ def test_a_scene_grid_grows_to_the_rows_a_fit_of_its_sensor_needs(tmp_path):
     proc = run_cli("fitgen", "tradeoff", str(ten), "--scene", "press", "--family", "integer", "--precision", "float",
                    "--k", "aic", "--max-terms", "6", "--style", "unrolled", "-o", str(tmp_path / "t"))
     assert proc.returncode == 0 and (tmp_path / "t" / "tradeoff.csv").is_file(), proc.stderr
+
+
+def test_a_scene_grid_raised_and_a_box_past_the_travel_are_said(tmp_path):
+    """simulate raised a scene file's levels for the fit's rows without a word, and took a box 20 mm wide, past the
+    paper sensor's 3 mm of travel, as readily as one within it; observe said nothing of the travel either."""
+    scene = tmp_path / "wide.toml"
+    scene.write_text('outputs = ["dx"]\nlevels = 3\n[ranges]\ndx = [-20, 20]\ndy = [0, 0]\ndz = [-0.3, -0.3]\n'
+                     'thx = [0, 0]\nthy = [0, 0]\n')
+    proc = run_cli("fitgen", "simulate", "--scene", str(scene), "-o", str(tmp_path / "w.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert "note: scene wide: its grid takes 19 levels per moving component, not its 3" in proc.stderr
+    travel = "its box reaches past the sensor's travel ([travel] of its file): dx -20..20 mm (travel -3..3)"
+    assert f"note: scene wide: {travel}" in proc.stderr
+    proc = run_cli("fitgen", "observe", "--scene", str(scene))
+    assert proc.returncode == 0 and f"note: scene wide: {travel}" in proc.stderr, proc.stderr
+    # within the travel and at levels enough: nothing said
+    scene.write_text(scene.read_text().replace("[-20, 20]", "[-2, 2]").replace("levels = 3", "levels = 19"))
+    proc = run_cli("fitgen", "simulate", "--scene", str(scene), "-o", str(tmp_path / "w.csv"))
+    assert proc.returncode == 0 and "note:" not in proc.stderr, proc.stderr
+    assert "note:" not in run_cli("fitgen", "observe", "--scene", str(scene)).stderr

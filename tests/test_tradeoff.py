@@ -190,6 +190,21 @@ def test_tiny_sweep_through_the_cli(tmp_path):
     assert "--force" not in commands[1] and (tmp_path / "again" / "c" / "tm_model.h").is_file()
 
 
+def test_the_printed_commands_reproduce_an_uncapped_point_of_a_scene_file(tmp_path):
+    """The commands printed for a point without a term cap, on a scene file named otherwise than its file, run as
+    printed: they said `--max-terms none`, which fit refuses, and `--scene light`, the file's name key, which
+    simulate cannot find; and the training grid's levels are those the sweep fitted on (raised from the file's 9)."""
+    scene = tmp_path / "button.toml"
+    scene.write_text('name = "light"\noutputs = ["dz"]\nlevels = 9\n[ranges]\ndx = [0, 0]\ndy = [0, 0]\n'
+                     'dz = [-1.5, 0]\nthx = [0, 0]\nthy = [0, 0]\n')
+    proc, rows = _sweep(tmp_path / "t", str(scene), "aic", "none", "integer")
+    assert proc.returncode == 0, proc.stderr
+    assert len(rows) == 1 and rows[0]["max_terms"] in ("", "-", "none") and rows[0]["recommended"] == "1"
+    assert "(19 levels per moving component, raised from the scene's 9 for the rows" in proc.stdout
+    commands = reproduced(proc, rows, tmp_path / "again")
+    assert "--max-terms" not in commands[1] and commands[0][commands[0].index("--scene") + 1] == str(scene)
+
+
 def test_a_point_that_leaves_an_output_a_constant_is_not_recommended(tmp_path):
     """BIC capped at 8 terms on the whole pose gives the tilts no terms; a constant on +-5 deg is 2.9 deg rms, so it
     met a 3 deg target and was recommended while estimating no tilt."""

@@ -9,8 +9,8 @@ from pathlib import Path
 from fitgen import __version__
 from fitgen.app.calibrate_cli import add_calibration_commands, cmd_identify, cmd_schedule
 from fitgen.app.cliutil import Parser, check_not_empty, check_output_kind, check_written, command_main, count, finite
-from fitgen.app.options import MAX_NOISE, fit_settings, noise_of, sensor_of
-from fitgen.base.parse import parse_assignments, parse_names
+from fitgen.app.options import MAX_NOISE, accuracy_of, fit_settings, noise_of, sensor_of
+from fitgen.base.parse import parse_names
 from fitgen.base.errors import InputError
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
 from fitgen.equations.terms import FAMILIES
@@ -54,7 +54,7 @@ def cmd_simulate(args) -> int:
         bar.update(1, "written")
     if unit is not None:
         print(f"wrote unit {sensor.name} (a unit of {drawing.name}) to {unit}", file=sys.stderr)
-    notes = "".join(f"note: {n}\n" for n in simulate_notes(sensor, poses, args.labels, args.sensor, args.adc_bits)
+    notes = "".join(f"note: {n}\n" for n in simulate_notes(sensor, poses, args.labels, args.sensor, args.adc_bits, source)
                     + _posterior_note(args.sensor if args.unit is None else None))
     print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}\n"
           + notes, end="", file=sys.stderr)
@@ -76,6 +76,7 @@ def _posterior_note(spec) -> list[str]:
 
 
 def cmd_observe(args) -> int:
+    from fitgen.app.report import travel_notes
     from fitgen.physics.observe import observe
     from fitgen.physics.scenes import load_scene, preset_sizes
     from fitgen.physics.simulate import parse_ranges
@@ -90,13 +91,11 @@ def cmd_observe(args) -> int:
     if noise is not None and not noise > 0:
         raise InputError("--noise must be > 0 for observe: without noise every pose component is resolved to 0, "
                          "resolvable or not")
-    accuracy = parse_assignments(args.accuracy, POSE_NAMES, "--accuracy") if args.accuracy else None
-    for name, value in (accuracy or {}).items():
-        if not (math.isfinite(value) and value > 0):
-            raise InputError(f"--accuracy {name}={value!r} must be a finite number > 0")
-    report = observe(sensor, ranges, scene.outputs, noise=noise, accuracy=accuracy, scenes=preset_sizes())
+    report = observe(sensor, ranges, scene.outputs, noise=noise, accuracy=accuracy_of(args.accuracy),
+                     scenes=preset_sizes())
     print(f"sensor {sensor.name} ({sensor.n_elements} elements, {sensor.transfer}), scene {scene.name}")
     print(report.text(), end="")
+    print("".join(f"note: {n}\n" for n in travel_notes(sensor, f"scene {scene.name}", ranges)), end="", file=sys.stderr)
     for c in report.unresolved():
         print(f"warning: scene {scene.name} asks for {c}, which sensor {sensor.name} cannot resolve to "
               f"{report.accuracy[c]:g} {'deg' if c.startswith('th') else 'mm'} everywhere in its box", file=sys.stderr)

@@ -123,3 +123,17 @@ def check_host(host: str) -> None:
         address, port = m.group(1) or m.group(3), m.group(2) or m.group(4)
         raise InputError(f"--host {host}: the address only; the port goes in --port (--host {address or '127.0.0.1'} "
                          f"--port {port})")
+
+
+def accuracy_of(spec: str | None) -> dict | None:
+    """``--accuracy dz=0.05 thx=2``: per pose component a finite number > 0; None when not given."""
+    import math
+
+    from fitgen.base.parse import parse_assignments
+    from fitgen.physics.pose import POSE_NAMES
+
+    accuracy = parse_assignments(spec, POSE_NAMES, "--accuracy") if spec else None
+    for name, value in (accuracy or {}).items():
+        if not (math.isfinite(value) and value > 0):
+            raise InputError(f"--accuracy {name}={value!r} must be a finite number > 0")
+    return accuracy

@@ -221,10 +221,12 @@ BLIND_SHARE = 0.5  # a training RMS past this share of an output's own spread, w
 NEAR_CONSTANT = 0.8  # past this share the equation is near a constant, cause found or not
 
 
-def simulate_notes(sensor, poses, labels: str, spec: str, adc_bits: int | None = None) -> list[str]:
+def simulate_notes(sensor, poses, labels: str, spec: str, adc_bits: int | None = None,
+                   source: dict | None = None) -> list[str]:
     """What `fitgen simulate` says of its rows beyond their count: rows where an element's reading no longer
     follows the pose (``spec``: the --sensor given, for the command that tells more; ``adc_bits``: --adc-bits,
-    which gives a raw transfer a converter and so a full scale its readings clip at)."""
+    which gives a raw transfer a converter and so a full scale its readings clip at); of a scene's grid
+    (``source``: the poses' provenance), levels raised and a box past the sensor's travel."""
     import dataclasses
 
     from fitgen.physics.simulate import rows_past_linear
@@ -233,7 +235,7 @@ def simulate_notes(sensor, poses, labels: str, spec: str, adc_bits: int | None =
 
     if adc_bits is not None and sensor.transfer == "raw":
         sensor = dataclasses.replace(sensor, raw=dataclasses.replace(sensor.raw, adc_bits=adc_bits))
-    notes = []
+    notes = _scene_notes(sensor, source or {})
     if lifted := int(off_skin(poses).sum()):  # a schedule's rest rows; in a grid or a box, labels that read as rest
         notes.append(f"{lifted} of {len(poses)} rows lie above first contact (dz > 0.05 mm): the indenter is off the "
                      "skin there, and they read the sensor at rest (fitgen fit leaves them out)")
@@ -243,6 +245,27 @@ def simulate_notes(sensor, poses, labels: str, spec: str, adc_bits: int | None =
                      f"`fitgen observe --sensor {spec} --transfer {sensor.transfer}` tells whether the others still "
                      "resolve it")
     return notes
+
+
+def _scene_notes(sensor, source: dict) -> list[str]:
+    """A scene grid's levels raised for the fit, and a scene box that reaches past the sensor's ``[travel]``."""
+    from fitgen.physics.scenes import load_scene
+
+    if "scene_spec" not in source:
+        return []
+    scene, notes = load_scene(source["scene_spec"]), []
+    if source.get("scene_grid_levels", scene.levels) != scene.levels:
+        notes.append(f"scene {scene.name}: its grid takes {source['scene_grid_levels']} levels per moving component, "
+                     f"not its {scene.levels}, for the rows the fit's first equation needs")
+    return notes + travel_notes(sensor, f"scene {scene.name}", scene.ranges)
+
+
+def travel_notes(sensor, what: str, ranges: dict) -> list[str]:
+    """A note when the pose box ``ranges`` of ``what`` reaches past the sensor's ``[travel]``, else none."""
+    past = [f"{a} {lo:g}..{hi:g} mm (travel {t[0]:g}..{t[1]:g})" for a, t in sensor.travel.items()
+            for lo, hi in [ranges[a]] if lo < t[0] or hi > t[1]]
+    return [f"{what}: its box reaches past the sensor's travel ([travel] of its file): {', '.join(past)}; the skin "
+            "does not carry the magnet that far, and poses there describe no contact the sensor will see"] if past else []
 
 
 def _blind_causes(model: Model, ds, sensor) -> list[str]:
@@ -282,11 +305,17 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
                      "so codegen, verify and flash refuse this model; Model.predict and fitgen predict take it")
     copies = {j: i for j in range(ds.n_inputs) for i in reversed(range(j))
               if j not in flat and np.array_equal(ds.inputs[:, i], ds.inputs[:, j])}
-    if copies:  # its terms and the original's are one column to the fit: both stay in, weighed against each other
+    simulated = bool(ds.meta.get("generator")) and "samples_per_row" not in ds.meta
+    if copies and not (simulated and "scene_spec" in ds.meta):  # a scene's box is the poses the device will see
+        # its terms and the original's are one column to the fit: both stay in, weighed against each other
         said = ", ".join(f"v{j + 1} reads what v{i + 1} reads" for j, i in copies.items())
-        notes.append(f"{said} on every row: one ADC channel read twice (a channel map that lists it twice) or two "
-                     "elements wired together; the fit learns nothing from the copy, and on a device that reads them "
-                     "apart the estimates will be off by however much they differ")
+        notes.append(f"{said} on every row: " + (
+            "the simulated poses keep the magnet where these elements read alike (the ring's symmetry: a scene that "
+            "holds dx and dy at 0, say), so the fit cannot tell them apart; a device's poses off that line read "
+            "them apart, where the estimates were not fitted" if simulated else
+            "one ADC channel read twice (a channel map that lists it twice) or two elements wired together; the "
+            "fit learns nothing from the copy, and on a device that reads them apart the estimates will be off by "
+            "however much they differ"))
     table = np.ascontiguousarray(np.hstack([ds.inputs, ds.targets]))
     repeats = rows - np.unique(table.view(np.dtype((np.void, table.itemsize * table.shape[1])))).size
     if repeats:  # a row counted twice weighs twice and adds to n in AIC: terms are admitted on less evidence
@@ -316,13 +345,24 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
                          + (f"; against the {noise:.3g} {model.input_units} rms of reading noise it is fitted for, "
                             f"the readings barely carry {e.name} here" if noise > 0 else "")
                          + "; `fitgen observe` tells how well each output can be seen")
-    crowded = [e for e in model.equations if len(e.terms) + 1 > rows / 3]
+    crowded = [e for e in model.equations if len(e.terms) + 1 > rows / 3 and not _holds_out_as_trained(model, e.name)]
     if crowded:  # AIC's penalty is no guard when the terms near the rows: the equation threads the rows' noise
         e = max(crowded, key=lambda e: len(e.terms))
         notes.append(f"{e.name} has {len(e.terms)} terms on {rows} rows: it threads these rows (and their noise, "
                      "where they have some) more than it follows the sensor, and errs between them; more rows, "
                      "--max-terms, or fit the identified unit's simulated rows (fitgen identify)")
     return notes
+
+
+def _holds_out_as_trained(model: Model, name: str) -> bool:
+    """Whether output ``name``'s noise-free held-out RMS (in the precision fitted for) is within twice its training
+    RMS: an equation that threaded its rows would err between them."""
+    info = model.fit_info
+    held = ((info.get("held_out") or {}).get("errors") or {})
+    errors = held.get((info.get("precision") or {}).get("target")) or held.get("double") or {}
+    rms = (errors.get(name) or {}).get("rms")
+    trained = info["outputs"][name]["model_training_error"]["rms"]
+    return isinstance(rms, float) and rms <= 2 * trained
 
 
 def _d_terms_note(model: Model) -> list[str]:

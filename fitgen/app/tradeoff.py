@@ -101,6 +101,7 @@ def run_tradeoff(args, sensor) -> int:
         result = sweep(sensor, scene, grid, target=target, seed=args.seed, jobs=args.jobs,
                        progress=lambda note, total: (setattr(bar, 'total', total), bar.update(1, note)), max_share=args.max_share, core=args.core)
     result.given = (args.sensor, *(("--transfer", args.transfer) if args.transfer else ()))
+    result.scene_given = args.scene
     paths, text = write_outputs(result, args.output)
     print(text, end="")
     print("wrote " + ", ".join(str(p) for p in paths), file=sys.stderr)

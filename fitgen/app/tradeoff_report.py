@@ -78,24 +78,27 @@ def reproduce(i: int, result: TradeoffResult) -> list[str]:
     from shlex import quote
 
     kn = result.points[i].knobs
-    scene = result.scene.name
+    spec = result.scene_given or result.scene.name  # a scene file by its path: simulate reads it again
+    data = quote(f"{Path(spec).stem if Path(spec).suffix else spec}.csv")
     k = kn.k if isinstance(kn.k, str) else f"{kn.k:g}"
-    fit = (f"fitgen fit {scene}.csv --k {k} --max-terms {kn.max_terms or 'none'} --family {kn.family}"
-           + (f" --refine {kn.refine}" if kn.refine else "") + (" --force" if result.warnings else "")
-           + " -o model.json")
+    fit = (f"fitgen fit {data} --k {k}" + (f" --max-terms {kn.max_terms}" if kn.max_terms else "")
+           + f" --family {kn.family}" + (f" --refine {kn.refine}" if kn.refine else "")
+           + (" --force" if result.warnings else "") + " -o model.json")
     gen = (f"fitgen codegen model.json --precision {kn.precision}"
            + (f" --style {kn.style}" if kn.precision != "fixed" else "")
            + (f" --target {result.core}" if result.core else "") + " -o c")
     return [f"fitgen simulate --sensor {' '.join(quote(x) for x in result.given or (result.sensor,))} "
-            f"--scene {scene} -o {scene}.csv", fit, gen]
+            f"--scene {quote(spec)} -o {data}", fit, gen]
 
 
 def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
     s, outs = result.setup, result.scene.outputs
     units = {o: POSE_UNITS[POSE_NAMES.index(o)] for o in outs}
     lines = [f"# Trade-off: sensor {result.sensor} ({result.transfer}), scene {result.scene.name}", ""]
+    raised = (f", raised from the scene's {result.scene.levels} for the rows the fit's first equation needs"
+              if s["levels"] != result.scene.levels else "")
     lines.append(f"Training: the scene's grid, {s['training_rows']:,} poses ({s['levels']} levels per moving "
-                 "component), simulated noise-free and fitted for the sensor's noise and float rounding. "
+                 f"component{raised}), simulated noise-free and fitted for the sensor's noise and float rounding. "
                  f"Held-out: {s['held_out']:,} random poses in the scene's box (seed "
                  f"{s['seed']}), noise-free and with the sensor's noise ({s['noise']:g} {s['units']} rms per element, "
                  f"{s['noise_draws']} draws). {s['fits']} fits, {s['measured']} distinct builds measured.")

@@ -194,6 +194,7 @@ class TradeoffResult:
     core: str | None = None  # the costs are cycles on this core (fitgen.c.targets), else x86 instructions
     constant: list[int] = field(default_factory=list)  # points that estimate some output no better than a constant
     given: tuple = ()  # the command's sensor options as typed (--sensor's value, --transfer ...), to reproduce a point
+    scene_given: str | None = None  # --scene as typed (a file's path), to reproduce a point
 
     def cost(self, p: Point) -> float | None:
         """The point's cost: cycles per estimate on the core, else instructions."""
@@ -423,7 +424,7 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
     front = pareto_front(cost_, score)
     rec, met = recommend([math.nan if c is None else c for c in cost_],
                          [math.nan if s is None else s for s in score], [p.flash for p in points])
-    setup = {"training_rows": train.n_rows, "levels": scene.levels, "held_out": n_held, "noise_draws": noise_draws,
+    setup = {"training_rows": train.n_rows, "levels": taught.levels, "held_out": n_held, "noise_draws": noise_draws,
              "noise": sensor.noise, "units": sensor.units, "seed": seed, "fits": len(fits), "measured": len(units)}
     return TradeoffResult(sensor.name, sensor.transfer, scene, target, points, front, rec, met, warnings, notes, setup,
                           max_share, over, core, constant)
