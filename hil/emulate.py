@@ -14,7 +14,7 @@ from pathlib import Path
 
 from fitgen.base.children import tied
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import write_atomic
+from fitgen.base.fileio import hold_folder, write_atomic
 
 QEMU = "qemu-system-arm"
 # the emulated boards: QEMU machine per target (mps2: Cortex-M4F; microbit: nRF51822, Cortex-M0)
@@ -83,7 +83,7 @@ class _Running:
     """A started firmware process: stopped (and its build folder removed) on exit."""
 
     proc: subprocess.Popen | None = None
-    _tmp = None
+    _tmp = _lock = None
 
     def start(self):
         raise NotImplementedError
@@ -96,6 +96,9 @@ class _Running:
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None
+        if self._lock is not None:
+            self._lock.close()
+            self._lock = None
 
     def __enter__(self):
         return self.start()
@@ -406,15 +409,22 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
             raise InputError(f"{' and '.join(missing)} not found; {INSTALL_HINT}")
     if target == "uno":
         require_avr_tools()
-    tmp = None
+    tmp = lock = None
     if workdir is None:
         tmp = tempfile.TemporaryDirectory(prefix="tactile-fw-")
         workdir = tmp.name
+    else:  # a folder the user named may be another emulator's: its sources and image are not to mix with these
+        lock = hold_folder(Path(workdir), "tactile-hil", "--build-dir")
     folder = Path(workdir)
     port_name = "posix" if target == "host" else target
-    render_firmware(model, folder, precision=precision, style=style, fma=fma, port=port_name, sensor_id=sensor_id,
-                    cmap=cmap, tin=tin, tempcomp=tempcomp)
-    image = build_firmware(folder, port_name)
+    try:
+        render_firmware(model, folder, precision=precision, style=style, fma=fma, port=port_name,
+                        sensor_id=sensor_id, cmap=cmap, tin=tin, tempcomp=tempcomp)
+        image = build_firmware(folder, port_name)
+    except BaseException:
+        if lock is not None:
+            lock.close()
+        raise
     if target in MACHINES:
         runner = Emulator(image, port, bridge=bridge, machine=MACHINES[target])
         runner.size = firmware_size(image)
@@ -427,8 +437,9 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
         runner = HostFirmware(image, bridge=bridge)
         runner.size = None
     runner.workdir = folder
-    runner._tmp = tmp  # removed with the runner
+    runner._tmp, runner._lock = tmp, lock  # removed, and released, with the runner
     return runner
+
 
 
 def uno_crash_advice(model, precision: str, style: str, **render) -> str:

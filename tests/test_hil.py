@@ -101,6 +101,30 @@ def test_full_suite_on_host_build_over_a_pty(paper_model, precision, style):
         assert max(res.checks[1].figures["max_error"]) == 0.0
 
 
+def test_a_build_folder_in_use_is_refused_not_shared(paper_model, model_file, tmp_path):
+    """Two emulators given one --build-dir interleaved their sources: one answered INFO with its model's hash and
+    EVAL with the other's. A folder another build or firmware holds is refused in one line, before any file of it
+    is written; once that firmware stops the folder serves again."""
+    from fitgen.base.errors import InputError
+
+    require_tool("gcc")
+    folder = tmp_path / "fw"
+    other = dataclasses.replace(paper_model, fit_info={**paper_model.fit_info, "note": "another"})
+    with start_target(paper_model, "host", workdir=folder) as fw:
+        main_c = (folder / "main.c").read_text()
+        with pytest.raises(InputError, match=f"--build-dir {folder} is in use by another tactile-hil"):
+            start_target(other, "host", workdir=folder)
+        proc = run_cli("tactile-hil", "emulate", "--target", "host", "--model", str(model_file), "--build-dir",
+                       str(folder))
+        assert_one_line_error(proc, 2, f"--build-dir {folder} is in use by another tactile-hil")
+        assert (folder / "main.c").read_text() == main_c
+        with Device.open(fw.url, timeout=5) as dev:
+            assert dev.info(refresh=True).model_hash == paper_model.sha256
+    with start_target(other, "host", workdir=folder) as fw:
+        with Device.open(fw.url, timeout=5) as dev:
+            assert dev.info(refresh=True).model_hash == other.sha256
+
+
 def test_fixed_point_suite_on_emulated_cortex_m4():
     """A fixed-point build (integer powers only, ADC codes in) through the same suite on the emulated core."""
     require_tool("qemu-system-arm")

@@ -318,3 +318,23 @@ def staged_beside(folder: Path):
         yield partial
     finally:
         shutil.rmtree(partial, ignore_errors=True)
+
+
+def hold_folder(folder: Path, who: str, option: str):
+    """An exclusive lock on ``folder`` (created; the lock is its ``.lock`` file), held until the returned file is
+    closed or the process ends; InputError when another process holds it, naming ``who`` holds such folders and
+    the ``option`` that gives each its own."""
+    import fcntl
+
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        handle = open(folder / ".lock", "a")
+    except OSError as exc:
+        raise InputError(f"{option} {folder}: {exc.strerror or exc}") from None
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.close()
+        raise InputError(f"{option} {folder} is in use by another {who} (a build, or a firmware running from it): "
+                         f"give each its own {option}") from None
+    return handle
