@@ -177,6 +177,10 @@ def test_fixed_point_and_blobs_refuse_in_one_line(harmonic_model, tmp_path):
                                   "--input-lsb", "1e-4"),
                           contains="fixed point has no harmonic terms")
     assert not (tmp_path / "gen" / "tm_model.h").exists()
+    # flash says so before it opens the port (it said "cannot open port" first), naming the families that flash
+    proc = run_cli("tactile-host", "flash", "--port", "socket://127.0.0.1:1", str(path), "--timeout", "0.5")
+    assert_one_line_error(proc, 2, "no harmonic terms")
+    assert "--family all, no-roots or integer" in proc.stderr and "port" not in proc.stderr
 
 
 def test_cli_needs_the_sensor_and_a_positive_sum(tmp_path):

@@ -16,14 +16,15 @@ from host.stagesettings import APPROACH
 
 
 def cmd_flash(args) -> int:
-    from fitgen.c.calblob import check_sensor_id, model_sensor_id
+    from fitgen.c.calblob import blob_refusal, check_sensor_id, model_sensor_id
     from fitgen.equations.model import load_model
 
     from host.device import BOOT_WAIT, Device, FlashFailed, flash_model
 
     timeout = parse_positive(args.timeout, "--timeout", most=LONGEST_WAIT)
     model = load_model(args.model)
-    # a bad id said before the port is opened, not after the device answered
+    if refused := blob_refusal(model):  # said before the port is opened, not after the device answered
+        raise InputError(refused)
     sensor_id = model_sensor_id(model) if args.sensor_id is None else check_sensor_id(args.sensor_id)
     try:
         with Device.open(args.port, timeout=timeout, ready=max(BOOT_WAIT, timeout)) as dev:

@@ -120,23 +120,32 @@ def model_sensor_id(model: Model, fallback: str = "paper", also=None) -> str:
     return name
 
 
+def blob_refusal(model: Model) -> str:
+    """Why no calibration blob holds ``model``, whatever the firmware's precision; '' when one can."""
+    built_in = "build it into the firmware instead (`fitgen codegen`, `tactile-hil emulate --model`)"
+    if model.refine is not None:
+        return f"the calibration blob format has no refinement: fit without --refine to flash the model, or {built_in}"
+    harm = next((t for e in model.equations for t in e.terms if t.harm), None)
+    if harm is not None:
+        return (f"the calibration blob format has no harmonic terms ({harm.text}), which the default --family auto "
+                f"keeps where they validate better: fit with --family all, no-roots or integer to flash the model, "
+                f"or {built_in}")
+    if model.n_inputs > MAX_INPUTS:
+        return f"the model takes {model.n_inputs} inputs; a calibration blob holds at most {MAX_INPUTS}"
+    total = sum(len(e.terms) for e in model.equations)
+    if total > MAX_TERMS:
+        return f"the model has {total} terms; a calibration blob holds at most {MAX_TERMS}"
+    return ""
+
+
 def to_blob(model: Model, precision: str = "float", sensor_id: str = "paper", fma: bool = False) -> bytes:
     """The calibration blob (format version 1) of ``model`` for a firmware of this precision."""
     if precision not in PRECISION_CODES:
         raise InputError(f"precision must be one of {', '.join(PRECISION_CODES)}, got {precision!r}")
-    if model.refine is not None:
-        raise InputError("the calibration blob format has no refinement: build the model into the firmware with "
-                         "`fitgen codegen`, or fit without --refine to flash it")
-    harm = next((t for e in model.equations for t in e.terms if t.harm), None)
-    if harm is not None:
-        raise InputError(f"the calibration blob format has no harmonic terms ({harm.text}): build the model into the "
-                         "firmware with `fitgen codegen`, or fit another family to flash it")
+    if refused := blob_refusal(model):
+        raise InputError(refused)
     check_sensor_id(sensor_id)
-    if model.n_inputs > MAX_INPUTS:
-        raise InputError(f"the model takes {model.n_inputs} inputs; a calibration blob holds at most {MAX_INPUTS}")
     total = sum(len(e.terms) for e in model.equations)
-    if total > MAX_TERMS:
-        raise InputError(f"the model has {total} terms; a calibration blob holds at most {MAX_TERMS}")
     from fitgen.c.codegen import term_magnitudes
 
     for name, mag in term_magnitudes(model).items():
