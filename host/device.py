@@ -347,7 +347,8 @@ def flash_model(dev: Device, model, origin: str, *, sensor_id: str = "paper", fm
     if info.precision == "fixed":
         raise InputError("the device is a fixed-point build; calibration blobs need a float or double build")
     if (info.n_inputs, info.n_outputs) != (model.n_inputs, len(model.equations)):
-        raise InputError(f"model {origin} has {model.n_inputs} inputs and {len(model.equations)} outputs; "
+        n_out = len(model.equations)
+        raise InputError(f"model {origin} has {model.n_inputs} inputs and {n_out} output{'s' * (n_out != 1)}; "
                          f"the device's build has {info.n_inputs} and {info.n_outputs}")
     if info.adc_chips:  # its inputs are its ADCs' volts, whatever the blob says
         check_input_units(model, "V", "the device's ADC readings", f"model {origin}")

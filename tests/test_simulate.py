@@ -159,6 +159,13 @@ def test_the_fit_note_names_causes_that_hold(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert re.search(r"note: thx's equation leaves 100% of its spread .*: it has no terms, as the penalty per term "
                      r"\(k = 5\.7\) admitted none; a smaller --k \(aic: 2\) may admit some", proc.stderr), proc.stderr
+    # a cap that leaves a tilt near a constant is named, not the readings (they carry thx uncapped)
+    proc = run_cli("fitgen", "fit", str(data), "-o", str(model), "--family", "all", "--max-terms", "4",
+                   "--held-out", "0")
+    assert proc.returncode == 0, proc.stderr
+    capped = [ln for ln in proc.stderr.splitlines() if "of its spread" in ln]
+    assert capped and all("close to a constant within --max-terms 4" in ln for ln in capped), capped
+    assert "barely carry" not in proc.stderr
     # the paper's procedure on its grid: its tilts leave about half their spread, as the paper's do; no note
     for argv in (("simulate", "--sensor", "paper", "--grid", "paper-sim", "-o", str(data)),
                  ("fit", str(data), "--noise", "0", "-o", str(model))):

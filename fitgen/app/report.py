@@ -340,6 +340,10 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
                          "--k (aic: 2) may admit some")
         elif rms > NEAR_CONSTANT * sd and no_d and e.name in ("thx", "thy"):
             notes.append(f"{said}: it is close to a constant, fitted without the displacement terms (above)")
+        elif rms > NEAR_CONSTANT * sd and isinstance(cap := (model.fit_info.get("settings") or {}).get("max_terms"),
+                                                     int):
+            notes.append(f"{said}: it is close to a constant within --max-terms {cap}, which may be too few terms for "
+                         f"{e.name} on these readings: a larger cap (or none) tells")
         elif rms > NEAR_CONSTANT * sd:  # no cause found; the paper's tilts, fitted its way, leave about half
             notes.append(f"{said}: it is close to a constant"
                          + (f"; against the {noise:.3g} {model.input_units} rms of reading noise it is fitted for, "
