@@ -221,3 +221,15 @@ def firmware_size(elf: str | Path, size_tool: str = "arm-none-eabi-size") -> dic
     proc = _run([size_tool, str(elf)], f"measuring {elf}")
     text, data, bss = (int(x) for x in proc.stdout.splitlines()[1].split()[:3])
     return {"text": text, "data": data, "bss": bss, "flash": text + data, "ram": data + bss}
+
+
+def reported_lsb(info) -> float:
+    """The volts of one ADC code of a fixed-point device reading ADS1115s at one PGA, from its INFO; InputError
+    when INFO cannot say (an ADS7828's reference is not in it)."""
+    from host.channelmap import ADS1115_PGA
+
+    pgas = {c[3] for c in info.adc_chips if c[0] == "ads1115"}
+    if len(pgas) != 1 or any(c[0] != "ads1115" for c in info.adc_chips) or min(pgas) >= len(ADS1115_PGA):
+        raise InputError("the device reads ADCs whose code scale its INFO does not give (an ADS7828's reference, or "
+                         "mixed PGAs): run the suite from tactile-hil emulate --suite, which knows the channel map")
+    return ADS1115_PGA[pgas.pop()] / 32768.0

@@ -387,18 +387,6 @@ def check_fuzz(dev: Device, n_frames: int, batch: int = 50, seed: int = 0, progr
                  figures={"frames": sent})
 
 
-def reported_lsb(info) -> float:
-    """The volts of one ADC code of a fixed-point device reading ADS1115s at one PGA, from its INFO; InputError
-    when INFO cannot say (an ADS7828's reference is not in it)."""
-    from host.channelmap import ADS1115_PGA
-
-    pgas = {c[3] for c in info.adc_chips if c[0] == "ads1115"}
-    if len(pgas) != 1 or any(c[0] != "ads1115" for c in info.adc_chips) or min(pgas) >= len(ADS1115_PGA):
-        raise InputError("the device reads ADCs whose code scale its INFO does not give (an ADS7828's reference, or "
-                         "mixed PGAs): run the suite from tactile-hil emulate --suite, which knows the channel map")
-    return ADS1115_PGA[pgas.pop()] / 32768.0
-
-
 def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000, data: np.ndarray | None = None,
               n_fuzz: int = 10_000, flash: bool = True, sensor_id: str = "paper", fma: bool = False,
               seed: int = 0, verbose: bool = True, input_lsb: float | None = None,
@@ -421,7 +409,7 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
     if info.precision == "fixed":
         from fitgen.equations.fixedpoint import build_fixed
         from fitgen.equations.inputscale import default_input_scale
-        from hil.firmware import NARROW_TAG
+        from hil.firmware import NARROW_TAG, reported_lsb
 
         if mul_bits is None:
             mul_bits = 16 if info.firmware_version.endswith(NARROW_TAG) else 32
@@ -444,57 +432,66 @@ def run_suite(dev: Device, model: Model, *, url: str = "", n_vectors: int = 1000
             return step(check_eval, dev, model, subset, name, fma, progress=prog)
 
     def step(fn, *args, **kw):
-        t0 = time.perf_counter()
+        t0, lost, name = time.perf_counter(), None, fn.__name__.removeprefix("check_").replace("_", " ")
         try:
             c = fn(*args, **kw)
         except DeviceError as exc:
             # a refusal is this check's failure (a device built for another model refuses its calibration);
             # the other checks still run and the table says which failed
-            c = Check(fn.__name__.removeprefix("check_").replace("_", " "), False, str(exc))
+            c = Check(name, False, str(exc))
+        except NoAnswer as exc:  # the device stopped: this check failed, and the table so far is the suite's
+            lost, c = exc, Check(name, False, f"{exc}; the checks after it were not run")
         c.seconds = time.perf_counter() - t0
         checks.append(c)
         if kw.get("progress") is not None:
             kw["progress"].close()  # the bar's line cleared before the check's
         if verbose:
             print(f"  {c.name}: {'pass' if c.ok else 'FAIL'} ({c.seconds:.1f} s)", flush=True)
+        if lost is not None:
+            raise lost
         return c
 
     if not sync(dev, b"hil-start" + bytes(np.random.default_rng().bytes(16))):
         raise NoAnswer(f"{url or 'the device'} does not answer PING")
-    step(check_info, dev, model)  # resets a loaded calibration first
-    evaluate(inputs, "eval")
-    running = dev.info().model_hash
-    if held_out is not None and running != model.sha256:
-        # its differences are another model's, not rounding's: say that rather than blame the arithmetic
-        checks.append(Check("held-out accuracy", False, f"not measured: the device runs model {running[:12]}, not "
-                            f"{model.sha256[:12]} (info)"))
-        if verbose:
-            print("  held-out accuracy: FAIL (not measured: another model)", flush=True)
-    elif held_out is not None:
-        with Progress("held-out accuracy", len(held_out[0])) as prog:
-            step(check_held_out, dev, model, held_out, max_share, fixed, progress=prog)
-    step(check_stream, dev)
-    step(check_timing, dev, model, fixed=fixed)
-    if flash and fixed is not None:
-        step(check_fixed_refuses_blobs, dev, model, sensor_id)
-    elif flash:
-        new = flash_variant(model)
-        few = inputs[: min(len(inputs), 300)]
-        room = dev.cal_capacity()
-        try:
-            if len(to_blob(new, dev.info().precision, sensor_id)) > room:
-                # a store smaller than the blob (the Uno's EEPROM): refused, then the checks on the terms it takes
-                step(check_flash_too_big, dev, model, new, room, sensor_id)
-                new = fit_store(new, room, dev.info().precision, sensor_id)
-            step(check_flash, dev, model, new, few, sensor_id)
-            step(check_corrupt_flash, dev, new, few, sensor_id)
-        except BaseException:  # Ctrl-C or a lost device mid-way: the suite's variant must not outlive it (an EEPROM
-            with contextlib.suppress(Exception):  # keeps it across resets); at best effort, the first error stands
-                dev.reset_calibration()
-            raise
-        dev.reset_calibration()
-    if n_fuzz:
-        with Progress("fuzz frames", n_fuzz) as prog:
-            step(check_fuzz, dev, n_fuzz, seed=seed, progress=prog)
-        evaluate(inputs[: min(len(inputs), 300)], "eval after fuzz")
+    try:
+        step(check_info, dev, model)  # resets a loaded calibration first
+        evaluate(inputs, "eval")
+        running = dev.info().model_hash
+        if held_out is not None and running != model.sha256:
+            # its differences are another model's, not rounding's: say that rather than blame the arithmetic
+            checks.append(Check("held-out accuracy", False, f"not measured: the device runs model {running[:12]}, not "
+                                f"{model.sha256[:12]} (info)"))
+            if verbose:
+                print("  held-out accuracy: FAIL (not measured: another model)", flush=True)
+        elif held_out is not None:
+            with Progress("held-out accuracy", len(held_out[0])) as prog:
+                step(check_held_out, dev, model, held_out, max_share, fixed, progress=prog)
+        step(check_stream, dev)
+        step(check_timing, dev, model, fixed=fixed)
+        if flash and fixed is not None:
+            step(check_fixed_refuses_blobs, dev, model, sensor_id)
+        elif flash:
+            new = flash_variant(model)
+            few = inputs[: min(len(inputs), 300)]
+            room = dev.cal_capacity()
+            try:
+                if len(to_blob(new, dev.info().precision, sensor_id)) > room:
+                    # a store smaller than the blob (the Uno's EEPROM): refused, then the checks on the terms it
+                    # takes
+                    step(check_flash_too_big, dev, model, new, room, sensor_id)
+                    new = fit_store(new, room, dev.info().precision, sensor_id)
+                step(check_flash, dev, model, new, few, sensor_id)
+                step(check_corrupt_flash, dev, new, few, sensor_id)
+            except BaseException:  # Ctrl-C or a lost device mid-way: the suite's variant must not outlive it
+                with contextlib.suppress(Exception):  # (an EEPROM keeps it across resets); the first error stands
+                    dev.reset_calibration()
+                raise
+            dev.reset_calibration()
+        if n_fuzz:
+            with Progress("fuzz frames", n_fuzz) as prog:
+                step(check_fuzz, dev, n_fuzz, seed=seed, progress=prog)
+            evaluate(inputs[: min(len(inputs), 300)], "eval after fuzz")
+    except NoAnswer as exc:  # lost between checks; a check's own loss is in the table already
+        if not (checks and checks[-1].detail.endswith("were not run")):
+            checks.append(Check("device", False, f"{exc}; the checks after it were not run"))
     return SuiteResult(url, checks, time.perf_counter() - t_suite)

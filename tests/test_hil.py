@@ -125,6 +125,35 @@ def test_a_build_folder_in_use_is_refused_not_shared(paper_model, model_file, tm
             assert dev.info(refresh=True).model_hash == other.sha256
 
 
+def test_a_device_that_stops_mid_suite_leaves_the_table_so_far(paper_model, monkeypatch):
+    """A device that stopped answering mid-suite ended `tactile-hil run` with one line, and the checks already done
+    were lost: now the check it stopped in fails, the table holds those before it, and the rest are said not run."""
+    import os
+    import signal
+
+    import hil.suite
+
+    require_tool("gcc")
+    real = hil.suite.check_stream
+    with start_target(paper_model, "host") as fw:
+
+        def check_stream(dev, *a, **kw):
+            os.kill(fw.proc.pid, signal.SIGSTOP)  # hung: the pty stays open, nothing answers
+            return real(dev, *a, **kw)
+
+        monkeypatch.setattr(hil.suite, "check_stream", check_stream)
+        try:
+            with Device.open(fw.url, timeout=1) as dev:
+                res = run_suite(dev, paper_model, url=fw.url, n_vectors=50, n_fuzz=100, verbose=False)
+        finally:
+            os.kill(fw.proc.pid, signal.SIGCONT)
+    assert not res.ok
+    names = [c.name for c in res.checks]
+    assert names[:3] == ["info", "eval", "stream"] and "timing" not in names and "fuzz" not in names, names
+    assert res.checks[0].ok and res.checks[1].ok
+    assert "no answer" in res.checks[2].detail and res.checks[2].detail.endswith("the checks after it were not run")
+
+
 def test_fixed_point_suite_on_emulated_cortex_m4():
     """A fixed-point build (integer powers only, ADC codes in) through the same suite on the emulated core."""
     require_tool("qemu-system-arm")
