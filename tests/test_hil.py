@@ -343,6 +343,33 @@ def test_the_emulator_ends_with_emulate_even_when_it_is_killed(model_file):
         time.sleep(0.1)
 
 
+@pytest.mark.parametrize("sig, said", [("TERM", "stopped from outside (qemu-system-arm: terminating on signal 15"),
+                                        ("KILL", "killed by signal 9 from outside")])
+def test_an_emulator_stopped_from_outside_is_said_so(model_file, sig, said):
+    """QEMU killed under emulate was reported as 'the mps2 firmware exited on its own (status 0)'."""
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    import re
+    import subprocess
+    import sys
+
+    code = "import sys; from fitgen.app.hil_cli import main; sys.argv[0] = 'tactile-hil'; main()"
+    proc = subprocess.Popen([sys.executable, "-c", code, "emulate", "--target", "mps2", "--model", str(model_file)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = ""
+        while not line.startswith("ready: "):
+            line = proc.stdout.readline()
+            assert line, proc.stderr.read()
+        port = re.search(r"socket://127\.0\.0\.1:(\d+)", line).group(1)
+        subprocess.run(["pkill", f"-{sig}", "-f", f"qemu-system-arm.*port={port},"], check=True)
+        _, err = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    assert proc.returncode == 2
+    assert err.strip().splitlines()[-1].startswith(f"tactile-hil emulate: error: the mps2 firmware ended: {said}"), err
+
+
 def test_cli_emulate_refuses_the_suites_options_without_suite(model_file, tmp_path):
     """Without --suite the suite never runs: each of its options, even typed as its default (--vectors 0 too), is
     one line before the model is read or the firmware built, and --help says they need --suite."""

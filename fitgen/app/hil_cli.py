@@ -119,6 +119,19 @@ def _stopped(runner, args, advice, before: bool = True) -> None:
     raise InputError(f"the {args.target} firmware stopped{' before answering' if before else ''}: {said}{hint}")
 
 
+def _ending(runner) -> str:
+    """How a firmware that ended while emulate waited ended: a signal (QEMU says it was stopped by one, and exits
+    0), else its exit status and its last word on stderr."""
+    rc = runner.proc.returncode
+    if rc < 0:
+        return f"killed by signal {-rc} from outside"
+    err = runner.proc.stderr.read() if runner.proc.stderr is not None and not runner.proc.stderr.closed else ""
+    last = (err.decode(errors="replace") if isinstance(err, bytes) else err or "").strip().splitlines()[-1:]
+    if last and "terminating on signal" in last[0]:
+        return f"stopped from outside ({last[0].strip()})"
+    return f"exit status {rc}" + (f" ({last[0].strip()})" if last else "")
+
+
 def cmd_emulate(args) -> int:
     from host.device import Device
 
@@ -175,7 +188,7 @@ def cmd_emulate(args) -> int:
         while not stop.is_set() and runner.proc is not None and runner.proc.poll() is None:
             stop.wait(0.2)
         if not stop.is_set():
-            raise InputError(f"the {args.target} firmware exited on its own (status {runner.proc.returncode})")
+            raise InputError(f"the {args.target} firmware ended: {_ending(runner)}")
     print("stopped", file=sys.stderr)
     return 0
 
