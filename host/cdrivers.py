@@ -48,7 +48,7 @@ class AdcChip(ctypes.Structure):
     _fields_ = [("kind", ctypes.c_uint8), ("address", ctypes.c_uint8), ("n_inputs", ctypes.c_uint8),
                 ("pos", ctypes.c_uint8 * 8), ("neg", ctypes.c_uint8 * 8), ("pga", ctypes.c_uint8),
                 ("rate", ctypes.c_uint8), ("continuous", ctypes.c_uint8), ("vref_internal", ctypes.c_uint8),
-                ("vref", ctypes.c_float)]
+                ("vref", ctypes.c_double)]
 
 
 class AdcPolicy(ctypes.Structure):

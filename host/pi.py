@@ -47,7 +47,7 @@ def _chip_rows(cmap: ChannelMap) -> list[str]:
         neg = ", ".join(str(x) for x in c.neg)
         kind = "ADC_ADS1115" if chip.kind == "ads1115" else "ADC_ADS7828"
         rows.append(f"    {{ {kind}, 0x{c.address:02x}, {c.n_inputs}, {{ {pos} }}, {{ {neg} }}, {c.pga}, {c.rate}, "
-                    f"{c.continuous}, {c.vref_internal}, {float(c.vref)!r}f }}")
+                    f"{c.continuous}, {c.vref_internal}, {float(c.vref)!r} }}")
     return rows
 
 

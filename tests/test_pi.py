@@ -38,9 +38,9 @@ def _bus(faults=()):
     return sim_bus(MAP, faults)
 
 
-def _python_lines(model, n, faults=()):
+def _python_lines(model, n, faults=(), spec=MAP, settings=None):
     """What the Python drivers and the float model give for the same bus, as tactile-host read's lines."""
-    cmap, bus, clock = _bus(faults=faults)
+    cmap, bus, clock = sim_bus(spec, faults, settings)
     arr = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy())
     arr.probe()
     arr.setup()
@@ -103,6 +103,23 @@ def test_pi_build_under_qemu_gives_the_python_readout(model, standin_build):
     assert [ln.split(",", 1)[1] for ln in lines[1:]] == [ln.split(",", 1)[1] for ln in expected]
     assert re.search(r"tm_pi: 6 samples in \d+\.\d\d s \(\d+\.\d Hz\); I2C errors 0", res.stderr), res.stderr
     assert "estimated outside" not in res.stderr
+
+
+def test_pi_build_reads_an_ads7828_to_the_digit_of_the_python_readout(model, tmp_path):
+    """The ADS7828's external reference went into C as a float (3.3 became 3.2999999523), so tm_pi's volts and
+    estimates left read's in the last digits on 7 of 20 lines; the ADS1115's power-of-two LSBs hid it."""
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    from host.channelmap import Settings
+
+    spec, settings = "ads7828@0x48:7,6,5,4,3,2,1,0", Settings(vref=3.3)
+    exe = build_pi(render_pi(model, parse_spec(spec, settings), tmp_path, precision="float"), standin=True)
+    _, bus, clock = sim_bus(spec, (), settings)
+    res = StandIn(bus, clock).run(["qemu-arm", str(exe), "--count", "20", "--format", "csv"])
+    assert res.returncode == 0, res.stderr
+    expected, _ = _python_lines(model, 20, spec=spec, settings=settings)
+    assert [ln.split(",", 1)[1] for ln in res.stdout.splitlines(keepends=True)[1:]] == \
+        [ln.split(",", 1)[1] for ln in expected]
 
 
 def test_pi_build_counts_estimates_far_outside_the_fitted_box_as_read_does(model, tmp_path):
@@ -168,7 +185,7 @@ def test_adc_map_header_carries_the_channel_map():
                                                                                       vref="internal")))
     assert "#define ADC_MAP_N_CHIPS 2" in text and "#define ADC_MAP_N_ELEMENTS 6" in text
     assert "{ ADC_ADS1115, 0x48, 2, { 0, 2, 0, 0, 0, 0, 0, 0 }, { 1, 255," in text
-    assert ", 2, 4, 0, 1, 0.0f }" in text  # PGA code 2 (2.048 V), rate 4 (128 SPS), single-shot, internal ref
+    assert ", 2, 4, 0, 1, 0.0 }" in text  # PGA code 2 (2.048 V), rate 4 (128 SPS), single-shot, internal ref
     assert '"ads1115@0x48", "ads7828@0x4b"' in text
 
 

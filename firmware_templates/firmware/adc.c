@@ -39,7 +39,7 @@ double adc_lsb_volts(const adc_chip *c)
     if (c->kind == ADC_ADS1115) {
         return PGA_VOLTS[c->pga] / 32768.0;
     }
-    return (c->vref_internal ? 2.5 : (double)c->vref) / 4096.0;
+    return (c->vref_internal ? 2.5 : c->vref) / 4096.0;
 }
 
 double adc_ntc_degc(double volts, double beta, double r25, double series, double vref)

@@ -57,7 +57,8 @@ typedef struct {
     uint8_t rate;          /* ADS1115: data-rate code 0..7 (8 .. 860 SPS) */
     uint8_t continuous;    /* ADS1115: 1 continuous mode, 0 single-shot */
     uint8_t vref_internal; /* ADS7828: 1 the internal 2.5 V reference, 0 external */
-    float vref;            /* ADS7828: the external reference, V (unused with the internal one) */
+    double vref;           /* ADS7828: the external reference, V (unused with the internal one); double, as the
+                              host computes its LSB: 3.3 in float is not 3.3 */
 } adc_chip;
 
 typedef struct {
