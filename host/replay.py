@@ -22,7 +22,7 @@ from fitgen.base.fileio import read_text, write_atomic
 from fitgen.equations.model import Model, check_input_units, load_model, model_from_dict
 
 from host.autozero import AutoZero, AutoZeroSettings
-from host.readout import Corrections, RunRecord
+from host.readout import FAR_OUTSIDE, Corrections, RunRecord
 from host.temperature import load_tempcomp, tempcomp_from_dict
 
 BLOCK = 2048  # samples estimated at once: the model's per-call overhead spread, the memory bounded
@@ -45,7 +45,9 @@ class Run:
 
 def load_run(path) -> Run:
     origin = f"run {path}"
-    numbered = [(i, ln) for i, ln in enumerate(read_text(path, "run record").splitlines(), start=1) if ln.strip()]
+    text = read_text(path, "run record")
+    numbered = [(i, ln) for i, ln in enumerate(text.splitlines(), start=1) if ln.strip()]
+    whole = text.rstrip(" \t").endswith("\n")  # a stop cuts a line short before its newline; one after it is damage
     lines = [ln for _, ln in numbered]
     try:
         header = json.loads(lines[0]) if lines else None
@@ -68,7 +70,7 @@ def load_run(path) -> Run:
             tt, st = float(rec["t"]), int(rec["status"])
             tp = math.nan if rec.get("temp") is None else float(rec["temp"])
         except (ValueError, KeyError, TypeError):
-            if k == len(lines):
+            if k == len(lines) and not whole:
                 torn = i  # a last line cut short by a stop: dropped, and said
                 break
             raise InputError(f"{origin}: line {i} is not a sample") from None
@@ -128,6 +130,8 @@ class ReplayResult:
         lines = [f"replayed {len(self.t)} samples with model {self.model_hash[:12]}"
                  f"{' (the recording model)' if self.same_model else ''}; auto-zero updates {len(self.updates)}"]
         lines += [f"note: {n}" for n in self.notes]
+        if self.far is not None and (far := int(np.sum(self.far))):
+            lines.append(f"warning: {far} of {len(self.t)} samples {FAR_OUTSIDE}")
         # the recorded columns' names: the run's header's, else (a header without them) the model's where as many
         rec = (tuple(self.recorded_outputs) if len(self.recorded_outputs) == self.recorded.shape[1]
                else self.outputs if self.out.shape == self.recorded.shape else ())
@@ -199,8 +203,9 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     same = model.sha256 == h.get("model")
     if temp_comp and no_temp_comp:
         raise InputError("give --temp-comp or --no-temp-comp, not both")
+    rest = None if same or h.get("reference") is None else _own_rest(model, h["reference"], run.n_inputs, notes)
     try:
-        corrections = _corrections(run, model, temp_comp, no_temp_comp, auto_zero)
+        corrections = _corrections(run, model, temp_comp, no_temp_comp, auto_zero, rest)
     except InputError:  # already says what is wrong, with the option or the header field
         raise
     except (KeyError, TypeError, ValueError, AttributeError) as exc:  # a header edited by hand
@@ -254,8 +259,35 @@ def _estimate(run: Run, model: Model, precision: str, corrections: Corrections, 
     return v_all, out_all, st_all
 
 
-def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zero) -> Corrections:
-    """The corrections to replay ``run`` with: a compensation file or the header's, its tare, its auto-zero."""
+def _own_rest(model: Model, recorded, n: int, notes: list) -> np.ndarray | None:
+    """The rest readings another model than the recording's tares onto (its own sensor's, as read --tare takes
+    them), where they differ from the run's ``recorded``; None to keep the run's. InputError when the model names
+    none and reads the run's as a pose far from rest: another sensor's model, which the tare would bend."""
+    from host.readout import check_rest_reference, model_rest
+
+    old = np.asarray(recorded, dtype=float)
+    if old.shape != (n,):
+        raise InputError(f"the run's header records {old.size} rest readings for {n} readings")
+    found = model_rest(model, required=False)
+    if found is None:
+        try:
+            check_rest_reference(model, old, "the run's tare (its recording model's rest)")
+        except InputError as exc:
+            raise InputError(str(exc).split("; give --rest")[0] + "; this model names no rest of its own to tare onto "
+                             "(the sensor file it was fitted on, found here, or a rest it records): replay with a "
+                             "model of the sensor the run was read from") from None
+        return None
+    new, whose = found
+    if np.array_equal(new, old):
+        return None
+    notes.append(f"the run's tare taken again onto the rest readings of {whose}, as read --tare takes them with this "
+                 "model: the rest the run measured, less those")
+    return new
+
+
+def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zero, rest=None) -> Corrections:
+    """The corrections to replay ``run`` with: a compensation file or the header's, its tare, its auto-zero; with
+    ``rest``, the tare and auto-zero's zero taken onto those rest readings instead of the run's."""
     h, n = run.header, run.n_inputs
     tc = None
     if temp_comp:
@@ -272,6 +304,8 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
     tare = None if h.get("tare") is None else np.array(h["tare"], dtype=float)
     if tare is not None and tare.shape != (n,):
         raise InputError(f"the run's header records a tare of {tare.size} offsets for {n} readings")
+    moved = 0.0 if rest is None else np.asarray(h["reference"], dtype=float) - rest  # the offsets onto ``rest``
+    tare = None if tare is None else tare + moved
     az_rec = h.get("auto_zero")
     use_az = bool(az_rec) if auto_zero is None else auto_zero
     az = None
@@ -283,8 +317,8 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
                              "was read with --tare or --auto-zero, and this one was not")
         settings = AutoZeroSettings(**{k: az_rec[k] for k in AutoZeroSettings.__dataclass_fields__ if k != "test"},
                                     test=az_rec.get("test", "sample")) if az_rec else AutoZeroSettings()
-        start = az_rec["start"] if az_rec else (None if tare is None else tare.tolist())
-        ref = np.array(ref, dtype=float)
+        start = np.asarray(az_rec["start"], dtype=float) + moved if az_rec else tare
+        ref = np.array(ref, dtype=float) if rest is None else rest
         if ref.shape != (n,):
             raise InputError(f"the run's header records {ref.size} rest readings for {n} readings")
         az = AutoZero.for_model(model, ref, float(noise), zero=start, settings=settings)

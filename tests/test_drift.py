@@ -436,6 +436,38 @@ def test_read_records_and_replay_reproduces_it_exactly(rest_model_file, tmp_path
     assert_one_line_error(run_cli("tactile-host", "replay", str(tmp_path / "bad.jsonl")), contains="line 7 is not")
 
 
+def test_replay_with_another_sensors_model_tares_onto_its_rest_and_counts_far_estimates(rest_model_file, tmp_path):
+    """replay --model with a unit's twin kept the run's tare onto the drawing's rest, which the twin reads as a tilt
+    of tens of degrees, and said nothing of estimates far outside its box: the tare is now taken onto the model's own
+    rest as read --tare takes it, a model with none is refused as read refuses it, and far estimates are counted."""
+    from fitgen.equations.model import load_model
+
+    tared, plain = tmp_path / "tared.jsonl", tmp_path / "plain.jsonl"
+    for run, tare in ((tared, ["--tare"]), (plain, [])):
+        proc = run_cli("tactile-host", "read", "--model", rest_model_file, "--adc", TWO_CHIPS, "--simulate",
+                       "0,0,0,0,0", *tare, "--count", "30", "--record", str(run), "-o", str(tmp_path / "s.csv"))
+        assert proc.returncode == 0, proc.stderr
+    _ok("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "7", "--grid", "paper-sim",
+        "-o", str(tmp_path / "u7.csv"))
+    _ok("fitgen", "fit", str(tmp_path / "u7.csv"), "--family", "integer", "--held-out", "50", "-o",
+        str(tmp_path / "twin.json"))
+    rep = _ok("tactile-host", "replay", str(tared), "--model", str(tmp_path / "twin.json"), "-o",
+              str(tmp_path / "again.jsonl"))
+    assert f"note: the run's tare taken again onto the rest readings of {tmp_path / 'u7.unit.toml'}" in rep.stdout
+    assert "warning:" not in rep.stdout, rep.stdout
+    out = np.array([list(json.loads(ln)["out"]) for ln in (tmp_path / "again.jsonl").read_text().splitlines()[1:]])
+    # at rest, to the noise (the ring sees no tilt at rest); onto the drawing's rest the twin read tens of degrees
+    assert np.abs(out[:, :3]).max() < 0.2 and np.abs(out[:, 3:]).max() < 5.0, out.max(axis=0)
+    # a model that names no rest of its own reads the run's as far from rest: refused, as read --tare refuses it
+    bare = load_model(tmp_path / "twin.json")
+    bare = dataclasses.replace(bare, fit_info={k: v for k, v in bare.fit_info.items() if k != "held_out"})
+    assert_one_line_error(run_cli("tactile-host", "replay", str(tared), "--model", str(bare.save(tmp_path / "b.json"))),
+                          contains="far from rest")
+    # an untared run: nothing to tare, and the twin's estimates of the drawing's readings are counted as far out
+    rep = _ok("tactile-host", "replay", str(plain), "--model", str(tmp_path / "twin.json"))
+    assert re.search(r"warning: \d+ of 30 samples estimated outside the pose box the model was fitted in", rep.stdout)
+
+
 def test_a_correction_the_run_cannot_take_names_the_option_typed(model_file, tmp_path):
     """A run read without a thermistor or a tare: --temp-comp and --auto-zero are the user's, not the header's
     fault, and the line says so without an exception's name."""

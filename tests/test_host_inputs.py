@@ -197,6 +197,10 @@ def test_a_replay_says_it_left_out_a_last_line_cut_short(model_file, tmp_path):
     assert proc.returncode == 0 and "tactile-host view: note: its last line" in proc.stderr, proc.stderr
     run.write_text("\n".join(lines[:-1] + [lines[-1][:25], lines[-1]]) + "\n")
     assert_one_line_error(run_cli("tactile-host", "replay", str(run)), 2, f"line {len(lines)} is not a sample")
+    # a last line damaged but whole (its newline written after it) is damage, not a stop's: refused as any other
+    run.write_text("\n".join(lines[:-1] + [lines[-1].replace('"status": 0', '"status": "x"')]) + "\n")
+    assert '"status": "x"' in run.read_text()
+    assert_one_line_error(run_cli("tactile-host", "replay", str(run)), 2, f"line {len(lines)} is not a sample")
 
 
 def test_a_replay_plays_over_a_clock_step_and_view_refuses_readout_options(model_file, tmp_path):
