@@ -241,6 +241,9 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
     ``t0``: the calibration temperature (default: the temperature closest to the median).
     """
     readings, pose_ids, temps = np.asarray(readings, float), np.asarray(pose_ids), np.asarray(temps, float)
+    if readings.ndim != 2 or pose_ids.shape != (len(readings),) or temps.shape != (len(readings),):
+        raise InputError(f"a temperature capture is rows of readings (n, N) with a pose id and a temperature each; got "
+                         f"shapes {readings.shape}, {pose_ids.shape} and {temps.shape}")
     if not np.all(np.isfinite(temps)):
         raise InputError("a capture row has no temperature (is the thermistor connected?)")
     levels = np.unique(np.round(temps, 1))

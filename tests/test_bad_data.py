@@ -1,6 +1,7 @@
 """Data and options as users get them wrong: each is one line on stderr, exit status 2, and nothing written."""
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -707,3 +708,41 @@ def test_a_pose_column_removed_since_the_meta_is_refused_by_identify_and_check(d
         assert_one_line_error(run_cli("fitgen", *argv), contains=f"{tmp_path / 'cut.csv'} has no dz column, which "
                                                                  "its meta records")
     assert files(tmp_path) == ["cut.csv", "cut.csv.meta.json"]
+
+
+def test_the_librarys_entry_points_refuse_bad_arrays_in_their_own_words(device_model):
+    """From Python, identify, check, observe, Model.predict and fit_tempcomp raised numpy's and scipy's errors
+    (IndexError, a broadcast ValueError, KeyError 'dy', 'Residuals are not finite') on rows that do not match
+    their poses, a NaN reading or a box that leaves a component out; each is now an InputError saying what."""
+    from fitgen.base.errors import InputError
+    from fitgen.fitting.check import check
+    from fitgen.fitting.identify import identify
+    from fitgen.fitting.schedule import schedule
+    from fitgen.physics.observe import observe
+    from fitgen.physics.scenes import PRESETS
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.simulate import simulate
+    from host.temperature import fit_tempcomp
+
+    sensor = load_sensor("paper").with_transfer("gmr")
+    poses, _ = schedule(sensor, 40, noise=sensor.noise / 4)
+    X = simulate(sensor, poses).inputs
+    nan = X.copy()
+    nan[3, 2] = np.nan
+    cases = [
+        (lambda: identify(sensor, X, poses[:30], 1.25e-4), "40 rows of readings and 30 poses"),
+        (lambda: identify(sensor, X, poses[:, :3], 1.25e-4), "must be (rows, elements) and (rows, 5"),
+        (lambda: identify(sensor, nan, poses, 1.25e-4), "row 4's reading v3 is nan"),
+        (lambda: check(device_model, X, poses[:30], sensor, 1.25e-4), "40 rows of readings and 30 poses"),
+        (lambda: check(device_model, X, poses, sensor, -1e-4), "reading noise must be finite and >= 0"),
+        (lambda: observe(sensor, PRESETS["slide"].ranges, ("dx", "zz")), "got dx, zz"),
+        (lambda: observe(sensor, {"dx": (-2, 2)}, ("dx",)), "gives no range for dy"),
+        (lambda: observe(sensor, {**PRESETS["slide"].ranges, "dx": (2, -2)}, ("dx",)), "lo must not exceed hi"),
+        (lambda: observe(sensor, PRESETS["slide"].ranges, ()), "got none"),
+        (lambda: device_model.predict(np.zeros((3, 8, 1))), "a 1-D or 2-D array"),
+        (lambda: fit_tempcomp(X, np.arange(40), np.full(39, 25.0)), "a pose id and a temperature each"),
+        (lambda: fit_tempcomp(X[0], np.arange(1), np.full(1, 25.0)), "a pose id and a temperature each"),
+    ]
+    for call, said in cases:
+        with pytest.raises(InputError, match=re.escape(said)):
+            call()

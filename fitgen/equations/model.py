@@ -129,6 +129,9 @@ class Model:
         v = np.asarray(inputs, dtype=float)
         if v.ndim == 1:
             v = v[None, :]
+        if v.ndim != 2:
+            raise InputError(f"the model takes rows of {self.n_inputs} inputs (a 1-D or 2-D array), got shape "
+                             f"{v.shape}")
         if v.shape[1] != self.n_inputs:
             raise InputError(f"the model takes {self.n_inputs} inputs, got {v.shape[1]}")
         finite = np.all(np.isfinite(v), axis=1)

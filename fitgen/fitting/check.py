@@ -19,7 +19,7 @@ from fitgen.fitting.holdout import (POSTERIOR_UNITS, device_precision, estimator
                                      unit_posterior)
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR
 from fitgen.fitting.unitrecord import row_noise, schedule_stage, stage_zero, zero_record
-from fitgen.physics.pose import POSE_NAMES, off_skin
+from fitgen.physics.pose import POSE_NAMES, check_rows, off_skin
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings
 
@@ -78,7 +78,9 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
     outside the pose box the model was fitted in (its held-out record's): it makes no claim there."""
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
-    inputs, labels = np.asarray(inputs, dtype=float), np.asarray(labels, dtype=float)
+    inputs, labels = check_rows(inputs, labels, "the check capture")
+    if not np.all(np.isfinite(row_noise) & (np.asarray(row_noise, dtype=float) >= 0)):
+        raise InputError(f"the rows' reading noise must be finite and >= 0, got {row_noise!r}")
     keep = ~off_skin(labels)
     inputs, labels = inputs[keep], labels[keep]
     if not len(labels):

@@ -37,7 +37,7 @@ from scipy.optimize import least_squares
 
 from fitgen.base.errors import InputError
 from fitgen.fitting.capturecheck import check_capture, check_contact, check_error
-from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.pose import POSE_NAMES, check_rows
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
 from fitgen.physics.units import UnitSpace
@@ -366,8 +366,7 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     reading noise ``noise`` (rms of a row, per element or one number), the rig's error ``rig_error`` per row and
     the zero's ``zero_error`` common to the rows in contact (mm rms per axis)."""
     space = unit_space(drawing)
-    readings = np.asarray(readings, dtype=float)
-    poses = np.asarray(poses, dtype=float)
+    readings, poses = check_rows(readings, poses, "the capture")
     valid = check_capture(space, readings, poses)
     noise = np.broadcast_to(np.asarray(noise, dtype=float), (readings.shape[1],)).copy()
     if not np.all(noise > 0):

@@ -9,7 +9,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.physics.pose import (POSE_NAMES, POSE_UNITS, as_poses, board_clearance, check_above_board, check_box,
-                                 field_readings, pose_label)
+                                 check_pose_range, field_readings, pose_label)
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.transfer import apply_transfer, missing_noise, past_linear, step_rms
 
@@ -227,6 +227,18 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
     if noise is None and not sensor.noise > 0:  # a file without one reads 0: every bound would be 0
         raise InputError(f"{missing_noise(sensor)}: add it to the file, or give --noise; without noise every pose "
                          "component is resolved to 0, resolvable or not")
+    bad = [c for c in components if c not in POSE_NAMES]
+    if not components or bad or len(set(components)) != len(components):
+        raise InputError(f"observe takes the pose components to estimate, each once, from {', '.join(POSE_NAMES)}; "
+                         f"got {', '.join(map(str, components)) or 'none'}")
+    for name in POSE_NAMES:
+        if name not in ranges:
+            raise InputError(f"observe's pose box gives no range for {name}: give every one of {', '.join(POSE_NAMES)} "
+                             "(fitgen.physics.simulate.DEFAULT_RANGES holds the default box)")
+        lo, hi = ranges[name]
+        if not lo <= hi:
+            raise InputError(f"observe's pose box gives {name} from {lo:g} to {hi:g}: lo must not exceed hi")
+        check_pose_range(name, lo, hi, "observe")
     check_box(sensor, ranges, "observe")
     extra = [c for c in (accuracy or {}) if c not in components]
     if extra:  # it would be ignored: say so rather than judge without it

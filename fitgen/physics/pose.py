@@ -44,6 +44,26 @@ def check_pose_range(name: str, lo: float, hi: float, origin: str) -> None:
                          f"-{limit:g}..{limit:g} {unit} (finite numbers)")
 
 
+def check_rows(readings, poses, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """``readings`` (n, N) and ``poses`` (n, 5) of ``what`` as float arrays; InputError (one line) unless they have
+    those shapes with one pose per row and every value finite."""
+    try:
+        readings, poses = np.asarray(readings, dtype=float), np.asarray(poses, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: the readings and poses must be arrays of numbers") from None
+    if readings.ndim != 2 or poses.ndim != 2 or poses.shape[1] != len(POSE_NAMES):
+        raise InputError(f"{what}: readings of shape {readings.shape} and poses of shape {poses.shape}; they must be "
+                         f"(rows, elements) and (rows, {len(POSE_NAMES)}: {', '.join(POSE_NAMES)})")
+    if len(readings) != len(poses):
+        raise InputError(f"{what}: {len(readings)} rows of readings and {len(poses)} poses; one pose per row")
+    for values, kind in ((readings, "reading"), (poses, "pose")):
+        if not np.all(np.isfinite(values)):
+            r, c = np.argwhere(~np.isfinite(values))[0]
+            name = f"v{c + 1}" if kind == "reading" else POSE_NAMES[c]
+            raise InputError(f"{what}: row {r + 1}'s {kind} {name} is {values[r, c]}: every value must be finite")
+    return readings, poses
+
+
 def pose_label(pose) -> str:
     """``dx=.. dy=.. dz=.. thx=.. thy=..`` for messages, each value to 10 significant digits."""
     return " ".join(f"{n}={float(v):.10g}" for n, v in zip(POSE_NAMES, pose))
