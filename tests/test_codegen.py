@@ -337,6 +337,12 @@ def test_c_strings_take_plain_text_and_a_lossy_one_shows_the_rest_as_question_ma
         with pytest.raises(InputError):
             c_string(bad)
     assert c_string('/tmp/my "unit"\\1~.toml', lossy=True) == '"/tmp/my _unit__1_.toml"'
+    # tm_pi's tare line names "the model's" rest: its apostrophe became '_' ("the model_s")
+    assert c_string("paper (the model's)", lossy=True) == '"paper (the model\'s)"'
+    gcc, literal = require_tool("gcc"), c_string("it's")
+    proc = subprocess.run([gcc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wtrigraphs", "-x", "c",
+                           "-fsyntax-only", "-"], input=f"const char *s = {literal};\n", text=True, capture_output=True)
+    assert proc.returncode == 0, proc.stderr
 
 
 @pytest.mark.parametrize("precision", ["double", "float", "fixed"])

@@ -84,7 +84,7 @@ def c_real(x: float, precision: str) -> str:
     return c_float(x) if precision == "float" else c_double(x)
 
 
-_NOT_PLAIN = re.compile(r"[^A-Za-z0-9 _.,:;/+\-=()\[\]]")
+_NOT_PLAIN = re.compile(r"[^A-Za-z0-9 _.,:;/+\-=()\[\]']")  # an apostrophe needs no escape between double quotes
 
 
 def c_string(text: str, lossy: bool = False) -> str:
