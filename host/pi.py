@@ -24,7 +24,7 @@ from fitgen import __version__
 from fitgen.c.codegen import render_header
 from fitgen.base.children import tied
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import check_folder, make_folder, staged_beside, write_in_folder
+from fitgen.base.fileio import check_folder, make_folder, staged_beside, write_atomic, write_in_folder
 from fitgen.equations.model import Model, check_input_units, load_model
 
 from host.cdrivers import chip_table, smbus_transfer
@@ -33,7 +33,8 @@ from host.readout import TARE_SAMPLES
 from fitgen.c.cgen import c_real, c_string
 from fitgen.c.compiled import WARNING_FLAGS, first_error, run_tool, tool_command
 
-PI_FILES = ("tm_pi.c", "autozero.h", "i2c_linux.h", "i2c_linux.c", "standin.h", "standin.c")
+PI_FILES = ("tm_pi.c", "autozero.h", "i2c_linux.h", "i2c_linux.c")
+STANDIN_FILES = ("standin.h", "standin.c")  # the tests' stand-in for the kernel: written by build_pi(standin=True)
 DRIVER_FILES = ("adc.h", "adc.c")
 DEFAULT_CC = "arm-linux-gnueabihf-gcc -static"
 CC_HINT = "apt-get install gcc-arm-linux-gnueabihf"
@@ -271,9 +272,12 @@ def build_pi(folder: str | Path, cc: str = DEFAULT_CC, *, standin: bool = False)
     """Compile a rendered folder into ``folder/tm_pi`` (``standin``: against StandIn, for tests)."""
     folder = Path(folder)
     sources = ["tm_pi.c", "i2c_linux.c", "adc.c"] + (["standin.c"] if standin else [])
-    missing = [n for n in sources + ["tm_model.h", "adc_map.h", "pi_options.h"] if not (folder / n).is_file()]
+    missing = [n for n in sources + ["tm_model.h", "adc_map.h", "pi_options.h"]
+               if not (folder / n).is_file() and n not in STANDIN_FILES]
     if missing:
         raise InputError(f"{folder} holds no rendered Pi build (missing {', '.join(missing)})")
+    for name in STANDIN_FILES if standin else ():
+        write_atomic(folder / name, (resources.files("firmware_templates") / "pi" / name).read_bytes())
     out = folder / "tm_pi"
     tool = compiler(cc)
     partial = folder / ".tm_pi.partial"
