@@ -203,6 +203,9 @@ class ReadoutSession:
             raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
         if tempcomp is not None and (note := channel_map_note(tempcomp, cmap0, f"--temp-comp {args.temp_comp}")):
             print(f"{prog}: {note}", file=sys.stderr)
+        if tempcomp is not None and tempcomp.fitted_range is None:  # one made by hand, or from Python without it
+            print(f"{prog}: note: --temp-comp {args.temp_comp} records no temperatures it was fitted at "
+                  "(fit.temperatures), so samples read far from them are not flagged", file=sys.stderr)
         self.cmap = cmap = cmap0
         if cmap.n_elements != model.n_inputs:
             raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")

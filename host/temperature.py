@@ -221,6 +221,12 @@ def tempcomp_from_dict(data, origin: str) -> TempComp:
                              f"1 + g (T - t0) = {factor[k]:.3g} at {t:g} degC (it must stay > 0 over the thermistor's "
                              f"{T_RANGE[0]:g}..{T_RANGE[1]:g} degC)")
     fit = data.get("fit", {})
+    temps = fit.get("temperatures") if isinstance(fit, dict) else None
+    if temps is not None and not (isinstance(temps, list) and len(temps) >= 2
+                                  and all(is_finite_number(t) for t in temps)):
+        # what the readouts flag extrapolation against: damaged, it would turn that check off in silence
+        raise InputError(f"{origin}: fit.temperatures must list the two or more temperatures it was fitted at "
+                         f"(degC), got {temps!r}")
     return TempComp(t0, off, gain, fit if isinstance(fit, dict) else {})
 
 

@@ -173,13 +173,33 @@ def test_read_and_tempcomp_c_refuse_the_same_compensation_files(rest_model_file,
                                   str(path), "--count", "1"), contains=said)
 
 
+def test_a_compensation_without_its_fitted_temperatures_is_noted_and_a_damaged_list_refused(rest_model_file,
+                                                                                            tmp_path):
+    """fit.temperatures is what read flags extrapolation against: a file without it (made by hand, or saved from
+    Python) turned the flag off in silence, and so did a damaged list (["a"], one temperature)."""
+    path = tmp_path / "tc.json"
+    base = {"kind": TempComp.KIND, "version": 1, "t0": 25.0, "offset_v_per_degc": [1e-5] * 8,
+            "gain_per_degc": [-1e-4] * 8}
+    read = ["tactile-host", "read", "--model", rest_model_file, "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+            "--simulate", "0,0,0,0,0", "--temp-comp", str(path), "--count", "2"]
+    path.write_text(json.dumps(base))
+    proc = run_cli(*read)
+    assert proc.returncode == 0 and "records no temperatures it was fitted at (fit.temperatures)" in proc.stderr
+    for bad in (["a"], [25.0], "15..35"):
+        path.write_text(json.dumps({**base, "fit": {"temperatures": bad}}))
+        assert_one_line_error(run_cli(*read), 2, "fit.temperatures must list the two or more temperatures")
+    path.write_text(json.dumps({**base, "fit": {"temperatures": [15.0, 35.0]}}))
+    proc = run_cli(*read)
+    assert proc.returncode == 0 and "note:" not in proc.stderr, proc.stderr
+
+
 def test_read_says_at_once_when_its_compensation_cannot_apply(rest_model_file, tmp_path):
     """A thermistor that reads nothing (its divider at the rail: open or shorted) leaves the readings
     uncompensated, and one outside the range a compensation is checked over extrapolates it: each is a warning
     at its first sample and a count in the summary; a thermistor in range, neither."""
     path = tmp_path / "tc.json"
     path.write_text(json.dumps({"kind": TempComp.KIND, "version": 1, "t0": 25.0, "offset_v_per_degc": [1e-5] * 8,
-                                "gain_per_degc": [-1e-4] * 8}))
+                                "gain_per_degc": [-1e-4] * 8, "fit": {"temperatures": [15.0, 25.0, 35.0]}}))
     for start, said in (("-200", "not compensated for temperature: the thermistor read none (is it connected?)"),
                         ("140", "at a temperature outside -40..125 degC, where the compensation is extrapolated"),
                         ("25", None)):
@@ -666,7 +686,7 @@ def test_a_units_capture_temperature_is_recorded_and_a_compensation_about_anothe
     ok("fitgen", "fit", str(tmp_path / "twin.csv"), "--held-out", "50", "--family", "no-roots",
        "-o", str(tmp_path / "twin.json"))
     d = Drift.typical(8)
-    TempComp(25.0, d.offset_tc, d.gain_tc).save(tmp_path / "tc.json")
+    TempComp(25.0, d.offset_tc, d.gain_tc, {"temperatures": [15.0, 25.0, 35.0]}).save(tmp_path / "tc.json")
     shift = np.abs(d.offset_tc).max() * 7.0 * 1e3
     read = ["tactile-host", "read", "--model", str(tmp_path / "twin.json"), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
             "--temp-comp", str(tmp_path / "tc.json"), "--simulate", "dx=0.5", "--count", "2"]
