@@ -53,6 +53,11 @@ def test_a_constant_output_names_the_ones_to_fit(tmp_path):
                           contains="thx is 0 in every row: nothing to fit (fit the outputs that vary: --outputs "
                                    "dx,dy,dz)")
     assert not (tmp_path / "m.json").exists()
+    # asked for one that does not vary alone: the ones that do are named from the data (it said no more)
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "flat.csv"), "-o", str(tmp_path / "m.json"),
+                                  "--outputs", "thy"),
+                          contains="thy is 0 in every row: nothing to fit (fit the outputs that vary: --outputs "
+                                   "dx,dy,dz)")
 
 
 def test_quoted_numbers_read_as_numbers_and_an_unnamed_column_is_named(data, tmp_path):

@@ -373,8 +373,12 @@ def test_predict_cli_fixed_equals_the_c(paper_fixed_model, compiled, plan, tmp_p
     assert_one_line_error(run_cli("fitgen", "predict", str(path), str(tmp_path / "values.csv"), "-o",
                                   str(tmp_path / "x.csv"), "--precision", "fixed", "--codes"), contains="whole numbers")
     assert_one_line_error(run_cli("fitgen", "predict", str(path), str(tmp_path / "values.csv"), "-o",
-                                  str(tmp_path / "x.csv"), "--codes"), contains="fixed only")
+                                  str(tmp_path / "x.csv"), "--codes", "--precision", "float"), contains="fixed only")
     assert not (tmp_path / "x.csv").exists()
+    # codes are what fixed point takes: --codes alone is --precision fixed (it was refused as 'fixed only')
+    proc = run_cli("fitgen", "predict", str(path), str(tmp_path / "codes.csv"), "-o", str(tmp_path / "c.csv"),
+                   "--codes")
+    assert proc.returncode == 0 and (tmp_path / "c.csv").read_text() == (tmp_path / "codes-est.csv").read_text()
 
 
 def test_fit_for_fixed_point_gives_what_fixed_point_runs(tmp_path):

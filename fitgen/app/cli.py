@@ -182,6 +182,7 @@ def cmd_predict(args) -> int:
     from fitgen.equations.model import check_input_units
     from fitgen.physics.dataset import estimates_csv, load_inputs_and_labels, load_meta
 
+    args.precision = args.precision or ("fixed" if args.codes else None)  # codes are what fixed point takes
     model, target = _model_and_target(args)
     inputs, labels = load_inputs_and_labels(args.data, model.n_inputs)
     check_input_units(model, load_meta(args.data).get("units"), f"{args.data}'s readings", f"model {args.model}")
@@ -410,8 +411,8 @@ def build_parser() -> Parser:
                     help="the arithmetic of the generated C, bit for bit: double or float, as the header computes "
                          "them; fixed: the fixed-point header's integers (as real values), from the v columns rounded "
                          "to ADC codes as the ADC would, or taken as codes with --codes. Default as codegen's: "
-                         "double, or on a --target without double the precision the model was fitted for if it "
-                         "runs it")
+                         "double (fixed with --codes), or on a --target without double the precision the model "
+                         "was fitted for if it runs it")
     pr.add_argument("--codes", action="store_true",
                     help="fixed: the v columns are the ADC codes the fixed header takes (whole numbers)")
     pr.add_argument("--input-lsb", type=finite, metavar="X",

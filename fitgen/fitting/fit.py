@@ -293,7 +293,8 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
     y = ds.targets[:, [ds.target_names.index(o) for o in outputs]]
     still = [o for o, col in zip(outputs, y.T) if np.ptp(col) == 0]
     if still:
-        varying = ",".join(o for o in outputs if o not in still)
+        varying = ",".join(o for o in outputs if o not in still) or ",".join(
+            o for o, col in zip(ds.target_names, ds.targets.T) if np.ptp(col) > 0)  # the data's, where none asked for
         raise InputError(f"{still[0]} is {y[0, outputs.index(still[0])]:g} in every row: nothing to fit"
                          + (f" (fit the outputs that vary: --outputs {varying})" if varying else ""))
 
