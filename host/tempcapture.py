@@ -29,7 +29,10 @@ def parse_temperatures(text: str) -> list[float]:
     if vals is None:
         raise InputError(f"--temperature {text!r}: give temperatures in degC, one between each two commas, e.g. "
                          "15,25,35")
-    if len(vals) < 2 or not all(math.isfinite(v) and -40 <= v <= 125 for v in vals):
+    bad = next((v for v in vals if not (math.isfinite(v) and -40 <= v <= 125)), None)
+    if bad is not None:
+        raise InputError(f"--temperature {text!r}: {bad:g} degC is outside -40..125 degC, the thermistor's range")
+    if len(vals) < 2:
         raise InputError(f"--temperature {text!r}: give two or more different temperatures in -40..125 degC")
     if len({round(v, 1) for v in vals}) != len(vals):  # the compensation tells levels apart to 0.1 degC
         raise InputError(f"--temperature {text!r}: give temperatures at least 0.1 degC apart")

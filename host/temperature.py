@@ -244,7 +244,7 @@ def _coefficients(values, where: str) -> np.ndarray:
 def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, t0: float | None = None) -> TempComp:
     """Coefficients from rows of readings (n, N), the pose each row was taken at, and its temperature.
 
-    ``t0``: the calibration temperature (default: the temperature closest to the median).
+    ``t0``: the calibration temperature (default: the temperature closest to the median, the lower of two).
     """
     readings, pose_ids, temps = np.asarray(readings, float), np.asarray(pose_ids), np.asarray(temps, float)
     if readings.ndim != 2 or pose_ids.shape != (len(readings),) or temps.shape != (len(readings),):
@@ -261,7 +261,8 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
             raise InputError(f"t0 {t0:g} degC is not a temperature of the capture "
                              f"({', '.join(f'{v:g}' for v in levels)}): the readings there are the compensation's base")
         t0 = near
-    t0 = float(t0) if t0 is not None else float(levels[np.argmin(np.abs(levels - np.median(temps)))])
+    # two levels as near the median (15 and 35): the lower, not whichever the thermistor's rounding favours
+    t0 = float(t0) if t0 is not None else float(levels[np.argmin(np.round(np.abs(levels - np.median(temps)), 1))])
     n = readings.shape[1]
     base = np.full(readings.shape, np.nan)
     for p in np.unique(pose_ids):

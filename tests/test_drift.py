@@ -146,6 +146,11 @@ def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
     one = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS, "--simulate", "--temperature",
                   "25", "-o", str(tmp_path / "x.csv"))
     assert_one_line_error(one, contains="two or more different temperatures")
+    for bad, said in (("nan,25", "nan degC is outside"), ("25,200", "200 degC is outside -40..125 degC")):
+        # they said 'give two or more different temperatures', naming neither
+        assert_one_line_error(run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS,
+                                      "--simulate", "--temperature", bad, "-o", str(tmp_path / "x.csv")),
+                              contains=said)
     # without a thermistor each level is the temperature given: said, as a ramp the levels do not simulate is
     blind = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS, "--simulate", "--temperature",
                     "15,35", "--sim-drift", "ramp=5,over=10", "-o", str(tmp_path / "b.csv"))
@@ -914,3 +919,11 @@ def test_fitgen_check_takes_a_warmer_check_capture_to_the_units_temperature(tmp_
                                                if ln.startswith("| d"))
     assert_one_line_error(run_cli(*check, "--temp-comp", str(tmp_path / "tc18.json")), 2,
                           "takes the check's rows to 18 degC, but the unit was identified at 25.0 degC")
+
+
+def test_the_default_t0_of_two_levels_as_near_the_median_is_the_lower():
+    """--temperature 15,35 gave t0 35 and 10,20,30,40 gave 20: the thermistor's rounding chose between two levels
+    equally near the median. The lower is taken, whichever side the readings' rounding falls."""
+    readings = np.ones((4, 8)) + np.arange(4)[:, None] * 1e-3
+    for temps in ([15.02, 15.02, 34.98, 34.98], [14.98, 14.98, 35.03, 35.03]):
+        assert fit_tempcomp(readings, np.zeros(4), np.array(temps)).t0 == pytest.approx(min(temps), abs=0.05)

@@ -423,7 +423,7 @@ def build_parser() -> Parser:
                    help="capture the schedule at each of these temperatures (degC; one file OUTPUT.T<t>.csv each) and "
                         "fit per-element offset and gain compensation from them (OUTPUT.tempcomp.json)")
     c.add_argument("--t0", metavar="DEGC", help="with --temperature: the calibration temperature (default: the one "
-                   "nearest the median)")
+                   "nearest the median, the lower of two as near)")
     c.add_argument("--temp-comp-output", metavar="FILE.json", help="with --temperature: where the compensation goes")
     c.add_argument("--sim-drift", metavar="ramp=..,over=..,tau=..,creep=..,seed=..",
                    help="with --simulate: the simulated sensor drifts so (ramp degC over `over` s, creep V with time "
