@@ -379,7 +379,7 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
         p.terms_per_output = {e.name: len(e.terms) for e in m.equations}
         p.terms = sum(p.terms_per_output.values())
         units.setdefault((m.sha256, p.knobs.precision, p.knobs.style), []).append(i)
-    total = n_fits + len(units)
+    total, unmeasured = n_fits + len(units), 0
 
     with tempfile.TemporaryDirectory(prefix="fitgen-tradeoff-") as tmp:
         runner = None
@@ -400,6 +400,7 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
 
         with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
             for idx, res, err in pool.map(one, enumerate(units.items())):
+                unmeasured += res is None
                 for i in idx:
                     p = points[i]
                     if res is None:
@@ -425,7 +426,7 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
     rec, met = recommend([math.nan if c is None else c for c in cost_],
                          [math.nan if s is None else s for s in score], [p.flash for p in points])
     setup = {"training_rows": train.n_rows, "levels": taught.levels, "held_out": n_held, "noise_draws": noise_draws,
-             "noise": sensor.noise, "units": sensor.units, "seed": seed, "fits": len(fits), "measured": len(units)}
+             "noise": sensor.noise, "units": sensor.units, "seed": seed, "fits": len(fits), "measured": len(units) - unmeasured}
     return TradeoffResult(sensor.name, sensor.transfer, scene, target, points, front, rec, met, warnings, notes, setup,
                           max_share, over, core, constant)
 
