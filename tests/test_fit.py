@@ -476,3 +476,12 @@ def test_an_output_in_a_missing_folder_is_said_before_the_work(argv, work, tmp_p
     with pytest.raises(SystemExit) as stop:
         cli.main([a.format(**names) for a in argv])
     assert stop.value.code == 2 and f"folder {tmp_path / 'no'} does not exist" in capsys.readouterr().err
+
+
+def test_a_huge_penalty_prints_its_aic_in_a_few_digits(tmp_path):
+    """--k 1e300 printed each equation's AIC as a 300-digit number."""
+    data = tmp_path / "press.csv"
+    assert run_cli("fitgen", "simulate", "--scene", "press", "-o", str(data)).returncode == 0
+    proc = run_cli("fitgen", "fit", str(data), "--k", "1e300", "--held-out", "0", "-o", str(tmp_path / "m.json"))
+    assert proc.returncode == 0, proc.stderr
+    assert "dz: 0 terms, AIC 1e+300, training max error" in proc.stdout + proc.stderr

@@ -79,7 +79,8 @@ def fit_summary(model: Model, held_out: int) -> str:
     for e in model.equations:
         i = model.fit_info["outputs"][e.name]
         err = i["model_training_error"]
-        lines.append(f"{e.name}: {len(e.terms)} terms, AIC {i['aic']:.2f}, training max error {err['max']:.4g} "
+        aic = f"{i['aic']:.2f}" if abs(i["aic"]) < 1e9 else f"{i['aic']:.4g}"  # a --k of 1e300 gives 1e300s
+        lines.append(f"{e.name}: {len(e.terms)} terms, AIC {aic}, training max error {err['max']:.4g} "
                      f"{e.unit}, RMS {err['rms']:.4g}, condition {i['condition']:.3g}")
     lines.append(fit_assumptions(model.fit_info))
     noise = model.fit_info["noise"]
