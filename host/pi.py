@@ -54,11 +54,11 @@ def _chip_rows(cmap: ChannelMap) -> list[str]:
 
 def _temperature_block(cmap: ChannelMap, tin) -> list[str]:
     """The thermistor as a one-chip table and its divider (host/temperature.py), for a second adc_array."""
-    from host.channelmap import Chip
+    from host.temperature import thermistor_chip
 
     if tin is None:
         return ["#define ADC_HAS_TEMPERATURE 0", ""]
-    chip = Chip(tin.kind, tin.address, (tin.input,), cmap.chips[0].settings)
+    chip = thermistor_chip(tin, cmap)
     d = tin.divider
     return ["#define ADC_HAS_TEMPERATURE 1",
             f"/* the thermistor: an NTC to ground, a series resistor to the reference, on {chip.label}:{tin.input} */",

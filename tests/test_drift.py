@@ -927,3 +927,29 @@ def test_the_default_t0_of_two_levels_as_near_the_median_is_the_lower():
     readings = np.ones((4, 8)) + np.arange(4)[:, None] * 1e-3
     for temps in ([15.02, 15.02, 34.98, 34.98], [14.98, 14.98, 35.03, 35.03]):
         assert fit_tempcomp(readings, np.zeros(4), np.array(temps)).t0 == pytest.approx(min(temps), abs=0.05)
+
+
+def test_a_thermistor_on_an_element_chip_is_read_with_that_chips_settings(tmp_path):
+    """The thermistor was read with the map's first chip's settings: on an ADS7828 that a TOML map tells to use
+    its internal reference, the driver switched the reference off and every temperature read none."""
+    _ok("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--grid", "dx=-1:1:5 dy=-1:1:5 dz=0,-0.3,-0.6",
+        "-o", str(tmp_path / "s.csv"))  # readings within the ADS7828's internal 2.5 V
+    _ok("fitgen", "fit", str(tmp_path / "s.csv"), "--outputs", "dx,dy,dz", "--family", "integer", "--held-out", "0",
+        "-o", str(tmp_path / "m.json"))
+    spec = tmp_path / "map.toml"
+    spec.write_text('[[chip]]\ntype = "ads1115"\naddress = 0x48\ninputs = [0, 1, 2, 3]\n'
+                    '[[chip]]\ntype = "ads1115"\naddress = 0x49\ninputs = [0, 1, 2]\n'
+                    '[[chip]]\ntype = "ads7828"\naddress = 0x4a\ninputs = [0]\nvref = "internal"\n'
+                    '[temperature]\ninput = "ads7828@0x4a:7"\n')
+    _ok("tactile-host", "read", "--model", str(tmp_path / "m.json"), "--adc", str(spec), "--simulate", "dx=0",
+        "--count", "3", "--record", str(tmp_path / "r.jsonl"))
+    temps = [json.loads(ln)["temp"] for ln in (tmp_path / "r.jsonl").read_text().splitlines()[1:]]
+    assert temps and all(t is not None and abs(t - 25.0) < 0.5 for t in temps), temps
+    # tm_pi's thermistor chip keeps the internal reference too (vref_internal 1 in its one-row table)
+    from host.channelmap import load_map_file
+    from host.pi import render_adc_map
+
+    cmap = load_map_file(spec)
+    tin = parse_temperature_input(cmap.temperature[0])
+    table = render_adc_map(cmap, tin).split("ADC_TEMP_CHIP[1] = {", 1)[1].split("};", 1)[0]
+    assert table.strip().endswith(", 1, 0.0 }"), table
