@@ -23,6 +23,7 @@ from fitgen.base.errors import InputError
 from host.adc import NACK_ERRNOS, TIMEOUT_ERRNOS, DeviceSilent, ErrorCounts, RetryPolicy
 from host.channelmap import ADS1115_PGA, ADS1115_RATES, ChannelMap
 from host.clock import REAL_CLOCK
+from host.protocol import ADC_KINDS
 from fitgen.c.compiled import compile_checked
 
 I2C_OK, I2C_NACK, I2C_TIMEOUT, I2C_OTHER = 0, 1, 2, 3
@@ -106,7 +107,7 @@ def chip_table(cmap: ChannelMap):
     """The channel map as the C drivers' adc_chip array."""
     table = (AdcChip * len(cmap.chips))()
     for c, chip in zip(table, cmap.chips):
-        c.kind = 0 if chip.kind == "ads1115" else 1
+        c.kind = ADC_KINDS.index(chip.kind)  # adc.h's enum, which a test holds to the protocol's list
         c.address = chip.address
         c.n_inputs = len(chip.inputs)
         for j, inp in enumerate(chip.inputs):

@@ -301,6 +301,11 @@ def load_map_file(path: str | Path, settings: Settings = Settings()) -> ChannelM
             if isinstance(x, bool) or not isinstance(x, (int, str)):
                 raise InputError(f"{where}: input {x!r} must be a number or a string like \"0-3\" or \"d0-1\"")
         over = {k: t[k] for k in ("pga", "data_rate", "mode", "vref") if k in t}
+        # as the command line refuses them: a setting of the other chip would be ignored
+        foreign = [k for k in over if k not in (("vref",) if kind == "ads7828" else ("pga", "data_rate", "mode"))]
+        if foreign:
+            raise InputError(f"{where}: {foreign[0]} is not a setting of an {kind} (an ads1115 takes pga, data_rate "
+                             "and mode; an ads7828 takes vref)")
         if "pga" in over and (isinstance(over["pga"], bool) or not isinstance(over["pga"], (int, float))):
             raise InputError(f"{where}: pga must be a number")
         if "data_rate" in over and (isinstance(over["data_rate"], bool) or not isinstance(over["data_rate"], int)):

@@ -46,7 +46,7 @@ def _chip_rows(cmap: ChannelMap) -> list[str]:
     for c, chip in zip(chip_table(cmap), cmap.chips):
         pos = ", ".join(str(x) for x in c.pos)
         neg = ", ".join(str(x) for x in c.neg)
-        kind = "ADC_ADS1115" if chip.kind == "ads1115" else "ADC_ADS7828"
+        kind = f"ADC_{chip.kind.upper()}"  # adc.h's enum names the kinds as the map does
         rows.append(f"    {{ {kind}, 0x{c.address:02x}, {c.n_inputs}, {{ {pos} }}, {{ {neg} }}, {c.pga}, {c.rate}, "
                     f"{c.continuous}, {c.vref_internal}, {float(c.vref)!r} }}")
     return rows

@@ -2,6 +2,7 @@
 
 import errno
 import inspect
+import json
 import re
 
 import numpy as np
@@ -447,3 +448,28 @@ def test_read_refuses_a_model_in_millitesla(tmp_path):
     path = raw.save(tmp_path / "raw.json")
     proc = run_cli("tactile-host", "read", "--model", str(path), "--adc", TWO_1115, "--simulate", "dx=0")
     assert_one_line_error(proc, 2, "takes inputs in mT")
+
+
+def test_the_c_enum_of_chip_kinds_is_the_protocols_list():
+    """A chip's kind number stood in three places (the protocol's ADC_KINDS, adc.h's enum, a literal in the C
+    drivers' table); the table takes the protocol's now, and adc.h's enum must agree with it."""
+    from importlib import resources
+
+    from host.protocol import ADC_KINDS
+
+    text = (resources.files("firmware_templates") / "firmware" / "adc.h").read_text()
+    enum = dict((m[1].lower(), int(m[2])) for m in re.finditer(r"ADC_(ADS\w+) = (\d+)", text))
+    assert enum == {k: i for i, k in enumerate(ADC_KINDS)}
+
+
+@pytest.mark.parametrize("kind, key, value", [("ads7828", "pga", 2.048), ("ads7828", "mode", "continuous"),
+                                              ("ads7828", "data_rate", 128), ("ads1115", "vref", 3.3)])
+def test_a_map_file_refuses_a_setting_of_the_other_chip(tmp_path, kind, key, value):
+    """--vref on an ADS1115 or --pga on an ADS7828 is refused on the command line; a TOML [[chip]] took them and
+    ignored them."""
+    from host.channelmap import load_map_file
+
+    path = tmp_path / "map.toml"
+    path.write_text(f'[[chip]]\ntype = "{kind}"\naddress = 0x48\n{key} = {json.dumps(value)}\n')
+    with pytest.raises(InputError, match=f"chip\\[0\\]: {key} is not a setting of an {kind}"):
+        load_map_file(path)
