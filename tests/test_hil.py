@@ -118,6 +118,7 @@ def test_a_build_folder_in_use_is_refused_not_shared(paper_model, model_file, tm
                        str(folder))
         assert_one_line_error(proc, 2, f"--build-dir {folder} is in use by another tactile-hil")
         assert (folder / "main.c").read_text() == main_c
+        assert not list(folder.glob("*lock*"))  # the folder itself is locked: no lock file is left in it
         with Device.open(fw.url, timeout=5) as dev:
             assert dev.info(refresh=True).model_hash == paper_model.sha256
     with start_target(other, "host", workdir=folder) as fw:

@@ -320,21 +320,33 @@ def staged_beside(folder: Path):
         shutil.rmtree(partial, ignore_errors=True)
 
 
-def hold_folder(folder: Path, who: str, option: str):
-    """An exclusive lock on ``folder`` (created; the lock is its ``.lock`` file), held until the returned file is
-    closed or the process ends; InputError when another process holds it, naming ``who`` holds such folders and
-    the ``option`` that gives each its own."""
+class _HeldFolder:
+    """A descriptor of a folder holding its flock; ``close()`` releases it."""
+
+    def __init__(self, fd: int):
+        self.fd = fd
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1
+
+
+def hold_folder(folder: Path, who: str, option: str) -> _HeldFolder:
+    """An exclusive lock on ``folder`` (created), held until the returned object is closed or the process ends:
+    an flock on the folder itself, so that no lock file is left in it; InputError when another process holds
+    it, naming ``who`` holds such folders and the ``option`` that gives each its own."""
     import fcntl
 
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        handle = open(folder / ".lock", "a")
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
     except OSError as exc:
         raise InputError(f"{option} {folder}: {exc.strerror or exc}") from None
     try:
-        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
-        handle.close()
+        os.close(fd)
         raise InputError(f"{option} {folder} is in use by another {who} (a build, or a firmware running from it): "
                          f"give each its own {option}") from None
-    return handle
+    return _HeldFolder(fd)
