@@ -40,6 +40,13 @@ def test_demo_runs_end_to_end(tmp_path):
     rows = {m.group(1): [float(x) for x in m.group(2, 4)] for m in
             re.finditer(r"^\s+(d[xyz]|th[xy])\s+([\d.e+-]+)\s+(\S+|\(no label\))\s+([\d.e+-]+)\s+[\d.e+-]+", text, re.M)}
     assert set(rows) == {"dx", "dy", "dz", "thx", "thy"}, text[-1500:]
+    # the direct fit's rows are the capture's in contact (the header said 40, the schedule's rest rows included)
+    from fitgen.physics.dataset import load_dataset, rows_on_the_skin
+
+    on_skin = rows_on_the_skin(load_dataset(out / "capture.csv"))[0].n_rows
+    assert on_skin < 40 and f"direct ({on_skin} rows)" in text
+    # the tilts' error at rest is the ring's limit, said in words beside the table
+    assert "thx and thy: one ring cannot tell a small tilt from a slide near rest" in text
     for name, (drawing, twin) in rows.items():
         assert twin < drawing / 5, (name, drawing, twin)
     # a check capture through the same stage: the twin as predicted there, the drawing's model far beyond it
@@ -77,3 +84,29 @@ def test_demo_bad_output_folder(tmp_path):
     blocker.write_text("x")
     proc = run_cli("fitgen", "demo", "--out", str(blocker / "sub"))
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
+
+
+def test_the_demos_fit_progress_line_is_cleared_when_the_fit_ends():
+    """On a terminal the demo's fit line stayed after each fit ("fit [ ] 0/1 ... thx: step 1"), reading as a fit
+    stopped at its first step."""
+    import io
+
+    from fitgen.app.demo import _fitting
+    from fitgen.base.progress import Progress
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    tty = Tty()
+    real = Progress.__init__
+    try:
+        Progress.__init__ = lambda self, label, total, stream=None, min_interval=0.0: real(self, label, total, tty, 0.0)
+        with _fitting() as progress:
+            progress("dx", 1, -10.0, 3)
+            progress("dy", 1, -11.0, 4)
+    finally:
+        Progress.__init__ = real
+    text = tty.getvalue()
+    assert "dy: step 1, 4 terms" in text and "2/10" not in text and "1/10" in text
+    assert text.endswith("\r\033[K")

@@ -232,7 +232,7 @@ def test_terms_near_the_rows_are_said_and_an_unknown_noise_is_said_plainly(tmp_p
     assert f"note: {worst.name} has {len(worst.terms)} terms on 37 rows" in proc.stderr
     rep = run_cli("fitgen", "report", str(tmp_path / "m.json"))
     assert ("fitted for: reading noise unknown (no --noise, no sensor, and the capture did not measure it), data's "
-            "own noise not recorded (the rows taken to carry the device's own), added in expectation 0 (no device "
+            "own noise not recorded (the rows taken to carry the device's own), added in expectation 0 mT (no device "
             "noise known)") in rep.stdout, rep.stdout
     big = run_cli("fitgen", "fit", str(tmp_path / "c.csv"), "-o", str(tmp_path / "m2.json"), "--held-out", "0",
                   "--max-terms", "5")

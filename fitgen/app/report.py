@@ -44,19 +44,21 @@ def _g(x: float) -> str:
     return f"{x:.3g}"
 
 
-def fit_assumptions(info: dict) -> str:
-    """One line: the noise and the precision the fit assumed (from a model file's fit notes)."""
+def fit_assumptions(info: dict, units: str = "") -> str:
+    """One line: the noise (in the inputs' ``units``) and the precision the fit assumed (from a model file's fit
+    notes)."""
     noise, prec = info.get("noise"), info.get("precision", {})
     if not isinstance(noise, dict):
         return "fitted for: not recorded (a model file from before noise-aware fitting)"
+    u = f" {units}" if units else ""
     dev = ("unknown (no --noise, no sensor, and the capture did not measure it)" if noise.get("device") is None
-           else f"{noise['device']:g} rms ({noise.get('device_source', '?')})")
+           else f"{noise['device']:g}{u} rms ({noise.get('device_source', '?')})")
     data = ("not recorded (the rows taken to carry the device's own)" if noise.get("data") is None
-            else f"{noise['data']:g}")
+            else f"{noise['data']:g}{u}")
     added = noise.get("added", 0)
     why = f" ({noise['why']})" if not added and noise.get("why") else ""
     target = prec.get("target") or "exact arithmetic"
-    line = (f"fitted for: reading noise {dev}, data's own noise {data}, added in expectation {added:g}{why}; "
+    line = (f"fitted for: reading noise {dev}, data's own noise {data}, added in expectation {added:g}{u}{why}; "
             f"precision {target}")
     fam = info.get("family")
     if isinstance(fam, dict) and "name" in fam:
@@ -82,7 +84,7 @@ def fit_summary(model: Model, held_out: int) -> str:
         aic = f"{i['aic']:.2f}" if abs(i["aic"]) < 1e9 else f"{i['aic']:.4g}"  # a --k of 1e300 gives 1e300s
         lines.append(f"{e.name}: {len(e.terms)} terms, AIC {aic}, training max error {err['max']:.4g} "
                      f"{e.unit}, RMS {err['rms']:.4g}, condition {i['condition']:.3g}")
-    lines.append(fit_assumptions(model.fit_info))
+    lines.append(fit_assumptions(model.fit_info, model.input_units))
     noise = model.fit_info["noise"]
     if noise["device"] is None and noise["data"] == 0:
         lines.append("warning: the dataset was simulated without noise and names no sensor this fitgen knows: fitted "
@@ -171,7 +173,7 @@ def format_report(model: Model, ds: Dataset | None = None, title: str = "", pape
                      str(len(i.get("steps", [])) - 1) if "steps" in i else "-",
                      _g(i["condition"]) if "condition" in i else "-"])
     parts += [_table(head, rows), ""]
-    parts += [fit_assumptions(model.fit_info), ""]
+    parts += [fit_assumptions(model.fit_info, model.input_units), ""]
     deployed = deployed_table(model)
     if deployed:
         parts.append(deployed)
