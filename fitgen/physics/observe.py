@@ -188,7 +188,7 @@ class ObserveReport:
             where = "at rest" if np.all(r.pose == 0) else f"at {' '.join(f'{v:g}' for v in r.pose)}"
             # the pose direction that contributes most to this component's bound
             weight = np.abs(r.directions[:, j]) / np.maximum(r.singular_values, 1e-300)
-            blind = describe_direction(r.directions[int(np.argmax(weight))], self.components)
+            blind = describe_direction(_blind_direction(r, j, int(np.argmax(weight))), self.components)
             # a reading that stopped following the field is why, more often than the layout's geometry
             why = (f"; {r.past_linear} of {self.n_elements} elements there are past their linear range, saturated "
                    "or on the ADC's rails" if r.past_linear else "")
@@ -215,6 +215,20 @@ class ObserveReport:
 
 def _fmt_bound(b: float) -> str:
     return "inf" if not np.isfinite(b) or b > 1e6 else f"{b:.3g}"
+
+
+def _blind_direction(r, j: int, k: int) -> np.ndarray:
+    """The direction along which component ``j`` is blind at result ``r``: singular direction ``k``, or where other
+    singular values lie within 10x of its own (at rest the paper ring has two, 1e-11 each, and any mix of them is a
+    singular direction) the direction of their span that moves ``j`` most, so that it names what ``j`` is confused
+    with rather than an arbitrary mix."""
+    s = r.singular_values
+    near = np.flatnonzero((s <= 10 * s[k]) & (s >= s[k] / 10))
+    if len(near) < 2:
+        return r.directions[k]
+    span = r.directions[near]
+    v = span.T @ span[:, j]
+    return v / np.linalg.norm(v)
 
 
 def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | None = None,
