@@ -139,7 +139,7 @@ def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write
         return ResumeState(np.zeros(n_poses, dtype=bool), 0)
     origin = f"output {path}"
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")  # a file re-saved with a byte-order mark
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{origin}: cannot read it to resume: {exc}") from None
     dropped = False
@@ -316,7 +316,7 @@ class NoiseStats:
 def prior_meta(output) -> dict:
     """The meta of ``output``'s rows so far ({} when there is none, or it cannot be read)."""
     try:
-        meta = json.loads(meta_path(output).read_text())
+        meta = json.loads(meta_path(output).read_text(encoding="utf-8-sig"))
     except (OSError, ValueError):
         return {}
     return meta if isinstance(meta, dict) else {}

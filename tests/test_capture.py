@@ -478,3 +478,19 @@ def test_a_schedule_column_that_is_no_pose_is_refused_not_held_at_0(tmp_path, he
     data = tmp_path / "data.csv"  # a dataset's inputs v1.. are passed over: its poses are read
     data.write_text("v1,v2,dx,dz\n1.0,2.0,0.5,-1\n")
     assert load_schedule(data).columns == ("dx", "dz") and load_schedule(data).poses[0, 2] == -1
+
+
+def test_a_capture_re_saved_with_a_byte_order_mark_resumes(tmp_path):
+    """A partial capture opened and saved in a spreadsheet gains a BOM: the resume read its header as '\\ufeffv1,..'
+    and refused it as another channel map's."""
+    spec = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+    assert run_cli("fitgen", "schedule", "--sensor", "paper", "--n", "12", "-o", str(tmp_path / "s.csv")).returncode == 0
+    cap = tmp_path / "cap.csv"
+    args = ["tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", spec, "--simulate", "--samples",
+            "2", "-o", str(cap)]
+    assert run_cli(*args).returncode == 0
+    whole = cap.read_text().splitlines(keepends=True)
+    cap.write_bytes(b"\xef\xbb\xbf" + "".join(whole[:6]).encode())
+    proc = run_cli(*args)
+    assert proc.returncode == 0, proc.stderr
+    assert load_dataset(cap).n_rows == len(whole) - 1

@@ -249,3 +249,14 @@ def test_the_twin_saved_from_python_refuses_its_own_capture_as_a_check(doc):
     assert record["capture_sha256"] == load_dataset(folder / "capture.csv").sha256
     proc = run_cli("fitgen", "check", "twin.json", "capture.csv", cwd=folder)
     assert_one_line_error(proc, 2, "capture.csv is the capture")
+
+
+def test_a_unit_file_re_saved_with_a_byte_order_mark_keeps_its_posterior(doc):
+    """load_sensor took the unit file with a BOM, but the posterior's reader did not and said there was none: the
+    twin's held-out figures and check's predictions lost the identification's uncertainty without a word."""
+    from fitgen.fitting.unitrecord import load_posterior
+
+    _, folder, _ = doc
+    bom = folder / "twin-bom.toml"
+    bom.write_bytes(b"\xef\xbb\xbf" + (folder / "twin.toml").read_bytes())
+    assert load_posterior(bom) is not None and load_posterior(bom) == load_posterior(folder / "twin.toml")

@@ -377,7 +377,7 @@ def load_posterior(unit_path) -> dict | None:
 
     unit_path = Path(unit_path)
     try:
-        doc = tomllib.loads(unit_path.read_text())
+        doc = tomllib.loads(unit_path.read_text(encoding="utf-8-sig"))
     except (OSError, ValueError):
         return None
     name = doc.get("unit", {}).get("posterior") if isinstance(doc.get("unit"), dict) else None
@@ -386,7 +386,7 @@ def load_posterior(unit_path) -> dict | None:
     todo = "identify again, or delete the [unit] posterior line to use the unit without its uncertainty"
     path = real_file(unit_path).parent / name
     try:
-        rec = json.loads(path.read_text())
+        rec = json.loads(path.read_text(encoding="utf-8-sig"))
     except (OSError, ValueError):
         why = "is missing" if not path.exists() else "cannot be read"
         raise InputError(f"unit file {unit_path}: its posterior {name} {why} (identify writes it beside the unit "
