@@ -151,7 +151,7 @@ def test_pose_files_with_a_byte_order_mark_or_a_column_twice(tmp_path):
 
 
 @pytest.mark.parametrize("meta, said", [([], "not a dataset's meta"), ({"units": 5}, "not a dataset's meta"),
-                                        ("{", "not JSON"), (b"{\xff}", "cannot read: 'utf-8' codec")])
+                                        ("{", "not JSON"), (b"{\xff}", "line 1 is not UTF-8 text (byte 0xff")])
 def test_a_broken_meta_is_said(data, tmp_path, meta, said):
     shutil.copy(data, tmp_path / "d.csv")
     mp = tmp_path / "d.csv.meta.json"
@@ -159,6 +159,20 @@ def test_a_broken_meta_is_said(data, tmp_path, meta, said):
     proc = run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"))
     assert_one_line_error(proc, contains=said)
     assert "not JSON" not in proc.stderr or said == "not JSON"
+
+
+def test_text_in_another_encoding_is_named_with_its_line_and_the_fix(data, tmp_path):
+    """A spreadsheet's 'Unicode text' (UTF-16) and a Latin-1 comment were refused as "'utf-8' codec can't decode
+    byte 0xff in position 0": a byte offset, not the line or what to do."""
+    text = data.read_text()
+    (tmp_path / "u16.csv").write_text(text, encoding="utf-16")
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "u16.csv"), "-o", str(tmp_path / "m.json")),
+                          contains="u16.csv: UTF-16 text (a spreadsheet's 'Unicode text'): save it as UTF-8")
+    lines = text.splitlines(keepends=True)
+    (tmp_path / "latin.csv").write_bytes("".join(lines[:3] + ["# caf\u00e9\n"] + lines[3:]).encode("latin-1"))
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "latin.csv"), "-o", str(tmp_path / "m.json")),
+                          contains="latin.csv: line 4 is not UTF-8 text (byte 0xe9")
+    assert not (tmp_path / "m.json").exists()
 
 
 def test_fit_options_and_columns_are_checked_before_the_fit(data, tmp_path):

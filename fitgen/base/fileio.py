@@ -294,15 +294,27 @@ def text_kind(text: str) -> str:
 
 
 def read_text(path: str | os.PathLike, what: str) -> str:
-    """A text file's content; a missing or unreadable file is an InputError naming ``what``."""
+    """A text file's content; a missing or unreadable file, or one that is not UTF-8 text, is an InputError naming
+    ``what`` (and the line of the first byte that is not UTF-8)."""
     try:
-        return Path(path).read_text(encoding="utf-8-sig")  # -sig: the byte-order mark spreadsheets write
+        data = Path(path).read_bytes()
     except FileNotFoundError:
         raise InputError(f"{what} {path}: no such file") from None
     except IsADirectoryError:
         raise InputError(f"{what} {path}: a folder, not a file") from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except OSError as exc:
         raise InputError(f"{what} {path}: cannot read: {exc}") from None
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise InputError(f"{what} {path}: UTF-16 text (a spreadsheet's 'Unicode text'): save it as UTF-8 (in a "
+                         "spreadsheet, 'CSV UTF-8')")
+    try:
+        text = data.decode("utf-8-sig")  # -sig: the byte-order mark spreadsheets write
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise InputError(f"{what} {path}: line {line} is not UTF-8 text (byte 0x{data[exc.start]:02x}, from another "
+                         "encoding such as Latin-1): save it as UTF-8") from None
+    # as read_text with universal newlines: CRLF and CR line ends read as LF
+    return text.replace("\r\n", "\n").replace("\r", "\n")
 
 
 @contextmanager
