@@ -175,6 +175,20 @@ def test_text_in_another_encoding_is_named_with_its_line_and_the_fix(data, tmp_p
     assert not (tmp_path / "m.json").exists()
 
 
+def test_a_text_column_is_named_as_unknown_and_a_spreadsheets_empty_rows_are_no_rows(data, tmp_path):
+    """A 'notes' column of text was refused as "line 2, column notes: 'ok' is not a number", where the column is
+    what fit does not know; rows of bare commas, which spreadsheets leave below a table, as "'' is not a number"."""
+    from fitgen.physics.dataset import load_dataset
+
+    lines = data.read_text().splitlines()
+    (tmp_path / "notes.csv").write_text(lines[0] + ",notes\n" + "".join(ln + ",ok\n" for ln in lines[1:]))
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "notes.csv"), "-o", str(tmp_path / "m.json")),
+                          contains="unknown column 'notes'")
+    n = lines[0].count(",")
+    (tmp_path / "commas.csv").write_text("\n".join(lines) + "\n" + ("," * n + "\n") * 3)
+    assert load_dataset(tmp_path / "commas.csv").sha256 == load_dataset(data).sha256
+
+
 def test_fit_options_and_columns_are_checked_before_the_fit(data, tmp_path):
     assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--held-out", "-1"),
                           contains="argument --held-out: must be >= 0")

@@ -162,7 +162,7 @@ def _header(names: list[str], origin: str) -> tuple[int, tuple[str, ...]]:
 def _find_bad_cell(text: str, names: list[str], origin: str) -> InputError:
     header = None
     for lineno, row in enumerate(csv.reader(io.StringIO(text)), start=1):
-        if not row or row[0].lstrip().startswith("#"):  # blank, or a comment (skipped as the table's reader does)
+        if not any(c.strip() for c in row) or row[0].lstrip().startswith("#"):  # blank, or a comment, as the reader
             continue
         if header is None:
             header = lineno
@@ -179,8 +179,10 @@ def _find_bad_cell(text: str, names: list[str], origin: str) -> InputError:
     return InputError(f"{origin}: cannot parse as CSV numbers")
 
 
-def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
-    """Header names (each once) and a finite float table from CSV text; errors name line and column."""
+def parse_table(text: str, origin: str, header=None) -> tuple[list[str], np.ndarray]:
+    """Header names (each once) and a finite float table from CSV text; errors name line and column.
+    ``header(names)``: checks the names before the cells are read (an unknown column is then said as such, not as
+    its first cell that is not a number)."""
     lines = text.splitlines()
     if not lines or not lines[0].strip():
         raise InputError(f"{origin}: empty file")
@@ -207,7 +209,10 @@ def parse_table(text: str, origin: str) -> tuple[list[str], np.ndarray]:
     twice = next((n for n in names if names.count(n) > 1), None)
     if twice is not None:
         raise InputError(f"{origin}: column {twice} appears twice")
-    body = [ln for ln in lines[1:] if ln.strip()]
+    if header is not None:
+        header(names)
+    # blank lines, and a spreadsheet's empty rows (",,,,"), are no rows
+    body = [ln for ln in lines[1:] if ln.replace(",", "").strip()]
     if not body:
         raise InputError(f"{origin}: no data rows")
     try:
@@ -229,7 +234,7 @@ META_NOISE = ("noise", "row_noise", "sample_noise")
 def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
     """Read and validate a dataset CSV (and its ``.meta.json`` if present)."""
     origin = f"dataset {path}"
-    names, table = parse_table(read_text(path, "dataset"), origin)
+    names, table = parse_table(read_text(path, "dataset"), origin, lambda names: _header(names, origin))
     n_in, targets = _header(names, origin)
     if table.shape[0] < min_rows:
         raise InputError(f"{origin}: {table.shape[0]} data row(s); at least {min_rows} needed")
