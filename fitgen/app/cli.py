@@ -84,8 +84,7 @@ def cmd_observe(args) -> int:
     if args.sensor_pos and args.sensor:
         raise InputError("give the sensor once (positional or --sensor)")
     args.sensor = args.sensor_pos or args.sensor or "paper"
-    sensor = sensor_of(args)
-    scene = load_scene(args.scene)
+    sensor, scene = sensor_of(args), load_scene(args.scene)
     ranges = parse_ranges(args.ranges, scene.ranges)
     noise = None if args.noise is None else noise_of(args.noise, sensor)
     if noise is not None and not noise > 0:
@@ -124,8 +123,9 @@ def cmd_fit(args) -> int:
               "their labels are no contact pose", file=sys.stderr)
     sensor = dataset_sensor(ds.meta, args.sensor, ds.n_inputs)
     if edited and sensor is not None and not args.sensor:
-        print(f"note: {args.data}'s rows are not the ones its meta was written for (edited since): its sensor "
-              f"{sensor.name} is not taken to hold out on (give --sensor to)", file=sys.stderr)
+        print(f"note: {args.data}'s rows are not the ones its meta was written for (edited, or another file's "
+              f"meta): its sensor {sensor.name} is not taken to hold out on or to compare families (give --sensor "
+              "to); its units and noise are still taken from it", file=sys.stderr)
         sensor = None
     # --scene, or the scene the dataset was simulated for, names the outputs
     if args.scene and args.outputs:
