@@ -36,7 +36,7 @@ def test_demo_runs_end_to_end(tmp_path):
 
     assert "40 poses captured through a simulated GRBL" in text and (out / "twin.toml").is_file()
     png = out / "identify.png"  # the test install has the plots extra: the figure is made
-    assert f"what the capture determines -> {png}" in text and png.read_bytes()[:4] == b"\x89PNG"
+    assert f"what the capture determines, with the unit's truth -> {png}" in text and png.read_bytes()[:4] == b"\x89PNG"
     rows = {m.group(1): [float(x) for x in m.group(2, 4)] for m in
             re.finditer(r"^\s+(d[xyz]|th[xy])\s+([\d.e+-]+)\s+(\S+|\(no label\))\s+([\d.e+-]+)\s+[\d.e+-]+", text, re.M)}
     assert set(rows) == {"dx", "dy", "dz", "thx", "thy"}, text[-1500:]

@@ -135,7 +135,7 @@ def _unit_stage(out: Path, drawing_model) -> None:
 
     t = time.monotonic()
     drawing = load_sensor("paper").with_transfer("gmr")
-    unit, _ = draw_unit(drawing, 7)
+    unit, theta = draw_unit(drawing, 7)
     write_unit(out / "unit-7.toml", unit, "paper", {"seed": 7, "source": "the demo's unit: its truth"})
     poses, _ = schedule(drawing, 40, noise=drawing.noise / 4)
     write_atomic(out / "schedule.csv", schedule_csv(poses))
@@ -162,7 +162,11 @@ def _unit_stage(out: Path, drawing_model) -> None:
     try:
         from fitgen.app.plots import identification
 
-        print(f"   its residuals and what the capture determines -> {identification(ident, out / 'identify.png')}")
+        from fitgen.fitting.identify import derived_quantities
+
+        truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}  # the demo knows its unit
+        print(f"   its residuals and what the capture determines, with the unit's truth -> "
+              f"{identification(ident, out / 'identify.png', truth)}")
     except InputError as exc:  # matplotlib is an extra: the demo goes on without the figure
         print(f"   (no figure: {exc})")
     t = time.monotonic()

@@ -182,15 +182,16 @@ def tradeoff(result, path: Path) -> Path:
     return path
 
 
-def identification(ident, path: Path) -> Path:
+def identification(ident, path: Path, truth: dict | None = None) -> Path:
     """fitgen identify --plot: :func:`identification_png` written to ``path``."""
-    return write_in_folder(path.parent, path.name, identification_png(ident))
+    return write_in_folder(path.parent, path.name, identification_png(ident, truth))
 
 
-def identification_png(ident) -> bytes:
+def identification_png(ident, truth: dict | None = None) -> bytes:
     """Each reading's standardized residual by row (rows off the skin shaded), and what the capture determines
     (each element's sensitivity, the magnet's offset from the elements' centre) with its standard error beside
-    the prior's spread about the drawing, as PNG."""
+    the prior's spread about the drawing, as PNG; ``truth`` (a simulated unit's, by the names of
+    ``ident.derived()``): marked beside them."""
     from fitgen.physics.pose import off_skin
 
     plt = _plt()
@@ -217,6 +218,9 @@ def identification_png(ident) -> bytes:
                     elinewidth=6, alpha=0.6, label="prior: the drawing, 1 sd")
         ax.errorbar(x + 0.12, [post[k][0] for k in names], [post[k][1] for k in names], fmt="o", color="k", ms=4,
                     capsize=3, label="identified, 1 standard error")
+        if truth:
+            ax.plot(x + 0.12, [truth[k] for k in names], "x", color="tab:red", ms=7, mew=1.5,
+                    label="the unit's truth (simulated)")
         ax.set_xticks(x, labels)
         ax.set_ylabel(unit)
         ax.set_title(title, fontsize=10)
