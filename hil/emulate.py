@@ -101,7 +101,11 @@ class _Running:
             self._lock = None
 
     def __enter__(self):
-        return self.start()
+        try:
+            return self.start()
+        except BaseException:  # a start that failed: its process, folder and lock go too (no __exit__ follows)
+            self.stop()
+            raise
 
     def __exit__(self, *exc) -> None:
         self.stop()
@@ -241,7 +245,6 @@ class HostFirmware(_Running):
             raise InputError(f"host firmware said {line!r} instead of 'PTY <path>'")
         self.url = line[4:]
         return self
-
 
 
 class UnoEmulator(_Running):
@@ -421,25 +424,25 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
         render_firmware(model, folder, precision=precision, style=style, fma=fma, port=port_name,
                         sensor_id=sensor_id, cmap=cmap, tin=tin, tempcomp=tempcomp)
         image = build_firmware(folder, port_name)
-    except BaseException:
-        if lock is not None:
-            lock.close()
+        if target in MACHINES:
+            runner = Emulator(image, port, bridge=bridge, machine=MACHINES[target])
+            runner.size = firmware_size(image)
+        elif target == "uno":
+            fresh_eeprom(folder, model.sha256)
+            runner = UnoEmulator(build_uno_board(folder), image, port, bridge=bridge, paint=bss_end(image),
+                                 eeprom=folder / "eeprom.bin")
+            runner.size = firmware_size(image, "avr-size")
+        else:
+            runner = HostFirmware(image, bridge=bridge)
+            runner.size = None
+    except BaseException:  # no runner to release them with: the folder is free again, a temporary one gone
+        for held in (lock, tmp):
+            if held is not None:
+                held.cleanup() if held is tmp else held.close()
         raise
-    if target in MACHINES:
-        runner = Emulator(image, port, bridge=bridge, machine=MACHINES[target])
-        runner.size = firmware_size(image)
-    elif target == "uno":
-        fresh_eeprom(folder, model.sha256)
-        runner = UnoEmulator(build_uno_board(folder), image, port, bridge=bridge, paint=bss_end(image),
-                             eeprom=folder / "eeprom.bin")
-        runner.size = firmware_size(image, "avr-size")
-    else:
-        runner = HostFirmware(image, bridge=bridge)
-        runner.size = None
     runner.workdir = folder
     runner._tmp, runner._lock = tmp, lock  # removed, and released, with the runner
     return runner
-
 
 
 def uno_crash_advice(model, precision: str, style: str, **render) -> str:

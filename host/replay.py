@@ -203,15 +203,16 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     same = model.sha256 == h.get("model")
     if temp_comp and no_temp_comp:
         raise InputError("give --temp-comp or --no-temp-comp, not both")
-    rest = None if same or h.get("reference") is None else _own_rest(model, h["reference"], run.n_inputs, notes)
     try:
-        corrections = _corrections(run, model, temp_comp, no_temp_comp, auto_zero, rest)
+        moved = None if same or h.get("reference") is None else _own_rest(model, h, run.n_inputs, notes)
+        corrections = _corrections(run, model, temp_comp, no_temp_comp, auto_zero, moved and moved[0])
     except InputError:  # already says what is wrong, with the option or the header field
         raise
     except (KeyError, TypeError, ValueError, AttributeError) as exc:  # a header edited by hand
         raise InputError(f"the run's header records corrections that are not as tactile-host read writes them "
                          f"({type(exc).__name__}: {exc})") from None
     header = {**{k: v for k, v in h.items() if k != "run"}, "model": model.sha256,
+              **({} if moved is None else {"reference": moved[0].tolist(), "rest_source": moved[1]}),
               "outputs": list(model.output_names), **corrections.describe(), "model_file": model.to_dict()}
     # the arithmetic the run was estimated in: the C engine's float is the float header's, emulated bit for bit
     precision = h.get("precision", "double") if h.get("precision") in ("double", "float") else "double"
@@ -259,30 +260,35 @@ def _estimate(run: Run, model: Model, precision: str, corrections: Corrections, 
     return v_all, out_all, st_all
 
 
-def _own_rest(model: Model, recorded, n: int, notes: list) -> np.ndarray | None:
+def _own_rest(model: Model, header: dict, n: int, notes: list) -> tuple[np.ndarray, str] | None:
     """The rest readings another model than the recording's tares onto (its own sensor's, as read --tare takes
-    them), where they differ from the run's ``recorded``; None to keep the run's. InputError when the model names
-    none and reads the run's as a pose far from rest: another sensor's model, which the tare would bend."""
+    them), where they differ from the run's and the run took the recording model's own (its header's
+    ``rest_source``; a rest the user chose with --rest is kept); None to keep the run's. InputError when
+    the run's is kept and the model reads it as a pose far from rest: another sensor's model, which the tare
+    would bend. With the rest readings, whose they are."""
     from host.readout import check_rest_reference, model_rest
 
-    old = np.asarray(recorded, dtype=float)
+    old = np.asarray(header["reference"], dtype=float)
     if old.shape != (n,):
         raise InputError(f"the run's header records {old.size} rest readings for {n} readings")
-    found = model_rest(model, required=False)
+    source = header.get("rest_source")
+    chosen = isinstance(source, str) and source.startswith("--rest ")  # read's --sensor is its sensor's own rest
+    found = None if chosen else model_rest(model, required=False)
     if found is None:
         try:
-            check_rest_reference(model, old, "the run's tare (its recording model's rest)")
+            check_rest_reference(model, old, f"the run's tare ({source or 'its recording model'}'s rest)")
         except InputError as exc:
-            raise InputError(str(exc).split("; give --rest")[0] + "; this model names no rest of its own to tare onto "
-                             "(the sensor file it was fitted on, found here, or a rest it records): replay with a "
-                             "model of the sensor the run was read from") from None
+            why = ("the run was tared onto the rest the user gave it" if chosen else "this model names no rest of "
+                   "its own to tare onto (the sensor file it was fitted on, found here, or a rest it records)")
+            raise InputError(str(exc).split("; give --rest")[0] + f"; {why}: replay with a model of the sensor the "
+                             "run was read from") from None
         return None
     new, whose = found
     if np.array_equal(new, old):
         return None
     notes.append(f"the run's tare taken again onto the rest readings of {whose}, as read --tare takes them with this "
                  "model: the rest the run measured, less those")
-    return new
+    return new, whose
 
 
 def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zero, rest=None) -> Corrections:

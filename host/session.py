@@ -259,7 +259,7 @@ class ReadoutSession:
                     print(f"{prog}: {autozero.describe_band()}", file=sys.stderr)
                 autozero.log = lambda text: print(f"{prog}: {text}", file=sys.stderr)
             self.corrections = Corrections(offsets, tempcomp, autozero)
-            self.reference, self.noise = reference, noise
+            self.reference, self.noise, self.rest_source = reference, noise, target if need_ref else None
         except BaseException:
             self.close()
             raise
@@ -277,7 +277,8 @@ class ReadoutSession:
                                              "n_inputs": self.model.n_inputs, "source": self.source,
                                              "engine": self.engine.name,
                                              "precision": getattr(self.engine, "precision", "double"),
-                                             "reference": ref, "noise": self.noise,
+                                             "reference": ref, "rest_source": self.rest_source,
+                                             "noise": self.noise,
                                              **self.corrections.describe(), "model_file": self.model.to_dict()})
 
     def close(self):

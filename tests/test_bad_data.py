@@ -172,6 +172,9 @@ def test_text_in_another_encoding_is_named_with_its_line_and_the_fix(data, tmp_p
     (tmp_path / "latin.csv").write_bytes("".join(lines[:3] + ["# caf\u00e9\n"] + lines[3:]).encode("latin-1"))
     assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "latin.csv"), "-o", str(tmp_path / "m.json")),
                           contains="latin.csv: line 4 is not UTF-8 text (byte 0xe9")
+    (tmp_path / "bom.csv").write_bytes(b"\xef\xbb\xbf" + (tmp_path / "latin.csv").read_bytes())  # the same place
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "bom.csv"), "-o", str(tmp_path / "m.json")),
+                          contains="bom.csv: line 4 is not UTF-8 text (byte 0xe9")
     assert not (tmp_path / "m.json").exists()
 
 
@@ -768,6 +771,10 @@ def test_the_librarys_entry_points_refuse_bad_arrays_in_their_own_words(device_m
         (lambda: identify(sensor, nan, poses, 1.25e-4), "row 4's reading v3 is nan"),
         (lambda: check(device_model, X, poses[:30], sensor, 1.25e-4), "40 rows of readings and 30 poses"),
         (lambda: check(device_model, X, poses, sensor, -1e-4), "reading noise must be finite and >= 0"),
+        (lambda: check(device_model, X, poses, sensor, None), "must be finite and >= 0, got None"),
+        (lambda: check(device_model, X, poses, sensor, np.full(3, 1e-4)), "gives 3 figures for 8 elements"),
+        (lambda: identify(sensor, X, poses, np.full(5, 1e-4)), "gives 5 figures for 8 elements"),
+        (lambda: identify(sensor, X, poses, 0.0), "reading noise (--noise, or a sensor file's figure) must be"),
         (lambda: observe(sensor, PRESETS["slide"].ranges, ("dx", "zz")), "got dx, zz"),
         (lambda: observe(sensor, {"dx": (-2, 2)}, ("dx",)), "gives no range for dy"),
         (lambda: observe(sensor, {**PRESETS["slide"].ranges, "dx": (2, -2)}, ("dx",)), "lo must not exceed hi"),

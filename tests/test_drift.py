@@ -488,6 +488,19 @@ def test_replay_with_another_sensors_model_tares_onto_its_rest_and_counts_far_es
     bare = dataclasses.replace(bare, fit_info={k: v for k, v in bare.fit_info.items() if k != "held_out"})
     assert_one_line_error(run_cli("tactile-host", "replay", str(tared), "--model", str(bare.save(tmp_path / "b.json"))),
                           contains="far from rest")
+    # a rest the user gave (--rest) is kept, not replaced by the model's own: the twin reads the drawing's far off
+    chosen = tmp_path / "chosen.jsonl"
+    _ok("tactile-host", "read", "--model", rest_model_file, "--adc", TWO_CHIPS, "--simulate", "0,0,0,0,0", "--tare",
+        "--rest", "paper", "--count", "5", "--record", str(chosen), "-o", str(tmp_path / "s.csv"))
+    assert json.loads(chosen.read_text().splitlines()[0])["rest_source"] == "--rest paper"
+    assert_one_line_error(run_cli("tactile-host", "replay", str(chosen), "--model", str(tmp_path / "twin.json")),
+                          contains="the run was tared onto the rest the user gave it")
+    # a header edited by hand: one line, not numpy's traceback
+    lines = tared.read_text().splitlines()
+    (tmp_path / "edited.jsonl").write_text("\n".join([json.dumps({**json.loads(lines[0]), "reference": "abc"})]
+                                                    + lines[1:]) + "\n")
+    assert_one_line_error(run_cli("tactile-host", "replay", str(tmp_path / "edited.jsonl"), "--model",
+                                  str(tmp_path / "twin.json")), contains="not as tactile-host read writes them")
     # an untared run: nothing to tare, and the twin's estimates of the drawing's readings are counted as far out
     rep = _ok("tactile-host", "replay", str(plain), "--model", str(tmp_path / "twin.json"))
     assert re.search(r"warning: \d+ of 30 samples estimated outside the pose box the model was fitted in", rep.stdout)

@@ -307,8 +307,9 @@ def read_text(path: str | os.PathLike, what: str) -> str:
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise InputError(f"{what} {path}: UTF-16 text (a spreadsheet's 'Unicode text'): save it as UTF-8 (in a "
                          "spreadsheet, 'CSV UTF-8')")
+    data = data.removeprefix(b"\xef\xbb\xbf")  # the byte-order mark spreadsheets write (off first: the line below)
     try:
-        text = data.decode("utf-8-sig")  # -sig: the byte-order mark spreadsheets write
+        text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = data[:exc.start].count(b"\n") + 1
         raise InputError(f"{what} {path}: line {line} is not UTF-8 text (byte 0x{data[exc.start]:02x}, from another "

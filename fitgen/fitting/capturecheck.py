@@ -20,6 +20,20 @@ REST_LIKE = 5.0  # noise sd: a row in contact within this of the rest rows' read
 STILL_SHARE = 0.25  # pressed rows that read as at rest, above which the zero is above the skin
 
 
+def element_noise(noise, n: int, what: str, positive: bool = True) -> np.ndarray:
+    """``noise`` (one figure, or one per element) as ``n`` figures; InputError unless each is finite and > 0
+    (``positive``) or >= 0."""
+    try:
+        arr = np.asarray(noise, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be a number, or one per element, got {noise!r}") from None
+    if arr.shape not in ((), (n,)):
+        raise InputError(f"{what} gives {arr.size} figures for {n} elements: give one, or one per element")
+    if not np.all(np.isfinite(arr) & ((arr > 0) if positive else (arr >= 0))):
+        raise InputError(f"{what} must be finite and {'> 0' if positive else '>= 0'}, got {noise!r}")
+    return np.broadcast_to(arr, (n,)).copy()
+
+
 def check_capture(space, readings: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """Refuse captures no identification can use (InputError, one line); the mask of readings that are not
     clipped (a few clipped ones are left out, more than MAX_CLIPPED of them refuse the capture)."""

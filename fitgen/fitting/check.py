@@ -14,7 +14,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
-from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, check_error
+from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, check_error, element_noise
 from fitgen.fitting.holdout import (POSTERIOR_UNITS, device_precision, estimator, posterior_units, sensor_hashes,
                                      unit_posterior)
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR
@@ -79,8 +79,7 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
     inputs, labels = check_rows(inputs, labels, "the check capture")
-    if not np.all(np.isfinite(row_noise) & (np.asarray(row_noise, dtype=float) >= 0)):
-        raise InputError(f"the rows' reading noise must be finite and >= 0, got {row_noise!r}")
+    noise = element_noise(row_noise, inputs.shape[1], "the rows' reading noise", positive=False)
     keep = ~off_skin(labels)
     inputs, labels = inputs[keep], labels[keep]
     if not len(labels):
@@ -99,7 +98,6 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
     truth = labels[:, [POSE_NAMES.index(o) for o in outputs]]
     measured = {o: {f: float(v[j]) for f, v in _figures(fn(inputs)[:, cols] - truth).items()}
                 for j, o in enumerate(outputs)}
-    noise = np.broadcast_to(np.asarray(row_noise, dtype=float), (inputs.shape[1],))
     pool = posterior_units(posterior, sensor, units) if posterior is not None else [sensor]
     rng = np.random.default_rng(seed)
     sims = []

@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.capturecheck import check_capture, check_contact, check_error
+from fitgen.fitting.capturecheck import check_capture, check_contact, check_error, element_noise
 from fitgen.physics.pose import POSE_NAMES, check_rows
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
@@ -368,9 +368,7 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     space = unit_space(drawing)
     readings, poses = check_rows(readings, poses, "the capture")
     valid = check_capture(space, readings, poses)
-    noise = np.broadcast_to(np.asarray(noise, dtype=float), (readings.shape[1],)).copy()
-    if not np.all(noise > 0):
-        raise InputError("identify needs the reading noise > 0 (give --noise, or a sensor file with a noise figure)")
+    noise = element_noise(noise, readings.shape[1], "identify's reading noise (--noise, or a sensor file's figure)")
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
     check_contact(readings, poses, noise)
