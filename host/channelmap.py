@@ -44,6 +44,7 @@ ADS1115_PAIRS = ((0, 1), (0, 3), (1, 3), (2, 3))  # the differential pairs the M
 MODES = ("single", "continuous")
 INTERNAL_VREF = 2.5  # V, the ADS7828's internal reference
 N_INPUTS = {"ads1115": 4, "ads7828": 8}
+CHIP_SETTINGS = {"ads1115": ("pga", "data_rate", "mode"), "ads7828": ("vref",)}  # what each kind's conversions take
 
 
 @dataclass(frozen=True)
@@ -302,10 +303,10 @@ def load_map_file(path: str | Path, settings: Settings = Settings()) -> ChannelM
                 raise InputError(f"{where}: input {x!r} must be a number or a string like \"0-3\" or \"d0-1\"")
         over = {k: t[k] for k in ("pga", "data_rate", "mode", "vref") if k in t}
         # as the command line refuses them: a setting of the other chip would be ignored
-        foreign = [k for k in over if k not in (("vref",) if kind == "ads7828" else ("pga", "data_rate", "mode"))]
+        foreign = [k for k in over if k not in CHIP_SETTINGS[kind]]
         if foreign:
-            raise InputError(f"{where}: {foreign[0]} is not a setting of an {kind} (an ads1115 takes pga, data_rate "
-                             "and mode; an ads7828 takes vref)")
+            takes = "; ".join(f"an {c} takes {', '.join(v)}" for c, v in CHIP_SETTINGS.items())
+            raise InputError(f"{where}: {foreign[0]} is not a setting of an {kind} ({takes})")
         if "pga" in over and (isinstance(over["pga"], bool) or not isinstance(over["pga"], (int, float))):
             raise InputError(f"{where}: pga must be a number")
         if "data_rate" in over and (isinstance(over["data_rate"], bool) or not isinstance(over["data_rate"], int)):

@@ -22,7 +22,7 @@ from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, RetryPolicy, open_bus
 from host.autozero import AutoZero, AutoZeroSettings
-from host.channelmap import CHIPS, Settings, channel_map, check_full_scale
+from host.channelmap import CHIP_SETTINGS, CHIPS, Settings, channel_map, check_full_scale
 from host.clock import REAL_CLOCK
 from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
@@ -46,7 +46,7 @@ def channel_map_from_args(args):
     """The channel map of ``--adc`` (without its thermistor) and the ADS options; InputError for ``--vref`` when
     no chip it reads (the thermistor's included) is an ADS7828, the only one it sets, and for ``--pga``,
     ``--data-rate`` or ``--mode`` when none is an ADS1115, the only one they set."""
-    chosen = {k: getattr(args, k) for k in ("pga", "data_rate", "mode") if getattr(args, k) is not None}
+    chosen = {k: getattr(args, k) for k in CHIP_SETTINGS["ads1115"] if getattr(args, k) is not None}
     settings = Settings(**chosen, vref=parse_vref(args.vref or "3.3")).checked("option")  # Settings' defaults
     spec, temp = split_channel_map(args.adc)
     cmap = channel_map(spec, settings)
