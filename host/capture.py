@@ -138,10 +138,7 @@ def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write
             raise InputError(f"cannot write {path}: folder {path.parent} does not exist")
         return ResumeState(np.zeros(n_poses, dtype=bool), 0)
     origin = f"output {path}"
-    try:
-        text = path.read_text(encoding="utf-8-sig")  # a file re-saved with a byte-order mark
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{origin}: cannot read it to resume: {exc}") from None
+    text = read_text(path, "output (to resume)")  # a byte-order mark (re-saved in a spreadsheet) taken off
     dropped = False
     if not text.endswith("\n"):
         text = text[: text.rfind("\n") + 1]  # the last write was cut short: it never was a row
@@ -316,8 +313,8 @@ class NoiseStats:
 def prior_meta(output) -> dict:
     """The meta of ``output``'s rows so far ({} when there is none, or it cannot be read)."""
     try:
-        meta = json.loads(meta_path(output).read_text(encoding="utf-8-sig"))
-    except (OSError, ValueError):
+        meta = json.loads(read_text(meta_path(output), "meta"))
+    except (InputError, ValueError):
         return {}
     return meta if isinstance(meta, dict) else {}
 

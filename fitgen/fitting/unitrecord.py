@@ -371,14 +371,13 @@ def load_posterior(unit_path) -> dict | None:
     import json
     from pathlib import Path
 
-    from fitgen.base.fileio import real_file
-    from fitgen.base.fileio import tomllib
+    from fitgen.base.fileio import read_text, real_file, tomllib
     from fitgen.physics.sensor import load_sensor
 
     unit_path = Path(unit_path)
     try:
-        doc = tomllib.loads(unit_path.read_text(encoding="utf-8-sig"))
-    except (OSError, ValueError):
+        doc = tomllib.loads(read_text(unit_path, "unit file"))
+    except (InputError, ValueError):
         return None
     name = doc.get("unit", {}).get("posterior") if isinstance(doc.get("unit"), dict) else None
     if not isinstance(name, str):
@@ -386,8 +385,8 @@ def load_posterior(unit_path) -> dict | None:
     todo = "identify again, or delete the [unit] posterior line to use the unit without its uncertainty"
     path = real_file(unit_path).parent / name
     try:
-        rec = json.loads(path.read_text(encoding="utf-8-sig"))
-    except (OSError, ValueError):
+        rec = json.loads(read_text(path, "posterior"))
+    except (InputError, ValueError):
         why = "is missing" if not path.exists() else "cannot be read"
         raise InputError(f"unit file {unit_path}: its posterior {name} {why} (identify writes it beside the unit "
                          f"file): {todo}") from None
