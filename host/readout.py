@@ -179,11 +179,15 @@ REST_FLOOR = {"mm": 0.1, "deg": 0.5}  # ... and at least this, were a box's widt
 REST_DOMAIN_SHARE = 0.1  # of an input's fitted span: how far outside it the tare's target may lie
 
 
-def check_rest_reference(model, reference: np.ndarray, spec: str) -> None:
+REST_ADVICE = ("give --rest the sensor file the model was fitted on (a unit's twin: the unit file identify wrote) "
+               "or a dataset of this sensor's own with rows at rest")
+
+
+def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = REST_ADVICE) -> None:
     """InputError when the rest readings ``reference`` (from ``spec``) lie outside the inputs ``model`` was fitted on
     by more than REST_DOMAIN_SHARE of their span, or when it reads them as a pose far from rest, by more than a
     quarter of its fitted box's width (the default box's without one): another sensor's rest, as the drawing's is
-    to a unit's twin, which a tare would map every reading onto."""
+    to a unit's twin, which a tare would map every reading onto; ``advice``: what the message then tells to do."""
     ref = np.asarray(reference, dtype=float)
     span = model.input_max - model.input_min
     # the estimate of clamped inputs can look like rest (a two-ring model at the paper's rest: dz -0.28 mm), so the
@@ -193,9 +197,7 @@ def check_rest_reference(model, reference: np.ndarray, spec: str) -> None:
     if out:
         raise InputError(f"the rest readings of {spec} lie outside the readings the model was fitted on (v"
                          f"{', v'.join(map(str, out))} beyond {REST_DOMAIN_SHARE:.0%} of their span): they are another "
-                         "sensor's, and a tare onto them would bend every estimate; give --rest the sensor file the "
-                         "model was fitted on (a unit's twin: the unit file identify wrote) or a dataset of this "
-                         "sensor's own with rows at rest")
+                         f"sensor's, and a tare onto them would bend every estimate; {advice}")
     est = np.asarray(model.predict(ref[None]), dtype=float)[0]
     box = {**DEFAULT_RANGES, **model.held_out_box}
     far = []
@@ -205,9 +207,7 @@ def check_rest_reference(model, reference: np.ndarray, spec: str) -> None:
             far.append(f"{e.name} {est[j]:.3g} {e.unit}")
     if far:
         raise InputError(f"the model reads the rest readings of {spec} as {', '.join(far)}, far from rest: they are "
-                         "another sensor's, and a tare onto them would bend every estimate; give --rest the sensor "
-                         "file the model was fitted on (a unit's twin: the unit file identify wrote) or a dataset of "
-                         "this sensor's own with rows at rest")
+                         f"another sensor's, and a tare onto them would bend every estimate; {advice}")
 
 
 @dataclass

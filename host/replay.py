@@ -275,13 +275,10 @@ def _own_rest(model: Model, header: dict, n: int, notes: list) -> tuple[np.ndarr
     chosen = isinstance(source, str) and source.startswith("--rest ")  # read's --sensor is its sensor's own rest
     found = None if chosen else model_rest(model, required=False)
     if found is None:
-        try:
-            check_rest_reference(model, old, f"the run's tare ({source or 'its recording model'}'s rest)")
-        except InputError as exc:
-            why = ("the run was tared onto the rest the user gave it" if chosen else "this model names no rest of "
-                   "its own to tare onto (the sensor file it was fitted on, found here, or a rest it records)")
-            raise InputError(str(exc).split("; give --rest")[0] + f"; {why}: replay with a model of the sensor the "
-                             "run was read from") from None
+        why = ("the run was tared onto the rest the user gave it" if chosen else "this model names no rest of its "
+               "own to tare onto (the sensor file it was fitted on, found here, or a rest it records)")
+        check_rest_reference(model, old, f"the run's tare ({source or 'its recording model'}'s rest)",
+                             f"{why}: replay with a model of the sensor the run was read from")
         return None
     new, whose = found
     if np.array_equal(new, old):
