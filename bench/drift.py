@@ -94,7 +94,7 @@ def fit_compensation(sensor, cmap, tin, work: Path):
     array = AdcArray(bus, cmap, clock=clock)
     array.probe()
     array.setup()
-    thermo = Thermometer(array, tin, cmap.chips[0].settings)
+    thermo = Thermometer(array, tin)
     sched = Schedule(np.array([[0, 0, 0, 0, 0], [1, 0, -1, 0, 0], [-1, 1, -0.5, 0, 0]], dtype=float),
                      ("dx", "dy", "dz"), "bench")
     rows, ids, temps = [], [], []
@@ -128,7 +128,7 @@ def run_flow(flow: str, sensor, model, cmap, tin, tc, reference=None) -> dict:
     array = AdcArray(bus, cmap, clock=clock)
     array.probe()
     array.setup()
-    thermo = Thermometer(array, tin, cmap.chips[0].settings)
+    thermo = Thermometer(array, tin)
     reference = rest_reference("paper", model.n_inputs) if reference is None else reference
     t0 = tare(array, reference, 50)
     noise = t0.noise_floor(array.lsb)

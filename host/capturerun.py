@@ -150,7 +150,7 @@ def _run_capture(args, prog: str) -> None:
         array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
         array.probe()
         array.setup()
-        thermometer = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
+        thermometer = Thermometer(array, tin) if tin is not None else None
         if thermometer is not None:  # the unit's readings are of this temperature: identify records it (--temp-comp's t0)
             meta["thermistor_degc"] = same_temperature(args.output, state.rows, thermometer.read(fresh=True))
         set_pose = bus.set_pose if args.simulate else None

@@ -238,7 +238,7 @@ class ReadoutSession:
             self.array = array = AdcArray(self.bus, cmap, clock=self.clock, policy=RetryPolicy(attempts=retries))
             array.probe()
             array.setup()
-            self.thermometer = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
+            self.thermometer = Thermometer(array, tin) if tin is not None else None
             offsets, noise = None, None
             if need_ref:
                 compensate = None

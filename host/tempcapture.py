@@ -105,7 +105,7 @@ def _capture_temperatures(args, prog: str):
         array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
         array.probe()
         array.setup()
-        thermo = Thermometer(array, tin, cmap.chips[0].settings) if tin is not None else None
+        thermo = Thermometer(array, tin) if tin is not None else None
         for T in temps:
             path = _temperature_file(out, T)
             if args.simulate:

@@ -119,25 +119,25 @@ def check_beside(tin: TemperatureInput, cmap, where: str = "temp= in --adc") -> 
     return tin
 
 
-def thermistor_chip(tin: TemperatureInput, cmap, settings=None):
+def thermistor_chip(tin: TemperatureInput, cmap):
     """The chip the thermistor is read through: with the settings of the map's chip at its address where it shares
     one with the elements (its reference, its gain: read with the first chip's, an ADS7828 told to use its internal
-    reference read nothing), else ``settings`` (default: the map's first chip's, the command line's)."""
+    reference read nothing), else the map's first chip's (the command line's)."""
     from host.channelmap import Chip
 
     own = next((c.settings for c in cmap.chips if (c.kind, c.address) == (tin.kind, tin.address)), None)
-    return Chip(tin.kind, tin.address, (tin.input,), own or settings or cmap.chips[0].settings)
+    return Chip(tin.kind, tin.address, (tin.input,), own or cmap.chips[0].settings)
 
 
 class Thermometer:
     """Reads the thermistor through the ADC array's bus (same retries and counts), at most every READ_EVERY s."""
 
-    def __init__(self, array, tin: TemperatureInput, cmap_settings=None):
+    def __init__(self, array, tin: TemperatureInput):
         from host.adc import make_driver
 
         check_beside(tin, array.cmap)
         self.tin, self.clock = tin, array.clock
-        self.driver = make_driver(array.io, thermistor_chip(tin, array.cmap, cmap_settings))
+        self.driver = make_driver(array.io, thermistor_chip(tin, array.cmap))
         self.last_t = -math.inf
         self.value = math.nan
 

@@ -41,7 +41,7 @@ def test_thermistor_reads_the_drifts_temperature(sensor):
     tin = parse_temperature_input("ads1115@0x4a:0")
     d = Drift.typical(8, ramp_degc=10.0, ramp_s=100.0)
     bus, array, clock = _bus(sensor, d, tin=tin)
-    thermo = Thermometer(array, tin, array.cmap.chips[0].settings)
+    thermo = Thermometer(array, tin)
     for t in (0.0, 30.0, 100.0, 150.0):
         clock.t = t
         thermo.last_t = -1e9
@@ -53,7 +53,7 @@ def test_thermistor_reads_the_drifts_temperature(sensor):
         with pytest.raises(InputError):
             parse_temperature_input(bad)
     with pytest.raises(InputError, match="also an element's input"):
-        Thermometer(array, parse_temperature_input("ads1115@0x48:2"), array.cmap.chips[0].settings)
+        Thermometer(array, parse_temperature_input("ads1115@0x48:2"))
 
 
 def test_compensation_undoes_the_drift_in_python_and_in_c(sensor, tmp_path):

@@ -192,7 +192,7 @@ def test_the_firmware_compensates_temperature_as_the_python_readout_does(model, 
     arr = AdcArray(b, cmap, clock=clock, policy=RetryPolicy())
     arr.probe()
     arr.setup()
-    thermo = Thermometer(arr, tin, cmap.chips[0].settings)
+    thermo = Thermometer(arr, tin)
     corr = Corrections(None, tc)
     engine = make_engine("c", model, precision="float", style="unrolled")
     try:

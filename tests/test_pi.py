@@ -77,7 +77,7 @@ def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=N
     arr = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy())
     arr.probe()
     arr.setup()
-    thermometer = Thermometer(arr, tin, cmap.chips[0].settings) if tin else None
+    thermometer = Thermometer(arr, tin) if tin else None
     compensate = None
     if rest is not None and tempcomp is not None:  # as read: the tare's rows compensated at the temperature first
         compensate = partial(tempcomp.apply, temp=thermometer.read(fresh=True))
