@@ -310,27 +310,39 @@ def test_emulate_compiles_in_the_name_of_the_unit_the_model_is_for(model, tmp_pa
     assert re.search(r"\| info \| pass \|.*, sensor unit-042 \|", proc.stdout), proc.stdout
 
 
+def _emulate_mps2(model_file, stderr):
+    """`tactile-hil emulate --target mps2 --model MODEL_FILE` as a process of its own (a test signals it, or the
+    QEMU it starts), its stdout a pipe."""
+    import subprocess
+    import sys
+
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    code = "import sys; from fitgen.app.hil_cli import main; sys.argv[0] = 'tactile-hil'; main()"
+    return subprocess.Popen([sys.executable, "-c", code, "emulate", "--target", "mps2", "--model", str(model_file)],
+                            stdout=subprocess.PIPE, stderr=stderr, text=True)
+
+
+def _ready_port(proc) -> int:
+    """The TCP port an emulate process says it is ready on."""
+    lines = []
+    while not (lines and lines[-1].startswith("ready: ")):
+        line = proc.stdout.readline()
+        assert line, "".join(lines) + (proc.stderr.read() if proc.stderr else "")
+        lines.append(line)
+    return int(re.search(r"socket://127\.0\.0\.1:(\d+)", lines[-1]).group(1))
+
+
 def test_the_emulator_ends_with_emulate_even_when_it_is_killed(model_file):
     """kill -9 leaves emulate no chance to stop QEMU: the kernel sends it SIGTERM (PR_SET_PDEATHSIG), so its port
     is free again and no QEMU is left running."""
-    require_tool("qemu-system-arm")
-    require_tool("arm-none-eabi-gcc")
-    import re
     import signal
     import subprocess
-    import sys
     import time
 
-    code = "import sys; from fitgen.app.hil_cli import main; sys.argv[0] = 'tactile-hil'; main()"
-    proc = subprocess.Popen([sys.executable, "-c", code, "emulate", "--target", "mps2", "--model", str(model_file)],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    proc = _emulate_mps2(model_file, subprocess.DEVNULL)
     try:
-        lines = []
-        while not (lines and lines[-1].startswith("ready: ")):
-            line = proc.stdout.readline()
-            assert line, "".join(lines)
-            lines.append(line)
-        port = int(re.search(r"socket://127\.0\.0\.1:(\d+)", lines[-1]).group(1))
+        port = _ready_port(proc)
         socket.create_connection(("127.0.0.1", port), timeout=5).close()  # QEMU serves it
     finally:
         proc.send_signal(signal.SIGKILL)
@@ -349,21 +361,11 @@ def test_the_emulator_ends_with_emulate_even_when_it_is_killed(model_file):
                                         ("KILL", "killed by signal 9 from outside")])
 def test_an_emulator_stopped_from_outside_is_said_so(model_file, sig, said):
     """QEMU killed under emulate was reported as 'the mps2 firmware exited on its own (status 0)'."""
-    require_tool("qemu-system-arm")
-    require_tool("arm-none-eabi-gcc")
-    import re
     import subprocess
-    import sys
 
-    code = "import sys; from fitgen.app.hil_cli import main; sys.argv[0] = 'tactile-hil'; main()"
-    proc = subprocess.Popen([sys.executable, "-c", code, "emulate", "--target", "mps2", "--model", str(model_file)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = _emulate_mps2(model_file, subprocess.PIPE)
     try:
-        line = ""
-        while not line.startswith("ready: "):
-            line = proc.stdout.readline()
-            assert line, proc.stderr.read()
-        port = re.search(r"socket://127\.0\.0\.1:(\d+)", line).group(1)
+        port = _ready_port(proc)
         subprocess.run(["pkill", f"-{sig}", "-f", f"qemu-system-arm.*port={port},"], check=True)
         _, err = proc.communicate(timeout=20)
     finally:
