@@ -20,7 +20,7 @@ from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers, 
 from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.simsensor import Drift
-from host.temperature import Thermometer, fit_tempcomp, temperature_input
+from host.temperature import T_RANGE, Thermometer, fit_tempcomp, temperature_input
 
 
 def parse_temperatures(text: str) -> list[float]:
@@ -29,11 +29,13 @@ def parse_temperatures(text: str) -> list[float]:
     if vals is None:
         raise InputError(f"--temperature {text!r}: give temperatures in degC, one between each two commas, e.g. "
                          "15,25,35")
-    bad = next((v for v in vals if not (math.isfinite(v) and -40 <= v <= 125)), None)
+    lo, hi = T_RANGE
+    bad = next((v for v in vals if not (math.isfinite(v) and lo <= v <= hi)), None)
     if bad is not None:
-        raise InputError(f"--temperature {text!r}: {bad:g} degC is outside -40..125 degC, the thermistor's range")
+        raise InputError(f"--temperature {text!r}: {bad:g} degC is outside {lo:g}..{hi:g} degC, the thermistor's "
+                         "range")
     if len(vals) < 2:
-        raise InputError(f"--temperature {text!r}: give two or more different temperatures in -40..125 degC")
+        raise InputError(f"--temperature {text!r}: give two or more different temperatures in {lo:g}..{hi:g} degC")
     if len({round(v, 1) for v in vals}) != len(vals):  # the compensation tells levels apart to 0.1 degC
         raise InputError(f"--temperature {text!r}: give temperatures at least 0.1 degC apart")
     return vals

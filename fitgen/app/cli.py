@@ -54,8 +54,8 @@ def cmd_simulate(args) -> int:
         bar.update(1, "written")
     if unit is not None:
         print(f"wrote unit {sensor.name} (a unit of {drawing.name}) to {unit}", file=sys.stderr)
-    notes = "".join(f"note: {n}\n" for n in simulate_notes(sensor, poses, args.labels, args.sensor, args.adc_bits, source)
-                    + _posterior_note(args.sensor if args.unit is None else None))
+    said = simulate_notes(sensor, poses, args.labels, args.sensor, args.adc_bits, source)
+    notes = "".join(f"note: {n}\n" for n in said + _posterior_note(args.sensor if args.unit is None else None))
     print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}\n"
           + notes, end="", file=sys.stderr)
     return 0

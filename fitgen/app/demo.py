@@ -77,9 +77,9 @@ def run_demo(out: Path) -> int:
     _print_deployed(paper_model, model, deployed_errors(paper_model, held, sensor, ("double", "float")),
                     model.fit_info["held_out"]["errors"], held.spec)
     if blind := [c for c in ("thx", "thy") if c in report.unresolved()]:
-        print(f"   {' and '.join(blind)}: one ring cannot tell a small tilt from a slide near rest (step 2), so a tilt of "
-              "a few degrees there reads as a slide of hundredths of a mm and its error is the layout's limit, not "
-              "the fit's (docs/observe.md; the tilted-axes layout sees it, docs/layouts.md)")
+        print(f"   {' and '.join(blind)}: one ring cannot tell a small tilt from a slide near rest (step 2), so a "
+              "tilt of a few degrees there reads as a slide of hundredths of a mm and its error is the layout's "
+              "limit, not the fit's (docs/observe.md; the tilted-axes layout sees it, docs/layouts.md)")
     if unc is not None:
         print(f"   on {unc['units']} units built within the drawing's tolerances, flashed uncalibrated (median max "
               "error with noise): " + ", ".join(f"{o} {v['noisy_max']:.3g}" for o, v in unc["errors"].items())

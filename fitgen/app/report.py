@@ -267,8 +267,10 @@ def travel_notes(sensor, what: str, ranges: dict) -> list[str]:
     """A note when the pose box ``ranges`` of ``what`` reaches past the sensor's ``[travel]``, else none."""
     past = [f"{a} {lo:g}..{hi:g} mm (travel {t[0]:g}..{t[1]:g})" for a, t in sensor.travel.items()
             for lo, hi in [ranges[a]] if lo < t[0] or hi > t[1]]
+    if not past:
+        return []
     return [f"{what}: its box reaches past the sensor's travel ([travel] of its file): {', '.join(past)}; the skin "
-            "does not carry the magnet that far, and poses there describe no contact the sensor will see"] if past else []
+            "does not carry the magnet that far, and poses there describe no contact the sensor will see"]
 
 
 def _blind_causes(model: Model, ds, sensor) -> list[str]:

@@ -426,7 +426,8 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
     rec, met = recommend([math.nan if c is None else c for c in cost_],
                          [math.nan if s is None else s for s in score], [p.flash for p in points])
     setup = {"training_rows": train.n_rows, "levels": taught.levels, "held_out": n_held, "noise_draws": noise_draws,
-             "noise": sensor.noise, "units": sensor.units, "seed": seed, "fits": len(fits), "measured": len(units) - unmeasured}
+             "noise": sensor.noise, "units": sensor.units, "seed": seed, "fits": len(fits),
+             "measured": len(units) - unmeasured}
     return TradeoffResult(sensor.name, sensor.transfer, scene, target, points, front, rec, met, warnings, notes, setup,
                           max_share, over, core, constant)
 
