@@ -57,7 +57,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from benchutil import fmt, log, parser, table  # noqa: E402
 from fitgen.fitting.holdout import (NOISE_DRAWS as DRAWS, SEED, box_of, deployed_errors, held_out_set,  # noqa: E402
                                     posterior_units, unit_sets)
-from fitgen.fitting.identify import ZERO_ERROR, Problem, derived_quantities, derived_slopes, identify  # noqa: E402
+from fitgen.fitting.identify import ZERO_ERROR, Problem, derived_at, derived_slopes, identify  # noqa: E402
 from fitgen.fitting.unitrecord import load_posterior, save  # noqa: E402
 from fitgen.fitting.schedule import capture_candidates, d_optimal, exchange_design, schedule  # noqa: E402
 from fitgen.physics.pose import off_skin  # noqa: E402
@@ -271,7 +271,7 @@ def odds_rows(sets: int) -> list[list[str]]:
             y = U.capture(unit, labels, rig, [seed, len(labels), 3], samples=samples)
             ident = identify(drawing, y, labels, ctx.noise / np.sqrt(samples), rig_error=rig, zero_error=0.0)
             chi2.append(ident.reduced_chi2)
-            truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+            truth = derived_at(ident.space, theta)
             e, s, _ = U.derived_errors({"derived": ident.derived(), "derived_truth": truth})
             err.append(np.abs(e))
             se.append(s)

@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from benchutil import fmt, log, parser, table  # noqa: E402
 from fitgen.base.errors import InputError  # noqa: E402
-from fitgen.fitting.identify import CHI2_LIMIT, derived_quantities, identify  # noqa: E402
+from fitgen.fitting.identify import CHI2_LIMIT, derived_at, identify  # noqa: E402
 from fitgen.fitting.schedule import schedule  # noqa: E402
 from fitgen.fitting.verdict import check_explained  # noqa: E402
 from fitgen.physics.simulate import rig_poses  # noqa: E402
@@ -95,7 +95,7 @@ def task(spec):
         check_explained(ident, f"unit {seed}'s capture", U.PRESET, "the bench's")  # as fitgen identify refuses
     except InputError as exc:
         return {**out, "error": str(exc).splitlines()[0]}
-    truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+    truth = derived_at(ident.space, theta)
     e, s, _ = U.derived_errors({"derived": ident.derived(), "derived_truth": truth})
     return {**out, "chi2": ident.reduced_chi2, "err": np.abs(e), "se": s}
 

@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from benchutil import fmt, log, parser, table  # noqa: E402
 from fitgen.base.errors import InputError  # noqa: E402
-from fitgen.fitting.identify import derived_quantities, identify  # noqa: E402
+from fitgen.fitting.identify import derived_at, identify  # noqa: E402
 from fitgen.fitting.schedule import schedule  # noqa: E402
 from fitgen.fitting.unitrecord import save  # noqa: E402
 from fitgen.fitting.verdict import check_explained  # noqa: E402
@@ -67,7 +67,7 @@ def task(spec):
     except InputError as exc:
         return {**out, "error": str(exc).splitlines()[0]}
     th = np.concatenate([theta, G.ravel()]) if allow else theta
-    truth = {k: fn(th) for k, fn in derived_quantities(ident.space).items()}
+    truth = derived_at(ident.space, th)
     e, s, _ = U.derived_errors({"derived": ident.derived(), "derived_truth": truth})
     with tempfile.TemporaryDirectory(prefix="fitgen-field-") as tmp:
         path, _ = save(ident, Path(tmp) / "unit.toml", {"capture": f"simulated capture of unit {seed}",

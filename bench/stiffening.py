@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from benchutil import fmt, log, parser, table  # noqa: E402
 from identify_bound import STIFF as ALLOW, _units_module, twin_of, with_tolerances  # noqa: E402
-from fitgen.fitting.identify import CHI2_LIMIT, derived_quantities, identify  # noqa: E402
+from fitgen.fitting.identify import CHI2_LIMIT, derived_at, identify  # noqa: E402
 from fitgen.base.fileio import write_in_folder  # noqa: E402
 from fitgen.fitting.schedule import schedule  # noqa: E402
 from fitgen.physics.pose import POSE_NAMES  # noqa: E402
@@ -73,7 +73,7 @@ def rows(units: int, twins: int, found_by: dict | None = None) -> list[list[str]
                 if ident.space.size > len(theta):
                     theta = np.append(theta, c)
                     found.append(ident.theta[ident.space.index(PARAM)])
-                truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+                truth = derived_at(ident.space, theta)
                 e, _, _ = U.derived_errors({"derived": ident.derived(), "derived_truth": truth})
                 chi.append(ident.reduced_chi2)
                 height.append(abs(e[2]))

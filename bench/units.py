@@ -107,7 +107,7 @@ from fitgen.base.errors import InputError  # noqa: E402
 from fitgen.fitting.family import fit_auto  # noqa: E402
 from fitgen.fitting.fit import FitSettings, fit_model  # noqa: E402
 from fitgen.fitting.holdout import box_of, evaluate  # noqa: E402
-from fitgen.fitting.identify import CHI2_LIMIT, derived_quantities, identify  # noqa: E402
+from fitgen.fitting.identify import CHI2_LIMIT, derived_at, identify  # noqa: E402
 from fitgen.fitting.unitrecord import load_posterior, save  # noqa: E402
 from fitgen.fitting.verdict import check_explained  # noqa: E402
 from fitgen.physics.pose import POSE_NAMES  # noqa: E402
@@ -292,7 +292,7 @@ def task(spec: tuple) -> tuple[tuple, dict]:
         check_explained(ident, f"unit {seed}'s capture", PRESET, "the bench's")  # as fitgen identify refuses it
     except InputError as exc:
         return spec, {"error": str(exc).splitlines()[0], "seconds": time.monotonic() - t0}
-    truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+    truth = derived_at(ident.space, theta)
     res.update({"derived": ident.derived(), "derived_truth": truth, "theta": ident.theta, "sd": ident.sd,
                 "drawn": theta, "reduced_chi2": ident.reduced_chi2,
                 "determined": int(np.sum(ident.info_eig >= 1.0))})

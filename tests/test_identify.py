@@ -12,7 +12,7 @@ import pytest
 
 from conftest import assert_one_line_error, run_cli, save_capture, simulated_capture
 from fitgen.base.errors import InputError
-from fitgen.fitting.identify import PINNABLE, RIG, Problem, derived_quantities, identify
+from fitgen.fitting.identify import PINNABLE, RIG, Problem, derived_at, identify
 from fitgen.fitting.schedule import schedule
 from fitgen.fitting.unitrecord import report, row_noise, stage_errors, what_pins_more
 from fitgen.fitting.verdict import check_explained, field_line, lifted_rows_line, looser_stage_line, outlier_lines
@@ -43,7 +43,7 @@ def test_identify_recovers_what_a_capture_determines(drawing, plan, seed):
     y, noise = simulated_capture(unit, plan[0], seed)
     ident = identify(drawing, y, plan[0], noise)
     assert 0.6 < ident.reduced_chi2 < 1.5  # the physics explains the rows to the noise
-    truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+    truth = derived_at(ident.space, theta)
     for name, (value, se) in ident.derived().items():
         assert abs(value - truth[name]) < 3.5 * se, (name, value, truth[name], se)
         assert se < (0.06 if "offset" in name else 0.02), (name, se)
@@ -67,7 +67,7 @@ def test_a_zero_off_first_contact_is_allowed_for(drawing, plan, seed):
     for zero_error in (0.0, 0.02):
         ident = identify(drawing, y, plan[0], drawing.noise / np.sqrt(SAMPLES), zero_error=zero_error)
         assert ident.reduced_chi2 < 1.5
-        truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+        truth = derived_at(ident.space, theta)
         z = np.array([(value - truth[name]) / se for name, (value, se) in ident.derived().items()])
         rms_z[zero_error] = float(np.sqrt(np.mean(z**2)))
         if zero_error:
@@ -80,7 +80,7 @@ def test_a_zero_off_first_contact_is_allowed_for(drawing, plan, seed):
 
 def _explained_and_recovered(ident, theta):
     assert ident.reduced_chi2 < 1.5
-    truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+    truth = derived_at(ident.space, theta)
     for name, (value, se) in ident.derived().items():
         assert abs(value - truth[name]) < 3.5 * se, (name, value, truth[name], se)
 
@@ -414,7 +414,7 @@ def test_a_spread_of_zero_fixes_its_parameter_at_the_drawing(drawing, plan, tmp_
     assert 0.6 < ident.reduced_chi2 < 1.5
     assert np.all(ident.theta[fixed] == 0) and np.all(ident.sd[fixed] == 0)
     assert np.all(ident.gauge[fixed] == 0) and len(ident.info_eig) == (~fixed).sum()
-    truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+    truth = derived_at(ident.space, theta)
     for name, (value, se) in ident.derived().items():
         assert abs(value - truth[name]) < 3.5 * se, (name, value, truth[name], se)
     save_capture(tmp_path / "c.csv", y, plan[0], {"samples_per_row": SAMPLES})

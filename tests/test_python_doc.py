@@ -156,7 +156,7 @@ def test_a_built_unit_is_far_worse_served_than_the_drawing(doc):
 def test_the_twin_of_a_short_capture_serves_the_unit_as_its_file_says(doc):
     """Section 7: the capture is explained to its noise, the magnet's offset is found within its standard errors,
     and the twin's model errs on unit 7 by a tenth of the drawing's model or less, no worse than its file says."""
-    from fitgen.fitting.identify import derived_quantities
+    from fitgen.fitting.identify import derived_at
     from fitgen.physics.sensor import load_sensor
     from fitgen.physics.units import draw_unit
 
@@ -166,7 +166,7 @@ def test_the_twin_of_a_short_capture_serves_the_unit_as_its_file_says(doc):
     assert ident.chi2 < 2 * ident.dof
     assert f"residual chi-square {ident.chi2:.1f} on {ident.dof:.1f} degrees of freedom" in printed[6]
     _, theta = draw_unit(sensor, 7)
-    truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}
+    truth = derived_at(ident.space, theta)
     offsets = [(n, v, se) for n, (v, se) in ident.derived().items() if "offset" in n]
     assert len(offsets) == 3
     for name, value, se in offsets:

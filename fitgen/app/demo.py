@@ -162,9 +162,9 @@ def _unit_stage(out: Path, drawing_model) -> None:
     try:
         from fitgen.app.plots import identification
 
-        from fitgen.fitting.identify import derived_quantities
+        from fitgen.fitting.identify import derived_at
 
-        truth = {k: fn(theta) for k, fn in derived_quantities(ident.space).items()}  # the demo knows its unit
+        truth = derived_at(ident.space, theta)  # the demo knows its unit
         print(f"   its residuals and what the capture determines, with the unit's truth -> "
               f"{identification(ident, out / 'identify.png', truth)}")
     except InputError as exc:  # matplotlib is an extra: the demo goes on without the figure

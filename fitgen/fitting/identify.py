@@ -280,6 +280,11 @@ def derived_quantities(space: UnitSpace) -> dict:
     return out
 
 
+def derived_at(space: UnitSpace, theta) -> dict:
+    """:func:`derived_quantities` at the parameters ``theta``: a drawn unit's truth, beside an identification's."""
+    return {k: fn(theta) for k, fn in derived_quantities(space).items()}
+
+
 def derived_slopes(space: UnitSpace, theta: np.ndarray) -> dict[str, tuple[float, np.ndarray]]:
     """Per derived quantity, its value and gradient (central differences) at ``theta``."""
     h, out = 1e-6, {}
