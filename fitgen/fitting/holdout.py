@@ -178,8 +178,9 @@ def evaluate(model: Model, sensor, ranges: dict, *, noise: float | None = None, 
     return {**spec, "sensor": sensor.name, "sensor_sha256": sensor.sha256, "errors": errors,
             "posterior": {"units": len(units), "seed": POSTERIOR_SEED,
                           "statistic": "median over units drawn from the identification's posterior (Laplace), "
-                                       "each with its own noise draws; *_p90: their 90th percentile; *_lo, *_hi: "
-                                       "their least and greatest (a unit is one draw of that spread: "
+                                       "each with its own noise draws; *_p90: their 90th percentile (of 8 draws: a unit "
+                                       "falls below it about 4 times in 5); *_lo, *_hi: their least and greatest "
+                                       "(a unit falls between them 7 times in 9, below *_hi 8 in 9: "
                                        "bench/identify_bound.py)"}}
 
 
