@@ -224,14 +224,20 @@ class RowWriter:
     """Appends complete lines: one write of the whole line, then fsync."""
 
     def __init__(self, path: str | Path):
+        self.path = path
         self.fd = open_output(path, append=True)
 
     def append(self, line: str) -> None:
+        """``line`` written and synced; InputError naming the file when the disk refuses it (full, a size limit):
+        a part written is a partial row, dropped by the next run."""
         data = line.encode()
-        while data:
-            n = os.write(self.fd, data)
-            data = data[n:]
-        os.fsync(self.fd)
+        try:
+            while data:
+                n = os.write(self.fd, data)
+                data = data[n:]
+            os.fsync(self.fd)
+        except OSError as exc:
+            raise InputError(f"cannot write {self.path}: {exc.strerror or exc}") from None
 
     def close(self) -> None:
         if self.fd is not None:
@@ -392,10 +398,12 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
         write_meta(output, info)
         return clock.monotonic()
 
-    last_meta = refresh()
-    writer = RowWriter(output)
+    if prior and state.done.all():  # nothing left to capture: the meta stays as the runs that did left it
+        return res
+    writer = RowWriter(output)  # before the meta: a run refused (a read-only output) leaves both as they were
     values = schedule.values
     try:
+        last_meta = refresh()
         for i in np.flatnonzero(~state.done):
             pose = schedule.poses[i]
             if set_pose is not None:

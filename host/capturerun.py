@@ -33,7 +33,12 @@ class CaptureFailed(RuntimeError):
 
 
 class CaptureInterrupted(RuntimeError):
-    """A capture stopped by Ctrl-C; the message says what is kept."""
+    """A capture stopped by Ctrl-C (or SIGTERM, SIGHUP: ``stop``, the KeyboardInterrupt raised); the message says
+    what is kept."""
+
+    def __init__(self, message: str, stop: BaseException | None = None):
+        super().__init__(message)
+        self.stop = stop
 
 
 def capture_samples(args) -> int:
@@ -166,8 +171,8 @@ def _run_capture(args, prog: str) -> None:
                           wait=wait, set_pose=set_pose, settle=settle,
                           clock=clock, progress=None if interactive else progress, meta=meta,
                           temperature=None if thermometer is None else lambda: thermometer.read(fresh=True))
-    except KeyboardInterrupt:
-        raise CaptureInterrupted(_kept(args.output)) from None
+    except KeyboardInterrupt as exc:
+        raise CaptureInterrupted(_kept(args.output), exc) from None
     except (DeviceSilent, SpreadTooLarge, TriggerFailed, StageError) as exc:
         if getattr(exc, "lost", ""):
             StageState.mark_lost(args.output, exc.lost)

@@ -7,12 +7,11 @@ auto-zero, temperature) and the engine, and closes them all in one place.
 
 from __future__ import annotations
 
-import os
 import sys
 from functools import partial
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import open_output
+from fitgen.base.fileio import OutputText
 from fitgen.base.parse import LONGEST_WAIT, parse_numbers, parse_positive
 from fitgen.base.progress import Progress
 from fitgen.equations.model import check_input_units, load_model
@@ -271,7 +270,7 @@ class ReadoutSession:
         """The run record ``--record`` asks for (None without it), closed with the session."""
         if path is None:
             return None
-        self._record_file = os.fdopen(open_output(path), "w")
+        self._record_file = OutputText(path)
         ref = None if self.reference is None else [float(x) for x in self.reference]
         return RunRecord(self._record_file, {"model": self.model.sha256, "outputs": list(self.model.output_names),
                                              "n_inputs": self.model.n_inputs, "source": self.source,

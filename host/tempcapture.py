@@ -140,8 +140,8 @@ def _capture_temperatures(args, prog: str):
             files.append(str(path))
             print(f"{prog}: {ds.n_rows} poses at {T:g} degC"
                   f"{f' (thermistor {measured:.2f} degC)' if np.isfinite(measured) else ''} in {path}", file=sys.stderr)
-    except KeyboardInterrupt:
-        raise CaptureInterrupted(_kept(out, temps)) from None
+    except KeyboardInterrupt as exc:
+        raise CaptureInterrupted(_kept(out, temps), exc) from None
     except (DeviceSilent, SpreadTooLarge, TriggerFailed) as exc:
         raise CaptureFailed(f"{exc}; {_kept(out, temps)}") from exc
     finally:

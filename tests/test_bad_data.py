@@ -545,33 +545,6 @@ def test_fit_takes_the_units_of_data_without_meta_from_units(data, tmp_path):
                           contains="meta says its readings are in mT")
 
 
-def test_sigterm_cleans_up_as_ctrl_c_does(capsys):
-    """A command stopped by SIGTERM (timeout, systemd, kill) leaves no temporary folder: the signal is raised as
-    an exception where the program is, so that every with-block's cleanup runs."""
-    import os
-    import signal
-    import tempfile
-    from pathlib import Path
-
-    from fitgen.app.cliutil import run
-
-    made = []
-
-    def work(argv):
-        with tempfile.TemporaryDirectory(prefix="fitgen-test-term-") as tmp:
-            made.append(Path(tmp))
-            os.kill(os.getpid(), signal.SIGTERM)
-            for _ in range(1000):  # the handler runs between bytecodes
-                pass
-        return 0
-
-    before = signal.getsignal(signal.SIGTERM)
-    assert run(work, [], "fitgen") == 143
-    assert made and not made[0].exists()
-    assert capsys.readouterr().err.strip() == "fitgen: terminated"
-    assert signal.getsignal(signal.SIGTERM) is before
-
-
 @pytest.mark.parametrize("tool, args", [("fitgen", ["observe", "--sensor", "paper"]), ("fitgen", ["--help"]),
                                         ("tactile-host", ["read", "--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3",
                                                           "--simulate", "motion", "--duration", "0.3"])])

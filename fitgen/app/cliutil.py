@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import errno
 import math
+import os
 import re
 import signal
 import sys
@@ -87,12 +88,36 @@ def seconds(text: str) -> float:
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where the program is, so that its temporary files and half-written outputs are cleaned up
-    as for Ctrl-C (the default action ends the process with no cleanup at all)."""
+    """SIGTERM or SIGHUP (a closed terminal or ssh session), raised where the program is, so that its temporary
+    files and half-written outputs are cleaned up as for Ctrl-C (the default action ends the process with no
+    cleanup at all). ``status``: the shell's for that signal, 128 + its number."""
+
+    def __init__(self, signum: int = signal.SIGTERM):
+        super().__init__()
+        self.signum = signum
+        self.status = 128 + int(signum)
+        self.said = "hung up" if signum == signal.SIGHUP else "terminated"
 
 
 def _terminate(signum, frame):
-    raise Terminated()
+    raise Terminated(signum)
+
+
+ENDING = (signal.SIGTERM, signal.SIGHUP)  # the signals that end a command as Ctrl-C does, cleaned up
+
+
+def catch_ending() -> dict:
+    """Terminated raised for SIGTERM and SIGHUP from now on, except where the signal is ignored (nohup's SIG_IGN
+    is kept: the command outlives its terminal as asked); the handlers replaced, to give back to
+    :func:`restore`. Nothing outside the main thread (Python runs handlers only there)."""
+    if not _main_thread():
+        return {}
+    return {s: signal.signal(s, _terminate) for s in ENDING if signal.getsignal(s) is not signal.SIG_IGN}
+
+
+def restore(previous: dict) -> None:
+    for s, handler in previous.items():
+        signal.signal(s, handler if handler is not None else signal.SIG_DFL)
 
 
 class OutputFailed(Exception):
@@ -126,9 +151,13 @@ class _Stdout:
 def run(main_fn, argv=None, prog="") -> int:
     """Call ``main_fn(argv)``; turn bad input into one line on stderr and exit status 2. ``prog``: the name the
     line starts with, or a function giving it (the subcommand's, once parsed)."""
-    previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
-    stdout = sys.stdout
-    sys.stdout = _Stdout(stdout)
+    previous = catch_ending()
+    stdout, stderr = sys.stdout, sys.stderr
+    # a stream closed before the start (>&-) is None in Python: its lines go nowhere, as the shell asked
+    nowhere = [open(os.devnull, "w") for stream in (stdout, stderr) if stream is None]
+    if stderr is None:
+        sys.stderr = nowhere[-1]
+    sys.stdout = _Stdout(stdout if stdout is not None else nowhere[0])
     try:
         status = int(main_fn(argv) or 0)
         sys.stdout.flush()  # here, not at exit, so that a full disk is said as one line
@@ -137,13 +166,13 @@ def run(main_fn, argv=None, prog="") -> int:
         print(f"{_name(prog)}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt as exc:
-        print(f"{_name(prog)}: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
-        return 143 if isinstance(exc, Terminated) else 130
+        print(f"{_name(prog)}: {exc.said if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
+        return exc.status if isinstance(exc, Terminated) else 130
     except BrokenPipeError:  # the reader went away (| head): nothing more to say
-        _drop(stdout)
+        _drop(sys.stdout)
         return 0
     except OutputFailed as exc:
-        _drop(stdout)
+        _drop(sys.stdout)
         print(f"{_name(prog)}: error: cannot write standard output: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except OSError as exc:  # Path.is_file() and its kin raise this one where they return False for a missing file
@@ -157,9 +186,10 @@ def run(main_fn, argv=None, prog="") -> int:
               "tactile-host wrote", file=sys.stderr)
         return EXIT_USAGE
     finally:
-        sys.stdout = stdout
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        sys.stdout, sys.stderr = stdout, stderr
+        for stream in nowhere:
+            stream.close()
+        restore(previous)
 
 
 def _name(prog) -> str:
@@ -168,8 +198,6 @@ def _name(prog) -> str:
 
 def _drop(stream) -> None:
     """Point ``stream``'s file at the null device, so that Python's flush at exit has nothing to fail on."""
-    import os
-
     try:
         os.dup2(os.open(os.devnull, os.O_WRONLY), stream.fileno())
     except (OSError, ValueError, AttributeError):  # not a real file (a test's capture): nothing to flush at exit
@@ -206,7 +234,8 @@ def command_main(build_parser, argv, prog: str, check=None):
 
 
 class StopFlag:
-    """SIGINT and SIGTERM set a flag a loop checks between steps (the handlers are restored on exit)."""
+    """SIGINT, SIGTERM and SIGHUP (where not ignored) set a flag a loop checks between steps (the handlers are
+    restored on exit)."""
 
     def __init__(self):
         self.stopped = False
@@ -218,7 +247,8 @@ class StopFlag:
         def handler(signum, frame):
             self.stopped = True
 
-        self._old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+        self._old = {s: signal.signal(s, handler) for s in (signal.SIGINT, *ENDING)
+                     if s == signal.SIGINT or signal.getsignal(s) is not signal.SIG_IGN}
         return self
 
     def __exit__(self, *exc):
@@ -228,7 +258,7 @@ class StopFlag:
 
 WRITES = ("output", "record", "temp_comp_output", "pose_file", "junit")  # the files a command writes
 READS = ("model", "run", "tempcomp", "adc", "temp_comp", "rest", "poses", "data", "replay", "sensor", "sim_sensor",
-         "capture")  # and those it reads: never one of the written
+         "capture", "samples")  # and those it reads: never one of the written
 
 
 STDOUT_DEFAULT = ("cmd_read", "cmd_report")  # commands whose -o, left out, is stdout: there "-o -" says so too

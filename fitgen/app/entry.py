@@ -1,20 +1,24 @@
-"""The console scripts. Each imports its command's module under a Ctrl-C guard: the imports (numpy's) take a
-moment, and a Ctrl-C then ends the command as one at any other time does, in one line, not a traceback."""
+"""The console scripts. Each imports its command's module under a Ctrl-C, SIGTERM and SIGHUP guard: the imports
+(numpy's) take a moment, and a signal then ends the command as one at any other time does, in one line, not a
+traceback."""
 
 from __future__ import annotations
 
 import sys
 from importlib import import_module
 
+from fitgen.app.cliutil import Terminated, catch_ending
+
 EXIT_INTERRUPTED = 130
 
 
 def _main(module: str, prog: str) -> None:
+    catch_ending()  # kept: the command's run() takes them over
     try:
         main = import_module(module).main
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted", file=sys.stderr)
-        sys.exit(EXIT_INTERRUPTED)
+    except KeyboardInterrupt as exc:
+        print(f"{prog}: {exc.said if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
+        sys.exit(exc.status if isinstance(exc, Terminated) else EXIT_INTERRUPTED)
     main()
 
 

@@ -56,9 +56,7 @@ def _warn(prog: str):
 
 
 def cmd_read(args) -> int:
-    import os
-
-    from fitgen.base.fileio import open_output
+    from fitgen.base.fileio import OutputText
     from host.adc import DeviceSilent
     from host.readout import LineFormat, Readout
     from host.session import ReadoutSession
@@ -69,7 +67,7 @@ def cmd_read(args) -> int:
         fmt = LineFormat(args.format, s.model.n_inputs, s.model.output_names)
         record = s.record(args.record)  # before -o is opened: a record that cannot be made leaves -o as it was
         if args.output:
-            sink = os.fdopen(open_output(args.output), "w")  # a device, FIFO or descriptor's link refused
+            sink = OutputText(args.output)  # a device, FIFO or descriptor's link refused
         out = sink or sys.stdout
         out.write(fmt.header)
         reader = Readout(s.array, s.engine, out, fmt, clock=s.clock, corrections=s.corrections,
@@ -211,9 +209,9 @@ def cmd_capture(args) -> int:
         if args.temperature is not None and args.stage is None:
             return 130 if capture_temperatures(args, prog) is None else 0
         run_capture(args, prog)
-    except CaptureInterrupted as exc:
-        print(f"{prog}: interrupted; {exc}", file=sys.stderr)
-        return 130
+    except CaptureInterrupted as exc:  # SIGTERM and SIGHUP said and ended with their own status, as elsewhere
+        print(f"{prog}: {getattr(exc.stop, 'said', 'interrupted')}; {exc}", file=sys.stderr)
+        return getattr(exc.stop, "status", 130)
     except CaptureFailed as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_CHECK_FAILED

@@ -6,9 +6,11 @@ import hashlib
 import json
 import os
 import shutil
+import signal
 import stat
 import sys
 import tempfile
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -140,15 +142,16 @@ def write_all(files) -> list:
             made += [f for f in (target.parent, *target.parent.parents) if not f.exists()]
             make_folder(target.parent)
             staged.append((_staged(target, data, path), target, path))
-        while staged:  # each folder took a new file and no target is a folder: a rename fails only in a race
-            tmp, target, path = staged[0]
-            try:
-                os.replace(tmp, target)
-            except OSError as exc:
-                done = [str(p) for p, _ in files[:len(files) - len(staged)]]
-                raise InputError(f"cannot write {path}: {exc.strerror}"
-                                 + (f" ({', '.join(done)} written)" if done else "")) from None
-            staged.pop(0)
+        with signals_held():  # a Ctrl-C between two renames would leave new files beside old ones
+            while staged:  # each folder took a new file and no target is a folder: a rename fails only in a race
+                tmp, target, path = staged[0]
+                try:
+                    os.replace(tmp, target)
+                except OSError as exc:
+                    done = [str(p) for p, _ in files[:len(files) - len(staged)]]
+                    raise InputError(f"cannot write {path}: {exc.strerror}"
+                                     + (f" ({', '.join(done)} written)" if done else "")) from None
+                staged.pop(0)
     except BaseException:  # an InputError, or Ctrl-C: nothing half-written either way
         for tmp, _, _ in staged:
             _remove(tmp)
@@ -159,6 +162,30 @@ def write_all(files) -> list:
                 pass
         raise
     return [path for path, _ in files]
+
+
+HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+@contextmanager
+def signals_held():
+    """SIGINT, SIGTERM and SIGHUP held while the block runs and delivered after it (each once), so that a few
+    renames are done all or none. Python runs signal handlers in the main thread only, whichever thread the
+    kernel chose: its handlers are swapped there, not the thread's signal mask. Elsewhere, and for a signal
+    ignored, nothing is held."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list = []
+    held = {s: signal.signal(s, lambda signum, frame: caught.append(signum)) for s in HELD_SIGNALS
+            if signal.getsignal(s) not in (signal.SIG_IGN, None)}
+    try:
+        yield
+    finally:
+        for s, handler in held.items():
+            signal.signal(s, handler)
+        for s in dict.fromkeys(caught):
+            signal.raise_signal(s)
 
 
 def _staged(target: Path, data: str | bytes, path) -> str:
@@ -213,6 +240,38 @@ def open_output(path: str | os.PathLike, append: bool = False) -> int:
     return fd
 
 
+class OutputText:
+    """A text file written as the work goes (:func:`open_output`'s): a write that fails there (a full disk, a file
+    size limit) is InputError naming the file, one line, not a traceback after minutes of work."""
+
+    def __init__(self, path: str | os.PathLike, append: bool = False):
+        self.path = path
+        self._fh = os.fdopen(open_output(path, append), "w")
+
+    def _guard(self, fn, *args):
+        try:
+            return fn(*args)
+        except OSError as exc:
+            raise InputError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+
+    def write(self, text: str) -> int:
+        return self._guard(self._fh.write, text)
+
+    def flush(self) -> None:
+        self._guard(self._fh.flush)
+
+    def close(self) -> None:
+        """Closed; what could not be flushed is said (InputError) once, and the descriptor is closed either way."""
+        if not self._fh.closed:
+            try:
+                self._guard(self._fh.flush)
+            finally:
+                try:
+                    self._fh.close()
+                except OSError:  # the flush above said it
+                    pass
+
+
 def make_folder(folder: str | os.PathLike) -> Path:
     """``folder``, created (and its parents) when missing; one line (InputError) when it cannot be."""
     folder = Path(folder)
@@ -255,8 +314,9 @@ def check_folder(folder: str | os.PathLike, flag: str = "-o") -> Path:
 
 
 def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes) -> Path:
-    """:func:`write_atomic` into ``folder/name``, creating ``folder`` (and its parents) when missing."""
-    path = make_folder(folder) / name
+    """:func:`write_atomic` into ``folder/name``, creating ``folder`` (and its parents) when missing; a write that
+    fails leaves no folder it made (:func:`write_all`)."""
+    path = Path(folder) / name
     try:
         mode = os.stat(path).st_mode
     except OSError:
@@ -264,7 +324,7 @@ def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes) -> 
     if mode is not None and not stat.S_ISREG(mode):  # the user named the folder: the name inside is ours
         raise InputError(f"cannot write {path}: {_kind(mode)} of that name is in the way; move it or give "
                          "another folder")
-    return write_atomic(path, data)
+    return write_all([(path, data)])[0]
 
 
 def canonical_json(obj) -> str:
@@ -329,6 +389,10 @@ def staged_beside(folder: Path):
         raise InputError(f"cannot write {folder}: {exc.strerror}") from None
     try:
         yield partial
+    except InputError as exc:  # a compiler's line names the staged copy: name the folder the user gave
+        if str(partial) not in str(exc):
+            raise
+        raise InputError(str(exc).replace(str(partial), str(folder))) from None
     finally:
         shutil.rmtree(partial, ignore_errors=True)
 

@@ -30,7 +30,7 @@ import json
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import write_atomic
+from fitgen.base.fileio import write_all
 from fitgen.fitting.capturecheck import MIN_DISTINCT, MIN_ROWS, check_error
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR, Problem, unit_space
 from fitgen.physics.dataset import meta_path
@@ -268,8 +268,7 @@ def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: 
 
 def write_schedule(path, poses: np.ndarray, axes, info: dict) -> None:
     """The schedule (:func:`schedule_csv`) at ``path``, and ``info`` in its ``.meta.json`` beside it."""
-    write_atomic(path, schedule_csv(poses, axes))
-    write_atomic(meta_path(path), json.dumps(info, indent=1) + "\n")
+    write_all([(path, schedule_csv(poses, axes)), (meta_path(path), json.dumps(info, indent=1) + "\n")])
 
 
 def schedule_csv(poses: np.ndarray, axes=("dx", "dy", "dz")) -> str:

@@ -238,7 +238,9 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> Stepwise
                 new_r = r[:, None] - Z * coef
                 add_rss = np.sum(new_r * new_r, axis=0)
                 scores.append(aic_of(np.maximum(add_rss, 1e-300), n, len(current) + 1, k))
-        best = int(np.argmin(np.concatenate(scores)))  # argmin takes the first of equal scores: R's order()
+        # argmin takes the first of exactly equal scores, as R's order() does; scores equal in exact arithmetic
+        # (a mirror pair of elements on a symmetric ring) go by their rounding, which the CPU's BLAS kernel sets
+        best = int(np.argmin(np.concatenate(scores)))
         if best == 0:
             break
         if best <= len(current):

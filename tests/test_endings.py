@@ -1,0 +1,243 @@
+"""How a command ends when the world around it does: a disk that fills or a file size limit, a closed stream,
+a hang-up, a signal between two renames. One line and a status, never a traceback, nothing half-written."""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import signal
+import subprocess
+import sys
+
+import pytest
+from conftest import TWO_CHIPS, assert_one_line_error
+
+TOOLS = {"fitgen": "fitgen.app.cli", "tactile-host": "fitgen.app.host_cli"}
+
+
+def run_limited(tool, *args, fsize=None, close=(), stdout=subprocess.PIPE):
+    """``tool args`` as a subprocess, its files limited to ``fsize`` bytes (EFBIG past it, as a full disk gives
+    ENOSPC) and the descriptors ``close`` closed before it starts (the shell's ``>&-``)."""
+
+    def setup():
+        if fsize is not None:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
+        for fd in close:
+            os.close(fd)
+
+    code = f"import sys; from {TOOLS[tool]} import main; sys.argv[0] = {tool!r}; main()"
+    return subprocess.run([sys.executable, "-c", code, *args], stdout=stdout, stderr=subprocess.PIPE, text=True,
+                          preexec_fn=setup, timeout=300)
+
+
+def test_read_whose_output_file_fills_is_one_line(model_file, tmp_path):
+    out = tmp_path / "s.csv"
+    proc = run_limited("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "motion",
+                       "--count", "5000", "-o", str(out), fsize=20_000)
+    assert_one_line_error(proc, 2, f"tactile-host read: error: cannot write {out}: File too large")
+    assert 0 < out.stat().st_size <= 20_000
+
+
+def test_read_whose_run_record_fills_is_one_line(model_file, tmp_path):
+    run = tmp_path / "run.jsonl"
+    proc = run_limited("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "motion",
+                       "--count", "5000", "--record", str(run), fsize=60_000)
+    assert_one_line_error(proc, 2, f"tactile-host read: error: cannot write {run}: File too large")
+
+
+def test_a_capture_whose_file_fills_keeps_its_rows_and_says_so_in_one_line(tmp_path):
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dy,dz\n" + "".join(f"{dx},{dy},0\n" for dx in range(-3, 4) for dy in range(-3, 4)))
+    out = tmp_path / "d.csv"
+    proc = run_limited("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS, "-o", str(out),
+                       "--simulate", "--samples", "2", fsize=4000)
+    assert_one_line_error(proc, 2, f"tactile-host capture: error: cannot write {out}: File too large")
+    lines = out.read_text().split("\n")
+    assert 3 < len(lines) < 49
+    meta = json.loads((tmp_path / "d.csv.meta.json").read_text())  # the meta counts the rows kept
+    assert meta["rows"] == sum(1 for ln in lines[1:] if ln) - (not out.read_text().endswith("\n"))
+
+
+def test_a_closed_standard_output_or_error_is_nowhere_to_write_not_a_traceback(tmp_path):
+    """``>&-``: Python starts with sys.stdout (or stderr) None; what would go there goes nowhere, the work is
+    done and the status is the command's."""
+    proc = run_limited("fitgen", "observe", "--sensor", "paper", close=(1,), stdout=None)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr and "error" not in proc.stderr, proc.stderr
+    # stderr closed: the error line is lost (no stream), not printed on stdout where print(file=None) sends it
+    proc = run_limited("fitgen", "fit", str(tmp_path / "nothere.csv"), "-o", str(tmp_path / "m.json"), close=(2,))
+    assert proc.returncode == 2 and proc.stdout == ""
+    out = tmp_path / "d.csv"
+    proc = run_limited("fitgen", "simulate", "--random", "5", "-o", str(out), close=(1, 2), stdout=None)
+    assert proc.returncode == 0 and out.is_file()
+
+
+@pytest.mark.parametrize("sig, status, said", [(signal.SIGTERM, 143, "terminated"), (signal.SIGHUP, 129, "hung up")])
+def test_a_signal_ends_a_command_cleaned_up_unless_it_is_ignored(capsys, sig, status, said):
+    """SIGTERM (timeout, systemd, kill) and SIGHUP (the terminal or ssh session closed) are raised where the
+    program is, so that every with-block's cleanup runs: no temporary folder is left, and the status is the
+    shell's (128 + the signal). A signal ignored (nohup's SIGHUP) stays ignored."""
+    import tempfile
+    from pathlib import Path
+
+    from fitgen.app.cliutil import run
+
+    made = []
+
+    def work(argv):
+        with tempfile.TemporaryDirectory(prefix="fitgen-test-term-") as tmp:
+            made.append(Path(tmp))
+            os.kill(os.getpid(), sig)
+            for _ in range(1000):  # the handler runs between bytecodes
+                pass
+        return 0
+
+    before = signal.getsignal(sig)
+    try:
+        assert run(work, [], "fitgen") == status
+        assert made and not made[0].exists()
+        assert capsys.readouterr().err.strip() == f"fitgen: {said}"
+        assert signal.getsignal(sig) is before
+        signal.signal(sig, signal.SIG_IGN)
+        assert run(work, [], "fitgen") == 0 and not made[1].exists()
+        assert capsys.readouterr().err == ""
+        assert signal.getsignal(sig) is signal.SIG_IGN
+    finally:
+        signal.signal(sig, before)
+
+
+@pytest.mark.parametrize("name, status, said", [("INT", 130, "interrupted"), ("TERM", 143, "terminated"),
+                                                ("HUP", 129, "hung up")])
+def test_a_capture_stopped_by_a_signal_keeps_its_rows_and_says_which(tmp_path, name, status, said):
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dy,dz\n" + "".join(f"{dx},0,0\n" for dx in range(5)))
+    out = tmp_path / "d.csv"
+    proc = run_limited("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_CHIPS, "-o", str(out),
+                       "--simulate", "--samples", "2", "--trigger",
+                       f'if [ "$TM_POSE_INDEX" = 3 ]; then kill -{name} $PPID; sleep 5; fi')
+    assert proc.returncode == status, proc.stderr
+    assert proc.stderr.strip() == (f"tactile-host capture: {said}; the rows written so far are kept in {out}: "
+                                   "run the same command again to resume")
+    assert len(out.read_text().splitlines()) == 3
+
+
+def test_write_all_finishes_its_renames_before_a_signal_that_comes_between_them(tmp_path, monkeypatch):
+    """A Ctrl-C between two renames is delivered after the last: every file new (and the command ends as
+    interrupted), never a new file beside an old one."""
+    import fitgen.base.fileio as fileio
+
+    real = os.replace
+    calls = []
+
+    def replace_then_ctrl_c(src, dst):
+        real(src, dst)
+        calls.append(dst)
+        if len(calls) == 1:
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(1000):  # where the handler would run
+                pass
+
+    monkeypatch.setattr(fileio.os, "replace", replace_then_ctrl_c)
+    for name in ("a.csv", "a.csv.meta.json"):
+        (tmp_path / name).write_text("old")
+    with pytest.raises(KeyboardInterrupt):
+        fileio.write_all([(tmp_path / "a.csv", "new"), (tmp_path / "a.csv.meta.json", "new")])
+    assert len(calls) == 2
+    assert [(tmp_path / n).read_text() for n in ("a.csv", "a.csv.meta.json")] == ["new", "new"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "a.csv.meta.json"]
+
+
+def test_schedule_writes_its_poses_and_its_meta_both_or_neither(tmp_path):
+    """A meta that cannot be written leaves no schedule without one (capture would take it for another kind)."""
+    from conftest import run_cli
+
+    (tmp_path / "s.csv.meta.json").mkdir()
+    proc = run_cli("fitgen", "schedule", "--sensor", "paper", "-o", str(tmp_path / "s.csv"))
+    assert_one_line_error(proc, 2, "s.csv.meta.json")
+    assert not (tmp_path / "s.csv").exists()
+
+
+def test_schedule_refuses_to_write_over_the_noise_file_it_reads(tmp_path):
+    from conftest import run_cli
+
+    noise = tmp_path / "noise.json"
+    assert run_cli("tactile-host", "noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "1", "-o",
+                   str(noise)).returncode == 0
+    before = noise.read_bytes()
+    proc = run_cli("fitgen", "schedule", "--sensor", "paper", "--samples", str(noise), "-o", str(noise))
+    assert_one_line_error(proc, 2, f"-o {noise} is the input {noise}")
+    assert noise.read_bytes() == before
+
+
+@pytest.mark.parametrize("levels", [[], ["--temperature", "20,30"]])
+def test_a_finished_capture_run_again_leaves_its_meta_as_it_was(tmp_path, levels):
+    """A run with nothing left to capture (every temperature's level done) is no run: no meta counts it."""
+    from conftest import run_cli
+
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dy,dz\n0,0,0\n1,0,0\n")
+    args = ["capture", "--poses", str(sched), "--adc", TWO_CHIPS, "-o", str(tmp_path / "d.csv"), "--simulate",
+            "--samples", "2", *levels]
+    assert run_cli("tactile-host", *args).returncode == 0
+    metas = sorted(tmp_path.glob("*.meta.json"))
+    assert len(metas) == (2 if levels else 1)
+    before = [m.read_bytes() for m in metas]
+    proc = run_cli("tactile-host", *args)
+    assert proc.returncode == 0, proc.stderr
+    assert [m.read_bytes() for m in metas] == before and all(json.loads(m)["runs"] == 1 for m in before)
+
+
+def test_a_capture_refused_its_output_leaves_the_meta_as_it_was(sensor, tmp_path, monkeypatch):
+    """An output that cannot be appended to (read-only, to a user other than root) is refused before the meta
+    is touched: an earlier run's meta kept byte for byte, none made where there was none."""
+    import host.capture as capture_mod
+    from fitgen.base.errors import InputError
+    from host.adc import AdcArray
+    from host.capture import capture, load_schedule
+    from host.channelmap import parse_spec
+    from host.clock import VirtualClock
+    from host.simbus import SimBus
+
+    def refused(path, append=False):
+        raise InputError(f"cannot append to {path}: Permission denied")
+
+    sched_path = tmp_path / "s.csv"
+    sched_path.write_text("dx,dy,dz\n0,0,0\n1,0,0\n")
+    sched = load_schedule(sched_path)
+    cmap, clock = parse_spec(TWO_CHIPS), VirtualClock()
+    bus = SimBus.for_channel_map(cmap, sensor, None, clock=clock, noise=0.0005, seed=0)
+    arr = AdcArray(bus, cmap, clock=clock)
+    out = tmp_path / "d.csv"
+    capture(arr, load_schedule(sched_path), out, samples=2, set_pose=bus.set_pose, clock=clock)
+    meta = (tmp_path / "d.csv.meta.json").read_bytes()
+    sched_path.write_text("dx,dy,dz\n0,0,0\n1,0,0\n2,0,0\n")  # one pose more to capture
+    monkeypatch.setattr(capture_mod, "open_output", refused)
+    with pytest.raises(InputError, match="Permission denied"):
+        capture(arr, load_schedule(sched_path), out, samples=2, set_pose=bus.set_pose, clock=clock)
+    assert (tmp_path / "d.csv.meta.json").read_bytes() == meta
+    other = tmp_path / "e.csv"
+    with pytest.raises(InputError, match="Permission denied"):
+        capture(arr, sched, other, samples=2, set_pose=bus.set_pose, clock=clock)
+    assert not (tmp_path / "e.csv.meta.json").exists()
+
+
+def test_codegen_whose_header_cannot_be_written_leaves_no_folder(model_file, tmp_path):
+    folder = tmp_path / "new" / "gen"
+    proc = run_limited("fitgen", "codegen", model_file, "-o", str(folder), fsize=200)
+    assert_one_line_error(proc, 2, "File too large")
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_pi_build_that_fails_names_the_folder_given_not_its_staging_copy(model_file, tmp_path):
+    """The compiler's line names the source it was given, which is the staged copy: said with the user's -o."""
+    from conftest import run_cli
+
+    cc = tmp_path / "badcc"
+    cc.write_text('#!/bin/sh\nfor a; do case "$a" in *tm_pi.c) echo "$a:1:1: error: no luck" >&2;; esac; done\n'
+                  "exit 1\n")
+    cc.chmod(0o755)
+    out = tmp_path / "pi"
+    proc = run_cli("tactile-host", "pi-build", "--model", model_file, "--adc", TWO_CHIPS, "--cc", str(cc), "-o",
+                   str(out))
+    assert_one_line_error(proc, 2, f"{out}/tm_pi.c:1:1: error: no luck")
+    assert ".partial" not in proc.stderr and not out.exists()
