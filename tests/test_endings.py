@@ -27,8 +27,11 @@ def run_limited(tool, *args, fsize=None, close=(), stdout=subprocess.PIPE):
             os.close(fd)
 
     code = f"import sys; from {TOOLS[tool]} import main; sys.argv[0] = {tool!r}; main()"
+    # no bytecode written under the limit: CPython writes a .pyc by one raw write, and a short one (EFBIG past the
+    # limit is a short write first) is renamed into place whole, to break every later import of that module
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")
     return subprocess.run([sys.executable, "-c", code, *args], stdout=stdout, stderr=subprocess.PIPE, text=True,
-                          preexec_fn=setup, timeout=300)
+                          preexec_fn=setup, timeout=300, env=env)
 
 
 def test_read_whose_output_file_fills_is_one_line(model_file, tmp_path):
