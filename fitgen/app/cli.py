@@ -478,7 +478,7 @@ def build_parser() -> Parser:
                    help="folder for tradeoff.csv, .md, .png (default: tradeoff-out)")
 
     d = command("demo", cmd_demo, "the main job end to end on the paper sensor")
-    d.add_argument("--out", default="demo-out", help="folder for the demo's files (default: demo-out)")
+    d.add_argument("-o", "--out", "--output", dest="out", default="demo-out", help="its folder (default: demo-out)")
     return p
 
 

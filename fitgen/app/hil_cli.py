@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import argparse
 import signal
 import sys
 import threading
@@ -230,7 +231,7 @@ def _suite_defaults() -> dict:
 
 
 def build_parser() -> Parser:
-    p = Parser(prog="tactile-hil", description=__doc__)
+    p = Parser(prog="tactile-hil", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     r = sub.add_parser("run", help="run the HIL suite against a device")
     r.add_argument("--port", required=True, metavar="URL",
