@@ -280,10 +280,16 @@ class ReadoutSession:
                                              "noise": self.noise,
                                              **self.corrections.describe(), "model_file": self.model.to_dict()})
 
-    def close(self):
-        self.engine.close()
-        f = getattr(self, "_record_file", None)
-        if f is not None:
-            f.close()
-        if self.bus is not None:
-            self.bus.close()
+    def close(self, quiet: bool = False):
+        """The engine, the run record and the bus closed, each whatever the others do; a record that could not be
+        flushed is said (InputError) unless ``quiet`` (the work ends on another error, the one to say)."""
+        try:
+            self.engine.close()
+        finally:
+            try:
+                f = getattr(self, "_record_file", None)
+                if f is not None:
+                    f.close(quiet)
+            finally:
+                if self.bus is not None:
+                    self.bus.close()

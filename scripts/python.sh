@@ -25,15 +25,17 @@ then
         echo "error: $(python3 --version 2>&1) is too old: this package needs Python 3.10 or later" >&2
         exit 1
     fi
-    if [ ! -x .venv/bin/python ]; then
+    # made anew (--clear) where a run was stopped half-way or python3 was upgraded under it: no pip to run there
+    if ! .venv/bin/python -c 'import pip' >/dev/null 2>&1; then
         echo "python3 is the system's (or has no pip): making a virtual environment in .venv" >&2
-        if ! python3 -m venv .venv >/dev/null 2>&1; then
+        if ! python3 -m venv --clear .venv >/dev/null 2>&1; then
             rm -rf .venv
             if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
                 apt-get update -qq
                 DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends python3-venv >/dev/null
-                python3 -m venv .venv
-            else
+            fi
+            if ! python3 -m venv --clear .venv; then
+                rm -rf .venv
                 echo "error: python3 cannot make a virtual environment; install python3-venv (sudo apt-get install python3-venv)" >&2
                 exit 1
             fi

@@ -29,11 +29,9 @@ def require_tool(name: str) -> str:
 # back at its default in every child, as under a terminal.
 if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
-# Likewise SIGCHLD: inherited as ignored, children are reaped unasked and every exit status reads 0; and SIGHUP
-# under nohup, which the tests of a hang-up send (the commands keep an ignored one ignored, as nohup asks).
-for _sig in (signal.SIGCHLD, signal.SIGHUP):
-    if signal.getsignal(_sig) == signal.SIG_IGN:
-        signal.signal(_sig, signal.SIG_DFL)
+# Likewise SIGCHLD: inherited as ignored, children are reaped unasked and every exit status reads 0.
+if signal.getsignal(signal.SIGCHLD) == signal.SIG_IGN:
+    signal.signal(signal.SIGCHLD, signal.SIG_DFL)
 
 
 def run_cli(*args, input=None, cwd=None):

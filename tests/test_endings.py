@@ -21,6 +21,7 @@ def run_limited(tool, *args, fsize=None, close=(), stdout=subprocess.PIPE):
     ENOSPC) and the descriptors ``close`` closed before it starts (the shell's ``>&-``)."""
 
     def setup():
+        signal.signal(signal.SIGHUP, signal.SIG_DFL)  # under nohup the suite ignores it, as nohup asks
         if fsize is not None:
             resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
         for fd in close:
@@ -97,10 +98,11 @@ def test_a_signal_ends_a_command_cleaned_up_unless_it_is_ignored(capsys, sig, st
 
     before = signal.getsignal(sig)
     try:
+        signal.signal(sig, signal.SIG_DFL)  # as a command starts, unless nohup (or another) ignores it
         assert run(work, [], "fitgen") == status
         assert made and not made[0].exists()
         assert capsys.readouterr().err.strip() == f"fitgen: {said}"
-        assert signal.getsignal(sig) is before
+        assert signal.getsignal(sig) is signal.SIG_DFL
         signal.signal(sig, signal.SIG_IGN)
         assert run(work, [], "fitgen") == 0 and not made[1].exists()
         assert capsys.readouterr().err == ""
@@ -231,8 +233,9 @@ def test_codegen_whose_header_cannot_be_written_leaves_no_folder(model_file, tmp
     assert not (tmp_path / "new").exists()
 
 
-def test_a_pi_build_that_fails_names_the_folder_given_not_its_staging_copy(model_file, tmp_path):
-    """The compiler's line names the source it was given, which is the staged copy: said with the user's -o."""
+def test_a_pi_build_that_fails_names_the_generated_file_not_its_staging_copy(model_file, tmp_path):
+    """The compiler's line names the source it was given, the staged copy, which goes with the failed build: said
+    by the generated file's name."""
     from conftest import run_cli
 
     cc = tmp_path / "badcc"
@@ -242,5 +245,29 @@ def test_a_pi_build_that_fails_names_the_folder_given_not_its_staging_copy(model
     out = tmp_path / "pi"
     proc = run_cli("tactile-host", "pi-build", "--model", model_file, "--adc", TWO_CHIPS, "--cc", str(cc), "-o",
                    str(out))
-    assert_one_line_error(proc, 2, f"{out}/tm_pi.c:1:1: error: no luck")
+    assert_one_line_error(proc, 2, "building the Pi program failed: tm_pi.c:1:1: error: no luck")
     assert ".partial" not in proc.stderr and not out.exists()
+
+
+def test_a_signal_whose_handler_runs_as_the_handlers_go_back_leaves_none_of_write_all_s_installed(tmp_path,
+                                                                                                  monkeypatch):
+    """signal.signal runs a pending handler before it swaps, and raises its exception without swapping: each
+    handler is put back all the same, and the exception comes after (a later SIGTERM or hang-up still ends the
+    command, not a handler of write_all's that drops it)."""
+    import fitgen.base.fileio as fileio
+
+    real = signal.signal
+    before = {s: signal.getsignal(s) for s in fileio.HELD_SIGNALS}
+    swaps = []
+
+    def swap_once_interrupted(sig, handler):
+        swaps.append(sig)
+        if len(swaps) == len(before) + 2:  # the second handler put back: a Ctrl-C's handler runs first
+            raise KeyboardInterrupt
+        return real(sig, handler)
+
+    monkeypatch.setattr(fileio.signal, "signal", swap_once_interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        fileio.write_all([(tmp_path / "a.csv", "new"), (tmp_path / "a.csv.meta.json", "new")])
+    assert {s: signal.getsignal(s) for s in fileio.HELD_SIGNALS} == before
+    assert (tmp_path / "a.csv").read_text() == "new" == (tmp_path / "a.csv.meta.json").read_text()

@@ -83,7 +83,13 @@ def test_the_set_up_takes_a_python3_with_pip_and_makes_a_venv_for_one_without(tm
     assert proc.stdout.splitlines()[1].startswith("pip ") and "making a virtual environment" in proc.stderr
     again = set_up(bare / "bin")  # made once: the second run takes it without a word
     assert again.returncode == 0 and again.stdout == proc.stdout and again.stderr == ""
+    subprocess.run([str(checkout / ".venv" / "bin" / "python"), "-m", "pip", "uninstall", "-y", "-q", "pip"],
+                   check=True, timeout=300)  # as a run stopped half-way leaves it: made anew, not taken
+    mended = set_up(bare / "bin")
+    assert mended.returncode == 0 and mended.stdout == proc.stdout, mended.stderr
     shutil.rmtree(checkout / ".venv")
-    own = set_up(Path(sys.executable).parent)  # the tests' own Python, which pip installed into
+    with_pip = tmp_path / "withpip"  # a Python pip may install into: taken as it is
+    subprocess.run([sys.executable, "-m", "venv", str(with_pip)], check=True, timeout=300)
+    own = set_up(with_pip / "bin")
     assert own.returncode == 0 and own.stdout.splitlines()[0] == "python3", own.stderr
     assert not (checkout / ".venv").exists()

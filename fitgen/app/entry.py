@@ -7,18 +7,20 @@ from __future__ import annotations
 import sys
 from importlib import import_module
 
-from fitgen.app.cliutil import Terminated, catch_ending
+from fitgen.app.cliutil import Terminated, catch_ending, restore
 
 EXIT_INTERRUPTED = 130
 
 
 def _main(module: str, prog: str) -> None:
-    catch_ending()  # kept: the command's run() takes them over
+    previous = catch_ending()
     try:
         main = import_module(module).main
     except KeyboardInterrupt as exc:
-        print(f"{prog}: {exc.said if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
+        if sys.stderr is not None:  # closed (2>&-): print(file=None) would write on stdout
+            print(f"{prog}: {exc.said if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
         sys.exit(exc.status if isinstance(exc, Terminated) else EXIT_INTERRUPTED)
+    restore(previous)  # the defaults again, which the command's run() saves and gives back at its end
     main()
 
 

@@ -74,16 +74,19 @@ def cmd_read(args) -> int:
                          thermometer=s.thermometer, record=record, warn=_warn("tactile-host read"))
         with StopFlag() as stop:
             stats = reader.run(rate=s.rate, count=s.count, duration=s.duration, stop=stop)
+        for done in (sink, s):  # a last block the disk refuses is said, before the summary
+            if done is not None:
+                done.close()
+        s = sink = None
         how = "stopped" if stop.stopped else "done"
         print(f"tactile-host read: {how}: {stats.summary()}", file=sys.stderr)
         return 0
     except DeviceSilent as exc:
         return _silent("tactile-host read", exc)
-    finally:
-        if s is not None:
-            s.close()
-        if sink is not None:
-            sink.close()
+    finally:  # ending on an error or a signal, which is the one to say
+        for f in (s, sink):
+            if f is not None:
+                f.close(quiet=True)
 
 
 def cmd_view(args) -> int:
@@ -112,6 +115,8 @@ def cmd_view(args) -> int:
         with StopFlag() as stop:
             stats = reader.run(rate=s.rate, count=s.count, duration=s.duration, stop=stop)
         ended = not stop.stopped
+        s.close()  # a record's last block the disk refuses is said, before the summary
+        s = None
         print(f"tactile-host view: {'stopped' if stop.stopped else 'done'}: {stats.summary()}", file=sys.stderr)
         return 0
     except DeviceSilent as exc:
@@ -120,7 +125,7 @@ def cmd_view(args) -> int:
         if server is not None:
             server.stop(drain=DRAIN if ended else 0.0)  # a run that ended reaches its viewers whole
         if s is not None:
-            s.close()
+            s.close(quiet=True)
 
 
 def _silent(prog: str, exc) -> int:

@@ -177,15 +177,39 @@ def signals_held():
         yield
         return
     caught: list = []
-    held = {s: signal.signal(s, lambda signum, frame: caught.append(signum)) for s in HELD_SIGNALS
-            if signal.getsignal(s) not in (signal.SIG_IGN, None)}
+    held: dict = {}
+    try:
+        for s in HELD_SIGNALS:
+            if signal.getsignal(s) not in (signal.SIG_IGN, None):
+                held[s] = signal.signal(s, lambda signum, frame: caught.append(signum))
+    except BaseException:  # a signal come before the block: its handler ran as a swap began, nothing is done yet
+        _put_back(held)
+        raise
     try:
         yield
     finally:
-        for s, handler in held.items():
-            signal.signal(s, handler)
+        late = _put_back(held)
         for s in dict.fromkeys(caught):
-            signal.raise_signal(s)
+            try:
+                signal.raise_signal(s)
+            except BaseException as exc:  # the handler raised at once: its exception, once all are delivered
+                late = late or exc
+        if late is not None:
+            raise late
+
+
+def _put_back(handlers: dict):
+    """Every handler of ``handlers`` put back; the exception a signal's handler raised meanwhile (signal.signal
+    runs a pending one before it swaps, and raises its exception without swapping: so each is tried again)."""
+    late = None
+    for s, handler in handlers.items():
+        while True:
+            try:
+                signal.signal(s, handler)
+                break
+            except BaseException as exc:
+                late = late or exc
+    return late
 
 
 def _staged(target: Path, data: str | bytes, path) -> str:
@@ -260,11 +284,15 @@ class OutputText:
     def flush(self) -> None:
         self._guard(self._fh.flush)
 
-    def close(self) -> None:
-        """Closed; what could not be flushed is said (InputError) once, and the descriptor is closed either way."""
+    def close(self, quiet: bool = False) -> None:
+        """Closed; what could not be flushed is said (InputError) once, unless ``quiet`` (another error or a signal
+        is ending the work, and is the one to say), and the descriptor is closed either way."""
         if not self._fh.closed:
             try:
                 self._guard(self._fh.flush)
+            except InputError:
+                if not quiet:
+                    raise
             finally:
                 try:
                     self._fh.close()
@@ -389,10 +417,10 @@ def staged_beside(folder: Path):
         raise InputError(f"cannot write {folder}: {exc.strerror}") from None
     try:
         yield partial
-    except InputError as exc:  # a compiler's line names the staged copy: name the folder the user gave
+    except InputError as exc:  # a compiler's line names the staged copy, which goes: the generated file's name
         if str(partial) not in str(exc):
             raise
-        raise InputError(str(exc).replace(str(partial), str(folder))) from None
+        raise InputError(str(exc).replace(str(partial) + os.sep, "").replace(str(partial), str(folder))) from None
     finally:
         shutil.rmtree(partial, ignore_errors=True)
 
