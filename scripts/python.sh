@@ -9,7 +9,9 @@ if ! command -v python3 >/dev/null 2>&1; then
     echo "error: no python3 on PATH; install Python 3.10 or later (Debian: apt-get install python3 python3-venv)" >&2
     exit 1
 fi
-if ! python3 - <<'PYEOF'
+# 0: pip may install into python3; 1: it may not (the system's, or no pip); 3: too old
+takes_pip=0
+python3 - <<'PYEOF' || takes_pip=$?
 import os, sys, sysconfig
 if sys.version_info < (3, 10):
     sys.exit(3)
@@ -20,11 +22,11 @@ except ImportError:
     sys.exit(1)
 sys.exit(1 if managed else 0)
 PYEOF
-then
-    if [ "$(python3 -c 'import sys; print(sys.version_info >= (3, 10))')" != True ]; then
-        echo "error: $(python3 --version 2>&1) is too old: this package needs Python 3.10 or later" >&2
-        exit 1
-    fi
+if [ "$takes_pip" = 3 ]; then
+    echo "error: $(python3 --version 2>&1) is too old: this package needs Python 3.10 or later" >&2
+    exit 1
+fi
+if [ "$takes_pip" != 0 ]; then
     # made anew (--clear) where a run was stopped half-way or python3 was upgraded under it: no pip to run there
     if ! .venv/bin/python -c 'import pip' >/dev/null 2>&1; then
         echo "python3 is the system's (or has no pip): making a virtual environment in .venv" >&2

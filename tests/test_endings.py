@@ -197,11 +197,8 @@ def test_a_capture_refused_its_output_leaves_the_meta_as_it_was(sensor, tmp_path
     is touched: an earlier run's meta kept byte for byte, none made where there was none."""
     import host.capture as capture_mod
     from fitgen.base.errors import InputError
-    from host.adc import AdcArray
     from host.capture import capture, load_schedule
-    from host.channelmap import parse_spec
-    from host.clock import VirtualClock
-    from host.simbus import SimBus
+    from test_capture import rig
 
     def refused(path, append=False):
         raise InputError(f"cannot append to {path}: Permission denied")
@@ -209,9 +206,7 @@ def test_a_capture_refused_its_output_leaves_the_meta_as_it_was(sensor, tmp_path
     sched_path = tmp_path / "s.csv"
     sched_path.write_text("dx,dy,dz\n0,0,0\n1,0,0\n")
     sched = load_schedule(sched_path)
-    cmap, clock = parse_spec(TWO_CHIPS), VirtualClock()
-    bus = SimBus.for_channel_map(cmap, sensor, None, clock=clock, noise=0.0005, seed=0)
-    arr = AdcArray(bus, cmap, clock=clock)
+    bus, arr, clock = rig(sensor)
     out = tmp_path / "d.csv"
     capture(arr, load_schedule(sched_path), out, samples=2, set_pose=bus.set_pose, clock=clock)
     meta = (tmp_path / "d.csv.meta.json").read_bytes()

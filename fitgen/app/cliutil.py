@@ -90,17 +90,26 @@ def seconds(text: str) -> float:
 class Terminated(KeyboardInterrupt):
     """SIGTERM or SIGHUP (a closed terminal or ssh session), raised where the program is, so that its temporary
     files and half-written outputs are cleaned up as for Ctrl-C (the default action ends the process with no
-    cleanup at all). ``status``: the shell's for that signal, 128 + its number."""
+    cleanup at all)."""
 
     def __init__(self, signum: int = signal.SIGTERM):
         super().__init__()
         self.signum = signum
-        self.status = 128 + int(signum)
-        self.said = "hung up" if signum == signal.SIGHUP else "terminated"
 
 
 def _terminate(signum, frame):
     raise Terminated(signum)
+
+
+EXIT_INTERRUPTED = 130
+
+
+def ended_by(stop: BaseException | None) -> tuple[str, int]:
+    """What a command stopped by ``stop`` (a KeyboardInterrupt: Ctrl-C, or :class:`Terminated`) says and the status
+    it exits with, as a shell gives a process a signal ended: 128 + the signal's number."""
+    if isinstance(stop, Terminated):
+        return ("hung up" if stop.signum == signal.SIGHUP else "terminated"), 128 + int(stop.signum)
+    return "interrupted", EXIT_INTERRUPTED
 
 
 ENDING = (signal.SIGTERM, signal.SIGHUP)  # the signals that end a command as Ctrl-C does, cleaned up
@@ -166,8 +175,9 @@ def run(main_fn, argv=None, prog="") -> int:
         print(f"{_name(prog)}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt as exc:
-        print(f"{_name(prog)}: {exc.said if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
-        return exc.status if isinstance(exc, Terminated) else 130
+        said, status = ended_by(exc)
+        print(f"{_name(prog)}: {said}", file=sys.stderr)
+        return status
     except BrokenPipeError:  # the reader went away (| head): nothing more to say
         _drop(sys.stdout)
         return 0
@@ -252,8 +262,7 @@ class StopFlag:
         return self
 
     def __exit__(self, *exc):
-        for s, h in self._old.items():
-            signal.signal(s, h)
+        restore(self._old)
 
 
 WRITES = ("output", "record", "temp_comp_output", "pose_file", "junit")  # the files a command writes

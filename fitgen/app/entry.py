@@ -7,9 +7,7 @@ from __future__ import annotations
 import sys
 from importlib import import_module
 
-from fitgen.app.cliutil import Terminated, catch_ending, restore
-
-EXIT_INTERRUPTED = 130
+from fitgen.app.cliutil import catch_ending, ended_by, restore
 
 
 def _main(module: str, prog: str) -> None:
@@ -17,9 +15,10 @@ def _main(module: str, prog: str) -> None:
     try:
         main = import_module(module).main
     except KeyboardInterrupt as exc:
+        said, status = ended_by(exc)
         if sys.stderr is not None:  # closed (2>&-): print(file=None) would write on stdout
-            print(f"{prog}: {exc.said if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
-        sys.exit(exc.status if isinstance(exc, Terminated) else EXIT_INTERRUPTED)
+            print(f"{prog}: {said}", file=sys.stderr)
+        sys.exit(status)
     restore(previous)  # the defaults again, which the command's run() saves and gives back at its end
     main()
 

@@ -8,7 +8,8 @@ from fitgen.app.options import check_host, map_options, refuse_readout_options
 from fitgen.app.arduino_cli import add_arduino_build
 from fitgen.app.noise_cli import add_noise, cmd_noise
 from fitgen.app.verify_cmd import cmd_verify
-from fitgen.app.cliutil import EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_written, command_main, count, noise_volts
+from fitgen.app.cliutil import (EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_written, command_main,
+                                count, ended_by, noise_volts)
 from fitgen.base.errors import InputError
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 
@@ -74,9 +75,8 @@ def cmd_read(args) -> int:
                          thermometer=s.thermometer, record=record, warn=_warn("tactile-host read"))
         with StopFlag() as stop:
             stats = reader.run(rate=s.rate, count=s.count, duration=s.duration, stop=stop)
-        for done in (sink, s):  # a last block the disk refuses is said, before the summary
-            if done is not None:
-                done.close()
+        for done in [f for f in (sink, s) if f is not None]:  # a last block the disk refuses is said here
+            done.close()
         s = sink = None
         how = "stopped" if stop.stopped else "done"
         print(f"tactile-host read: {how}: {stats.summary()}", file=sys.stderr)
@@ -84,9 +84,8 @@ def cmd_read(args) -> int:
     except DeviceSilent as exc:
         return _silent("tactile-host read", exc)
     finally:  # ending on an error or a signal, which is the one to say
-        for f in (s, sink):
-            if f is not None:
-                f.close(quiet=True)
+        for f in [f for f in (s, sink) if f is not None]:
+            f.close(quiet=True)
 
 
 def cmd_view(args) -> int:
@@ -215,8 +214,9 @@ def cmd_capture(args) -> int:
             return 130 if capture_temperatures(args, prog) is None else 0
         run_capture(args, prog)
     except CaptureInterrupted as exc:  # SIGTERM and SIGHUP said and ended with their own status, as elsewhere
-        print(f"{prog}: {getattr(exc.stop, 'said', 'interrupted')}; {exc}", file=sys.stderr)
-        return getattr(exc.stop, "status", 130)
+        said, status = ended_by(exc.stop)
+        print(f"{prog}: {said}; {exc}", file=sys.stderr)
+        return status
     except CaptureFailed as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_CHECK_FAILED
