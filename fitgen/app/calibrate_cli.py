@@ -294,7 +294,9 @@ def _check_schedule(args, drawing, axes, samples: int, given: dict) -> int:
                                  rig_error=args.rig_error, zero_error=args.zero_error)
     write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples,
                                               "sensor_sha256": drawing.sha256, "transfer": drawing.transfer})
-    print(f"wrote {len(poses)} random check poses ({_box(info)} from first contact, seed {args.seed}"
+    margin = (f", {info['edge_margin']:g} mm inside the working box's edges, which the stage's error could carry "
+              "a row past" if info["edge_margin"] else "")
+    print(f"wrote {len(poses)} random check poses ({_box(info)} from first contact{margin}, seed {args.seed}"
           f"{_pressed(info)}) to {args.output}: capture them as for the calibration (tactile-host capture "
           "--poses), then fitgen check MODEL CHECK.csv", file=sys.stderr)
     return 0
@@ -335,13 +337,17 @@ def cmd_check(args) -> int:
     print(f"check: zero error {result.zero_error:.3g} mm: {result.zero_said}", file=sys.stderr)
     if result.outside:
         print(f"check: {result.outside} rows of {args.capture} lie outside the pose box the model was fitted in "
-              f"({box_words(model.held_out_box)}), where it makes no claim: left out", file=sys.stderr)
+              f"({box_words(model.held_out_box)}), where it makes no claim, or within {result.margin:.2g} mm of its "
+              "edge, where the stage's error may carry them out: left out", file=sys.stderr)
     where = (f"{result.units} units drawn from the posterior of {sensor.name}" if result.identified
              else f"{sensor.name} (no posterior: its noise and the stage's error alone)")
     print(f"check: {result.rows} rows of {args.capture} in contact, estimated in {result.precision}; predicted on "
           f"{where}, {DRAWS} draws each of the stage's error ({result.rig_error:g} mm, {result.rig_said})"
           + (f", the zero's ({result.zero_error:.3g} mm)" if result.zero_error else "")
           + f" and the rows' noise ({source})")
+    if result.rig_error or result.zero_error:  # else a user reads the check's figures against the model file's
+        print("check: the stage's labels err too: the measured and the predicted figures both carry it, so they run "
+              "above the model file's held-out figures (the model's error alone, at exact poses)", file=sys.stderr)
     if result.rows < FEW_CHECK_ROWS:  # each max is then the max of a handful: a verdict on little
         print(f"check: note: {result.rows} rows say little of a unit's errors over its box; fitgen schedule --check 30 "
               "gives a check capture", file=sys.stderr)
@@ -351,8 +357,8 @@ def cmd_check(args) -> int:
     for o in result.outputs:
         unit = model.equation(o).unit
         (mm, ml, mh), (rm, rl, rh) = result.predicted(o, "max"), result.predicted(o, "rms")
-        beyond = result.beyond(o)
-        said = "as predicted" if beyond <= 1 else f"{beyond:.2g}x the greatest"
+        figure, beyond = result.worst(o)
+        said = "as predicted" if beyond <= 1 else f"{'max' if figure == 'max' else 'RMS'} {beyond:.2g}x the greatest"
         print(f"| {o} | {unit} | {result.measured[o]['max']:.3g} | {mm:.3g} ({ml:.3g}-{mh:.3g}) | "
               f"{result.measured[o]['rms']:.3g} | {rm:.3g} ({rl:.3g}-{rh:.3g}) | {said} |")
     if folder is not None:
@@ -362,8 +368,9 @@ def cmd_check(args) -> int:
     failed = result.failed()
     if failed:
         warmer = heat.startswith("check: note:")  # read away from the unit's temperature, not compensated
-        print(f"\ncheck: {', '.join(failed)} err beyond {TOO_FAR:g}x every prediction: the model does not describe "
-              "this unit as it is now (a knock, the sensor moved on its bed, another unit's file, the temperature); "
+        print(f"\ncheck: {', '.join(failed)} err beyond {TOO_FAR:g}x every prediction (max or RMS): the model does not "
+              "describe this unit as it is now (a knock, the sensor moved on its bed, another unit's file, the "
+              "temperature); "
               + ("check again with --temp-comp (the note above) before you " if warmer else "")
               + "capture, identify and fit again", file=sys.stderr)
         return 1

@@ -228,7 +228,7 @@ def _check_stage(out: Path, drawing, unit, models: dict) -> None:
         c, _ = check_capture(model, ds, sensor, unit_file)
         said = ", ".join(f"{o} {c.measured[o]['max']:.3g} (up to {c.predicted(o, 'max')[2]:.3g})" for o in c.outputs)
         verdict = ("as predicted" if not c.failed() else
-                   f"{max(c.beyond(o) for o in c.outputs):.2g}x the greatest: it does not describe this unit")
+                   f"{max(c.worst(o)[1] for o in c.outputs):.2g}x the greatest: it does not describe this unit")
         print(f"   {name:16} {said}: {verdict}")
         if c.identified:
             print(f"   {'':16} zero error {c.zero_error:.3g} mm: {c.zero_said}")

@@ -34,7 +34,8 @@ from fitgen.base.fileio import write_all
 from fitgen.fitting.capturecheck import MIN_DISTINCT, MIN_ROWS, check_error
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR, Problem, unit_space
 from fitgen.physics.dataset import meta_path
-from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, contact_top, field_readings, off_skin
+from fitgen.physics.pose import (POSE_NAMES, REST_LIFT_MM, contact_top, edge_margin, field_readings, inner_box,
+                                 off_skin)
 from fitgen.physics.sensor import TRAVEL_AXES, Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
 from fitgen.physics.transfer import linear_top, missing_noise
@@ -244,8 +245,9 @@ def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: 
     """``n`` random stage poses (n, 5) for a check capture (fitgen.fitting.check): uniform over the working pose
     box (DEFAULT_RANGES, where estimators are fitted and held out) within ``ranges`` (the stage's limits) in
     ``axes``, the others 0, in contact on a stage of ``rig_error`` zeroed within ``zero_error``
-    (:func:`capture_box`) and within the elements'
-    linear range; and a record of how they were drawn.
+    (:func:`capture_box`), clear of the working box's edges by the margin fitgen check leaves there
+    (fitgen.physics.pose.inner_box, for this zero and the calibration's, each set within ``zero_error``), and within
+    the elements' linear range; and a record of how they were drawn.
     Random, not chosen: a check measures the estimator where it is used, not where it learns most."""
     axes = checked_axes(axes, ranges)
     if not 1 <= n <= 10000:
@@ -253,6 +255,14 @@ def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: 
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
     box = capture_box(drawing, axes, ranges, working=True, rig_error=rig_error, zero_error=zero_error)
+    inner = inner_box(DEFAULT_RANGES, rig_error, float(np.hypot(zero_error, zero_error)))
+    for a in axes:
+        lo, hi = max(box[a][0], inner[a][0]), min(box[a][1], inner[a][1])
+        if not lo < hi:
+            raise InputError(f"the limits of {a} leave no room in the working pose box ({DEFAULT_RANGES[a][0]:g}.."
+                             f"{DEFAULT_RANGES[a][1]:g}) clear of its edges by the stage's error "
+                             f"({inner[a][0] - DEFAULT_RANGES[a][0]:.2g} mm), where fitgen check reads no row")
+        box[a] = (lo, hi)
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x636865636B]))
     cand = np.zeros((CHECK_TRIES * n, len(POSE_NAMES)))
     for a in axes:
@@ -263,7 +273,8 @@ def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: 
                          "linear range almost everywhere: check the sensor file's transfer")
     return stage_order(cand), {"check": True, "seed": seed, "axes": list(axes), "sensor": drawing.name,
                                "ranges": {a: list(box[a]) for a in axes}, "linear_share": LINEAR_SHARE,
-                               "rig_error": rig_error, "zero_error": zero_error}
+                               "rig_error": rig_error, "zero_error": zero_error,
+                               "edge_margin": edge_margin(rig_error, float(np.hypot(zero_error, zero_error)))}
 
 
 def write_schedule(path, poses: np.ndarray, axes, info: dict) -> None:

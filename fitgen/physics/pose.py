@@ -111,6 +111,27 @@ def contact_top(rig_error: float, zero_error: float = 0.0) -> float:
     return min(0.0, round(OFF_SKIN_MM - HOLD_SIGMAS * math.hypot(rig_error, zero_error), 3))
 
 
+def inner_box(box: dict, rig_error: float, zero_error: float = 0.0) -> dict:
+    """``box`` ({pose name: (low, high)}) less HOLD_SIGMAS stage errors (``rig_error`` and ``zero_error``, mm rms per
+    axis, together) at each edge a stage's error can carry a row in contact past: dx's and dy's both, dz's floor,
+    and dz's top only below first contact (above it the indenter lifts and the magnet rests, so no pose lies
+    beyond). A row labelled inside stays in ``box`` but for about one in 30,000 per edge; a box the margins close
+    is returned with low above high. The margin is :func:`edge_margin`'s."""
+    margin = edge_margin(rig_error, zero_error)
+    out = dict(box)
+    for name in ("dx", "dy", "dz"):
+        if name in box:
+            lo, hi = box[name]
+            out[name] = (round(lo + margin, 6), hi if name == "dz" and hi >= 0 else round(hi - margin, 6))
+    return out
+
+
+def edge_margin(rig_error: float, zero_error: float = 0.0) -> float:
+    """HOLD_SIGMAS stage errors (mm rms per axis, the rig's and the zero's together), up to the micrometre, as a
+    stage takes it."""
+    return math.ceil(round(1000 * HOLD_SIGMAS * math.hypot(rig_error, zero_error), 6)) / 1000
+
+
 def lift_odds(dz: float, rig_error: float, zero_error: float = 0.0) -> float:
     """The chance that a stage off by ``rig_error`` mm rms, zeroed ``zero_error`` mm rms off first contact, lifts a
     row labelled at ``dz`` (mm, in contact) past the skin's adhesion (OFF_SKIN_MM)."""
