@@ -52,6 +52,23 @@ def test_identify_recovers_what_a_capture_determines(drawing, plan, seed):
     twin_err = np.abs(readings(ident.unit(), test_poses, adc_bits=0) - readings(unit, test_poses, adc_bits=0)).max()
     drawing_err = np.abs(readings(drawing, test_poses, adc_bits=0) - readings(unit, test_poses, adc_bits=0)).max()
     assert twin_err < drawing_err / 20
+    assert_counts_add_up(ident)
+
+
+def assert_counts_add_up(ident):
+    """identify's report: the directions it says it left to the prior are those no capture separates, those it
+    names poses for and the rest it counts, one by one (a capture once read "left to the prior: 12" beside 10)."""
+    import re
+
+    from fitgen.fitting.unitrecord import report
+
+    said = report(ident)
+    left = int(re.search(r"left to the prior: (\d+)", said).group(1))
+    gauge = int(re.search(r"no capture can separate \((\d+) directions", said).group(1))
+    named = said.count(": poses that pin it: ")
+    rest = re.search(r"leaves? (\d+) more directions? to the prior", said)
+    assert left == gauge + named + (int(rest.group(1)) if rest else 0), said
+    assert ("nothing else to the prior" in said) == (left == gauge), said
 
 
 @pytest.mark.parametrize("seed", [21, 22, 24])
@@ -325,6 +342,7 @@ def test_a_capture_without_presses_names_what_it_starves(drawing, tmp_path):
     said = report(ident)
     assert "(a dense capture over dx, dy and dz would not; this one does not move dz, which the poses below do):" \
         in said and "same axes would not" not in said
+    assert_counts_add_up(ident)
 
 
 def test_an_elastomer_that_stiffens_is_identified_where_the_drawing_allows_for_it(drawing, plan):

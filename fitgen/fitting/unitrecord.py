@@ -78,7 +78,13 @@ def report(ident: Identification, samples: int | None = None) -> str:
         for v, poses, gain in ident.starved:
             where = "; ".join(pose_words(ident, p) for p in poses)
             lines.append(f"  {describe_direction(sp, v)}: poses that pin it: {where}")
-    else:
+    # the rest of what is left to the prior: directions no one pose pins, which rows add up to (the count adds up)
+    rest = free - det - g - len(ident.starved)
+    if rest > 0:
+        lines.append(f"{'and ' if ident.starved else 'this capture leaves '}{rest} more direction{'s' * (rest > 1)} to "
+                     "the prior that no one pose of a capture over the same axes pins: more rows, or more samples per "
+                     "row, add to what it knows of them")
+    elif not ident.starved:
         lines.append("this capture leaves nothing else to the prior that a capture over the same axes could pin")
     return "\n".join(lines) + "\n"
 
