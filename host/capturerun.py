@@ -171,6 +171,7 @@ def _run_capture(args, prog: str) -> None:
                           wait=wait, set_pose=set_pose, settle=settle,
                           clock=clock, progress=None if interactive else progress, meta=meta,
                           temperature=None if thermometer is None else lambda: thermometer.read(fresh=True))
+        lifted = stage.lift() if stage is not None and res.complete else None  # not after Ctrl-C: it stops motion
     except KeyboardInterrupt as exc:
         raise CaptureInterrupted(_kept(args.output), exc) from None
     except (DeviceSilent, SpreadTooLarge, TriggerFailed, StageError) as exc:
@@ -187,6 +188,8 @@ def _run_capture(args, prog: str) -> None:
     if res.complete:
         print(f"{prog}: {done}/{total} poses in {args.output} ({res.captured} captured now{took}, "
               f"{res.before} already there{note})", file=sys.stderr)
+        if lifted is not None:
+            print(f"{prog}: the indenter lifted to dz {lifted:+g} mm, off the skin", file=sys.stderr)
     else:
         print(f"{prog}: stopped with {done}/{total} poses in {args.output}{note}; run the same "
               "command again to resume", file=sys.stderr)

@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from fitgen.base.errors import InputError
+from fitgen.physics.pose import OFF_SKIN_MM
 
 from host.gcode import MACHINE_AXES, GcodeController, StageError, stage_url
 from host.prompt import ask_line
@@ -32,6 +33,9 @@ __all__ = ["AxisMap", "GcodeController", "PoseStage", "StageError", "StageSettin
 
 
 SAME = 6e-4  # mm: two displacements this close are one (moves are sent to 0.001 mm)
+# Where a finished capture leaves the indenter (mm above first contact, or the limit's top where lower): its last
+# rows press millimetres deep, where the elastomer creeps under load and a jog sideways drags the tool through it.
+LIFT_MM = 1.0
 
 
 class PoseStage:
@@ -99,6 +103,28 @@ class PoseStage:
             self.loaded[STAGE_AXES.index(name)] = True
         if self.on_move is not None:
             self.on_move(None)
+
+    def lift(self) -> float | None:
+        """After the last pose: the indenter straight up in dz to LIFT_MM above first contact, or the limits' top
+        where lower, so that nothing stays pressed into the skin; the dz it went to, or None where it did not move
+        (dz not among the stage's axes, a limit that allows no lift off the skin, or already there)."""
+        if "dz" not in self.settings.axes.pose_axes or self.position is None:
+            return None
+        top = min(LIFT_MM, self.settings.limits["dz"][1])
+        here = self.settings.axes.to_pose(self.zero, self.position)
+        if top <= OFF_SKIN_MM or here[STAGE_AXES.index("dz")] >= top - SAME:
+            return None
+        target = np.array(here, dtype=float)
+        target[STAGE_AXES.index("dz")] = top
+        machine = self.settings.axes.to_machine(self.zero, target)
+        if self.on_move is not None:
+            self.on_move([machine])
+        self.position = self.ctrl.move(machine, self.settings.feed, start=self.position)
+        self.moves += 1
+        self.loaded[STAGE_AXES.index("dz")] = False  # against the approach: the next pose comes from above again
+        if self.on_move is not None:
+            self.on_move(None)
+        return float(top)
 
     def jog(self, axis: str, step: float) -> np.ndarray:
         """A relative move along a pose axis while the zero is set (no limits: they count from the zero)."""

@@ -906,6 +906,13 @@ def test_capture_command_killed_midway_and_reset_between_runs_keeps_every_row(se
         assert proc.returncode == 0, proc.stderr
         assert "(set by jogging)" in proc.stderr
         assert f"27/27 poses in {out} ({27 - len(second)} captured now" in proc.stderr
+        # the last pose pressed 1 mm deep: a finished capture leaves the indenter above the skin (the limits' top,
+        # dz 1), straight up from it, and the magnet at rest
+        assert "the indenter lifted to dz +1 mm, off the skin" in proc.stderr
+        srv.ctrl.wait_idle()
+        lag = BACKLASH / 2  # dx and dy approached from below; dz just moved up, so it lags below too
+        np.testing.assert_allclose(srv.ctrl.rig.displacement(), np.array([1.5, 1.0, 1.0]) - lag, atol=0.005)
+        assert not srv.ctrl.rig.pose.any()
     got = data_rows(out)
     assert got[:len(second)] == second
     assert [r[8:] for r in got] == [tuple(map(float, r)) for r in rows]  # every pose once, in schedule order
