@@ -15,6 +15,7 @@ import jinja2
 
 from fitgen import __version__
 from fitgen.c.codegen import PRECISIONS, STYLES, render_blob_interpreter, write_header
+from fitgen.base.children import run_captured
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_atomic
 from fitgen.equations.model import Model, check_input_units
@@ -179,7 +180,7 @@ def render_firmware(model: Model, folder: str | Path, *, precision: str = "float
 def _run(cmd: list[str], what: str) -> subprocess.CompletedProcess:
     if shutil.which(cmd[0]) is None:
         raise InputError(f"{what}: {cmd[0]!r} not found")
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = run_captured(cmd)
     if proc.returncode != 0:
         lines = proc.stderr.strip().splitlines()
         # the linker's own words when the image does not fit (collect2's "error" line says only that ld failed)

@@ -22,6 +22,7 @@ from importlib import resources
 from pathlib import Path
 
 from fitgen import __version__
+from fitgen.base.children import run_captured
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import check_folder, staged_beside, write_atomic
 from fitgen.base.progress import Progress
@@ -291,7 +292,7 @@ def build_example(library: str | Path, build_path: str | Path, board: Board = BO
         cmd += [f"-prefs={p}" for p in BUILDER_PREFS]
         cmd += ["-libraries", libs, "-build-path", str(build_path.resolve()),
                 str(library / "examples" / EXAMPLE / f"{EXAMPLE}.ino")]
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+        proc = run_captured(cmd, timeout=600)
     if proc.returncode != 0:
         text = proc.stdout + proc.stderr
         over = _overflow_size(text, board)

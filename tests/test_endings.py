@@ -266,3 +266,69 @@ def test_a_signal_whose_handler_runs_as_the_handlers_go_back_leaves_none_of_writ
         fileio.write_all([(tmp_path / "a.csv", "new"), (tmp_path / "a.csv.meta.json", "new")])
     assert {s: signal.getsignal(s) for s in fileio.HELD_SIGNALS} == before
     assert (tmp_path / "a.csv").read_text() == "new" == (tmp_path / "a.csv.meta.json").read_text()
+
+
+def _gone(pid: int) -> bool:
+    """Whether process ``pid`` has ended (absent, or a zombie its new parent has not reaped yet)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.parametrize("cut", ["timeout", "ctrl-c"])
+def test_a_tool_cut_short_gets_sigterm_to_clean_up_and_its_children_end_with_it(tmp_path, cut):
+    """A compiler interrupted (Ctrl-C, a signal, its time limit) by subprocess.run got SIGKILL at once and left its
+    temporary files (gcc's cc*.s in $TMPDIR); run_captured sends SIGTERM to the tool's whole process group first,
+    so a shell's trap runs, and the child it started (gcc's cc1) ends too."""
+    import threading
+    import time
+
+    from fitgen.base.children import run_captured
+
+    script = (f"trap 'touch {tmp_path}/cleaned; exit 1' TERM; sleep 60 & echo $! > {tmp_path}/child; "
+              f"touch {tmp_path}/started; wait")
+    if cut == "timeout":
+        with pytest.raises(subprocess.TimeoutExpired):
+            run_captured(["sh", "-c", script], timeout=1.0)
+    else:
+        def interrupt():
+            while not (tmp_path / "started").exists():
+                time.sleep(0.01)
+            os.kill(os.getpid(), signal.SIGINT)  # as a terminal's Ctrl-C reaches this process
+
+        threading.Thread(target=interrupt, daemon=True).start()
+        with pytest.raises(KeyboardInterrupt):
+            run_captured(["sh", "-c", script], timeout=60)
+    assert (tmp_path / "cleaned").exists()
+    child = int((tmp_path / "child").read_text())
+    deadline = time.monotonic() + 5
+    while not _gone(child) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _gone(child)
+    # and a tool that ends by itself answers as subprocess.run does
+    done = run_captured(["sh", "-c", "read x; echo out $x; echo err >&2; exit 3"], input="in\n")
+    assert (done.returncode, done.stdout, done.stderr) == (3, "out in\n", "err\n")
+
+
+def test_a_build_of_the_generated_c_that_fails_leaves_no_folder(model_file, tmp_path, monkeypatch):
+    """tactile-host verify's build in a temporary folder: a compiler that fails (or a Ctrl-C during it, which ends
+    the same way) removed the folder only when the garbage collector got to it, and never when the signal then
+    ended the process; the folder goes with the failure now."""
+    import tempfile
+
+    from fitgen.base.errors import InputError
+    from fitgen.c.compiled import CompiledModel
+    from fitgen.equations.model import load_model
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    try:
+        CompiledModel(load_model(model_file), "float", cc="false")
+    except InputError as exc:
+        failure = exc  # held, as a command's error handler holds it while it says it and ends
+    assert "failed on the generated code" in str(failure)
+    assert list(tmp_path.iterdir()) == []
+    with CompiledModel(load_model(model_file), "float") as built:  # and a build that succeeds keeps it until closed
+        assert built.binary.is_file() and built.dir.parent == tmp_path
+    assert list(tmp_path.iterdir()) == []

@@ -5,6 +5,7 @@ from __future__ import annotations
 import ctypes
 import os
 import signal
+import subprocess
 import sys
 
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
@@ -37,3 +38,37 @@ def tied(then=None):
             then()
 
     return preexec
+
+
+GRACE_S = 2.0  # how long an interrupted tool has to clean up (a compiler its temporary files) before SIGKILL
+
+
+def run_captured(cmd: list[str], input: str | None = None, timeout: float | None = None,
+                 **popen) -> subprocess.CompletedProcess:
+    """``subprocess.run(cmd, input=input, timeout=timeout, capture_output=True, text=True)``, but the tool runs in
+    a session of its own and, when this process is interrupted (Ctrl-C, SIGTERM, SIGHUP) or the timeout passes,
+    it and the processes it started get SIGTERM and GRACE_S seconds to clean up before SIGKILL. subprocess.run
+    sends SIGKILL at once, which leaves gcc's temporary files in $TMPDIR; and in a session of its own the tool
+    takes no terminal Ctrl-C meant for this process, which ends it here instead. The exception is raised again."""
+    with subprocess.Popen(cmd, stdin=subprocess.PIPE if input is not None else None, stdout=subprocess.PIPE,
+                          stderr=subprocess.PIPE, text=True, start_new_session=True, **popen) as proc:
+        try:
+            out, err = proc.communicate(input, timeout=timeout)
+        except BaseException:
+            _end_group(proc)
+            raise
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
+def _end_group(proc: subprocess.Popen) -> None:
+    """SIGTERM to ``proc``'s process group, SIGKILL after GRACE_S if it still runs, whatever interrupts the wait."""
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(GRACE_S)
+    except (ProcessLookupError, subprocess.TimeoutExpired):
+        pass
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)  # the group: a compiler's cc1 and as outlive the driver otherwise
+        except ProcessLookupError:
+            pass

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen import __version__
+from fitgen.base.children import run_captured
 from fitgen.base.errors import InputError
 from fitgen.c.codegen import _env, render_fixed_header, write_header
 from fitgen.c.compiled import WARNING_FLAGS
@@ -54,7 +55,7 @@ def _tool(name: str) -> str:
 
 
 def _run(cmd: list[str], what: str, timeout: float = 600) -> subprocess.CompletedProcess:
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    proc = run_captured(cmd, timeout=timeout)
     if proc.returncode != 0:
         lines = (proc.stderr.strip() or proc.stdout.strip() or "(no message)").splitlines()
         over = re.search(r"region `(text|data)' overflowed by (\d+) bytes", proc.stderr)

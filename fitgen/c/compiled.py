@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.c.codegen import _env, render_fixed_header, write_header
+from fitgen.base.children import run_captured
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
 
@@ -51,7 +52,7 @@ def tool_command(text: str, what: str, hint: str = "") -> list[str]:
 def run_tool(cmd: list[str], what: str, stdin: str | None, timeout: float = 600) -> subprocess.CompletedProcess:
     """Run ``cmd``; one line (InputError) when it cannot start or runs past ``timeout`` seconds."""
     try:
-        return subprocess.run(cmd, input=stdin, capture_output=True, text=True, timeout=timeout)
+        return run_captured(cmd, input=stdin, timeout=timeout)
     except subprocess.TimeoutExpired:
         raise InputError(f"the {what} {cmd[0]} ran past {timeout:g} s") from None
     except OSError as exc:
@@ -90,9 +91,17 @@ class CompiledModel:
             self._tmp = tempfile.TemporaryDirectory(prefix="fitgen-c-")
             workdir = self._tmp.name
         self.dir = Path(workdir)
-        if self.fixed is not None:
+        try:  # a build that fails or is interrupted leaves no folder behind: no `with` holds this object yet
+            self._build(model, prefix, cc, cflags, precision, style, fma, text if self.fixed is not None else None)
+        except BaseException:
+            self.close()
+            raise
+
+    def _build(self, model: Model, prefix: str, cc: str, cflags, precision: str, style: str, fma: bool,
+               fixed_text: str | None) -> None:
+        if fixed_text is not None:
             self.header = self.dir / f"{prefix}_model.h"
-            self.header.write_text(text)
+            self.header.write_text(fixed_text)
         else:
             self.header = write_header(model, self.dir, precision, style, prefix, fma)
         runner_template = "vector_main_fixed.c.j2" if self.fixed is not None else "vector_main.c.j2"

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fitgen.base.children import run_captured
 from fitgen.c.codegen import write_header
 from fitgen.equations.model import Model
 from fitgen.equations.terms import monomial_factors
@@ -178,7 +179,7 @@ int main(void)
 
 def run(cmd: list[str], **kw) -> subprocess.CompletedProcess:
     """Run a tool; a failure is a RuntimeError with its first lines of stderr."""
-    proc = subprocess.run(cmd, capture_output=True, text=True, **kw)
+    proc = run_captured(cmd, **kw)
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}): {proc.stderr.strip()[:400]}")
     return proc
