@@ -38,10 +38,11 @@ def record(array: AdcArray, seconds: float, clock, stop=lambda: False, progress=
         rows.append(array.read_volts())
         clipped += array.clipped
         if progress is not None:  # the bar counts tenths of a second
-            progress.update(min(int(10 * (now - t0)), progress.total) - progress.done, f"{len(rows)} samples")
+            progress.update(min(int(10 * (now - t0)), progress.total) - progress.done,
+                            f"{(now - t0):.0f} of {seconds:g} s read, {len(rows)} samples")
     elapsed = clock.monotonic() - t0
     if progress is not None and not stop():
-        progress.update(progress.total - progress.done, f"{len(rows)} samples")
+        progress.update(progress.total - progress.done, f"{seconds:g} of {seconds:g} s read, {len(rows)} samples")
     if clipped.any():
         k = int(np.argmax(clipped))
         raise InputError(f"element {k + 1} read at its converter's full scale in {clipped[k]} of {len(rows)} samples: "
@@ -85,9 +86,10 @@ def table(av: Averaging) -> str:
     return "\n".join(lines)
 
 
-def verdict(av: Averaging) -> str:
-    """One line: the samples per row the recording supports, and what to give fitgen schedule; or that even rows
-    of 16 do not average, or that the readings drift."""
+def verdict(av: Averaging, record=None) -> str:
+    """One line: the samples per row the recording supports, and what to give fitgen schedule (``record``, where
+    the recording is written, or else the count); or that even rows of 16 do not average, or that the readings
+    drift."""
     if not av.candidates:
         return (f"too short to read {CANDIDATES[0]} samples per row: record at least "
                 f"{_seconds(needed_samples(CANDIDATES[0]), av.rate)} s (--seconds)")
@@ -114,7 +116,8 @@ def verdict(av: Averaging) -> str:
                 f"{av.flicker_share(nxt):.3f} of a row's white noise, more than {EXCESS}: it wanders over a capture "
                 "and identify would read its posterior too narrow; a longer --seconds reads it closer)")
     return (f"the noise averages down up to {best} samples per row ({floor}: at most {av.flicker_share(best):.3f} of a "
-            f"row's white noise there, within {EXCESS}): fitgen schedule ... --samples {best}")
+            f"row's white noise there, within {EXCESS}): fitgen schedule ... --samples "
+            + (f"{record} (which takes {best}, and the noise measured here)" if record else str(best)))
 
 
 def save(av: Averaging, path, source: str) -> None:

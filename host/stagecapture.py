@@ -86,6 +86,8 @@ def open_stage(args, opts, output, rows, prog: str):
             ctrl.home(timeout=max(120.0, opts["timeout"]))
         elif args.unlock:
             ctrl.unlock()
+            print(f"{prog}: unlocked the stage ($X: out of ALARM without homing, its position taken as it stands)",
+                  file=sys.stderr, flush=True)
         if ctrl.alarm:
             raise StageError(f"{ctrl.name}: the GRBL controller is in ALARM (it starts so after a reset when homing "
                              "is on): home it (--home; a zero taken on the homed machine holds) or unlock it "

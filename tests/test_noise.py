@@ -78,6 +78,9 @@ def test_white_noise_read_for_the_default_time_is_told_to_average_128_samples():
     assert av.recommended() == 256
     assert av.flicker_share(128) <= EXCESS
     assert f"--samples {av.recommended()}" in verdict(av)
+    # with the recording written, the schedule is told to read it: the count and the noise it measured
+    assert verdict(av, "n.json").endswith("fitgen schedule ... --samples n.json (which takes 256, and the noise "
+                                          "measured here)")
 
 
 def test_a_short_recording_cannot_tell_128_samples_safe():

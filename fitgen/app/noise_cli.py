@@ -25,7 +25,7 @@ def cmd_noise(args) -> int:
     print(f"tactile-host noise: {av.samples} samples of every element in {av.samples / av.rate:.1f} s "
           f"({av.rate:.0f} per s), the sensor at rest")
     print(table(av))
-    print(verdict(av))
+    print(verdict(av, args.output))
     if args.output:
         save(av, args.output, f"simulated {args.sensor}" if args.simulate else "hardware")
         print(f"wrote {args.output}", file=sys.stderr)

@@ -124,7 +124,7 @@ def _deployed_table(model: Model, rec: dict) -> str:
           f"on unit {rec.get('sensor', '?')} ({unit_file})" if unit_file else
           f"on the drawing {rec.get('sensor', '?')}: a built unit differs from it (fitgen identify)")
     lines = [f"### deployed accuracy, held out ({rec['poses']} random poses in the training box, seed {rec['seed']}; "
-             f"noise {rec['noise']:g} rms, {rec['noise_draws']} draws), {on}", "",
+             f"noise {rec['noise']:g} {model.input_units} rms, {rec['noise_draws']} draws), {on}", "",
              "| output | unit | precision | max | RMS | max, noise | RMS, noise | rounding's share |",
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for e in model.equations:
