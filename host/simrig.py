@@ -37,6 +37,9 @@ class SimRig:
         self.repeatability = float(repeatability)
         self.adhesion = float(adhesion)
         self.travel = np.asarray(travel, dtype=float)  # carriage range in the home frame
+        # where homing puts the carriage (home frame), machine 0 once homed: every axis's minimum, as a printer's
+        # endstops (Marlin homes Z down, onto the bed); a GRBL controller puts Z's at the top (host.stagesim)
+        self.switches = np.zeros(3)
         self.rng = np.random.default_rng(seed)
         self.carriage = np.asarray(start, dtype=float).copy()  # where the motors put the carriage (home frame)
         self.start = self.carriage.copy()  # machine 0 until homed
@@ -74,7 +77,7 @@ class SimRig:
         coordinates before homing (power-on puts machine 0 at the start) and after it (the switches are 0)."""
         at = self.carriage_at_contact()
         first = " ".join(f"{a}{c - s:.6g}" for a, c, s in zip("XYZ", at, self.start))
-        homed = " ".join(f"{a}{c:.6g}" for a, c in zip("XYZ", at))
+        homed = " ".join(f"{a}{c - s:.6g}" for a, c, s in zip("XYZ", at, self.switches))
         return (f"first contact at machine {first} ({homed} once homed; the carriage, each axis come from the "
                 "capture's approach side: from -dx, -dy, above)")
 

@@ -42,6 +42,7 @@ __all__ = ["PoseFile", "PtyServer", "SimController", "SimRig", "SocketServer", "
            "pose_file_motion", "simulated_stage_capture"]
 
 GRBL_VERSION = "1.1h"
+GRBL_Z_SWITCH = 20.0  # mm above first contact: where a simulated GRBL's Z homes to (a CNC's Z homes up)
 GRBL_WELCOME = f"Grbl {GRBL_VERSION} ['$' for help]"  # grblHAL says "GrblHAL 1.1f ['$' or '$HELP' for help]"
 MARLIN_VERSION = "2.1.2.1"
 
@@ -75,6 +76,10 @@ class SimController:
         self._out = bytearray()
         self.silent = False
         self.welcome = GRBL_WELCOME  # GRBL's start-up line (a test may give grblHAL's)
+        if flavor == "grbl":  # a CNC homes Z up, away from the work: its switch tops Z's travel
+            top = min(rig.travel[2, 1], rig.contact[2] + GRBL_Z_SWITCH)
+            rig.switches = np.array([0.0, 0.0, top])
+            rig.travel[2, 1] = top
         self._power_on()
 
     # -- state
@@ -323,8 +328,8 @@ class SimController:
 
     def _home(self, now: float) -> None:
         def done():
-            self.rig.move(np.zeros(3))  # the switches sit at the home frame's origin
-            self.offset = np.zeros(3)
+            self.rig.move(self.rig.switches.copy())
+            self.offset = self.rig.switches.copy()  # machine 0 at the switches
             self.homed = True
             self.homing = False
             self.alarm = False

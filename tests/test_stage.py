@@ -28,7 +28,7 @@ from host.gcode import GcodeController, StageError
 from host.stage import PoseStage, jog_to_zero
 from host.stageserver import PoseFile, PtyServer, SocketServer
 from host.stagesettings import AxisMap, StageSettings, parse_approach, parse_ranges
-from host.stagesim import SimController, SimRig
+from host.stagesim import GRBL_Z_SWITCH, SimController, SimRig
 from host.stagezero import StageState, choose_zero, parse_zero, run_zeros
 
 from conftest import assert_one_line_error
@@ -397,6 +397,9 @@ def test_grbl_after_reset_with_homing_is_in_alarm_until_homed():
             assert not c.alarm and c.homed
             c.setup()
             np.testing.assert_allclose(c.position(), [0, 0, 0])
+            # a CNC homes Z up, away from the sensor: the tool stands 20 mm above first contact, the magnet at rest
+            assert srv.ctrl.rig.displacement()[2] == pytest.approx(GRBL_Z_SWITCH, abs=0.1)
+            assert not srv.ctrl.rig.pose.any()
             # homed, GRBL's own soft limits hold: a target beyond its travel is ALARM:2
             with pytest.raises(StageError, match=r"ALARM:2 \(soft limit"):
                 c.move({"X": -5.0}, FEED)
@@ -761,8 +764,8 @@ def test_the_zero_holds_until_a_reset_and_a_homed_zero_holds_after_one(tmp_path)
         assert choose_zero(c, None, axes, "here", rows=0, ask=None)[1] == "here"
         with pytest.raises(InputError, match="--zero here takes the zero only for a dataset without rows"):
             choose_zero(c, None, axes, "here", rows=3, ask=None)
-        c.move({"X": 1.0, "Y": 2.0, "Z": 3.0}, FEED)
-        state = StageState("grbl", str(axes), z, True, [1.0, 2.0, 3.0], [])
+        c.move({"X": 1.0, "Y": 2.0, "Z": -3.0}, FEED)  # homed, GRBL's Z counts down from its switch at the top
+        state = StageState("grbl", str(axes), z, True, [1.0, 2.0, -3.0], [])
         assert choose_zero(c, state, axes, "ask", rows=3, ask=None) == (z, "kept from the last run")
         c.close()
         srv.ctrl.reset()  # between runs
@@ -972,10 +975,13 @@ def test_capture_command_alarm_at_start_is_one_line_exit_1_and_home_clears_it(tm
                                        "a zero taken on the homed machine holds) or unlock it (--unlock; the zero is "
                                        "then set again)")
         assert proc.stderr.strip().endswith("; nothing was written") and not out.exists()
-        zero = ",".join(f"{v:g}" for v in CONTACT)  # homed: machine coordinates are the home frame's
-        proc = run_host(*args, "--home", "--zero", zero)
+        # homed: machine 0 is at the switches, GRBL's Z at the top of its travel (a CNC homes Z up), so first
+        # contact is below it
+        homed = np.array(CONTACT) - srv.ctrl.rig.switches
+        assert homed[2] < 0 and srv.ctrl.rig.switches[2] == CONTACT[2] + GRBL_Z_SWITCH
+        proc = run_host(*args, "--home", "--zero", ",".join(f"{v:g}" for v in homed))
         assert proc.returncode == 0, proc.stderr
-        assert f"zero X{CONTACT[0]:g} Y{CONTACT[1]:g} Z{CONTACT[2]:g} (given)" in proc.stderr
+        assert f"zero X{homed[0]:g} Y{homed[1]:g} Z{homed[2]:g} (given)" in proc.stderr
         assert srv.ctrl.lines.count("$H") == 1
 
 
