@@ -1141,6 +1141,8 @@ def test_stage_sim_command_prints_its_url_and_serves(tmp_path):
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=10)
     assert proc.returncode == 0
+    # stopped as it is meant to be, it says what it served (README: the commands that run until stopped)
+    assert re.fullmatch(r"tactile-host stage-sim: stopped after \d+ lines received, 3 moves\n", proc.stderr.read())
 
 
 def test_the_meta_pools_the_noise_over_the_runs_that_wrote_the_rows(sensor, tmp_path):

@@ -231,13 +231,10 @@ def cmd_stage_sim(args) -> int:
 
     if args.pty and args.port is not None:
         raise InputError("--port is the loopback socket's; with --pty there is none (without it, it would be ignored)")
-    M = parse_matrix(args.map) if args.map else None
-    backlash = parse_positive(args.backlash, "--backlash", zero=True)
-    rep = parse_positive(args.repeatability, "--repeatability", zero=True)
-    contact, start = parse_xyz(args.contact, "--contact"), parse_xyz(args.start, "--start")
-    target = PoseFile(args.pose_file) if args.pose_file else None
-    rig = SimRig(target, M, axes=args.axes, contact=contact, start=start, backlash=backlash, repeatability=rep,
-                 seed=args.seed)
+    rig = SimRig(PoseFile(args.pose_file) if args.pose_file else None, parse_matrix(args.map) if args.map else None,
+                 axes=args.axes, contact=parse_xyz(args.contact, "--contact"), start=parse_xyz(args.start, "--start"),
+                 backlash=parse_positive(args.backlash, "--backlash", zero=True),
+                 repeatability=parse_positive(args.repeatability, "--repeatability", zero=True), seed=args.seed)
     ctrl = SimController(args.flavor, rig, homing_lock=args.homing)
     server = PtyServer(ctrl) if args.pty else SocketServer(ctrl, port=args.port or 0)
     with server, StopFlag() as stop:
@@ -247,6 +244,8 @@ def cmd_stage_sim(args) -> int:
               file=sys.stderr, flush=True)
         while not stop():
             time.sleep(0.1)
+    print(f"tactile-host stage-sim: stopped after {len(ctrl.lines)} lines received, {ctrl.g1_count} moves",
+          file=sys.stderr)
     return 0
 
 
