@@ -143,7 +143,20 @@ class StageSettings:
                 if bad.size:
                     i = int(bad[0])
                     raise InputError(f"pose {i + 1}/{len(poses)} ({describe(i)}){label} reaches {name}={vals[i]:g}, "
-                                     f"outside --stage-limits {name}={lo:g}:{hi:g}")
+                                     f"outside --stage-limits {name}={lo:g}:{hi:g}; the schedule with its approach "
+                                     f"points spans {self.span(poses)}: give limits at least that wide where the "
+                                     "machine allows")
+
+    def span(self, poses: np.ndarray) -> str:
+        """The --stage-limits that hold ``poses`` and the points their approaches start from, to the micrometre
+        outward: 'dx=-3.3:3.3,dy=-3.3:3.3,dz=-3:0.5'."""
+        parts = []
+        for name in self.axes.pose_axes:
+            k = STAGE_AXES.index(name)
+            vals = np.concatenate([poses[:, k], poses[:, k] + self.approach[k]])
+            lo, hi = np.floor(vals.min() * 1000 + 1e-6) / 1000, np.ceil(vals.max() * 1000 - 1e-6) / 1000
+            parts.append(f"{name}={lo + 0.0:g}:{hi + 0.0:g}")  # + 0.0: no -0
+        return ",".join(parts)
 
     def describe(self) -> dict:
         return {"axes": str(self.axes), "feed_mm_min": self.feed,

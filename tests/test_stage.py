@@ -159,6 +159,12 @@ def test_the_schedule_is_checked_against_limits_approach_and_axes(tmp_path):
     poses[2, 2] = -2.5
     with pytest.raises(InputError, match=r"pose 3/3 \(#2\) reaches dz=-2.5, outside --stage-limits dz=-2:1"):
         ok.check_schedule(poses, lambda i: f"#{i}")
+    # and says, all at once, the limits that hold the whole schedule and its approach points (a walkthrough took
+    # three tries, one limit each)
+    said = pytest.raises(InputError, ok.check_schedule, poses, lambda i: f"#{i}").value.args[0]
+    assert said.endswith("; the schedule with its approach points spans dx=-0.3:1,dy=-0.3:0,dz=-2.5:0.3: give "
+                         "limits at least that wide where the machine allows"), said
+    settings(limits="dx=-0.3:1,dy=-0.3:0,dz=-2.5:0.3").check_schedule(poses, lambda i: f"#{i}")  # and they do
     poses[2] = [0, 0, -1, 3, 0]
     with pytest.raises(InputError, match="has thx != 0: the stage moves dx,dy,dz only"):
         ok.check_schedule(poses, lambda i: f"#{i}")
