@@ -57,6 +57,7 @@ class Schedule:
     drawing: dict | None = None  # the drawing `fitgen schedule` made it for: sensor, sensor_file, sha256, transfer
     stage: dict | None = None  # the stage it was made for: rig_error, zero_error (mm), as `fitgen schedule` took them,
     # and rig_error_given: whether it was told the rig's error (fitgen check takes a check schedule's only then)
+    check: bool = False  # `fitgen schedule --check`'s: random poses for a check capture, not a calibration's
 
     @property
     def values(self) -> np.ndarray:
@@ -90,7 +91,8 @@ def load_schedule(path: str | Path) -> Schedule:
     meta = load_meta(path)
     drawing = {k: meta[k] for k in ("sensor", "sensor_file", "sensor_sha256", "transfer") if k in meta}
     stage = {k: meta[k] for k in ("rig_error", "rig_error_given", "zero_error") if k in meta}
-    return Schedule(as_poses(poses), columns, origin, drawing if "sensor" in drawing else None, stage or None)
+    return Schedule(as_poses(poses), columns, origin, drawing if "sensor" in drawing else None, stage or None,
+                    meta.get("check") is True)
 
 
 def simulated_sensor(args, schedule: Schedule) -> None:

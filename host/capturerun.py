@@ -14,6 +14,7 @@ from fitgen.base.parse import LONGEST_WAIT, MAX_ROW_SAMPLES, parse_positive
 from fitgen.base.progress import Progress
 from fitgen.physics.dataset import thermistor_degc
 from fitgen.physics.sensor import load_sensor
+from fitgen.physics.simulate import recorded_spec
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import (SAMPLES, SpreadTooLarge, capture, check_resume, designed_samples, load_schedule,
@@ -111,6 +112,15 @@ def run_capture(args, prog: str) -> None:
         _run_capture(args, prog)
 
 
+def next_step(schedule, output) -> str:
+    """What a user runs on a finished capture (docs/calibration.md, "The workflow")."""
+    if schedule.check:
+        return f"fitgen check TWIN.json {output} (the twin's model on these poses, against what identify predicts)"
+    drawing = recorded_spec(schedule.drawing) if schedule.drawing else None
+    return (f"fitgen identify {output} --sensor {drawing or 'DRAWING'} -o unit.toml (the unit's physics from these "
+            "rows)")
+
+
 def check_simulation_options(args) -> None:
     """InputError for --sim-drift without --simulate (with or without --temperature: it would be ignored)."""
     refuse_alone([(args.sim_drift is not None, "--sim-drift", "--simulate", bool(args.simulate))])
@@ -190,6 +200,7 @@ def _run_capture(args, prog: str) -> None:
               f"{res.before} already there{note})", file=sys.stderr)
         if lifted is not None:
             print(f"{prog}: the indenter lifted to dz {lifted:+g} mm, off the skin", file=sys.stderr)
+        print(f"{prog}: next: {next_step(schedule, args.output)}", file=sys.stderr)
     else:
         print(f"{prog}: stopped with {done}/{total} poses in {args.output}{note}; run the same "
               "command again to resume", file=sys.stderr)

@@ -232,7 +232,9 @@ def test_capture_command_killed_midway_resumes_without_loss_or_duplicates(tmp_pa
     assert len(data_rows(out)[1]) == 8
     proc = run_cli("tactile-host", *args, "--trigger", "true")
     assert proc.returncode == 0, proc.stderr
-    assert proc.stderr.strip() == f"tactile-host capture: 27/27 poses in {out} (19 captured now, 8 already there)"
+    assert proc.stderr.strip() == (f"tactile-host capture: 27/27 poses in {out} (19 captured now, 8 already there)\n"
+                                   f"tactile-host capture: next: fitgen identify {out} --sensor DRAWING -o unit.toml "
+                                   "(the unit's physics from these rows)")  # a schedule without meta names none
     header, got = data_rows(out)
     assert header == "v1,v2,v3,v4,v5,v6,v7,v8,dx,dy,dz"
     assert [r[8:] for r in got] == [tuple(map(float, r)) for r in rows]
@@ -408,7 +410,8 @@ def test_a_simulated_capture_resumes_with_its_units_file_by_any_path_and_not_wit
     (tmp_path / "unit7.unit.toml").rename(tmp_path / "sub" / "moved.toml")
     proc = run_cli("tactile-host", *up, "--sensor", "moved.toml", cwd=tmp_path / "sub")
     assert proc.returncode == 0, proc.stderr
-    assert proc.stderr.strip() == "tactile-host capture: 6/6 poses in ../d.csv (2 captured now, 4 already there)"
+    assert proc.stderr.strip().splitlines()[0] == ("tactile-host capture: 6/6 poses in ../d.csv (2 captured now, 4 "
+                                                   "already there)")
     assert [r[8:] for r in data_rows(tmp_path / "d.csv")[1]] == [tuple(map(float, r)) for r in grid_rows()[:6]]
     meta = json.loads((tmp_path / "d.csv.meta.json").read_text())
     assert meta["runs"] == 3 and meta["sensor_sha256"] == load_sensor(tmp_path / "sub" / "moved.toml").sha256
@@ -494,3 +497,21 @@ def test_a_capture_re_saved_with_a_byte_order_mark_resumes(tmp_path):
     proc = run_cli(*args)
     assert proc.returncode == 0, proc.stderr
     assert load_dataset(cap).n_rows == len(whole) - 1
+
+
+def test_a_finished_capture_names_the_next_step_from_its_schedule(tmp_path):
+    """A calibration capture: identify, with the drawing its schedule was made for; a check capture (fitgen schedule
+    --check): fitgen check (docs/calibration.md, "The workflow")."""
+    spec = "ads1115@0x48:0-3,ads1115@0x49:0-3"
+    for kind, extra in (("s", ["--n", "12"]), ("c", ["--check", "6"])):
+        assert run_cli("fitgen", "schedule", "--sensor", "paper", *extra, "-o", str(tmp_path / f"{kind}.csv")
+                       ).returncode == 0
+        cap = tmp_path / f"{kind}-cap.csv"
+        proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / f"{kind}.csv"), "--adc", spec,
+                       "--simulate", "--samples", "2", "-o", str(cap))
+        assert proc.returncode == 0, proc.stderr
+        said = proc.stderr.strip().splitlines()[-1]
+        assert said == ({"s": f"tactile-host capture: next: fitgen identify {cap} --sensor paper -o unit.toml (the "
+                              "unit's physics from these rows)",
+                         "c": f"tactile-host capture: next: fitgen check TWIN.json {cap} (the twin's model on these "
+                              "poses, against what identify predicts)"}[kind]), said

@@ -755,6 +755,9 @@ def test_cli_schedule_capture_identify(tmp_path):
                    "--plot", str(tmp_path / "plots"))
     assert proc.returncode == 0, proc.stderr
     assert "stands out" not in proc.stderr  # no row the physics does not explain
+    assert proc.stderr.endswith(f"next: fitgen simulate --sensor {unit_file} --grid paper-sim --random 5000 -o "
+                                "twin.csv, then fitgen fit twin.csv -o twin.json (the unit's own equations, tilt "
+                                "included)\n"), proc.stderr  # what a user runs next, as docs/calibration.md does
     png = tmp_path / "plots" / "identify.png"
     assert f"plot: {png}" in proc.stderr and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     lifted = int((table[:, 2] > 0).sum())
