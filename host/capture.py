@@ -47,6 +47,7 @@ class SpreadTooLarge(RuntimeError):
 
 
 SAMPLES = 16  # samples averaged per row when neither --samples nor the schedule names a number
+MAX_POOLED_ROWS = 10 ** 9  # an earlier run's noise_rows past this is no count a capture wrote: its figures start anew
 
 
 @dataclass(frozen=True)
@@ -304,9 +305,9 @@ class NoiseStats:
         try:
             rows = int(meta["noise_rows"])
             ns, nr = np.asarray(meta["sample_noise"], dtype=float), np.asarray(meta["row_noise"], dtype=float)
-        except (KeyError, TypeError, ValueError):
+        except (KeyError, TypeError, ValueError, OverflowError):
             return cls(n)
-        if rows < 1 or ns.shape != (n,) or nr.shape != (n,) or not (np.all(np.isfinite(ns)) and np.all(np.isfinite(nr))):
+        if not 1 <= rows <= MAX_POOLED_ROWS or ns.shape != (n,) or nr.shape != (n,) or not (np.all(np.isfinite(ns)) and np.all(np.isfinite(nr))):
             return cls(n)
         return cls(n, rows, rows * ns ** 2, rows * nr ** 2)
 

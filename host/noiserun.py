@@ -135,7 +135,7 @@ def told(path) -> tuple[int, np.ndarray]:
         candidates, ratio, drifts = list(rec["candidates"]), np.asarray(rec["ratio"], dtype=float), rec["drifts"]
     except OSError as exc:
         raise InputError(f"cannot read the noise record {path}: {exc.strerror or exc}") from None
-    except (ValueError, TypeError, KeyError) as exc:
+    except (ValueError, TypeError, KeyError, OverflowError) as exc:
         raise InputError(f"{path} is not a record tactile-host noise -o wrote ({type(exc).__name__}: {exc})") from None
     sane = single.ndim == 1 and single.size and np.all(np.isfinite(single) & (single > 0))
     if samples not in CANDIDATES or not sane or not isinstance(drifts, bool):

@@ -69,7 +69,7 @@ def load_run(path) -> Run:
             o = [float(x) for x in rec["out"]]
             tt, st = float(rec["t"]), int(rec["status"])
             tp = math.nan if rec.get("temp") is None else float(rec["temp"])
-        except (ValueError, KeyError, TypeError):
+        except (ValueError, KeyError, TypeError, OverflowError):  # a number past a float's range too
             if k == len(lines) and not whole:
                 torn = i  # a last line cut short by a stop: dropped, and said
                 break

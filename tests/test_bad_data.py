@@ -279,7 +279,12 @@ def test_report_on_fit_notes_edited_by_hand_is_one_line(fitted, tmp_path, edit):
     (lambda f: f.__setitem__("held_out", {"box": {"dx": [2, -2]}}), "fit.held_out.box.dx must be [low, high]"),
     (lambda f: f.__setitem__("held_out", {"rest": 1.5}), "fit.held_out.rest must be a list of readings"),
     # JSON holds integers past float's range: float() of one raised, a traceback
-    (lambda f: f.__setitem__("held_out", {"box": {"dx": [0, 10 ** 400]}}), "fit.held_out.box.dx must be [low, high]")])
+    (lambda f: f.__setitem__("held_out", {"box": {"dx": [0, 10 ** 400]}}), "fit.held_out.box.dx must be [low, high]"),
+    # a held-out record whose seed is no whole number: read by verify and tactile-hil run, a traceback
+    (lambda f: f.__setitem__("held_out", {"sensor": "paper", "box": {}, "poses": 10, "seed": 1.5}),
+     "fit.held_out.seed must be a whole number >= 0"),
+    # a hash that is a list: fitgen check's TypeError (unhashable), a traceback
+    (lambda f: f.__setitem__("sensor_sha256", ["ab"]), "fit.sensor_sha256 must be a hash (text)")])
 def test_fit_notes_edited_where_commands_read_them_are_refused_as_the_model_is_loaded(fitted, data, tmp_path, edit,
                                                                                        said):
     """Notes that predict, codegen and the readouts read (the held-out box, the precision) were read as tables far

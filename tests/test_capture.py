@@ -515,3 +515,14 @@ def test_a_finished_capture_names_the_next_step_from_its_schedule(tmp_path):
                               "unit's physics from these rows)",
                          "c": f"tactile-host capture: next: fitgen check TWIN.json {cap} (the twin's model on these "
                               "poses, against what identify predicts)"}[kind]), said
+
+
+def test_an_earlier_runs_noise_figures_past_any_count_start_anew():
+    """A resumed capture pools on from the meta's noise figures; a noise_rows past a float's range (JSON's integers
+    have none) raised OverflowError, a traceback, where other damage starts the pool anew."""
+    from host.capture import NoiseStats
+
+    figures = {"sample_noise": [5e-4] * 8, "row_noise": [1.25e-4] * 8}
+    assert NoiseStats.from_meta({"noise_rows": 4, **figures}, 8).rows == 4
+    for rows in (10 ** 400, 10 ** 12, 0, "4"):
+        assert NoiseStats.from_meta({"noise_rows": rows, **figures}, 8).rows == (4 if rows == "4" else 0)

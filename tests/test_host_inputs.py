@@ -201,6 +201,11 @@ def test_a_replay_says_it_left_out_a_last_line_cut_short(model_file, tmp_path):
     run.write_text("\n".join(lines[:-1] + [lines[-1].replace('"status": 0', '"status": "x"')]) + "\n")
     assert '"status": "x"' in run.read_text()
     assert_one_line_error(run_cli("tactile-host", "replay", str(run)), 2, f"line {len(lines)} is not a sample")
+    # and a time past a float's range (JSON's integers have none): an OverflowError, a traceback
+    big = json.loads(lines[-1])
+    big["t"] = 10 ** 400
+    run.write_text("\n".join(lines[:-1] + [json.dumps(big)]) + "\n")
+    assert_one_line_error(run_cli("tactile-host", "replay", str(run)), 2, f"line {len(lines)} is not a sample")
 
 
 def test_a_replay_plays_over_a_clock_step_and_view_refuses_readout_options(model_file, tmp_path):

@@ -255,6 +255,8 @@ def _edited(tmp_path, **changes):
     (lambda p: _record(p, _stream(NOISE, 60.0)), (), "does not average down even over 16 samples"),
     (lambda p: _edited(p, single_v=[NOISE] * 4), (), "records 4 elements, the sensor paper has 8"),
     (lambda p: _edited(p, recommended=None), (), "is not a record tactile-host noise -o wrote"),
+    # JSON's integers past a float's range: an OverflowError, a traceback
+    (lambda p: _edited(p, ratio=[[10 ** 400]]), (), "is not a record tactile-host noise -o wrote"),
     (lambda p: _record(p, _stream(0.0, 120.0)), ("--transfer", "raw"), "measured volts and the schedule is for mT"),
     (lambda p: p / "absent.json", (), "cannot read the noise record"),
 ])

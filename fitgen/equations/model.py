@@ -366,6 +366,13 @@ def _check_fit_notes(fit, origin: str) -> None:
             refuse(f".held_out.box.{name}", "[low, high] (finite, low <= high)", pair)
     if "rest" in held and not isinstance(held["rest"], list):
         refuse(".held_out.rest", "a list of readings", held["rest"])
+    for key, low in (("poses", 1), ("seed", 0)):  # what verify and tactile-hil simulate the held-out set again from
+        if key in held and (isinstance(held[key], bool) or not isinstance(held[key], int)
+                            or not low <= held[key] < 2 ** 63):
+            refuse(f".held_out.{key}", f"a whole number >= {low}", held[key])
+    for key in ("sensor_sha256",):
+        if key in fit and not isinstance(fit[key], (str, type(None))):
+            refuse(f".{key}", "a hash (text)", fit[key])
 
 
 def _term(text, where: str) -> Term:

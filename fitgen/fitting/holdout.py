@@ -340,8 +340,8 @@ def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] |
     from fitgen.physics.simulate import dataset_sensor
 
     rec = model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None
-    if not isinstance(rec, dict):
-        return None
+    if not isinstance(rec, dict) or not all(key in rec for key in ("box", "poses", "seed")):
+        return None  # no record, or one that names no set (a sensor alone)
     sensor = sensor or dataset_sensor(rec)
     if sensor is None:
         return None
