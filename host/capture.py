@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+import math
 import os
 from collections import Counter
 from contextlib import contextmanager
@@ -384,9 +385,11 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
     res = CaptureResult(len(schedule.poses), int(state.done.sum()), dropped_partial=state.dropped_partial)
     prior = prior_meta(output) if state.rows > 0 else {}  # rows from earlier runs: pool on from their figures
     noise = res.noise = NoiseStats.from_meta(prior, array.n)
-    try:
+    try:  # an earlier run's counts, as its meta kept them; damaged ones start anew, as the noise figures do
         before_s, runs = float(prior.get("duration_s", 0.0)), int(prior.get("runs", 0)) + 1
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
+        before_s, runs = 0.0, 1
+    if not (math.isfinite(before_s) and before_s >= 0) or not 1 <= runs <= MAX_POOLED_ROWS:
         before_s, runs = 0.0, 1
     t_start = clock.monotonic()
     info = {"schedule": schedule.origin, "samples_per_row": samples, "max_spread_volts": max_spread,

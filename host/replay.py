@@ -208,7 +208,7 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
         corrections = _corrections(run, model, temp_comp, no_temp_comp, auto_zero, moved and moved[0])
     except InputError:  # already says what is wrong, with the option or the header field
         raise
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:  # a header edited by hand
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:  # a header edited by hand
         raise InputError(f"the run's header records corrections that are not as tactile-host read writes them "
                          f"({type(exc).__name__}: {exc})") from None
     header = {**{k: v for k, v in h.items() if k != "run"}, "model": model.sha256,
@@ -321,6 +321,9 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
         settings = AutoZeroSettings(**{k: az_rec[k] for k in AutoZeroSettings.__dataclass_fields__ if k != "test"},
                                     test=az_rec.get("test", "sample")) if az_rec else AutoZeroSettings()
         start = np.asarray(az_rec["start"], dtype=float) + moved if az_rec else tare
+        if start is not None and np.shape(start) != (n,):
+            raise InputError(f"the run's header records an auto-zero start of {np.size(start)} offsets for {n} "
+                             "readings")
         ref = np.array(ref, dtype=float) if rest is None else rest
         if ref.shape != (n,):
             raise InputError(f"the run's header records {ref.size} rest readings for {n} readings")

@@ -526,3 +526,21 @@ def test_an_earlier_runs_noise_figures_past_any_count_start_anew():
     assert NoiseStats.from_meta({"noise_rows": 4, **figures}, 8).rows == 4
     for rows in (10 ** 400, 10 ** 12, 0, "4"):
         assert NoiseStats.from_meta({"noise_rows": rows, **figures}, 8).rows == (4 if rows == "4" else 0)
+
+
+@pytest.mark.parametrize("edit", [{"runs": 1e400}, {"duration_s": 10 ** 400}, {"duration_s": -1e400},
+                                  {"runs": -5}])
+def test_a_resume_over_an_earlier_runs_damaged_counts_counts_anew(sensor, tmp_path, edit):
+    """The meta's run count and duration, edited past a float's range or below 0: a resume raised OverflowError
+    (a traceback) or wrote -Infinity into the meta; it counts anew, as for other damage."""
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid_rows()[:4]))
+    out = tmp_path / "d.csv"
+    bus, arr, clock = rig(sensor)
+    assert capture(arr, sched, out, samples=2, clock=clock, set_pose=bus.set_pose).captured == 4
+    out.write_text("".join(out.read_text().splitlines(keepends=True)[:3]))  # two rows to take again
+    meta_file = tmp_path / "d.csv.meta.json"
+    meta_file.write_text(json.dumps({**json.loads(meta_file.read_text()), **edit}))
+    res = capture(arr, sched, out, samples=2, clock=clock, set_pose=bus.set_pose)
+    assert res.complete
+    meta = json.loads(meta_file.read_text())
+    assert meta["runs"] == 1 and 0 <= meta["duration_s"] < 1e6, meta

@@ -73,7 +73,10 @@ def test_rest_readings_come_in_volts_and_from_a_schedules_lifted_row(model_file,
                                   lambda h: h.__setitem__("tare", [0.0, 0.0, 0.0]),
                                   lambda h: h.__setitem__("temp_comp", {"t0": 25}),
                                   lambda h: h.__setitem__("outputs", 5),  # a traceback: len() of an int
-                                  lambda h: h.__setitem__("n_inputs", "8")])  # "8 readings; the header says 8"
+                                  lambda h: h.__setitem__("n_inputs", "8"),  # "8 readings; the header says 8"
+                                  # a start of one number: TypeError (iteration over a 0-d array), a traceback
+                                  lambda h: h["auto_zero"].__setitem__("start", -1),
+                                  lambda h: h["auto_zero"].__setitem__("start", [10 ** 400] * 8)])
 def test_replay_of_a_header_edited_by_hand_is_one_line(model_file, tmp_path, edit):
     run = tmp_path / "az.jsonl"
     assert read(model_file, "--tare", "--auto-zero", "--record", str(run)).returncode == 0
