@@ -292,7 +292,7 @@ def test_the_papers_procedure_is_held_out_with_the_sensors_noise(tmp_path):
                    "--outputs", "dx,dy,dz")
     assert proc.returncode == 0, proc.stderr
     rec = json.loads((tmp_path / "m.json").read_text())["fit"]["held_out"]
-    assert rec["noise"] == PAPER.noise > 0 and "noise 0.0005 rms" in proc.stdout + proc.stderr
+    assert rec["noise"] == PAPER.noise > 0 and "noise 0.0005 mT rms" in proc.stdout + proc.stderr
     for o in ("dx", "dy", "dz"):
         e = rec["errors"]["double"][o]
         assert e["noisy_rms"] > 1.02 * e["rms"], (o, e)  # held out with none, the two were equal
