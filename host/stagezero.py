@@ -49,10 +49,17 @@ class StageState:
             return None
         try:
             d = json.loads(path.read_text())
-            return cls(str(d["flavor"]), str(d["axes"]), {k: float(v) for k, v in d["zero"].items()},
-                       bool(d["homed"]), d.get("position"), list(d.get("pending") or []), str(d.get("lost") or ""))
-        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-            raise InputError(f"{path}: not a stage state ({exc}); remove it to set the zero again") from None
+            zero = {str(k): _coordinate(v) for k, v in d["zero"].items()}
+            mapped = [m for m, _, _ in AxisMap.parse(str(d["axes"])).pairs]
+            if set(zero) != set(mapped):  # a move is sent from these: every mapped axis, nothing else
+                raise ValueError(f"its zero gives {','.join(sorted(zero)) or 'no axis'} for the axes {','.join(mapped)}")
+            position = None if d.get("position") is None else _xyz(d["position"])
+            pending = [_xyz(t) for t in (d.get("pending") or [])]
+            return cls(str(d["flavor"]), str(d["axes"]), zero, bool(d["homed"]), position, pending,
+                       str(d.get("lost") or ""))
+        except (OSError, ValueError, KeyError, TypeError, AttributeError, OverflowError, InputError) as exc:
+            raise InputError(f"{path}: not a stage state as tactile-host capture writes it ({exc}); remove it to set "
+                             "the zero again") from None
 
     @classmethod
     def mark_lost(cls, output: str | Path, why: str) -> None:
@@ -61,6 +68,24 @@ class StageState:
         if state is not None:
             state.lost = why
             state.save(output)
+
+
+def _coordinate(v) -> float:
+    """A machine coordinate from a state file: a finite number within MAX_COORD (ValueError otherwise): the zero
+    is where every move is sent from, and a damaged one drove a stage toward X 1,000,000 or sent 'G1 Xnan'."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not abs(v) <= MAX_COORD:  # NaN, huge ints too
+        raise ValueError(f"{v!r:.30} is no machine coordinate (a number within {MAX_COORD:g} mm)")
+    return float(v)
+
+
+def _xyz(p) -> list[float] | dict[str, float]:
+    """A position (X, Y, Z) or a pending target (the mapped axes by name) from a state file (ValueError
+    otherwise)."""
+    if isinstance(p, dict) and p and set(p) <= set(MACHINE_AXES):
+        return {a: _coordinate(v) for a, v in p.items()}
+    if isinstance(p, list) and len(p) == len(MACHINE_AXES):
+        return [_coordinate(v) for v in p]
+    raise ValueError(f"{p!r:.40} is no machine position (X, Y, Z)")
 
 
 KEPT = "kept from the last run"  # choose_zero's word for a zero that holds
@@ -86,7 +111,8 @@ def zero_still_valid(state: StageState | None, ctrl: GcodeController, axes: Axis
     pos = ctrl.position()
     known = ([state.position] if state.position is not None else []) + list(state.pending)
     for p in known:
-        p = np.array([p[a] for a in MACHINE_AXES]) if isinstance(p, dict) else np.asarray(p, dtype=float)
+        # a pending target names the mapped axes only; the others never move
+        p = np.array([p.get(a, np.nan) for a in MACHINE_AXES]) if isinstance(p, dict) else np.asarray(p, dtype=float)
         want = [MACHINE_AXES.index(m) for m, _, _ in axes.pairs]
         if np.all(np.abs(pos[want] - p[want]) <= POSITION_TOL):
             return ""

@@ -29,7 +29,7 @@ from host.stage import PoseStage, jog_to_zero
 from host.stageserver import PoseFile, PtyServer, SocketServer
 from host.stagesettings import AxisMap, StageSettings, parse_approach, parse_ranges
 from host.stagesim import GRBL_Z_SWITCH, SimController, SimRig
-from host.stagezero import StageState, choose_zero, parse_zero, run_zeros
+from host.stagezero import StageState, choose_zero, parse_zero, run_zeros, zero_still_valid
 
 from conftest import assert_one_line_error
 
@@ -1172,3 +1172,46 @@ def test_the_meta_pools_the_noise_over_the_runs_that_wrote_the_rows(sensor, tmp_
     nr = np.array(meta["row_noise"])
     np.testing.assert_allclose(nr ** 2, (6 * ns1 ** 2 / 4 + 4 * ns2 ** 2 / 16) / 10)
     assert meta["duration_s"] > meta1["duration_s"] > 0  # the virtual clock's seconds: conversions take time
+
+
+@pytest.mark.parametrize("edit, said", [
+    (lambda d: d["zero"].pop("Z"), "its zero gives X,Y for the axes X,Y,Z"),
+    (lambda d: d.__setitem__("zero", {}), "its zero gives no axis for the axes X,Y,Z"),
+    (lambda d: d["zero"].__setitem__("X", float("nan")), "nan is no machine coordinate"),
+    (lambda d: d["zero"].__setitem__("X", 1e6), "1000000.0 is no machine coordinate (a number within 2000 mm)"),
+    (lambda d: d["zero"].__setitem__("X", 10 ** 400), "is no machine coordinate"),
+    (lambda d: d.__setitem__("position", ["a", "b", "c"]), "'a' is no machine coordinate"),
+    (lambda d: d.__setitem__("position", [1.0, 2.0]), "[1.0, 2.0] is no machine position"),
+    (lambda d: d.__setitem__("pending", [[1.0]]), "[1.0] is no machine position"),
+    (lambda d: d.__setitem__("pending", [{"Q": 1.0}]), "{'Q': 1.0} is no machine position")])
+def test_a_damaged_stage_state_is_refused_in_one_line_before_anything_moves(tmp_path, edit, said):
+    """The state file beside a capture gives the zero every move is sent from: a damaged one raised KeyError or
+    IndexError (tracebacks), sent 'G1 Xnan', or drove the stage toward X 1,000,000 where --zero refuses past 2000
+    mm. It is read whole, and refused naming the file."""
+    out = tmp_path / "d.csv"
+    StageState("grbl", "X=dx,Y=dy,Z=dz", {"X": 2.0, "Y": -2.0, "Z": -6.0}, False, [1.0, 2.0, 3.0],
+               [{"X": 1.0, "Y": 2.0, "Z": 3.0}]).save(out)
+    assert StageState.load(out).zero == {"X": 2.0, "Y": -2.0, "Z": -6.0}
+    path = StageState.path_for(out)
+    d = json.loads(path.read_text())
+    edit(d)
+    path.write_text(json.dumps(d))
+    with pytest.raises(InputError) as err:
+        StageState.load(out)
+    assert str(err.value).startswith(f"{path}: not a stage state as tactile-host capture writes it (")
+    assert said in str(err.value) and str(err.value).endswith("remove it to set the zero again")
+
+
+def test_a_two_axis_stages_pending_target_tells_a_standstill_where_it_was_sent():
+    """A stopped run's pending target names the mapped axes only (X and Z here): the check that the controller
+    stands where the last run left it read all three and raised KeyError."""
+    axes = AxisMap.parse("X=dx,Z=dz")
+    with server("grbl") as srv:
+        c = connect(srv)
+        try:
+            c.setup()
+            c.move({"X": 1.0, "Z": -3.0}, FEED)
+            state = StageState("grbl", str(axes), {"X": 2.0, "Z": -6.0}, False, None, [{"X": 1.0, "Z": -3.0}])
+            assert zero_still_valid(state, c, axes, False) == ""
+        finally:
+            c.close()
