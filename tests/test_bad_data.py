@@ -764,3 +764,25 @@ def test_the_librarys_entry_points_refuse_bad_arrays_in_their_own_words(device_m
     for call, said in cases:
         with pytest.raises(InputError, match=re.escape(said)):
             call()
+
+
+def test_a_held_out_record_edited_by_hand_is_one_line_where_it_is_simulated_again(data, tmp_path):
+    """verify and tactile-hil run simulate the model's held-out set again from its record: a box without every pose
+    component raised KeyError there, and rest readings that are text raised ValueError in read --tare (tracebacks);
+    the box is said in one line where it is read, the rest as the model is loaded."""
+    from fitgen.fitting.fit import fit_model
+    from fitgen.fitting.holdout import fitted_held_out
+    from fitgen.physics.dataset import load_dataset
+
+    ds = load_dataset(data)
+    model = fit_model(ds)
+    model.fit_info["held_out"] = fitted_held_out(model, load_sensor("paper"), ds, 20)
+    good = model.to_dict()
+    for edit, argv, said in (
+            (lambda h: h.__setitem__("box", {"dx": [-1, 1]}), ["tactile-host", "verify"],
+             "fit.held_out.box gives no range for dy, dz, thx, thy"),
+            (lambda h: h.__setitem__("rest", ["a"] * 8), ["fitgen", "report"], "fit.held_out.rest must be a list")):
+        d = json.loads(json.dumps(good))
+        edit(d["fit"]["held_out"])
+        (tmp_path / "m.json").write_text(json.dumps(d))
+        assert_one_line_error(run_cli(*argv, str(tmp_path / "m.json")), 2, said)

@@ -364,7 +364,7 @@ def _check_fit_notes(fit, origin: str) -> None:
         ok = isinstance(pair, list) and len(pair) == 2 and all(map(is_finite_number, pair)) and pair[0] <= pair[1]
         if not ok:
             refuse(f".held_out.box.{name}", "[low, high] (finite, low <= high)", pair)
-    if "rest" in held and not isinstance(held["rest"], list):
+    if "rest" in held and not (isinstance(held["rest"], list) and all(map(is_finite_number, held["rest"]))):
         refuse(".held_out.rest", "a list of readings", held["rest"])
     for key, low in (("poses", 1), ("seed", 0)):  # what verify and tactile-hil simulate the held-out set again from
         if key in held and (isinstance(held[key], bool) or not isinstance(held[key], int)

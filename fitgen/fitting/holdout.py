@@ -342,6 +342,10 @@ def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] |
     rec = model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None
     if not isinstance(rec, dict) or not all(key in rec for key in ("box", "poses", "seed")):
         return None  # no record, or one that names no set (a sensor alone)
+    if not set(POSE_NAMES) <= set(rec["box"]):
+        raise InputError(f"the model file's fit.held_out.box gives no range for "
+                         f"{', '.join(o for o in POSE_NAMES if o not in rec['box'])} (fitgen fit gives one for each "
+                         "pose component): fit the model again, or go without its held-out check (--no-held-out)")
     sensor = sensor or dataset_sensor(rec)
     if sensor is None:
         return None
