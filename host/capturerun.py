@@ -13,6 +13,7 @@ from fitgen.base.errors import InputError
 from fitgen.base.parse import LONGEST_WAIT, MAX_ROW_SAMPLES, parse_positive
 from fitgen.base.progress import Progress
 from fitgen.physics.dataset import thermistor_degc
+from fitgen.physics.pose import check_above_board
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import recorded_spec
 
@@ -138,7 +139,12 @@ def _run_capture(args, prog: str) -> None:
     total, pending = len(schedule.poses), int((~state.done).sum())
     source = {"source": f"simulated {args.sensor}" if args.simulate else "hardware"}
     if args.simulate:  # the sensor itself, not the path typed for it, tells a resume whether it is the same one
-        source["sensor_sha256"] = load_sensor(args.sensor).sha256
+        simulated = load_sensor(args.sensor)
+        source["sensor_sha256"] = simulated.sha256
+        try:  # every pose before the first row, numbered as in the schedule (the bus checks one at a time)
+            check_above_board(simulated, schedule.poses)
+        except InputError as exc:
+            raise InputError(f"{args.poses}: {exc}") from None
     check_resume(args.output, state.rows, {"adc": cmap.describe(), **source, "samples_per_row": samples})
     if pending == 0:  # the stage and the bus stay shut, the meta as it is
         print(f"{prog}: {total}/{total} poses in {args.output} already: nothing to capture", file=sys.stderr)

@@ -544,3 +544,14 @@ def test_a_resume_over_an_earlier_runs_damaged_counts_counts_anew(sensor, tmp_pa
     assert res.complete
     meta = json.loads(meta_file.read_text())
     assert meta["runs"] == 1 and 0 <= meta["duration_s"] < 1e6, meta
+
+
+def test_a_simulated_capture_checks_every_pose_before_the_first_row(tmp_path):
+    """A schedule pose that drives the magnet through the board was found only when its turn came, after rows were
+    written, and called pose 1 (the bus checks one pose at a time); it is refused first, numbered as in the file."""
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dy,dz\n0,0,0.2\n1,1,-1\n3,-3,-39\n1,-1,-1\n")
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "--simulate", "--samples",
+                   "2", "-o", str(tmp_path / "c.csv"))
+    assert_one_line_error(proc, 2, f"{sched}: pose 3 (dx=3 dy=-3 dz=-39 thx=0 thy=0) puts the magnet's lowest point")
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["s.csv"]
