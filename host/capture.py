@@ -48,7 +48,7 @@ class SpreadTooLarge(RuntimeError):
 
 
 SAMPLES = 16  # samples averaged per row when neither --samples nor the schedule names a number
-MAX_POOLED_ROWS = 10 ** 9  # an earlier run's noise_rows past this is no count a capture wrote: its figures start anew
+MAX_COUNT = 10 ** 9  # an earlier run's noise_rows or runs past this is no count a capture wrote: counted anew
 
 
 @dataclass(frozen=True)
@@ -308,7 +308,8 @@ class NoiseStats:
             ns, nr = np.asarray(meta["sample_noise"], dtype=float), np.asarray(meta["row_noise"], dtype=float)
         except (KeyError, TypeError, ValueError, OverflowError):
             return cls(n)
-        if not 1 <= rows <= MAX_POOLED_ROWS or ns.shape != (n,) or nr.shape != (n,) or not (np.all(np.isfinite(ns)) and np.all(np.isfinite(nr))):
+        if not 1 <= rows <= MAX_COUNT or ns.shape != (n,) or nr.shape != (n,) or \
+                not (np.all(np.isfinite(ns)) and np.all(np.isfinite(nr))):
             return cls(n)
         return cls(n, rows, rows * ns ** 2, rows * nr ** 2)
 
@@ -389,7 +390,7 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
         before_s, runs = float(prior.get("duration_s", 0.0)), int(prior.get("runs", 0)) + 1
     except (TypeError, ValueError, OverflowError):
         before_s, runs = 0.0, 1
-    if not (math.isfinite(before_s) and before_s >= 0) or not 1 <= runs <= MAX_POOLED_ROWS:
+    if not (math.isfinite(before_s) and before_s >= 0) or not 1 <= runs <= MAX_COUNT:
         before_s, runs = 0.0, 1
     t_start = clock.monotonic()
     info = {"schedule": schedule.origin, "samples_per_row": samples, "max_spread_volts": max_spread,

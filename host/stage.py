@@ -89,18 +89,21 @@ class PoseStage:
         return [np.where(need, target + a, target), target]
 
     def move_to(self, pose) -> None:
-        steps = self.plan(pose)
+        self._go(self.plan(pose))
+        for name in self.settings.axes.pose_axes:
+            self.loaded[STAGE_AXES.index(name)] = True
+
+    def _go(self, steps: list[np.ndarray]) -> None:
+        """Move through pose displacements ``steps``, each checked against the limits before the first is sent,
+        ``on_move`` told the machine targets before and None after."""
         for d in steps:
             self._check(d)
         targets = [self.settings.axes.to_machine(self.zero, d) for d in steps]
         if self.on_move is not None:
             self.on_move(targets)
-        for d, t in zip(steps, targets):
-            start = self.position
-            self.position = self.ctrl.move(t, self.settings.feed, start=start)
+        for t in targets:
+            self.position = self.ctrl.move(t, self.settings.feed, start=self.position)
             self.moves += 1
-        for name in self.settings.axes.pose_axes:
-            self.loaded[STAGE_AXES.index(name)] = True
         if self.on_move is not None:
             self.on_move(None)
 
@@ -116,14 +119,8 @@ class PoseStage:
             return None
         target = np.array(here, dtype=float)
         target[STAGE_AXES.index("dz")] = top
-        machine = self.settings.axes.to_machine(self.zero, target)
-        if self.on_move is not None:
-            self.on_move([machine])
-        self.position = self.ctrl.move(machine, self.settings.feed, start=self.position)
-        self.moves += 1
+        self._go([target])
         self.loaded[STAGE_AXES.index("dz")] = False  # against the approach: the next pose comes from above again
-        if self.on_move is not None:
-            self.on_move(None)
         return float(top)
 
     def jog(self, axis: str, step: float) -> np.ndarray:

@@ -99,11 +99,13 @@ def held_out_from_args(model: Model, args) -> tuple[np.ndarray, np.ndarray] | No
 
 def no_held_out_note(model: Model) -> str:
     """Why a check without held-out readings (:func:`held_out_from_args` gave None) measured no rounding's share."""
+    from fitgen.fitting.holdout import names_held_out_set
+
     rec = model.fit_info.get("held_out")
     if not isinstance(rec, dict):
         return ("note: rounding's share not measured: the model file has no held_out record (`fitgen fit` writes "
                 "one when it knows the sensor)")
-    if not all(key in rec for key in ("box", "poses", "seed")):
+    if not names_held_out_set(rec):
         return ("note: rounding's share not measured: the model file's held_out record names no held-out set (its "
                 "box, poses and seed, which `fitgen fit` writes)")
     return ("note: rounding's share not measured: the sensor the model file's held_out record names is not known "

@@ -370,9 +370,8 @@ def _check_fit_notes(fit, origin: str) -> None:
         if key in held and (isinstance(held[key], bool) or not isinstance(held[key], int)
                             or not low <= held[key] < 2 ** 63):
             refuse(f".held_out.{key}", f"a whole number >= {low}", held[key])
-    for key in ("sensor_sha256",):
-        if key in fit and not isinstance(fit[key], (str, type(None))):
-            refuse(f".{key}", "a hash (text)", fit[key])
+    if not isinstance(fit.get("sensor_sha256"), (str, type(None))):
+        refuse(".sensor_sha256", "a hash (text)", fit["sensor_sha256"])
 
 
 def _term(text, where: str) -> Term:

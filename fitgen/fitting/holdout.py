@@ -333,6 +333,11 @@ def fitted_sensor_spec(model: Model) -> str | None:
     return recorded_spec(model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None)
 
 
+def names_held_out_set(rec) -> bool:
+    """Whether a model's ``held_out`` record names a set to simulate again: its box, poses and seed."""
+    return isinstance(rec, dict) and all(key in rec for key in ("box", "poses", "seed"))
+
+
 def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] | None:
     """The noise-free held-out readings and targets the model file's ``held_out`` record names,
     simulated again (with ``sensor``, else the preset it names, checked by hash); None when the
@@ -340,7 +345,7 @@ def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] |
     from fitgen.physics.simulate import dataset_sensor
 
     rec = model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None
-    if not isinstance(rec, dict) or not all(key in rec for key in ("box", "poses", "seed")):
+    if not names_held_out_set(rec):
         return None  # no record, or one that names no set (a sensor alone)
     if not set(POSE_NAMES) <= set(rec["box"]):
         raise InputError(f"the model file's fit.held_out.box gives no range for "

@@ -255,13 +255,14 @@ def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: 
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
     box = capture_box(drawing, axes, ranges, working=True, rig_error=rig_error, zero_error=zero_error)
-    inner = inner_box(DEFAULT_RANGES, rig_error, float(np.hypot(zero_error, zero_error)))
+    zeros = float(np.hypot(zero_error, zero_error))  # this capture's zero and the calibration's, each set anew
+    inner = inner_box(DEFAULT_RANGES, rig_error, zeros)
     for a in axes:
         lo, hi = max(box[a][0], inner[a][0]), min(box[a][1], inner[a][1])
         if not lo < hi:
             raise InputError(f"the limits of {a} leave no room in the working pose box ({DEFAULT_RANGES[a][0]:g}.."
                              f"{DEFAULT_RANGES[a][1]:g}) clear of its edges by the stage's error "
-                             f"({inner[a][0] - DEFAULT_RANGES[a][0]:.2g} mm), where fitgen check reads no row")
+                             f"({edge_margin(rig_error, zeros):.2g} mm), where fitgen check reads no row")
         box[a] = (lo, hi)
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x636865636B]))
     cand = np.zeros((CHECK_TRIES * n, len(POSE_NAMES)))
@@ -274,7 +275,7 @@ def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: 
     return stage_order(cand), {"check": True, "seed": seed, "axes": list(axes), "sensor": drawing.name,
                                "ranges": {a: list(box[a]) for a in axes}, "linear_share": LINEAR_SHARE,
                                "rig_error": rig_error, "zero_error": zero_error,
-                               "edge_margin": edge_margin(rig_error, float(np.hypot(zero_error, zero_error)))}
+                               "edge_margin": edge_margin(rig_error, zeros)}
 
 
 def write_schedule(path, poses: np.ndarray, axes, info: dict) -> None:
