@@ -19,6 +19,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import read_text, write_atomic
+from fitgen.c.codegen import check_magnitudes
 from fitgen.equations.model import Model, check_input_units, load_model, model_from_dict
 
 from host.autozero import AutoZero, AutoZeroSettings
@@ -200,6 +201,9 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
         raise InputError(f"the model takes {model.n_inputs} inputs; the run has {run.n_inputs} readings per sample")
     units = recorded.input_units if recorded is not None else "V"  # tactile-host read records ADC volts
     check_input_units(model, units, "the run's readings")
+    # the arithmetic the run was estimated in: the C engine's float is the float header's, emulated bit for bit
+    precision = h.get("precision", "double") if h.get("precision") in ("double", "float") else "double"
+    check_magnitudes(model, precision)  # as predict and codegen: estimates always finite
     same = model.sha256 == h.get("model")
     if temp_comp and no_temp_comp:
         raise InputError("give --temp-comp or --no-temp-comp, not both")
@@ -214,8 +218,6 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     header = {**{k: v for k, v in h.items() if k != "run"}, "model": model.sha256,
               **({} if moved is None else {"reference": moved[0].tolist(), "rest_source": moved[1]}),
               "outputs": list(model.output_names), **corrections.describe(), "model_file": model.to_dict()}
-    # the arithmetic the run was estimated in: the C engine's float is the float header's, emulated bit for bit
-    precision = h.get("precision", "double") if h.get("precision") in ("double", "float") else "double"
     v_all, out_all, st_all = _estimate(run, model, precision, corrections, progress)
     if not same:
         notes.append(f"the run was recorded with model {str(h.get('model'))[:12]}")

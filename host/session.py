@@ -14,6 +14,7 @@ from fitgen.base.errors import InputError
 from fitgen.base.fileio import OutputText
 from fitgen.base.parse import LONGEST_WAIT, parse_numbers, parse_positive
 from fitgen.base.progress import Progress
+from fitgen.c.codegen import check_magnitudes
 from fitgen.equations.model import check_input_units, load_model
 from fitgen.fitting.holdout import fitted_sensor_spec
 from fitgen.physics.pose import check_above_board
@@ -196,6 +197,7 @@ class ReadoutSession:
             print(f"{prog}: note: the model was fitted on {lost}, not found here as it was: simulating "
                   f"{args.sensor}; give --sensor", file=sys.stderr)
         check_input_units(model, "V", "the ADCs' readings", f"model {args.model}")
+        check_magnitudes(model, args.precision or "double")  # as predict and codegen: estimates always finite
         if motion is None and pose is not None:  # said of the option here; the simulated bus would say "pose 1"
             check_above_board(load_sensor(args.sensor), pose[None], name=f"--simulate {args.simulate}")
         if tempcomp is not None and tempcomp.n != model.n_inputs:

@@ -368,6 +368,27 @@ def test_absurd_coefficients_are_refused_in_one_line_without_numpys_warning(fitt
     assert_one_line_error(proc, 2, "its terms reach inf in the input domain")
 
 
+@pytest.mark.parametrize("where", ["coefficients", "harmonics"])
+def test_read_and_replay_refuse_an_overflowing_model_as_predict_does(model_file, tmp_path, where):
+    """read and replay took such a model and streamed inf and NaN estimates with status 0."""
+    run = tmp_path / "r.jsonl"
+    read = ("tactile-host", "read", "--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3", "--simulate", "0,0,-1,0,0",
+            "--count", "3")
+    assert run_cli(*read, "--model", model_file, "--record", str(run), "-o", str(tmp_path / "r.csv")).returncode == 0
+    model = json.loads(Path(model_file).read_text())
+    if where == "coefficients":
+        model["outputs"][0]["coefficients"][:2] = [1e308, 1e308]
+    else:
+        model["inputs"]["harmonics"] = {"hc1": [1e308] * 2 + [0.0] * 6}
+        model["outputs"][0]["terms"][0] = "hc1*hr"
+    (tmp_path / "m.json").write_text(json.dumps(model))
+    for proc in (run_cli(*read, "--model", str(tmp_path / "m.json"), "-o", str(tmp_path / "e.csv")),
+                 run_cli("tactile-host", "replay", str(run), "--model", str(tmp_path / "m.json"),
+                         "-o", str(tmp_path / "e.csv"))):
+        assert_one_line_error(proc, 2, "output dx: its terms reach")
+        assert not (tmp_path / "e.csv").exists()
+
+
 def test_a_huge_cell_is_named_where_it_is(data, tmp_path):
     lines = data.read_text().splitlines()
     cells = lines[3].split(",")

@@ -225,8 +225,9 @@ class Harmonics:
         smin = float(np.sum(lo))
         big = np.maximum(np.abs(lo), np.abs(hi))
         out = {"hr": 1.0 / smin}
-        for sym, w in self.weights:
-            out[sym] = float(np.sum(np.abs(w) * big)) / smin
+        with np.errstate(over="ignore"):  # weights past float's range: inf, which the caller refuses
+            for sym, w in self.weights:
+                out[sym] = float(np.sum(np.abs(w) * big)) / smin
         return out
 
 
