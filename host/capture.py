@@ -321,13 +321,26 @@ class NoiseStats:
                 "row_noise": [float(x) for x in np.sqrt(self.sum_var_row / self.rows)]}
 
 
-def prior_meta(output) -> dict:
-    """The meta of ``output``'s rows so far ({} when there is none, or it cannot be read)."""
-    try:
-        meta = json.loads(read_text(meta_path(output), "meta"))
-    except (InputError, ValueError):
+def prior_meta(output, rows: int) -> dict:
+    """The meta of ``output``'s ``rows`` rows so far ({} without rows). InputError when they have none, or one
+    that cannot be read: it is all that says which sensor, channels and samples they were taken with, and a
+    resume would write this run's over it as if it spoke for them."""
+    if rows == 0:
         return {}
-    return meta if isinstance(meta, dict) else {}
+    path, these = meta_path(output), "its row" if rows == 1 else f"its {rows} rows"
+    if not path.exists():
+        raise InputError(f"output {output}: no meta ({path.name}) says what {these} {'was' if rows == 1 else 'were'} "
+                         "captured with: restore it to resume, or choose another -o")
+    try:
+        meta = json.loads(read_text(path, "meta"))
+    except (InputError, ValueError, RecursionError) as exc:
+        why = str(exc).splitlines()[0] if isinstance(exc, InputError) else "not JSON"
+        raise InputError(f"output {output}: the meta of {these} cannot be read ({why}): repair it from a "
+                         "copy to resume, or choose another -o") from None
+    if not isinstance(meta, dict):
+        raise InputError(f"output {output}: the meta of {these} is not a JSON object: repair it from a copy "
+                         "to resume, or choose another -o")
+    return meta
 
 
 def prior_row_degc(prior: dict, rows: int) -> list | None:
@@ -346,9 +359,7 @@ def check_resume(output: str | Path, rows: int, this: dict) -> None:
     source, or averaging another number of samples (the meta speaks for every row with one of each). A simulated
     sensor is told by its description's hash (``sensor_sha256``) when both runs recorded one: the same unit's
     file, by another path or moved, is the same source."""
-    if rows == 0:
-        return
-    prior = prior_meta(output)
+    prior = prior_meta(output, rows)
     if "sensor_sha256" in prior and "sensor_sha256" in this:
         if prior["sensor_sha256"] != this["sensor_sha256"]:
             raise InputError(f"output {output}: its {rows} rows were captured from {prior.get('source')} (sensor "
@@ -384,7 +395,7 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
         raise InputError(f"--settle must be >= 0 s, got {settle}")
     state = prepare_output(output, array.n, schedule)
     res = CaptureResult(len(schedule.poses), int(state.done.sum()), dropped_partial=state.dropped_partial)
-    prior = prior_meta(output) if state.rows > 0 else {}  # rows from earlier runs: pool on from their figures
+    prior = prior_meta(output, state.rows)  # rows from earlier runs: pool on from their figures
     noise = res.noise = NoiseStats.from_meta(prior, array.n)
     try:  # an earlier run's counts, as its meta kept them; damaged ones start anew, as the noise figures do
         before_s, runs = float(prior.get("duration_s", 0.0)), int(prior.get("runs", 0)) + 1

@@ -96,7 +96,7 @@ def _kept(output, resume: str = "") -> str:
 def same_temperature(output, rows: int, degc: float) -> float:
     """``degc``, the thermistor's reading as a run starts; InputError when ``output``'s ``rows`` rows were taken more
     than CAPTURE_DEGC_TOL away from it (the meta speaks for every row with one temperature)."""
-    before = thermistor_degc(prior_meta(output)) if rows else None
+    before = thermistor_degc(prior_meta(output, rows)) if rows else None
     if before is not None and math.isfinite(degc) and abs(degc - before) > CAPTURE_DEGC_TOL:
         raise InputError(f"the {rows} rows in {output} were captured at {before:.1f} degC and the thermistor reads "
                          f"{degc:.1f} degC now: let the sensor come back within {CAPTURE_DEGC_TOL:g} degC of it, or "
@@ -179,7 +179,7 @@ def _run_capture(args, prog: str) -> None:
             stage, meta["stage"] = open_stage(args, stage_opts, args.output, state.rows, prog)
             meta["stage"]["settle_s"] = settle
             st = meta["stage"]
-            st["zeros_machine_mm"] = run_zeros(prior_meta(args.output) if state.rows else {}, st["zero_machine_mm"],
+            st["zeros_machine_mm"] = run_zeros(prior_meta(args.output, state.rows), st["zero_machine_mm"],
                                                st["zero_source"])
             set_pose = stage.move_to
         with Progress("capture", pending) as progress:

@@ -546,6 +546,30 @@ def test_a_resume_over_an_earlier_runs_damaged_counts_counts_anew(sensor, tmp_pa
     assert meta["runs"] == 1 and 0 <= meta["duration_s"] < 1e6, meta
 
 
+@pytest.mark.parametrize("damage, said", [
+    ("remove", "no meta (d.csv.meta.json) says what its 2 rows were captured with"),
+    ("{\"samples_per_row\": 2,", "the meta of its 2 rows cannot be read (not JSON)"),
+    ("[1, 2]", "the meta of its 2 rows is not a JSON object"),
+    ("folder", "the meta of its 2 rows cannot be read (")])
+def test_a_resume_over_rows_whose_meta_is_lost_or_damaged_is_refused_and_keeps_them(tmp_path, damage, said):
+    """Such a resume wrote this run's meta over them, as if its sensor, channels and samples were theirs."""
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:4])
+    out, meta_file = tmp_path / "d.csv", tmp_path / "d.csv.meta.json"
+    args = ["capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate", "--samples", "2"]
+    assert run_cli("tactile-host", *args).returncode == 0
+    out.write_text("".join(out.read_text().splitlines(keepends=True)[:3]))  # two rows to take again
+    meta_file.unlink()
+    if damage == "folder":
+        meta_file.mkdir()
+    elif damage != "remove":
+        meta_file.write_text(damage)
+    rows = out.read_text()
+    assert_one_line_error(run_cli("tactile-host", *args), 2, f"output {out}: {said}")
+    assert out.read_text() == rows
+    assert (meta_file.is_dir() if damage == "folder" else
+            not meta_file.exists() if damage == "remove" else meta_file.read_text() == damage)
+
+
 def test_a_simulated_capture_checks_every_pose_before_the_first_row(tmp_path):
     """A schedule pose that drives the magnet through the board was found only when its turn came, after rows were
     written, and called pose 1 (the bus checks one pose at a time); it is refused first, numbered as in the file."""
