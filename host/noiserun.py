@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import write_atomic
+from fitgen.base.fileio import read_text, write_atomic
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from fitgen.base.progress import Progress
 
@@ -20,6 +20,8 @@ from host.session import adc_defaults, channel_map_from_args, open_bus_from_args
 # at two ADS1115s' 140 samples per second white noise's flicker floor is read to about 6e-6 mV^2, so that 128 and
 # 256 samples per row can be told safe (host.allan.EXCESS); at 300 s 1 in 3 white recordings is told 64
 SECONDS = 600.0
+# V rms a sample can read: below 1 nV no ADC resolves (an ADS1115's least step is 7.8 uV), above 10 V none reads
+SINGLE_V = (1e-9, 10.0)
 
 
 def _seconds(samples: int, rate: float) -> int:
@@ -128,16 +130,15 @@ def told(path) -> tuple[int, np.ndarray]:
     """What a record ``save`` wrote tells a capture: the samples per row it recommends and each element's
     single-sample noise, V. InputError when the file is no such record, or when its recording recommends
     no rows (too short to read one, readings that do not average down or that drift: verdict's order)."""
+    text = read_text(path, "noise record")
     try:
-        with open(path, encoding="utf-8") as f:
-            rec = json.load(f)
+        rec = json.loads(text)
         samples, single = int(rec["recommended"]), np.asarray(rec["single_v"], dtype=float)
         candidates, ratio, drifts = list(rec["candidates"]), np.asarray(rec["ratio"], dtype=float), rec["drifts"]
-    except OSError as exc:
-        raise InputError(f"cannot read the noise record {path}: {exc.strerror or exc}") from None
-    except (ValueError, TypeError, KeyError, OverflowError) as exc:
-        raise InputError(f"{path} is not a record tactile-host noise -o wrote ({type(exc).__name__}: {exc})") from None
-    sane = single.ndim == 1 and single.size and np.all(np.isfinite(single) & (single > 0))
+    except (ValueError, TypeError, KeyError, OverflowError, RecursionError) as exc:
+        raise InputError(f"{path} is not a record tactile-host noise -o wrote ({type(exc).__name__}: "
+                         f"{str(exc)[:80]})") from None
+    sane = single.ndim == 1 and single.size and np.all((single >= SINGLE_V[0]) & (single <= SINGLE_V[1]))
     if samples not in CANDIDATES or not sane or not isinstance(drifts, bool):
         raise InputError(f"{path} is not a record tactile-host noise -o wrote (its recommendation, noise or drift "
                          "is off)")

@@ -248,6 +248,11 @@ def _edited(tmp_path, **changes):
     return path
 
 
+def _written(path, data: bytes):
+    path.write_bytes(data)
+    return path
+
+
 @pytest.mark.parametrize("make,extra,what", [
     (lambda p: _record(p, _stream(0.0, 3.0)), (), "too short to read 16 samples per row"),
     (lambda p: _record(p, _stream(0.0, 60.0) + 2e-5 * np.arange(int(60 * RATE))[:, None] / RATE), (),
@@ -258,12 +263,17 @@ def _edited(tmp_path, **changes):
     # JSON's integers past a float's range: an OverflowError, a traceback
     (lambda p: _edited(p, ratio=[[10 ** 400]]), (), "is not a record tactile-host noise -o wrote"),
     (lambda p: _record(p, _stream(0.0, 120.0)), ("--transfer", "raw"), "measured volts and the schedule is for mT"),
-    (lambda p: p / "absent.json", (), "cannot read the noise record"),
+    (lambda p: p / "absent.json", (), "noise record {p}/absent.json: no such file"),
+    # figures no ADC reads: 1e300 overflowed the schedule's weights in numpy warnings, 1e-300 read as no noise
+    (lambda p: _edited(p, single_v=[1e300] * 8), (), "its recommendation, noise or drift is off"),
+    (lambda p: _edited(p, single_v=[1e-300] * 8), (), "its recommendation, noise or drift is off"),
+    (lambda p: (p / "folder.json").mkdir() or p / "folder.json", (), "folder.json: a folder, not a file"),
+    (lambda p: _written(p / "r.json", b'{"a": "\xe9"}'), (), "line 1 is not UTF-8 text"),
 ])
 def test_a_record_that_tells_no_rows_is_refused(tmp_path, make, extra, what):
     out = tmp_path / "s.csv"
     r = run_cli("fitgen", "schedule", "--n", "12", "--samples", str(make(tmp_path)), *extra, "-o", str(out))
-    assert_one_line_error(r, 2, what)
+    assert_one_line_error(r, 2, what.format(p=tmp_path))
     assert not out.exists() and not (tmp_path / "s.csv.meta.json").exists()
 
 
