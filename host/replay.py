@@ -290,6 +290,14 @@ def _own_rest(model: Model, header: dict, n: int, notes: list) -> tuple[np.ndarr
     return new, whose
 
 
+def _finite(values, what: str) -> None:
+    """InputError when header ``values`` (None: not recorded) hold a number that is not finite: every estimate
+    corrected by them would be NaN, replayed without a word."""
+    if values is not None and not np.all(np.isfinite(values)):
+        raise InputError(f"the run's header records {what} with a number that is not finite (edited by hand?): every "
+                         "estimate corrected by it would be NaN")
+
+
 def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zero, rest=None) -> Corrections:
     """The corrections to replay ``run`` with: a compensation file or the header's, its tare, its auto-zero; with
     ``rest``, the tare and auto-zero's zero taken onto those rest readings instead of the run's."""
@@ -309,7 +317,9 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
     tare = None if h.get("tare") is None else np.array(h["tare"], dtype=float)
     if tare is not None and tare.shape != (n,):
         raise InputError(f"the run's header records a tare of {tare.size} offsets for {n} readings")
+    _finite(tare, "a tare")
     moved = 0.0 if rest is None else np.asarray(h["reference"], dtype=float) - rest  # the offsets onto ``rest``
+    _finite(moved, "rest readings")
     tare = None if tare is None else tare + moved
     az_rec = h.get("auto_zero")
     use_az = bool(az_rec) if auto_zero is None else auto_zero
@@ -329,5 +339,9 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
         ref = np.array(ref, dtype=float) if rest is None else rest
         if ref.shape != (n,):
             raise InputError(f"the run's header records {ref.size} rest readings for {n} readings")
+        _finite(start, "an auto-zero start")
+        _finite(ref, "rest readings")
+        if not (math.isfinite(float(noise)) and float(noise) >= 0):
+            raise InputError(f"the run's header records a noise floor of {noise}, not a figure >= 0 (edited by hand?)")
         az = AutoZero.for_model(model, ref, float(noise), zero=start, settings=settings)
     return Corrections(tare, tc, az)

@@ -523,6 +523,32 @@ def test_a_correction_the_run_cannot_take_names_the_option_typed(model_file, tmp
             assert "header records" not in proc.stderr and "InputError" not in proc.stderr
 
 
+@pytest.mark.parametrize("field, value, said", [
+    ("tare", [float("nan")] * 8, "a tare with a number that is not finite"),
+    ("reference", [1.5] * 7 + [float("inf")], "rest readings with a number that is not finite"),
+    ("auto_zero.start", [float("nan")] * 8, "an auto-zero start with a number that is not finite"),
+    ("noise", -1.0, "a noise floor of -1.0, not a figure >= 0"),
+    ("noise", float("nan"), "a noise floor of nan")])
+def test_a_header_correction_that_is_not_a_number_is_refused_not_replayed_as_nan(model_file, tmp_path, field, value,
+                                                                                 said):
+    """A run's tare, rest or auto-zero start edited to NaN: replay estimated every sample as NaN and said nothing."""
+    run = tmp_path / "r.jsonl"
+    assert run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "0,0,0,0,0",
+                   "--tare", "--auto-zero", "--count", "5", "--record", str(run),
+                   "-o", str(tmp_path / "s.csv")).returncode == 0
+    assert run_cli("tactile-host", "replay", str(run), "-o", str(tmp_path / "ok.csv")).returncode == 0
+    header, *rest = run.read_text().splitlines()
+    h = json.loads(header)
+    key, _, sub = field.partition(".")
+    if sub:
+        h[key][sub] = value
+    else:
+        h[key] = value
+    run.write_text("\n".join([json.dumps(h)] + rest) + "\n")
+    assert_one_line_error(run_cli("tactile-host", "replay", str(run), "-o", str(tmp_path / "e.csv")), 2, said)
+    assert not (tmp_path / "e.csv").exists()
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--temp-comp", "tc.json"], "temp=CHIP@ADDRESS:INPUT"),
     (["--thermistor", "beta=3950"], "add temp=CHIP@ADDRESS:INPUT to --adc"),
