@@ -99,6 +99,17 @@ def test_explicit_elements_and_rings_combine():
     np.testing.assert_allclose(s.axes[8:12], np.tile([0, 0, 1.0], (4, 1)))
 
 
+@pytest.mark.parametrize("scale", [1e308, 1e-320])
+def test_an_axis_written_near_floats_limits_is_the_direction_it_names(scale):
+    """[1e308, 1e308, 0]'s norm overflowed (numpy's warning) and the element's axis read as zeros: a dead element
+    without a word; [1e-320, ..]'s underflowed."""
+    d = paper_dict()
+    d["elements"]["list"] = [{"position": [1.0, 2.0, 0.0], "axis": [scale, scale, 0.0]}]
+    with np.errstate(all="raise"):
+        s = parse_sensor(d)
+    np.testing.assert_allclose(s.axes[-1], [math.sqrt(0.5), math.sqrt(0.5), 0.0], rtol=1e-15)
+
+
 def test_elevation_raises_a_ring_axis_toward_the_normal():
     d = paper_dict()
     d["elements"]["ring"] = [{"count": 4, "radius": 10.0, "axis": "radial", "elevation": 30.0},

@@ -237,9 +237,15 @@ class _Section:
             raise InputError(f"{self.origin}: '{self._key(key)}' must be a list of 3 finite numbers, got {val!r}")
         vec = np.asarray(val, dtype=float)
         if unit:
-            norm = np.linalg.norm(vec)
-            if norm == 0:
+            if not vec.any():
                 raise InputError(f"{self.origin}: '{self._key(key)}' must not be the zero vector")
+            with np.errstate(over="ignore", under="ignore"):
+                norm = np.linalg.norm(vec)
+            # numbers near float's limits (1e308, 1e-320) scaled first; only they, so that every other axis keeps
+            # its bits, and its sensor its hash (a unit's posterior records it)
+            if not np.finfo(float).tiny <= norm < np.inf:
+                vec = vec / np.abs(vec).max()
+                norm = np.linalg.norm(vec)
             vec = vec / norm
         return vec
 
