@@ -331,10 +331,13 @@ def test_a_models_input_names_that_are_not_its_inputs_are_refused(fitted, data, 
 
 @pytest.mark.parametrize("edit, said", [
     ({"units": "furlongs"}, "units must be mT or V, got 'furlongs'"),
-    ({"noise": -1}, "noise must be a noise figure >= 0 (or one per element), got -1"),
+    ({"noise": -1}, "noise must be a noise figure 0..1000 (or one per element), got -1"),
     ({"row_noise": [0.001]}, "row_noise gives 1 figure(s) for 8 elements"),
     ({"samples_per_row": 0}, "samples_per_row must be a whole number 1..10000, got 0"),
-    ({"noise": 10 ** 400}, "noise must be a noise figure >= 0 (or one per element)")])
+    ({"noise": 10 ** 400}, "noise must be a noise figure 0..1000 (or one per element)"),
+    # a figure past any sensor's, squared, overflowed in the fit or identify (which blamed the unit file it wrote)
+    ({"sample_noise": [5e-4] * 7 + [1e308]}, "sample_noise must be a noise figure 0..1000 (or one per element), got "
+                                               "1e+308 for element 8")])
 def test_a_meta_figure_the_fit_reads_that_is_not_as_written_is_refused(data, tmp_path, edit, said):
     """A meta edited by hand was fitted on without a word: a model in 'furlongs' no other command would read, or
     a noise of -1 recorded as the data's own."""
@@ -396,6 +399,18 @@ def test_a_huge_cell_is_named_where_it_is(data, tmp_path):
     (tmp_path / "d.csv").write_text("\n".join(lines[:3] + [",".join(cells)] + lines[4:]) + "\n")
     assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json")),
                           contains="data row 3, column v4, holds 1e+300")
+
+
+def test_report_names_a_huge_label_where_it_is(fitted, data, tmp_path):
+    """A label of 1e308 mm: report squared it into numpy's overflow warning and an error table of inf."""
+    lines = data.read_text().splitlines()
+    cells = lines[4].split(",")
+    cells[lines[0].split(",").index("dx")] = "1e308"
+    (tmp_path / "d.csv").write_text("\n".join(lines[:4] + [",".join(cells)] + lines[5:]) + "\n")
+    (tmp_path / "m.json").write_text(json.dumps(fitted))
+    assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "m.json"), "--data", str(tmp_path / "d.csv"),
+                                  "-o", str(tmp_path / "r.md")), contains="data row 4, column dx, holds 1e+308")
+    assert not (tmp_path / "r.md").exists()
 
 
 @pytest.mark.parametrize("edit, said", [

@@ -9,8 +9,8 @@ from pathlib import Path
 from fitgen import __version__
 from fitgen.app.calibrate_cli import add_calibration_commands, cmd_identify, cmd_schedule
 from fitgen.app.cliutil import Parser, check_not_empty, check_output_kind, check_written, command_main, count, finite
-from fitgen.app.options import MAX_NOISE, accuracy_of, fit_settings, noise_of, sensor_of
-from fitgen.base.parse import parse_names
+from fitgen.app.options import accuracy_of, fit_settings, noise_of, sensor_of
+from fitgen.base.parse import MAX_NOISE, parse_names
 from fitgen.base.errors import InputError
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
 from fitgen.equations.terms import FAMILIES
@@ -233,7 +233,7 @@ def cmd_report(args) -> int:
     from fitgen.base.fileio import write_all
     from fitgen.app.report import data_notes, format_report, sweep_sensor
     from fitgen.equations.model import check_input_units, load_model
-    from fitgen.physics.dataset import load_dataset, rows_on_the_skin
+    from fitgen.physics.dataset import load_dataset, refuse_huge, rows_on_the_skin
     from fitgen.physics.sensor import load_sensor
 
     if args.plot and not args.data:  # every check before anything is written
@@ -248,7 +248,7 @@ def cmd_report(args) -> int:
         raise InputError(f"--sensor draws the rotation sweep, and model {args.model} estimates no rotation "
                          f"({', '.join(model.output_names)}): leave --sensor out")
     sensor = sweep_sensor(load_sensor(args.sensor), model) if folder is not None and args.sensor else None
-    ds, lifted = rows_on_the_skin(load_dataset(args.data)) if args.data else (None, 0)
+    ds, lifted = rows_on_the_skin(refuse_huge(load_dataset(args.data))) if args.data else (None, 0)
     if ds is not None:
         check_input_units(model, ds.meta.get("units"), f"{args.data}'s readings", f"model {args.model}")
     if lifted:

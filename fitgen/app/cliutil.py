@@ -57,7 +57,7 @@ def count(text: str) -> int:
 def noise_volts(text: str) -> float:
     """An argparse type: a noise figure in volts, a finite number >= 0 and at most MAX_NOISE (past every reading:
     a slip of the exponent, whose readings overflow)."""
-    from fitgen.app.options import MAX_NOISE
+    from fitgen.base.parse import MAX_NOISE
 
     x = finite(text)
     if not 0 <= x <= MAX_NOISE:

@@ -17,9 +17,6 @@ def sensor_of(args):
     return sensor
 
 
-MAX_NOISE = 1000.0  # V or mT rms: past every reading a sensor gives (a slip of the exponent): readings of it overflow
-
-
 def noise_of(value: str, sensor, most: float | None = None) -> float:
     """``--noise``: a figure >= 0 (at most ``most``), or ``sensor`` for the sensor's own (which must be > 0: a file
     that leaves it out reads 0, and 'the sensor's noise' would then add none without a word)."""

@@ -74,6 +74,9 @@ def parse_penalty(text: str) -> str | float:
     return k
 
 
+MAX_NOISE = 1000.0  # V or mT rms: past every reading a sensor gives (a slip of the exponent): readings of it overflow
+
+
 def parse_noise(text: str, finite: bool = True) -> float:
     """A noise figure: a number >= 0, and finite unless ``finite`` is False.
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError, is_finite_number
 from fitgen.base.fileio import read_text, real_file, sha256_hex, text_kind, write_all
-from fitgen.base.parse import MAX_ROW_SAMPLES
+from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, off_skin
 
 _INPUT_RE = re.compile(r"^v([1-9][0-9]*)$")
@@ -90,14 +90,15 @@ class Dataset:
 HUGE = 1e30  # a reading or label beyond it is a typo or a unit error; its powers would overflow
 
 
-def refuse_huge(ds: Dataset) -> None:
-    """InputError naming the first reading or label beyond HUGE, where it is (not as a term that is not finite,
-    a cast's overflow or a residual that is not)."""
+def refuse_huge(ds: Dataset) -> Dataset:
+    """``ds``; InputError naming the first reading or label beyond HUGE, where it is (not as a term that is not
+    finite, a cast's overflow, or an error whose square is not)."""
     for values, names in ((ds.inputs, [f"v{k + 1}" for k in range(ds.n_inputs)]), (ds.targets, ds.target_names)):
         big = np.argwhere(np.abs(values) > HUGE)
         if big.size:
             r, c = big[0]
             raise InputError(f"data row {r + 1}, column {names[c]}, holds {values[r, c]:g}: beyond any reading or pose")
+    return ds
 
 
 def load_capture(path: str | Path) -> Dataset:
@@ -265,19 +266,22 @@ def load_meta(path: str | Path) -> dict:
 
 def _check_meta_numbers(meta: dict, mp) -> None:
     """InputError (one line) for a meta figure the fit and identify read that is not as the tools write it."""
-    def refuse(key: str, what: str) -> None:
-        raise InputError(f"{mp}: {key} must be {what}, got {meta[key]!r:.60}; repair or remove it")
+    def refuse(key: str, what: str, got=None) -> None:
+        got = f"{meta[key]!r:.60}" if got is None else got
+        raise InputError(f"{mp}: {key} must be {what}, got {got}; repair or remove it")
 
     if meta.get("units") not in (None, *READING_UNITS):
         refuse("units", " or ".join(READING_UNITS))
 
-    def figure(x) -> bool:
-        return is_finite_number(x) and x >= 0
+    def figure(x) -> bool:  # past MAX_NOISE no sensor's, and its square overflows
+        return is_finite_number(x) and 0 <= x <= MAX_NOISE
 
     for key in META_NOISE:
         x = meta.get(key)
         if x is not None and not (figure(x) or isinstance(x, list) and x and all(figure(v) for v in x)):
-            refuse(key, "a noise figure >= 0 (or one per element)")
+            bad = next(((k, v) for k, v in enumerate(x) if not figure(v)), None) if isinstance(x, list) else None
+            refuse(key, f"a noise figure 0..{MAX_NOISE:g} (or one per element)",
+                   None if bad is None else f"{bad[1]!r:.60} for element {bad[0] + 1}")
     n = meta.get("samples_per_row")
     if n is not None and not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_ROW_SAMPLES):
         refuse("samples_per_row", f"a whole number 1..{MAX_ROW_SAMPLES}")
