@@ -151,11 +151,16 @@ def test_pose_files_with_a_byte_order_mark_or_a_column_twice(tmp_path):
 
 
 @pytest.mark.parametrize("meta, said", [([], "not a dataset's meta"), ({"units": 5}, "not a dataset's meta"),
-                                        ("{", "not JSON"), (b"{\xff}", "line 1 is not UTF-8 text (byte 0xff")])
+                                        ("{", "not JSON"), (b"{\xff}", "line 1 is not UTF-8 text (byte 0xff"),
+                                        (None, "d.csv.meta.json: a folder, not a file")])  # was read as no meta
 def test_a_broken_meta_is_said(data, tmp_path, meta, said):
     shutil.copy(data, tmp_path / "d.csv")
     mp = tmp_path / "d.csv.meta.json"
-    mp.write_bytes(meta if isinstance(meta, bytes) else (meta if isinstance(meta, str) else json.dumps(meta)).encode())
+    if meta is None:
+        mp.mkdir()
+    else:
+        mp.write_bytes(meta if isinstance(meta, bytes) else
+                       (meta if isinstance(meta, str) else json.dumps(meta)).encode())
     proc = run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"))
     assert_one_line_error(proc, contains=said)
     assert "not JSON" not in proc.stderr or said == "not JSON"

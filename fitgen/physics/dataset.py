@@ -251,7 +251,7 @@ def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
 def load_meta(path: str | Path) -> dict:
     """The dataset's ``<path>.meta.json`` as written by :meth:`Dataset.save`; {} when there is none."""
     mp = meta_path(path)
-    if not mp.is_file():
+    if not mp.exists():  # a folder of that name is said by read_text, not taken for no meta
         return {}
     text = read_text(mp, "dataset meta")  # its InputError is a ValueError: said as it is, not as JSON's
     try:
