@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen import __version__
+from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, is_stage_error
 from fitgen.physics.dataset import load_meta, meta_path, pose_table, read_text, row_degc
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output, real_file, sha256_hex, write_atomic, write_target
@@ -93,6 +94,10 @@ def load_schedule(path: str | Path) -> Schedule:
     meta = load_meta(path)
     drawing = {k: meta[k] for k in ("sensor", "sensor_file", "sensor_sha256", "transfer") if k in meta}
     stage = {k: meta[k] for k in ("rig_error", "rig_error_given", "zero_error") if k in meta}
+    bad = next((k for k in ("rig_error", "zero_error") if k in stage and not is_stage_error(stage[k])), None)
+    if bad:  # the capture passes it on to identify, which would refuse it only after every row was taken
+        raise InputError(f"{meta_path(path)}: {bad} must be 0..{MAX_STAGE_ERROR:g} mm, got {stage[bad]!r}; repair "
+                         "it, or make the schedule again")
     return Schedule(as_poses(poses), columns, origin, drawing if "sensor" in drawing else None, stage or None,
                     meta.get("check") is True)
 

@@ -441,6 +441,17 @@ def test_capture_averages_as_many_samples_as_the_schedule_was_made_for(tmp_path)
     assert samples_of("given-anyway.csv", "--samples", "2") == 2  # what the user gives is not the meta's to refuse
 
 
+@pytest.mark.parametrize("key, bad", [("rig_error", float("nan")), ("zero_error", 3.0), ("rig_error", "0.01")])
+def test_a_schedule_whose_stage_errors_identify_refuses_is_refused_before_the_capture(tmp_path, key, bad):
+    """The capture copied them into its meta, and identify refused them only once every row had been taken."""
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:2])
+    (tmp_path / "s.csv.meta.json").write_text(json.dumps({"rig_error": 0.01, "zero_error": 0.02, key: bad}))
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "--simulate", "-o",
+                   str(tmp_path / "d.csv"))
+    assert_one_line_error(proc, 2, f"s.csv.meta.json: {key} must be 0..0.5 mm, got {bad!r}; repair it")
+    assert not (tmp_path / "d.csv").exists()
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--samples", "0"], "--samples must be a whole number >= 1, got 0"),
     (["--max-spread", "x"], "--max-spread 'x' is not a number"),

@@ -123,6 +123,11 @@ def check_contact(readings: np.ndarray, poses: np.ndarray, noise: np.ndarray) ->
 MAX_STAGE_ERROR = 0.5  # mm rms: a quarter of the pose box's half-width; a printer errs by 0.01-0.1
 
 
+def is_stage_error(value) -> bool:
+    """``value`` is a number 0..MAX_STAGE_ERROR mm, as a meta may record a rig's or zero's error."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value <= MAX_STAGE_ERROR
+
+
 def check_error(name: str, value: float) -> None:
     """InputError unless a rig's or zero's error is 0..MAX_STAGE_ERROR mm: a stage that errs by more is not one
     to calibrate a +-2 mm sensor on (its rows would weigh next to nothing, and any unit would pass)."""

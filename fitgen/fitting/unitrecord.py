@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.capturecheck import MAX_STAGE_ERROR
+from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, is_stage_error
 from fitgen.fitting.identify import PINNABLE, RIG, RIG_ERROR, ZERO_ERROR, Identification, tilting
 from fitgen.physics.dataset import row_degc, thermistor_degc
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
@@ -215,7 +215,7 @@ def stage_errors(rig: float | None, zero: float | None, meta: dict, capture) -> 
                                       (zero, "zero_error", "--zero-error", ZERO_ERROR)):
         if value is None and key in made:
             value = made[key]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= MAX_STAGE_ERROR:
+            if not is_stage_error(value):
                 raise InputError(f"{capture}'s meta: schedule_stage.{key} must be 0..{MAX_STAGE_ERROR:g} mm, got "
                                  f"{value!r}; repair it, or give {flag}")
             recorded.append(key.replace("_", " "))
