@@ -289,7 +289,9 @@ def test_report_on_fit_notes_edited_by_hand_is_one_line(fitted, tmp_path, edit):
     (lambda f: f.__setitem__("held_out", {"sensor": "paper", "box": {}, "poses": 10, "seed": 1.5}),
      "fit.held_out.seed must be a whole number >= 0"),
     # a hash that is a list: fitgen check's TypeError (unhashable), a traceback
-    (lambda f: f.__setitem__("sensor_sha256", ["ab"]), "fit.sensor_sha256 must be a hash (text)")])
+    (lambda f: f.__setitem__("sensor_sha256", ["ab"]), "fit.sensor_sha256 must be a hash (text)"),
+    # labels no simulation knows: verify said "labels are the stage's or the magnet's" without the file or field
+    (lambda f: f.__setitem__("held_out", {"labels": "xyz"}), "fit.held_out.labels must be 'stage' or 'magnet'")])
 def test_fit_notes_edited_where_commands_read_them_are_refused_as_the_model_is_loaded(fitted, data, tmp_path, edit,
                                                                                        said):
     """Notes that predict, codegen and the readouts read (the held-out box, the precision) were read as tables far
@@ -428,7 +430,9 @@ def test_report_names_a_huge_label_where_it_is(fitted, data, tmp_path):
     (lambda m: m["inputs"]["min"].__setitem__(0, 10 ** 400), "inputs.min must be a finite number, got 1000"),
     (lambda m: m.__setitem__("outputs", []), "no outputs"),
     # it said inputs.names must be v1..v7 for its 7 inputs, of names that were right
-    (lambda m: m["inputs"]["min"].pop(), "inputs.min has 7 values and inputs.max 8: one per input")])
+    (lambda m: m["inputs"]["min"].pop(), "inputs.min has 7 values and inputs.max 8: one per input"),
+    # read by nothing, so an edit to "m" or "in" converted nothing and no one said so
+    (lambda m: m["outputs"][0].__setitem__("unit", "in"), "outputs[0].unit: dx is estimated in mm, not 'in'")])
 def test_a_model_file_edited_by_hand_is_named_in_its_refusal(fitted, tmp_path, edit, said):
     data = json.loads(json.dumps(fitted))
     edit(data)

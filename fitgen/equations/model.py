@@ -319,6 +319,10 @@ def model_from_dict(data, origin: str = "model") -> Model:
             coefs = tuple(finite_number(c, f"{where}.coefficients") for c in o["coefficients"])
             if len(terms) != len(coefs):
                 raise InputError(f"{where}: {len(terms)} terms but {len(coefs)} coefficients")
+            own = POSE_UNITS[POSE_NAMES.index(o["name"])] if o["name"] in POSE_NAMES else None
+            if own is not None and o.get("unit", own) != own:  # the estimate is in its own, whatever the file says
+                raise InputError(f"{where}.unit: {o['name']} is estimated in {own}, not {o['unit']!r:.40} (the "
+                                 "coefficients are fitted in it; an edit does not convert them)")
             eqs.append(Equation(o["name"], finite_number(o["intercept"], f"{where}.intercept"), terms, coefs))
     except (KeyError, TypeError) as exc:
         raise InputError(f"{origin}: malformed model ({type(exc).__name__}: {exc})") from None
@@ -366,6 +370,8 @@ def _check_fit_notes(fit, origin: str) -> None:
             refuse(f".held_out.box.{name}", "[low, high] (finite, low <= high)", pair)
     if "rest" in held and not (isinstance(held["rest"], list) and all(map(is_finite_number, held["rest"]))):
         refuse(".held_out.rest", "a list of readings", held["rest"])
+    if held.get("labels", "stage") not in ("stage", "magnet"):  # whose displacements the set is simulated in
+        refuse(".held_out.labels", "'stage' or 'magnet'", held["labels"])
     for key, low in (("poses", 1), ("seed", 0)):  # what verify and tactile-hil simulate the held-out set again from
         if key in held and (isinstance(held[key], bool) or not isinstance(held[key], int)
                             or not low <= held[key] < 2 ** 63):
