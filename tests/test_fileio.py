@@ -79,6 +79,21 @@ def test_a_device_node_is_refused_and_stays_a_device(tmp_path, writer):
     assert leftovers(tmp_path) == []
 
 
+@pytest.mark.parametrize("argv", [["fit", "/dev/zero", "-o", "m.json"], ["simulate", "--poses", "/dev/zero", "-o", "d.csv"],
+                                  ["schedule", "--samples", "/dev/zero.json", "-o", "s.csv"]])
+def test_an_endless_device_as_an_input_is_one_line_not_all_memory(tmp_path, argv):
+    """/dev/zero given for a dataset, a pose file or a noise record was read to its end, which it has not, until
+    the memory ran out; a pipe, which ends, still reads."""
+    if argv[2] == "/dev/zero.json":
+        os.symlink("/dev/zero", tmp_path / "zero.json")
+        argv = [*argv[:2], "zero.json", *argv[3:]]
+    proc = run_cli("fitgen", *argv, cwd=tmp_path)
+    assert_one_line_error(proc, 2, "a character device, not a file")
+    assert os.listdir(tmp_path) in ([], ["zero.json"])
+    ok = run_cli("fitgen", "simulate", "--poses", "/dev/stdin", "-o", "d.csv", input="dx,dz\n0.5,-1\n", cwd=tmp_path)
+    assert ok.returncode == 0, ok.stderr
+
+
 @pytest.mark.parametrize("writer", WRITERS)
 def test_a_socket_is_refused(tmp_path, writer):
     with unix_socket(tmp_path / "sock") as path:

@@ -381,9 +381,30 @@ def text_kind(text: str) -> str:
     return "csv" if "," in first else ""
 
 
+def _device(path) -> str | None:
+    """What ``path`` is when it is a device other than a terminal (which ends where its user types the end)."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None  # said as read_bytes says it
+    if not (stat.S_ISCHR(mode) or stat.S_ISBLK(mode)):
+        return None
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    except OSError:
+        return None
+    try:
+        return None if os.isatty(fd) else _kind(mode)
+    finally:
+        os.close(fd)
+
+
 def read_text(path: str | os.PathLike, what: str) -> str:
     """A text file's content; a missing or unreadable file, or one that is not UTF-8 text, is an InputError naming
     ``what`` (and the line of the first byte that is not UTF-8)."""
+    device = _device(path)
+    if device:  # /dev/zero, a disk: read to their end, they fill the memory first
+        raise InputError(f"{what} {path}: {device}, not a file")
     try:
         data = Path(path).read_bytes()
     except FileNotFoundError:
