@@ -190,12 +190,13 @@ class ReadoutSession:
         az_settings = AutoZeroSettings(band_mm=band[0], band_deg=band[1],
                                        hold=parse_positive(args.rest_hold, "--rest-hold")).checked()
         self.model = model = load_model(args.model)
+        notes = []  # said once every option has passed: a refusal is one line, not a note and then the refusal
         own = None if sensor_given else fitted_sensor_spec(model)
         if own:  # what --simulate simulates and --tare rests on: the model's own sensor, where found
             args.sensor = own
         elif not sensor_given and args.simulate is not None and (lost := _lost_sensor(model)):
-            print(f"{prog}: note: the model was fitted on {lost}, not found here as it was: simulating "
-                  f"{args.sensor}; give --sensor", file=sys.stderr)
+            notes.append(f"note: the model was fitted on {lost}, not found here as it was: simulating {args.sensor}; "
+                         "give --sensor")
         check_input_units(model, "V", "the ADCs' readings", f"model {args.model}")
         check_magnitudes(model, args.precision or "double")  # as predict and codegen: estimates always finite
         if motion is None and pose is not None:  # said of the option here; the simulated bus would say "pose 1"
@@ -203,10 +204,10 @@ class ReadoutSession:
         if tempcomp is not None and tempcomp.n != model.n_inputs:
             raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
         if tempcomp is not None and (note := channel_map_note(tempcomp, cmap0, f"--temp-comp {args.temp_comp}")):
-            print(f"{prog}: {note}", file=sys.stderr)
+            notes.append(note)
         if tempcomp is not None and tempcomp.fitted_range is None:  # one made by hand, or from Python without it
-            print(f"{prog}: note: --temp-comp {args.temp_comp} records no temperatures it was fitted at "
-                  "(fit.temperatures), so samples read far from them are not flagged", file=sys.stderr)
+            notes.append(f"note: --temp-comp {args.temp_comp} records no temperatures it was fitted at "
+                         "(fit.temperatures), so samples read far from them are not flagged")
         self.cmap = cmap = cmap0
         if cmap.n_elements != model.n_inputs:
             raise InputError(f"--adc reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
@@ -215,7 +216,7 @@ class ReadoutSession:
         if tempcomp is not None and not need_ref:
             note = capture_temperature_note(model, tempcomp)
             if note:
-                print(f"{prog}: {note}", file=sys.stderr)
+                notes.append(note)
         # without a file to rest on, the rest readings the model recorded from its own sensor
         recorded = None if args.rest or sensor_given or own or not need_ref else model.held_out_rest
         reference, target = None, (f"--rest {args.rest}" if args.rest else "the model's own record"
@@ -224,6 +225,8 @@ class ReadoutSession:
         if need_ref:
             reference = recorded if recorded is not None else rest_reference(args.rest or args.sensor, model.n_inputs)
             check_rest_reference(model, reference, target)
+        for note in notes:
+            print(f"{prog}: {note}", file=sys.stderr)
         self.engine = make_engine(args.engine, model, **({"precision": args.precision, "cc": args.cc}
                                                          if args.engine == "c" else {}))
         self.bus = None

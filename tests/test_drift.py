@@ -190,6 +190,9 @@ def test_a_compensation_without_its_fitted_temperatures_is_noted_and_a_damaged_l
     path.write_text(json.dumps(base))
     proc = run_cli(*read)
     assert proc.returncode == 0 and "records no temperatures it was fitted at (fit.temperatures)" in proc.stderr
+    # a channel map refused after it: the refusal alone, one line (the note came first, a line that was no error)
+    assert_one_line_error(run_cli(*[a.replace(TWO_CHIPS, "ads1115@0x48:0-3,ads1115@0x49:0-2") for a in read]), 2,
+                          "--adc reads 7 elements; the model takes 8")
     for bad in (["a"], [25.0], "15..35"):
         path.write_text(json.dumps({**base, "fit": {"temperatures": bad}}))
         assert_one_line_error(run_cli(*read), 2, "fit.temperatures must list the two or more temperatures")
