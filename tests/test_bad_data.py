@@ -408,6 +408,26 @@ def test_a_huge_cell_is_named_where_it_is(data, tmp_path):
                           contains="data row 3, column v4, holds 1e+300")
 
 
+def test_fit_on_a_capture_with_rows_off_the_skin_refuses_in_one_line_numbered_as_in_the_file(data, tmp_path):
+    """A capture's rest rows (dz > 0) are left out before the fit: its note came first, so a refusal was two lines,
+    and a huge cell after a rest row was numbered among the rows kept, one too low."""
+    lines = data.read_text().splitlines()
+    header = lines[0].split(",")
+    rest = lines[1].split(",")
+    rest[header.index("dz")] = "0.2"
+    cells = lines[4].split(",")
+    cells[header.index("v2")] = "1e300"
+    (tmp_path / "c.csv").write_text("\n".join([lines[0], ",".join(rest)] + lines[2:4] + [",".join(cells)]
+                                              + lines[5:]) + "\n")
+    (tmp_path / "c.csv.meta.json").write_text(json.dumps({"samples_per_row": 16, "units": "mT"}))
+    fit = ("fitgen", "fit", str(tmp_path / "c.csv"), "-o", str(tmp_path / "m.json"))
+    assert_one_line_error(run_cli(*fit), 2, "data row 4, column v2, holds 1e+300")
+    (tmp_path / "c.csv").write_text("\n".join([lines[0], ",".join(rest)] + lines[2:]) + "\n")
+    assert_one_line_error(run_cli(*fit, "--outputs", "dx,dq"), 2, "--outputs")
+    assert_one_line_error(run_cli(*fit, "--force"), 2, "--force applies to a scene's outputs")
+    assert not (tmp_path / "m.json").exists()
+
+
 def test_report_names_a_huge_label_where_it_is(fitted, data, tmp_path):
     """A label of 1e308 mm: report squared it into numpy's overflow warning and an error table of inf."""
     lines = data.read_text().splitlines()

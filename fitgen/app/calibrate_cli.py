@@ -32,8 +32,6 @@ def cmd_identify(args) -> int:
     elif span := rec.temperature_span_line(ds.meta, ds.n_rows):  # before a refusal, which it may explain
         print(f"identify: {span}", file=sys.stderr)
     args.sensor, said = rec.drawing_for(args.sensor, ds.meta)  # the one the capture's schedule was made for
-    if said:
-        print(said, file=sys.stderr)
     if not ds.target_names:
         raise InputError(f"{args.capture} has readings but no pose columns (dx,dy,dz,...): identify needs each row's "
                          "stage displacement from the zero, as tactile-host capture writes it")
@@ -42,6 +40,8 @@ def cmd_identify(args) -> int:
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)
     args.rig_error, args.zero_error, stage = rec.stage_errors(args.rig_error, args.zero_error, ds.meta, args.capture)
     zero = rec.stage_zero(ds.meta, args.capture)  # recorded, so that fitgen check tells a zero reused from one set anew
+    if said:  # once the options and the meta have passed: a refusal is one line
+        print(f"identify: {said}", file=sys.stderr)
     if zero and zero["zeros"] > 1:
         print(f"identify: note: the capture's rows were taken from {zero['zeros']} zeros (a run set it again, after a "
               "controller reset), and identify allows for one zero's error shared by every row: rows from another "

@@ -105,12 +105,12 @@ def cmd_fit(args) -> int:
     from fitgen.app.report import fit_notes, fit_summary
     from fitgen.base.progress import Progress
     from fitgen.fitting.family import auto_compares, fit_device
-    from fitgen.physics.dataset import load_dataset, rows_on_the_skin
+    from fitgen.physics.dataset import load_dataset, refuse_huge, rows_on_the_skin
     from fitgen.physics.scenes import scene_outputs
     from fitgen.physics.simulate import check_sensor_file, dataset_sensor
 
     settings = fit_settings(args)
-    loaded = load_dataset(args.data)
+    loaded = refuse_huge(load_dataset(args.data))  # numbered as in the file: before lifted rows are left out
     check_sensor_file(loaded.meta, args.sensor, str(args.data))  # a unit file gone or changed: said, not fitted without
     edited = loaded.meta.get("dataset_sha256") not in (None, loaded.sha256)  # rows changed since the meta was written
     ds, lifted = rows_on_the_skin(loaded)
@@ -118,15 +118,8 @@ def cmd_fit(args) -> int:
     if args.units is not None and recorded not in (None, args.units):
         raise InputError(f"--units {args.units}, but {args.data}'s meta says its readings are in {recorded}")
     ds.meta["units"] = args.units or recorded or "mT"
-    if lifted:
-        print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, which serves identify; "
-              "their labels are no contact pose", file=sys.stderr)
     sensor = dataset_sensor(ds.meta, args.sensor, ds.n_inputs)
-    if edited and sensor is not None and not args.sensor:
-        print(f"note: {args.data}'s rows are not the ones its meta was written for (edited, or another file's "
-              f"meta): its sensor {sensor.name} is not taken to hold out on or to compare families (give --sensor "
-              "to); its units and noise are still taken from it", file=sys.stderr)
-        sensor = None
+    forgot, sensor = (sensor.name, None) if edited and sensor is not None and not args.sensor else (None, sensor)
     # --scene, or the scene the dataset was simulated for, names the outputs
     if args.scene and args.outputs:
         raise InputError("give --outputs or --scene, not both (the scene names the outputs)")
@@ -140,6 +133,13 @@ def cmd_fit(args) -> int:
                                 recorded=None if args.scene else ds.meta.get("scene_outputs"), noise=settings.noise)
     else:
         outputs = ds.target_names if args.outputs is None else parse_names(args.outputs, POSE_NAMES, "--outputs")
+    if lifted:  # said once the options have passed: a refusal is one line
+        print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, which serves identify; "
+              "their labels are no contact pose", file=sys.stderr)
+    if forgot:
+        print(f"note: {args.data}'s rows are not the ones its meta was written for (edited, or another file's "
+              f"meta): its sensor {forgot} is not taken to hold out on or to compare families (give --sensor "
+              "to); its units and noise are still taken from it", file=sys.stderr)
     unit_file = args.sensor or ds.meta.get("sensor_file")
     auto, hold = auto_compares(args.family, settings), int(bool(args.held_out) and sensor is not None)
     steps = len(outputs) + (ds.n_inputs if settings.refine else 0)  # the equations, then the forward model's
