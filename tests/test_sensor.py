@@ -56,6 +56,10 @@ def test_hash_is_stable_and_sensitive():
         (lambda d: d["elements"]["ring"][0].__setitem__("z", 1e200), "the elements' places must be within +-1000 mm"),
         (lambda d: d["elements"]["ring"][0].__setitem__("radius", 1e308), "must be within +-1000 mm, got 1e+308"),
         (lambda d: d["magnet"].__setitem__("polarization", 1e30), "'magnet.polarization' must be within +-10 T"),
+        # TOML integers past float's range: math.isfinite raised OverflowError, a traceback
+        (lambda d: d["magnet"].__setitem__("polarization", 10 ** 400), "'magnet.polarization' must be a finite"),
+        (lambda d: d["travel"].__setitem__("dz", [-10 ** 400, 0]), "'travel.dz' must be a list of 2 finite numbers"),
+        (lambda d: d["magnet"].__setitem__("offset", [0, 0, 10 ** 400]), "'magnet.offset' must be a list of 3"),
         (lambda d: d["elements"]["ring"][0].__setitem__("elevation", 95.0), "elements.ring[0].elevation"),
         (lambda d: d["elements"]["ring"][0].update(axis="z", elevation=10.0), "elements.ring[0].elevation"),
         (lambda d: d.__setitem__("colour", "red"), "colour"),

@@ -46,7 +46,10 @@ def parse_positive(text: str, what: str, *, integer: bool = False, zero: bool = 
     try:
         val = int(text) if integer else float(text)
     except ValueError:
-        raise InputError(f"{what} {text!r} is not a{' whole' if integer else ''} number") from None
+        raise InputError(f"{what} {text!r:.40} is not a{' whole' if integer else ''} number") from None
+    if integer and val >= 2 ** 63:  # no count is as large, and math.isfinite of an int past float's range raises
+        bound = f"at most {most:g}" if most is not None else "a whole number below 2^63"
+        raise InputError(f"{what} must be {bound}, got {str(text).strip()[:20]}... ({len(str(val))} digits)")
     if not math.isfinite(val) or val < 0 or (val == 0 and not zero):
         bound = ("a whole number " + (">= 0" if zero else ">= 1")) if integer else \
             ("a finite number " + (">= 0" if zero else "> 0"))

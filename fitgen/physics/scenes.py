@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, is_finite_number
 from fitgen.base.fileio import read_text, tomllib
 from fitgen.physics.pose import POSE_NAMES, check_pose_range
 from fitgen.physics.simulate import DEFAULT_RANGES, grid_poses
@@ -92,10 +92,9 @@ def load_scene(spec: str | None) -> Scene:
     for key, val in raw.items():
         if key not in POSE_NAMES:
             raise InputError(f"{origin}: unknown key 'ranges.{key}'")
-        ok = (isinstance(val, list) and len(val) == 2
-              and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in val) and val[0] <= val[1])
+        ok = isinstance(val, list) and len(val) == 2 and all(map(is_finite_number, val)) and val[0] <= val[1]
         if not ok:
-            raise InputError(f"{origin}: 'ranges.{key}' must be [low, high] with low <= high")
+            raise InputError(f"{origin}: 'ranges.{key}' must be [low, high], finite, with low <= high")
         ranges[key] = (float(val[0]), float(val[1]))
         check_pose_range(key, *ranges[key], origin)
     levels = data.get("levels", 5)

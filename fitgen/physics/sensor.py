@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, is_finite_number
 from fitgen.base.fileio import canonical_json, read_text, sha256_hex, text_kind, tomllib
 from fitgen.physics.tolerances import STIFFENING_MAX, TOLERANCE_MAX, Tolerances
 
@@ -201,7 +201,7 @@ class _Section:
 
     def number(self, key, default=None, *, required=False, positive=False, min_=None, max_=None) -> float:
         val = self.raw(key, default, required)
-        if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+        if not is_finite_number(val):  # a TOML integer past float's range too (math.isfinite raised on it)
             raise InputError(f"{self.origin}: '{self._key(key)}' must be a finite number, got {val!r}")
         val = float(val)
         if positive and val <= 0:
@@ -230,9 +230,7 @@ class _Section:
 
     def vector(self, key, *, required=True, unit=False) -> np.ndarray:
         val = self.raw(key, None, required)
-        ok = isinstance(val, list) and len(val) == 3 and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in val
-        )
+        ok = isinstance(val, list) and len(val) == 3 and all(map(is_finite_number, val))
         if not ok:
             raise InputError(f"{self.origin}: '{self._key(key)}' must be a list of 3 finite numbers, got {val!r}")
         vec = np.asarray(val, dtype=float)
@@ -463,8 +461,7 @@ def _travel(sec: _Section, gap: float) -> dict:
 
 def _numbers(sec: _Section, key: str, n: int) -> list[float]:
     val = sec.raw(key, None, True)
-    if not (isinstance(val, list) and len(val) == n and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in val)):
+    if not (isinstance(val, list) and len(val) == n and all(map(is_finite_number, val))):
         raise InputError(f"{sec.origin}: '{sec._key(key)}' must be a list of {n} finite numbers, got {val!r}")
     return [float(v) for v in val]
 
