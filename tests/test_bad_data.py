@@ -362,7 +362,9 @@ def test_a_meta_figure_the_fit_reads_that_is_not_as_written_is_refused(data, tmp
     (["simulate", "--grid", "paper-sim", "--ranges", "dx=-1:1", "-o", "d.csv"],
      "--ranges is the box of --random poses: give --random N with it"),
     (["simulate", "--random", "10", "--noise", "1e300", "-o", "d.csv"], "--noise 1e300 is no sensor's reading noise"),
-    (["schedule", "--samples", "1000000000", "-o", "s.csv"], "--samples must be at most 10000")])
+    (["schedule", "--samples", "1000000000", "-o", "s.csv"], "--samples must be at most 10000"),
+    # a count past float's range: "a file name is too long" (--samples may name a file), or math.isfinite's traceback
+    (["schedule", "--samples", "1" + "0" * 300, "-o", "s.csv"], "--samples must be at most 10000, got 1000000000")])
 def test_counts_past_any_machines_memory_or_patience_are_refused_before_the_work(data, tmp_path, argv, said):
     """A count of 1e12 poses ran out of memory in a traceback; 1e9 samples per row made a capture that never ends."""
     proc = run_cli("fitgen", *[str(data) if a == "D" else a for a in argv], cwd=tmp_path)
@@ -662,10 +664,17 @@ def test_a_command_given_nothing_lists_its_subcommands(tool, command):
     (["simulate", "--random", "5", "-o", "d.toml"], "-o d.toml: simulate writes a dataset in CSV"),
     (["fit", "nothere.csv", "-o", "m.csv"], "-o m.csv: fit writes a model in JSON: name it .json"),
     (["identify", "nothere.csv", "-o", "u.json"], "-o u.json: the unit file is a sensor file in TOML: name it .toml"),
+    # these wrote over a model named by a slip: schedule's CSV, the suite's XML, stage-sim's pose line
+    (["schedule", "--n", "10", "-o", "model.json"], "-o model.json: schedule writes poses in CSV: name it .csv"),
+    (["predict", "nothere.json", "nothere.csv", "-o", "e.toml"], "-o e.toml: predict writes estimates in CSV"),
+    (["tactile-hil", "run", "--model", "m.json", "--port", "socket://localhost:1", "--junit", "model.json"],
+     "--junit model.json: the results are JUnit XML: name it .xml"),
+    (["tactile-host", "stage-sim", "--pose-file", "model.json"], "--pose-file model.json: the pose file is one line"),
 ])
 def test_an_output_named_as_another_kind_of_file_is_refused_before_the_work(args, said, tmp_path):
     """simulate -o x.json wrote CSV into a .json file without a word (identify refused a .csv unit file already)."""
-    assert_one_line_error(run_cli("fitgen", *args, cwd=tmp_path), 2, said)
+    tool, args = (args[0], args[1:]) if args[0].startswith("tactile") else ("fitgen", args)
+    assert_one_line_error(run_cli(tool, *args, cwd=tmp_path), 2, said)
     assert list(tmp_path.iterdir()) == []
 
 

@@ -282,7 +282,13 @@ def check_written(args, files=()) -> None:
     from fitgen.base.fileio import check_folder, output_file
     from fitgen.physics.dataset import meta_path
 
-    inputs = [p for p in (getattr(args, n, None) for n in READS) if isinstance(p, str) and Path(p).is_file()]
+    def is_file(p) -> bool:  # an option that names a file or a count (--samples): a long count is no file
+        try:
+            return Path(p).is_file()
+        except OSError:
+            return False
+
+    inputs = [p for p in (getattr(args, n, None) for n in READS) if isinstance(p, str) and is_file(p)]
     inputs += [str(m) for m in map(meta_path, inputs) if m.is_file()]  # a dataset's meta is read with it
     written = []
     for name in WRITES:
@@ -307,20 +313,30 @@ def check_written(args, files=()) -> None:
 
 STYLE_WITH_FIXED = "--style does not apply to --precision fixed (its header is straight-line code)"
 
-# per command, the suffixes of another kind of file than its -o writes, and what it writes
-OUTPUT_KINDS = {"identify": ((".csv", ".json"), "the unit file is a sensor file in TOML: name it .toml (e.g. unit.toml)"),
-                "simulate": ((".json", ".toml"), "simulate writes a dataset in CSV: name it .csv (its meta goes "
-                             "beside it)"),
-                "fit": ((".csv", ".toml"), "fit writes a model in JSON: name it .json (e.g. model.json)")}
+# per command and output option, the suffixes of the tools' other files (a model, a dataset, a sensor) than the one
+# it writes, and what it writes: a slip of the name would replace one of them
+_CSV = (".json", ".toml")
+OUTPUT_KINDS = {("identify", "output"): ((".csv", ".json"), "the unit file is a sensor file in TOML: name it .toml "
+                                         "(e.g. unit.toml)"),
+                ("simulate", "output"): (_CSV, "simulate writes a dataset in CSV: name it .csv (its meta goes beside "
+                                         "it)"),
+                ("schedule", "output"): (_CSV, "schedule writes poses in CSV: name it .csv (its meta goes beside it)"),
+                ("predict", "output"): (_CSV, "predict writes estimates in CSV: name it .csv"),
+                ("fit", "output"): ((".csv", ".toml"), "fit writes a model in JSON: name it .json (e.g. model.json)"),
+                ("run", "junit"): ((".csv", ".json", ".toml"), "the results are JUnit XML: name it .xml"),
+                ("stage-sim", "pose_file"): ((".csv", ".json", ".toml"), "the pose file is one line of text, which "
+                                             "it rewrites at each move: name it .txt (e.g. pose.txt)")}
 
 
 def check_output_kind(args) -> None:
-    """InputError when ``-o`` is named as another kind of file than the command writes (a dataset called .json)."""
+    """InputError when an output is named as another kind of file than the command writes (a dataset called .json)."""
     from pathlib import Path
 
-    kind = OUTPUT_KINDS.get(getattr(args, "command", None))
-    if kind and isinstance(args.output, str) and Path(args.output).suffix.lower() in kind[0]:
-        raise InputError(f"-o {args.output}: {kind[1]}")
+    for (command, dest), (suffixes, said) in OUTPUT_KINDS.items():
+        path = getattr(args, dest, None) if getattr(args, "command", None) == command else None
+        if isinstance(path, str) and Path(path).suffix.lower() in suffixes:
+            flag = "-o" if dest == "output" else "--" + dest.replace("_", "-")
+            raise InputError(f"{flag} {path}: {said}")
 
 
 def check_not_empty(args) -> None:

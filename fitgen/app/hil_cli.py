@@ -13,8 +13,8 @@ import sys
 import threading
 import time
 
-from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, check_written, command_main, count, seconds,
-                               tcp_port)
+from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, check_output_kind, check_written, command_main,
+                               count, seconds, tcp_port)
 from fitgen.base.errors import InputError
 
 
@@ -289,6 +289,7 @@ def _check(args) -> None:
     if args.command == "emulate":
         _suite_alone(args)
     check_written(args)
+    check_output_kind(args)
     if args.sensor_id is not None:
         (check_compiled_id if args.command == "emulate" else check_sensor_id)(args.sensor_id)
 

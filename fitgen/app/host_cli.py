@@ -8,8 +8,8 @@ from fitgen.app.options import check_host, map_options, refuse_readout_options
 from fitgen.app.arduino_cli import add_arduino_build
 from fitgen.app.noise_cli import add_noise, cmd_noise
 from fitgen.app.verify_cmd import cmd_verify
-from fitgen.app.cliutil import (EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_written, command_main,
-                                count, ended_by, noise_volts)
+from fitgen.app.cliutil import (EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_output_kind,
+                                check_written, command_main, count, ended_by, noise_volts)
 from fitgen.base.errors import InputError
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 
@@ -493,6 +493,7 @@ def _check(args) -> None:
         check_host(args.host)
     # -o is a file for these; a folder for pi-build, arduino-build and tempcomp-c
     check_written(args, files=(cmd_read, cmd_view, cmd_replay, cmd_capture, cmd_noise))
+    check_output_kind(args)
 
 
 def main(argv=None) -> int:
