@@ -514,7 +514,10 @@ def test_schedule_is_d_optimal_within_limits(drawing, plan):
     (["--rig-error", "0.03", "--limits", "dz=-0.03:0"], "the limits of dz (-0.03..0) leave no row below -0.094 mm, "
      "where a stage off by 0.03 mm rms, zeroed within 0.02 mm, keeps the indenter on the skin: allow a deeper press"),
     (["--axes", "dx", "--n", "12", "--limits", "dx=-2:2"],
-     "the best 12 poses over dx are 4 distinct ones; identify needs at least 6"),
+     "the best 12 poses over dx are 4 distinct ones; identify needs at least 6: move more axes"),
+    # a noise in mV typed as V: the poses came out alike, and the line asked for more axes; past 1000 numpy warned
+    (["--transfer", "gmr", "--noise", "1"], "0.25 V, is 500x sensor paper's per sample (a figure in other units?)"),
+    (["--noise", "1e200"], "--noise 1e200 is no sensor's reading noise (at most 1000"),
 ])
 def test_schedule_refuses_what_identify_could_not_use(tmp_path, args, message):
     out = tmp_path / "s.csv"

@@ -11,7 +11,7 @@ from fitgen.app.cliutil import count, finite
 from fitgen.app.options import noise_of, sensor_of
 from fitgen.base.fileio import write_all
 from fitgen.base.errors import InputError
-from fitgen.base.parse import MAX_ROW_SAMPLES, parse_positive
+from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES, parse_positive
 
 
 def cmd_identify(args) -> int:
@@ -191,7 +191,7 @@ def samples_of(args, drawing) -> tuple[int, float, dict]:
     """``--samples`` and ``--noise``: the samples per row and the single-sample noise the schedule is made for, and
     what the schedule's meta records of a noise record they came from. ``--samples`` is a count, or the record
     ``tactile-host noise -o`` wrote: its recommendation and, unless ``--noise`` is given, its measured noise."""
-    noise = drawing.noise if args.noise is None else noise_of(args.noise, drawing)
+    noise = drawing.noise if args.noise is None else noise_of(args.noise, drawing, most=MAX_NOISE)
     if args.noise is not None and not noise > 0:  # the option's, not the file's
         raise InputError(f"--noise must be a finite number > 0, got {args.noise} (the schedule weighs each reading by "
                          "it)")

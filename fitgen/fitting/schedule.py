@@ -224,8 +224,12 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     idx, logdet = d_optimal(J, n, None if progress is None else lambda i, m, note: progress(i + 1, total, note))
     distinct = len(np.unique(idx))
     if distinct < MIN_DISTINCT:
+        loud = noise > 10 * drawing.noise > 0  # past the readings' spread, every pose tells as little as another
         raise InputError(f"the best {n} poses over {','.join(axes)} are {distinct} distinct ones; identify needs at "
-                         f"least {MIN_DISTINCT}: move more axes (--axes dx,dy,dz) or widen the limits")
+                         f"least {MIN_DISTINCT}: " + (f"the rows' reading noise, {noise:g} {drawing.units}, is "
+                                                      f"{noise / drawing.noise:.3g}x sensor {drawing.name}'s per "
+                                                      "sample (a figure in other units?)" if loud else
+                                                      "move more axes (--axes dx,dy,dz) or widen the limits"))
     poses = stage_order(cand[idx])
     info = {"criterion": "D-optimal (log det of the prior plus the capture's information, in prior spreads)",
             "log_det": logdet, "candidates": len(cand), "levels_per_axis": levels_for(len(axes)), "axes": list(axes),
