@@ -194,6 +194,20 @@ def test_verify_refuses_data_in_other_units_than_the_model_takes(paper_model, tm
                           "tactile-host capture), or give readings in mT")
 
 
+def test_verify_takes_readings_past_floats_range_as_the_c_does_without_numpys_warning(paper_model, tmp_path):
+    """A --data reading of 1e39 is inf in the float C and in its reference alike (status -1 in both): numpy's
+    overflow warning came before a PASS that was right."""
+    path = paper_model.save(tmp_path / "m.json")
+    assert run_cli("fitgen", "simulate", "--grid", "dx=0,1", "-o", str(tmp_path / "d.csv")).returncode == 0
+    lines = (tmp_path / "d.csv").read_text().splitlines()
+    lines[1] = ",".join(["1e39"] + lines[1].split(",")[1:])
+    (tmp_path / "d.csv").write_text("\n".join(lines) + "\n")
+    proc = run_cli("tactile-host", "verify", str(path), "--data", str(tmp_path / "d.csv"), "--precision", "float",
+                   "--vectors", "0", "--no-held-out")
+    assert proc.returncode == 0 and "PASS" in proc.stdout, proc.stdout + proc.stderr
+    assert "Warning" not in proc.stderr, proc.stderr
+
+
 @pytest.mark.parametrize("cc", ["gcc", "clang"])
 def test_a_file_that_includes_the_headers_without_calling_them_compiles_warning_free(paper_model, tmp_path, cc):
     """A second translation unit that needs only TM_N_INPUTS (or the compensation's count) is warning-free."""
