@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen import __version__
-from fitgen.c.codegen import render_header
+from fitgen.c.codegen import check_magnitudes, render_header
 from fitgen.base.children import tied
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import check_folder, make_folder, staged_beside, write_atomic, write_in_folder
@@ -231,6 +231,7 @@ def pi_build(args) -> str:
     tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
     precision = pi_precision(model, args.precision)
     check_reads(model, cmap)  # before the rest readings, which a model in other units reads far from rest
+    check_magnitudes(model, precision)  # and absurd coefficients, which read the rest as far from it
     rest = model_rest(model, args.rest, required=False)
     folder = check_folder(args.output)
     make_folder(folder.parent)

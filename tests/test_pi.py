@@ -210,6 +210,13 @@ def test_pi_build_cli_errors(tmp_path, model):
                              "(fitgen simulate --transfer gmr, or tactile-host capture)")
     assert "give readings" not in run_cli("tactile-host", "pi-build", "--model", mt, "--adc", MAP, "-o",
                                           str(tmp_path / "z")).stderr  # the ADCs' are what they are
+    # absurd coefficients are named as the codegen names them, not as rest readings the model reads far from rest
+    eq = replace(model.equations[0], coefficients=(1e300,) + model.equations[0].coefficients[1:])
+    rest = {"held_out": {"rest": readings(load_sensor("paper").with_transfer("gmr"), np.zeros((1, 5)))[0].tolist()}}
+    big = str(replace(model, equations=(eq,) + model.equations[1:], fit_info={**model.fit_info, **rest})
+              .save(tmp_path / "big.json"))
+    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", big, "--adc", MAP, "-o", str(tmp_path / "z")),
+                          2, f"output {eq.name}: its terms reach")
     assert not (tmp_path / "z").exists()
 
 
