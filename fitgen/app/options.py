@@ -115,6 +115,10 @@ def check_host(host: str) -> None:
     """``view --host``: InputError for ADDRESS:PORT (no address has one colon, IPv6 has two or more, nor brackets)."""
     import re
 
+    try:
+        host.encode("idna")  # as the socket names it; a byte the terminal gave undecoded (\xff) is no address
+    except UnicodeError:
+        raise InputError(f"--host {host.encode('utf-8', 'replace').decode()!r}: not a host name or address") from None
     m = re.fullmatch(r"\[(.*)\]:(\d+)|([^:]*):(\d+)", host)
     if m:
         address, port = m.group(1) or m.group(3), m.group(2) or m.group(4)
