@@ -17,10 +17,13 @@ import threading
 
 import numpy as np
 
+from fitgen.base.errors import InputError
 from fitgen.physics.pose import OFF_SKIN_MM
 
 from host.gcode import MACHINE_AXES
 from host.stagesettings import APPROACH, STAGE_AXES, AxisMap, parse_approach
+
+MAX_SLACK = 1.0  # mm: a stage's backlash or repeatability past it is broken, not one to calibrate a sensor on
 
 
 class SimRig:
@@ -35,6 +38,10 @@ class SimRig:
         self.contact = np.asarray(contact, dtype=float)  # carriage position (home frame) at first contact
         self.backlash = np.broadcast_to(np.asarray(backlash, dtype=float), (3,)).copy()
         self.repeatability = float(repeatability)
+        for name, value in (("backlash", self.backlash), ("repeatability", self.repeatability)):
+            bad = np.asarray(value)[~((0 <= np.asarray(value)) & (np.asarray(value) <= MAX_SLACK))]
+            if bad.size:  # past it, no stage to calibrate on: moves by 1e308 mm overflowed
+                raise InputError(f"--{name} must be 0..{MAX_SLACK:g} mm (a printer's is 0.01-0.1), got {bad[0]:g}")
         self.adhesion = float(adhesion)
         self.travel = np.asarray(travel, dtype=float)  # carriage range in the home frame
         # where homing puts the carriage (home frame), machine 0 once homed: every axis's minimum, as a printer's

@@ -36,6 +36,7 @@ from host.gcode import MACHINE_AXES
 from host.simrig import SimRig
 from host.stageserver import PoseFile, PtyServer, SocketServer, pose_file_motion
 from host.stagesettings import APPROACH, AxisMap, parse_approach
+from host.stagezero import MAX_COORD
 
 # fitgen/app/host_cli.py imports the rig's and the serving side's names from here too
 __all__ = ["PoseFile", "PtyServer", "SimController", "SimRig", "SocketServer", "parse_matrix", "parse_xyz",
@@ -396,10 +397,12 @@ def parse_matrix(spec: str) -> np.ndarray:
 
 
 def parse_xyz(text: str, what: str) -> list[float]:
-    """``X,Y,Z`` in mm (``what``: the option, for the error) -> three numbers."""
+    """``X,Y,Z`` in mm (``what``: the option, for the error) -> three numbers, each within MAX_COORD."""
     vals = parse_numbers(text)
     if vals is None or len(vals) != 3:
         raise InputError(f"{what} {text!r}: three numbers X,Y,Z (mm)")
+    if not all(abs(v) <= MAX_COORD for v in vals):  # NaN too: the rig served 'first contact at Xnan'
+        raise InputError(f"{what} {text!r}: each must lie within +-{MAX_COORD:g} mm (no machine travels further)")
     return vals
 
 

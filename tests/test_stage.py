@@ -1108,6 +1108,12 @@ def test_stage_options_need_stage(tmp_path):
     # the port of a socket it does not open, and a map under which the magnet never moves: both were taken
     (["--pty", "--port", "5000"], "--port is the loopback socket's; with --pty there is none"),
     (["--map", "0,0,0;0,0,0;0,0,0"], "leaves the magnet unmoved along some direction of the stage (singular)"),
+    # served as they were: 'first contact at machine Xnan', numpy's warnings, a pose of 1e+308 in the pose file
+    (["--start", "inf,0,0"], "--start 'inf,0,0': each must lie within +-2000 mm"),
+    (["--contact", "nan,1,1"], "--contact 'nan,1,1': each must lie within +-2000 mm"),
+    (["--start", "1e308,0,0"], "--start '1e308,0,0': each must lie within +-2000 mm"),
+    (["--backlash", "1e308"], "--backlash must be 0..1 mm (a printer's is 0.01-0.1), got 1e+308"),
+    (["--repeatability", "2"], "--repeatability must be 0..1 mm"),
 ])
 def test_stage_sim_bad_options_are_one_line(tmp_path, args, message):
     proc = subprocess.run(host_cmd("stage-sim", *[a.replace("{tmp}", str(tmp_path)) for a in args]),
