@@ -31,6 +31,9 @@ from fitgen.base.fileio import read_text, write_atomic
 
 DIVIDER_KEYS = ("beta", "r25", "series", "vref")
 DIVIDER_DEFAULTS = {"beta": 3950.0, "r25": 10_000.0, "series": 10_000.0, "vref": 3.3}
+# what an NTC divider's parts can be, widely: beta 2000-5000 K, 1 kohm-1 Mohm at 25 degC, a reference under 6 V
+DIVIDER_RANGES = {"beta": (500.0, 20_000.0), "r25": (1.0, 1e9), "series": (1.0, 1e9), "vref": (0.1, 50.0)}
+DIVIDER_UNITS = {"beta": "K", "r25": "ohm", "series": "ohm", "vref": "V"}
 READ_EVERY = 0.25  # s between thermistor reads: temperature moves slowly, conversions cost bus time
 # degC: an NTC thermistor's usual rated range; a compensation must stay meaningful wherever it can read
 T_RANGE = (-40.0, 125.0)
@@ -87,8 +90,11 @@ def parse_temperature_input(spec: str, thermistor: str | None = None, divider: d
     divider = {**DIVIDER_DEFAULTS, **(divider or {})}
     if thermistor:
         divider.update(parse_assignments(thermistor, DIVIDER_KEYS, "--thermistor"))
-        if not all(v > 0 and math.isfinite(v) for v in divider.values()):
-            raise InputError(f"--thermistor {thermistor!r}: every value must be a finite number > 0")
+        bad = next((k for k, v in divider.items() if not DIVIDER_RANGES[k][0] <= v <= DIVIDER_RANGES[k][1]), None)
+        if bad:  # 1e-300 and 1e308 passed, to read -278.8 degC or nothing, and a warning that blamed the wiring
+            lo, hi = DIVIDER_RANGES[bad]
+            raise InputError(f"--thermistor {thermistor!r}: {bad} must be {lo:g}..{hi:g} {DIVIDER_UNITS[bad]}, got "
+                             f"{divider[bad]:g}")
     return TemperatureInput(kind, address, pin, divider)
 
 

@@ -54,6 +54,13 @@ def test_thermistor_reads_the_drifts_temperature(sensor):
             parse_temperature_input(bad)
     with pytest.raises(InputError, match="also an element's input"):
         Thermometer(array, parse_temperature_input("ads1115@0x48:2"))
+    # parts no divider has: beta=1e-300 read -278.8 degC, vref=1e308 read none, each said as the wiring's fault
+    for given, said in (("beta=1e-300", "beta must be 500..20000 K, got 1e-300"),
+                        ("r25=1e308", "r25 must be 1..1e+09 ohm"), ("series=1e-308", "series must be 1..1e+09 ohm"),
+                        ("vref=1e308", "vref must be 0.1..50 V"), ("beta=nan", "beta must be 500..20000 K, got nan")):
+        with pytest.raises(InputError, match=re.escape(f"--thermistor '{given}': {said}")):
+            parse_temperature_input("ads1115@0x4a:0", given)
+    assert parse_temperature_input("ads1115@0x4a:0", "beta=3380,r25=47000,series=47000,vref=5").divider["beta"] == 3380
 
 
 def test_compensation_undoes_the_drift_in_python_and_in_c(sensor, tmp_path):

@@ -214,6 +214,12 @@ def test_emulate_temperature_options_need_the_thermistor(model, tmp_path):
                                   "tc.json"), contains="go with --adc")
     assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc", MAP,
                                   "--temp-comp", "tc.json"), contains="temp=CHIP@ADDRESS:INPUT")
+    # taken as given: nan failed the stream's reads with no line saying why, -300 degC and 1e308 V ran
+    for option, said in ((["--sim-temperature", "nan"], "--sim-temperature: 'nan' is not a finite number"),
+                         (["--sim-temperature", "-300"], "--sim-temperature: must be -40..125 degC"),
+                         (["--sim-noise", "1e308"], "--sim-noise: must be >= 0 and at most 1000 V")):
+        assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc", MAP,
+                                      *option), contains=said)
 
 
 def test_the_drift_sections_emulate_command_runs_as_written(model, tmp_path):

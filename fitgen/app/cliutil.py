@@ -65,6 +65,17 @@ def noise_volts(text: str) -> float:
     return x
 
 
+def degc(text: str) -> float:
+    """An argparse type: a temperature in the thermistor's range (host.temperature.T_RANGE), degC."""
+    from host.temperature import T_RANGE
+
+    x = finite(text)
+    if not T_RANGE[0] <= x <= T_RANGE[1]:
+        raise argparse.ArgumentTypeError(f"must be {T_RANGE[0]:g}..{T_RANGE[1]:g} degC (the thermistor's range), "
+                                         f"got {x:g}")
+    return x
+
+
 def tcp_port(text: str) -> int:
     """An argparse type: a TCP port number, 1..65535 (leave the option out for a free one); one message for every
     number outside it, negative ones too."""

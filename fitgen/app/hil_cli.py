@@ -14,7 +14,7 @@ import threading
 import time
 
 from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, check_output_kind, check_written, command_main,
-                               count, seconds, tcp_port)
+                               count, degc, noise_volts, seconds, tcp_port)
 from fitgen.base.errors import InputError
 
 
@@ -266,13 +266,14 @@ def build_parser() -> Parser:
                    help="with --adc: the bus model's magnet pose dx,dy,dz,thx,thy (default rest)")
     e.add_argument("--sim-sensor", help="with --adc: the simulated sensor, gmr (default: the sensor the model was "
                                         "fitted on where its file is found, else paper)")
-    e.add_argument("--sim-noise", type=float, help="with --adc: simulated element noise, V rms (default: the sensor's)")
+    e.add_argument("--sim-noise", type=noise_volts,
+                   help="with --adc: simulated element noise, V rms (default: the sensor's)")
     e.add_argument("--seed", type=count, default=0, help="with --adc: seed of the simulated noise")
     e.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",
                    help="with temp= in --adc: the thermistor's NTC divider (default beta=3950,r25=10000,series=10000)")
     e.add_argument("--temp-comp", metavar="FILE.json",
                    help="with temp= in --adc: temperature compensation before the model (float and double builds)")
-    e.add_argument("--sim-temperature", type=float, metavar="DEGC",
+    e.add_argument("--sim-temperature", type=degc, metavar="DEGC",
                    help="with --adc: the simulated sensor at this temperature (typical coefficients, seed --seed)")
     _suite_options(e, e.add_argument_group("the HIL suite's options (only with --suite: refused without it)"))
     e.set_defaults(func=cmd_emulate, **dict.fromkeys(_suite_defaults()))
