@@ -566,7 +566,11 @@ def test_a_header_correction_that_is_not_a_number_is_refused_not_replayed_as_nan
     (["--auto-zero", "--rest-band", "0,0"], "--rest-band '0,0': both must be finite numbers > 0 (mm, then deg)"),
     (["--tare", "--tare-samples", "100000000"], "--tare-samples must be 1..100000, got 100000000"),
     (["--rest-hold", "-1"], "--rest-hold"),
-    (["--sim-drift", "ramp=5,over=0"], "over and tau must be > 0"),
+    (["--sim-drift", "ramp=5,over=0"], "over and tau must be 1..1e7 s"),
+    # figures no sensor drifts by: the warnings they raised blamed another sensor, or the thermistor's wiring
+    (["--sim-drift", "start=1e308"], "start and start + ramp must lie within -273.15..1000 degC"),
+    (["--sim-drift", "ramp=1e308,over=1e-300"], "over and tau must be 1..1e7 s"),
+    (["--sim-drift", "creep=1e308"], "creep must be within +-1 V"),
     (["--sim-drift", "warp=9"], "--sim-drift"),
 ])
 def test_bad_drift_options_are_one_line(model_file, extra, message):
