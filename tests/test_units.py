@@ -354,6 +354,9 @@ def test_data_of_a_preset_file_gone_fit_on_the_preset(tmp_path):
            "or delete the [unit] posterior line to use the unit without its uncertainty"),
     ("{", "its posterior u.posterior.json cannot be read (identify writes it beside the unit file): identify again"),
     ("negative", "the unit's posterior covariance is not positive definite (expected fitgen identify's)"),
+    # NaN or 1e308 drew units of no field: check's table of nonsense passed or failed by chance
+    ("nan", "the unit's posterior gives magnet.x a value or spread past any identification's (edited by hand?)"),
+    ("huge", "the unit's posterior gives magnet.x a value or spread past any identification's (edited by hand?)"),
 ])
 def test_fit_reads_the_units_posterior_before_fitting(tmp_path, monkeypatch, capsys, record, said):
     """A missing or bad posterior is said before the fit (which takes minutes on a real twin), not after it."""
@@ -363,8 +366,10 @@ def test_fit_reads_the_units_posterior_before_fitting(tmp_path, monkeypatch, cap
     drawing = load_sensor("paper")
     path = write_unit(tmp_path / "u.toml", draw_unit(drawing, 4)[0], "paper", {"posterior": "u.posterior.json"})
     size = UnitSpace.of(drawing).size
-    if record == "negative":
-        record = json.dumps({"theta": [0.0] * size, "covariance": (-np.eye(size)).tolist(), "drawing_spec": "paper"})
+    if record in ("negative", "nan", "huge"):
+        cov = {"negative": -np.eye(size), "nan": np.diag([np.nan] + [1e-6] * (size - 1)),
+               "huge": np.diag([1e300] + [1e-6] * (size - 1))}[record]
+        record = json.dumps({"theta": [0.0] * size, "covariance": cov.tolist(), "drawing_spec": "paper"})
     if record is not None:
         (tmp_path / "u.posterior.json").write_text(record)
     simulate(load_sensor(path), grid_poses({"dx": [-1, 0, 1], "dy": [-1, 0, 1], "dz": [0, -1, -2]}),

@@ -302,6 +302,13 @@ def _posterior_draw(record: dict, sensor):
     except np.linalg.LinAlgError:  # edited by hand: no covariance a draw could come from
         raise InputError("the unit's posterior covariance is not positive definite (expected fitgen "
                          "identify's)") from None
+    # identify's lie within a few prior spreads, and no posterior is wider than its prior: past these, an edit
+    # (NaN or 1e308 drew units of no field, and check's table of nonsense passed or failed by chance)
+    with np.errstate(all="ignore"):
+        far = ~(np.abs(theta) <= 20 * space.prior_sd) | ~(np.sqrt(np.abs(np.diag(cov))) <= 2 * space.prior_sd)
+    if far.any():
+        raise InputError(f"the unit's posterior gives {space.names[int(np.argmax(far))]} a value or spread past any "
+                         "identification's (edited by hand?): identify again")
     return space, theta, L
 
 
