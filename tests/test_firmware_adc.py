@@ -211,7 +211,7 @@ def test_the_firmware_compensates_temperature_as_the_python_readout_does(model, 
 def test_emulate_temperature_options_need_the_thermistor(model, tmp_path):
     path = str(model.save(tmp_path / "m.json"))
     assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--temp-comp",
-                                  "tc.json"), contains="go with --adc")
+                                  "tc.json"), contains="--temp-comp goes with --adc")
     assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc", MAP,
                                   "--temp-comp", "tc.json"), contains="temp=CHIP@ADDRESS:INPUT")
     # taken as given: nan failed the stream's reads with no line saying why, -300 degC and 1e308 V ran

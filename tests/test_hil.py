@@ -425,7 +425,9 @@ def test_cli_run_against_a_wrong_model_fails_with_status_1(paper_model, tmp_path
 
 
 def test_cli_emulate_refuses_bus_options_it_cannot_serve(model_file):
-    for extra, said in ((["--simulate", "dx=1"], "go with --adc"), (["--adc", " "], "--adc is empty"),
+    for extra, said in ((["--simulate", "dx=1"], "--simulate goes with --adc"), (["--adc", " "], "--adc is empty"),
+                        # ignored without a word: the emulated firmware read the serial protocol's inputs
+                        (["--seed", "3", "--sim-sensor", "paper"], "--sim-sensor, --seed go with --adc"),
                         # a model in mT behind ADCs in volts: the check read, pi-build and replay share
                         (["--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3"],
                          "the model takes inputs in mT; the ADCs' readings are in V")):

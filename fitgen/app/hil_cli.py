@@ -100,13 +100,15 @@ def _adc_bridge(args):
     if args.adc is not None and not args.adc.strip():
         raise InputError("--adc is empty: give the channel map, e.g. ads1115@0x48:0-3,ads1115@0x49:0-3")
     if not args.adc:
-        if args.temp_comp or args.thermistor or args.sim_temperature is not None or args.simulate is not None:
-            raise InputError("--simulate, --temp-comp, --thermistor and --sim-temperature go with --adc (without it "
-                             "the firmware's inputs come from the serial protocol)")
+        given = [f"--{k.replace('_', '-')}" for k in ("simulate", "temp_comp", "thermistor", "sim_temperature",
+                                                       "sim_sensor", "sim_noise", "seed") if getattr(args, k) is not None]
+        if given:  # --sim-sensor, --sim-noise and --seed were ignored without a word
+            raise InputError(f"{', '.join(given)} {'goes' if len(given) == 1 else 'go'} with --adc (without it the "
+                             "firmware's inputs come from the serial protocol)")
         return None, None, None, None
     return adc_bridge(args.adc, args.simulate or "0,0,0,0,0", sensor=args.sim_sensor, noise=args.sim_noise,
-                      seed=args.seed,
-                      thermistor=args.thermistor, temp_comp=args.temp_comp, temperature=args.sim_temperature)
+                      seed=args.seed or 0, thermistor=args.thermistor, temp_comp=args.temp_comp,
+                      temperature=args.sim_temperature)
 
 
 def _stopped(runner, args, advice, before: bool = True) -> None:
@@ -151,7 +153,8 @@ def cmd_emulate(args) -> int:
         raise InputError("--port is the emulated UART's TCP port, and the host target has none (its UART is a "
                          "pseudo-terminal): drop --port")
     model, data = _load(args)
-    args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"  # the model's own, where found
+    if args.adc:  # the model's own, where found (without --adc, a --sim-sensor given is refused)
+        args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"
     cmap, bridge, tin, tempcomp = _adc_bridge(args)
     with ExitStack() as stack:
         with Progress(f"{args.target} firmware", 2) as bar:  # building and booting take seconds
@@ -268,7 +271,7 @@ def build_parser() -> Parser:
                                         "fitted on where its file is found, else paper)")
     e.add_argument("--sim-noise", type=noise_volts,
                    help="with --adc: simulated element noise, V rms (default: the sensor's)")
-    e.add_argument("--seed", type=count, default=0, help="with --adc: seed of the simulated noise")
+    e.add_argument("--seed", type=count, help="with --adc: seed of the simulated noise (default 0)")
     e.add_argument("--thermistor", metavar="beta=..,r25=..,series=..,vref=..",
                    help="with temp= in --adc: the thermistor's NTC divider (default beta=3950,r25=10000,series=10000)")
     e.add_argument("--temp-comp", metavar="FILE.json",
