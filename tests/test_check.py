@@ -339,6 +339,11 @@ def test_fitgen_check_reads_the_model_only_where_it_was_fitted_and_never_on_the_
     assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(beyond)),
                           contains="none of the check capture's 6 rows in contact lies in the pose box the model was "
                                    "fitted in (dx -2..2, dy -2..2, dz -2..0)")
+    # a compensation file that is none: said as such, not as the temperature this unit (no thermistor) lacks
+    (tmp_path / "adir.json").mkdir()
+    assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(data), "--temp-comp",
+                                  str(tmp_path / "adir.json")),
+                          contains=f"temperature compensation file {tmp_path / 'adir.json'}: a folder, not a file")
     record = json.loads((folder / "twin.posterior.json").read_text())
     try:
         (folder / "twin.posterior.json").write_text(json.dumps({**record,

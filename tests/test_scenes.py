@@ -120,6 +120,9 @@ def test_a_scene_file_is_found_from_another_folder_and_a_scene_too_large_or_hold
     (tmp_path / "big.toml").write_text('outputs = ["dz"]\nlevels = 101\n')
     assert_one_line_error(run_cli("fitgen", "simulate", "--scene", str(tmp_path / "big.toml"), "-o",
                                   str(tmp_path / "b.csv")), 2, "make 10,510,100,501 poses (at most 1,000,000)")
+    (tmp_path / "adir.toml").mkdir()  # it said "no such file"
+    assert_one_line_error(run_cli("fitgen", "observe", "--scene", str(tmp_path / "adir.toml")), 2,
+                          f"scene file {tmp_path / 'adir.toml'}: a folder, not a file")
     (tmp_path / "huge.toml").write_text(f'outputs = ["dz"]\n[ranges]\ndz = [-{10 ** 400}, 0]\n')  # OverflowError
     assert_one_line_error(run_cli("fitgen", "observe", "--scene", str(tmp_path / "huge.toml")), 2,
                           "'ranges.dz' must be [low, high], finite, with low <= high")

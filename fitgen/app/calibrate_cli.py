@@ -150,11 +150,12 @@ def _check_temperature(ds, sensor, temp_comp: str | None, capture: str):
     without, a note when it was read more than CAPTURE_DEGC_TOL from the unit's, which the prediction does not
     draw; '' when there is nothing to say."""
     from fitgen.fitting.unitrecord import capture_temperature
-    from host.temperature import CAPTURE_DEGC_TOL, unit_capture_degc
+    from host.temperature import CAPTURE_DEGC_TOL, load_tempcomp, unit_capture_degc
 
     theirs = unit_capture_degc(sensor.source)
     mine = capture_temperature(ds.meta, ds.n_rows).get("capture_degc")  # as identify takes a capture's
     if temp_comp:
+        load_tempcomp(temp_comp)  # a file that is none (a folder, a model) said as such, before what the unit lacks
         if theirs is None:
             raise InputError(f"--temp-comp {temp_comp}: the unit file ({sensor.name}) records no temperature it was "
                              "identified at (capture_degc: its capture had no thermistor), so there is none to take "

@@ -70,7 +70,7 @@ def load_scene(spec: str | None) -> Scene:
     if spec in PRESETS:
         return PRESETS[spec]
     path = Path(spec)
-    if not path.is_file():
+    if not path.exists():  # anything else there (a folder) is said by read_text as what it is
         raise InputError(f"scene {spec!r}: no such file, and not a preset ({', '.join(PRESETS)})")
     origin = f"scene file {spec}"
     try:
