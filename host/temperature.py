@@ -235,14 +235,16 @@ def tempcomp_from_dict(data, origin: str) -> TempComp:
             raise InputError(f"{origin}: gain_per_degc[{k}] = {gain[k]:g} makes the correction's factor "
                              f"1 + g (T - t0) = {factor[k]:.3g} at {t:g} degC (it must stay > 0 over the thermistor's "
                              f"{T_RANGE[0]:g}..{T_RANGE[1]:g} degC)")
-    fit = data.get("fit", {})
-    temps = fit.get("temperatures") if isinstance(fit, dict) else None
+    fit = {} if data.get("fit") is None else data["fit"]
+    if not isinstance(fit, dict):  # it holds the temperatures fitted at: a number there was taken as no record
+        raise InputError(f"{origin}: fit must be an object (what the compensation was fitted on), got {fit!r:.40}")
+    temps = fit.get("temperatures")
     if temps is not None and not (isinstance(temps, list) and len(temps) >= 2
                                   and all(is_finite_number(t) for t in temps)):
         # what the readouts flag extrapolation against: damaged, it would turn that check off in silence
         raise InputError(f"{origin}: fit.temperatures must list the two or more temperatures it was fitted at "
                          f"(degC), got {temps!r}")
-    return TempComp(t0, off, gain, fit if isinstance(fit, dict) else {})
+    return TempComp(t0, off, gain, fit)
 
 
 def _coefficients(values, where: str) -> np.ndarray:

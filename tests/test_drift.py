@@ -203,6 +203,8 @@ def test_a_compensation_without_its_fitted_temperatures_is_noted_and_a_damaged_l
     for bad in (["a"], [25.0], "15..35"):
         path.write_text(json.dumps({**base, "fit": {"temperatures": bad}}))
         assert_one_line_error(run_cli(*read), 2, "fit.temperatures must list the two or more temperatures")
+    path.write_text(json.dumps({**base, "fit": 5}))  # taken as no record, in silence
+    assert_one_line_error(run_cli(*read), 2, "fit must be an object (what the compensation was fitted on), got 5")
     path.write_text(json.dumps({**base, "fit": {"temperatures": [15.0, 35.0]}}))
     proc = run_cli(*read)
     assert proc.returncode == 0 and "note:" not in proc.stderr, proc.stderr
