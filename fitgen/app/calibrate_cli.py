@@ -43,9 +43,10 @@ def cmd_identify(args) -> int:
     if said:  # once the options and the meta have passed: a refusal is one line
         print(f"identify: {said}", file=sys.stderr)
     if zero and zero["zeros"] > 1:
-        print(f"identify: note: the capture's rows were taken from {zero['zeros']} zeros (a run set it again, after a "
-              "controller reset), and identify allows for one zero's error shared by every row: rows from another "
-              "zero may stand out; capture them again from one zero if they do", file=sys.stderr)
+        print(f"identify: note: the capture's rows were taken from {zero['zeros']} zeros (a run set it again: the "
+              "controller was reset, or the stage moved, since the zero was taken, and the same numbers after a "
+              "reset need not be the same place), and identify allows for one zero's error shared by every row: "
+              "rows from another zero may stand out; capture them again from one zero if they do", file=sys.stderr)
     # before a refusal, which may name such a row
     for line in verdict.lifted_rows_line(ds.poses(), args.rig_error, args.zero_error):
         print(f"identify: {line}", file=sys.stderr)
