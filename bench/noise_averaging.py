@@ -148,7 +148,9 @@ def main() -> None:
             fig[(f, s)] = (z, float(np.median(chi2)), float(np.median(err[:, 2])))
             used = Counter(r["samples"] for r in rs).most_common()
             told = s if s != TOLD else "told: " + ", ".join(f"{k} ({v})" for k, v in used)
-            rows.append([f"{1e3 * f:g}", str(told), f"{len(rs) - len(ok)} of {len(rs)}",
+            # flicker's variance over a row's white noise variance: what tactile-host noise reads, less its error
+            share = "-" if s == TOLD else f"{f ** 2 * s / sigma ** 2:.2g}"
+            rows.append([f"{1e3 * f:g}", str(told), share, f"{len(rs) - len(ok)} of {len(rs)}",
                          f"{np.median(chi2):.2f} ({chi2.max():.2f})", fmt(np.median(err[:, 2])), fmt(off),
                          f"{100 * worst:.2g} %", f"{100 * cover:.0f} %", f"{z:.2f}", "yes" if meets else "no"])
         recs = [r["noise"] for r in results if r["spec"][:2] == (f, TOLD)]
@@ -166,12 +168,13 @@ def main() -> None:
           f"chi-square of {CHI2_LIMIT:g}. The line: "
           f"every offset's median within {LIMIT_MM} mm, the median unit's worst element within "
           f"{100 * LIMIT_REL:g} %, coverage {100 * COVER[0]:.0f}-{100 * COVER[1]:.0f} %, no capture refused.\n")
-    print(table(["flicker [mV]", "samples per row", "refused", "reduced chi-square, median (greatest)",
+    print(table(["flicker [mV]", "samples per row", "flicker share", "refused", "reduced chi-square, median (greatest)",
                  "offset z [mm]", "offset, worst axis [mm]", "sensitivity, worst element", "coverage",
                  "error / standard error, rms", "meets the line"], rows))
-    print(f"\nWhat `tactile-host noise` reads from {SECONDS:g} s at rest (per unit its own noise draws; the worst "
-          "element's ratio of a row's real noise to what the capture records, median over units):\n")
-    print(table(["flicker [mV]", "ratio at 16", "ratio at 128", "samples per row it recommends"], noise_rows))
+    if noise_rows:  # only `told` records a recording
+        print(f"\nWhat `tactile-host noise` reads from {SECONDS:g} s at rest (per unit its own noise draws; the "
+              "worst element's ratio of a row's real noise to what the capture records, median over units):\n")
+        print(table(["flicker [mV]", "ratio at 16", "ratio at 128", "samples per row it recommends"], noise_rows))
     if args.plot and TOLD in SAMPLES:
         _plot(fig, Path(args.plot))
 
