@@ -68,7 +68,7 @@ def parse_drift(spec: str | None, n: int) -> Drift | None:
     if "seed" in vals and not (vals["seed"] >= 0 and vals["seed"] == int(vals["seed"])):
         raise InputError(f"--sim-drift {spec!r}: seed must be a whole number >= 0")
     over, tau = vals.get("over", 600.0), vals.get("tau", 600.0)
-    if not (1.0 <= over <= 1e7 and 1.0 <= tau <= 1e7):  # 1e-300 s overflowed the ramp's slope
+    if not (1.0 <= over <= 1e7 and 1.0 <= tau <= 1e7):  # a shorter ramp overflows its slope
         raise InputError(f"--sim-drift {spec!r}: over and tau must be 1..1e7 s")
     start = vals.get("start", 25.0)
     ends = (start, start + vals.get("ramp", 5.0))

@@ -40,7 +40,7 @@ class SimRig:
         self.repeatability = float(repeatability)
         for name, value in (("backlash", self.backlash), ("repeatability", self.repeatability)):
             bad = np.asarray(value)[~((0 <= np.asarray(value)) & (np.asarray(value) <= MAX_SLACK))]
-            if bad.size:  # past it, no stage to calibrate on: moves by 1e308 mm overflowed
+            if bad.size:  # past it, no stage to calibrate on (and 1e308 mm overflows a move)
                 raise InputError(f"--{name} must be 0..{MAX_SLACK:g} mm (a printer's is 0.01-0.1), got {bad[0]:g}")
         self.adhesion = float(adhesion)
         self.travel = np.asarray(travel, dtype=float)  # carriage range in the home frame

@@ -401,7 +401,7 @@ def parse_xyz(text: str, what: str) -> list[float]:
     vals = parse_numbers(text)
     if vals is None or len(vals) != 3:
         raise InputError(f"{what} {text!r}: three numbers X,Y,Z (mm)")
-    if not all(abs(v) <= MAX_COORD for v in vals):  # NaN too: the rig served 'first contact at Xnan'
+    if not all(abs(v) <= MAX_COORD for v in vals):  # NaN fails it too
         raise InputError(f"{what} {text!r}: each must lie within +-{MAX_COORD:g} mm (no machine travels further)")
     return vals
 

@@ -91,7 +91,7 @@ def parse_temperature_input(spec: str, thermistor: str | None = None, divider: d
     if thermistor:
         divider.update(parse_assignments(thermistor, DIVIDER_KEYS, "--thermistor"))
         bad = next((k for k, v in divider.items() if not DIVIDER_RANGES[k][0] <= v <= DIVIDER_RANGES[k][1]), None)
-        if bad:  # 1e-300 and 1e308 passed, to read -278.8 degC or nothing, and a warning that blamed the wiring
+        if bad:  # outside them a reading is nonsense, and the warning it raises blames the wiring
             lo, hi = DIVIDER_RANGES[bad]
             raise InputError(f"--thermistor {thermistor!r}: {bad} must be {lo:g}..{hi:g} {DIVIDER_UNITS[bad]}, got "
                              f"{divider[bad]:g}")

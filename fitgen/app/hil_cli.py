@@ -13,8 +13,8 @@ import sys
 import threading
 import time
 
-from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, check_output_kind, check_written, command_main,
-                               count, degc, noise_volts, seconds, tcp_port)
+from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, check_output_kind, check_written,
+                               command_main, count, degc, noise_volts, seconds, tcp_port)
 from fitgen.base.errors import InputError
 
 
@@ -100,9 +100,9 @@ def _adc_bridge(args):
     if args.adc is not None and not args.adc.strip():
         raise InputError("--adc is empty: give the channel map, e.g. ads1115@0x48:0-3,ads1115@0x49:0-3")
     if not args.adc:
-        given = [f"--{k.replace('_', '-')}" for k in ("simulate", "temp_comp", "thermistor", "sim_temperature",
-                                                       "sim_sensor", "sim_noise", "seed") if getattr(args, k) is not None]
-        if given:  # --sim-sensor, --sim-noise and --seed were ignored without a word
+        bus = ("simulate", "temp_comp", "thermistor", "sim_temperature", "sim_sensor", "sim_noise", "seed")
+        given = [f"--{k.replace('_', '-')}" for k in bus if getattr(args, k) is not None]
+        if given:  # none of them reaches a firmware that reads the serial protocol
             raise InputError(f"{', '.join(given)} {'goes' if len(given) == 1 else 'go'} with --adc (without it the "
                              "firmware's inputs come from the serial protocol)")
         return None, None, None, None
