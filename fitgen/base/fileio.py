@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -412,6 +413,8 @@ def read_text(path: str | os.PathLike, what: str) -> str:
     except IsADirectoryError:
         raise InputError(f"{what} {path}: a folder, not a file") from None
     except OSError as exc:
+        if exc.errno == errno.ENAMETOOLONG:  # as the commands' own handler says it, the name cut short
+            raise InputError(f"{what}: a file name is too long for this system ({str(path)[:40]}...)") from None
         raise InputError(f"{what} {path}: cannot read: {exc}") from None
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise InputError(f"{what} {path}: UTF-16 text (a spreadsheet's 'Unicode text'): save it as UTF-8 (in a "
