@@ -92,8 +92,10 @@ def load_scene(spec: str | None) -> Scene:
     for key, val in raw.items():
         if key not in POSE_NAMES:
             raise InputError(f"{origin}: unknown key 'ranges.{key}'")
-        ok = isinstance(val, list) and len(val) == 2 and all(map(is_finite_number, val)) and val[0] <= val[1]
-        if not ok:
+        ok = (isinstance(val, list) and len(val) == 2
+              and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in val) and val[0] <= val[1])
+        # an integer past float's range (TOML holds any) is no pose, as inf is (check_pose_range says which)
+        if not ok or not all(is_finite_number(v) or isinstance(v, float) for v in val):
             raise InputError(f"{origin}: 'ranges.{key}' must be [low, high], finite, with low <= high")
         ranges[key] = (float(val[0]), float(val[1]))
         check_pose_range(key, *ranges[key], origin)
