@@ -70,15 +70,15 @@ def parse_drift(spec: str | None, n: int) -> Drift | None:
     over, tau = vals.get("over", 600.0), vals.get("tau", 600.0)
     if not (1.0 <= over <= 1e7 and 1.0 <= tau <= 1e7):  # a shorter ramp overflows its slope
         raise InputError(f"--sim-drift {spec!r}: over and tau must be 1..1e7 s")
-    start = vals.get("start", 25.0)
-    ends = (start, start + vals.get("ramp", 5.0))
+    start, ramp = vals.get("start", 25.0), vals.get("ramp", 5.0)
+    ends = (start, start + ramp)
     # past the thermistor's range is a case to simulate (a read says it reads none); past these, no sensor's
     if not all(-273.15 <= t <= 1000.0 for t in ends):
         raise InputError(f"--sim-drift {spec!r}: start and start + ramp must lie within -273.15..1000 degC")
     if not abs(vals.get("creep", 0.0)) <= 1.0:
         raise InputError(f"--sim-drift {spec!r}: creep must be within +-1 V")
-    d = Drift.typical(n, seed=int(vals.get("seed", 0)), ramp_degc=vals.get("ramp", 5.0), ramp_s=over,
-                      creep_tau=tau, start_degc=vals.get("start", 25.0))
+    d = Drift.typical(n, seed=int(vals.get("seed", 0)), ramp_degc=ramp, ramp_s=over, creep_tau=tau,
+                      start_degc=start)
     if "creep" in vals:
         d.creep = d.creep / 2e-3 * vals["creep"]
     return d

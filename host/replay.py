@@ -341,7 +341,8 @@ def _corrections(run: Run, model: Model, temp_comp, no_temp_comp: bool, auto_zer
             raise InputError(f"the run's header records {ref.size} rest readings for {n} readings")
         _finite(start, "an auto-zero start")
         _finite(ref, "rest readings")
-        if not (math.isfinite(float(noise)) and float(noise) >= 0):
+        floor = float(noise)
+        if not (math.isfinite(floor) and floor >= 0):
             raise InputError(f"the run's header records a noise floor of {noise}, not a figure >= 0 (edited by hand?)")
-        az = AutoZero.for_model(model, ref, float(noise), zero=start, settings=settings)
+        az = AutoZero.for_model(model, ref, floor, zero=start, settings=settings)
     return Corrections(tare, tc, az)

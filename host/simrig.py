@@ -38,8 +38,8 @@ class SimRig:
         self.contact = np.asarray(contact, dtype=float)  # carriage position (home frame) at first contact
         self.backlash = np.broadcast_to(np.asarray(backlash, dtype=float), (3,)).copy()
         self.repeatability = float(repeatability)
-        for name, value in (("backlash", self.backlash), ("repeatability", self.repeatability)):
-            bad = np.asarray(value)[~((0 <= np.asarray(value)) & (np.asarray(value) <= MAX_SLACK))]
+        for name, value in (("backlash", self.backlash), ("repeatability", np.array([self.repeatability]))):
+            bad = value[~((0 <= value) & (value <= MAX_SLACK))]
             if bad.size:  # past it, no stage to calibrate on (and 1e308 mm overflows a move)
                 raise InputError(f"--{name} must be 0..{MAX_SLACK:g} mm (a printer's is 0.01-0.1), got {bad[0]:g}")
         self.adhesion = float(adhesion)

@@ -19,6 +19,7 @@ def cmd_identify(args) -> int:
     from fitgen.base.progress import Progress
     from fitgen.fitting import identify as idf, unitrecord as rec, verdict
     from fitgen.physics.dataset import load_capture
+    from host.temperature import load_tempcomp
 
     if args.noise is not None and not args.noise > 0:  # identify weighs each reading by it
         raise InputError(f"--noise must be a finite number > 0, got {args.noise:g}")
@@ -28,7 +29,7 @@ def cmd_identify(args) -> int:
     temperature = rec.capture_temperature(ds.meta, ds.n_rows)
     span = ""
     if args.temp_comp:
-        ds, temperature = _at_t0(ds, args.temp_comp, args.capture, "identify")
+        ds, temperature = _at_t0(ds, load_tempcomp(args.temp_comp), args.temp_comp, args.capture, "identify")
     elif span := rec.temperature_span_line(ds.meta, ds.n_rows):  # before a refusal, which it may explain
         print(f"identify: {span}", file=sys.stderr)
     args.sensor, said = rec.drawing_for(args.sensor, ds.meta)  # the one the capture's schedule was made for
@@ -112,8 +113,8 @@ def _replaces_another(file) -> bool:
         return False
 
 
-def _at_t0(ds, path: str, capture: str, command: str):
-    """``ds``'s readings mapped to temperature compensation ``path``'s t0 from the temperature its capture recorded,
+def _at_t0(ds, tc, path: str, capture: str, command: str):
+    """``ds``'s readings mapped to temperature compensation ``tc`` (read from ``path``)'s t0 from the temperature its capture recorded,
     and the unit file's record of it: the twin is then the unit at t0, as a readout with the compensation sees it.
     Notes on ``command``'s stderr, as a readout's: rows read where the compensation is extrapolated, and a
     compensation fitted through another channel map than the capture's."""
@@ -122,9 +123,8 @@ def _at_t0(ds, path: str, capture: str, command: str):
     import numpy as np
 
     from fitgen.physics.dataset import row_degc, thermistor_degc
-    from host.temperature import beyond_note, channel_map_note, load_tempcomp
+    from host.temperature import beyond_note, channel_map_note
 
-    tc = load_tempcomp(path)
     degc, rows = thermistor_degc(ds.meta), row_degc(ds.meta, ds.n_rows)
     if degc is None and rows is None:
         raise InputError(f"--temp-comp {path}: {capture} records no temperature (thermistor_degc: its channel map "
@@ -156,12 +156,12 @@ def _check_temperature(ds, sensor, temp_comp: str | None, capture: str):
     theirs = unit_capture_degc(sensor.source)
     mine = capture_temperature(ds.meta, ds.n_rows).get("capture_degc")  # as identify takes a capture's
     if temp_comp:
-        load_tempcomp(temp_comp)  # a file that is none (a folder, a model) said as such, before what the unit lacks
+        tc = load_tempcomp(temp_comp)  # a file that is none (a folder, a model) said as such, before what the unit lacks
         if theirs is None:
             raise InputError(f"--temp-comp {temp_comp}: the unit file ({sensor.name}) records no temperature it was "
                              "identified at (capture_degc: its capture had no thermistor), so there is none to take "
                              "the check's rows to")
-        ds, info = _at_t0(ds, temp_comp, capture, "check")
+        ds, info = _at_t0(ds, tc, temp_comp, capture, "check")
         t0 = info["capture_degc"]
         if abs(t0 - theirs) > CAPTURE_DEGC_TOL:
             raise InputError(f"--temp-comp {temp_comp} takes the check's rows to {t0:g} degC, but the unit was "

@@ -199,8 +199,9 @@ def run(main_fn, argv=None, prog="") -> int:
     except OSError as exc:  # Path.is_file() and its kin raise this one where they return False for a missing file
         if exc.errno != errno.ENAMETOOLONG:
             raise
-        name = str(exc.filename or "")
-        print(f"{_name(prog)}: error: a file name is too long for this system ({name[:40]}...)", file=sys.stderr)
+        from fitgen.base.fileio import too_long
+
+        print(f"{_name(prog)}: error: {too_long(exc.filename or '')}", file=sys.stderr)
         return EXIT_USAGE
     except RecursionError:  # the JSON and TOML parsers recurse per bracket: no file fitgen writes nests so
         print(f"{_name(prog)}: error: an input file nests brackets too deeply to read: not a file fitgen or "
@@ -326,13 +327,13 @@ STYLE_WITH_FIXED = "--style does not apply to --precision fixed (its header is s
 
 # per command and output option, the suffixes of the tools' other files (a model, a dataset, a sensor) than the one
 # it writes, and what it writes: a slip of the name would replace one of them
-_CSV = (".json", ".toml")
+_NOT_CSV = (".json", ".toml")
 OUTPUT_KINDS = {("identify", "output"): ((".csv", ".json"), "the unit file is a sensor file in TOML: name it .toml "
                                          "(e.g. unit.toml)"),
-                ("simulate", "output"): (_CSV, "simulate writes a dataset in CSV: name it .csv (its meta goes beside "
+                ("simulate", "output"): (_NOT_CSV, "simulate writes a dataset in CSV: name it .csv (its meta goes beside "
                                          "it)"),
-                ("schedule", "output"): (_CSV, "schedule writes poses in CSV: name it .csv (its meta goes beside it)"),
-                ("predict", "output"): (_CSV, "predict writes estimates in CSV: name it .csv"),
+                ("schedule", "output"): (_NOT_CSV, "schedule writes poses in CSV: name it .csv (its meta goes beside it)"),
+                ("predict", "output"): (_NOT_CSV, "predict writes estimates in CSV: name it .csv"),
                 ("fit", "output"): ((".csv", ".toml"), "fit writes a model in JSON: name it .json (e.g. model.json)"),
                 ("run", "junit"): ((".csv", ".json", ".toml"), "the results are JUnit XML: name it .xml"),
                 ("stage-sim", "pose_file"): ((".csv", ".json", ".toml"), "the pose file is one line of text, which "

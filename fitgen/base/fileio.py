@@ -382,6 +382,11 @@ def text_kind(text: str) -> str:
     return "csv" if "," in first else ""
 
 
+def too_long(name) -> str:
+    """What is said of a file name longer than the system takes, the name cut short."""
+    return f"a file name is too long for this system ({str(name)[:40]}...)"
+
+
 def _device(path) -> str | None:
     """What ``path`` is when it is a device other than a terminal (which ends where its user types the end)."""
     try:
@@ -414,7 +419,7 @@ def read_text(path: str | os.PathLike, what: str) -> str:
         raise InputError(f"{what} {path}: a folder, not a file") from None
     except OSError as exc:
         if exc.errno == errno.ENAMETOOLONG:  # as the commands' own handler says it, the name cut short
-            raise InputError(f"{what}: a file name is too long for this system ({str(path)[:40]}...)") from None
+            raise InputError(f"{what}: {too_long(path)}") from None
         raise InputError(f"{what} {path}: cannot read: {exc}") from None
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise InputError(f"{what} {path}: UTF-16 text (a spreadsheet's 'Unicode text'): save it as UTF-8 (in a "
