@@ -767,6 +767,14 @@ def test_a_huge_reading_is_one_line_in_identify_and_check(data, model_file, tmp_
     type(ds)(rows, ds.targets, ds.target_names).save(tmp_path / "huge.csv")
     assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "huge.csv"), "-o", str(tmp_path / "m.json")),
                           contains="candidate term v2^-1 for dx is not finite on data row 4 (an input too close to 0?)")
+    # numbered as in the file when a stage's rest row before it was left out (it said row 3)
+    poses = ds.targets.copy()
+    poses[0, ds.target_names.index("dz")] = 0.2
+    type(ds)(rows, poses, ds.target_names, {"samples_per_row": 16}).save(tmp_path / "huge.csv")
+    out = run_cli("fitgen", "fit", str(tmp_path / "huge.csv"), "-o", str(tmp_path / "m.json"))
+    assert "left out 1 row(s) lifted off the skin" in out.stderr
+    assert out.stderr.strip().splitlines()[-1].endswith("is not finite on data row 4 (an input too close to 0?)")
+    assert out.returncode == 2 and not (tmp_path / "m.json").exists()
 
 
 def test_more_inputs_than_the_c_status_holds_are_said_by_fit(tmp_path):

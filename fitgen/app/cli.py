@@ -105,7 +105,7 @@ def cmd_fit(args) -> int:
     from fitgen.app.report import fit_notes, fit_summary
     from fitgen.base.progress import Progress
     from fitgen.fitting.family import auto_compares, fit_device
-    from fitgen.physics.dataset import load_dataset, refuse_huge, rows_on_the_skin
+    from fitgen.physics.dataset import load_dataset, numbered_as_in, refuse_huge, rows_on_the_skin
     from fitgen.physics.scenes import scene_outputs
     from fitgen.physics.simulate import check_sensor_file, dataset_sensor
 
@@ -145,7 +145,7 @@ def cmd_fit(args) -> int:
     steps = len(outputs) + (ds.n_inputs if settings.refine else 0)  # the equations, then the forward model's
     bar = Progress("fit", (per_fit := steps * (2 if auto and sensor is not None else 1)) + hold)
     progress = bar.per_item(lambda name, step, aic, n_terms: f"{name}: step {step}, {n_terms} terms, AIC {aic:.1f}")
-    with bar:  # the first note shows at once: forming the rows' products takes seconds on a large dataset
+    with bar, numbered_as_in(loaded):  # the first note shows at once: the rows' products take seconds when many
         bar.update(0, f"{len(ds.inputs):,} rows: the candidate terms' products")
         model = fit_device(ds, outputs, settings, sensor, args.family, held_out=args.held_out, unit_file=unit_file,
                            progress=progress, note=lambda text: bar.update(0, f"held-out: {text}"),

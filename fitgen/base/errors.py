@@ -7,6 +7,18 @@ class InputError(ValueError):
     """Bad input from a user: a file, an option or a value. The message is shown as is."""
 
 
+class RowError(InputError):
+    """InputError about the data row ``row`` (from 0) of the rows a step was given, so that a caller that left
+    rows out before can say it as the file numbers it (:meth:`numbered`)."""
+
+    def __init__(self, before: str, row: int, after: str):
+        self.before, self.row, self.after = before, row, after
+        super().__init__(f"{before}{row + 1}{after}")
+
+    def numbered(self, number: int) -> str:
+        return f"{self.before}{number}{self.after}"
+
+
 def is_finite_number(val) -> bool:
     """Whether ``val`` is a finite JSON number (not a bool); an integer past float's range is not (JSON holds any,
     and float() of it raises)."""

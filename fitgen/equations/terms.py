@@ -23,7 +23,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, RowError
 from fitgen.equations.roots import cbrt
 from fitgen.physics.pose import POSE_NAMES
 
@@ -360,8 +360,8 @@ def finite_design_matrix(terms: list[Term], inputs: np.ndarray, d: np.ndarray | 
     bad = np.argwhere(~np.isfinite(cols))
     if bad.size:
         r, c = bad[0]
-        raise InputError(f"candidate term {terms[c].text}{what} is not finite on data row {first_row + r + 1} (an "
-                         "input too close to 0?)")
+        raise RowError(f"candidate term {terms[c].text}{what} is not finite on data row ", first_row + int(r),
+                       " (an input too close to 0?)")
     return cols
 
 

@@ -9,12 +9,13 @@ import io
 import json
 import math
 import re
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from fitgen.base.errors import InputError, is_finite_number
+from fitgen.base.errors import InputError, RowError, is_finite_number
 from fitgen.base.fileio import read_text, real_file, sha256_hex, text_kind, write_all
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, off_skin
@@ -126,12 +127,26 @@ def rows_on_the_skin(ds: Dataset) -> tuple[Dataset, int]:
     """``ds`` without the rows its stage lifted off the skin, and how many were left out. Such a row reads the
     magnet at rest (fitgen.physics.pose.off_skin): it helps identify a unit, but its label is no contact pose
     for an estimator to learn. A dataset whose labels are not a stage's is returned as it is."""
-    if not stage_labelled(ds) or "dz" not in ds.target_names:
-        return ds, 0
-    keep = ~off_skin(ds.poses())
+    keep = _on_the_skin(ds)
     if keep.all():
         return ds, 0
     return Dataset(ds.inputs[keep], ds.targets[keep], ds.target_names, dict(ds.meta)), int(np.sum(~keep))
+
+
+def _on_the_skin(ds: Dataset) -> np.ndarray:
+    if not stage_labelled(ds) or "dz" not in ds.target_names:
+        return np.ones(ds.n_rows, bool)
+    return ~off_skin(ds.poses())
+
+
+@contextmanager
+def numbered_as_in(loaded: Dataset):
+    """A RowError raised within about the rows :func:`rows_on_the_skin` kept of ``loaded`` names the row as
+    ``loaded``'s file numbers it."""
+    try:
+        yield
+    except RowError as e:
+        raise InputError(e.numbered(int(np.flatnonzero(_on_the_skin(loaded))[e.row]) + 1)) from None
 
 
 def meta_path(path: str | Path) -> Path:
