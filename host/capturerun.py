@@ -116,7 +116,8 @@ def run_capture(args, prog: str) -> None:
 def next_step(schedule, output) -> str:
     """What a user runs on a finished capture (docs/calibration.md, "The workflow")."""
     if schedule.check:
-        return f"fitgen check TWIN.json {output} (the twin's model on these poses, against what identify predicts)"
+        return (f"fitgen check twin.json {output} (the twin's model, named as identify's next step names it, on "
+                "these poses against what identify predicts)")
     drawing = recorded_spec(schedule.drawing) if schedule.drawing else None
     return (f"fitgen identify {output} --sensor {drawing or 'DRAWING'} -o unit.toml (the unit's physics from these "
             "rows)")

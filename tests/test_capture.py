@@ -524,8 +524,9 @@ def test_a_finished_capture_names_the_next_step_from_its_schedule(tmp_path):
         said = proc.stderr.strip().splitlines()[-1]
         assert said == ({"s": f"tactile-host capture: next: fitgen identify {cap} --sensor paper -o unit.toml (the "
                               "unit's physics from these rows)",
-                         "c": f"tactile-host capture: next: fitgen check TWIN.json {cap} (the twin's model on these "
-                              "poses, against what identify predicts)"}[kind]), said
+                         "c": f"tactile-host capture: next: fitgen check twin.json {cap} (the twin's model, named as "
+                              "identify's next step names it, on these poses against what identify predicts)"}
+                        [kind]), said
 
 
 def test_an_earlier_runs_noise_figures_past_any_count_start_anew():
