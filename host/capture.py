@@ -32,7 +32,7 @@ from fitgen import __version__
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, is_stage_error
 from fitgen.physics.dataset import load_meta, meta_path, pose_table, read_text, row_degc
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import open_output, real_file, sha256_hex, write_atomic, write_target
+from fitgen.base.fileio import open_output, real_file, sha256_hex, signals_held, write_atomic, write_target
 from fitgen.base.parse import MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, as_poses
 
@@ -458,8 +458,9 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
             if clock.monotonic() - last_meta >= META_EVERY:
                 last_meta = refresh()
     finally:
-        writer.close()
-        if temps is not None:  # a run stopped after a row's temperature but before its row: the rows written
-            del temps[state.rows + res.captured:]
-        refresh()
+        with signals_held():  # a second Ctrl-C here would leave the meta behind the rows (four runs in 33 did)
+            writer.close()
+            if temps is not None:  # a run stopped after a row's temperature but before its row: the rows written
+                del temps[state.rows + res.captured:]
+            refresh()
     return res

@@ -112,6 +112,38 @@ def test_an_interruption_loses_and_doubles_no_row(sensor, tmp_path):
     assert np.max(np.abs(np.array(got)[:, :8] - truth)) < 0.002
 
 
+def test_a_second_ctrl_c_during_the_last_meta_write_leaves_the_meta_with_the_rows(sensor, tmp_path, monkeypatch):
+    """A second SIGINT (``timeout -s INT`` sends two; a user presses Ctrl-C twice) landed in the final meta write of
+    an interrupted capture: its rows were kept but its meta said 'rows: 0' and no noise, so a resume pooled
+    noise over fewer rows than the file holds."""
+    import signal
+
+    from host import capture as cap
+
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid_rows()[:8]))
+    out = tmp_path / "d.csv"
+    bus, arr, clock = rig(sensor)
+    real, calls = cap.write_meta, []
+
+    def write_meta(path, info):
+        calls.append(1)
+        if len(calls) > 1:  # the write in capture's cleanup, after the first Ctrl-C below
+            signal.raise_signal(signal.SIGINT)
+        real(path, info)
+
+    def wait(i, pose):
+        if i == 5:
+            raise KeyboardInterrupt
+        return True
+
+    monkeypatch.setattr(cap, "write_meta", write_meta)
+    with pytest.raises(KeyboardInterrupt):
+        capture(arr, sched, out, samples=4, wait=wait, set_pose=bus.set_pose, clock=clock)
+    assert len(calls) == 2
+    meta = json.loads((tmp_path / "d.csv.meta.json").read_text())
+    assert len(data_rows(out)[1]) == 5 and meta["rows"] == 5 and meta["noise_rows"] == 5
+
+
 def test_each_rows_temperature_stays_with_its_row_when_a_run_is_stopped(sensor, tmp_path, monkeypatch):
     """The meta takes a row's temperature before the row is written; a run stopped between the two keeps one per
     row written, and a resumed run appends to them."""
