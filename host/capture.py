@@ -183,8 +183,9 @@ def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write
             done[i] = True
     extra = [k for k, c in counts.items() if c > 0]
     if extra:
-        raise InputError(f"{origin} line {where[extra[0]]}: pose {dict(zip(schedule.columns, extra[0]))} is not "
-                         f"(or not that often) in the {schedule.origin}; it belongs to another run (choose another -o)")
+        pose = " ".join(f"{c}={v:g}" for c, v in zip(schedule.columns, extra[0]))  # as a row's progress names it
+        raise InputError(f"{origin} line {where[extra[0]]}: pose {pose} is not (or not that often) in the "
+                         f"{schedule.origin}; it belongs to another run (choose another -o)")
     return ResumeState(done, rows, dropped)
 
 

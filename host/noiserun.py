@@ -131,13 +131,19 @@ def told(path) -> tuple[int, np.ndarray]:
     single-sample noise, V. InputError when the file is no such record, or when its recording recommends
     no rows (too short to read one, readings that do not average down or that drift: verdict's order)."""
     text = read_text(path, "noise record")
+    rec = None
     try:
         rec = json.loads(text)
+        if not isinstance(rec, dict):
+            raise TypeError
         samples, single = int(rec["recommended"]), np.asarray(rec["single_v"], dtype=float)
         candidates, ratio, drifts = list(rec["candidates"]), np.asarray(rec["ratio"], dtype=float), rec["drifts"]
     except (ValueError, TypeError, KeyError, OverflowError, RecursionError) as exc:
-        raise InputError(f"{path} is not a record tactile-host noise -o wrote ({type(exc).__name__}: "
-                         f"{str(exc)[:80]})") from None
+        why = ("not JSON" if isinstance(exc, json.JSONDecodeError) else "nested too deep"
+               if isinstance(exc, RecursionError) else f"it has no {exc.args[0]!r}"
+               if isinstance(exc, KeyError) else "not a JSON object" if not isinstance(rec, dict)
+               else "a field that is not what such a record holds")
+        raise InputError(f"{path} is not a record tactile-host noise -o wrote ({why})") from None
     sane = single.ndim == 1 and single.size and np.all((single >= SINGLE_V[0]) & (single <= SINGLE_V[1]))
     if samples not in CANDIDATES or not sane or not isinstance(drifts, bool):
         raise InputError(f"{path} is not a record tactile-host noise -o wrote (its recommendation, noise or drift "

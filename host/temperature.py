@@ -217,7 +217,9 @@ def tempcomp_from_dict(data, origin: str) -> TempComp:
     at every temperature of T_RANGE."""
     if not isinstance(data, dict) or data.get("kind") != TempComp.KIND:
         kind = data.get("kind") if isinstance(data, dict) else None
-        raise InputError(f"{origin}: not a compensation file (its kind is {kind!r}, not {TempComp.KIND!r})")
+        raise InputError(f"{origin}: not a compensation file (" + (f"its kind is {kind!r}, not {TempComp.KIND!r}"
+                         if isinstance(kind, str) else f"it names no kind; a compensation file's is {TempComp.KIND!r}")
+                         + ")")
     if data.get("version") != 1 or isinstance(data.get("version"), bool):
         raise InputError(f"{origin}: version {data.get('version')!r} is not one this tactile-host reads (1)")
     t0 = finite_number(data.get("t0"), f"{origin}: t0")

@@ -112,6 +112,22 @@ def test_an_interruption_loses_and_doubles_no_row(sensor, tmp_path):
     assert np.max(np.abs(np.array(got)[:, :8] - truth)) < 0.002
 
 
+def test_rows_of_another_schedule_are_named_as_poses(sensor, tmp_path):
+    """Resuming into a file of another schedule's rows names the first foreign pose as progress names poses (it
+    printed a Python dict of numpy floats)."""
+    rows = grid_rows()
+    out = tmp_path / "d.csv"
+    bus, arr, clock = rig(sensor)
+    capture(arr, load_schedule(write_schedule(tmp_path / "a.csv", rows[:3])), out, samples=4, set_pose=bus.set_pose,
+            clock=clock)
+    other = load_schedule(write_schedule(tmp_path / "b.csv", rows[3:6]))
+    with pytest.raises(InputError) as err:
+        capture(arr, other, out, samples=4, set_pose=bus.set_pose, clock=clock)
+    first = " ".join(f"{c}={v:g}" for c, v in zip(("dx", "dy", "dz"), rows[0]))
+    assert str(err.value).startswith(f"output {out} line 2: pose {first} is not (or not that often) in the "), \
+        str(err.value)
+
+
 def test_a_second_ctrl_c_during_the_last_meta_write_leaves_the_meta_with_the_rows(sensor, tmp_path, monkeypatch):
     """A second SIGINT (``timeout -s INT`` sends two; a user presses Ctrl-C twice) landed in the final meta write of
     an interrupted capture: its rows were kept but its meta said 'rows: 0' and no noise, so a resume pooled

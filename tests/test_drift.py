@@ -115,6 +115,8 @@ def test_the_tempcomp_functions_linkage_can_be_chosen(tmp_path):
     ({"offset_v_per_degc": [], "gain_per_degc": []}, "no element"),
     ({"offset_v_per_degc": [1e300], "gain_per_degc": [-1e300]}, "does not fit in a float"),
     ({"kind": "tactile model", "offset_v_per_degc": [0.0], "gain_per_degc": [0.0]}, "its kind is 'tactile model'"),
+    # a model or any JSON without a kind: it said "its kind is None"
+    ({"kind": None}, "(it names no kind; a compensation file's is 'tactile temperature compensation')"),
 ])
 def test_tempcomp_c_refuses_what_would_not_compile_in_one_line(tmp_path, content, said):
     path = tmp_path / "tc.json"

@@ -259,9 +259,19 @@ def _written(path, data: bytes):
      "its readings drift"),
     (lambda p: _record(p, _stream(NOISE, 60.0)), (), "does not average down even over 16 samples"),
     (lambda p: _edited(p, single_v=[NOISE] * 4), (), "records 4 elements, the sensor paper has 8"),
-    (lambda p: _edited(p, recommended=None), (), "is not a record tactile-host noise -o wrote"),
+    (lambda p: _edited(p, recommended=None), (), "is not a record tactile-host noise -o wrote (a field that is not "
+                                                 "what such a record holds)"),
     # JSON's integers past a float's range: an OverflowError, a traceback
-    (lambda p: _edited(p, ratio=[[10 ** 400]]), (), "is not a record tactile-host noise -o wrote"),
+    (lambda p: _edited(p, ratio=[[10 ** 400]]), (), "is not a record tactile-host noise -o wrote (a field"),
+    # another command's JSON, or a list: Python's exception names leaked ("KeyError: 'recommended'")
+    (lambda p: _written(p / "m.json", b'{"single_v": [0.001]}'), (), "m.json is not a record tactile-host noise -o "
+                                                                      "wrote (it has no 'recommended')"),
+    (lambda p: _written(p / "l.json", b"[1, 2]"), (), "l.json is not a record tactile-host noise -o wrote (not a "
+                                                       "JSON object)"),
+    (lambda p: _written(p / "t.json", b"nope"), (), "t.json is not a record tactile-host noise -o wrote (not JSON)"),
+    # a file that is no .json: it was called "not a whole number"
+    (lambda p: _written(p / "c.csv", b"v1,dx\n1,0\n"), (), "--samples {p}/c.csv: a count, or the .json record "
+                                                            "tactile-host noise -o writes; this file is neither"),
     (lambda p: _record(p, _stream(0.0, 120.0)), ("--transfer", "raw"), "measured volts and the schedule is for mT"),
     (lambda p: p / "absent.json", (), "noise record {p}/absent.json: no such file"),
     # figures no ADC reads: 1e300 overflowed the schedule's weights in numpy warnings, 1e-300 read as no noise

@@ -4,6 +4,7 @@ fitgen.fitting.identify, fitgen.fitting.schedule and fitgen.fitting.check."""
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -198,6 +199,9 @@ def samples_of(args, drawing) -> tuple[int, float, dict]:
         raise InputError(f"--noise must be a finite number > 0, got {args.noise} (the schedule weighs each reading by "
                          "it)")
     if not args.samples.lower().endswith(".json"):
+        if os.path.exists(args.samples):  # a file, but no record: "not a whole number" would not say what is wanted
+            raise InputError(f"--samples {args.samples}: a count, or the .json record tactile-host noise -o writes; "
+                             "this file is neither")
         return parse_positive(args.samples, "--samples", integer=True, most=MAX_ROW_SAMPLES), noise, {}
     import numpy as np
 
