@@ -447,9 +447,16 @@ def test_check_on_a_model_with_no_held_out_figures_says_why_it_names_no_unit(twi
     (tmp_path / "direct.json").write_text(json.dumps(data))
     poses, _ = check_schedule(drawing, 10, seed=0)
     capture = save_capture(tmp_path / "c.csv", _capture(unit, poses, 100), poses, ROWS_META)
+    # rows a simulation read record its sensor: that file, not identify's, is the one the model takes (a user
+    # who gave identify's was refused as "another sensor")
     assert_one_line_error(run_cli("fitgen", "check", str(tmp_path / "direct.json"), str(capture)), 2,
                           "it has no held-out figures, so it names no unit (a fit straight on a capture names none): "
-                          "give the unit's file as --sensor")
+                          f"give the file of sensor {data['fit']['sensor_sha256'][:12]}, whose readings it was "
+                          "fitted on (a simulation's")
+    data["fit"].pop("sensor_sha256")  # a real capture's rows name no sensor
+    (tmp_path / "direct.json").write_text(json.dumps(data))
+    assert_one_line_error(run_cli("fitgen", "check", str(tmp_path / "direct.json"), str(capture)), 2,
+                          "names none): give the unit's file (fitgen identify writes it) as --sensor")
 
 
 def test_a_simulation_of_the_models_own_unit_file_is_refused_as_a_check(twin, tmp_path):

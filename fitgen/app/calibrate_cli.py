@@ -333,8 +333,12 @@ def cmd_check(args) -> int:
         why = ("the sensor its held-out figures were made on is not found here (or has changed)"
                if model.fit_info.get("held_out") else "it has no held-out figures, so it names no unit (a fit "
                "straight on a capture names none)")
-        raise InputError(f"model {args.model}: {why}: give the unit's file as --sensor (fitgen identify writes it), "
-                         "or check the twin's model (identify, simulate --sensor unit.toml, fit)")
+        read_from = model.fit_info.get("sensor_sha256")  # rows a simulation read: its sensor, not identify's file
+        which = (f"the file of sensor {str(read_from)[:12]}, whose readings it was fitted on (a simulation's: the "
+                 "--sensor that simulate or capture --simulate read)" if read_from else
+                 "the unit's file (fitgen identify writes it)")
+        raise InputError(f"model {args.model}: {why}: give {which} as --sensor, or check the twin's model (identify, "
+                         "simulate --sensor unit.toml, fit)")
     sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on")
     sha = ds.sha256  # the capture's as written, before a compensation
     ds, heat = _check_temperature(ds, sensor, args.temp_comp, args.capture)
