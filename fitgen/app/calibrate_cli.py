@@ -333,7 +333,8 @@ def cmd_check(args) -> int:
         why = ("the sensor its held-out figures were made on is not found here (or has changed)"
                if model.fit_info.get("held_out") else "it has no held-out figures, so it names no unit (a fit "
                "straight on a capture names none)")
-        read_from = model.fit_info.get("sensor_sha256")  # rows a simulation read: its sensor, not identify's file
+        # a direct fit on rows a simulation read: that sensor's file, not identify's (a twin's is identify's)
+        read_from = None if model.fit_info.get("held_out") else model.fit_info.get("sensor_sha256")
         which = (f"the file of sensor {str(read_from)[:12]}, whose readings it was fitted on (a simulation's: the "
                  "--sensor that simulate or capture --simulate read)" if read_from else
                  "the unit's file (fitgen identify writes it)")
