@@ -306,6 +306,16 @@ def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
     assert_one_line_error(run_cli("fitgen", "simulate", "--labels", "magnet", "--grid", "dx=0", "-o",
                                   str(tmp_path / "again.csv")), 2, "--labels magnet is for a built unit")
     assert not (tmp_path / "again.csv").exists()
+    # another unit into the same name replaces its unit file: said, as identify says it (a model held out on the
+    # old one no longer matches); the same unit again says nothing
+    for seed, said in (("4", False), ("5", True)):
+        proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", seed, "--grid",
+                       "paper-exp", "-o", str(out))
+        assert proc.returncode == 0, proc.stderr
+        assert (f"note: {tmp_path / 'u.unit.toml'} held another unit, now replaced" in proc.stderr) == said, proc.stderr
+    assert load_sensor(tmp_path / "u.unit.toml").name.endswith("-5")
+    assert_one_line_error(run_cli("fitgen", "check", str(tmp_path / "m.json"), str(out)), 2,
+                          "the sensor its held-out figures were made on is not found here (or has changed)")
 
 
 def test_fit_refuses_data_whose_unit_file_is_gone_or_changed(tmp_path):

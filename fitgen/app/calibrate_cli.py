@@ -10,7 +10,7 @@ from pathlib import Path
 
 from fitgen.app.cliutil import count, finite
 from fitgen.app.options import noise_of, sensor_of
-from fitgen.base.fileio import write_all
+from fitgen.base.fileio import replaces_other, write_all
 from fitgen.base.errors import InputError
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES, parse_positive
 
@@ -77,7 +77,7 @@ def cmd_identify(args) -> int:
                                                 **({"capture_zero": zero} if zero else {})}, unit_noise)
     if folder is not None:  # drawn first, then written with the unit's files: a failure leaves none of them
         files.append((folder / "identify.png", plots.identification_png(ident)))
-    replaced = _replaces_another(files[0])
+    replaced = replaces_other(*files[0])
     unit, post, *png = write_all(files)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
           f"{args.zero_error:g} mm{stage}", file=sys.stderr)
@@ -101,17 +101,6 @@ def cmd_identify(args) -> int:
     print(f"next: fitgen simulate --sensor {unit} --grid paper-sim --random 5000 -o twin.csv, then fitgen fit "
           "twin.csv -o twin.json (the unit's own equations, tilt included)", file=sys.stderr)
     return 0
-
-
-def _replaces_another(file) -> bool:
-    """Whether writing ``(path, text)`` replaces a file that says something else (a unit a twin may be fitted on)."""
-    from pathlib import Path
-
-    path, text = file
-    try:
-        return Path(path).read_text() != text
-    except (OSError, UnicodeDecodeError):  # none there (or not a text file: the write says what it says)
-        return False
 
 
 def _at_t0(ds, tc, path: str, capture: str, command: str):

@@ -21,7 +21,8 @@ FAMILY_CHOICES = ("auto", *FAMILIES)
 
 
 def cmd_simulate(args) -> int:
-    from fitgen.app.report import simulate_notes
+    from fitgen.app.report import posterior_note, simulate_notes
+    from fitgen.base.fileio import replaces_other
     from fitgen.fitting.fit import rows_needed
     from fitgen.physics.posesource import choose_poses
     from fitgen.physics.simulate import simulate
@@ -36,13 +37,14 @@ def cmd_simulate(args) -> int:
     if args.labels == "magnet" and args.unit is None and sensor.is_drawing:
         raise InputError("--labels magnet is for a built unit (--unit SEED, or a unit's file as --sensor): on the "
                          "drawing the stage moves the magnet one to one, so the labels are the same")
-    unit, beside = None, []
+    unit, beside, replaced = None, [], None
     if args.unit is not None:
         from fitgen.physics.units import unit_beside
 
         drawing = sensor
         sensor, unit, text, unit_info = unit_beside(drawing, args.unit, args.output)
         beside = [(unit, text)]  # written with the data or not at all: a refusal keeps an earlier run's
+        replaced = unit if replaces_other(unit, text) else None
     from fitgen.base.progress import Progress
 
     with Progress("simulate", 2) as bar:  # seen on a terminal when many poses take seconds
@@ -54,25 +56,11 @@ def cmd_simulate(args) -> int:
         bar.update(1, "written")
     if unit is not None:
         print(f"wrote unit {sensor.name} (a unit of {drawing.name}) to {unit}", file=sys.stderr)
-    said = simulate_notes(sensor, poses, args.labels, args.sensor, args.adc_bits, source)
-    notes = "".join(f"note: {n}\n" for n in said + _posterior_note(args.sensor if args.unit is None else None))
+    said = simulate_notes(sensor, poses, args.labels, args.sensor, args.adc_bits, source, replaced)
+    notes = "".join(f"note: {n}\n" for n in said + posterior_note(args.sensor if args.unit is None else None))
     print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}\n"
           + notes, end="", file=sys.stderr)
     return 0
-
-
-def _posterior_note(spec) -> list[str]:
-    """A unit file whose posterior is not beside it (copied alone): fit would refuse the twin's rows, so simulate
-    says so before the user fits."""
-    if spec is None or not Path(spec).is_file():
-        return []
-    from fitgen.fitting.unitrecord import load_posterior
-
-    try:
-        load_posterior(spec)
-    except InputError as exc:
-        return [f"{exc}; fitgen fit refuses these rows until then"]
-    return []
 
 
 def cmd_observe(args) -> int:

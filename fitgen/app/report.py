@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from fitgen.base.errors import InputError
@@ -224,12 +226,27 @@ BLIND_SHARE = 0.5  # a training RMS past this share of an output's own spread, w
 NEAR_CONSTANT = 0.8  # past this share the equation is near a constant, cause found or not
 
 
+def posterior_note(spec) -> list[str]:
+    """A unit file whose posterior is not beside it (copied alone): fit would refuse the twin's rows, so simulate
+    says so before the user fits."""
+    if spec is None or not Path(spec).is_file():
+        return []
+    from fitgen.fitting.unitrecord import load_posterior
+
+    try:
+        load_posterior(spec)
+    except InputError as exc:
+        return [f"{exc}; fitgen fit refuses these rows until then"]
+    return []
+
+
 def simulate_notes(sensor, poses, labels: str, spec: str, adc_bits: int | None = None,
-                   source: dict | None = None) -> list[str]:
+                   source: dict | None = None, replaced=None) -> list[str]:
     """What `fitgen simulate` says of its rows beyond their count: rows where an element's reading no longer
     follows the pose (``spec``: the --sensor given, for the command that tells more; ``adc_bits``: --adc-bits,
     which gives a raw transfer a converter and so a full scale its readings clip at); of a scene's grid
-    (``source``: the poses' provenance), levels raised and a box past the sensor's travel."""
+    (``source``: the poses' provenance), levels raised and a box past the sensor's travel; ``replaced``: the unit
+    file ``--unit`` wrote over one of another unit."""
     import dataclasses
 
     from fitgen.physics.simulate import rows_past_linear
@@ -239,6 +256,9 @@ def simulate_notes(sensor, poses, labels: str, spec: str, adc_bits: int | None =
     if adc_bits is not None and sensor.transfer == "raw":
         sensor = dataclasses.replace(sensor, raw=dataclasses.replace(sensor.raw, adc_bits=adc_bits))
     notes = _scene_notes(sensor, source or {})
+    if replaced is not None:  # as identify says it: a model held out on the file no longer matches it
+        notes.append(f"{replaced} held another unit, now replaced: rows and models made with that unit no longer "
+                     "match it (fit and check refuse them)")
     if lifted := int(off_skin(poses).sum()):  # a schedule's rest rows; in a grid or a box, labels that read as rest
         notes.append(f"{lifted} of {len(poses)} rows lie above first contact (dz > 0.05 mm): the indenter is off the "
                      "skin there, and they read the sensor at rest (fitgen fit leaves them out)")

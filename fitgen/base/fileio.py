@@ -130,6 +130,14 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
     return path
 
 
+def replaces_other(path: str | os.PathLike, text: str) -> bool:
+    """Whether writing ``text`` to ``path`` replaces a file that says something else (a unit a model is tied to)."""
+    try:
+        return Path(path).read_text() != text
+    except (OSError, UnicodeDecodeError):  # none there (or not a text file: the write says what it says)
+        return False
+
+
 def write_all(files) -> list:
     """Write every ``(path, data)`` of ``files``, or none of them: each is first written whole under a temporary
     name beside the file it replaces (through a symlink, as :func:`write_atomic`; its folder made when missing),
