@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import read_text, write_atomic
+from fitgen.base.fileio import read_text
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from fitgen.base.progress import Progress
 
@@ -122,8 +122,9 @@ def verdict(av: Averaging, record=None) -> str:
             + (f"{record} (which takes {best}, and the noise measured here)" if record else str(best)))
 
 
-def save(av: Averaging, path, source: str) -> None:
-    write_atomic(path, json.dumps({"source": source, **av.meta()}, indent=2, sort_keys=True) + "\n")
+def record_text(av: Averaging, source: str) -> str:
+    """The JSON record ``noise -o`` writes and :func:`told` reads; ``source``: what was read (hardware or a preset)."""
+    return json.dumps({"source": source, **av.meta()}, indent=2, sort_keys=True) + "\n"
 
 
 def told(path) -> tuple[int, np.ndarray]:

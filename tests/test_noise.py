@@ -17,7 +17,7 @@ from host.adc import AdcArray
 from host.allan import CANDIDATES, EXCESS, MIN_AVERAGES, averaging, overlapping_adev
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
-from host.noiserun import SECONDS, record, save, told, verdict
+from host.noiserun import SECONDS, record, record_text, told, verdict
 from host.simbus import SimBus
 from host.simsensor import Drift, Flicker
 
@@ -153,6 +153,35 @@ def test_the_command_writes_its_verdict_and_plot(tmp_path):
     assert (plots / "allan.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_a_ctrl_c_between_the_record_and_its_plot_leaves_both_new(tmp_path, monkeypatch):
+    """A signal landing after the record was renamed into place, before the plot was, left a new record beside
+    the old run's plot (SIGTERM 15-250 ms after a first one, 10 runs in 10)."""
+    import os
+    import signal
+
+    from fitgen.app import host_cli
+
+    out, plots = tmp_path / "noise.json", tmp_path / "img"
+    plots.mkdir()
+    out.write_text("old record")
+    (plots / "allan.png").write_bytes(b"old plot")
+    real, renamed = os.replace, []
+
+    def replace(src, dst):
+        real(src, dst)
+        renamed.append(dst)
+        if len(renamed) == 1:
+            signal.raise_signal(signal.SIGINT)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(SystemExit) as stop:
+        host_cli.main(["noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "1", "-o", str(out),
+                       "--plot", str(plots)])
+    assert stop.value.code == 130 and len(renamed) == 2
+    assert json.loads(out.read_text())["source"] == "simulated paper"
+    assert (plots / "allan.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 @pytest.mark.parametrize("args,what", [
     (["--seconds", "0"], "--seconds"),
     (["--seconds", "nan"], "--seconds"),
@@ -211,7 +240,7 @@ def test_a_short_recording_of_white_noise_does_not_read_as_drift():
 
 def _record(tmp_path, x, name="noise.json"):
     path = tmp_path / name
-    save(averaging(x, RATE), path, "test")
+    path.write_text(record_text(averaging(x, RATE), "test"))
     return path
 
 

@@ -6,12 +6,13 @@ from __future__ import annotations
 import sys
 
 from fitgen.app.cliutil import EXIT_CHECK_FAILED, StopFlag
+from fitgen.base.fileio import write_all
 
 
 def cmd_noise(args) -> int:
     from fitgen.app import plots
     from host.adc import DeviceSilent
-    from host.noiserun import run_noise, save, table, verdict
+    from host.noiserun import record_text, run_noise, table, verdict
 
     folder = plots.require(args.plot) if args.plot else None
     try:
@@ -26,11 +27,12 @@ def cmd_noise(args) -> int:
           f"({av.rate:.0f} per s), the sensor at rest")
     print(table(av))
     print(verdict(av, args.output))
-    if args.output:
-        save(av, args.output, f"simulated {args.sensor}" if args.simulate else "hardware")
-        print(f"wrote {args.output}", file=sys.stderr)
+    files = [(args.output, record_text(av, f"simulated {args.sensor}" if args.simulate else "hardware"))
+             ] if args.output else []
     if folder is not None:
-        print(f"wrote {plots.allan(av, folder / 'allan.png')}", file=sys.stderr)
+        files.append((folder / "allan.png", plots.allan_png(av)))
+    for path in write_all(files):  # both or neither: a Ctrl-C between them left a new record beside an old plot
+        print(f"wrote {path}", file=sys.stderr)
     return 0
 
 

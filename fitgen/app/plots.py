@@ -235,7 +235,7 @@ def identification_png(ident, truth: dict | None = None) -> bytes:
     return _png(fig)
 
 
-def allan(av, path: Path) -> Path:
+def allan_png(av) -> bytes:
     """tactile-host noise --plot: each element's overlapping Allan deviation against the row's reading time, beside
     white noise's (the one-sample deviation over sqrt(S)), the candidates marked, as PNG."""
     plt = _plt()
@@ -254,7 +254,7 @@ def allan(av, path: Path) -> Path:
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.legend(fontsize=7, ncol=4, loc="lower left")
     fig.tight_layout()
-    return write_in_folder(path.parent, path.name, _png(fig))
+    return _png(fig)
 
 
 def check_png(result, units: dict) -> bytes:
