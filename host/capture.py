@@ -450,10 +450,11 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
             if temps is not None:  # in the meta before the row: a run killed between the two keeps them aligned
                 temps.append(round(0.5 * (before + temperature()), 4))
                 last_meta = refresh()
-            writer.append(row_line(block.mean(axis=0), values[i]))
-            res.captured += 1
-            noise.add(block)
-            res.spreads.append(float(spread.max()))
+            with signals_held():  # a Ctrl-C in the row's fsync: the row is on disk, so it is counted with its noise
+                writer.append(row_line(block.mean(axis=0), values[i]))
+                res.captured += 1
+                noise.add(block)
+                res.spreads.append(float(spread.max()))
             if progress is not None:
                 progress.update(1)
             if clock.monotonic() - last_meta >= META_EVERY:

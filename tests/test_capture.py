@@ -160,6 +160,33 @@ def test_a_second_ctrl_c_during_the_last_meta_write_leaves_the_meta_with_the_row
     assert len(data_rows(out)[1]) == 5 and meta["rows"] == 5 and meta["noise_rows"] == 5
 
 
+def test_a_ctrl_c_while_a_row_is_synced_counts_the_row(sensor, tmp_path, monkeypatch):
+    """A SIGINT landing in a row's fsync (strace's signal injection hit it) raised after the row was on disk but
+    before it was counted: the meta's noise was pooled over one row fewer, and the row's temperature was dropped."""
+    import signal
+
+    from fitgen.physics.dataset import load_dataset, row_degc
+    from host import capture as cap
+
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid_rows()[:8]))
+    out = tmp_path / "d.csv"
+    bus, arr, clock = rig(sensor)
+    degc = iter(np.arange(20.0, 40.0, 0.25))
+    real, appended = cap.RowWriter.append, []
+
+    def append(self, line):
+        real(self, line)
+        appended.append(line)
+        if len(appended) == 3:
+            signal.raise_signal(signal.SIGINT)
+
+    monkeypatch.setattr(cap.RowWriter, "append", append)
+    with pytest.raises(KeyboardInterrupt):
+        capture(arr, sched, out, samples=4, set_pose=bus.set_pose, clock=clock, temperature=lambda: next(degc))
+    ds = load_dataset(out)
+    assert ds.n_rows == 3 and ds.meta["noise_rows"] == 3 and len(row_degc(ds.meta, 3)) == 3
+
+
 def test_each_rows_temperature_stays_with_its_row_when_a_run_is_stopped(sensor, tmp_path, monkeypatch):
     """The meta takes a row's temperature before the row is written; a run stopped between the two keeps one per
     row written, and a resumed run appends to them."""
