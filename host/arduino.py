@@ -24,7 +24,7 @@ from pathlib import Path
 from fitgen import __version__
 from fitgen.base.children import run_captured
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import check_folder, staged_beside, write_atomic
+from fitgen.base.fileio import check_folder, signals_held, staged_beside, write_atomic
 from fitgen.base.progress import Progress
 from fitgen.c.cgen import c_real
 from fitgen.c.codegen import write_header
@@ -411,13 +411,14 @@ def _install(partial: Path, folder: Path) -> None:
     """Move the rendered library's parts into ``folder``, each replacing the last build's whole (``src/`` is
     generated: a file left there would be compiled with it); the folder's other files stay."""
     (folder / "examples").mkdir(parents=True, exist_ok=True)
-    for part in INSTALLED:
-        old = folder / part
-        if old.is_dir() and not old.is_symlink():
-            shutil.rmtree(old)
-        elif old.exists() or old.is_symlink():
-            old.unlink()
-        (partial / part).replace(old)
+    with signals_held():  # a Ctrl-C between two parts left a library without its manifest, which the next refused
+        for part in INSTALLED:
+            old = folder / part
+            if old.is_dir() and not old.is_symlink():
+                shutil.rmtree(old)
+            elif old.exists() or old.is_symlink():
+                old.unlink()
+            (partial / part).replace(old)
 
 
 def _build_fitting(model, cmap, library: Path, precision, style, board, build, build_path, measure,

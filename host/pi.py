@@ -24,7 +24,7 @@ from fitgen import __version__
 from fitgen.c.codegen import check_magnitudes, render_header
 from fitgen.base.children import tied
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import check_folder, make_folder, staged_beside, write_atomic, write_in_folder
+from fitgen.base.fileio import check_folder, make_folder, signals_held, staged_beside, write_atomic, write_in_folder
 from fitgen.equations.model import Model, check_input_units, load_model
 
 from host.cdrivers import chip_table, smbus_transfer
@@ -256,11 +256,12 @@ def _install(partial: Path, folder: Path) -> Path:
     beside sources it was not built from; the folder's other files stay, but for a compensation the new build has
     none of. The program's path."""
     make_folder(folder)
-    if not (partial / "tm_tempcomp.h").exists():
-        (folder / "tm_tempcomp.h").unlink(missing_ok=True)
-    (folder / "tm_pi").unlink(missing_ok=True)
-    for path in sorted(partial.iterdir(), key=lambda p: p.name == "tm_pi"):
-        os.replace(path, folder / path.name)
+    with signals_held():  # a Ctrl-C between two renames left new sources beside old ones, or no program
+        if not (partial / "tm_tempcomp.h").exists():
+            (folder / "tm_tempcomp.h").unlink(missing_ok=True)
+        (folder / "tm_pi").unlink(missing_ok=True)
+        for path in sorted(partial.iterdir(), key=lambda p: p.name == "tm_pi"):
+            os.replace(path, folder / path.name)
     return folder / "tm_pi"
 
 

@@ -212,6 +212,36 @@ def test_a_refused_build_leaves_the_library_as_it_was_and_a_new_one_replaces_src
     assert "architectures=avr\n" in (lib / "library.properties").read_text()
 
 
+def test_a_ctrl_c_while_a_build_replaces_the_last_one_leaves_a_whole_library(model_path, tmp_path, monkeypatch):
+    """A signal landing between two of the library's parts left a folder without library.properties (after src/
+    went, before the manifest came), which the next build refused as a library it did not write."""
+    import shutil
+    import signal
+
+    from fitgen.app import host_cli
+
+    lib = tmp_path / "TactilePose"
+    assert _build_cli(model_path, lib, "--no-build").returncode == 0
+    (lib / "src" / "extra.h").write_text("/* a file the last build did not write */\n")
+    real, removed = shutil.rmtree, []
+
+    def rmtree(path, *args, **kwargs):
+        real(path, *args, **kwargs)
+        if Path(path).parent == lib:  # the last build's src/, the first part replaced
+            removed.append(path)
+            signal.raise_signal(signal.SIGINT)
+
+    monkeypatch.setattr(shutil, "rmtree", rmtree)
+    with pytest.raises(SystemExit) as stop:
+        host_cli.main(["arduino-build", "--model", model_path, "--adc", TWO_CHIPS, "-o", str(lib), "--no-build"])
+    monkeypatch.setattr(shutil, "rmtree", real)
+    assert stop.value.code == 130 and len(removed) == 1
+    assert not (lib / "src" / "extra.h").exists() and (lib / "src" / "tm_model.h").is_file()
+    assert "architectures=avr\n" in (lib / "library.properties").read_text()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["TactilePose"]  # no partial folder left
+    assert _build_cli(model_path, lib, "--no-build").returncode == 0
+
+
 def test_a_build_too_big_for_a_smaller_avr_board_says_so_and_options_that_would_be_ignored_are_refused(
         model_path, tmp_path):
     """The manifests say architectures=avr, and the fit is checked on one board: flash or RAM past another's room
