@@ -128,7 +128,7 @@ def record_text(av: Averaging, source: str) -> str:
 
 
 def told(path) -> tuple[int, np.ndarray]:
-    """What a record ``save`` wrote tells a capture: the samples per row it recommends and each element's
+    """What a record of :func:`record_text` tells a capture: the samples per row it recommends and each element's
     single-sample noise, V. InputError when the file is no such record, or when its recording recommends
     no rows (too short to read one, readings that do not average down or that drift: verdict's order)."""
     text = read_text(path, "noise record")
