@@ -150,7 +150,7 @@ def test_pose_files_with_a_byte_order_mark_or_a_column_twice(tmp_path):
                                   str(tmp_path / "t.csv")), contains="column dx appears twice")
 
 
-@pytest.mark.parametrize("meta, said", [([], "not a dataset's meta"), ({"units": 5}, "not a dataset's meta"),
+@pytest.mark.parametrize("meta, said", [([], "not a dataset's meta"), ({"units": 5}, "units must be text, got 5"),
                                         ("{", "not JSON"), (b"{\xff}", "line 1 is not UTF-8 text (byte 0xff"),
                                         (None, "d.csv.meta.json: a folder, not a file")])  # was read as no meta
 def test_a_broken_meta_is_said(data, tmp_path, meta, said):
@@ -291,7 +291,15 @@ def test_report_on_fit_notes_edited_by_hand_is_one_line(fitted, tmp_path, edit):
     # a hash that is a list: fitgen check's TypeError (unhashable), a traceback
     (lambda f: f.__setitem__("sensor_sha256", ["ab"]), "fit.sensor_sha256 must be a hash (text)"),
     # labels no simulation knows: verify said "labels are the stage's or the magnet's" without the file or field
-    (lambda f: f.__setitem__("held_out", {"labels": "xyz"}), "fit.held_out.labels must be 'stage' or 'magnet'")])
+    (lambda f: f.__setitem__("held_out", {"labels": "xyz"}), "fit.held_out.labels must be 'stage' or 'magnet'"),
+    # figures report printed as they were ('-5', 'nan') and check compared with
+    (lambda f: f.__setitem__("held_out", {"errors": {"float": {"dx": {"max": -5}}}}),
+     "fit.held_out.errors.float.dx.max must be an error figure (a number >= 0), got -5"),
+    (lambda f: f.__setitem__("held_out", {"errors": {"float": {"dx": 0.1}}}),
+     "fit.held_out.errors.float.dx must be an object of error figures, got 0.1"),
+    (lambda f: f.__setitem__("held_out", {"noise": -1.0}), "fit.held_out.noise must be a noise figure"),
+    (lambda f: f["noise"].__setitem__("device", "x"), "fit.noise.device must be a noise figure (a number >= 0), "
+                                                      "got 'x'")])
 def test_fit_notes_edited_where_commands_read_them_are_refused_as_the_model_is_loaded(fitted, data, tmp_path, edit,
                                                                                        said):
     """Notes that predict, codegen and the readouts read (the held-out box, the precision) were read as tables far
@@ -344,7 +352,20 @@ def test_a_models_input_names_that_are_not_its_inputs_are_refused(fitted, data, 
     ({"noise": 10 ** 400}, "noise must be a noise figure 0..1000 (or one per element)"),
     # a figure past any sensor's, squared, overflowed in the fit or identify (which blamed the unit file it wrote)
     ({"sample_noise": [5e-4] * 7 + [1e308]}, "sample_noise must be a noise figure 0..1000 (or one per element), got "
-                                               "1e+308 for element 8")])
+                                               "1e+308 for element 8"),
+    # the fit wrote a model codegen and report then refused, as often as it was fitted again
+    ({"sensor_sha256": [1, 2]}, "d.csv.meta.json: sensor_sha256 must be text, got [1, 2]"),
+    ({"labels": 0}, "d.csv.meta.json: labels must be text, got 0"),
+    # figures a capture never writes, taken as the rows' own: a fit added no noise, identify wrote 5 V into the unit
+    ({"samples_per_row": 16, "sample_noise": [5.0] * 8, "row_noise": [1.25e-4] * 8},
+     "sample_noise must be row_noise times sqrt(samples_per_row 16), as a capture writes it, got [5.0"),
+    ({"noise": 500}, "noise 500 puts more noise in a row than all the rows' readings span"),
+    ({"samples_per_row": 4, "sample_noise": [60.0] * 8, "row_noise": [30.0] * 8},
+     "row_noise 30 puts more noise in a row than all the rows' readings span"),
+    # identify blamed the unit file it was writing for the capture's temperature
+    ({"thermistor_degc": 1e300}, "thermistor_degc must be a temperature -40..125 degC, got 1e+300"),
+    ({"row_degc": [25.0] * 59 + [-500.0]}, "row_degc must be a list of temperatures -40..125 degC, one per row, "
+                                           "got -500.0 for row 60")])
 def test_a_meta_figure_the_fit_reads_that_is_not_as_written_is_refused(data, tmp_path, edit, said):
     """A meta edited by hand was fitted on without a word: a model in 'furlongs' no other command would read, or
     a noise of -1 recorded as the data's own."""

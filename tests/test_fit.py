@@ -436,7 +436,8 @@ def test_fit_on_a_capture_adds_the_single_sample_noise_less_the_rows(tmp_path):
              ({k: v for k, v in capture.items() if k != "row_noise"}, [], 0.0005, 0.0005 / 4),
              ({"units": "V", "source": "hardware"}, ["--noise", "0.001"], 0.001, None),
              # a unit noisier than its drawing: what the capture measured wins over the drawing's figure
-             ({**capture, "sample_noise": [0.001] * 8}, ["--sensor", "paper"], 0.001, 0.000125)]
+             ({**capture, "sample_noise": [0.001] * 8, "row_noise": [0.00025] * 8}, ["--sensor", "paper"], 0.001,
+              0.00025)]
     for i, (meta, extra, device, data) in enumerate(cases):
         ds.meta = dict(meta)
         path = ds.save(tmp_path / f"c{i}.csv", meta)

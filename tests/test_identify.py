@@ -1138,7 +1138,7 @@ def test_the_unit_file_carries_the_units_own_reading_noise(tmp_path):
     meta_file = tmp_path / "c.csv.meta.json"
     simulated = json.loads(meta_file.read_text())
     measured = [0.0007, 0.0009] * 4  # V: what a capture of 16 samples per row would have measured, rms 0.0008062
-    as_captured = {**simulated, "samples_per_row": 16, "row_noise": [0.0002] * 8, "sample_noise": measured}
+    as_captured = {**simulated, "samples_per_row": 16, "row_noise": [m / 4 for m in measured], "sample_noise": measured}
     for meta, extra, noise, source in ((as_captured, (), float(np.sqrt(np.mean(np.square(measured)))),
                                         "measured by the capture"),
                                        (as_captured, ("--noise", "0.0006"), 0.0006, "--noise"),

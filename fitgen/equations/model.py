@@ -379,6 +379,25 @@ def _check_fit_notes(fit, origin: str) -> None:
     if not isinstance(fit.get("sensor_sha256"), (str, type(None))):
         refuse(".sensor_sha256", "a hash (text)", fit["sensor_sha256"])
 
+    def figure(x) -> bool:  # what report prints and check compares: an error or a noise, never negative
+        return is_finite_number(x) and x >= 0
+
+    for key in ("device", "data", "added"):
+        if fit.get("noise", {}).get(key) is not None and not figure(fit["noise"][key]):
+            refuse(f".noise.{key}", "a noise figure (a number >= 0)", fit["noise"][key])
+    if "noise" in held and not figure(held["noise"]):
+        refuse(".held_out.noise", "a noise figure (a number >= 0)", held["noise"])
+    for precision, outputs in held.get("errors", {}).items():
+        for output, figures in (outputs.items() if isinstance(outputs, dict) else [("", outputs)]):
+            where = f".held_out.errors.{precision}" + (f".{output}" if output else "")
+            if isinstance(figures, str) and output:  # why a precision has none ('unavailable')
+                continue
+            if not isinstance(figures, dict):
+                refuse(where, "an object of error figures", figures)
+            for name, x in figures.items():
+                if not figure(x):
+                    refuse(f"{where}.{name}", "an error figure (a number >= 0)", x)
+
 
 def _term(text, where: str) -> Term:
     if not isinstance(text, str):

@@ -241,7 +241,9 @@ def parse_table(text: str, origin: str, header=None) -> tuple[list[str], np.ndar
     return names, table
 
 
-META_TEXT = ("units", "sensor", "sensor_file", "scene_spec", "drawing", "transfer")  # keys read as text (or null)
+META_TEXT = ("units", "sensor", "sensor_file", "scene_spec", "drawing", "transfer", "sensor_sha256",
+             "labels")  # keys read as text (or null)
+DEGC = (-40.0, 125.0)  # degC: a thermistor's reading the tools take (the elements' and ADCs' operating range)
 READING_UNITS = ("mT", "V")  # the field at the elements (transfer raw) or their voltages (gmr)
 # noise figures the fit reads from a meta (V or mT): one number, or one per element
 META_NOISE = ("noise", "row_noise", "sample_noise")
@@ -260,7 +262,24 @@ def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
         if isinstance(meta.get(key), list) and len(meta[key]) != n_in:
             raise InputError(f"{meta_path(path)}: {key} gives {len(meta[key])} figure(s) for {n_in} elements; "
                              "repair or remove it")
+    _check_noise_against_rows(meta, table[:, :n_in], meta_path(path))
     return Dataset(table[:, :n_in].copy(), table[:, n_in:].copy(), targets, meta)
+
+
+def _check_noise_against_rows(meta: dict, inputs: np.ndarray, mp) -> None:
+    """InputError when a meta's noise in a row is more than all the rows' readings span: ten rows or more of such
+    noise would spread wider (a typo's figure, which a fit would take as the rows' own and add none)."""
+    if inputs.shape[0] < 10:
+        return
+    span = float(np.ptp(inputs))
+    n = meta.get("samples_per_row") or 1
+    for key in META_NOISE:
+        if meta.get(key) is None:
+            continue
+        in_row = float(np.max(meta[key])) / (np.sqrt(n) if key == "sample_noise" else 1.0)
+        if in_row > span:
+            raise InputError(f"{mp}: {key} {float(np.max(meta[key])):g} puts more noise in a row than all the rows' "
+                             f"readings span ({span:.3g}); repair or remove it")
 
 
 def load_meta(path: str | Path) -> dict:
@@ -273,9 +292,11 @@ def load_meta(path: str | Path) -> dict:
         meta = json.loads(text)
     except ValueError as exc:
         raise InputError(f"{mp}: not JSON ({exc}); repair or remove it") from None
-    if not isinstance(meta, dict) or not all(isinstance(meta.get(k), (str, type(None))) for k in META_TEXT):
-        raise InputError(f"{mp}: not a dataset's meta (an object whose {', '.join(META_TEXT)} are text); "
-                         "repair or remove it")
+    if not isinstance(meta, dict):
+        raise InputError(f"{mp}: not a dataset's meta (a JSON object); repair or remove it")
+    for key in META_TEXT:
+        if not isinstance(meta.get(key), (str, type(None))):
+            raise InputError(f"{mp}: {key} must be text, got {meta[key]!r:.60}; repair or remove it")
     return meta
 
 
@@ -300,6 +321,24 @@ def _check_meta_numbers(meta: dict, mp) -> None:
     n = meta.get("samples_per_row")
     if n is not None and not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_ROW_SAMPLES):
         refuse("samples_per_row", f"a whole number 1..{MAX_ROW_SAMPLES}")
+    each, row = meta.get("sample_noise"), meta.get("row_noise")
+    if n is not None and each is not None and row is not None:  # a capture writes both from the same samples
+        each_a, row_a = np.asarray(each, dtype=float), np.asarray(row, dtype=float)
+        same = each_a.shape == row_a.shape or not each_a.ndim or not row_a.ndim  # else load_dataset says the count
+        if same and np.any(np.abs(each_a / np.sqrt(n) - row_a) > 0.01 * row_a + 1e-12):
+            refuse("sample_noise", f"row_noise times sqrt(samples_per_row {n}), as a capture writes it",
+                   f"{each!r:.60} beside row_noise {row!r:.60}")
+
+    def absurd(x) -> bool:  # a number no thermistor reads (what is no number at all is noted where it is read)
+        return is_finite_number(x) and not DEGC[0] <= x <= DEGC[1]
+
+    span = f"{DEGC[0]:g}..{DEGC[1]:g} degC"
+    if absurd(meta.get("thermistor_degc")):
+        refuse("thermistor_degc", f"a temperature {span}")
+    t = meta.get("row_degc")
+    if isinstance(t, list) and any(absurd(x) for x in t):
+        refuse("row_degc", f"a list of temperatures {span}, one per row",
+               next(f"{x!r} for row {k + 1}" for k, x in enumerate(t) if absurd(x)))
 
 
 def load_inputs(path: str | Path, n_inputs: int) -> np.ndarray:
