@@ -52,6 +52,10 @@ def test_hash_is_stable_and_sensitive():
         (lambda d: d["transfer"]["gmr"].__setitem__("adc_max", 1e308), "'transfer.gmr.adc_max' must be <= 100"),
         (lambda d: d["transfer"]["gmr"].__setitem__("adc_min", -1e308), "'transfer.gmr.adc_min' must be >= -100"),
         (lambda d: d["transfer"]["gmr"].__setitem__("offset", 1e300), "'transfer.gmr.offset' must be <= 100"),
+        # a noise no sensor has: simulate wrote rows with it, and the fit then refused them
+        (lambda d: d["transfer"]["gmr"].__setitem__("noise", 1e308), "'transfer.gmr.noise' must be <= 1000"),
+        (lambda d: d["transfer"].setdefault("raw", {}).__setitem__("noise", 1e308),
+         "'transfer.raw.noise' must be <= 1000"),
         # lengths and a polarization past any sensor's: observe's SVD failed in a traceback on z = 1e200
         (lambda d: d["elements"]["ring"][0].__setitem__("z", 1e200), "the elements' places must be within +-1000 mm"),
         (lambda d: d["elements"]["ring"][0].__setitem__("radius", 1e308), "must be within +-1000 mm, got 1e+308"),

@@ -12,6 +12,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError, is_finite_number
 from fitgen.base.fileio import canonical_json, read_text, sha256_hex, text_kind, tomllib
+from fitgen.base.parse import MAX_NOISE
 from fitgen.physics.tolerances import STIFFENING_MAX, TOLERANCE_MAX, Tolerances
 
 AXIS_WORDS = ("radial", "tangential", "z", "-z")
@@ -388,7 +389,7 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
     kind = tr.string("kind", "raw", choices=("raw", "gmr"))
     rs = tr.sub("raw", required=False)
     raw = RawTransfer(
-        noise=rs.number("noise", 0.0, min_=0.0),
+        noise=rs.number("noise", 0.0, min_=0.0, max_=MAX_NOISE),  # more overflows a fit's variance
         full_scale=rs.number("full_scale", 2.0, positive=True),
         adc_bits=rs.integer("adc_bits", 0, min_=0, max_=32),
     )
@@ -403,7 +404,7 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
         adc_min=gs.number("adc_min", 0.0, min_=-MAX_VOLTS, max_=MAX_VOLTS),
         adc_max=gs.number("adc_max", 3.3, min_=-MAX_VOLTS, max_=MAX_VOLTS),
         adc_bits=gs.integer("adc_bits", 16, min_=0, max_=32),
-        noise=gs.number("noise", 0.0, min_=0.0),
+        noise=gs.number("noise", 0.0, min_=0.0, max_=MAX_NOISE),
     )
     gs.finish()
     if gmr.adc_max <= gmr.adc_min:
