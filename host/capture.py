@@ -33,7 +33,7 @@ from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, is_stage_error
 from fitgen.physics.dataset import load_meta, meta_path, pose_table, read_text, row_degc
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output, real_file, sha256_hex, signals_held, write_atomic, write_target
-from fitgen.base.parse import MAX_ROW_SAMPLES
+from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, as_poses
 
 from host.adc import AdcArray
@@ -307,16 +307,17 @@ class NoiseStats:
         self.sum_var_row += var / block.shape[0]
 
     @classmethod
-    def from_meta(cls, meta: dict, n: int) -> "NoiseStats":
-        """The figures an earlier run recorded (pooled over ``noise_rows`` rows), to pool on from."""
+    def from_meta(cls, meta: dict, n: int, kept: int) -> "NoiseStats":
+        """The figures an earlier run recorded (pooled over ``noise_rows`` rows, at most the ``kept`` rows in the
+        file), to pool on from; none when they are not figures a capture writes (damaged: this run's stand alone)."""
         try:
             rows = int(meta["noise_rows"])
             ns, nr = np.asarray(meta["sample_noise"], dtype=float), np.asarray(meta["row_noise"], dtype=float)
         except (KeyError, TypeError, ValueError, OverflowError):
             return cls(n)
-        if not 1 <= rows <= MAX_COUNT or ns.shape != (n,) or nr.shape != (n,) or \
-                not (np.all(np.isfinite(ns)) and np.all(np.isfinite(nr))):
-            return cls(n)
+        if not 1 <= rows <= min(kept, MAX_COUNT) or ns.shape != (n,) or nr.shape != (n,) or \
+                not (np.all((ns >= 0) & (ns <= MAX_NOISE)) and np.all((nr >= 0) & (nr <= MAX_NOISE))):
+            return cls(n)  # NaN fails the bounds too
         return cls(n, rows, rows * ns ** 2, rows * nr ** 2)
 
     def meta(self) -> dict:
@@ -375,7 +376,8 @@ def check_resume(output: str | Path, rows: int, this: dict) -> None:
         prior = {k: v for k, v in prior.items() if k != "source"}  # the paths typed may differ
     for key, option in (("adc", "--adc"), ("source", "a source"), ("samples_per_row", "--samples")):
         if key in prior and key in this and prior[key] != this[key]:
-            raise InputError(f"output {output}: its {rows} rows were captured with {option} {prior[key]}, this run's "
+            was = prior[key] if type(prior[key]) is type(this[key]) else repr(prior[key])  # '16', not 16
+            raise InputError(f"output {output}: its {rows} rows were captured with {option} {was}, this run's "
                              f"is {this[key]}: resume with the same, or choose another -o")
 
 
@@ -402,7 +404,7 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
     state = prepare_output(output, array.n, schedule)
     res = CaptureResult(len(schedule.poses), int(state.done.sum()), dropped_partial=state.dropped_partial)
     prior = prior_meta(output, state.rows)  # rows from earlier runs: pool on from their figures
-    noise = res.noise = NoiseStats.from_meta(prior, array.n)
+    noise = res.noise = NoiseStats.from_meta(prior, array.n, state.rows)
     try:  # an earlier run's counts, as its meta kept them; damaged ones start anew, as the noise figures do
         before_s, runs = float(prior.get("duration_s", 0.0)), int(prior.get("runs", 0)) + 1
     except (TypeError, ValueError, OverflowError):

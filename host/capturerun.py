@@ -93,6 +93,17 @@ def _kept(output, resume: str = "") -> str:
                 + (resume or "run the same command again to resume"))
 
 
+def same_thermistor(output, rows: int, reads: bool) -> None:
+    """InputError when ``output``'s ``rows`` rows were captured with a thermistor and this run ``reads`` none, or the
+    other way round: a resume dropped their temperatures from the meta, or gave rows read without one a
+    temperature (``--adc`` names the elements' channels only, which the resume compares)."""
+    had = rows > 0 and "thermistor_degc" in prior_meta(output, rows)
+    if rows and had != reads:
+        raise InputError(f"output {output}: its {rows} rows were captured {'with' if had else 'without'} a thermistor "
+                         f"(temp= in --adc), this run's --adc {'has none' if had else 'reads one'}: resume with the "
+                         "same, or choose another -o")
+
+
 def same_temperature(output, rows: int, degc: float) -> float:
     """``degc``, the thermistor's reading as a run starts; InputError when ``output``'s ``rows`` rows were taken more
     than CAPTURE_DEGC_TOL away from it (the meta speaks for every row with one temperature)."""
@@ -147,6 +158,8 @@ def _run_capture(args, prog: str) -> None:
         except InputError as exc:
             raise InputError(f"{args.poses}: {exc}") from None
     check_resume(args.output, state.rows, {"adc": cmap.describe(), **source, "samples_per_row": samples})
+    tin = temperature_input(args.adc, cmap, args.thermistor)
+    same_thermistor(args.output, state.rows, tin is not None)
     if pending == 0:  # the stage and the bus stay shut, the meta as it is
         print(f"{prog}: {total}/{total} poses in {args.output} already: nothing to capture", file=sys.stderr)
         return
@@ -159,7 +172,6 @@ def _run_capture(args, prog: str) -> None:
         wait = enter_waiter(schedule)
     meta = {"adc": cmap.describe(), **source}
     motion = pose_file_motion(args.sim_pose_file) if args.sim_pose_file else None
-    tin = temperature_input(args.adc, cmap, args.thermistor)
     drift = parse_drift(args.sim_drift, cmap.n_elements) if args.simulate else None
     bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, motion=motion,
                                     drift=drift, thermistor=tin)

@@ -324,7 +324,11 @@ def test_capture_command_killed_midway_resumes_without_loss_or_duplicates(tmp_pa
     write_schedule(sched, rows + [(0.25, 0.25, -0.25)])
     other = ["--adc", "ads1115@0x49:0-3,ads1115@0x48:0-3"]
     for extra, said in ((other, "captured with --adc ads1115@0x48:0,1,2,3,ads1115@0x49:0,1,2,3, this run's is"),
-                        (["--samples", "8"], "captured with --samples 4, this run's is 8")):
+                        (["--samples", "8"], "captured with --samples 4, this run's is 8"),
+                        # the elements' map alone was compared: rows read without a thermistor gained a temperature,
+                        # and the other way round a resume dropped theirs from the meta
+                        (["--adc", TWO_1115 + ",temp=ads1115@0x4a:0"],
+                         "its 27 rows were captured without a thermistor (temp= in --adc), this run's --adc reads one")):
         assert_one_line_error(run_cli("tactile-host", *args, *extra, "--trigger", "true"), 2, said)
     assert (tmp_path / "d.csv.meta.json").read_text() == meta and len(data_rows(out)[1]) == 27
 
@@ -610,9 +614,14 @@ def test_an_earlier_runs_noise_figures_past_any_count_start_anew():
     from host.capture import NoiseStats
 
     figures = {"sample_noise": [5e-4] * 8, "row_noise": [1.25e-4] * 8}
-    assert NoiseStats.from_meta({"noise_rows": 4, **figures}, 8).rows == 4
+    assert NoiseStats.from_meta({"noise_rows": 4, **figures}, 8, 38).rows == 4
     for rows in (10 ** 400, 10 ** 12, 0, "4"):
-        assert NoiseStats.from_meta({"noise_rows": rows, **figures}, 8).rows == (4 if rows == "4" else 0)
+        assert NoiseStats.from_meta({"noise_rows": rows, **figures}, 8, 38).rows == (4 if rows == "4" else 0)
+    # more rows than the file keeps, or figures no capture writes (their square overflowed, with numpy's warning
+    # on the terminal, and Infinity went into the meta): this run's figures stand alone
+    assert NoiseStats.from_meta({"noise_rows": 39, **figures}, 8, 38).rows == 0
+    for bad in (1e200, -1.0, float("nan")):
+        assert NoiseStats.from_meta({"noise_rows": 4, **figures, "sample_noise": [bad] * 8}, 8, 38).rows == 0
 
 
 @pytest.mark.parametrize("edit", [{"runs": 1e400}, {"duration_s": 10 ** 400}, {"duration_s": -1e400},
