@@ -78,7 +78,7 @@ class GcodeController(PortOwner):
 
         try:
             port = serial.serial_for_url(url, baudrate=baud, timeout=POLL, write_timeout=timeout)
-        except (serial.SerialException, ValueError, OSError) as exc:
+        except (serial.SerialException, ValueError, OSError, OverflowError) as exc:  # a rate the driver cannot set
             raise InputError(f"cannot open stage {url}: {port_error(exc)}{url_hint(url)}") from None
         no_nagle(port)  # one short line each way
         return cls(port, url, timeout=timeout, log=log)

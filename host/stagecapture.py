@@ -54,9 +54,21 @@ def stage_settings(args, schedule):
                              approach=parse_approach(args.stage_approach or APPROACH)).check()
     settings.check_schedule(schedule.poses, schedule.describe)
     return {"url": stage_url(args.stage), "settings": settings, "zero": parse_zero(args.zero or "ask"),
-            "baud": parse_positive(args.stage_baud or "115200", "--stage-baud", integer=True),
+            "baud": parse_baud(args.stage_baud or "115200"),
             "timeout": parse_positive(args.stage_timeout or "5", "--stage-timeout", most=LONGEST_WAIT),
             "boot_wait": parse_positive(args.stage_boot_wait or "2", "--stage-boot-wait", zero=True, most=LONGEST_WAIT)}
+
+
+MAX_BAUD = 12_000_000  # a USB serial chip's fastest (FTDI's FT232H); pyserial overflowed past 2^31 in a traceback
+
+
+def parse_baud(text: str) -> int:
+    """``--stage-baud``: a whole number of bits per second, at most MAX_BAUD; InputError otherwise."""
+    baud = parse_positive(text, "--stage-baud", integer=True)
+    if baud > MAX_BAUD:
+        raise InputError(f"--stage-baud must be at most {MAX_BAUD:,} (a USB serial chip's fastest; printers and CNCs "
+                         f"run at 115,200 or 250,000), got {text}")
+    return baud
 
 
 def parse_feed(text: str) -> float:

@@ -1068,6 +1068,7 @@ def test_ctrl_c_says_what_is_kept_nothing_before_the_first_row(tmp_path):
     (["--settle", "1e308"], "--settle must be at most 3600"),
     (["--stage-feed", "1e-9"], "--stage-feed is in mm/min, at least 1"),
     (["--stage-timeout", "1e12"], "--stage-timeout must be at most 3600"),
+    (["--stage-baud", "2147483648"], "--stage-baud must be at most 12,000,000"),  # pyserial's OverflowError
     (["--trigger", "true"], "--stage and --trigger both set the poses"),
     (["--zero", "1,2"], "--zero '1,2': ask, here, or the machine coordinates"),
     (["--home", "--unlock"], "--home and --unlock both leave GRBL's ALARM: give one"),
