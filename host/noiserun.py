@@ -146,13 +146,16 @@ def told(path) -> tuple[int, np.ndarray]:
                else "a field that is not what such a record holds")
         raise InputError(f"{path} is not a record tactile-host noise -o wrote ({why})") from None
     sane = single.ndim == 1 and single.size and np.all((single >= SINGLE_V[0]) & (single <= SINGLE_V[1]))
-    if samples not in CANDIDATES or not sane or not isinstance(drifts, bool):
-        raise InputError(f"{path} is not a record tactile-host noise -o wrote (its recommendation, noise or drift "
-                         "is off)")
+    whole = type(rec["recommended"]) is int and all(type(c) is int and c in CANDIDATES for c in candidates)
+    shaped = ratio.ndim == 2 and ratio.shape[0] == len(candidates) and ratio.size and np.all(np.isfinite(ratio))
+    if samples not in CANDIDATES or not whole or not sane or not isinstance(drifts, bool) or \
+            (candidates and not shaped):  # 16.7 read as 16, a NaN ratio as one that averages down
+        raise InputError(f"{path} is not a record tactile-host noise -o wrote (its recommendation, candidates, "
+                         "ratios, noise or drift are off)")
     if not candidates:
         raise InputError(f"{path}: its recording was too short to read {CANDIDATES[0]} samples per row: record "
                          "longer (tactile-host noise --seconds)")
-    if ratio.ndim != 2 or not ratio.size or ratio[0].max() > WHITE_RATIO:
+    if ratio[0].max() > WHITE_RATIO:
         raise InputError(f"{path}: its noise does not average down even over {CANDIDATES[0]} samples per row: find "
                          "what drifts (a longer --settle, the supply, the temperature) and record again")
     if drifts:

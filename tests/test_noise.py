@@ -304,8 +304,13 @@ def _written(path, data: bytes):
     (lambda p: _record(p, _stream(0.0, 120.0)), ("--transfer", "raw"), "measured volts and the schedule is for mT"),
     (lambda p: p / "absent.json", (), "noise record {p}/absent.json: no such file"),
     # figures no ADC reads: 1e300 overflowed the schedule's weights in numpy warnings, 1e-300 read as no noise
-    (lambda p: _edited(p, single_v=[1e300] * 8), (), "its recommendation, noise or drift is off"),
-    (lambda p: _edited(p, single_v=[1e-300] * 8), (), "its recommendation, noise or drift is off"),
+    (lambda p: _edited(p, single_v=[1e300] * 8), (), "its recommendation, candidates, ratios, noise or drift are off"),
+    # a hand edit read as something it does not say: 16.7 as 16, a NaN ratio as one that averages down
+    (lambda p: _edited(p, recommended=16.7), (), "its recommendation, candidates, ratios, noise or drift are off"),
+    (lambda p: _edited(p, recommended="16"), (), "its recommendation, candidates, ratios, noise or drift are off"),
+    (lambda p: _edited(p, candidates=[16], ratio=[[float("nan")] * 8]), (), "its recommendation, candidates, ratios, noise or drift"),
+    (lambda p: _edited(p, candidates="x"), (), "its recommendation, candidates, ratios, noise or drift are off"),
+    (lambda p: _edited(p, single_v=[1e-300] * 8), (), "its recommendation, candidates, ratios, noise or drift are off"),
     (lambda p: (p / "folder.json").mkdir() or p / "folder.json", (), "folder.json: a folder, not a file"),
     (lambda p: _written(p / "r.json", b'{"a": "\xe9"}'), (), "line 1 is not UTF-8 text"),
 ])
