@@ -54,7 +54,26 @@ def url_hint(url: str) -> str:
         return f"; a TCP port is given as socket://{url}"
     if os.path.isfile(url):
         return "; it is a regular file, not a serial device (/dev/tty...) or a URL such as socket://HOST:PORT"
+    if _no_terminal(url):  # pyserial says 'Inappropriate ioctl for device' in its own words
+        return "; it is a device but no serial port (a controller's is /dev/ttyUSB* or /dev/ttyACM*: ls /dev/serial/by-id)"
     return ""
+
+
+def _no_terminal(path: str) -> bool:
+    """Whether ``path`` is a character device that is not a terminal (/dev/null, /dev/zero)."""
+    import os
+    import stat
+
+    try:
+        if not stat.S_ISCHR(os.stat(path).st_mode):
+            return False
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    except OSError:
+        return False
+    try:
+        return not os.isatty(fd)
+    finally:
+        os.close(fd)
 
 
 def no_nagle(port) -> None:

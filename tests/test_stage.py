@@ -1061,6 +1061,8 @@ def test_ctrl_c_says_what_is_kept_nothing_before_the_first_row(tmp_path):
 @pytest.mark.parametrize("extra, message", [
     (["--stage", "gcode:socket://127.0.0.1:1"], "cannot open stage socket://127.0.0.1:1"),
     (["--stage", "serial:/dev/ttyUSB0"], "expected gcode:URL"),
+    (["--stage", "gcode:/dev/null"], "/dev/null: Could not configure port: (25, 'Inappropriate ioctl for device'); it is "
+                                     "a device but no serial port"),  # was pyserial's words alone
     (["--stage-axes", "X=dx,Y=dx"], "--stage-axes 'X=dx,Y=dx': dx appears twice"),
     (["--stage-limits", "dx=-1:1,dy=-2:2,dz=-2:1"], "pose 1/27 (dx=-1.5 dy=-1 dz=0) reaches dx=-1.5, outside"),
     (["--stage-limits", "dx=-2:2,dy=-2:2"], "--stage-limits: give a range for dz"),
