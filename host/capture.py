@@ -307,17 +307,19 @@ class NoiseStats:
         self.sum_var_row += var / block.shape[0]
 
     @classmethod
-    def from_meta(cls, meta: dict, n: int, kept: int) -> "NoiseStats":
-        """The figures an earlier run recorded (pooled over ``noise_rows`` rows, at most the ``kept`` rows in the
-        file), to pool on from; none when they are not figures a capture writes (damaged: this run's stand alone)."""
+    def from_meta(cls, meta: dict, n: int) -> "NoiseStats":
+        """The figures an earlier run recorded (pooled over ``noise_rows`` rows: rows deleted to be taken again
+        count too), to pool on from; none when they are not figures a capture writes (this run's then stand alone)."""
         try:
-            rows = int(meta["noise_rows"])
+            rows, samples = int(meta["noise_rows"]), int(meta["samples_per_row"])
             ns, nr = np.asarray(meta["sample_noise"], dtype=float), np.asarray(meta["row_noise"], dtype=float)
         except (KeyError, TypeError, ValueError, OverflowError):
             return cls(n)
-        if not 1 <= rows <= min(kept, MAX_COUNT) or ns.shape != (n,) or nr.shape != (n,) or \
-                not (np.all((ns >= 0) & (ns <= MAX_NOISE)) and np.all((nr >= 0) & (nr <= MAX_NOISE))):
+        if not 1 <= rows <= MAX_COUNT or not 1 <= samples <= MAX_ROW_SAMPLES or ns.shape != (n,) or \
+                nr.shape != (n,) or not np.all((ns >= 0) & (ns <= MAX_NOISE) & (nr >= 0) & (nr <= MAX_NOISE)):
             return cls(n)  # NaN fails the bounds too
+        if np.any(np.abs(ns / np.sqrt(samples) - nr) > 0.01 * nr + 1e-12):  # not from the same samples
+            return cls(n)
         return cls(n, rows, rows * ns ** 2, rows * nr ** 2)
 
     def meta(self) -> dict:
@@ -404,7 +406,7 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
     state = prepare_output(output, array.n, schedule)
     res = CaptureResult(len(schedule.poses), int(state.done.sum()), dropped_partial=state.dropped_partial)
     prior = prior_meta(output, state.rows)  # rows from earlier runs: pool on from their figures
-    noise = res.noise = NoiseStats.from_meta(prior, array.n, state.rows)
+    noise = res.noise = NoiseStats.from_meta(prior, array.n)
     try:  # an earlier run's counts, as its meta kept them; damaged ones start anew, as the noise figures do
         before_s, runs = float(prior.get("duration_s", 0.0)), int(prior.get("runs", 0)) + 1
     except (TypeError, ValueError, OverflowError):

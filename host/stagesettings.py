@@ -103,6 +103,10 @@ def parse_approach(spec: str) -> np.ndarray:
     d = np.array([vals.get(a, 0.0) for a in STAGE_AXES])
     if not np.all(np.isfinite(d)) or np.any(np.abs(d) > 10):
         raise InputError(f"--stage-approach {spec!r}: each distance within -10..10 mm")
+    dz = d[STAGE_AXES.index("dz")] if "dz" in STAGE_AXES else 0.0
+    if dz < 0:  # from below, every row would first press deeper than its pose and read the skin as it relaxes
+        raise InputError(f"--stage-approach {spec!r}: dz={dz:g} starts each pose's last move {-dz:g} mm deeper than "
+                         "the pose, pressing into the skin past it; approach dz from above (dz > 0), or give dz=0")
     return d
 
 

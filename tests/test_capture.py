@@ -613,15 +613,15 @@ def test_an_earlier_runs_noise_figures_past_any_count_start_anew():
     have none) raised OverflowError, a traceback, where other damage starts the pool anew."""
     from host.capture import NoiseStats
 
-    figures = {"sample_noise": [5e-4] * 8, "row_noise": [1.25e-4] * 8}
-    assert NoiseStats.from_meta({"noise_rows": 4, **figures}, 8, 38).rows == 4
+    figures = {"sample_noise": [5e-4] * 8, "row_noise": [1.25e-4] * 8, "samples_per_row": 16}
+    assert NoiseStats.from_meta({"noise_rows": 4, **figures}, 8).rows == 4
     for rows in (10 ** 400, 10 ** 12, 0, "4"):
-        assert NoiseStats.from_meta({"noise_rows": rows, **figures}, 8, 38).rows == (4 if rows == "4" else 0)
-    # more rows than the file keeps, or figures no capture writes (their square overflowed, with numpy's warning
-    # on the terminal, and Infinity went into the meta): this run's figures stand alone
-    assert NoiseStats.from_meta({"noise_rows": 39, **figures}, 8, 38).rows == 0
-    for bad in (1e200, -1.0, float("nan")):
-        assert NoiseStats.from_meta({"noise_rows": 4, **figures, "sample_noise": [bad] * 8}, 8, 38).rows == 0
+        assert NoiseStats.from_meta({"noise_rows": rows, **figures}, 8).rows == (4 if rows == "4" else 0)
+    # figures no capture writes (1e200's square overflowed, with numpy's warning on the terminal, and Infinity went
+    # into the meta; 5 V per sample beside 0.125 mV per row went on into identify's unit): this run's stand alone
+    for bad in (1e200, -1.0, float("nan"), 5.0):
+        assert NoiseStats.from_meta({"noise_rows": 4, **figures, "sample_noise": [bad] * 8}, 8).rows == 0
+    assert NoiseStats.from_meta({"noise_rows": 4, **figures, "samples_per_row": 4}, 8).rows == 0
 
 
 @pytest.mark.parametrize("edit", [{"runs": 1e400}, {"duration_s": 10 ** 400}, {"duration_s": -1e400},
