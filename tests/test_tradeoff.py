@@ -190,6 +190,38 @@ def test_tiny_sweep_through_the_cli(tmp_path):
     assert "--force" not in commands[1] and (tmp_path / "again" / "c" / "tm_model.h").is_file()
 
 
+def test_a_ctrl_c_while_the_outputs_are_renamed_leaves_all_of_this_run(tmp_path, monkeypatch):
+    """A signal after the table's rename, before the page's and the plot's, left a new tradeoff.csv beside the last
+    run's tradeoff.md and tradeoff.png."""
+    import os
+    import signal
+
+    from fitgen.app import cli
+
+    require_tool("gcc")
+    require_tool("valgrind")
+    out = tmp_path / "t"
+    out.mkdir()
+    for name in ("tradeoff.csv", "tradeoff.md", "tradeoff.png"):
+        (out / name).write_text("the last run's\n")
+    real, renamed = os.replace, []
+
+    def replace(src, dst):
+        real(src, dst)
+        if os.path.dirname(dst) == str(out):
+            renamed.append(dst)
+            if len(renamed) == 1:
+                signal.raise_signal(signal.SIGINT)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["tradeoff", "paper", "--scene", "press", "--k", "aic", "--max-terms", "2", "--family", "integer",
+                  "--precision", "float", "--style", "unrolled", "-o", str(out)])
+    assert stop.value.code == 130 and len(renamed) == 3
+    assert all((out / name).read_bytes() != b"the last run's\n" for name in ("tradeoff.csv", "tradeoff.md",
+                                                                            "tradeoff.png"))
+
+
 def test_the_printed_commands_reproduce_an_uncapped_point_of_a_scene_file(tmp_path):
     """The commands printed for a point without a term cap, on a scene file named otherwise than its file, run as
     printed: they said `--max-terms none`, which fit refuses, and `--scene light`, the file's name key, which

@@ -42,10 +42,6 @@ def _png(fig) -> bytes:
     return buf.getvalue()
 
 
-def _save(fig, path: Path) -> Path:
-    return write_in_folder(path.parent, path.name, _png(fig))
-
-
 def _estimates(model: Model, ds: Dataset):
     """(file name, PNG) of each output of ``model`` that ``ds`` has a column of: target and estimate against the
     row index (rows sorted by target), the error below."""
@@ -139,7 +135,7 @@ def report_figures(model: Model, ds: Dataset, sensor=None) -> dict[str, bytes]:
     return out
 
 
-def tradeoff(result, path: Path) -> Path:
+def tradeoff_png(result) -> bytes:
     """fitgen tradeoff: instructions (or a core's cycles) per estimate against score (log axes), the front
     joined, the target (score 1) dashed, the recommended point ringed; colour by precision, marker by family."""
     plt = _plt()
@@ -178,8 +174,7 @@ def tradeoff(result, path: Path) -> Path:
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
-    _save(fig, path)
-    return path
+    return _png(fig)
 
 
 def identification(ident, path: Path, truth: dict | None = None) -> Path:

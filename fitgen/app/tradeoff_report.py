@@ -178,21 +178,21 @@ def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
 
 
 def write_outputs(result: TradeoffResult, folder: str | Path) -> tuple[list[Path], str]:
-    """DIR/tradeoff.csv, DIR/tradeoff.md and (matplotlib permitting) DIR/tradeoff.png, each
-    written atomically; returns the paths and the markdown."""
-    from fitgen.base.fileio import make_folder, write_atomic
+    """DIR/tradeoff.csv, DIR/tradeoff.md and (matplotlib permitting) DIR/tradeoff.png, written together (a Ctrl-C
+    between two left a new table beside the last run's page and plot); returns the paths and the markdown."""
+    from fitgen.base.fileio import signals_held, write_all
 
-    folder = make_folder(folder)
-    paths = [write_atomic(folder / "tradeoff.csv", to_csv(result))]
-    plot = None
+    folder, png = Path(folder), None
     try:
         from fitgen.app import plots
 
-        paths.append(plots.tradeoff(result, folder / "tradeoff.png"))
-        plot = "tradeoff.png"
+        png = plots.tradeoff_png(result)
     except InputError as exc:
         result.notes.append(f"no plot: {exc}")
-        (folder / "tradeoff.png").unlink(missing_ok=True)  # an earlier run's plot would pass for this run's
-    text = to_markdown(result, plot)
-    paths.insert(1, write_atomic(folder / "tradeoff.md", text))
+    text = to_markdown(result, None if png is None else "tradeoff.png")
+    files = [(folder / "tradeoff.csv", to_csv(result)), (folder / "tradeoff.md", text)]
+    with signals_held():
+        paths = write_all(files + ([(folder / "tradeoff.png", png)] if png is not None else []))
+        if png is None:
+            (folder / "tradeoff.png").unlink(missing_ok=True)  # an earlier run's plot would pass for this run's
     return paths, text
