@@ -293,6 +293,32 @@ def test_read_command_with_the_c_engine_to_a_jsonl_file(model_file, tmp_path):
     assert np.all(np.diff([r["t"] for r in recs]) > 0)
 
 
+def test_a_ctrl_c_between_the_record_and_the_output_starts_both(model_file, tmp_path, monkeypatch):
+    """A signal after --record's file was started, before -o's: the old recording was emptied and the old -o kept,
+    a new run's record beside an old run's estimates."""
+    import signal
+
+    from fitgen.app import host_cli
+    from host import session
+
+    out, run = tmp_path / "est.csv", tmp_path / "run.jsonl"
+    out.write_text("the last run's\n")
+    run.write_text("the last run's\n")
+    real = session.OutputText
+
+    def opened(path, *args, **kwargs):
+        text = real(path, *args, **kwargs)
+        signal.raise_signal(signal.SIGINT)
+        return text
+
+    monkeypatch.setattr(session, "OutputText", opened)
+    with pytest.raises(SystemExit) as stop:
+        host_cli.main(["read", "--model", model_file, "--adc", TWO_1115, "--simulate", "0,0,-1,0,0", "--count", "3",
+                       "-o", str(out), "--record", str(run)])
+    assert stop.value.code == 130
+    assert out.read_text() != "the last run's\n" and run.read_text() != "the last run's\n"
+
+
 def test_the_tare_shows_progress_on_a_terminal(model_file, tmp_path, monkeypatch):
     """A tare of many samples at a low data rate takes seconds: on a terminal a bar counts them."""
     from fitgen.app.host_cli import main

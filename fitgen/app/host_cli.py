@@ -45,10 +45,9 @@ def cmd_flash(args) -> int:
 
 def _where(server) -> str:
     """The page's address, and when it listens on every interface, that other machines reach it too."""
-    if not server.every_interface:
-        return server.url
-    return (f"{server.url} and on every interface (from another machine: this one's address, the same port; anyone "
-            "on the network can see it)")
+    return server.url if not server.every_interface else (
+        f"{server.url} and on every interface (from another machine: this one's address, the same port; anyone on "
+        "the network can see it)")
 
 
 def _warn(prog: str):
@@ -57,7 +56,7 @@ def _warn(prog: str):
 
 
 def cmd_read(args) -> int:
-    from fitgen.base.fileio import OutputText
+    from fitgen.base.fileio import OutputText, signals_held
     from host.adc import DeviceSilent
     from host.readout import LineFormat, Readout
     from host.session import ReadoutSession
@@ -66,9 +65,10 @@ def cmd_read(args) -> int:
     try:
         s = ReadoutSession(args, "tactile-host read")  # a chip silent during its tare: one line, as later
         fmt = LineFormat(args.format, s.model.n_inputs, s.model.output_names)
-        record = s.record(args.record)  # before -o is opened: a record that cannot be made leaves -o as it was
-        if args.output:
-            sink = OutputText(args.output)  # a device, FIFO or descriptor's link refused
+        with signals_held():  # both started or neither: a Ctrl-C between them emptied the record, kept the old -o
+            record = s.record(args.record)  # before -o is opened: a record that cannot be made leaves -o as it was
+            if args.output:
+                sink = OutputText(args.output)  # a device, FIFO or descriptor's link refused
         out = sink or sys.stdout
         out.write(fmt.header)
         reader = Readout(s.array, s.engine, out, fmt, clock=s.clock, corrections=s.corrections,
