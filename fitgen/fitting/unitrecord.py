@@ -313,11 +313,11 @@ def save(ident: Identification, path, provenance: dict, noise: float | None = No
     parameter with its standard error, the posterior covariance, what was determined and what not.
     ``provenance``: strings recorded in both (``capture``: the capture's file, whose hash the record keeps
     unless ``capture_sha256`` gives it)."""
-    from fitgen.base.fileio import write_atomic
+    from fitgen.base.fileio import write_all
 
-    (unit, text), (post_path, record) = unit_files(ident, path, provenance, noise)
-    write_atomic(post_path, record)
-    return write_atomic(unit, text), post_path
+    files = unit_files(ident, path, provenance, noise)  # together: the unit file names its posterior's hash
+    unit, post_path = write_all(files)
+    return unit, post_path
 
 
 def unit_files(ident: Identification, path, provenance: dict, noise: float | None = None) -> list:
