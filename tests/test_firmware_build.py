@@ -78,6 +78,34 @@ def test_render_is_deterministic(paper_model, tmp_path):
     assert paper_model.sha256[:16] in (a / "main.c").read_text()
 
 
+def test_a_ctrl_c_during_a_render_over_the_last_build_leaves_one_models_sources(paper_model, tmp_path, monkeypatch):
+    """tactile-hil emulate --build-dir renders over the last build: a signal between two files left the new model's
+    header beside the old main.c (another model's hash) and the old image."""
+    from dataclasses import replace
+
+    require_tool("gcc")
+    folder = render_firmware(paper_model, tmp_path / "fw", port="posix")
+    build_firmware(folder, "posix")
+    other = replace(paper_model, input_min=paper_model.input_min * 0.99)
+    real, renamed = os.replace, []
+
+    def rename(src, dst):
+        real(src, dst)
+        renamed.append(dst)
+        if len(renamed) == 1:
+            signal.raise_signal(signal.SIGINT)
+
+    monkeypatch.setattr(os, "replace", rename)
+    with pytest.raises(KeyboardInterrupt):
+        render_firmware(other, folder, port="posix")
+    monkeypatch.setattr(os, "replace", real)
+    assert len(renamed) > 2 and other.sha256 != paper_model.sha256
+    assert other.sha256[:16] in (folder / "main.c").read_text() and other.sha256 in (folder / "tm_model.h").read_text()
+    assert not (folder / "firmware").exists()  # built from the other model's sources: gone with them
+    assert render_firmware(other, tmp_path / "fresh", port="posix") and \
+        all((folder / p.name).read_bytes() == p.read_bytes() for p in (tmp_path / "fresh").iterdir())
+
+
 def test_render_and_build_refuse_bad_arguments(paper_model, tmp_path):
     with pytest.raises(InputError, match="port"):
         render_firmware(paper_model, tmp_path, port="avr")
