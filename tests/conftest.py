@@ -81,6 +81,22 @@ def save_capture(path, y, poses, meta=None):
     return path
 
 
+def interrupt_after_rename(monkeypatch, under=None) -> list:
+    """``os.replace`` patched to raise SIGINT right after its first real rename (of a file in folder ``under``,
+    when given): a Ctrl-C landing between two of a command's writes. The renamed targets, in order."""
+    real, renamed = os.replace, []
+
+    def replace(src, dst):
+        real(src, dst)
+        if under is None or os.path.dirname(dst) == str(under):
+            renamed.append(dst)
+            if len(renamed) == 1:
+                signal.raise_signal(signal.SIGINT)
+
+    monkeypatch.setattr(os, "replace", replace)
+    return renamed
+
+
 def assert_one_line_error(proc, status: int = 2, contains: str | None = None):
     assert proc.returncode == status, (proc.returncode, proc.stdout, proc.stderr)
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]

@@ -27,7 +27,7 @@ from fitgen.c.compiled import CompiledModel
 from host.protocol import ErrorCode as E
 from host.protocol import MsgType as T
 
-from conftest import require_tool
+from conftest import interrupt_after_rename, require_tool
 
 
 @pytest.fixture(scope="module")
@@ -87,18 +87,10 @@ def test_a_ctrl_c_during_a_render_over_the_last_build_leaves_one_models_sources(
     folder = render_firmware(paper_model, tmp_path / "fw", port="posix")
     build_firmware(folder, "posix")
     other = replace(paper_model, input_min=paper_model.input_min * 0.99)
-    real, renamed = os.replace, []
-
-    def rename(src, dst):
-        real(src, dst)
-        renamed.append(dst)
-        if len(renamed) == 1:
-            signal.raise_signal(signal.SIGINT)
-
-    monkeypatch.setattr(os, "replace", rename)
+    renamed = interrupt_after_rename(monkeypatch)
     with pytest.raises(KeyboardInterrupt):
         render_firmware(other, folder, port="posix")
-    monkeypatch.setattr(os, "replace", real)
+    monkeypatch.undo()
     assert len(renamed) > 2 and other.sha256 != paper_model.sha256
     assert other.sha256[:16] in (folder / "main.c").read_text() and other.sha256 in (folder / "tm_model.h").read_text()
     assert not (folder / "firmware").exists()  # built from the other model's sources: gone with them

@@ -21,7 +21,7 @@ from host.noiserun import SECONDS, record, record_text, told, verdict
 from host.simbus import SimBus
 from host.simsensor import Drift, Flicker
 
-from conftest import TWO_CHIPS, Terminal, assert_one_line_error, run_cli
+from conftest import TWO_CHIPS, Terminal, assert_one_line_error, interrupt_after_rename, run_cli
 
 NOISE = 5e-4  # V: the paper's sensor file's white noise per sample
 
@@ -156,24 +156,13 @@ def test_the_command_writes_its_verdict_and_plot(tmp_path):
 def test_a_ctrl_c_between_the_record_and_its_plot_leaves_both_new(tmp_path, monkeypatch):
     """A signal landing after the record was renamed into place, before the plot was, left a new record beside
     the old run's plot (SIGTERM 15-250 ms after a first one, 10 runs in 10)."""
-    import os
-    import signal
-
     from fitgen.app import host_cli
 
     out, plots = tmp_path / "noise.json", tmp_path / "img"
     plots.mkdir()
     out.write_text("old record")
     (plots / "allan.png").write_bytes(b"old plot")
-    real, renamed = os.replace, []
-
-    def replace(src, dst):
-        real(src, dst)
-        renamed.append(dst)
-        if len(renamed) == 1:
-            signal.raise_signal(signal.SIGINT)
-
-    monkeypatch.setattr(os, "replace", replace)
+    renamed = interrupt_after_rename(monkeypatch)
     with pytest.raises(SystemExit) as stop:
         host_cli.main(["noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "1", "-o", str(out),
                        "--plot", str(plots)])

@@ -5,7 +5,6 @@ import re
 import signal
 from dataclasses import replace
 from functools import partial
-from pathlib import Path
 import subprocess
 import time
 
@@ -18,7 +17,7 @@ from host.pi import StandIn, build_pi, render_adc_map, render_pi
 from host.readout import LineFormat
 from host.temperature import TempComp
 
-from conftest import TWO_CHIPS, assert_one_line_error, require_tool, run_cli, sim_bus
+from conftest import TWO_CHIPS, assert_one_line_error, interrupt_after_rename, require_tool, run_cli, sim_bus
 
 MAP = TWO_CHIPS
 
@@ -302,8 +301,6 @@ def test_a_failed_pi_build_leaves_the_folder_as_it_was_and_refuses_before_it_wri
 def test_a_ctrl_c_while_a_pi_build_replaces_the_last_one_leaves_the_new_build_whole(model, tmp_path, monkeypatch):
     """A signal landing between two renames into the folder left the new sources beside the old ones and no
     program (the old one goes first, the new one comes last)."""
-    import os
-
     from fitgen.app import host_cli
 
     require_tool("gcc")
@@ -312,20 +309,11 @@ def test_a_ctrl_c_while_a_pi_build_replaces_the_last_one_leaves_the_new_build_wh
     assert run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc", "-o",
                    str(out)).returncode == 0
     other = replace(model, input_min=model.input_min * 0.99)
-    real, renamed = os.replace, []
-
-    def rename(src, dst):
-        real(src, dst)
-        if Path(dst).parent == out:
-            renamed.append(dst)
-            if len(renamed) == 1:
-                signal.raise_signal(signal.SIGINT)
-
-    monkeypatch.setattr(os, "replace", rename)
+    renamed = interrupt_after_rename(monkeypatch, out)
     with pytest.raises(SystemExit) as stop:
         host_cli.main(["pi-build", "--model", str(other.save(tmp_path / "other.json")), "--adc", MAP, "--cc", "gcc",
                        "-o", str(out)])
-    monkeypatch.setattr(os, "replace", real)
+    monkeypatch.undo()
     assert stop.value.code == 130 and len(renamed) > 1 and (out / "tm_pi").is_file()
     assert other.sha256[:12] in (out / "tm_model.h").read_text()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.json", "other.json", "pi"]

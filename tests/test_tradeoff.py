@@ -8,7 +8,7 @@ import os
 
 import numpy as np
 import pytest
-from conftest import assert_one_line_error, require_tool, run_cli
+from conftest import assert_one_line_error, interrupt_after_rename, require_tool, run_cli
 
 from fitgen.base.errors import InputError
 from fitgen.app.tradeoff import parse_knob_list, parse_target
@@ -193,9 +193,6 @@ def test_tiny_sweep_through_the_cli(tmp_path):
 def test_a_ctrl_c_while_the_outputs_are_renamed_leaves_all_of_this_run(tmp_path, monkeypatch):
     """A signal after the table's rename, before the page's and the plot's, left a new tradeoff.csv beside the last
     run's tradeoff.md and tradeoff.png."""
-    import os
-    import signal
-
     from fitgen.app import cli
 
     require_tool("gcc")
@@ -204,16 +201,7 @@ def test_a_ctrl_c_while_the_outputs_are_renamed_leaves_all_of_this_run(tmp_path,
     out.mkdir()
     for name in ("tradeoff.csv", "tradeoff.md", "tradeoff.png"):
         (out / name).write_text("the last run's\n")
-    real, renamed = os.replace, []
-
-    def replace(src, dst):
-        real(src, dst)
-        if os.path.dirname(dst) == str(out):
-            renamed.append(dst)
-            if len(renamed) == 1:
-                signal.raise_signal(signal.SIGINT)
-
-    monkeypatch.setattr(os, "replace", replace)
+    renamed = interrupt_after_rename(monkeypatch, out)
     with pytest.raises(SystemExit) as stop:
         cli.main(["tradeoff", "paper", "--scene", "press", "--k", "aic", "--max-terms", "2", "--family", "integer",
                   "--precision", "float", "--style", "unrolled", "-o", str(out)])
