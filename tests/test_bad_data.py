@@ -469,6 +469,13 @@ def test_report_names_a_huge_label_where_it_is(fitted, data, tmp_path):
     (lambda m: m["outputs"][0].__setitem__("terms", "v1"), "outputs[0]: terms and coefficients must be lists"),
     (lambda m: m["outputs"][0]["terms"].__setitem__(0, 5), "outputs[0].terms: 5 is not a term"),
     (lambda m: m["inputs"]["min"].__setitem__(0, 99.0), "input v1 has min > max"),
+    # predict read -564 mm at every row, check called it 'as predicted', verify passed
+    (lambda m: m["inputs"]["min"].__setitem__(0, m["inputs"]["max"][0]), "input v1 has min = max: a domain of no "
+                                                                          "width"),
+    # verify's vectors overflowed in numpy's warnings before its refusal
+    (lambda m: m["inputs"]["max"].__setitem__(0, 1e308), "the input domain must lie within +-1e+06"),
+    # a symbol from_azimuths drops: predict, check and read raised TypeError, codegen wrote C gcc refused
+    (lambda m: m["inputs"].__setitem__("harmonics", {"hc1": [0] * 8}), "inputs.harmonics.hc1: every weight is 0"),
     # an integer past float's range: math.isfinite raised OverflowError, a traceback
     (lambda m: m["inputs"]["min"].__setitem__(0, 10 ** 400), "inputs.min must be a finite number, got 1000"),
     (lambda m: m.__setitem__("outputs", []), "no outputs"),

@@ -181,6 +181,9 @@ class Harmonics:
             if (not isinstance(w, list) or len(w) != n_inputs
                     or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in w)):
                 raise InputError(f"{origin}: inputs.harmonics.{sym}: {n_inputs} finite weights expected")
+            if not any(w):  # from_azimuths drops such a symbol: its sum has no term to start from (predict's TypeError)
+                raise InputError(f"{origin}: inputs.harmonics.{sym}: every weight is 0, which no ring gives (its "
+                                 "symbol is left out instead)")
             out.append((sym, tuple(float(x) for x in w)))
         return cls(tuple(sorted(out, key=lambda kv: symbol_key(kv[0]))))
 
