@@ -459,6 +459,19 @@ def test_check_on_a_model_with_no_held_out_figures_says_why_it_names_no_unit(twi
                           "names none): give the unit's file (fitgen identify writes it) as --sensor")
 
 
+def test_a_model_whose_terms_overflow_is_refused_as_predict_refuses_it(twin, tmp_path):
+    """check ran such a model: numpy's overflow warnings, rows of inf 'as predicted', status 0."""
+    import json
+
+    folder = twin[0]
+    model = json.loads((folder / "twin.json").read_text())
+    model["outputs"][0]["coefficients"][0] = 3e38
+    (tmp_path / "m.json").write_text(json.dumps(model))
+    (tmp_path / "c.csv").write_text("v1,v2,v3,v4,v5,v6,v7,v8,dx,dy,dz\n" + "1,1,1,1,1,1,1,1,0,0,0\n" * 3)
+    assert_one_line_error(run_cli("fitgen", "check", str(tmp_path / "m.json"), str(tmp_path / "c.csv")), 2,
+                          "its terms reach")
+
+
 def test_a_simulation_of_the_models_own_unit_file_is_refused_as_a_check(twin, tmp_path):
     """The twin's training rows, or any simulation of its unit file, agree with the twin by construction: check
     passed them "as predicted"."""

@@ -305,6 +305,7 @@ FEW_CHECK_ROWS = 10  # a check capture of fewer rows in contact gets a word: its
 def cmd_check(args) -> int:
     """``check``: the measured errors on a check capture beside the ones the unit's identification predicts."""
     from fitgen.app import plots
+    from fitgen.c.codegen import check_magnitudes
     from fitgen.equations.model import check_input_units, load_model
     from fitgen.fitting.check import DRAWS, TOO_FAR, box_words, check_capture
     from fitgen.fitting.holdout import fitted_sensor, fitted_sensor_spec
@@ -313,6 +314,7 @@ def cmd_check(args) -> int:
 
     folder = plots.require(args.plot) if args.plot else None
     model = load_model(args.model)
+    check_magnitudes(model, "double")  # as predict: a model whose terms overflow checked 'as predicted' on inf
     ds = load_capture(args.capture)
     check_input_units(model, ds.meta.get("units"), f"{args.capture}'s readings", f"model {args.model}")
     if not set(ds.target_names) & {"dx", "dy", "dz"}:
