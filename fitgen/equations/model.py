@@ -330,8 +330,6 @@ def model_from_dict(data, origin: str = "model") -> Model:
         raise InputError(f"{origin}: inputs.units must be {' or '.join(INPUT_UNITS)}, got {units!r}")
     if len(hi) != len(lo):  # said before the names, which are checked against min's length
         raise InputError(f"{origin}: inputs.min has {len(lo)} values and inputs.max {len(hi)}: one per input")
-    if any(abs(x) > MAX_INPUT for x in lo + hi):  # verify's vectors overflowed in numpy's warnings
-        raise InputError(f"{origin}: the input domain must lie within +-{MAX_INPUT:g} (V or mT: past any reading)")
     k = next((k for k, (a, b) in enumerate(zip(lo, hi)) if a == b), None)
     if k is not None:  # clamped there, every estimate is one far point (predict read -564 mm at every row)
         raise InputError(f"{origin}: input v{k + 1} has min = max: a domain of no width, which no fit of readings "
@@ -350,7 +348,6 @@ def model_from_dict(data, origin: str = "model") -> Model:
 
 
 # the fit notes' parts the tools read (the rest is a record for people): each an object where present
-MAX_INPUT = 1e6  # V or mT: the input domain's bound, far past any element's reading
 _NOTE_TABLES = ("settings", "noise", "precision", "outputs", "family", "held_out")
 _HELD_OUT_TABLES = ("box", "errors", "posterior", "uncalibrated")
 
