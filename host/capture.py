@@ -30,7 +30,7 @@ import numpy as np
 
 from fitgen import __version__
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, is_stage_error
-from fitgen.physics.dataset import load_meta, meta_path, pose_table, read_text, row_degc
+from fitgen.physics.dataset import load_meta, meta_path, noise_figures_agree, pose_table, read_text, row_degc
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output, real_file, sha256_hex, signals_held, write_atomic, write_target
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES
@@ -318,7 +318,7 @@ class NoiseStats:
         if not 1 <= rows <= MAX_COUNT or not 1 <= samples <= MAX_ROW_SAMPLES or ns.shape != (n,) or \
                 nr.shape != (n,) or not np.all((ns >= 0) & (ns <= MAX_NOISE) & (nr >= 0) & (nr <= MAX_NOISE)):
             return cls(n)  # NaN fails the bounds too
-        if np.any(np.abs(ns / np.sqrt(samples) - nr) > 0.01 * nr + 1e-12):  # not from the same samples
+        if not noise_figures_agree(ns, nr, samples):  # not from the same samples
             return cls(n)
         return cls(n, rows, rows * ns ** 2, rows * nr ** 2)
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError, finite_number, is_finite_number
 from fitgen.base.fileio import read_text, write_atomic
+from fitgen.physics.dataset import DEGC
 
 DIVIDER_KEYS = ("beta", "r25", "series", "vref")
 DIVIDER_DEFAULTS = {"beta": 3950.0, "r25": 10_000.0, "series": 10_000.0, "vref": 3.3}
@@ -35,8 +36,7 @@ DIVIDER_DEFAULTS = {"beta": 3950.0, "r25": 10_000.0, "series": 10_000.0, "vref":
 DIVIDER_RANGES = {"beta": (500.0, 20_000.0), "r25": (1.0, 1e9), "series": (1.0, 1e9), "vref": (0.1, 50.0)}
 DIVIDER_UNITS = {"beta": "K", "r25": "ohm", "series": "ohm", "vref": "V"}
 READ_EVERY = 0.25  # s between thermistor reads: temperature moves slowly, conversions cost bus time
-# degC: an NTC thermistor's usual rated range; a compensation must stay meaningful wherever it can read
-T_RANGE = (-40.0, 125.0)
+T_RANGE = DEGC  # degC: an NTC thermistor's usual rated range; a compensation must stay meaningful wherever it reads
 FLOAT_MAX = float(np.finfo(np.float32).max)  # tempcomp-c's default header holds every coefficient as a float
 
 

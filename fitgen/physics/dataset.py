@@ -243,7 +243,7 @@ def parse_table(text: str, origin: str, header=None) -> tuple[list[str], np.ndar
 
 META_TEXT = ("units", "sensor", "sensor_file", "scene_spec", "drawing", "transfer", "sensor_sha256",
              "labels")  # keys read as text (or null)
-DEGC = (-40.0, 125.0)  # degC: a thermistor's reading the tools take (the elements' and ADCs' operating range)
+DEGC = (-40.0, 125.0)  # degC: a thermistor's reading the tools take (an NTC's usual rated range; host.temperature)
 READING_UNITS = ("mT", "V")  # the field at the elements (transfer raw) or their voltages (gmr)
 # noise figures the fit reads from a meta (V or mT): one number, or one per element
 META_NOISE = ("noise", "row_noise", "sample_noise")
@@ -276,10 +276,10 @@ def _check_noise_against_rows(meta: dict, inputs: np.ndarray, mp) -> None:
     for key in META_NOISE:
         if meta.get(key) is None:
             continue
-        in_row = float(np.max(meta[key])) / (np.sqrt(n) if key == "sample_noise" else 1.0)
-        if in_row > span:
-            raise InputError(f"{mp}: {key} {float(np.max(meta[key])):g} puts more noise in a row than all the rows' "
-                             f"readings span ({span:.3g}); repair or remove it")
+        top = float(np.max(meta[key]))
+        if top / (np.sqrt(n) if key == "sample_noise" else 1.0) > span:
+            raise InputError(f"{mp}: {key} {top:g} puts more noise in a row than all the rows' readings span "
+                             f"({span:.3g}); repair or remove it")
 
 
 def load_meta(path: str | Path) -> dict:
@@ -298,6 +298,13 @@ def load_meta(path: str | Path) -> dict:
         if not isinstance(meta.get(key), (str, type(None))):
             raise InputError(f"{mp}: {key} must be text, got {meta[key]!r:.60}; repair or remove it")
     return meta
+
+
+def noise_figures_agree(sample_noise, row_noise, samples: int) -> bool:
+    """Whether a meta's per-sample and per-row noise are one measurement's, as a capture writes them (every row
+    averages ``samples``: the row's is the sample's over sqrt(samples), to 1 %)."""
+    each, row = np.asarray(sample_noise, dtype=float), np.asarray(row_noise, dtype=float)
+    return not np.any(np.abs(each / np.sqrt(samples) - row) > 0.01 * row + 1e-12)
 
 
 def _check_meta_numbers(meta: dict, mp) -> None:
@@ -325,7 +332,7 @@ def _check_meta_numbers(meta: dict, mp) -> None:
     if n is not None and each is not None and row is not None:  # a capture writes both from the same samples
         each_a, row_a = np.asarray(each, dtype=float), np.asarray(row, dtype=float)
         same = each_a.shape == row_a.shape or not each_a.ndim or not row_a.ndim  # else load_dataset says the count
-        if same and np.any(np.abs(each_a / np.sqrt(n) - row_a) > 0.01 * row_a + 1e-12):
+        if same and not noise_figures_agree(each_a, row_a, n):
             refuse("sample_noise", f"row_noise times sqrt(samples_per_row {n}), as a capture writes it",
                    f"{each!r:.60} beside row_noise {row!r:.60}")
 
