@@ -160,6 +160,12 @@ def test_a_second_ctrl_c_during_the_last_meta_write_leaves_the_meta_with_the_row
     assert len(data_rows(out)[1]) == 5 and meta["rows"] == 5 and meta["noise_rows"] == 5
 
 
+def _eight_poses_with_a_thermistor(sensor, tmp_path):
+    """A schedule of 8 poses, the output, a rig, and temperatures that rise a quarter degree per read."""
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid_rows()[:8]))
+    return sched, tmp_path / "d.csv", rig(sensor), iter(np.arange(20.0, 40.0, 0.25))
+
+
 def test_a_ctrl_c_while_a_row_is_synced_counts_the_row(sensor, tmp_path, monkeypatch):
     """A SIGINT landing in a row's fsync (strace's signal injection hit it) raised after the row was on disk but
     before it was counted: the meta's noise was pooled over one row fewer, and the row's temperature was dropped."""
@@ -168,10 +174,7 @@ def test_a_ctrl_c_while_a_row_is_synced_counts_the_row(sensor, tmp_path, monkeyp
     from fitgen.physics.dataset import load_dataset, row_degc
     from host import capture as cap
 
-    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid_rows()[:8]))
-    out = tmp_path / "d.csv"
-    bus, arr, clock = rig(sensor)
-    degc = iter(np.arange(20.0, 40.0, 0.25))
+    sched, out, (bus, arr, clock), degc = _eight_poses_with_a_thermistor(sensor, tmp_path)
     real, appended = cap.RowWriter.append, []
 
     def append(self, line):
@@ -193,10 +196,7 @@ def test_each_rows_temperature_stays_with_its_row_when_a_run_is_stopped(sensor, 
     from fitgen.physics.dataset import load_dataset, row_degc
     from host import capture as cap
 
-    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid_rows()[:8]))
-    out = tmp_path / "d.csv"
-    bus, arr, clock = rig(sensor)
-    degc = iter(np.arange(20.0, 40.0, 0.25))
+    sched, out, (bus, arr, clock), degc = _eight_poses_with_a_thermistor(sensor, tmp_path)
     real, appended = cap.RowWriter.append, []
 
     def append(self, line):
