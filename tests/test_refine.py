@@ -151,6 +151,45 @@ def test_model_file_round_trip_and_validation(model, tmp_path):
             model_from_dict(d, "m")
 
 
+def test_absurd_refinement_numbers_are_refused_where_the_estimates_would_be_nonsense(model, train, tmp_path):
+    # a fitted refinement sits far inside the bounds, so they refuse only what no fit writes
+    bound = np.maximum(np.abs(model.input_min), np.abs(model.input_max))
+    assert 0 < model.refine.magnitude(bound) < 1e10
+    data = json.loads(model.save(tmp_path / "r.json").read_text())
+    rows = tmp_path / "rows.csv"
+    train.save(rows)
+    n_forward = len(data["refine"]["forward"][0]["coefficients"])
+    cases = [  # (change, precision, message): each had predicted a pose with status 0
+        (lambda r: r.__setitem__("weights", [1e308] * len(r["weights"])), "double", "steps reach inf"),
+        (lambda r: r["forward"][0].__setitem__("coefficients", [1e300] * n_forward), "double", "over the double limit"),
+        (lambda r: r.__setitem__("prior_precision", (1e200 * np.eye(5)).tolist()), "double", "steps reach 1e+200"),
+        (lambda r: r["weights"].__setitem__(0, 1e39), "float", "over the float limit"),
+        (lambda r: r.__setitem__("pose_max", [1e308] * 5), "double", "must lie within -1000..1000 mm"),
+    ]
+    for change, precision, msg in cases:
+        d = json.loads(json.dumps(data))
+        change(d["refine"])
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps(d))
+        out = tmp_path / "p.csv"
+        proc = run_cli("fitgen", "predict", str(bad), str(rows), "-o", str(out), "--precision", precision)
+        assert_one_line_error(proc, contains=msg)
+        assert not out.exists()
+    # the one weight past float's range is still a model in double, and is refused in float by codegen too
+    d = json.loads(json.dumps(data))
+    d["refine"]["weights"][0] = 1e39
+    bad.write_text(json.dumps(d))
+    assert run_cli("fitgen", "predict", str(bad), str(rows), "-o", str(tmp_path / "p.csv")).returncode == 0
+    proc = run_cli("fitgen", "codegen", str(bad), "-o", str(tmp_path / "gen"), "--precision", "float")
+    assert_one_line_error(proc, contains="over the float limit")
+    # data past the pose limits are refused by the fit, which would write a refinement the loader refuses
+    targets = train.targets.copy()
+    targets[:, train.target_names.index("thy")] *= 1e3
+    far = dataclasses.replace(train, targets=targets)
+    with pytest.raises(InputError, match="--refine: the data's poses: thy"):
+        fit_model(far, settings=FitSettings.family("all", max_terms=5, refine=1, refine_terms=5), sensor=PAPER)
+
+
 def test_blobs_and_fixed_point_refuse_in_one_line(model, tmp_path):
     with pytest.raises(InputError, match="no refinement"):
         to_blob(model)

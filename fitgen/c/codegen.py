@@ -30,6 +30,9 @@ EXP_CODE = {"1": "P1", "2": "P2", "3": "P3", "4": "P4", "-1": "M1", "-2": "M2", 
 # below FLT_MAX (3.4e38) that no partial sum can overflow. double: past 1e15 a sum in
 # mm or deg keeps no correct digit (eps 2.2e-16); such a model is refused as absurd.
 _LIMIT = {"double": 1e15, "float": 1e30}
+# a refinement's normal equations: a step's Cholesky takes their square roots, never their squares, and solves
+# for the step's own scale, so overflow (not cancellation) is what bounds them
+_REFINE_LIMIT = {"double": 1e150, "float": 1e30}
 Literals = tuple[str, ...]  # C literals of reals (cgen.c_real), one per input, component, element or term
 
 
@@ -144,11 +147,17 @@ def term_magnitudes(model: Model) -> dict[str, float]:
 
 
 def check_magnitudes(model: Model, precision: str) -> None:
-    """InputError when an output's terms can reach beyond what ``precision`` (float, double) sums safely."""
+    """InputError when an output's terms, or the refinement's steps, can reach beyond what ``precision``
+    (float, double) sums safely."""
     for name, mag in term_magnitudes(model).items():
         if not mag <= _LIMIT[precision]:
             raise InputError(f"output {name}: its terms reach {mag:.3g} in the input domain, over the {precision} "
                              f"limit {_LIMIT[precision]:g} (absurd coefficients, or a sum that could overflow)")
+    if model.refine is not None:
+        mag = model.refine.magnitude(np.maximum(np.abs(model.input_min), np.abs(model.input_max)))
+        if not mag <= _REFINE_LIMIT[precision]:
+            raise InputError(f"refine: its steps reach {mag:.3g} over its pose box, over the {precision} limit "
+                             f"{_REFINE_LIMIT[precision]:g} (absurd weights, prior or forward coefficients)")
 
 
 def build_cmodel(model: Model, precision: str = "double", style: str = "table", prefix: str = "tm",

@@ -155,6 +155,11 @@ class Model:
         for x in (*self.input_min, *self.input_max):
             if not abs(x) <= top:
                 return f"the input domain reaches {x:.4g}, past float's range: rescale the readings, or use double"
+        if self.refine is not None:
+            x = max(map(abs, self.refine.numbers()))
+            if not x <= top:
+                return (f"refine: a weight, prior or forward coefficient of {x:.4g} does not fit in a float "
+                        f"(|x| <= {top:.3g}): use double")
         return ""
 
     def predict(self, inputs: np.ndarray, with_status: bool = False, fma: bool = False,

@@ -27,7 +27,7 @@ from functools import cached_property
 import numpy as np
 
 from fitgen.base.errors import InputError, finite_number
-from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.pose import POSE_NAMES, check_pose_range
 
 TRANSFORMS = ("identity", "cbrt")
 MAX_STEPS = 8
@@ -106,6 +106,37 @@ class Refinement:
         """The readings the forward model predicts at ``poses`` (n, 5), in double."""
         t, _ = self._forward(np.asarray(poses, dtype=float), np.float64)
         return t ** -3.0 if self.transform == "cbrt" else t
+
+    def numbers(self) -> tuple[float, ...]:
+        """Every real the generated C holds as a literal."""
+        return (*self.pose_min, *self.pose_max, *self.weights, *(x for row in self.prior for x in row),
+                *(x for eq in self.forward for x in (eq.intercept, *eq.coefficients)))
+
+    def magnitude(self, x_bound: np.ndarray) -> float:
+        """The largest number a step's normal equations reach over the pose box (inf when one overflows).
+
+        Evaluated on the box's 3^5 grid (each component at its ends and centre), where the forward model
+        is defined (t > 0 for cbrt; elsewhere a step stops anyway): the prior, the forward values t,
+        ``sum w J^2`` and ``sum w |J| (|x| + |f|)`` per component, ``x_bound`` being each input's largest
+        magnitude. Weights scale as 1 / input^2 and J as the input, so the figure is the same in any units.
+        """
+        levels = np.stack([self.pose_min, self.centre, self.pose_max], axis=1)  # (5, 3)
+        grid = np.stack(np.meshgrid(*levels, indexing="ij"), axis=-1).reshape(-1, 5)
+        w = np.asarray(self.weights, dtype=float)
+        with np.errstate(all="ignore"):
+            t, dtdu = self._forward(grid, np.float64)
+            defined = np.all(t > 0, axis=1) if self.transform == "cbrt" else np.ones(len(t), dtype=bool)
+            t, dtdu = t[defined], dtdu[defined]
+            if self.transform == "cbrt":
+                f, fd = t ** -3.0, -3.0 * t ** -4.0
+            else:
+                f, fd = t, np.ones_like(t)
+            J = np.abs(fd[:, :, None] * dtdu * self.scale)  # (n, N, 5)
+            normal = np.einsum("k,nkj->nj", w, J * J)
+            rhs = np.einsum("k,nkj,nk->nj", w, J, np.asarray(x_bound, dtype=float) + np.abs(f))
+            parts = (np.abs(np.asarray(self.prior)), np.abs(t), normal, rhs)
+            values = np.concatenate([np.ravel(a) for a in parts])
+        return float(np.max(np.where(np.isnan(values), np.inf, values)))
 
     def _forward(self, p: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray]:
         """t (n, N) and dt/du (n, N, 5), in the C's order of operations."""
@@ -243,6 +274,8 @@ class Refinement:
             raise InputError(f"{where}.prior_precision must be a symmetric 5x5 matrix of finite numbers")
         if not all(a < b for a, b in zip(self.pose_min, self.pose_max)):
             raise InputError(f"{where}: the pose box needs pose_min < pose_max in every component")
+        for name, lo, hi in zip(POSE_NAMES, self.pose_min, self.pose_max):
+            check_pose_range(name, lo, hi, where)
         if not all(x > 0 for x in self.weights) or not np.all(np.diag(P) >= 0):
             raise InputError(f"{where}: weights must be > 0, and the prior precision's diagonal >= 0")
         if len(self.forward) != n_inputs:
