@@ -3,6 +3,7 @@ used to calibrate it, against what the unit's identification predicts there. A s
 keeps the twin's fit to a second."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -481,3 +482,47 @@ def test_a_simulation_of_the_models_own_unit_file_is_refused_as_a_check(twin, tm
     assert proc.returncode == 0, proc.stderr
     assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(tmp_path / "sim.csv")), 2,
                           "was simulated (fitgen simulate) on the unit file the model was fitted on, not captured")
+
+
+def test_a_posterior_that_identify_could_not_have_written_is_refused_before_it_widens_any_figure(twin, tmp_path):
+    """The posterior beside a unit file is what units are drawn from to widen its twin's figures. Each of these
+    edits had been read in silence: a covariance read by its lower triangle, one of zeros (every draw the same
+    unit), a mean that is not the file's unit, parameters named for another drawing, no unit named at all."""
+    import shutil
+
+    folder, drawing, unit, sensor, _ = twin
+    for name in ("ring.toml", "twin.toml", "twin.posterior.json"):
+        shutil.copy(folder / name, tmp_path / name)
+    record = json.loads((folder / "twin.posterior.json").read_text())
+    record["drawing_spec"] = str(tmp_path / "ring.toml")
+    unit_file, post = tmp_path / "twin.toml", tmp_path / "twin.posterior.json"
+    post.write_text(json.dumps(record))
+    assert unit_posterior(unit_file, sensor)["theta"] == record["theta"]  # as identify wrote it: taken
+    cov = np.array(record["covariance"])
+    free = np.flatnonzero(np.diag(cov) > 0)
+    i, j = free[0], free[1]
+    skew = cov.copy()
+    skew[i, j] += 0.5 * np.sqrt(cov[i, i] * cov[j, j])
+    theta = np.array(record["theta"])
+    theta[i] += 3 * np.sqrt(cov[i, i])
+    renamed = list(record["parameters"])
+    renamed[i], renamed[j] = renamed[j], renamed[i]
+    edits = [({"covariance": skew.tolist()}, "not symmetric positive definite"),
+             ({"covariance": np.zeros_like(cov).tolist()}, "not symmetric positive definite"),
+             ({"theta": theta.tolist()}, "posterior mean (theta) is not the unit its file describes"),
+             ({"parameters": renamed}, "its parameters are not the drawing's"),
+             ({"unit_sha256": None}, "does not name the unit it was written for")]
+    for change, said in edits:
+        post.write_text(json.dumps({**record, **change}))
+        with pytest.raises(InputError, match=re.escape(said)):
+            unit_posterior(unit_file, sensor)
+    # through the CLI: one line, and nothing written
+    post.write_text(json.dumps({**record, "covariance": skew.tolist()}))
+    poses, _ = check_schedule(drawing, 30, seed=0)
+    data = save_capture(tmp_path / "c.csv", _capture(unit, poses, 5), poses, ROWS_META)
+    model = tmp_path / "twin.json"
+    shutil.copy(folder / "twin.json", model)
+    out = tmp_path / "plots"
+    assert_one_line_error(run_cli("fitgen", "check", str(model), str(data), "--sensor", str(unit_file), "--plot",
+                                  str(out)), contains="not symmetric positive definite")
+    assert not out.exists()

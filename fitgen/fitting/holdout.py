@@ -237,7 +237,14 @@ def unit_posterior(unit_file, sensor) -> dict | None:
     posterior = load_posterior(unit_file) if unit_file else None
     if posterior is not None:
         try:
-            _posterior_draw(posterior, sensor)
+            space, theta, _ = _posterior_draw(posterior, sensor)
+            # its mean is the unit the file describes (identify writes both from one fit): an edited mean
+            # would hold the figures out on units about another one, in silence
+            poses = np.vstack([np.zeros(5), np.diag([0.5, 0.5, -0.5, 3.0, 3.0])])
+            mine, theirs = (readings(u, poses, adc_bits=0) for u in (space.sensor(theta), sensor))
+            if not np.allclose(mine, theirs, rtol=1e-6, atol=1e-9 * np.max(np.abs(theirs))):
+                raise InputError("the unit's posterior mean (theta) is not the unit its file describes "
+                                 "(one of the two edited?): identify again")
         except InputError as exc:
             raise InputError(f"unit file {unit_file}: {exc}") from None
     return posterior
@@ -295,13 +302,14 @@ def _posterior_draw(record: dict, sensor):
     except (KeyError, TypeError, ValueError):
         raise InputError("the unit's posterior record is malformed (expected fitgen identify's)") from None
     space = UnitSpace.of(drawing)
-    if theta.shape != (space.size,) or cov.shape != (space.size, space.size):
-        raise InputError(f"the unit's posterior does not fit its drawing {record.get('drawing_spec')!r}")
-    try:
-        L = np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov)) + 1e-300 * np.eye(space.size))
-    except np.linalg.LinAlgError:  # edited by hand: no covariance a draw could come from
-        raise InputError("the unit's posterior covariance is not positive definite (expected fitgen "
-                         "identify's)") from None
+    if (theta.shape != (space.size,) or cov.shape != (space.size, space.size)
+            or record.get("parameters") != list(space.names)):
+        raise InputError(f"the unit's posterior does not fit its drawing {record.get('drawing_spec')!r} (its "
+                         "parameters are not the drawing's)")
+    if not _covariance_ok(cov, space.free):  # edited by hand: no covariance a draw could come from
+        raise InputError("the unit's posterior covariance is not symmetric positive definite over the parameters "
+                         "that vary between units, 0 elsewhere (expected fitgen identify's)")
+    L = np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov)) + 1e-300 * np.eye(space.size))
     # identify's lie within a few prior spreads, and no posterior is wider than its prior: past these, an edit
     # (NaN or 1e308 drew units of no field, and check's table of nonsense passed or failed by chance)
     with np.errstate(all="ignore"):
@@ -310,6 +318,26 @@ def _posterior_draw(record: dict, sensor):
         raise InputError(f"the unit's posterior gives {space.names[int(np.argmax(far))]} a value or spread past any "
                          "identification's (edited by hand?): identify again")
     return space, theta, L
+
+
+def _covariance_ok(cov: np.ndarray, free: np.ndarray) -> bool:
+    """Whether ``cov`` is a posterior covariance identify could write: finite; 0 in the rows and columns of the
+    parameters that do not vary (``free`` False, the prior pins them); over the others, symmetric to rounding
+    (identify's is an inverse's) and positive definite, each with a spread > 0 (the prior bounds it from below)."""
+    if not np.all(np.isfinite(cov)) or np.any(cov[~free]) or np.any(cov[:, ~free]):
+        return False
+    c = cov[np.ix_(free, free)]
+    d = np.diag(c)
+    if not np.all(d > 0):
+        return False
+    corr = c / np.sqrt(np.outer(d, d))
+    if not np.all(np.abs(corr - corr.T) <= 1e-6):
+        return False
+    try:
+        np.linalg.cholesky((corr + corr.T) / 2)
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
 def sensor_hashes(sensor) -> set[str]:

@@ -400,7 +400,10 @@ def load_posterior(unit_path) -> dict | None:
             and isinstance(rec.get("drawing_spec"), str)):
         raise InputError(f"unit file {unit_path}: its posterior {name} is malformed (expected fitgen identify's): "
                          f"{todo}")
-    if "unit_sha256" in rec and rec["unit_sha256"] != load_sensor(unit_path).sha256:
+    if not isinstance(rec.get("unit_sha256"), str):  # identify always writes it: without it no unit is checked
+        raise InputError(f"unit file {unit_path}: its posterior {name} does not name the unit it was written for "
+                         f"(unit_sha256; expected fitgen identify's): {todo}")
+    if rec["unit_sha256"] != load_sensor(unit_path).sha256:
         raise InputError(f"unit file {unit_path}: its posterior {name} was written for another unit (another "
                          f"identification's, or the unit file was edited since): {todo}")
     return rec
