@@ -35,6 +35,7 @@ from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output, real_file, sha256_hex, signals_held, write_atomic, write_target
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, as_poses
+from fitgen.physics.simulate import sensor_record_problem
 
 from host.adc import AdcArray
 from host.clock import REAL_CLOCK
@@ -95,9 +96,12 @@ def load_schedule(path: str | Path) -> Schedule:
     drawing = {k: meta[k] for k in ("sensor", "sensor_file", "sensor_sha256", "transfer") if k in meta}
     stage = {k: meta[k] for k in ("rig_error", "rig_error_given", "zero_error") if k in meta}
     bad = next((k for k in ("rig_error", "zero_error") if k in stage and not is_stage_error(stage[k])), None)
-    if bad:  # the capture passes it on to identify, which would refuse it only after every row was taken
-        raise InputError(f"{meta_path(path)}: {bad} must be 0..{MAX_STAGE_ERROR:g} mm, got {stage[bad]!r}; repair "
-                         "it, or make the schedule again")
+    # the capture passes these on to identify and check, which would read them only after every row was taken
+    problem = (f"{bad} must be 0..{MAX_STAGE_ERROR:g} mm, got {stage[bad]!r}" if bad else
+               f"rig_error_given must be true or false, got {stage['rig_error_given']!r}"
+               if not isinstance(stage.get("rig_error_given", False), bool) else sensor_record_problem(drawing))
+    if problem:
+        raise InputError(f"{meta_path(path)}: {problem}; repair it, or make the schedule again")
     return Schedule(as_poses(poses), columns, origin, drawing if "sensor" in drawing else None, stage or None,
                     meta.get("check") is True)
 

@@ -520,14 +520,20 @@ def test_capture_averages_as_many_samples_as_the_schedule_was_made_for(tmp_path)
     assert samples_of("given-anyway.csv", "--samples", "2") == 2  # what the user gives is not the meta's to refuse
 
 
-@pytest.mark.parametrize("key, bad", [("rig_error", float("nan")), ("zero_error", 3.0), ("rig_error", "0.01")])
-def test_a_schedule_whose_stage_errors_identify_refuses_is_refused_before_the_capture(tmp_path, key, bad):
+@pytest.mark.parametrize("key, bad, said", [
+    ("rig_error", float("nan"), "must be 0..0.5 mm"), ("zero_error", 3.0, "must be 0..0.5 mm"),
+    ("rig_error", "0.01", "must be 0..0.5 mm"),
+    # copied as they were into the meta: check read "yes" as not given, identify a transfer abc as a file changed
+    ("rig_error_given", "yes", "must be true or false"), ("transfer", "abc", "must be raw or gmr"),
+    ("sensor_sha256", 7, "must be text")])
+def test_a_schedule_whose_records_identify_or_check_refuse_is_refused_before_the_capture(tmp_path, key, bad, said):
     """The capture copied them into its meta, and identify refused them only once every row had been taken."""
     sched = write_schedule(tmp_path / "s.csv", grid_rows()[:2])
-    (tmp_path / "s.csv.meta.json").write_text(json.dumps({"rig_error": 0.01, "zero_error": 0.02, key: bad}))
+    (tmp_path / "s.csv.meta.json").write_text(json.dumps({"rig_error": 0.01, "zero_error": 0.02, "sensor": "paper",
+                                                          key: bad}))
     proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "--simulate", "-o",
                    str(tmp_path / "d.csv"))
-    assert_one_line_error(proc, 2, f"s.csv.meta.json: {key} must be 0..0.5 mm, got {bad!r}; repair it")
+    assert_one_line_error(proc, 2, f"s.csv.meta.json: {key} {said}, got {bad!r}; repair")
     assert not (tmp_path / "d.csv").exists()
 
 

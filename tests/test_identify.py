@@ -722,6 +722,13 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
                           "c.csv's meta: schedule_stage.rig_error must be 0..0.5 mm, got 'fast'; repair it, or give "
                           "--rig-error")
     assert not (tmp_path / "v.toml").exists()
+    # a drawing record edited into what schedule never writes: not read as "its file is not here as it was"
+    made = {**meta["schedule_drawing"], "transfer": "abc"}
+    (tmp_path / "c.csv.meta.json").write_text(json.dumps({**meta, "schedule_drawing": made}))
+    assert_one_line_error(run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "v.toml")), 2,
+                          "c.csv's meta: schedule_drawing.transfer must be raw or gmr, got 'abc'; repair it, or give "
+                          "--sensor")
+    assert not (tmp_path / "v.toml").exists()
     # rows from two zeros (a run set it again after a controller reset): said, and recorded for fitgen check
     two = {**meta, "stage": {**meta["stage"], "zeros_machine_mm": [{"X": 0.0, "Y": 0.0, "Z": 0.0},
                                                                     meta["stage"]["zero_machine_mm"]]}}

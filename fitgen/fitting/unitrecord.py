@@ -15,7 +15,7 @@ from fitgen.fitting.identify import PINNABLE, RIG, RIG_ERROR, ZERO_ERROR, Identi
 from fitgen.physics.dataset import row_degc, thermistor_degc
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
 from fitgen.physics.sensor import Sensor
-from fitgen.physics.simulate import recorded_spec
+from fitgen.physics.simulate import recorded_spec, sensor_record_problem
 from fitgen.physics.units import STIFFENING, UnitSpace
 
 SPAN_NOTE_DEGC = 0.5  # a capture's rows this far apart in temperature: identify says so
@@ -177,11 +177,14 @@ def device_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tupl
     return sensor.noise, f"the drawing {sensor.name}'s"
 
 
-def drawing_for(given: str | None, meta: dict) -> tuple[str, str]:
+def drawing_for(given: str | None, meta: dict, capture="the capture") -> tuple[str, str]:
     """The drawing identify takes for a capture with ``meta`` (``given``: --sensor, else the one its schedule was
     made for, as `fitgen schedule` recorded it and `tactile-host capture` passed it on, where its file is here
     unchanged; else paper), and a line saying so where that is not plain (else '')."""
     made = meta.get("schedule_drawing")
+    if given is None and isinstance(made, dict) and sensor_record_problem(made):  # else read as a file changed
+        raise InputError(f"{capture}'s meta: schedule_drawing.{sensor_record_problem(made)}; repair it, or give "
+                         "--sensor")
     recorded = recorded_spec(made)
     if given is not None:
         if recorded is not None and Path(given).name != Path(recorded).name:

@@ -222,6 +222,17 @@ def dataset_sensor(meta: dict, spec: str | None = None, n_inputs: int | None = N
     return sensor
 
 
+def sensor_record_problem(rec: dict) -> str:
+    """What in a record naming a sensor (``sensor``, ``sensor_file``, ``sensor_sha256``, ``transfer``) is not what
+    fitgen writes there, in words ('' when nothing): each is text, and the transfer raw or gmr."""
+    for key in ("sensor", "sensor_file", "sensor_sha256"):
+        if key in rec and not isinstance(rec[key], str):
+            return f"{key} must be text, got {rec[key]!r}"
+    if "transfer" in rec and rec["transfer"] not in ("raw", "gmr"):
+        return f"transfer must be raw or gmr, got {rec['transfer']!r}"
+    return ""
+
+
 def recorded_spec(rec) -> str | None:
     """The sensor file or preset name a record names (``sensor``, ``sensor_file``, ``sensor_sha256``, ``transfer``: a
     dataset's meta, a model's held-out record, a schedule's drawing), where it is found here and is still that
