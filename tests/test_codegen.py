@@ -183,6 +183,19 @@ def test_verify_bounds_the_random_vectors(paper_model, tmp_path):
                               contains="--vectors must be a whole number from 0 to 100,000")
 
 
+def test_verify_refuses_a_domain_past_what_the_c_sums_in_one_line_before_its_vectors(paper_model, tmp_path):
+    """A domain reaching 1e308: numpy's three overflow warnings (the vectors reach past it) came before the
+    refusal codegen gives."""
+    import json
+
+    data = json.loads(paper_model.save(tmp_path / "m.json").read_text())
+    data["inputs"]["max"] = [1e308] * len(data["inputs"]["max"])
+    (tmp_path / "m.json").write_text(json.dumps(data))
+    for precision in ("double", "float", "both"):
+        assert_one_line_error(run_cli("tactile-host", "verify", str(tmp_path / "m.json"), "--precision", precision),
+                              contains="its terms reach inf in the input domain")
+
+
 def test_verify_refuses_data_in_other_units_than_the_model_takes(paper_model, tmp_path):
     """--data's readings are checked against the model's units as read --model checks the ADCs' volts."""
     path = paper_model.save(tmp_path / "m.json")  # mT

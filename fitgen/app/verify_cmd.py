@@ -9,7 +9,7 @@ from fitgen.base.progress import Progress
 
 def cmd_verify(args) -> int:
     """Each build's check as a table, then PASS or FAIL; exit status 1 when one fails."""
-    from fitgen.c.codegen import STYLES
+    from fitgen.c.codegen import STYLES, check_magnitudes
     from fitgen.equations.model import load_model
 
     from fitgen.c.verify import check_vectors, data_inputs, held_out_from_args, no_held_out_note, verify
@@ -24,6 +24,9 @@ def cmd_verify(args) -> int:
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
     if args.fma and args.precision == "fixed":
         raise InputError("--fma does not apply to --precision fixed")
+    for precision in precisions:  # refused before the work (verify's vectors past the domain would overflow)
+        if precision != "fixed":
+            check_magnitudes(model, precision)
     extra = data_inputs(model, args.data) if args.data else None
     # the fixed-point header has one form (straight-line code): checked once
     builds = [(p, s) for p in precisions for s in (("unrolled",) if p == "fixed" else styles)]

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fitgen.c.codegen import float_domain
+from fitgen.c.codegen import check_magnitudes, float_domain
 from fitgen.equations.fixedmodel import INT32_MAX, INT32_MIN, FixedModel
 from fitgen.equations.model import Model
 from fitgen.equations.rounding import U_DOUBLE, U_FLOAT, error_bound
@@ -380,6 +380,7 @@ def verify(model: Model, precision: str, style: str, *, cc: str = "gcc", runner:
             if extra_inputs is not None:
                 codes = np.vstack([codes, cm.fixed.codes_of(extra_inputs)])
             return compare_fixed(model, cm, codes, held_out, max_share)
+    check_magnitudes(model, precision)  # before the vectors, which reach twice the domain's width past it
     inputs, _ = make_vectors(model, n_random, seed)
     if extra_inputs is not None:
         inputs = np.vstack([inputs, extra_inputs])
