@@ -28,7 +28,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError, finite_number, is_finite_number
 from fitgen.base.fileio import read_text, write_atomic
-from fitgen.physics.dataset import DEGC
+from fitgen.base.parse import DEGC
 
 DIVIDER_KEYS = ("beta", "r25", "series", "vref")
 DIVIDER_DEFAULTS = {"beta": 3950.0, "r25": 10_000.0, "series": 10_000.0, "vref": 3.3}

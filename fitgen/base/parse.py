@@ -38,6 +38,7 @@ LONGEST_WAIT = 3600.0  # s: a time limit or pause beyond an hour is a slip of th
 # samples averaged per captured row: 10,000 is a minute a row at the ADCs' fastest, far past where flicker stops the
 # gain (tactile-host noise); beyond it a capture would never finish a row
 MAX_ROW_SAMPLES = 10_000
+DEGC = (-40.0, 125.0)  # degC: a thermistor's reading the tools take (an NTC's usual rated range)
 
 
 def parse_positive(text: str, what: str, *, integer: bool = False, zero: bool = False, most: float | None = None):

@@ -17,7 +17,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError, RowError, is_finite_number
 from fitgen.base.fileio import read_text, real_file, sha256_hex, text_kind, write_all
-from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES
+from fitgen.base.parse import DEGC, MAX_NOISE, MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, off_skin
 
 _INPUT_RE = re.compile(r"^v([1-9][0-9]*)$")
@@ -243,7 +243,6 @@ def parse_table(text: str, origin: str, header=None) -> tuple[list[str], np.ndar
 
 META_TEXT = ("units", "sensor", "sensor_file", "scene_spec", "drawing", "transfer", "sensor_sha256",
              "labels")  # keys read as text (or null)
-DEGC = (-40.0, 125.0)  # degC: a thermistor's reading the tools take (an NTC's usual rated range; host.temperature)
 READING_UNITS = ("mT", "V")  # the field at the elements (transfer raw) or their voltages (gmr)
 # noise figures the fit reads from a meta (V or mT): one number, or one per element
 META_NOISE = ("noise", "row_noise", "sample_noise")

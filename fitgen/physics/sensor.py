@@ -12,7 +12,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError, is_finite_number
 from fitgen.base.fileio import canonical_json, read_text, sha256_hex, text_kind, tomllib
-from fitgen.base.parse import MAX_NOISE
+from fitgen.base.parse import DEGC, MAX_NOISE
 from fitgen.physics.tolerances import STIFFENING_MAX, TOLERANCE_MAX, Tolerances
 
 AXIS_WORDS = ("radial", "tangential", "z", "-z")
@@ -370,7 +370,7 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
     travel = _travel(top.sub("travel", required=False), gap)
     unit = top.sub("unit", required=False)  # provenance of a unit file (fitgen simulate --unit, fitgen identify)
     if unit.has("capture_degc"):  # read by the readouts against a temperature compensation's t0
-        unit.number("capture_degc", min_=-40.0, max_=125.0)
+        unit.number("capture_degc", min_=DEGC[0], max_=DEGC[1])
     for key in list(unit.data):
         unit.raw(key)
     unit.finish()
