@@ -33,7 +33,7 @@ def cmd_simulate(args) -> int:
     poses, source = choose_poses(grid=args.grid, random=args.random, poses=args.poses, ranges=args.ranges,
                                  scene=args.scene, seed=args.seed, sensor=sensor,
                                  min_rows=rows_needed(sensor.n_elements))  # a scene's grid that a fit can carry
-    noise = noise_of(args.noise, sensor, most=MAX_NOISE)  # readings of more overflow (observe takes any: its bounds)
+    noise = noise_of(args.noise, sensor, most=MAX_NOISE)  # readings of more overflow
     if args.labels == "magnet" and args.unit is None and sensor.is_drawing:
         raise InputError("--labels magnet is for a built unit (--unit SEED, or a unit's file as --sensor): on the "
                          "drawing the stage moves the magnet one to one, so the labels are the same")
@@ -74,7 +74,8 @@ def cmd_observe(args) -> int:
     args.sensor = args.sensor_pos or args.sensor or "paper"
     sensor, scene = sensor_of(args), load_scene(args.scene)
     ranges = parse_ranges(args.ranges, scene.ranges)
-    noise = None if args.noise is None else noise_of(args.noise, sensor)
+    # the bounds scale with it: 1e308 gave "inf mm" at every pose (as a sensor file's noise, capped as simulate's)
+    noise = None if args.noise is None else noise_of(args.noise, sensor, most=MAX_NOISE)
     if noise is not None and not noise > 0:
         raise InputError("--noise must be > 0 for observe: without noise every pose component is resolved to 0, "
                          "resolvable or not")
