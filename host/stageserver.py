@@ -29,9 +29,14 @@ class PoseFile:
         self.path = write_target(path)
 
     def set_pose(self, pose) -> None:
+        # not write_atomic: no fsync, since a pose changes many times a second and a crash loses only the simulation
         tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        tmp.write_text(",".join(repr(float(x)) for x in pose) + "\n")
-        os.replace(tmp, self.path)
+        try:
+            tmp.write_text(",".join(repr(float(x)) for x in pose) + "\n")
+            os.replace(tmp, self.path)
+        except BaseException:  # a signal between the two: no temporary left beside the pose file
+            tmp.unlink(missing_ok=True)
+            raise
 
 
 def pose_file_motion(path: str | Path):

@@ -219,6 +219,24 @@ def test_a_capture_a_run_record_and_a_pose_file_refuse_a_fifo(tmp_path):
     assert (tmp_path / "real.txt").read_text() == "1.0,2.0,-1.0,0.0,0.0\n"
 
 
+def test_a_pose_file_interrupted_between_its_write_and_rename_keeps_the_last_pose_and_no_temporary(tmp_path,
+                                                                                                   monkeypatch):
+    """stage-sim's pose file: a signal after the temporary's write left a stray .pose.txt.PID.tmp beside it."""
+    from host import stageserver
+
+    pose = stageserver.PoseFile(tmp_path / "pose.txt")
+    pose.set_pose([1, 2, -1, 0, 0])
+
+    def interrupted(src, dst):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(stageserver.os, "replace", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        pose.set_pose([3, 0, 0, 0, 0])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pose.txt"]
+    assert (tmp_path / "pose.txt").read_text() == "1.0,2.0,-1.0,0.0,0.0\n"
+
+
 def test_two_outputs_naming_one_file_through_a_symlink_are_refused(tmp_path):
     from fitgen.app.cliutil import check_written
 
