@@ -133,11 +133,12 @@ def smaller_boards_note(size: Size | None, board: str = "uno", fixed_too: bool =
         return ""
     room = []
     for (flash, ram_room, there), keys in tight.items():
-        over = ([f"{flash:,} B of flash" + (f" (about {there:,} B there, with its core)" if there != size.flash else "")]
-                * (there > flash) + [f"{ram_room:,} B of RAM"] * (ram > ram_room))
-        room.append(f"the {' or '.join(BOARDS[k].label for k in keys)}'s {' and '.join(over)}")
+        # the build's size there (another core) against the board's room, never the Uno's size against it
+        over = ([(f"about {there:,} B of flash there, with its core, over {flash:,} B" if there != size.flash
+                  else f"over {flash:,} B of flash")] * (there > flash) + [f"over {ram_room:,} B of RAM"] * (ram > ram_room))
+        room.append(f"the {' or '.join(BOARDS[k].label for k in keys)} ({'; '.join(over)})")
     first = next(iter(tight.values()))[0]
-    return (f"note: the build ({size.flash:,} B of flash, {ram:,} B of static RAM) is more than {' or '.join(room)}: "
+    return (f"note: the build ({size.flash:,} B of flash, {ram:,} B of static RAM) does not fit {' or '.join(room)}: "
             f"it was checked on the {BOARDS[board].label}; give --board {first} (or the board you flash) to check it "
             f"there (fewer terms: fitgen fit --max-terms{'; or --precision fixed' if fixed_too else ''})")
 

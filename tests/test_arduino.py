@@ -251,18 +251,18 @@ def test_a_build_too_big_for_a_smaller_avr_board_says_so_and_options_that_would_
     assert smaller_boards_note(Size(26000, 1168)) == "" and smaller_boards_note(None) == ""
     # the Leonardo's USB core is about 2.2 kB more than the Uno's: 27,348 B on the Uno was 29,550 B there
     assert smaller_boards_note(Size(27348, 1168)) == (
-        "note: the build (27,348 B of flash, 1,168 B of static RAM) is more than the Leonardo or Micro's 28,672 B of "
-        "flash (about 29,548 B there, with its core): it was checked on the Uno; give --board leonardo (or the board "
+        "note: the build (27,348 B of flash, 1,168 B of static RAM) does not fit the Leonardo or Micro (about 29,548 B "
+        "of flash there, with its core, over 28,672 B): it was checked on the Uno; give --board leonardo (or the board "
         "you flash) to check it there (fewer terms: fitgen fit --max-terms)")
     assert smaller_boards_note(Size(29984, 1168), fixed_too=True).endswith(
         "(fewer terms: fitgen fit --max-terms; or --precision fixed)")
-    assert "than the Nano's 30,720 B of flash or the Leonardo or Micro's 28,672 B of flash (about 33,200 B there" in \
+    assert "does not fit the Nano (over 30,720 B of flash) or the Leonardo or Micro (about 33,200 B of flash there" in \
         smaller_boards_note(Size(31000, 1168))
     # built for the Mega: its 8 kB of RAM is past the others'
     said = smaller_boards_note(Size(40000, 2100), "mega")
-    assert "the Uno's 32,256 B of flash (about 39,600 B there, with its core) and 2,048 B of RAM" in said and \
-        "checked on the Mega 2560; give --board uno" in said and "the Leonardo or Micro's 28,672 B of flash (about " \
-        "41,800 B there" in said
+    assert "the Uno (about 39,600 B of flash there, with its core, over 32,256 B; over 2,048 B of RAM)" in said and \
+        "checked on the Mega 2560; give --board uno" in said and "the Leonardo or Micro (about 41,800 B of flash " \
+        "there" in said
     assert_one_line_error(_build_cli(model_path, tmp_path / "L", "--no-build", "--precision", "fixed", "--style",
                                      "table"), 2, "--style does not apply to --precision fixed")
     assert not (tmp_path / "L").exists()
