@@ -363,7 +363,7 @@ def test_data_of_a_preset_file_gone_fit_on_the_preset(tmp_path):
     (None, "its posterior u.posterior.json is missing (identify writes it beside the unit file): identify again, "
            "or delete the [unit] posterior line to use the unit without its uncertainty"),
     ("{", "its posterior u.posterior.json cannot be read (identify writes it beside the unit file): identify again"),
-    ("negative", "the unit's posterior covariance is not positive definite (expected fitgen identify's)"),
+    ("negative", "the unit's posterior covariance is not symmetric positive definite over the parameters that vary"),
     # NaN or 1e308 drew units of no field: check's table of nonsense passed or failed by chance
     ("nan", "the unit's posterior gives magnet.x a value or spread past any identification's (edited by hand?)"),
     ("huge", "the unit's posterior gives magnet.x a value or spread past any identification's (edited by hand?)"),
@@ -377,9 +377,10 @@ def test_fit_reads_the_units_posterior_before_fitting(tmp_path, monkeypatch, cap
     path = write_unit(tmp_path / "u.toml", draw_unit(drawing, 4)[0], "paper", {"posterior": "u.posterior.json"})
     size = UnitSpace.of(drawing).size
     if record in ("negative", "nan", "huge"):
-        cov = {"negative": -np.eye(size), "nan": np.diag([np.nan] + [1e-6] * (size - 1)),
+        cov = {"negative": -1e-6 * np.eye(size), "nan": np.diag([np.nan] + [1e-6] * (size - 1)),
                "huge": np.diag([1e300] + [1e-6] * (size - 1))}[record]
-        record = json.dumps({"theta": [0.0] * size, "covariance": cov.tolist(), "drawing_spec": "paper"})
+        record = json.dumps({"theta": [0.0] * size, "covariance": cov.tolist(), "drawing_spec": "paper",
+                             "unit_sha256": load_sensor(path).sha256, "parameters": list(UnitSpace.of(drawing).names)})
     if record is not None:
         (tmp_path / "u.posterior.json").write_text(record)
     simulate(load_sensor(path), grid_poses({"dx": [-1, 0, 1], "dy": [-1, 0, 1], "dz": [0, -1, -2]}),

@@ -306,10 +306,6 @@ def _posterior_draw(record: dict, sensor):
             or record.get("parameters") != list(space.names)):
         raise InputError(f"the unit's posterior does not fit its drawing {record.get('drawing_spec')!r} (its "
                          "parameters are not the drawing's)")
-    if not _covariance_ok(cov, space.free):  # edited by hand: no covariance a draw could come from
-        raise InputError("the unit's posterior covariance is not symmetric positive definite over the parameters "
-                         "that vary between units, 0 elsewhere (expected fitgen identify's)")
-    L = np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov)) + 1e-300 * np.eye(space.size))
     # identify's lie within a few prior spreads, and no posterior is wider than its prior: past these, an edit
     # (NaN or 1e308 drew units of no field, and check's table of nonsense passed or failed by chance)
     with np.errstate(all="ignore"):
@@ -317,6 +313,10 @@ def _posterior_draw(record: dict, sensor):
     if far.any():
         raise InputError(f"the unit's posterior gives {space.names[int(np.argmax(far))]} a value or spread past any "
                          "identification's (edited by hand?): identify again")
+    if not _covariance_ok(cov, space.free):  # edited by hand: no covariance a draw could come from
+        raise InputError("the unit's posterior covariance is not symmetric positive definite over the parameters "
+                         "that vary between units, 0 elsewhere (expected fitgen identify's)")
+    L = np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov)) + 1e-300 * np.eye(space.size))
     return space, theta, L
 
 
