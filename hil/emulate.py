@@ -418,7 +418,7 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
         workdir = tmp.name
     else:  # a folder the user named may be another emulator's: its sources and image are not to mix with these
         lock = hold_folder(Path(workdir), "tactile-hil", "--build-dir")
-    folder = Path(workdir)
+    folder = Path(workdir).absolute()  # the image is run by its path: "firmware" alone would be looked up on PATH
     port_name = "posix" if target == "host" else target
     try:
         render_firmware(model, folder, precision=precision, style=style, fma=fma, port=port_name,

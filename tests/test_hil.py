@@ -126,6 +126,23 @@ def test_a_build_folder_in_use_is_refused_not_shared(paper_model, model_file, tm
             assert dev.info(refresh=True).model_hash == other.sha256
 
 
+def test_a_build_folder_named_relative_to_where_it_runs_serves_and_an_empty_one_is_refused(model_file, tmp_path):
+    """--build-dir . ran its image as 'firmware', which the system looked up on PATH (a traceback); --build-dir ''
+    did the same after writing the sources into the current folder."""
+    require_tool("gcc")
+    proc = run_cli("tactile-hil", "emulate", "--target", "host", "--model", str(model_file), "--suite", "--vectors",
+                   "20", "--fuzz", "10", "--no-flash", "--build-dir", ".", cwd=tmp_path)
+    assert proc.returncode == 0 and proc.stdout.rstrip().endswith("PASS"), proc.stdout + proc.stderr
+    assert (tmp_path / "firmware").is_file()
+    (tmp_path / "empty").mkdir()
+    proc = run_cli("tactile-hil", "emulate", "--target", "host", "--model", str(model_file), "--build-dir", "",
+                   cwd=tmp_path / "empty")
+    assert_one_line_error(proc, 2, "--build-dir is empty")
+    assert not list((tmp_path / "empty").iterdir())
+    assert_one_line_error(run_cli("tactile-hil", "run", "--port", "socket://127.0.0.1:1", "--model", ""), 2,
+                          "--model is empty")
+
+
 def test_a_device_that_stops_mid_suite_leaves_the_table_so_far(paper_model, monkeypatch):
     """A device that stopped answering mid-suite ended `tactile-hil run` with one line, and the checks already done
     were lost: now the check it stopped in fails, the table holds those before it, and the rest are said not run."""

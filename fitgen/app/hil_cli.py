@@ -14,7 +14,7 @@ import threading
 import time
 
 from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, check_output_kind, check_written,
-                               command_main, count, degc, noise_volts, seconds, tcp_port)
+                               check_not_empty, command_main, count, degc, noise_volts, seconds, tcp_port)
 from fitgen.base.errors import InputError
 
 
@@ -290,6 +290,7 @@ def _check(args) -> None:
     from fitgen.c.calblob import check_sensor_id
     from hil.firmware import check_sensor_id as check_compiled_id
 
+    check_not_empty(args)
     if args.command == "emulate":
         _suite_alone(args)
     check_written(args)
