@@ -518,6 +518,8 @@ def test_schedule_is_d_optimal_within_limits(drawing, plan):
     # a noise in mV typed as V: the poses came out alike, and the line asked for more axes; past 1000 numpy warned
     (["--transfer", "gmr", "--noise", "1"], "0.25 V, is 500x sensor paper's per sample (a figure in other units?)"),
     (["--noise", "1e200"], "--noise 1e200 is no sensor's reading noise (at most 1000"),
+    # the rows' covariances were not positive definite in float: numpy's LinAlgError, a traceback
+    (["--noise", "1e-12"], "the rows' reading noise, 2.5e-13 V, is too small against the rig error (0.01 mm)"),
 ])
 def test_schedule_refuses_what_identify_could_not_use(tmp_path, args, message):
     out = tmp_path / "s.csv"

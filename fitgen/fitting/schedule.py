@@ -218,7 +218,12 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     prob = Problem(space, np.zeros((len(cand), drawing.n_elements)), cand, np.full(drawing.n_elements, noise),
                    float(rig_error))
     z = np.zeros(space.size)
-    J = np.concatenate([prob.whitened_rows(z, cand[i:i + CHUNK]) for i in range(0, len(cand), CHUNK)])
+    try:
+        J = np.concatenate([prob.whitened_rows(z, cand[i:i + CHUNK]) for i in range(0, len(cand), CHUNK)])
+    except (np.linalg.LinAlgError, OverflowError):  # a row's covariance no longer positive definite in float
+        raise InputError(f"the rows' reading noise, {noise:g} {drawing.units}, is too small against the rig error "
+                         f"({rig_error:g} mm) to weigh them in floating point (sensor {drawing.name}'s per sample is "
+                         f"{drawing.noise:g}): give --noise as a single sample's") from None
     if progress is not None:
         progress(1, total, "information")
     idx, logdet = d_optimal(J, n, None if progress is None else lambda i, m, note: progress(i + 1, total, note))
