@@ -60,6 +60,18 @@ def test_hash_is_stable_and_sensitive():
         (lambda d: d["elements"]["ring"][0].__setitem__("z", 1e200), "the elements' places must be within +-1000 mm"),
         (lambda d: d["elements"]["ring"][0].__setitem__("radius", 1e308), "must be within +-1000 mm, got 1e+308"),
         (lambda d: d["magnet"].__setitem__("polarization", 1e30), "'magnet.polarization' must be within +-10 T"),
+        # and below any sensor's: observe's field overflowed (numpy's warnings, then SVD's LinAlgError traceback) on a
+        # magnet 1e-300 mm across; the others gave readings of 1e-300, on a rail, or that never change
+        (lambda d: d["magnet"].__setitem__("diameter", 1e-300), "'magnet.diameter' must be >= 0.001, got 1e-300"),
+        (lambda d: d["magnet"].__setitem__("height", 1e-300), "'magnet.height' must be >= 0.001"),
+        (lambda d: d.setdefault("stage", {}).__setitem__("map", [[1e308, 0, 0], [0, 1, 0], [0, 0, 1]]),
+         "'stage.map' must hold numbers within +-10"),
+        (lambda d: d.setdefault("ambient", {}).__setitem__("field", [1e308, 0, 0]),
+         "'ambient.field' must be within +-1000 mT"),
+        (lambda d: d["transfer"]["gmr"].__setitem__("supply", 1e308), "'transfer.gmr.supply' must be <= 100"),
+        (lambda d: d["transfer"]["gmr"].__setitem__("sensitivity", 1e308), "'transfer.gmr.sensitivity' must be <="),
+        (lambda d: d["transfer"]["gmr"].__setitem__("saturation", 1e-300), "'transfer.gmr.saturation' must be >="),
+        (lambda d: d["transfer"]["gmr"].__setitem__("adc_max", 1e-300), "must be at least 0.001 V above"),
         # TOML integers past float's range: math.isfinite raised OverflowError, a traceback
         (lambda d: d["magnet"].__setitem__("polarization", 10 ** 400), "'magnet.polarization' must be a finite"),
         (lambda d: d["travel"].__setitem__("dz", [-10 ** 400, 0]), "'travel.dz' must be a list of 2 finite numbers"),

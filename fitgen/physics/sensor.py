@@ -285,6 +285,10 @@ def _ring(sec: _Section) -> tuple[np.ndarray, np.ndarray]:
 
 
 MAX_MM, MAX_POLARIZATION, MAX_GAIN, MAX_OFFSET_MT = 1000.0, 10.0, 1000.0, 1000.0
+# below these no sensor is described either: a magnet a micrometre across, a gain a thousandth of the drawing's, an
+# ADC a millivolt wide (a slip of the exponent, whose field underflows or whose readings all sit on a rail)
+MIN_MM, MIN_GAIN, MIN_ADC_SPAN = 1e-3, 1.0 / MAX_GAIN, 1e-3
+MAX_STAGE_MAP = 10.0  # the magnet moves a fraction of the stage's displacement; 10x is no elastomer's
 
 
 def _table_list(sec: _Section, key: str) -> list:
@@ -302,8 +306,8 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
 
     mag = top.sub("magnet")
     mag.string("shape", "cylinder", choices=("cylinder",))
-    diameter = mag.number("diameter", required=True, positive=True)
-    height = mag.number("height", required=True, positive=True)
+    diameter = mag.number("diameter", required=True, min_=MIN_MM)
+    height = mag.number("height", required=True, min_=MIN_MM)
     pol = mag.number("polarization", 1.32)
     if pol == 0:
         raise InputError(f"{origin}: 'magnet.polarization' must not be 0")
@@ -331,7 +335,7 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
         sec = _Section(item, f"elements.list[{i}]", origin)
         positions.append(sec.vector("position")[None])
         axes.append(sec.vector("axis", unit=True)[None])
-        gains.append(sec.number("gain", 1.0, positive=True))
+        gains.append(sec.number("gain", 1.0, min_=MIN_GAIN))
         offsets.append(sec.number("offset", 0.0))
         sec.finish()
     el.finish()
@@ -350,6 +354,8 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
 
     amb = top.sub("ambient", required=False)
     ambient = amb.vector("field", required=False) if amb.has("field") else np.zeros(3)
+    if not np.max(np.abs(ambient)) <= MAX_OFFSET_MT:  # the Earth's is 0.05 mT
+        raise InputError(f"{origin}: 'ambient.field' must be within +-{MAX_OFFSET_MT:g} mT, got {ambient.tolist()}")
     amb.finish()
     st = top.sub("stage", required=False)
     stage_map = np.eye(3)
@@ -359,6 +365,9 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
             raise InputError(f"{origin}: 'stage.map' must be 3 rows of 3 numbers (magnet displacement = map x "
                              "stage displacement)")
         stage_map = np.array([_numbers(_Section({"row": r}, "stage.map", origin), "row", 3) for r in rows])
+        if not np.max(np.abs(stage_map)) <= MAX_STAGE_MAP:
+            raise InputError(f"{origin}: 'stage.map' must hold numbers within +-{MAX_STAGE_MAP:g} (the magnet's "
+                             f"displacement per mm of the stage's), got {stage_map.tolist()}")
         if not abs(np.linalg.det(stage_map)) > 1e-6:
             raise InputError(f"{origin}: 'stage.map' is singular: the magnet would not follow the stage")
     stiffening = st.number("stiffening", 0.0, min_=-STIFFENING_MAX, max_=STIFFENING_MAX)
@@ -396,19 +405,20 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
     rs.finish()
     gs = tr.sub("gmr", required=False)
     gmr = GmrTransfer(
-        supply=gs.number("supply", 5.0, positive=True),
-        sensitivity=gs.number("sensitivity", 2.6, positive=True),
-        gain=gs.number("gain", 12.0, positive=True),
+        supply=gs.number("supply", 5.0, positive=True, max_=MAX_VOLTS),
+        sensitivity=gs.number("sensitivity", 2.6, min_=1e-6, max_=1e6),  # mV/V/Oe: the AA003-02's is 2.0-3.2
+        gain=gs.number("gain", 12.0, min_=1e-6, max_=1e6),
         offset=gs.number("offset", 0.0, min_=-MAX_VOLTS, max_=MAX_VOLTS),
-        saturation=gs.number("saturation", 2.0, positive=True),
+        saturation=gs.number("saturation", 2.0, min_=1e-6, max_=MAX_OFFSET_MT),
         adc_min=gs.number("adc_min", 0.0, min_=-MAX_VOLTS, max_=MAX_VOLTS),
         adc_max=gs.number("adc_max", 3.3, min_=-MAX_VOLTS, max_=MAX_VOLTS),
         adc_bits=gs.integer("adc_bits", 16, min_=0, max_=32),
         noise=gs.number("noise", 0.0, min_=0.0, max_=MAX_NOISE),
     )
     gs.finish()
-    if gmr.adc_max <= gmr.adc_min:
-        raise InputError(f"{origin}: 'transfer.gmr.adc_max' must be greater than 'transfer.gmr.adc_min'")
+    if not gmr.adc_max - gmr.adc_min >= MIN_ADC_SPAN:
+        raise InputError(f"{origin}: 'transfer.gmr.adc_max' must be at least {MIN_ADC_SPAN:g} V above "
+                         f"'transfer.gmr.adc_min'")
     tr.finish()
     top.finish()
 
