@@ -34,8 +34,10 @@ class PoseFile:
         try:
             tmp.write_text(",".join(repr(float(x)) for x in pose) + "\n")
             os.replace(tmp, self.path)
-        except BaseException:  # a signal between the two: no temporary left beside the pose file
+        except BaseException as exc:  # a signal between the two too: no temporary left beside the pose file
             tmp.unlink(missing_ok=True)
+            if isinstance(exc, OSError):  # a folder or file that takes no writes (read-only, immutable, full)
+                raise InputError(f"cannot write {self.path}: {exc.strerror or exc}") from None
             raise
 
 

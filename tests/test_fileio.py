@@ -236,6 +236,14 @@ def test_a_pose_file_interrupted_between_its_write_and_rename_keeps_the_last_pos
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pose.txt"]
     assert (tmp_path / "pose.txt").read_text() == "1.0,2.0,-1.0,0.0,0.0\n"
 
+    def immutable(src, dst):  # chattr +i, or a read-only mount: stage-sim ended in PermissionError's traceback
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(stageserver.os, "replace", immutable)
+    with pytest.raises(InputError, match="^cannot write .*pose.txt: Operation not permitted$"):
+        pose.set_pose([3, 0, 0, 0, 0])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pose.txt"]
+
 
 def test_two_outputs_naming_one_file_through_a_symlink_are_refused(tmp_path):
     from fitgen.app.cliutil import check_written
