@@ -289,6 +289,8 @@ def build_pi(folder: str | Path, cc: str = DEFAULT_CC, *, standin: bool = False)
         proc = run_tool(cmd, "compiler", None)
         if proc.returncode != 0:
             raise InputError(f"building the Pi program failed: {first_error(proc.stderr)}")
+        if not partial.is_file():  # `--cc true`: a status 0 and no program
+            raise InputError(f"the compiler {cc!r} exited with status 0 but wrote no program: give a C compiler")
         os.replace(partial, out)
     finally:
         partial.unlink(missing_ok=True)

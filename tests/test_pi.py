@@ -198,6 +198,11 @@ def test_pi_build_cli_errors(tmp_path, model):
                                   "-o", str(tmp_path / "x")), 2, "reads 4 elements")
     assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "no-such-cc",
                                   "-o", str(tmp_path / "y")), 2, "not found")
+    # a "compiler" that exits 0 and writes nothing: FileNotFoundError's traceback on the program it did not write
+    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "true",
+                                  "-o", str(tmp_path / "z")), 2, "the compiler 'true' exited with status 0 but wrote no")
+    assert not (tmp_path / "z").exists() and not list(tmp_path.glob(".z*"))
+    assert_one_line_error(run_cli("tactile-host", "verify", path, "--cc", "true"), 2, "wrote no tm_vectors")
     # a model in mT is refused for its units, as read refuses it, not for rest readings it reads far from rest
     from fitgen.physics.sensor import load_sensor
     from fitgen.physics.transfer import readings

@@ -28,6 +28,8 @@ def compile_checked(cc: str, sources: list[Path], output: Path, include: Path, e
     proc = run_tool(cmd, "compiler", None)
     if proc.returncode != 0:
         raise InputError(f"{cc} failed on the generated code: {first_error(proc.stderr)}")
+    if not output.is_file():  # `--cc true`: a status 0 and nothing built
+        raise InputError(f"the compiler {cc!r} exited with status 0 but wrote no {output.name}: give a C compiler")
 
 
 def first_error(stderr: str) -> str:
