@@ -958,6 +958,11 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
     assert len(said) == 1 and said[0].startswith(f"identify: row {deep + 1} of "), proc.stderr
     post = json.loads((tmp_path / "s.posterior.json").read_text())
     assert [r["row"] for r in post["outlying_rows"]] == [deep + 1]
+    # a noise past any sensor's: said before the work (the unit file's write refused it after the solve, with
+    # numpy's overflow warning and a line about the rows before it)
+    proc = run_cli("fitgen", "identify", str(tmp_path / "slip.csv"), "--noise", "1e308", "-o", str(tmp_path / "n.toml"))
+    assert_one_line_error(proc, 2, "--noise 1e+308 is no sensor's reading noise (at most 1000")
+    assert not (tmp_path / "n.toml").exists()
     # a folder for the figure that cannot be made: said before the work, nothing written
     (tmp_path / "file").write_text("x")
     proc = run_cli("fitgen", "identify", str(tmp_path / "slip.csv"), "--sensor", "paper", "-o", str(tmp_path / "p.toml"),

@@ -24,6 +24,9 @@ def cmd_identify(args) -> int:
 
     if args.noise is not None and not args.noise > 0:  # identify weighs each reading by it
         raise InputError(f"--noise must be a finite number > 0, got {args.noise:g}")
+    if args.noise is not None and args.noise > MAX_NOISE:  # said now, not by the unit file's write after the solve
+        raise InputError(f"--noise {args.noise:g} is no sensor's reading noise (at most {MAX_NOISE:g}, in the "
+                         "readings' units: V or mT)")
     folder = plots.require(args.plot) if args.plot else None
     ds = load_capture(args.capture)
     sha = ds.sha256  # the capture's as written, before a compensation
