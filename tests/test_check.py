@@ -471,6 +471,9 @@ def test_a_model_whose_terms_overflow_is_refused_as_predict_refuses_it(twin, tmp
     (tmp_path / "c.csv").write_text("v1,v2,v3,v4,v5,v6,v7,v8,dx,dy,dz\n" + "1,1,1,1,1,1,1,1,0,0,0\n" * 3)
     assert_one_line_error(run_cli("fitgen", "check", str(tmp_path / "m.json"), str(tmp_path / "c.csv")), 2,
                           "its terms reach")
+    # report on rows: numpy's overflow warning, then a table of inf errors, status 0
+    assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "m.json"), "--data", str(tmp_path / "c.csv")), 2,
+                          "its terms reach")
 
 
 def test_a_simulation_of_the_models_own_unit_file_is_refused_as_a_check(twin, tmp_path):

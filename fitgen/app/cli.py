@@ -221,6 +221,7 @@ def cmd_report(args) -> int:
     from fitgen.app import plots
     from fitgen.base.fileio import write_all
     from fitgen.app.report import data_notes, format_report, sweep_sensor
+    from fitgen.c.codegen import check_magnitudes
     from fitgen.equations.model import check_input_units, load_model
     from fitgen.physics.dataset import load_dataset, refuse_huge, rows_on_the_skin
     from fitgen.physics.sensor import load_sensor
@@ -240,6 +241,7 @@ def cmd_report(args) -> int:
     ds, lifted = rows_on_the_skin(refuse_huge(load_dataset(args.data))) if args.data else (None, 0)
     if ds is not None:
         check_input_units(model, ds.meta.get("units"), f"{args.data}'s readings", f"model {args.model}")
+        check_magnitudes(model, "double")  # as predict: estimates of inf had made a table of them, status 0
     if lifted:
         print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, no contact pose to "
               "estimate", file=sys.stderr)
