@@ -16,10 +16,12 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.sensor import TRAVEL_MAX
 
 from host.gcode import MACHINE_AXES
 
 STAGE_AXES = ("dx", "dy", "dz")  # what a 3-axis stage can set; thx, thy need a tilt stage
+MAX_LIMIT_MM = 2 * TRAVEL_MAX  # soft limits past this, from the zero, guard nothing a capture moves to
 
 
 @dataclass(frozen=True)
@@ -88,6 +90,9 @@ def parse_ranges(spec: str, what: str) -> dict[str, tuple[float, float]]:
                              "e.g. dx=-3.5:3.5,dy=-3.5:3.5,dz=-3.5:0.5")
         if name.strip() in out:
             raise InputError(f"{what} {spec!r}: {name.strip()} is given twice")
+        if max(-lo_v, hi_v) > MAX_LIMIT_MM:  # a safety box a metre wide keeps no indenter off anything
+            raise InputError(f"{what} {spec!r}: {name.strip()} must lie within +-{MAX_LIMIT_MM:g} mm of the zero "
+                             f"(no sensor's travel reaches past {TRAVEL_MAX:g} mm from first contact)")
         out[name.strip()] = (lo_v, hi_v)
     return out
 

@@ -124,6 +124,11 @@ def test_axis_map_limits_and_approach_parse_or_refuse_in_one_line():
             parse_ranges(bad, "--stage-limits")
     with pytest.raises(InputError, match="dz is given twice"):
         parse_ranges("dx=-1:1,dz=-2.5:1,dz=-1:1", "--stage-limits")
+    # soft limits of +-1e308 mm had been taken, and the capture ran: a safety box that keeps nothing out
+    for bad in ("dx=-1e308:1e308", "dz=-3:41"):
+        with pytest.raises(InputError, match=r"must lie within \+-40 mm of the zero"):
+            parse_ranges(bad, "--stage-limits")
+    assert parse_ranges("dx=-40:40", "l") == {"dx": (-40.0, 40.0)}
     with pytest.raises(InputError, match="X is given twice"):
         parse_zero("X=1,X=2,Y=0,Z=0")
     np.testing.assert_array_equal(parse_approach("dz=0.5"), [0, 0, 0.5])
