@@ -520,6 +520,16 @@ def test_capture_averages_as_many_samples_as_the_schedule_was_made_for(tmp_path)
     assert samples_of("given-anyway.csv", "--samples", "2") == 2  # what the user gives is not the meta's to refuse
 
 
+def test_a_schedule_pose_past_any_sensors_reach_is_refused_before_the_first_row(tmp_path):
+    """Its sixth row at dx = 1e308: five rows were captured, then the capture stopped with status 2 beside a partial
+    file and its meta."""
+    sched = write_schedule(tmp_path / "s.csv", grid_rows()[:5] + [(1e308, 0, -1)])
+    proc = run_cli("tactile-host", "capture", "--poses", str(sched), "--adc", TWO_1115, "--simulate", "-o",
+                   str(tmp_path / "d.csv"))
+    assert_one_line_error(proc, 2, "dx from -2 to 1e+308 mm: a pose box's dx must lie within -1000..1000 mm")
+    assert not list(tmp_path.glob("d.csv*"))
+
+
 @pytest.mark.parametrize("key, bad, said", [
     ("rig_error", float("nan"), "must be 0..0.5 mm"), ("zero_error", 3.0, "must be 0..0.5 mm"),
     ("rig_error", "0.01", "must be 0..0.5 mm"),
