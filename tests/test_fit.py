@@ -479,10 +479,18 @@ def test_an_output_in_a_missing_folder_is_said_before_the_work(argv, work, tmp_p
     assert stop.value.code == 2 and f"folder {tmp_path / 'no'} does not exist" in capsys.readouterr().err
 
 
-def test_a_huge_penalty_prints_its_aic_in_a_few_digits(tmp_path):
-    """--k 1e300 printed each equation's AIC as a 300-digit number."""
+def test_a_penalty_past_any_datasets_is_refused_and_the_largest_taken_prints_in_a_few_digits(tmp_path):
+    """--k 1e300 printed each equation's AIC as a 300-digit number (then as 1e+300) for a model of no terms, and
+    1e308 ended in 'the model holds a non-finite number'; past 100 (BIC's at 10^43 rows) it is refused."""
     data = tmp_path / "press.csv"
     assert run_cli("fitgen", "simulate", "--scene", "press", "-o", str(data)).returncode == 0
-    proc = run_cli("fitgen", "fit", str(data), "--k", "1e300", "--held-out", "0", "-o", str(tmp_path / "m.json"))
+    for k in ("1e300", "1e308", "100.5"):
+        proc = run_cli("fitgen", "fit", str(data), "--k", k, "--held-out", "0", "-o", str(tmp_path / "m.json"))
+        assert_one_line_error(proc, 2, f"--k must be a number > 0 and at most 100, got {k}")
+        assert not (tmp_path / "m.json").exists()
+    proc = run_cli("fitgen", "fit", str(data), "--k", "100", "--held-out", "0", "-o", str(tmp_path / "m.json"))
     assert proc.returncode == 0, proc.stderr
-    assert "dz: 0 terms, AIC 1e+300, training max error" in proc.stdout + proc.stderr
+    line = next(ln for ln in (proc.stdout + proc.stderr).splitlines() if ln.startswith("dz: "))
+    assert len(line.split("AIC ")[1].split(",")[0]) <= 10, line
+    proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "--k", "1e308", "-o", str(tmp_path / "t"))
+    assert_one_line_error(proc, 2, "--k takes aic, bic or numbers > 0 and at most 100, got '1e308'")

@@ -4,7 +4,7 @@ options, view's checks of --replay and --host."""
 from __future__ import annotations
 
 from fitgen.base.errors import InputError
-from fitgen.base.parse import OutOfRange, parse_noise, parse_penalty
+from fitgen.base.parse import MAX_PENALTY, OutOfRange, parse_noise, parse_penalty
 
 
 def sensor_of(args):
@@ -46,7 +46,7 @@ def fit_settings(args):
     try:
         k = parse_penalty(args.k)
     except OutOfRange:
-        raise InputError(f"--k must be a finite number > 0, got {args.k}") from None
+        raise InputError(f"--k must be a number > 0 and at most {MAX_PENALTY:g}, got {args.k}") from None
     except ValueError:
         raise InputError(f"--k must be aic, bic or a number > 0, got {args.k!r}") from None
     k = 2.0 if k == "aic" else k

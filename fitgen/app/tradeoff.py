@@ -7,7 +7,7 @@ import math
 import sys
 
 from fitgen.base.errors import InputError
-from fitgen.base.parse import parse_assignments, parse_penalty
+from fitgen.base.parse import MAX_PENALTY, parse_assignments, parse_penalty
 from fitgen.c.codegen import STYLES
 from fitgen.c.tradeoff import FAMILY_NAMES, default_target
 from fitgen.equations.refine import MAX_STEPS
@@ -23,7 +23,7 @@ def parse_knob_list(name: str, spec: str) -> list:
             try:
                 val = parse_penalty(part)
             except ValueError:
-                raise InputError(f"--k takes aic, bic or numbers > 0, got {part!r}") from None
+                raise InputError(f"--k takes aic, bic or numbers > 0 and at most {MAX_PENALTY:g}, got {part!r}") from None
         elif name == "refine":
             if not (part.isdigit() and int(part) <= MAX_STEPS):
                 raise InputError(f"--refine takes step counts from 0 to {MAX_STEPS}, got {part!r}")

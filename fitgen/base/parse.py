@@ -64,16 +64,21 @@ class OutOfRange(ValueError):
     """A number, but outside the values the option takes."""
 
 
+# a penalty per term past it admits no term on any dataset (BIC's log(n) reaches 100 at 10^43 rows): a slip, whose
+# 1e300 wrote a model of no terms and 1e308 one "holding a non-finite number"
+MAX_PENALTY = 100.0
+
+
 def parse_penalty(text: str) -> str | float:
-    """A penalty per term: ``aic`` or ``bic`` (as given) or a finite number > 0.
+    """A penalty per term: ``aic`` or ``bic`` (as given) or a number > 0, at most MAX_PENALTY.
 
     ValueError when ``text`` is none of these; :class:`OutOfRange` (a ValueError) when it is a
-    number not finite and > 0, so that a caller can word the two apart.
+    number out of that range, so that a caller can word the two apart.
     """
     if text in ("aic", "bic"):
         return text
     k = float(text)
-    if not (k > 0 and math.isfinite(k)):
+    if not (0 < k <= MAX_PENALTY):
         raise OutOfRange(text)
     return k
 
