@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from fitgen.base.errors import InputError
-from fitgen.base.parse import LONGEST_WAIT, MAX_ROW_SAMPLES, parse_positive
+from fitgen.base.parse import LONGEST_WAIT, MAX_NOISE, MAX_ROW_SAMPLES, MAX_TRIES, parse_positive
 from fitgen.base.progress import Progress
 from fitgen.physics.dataset import thermistor_degc
 from fitgen.physics.pose import check_above_board
@@ -54,10 +54,10 @@ def capture_samples(args) -> int:
 
 def capture_numbers(args) -> tuple:
     """--samples (capture_samples), --max-spread, --tries, --settle and --retries, checked."""
-    return (capture_samples(args), parse_positive(args.max_spread, "--max-spread"),
-            parse_positive(args.tries, "--tries", integer=True),
+    return (capture_samples(args), parse_positive(args.max_spread, "--max-spread", most=MAX_NOISE),
+            parse_positive(args.tries, "--tries", integer=True, most=MAX_TRIES),
             parse_positive(args.settle, "--settle", zero=True, most=LONGEST_WAIT),
-            parse_positive(args.retries, "--retries", integer=True))
+            parse_positive(args.retries, "--retries", integer=True, most=MAX_TRIES))
 
 
 def trigger_timeout(args) -> float:

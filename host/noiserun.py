@@ -10,7 +10,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import read_text
-from fitgen.base.parse import LONGEST_WAIT, parse_positive
+from fitgen.base.parse import LONGEST_WAIT, MAX_TRIES, parse_positive
 from fitgen.base.progress import Progress
 
 from host.adc import AdcArray, RetryPolicy
@@ -59,7 +59,7 @@ def run_noise(args, stop=lambda: False) -> Averaging:
     adc_defaults(args)
     refuse_alone([("sensor" in args.adc_given, "--sensor", "--simulate", args.simulate)])  # what it simulates
     seconds = parse_positive(args.seconds, "--seconds", most=LONGEST_WAIT)
-    retries = parse_positive(args.retries, "--retries", integer=True)
+    retries = parse_positive(args.retries, "--retries", integer=True, most=MAX_TRIES)
     cmap = channel_map_from_args(args)
     bus, clock = open_bus_from_args(args, cmap, np.zeros(5) if args.simulate else None)
     try:

@@ -12,12 +12,12 @@ from functools import partial
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import OutputText
-from fitgen.base.parse import LONGEST_WAIT, parse_numbers, parse_positive
+from fitgen.base.parse import LONGEST_RUN, LONGEST_WAIT, MAX_TRIES, parse_numbers, parse_positive
 from fitgen.base.progress import Progress
 from fitgen.c.codegen import check_magnitudes
 from fitgen.equations.model import check_input_units, load_model
 from fitgen.fitting.holdout import fitted_sensor_spec
-from fitgen.physics.pose import check_above_board
+from fitgen.physics.pose import POSE_LIMITS, check_above_board
 from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, RetryPolicy, open_bus
@@ -109,8 +109,9 @@ def parse_rest_band(text: str) -> tuple[float, float]:
     vals = parse_numbers(text)
     if vals is None or len(vals) != 2:
         raise InputError(f"--rest-band {text!r}: give MM,DEG, e.g. 0.08,1.5")
-    if not all(0 < v < float("inf") for v in vals):  # said of the option, not of AutoZeroSettings' fields
-        raise InputError(f"--rest-band {text!r}: both must be finite numbers > 0 (mm, then deg)")
+    if not (0 < vals[0] <= POSE_LIMITS[0] and 0 < vals[1] <= POSE_LIMITS[3]):  # of the option, not of the settings
+        raise InputError(f"--rest-band {text!r}: both must be numbers > 0, at most {POSE_LIMITS[0]:g} mm, then "
+                         f"{POSE_LIMITS[3]:g} deg")
     return vals[0], vals[1]
 
 
@@ -148,10 +149,13 @@ def refuse_alone(needs) -> None:
             raise InputError(f"{option} goes with {needed} (without it, it would be ignored)")
 
 
+MAX_RATE = 100_000.0  # Hz: a hundred times the fastest converter's 860 SPS; past it every sample is late
+
+
 def parse_rate(text: str) -> float:
     """--rate in Hz: > 0, and a sample at least every LONGEST_WAIT seconds (a slower pace is a slip, and
     would wait between samples for years)."""
-    rate = parse_positive(text, "--rate")
+    rate = parse_positive(text, "--rate", most=MAX_RATE)
     if rate < 1.0 / LONGEST_WAIT:
         raise InputError(f"--rate must be at least 1/{LONGEST_WAIT:g} (a sample an hour), got {text}")
     return rate
@@ -165,7 +169,8 @@ class ReadoutSession:
         self.prog = prog
         self.rate = parse_rate(args.rate) if args.rate is not None else None
         self.count = parse_positive(args.count, "--count", integer=True) if args.count is not None else None
-        self.duration = parse_positive(args.duration, "--duration") if args.duration is not None else None
+        self.duration = (parse_positive(args.duration, "--duration", most=LONGEST_RUN) if args.duration is not None
+                         else None)
         check_depends(args)
         sensor_given = args.sensor is not None
         # the sensor is what a simulation simulates, or what a tare rests on when --rest names nothing else
@@ -178,7 +183,7 @@ class ReadoutSession:
         if args.auto_zero and tare_n < MIN_AUTOZERO_TARE:
             raise InputError(f"--auto-zero takes its noise floor from the tare's spread: give --tare-samples "
                              f"{MIN_AUTOZERO_TARE} or more (got {tare_n:g})")
-        retries = parse_positive(args.retries, "--retries", integer=True)
+        retries = parse_positive(args.retries, "--retries", integer=True, most=MAX_TRIES)
         pose, motion = pose_or_motion(args.simulate) if args.simulate is not None else (None, None)
         cmap0 = channel_map_from_args(args)
         tin = temperature_input(args.adc, cmap0, args.thermistor)
@@ -188,7 +193,7 @@ class ReadoutSession:
         tempcomp = load_tempcomp(args.temp_comp) if args.temp_comp else None
         band = parse_rest_band(args.rest_band)
         az_settings = AutoZeroSettings(band_mm=band[0], band_deg=band[1],
-                                       hold=parse_positive(args.rest_hold, "--rest-hold")).checked()
+                                       hold=parse_positive(args.rest_hold, "--rest-hold", most=LONGEST_WAIT)).checked()
         self.model = model = load_model(args.model)
         notes = []  # said once every option has passed: a refusal is one line, not a note and then the refusal
         own = None if sensor_given else fitted_sensor_spec(model)

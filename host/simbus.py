@@ -28,7 +28,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_numbers
-from fitgen.physics.sensor import Sensor
+from fitgen.physics.sensor import MAX_VOLTS, Sensor
 
 from host.channelmap import ADDRESSES, ChannelMap
 from host.clock import VirtualClock
@@ -301,8 +301,8 @@ def simulated_bus(cmap: ChannelMap, sensor: Sensor, pose, *, clock, noise: float
     values = None
     if offsets:
         values = parse_numbers(offsets)
-        if values is None or not all(np.isfinite(values)):
-            raise InputError(f"--sim-offsets {offsets!r}: not finite numbers")
+        if values is None or not all(abs(v) <= MAX_VOLTS for v in values):  # as --sim-noise's bound: past any rail
+            raise InputError(f"--sim-offsets {offsets!r}: give numbers within +-{MAX_VOLTS:g} V")
         if len(values) != sensor.n_elements:
             raise InputError(f"--sim-offsets: give {sensor.n_elements} numbers (V), got {len(values)}")
     specs = [parse_fault(f) for f in faults]

@@ -436,6 +436,14 @@ def test_fault_and_pose_specs():
                                                                                "at 0x4b on the simulated bus (it has "
                                                                                "0x48, 0x49)"),
     (["--adc", TWO_1115, "--simulate", "dx=0", "--sim-fault", "silent:0x4a:20"], "no chip at 0x4a"),
+    # absurd values had run: for ever, with every sample late, or with a chip retried for ever
+    (["--adc", TWO_1115, "--simulate", "dx=0", "--duration", "1e308"], "--duration must be at most 2.592e+06"),
+    (["--adc", TWO_1115, "--simulate", "dx=0", "--rate", "1e308"], "--rate must be at most 100000"),
+    (["--adc", TWO_1115, "--simulate", "dx=0", "--retries", "99999999999"], "--retries must be at most 100"),
+    (["--adc", TWO_1115, "--simulate", "dx=0", "--auto-zero", "--rest-hold", "1e308"], "--rest-hold must be at most"),
+    (["--adc", TWO_1115, "--simulate", "dx=0", "--auto-zero", "--rest-band", "1e308,1e308"],
+     "both must be numbers > 0, at most 1000 mm, then 180 deg"),
+    (["--adc", TWO_1115, "--simulate", "dx=0", "--sim-offsets", "1e308,0,0,0,0,0,0,0"], "give numbers within +-100 V"),
 ])
 def test_read_bad_input_is_one_line_exit_2(model_file, args, message):
     proc = run_cli("tactile-host", "read", "--model", model_file, *args)

@@ -550,6 +550,9 @@ def test_a_schedule_whose_records_identify_or_check_refuse_is_refused_before_the
 @pytest.mark.parametrize("extra, message", [
     (["--samples", "0"], "--samples must be a whole number >= 1, got 0"),
     (["--max-spread", "x"], "--max-spread 'x' is not a number"),
+    (["--max-spread", "1e308"], "--max-spread must be at most 1000"),
+    (["--tries", "99999999999"], "--tries must be at most 100"),
+    (["--retries", "1000"], "--retries must be at most 100"),
     (["--adc", "ads1115@0x48:0-3,ads7829@0x49"], "unknown chip 'ads7829'"),
     (["--bus", "99"], "/dev/i2c-99 does not exist"),
     (["--bus", "99", "--seed", "2"], "--seed needs --simulate"),

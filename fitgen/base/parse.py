@@ -35,6 +35,8 @@ def parse_numbers(text: str) -> list[float] | None:
 
 
 LONGEST_WAIT = 3600.0  # s: a time limit or pause beyond an hour is a slip of the keyboard (and 1e300 overflows sleep)
+LONGEST_RUN = 30 * 86400.0  # s: a recording's --duration; a month of drift is the longest anyone records
+MAX_TRIES = 100  # tries per I2C transfer or per pose: past them a silent chip or a shaking stage is not waited out
 # samples averaged per captured row: 10,000 is a minute a row at the ADCs' fastest, far past where flicker stops the
 # gain (tactile-host noise); beyond it a capture would never finish a row
 MAX_ROW_SAMPLES = 10_000
