@@ -31,6 +31,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_numbers
+from fitgen.physics.sensor import MAX_STAGE_MAP
 
 from host.gcode import MACHINE_AXES
 from host.simrig import SimRig
@@ -386,8 +387,8 @@ def parse_matrix(spec: str) -> np.ndarray:
         M = np.array(rows, dtype=float)
     except ValueError:
         M = np.zeros(0)
-    if M.shape != (3, 3) or not np.all(np.isfinite(M)):
-        raise InputError(f"--map {spec!r}: three rows of three numbers, rows split by ';' "
+    if M.shape != (3, 3) or not np.all(np.abs(M) <= MAX_STAGE_MAP):  # NaN and inf too
+        raise InputError(f"--map {spec!r}: three rows of three numbers within +-{MAX_STAGE_MAP:g}, rows split by ';' "
                          "(e.g. 0.95,0.05,0;-0.05,0.95,0;0,0,0.9)")
     # the magnet follows the tool by a fraction: a map that leaves a direction unmoved is no elastomer's
     if np.linalg.svd(M, compute_uv=False)[-1] < 1e-3:

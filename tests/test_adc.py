@@ -444,6 +444,7 @@ def test_fault_and_pose_specs():
     (["--adc", TWO_1115, "--simulate", "dx=0", "--auto-zero", "--rest-band", "1e308,1e308"],
      "both must be numbers > 0, at most 1000 mm, then 180 deg"),
     (["--adc", TWO_1115, "--simulate", "dx=0", "--sim-offsets", "1e308,0,0,0,0,0,0,0"], "give numbers within +-100 V"),
+    (["--adc", TWO_1115, "--simulate", "thx=1e6"], "thx must lie within -180..180 deg"),
 ])
 def test_read_bad_input_is_one_line_exit_2(model_file, args, message):
     proc = run_cli("tactile-host", "read", "--model", model_file, *args)

@@ -205,6 +205,9 @@ def test_grid_and_range_specs():
         parse_grid("dx=1:2")
     with pytest.raises(InputError, match=r"grid 'paper-simm': not a preset \(paper-sim, paper-exp\)"):
         parse_grid("paper-simm")  # a preset's name mistyped: the names there are
+    # a grid past the pose limits --ranges keeps to: thx = 1e6 deg had been simulated
+    with pytest.raises(InputError, match="thx must lie within -180..180 deg"):
+        parse_grid("dx=0,1 thx=0,1e6")
     r = parse_ranges("dz=-3:0")
     p = random_poses(1000, r, pose_rng(0))
     assert p[:, 2].min() >= -3 and p[:, 2].max() <= 0

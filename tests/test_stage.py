@@ -1118,6 +1118,7 @@ def test_stage_options_need_stage(tmp_path):
     # the port of a socket it does not open, and a map under which the magnet never moves: both were taken
     (["--pty", "--port", "5000"], "--port is the loopback socket's; with --pty there is none"),
     (["--map", "0,0,0;0,0,0;0,0,0"], "leaves the magnet unmoved along some direction of the stage (singular)"),
+    (["--map", "1e308,0,0;0,1,0;0,0,1"], "three rows of three numbers within +-10"),  # had been served
     # served as they were: 'first contact at machine Xnan', numpy's warnings, a pose of 1e+308 in the pose file
     (["--start", "inf,0,0"], "--start 'inf,0,0': each must lie within +-2000 mm"),
     (["--contact", "nan,1,1"], "--contact 'nan,1,1': each must lie within +-2000 mm"),

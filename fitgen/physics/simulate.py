@@ -71,6 +71,7 @@ def parse_grid(spec: str) -> dict[str, list[float]]:
             levels[name] = [float(v) for v in value.split(",")]
         else:
             raise InputError(f"grid {spec!r}: {name}={value!r} is neither START:STOP:COUNT nor a list of numbers")
+        check_pose_range(name, min(levels[name]), max(levels[name]), f"grid {spec!r}")  # as --ranges is
     total = int(np.prod([len(v) for v in levels.values()]))
     if total > MAX_POSES:
         raise InputError(f"grid {spec!r} has {total} poses; at most {MAX_POSES:,}")
