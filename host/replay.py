@@ -21,6 +21,7 @@ from fitgen.base.errors import InputError
 from fitgen.base.fileio import read_text, write_atomic
 from fitgen.c.codegen import check_magnitudes
 from fitgen.equations.model import Model, check_input_units, load_model, model_from_dict
+from fitgen.physics.sensor import MAX_VOLTS
 
 from host.autozero import AutoZero, AutoZeroSettings
 from host.readout import FAR_OUTSIDE, Corrections, RunRecord
@@ -78,6 +79,10 @@ def load_run(path) -> Run:
         if len(row) != n or len(o) != m:
             raise InputError(f"{origin}: line {i} has {len(row)} readings and {len(o)} outputs; the header says {n} "
                              f"and {m}")
+        # what read writes: a clock's time, ADC volts, a temperature or null (a NaN time or 1e308 V had replayed)
+        if not (math.isfinite(tt) and all(abs(x) <= MAX_VOLTS for x in row) and not math.isinf(tp)):
+            raise InputError(f"{origin}: line {i} is not a sample read records (its time must be finite, its "
+                             f"readings ADC volts within +-{MAX_VOLTS:g}, its temperature a number or null)")
         t.append(tt), raw.append(row), temp.append(tp), out.append(o), status.append(st)
     if not t:
         raise InputError(f"{origin}: no samples")

@@ -216,6 +216,12 @@ def test_a_replay_says_it_left_out_a_last_line_cut_short(model_file, tmp_path):
     big["t"] = 10 ** 400
     run.write_text("\n".join(lines[:-1] + [json.dumps(big)]) + "\n")
     assert_one_line_error(run_cli("tactile-host", "replay", str(run)), 2, f"line {len(lines)} is not a sample")
+    # numbers read never records: they had replayed silently, status 0
+    for key, value in (("t", float("nan")), ("raw", [1e308] * len(big["raw"])), ("temp", float("inf"))):
+        bad = {**json.loads(lines[-1]), key: value}
+        run.write_text("\n".join(lines[:-1] + [json.dumps(bad)]) + "\n")
+        assert_one_line_error(run_cli("tactile-host", "replay", str(run)), 2,
+                              f"line {len(lines)} is not a sample read records (its time must be finite")
 
 
 def test_a_replay_plays_over_a_clock_step_and_view_refuses_readout_options(model_file, tmp_path):
