@@ -317,6 +317,9 @@ def test_sweep_on_the_uno_counts_its_cycles(tmp_path):
     (["--max-terms", "0"], "--max-terms"),
     (["--family", "roots"], "--family"),
     (["--jobs", "0"], "--jobs"),
+    # absurd values had swept: a score of 1.56e-311 against a target of 1e308 mm, and a pool of 99,999,999
+    (["--target", "dz=1e308"], "--target dz must be a number > 0 and at most 1000, got 1e+308"),
+    (["--jobs", "99999999"], "--jobs must be 1..64, got 99999999"),
     (["--max-share", "0"], "--max-share"),
     (["--refine", "2"], "nothing to sweep"),
     # the rule that applies, not every rule (it spoke of fixed point where none was asked for)

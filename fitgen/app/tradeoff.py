@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import math
 import sys
 
 from fitgen.base.errors import InputError
@@ -12,7 +11,9 @@ from fitgen.c.codegen import STYLES
 from fitgen.c.tradeoff import FAMILY_NAMES, default_target
 from fitgen.equations.refine import MAX_STEPS
 from fitgen.equations.rounding import PRECISIONS
-from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.pose import POSE_LIMITS, POSE_NAMES
+
+MAX_JOBS = 64  # builds measured at once: past the cores any machine here has, each a compiler and an emulator
 
 
 def parse_knob_list(name: str, spec: str) -> list:
@@ -56,8 +57,9 @@ def parse_target(spec: str | None, outputs: tuple[str, ...]) -> dict[str, float]
             if name not in outputs:
                 raise InputError(f"--target names {name}, which the scene does not estimate "
                                  f"(its outputs: {', '.join(outputs)})")
-            if not (value > 0 and math.isfinite(value)):
-                raise InputError(f"--target {name} must be a finite number > 0, got {value:g}")
+            limit = POSE_LIMITS[POSE_NAMES.index(name)]  # an error past the pose limits is no accuracy
+            if not 0 < value <= limit:
+                raise InputError(f"--target {name} must be a number > 0 and at most {limit:g}, got {value:g}")
             target[name] = value
     return target
 
@@ -83,8 +85,8 @@ def run_tradeoff(args, sensor) -> int:
     knobs = {name: parse_knob_list(name, getattr(args, name)) for name in ("k", "max_terms", "family", "precision",
                                                                          "style", "refine")
              if getattr(args, name) is not None}
-    if args.jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {args.jobs}")
+    if not 1 <= args.jobs <= MAX_JOBS:
+        raise InputError(f"--jobs must be 1..{MAX_JOBS}, got {args.jobs}")
     if "style" in knobs and knobs.get("precision") == ["fixed"]:  # it would be swept in its one style, unsaid
         raise InputError(f"{STYLE_WITH_FIXED}: leave --style out")
     scene = load_scene(args.scene)
