@@ -65,7 +65,7 @@ def test_hash_is_stable_and_sensitive():
         (lambda d: d["magnet"].__setitem__("diameter", 1e-300), "'magnet.diameter' must be >= 0.001, got 1e-300"),
         (lambda d: d["magnet"].__setitem__("height", 1e-300), "'magnet.height' must be >= 0.001"),
         (lambda d: d.setdefault("stage", {}).__setitem__("map", [[1e308, 0, 0], [0, 1, 0], [0, 0, 1]]),
-         "'stage.map' must hold numbers within +-10"),
+         "'stage.map' must be within +-10, got 1e+308"),
         (lambda d: d.setdefault("ambient", {}).__setitem__("field", [1e308, 0, 0]),
          "'ambient.field' must be within +-1000 mT"),
         (lambda d: d["transfer"]["gmr"].__setitem__("supply", 1e308), "'transfer.gmr.supply' must be <= 100"),

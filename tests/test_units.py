@@ -247,7 +247,7 @@ def test_tolerances_from_the_sensor_file(tmp_path):
     (("tilt = [", "tilt = [1.0, "), "magnet.tilt"),
     (("map = [[", "map = [[0.0, 0.0, 0.0], ["), "stage.map"),
     (("[tolerances]", "[tolerances]\nbogus = 1.0"), "tolerances.bogus"),
-    (("gain = ", "gain = -"), "must be > 0"),
+    (("gain = ", "gain = -"), "must be >= 0.001"),
     # a spread no built unit has: its 3-sigma draw puts the magnet metres away
     (("magnet_offset_xy = 0.2", "magnet_offset_xy = 1000"), "'tolerances.magnet_offset_xy' must be <= 1, got 1000"),
     (("\ngain = 0.077", "\ngain = 0.4"), "'tolerances.gain' must be <= 0.25, got 0.4"),

@@ -284,11 +284,8 @@ def _ring(sec: _Section) -> tuple[np.ndarray, np.ndarray]:
     return pos, axes
 
 
-MAX_MM, MAX_POLARIZATION, MAX_GAIN, MAX_OFFSET_MT = 1000.0, 10.0, 1000.0, 1000.0
-# below these no sensor is described either: a magnet a micrometre across, a gain a thousandth of the drawing's, an
-# ADC a millivolt wide (a slip of the exponent, whose field underflows or whose readings all sit on a rail)
-MIN_MM, MIN_GAIN, MIN_ADC_SPAN = 1e-3, 1.0 / MAX_GAIN, 1e-3
-MAX_STAGE_MAP = 10.0  # the magnet moves a fraction of the stage's displacement; 10x is no elastomer's
+MAX_MM, MAX_POLARIZATION, MAX_GAIN, MAX_OFFSET_MT, MAX_STAGE_MAP = 1000.0, 10.0, 1000.0, 1000.0, 10.0
+MIN_MM, MIN_GAIN, MIN_ADC_SPAN = 1e-3, 1.0 / MAX_GAIN, 1e-3  # nor below: a micrometre magnet, a millivolt ADC
 
 
 def _table_list(sec: _Section, key: str) -> list:
@@ -343,19 +340,8 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
         raise InputError(f"{origin}: 'elements' must have at least one [[elements.ring]] or [[elements.list]]")
     positions = np.vstack(positions)
     axes = np.vstack(axes)
-    # past these no sensor is described, and the field's arithmetic overflows (a slip of the exponent)
-    for what, values, limit, unit in (
-            ("the magnet's size, the board's and the elements' places", [diameter, height, thickness, gap, *offset,
-                                                                         *positions.ravel()], MAX_MM, " mm"),
-            ("'magnet.polarization'", [pol], MAX_POLARIZATION, " T"), ("each element's gain", gains, MAX_GAIN, ""),
-            ("each element's offset", offsets, MAX_OFFSET_MT, " mT")):
-        if (worst := float(np.max(np.abs(values)))) > limit:
-            raise InputError(f"{origin}: {what} must be within +-{limit:g}{unit}, got {worst:g}")
-
     amb = top.sub("ambient", required=False)
     ambient = amb.vector("field", required=False) if amb.has("field") else np.zeros(3)
-    if not np.max(np.abs(ambient)) <= MAX_OFFSET_MT:  # the Earth's is 0.05 mT
-        raise InputError(f"{origin}: 'ambient.field' must be within +-{MAX_OFFSET_MT:g} mT, got {ambient.tolist()}")
     amb.finish()
     st = top.sub("stage", required=False)
     stage_map = np.eye(3)
@@ -365,11 +351,17 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
             raise InputError(f"{origin}: 'stage.map' must be 3 rows of 3 numbers (magnet displacement = map x "
                              "stage displacement)")
         stage_map = np.array([_numbers(_Section({"row": r}, "stage.map", origin), "row", 3) for r in rows])
-        if not np.max(np.abs(stage_map)) <= MAX_STAGE_MAP:
-            raise InputError(f"{origin}: 'stage.map' must hold numbers within +-{MAX_STAGE_MAP:g} (the magnet's "
-                             f"displacement per mm of the stage's), got {stage_map.tolist()}")
-        if not abs(np.linalg.det(stage_map)) > 1e-6:
-            raise InputError(f"{origin}: 'stage.map' is singular: the magnet would not follow the stage")
+    # past these no sensor is described, and the field's arithmetic overflows (a slip of the exponent)
+    for what, values, limit, unit in (
+            ("the magnet's size, the board's and the elements' places", [diameter, height, thickness, gap, *offset,
+                                                                         *positions.ravel()], MAX_MM, " mm"),
+            ("'magnet.polarization'", [pol], MAX_POLARIZATION, " T"), ("each element's gain", gains, MAX_GAIN, ""),
+            ("each element's offset", offsets, MAX_OFFSET_MT, " mT"),
+            ("'ambient.field'", ambient, MAX_OFFSET_MT, " mT"), ("'stage.map'", stage_map, MAX_STAGE_MAP, "")):
+        if (worst := float(np.max(np.abs(values)))) > limit:
+            raise InputError(f"{origin}: {what} must be within +-{limit:g}{unit}, got {worst:g}")
+    if not abs(np.linalg.det(stage_map)) > 1e-6:
+        raise InputError(f"{origin}: 'stage.map' is singular: the magnet would not follow the stage")
     stiffening = st.number("stiffening", 0.0, min_=-STIFFENING_MAX, max_=STIFFENING_MAX)
     st.finish()
     tol = top.sub("tolerances", required=False)
