@@ -135,9 +135,16 @@ def test_rows_repeated_exactly_are_said_by_fit(data, tmp_path):
 def test_simulate_leaves_no_unit_file_when_it_fails_and_refuses_poses_outside_the_sensor(tmp_path):
     assert_one_line_error(run_cli("fitgen", "simulate", "--unit", "3", "--random", "10", "--noise", "-1", "-o",
                                   str(tmp_path / "u.csv")), contains="--noise must be a finite number >= 0")
+    # a grid keeps to the pose limits as --ranges does; a pose file's pose is refused by its readings
     assert_one_line_error(run_cli("fitgen", "simulate", "--grid", "dx=1e200", "-o", str(tmp_path / "far.csv")),
-                          contains="pose 1 (dx=1e+200 dy=0 dz=0 thx=0 thy=0) gives readings that are not finite")
+                          contains="grid 'dx=1e200': dx from 1e+200 to 1e+200 mm: a pose box's dx must lie within")
     assert files(tmp_path) == []
+    (tmp_path / "far").mkdir()
+    (tmp_path / "far" / "p.csv").write_text("dx,dy,dz\n1e200,0,0\n")
+    assert_one_line_error(run_cli("fitgen", "simulate", "--poses", str(tmp_path / "far" / "p.csv"), "-o",
+                                  str(tmp_path / "far.csv")),
+                          contains="pose 1 (dx=1e+200 dy=0 dz=0 thx=0 thy=0) gives readings that are not finite")
+    assert files(tmp_path) == ["far"] and files(tmp_path / "far") == ["p.csv"]
 
 
 def test_pose_files_with_a_byte_order_mark_or_a_column_twice(tmp_path):

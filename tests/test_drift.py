@@ -567,7 +567,7 @@ def test_a_header_correction_that_is_not_a_number_is_refused_not_replayed_as_nan
     (["--temp-comp", "tc.json"], "temp=CHIP@ADDRESS:INPUT"),
     (["--thermistor", "beta=3950"], "add temp=CHIP@ADDRESS:INPUT to --adc"),
     (["--rest-band", "0.1"], "--rest-band"),
-    (["--auto-zero", "--rest-band", "0,0"], "--rest-band '0,0': both must be finite numbers > 0 (mm, then deg)"),
+    (["--auto-zero", "--rest-band", "0,0"], "--rest-band '0,0': both must be numbers > 0, at most 1000 mm, then 180 deg"),
     (["--tare", "--tare-samples", "100000000"], "--tare-samples must be 1..100000, got 100000000"),
     (["--rest-hold", "-1"], "--rest-hold"),
     (["--sim-drift", "ramp=5,over=0"], "over and tau must be 1..1e7 s"),

@@ -44,7 +44,7 @@ def test_a_record_that_cannot_be_made_leaves_the_output_as_it_was(model_file, tm
 
 
 @pytest.mark.parametrize("option, said", [(["--sim-noise", "nan"], "not a finite number"),
-                                          (["--sim-offsets", "nan,0,0,0,0,0,0,0"], "not finite numbers"),
+                                          (["--sim-offsets", "nan,0,0,0,0,0,0,0"], "give numbers within +-100 V"),
                                           (["--sim-drift", "ramp=nan"], "ramp must be a finite number"),
                                           (["--sim-drift", "seed=-1"], "seed must be a whole number >= 0")])
 def test_simulation_options_that_are_not_numbers_are_one_line(model_file, option, said):

@@ -261,8 +261,8 @@ def test_a_chip_that_goes_silent_ends_the_run_with_the_statistics(sensor, model)
 def test_a_simulated_pose_or_noise_past_any_sensor_is_one_line(model_file, tmp_path):
     """dx=1e308 made the simulated field NaN and the simulated ADC a traceback (cannot convert NaN to integer), as
     did --sim-flicker 1e308; fitgen simulate refused the same pose in one line."""
-    for extra, said in ((("--simulate", "dx=1e308"), "the simulated pose dx=1e+308 dy=0 dz=0 thx=0 thy=0 gives "
-                                                     "readings that are not finite numbers"),
+    for extra, said in ((("--simulate", "dx=1e308"), "--simulate pose 'dx=1e308': dx from 1e+308 to 1e+308 mm: a pose "
+                                                     "box's dx must lie within -1000..1000 mm"),
                         (("--simulate", "dx=1,dz=-1", "--sim-flicker", "1e308"),
                          "argument --sim-flicker: must be >= 0 and at most 1000 V, got 1e+308")):
         proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_1115, "--count", "2", *extra)
