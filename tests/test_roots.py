@@ -333,8 +333,9 @@ def test_the_users_compiler_flags_come_after_the_projects(monkeypatch, tmp_path)
     from fitgen.c import compiled
 
     seen = []
+    # a compiler that writes its output, as compile_checked requires of one that exits 0
     monkeypatch.setattr(compiled, "run_tool", lambda cmd, *a, **k: seen.append(cmd) or
-                        subprocess.CompletedProcess(cmd, 0, "", ""))
+                        Path(cmd[cmd.index("-o") + 1]).touch() or subprocess.CompletedProcess(cmd, 0, "", ""))
     compiled.compile_checked("gcc -O3 -std=gnu99", [tmp_path / "a.c"], tmp_path / "a", tmp_path)
     cmd = seen[0]
     assert cmd[0] == "gcc"
