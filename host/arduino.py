@@ -134,8 +134,9 @@ def smaller_boards_note(size: Size | None, board: str = "uno", fixed_too: bool =
     room = []
     for (flash, ram_room, there), keys in tight.items():
         # the build's size there (another core) against the board's room, never the Uno's size against it
-        over = ([(f"about {there:,} B of flash there, with its core, over {flash:,} B" if there != size.flash
-                  else f"over {flash:,} B of flash")] * (there > flash) + [f"over {ram_room:,} B of RAM"] * (ram > ram_room))
+        flash_over = (f"about {there:,} B of flash there, with its core, over {flash:,} B" if there != size.flash
+                      else f"over {flash:,} B of flash")
+        over = [flash_over] * (there > flash) + [f"over {ram_room:,} B of RAM"] * (ram > ram_room)
         room.append(f"the {' or '.join(BOARDS[k].label for k in keys)} ({'; '.join(over)})")
     first = next(iter(tight.values()))[0]
     return (f"note: the build ({size.flash:,} B of flash, {ram:,} B of static RAM) does not fit {' or '.join(room)}: "

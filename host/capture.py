@@ -34,7 +34,7 @@ from fitgen.physics.dataset import load_meta, meta_path, noise_figures_agree, po
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output, real_file, sha256_hex, signals_held, write_atomic, write_target
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES
-from fitgen.physics.pose import POSE_NAMES, as_poses, check_pose_range
+from fitgen.physics.pose import POSE_NAMES, as_poses, check_pose_rows
 from fitgen.physics.simulate import sensor_record_problem
 
 from host.adc import AdcArray
@@ -92,9 +92,7 @@ def load_schedule(path: str | Path) -> Schedule:
     0."""
     origin = f"schedule {path}"
     poses, columns = pose_table(read_text(path, "schedule"), origin)
-    for name in columns if len(poses) else ():  # a pose of 1e308 mm had been reached only after the rows before it
-        col = poses[:, POSE_NAMES.index(name)]
-        check_pose_range(name, float(np.min(col)), float(np.max(col)), origin)
+    check_pose_rows(poses, origin)  # a pose of 1e308 mm had been reached only after the rows before it
     meta = load_meta(path)
     drawing = {k: meta[k] for k in ("sensor", "sensor_file", "sensor_sha256", "transfer") if k in meta}
     stage = {k: meta[k] for k in ("rig_error", "rig_error_given", "zero_error") if k in meta}

@@ -8,7 +8,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_assignments, parse_numbers
-from fitgen.physics.pose import POSE_NAMES, check_pose_range
+from fitgen.physics.pose import POSE_NAMES, check_pose_rows
 
 from host.simsensor import Drift
 
@@ -28,8 +28,7 @@ def parse_pose(spec: str) -> np.ndarray:
                              "or NAME=VALUE parts such as dx=1,dz=-1")
     if not np.all(np.isfinite(pose)):
         raise InputError(f"--simulate pose {spec!r}: not finite")
-    for name, x in zip(POSE_NAMES, pose):  # as --ranges and --grid: thx=1e6 had been simulated
-        check_pose_range(name, float(x), float(x), f"--simulate pose {spec!r}")
+    check_pose_rows(pose[None], f"--simulate pose {spec!r}")  # as --ranges and --grid: thx=1e6 had been simulated
     return pose
 
 

@@ -36,7 +36,8 @@ def cmd_identify(args) -> int:
         ds, temperature = _at_t0(ds, load_tempcomp(args.temp_comp), args.temp_comp, args.capture, "identify")
     elif span := rec.temperature_span_line(ds.meta, ds.n_rows):  # before a refusal, which it may explain
         print(f"identify: {span}", file=sys.stderr)
-    args.sensor, said = rec.drawing_for(args.sensor, ds.meta, args.capture)  # the one the capture's schedule was made for
+    # the one the capture's schedule was made for
+    args.sensor, said = rec.drawing_for(args.sensor, ds.meta, args.capture)
     if not ds.target_names:
         raise InputError(f"{args.capture} has readings but no pose columns (dx,dy,dz,...): identify needs each row's "
                          "stage displacement from the zero, as tactile-host capture writes it")

@@ -24,7 +24,8 @@ def parse_knob_list(name: str, spec: str) -> list:
             try:
                 val = parse_penalty(part)
             except ValueError:
-                raise InputError(f"--k takes aic, bic or numbers > 0 and at most {MAX_PENALTY:g}, got {part!r}") from None
+                raise InputError(f"--k takes aic, bic or numbers > 0 and at most {MAX_PENALTY:g}, "
+                                 f"got {part!r}") from None
         elif name == "refine":
             if not (part.isdigit() and int(part) <= MAX_STEPS):
                 raise InputError(f"--refine takes step counts from 0 to {MAX_STEPS}, got {part!r}")

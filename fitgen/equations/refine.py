@@ -125,9 +125,9 @@ class Refinement:
         w = np.asarray(self.weights, dtype=float)
         with np.errstate(all="ignore"):
             t, dtdu = self._forward(grid, np.float64)
-            defined = np.all(t > 0, axis=1) if self.transform == "cbrt" else np.ones(len(t), dtype=bool)
-            t, dtdu = t[defined], dtdu[defined]
             if self.transform == "cbrt":
+                defined = np.all(t > 0, axis=1)
+                t, dtdu = t[defined], dtdu[defined]
                 f, fd = t ** -3.0, -3.0 * t ** -4.0
             else:
                 f, fd = t, np.ones_like(t)

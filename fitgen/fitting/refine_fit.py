@@ -19,7 +19,7 @@ import numpy as np
 from fitgen.physics.dataset import Dataset
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
-from fitgen.physics.pose import POSE_NAMES, check_pose_range
+from fitgen.physics.pose import POSE_NAMES, check_pose_rows
 from fitgen.equations.refine import MAX_STEPS, ForwardEquation, Refinement
 from fitgen.fitting.stepwise import compress, refit, stepwise
 
@@ -55,8 +55,7 @@ def check_refinable(ds: Dataset, outputs, steps: int, max_terms: int) -> None:
     if max_terms < 5:
         raise InputError(f"--refine-terms must be >= 5 (the five linear terms), got {max_terms}")
     poses = ds.poses()
-    for name, lo, hi in zip(POSE_NAMES, poses.min(axis=0), poses.max(axis=0)):
-        check_pose_range(name, float(lo), float(hi), "--refine: the data's poses")  # the model file's refine box
+    check_pose_rows(poses, "--refine: the data's poses")  # the box the model file's refinement keeps
     moves = poses.max(axis=0) > poses.min(axis=0)
     if not np.all(moves):
         raise InputError(f"--refine fits readings from poses: the data's {POSE_NAMES[int(np.argmin(moves))]} never varies")

@@ -182,9 +182,8 @@ def drawing_for(given: str | None, meta: dict, capture="the capture") -> tuple[s
     made for, as `fitgen schedule` recorded it and `tactile-host capture` passed it on, where its file is here
     unchanged; else paper), and a line saying so where that is not plain (else '')."""
     made = meta.get("schedule_drawing")
-    if given is None and isinstance(made, dict) and sensor_record_problem(made):  # else read as a file changed
-        raise InputError(f"{capture}'s meta: schedule_drawing.{sensor_record_problem(made)}; repair it, or give "
-                         "--sensor")
+    if given is None and isinstance(made, dict) and (problem := sensor_record_problem(made)):  # not: file changed
+        raise InputError(f"{capture}'s meta: schedule_drawing.{problem}; repair it, or give --sensor")
     recorded = recorded_spec(made)
     if given is not None:
         if recorded is not None and Path(given).name != Path(recorded).name:

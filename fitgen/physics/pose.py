@@ -44,6 +44,13 @@ def check_pose_range(name: str, lo: float, hi: float, origin: str) -> None:
                          f"-{limit:g}..{limit:g} {unit} (finite numbers)")
 
 
+def check_pose_rows(poses: np.ndarray, origin: str) -> None:
+    """:func:`check_pose_range` of each component over rows of ``poses`` (n, 5); none when there are no rows."""
+    if len(poses):
+        for name, lo, hi in zip(POSE_NAMES, np.min(poses, axis=0), np.max(poses, axis=0)):
+            check_pose_range(name, float(lo), float(hi), origin)
+
+
 def check_rows(readings, poses, what: str) -> tuple[np.ndarray, np.ndarray]:
     """``readings`` (n, N) and ``poses`` (n, 5) of ``what`` as float arrays; InputError (one line) unless they have
     those shapes with one pose per row and every value finite."""
