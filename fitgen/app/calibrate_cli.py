@@ -13,6 +13,7 @@ from fitgen.app.options import noise_of, sensor_of
 from fitgen.base.fileio import replaces_other, write_all
 from fitgen.base.errors import InputError
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES, parse_positive
+from fitgen.physics.sensor import TRANSFERS
 
 
 def cmd_identify(args) -> int:
@@ -393,7 +394,7 @@ def add_calibration_commands(command) -> None:
     i.add_argument("capture", metavar="CAPTURE.csv", help="rows of readings with the stage's displacements (dx,dy,dz)")
     i.add_argument("--sensor", help="the drawing the unit was built to (preset or TOML; default: the one the "
                                     "capture's schedule was made for, else paper)")
-    i.add_argument("--transfer", choices=("raw", "gmr"), help="override the transfer (default: the capture's units)")
+    i.add_argument("--transfer", choices=TRANSFERS, help="override the transfer (default: the capture's units)")
     i.add_argument("--noise", type=finite, metavar="X",
                    help="the device's single-sample reading noise (default: what the capture measured or was "
                         "simulated with, else the sensor file's), divided by sqrt(samples per row)")
@@ -411,7 +412,7 @@ def add_calibration_commands(command) -> None:
 
     sc = command("schedule", cmd_schedule, "the capture poses that pin a unit's parameters best (D-optimal)")
     sc.add_argument("--sensor", default="paper", help="the drawing (preset or TOML; default paper)")
-    sc.add_argument("--transfer", choices=("raw", "gmr"), default="gmr",
+    sc.add_argument("--transfer", choices=TRANSFERS, default="gmr",
                     help="the readings the capture takes (default gmr: volts, as tactile-host capture reads them)")
     sc.add_argument("--n", type=int, help="poses to capture (default 40)")
     sc.add_argument("--axes", default="dx,dy,dz", help="the axes the stage moves (default dx,dy,dz)")

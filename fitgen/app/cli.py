@@ -15,6 +15,7 @@ from fitgen.base.errors import InputError
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
 from fitgen.equations.terms import FAMILIES
 from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.sensor import TRANSFERS
 from fitgen.physics.simulate import MAX_POSES
 
 FAMILY_CHOICES = ("auto", *FAMILIES)
@@ -336,7 +337,7 @@ def build_parser() -> Parser:
     s.add_argument("--seed", type=count, default=0, help="seed of --random's poses and the noise (default 0)")
     s.add_argument("--noise", default="0", help="element noise rms in output units, or 'sensor' (default 0)")
     s.add_argument("--adc-bits", type=int, help="override the transfer's ADC bits (0: no quantisation)")
-    s.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
+    s.add_argument("--transfer", choices=TRANSFERS, help="override the sensor file's transfer")
     s.add_argument("--scene", help="full, slide, press or a scene TOML: simulate its grid (or --random N in its box)")
     s.add_argument("--labels", choices=("stage", "magnet"), default="stage",
                    help="for a built unit: the displacements the poses and labels are, the stage's (what a capture "
@@ -353,7 +354,7 @@ def build_parser() -> Parser:
     o.add_argument("--ranges", help="pose box 'dx=-2:2 ...' overriding the scene's")
     o.add_argument("--noise", help="element noise rms in output units (default: the sensor file's)")
     o.add_argument("--accuracy", help="required 1-sigma accuracy, e.g. 'dx=0.05 thx=0.5'")
-    o.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
+    o.add_argument("--transfer", choices=TRANSFERS, help="override the sensor file's transfer")
 
     f = command("fit", cmd_fit, "choose and fit the estimate equations by stepwise AIC")
     f.add_argument("data", metavar="DATA.csv", help="readings and poses (fitgen simulate, tactile-host capture)")
@@ -462,7 +463,7 @@ def build_parser() -> Parser:
     t.add_argument("--max-share", type=float, default=0.05, metavar="S",
                    help="fail (exit 1) when a point's rounding adds more than this share of its model's held-out "
                         "max error (default 0.05)")
-    t.add_argument("--transfer", choices=("raw", "gmr"), help="override the sensor file's transfer")
+    t.add_argument("--transfer", choices=TRANSFERS, help="override the sensor file's transfer")
     t.add_argument("--core", choices=CYCLE_TARGETS, help="costs on this core: uno = cycles per estimate on the ATmega328P "
                    "(simavr), its fixed-point plan, float and fixed only (default: x86 instructions, Cortex-M flash)")
     t.add_argument("-o", "--output", default="tradeoff-out", metavar="DIR",

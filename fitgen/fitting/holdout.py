@@ -21,6 +21,7 @@ from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
 from fitgen.equations.rounding import PRECISIONS
 from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.sensor import TRANSFERS
 from fitgen.physics.simulate import pose_rng, random_poses, simulate
 from fitgen.physics.transfer import readings
 
@@ -344,7 +345,7 @@ def _covariance_ok(cov: np.ndarray, free: np.ndarray) -> bool:
 def sensor_hashes(sensor) -> set[str]:
     """The sensor's hash in either transfer: a record may hold either for the same sensor (a capture the file's as
     read, a simulation the one it read through)."""
-    return {sensor.with_transfer(kind).sha256 for kind in ("raw", "gmr")}
+    return {sensor.with_transfer(kind).sha256 for kind in TRANSFERS}
 
 
 def fitted_sensor(sensor, model: Model, why: str, flag: str = "--sensor"):

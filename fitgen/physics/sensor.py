@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 
@@ -16,6 +16,7 @@ from fitgen.base.parse import DEGC, MAX_NOISE
 from fitgen.physics.tolerances import STIFFENING_MAX, TOLERANCE_MAX, Tolerances
 
 AXIS_WORDS = ("radial", "tangential", "z", "-z")
+TRANSFERS = ("raw", "gmr")  # a sensor file's [transfer] kinds: field in mT, or a GMR bridge's volts
 # V: the most an amplifier's output or an ADC's range may reach from 0 (a GMR bridge's amplifier runs on a few
 # volts; past this a file's volts are in other units, and an ADC's span past it overflows its step)
 MAX_VOLTS = 100.0
@@ -128,15 +129,11 @@ class Sensor:
 
     def with_noise(self, noise: float) -> "Sensor":
         """The sensor with ``noise`` (rms, in its units) as its active transfer's reading noise."""
-        from dataclasses import replace
-
         return replace(self, **{self.transfer: replace(getattr(self, self.transfer), noise=float(noise))})
 
     def with_transfer(self, kind: str) -> "Sensor":
-        if kind not in ("raw", "gmr"):
+        if kind not in TRANSFERS:
             raise InputError(f"transfer must be 'raw' or 'gmr', got {kind!r}")
-        from dataclasses import replace
-
         return replace(self, transfer=kind)
 
     def to_dict(self) -> dict:
@@ -387,7 +384,7 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
         raise InputError(f"{origin}: element {k} shares its position with another element")
 
     tr = top.sub("transfer")
-    kind = tr.string("kind", "raw", choices=("raw", "gmr"))
+    kind = tr.string("kind", "raw", choices=TRANSFERS)
     rs = tr.sub("raw", required=False)
     raw = RawTransfer(
         noise=rs.number("noise", 0.0, min_=0.0, max_=MAX_NOISE),  # more overflows a fit's variance

@@ -11,7 +11,7 @@ from fitgen import __version__
 from fitgen.physics.dataset import Dataset
 from fitgen.base.errors import InputError
 from fitgen.physics.pose import POSE_NAMES, as_poses, check_pose_range, field_readings, off_skin, pose_label
-from fitgen.physics.sensor import Sensor
+from fitgen.physics.sensor import TRANSFERS, Sensor
 from fitgen.physics.transfer import past_linear, readings
 
 PAPER_GRIDS = {
@@ -207,7 +207,7 @@ def dataset_sensor(meta: dict, spec: str | None = None, n_inputs: int | None = N
             spec = name
     given = spec is not None and spec not in (meta.get("sensor"), meta.get("sensor_file"))
     sensor = load_sensor(spec)
-    if meta.get("transfer") in ("raw", "gmr"):
+    if meta.get("transfer") in TRANSFERS:
         sensor = sensor.with_transfer(meta["transfer"])
     elif meta.get("units") in ("mT", "V") and sensor.units != meta["units"]:  # measured rows: their units say which
         sensor = sensor.with_transfer("raw" if meta["units"] == "mT" else "gmr")
@@ -229,7 +229,7 @@ def sensor_record_problem(rec: dict) -> str:
     for key in ("sensor", "sensor_file", "sensor_sha256"):
         if key in rec and not isinstance(rec[key], str):
             return f"{key} must be text, got {rec[key]!r}"
-    if "transfer" in rec and rec["transfer"] not in ("raw", "gmr"):
+    if "transfer" in rec and rec["transfer"] not in TRANSFERS:
         return f"transfer must be raw or gmr, got {rec['transfer']!r}"
     return ""
 
@@ -284,4 +284,4 @@ def _recorded_sensor(spec: str, meta: dict) -> Sensor:
     from fitgen.physics.sensor import load_sensor
 
     sensor = load_sensor(spec)
-    return sensor.with_transfer(meta["transfer"]) if meta.get("transfer") in ("raw", "gmr") else sensor
+    return sensor.with_transfer(meta["transfer"]) if meta.get("transfer") in TRANSFERS else sensor
