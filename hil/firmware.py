@@ -17,7 +17,8 @@ from fitgen import __version__
 from fitgen.c.codegen import PRECISIONS, STYLES, render_blob_interpreter, render_header
 from fitgen.base.children import run_captured
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import signals_held, write_all
+from fitgen.base.fileio import write_all
+from fitgen.base.signals import signals_held
 from fitgen.equations.model import Model, check_input_units
 from fitgen.c.compiled import WARNING_FLAGS
 from fitgen.c.targets import TARGETS, check_precision

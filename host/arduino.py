@@ -24,7 +24,8 @@ from pathlib import Path
 from fitgen import __version__
 from fitgen.base.children import run_captured
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import check_folder, signals_held, staged_beside, write_atomic
+from fitgen.base.fileio import check_folder, staged_beside, write_atomic
+from fitgen.base.signals import signals_held
 from fitgen.base.progress import Progress
 from fitgen.c.cgen import c_real
 from fitgen.c.codegen import write_header

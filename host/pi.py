@@ -24,7 +24,8 @@ from fitgen import __version__
 from fitgen.c.codegen import check_magnitudes, render_header
 from fitgen.base.children import tied
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import check_folder, make_folder, signals_held, staged_beside, write_atomic, write_in_folder
+from fitgen.base.fileio import check_folder, make_folder, staged_beside, write_atomic, write_in_folder
+from fitgen.base.signals import signals_held
 from fitgen.equations.model import Model, check_input_units, load_model
 
 from host.cdrivers import chip_table, smbus_transfer

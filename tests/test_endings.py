@@ -250,9 +250,10 @@ def test_a_signal_whose_handler_runs_as_the_handlers_go_back_leaves_none_of_writ
     handler is put back all the same, and the exception comes after (a later SIGTERM or hang-up still ends the
     command, not a handler of write_all's that drops it)."""
     import fitgen.base.fileio as fileio
+    import fitgen.base.signals as signals
 
     real = signal.signal
-    before = {s: signal.getsignal(s) for s in fileio.HELD_SIGNALS}
+    before = {s: signal.getsignal(s) for s in signals.HELD_SIGNALS}
     swaps = []
 
     def swap_once_interrupted(sig, handler):
@@ -261,10 +262,10 @@ def test_a_signal_whose_handler_runs_as_the_handlers_go_back_leaves_none_of_writ
             raise KeyboardInterrupt
         return real(sig, handler)
 
-    monkeypatch.setattr(fileio.signal, "signal", swap_once_interrupted)
+    monkeypatch.setattr(signals.signal, "signal", swap_once_interrupted)
     with pytest.raises(KeyboardInterrupt):
         fileio.write_all([(tmp_path / "a.csv", "new"), (tmp_path / "a.csv.meta.json", "new")])
-    assert {s: signal.getsignal(s) for s in fileio.HELD_SIGNALS} == before
+    assert {s: signal.getsignal(s) for s in signals.HELD_SIGNALS} == before
     assert (tmp_path / "a.csv").read_text() == "new" == (tmp_path / "a.csv.meta.json").read_text()
 
 

@@ -8,6 +8,8 @@ import os
 import re
 import socket
 import stat
+import subprocess
+import sys
 import types
 from contextlib import contextmanager
 
@@ -360,3 +362,57 @@ def test_make_folder_names_the_file_in_its_way(tmp_path):
                                              f"{re.escape(str(tmp_path / 'afile'))} is a file; give a folder$"):
             make_folder(folder)
     assert (tmp_path / "afile").read_text() == "x"
+
+
+def test_a_name_ending_in_a_slash_asks_for_a_folder_and_writes_no_file(tmp_path):
+    """Path drops a trailing slash: `-o new/` had written a file named `new`."""
+    with pytest.raises(InputError, match=r"^cannot write .*new/: a name ending in / is a folder's; give a file name$"):
+        output_file(str(tmp_path / "new") + "/")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_input_named_with_a_slash_is_still_told_from_the_output(tmp_path):
+    """The loaders read `data.csv/` as data.csv; samefile on the string raised NotADirectoryError (a traceback)."""
+    (tmp_path / "d.csv").write_text("x\n")
+    (tmp_path / "out.csv").write_text("old\n")
+    assert output_file(tmp_path / "out.csv", inputs=[str(tmp_path / "d.csv") + "/"]) == tmp_path / "out.csv"
+    with pytest.raises(InputError, match="is the input"):
+        output_file(tmp_path / "d.csv", inputs=[str(tmp_path / "d.csv") + "/"])
+
+
+def test_a_folder_named_in_a_removed_working_folder_is_one_line(tmp_path, monkeypatch):
+    gone = tmp_path / "gone"
+    gone.mkdir()
+    monkeypatch.chdir(gone)
+    gone.rmdir()
+    with pytest.raises(InputError, match=r"^cannot create out: the working folder is gone .*give an absolute path$"):
+        check_folder("out")
+    assert check_folder(tmp_path / "out") == tmp_path / "out"
+
+
+def test_a_replaced_file_keeps_its_mode_and_a_new_one_follows_the_umask(tmp_path, model_file):
+    """A calibration kept private (0600) stayed private only until the first rewrite; a new file was 0644
+    whatever the umask."""
+    private = tmp_path / "private.csv"
+    private.write_text("old\n")
+    private.chmod(0o600)
+    write_atomic(private, "new\n")
+    assert stat.S_IMODE(private.stat().st_mode) == 0o600 and private.read_text() == "new\n"
+    for mask, mode in ((0o077, 0o600), (0o002, 0o664), (0o022, 0o644)):
+        out = tmp_path / f"umask{mask:03o}"
+        proc = subprocess.run([sys.executable, "-c", "from fitgen.app.cli import main; main()", "codegen", model_file,
+                               "-o", str(out)],
+                              capture_output=True, text=True, umask=mask, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        assert stat.S_IMODE((out / "tm_model.h").stat().st_mode) == mode, (oct(mask), proc.stderr)
+        assert stat.S_IMODE(out.stat().st_mode) == 0o777 & ~mask
+
+
+@pytest.mark.parametrize("length", [241, 250, 255])
+def test_a_legal_name_up_to_the_file_system_s_255_bytes_is_written(tmp_path, length):
+    """The temporary beside it adds 14 bytes to the name: one of 242-255 bytes had been refused as too long."""
+    name = "é" * ((length - 4) // 2) + "b" * ((length - 4) % 2) + ".csv"  # two-byte letters: bytes are counted
+    assert len(os.fsencode(name)) == length
+    output_file(tmp_path / name)
+    write_atomic(tmp_path / name, "x\n")
+    assert (tmp_path / name).read_text() == "x\n" and [p.name for p in tmp_path.iterdir()] == [name]

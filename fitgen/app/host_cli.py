@@ -11,7 +11,9 @@ from fitgen.app.verify_cmd import cmd_verify
 from fitgen.app.cliutil import (EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_output_kind,
                                 check_written, command_main, count, ended_by, noise_volts)
 from fitgen.base.errors import InputError
+from fitgen.base.fileio import OutputText, write_in_folder
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
+from fitgen.base.signals import signals_held
 
 from host.stagesettings import APPROACH
 
@@ -56,7 +58,6 @@ def _warn(prog: str):
 
 
 def cmd_read(args) -> int:
-    from fitgen.base.fileio import OutputText, signals_held
     from host.adc import DeviceSilent
     from host.readout import LineFormat, Readout
     from host.session import ReadoutSession
@@ -179,8 +180,6 @@ def _flag(args):
 
 
 def cmd_tempcomp_c(args) -> int:
-    from fitgen.base.fileio import write_in_folder
-
     from host.temperature import load_tempcomp, render_c
 
     tc = load_tempcomp(args.tempcomp)

@@ -180,7 +180,8 @@ def to_markdown(result: TradeoffResult, plot: str | None = None) -> str:
 def write_outputs(result: TradeoffResult, folder: str | Path) -> tuple[list[Path], str]:
     """DIR/tradeoff.csv, DIR/tradeoff.md and (matplotlib permitting) DIR/tradeoff.png, written together (a Ctrl-C
     between two left a new table beside the last run's page and plot); returns the paths and the markdown."""
-    from fitgen.base.fileio import signals_held, write_all
+    from fitgen.base.fileio import write_all
+    from fitgen.base.signals import signals_held
 
     folder, png = Path(folder), None
     try:

@@ -7,11 +7,9 @@ import hashlib
 import json
 import os
 import shutil
-import signal
 import stat
 import sys
 import tempfile
-import threading
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -21,6 +19,37 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 from fitgen.base.errors import InputError
+from fitgen.base.signals import signals_held
+
+
+NAME_MAX = 255  # bytes in one name on Linux's file systems (ext4, xfs, btrfs, tmpfs)
+# the most of an output's name a temporary's prefix keeps: "." + name + "." + mkstemp's 8 letters + ".partial"
+_TEMP_NAME_MAX = NAME_MAX - 1 - 1 - 8 - len(".partial")
+
+
+def temp_prefix(name: str) -> str:
+    """A prefix for a temporary beside the output ``name``: ``.name.``, the name cut so that the temporary's own
+    name stays within NAME_MAX (a legal name of 242-255 bytes had been refused as too long)."""
+    while len(os.fsencode(name)) > _TEMP_NAME_MAX:
+        name = name[:-1]
+    return f".{name}."
+
+
+def _new_mode(target: Path) -> int:
+    """The mode a replaced file keeps, or a new file's under the umask (mkstemp's 0600 would hide it)."""
+    try:
+        return stat.S_IMODE(os.stat(target).st_mode) & 0o777  # no set-id bit onto new contents
+    except OSError:
+        return 0o666 & ~_UMASK
+
+
+def _read_umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _read_umask()  # once, at import: os.umask can only be read by setting it, which threads would race
 
 
 def folder_of(path: str | os.PathLike) -> Path:
@@ -94,20 +123,24 @@ def output_file(path: str | os.PathLike, inputs=(), flag: str = "-o") -> Path:
     """``path`` checked as a file to write before the work: a name, not a folder, device or FIFO, in a folder that
     exists and takes a new file, and none of the command's ``inputs`` (which it would overwrite); InputError
     otherwise."""
-    path = Path(path)
+    given_name, path = os.fspath(path), Path(path)
+    # Path drops a trailing slash, which asks for a folder: "-o new/" had written a file named "new"
     if path.name in ("", ".", "..") or path.is_dir():
         raise InputError(f"cannot write {path}: it is a folder; give a file name")
+    if given_name.endswith(os.sep):
+        raise InputError(f"cannot write {given_name}: a name ending in {os.sep} is a folder's; give a file name")
     target = write_target(path)
     # a file made and removed as write_atomic will make it: permissions do not tell (root passes os.access, and
     # /proc refuses new files to root too), and an output written last would fail after all the work
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder_of(target), prefix=f".{target.name}.", suffix=".tmp")
+        fd, tmp = tempfile.mkstemp(dir=folder_of(target), prefix=temp_prefix(target.name), suffix=".tmp")
     except OSError as exc:
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     os.close(fd)
     os.unlink(tmp)
     for given in inputs:
-        if given is not None and path.exists() and Path(given).exists() and os.path.samefile(given, path):
+        # Path(given): "data.csv/" names the file as the loaders read it; samefile on the string raised ENOTDIR
+        if given is not None and path.exists() and Path(given).exists() and os.path.samefile(Path(given), path):
             raise InputError(f"{flag} {path} is the input {given}: writing it would destroy it; give another name")
     return path
 
@@ -173,59 +206,11 @@ def write_all(files) -> list:
     return [path for path, _ in files]
 
 
-HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-
-
-@contextmanager
-def signals_held():
-    """SIGINT, SIGTERM and SIGHUP held while the block runs and delivered after it (each once), so that a few
-    renames are done all or none. Python runs signal handlers in the main thread only, whichever thread the
-    kernel chose: its handlers are swapped there, not the thread's signal mask. Elsewhere, and for a signal
-    ignored, nothing is held."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    caught: list = []
-    held: dict = {}
-    try:
-        for s in HELD_SIGNALS:
-            if signal.getsignal(s) not in (signal.SIG_IGN, None):
-                held[s] = signal.signal(s, lambda signum, frame: caught.append(signum))
-    except BaseException:  # a signal come before the block: its handler ran as a swap began, nothing is done yet
-        _put_back(held)
-        raise
-    try:
-        yield
-    finally:
-        late = _put_back(held)
-        for s in dict.fromkeys(caught):
-            try:
-                signal.raise_signal(s)
-            except BaseException as exc:  # the handler raised at once: its exception, once all are delivered
-                late = late or exc
-        if late is not None:
-            raise late
-
-
-def _put_back(handlers: dict):
-    """Every handler of ``handlers`` put back; the exception a signal's handler raised meanwhile (signal.signal
-    runs a pending one before it swaps, and raises its exception without swapping: so each is tried again)."""
-    late = None
-    for s, handler in handlers.items():
-        while True:
-            try:
-                signal.signal(s, handler)
-                break
-            except BaseException as exc:
-                late = late or exc
-    return late
-
-
 def _staged(target: Path, data: str | bytes, path) -> str:
     """``data`` written whole and synced to a new temporary file beside ``target``; its name. InputError naming
     ``path`` (the name the user gave), nothing left, when it cannot be."""
     try:
-        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=temp_prefix(target.name), suffix=".tmp")
     except OSError as exc:
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     try:
@@ -233,7 +218,7 @@ def _staged(target: Path, data: str | bytes, path) -> str:
             fh.write(data.encode() if isinstance(data, str) else data)
             fh.flush()
             os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)
+        os.chmod(tmp, _new_mode(target))
     except BaseException as exc:  # Ctrl-C too: the temporary goes
         _remove(tmp)
         if isinstance(exc, OSError):
@@ -330,7 +315,11 @@ def check_folder(folder: str | os.PathLike, flag: str = "-o") -> Path:
         raise InputError(f"{flag} is empty: give a folder")
     if path.exists() and not path.is_dir():
         raise InputError(f"{flag} {path}: it is {_kind(path.stat().st_mode)}; give a folder")
-    base = path.absolute()
+    try:
+        base = path.absolute()
+    except OSError as exc:  # a working folder removed since the shell entered it: a relative name leads nowhere
+        raise InputError(f"cannot create {path}: the working folder is gone ({exc.strerror}); cd to one that "
+                         "exists, or give an absolute path") from None
     while not os.path.lexists(base):  # lexists: a dangling symlink on the way is no folder to make
         base = base.parent
     if not base.is_dir():
@@ -449,7 +438,7 @@ def staged_beside(folder: Path):
     ``folder`` whole), removed on exit with whatever is left in it; InputError naming ``folder`` when it cannot
     be made."""
     try:
-        partial = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".partial", dir=folder.parent))
+        partial = Path(tempfile.mkdtemp(prefix=temp_prefix(folder.name), suffix=".partial", dir=folder.parent))
     except OSError as exc:  # e.g. under /proc, which a root user may "write"
         raise InputError(f"cannot write {folder}: {exc.strerror}") from None
     try:
