@@ -13,6 +13,7 @@ import sys
 from fitgen.base.errors import InputError
 
 EXIT_USAGE = 2
+EXIT_PIPE = 128 + signal.SIGPIPE  # the reader went away: the status of a program SIGPIPE ends (cat, git)
 EXIT_CHECK_FAILED = 1
 
 
@@ -144,6 +145,39 @@ class OutputFailed(Exception):
     """Standard output could not be written (a full disk, a closed terminal): not the program's fault."""
 
 
+class _Stderr:
+    """Standard error whose write failures (a full disk under 2>>log) are dropped: a diagnostic that cannot be
+    said must not turn a command's status into a traceback's."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text):
+        try:
+            return self._stream.write(text)
+        except OSError:
+            _drop(self._stream)
+            return len(text)
+
+    def flush(self):
+        try:
+            self._stream.flush()
+        except OSError:
+            _drop(self._stream)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+def _tolerant(stream) -> None:
+    """``stream`` to write a character its encoding lacks as an escape (a path's é to an ASCII terminal), not to
+    raise UnicodeEncodeError."""
+    try:
+        stream.reconfigure(errors="backslashreplace")
+    except (AttributeError, ValueError, OSError):  # not a TextIOWrapper (a test's capture): left as it is
+        pass
+
+
 class _Stdout:
     """Standard output whose write failures are told apart from any other OSError (which they look like)."""
 
@@ -175,8 +209,10 @@ def run(main_fn, argv=None, prog="") -> int:
     stdout, stderr = sys.stdout, sys.stderr
     # a stream closed before the start (>&-) is None in Python: its lines go nowhere, as the shell asked
     nowhere = [open(os.devnull, "w") for stream in (stdout, stderr) if stream is None]
-    if stderr is None:
-        sys.stderr = nowhere[-1]
+    for stream in (stdout, stderr):
+        if stream is not None:
+            _tolerant(stream)
+    sys.stderr = _Stderr(stderr if stderr is not None else nowhere[-1])
     sys.stdout = _Stdout(stdout if stdout is not None else nowhere[0])
     try:
         status = int(main_fn(argv) or 0)
@@ -189,9 +225,9 @@ def run(main_fn, argv=None, prog="") -> int:
         said, status = ended_by(exc)
         print(f"{_name(prog)}: {said}", file=sys.stderr)
         return status
-    except BrokenPipeError:  # the reader went away (| head): nothing more to say
+    except BrokenPipeError:  # the reader went away (| head): nothing more to say, and no verdict to give
         _drop(sys.stdout)
-        return 0
+        return EXIT_PIPE
     except OutputFailed as exc:
         _drop(sys.stdout)
         print(f"{_name(prog)}: error: cannot write standard output: {exc}", file=sys.stderr)
