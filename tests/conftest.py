@@ -43,6 +43,9 @@ def run_cli(*args, input=None, cwd=None):
                           input=input, cwd=cwd, timeout=600)
 
 
+CLEARED = "\r" + " " * 79 + "\r"  # a progress line erased on a terminal of unknown width (taken as 80 columns)
+
+
 class Terminal:
     """A stderr that says it is a terminal, keeping what is written (fitgen.base.progress.Progress draws on one)."""
 

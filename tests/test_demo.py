@@ -1,4 +1,4 @@
-from conftest import require_tool, run_cli
+from conftest import CLEARED, require_tool, run_cli
 
 
 def test_demo_runs_end_to_end(tmp_path):
@@ -109,4 +109,4 @@ def test_the_demos_fit_progress_line_is_cleared_when_the_fit_ends():
         Progress.__init__ = real
     text = tty.getvalue()
     assert "dy: step 1, 4 terms" in text and "2/10" not in text and "1/10" in text
-    assert text.endswith("\r\033[K")
+    assert text.endswith(CLEARED)

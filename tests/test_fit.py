@@ -177,7 +177,7 @@ def test_report_shows_progress_through_its_figures_on_a_terminal(paper_fit, tmp_
     figure, and is cleared at the end."""
     import sys
 
-    from conftest import Terminal
+    from conftest import CLEARED, Terminal
     from fitgen.app import cli
 
     folder = paper_fit[0]
@@ -191,7 +191,7 @@ def test_report_shows_progress_through_its_figures_on_a_terminal(paper_fit, tmp_
     bars = [t for t in term.text.split("\r") if t.startswith("plots [")]
     assert bars and "1/7" in bars[0] and "drawing estimate_dx.png" in bars[0], term.text  # at once: the first is slow
     assert "7/7" in bars[-1] and "drawing sweep_thy.png" in bars[-1]
-    assert "\r\033[K" in term.text and sorted(p.name for p in (tmp_path / "p").iterdir())[-1] == "sweep_thy.png"
+    assert CLEARED in term.text and sorted(p.name for p in (tmp_path / "p").iterdir())[-1] == "sweep_thy.png"
 
 
 @pytest.mark.parametrize("text, msg", [

@@ -21,7 +21,7 @@ from host.engine import CEngine, PythonEngine
 from host.readout import LineFormat, Readout, check_rest_reference, rest_reference, tare
 from host.simbus import SimBus
 
-from conftest import Terminal, assert_one_line_error, require_tool, run_cli
+from conftest import CLEARED, Terminal, assert_one_line_error, require_tool, run_cli
 
 TWO_1115 = "ads1115@0x48:0-3,ads1115@0x49:0-3"
 POSE = np.array([1.0, 0.5, -1.0, 0.0, 0.0])
@@ -331,7 +331,7 @@ def test_the_tare_shows_progress_on_a_terminal(model_file, tmp_path, monkeypatch
     assert done.value.code == 0, term.text
     bars = re.findall(r"\rtactile-host read: tare \[[# ]*\] (\d+)/120", term.text)
     assert bars and bars[-1] == "120", term.text
-    assert "\r\033[K" + "tactile-host read: tare: offsets [mV]" in term.text  # the bar is cleared before the line
+    assert CLEARED + "tactile-host read: tare: offsets [mV]" in term.text  # the bar is cleared before the line
 
 
 def test_read_command_ends_on_a_silent_chip_with_one_line_and_status_1(model_file):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 
@@ -24,8 +25,20 @@ class Progress:
         self.last = now
         frac = min(self.done / self.total, 1.0)
         bar = "#" * int(frac * 24)
-        self.stream.write(f"\r{self.label} [{bar:<24}] {self.done}/{self.total} {now - self.start:5.1f}s {note}\033[K")
+        self._show(f"{self.label} [{bar:<24}] {self.done}/{self.total} {now - self.start:5.1f}s {note}")
+
+    def _show(self, line: str) -> None:
+        """``line`` over the last, cut and padded to the terminal's width: a line that wraps is redrawn below
+        itself, and spaces erase where an escape (``TERM=dumb``) would not."""
+        width = self._width() - 1  # the last column: a full line wraps on some terminals
+        self.stream.write("\r" + line[:width].ljust(width))
         self.stream.flush()
+
+    def _width(self) -> int:
+        try:
+            return max(os.get_terminal_size(self.stream.fileno()).columns, 2)
+        except (OSError, ValueError, AttributeError):  # not a real terminal after all
+            return 80
 
     def grow(self, steps: int, note: str = "") -> None:
         """More work than the total said (a fit taken again): ``steps`` more, shown with ``note``."""
@@ -48,7 +61,8 @@ class Progress:
 
     def close(self) -> None:
         if self.enabled:
-            self.stream.write("\r\033[K")
+            self._show("")
+            self.stream.write("\r")
             self.stream.flush()
 
     def __enter__(self):

@@ -1,0 +1,57 @@
+"""The progress line: drawn on a terminal only, within its width, with no escape a dumb terminal would print."""
+
+import fcntl
+import os
+import pty
+import struct
+import termios
+
+from conftest import CLEARED, Terminal
+from fitgen.base.progress import Progress
+
+
+def _drawn_on_a_terminal(columns: int, label: str, note: str) -> str:
+    """What a Progress writes to a pseudo-terminal ``columns`` wide (the kernel's window size, as a real terminal
+    sets it)."""
+    master, slave = pty.openpty()
+    try:
+        fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, columns, 0, 0))
+        attrs = termios.tcgetattr(slave)
+        attrs[1] &= ~termios.OPOST  # bytes as written: no newline translation to read through
+        termios.tcsetattr(slave, termios.TCSANOW, attrs)
+        with os.fdopen(os.dup(slave), "w") as stream:
+            with Progress(label, 3, stream=stream, min_interval=0.0) as bar:
+                for _ in range(3):
+                    bar.update(note=note)
+        return os.read(master, 65536).decode()
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_a_line_is_cut_to_the_terminal_s_width():
+    """A note longer than the terminal would wrap, and each redraw would then leave a stale row behind."""
+    text = _drawn_on_a_terminal(40, "fit", "held-out: 8 units built within the drawing's tolerances")
+    lines = text.split("\r")[1:]
+    assert len(lines) == 5, text  # three updates, the erase, the return to the line's start
+    assert all(len(line) <= 39 for line in lines), [len(line) for line in lines]
+    assert lines[0].startswith("fit [########") and "1/3" in lines[0]
+    assert lines[2].startswith("fit [" + "#" * 24 + "] 3/3")
+    assert lines[3] == " " * 39 and lines[4] == ""
+
+
+def test_no_escape_sequence_reaches_the_terminal():
+    """TERM=dumb (an editor's shell, a serial console) prints ESC [ K as text: spaces erase instead."""
+    text = _drawn_on_a_terminal(100, "plots", "drawing estimate_dx.png")
+    assert "\033" not in text and "plots [" in text
+    assert text.endswith("\r" + " " * 99 + "\r")
+
+
+def test_silent_off_a_terminal_and_80_columns_where_the_width_is_unknown(tmp_path):
+    with open(tmp_path / "log", "w") as log, Progress("fit", 2, stream=log, min_interval=0.0) as bar:
+        bar.update(2)
+    assert (tmp_path / "log").read_text() == ""
+    term = Terminal()  # says it is a terminal but has no window size
+    with Progress("fit", 2, stream=term, min_interval=0.0) as bar:
+        bar.update(2, "x" * 200)
+    assert term.text.endswith(CLEARED) and max(len(line) for line in term.text.split("\r")) == 79
