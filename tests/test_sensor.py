@@ -178,3 +178,16 @@ def test_travel_is_read_written_and_left_out_of_the_hash(tmp_path):
     unit, _ = draw_unit(narrow, 3)
     back = load_sensor(write_unit(tmp_path / "u.toml", unit, "paper"))
     assert back.travel == narrow.travel and back.sha256 == unit.sha256
+
+
+def test_a_sensor_file_through_a_pipe_is_told_as_such_not_as_missing(tmp_path):
+    """<(cat unit.toml) was said to be no such file; a pipe reads once, and a dataset's meta names the file to
+    read again, so the path is asked for."""
+    import os
+
+    os.mkfifo(tmp_path / "unit.toml")  # nothing writes it: a read would block, so none may happen
+    with pytest.raises(InputError, match=r"^sensor '.*unit.toml': not a regular file \(a pipe or a device\): give "
+                                         r"the sensor file's path$"):
+        load_sensor(tmp_path / "unit.toml")
+    with pytest.raises(InputError, match="no such file, and not a preset"):
+        load_sensor(tmp_path / "none.toml")

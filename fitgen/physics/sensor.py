@@ -481,10 +481,11 @@ def load_sensor(spec: str | Path) -> Sensor:
         if path.is_dir():
             raise InputError(f"sensor {spec!r}: a folder, not a sensor file (a TOML file, or a preset: "
                              f"{', '.join(preset_names())})")
+        # a pipe (<(cat unit.toml)) reads once, and a dataset's meta names the file that fit reads again
+        if path.exists() and not path.is_file():
+            raise InputError(f"sensor {spec!r}: not a regular file (a pipe or a device): give the sensor file's path")
         if not path.is_file():
-            raise InputError(
-                f"sensor {spec!r}: no such file, and not a preset ({', '.join(preset_names())})"
-            )
+            raise InputError(f"sensor {spec!r}: no such file, and not a preset ({', '.join(preset_names())})")
         text = read_text(path, "sensor file")
         origin = f"sensor file {spec}"
     try:
