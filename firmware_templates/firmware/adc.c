@@ -233,7 +233,7 @@ static int write_config(adc_array *a, uint8_t chip, uint16_t word)
 
 static int read_register(adc_array *a, uint8_t chip, uint8_t reg, uint16_t *word)
 {
-    uint8_t in[2];
+    uint8_t in[2] = { 0, 0 }; /* a failed transfer leaves it unread: a word of 0, not of the stack's bytes */
     const int st = xfer(a, chip, a->chips[chip].address, &reg, 1, in, 2);
     *word = (uint16_t)(((unsigned)in[0] << 8) | in[1]);
     return st;
@@ -327,7 +327,7 @@ static int read_round(adc_array *a, const adc_round *r, int32_t codes[])
     }
     t0 = b->now_ns(b->ctx); /* the last conversion started now */
     for (i = 0; i < r->n_direct && st == ADC_OK; ++i) {
-        uint8_t in[2];
+        uint8_t in[2] = { 0, 0 };
         st = ads7828_read(a, r->direct[i].chip, r->direct[i].slot, in);
         codes[r->direct[i].element] = (int32_t)((((unsigned)in[0] & 0x0Fu) << 8) | in[1]);
     }

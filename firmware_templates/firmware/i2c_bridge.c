@@ -54,10 +54,13 @@ static int hexval(char c)
     return c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'f' ? c - 'a' + 10 : -1;
 }
 
-/* send the request, read the answer line: 1 "OK", 0 "E" (its number in *err), -1 no answer in time */
-static int ask(char *line, size_t n, char *answer, int *err)
+/* send the request, read the answer line: 1 "OK" or "OK <rest>" (the line's length in *len), 0 "E <errno>"
+ * (its number in *err; -1 for an answer the protocol has no word for), -1 no answer in time. Only the
+ * line's own characters are read: the answer comes from outside the firmware. */
+static int ask(char *line, size_t n, char *answer, size_t *len, int *err)
 {
-    size_t k = 0;
+    size_t k = 0, d;
+    int v = 0;
     line[n++] = '\n';
     hal_bridge_write((const uint8_t *)line, n);
     for (;;) {
@@ -71,12 +74,20 @@ static int ask(char *line, size_t n, char *answer, int *err)
         answer[k++] = (char)c;
     }
     answer[k] = 0;
-    if (k >= 2u && answer[0] == 'O' && answer[1] == 'K') {
+    *len = k;
+    if (k >= 2u && answer[0] == 'O' && answer[1] == 'K' && (k == 2u || answer[2] == ' ')) {
         return 1;
     }
-    *err = 0;
-    for (k = 2; answer[k] >= '0' && answer[k] <= '9'; ++k) {
-        *err = *err * 10 + (answer[k] - '0');
+    *err = -1;
+    if (k < 3u || answer[0] != 'E' || answer[1] != ' ') {
+        return 0;
+    }
+    /* at most 9 digits: an int holds them; a longer number is no errno */
+    for (d = 2; d < k && d < 11u && answer[d] >= '0' && answer[d] <= '9'; ++d) {
+        v = v * 10 + (answer[d] - '0');
+    }
+    if (d == k) {
+        *err = v;
     }
     return 0;
 }
@@ -84,7 +95,7 @@ static int ask(char *line, size_t n, char *answer, int *err)
 static int transfer(uint8_t addr, const uint8_t *wr, uint16_t nw, uint8_t *rd, uint16_t nr)
 {
     char line[LINE_MAX_LEN], answer[LINE_MAX_LEN];
-    size_t n = 0, i;
+    size_t n = 0, i, len = 0;
     int err = 0, r;
     if (nw > 32u || nr > 32u) {
         return ADC_I2C_OTHER;
@@ -105,13 +116,16 @@ static int transfer(uint8_t addr, const uint8_t *wr, uint16_t nw, uint8_t *rd, u
         n = put_uint(line, n, nr);
         n = put_text(line, n, " -");
     }
-    r = ask(line, n, answer, &err);
+    r = ask(line, n, answer, &len, &err);
     if (r < 0) {
         return ADC_I2C_TIMEOUT;
     }
     if (r == 0) {
         return err == ERRNO_EREMOTEIO || err == ERRNO_ENXIO ? ADC_I2C_NACK
              : err == ERRNO_ETIMEDOUT ? ADC_I2C_TIMEOUT : ADC_I2C_OTHER;
+    }
+    if (nr && len != 3u + 2u * nr) { /* "OK " and two hex digits a byte, no fewer: none read past the line */
+        return ADC_I2C_OTHER;
     }
     for (i = 0; i < nr; ++i) {
         const int hi = hexval(answer[3u + 2u * i]), lo = hi < 0 ? -1 : hexval(answer[4u + 2u * i]);
@@ -144,16 +158,18 @@ static int bridge_write_read(void *ctx, uint8_t addr, const uint8_t *wr, uint16_
 static uint64_t bridge_now(void *ctx)
 {
     char line[LINE_MAX_LEN], answer[LINE_MAX_LEN];
+    size_t len;
     int err;
     (void)ctx;
     line[0] = 'M';
-    if (ask(line, 1, answer, &err) == 1) {
+    if (ask(line, 1, answer, &len, &err) == 1) {
         uint64_t v = 0;
         size_t k;
-        for (k = 3; answer[k] >= '0' && answer[k] <= '9'; ++k) {
+        /* 19 digits at most: past them uint64_t would wrap */
+        for (k = 3; k < len && k < 22u && answer[k] >= '0' && answer[k] <= '9'; ++k) {
             v = v * 10u + (uint64_t)(answer[k] - '0');
         }
-        if (v > last_ns) {
+        if (k == len && v > last_ns) { /* a clock's answer is all digits: any other is lost, as a late one is */
             last_ns = v;
         }
     }
@@ -163,12 +179,12 @@ static uint64_t bridge_now(void *ctx)
 static void bridge_sleep(void *ctx, uint64_t ns)
 {
     char line[LINE_MAX_LEN], answer[LINE_MAX_LEN];
-    size_t n;
+    size_t n, len;
     int err;
     (void)ctx;
     n = put_text(line, 0, "S ");
     n = put_uint(line, n, ns);
-    (void)ask(line, n, answer, &err);
+    (void)ask(line, n, answer, &len, &err);
 }
 
 const adc_i2c *hal_i2c(void)
