@@ -43,7 +43,9 @@ def run_cli(*args, input=None, cwd=None):
                           input=input, cwd=cwd, timeout=600)
 
 
-CLEARED = "\r" + " " * 79 + "\r"  # a progress line erased on a terminal of unknown width (taken as 80 columns)
+# Progress lines are cut to COLUMNS where it is set: the tests draw them on a terminal of unknown width, 80 columns
+os.environ.pop("COLUMNS", None)
+CLEARED = "\r" + " " * 79 + "\r"  # a progress line erased on such a terminal
 
 
 class Terminal:

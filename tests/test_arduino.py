@@ -665,6 +665,7 @@ def test_the_build_shows_progress_on_a_terminal(device_model, tmp_path, monkeypa
 
     term = Terminal()
     monkeypatch.setattr(sys, "stderr", term)
+    monkeypatch.setenv("COLUMNS", "200")  # the whole note: on 80 columns the line is cut to the terminal's width
     size = arduino_build(device_model, parse_spec(TWO_CHIPS), tmp_path / "TactilePose", build=True)
     assert size.fits(UNO)
     assert "\rarduino-build [" in term.text and "building ReadPose (float, unrolled) with arduino-builder" in term.text

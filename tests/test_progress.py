@@ -3,6 +3,7 @@
 import fcntl
 import os
 import pty
+import select
 import struct
 import termios
 
@@ -23,14 +24,18 @@ def _drawn_on_a_terminal(columns: int, label: str, note: str) -> str:
             with Progress(label, 3, stream=stream, min_interval=0.0) as bar:
                 for _ in range(3):
                     bar.update(note=note)
-        return os.read(master, 65536).decode()
+        text = b""
+        while select.select([master], [], [], 0.5)[0]:  # a pty hands over its bytes in pieces
+            text += os.read(master, 65536)
+        return text.decode()
     finally:
         os.close(master)
         os.close(slave)
 
 
-def test_a_line_is_cut_to_the_terminal_s_width():
+def test_a_line_is_cut_to_the_terminal_s_width(monkeypatch):
     """A note longer than the terminal would wrap, and each redraw would then leave a stale row behind."""
+    monkeypatch.delenv("COLUMNS", raising=False)
     text = _drawn_on_a_terminal(40, "fit", "held-out: 8 units built within the drawing's tolerances")
     lines = text.split("\r")[1:]
     assert len(lines) == 5, text  # three updates, the erase, the return to the line's start
@@ -40,14 +45,22 @@ def test_a_line_is_cut_to_the_terminal_s_width():
     assert lines[3] == " " * 39 and lines[4] == ""
 
 
-def test_no_escape_sequence_reaches_the_terminal():
+def test_no_escape_sequence_reaches_the_terminal(monkeypatch):
     """TERM=dumb (an editor's shell, a serial console) prints ESC [ K as text: spaces erase instead."""
+    monkeypatch.delenv("COLUMNS", raising=False)
     text = _drawn_on_a_terminal(100, "plots", "drawing estimate_dx.png")
     assert "\033" not in text and "plots [" in text
     assert text.endswith("\r" + " " * 99 + "\r")
 
 
-def test_silent_off_a_terminal_and_80_columns_where_the_width_is_unknown(tmp_path):
+def test_columns_sets_the_width_as_shutil_reads_it(monkeypatch):
+    monkeypatch.setenv("COLUMNS", "30")
+    text = _drawn_on_a_terminal(100, "fit", "x" * 100)
+    assert max(len(line) for line in text.split("\r")) == 29
+
+
+def test_silent_off_a_terminal_and_80_columns_where_the_width_is_unknown(tmp_path, monkeypatch):
+    monkeypatch.delenv("COLUMNS", raising=False)
     with open(tmp_path / "log", "w") as log, Progress("fit", 2, stream=log, min_interval=0.0) as bar:
         bar.update(2)
     assert (tmp_path / "log").read_text() == ""

@@ -35,6 +35,11 @@ class Progress:
         self.stream.flush()
 
     def _width(self) -> int:
+        """COLUMNS where set (as shutil.get_terminal_size reads it), else the terminal's, else 80."""
+        try:
+            return max(int(os.environ["COLUMNS"]), 2)
+        except (KeyError, ValueError):
+            pass
         try:
             return max(os.get_terminal_size(self.stream.fileno()).columns, 2)
         except (OSError, ValueError, AttributeError):  # not a real terminal after all
