@@ -1015,15 +1015,20 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
         assert not out.exists() and not out.with_suffix(".posterior.json").exists()
     assert_one_line_error(run_cli("fitgen", "schedule", "--axes", "dx,dq", "-o", str(tmp_path / "x.csv")),
                           contains="--axes")
-    # a dead element that the chi-square lets pass (the unit bends to it): far outside the tolerances, refused
+    # a dead element that the chi-square may let pass (the unit bends to it): far outside the tolerances, refused.
+    # Where the solve stops on this capture, which no unit within the tolerances explains, moves with numpy: with
+    # 2.4 at a unit whose chi-square passes (1.56: refused as far outside), with 2.5 at one whose chi-square does
+    # not (4.0: refused as not explained). Either way the element is named and the unit said to be far outside.
     unit27, _ = draw_unit(drawing, 27)
     y27, _ = simulated_capture(unit27, plan[0], 27)
     y27[:, 2] = y27[:, 2].mean()
     save_capture(tmp_path / "dead.csv", y27, plan[0], {"samples_per_row": SAMPLES})
     proc = run_cli("fitgen", "identify", str(tmp_path / "dead.csv"), "--sensor", "paper", "-o",
                    str(tmp_path / "d.toml"))
-    assert_one_line_error(proc, contains="only with a unit far outside paper's tolerances (")
-    assert "element 3 (v3) alone" in proc.stderr and not (tmp_path / "d.toml").exists()
+    assert_one_line_error(proc, contains="element 3 (v3) alone")
+    assert re.search(r"only with a unit far outside paper's tolerances \(|the nearest unit lies far outside the "
+                     r"tolerances \(", proc.stderr), proc.stderr
+    assert not (tmp_path / "d.toml").exists()
 
 
 def test_a_sensor_turned_on_the_stage_is_named_and_the_axis_map_it_names_fixes_it(drawing, plan, tmp_path):
