@@ -1031,6 +1031,36 @@ def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypat
     assert not (tmp_path / "d.toml").exists()
 
 
+def test_a_unit_built_looser_than_its_tolerances_is_refused_and_explained_once_they_are_widened(drawing, plan,
+                                                                                               tmp_path):
+    """A unit whose every part lies three times as far from the drawing as a unit within the tolerances (two
+    elements' places and axes past 5 prior spreads): the physics explains its capture to the noise, but only with a unit
+    no [tolerances] allow, and the refusal says to widen them; in a drawing whose file widens them so, the same
+    capture is identified and what it determines recovered."""
+    space = UnitSpace.of(drawing)
+    _, theta = draw_unit(drawing, 22)
+    theta = 3.0 * theta
+    assert np.abs(space.in_spreads(theta)).max() > 8  # no unit drawn within the tolerances (clipped at 3)
+    y, noise = simulated_capture(space.sensor(theta, "loose"), plan[0], 22)
+    save_capture(tmp_path / "c.csv", y, plan[0], {"samples_per_row": SAMPLES})
+    proc = run_cli("fitgen", "identify", str(tmp_path / "c.csv"), "--sensor", "paper", "-o", str(tmp_path / "u.toml"))
+    assert_one_line_error(proc, contains="the physics explains ")
+    assert re.search(r"only with a unit far outside paper's tolerances \((e\d\.|magnet)", proc.stderr), proc.stderr
+    assert "or a unit built looser than its [tolerances] say (widen them in the drawing's file)" in proc.stderr
+    assert not (tmp_path / "u.toml").exists() and not (tmp_path / "u.posterior.json").exists()
+    # the drawing's file with its tolerances widened three times, as a user does who builds so
+    wide = {k: 3 * v for k, v in drawing.tolerances.to_dict().items()}
+    text = (Path(presets.__file__).parent / "paper.toml").read_text().replace('name = "paper"', 'name = "loose"')
+    (tmp_path / "loose.toml").write_text(text + "\n[tolerances]\n" + "".join(f"{k} = {v!r}\n" for k, v in wide.items()))
+    proc = run_cli("fitgen", "identify", str(tmp_path / "c.csv"), "--sensor", str(tmp_path / "loose.toml"), "-o",
+                   str(tmp_path / "u.toml"))
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "u.toml").exists()
+    ident = identify(load_sensor(tmp_path / "loose.toml").with_transfer("gmr"), y, plan[0], noise)
+    assert not ident.outside_tolerances()
+    _explained_and_recovered(ident, theta)
+
+
 def test_a_sensor_turned_on_the_stage_is_named_and_the_axis_map_it_names_fixes_it(drawing, plan, tmp_path):
     """The sensor sits turned by 90 deg on the stage's bed: the refusal names the ring's turn and what to put in the
     axis map; the capture taken again with that map (each pose component from the machine's axes as the new map
