@@ -525,3 +525,65 @@ def test_predict_takes_no_labels_from_a_readouts_lines(tmp_path):
         said[name] = proc.stderr
     assert "readings of another sensor than the model's?" in said["lines"] and "labelled" not in said["lines"]
     assert "all labelled outside it too" in said["poses"]  # a dataset's pose columns are its labels still
+
+
+def test_a_folder_moved_with_its_files_is_read_where_it_now_is(tmp_path):
+    """A project folder (a drawing's file, a twin identified on it, its posterior, a scene, the twin's data and
+    model) moved or copied to another machine: every file a record names by its old absolute path is found beside
+    the record, where it is still the file recorded; another file of that name is not taken."""
+    from conftest import save_capture, simulated_capture
+    from fitgen.fitting.schedule import schedule
+    from fitgen.physics import presets
+
+    old, new = tmp_path / "old", tmp_path / "new"
+    old.mkdir()
+    text = (Path(presets.__file__).parent / "paper.toml").read_text().replace('name = "paper"', 'name = "mine"')
+    (old / "mine.toml").write_text(text)
+    (old / "press.toml").write_text('name = "press-only"\noutputs = ["dz"]\nlevels = 30\n[ranges]\ndx = [0, 0]\n'
+                                    'dy = [0, 0]\nthx = [0, 0]\nthy = [0, 0]\n')
+    drawing = load_sensor(old / "mine.toml").with_transfer("gmr")
+    poses, _ = schedule(drawing, 40, noise=drawing.noise / 4)
+    unit = draw_unit(drawing, 6)[0]
+    y, _ = simulated_capture(unit, poses, 6)
+    save_capture(old / "c.csv", y, poses, {"samples_per_row": 16})
+    presses = np.zeros((20, 5))
+    presses[:, 2] = np.linspace(-0.2, -1.9, 20)
+    save_capture(old / "check.csv", simulated_capture(unit, presses, 7)[0], presses, {"samples_per_row": 16})
+    for args in (("identify", str(old / "c.csv"), "--sensor", str(old / "mine.toml"), "-o", str(old / "twin.toml")),
+                 ("simulate", "--sensor", str(old / "twin.toml"), "--scene", str(old / "press.toml"), "--random", "300",
+                  "-o", str(old / "t.csv")),
+                 ("fit", str(old / "t.csv"), "--held-out", "50", "-o", str(old / "m.json")),
+                 ("schedule", "--sensor", str(old / "mine.toml"), "--n", "12", "-o", str(old / "s.csv"))):
+        proc = run_cli("fitgen", *args)
+        assert proc.returncode == 0, proc.stderr
+    meta = json.loads((old / "t.csv.meta.json").read_text())
+    assert (meta["sensor_file"], meta["scene_spec"]) == (str(old / "twin.toml"), str(old / "press.toml"))
+    assert json.loads((old / "twin.posterior.json").read_text())["drawing_spec"] == str(old / "mine.toml")
+    first = json.loads((old / "m.json").read_text())["fit"]
+    old.rename(new)
+    # the data's unit and scene, the twin's posterior's drawing: all found in the folder as it now is
+    proc = run_cli("fitgen", "fit", str(new / "t.csv"), "--held-out", "50", "-o", str(new / "again.json"))
+    assert proc.returncode == 0, proc.stderr
+    again = json.loads((new / "again.json").read_text())["fit"]
+    assert [o["name"] for o in json.loads((new / "again.json").read_text())["outputs"]] == ["dz"]  # the scene's
+    assert again["held_out"]["sensor_file"] == str(new / "twin.toml")
+    assert again["held_out"]["posterior"] == first["held_out"]["posterior"]  # widened by the same posterior
+    # the model fitted before the move: its figures' unit found beside it (check predicts on its posterior)
+    proc = run_cli("fitgen", "check", str(new / "m.json"), str(new / "check.csv"))
+    assert proc.returncode == 0 and "every output within what the identification predicts" in proc.stderr, proc.stderr
+    assert "predicted on 8 units drawn from the posterior of twin" in proc.stdout + proc.stderr
+    # a schedule's drawing, which a capture simulates
+    from host.capture import load_schedule
+
+    assert load_schedule(new / "s.csv").drawing["sensor_file"] == str(new / "mine.toml")
+    # the drawing's file gone: said as that (it had read as a malformed posterior)
+    (new / "mine.toml").rename(tmp_path / "elsewhere.toml")
+    assert_one_line_error(run_cli("fitgen", "fit", str(new / "t.csv"), "-o", str(new / "x.json")), 2,
+                          f"the unit's posterior names the drawing it was identified on, {old / 'mine.toml'}, which "
+                          "does not load here (")
+    # a file of the name that is not the one recorded (another unit identified into it): not taken
+    write_unit(new / "twin.toml", draw_unit(load_sensor("paper"), 5)[0], "paper")
+    assert_one_line_error(run_cli("fitgen", "fit", str(new / "t.csv"), "-o", str(new / "x.json")), 2,
+                          f"t.csv was simulated with sensor file {old / 'twin.toml'}, which is missing")
+    assert_one_line_error(run_cli("fitgen", "check", str(new / "m.json"), str(new / "check.csv")), 2,
+                          "the sensor its held-out figures were made on is not found here (or has changed)")

@@ -16,10 +16,11 @@ import numpy as np
 
 from fitgen import __version__
 from fitgen.base.errors import InputError, finite_number, is_finite_number
-from fitgen.base.fileio import canonical_json, read_text, sha256_hex, text_kind, write_atomic
+from fitgen.base.fileio import canonical_json, read_text, real_file, sha256_hex, text_kind, write_atomic
 from fitgen.equations.fma import fma as fused_multiply_add
 from fitgen.physics.dataset import READING_UNITS
 from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
+from fitgen.physics.relocate import relocated
 from fitgen.equations.refine import Refinement
 from fitgen.equations.terms import DISPLACEMENTS, Harmonics, Term, design_matrix, monomial_factors, parse_term
 
@@ -296,7 +297,11 @@ def load_model(path: str | Path) -> Model:
         seen = {"toml": "TOML (a sensor file?)", "csv": "CSV (a dataset?)"}.get(text_kind(text))
         raise InputError(f"{origin}: " + (f"{seen}, not a model (JSON, as fitgen fit writes it)" if seen else
                                           f"not valid JSON: {exc}")) from None
-    return model_from_dict(data, origin)
+    model = model_from_dict(data, origin)
+    held = model.fit_info.get("held_out")
+    if isinstance(held, dict):  # a folder moved with the unit's file its figures were held out on: found beside it
+        model.fit_info["held_out"] = relocated(held, real_file(path).parent)
+    return model
 
 
 def model_from_dict(data, origin: str = "model") -> Model:

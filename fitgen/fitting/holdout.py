@@ -297,11 +297,16 @@ def _posterior_draw(record: dict, sensor):
     from fitgen.physics.units import UnitSpace
 
     try:
-        drawing = load_sensor(record["drawing_spec"]).with_transfer(sensor.transfer)
+        spec = str(record["drawing_spec"])
         theta = np.asarray(record["theta"], dtype=float)
         cov = np.asarray(record["covariance"], dtype=float)
     except (KeyError, TypeError, ValueError):
         raise InputError("the unit's posterior record is malformed (expected fitgen identify's)") from None
+    try:
+        drawing = load_sensor(spec).with_transfer(sensor.transfer)
+    except InputError as exc:  # a drawing's file deleted or moved without the unit's: not a malformed record
+        raise InputError(f"the unit's posterior names the drawing it was identified on, {spec}, which does not load "
+                         f"here ({exc}): put that file back, or beside the unit's file") from None
     space = UnitSpace.of(drawing)
     if (theta.shape != (space.size,) or cov.shape != (space.size, space.size)
             or record.get("parameters") != list(space.names)):

@@ -380,6 +380,7 @@ def load_posterior(unit_path) -> dict | None:
     from pathlib import Path
 
     from fitgen.base.fileio import read_text, real_file, tomllib
+    from fitgen.physics.relocate import relocated
     from fitgen.physics.sensor import load_sensor
 
     unit_path = Path(unit_path)
@@ -408,4 +409,4 @@ def load_posterior(unit_path) -> dict | None:
     if rec["unit_sha256"] != load_sensor(unit_path).sha256:
         raise InputError(f"unit file {unit_path}: its posterior {name} was written for another unit (another "
                          f"identification's, or the unit file was edited since): {todo}")
-    return rec
+    return relocated(rec, path.parent, "drawing_spec", "drawing_sha256")  # a drawing's file moved with the unit's

@@ -296,7 +296,9 @@ def load_meta(path: str | Path) -> dict:
     for key in META_TEXT:
         if not isinstance(meta.get(key), (str, type(None))):
             raise InputError(f"{mp}: {key} must be text, got {meta[key]!r:.60}; repair or remove it")
-    return meta
+    from fitgen.physics.relocate import relocated_meta
+
+    return relocated_meta(meta, mp.parent)  # a folder moved with its unit's file: found beside the data
 
 
 def noise_figures_agree(sample_noise, row_noise, samples: int) -> bool:
