@@ -3,12 +3,14 @@ its readings (read and view, arduino-build, emulate --adc) simulated the paper's
 four-element model was refused ("the simulated sensor 'paper' has 8") and a tare rested on the paper's rest."""
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from conftest import assert_one_line_error, require_tool, run_cli
+from fitgen.physics.sensor import load_sensor
 
 PRESET = Path(__file__).resolve().parents[1] / "fitgen" / "physics" / "presets" / "paper.toml"
 ONE_CHIP = "ads1115@0x48:0-3"
@@ -126,10 +128,32 @@ def test_identify_takes_the_drawing_the_capture_was_scheduled_for(tmp_path):
     proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "p.toml"), "--sensor", "paper")
     assert proc.returncode == 2 and f"note: the capture's schedule was made for {drawing.resolve()}; identifying " \
         "against --sensor paper" in proc.stderr, proc.stderr
+    # the capture moved to another folder with the drawing's file (captured on a Pi, identified on a laptop): the
+    # file beside it taken, as the same hash; it had been identified against paper, noted in one line
+    moved = tmp_path / "laptop"
+    moved.mkdir()
+    for f in (drawing, cap, Path(f"{cap}.meta.json")):
+        shutil.copy(f, moved / f.name)
+    drawing.rename(tmp_path / "elsewhere.toml")
+    proc = run_cli("fitgen", "identify", str(moved / cap.name), "-o", str(moved / "unit.toml"))
+    assert proc.returncode == 0, proc.stderr
+    assert f"the drawing: {moved / drawing.name}, as the capture's schedule names it" in proc.stderr
+    assert f'drawing_spec = "{moved / drawing.name}"' in (moved / "unit.toml").read_text()
+    np.testing.assert_array_equal(load_sensor(moved / "unit.toml").positions, load_sensor(tmp_path / "unit.toml").positions)
+    # its file changed since (or not found): refused, naming it; against paper the unit would be as far off as the
+    # drawings are (r9 against paper is refused as unexplained, a 9.7 mm ring had been taken)
+    (tmp_path / "elsewhere.toml").rename(drawing)
     drawing.write_text(drawing.read_text().replace("radius = 9.0 ", "radius = 9.5 "))
-    proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "q.toml"))
-    assert proc.returncode == 2 and "note: the capture's schedule was made for sensor r9, whose file is not here as " \
-        "it was; identifying against paper" in proc.stderr, proc.stderr
+    (moved / drawing.name).unlink()
+    assert_one_line_error(run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "q.toml")), 2,
+                          f"the capture's schedule was made for sensor r9 ({drawing.resolve()}), whose file is not here "
+                          "as it was (moved without the capture, or changed since): give the drawing the unit was "
+                          "built to as --sensor; nothing written")
+    assert not (tmp_path / "q.toml").exists()
+    # a check schedule records its drawing's file too, so a simulated check capture simulates that drawing
+    proc = run_cli("fitgen", "schedule", "--sensor", str(drawing), "--check", "12", "-o", str(tmp_path / "cp.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((tmp_path / "cp.csv.meta.json").read_text())["sensor_file"] == str(drawing.resolve())
 
 
 def test_a_simulated_capture_simulates_the_drawing_its_schedule_was_made_for(four, tmp_path):

@@ -4,6 +4,7 @@ and `fitgen simulate --unit`."""
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -529,8 +530,9 @@ def test_predict_takes_no_labels_from_a_readouts_lines(tmp_path):
 
 def test_a_folder_moved_with_its_files_is_read_where_it_now_is(tmp_path):
     """A project folder (a drawing's file, a twin identified on it, its posterior, a scene, the twin's data and
-    model) moved or copied to another machine: every file a record names by its old absolute path is found beside
-    the record, where it is still the file recorded; another file of that name is not taken."""
+    model) moved or copied to another machine, or archived while the next unit takes its old place: every file a
+    record names by its old absolute path is found beside the record where the old path no longer holds the file
+    recorded; another file of that name is not taken. A drawing edited since identify is refused, not drawn from."""
     from conftest import save_capture, simulated_capture
     from fitgen.fitting.schedule import schedule
     from fitgen.physics import presets
@@ -560,6 +562,18 @@ def test_a_folder_moved_with_its_files_is_read_where_it_now_is(tmp_path):
     assert (meta["sensor_file"], meta["scene_spec"]) == (str(old / "twin.toml"), str(old / "press.toml"))
     assert json.loads((old / "twin.posterior.json").read_text())["drawing_spec"] == str(old / "mine.toml")
     first = json.loads((old / "m.json").read_text())["fit"]
+    # the drawing edited since identify: its ADC (in its hash) or its tolerances (not in it). Units drawn from the
+    # posterior with the edited one had widened the twin's figures 7x in silence (an 8-bit ADC)
+    fit = ("fitgen", "fit", str(old / "t.csv"), "--held-out", "50", "-o", str(old / "x.json"))
+    back = "put back the file it was identified on (it is looked for beside the unit's file too), or identify again"
+    for edited, said in ((text.replace("adc_bits = 16 ", "adc_bits = 8 "), "has changed since (edited, or another "
+                          "drawing now at that path)"),
+                         (text + "\n[tolerances]\nmagnet_tilt = 0.5\n", "has other [tolerances] than at identify")):
+        (old / "mine.toml").write_text(edited)
+        assert_one_line_error(run_cli(*fit), 2, f"the drawing the unit was identified on, {old / 'mine.toml'}, {said}: "
+                                                f"{back}")
+        assert not (old / "x.json").exists()
+    (old / "mine.toml").write_text(text)
     old.rename(new)
     # the data's unit and scene, the twin's posterior's drawing: all found in the folder as it now is
     proc = run_cli("fitgen", "fit", str(new / "t.csv"), "--held-out", "50", "-o", str(new / "again.json"))
@@ -568,6 +582,15 @@ def test_a_folder_moved_with_its_files_is_read_where_it_now_is(tmp_path):
     assert [o["name"] for o in json.loads((new / "again.json").read_text())["outputs"]] == ["dz"]  # the scene's
     assert again["held_out"]["sensor_file"] == str(new / "twin.toml")
     assert again["held_out"]["posterior"] == first["held_out"]["posterior"]  # widened by the same posterior
+    # the old place taken by the next unit's project (another twin, its drawing with an 8-bit ADC): the files beside
+    # the records are still the ones recorded, and taken over those at the old paths, which are not
+    old.mkdir()
+    (old / "mine.toml").write_text(text.replace("adc_bits = 16 ", "adc_bits = 8 "))
+    write_unit(old / "twin.toml", draw_unit(drawing, 9)[0], "mine")
+    (old / "press.toml").write_text('name = "other"\noutputs = ["dx"]\n')
+    proc = run_cli("fitgen", "fit", str(new / "t.csv"), "--held-out", "50", "-o", str(new / "again.json"))
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((new / "again.json").read_text())["fit"] == again
     # the model fitted before the move: its figures' unit found beside it (check predicts on its posterior)
     proc = run_cli("fitgen", "check", str(new / "m.json"), str(new / "check.csv"))
     assert proc.returncode == 0 and "every output within what the identification predicts" in proc.stderr, proc.stderr
@@ -576,14 +599,30 @@ def test_a_folder_moved_with_its_files_is_read_where_it_now_is(tmp_path):
     from host.capture import load_schedule
 
     assert load_schedule(new / "s.csv").drawing["sensor_file"] == str(new / "mine.toml")
+    # a unit named past a dot (a date) has a posterior of its own: another of the same stem had overwritten it
+    for name in ("twin.2026.05.01", "twin.2026.05.02"):
+        proc = run_cli("fitgen", "identify", str(new / "c.csv"), "--sensor", str(new / "mine.toml"), "-o",
+                       str(new / name))
+        assert proc.returncode == 0, proc.stderr
+        assert (new / f"{name}.posterior.json").exists()
+    assert not (new / "twin.2026.05.posterior.json").exists()
     # the drawing's file gone: said as that (it had read as a malformed posterior)
+    shutil.rmtree(old)
     (new / "mine.toml").rename(tmp_path / "elsewhere.toml")
     assert_one_line_error(run_cli("fitgen", "fit", str(new / "t.csv"), "-o", str(new / "x.json")), 2,
                           f"the unit's posterior names the drawing it was identified on, {old / 'mine.toml'}, which "
-                          "does not load here (")
+                          f"does not load here (")
     # a file of the name that is not the one recorded (another unit identified into it): not taken
     write_unit(new / "twin.toml", draw_unit(load_sensor("paper"), 5)[0], "paper")
     assert_one_line_error(run_cli("fitgen", "fit", str(new / "t.csv"), "-o", str(new / "x.json")), 2,
                           f"t.csv was simulated with sensor file {old / 'twin.toml'}, which is missing")
     assert_one_line_error(run_cli("fitgen", "check", str(new / "m.json"), str(new / "check.csv")), 2,
                           "the sensor its held-out figures were made on is not found here (or has changed)")
+
+
+def test_a_units_file_beside_data_named_past_a_dot_is_its_own():
+    """`simulate --unit` into run.1 and run.2 had written both units to run.unit.toml."""
+    from fitgen.physics.units import unit_path
+
+    assert [unit_path(p) for p in ("a.csv", "a", "run.1", "d/run.2.csv")] == [
+        Path("a.unit.toml"), Path("a.unit.toml"), Path("run.1.unit.toml"), Path("d/run.2.unit.toml")]

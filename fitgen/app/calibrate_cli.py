@@ -6,10 +6,9 @@ from __future__ import annotations
 
 import os
 import sys
-from pathlib import Path
 
 from fitgen.app.cliutil import count, finite
-from fitgen.app.options import noise_of, sensor_of
+from fitgen.app.options import noise_of, sensor_file_of, sensor_of
 from fitgen.base.fileio import replaces_other, write_all
 from fitgen.base.errors import InputError
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES, parse_positive
@@ -245,7 +244,7 @@ def cmd_schedule(args) -> int:
                                noise=noise / np.sqrt(samples), rig_error=args.rig_error, zero_error=args.zero_error,
                                progress=step)
     # the drawing's file and hash: capture passes them on, and identify takes that drawing unless told
-    own = {"sensor_file": str(Path(args.sensor).resolve())} if Path(args.sensor).is_file() else {}
+    own = sensor_file_of(args)
     write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples, **told, **own,
                                               "sensor_sha256": drawing.sha256, "transfer": drawing.transfer})
     rest = (f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"]
@@ -294,7 +293,8 @@ def _check_schedule(args, drawing, axes, samples: int, given: dict) -> int:
 
     poses, info = check_schedule(drawing, args.check, axes=axes, ranges=parse_ranges(args.limits, {}), seed=args.seed,
                                  rig_error=args.rig_error, zero_error=args.zero_error)
-    write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples,
+    own = sensor_file_of(args)
+    write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples, **own,
                                               "sensor_sha256": drawing.sha256, "transfer": drawing.transfer})
     margin = (f", {info['edge_margin']:g} mm inside the working box's edges, which the stage's error could carry "
               "a row past" if info["edge_margin"] else "")

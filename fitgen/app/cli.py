@@ -9,7 +9,7 @@ from pathlib import Path
 from fitgen import __version__
 from fitgen.app.calibrate_cli import add_calibration_commands, cmd_identify, cmd_schedule
 from fitgen.app.cliutil import Parser, check_not_empty, check_output_kind, check_written, command_main, count, finite
-from fitgen.app.options import accuracy_of, fit_settings, noise_of, sensor_of
+from fitgen.app.options import accuracy_of, fit_settings, noise_of, sensor_file_of, sensor_of
 from fitgen.base.parse import MAX_NOISE, parse_names
 from fitgen.base.errors import InputError
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
@@ -30,7 +30,7 @@ def cmd_simulate(args) -> int:
 
     sensor = sensor_of(args)
     # a sensor file (a unit's, say) is named in the meta, so that fit finds it to hold out on
-    unit_info = {"sensor_file": str(Path(args.sensor).resolve())} if Path(args.sensor).is_file() else {}
+    unit_info = sensor_file_of(args)
     poses, source = choose_poses(grid=args.grid, random=args.random, poses=args.poses, ranges=args.ranges,
                                  scene=args.scene, seed=args.seed, sensor=sensor,
                                  min_rows=rows_needed(sensor.n_elements))  # a scene's grid that a fit can carry

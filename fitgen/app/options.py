@@ -17,6 +17,14 @@ def sensor_of(args):
     return sensor
 
 
+def sensor_file_of(args) -> dict:
+    """``{"sensor_file": its absolute path}`` where ``--sensor`` is a file (a unit's, a drawing of one's own), so that
+    the commands after find it from any folder; {} for a preset."""
+    from pathlib import Path
+
+    return {"sensor_file": str(Path(args.sensor).resolve())} if Path(args.sensor).is_file() else {}
+
+
 def noise_of(value: str, sensor, most: float | None = None) -> float:
     """``--noise``: a figure >= 0 (at most ``most``), or ``sensor`` for the sensor's own (which must be > 0: a file
     that leaves it out reads 0, and 'the sensor's noise' would then add none without a word)."""

@@ -15,13 +15,12 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, check_error, element_noise
-from fitgen.fitting.holdout import (POSTERIOR_UNITS, device_precision, estimator, posterior_units, sensor_hashes,
-                                     unit_posterior)
+from fitgen.fitting.holdout import POSTERIOR_UNITS, device_precision, estimator, posterior_units, unit_posterior
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR
 from fitgen.fitting.unitrecord import row_noise, schedule_stage, stage_zero, zero_record
 from fitgen.physics.pose import POSE_NAMES, check_rows, edge_margin, inner_box, off_skin
 from fitgen.physics.simulate import rig_poses
-from fitgen.physics.transfer import readings
+from fitgen.physics.transfer import readings, sensor_hashes
 
 DRAWS = 5  # the stage's error and the rows' noise drawn this many times per unit
 SEED = 2031

@@ -21,9 +21,8 @@ from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
 from fitgen.equations.rounding import PRECISIONS
 from fitgen.physics.pose import POSE_NAMES
-from fitgen.physics.sensor import TRANSFERS
 from fitgen.physics.simulate import pose_rng, random_poses, simulate
-from fitgen.physics.transfer import readings
+from fitgen.physics.transfer import readings, sensor_hashes
 
 N_POSES = 2000
 SEED = 2026
@@ -302,16 +301,27 @@ def _posterior_draw(record: dict, sensor):
         cov = np.asarray(record["covariance"], dtype=float)
     except (KeyError, TypeError, ValueError):
         raise InputError("the unit's posterior record is malformed (expected fitgen identify's)") from None
+    back = "put back the file it was identified on (it is looked for beside the unit's file too), or identify again"
     try:
         drawing = load_sensor(spec).with_transfer(sensor.transfer)
     except InputError as exc:  # a drawing's file deleted or moved without the unit's: not a malformed record
         raise InputError(f"the unit's posterior names the drawing it was identified on, {spec}, which does not load "
-                         f"here ({exc}): put that file back, or beside the unit's file") from None
+                         f"here ({exc}): {back}") from None
+    sha = record.get("drawing_sha256")
+    if isinstance(sha, str) and sha not in sensor_hashes(drawing):
+        # its units would be drawn with the edited drawing (another ADC, say) about a unit identified on the old one
+        raise InputError(f"the drawing the unit was identified on, {spec}, has changed since (edited, or another "
+                         f"drawing now at that path): {back}")
     space = UnitSpace.of(drawing)
     if (theta.shape != (space.size,) or cov.shape != (space.size, space.size)
             or record.get("parameters") != list(space.names)):
         raise InputError(f"the unit's posterior does not fit its drawing {record.get('drawing_spec')!r} (its "
-                         "parameters are not the drawing's)")
+                         "parameters are not the drawing's: its [tolerances] edited since identify?)")
+    prior = record.get("prior_sd")
+    if isinstance(prior, list) and (len(prior) != space.size or not np.allclose(prior, space.prior_sd, rtol=1e-9,
+                                                                                 atol=0.0)):
+        raise InputError(f"the drawing the unit was identified on, {spec}, has other [tolerances] than at identify: "
+                         f"{back}")
     # identify's lie within a few prior spreads, and no posterior is wider than its prior: past these, an edit
     # (NaN or 1e308 drew units of no field, and check's table of nonsense passed or failed by chance)
     with np.errstate(all="ignore"):
@@ -345,12 +355,6 @@ def _covariance_ok(cov: np.ndarray, free: np.ndarray) -> bool:
     except np.linalg.LinAlgError:
         return False
     return True
-
-
-def sensor_hashes(sensor) -> set[str]:
-    """The sensor's hash in either transfer: a record may hold either for the same sensor (a capture the file's as
-    read, a simulation the one it read through)."""
-    return {sensor.with_transfer(kind).sha256 for kind in TRANSFERS}
 
 
 def fitted_sensor(sensor, model: Model, why: str, flag: str = "--sensor"):

@@ -14,7 +14,7 @@ from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, is_stage_error
 from fitgen.fitting.identify import PINNABLE, RIG, RIG_ERROR, ZERO_ERROR, Identification, tilting
 from fitgen.physics.dataset import row_degc, thermistor_degc
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
-from fitgen.physics.sensor import Sensor
+from fitgen.physics.sensor import Sensor, preset_names
 from fitgen.physics.simulate import recorded_spec, sensor_record_problem
 from fitgen.physics.units import STIFFENING, UnitSpace
 
@@ -192,9 +192,14 @@ def drawing_for(given: str | None, meta: dict, capture="the capture") -> tuple[s
     if recorded is not None:
         return recorded, ("" if recorded == "paper" else
                           f"the drawing: {recorded}, as the capture's schedule names it (--sensor to say another)")
-    if isinstance(made, dict):
-        return "paper", (f"note: the capture's schedule was made for sensor {made.get('sensor')}, whose file is not "
-                         "here as it was; identifying against paper (--sensor to say which)")
+    if isinstance(made, dict) and made.get("sensor") in preset_names():  # a preset another fitgen drew otherwise
+        return made["sensor"], (f"note: the capture's schedule was made for preset {made['sensor']} as another fitgen "
+                                f"drew it; identifying against this one's (--sensor to say which)")
+    if isinstance(made, dict):  # identified against another drawing, a unit would be as far off as the drawings
+        where = f" ({made['sensor_file']})" if isinstance(made.get("sensor_file"), str) else ""
+        raise InputError(f"the capture's schedule was made for sensor {made.get('sensor')}{where}, whose file is not "
+                         "here as it was (moved without the capture, or changed since): give the drawing the unit was "
+                         "built to as --sensor; nothing written")
     return "paper", ""
 
 
@@ -330,12 +335,12 @@ def unit_files(ident: Identification, path, provenance: dict, noise: float | Non
 
     from fitgen.base.fileio import tomllib
     from fitgen.physics.sensor import parse_sensor
-    from fitgen.physics.units import unit_toml
+    from fitgen.physics.units import beside_as, unit_toml
 
     from fitgen.base.fileio import real_file
 
     path = Path(path)
-    post_path = real_file(path).with_suffix(".posterior.json")  # beside the unit file itself, not a link to it
+    post_path = beside_as(real_file(path), ".toml", ".posterior.json")  # beside the unit file itself, not a link
     spec = provenance.get("drawing_spec")
     if spec is not None and Path(spec).is_file():  # a sensor file: named so that it is found from anywhere
         provenance = {**provenance, "drawing_spec": str(Path(spec).resolve())}

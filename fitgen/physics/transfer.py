@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fitgen.physics.sensor import Sensor
+from fitgen.physics.sensor import TRANSFERS, Sensor
 
 OE_PER_MT = 10.0  # 1 Oe = 0.1 mT in air
 
@@ -124,3 +124,9 @@ def readings(sensor: Sensor, poses, touching: bool = False, **kw) -> np.ndarray:
     from fitgen.physics.pose import field_readings
 
     return apply_transfer(sensor, field_readings(sensor, poses, touching), **kw)
+
+
+def sensor_hashes(sensor: Sensor) -> set[str]:
+    """The sensor's hash in either transfer: a record may hold either for the same sensor (a capture the file's as
+    read, a simulation the one it read through)."""
+    return {sensor.with_transfer(kind).sha256 for kind in TRANSFERS}

@@ -299,8 +299,16 @@ def _quote(s: str) -> str:
 
 
 def unit_path(data_path: str | Path) -> Path:
-    """Where a dataset's unit file goes: beside it, ``<stem>.unit.toml``."""
-    return Path(data_path).with_suffix(".unit.toml")
+    """Where a dataset's unit file goes: beside it, ``<stem>.unit.toml`` for a ``.csv``, else its whole name and
+    ``.unit.toml`` (``run.1`` and ``run.2`` would share ``run.unit.toml``)."""
+    return beside_as(data_path, ".csv", ".unit.toml")
+
+
+def beside_as(path: str | Path, suffix: str, new: str) -> Path:
+    """The file beside ``path`` with its ``suffix`` replaced by ``new``, or ``new`` added where it has another
+    suffix: names that differ only past their last dot keep files of their own."""
+    path = Path(path)
+    return path.with_suffix(new) if path.suffix in ("", suffix) else path.with_name(path.name + new)
 
 
 def write_unit(path: str | Path, unit: Sensor, drawing: str, provenance: dict | None = None) -> Path:
