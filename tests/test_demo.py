@@ -1,4 +1,4 @@
-from conftest import CLEARED, require_tool, run_cli
+from conftest import CLEARED, assert_one_line_error, require_tool, run_cli
 
 
 def test_demo_runs_end_to_end(tmp_path):
@@ -7,7 +7,7 @@ def test_demo_runs_end_to_end(tmp_path):
     out = tmp_path / "demo"
     proc = run_cli("fitgen", "demo", "--out", str(out))
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    for name in ("paper-sim.csv", "paper-model.json", "random-2000.csv", "paper-report.md",
+    for name in (".fitgen-demo", "paper-sim.csv", "paper-model.json", "random-2000.csv", "paper-report.md",
                  "c-float-table/tm_model.h", "c-double-table/tm_model.h"):
         assert (out / name).is_file(), name
     text = proc.stdout
@@ -77,6 +77,27 @@ def test_demo_runs_end_to_end(tmp_path):
     twin_model = load_model(out / "twin-model.json")
     assert twin_model.fit_info["held_out"]["sensor_file"] == str((out / "twin.toml").resolve())
     assert clean_readings(twin_model) is not None
+
+
+def test_the_demo_writes_only_into_a_folder_of_its_own(tmp_path):
+    """`fitgen demo -o .` in a project's folder wrote its own capture.csv, schedule.csv, check.csv and
+    check-poses.csv over the project's (the names docs/calibration.md uses), without a word. A folder it wrote (its
+    mark, or one from before it marked them) or an empty one it writes into."""
+    from fitgen.app.demo import MARK, _own_folder
+
+    (tmp_path / "capture.csv").write_text("v1,dz\n1.5,-1\n")
+    proc = run_cli("fitgen", "demo", "--out", str(tmp_path))
+    assert_one_line_error(proc, 2, f"{tmp_path} holds files no earlier demo wrote (capture.csv), and the demo writes "
+                                   "capture.csv, schedule.csv, check.csv and more there over files of those names: "
+                                   "give a new or empty folder (--out)")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.csv"]
+    for held in ((), (MARK, "capture.csv"), ("paper-model.json", "capture.csv")):
+        folder = tmp_path / f"f{len(held)}{held[:1]}"
+        folder.mkdir()
+        for name in held:
+            (folder / name).write_text("")
+        _own_folder(folder)  # taken
+    _own_folder(tmp_path / "none")
 
 
 def test_demo_bad_output_folder(tmp_path):

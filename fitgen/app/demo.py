@@ -10,6 +10,23 @@ from fitgen.base.errors import InputError
 from fitgen.base.fileio import check_folder, make_folder, write_atomic
 
 
+MARK = ".fitgen-demo"  # in the demo's folder: a folder the demo wrote, which it may write over again
+
+
+def _own_folder(out: Path) -> None:
+    """InputError where ``out`` holds files that no earlier demo wrote: the demo writes capture.csv, schedule.csv,
+    check.csv and more, the names a project of one's own uses (docs/calibration.md), over what is there."""
+    try:
+        held = sorted(p.name for p in out.iterdir())
+    except OSError:  # none yet (or no folder: check_folder and make_folder say what it is)
+        return
+    # paper-model.json: a folder a demo wrote before it marked its folders
+    if held and MARK not in held and "paper-model.json" not in held:
+        raise InputError(f"{out} holds files no earlier demo wrote ({', '.join(held[:3])}"
+                         f"{', ...' if len(held) > 3 else ''}), and the demo writes capture.csv, schedule.csv, "
+                         "check.csv and more there over files of those names: give a new or empty folder (--out)")
+
+
 def _stage(title: str) -> float:
     print(f"\n== {title}", flush=True)
     return time.monotonic()
@@ -27,7 +44,9 @@ def run_demo(out: Path) -> int:
     from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 
     check_folder(out, "--out")
+    _own_folder(out)
     make_folder(out)
+    write_atomic(out / MARK, "fitgen demo wrote this folder and writes over its files on every run\n")
     sensor = load_sensor("paper")
     print(f"fitgen demo: sensor 'paper' ({sensor.n_elements} GMR elements, magnet "
           f"{sensor.magnet.diameter:g} x {sensor.magnet.height:g} mm, {sensor.magnet.polarization:g} T), "
