@@ -22,6 +22,7 @@ from fitgen.base.signals import signals_held
 from fitgen.equations.model import Model, check_input_units
 from fitgen.c.compiled import WARNING_FLAGS
 from fitgen.c.targets import TARGETS, check_precision
+from host.channelmap import check_full_scale
 from host.protocol_c import render_proto_defs
 
 PORTS = ("posix", "mps2", "microbit", "uno")
@@ -129,6 +130,8 @@ def render_firmware(model: Model, folder: str | Path, *, precision: str = "float
         raise InputError(f"the channel map reads {cmap.n_elements} elements; the model takes {model.n_inputs}")
     if cmap is not None and precision != "fixed":  # fixed point takes the ADC's codes
         check_input_units(model, "V", "the ADCs' readings")
+    if cmap is not None and model.input_units == "V":  # as read and pi-build: clipped, every estimate bent in silence
+        check_full_scale(cmap, model.input_min, model.input_max)
     if (tin is not None or tempcomp is not None) and cmap is None:
         raise InputError("a thermistor and a temperature compensation need the ADC inputs (--adc)")
     if tempcomp is not None and tin is None:

@@ -153,6 +153,16 @@ def test_emulate_refuses_a_bad_channel_map(tmp_path, model):
                                   "ads1116@0x48:0-3"), 2, "unknown chip")
     assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc",
                                   "ads1115@0x48:0-3"), 2, "reads 4 elements")
+    # ADCs whose full scale the model's readings pass: read and pi-build refused them, emulate built the firmware,
+    # whose readings clipped at 2.048 V (estimates off by a millimetre and tens of degrees, status 0)
+    assert model.input_units == "V" and model.input_max.max() > 2.048
+    chips = "".join(f'[[chip]]\ntype = "ads1115"\naddress = {a}\ninputs = [0, 1, 2, 3]\npga = 2.048\n' for a in (72, 73))
+    (tmp_path / "small.toml").write_text(chips)
+    for tool, cmd in (("tactile-hil", "emulate"), ("tactile-host", "read")):
+        proc = run_cli(tool, cmd, "--model", path, *(("--target", "host") if cmd == "emulate" else ("--count", "1")),
+                       "--adc", str(tmp_path / "small.toml"), "--simulate", "0,0,-1,0,0")
+        assert_one_line_error(proc, 2, "beyond its ADC's full scale 2.048 V (ads1115@0x48, --pga 2.048): its "
+                                       "readings would clip")
 
 
 @pytest.mark.parametrize("target", ["host", "mps2"])
