@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from conftest import assert_one_line_error, require_tool, run_cli
+from fitgen.base.errors import InputError
 from fitgen.physics.sensor import load_sensor
 
 PRESET = Path(__file__).resolve().parents[1] / "fitgen" / "physics" / "presets" / "paper.toml"
@@ -200,3 +201,18 @@ def test_fixed_point_takes_the_adc_of_the_models_own_sensor_file(tmp_path):
     assert_one_line_error(run_cli("fitgen", "codegen", str(model), "--precision", "fixed", "-o", str(tmp_path / "e")),
                           2, f"the model was fitted on sensor {sensor.resolve()}, not found here as it was; give "
                           "--input-lsb (in V)")
+
+
+def test_a_schedules_preset_drawn_otherwise_is_noted_and_a_file_of_its_name_refused(tmp_path):
+    """A schedule made for the preset by another fitgen (its hash not this one's): identified against this one's,
+    noted. A file named like the preset, gone since: refused as any drawing's file, not taken for the preset."""
+    from fitgen.fitting.unitrecord import drawing_for
+
+    made = {"sensor": "paper", "sensor_sha256": "0" * 64, "transfer": "gmr"}
+    spec, said = drawing_for(None, {"schedule_drawing": made}, "c.csv")
+    assert spec == "paper" and said == ("note: the capture's schedule was made for preset paper as another fitgen "
+                                        "drew it; identifying against this one's (--sensor to say which)")
+    gone = {**made, "sensor_file": str(tmp_path / "paper.toml")}
+    with pytest.raises(InputError, match=r"^the capture's schedule was made for sensor paper \(.*paper\.toml\), whose "
+                                         r"file is not here as it was"):
+        drawing_for(None, {"schedule_drawing": gone}, "c.csv")

@@ -192,7 +192,8 @@ def drawing_for(given: str | None, meta: dict, capture="the capture") -> tuple[s
     if recorded is not None:
         return recorded, ("" if recorded == "paper" else
                           f"the drawing: {recorded}, as the capture's schedule names it (--sensor to say another)")
-    if isinstance(made, dict) and made.get("sensor") in preset_names():  # a preset another fitgen drew otherwise
+    if isinstance(made, dict) and made.get("sensor") in preset_names() and "sensor_file" not in made:
+        # the preset itself, as another fitgen drew it (a file of a preset's name is refused as any other file)
         return made["sensor"], (f"note: the capture's schedule was made for preset {made['sensor']} as another fitgen "
                                 f"drew it; identifying against this one's (--sensor to say which)")
     if isinstance(made, dict):  # identified against another drawing, a unit would be as far off as the drawings
