@@ -136,16 +136,32 @@ def reordered_spec(spec, order) -> str | None:
 def check_full_scale(cmap: ChannelMap, low, high) -> None:
     """InputError when an element's ADC cannot reach readings from ``low`` to ``high`` (volts, per element: a
     model's fitted domain): each would clip at the full scale, and every estimate with it."""
-    for k, (chip, _) in enumerate(cmap.elements()):
+    scales = []
+    for chip, _ in cmap.elements():
         if chip.kind == "ads1115":
-            top, how = chip.settings.pga * 32767 / 32768, f"--pga {chip.settings.pga:g}"
+            scales.append((chip.settings.pga * 32767 / 32768, f"{chip.label}, --pga {chip.settings.pga:g}"))
         else:
-            top, how = chip.vref_volts * 4095 / 4096, f"--vref {chip.settings.vref}"
+            scales.append((chip.vref_volts * 4095 / 4096, f"{chip.label}, --vref {chip.settings.vref}"))
+    _check_scales(scales, low, high, "choose a larger full scale")
+
+
+def check_reported_full_scale(adc_chips, low, high) -> None:
+    """:func:`check_full_scale` for the chips a device's INFO reports (kind, address, inputs, PGA code, ...): its
+    ADS1115s' PGAs; an ADS7828's reference is not in INFO, so its elements go unchecked."""
+    scales = []
+    for kind, address, n, code, *_ in adc_chips:
+        known = kind == "ads1115" and code < len(ADS1115_PGA)
+        scales += [(ADS1115_PGA[code] * 32767 / 32768 if known else None,
+                    f"{kind}@0x{address:02x}, the build's PGA" + (f" {ADS1115_PGA[code]:g} V" if known else ""))] * n
+    _check_scales(scales, low, high, "rebuild the firmware with a larger --pga, or flash a model fitted within it")
+
+
+def _check_scales(scales, low, high, fix: str) -> None:
+    for k, (top, where) in enumerate(scales):
         reach = max(abs(float(low[k])), abs(float(high[k])))
-        if reach > top:
+        if top is not None and reach > top:
             raise InputError(f"element v{k + 1} was fitted on readings up to {reach:.4g} V, beyond its ADC's full "
-                             f"scale {top:.4g} V ({chip.label}, {how}): its readings would clip; choose a larger "
-                             "full scale")
+                             f"scale {top:.4g} V ({where}): its readings would clip; {fix}")
 
 
 # --- parsing -----------------------------------------------------------------------

@@ -10,6 +10,7 @@ import numpy as np
 from fitgen.base.errors import InputError
 
 from host import protocol as p
+from host.channelmap import check_reported_full_scale
 from host.protocol import DeviceInfo, ErrorCode, Frame, MsgType
 
 POLL = 0.02  # seconds one read of the port blocks at most
@@ -371,6 +372,7 @@ def flash_model(dev: Device, model, origin: str, *, sensor_id: str = "paper", fm
                          f"the device's build has {info.n_inputs} and {info.n_outputs}")
     if info.adc_chips:  # its inputs are its ADCs' volts, whatever the blob says
         check_input_units(model, "V", "the device's ADC readings", f"model {origin}")
+        check_reported_full_scale(info.adc_chips, model.input_min, model.input_max)
     blob = to_blob(model, info.precision, sensor_id=sensor_id, fma=fma)
     try:
         answer = dev.load_calibration(blob)

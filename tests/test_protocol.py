@@ -439,7 +439,7 @@ def test_a_board_that_restarts_when_its_port_opens_is_waited_for(paper_model, pa
         assert fake.active is not None
 
 
-def test_flash_failures(paper_model, paper_model_file):
+def test_flash_failures(paper_model, paper_model_file, model, model_file):
     from fake_device import FakeDevice
 
     with FakeDevice(paper_model, "double", corrupt_read=True) as fake:
@@ -457,6 +457,22 @@ def test_flash_failures(paper_model, paper_model_file):
         proc = run_cli("tactile-host", "flash", "--port", fake.url, paper_model_file)
         assert_one_line_error(proc, 2, "takes inputs in mT; the device's ADC readings are in V")
         assert fake.active is None
+    # a build whose PGA the model's readings pass: flashed, its readings would clip and every estimate with them
+    assert model.input_units == "V" and 2.048 < model.input_max.max() < 4.096
+    for pga, refused in ((2, True), (1, False)):  # codes of 2.048 and 4.096 V
+        with FakeDevice(model, "double", adc_chips=(("ads1115", 0x48, 4, pga, 4, 0),) * 2) as fake:
+            proc = run_cli("tactile-host", "flash", "--port", fake.url, model_file)
+            if refused:
+                assert_one_line_error(proc, 2, "beyond its ADC's full scale 2.048 V (ads1115@0x48, the build's PGA "
+                                               "2.048 V): its readings would clip; rebuild the firmware with a larger "
+                                               "--pga")
+                assert fake.active is None
+            else:
+                assert proc.returncode == 0, proc.stderr
+                assert fake.active is not None
+    # an ADS7828's reference is not in INFO: its elements are not refused for it
+    with FakeDevice(model, "double", adc_chips=(("ads7828", 0x4a, 8, 0, 0, 0),)) as fake:
+        assert run_cli("tactile-host", "flash", "--port", fake.url, model_file).returncode == 0
     with FakeDevice(paper_model, "fixed") as fake:
         proc = run_cli("tactile-host", "flash", "--port", fake.url, paper_model_file)
         assert_one_line_error(proc, 2, "fixed-point build")
