@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import fitgen.physics
 from hil.emulate import start_target
 from hil.suite import READ_FAILED
 from host import protocol as P
@@ -152,7 +153,14 @@ def test_emulate_refuses_a_bad_channel_map(tmp_path, model):
     assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc",
                                   "ads1116@0x48:0-3"), 2, "unknown chip")
     assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc",
-                                  "ads1115@0x48:0-3"), 2, "reads 4 elements")
+                                  "ads1115@0x48:0-3"), 2, "the channel map reads 4 elements; the model takes 8")
+    # with a simulated sensor of as few elements, the model's count is still the one named (it named the sensor)
+    four = tmp_path / "four.toml"
+    paper = (Path(fitgen.physics.__file__).parent / "presets" / "paper.toml").read_text()
+    four.write_text(paper.replace('name = "paper"', 'name = "four"').replace("count = 8", "count = 4"))
+    assert_one_line_error(run_cli("tactile-hil", "emulate", "--model", path, "--target", "host", "--adc",
+                                  "ads1115@0x48:0-3", "--sim-sensor", str(four)), 2,
+                          "the channel map reads 4 elements; the model takes 8")
     # ADCs whose full scale the model's readings pass: read and pi-build refused them, emulate built the firmware,
     # whose readings clipped at 2.048 V (estimates off by a millimetre and tens of degrees, status 0)
     assert model.input_units == "V" and model.input_max.max() > 2.048

@@ -9,7 +9,8 @@ from fitgen.fitting.fit import fit_model
 from fitgen.fitting.holdout import box_of, clean_readings, evaluate
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
-from hil.emulate import adc_bridge, start_target
+from hil.bridge import adc_bridge
+from hil.emulate import start_target
 from hil.suite import run_suite
 from host.device import Device
 

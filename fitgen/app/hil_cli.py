@@ -93,9 +93,9 @@ def _describe(runner, dev, target: str, compiled: str = "") -> None:
               + (" on the TWI bus" if target == "uno" else " over the I2C bridge") + ", answered by the bus model")
 
 
-def _adc_bridge(args):
+def _adc_bridge(args, n_inputs: int):
     """(channel map, stand-in bus, thermistor input, compensation) for --adc, or Nones."""
-    from hil.emulate import adc_bridge
+    from hil.bridge import adc_bridge
 
     if args.adc is not None and not args.adc.strip():
         raise InputError("--adc is empty: give the channel map, e.g. ads1115@0x48:0-3,ads1115@0x49:0-3")
@@ -108,7 +108,7 @@ def _adc_bridge(args):
         return None, None, None, None
     return adc_bridge(args.adc, args.simulate or "0,0,0,0,0", sensor=args.sim_sensor, noise=args.sim_noise,
                       seed=args.seed or 0, thermistor=args.thermistor, temp_comp=args.temp_comp,
-                      temperature=args.sim_temperature)
+                      temperature=args.sim_temperature, n_inputs=n_inputs)
 
 
 def _stopped(runner, args, advice, before: bool = True) -> None:
@@ -155,7 +155,7 @@ def cmd_emulate(args) -> int:
     model, data = _load(args)
     if args.adc:  # the model's own, where found (without --adc, a --sim-sensor given is refused)
         args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"
-    cmap, bridge, tin, tempcomp = _adc_bridge(args)
+    cmap, bridge, tin, tempcomp = _adc_bridge(args, model.n_inputs)
     with ExitStack() as stack:
         with Progress(f"{args.target} firmware", 2) as bar:  # building and booting take seconds
             bar.update(0, "building")
