@@ -210,6 +210,26 @@ def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = 
                          f"another sensor's, and a tare onto them would bend every estimate; {advice}")
 
 
+TARE_UNIT_SHARE = 0.25  # of the rest readings' spread between units: a unit's own drift stays well under it
+
+
+def another_unit_note(model, offsets) -> str:
+    """A note when a tare's ``offsets`` (V) reach, in rms over the elements, TARE_UNIT_SHARE of how far the rest
+    readings of units built to the drawing of ``model``'s unit spread (Model.held_out_rest_spread, a twin's record):
+    the sensor resting is then more likely another unit than this one drifted, and a tare maps any unit's rest onto
+    the model's; '' otherwise, or without the record."""
+    spread = model.held_out_rest_spread
+    if spread is None:
+        return ""
+    off, between = (float(np.sqrt(np.mean(np.square(x)))) for x in (offsets, spread))
+    if not off > TARE_UNIT_SHARE * between:
+        return ""
+    return (f"note: the tare's offsets reach {off * 1e3:.3g} mV rms, and the rest readings of units built to the "
+            f"drawing of the model's unit spread by {between * 1e3:.3g} mV rms (one unit's drift stays well under "
+            f"{TARE_UNIT_SHARE * between * 1e3:.2g}): is this the unit the model was fitted for? On another unit its "
+            "estimates err as the drawing's model does on a unit (identify this one and fit its twin)")
+
+
 @dataclass
 class Tare:
     measured: np.ndarray  # mean rest readings

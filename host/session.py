@@ -26,7 +26,8 @@ from host.channelmap import CHIP_SETTINGS, CHIPS, Settings, channel_map, check_f
 from host.clock import REAL_CLOCK
 from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
-from host.readout import TARE_SAMPLES, Corrections, RunRecord, check_rest_reference, rest_reference, tare
+from host.readout import (TARE_SAMPLES, Corrections, RunRecord, another_unit_note, check_rest_reference,
+                          rest_reference, tare)
 from host.simbus import simulated_bus
 from host.temperature import (Thermometer, capture_temperature_note, channel_map_note, load_tempcomp,
                               split_channel_map, temperature_input)
@@ -256,6 +257,8 @@ class ReadoutSession:
                 with Progress(f"{prog}: tare", tare_n) as bar:  # seconds at a low data rate: say so
                     t = tare(array, reference, tare_n, bar.update, compensate)
                 print(f"{prog}: {t.describe()}, onto the rest readings of {target}", file=sys.stderr)
+                if note := another_unit_note(model, t.offsets):
+                    print(f"{prog}: {note}", file=sys.stderr)
                 offsets = t.offsets
                 noise = t.noise_floor(array.lsb)
                 if pose is not None:

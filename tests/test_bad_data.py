@@ -290,6 +290,9 @@ def test_report_on_fit_notes_edited_by_hand_is_one_line(fitted, tmp_path, edit):
     (lambda f: f.__setitem__("precision", "float"), "fit.precision must be an object, got 'float'"),
     (lambda f: f.__setitem__("held_out", {"box": {"dx": [2, -2]}}), "fit.held_out.box.dx must be [low, high]"),
     (lambda f: f.__setitem__("held_out", {"rest": 1.5}), "fit.held_out.rest must be a list of readings"),
+    # what a tare's note reads: a negative or NaN spread would note every tare, or none, in silence
+    (lambda f: f.__setitem__("held_out", {"rest_spread": [0.1, -0.1]}), "fit.held_out.rest_spread must be a list of "
+                                                                         "spreads (>= 0)"),
     # JSON holds integers past float's range: float() of one raised, a traceback
     (lambda f: f.__setitem__("held_out", {"box": {"dx": [0, 10 ** 400]}}), "fit.held_out.box.dx must be [low, high]"),
     # a held-out record whose seed is no whole number: read by verify and tactile-hil run, a traceback

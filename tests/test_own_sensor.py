@@ -102,6 +102,46 @@ def test_a_twin_copied_alone_tares_onto_the_rest_it_recorded(tmp_path):
     offsets = np.array([float(x) for x in line.split("[mV] ")[1].split(" (")[0].split()])
     np.testing.assert_allclose(offsets, (paper_rest - own_rest) * 1e3, atol=0.3)
     assert np.abs(offsets).max() > 3  # a unit's rest is not the drawing's: the test tells them apart
+    # ... which is another sensor than the twin's unit: said, though the unit file is not at hand (the model records
+    # how far units' rest readings spread)
+    assert "note: the tare's offsets reach" in proc.stderr and "is this the unit the model was fitted for?" in proc.stderr
+
+
+def test_a_tare_onto_a_twin_from_another_unit_is_said(tmp_path):
+    """A twin's tare with another unit resting on the bus: the offsets took up that unit's rest in silence, and its
+    estimates erred by a millimetre. The model records how far the rest readings of units built to its drawing
+    spread; offsets past a quarter of that are noted, a unit's own temperature drift of 10 degC is not."""
+    from fitgen.equations.model import load_model
+    from fitgen.fitting.holdout import rest_spread
+    from fitgen.physics.transfer import readings
+
+    for seed in (7, 8):
+        proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--unit", str(seed), "--transfer", "gmr", "--scene",
+                       "slide", "-o", str(tmp_path / f"u{seed}.csv"))
+        assert proc.returncode == 0, proc.stderr
+    proc = run_cli("fitgen", "fit", str(tmp_path / "u7.csv"), "-o", str(tmp_path / "twin.json"), "--family", "all",
+                   "--held-out", "50")
+    assert proc.returncode == 0, proc.stderr
+    spread = load_model(tmp_path / "twin.json").held_out_rest_spread
+    # what the record says of units matches units simulate draws within the drawing's tolerances
+    drawn = []
+    for seed in range(20, 36):
+        assert run_cli("fitgen", "simulate", "--sensor", "paper", "--unit", str(seed), "--transfer", "gmr", "--grid",
+                       "dz=0", "-o", str(tmp_path / f"d{seed}.csv")).returncode == 0
+        drawn.append(readings(load_sensor(str(tmp_path / f"d{seed}.unit.toml")).with_transfer("gmr"), np.zeros(5),
+                              adc_bits=0)[0])
+    assert 0.7 < np.sqrt(np.mean(np.var(drawn, axis=0))) / np.sqrt(np.mean(spread ** 2)) < 1.4
+    said = []
+    for unit, drift in (("u8", "ramp=0,start=25"), ("u7", "ramp=0,start=35"), ("u7", "ramp=0,start=25")):
+        proc = run_cli("tactile-host", "read", "--model", str(tmp_path / "twin.json"), "--adc",
+                       "ads1115@0x48:0-3,ads1115@0x49:0-3", "--sensor", str(tmp_path / f"{unit}.unit.toml"), "--rest",
+                       str(tmp_path / "u7.unit.toml"), "--simulate", "0,0,0,0,0", "--sim-drift", drift, "--tare",
+                       "--count", "1")
+        assert proc.returncode == 0, proc.stderr
+        said.append("is this the unit the model was fitted for?" in proc.stderr)
+    assert said == [True, False, False]
+    # a drawing's model records no spread: a unit's rest off the drawing's is what its tare is for
+    assert rest_spread(load_sensor("paper").with_transfer("gmr")) is None
 
 
 def test_identify_takes_the_drawing_the_capture_was_scheduled_for(tmp_path):

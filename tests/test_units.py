@@ -562,6 +562,8 @@ def test_a_folder_moved_with_its_files_is_read_where_it_now_is(tmp_path):
     assert (meta["sensor_file"], meta["scene_spec"]) == (str(old / "twin.toml"), str(old / "press.toml"))
     assert json.loads((old / "twin.posterior.json").read_text())["drawing_spec"] == str(old / "mine.toml")
     first = json.loads((old / "m.json").read_text())["fit"]
+    # a twin identified on a drawing of one's own: how far its units' rest spreads, which a tare's note reads
+    assert len(first["held_out"]["rest_spread"]) == 8 and min(first["held_out"]["rest_spread"]) > 0.01
     # the drawing edited since identify: its ADC (in its hash) or its tolerances (not in it). Units drawn from the
     # posterior with the edited one had widened the twin's figures 7x in silence (an 8-bit ADC)
     fit = ("fitgen", "fit", str(old / "t.csv"), "--held-out", "50", "-o", str(old / "x.json"))

@@ -114,6 +114,15 @@ class Model:
         out = np.array(rest, dtype=float)
         return out if np.all(np.isfinite(out)) else None
 
+    @property
+    def held_out_rest_spread(self) -> np.ndarray | None:
+        """How far the rest readings of units built within the tolerances of its unit's drawing spread (a standard
+        deviation per input; its ``held_out`` record's ``rest_spread``, a twin's); None without one."""
+        spread = (self.fit_info.get("held_out") or {}).get("rest_spread")
+        if not isinstance(spread, list) or len(spread) != self.n_inputs:
+            return None
+        return np.array(spread, dtype=float)
+
     def equation(self, name: str) -> Equation:
         for e in self.equations:
             if e.name == name:
@@ -384,6 +393,9 @@ def _check_fit_notes(fit, origin: str) -> None:
             refuse(f".held_out.box.{name}", "[low, high] (finite, low <= high)", pair)
     if "rest" in held and not (isinstance(held["rest"], list) and all(map(is_finite_number, held["rest"]))):
         refuse(".held_out.rest", "a list of readings", held["rest"])
+    if "rest_spread" in held and not (isinstance(held["rest_spread"], list)
+                                      and all(is_finite_number(x) and x >= 0 for x in held["rest_spread"])):
+        refuse(".held_out.rest_spread", "a list of spreads (>= 0)", held["rest_spread"])
     if held.get("labels", "stage") not in ("stage", "magnet"):  # whose displacements the set is simulated in
         refuse(".held_out.labels", "'stage' or 'magnet'", held["labels"])
     for key, low in (("poses", 1), ("seed", 0)):  # what verify and tactile-hil simulate the held-out set again from

@@ -268,6 +268,8 @@ def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None,
                       labels=ds.meta.get("labels", "stage"))
     # what a tare rests on where the sensor's file is not at hand (the model alone copied to a Pi)
     record["rest"] = readings(sensor, np.zeros(5), adc_bits=0)[0].tolist()
+    if (spread := rest_spread(sensor, posterior)) is not None:  # what a tare onto another unit's rest would take
+        record["rest_spread"] = spread
     if unit_file and Path(unit_file).is_file():  # a unit's, or a drawing of the user's own: verify finds it again
         record["sensor_file"] = str(Path(unit_file).resolve())
         if sensor.is_drawing:  # a record without it, with a file, is a unit's (as models fitted before it say)
@@ -280,6 +282,38 @@ def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None,
         if unc is not None:
             record["uncalibrated"] = unc
     return record
+
+
+REST_SPREAD_UNITS = 64  # units drawn for the spread of their rest readings
+REST_SPREAD_SEED = 2031
+
+
+def rest_spread(sensor, posterior: dict | None = None) -> list[float] | None:
+    """Per input, the spread (standard deviation) of the rest readings over units built within the tolerances of
+    the drawing that unit ``sensor`` was built to (its posterior's drawing, else its ``[unit]`` table's): how far
+    another unit's rest lies from this one's, which a tare onto this one's would take for offsets. None for a
+    drawing, and where the drawing does not load here or has no tolerances."""
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.units import UnitSpace
+
+    if sensor.is_drawing:
+        return None
+    unit = sensor.source.get("unit") if isinstance(sensor.source, dict) else None
+    spec = (unit.get("drawing_spec") or unit.get("drawing")) if isinstance(unit, dict) else None
+    try:
+        if posterior is not None:
+            space = _posterior_draw(posterior, sensor)[0]
+        elif isinstance(spec, str):
+            space = UnitSpace.of(load_sensor(spec).with_transfer(sensor.transfer))
+        else:
+            return None
+    except InputError:  # a drawing moved or edited: the fit goes on without what only a tare's note reads
+        return None
+    if not np.any(space.prior_sd > 0) or space.drawing.n_elements != sensor.n_elements:
+        return None
+    rng = np.random.default_rng(REST_SPREAD_SEED)
+    thetas = np.array([space.draw(rng) for _ in range(REST_SPREAD_UNITS)])
+    return space.readings(thetas, np.zeros((1, 5)))[:, 0, :].std(axis=0).tolist()
 
 
 def posterior_units(record: dict, sensor, k: int) -> list:
