@@ -30,7 +30,7 @@ from fitgen.equations.model import Model, check_input_units, load_model
 
 from host.cdrivers import chip_table, smbus_transfer
 from host.channelmap import ChannelMap, check_full_scale
-from host.readout import TARE_SAMPLES
+from host.readout import ANOTHER_UNIT, TARE_SAMPLES, another_unit_limit
 from fitgen.c.cgen import c_real, c_string
 from fitgen.c.compiled import WARNING_FLAGS, first_error, run_tool, tool_command
 
@@ -162,7 +162,20 @@ def _rest_block(model: Model, rest) -> str:
     whose = c_string(whose, lossy=True)
     return (f"#define PI_HAS_REST 1\n/* V: the readings the model expects at rest */\nstatic const double "
             f"PI_REST[{model.n_inputs}] = {{ {', '.join(c_real(float(x), 'double') for x in volts)} }};\n"
-            f"#define PI_REST_FROM {whose}\n")
+            f"#define PI_REST_FROM {whose}\n" + _another_unit_block(model))
+
+
+def _another_unit_block(model: Model) -> str:
+    """pi_options.h's limit on a tare's offsets past which tm_pi notes another unit, as read does
+    (host.readout.another_unit_note); none without a twin's record."""
+    limits = another_unit_limit(model)
+    if limits is None:
+        return ""
+    between, limit = limits
+    text = ANOTHER_UNIT.format(off="%.3g", between=f"{between * 1e3:.3g}", limit=f"{limit * 1e3:.2g}")
+    assert not any(c in text for c in '"\\') and "??" not in text  # a literal as it stands, no trigraph
+    return (f"/* V rms: a tare's offsets past it note another unit (host/readout.py another_unit_note) */\n"
+            f"#define PI_UNIT_LIMIT {c_real(limit, 'double')}\n#define PI_UNIT_NOTE \"{text}\"\n")
 
 
 def pi_autozero(model: Model, rest, precision: str) -> tuple | None:

@@ -211,23 +211,32 @@ def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = 
 
 
 TARE_UNIT_SHARE = 0.25  # of the rest readings' spread between units: a unit's own drift stays well under it
+ANOTHER_UNIT = ("note: the tare's offsets reach {off} mV rms, and the rest readings of units built to the drawing of "
+                "the model's unit spread by {between} mV rms (one unit's drift stays well under {limit}): is this the "
+                "unit the model was fitted for? On another unit its estimates err as the drawing's model does on a "
+                "unit (identify this one and fit its twin)")
+
+
+def another_unit_limit(model) -> tuple[float, float] | None:
+    """(how far the rest readings of units built to the drawing of ``model``'s unit spread, rms over the elements of
+    Model.held_out_rest_spread, a twin's record; the tare offsets' rms past which :func:`another_unit_note` speaks:
+    TARE_UNIT_SHARE of it), in V; None without the record."""
+    spread = model.held_out_rest_spread
+    if spread is None:
+        return None
+    between = float(np.sqrt(np.mean(np.square(spread))))
+    return between, TARE_UNIT_SHARE * between
 
 
 def another_unit_note(model, offsets) -> str:
-    """A note when a tare's ``offsets`` (V) reach, in rms over the elements, TARE_UNIT_SHARE of how far the rest
-    readings of units built to the drawing of ``model``'s unit spread (Model.held_out_rest_spread, a twin's record):
-    the sensor resting is then more likely another unit than this one drifted, and a tare maps any unit's rest onto
-    the model's; '' otherwise, or without the record."""
-    spread = model.held_out_rest_spread
-    if spread is None:
+    """A note when a tare's ``offsets`` (V) reach, in rms over the elements, :func:`another_unit_limit`: the sensor
+    resting is then more likely another unit than this one drifted, and a tare maps any unit's rest onto the
+    model's; '' otherwise, or without the record."""
+    limits = another_unit_limit(model)
+    off = float(np.sqrt(np.mean(np.square(offsets))))
+    if limits is None or not off > limits[1]:
         return ""
-    off, between = (float(np.sqrt(np.mean(np.square(x)))) for x in (offsets, spread))
-    if not off > TARE_UNIT_SHARE * between:
-        return ""
-    return (f"note: the tare's offsets reach {off * 1e3:.3g} mV rms, and the rest readings of units built to the "
-            f"drawing of the model's unit spread by {between * 1e3:.3g} mV rms (one unit's drift stays well under "
-            f"{TARE_UNIT_SHARE * between * 1e3:.2g}): is this the unit the model was fitted for? On another unit its "
-            "estimates err as the drawing's model does on a unit (identify this one and fit its twin)")
+    return ANOTHER_UNIT.format(off=f"{off * 1e3:.3g}", between=f"{limits[0] * 1e3:.3g}", limit=f"{limits[1] * 1e3:.2g}")
 
 
 @dataclass

@@ -64,6 +64,24 @@ class Terminal:
         pass
 
 
+def twin_and_another_unit(folder):
+    """Units 7 and 8 of paper in volts, simulated on the slide scene (``u7.unit.toml``, ``u8.unit.toml`` in
+    ``folder``), and unit 7's twin as ``fitgen fit`` writes it (``twin.json``): the model, loaded."""
+    from pathlib import Path
+
+    from fitgen.equations.model import load_model
+
+    folder = Path(folder)
+    for seed in (7, 8):
+        proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--unit", str(seed), "--transfer", "gmr", "--scene",
+                       "slide", "-o", str(folder / f"u{seed}.csv"))
+        assert proc.returncode == 0, proc.stderr
+    proc = run_cli("fitgen", "fit", str(folder / "u7.csv"), "-o", str(folder / "twin.json"), "--family", "all",
+                   "--held-out", "50")
+    assert proc.returncode == 0, proc.stderr
+    return load_model(folder / "twin.json")
+
+
 def simulated_capture(unit, poses, seed, rig_error=0.01, samples=16):
     """A simulated capture of ``unit`` at stage ``poses``: the stage off its labels by the rig's error, rows averaged
     over ``samples`` (the unit's noise over sqrt(samples)); the readings and that noise."""

@@ -15,7 +15,7 @@ from host.arduino import HARDWARE, build_example, example_elf, library_propertie
 from host.boards import BOARDS
 from host.channelmap import parse_spec
 
-from conftest import TWO_CHIPS, Terminal, assert_one_line_error, require_tool, run_cli
+from conftest import TWO_CHIPS, Terminal, assert_one_line_error, require_tool, run_cli, twin_and_another_unit
 
 UNO = BOARDS["uno"]
 # flash and static RAM (the stack's peak after them when it was measured, as it is wherever simavr is)
@@ -460,6 +460,30 @@ def test_read_pose_on_the_nano_and_the_mega_prints_what_it_prints_on_the_uno(mod
     leonardo_flash = int(re.search(r"the Leonardo: flash (?:over )?(\d+) of 28672 B", said)[1])  # fits or not
     assert abs(leonardo_flash - (uno_flash + BOARDS["leonardo"].core_flash)) <= 100, (uno, said)
     assert "not measured: the emulated board runs no atmega32u4" in said, said
+
+
+def test_read_pose_notes_a_tare_from_another_unit(tmp_path):
+    """A twin's ReadPose tared with another unit resting: the tare's line is followed by a note, as read's tare is
+    (host.readout.another_unit_note), the offsets' rms as read computes it; on the twin's own unit, no note."""
+    _require_emulator()
+    from hil.sketch import build_readpose, run_sketch
+    from host.readout import another_unit_note, model_rest
+
+    twin = twin_and_another_unit(tmp_path)
+    rest, _ = model_rest(twin)
+    cmap = parse_spec(TWO_CHIPS)
+    lines = {"u8": build_readpose(twin, cmap, tmp_path / "lib", "0,0,0,0,0", n_lines=3, rest=rest,
+                                  sensor=str(tmp_path / "u8.unit.toml"), build_path=tmp_path / "build")[1].lines}
+    lines["u7"] = run_sketch(example_elf(tmp_path / "build"), cmap, "0,0,0,0,0", n_lines=3, rest_first=True,
+                             sensor=str(tmp_path / "u7.unit.toml")).lines
+    notes = {k: [ln for ln in v if ln.startswith("# note:")] for k, v in lines.items()}
+    assert notes["u7"] == [], lines["u7"]
+    assert len(notes["u8"]) == 1 and notes["u8"][0].endswith("is this the unit the model was fitted for?"), lines
+    said = next(ln for ln in lines["u8"] if ln.startswith("# tare:"))
+    offsets = np.array([float(x) for x in said.split()[4:]]) * 1e-3
+    python = another_unit_note(twin, offsets)
+    reach = [float(t.split("offsets reach ")[1].split(" mV rms")[0]) for t in (python, notes["u8"][0])]
+    assert python and abs(reach[0] - reach[1]) <= 0.1, (python, notes)
 
 
 @pytest.mark.parametrize("precision", ["float", "fixed"])

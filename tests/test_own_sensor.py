@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import assert_one_line_error, require_tool, run_cli
+from conftest import assert_one_line_error, require_tool, run_cli, twin_and_another_unit
 from fitgen.base.errors import InputError
 from fitgen.physics.sensor import load_sensor
 
@@ -111,18 +111,11 @@ def test_a_tare_onto_a_twin_from_another_unit_is_said(tmp_path):
     """A twin's tare with another unit resting on the bus: the offsets took up that unit's rest in silence, and its
     estimates erred by a millimetre. The model records how far the rest readings of units built to its drawing
     spread; offsets past a quarter of that are noted, a unit's own temperature drift of 10 degC is not."""
-    from fitgen.equations.model import load_model
     from fitgen.fitting.holdout import rest_spread
     from fitgen.physics.transfer import readings
 
-    for seed in (7, 8):
-        proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--unit", str(seed), "--transfer", "gmr", "--scene",
-                       "slide", "-o", str(tmp_path / f"u{seed}.csv"))
-        assert proc.returncode == 0, proc.stderr
-    proc = run_cli("fitgen", "fit", str(tmp_path / "u7.csv"), "-o", str(tmp_path / "twin.json"), "--family", "all",
-                   "--held-out", "50")
-    assert proc.returncode == 0, proc.stderr
-    spread = load_model(tmp_path / "twin.json").held_out_rest_spread
+    twin = twin_and_another_unit(tmp_path)
+    spread = twin.held_out_rest_spread
     # what the record says of units matches units simulate draws within the drawing's tolerances
     drawn = []
     for seed in range(20, 36):

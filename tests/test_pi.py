@@ -17,7 +17,8 @@ from host.pi import StandIn, build_pi, render_adc_map, render_pi
 from host.readout import LineFormat
 from host.temperature import TempComp
 
-from conftest import TWO_CHIPS, assert_one_line_error, interrupt_after_rename, require_tool, run_cli, sim_bus
+from conftest import (TWO_CHIPS, assert_one_line_error, interrupt_after_rename, require_tool, run_cli, sim_bus,
+                      twin_and_another_unit)
 
 MAP = TWO_CHIPS
 
@@ -375,6 +376,41 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     assert [ln.split(",", 1)[1] for ln in res3.stdout.splitlines()[1:]] == [ln.split(",", 1)[1] for ln in expected[1:]]
     assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", str(tmp_path / "m.json"), "--adc", MAP,
                                   "--temp-comp", "x.json", "-o", str(tmp_path / "z")))
+
+
+def test_pi_build_notes_a_tare_from_another_unit_as_read_does(tmp_path):
+    """tm_pi --tare on a twin's build with another unit resting: the note read gives, word for word, from the limit
+    pi-build compiles in; on the twin's own unit, none. A drawing's build compiles in no limit."""
+    from fitgen.equations.model import load_model
+    from fitgen.physics.sensor import load_sensor
+    from host.clock import VirtualClock
+    from host.pi import _another_unit_block
+    from host.readout import another_unit_note, model_rest
+    from host.simbus import SimBus
+
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    twin = twin_and_another_unit(tmp_path)
+    rest = model_rest(twin)
+    cmap = parse_spec(MAP)
+    binary = build_pi(render_pi(twin, cmap, tmp_path / "pi", precision="float", rest=rest), standin=True)
+    said = []
+    for unit in ("u8", "u7"):
+        def bus():
+            clock = VirtualClock()
+            return SimBus.for_channel_map(cmap, load_sensor(str(tmp_path / f"{unit}.unit.toml")).with_transfer("gmr"),
+                                          [0.0] * 5, clock=clock, noise=0.0005, seed=3), clock
+
+        b, clock = bus()
+        res = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", "1", "--tare"])
+        assert res.returncode == 0, res.stderr
+        b, clock = bus()
+        note = another_unit_note(twin, _python_readout(twin, b, clock, 1, rest=rest[0])[1].offsets)
+        said.append(note)
+        assert [ln for ln in res.stderr.splitlines() if "note:" in ln] == ([f"tm_pi: {note}"] if note else [])
+    assert said[0] and not said[1]
+    assert _another_unit_block(load_model(tmp_path / "twin.json")) and not _another_unit_block(
+        replace(twin, fit_info={k: v for k, v in twin.fit_info.items() if k != "held_out"}))
 
 
 def test_pi_build_tares_as_the_python_readout_does(model, tmp_path):

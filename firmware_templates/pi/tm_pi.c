@@ -178,6 +178,17 @@ static int tare(adc_array *array, const double lsb[TM_N_INPUTS], long n, double 
         fprintf(stderr, " %+.2f", offsets[k] * 1e3);
     }
     fprintf(stderr, " (spread up to %.2f mV rms), onto the rest readings of %s\n", spread * 1e3, PI_REST_FROM);
+#ifdef PI_UNIT_LIMIT /* a twin's: another unit's rest is offsets to a tare (host/readout.py) */
+    {
+        double sq = 0.0;
+        for (k = 0; k < TM_N_INPUTS; ++k) {
+            sq += offsets[k] * offsets[k];
+        }
+        if (sqrt(sq / TM_N_INPUTS) > PI_UNIT_LIMIT) {
+            fprintf(stderr, "tm_pi: " PI_UNIT_NOTE "\n", sqrt(sq / TM_N_INPUTS) * 1e3);
+        }
+    }
+#endif
     return ADC_OK;
 }
 

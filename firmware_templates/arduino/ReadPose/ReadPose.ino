@@ -9,7 +9,8 @@
  * readout with one line starting "error:". A library built with --tare (TACTILE_TARE) first averages
  * TACTILE_TARE_SAMPLES readings of the untouched sensor and maps them onto the model's rest readings
  * (TACTILE_REST), as tactile-host read --tare does; it prints one line before the header, "# tare: offsets
- * [mV] ...", and every line after carries the tared volts. Leave the skin untouched at power-up; a 't' sent
+ * [mV] ...", and every line after carries the tared volts; a twin's library (TACTILE_UNIT_LIMIT) follows it with
+ * a "# note:" line when the offsets look like another unit's rest. Leave the skin untouched at power-up; a 't' sent
  * over Serial (the serial monitor's input line) tares again, its line printed among the rows. The first
  * estimate far outside the pose box the model was fitted in (tm_far_outside) is followed by one line
  * starting "# note:": readings of another sensor than the model's, as tactile-host read counts them. */
@@ -54,6 +55,9 @@ static bool tare()
 {
     int32_t codes[TM_N_INPUTS], sum[TM_N_INPUTS];
     int k, n, st;
+#ifdef TACTILE_UNIT_LIMIT
+    float sq = 0.0f;
+#endif
     for (k = 0; k < TM_N_INPUTS; ++k) {
         sum[k] = 0;
     }
@@ -80,8 +84,18 @@ static bool tare()
 #endif
         Serial.print(-shift >= 0.0f ? F(" +") : F(" ")); /* as read prints them: measured less the rest, signed */
         Serial.print(-1000.0f * shift, 2);
+#ifdef TACTILE_UNIT_LIMIT
+        sq += shift * shift;
+#endif
     }
     Serial.println();
+#ifdef TACTILE_UNIT_LIMIT /* a twin's: another unit's rest is offsets to a tare (host/readout.py) */
+    if (sqrtf(sq / (float)TM_N_INPUTS) > TACTILE_UNIT_LIMIT) {
+        Serial.print(F("# note: the tare's offsets reach "));
+        Serial.print(1000.0f * sqrtf(sq / (float)TM_N_INPUTS), 1);
+        Serial.println(F(" mV rms, past what one unit drifts: is this the unit the model was fitted for?"));
+    }
+#endif
     return true;
 }
 #endif
