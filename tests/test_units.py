@@ -617,7 +617,9 @@ def test_a_folder_moved_with_its_files_is_read_where_it_now_is(tmp_path):
     # a file of the name that is not the one recorded (another unit identified into it): not taken
     write_unit(new / "twin.toml", draw_unit(load_sensor("paper"), 5)[0], "paper")
     assert_one_line_error(run_cli("fitgen", "fit", str(new / "t.csv"), "-o", str(new / "x.json")), 2,
-                          f"t.csv was simulated with sensor file {old / 'twin.toml'}, which is missing")
+                          f"t.csv was simulated with sensor file {old / 'twin.toml'}, which is missing, and the "
+                          "twin.toml beside it is another sensor (changed since, or another unit's): give the file it "
+                          "was simulated with")
     assert_one_line_error(run_cli("fitgen", "check", str(new / "m.json"), str(new / "check.csv")), 2,
                           "the sensor its held-out figures were made on is not found here (or has changed)")
 

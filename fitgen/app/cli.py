@@ -101,7 +101,7 @@ def cmd_fit(args) -> int:
 
     settings = fit_settings(args)
     loaded = refuse_huge(load_dataset(args.data))  # numbered as in the file: before lifted rows are left out
-    check_sensor_file(loaded.meta, args.sensor, str(args.data))  # a unit file gone or changed: said, not fitted without
+    check_sensor_file(loaded.meta, args.sensor, str(args.data), Path(args.data).resolve().parent)  # a unit file gone or changed: said, not fitted without
     edited = loaded.meta.get("dataset_sha256") not in (None, loaded.sha256)  # rows changed since the meta was written
     ds, lifted = rows_on_the_skin(loaded)
     recorded = ds.meta.get("units")

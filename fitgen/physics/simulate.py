@@ -251,12 +251,13 @@ def recorded_spec(rec) -> str | None:
     return path if isinstance(path, str) and Path(path).is_file() else rec["sensor"]
 
 
-def check_sensor_file(meta: dict, spec: str | None = None, origin: str = "the dataset") -> None:
+def check_sensor_file(meta: dict, spec: str | None = None, origin: str = "the dataset", folder=None) -> None:
     """InputError when the sensor file a simulated dataset's meta names (``sensor_file``: a unit's, say) is
     missing or has changed since the data were simulated, unless ``spec`` (a --sensor) names another: without
     it :func:`dataset_sensor` finds no sensor, and a fit would lose its noise and held-out figures unsaid.
     A meta naming no file (a preset's data, measured data) passes, and so does a missing file whose sensor is
-    the preset the meta names."""
+    the preset the meta names. ``folder``: the dataset's, where a file of the recorded name that is not the one
+    recorded (fitgen.physics.relocate left it) is said to be another."""
     from pathlib import Path
 
     from fitgen.physics.sensor import preset_names
@@ -269,7 +270,10 @@ def check_sensor_file(meta: dict, spec: str | None = None, origin: str = "the da
     if not Path(recorded).is_file():
         if name in preset_names() and sha in (None, _recorded_sensor(name, meta).sha256):
             return  # the preset it was: dataset_sensor takes that
-        raise InputError(f"{origin} was simulated with sensor file {recorded}, which is missing: {todo}")
+        beside = None if folder is None else Path(folder, re.split(r"[\\/]", recorded)[-1])
+        other = (f", and the {beside.name} beside it is another sensor (changed since, or another unit's)"
+                 if beside is not None and beside.is_file() else "")
+        raise InputError(f"{origin} was simulated with sensor file {recorded}, which is missing{other}: {todo}")
     try:
         changed = sha not in (None, _recorded_sensor(recorded, meta).sha256)
     except InputError:  # it no longer reads as a sensor file
