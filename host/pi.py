@@ -238,6 +238,7 @@ def pi_build(args) -> str:
     from host.readout import model_rest
     from host.session import channel_map_from_args
     from host.temperature import capture_temperature_note, channel_map_note, load_tempcomp, temperature_input
+    from host.tempunit import model_note
 
     compiler(args.cc)
     model, cmap = load_model(args.model), channel_map_from_args(args)
@@ -254,7 +255,8 @@ def pi_build(args) -> str:
                            rest=rest), args.cc)
         binary = _install(partial, folder)
     note = "\n".join(n for n in (channel_map_note(tempcomp, cmap, f"--temp-comp {args.temp_comp}"),
-                                  capture_temperature_note(model, tempcomp, f"{binary.name} --tare")) if n) \
+                                  capture_temperature_note(model, tempcomp, f"{binary.name} --tare"),
+                                  model_note(model, tempcomp, f"--temp-comp {args.temp_comp}")) if n) \
         if tempcomp is not None else ""
     return (f"wrote {binary} ({describe_reads(cmap, tin, tempcomp)}, model {model.sha256[:12]}, {precision}); "
             f"on the Pi: {binary.name} --format csv (I2C bus {default_bus(cmap)} unless --bus N)"

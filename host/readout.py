@@ -212,8 +212,8 @@ def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = 
 
 TARE_UNIT_SHARE = 0.25  # of the rest readings' spread between units: a unit's own drift stays well under it
 ANOTHER_UNIT = ("note: the tare's offsets reach {off} mV rms, and the rest readings of units built to the drawing of "
-                "the model's unit spread by {between} mV rms (one unit's drift stays well under {limit}): is this the "
-                "unit the model was fitted for? On another unit its estimates err as the drawing's model does on a "
+                "the model's unit spread by {between} mV rms (one unit's drift stays well under {limit} mV): is "
+                "this the unit the model was fitted for? On another unit its estimates err as the drawing's model does on a "
                 "unit (identify this one and fit its twin)")
 
 
@@ -221,7 +221,13 @@ def another_unit_limit(model) -> tuple[float, float] | None:
     """(how far the rest readings of units built to the drawing of ``model``'s unit spread, rms over the elements of
     Model.held_out_rest_spread, a twin's record; the tare offsets' rms past which :func:`another_unit_note` speaks:
     TARE_UNIT_SHARE of it), in V; None without the record."""
-    spread = model.held_out_rest_spread
+    return unit_limit(model.held_out_rest_spread)
+
+
+def unit_limit(spread) -> tuple[float, float] | None:
+    """(the rms over the elements of ``spread``, per element how far the rest readings of units built to one drawing
+    spread; TARE_UNIT_SHARE of it, past which rest readings are more likely another unit's than this one's drifted),
+    in V; None for None."""
     if spread is None:
         return None
     between = float(np.sqrt(np.mean(np.square(spread))))

@@ -29,6 +29,7 @@ from host.motion import parse_drift, pose_or_motion
 from host.readout import (TARE_SAMPLES, Corrections, RunRecord, another_unit_note, check_rest_reference,
                           rest_reference, tare)
 from host.simbus import simulated_bus
+from host import tempunit
 from host.temperature import (Thermometer, capture_temperature_note, channel_map_note, load_tempcomp,
                               split_channel_map, temperature_input)
 
@@ -210,6 +211,8 @@ class ReadoutSession:
         if tempcomp is not None and tempcomp.n != model.n_inputs:
             raise InputError(f"--temp-comp {args.temp_comp} has {tempcomp.n} elements; the model takes {model.n_inputs}")
         if tempcomp is not None and (note := channel_map_note(tempcomp, cmap0, f"--temp-comp {args.temp_comp}")):
+            notes.append(note)
+        if tempcomp is not None and (note := tempunit.model_note(model, tempcomp, f"--temp-comp {args.temp_comp}")):
             notes.append(note)
         if tempcomp is not None and tempcomp.fitted_range is None:  # one made by hand, or from Python without it
             notes.append(f"note: --temp-comp {args.temp_comp} records no temperatures it was fitted at "

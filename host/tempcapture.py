@@ -12,6 +12,7 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_numbers
 from fitgen.physics.dataset import load_dataset
+from fitgen.physics.pose import contact_poses
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import SpreadTooLarge, capture, load_schedule, output_lock, simulated_sensor
@@ -90,7 +91,10 @@ def _capture_temperatures(args, prog: str):
     samples, spread, tries, settle, retries = capture_numbers(args)
     timeout = trigger_timeout(args)
     # a pose visited twice is one pose to the compensation: its gain needs two different ones
-    pose_of_row = np.unique(schedule.poses, axis=0, return_inverse=True)[1].ravel()
+    poses, pose_of_row = np.unique(schedule.poses, axis=0, return_inverse=True)
+    pose_of_row = pose_of_row.ravel()
+    # the rest readings at t0 tell whose sensor the file is for (the readouts compare a twin's unit with them)
+    at_rest = np.flatnonzero(np.all(contact_poses(poses) == 0, axis=1))
     if pose_of_row.max() < 1:
         print(f"{prog}: note: one pose per temperature gives offsets only (gain needs two poses)", file=sys.stderr)
     cmap = channel_map_from_args(args)
@@ -146,7 +150,8 @@ def _capture_temperatures(args, prog: str):
         raise CaptureFailed(f"{exc}; {_kept(out, temps)}") from exc
     finally:
         bus.close()
-    tc = fit_tempcomp(np.vstack(rows), np.concatenate(pose_ids), np.concatenate(row_temps), t0=t0)
+    tc = fit_tempcomp(np.vstack(rows), np.concatenate(pose_ids), np.concatenate(row_temps), t0=t0,
+                      rest=int(at_rest[0]) if at_rest.size else None)
     tc.info["captures"] = files
     tc.info["adc"] = cmap.describe()  # the elements each coefficient is for: read and pi-build compare their map
     dest = args.temp_comp_output or str(out.with_name(out.stem + ".tempcomp.json"))

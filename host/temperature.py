@@ -179,6 +179,18 @@ class TempComp:
             return None
         return float(min(temps)), float(max(temps))
 
+    @property
+    def rest_v(self) -> np.ndarray | None:
+        """The rest readings (V) of the sensor it was fitted on, at t0 (its ``fit.rest_v``, recorded where the
+        captures held a row at rest); None without the record."""
+        rest = self.info.get("rest_v")
+        return None if rest is None else np.asarray(rest, dtype=float)
+
+    def reading_at(self, v: np.ndarray, temp: float) -> np.ndarray:
+        """What the sensor reads at ``temp`` (degC) where it reads ``v`` at t0: the drift :meth:`apply` takes off."""
+        dT = temp - self.t0
+        return v * (1.0 + self.gain * dT) + self.offset * dT
+
     def apply(self, raw: np.ndarray, temp) -> np.ndarray:
         """Compensated readings (one row, or rows with a temperature each); a non-finite temperature leaves its
         row as it is."""
@@ -246,6 +258,11 @@ def tempcomp_from_dict(data, origin: str) -> TempComp:
         # what the readouts flag extrapolation against: damaged, it would turn that check off in silence
         raise InputError(f"{origin}: fit.temperatures must list the two or more temperatures it was fitted at "
                          f"(degC), got {temps!r}")
+    rest = fit.get("rest_v")
+    if rest is not None:  # what read and identify tell another unit's compensation by: damaged, it would mislead
+        rest = _coefficients(rest, f"{origin}: fit.rest_v")
+        if rest.shape != off.shape:
+            raise InputError(f"{origin}: fit.rest_v holds {rest.size} rest readings for {off.size} elements")
     return TempComp(t0, off, gain, fit)
 
 
@@ -260,10 +277,12 @@ def _coefficients(values, where: str) -> np.ndarray:
     return out
 
 
-def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, t0: float | None = None) -> TempComp:
+def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, t0: float | None = None,
+                 rest: int | None = None) -> TempComp:
     """Coefficients from rows of readings (n, N), the pose each row was taken at, and its temperature.
 
-    ``t0``: the calibration temperature (default: the temperature closest to the median, the lower of two).
+    ``t0``: the calibration temperature (default: the temperature closest to the median, the lower of two);
+    ``rest``: the pose id at rest, whose readings at t0 the file records (``fit.rest_v``: whose sensor it is).
     """
     readings, pose_ids, temps = np.asarray(readings, float), np.asarray(pose_ids), np.asarray(temps, float)
     if readings.ndim != 2 or pose_ids.shape != (len(readings),) or temps.shape != (len(readings),):
@@ -300,6 +319,8 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
         resid[k] = float(np.sqrt(np.mean((y - X @ coef) ** 2)))
     info = {"rows": int(readings.shape[0]), "temperatures": levels.tolist(), "poses": int(np.unique(pose_ids).size),
             "residual_rms_v": resid.tolist(), "gain_fitted": bool(multi)}
+    if rest is not None and np.any(pose_ids == rest):
+        info["rest_v"] = base[pose_ids == rest][0].tolist()
     tc = TempComp(t0, off, gain, info)
     tempcomp_from_dict(tc.to_dict(), "the compensation these captures give")  # nothing saved that read refuses
     return tc

@@ -117,6 +117,10 @@ def test_the_tempcomp_functions_linkage_can_be_chosen(tmp_path):
     ({"kind": "tactile model", "offset_v_per_degc": [0.0], "gain_per_degc": [0.0]}, "its kind is 'tactile model'"),
     # a model or any JSON without a kind: it said "its kind is None"
     ({"kind": None}, "(it names no kind; a compensation file's is 'tactile temperature compensation')"),
+    # the rest readings the readouts tell another unit's compensation by
+    ({"offset_v_per_degc": [0.0] * 2, "gain_per_degc": [0.0] * 2, "fit": {"rest_v": [1.5]}},
+     "fit.rest_v holds 1 rest readings for 2 elements"),
+    ({"offset_v_per_degc": [0.0], "gain_per_degc": [0.0], "fit": {"rest_v": ["x"]}}, "fit.rest_v[0]"),
 ])
 def test_tempcomp_c_refuses_what_would_not_compile_in_one_line(tmp_path, content, said):
     path = tmp_path / "tc.json"
@@ -843,6 +847,76 @@ def test_identify_and_check_note_a_compensation_extrapolated_or_fitted_through_a
     said = notes(tmp_path / "near.json")
     assert len(said) == 1 and "has a row_degc that does not hold one finite temperature for each of its 24 rows" \
         in said[0], said
+
+
+def test_a_compensation_fitted_on_another_unit_is_noted_wherever_it_meets_this_one(tmp_path, capsys):
+    """A compensation records its sensor's rest readings at t0 (fit.rest_v); identify, check, read, pi-build and
+    emulate --adc note one whose rest lies from the unit's past a quarter of how far the rest readings of units built
+    to the drawing spread (the tare's test): unit 4's compensation went with unit 3 without a word, while each unit
+    drifts its own way. Unit 3's own is not noted, nor one that records no rest."""
+    import argparse
+
+    from fitgen.equations.model import load_model
+    from fitgen.app.hil_cli import _adc_bridge
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.transfer import readings
+
+    require_tool("gcc")
+    ok = _unit_captured_with_a_thermistor(tmp_path)
+    ok("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "4", "--grid", "dx=0",
+       "-o", str(tmp_path / "v.csv"))
+    (tmp_path / "t.csv").write_text("dx,dz\n0,0\n1,-1\n-1,-0.5\n")
+    adc = TWO_CHIPS + ",temp=ads1115@0x4a:0"
+    for name, unit, seed in (("own", "u", "0"), ("other", "v", "4")):
+        ok("tactile-host", "capture", "--poses", str(tmp_path / "t.csv"), "--adc", adc, "--simulate", "--sensor",
+           str(tmp_path / f"{unit}.unit.toml"), "--temperature", "15,25,35", "--seed", seed,
+           "-o", str(tmp_path / f"{name}.csv"))
+    own, other = (str(tmp_path / f"{n}.tempcomp.json") for n in ("own", "other"))
+    rest3 = readings(load_sensor(tmp_path / "u.unit.toml"), np.zeros((1, 5)), adc_bits=0)[0]
+    np.testing.assert_allclose(load_tempcomp(own).rest_v, rest3, atol=1e-3)  # noise over 16 samples, 16-bit steps
+    unit_note = "is it this unit's compensation?"
+
+    def said(proc, prefix):
+        lines = [ln for ln in proc.stderr.splitlines() if unit_note in ln]
+        assert len(lines) <= 1 and all(ln.startswith(f"{prefix}note: --temp-comp {other} was fitted on a sensor "
+                                                     "that rests ") for ln in lines), lines
+        return lines
+
+    cap = str(tmp_path / "cap.csv")
+    identify = ["fitgen", "identify", cap, "--sensor", "paper", "--temp-comp"]
+    assert said(ok(*identify, own, "-o", str(tmp_path / "twin.toml")), "identify: ") == []
+    line, = said(ok(*identify, other, "-o", str(tmp_path / "x.toml")), "identify: ")
+    assert f"mV rms from {cap}'s rows at rest, and the rest readings of units built to its drawing spread by" in line
+    ok("fitgen", "simulate", "--sensor", str(tmp_path / "twin.toml"), "--grid", "paper-sim",
+       "-o", str(tmp_path / "twin.csv"))
+    ok("fitgen", "fit", str(tmp_path / "twin.csv"), "--held-out", "50", "--family", "no-roots",
+       "-o", str(tmp_path / "twin.json"))
+    read = ["tactile-host", "read", "--model", str(tmp_path / "twin.json"), "--adc", adc, "--simulate", "dx=0.5",
+            "--sensor", str(tmp_path / "u.unit.toml"), "--count", "2", "--temp-comp"]
+    assert said(ok(*read, own), "") == []
+    line, = said(ok(*read, other), "tactile-host read: ")
+    assert "mV rms from the model's unit, and the rest readings of units built to its drawing spread by" in line
+    # without a record of its rest (a file from before it, or made by hand): nothing to tell it by
+    bare = json.loads(Path(other).read_text())
+    del bare["fit"]["rest_v"]
+    (tmp_path / "bare.json").write_text(json.dumps(bare))
+    assert said(ok(*read[:-1], "--temp-comp", str(tmp_path / "bare.json")), "") == []
+    ok("fitgen", "schedule", "--check", "12", "-o", str(tmp_path / "cs.csv"))
+    ok("tactile-host", "capture", "--poses", str(tmp_path / "cs.csv"), "--adc", adc, "--simulate", "--sensor",
+       str(tmp_path / "u.unit.toml"), "-o", str(tmp_path / "c.csv"))
+    check = ["fitgen", "check", str(tmp_path / "twin.json"), str(tmp_path / "c.csv"), "--temp-comp"]
+    assert said(run_cli(*check, own), "check: ") == []
+    assert len(said(run_cli(*check, other), "check: ")) == 1
+    pi = ["tactile-host", "pi-build", "--model", str(tmp_path / "twin.json"), "--adc", adc, "--cc", "gcc",
+          "-o", str(tmp_path / "pi"), "--temp-comp"]
+    assert said(ok(*pi, own), "") == []
+    assert len(said(ok(*pi, other), "")) == 1
+    model = load_model(tmp_path / "twin.json")
+    for path, n in ((own, 0), (other, 1)):
+        args = argparse.Namespace(adc=adc, simulate=None, sim_sensor=str(tmp_path / "u.unit.toml"), sim_noise=None,
+                                  seed=None, thermistor=None, temp_comp=path, sim_temperature=None)
+        assert _adc_bridge(args, model)[3] is not None
+        assert len(said(argparse.Namespace(stderr=capsys.readouterr().err), "emulate: ")) == n
 
 
 def test_the_scatter_at_rest_per_volt_scales_to_other_noise_floors(device_model):

@@ -19,6 +19,7 @@ def cmd_identify(args) -> int:
     from fitgen.app import plots
     from fitgen.base.progress import Progress
     from fitgen.fitting import identify as idf, unitrecord as rec, verdict
+    from fitgen.fitting.holdout import drawing_rest_spread
     from fitgen.physics.dataset import load_capture
     from host.temperature import load_tempcomp
 
@@ -32,8 +33,9 @@ def cmd_identify(args) -> int:
     sha = ds.sha256  # the capture's as written, before a compensation
     temperature = rec.capture_temperature(ds.meta, ds.n_rows)
     span = ""
-    if args.temp_comp:
-        ds, temperature = _at_t0(ds, load_tempcomp(args.temp_comp), args.temp_comp, args.capture, "identify")
+    tc = load_tempcomp(args.temp_comp) if args.temp_comp else None
+    if tc is not None:
+        ds, temperature = _at_t0(ds, tc, args.temp_comp, args.capture, "identify")
     elif span := rec.temperature_span_line(ds.meta, ds.n_rows):  # before a refusal, which it may explain
         print(f"identify: {span}", file=sys.stderr)
     # the one the capture's schedule was made for
@@ -43,6 +45,8 @@ def cmd_identify(args) -> int:
                          "stage displacement from the zero, as tactile-host capture writes it")
     rec.check_transfer(args.transfer, ds.meta, args.capture)
     drawing = sensor_of(args) if args.transfer else rec.in_capture_units(sensor_of(args), ds.meta)
+    if tc is not None and (note := _unit_note(ds, tc, drawing_rest_spread(drawing), args.temp_comp, args.capture)):
+        print(f"identify: {note}", file=sys.stderr)
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)
     args.rig_error, args.zero_error, stage = rec.stage_errors(args.rig_error, args.zero_error, ds.meta, args.capture)
     zero = rec.stage_zero(ds.meta, args.capture)  # recorded, so that fitgen check tells a zero reused from one set anew
@@ -139,12 +143,24 @@ def _at_t0(ds, tc, path: str, capture: str, command: str):
     return out, {"capture_degc": tc.t0, "compensated_from_degc": round(float(np.median(temps)), 4)}
 
 
+def _unit_note(ds, tc, spread, path: str, capture: str) -> str:
+    """host.tempunit.capture_note: a compensation fitted on another unit than the one ``capture`` (at t0) is of."""
+    from host.tempunit import capture_note
+
+    return capture_note(ds, tc, spread, f"--temp-comp {path}", capture)
+
+
 def _check_temperature(ds, sensor, temp_comp: str | None, capture: str):
     """A check capture and a line on its temperature against the unit's (the unit file's ``capture_degc``): with
     ``temp_comp``, its rows taken from their own temperatures to the compensation's t0, which must be the unit's;
     without, a note when it was read more than CAPTURE_DEGC_TOL from the unit's, which the prediction does not
     draw; '' when there is nothing to say."""
+    import numpy as np
+
+    from fitgen.fitting.holdout import rest_spread
     from fitgen.fitting.unitrecord import capture_temperature
+    from fitgen.physics.transfer import readings
+    from host.tempunit import rest_note
     from host.temperature import CAPTURE_DEGC_TOL, load_tempcomp, unit_capture_degc
 
     theirs = unit_capture_degc(sensor.source)
@@ -156,6 +172,10 @@ def _check_temperature(ds, sensor, temp_comp: str | None, capture: str):
                              "identified at (capture_degc: its capture had no thermistor), so there is none to take "
                              "the check's rows to")
         ds, info = _at_t0(ds, tc, temp_comp, capture, "check")
+        # against the unit's rest: a check's schedule has no row at rest
+        rest = readings(sensor, np.zeros((1, 5)), adc_bits=0)[0]
+        if note := rest_note(tc, rest, rest_spread(sensor), f"--temp-comp {temp_comp}", f"the unit ({sensor.name})"):
+            print(f"check: {note}", file=sys.stderr)
         t0 = info["capture_degc"]
         if abs(t0 - theirs) > CAPTURE_DEGC_TOL:
             raise InputError(f"--temp-comp {temp_comp} takes the check's rows to {t0:g} degC, but the unit was "

@@ -93,7 +93,7 @@ def _describe(runner, dev, target: str, compiled: str = "") -> None:
               + (" on the TWI bus" if target == "uno" else " over the I2C bridge") + ", answered by the bus model")
 
 
-def _adc_bridge(args, n_inputs: int):
+def _adc_bridge(args, model):
     """(channel map, stand-in bus, thermistor input, compensation) for --adc, or Nones."""
     from hil.bridge import adc_bridge
 
@@ -106,9 +106,18 @@ def _adc_bridge(args, n_inputs: int):
             raise InputError(f"{', '.join(given)} {'goes' if len(given) == 1 else 'go'} with --adc (without it the "
                              "firmware's inputs come from the serial protocol)")
         return None, None, None, None
-    return adc_bridge(args.adc, args.simulate or "0,0,0,0,0", sensor=args.sim_sensor, noise=args.sim_noise,
-                      seed=args.seed or 0, thermistor=args.thermistor, temp_comp=args.temp_comp,
-                      temperature=args.sim_temperature, n_inputs=n_inputs)
+    out = adc_bridge(args.adc, args.simulate or "0,0,0,0,0", sensor=args.sim_sensor, noise=args.sim_noise,
+                     seed=args.seed or 0, thermistor=args.thermistor, temp_comp=args.temp_comp,
+                     temperature=args.sim_temperature, n_inputs=model.n_inputs)
+    if (tempcomp := out[3]) is not None:  # as read and pi-build say of the compensation they compile in
+        from host.temperature import channel_map_note
+        from host.tempunit import model_note
+
+        option = f"--temp-comp {args.temp_comp}"
+        for note in (channel_map_note(tempcomp, out[0], option), model_note(model, tempcomp, option)):
+            if note:
+                print(f"emulate: {note}", file=sys.stderr)
+    return out
 
 
 def _stopped(runner, args, advice, before: bool = True) -> None:
@@ -155,7 +164,7 @@ def cmd_emulate(args) -> int:
     model, data = _load(args)
     if args.adc:  # the model's own, where found (without --adc, a --sim-sensor given is refused)
         args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"
-    cmap, bridge, tin, tempcomp = _adc_bridge(args, model.n_inputs)
+    cmap, bridge, tin, tempcomp = _adc_bridge(args, model)
     with ExitStack() as stack:
         with Progress(f"{args.target} firmware", 2) as bar:  # building and booting take seconds
             bar.update(0, "building")

@@ -309,7 +309,20 @@ def rest_spread(sensor, posterior: dict | None = None) -> list[float] | None:
             return None
     except InputError:  # a drawing moved or edited: the fit goes on without what only a tare's note reads
         return None
-    if not np.any(space.prior_sd > 0) or space.drawing.n_elements != sensor.n_elements:
+    if space.drawing.n_elements != sensor.n_elements:
+        return None
+    return _units_rest_spread(space)
+
+
+def drawing_rest_spread(drawing) -> list[float] | None:
+    """:func:`rest_spread` of the units built within ``drawing``'s tolerances; None where it has none."""
+    from fitgen.physics.units import UnitSpace
+
+    return _units_rest_spread(UnitSpace.of(drawing))
+
+
+def _units_rest_spread(space) -> list[float] | None:
+    if not np.any(space.prior_sd > 0):
         return None
     rng = np.random.default_rng(REST_SPREAD_SEED)
     thetas = np.array([space.draw(rng) for _ in range(REST_SPREAD_UNITS)])
