@@ -159,6 +159,14 @@ def test_identify_takes_the_drawing_the_capture_was_scheduled_for(tmp_path):
     assert f"the drawing: {drawing.resolve()}, as the capture's schedule names it" in proc.stderr
     unit = (tmp_path / "unit.toml").read_text()
     assert 'drawing = "r9"' in unit and f'drawing_spec = "{drawing.resolve()}"' in unit, unit
+    # -o onto the drawing taken from the record (no option names it), or onto a copy of a drawing: refused, kept
+    copy = tmp_path / "copy.toml"
+    shutil.copy(drawing, copy)
+    before = drawing.read_text()
+    for out, said in ((drawing, f"-o {drawing} is the drawing identify reads"), (copy, f"-o {copy} is a drawing (sensor "
+                      "r9, no unit's traits): writing the unit there would destroy it")):
+        assert_one_line_error(run_cli("fitgen", "identify", str(cap), "-o", str(out)), 2, said)
+        assert out.read_text() == before
     proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "p.toml"), "--sensor", "paper")
     assert proc.returncode == 2 and f"note: the capture's schedule was made for {drawing.resolve()}; identifying " \
         "against --sensor paper" in proc.stderr, proc.stderr

@@ -15,6 +15,28 @@ from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES, parse_positive
 from fitgen.physics.sensor import TRANSFERS
 
 
+def _not_a_drawing(output, drawing: str) -> None:
+    """InputError when identify's ``output`` is a drawing's file: the unit written there would destroy it (the
+    drawing taken from the capture's record is no input the options name, so the general guard misses it)."""
+    from pathlib import Path
+
+    from fitgen.physics.sensor import load_sensor
+
+    path = Path(output)
+    if not path.is_file():
+        return
+    if Path(drawing).is_file() and path.samefile(drawing):
+        raise InputError(f"-o {output} is the drawing identify reads (the capture's schedule names it): writing the "
+                         "unit there would destroy it; give another name (e.g. unit.toml)")
+    try:
+        there = load_sensor(str(path))
+    except (InputError, OSError, ValueError):  # no sensor file: the tools' other checks say what it is
+        return
+    if there.is_drawing:
+        raise InputError(f"-o {output} is a drawing (sensor {there.name}, no unit's traits): writing the unit there "
+                         "would destroy it; give another name (e.g. unit.toml)")
+
+
 def cmd_identify(args) -> int:
     from fitgen.app import plots
     from fitgen.base.progress import Progress
@@ -40,6 +62,7 @@ def cmd_identify(args) -> int:
         print(f"identify: {span}", file=sys.stderr)
     # the one the capture's schedule was made for
     args.sensor, said = rec.drawing_for(args.sensor, ds.meta, args.capture)
+    _not_a_drawing(args.output, args.sensor)
     if not ds.target_names:
         raise InputError(f"{args.capture} has readings but no pose columns (dx,dy,dz,...): identify needs each row's "
                          "stage displacement from the zero, as tactile-host capture writes it")
