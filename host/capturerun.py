@@ -97,7 +97,7 @@ def same_thermistor(output, rows: int, reads: bool) -> None:
     """InputError when ``output``'s ``rows`` rows were captured with a thermistor and this run ``reads`` none, or the
     other way round: a resume dropped their temperatures from the meta, or gave rows read without one a
     temperature (``--adc`` names the elements' channels only, which the resume compares)."""
-    had = rows > 0 and "thermistor_degc" in prior_meta(output, rows)
+    had = rows > 0 and prior_meta(output, rows).get("thermistor_degc") is not None  # None: an older level's none
     if rows and had != reads:
         raise InputError(f"output {output}: its {rows} rows were captured {'with' if had else 'without'} a thermistor "
                          f"(temp= in --adc), this run's --adc {'has none' if had else 'reads one'}: resume with the "

@@ -13,11 +13,14 @@ from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_numbers
 from fitgen.physics.dataset import load_dataset
 from fitgen.physics.pose import contact_poses
+from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.capture import SpreadTooLarge, capture, load_schedule, output_lock, simulated_sensor
+from host.capture import (SpreadTooLarge, capture, check_resume, load_schedule, output_lock, prepare_output,
+                          simulated_sensor)
 from host.posewait import TriggerFailed, enter_waiter, trigger_waiter
-from host.capturerun import CaptureFailed, CaptureInterrupted, capture_numbers, kept, trigger_timeout
+from host.capturerun import (CaptureFailed, CaptureInterrupted, capture_numbers, kept, same_thermistor,
+                             trigger_timeout)
 from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.simsensor import Drift
@@ -100,6 +103,14 @@ def _capture_temperatures(args, prog: str):
     cmap = channel_map_from_args(args)
     tin = temperature_input(args.adc, cmap, args.thermistor)
     out = Path(args.output)
+    source = {"source": f"simulated {args.sensor}" if args.simulate else "hardware"}
+    if args.simulate:  # the sensor itself tells a resume whether it is the same one
+        source["sensor_sha256"] = load_sensor(args.sensor).sha256
+    for T in temps:  # every level's rows checked as a plain capture's are, before any is taken
+        path = _temperature_file(out, T)
+        done = prepare_output(path, cmap.n_elements, schedule, write=False).rows
+        check_resume(path, done, {"adc": cmap.describe(), **source, "samples_per_row": samples})
+        same_thermistor(path, done, tin is not None)
     drift = None
     if args.simulate:
         drift = (parse_drift(args.sim_drift, cmap.n_elements) or Drift.typical(cmap.n_elements, seed=args.seed)
@@ -132,9 +143,8 @@ def _capture_temperatures(args, prog: str):
             with output_lock(path):  # a plain capture into this temperature's file is another run too
                 capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
                         set_pose=bus.set_pose if args.simulate else None, settle=settle, clock=clock,
-                        meta={"adc": cmap.describe(), "temperature_set": T,
-                              "thermistor_degc": now if np.isfinite(now) else None,
-                              "source": f"simulated {args.sensor}" if args.simulate else "hardware"})
+                        meta={"adc": cmap.describe(), "temperature_set": T, **source,
+                              **({"thermistor_degc": now} if np.isfinite(now) else {})})
             ds = load_dataset(path, min_rows=1)
             recorded = ds.meta.get("thermistor_degc")
             measured = float(recorded) if isinstance(recorded, (int, float)) and thermo is not None else now

@@ -124,6 +124,31 @@ def test_a_resumed_level_keeps_its_own_temperature_and_a_pose_twice_is_one_pose(
     assert np.max(np.abs(tw["offset_v_per_degc"])) < 0.01
 
 
+def test_a_temperature_capture_resumes_only_as_it_was_taken(tmp_path):
+    """A resumed `capture --temperature` added to each level's rows without the plain capture's checks: another
+    unit's rows were mixed in (exit 0, a compensation that read dx 16.5), rows of another --samples, another map,
+    or temperatures dropped. Each is refused in one line before any row, and the levels and compensation are kept."""
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.units import draw_unit, write_unit
+
+    write_unit(tmp_path / "u3.unit.toml", draw_unit(load_sensor("paper").with_transfer("gmr"), 3)[0], "paper", {})
+    proc = capture_t(tmp_path, SCHEDULE, "15,25", "--samples", "4")
+    assert proc.returncode == 0, proc.stderr
+    kept = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    swapped = WITH_TEMP.replace("0x48", "0x4X").replace("0x49", "0x48").replace("0x4X", "0x49")
+    for extra, adc, said in ((["--sensor", str(tmp_path / "u3.unit.toml")], WITH_TEMP,
+                              "its 6 rows were captured from simulated paper (sensor sha256 "),
+                             ([], WITH_TEMP, "its 6 rows were captured with --samples 4, this run's is 16"),
+                             ([], swapped, "its 6 rows were captured with --adc "),
+                             ([], WITH_TEMP.rsplit(",", 1)[0], "its 6 rows were captured with a thermistor (temp= in "
+                              "--adc), this run's --adc has none")):
+        samples = [] if "16" in said else ["--samples", "4"]
+        proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", adc, "--simulate",
+                       "--temperature", "15,25", "-o", str(tmp_path / "cap.csv"), *samples, *extra)
+        assert_one_line_error(proc, 2, said)
+        assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == kept
+
+
 @pytest.mark.parametrize("option, said", [(["--precision", "float"], "--precision goes with --engine c"),
                                           (["--rest", "paper"], "--rest goes with --tare or --auto-zero"),
                                           (["--rest-hold", "5"], "--rest-hold goes with --auto-zero"),
