@@ -36,6 +36,39 @@ def test_no_output_is_an_input_or_another_output(model_file, tmp_path):
     assert (tmp_path / "s.csv").read_text() == SCHEDULE
 
 
+def test_no_output_replaces_another_kind_of_the_tools_json_files(model_file, tmp_path):
+    """`fit -o` over a temperature compensation, `capture --temp-comp-output` or `noise -o` over a model: each wrote
+    its own JSON over the other's, exit 0. Refused in one line naming what the file is; a model over a model is a
+    refit, taken."""
+    model = tmp_path / "m.json"
+    shutil.copy(model_file, model)
+    assert capture_t(tmp_path, SCHEDULE, "15,25", "--samples", "2").returncode == 0
+    comp, level = tmp_path / "cap.tempcomp.json", tmp_path / "cap.T15.csv"
+    noise = tmp_path / "noise.json"
+    assert run_cli("tactile-host", "noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "1", "-o",
+                   str(noise)).returncode == 0
+    kept = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    for tool, argv, said in (
+            ("fitgen", ["fit", str(level), "-o", str(comp)], f"-o {comp} is a temperature compensation: fit would "
+             "write a model over it"),
+            ("fitgen", ["fit", str(level), "-o", str(noise)], f"-o {noise} is a noise record: fit would write a model"),
+            ("tactile-host", ["noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "1", "-o", str(model)],
+             f"-o {model} is a model: noise would write a noise record over it"),
+            ("tactile-host", ["capture", "--poses", str(tmp_path / "s.csv"), "--adc", WITH_TEMP, "--simulate",
+                              "--temperature", "15,25", "-o", str(tmp_path / "c2.csv"), "--temp-comp-output",
+                              str(model)], f"--temp-comp-output {model} is a model: capture would write a temperature "
+             "compensation over it"),
+            ("tactile-host", ["read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "dx=1", "--count", "1",
+                              "--record", str(comp)], f"--record {comp} is a temperature compensation: read would "
+             "write another kind of file over it")):
+        assert_one_line_error(run_cli(tool, *argv), 2, said)
+        assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == kept
+    sim = tmp_path / "sim.csv"
+    assert run_cli("fitgen", "simulate", "--random", "100", "-o", str(sim)).returncode == 0
+    proc = run_cli("fitgen", "fit", str(sim), "-o", str(model))
+    assert proc.returncode == 0 and model.read_bytes() != kept["m.json"], proc.stderr
+
+
 def test_a_record_that_cannot_be_made_leaves_the_output_as_it_was(model_file, tmp_path):
     (tmp_path / "keep.csv").write_text("precious\n")
     assert_one_line_error(read(model_file, "-o", str(tmp_path / "keep.csv"), "--record",

@@ -376,15 +376,50 @@ OUTPUT_KINDS = {("identify", "output"): ((".csv", ".json"), "the unit file is a 
                                              "it rewrites at each move: name it .txt (e.g. pose.txt)")}
 
 
+# the tools' JSON files, told by the keys each always holds; and the kind each command's output writes
+JSON_KINDS = (("a model", ("schema_version", "inputs", "outputs")),
+              ("a temperature compensation", ("t0", "offset_v_per_degc", "gain_per_degc")),
+              ("a unit's posterior", ("covariance", "drawing_spec")),
+              ("a noise record", ("recommended", "single_v")),
+              ("a stage's record", ("flavor", "position", "zero")))
+WRITES_JSON = {("fit", "output"): "a model", ("capture", "temp_comp_output"): "a temperature compensation",
+               ("noise", "output"): "a noise record"}
+
+
+def json_kind(path) -> str | None:
+    """Which of the tools' JSON files ``path`` holds (JSON_KINDS; a dataset's meta by its name), or None."""
+    import json
+
+    if str(path).endswith(".meta.json"):
+        return "a dataset's meta"
+    try:
+        with open(path, "rb") as f:
+            doc = json.loads(f.read(1 << 24))
+    except (OSError, ValueError, RecursionError):
+        return None
+    return next((kind for kind, keys in JSON_KINDS if isinstance(doc, dict) and all(k in doc for k in keys)), None)
+
+
 def check_output_kind(args) -> None:
-    """InputError when an output is named as another kind of file than the command writes (a dataset called .json)."""
+    """InputError when an output is named as another kind of file than the command writes (a dataset called .json),
+    or would replace another kind of the tools' JSON files (a model written over a compensation)."""
     from pathlib import Path
 
-    for (command, dest), (suffixes, said) in OUTPUT_KINDS.items():
-        path = getattr(args, dest, None) if getattr(args, "command", None) == command else None
+    command = getattr(args, "command", None)
+    for (cmd, dest), (suffixes, said) in OUTPUT_KINDS.items():
+        path = getattr(args, dest, None) if command == cmd else None
         if isinstance(path, str) and Path(path).suffix.lower() in suffixes:
             flag = "-o" if dest == "output" else "--" + dest.replace("_", "-")
             raise InputError(f"{flag} {path}: {said}")
+    for dest in WRITES:
+        path = getattr(args, dest, None)
+        if not isinstance(path, str) or path == "-" or not Path(path).is_file():
+            continue
+        kind, writes = json_kind(path), WRITES_JSON.get((command, dest))
+        if kind is not None and kind != writes:
+            flag = "-o" if dest == "output" else "--" + dest.replace("_", "-")
+            raise InputError(f"{flag} {path} is {kind}: {command} would write {writes or 'another kind of file'} over "
+                             "it; give another name")
 
 
 def check_not_empty(args) -> None:
