@@ -712,8 +712,12 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
     assert (tmp_path / "u.toml").read_text() == before
     proc = run_cli("fitgen", "identify", str(cap), "--rig-error", "0.05", "-o", str(tmp_path / "u.toml"))
     assert proc.returncode == 0, proc.stderr
-    assert (f"identify: note: {tmp_path / 'u.toml'} held another unit, now replaced: a twin fitted on it no longer "
-            "matches this file") in proc.stderr and (tmp_path / "u.toml").read_text() != before
+    assert (f"identify: note: {tmp_path / 'u.toml'} held this capture's unit as identified before, now replaced: a "
+            "twin fitted on it no longer matches this file") in proc.stderr and (tmp_path / "u.toml").read_text() != before
+    simulated_stage_capture(draw_unit(drawing, 13)[0], load_schedule(sch), tmp_path / "c13.csv", repeatability=0.03,
+                            seed=4)
+    proc = run_cli("fitgen", "identify", str(tmp_path / "c13.csv"), "-o", str(tmp_path / "u.toml"))
+    assert proc.returncode == 0 and f"{tmp_path / 'u.toml'} held another unit, now replaced" in proc.stderr, proc.stderr
     # a flag wins over the record; without a record, the defaults
     assert stage_errors(None, 0.01, meta, "c.csv") == (0.03, 0.01, " (rig error as the capture's schedule was made "
                                                                   "for)")

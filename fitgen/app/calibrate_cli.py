@@ -9,36 +9,15 @@ import sys
 
 from fitgen.app.cliutil import count, finite
 from fitgen.app.options import noise_of, sensor_file_of, sensor_of
-from fitgen.base.fileio import replaces_other, write_all
+from fitgen.base.fileio import write_all
 from fitgen.base.errors import InputError
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES, parse_positive
 from fitgen.physics.sensor import TRANSFERS
 
 
-def _not_a_drawing(output, drawing: str) -> None:
-    """InputError when identify's ``output`` is a drawing's file: the unit written there would destroy it (the
-    drawing taken from the capture's record is no input the options name, so the general guard misses it)."""
-    from pathlib import Path
-
-    from fitgen.physics.sensor import load_sensor
-
-    path = Path(output)
-    if not path.is_file():
-        return
-    if Path(drawing).is_file() and path.samefile(drawing):
-        raise InputError(f"-o {output} is the drawing identify reads (the capture's schedule names it): writing the "
-                         "unit there would destroy it; give another name (e.g. unit.toml)")
-    try:
-        there = load_sensor(str(path))
-    except (InputError, OSError, ValueError):  # no sensor file: the tools' other checks say what it is
-        return
-    if there.is_drawing:
-        raise InputError(f"-o {output} is a drawing (sensor {there.name}, no unit's traits): writing the unit there "
-                         "would destroy it; give another name (e.g. unit.toml)")
-
-
 def cmd_identify(args) -> int:
     from fitgen.app import plots
+    from fitgen.app.unit_output import not_a_drawing, replaced_unit
     from fitgen.base.progress import Progress
     from fitgen.fitting import identify as idf, unitrecord as rec, verdict
     from fitgen.fitting.holdout import drawing_rest_spread
@@ -62,7 +41,7 @@ def cmd_identify(args) -> int:
         print(f"identify: {span}", file=sys.stderr)
     # the one the capture's schedule was made for
     args.sensor, said = rec.drawing_for(args.sensor, ds.meta, args.capture)
-    _not_a_drawing(args.output, args.sensor)
+    not_a_drawing(args.output, args.sensor)
     if not ds.target_names:
         raise InputError(f"{args.capture} has readings but no pose columns (dx,dy,dz,...): identify needs each row's "
                          "stage displacement from the zero, as tactile-host capture writes it")
@@ -108,7 +87,7 @@ def cmd_identify(args) -> int:
                                                 **({"capture_zero": zero} if zero else {})}, unit_noise)
     if folder is not None:  # drawn first, then written with the unit's files: a failure leaves none of them
         files.append((folder / "identify.png", plots.identification_png(ident)))
-    replaced = replaces_other(*files[0])
+    replaced = replaced_unit(*files[0], sha)
     unit, post, *png = write_all(files)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
           f"{args.zero_error:g} mm{stage}", file=sys.stderr)
@@ -118,7 +97,7 @@ def cmd_identify(args) -> int:
     print(f"the unit's reading noise per sample: {unit_noise:.3g} {drawing.units} ({unit_source}), in {unit}: the "
           "twin's fit adds it in expectation and holds out with it", file=sys.stderr)
     if replaced:
-        print(f"identify: note: {unit} held another unit, now replaced: a twin fitted on it no longer matches "
+        print(f"identify: note: {unit} held {replaced}, now replaced: a twin fitted on it no longer matches "
               f"this file (fitgen check refuses it); simulate --sensor {unit} and fit again", file=sys.stderr)
     if png:
         print(f"plot: {png[0]}", file=sys.stderr)

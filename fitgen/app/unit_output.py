@@ -1,0 +1,49 @@
+"""What identify's unit file would replace: a drawing, refused; another unit, or this capture's unit as identified
+before, said."""
+
+from __future__ import annotations
+
+from fitgen.base.errors import InputError
+from fitgen.base.fileio import replaces_other
+
+
+def not_a_drawing(output, drawing: str) -> None:
+    """InputError when identify's ``output`` is a drawing's file: the unit written there would destroy it (the
+    drawing taken from the capture's record is no input the options name, so the general guard misses it)."""
+    from pathlib import Path
+
+    from fitgen.physics.sensor import load_sensor
+
+    path = Path(output)
+    if not path.is_file():
+        return
+    if Path(drawing).is_file() and path.samefile(drawing):
+        raise InputError(f"-o {output} is the drawing identify reads (the capture's schedule names it): writing the "
+                         "unit there would destroy it; give another name (e.g. unit.toml)")
+    try:
+        there = load_sensor(str(path))
+    except (InputError, OSError, ValueError):  # no sensor file: the tools' other checks say what it is
+        return
+    if there.is_drawing:
+        raise InputError(f"-o {output} is a drawing (sensor {there.name}, no unit's traits): writing the unit there "
+                         "would destroy it; give another name (e.g. unit.toml)")
+
+
+def _capture_of(unit_file) -> str | None:
+    """The sha256 of the capture the unit file there was identified from, as it records it; None for none."""
+    import tomllib
+
+    try:
+        with open(unit_file, "rb") as f:
+            unit = tomllib.load(f).get("unit")
+    except (OSError, ValueError):
+        return None
+    return unit.get("capture_sha256") if isinstance(unit, dict) else None
+
+
+def replaced_unit(path, text: str, capture_sha256: str) -> str:
+    """What writing the unit ``text`` to ``path`` replaces, for identify's note: "another unit", "this capture's
+    unit as identified before" (other options), or "" (nothing, or the same text)."""
+    if not replaces_other(path, text):
+        return ""
+    return "this capture's unit as identified before" if _capture_of(path) == capture_sha256 else "another unit"
