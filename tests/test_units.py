@@ -317,6 +317,12 @@ def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
     assert load_sensor(tmp_path / "u.unit.toml").name.endswith("-5")
     assert_one_line_error(run_cli("fitgen", "check", str(tmp_path / "m.json"), str(out)), 2,
                           "the sensor its held-out figures were made on is not found here (or has changed)")
+    # a model of unit 5 into unit 4's model's name: said, as the unit file's replacement is; unit 5's again: nothing
+    for said in (f"note: {tmp_path / 'm.json'} held the model of another sensor ({unit.name}), now replaced", None):
+        proc = run_cli("fitgen", "fit", str(out), "-o", str(tmp_path / "m.json"), "--held-out", "100", "--family",
+                       "no-roots")
+        assert proc.returncode == 0 and (said in proc.stderr if said else "held the model" not in proc.stderr), \
+            proc.stderr
 
 
 def test_fit_refuses_data_whose_unit_file_is_gone_or_changed(tmp_path):

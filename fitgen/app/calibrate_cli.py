@@ -17,7 +17,7 @@ from fitgen.physics.sensor import TRANSFERS
 
 def cmd_identify(args) -> int:
     from fitgen.app import plots
-    from fitgen.app.unit_output import not_a_drawing, replaced_unit
+    from fitgen.app.replaced import not_a_drawing, replaced_unit
     from fitgen.base.progress import Progress
     from fitgen.fitting import identify as idf, unitrecord as rec, verdict
     from fitgen.fitting.holdout import drawing_rest_spread

@@ -92,6 +92,7 @@ def cmd_observe(args) -> int:
 
 
 def cmd_fit(args) -> int:
+    from fitgen.app.replaced import replaced_model
     from fitgen.app.report import fit_notes, fit_summary
     from fitgen.base.progress import Progress
     from fitgen.fitting.family import auto_compares, fit_device
@@ -145,8 +146,11 @@ def cmd_fit(args) -> int:
     model.fit_info["dataset"] = str(args.data)
     if lifted:
         model.fit_info["rows_off_skin_left_out"] = lifted
+    replaced = replaced_model(args.output, model)
     model.save(args.output)
     print(fit_summary(model, args.held_out), end="", file=sys.stderr)
+    if replaced:
+        print(f"note: {replaced}", file=sys.stderr)
     print("".join(f"note: {n}\n" for n in fit_notes(model, ds, args.data, args.units or recorded, sensor)), end="", file=sys.stderr)
     print(f"wrote {args.output}", file=sys.stderr)
     return 0

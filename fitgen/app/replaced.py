@@ -1,5 +1,5 @@
-"""What identify's unit file would replace: a drawing, refused; another unit, or this capture's unit as identified
-before, said."""
+"""What an output would replace: identify's unit file a drawing (refused), another unit or this capture's unit as
+identified before (said); fit's model another sensor's (said)."""
 
 from __future__ import annotations
 
@@ -47,3 +47,23 @@ def replaced_unit(path, text: str, capture_sha256: str) -> str:
     if not replaces_other(path, text):
         return ""
     return "this capture's unit as identified before" if _capture_of(path) == capture_sha256 else "another unit"
+
+
+def replaced_model(path, model) -> str:
+    """A note when fit's output ``path`` holds a model fitted for another sensor than ``model`` is ('' otherwise)."""
+    import json
+    from pathlib import Path
+
+    try:
+        doc = json.loads(Path(path).read_text())
+    except (OSError, ValueError, RecursionError):  # UnicodeDecodeError is a ValueError
+        return ""
+    fit = doc.get("fit") if isinstance(doc, dict) else None
+    old = fit.get("sensor_sha256") if isinstance(fit, dict) else None
+    new = model.fit_info.get("sensor_sha256")
+    if not isinstance(old, str) or not isinstance(new, str) or old == new:
+        return ""
+    held = fit.get("held_out")
+    name = held.get("sensor") if isinstance(held, dict) and isinstance(held.get("sensor"), str) else None
+    return (f"{path} held the model of another sensor{f' ({name})' if name else ''}, now replaced: a device running "
+            "that one, or a check of its unit, needs it fitted again")
