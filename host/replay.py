@@ -26,6 +26,7 @@ from fitgen.physics.sensor import MAX_VOLTS
 from host.autozero import AutoZero, AutoZeroSettings
 from host.readout import FAR_OUTSIDE, Corrections, RunRecord
 from host.temperature import load_tempcomp, tempcomp_from_dict
+from host.tempunit import model_note
 
 BLOCK = 2048  # samples estimated at once: the model's per-call overhead spread, the memory bounded
 
@@ -234,6 +235,9 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
                      f"compensation, and is replayed {'with another' if now else 'without one'}: away from the "
                      "compensation's t0 its offsets no longer map the rest onto the model's (a tare of its own, as "
                      "read --tare --temp-comp takes, would)")
+    whose = f"--temp-comp {temp_comp}" if temp_comp else "the run's temperature compensation"
+    if corrections.tempcomp is not None and (note := model_note(model, corrections.tempcomp, whose)):
+        notes.append(note.removeprefix("note: "))  # another unit's, as read notes it
     az = corrections.autozero
     return ReplayResult(run.t, run.raw, run.temp, v_all, out_all, st_all, run.out,
                         tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes,

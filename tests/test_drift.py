@@ -901,6 +901,12 @@ def test_a_compensation_fitted_on_another_unit_is_noted_wherever_it_meets_this_o
     del bare["fit"]["rest_v"]
     (tmp_path / "bare.json").write_text(json.dumps(bare))
     assert said(ok(*read[:-1], "--temp-comp", str(tmp_path / "bare.json")), "") == []
+    run = tmp_path / "run.jsonl"
+    ok(*read, own, "--record", str(run))
+    for replayed, n in (([], 0), (["--temp-comp", other], 1)):
+        proc = ok("tactile-host", "replay", str(run), *replayed)
+        assert sum(f"note: --temp-comp {other} was fitted on a sensor that rests " in ln
+                   for ln in (proc.stdout + proc.stderr).splitlines()) == n, proc.stdout + proc.stderr
     ok("fitgen", "schedule", "--check", "12", "-o", str(tmp_path / "cs.csv"))
     ok("tactile-host", "capture", "--poses", str(tmp_path / "cs.csv"), "--adc", adc, "--simulate", "--sensor",
        str(tmp_path / "u.unit.toml"), "-o", str(tmp_path / "c.csv"))
