@@ -213,8 +213,8 @@ def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = 
 TARE_UNIT_SHARE = 0.25  # of the rest readings' spread between units: a unit's own drift stays well under it
 ANOTHER_UNIT = ("note: the tare's offsets reach {off} mV rms, and the rest readings of units built to the drawing of "
                 "the model's unit spread by {between} mV rms (one unit's drift stays well under {limit} mV): is "
-                "this the unit the model was fitted for? On another unit its estimates err as the drawing's model does on a "
-                "unit (identify this one and fit its twin)")
+                "this the unit the model was fitted for? On another unit its estimates err as the drawing's model "
+                "does on a unit (identify this one and fit its twin)")
 
 
 def another_unit_limit(model) -> tuple[float, float] | None:

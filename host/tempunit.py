@@ -12,8 +12,8 @@ from host.readout import model_rest, unit_limit
 
 OTHER_UNIT = ("note: {option} was fitted on a sensor that rests {off} mV rms from {whose}, and the rest readings "
               "of units built to its drawing spread by {between} mV rms (one unit's drift stays well under {limit} "
-              "mV): is it this unit's compensation? Each unit drifts its own way, and another's coefficients correct this "
-              "one's wrongly (this unit's: tactile-host capture --temperature)")
+              "mV): is it this unit's compensation? Each unit drifts its own way, and another's coefficients "
+              "correct this one's wrongly (this unit's: tactile-host capture --temperature)")
 
 
 def rest_note(tempcomp, rest, spread, option: str, whose: str, degc: float | None = None) -> str:

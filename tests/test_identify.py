@@ -713,7 +713,8 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
     proc = run_cli("fitgen", "identify", str(cap), "--rig-error", "0.05", "-o", str(tmp_path / "u.toml"))
     assert proc.returncode == 0, proc.stderr
     assert (f"identify: note: {tmp_path / 'u.toml'} held this capture's unit as identified before, now replaced: a "
-            "twin fitted on it no longer matches this file") in proc.stderr and (tmp_path / "u.toml").read_text() != before
+            "twin fitted on it no longer matches this file") in proc.stderr
+    assert (tmp_path / "u.toml").read_text() != before
     simulated_stage_capture(draw_unit(drawing, 13)[0], load_schedule(sch), tmp_path / "c13.csv", repeatability=0.03,
                             seed=4)
     proc = run_cli("fitgen", "identify", str(tmp_path / "c13.csv"), "-o", str(tmp_path / "u.toml"))

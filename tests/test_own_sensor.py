@@ -163,8 +163,9 @@ def test_identify_takes_the_drawing_the_capture_was_scheduled_for(tmp_path):
     copy = tmp_path / "copy.toml"
     shutil.copy(drawing, copy)
     before = drawing.read_text()
-    for out, said in ((drawing, f"-o {drawing} is the drawing identify reads"), (copy, f"-o {copy} is a drawing (sensor "
-                      "r9, no unit's traits): writing the unit there would destroy it")):
+    for out, said in ((drawing, f"-o {drawing} is the drawing identify reads"),
+                      (copy, f"-o {copy} is a drawing (sensor r9, no unit's traits): writing the unit there would "
+                       "destroy it")):
         assert_one_line_error(run_cli("fitgen", "identify", str(cap), "-o", str(out)), 2, said)
         assert out.read_text() == before
     proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "p.toml"), "--sensor", "paper")
