@@ -130,7 +130,9 @@ def next_step(schedule, output) -> str:
         return (f"fitgen check twin.json {output} (the twin's model, named as identify's next step names it, on "
                 "these poses against what identify predicts)")
     drawing = recorded_spec(schedule.drawing) if schedule.drawing else None
-    return (f"fitgen identify {output} --sensor {drawing or 'DRAWING'} -o unit.toml (the unit's physics from these "
+    # a unit.toml here is most likely another unit's: this capture's own name keeps it
+    unit = f"{Path(output).stem}.unit.toml" if Path("unit.toml").exists() else "unit.toml"
+    return (f"fitgen identify {output} --sensor {drawing or 'DRAWING'} -o {unit} (the unit's physics from these "
             "rows)")
 
 

@@ -625,6 +625,13 @@ def test_a_finished_capture_names_the_next_step_from_its_schedule(tmp_path):
                          "c": f"tactile-host capture: next: fitgen check twin.json {cap} (the twin's model, named as "
                               "identify's next step names it, on these poses against what identify predicts)"}
                         [kind]), said
+    # a batch of units in one folder: with a unit.toml there, the next one's own name (it replaced the first's)
+    (tmp_path / "unit.toml").write_text("")
+    proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", spec, "--simulate",
+                   "--samples", "2", "-o", "u2.csv", cwd=tmp_path)
+    assert proc.returncode == 0 and proc.stderr.strip().splitlines()[-1] == (
+        "tactile-host capture: next: fitgen identify u2.csv --sensor paper -o u2.unit.toml (the unit's physics from "
+        "these rows)"), proc.stderr
 
 
 def test_an_earlier_runs_noise_figures_past_any_count_start_anew():
