@@ -106,11 +106,13 @@ def _capture_temperatures(args, prog: str):
     source = {"source": f"simulated {args.sensor}" if args.simulate else "hardware"}
     if args.simulate:  # the sensor itself tells a resume whether it is the same one
         source["sensor_sha256"] = load_sensor(args.sensor).sha256
+    had = {}  # per level, the rows an earlier run took
     for T in temps:  # every level's rows checked as a plain capture's are, before any is taken
         path = _temperature_file(out, T)
-        done = prepare_output(path, cmap.n_elements, schedule, write=False).rows
-        check_resume(path, done, {"adc": cmap.describe(), **source, "samples_per_row": samples})
-        same_thermistor(path, done, tin is not None)
+        state = prepare_output(path, cmap.n_elements, schedule, write=False)
+        check_resume(path, state.rows, {"adc": cmap.describe(), **source, "samples_per_row": samples})
+        same_thermistor(path, state.rows, tin is not None)
+        had[T] = (state.rows, bool(state.done.all()))
     drift = None
     if args.simulate:
         drift = (parse_drift(args.sim_drift, cmap.n_elements) or Drift.typical(cmap.n_elements, seed=args.seed)
@@ -125,26 +127,26 @@ def _capture_temperatures(args, prog: str):
         thermo = Thermometer(array, tin) if tin is not None else None
         for T in temps:
             path = _temperature_file(out, T)
-            if args.simulate:
-                drift.start_degc = T
-            elif args.trigger:
-                pass
-            else:
-                print(f"{prog}: bring the sensor to {T:g} degC and let it settle, then press Enter",
-                      file=sys.stderr, flush=True)
-                if not sys.stdin.readline():
-                    return None
-            wait = trigger_waiter(args.trigger, schedule, timeout) if args.trigger else None
-            if wait is None and not args.simulate:
-                wait = enter_waiter(schedule)
-            # read now, at this level (not a value kept from the last one); a level captured by an earlier run
-            # keeps the reading its meta recorded then
-            now = thermo.read(fresh=True) if thermo is not None else float("nan")
-            with output_lock(path):  # a plain capture into this temperature's file is another run too
-                capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
-                        set_pose=bus.set_pose if args.simulate else None, settle=settle, clock=clock,
-                        meta={"adc": cmap.describe(), "temperature_set": T, **source,
-                              **({"thermistor_degc": now} if np.isfinite(now) else {})})
+            now = float("nan")
+            if not had[T][1]:  # a level an earlier run finished needs neither the sensor brought there nor a row
+                if args.simulate:
+                    drift.start_degc = T
+                elif not args.trigger:
+                    print(f"{prog}: bring the sensor to {T:g} degC and let it settle, then press Enter",
+                          file=sys.stderr, flush=True)
+                    if not sys.stdin.readline():
+                        return None
+                wait = trigger_waiter(args.trigger, schedule, timeout) if args.trigger else None
+                if wait is None and not args.simulate:
+                    wait = enter_waiter(schedule)
+                # read now, at this level (not a value kept from the last one); a level captured by an earlier run
+                # keeps the reading its meta recorded then
+                now = thermo.read(fresh=True) if thermo is not None else float("nan")
+                with output_lock(path):  # a plain capture into this temperature's file is another run too
+                    capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
+                            set_pose=bus.set_pose if args.simulate else None, settle=settle, clock=clock,
+                            meta={"adc": cmap.describe(), "temperature_set": T, **source,
+                                  **({"thermistor_degc": now} if np.isfinite(now) else {})})
             ds = load_dataset(path, min_rows=1)
             recorded = ds.meta.get("thermistor_degc")
             measured = float(recorded) if isinstance(recorded, (int, float)) and thermo is not None else now
@@ -152,8 +154,11 @@ def _capture_temperatures(args, prog: str):
             pose_ids.append(pose_of_row[:ds.n_rows])
             row_temps.append(np.full(ds.n_rows, measured if np.isfinite(measured) else T))
             files.append(str(path))
+            before = had[T][0]  # as the plain capture counts them: a resume says what it took, a rerun nothing
             print(f"{prog}: {ds.n_rows} poses at {T:g} degC"
-                  f"{f' (thermistor {measured:.2f} degC)' if np.isfinite(measured) else ''} in {path}", file=sys.stderr)
+                  f"{f' (thermistor {measured:.2f} degC)' if np.isfinite(measured) else ''} in {path}"
+                  f"{f' ({ds.n_rows - before} captured now, {before} already there)' if before else ''}",
+                  file=sys.stderr)
     except KeyboardInterrupt as exc:
         raise CaptureInterrupted(_kept(out, temps), exc) from None
     except (DeviceSilent, SpreadTooLarge, TriggerFailed) as exc:

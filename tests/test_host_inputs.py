@@ -180,6 +180,11 @@ def test_a_temperature_capture_resumes_only_as_it_was_taken(tmp_path):
                        "--temperature", "15,25", "-o", str(tmp_path / "cap.csv"), *samples, *extra)
         assert_one_line_error(proc, 2, said)
         assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == kept
+    # the same run again takes no row, and says so of each level (it had said "6 poses at 15 degC" as if taken)
+    proc = capture_t(tmp_path, SCHEDULE, "15,25", "--samples", "4")
+    assert proc.returncode == 0, proc.stderr
+    assert [ln.endswith("(0 captured now, 6 already there)") for ln in proc.stderr.splitlines()
+            if " poses at " in ln] == [True, True], proc.stderr
 
 
 @pytest.mark.parametrize("option, said", [(["--precision", "float"], "--precision goes with --engine c"),
