@@ -38,8 +38,8 @@ def test_no_output_is_an_input_or_another_output(model_file, tmp_path):
 
 def test_no_output_replaces_another_kind_of_the_tools_json_files(model_file, tmp_path):
     """`fit -o` over a temperature compensation, `capture --temp-comp-output` or `noise -o` over a model: each wrote
-    its own JSON over the other's, exit 0. Refused in one line naming what the file is; a model over a model is a
-    refit, taken."""
+    its own JSON over the other's, exit 0, and schedule, simulate, read or noise wrote over a capture. Refused in one
+    line naming what the file is; a model over a model is a refit, taken."""
     model = tmp_path / "m.json"
     shutil.copy(model_file, model)
     assert capture_t(tmp_path, SCHEDULE, "15,25", "--samples", "2").returncode == 0
@@ -60,7 +60,18 @@ def test_no_output_replaces_another_kind_of_the_tools_json_files(model_file, tmp
              "compensation over it"),
             ("tactile-host", ["read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "dx=1", "--count", "1",
                               "--record", str(comp)], f"--record {comp} is a temperature compensation: read would "
-             "write another kind of file over it")):
+             "write another kind of file over it"),
+            # a capture (a level's file) is measured: no other command's output replaces it
+            ("fitgen", ["schedule", "--n", "20", "-o", str(level)], f"-o {level} is a capture (rows measured on the "
+             "sensor, as its meta says): schedule would write over it"),
+            ("fitgen", ["simulate", "--random", "10", "-o", str(level)], f"-o {level} is a capture"),
+            ("tactile-host", ["read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "dx=1", "--count", "1",
+                              "-o", str(level)], f"-o {level} is a capture"),
+            ("tactile-host", ["noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "1", "-o", str(level)],
+             f"-o {level}: the noise record is JSON: name it .json"),
+            ("tactile-host", ["capture", "--poses", str(tmp_path / "s.csv"), "--adc", WITH_TEMP, "--simulate",
+                              "--temperature", "15,25", "-o", str(tmp_path / "c2.csv"), "--temp-comp-output",
+                              str(level)], f"--temp-comp-output {level}: the compensation is JSON: name it .json")):
         assert_one_line_error(run_cli(tool, *argv), 2, said)
         assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == kept
     sim = tmp_path / "sim.csv"

@@ -371,6 +371,9 @@ OUTPUT_KINDS = {("identify", "output"): ((".csv", ".json"), "the unit file is a 
                 ("schedule", "output"): (_NOT_CSV, "schedule writes poses in CSV: name it .csv (its meta goes beside it)"),
                 ("predict", "output"): (_NOT_CSV, "predict writes estimates in CSV: name it .csv"),
                 ("fit", "output"): ((".csv", ".toml"), "fit writes a model in JSON: name it .json (e.g. model.json)"),
+                ("capture", "temp_comp_output"): ((".csv", ".toml"), "the compensation is JSON: name it .json (e.g. "
+                                                  "cap.tempcomp.json)"),
+                ("noise", "output"): ((".csv", ".toml"), "the noise record is JSON: name it .json (e.g. noise.json)"),
                 ("run", "junit"): ((".csv", ".json", ".toml"), "the results are JUnit XML: name it .xml"),
                 ("stage-sim", "pose_file"): ((".csv", ".json", ".toml"), "the pose file is one line of text, which "
                                              "it rewrites at each move: name it .txt (e.g. pose.txt)")}
@@ -384,6 +387,20 @@ JSON_KINDS = (("a model", ("schema_version", "inputs", "outputs")),
               ("a stage's record", ("flavor", "position", "zero")))
 WRITES_JSON = {("fit", "output"): "a model", ("capture", "temp_comp_output"): "a temperature compensation",
                ("noise", "output"): "a noise record"}
+
+
+def is_capture(path) -> bool:
+    """Whether ``path`` is a capture (rows measured by `tactile-host capture`), as the meta beside it says."""
+    import json
+
+    from fitgen.physics.dataset import meta_path
+
+    try:
+        with open(meta_path(path), "rb") as f:
+            meta = json.loads(f.read(1 << 24))
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(meta, dict) and str(meta.get("generator", "")).startswith("tactile-host capture")
 
 
 def json_kind(path) -> str | None:
@@ -402,24 +419,29 @@ def json_kind(path) -> str | None:
 
 def check_output_kind(args) -> None:
     """InputError when an output is named as another kind of file than the command writes (a dataset called .json),
-    or would replace another kind of the tools' JSON files (a model written over a compensation)."""
+    or would replace a capture (measured rows) or another kind of the tools' JSON files (a model over a
+    compensation)."""
     from pathlib import Path
+
+    def flag(dest: str) -> str:
+        return "-o" if dest == "output" else "--" + dest.replace("_", "-")
 
     command = getattr(args, "command", None)
     for (cmd, dest), (suffixes, said) in OUTPUT_KINDS.items():
         path = getattr(args, dest, None) if command == cmd else None
         if isinstance(path, str) and Path(path).suffix.lower() in suffixes:
-            flag = "-o" if dest == "output" else "--" + dest.replace("_", "-")
-            raise InputError(f"{flag} {path}: {said}")
+            raise InputError(f"{flag(dest)} {path}: {said}")
     for dest in WRITES:
         path = getattr(args, dest, None)
         if not isinstance(path, str) or path == "-" or not Path(path).is_file():
             continue
+        if is_capture(path) and (command, dest) != ("capture", "output"):  # measured: only its own run adds to it
+            raise InputError(f"{flag(dest)} {path} is a capture (rows measured on the sensor, as its meta says): "
+                             f"{command} would write over it; give another name")
         kind, writes = json_kind(path), WRITES_JSON.get((command, dest))
         if kind is not None and kind != writes:
-            flag = "-o" if dest == "output" else "--" + dest.replace("_", "-")
-            raise InputError(f"{flag} {path} is {kind}: {command} would write {writes or 'another kind of file'} over "
-                             "it; give another name")
+            raise InputError(f"{flag(dest)} {path} is {kind}: {command} would write {writes or 'another kind of file'} "
+                             "over it; give another name")
 
 
 def check_not_empty(args) -> None:
