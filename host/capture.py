@@ -420,7 +420,8 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
     if not (math.isfinite(before_s) and before_s >= 0) or not 1 <= runs <= MAX_COUNT:
         before_s, runs = 0.0, 1
     t_start = clock.monotonic()
-    info = {"schedule": schedule.origin, "samples_per_row": samples, "max_spread_volts": max_spread,
+    info = {"schedule": schedule.origin, "schedule_poses": len(schedule.poses), "samples_per_row": samples,
+            "max_spread_volts": max_spread,
             **({"schedule_drawing": schedule.drawing} if schedule.drawing else {}),
             **({"schedule_stage": schedule.stage} if schedule.stage else {}), **(meta or {})}
     temps = prior_row_degc(prior, state.rows) if temperature is not None else None

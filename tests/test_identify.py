@@ -1226,3 +1226,23 @@ def test_a_stage_axis_the_nearest_unit_moves_against_is_named_as_mirrored():
     assert mirrored_axes(ident([-0.9, 1.0, -0.86]), far) == ["dx", "dz"]
     assert mirrored_axes(ident([0.3, 1.0, 0.25]), far) == []  # far, but along the stage
     assert mirrored_axes(ident([1.0, -1.0, 1.0]), far) == []  # dy not among the far parameters
+
+
+def test_identify_notes_a_capture_that_stopped_before_its_schedule_ended(tmp_path):
+    """A capture stopped at 30 of 40 poses ("run the same command again to resume") was identified without a word,
+    its standard errors wider than the schedule was made for. The capture records its schedule's poses; identify
+    notes the rows missing, and says nothing once the capture is resumed to its end."""
+    sched, cap = tmp_path / "s.csv", tmp_path / "c.csv"
+    assert run_cli("fitgen", "schedule", "--n", "40", "-o", str(sched)).returncode == 0
+    capture = ["tactile-host", "capture", "--poses", str(sched), "--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3",
+               "--simulate", "--sensor", str(tmp_path / "u.unit.toml"), "-o", str(cap)]
+    assert run_cli("fitgen", "simulate", "--transfer", "gmr", "--unit", "3", "--random", "2",
+                   "-o", str(tmp_path / "u.csv")).returncode == 0
+    proc = run_cli(*capture, "--trigger", '[ "$TM_POSE_INDEX" -lt 31 ]')
+    assert proc.returncode == 1 and "at pose 31/40" in proc.stderr, proc.stderr
+    note = f"identify: note: {cap} holds 30 of the 40 poses of its schedule (its capture stopped early"
+    proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "unit.toml"))
+    assert note in proc.stderr, proc.stderr
+    assert run_cli(*capture).returncode == 0
+    proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "unit.toml"))
+    assert proc.returncode == 0 and "of the 40 poses of its schedule" not in proc.stderr, proc.stderr

@@ -39,6 +39,8 @@ def cmd_identify(args) -> int:
         ds, temperature = _at_t0(ds, tc, args.temp_comp, args.capture, "identify")
     elif span := rec.temperature_span_line(ds.meta, ds.n_rows):  # before a refusal, which it may explain
         print(f"identify: {span}", file=sys.stderr)
+    if unfinished := rec.unfinished_line(ds.meta, ds.n_rows, args.capture):
+        print(f"identify: {unfinished}", file=sys.stderr)
     # the one the capture's schedule was made for
     args.sensor, said = rec.drawing_for(args.sensor, ds.meta, args.capture)
     not_a_drawing(args.output, args.sensor)

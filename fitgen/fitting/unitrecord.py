@@ -304,6 +304,17 @@ def capture_temperature(meta: dict, rows: int) -> dict:
     return {} if t is None else {"capture_degc": t}
 
 
+def unfinished_line(meta: dict, rows: int, capture) -> str:
+    """A note when ``capture`` holds fewer than the ``schedule_poses`` its meta records (`tactile-host capture`
+    stopped early), else ''."""
+    total = meta.get("schedule_poses")
+    if type(total) is not int or not rows < total:
+        return ""
+    return (f"note: {capture} holds {rows} of the {total} poses of its schedule (its capture stopped early: the same "
+            "capture command run again takes the rest); identified from these, the unit is known less well than the "
+            "schedule was made for (its standard errors are wider)")
+
+
 def temperature_span_line(meta: dict, rows: int) -> str:
     """A note when a capture's ``rows`` rows were read SPAN_NOTE_DEGC or more apart in temperature (its meta's
     ``row_degc``), else ''."""
