@@ -24,7 +24,7 @@ from host.capturerun import (CaptureFailed, CaptureInterrupted, capture_numbers,
 from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.simsensor import Drift
-from host.temperature import T_RANGE, Thermometer, fit_tempcomp, temperature_input
+from host.temperature import T_RANGE, Thermometer, fit_tempcomp, load_tempcomp, temperature_input
 
 
 def parse_temperatures(text: str) -> list[float]:
@@ -83,6 +83,19 @@ def _kept(out: Path, temps) -> str:
     """What a multi-temperature run stopped early leaves, for its last line."""
     return kept([_temperature_file(out, T) for T in temps],
                 "the temperatures and rows done so far are kept: run the same command again to resume")
+
+
+def _replaced(dest, tc) -> str:
+    """What the compensation file ``dest`` held where writing ``tc`` changes it (its t0 and levels), else ''."""
+    try:
+        old = load_tempcomp(dest)
+    except InputError:  # none there, or no compensation (the output checks said what it is)
+        return ""
+    if old.to_dict() == tc.to_dict():
+        return ""
+    levels = old.info.get("temperatures")
+    at = f", levels {', '.join(f'{t:g}' for t in levels)}" if isinstance(levels, list) and levels else ""
+    return f"a compensation about {old.t0:g} degC{at}"
 
 
 def _capture_temperatures(args, prog: str):
@@ -170,11 +183,15 @@ def _capture_temperatures(args, prog: str):
     tc.info["captures"] = files
     tc.info["adc"] = cmap.describe()  # the elements each coefficient is for: read and pi-build compare their map
     dest = args.temp_comp_output or str(out.with_name(out.stem + ".tempcomp.json"))
+    was = _replaced(dest, tc)
     tc.save(dest)
     worst = max(tc.info["residual_rms_v"]) * 1e3
     print(f"{prog}: temperature compensation about {tc.t0:g} degC -> {dest} (offsets up to "
           f"{np.abs(tc.offset).max() * 1e3:.3g} mV/degC, gains up to {np.abs(tc.gain).max() * 100:.3g} %/degC; "
           f"residual up to {worst:.3g} mV rms)", file=sys.stderr)
+    if was:
+        print(f"{prog}: note: {dest} held {was}, now replaced: a twin identified through that one, or a build "
+              "that compiled it in, no longer matches it (--temp-comp-output keeps both)", file=sys.stderr)
     if tin is None:  # the levels as set, not as the sensor reached them: a chamber off by a degree is fitted so
         print(f"{prog}: note: no thermistor (temp=CHIP@ADDRESS:INPUT in --adc): each level was taken at the "
               "temperature given, not one measured, and read cannot compensate without one", file=sys.stderr)

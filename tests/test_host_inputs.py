@@ -196,6 +196,11 @@ def test_a_temperature_capture_resumes_only_as_it_was_taken(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert [ln.endswith("(0 captured now, 6 already there)") for ln in proc.stderr.splitlines()
             if " poses at " in ln] == [True, True], proc.stderr
+    assert "now replaced" not in proc.stderr  # the same compensation again
+    # other levels refit the compensation: the one it replaces is named (it went without a word)
+    proc = capture_t(tmp_path, SCHEDULE, "15,25,35", "--samples", "4")
+    assert proc.returncode == 0 and (f"note: {tmp_path / 'cap.tempcomp.json'} held a compensation about 15 degC, "
+                                     "levels 15, 25, now replaced") in proc.stderr, proc.stderr
 
 
 @pytest.mark.parametrize("option, said", [(["--precision", "float"], "--precision goes with --engine c"),
