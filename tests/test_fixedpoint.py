@@ -4,6 +4,7 @@ model of the same integer arithmetic, against double within the plan's bound, an
 import json
 import re
 import subprocess
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from fitgen.c.codegen import render_fixed_header, render_header, write_header
 from fitgen.base.errors import InputError
 from fitgen.fitting.fit import FitSettings, fit_model
 from fitgen.equations.fixedpoint import BUDGET, INT32_MAX, INT32_MIN, build_fixed
-from fitgen.equations.inputscale import default_input_scale
+from fitgen.equations.inputscale import default_input_scale, sensor_input_scale
 from fitgen.equations.model import Equation, Model
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, simulate
@@ -281,6 +282,13 @@ def test_default_input_scale(paper_fixed_model):
     assert lsb == 3.3 / 65535 and off == 0.0 and "paper" in source
     anon = Model(paper_fixed_model.input_min, paper_fixed_model.input_max, paper_fixed_model.equations, "V")
     assert default_input_scale(anon)[:2] == (3.3 / 65535, 0.0)
+    # fitted on a capture (volts) whose simulated sensor was the paper preset in mT, as its meta's hash says: the
+    # preset's mT step was taken for a code of these volts
+    raw = load_sensor("paper").with_transfer("raw")
+    captured = replace(anon, fit_info={"sensor_sha256": raw.sha256})
+    assert raw.units == "mT" and default_input_scale(captured)[:2] == (3.3 / 65535, 0.0)
+    assert default_input_scale(replace(anon, input_units="mT", fit_info={"sensor_sha256": raw.sha256}))[:2] == \
+        sensor_input_scale(raw)[:2]
 
 
 def test_codegen_cli(paper_fixed_model, tmp_path):

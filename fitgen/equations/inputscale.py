@@ -52,7 +52,9 @@ def fitted_input_scale(model: Model) -> tuple[float, float, str] | None:
             base = load_sensor(name)
             for kind in ("gmr", "raw"):
                 s = base.with_transfer(kind)
-                if s.sha256 == sha:
+                # a capture simulated on a preset records its hash whatever its readings are in: a code of the
+                # preset's mT had been taken as a code of the capture's volts
+                if s.sha256 == sha and s.units == model.input_units:
                     lsb, offset, what = sensor_input_scale(s)
                     return lsb, offset, f"sensor {name} ({kind}: {what})"
     return None
