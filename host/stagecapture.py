@@ -35,7 +35,9 @@ def stage_settings(args, schedule):
         raise InputError("--home and --unlock both leave GRBL's ALARM: give one (--home homes; --unlock trusts the "
                          "position GRBL believes)")
     if args.temperature is not None:
-        raise InputError("--stage with --temperature is not supported yet: capture each temperature on its own")
+        raise InputError("--stage with --temperature is not supported: capture each temperature on its own "
+                         "(--stage, a thermistor in --adc, an -o each), then fit the compensation from them with "
+                         "tactile-host tempcomp-fit CAP1.csv CAP2.csv ... -o cap.tempcomp.json")
     if args.simulate and not args.sim_pose_file:
         raise InputError("--simulate with --stage needs --sim-pose-file FILE (the pose file tactile-host stage-sim "
                          "--pose-file FILE writes), or the simulated sensor would never move")

@@ -421,3 +421,40 @@ def test_a_replay_report_matches_outputs_by_name_when_as_many_differ():
     text = res.report()
     assert "the recorded run has outputs dx, dy, dz: differences in dx, dz" in text
     assert [ln.split(" | ")[0] for ln in text.splitlines() if ln.startswith("| d")] == ["| dx", "| dz"]
+
+
+def test_a_compensation_from_captures_each_at_one_temperature_is_the_one_capture_temperature_fits(tmp_path):
+    """`capture --stage` cannot take --temperature, and nothing fitted a compensation from captures taken one
+    temperature at a time: a stage's user had none. tempcomp-fit fits it from them (each capture's thermistor), as
+    capture --temperature fits it from its levels; captures that do not go together are refused in one line."""
+    from host.temperature import load_tempcomp
+
+    assert capture_t(tmp_path, SCHEDULE, "15,25,35", "--samples", "16", "--seed", "3").returncode == 0
+    for T in (15, 25, 35):
+        proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", WITH_TEMP, "--simulate",
+                       "--samples", "16", "--sim-drift", f"ramp=0,creep=0,start={T},seed=3", "-o",
+                       str(tmp_path / f"one{T}.csv"))
+        assert proc.returncode == 0, proc.stderr
+    caps = [str(tmp_path / f"one{T}.csv") for T in (15, 25, 35)]
+    swapped = WITH_TEMP.replace("0x48", "0x4X").replace("0x49", "0x48").replace("0x4X", "0x49")
+    proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", swapped, "--simulate",
+                   "--samples", "4", "--sim-drift", "ramp=0,creep=0,start=35", "-o", str(tmp_path / "sw.csv"))
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli("tactile-host", "tempcomp-fit", *caps, "-o", str(tmp_path / "fit.json"))
+    assert proc.returncode == 0 and "temperature compensation about 25 degC from 3 captures at 15, 25, 35" in \
+        proc.stderr, proc.stderr
+    ours, levels = load_tempcomp(tmp_path / "fit.json"), load_tempcomp(tmp_path / "cap.tempcomp.json")
+    assert ours.t0 == levels.t0 == 25 and ours.info["adc"] == levels.info["adc"]
+    # the same drift, other noise: offsets of up to 2.6 mV/degC agree to the noise's 0.1 mV/degC, rest readings to
+    # a fraction of a mV
+    np.testing.assert_allclose(ours.offset, levels.offset, atol=1e-4)
+    np.testing.assert_allclose(ours.gain, levels.gain, atol=1e-4)
+    np.testing.assert_allclose(ours.rest_v, levels.rest_v, atol=5e-4)
+    assert np.max(np.abs(levels.offset)) > 1e-3  # a drift to find, not zeros agreeing
+    for argv, said in (([caps[0]], "give two or more captures"),
+                       ([caps[0], str(tmp_path / "cap.T15.csv")], "the captures were all read at 15.0 degC"),
+                       ([*caps, str(tmp_path / "cap.tempcomp.json")], "cap.tempcomp.json"),
+                       ([caps[0], str(tmp_path / "sw.csv")], "was captured through another channel map (--adc)")):
+        assert_one_line_error(run_cli("tactile-host", "tempcomp-fit", *argv, "-o", str(tmp_path / "x.json")), 2, said)
+    assert not (tmp_path / "x.json").exists()
+    assert_one_line_error(run_cli("tactile-host", "tempcomp-fit", *caps, "-o", caps[0]), 2, f"-o {caps[0]} is the input")

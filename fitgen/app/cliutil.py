@@ -315,7 +315,7 @@ class StopFlag:
 
 WRITES = ("output", "record", "temp_comp_output", "pose_file", "junit")  # the files a command writes
 READS = ("model", "run", "tempcomp", "adc", "temp_comp", "rest", "poses", "data", "replay", "sensor", "sim_sensor",
-         "capture", "samples")  # and those it reads: never one of the written
+         "capture", "captures", "samples")  # and those it reads: never one of the written
 
 
 STDOUT_DEFAULT = ("cmd_read", "cmd_report")  # commands whose -o, left out, is stdout: there "-o -" says so too
@@ -336,7 +336,9 @@ def check_written(args, files=()) -> None:
         except OSError:
             return False
 
-    inputs = [p for p in (getattr(args, n, None) for n in READS) if isinstance(p, str) and is_file(p)]
+    given = [getattr(args, n, None) for n in READS]
+    given = [p for g in given for p in (g if isinstance(g, list) else [g])]  # a list: files of one option
+    inputs = [p for p in given if isinstance(p, str) and is_file(p)]
     inputs += [str(m) for m in map(meta_path, inputs) if m.is_file()]  # a dataset's meta is read with it
     written = []
     for name in WRITES:
@@ -374,6 +376,8 @@ OUTPUT_KINDS = {("identify", "output"): ((".csv", ".json"), "the unit file is a 
                 ("capture", "temp_comp_output"): ((".csv", ".toml"), "the compensation is JSON: name it .json (e.g. "
                                                   "cap.tempcomp.json)"),
                 ("noise", "output"): ((".csv", ".toml"), "the noise record is JSON: name it .json (e.g. noise.json)"),
+                ("tempcomp-fit", "output"): ((".csv", ".toml"), "the compensation is JSON: name it .json (e.g. "
+                                             "cap.tempcomp.json)"),
                 ("run", "junit"): ((".csv", ".json", ".toml"), "the results are JUnit XML: name it .xml"),
                 ("stage-sim", "pose_file"): ((".csv", ".json", ".toml"), "the pose file is one line of text, which "
                                              "it rewrites at each move: name it .txt (e.g. pose.txt)")}
@@ -386,7 +390,7 @@ JSON_KINDS = (("a model", ("schema_version", "inputs", "outputs")),
               ("a noise record", ("recommended", "single_v")),
               ("a stage's record", ("flavor", "position", "zero")))
 WRITES_JSON = {("fit", "output"): "a model", ("capture", "temp_comp_output"): "a temperature compensation",
-               ("noise", "output"): "a noise record"}
+               ("tempcomp-fit", "output"): "a temperature compensation", ("noise", "output"): "a noise record"}
 
 
 def is_capture(path) -> bool:

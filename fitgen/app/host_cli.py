@@ -7,11 +7,12 @@ import sys
 from fitgen.app.options import check_host, map_options, refuse_readout_options
 from fitgen.app.arduino_cli import add_arduino_build
 from fitgen.app.noise_cli import add_noise, cmd_noise
+from fitgen.app.tempcomp_cli import add_tempcomp, cmd_tempcomp_fit
 from fitgen.app.verify_cmd import cmd_verify
 from fitgen.app.cliutil import (EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_output_kind,
                                 check_written, command_main, count, ended_by, noise_volts)
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import OutputText, write_in_folder
+from fitgen.base.fileio import OutputText
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
 from fitgen.base.signals import signals_held
 
@@ -177,17 +178,6 @@ def _flag(args):
     if args.auto_zero and getattr(args, "no_auto_zero", False):
         raise InputError("give --auto-zero or --no-auto-zero, not both")
     return True if args.auto_zero else (False if getattr(args, "no_auto_zero", False) else None)
-
-
-def cmd_tempcomp_c(args) -> int:
-    from host.temperature import load_tempcomp, render_c
-
-    tc = load_tempcomp(args.tempcomp)
-    path = write_in_folder(args.output, f"{args.prefix}_tempcomp.h", render_c(tc, args.prefix, args.precision))
-    print(f"wrote {path} ({tc.n} elements about {tc.t0:g} degC, {args.precision}); call "
-          f"{args.prefix}_tempcomp(v, degc) on the readings before {args.prefix}_estimate, from a model header of "
-          f"the same precision (fitgen codegen --precision {args.precision})", file=sys.stderr)
-    return 0
 
 
 def cmd_replay(args) -> int:
@@ -395,12 +385,7 @@ def build_parser() -> Parser:
     rp.add_argument("-o", "--output", metavar="OUT.jsonl", help="write the re-estimated run here")
     rp.set_defaults(func=cmd_replay)
 
-    tcc = sub.add_parser("tempcomp-c", help="the temperature compensation as a C99 header (<prefix>_tempcomp.h)")
-    tcc.add_argument("tempcomp", metavar="FILE.json", help="from tactile-host capture --temperature")
-    tcc.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for <prefix>_tempcomp.h")
-    tcc.add_argument("--precision", default="float", choices=("float", "double"), help="C arithmetic (default float)")
-    tcc.add_argument("--prefix", default="tm", help="C identifier prefix (default tm)")
-    tcc.set_defaults(func=cmd_tempcomp_c)
+    add_tempcomp(sub)
 
     c = sub.add_parser("capture", help="record a calibration dataset, one averaged row per scheduled pose")
     c.add_argument("--poses", required=True, metavar="SCHEDULE.csv", help="poses to visit: columns of dx,dy,dz,thx,thy")
@@ -491,7 +476,7 @@ def _check(args) -> None:
     if args.func is cmd_view:
         check_host(args.host)
     # -o is a file for these; a folder for pi-build, arduino-build and tempcomp-c
-    check_written(args, files=(cmd_read, cmd_view, cmd_replay, cmd_capture, cmd_noise))
+    check_written(args, files=(cmd_read, cmd_view, cmd_replay, cmd_capture, cmd_noise, cmd_tempcomp_fit))
     check_output_kind(args)
 
 
