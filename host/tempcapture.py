@@ -192,6 +192,8 @@ def _capture_temperatures(args, prog: str):
     if was:
         print(f"{prog}: note: {dest} held {was}, now replaced: a twin identified through that one, or a build "
               "that compiled it in, no longer matches it (--temp-comp-output keeps both)", file=sys.stderr)
+    print(f"{prog}: next: --temp-comp {dest} with read, view, pi-build or emulate --adc, and with fitgen identify "
+          "and check for captures read away from its t0", file=sys.stderr)
     if tin is None:  # the levels as set, not as the sensor reached them: a chamber off by a degree is fitted so
         print(f"{prog}: note: no thermistor (temp=CHIP@ADDRESS:INPUT in --adc): each level was taken at the "
               "temperature given, not one measured, and read cannot compensate without one", file=sys.stderr)

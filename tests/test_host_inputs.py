@@ -197,6 +197,11 @@ def test_a_temperature_capture_resumes_only_as_it_was_taken(tmp_path):
     assert [ln.endswith("(0 captured now, 6 already there)") for ln in proc.stderr.splitlines()
             if " poses at " in ln] == [True, True], proc.stderr
     assert "now replaced" not in proc.stderr  # the same compensation again
+    assert f"next: --temp-comp {tmp_path / 'cap.tempcomp.json'} with read" in proc.stderr
+    # -o named the levels' files, not one of its own: identify named only a missing file
+    assert_one_line_error(run_cli("fitgen", "identify", str(tmp_path / "cap.csv"), "-o", str(tmp_path / "u.toml")),
+                          2, f"{tmp_path / 'cap.csv'}: no such file; capture --temperature wrote one capture per "
+                          "temperature under that name (cap.T15.csv, cap.T25.csv): give one of them")
     # other levels refit the compensation: the one it replaces is named (it went without a word)
     proc = capture_t(tmp_path, SCHEDULE, "15,25,35", "--samples", "4")
     assert proc.returncode == 0 and (f"note: {tmp_path / 'cap.tempcomp.json'} held a compensation about 15 degC, "

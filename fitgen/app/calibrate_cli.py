@@ -15,6 +15,20 @@ from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES, parse_positive
 from fitgen.physics.sensor import TRANSFERS
 
 
+def _not_levels(capture) -> None:
+    """InputError naming the captures `capture --temperature -o CAPTURE` wrote, one per level, where ``capture``
+    is not there but they are (it writes no file of that name)."""
+    import glob
+    from pathlib import Path
+
+    path = Path(capture)
+    levels = sorted(glob.glob(f"{glob.escape(str(path.with_suffix('')))}.T*{path.suffix or '.csv'}"))
+    if levels and not path.exists():
+        raise InputError(f"{capture}: no such file; capture --temperature wrote one capture per temperature under "
+                         f"that name ({', '.join(Path(f).name for f in levels)}): give one of them (--temp-comp "
+                         f"{path.stem}.tempcomp.json takes its rows to the compensation's t0)")
+
+
 def cmd_identify(args) -> int:
     from fitgen.app import plots
     from fitgen.app.replaced import not_a_drawing, replaced_unit
@@ -30,6 +44,7 @@ def cmd_identify(args) -> int:
         raise InputError(f"--noise {args.noise:g} is no sensor's reading noise (at most {MAX_NOISE:g}, in the "
                          "readings' units: V or mT)")
     folder = plots.require(args.plot) if args.plot else None
+    _not_levels(args.capture)
     ds = load_capture(args.capture)
     sha = ds.sha256  # the capture's as written, before a compensation
     temperature = rec.capture_temperature(ds.meta, ds.n_rows)
@@ -344,6 +359,7 @@ def cmd_check(args) -> int:
     folder = plots.require(args.plot) if args.plot else None
     model = load_model(args.model)
     check_magnitudes(model, "double")  # as predict: a model whose terms overflow checked 'as predicted' on inf
+    _not_levels(args.capture)
     ds = load_capture(args.capture)
     check_input_units(model, ds.meta.get("units"), f"{args.capture}'s readings", f"model {args.model}")
     if not set(ds.target_names) & {"dx", "dy", "dz"}:
