@@ -719,6 +719,8 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
                             seed=4)
     proc = run_cli("fitgen", "identify", str(tmp_path / "c13.csv"), "-o", str(tmp_path / "u.toml"))
     assert proc.returncode == 0 and f"{tmp_path / 'u.toml'} held another unit, now replaced" in proc.stderr, proc.stderr
+    # a unit file of its own name, its twin too (every unit of a batch had been told twin.json)
+    assert "-o u.twin.csv, then fitgen fit u.twin.csv -o u.twin.json" in proc.stderr.splitlines()[-1], proc.stderr
     # a flag wins over the record; without a record, the defaults
     assert stage_errors(None, 0.01, meta, "c.csv") == (0.03, 0.01, " (rig error as the capture's schedule was made "
                                                                   "for)")

@@ -125,8 +125,10 @@ def cmd_identify(args) -> int:
     # a cause every row shares first: under it, the rows that stand out may not
     notes = field + verdict.outlier_lines(ident, args.capture) + verdict.low_residual_line(ident, source)
     print("".join(f"identify: {ln}\n" for ln in notes), end="", file=sys.stderr)
-    print(f"next: fitgen simulate --sensor {unit} --grid paper-sim --random 5000 -o twin.csv, then fitgen fit "
-          "twin.csv -o twin.json (the unit's own equations, tilt included)", file=sys.stderr)
+    # unit.toml's twin is twin.json; another unit file's (a batch in one folder) its own, or each replaced the last
+    twin = "twin" if unit.name == "unit.toml" else unit.name.removesuffix(".toml").removesuffix(".unit") + ".twin"
+    print(f"next: fitgen simulate --sensor {unit} --grid paper-sim --random 5000 -o {twin}.csv, then fitgen fit "
+          f"{twin}.csv -o {twin}.json (the unit's own equations, tilt included)", file=sys.stderr)
     return 0
 
 
