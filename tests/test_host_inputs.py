@@ -76,6 +76,10 @@ def test_no_output_replaces_another_kind_of_the_tools_json_files(model_file, tmp
         assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == kept
     sim = tmp_path / "sim.csv"
     assert run_cli("fitgen", "simulate", "--random", "100", "-o", str(sim)).returncode == 0
+    # through a link, the file it leads to is what would be written over
+    (tmp_path / "link.json").symlink_to(f"{level}.meta.json")
+    assert_one_line_error(run_cli("fitgen", "fit", str(sim), "-o", str(tmp_path / "link.json")), 2,
+                          f"-o {tmp_path / 'link.json'} is a dataset's meta: fit would write a model over it")
     proc = run_cli("fitgen", "fit", str(sim), "-o", str(model))
     assert proc.returncode == 0 and model.read_bytes() != kept["m.json"], proc.stderr
 

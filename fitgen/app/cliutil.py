@@ -399,8 +399,11 @@ def is_capture(path) -> bool:
 
     from fitgen.physics.dataset import meta_path
 
+    beside = meta_path(path)
+    if not beside.is_file():  # none, or a FIFO, whose open would wait for a writer (the write refuses it in one line)
+        return False
     try:
-        with open(meta_path(path), "rb") as f:
+        with open(beside, "rb") as f:
             meta = json.loads(f.read(1 << 24))
     except (OSError, ValueError, RecursionError):
         return False
@@ -411,7 +414,7 @@ def json_kind(path) -> str | None:
     """Which of the tools' JSON files ``path`` holds (JSON_KINDS; a dataset's meta by its name), or None."""
     import json
 
-    if str(path).endswith(".meta.json"):
+    if os.path.realpath(path).endswith(".meta.json"):  # through a link too: it is the file written over
         return "a dataset's meta"
     try:
         with open(path, "rb") as f:
