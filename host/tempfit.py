@@ -13,44 +13,62 @@ from fitgen.physics.pose import contact_poses
 from host.temperature import TempComp, fit_tempcomp
 
 
-def _temperature(ds, path) -> float:
-    """The temperature ``path``'s rows were read at: its thermistor as the capture started, else its rows' median."""
+def _temperatures(ds, path) -> np.ndarray:
+    """Each row's temperature: as the thermistor read it around the row (``row_degc``), else as the capture started
+    (``thermistor_degc``), else as `capture --temperature` set the level (``temperature_set``, no thermistor)."""
+    each = row_degc(ds.meta, ds.n_rows)
+    if each is not None:
+        return np.asarray(each, dtype=float)
     degc = thermistor_degc(ds.meta)
-    if degc is None and (each := row_degc(ds.meta, ds.n_rows)) is not None:
-        degc = float(np.median(each))
-    if degc is None:
+    if degc is None and isinstance(ds.meta.get("temperature_set"), (int, float)):
+        degc = float(ds.meta["temperature_set"])
+    if degc is None or not np.isfinite(degc):
         raise InputError(f"{path} records no temperature (its capture read no thermistor: temp=CHIP@ADDRESS:INPUT in "
                          "--adc): a compensation needs each capture's")
-    return float(degc)
+    return np.full(ds.n_rows, float(degc))
 
 
-def captures_tempcomp(paths, t0: float | None = None) -> TempComp:
+def _pose_set(ds) -> set:
+    return {tuple(p) for p in np.round(ds.poses(), 6).tolist()}
+
+
+def captures_tempcomp(paths, t0: float | None = None) -> tuple[TempComp, list[str]]:
     """The per-element compensation (host.temperature.fit_tempcomp) from the captures at ``paths``, of one sensor
-    through one channel map, each at the temperature its meta records; a pose is matched across them by value.
-    ``t0``: one of their temperatures (default: as fit_tempcomp chooses). InputError for captures that do not
-    go together."""
+    through one channel map, each holding the same poses at its own temperatures (its rows' as its meta records
+    them), and notes on it. ``t0``: one of their temperatures (default: as fit_tempcomp chooses). InputError for
+    captures that do not go together."""
     if len(paths) < 2:
         raise InputError("give two or more captures, each taken at its own temperature")
     sets = [load_dataset(p, min_rows=1) for p in paths]
     first, name = sets[0], paths[0]
+    seen = {first.sha256: name}
     for ds, path in zip(sets[1:], paths[1:]):
+        if ds.sha256 in seen:  # its rows would count twice, and pull t0 to its temperature
+            raise InputError(f"{path} holds the same rows as {seen[ds.sha256]}: give each capture once")
+        seen[ds.sha256] = path
         for key, what in (("adc", "channel map (--adc)"), ("sensor_sha256", "simulated sensor")):
             if key in first.meta and ds.meta.get(key) != first.meta[key]:
                 raise InputError(f"{path} was captured through another {what} than {name}: one compensation is "
                                  "for one sensor read one way")
         if ds.n_inputs != first.n_inputs or ds.target_names != first.target_names:
             raise InputError(f"{path} has other columns than {name}: capture each temperature with one schedule")
-    temps = [_temperature(ds, p) for ds, p in zip(sets, paths)]
-    if len({round(t, 1) for t in temps}) < 2:
-        raise InputError(f"the captures were all read at {temps[0]:.1f} degC: give captures at two or more "
+        # a pose at one temperature only tells nothing of its drift, and pulls the others' fit (a capture stopped
+        # early, another schedule): each capture holds every pose
+        if _pose_set(ds) != _pose_set(first):
+            raise InputError(f"{path} holds other poses than {name}: capture each temperature with one schedule, "
+                             "to its end (a capture stopped early resumes with the same command)")
+    temps = [_temperatures(ds, p) for ds, p in zip(sets, paths)]
+    medians = [float(np.median(t)) for t in temps]
+    if len({round(t, 1) for t in medians}) < 2:
+        raise InputError(f"the captures were all read at {medians[0]:.1f} degC: give captures at two or more "
                          "temperatures")
     poses = np.vstack([ds.poses() for ds in sets])
     unique, pose_ids = np.unique(np.round(poses, 6), axis=0, return_inverse=True)
     at_rest = np.flatnonzero(np.all(contact_poses(unique) == 0, axis=1))
-    tc = fit_tempcomp(np.vstack([ds.inputs for ds in sets]), pose_ids.ravel(),
-                      np.concatenate([np.full(ds.n_rows, t) for ds, t in zip(sets, temps)]), t0=t0,
+    tc = fit_tempcomp(np.vstack([ds.inputs for ds in sets]), pose_ids.ravel(), np.concatenate(temps), t0=t0,
                       rest=int(at_rest[0]) if at_rest.size else None)
     tc.info["captures"] = [str(p) for p in paths]
     if isinstance(first.meta.get("adc"), str):  # the elements each coefficient is for: read and pi-build compare
         tc.info["adc"] = first.meta["adc"]
-    return tc
+    notes = [] if len(unique) > 1 else ["one pose per capture gives offsets only (gain needs two poses)"]
+    return tc, notes

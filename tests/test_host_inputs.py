@@ -450,7 +450,7 @@ def test_a_compensation_from_captures_each_at_one_temperature_is_the_one_capture
                    "--samples", "4", "--sim-drift", "ramp=0,creep=0,start=35", "-o", str(tmp_path / "sw.csv"))
     assert proc.returncode == 0, proc.stderr
     proc = run_cli("tactile-host", "tempcomp-fit", *caps, "-o", str(tmp_path / "fit.json"))
-    assert proc.returncode == 0 and "temperature compensation about 25 degC from 3 captures at 15, 25, 35" in \
+    assert proc.returncode == 0 and "temperature compensation about 25 degC from 3 captures read at 15 to 35" in \
         proc.stderr, proc.stderr
     ours, levels = load_tempcomp(tmp_path / "fit.json"), load_tempcomp(tmp_path / "cap.tempcomp.json")
     assert ours.t0 == levels.t0 == 25 and ours.info["adc"] == levels.info["adc"]
@@ -460,7 +460,24 @@ def test_a_compensation_from_captures_each_at_one_temperature_is_the_one_capture
     np.testing.assert_allclose(ours.gain, levels.gain, atol=1e-4)
     np.testing.assert_allclose(ours.rest_v, levels.rest_v, atol=5e-4)
     assert np.max(np.abs(levels.offset)) > 1e-3  # a drift to find, not zeros agreeing
+    # each row at its own temperature: a capture whose rows warmed from 15.2 to 19 degC is fitted as read (taken
+    # at its start, 15, the gains had come out 31 % off)
+    proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", WITH_TEMP, "--simulate",
+                   "--samples", "16", "--sim-drift", "ramp=4,over=2,creep=0,start=15,seed=3", "-o",
+                   str(tmp_path / "warm.csv"))
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli("tactile-host", "tempcomp-fit", str(tmp_path / "warm.csv"), *caps[1:], "-o", str(tmp_path / "w.json"))
+    assert proc.returncode == 0 and "read at 15.2 to 35 degC" in proc.stderr, proc.stderr
+    np.testing.assert_allclose(load_tempcomp(tmp_path / "w.json").gain, levels.gain, atol=1e-4)
+    # a capture stopped early (1 of 6 poses), or of another schedule, shares too few poses: refused (a pose at one
+    # temperature tells nothing of its drift; the offsets had come out 5.6 mV/degC off)
+    proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", WITH_TEMP, "--simulate",
+                   "--samples", "4", "--sim-drift", "ramp=0,creep=0,start=35,seed=3", "-o", str(tmp_path / "short.csv"),
+                   "--trigger", '[ "$TM_POSE_INDEX" -lt 2 ]')
+    assert proc.returncode == 1, proc.stderr
     for argv, said in (([caps[0]], "give two or more captures"),
+                       ([caps[0], str(tmp_path / "short.csv")], "short.csv holds other poses than"),
+                       ([*caps, caps[1]], f"{caps[1]} holds the same rows as {caps[1]}: give each capture once"),
                        ([caps[0], str(tmp_path / "cap.T15.csv")], "the captures were all read at 15.0 degC"),
                        ([*caps, str(tmp_path / "cap.tempcomp.json")], "cap.tempcomp.json"),
                        ([caps[0], str(tmp_path / "sw.csv")], "was captured through another channel map (--adc)")):

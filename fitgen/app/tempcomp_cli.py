@@ -22,13 +22,15 @@ def cmd_tempcomp_c(args) -> int:
 def cmd_tempcomp_fit(args) -> int:
     from host.tempfit import captures_tempcomp
 
-    tc = captures_tempcomp(args.captures, args.t0)
+    tc, notes = captures_tempcomp(args.captures, args.t0)
     tc.save(args.output)
-    levels = ", ".join(f"{t:g}" for t in tc.info["temperatures"])
+    lo, hi = tc.fitted_range
     print(f"wrote {args.output}: temperature compensation about {tc.t0:g} degC from {len(args.captures)} captures "
-          f"at {levels} degC (offsets up to {abs(tc.offset).max() * 1e3:.3g} mV/degC, gains up to "
+          f"read at {lo:g} to {hi:g} degC (offsets up to {abs(tc.offset).max() * 1e3:.3g} mV/degC, gains up to "
           f"{abs(tc.gain).max() * 100:.3g} %/degC; residual up to {max(tc.info['residual_rms_v']) * 1e3:.3g} mV rms)",
           file=sys.stderr)
+    for note in notes:
+        print(f"tactile-host tempcomp-fit: note: {note}", file=sys.stderr)
     return 0
 
 
