@@ -107,11 +107,7 @@ def _capture_temperatures(args, prog: str):
     samples, spread, tries, settle, retries = capture_numbers(args)
     timeout = trigger_timeout(args)
     # a pose visited twice is one pose to the compensation: its gain needs two different ones
-    poses, pose_of_row = np.unique(schedule.poses, axis=0, return_inverse=True)
-    pose_of_row = pose_of_row.ravel()
-    # the rest readings at t0 tell whose sensor the file is for (the readouts compare a twin's unit with them)
-    at_rest = np.flatnonzero(np.all(contact_poses(poses) == 0, axis=1))
-    if pose_of_row.max() < 1:
+    if len(np.unique(schedule.poses, axis=0)) < 2:
         print(f"{prog}: note: one pose per temperature gives offsets only (gain needs two poses)", file=sys.stderr)
     cmap = channel_map_from_args(args)
     tin = temperature_input(args.adc, cmap, args.thermistor)
@@ -132,7 +128,7 @@ def _capture_temperatures(args, prog: str):
                  ).steady(temps[0])
     bus, clock = open_bus_from_args(args, cmap, schedule.poses[0] if args.simulate else None, drift=drift,
                                     thermistor=tin)
-    rows, pose_ids, row_temps, files = [], [], [], []
+    rows, level_poses, row_temps, files = [], [], [], []
     try:
         array = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy(attempts=retries))
         array.probe()
@@ -164,7 +160,7 @@ def _capture_temperatures(args, prog: str):
             recorded = ds.meta.get("thermistor_degc")
             measured = float(recorded) if isinstance(recorded, (int, float)) and thermo is not None else now
             rows.append(ds.inputs)
-            pose_ids.append(pose_of_row[:ds.n_rows])
+            level_poses.append(ds.poses())  # by value: a row deleted and taken again sits at the file's end
             row_temps.append(np.full(ds.n_rows, measured if np.isfinite(measured) else T))
             files.append(str(path))
             before = had[T][0]  # as the plain capture counts them: a resume says what it took, a rerun nothing
@@ -178,7 +174,10 @@ def _capture_temperatures(args, prog: str):
         raise CaptureFailed(f"{exc}; {_kept(out, temps)}") from exc
     finally:
         bus.close()
-    tc = fit_tempcomp(np.vstack(rows), np.concatenate(pose_ids), np.concatenate(row_temps), t0=t0,
+    poses, pose_of_row = np.unique(np.round(np.vstack(level_poses), 6), axis=0, return_inverse=True)
+    # the rest readings at t0 tell whose sensor the file is for (the readouts compare a twin's unit with them)
+    at_rest = np.flatnonzero(np.all(contact_poses(poses) == 0, axis=1))
+    tc = fit_tempcomp(np.vstack(rows), pose_of_row.ravel(), np.concatenate(row_temps), t0=t0,
                       rest=int(at_rest[0]) if at_rest.size else None)
     tc.info["captures"] = files
     tc.info["adc"] = cmap.describe()  # the elements each coefficient is for: read and pi-build compare their map

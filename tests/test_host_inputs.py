@@ -164,6 +164,16 @@ def test_a_resumed_level_keeps_its_own_temperature_and_a_pose_twice_is_one_pose(
     # the physics explains the rows as well as on the first run (a level labelled with another's temperature
     # left 14 mV rms unexplained)
     assert max(again["fit"]["residual_rms_v"]) < 2 * max(first["fit"]["residual_rms_v"]) < 1e-3
+    # a row deleted to be taken again is taken at the file's end: matched by its pose, not its place (it had been
+    # labelled the next pose's, and the compensation came out 25 % off with a residual of 300 mV)
+    level = tmp_path / "cap.T25.csv"
+    lines = level.read_text().splitlines(keepends=True)
+    level.write_text("".join(lines[:2] + lines[3:]))
+    proc = capture_t(tmp_path, SCHEDULE, "15,25,35", "--t0", "35")
+    assert proc.returncode == 0 and "(1 captured now, 5 already there)" in proc.stderr, proc.stderr
+    retaken = json.loads((tmp_path / "cap.tempcomp.json").read_text())
+    assert max(retaken["fit"]["residual_rms_v"]) < 1e-3
+    np.testing.assert_allclose(retaken["offset_v_per_degc"], again["offset_v_per_degc"], atol=1e-4)
     # a schedule that visits its one pose twice: offsets only, not a gain fitted from two equal rows
     proc = capture_t(tmp_path, "dx,dy,dz\n0,0,0.2\n0,0,0.2\n", "15,25", out="tw.csv")
     assert proc.returncode == 0, proc.stderr
