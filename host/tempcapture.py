@@ -91,7 +91,9 @@ def _replaced(dest, tc) -> str:
         old = load_tempcomp(dest)
     except InputError:  # none there, or no compensation (the output checks said what it is)
         return ""
-    if old.to_dict() == tc.to_dict():
+    # the same coefficients from the same rows, whatever order the levels were given in or path they were named by
+    if (old.t0 == tc.t0 and old.info.get("temperatures") == tc.info.get("temperatures")
+            and np.allclose(old.offset, tc.offset, rtol=1e-9, atol=0) and np.allclose(old.gain, tc.gain, rtol=1e-9, atol=0)):
         return ""
     levels = old.info.get("temperatures")
     at = f", levels {', '.join(f'{t:g}' for t in levels)}" if isinstance(levels, list) and levels else ""
@@ -196,6 +198,6 @@ def _capture_temperatures(args, prog: str):
     if tin is None:  # the levels as set, not as the sensor reached them: a chamber off by a degree is fitted so
         print(f"{prog}: note: no thermistor (temp=CHIP@ADDRESS:INPUT in --adc): each level was taken at the "
               "temperature given, not one measured, and read cannot compensate without one", file=sys.stderr)
-    if args.simulate and args.sim_drift and "ramp" in args.sim_drift:  # each level is held steady
+    if args.simulate and args.sim_drift and parse_drift(args.sim_drift, cmap.n_elements).ramp_degc:  # held steady
         print(f"{prog}: note: --sim-drift's ramp was not simulated: each level held its temperature", file=sys.stderr)
     return tc

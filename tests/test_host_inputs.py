@@ -211,6 +211,9 @@ def test_a_temperature_capture_resumes_only_as_it_was_taken(tmp_path):
     assert [ln.endswith("(0 captured now, 6 already there)") for ln in proc.stderr.splitlines()
             if " poses at " in ln] == [True, True], proc.stderr
     assert "now replaced" not in proc.stderr  # the same compensation again
+    proc = capture_t(tmp_path, SCHEDULE, "25,15", "--samples", "4", "--sim-drift", "ramp=0,creep=0")
+    assert proc.returncode == 0 and "now replaced" not in proc.stderr, proc.stderr  # the levels in another order
+    assert "ramp was not simulated" not in proc.stderr  # a ramp of 0 is none
     assert f"next: --temp-comp {tmp_path / 'cap.tempcomp.json'} with read" in proc.stderr
     # -o named the levels' files, not one of its own: identify named only a missing file
     assert_one_line_error(run_cli("fitgen", "identify", str(tmp_path / "cap.csv"), "-o", str(tmp_path / "u.toml")),
