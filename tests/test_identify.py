@@ -1248,3 +1248,9 @@ def test_identify_notes_a_capture_that_stopped_before_its_schedule_ended(tmp_pat
     assert run_cli(*capture).returncode == 0
     proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "unit.toml"))
     assert proc.returncode == 0 and "of the 40 poses of its schedule" not in proc.stderr, proc.stderr
+    # the capture resumed is the same capture (it had been called another unit's)
+    assert f"{tmp_path / 'unit.toml'} held this capture's unit as identified before, now replaced" in proc.stderr
+    # the same unit again from another folder: only its record's text differs, which no twin reads
+    (tmp_path / "sub").mkdir()
+    proc = run_cli("fitgen", "identify", "../c.csv", "-o", "../unit.toml", cwd=tmp_path / "sub")
+    assert proc.returncode == 0 and "now replaced" not in proc.stderr, proc.stderr

@@ -104,7 +104,7 @@ def cmd_identify(args) -> int:
                                                 **({"capture_zero": zero} if zero else {})}, unit_noise)
     if folder is not None:  # drawn first, then written with the unit's files: a failure leaves none of them
         files.append((folder / "identify.png", plots.identification_png(ident)))
-    replaced = replaced_unit(*files[0], sha)
+    replaced = replaced_unit(*files[0], sha, args.capture)
     unit, post, *png = write_all(files)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
           f"{args.zero_error:g} mm{stage}", file=sys.stderr)

@@ -29,24 +29,39 @@ def not_a_drawing(output, drawing: str) -> None:
                          "would destroy it; give another name (e.g. unit.toml)")
 
 
-def _capture_of(unit_file) -> str | None:
-    """The sha256 of the capture the unit file there was identified from, as it records it; None for none."""
+def _recorded_capture(unit_file) -> tuple[str | None, str | None]:
+    """(sha256, path) of the capture the unit file there was identified from, as its [unit] table records them."""
     import tomllib
 
     try:
         with open(unit_file, "rb") as f:
             unit = tomllib.load(f).get("unit")
     except (OSError, ValueError):
-        return None
-    return unit.get("capture_sha256") if isinstance(unit, dict) else None
+        return None, None
+    unit = unit if isinstance(unit, dict) else {}
+    return unit.get("capture_sha256"), unit.get("capture")
 
 
-def replaced_unit(path, text: str, capture_sha256: str) -> str:
+def replaced_unit(path, text: str, capture_sha256: str, capture) -> str:
     """What writing the unit ``text`` to ``path`` replaces, for identify's note: "another unit", "this capture's
-    unit as identified before" (other options), or "" (nothing, or the same text)."""
+    unit as identified before" (other options, or the capture resumed since), or "" (nothing, or the same unit:
+    only its record's text differs, which no twin reads)."""
+    import os
+    import tomllib
+
+    from fitgen.physics.sensor import load_sensor, parse_sensor
+
     if not replaces_other(path, text):
         return ""
-    return "this capture's unit as identified before" if _capture_of(path) == capture_sha256 else "another unit"
+    try:
+        if load_sensor(str(path)).sha256 == parse_sensor(tomllib.loads(text)).sha256:
+            return ""
+    except (InputError, OSError, ValueError):  # no sensor file there: the write says what it says
+        pass
+    sha, recorded = _recorded_capture(path)
+    same = sha == capture_sha256 or (isinstance(recorded, str)
+                                     and os.path.realpath(recorded) == os.path.realpath(capture))
+    return "this capture's unit as identified before" if same else "another unit"
 
 
 def replaced_model(path, model) -> str:
