@@ -323,6 +323,15 @@ def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
                        "no-roots")
         assert proc.returncode == 0 and (said in proc.stderr if said else "held the model" not in proc.stderr), \
             proc.stderr
+    # the same unit's file changed since (identified again): said as such, not as another sensor
+    unit_file = tmp_path / "u.unit.toml"
+    unit_file.write_text(unit_file.read_text().replace("gain = 1.", "gain = 1.01", 1))
+    assert run_cli("fitgen", "simulate", "--sensor", str(unit_file), "--grid", "paper-exp", "-o",
+                   str(tmp_path / "again.csv")).returncode == 0
+    proc = run_cli("fitgen", "fit", str(tmp_path / "again.csv"), "-o", str(tmp_path / "m.json"), "--held-out", "100",
+                   "--family", "no-roots")
+    assert proc.returncode == 0 and (f"{tmp_path / 'm.json'} held the model of sensor {load_sensor(unit_file).name} "
+                                     "as its file was before (identified again since)") in proc.stderr, proc.stderr
 
 
 def test_fit_refuses_data_whose_unit_file_is_gone_or_changed(tmp_path):

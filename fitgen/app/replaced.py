@@ -80,5 +80,9 @@ def replaced_model(path, model) -> str:
         return ""
     held = fit.get("held_out")
     name = held.get("sensor") if isinstance(held, dict) and isinstance(held.get("sensor"), str) else None
+    now = (model.fit_info.get("held_out") or {}).get("sensor")
+    if name is not None and name == now:  # the same name, other physics: a unit identified again, as identify says
+        return (f"{path} held the model of sensor {name} as its file was before (identified again since), now "
+                "replaced: a device flashed with the old one runs the old unit's physics")
     return (f"{path} held the model of another sensor{f' ({name})' if name else ''}, now replaced: a device running "
             "that one, or a check of its unit, needs it fitted again")
