@@ -12,7 +12,6 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_numbers
 from fitgen.physics.dataset import load_dataset
-from fitgen.physics.pose import contact_poses
 from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
@@ -24,7 +23,7 @@ from host.capturerun import (CaptureFailed, CaptureInterrupted, capture_numbers,
 from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.simsensor import Drift
-from host.temperature import T_RANGE, Thermometer, fit_tempcomp, load_tempcomp, temperature_input
+from host.temperature import T_RANGE, Thermometer, fit_tempcomp_at, load_tempcomp, temperature_input
 
 
 def parse_temperatures(text: str) -> list[float]:
@@ -176,11 +175,8 @@ def _capture_temperatures(args, prog: str):
         raise CaptureFailed(f"{exc}; {_kept(out, temps)}") from exc
     finally:
         bus.close()
-    poses, pose_of_row = np.unique(np.round(np.vstack(level_poses), 6), axis=0, return_inverse=True)
     # the rest readings at t0 tell whose sensor the file is for (the readouts compare a twin's unit with them)
-    at_rest = np.flatnonzero(np.all(contact_poses(poses) == 0, axis=1))
-    tc = fit_tempcomp(np.vstack(rows), pose_of_row.ravel(), np.concatenate(row_temps), t0=t0,
-                      rest=int(at_rest[0]) if at_rest.size else None)
+    tc = fit_tempcomp_at(np.vstack(rows), np.vstack(level_poses), np.concatenate(row_temps), t0=t0)
     tc.info["captures"] = files
     tc.info["adc"] = cmap.describe()  # the elements each coefficient is for: read and pi-build compare their map
     dest = args.temp_comp_output or str(out.with_name(out.stem + ".tempcomp.json"))

@@ -326,6 +326,17 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
     return tc
 
 
+def fit_tempcomp_at(readings: np.ndarray, poses: np.ndarray, temps: np.ndarray,
+                    t0: float | None = None) -> TempComp:
+    """:func:`fit_tempcomp` from each row's pose (n, 5) rather than a pose id: rows of one pose matched by value
+    (to 1e-6 mm or deg), wherever they sit, and the readings of the pose at rest recorded (whose sensor it is)."""
+    from fitgen.physics.pose import contact_poses
+
+    unique, ids = np.unique(np.round(poses, 6), axis=0, return_inverse=True)
+    at_rest = np.flatnonzero(np.all(contact_poses(unique) == 0, axis=1))
+    return fit_tempcomp(readings, ids.ravel(), temps, t0=t0, rest=int(at_rest[0]) if at_rest.size else None)
+
+
 def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:
     """``<prefix>_tempcomp.h``: the compensation in C99, the operations of :meth:`TempComp.apply`."""
     from fitgen.c.cgen import c_real, fp_guard, nonfinite_test, prefix_identifier

@@ -8,9 +8,8 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.physics.dataset import load_dataset, row_degc, thermistor_degc
-from fitgen.physics.pose import contact_poses
 
-from host.temperature import TempComp, fit_tempcomp
+from host.temperature import TempComp, fit_tempcomp_at
 
 
 def _temperatures(ds, path) -> np.ndarray:
@@ -62,13 +61,10 @@ def captures_tempcomp(paths, t0: float | None = None) -> tuple[TempComp, list[st
     if len({round(t, 1) for t in medians}) < 2:
         raise InputError(f"the captures were all read at {medians[0]:.1f} degC: give captures at two or more "
                          "temperatures")
-    poses = np.vstack([ds.poses() for ds in sets])
-    unique, pose_ids = np.unique(np.round(poses, 6), axis=0, return_inverse=True)
-    at_rest = np.flatnonzero(np.all(contact_poses(unique) == 0, axis=1))
-    tc = fit_tempcomp(np.vstack([ds.inputs for ds in sets]), pose_ids.ravel(), np.concatenate(temps), t0=t0,
-                      rest=int(at_rest[0]) if at_rest.size else None)
+    tc = fit_tempcomp_at(np.vstack([ds.inputs for ds in sets]), np.vstack([ds.poses() for ds in sets]),
+                         np.concatenate(temps), t0=t0)
     tc.info["captures"] = [str(p) for p in paths]
     if isinstance(first.meta.get("adc"), str):  # the elements each coefficient is for: read and pi-build compare
         tc.info["adc"] = first.meta["adc"]
-    notes = [] if len(unique) > 1 else ["one pose per capture gives offsets only (gain needs two poses)"]
+    notes = [] if tc.info["gain_fitted"] else ["one pose per capture gives offsets only (gain needs two poses)"]
     return tc, notes

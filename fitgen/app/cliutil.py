@@ -395,19 +395,15 @@ WRITES_JSON = {("fit", "output"): "a model", ("capture", "temp_comp_output"): "a
 
 def is_capture(path) -> bool:
     """Whether ``path`` is a capture (rows measured by `tactile-host capture`), as the meta beside it says."""
-    import json
+    from fitgen.physics.dataset import load_meta, meta_path
 
-    from fitgen.physics.dataset import meta_path
-
-    beside = meta_path(path)
-    if not beside.is_file():  # none, or a FIFO, whose open would wait for a writer (the write refuses it in one line)
+    if not meta_path(path).is_file():  # none, or a FIFO, whose open would wait for a writer (the write refuses it)
         return False
     try:
-        with open(beside, "rb") as f:
-            meta = json.loads(f.read(1 << 24))
-    except (OSError, ValueError, RecursionError):
+        meta = load_meta(path)
+    except InputError:  # damaged: not known for a capture (a resume of one refuses it itself)
         return False
-    return isinstance(meta, dict) and str(meta.get("generator", "")).startswith("tactile-host capture")
+    return str(meta.get("generator", "")).startswith("tactile-host capture")
 
 
 def json_kind(path) -> str | None:
