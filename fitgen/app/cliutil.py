@@ -395,15 +395,20 @@ WRITES_JSON = {("fit", "output"): "a model", ("capture", "temp_comp_output"): "a
 
 def is_capture(path) -> bool:
     """Whether ``path`` is a capture (rows measured by `tactile-host capture`), as the meta beside it says."""
-    from fitgen.physics.dataset import load_meta, meta_path
+    import json
 
-    if not meta_path(path).is_file():  # none, or a FIFO, whose open would wait for a writer (the write refuses it)
+    from fitgen.physics.dataset import meta_path
+
+    beside = meta_path(path)
+    if not beside.is_file():  # none, or a FIFO, whose open would wait for a writer (the write refuses it in one line)
         return False
+    # parsed, not loaded: load_meta checks and relocates what it reads, and a meta it refuses is still a capture's
     try:
-        meta = load_meta(path)
-    except InputError:  # damaged: not known for a capture (a resume of one refuses it itself)
+        with open(beside, "rb") as f:
+            meta = json.loads(f.read(1 << 24))
+    except (OSError, ValueError, RecursionError):
         return False
-    return str(meta.get("generator", "")).startswith("tactile-host capture")
+    return isinstance(meta, dict) and str(meta.get("generator", "")).startswith("tactile-host capture")
 
 
 def json_kind(path) -> str | None:
