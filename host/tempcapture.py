@@ -92,7 +92,8 @@ def _replaced(dest, tc) -> str:
         return ""
     # the same coefficients from the same rows, whatever order the levels were given in or path they were named by
     if (old.t0 == tc.t0 and old.info.get("temperatures") == tc.info.get("temperatures")
-            and np.allclose(old.offset, tc.offset, rtol=1e-9, atol=0) and np.allclose(old.gain, tc.gain, rtol=1e-9, atol=0)):
+            and np.allclose(old.offset, tc.offset, rtol=1e-9, atol=0)
+            and np.allclose(old.gain, tc.gain, rtol=1e-9, atol=0)):
         return ""
     levels = old.info.get("temperatures")
     at = f", levels {', '.join(f'{t:g}' for t in levels)}" if isinstance(levels, list) and levels else ""

@@ -37,6 +37,7 @@ def cmd_identify(args) -> int:
     from fitgen.fitting.holdout import drawing_rest_spread
     from fitgen.physics.dataset import load_capture
     from host.temperature import load_tempcomp
+    from host.tempunit import capture_note
 
     if args.noise is not None and not args.noise > 0:  # identify weighs each reading by it
         raise InputError(f"--noise must be a finite number > 0, got {args.noise:g}")
@@ -64,7 +65,9 @@ def cmd_identify(args) -> int:
                          "stage displacement from the zero, as tactile-host capture writes it")
     rec.check_transfer(args.transfer, ds.meta, args.capture)
     drawing = sensor_of(args) if args.transfer else rec.in_capture_units(sensor_of(args), ds.meta)
-    if tc is not None and (note := _unit_note(ds, tc, drawing_rest_spread(drawing), args.temp_comp, args.capture)):
+    # a compensation fitted on another unit than the one the capture (at t0) is of
+    if tc is not None and (note := capture_note(ds, tc, drawing_rest_spread(drawing), f"--temp-comp {args.temp_comp}",
+                                                args.capture)):
         print(f"identify: {note}", file=sys.stderr)
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)
     args.rig_error, args.zero_error, stage = rec.stage_errors(args.rig_error, args.zero_error, ds.meta, args.capture)
@@ -162,13 +165,6 @@ def _at_t0(ds, tc, path: str, capture: str, command: str):
             print(f"{command}: {note}", file=sys.stderr)
     out = replace(ds, inputs=tc.apply(ds.inputs, temps))
     return out, {"capture_degc": tc.t0, "compensated_from_degc": round(float(np.median(temps)), 4)}
-
-
-def _unit_note(ds, tc, spread, path: str, capture: str) -> str:
-    """host.tempunit.capture_note: a compensation fitted on another unit than the one ``capture`` (at t0) is of."""
-    from host.tempunit import capture_note
-
-    return capture_note(ds, tc, spread, f"--temp-comp {path}", capture)
 
 
 def _check_temperature(ds, sensor, temp_comp: str | None, capture: str):
