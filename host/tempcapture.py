@@ -23,7 +23,7 @@ from host.capturerun import (CaptureFailed, CaptureInterrupted, capture_numbers,
 from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.simsensor import Drift
-from host.temperature import T_RANGE, Thermometer, fit_tempcomp_at, load_tempcomp, temperature_input
+from host.temperature import T_RANGE, Thermometer, fit_tempcomp_at, load_tempcomp, spread_note, temperature_input
 
 
 def parse_temperatures(text: str) -> list[float]:
@@ -187,6 +187,8 @@ def _capture_temperatures(args, prog: str):
     print(f"{prog}: temperature compensation about {tc.t0:g} degC -> {dest} (offsets up to "
           f"{np.abs(tc.offset).max() * 1e3:.3g} mV/degC, gains up to {np.abs(tc.gain).max() * 100:.3g} %/degC; "
           f"residual up to {worst:.3g} mV rms)", file=sys.stderr)
+    if spread_note(tc):
+        print(f"{prog}: {spread_note(tc)}", file=sys.stderr)
     if was:
         print(f"{prog}: note: {dest} held {was}, now replaced: a twin identified through that one, or a build "
               "that compiled it in, no longer matches it (--temp-comp-output keeps both)", file=sys.stderr)

@@ -278,11 +278,12 @@ def _coefficients(values, where: str) -> np.ndarray:
 
 
 def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, t0: float | None = None,
-                 rest: int | None = None) -> TempComp:
+                 rest: int | None = None, source: str = "the capture") -> TempComp:
     """Coefficients from rows of readings (n, N), the pose each row was taken at, and its temperature.
 
     ``t0``: the calibration temperature (default: the temperature closest to the median, the lower of two);
-    ``rest``: the pose id at rest, whose readings at t0 the file records (``fit.rest_v``: whose sensor it is).
+    ``rest``: the pose id at rest, whose readings at t0 the file records (``fit.rest_v``: whose sensor it is);
+    ``source``: what the rows are, as refusals name it.
     """
     readings, pose_ids, temps = np.asarray(readings, float), np.asarray(pose_ids), np.asarray(temps, float)
     if readings.ndim != 2 or pose_ids.shape != (len(readings),) or temps.shape != (len(readings),):
@@ -296,7 +297,7 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
     if t0 is not None:  # the level it names, as measured: the readings there are the compensation's base
         near = float(levels[np.argmin(np.abs(levels - float(t0)))])
         if not abs(near - float(t0)) <= 0.5:
-            raise InputError(f"t0 {t0:g} degC is not a temperature of the capture "
+            raise InputError(f"t0 {t0:g} degC is not a temperature of {source} "
                              f"({', '.join(f'{v:g}' for v in levels)}): the readings there are the compensation's base")
         t0 = near
     # two levels as near the median (15 and 35): the lower, not whichever the thermistor's rounding favours
@@ -309,16 +310,25 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
         base[rows] = readings[near].mean(axis=0)
     dT = temps - t0
     multi = np.unique(pose_ids).size >= 2
-    off, gain, resid = np.zeros(n), np.zeros(n), np.zeros(n)
+    off, gain, resid, spread = np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, np.nan)
+    # the rows at t0 are the base, their y 0 by construction: they leave no degree of freedom to the residual
+    dof = int(np.sum(dT != 0)) - (2 if multi else 1)
     for k in range(n):
         y = readings[:, k] - base[:, k]
         X = np.column_stack([dT, base[:, k] * dT]) if multi else dT[:, None]
         coef, *_ = np.linalg.lstsq(X, y, rcond=None)
         off[k] = coef[0]
         gain[k] = coef[1] if multi else 0.0
-        resid[k] = float(np.sqrt(np.mean((y - X @ coef) ** 2)))
+        r = y - X @ coef
+        resid[k] = float(np.sqrt(np.mean(r ** 2)))
+        if dof > 0:  # the drift per degC the coefficients' standard errors leave, rms over the rows' readings
+            cov = np.linalg.pinv(X.T @ X) * float(r @ r) / dof
+            per = X / np.where(dT == 0, np.inf, dT)[:, None]
+            spread[k] = float(np.sqrt(np.mean(np.einsum("ri,ij,rj->r", per, cov, per)[dT != 0])))
     info = {"rows": int(readings.shape[0]), "temperatures": levels.tolist(), "poses": int(np.unique(pose_ids).size),
             "residual_rms_v": resid.tolist(), "gain_fitted": bool(multi)}
+    if dof > 0:
+        info["drift_se_v_per_degc"] = spread.tolist()
     if rest is not None and np.any(pose_ids == rest):
         info["rest_v"] = base[pose_ids == rest][0].tolist()
     tc = TempComp(t0, off, gain, info)
@@ -327,14 +337,15 @@ def fit_tempcomp(readings: np.ndarray, pose_ids: np.ndarray, temps: np.ndarray, 
 
 
 def fit_tempcomp_at(readings: np.ndarray, poses: np.ndarray, temps: np.ndarray,
-                    t0: float | None = None) -> TempComp:
+                    t0: float | None = None, source: str = "the capture") -> TempComp:
     """:func:`fit_tempcomp` from each row's pose (n, 5) rather than a pose id: rows of one pose matched by value
     (to 1e-6 mm or deg), wherever they sit, and the readings of the pose at rest recorded (whose sensor it is)."""
     from fitgen.physics.pose import contact_poses
 
     unique, ids = np.unique(np.round(poses, 6), axis=0, return_inverse=True)
     at_rest = np.flatnonzero(np.all(contact_poses(unique) == 0, axis=1))
-    return fit_tempcomp(readings, ids.ravel(), temps, t0=t0, rest=int(at_rest[0]) if at_rest.size else None)
+    return fit_tempcomp(readings, ids.ravel(), temps, t0=t0, rest=int(at_rest[0]) if at_rest.size else None,
+                        source=source)
 
 
 def render_c(tc: TempComp, prefix: str = "tm", precision: str = "float") -> str:
@@ -411,6 +422,29 @@ def beyond_note(tempcomp: "TempComp", temps, option: str, what: str) -> str:
     return (f"note: {what} were read at {at}, and {option} was fitted at {fitted[0]:g}..{fitted[1]:g} degC: "
             f"beyond it by more than {BEYOND_DEGC:g} degC its linear drift is extrapolated (a compensation "
             "fitted across these temperatures: tactile-host capture --temperature)")
+
+
+SPREAD_NOTE = 2.0  # the compensation's own error over the rows' residual past which the fit says so
+
+
+def spread_note(tempcomp: "TempComp") -> str:
+    """A note when the coefficients' standard errors (``fit.drift_se_v_per_degc``), carried to the farthest
+    temperature the readouts take without a note (BEYOND_DEGC past the fitted ones), exceed SPREAD_NOTE times
+    the rows' residual on some element: levels too close for the rows' noise; '' otherwise."""
+    se, resid, fitted = (tempcomp.info.get("drift_se_v_per_degc"), tempcomp.info.get("residual_rms_v"),
+                         tempcomp.fitted_range)
+    if fitted is None or not isinstance(se, list) or not isinstance(resid, list) or len(se) != len(resid):
+        return ""
+    reach = max(abs(fitted[0] - BEYOND_DEGC - tempcomp.t0), abs(fitted[1] + BEYOND_DEGC - tempcomp.t0))
+    err = np.asarray(se, dtype=float) * reach
+    ratio = err / np.maximum(np.asarray(resid, dtype=float), 1e-12)
+    k = int(np.nanargmax(ratio)) if np.any(np.isfinite(ratio)) else -1
+    if k < 0 or not ratio[k] > SPREAD_NOTE:
+        return ""
+    return (f"note: the compensation's temperatures span {fitted[1] - fitted[0]:.3g} degC, too little for the rows' "
+            f"noise: {reach:.3g} degC from t0 (as far as the readouts take it without a note) its own error reaches "
+            f"{err[k] * 1e3:.2g} mV on element {k + 1}, {ratio[k]:.2g}x the rows' residual; levels further apart "
+            "pin the drift (that error falls as 1/span)")
 
 
 def capture_temperature_note(model, tempcomp: "TempComp", tare: str = "--tare") -> str:

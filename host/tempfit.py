@@ -9,7 +9,7 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.physics.dataset import load_dataset, row_degc, thermistor_degc
 
-from host.temperature import TempComp, fit_tempcomp_at
+from host.temperature import TempComp, fit_tempcomp_at, spread_note
 
 
 def _temperatures(ds, path) -> np.ndarray:
@@ -18,6 +18,12 @@ def _temperatures(ds, path) -> np.ndarray:
     each = row_degc(ds.meta, ds.n_rows)
     if each is not None:
         return np.asarray(each, dtype=float)
+    # a record there but damaged: the fallback would fit rows that warmed as if at one temperature, in silence
+    for key, what in (("row_degc", f"one finite temperature for each of its {ds.n_rows} rows"),
+                      ("thermistor_degc", "a temperature")):
+        if key in ds.meta and (key == "row_degc" or thermistor_degc(ds.meta) is None):
+            raise InputError(f"{path}'s meta has a {key} that is not {what} (edited, or damaged): the rows' "
+                             "temperatures are not known; take the capture again")
     degc = thermistor_degc(ds.meta)
     if degc is None and isinstance(ds.meta.get("temperature_set"), (int, float)):
         degc = float(ds.meta["temperature_set"])
@@ -62,9 +68,10 @@ def captures_tempcomp(paths, t0: float | None = None) -> tuple[TempComp, list[st
         raise InputError(f"the captures were all read at {medians[0]:.1f} degC: give captures at two or more "
                          "temperatures")
     tc = fit_tempcomp_at(np.vstack([ds.inputs for ds in sets]), np.vstack([ds.poses() for ds in sets]),
-                         np.concatenate(temps), t0=t0)
+                         np.concatenate(temps), t0=t0, source="the captures")
     tc.info["captures"] = [str(p) for p in paths]
     if isinstance(first.meta.get("adc"), str):  # the elements each coefficient is for: read and pi-build compare
         tc.info["adc"] = first.meta["adc"]
     notes = [] if tc.info["gain_fitted"] else ["one pose per capture gives offsets only (gain needs two poses)"]
-    return tc, notes
+    spread = spread_note(tc)
+    return tc, notes + ([spread.removeprefix("note: ")] if spread else [])

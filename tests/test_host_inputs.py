@@ -497,3 +497,36 @@ def test_a_compensation_from_captures_each_at_one_temperature_is_the_one_capture
         assert_one_line_error(run_cli("tactile-host", "tempcomp-fit", *argv, "-o", str(tmp_path / "x.json")), 2, said)
     assert not (tmp_path / "x.json").exists()
     assert_one_line_error(run_cli("tactile-host", "tempcomp-fit", *caps, "-o", caps[0]), 2, f"-o {caps[0]} is the input")
+
+
+def test_a_compensation_fitted_across_too_little_temperature_says_so_and_damaged_temperatures_are_refused(tmp_path):
+    """Levels 0.1 degC apart gave offsets 5.6 mV/degC where the drift is 0.4, with exit 0 and no word: the fit now
+    carries its coefficients' standard errors to where the readouts use it without a note, and notes an error past
+    twice the rows' residual (not for 15, 25, 35). tempcomp-fit took a capture whose row_degc or thermistor_degc
+    was damaged at another temperature in silence, and its --t0 refusal spoke of "the capture"."""
+    import json
+
+    from host.temperature import load_tempcomp
+
+    for temps, noted in (("15,25,35", False), ("25,25.1", True)):
+        out = f"c{temps.count(',')}{noted}.csv"
+        proc = capture_t(tmp_path, SCHEDULE, temps, "--samples", "4", "--seed", "3", out=out)
+        assert proc.returncode == 0, proc.stderr
+        assert ("temperatures span 0.1 degC, too little for the rows' noise" in proc.stderr) == noted, proc.stderr
+        tc = load_tempcomp(tmp_path / out.replace(".csv", ".tempcomp.json"))
+        assert len(tc.info["drift_se_v_per_degc"]) == tc.n
+    caps = [str(tmp_path / f"c2False.T{T}.csv") for T in (15, 25, 35)]
+    proc = run_cli("tactile-host", "tempcomp-fit", str(tmp_path / "c1True.T25.csv"), str(tmp_path / "c1True.T25.1.csv"),
+                   "-o", str(tmp_path / "near.json"))
+    assert proc.returncode == 0 and "note: the compensation's temperatures span 0.1 degC" in proc.stderr, proc.stderr
+    proc = run_cli("tactile-host", "tempcomp-fit", *caps, "-o", str(tmp_path / "far.json"))
+    assert proc.returncode == 0 and "too little" not in proc.stderr, proc.stderr
+    assert_one_line_error(run_cli("tactile-host", "tempcomp-fit", *caps, "--t0", "20", "-o", str(tmp_path / "x.json")),
+                          2, "t0 20 degC is not a temperature of the captures (15, 25, 35)")
+    meta = tmp_path / "c2False.T15.csv.meta.json"
+    good = json.loads(meta.read_text())
+    for key, bad in (("row_degc", [15.0] * 5), ("thermistor_degc", "warm")):  # 6 rows
+        meta.write_text(json.dumps({**{k: v for k, v in good.items() if k != "row_degc"}, key: bad}))
+        assert_one_line_error(run_cli("tactile-host", "tempcomp-fit", *caps, "-o", str(tmp_path / "x.json")), 2,
+                              f"c2False.T15.csv's meta has a {key} that is not")
+    assert not (tmp_path / "x.json").exists()
