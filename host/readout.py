@@ -26,7 +26,7 @@ from fitgen.physics.transfer import readings
 
 from host.adc import AdcArray, DeviceSilent, ErrorCounts
 from host.clock import REAL_CLOCK
-from host.temperature import BEYOND_DEGC, T_RANGE
+from host.temperature import BEYOND_DEGC, CAPTURE_DEGC_TOL, T_RANGE, model_unit_degc
 
 FORMATS = ("csv", "jsonl")
 
@@ -146,7 +146,7 @@ def model_rest(model, rest: str | None = None, required: bool = True) -> tuple[n
         raise InputError("the model records no rest readings and names no sensor file found here: give --rest, the "
                          "sensor file it was fitted on (a twin: the unit file identify wrote) or a dataset of this "
                          "sensor with rows at rest")
-    check_rest_reference(model, reference, target)
+    check_rest_reference(model, reference, target, degc=rest_degc(rest or own))
     return reference, target
 
 
@@ -183,11 +183,39 @@ REST_ADVICE = ("give --rest the sensor file the model was fitted on (a unit's tw
                "or a dataset of this sensor's own with rows at rest")
 
 
-def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = REST_ADVICE) -> None:
+def rest_degc(spec: str | None) -> float | None:
+    """The temperature a dataset given as rest readings (--rest FILE.csv) was read at, as its meta records it (its
+    rows' median, else as the capture started); None for a sensor file or a dataset that records none."""
+    from fitgen.physics.dataset import load_meta, row_degc, thermistor_degc
+
+    if not spec or not spec.lower().endswith(".csv"):
+        return None
+    try:
+        meta = load_meta(spec)
+    except (InputError, OSError):
+        return None
+    each = row_degc(meta, len(meta.get("row_degc") or []))
+    return float(np.median(each)) if each is not None and each.size else thermistor_degc(meta)
+
+
+def _another(model, degc: float | None) -> str:
+    """What rest readings a model refuses are: another sensor's, or, read ``degc`` away from its unit's capture
+    temperature, maybe its own at another temperature."""
+    unit = model_unit_degc(model)[1] if degc is not None else None
+    if unit is None or abs(degc - unit) <= CAPTURE_DEGC_TOL:
+        return "they are another sensor's"
+    return (f"they were read at {degc:.1f} degC and the model's unit at {unit:.1f} degC, so they are its rest drifted "
+            "by the difference, or another sensor's")
+
+
+def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = REST_ADVICE,
+                         degc: float | None = None) -> None:
     """InputError when the rest readings ``reference`` (from ``spec``) lie outside the inputs ``model`` was fitted on
     by more than REST_DOMAIN_SHARE of their span, or when it reads them as a pose far from rest, by more than a
     quarter of its fitted box's width (the default box's without one): another sensor's rest, as the drawing's is
-    to a unit's twin, which a tare would map every reading onto; ``advice``: what the message then tells to do."""
+    to a unit's twin, which a tare would map every reading onto; ``advice``: what the message then tells to do;
+    ``degc``: the temperature they were read at (:func:`rest_degc`), which the message names where it is not the
+    unit's."""
     ref = np.asarray(reference, dtype=float)
     span = model.input_max - model.input_min
     # the estimate of clamped inputs can look like rest (a two-ring model at the paper's rest: dz -0.28 mm), so the
@@ -196,8 +224,8 @@ def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = 
                                            & (ref <= model.input_max + REST_DOMAIN_SHARE * span)))]
     if out:
         raise InputError(f"the rest readings of {spec} lie outside the readings the model was fitted on (v"
-                         f"{', v'.join(map(str, out))} beyond {REST_DOMAIN_SHARE:.0%} of their span): they are another "
-                         f"sensor's, and a tare onto them would bend every estimate; {advice}")
+                         f"{', v'.join(map(str, out))} beyond {REST_DOMAIN_SHARE:.0%} of their span): "
+                         f"{_another(model, degc)}, and a tare onto them would bend every estimate; {advice}")
     est = np.asarray(model.predict(ref[None]), dtype=float)[0]
     box = {**DEFAULT_RANGES, **model.held_out_box}
     far = []
@@ -206,8 +234,8 @@ def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = 
         if not abs(est[j]) <= max(REST_SHARE * (hi - lo), REST_FLOOR[e.unit]):  # NaN too
             far.append(f"{e.name} {est[j]:.3g} {e.unit}")
     if far:
-        raise InputError(f"the model reads the rest readings of {spec} as {', '.join(far)}, far from rest: they are "
-                         f"another sensor's, and a tare onto them would bend every estimate; {advice}")
+        raise InputError(f"the model reads the rest readings of {spec} as {', '.join(far)}, far from rest: "
+                         f"{_another(model, degc)}, and a tare onto them would bend every estimate; {advice}")
 
 
 TARE_UNIT_SHARE = 0.25  # of the rest readings' spread between units: a unit's own drift stays well under it

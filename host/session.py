@@ -27,7 +27,7 @@ from host.clock import REAL_CLOCK
 from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
 from host.readout import (TARE_SAMPLES, Corrections, RunRecord, another_unit_note, check_rest_reference,
-                          rest_reference, tare)
+                          rest_degc, rest_reference, tare)
 from host.simbus import simulated_bus
 from host import tempunit
 from host.temperature import (Thermometer, capture_temperature_note, channel_map_note, load_tempcomp,
@@ -233,7 +233,8 @@ class ReadoutSession:
                                    + (" (the model's)" if own else ""))
         if need_ref:
             reference = recorded if recorded is not None else rest_reference(args.rest or args.sensor, model.n_inputs)
-            check_rest_reference(model, reference, target)
+            check_rest_reference(model, reference, target,
+                                 degc=None if recorded is not None else rest_degc(args.rest or args.sensor))
         for note in notes:
             print(f"{prog}: {note}", file=sys.stderr)
         self.engine = make_engine(args.engine, model, **({"precision": args.precision, "cc": args.cc}

@@ -447,19 +447,25 @@ def spread_note(tempcomp: "TempComp") -> str:
             "pin the drift (that error falls as 1/span)")
 
 
-def capture_temperature_note(model, tempcomp: "TempComp", tare: str = "--tare") -> str:
-    """A note when ``model``'s unit (its sensor file, fitgen.fitting.holdout.fitted_sensor_spec) was identified from a
-    capture more than CAPTURE_DEGC_TOL from ``tempcomp``'s t0: the compensation maps readings to t0, the model was
-    fitted for the capture's; '' otherwise, or when the file records no capture temperature. ``tare``: the option
-    that takes the offsets off at start, which the note suggests."""
+def model_unit_degc(model) -> tuple[str | None, float | None]:
+    """(``model``'s sensor file as found here, fitgen.fitting.holdout.fitted_sensor_spec; the temperature its unit
+    was identified at, :func:`unit_capture_degc`), None for either it does not record or a file not read."""
     from fitgen.fitting.holdout import fitted_sensor_spec
     from fitgen.physics.sensor import load_sensor
 
     spec = fitted_sensor_spec(model)
     try:
-        degc = unit_capture_degc(load_sensor(spec).source) if spec else None
+        return spec, unit_capture_degc(load_sensor(spec).source) if spec else None
     except InputError:
-        return ""
+        return spec, None
+
+
+def capture_temperature_note(model, tempcomp: "TempComp", tare: str = "--tare") -> str:
+    """A note when ``model``'s unit (its sensor file, fitgen.fitting.holdout.fitted_sensor_spec) was identified from a
+    capture more than CAPTURE_DEGC_TOL from ``tempcomp``'s t0: the compensation maps readings to t0, the model was
+    fitted for the capture's; '' otherwise, or when the file records no capture temperature. ``tare``: the option
+    that takes the offsets off at start, which the note suggests."""
+    spec, degc = model_unit_degc(model)
     if degc is None or abs(degc - tempcomp.t0) <= CAPTURE_DEGC_TOL:
         return ""
     shift = float(np.max(np.abs(tempcomp.offset))) * abs(degc - tempcomp.t0) * 1e3

@@ -762,6 +762,17 @@ def test_a_units_capture_temperature_is_recorded_and_a_compensation_about_anothe
                      f"{shift:.2g} mV off what it was fitted for; tare at start (--tare), or identify the unit "
                      "with --temp-comp (its capture mapped to 25 degC)"]
     assert "note:" not in ok(*read, "--tare").stderr  # the tare takes the offsets off at start
+    # the same unit's rest read at 35 degC is refused as a tare's target, as another's is, but said to be maybe
+    # its own drifted (it had been called another sensor's, without a word on temperature)
+    ok("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
+       "--simulate", "--sensor", str(tmp_path / "u.unit.toml"), "--sim-drift", "ramp=0,creep=0,start=35",
+       "-o", str(tmp_path / "cap35.csv"))
+    tare = ["--tare", "--sensor", str(tmp_path / "u.unit.toml"), "--rest"]
+    assert_one_line_error(run_cli(*read[:-4], "--simulate", "dx=0", "--count", "1", *tare, str(tmp_path / "cap35.csv")),
+                          contains="they were read at 35.0 degC and the model's unit at 18.0 degC, so they are its "
+                                   "rest drifted by the difference, or another sensor's")
+    assert_one_line_error(run_cli(*read[:-4], "--simulate", "dx=0", "--count", "1", *tare, "paper"),
+                          contains=": they are another sensor's, and a tare")  # no temperature: as before
     model = load_model(tmp_path / "twin.json")
     assert "(tm_pi --tare)" in capture_temperature_note(model, TempComp(25.0, d.offset_tc, d.gain_tc), "tm_pi --tare")
     assert capture_temperature_note(model, TempComp(18.5, d.offset_tc, d.gain_tc)) == ""  # within 1 degC
