@@ -1245,6 +1245,13 @@ def test_identify_notes_a_capture_that_stopped_before_its_schedule_ended(tmp_pat
     note = f"identify: note: {cap} holds 30 of the 40 poses of its schedule (its capture stopped early"
     proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "unit.toml"))
     assert note in proc.stderr, proc.stderr
+    # stopped before identify's 10 rows: one line that says so (it had noted the stop, then refused a short capture)
+    five = tmp_path / "c5.csv"
+    five.write_text("".join(cap.read_text().splitlines(keepends=True)[:6]))
+    (tmp_path / "c5.csv.meta.json").write_text((tmp_path / "c.csv.meta.json").read_text())
+    assert_one_line_error(run_cli("fitgen", "identify", str(five), "-o", str(tmp_path / "u5.toml")), 2,
+                          f"{five} holds 5 of the 40 poses of its schedule (its capture stopped early: the same "
+                          "capture command run again takes the rest); identify needs at least 10 rows")
     assert run_cli(*capture).returncode == 0
     proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "unit.toml"))
     assert proc.returncode == 0 and "of the 40 poses of its schedule" not in proc.stderr, proc.stderr

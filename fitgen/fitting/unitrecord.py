@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, is_stage_error
+from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, MIN_ROWS, is_stage_error
 from fitgen.fitting.identify import PINNABLE, RIG, RIG_ERROR, ZERO_ERROR, Identification, tilting
 from fitgen.physics.dataset import row_degc, thermistor_degc
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
@@ -306,13 +306,16 @@ def capture_temperature(meta: dict, rows: int) -> dict:
 
 def unfinished_line(meta: dict, rows: int, capture) -> str:
     """A note when ``capture`` holds fewer than the ``schedule_poses`` its meta records (`tactile-host capture`
-    stopped early), else ''."""
+    stopped early), else ''; InputError saying so when it holds fewer rows than identify takes."""
     total = meta.get("schedule_poses")
     if type(total) is not int or not rows < total:
         return ""
-    return (f"note: {capture} holds {rows} of the {total} poses of its schedule (its capture stopped early: the same "
-            "capture command run again takes the rest); identified from these, the unit is known less well than the "
-            "schedule was made for (its standard errors are wider)")
+    stopped = (f"{capture} holds {rows} of the {total} poses of its schedule (its capture stopped early: the same "
+               "capture command run again takes the rest)")
+    if rows < MIN_ROWS:  # said as what it is, not after a note as a capture too short
+        raise InputError(f"{stopped}; identify needs at least {MIN_ROWS} rows")
+    return (f"note: {stopped}; identified from these, the unit is known less well than the schedule was made for "
+            "(its standard errors are wider)")
 
 
 def temperature_span_line(meta: dict, rows: int) -> str:
