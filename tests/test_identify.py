@@ -1118,7 +1118,11 @@ def test_the_rows_noise_says_where_it_comes_from_with_its_figure():
     assert said == "the noise the rows were simulated with (0.000125 V)"
     assert row_noise({"noise": 1.25e-4, "row_noise": measured}, sensor)[0].tolist() == measured
     for free in (0.0, None, True, float("nan")):  # no noise to weigh by: the sensor's, as before
-        assert row_noise({"noise": free}, sensor)[1] == f"sensor paper's {sensor.noise:g} over sqrt(1) samples"
+        assert row_noise({"noise": free, "samples_per_row": 1}, sensor)[1] == \
+            f"sensor paper's {sensor.noise:g} over sqrt(1) samples"
+    # no meta names the samples: taken as one, and said, as --noise gives the rows' own then
+    assert row_noise({}, sensor)[1] == (f"sensor paper's {sensor.noise:g} over sqrt(1) samples (no meta names the "
+                                        "samples per row: --noise takes the rows' own)")
 
 
 def test_a_simulated_capture_is_weighed_by_the_noise_it_was_made_with(tmp_path):

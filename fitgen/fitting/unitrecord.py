@@ -150,8 +150,11 @@ def row_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[n
     simulated capture was made with (``fitgen simulate --noise``), else the sensor file's over sqrt(samples)."""
     n = sensor.n_elements
     samples = samples_per_row(meta) or 1
+    # a capture without its meta (a rig's own logger): rows averaged over 16 would be weighed 4x too loosely
+    over = f"over sqrt({samples}) samples" + ("" if samples_per_row(meta) else
+                                              " (no meta names the samples per row: --noise takes the rows' own)")
     if noise is not None:
-        return np.full(n, noise / np.sqrt(samples)), f"--noise {noise:g} over sqrt({samples}) samples"
+        return np.full(n, noise / np.sqrt(samples)), f"--noise {noise:g} {over}"
     units = f" {meta['units']}" if isinstance(meta.get("units"), str) else ""
     measured = _measured(meta, ROW_NOISE_KEY, n)
     if measured is not None:
@@ -162,7 +165,7 @@ def row_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[n
             and simulated > 0):  # noise-free rows fall through: identify weighs rows by a noise > 0
         return np.full(n, float(simulated)), f"the noise the rows were simulated with ({simulated:g}{units})"
     return (np.full(n, sensor.noise / np.sqrt(samples)),
-            f"sensor {sensor.name}'s {sensor.noise:g} over sqrt({samples}) samples")
+            f"sensor {sensor.name}'s {sensor.noise:g} {over}")
 
 
 def device_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[float, str]:
