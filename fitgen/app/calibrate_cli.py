@@ -117,8 +117,10 @@ def cmd_identify(args) -> int:
     print(f"the unit's reading noise per sample: {unit_noise:.3g} {drawing.units} ({unit_source}), in {unit}: the "
           "twin's fit adds it in expectation and holds out with it", file=sys.stderr)
     if replaced:
+        # a copied project folder's twin records the original's path: check refuses only a twin that leads here
         print(f"identify: note: {unit} held {replaced}, now replaced: a twin fitted on it no longer matches "
-              f"this file (fitgen check refuses it); simulate --sensor {unit} and fit again", file=sys.stderr)
+              f"this file (fitgen check refuses one whose record names it); simulate --sensor {unit} and fit again",
+              file=sys.stderr)
     if png:
         print(f"plot: {png[0]}", file=sys.stderr)
     with Progress("a looser stage?", 4) as bar:  # each moves only when the chi-square sits high
