@@ -63,6 +63,16 @@ class Schedule:
     stage: dict | None = None  # the stage it was made for: rig_error, zero_error (mm), as `fitgen schedule` took them,
     # and rig_error_given: whether it was told the rig's error (fitgen check takes a check schedule's only then)
     check: bool = False  # `fitgen schedule --check`'s: random poses for a check capture, not a calibration's
+    captured: str | None = None  # a capture given as the schedule: the schedule its meta names ('' for none)
+
+    def capture_note(self) -> str:
+        """A note when the schedule is a capture (its poses taken, its schedule's record not), else ''."""
+        if self.captured is None:
+            return ""
+        was = f" {self.captured.removeprefix('schedule ')}" if self.captured else ""
+        return (f"note: --poses {self.origin.removeprefix('schedule ')} is a capture, not a schedule: its poses are "
+                f"taken, but not what its schedule{was} recorded (the drawing and the stage's errors it was made for, "
+                "which identify and check read from the capture): give that schedule")
 
     @property
     def values(self) -> np.ndarray:
@@ -104,8 +114,11 @@ def load_schedule(path: str | Path) -> Schedule:
                if not isinstance(stage.get("rig_error_given", False), bool) else sensor_record_problem(drawing))
     if problem:
         raise InputError(f"{meta_path(path)}: {problem}; repair it, or make the schedule again")
+    captured = None
+    if str(meta.get("generator", "")).startswith("tactile-host capture"):  # as fitgen.app.cliutil.is_capture tells
+        captured = meta["schedule"] if isinstance(meta.get("schedule"), str) else ""
     return Schedule(as_poses(poses), columns, origin, drawing if "sensor" in drawing else None, stage or None,
-                    meta.get("check") is True)
+                    meta.get("check") is True, captured)
 
 
 def simulated_sensor(args, schedule: Schedule) -> None:

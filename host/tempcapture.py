@@ -103,6 +103,8 @@ def _replaced(dest, tc) -> str:
 def _capture_temperatures(args, prog: str):
     schedule = load_schedule(args.poses)
     simulated_sensor(args, schedule)
+    if schedule.capture_note():
+        print(f"{prog}: {schedule.capture_note()}", file=sys.stderr)
     adc_defaults(args)
     temps = parse_temperatures(args.temperature)
     t0 = parse_t0(args.t0, temps)

@@ -625,6 +625,15 @@ def test_a_finished_capture_names_the_next_step_from_its_schedule(tmp_path):
                          "c": f"tactile-host capture: next: fitgen check twin.json {cap} (the twin's model, named as "
                               "identify's next step names it, on these poses against what identify predicts)"}
                         [kind]), said
+    # a capture given as the schedule: its poses taken, with a note that its schedule's record is not (identify
+    # would take the default drawing and stage errors); a schedule is taken without one
+    proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s-cap.csv"), "--adc", spec, "--simulate",
+                   "--samples", "2", "-o", str(tmp_path / "again.csv"))
+    assert proc.returncode == 0 and (f"tactile-host capture: note: --poses {tmp_path / 's-cap.csv'} is a capture, not a "
+                                     f"schedule: its poses are taken, but not what its schedule {tmp_path / 's.csv'} "
+                                     "recorded") in proc.stderr, proc.stderr
+    assert "note:" not in run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", spec,
+                                  "--simulate", "--samples", "2", "-o", str(tmp_path / "once.csv")).stderr
     # a batch of units in one folder: with a unit.toml there, the next one's own name (it replaced the first's)
     (tmp_path / "unit.toml").write_text("")
     proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", spec, "--simulate",
