@@ -629,9 +629,9 @@ def test_a_finished_capture_names_the_next_step_from_its_schedule(tmp_path):
     # would take the default drawing and stage errors); a schedule is taken without one
     proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s-cap.csv"), "--adc", spec, "--simulate",
                    "--samples", "2", "-o", str(tmp_path / "again.csv"))
-    assert proc.returncode == 0 and (f"tactile-host capture: note: --poses {tmp_path / 's-cap.csv'} is a capture, not a "
-                                     f"schedule: its poses are taken, but not what its schedule {tmp_path / 's.csv'} "
-                                     "recorded") in proc.stderr, proc.stderr
+    said = (f"tactile-host capture: note: --poses {tmp_path / 's-cap.csv'} is a capture, not a schedule: its poses "
+            f"are taken, but not what its schedule {tmp_path / 's.csv'} recorded")
+    assert proc.returncode == 0 and said in proc.stderr, proc.stderr
     assert "note:" not in run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", spec,
                                   "--simulate", "--samples", "2", "-o", str(tmp_path / "once.csv")).stderr
     # a batch of units in one folder: with a unit.toml there, the next one's own name (it replaced the first's)
