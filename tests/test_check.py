@@ -529,3 +529,22 @@ def test_a_posterior_that_identify_could_not_have_written_is_refused_before_it_w
     assert_one_line_error(run_cli("fitgen", "check", str(model), str(data), "--sensor", str(unit_file), "--plot",
                                   str(out)), contains="not symmetric positive definite")
     assert not out.exists()
+
+
+def test_the_library_refuses_a_sensor_that_is_not_the_models_or_the_datasets(twin):
+    """Through Python, check() took a sensor in mT for a model in V (its draws read through the model wrongly, wide
+    enough that the drawing's model passed as predicted), fit_device held a twin's model out on the drawing (0.5
+    mm where it errs 0.01), and unit_posterior blamed the files for a drawing given in the unit's place."""
+    folder, drawing, unit, sensor, model = twin
+    poses, _ = check_schedule(drawing, 30, seed=0)
+    y = _capture(unit, poses, 5)
+    with pytest.raises(InputError, match="takes inputs in V; sensor .* readings \\(raw transfer\\) are in mT"):
+        check(model, y, poses, drawing.with_transfer("raw"), ROW_NOISE)
+    with pytest.raises(InputError, match=f"sensor {drawing.name} is not the unit .*twin.toml describes"):
+        unit_posterior(folder / "twin.toml", drawing)
+    train = simulate(sensor, poses)  # the twin's rows, its hash in their meta
+    with pytest.raises(InputError, match="the dataset was simulated with sensor .* not ring"):
+        fit_device(train, ("dx",), FitSettings(), drawing, held_out=10)
+    with pytest.raises(InputError, match="the dataset's readings are in V; sensor .* reads in mT"):
+        fit_device(train, ("dx",), FitSettings(), sensor.with_transfer("raw"), held_out=10)
+    assert check(model, y, poses, sensor, ROW_NOISE).failed() == []  # its own: as before

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError
-from fitgen.equations.model import Model
+from fitgen.equations.model import Model, check_input_units
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, check_error, element_noise
 from fitgen.fitting.holdout import POSTERIOR_UNITS, device_precision, estimator, posterior_units, unit_posterior
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR
@@ -86,6 +86,8 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
     and one draw that carried a row there would set the greatest predicted error for the whole check."""
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
+    # a sensor in other units reads the draws through the model wrongly, and wide draws pass any capture
+    check_input_units(model, sensor.units, f"sensor {sensor.name}'s readings ({sensor.transfer} transfer)")
     inputs, labels = check_rows(inputs, labels, "the check capture")
     noise = element_noise(row_noise, inputs.shape[1], "the rows' reading noise", positive=False)
     keep = ~off_skin(labels)

@@ -27,7 +27,7 @@ from fitgen.fitting.holdout import N_POSES, box_of, deployed_errors, held_out_se
 from fitgen.equations.model import Model
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.fitting.shared import SharedRows
-from fitgen.equations.terms import FIXED_FAMILIES, candidate_terms
+from fitgen.equations.terms import FAMILIES, FIXED_FAMILIES, HARMONIC_DEGREE, candidate_terms
 
 VALIDATION_SEED = 7919
 VALIDATION_POSES = 1000
@@ -207,15 +207,47 @@ def fit_family(ds: Dataset, outputs, settings: FitSettings, sensor, family: str,
                             settings, sensor, again)
 
 
-def fit_device(ds: Dataset, outputs, settings: FitSettings, sensor, family: str = "auto", *, held_out: int = N_POSES,
-               unit_file=None, progress=None, again=None, note=None) -> Model:
+def settings_family(settings: FitSettings) -> str:
+    """The family ``settings`` name: 'auto' for the default candidates (what `fitgen fit` starts from), else the one
+    of fitgen.equations.terms.FAMILIES whose candidates they hold; InputError for candidates of one's own."""
+    default = FitSettings()
+    if (settings.exponents, settings.harmonic_degree) == (default.exponents, default.harmonic_degree):
+        return "auto"
+    named = [n for n, e in FAMILIES.items() if (e, HARMONIC_DEGREE.get(n, 0)) == (settings.exponents,
+                                                                                   settings.harmonic_degree)]
+    if not named:
+        raise InputError("the settings' exponents are no named family (fitgen.equations.terms.FAMILIES), which "
+                         "fit_device records: give family=, or fit with fit_model")
+    return named[0]
+
+
+def check_dataset_sensor(ds: Dataset, sensor) -> None:
+    """InputError when ``sensor`` is not the one ``ds`` was read with, as its meta records it (units, hash): its
+    noise would be added to other readings, and figures held out on it would not be the model's."""
+    units = ds.meta.get("units")
+    if units in ("mT", "V") and sensor.units != units:
+        raise InputError(f"the dataset's readings are in {units}; sensor {sensor.name} reads in {sensor.units} (its "
+                         f"{sensor.transfer} transfer): give it with_transfer('{'raw' if units == 'mT' else 'gmr'}')")
+    sha = ds.meta.get("sensor_sha256")
+    if isinstance(sha, str) and sha != sensor.sha256:
+        raise InputError(f"the dataset was simulated with sensor {ds.meta.get('sensor_file') or ds.meta.get('sensor')} "
+                         f"(sha256 {sha[:12]}), not {sensor.name} ({sensor.sha256[:12]}): figures held out on another "
+                         "sensor would not be this model's")
+
+
+def fit_device(ds: Dataset, outputs, settings: FitSettings, sensor, family: str | None = None, *,
+               held_out: int = N_POSES, unit_file=None, progress=None, again=None, note=None) -> Model:
     """The model `fitgen fit` writes for dataset ``ds``: :func:`fit_family`'s equations and its record of the family;
     where ``sensor`` is known and ``held_out`` > 0, the held-out record on that many poses
     (fitgen.fitting.holdout.fitted_held_out: on units drawn from the identification's posterior when ``unit_file``
-    has one; ``note(text)`` is told what it simulates). InputError: a bad posterior, before the fit; a float fit
+    has one; ``note(text)`` is told what it simulates). ``family``: None for the one ``settings`` name
+    (:func:`settings_family`). InputError: a sensor not the dataset's, a bad posterior, before the fit; a float fit
     that float cannot run, after it."""
     from fitgen.fitting.holdout import fitted_held_out, unit_posterior
 
+    family = settings_family(settings) if family is None else family
+    if sensor is not None:
+        check_dataset_sensor(ds, sensor)
     hold = bool(held_out) and sensor is not None
     posterior = unit_posterior(unit_file, sensor) if hold else None  # said before the fit's seconds, not after
     model, record = fit_family(ds, outputs, settings, sensor, family, progress, again=again)

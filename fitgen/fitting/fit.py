@@ -15,7 +15,7 @@ import numpy as np
 from fitgen import __version__
 from fitgen.fitting.augment import ROUNDING_FACTOR, UNIT_ROUNDOFF, gram_fold, noise_blocks, rounding_rows
 from fitgen.physics.dataset import Dataset, refuse_huge
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, is_finite_number
 from fitgen.equations.model import Equation, Model
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.fitting.shared import SharedRows
@@ -66,13 +66,18 @@ class FitSettings:
         """The paper's procedure: the data as given, exact arithmetic (what R's step() computes)."""
         return cls(noise=0.0, precision=None, **kw)
 
+    def __post_init__(self):
+        # set in a notebook: said here, not as a float() of 'aic' or an argmin of nothing inside the search
+        if not (self.k in ("aic", "bic") or (is_finite_number(self.k) and self.k > 0)):
+            raise InputError(f"k, the penalty per term, is 'aic', 'bic' or a number > 0 (2 for AIC), got {self.k!r}")
+        if self.max_terms is not None and not (isinstance(self.max_terms, (int, np.integer))
+                                               and not isinstance(self.max_terms, bool) and self.max_terms >= 1):
+            raise InputError(f"max_terms is None or a whole number >= 1, got {self.max_terms!r}")
+
     def penalty(self, n: int) -> float:
         if self.k == "bic":
             return float(np.log(n))
-        k = float(self.k)
-        if not k > 0:
-            raise InputError(f"the penalty per term must be > 0 (2 for AIC), got {self.k}")
-        return k
+        return 2.0 if self.k == "aic" else float(self.k)
 
 
 def error_stats(err: np.ndarray) -> dict:
@@ -337,7 +342,7 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
         "sensor_sha256": ds.meta.get("sensor_sha256"),
         "outputs": {o: fitted[o].info for o in outputs},
     }
-    units = ds.meta.get("units") or "mT"
+    units = ds.meta.get("units") or (sensor.units if sensor is not None else "mT")  # a dataset made in numpy
     model = Model(lo, hi, tuple(fitted[o].equation for o in outputs), units, info, harmonics)
     if settings.refine:
         from fitgen.fitting.refine_fit import fit_refinement

@@ -236,6 +236,11 @@ def unit_posterior(unit_file, sensor) -> dict | None:
 
     posterior = load_posterior(unit_file) if unit_file else None
     if posterior is not None:
+        from fitgen.physics.sensor import load_sensor
+
+        if load_sensor(unit_file).with_transfer(sensor.transfer).sha256 != sensor.sha256:  # the drawing, say
+            raise InputError(f"sensor {sensor.name} is not the unit {unit_file} describes: give that file's own "
+                             "(load_sensor of it), whose posterior this is")
         try:
             space, theta, _ = _posterior_draw(posterior, sensor)
             # its mean is the unit the file describes (identify writes both from one fit): an edited mean
@@ -424,6 +429,21 @@ def fitted_sensor_spec(model: Model) -> str | None:
     from fitgen.physics.simulate import recorded_spec
 
     return recorded_spec(model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None)
+
+
+def simulated_sensor_spec(model: Model, option: str, default: str = "paper") -> tuple[str, str]:
+    """The sensor a simulation for ``model`` runs without being told one: :func:`fitted_sensor_spec`, else
+    ``default``; and a note when the model names another sensor (a unit's file) not found here as it was, which
+    ``option`` gives ('' otherwise): a silent drawing in a unit's place reads as a unit far from its twin."""
+    own = fitted_sensor_spec(model)
+    if own:
+        return own, ""
+    rec = model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None
+    lost = (rec.get("sensor_file") or rec.get("sensor")) if isinstance(rec, dict) else None
+    if not isinstance(lost, str) or lost == default:
+        return default, ""
+    return default, (f"note: the model was fitted on {lost}, not found here as it was: simulating {default}; "
+                     f"give {option}")
 
 
 def names_held_out_set(rec) -> bool:

@@ -32,6 +32,19 @@ class Dataset:
     target_names: tuple[str, ...]
     meta: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        # one made in a notebook: said here, not as a broadcast or an index error deep in a fit
+        self.inputs, self.targets = (np.asarray(self.inputs, dtype=float), np.asarray(self.targets, dtype=float))
+        self.target_names = tuple(self.target_names)
+        if self.inputs.ndim != 2 or self.targets.ndim != 2 or len(self.targets) != len(self.inputs):
+            raise InputError(f"a dataset is inputs (n, N) and targets (n, T) of the same rows; got shapes "
+                             f"{self.inputs.shape} and {self.targets.shape}")
+        names = self.target_names
+        if (self.targets.shape[1] != len(names) or any(t not in POSE_NAMES for t in names)
+                or len(set(names)) < len(names)):
+            raise InputError(f"a dataset's target_names are one distinct pose component ({', '.join(POSE_NAMES)}) "
+                             f"per column of targets ({self.targets.shape[1]}); got {self.target_names}")
+
     @property
     def n_rows(self) -> int:
         return int(self.inputs.shape[0])
@@ -126,7 +139,7 @@ def stage_labelled(ds: Dataset) -> bool:
 def rows_on_the_skin(ds: Dataset) -> tuple[Dataset, int]:
     """``ds`` without the rows its stage lifted off the skin, and how many were left out. Such a row reads the
     magnet at rest (fitgen.physics.pose.off_skin): it helps identify a unit, but its label is no contact pose
-    for an estimator to learn. A dataset whose labels are not a stage's is returned as it is."""
+    for an estimator to learn. A dataset neither a stage's nor fitgen simulate's is returned as it is."""
     keep = _on_the_skin(ds)
     if keep.all():
         return ds, 0
@@ -134,7 +147,10 @@ def rows_on_the_skin(ds: Dataset) -> tuple[Dataset, int]:
 
 
 def _on_the_skin(ds: Dataset) -> np.ndarray:
-    if not stage_labelled(ds) or "dz" not in ds.target_names:
+    # fitgen simulate's rows read at rest there too (its note says fit leaves them out); a CSV of one's own may
+    # count dz into the skin as positive, so its rows are kept
+    simulated = str(ds.meta.get("generator", "")).startswith("fitgen ")
+    if not (stage_labelled(ds) or simulated) or "dz" not in ds.target_names:
         return np.ones(ds.n_rows, bool)
     return ~off_skin(ds.poses())
 

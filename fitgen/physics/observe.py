@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, is_finite_number
 from fitgen.physics.pose import (POSE_NAMES, POSE_UNITS, as_poses, board_clearance, check_above_board, check_box,
                                  check_pose_range, field_readings, pose_label)
 from fitgen.physics.sensor import Sensor
@@ -238,6 +238,8 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
     (name, number of outputs) of the scenes a verdict may point a sensor of too few elements at."""
     from fitgen.physics.simulate import pose_rng, random_poses
 
+    if noise is not None and not (is_finite_number(noise) and noise > 0):  # -0.01 had been taken as 0.01
+        raise InputError(f"noise must be a number > 0 (one sample's, in the sensor's units), got {noise!r:.40}")
     if noise is None and not sensor.noise > 0:  # a file without one reads 0: every bound would be 0
         raise InputError(f"{missing_noise(sensor)}: add it to the file, or give --noise; without noise every pose "
                          "component is resolved to 0, resolvable or not")

@@ -9,7 +9,7 @@ import numpy as np
 
 from fitgen import __version__
 from fitgen.physics.dataset import Dataset
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, is_finite_number
 from fitgen.physics.pose import POSE_NAMES, as_poses, check_pose_range, field_readings, off_skin, pose_label
 from fitgen.physics.sensor import TRANSFERS, Sensor
 from fitgen.physics.transfer import past_linear, readings
@@ -96,11 +96,14 @@ def parse_ranges(spec: str | None, base: dict[str, tuple[float, float]] | None =
 
 
 def random_poses(n: int, ranges: dict[str, tuple[float, float]], rng: np.random.Generator) -> np.ndarray:
-    """``n`` poses uniform in the box ``ranges``."""
+    """``n`` poses uniform in the box ``ranges`` ({pose name: (low, high)}; a component it leaves out stays 0)."""
     if not 1 <= n <= MAX_POSES:
         raise InputError(f"number of random poses must be 1..{MAX_POSES:,}, got {n}")
-    lo = np.array([ranges[k][0] for k in POSE_NAMES])
-    hi = np.array([ranges[k][1] for k in POSE_NAMES])
+    odd = [k for k in ranges if k not in POSE_NAMES]
+    if odd:
+        raise InputError(f"ranges name {', '.join(map(str, odd))}, no pose component ({', '.join(POSE_NAMES)})")
+    lo = np.array([ranges.get(k, (0.0, 0.0))[0] for k in POSE_NAMES], dtype=float)
+    hi = np.array([ranges.get(k, (0.0, 0.0))[1] for k in POSE_NAMES], dtype=float)
     return lo + (hi - lo) * rng.random((n, 5))
 
 
@@ -122,8 +125,16 @@ def simulate(
     stage's displacements (what a capture's labels measure) or the magnet's.
     """
     poses = as_poses(poses)
-    if noise < 0:
-        raise InputError(f"noise must be >= 0, got {noise}")
+    unknown = [t for t in targets if t not in POSE_NAMES]
+    if unknown or len(set(targets)) != len(targets):
+        raise InputError(f"targets must be distinct pose components ({', '.join(POSE_NAMES)}), got {tuple(targets)}")
+    # a dataset's missing pose columns read as 0 (fit's held-out box, identify): one the poses move in would lie
+    moved = [c for k, c in enumerate(POSE_NAMES) if c not in targets and np.any(poses[:, k] != 0)]
+    if moved:
+        raise InputError(f"targets leave out {', '.join(moved)}, which the poses move in: a dataset's missing pose "
+                         "columns read as 0; keep them, and choose the outputs when fitting")
+    if not is_finite_number(noise) or noise < 0:  # one figure for every element: the meta records one
+        raise InputError(f"noise must be a number >= 0 (one sample's, in the sensor's units), got {noise!r:.40}")
     if labels not in ("stage", "magnet"):
         raise InputError(f"labels are the stage's or the magnet's, not {labels!r}")
     source = _labelled(sensor, labels)
