@@ -16,7 +16,7 @@ from fitgen.base.parse import LONGEST_RUN, LONGEST_WAIT, MAX_TRIES, parse_number
 from fitgen.base.progress import Progress
 from fitgen.c.codegen import check_magnitudes
 from fitgen.equations.model import check_input_units, load_model
-from fitgen.fitting.holdout import fitted_sensor_spec
+from fitgen.fitting.holdout import fitted_sensor_spec, simulated_sensor_spec
 from fitgen.physics.pose import POSE_LIMITS, check_above_board
 from fitgen.physics.sensor import load_sensor
 
@@ -94,16 +94,6 @@ def open_bus_from_args(args, cmap, simulate_pose, *, motion=None, drift=None, th
                         offsets=args.sim_offsets, faults=args.sim_fault or (), seed=args.seed, motion=motion,
                         drift=drift, thermistor=thermistor, flicker=args.sim_flicker)
     return bus, REAL_CLOCK
-
-
-def _lost_sensor(model) -> str | None:
-    """The sensor the model's held-out record names where it is not the default paper (a unit's file, another
-    preset) and was not found here unchanged: what a simulation without --sensor does not simulate."""
-    rec = model.fit_info.get("held_out") if isinstance(model.fit_info, dict) else None
-    if not isinstance(rec, dict):
-        return None
-    name = rec.get("sensor_file") or rec.get("sensor")
-    return name if isinstance(name, str) and name != ADC_DEFAULTS["sensor"] else None
 
 
 def parse_rest_band(text: str) -> tuple[float, float]:
@@ -201,9 +191,9 @@ class ReadoutSession:
         own = None if sensor_given else fitted_sensor_spec(model)
         if own:  # what --simulate simulates and --tare rests on: the model's own sensor, where found
             args.sensor = own
-        elif not sensor_given and args.simulate is not None and (lost := _lost_sensor(model)):
-            notes.append(f"note: the model was fitted on {lost}, not found here as it was: simulating {args.sensor}; "
-                         "give --sensor")
+        elif not sensor_given and args.simulate is not None:
+            lost = simulated_sensor_spec(model, "--sensor", args.sensor)[1]
+            notes += [lost] if lost else []
         check_input_units(model, "V", "the ADCs' readings", f"model {args.model}")
         check_magnitudes(model, args.precision or "double")  # as predict and codegen: estimates always finite
         if motion is None and pose is not None:  # said of the option here; the simulated bus would say "pose 1"

@@ -600,6 +600,28 @@ def test_emulate_refuses_no_build_and_a_bad_pose_in_one_line(model_path, tmp_pat
     assert not (tmp_path / "b").exists()  # refused before anything was written
 
 
+def test_an_emulated_run_says_when_the_models_own_sensor_is_not_here(model_path, tmp_path):
+    """A twin whose unit file was moved away: --emulate's ReadPose read the paper drawing in its place without a
+    word (then, tared, blamed the user's unit in its other-unit note), where read says so; now it says so too.
+    --sim-sensor with --no-build, which runs nothing to read it, is refused rather than ignored."""
+    _require_emulator()
+    data = json.loads(Path(model_path).read_text())
+    gone = str(tmp_path / "gone" / "unit.toml")
+    data.setdefault("fit", {}).setdefault("held_out", {}).update({"sensor": "unit", "sensor_file": gone})
+    twin = tmp_path / "twin.json"
+    twin.write_text(json.dumps(data))
+    note = (f"tactile-host arduino-build: note: the model was fitted on {gone}, not found here as it was: simulating "
+            "paper; give --sim-sensor")
+    proc = _build_cli(str(twin), tmp_path / "lib", "--emulate", "dx=1,dz=-1")
+    assert proc.returncode == 0 and note in proc.stderr, proc.stderr
+    proc = _build_cli(str(twin), tmp_path / "lib", "--emulate", "dx=1,dz=-1", "--sim-sensor", "paper")
+    assert proc.returncode == 0 and "not found here" not in proc.stderr, proc.stderr
+    assert "not found here" not in _build_cli(model_path, tmp_path / "own", "--emulate", "dx=1,dz=-1").stderr
+    assert_one_line_error(_build_cli(str(twin), tmp_path / "nb", "--no-build", "--sim-sensor", "paper"), 2,
+                          "--sim-sensor is the sensor the emulated runs read, and --no-build runs none")
+    assert not (tmp_path / "nb").exists()
+
+
 def test_without_arduino_builder_the_library_is_written_and_said_not_built(model_path, tmp_path, monkeypatch):
     """The build is done when arduino-builder is installed: without it the library is written and the line says it
     was not built; --emulate, which asks for a build, is refused in one line before anything is written."""

@@ -1,10 +1,12 @@
 """The HIL suite against the real firmware: the emulated Cortex-M4 (QEMU mps2-an386) and the host build on a pty."""
 
 import dataclasses
+import json
 import re
 import socket
 import threading
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -583,3 +585,18 @@ def test_timing_reports_the_median_of_its_batched_evals(model, monkeypatch):
     assert sizes == [1] * 5 + [20] * 3
     assert check.figures["per_s"] == pytest.approx(100.0)
     assert check.figures["rtt_ms_median"] == pytest.approx(1.0)
+
+
+def test_cli_emulate_with_adcs_says_when_the_models_own_sensor_is_not_here(device_model, tmp_path):
+    """emulate --adc simulated paper in place of a twin's unit file moved away, without the note read makes."""
+    require_tool("gcc")
+    data = json.loads(Path(device_model.save(tmp_path / "m.json")).read_text())
+    gone = str(tmp_path / "gone" / "unit.toml")
+    data.setdefault("fit", {}).setdefault("held_out", {}).update({"sensor": "unit", "sensor_file": gone})
+    (tmp_path / "twin.json").write_text(json.dumps(data))
+    run = ["tactile-hil", "emulate", "--target", "host", "--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3", "--simulate",
+           "dx=1,dz=-1", "--suite", "--vectors", "5", "--fuzz", "0", "--no-flash", "--no-held-out", "--model"]
+    proc = run_cli(*run, str(tmp_path / "twin.json"))
+    assert (f"tactile-hil emulate: note: the model was fitted on {gone}, not found here as it was: simulating paper; "
+            "give --sim-sensor") in proc.stderr, proc.stderr
+    assert "not found here" not in run_cli(*run, str(tmp_path / "twin.json"), "--sim-sensor", "paper").stderr

@@ -400,13 +400,19 @@ def test_flash_names_the_unit_a_model_was_fitted_for(paper_model, tmp_path):
     # a bad id given is said before any port is opened (this one refuses connections)
     assert_one_line_error(run_cli("tactile-host", "flash", "--port", "socket://127.0.0.1:1", "--sensor-id", "capteur-é",
                                   model_for_sensor(paper_model, "paper", tmp_path / "p.json")), contains="sensor id")
-    for name, carried in (("unit-042", "unit-042"), ("a-unit-named-at-length", "paper")):
-        with FakeDevice(paper_model, "double", transport="tcp") as fake:
-            proc = run_cli("tactile-host", "flash", "--port", fake.url,
-                           model_for_sensor(paper_model, name, tmp_path / f"{len(name)}.json"))
-            assert proc.returncode == 0, proc.stderr
-            assert fake.active[1].sensor_id == carried and f"sensor id {carried!r}" in proc.stdout
-            assert ("note" in proc.stderr) == (carried != "paper")  # the fake starts with the drawing's id
+    with FakeDevice(paper_model, "double", transport="tcp") as fake:
+        proc = run_cli("tactile-host", "flash", "--port", fake.url,
+                       model_for_sensor(paper_model, "unit-042", tmp_path / "u42.json"))
+        assert proc.returncode == 0, proc.stderr
+        assert fake.active[1].sensor_id == "unit-042" and "sensor id 'unit-042'" in proc.stdout
+        assert "note" in proc.stderr  # the fake starts with the drawing's id
+    # a name no blob carries had been replaced by 'paper': a unit's calibration called the drawing's
+    long = model_for_sensor(paper_model, "a-unit-named-at-length", tmp_path / "long.json")
+    assert_one_line_error(run_cli("tactile-host", "flash", "--port", "socket://127.0.0.1:1", long), 2,
+                          "the model's sensor, 'a-unit-named-at-length', cannot be the calibration's sensor id")
+    with FakeDevice(paper_model, "double", transport="tcp") as fake:
+        proc = run_cli("tactile-host", "flash", "--port", fake.url, "--sensor-id", "unit-long", long)
+        assert proc.returncode == 0 and fake.active[1].sensor_id == "unit-long", proc.stderr
     # over a unit's own calibration, the drawing's model is flashed with a note that it is another sensor's
     with FakeDevice(paper_model, "double", transport="tcp", sensor_id="unit-042") as fake:
         proc = run_cli("tactile-host", "flash", "--port", fake.url,

@@ -12,7 +12,7 @@ from host.boards import BOARDS
 
 def cmd_arduino_build(args) -> int:
     from fitgen.equations.model import load_model
-    from fitgen.fitting.holdout import device_precision, fitted_sensor_spec
+    from fitgen.fitting.holdout import device_precision, simulated_sensor_spec
     from fitgen.physics.sensor import load_sensor
     from hil.sketch import build_readpose
     from fitgen.app.report import rounding_note
@@ -29,7 +29,11 @@ def cmd_arduino_build(args) -> int:
         raise InputError("--style does not apply to --precision fixed" + (
             " (the model was fitted for it: give --precision float to build it in float)" if fitted == "fixed" else ""))
     args.style = args.style or "unrolled"
-    args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"
+    if args.sim_sensor and args.no_build:  # no emulated run to read it: it would do nothing
+        raise InputError("--sim-sensor is the sensor the emulated runs read, and --no-build runs none: drop one")
+    lost = ""
+    if not args.sim_sensor:
+        args.sim_sensor, lost = simulated_sensor_spec(model, "--sim-sensor")
     if split_channel_map(args.adc)[1] is not None or cmap.temperature is not None or args.thermistor:
         raise InputError("the Arduino library reads the elements only, no thermistor: drop temp= from --adc and "
                          "--thermistor (tactile-host read and pi-build read one)")
@@ -37,6 +41,8 @@ def cmd_arduino_build(args) -> int:
     if args.rest and not args.tare:
         raise InputError("--rest names what --tare maps the rest readings onto: give --tare too")
     rest, onto = model_rest(model, args.rest) if args.tare else (None, None)
+    if lost and args.emulate:  # its lines would read another sensor than the model's, unsaid
+        print(f"tactile-host arduino-build: {lost}", file=sys.stderr)
     key = args.board or "uno"  # the note on other boards is for a build none was named for
     size, run = build_readpose(model, cmap, args.output, args.emulate, precision=args.precision, style=args.style,
                                build=False if args.no_build else None, sensor=args.sim_sensor, rest=rest,

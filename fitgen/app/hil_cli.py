@@ -150,7 +150,7 @@ def cmd_emulate(args) -> int:
     from contextlib import ExitStack
 
     from fitgen.base.progress import Progress
-    from fitgen.fitting.holdout import fitted_sensor_spec
+    from fitgen.fitting.holdout import simulated_sensor_spec
     from hil.emulate import start_target, uno_crash_advice
 
     _check_counts(args)
@@ -162,8 +162,10 @@ def cmd_emulate(args) -> int:
         raise InputError("--port is the emulated UART's TCP port, and the host target has none (its UART is a "
                          "pseudo-terminal): drop --port")
     model, data = _load(args)
-    if args.adc:  # the model's own, where found (without --adc, a --sim-sensor given is refused)
-        args.sim_sensor = args.sim_sensor or fitted_sensor_spec(model) or "paper"
+    if args.adc and not args.sim_sensor:  # the model's own, where found (without --adc, --sim-sensor is refused)
+        args.sim_sensor, lost = simulated_sensor_spec(model, "--sim-sensor")
+        if lost:
+            print(f"tactile-hil emulate: {lost}", file=sys.stderr)
     cmap, bridge, tin, tempcomp = _adc_bridge(args, model)
     with ExitStack() as stack:
         with Progress(f"{args.target} firmware", 2) as bar:  # building and booting take seconds
@@ -225,7 +227,8 @@ def _suite_options(p, suite=None) -> None:
     s.add_argument("--no-flash", action="store_true", help="skip the calibration flashing checks")
     s.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
     p.add_argument("--sensor-id", help="sensor id compiled in and written into flashed blobs (default: the name of "
-                                       "the sensor the model's held-out figures are for, a unit file's; else paper)")
+                                       "the sensor the model's held-out figures are for, a unit file's, refused "
+                                       "where it cannot be one; paper for a model that names none)")
     p.add_argument("--fma", action="store_true", help="the compiled-in model sums terms by fma")
     p.add_argument("--timeout", type=seconds, default=2.0, help="seconds to wait for each reply (default 2)")
     add_held_out_options(s)

@@ -349,7 +349,7 @@ def build_parser() -> Parser:
                    help="serial port: /dev/ttyACM0, /dev/pts/N or socket://HOST:PORT")
     f.add_argument("--sensor-id", help="sensor id stored in the blob (ASCII, <= 16 bytes; default: the name of "
                                        "the sensor the model's held-out figures are for, such as a unit file's, "
-                                       "else paper)")
+                                       "refused where it cannot be one; paper for a model that names none)")
     f.add_argument("--fma", action="store_true", help="the device sums the terms by fused multiply-add")
     f.add_argument("--timeout", default="2", help="seconds to wait for each answer (default 2); the first PING "
                    "waits at least 3 s, for a board that restarts when its port opens (an Uno's bootloader)")

@@ -107,7 +107,9 @@ def check_sensor_id(sensor_id: str) -> str:
 def model_sensor_id(model: Model, fallback: str = "paper", also=None) -> str:
     """The sensor id a blob of ``model`` carries unless told: the name of the sensor its held-out figures are
     for (a unit file's, as identify names it: ``-o unit-042.toml`` gives ``unit-042``), where it is one a blob
-    can carry (and ``also(name)``, a firmware's own check, raises no InputError); else ``fallback``."""
+    can carry (and ``also(name)``, a firmware's own check, raises no InputError); ``fallback`` for a model that
+    names none. InputError for a name no blob can carry: the drawing's id in its place would call a unit's
+    calibration the drawing's."""
     name = (model.fit_info.get("held_out") or {}).get("sensor")
     if not isinstance(name, str) or not name:
         return fallback
@@ -115,8 +117,9 @@ def model_sensor_id(model: Model, fallback: str = "paper", also=None) -> str:
         check_sensor_id(name)
         if also is not None:
             also(name)
-    except InputError:
-        return fallback
+    except InputError as exc:
+        raise InputError(f"the model's sensor, {name!r}, cannot be the calibration's sensor id ({exc}): give one "
+                         "with --sensor-id") from None
     return name
 
 
