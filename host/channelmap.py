@@ -139,10 +139,11 @@ def check_full_scale(cmap: ChannelMap, low, high) -> None:
     scales = []
     for chip, _ in cmap.elements():
         if chip.kind == "ads1115":
-            scales.append((chip.settings.pga * 32767 / 32768, f"{chip.label}, --pga {chip.settings.pga:g}"))
+            # the map's setting, typed as --pga or written in a TOML map: named as neither
+            scales.append((chip.settings.pga * 32767 / 32768, f"{chip.label}, PGA {chip.settings.pga:g} V"))
         else:
-            scales.append((chip.vref_volts * 4095 / 4096, f"{chip.label}, --vref {chip.settings.vref}"))
-    _check_scales(scales, low, high, "choose a larger full scale")
+            scales.append((chip.vref_volts * 4095 / 4096, f"{chip.label}, reference {chip.settings.vref}"))
+    _check_scales(scales, low, high, "choose a larger full scale (--pga or --vref, or the map file's pga or vref)")
 
 
 def check_reported_full_scale(adc_chips, low, high) -> None:

@@ -169,7 +169,7 @@ def test_emulate_refuses_a_bad_channel_map(tmp_path, model):
     for tool, cmd in (("tactile-hil", "emulate"), ("tactile-host", "read")):
         proc = run_cli(tool, cmd, "--model", path, *(("--target", "host") if cmd == "emulate" else ("--count", "1")),
                        "--adc", str(tmp_path / "small.toml"), "--simulate", "0,0,-1,0,0")
-        assert_one_line_error(proc, 2, "beyond its ADC's full scale 2.048 V (ads1115@0x48, --pga 2.048): its "
+        assert_one_line_error(proc, 2, "beyond its ADC's full scale 2.048 V (ads1115@0x48, PGA 2.048 V): its "
                                        "readings would clip")
 
 

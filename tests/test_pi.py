@@ -302,6 +302,17 @@ def test_a_failed_pi_build_leaves_the_folder_as_it_was_and_refuses_before_it_wri
         assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", adc, "--temp-comp",
                                       str(tc), "--cc", "gcc", "-o", str(tmp_path / "none")), contains=said)
         assert not (tmp_path / "none").exists()
+    # a folder of one's own whose adc.c the build would replace (it had been written over): refused, untouched;
+    # the folder the build wrote is rebuilt into (above), and so is one that holds other files only
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "adc.c").write_text("/* my own driver */\n")
+    assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc", "-o",
+                                  str(mine)), 2, f"-o {mine} holds adc.c, which no earlier pi-build wrote")
+    assert [p.name for p in mine.iterdir()] == ["adc.c"] and (mine / "adc.c").read_text() == "/* my own driver */\n"
+    (mine / "adc.c").rename(mine / "notes.txt")
+    assert run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc", "-o",
+                   str(mine)).returncode == 0 and (mine / "tm_pi").is_file()
 
 
 def test_a_ctrl_c_while_a_pi_build_replaces_the_last_one_leaves_the_new_build_whole(model, tmp_path, monkeypatch):
