@@ -195,8 +195,8 @@ def test_a_refused_build_leaves_the_library_as_it_was_and_a_new_one_replaces_src
     assert _build_cli(model_path, lib, "--no-build").returncode == 0
     (lib / "src" / "extra.h").write_text("/* a file the last build did not write */\n")
     before = _tree(lib)
-    for extra, said in ((["--pga", "1.024"], "beyond its ADC's full scale 1.024 V (ads1115@0x48, --pga 1.024)"),
-                        (["--sim-sensor", "nosuch"], "sensor 'nosuch'"),
+    for extra, said in ((["--pga", "1.024"], "beyond its ADC's full scale 1.024 V (ads1115@0x48, PGA 1.024 V)"),
+                        (["--sim-sensor", "nosuch"], "and --no-build runs none"),
                         (["--thermistor", "beta=3950"], "no thermistor")):
         assert_one_line_error(_build_cli(model_path, lib, "--no-build", *extra), 2, said)
         assert _tree(lib) == before
