@@ -600,3 +600,23 @@ def test_cli_emulate_with_adcs_says_when_the_models_own_sensor_is_not_here(devic
     assert (f"tactile-hil emulate: note: the model was fitted on {gone}, not found here as it was: simulating paper; "
             "give --sim-sensor") in proc.stderr, proc.stderr
     assert "not found here" not in run_cli(*run, str(tmp_path / "twin.json"), "--sim-sensor", "paper").stderr
+
+
+def test_cli_emulate_runs_a_model_fitted_for_fixed_point_in_it_by_default(sensor, tmp_path):
+    """codegen --target uno, predict --target uno and arduino-build run a model fitted for fixed point in it; emulate
+    built float, so its suite checked another arithmetic than the library flashed. A style asks for float."""
+    require_tool("gcc")
+    from fitgen.fitting.fit import FitSettings
+    from fitgen.physics.scenes import PRESETS
+
+    slide = simulate(sensor, PRESETS["slide"].poses())
+    fixed = fit_model(slide, PRESETS["slide"].outputs,
+                      settings=FitSettings.family("no-roots", precision="fixed")).save(tmp_path / "fx.json")
+    floated = fit_model(slide, PRESETS["slide"].outputs,
+                        settings=FitSettings.family("no-roots")).save(tmp_path / "fl.json")
+    run = ["tactile-hil", "emulate", "--target", "host", "--suite", "--vectors", "5", "--fuzz", "0", "--no-flash",
+           "--no-held-out", "--model"]
+    for path, extra, built in ((fixed, [], "fixed, unrolled"), (fixed, ["--style", "table"], "float, table"),
+                               (fixed, ["--precision", "float"], "float, table"), (floated, [], "float, table")):
+        proc = run_cli(*run, str(path), *extra)
+        assert proc.returncode == 0 and proc.stdout.startswith(f"host firmware: {built},"), proc.stdout + proc.stderr

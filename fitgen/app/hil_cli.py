@@ -150,18 +150,20 @@ def cmd_emulate(args) -> int:
     from contextlib import ExitStack
 
     from fitgen.base.progress import Progress
-    from fitgen.fitting.holdout import simulated_sensor_spec
+    from fitgen.fitting.holdout import device_precision, simulated_sensor_spec
     from hil.emulate import start_target, uno_crash_advice
 
     _check_counts(args)
-    args.precision = args.precision or ("fixed" if args.target == "microbit" else "float")  # as codegen's --target
     if args.precision == "fixed" and args.style is not None:  # as codegen refuses it: it would be ignored
         raise InputError(STYLE_WITH_FIXED)
-    args.style = args.style or "table"
     if args.target == "host" and args.port is not None:  # its UART is a pseudo-terminal, not a TCP port
         raise InputError("--port is the emulated UART's TCP port, and the host target has none (its UART is a "
                          "pseudo-terminal): drop --port")
     model, data = _load(args)
+    # as codegen --target and arduino-build: a model fitted for fixed point runs in it (a style asks for float)
+    fixed = args.target == "microbit" or (device_precision(model) == "fixed" and args.style is None)
+    args.precision = args.precision or ("fixed" if fixed else "float")
+    args.style = args.style or "table"
     if args.adc and not args.sim_sensor:  # the model's own, where found (without --adc, --sim-sensor is refused)
         args.sim_sensor, lost = simulated_sensor_spec(model, "--sim-sensor")
         if lost:
@@ -266,7 +268,8 @@ def build_parser() -> Parser:
                         "on its TWI bus); host: the POSIX build on a pty")
     e.add_argument("--port", type=tcp_port, help="TCP port of the emulated UART (default: a free one)")
     e.add_argument("--precision", choices=("float", "double", "fixed"),
-                   help="the firmware's arithmetic (default float; on the microbit fixed, its only one)")
+                   help="the firmware's arithmetic (default float, or fixed for a model fitted for it; on the "
+                        "microbit fixed, its only one)")
     e.add_argument("--style", choices=("table", "unrolled"),
                    help="the C's form: table (coefficient arrays and a loop; default) or unrolled (straight-line "
                         "code); not with --precision fixed, whose header is straight-line code")
