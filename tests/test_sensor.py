@@ -130,6 +130,22 @@ def test_an_axis_written_near_floats_limits_is_the_direction_it_names(scale):
     np.testing.assert_allclose(s.axes[-1], [math.sqrt(0.5), math.sqrt(0.5), 0.0], rtol=1e-15)
 
 
+def test_a_ring_start_of_many_turns_is_the_angle_it_names():
+    """start = 1e308 left every element at the first's place (1e308 + 45 deg is 1e308), refused as elements sharing
+    a position; a start of whole turns more is the same ring."""
+    d = paper_dict()
+    ring = d["elements"]["ring"][0]
+    base = parse_sensor(d)
+    for start in (360.0 * 3 + ring.get("start", 0.0), 1e308):
+        d["elements"]["ring"][0] = {**ring, "start": start}
+        s = parse_sensor(d)
+        if start < 1e300:
+            np.testing.assert_allclose(s.positions, base.positions, atol=1e-12)
+        assert len({tuple(np.round(p, 9)) for p in s.positions}) == s.n_elements
+        phi = np.degrees(np.arctan2(s.positions[:8, 1], s.positions[:8, 0]))
+        np.testing.assert_allclose(np.diff(np.unwrap(np.radians(phi))), np.radians(45.0), atol=1e-12)
+
+
 def test_elevation_raises_a_ring_axis_toward_the_normal():
     d = paper_dict()
     d["elements"]["ring"] = [{"count": 4, "radius": 10.0, "axis": "radial", "elevation": 30.0},

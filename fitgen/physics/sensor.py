@@ -259,7 +259,8 @@ def _ring(sec: _Section) -> tuple[np.ndarray, np.ndarray]:
     count = sec.integer("count", min_=1, max_=64)
     radius = sec.number("radius", required=True, positive=True)
     z = sec.number("z", 0.0)
-    start = sec.number("start", 0.0)
+    # within a turn: 1e308 + 45 is 1e308, and every element had taken the first's place
+    start = math.fmod(sec.number("start", 0.0), 360.0)
     axis = sec.string("axis", "radial", choices=AXIS_WORDS)
     # a part mounted on a wedge: its in-plane axis tilted toward the board's normal
     elevation = sec.number("elevation", 0.0, min_=-90.0, max_=90.0)
