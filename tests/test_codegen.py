@@ -97,6 +97,24 @@ def test_outputs_without_input_powers_compile_warning_free_and_match_python(pape
     assert status.tolist() == [0, 0, 0, 255, 255] and np.array_equal(status, ref_status)
 
 
+@pytest.mark.parametrize("precision", ["double", "float"])
+@pytest.mark.parametrize("exponents", [("-1",), ("1", "-1"), ("-1", "1/2"), ("1", "-1", "1/4")])
+def test_a_table_whose_powers_need_no_square_compiles_warning_free(paper_model, precision, exponents):
+    """A table header declared v2 = v * v whenever a term took 1/v, which never reads it: a model of v, 1/v and
+    roots only (press, --k 6, --family all) did not compile under -Werror (unused variable), and tradeoff left
+    its points out with status 0."""
+    require_tool("gcc")
+    terms = tuple(Term(k + 1, e) for k, e in enumerate(exponents))
+    eqs = [Equation(e.name, e.intercept, terms, tuple(0.5 / (j + 1) for j in range(len(terms))))
+           for e in paper_model.equations]
+    model = dataclasses.replace(paper_model, equations=tuple(eqs))
+    lo, hi = model.input_min, model.input_max
+    rows = np.vstack([lo, hi, (lo + hi) / 2])
+    with CompiledModel(model, precision, "table") as cm:
+        out, _ = cm.predict(rows)
+    assert np.array_equal(out, model.predict(rows, precision=precision))
+
+
 def test_generation_is_deterministic(paper_model, tmp_path):
     for precision in ("double", "float"):
         for style in ("table", "unrolled"):
