@@ -55,10 +55,16 @@ def test_datasets_settings_and_pose_boxes_made_in_python_are_checked_where_made(
         random_poses(5, {"x": (0, 1)}, pose_rng(1))
 
 
-def test_observe_refuses_a_noise_that_is_no_noise(sensor):
-    for bad in (-0.01, 0.0, float("nan")):  # -0.01 had been taken as 0.01
-        with pytest.raises(InputError, match="noise must be a number > 0"):
+def test_observe_refuses_a_noise_that_is_no_noise(sensor, tmp_path):
+    for bad in (-0.01, float("nan")):  # -0.01 had been taken as 0.01
+        with pytest.raises(InputError, match="noise must be a number >= 0"):
             observe(sensor, DEFAULT_RANGES, ("dx",), noise=bad)
+    # 0 is fit --noise 0's, the paper's procedure, whose scene check observes without noise: a scene's data fitted
+    # so (a refusal of 0 had refused it, naming a noise the user never gave)
+    data = tmp_path / "press.csv"
+    assert run_cli("fitgen", "simulate", "--sensor", "paper", "--scene", "press", "-o", str(data)).returncode == 0
+    proc = run_cli("fitgen", "fit", str(data), "--noise", "0", "--held-out", "0", "-o", str(tmp_path / "m.json"))
+    assert proc.returncode == 0, proc.stderr
 
 
 def test_fit_device_fits_the_family_its_settings_name_and_reads_units_from_the_sensor(sensor):

@@ -238,8 +238,9 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
     (name, number of outputs) of the scenes a verdict may point a sensor of too few elements at."""
     from fitgen.physics.simulate import pose_rng, random_poses
 
-    if noise is not None and not (is_finite_number(noise) and noise > 0):  # -0.01 had been taken as 0.01
-        raise InputError(f"noise must be a number > 0 (one sample's, in the sensor's units), got {noise!r:.40}")
+    # -0.01 had been taken as 0.01; 0 is fit --noise 0's (the paper's procedure), its scene checked without noise
+    if noise is not None and not (is_finite_number(noise) and noise >= 0):
+        raise InputError(f"noise must be a number >= 0 (one sample's, in the sensor's units), got {noise!r:.40}")
     if noise is None and not sensor.noise > 0:  # a file without one reads 0: every bound would be 0
         raise InputError(f"{missing_noise(sensor)}: add it to the file, or give --noise; without noise every pose "
                          "component is resolved to 0, resolvable or not")
