@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import re
 
 import numpy as np
 import pytest
@@ -383,6 +384,15 @@ def test_bad_scene_and_sensor_one_line(tmp_path):
     assert_one_line_error(run_cli("fitgen", "tradeoff", "paper", "--scene", "nowhere", "-o", str(tmp_path)), 2)
     assert_one_line_error(run_cli("fitgen", "tradeoff", "nosuch", "--scene", "press", "-o", str(tmp_path)), 2)
     assert_one_line_error(run_cli("fitgen", "tradeoff", "paper", "-o", str(tmp_path)), 2)
+    # a sensor file without a noise figure: it had been told to give --noise, which tradeoff has not
+    from importlib import resources
+
+    paper = (resources.files("fitgen.physics") / "presets" / "paper.toml").read_text()
+    quiet = tmp_path / "quiet.toml"
+    quiet.write_text(re.sub(r"(?m)^noise = .*$", "noise = 0.0", paper))
+    proc = run_cli("fitgen", "tradeoff", str(quiet), "--scene", "press", "-o", str(tmp_path / "q"))
+    assert_one_line_error(proc, 2, "gives no noise figure for its raw transfer")
+    assert "--noise" not in proc.stderr and "add it to the file" in proc.stderr and not (tmp_path / "q").exists()
 
 
 def test_a_refused_sweep_leaves_no_output_folder(tmp_path):

@@ -43,6 +43,7 @@ from fitgen.fitting.fit import FitSettings, fit_model, rows_needed
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.scenes import Scene, unresolved_warnings
 from fitgen.physics.simulate import pose_rng, random_poses, simulate
+from fitgen.physics.transfer import missing_noise
 
 K_VALUES = ("aic", "bic", 6.0)
 CAPS = (None, 20, 8)
@@ -321,6 +322,9 @@ def sweep(sensor, scene: Scene, grid: list[Knobs], *, target: dict | None = None
     """
     if shutil.which("valgrind") is None:
         raise InputError("valgrind not found: the instruction counts need it (apt-get install valgrind)")
+    if not sensor.noise > 0:  # said as the sweep's need: observe's words name a --noise the sweep has not
+        raise InputError(f"{missing_noise(sensor)}: the sweep measures accuracy with the device's reading noise; "
+                         "add it to the file")
     outputs = scene.outputs
     target = default_target(outputs) if target is None else dict(target)
     notes: list[str] = []
