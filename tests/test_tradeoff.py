@@ -420,3 +420,30 @@ def test_a_units_sweep_fits_each_point_as_fitgen_fit_does(tmp_path):
     assert "Note: fit aic cap=- harmonics: the float rounding's share" in proc.stdout
     rows = list(csv.DictReader((out / "tradeoff.csv").open()))
     assert rows and all(0 < float(r["share"]) <= 0.05 for r in rows)  # the equations, and with a refinement step
+
+
+def test_the_plot_greys_the_points_left_out_and_labels_scores_below_one(monkeypatch):
+    """Points left out of the front (no better than a constant, rounding past --max-share) were drawn as any
+    other, visibly dominating the front drawn; and on a 3-degree target (scores 0.26-0.99) the score axis's only
+    label was 1: the minor labels kept a tick whose text began 1, 2, 3 or 5, and 0.3's begins 0."""
+    from types import SimpleNamespace
+
+    from fitgen.app import plots
+
+    knobs = SimpleNamespace(precision="float", method="equations", style="unrolled", refine=0, family="integer")
+    points = [SimpleNamespace(knobs=knobs, score=s, instructions=c) for s, c in ((0.3, 120), (0.5, 300), (0.9, 90))]
+    result = SimpleNamespace(points=points, front=[0, 1], recommended=1, met=True, constant=[2], over_share=[],
+                             core=None, sensor="paper", scene=SimpleNamespace(name="full"),
+                             cost=lambda p: p.instructions)
+    figs = []
+    monkeypatch.setattr(plots, "_png", lambda fig: figs.append(fig) or b"")
+    plots.tradeoff_png(result)
+    ax = figs[0].axes[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any(t.startswith("left out: no better than a constant") for t in labels) and "float, equations" in labels
+    grey = [c for c in ax.collections if tuple(c.get_edgecolor()[0][:3]) == (0.6, 0.6, 0.6)]
+    assert len(grey) == 1 and tuple(grey[0].get_offsets()[0]) == (90, 0.9)
+    figs[0].canvas.draw()
+    shown = {t.get_text() for t in ax.yaxis.get_ticklabels(minor=True)} | {t.get_text() for t in
+                                                                        ax.yaxis.get_ticklabels()}
+    assert {"0.3", "0.5"} <= shown, shown

@@ -144,13 +144,18 @@ def tradeoff_png(result) -> bytes:
     refined = "P"  # any family with refinement steps
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
     pts = [(i, p) for i, p in enumerate(result.points) if result.cost(p) is not None and p.score is not None]
+    # left out of the front and the recommendation (no better than a constant, rounding past --max-share): grey,
+    # so that the front is seen to be over the points it is over
+    out = set(result.constant) | set(result.over_share)
     seen = set()
     for i, p in pts:
-        key = (p.knobs.precision, p.knobs.method)
-        face = "none" if p.knobs.style == "table" else colours[p.knobs.precision]
+        key = ("left out",) if i in out else (p.knobs.precision, p.knobs.method)
+        colour = "0.6" if i in out else colours[p.knobs.precision]
+        face = "none" if p.knobs.style == "table" or i in out else colour
         ax.scatter(result.cost(p), p.score, s=36, marker=refined if p.knobs.refine else markers[p.knobs.family],
-                   facecolors=face, edgecolors=colours[p.knobs.precision], linewidths=1, alpha=0.85,
-                   label=None if key in seen else f"{p.knobs.precision}, {p.knobs.method}")
+                   facecolors=face, edgecolors=colour, linewidths=1, alpha=0.85,
+                   label=None if key in seen else "left out: no better than a constant, or rounding past --max-share"
+                   if i in out else f"{p.knobs.precision}, {p.knobs.method}")
         seen.add(key)
     front = [result.points[i] for i in result.front]
     if front:
@@ -166,7 +171,8 @@ def tradeoff_png(result) -> bytes:
 
     for axis in (ax.xaxis, ax.yaxis):
         axis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
-        axis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if f"{x:g}"[0] in "1235" else ""))
+        # by the leading digit (0.3's is 3, not its "0"): scores below 1 are read off too
+        axis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if f"{x:.0e}"[0] in "1235" else ""))
     ax.set_xlabel(f"cycles per estimate on {result.core} (simavr)" if result.core
                   else "x86-64 instructions per estimate (callgrind)")
     ax.set_ylabel("score: worst RMS error with noise / target")
