@@ -440,10 +440,19 @@ def test_the_plot_greys_the_points_left_out_and_labels_scores_below_one(monkeypa
     plots.tradeoff_png(result)
     ax = figs[0].axes[0]
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
-    assert any(t.startswith("left out: no better than a constant") for t in labels) and "float, equations" in labels
+    assert "left out (a constant; --max-share)" in labels and "float, equations" in labels
     grey = [c for c in ax.collections if tuple(c.get_edgecolor()[0][:3]) == (0.6, 0.6, 0.6)]
     assert len(grey) == 1 and tuple(grey[0].get_offsets()[0]) == (90, 0.9)
     figs[0].canvas.draw()
     shown = {t.get_text() for t in ax.yaxis.get_ticklabels(minor=True)} | {t.get_text() for t in
                                                                         ax.yaxis.get_ticklabels()}
     assert {"0.3", "0.5"} <= shown, shown
+    # over two decades (press: scores near 0.01 below the target's 1), the 1-2-3-5 ticks only, or they overlap
+    for p, score in zip(points, (0.009, 0.012, 0.016)):
+        p.score = score
+    plots.tradeoff_png(result)
+    figs[1].canvas.draw()
+    ax = figs[1].axes[0]
+    shown = {t.get_text() for t in ax.yaxis.get_ticklabels(minor=True)} | {t.get_text() for t in
+                                                                        ax.yaxis.get_ticklabels()}
+    assert "0.02" in shown and "0.07" not in shown, shown

@@ -142,7 +142,7 @@ def tradeoff_png(result) -> bytes:
     colours = {"double": "tab:blue", "float": "tab:orange", "fixed": "tab:green"}
     markers = {"all": "o", "no-roots": "s", "integer": "^", "harmonics": "D"}
     refined = "P"  # any family with refinement steps
-    fig, ax = plt.subplots(figsize=(7.5, 4.8))
+    fig, ax = plt.subplots(figsize=(9.5, 4.8))
     pts = [(i, p) for i, p in enumerate(result.points) if result.cost(p) is not None and p.score is not None]
     # left out of the front and the recommendation (no better than a constant, rounding past --max-share): grey,
     # so that the front is seen to be over the points it is over
@@ -154,7 +154,7 @@ def tradeoff_png(result) -> bytes:
         face = "none" if p.knobs.style == "table" or i in out else colour
         ax.scatter(result.cost(p), p.score, s=36, marker=refined if p.knobs.refine else markers[p.knobs.family],
                    facecolors=face, edgecolors=colour, linewidths=1, alpha=0.85,
-                   label=None if key in seen else "left out: no better than a constant, or rounding past --max-share"
+                   label=None if key in seen else "left out (a constant; --max-share)"
                    if i in out else f"{p.knobs.precision}, {p.knobs.method}")
         seen.add(key)
     front = [result.points[i] for i in result.front]
@@ -169,16 +169,18 @@ def tradeoff_png(result) -> bytes:
     ax.set_yscale("log")
     from matplotlib.ticker import FuncFormatter
 
-    for axis in (ax.xaxis, ax.yaxis):
+    scores = [p.score for _, p in pts] + [1.0]  # the target's line is on the axis too
+    narrow = max(scores) < 10 * min(scores)  # within a decade: every minor tick labelled
+    for axis, digits in ((ax.xaxis, "1235"), (ax.yaxis, "123456789" if narrow else "1235")):
         axis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
         # by the leading digit (0.3's is 3, not its "0"): scores below 1 are read off too
-        axis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if f"{x:.0e}"[0] in "1235" else ""))
+        axis.set_minor_formatter(FuncFormatter(lambda x, _, d=digits: f"{x:g}" if f"{x:.0e}"[0] in d else ""))
     ax.set_xlabel(f"cycles per estimate on {result.core} (simavr)" if result.core
                   else "x86-64 instructions per estimate (callgrind)")
     ax.set_ylabel("score: worst RMS error with noise / target")
     ax.set_title(f"sensor {result.sensor}, scene {result.scene.name} (hollow: table style)", fontsize=10)
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
-    ax.legend(fontsize=7, loc="best")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the points, never over them
     fig.tight_layout()
     return _png(fig)
 
