@@ -277,8 +277,9 @@ def check_pi_folder(folder: Path) -> Path:
     ours = options.is_file() and options.read_text(errors="replace").startswith(PI_OPTIONS_HEAD)
     if present and not ours:
         raise InputError(f"-o {folder} holds {', '.join(present[:3])}{' ...' if len(present) > 3 else ''}, which "
-                         "no earlier pi-build wrote (it has no pi_options.h of one), and the build would replace: "
-                         "choose another -o; nothing written")
+                         "the build would replace, and no pi_options.h tells them a pi-build's (a folder of one's "
+                         "own, or a build before 2026-11-29, which wrote none): choose another -o, or empty it; "
+                         "nothing written")
     return folder
 
 

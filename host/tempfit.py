@@ -22,8 +22,9 @@ def _temperatures(ds, path) -> np.ndarray:
     for key, what in (("row_degc", f"one finite temperature for each of its {ds.n_rows} rows"),
                       ("thermistor_degc", "a temperature")):
         if key in ds.meta and (key == "row_degc" or thermistor_degc(ds.meta) is None):
-            raise InputError(f"{path}'s meta has a {key} that is not {what} (edited, or damaged): the rows' "
-                             "temperatures are not known; take the capture again")
+            raise InputError(f"{path}'s meta has a {key} that is not {what}: the thermistor read no temperature "
+                             "around some row (its divider open or shorted), or the meta was edited or cut short; "
+                             "the rows' temperatures are not known: take the capture again")
     degc = thermistor_degc(ds.meta)
     if degc is None and isinstance(ds.meta.get("temperature_set"), (int, float)):
         degc = float(ds.meta["temperature_set"])

@@ -616,7 +616,25 @@ def test_cli_emulate_runs_a_model_fitted_for_fixed_point_in_it_by_default(sensor
                         settings=FitSettings.family("no-roots")).save(tmp_path / "fl.json")
     run = ["tactile-hil", "emulate", "--target", "host", "--suite", "--vectors", "5", "--fuzz", "0", "--no-flash",
            "--no-held-out", "--model"]
+    from host.temperature import TempComp
+
+    tc = TempComp(25.0, np.zeros(8), np.zeros(8), {"temperatures": [15.0, 35.0]}).save(tmp_path / "tc.json")
+    adc = ["--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3,temp=ads1115@0x4a:0", "--simulate", "dx=1"]
+    # --fma and --temp-comp have no fixed point: each asks for float, as --style does (they had been refused)
     for path, extra, built in ((fixed, [], "fixed, unrolled"), (fixed, ["--style", "table"], "float, table"),
-                               (fixed, ["--precision", "float"], "float, table"), (floated, [], "float, table")):
+                               (fixed, ["--precision", "float"], "float, table"), (floated, [], "float, table"),
+                               (fixed, ["--fma"], "float, table"), (fixed, ["--temp-comp", str(tc), *adc],
+                                                                   "float, table")):
         proc = run_cli(*run, str(path), *extra)
-        assert proc.returncode == 0 and proc.stdout.startswith(f"host firmware: {built},"), proc.stdout + proc.stderr
+        assert proc.returncode == 0 and proc.stdout.startswith(f"host firmware: {built}"), proc.stdout + proc.stderr
+
+
+def test_run_without_flashing_needs_no_sensor_id(paper_model, tmp_path):
+    """run --no-flash writes no blob and compiles nothing, yet refused a unit's name longer than a blob's id."""
+    from conftest import model_for_sensor
+
+    long = model_for_sensor(paper_model, "unit-2026-12-04-lab-a", tmp_path / "long.json")
+    proc = run_cli("tactile-hil", "run", "--port", "socket://127.0.0.1:1", "--model", long, "--no-flash")
+    assert proc.returncode != 0 and "sensor id" not in proc.stderr and "127.0.0.1:1" in proc.stderr, proc.stderr
+    assert "cannot be the calibration's sensor id" in run_cli("tactile-hil", "run", "--port", "socket://127.0.0.1:1",
+                                                            "--model", long).stderr

@@ -21,6 +21,7 @@ def test_simulate_refuses_targets_that_drop_a_moving_pose_column_and_bad_noise(s
     with pytest.raises(InputError, match="targets leave out dx, dy, which the poses move in"):
         simulate(sensor, poses, targets=("dz",))
     ds = simulate(sensor, poses, targets=("dx", "dy", "dz"))  # thx, thy stay 0: nothing lost
+    assert simulate(sensor, poses[:3], noise=np.float32(1e-4)).meta["noise"] == pytest.approx(1e-4)
     assert np.array_equal(ds.poses(), poses)
     for bad, said in (({"targets": ("x",)}, "targets must be distinct pose components"),
                       ({"targets": ("dx", "dx", "dy", "dz")}, "targets must be distinct pose components"),
@@ -49,6 +50,7 @@ def test_datasets_settings_and_pose_boxes_made_in_python_are_checked_where_made(
         with pytest.raises(InputError, match=said):
             FitSettings(**bad)
     assert FitSettings(max_terms=np.int64(5)).max_terms == 5
+    assert FitSettings(k=np.float32(6)).penalty(10) == 6.0 and FitSettings(k=np.int64(6)).penalty(10) == 6.0
     poses = random_poses(50, {"dx": (-1, 1)}, pose_rng(1))  # the others stay 0, as a dataset's missing columns
     assert np.all(np.abs(poses[:, 0]) <= 1) and np.ptp(poses[:, 0]) > 1 and not poses[:, 1:].any()
     with pytest.raises(InputError, match="ranges name x, no pose component"):

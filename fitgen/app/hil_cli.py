@@ -18,14 +18,16 @@ from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, che
 from fitgen.base.errors import InputError
 
 
-def _load(args):
+def _load(args, needs_id: bool = True):
+    """The model and the --data inputs; ``needs_id``: the sensor id is compiled in or flashed (run --no-flash
+    does neither, and a unit's name no blob carries is then no matter)."""
     from fitgen.c.calblob import model_sensor_id
     from fitgen.c.verify import data_inputs
     from fitgen.equations.model import load_model
     from hil.firmware import check_sensor_id as check_compiled_id
 
     model = load_model(args.model)
-    if args.sensor_id is None:  # the model's sensor, where the firmware can compile it in and a blob carry it
+    if args.sensor_id is None and needs_id:  # the model's sensor, where the firmware compiles it in, a blob carries
         args.sensor_id = model_sensor_id(model, also=check_compiled_id)
     return model, (data_inputs(model, args.data) if getattr(args, "data", None) else None)
 
@@ -64,7 +66,7 @@ def _suite(url: str, model, data, args, input_lsb: float | None = None) -> int:
 
 def cmd_run(args) -> int:
     _check_counts(args)
-    model, data = _load(args)
+    model, data = _load(args, needs_id=not args.no_flash)
     return _suite(args.port, model, data, args)
 
 
@@ -160,8 +162,10 @@ def cmd_emulate(args) -> int:
         raise InputError("--port is the emulated UART's TCP port, and the host target has none (its UART is a "
                          "pseudo-terminal): drop --port")
     model, data = _load(args)
-    # as codegen --target and arduino-build: a model fitted for fixed point runs in it (a style asks for float)
-    fixed = args.target == "microbit" or (device_precision(model) == "fixed" and args.style is None)
+    # as codegen --target and arduino-build: a model fitted for fixed point runs in it (--style, --fma and
+    # --temp-comp ask for float)
+    fixed = args.target == "microbit" or (device_precision(model) == "fixed" and args.style is None
+                                          and not args.fma and not args.temp_comp)  # each asks for float
     args.precision = args.precision or ("fixed" if fixed else "float")
     args.style = args.style or "table"
     if args.adc and not args.sim_sensor:  # the model's own, where found (without --adc, --sim-sensor is refused)

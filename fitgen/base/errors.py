@@ -1,6 +1,7 @@
 """The one exception type that command-line tools turn into a single line and exit status 2."""
 
 import math
+import numbers
 
 
 class InputError(ValueError):
@@ -20,9 +21,9 @@ class RowError(InputError):
 
 
 def is_finite_number(val) -> bool:
-    """Whether ``val`` is a finite JSON number (not a bool); an integer past float's range is not (JSON holds any,
-    and float() of it raises)."""
-    if isinstance(val, bool) or not isinstance(val, (int, float)):
+    """Whether ``val`` is a finite JSON number (not a bool), or a numpy one a notebook passes (np.float32(6)); an
+    integer past float's range is not (JSON holds any, and float() of it raises)."""
+    if isinstance(val, bool) or not isinstance(val, numbers.Real):
         return False
     try:
         return math.isfinite(val)

@@ -208,8 +208,9 @@ def fit_family(ds: Dataset, outputs, settings: FitSettings, sensor, family: str,
 
 
 def settings_family(settings: FitSettings) -> str:
-    """The family ``settings`` name: 'auto' for the default candidates (what `fitgen fit` starts from), else the one
-    of fitgen.equations.terms.FAMILIES whose candidates they hold; InputError for candidates of one's own."""
+    """The family ``settings`` name: 'auto' for the default candidates (what `fitgen fit` starts from; they are
+    'all''s, so FitSettings.family('all') reads as auto too), else the one of fitgen.equations.terms.FAMILIES whose
+    candidates they hold; InputError for candidates of one's own."""
     default = FitSettings()
     if (settings.exponents, settings.harmonic_degree) == (default.exponents, default.harmonic_degree):
         return "auto"
