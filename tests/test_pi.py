@@ -308,7 +308,8 @@ def test_a_failed_pi_build_leaves_the_folder_as_it_was_and_refuses_before_it_wri
     mine.mkdir()
     (mine / "adc.c").write_text("/* my own driver */\n")
     assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc", "-o",
-                                  str(mine)), 2, f"-o {mine} holds adc.c, which the build would replace, and no pi_options.h")
+                                  str(mine)), 2,
+                          f"-o {mine} holds adc.c, which the build would replace, and no pi_options.h")
     assert [p.name for p in mine.iterdir()] == ["adc.c"] and (mine / "adc.c").read_text() == "/* my own driver */\n"
     (mine / "adc.c").rename(mine / "notes.txt")
     assert run_cli("tactile-host", "pi-build", "--model", path, "--adc", MAP, "--cc", "gcc", "-o",
