@@ -144,8 +144,8 @@ def check_simulation_options(args) -> None:
 def _run_capture(args, prog: str) -> None:
     schedule = load_schedule(args.poses)
     simulated_sensor(args, schedule)
-    if schedule.capture_note():
-        print(f"{prog}: {schedule.capture_note()}", file=sys.stderr)
+    if note := schedule.capture_note():
+        print(f"{prog}: {note}", file=sys.stderr)
     adc_defaults(args)
     samples, spread, tries, settle, retries = capture_numbers(args)
     timeout = trigger_timeout(args)

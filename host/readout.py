@@ -194,7 +194,8 @@ def rest_degc(spec: str | None) -> float | None:
         meta = load_meta(spec)
     except (InputError, OSError):
         return None
-    each = row_degc(meta, len(meta.get("row_degc") or []))
+    rows = meta.get("row_degc")
+    each = row_degc(meta, len(rows)) if isinstance(rows, list) else None  # a damaged one: as none recorded
     return float(np.median(each)) if each is not None and each.size else thermistor_degc(meta)
 
 

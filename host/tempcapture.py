@@ -103,8 +103,8 @@ def _replaced(dest, tc) -> str:
 def _capture_temperatures(args, prog: str):
     schedule = load_schedule(args.poses)
     simulated_sensor(args, schedule)
-    if schedule.capture_note():
-        print(f"{prog}: {schedule.capture_note()}", file=sys.stderr)
+    if note := schedule.capture_note():
+        print(f"{prog}: {note}", file=sys.stderr)
     adc_defaults(args)
     temps = parse_temperatures(args.temperature)
     t0 = parse_t0(args.t0, temps)
@@ -189,8 +189,8 @@ def _capture_temperatures(args, prog: str):
     print(f"{prog}: temperature compensation about {tc.t0:g} degC -> {dest} (offsets up to "
           f"{np.abs(tc.offset).max() * 1e3:.3g} mV/degC, gains up to {np.abs(tc.gain).max() * 100:.3g} %/degC; "
           f"residual up to {worst:.3g} mV rms)", file=sys.stderr)
-    if spread_note(tc):
-        print(f"{prog}: {spread_note(tc)}", file=sys.stderr)
+    if spread := spread_note(tc):
+        print(f"{prog}: {spread}", file=sys.stderr)
     if was:
         print(f"{prog}: note: {dest} held {was}, now replaced: a twin identified through that one, or a build "
               "that compiled it in, no longer matches it (--temp-comp-output keeps both)", file=sys.stderr)
