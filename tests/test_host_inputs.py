@@ -530,3 +530,14 @@ def test_a_compensation_fitted_across_too_little_temperature_says_so_and_damaged
         assert_one_line_error(run_cli("tactile-host", "tempcomp-fit", *caps, "-o", str(tmp_path / "x.json")), 2,
                               f"c2False.T15.csv's meta has a {key} that is not")
     assert not (tmp_path / "x.json").exists()
+
+
+def test_a_rest_captures_damaged_row_temperatures_are_read_as_none_recorded(tmp_path):
+    """rest_degc took len() of row_degc, which a damaged meta holds as a number: a traceback in read --tare."""
+    from host.readout import rest_degc
+
+    cap = tmp_path / "c.csv"
+    cap.write_text("v1,dx\n1,0\n")
+    for row_degc, said in ((5, 30.0), ([31.0], 31.0)):
+        (tmp_path / "c.csv.meta.json").write_text(json.dumps({"row_degc": row_degc, "thermistor_degc": 30.0}))
+        assert rest_degc(str(cap)) == said
