@@ -26,6 +26,7 @@ from fitgen.fitting.fit import FitSettings, fit_model, noise_to_add, ring_harmon
 from fitgen.fitting.holdout import N_POSES, box_of, deployed_errors, held_out_set
 from fitgen.equations.model import Model
 from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.simulate import other_sensor_problem
 from fitgen.fitting.shared import SharedRows
 from fitgen.equations.terms import FAMILIES, FIXED_FAMILIES, HARMONIC_DEGREE, candidate_terms
 
@@ -229,11 +230,8 @@ def check_dataset_sensor(ds: Dataset, sensor) -> None:
     if units in ("mT", "V") and sensor.units != units:
         raise InputError(f"the dataset's readings are in {units}; sensor {sensor.name} reads in {sensor.units} (its "
                          f"{sensor.transfer} transfer): give it with_transfer('{'raw' if units == 'mT' else 'gmr'}')")
-    sha = ds.meta.get("sensor_sha256")
-    if isinstance(sha, str) and sha != sensor.sha256:
-        raise InputError(f"the dataset was simulated with sensor {ds.meta.get('sensor_file') or ds.meta.get('sensor')} "
-                         f"(sha256 {sha[:12]}), not {sensor.name} ({sensor.sha256[:12]}): figures held out on another "
-                         "sensor would not be this model's")
+    if problem := other_sensor_problem(ds.meta, sensor, sensor.name):
+        raise InputError(problem)
 
 
 def fit_device(ds: Dataset, outputs, settings: FitSettings, sensor, family: str | None = None, *,

@@ -222,16 +222,25 @@ def dataset_sensor(meta: dict, spec: str | None = None, n_inputs: int | None = N
         sensor = sensor.with_transfer(meta["transfer"])
     elif meta.get("units") in ("mT", "V") and sensor.units != meta["units"]:  # measured rows: their units say which
         sensor = sensor.with_transfer("raw" if meta["units"] == "mT" else "gmr")
-    if given and meta.get("sensor_sha256") not in (None, sensor.sha256):
-        raise InputError(f"the dataset was simulated with sensor {meta.get('sensor_file') or meta.get('sensor')}, "
-                         f"not {spec}: figures held out on another sensor would not be this model's (leave --sensor "
-                         "out)")
+    if given and (problem := other_sensor_problem(meta, sensor, spec)):
+        raise InputError(f"{problem} (leave --sensor out)")
     if spec in (meta.get("sensor"), meta.get("sensor_file")) and meta.get("sensor_sha256") not in (None, sensor.sha256):
         return None
     if n_inputs is not None and sensor.n_elements != n_inputs:
         raise InputError(f"the dataset has {n_inputs} input columns, its sensor {sensor.name} {sensor.n_elements} "
                          "elements")
     return sensor
+
+
+def other_sensor_problem(meta: dict, sensor: Sensor, named: str) -> str:
+    """Why ``sensor`` (``named`` so in the words) is not the one a dataset's meta records by hash, in words ('' when
+    it is, or the meta records none): figures held out on another sensor would not be the model's."""
+    sha = meta.get("sensor_sha256")
+    if not isinstance(sha, str) or sha == sensor.sha256:
+        return ""
+    return (f"the dataset was simulated with sensor {meta.get('sensor_file') or meta.get('sensor')} (sha256 "
+            f"{sha[:12]}), not {named} ({sensor.sha256[:12]}): figures held out on another sensor would not be this "
+            "model's")
 
 
 def sensor_record_problem(rec: dict) -> str:
