@@ -443,16 +443,19 @@ def test_the_plot_greys_the_points_left_out_and_labels_scores_below_one(monkeypa
     assert "left out (a constant; --max-share)" in labels and "float, equations" in labels
     grey = [c for c in ax.collections if tuple(c.get_edgecolor()[0][:3]) == (0.6, 0.6, 0.6)]
     assert len(grey) == 1 and tuple(grey[0].get_offsets()[0]) == (90, 0.9)
-    figs[0].canvas.draw()
-    shown = {t.get_text() for t in ax.yaxis.get_ticklabels(minor=True)} | {t.get_text() for t in
-                                                                        ax.yaxis.get_ticklabels()}
-    assert {"0.3", "0.5"} <= shown, shown
+    def shown(fig, axis):  # every tick label drawn on the axis, major and minor
+        fig.canvas.draw()
+        ticks = getattr(fig.axes[0], axis)
+        return {t.get_text() for t in ticks.get_ticklabels(minor=True)} | {t.get_text() for t in ticks.get_ticklabels()}
+
+    assert {"0.3", "0.5"} <= shown(figs[0], "yaxis")
     # over two decades (press: scores near 0.01 below the target's 1), the 1-2-3-5 ticks only, or they overlap
     for p, score in zip(points, (0.009, 0.012, 0.016)):
         p.score = score
     plots.tradeoff_png(result)
-    figs[1].canvas.draw()
-    ax = figs[1].axes[0]
-    shown = {t.get_text() for t in ax.yaxis.get_ticklabels(minor=True)} | {t.get_text() for t in
-                                                                        ax.yaxis.get_ticklabels()}
-    assert "0.02" in shown and "0.07" not in shown, shown
+    assert "0.02" in shown(figs[1], "yaxis") and "0.07" not in shown(figs[1], "yaxis")
+    # costs within a decade (a press sweep's 400-900 instructions) read off every minor tick, not 500 alone
+    for p, cost in zip(points, (400, 600, 900)):
+        p.instructions = cost
+    plots.tradeoff_png(result)
+    assert {"400", "600", "900"} <= shown(figs[2], "xaxis")

@@ -170,8 +170,12 @@ def tradeoff_png(result) -> bytes:
     from matplotlib.ticker import FuncFormatter
 
     scores = [p.score for _, p in pts] + [1.0]  # the target's line is on the axis too
-    narrow = max(scores) < 10 * min(scores)  # within a decade: every minor tick labelled
-    for axis, digits in ((ax.xaxis, "1235"), (ax.yaxis, "123456789" if narrow else "1235")):
+    costs = [result.cost(p) for _, p in pts] or [1.0]  # no points: an empty plot, labelled as any other
+
+    def leading(values):  # within a decade: every minor tick labelled, else 1-2-3-5 (or they overlap)
+        return "123456789" if max(values) < 10 * min(values) else "1235"
+
+    for axis, digits in ((ax.xaxis, leading(costs)), (ax.yaxis, leading(scores))):
         axis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
         # by the leading digit (0.3's is 3, not its "0"): scores below 1 are read off too
         axis.set_minor_formatter(FuncFormatter(lambda x, _, d=digits: f"{x:g}" if f"{x:.0e}"[0] in d else ""))
