@@ -171,6 +171,31 @@ def test_a_ctrl_c_between_the_record_and_its_plot_leaves_both_new(tmp_path, monk
     assert (plots / "allan.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_a_recording_stopped_early_writes_nothing(tmp_path, monkeypatch, capsys):
+    """Ctrl-C during a re-run wrote its few samples' record over a whole one (candidates [], which schedule then
+    refused) and its plot, with exit 0."""
+    from fitgen.app import host_cli
+    from host import noiserun
+
+    out, plots = tmp_path / "noise.json", tmp_path / "img"
+    plots.mkdir()
+    out.write_text("old record")
+    (plots / "allan.png").write_bytes(b"old plot")
+    run = noiserun.run_noise
+
+    def stopped(args, stop):  # the signal lands as the recording ends
+        av = run(args, stop)
+        stop.stopped = True
+        return av
+
+    monkeypatch.setattr(noiserun, "run_noise", stopped)
+    with pytest.raises(SystemExit) as end:
+        host_cli.main(["noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "1", "-o", str(out),
+                       "--plot", str(plots)])
+    assert end.value.code == 130 and "nothing written" in capsys.readouterr().err
+    assert out.read_text() == "old record" and (plots / "allan.png").read_bytes() == b"old plot"
+
+
 @pytest.mark.parametrize("args,what", [
     (["--seconds", "0"], "--seconds"),
     (["--seconds", "nan"], "--seconds"),

@@ -21,12 +21,14 @@ def cmd_noise(args) -> int:
     except DeviceSilent as exc:
         print(f"tactile-host noise: error: {exc}; nothing written", file=sys.stderr)
         return EXIT_CHECK_FAILED
-    if stop.stopped:
-        print(f"tactile-host noise: stopped: {av.samples} samples so far", file=sys.stderr)
     print(f"tactile-host noise: {av.samples} samples of every element in {av.samples / av.rate:.1f} s "
           f"({av.rate:.0f} per s), the sensor at rest")
     print(table(av))
     print(verdict(av, args.output))
+    if stop.stopped:  # a recording cut short would replace a whole one with a verdict on too few samples
+        print(f"tactile-host noise: stopped: {av.samples} samples so far; nothing written (run it to the end to "
+              "write a record)", file=sys.stderr)
+        return 130
     files = [(args.output, record_text(av, f"simulated {args.sensor}" if args.simulate else "hardware"))
              ] if args.output else []
     if folder is not None:
