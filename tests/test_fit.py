@@ -356,6 +356,7 @@ def test_bad_model_files(paper_fit, tmp_path):
     data = json.loads((folder / "m.json").read_text())
     cases = {
         "version": ({**data, "schema_version": 2}, "schema_version 2"),
+        "version-bool": ({**data, "schema_version": True}, "schema_version True is not supported"),  # True == 1
         "term": ({**data, "outputs": [{**data["outputs"][0], "terms": ["v9^7"] + data["outputs"][0]["terms"][1:]}]},
                  "not a term"),
         "nan": ({**data, "outputs": [{**data["outputs"][0], "intercept": "NaN"}]}, "finite"),

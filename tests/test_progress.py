@@ -68,3 +68,10 @@ def test_silent_off_a_terminal_and_80_columns_where_the_width_is_unknown(tmp_pat
     with Progress("fit", 2, stream=term, min_interval=0.0) as bar:
         bar.update(2, "x" * 200)
     assert term.text.endswith(CLEARED) and max(len(line) for line in term.text.split("\r")) == 79
+
+
+def test_a_terminal_of_no_width_draws_80_columns(monkeypatch):
+    """A serial console's tty is 0x0 until `stty cols` sizes it: the bar shrank to one character per redraw."""
+    monkeypatch.delenv("COLUMNS", raising=False)
+    text = _drawn_on_a_terminal(0, "fit", "x" * 200)
+    assert max(len(line) for line in text.split("\r")) == 79 and "fit [" in text

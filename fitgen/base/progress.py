@@ -41,7 +41,8 @@ class Progress:
         except (KeyError, ValueError):
             pass
         try:
-            return max(os.get_terminal_size(self.stream.fileno()).columns, 2)
+            columns = os.get_terminal_size(self.stream.fileno()).columns
+            return max(columns, 2) if columns else 80  # 0: a serial console's tty that was never sized
         except (OSError, ValueError, AttributeError):  # not a real terminal after all
             return 80
 

@@ -320,7 +320,7 @@ def model_from_dict(data, origin: str = "model") -> Model:
     if ver is None and "outputs" not in data:  # another JSON file: a dataset's meta, a blob, a report
         what = "a dataset's meta file" if "columns" in data else "JSON without a model's schema_version and outputs"
         raise InputError(f"{origin}: not a model but {what}; `fitgen fit DATA.csv -o MODEL.json` writes a model")
-    if ver != SCHEMA_VERSION:
+    if type(ver) is not int or ver != SCHEMA_VERSION:  # true and 1.0 compare equal to 1
         raise InputError(f"{origin}: schema_version {ver!r} is not supported (this fitgen reads {SCHEMA_VERSION})")
     try:
         inputs = data["inputs"]
