@@ -401,7 +401,8 @@ def build_parser() -> Parser:
 
     pr = command("predict", cmd_predict, "estimates for the rows of a dataset")
     pr.add_argument("model", metavar="MODEL", help="model file (fitgen fit)")
-    pr.add_argument("data", metavar="DATA.csv", help="the readings to estimate from (other columns ignored)")
+    pr.add_argument("data", metavar="DATA.csv", help="the readings to estimate from (columns but the inputs and "
+                    "poses go unused; every cell a number)")
     pr.add_argument("-o", "--output", required=True, help="CSV of estimates (and status) to write")
     pr.add_argument("--precision", choices=("double", "float", "fixed"),
                     help="the arithmetic of the generated C, bit for bit: double or float, as the header computes "
