@@ -203,6 +203,9 @@ def test_a_recording_stopped_early_writes_nothing(tmp_path, monkeypatch, capsys)
     (["--sensor", "paper"], "--sensor goes with --simulate"),  # it names what a simulation simulates, no more
     (["--seed", "3"], "--seed needs --simulate"),
     (["--simulate", "--sim-flicker", "-1"], "--sim-flicker"),
+    # it records the elements only: a thermistor's settings were taken and ignored
+    (["--simulate", "--thermistor", "beta=3000,r25=10000,series=10000,vref=3.3"], "no thermistor"),
+    (["--simulate", "--adc", TWO_CHIPS + ",temp=ads7828@0x4b:0"], "drop temp= from --adc"),
 ])
 def test_bad_input_is_one_line_and_nothing_written(tmp_path, args, what):
     out = tmp_path / "noise.json"

@@ -280,8 +280,8 @@ def _readout_options(p) -> None:
                         "one: ramp=5,over=300,tau=120,creep=0.002)")
 
 
-def _adc_options(p, required: bool = True, sensor_help: str | None = None) -> None:
-    map_options(p, required)
+def _adc_options(p, required: bool = True, sensor_help: str | None = None, thermistor: bool = True) -> None:
+    map_options(p, required, thermistor)
     p.add_argument("--bus", type=int, help="I2C bus number: /dev/i2c-N (default 1, or the map file's bus)")
     # --retries, --sensor, --seed: no argparse defaults, so that view --replay tells one typed from one left out
     # (host.session.ADC_DEFAULTS fills them in)

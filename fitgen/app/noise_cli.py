@@ -44,7 +44,8 @@ def add_noise(sub, adc_options) -> None:
 
     n = sub.add_parser("noise", help="read the resting sensor for a while: does its noise average down, and over "
                                      "how many samples per row (the Allan deviation, the flicker floor)?")
-    adc_options(n, sensor_help="sensor preset or TOML file: what --simulate simulates (default paper)")
+    adc_options(n, sensor_help="sensor preset or TOML file: what --simulate simulates (default paper)",
+                thermistor=False)
     n.add_argument("--seconds", default=str(SECONDS), help=f"how long to read, s (default {SECONDS:g}: at two "
                    "ADS1115s' rate, long enough to tell 128 samples per row safe where the noise is white)")
     n.add_argument("--simulate", action="store_true", help="no hardware: the simulated sensor at rest")
