@@ -357,6 +357,9 @@ def test_bad_model_files(paper_fit, tmp_path):
     cases = {
         "version": ({**data, "schema_version": 2}, "schema_version 2"),
         "version-bool": ({**data, "schema_version": True}, "schema_version True is not supported"),  # True == 1
+        # no sensor's pose: fixed codegen's bounds overflowed (a traceback), float's named no field
+        "box": ({**data, "fit": {**data["fit"], "held_out": {**data["fit"].get("held_out", {}),
+                                                             "box": {"dx": [-1e300, 1e300]}}}}, "within +-10000"),
         "term": ({**data, "outputs": [{**data["outputs"][0], "terms": ["v9^7"] + data["outputs"][0]["terms"][1:]}]},
                  "not a term"),
         "nan": ({**data, "outputs": [{**data["outputs"][0], "intercept": "NaN"}]}, "finite"),

@@ -25,6 +25,7 @@ from fitgen.equations.refine import Refinement
 from fitgen.equations.terms import DISPLACEMENTS, Harmonics, Term, design_matrix, monomial_factors, parse_term
 
 SCHEMA_VERSION = 1
+BOX_LIMIT = 1e4  # a held-out box's bounds, mm or deg
 STATUS_NONFINITE = -1
 MAX_INPUTS = 30  # the C status is a positive int with one bit per input (the headers assert it)
 _ROWS = 1 << 15  # rows per block of predict
@@ -389,8 +390,8 @@ def _check_fit_notes(fit, origin: str) -> None:
             refuse(f".held_out.{key}", "an object", held[key])
     for name, pair in held.get("box", {}).items():
         ok = isinstance(pair, list) and len(pair) == 2 and all(map(is_finite_number, pair)) and pair[0] <= pair[1]
-        if not ok:
-            refuse(f".held_out.box.{name}", "[low, high] (finite, low <= high)", pair)
+        if not ok or max(map(abs, pair)) > BOX_LIMIT:  # mm or deg: past it no sensor's pose, and C's bounds overflow
+            refuse(f".held_out.box.{name}", f"[low, high] (finite, within +-{BOX_LIMIT:g}, low <= high)", pair)
     if "rest" in held and not (isinstance(held["rest"], list) and all(map(is_finite_number, held["rest"]))):
         refuse(".held_out.rest", "a list of readings", held["rest"])
     if "rest_spread" in held and not (isinstance(held["rest_spread"], list)
