@@ -350,6 +350,9 @@ def test_a_dash_is_stdout_where_the_command_writes_there_and_refused_elsewhere(m
                           "-o -: give a file name")
     assert_one_line_error(run_cli("tactile-host", "read", "--model", model_file, *sim, "--record", "-",
                                   cwd=tmp_path), 2, "--record -: give a file name")
+    # codegen's -o is the folder it writes its header into
+    assert_one_line_error(run_cli("fitgen", "codegen", model_file, "-o", "-", cwd=tmp_path), 2,
+                          "-o -: give a folder name")
     assert not (tmp_path / "-").exists()
 
 

@@ -138,6 +138,8 @@ def test_model_file_round_trip_and_validation(model, tmp_path):
         (lambda d: d["refine"]["forward"][0]["exponents"].__setitem__(0, [0, 0, 0, 0, 0]), "not 5 powers"),
         (lambda d: d["refine"]["forward"][0]["exponents"][0].__setitem__(0, [1]), "not 5 powers"),
         (lambda d: d["refine"]["prior_precision"].__setitem__(0, []), "symmetric 5x5"),
+        # flat: it is a list of numbers, which the line had said it must be
+        (lambda d: d["refine"].__setitem__("prior_precision", [0.0] * 5), "prior_precision must be a matrix"),
         (lambda d: d["refine"]["forward"][0]["coefficients"].pop(), "exponents but"),
         (lambda d: d["refine"].__setitem__("pose_max", d["refine"]["pose_min"]), "pose_min < pose_max"),
         (lambda d: d["refine"]["weights"].__setitem__(0, -1.0), "weights must be > 0"),

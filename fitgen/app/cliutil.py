@@ -350,7 +350,8 @@ def check_written(args, files=()) -> None:
             if name == "output" and getattr(args.func, "__name__", "") in STDOUT_DEFAULT:
                 args.output = None  # the command's own stdout
                 continue
-            raise InputError(f"{flag} -: give a file name (this command writes nothing to stdout)")
+            raise InputError(f"{flag} -: give a {'folder' if name == 'output' and args.func not in files else 'file'}"
+                             " name (this command writes nothing to stdout)")
         if name == "output" and args.func not in files:  # a folder the command makes
             check_folder(path)
             continue

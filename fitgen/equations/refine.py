@@ -251,7 +251,8 @@ class Refinement:
                                                tuple(finite_number(c, f"{where}.forward[{k}].coefficients") for c in eq["coefficients"])))
             ref = cls(steps, data["transform"], _nums(data["pose_min"], f"{where}.pose_min"),
                       _nums(data["pose_max"], f"{where}.pose_max"), _nums(data["weights"], f"{where}.weights"),
-                      tuple(_nums(row, f"{where}.prior_precision") for row in prior), tuple(forward))
+                      tuple(_nums(row, f"{where}.prior_precision", "a matrix (a list of rows of numbers)")
+                            for row in prior), tuple(forward))
         except (KeyError, TypeError) as exc:
             raise InputError(f"{where}: malformed ({type(exc).__name__}: {exc})") from None
         ref.validate(n_inputs, where)
@@ -324,7 +325,7 @@ def _cholesky_solve(A: np.ndarray, g: np.ndarray, dt) -> tuple[np.ndarray, np.nd
     return delta, ok
 
 
-def _nums(vals, where: str) -> tuple[float, ...]:
+def _nums(vals, where: str, what: str = "a list of numbers") -> tuple[float, ...]:
     if not isinstance(vals, list):
-        raise InputError(f"{where} must be a list of numbers")
+        raise InputError(f"{where} must be {what}")
     return tuple(finite_number(v, where) for v in vals)
