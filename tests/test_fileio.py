@@ -356,6 +356,29 @@ def test_a_dash_is_stdout_where_the_command_writes_there_and_refused_elsewhere(m
     assert not (tmp_path / "-").exists()
 
 
+def test_a_run_record_is_not_written_over_by_another_kind(model_file, tmp_path):
+    """A recorded run (the only input replay takes, not to be taken again on hardware) was replaced by read's CSV
+    stream or a noise record, and a unit's TOML by a run record, each with exit 0."""
+    sim = ("--adc", TWO_CHIPS, "--simulate", "dx=1", "--count", "3")
+    run, unit = tmp_path / "run.jsonl", tmp_path / "unit.toml"
+    assert run_cli("tactile-host", "read", "--model", model_file, *sim, "--record", str(run), "-o",
+                   str(tmp_path / "s.csv")).returncode == 0
+    kept = run.read_bytes()
+    assert_one_line_error(run_cli("tactile-host", "read", "--model", model_file, *sim, "--format", "jsonl", "-o",
+                                  str(run)), 2, f"-o {run} is a run record")
+    assert_one_line_error(run_cli("tactile-host", "noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "1", "-o",
+                                  str(run)), 2, "noise would write a noise record over it")
+    assert run.read_bytes() == kept
+    unit.write_text("kept")
+    assert_one_line_error(run_cli("tactile-host", "read", "--model", model_file, *sim, "--record", str(unit)), 2,
+                          "the run record is JSONL")
+    assert unit.read_text() == "kept"
+    # a run recorded again over its own name, and replay's record, are the same kind: written as before
+    assert run_cli("tactile-host", "read", "--model", model_file, *sim, "--record", str(run), "-o",
+                   str(tmp_path / "s.csv")).returncode == 0
+    assert run_cli("tactile-host", "replay", str(run), "-o", str(tmp_path / "again.jsonl")).returncode == 0
+
+
 def test_make_folder_names_the_file_in_its_way(tmp_path):
     from fitgen.base.fileio import make_folder
 

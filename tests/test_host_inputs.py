@@ -60,7 +60,7 @@ def test_no_output_replaces_another_kind_of_the_tools_json_files(model_file, tmp
              "compensation over it"),
             ("tactile-host", ["read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "dx=1", "--count", "1",
                               "--record", str(comp)], f"--record {comp} is a temperature compensation: read would "
-             "write another kind of file over it"),
+             "write a run record over it"),
             # a capture (a level's file) is measured: no other command's output replaces it
             ("fitgen", ["schedule", "--n", "20", "-o", str(level)], f"-o {level} is a capture (rows measured on the "
              "sensor, as its meta says): schedule would write over it"),

@@ -380,6 +380,9 @@ OUTPUT_KINDS = {("identify", "output"): ((".csv", ".json"), "the unit file is a 
                 ("tempcomp-fit", "output"): ((".csv", ".toml"), "the compensation is JSON: name it .json (e.g. "
                                              "cap.tempcomp.json)"),
                 ("run", "junit"): ((".csv", ".json", ".toml"), "the results are JUnit XML: name it .xml"),
+                ("read", "output"): ((".toml",), "read writes its stream as CSV or JSONL: name it .csv or .jsonl"),
+                ("read", "record"): ((".csv", ".toml"), "the run record is JSONL: name it .jsonl (e.g. run.jsonl)"),
+                ("view", "record"): ((".csv", ".toml"), "the run record is JSONL: name it .jsonl (e.g. run.jsonl)"),
                 ("stage-sim", "pose_file"): ((".csv", ".json", ".toml"), "the pose file is one line of text, which "
                                              "it rewrites at each move: name it .txt (e.g. pose.txt)")}
 
@@ -389,9 +392,12 @@ JSON_KINDS = (("a model", ("schema_version", "inputs", "outputs")),
               ("a temperature compensation", ("t0", "offset_v_per_degc", "gain_per_degc")),
               ("a unit's posterior", ("covariance", "drawing_spec")),
               ("a noise record", ("recommended", "single_v")),
-              ("a stage's record", ("flavor", "position", "zero")))
+              ("a stage's record", ("flavor", "position", "zero")),
+              ("a run record", ("run", "n_inputs", "outputs")))  # JSONL: told by its first line, the header
 WRITES_JSON = {("fit", "output"): "a model", ("capture", "temp_comp_output"): "a temperature compensation",
-               ("tempcomp-fit", "output"): "a temperature compensation", ("noise", "output"): "a noise record"}
+               ("tempcomp-fit", "output"): "a temperature compensation", ("noise", "output"): "a noise record",
+               ("read", "record"): "a run record", ("view", "record"): "a run record",
+               ("replay", "output"): "a run record"}  # or its estimates in CSV: over a run record, as before
 
 
 def is_capture(path) -> bool:
@@ -420,9 +426,16 @@ def json_kind(path) -> str | None:
         return "a dataset's meta"
     try:
         with open(path, "rb") as f:
-            doc = json.loads(f.read(1 << 24))
-    except (OSError, ValueError, RecursionError):
+            text = f.read(1 << 24)
+    except OSError:
         return None
+    try:
+        doc = json.loads(text)
+    except (ValueError, RecursionError):
+        try:  # JSON lines (a run record): its first line
+            doc = json.loads(text.split(b"\n", 1)[0])
+        except (ValueError, RecursionError):
+            return None
     return next((kind for kind, keys in JSON_KINDS if isinstance(doc, dict) and all(k in doc for k in keys)), None)
 
 
