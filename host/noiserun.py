@@ -14,7 +14,7 @@ from fitgen.base.parse import LONGEST_WAIT, MAX_TRIES, parse_positive
 from fitgen.base.progress import Progress
 
 from host.adc import AdcArray, RetryPolicy
-from host.temperature import split_channel_map
+from host.temperature import thermistor_given
 from host.allan import CANDIDATES, CAPTURE_S, EXCESS, SURE, WHITE_RATIO, Averaging, averaging, needed_samples
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 
@@ -62,8 +62,7 @@ def run_noise(args, stop=lambda: False) -> Averaging:
     seconds = parse_positive(args.seconds, "--seconds", most=LONGEST_WAIT)
     retries = parse_positive(args.retries, "--retries", integer=True, most=MAX_TRIES)
     cmap = channel_map_from_args(args)
-    # it records the elements' noise only: a thermistor given is said, not ignored
-    if split_channel_map(args.adc)[1] is not None or cmap.temperature is not None or args.thermistor:
+    if thermistor_given(args, cmap):  # it records the elements' noise only
         raise InputError("noise reads the elements only, no thermistor: drop temp= from --adc and --thermistor")
     bus, clock = open_bus_from_args(args, cmap, np.zeros(5) if args.simulate else None)
     try:

@@ -67,6 +67,12 @@ def split_channel_map(spec: str) -> tuple[str, str | None]:
     return ",".join(p for p in parts if not p.lower().startswith("temp=")), (temps[0][5:] if temps else None)
 
 
+def thermistor_given(args, cmap) -> bool:
+    """Whether the options name a thermistor (temp= in --adc, one in the map file, --thermistor): refused by a
+    command that reads the elements only, rather than ignored."""
+    return split_channel_map(args.adc)[1] is not None or cmap.temperature is not None or bool(args.thermistor)
+
+
 def parse_temperature_input(spec: str, thermistor: str | None = None, divider: dict | None = None) -> TemperatureInput:
     """``ads1115@0x4a:0`` (or ``ads7828@0x48:7``) and ``beta=3950,r25=10000,series=10000,vref=3.3``."""
     from fitgen.base.parse import parse_assignments

@@ -20,7 +20,7 @@ def cmd_arduino_build(args) -> int:
     from host.arduino import folder_name_note, headroom_note, lsb_volts, smaller_boards_note
     from host.readout import model_rest
     from host.session import channel_map_from_args
-    from host.temperature import split_channel_map
+    from host.temperature import thermistor_given
 
     model, cmap = load_model(args.model), channel_map_from_args(args)
     fitted = device_precision(model)  # as codegen --target uno: the precision fitted for, where an AVR runs it
@@ -34,7 +34,7 @@ def cmd_arduino_build(args) -> int:
     lost = ""
     if not args.sim_sensor:
         args.sim_sensor, lost = simulated_sensor_spec(model, "--sim-sensor")
-    if split_channel_map(args.adc)[1] is not None or cmap.temperature is not None or args.thermistor:
+    if thermistor_given(args, cmap):
         raise InputError("the Arduino library reads the elements only, no thermistor: drop temp= from --adc and "
                          "--thermistor (tactile-host read and pi-build read one)")
     load_sensor(args.sim_sensor)  # a bad one said before the library is written

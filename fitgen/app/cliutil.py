@@ -397,7 +397,7 @@ JSON_KINDS = (("a model", ("schema_version", "inputs", "outputs")),
 WRITES_JSON = {("fit", "output"): "a model", ("capture", "temp_comp_output"): "a temperature compensation",
                ("tempcomp-fit", "output"): "a temperature compensation", ("noise", "output"): "a noise record",
                ("read", "record"): "a run record", ("view", "record"): "a run record",
-               ("replay", "output"): "a run record"}  # or its estimates in CSV: over a run record, as before
+               ("replay", "output"): "a run record"}
 
 
 def is_capture(path) -> bool:

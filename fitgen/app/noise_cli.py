@@ -24,7 +24,7 @@ def cmd_noise(args) -> int:
     print(f"tactile-host noise: {av.samples} samples of every element in {av.samples / av.rate:.1f} s "
           f"({av.rate:.0f} per s), the sensor at rest")
     print(table(av))
-    print(verdict(av, args.output))
+    print(verdict(av, None if stop.stopped else args.output))  # a stopped run's record is not written
     if stop.stopped:  # a recording cut short would replace a whole one with a verdict on too few samples
         print(f"tactile-host noise: stopped: {av.samples} samples so far; nothing written (run it to the end to "
               "write a record)", file=sys.stderr)
