@@ -823,8 +823,31 @@ def test_more_inputs_than_the_c_status_holds_are_said_by_fit(tmp_path):
     proc = run_cli("fitgen", "fit", str(tmp_path / "w.csv"), "--family", "integer", "-o", str(tmp_path / "m.json"))
     assert proc.returncode == 0, proc.stderr
     assert "note: 31 inputs: the generated C's status holds one bit per input, at most 30" in proc.stderr
-    assert_one_line_error(run_cli("fitgen", "codegen", str(tmp_path / "m.json"), "-o", str(tmp_path / "c")),
-                          contains="the status bit mask holds at most 30")
+    holds = "the generated C's status (one bit per input, in a C int) holds at most 30"
+    for precision in ("double", "fixed"):  # fixed point's was written, to fail its static assertion in gcc
+        assert_one_line_error(run_cli("fitgen", "codegen", str(tmp_path / "m.json"), "-o", str(tmp_path / "c"),
+                                      "--precision", precision), contains=holds)
+    assert not (tmp_path / "c").exists()
+    # predict computes what codegen writes: it printed estimates with a status of 2**31 - 1 for C never written
+    assert_one_line_error(run_cli("fitgen", "predict", str(tmp_path / "m.json"), str(tmp_path / "w.csv"),
+                                  "-o", str(tmp_path / "e.csv")), contains=holds)
+    assert not (tmp_path / "e.csv").exists()
+
+
+def test_an_uno_status_holds_fifteen_inputs(tmp_path):
+    """avr-gcc's int is 16 bits: a 16-input model for the Uno was written, to fail its static assertion."""
+    from fitgen.physics.dataset import Dataset
+
+    v = np.random.default_rng(0).uniform(1, 2, (300, 16))
+    Dataset(v, (v[:, 0] - v[:, 1])[:, None], ("dz",)).save(tmp_path / "w.csv")
+    assert run_cli("fitgen", "fit", str(tmp_path / "w.csv"), "--family", "integer",
+                   "-o", str(tmp_path / "m.json")).returncode == 0
+    for cmd in (["codegen", str(tmp_path / "m.json"), "-o", str(tmp_path / "c")],
+                ["predict", str(tmp_path / "m.json"), str(tmp_path / "w.csv"), "-o", str(tmp_path / "e.csv")]):
+        assert_one_line_error(run_cli("fitgen", *cmd, "--target", "uno", "--precision", "float"),
+                              contains="status (one bit per input, in target uno's 16-bit int) holds at most 15")
+    assert run_cli("fitgen", "codegen", str(tmp_path / "m.json"), "-o", str(tmp_path / "c"),
+                   "--target", "mps2").returncode == 0
 
 
 def test_a_pose_column_removed_since_the_meta_is_refused_by_identify_and_check(data, model_file, tmp_path):

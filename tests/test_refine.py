@@ -282,3 +282,7 @@ def test_codegen_for_the_uno_refuses_a_refinement_in_one_line(model, tmp_path):
                    "--target", "uno", "--precision", "float")
     assert_one_line_error(proc, 2, "fit without --refine")
     assert not (tmp_path / "u").exists()
+    # predict computes what codegen writes: it printed the uno's estimates for a header codegen refuses
+    data = simulate(PAPER, GRID[:20]).save(tmp_path / "d.csv")
+    assert_one_line_error(run_cli("fitgen", "predict", str(tmp_path / "r.json"), str(data), "--target", "uno",
+                                  "--precision", "float", "-o", str(tmp_path / "e.csv")), 2, "fit without --refine")

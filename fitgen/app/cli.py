@@ -158,13 +158,15 @@ def cmd_fit(args) -> int:
 
 def _model_and_target(args):
     """predict's and codegen's model and target; args.precision the header's: predict computes what codegen writes."""
-    from fitgen.c.targets import check_precision, get_target, header_precision
+    from fitgen.c.targets import check_model, check_precision, get_target, header_precision
     from fitgen.equations.model import load_model
 
     get_target(args.target)  # a bad name said before the model is read
     model = load_model(args.model)
     args.precision = header_precision(args.target, args.precision, model)
-    return model, check_precision(args.target, args.precision)
+    target = check_precision(args.target, args.precision)
+    check_model(target, model)
+    return model, target
 
 
 def cmd_predict(args) -> int:

@@ -15,10 +15,10 @@ import numpy as np
 
 from fitgen import __version__
 from fitgen.c.cgen import GCC_FP, c_real, fp_guard, identifier, nonfinite_test, prefix_identifier
-from fitgen.c.targets import check_precision
+from fitgen.c.targets import check_model, check_precision
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
-from fitgen.equations.model import MAX_INPUTS, Model, float_domain
+from fitgen.equations.model import Model, float_domain
 from fitgen.equations.rounding import PRECISIONS
 from fitgen.equations.terms import DISPLACEMENTS, EXPONENTS, monomial_factors
 
@@ -300,9 +300,7 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
     int32 outputs out; ``style`` does not apply (the fixed header is straight-line code).
     """
     t = check_precision(target, precision)
-    if t is not None and t.progmem and model.refine is not None:
-        raise InputError(f"target {t.name}: a refinement's forward model and solve do not fit the {t.core} "
-                         "(its tables in RAM, its code past the flash): fit without --refine")
+    check_model(t, model)
     if precision == "fixed":
         from fitgen.equations.inputscale import plan_at
 
@@ -313,8 +311,6 @@ def render_header(model: Model, precision: str = "double", style: str = "table",
     if input_lsb is not None or input_offset is not None:
         raise InputError("an input LSB and offset apply to --precision fixed only")
     cm = build_cmodel(model, precision, style, prefix, fma)
-    if model.n_inputs > MAX_INPUTS:
-        raise InputError(f"the model has {model.n_inputs} inputs; the status bit mask holds at most {MAX_INPUTS}")
     fp_before, fp_after = fp_guard(f"{cm.upper}_FP_SCOPE")
     nonfinite = nonfinite_test(f"{cm.prefix}_nonfinite", f"{cm.upper}_NONFINITE", precision, "0")
     return _env().get_template("model.h.j2").render(m=cm, exp_codes=[EXP_CODE[e] for e in EXPONENTS],

@@ -23,12 +23,13 @@ class Target:
     progmem: bool  # const tables must be placed in flash explicitly (PROGMEM) to stay out of RAM
     mul_bits: int  # the core's natural multiply: 16 (8-bit AVR: MUL makes 16x16->32 cheap), 32 (32x32->64)
     why: str = ""  # why a precision is missing, for the refusal
+    int_bits: int = 32  # sizeof(int) * 8: the generated C's status is an int with one bit per input
 
 
 TARGETS = {t.name: t for t in (
     Target("uno", "ATmega328P (Arduino Uno), 8-bit AVR at 16 MHz", ("float", "fixed"), "none", 32,
            2048, 32768, True, 16,
-           "avr-gcc's double is 32 bits (DBL_MANT_DIG 24), so a double header cannot run there"),
+           "avr-gcc's double is 32 bits (DBL_MANT_DIG 24), so a double header cannot run there", int_bits=16),
     Target("microbit", "nRF51822 (BBC micro:bit), Cortex-M0 at 16 MHz", ("fixed",), "none", 64, 16384, 262144,
            False, 32, "the Cortex-M0 has no FPU: the reference firmware runs fixed point there (hil/firmware.py)"),
     Target("mps2", "MPS2-AN386, Cortex-M4F", ("double", "float", "fixed"), "single", 64, 4 << 20, 4 << 20, False, 32),
@@ -47,6 +48,21 @@ def get_target(name: str | None) -> Target | None:
     if name not in TARGETS:
         raise InputError(f"target must be one of {', '.join(TARGETS)}, got {name!r}")
     return TARGETS[name]
+
+
+def check_model(t: Target | None, model) -> None:
+    """InputError (one line) when ``model`` cannot run on target ``t`` (None: any core with a 32-bit int) in any
+    precision: predict refuses what codegen would, so no estimate is printed for C that is never written."""
+    from fitgen.equations.model import MAX_INPUTS
+
+    most = MAX_INPUTS if t is None or t.int_bits >= 32 else t.int_bits - 1  # a positive int: its sign bit stays 0
+    if model.n_inputs > most:
+        where = f"target {t.name}'s {t.int_bits}-bit int" if t is not None and t.int_bits < 32 else "a C int"
+        raise InputError(f"the model has {model.n_inputs} inputs; the generated C's status (one bit per input, in "
+                         f"{where}) holds at most {most}")
+    if t is not None and t.progmem and model.refine is not None:
+        raise InputError(f"target {t.name}: a refinement's forward model and solve do not fit the {t.core} "
+                         "(its tables in RAM, its code past the flash): fit without --refine")
 
 
 def default_precision(target: str | None, fitted: str) -> str:
