@@ -554,7 +554,7 @@ def test_a_header_correction_that_is_not_a_number_is_refused_not_replayed_as_nan
     assert run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_CHIPS, "--simulate", "0,0,0,0,0",
                    "--tare", "--auto-zero", "--count", "5", "--record", str(run),
                    "-o", str(tmp_path / "s.csv")).returncode == 0
-    assert run_cli("tactile-host", "replay", str(run), "-o", str(tmp_path / "ok.csv")).returncode == 0
+    assert run_cli("tactile-host", "replay", str(run), "-o", str(tmp_path / "ok.jsonl")).returncode == 0
     header, *rest = run.read_text().splitlines()
     h = json.loads(header)
     key, _, sub = field.partition(".")
@@ -563,8 +563,8 @@ def test_a_header_correction_that_is_not_a_number_is_refused_not_replayed_as_nan
     else:
         h[key] = value
     run.write_text("\n".join([json.dumps(h)] + rest) + "\n")
-    assert_one_line_error(run_cli("tactile-host", "replay", str(run), "-o", str(tmp_path / "e.csv")), 2, said)
-    assert not (tmp_path / "e.csv").exists()
+    assert_one_line_error(run_cli("tactile-host", "replay", str(run), "-o", str(tmp_path / "e.jsonl")), 2, said)
+    assert not (tmp_path / "e.jsonl").exists()
 
 
 @pytest.mark.parametrize("extra, message", [

@@ -373,6 +373,10 @@ def test_a_run_record_is_not_written_over_by_another_kind(model_file, tmp_path):
     assert_one_line_error(run_cli("tactile-host", "read", "--model", model_file, *sim, "--record", str(unit)), 2,
                           "the run record is JSONL")
     assert unit.read_text() == "kept"
+    # replay's -o is a run record too: named .toml it replaced a channel map or a unit file
+    assert_one_line_error(run_cli("tactile-host", "replay", str(run), "-o", str(unit)), 2,
+                          "replay writes a run record in JSONL")
+    assert unit.read_text() == "kept"
     # a run recorded again over its own name, and replay's record, are the same kind: written as before
     assert run_cli("tactile-host", "read", "--model", model_file, *sim, "--record", str(run), "-o",
                    str(tmp_path / "s.csv")).returncode == 0

@@ -383,6 +383,8 @@ OUTPUT_KINDS = {("identify", "output"): ((".csv", ".json"), "the unit file is a 
                 ("read", "output"): ((".toml",), "read writes its stream as CSV or JSONL: name it .csv or .jsonl"),
                 ("read", "record"): ((".csv", ".toml"), "the run record is JSONL: name it .jsonl (e.g. run.jsonl)"),
                 ("view", "record"): ((".csv", ".toml"), "the run record is JSONL: name it .jsonl (e.g. run.jsonl)"),
+                ("replay", "output"): ((".csv", ".toml"), "replay writes a run record in JSONL: name it .jsonl (e.g. "
+                                       "again.jsonl)"),
                 ("stage-sim", "pose_file"): ((".csv", ".json", ".toml"), "the pose file is one line of text, which "
                                              "it rewrites at each move: name it .txt (e.g. pose.txt)")}
 
