@@ -557,6 +557,10 @@ def test_write_all_writes_every_file_or_none(tmp_path):
     (tmp_path / "link.txt").symlink_to(tmp_path / "old.txt")
     write_all([(tmp_path / "link.txt", "through")])
     assert (tmp_path / "link.txt").is_symlink() and (tmp_path / "old.txt").read_text() == "through"
+    # one file named twice (here through the link): the second replaced the first unsaid
+    with pytest.raises(InputError, match="link.txt name the same file: give two"):
+        write_all([(tmp_path / "old.txt", "first"), (tmp_path / "link.txt", "second")])
+    assert (tmp_path / "old.txt").read_text() == "through"
 
 
 def test_fit_refuses_to_hold_out_on_another_sensor_than_the_datas(data, tmp_path):

@@ -153,6 +153,16 @@ def test_the_command_writes_its_verdict_and_plot(tmp_path):
     assert (plots / "allan.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_a_record_named_as_the_plot_is_refused_before_the_recording(tmp_path):
+    """noise -o img/allan.png --plot img: ten minutes of reading, then the plot written over the record."""
+    plots = tmp_path / "img"
+    plots.mkdir()
+    r = run_cli("tactile-host", "noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "60",
+                "-o", str(plots / "allan.png"), "--plot", str(plots))
+    assert_one_line_error(r, 2, f"-o {plots / 'allan.png'} is the plot --plot {plots} writes: give another name")
+    assert "samples of every element" not in r.stdout and not any(plots.iterdir())
+
+
 def test_a_ctrl_c_between_the_record_and_its_plot_leaves_both_new(tmp_path, monkeypatch):
     """A signal landing after the record was renamed into place, before the plot was, left a new record beside
     the old run's plot (SIGTERM 15-250 ms after a first one, 10 runs in 10)."""

@@ -360,7 +360,15 @@ def check_written(args, files=()) -> None:
             if os.path.realpath(other) == os.path.realpath(path):  # realpath: a symlink is written through
                 raise InputError(f"{other_flag} and {flag} name the same file {path}: give two")
         written.append((flag, path))
+    plot = getattr(args, "plot", None)
+    for name in PLOT_FILES.get(getattr(args, "command", None), ()) if isinstance(plot, str) else ():
+        for other_flag, other in written:
+            if os.path.realpath(other) == os.path.realpath(os.path.join(plot, name)):
+                raise InputError(f"{other_flag} {other} is the plot --plot {plot} writes: give another name")
 
+
+# the plots a command's --plot FOLDER holds, by fixed name
+PLOT_FILES = {"noise": ("allan.png",), "identify": ("identify.png",), "check": ("check.png",)}
 
 STYLE_WITH_FIXED = "--style does not apply to --precision fixed (its header is straight-line code)"
 

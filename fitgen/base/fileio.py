@@ -177,6 +177,11 @@ def write_all(files) -> list:
     and renamed into place only when all are. A failure removes the temporaries and the folders made for them:
     InputError, one line. Returns the paths."""
     files = [(Path(path), data) for path, data in files]
+    seen = {}
+    for path, _ in files:  # two of them one file: the later would replace the earlier unsaid
+        if (real := os.path.realpath(path)) in seen:
+            raise InputError(f"{seen[real]} and {path} name the same file: give two")
+        seen[real] = path
     staged, made = [], []  # (temporary, the file it replaces, the path given); the folders this call made
     try:
         for path, data in files:
