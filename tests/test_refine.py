@@ -4,6 +4,7 @@ model and the firmware on the emulated Cortex-M4."""
 
 import dataclasses
 import json
+import subprocess
 
 import numpy as np
 import pytest
@@ -286,3 +287,41 @@ def test_codegen_for_the_uno_refuses_a_refinement_in_one_line(model, tmp_path):
     data = simulate(PAPER, GRID[:20]).save(tmp_path / "d.csv")
     assert_one_line_error(run_cli("fitgen", "predict", str(tmp_path / "r.json"), str(data), "--target", "uno",
                                   "--precision", "float", "-o", str(tmp_path / "e.csv")), 2, "fit without --refine")
+
+
+def test_the_prefixes_refused_as_clashing_are_the_words_the_headers_share(model, train, tmp_path):
+    """tm and tm_status in one program: each header defined TM_STATUS_NONFINITE (tm_r and tm_r_term alike). The
+    refused words are read here from headers of every kind, so a template's new name cannot slip past the list."""
+    import re
+
+    from fitgen.c.cgen import CLASHING_TAILS
+
+    plain = fit_model(train, settings=FitSettings.family("integer", max_terms=8))
+    texts = [render_header(m, p, s, "tm", fma=f) for m in (model, plain) for p in ("double", "float")
+             for s in ("table", "unrolled") for f in (False, True)]  # one text for every core
+    texts.append(render_header(plain, "fixed", target="uno"))
+    texts.append(render_header(plain, "fixed"))
+    names = {n[3:] for text in texts for n in re.findall(r"\b(?:tm|TM)_\w+", text)}
+    shared = {}  # case kept: TM_RD_REAL (a macro) and tm_rd_real (tm_rd's real type) are two names
+    for a in names:
+        for b in names:
+            if a.endswith("_" + b):
+                shared.setdefault(a[:-len(b) - 1].lower(), set()).add(a)
+    assert set(shared) == set(CLASHING_TAILS) and all(CLASHING_TAILS[w] in shared[w] for w in shared)
+    path = model.save(tmp_path / "m.json")
+    for prefix, both in (("tm_status", "TM_STATUS_NONFINITE"), ("tm_r", "tm_r_term"),
+                         ("x_require", "X_REQUIRE_GENERATOR_VERSION_NUM")):
+        assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "c"), "--prefix", prefix),
+                              2, f"({both} is both headers')")
+    # the peer: two headers of prefixes the check lets through compile side by side in one program
+    require_tool("gcc")
+    for prefix in ("tm", "tm_stat", "tm_rd"):
+        assert run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "c"), "--prefix", prefix,
+                       "--precision", "float").returncode == 0
+    (tmp_path / "c" / "both.c").write_text(
+        '#include "tm_model.h"\n#include "tm_stat_model.h"\n#include "tm_rd_model.h"\n'
+        "int main(void) { return TM_N_INPUTS + TM_STAT_N_INPUTS + TM_RD_N_INPUTS == 24 ? 0 : 1; }\n")
+    proc = subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "both.c", "-lm",
+                           "-o", "both"], cwd=tmp_path / "c", capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert subprocess.run([str(tmp_path / "c" / "both")]).returncode == 0

@@ -35,10 +35,17 @@ def identifier(name: str, what: str = "identifier", longest: int = 31) -> str:
     return name
 
 
+# the first words of the header's two-word names whose second word is a name of its own: a prefix ending in one
+# (tm_status) would define what the shorter prefix's header (tm) defines, e.g. TM_STATUS_NONFINITE; with a name
+# both define, for the message (tests/test_codegen.py derives the words from rendered headers)
+CLASHING_TAILS = {"r": "r_term", "require": "REQUIRE_GENERATOR_VERSION_NUM", "status": "STATUS_NONFINITE"}
+
+
 def prefix_identifier(prefix: str) -> str:
     """``prefix`` if it starts the generated identifiers safely: an :func:`identifier` of at most 16 characters
     that does not end in '_' (``<prefix>_model`` would hold '__', reserved in C and C++) and whose upper case does
-    not start a macro name the C library reserves (``SIG_N_INPUTS``: signal.h's)."""
+    not start a macro name the C library reserves (``SIG_N_INPUTS``: signal.h's), nor end in a word
+    (:data:`CLASHING_TAILS`) that would make its names another prefix's."""
     prefix = identifier(prefix, "prefix", 16)
     if prefix != prefix.lower():  # its macros and include guard are its upper case: Tm's would be tm's
         raise InputError(f"prefix {prefix!r}: give it in lower case ({prefix.lower()!r}); the header's macros and "
@@ -46,6 +53,13 @@ def prefix_identifier(prefix: str) -> str:
                          "same ones and the second header would compile to nothing")
     if prefix.endswith("_"):
         raise InputError(f"prefix {prefix!r} ends in '_': the names it starts would hold '__' (reserved)")
+    tails = ["_".join(prefix.split("_")[i:]) for i in range(1, prefix.count("_") + 1)]
+    if clash := next((t for t in tails if t in CLASHING_TAILS), None):
+        other, name = prefix[:-len(clash) - 1], CLASHING_TAILS[clash]
+        both = f"{other}_{name}" if name.islower() else f"{other.upper()}_{name}"
+        raise InputError(f"prefix {prefix!r}: beside a header of prefix {other!r} in one program their names would "
+                         f"clash ({both} is both headers'); choose another (e.g. "
+                         f"{prefix.replace('_', '')!r})")
     if _RESERVED_MACROS.match(prefix.upper() + "_X"):
         raise InputError(f"prefix {prefix!r}: the header's macros ({prefix.upper()}_...) would start as "
                          "names the C library reserves (E and a digit or capital: errno.h; LC_, SIG, FE_, PRIX, "
