@@ -370,6 +370,8 @@ def test_view_names_the_option_it_misses_and_a_port_in_host_points_at_port(model
         assert_one_line_error(run_cli("tactile-host", "view", "--port", "0", *given), 2, said)
     for host, said in (("127.0.0.1:8765", "the port goes in --port (--host 127.0.0.1 --port 8765)"),
                        ("[::1]:8765", "the port goes in --port (--host ::1 --port 8765)"),
+                       # said as an address it could not resolve, where the same without brackets serves
+                       ("[::1]", "--host [::1]: give the address without brackets (--host ::1)"),
                        # a byte no terminal decoded: the socket's "encoding of hostname failed", a traceback
                        ("\udcff", "--host '?': not a host name or address")):
         assert_one_line_error(run_cli("tactile-host", "view", "--model", model_file, "--adc", TWO_CHIPS, "--simulate",

@@ -120,7 +120,8 @@ def refuse_readout_options(args) -> None:
 
 
 def check_host(host: str) -> None:
-    """``view --host``: InputError for ADDRESS:PORT (no address has one colon, IPv6 has two or more, nor brackets)."""
+    """``view --host``: InputError for ADDRESS:PORT (no address has one colon, IPv6 has two or more) and for an
+    address in brackets."""
     import re
 
     try:
@@ -132,6 +133,8 @@ def check_host(host: str) -> None:
         address, port = m.group(1) or m.group(3), m.group(2) or m.group(4)
         raise InputError(f"--host {host}: the address only; the port goes in --port (--host {address or '127.0.0.1'} "
                          f"--port {port})")
+    if m := re.fullmatch(r"\[(.*)\]", host):  # a URL's form of an IPv6 address; the socket takes it bare
+        raise InputError(f"--host {host}: give the address without brackets (--host {m.group(1)})")
 
 
 def accuracy_of(spec: str | None) -> dict | None:
