@@ -1,13 +1,12 @@
 """The live readout: read every element, estimate the pose, write a timestamped line; pace, tare, count.
 
-One sample is ``Readout.step()``: the ADC array's volts (transient I2C errors retried
-with back-off inside it) through the corrections (:class:`Corrections`: temperature
-compensation, then the tare's or the auto-zero's offsets), through the engine, formatted
-as a CSV or JSON line and written in one piece; an observer (the live view) and a run
-record (``--record``, for ``tactile-host replay``) may see each sample too. ``run`` repeats it at a rate or as fast as
-the converters allow, until a count, a duration or a stop request (Ctrl-C), and
-returns the statistics the summary line shows. A chip that stays silent raises
-``DeviceSilent`` out of ``run`` with the statistics so far attached (``exc.stats``).
+One sample is ``Readout.step()``: the ADC array's volts (transient I2C errors retried with back-off inside it)
+through the corrections (:class:`Corrections`: temperature compensation, then the tare's or the auto-zero's
+offsets), through the engine, formatted as a CSV or JSON line and written in one piece; an observer (the live view)
+and a run record (``--record``, for ``tactile-host replay``) may see each sample too. ``run`` repeats it at a rate or
+as fast as the converters allow, until a count, a duration or a stop request (Ctrl-C), and returns the statistics
+the summary line shows. A chip that stays silent raises ``DeviceSilent`` out of ``run`` with the statistics so far
+attached (``exc.stats``).
 """
 
 from __future__ import annotations
@@ -279,6 +278,7 @@ class Tare:
     measured: np.ndarray  # mean rest readings
     reference: np.ndarray
     spread: np.ndarray  # standard deviation of each element during the tare
+    samples: int = 0  # how many the tare averaged
 
     @property
     def offsets(self) -> np.ndarray:
@@ -290,8 +290,9 @@ class Tare:
         return max(float(np.median(self.spread)), float(np.max(lsb)) / math.sqrt(12.0))
 
     def describe(self) -> str:
-        mv = " ".join(f"{x * 1e3:+.2f}" for x in self.offsets)
-        return f"tare: offsets [mV] {mv} (spread up to {self.spread.max() * 1e3:.2f} mV rms)"
+        mv = " ".join(f"{x * 1e3:+.2f}" for x in self.offsets)  # one sample has no spread: 0.00 would read as none
+        spread = f"spread up to {self.spread.max() * 1e3:.2f} mV rms" if self.samples > 1 else "one sample: no spread"
+        return f"tare: offsets [mV] {mv} ({spread})"
 
 
 TARE_SAMPLES = 50  # samples a tare averages by default: read's, tm_pi's and the Arduino ReadPose's
@@ -304,7 +305,7 @@ def tare(array: AdcArray, reference: np.ndarray, n: int = TARE_SAMPLES, step=Non
     block = measure(array, n, step)
     if compensate is not None:
         block = compensate(block)
-    return Tare(block.mean(axis=0), np.asarray(reference, dtype=float), block.std(axis=0))
+    return Tare(block.mean(axis=0), np.asarray(reference, dtype=float), block.std(axis=0), len(block))
 
 
 @dataclass

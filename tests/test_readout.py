@@ -273,6 +273,18 @@ def test_a_simulated_pose_or_noise_past_any_sensor_is_one_line(model_file, tmp_p
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_tare_of_one_sample_says_it_measured_no_spread(model_file, tmp_path):
+    """--tare-samples 1 printed "spread up to 0.00 mV rms", which reads as a sensor without noise."""
+    said = {}
+    for n in ("1", "2"):
+        proc = run_cli("tactile-host", "read", "--model", model_file, "--adc", TWO_1115, "--simulate", "dx=1",
+                       "--count", "1", "--tare", "--tare-samples", n, "-o", str(tmp_path / "s.csv"))
+        assert proc.returncode == 0, proc.stderr
+        said[n] = proc.stderr.splitlines()[0]
+    assert "(one sample: no spread)" in said["1"] and "0.00 mV" not in said["1"], said["1"]
+    assert re.search(r"\(spread up to \d+\.\d\d mV rms\)", said["2"]) and "0.00 mV" not in said["2"], said["2"]
+
+
 def test_read_command_with_the_c_engine_to_a_jsonl_file(model_file, tmp_path):
     require_tool("gcc")
     out = tmp_path / "stream.jsonl"
