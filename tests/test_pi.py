@@ -58,7 +58,7 @@ def _python_lines(model, n, faults=(), spec=MAP, settings=None):
     return lines, arr.counts
 
 
-def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=None, autozero=None):
+def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=None, autozero=None, tare_n=50):
     """tactile-host read's CSV lines (header first) for ``bus``, and its tare (None without ``rest``): the Python
     drivers, a tare onto ``rest`` and ``tempcomp`` (with the thermistor at ``tin``), then Python's emulation of
     the float header, as tm_pi's float build computes them; ``autozero(tare, lsb)``: an AutoZero that follows
@@ -82,7 +82,7 @@ def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=N
     compensate = None
     if rest is not None and tempcomp is not None:  # as read: the tare's rows compensated at the temperature first
         compensate = partial(tempcomp.apply, temp=thermometer.read(fresh=True))
-    t = None if rest is None else tare(arr, rest, 50, compensate=compensate)
+    t = None if rest is None else tare(arr, rest, tare_n, compensate=compensate)
     sink, fmt = io.StringIO(), LineFormat("csv", model.n_inputs, model.output_names)
     sink.write(fmt.header)
     Readout(arr, FloatEngine(model), sink, fmt, clock=clock,
@@ -456,6 +456,13 @@ def test_pi_build_tares_as_the_python_readout_does(model, tmp_path):
     got = res.stdout.splitlines()
     assert got == expected[:1] + got[1:] and len(got) == len(expected) == 7
     assert [ln.split(",", 1)[1] for ln in got[1:]] == [ln.split(",", 1)[1] for ln in expected[1:]]
+    # a tare of one sample has no spread: both said so (each printed 0.00 mV rms, as of a sensor without noise)
+    b, clock = bus()
+    one = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", "1", "--tare", "--tare-samples", "1"])
+    b, clock = bus()
+    _, tared_one = _python_readout(model, b, clock, 1, rest=rest[0], tare_n=1)
+    assert f"tm_pi: {tared_one.describe()}, onto the rest readings of --rest paper\n" in one.stderr, one.stderr
+    assert "(one sample: no spread)" in one.stderr
     b, clock = bus()
     plain = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", "6"]).stdout.splitlines()
     assert [ln.split(",", 1)[1] for ln in plain[1:]] != [ln.split(",", 1)[1] for ln in got[1:]]

@@ -177,7 +177,11 @@ static int tare(adc_array *array, const double lsb[TM_N_INPUTS], long n, double 
         spread = spreads[k] > spread ? spreads[k] : spread;
         fprintf(stderr, " %+.2f", offsets[k] * 1e3);
     }
-    fprintf(stderr, " (spread up to %.2f mV rms), onto the rest readings of %s\n", spread * 1e3, PI_REST_FROM);
+    if (n > 1) {
+        fprintf(stderr, " (spread up to %.2f mV rms), onto the rest readings of %s\n", spread * 1e3, PI_REST_FROM);
+    } else { /* one sample has no spread: 0.00 would read as a sensor without noise (read says the same) */
+        fprintf(stderr, " (one sample: no spread), onto the rest readings of %s\n", PI_REST_FROM);
+    }
 #ifdef PI_UNIT_LIMIT /* a twin's: another unit's rest is offsets to a tare (host/readout.py) */
     {
         double sq = 0.0;
