@@ -427,9 +427,9 @@ def test_read_and_replay_refuse_an_overflowing_model_as_predict_does(model_file,
     (tmp_path / "m.json").write_text(json.dumps(model))
     for proc in (run_cli(*read, "--model", str(tmp_path / "m.json"), "-o", str(tmp_path / "e.csv")),
                  run_cli("tactile-host", "replay", str(run), "--model", str(tmp_path / "m.json"),
-                         "-o", str(tmp_path / "e.csv"))):
+                         "-o", str(tmp_path / "e.jsonl"))):
         assert_one_line_error(proc, 2, "output dx: its terms reach")
-        assert not (tmp_path / "e.csv").exists()
+        assert not (tmp_path / "e.csv").exists() and not (tmp_path / "e.jsonl").exists()
 
 
 def test_a_huge_cell_is_named_where_it_is(data, tmp_path):
@@ -707,6 +707,7 @@ def test_a_command_given_nothing_lists_its_subcommands(tool, command):
     # these wrote over a model named by a slip: schedule's CSV, the suite's XML, stage-sim's pose line
     (["schedule", "--n", "10", "-o", "model.json"], "-o model.json: schedule writes poses in CSV: name it .csv"),
     (["predict", "nothere.json", "nothere.csv", "-o", "e.toml"], "-o e.toml: predict writes estimates in CSV"),
+    (["report", "nothere.json", "-o", "sim.csv"], "-o sim.csv: report writes Markdown: name it .md"),
     (["tactile-hil", "run", "--model", "m.json", "--port", "socket://localhost:1", "--junit", "model.json"],
      "--junit model.json: the results are JUnit XML: name it .xml"),
     (["tactile-host", "stage-sim", "--pose-file", "model.json"], "--pose-file model.json: the pose file is one line"),
@@ -716,6 +717,25 @@ def test_an_output_named_as_another_kind_of_file_is_refused_before_the_work(args
     tool, args = (args[0], args[1:]) if args[0].startswith("tactile") else ("fitgen", args)
     assert_one_line_error(run_cli(tool, *args, cwd=tmp_path), 2, said)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_output_over_a_dataset_is_refused(model_file, tmp_path):
+    """predict -o other.csv wrote estimates over a dataset and left its meta beside them (which then spoke for the
+    estimates); report -o x.md over one wrote Markdown. simulate over its own kind writes as ever."""
+    sim = run_cli("fitgen", "simulate", "--random", "20", "-o", str(tmp_path / "other.csv"))
+    assert sim.returncode == 0, sim.stderr
+    other = tmp_path / "other.csv"
+    kept = other.read_bytes()
+    run_cli("fitgen", "simulate", "--random", "20", "--seed", "2", "-o", str(tmp_path / "d.csv"))
+    assert_one_line_error(run_cli("fitgen", "predict", model_file, str(tmp_path / "d.csv"), "-o", str(other)), 2,
+                          f"-o {other} is a dataset (its meta is beside it): predict would write another kind of "
+                          "file over it")
+    (tmp_path / "notes.md").write_bytes(kept)
+    (tmp_path / "notes.md.meta.json").write_bytes((tmp_path / "other.csv.meta.json").read_bytes())
+    assert_one_line_error(run_cli("fitgen", "report", model_file, "-o", str(tmp_path / "notes.md")), 2,
+                          "is a dataset (its meta is beside it): report would write")
+    assert other.read_bytes() == kept and (tmp_path / "notes.md").read_bytes() == kept
+    assert run_cli("fitgen", "simulate", "--random", "20", "-o", str(other)).returncode == 0
 
 
 def test_codes_that_are_not_whole_or_beyond_int32_are_named_by_row_and_column(tmp_path):

@@ -381,6 +381,8 @@ OUTPUT_KINDS = {("identify", "output"): ((".csv", ".json"), "the unit file is a 
                                          "it)"),
                 ("schedule", "output"): (_NOT_CSV, "schedule writes poses in CSV: name it .csv (its meta goes beside it)"),
                 ("predict", "output"): (_NOT_CSV, "predict writes estimates in CSV: name it .csv"),
+                ("report", "output"): ((".csv", ".json", ".toml"), "report writes Markdown: name it .md (e.g. "
+                                       "report.md)"),
                 ("fit", "output"): ((".csv", ".toml"), "fit writes a model in JSON: name it .json (e.g. model.json)"),
                 ("capture", "temp_comp_output"): ((".csv", ".toml"), "the compensation is JSON: name it .json (e.g. "
                                                   "cap.tempcomp.json)"),
@@ -408,6 +410,9 @@ WRITES_JSON = {("fit", "output"): "a model", ("capture", "temp_comp_output"): "a
                ("tempcomp-fit", "output"): "a temperature compensation", ("noise", "output"): "a noise record",
                ("read", "record"): "a run record", ("view", "record"): "a run record",
                ("replay", "output"): "a run record"}
+
+
+DATASET_WRITERS = {("simulate", "output"), ("schedule", "output"), ("capture", "output")}  # a CSV and its meta
 
 
 def is_capture(path) -> bool:
@@ -455,6 +460,8 @@ def check_output_kind(args) -> None:
     compensation)."""
     from pathlib import Path
 
+    from fitgen.physics.dataset import meta_path
+
     def flag(dest: str) -> str:
         return "-o" if dest == "output" else "--" + dest.replace("_", "-")
 
@@ -470,6 +477,9 @@ def check_output_kind(args) -> None:
         if is_capture(path) and (command, dest) != ("capture", "output"):  # measured: only its own run adds to it
             raise InputError(f"{flag(dest)} {path} is a capture (rows measured on the sensor, as its meta says): "
                              f"{command} would write over it; give another name")
+        if meta_path(path).is_file() and (command, dest) not in DATASET_WRITERS:  # its meta would describe our text
+            raise InputError(f"{flag(dest)} {path} is a dataset (its meta is beside it): {command} would write "
+                             f"{WRITES_JSON.get((command, dest)) or 'another kind of file'} over it; give another name")
         kind, writes = json_kind(path), WRITES_JSON.get((command, dest))
         if kind is not None and kind != writes:
             raise InputError(f"{flag(dest)} {path} is {kind}: {command} would write {writes or 'another kind of file'} "
