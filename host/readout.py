@@ -278,7 +278,7 @@ class Tare:
     measured: np.ndarray  # mean rest readings
     reference: np.ndarray
     spread: np.ndarray  # standard deviation of each element during the tare
-    samples: int = 0  # how many the tare averaged
+    samples: int  # how many the tare averaged
 
     @property
     def offsets(self) -> np.ndarray:

@@ -37,7 +37,7 @@ def identifier(name: str, what: str = "identifier", longest: int = 31) -> str:
 
 # the first words of the header's two-word names whose second word is a name of its own: a prefix ending in one
 # (tm_status) would define what the shorter prefix's header (tm) defines, e.g. TM_STATUS_NONFINITE; with a name
-# both define, for the message (tests/test_codegen.py derives the words from rendered headers)
+# both define, for the message (tests/test_refine.py derives the words from rendered headers)
 CLASHING_TAILS = {"r": "r_term", "require": "REQUIRE_GENERATOR_VERSION_NUM", "status": "STATUS_NONFINITE"}
 
 
