@@ -272,6 +272,30 @@ def test_a_negative_unit_seed_is_one_line_and_writes_nothing(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_simulate_unit_keeps_a_unit_file_no_seed_draws_again(tmp_path):
+    """--unit writes its unit beside -o: over the --sensor input, a drawing or a unit identified from a capture it
+    would destroy what no seed draws again (it said "held another unit" of a drawing); one line, nothing written."""
+    drawing = tmp_path / "d.toml"
+    shutil.copy(Path(__file__).parents[1] / "fitgen" / "physics" / "presets" / "paper.toml", drawing)
+    identified = unit_toml(draw_unit(load_sensor("paper"), 9)[0], "paper",
+                           {"capture": "cap.csv", "capture_sha256": "ab" * 32})
+    cases = (("x", drawing.read_text(), "x.unit.toml", "which is the --sensor input"),
+             ("y", drawing.read_text(), str(drawing), "which holds a drawing (sensor paper, no unit's traits)"),
+             ("z", identified, str(drawing), "which holds unit paper-unit-9, identified from cap.csv"))
+    for stem, text, sensor, said in cases:
+        (tmp_path / f"{stem}.unit.toml").write_text(text)
+        sensor = str(tmp_path / sensor) if sensor == "x.unit.toml" else sensor
+        proc = run_cli("fitgen", "simulate", "--sensor", sensor, "--unit", "3", "--grid", "dx=0", "-o",
+                       str(tmp_path / f"{stem}.csv"))
+        assert_one_line_error(proc, 2, f"--unit writes the unit it draws beside -o {tmp_path / stem}.csv, to "
+                                       f"{tmp_path / stem}.unit.toml, {said}: writing it would destroy it")
+        assert (tmp_path / f"{stem}.unit.toml").read_text() == text and not (tmp_path / f"{stem}.csv").exists()
+    # a unit a seed drew is drawn again as easily: replaced, and said (test_simulate_unit_writes_the_unit_...)
+    (tmp_path / "w.unit.toml").write_text(unit_toml(draw_unit(load_sensor("paper"), 9)[0], "paper", {"seed": 9}))
+    proc = run_cli("fitgen", "simulate", "--unit", "3", "--grid", "dx=0", "-o", str(tmp_path / "w.csv"))
+    assert proc.returncode == 0 and "held another unit, now replaced" in proc.stderr, proc.stderr
+
+
 def test_simulate_unit_writes_the_unit_and_fit_holds_out_on_it(tmp_path):
     out = tmp_path / "u.csv"
     proc = run_cli("fitgen", "simulate", "--sensor", "paper", "--transfer", "gmr", "--unit", "4", "--grid",

@@ -23,7 +23,6 @@ FAMILY_CHOICES = ("auto", *FAMILIES)
 
 def cmd_simulate(args) -> int:
     from fitgen.app.report import posterior_note, simulate_notes
-    from fitgen.base.fileio import replaces_other
     from fitgen.fitting.fit import rows_needed
     from fitgen.physics.posesource import choose_poses
     from fitgen.physics.simulate import simulate
@@ -40,12 +39,13 @@ def cmd_simulate(args) -> int:
                          "drawing the stage moves the magnet one to one, so the labels are the same")
     unit, beside, replaced = None, [], None
     if args.unit is not None:
+        from fitgen.app.replaced import drawn_unit_over
         from fitgen.physics.units import unit_beside
 
         drawing = sensor
         sensor, unit, text, unit_info = unit_beside(drawing, args.unit, args.output)
         beside = [(unit, text)]  # written with the data or not at all: a refusal keeps an earlier run's
-        replaced = unit if replaces_other(unit, text) else None
+        replaced = drawn_unit_over(unit, text, args.output, args.sensor)
     from fitgen.base.progress import Progress
 
     with Progress("simulate", 2) as bar:  # seen on a terminal when many poses take seconds

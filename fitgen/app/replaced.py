@@ -1,5 +1,6 @@
 """What an output would replace: identify's unit file a drawing (refused), another unit or this capture's unit as
-identified before (said); fit's model another sensor's (said)."""
+identified before (said); simulate's unit file a drawing, its input or an identified unit (refused), another drawn
+unit (said); fit's model another sensor's (said)."""
 
 from __future__ import annotations
 
@@ -7,26 +8,53 @@ from fitgen.base.errors import InputError
 from fitgen.base.fileio import replaces_other
 
 
-def not_a_drawing(output, drawing: str) -> None:
-    """InputError when identify's ``output`` is a drawing's file: the unit written there would destroy it (the
-    drawing taken from the capture's record is no input the options name, so the general guard misses it)."""
+def _held(path, given: str | None, identified: bool) -> str:
+    """What a unit written over ``path`` would destroy ('' when nothing a user can't make again): the input
+    ``given``, a drawing, or (``identified``) a unit identified from a capture."""
     from pathlib import Path
 
     from fitgen.physics.sensor import load_sensor
 
-    path = Path(output)
+    path = Path(path)
     if not path.is_file():
-        return
-    if Path(drawing).is_file() and path.samefile(drawing):
-        raise InputError(f"-o {output} is the drawing identify reads (the capture's schedule names it): writing the "
-                         "unit there would destroy it; give another name (e.g. unit.toml)")
+        return ""
+    if given is not None and Path(given).is_file() and path.samefile(given):
+        return "input"
     try:
         there = load_sensor(str(path))
     except (InputError, OSError, ValueError):  # no sensor file: the tools' other checks say what it is
-        return
+        return ""
     if there.is_drawing:
-        raise InputError(f"-o {output} is a drawing (sensor {there.name}, no unit's traits): writing the unit there "
-                         "would destroy it; give another name (e.g. unit.toml)")
+        return f"a drawing (sensor {there.name}, no unit's traits)"
+    sha, capture = _recorded_capture(path)
+    if identified and (sha or capture):  # made from a capture, which a seed cannot draw again
+        return f"unit {there.name}, identified from {capture if isinstance(capture, str) else 'a capture'}"
+    return ""
+
+
+def not_a_drawing(output, drawing: str) -> None:
+    """InputError when identify's ``output`` is a drawing's file: the unit written there would destroy it (the
+    drawing taken from the capture's record is no input the options name, so the general guard misses it)."""
+    held = _held(output, drawing, identified=False)
+    if held == "input":
+        raise InputError(f"-o {output} is the drawing identify reads (the capture's schedule names it): writing the "
+                         "unit there would destroy it; give another name (e.g. unit.toml)")
+    if held:
+        raise InputError(f"-o {output} is {held}: writing the unit there would destroy it; give another name "
+                         "(e.g. unit.toml)")
+
+
+def drawn_unit_over(unit, text: str, output, sensor: str):
+    """``unit`` when ``simulate --unit``'s unit file there (named for ``output``) holds another drawn unit, for the
+    note; None when it holds nothing or ``text``. InputError when it holds what a seed cannot draw again: the
+    ``--sensor`` input, a drawing, or a unit identified from a capture (its posterior beside it)."""
+    held = _held(unit, sensor, identified=True)
+    what = f"--unit writes the unit it draws beside -o {output}, to {unit}"
+    if held == "input":
+        raise InputError(f"{what}, which is the --sensor input: writing it would destroy it; give -o another name")
+    if held:
+        raise InputError(f"{what}, which holds {held}: writing it would destroy it; give -o another name")
+    return unit if replaces_other(unit, text) else None
 
 
 def _recorded_capture(unit_file) -> tuple[str | None, str | None]:
