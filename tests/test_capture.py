@@ -496,6 +496,23 @@ def test_a_simulated_capture_resumes_with_its_units_file_by_any_path_and_not_wit
     assert meta["runs"] == 3 and meta["sensor_sha256"] == load_sensor(tmp_path / "sub" / "moved.toml").sha256
 
 
+def test_a_simulated_capture_is_fitted_with_the_sensor_it_was_read_from(tmp_path):
+    """A simulated capture records its sensor file's hash as read (paper's: raw), its rows are in volts: fit with
+    --sensor paper holds out on it (it was refused as 'sensor None', another sensor); another sensor is refused in
+    words that name no None."""
+    write_schedule(tmp_path / "s.csv", grid_rows())
+    proc = run_cli("tactile-host", "capture", "--poses", "s.csv", "--adc", TWO_1115, "-o", "c.csv", "--simulate",
+                   "--sensor", "paper", "--samples", "2", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli("fitgen", "fit", "c.csv", "--sensor", "paper", "--held-out", "100", "-o", "m.json", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    held = json.loads((tmp_path / "m.json").read_text())["fit"]["held_out"]
+    assert held["sensor"] == "paper" and held["transfer"] == "gmr"
+    proc = run_cli("fitgen", "fit", "c.csv", "--sensor", "two-rings", "-o", "m2.json", cwd=tmp_path)
+    assert_one_line_error(proc, 2, "the dataset was read from another sensor (sha256 ")
+    assert "None" not in proc.stderr and not (tmp_path / "m2.json").exists()
+
+
 def test_capture_averages_as_many_samples_as_the_schedule_was_made_for(tmp_path):
     """`fitgen schedule --samples S` designs its poses for rows averaged over S samples and says so in its meta:
     capture takes S unless --samples says otherwise, and 16 for a schedule that names none."""

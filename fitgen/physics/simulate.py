@@ -235,12 +235,16 @@ def dataset_sensor(meta: dict, spec: str | None = None, n_inputs: int | None = N
 def other_sensor_problem(meta: dict, sensor: Sensor, named: str) -> str:
     """Why ``sensor`` (``named`` so in the words) is not the one a dataset's meta records by hash, in words ('' when
     it is, or the meta records none): figures held out on another sensor would not be the model's."""
+    from fitgen.physics.transfer import sensor_hashes
+
     sha = meta.get("sensor_sha256")
-    if not isinstance(sha, str) or sha == sensor.sha256:
+    # either transfer's: a simulated capture records its sensor file's as read (raw), its rows are in volts
+    if not isinstance(sha, str) or sha in sensor_hashes(sensor):
         return ""
-    return (f"the dataset was simulated with sensor {meta.get('sensor_file') or meta.get('sensor')} (sha256 "
-            f"{sha[:12]}), not {named} ({sensor.sha256[:12]}): figures held out on another sensor would not be this "
-            "model's")
+    recorded = meta.get("sensor_file") or meta.get("sensor")
+    return (f"the dataset was {f'simulated with sensor {recorded}' if recorded else 'read from another sensor'} "
+            f"(sha256 {sha[:12]}), not {named} ({sensor.sha256[:12]}): figures held out on another sensor would not "
+            "be this model's")
 
 
 def sensor_record_problem(rec: dict) -> str:
