@@ -101,11 +101,15 @@ APPROACH = "dx=-0.3,dy=-0.3,dz=0.3"  # every pose from -dx, -dy and above: the l
 
 
 def parse_approach(spec: str) -> np.ndarray:
-    """``dx=-0.3,dy=-0.3,dz=0.3`` -> where the last move to a pose starts from, relative to it (mm)."""
+    """``dx=-0.3,dy=-0.3,dz=0.3`` -> where the last move to a pose starts from, relative to it (mm); every axis
+    named (``dz=0.4`` once set the others to 0, turning their backlash compensation off unsaid)."""
     from fitgen.base.parse import parse_assignments
 
     vals = parse_assignments(spec, STAGE_AXES, "--stage-approach")
-    d = np.array([vals.get(a, 0.0) for a in STAGE_AXES])
+    if missing := [a for a in STAGE_AXES if a not in vals]:
+        raise InputError(f"--stage-approach {spec!r} leaves out {', '.join(missing)}: give every axis (0 turns one's "
+                         f"backlash compensation off; default {APPROACH})")
+    d = np.array([vals[a] for a in STAGE_AXES])
     if not np.all(np.isfinite(d)) or np.any(np.abs(d) > 10):
         raise InputError(f"--stage-approach {spec!r}: each distance within -10..10 mm")
     dz = d[STAGE_AXES.index("dz")] if "dz" in STAGE_AXES else 0.0

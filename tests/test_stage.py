@@ -131,11 +131,14 @@ def test_axis_map_limits_and_approach_parse_or_refuse_in_one_line():
     assert parse_ranges("dx=-40:40", "l") == {"dx": (-40.0, 40.0)}
     with pytest.raises(InputError, match="X is given twice"):
         parse_zero("X=1,X=2,Y=0,Z=0")
-    np.testing.assert_array_equal(parse_approach("dz=0.5"), [0, 0, 0.5])
+    np.testing.assert_array_equal(parse_approach("dz=0.5,dx=0,dy=-0.2"), [0, -0.2, 0.5])
+    # an axis left out had been set to 0: its backlash compensation off, unsaid
+    with pytest.raises(InputError, match="--stage-approach 'dz=0.5' leaves out dx, dy: give every axis"):
+        parse_approach("dz=0.5")
     with pytest.raises(InputError):
         parse_approach("dz=20")
     with pytest.raises(InputError, match="dz=-0.3 starts each pose's last move 0.3 mm deeper than the pose"):
-        parse_approach("dx=-0.3,dz=-0.3")  # was taken: every row pressed past its pose first
+        parse_approach("dx=-0.3,dy=0,dz=-0.3")  # was taken: every row pressed past its pose first
     assert parse_zero("ask") == "ask" and parse_zero("1,2,3") == {"X": 1.0, "Y": 2.0, "Z": 3.0}
     assert parse_zero("z=-4.5,x=1,y=2") == {"X": 1.0, "Y": 2.0, "Z": -4.5}
     # G-code words, as M114 and stage-sim print a position, pasted as they are

@@ -430,7 +430,7 @@ def build_parser() -> Parser:
     st.add_argument("--stage-feed", metavar="MM_MIN", help="feed rate of every move, mm/min (default 600)")
     st.add_argument("--stage-approach", metavar=APPROACH,
                     help="where the last move to each pose starts, relative to it (backlash: every pose approached "
-                         f"from the same side; 0 turns it off for an axis; default {APPROACH})")
+                         f"from the same side; every axis named, 0 turns it off for one; default {APPROACH})")
     st.add_argument("--stage-timeout", metavar="S", help="time limit for each answer of the controller (default 5 s, "
                     "plus each move's own time)")
     st.add_argument("--stage-boot-wait", metavar="S", help="seconds to wait for a start-up banner after opening the "
