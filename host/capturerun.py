@@ -126,14 +126,17 @@ def run_capture(args, prog: str) -> None:
 
 def next_step(schedule, output) -> str:
     """What a user runs on a finished capture (docs/calibration.md, "The workflow")."""
+    from shlex import quote
+
+    folder = Path(output).parent  # the unit's files beside its capture: two units' folders keep theirs apart
     if schedule.check:
-        return (f"fitgen check twin.json {output} (the twin's model, named as identify's next step names it, on "
-                "these poses against what identify predicts)")
+        return (f"fitgen check {quote(str(folder / 'twin.json'))} {quote(str(output))} (the twin's model, named as "
+                "identify's next step names it, on these poses against what identify predicts)")
     drawing = recorded_spec(schedule.drawing) if schedule.drawing else None
-    # a unit.toml here is most likely another unit's: this capture's own name keeps it
-    unit = f"{Path(output).stem}.unit.toml" if Path("unit.toml").exists() else "unit.toml"
-    return (f"fitgen identify {output} --sensor {drawing or 'DRAWING'} -o {unit} (the unit's physics from these "
-            "rows)")
+    # a unit.toml there is most likely another unit's: this capture's own name keeps it
+    unit = folder / (f"{Path(output).stem}.unit.toml" if (folder / "unit.toml").exists() else "unit.toml")
+    return (f"fitgen identify {quote(str(output))} --sensor {quote(drawing) if drawing else 'DRAWING'} -o "
+            f"{quote(str(unit))} (the unit's physics from these rows)")
 
 
 def check_simulation_options(args) -> None:

@@ -308,7 +308,8 @@ def test_capture_command_killed_midway_resumes_without_loss_or_duplicates(tmp_pa
     proc = run_cli("tactile-host", *args, "--trigger", "true")
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr.strip() == (f"tactile-host capture: 27/27 poses in {out} (19 captured now, 8 already there)\n"
-                                   f"tactile-host capture: next: fitgen identify {out} --sensor DRAWING -o unit.toml "
+                                   f"tactile-host capture: next: fitgen identify {out} --sensor DRAWING -o "
+                                   f"{tmp_path / 'unit.toml'} "
                                    "(the unit's physics from these rows)")  # a schedule without meta names none
     header, got = data_rows(out)
     assert header == "v1,v2,v3,v4,v5,v6,v7,v8,dx,dy,dz"
@@ -637,10 +638,11 @@ def test_a_finished_capture_names_the_next_step_from_its_schedule(tmp_path):
                        "--simulate", "--samples", "2", "-o", str(cap))
         assert proc.returncode == 0, proc.stderr
         said = proc.stderr.strip().splitlines()[-1]
-        assert said == ({"s": f"tactile-host capture: next: fitgen identify {cap} --sensor paper -o unit.toml (the "
-                              "unit's physics from these rows)",
-                         "c": f"tactile-host capture: next: fitgen check twin.json {cap} (the twin's model, named as "
-                              "identify's next step names it, on these poses against what identify predicts)"}
+        assert said == ({"s": f"tactile-host capture: next: fitgen identify {cap} --sensor paper -o "
+                              f"{tmp_path / 'unit.toml'} (the unit's physics from these rows)",
+                         "c": f"tactile-host capture: next: fitgen check {tmp_path / 'twin.json'} {cap} (the twin's "
+                              "model, named as identify's next step names it, on these poses against what identify "
+                              "predicts)"}
                         [kind]), said
     # a capture given as the schedule: its poses taken, with a note that its schedule's record is not (identify
     # would take the default drawing and stage errors); a schedule is taken without one
@@ -658,6 +660,13 @@ def test_a_finished_capture_names_the_next_step_from_its_schedule(tmp_path):
     assert proc.returncode == 0 and proc.stderr.strip().splitlines()[-1] == (
         "tactile-host capture: next: fitgen identify u2.csv --sensor paper -o u2.unit.toml (the unit's physics from "
         "these rows)"), proc.stderr
+    # a unit in its own folder, named with a space: its files beside its capture, quoted for the shell
+    (tmp_path / "unit 3").mkdir()
+    proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s.csv"), "--adc", spec, "--simulate",
+                   "--samples", "2", "-o", "unit 3/u3.csv", cwd=tmp_path)
+    assert proc.returncode == 0 and proc.stderr.strip().splitlines()[-1] == (
+        "tactile-host capture: next: fitgen identify 'unit 3/u3.csv' --sensor paper -o 'unit 3/unit.toml' (the "
+        "unit's physics from these rows)"), proc.stderr
 
 
 def test_an_earlier_runs_noise_figures_past_any_count_start_anew():

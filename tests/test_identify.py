@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import shlex
 from dataclasses import replace
 from pathlib import Path
 
@@ -720,7 +721,8 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
     proc = run_cli("fitgen", "identify", str(tmp_path / "c13.csv"), "-o", str(tmp_path / "u.toml"))
     assert proc.returncode == 0 and f"{tmp_path / 'u.toml'} held another unit, now replaced" in proc.stderr, proc.stderr
     # a unit file of its own name, its twin too (every unit of a batch had been told twin.json)
-    assert "-o u.twin.csv, then fitgen fit u.twin.csv -o u.twin.json" in proc.stderr.splitlines()[-1], proc.stderr
+    twin = tmp_path / "u.twin"
+    assert f"-o {twin}.csv, then fitgen fit {twin}.csv -o {twin}.json" in proc.stderr.splitlines()[-1], proc.stderr
     # a flag wins over the record; without a record, the defaults
     assert stage_errors(None, 0.01, meta, "c.csv") == (0.03, 0.01, " (rig error as the capture's schedule was made "
                                                                   "for)")
@@ -749,6 +751,8 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
 
 
 def test_cli_schedule_capture_identify(tmp_path):
+    tmp_path = tmp_path / "unit 1"  # a folder of a name with a space: the next step's words quote it
+    tmp_path.mkdir()
     sch, cap, unit_file = tmp_path / "s.csv", tmp_path / "c.csv", tmp_path / "unit.toml"
     proc = run_cli("fitgen", "schedule", "--sensor", "paper", "--transfer", "gmr", "--n", "30", "--limits",
                    "dx=-1.5:1.5 dy=-1.5:1.5 dz=-1.5:0", "-o", str(sch))
@@ -774,9 +778,11 @@ def test_cli_schedule_capture_identify(tmp_path):
                    "--plot", str(tmp_path / "plots"))
     assert proc.returncode == 0, proc.stderr
     assert "stands out" not in proc.stderr  # no row the physics does not explain
-    assert proc.stderr.endswith(f"next: fitgen simulate --sensor {unit_file} --grid paper-sim --random 5000 -o "
-                                "twin.csv, then fitgen fit twin.csv -o twin.json (the unit's own equations, tilt "
-                                "included)\n"), proc.stderr  # what a user runs next, as docs/calibration.md does
+    here = [shlex.quote(str(tmp_path / name)) for name in ("unit.toml", "twin.csv", "twin.json")]
+    # the twin beside its unit (two units' folders keep two twins), what a user runs next as docs/calibration.md does
+    assert proc.stderr.endswith(f"next: fitgen simulate --sensor {here[0]} --grid paper-sim --random 5000 -o "
+                                f"{here[1]}, then fitgen fit {here[1]} -o {here[2]} (the unit's own equations, tilt "
+                                "included)\n"), proc.stderr
     png = tmp_path / "plots" / "identify.png"
     assert f"plot: {png}" in proc.stderr and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     lifted = int((table[:, 2] > 0).sum())

@@ -30,6 +30,8 @@ def _not_levels(capture) -> None:
 
 
 def cmd_identify(args) -> int:
+    from shlex import quote
+
     from fitgen.app import plots
     from fitgen.app.replaced import not_a_drawing, replaced_unit
     from fitgen.base.progress import Progress
@@ -130,10 +132,12 @@ def cmd_identify(args) -> int:
     # a cause every row shares first: under it, the rows that stand out may not
     notes = field + verdict.outlier_lines(ident, args.capture) + verdict.low_residual_line(ident, source)
     print("".join(f"identify: {ln}\n" for ln in notes), end="", file=sys.stderr)
-    # unit.toml's twin is twin.json; another unit file's (a batch in one folder) its own, or each replaced the last
-    twin = "twin" if unit.name == "unit.toml" else unit.name.removesuffix(".toml").removesuffix(".unit") + ".twin"
-    print(f"next: fitgen simulate --sensor {unit} --grid paper-sim --random 5000 -o {twin}.csv, then fitgen fit "
-          f"{twin}.csv -o {twin}.json (the unit's own equations, tilt included)", file=sys.stderr)
+    # unit.toml's twin is twin.json beside it; another unit file's its own (a batch in one folder: none replaces one)
+    twin = str(unit.with_name("twin" if unit.name == "unit.toml" else unit.name.removesuffix(".toml")
+                              .removesuffix(".unit") + ".twin"))
+    print(f"next: fitgen simulate --sensor {quote(str(unit))} --grid paper-sim --random 5000 -o {quote(twin + '.csv')}"
+          f", then fitgen fit {quote(twin + '.csv')} -o {quote(twin + '.json')} (the unit's own equations, tilt "
+          "included)", file=sys.stderr)
     return 0
 
 
