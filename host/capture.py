@@ -115,7 +115,7 @@ def load_schedule(path: str | Path) -> Schedule:
     if problem:
         raise InputError(f"{meta_path(path)}: {problem}; repair it, or make the schedule again")
     captured = None
-    if str(meta.get("generator", "")).startswith("tactile-host capture"):  # as fitgen.app.cliutil.is_capture tells
+    if str(meta.get("generator", "")).startswith("tactile-host capture"):  # as fitgen.app.outputkind.is_capture tells
         captured = meta["schedule"] if isinstance(meta.get("schedule"), str) else ""
     return Schedule(as_poses(poses), columns, origin, drawing if "sensor" in drawing else None, stage or None,
                     meta.get("check") is True, captured)

@@ -8,7 +8,8 @@ from pathlib import Path
 
 from fitgen import __version__
 from fitgen.app.calibrate_cli import add_calibration_commands, cmd_identify, cmd_schedule
-from fitgen.app.cliutil import Parser, check_not_empty, check_output_kind, check_written, command_main, count, finite
+from fitgen.app.cliutil import Parser, check_not_empty, check_written, command_main, count, finite
+from fitgen.app.outputkind import check_output_kind
 from fitgen.app.options import accuracy_of, fit_settings, noise_of, sensor_file_of, sensor_of
 from fitgen.base.parse import MAX_NOISE, parse_names
 from fitgen.base.errors import InputError

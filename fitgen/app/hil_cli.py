@@ -13,8 +13,9 @@ import sys
 import threading
 import time
 
-from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, check_output_kind, check_written,
-                               check_not_empty, command_main, count, degc, noise_volts, seconds, tcp_port)
+from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, check_written, check_not_empty,
+                               command_main, count, degc, noise_volts, seconds, tcp_port)
+from fitgen.app.outputkind import check_output_kind
 from fitgen.base.errors import InputError
 
 

@@ -9,8 +9,9 @@ from fitgen.app.arduino_cli import add_arduino_build
 from fitgen.app.noise_cli import add_noise, cmd_noise
 from fitgen.app.tempcomp_cli import add_tempcomp, cmd_tempcomp_fit
 from fitgen.app.verify_cmd import cmd_verify
-from fitgen.app.cliutil import (EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_output_kind,
-                                check_written, command_main, count, ended_by, noise_volts)
+from fitgen.app.cliutil import (EXIT_CHECK_FAILED, Parser, StopFlag, check_not_empty, check_written, command_main,
+                                count, ended_by, noise_volts)
+from fitgen.app.outputkind import check_output_kind
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import OutputText
 from fitgen.base.parse import LONGEST_WAIT, parse_positive
