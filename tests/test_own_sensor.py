@@ -168,6 +168,17 @@ def test_identify_takes_the_drawing_the_capture_was_scheduled_for(tmp_path):
                        "destroy it")):
         assert_one_line_error(run_cli("fitgen", "identify", str(cap), "-o", str(out)), 2, said)
         assert out.read_text() == before
+    # the posterior beside the unit file over a model or a capture of its name: refused, kept (it was replaced)
+    (tmp_path / "m.posterior.json").write_text('{"schema_version": 1, "inputs": ["v1"], "outputs": {}}')
+    shutil.copy(cap, tmp_path / "k.posterior.json")
+    shutil.copy(f"{cap}.meta.json", tmp_path / "k.posterior.json.meta.json")
+    for stem, said in (("m", "a model: identify would write a unit's posterior over it"),
+                       ("k", "a capture (rows measured on the sensor, as its meta says): identify would write over")):
+        kept = (tmp_path / f"{stem}.posterior.json").read_text()
+        assert_one_line_error(run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / f"{stem}.toml")), 2,
+                              f"-o {tmp_path / stem}.toml writes the unit's posterior beside it, to "
+                              f"{tmp_path / stem}.posterior.json, which is {said}")
+        assert (tmp_path / f"{stem}.posterior.json").read_text() == kept and not (tmp_path / f"{stem}.toml").exists()
     proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "p.toml"), "--sensor", "paper")
     assert proc.returncode == 2 and f"note: the capture's schedule was made for {drawing.resolve()}; identifying " \
         "against --sensor paper" in proc.stderr, proc.stderr

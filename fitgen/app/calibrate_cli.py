@@ -33,7 +33,7 @@ def cmd_identify(args) -> int:
     from shlex import quote
 
     from fitgen.app import plots
-    from fitgen.app.replaced import not_a_drawing, replaced_unit
+    from fitgen.app.replaced import replaced_unit, unit_output
     from fitgen.base.progress import Progress
     from fitgen.fitting import identify as idf, unitrecord as rec, verdict
     from fitgen.fitting.holdout import drawing_rest_spread
@@ -61,7 +61,7 @@ def cmd_identify(args) -> int:
         print(f"identify: {unfinished}", file=sys.stderr)
     # the one the capture's schedule was made for
     args.sensor, said = rec.drawing_for(args.sensor, ds.meta, args.capture)
-    not_a_drawing(args.output, args.sensor)
+    unit_output(args.output, args.sensor)
     if not ds.target_names:
         raise InputError(f"{args.capture} has readings but no pose columns (dx,dy,dz,...): identify needs each row's "
                          "stage displacement from the zero, as tactile-host capture writes it")

@@ -1,6 +1,6 @@
 """What an output would replace: identify's unit file a drawing (refused), another unit or this capture's unit as
-identified before (said); simulate's unit file a drawing, its input or an identified unit (refused), another drawn
-unit (said); fit's model another sensor's (said)."""
+identified before (said), its posterior another kind of file (refused); simulate's unit file a drawing, its input
+or an identified unit (refused), another drawn unit (said); fit's model another sensor's (said)."""
 
 from __future__ import annotations
 
@@ -32,9 +32,10 @@ def _held(path, given: str | None, identified: bool) -> str:
     return ""
 
 
-def not_a_drawing(output, drawing: str) -> None:
+def unit_output(output, drawing: str) -> None:
     """InputError when identify's ``output`` is a drawing's file: the unit written there would destroy it (the
-    drawing taken from the capture's record is no input the options name, so the general guard misses it)."""
+    drawing taken from the capture's record is no input the options name, so the general guard misses it); or
+    when the posterior beside it would write over another kind of file (:func:`posterior_over`)."""
     held = _held(output, drawing, identified=False)
     if held == "input":
         raise InputError(f"-o {output} is the drawing identify reads (the capture's schedule names it): writing the "
@@ -42,6 +43,19 @@ def not_a_drawing(output, drawing: str) -> None:
     if held:
         raise InputError(f"-o {output} is {held}: writing the unit there would destroy it; give another name "
                          "(e.g. unit.toml)")
+    posterior_over(output)
+
+
+def posterior_over(output) -> None:
+    """InputError when the posterior identify writes beside its unit file ``output`` would write over a capture, a
+    dataset or another kind of the tools' files (no option names it, so the outputs' general check misses it)."""
+    from fitgen.app.outputkind import written_over
+    from fitgen.base.fileio import real_file
+    from fitgen.physics.units import beside_as
+
+    post = beside_as(real_file(output), ".toml", ".posterior.json")  # as fitgen.fitting.unitrecord.unit_files names it
+    if what := written_over(str(post), "identify", "a unit's posterior"):
+        raise InputError(f"-o {output} writes the unit's posterior beside it, to {post}, which {what}")
 
 
 def drawn_unit_over(unit, text: str, output, sensor: str):
