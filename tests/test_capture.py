@@ -588,6 +588,17 @@ def test_capture_command_bad_input_is_one_line_exit_2(tmp_path, extra, message):
     assert not (tmp_path / "d.csv").exists()
 
 
+def test_a_capture_named_as_another_kind_of_file_is_refused(tmp_path):
+    """capture -o x.json or x.toml wrote CSV under the name of a model or a sensor file (fit and identify, told the
+    name, read them as the wrong kind)."""
+    write_schedule(tmp_path / "s.csv", grid_rows()[:2])
+    for name in ("x.json", "x.TOML"):
+        proc = run_cli("tactile-host", "capture", "--poses", "s.csv", "--adc", TWO_1115, "--simulate", "-o", name,
+                       cwd=tmp_path)
+        assert_one_line_error(proc, 2, f"-o {name}: capture writes rows in CSV: name it .csv (its meta goes beside it)")
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["s.csv"]
+
+
 def test_capture_command_missing_schedule(tmp_path):
     proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "none.csv"), "--adc", TWO_1115,
                    "-o", str(tmp_path / "d.csv"), "--simulate")

@@ -20,6 +20,7 @@ OUTPUT_KINDS = {("identify", "output"): ((".csv", ".json"), "the unit file is a 
                 ("report", "output"): ((".csv", ".json", ".toml"), "report writes Markdown: name it .md (e.g. "
                                        "report.md)"),
                 ("fit", "output"): ((".csv", ".toml"), "fit writes a model in JSON: name it .json (e.g. model.json)"),
+                ("capture", "output"): (_NOT_CSV, "capture writes rows in CSV: name it .csv (its meta goes beside it)"),
                 ("capture", "temp_comp_output"): ((".csv", ".toml"), "the compensation is JSON: name it .json (e.g. "
                                                   "cap.tempcomp.json)"),
                 ("noise", "output"): ((".csv", ".toml"), "the noise record is JSON: name it .json (e.g. noise.json)"),
