@@ -419,6 +419,13 @@ def test_fitgen_check_says_so_and_exits_1_when_the_model_does_not_describe_the_u
         assert_one_line_error(run_cli("fitgen", "check", str(drawing_model), str(ok)), contains="give the unit's file")
     finally:
         (folder / "gone.toml").rename(folder / "twin.toml")
+    # another unit's file: named as typed (it said --sensor paper-unit-8, a name no file has)
+    from fitgen.physics.units import write_unit
+
+    write_unit(tmp_path / "u8.toml", draw_unit(drawing, 8)[0], drawing.name, {"seed": 8})
+    assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(ok), "--sensor",
+                                  str(tmp_path / "u8.toml")), 2,
+                          f"--sensor {tmp_path / 'u8.toml'}: the model was fitted on another sensor")
     assert load_dataset(ok).n_rows == 30 and POSE_NAMES[:3] == ("dx", "dy", "dz")
 
 

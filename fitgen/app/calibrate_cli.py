@@ -380,7 +380,7 @@ def cmd_check(args) -> int:
                  "the unit's file (fitgen identify writes it)")
         raise InputError(f"model {args.model}: {why}: give {which} as --sensor, or check the twin's model (identify, "
                          "simulate --sensor unit.toml, fit)")
-    sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on")
+    sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on", given=spec)
     sha = ds.sha256  # the capture's as written, before a compensation
     ds, heat = _check_temperature(ds, sensor, args.temp_comp, args.capture)
     if heat:

@@ -245,7 +245,7 @@ def cmd_report(args) -> int:
     if args.sensor and not {"thx", "thy"} & set(model.output_names):
         raise InputError(f"--sensor draws the rotation sweep, and model {args.model} estimates no rotation "
                          f"({', '.join(model.output_names)}): leave --sensor out")
-    sensor = sweep_sensor(load_sensor(args.sensor), model) if folder is not None and args.sensor else None
+    sensor = sweep_sensor(load_sensor(args.sensor), model, args.sensor) if folder is not None and args.sensor else None
     ds, lifted = rows_on_the_skin(refuse_huge(load_dataset(args.data))) if args.data else (None, 0)
     if ds is not None:
         check_input_units(model, ds.meta.get("units"), f"{args.data}'s readings", f"model {args.model}")

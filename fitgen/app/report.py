@@ -215,11 +215,12 @@ def format_report(model: Model, ds: Dataset | None = None, title: str = "", pape
     return "\n".join(parts) + "\n"
 
 
-def sweep_sensor(sensor, model):
-    """``sensor`` in the transfer that gives ``model``'s units; InputError when the model was fitted on another."""
+def sweep_sensor(sensor, model, given: str):
+    """``sensor`` (``given`` so) in the transfer that gives ``model``'s units; InputError when the model was fitted
+    on another."""
     from fitgen.fitting.holdout import fitted_sensor
 
-    return fitted_sensor(sensor, model, "its sweep on this one would not be the model's")
+    return fitted_sensor(sensor, model, "its sweep on this one would not be the model's", given=given)
 
 
 BLIND_SHARE = 0.5  # a training RMS past this share of an output's own spread, where a cause is found

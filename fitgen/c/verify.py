@@ -93,7 +93,8 @@ def held_out_from_args(model: Model, args) -> tuple[np.ndarray, np.ndarray] | No
                          "(`fitgen fit` writes one when it knows the sensor); leave --sensor out")
     # another sensor's readings would measure rounding against errors that are not the model's
     sensor = (fitted_sensor(load_sensor(args.sensor), model, "its held-out check on this one would not be the "
-                            "model's (give the one it was fitted on, or leave --sensor out)") if args.sensor else None)
+                            "model's (give the one it was fitted on, or leave --sensor out)", given=args.sensor)
+              if args.sensor else None)
     return clean_readings(model, sensor)
 
 

@@ -409,15 +409,15 @@ def _covariance_ok(cov: np.ndarray, free: np.ndarray) -> bool:
     return True
 
 
-def fitted_sensor(sensor, model: Model, why: str, flag: str = "--sensor"):
+def fitted_sensor(sensor, model: Model, why: str, flag: str = "--sensor", given: str | None = None):
     """``sensor`` in the transfer that gives ``model``'s units; InputError, ending in ``why``, when the model was
     fitted on another sensor (other units, or a hash in neither transfer, :func:`sensor_hashes`, the one its file
-    records)."""
+    records), naming it as ``given`` (the file or preset typed), else by its name."""
     if sensor.units != model.input_units and model.input_units in ("mT", "V"):
         sensor = sensor.with_transfer("gmr" if model.input_units == "V" else "raw")
     fitted_on = model.fit_info.get("sensor_sha256")
     if sensor.units != model.input_units or (fitted_on is not None and fitted_on not in sensor_hashes(sensor)):
-        raise InputError(f"{flag} {sensor.name}: the model was fitted on another sensor "
+        raise InputError(f"{flag} {given or sensor.name}: the model was fitted on another sensor "
                          f"({model.input_units} readings{', sensor ' + str(fitted_on)[:12] if fitted_on else ''}); "
                          f"{why}")
     return sensor
