@@ -122,6 +122,9 @@ def _capture_temperatures(args, prog: str):
     had = {}  # per level, the rows an earlier run took
     for T in temps:  # every level's rows checked as a plain capture's are, before any is taken
         path = _temperature_file(out, T)
+        if path.is_file() and path.samefile(args.poses):  # its header had been read as another run's
+            raise InputError(f"-o {out} writes {T:g} degC's rows to {path}, which is the --poses schedule: writing "
+                             "it would destroy it; give -o another name")
         state = prepare_output(path, cmap.n_elements, schedule, write=False)
         check_resume(path, state.rows, {"adc": cmap.describe(), **source, "samples_per_row": samples})
         same_thermistor(path, state.rows, tin is not None)

@@ -332,6 +332,14 @@ def test_capture_temperatures_below_zero_and_empty_items(tmp_path):
         assert_one_line_error(run_cli("tactile-host", *args, "--temperature", bad, "-o", str(tmp_path / "x.csv")),
                               contains=f"--temperature {bad!r}: give temperatures in degC, one between each two")
     assert not list(tmp_path.glob("x.*"))
+    # a level's file that is the schedule itself: said as such (it was "another channel map or schedule")
+    level = tmp_path / "x.T35.csv"
+    level.write_text(sched.read_text())
+    proc = run_cli("tactile-host", *args[:2], str(level), *args[3:], "--temperature", "15,35", "-o",
+                   str(tmp_path / "x.csv"))
+    assert_one_line_error(proc, 2, f"-o {tmp_path / 'x.csv'} writes 35 degC's rows to {level}, which is the --poses "
+                                   "schedule: writing it would destroy it")
+    assert level.read_text() == sched.read_text() and sorted(tmp_path.glob("x.*")) == [level]
 
 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc (a folder no one can add a file to)")
