@@ -740,6 +740,13 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
                           "c.csv's meta: schedule_drawing.transfer must be raw or gmr, got 'abc'; repair it, or give "
                           "--sensor")
     assert not (tmp_path / "v.toml").exists()
+    # a record that is no object at all: refused (it was read as none, paper and the default stage errors taken)
+    for key, bad in (("schedule_stage", "x"), ("schedule_drawing", 5)):
+        (tmp_path / "c.csv.meta.json").write_text(json.dumps({**meta, key: bad}))
+        assert_one_line_error(run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "v.toml")), 2,
+                              f"c.csv.meta.json: {key} must be an object (the schedule's record, as capture copies "
+                              f"it), got {bad!r}; repair or remove it")
+        assert not (tmp_path / "v.toml").exists()
     # rows from two zeros (a run set it again after a controller reset): said, and recorded for fitgen check
     two = {**meta, "stage": {**meta["stage"], "zeros_machine_mm": [{"X": 0.0, "Y": 0.0, "Z": 0.0},
                                                                     meta["stage"]["zero_machine_mm"]]}}

@@ -259,6 +259,7 @@ def parse_table(text: str, origin: str, header=None) -> tuple[list[str], np.ndar
 
 META_TEXT = ("units", "sensor", "sensor_file", "scene_spec", "drawing", "transfer", "sensor_sha256",
              "labels")  # keys read as text (or null)
+META_OBJECTS = ("schedule_drawing", "schedule_stage")  # a capture's copy of its schedule's records (identify, check)
 READING_UNITS = ("mT", "V")  # the field at the elements (transfer raw) or their voltages (gmr)
 # noise figures the fit reads from a meta (V or mT): one number, or one per element
 META_NOISE = ("noise", "row_noise", "sample_noise")
@@ -312,6 +313,10 @@ def load_meta(path: str | Path) -> dict:
     for key in META_TEXT:
         if not isinstance(meta.get(key), (str, type(None))):
             raise InputError(f"{mp}: {key} must be text, got {meta[key]!r:.60}; repair or remove it")
+    for key in META_OBJECTS:  # else read as none recorded: identify took paper and the default stage errors unsaid
+        if not isinstance(meta.get(key), (dict, type(None))):
+            raise InputError(f"{mp}: {key} must be an object (the schedule's record, as capture copies it), got "
+                             f"{meta[key]!r:.60}; repair or remove it")
     from fitgen.physics.relocate import relocated_meta
 
     return relocated_meta(meta, mp.parent)  # a folder moved with its unit's file: found beside the data
