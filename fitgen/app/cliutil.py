@@ -340,7 +340,11 @@ def check_written(args, files=()) -> None:
     given = [p for g in given for p in (g if isinstance(g, list) else [g])]  # a list: files of one option
     inputs = [p for p in given if isinstance(p, str) and is_file(p)]
     inputs += [str(m) for m in map(meta_path, inputs) if m.is_file()]  # a dataset's meta is read with it
-    written = []
+    written = []  # (flag, path) of the outputs checked so far
+
+    def written_as(path):  # the output already named that file (realpath: a symlink is written through), or None
+        return next(((f, o) for f, o in written if os.path.realpath(o) == os.path.realpath(path)), None)
+
     for name in WRITES:
         path = getattr(args, name, None)
         if not isinstance(path, str):
@@ -356,15 +360,13 @@ def check_written(args, files=()) -> None:
             check_folder(path)
             continue
         output_file(path, inputs, flag)
-        for other_flag, other in written:
-            if os.path.realpath(other) == os.path.realpath(path):  # realpath: a symlink is written through
-                raise InputError(f"{other_flag} and {flag} name the same file {path}: give two")
+        if same := written_as(path):
+            raise InputError(f"{same[0]} and {flag} name the same file {path}: give two")
         written.append((flag, path))
     plot = getattr(args, "plot", None)
     for name in PLOT_FILES.get(getattr(args, "command", None), ()) if isinstance(plot, str) else ():
-        for other_flag, other in written:
-            if os.path.realpath(other) == os.path.realpath(os.path.join(plot, name)):
-                raise InputError(f"{other_flag} {other} is the plot --plot {plot} writes: give another name")
+        if same := written_as(os.path.join(plot, name)):
+            raise InputError(f"{same[0]} {same[1]} is the plot --plot {plot} writes: give another name")
 
 
 # the plots a command's --plot FOLDER holds, by fixed name
