@@ -162,7 +162,10 @@ def choose_zero(ctrl: GcodeController, state: StageState | None, axes: AxisMap, 
                 ask) -> tuple[dict[str, float], str]:
     """The zero for this run and how it was had: kept from ``state`` while it holds, else from ``spec``
     (``ask``: ``ask(reason)`` jogs with the user; ``here``: the current position, for a dataset without
-    rows only; or machine coordinates). Raises InputError when none can be had."""
+    rows only; or machine coordinates). Raises InputError when none can be had. A dataset without rows keeps no
+    zero: ``state`` is then an earlier capture's of that name (deleted since), not this one's."""
+    if not rows:  # the old zero kept, a new unit seated since would have been pressed from it, --zero here unheard
+        state = None
     reason = zero_still_valid(state, ctrl, axes, ctrl.homed)
     if isinstance(spec, dict):
         want = [m for m, _, _ in axes.pairs]

@@ -783,6 +783,13 @@ def test_the_zero_holds_until_a_reset_and_a_homed_zero_holds_after_one(tmp_path)
         c.move({"X": 1.0, "Y": 2.0, "Z": -3.0}, FEED)  # homed, GRBL's Z counts down from its switch at the top
         state = StageState("grbl", str(axes), z, True, [1.0, 2.0, -3.0], [])
         assert choose_zero(c, state, axes, "ask", rows=3, ask=None) == (z, "kept from the last run")
+        # a dataset without rows (deleted, begun anew): the zero left beside its name is no longer taken
+        here = choose_zero(c, state, axes, "here", rows=0, ask=None)
+        assert here == ({"X": 1.0, "Y": 2.0, "Z": -3.0}, "here") and here[0] != z
+        said = []
+        assert choose_zero(c, state, axes, "ask", rows=0, ask=lambda why: said.append(why) or z) == (z, "set by "
+                                                                                                      "jogging")
+        assert said == ["the stage has no zero yet"]
         c.close()
         srv.ctrl.reset()  # between runs
         c = connect(srv)
