@@ -50,10 +50,9 @@ def posterior_over(output) -> None:
     """InputError when the posterior identify writes beside its unit file ``output`` would write over a capture, a
     dataset or another kind of the tools' files (no option names it, so the outputs' general check misses it)."""
     from fitgen.app.outputkind import written_over
-    from fitgen.base.fileio import real_file
-    from fitgen.physics.units import beside_as
+    from fitgen.fitting.unitrecord import posterior_beside
 
-    post = beside_as(real_file(output), ".toml", ".posterior.json")  # as fitgen.fitting.unitrecord.unit_files names it
+    post = posterior_beside(output)
     if what := written_over(str(post), "identify", "a unit's posterior"):
         raise InputError(f"-o {output} writes the unit's posterior beside it, to {post}, which {what}")
 

@@ -345,6 +345,14 @@ def save(ident: Identification, path, provenance: dict, noise: float | None = No
     return unit, post_path
 
 
+def posterior_beside(unit_file) -> Path:
+    """Where identify writes the posterior of the unit file ``unit_file``: beside the file itself, not a link."""
+    from fitgen.base.fileio import real_file
+    from fitgen.physics.units import beside_as
+
+    return beside_as(real_file(unit_file), ".toml", ".posterior.json")
+
+
 def unit_files(ident: Identification, path, provenance: dict, noise: float | None = None) -> list:
     """What :func:`save` writes, not written: ``[(path, the unit file's text), (<stem>.posterior.json, its text)]``;
     ``noise``: the unit's single-sample reading noise (:func:`device_noise`), else the drawing's."""
@@ -353,12 +361,10 @@ def unit_files(ident: Identification, path, provenance: dict, noise: float | Non
 
     from fitgen.base.fileio import tomllib
     from fitgen.physics.sensor import parse_sensor
-    from fitgen.physics.units import beside_as, unit_toml
-
-    from fitgen.base.fileio import real_file
+    from fitgen.physics.units import unit_toml
 
     path = Path(path)
-    post_path = beside_as(real_file(path), ".toml", ".posterior.json")  # beside the unit file itself, not a link
+    post_path = posterior_beside(path)
     spec = provenance.get("drawing_spec")
     if spec is not None and Path(spec).is_file():  # a sensor file: named so that it is found from anywhere
         provenance = {**provenance, "drawing_spec": str(Path(spec).resolve())}
