@@ -2,6 +2,7 @@
 used to calibrate it, against what the unit's identification predicts there. A six-element ring in the slide scene
 keeps the twin's fit to a second."""
 
+import dataclasses
 import json
 import re
 
@@ -333,13 +334,14 @@ def test_fitgen_check_reads_the_model_only_where_it_was_fitted_and_never_on_the_
     proc = run_cli("fitgen", "check", str(folder / "twin.json"), str(data))
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("check: 30 rows of ")
-    assert (f"check: 6 rows of {data} lie outside the pose box the model was fitted in (dx -2..2, dy -2..2, dz -2..0)"
+    assert (f"check: 6 rows of {data} lie outside the pose box the model was fitted in (dx -2..2, dy -2..2, dz -2..0, "
+                "thx 0 (held), thy 0 (held))"
             ", where it makes no claim, or within 0.04 mm of its edge, where the stage's error may carry them out: "
             "left out") in proc.stderr
     beyond = save_capture(tmp_path / "beyond.csv", _capture(unit, wide[30:], 100), wide[30:], ROWS_META)
     assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(beyond)),
                           contains="none of the check capture's 6 rows in contact lies in the pose box the model was "
-                                   "fitted in (dx -2..2, dy -2..2, dz -2..0)")
+                                   "fitted in (dx -2..2, dy -2..2, dz -2..0, thx 0 (held), thy 0 (held))")
     # a compensation file that is none: said as such, not as the temperature this unit (no thermistor) lacks
     (tmp_path / "adir.json").mkdir()
     assert_one_line_error(run_cli("fitgen", "check", str(folder / "twin.json"), str(data), "--temp-comp",
@@ -448,23 +450,51 @@ def test_the_unit_file_a_model_records_is_its_own_as_read_or_in_the_models_trans
         fitted_sensor(paper, model, "why")
 
 
-def test_check_on_a_model_with_no_held_out_figures_says_why_it_names_no_unit(twin, tmp_path):
+def test_check_on_a_model_with_no_held_out_record_is_refused_even_with_its_sensor_given(twin, tmp_path):
+    """A model fitted with --held-out 0 (or straight on a capture) names no pose box, so every row counted as inside
+    it: given its sensor, rows far past the box read millimetre errors "as predicted", exit 0. Refused in one line
+    that says which sensor file to fit it again with."""
     folder, drawing, unit, _, model = twin
-    data = model.to_dict()
+    data = json.loads(json.dumps(model.to_dict()))  # the fixture's model is shared: its record stays
     data["fit"].pop("held_out")
     (tmp_path / "direct.json").write_text(json.dumps(data))
     poses, _ = check_schedule(drawing, 10, seed=0)
     capture = save_capture(tmp_path / "c.csv", _capture(unit, poses, 100), poses, ROWS_META)
     # rows a simulation read record its sensor: that file, not identify's, is the one the model takes (a user
     # who gave identify's was refused as "another sensor")
-    assert_one_line_error(run_cli("fitgen", "check", str(tmp_path / "direct.json"), str(capture)), 2,
-                          "it has no held-out figures, so it names no unit (a fit straight on a capture names none): "
-                          f"give the file of sensor {data['fit']['sensor_sha256'][:12]}, whose readings it was "
-                          "fitted on (a simulation's")
+    for given in ((), ("--sensor", str(folder / "twin.toml"))):
+        assert_one_line_error(run_cli("fitgen", "check", str(tmp_path / "direct.json"), str(capture), *given), 2,
+                              "has no held-out record (a fit with --held-out 0, or straight on a capture without "
+                              "--sensor), so it names no pose box it was fitted in, and a check cannot tell where it "
+                              "makes a claim: fit it again with --sensor the file of sensor "
+                              f"{data['fit']['sensor_sha256'][:12]}, whose readings it was fitted on (a simulation's")
     data["fit"].pop("sensor_sha256")  # a real capture's rows name no sensor
     (tmp_path / "direct.json").write_text(json.dumps(data))
     assert_one_line_error(run_cli("fitgen", "check", str(tmp_path / "direct.json"), str(capture)), 2,
-                          "names none): give the unit's file (fitgen identify writes it) as --sensor")
+                          "fit it again with --sensor the unit's file (identify's), or check the twin's model")
+    bare = dataclasses.replace(model, fit_info={k: v for k, v in model.fit_info.items() if k != "held_out"})
+    with pytest.raises(InputError, match="names no pose box it was fitted in"):
+        check(bare, _capture(unit, poses, 100), poses, load_sensor(folder / "twin.toml"), ROW_NOISE)
+
+
+def test_a_check_reads_a_scene_model_only_at_the_components_its_scene_holds(twin):
+    """A scene's model (press: dz alone, dx and dy held at 0) names a box for dz only among its outputs: the check
+    read it at any dx and dy, where its dz errs far past the file's figure, and called that "as predicted". Rows off
+    a held component are left out; rows at it stay, though the stage's error moves them off it (both sides carry
+    that)."""
+    folder, drawing, unit, sensor, model = twin
+    record = json.loads(json.dumps(model.fit_info["held_out"]))
+    record["box"].update(dx=[0.0, 0.0], dy=[0.0, 0.0])
+    press = dataclasses.replace(model, equations=(model.equation("dz"),), fit_info={**model.fit_info,
+                                                                                  "held_out": record})
+    assert press.pose_box["dx"] == press.pose_box["thx"] == (0.0, 0.0) and set(press.held_out_box) == {"dz"}
+    poses, _ = check_schedule(drawing, 30, seed=0)
+    pressed = np.array([[0, 0, -0.5, 0, 0], [0, 0, -1.0, 0, 0], [0, 0, -1.5, 0, 0]])
+    labels = np.vstack([poses, pressed])
+    c = check(press, _capture(unit, labels, 100), labels, sensor, ROW_NOISE, zero_error=0.02)
+    assert (c.outputs, c.rows, c.outside) == (("dz",), 3, 30)
+    with pytest.raises(InputError, match="none of the check capture's 30 rows in contact lies in the pose box"):
+        check(press, _capture(unit, poses, 100), poses, sensor, ROW_NOISE)
 
 
 def test_a_model_whose_terms_overflow_is_refused_as_predict_refuses_it(twin, tmp_path):

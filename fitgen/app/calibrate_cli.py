@@ -355,7 +355,7 @@ def cmd_check(args) -> int:
     from fitgen.app import plots
     from fitgen.c.codegen import check_magnitudes
     from fitgen.equations.model import check_input_units, load_model
-    from fitgen.fitting.check import DRAWS, TOO_FAR, box_words, check_capture
+    from fitgen.fitting.check import DRAWS, NO_BOX, TOO_FAR, box_words, check_capture
     from fitgen.fitting.holdout import fitted_sensor, fitted_sensor_spec
     from fitgen.physics.dataset import load_capture
     from fitgen.physics.sensor import load_sensor
@@ -368,18 +368,18 @@ def cmd_check(args) -> int:
     check_input_units(model, ds.meta.get("units"), f"{args.capture}'s readings", f"model {args.model}")
     if not set(ds.target_names) & {"dx", "dy", "dz"}:
         raise InputError(f"{args.capture} has no stage displacement (dx, dy, dz): a check needs each row's pose")
+    if not model.pose_box:
+        # a direct fit on rows a simulation read: that sensor's file, not identify's (a twin's is identify's)
+        read_from = model.fit_info.get("sensor_sha256")
+        which = (f"the file of sensor {str(read_from)[:12]}, whose readings it was fitted on (a simulation's: the "
+                 "--sensor that simulate or capture --simulate read)" if read_from else "the unit's file (identify's)")
+        raise InputError(f"model {args.model}: {NO_BOX}: fit it again with --sensor {which}, or check the twin's "
+                         "model (identify, simulate --sensor unit.toml, fit)")
     spec = args.sensor or fitted_sensor_spec(model)
     if spec is None:
-        why = ("the sensor its held-out figures were made on is not found here (or has changed)"
-               if model.fit_info.get("held_out") else "it has no held-out figures, so it names no unit (a fit "
-               "straight on a capture names none)")
-        # a direct fit on rows a simulation read: that sensor's file, not identify's (a twin's is identify's)
-        read_from = None if model.fit_info.get("held_out") else model.fit_info.get("sensor_sha256")
-        which = (f"the file of sensor {str(read_from)[:12]}, whose readings it was fitted on (a simulation's: the "
-                 "--sensor that simulate or capture --simulate read)" if read_from else
-                 "the unit's file (fitgen identify writes it)")
-        raise InputError(f"model {args.model}: {why}: give {which} as --sensor, or check the twin's model (identify, "
-                         "simulate --sensor unit.toml, fit)")
+        raise InputError(f"model {args.model}: the sensor its held-out figures were made on is not found here (or "
+                         "has changed): give the unit's file (fitgen identify writes it) as --sensor, or check the "
+                         "twin's model (identify, simulate --sensor unit.toml, fit)")
     sensor = fitted_sensor(load_sensor(spec), model, "give the unit file it was fitted on", given=spec)
     sha = ds.sha256  # the capture's as written, before a compensation
     ds, heat = _check_temperature(ds, sensor, args.temp_comp, args.capture)
@@ -390,7 +390,7 @@ def cmd_check(args) -> int:
     print(f"check: zero error {result.zero_error:.3g} mm: {result.zero_said}", file=sys.stderr)
     if result.outside:
         print(f"check: {result.outside} rows of {args.capture} lie outside the pose box the model was fitted in "
-              f"({box_words(model.held_out_box)}), where it makes no claim, or within {result.margin:.2g} mm of its "
+              f"({box_words(model.pose_box)}), where it makes no claim, or within {result.margin:.2g} mm of its "
               "edge, where the stage's error may carry them out: left out", file=sys.stderr)
     where = (f"{result.units} units drawn from the posterior of {sensor.name}" if result.identified
              else f"{sensor.name} (no posterior: its noise and the stage's error alone)")

@@ -81,6 +81,13 @@ class Model:
         box = (self.fit_info.get("held_out") or {}).get("box") or {}
         return {o: (float(box[o][0]), float(box[o][1])) for o in self.output_names if o in box}
 
+    @property
+    def pose_box(self) -> dict[str, tuple[float, float]]:
+        """The pose box the model was fitted and held out in, over every pose component its ``held_out`` record's
+        ``box`` names (a scene's held components too, which :attr:`held_out_box` leaves out); empty without one."""
+        box = (self.fit_info.get("held_out") or {}).get("box") or {}
+        return {o: (float(box[o][0]), float(box[o][1])) for o in POSE_NAMES if o in box}
+
     def far_bounds(self) -> tuple[list[int], np.ndarray, np.ndarray]:
         """(output columns, low, high): an estimate below low or above high lies outside :attr:`held_out_box` by
         more than the box's width, as readings of another sensor do (the drawing's model on a built unit's). No

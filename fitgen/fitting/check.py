@@ -26,6 +26,8 @@ DRAWS = 5  # the stage's error and the rows' noise drawn this many times per uni
 SEED = 2031
 FIGURES = ("max", "rms")
 TOO_FAR = 1.5  # a measured max or RMS this many times the greatest drawn one: the twin does not describe the unit
+NO_BOX = ("the model has no held-out record (a fit with --held-out 0, or straight on a capture without --sensor), "
+          "so it names no pose box it was fitted in, and a check cannot tell where it makes a claim")
 SAME_ZERO = 0.005  # mm: machine coordinates this close are one zero (a zero copied as printed keeps 6 digits)
 
 
@@ -94,12 +96,14 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
     inputs, labels = inputs[keep], labels[keep]
     if not len(labels):
         raise InputError("every row of the check capture is lifted off the skin: no contact pose to check")
-    box = inner_box(model.held_out_box, rig_error, zero_error)
+    if not model.pose_box:  # every row would count as inside, where a model errs by millimetres "as predicted"
+        raise InputError(NO_BOX)
+    box = inner_box(model.pose_box, rig_error, zero_error)
     inside = within_box(labels, box)
     margin = edge_margin(rig_error, zero_error)
     if not inside.any():
         raise InputError(f"none of the check capture's {len(labels)} rows in contact lies in the pose box the model "
-                         f"was fitted in ({box_words(model.held_out_box)}), {margin:.2g} mm inside its edges (the "
+                         f"was fitted in ({box_words(model.pose_box)}), {margin:.2g} mm inside its edges (the "
                          "stage's error): check it at fitgen schedule --check's poses")
     inputs, labels = inputs[inside], labels[inside]
     fn = estimator(model, precision, sensor)
@@ -135,7 +139,7 @@ def within_box(labels: np.ndarray, box: dict) -> np.ndarray:
 
 
 def box_words(box: dict) -> str:
-    return ", ".join(f"{k} {lo:g}..{hi:g}" for k, (lo, hi) in box.items())
+    return ", ".join(f"{k} {lo:g}" + (f"..{hi:g}" if hi != lo else " (held)") for k, (lo, hi) in box.items())
 
 
 def _words(zero: dict) -> str:

@@ -127,7 +127,7 @@ def inner_box(box: dict, rig_error: float, zero_error: float = 0.0) -> dict:
     margin = edge_margin(rig_error, zero_error)
     out = dict(box)
     for name in ("dx", "dy", "dz"):
-        if name in box:
+        if name in box and box[name][0] != box[name][1]:  # a held component's rows lie at its value, not inside it
             lo, hi = box[name]
             out[name] = (round(lo + margin, 6), hi if name == "dz" and hi >= 0 else round(hi - margin, 6))
     return out
