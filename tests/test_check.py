@@ -322,6 +322,21 @@ def test_rows_the_stage_s_error_may_carry_out_of_the_box_are_left_out_of_both_si
     assert (without.margin, without.outside) == (0.0, 0)  # an exact stage: the box itself
 
 
+def test_a_box_whose_top_lies_a_hair_below_first_contact_keeps_its_shallow_rows(twin):
+    """A twin simulated at random poses alone tops its box at the shallowest one drawn (dz -0.0006 mm), and the
+    check left out every row within four stage errors below it (0.09 mm) as near an edge: a stage's error carries a
+    row up to first contact at most, 0.0006 mm past that top, so the margin there is what lies below first contact."""
+    folder, drawing, unit, sensor, model = twin
+    assert inner_box({"dz": (-2.0, -0.0006)}, RIG, 0.02)["dz"] == (-1.91, -0.0012)
+    assert inner_box({"dz": (-2.0, -0.5)}, RIG, 0.02)["dz"] == (-1.91, -0.59)  # well below: the whole margin
+    record = json.loads(json.dumps(model.fit_info["held_out"]))
+    record["box"]["dz"] = [-2.0, -0.0006]
+    random_top = dataclasses.replace(model, fit_info={**model.fit_info, "held_out": record})
+    labels = np.array([[0.5, -0.5, d, 0, 0] for d in (-0.02, -0.05, -0.08, -0.5, -1.0)])
+    c = check(random_top, _capture(unit, labels, 100), labels, sensor, ROW_NOISE, zero_error=0.02)
+    assert (c.rows, c.outside) == (5, 0)
+
+
 def test_fitgen_check_reads_the_model_only_where_it_was_fitted_and_never_on_the_identification_s_capture(twin,
                                                                                                       tmp_path):
     """Rows outside the pose box the model was fitted in are left out, said so (a calibration capture over the

@@ -121,15 +121,16 @@ def contact_top(rig_error: float, zero_error: float = 0.0) -> float:
 def inner_box(box: dict, rig_error: float, zero_error: float = 0.0) -> dict:
     """``box`` ({pose name: (low, high)}) less HOLD_SIGMAS stage errors (``rig_error`` and ``zero_error``, mm rms per
     axis, together) at each edge a stage's error can carry a row in contact past: dx's and dy's both, dz's floor,
-    and dz's top only below first contact (above it the indenter lifts and the magnet rests, so no pose lies
-    beyond). A row labelled inside stays in ``box`` but for about one in 30,000 per edge; a box the margins close
-    is returned with low above high. The margin is :func:`edge_margin`'s."""
+    and dz's top by no more than it lies below first contact (above it the indenter lifts and the magnet rests, so a
+    row carried up reaches first contact at most). A row labelled inside stays in ``box`` but for about one in 30,000
+    per edge; a box the margins close is returned with low above high. The margin is :func:`edge_margin`'s."""
     margin = edge_margin(rig_error, zero_error)
     out = dict(box)
     for name in ("dx", "dy", "dz"):
         if name in box and box[name][0] != box[name][1]:  # a held component's rows lie at its value, not inside it
             lo, hi = box[name]
-            out[name] = (round(lo + margin, 6), hi if name == "dz" and hi >= 0 else round(hi - margin, 6))
+            top = min(margin, max(-hi, 0.0)) if name == "dz" else margin  # random poses' top: a hair below 0
+            out[name] = (round(lo + margin, 6), hi if top == 0 else round(hi - top, 6))
     return out
 
 
