@@ -25,7 +25,7 @@ from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.stage import StageError, StageState
 from host.stagezero import run_zeros
-from host.stagecapture import open_stage, stage_settings
+from host.stagecapture import open_stage, same_stage, stage_settings
 from host.stagesim import pose_file_motion
 from host.temperature import CAPTURE_DEGC_TOL, Thermometer, temperature_input
 
@@ -170,6 +170,7 @@ def _run_capture(args, prog: str) -> None:
     if pending == 0:  # the stage and the bus stay shut, the meta as it is
         print(f"{prog}: {total}/{total} poses in {args.output} already: nothing to capture", file=sys.stderr)
         return
+    same_stage(args.output, state.rows, stage_opts, settle)
     interactive = not args.trigger and not args.simulate and stage_opts is None
     if args.trigger:
         wait = trigger_waiter(args.trigger, schedule, timeout)

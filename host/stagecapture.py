@@ -11,6 +11,7 @@ from fitgen.base.parse import LONGEST_WAIT, parse_positive
 
 from host.stage import (AxisMap, GcodeController, PoseStage, StageError, StageSettings, StageState, choose_zero,
                         jog_to_zero, parse_approach, parse_ranges, parse_zero, stage_url)
+from host.capture import prior_meta
 from host.gcode import QUEUED_WAIT
 from host.prompt import ask_line
 from host.stagezero import KEPT
@@ -59,6 +60,41 @@ def stage_settings(args, schedule):
             "baud": parse_baud(args.stage_baud or "115200"),
             "timeout": parse_positive(args.stage_timeout or "5", "--stage-timeout", most=LONGEST_WAIT),
             "boot_wait": parse_positive(args.stage_boot_wait or "2", "--stage-boot-wait", zero=True, most=LONGEST_WAIT)}
+
+
+def same_stage(output, rows: int, opts: dict | None, settle: float) -> None:
+    """Refuse to add rows to ``output``'s ``rows`` taken otherwise than they were: through a stage or not, or through
+    one with another axis map, approach or settle time (where a row's pose lies, from which side it was reached, how
+    long the skin crept before it was read), which the meta's one stage record speaks for. ``opts``:
+    :func:`stage_settings`'s (None without --stage). The limits, the feed and the port may change: they guard and
+    pace the moves, not where they end."""
+    prior = prior_meta(output, rows)
+    if not prior:
+        return
+    was = prior.get("stage") if isinstance(prior.get("stage"), dict) else None
+    these = "its row was" if rows == 1 else f"its {rows} rows were"
+    if was is not None and opts is None:
+        raise InputError(f"output {output}: {these} captured through a stage (--stage), this run's is not: resume "
+                         "with --stage and the same settings, or choose another -o")
+    if was is None and opts is not None:
+        raise InputError(f"output {output}: {these} captured without a stage, this run moves one (--stage): its zero "
+                         "is not theirs; resume as they were taken, or choose another -o")
+    if opts is None:
+        return
+    now = {**opts["settings"].describe(), "settle_s": settle}
+    for key, option in (("axes", "--stage-axes"), ("approach_mm", "--stage-approach"), ("settle_s", "--settle")):
+        if key in was and was[key] != now[key]:
+            raise InputError(f"output {output}: {these} captured with {option} {_words(was[key])}, this run's is "
+                             f"{_words(now[key])}: resume with the same, or choose another -o")
+
+
+def _words(value) -> str:
+    """A stage setting as its option is typed: 'dx=-0.3,dy=-0.3,dz=0.3', '0.5' (s)."""
+    if isinstance(value, dict):
+        return ",".join(f"{k}={v:g}" if isinstance(v, (int, float)) else f"{k}={v!r}" for k, v in value.items())
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return f"{value:g}"
+    return value if isinstance(value, str) else repr(value)
 
 
 MAX_BAUD = 12_000_000  # a USB serial chip's fastest (FTDI's FT232H); pyserial overflowed past 2^31 in a traceback

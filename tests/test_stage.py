@@ -881,6 +881,40 @@ def data_rows(path):
     return [tuple(float(x) for x in ln.split(",")) for ln in path.read_text().splitlines()[1:]]
 
 
+def test_a_resume_through_another_stage_setting_or_none_is_refused_and_keeps_the_rows(tmp_path):
+    """The meta's one stage record speaks for every row: a resume with no --stage dropped it (identify and check then
+    lost the rows' zeros), and one with another axis map, approach or settle took rows in another frame, from
+    another side or after another creep, then recorded its settings as every row's. Those are refused in one line;
+    the limits, the feed and the port may change (they guard and pace the moves)."""
+    sched = write_schedule(tmp_path / "s.csv", grid()[:6])
+    out = tmp_path / "d.csv"
+    (tmp_path / "pose.txt").write_text("")
+    base = ["capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(out), "--simulate", "--samples", "2"]
+    stop = run_host(*base, "--trigger", '[ "$TM_POSE_INDEX" -lt 3 ]')
+    assert stop.returncode == 1 and len(data_rows(out)) == 2, stop.stderr
+    rows = out.read_bytes()
+    staged = ["--sim-pose-file", str(tmp_path / "pose.txt"), "--stage", "gcode:socket://127.0.0.1:9",
+              "--stage-limits", LIMITS, "--stage-timeout", "1", "--stage-boot-wait", "0"]
+    assert_one_line_error(run_host(*base, *staged), 2, "its 2 rows were captured without a stage, this run moves one "
+                                                     "(--stage): its zero is not theirs")
+    meta_file = tmp_path / "d.csv.meta.json"
+    meta = json.loads(meta_file.read_text())
+    meta["stage"] = {"kind": "gcode", **settings().describe(), "settle_s": 0.0}
+    meta_file.write_text(json.dumps(meta))
+    assert_one_line_error(run_host(*base), 2, "its 2 rows were captured through a stage (--stage), this run's is "
+                                              "not: resume with --stage and the same settings")
+    for extra, said in ((["--settle", "0.5"], "captured with --settle 0, this run's is 0.5"),
+                        (["--stage-approach", "dx=0.3,dy=-0.3,dz=0.3"],
+                         "captured with --stage-approach dx=-0.3,dy=-0.3,dz=0.3, this run's is dx=0.3,dy=-0.3,dz=0.3"),
+                        (["--stage-axes", "X=dy,Y=dx,Z=dz"], "captured with --stage-axes X=dx,Y=dy,Z=dz, this run's")):
+        assert_one_line_error(run_host(*base, *staged, *extra), 2, said)
+    assert out.read_bytes() == rows
+    # another feed and wider limits pass to the stage itself (none listens here)
+    proc = run_host(*base, *staged[:5], "dx=-3:3,dy=-3:3,dz=-3:1", *staged[6:], "--stage-feed", "900")
+    assert proc.returncode != 0 and "rows were captured" not in proc.stderr and "stage" in proc.stderr, proc.stderr
+    assert out.read_bytes() == rows
+
+
 @pytest.mark.parametrize("flavor", ["grbl", "marlin"])
 def test_capture_command_killed_midway_and_reset_between_runs_keeps_every_row(sensor, tmp_path, flavor):
     rows = grid()
