@@ -263,7 +263,10 @@ def test_the_drift_sections_emulate_command_runs_as_written(model, tmp_path):
         lines = [proc.stdout.readline() for _ in range(3)]
         assert lines[-1].startswith("ready: "), (lines, proc.poll() is not None and proc.stderr.read())
         assert "over the I2C bridge" in lines[1], lines
+        proc.terminate()  # the moment it says ready, as a script that waits for the line would
+        _, err = proc.communicate(timeout=60)  # a handler that deadlocked hung here (CI, stop 75)
+        assert proc.returncode == 0 and err.rstrip().endswith("stopped"), (proc.returncode, err)
     finally:
         watchdog.cancel()
-        proc.terminate()
-        proc.wait(timeout=30)
+        proc.kill()
+        proc.wait()

@@ -8,13 +8,11 @@
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
-import threading
 import time
 
-from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, check_written, check_not_empty,
-                               command_main, count, degc, noise_volts, seconds, tcp_port)
+from fitgen.app.cliutil import (EXIT_CHECK_FAILED, STYLE_WITH_FIXED, Parser, StopFlag, check_written,
+                               check_not_empty, command_main, count, degc, noise_volts, seconds, tcp_port)
 from fitgen.app.outputkind import check_output_kind
 from fitgen.base.errors import InputError
 
@@ -203,13 +201,12 @@ def cmd_emulate(args) -> int:
 
             lsb = adc_input_lsb(cmap) if cmap is not None and args.precision == "fixed" else None
             return _suite(runner.url, model, data, args, lsb)
-        print(f"ready: {runner.url} (Ctrl-C stops)", flush=True)
-        stop = threading.Event()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda *_: stop.set())
-        while not stop.is_set() and runner.proc is not None and runner.proc.poll() is None:
-            stop.wait(0.2)
-        if not stop.is_set():
+        # a flag, not an Event: Event.set in a handler deadlocks when the signal lands while wait holds its lock
+        with StopFlag() as stop:  # set before "ready": a caller may stop it the moment it reads that
+            print(f"ready: {runner.url} (Ctrl-C stops)", flush=True)
+            while not stop() and runner.proc is not None and runner.proc.poll() is None:
+                time.sleep(0.2)
+        if not stop():
             raise InputError(f"the {args.target} firmware ended: {_ending(runner)}")
     print("stopped", file=sys.stderr)
     return 0
