@@ -22,7 +22,7 @@ import numpy as np
 from fitgen.base.errors import InputError
 
 from host.device import PortOwner, no_nagle, port_error, url_hint
-from host.gcodereplies import GRBL_BANNER, NoStatus, StageError, UnknownCommand, line_fault
+from host.gcodereplies import GRBL_BANNER, LEAVE_ALARM, NoStatus, StageError, UnknownCommand, line_fault
 
 __all__ = ["GcodeController", "MACHINE_AXES", "NoStatus", "POSITION_TOL", "QUEUED_WAIT", "StageError",
            "UnknownCommand", "stage_url"]
@@ -365,7 +365,8 @@ class GcodeController(PortOwner):
                 return
             if state.startswith("Alarm"):
                 raise StageError(f"{self.name}: the controller went into ALARM during {what}; home it (--home) or "
-                                 "unlock it (--unlock), then set the zero again", lost="the controller went into ALARM")
+                                 "unlock it (--unlock), then set the zero again", lost="the controller went into ALARM",
+                                 resume=LEAVE_ALARM)
             if time.monotonic() > deadline:
                 raise StageError(f"{self.name}: still {state} {self.timeout:g} s after {what} ended")
             time.sleep(POLL)

@@ -17,6 +17,9 @@ GRBL_ALARMS = {1: "hard limit triggered", 2: "soft limit: the target exceeds the
                12: "a limit switch engaged (grblHAL)"}
 
 
+LEAVE_ALARM = "run the command again with --home or --unlock to resume"  # GRBL stays in ALARM: the same one fails
+
+
 class StageError(RuntimeError):
     """The controller failed: an error or alarm, a halt, silence, a reset, or a position not the commanded one.
 
@@ -54,7 +57,7 @@ def line_fault(text: str, what: str, name: str, flavor: str | None) -> StageErro
         meaning = GRBL_ALARMS.get(int(code)) if code.isdigit() else None
         return StageError(f"{name}: the controller raised ALARM:{code}{f' ({meaning})' if meaning else ''} "
                           f"during {what}; home it (--home) or unlock it (--unlock), then set the zero again",
-                          lost=f"the controller raised ALARM:{code}")
+                          lost=f"the controller raised ALARM:{code}", resume=LEAVE_ALARM)
     if text.startswith("!! "):  # Klipper's error line (then its ok): the command was refused
         shut = "shutdown" in low
         return StageError(f"{name}: the controller answered {what} with {text!r}"
@@ -65,7 +68,8 @@ def line_fault(text: str, what: str, name: str, flavor: str | None) -> StageErro
                           "set the zero again", lost="the controller halted")
     if re.search(r"home [xyz]+ first", low):  # Marlin built with NO_MOTION_BEFORE_HOMING: the move is ignored
         return StageError(f"{name}: the controller refused {what} until it is homed ({text}); home it "
-                          "(--home) if its homing keeps clear of the sensor, then set the zero again")
+                          "(--home) if its homing keeps clear of the sensor, then set the zero again",
+                          resume="run the command again with --home to resume")
     if low.startswith("echo:unknown command"):
         return UnknownCommand(f"{name}: the controller does not know {what} ({text})")
     if GRBL_BANNER.match(text) or text == "start":

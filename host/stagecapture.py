@@ -13,6 +13,7 @@ from host.stage import (AxisMap, GcodeController, PoseStage, StageError, StageSe
                         jog_to_zero, parse_approach, parse_ranges, parse_zero, stage_url)
 from host.capture import prior_meta
 from host.gcode import QUEUED_WAIT
+from host.gcodereplies import LEAVE_ALARM
 from host.prompt import ask_line
 from host.stagezero import KEPT
 from host.stagesettings import APPROACH
@@ -143,7 +144,7 @@ def open_stage(args, opts, output, rows, prog: str):
                              "is on): home it (--home; a zero taken on the homed machine holds) or unlock it "
                              "(--unlock; the zero is then set again)",
                              lost="the controller was in ALARM when the capture connected",
-                             resume="run the command again with --home or --unlock to resume")
+                             resume=LEAVE_ALARM)
         ctrl.setup()
         # moves a killed run left queued end first: the position that tells a reset must be a standstill's
         ctrl.wait_idle(QUEUED_WAIT + opts["timeout"], "the moves already queued")

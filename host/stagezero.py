@@ -125,16 +125,19 @@ MAX_COORD = 2000.0  # mm: past the travel of any machine this drives (printers, 
 
 
 def parse_zero(spec: str) -> str | dict[str, float]:
-    """``ask``, ``here``, or machine coordinates ``X=..,Y=..,Z=..``, G-code words ``X.. Y.. Z..`` (as M114 and
-    stage-sim print them) or three numbers."""
+    """``ask``, ``here``, or machine coordinates ``X=..,Y=..,Z=..``, G-code words ``X.. Y.. Z..`` (as stage-sim
+    prints them), M114's answer as printed (``X:.. Y:.. Z:.. E:.. Count X:..``: its steps and extruder left out) or
+    three numbers."""
     s = spec.strip().lower()
     if s in ("ask", "here"):
         return s
     from fitgen.base.parse import parse_assignments
 
-    words = re.fullmatch(r"(?:\s*[xyz]\s*[-+.\d][^\s,;xyz]*[\s,;]*)+", s) if "=" not in s else None
+    if re.match(r"\s*x\s*:", s):  # M114's line: the position before "Count" (the steppers' counts), no extruder
+        s = re.sub(r"\be\s*:\s*\S*", " ", re.split(r"\bcount\b", s)[0])
+    words = re.fullmatch(r"(?:\s*[xyz]\s*:?\s*[-+.\d][^\s,;xyz]*[\s,;]*)+", s) if "=" not in s else None
     if "=" in s or words:
-        text = (re.sub(r"([xyz])\s*(?=[-+.\d])", r" \1=", s) if words else s).upper()  # X1Y2Z3 too
+        text = (re.sub(r"([xyz])\s*:?\s*(?=[-+.\d])", r" \1=", s) if words else s).upper()  # X1Y2Z3 too
         try:
             vals = parse_assignments(text, MACHINE_AXES, "--zero")
         except InputError as exc:  # said of the words as given

@@ -145,7 +145,11 @@ def test_axis_map_limits_and_approach_parse_or_refuse_in_one_line():
     for words in ("X1 Y2 Z-4.5", "X1,Y2,Z-4.5", "x1 y2 z-4.5", "Z-4.5 X1 Y2", "X 1 Y 2 Z -4.5", "X1. Y2. Z-4.5",
                   "X1Y2Z-4.5"):
         assert parse_zero(words) == {"X": 1.0, "Y": 2.0, "Z": -4.5}, words
-    for bad in ("X1 Y2 Q3", "X1 Y-- Z3", "X1 X2 Z3"):
+    # Marlin's M114 answer as printed, which docs/calibration.md says works: its step counts and extruder are not
+    # the position (the colons had been refused)
+    for m114 in ("X:1.00 Y:2.00 Z:-4.50 E:0.00 Count X:80 Y:160 Z:-1800", "X:1.00 Y:2.00 Z:-4.50", "X: 1 Y: 2 Z: -4.5"):
+        assert parse_zero(m114) == {"X": 1.0, "Y": 2.0, "Z": -4.5}, m114
+    for bad in ("X1 Y2 Q3", "X1 Y-- Z3", "X1 X2 Z3", "X:1 Y:2 Z:3 Q:4"):
         with pytest.raises(InputError, match=re.escape(f"--zero {bad!r}: ")):
             parse_zero(bad)
     with pytest.raises(InputError, match="ask, here, or the machine coordinates"):
@@ -990,6 +994,29 @@ def test_capture_command_killed_midway_and_reset_between_runs_keeps_every_row(se
     model = fit_model(load_dataset(out))
     assert model.input_units == "V" and model.output_names == ("dx", "dy", "dz")
     assert "tm_estimate" in render_header(model)
+
+
+def test_an_alarm_mid_run_says_to_resume_with_unlock_and_that_resumes(tmp_path):
+    """GRBL stays in ALARM after one mid-run: the line had said "run the same command again to resume", which then
+    failed on the ALARM at connect. It says to run it with --home or --unlock, and that resumes every row."""
+    sched = write_schedule(tmp_path / "s.csv", grid()[:9])
+    out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
+    with server("grbl", PoseFile(posefile), M=M_RIG) as srv:
+        zero = ",".join(f"{v:g}" for v in contact_zero(srv).values())
+        args = capture_args(sched, out, srv.url, posefile, "--zero", zero)
+        srv.ctrl.inject("alarm", 5)
+        proc = run_host(*args)
+        last = proc.stderr.strip().splitlines()[-1]
+        assert proc.returncode == 1 and "ALARM:1" in last, proc.stderr
+        assert last.endswith(f"the rows written so far are kept in {out}: run the command again with --home or "
+                             "--unlock to resume"), last
+        kept = data_rows(out)
+        assert 1 <= len(kept) < 9
+        assert_one_line_error(run_host(*args), 1, "is in ALARM")  # the same command, as the line no longer says
+        proc = run_host(*args, "--unlock")
+        assert proc.returncode == 0, proc.stderr
+        assert f"9/9 poses in {out} ({9 - len(kept)} captured now" in proc.stderr
+    assert data_rows(out)[:len(kept)] == kept
 
 
 @pytest.mark.parametrize("flavor", ["marlin", "grbl"])
