@@ -35,7 +35,7 @@ from fitgen.base.errors import InputError
 from fitgen.base.fileio import open_output, real_file, sha256_hex, write_atomic, write_target
 from fitgen.base.signals import signals_held
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES
-from fitgen.physics.pose import POSE_NAMES, as_poses, check_pose_rows
+from fitgen.physics.pose import POSE_NAMES, as_poses, box_problem, check_pose_rows
 from fitgen.physics.simulate import sensor_record_problem
 
 from host.adc import AdcArray
@@ -106,12 +106,14 @@ def load_schedule(path: str | Path) -> Schedule:
     check_pose_rows(poses, origin)  # a pose of 1e308 mm had been reached only after the rows before it
     meta = load_meta(path)
     drawing = {k: meta[k] for k in ("sensor", "sensor_file", "sensor_sha256", "transfer") if k in meta}
-    stage = {k: meta[k] for k in ("rig_error", "rig_error_given", "zero_error") if k in meta}
+    stage = {k: meta[k] for k in ("rig_error", "rig_error_given", "zero_error", "ranges") if k in meta}
     bad = next((k for k in ("rig_error", "zero_error") if k in stage and not is_stage_error(stage[k])), None)
     # the capture passes these on to identify and check, which would read them only after every row was taken
+    ranges = box_problem(stage["ranges"]) if "ranges" in stage else ""  # where identify names poses to capture
     problem = (f"{bad} must be 0..{MAX_STAGE_ERROR:g} mm, got {stage[bad]!r}" if bad else
                f"rig_error_given must be true or false, got {stage['rig_error_given']!r}"
-               if not isinstance(stage.get("rig_error_given", False), bool) else sensor_record_problem(drawing))
+               if not isinstance(stage.get("rig_error_given", False), bool) else
+               f"ranges {ranges}" if ranges else sensor_record_problem(drawing))
     if problem:
         raise InputError(f"{meta_path(path)}: {problem}; repair it, or make the schedule again")
     captured = None

@@ -262,7 +262,9 @@ def test_check_rig_takes_a_check_schedule_s_rig_error_only_where_it_was_given(tm
             out = tmp_path / f"s{len(flags)}{kind[0]}.csv"
             proc = run_cli("fitgen", "schedule", *kind, *flags, "-o", str(out))
             assert proc.returncode == 0, proc.stderr
-            assert load_schedule(out).stage == {"rig_error": rig, "rig_error_given": given, "zero_error": 0.02}
+            stage = load_schedule(out).stage  # and the box it was made in, where identify names poses to add
+            assert stage.pop("ranges") == json.loads(out.with_name(out.name + ".meta.json").read_text())["ranges"]
+            assert stage == {"rig_error": rig, "rig_error_given": given, "zero_error": 0.02}
     # --n is the D-optimal schedule's; with --check it was passed over without a word
     assert_one_line_error(run_cli("fitgen", "schedule", "--check", "5", "--n", "10", "-o", str(tmp_path / "n.csv")),
                           contains="--n goes with the D-optimal schedule; --check 5 says how many check poses")

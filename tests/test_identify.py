@@ -21,7 +21,7 @@ from fitgen.physics import presets
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import rig_poses
-from fitgen.physics.transfer import readings
+from fitgen.physics.transfer import readings, within_linear_range
 from fitgen.physics.units import UnitSpace, draw_unit
 
 SAMPLES = 16
@@ -67,7 +67,7 @@ def assert_counts_add_up(ident):
     left = int(re.search(r"left to the prior: (\d+)", said).group(1))
     gauge = int(re.search(r"no capture can separate \((\d+) directions", said).group(1))
     named = said.count(": poses that pin it: ")
-    rest = re.search(r"leaves? (\d+) more directions? to the prior", said)
+    rest = re.search(r"(?:leaves?|and) (\d+) more directions? to the prior", said)
     assert left == gauge + named + (int(rest.group(1)) if rest else 0), said
     assert ("nothing else to the prior" in said) == (left == gauge), said
 
@@ -343,7 +343,37 @@ def test_a_capture_without_presses_names_what_it_starves(drawing, tmp_path):
     said = report(ident)
     assert "(a dense capture over dx, dy and dz would not; this one does not move dz, which the poses below do):" \
         in said and "same axes would not" not in said
+    # the poses named are ones a user can capture: none drives an element past its linear range (19 of 21 did, the
+    # deepest corners, where a saturated reading pins nothing), and none lies past the stage's reach
+    named = np.vstack([p for _, p, _ in ident.starved])
+    assert within_linear_range(drawing, named).all()
+    shallow = identify(drawing, y, poses, noise, reach={"dz": (-0.5, 0.0)})
+    assert shallow.starved and all(np.all(p[:, 2] >= -0.5) for _, p, _ in shallow.starved)
+    assert_counts_add_up(shallow)
     assert_counts_add_up(ident)
+
+
+def test_the_stages_reach_is_its_schedules_box_and_its_limits_less_the_approach(tmp_path):
+    """identify names poses within what the capture's meta says the stage reached: the box its schedule was made in
+    (copied from the schedule's meta when the capture loads it) and the limits the stage moved within, less the
+    approach on its side (the last move starts there)."""
+    from fitgen.fitting.schedule import write_schedule
+    from fitgen.fitting.unitrecord import stage_reach
+    from host.capture import load_schedule
+
+    write_schedule(tmp_path / "s.csv", np.zeros((3, 5)), ("dx", "dy", "dz"),
+                   {"ranges": {"dx": [-2, 2], "dz": [-1.5, 0.5]}, "rig_error": 0.01})
+    made = load_schedule(tmp_path / "s.csv").stage
+    assert made["ranges"] == {"dx": [-2, 2], "dz": [-1.5, 0.5]}
+    meta = {"schedule_stage": made, "stage": {"limits_mm": {"dx": [-3, 1.5], "dz": [-1, 0.5]},
+                                              "approach_mm": {"dx": -0.3, "dy": -0.3, "dz": 0.3}}}
+    assert stage_reach(meta, "c.csv") == {"dx": (-2, 1.5), "dz": (-1, 0.2)}
+    assert stage_reach({}, "c.csv") is None
+    with pytest.raises(InputError, match="c.csv's meta: stage.limits_mm must be pose ranges"):
+        stage_reach({"stage": {"limits_mm": {"dq": [0, 1]}}}, "c.csv")
+    write_schedule(tmp_path / "bad.csv", np.zeros((3, 5)), ("dx",), {"ranges": {"dx": [2, -2]}})
+    with pytest.raises(InputError, match="bad.csv.meta.json: ranges must be pose ranges"):
+        load_schedule(tmp_path / "bad.csv")
 
 
 def test_an_elastomer_that_stiffens_is_identified_where_the_drawing_allows_for_it(drawing, plan):
@@ -693,7 +723,8 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
     unit, _ = draw_unit(drawing, 12)
     simulated_stage_capture(unit, load_schedule(sch), cap, repeatability=0.03, seed=3)
     meta = json.loads((tmp_path / "c.csv.meta.json").read_text())
-    assert meta["schedule_stage"] == {"rig_error": 0.03, "rig_error_given": True, "zero_error": 0.03}
+    assert meta["schedule_stage"] == {"rig_error": 0.03, "rig_error_given": True, "zero_error": 0.03,
+                                      "ranges": json.loads((tmp_path / "s.csv.meta.json").read_text())["ranges"]}
     proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "u.toml"))
     assert proc.returncode == 0, proc.stderr
     assert ("rig error 0.03 mm per row, zero error 0.03 mm (rig error and zero error as the capture's schedule was "

@@ -81,12 +81,12 @@ def cmd_identify(args) -> int:
               "controller was reset, or the stage moved, since the zero was taken, and the same numbers after a "
               "reset need not be the same place), and identify allows for one zero's error shared by every row: "
               "rows from another zero may stand out; capture them again from one zero if they do", file=sys.stderr)
-    # before a refusal, which may name such a row
-    for line in verdict.lifted_rows_line(ds.poses(), args.rig_error, args.zero_error):
+    for line in verdict.lifted_rows_line(ds.poses(), args.rig_error, args.zero_error):  # before a refusal naming one
         print(f"identify: {line}", file=sys.stderr)
     with Progress("identify", 4) as bar:
         ident = idf.identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
-                             zero_error=args.zero_error, progress=lambda i, n, note: bar.update(i - bar.done, note))
+                             zero_error=args.zero_error, reach=rec.stage_reach(ds.meta, args.capture),
+                             progress=lambda i, n, note: bar.update(i - bar.done, note))
     with Progress("what to blame", drawing.n_elements) as bar:  # moves only when the capture is refused
 
         def trial(i, n, note):

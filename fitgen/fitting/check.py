@@ -18,7 +18,7 @@ from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, check_error, element_no
 from fitgen.fitting.holdout import POSTERIOR_UNITS, device_precision, estimator, posterior_units, unit_posterior
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR
 from fitgen.fitting.unitrecord import row_noise, schedule_stage, stage_zero, zero_record
-from fitgen.physics.pose import POSE_NAMES, check_rows, edge_margin, inner_box, off_skin
+from fitgen.physics.pose import POSE_NAMES, check_rows, edge_margin, inner_box, off_skin, within_box
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings, sensor_hashes
 
@@ -125,17 +125,6 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
     drawn = {o: {f: np.array([s[f][j] for s in sims]) for f in FIGURES} for j, o in enumerate(outputs)}
     return Check(outputs, len(labels), precision, measured, drawn, len(pool), draws, float(rig_error),
                  posterior is not None, float(zero_error), outside=int(np.sum(~inside)), margin=margin)
-
-
-def within_box(labels: np.ndarray, box: dict) -> np.ndarray:
-    """Per row, whether its pose ``labels`` (n, 5) lie in ``box`` ({pose name: (low, high)}; a bound's last bits
-    given)."""
-    inside = np.ones(len(labels), bool)
-    for name, (lo, hi) in box.items():
-        if name in POSE_NAMES:
-            v, slack = labels[:, POSE_NAMES.index(name)], 1e-9 * max(abs(lo), abs(hi), 1.0)
-            inside &= (v >= lo - slack) & (v <= hi + slack)
-    return inside
 
 
 def box_words(box: dict) -> str:

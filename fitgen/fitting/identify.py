@@ -37,9 +37,10 @@ from scipy.optimize import least_squares
 
 from fitgen.base.errors import InputError
 from fitgen.fitting.capturecheck import check_capture, check_contact, check_error, element_noise
-from fitgen.physics.pose import POSE_NAMES, check_rows
+from fitgen.physics.pose import POSE_NAMES, check_rows, within_box
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
+from fitgen.physics.transfer import within_linear_range
 from fitgen.physics.units import UnitSpace
 
 RIG_ERROR = 0.01  # mm rms per axis: a CNC's or a good printer's repeatability
@@ -366,10 +367,13 @@ def _chi2(prob: Problem, z: np.ndarray) -> tuple[float, float, np.ndarray, np.nd
 
 
 def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *, rig_error: float = RIG_ERROR,
-             zero_error: float = ZERO_ERROR, ranges: dict | None = None, progress=None) -> Identification:
+             zero_error: float = ZERO_ERROR, ranges: dict | None = None, reach: dict | None = None,
+             progress=None) -> Identification:
     """The unit of ``drawing`` behind a capture: rows of ``readings`` (n, N) at label ``poses`` (n, 5), with
     reading noise ``noise`` (rms of a row, per element or one number), the rig's error ``rig_error`` per row and
-    the zero's ``zero_error`` common to the rows in contact (mm rms per axis)."""
+    the zero's ``zero_error`` common to the rows in contact (mm rms per axis). The poses it names to pin what the
+    capture leaves to the prior lie within the elements' linear range and within ``reach`` ({pose name: (low,
+    high)}, mm: where the stage can set a pose) where given."""
     space = unit_space(drawing)
     readings, poses = check_rows(readings, poses, "the capture")
     valid = check_capture(space, readings, poses)
@@ -379,7 +383,7 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     check_contact(readings, poses, noise)
     prob = Problem(space, readings, poses, noise, float(rig_error), valid, float(zero_error))
     try:
-        return _solve(prob, ranges, progress)
+        return _solve(prob, ranges, progress, reach)
     except (np.linalg.LinAlgError, OverflowError):
         # covariances no longer positive definite in float: a noise figure tiny against the readings, a rig
         # error huge against them, or labels far outside the sensor
@@ -389,7 +393,7 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
                          "the labels (mm and deg from first contact)") from None
 
 
-def _solve(prob: Problem, ranges: dict | None, progress) -> Identification:
+def _solve(prob: Problem, ranges: dict | None, progress, reach: dict | None = None) -> Identification:
     """:func:`identify`'s work on a checked problem."""
     space, poses = prob.space, prob.poses
     P = space.size
@@ -420,8 +424,10 @@ def _solve(prob: Problem, ranges: dict | None, progress) -> Identification:
     if weak.shape[1]:
         weak = weak - gauge @ (gauge.T @ weak)
         u, s, _ = np.linalg.svd(weak, full_matrices=False)
+        # a pose that saturates an element, or that the stage cannot reach, pins nothing the user can capture
+        settable = within_linear_range(space.drawing, dense) & within_box(dense, reach or {})
         for v in u[:, s > 0.5].T:
-            gain = np.sum((Jd @ v) ** 2, axis=1)
+            gain = np.where(settable, np.sum((Jd @ v) ** 2, axis=1), 0.0)
             if gain.max() < 1.0:
                 continue
             best = np.argsort(gain)[::-1][:3]

@@ -38,13 +38,12 @@ from fitgen.physics.pose import (POSE_NAMES, REST_LIFT_MM, contact_top, edge_mar
                                  off_skin)
 from fitgen.physics.sensor import TRAVEL_AXES, Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
-from fitgen.physics.transfer import linear_top, missing_noise
+from fitgen.physics.transfer import LINEAR_SHARE, linear_top, missing_noise, within_linear_range
 
 LEVELS = 9  # grid levels per moving axis
 MAX_CANDIDATES = 20_000  # fewer levels where LEVELS ** axes would pass it (five axes: 7 levels, not 59,049 poses)
 MAX_PASSES = 4
 CHUNK = 2048  # candidates whose criterion is computed at once (bounds the memory: CHUNK x N x P numbers)
-LINEAR_SHARE = 0.8  # of an element's linear range (fitgen.physics.transfer.linear_top) a candidate may use
 
 
 def levels_for(n_axes: int) -> int:
@@ -104,14 +103,6 @@ def capture_box(drawing: Sensor, axes, limits: dict | None = None, working: bool
         hi = min(hi, top)
         box[a] = (lo, hi)
     return box
-
-
-def within_linear_range(drawing: Sensor, poses: np.ndarray) -> np.ndarray:
-    """Whether every element of ``drawing`` reads at most LINEAR_SHARE of its linear range at each pose (P,)."""
-    top = linear_top(drawing)
-    if not np.isfinite(top):
-        return np.ones(len(poses), dtype=bool)
-    return np.abs(field_readings(drawing, poses)).max(axis=1) <= LINEAR_SHARE * top
 
 
 def capture_candidates(drawing: Sensor, axes=("dx", "dy", "dz"), limits: dict | None = None,

@@ -13,7 +13,7 @@ from fitgen.base.errors import InputError
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, MIN_ROWS, is_stage_error
 from fitgen.fitting.identify import PINNABLE, RIG, RIG_ERROR, ZERO_ERROR, Identification, tilting
 from fitgen.physics.dataset import row_degc, thermistor_degc
-from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, off_skin
+from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, box_problem, off_skin
 from fitgen.physics.sensor import Sensor, preset_names
 from fitgen.physics.simulate import recorded_spec, sensor_record_problem
 from fitgen.physics.units import STIFFENING, UnitSpace
@@ -232,6 +232,28 @@ def stage_errors(rig: float | None, zero: float | None, meta: dict, capture) -> 
             recorded.append(key.replace("_", " "))
         out.append(float(default if value is None else value))
     return out[0], out[1], (f" ({' and '.join(recorded)} as the capture's schedule was made for)" if recorded else "")
+
+
+def stage_reach(meta: dict, capture) -> dict | None:
+    """Where the stage that took a capture can set a pose ({pose name: (low, high)}, mm), as its meta records it:
+    the box its schedule was made in (``schedule_stage.ranges``: the limits and travel `fitgen schedule` took) and
+    the limits `tactile-host capture --stage` moved within, less the approach on its side; None where it records
+    neither. InputError naming ``capture``'s meta for a record that is no pose box."""
+    made, st = schedule_stage(meta), meta.get("stage") if isinstance(meta.get("stage"), dict) else {}
+    reach: dict = {}
+    for where, box, approach in (("schedule_stage.ranges", made.get("ranges"), {}),
+                                 ("stage.limits_mm", st.get("limits_mm"), st.get("approach_mm"))):
+        if box is None:
+            continue
+        if problem := box_problem(box):
+            raise InputError(f"{capture}'s meta: {where} {problem}; repair it")
+        approach = approach if isinstance(approach, dict) else {}
+        for name, (lo, hi) in box.items():
+            a = approach.get(name, 0.0) if isinstance(approach.get(name), (int, float)) else 0.0
+            lo, hi = lo - min(a, 0.0), hi - max(a, 0.0)  # the last move starts at pose + approach
+            was = reach.get(name, (lo, hi))
+            reach[name] = (max(lo, was[0]), min(hi, was[1]))
+    return reach or None
 
 
 def stage_zero(meta: dict, capture) -> dict | None:

@@ -134,6 +134,29 @@ def inner_box(box: dict, rig_error: float, zero_error: float = 0.0) -> dict:
     return out
 
 
+def within_box(poses: np.ndarray, box: dict) -> np.ndarray:
+    """Per row, whether its pose ``poses`` (n, 5) lie in ``box`` ({pose name: (low, high)}; a bound's last bits
+    given)."""
+    inside = np.ones(len(poses), bool)
+    for name, (lo, hi) in box.items():
+        if name in POSE_NAMES:
+            v, slack = poses[:, POSE_NAMES.index(name)], 1e-9 * max(abs(lo), abs(hi), 1.0)
+            inside &= (v >= lo - slack) & (v <= hi + slack)
+    return inside
+
+
+def box_problem(box) -> str:
+    """What makes ``box`` no pose box ({pose name: [low, high]}, finite, low <= high), or '' when it is one."""
+    if not isinstance(box, dict) or not box:
+        return f"must be pose ranges {{name: [low, high]}}, got {box!r}"
+    for name, pair in box.items():
+        ok = (isinstance(pair, list) and len(pair) == 2
+              and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in pair))
+        if name not in POSE_NAMES or not ok or pair[0] > pair[1]:
+            return f"must be pose ranges {{name: [low, high]}} ({', '.join(POSE_NAMES)}), got {name!r}: {pair!r}"
+    return ""
+
+
 def edge_margin(rig_error: float, zero_error: float = 0.0) -> float:
     """HOLD_SIGMAS stage errors (mm rms per axis, the rig's and the zero's together), up to the micrometre, as a
     stage takes it."""

@@ -130,3 +130,16 @@ def sensor_hashes(sensor: Sensor) -> set[str]:
     """The sensor's hash in either transfer: a record may hold either for the same sensor (a capture the file's as
     read, a simulation the one it read through)."""
     return {sensor.with_transfer(kind).sha256 for kind in TRANSFERS}
+
+
+LINEAR_SHARE = 0.8  # of an element's linear range (linear_top) a scheduled or suggested pose may use
+
+
+def within_linear_range(drawing: Sensor, poses: np.ndarray) -> np.ndarray:
+    """Whether every element of ``drawing`` reads at most LINEAR_SHARE of its linear range at each pose (P,)."""
+    from fitgen.physics.pose import field_readings
+
+    top = linear_top(drawing)
+    if not np.isfinite(top):
+        return np.ones(len(poses), dtype=bool)
+    return np.abs(field_readings(drawing, poses)).max(axis=1) <= LINEAR_SHARE * top
