@@ -1309,3 +1309,9 @@ def test_identify_notes_a_capture_that_stopped_before_its_schedule_ended(tmp_pat
     (tmp_path / "sub").mkdir()
     proc = run_cli("fitgen", "identify", "../c.csv", "-o", "../unit.toml", cwd=tmp_path / "sub")
     assert proc.returncode == 0 and "now replaced" not in proc.stderr, proc.stderr
+    # the unit the capture was simulated from is its truth: it had been written over with a note ("another unit")
+    truth = (tmp_path / "u.unit.toml").read_bytes()
+    assert_one_line_error(run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "u.unit.toml")), 2,
+                          f"-o {tmp_path / 'u.unit.toml'} is the unit the capture was simulated from (its meta records "
+                          "its hash): writing the identified unit there would destroy the truth it is judged against")
+    assert (tmp_path / "u.unit.toml").read_bytes() == truth and not (tmp_path / "u.unit.posterior.json").exists()

@@ -61,7 +61,7 @@ def cmd_identify(args) -> int:
         print(f"identify: {unfinished}", file=sys.stderr)
     # the one the capture's schedule was made for
     args.sensor, said = rec.drawing_for(args.sensor, ds.meta, args.capture)
-    unit_output(args.output, args.sensor)
+    unit_output(args.output, args.sensor, ds.meta)
     if not ds.target_names:
         raise InputError(f"{args.capture} has readings but no pose columns (dx,dy,dz,...): identify needs each row's "
                          "stage displacement from the zero, as tactile-host capture writes it")

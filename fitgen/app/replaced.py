@@ -32,10 +32,11 @@ def _held(path, given: str | None, identified: bool) -> str:
     return ""
 
 
-def unit_output(output, drawing: str) -> None:
+def unit_output(output, drawing: str, meta: dict | None = None) -> None:
     """InputError when identify's ``output`` is a drawing's file: the unit written there would destroy it (the
-    drawing taken from the capture's record is no input the options name, so the general guard misses it); or
-    when the posterior beside it would write over another kind of file (:func:`posterior_over`)."""
+    drawing taken from the capture's record is no input the options name, so the general guard misses it); when it
+    is the unit a simulated capture with ``meta`` was read from (its truth, which the identified unit is judged
+    against); or when the posterior beside it would write over another kind of file (:func:`posterior_over`)."""
     held = _held(output, drawing, identified=False)
     if held == "input":
         raise InputError(f"-o {output} is the drawing identify reads (the capture's schedule names it): writing the "
@@ -43,7 +44,24 @@ def unit_output(output, drawing: str) -> None:
     if held:
         raise InputError(f"-o {output} is {held}: writing the unit there would destroy it; give another name "
                          "(e.g. unit.toml)")
+    if (meta or {}).get("sensor_sha256") is not None and meta["sensor_sha256"] in _hashes(output):
+        raise InputError(f"-o {output} is the unit the capture was simulated from (its meta records its hash): "
+                         "writing the identified unit there would destroy the truth it is judged against, and leave "
+                         "the capture naming another unit; give another name (e.g. unit.toml)")
     posterior_over(output)
+
+
+def _hashes(path) -> tuple:
+    """The hashes of the sensor file at ``path`` in either transfer; () where there is none."""
+    from pathlib import Path
+
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.transfer import sensor_hashes
+
+    try:
+        return tuple(sensor_hashes(load_sensor(str(path)))) if Path(path).is_file() else ()
+    except (InputError, OSError, ValueError):
+        return ()
 
 
 def posterior_over(output) -> None:
