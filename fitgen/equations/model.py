@@ -7,6 +7,7 @@ and how and on what it was fitted.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 from dataclasses import dataclass, field
@@ -235,6 +236,9 @@ class Model:
                                    fit_info={})
 
     def to_dict(self) -> dict:
+        return self._as_dict(copy.deepcopy(self.fit_info))  # a caller that edits the dict leaves the model as it was
+
+    def _as_dict(self, fit) -> dict:
         inputs = {
             "names": [f"v{k}" for k in range(1, self.n_inputs + 1)],
             "units": self.input_units,
@@ -252,7 +256,7 @@ class Model:
                  "terms": [t.text for t in e.terms], "coefficients": list(e.coefficients)}
                 for e in self.equations
             ],
-            "fit": self.fit_info,
+            "fit": fit,
         }
         if self.refine is not None:
             out["refine"] = self.refine.to_dict()
@@ -261,7 +265,7 @@ class Model:
     @property
     def sha256(self) -> str:
         """Hash of what the estimate depends on (domain, equations, refinement), not of the fit notes."""
-        d = self.to_dict()
+        d = self._as_dict(None)
         return sha256_hex(canonical_json({k: d[k] for k in ("inputs", "outputs", "refine") if k in d}))
 
     def save(self, path: str | Path) -> Path:
