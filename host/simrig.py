@@ -44,6 +44,11 @@ class SimRig:
                 raise InputError(f"--{name} must be 0..{MAX_SLACK:g} mm (a printer's is 0.01-0.1), got {bad[0]:g}")
         self.adhesion = float(adhesion)
         self.travel = np.asarray(travel, dtype=float)  # carriage range in the home frame
+        for name, at in (("contact", self.contact), ("start", np.asarray(start, dtype=float))):
+            if np.any((at < self.travel[:, 0]) | (at > self.travel[:, 1])):  # a sensor no move reaches; past a stop
+                raise InputError(f"--{name} {','.join(f'{v:g}' for v in at)} lies outside the rig's travel ("
+                                 + ", ".join(f"{a} {lo:g}..{hi:g}" for a, (lo, hi) in zip("XYZ", self.travel))
+                                 + " mm from the home switches)")
         # where homing puts the carriage (home frame), machine 0 once homed: every axis's minimum, as a printer's
         # endstops (Marlin homes Z down, onto the bed); a GRBL controller puts Z's at the top (host.stagesim)
         self.switches = np.zeros(3)

@@ -1196,6 +1196,9 @@ def test_stage_options_need_stage(tmp_path):
     (["--start", "1e308,0,0"], "--start '1e308,0,0': each must lie within +-2000 mm"),
     (["--backlash", "1e308"], "--backlash must be 0..1 mm (a printer's is 0.01-0.1), got 1e+308"),
     (["--repeatability", "2"], "--repeatability must be 0..1 mm"),
+    # a sensor past the travel no move reaches, a carriage past a stop: both had been served
+    (["--contact", "250,8,4"], "--contact 250,8,4 lies outside the rig's travel (X 0..200, Y 0..200, Z 0..200 mm"),
+    (["--start", "10,-5,10"], "--start 10,-5,10 lies outside the rig's travel"),
 ])
 def test_stage_sim_bad_options_are_one_line(tmp_path, args, message):
     proc = subprocess.run(host_cmd("stage-sim", *[a.replace("{tmp}", str(tmp_path)) for a in args]),
