@@ -136,8 +136,10 @@ def open_stage(args, opts, output, rows, prog: str):
             print(f"{prog}: homing the stage", file=sys.stderr, flush=True)
             ctrl.home(timeout=max(120.0, opts["timeout"]))
         elif args.unlock:
+            locked = bool(ctrl.alarm)
             ctrl.unlock()
-            print(f"{prog}: unlocked the stage ($X: out of ALARM without homing, its position taken as it stands)",
+            print(f"{prog}: unlocked the stage ($X: out of ALARM without homing, its position taken as it stands)"
+                  if locked else f"{prog}: the stage was not in ALARM: --unlock had nothing to unlock",
                   file=sys.stderr, flush=True)
         if ctrl.alarm:
             raise StageError(f"{ctrl.name}: the GRBL controller is in ALARM (it starts so after a reset when homing "

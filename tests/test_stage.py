@@ -1005,16 +1005,18 @@ def test_an_alarm_mid_run_says_to_resume_with_unlock_and_that_resumes(tmp_path):
         zero = ",".join(f"{v:g}" for v in contact_zero(srv).values())
         args = capture_args(sched, out, srv.url, posefile, "--zero", zero)
         srv.ctrl.inject("alarm", 5)
-        proc = run_host(*args)
+        proc = run_host(*args, "--unlock")  # not in ALARM yet: it had said "unlocked the stage"
         last = proc.stderr.strip().splitlines()[-1]
         assert proc.returncode == 1 and "ALARM:1" in last, proc.stderr
+        assert "the stage was not in ALARM: --unlock had nothing to unlock" in proc.stderr, proc.stderr
+        assert "unlocked the stage" not in proc.stderr
         assert last.endswith(f"the rows written so far are kept in {out}: run the command again with --home or "
                              "--unlock to resume"), last
         kept = data_rows(out)
         assert 1 <= len(kept) < 9
         assert_one_line_error(run_host(*args), 1, "is in ALARM")  # the same command, as the line no longer says
         proc = run_host(*args, "--unlock")
-        assert proc.returncode == 0, proc.stderr
+        assert proc.returncode == 0 and "unlocked the stage ($X: out of ALARM" in proc.stderr, proc.stderr
         assert f"9/9 poses in {out} ({9 - len(kept)} captured now" in proc.stderr
     assert data_rows(out)[:len(kept)] == kept
 
