@@ -369,8 +369,9 @@ def test_the_stages_reach_is_its_schedules_box_and_its_limits_less_the_approach(
                                               "approach_mm": {"dx": -0.3, "dy": -0.3, "dz": 0.3}}}
     assert stage_reach(meta, "c.csv") == {"dx": (-2, 1.5), "dz": (-1, 0.2)}
     assert stage_reach({}, "c.csv") is None
-    with pytest.raises(InputError, match="c.csv's meta: stage.limits_mm must be pose ranges"):
-        stage_reach({"stage": {"limits_mm": {"dq": [0, 1]}}}, "c.csv")
+    for bad in ({"dq": [0, 1]}, {"dz": [0, 10 ** 400]}):  # an integer past float's range too (JSON holds any)
+        with pytest.raises(InputError, match="c.csv's meta: stage.limits_mm must be pose ranges"):
+            stage_reach({"stage": {"limits_mm": bad}}, "c.csv")
     write_schedule(tmp_path / "bad.csv", np.zeros((3, 5)), ("dx",), {"ranges": {"dx": [2, -2]}})
     with pytest.raises(InputError, match="bad.csv.meta.json: ranges must be pose ranges"):
         load_schedule(tmp_path / "bad.csv")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, is_finite_number
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, MIN_ROWS, is_stage_error
 from fitgen.fitting.identify import PINNABLE, RIG, RIG_ERROR, ZERO_ERROR, Identification, tilting
 from fitgen.physics.dataset import row_degc, thermistor_degc
@@ -249,7 +249,7 @@ def stage_reach(meta: dict, capture) -> dict | None:
             raise InputError(f"{capture}'s meta: {where} {problem}; repair it")
         approach = approach if isinstance(approach, dict) else {}
         for name, (lo, hi) in box.items():
-            a = approach.get(name, 0.0) if isinstance(approach.get(name), (int, float)) else 0.0
+            a = approach[name] if is_finite_number(approach.get(name)) else 0.0
             lo, hi = lo - min(a, 0.0), hi - max(a, 0.0)  # the last move starts at pose + approach
             was = reach.get(name, (lo, hi))
             reach[name] = (max(lo, was[0]), min(hi, was[1]))
