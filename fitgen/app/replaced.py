@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import replaces_other
+from fitgen.physics.relocate import holds_sensor
 
 
 def _held(path, given: str | None, identified: bool) -> str:
@@ -44,24 +45,11 @@ def unit_output(output, drawing: str, meta: dict | None = None) -> None:
     if held:
         raise InputError(f"-o {output} is {held}: writing the unit there would destroy it; give another name "
                          "(e.g. unit.toml)")
-    if (meta or {}).get("sensor_sha256") is not None and meta["sensor_sha256"] in _hashes(output):
+    if holds_sensor(output, (meta or {}).get("sensor_sha256")):
         raise InputError(f"-o {output} is the unit the capture was simulated from (its meta records its hash): "
                          "writing the identified unit there would destroy the truth it is judged against, and leave "
                          "the capture naming another unit; give another name (e.g. unit.toml)")
     posterior_over(output)
-
-
-def _hashes(path) -> tuple:
-    """The hashes of the sensor file at ``path`` in either transfer; () where there is none."""
-    from pathlib import Path
-
-    from fitgen.physics.sensor import load_sensor
-    from fitgen.physics.transfer import sensor_hashes
-
-    try:
-        return tuple(sensor_hashes(load_sensor(str(path)))) if Path(path).is_file() else ()
-    except (InputError, OSError, ValueError):
-        return ()
 
 
 def posterior_over(output) -> None:

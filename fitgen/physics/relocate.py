@@ -40,6 +40,12 @@ def _sensor_hashed(sha):
     return same
 
 
+def holds_sensor(path, sha) -> bool:
+    """Whether the file at ``path`` is a sensor file whose hash in either transfer is ``sha``; False where it reads
+    as none."""
+    return _is(_sensor_hashed(sha), str(path))
+
+
 def relocated(rec, folder, file_key: str = "sensor_file", sha_key: str = "sensor_sha256") -> dict:
     """``rec`` (a record naming a sensor file by ``file_key`` and its hash by ``sha_key``: a dataset's meta, a
     model's held-out record, a posterior) with that file found beside it in ``folder`` where the recorded path no
