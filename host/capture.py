@@ -31,7 +31,7 @@ import numpy as np
 from fitgen import __version__
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, is_stage_error
 from fitgen.physics.dataset import load_meta, meta_path, noise_figures_agree, pose_table, read_text, row_degc
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, shown
 from fitgen.base.fileio import open_output, real_file, sha256_hex, write_atomic, write_target
 from fitgen.base.signals import signals_held
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES
@@ -90,8 +90,8 @@ def designed_samples(path: str | Path) -> int | None:
     if n is None:
         return None
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-        raise InputError(f"{meta_path(path)}: samples_per_row must be a whole number >= 1, got {n!r}; repair it, or "
-                         "give --samples")
+        raise InputError(f"{meta_path(path)}: samples_per_row must be a whole number >= 1, got {shown(n)}; repair it, "
+                         "or give --samples")
     if n > MAX_ROW_SAMPLES:  # a row would take hours
         raise InputError(f"{meta_path(path)}: samples_per_row must be at most {MAX_ROW_SAMPLES}, got {n}; repair it, "
                          "or give --samples")

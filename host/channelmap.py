@@ -33,8 +33,8 @@ import re
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from fitgen.base.errors import InputError
-from fitgen.base.fileio import read_text, tomllib
+from fitgen.base.errors import InputError, is_finite_number, shown
+from fitgen.base.fileio import load_toml, read_text
 
 CHIPS = ("ads1115", "ads7828")
 ADDRESSES = (0x48, 0x49, 0x4A, 0x4B)  # both chips: 1001 0xx, set by the ADDR / A1 A0 pins
@@ -67,7 +67,7 @@ class Settings:
         if self.vref != "internal":
             if isinstance(self.vref, bool) or not isinstance(self.vref, (int, float)) or not 0.05 <= self.vref <= 5.5:
                 raise InputError(f"{'--vref' if origin == 'option' else origin + ': vref'} must be 'internal' or an "
-                                 f"external reference in 0.05..5.5 V, got {self.vref!r}")
+                                 f"external reference in 0.05..5.5 V, got {shown(self.vref)}")
         return self
 
 
@@ -170,7 +170,7 @@ def _check_scales(scales, low, high, fix: str) -> None:
 
 def _address(text, origin: str) -> int:
     if isinstance(text, bool):
-        raise InputError(f"{origin}: address must be one of 0x48..0x4b, got {text!r}")
+        raise InputError(f"{origin}: address must be one of 0x48..0x4b, got {shown(text)}")
     if isinstance(text, int):
         addr = text
     else:
@@ -277,10 +277,7 @@ def parse_spec(spec: str, settings: Settings = Settings()) -> ChannelMap:
 def load_map_file(path: str | Path, settings: Settings = Settings()) -> ChannelMap:
     """A TOML channel map (see the module's text)."""
     origin = f"channel map {path}"
-    try:
-        data = tomllib.loads(read_text(path, "channel map"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{origin}: not valid TOML: {exc}") from None
+    data = load_toml(read_text(path, "channel map"), origin, "channel map")
     unknown = sorted(set(data) - {"bus", "chip", "temperature"})
     if unknown:
         raise InputError(f"{origin}: unknown key {unknown[0]!r} (known: bus, chip, temperature)")
@@ -293,12 +290,13 @@ def load_map_file(path: str | Path, settings: Settings = Settings()) -> ChannelM
         if extra:
             raise InputError(f"{origin}: [temperature]: unknown key {extra[0]!r}")
         divider = {k: tt[k] for k in ("beta", "r25", "series", "vref") if k in tt}
-        if not all(not isinstance(v, bool) and isinstance(v, (int, float)) and v > 0 for v in divider.values()):
-            raise InputError(f"{origin}: [temperature]: beta, r25, series and vref must be numbers > 0")
+        # inf had passed (> 0), and an integer past float's range had raised OverflowError at float()
+        if not all(is_finite_number(v) and v > 0 for v in divider.values()):
+            raise InputError(f"{origin}: [temperature]: beta, r25, series and vref must be finite numbers > 0")
         temperature = (tt["input"], {k: float(v) for k, v in divider.items()})
     bus = data.get("bus")
     if bus is not None and (isinstance(bus, bool) or not isinstance(bus, int) or bus < 0):
-        raise InputError(f"{origin}: bus must be a whole number >= 0, got {bus!r}")
+        raise InputError(f"{origin}: bus must be a whole number >= 0, got {shown(bus)}")
     tables = data.get("chip", [])
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
         raise InputError(f"{origin}: 'chip' must be an array of tables ([[chip]])")

@@ -12,6 +12,10 @@ from importlib import resources
 from conftest import assert_one_line_error, run_cli
 
 
+def paper_dict_text():
+    return resources.files("fitgen.physics.presets").joinpath("paper.toml").read_text()
+
+
 def paper_dict():
     return tomllib.loads(resources.files("fitgen.physics.presets").joinpath("paper.toml").read_text())
 
@@ -176,6 +180,41 @@ def test_bad_sensor_file_cli(tmp_path):
     assert_one_line_error(run_cli("fitgen", "observe", "--sensor", "nope"), contains="not a preset")
     assert_one_line_error(run_cli("fitgen", "observe", "--sensor", str(tmp_path)),
                           contains=f"sensor {str(tmp_path)!r}: a folder, not a sensor file")
+
+
+def test_a_toml_file_holding_an_integer_of_too_many_digits_is_refused_in_one_line(tmp_path):
+    """tomllib raises a plain ValueError, not its TOMLDecodeError, for an integer past the 4,300 digits Python
+    converts: the sensor, scene and channel map loaders had let it through as a traceback. One just short of the
+    limit reads, and is said cut short."""
+    from host.channelmap import load_map_file
+
+    too_many, many = "1" + "0" * 5000, "1" + "0" * 4000
+    sensor = tmp_path / "s.toml"
+    sensor.write_text(paper_dict_text().replace("diameter = 6.0", f"diameter = {too_many}", 1))
+    assert_one_line_error(run_cli("fitgen", "observe", "--sensor", str(sensor)),
+                          contains=f"sensor file {sensor}: not valid TOML: Exceeds the limit (4300 digits)")
+    sensor.write_text(paper_dict_text().replace("diameter = 6.0", f"diameter = {many}", 1))
+    proc = run_cli("fitgen", "observe", "--sensor", str(sensor))
+    assert_one_line_error(proc, contains="'magnet.diameter' must be a finite number, got 1000000")
+    assert proc.stderr.rstrip().endswith("got 1" + "0" * 56 + "..."), proc.stderr  # 60 characters, not 4,001
+    scene = tmp_path / "scene.toml"
+    scene.write_text(f'name = "x"\noutputs = ["dz"]\nlevels = {too_many}\n')
+    assert_one_line_error(run_cli("fitgen", "observe", "--scene", str(scene)),
+                          contains=f"scene file {scene}: not valid TOML: Exceeds the limit (4300 digits)")
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(f"bus = {too_many}\n")
+    with pytest.raises(InputError, match="channel map .*: not valid TOML: Exceeds the limit"):
+        load_map_file(cmap)
+    cmap.write_text(f'bus = -{many}\n[[chip]]\ntype = "ads1115"\naddress = 0x48\n')
+    with pytest.raises(InputError, match=r"bus must be a whole number >= 0, got -1000+\.\.\.$"):
+        load_map_file(cmap)
+    cmap.write_text(f'[temperature]\ninput = "ads1115@0x4a:0"\nbeta = {many}\n[[chip]]\ntype = "ads1115"\naddress = 0x48\n')
+    with pytest.raises(InputError, match="beta, r25, series and vref must be finite numbers > 0"):  # OverflowError
+        load_map_file(cmap)
+    # a model or a dataset given for a scene: named as for a sensor
+    scene.write_text('{"schema_version": 1}\n')
+    assert_one_line_error(run_cli("fitgen", "observe", "--scene", str(scene)),
+                          contains=f"scene file {scene}: JSON (a model or meta file?), not a scene file (TOML)")
 
 
 def test_travel_is_read_written_and_left_out_of_the_hash(tmp_path):

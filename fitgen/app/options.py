@@ -3,7 +3,7 @@ options, view's checks of --replay and --host."""
 
 from __future__ import annotations
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, shown
 from fitgen.base.parse import MAX_PENALTY, OutOfRange, parse_noise, parse_penalty
 
 
@@ -39,7 +39,7 @@ def noise_of(value: str, sensor, most: float | None = None) -> float:
     except OutOfRange:
         raise InputError(f"--noise must be a finite number >= 0, got {value}") from None
     except ValueError:
-        raise InputError(f"--noise must be a number or 'sensor', got {value!r}") from None
+        raise InputError(f"--noise must be a number or 'sensor', got {shown(value)}") from None
     if most is not None and x > most:
         raise InputError(f"--noise {value} is no sensor's reading noise (at most {most:g}, in the readings' "
                          "units: V or mT)")

@@ -31,8 +31,18 @@ def is_finite_number(val) -> bool:
         return False
 
 
+def shown(val, width: int = 60) -> str:
+    """``repr(val)`` for a refusal's one line, cut to ``width`` characters (a number of 4,000 digits had filled a
+    screen); an integer past the digits Python converts (repr raises on it) said as such."""
+    try:
+        text = repr(val)
+    except ValueError:
+        return "an integer of too many digits"
+    return text if len(text) <= width else text[:width - 3] + "..."
+
+
 def finite_number(val, where: str) -> float:
     """``val`` as a float if it is a finite JSON number (not a bool); else InputError naming ``where``."""
     if not is_finite_number(val):
-        raise InputError(f"{where} must be a finite number, got {val!r}")
+        raise InputError(f"{where} must be a finite number, got {shown(val)}")
     return float(val)

@@ -384,6 +384,18 @@ def text_kind(text: str) -> str:
     return "csv" if "," in first else ""
 
 
+def load_toml(text: str, origin: str, kind: str) -> dict:
+    """``text`` read as TOML; else InputError naming what it reads as (JSON, CSV) or what the parser says. An
+    integer past the 4,300 digits Python converts is tomllib's plain ValueError, not TOMLDecodeError: caught too."""
+    try:
+        return tomllib.loads(text)
+    except ValueError as exc:
+        seen = {"json": "JSON (a model or meta file?)", "csv": "CSV (a dataset?)"}.get(text_kind(text))
+        # the int limit's advice (call sys.set_int_max_str_digits) is not the user's to take
+        raise InputError(f"{origin}: " + (f"{seen}, not a {kind} (TOML)" if seen
+                                          else f"not valid TOML: {str(exc).split(';')[0]}")) from None
+
+
 def too_long(name) -> str:
     """What is said of a file name longer than the system takes, the name cut short."""
     return f"a file name is too long for this system ({str(name)[:40]}...)"

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen import __version__
-from fitgen.base.errors import InputError, finite_number, is_finite_number
+from fitgen.base.errors import InputError, finite_number, is_finite_number, shown
 from fitgen.base.fileio import canonical_json, read_text, real_file, sha256_hex, text_kind, write_atomic
 from fitgen.equations.fma import fma as fused_multiply_add
 from fitgen.physics.dataset import READING_UNITS
@@ -358,7 +358,7 @@ def model_from_dict(data, origin: str = "model") -> Model:
     except (KeyError, TypeError) as exc:
         raise InputError(f"{origin}: malformed model ({type(exc).__name__}: {exc})") from None
     if units not in INPUT_UNITS:
-        raise InputError(f"{origin}: inputs.units must be {' or '.join(INPUT_UNITS)}, got {units!r}")
+        raise InputError(f"{origin}: inputs.units must be {' or '.join(INPUT_UNITS)}, got {shown(units)}")
     if len(hi) != len(lo):  # said before the names, which are checked against min's length
         raise InputError(f"{origin}: inputs.min has {len(lo)} values and inputs.max {len(hi)}: one per input")
     k = next((k for k, (a, b) in enumerate(zip(lo, hi)) if a == b), None)

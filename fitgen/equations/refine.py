@@ -26,7 +26,7 @@ from functools import cached_property
 
 import numpy as np
 
-from fitgen.base.errors import InputError, finite_number
+from fitgen.base.errors import InputError, finite_number, shown
 from fitgen.physics.pose import POSE_NAMES, check_pose_range
 
 TRANSFORMS = ("identity", "cbrt")
@@ -260,9 +260,9 @@ class Refinement:
 
     def validate(self, n_inputs: int, where: str = "refine") -> None:
         if isinstance(self.steps, bool) or not isinstance(self.steps, int) or not 1 <= self.steps <= MAX_STEPS:
-            raise InputError(f"{where}.steps must be an integer from 1 to {MAX_STEPS}, got {self.steps!r}")
+            raise InputError(f"{where}.steps must be an integer from 1 to {MAX_STEPS}, got {shown(self.steps)}")
         if self.transform not in TRANSFORMS:
-            raise InputError(f"{where}.transform must be one of {', '.join(TRANSFORMS)}, got {self.transform!r}")
+            raise InputError(f"{where}.transform must be one of {', '.join(TRANSFORMS)}, got {shown(self.transform)}")
         for name, vals, n in (("pose_min", self.pose_min, 5), ("pose_max", self.pose_max, 5),
                               ("weights", self.weights, n_inputs)):
             if len(vals) != n:

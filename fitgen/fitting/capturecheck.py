@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, shown
 from fitgen.physics.pose import off_skin
 from fitgen.physics.sensor import TRAVEL_MAX
 
@@ -26,11 +26,11 @@ def element_noise(noise, n: int, what: str, positive: bool = True) -> np.ndarray
     try:
         arr = np.asarray(noise, dtype=float)
     except (TypeError, ValueError):
-        raise InputError(f"{what} must be a number, or one per element, got {noise!r}") from None
+        raise InputError(f"{what} must be a number, or one per element, got {shown(noise)}") from None
     if arr.shape not in ((), (n,)):
         raise InputError(f"{what} gives {arr.size} figures for {n} elements: give one, or one per element")
     if not np.all(np.isfinite(arr) & ((arr > 0) if positive else (arr >= 0))):
-        raise InputError(f"{what} must be finite and {'> 0' if positive else '>= 0'}, got {noise!r}")
+        raise InputError(f"{what} must be finite and {'> 0' if positive else '>= 0'}, got {shown(noise)}")
     return np.broadcast_to(arr, (n,)).copy()
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, shown
 from fitgen.equations.model import Model, check_input_units
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, check_error, element_noise
 from fitgen.fitting.holdout import POSTERIOR_UNITS, device_precision, estimator, posterior_units, unit_posterior
@@ -137,7 +137,7 @@ def _words(zero: dict) -> str:
 
 def _stage_error(value, where: str, flag: str = "--zero-error") -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= MAX_STAGE_ERROR:
-        raise InputError(f"{where} must be 0..{MAX_STAGE_ERROR:g} mm, got {value!r}; repair it, or give {flag}")
+        raise InputError(f"{where} must be 0..{MAX_STAGE_ERROR:g} mm, got {shown(value)}; repair it, or give {flag}")
     return float(value)
 
 

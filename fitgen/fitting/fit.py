@@ -15,7 +15,7 @@ import numpy as np
 from fitgen import __version__
 from fitgen.fitting.augment import ROUNDING_FACTOR, UNIT_ROUNDOFF, gram_fold, noise_blocks, rounding_rows
 from fitgen.physics.dataset import Dataset, refuse_huge
-from fitgen.base.errors import InputError, is_finite_number
+from fitgen.base.errors import InputError, is_finite_number, shown
 from fitgen.equations.model import Equation, Model
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.fitting.shared import SharedRows
@@ -69,10 +69,11 @@ class FitSettings:
     def __post_init__(self):
         # set in a notebook: said here, not as a float() of 'aic' or an argmin of nothing inside the search
         if not (self.k in ("aic", "bic") or (is_finite_number(self.k) and self.k > 0)):
-            raise InputError(f"k, the penalty per term, is 'aic', 'bic' or a number > 0 (2 for AIC), got {self.k!r}")
+            raise InputError("k, the penalty per term, is 'aic', 'bic' or a number > 0 (2 for AIC), "
+                             f"got {shown(self.k)}")
         if self.max_terms is not None and not (isinstance(self.max_terms, (int, np.integer))
                                                and not isinstance(self.max_terms, bool) and self.max_terms >= 1):
-            raise InputError(f"max_terms is None or a whole number >= 1, got {self.max_terms!r}")
+            raise InputError(f"max_terms is None or a whole number >= 1, got {shown(self.max_terms)}")
 
     def penalty(self, n: int) -> float:
         if self.k == "bic":
@@ -278,7 +279,7 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
         if o not in ds.target_names:
             raise InputError(f"cannot fit {o}: the dataset has no column {o}")
     if settings.d_source not in ("estimated", "true"):
-        raise InputError(f"d_source must be 'estimated' or 'true', got {settings.d_source!r}")
+        raise InputError(f"d_source must be 'estimated' or 'true', got {shown(settings.d_source)}")
     outputs = tuple(n for n in POSE_NAMES if n in outputs)
     refuse_huge(ds)  # its powers overflow: said where it is, not as a candidate term that is not finite
     if settings.refine:
@@ -286,7 +287,8 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
 
         check_refinable(ds, outputs, settings.refine, settings.refine_terms)  # before the equations' fit
     if settings.precision is not None and settings.precision not in UNIT_ROUNDOFF:
-        raise InputError(f"precision must be one of {', '.join(UNIT_ROUNDOFF)} or None, got {settings.precision!r}")
+        raise InputError(f"precision must be one of {', '.join(UNIT_ROUNDOFF)} or None, "
+                         f"got {shown(settings.precision)}")
     noise = noise_to_add(ds, settings, sensor)
     v = ds.inputs
     lo, hi = v.min(axis=0), v.max(axis=0)

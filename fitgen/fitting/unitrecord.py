@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.base.errors import InputError, is_finite_number
+from fitgen.base.errors import InputError, is_finite_number, shown
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, MIN_ROWS, is_stage_error
 from fitgen.fitting.identify import PINNABLE, RIG, RIG_ERROR, ZERO_ERROR, Identification, tilting
 from fitgen.physics.dataset import row_degc, thermistor_degc
@@ -278,7 +278,7 @@ def zero_record(zero, homed, axes, where: str) -> dict:
             or not all(isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
                        and math.isfinite(v) for k, v in zero.items())):
         raise InputError(f"{where} the stage's zero must be machine coordinates in mm, whether the machine was homed "
-                         f"(true or false) and its axis map, got {zero!r}, {homed!r}, {axes!r}")
+                         f"(true or false) and its axis map, got {shown(zero)}, {homed!r}, {axes!r}")
     return {"machine_mm": {k: float(v) for k, v in zero.items()}, "homed": homed, "axes": axes}
 
 

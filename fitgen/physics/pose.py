@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from fitgen.base.errors import InputError, is_finite_number
+from fitgen.base.errors import InputError, is_finite_number, shown
 from fitgen.physics.field import cylinder_projection
 from fitgen.physics.sensor import Sensor
 
@@ -148,13 +148,13 @@ def within_box(poses: np.ndarray, box: dict) -> np.ndarray:
 def box_problem(box) -> str:
     """What makes ``box`` no pose box ({pose name: [low, high]}, finite, low <= high), or '' when it is one."""
     if not isinstance(box, dict) or not box:
-        return f"must be pose ranges {{name: [low, high]}}, got {box!r:.60}"
+        return f"must be pose ranges {{name: [low, high]}}, got {shown(box)}"
     for name, pair in box.items():
         ok = (isinstance(pair, list) and len(pair) == 2
               and all(map(is_finite_number, pair)))  # an integer past float's range too (JSON holds any)
         if name not in POSE_NAMES or not ok or pair[0] > pair[1]:
             return (f"must be pose ranges {{name: [low, high]}} ({', '.join(POSE_NAMES)}), got {name!r:.20}: "
-                    f"{pair!r:.60}")
+                    f"{shown(pair)}")
     return ""
 
 

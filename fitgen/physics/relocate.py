@@ -77,5 +77,5 @@ def _scene_name(path: str):
 
     try:
         return tomllib.loads(read_text(path, "scene file")).get("name", Path(path).stem)
-    except tomllib.TOMLDecodeError:
+    except ValueError:  # TOMLDecodeError, or an integer past the digits Python converts
         return None

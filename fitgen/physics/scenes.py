@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError, is_finite_number
-from fitgen.base.fileio import read_text, tomllib
+from fitgen.base.fileio import load_toml, read_text
 from fitgen.physics.pose import POSE_NAMES, check_pose_range
 from fitgen.physics.simulate import DEFAULT_RANGES, grid_poses
 
@@ -73,10 +73,7 @@ def load_scene(spec: str | None) -> Scene:
     if not path.exists():  # anything else there (a folder) is said by read_text as what it is
         raise InputError(f"scene {spec!r}: no such file, and not a preset ({', '.join(PRESETS)})")
     origin = f"scene file {spec}"
-    try:
-        data = tomllib.loads(read_text(path, "scene file"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{origin}: not valid TOML: {exc}") from None
+    data = load_toml(read_text(path, "scene file"), origin, "scene file")
     unknown = set(data) - {"name", "outputs", "ranges", "levels"}
     if unknown:
         raise InputError(f"{origin}: unknown key {sorted(unknown)[0]!r}")

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.base.errors import InputError, is_finite_number
-from fitgen.base.fileio import canonical_json, read_text, sha256_hex, text_kind, tomllib
+from fitgen.base.errors import InputError, is_finite_number, shown
+from fitgen.base.fileio import canonical_json, load_toml, read_text, sha256_hex
 from fitgen.base.parse import DEGC, MAX_NOISE
 from fitgen.physics.tolerances import STIFFENING_MAX, TOLERANCE_MAX, Tolerances
 
@@ -200,7 +200,7 @@ class _Section:
     def number(self, key, default=None, *, required=False, positive=False, min_=None, max_=None) -> float:
         val = self.raw(key, default, required)
         if not is_finite_number(val):  # a TOML integer past float's range too (math.isfinite raised on it)
-            raise InputError(f"{self.origin}: '{self._key(key)}' must be a finite number, got {val!r}")
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be a finite number, got {shown(val)}")
         val = float(val)
         if positive and val <= 0:
             raise InputError(f"{self.origin}: '{self._key(key)}' must be > 0, got {val:g}")
@@ -213,7 +213,7 @@ class _Section:
     def integer(self, key, default=None, *, min_=None, max_=None) -> int:
         val = self.raw(key, default, required=default is None)
         if isinstance(val, bool) or not isinstance(val, int):
-            raise InputError(f"{self.origin}: '{self._key(key)}' must be a whole number, got {val!r}")
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be a whole number, got {shown(val)}")
         if (min_ is not None and val < min_) or (max_ is not None and val > max_):
             raise InputError(f"{self.origin}: '{self._key(key)}' must be in {min_}..{max_}, got {val}")
         return val
@@ -221,16 +221,16 @@ class _Section:
     def string(self, key, default=None, *, required=False, choices=None) -> str:
         val = self.raw(key, default, required)
         if not isinstance(val, str):
-            raise InputError(f"{self.origin}: '{self._key(key)}' must be a string, got {val!r}")
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be a string, got {shown(val)}")
         if choices and val not in choices:
-            raise InputError(f"{self.origin}: '{self._key(key)}' must be one of {', '.join(choices)}, got {val!r}")
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be one of {', '.join(choices)}, got {shown(val)}")
         return val
 
     def vector(self, key, *, required=True, unit=False) -> np.ndarray:
         val = self.raw(key, None, required)
         ok = isinstance(val, list) and len(val) == 3 and all(map(is_finite_number, val))
         if not ok:
-            raise InputError(f"{self.origin}: '{self._key(key)}' must be a list of 3 finite numbers, got {val!r}")
+            raise InputError(f"{self.origin}: '{self._key(key)}' must be a list of 3 finite numbers, got {shown(val)}")
         vec = np.asarray(val, dtype=float)
         if unit:
             if not vec.any():
@@ -463,7 +463,7 @@ def _travel(sec: _Section, gap: float) -> dict:
 def _numbers(sec: _Section, key: str, n: int) -> list[float]:
     val = sec.raw(key, None, True)
     if not (isinstance(val, list) and len(val) == n and all(map(is_finite_number, val))):
-        raise InputError(f"{sec.origin}: '{sec._key(key)}' must be a list of {n} finite numbers, got {val!r}")
+        raise InputError(f"{sec.origin}: '{sec._key(key)}' must be a list of {n} finite numbers, got {shown(val)}")
     return [float(v) for v in val]
 
 
@@ -489,10 +489,4 @@ def load_sensor(spec: str | Path) -> Sensor:
             raise InputError(f"sensor {spec!r}: no such file, and not a preset ({', '.join(preset_names())})")
         text = read_text(path, "sensor file")
         origin = f"sensor file {spec}"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        seen = {"json": "JSON (a model or meta file?)", "csv": "CSV (a dataset?)"}.get(text_kind(text))
-        raise InputError(f"{origin}: " + (f"{seen}, not a sensor file (TOML)" if seen else f"not valid TOML: {exc}")
-                         ) from None
-    return parse_sensor(data, origin)
+    return parse_sensor(load_toml(text, origin, "sensor file"), origin)
