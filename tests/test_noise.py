@@ -5,6 +5,8 @@ fitgen schedule --samples reads it."""
 from __future__ import annotations
 
 import json
+import os
+import signal
 
 import allantools
 import numpy as np
@@ -181,9 +183,12 @@ def test_a_ctrl_c_between_the_record_and_its_plot_leaves_both_new(tmp_path, monk
     assert (plots / "allan.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_a_recording_stopped_early_writes_nothing(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("sig, status, said", [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated"),
+                                                (signal.SIGHUP, 129, "hung up")])
+def test_a_recording_stopped_early_writes_nothing(tmp_path, monkeypatch, capsys, sig, status, said):
     """Ctrl-C during a re-run wrote its few samples' record over a whole one (candidates [], which schedule then
-    refused) and its plot, with exit 0."""
+    refused) and its plot, with exit 0. The status is the signal's, as every command's (SIGTERM and SIGHUP had
+    ended it with 130)."""
     from fitgen.app import host_cli
     from host import noiserun
 
@@ -195,14 +200,17 @@ def test_a_recording_stopped_early_writes_nothing(tmp_path, monkeypatch, capsys)
 
     def stopped(args, stop):  # the signal lands as the recording ends
         av = run(args, stop)
-        stop.stopped = True
+        os.kill(os.getpid(), sig)
+        for _ in range(1000):  # the handler runs between bytecodes
+            pass
         return av
 
     monkeypatch.setattr(noiserun, "run_noise", stopped)
     with pytest.raises(SystemExit) as end:
         host_cli.main(["noise", "--adc", TWO_CHIPS, "--simulate", "--seconds", "1", "-o", str(out),
                        "--plot", str(plots)])
-    assert end.value.code == 130 and "nothing written" in capsys.readouterr().err
+    assert end.value.code == status
+    assert capsys.readouterr().err.splitlines()[-1].startswith(f"tactile-host noise: {said}: ")
     assert out.read_text() == "old record" and (plots / "allan.png").read_bytes() == b"old plot"
 
 

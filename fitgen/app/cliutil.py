@@ -297,13 +297,18 @@ class StopFlag:
 
     def __init__(self):
         self.stopped = False
+        self.signum = signal.SIGINT  # the last that came
 
     def __call__(self) -> bool:
         return self.stopped
 
+    def ended_by(self) -> tuple[str, int]:
+        """What a command stopped by the signal says and its status, as :func:`ended_by` gives them."""
+        return ended_by(Terminated(self.signum) if self.signum in ENDING else KeyboardInterrupt())
+
     def __enter__(self):
         def handler(signum, frame):
-            self.stopped = True
+            self.stopped, self.signum = True, signum
 
         self._old = {s: signal.signal(s, handler) for s in (signal.SIGINT, *ENDING)
                      if s == signal.SIGINT or signal.getsignal(s) is not signal.SIG_IGN}

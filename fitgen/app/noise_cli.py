@@ -26,9 +26,10 @@ def cmd_noise(args) -> int:
     print(table(av))
     print(verdict(av, None if stop.stopped else args.output))  # a stopped run's record is not written
     if stop.stopped:  # a recording cut short would replace a whole one with a verdict on too few samples
-        print(f"tactile-host noise: stopped: {av.samples} samples so far; nothing written (run it to the end to "
+        said, status = stop.ended_by()
+        print(f"tactile-host noise: {said}: {av.samples} samples so far; nothing written (run it to the end to "
               "write a record)", file=sys.stderr)
-        return 130
+        return status
     files = [(args.output, record_text(av, f"simulated {args.sensor}" if args.simulate else "hardware"))
              ] if args.output else []
     if folder is not None:
