@@ -441,6 +441,25 @@ def test_a_huge_cell_is_named_where_it_is(data, tmp_path):
                           contains="data row 3, column v4, holds 1e+300")
 
 
+def test_a_stray_quote_or_a_cell_past_the_csv_modules_limit_is_named_where_it_is(fitted, data, tmp_path):
+    """The cell finder read the whole text with the csv module: a stray quote took the rest of a file over 128 KiB
+    for one field, and so did a long cell, past the module's limit (csv.Error, a traceback). Line by line now."""
+    lines = data.read_text().splitlines()
+    lines = lines[:1] + lines[1:] * 40  # 2,400 rows: over the limit after line 11
+    bad = tmp_path / "d.csv"
+    bad.write_text("\n".join(lines[:10] + ['"' + lines[10]] + lines[11:]) + "\n")
+    (tmp_path / "m.json").write_text(json.dumps(fitted))
+    proc = run_cli("fitgen", "predict", str(tmp_path / "m.json"), str(bad), "-o", str(tmp_path / "e.csv"))
+    assert_one_line_error(proc,
+                          contains=f"{bad} line 11: 1 fields, the header has {len(lines[0].split(','))}")
+    cells = lines[4].split(",")
+    cells[2] = "7" * 200_000
+    bad.write_text("\n".join(lines[:4] + [",".join(cells)] + lines[5:]) + "\n")
+    proc = run_cli("fitgen", "fit", str(bad), "-o", str(tmp_path / "f.json"))
+    assert_one_line_error(proc, contains=f"{bad} line 5, column v3: '7777")
+    assert len(proc.stderr) < 300 and not (tmp_path / "f.json").exists()
+
+
 def test_fit_on_a_capture_with_rows_off_the_skin_refuses_in_one_line_numbered_as_in_the_file(data, tmp_path):
     """A capture's rest rows (dz > 0) are left out before the fit: its note came first, so a refusal was two lines,
     and a huge cell after a rest row was numbered among the rows kept, one too low."""

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.base.errors import InputError, RowError, is_finite_number
+from fitgen.base.errors import InputError, RowError, is_finite_number, shown
 from fitgen.base.fileio import read_text, real_file, sha256_hex, text_kind, write_all
 from fitgen.base.parse import DEGC, MAX_NOISE, MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, off_skin
@@ -191,9 +191,18 @@ def _header(names: list[str], origin: str) -> tuple[int, tuple[str, ...]]:
     return n_in, tuple(rest)
 
 
+def _cells(line: str) -> list[str]:
+    """One line's cells as the csv module reads them (quoted numbers too), a line at a time: read as one text, a
+    stray quote took the rest of the file for one field, past the module's limit (csv.Error, a traceback)."""
+    try:
+        return next(csv.reader([line]), [])
+    except csv.Error:  # a field past the limit within the line
+        return line.split(",")
+
+
 def _find_bad_cell(text: str, names: list[str], origin: str) -> InputError:
     header = None
-    for lineno, row in enumerate(csv.reader(io.StringIO(text)), start=1):
+    for lineno, row in enumerate(map(_cells, text.splitlines()), start=1):
         if not any(c.strip() for c in row) or row[0].lstrip().startswith("#"):  # blank, or a comment, as the reader
             continue
         if header is None:
@@ -205,9 +214,10 @@ def _find_bad_cell(text: str, names: list[str], origin: str) -> InputError:
             try:
                 val = float(cell)
             except ValueError:
-                return InputError(f"{origin} line {lineno}, column {name}: {cell.strip()!r} is not a number")
+                return InputError(f"{origin} line {lineno}, column {name}: {shown(cell.strip())} is not a number")
             if not math.isfinite(val):
-                return InputError(f"{origin} line {lineno}, column {name}: {cell.strip()!r} is not a finite number")
+                return InputError(f"{origin} line {lineno}, column {name}: {shown(cell.strip())} is not a finite "
+                                  "number")
     return InputError(f"{origin}: cannot parse as CSV numbers")
 
 
@@ -228,7 +238,7 @@ def parse_table(text: str, origin: str, header=None) -> tuple[list[str], np.ndar
     # comment lines before the header are skipped as those in the body are (an Arduino's "# tare: ..." line)
     lines = lines[next((k for k, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")),
                        len(lines) - 1):]
-    names = [c.strip() for c in next(csv.reader([lines[0]]))]
+    names = [c.strip() for c in _cells(lines[0])]
     sep = next((s for s in ";\t" if len(names) == 1 and s in lines[0]), None)
     if sep is not None:  # a spreadsheet's export in a locale whose decimal point is a comma
         raise InputError(f"{origin}: its header is separated by {sep!r}, not commas: a dataset is comma-separated "
