@@ -392,6 +392,24 @@ def fresh_eeprom(folder: Path, model_hash: str) -> None:
     write_atomic(stamp, model_hash + "\n")
 
 
+FIRMWARE_MAIN = b"/* main.c: reference firmware of the tactile sensor"  # how a build's main.c starts
+
+
+def _check_build_folder(folder: Path) -> None:
+    """InputError where ``folder`` holds files and is no earlier build's (whose main.c is the generated one): a
+    build writes main.c, device.c and a dozen more there, over files of those names."""
+    held = sorted(p.name for p in folder.iterdir())
+    try:
+        with open(folder / "main.c", "rb") as f:
+            ours = f.read(len(FIRMWARE_MAIN)) == FIRMWARE_MAIN
+    except OSError:  # none there, or a folder of that name
+        ours = False
+    if held and not ours:
+        raise InputError(f"--build-dir {folder} holds files no firmware build wrote ({', '.join(held[:3])}"
+                         f"{', ...' if len(held) > 3 else ''}), and a build writes main.c, device.c and more there "
+                         "over files of those names: give a new or empty folder")
+
+
 def start_target(model, target: str = "mps2", *, precision: str = "float", style: str = "table", fma: bool = False,
                  port: int | None = None, workdir: str | Path | None = None, sensor_id: str = "paper",
                  cmap=None, bridge=None, tin=None, tempcomp=None):
@@ -418,6 +436,11 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
         workdir = tmp.name
     else:  # a folder the user named may be another emulator's: its sources and image are not to mix with these
         lock = hold_folder(Path(workdir), "tactile-hil", "--build-dir")
+        try:
+            _check_build_folder(Path(workdir))
+        except InputError:
+            lock.close()
+            raise
     folder = Path(workdir).absolute()  # the image is run by its path: "firmware" alone would be looked up on PATH
     port_name = "posix" if target == "host" else target
     try:

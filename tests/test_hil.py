@@ -128,6 +128,27 @@ def test_a_build_folder_in_use_is_refused_not_shared(paper_model, model_file, tm
             assert dev.info(refresh=True).model_hash == other.sha256
 
 
+def test_a_build_folder_holding_files_no_build_wrote_is_refused_before_any_is_written(model_file, tmp_path):
+    """--build-dir took any folder and wrote main.c, device.c and a dozen more over the user's files of those
+    names. A folder an earlier build wrote serves again."""
+    require_tool("gcc")
+    folder = tmp_path / "project"
+    folder.mkdir()
+    (folder / "main.c").write_text("int main(void) { return 42; } /* my own work */\n")
+    argv = ("tactile-hil", "emulate", "--target", "host", "--model", str(model_file), "--suite", "--vectors", "20",
+            "--fuzz", "10", "--no-flash", "--build-dir")
+    assert_one_line_error(run_cli(*argv, str(folder)), 2,
+                          f"--build-dir {folder} holds files no firmware build wrote (main.c)")
+    assert [p.name for p in folder.iterdir()] == ["main.c"] and "my own work" in (folder / "main.c").read_text()
+    (folder / "main.c").unlink()
+    (folder / "notes.txt").write_text("mine\n")
+    assert_one_line_error(run_cli(*argv, str(folder)), 2, "holds files no firmware build wrote (notes.txt)")
+    build = tmp_path / "fw"
+    for _ in range(2):  # new, then an earlier build's
+        proc = run_cli(*argv, str(build))
+        assert proc.returncode == 0 and proc.stdout.rstrip().endswith("PASS"), proc.stdout + proc.stderr
+
+
 def test_a_build_folder_named_relative_to_where_it_runs_serves_and_an_empty_one_is_refused(model_file, tmp_path):
     """--build-dir . ran its image as 'firmware', which the system looked up on PATH (a traceback); --build-dir ''
     did the same after writing the sources into the current folder."""

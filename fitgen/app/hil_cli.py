@@ -275,7 +275,8 @@ def build_parser() -> Parser:
     e.add_argument("--style", choices=("table", "unrolled"),
                    help="the C's form: table (coefficient arrays and a loop; default) or unrolled (straight-line "
                         "code); not with --precision fixed, whose header is straight-line code")
-    e.add_argument("--build-dir", metavar="DIR", help="keep the firmware sources and image here")
+    e.add_argument("--build-dir", metavar="DIR",
+                   help="keep the firmware sources and image here: a new or empty folder, or an earlier build's")
     e.add_argument("--suite", action="store_true",
                    help="run the HIL suite against it (with its own options, below), then stop")
     e.add_argument("--adc", metavar="SPEC|FILE.toml",
