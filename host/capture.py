@@ -32,7 +32,8 @@ from fitgen import __version__
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, is_stage_error
 from fitgen.physics.dataset import load_meta, meta_path, noise_figures_agree, pose_table, read_text, row_degc
 from fitgen.base.errors import InputError, shown
-from fitgen.base.fileio import open_output, real_file, sha256_hex, write_atomic, write_target
+from fitgen.base.fileio import open_output, real_file, write_atomic, write_target
+from fitgen.base.texts import sha256_hex
 from fitgen.base.signals import signals_held
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, as_poses, box_problem, check_pose_rows

@@ -34,7 +34,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from fitgen.base.errors import InputError, is_finite_number, shown
-from fitgen.base.fileio import load_toml, read_text
+from fitgen.base.fileio import read_text
+from fitgen.base.texts import load_toml
 
 CHIPS = ("ads1115", "ads7828")
 ADDRESSES = (0x48, 0x49, 0x4A, 0x4B)  # both chips: 1001 0xx, set by the ADDR / A1 A0 pins

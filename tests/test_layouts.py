@@ -9,7 +9,7 @@ from fitgen.fitting.fit import fit_model
 from fitgen.physics.observe import cramer_rao, jacobian, observe
 from fitgen.physics.pose import field_readings
 from fitgen.physics.scenes import PRESETS
-from fitgen.base.fileio import tomllib
+from fitgen.base.texts import tomllib
 from fitgen.physics.sensor import load_sensor, parse_sensor, preset_names
 from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import fnmatch
 from pathlib import Path
 
-from fitgen.base.fileio import tomllib
+from fitgen.base.texts import tomllib
 
 ROOT = Path(__file__).resolve().parents[1]
 TOP = ("fitgen", "host", "hil", "firmware_templates")

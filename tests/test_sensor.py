@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import tomllib
+from fitgen.base.texts import tomllib
 from fitgen.physics.sensor import load_sensor, parse_sensor, preset_names
 from importlib import resources
 

@@ -1,22 +1,14 @@
-"""Atomic file writes and content hashes: nothing half-written, identical input gives identical bytes."""
+"""Atomic file writes and checked reads: nothing half-written, every output checked before the work."""
 
 from __future__ import annotations
 
 import errno
-import hashlib
-import json
 import os
 import shutil
 import stat
-import sys
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-
-if sys.version_info >= (3, 11):  # the one place the TOML parser is chosen: the loaders import it from here
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 from fitgen.base.errors import InputError
 from fitgen.base.signals import signals_held
@@ -356,44 +348,6 @@ def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes) -> 
         raise InputError(f"cannot write {path}: {_kind(mode)} of that name is in the way; move it or give "
                          "another folder")
     return write_all([(path, data)])[0]
-
-
-def canonical_json(obj) -> str:
-    """JSON with sorted keys and no spacing variation, for hashing."""
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
-
-
-def sha256_hex(data: str | bytes) -> str:
-    raw = data.encode() if isinstance(data, str) else data
-    return hashlib.sha256(raw).hexdigest()
-
-
-def text_kind(text: str) -> str:
-    """What a text a loader could not read reads as, for the refusal to name it: "toml" (keys in TOML: a sensor or
-    unit file), "json" (a model or a meta file), "csv" (a comma in its first line, comments and blank lines
-    skipped: a dataset), or "" for none of these."""
-    first = next((ln.strip() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
-    if first.startswith("[") or "=" in first:
-        try:
-            if tomllib.loads(text):
-                return "toml"
-        except ValueError:  # TOMLDecodeError is one
-            pass
-    if first.startswith(("{", "[")):
-        return "json"
-    return "csv" if "," in first else ""
-
-
-def load_toml(text: str, origin: str, kind: str) -> dict:
-    """``text`` read as TOML; else InputError naming what it reads as (JSON, CSV) or what the parser says. An
-    integer past the 4,300 digits Python converts is tomllib's plain ValueError, not TOMLDecodeError: caught too."""
-    try:
-        return tomllib.loads(text)
-    except ValueError as exc:
-        seen = {"json": "JSON (a model or meta file?)", "csv": "CSV (a dataset?)"}.get(text_kind(text))
-        # the int limit's advice (call sys.set_int_max_str_digits) is not the user's to take
-        raise InputError(f"{origin}: " + (f"{seen}, not a {kind} (TOML)" if seen
-                                          else f"not valid TOML: {str(exc).split(';')[0]}")) from None
 
 
 def too_long(name) -> str:

@@ -17,7 +17,8 @@ import numpy as np
 
 from fitgen import __version__
 from fitgen.base.errors import InputError, finite_number, is_finite_number, shown
-from fitgen.base.fileio import canonical_json, read_text, real_file, sha256_hex, text_kind, write_atomic
+from fitgen.base.fileio import read_text, real_file, write_atomic
+from fitgen.base.texts import canonical_json, sha256_hex, text_kind
 from fitgen.equations.fma import fma as fused_multiply_add
 from fitgen.physics.dataset import READING_UNITS
 from fitgen.physics.pose import POSE_NAMES, POSE_UNITS

@@ -381,7 +381,7 @@ def unit_files(ident: Identification, path, provenance: dict, noise: float | Non
     import json
     from pathlib import Path
 
-    from fitgen.base.fileio import tomllib
+    from fitgen.base.texts import tomllib
     from fitgen.physics.sensor import parse_sensor
     from fitgen.physics.units import unit_toml
 
@@ -430,7 +430,8 @@ def load_posterior(unit_path) -> dict | None:
     import json
     from pathlib import Path
 
-    from fitgen.base.fileio import read_text, real_file, tomllib
+    from fitgen.base.fileio import read_text, real_file
+    from fitgen.base.texts import tomllib
     from fitgen.physics.relocate import relocated
     from fitgen.physics.sensor import load_sensor
 

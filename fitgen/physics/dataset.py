@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError, RowError, is_finite_number, shown
-from fitgen.base.fileio import read_text, real_file, sha256_hex, text_kind, write_all
+from fitgen.base.fileio import read_text, real_file, write_all
+from fitgen.base.texts import sha256_hex, text_kind
 from fitgen.base.parse import DEGC, MAX_NOISE, MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, off_skin
 

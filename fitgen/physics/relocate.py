@@ -73,7 +73,8 @@ def relocated_meta(meta: dict, folder) -> dict:
 def _scene_name(path: str):
     """A scene file's name as fitgen.physics.scenes.load_scene reads it (its ``name``, else the file's stem), read
     here without it: scenes import the datasets whose meta this reads."""
-    from fitgen.base.fileio import read_text, tomllib
+    from fitgen.base.fileio import read_text
+    from fitgen.base.texts import tomllib
 
     try:
         return tomllib.loads(read_text(path, "scene file")).get("name", Path(path).stem)

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError, is_finite_number
-from fitgen.base.fileio import load_toml, read_text
+from fitgen.base.fileio import read_text
+from fitgen.base.texts import load_toml
 from fitgen.physics.pose import POSE_NAMES, check_pose_range
 from fitgen.physics.simulate import DEFAULT_RANGES, grid_poses
 

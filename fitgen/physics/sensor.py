@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError, is_finite_number, shown
-from fitgen.base.fileio import canonical_json, load_toml, read_text, sha256_hex
+from fitgen.base.fileio import read_text
+from fitgen.base.texts import canonical_json, load_toml, sha256_hex
 from fitgen.base.parse import DEGC, MAX_NOISE
 from fitgen.physics.tolerances import STIFFENING_MAX, TOLERANCE_MAX, Tolerances
 

@@ -31,7 +31,8 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.physics.field import cylinder_projection
-from fitgen.base.fileio import tomllib, write_atomic
+from fitgen.base.fileio import write_atomic
+from fitgen.base.texts import tomllib
 from fitgen.physics.pose import as_poses, contact_poses, pressed, rotation_matrices
 from fitgen.physics.sensor import Magnet, Sensor, parse_sensor
 from fitgen.physics.tolerances import Tolerances
