@@ -4,6 +4,8 @@ and `fitgen simulate --unit`."""
 from __future__ import annotations
 
 import json
+import os
+import platform
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -213,7 +215,7 @@ def test_unit_file_round_trips(tmp_path):
     path = write_unit(tmp_path / "u.toml", unit, "paper", {"seed": 5})
     again = load_sensor(path)
     assert again.transfer == "gmr" and again.name == unit.name
-    for attr in ("positions", "gains", "offsets", "ambient", "stage_map"):
+    for attr in ("positions", "axes", "gains", "offsets", "ambient", "stage_map"):  # every bit: the hash is of them
         np.testing.assert_array_equal(getattr(again, attr), getattr(unit, attr))
     np.testing.assert_allclose(readings(again, POSES, adc_bits=0), readings(unit, POSES, adc_bits=0), rtol=0,
                                atol=1e-13)
@@ -221,6 +223,28 @@ def test_unit_file_round_trips(tmp_path):
     assert unit_toml(again, "paper", {"seed": 5}) == unit_toml(load_sensor(write_unit(tmp_path / "v.toml", again, "paper",
                                                                                          {"seed": 5})), "paper",
                                                                   {"seed": 5})
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="OpenBLAS's x86 kernels")
+def test_a_unit_file_is_the_same_sensor_whatever_blas_kernel_reads_it(tmp_path):
+    """Its axes were normalised by np.linalg.norm, a BLAS dot product whose rounding is the kernel's: one unit file
+    hashed as another sensor under OPENBLAS_CORETYPE=Prescott or Nehalem (kernels every x86-64 CPU runs) than
+    under the CPU's own, and `fitgen fit` on another machine refused the data simulated from it as 'changed'."""
+    import subprocess
+    import sys
+
+    paths = [write_unit(tmp_path / f"u{seed}.toml", draw_unit(load_sensor("paper"), seed)[0], "paper", {})
+             for seed in range(6)]
+    here = [load_sensor(str(p)).sha256 for p in paths]
+    code = ("import sys; from fitgen.physics.sensor import load_sensor; "
+            "print(' '.join(load_sensor(p).sha256 for p in sys.argv[1:]))")
+    for kernel in ("Prescott", "Nehalem"):
+        env = {**os.environ, "OPENBLAS_CORETYPE": kernel, "OPENBLAS_VERBOSE": "2"}
+        proc = subprocess.run([sys.executable, "-c", code, *map(str, paths)], capture_output=True, text=True,
+                              env=env, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        assert "Core: " in proc.stderr  # OpenBLAS took the variable (it names Prescott's kernel Katmai)
+        assert proc.stdout.split()[-len(paths):] == here, kernel
 
 
 def test_draws_follow_the_tolerances():

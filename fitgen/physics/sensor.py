@@ -174,6 +174,18 @@ class Sensor:
 # --- parsing -----------------------------------------------------------------
 
 
+def _unit_vector(vec: np.ndarray) -> np.ndarray:
+    """``vec`` over its length, the same bits on every machine: the sensor's hash is of them (a dataset's meta and a
+    unit's posterior record it). One of length 1 within rounding (as a unit file writes it) is taken as given, its
+    hash the file's; np.linalg.norm's dot product rounds by the BLAS kernel, and a unit file's axes had read as other
+    bits, and another sensor, on another machine. Lengths near float's limits (1e308, 1e-320) are scaled first."""
+    if abs(math.fsum(float(x) * float(x) for x in vec) - 1.0) <= 16 * np.finfo(float).eps:
+        return vec
+    if not np.finfo(float).tiny <= math.hypot(*vec) < np.inf:
+        vec = vec / np.abs(vec).max()
+    return vec / math.hypot(*vec)  # Python's own C, no BLAS
+
+
 class _Section:
     """Reads keys from one TOML table, remembering which were used, naming keys in errors."""
 
@@ -236,14 +248,7 @@ class _Section:
         if unit:
             if not vec.any():
                 raise InputError(f"{self.origin}: '{self._key(key)}' must not be the zero vector")
-            with np.errstate(over="ignore", under="ignore"):
-                norm = np.linalg.norm(vec)
-            # numbers near float's limits (1e308, 1e-320) scaled first; only they, so that every other axis keeps
-            # its bits, and its sensor its hash (a unit's posterior records it)
-            if not np.finfo(float).tiny <= norm < np.inf:
-                vec = vec / np.abs(vec).max()
-                norm = np.linalg.norm(vec)
-            vec = vec / norm
+            vec = _unit_vector(vec)
         return vec
 
     def sub(self, key, *, required=True) -> "_Section":
