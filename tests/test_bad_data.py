@@ -324,6 +324,25 @@ def test_fit_notes_edited_where_commands_read_them_are_refused_as_the_model_is_l
     assert files(tmp_path) == ["m.json"]
 
 
+def test_a_file_written_into_a_folder_by_its_own_name_is_not_the_input(fitted, data, tmp_path):
+    """codegen -o DIR wrote DIR/tm_model.h over a model file of that name, and report --plot DIR its estimate_dx.png
+    over a dataset of that name; both exited 0, the input gone."""
+    folder = tmp_path / "out"
+    folder.mkdir()
+    model = folder / "tm_model.h"
+    model.write_text(json.dumps(fitted))
+    for precision in ("double", "fixed"):
+        assert_one_line_error(run_cli("fitgen", "codegen", str(model), "-o", str(folder), "--precision", precision),
+                              contains=f"the file written {model} is the input {model}: writing it would destroy it")
+        assert json.loads(model.read_text()) == fitted
+    proc = run_cli("fitgen", "codegen", str(model), "-o", str(folder), "--prefix", "other")
+    assert proc.returncode == 0 and (folder / "other_model.h").is_file(), proc.stderr
+    shutil.copy(data, folder / "estimate_dx.png")
+    proc = run_cli("fitgen", "report", str(model), "--data", str(folder / "estimate_dx.png"), "--plot", str(folder))
+    assert_one_line_error(proc, contains=f"--plot writes {folder / 'estimate_dx.png'} is the input")
+    assert (folder / "estimate_dx.png").read_text() == data.read_text()
+
+
 def test_predict_reads_its_data_once_so_a_pipe_works(fitted, data, tmp_path):
     """The rows' labels were read in a second pass after the estimates were written: from a pipe it found nothing,
     exit 2 with the output on disk."""

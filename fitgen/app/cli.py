@@ -281,12 +281,11 @@ def cmd_report(args) -> int:
 
 
 def cmd_codegen(args) -> int:
-    from fitgen.c.codegen import write_header
+    from fitgen.c.codegen import render_fixed_header, write_header
 
     model, target = _model_and_target(args)
     if args.precision == "fixed":
         from fitgen.app.report import rounding_note
-        from fitgen.c.codegen import render_fixed_header
         from fitgen.c.fixedc import plan_line
         from fitgen.equations.inputscale import plan_at
         from fitgen.base.fileio import write_in_folder
@@ -294,18 +293,19 @@ def cmd_codegen(args) -> int:
         if args.fma or args.style:  # fixed point has one layout and no floating point to fuse
             raise InputError(f"{'--fma' if args.fma else '--style'} does not apply to --precision fixed")
         fm, source = plan_at(model, args.input_lsb, args.input_offset, target.mul_bits if target else 32)
-        path = write_in_folder(args.output, f"{args.prefix}_model.h", render_fixed_header(fm, args.prefix))
-        note = rounding_note(model, fm.input_lsb)
+        path = write_in_folder(args.output, f"{args.prefix}_model.h", render_fixed_header(fm, args.prefix),
+                               [args.model])
         print(f"wrote {path} (fixed point, input LSB {fm.input_lsb:.6g} {model.input_units} from {source}, "
               f"offset {fm.input_offset:g}; plan: {plan_line(fm)}; {fm.summary()}; model {model.sha256[:12]})"
-              + ("" if note is None else f"\nnote: {note}"), file=sys.stderr)
+              + ("" if (note := rounding_note(model, fm.input_lsb)) is None else f"\nnote: {note}"), file=sys.stderr)
         return 0
     if args.input_lsb is not None or args.input_offset is not None:
         raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
     # a table evaluation keeps every power and harmonic monomial in arrays on the stack, past the Uno's 2 kB of RAM
     # for the default harmonics model (docs/arduino.md): arduino-build's default there too
     args.style = args.style or ("unrolled" if args.target == "uno" else "table")
-    path = write_header(model, args.output, args.precision, args.style, args.prefix, args.fma, target=args.target)
+    path = write_header(model, args.output, args.precision, args.style, args.prefix, args.fma, target=args.target,
+                        inputs=[args.model])
     print(f"wrote {path} ({args.precision}, {args.style}{', fma' if args.fma else ''}, model {model.sha256[:12]})",
           file=sys.stderr)
     return 0

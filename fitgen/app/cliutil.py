@@ -332,7 +332,7 @@ def check_written(args, files=()) -> None:
     import os
     from pathlib import Path
 
-    from fitgen.base.fileio import check_folder, output_file
+    from fitgen.base.fileio import check_folder, output_file, refuse_inputs
     from fitgen.physics.dataset import meta_path
 
     def is_file(p) -> bool:  # an option that names a file or a count (--samples): a long count is no file
@@ -372,10 +372,13 @@ def check_written(args, files=()) -> None:
     for name in PLOT_FILES.get(getattr(args, "command", None), ()) if isinstance(plot, str) else ():
         if same := written_as(os.path.join(plot, name)):
             raise InputError(f"{same[0]} {same[1]} is the plot --plot {plot} writes: give another name")
+        for path in Path(plot).glob(name):  # report's names: estimate_dx.png, ... (a dataset once had one)
+            refuse_inputs(path, inputs, "--plot writes", "give --plot another folder")
 
 
-# the plots a command's --plot FOLDER holds, by fixed name
-PLOT_FILES = {"noise": ("allan.png",), "identify": ("identify.png",), "check": ("check.png",)}
+# the plots a command's --plot FOLDER holds, by name or pattern
+PLOT_FILES = {"noise": ("allan.png",), "identify": ("identify.png",), "check": ("check.png",),
+              "report": ("estimate_*.png", "sweep_*.png")}
 
 STYLE_WITH_FIXED = "--style does not apply to --precision fixed (its header is straight-line code)"
 

@@ -12,7 +12,8 @@ def cmd_tempcomp_c(args) -> int:
     from host.temperature import load_tempcomp, render_c
 
     tc = load_tempcomp(args.tempcomp)
-    path = write_in_folder(args.output, f"{args.prefix}_tempcomp.h", render_c(tc, args.prefix, args.precision))
+    path = write_in_folder(args.output, f"{args.prefix}_tempcomp.h", render_c(tc, args.prefix, args.precision),
+                           [args.tempcomp])
     print(f"wrote {path} ({tc.n} elements about {tc.t0:g} degC, {args.precision}); call "
           f"{args.prefix}_tempcomp(v, degc) on the readings before {args.prefix}_estimate, from a model header of "
           f"the same precision (fitgen codegen --precision {args.precision})", file=sys.stderr)

@@ -130,11 +130,16 @@ def output_file(path: str | os.PathLike, inputs=(), flag: str = "-o") -> Path:
         raise InputError(f"cannot write {path}: {exc.strerror}") from None
     os.close(fd)
     os.unlink(tmp)
+    refuse_inputs(path, inputs, flag)
+    return path
+
+
+def refuse_inputs(path: Path, inputs, said: str, fix: str = "give another name") -> None:
+    """InputError where ``path`` is one of ``inputs``, by any name (a link, the folder named another way)."""
     for given in inputs:
         # Path(given): "data.csv/" names the file as the loaders read it; samefile on the string raised ENOTDIR
         if given is not None and path.exists() and Path(given).exists() and os.path.samefile(Path(given), path):
-            raise InputError(f"{flag} {path} is the input {given}: writing it would destroy it; give another name")
-    return path
+            raise InputError(f"{said} {path} is the input {given}: writing it would destroy it; {fix}")
 
 
 def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
@@ -336,10 +341,12 @@ def check_folder(folder: str | os.PathLike, flag: str = "-o") -> Path:
     return path
 
 
-def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes) -> Path:
+def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes, inputs=()) -> Path:
     """:func:`write_atomic` into ``folder/name``, creating ``folder`` (and its parents) when missing; a write that
-    fails leaves no folder it made (:func:`write_all`)."""
+    fails leaves no folder it made (:func:`write_all`). InputError where that is one of the command's ``inputs``
+    (a model file named tm_model.h, in the folder codegen writes its header to)."""
     path = Path(folder) / name
+    refuse_inputs(path, inputs, "the file written", "give another folder")
     try:
         mode = os.stat(path).st_mode
     except OSError:

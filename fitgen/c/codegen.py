@@ -325,6 +325,7 @@ def render_blob_interpreter() -> str:
 
 def write_header(model: Model, folder: str | Path, precision: str = "double", style: str = "table",
                  prefix: str = "tm", fma: bool = False, input_lsb: float | None = None,
-                 input_offset: float | None = None, target: str | None = None) -> Path:
+                 input_offset: float | None = None, target: str | None = None, inputs=()) -> Path:
+    """The header written into ``folder``, which is not one of ``inputs`` (the model's file)."""
     text = render_header(model, precision, style, prefix, fma, input_lsb, input_offset, target)
-    return write_in_folder(folder, f"{prefix}_model.h", text)
+    return write_in_folder(folder, f"{prefix}_model.h", text, inputs)
