@@ -278,7 +278,7 @@ def zero_record(zero, homed, axes, where: str) -> dict:
             or not all(isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
                        and math.isfinite(v) for k, v in zero.items())):
         raise InputError(f"{where} the stage's zero must be machine coordinates in mm, whether the machine was homed "
-                         f"(true or false) and its axis map, got {shown(zero)}, {homed!r}, {axes!r}")
+                         f"(true or false) and its axis map, got {shown(zero)}, {shown(homed)}, {shown(axes)}")
     return {"machine_mm": {k: float(v) for k, v in zero.items()}, "homed": homed, "axes": axes}
 
 

@@ -181,9 +181,11 @@ def _unit_vector(vec: np.ndarray) -> np.ndarray:
     bits, and another sensor, on another machine. Lengths near float's limits (1e308, 1e-320) are scaled first."""
     if abs(math.fsum(float(x) * float(x) for x in vec) - 1.0) <= 16 * np.finfo(float).eps:
         return vec
-    if not np.finfo(float).tiny <= math.hypot(*vec) < np.inf:
+    norm = math.hypot(*vec)  # Python's own C, no BLAS
+    if not np.finfo(float).tiny <= norm < np.inf:
         vec = vec / np.abs(vec).max()
-    return vec / math.hypot(*vec)  # Python's own C, no BLAS
+        norm = math.hypot(*vec)
+    return vec / norm
 
 
 class _Section:
