@@ -18,6 +18,7 @@ from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.capture import (SpreadTooLarge, capture, check_resume, load_schedule, output_lock, prepare_output,
                           simulated_sensor)
 from host.posewait import TriggerFailed, enter_waiter, trigger_waiter
+from host.prompt import ask_line
 from host.capturerun import (CaptureFailed, CaptureInterrupted, capture_numbers, kept, same_thermistor,
                              trigger_timeout)
 from host.motion import parse_drift
@@ -66,9 +67,9 @@ def parse_t0(text: str | None, temps: list[float]) -> float | None:
 
 def capture_temperatures(args, prog: str):
     """``capture --temperature T1,T2,..``: the schedule at each temperature (one file each), then the compensation
-    fitted and saved; progress goes to stderr after ``prog``. The TempComp, or None when the input closes at a
-    prompt; CaptureFailed when a fault stops it (the temperatures done are kept); InputError when another run
-    holds the output."""
+    fitted and saved; progress goes to stderr after ``prog``. The TempComp, or None when the user stops it at a
+    prompt (q or the input's end); CaptureFailed when a fault stops it (the temperatures done are kept); InputError
+    when another run holds the output."""
     with output_lock(args.output):  # for every temperature's file, named after it: two runs would interleave
         return _capture_temperatures(args, prog)
 
@@ -82,6 +83,12 @@ def _kept(out: Path, temps) -> str:
     """What a multi-temperature run stopped early leaves, for its last line."""
     return kept([_temperature_file(out, T) for T in temps],
                 "the temperatures and rows done so far are kept: run the same command again to resume")
+
+
+def _stopped(prog: str, out: Path, temps, T: float) -> None:
+    """Say where the user stopped a run at a prompt, and what it kept; None, as capture_temperatures returns then."""
+    what = kept([_temperature_file(out, t) for t in temps], "the temperatures and rows done so far are kept")
+    print(f"{prog}: stopped at {T:g} degC; {what}; run the same command again to resume", file=sys.stderr)
 
 
 def _replaced(dest, tc) -> str:
@@ -147,11 +154,9 @@ def _capture_temperatures(args, prog: str):
             if not had[T][1]:  # a level an earlier run finished needs neither the sensor brought there nor a row
                 if args.simulate:
                     drift.start_degc = T
-                elif not args.trigger:
-                    print(f"{prog}: bring the sensor to {T:g} degC and let it settle, then press Enter",
-                          file=sys.stderr, flush=True)
-                    if not sys.stdin.readline():
-                        return None
+                elif not args.trigger and ask_line(sys.stdin, sys.stderr, f"{prog}: bring the sensor to {T:g} degC "
+                                                   "and let it settle, then press Enter (q to stop) ") is None:
+                    return _stopped(prog, out, temps, T)
                 wait = trigger_waiter(args.trigger, schedule, timeout) if args.trigger else None
                 if wait is None and not args.simulate:
                     wait = enter_waiter(schedule)
@@ -159,10 +164,12 @@ def _capture_temperatures(args, prog: str):
                 # keeps the reading its meta recorded then
                 now = thermo.read(fresh=True) if thermo is not None else float("nan")
                 with output_lock(path):  # a plain capture into this temperature's file is another run too
-                    capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
+                    res = capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
                             set_pose=bus.set_pose if args.simulate else None, settle=settle, clock=clock,
                             meta={"adc": cmap.describe(), "temperature_set": T, **source,
                                   **({"thermistor_degc": now} if np.isfinite(now) else {})})
+                if not res.complete:  # 'q' at a pose stops the run, not only this level
+                    return _stopped(prog, out, temps, T)
             ds = load_dataset(path, min_rows=1)
             recorded = ds.meta.get("thermistor_degc")
             measured = float(recorded) if isinstance(recorded, (int, float)) and thermo is not None else now

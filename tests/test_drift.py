@@ -1111,3 +1111,29 @@ def test_a_thermistor_on_an_element_chip_is_read_with_that_chips_settings(tmp_pa
     tin = parse_temperature_input(cmap.temperature[0])
     table = render_adc_map(cmap, tin).split("ADC_TEMP_CHIP[1] = {", 1)[1].split("};", 1)[0]
     assert table.strip().endswith(", 1, 0.0 }"), table
+
+
+@pytest.mark.parametrize("typed, rows_at_15", [("\n\n\n", 2), ("\n\nq\n\n\n\n", 1), ("", 0)])
+def test_capture_at_temperatures_stops_where_the_user_stops_it(tmp_path, monkeypatch, capsys, typed, rows_at_15):
+    """'q' at a pose, or the input's end at any prompt, stops the whole run (not only that level's rows) and says
+    what it kept and how to resume, as a plain capture does; no compensation is fitted from the levels so far."""
+    import io
+    import sys
+
+    import host.tempcapture
+    from fitgen.app.host_cli import build_parser
+
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dz\n0,0\n1,-1\n")
+    args = build_parser().parse_args(["capture", "--poses", str(sched), "--adc", TWO_CHIPS, "--simulate",
+                                      "--temperature", "15,25", "-o", str(tmp_path / "cap.csv")])
+    args.simulate = False  # the prompts of a run on hardware, read on the simulated bus
+    real = host.tempcapture.open_bus_from_args
+    monkeypatch.setattr(host.tempcapture, "open_bus_from_args", lambda a, c, p, **k: real(a, c, np.zeros(5), **k))
+    monkeypatch.setattr(sys, "stdin", io.StringIO(typed))
+    assert host.tempcapture.capture_temperatures(args, "tactile-host capture") is None
+    said = capsys.readouterr().err.splitlines()[-1]
+    assert said.startswith("tactile-host capture: stopped") and "run the same command again" in said, said
+    rows = (tmp_path / "cap.T15.csv").read_text().splitlines()[1:] if rows_at_15 else []
+    assert len([r for r in rows if r.strip()]) == rows_at_15
+    assert not (tmp_path / "cap.T25.csv").exists() and not list(tmp_path.glob("*.tempcomp.json"))

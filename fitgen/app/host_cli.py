@@ -201,7 +201,8 @@ def cmd_capture(args) -> int:
     check_simulation_options(args)
     try:
         if args.temperature is not None and args.stage is None:
-            return 130 if capture_temperatures(args, prog) is None else 0
+            capture_temperatures(args, prog)  # stopped at a prompt, it said so: 0, as a plain capture stopped
+            return 0
         run_capture(args, prog)
     except CaptureInterrupted as exc:  # SIGTERM and SIGHUP said and ended with their own status, as elsewhere
         said, status = ended_by(exc.stop)
