@@ -100,3 +100,14 @@ def test_fit_leaves_out_rows_fitgen_simulate_lifted_off_the_skin(tmp_path):
 
     assert load_model(tmp_path / "m.json").fit_info["dataset_rows"] == 125 - 50
     assert load_dataset(data).n_rows == 125
+
+
+@pytest.mark.parametrize("bad", [10 ** 400, [10 ** 400] * 8, "0.001", [[1e-3]] * 8, float("nan")],
+                         ids=["huge", "huge-each", "text", "nested", "nan"])
+def test_a_reading_noise_past_floats_range_or_of_another_shape_is_one_line(bad):
+    """identify's and check's noise per element: an integer too large for a float had raised OverflowError."""
+    from fitgen.fitting.capturecheck import element_noise
+
+    with pytest.raises(InputError, match="the rows' noise"):
+        element_noise(bad, 8, "the rows' noise")
+    assert np.array_equal(element_noise(2, 3, "noise"), [2.0, 2.0, 2.0])

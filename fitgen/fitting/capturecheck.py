@@ -23,9 +23,11 @@ STILL_SHARE = 0.25  # pressed rows that read as at rest, above which the zero is
 def element_noise(noise, n: int, what: str, positive: bool = True) -> np.ndarray:
     """``noise`` (one figure, or one per element) as ``n`` figures; InputError unless each is finite and > 0
     (``positive``) or >= 0."""
-    try:
+    try:  # a text is no figure, though numpy reads "0.001" as one
+        if isinstance(noise, (str, bytes)):
+            raise TypeError
         arr = np.asarray(noise, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"{what} must be a number, or one per element, got {shown(noise)}") from None
     if arr.shape not in ((), (n,)):
         raise InputError(f"{what} gives {arr.size} figures for {n} elements: give one, or one per element")
