@@ -278,6 +278,12 @@ def test_tolerances_from_the_sensor_file(tmp_path):
     (("\ngain = 0.077", "\ngain = 0.4"), "'tolerances.gain' must be <= 0.25, got 0.4"),
     (("\n[transfer]", "stiffening = 0.5\n\n[transfer]"), "'stage.stiffening' must be <= 0.1, got 0.5"),
     (("[tolerances]", "[tolerances]\nstiffening = -0.01"), "'tolerances.stiffening' must be >= 0"),
+    # the [unit] table's keys as identify writes them: misspelt or of another type, a posterior had been lost
+    (("drawing = ", 'posteriour = "u.posterior.json"\ndrawing = '), "unknown key 'unit.posteriour'"),
+    (("drawing = ", "capture_degC = 25.0\ndrawing = "), "unknown key 'unit.capture_degC'"),
+    (("drawing = ", "posterior = 5\ndrawing = "), "'unit.posterior' must be a string, got 5"),
+    (("drawing = ", "seed = 1.5\ndrawing = "), "'unit.seed' must be a whole number"),
+    (("drawing = ", "compensated_from_degc = 900\ndrawing = "), "'unit.compensated_from_degc' must be <="),
 ])
 def test_bad_unit_files_are_one_line(tmp_path, edit, message):
     unit, _ = draw_unit(load_sensor("paper"), 1)

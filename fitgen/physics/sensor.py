@@ -21,6 +21,9 @@ TRANSFERS = ("raw", "gmr")  # a sensor file's [transfer] kinds: field in mT, or 
 # V: the most an amplifier's output or an ADC's range may reach from 0 (a GMR bridge's amplifier runs on a few
 # volts; past this a file's volts are in other units, and an ADC's span past it overflows its step)
 MAX_VOLTS = 100.0
+# a unit file's [unit] table as fitgen simulate --unit and fitgen identify write it: each key's reader
+UNIT_KEYS = {**dict.fromkeys(("drawing", "source", "posterior", "capture", "capture_sha256", "drawing_spec"), "string"),
+             "seed": "integer", "reduced_chi2": "number", "capture_degc": "number", "compensated_from_degc": "number"}
 
 
 @dataclass(frozen=True)
@@ -149,15 +152,8 @@ class Sensor:
                 "rest_center": list(self.magnet.rest_center),
             },
             "board": {"thickness": self.board_thickness, "gap": self.board_gap},
-            "elements": {
-                "positions": self.positions.tolist(),
-                "axes": self.axes.tolist(),
-            },
-            "transfer": {
-                "kind": self.transfer,
-                "raw": vars(self.raw),
-                "gmr": vars(self.gmr),
-            },
+            "elements": {"positions": self.positions.tolist(), "axes": self.axes.tolist()},
+            "transfer": {"kind": self.transfer, "raw": vars(self.raw), "gmr": vars(self.gmr)},
         } | ({} if self.is_drawing else {"unit": {
             "magnet_tilt": list(self.magnet.tilt),
             "gains": self.gains.tolist(),
@@ -376,10 +372,9 @@ def parse_sensor(data: dict, origin: str = "sensor") -> Sensor:
     tol.finish()
     travel = _travel(top.sub("travel", required=False), gap)
     unit = top.sub("unit", required=False)  # provenance of a unit file (fitgen simulate --unit, fitgen identify)
-    if unit.has("capture_degc"):  # read by the readouts against a temperature compensation's t0
-        unit.number("capture_degc", min_=DEGC[0], max_=DEGC[1])
-    for key in list(unit.data):
-        unit.raw(key)
+    for key, kind in UNIT_KEYS.items():  # a key misspelt had been lost in silence: a posterior, a temperature
+        if unit.has(key):
+            getattr(unit, kind)(key, **({"min_": DEGC[0], "max_": DEGC[1]} if key.endswith("_degc") else {}))
     unit.finish()
 
     radius = diameter / 2
