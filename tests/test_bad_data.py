@@ -81,20 +81,21 @@ def test_quoted_numbers_read_as_numbers_and_an_unnamed_column_is_named(data, tmp
         assert not (tmp_path / out).exists()
 
 
-def test_a_dead_element_in_the_rows_is_said_by_fit(data, tmp_path):
-    """A column that reads one value on every row (a broken wire: 0 V, or a rail) was fitted in silence: the model
-    took it, domain and all, and the device clamps it there whatever it reads later."""
+def test_a_dead_element_in_the_rows_is_refused_by_fit(data, tmp_path):
+    """A column that reads one value on every row (a broken wire: 0 V, or a rail) had been fitted with a note, its
+    domain that one value, into a model file that predict, codegen and report then refused: now fit refuses it,
+    before the work, and writes nothing."""
     from fitgen.physics.dataset import load_dataset
 
     ds = load_dataset(data)
-    for k, value in ((2, 0.0), (6, 3.3)):
+    for ks, value, said in (([2], 0.0, "v3 reads one value on every row (v3: 0)"),
+                            ([6, 1], 3.3, "v2, v7 read one value on every row (v2: 3.3)")):
         rows = ds.inputs.copy()
-        rows[:, k] = value
+        rows[:, ks] = value
         type(ds)(rows, ds.targets, ds.target_names).save(tmp_path / "dead.csv")  # no meta: a measured file
         proc = run_cli("fitgen", "fit", str(tmp_path / "dead.csv"), "-o", str(tmp_path / "m.json"))
-        assert proc.returncode == 0, proc.stderr
-        assert f"note: v{k + 1} reads {value:g} mT on every row: a dead element, a broken wire" in proc.stderr, \
-            proc.stderr
+        assert_one_line_error(proc, contains=said)
+        assert "a dead element, a broken wire" in proc.stderr and not (tmp_path / "m.json").exists()
     proc = run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"))
     assert proc.returncode == 0 and "on every row" not in proc.stderr, proc.stderr
 

@@ -311,26 +311,16 @@ def _blind_causes(model: Model, ds, sensor) -> list[str]:
 
 def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
     """What a user should know of a fit to dataset ``ds`` (``sensor``: its rows' own, where known) beyond its
-    summary: readings' units assumed, dead elements, rows repeated, equations near the rows, outputs the readings
+    summary: readings' units assumed, rows repeated, equations near the rows, outputs the readings
     barely carry and why."""
     rows = len(ds.inputs)
     notes = [] if units else [f"{data} has no meta saying its readings' units: taken as mT (give --units V for "
                               "volts, as an ADC gives them)"]
-    flat = [k for k in range(ds.n_inputs) if np.ptp(ds.inputs[:, k]) == 0]
-    if len(flat) == 1:  # its domain is that one value: the device clamps every reading of it there, whatever it reads
-        notes.append(f"v{flat[0] + 1} reads {ds.inputs[0, flat[0]]:g} {model.input_units} on every row: a dead "
-                     "element, a broken wire, an empty ADC channel, or an element saturated throughout; the equations "
-                     "learn nothing from it, and the device will clamp it to that value")
-    elif flat:
-        notes.append(f"{', '.join(f'v{k + 1}' for k in flat)} each read one value on every row (v{flat[0] + 1}: "
-                     f"{ds.inputs[0, flat[0]]:g} {model.input_units}): dead elements, broken wires, empty ADC "
-                     "channels, or elements saturated throughout; the equations learn nothing from them, and the "
-                     "device will clamp them to those values")
     if ds.n_inputs > MAX_INPUTS:  # said now, not after the fit when codegen refuses it
         notes.append(f"{ds.n_inputs} inputs: the generated C's status holds one bit per input, at most {MAX_INPUTS}, "
                      "so codegen, verify and flash refuse this model; Model.predict and fitgen predict take it")
     copies = {j: i for j in range(ds.n_inputs) for i in reversed(range(j))
-              if j not in flat and np.array_equal(ds.inputs[:, i], ds.inputs[:, j])}
+              if np.array_equal(ds.inputs[:, i], ds.inputs[:, j])}
     simulated = bool(ds.meta.get("generator")) and "samples_per_row" not in ds.meta
     if copies and not (simulated and "scene_spec" in ds.meta):  # a scene's box is the poses the device will see
         # its terms and the original's are one column to the fit: both stay in, weighed against each other

@@ -292,6 +292,12 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
     noise = noise_to_add(ds, settings, sensor)
     v = ds.inputs
     lo, hi = v.min(axis=0), v.max(axis=0)
+    if len(flat := np.flatnonzero(lo == hi)):  # a domain of no width: every model file reader refuses it
+        raise InputError(f"{', '.join(f'v{k + 1}' for k in flat)} read{'s' if len(flat) == 1 else ''} one value on "
+                         f"every row (v{flat[0] + 1}: {float(lo[flat[0]]):g}): a dead element, a broken wire, an empty "
+                         "ADC channel, or an element saturated throughout carries nothing a model can use, nor can "
+                         "predict, codegen or the device take its one-value range: mend it and capture again, or, on a "
+                         "sensor file of your own, leave the element out")
     positive = lo > 0
     harmonics = ring_harmonics(ds, sensor) if settings.harmonic_degree > 0 else None
     if harmonics is not None and not np.sum(lo) > 0:
