@@ -802,6 +802,12 @@ def test_a_ctrl_c_while_a_command_starts_is_one_line(script, prog):
             f"e.import_module = interrupted\ne.{script}()\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert_one_line_error(proc, 130, f"{prog}: interrupted")
+    # earlier still, in the guard's own import (a Ctrl-C 80 ms after start had shown cliutil's 'import math')
+    code = ("import sys\nclass Stop:\n    def find_spec(self, name, *a):\n"
+            "        if name == 'fitgen.app.cliutil':\n            raise KeyboardInterrupt\n"
+            f"sys.meta_path.insert(0, Stop())\nimport fitgen.app.entry as e\ne.{script}()\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert_one_line_error(proc, 130, f"{prog}: interrupted")
 
 
 @pytest.mark.parametrize("sep", [";", "\t"])

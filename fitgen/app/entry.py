@@ -7,20 +7,25 @@ from __future__ import annotations
 import sys
 from importlib import import_module
 
-from fitgen.app.cliutil import catch_ending, ended_by, restore
-
 
 def _main(module: str, prog: str) -> None:
-    previous = catch_ending()
+    try:  # under Python's own Ctrl-C until cliutil's guard is in place: nothing here imported before it
+        util = import_module("fitgen.app.cliutil")
+    except KeyboardInterrupt:
+        _end(prog, "interrupted", 130)
+    previous = util.catch_ending()
     try:
         main = import_module(module).main
     except KeyboardInterrupt as exc:
-        said, status = ended_by(exc)
-        if sys.stderr is not None:  # closed (2>&-): print(file=None) would write on stdout
-            print(f"{prog}: {said}", file=sys.stderr)
-        sys.exit(status)
-    restore(previous)  # the defaults again, which the command's run() saves and gives back at its end
+        _end(prog, *util.ended_by(exc))
+    util.restore(previous)  # the defaults again, which the command's run() saves and gives back at its end
     main()
+
+
+def _end(prog: str, said: str, status: int) -> None:
+    if sys.stderr is not None:  # closed (2>&-): print(file=None) would write on stdout
+        print(f"{prog}: {said}", file=sys.stderr)
+    sys.exit(status)
 
 
 def fitgen() -> None:
