@@ -296,3 +296,28 @@ def test_unwritable_output(tmp_path):
     target.mkdir()
     assert_one_line_error(run_cli("fitgen", "simulate", "-o", str(target)), contains="cannot write")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
+
+
+def test_fit_holds_out_and_plans_fixed_point_through_the_adc_simulate_read_the_rows_with(tmp_path):
+    """simulate --adc-bits 6 was dropped by fit: its held-out figures were of an ADC-less sensor (thx max 5.4 deg
+    where the rows' 6-bit ADC errs 8.1), and codegen --precision fixed planned 16-bit codes over the 64 the rows
+    had. Now the model is the one fitted on the same rows from a sensor file whose transfer has that ADC."""
+    from conftest import run_cli
+    from fitgen.equations.model import load_model
+
+    own = tmp_path / "six.toml"
+    text = PAPER_TOML.read_text()
+    assert "adc_bits = 0  " in text
+    own.write_text(text.replace("adc_bits = 0  ", "adc_bits = 6  ", 1))
+    models = {}
+    for name, how in (("option", ["--sensor", "paper", "--adc-bits", "6"]), ("file", ["--sensor", str(own)])):
+        for argv in (["simulate", *how, "--grid", "paper-exp", "-o", f"{name}.csv"],
+                     ["fit", f"{name}.csv", "-o", f"{name}.json", "--outputs", "dx", "--max-terms", "6"],
+                     ["codegen", f"{name}.json", "--precision", "fixed", "-o", name]):
+            proc = run_cli("fitgen", *argv, cwd=tmp_path)
+            assert proc.returncode == 0, proc.stderr
+        models[name] = load_model(tmp_path / f"{name}.json").fit_info["held_out"]
+        assert "input LSB 0.031746 mT" in proc.stderr, proc.stderr
+    assert (tmp_path / "option.csv").read_text() == (tmp_path / "file.csv").read_text()
+    assert models["option"]["adc_bits"] == models["file"]["adc_bits"] == 6
+    assert models["option"]["errors"] == models["file"]["errors"]

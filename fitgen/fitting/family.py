@@ -26,7 +26,7 @@ from fitgen.fitting.fit import FitSettings, fit_model, noise_to_add, ring_harmon
 from fitgen.fitting.holdout import N_POSES, box_of, deployed_errors, held_out_set
 from fitgen.equations.model import Model
 from fitgen.physics.pose import POSE_NAMES
-from fitgen.physics.simulate import other_sensor_problem
+from fitgen.physics.simulate import other_sensor_problem, with_adc_bits
 from fitgen.fitting.shared import SharedRows
 from fitgen.equations.terms import FAMILIES, FIXED_FAMILIES, HARMONIC_DEGREE, candidate_terms
 
@@ -249,6 +249,8 @@ def fit_device(ds: Dataset, outputs, settings: FitSettings, sensor, family: str 
         check_dataset_sensor(ds, sensor)
     hold = bool(held_out) and sensor is not None
     posterior = unit_posterior(unit_file, sensor) if hold else None  # said before the fit's seconds, not after
+    if sensor is not None and ds.meta.get("adc_bits") is not None:  # simulate --adc-bits: held out through that ADC
+        sensor = with_adc_bits(sensor, ds.meta["adc_bits"])
     model, record = fit_family(ds, outputs, settings, sensor, family, progress, again=again)
     if problem := model.float_problem() if settings.precision == "float" else "":
         raise InputError(f"{problem} (--precision double fits it for double); nothing written")

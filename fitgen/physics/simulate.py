@@ -9,7 +9,7 @@ import numpy as np
 
 from fitgen import __version__
 from fitgen.physics.dataset import Dataset
-from fitgen.base.errors import InputError, is_finite_number
+from fitgen.base.errors import InputError, is_finite_number, shown
 from fitgen.physics.pose import POSE_NAMES, as_poses, check_pose_range, field_readings, off_skin, pose_label
 from fitgen.physics.sensor import TRANSFERS, Sensor
 from fitgen.physics.transfer import past_linear, readings
@@ -224,12 +224,25 @@ def dataset_sensor(meta: dict, spec: str | None = None, n_inputs: int | None = N
         sensor = sensor.with_transfer("raw" if meta["units"] == "mT" else "gmr")
     if given and (problem := other_sensor_problem(meta, sensor, spec)):
         raise InputError(f"{problem} (leave --sensor out)")
-    if spec in (meta.get("sensor"), meta.get("sensor_file")) and meta.get("sensor_sha256") not in (None, sensor.sha256):
+    # a held-out record names the sensor as read, through its ADC (simulate --adc-bits); a dataset's meta the file's
+    read = sensor if meta.get("adc_bits") is None else with_adc_bits(sensor, meta["adc_bits"])
+    if meta.get("sensor_sha256") == read.sha256:
+        sensor = read
+    elif spec in (meta.get("sensor"), meta.get("sensor_file")) and meta.get("sensor_sha256") not in (None,
+                                                                                                  sensor.sha256):
         return None
     if n_inputs is not None and sensor.n_elements != n_inputs:
         raise InputError(f"the dataset has {n_inputs} input columns, its sensor {sensor.name} {sensor.n_elements} "
                          "elements")
     return sensor
+
+
+def with_adc_bits(sensor: Sensor, bits) -> Sensor:
+    """``sensor`` with its transfer's ADC of ``bits`` (0..32; 0: no quantisation), as simulate's adc_bits reads."""
+    if isinstance(bits, bool) or not isinstance(bits, int) or not 0 <= bits <= 32:
+        raise InputError(f"the meta's adc_bits must be a whole number 0..32 (simulate --adc-bits), got {shown(bits)}")
+    kind = "raw" if sensor.transfer == "raw" else "gmr"
+    return replace(sensor, **{kind: replace(getattr(sensor, kind), adc_bits=bits)})
 
 
 def other_sensor_problem(meta: dict, sensor: Sensor, named: str) -> str:
