@@ -39,6 +39,7 @@ from fitgen.base.texts import load_toml
 
 CHIPS = ("ads1115", "ads7828")
 ADDRESSES = (0x48, 0x49, 0x4A, 0x4B)  # both chips: 1001 0xx, set by the ADDR / A1 A0 pins
+MAX_BUS = (1 << 20) - 1  # the greatest N of /dev/i2c-N: the kernel's i2c-dev has 2^20 minors (tm_pi reads an int)
 ADS1115_PGA = (6.144, 4.096, 2.048, 1.024, 0.512, 0.256)  # full-scale range, +-V
 ADS1115_RATES = (8, 16, 32, 64, 128, 250, 475, 860)  # samples per second
 ADS1115_PAIRS = ((0, 1), (0, 3), (1, 3), (2, 3))  # the differential pairs the MUX offers
@@ -185,7 +186,8 @@ def _address(text, origin: str) -> int:
             raise InputError(f"{origin}: address {text} is decimal {addr} (0x{addr:02x}); I2C addresses are given in "
                              f"hex: 0x{meant:02x}")
     if addr not in ADDRESSES:
-        raise InputError(f"{origin}: address 0x{addr:02x} is not one an ADS1115 or ADS7828 can take "
+        said = f"0x{addr:02x}" if addr >= 0 else shown(text)  # not 0x-48
+        raise InputError(f"{origin}: address {said} is not one an ADS1115 or ADS7828 can take "
                          "(0x48..0x4b, set by the ADDR or A1/A0 pins)")
     return addr
 
@@ -296,8 +298,8 @@ def load_map_file(path: str | Path, settings: Settings = Settings()) -> ChannelM
             raise InputError(f"{origin}: [temperature]: beta, r25, series and vref must be finite numbers > 0")
         temperature = (tt["input"], {k: float(v) for k, v in divider.items()})
     bus = data.get("bus")
-    if bus is not None and (isinstance(bus, bool) or not isinstance(bus, int) or bus < 0):
-        raise InputError(f"{origin}: bus must be a whole number >= 0, got {shown(bus)}")
+    if bus is not None and (isinstance(bus, bool) or not isinstance(bus, int) or not 0 <= bus <= MAX_BUS):
+        raise InputError(f"{origin}: bus must be a whole number 0..{MAX_BUS} (/dev/i2c-N), got {shown(bus)}")
     tables = data.get("chip", [])
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
         raise InputError(f"{origin}: 'chip' must be an array of tables ([[chip]])")

@@ -173,8 +173,13 @@ def test_bad_sensor_file_cli(tmp_path):
     bad.write_text("this is = = not toml")
     assert_one_line_error(run_cli("fitgen", "observe", str(bad)), contains="not valid TOML")
     # a model or a dataset given for the sensor: named as what it is
+    # a TOML file with a bracket dropped had been named JSON, the parser's line and column lost
     for text, said in (('{"schema_version": 1}\n', "JSON (a model or meta file?), not a sensor file (TOML)"),
-                       ("v1,v2,dz\n1,2,3\n", "CSV (a dataset?), not a sensor file (TOML)")):
+                       ('[1, 2]\n', "JSON (a model or meta file?), not a sensor file (TOML)"),
+                       ("v1,v2,dz\n1,2,3\n", "CSV (a dataset?), not a sensor file (TOML)"),
+                       ('[magnet\ndiameter = 1\n', "not valid TOML: Expected ']' at the end of a table declaration "
+                                                   "(at line 1, column 8)"),
+                       ('name = "x"\n[magnet]\noffset = [0, 0\n', "not valid TOML: ")):
         bad.write_text(text)
         assert_one_line_error(run_cli("fitgen", "observe", str(bad)), contains=f"sensor file {bad}: {said}")
     assert_one_line_error(run_cli("fitgen", "observe", "--sensor", "nope"), contains="not a preset")
@@ -206,7 +211,8 @@ def test_a_toml_file_holding_an_integer_of_too_many_digits_is_refused_in_one_lin
     with pytest.raises(InputError, match="channel map .*: not valid TOML: Exceeds the limit"):
         load_map_file(cmap)
     cmap.write_text(f'bus = -{many}\n[[chip]]\ntype = "ads1115"\naddress = 0x48\n')
-    with pytest.raises(InputError, match=r"bus must be a whole number >= 0, got -1000+\.\.\.$"):
+    with pytest.raises(InputError, match=r"bus must be a whole number 0\.\.1048575 \(/dev/i2c-N\), "
+                                         r"got -1000+\.\.\.$"):
         load_map_file(cmap)
     cmap.write_text(f'[temperature]\ninput = "ads1115@0x4a:0"\nbeta = {many}\n[[chip]]\ntype = "ads1115"\naddress = 0x48\n')
     with pytest.raises(InputError, match="beta, r25, series and vref must be finite numbers > 0"):  # OverflowError

@@ -36,8 +36,14 @@ def text_kind(text: str) -> str:
                 return "toml"
         except ValueError:  # TOMLDecodeError is one
             pass
-    if first.startswith(("{", "[")):
+    if first.startswith("{"):  # no TOML starts so
         return "json"
+    if first.startswith("[") or "=" in first:  # a TOML file with a slip (a bracket dropped) unless JSON reads it
+        try:
+            json.loads(text)
+            return "json"
+        except ValueError:
+            return ""
     return "csv" if "," in first else ""
 
 
