@@ -64,6 +64,9 @@ def split_channel_map(spec: str) -> tuple[str, str | None]:
     temps = [p for p in parts if p.lower().startswith("temp=")]
     if len(temps) > 1:
         raise InputError(f"--adc {spec!r}: one temp= input at most")
+    if temps and len(temps) == len([p for p in parts if p]):
+        raise InputError(f"--adc {spec!r}: no element inputs besides the thermistor (e.g. "
+                         f"ads1115@0x48:0-3,ads1115@0x49:0-3,{temps[0]})")
     return ",".join(p for p in parts if not p.lower().startswith("temp=")), (temps[0][5:] if temps else None)
 
 
@@ -93,14 +96,13 @@ def parse_temperature_input(spec: str, thermistor: str | None = None, divider: d
                          f"{', '.join(f'0x{a:02x}' for a in ADDRESSES)}")
     if not 0 <= pin < N_INPUTS[kind]:
         raise InputError(f"temp={spec!r} in --adc: {kind} has inputs 0-{N_INPUTS[kind] - 1}")
-    divider = {**DIVIDER_DEFAULTS, **(divider or {})}
-    if thermistor:
-        divider.update(parse_assignments(thermistor, DIVIDER_KEYS, "--thermistor"))
-        bad = next((k for k, v in divider.items() if not DIVIDER_RANGES[k][0] <= v <= DIVIDER_RANGES[k][1]), None)
-        if bad:  # outside them a reading is nonsense, and the warning it raises blames the wiring
-            lo, hi = DIVIDER_RANGES[bad]
-            raise InputError(f"--thermistor {thermistor!r}: {bad} must be {lo:g}..{hi:g} {DIVIDER_UNITS[bad]}, got "
-                             f"{divider[bad]:g}")
+    told = parse_assignments(thermistor, DIVIDER_KEYS, "--thermistor") if thermistor else {}
+    divider = {**DIVIDER_DEFAULTS, **(divider or {}), **told}
+    bad = next((k for k, v in divider.items() if not DIVIDER_RANGES[k][0] <= v <= DIVIDER_RANGES[k][1]), None)
+    if bad:  # outside them a reading is nonsense, and the warning it raises blames the wiring; a map's too
+        lo, hi = DIVIDER_RANGES[bad]
+        where = f"--thermistor {thermistor!r}" if bad in told else "the channel map's [temperature]"
+        raise InputError(f"{where}: {bad} must be {lo:g}..{hi:g} {DIVIDER_UNITS[bad]}, got {divider[bad]:g}")
     return TemperatureInput(kind, address, pin, divider)
 
 

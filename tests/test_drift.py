@@ -1137,3 +1137,29 @@ def test_capture_at_temperatures_stops_where_the_user_stops_it(tmp_path, monkeyp
     rows = (tmp_path / "cap.T15.csv").read_text().splitlines()[1:] if rows_at_15 else []
     assert len([r for r in rows if r.strip()]) == rows_at_15
     assert not (tmp_path / "cap.T25.csv").exists() and not list(tmp_path.glob("*.tempcomp.json"))
+
+
+MAP_HEAD = '[[chip]]\ntype = "ads1115"\naddress = 0x48\n[[chip]]\ntype = "ads1115"\naddress = 0x49\n'
+
+
+@pytest.mark.parametrize("adc, extra, said", [
+    # a map's thermistor past the ranges --thermistor holds had read as "the thermistor read none (is it connected?)"
+    (MAP_HEAD + '[temperature]\ninput = "ads1115@0x4a:0"\nvref = 1e-300\n', [],
+     "the channel map's [temperature]: vref must be 0.1..50 V, got 1e-300"),
+    (MAP_HEAD + '[temperature]\ninput = "ads1115@0x4a:0"\nbeta = 100000\n', [],
+     "the channel map's [temperature]: beta must be 500..20000"),
+    (MAP_HEAD + '[temperature]\ninput = "ads1115@0x4a:0"\nbeta = 3380\n', ["--thermistor", "beta=100000"],
+     "--thermistor 'beta=100000': beta must be 500..20000"),
+    # a bus past any /dev/i2c-N had built a tm_pi opening /dev/i2c--2147483648
+    ("bus = 2147483648\n" + MAP_HEAD, [], "bus must be a whole number 0..1048575 (/dev/i2c-N), got 2147483648"),
+    (TWO_CHIPS, ["--bus", "2147483648"], "--bus 2147483648: give 0..1048575"),
+    ("temp=ads1115@0x4a:0", [], "no element inputs besides the thermistor"),  # had said "--adc '': empty item"
+    ("ads7828@-0x48", [], "address '-0x48' is not one an ADS1115"),  # had said 0x-48
+])
+def test_a_channel_maps_thermistor_bus_and_addresses_are_checked_as_the_options_are(rest_model_file, tmp_path, adc,
+                                                                                    extra, said):
+    if "\n" in adc:
+        (tmp_path / "map.toml").write_text(adc)
+        adc = str(tmp_path / "map.toml")
+    assert_one_line_error(run_cli("tactile-host", "read", "--model", rest_model_file, "--adc", adc, "--simulate",
+                                  "0,0,0,0,0", "--count", "1", *extra), contains=said)
