@@ -154,11 +154,18 @@ def jog_to_zero(stage: PoseStage, stdin, stderr, prog: str) -> dict[str, float] 
     stderr.write(f"{prog}: the carriage stands at machine {' '.join(f'{m}{v:g}' for m, v in zip(MACHINE_AXES, origin))}"
                  "\n")
     moved = np.zeros(3)
+    up = False  # the last dz jog went up: the stage's backlash then leaves the indenter above where it reads
     while True:
         line = ask_line(stdin, stderr, f"jog [{' '.join(f'{a}{v:+.3f}' for a, v in zip(STAGE_AXES, moved))}]> ")
         if line is None:
             return None
         parts = line.replace("=", " ").split()
+        if not parts and up:  # said once: a user who knows the stage has none may take it so
+            stderr.write(f"{prog}: the last dz move was up, and backlash leaves the indenter above where the stage "
+                         "reads it: come down to contact (e.g. 'dz -0.05'), or press Enter again to take the zero "
+                         "here\n")
+            up = False
+            continue
         if not parts:
             pos = stage.position
             return {m: float(pos[MACHINE_AXES.index(m)]) for m, _, _ in axes.pairs}
@@ -171,5 +178,6 @@ def jog_to_zero(stage: PoseStage, stdin, stderr, prog: str) -> dict[str, float] 
                 raise InputError(f"{parts[1]!r} is not a number") from None
             stage.jog(parts[0].lower(), step)
             moved[STAGE_AXES.index(parts[0].lower())] += step
+            up = step > 0 if parts[0].lower() == "dz" else up
         except InputError as exc:
             stderr.write(f"{prog}: {exc}\n")

@@ -848,6 +848,12 @@ def test_jogging_to_the_zero(tmp_path):
         assert "a jog step is at most 5 mm" in err.getvalue() and "type AXIS STEP" in err.getvalue()
         assert "a jog step is a number of mm, got nan" in err.getvalue()
         assert jog_to_zero(st, io.StringIO("dz 1\nq\n"), io.StringIO(), "cap") is None
+        # the prompt asks to end with a move down: a zero taken after one up is questioned once, then taken
+        for typed, z in (("dz 0.5\n\ndz -0.25\n\n", -4.75), ("dz 0.5\n\n\n", -4.25)):  # from Z-5
+            err = io.StringIO()
+            zero = jog_to_zero(st, io.StringIO(typed), err, "cap")
+            assert zero == pytest.approx({"X": 2.0, "Y": -2.0, "Z": z}), err.getvalue()
+            assert err.getvalue().count("the last dz move was up") == 1, err.getvalue()
         c.close()
 
 
