@@ -75,3 +75,42 @@ def test_a_terminal_of_no_width_draws_80_columns(monkeypatch):
     monkeypatch.delenv("COLUMNS", raising=False)
     text = _drawn_on_a_terminal(0, "fit", "x" * 200)
     assert max(len(line) for line in text.split("\r")) == 79 and "fit [" in text
+
+
+def test_schedule_moves_its_note_through_the_candidates_information():
+    """schedule's candidates' information (10,292 over five axes, 13 s here) held one note; the bar now moves its
+    note with each chunk."""
+    import numpy as np
+
+    from fitgen.fitting.schedule import CHUNK, schedule
+    from fitgen.physics.sensor import load_sensor
+
+    notes = []
+    schedule(load_sensor("paper"), 10, axes=("dx", "dy", "dz", "thx", "thy"),
+             progress=lambda done, total, note: notes.append((done, note)))
+    told = [n for d, n in notes if d == 0 and n.startswith("candidates ")]
+    count = int(told[0].split("/")[1].replace(",", ""))
+    assert len(told) == -(-count // CHUNK) > 1 and told[-1] == f"candidates {(len(told) - 1) * CHUNK:,}/{count:,}"
+    assert np.all(np.diff([d for d, _ in notes]) >= 0)
+
+
+def test_simulate_shows_its_notes_step_on_a_terminal(tmp_path, monkeypatch):
+    """simulate's second pass over its rows (the linear range, 8 s on a million) ran after the bar had cleared."""
+    import sys
+
+    import pytest
+
+    from fitgen.app import cli
+
+    import itertools
+
+    term = Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    clock = itertools.count()  # a second between updates: every one drawn
+    monkeypatch.setattr("fitgen.base.progress.time.monotonic", lambda: float(next(clock)))
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["simulate", "--random", "200", "-o", str(tmp_path / "x.csv")])
+    assert stop.value.code == 0, term.text
+    bars = [t for t in term.text.split("\r") if t.startswith("simulate [")]
+    assert "2/3" in bars[-1] and "elements' linear range" in bars[-1], term.text
+    assert term.text.index(CLEARED) < term.text.index("wrote 200 rows")  # the notes after the bar, not under it

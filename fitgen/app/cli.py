@@ -49,16 +49,16 @@ def cmd_simulate(args) -> int:
         replaced = drawn_unit_over(unit, text, args.output, args.sensor)
     from fitgen.base.progress import Progress
 
-    with Progress("simulate", 2) as bar:  # seen on a terminal when many poses take seconds
+    with Progress("simulate", 3) as bar:  # seen on a terminal when many poses take seconds
         bar.update(0, f"{len(poses):,} poses")
         ds = simulate(sensor, poses, noise=noise, adc_bits=args.adc_bits,
                       seed=args.seed, provenance={**source, **unit_info}, labels=args.labels)
         bar.update(1, "writing")
         ds.save(args.output, beside=beside)
-        bar.update(1, "written")
+        bar.update(1, "written; elements' linear range")  # the field once more: seconds on a million rows
+        said = simulate_notes(sensor, poses, args.labels, args.sensor, args.adc_bits, source, replaced)
     if unit is not None:
         print(f"wrote unit {sensor.name} (a unit of {drawing.name}) to {unit}", file=sys.stderr)
-    said = simulate_notes(sensor, poses, args.labels, args.sensor, args.adc_bits, source, replaced)
     notes = "".join(f"note: {n}\n" for n in said + posterior_note(args.sensor if args.unit is None else None))
     print(f"wrote {ds.n_rows} rows x {len(ds.columns)} columns ({sensor.name}, {sensor.transfer}) to {args.output}\n"
           + notes, end="", file=sys.stderr)

@@ -204,13 +204,17 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     space = unit_space(drawing)
     cand, ranges, beyond = capture_candidates(drawing, axes, ranges, rig_error, zero_error)
     total = n + MAX_PASSES + 1
-    if progress is not None:
-        progress(0, total, f"the information of {len(cand):,} candidate poses")
     prob = Problem(space, np.zeros((len(cand), drawing.n_elements)), cand, np.full(drawing.n_elements, noise),
                    float(rig_error))
     z = np.zeros(space.size)
+
+    def chunk(i: int) -> np.ndarray:  # the note moves with each chunk: five axes' candidates take tens of seconds
+        if progress is not None:
+            progress(0, total, f"candidates {i:,}/{len(cand):,}")
+        return prob.whitened_rows(z, cand[i:i + CHUNK])
+
     try:
-        J = np.concatenate([prob.whitened_rows(z, cand[i:i + CHUNK]) for i in range(0, len(cand), CHUNK)])
+        J = np.concatenate([chunk(i) for i in range(0, len(cand), CHUNK)])
     except (np.linalg.LinAlgError, OverflowError):  # a row's covariance no longer positive definite in float
         raise InputError(f"the rows' reading noise, {noise:g} {drawing.units}, is too small against the rig error "
                          f"({rig_error:g} mm) to weigh them in floating point (sensor {drawing.name}'s per sample is "
