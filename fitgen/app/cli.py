@@ -10,8 +10,9 @@ from fitgen import __version__
 from fitgen.app.calibrate_cli import add_calibration_commands, cmd_identify, cmd_schedule
 from fitgen.app.cliutil import Parser, check_not_empty, check_written, command_main, count, finite
 from fitgen.app.outputkind import check_output_kind
-from fitgen.app.options import accuracy_of, fit_settings, noise_of, sensor_file_of, sensor_of
+from fitgen.app.options import accuracy_of, fit_settings, model_and_target, noise_of, sensor_file_of, sensor_of
 from fitgen.base.parse import MAX_NOISE, parse_names
+from fitgen.base.progress import shown_while
 from fitgen.base.errors import InputError
 from fitgen.c.targets import CYCLE_TARGETS, TARGETS
 from fitgen.equations.terms import FAMILIES
@@ -102,7 +103,8 @@ def cmd_fit(args) -> int:
     from fitgen.physics.simulate import check_sensor_file, dataset_sensor
 
     settings = fit_settings(args)
-    loaded = refuse_huge(load_dataset(args.data))  # numbered as in the file: before lifted rows are left out
+    # numbered as in the file: before lifted rows are left out
+    loaded = refuse_huge(shown_while("fit", f"reading {args.data}", lambda: load_dataset(args.data)))
     check_sensor_file(loaded.meta, args.sensor, str(args.data), Path(args.data).resolve().parent)  # a unit file gone or changed: said, not fitted without
     edited = loaded.meta.get("dataset_sha256") not in (None, loaded.sha256)  # rows changed since the meta was written
     ds, lifted = rows_on_the_skin(loaded)
@@ -157,19 +159,6 @@ def cmd_fit(args) -> int:
     return 0
 
 
-def _model_and_target(args):
-    """predict's and codegen's model and target; args.precision the header's: predict computes what codegen writes."""
-    from fitgen.c.targets import check_model, check_precision, get_target, header_precision
-    from fitgen.equations.model import load_model
-
-    get_target(args.target)  # a bad name said before the model is read
-    model = load_model(args.model)
-    args.precision = header_precision(args.target, args.precision, model)
-    target = check_precision(args.target, args.precision)
-    check_model(target, model)
-    return model, target
-
-
 def cmd_predict(args) -> int:
     import numpy as np
 
@@ -180,8 +169,9 @@ def cmd_predict(args) -> int:
     from fitgen.physics.dataset import estimates_csv, load_inputs_and_labels, load_meta
 
     args.precision = args.precision or ("fixed" if args.codes else None)  # codes are what fixed point takes
-    model, target = _model_and_target(args)
-    inputs, labels = load_inputs_and_labels(args.data, model.n_inputs)
+    model, target = model_and_target(args)
+    inputs, labels = shown_while("predict", f"reading {args.data}",
+                                 lambda: load_inputs_and_labels(args.data, model.n_inputs))
     check_input_units(model, load_meta(args.data).get("units"), f"{args.data}'s readings", f"model {args.model}")
     if args.precision == "fixed":
         from fitgen.c.fixedc import plan_line
@@ -217,7 +207,8 @@ def cmd_predict(args) -> int:
         check_magnitudes(model, args.precision)  # as codegen: the C's outputs are always finite
         with np.errstate(over="ignore"):  # a reading beyond float's range is inf, as the C's conversion makes it
             pred, status = model.predict(inputs, with_status=True, precision=args.precision)
-    write_atomic(args.output, estimates_csv(model.output_names, pred, status))
+    shown_while("predict", f"writing {args.output}",
+                lambda: write_atomic(args.output, estimates_csv(model.output_names, pred, status)))
     notes = predict_notes(model, pred, status, args.precision, labels)
     print(f"wrote {len(pred)} estimate{'s' * (len(pred) != 1)} to {args.output}"
           + (f" ({'; '.join(notes)})" if notes else ""),
@@ -246,7 +237,8 @@ def cmd_report(args) -> int:
         raise InputError(f"--sensor draws the rotation sweep, and model {args.model} estimates no rotation "
                          f"({', '.join(model.output_names)}): leave --sensor out")
     sensor = sweep_sensor(load_sensor(args.sensor), model, args.sensor) if folder is not None and args.sensor else None
-    ds, lifted = rows_on_the_skin(refuse_huge(load_dataset(args.data))) if args.data else (None, 0)
+    read = shown_while("report", f"reading {args.data}", lambda: load_dataset(args.data)) if args.data else None
+    ds, lifted = rows_on_the_skin(refuse_huge(read)) if read is not None else (None, 0)
     if ds is not None:
         check_input_units(model, ds.meta.get("units"), f"{args.data}'s readings", f"model {args.model}")
         check_magnitudes(model, "double")  # as predict: estimates of inf had made a table of them, status 0
@@ -283,7 +275,7 @@ def cmd_report(args) -> int:
 def cmd_codegen(args) -> int:
     from fitgen.c.codegen import render_fixed_header, write_header
 
-    model, target = _model_and_target(args)
+    model, target = model_and_target(args)
     if args.precision == "fixed":
         from fitgen.app.report import rounding_note
         from fitgen.c.fixedc import plan_line

@@ -1,5 +1,5 @@
-"""Option readers the commands share: the sensor (and its transfer), a noise figure, fit's settings, the channel map's
-options, view's checks of --replay and --host."""
+"""Option readers the commands share: the sensor (and its transfer), a noise figure, predict's and codegen's model and
+target, fit's settings, the channel map's options, view's checks of --replay and --host."""
 
 from __future__ import annotations
 
@@ -44,6 +44,19 @@ def noise_of(value: str, sensor, most: float | None = None) -> float:
         raise InputError(f"--noise {value} is no sensor's reading noise (at most {most:g}, in the readings' "
                          "units: V or mT)")
     return x
+
+
+def model_and_target(args):
+    """predict's and codegen's model and target; args.precision the header's: predict computes what codegen writes."""
+    from fitgen.c.targets import check_model, check_precision, get_target, header_precision
+    from fitgen.equations.model import load_model
+
+    get_target(args.target)  # a bad name said before the model is read
+    model = load_model(args.model)
+    args.precision = header_precision(args.target, args.precision, model)
+    target = check_precision(args.target, args.precision)
+    check_model(target, model)
+    return model, target
 
 
 def fit_settings(args):

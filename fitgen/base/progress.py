@@ -76,3 +76,11 @@ class Progress:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def shown_while(label: str, note: str, work):
+    """``work()``'s result, a one-step bar saying ``note`` while it runs: a step of seconds (a large file read or
+    written) seen on a terminal, not a silence."""
+    with Progress(label, 1) as bar:
+        bar.update(0, note)
+        return work()
