@@ -891,10 +891,13 @@ def test_cli_schedule_capture_identify(tmp_path):
                           "its posterior unit.posterior.json was written for another unit")
     assert not (tmp_path / "e.json").exists()
     unit_file.write_text(text)
-    (tmp_path / "unit.posterior.json").write_text('{"theta": 1}')
-    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "t.csv"), "-o", str(tmp_path / "e.json"),
-                                  "--held-out", "50", "--family", "no-roots"), 2,
-                          f"unit file {unit_file}: its posterior unit.posterior.json is malformed")
+    record = json.loads((tmp_path / "unit.posterior.json").read_text())
+    # what check reads of it too: a zero or a capture's hash of another type had read as none recorded
+    for bad in ({"theta": 1}, {**record, "capture_zero": "abc"}, {**record, "capture_sha256": 5}):
+        (tmp_path / "unit.posterior.json").write_text(json.dumps(bad))
+        assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "t.csv"), "-o", str(tmp_path / "e.json"),
+                                      "--held-out", "50", "--family", "no-roots"), 2,
+                              f"unit file {unit_file}: its posterior unit.posterior.json is malformed")
 
 
 TWO_ADCS = "ads1115@0x48:0,1,2,3,ads1115@0x49:0,1,2,3"

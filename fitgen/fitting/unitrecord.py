@@ -452,7 +452,8 @@ def load_posterior(unit_path) -> dict | None:
         raise InputError(f"unit file {unit_path}: its posterior {name} {why} (identify writes it beside the unit "
                          f"file): {todo}") from None
     if not (isinstance(rec, dict) and isinstance(rec.get("theta"), list) and isinstance(rec.get("covariance"), list)
-            and isinstance(rec.get("drawing_spec"), str)):
+            and isinstance(rec.get("drawing_spec"), str)  # and what check reads: of another type, it had read as none
+            and isinstance(rec.get("capture_zero", {}), dict) and isinstance(rec.get("capture_sha256", ""), str)):
         raise InputError(f"unit file {unit_path}: its posterior {name} is malformed (expected fitgen identify's): "
                          f"{todo}")
     if not isinstance(rec.get("unit_sha256"), str):  # identify always writes it: without it no unit is checked
