@@ -1,4 +1,7 @@
+import pytest
+
 from conftest import CLEARED, assert_one_line_error, require_tool, run_cli
+from fitgen.base.errors import InputError
 
 
 def test_demo_runs_end_to_end(tmp_path):
@@ -91,13 +94,19 @@ def test_the_demo_writes_only_into_a_folder_of_its_own(tmp_path):
                                    "capture.csv, schedule.csv, check.csv and more there over files of those names: "
                                    "give a new or empty folder (--out)")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.csv"]
-    for held in ((), (MARK, "capture.csv"), ("paper-model.json", "capture.csv")):
+    demos = '{"fit": {"dataset": "old/paper-sim.csv"}}'  # as a demo before the mark wrote its model
+    for held in ((), (MARK, "capture.csv"), ("paper-model.json", "paper-sim.csv", "capture.csv")):
         folder = tmp_path / f"f{len(held)}{held[:1]}"
         folder.mkdir()
         for name in held:
-            (folder / name).write_text("")
+            (folder / name).write_text(demos if name == "paper-model.json" else "")
         _own_folder(folder)  # taken
     _own_folder(tmp_path / "none")
+    # a model of one's own named paper-model.json is not a demo's: its capture.csv had been written over
+    for model in ('{"fit": {"dataset": "capture.csv"}}', "not json", '{"fit": 1}'):
+        (folder / "paper-model.json").write_text(model)
+        with pytest.raises(InputError, match="holds files no earlier demo wrote"):
+            _own_folder(folder)
 
 
 def test_demo_bad_output_folder(tmp_path):

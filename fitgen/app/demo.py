@@ -20,11 +20,22 @@ def _own_folder(out: Path) -> None:
         held = sorted(p.name for p in out.iterdir())
     except OSError:  # none yet (or no folder: check_folder and make_folder say what it is)
         return
-    # paper-model.json: a folder a demo wrote before it marked its folders
-    if held and MARK not in held and "paper-model.json" not in held:
+    if held and MARK not in held and not _unmarked_demo(out, held):
         raise InputError(f"{out} holds files no earlier demo wrote ({', '.join(held[:3])}"
                          f"{', ...' if len(held) > 3 else ''}), and the demo writes capture.csv, schedule.csv, "
                          "check.csv and more there over files of those names: give a new or empty folder (--out)")
+
+
+def _unmarked_demo(out: Path, held: list) -> bool:
+    """Whether ``out`` is a folder a demo wrote before it marked its folders: its paper-model.json fitted on the
+    paper-sim.csv beside it (a model of one's own of that name is not the demo's)."""
+    import json
+
+    try:
+        data = json.loads((out / "paper-model.json").read_text())["fit"]["dataset"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    return isinstance(data, str) and Path(data).name == "paper-sim.csv" and "paper-sim.csv" in held
 
 
 def _stage(title: str) -> float:
