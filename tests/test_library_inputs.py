@@ -69,7 +69,7 @@ def test_observe_refuses_a_noise_that_is_no_noise(sensor, tmp_path):
     assert proc.returncode == 0, proc.stderr
 
 
-def test_fit_device_fits_the_family_its_settings_name_and_reads_units_from_the_sensor(sensor):
+def test_fit_device_fits_the_family_its_settings_name_and_reads_units_from_the_sensor(sensor, tmp_path):
     """fit_device's family had defaulted to auto, which replaced the settings' candidates without a word (integer
     asked, harmonics fitted); a dataset made in numpy without a meta was recorded as mT whatever the sensor read."""
     from fitgen.physics.simulate import grid_poses
@@ -85,6 +85,17 @@ def test_fit_device_fits_the_family_its_settings_name_and_reads_units_from_the_s
         fit_device(train, ("dx",), FitSettings(exponents=("1", "2")), sensor, held_out=0)
     bare = Dataset(train.inputs, train.targets, train.target_names)  # no meta: made in numpy
     assert fit_device(bare, ("dx",), FitSettings(), sensor, held_out=0).input_units == "V"
+    # made by hand: of no rows (numpy's 'zero-size array'), of another sensor's elements (fitted with its noise)
+    # and of one row, every input one value: too few rows, not a dead element (a scene's rows nearly all lifted)
+    for ds, said in ((Dataset(train.inputs[:0], train.targets[:0], train.target_names), "no rows"),
+                     (Dataset(train.inputs[:1], train.targets[:1], train.target_names), "the dataset has one row: too few to fit"),
+                     (Dataset(train.inputs[:, :5], train.targets, train.target_names), "8 elements; the data have 5")):
+        with pytest.raises(InputError, match=said):
+            fit_device(ds, ("dx",), FitSettings(), sensor, "all", held_out=0)
+    # numpy's numbers, as np.arange gives them: the model had fitted, then failed to save (int64 not serializable)
+    model = fit_device(train, ("dx",), FitSettings(max_terms=np.int64(3), noise=np.float32(1e-3), k=np.float64(2)),
+                       sensor, "all", held_out=0)
+    model.save(tmp_path / "m.json")
 
 
 def test_fit_leaves_out_rows_fitgen_simulate_lifted_off_the_skin(tmp_path):

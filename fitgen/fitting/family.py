@@ -226,6 +226,8 @@ def settings_family(settings: FitSettings) -> str:
 def check_dataset_sensor(ds: Dataset, sensor) -> None:
     """InputError when ``sensor`` is not the one ``ds`` was read with, as its meta records it (units, hash): its
     noise would be added to other readings, and figures held out on it would not be the model's."""
+    if sensor.n_elements != ds.n_inputs:  # a Dataset made by hand: its noise would be another sensor's
+        raise InputError(f"sensor {sensor.name} has {sensor.n_elements} elements; the data have {ds.n_inputs} inputs")
     units = ds.meta.get("units")
     if units in ("mT", "V") and sensor.units != units:
         raise InputError(f"the dataset's readings are in {units}; sensor {sensor.name} reads in {sensor.units} (its "

@@ -67,6 +67,9 @@ class FitSettings:
         return cls(noise=0.0, precision=None, **kw)
 
     def __post_init__(self):
+        for name, value in vars(self).items():  # numpy's numbers as Python's: the model file's JSON takes those only
+            if isinstance(value, np.generic):
+                object.__setattr__(self, name, value.item())
         # set in a notebook: said here, not as a float() of 'aic' or an argmin of nothing inside the search
         if not (self.k in ("aic", "bic") or (is_finite_number(self.k) and self.k > 0)):
             raise InputError("k, the penalty per term, is 'aic', 'bic' or a number > 0 (2 for AIC), "
@@ -291,8 +294,10 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
                          f"got {shown(settings.precision)}")
     noise = noise_to_add(ds, settings, sensor)
     v = ds.inputs
+    if len(v) < 2:  # a Dataset made by hand, or a scene's rows all but one lifted: not numpy's, not a dead element
+        raise InputError(f"the dataset has {'one row' if len(v) else 'no rows'}: too few to fit")
     lo, hi = v.min(axis=0), v.max(axis=0)
-    if len(flat := np.flatnonzero(lo == hi)):  # a domain of no width: every model file reader refuses it
+    if len(flat := np.flatnonzero(lo == hi)):  # a domain of no width, which every model file reader refuses
         raise InputError(f"{', '.join(f'v{k + 1}' for k in flat)} read{'s' if len(flat) == 1 else ''} one value on "
                          f"every row (v{flat[0] + 1}: {float(lo[flat[0]]):g}): a dead element, a broken wire, an empty "
                          "ADC channel, or an element saturated throughout carries nothing a model can use, nor can "
