@@ -88,7 +88,7 @@ def test_fit_device_fits_the_family_its_settings_name_and_reads_units_from_the_s
     # made by hand: of no rows (numpy's 'zero-size array'), of another sensor's elements (fitted with its noise)
     # and of one row, every input one value: too few rows, not a dead element (a scene's rows nearly all lifted)
     for ds, said in ((Dataset(train.inputs[:0], train.targets[:0], train.target_names), "no rows"),
-                     (Dataset(train.inputs[:1], train.targets[:1], train.target_names), "the dataset has one row: too few to fit"),
+                     (Dataset(train.inputs[:1], train.targets[:1], train.target_names), "one row: too few to fit"),
                      (Dataset(train.inputs[:, :5], train.targets, train.target_names), "8 elements; the data have 5")):
         with pytest.raises(InputError, match=said):
             fit_device(ds, ("dx",), FitSettings(), sensor, "all", held_out=0)
