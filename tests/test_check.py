@@ -602,3 +602,14 @@ def test_the_library_refuses_a_sensor_that_is_not_the_models_or_the_datasets(twi
     with pytest.raises(InputError, match="the dataset's readings are in V; sensor .* reads in mT"):
         fit_device(train, ("dx",), FitSettings(), sensor.with_transfer("raw"), held_out=10)
     assert check(model, y, poses, sensor, ROW_NOISE).failed() == []  # its own: as before
+
+
+def test_checks_words_on_a_capture_without_meta_name_no_option_it_lacks():
+    """fitgen check printed '--noise takes the rows' own' of a capture without a meta: check has no --noise."""
+    from fitgen.fitting.unitrecord import row_noise
+    from fitgen.physics.sensor import load_sensor
+
+    paper = load_sensor("paper")
+    assert "(no meta names the samples per row: --noise takes the rows' own)" in row_noise({}, paper)[1]
+    noise, said = row_noise({}, paper, option="")
+    assert said.endswith("over sqrt(1) samples (no meta names the samples per row)") and len(noise) == 8, said

@@ -219,7 +219,7 @@ def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float 
         rig_error, rig_said = check_rig(posterior, ds.meta, capture, unit_file)
     if zero_error is None:
         zero_error, said = check_zero(posterior, ds.meta, capture)
-    noise, source = row_noise(ds.meta, sensor)
+    noise, source = row_noise(ds.meta, sensor, option="")  # check has no --noise
     result = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior, rig_error=rig_error,
                    zero_error=zero_error, precision=precision or device_precision(model))
     return replace(result, zero_said=said, rig_said=rig_said), source

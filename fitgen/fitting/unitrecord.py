@@ -144,15 +144,18 @@ def _measured(meta: dict, key: str, n: int) -> list[float] | None:
     return values if ok else None
 
 
-def row_noise(meta: dict, sensor: Sensor, noise: float | None = None) -> tuple[np.ndarray, str]:
+def row_noise(meta: dict, sensor: Sensor, noise: float | None = None,
+              option: str = "--noise") -> tuple[np.ndarray, str]:
     """The reading noise of a capture's rows, per element, and where it came from: ``noise`` (the device's
     single-sample noise) over sqrt(samples per row), else the noise the capture measured, else the noise a
-    simulated capture was made with (``fitgen simulate --noise``), else the sensor file's over sqrt(samples)."""
+    simulated capture was made with (``fitgen simulate --noise``), else the sensor file's over sqrt(samples).
+    ``option``: the command's option that gives ``noise``, for the words ('': it has none)."""
     n = sensor.n_elements
     samples = samples_per_row(meta) or 1
     # a capture without its meta (a rig's own logger): rows averaged over 16 would be weighed 4x too loosely
+    told = f": {option} takes the rows' own" if option else ""
     over = f"over sqrt({samples}) samples" + ("" if samples_per_row(meta) else
-                                              " (no meta names the samples per row: --noise takes the rows' own)")
+                                              f" (no meta names the samples per row{told})")
     if noise is not None:
         return np.full(n, noise / np.sqrt(samples)), f"--noise {noise:g} {over}"
     units = f" {meta['units']}" if isinstance(meta.get("units"), str) else ""
