@@ -108,7 +108,7 @@ def test_check_poses_are_random_in_the_working_box_in_contact_and_within_the_lin
     assert np.array_equal(load_schedule(tmp_path / "c.csv").poses, poses)
     proc = run_cli("fitgen", "schedule", "--check", "5", "--axes", "dx,thx", "-o", str(tmp_path / "t.csv"))
     assert proc.returncode == 0 and "(dx -1.88..1.88 mm, thx -5..5 deg from first contact, 0.12 mm inside the working box's edges" in proc.stderr, proc.stderr
-    for bad, said in ((["--check", "0"], "--check must be 1..10000"),
+    for bad, said in ((["--check", "0"], "--check must be a whole number 1..10000"),
                       (["--check", "5", "--limits", "dz=1:2"], "leave it no room"),
                       (["--seed", "3"], "--seed goes with --check"),
                       (["--check", "5", "--axes", "dq"], "--axes takes distinct names"),  # a traceback before

@@ -538,7 +538,7 @@ def test_schedule_is_d_optimal_within_limits(drawing, plan):
     (["--samples", "0"], "--samples must be a whole number >= 1, got 0"),
     (["--samples", "-4"], "--samples must be a whole number >= 1, got -4"),
     (["--samples", "1.5"], "--samples '1.5' is not a whole number"),
-    (["--n", "9"], "--n must be 10..10000 (identify needs at least 10 rows), got 9"),
+    (["--n", "9"], "--n must be a whole number 10..10000 (identify needs at least 10 rows), got 9"),
     (["--rig-error", "-0.01"], "the rig error must be 0..0.5 mm (a printer's is 0.01-0.1), got -0.01"),
     (["--limits", "dz=1:2"], "the limits of dz (1..2) leave it no room to move within the sensor's travel (-3..0)"),
     (["--axes", "dy,dz", "--limits", "dx=-1:1"], "--limits gives dx, which --axes (dy,dz) does not move"),

@@ -1,6 +1,8 @@
 """The library as a notebook meets it: inputs that a CLI never passes (its parser refuses them first) give one
 clear InputError, or are taken as documented, rather than a numpy error deep inside or a plausible wrong figure."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -122,3 +124,24 @@ def test_a_reading_noise_past_floats_range_or_of_another_shape_is_one_line(bad):
     with pytest.raises(InputError, match="the rows' noise"):
         element_noise(bad, 8, "the rows' noise")
     assert np.array_equal(element_noise(2, 3, "noise"), [2.0, 2.0, 2.0])
+
+
+def test_counts_seeds_noise_and_accuracies_from_a_notebook_are_one_inputerror(sensor):
+    """A count of 40.0, a seed of -1 or 1.5, a noise of 0, an accuracy of one figure or of -1: numpy's, range()'s
+    or SeedSequence's errors from deep inside, a sensor file blamed, or 'NOT resolvable to -1 mm'."""
+    from fitgen.fitting.schedule import check_schedule, schedule
+
+    for call, said in ((lambda: pose_rng(-1), "a seed must be a whole number >= 0, got -1"),
+                       (lambda: pose_rng(1.5), "a seed must be a whole number >= 0, got 1.5"),
+                       (lambda: random_poses(10.0, DEFAULT_RANGES, pose_rng(1)), "whole number 1..5,000,000, got 10.0"),
+                       (lambda: schedule(sensor, 40.0), "--n must be a whole number 10..10000"),
+                       (lambda: schedule(sensor, 12, noise=0), "noise, the rows' reading noise, must be a finite"),
+                       (lambda: check_schedule(sensor, 30.0), "--check must be a whole number 1..10000"),
+                       (lambda: check_schedule(sensor, 5, seed=-1), "a seed must be a whole number >= 0"),
+                       (lambda: observe(sensor, DEFAULT_RANGES, accuracy=0.001), "accuracy is a dict of pose"),
+                       (lambda: observe(sensor, DEFAULT_RANGES, accuracy={"dx": -1}), "accuracy dx must be a finite")):
+        with pytest.raises(InputError, match=re.escape(said)):
+            call()
+    ds = simulate(sensor, random_poses(np.int64(30), DEFAULT_RANGES, pose_rng(np.int64(2))))  # numpy's whole numbers
+    with pytest.raises(InputError, match="held_out must be a whole number of poses >= 0, got 2.5"):
+        fit_device(ds, ("dx",), FitSettings(), sensor, "all", held_out=2.5)

@@ -215,3 +215,19 @@ def test_a_scene_grid_raised_and_a_box_past_the_travel_are_said(tmp_path):
     proc = run_cli("fitgen", "simulate", "--scene", str(scene), "-o", str(tmp_path / "w.csv"))
     assert proc.returncode == 0 and "note:" not in proc.stderr, proc.stderr
     assert "note:" not in run_cli("fitgen", "observe", "--scene", str(scene)).stderr
+
+
+def test_a_scene_given_as_a_scene_or_named_empty(tmp_path):
+    """load_scene(PRESETS['slide']), as docs/python.md hands a Scene out, had raised 'unhashable type: dict'; a
+    file's name = "" had printed 'scene :' in every line."""
+    from fitgen.base.errors import InputError
+    from fitgen.physics.posesource import choose_poses
+    from fitgen.physics.scenes import PRESETS, load_scene
+    from fitgen.physics.sensor import load_sensor
+
+    assert load_scene(PRESETS["slide"]) is PRESETS["slide"]
+    poses, info = choose_poses(scene=PRESETS["slide"], sensor=load_sensor("paper"))
+    assert len(poses) and not poses[:, 3:].any() and info["scene_spec"] == "slide"  # no tilt; fit finds it by name
+    (tmp_path / "s.toml").write_text('name = ""\noutputs = ["dx"]\n')
+    with pytest.raises(InputError, match="'name' must be a string, not empty"):
+        load_scene(str(tmp_path / "s.toml"))

@@ -20,6 +20,12 @@ class RowError(InputError):
         return f"{self.before}{number}{self.after}"
 
 
+def is_whole_number(val) -> bool:
+    """Whether ``val`` is a whole number as Python or numpy holds one (np.int64(3)), not a bool nor a float (40.0:
+    range() and numpy's seeds refuse it deep inside)."""
+    return isinstance(val, numbers.Integral) and not isinstance(val, bool)
+
+
 def is_finite_number(val) -> bool:
     """Whether ``val`` is a finite JSON number (not a bool), or a numpy one a notebook passes (np.float32(6)); an
     integer past float's range is not (JSON holds any, and float() of it raises)."""

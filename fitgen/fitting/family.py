@@ -20,7 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, is_whole_number, shown
 from fitgen.physics.dataset import Dataset
 from fitgen.fitting.fit import FitSettings, fit_model, noise_to_add, ring_harmonics
 from fitgen.fitting.holdout import N_POSES, box_of, deployed_errors, held_out_set
@@ -247,6 +247,8 @@ def fit_device(ds: Dataset, outputs, settings: FitSettings, sensor, family: str 
     from fitgen.fitting.holdout import fitted_held_out, unit_posterior
 
     family = settings_family(settings) if family is None else family
+    if not (is_whole_number(held_out) and held_out >= 0):  # range() of 2.5 inside the held-out set, else
+        raise InputError(f"held_out must be a whole number of poses >= 0, got {shown(held_out)}")
     if sensor is not None:
         check_dataset_sensor(ds, sensor)
     hold = bool(held_out) and sensor is not None

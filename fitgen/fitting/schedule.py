@@ -29,7 +29,7 @@ import json
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, is_finite_number, is_whole_number, shown
 from fitgen.base.fileio import write_all
 from fitgen.fitting.capturecheck import MIN_DISTINCT, MIN_ROWS, check_error
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR, Problem, unit_space
@@ -193,10 +193,13 @@ def schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: dict |
     ``zero_error`` keeps it (:func:`capture_candidates`), and a record of how they were chosen.
     ``progress(done, total, note)``."""
     axes = checked_axes(axes, ranges)
-    if n < MIN_ROWS or n > 10000:
-        raise InputError(f"--n must be {MIN_ROWS}..10000 (identify needs at least {MIN_ROWS} rows), got {n}")
+    if not is_whole_number(n) or n < MIN_ROWS or n > 10000:
+        raise InputError(f"--n must be a whole number {MIN_ROWS}..10000 (identify needs at least {MIN_ROWS} rows), "
+                         f"got {shown(n)}")
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
+    if noise is not None and not (is_finite_number(noise) and noise > 0):  # given: not the sensor file's to blame
+        raise InputError(f"noise, the rows' reading noise, must be a finite number > 0, got {shown(noise)}")
     noise = drawing.noise if noise is None else noise
     if not noise > 0:
         raise InputError(f"the schedule needs the reading noise > 0: {missing_noise(drawing)}: add it to the file, "
@@ -254,8 +257,10 @@ def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: 
     the elements' linear range; and a record of how they were drawn.
     Random, not chosen: a check measures the estimator where it is used, not where it learns most."""
     axes = checked_axes(axes, ranges)
-    if not 1 <= n <= 10000:
-        raise InputError(f"--check must be 1..10000 poses, got {n}")
+    if not (is_whole_number(n) and 1 <= n <= 10000):
+        raise InputError(f"--check must be a whole number 1..10000 of poses, got {shown(n)}")
+    if not (is_whole_number(seed) and seed >= 0):  # SeedSequence's own words name no seed
+        raise InputError(f"a seed must be a whole number >= 0, got {shown(seed)}")
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
     box = capture_box(drawing, axes, ranges, working=True, rig_error=rig_error, zero_error=zero_error)

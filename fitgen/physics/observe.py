@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fitgen.base.errors import InputError, is_finite_number
+from fitgen.base.errors import InputError, is_finite_number, shown
 from fitgen.physics.pose import (POSE_NAMES, POSE_UNITS, as_poses, board_clearance, check_above_board, check_box,
                                  check_pose_range, field_readings, pose_label)
 from fitgen.physics.sensor import Sensor
@@ -257,6 +257,11 @@ def observe(sensor: Sensor, ranges: dict, components=POSE_NAMES, noise: float | 
             raise InputError(f"observe's pose box gives {name} from {lo:g} to {hi:g}: lo must not exceed hi")
         check_pose_range(name, lo, hi, "observe")
     check_box(sensor, ranges, "observe")
+    if accuracy is not None and not isinstance(accuracy, dict):  # one figure for all: which unit, mm or deg?
+        raise InputError(f"accuracy is a dict of pose components' figures, e.g. {{'dz': 0.05}}, got {shown(accuracy)}")
+    bad = next((c for c, v in (accuracy or {}).items() if not (is_finite_number(v) and v > 0)), None)
+    if bad is not None:  # the command's --accuracy says as much; a notebook's -1 had read as 'NOT resolvable to -1'
+        raise InputError(f"accuracy {bad} must be a finite number > 0, got {shown(accuracy[bad])}")
     extra = [c for c in (accuracy or {}) if c not in components]
     if extra:  # it would be ignored: say so rather than judge without it
         raise InputError(f"an accuracy is asked for {extra[0]}, which is not among the outputs estimated "

@@ -10,7 +10,7 @@ import numpy as np
 from fitgen.base.errors import InputError
 from fitgen.physics.dataset import load_poses
 from fitgen.physics.pose import check_box
-from fitgen.physics.scenes import PRESETS, load_scene
+from fitgen.physics.scenes import PRESETS, Scene, load_scene
 from fitgen.physics.simulate import grid_poses, parse_grid, parse_ranges, pose_rng, random_poses
 
 
@@ -34,8 +34,10 @@ def choose_poses(*, grid: str | None = None, random: int | None = None, poses: s
                          "ignored)")
     if scene:
         sc = load_scene(scene)
-        # a scene file by its absolute path, so that fit finds it from any folder
-        spec = scene if scene in PRESETS else str(Path(scene).resolve())
+        if isinstance(scene, Scene):  # made in Python: a preset by its name, else none that fit could find
+            spec = sc.name if PRESETS.get(sc.name) == sc else None
+        else:  # a scene file by its absolute path, so that fit finds it from any folder
+            spec = scene if scene in PRESETS else str(Path(scene).resolve())
         scene_info = {"scene": sc.name, "scene_spec": spec, "scene_outputs": list(sc.outputs)}
         if random is None:
             sc = sc.with_rows(min_rows)

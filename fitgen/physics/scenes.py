@@ -64,10 +64,12 @@ def preset_sizes() -> tuple[tuple[str, int], ...]:
     return tuple((name, len(sc.outputs)) for name, sc in PRESETS.items())
 
 
-def load_scene(spec: str | None) -> Scene:
-    """A preset name (full, slide, press) or a TOML file with ``outputs``, ``[ranges]``, ``levels``."""
+def load_scene(spec) -> Scene:
+    """A preset name (full, slide, press), a TOML file with ``outputs``, ``[ranges]``, ``levels``, or a Scene."""
     if spec is None:
         return PRESETS["full"]
+    if isinstance(spec, Scene):  # a notebook's own, or a preset as docs/python.md hands it out
+        return spec
     if spec in PRESETS:
         return PRESETS[spec]
     path = Path(spec)
@@ -101,8 +103,8 @@ def load_scene(spec: str | None) -> Scene:
     if isinstance(levels, bool) or not isinstance(levels, int) or not 2 <= levels <= 101:
         raise InputError(f"{origin}: 'levels' must be a whole number 2..101")
     name = data.get("name", path.stem)
-    if not isinstance(name, str):
-        raise InputError(f"{origin}: 'name' must be a string")
+    if not isinstance(name, str) or not name.strip():  # every line names the scene: "scene :" says nothing
+        raise InputError(f"{origin}: 'name' must be a string, not empty (or leave it out: the file's stem)")
     held = [o for o in outputs if ranges[o][0] == ranges[o][1]]
     if held:
         raise InputError(f"{origin}: output {held[0]} is held at {ranges[held[0]][0]:g}: there is nothing to "

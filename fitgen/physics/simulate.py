@@ -9,7 +9,7 @@ import numpy as np
 
 from fitgen import __version__
 from fitgen.physics.dataset import Dataset
-from fitgen.base.errors import InputError, is_finite_number, shown
+from fitgen.base.errors import InputError, is_finite_number, is_whole_number, shown
 from fitgen.physics.pose import POSE_NAMES, as_poses, check_pose_range, field_readings, off_skin, pose_label
 from fitgen.physics.sensor import TRANSFERS, Sensor
 from fitgen.physics.transfer import past_linear, readings
@@ -97,8 +97,8 @@ def parse_ranges(spec: str | None, base: dict[str, tuple[float, float]] | None =
 
 def random_poses(n: int, ranges: dict[str, tuple[float, float]], rng: np.random.Generator) -> np.ndarray:
     """``n`` poses uniform in the box ``ranges`` ({pose name: (low, high)}; a component it leaves out stays 0)."""
-    if not 1 <= n <= MAX_POSES:
-        raise InputError(f"number of random poses must be 1..{MAX_POSES:,}, got {n}")
+    if not (is_whole_number(n) and 1 <= n <= MAX_POSES):
+        raise InputError(f"number of random poses must be a whole number 1..{MAX_POSES:,}, got {shown(n)}")
     odd = [k for k in ranges if k not in POSE_NAMES]
     if odd:
         raise InputError(f"ranges name {', '.join(map(str, odd))}, no pose component ({', '.join(POSE_NAMES)})")
@@ -196,6 +196,8 @@ def rig_poses(labels: np.ndarray, rig_error: float, rng: np.random.Generator, ze
 
 def pose_rng(seed: int) -> np.random.Generator:
     """The random stream for pose sampling (independent of the noise stream)."""
+    if not (is_whole_number(seed) and seed >= 0):  # SeedSequence's own words name no seed
+        raise InputError(f"a seed must be a whole number >= 0, got {shown(seed)}")
     return np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[0])
 
 
