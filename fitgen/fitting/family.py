@@ -253,8 +253,8 @@ def fit_device(ds: Dataset, outputs, settings: FitSettings, sensor, family: str 
         check_dataset_sensor(ds, sensor)
     hold = bool(held_out) and sensor is not None
     posterior = unit_posterior(unit_file, sensor) if hold else None  # said before the fit's seconds, not after
-    if sensor is not None and ds.meta.get("adc_bits") is not None:  # simulate --adc-bits: held out through that ADC
-        sensor = with_adc_bits(sensor, ds.meta["adc_bits"])
+    if (bits := ds.meta.get("adc_bits")) is not None and sensor is not None:  # simulate --adc-bits: its ADC
+        sensor = with_adc_bits(sensor, bits)
     model, record = fit_family(ds, outputs, settings, sensor, family, progress, again=again)
     if problem := model.float_problem() if settings.precision == "float" else "":
         raise InputError(f"{problem} (--precision double fits it for double); nothing written")
@@ -262,4 +262,6 @@ def fit_device(ds: Dataset, outputs, settings: FitSettings, sensor, family: str 
     if hold:
         model.fit_info["held_out"] = fitted_held_out(model, sensor, ds, held_out, unit_file, note=note,
                                                      posterior=posterior)
+        if bits is not None:  # the sensor's file as read through it, for fixed point's codes (dataset_sensor)
+            model.fit_info["held_out"]["adc_bits"] = bits
     return model

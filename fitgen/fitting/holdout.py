@@ -62,8 +62,7 @@ def held_out_set(sensor, ranges: dict, outputs: tuple[str, ...], *, noise: float
     truth = poses[:, cols]
     spec = {"poses": n, "seed": seed, "box": {k: list(v) for k, v in ranges.items()}, "noise": noise, "labels": labels,
             "noise_draws": draws, "noise_seeds": [first, first + draws - 1], "sensor": sensor.name,
-            "sensor_sha256": sensor.sha256, "transfer": sensor.transfer,
-            "adc_bits": (sensor.raw if sensor.transfer == "raw" else sensor.gmr).adc_bits}
+            "sensor_sha256": sensor.sha256, "transfer": sensor.transfer}
     return HeldOut(clean, truth, noisy, np.tile(truth, (draws, 1)), spec)
 
 
