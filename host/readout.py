@@ -19,6 +19,8 @@ import numpy as np
 
 from fitgen.physics.dataset import load_dataset
 from fitgen.base.errors import InputError
+from fitgen.fitting.holdout import fitted_sensor_spec
+from fitgen.physics.pose import contact_poses
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
 from fitgen.physics.transfer import readings
@@ -106,8 +108,6 @@ def rest_reference(spec: str, n_inputs: int) -> np.ndarray:
     """The readings the model expects at rest: a dataset's rows at pose 0 (averaged), or a sensor's
     physics at pose 0 in its ``gmr`` transfer (volts)."""
     if spec.lower().endswith(".csv"):
-        from fitgen.physics.pose import contact_poses
-
         ds = load_dataset(spec, min_rows=1)
         if ds.meta.get("units", "V") != "V":
             raise InputError(f"--rest {spec}: its readings are in {ds.meta['units']}; the ADCs give volts (a dataset "
@@ -131,8 +131,6 @@ def model_rest(model, rest: str | None = None, required: bool = True) -> tuple[n
     --rest takes it), else the sensor file the model was fitted on where it is found here unchanged, else the rest
     the model recorded. InputError when the model reads them as a pose far from rest, and when there are none
     (None then, unless ``required``)."""
-    from fitgen.fitting.holdout import fitted_sensor_spec
-
     own = None if rest else fitted_sensor_spec(model)
     if rest or own:
         reference = rest_reference(rest or own, model.n_inputs)
@@ -216,6 +214,10 @@ def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = 
     to a unit's twin, which a tare would map every reading onto; ``advice``: what the message then tells to do;
     ``degc``: the temperature they were read at (:func:`rest_degc`), which the message names where it is not the
     unit's."""
+    never = [f"{c} {lo:g}..{hi:g}" for c, (lo, hi) in model.pose_box.items() if not lo <= 0 <= hi]
+    if never:  # no rest in it to tare onto: not another sensor's, and no --rest mends it
+        raise InputError(f"the model was fitted on poses that never rest ({', '.join(never)}): a tare needs one whose "
+                         "pose box reaches rest (0 in every component): fit on such poses, or leave the tare out")
     ref = np.asarray(reference, dtype=float)
     span = model.input_max - model.input_min
     # the estimate of clamped inputs can look like rest (a two-ring model at the paper's rest: dz -0.28 mm), so the
@@ -256,10 +258,8 @@ def unit_limit(spread) -> tuple[float, float] | None:
     """(the rms over the elements of ``spread``, per element how far the rest readings of units built to one drawing
     spread; TARE_UNIT_SHARE of it, past which rest readings are more likely another unit's than this one's drifted),
     in V; None for None."""
-    if spread is None:
-        return None
-    between = float(np.sqrt(np.mean(np.square(spread))))
-    return between, TARE_UNIT_SHARE * between
+    between = None if spread is None else float(np.sqrt(np.mean(np.square(spread))))
+    return None if between is None else (between, TARE_UNIT_SHARE * between)
 
 
 def another_unit_note(model, offsets) -> str:

@@ -543,3 +543,19 @@ def test_a_rest_captures_damaged_row_temperatures_are_read_as_none_recorded(tmp_
     for row_degc, said in ((5, 30.0), ([31.0], 31.0)):
         (tmp_path / "c.csv.meta.json").write_text(json.dumps({"row_degc": row_degc, "thermistor_degc": 30.0}))
         assert rest_degc(str(cap)) == said
+
+
+def test_a_tare_on_a_model_fitted_where_the_sensor_never_rests_says_so(tmp_path):
+    """A scene pressed 0.5-1.5 mm throughout: its model cannot read rest, and the tare's refusal had called the
+    model's own sensor 'another sensor's' and advised a --rest that failed the same way."""
+    (tmp_path / "tilt.toml").write_text('name = "tilt"\noutputs = ["dx", "thx", "thy"]\n[ranges]\ndx = [-1.5, 1.5]\n'
+                                        'dy = [0, 0]\ndz = [-1.5, -0.5]\nthx = [-5, 5]\nthy = [-5, 5]\n')
+    for argv in (["simulate", "--scene", str(tmp_path / "tilt.toml"), "--transfer", "gmr", "-o", "t.csv"],
+                 ["fit", "t.csv", "-o", "t.json", "--family", "no-roots", "--force", "--max-terms", "4",
+                  "--held-out", "50"]):
+        proc = run_cli("fitgen", *argv, cwd=tmp_path)
+        assert proc.returncode == 0, proc.stderr
+    for rest in ([], ["--rest", "paper"]):
+        assert_one_line_error(run_cli("tactile-host", "read", "--model", "t.json", "--adc", TWO_CHIPS, "--simulate",
+                                      "dx=0.5,dz=-1", "--tare", "--count", "1", *rest, cwd=tmp_path),
+                              2, "the model was fitted on poses that never rest (dz -1.5..-0.5)")
