@@ -111,6 +111,21 @@ def test_the_tempcomp_functions_linkage_can_be_chosen(tmp_path):
     assert "tm_tempcomp" in subprocess.run(["nm", str(tmp_path / "ext.o")], capture_output=True, text=True).stdout
 
 
+def test_tempcomp_c_does_not_write_over_its_own_input(tmp_path):
+    """A compensation file named DIR/tm_tempcomp.h: tempcomp-c -o DIR had written the header over it, exit 0."""
+    folder = tmp_path / "out"
+    folder.mkdir()
+    d = Drift.typical(8)
+    TempComp(25.0, d.offset_tc, d.gain_tc).save(folder / "tc.json")
+    (folder / "tm_tempcomp.h").write_bytes((folder / "tc.json").read_bytes())
+    kept = (folder / "tm_tempcomp.h").read_text()
+    assert_one_line_error(run_cli("tactile-host", "tempcomp-c", str(folder / "tm_tempcomp.h"), "-o", str(folder)),
+                          contains=f"the file written {folder / 'tm_tempcomp.h'} is the input")
+    assert (folder / "tm_tempcomp.h").read_text() == kept
+    proc = run_cli("tactile-host", "tempcomp-c", str(folder / "tm_tempcomp.h"), "-o", str(folder), "--prefix", "x")
+    assert proc.returncode == 0 and "x_tempcomp(" in (folder / "x_tempcomp.h").read_text(), proc.stderr
+
+
 @pytest.mark.parametrize("content, said", [
     ({"offset_v_per_degc": [], "gain_per_degc": []}, "no element"),
     ({"offset_v_per_degc": [1e300], "gain_per_degc": [-1e300]}, "does not fit in a float"),
