@@ -324,3 +324,7 @@ def test_fit_holds_out_and_plans_fixed_point_through_the_adc_simulate_read_the_r
     assert (tmp_path / "option.csv").read_text() == (tmp_path / "file.csv").read_text()
     assert models["option"]["adc_bits"] == 6 and "adc_bits" not in models["file"]  # the file's own says it
     assert models["option"]["errors"] == models["file"]["errors"]
+    # the record names the preset as its file is (a moved folder finds a file by that hash), and the drawing's
+    # units flashed uncalibrated are read through the same ADC
+    assert models["option"]["sensor_sha256"] == load_sensor("paper").sha256
+    assert models["option"]["uncalibrated"] == models["file"]["uncalibrated"]

@@ -34,14 +34,16 @@ def fitted_input_scale(model: Model) -> tuple[float, float, str] | None:
     (:func:`sensor_input_scale` of its sensor): the sensor its held-out record names, where found here
     unchanged (a sensor file too), else the preset whose hash the fit notes give; None when neither is."""
     from fitgen.physics.sensor import load_sensor, preset_names
-    from fitgen.physics.simulate import dataset_sensor
+    from fitgen.physics.simulate import dataset_sensor, with_adc_bits
 
     info = model.fit_info if isinstance(model.fit_info, dict) else {}
     rec = info.get("held_out")
     if isinstance(rec, dict) and isinstance(rec.get("sensor"), str):
         try:
             held = dataset_sensor(rec)
-        except InputError:  # a recorded file that no longer reads as a sensor
+            if held is not None and rec.get("adc_bits") is not None:  # simulate --adc-bits's ADC, not the file's
+                held = with_adc_bits(held, rec["adc_bits"])
+        except InputError:  # a recorded file that no longer reads as a sensor, bits that are none
             held = None
         if held is not None and held.units == model.input_units:
             lsb, offset, what = sensor_input_scale(held)

@@ -253,15 +253,13 @@ def fit_device(ds: Dataset, outputs, settings: FitSettings, sensor, family: str 
         check_dataset_sensor(ds, sensor)
     hold = bool(held_out) and sensor is not None
     posterior = unit_posterior(unit_file, sensor) if hold else None  # said before the fit's seconds, not after
-    if (bits := ds.meta.get("adc_bits")) is not None and sensor is not None:  # simulate --adc-bits: its ADC
-        sensor = with_adc_bits(sensor, bits)
-    model, record = fit_family(ds, outputs, settings, sensor, family, progress, again=again)
+    # the rows simulate --adc-bits read through that ADC: the fit's validation too (the held-out record's, below)
+    read = sensor if sensor is None or ds.meta.get("adc_bits") is None else with_adc_bits(sensor, ds.meta["adc_bits"])
+    model, record = fit_family(ds, outputs, settings, read, family, progress, again=again)
     if problem := model.float_problem() if settings.precision == "float" else "":
         raise InputError(f"{problem} (--precision double fits it for double); nothing written")
     model.fit_info["family"] = record
     if hold:
         model.fit_info["held_out"] = fitted_held_out(model, sensor, ds, held_out, unit_file, note=note,
                                                      posterior=posterior)
-        if bits is not None:  # the sensor's file as read through it, for fixed point's codes (dataset_sensor)
-            model.fit_info["held_out"]["adc_bits"] = bits
     return model

@@ -21,7 +21,7 @@ from fitgen.base.errors import InputError
 from fitgen.equations.model import Model
 from fitgen.equations.rounding import PRECISIONS
 from fitgen.physics.pose import POSE_NAMES
-from fitgen.physics.simulate import pose_rng, random_poses, simulate
+from fitgen.physics.simulate import pose_rng, random_poses, simulate, with_adc_bits
 from fitgen.physics.transfer import readings, sensor_hashes
 
 N_POSES = 2000
@@ -266,11 +266,16 @@ def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None,
     # the deployed figures are with the sensor's noise (conventions.md): a fit for none (--noise 0, the paper's
     # procedure) is still read by a device that has it
     noise = model.fit_info["noise"]["device"] or sensor.noise
+    file_sha, bits = sensor.sha256, ds.meta.get("adc_bits")
+    if bits is not None:  # simulate --adc-bits: through that ADC, the record naming the file's sensor and the bits
+        sensor = with_adc_bits(sensor, bits)
     if note:
         note(f"{n} random poses, {noise or 0:g} noise"
              + (", units from the identification's posterior" if posterior else ""))
     record = evaluate(model, sensor, box_of(ds.poses()), noise=noise, n=n, posterior=posterior,
                       labels=ds.meta.get("labels", "stage"))
+    if bits is not None:  # its file found again by that hash (a moved folder; fixed point's codes, with the bits)
+        record.update(sensor_sha256=file_sha, adc_bits=bits)
     # what a tare rests on where the sensor's file is not at hand (the model alone copied to a Pi)
     record["rest"] = readings(sensor, np.zeros(5), adc_bits=0)[0].tolist()
     if (spread := rest_spread(sensor, posterior)) is not None:  # what a tare onto another unit's rest would take
@@ -279,7 +284,7 @@ def fitted_held_out(model: Model, sensor, ds, n: int, unit_file=None, note=None,
         record["sensor_file"] = str(Path(unit_file).resolve())
         if sensor.is_drawing:  # a record without it, with a file, is a unit's (as models fitted before it say)
             record["drawing"] = True
-    if posterior is None and sensor.is_drawing and ds.meta.get("sensor_sha256") == sensor.sha256:
+    if posterior is None and sensor.is_drawing and ds.meta.get("sensor_sha256") == file_sha:
         # the drawing's own model: what it does on the units people build from the drawing, if not calibrated
         if note:
             note(f"{UNCALIBRATED_UNITS} units built within the drawing's tolerances")
@@ -467,6 +472,8 @@ def clean_readings(model: Model, sensor=None) -> tuple[np.ndarray, np.ndarray] |
     sensor = sensor or dataset_sensor(rec)
     if sensor is None:
         return None
+    if rec.get("adc_bits") is not None:  # the readings simulate --adc-bits made, read again through that ADC
+        sensor = with_adc_bits(sensor, rec["adc_bits"])
     held = held_out_set(sensor, {k: tuple(v) for k, v in rec["box"].items()}, model.output_names,
                         n=int(rec["poses"]), seed=int(rec["seed"]), draws=0, labels=rec.get("labels", "stage"))
     return held.clean, held.truth

@@ -226,12 +226,7 @@ def dataset_sensor(meta: dict, spec: str | None = None, n_inputs: int | None = N
         sensor = sensor.with_transfer("raw" if meta["units"] == "mT" else "gmr")
     if given and (problem := other_sensor_problem(meta, sensor, spec)):
         raise InputError(f"{problem} (leave --sensor out)")
-    # a held-out record names the sensor as read, through its ADC (simulate --adc-bits); a dataset's meta the file's
-    read = sensor if meta.get("adc_bits") is None else with_adc_bits(sensor, meta["adc_bits"])
-    if meta.get("sensor_sha256") == read.sha256:
-        sensor = read
-    elif spec in (meta.get("sensor"), meta.get("sensor_file")) and meta.get("sensor_sha256") not in (None,
-                                                                                                  sensor.sha256):
+    if spec in (meta.get("sensor"), meta.get("sensor_file")) and meta.get("sensor_sha256") not in (None, sensor.sha256):
         return None
     if n_inputs is not None and sensor.n_elements != n_inputs:
         raise InputError(f"the dataset has {n_inputs} input columns, its sensor {sensor.name} {sensor.n_elements} "
