@@ -208,16 +208,16 @@ def _another(model, degc: float | None) -> str:
 
 def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = REST_ADVICE,
                          degc: float | None = None) -> None:
-    """InputError when the rest readings ``reference`` (from ``spec``) lie outside the inputs ``model`` was fitted on
-    by more than REST_DOMAIN_SHARE of their span, or when it reads them as a pose far from rest, by more than a
-    quarter of its fitted box's width (the default box's without one): another sensor's rest, as the drawing's is
-    to a unit's twin, which a tare would map every reading onto; ``advice``: what the message then tells to do;
-    ``degc``: the temperature they were read at (:func:`rest_degc`), which the message names where it is not the
-    unit's."""
-    never = [f"{c} {lo:g}..{hi:g}" for c, (lo, hi) in model.pose_box.items() if not lo <= 0 <= hi]
+    """InputError when ``model``'s pose box stops short of rest by as much as below; when the rest readings
+    ``reference`` (from ``spec``) lie outside its inputs by over REST_DOMAIN_SHARE of their span, or it reads them as
+    a pose over REST_SHARE of its box's width from rest: another sensor's rest, which a tare would map every reading
+    onto. ``advice``: what the message then tells to do; ``degc``: when they were read (:func:`rest_degc`)."""
+    near = {c: (lo, hi, max(REST_SHARE * (hi - lo), REST_FLOOR["deg" if c[0] == "t" else "mm"]))
+            for c, (lo, hi) in model.pose_box.items()}  # random poses' box stops short of 0: near it is rest too
+    never = [f"{c} {lo:g}..{hi:g}" for c, (lo, hi, m) in near.items() if not lo - m <= 0 <= hi + m]
     if never:  # no rest in it to tare onto: not another sensor's, and no --rest mends it
-        raise InputError(f"the model was fitted on poses that never rest ({', '.join(never)}): a tare needs one whose "
-                         "pose box reaches rest (0 in every component): fit on such poses, or leave the tare out")
+        raise InputError(f"the model was fitted on poses that never rest ({', '.join(never)}): a tare needs one "
+                         "fitted where the sensor rests: fit on such poses, or leave the tare out")
     ref = np.asarray(reference, dtype=float)
     span = model.input_max - model.input_min
     # the estimate of clamped inputs can look like rest (a two-ring model at the paper's rest: dz -0.28 mm), so the
