@@ -559,6 +559,16 @@ def test_schedule_refuses_what_identify_could_not_use(tmp_path, args, message):
     assert not out.exists() and not Path(str(out) + ".meta.json").exists()
 
 
+def test_schedule_on_a_drawing_without_noise_names_the_file(tmp_path):
+    """The command passed the file's noise of 0 on as given, and the library's check of a given noise said 'got
+    np.float64(0.0)' of a noise the user never typed."""
+    text = (Path(__file__).resolve().parents[1] / "fitgen" / "physics" / "presets" / "paper.toml").read_text()
+    assert "noise = 0.0005        # V" in text
+    (tmp_path / "quiet.toml").write_text(text.replace("noise = 0.0005        # V", "noise = 0.0        # V"))
+    assert_one_line_error(run_cli("fitgen", "schedule", "--sensor", str(tmp_path / "quiet.toml"), "--n", "12", "-o",
+                                  str(tmp_path / "s.csv")), 2, "sensor paper gives no noise figure for its gmr")
+
+
 def test_a_drawing_saturated_at_rest_is_told_so_not_to_move_more_axes(tmp_path):
     """Every pose in contact past the linear range left the rest rows alone, and the schedule asked for more axes
     or wider limits, which could not help: the drawing saturates at rest."""

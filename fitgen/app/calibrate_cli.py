@@ -284,8 +284,8 @@ def cmd_schedule(args) -> int:
 
     with Progress("schedule", args.n) as bar:
         poses, info = schedule(drawing, args.n, axes=axes, ranges=parse_ranges(args.limits, {}),
-                               noise=noise / np.sqrt(samples), rig_error=args.rig_error, zero_error=args.zero_error,
-                               progress=step)
+                               noise=noise / np.sqrt(samples) if noise > 0 else None,  # none: the file's blamed
+                               rig_error=args.rig_error, zero_error=args.zero_error, progress=step)
     # the drawing's file and hash: capture passes them on, and identify takes that drawing unless told
     own = sensor_file_of(args)
     write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples, **told, **own,
