@@ -659,9 +659,10 @@ def test_fit_refuses_refine_terms_below_five_without_refine_too(data, tmp_path):
                                "be ignored"),
     (["--refine", "0", "--refine-terms", "30"], "without --refine it would be ignored"),
     (["--true-d", "--no-d-terms"], "--true-d and --no-d-terms contradict each other"),
-    (["--true-d", "--outputs", "dx,dz"], "--true-d shapes the rotations' d-terms, and this fit has no rotation (dx, "
-                                         "dz): it would be ignored"),
+    (["--true-d", "--outputs", "dx,dz"], "--true-d shapes the rotations' d-terms, which a fit of thx or thy with dx, "
+                                         "dy and dz has, not this one (dx, dz): it would be ignored"),
     (["--no-d-terms", "--outputs", "dz"], "--no-d-terms shapes the rotations' d-terms"),
+    (["--true-d", "--outputs", "dx,thx"], "not this one (dx, thx): it would be ignored"),  # no d without dy, dz
     (["--force"], "d.csv names no scene, so it would be ignored"),
     (["--force", "--outputs", "dx"], "--force applies to a scene's outputs (--scene, or the scene the data were "
                                      "simulated for): --outputs names them here, so it would be ignored"),

@@ -134,7 +134,8 @@ def test_predict_report_and_fit_say_they_read_and_write_a_large_file(tmp_path, m
                         ("fit", f"reading {data}")),
                        (["predict", model, data, "-o", str(tmp_path / "e.csv")],
                         ("predict", f"reading {data}", f"writing {tmp_path / 'e.csv'}")),
-                       (["report", model, "--data", data, "-o", str(tmp_path / "r.md")], ("report", f"reading {data}"))):
+                       (["report", model, "--data", data, "-o", str(tmp_path / "r.md")],
+                        ("report", f"reading {data}"))):
         term = Terminal()
         monkeypatch.setattr(sys, "stderr", term)
         with pytest.raises(SystemExit) as stop:

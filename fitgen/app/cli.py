@@ -127,9 +127,10 @@ def cmd_fit(args) -> int:
                                 recorded=None if args.scene else ds.meta.get("scene_outputs"), noise=settings.noise)
     else:
         outputs = ds.target_names if args.outputs is None else parse_names(args.outputs, POSE_NAMES, "--outputs")
-    if (args.true_d or args.no_d_terms) and not {"thx", "thy"} & set(outputs):
-        raise InputError(f"{'--true-d' if args.true_d else '--no-d-terms'} shapes the rotations' d-terms, and this fit "
-                         f"has no rotation ({', '.join(outputs)}): it would be ignored")
+    if (args.true_d or args.no_d_terms) and not ({"thx", "thy"} & set(outputs) and {"dx", "dy", "dz"} <= set(outputs)):
+        raise InputError(f"{'--true-d' if args.true_d else '--no-d-terms'} shapes the rotations' d-terms, which a fit "
+                         f"of thx or thy with dx, dy and dz has, not this one ({', '.join(outputs)}): it would be "
+                         "ignored")
     if lifted:  # said once the options have passed: a refusal is one line
         print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, which serves identify; "
               "their labels are no contact pose", file=sys.stderr)
