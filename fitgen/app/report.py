@@ -248,14 +248,11 @@ def simulate_notes(sensor, poses, labels: str, spec: str, adc_bits: int | None =
     which gives a raw transfer a converter and so a full scale its readings clip at); of a scene's grid
     (``source``: the poses' provenance), levels raised and a box past the sensor's travel; ``replaced``: the unit
     file ``--unit`` wrote over one of another unit."""
-    import dataclasses
-
-    from fitgen.physics.simulate import rows_past_linear
-
     from fitgen.physics.pose import off_skin
+    from fitgen.physics.simulate import rows_past_linear, with_adc_bits
 
     if adc_bits is not None and sensor.transfer == "raw":
-        sensor = dataclasses.replace(sensor, raw=dataclasses.replace(sensor.raw, adc_bits=adc_bits))
+        sensor = with_adc_bits(sensor, adc_bits)
     notes = _scene_notes(sensor, source or {})
     if replaced is not None:  # as identify says it: a model held out on the file no longer matches it
         notes.append(f"{replaced} held another unit, now replaced: rows and models made with that unit no longer "
