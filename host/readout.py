@@ -20,7 +20,7 @@ import numpy as np
 from fitgen.physics.dataset import load_dataset
 from fitgen.base.errors import InputError
 from fitgen.fitting.holdout import fitted_sensor_spec
-from fitgen.physics.pose import contact_poses
+from fitgen.physics.pose import POSE_NAMES, POSE_UNITS, contact_poses
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
 from fitgen.physics.transfer import readings
@@ -212,7 +212,7 @@ def check_rest_reference(model, reference: np.ndarray, spec: str, advice: str = 
     ``reference`` (from ``spec``) lie outside its inputs by over REST_DOMAIN_SHARE of their span, or it reads them as
     a pose over REST_SHARE of its box's width from rest: another sensor's rest, which a tare would map every reading
     onto. ``advice``: what the message then tells to do; ``degc``: when they were read (:func:`rest_degc`)."""
-    near = {c: (lo, hi, max(REST_SHARE * (hi - lo), REST_FLOOR["deg" if c[0] == "t" else "mm"]))
+    near = {c: (lo, hi, max(REST_SHARE * (hi - lo), REST_FLOOR[POSE_UNITS[POSE_NAMES.index(c)]]))
             for c, (lo, hi) in model.pose_box.items()}  # random poses' box stops short of 0: near it is rest too
     never = [f"{c} {lo:g}..{hi:g}" for c, (lo, hi, m) in near.items() if not lo - m <= 0 <= hi + m]
     if never:  # no rest in it to tare onto: not another sensor's, and no --rest mends it
