@@ -164,10 +164,10 @@ def _capture_temperatures(args, prog: str):
                 # keeps the reading its meta recorded then
                 now = thermo.read(fresh=True) if thermo is not None else float("nan")
                 with output_lock(path):  # a plain capture into this temperature's file is another run too
-                    res = capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries, wait=wait,
-                            set_pose=bus.set_pose if args.simulate else None, settle=settle, clock=clock,
-                            meta={"adc": cmap.describe(), "temperature_set": T, **source,
-                                  **({"thermistor_degc": now} if np.isfinite(now) else {})})
+                    res = capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries,
+                                  wait=wait, set_pose=bus.set_pose if args.simulate else None, settle=settle,
+                                  clock=clock, meta={"adc": cmap.describe(), "temperature_set": T, **source,
+                                                     **({"thermistor_degc": now} if np.isfinite(now) else {})})
                 if not res.complete:  # 'q' at a pose stops the run, not only this level
                     return _stopped(prog, out, temps, T)
             ds = load_dataset(path, min_rows=1)
