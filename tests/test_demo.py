@@ -62,6 +62,17 @@ def test_demo_runs_end_to_end(tmp_path):
     from fitgen.physics.dataset import load_dataset
 
     assert load_dataset(out / "check.csv").n_rows == 30
+    # both schedules carry the record `fitgen schedule` writes: the drawing, its hash, the stage, the samples per row
+    from fitgen.physics.dataset import load_meta
+    from fitgen.physics.sensor import load_sensor
+    from host.capture import load_schedule
+
+    gmr = load_sensor("paper").with_transfer("gmr")
+    for name in ("schedule.csv", "check-poses.csv"):
+        sched = load_schedule(out / name)
+        assert sched.drawing == {"sensor": "paper", "sensor_sha256": gmr.sha256, "transfer": "gmr"}, name
+        assert sched.stage["rig_error"] == 0.01 and sched.stage["rig_error_given"] is False, name
+        assert load_meta(out / name)["samples_per_row"] == 16, name
     # the twin's model file says how it was fitted, as `fitgen fit` writes it: the family, and the rounding noise
     # where the fit's check raised it
     fam = load_model(out / "twin-model.json").fit_info["family"]

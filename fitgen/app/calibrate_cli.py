@@ -259,7 +259,7 @@ def cmd_schedule(args) -> int:
     import numpy as np
 
     from fitgen.base.progress import Progress
-    from fitgen.fitting.schedule import schedule, write_schedule
+    from fitgen.fitting.schedule import schedule, schedule_record, write_schedule
     from fitgen.physics.simulate import parse_ranges
 
     if args.seed and args.check is None:
@@ -288,8 +288,7 @@ def cmd_schedule(args) -> int:
                                rig_error=args.rig_error, zero_error=args.zero_error, progress=step)
     # the drawing's file and hash: capture passes them on, and identify takes that drawing unless told
     own = sensor_file_of(args)
-    write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples, **told, **own,
-                                              "sensor_sha256": drawing.sha256, "transfer": drawing.transfer})
+    write_schedule(args.output, poses, axes, schedule_record(info, drawing, samples, **given, **told, **own))
     rest = (f"; {info['rest_rows']} at rest, lifted {info['rest_lift_mm']:g} mm off the skin" if info["rest_rows"]
             else "")
     if told:
@@ -331,14 +330,13 @@ def _pressed(info: dict) -> str:
 
 def _check_schedule(args, drawing, axes, samples: int, given: dict) -> int:
     """``schedule --check N``: random poses in the working box, for a check capture."""
-    from fitgen.fitting.schedule import check_schedule, write_schedule
+    from fitgen.fitting.schedule import check_schedule, schedule_record, write_schedule
     from fitgen.physics.simulate import parse_ranges
 
     poses, info = check_schedule(drawing, args.check, axes=axes, ranges=parse_ranges(args.limits, {}), seed=args.seed,
                                  rig_error=args.rig_error, zero_error=args.zero_error)
     own = sensor_file_of(args)
-    write_schedule(args.output, poses, axes, {**info, **given, "samples_per_row": samples, **own,
-                                              "sensor_sha256": drawing.sha256, "transfer": drawing.transfer})
+    write_schedule(args.output, poses, axes, schedule_record(info, drawing, samples, **given, **own))
     margin = (f", {info['edge_margin']:g} mm inside the working box's edges, which the stage's error could carry "
               "a row past" if info["edge_margin"] else "")
     print(f"wrote {len(poses)} random check poses ({_box(info)} from first contact{margin}, seed {args.seed}"

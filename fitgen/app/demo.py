@@ -11,6 +11,7 @@ from fitgen.base.fileio import check_folder, make_folder, write_atomic
 
 
 MARK = ".fitgen-demo"  # in the demo's folder: a folder the demo wrote, which it may write over again
+AXES, SAMPLES = ("dx", "dy", "dz"), 16  # the simulated stage's axes, and the samples averaged per captured row
 
 
 def _own_folder(out: Path) -> None:
@@ -156,7 +157,7 @@ def _unit_stage(out: Path, drawing_model) -> None:
     from fitgen.fitting.identify import identify
     from fitgen.fitting.unitrecord import device_noise, row_noise, save, stage_zero
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
-    from fitgen.fitting.schedule import schedule, schedule_csv
+    from fitgen.fitting.schedule import schedule, schedule_record, write_schedule
     from fitgen.physics.sensor import load_sensor
     from fitgen.physics.simulate import DEFAULT_RANGES, PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
     from fitgen.physics.units import draw_unit, write_unit
@@ -167,12 +168,14 @@ def _unit_stage(out: Path, drawing_model) -> None:
     drawing = load_sensor("paper").with_transfer("gmr")
     unit, theta = draw_unit(drawing, 7)
     write_unit(out / "unit-7.toml", unit, "paper", {"seed": 7, "source": "the demo's unit: its truth"})
-    poses, _ = schedule(drawing, 40, noise=drawing.noise / 4)
-    write_atomic(out / "schedule.csv", schedule_csv(poses))
+    poses, info = schedule(drawing, 40, noise=drawing.noise / SAMPLES ** 0.5)
+    # with the record `fitgen schedule` writes: identify and check on the demo's files read the drawing from it
+    write_schedule(out / "schedule.csv", poses, AXES, schedule_record(info, drawing, SAMPLES, rig_error_given=False))
     cap = out / "capture.csv"
     for stale in (cap, Path(f"{cap}.meta.json")):
         stale.unlink(missing_ok=True)  # a fresh capture each run, not a resumed one
-    res = simulated_stage_capture(unit, load_schedule(out / "schedule.csv"), cap, flavor="grbl", seed=7)
+    res = simulated_stage_capture(unit, load_schedule(out / "schedule.csv"), cap, flavor="grbl", samples=SAMPLES,
+                                  seed=7)
     print(f"   unit -> {out / 'unit-7.toml'}; {res.captured} poses captured through a simulated GRBL (backlash 0.03 mm, "
           f"repeatability 0.005 mm) -> {cap} ({time.monotonic() - t:.1f} s)")
     t = time.monotonic()
@@ -238,18 +241,19 @@ def _check_stage(out: Path, drawing, unit, models: dict) -> None:
     """A check capture of the unit through the same stage, and `fitgen check` of each model on it: ``models`` maps a
     name to the model, the sensor it was fitted on and that sensor's unit file (None for the drawing)."""
     from fitgen.fitting.check import check_capture
-    from fitgen.fitting.schedule import check_schedule, write_schedule
+    from fitgen.fitting.schedule import check_schedule, schedule_record, write_schedule
     from fitgen.physics.dataset import load_dataset
     from host.capture import load_schedule
     from host.stagesim import simulated_stage_capture
 
     t = time.monotonic()
     poses, info = check_schedule(drawing, 30, seed=7)
-    write_schedule(out / "check-poses.csv", poses, ("dx", "dy", "dz"), info)
+    write_schedule(out / "check-poses.csv", poses, AXES, schedule_record(info, drawing, SAMPLES, rig_error_given=False))
     cap = out / "check.csv"
     for stale in (cap, Path(f"{cap}.meta.json")):
         stale.unlink(missing_ok=True)
-    simulated_stage_capture(unit, load_schedule(out / "check-poses.csv"), cap, flavor="grbl", seed=8)
+    simulated_stage_capture(unit, load_schedule(out / "check-poses.csv"), cap, flavor="grbl", samples=SAMPLES,
+                            seed=8)
     ds = load_dataset(cap)
     print(f"   a check: 30 random poses in the working box, captured through the same stage -> {cap}; `fitgen check "
           f"MODEL {cap.name}`: each model's max error there, and the greatest that the sensor it was fitted on "

@@ -292,6 +292,13 @@ def write_schedule(path, poses: np.ndarray, axes, info: dict) -> None:
     write_all([(path, schedule_csv(poses, axes)), (meta_path(path), json.dumps(info, indent=1) + "\n")])
 
 
+def schedule_record(info: dict, drawing: Sensor, samples: int, **given) -> dict:
+    """A schedule's meta as capture, identify and check read it back: how it was chosen (``info``), what the user
+    gave (``given``), the samples per row it was made for, and the drawing's hash and transfer."""
+    return {**info, **given, "samples_per_row": samples, "sensor_sha256": drawing.sha256,
+            "transfer": drawing.transfer}
+
+
 def schedule_csv(poses: np.ndarray, axes=("dx", "dy", "dz")) -> str:
     """The schedule as `tactile-host capture --poses` reads it: the moving axes' columns, numbers that round-trip."""
     names = [a for a in POSE_NAMES if a in axes]
