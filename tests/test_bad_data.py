@@ -515,6 +515,10 @@ def test_report_names_a_huge_label_where_it_is(fitted, data, tmp_path):
 @pytest.mark.parametrize("edit, said", [
     (lambda m: m["outputs"][0]["terms"].__setitem__(0, "v99^-1"), "refers to input v99; the model has 8"),
     (lambda m: m["outputs"][0]["terms"].__setitem__(0, "zz"), "outputs[0].terms: not a term: 'zz'"),
+    # a term of an output's own estimate passed; report, predict, codegen and verify then raised KeyError
+    (lambda m: m["outputs"][0]["terms"].__setitem__(0, "v1*dx"), "output dx term v1*dx needs output dx computed "
+                                                                 "before it"),
+    (lambda m: m["outputs"][2]["terms"].__setitem__(0, "dz"), "output dz term dz needs output dz computed before it"),
     (lambda m: m["outputs"][0].__setitem__("terms", "v1"), "outputs[0]: terms and coefficients must be lists"),
     (lambda m: m["outputs"][0]["terms"].__setitem__(0, 5), "outputs[0].terms: 5 is not a term"),
     (lambda m: m["inputs"]["min"].__setitem__(0, 99.0), "input v1 has min > max"),

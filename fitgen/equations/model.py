@@ -488,6 +488,6 @@ def _validate(m: Model, origin: str) -> None:
             if t.needs_positive and not m.input_min[t.element - 1] > 0:
                 raise InputError(f"{origin}: output {e.name} term {t.text} needs v{t.element} > 0, "
                                  f"but its domain starts at {float(m.input_min[t.element - 1])!r}")
-            if t.mult and (t.mult not in names or names.index(t.mult) > names.index(e.name)):
+            if t.mult and (t.mult not in names or names.index(t.mult) >= names.index(e.name)):
                 raise InputError(f"{origin}: output {e.name} term {t.text} needs output {t.mult} "
                                  "computed before it")
