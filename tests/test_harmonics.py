@@ -201,6 +201,29 @@ def test_cli_needs_the_sensor_and_a_positive_sum(tmp_path):
                   settings=FitSettings.family("harmonics"), sensor=RING)
 
 
+def test_a_sum_that_is_positive_only_in_double_is_refused_in_float_by_every_command(harmonic_model, tmp_path):
+    """A domain whose lowest sum is > 0 in double and <= 0 as the float C sums it: predict refused float, but codegen
+    wrote a float header whose 1 / sum there is negative or infinite."""
+    data = json.loads(json.dumps(harmonic_model.to_dict()))
+    data["outputs"] = [{"name": "dx", "intercept": 0.0, "terms": ["hr", "v1^1"], "coefficients": [1.0, 0.5]}]
+    low = data["inputs"]["min"]
+    low[1] = 0.0
+    low[1] = -sum(low) * (1 - 1e-12)
+    model = model_from_dict(data)
+    assert np.sum(model.input_min) > 0  # a valid model, in double
+    path = model.save(tmp_path / "m.json")
+    header = tmp_path / "gen" / "tm_model.h"
+    assert run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "gen")).returncode == 0
+    header.unlink()
+    said = "in float, which the harmonics divide by"
+    assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "gen"), "--precision", "float"),
+                          2, said)
+    assert not header.exists()
+    (tmp_path / "r.csv").write_text("v1,v2,v3,v4,v5,v6,v7,v8\n" + ",".join(map(repr, low)) + "\n")
+    assert_one_line_error(run_cli("fitgen", "predict", str(path), str(tmp_path / "r.csv"), "--precision", "float",
+                                  "-o", str(tmp_path / "p.csv")), 2, said)
+
+
 def test_an_element_on_the_axis_weighs_in_no_harmonic():
     """arctan2(0, 0) is 0: an element at the ring's centre took the weights of one at +x (1 in hc1 and hc2)."""
     from fitgen.fitting.fit import ring_harmonics

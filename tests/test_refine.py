@@ -184,7 +184,8 @@ def test_absurd_refinement_numbers_are_refused_where_the_estimates_would_be_nons
     bad.write_text(json.dumps(d))
     assert run_cli("fitgen", "predict", str(bad), str(rows), "-o", str(tmp_path / "p.csv")).returncode == 0
     proc = run_cli("fitgen", "codegen", str(bad), "-o", str(tmp_path / "gen"), "--precision", "float")
-    assert_one_line_error(proc, contains="over the float limit")
+    assert_one_line_error(proc, contains="refine: a weight, prior or forward coefficient of 1e+39 does not fit in a "
+                                         "float")
     # data past the pose limits are refused by the fit, which would write a refinement the loader refuses
     targets = train.targets.copy()
     targets[:, train.target_names.index("thy")] *= 1e3

@@ -169,6 +169,8 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
     if style not in STYLES:
         raise InputError(f"style must be one of {', '.join(STYLES)}, got {style!r}")
     prefix = prefix_identifier(prefix)
+    if precision == "float" and (problem := model.float_problem()):
+        raise InputError(problem)
     check_magnitudes(model, precision)
     domain = float_domain(model) if precision == "float" else (model.input_min, model.input_max)
     outs = []

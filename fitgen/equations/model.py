@@ -175,6 +175,13 @@ class Model:
         for x in (*self.input_min, *self.input_max):
             if not abs(x) <= top:
                 return f"the input domain reaches {x:.4g}, past float's range: rescale the readings, or use double"
+        if any(t.harm for e in self.equations for t in e.terms):
+            total = np.float32(0)
+            for x in float_domain(self)[0].astype(np.float32):  # left to right, as the float C sums them
+                total = total + x
+            if not total > 0:
+                return (f"the inputs' lowest sum is {float(total)!r} in float, which the harmonics divide by (> 0 "
+                        "only in double): use double")
         if self.refine is not None:
             x = max(map(abs, self.refine.numbers()))
             if not x <= top:
