@@ -270,7 +270,7 @@ def test_far_outside_in_c_flags_the_estimates_python_does(paper_model, tmp_path)
     from fitgen.c.compiled import compile_checked
     from fitgen.equations.fixedpoint import build_fixed
 
-    box = {"dx": [-2.0, 2.1], "dz": [-2.0, 0.0], "thx": [-5.0, 5.0]}  # dy, thy: no box, never flagged
+    box = {"dx": [-2.0, 1.9], "dz": [-2.0, 0.0], "thx": [-5.0, 5.0]}  # dy, thy: no box, never flagged
     boxed = dataclasses.replace(paper_model, fit_info={**paper_model.fit_info, "held_out": {"box": box}})
     integer = [Equation(e.name, e.intercept, (Term(1, "1"),), (1.0,)) for e in boxed.equations]
     fm = build_fixed(dataclasses.replace(boxed, equations=tuple(integer)), 1e-4, 0.0, 32)
@@ -284,8 +284,15 @@ def test_far_outside_in_c_flags_the_estimates_python_does(paper_model, tmp_path)
     edges[:, 0] = [np.ceil(lo[0] * scale[0]) - 1, np.ceil(lo[0] * scale[0]), np.ceil(lo[0] * scale[0]) + 1,
                    np.floor(hi[0] * scale[0]) - 1, np.floor(hi[0] * scale[0]), np.floor(hi[0] * scale[0]) + 1]
     codes = np.vstack([codes, edges])
+    # a float out at a bound's nearest float and its neighbours, in dx: the header rounded -5.9 down and 5.8 up to
+    # those floats, which lie beyond the bounds, and did not flag them
+    near = np.float32([lo[0], hi[0]])
+    f_edges = np.zeros((6, 5))
+    f_edges[:, 0] = np.concatenate([np.nextafter(near, np.float32(-np.inf)), near,
+                                    np.nextafter(near, np.float32(np.inf))])
+    as_floats = np.vstack([est, f_edges]).astype(np.float32).astype(float)
     for name, text, rows, fmt, want in (
-            ("float", render_header(boxed, "float"), est, "%f", boxed.far_outside(est)),
+            ("float", render_header(boxed, "float"), as_floats, "%f", boxed.far_outside(as_floats)),
             ("double", render_header(boxed, "double"), est, "%lf", boxed.far_outside(est)),
             ("fixed", render_fixed_header(fm), codes, "%ld", boxed.far_outside(codes / scale)),
             ("nobox", render_header(paper_model, "double"), est, "%lf", np.zeros(len(est), bool))):

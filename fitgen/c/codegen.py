@@ -30,6 +30,7 @@ EXP_CODE = {"1": "P1", "2": "P2", "3": "P3", "4": "P4", "-1": "M1", "-2": "M2", 
 # below FLT_MAX (3.4e38) that no partial sum can overflow. double: past 1e15 a sum in
 # mm or deg keeps no correct digit (eps 2.2e-16); such a model is refused as absurd.
 _LIMIT = {"double": 1e15, "float": 1e30}
+_FLOAT_MAX = float(np.finfo(np.float32).max)
 # a refinement's normal equations: a step's Cholesky takes their square roots, never their squares, and solves
 # for the step's own scale, so overflow (not cancellation) is what bounds them
 _REFINE_LIMIT = {"double": 1e150, "float": 1e30}
@@ -210,9 +211,18 @@ def build_cmodel(model: Model, precision: str = "double", style: str = "table", 
         harmonics=_c_harmonics(model, monomials, precision),
         monomials=tuple(CMonomial(tuple(monomial_factors(h)), h) for h in monomials),
         refine=_c_refine(model, precision),
-        far=tuple(None if b is None else (c_real(b[0], precision), c_real(b[1], precision))
-                  for b in model.far_per_output()),
+        far=tuple(None if b is None else _far_literals(*b, precision) for b in model.far_per_output()),
     )
+
+
+def _far_literals(low: float, high: float, precision: str) -> tuple[str, str]:
+    """The literals of one output's far bounds; in float rounded inward (low up, high down), so that a float
+    estimate is below or above them exactly when it is below or above the double bounds predict compares with."""
+    if precision == "float" and abs(low) <= _FLOAT_MAX and abs(high) <= _FLOAT_MAX:
+        lo, hi = np.float32(low), np.float32(high)
+        low = float(np.nextafter(lo, np.float32(np.inf)) if float(lo) < low else lo)
+        high = float(np.nextafter(hi, np.float32(-np.inf)) if float(hi) > high else hi)
+    return c_real(low, precision), c_real(high, precision)
 
 
 NONE = 0xFFFF  # the refinement's "no derivative" index (TM_R_NONE)
