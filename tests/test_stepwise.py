@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fitgen.fitting.fit import FitSettings, fit_model
+from fitgen.fitting.fit import FitSettings, fit_model, within_cap
 from fitgen.equations.model import Model
 from rstep import r_step
 from fitgen.physics.sensor import load_sensor
@@ -64,14 +64,30 @@ def test_fast_search_equals_the_plain_refit_loop():
     rng = np.random.default_rng(5)
     poses = random_poses(250, DEFAULT_RANGES, rng)
     ds = simulate(PAPER, poses, noise=0.003, seed=5)
-    for out, cap in (("dx", None), ("dz", 18)):
+    for out, cap, keep in (("dx", None, 0), ("dz", 18, 0), ("dx", 3, 0), ("dx", 3, 2), ("dz", None, 3)):
         _, X, y, init = _problem(ds, out)
-        fast = stepwise(X, y, init, max_terms=cap)
-        slow = stepwise_reference(X, y, init, max_terms=cap)
+        init = within_cap(compress(X, y), init, cap or len(init))[0]
+        lower = tuple(init[:keep])  # R's scope lower: never dropped nor exchanged
+        fast = stepwise(X, y, init, max_terms=cap, lower=lower)
+        slow = stepwise_reference(X, y, init, max_terms=cap, lower=lower)
+        free = stepwise(X, y, init, max_terms=cap).selected
+        assert set(lower) <= set(fast.selected) and (not lower or set(lower) - set(free)), out  # it kept them
         assert fast.selected == slow.selected
         np.testing.assert_allclose([s.aic for s in fast.trace], [s.aic for s in slow.trace], rtol=1e-9)
-        if cap:
-            assert len(fast.selected) <= cap
+        assert [s.move for s in fast.trace] == [s.move for s in slow.trace]
+        if cap:  # at the cap the search exchanged terms, which it had no move for
+            assert len(fast.selected) <= cap and any(" + " in s.move for s in fast.trace), out
+
+
+def test_a_cap_of_one_ends_at_the_best_single_candidate():
+    """At the cap the search could only drop terms: --max-terms 1 kept eq. 1's best term, however much better
+    another candidate fitted alone."""
+    ds = simulate(PAPER, random_poses(250, DEFAULT_RANGES, pose_rng(5)), noise=0.003, seed=5)
+    for out in ("dx", "dz", "thx"):
+        cands, X, y, init = _problem(ds, out)
+        single = [float(np.sum((y - np.polyval(np.polyfit(X[:, j], y, 1), X[:, j])) ** 2)) for j in range(len(cands))]
+        got = fit_model(ds, (out,), FitSettings.exact(max_terms=1))
+        assert [t.text for t in got.equation(out).terms] == [cands[int(np.argmin(single))].text], out
 
 
 def test_aliased_columns_are_never_added_and_ties_take_candidate_order():

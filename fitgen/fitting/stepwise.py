@@ -167,6 +167,7 @@ def stepwise(
     max_steps: int = 1000,
     compressed: np.ndarray | None = None,
     progress=None,
+    lower: tuple[int, ...] = (),
 ) -> StepwiseResult:
     """Choose columns of ``columns`` (n, m) for ``y`` by bidirectional stepwise AIC (``columns`` may be
     None when ``compressed``, the triangle of :func:`compress`, is given).
@@ -174,15 +175,17 @@ def stepwise(
     Starts from ``initial`` (indices); each step takes the single addition or removal
     with the lowest AIC, stops when none lowers it. Ties go as in R: staying put, then
     removals in model order, then additions in candidate order. Aliased candidates
-    (relative residual norm < 1e-7 against the current model) are never added.
+    (relative residual norm < 1e-7 against the current model) are never added. At ``max_terms`` a term may
+    give way to another (an exchange). ``lower``: terms never removed, R's ``scope = list(lower = ...)``.
     """
     A = compress(columns, y) if compressed is None else compressed
     m = A.shape[1] - 2
     with _BLAS.limit(limits=1, user_api="blas"):
-        return _search(A, len(y), initial, names or [str(j) for j in range(m)], k, max_terms, max_steps, progress)
+        return _search(A, len(y), initial, names or [str(j) for j in range(m)], k, max_terms, max_steps, progress,
+                       set(lower))
 
 
-def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> StepwiseResult:
+def _search(A, n, initial, names, k, max_terms, max_steps, progress, lower) -> StepwiseResult:
     m = A.shape[1] - 2
     col_norm = np.linalg.norm(A, axis=0)[1:-1]
     yc = A[:, -1]
@@ -219,45 +222,77 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress) -> Stepwise
             continue
         # row 0: stay; then removals in model order; then additions in candidate order
         scores, outside = [np.array([aic])], np.zeros(0, dtype=int)
+        kept = np.array([c in lower for c in current], dtype=bool)
         if current:
             drops = _rss_drops(Q, R, yc, rss)
-            scores.append(aic_of(np.maximum(drops, 1e-300), n, len(current) - 1, k))
-        if max_terms is None or len(current) < max_terms:
-            free = np.ones(m, dtype=bool)
-            free[current] = False
-            outside = np.flatnonzero(free)
-            if outside.size:
-                Z = A[:, outside + 1]
-                Z = Z - Q @ (Q.T @ Z)
-                Z = Z - Q @ (Q.T @ Z)
-                znorm = np.linalg.norm(Z, axis=0)
-                ok = znorm > ALIAS_TOL * col_norm[outside]
-                aliased_seen.update(outside[~ok].tolist())
-                Z, outside, znorm = Z[:, ok], outside[ok], znorm[ok]
-                coef = (Z.T @ r) / znorm**2
-                new_r = r[:, None] - Z * coef
-                add_rss = np.sum(new_r * new_r, axis=0)
-                scores.append(aic_of(np.maximum(add_rss, 1e-300), n, len(current) + 1, k))
+            scores.append(np.where(kept, np.inf, aic_of(np.maximum(drops, 1e-300), n, len(current) - 1, k)))
+        at_cap = max_terms is not None and len(current) >= max_terms
+        free = np.ones(m, dtype=bool)
+        free[current] = False
+        outside = np.flatnonzero(free)
+        if outside.size and not at_cap:
+            Z = A[:, outside + 1]
+            Z = Z - Q @ (Q.T @ Z)
+            Z = Z - Q @ (Q.T @ Z)
+            znorm = np.linalg.norm(Z, axis=0)
+            ok = znorm > ALIAS_TOL * col_norm[outside]
+            aliased_seen.update(outside[~ok].tolist())
+            Z, outside, znorm = Z[:, ok], outside[ok], znorm[ok]
+            coef = (Z.T @ r) / znorm**2
+            new_r = r[:, None] - Z * coef
+            add_rss = np.sum(new_r * new_r, axis=0)
+            scores.append(aic_of(np.maximum(add_rss, 1e-300), n, len(current) + 1, k))
+        elif outside.size and current:
+            # at the cap a term may still give way to a better one: with additions barred, a search that only drops
+            # kept the first terms it took, and a cap of one could end worse than the best single candidate
+            swap_rss, skipped = _swap_rss(A, Q, R, r, rss, outside, col_norm[outside])
+            aliased_seen.update(outside[skipped].tolist())
+            swap_aic = aic_of(np.maximum(swap_rss, 1e-300), n, len(current), k)
+            scores.append(np.where(kept[:, None], np.inf, swap_aic).ravel())
         # argmin takes the first of exactly equal scores, as R's order() does; scores equal in exact arithmetic
         # (a mirror pair of elements on a symmetric ring) go by their rounding, which the CPU's BLAS kernel sets
         best = int(np.argmin(np.concatenate(scores)))
         if best == 0:
             break
         if best <= len(current):
-            sign, j = "-", current[best - 1]
+            move, j = "- {}", current[best - 1]
             current.remove(j)
+        elif at_cap:
+            gone, taken = divmod(best - 1 - len(current), len(outside))
+            move, j = f"- {names[current.pop(gone)]} + {{}}", int(outside[taken])
+            current.append(j)
         else:
-            sign, j = "+", int(outside[best - 1 - len(current)])
+            move, j = "+ {}", int(outside[best - 1 - len(current)])
             current.append(j)
         new_rss, Q, R, r = rss_of(current)
         new_aic = aic_of(new_rss, n, len(current), k)
-        trace.append(Step(f"{sign} {names[j]}", new_aic, new_rss, len(current)))
+        trace.append(Step(move.format(names[j]), new_aic, new_rss, len(current)))
         if progress is not None:
             progress(len(trace) - 1, new_aic, len(current))
         aic, rss = new_aic, new_rss
         if len(trace) > 1 and new_aic >= trace[-2].aic + 1e-7:
             break  # R's guard against a move the refit does not confirm (R keeps the move, so do we)
     return StepwiseResult(current, aic, rss, trace, sorted(aliased_seen))
+
+
+def _swap_rss(A, Q, R, r, rss, outside, col_norm) -> tuple[np.ndarray, np.ndarray]:
+    """RSS of the model with each of its columns (rows) exchanged for each ``outside`` candidate (columns), inf where
+    the candidate is aliased against the others; and the candidates aliased in every exchange.
+
+    Without column c the residual space gains u_c, the unit vector of Q R^-T e_c (in the model's span, orthogonal to
+    its other columns), so the residual and each candidate's projection gain one component each along it."""
+    rinv = solve_triangular(R, np.eye(R.shape[0]), check_finite=False)
+    U = Q @ rinv[1:].T
+    U /= np.linalg.norm(U, axis=0)
+    Z0 = A[:, outside + 1]
+    Z = Z0 - Q @ (Q.T @ Z0)
+    Z = Z - Q @ (Q.T @ Z)
+    g, H = U.T @ A[:, -1], U.T @ Z0
+    zz = np.sum(Z * Z, axis=0)[None, :] + H * H
+    ok = np.sqrt(zz) > ALIAS_TOL * col_norm[None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        swap = rss + g[:, None] ** 2 - ((Z.T @ r)[None, :] + H * g[:, None]) ** 2 / zz
+    return np.where(ok, swap, np.inf), ~ok.any(axis=0)
 
 
 @_ONE_THREAD
@@ -282,7 +317,7 @@ def refit(compressed: np.ndarray, selected: list[int]) -> tuple[float, np.ndarra
 
 
 def stepwise_reference(columns: np.ndarray, y: np.ndarray, initial: list[int], *, k: float = 2.0,
-                       max_terms: int | None = None) -> StepwiseResult:
+                       max_terms: int | None = None, lower: tuple[int, ...] = ()) -> StepwiseResult:
     """The plain way: refit every candidate model by least squares at every step.
 
     Same rules as :func:`stepwise`; kept as its independent check and its benchmark baseline.
@@ -305,14 +340,22 @@ def stepwise_reference(columns: np.ndarray, y: np.ndarray, initial: list[int], *
     trace = [Step("", aic, rss(current), len(current))]
     while True:
         moves = [("", aic)]
-        moves += [(("-", c), aic_of(rss([x for x in current if x != c]), n, len(current) - 1, k)) for c in current]
+        free = [c for c in current if c not in lower]
+        moves += [(("-", c), aic_of(rss([x for x in current if x != c]), n, len(current) - 1, k)) for c in free]
         if max_terms is None or len(current) < max_terms:
             moves += [(("+", j), aic_of(rss(current + [j]), n, len(current) + 1, k))
                       for j in range(m) if j not in current and not aliased(current, j)]
+        else:  # at the cap: exchanges, each term for each candidate
+            for c in free:
+                rest = [x for x in current if x != c]
+                moves += [((c, j), aic_of(rss(rest + [j]), n, len(current), k))
+                          for j in range(m) if j not in current and not aliased(rest, j)]
         best = min(range(len(moves)), key=lambda i: (moves[i][1], i))
         if best == 0:
             break
         sign, j = moves[best][0]
+        if sign not in ("-", "+"):
+            sign, current = f"- {sign} +", [x for x in current if x != sign]
         current = [x for x in current if x != j] if sign == "-" else current + [j]
         aic = aic_of(rss(current), n, len(current), k)
         trace.append(Step(f"{sign} {j}", aic, rss(current), len(current)))
