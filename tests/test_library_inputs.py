@@ -130,8 +130,10 @@ def test_counts_seeds_noise_and_accuracies_from_a_notebook_are_one_inputerror(se
     """A count of 40.0, a seed of -1 or 1.5, a noise of 0, an accuracy of one figure or of -1: numpy's, range()'s
     or SeedSequence's errors from deep inside, a sensor file blamed, or 'NOT resolvable to -1 mm'."""
     from fitgen.fitting.schedule import check_schedule, schedule
+    from fitgen.physics.units import draw_unit
 
     for call, said in ((lambda: pose_rng(-1), "a seed must be a whole number >= 0, got -1"),
+                       (lambda: draw_unit(sensor, True), "a unit's seed must be a whole number >= 0, got True"),
                        (lambda: pose_rng(1.5), "a seed must be a whole number >= 0, got 1.5"),
                        (lambda: random_poses(10.0, DEFAULT_RANGES, pose_rng(1)), "whole number 1..5,000,000, got 10.0"),
                        (lambda: schedule(sensor, 40.0), "--n must be a whole number 10..10000"),

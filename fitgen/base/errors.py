@@ -47,6 +47,12 @@ def shown(val, width: int = 60) -> str:
     return text if len(text) <= width else text[:width - 3] + "..."
 
 
+def check_seed(seed, what: str = "a seed") -> None:
+    """InputError naming ``what`` unless ``seed`` is a whole number >= 0 (numpy's SeedSequence says no seed's name)."""
+    if not (is_whole_number(seed) and seed >= 0):
+        raise InputError(f"{what} must be a whole number >= 0, got {shown(seed)}")
+
+
 def finite_number(val, where: str) -> float:
     """``val`` as a float if it is a finite JSON number (not a bool); else InputError naming ``where``."""
     if not is_finite_number(val):

@@ -29,7 +29,7 @@ import json
 
 import numpy as np
 
-from fitgen.base.errors import InputError, is_finite_number, is_whole_number, shown
+from fitgen.base.errors import InputError, check_seed, is_finite_number, is_whole_number, shown
 from fitgen.base.fileio import write_all
 from fitgen.fitting.capturecheck import MIN_DISTINCT, MIN_ROWS, check_error
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR, Problem, unit_space
@@ -259,8 +259,7 @@ def check_schedule(drawing: Sensor, n: int, *, axes=("dx", "dy", "dz"), ranges: 
     axes = checked_axes(axes, ranges)
     if not (is_whole_number(n) and 1 <= n <= 10000):
         raise InputError(f"--check must be a whole number 1..10000 of poses, got {shown(n)}")
-    if not (is_whole_number(seed) and seed >= 0):  # SeedSequence's own words name no seed
-        raise InputError(f"a seed must be a whole number >= 0, got {shown(seed)}")
+    check_seed(seed)
     check_error("rig error", rig_error)
     check_error("zero error", zero_error)
     box = capture_box(drawing, axes, ranges, working=True, rig_error=rig_error, zero_error=zero_error)

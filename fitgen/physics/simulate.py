@@ -9,7 +9,7 @@ import numpy as np
 
 from fitgen import __version__
 from fitgen.physics.dataset import Dataset
-from fitgen.base.errors import InputError, is_finite_number, is_whole_number, shown
+from fitgen.base.errors import InputError, check_seed, is_finite_number, is_whole_number, shown
 from fitgen.physics.pose import POSE_NAMES, as_poses, check_pose_range, field_readings, off_skin, pose_label
 from fitgen.physics.sensor import TRANSFERS, Sensor
 from fitgen.physics.transfer import past_linear, readings
@@ -196,8 +196,7 @@ def rig_poses(labels: np.ndarray, rig_error: float, rng: np.random.Generator, ze
 
 def pose_rng(seed: int) -> np.random.Generator:
     """The random stream for pose sampling (independent of the noise stream)."""
-    if not (is_whole_number(seed) and seed >= 0):  # SeedSequence's own words name no seed
-        raise InputError(f"a seed must be a whole number >= 0, got {shown(seed)}")
+    check_seed(seed)
     return np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[0])
 
 

@@ -29,7 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fitgen.base.errors import InputError
+from fitgen.base.errors import InputError, check_seed
 from fitgen.physics.field import cylinder_projection
 from fitgen.base.fileio import write_atomic
 from fitgen.base.texts import tomllib
@@ -204,8 +204,7 @@ class UnitSpace:
 
 def draw_unit(drawing: Sensor, seed: int) -> tuple[Sensor, np.ndarray]:
     """A unit of ``drawing`` drawn within its tolerances (seed ``seed``), and its parameters."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise InputError(f"a unit's seed must be a whole number >= 0, got {seed!r}")
+    check_seed(seed, "a unit's seed")
     space = UnitSpace.of(drawing)
     theta = space.draw(np.random.default_rng(np.random.SeedSequence([seed, 0x756E6974])))
     unit = space.sensor(theta, f"{drawing.name}-unit-{seed}",
