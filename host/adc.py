@@ -36,7 +36,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 
-from host.channelmap import ADS1115_PAIRS, ADS1115_PGA, ADS1115_RATES, ChannelMap, Chip
+from host.channelmap import ADS1115_PAIRS, ADS1115_PGA, ADS1115_RATES, ChannelMap, Chip, check_bus
 from host.clock import REAL_CLOCK
 
 # --- ADS1115 -----------------------------------------------------------------------
@@ -410,8 +410,7 @@ class AdcArray:
 
 def open_bus(number: int):
     """``smbus2.SMBus(number)``; a missing or forbidden /dev/i2c-N is bad input (one line, exit 2)."""
-    if number < 0:
-        raise InputError(f"--bus must be >= 0, got {number}")
+    check_bus(number, "the bus")
     try:
         import smbus2
     except ImportError:  # pragma: no cover - a dependency of the package

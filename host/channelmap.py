@@ -33,7 +33,7 @@ import re
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from fitgen.base.errors import InputError, is_finite_number, shown
+from fitgen.base.errors import InputError, is_finite_number, is_whole_number, shown
 from fitgen.base.fileio import read_text
 from fitgen.base.texts import load_toml
 
@@ -111,6 +111,12 @@ class ChannelMap:
             parts.append(f"{c.label}:{ins}")
         return ",".join(parts)
 
+
+
+def check_bus(bus, where: str) -> None:
+    """InputError naming ``where`` unless ``bus`` is the N of an I2C bus /dev/i2c-N (a whole number 0..MAX_BUS)."""
+    if not (is_whole_number(bus) and 0 <= bus <= MAX_BUS):
+        raise InputError(f"{where} must be a whole number 0..{MAX_BUS} (/dev/i2c-N), got {shown(bus)}")
 
 def reordered_spec(spec, order) -> str | None:
     """The ``--adc`` spec that reads as element j+1 what ``spec`` reads as element ``order[j]`` + 1 (0-based), where
@@ -298,8 +304,8 @@ def load_map_file(path: str | Path, settings: Settings = Settings()) -> ChannelM
             raise InputError(f"{origin}: [temperature]: beta, r25, series and vref must be finite numbers > 0")
         temperature = (tt["input"], {k: float(v) for k, v in divider.items()})
     bus = data.get("bus")
-    if bus is not None and (isinstance(bus, bool) or not isinstance(bus, int) or not 0 <= bus <= MAX_BUS):
-        raise InputError(f"{origin}: bus must be a whole number 0..{MAX_BUS} (/dev/i2c-N), got {shown(bus)}")
+    if bus is not None:
+        check_bus(bus, f"{origin}: bus")
     tables = data.get("chip", [])
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
         raise InputError(f"{origin}: 'chip' must be an array of tables ([[chip]])")

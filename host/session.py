@@ -22,7 +22,7 @@ from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, RetryPolicy, open_bus
 from host.autozero import AutoZero, AutoZeroSettings
-from host.channelmap import CHIP_SETTINGS, CHIPS, MAX_BUS, Settings, channel_map, check_full_scale
+from host.channelmap import CHIP_SETTINGS, CHIPS, Settings, channel_map, check_bus, check_full_scale
 from host.clock import REAL_CLOCK
 from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
@@ -52,8 +52,8 @@ def channel_map_from_args(args):
     settings = Settings(**chosen, vref=parse_vref(args.vref or "3.3")).checked("option")  # Settings' defaults
     spec, temp = split_channel_map(args.adc)
     cmap = channel_map(spec, settings)
-    if getattr(args, "bus", None) is not None and not 0 <= args.bus <= MAX_BUS:
-        raise InputError(f"--bus {args.bus}: give 0..{MAX_BUS} (/dev/i2c-N)")
+    if getattr(args, "bus", None) is not None:
+        check_bus(args.bus, "--bus")
     temp = temp or (cmap.temperature[0] if cmap.temperature is not None else "")
     kinds = {c.kind for c in cmap.chips} | {k for k in CHIPS if temp.strip().lower().startswith(k)}
     if args.vref is not None and "ads7828" not in kinds:

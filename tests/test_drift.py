@@ -1167,7 +1167,7 @@ MAP_HEAD = '[[chip]]\ntype = "ads1115"\naddress = 0x48\n[[chip]]\ntype = "ads111
      "--thermistor 'beta=100000': beta must be 500..20000"),
     # a bus past any /dev/i2c-N had built a tm_pi opening /dev/i2c--2147483648
     ("bus = 2147483648\n" + MAP_HEAD, [], "bus must be a whole number 0..1048575 (/dev/i2c-N), got 2147483648"),
-    (TWO_CHIPS, ["--bus", "2147483648"], "--bus 2147483648: give 0..1048575"),
+    (TWO_CHIPS, ["--bus", "2147483648"], "--bus must be a whole number 0..1048575 (/dev/i2c-N), got 2147483648"),
     ("temp=ads1115@0x4a:0", [], "no element inputs besides the thermistor"),  # had said "--adc '': empty item"
     ("ads7828@-0x48", [], "address '-0x48' is not one an ADS1115"),  # had said 0x-48
 ])
