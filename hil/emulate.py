@@ -14,7 +14,7 @@ from pathlib import Path
 
 from fitgen.base.children import tied
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import hold_folder, write_atomic
+from fitgen.base.fileio import foreign_files, hold_folder, write_atomic
 
 QEMU = "qemu-system-arm"
 # the emulated boards: QEMU machine per target (mps2: Cortex-M4F; microbit: nRF51822, Cortex-M0)
@@ -405,9 +405,8 @@ def _check_build_folder(folder: Path) -> None:
     except OSError:  # none there, or a folder of that name
         ours = False
     if held and not ours:
-        raise InputError(f"--build-dir {folder} holds files no firmware build wrote ({', '.join(held[:3])}"
-                         f"{', ...' if len(held) > 3 else ''}), and a build writes main.c, device.c and more there "
-                         "over files of those names: give a new or empty folder")
+        raise foreign_files(f"--build-dir {folder}", held, "firmware build",
+                            "a build writes main.c, device.c and more there")
 
 
 def start_target(model, target: str = "mps2", *, precision: str = "float", style: str = "table", fma: bool = False,

@@ -7,7 +7,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from fitgen.base.errors import InputError
-from fitgen.base.fileio import check_folder, make_folder, write_atomic
+from fitgen.base.fileio import check_folder, foreign_files, make_folder, write_atomic
 
 
 MARK = ".fitgen-demo"  # in the demo's folder: a folder the demo wrote, which it may write over again
@@ -22,9 +22,8 @@ def _own_folder(out: Path) -> None:
     except OSError:  # none yet (or no folder: check_folder and make_folder say what it is)
         return
     if held and MARK not in held and not _unmarked_demo(out, held):
-        raise InputError(f"{out} holds files no earlier demo wrote ({', '.join(held[:3])}"
-                         f"{', ...' if len(held) > 3 else ''}), and the demo writes capture.csv, schedule.csv, "
-                         "check.csv and more there over files of those names: give a new or empty folder (--out)")
+        raise foreign_files(str(out), held, "earlier demo", "the demo writes capture.csv, schedule.csv, check.csv and "
+                            "more there", "give a new or empty folder (--out)")
 
 
 def _unmarked_demo(out: Path, held: list) -> bool:

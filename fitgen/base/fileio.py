@@ -341,6 +341,15 @@ def check_folder(folder: str | os.PathLike, flag: str = "-o") -> Path:
     return path
 
 
+def foreign_files(where: str, held: list, writer: str, writes: str,
+                  fix: str = "give a new or empty folder") -> InputError:
+    """The refusal of a folder ``where`` that holds files (``held``) which no ``writer`` wrote and over which a run
+    would write: ``writes`` says what, before "over files of those names"."""
+    listed = ", ".join(held[:3]) + (", ..." if len(held) > 3 else "")
+    return InputError(f"{where} holds files no {writer} wrote ({listed}), and {writes} over files of those names: "
+                      f"{fix}")
+
+
 def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes, inputs=()) -> Path:
     """:func:`write_atomic` into ``folder/name``, creating ``folder`` (and its parents) when missing; a write that
     fails leaves no folder it made (:func:`write_all`). InputError where that is one of the command's ``inputs``
