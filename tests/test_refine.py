@@ -77,13 +77,13 @@ def test_forward_model_predicts_the_readings(model, held):
         (1, 0, 0, 0, 0), (0, 1, 0, 0, 0), (0, 0, 1, 0, 0), (0, 0, 0, 1, 0), (0, 0, 0, 0, 1)]
 
 
-def test_the_forward_model_keeps_its_linear_terms_at_the_cap():
-    """The refinement steps on the forward model's Jacobian at rest: at the cap, the search's exchanges traded the
-    linear terms for dx^5 and dz^3, which fit the grid as well, and the refined poses came out 20x worse."""
+def test_the_forward_model_takes_no_exchanges_at_the_cap(held):
+    """At the cap, the search's exchanges traded the forward model's terms for dx^5 and dz^3, which fit the grid's
+    three levels of dz as well: between them its readings were 3 % off (median), and refined poses 3-10x worse."""
     forward = fit_forward(simulate(PAPER, GRID))
-    equations = forward.refinement.forward
-    assert max(len(eq.exponents) for eq in equations) == forward.max_terms  # at the cap, where exchanges are made
-    assert all(set(monomial_exponents(1)) <= set(eq.exponents) for eq in equations)
+    assert max(len(eq.exponents) for eq in forward.refinement.forward) == forward.max_terms  # at the cap
+    rel = np.abs(forward.refinement.forward_values(held.truth) - held.clean) / held.clean
+    assert np.median(rel) < 2e-3, np.median(rel)
 
 
 def test_generated_c_is_python_bit_for_bit(model, held):

@@ -167,7 +167,7 @@ def stepwise(
     max_steps: int = 1000,
     compressed: np.ndarray | None = None,
     progress=None,
-    lower: tuple[int, ...] = (),
+    exchange: bool = True,
 ) -> StepwiseResult:
     """Choose columns of ``columns`` (n, m) for ``y`` by bidirectional stepwise AIC (``columns`` may be
     None when ``compressed``, the triangle of :func:`compress`, is given).
@@ -176,16 +176,16 @@ def stepwise(
     with the lowest AIC, stops when none lowers it. Ties go as in R: staying put, then
     removals in model order, then additions in candidate order. Aliased candidates
     (relative residual norm < 1e-7 against the current model) are never added. At ``max_terms`` a term may
-    give way to another (an exchange). ``lower``: terms never removed, R's ``scope = list(lower = ...)``.
+    give way to another (an exchange), unless not ``exchange``.
     """
     A = compress(columns, y) if compressed is None else compressed
     m = A.shape[1] - 2
     with _BLAS.limit(limits=1, user_api="blas"):
         return _search(A, len(y), initial, names or [str(j) for j in range(m)], k, max_terms, max_steps, progress,
-                       set(lower))
+                       exchange)
 
 
-def _search(A, n, initial, names, k, max_terms, max_steps, progress, lower) -> StepwiseResult:
+def _search(A, n, initial, names, k, max_terms, max_steps, progress, exchange) -> StepwiseResult:
     m = A.shape[1] - 2
     col_norm = np.linalg.norm(A, axis=0)[1:-1]
     yc = A[:, -1]
@@ -222,10 +222,9 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress, lower) -> S
             continue
         # row 0: stay; then removals in model order; then additions in candidate order
         scores, outside = [np.array([aic])], np.zeros(0, dtype=int)
-        kept = np.array([c in lower for c in current], dtype=bool)
         if current:
             drops = _rss_drops(Q, R, yc, rss)
-            scores.append(np.where(kept, np.inf, aic_of(np.maximum(drops, 1e-300), n, len(current) - 1, k)))
+            scores.append(aic_of(np.maximum(drops, 1e-300), n, len(current) - 1, k))
         at_cap = max_terms is not None and len(current) >= max_terms
         free = np.ones(m, dtype=bool)
         free[current] = False
@@ -242,13 +241,13 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress, lower) -> S
             new_r = r[:, None] - Z * coef
             add_rss = np.sum(new_r * new_r, axis=0)
             scores.append(aic_of(np.maximum(add_rss, 1e-300), n, len(current) + 1, k))
-        elif outside.size and current:
+        elif outside.size and current and exchange:
             # at the cap a term may still give way to a better one: with additions barred, a search that only drops
             # kept the first terms it took, and a cap of one could end worse than the best single candidate
             swap_rss, skipped = _swap_rss(A, Q, R, r, rss, outside, col_norm[outside])
             aliased_seen.update(outside[skipped].tolist())
             swap_aic = aic_of(np.maximum(swap_rss, 1e-300), n, len(current), k)
-            scores.append(np.where(kept[:, None], np.inf, swap_aic).ravel())
+            scores.append(swap_aic.ravel())
         # argmin takes the first of exactly equal scores, as R's order() does; scores equal in exact arithmetic
         # (a mirror pair of elements on a symmetric ring) go by their rounding, which the CPU's BLAS kernel sets
         best = int(np.argmin(np.concatenate(scores)))
@@ -317,7 +316,7 @@ def refit(compressed: np.ndarray, selected: list[int]) -> tuple[float, np.ndarra
 
 
 def stepwise_reference(columns: np.ndarray, y: np.ndarray, initial: list[int], *, k: float = 2.0,
-                       max_terms: int | None = None, lower: tuple[int, ...] = ()) -> StepwiseResult:
+                       max_terms: int | None = None, exchange: bool = True) -> StepwiseResult:
     """The plain way: refit every candidate model by least squares at every step.
 
     Same rules as :func:`stepwise`; kept as its independent check and its benchmark baseline.
@@ -340,13 +339,12 @@ def stepwise_reference(columns: np.ndarray, y: np.ndarray, initial: list[int], *
     trace = [Step("", aic, rss(current), len(current))]
     while True:
         moves = [("", aic)]
-        free = [c for c in current if c not in lower]
-        moves += [(("-", c), aic_of(rss([x for x in current if x != c]), n, len(current) - 1, k)) for c in free]
+        moves += [(("-", c), aic_of(rss([x for x in current if x != c]), n, len(current) - 1, k)) for c in current]
         if max_terms is None or len(current) < max_terms:
             moves += [(("+", j), aic_of(rss(current + [j]), n, len(current) + 1, k))
                       for j in range(m) if j not in current and not aliased(current, j)]
-        else:  # at the cap: exchanges, each term for each candidate
-            for c in free:
+        elif exchange:  # at the cap: exchanges, each term for each candidate
+            for c in current:
                 rest = [x for x in current if x != c]
                 moves += [((c, j), aic_of(rss(rest + [j]), n, len(current), k))
                           for j in range(m) if j not in current and not aliased(rest, j)]
