@@ -77,6 +77,22 @@ def test_fast_search_equals_the_plain_refit_loop():
             assert len(fast.selected) <= cap and any(" + " in s.move for s in fast.trace) == exchange, out
 
 
+def test_at_the_cap_exchanges_reach_the_best_subset_abess_finds():
+    """abess (best subset of a given size by splicing, written elsewhere) as the peer: a search capped at k and started
+    from k wrong columns ends on abess's k columns; one that only drops and adds kept the wrong ones."""
+    from abess.linear import LinearRegression
+
+    n, m, k = 300, 30, 4
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        X = rng.normal(size=(n, m)) + 0.35 * rng.normal(size=(n, 6)) @ rng.normal(size=(6, m))  # correlated columns
+        true = sorted(rng.choice(m, k, replace=False).tolist())
+        y = X[:, true] @ (rng.uniform(0.5, 2, k) * rng.choice([-1, 1], k)) + 0.3 * rng.normal(size=n)
+        peer = np.flatnonzero(LinearRegression(support_size=[k]).fit(X, y).coef_).tolist()
+        wrong = [j for j in range(m) if j not in true][:k]
+        assert sorted(stepwise(X, y, wrong, max_terms=k).selected) == peer, seed
+
+
 def test_a_cap_of_one_ends_at_the_best_single_candidate():
     """At the cap the search could only drop terms: --max-terms 1 kept eq. 1's best term, however much better
     another candidate fitted alone."""
