@@ -84,6 +84,24 @@ def test_no_output_replaces_another_kind_of_the_tools_json_files(model_file, tmp
     assert proc.returncode == 0 and model.read_bytes() != kept["m.json"], proc.stderr
 
 
+def test_a_schedule_is_written_over_only_by_a_schedule_of_its_kind(tmp_path):
+    """`schedule --check -o schedule.csv` or `simulate -o schedule.csv` replaced the calibration schedule a capture's
+    meta names, and the capture could no longer resume; a schedule made again with other options is taken."""
+    cal, chk = tmp_path / "schedule.csv", tmp_path / "check.csv"
+    for argv in (["--n", "12", "-o", str(cal)], ["--check", "5", "-o", str(chk)]):
+        assert run_cli("fitgen", "schedule", *argv).returncode == 0
+    kept = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    for argv, said in ((["schedule", "--check", "5", "-o", str(cal)], f"-o {cal} is a calibration schedule (poses for "
+                        "tactile-host capture, as its meta says): schedule would write a check schedule over it"),
+                       (["simulate", "--random", "10", "-o", str(cal)], "simulate would write a dataset over it"),
+                       (["schedule", "--n", "12", "-o", str(chk)], f"-o {chk} is a check schedule")):
+        assert_one_line_error(run_cli("fitgen", *argv), 2, said)
+        assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == kept
+    for argv in (["--n", "14", "-o", str(cal)], ["--check", "6", "-o", str(chk)]):
+        assert run_cli("fitgen", "schedule", *argv).returncode == 0
+    assert all(p.read_bytes() != kept[p.name] for p in (cal, chk))
+
+
 def test_a_record_that_cannot_be_made_leaves_the_output_as_it_was(model_file, tmp_path):
     (tmp_path / "keep.csv").write_text("precious\n")
     assert_one_line_error(read(model_file, "-o", str(tmp_path / "keep.csv"), "--record",

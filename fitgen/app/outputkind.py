@@ -53,21 +53,36 @@ DATASET_WRITERS = {("simulate", "output"), ("schedule", "output"), ("capture", "
 
 
 def is_capture(path) -> bool:
-    """Whether ``path`` is a capture (rows measured by `tactile-host capture`), as the meta beside it says."""
+    """Whether ``path`` is a capture (rows measured by `tactile-host capture`), as the meta beside it says (a meta
+    load_meta would refuse is still a capture's)."""
+    return str(_meta_beside(path).get("generator", "")).startswith("tactile-host capture")
+
+
+def schedule_kind(path) -> str | None:
+    """Which schedule ``path`` is, as the meta beside it says ('a calibration schedule' from fitgen schedule, 'a check
+    schedule' from fitgen schedule --check), or None."""
+    meta = _meta_beside(path)
+    if meta.get("check") is True:
+        return "a check schedule"
+    return "a calibration schedule" if "criterion" in meta and "samples_per_row" in meta else None
+
+
+def _meta_beside(path) -> dict:
+    """The meta beside ``path`` as parsed (not loaded: load_meta checks and relocates what it reads); {} when there is
+    none, or it is no JSON object (a FIFO is none: its open would wait for a writer)."""
     import json
 
     from fitgen.physics.dataset import meta_path
 
     beside = meta_path(path)
-    if not beside.is_file():  # none, or a FIFO, whose open would wait for a writer (the write refuses it in one line)
-        return False
-    # parsed, not loaded: load_meta checks and relocates what it reads, and a meta it refuses is still a capture's
+    if not beside.is_file():
+        return {}
     try:
         with open(beside, "rb") as f:
             meta = json.loads(f.read(1 << 24))
     except (OSError, ValueError, RecursionError):
-        return False
-    return isinstance(meta, dict) and str(meta.get("generator", "")).startswith("tactile-host capture")
+        return {}
+    return meta if isinstance(meta, dict) else {}
 
 
 def json_kind(path) -> str | None:
@@ -107,8 +122,10 @@ def check_output_kind(args) -> None:
             raise InputError(f"{flag(dest)} {path}: {said}")
     for dest in WRITES:
         path = getattr(args, dest, None)
-        if isinstance(path, str) and (what := written_over(path, command, WRITES_JSON.get((command, dest)),
-                                                           (command, dest) in DATASET_WRITERS)):
+        writes = WRITES_JSON.get((command, dest))
+        if (command, dest) == ("schedule", "output"):
+            writes = "a check schedule" if getattr(args, "check", None) is not None else "a calibration schedule"
+        if isinstance(path, str) and (what := written_over(path, command, writes, (command, dest) in DATASET_WRITERS)):
             raise InputError(f"{flag(dest)} {path} {what}")
 
 
@@ -125,6 +142,11 @@ def written_over(path: str, command: str, writes: str | None, dataset: bool = Fa
     if is_capture(path) and not (dataset and command == "capture"):
         return (f"is a capture (rows measured on the sensor, as its meta says): {command} would write over it; give "
                 "another name")
+    # a capture's meta names its schedule, and resuming it reads the schedule again: a check schedule or a dataset
+    # typed over a calibration schedule had left the capture unable to resume
+    if (kind := schedule_kind(path)) is not None and kind != writes:
+        return (f"is {kind} (poses for tactile-host capture, as its meta says): {command} would write "
+                f"{writes or ('a dataset' if dataset else 'another kind of file')} over it; give another name")
     if meta_path(path).is_file() and not dataset:
         return (f"is a dataset (its meta is beside it): {command} would write {writes or 'another kind of file'} over "
                 "it; give another name")
