@@ -182,6 +182,11 @@ def test_identify_takes_the_drawing_the_capture_was_scheduled_for(tmp_path):
     proc = run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "p.toml"), "--sensor", "paper")
     assert proc.returncode == 2 and f"note: the capture's schedule was made for {drawing.resolve()}; identifying " \
         "against --sensor paper" in proc.stderr, proc.stderr
+    # a built unit where the drawing belongs: its one line, without the note on a --sensor other than the schedule's
+    assert run_cli("fitgen", "simulate", "--sensor", "paper", "--unit", "1", "--grid", "dx=0", "-o",
+                   str(tmp_path / "u1.csv")).returncode == 0
+    assert_one_line_error(run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "q.toml"), "--sensor",
+                                  str(tmp_path / "u1.unit.toml")), 2, "is a built unit, not a drawing")
     # the capture moved to another folder with the drawing's file (captured on a Pi, identified on a laptop): the
     # file beside it taken, as the same hash; it had been identified against paper, noted in one line
     moved = tmp_path / "laptop"

@@ -38,6 +38,7 @@ def cmd_identify(args) -> int:
     from fitgen.fitting import identify as idf, unitrecord as rec, verdict
     from fitgen.fitting.holdout import drawing_rest_spread
     from fitgen.physics.dataset import load_capture
+    from fitgen.physics.units import require_drawing
     from host.temperature import load_tempcomp
     from host.tempunit import capture_note
 
@@ -67,6 +68,7 @@ def cmd_identify(args) -> int:
                          "stage displacement from the zero, as tactile-host capture writes it")
     rec.check_transfer(args.transfer, ds.meta, args.capture)
     drawing = sensor_of(args) if args.transfer else rec.in_capture_units(sensor_of(args), ds.meta)
+    require_drawing(drawing)  # a unit file given as --sensor: refused before the notes on it
     # a compensation fitted on another unit than the one the capture (at t0) is of
     if tc is not None and (note := capture_note(ds, tc, drawing_rest_spread(drawing), f"--temp-comp {args.temp_comp}",
                                                 args.capture)):

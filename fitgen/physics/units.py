@@ -66,6 +66,23 @@ def _axis_bases(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u1, u2
 
 
+def require_drawing(drawing: Sensor) -> None:
+    """InputError unless ``drawing`` is a drawing, not a built unit (whose parameters a unit is drawn around)."""
+    if drawing.is_drawing:
+        return
+    unit = drawing.source.get("unit") if isinstance(drawing.source, dict) else None
+    named = (unit.get("drawing_spec") or unit.get("drawing")) if isinstance(unit, dict) else None
+    if isinstance(named, str):
+        raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing: give the drawing it was "
+                         f"built to ({named}, as its [unit] table says)")
+    # no [unit] table: most likely a drawing written with a unit's keys
+    traits = "; ".join(drawing.unit_traits())
+    raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing ({traits}; a drawing's elements "
+                     "have gain 1 and offset 0, and it has no magnet offset or tilt, ambient field or stage "
+                     "map): give the drawing it was built to, or leave those keys out, which a unit draws "
+                     "within [tolerances]")
+
+
 @dataclass(frozen=True)
 class UnitSpace:
     """The units of one drawing: parameter names, their prior spreads, and the readings they give."""
@@ -76,18 +93,7 @@ class UnitSpace:
 
     @classmethod
     def of(cls, drawing: Sensor, tolerances: Tolerances | None = None) -> "UnitSpace":
-        if not drawing.is_drawing:
-            unit = drawing.source.get("unit") if isinstance(drawing.source, dict) else None
-            named = (unit.get("drawing_spec") or unit.get("drawing")) if isinstance(unit, dict) else None
-            if isinstance(named, str):
-                raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing: give the drawing it was "
-                                 f"built to ({named}, as its [unit] table says)")
-            # no [unit] table: most likely a drawing written with a unit's keys
-            traits = "; ".join(drawing.unit_traits())
-            raise InputError(f"sensor {drawing.name!r} is a built unit, not a drawing ({traits}; a drawing's elements "
-                             "have gain 1 and offset 0, and it has no magnet offset or tilt, ambient field or stage "
-                             "map): give the drawing it was built to, or leave those keys out, which a unit draws "
-                             "within [tolerances]")
+        require_drawing(drawing)
         t = tolerances or drawing.tolerances
         n = drawing.n_elements
         stiff = (STIFFENING,) if t.stiffening > 0 else ()  # absent, the space (and its records) are as before
