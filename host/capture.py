@@ -439,7 +439,8 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
     info = {"schedule": schedule.origin, "schedule_poses": len(schedule.poses), "samples_per_row": samples,
             "max_spread_volts": max_spread,
             **({"schedule_drawing": schedule.drawing} if schedule.drawing else {}),
-            **({"schedule_stage": schedule.stage} if schedule.stage else {}), **(meta or {})}
+            **({"schedule_stage": schedule.stage} if schedule.stage else {}),
+            **({"schedule_check": True} if schedule.check else {}), **(meta or {})}
     temps = prior_row_degc(prior, state.rows) if temperature is not None else None
     if temps is not None:
         info["row_degc"] = temps

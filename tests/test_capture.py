@@ -655,6 +655,12 @@ def test_a_finished_capture_names_the_next_step_from_its_schedule(tmp_path):
                               "model, named as identify's next step names it, on these poses against what identify "
                               "predicts)"}
                         [kind]), said
+    # a check capture given to identify: a note that its rows are a check's (they could no longer check the twin)
+    assert [json.loads((tmp_path / f"{k}-cap.csv.meta.json").read_text()).get("schedule_check") for k in "sc"] == \
+        [None, True]
+    proc = run_cli("fitgen", "identify", str(tmp_path / "c-cap.csv"), "-o", str(tmp_path / "c-unit.toml"))
+    assert (f"identify: note: {tmp_path / 'c-cap.csv'} was captured on a check schedule (fitgen schedule --check)"
+            in proc.stderr), proc.stderr
     # a capture given as the schedule: its poses taken, with a note that its schedule's record is not (identify
     # would take the default drawing and stage errors); a schedule is taken without one
     proc = run_cli("tactile-host", "capture", "--poses", str(tmp_path / "s-cap.csv"), "--adc", spec, "--simulate",
