@@ -382,7 +382,12 @@ def test_bad_model_files(paper_fit, tmp_path):
     assert_one_line_error(run_cli("fitgen", "predict", str(folder), str(folder / "sim.csv"), "-o",
                                   str(tmp_path / "p.csv")), contains=f"model file {folder}: a folder, not a file")
     assert_one_line_error(run_cli("fitgen", "fit", str(folder / "m.json"), "-o", str(tmp_path / "x.json")),
-                          contains="m.json: JSON, not CSV (a model or meta file?)")
+                          contains="m.json: JSON, not CSV (a model, meta or noise file?); a dataset is a CSV with")
+    # and for poses: what poses are (a noise record given to capture --poses had been told what a dataset is)
+    assert_one_line_error(run_cli("fitgen", "simulate", "--poses", str(folder / "m.json"), "-o",
+                                  str(tmp_path / "q.csv")),
+                          contains="m.json: JSON, not CSV (a model, meta or noise file?); poses are a CSV with any of "
+                                   "the columns dx,dy,dz,thx,thy, as fitgen schedule writes them")
     # a sensor or unit file for a dataset: fitgen simulate --unit writes one beside its data, which opens with a comment
     unit = tmp_path / "u.unit.toml"
     assert run_cli("fitgen", "simulate", "--unit", "3", "--random", "5", "-o", str(tmp_path / "u.csv")).returncode == 0

@@ -222,20 +222,21 @@ def _find_bad_cell(text: str, names: list[str], origin: str) -> InputError:
     return InputError(f"{origin}: cannot parse as CSV numbers")
 
 
-def parse_table(text: str, origin: str, header=None) -> tuple[list[str], np.ndarray]:
+DATASET_IS = "a dataset is a CSV with the header v1,...,vN,dx,dy,dz,thx,thy"
+
+
+def parse_table(text: str, origin: str, header=None, expected: str = DATASET_IS) -> tuple[list[str], np.ndarray]:
     """Header names (each once) and a finite float table from CSV text; errors name line and column.
     ``header(names)``: checks the names before the cells are read (an unknown column is then said as such, not as
-    its first cell that is not a number)."""
+    its first cell that is not a number). ``expected``: what the file should be, for a refusal of JSON or TOML."""
     lines = text.splitlines()
     if not lines or not lines[0].strip():
         raise InputError(f"{origin}: empty file")
     kind = text_kind(text)
     if kind == "toml":
-        raise InputError(f"{origin}: TOML, not CSV (a sensor or unit file? those go to --sensor); a dataset is a CSV "
-                         "with the header v1,...,vN,dx,dy,dz,thx,thy")
+        raise InputError(f"{origin}: TOML, not CSV (a sensor or unit file? those go to --sensor); {expected}")
     if kind == "json":
-        raise InputError(f"{origin}: JSON, not CSV (a model or meta file?); a dataset is a CSV with the header "
-                         "v1,...,vN,dx,dy,dz,thx,thy")
+        raise InputError(f"{origin}: JSON, not CSV (a model, meta or noise file?); {expected}")
     # comment lines before the header are skipped as those in the body are (an Arduino's "# tare: ..." line)
     lines = lines[next((k for k, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")),
                        len(lines) - 1):]
@@ -411,7 +412,8 @@ def pose_table(text: str, origin: str) -> tuple[np.ndarray, tuple[str, ...]]:
     """Poses (P, 5) from CSV text with any of the columns dx,dy,dz,thx,thy (missing = 0) and the ones it names,
     in that order. Input columns v1.. (a dataset's) are passed over; any other column is refused, so that a
     misspelt one (dzz, DZ) is not read as a pose held at 0."""
-    names, table = parse_table(text, origin)
+    names, table = parse_table(text, origin, expected="poses are a CSV with any of the columns dx,dy,dz,thx,thy, "
+                                                      "as fitgen schedule writes them")
     for name in names:
         if name not in POSE_NAMES and not re.fullmatch(r"v[1-9]\d*", name):
             close = difflib.get_close_matches(name.lower(), POSE_NAMES, n=1, cutoff=0.6)
