@@ -160,6 +160,7 @@ def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write
     """
     path = Path(path)
     write_target(path)  # a FIFO's or device's reading would hang or read nothing: no file to resume
+    write_target(meta_path(path))  # a folder of its name had failed the first row, after the stage took its zero
     header = header_line(n_inputs, schedule.columns)
     n_poses = len(schedule.poses)
     if not path.exists() or path.stat().st_size == 0:

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from fitgen.base.errors import InputError
+from fitgen.base.fileio import write_target
 from fitgen.base.parse import LONGEST_WAIT, MAX_NOISE, MAX_ROW_SAMPLES, MAX_TRIES, parse_positive
 from fitgen.base.progress import Progress
 from fitgen.physics.dataset import thermistor_degc
@@ -155,6 +156,8 @@ def _run_capture(args, prog: str) -> None:
     cmap = channel_map_from_args(args)
     state = prepare_output(args.output, cmap.n_elements, schedule, write=False)  # checked before any waiting
     stage_opts = stage_settings(args, schedule)  # and the stage's settings before anything moves
+    if stage_opts is not None:
+        write_target(StageState.path_for(args.output))  # its record, written when the zero is taken
     total, pending = len(schedule.poses), int((~state.done).sum())
     source = {"source": f"simulated {args.sensor}" if args.simulate else "hardware"}
     if args.simulate:  # the sensor itself, not the path typed for it, tells a resume whether it is the same one

@@ -1176,6 +1176,19 @@ def test_capture_command_bad_stage_input_is_one_line_exit_2_before_anything(tmp_
         assert not any(ln.startswith("G1") for ln in srv.ctrl.lines)
 
 
+@pytest.mark.parametrize("beside", ["d.csv.meta.json", "d.csv.stage.json"])
+def test_a_file_the_capture_writes_beside_its_output_is_checked_before_the_stage_moves(tmp_path, beside):
+    """A folder where the capture's meta goes had failed the first row, after the stage was opened and its zero taken,
+    leaving a header-only capture and a stage record."""
+    sched = write_schedule(tmp_path / "s.csv", grid())
+    out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
+    (tmp_path / beside).mkdir()
+    with server("grbl", PoseFile(posefile)) as srv:
+        proc = run_host(*capture_args(sched, out, srv.url, posefile))
+    assert_one_line_error(proc, 2, f"cannot write {tmp_path / beside}: it is a folder")
+    assert sorted(f.name for f in tmp_path.iterdir()) == sorted([beside, "pose.txt", "s.csv"])
+
+
 def test_stage_options_need_stage(tmp_path):
     sched = write_schedule(tmp_path / "s.csv", grid()[:2])
     proc = run_host("capture", "--poses", str(sched), "--adc", TWO_1115, "-o", str(tmp_path / "d.csv"), "--simulate",
