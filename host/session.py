@@ -221,8 +221,8 @@ class ReadoutSession:
         # without a file to rest on, the rest readings the model recorded from its own sensor
         recorded = None if args.rest or sensor_given or own or not need_ref else model.held_out_rest
         reference, target = None, (f"--rest {args.rest}" if args.rest else "the model's own record"
-                                   if recorded is not None else f"--sensor {args.sensor}"
-                                   + (" (the model's)" if own else ""))
+                                   if recorded is not None else f"{args.sensor} (the model's)" if own
+                                   else f"--sensor {args.sensor}")  # own: no --sensor was typed
         if need_ref:
             reference = recorded if recorded is not None else rest_reference(args.rest or args.sensor, model.n_inputs)
             check_rest_reference(model, reference, target,

@@ -91,6 +91,11 @@ def test_a_twin_copied_alone_tares_onto_the_rest_it_recorded(tmp_path):
         assert proc.returncode == 0, proc.stderr
     own_rest = readings(load_sensor(str(unit)).with_transfer("gmr"), np.zeros(5), adc_bits=0)[0]
     np.testing.assert_array_equal(load_model(model).held_out_rest, own_rest)
+    # its unit file here: the tare rests on it, named as the model's, not as a --sensor no one typed
+    proc = run_cli("tactile-host", "read", "--model", str(model), "--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3",
+                   "--simulate", "0,0,0,0,0", "--tare", "--tare-samples", "64", "--count", "2")
+    line = next(ln for ln in proc.stderr.splitlines() if "tare: offsets" in ln)
+    assert proc.returncode == 0 and line.endswith(f"onto the rest readings of {unit.resolve()} (the model's)"), line
     unit.rename(tmp_path / "elsewhere.toml")  # not on the Pi
     proc = run_cli("tactile-host", "read", "--model", str(model), "--adc", "ads1115@0x48:0-3,ads1115@0x49:0-3",
                    "--simulate", "0,0,0,0,0", "--tare", "--tare-samples", "64", "--count", "2")
