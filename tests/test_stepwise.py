@@ -93,6 +93,19 @@ def test_at_the_cap_exchanges_reach_the_best_subset_abess_finds():
         assert sorted(stepwise(X, y, wrong, max_terms=k).selected) == peer, seed
 
 
+def test_at_the_cap_a_column_in_the_models_span_is_no_exchange():
+    """A duplicate of a term (two channels wired to one element) had been swapped for it and back, on rounding alone,
+    until max_steps: 1,000 moves in the model file's trace, and the duplicate listed as aliased while selected."""
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        X = rng.normal(size=(100, 6))
+        y = X @ np.array([5.0, 3, 0.5, 0, 0, 0]) + 0.5 * rng.normal(size=100)
+        for extra in (X[:, :1], X[:, :1] + X[:, 1:2]):  # a copy of a term; the sum of two
+            res = stepwise(np.column_stack([X, extra]), y, [], max_terms=2)
+            # (which of two equal columns is added first goes by rounding, as R's ties do: no reference to compare with)
+            assert len(res.trace) <= 4 and not set(res.selected) & set(res.aliased), (seed, res.trace)
+
+
 def test_a_cap_of_one_ends_at_the_best_single_candidate():
     """At the cap the search could only drop terms: --max-terms 1 kept eq. 1's best term, however much better
     another candidate fitted alone."""

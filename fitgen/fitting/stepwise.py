@@ -211,6 +211,7 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress, exchange) -
     rss, Q, R, r, aic, shown = scored(current)
     trace = [Step("", aic, shown, len(current))]
     aliased_seen: set[int] = set()
+    visited = {frozenset(current)}
     for _ in range(max_steps):
         # R first drops a term of the current model that is aliased with the others (Df 0), the last one first
         dead = _aliased_in(A, current, R)
@@ -246,6 +247,8 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress, exchange) -
             # kept the first terms it took, and a cap of one could end worse than the best single candidate
             swap_rss, skipped = _swap_rss(A, Q, R, r, rss, outside, col_norm[outside])
             aliased_seen.update(outside[skipped].tolist())
+            for c, j in _back_to(visited, current):  # a model left had a higher AIC: only rounding leads back
+                swap_rss[current.index(c), np.searchsorted(outside, j)] = np.inf
             swap_aic = aic_of(np.maximum(swap_rss, 1e-300), n, len(current), k)
             scores.append(swap_aic.ravel())
         # argmin takes the first of exactly equal scores, as R's order() does; scores equal in exact arithmetic
@@ -263,6 +266,7 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress, exchange) -
         else:
             move, j = "+ {}", int(outside[best - 1 - len(current)])
             current.append(j)
+        visited.add(frozenset(current))
         new_rss, Q, R, r = rss_of(current)
         new_aic = aic_of(new_rss, n, len(current), k)
         trace.append(Step(move.format(names[j]), new_aic, new_rss, len(current)))
@@ -271,12 +275,20 @@ def _search(A, n, initial, names, k, max_terms, max_steps, progress, exchange) -
         aic, rss = new_aic, new_rss
         if len(trace) > 1 and new_aic >= trace[-2].aic + 1e-7:
             break  # R's guard against a move the refit does not confirm (R keeps the move, so do we)
-    return StepwiseResult(current, aic, rss, trace, sorted(aliased_seen))
+    return StepwiseResult(current, aic, rss, trace, sorted(aliased_seen - set(current)))
+
+
+def _back_to(visited, current) -> list[tuple[int, int]]:
+    """The exchanges (term c out, candidate j in) that lead from ``current`` to a model in ``visited``."""
+    now = set(current)
+    pairs = [(now - v, v - now) for v in visited if len(v) == len(now)]
+    return [(next(iter(c)), next(iter(j))) for c, j in pairs if len(c) == 1 and len(j) == 1]
 
 
 def _swap_rss(A, Q, R, r, rss, outside, col_norm) -> tuple[np.ndarray, np.ndarray]:
     """RSS of the model with each of its columns (rows) exchanged for each ``outside`` candidate (columns), inf where
-    the candidate is aliased against the others; and the candidates aliased in every exchange.
+    the candidate is aliased against the others or lies in the model's span (the RSS would stay, in exact arithmetic,
+    and rounding alone had swapped a duplicate column back and forth); and the candidates so left out of every one.
 
     Without column c the residual space gains u_c, the unit vector of Q R^-T e_c (in the model's span, orthogonal to
     its other columns), so the residual and each candidate's projection gain one component each along it."""
@@ -288,7 +300,8 @@ def _swap_rss(A, Q, R, r, rss, outside, col_norm) -> tuple[np.ndarray, np.ndarra
     Z = Z - Q @ (Q.T @ Z)
     g, H = U.T @ A[:, -1], U.T @ Z0
     zz = np.sum(Z * Z, axis=0)[None, :] + H * H
-    ok = np.sqrt(zz) > ALIAS_TOL * col_norm[None, :]
+    inside = np.sqrt(np.sum(Z * Z, axis=0)) <= ALIAS_TOL * col_norm
+    ok = (np.sqrt(zz) > ALIAS_TOL * col_norm[None, :]) & ~inside[None, :]
     with np.errstate(divide="ignore", invalid="ignore"):
         swap = rss + g[:, None] ** 2 - ((Z.T @ r)[None, :] + H * g[:, None]) ** 2 / zz
     return np.where(ok, swap, np.inf), ~ok.any(axis=0)
@@ -337,17 +350,19 @@ def stepwise_reference(columns: np.ndarray, y: np.ndarray, initial: list[int], *
     current = list(initial)
     aic = aic_of(rss(current), n, len(current), k)
     trace = [Step("", aic, rss(current), len(current))]
+    visited = {frozenset(current)}
     while True:
         moves = [("", aic)]
         moves += [(("-", c), aic_of(rss([x for x in current if x != c]), n, len(current) - 1, k)) for c in current]
         if max_terms is None or len(current) < max_terms:
             moves += [(("+", j), aic_of(rss(current + [j]), n, len(current) + 1, k))
                       for j in range(m) if j not in current and not aliased(current, j)]
-        elif exchange:  # at the cap: exchanges, each term for each candidate
+        elif exchange:  # at the cap: exchanges, each term for each candidate outside the model's span, to a new model
             for c in current:
                 rest = [x for x in current if x != c]
                 moves += [((c, j), aic_of(rss(rest + [j]), n, len(current), k))
-                          for j in range(m) if j not in current and not aliased(rest, j)]
+                          for j in range(m) if j not in current and not aliased(rest, j) and not aliased(current, j)
+                          and frozenset(rest + [j]) not in visited]
         best = min(range(len(moves)), key=lambda i: (moves[i][1], i))
         if best == 0:
             break
@@ -355,6 +370,7 @@ def stepwise_reference(columns: np.ndarray, y: np.ndarray, initial: list[int], *
         if sign not in ("-", "+"):
             sign, current = f"- {sign} +", [x for x in current if x != sign]
         current = [x for x in current if x != j] if sign == "-" else current + [j]
+        visited.add(frozenset(current))
         aic = aic_of(rss(current), n, len(current), k)
         trace.append(Step(f"{sign} {j}", aic, rss(current), len(current)))
     return StepwiseResult(current, aic, rss(current), trace)
