@@ -1,5 +1,6 @@
 """The header on the ATmega328P (Arduino Uno): codegen --target, avr-gcc builds, estimates in simavr against Python."""
 
+import dataclasses
 import shlex
 import subprocess
 
@@ -111,6 +112,19 @@ def test_header_builds_warning_free_for_atmega328p_tables_in_flash(small_model, 
         text, data, bss = (int(x) for x in subprocess.run(["avr-size", str(obj)], capture_output=True, text=True,
                                                           check=True).stdout.splitlines()[1].split()[:3])
         assert data == 0 and bss == 0 and text > 0
+
+
+def test_a_fixed_header_with_an_output_of_no_terms_builds_for_the_atmega328p(small_model, tmp_path):
+    """An output that is its intercept alone (a cap of 2 can leave thx none) has no term table, and the AVR path
+    called tm_avr_dot on it: 'tm_dot_thx' undeclared; an output 0 everywhere was Q100, past any 1 << frac."""
+    require_tool("avr-gcc")
+    eqs = tuple(dataclasses.replace(e, intercept=0.0, terms=(), coefficients=()) if e.name == "thx" else e
+                for e in small_model.equations)
+    header = render_header(dataclasses.replace(small_model, equations=eqs), "fixed")
+    (tmp_path / "tm_model.h").write_text(header)
+    proc, _ = _compile("avr-gcc", tmp_path, "c", ["-mmcu=atmega328p", "-std=c99"])
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    assert "thx [deg]: 0 terms, Q31," in header
 
 
 def test_estimates_in_simavr_equal_python(small_model):

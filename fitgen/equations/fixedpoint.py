@@ -371,7 +371,9 @@ def _plan_output(pl: _Planner, eq, j: int, operands: list[str], coefs: list[Frac
         raise InputError(f"output {eq.name}: its terms reach {bound:.3g} {eq.unit} in the input domain; an int32 "
                          f"output would need an LSB over 1 {eq.unit} (fixed point limit)")
     # the accumulator: the finest Q format whose every partial sum provably stays within its budget
-    f_acc = min(100, math.floor(math.log2(top) - math.log2(bound))) if bound > 0 else 100  # top / bound may pass float
+    # top / bound may pass float; an output 0 everywhere takes Q31, as an int32 in [-1, 1) would (Q100 had broken a
+    # conversion by 1 << frac)
+    f_acc = min(100, math.floor(math.log2(top) - math.log2(bound))) if bound > 0 else 31
     while True:
         plan = _try_accumulator(eq, j, ops_p, coefs, icpt, f_acc, acc_bits, align)
         if plan is not None:
