@@ -1004,3 +1004,15 @@ def test_a_held_out_record_edited_by_hand_is_one_line_where_it_is_simulated_agai
         edit(d["fit"]["held_out"])
         (tmp_path / "m.json").write_text(json.dumps(d))
         assert_one_line_error(run_cli(*argv, str(tmp_path / "m.json")), 2, said)
+
+
+def test_too_few_rows_for_the_initial_equation_say_why_a_cap_needs_them_too(tmp_path):
+    """A cap starts from eq. 1 cut down by its fit, so 8 rows are too few for --max-terms 2 as for none: the refusal
+    had named eq. 1's 17 coefficients without a word on the cap of 2."""
+    data = tmp_path / "tiny.csv"
+    assert run_cli("fitgen", "simulate", "--random", "8", "-o", str(data)).returncode == 0
+    head = ("8 rows cannot fit the 17 coefficients of the initial equation for dx and leave the two residual degrees "
+            "of freedom the search starts with")
+    for cap, said in (([], f"{head}; give at least 19 rows"),
+                      (["--max-terms", "2"], f"{head} (--max-terms cuts it down by its fit); give at least 19 rows")):
+        assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), *cap), 2, said)

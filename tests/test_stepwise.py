@@ -106,6 +106,16 @@ def test_at_the_cap_a_column_in_the_models_span_is_no_exchange():
             assert len(res.trace) <= 4 and not set(res.selected) & set(res.aliased), (seed, res.trace)
 
 
+def test_without_a_cap_the_n_minus_2_limit_makes_no_exchange():
+    """On 19 rows the limit of n - 2 terms binds, and the search without --max-terms had exchanged terms there
+    (- v1^-2 + v3^-4), which R's step(), the uncapped search's peer, never does."""
+    ds = simulate(PAPER, random_poses(19, DEFAULT_RANGES, pose_rng(5)))
+    for settings in (FitSettings.exact(), FitSettings.exact(max_terms=17)):
+        info = fit_model(ds, settings=settings).fit_info
+        moves = [m for out in DISPLACEMENTS for m, _ in info["outputs"][out]["steps"]]
+        assert any(" + " in m for m in moves) == (settings.max_terms is not None), moves
+
+
 def test_a_cap_of_one_ends_at_the_best_single_candidate():
     """At the cap the search could only drop terms: --max-terms 1 kept eq. 1's best term, however much better
     another candidate fitted alone."""

@@ -124,8 +124,9 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     init = [cands.index(t) for t in init_terms]
     if n < len(init) + 3:
         raise InputError(f"{n} rows cannot fit the {len(init) + 1} coefficients of the initial equation for {name} "
-                         "and leave the two residual degrees of freedom the search starts with; give at least "
-                         f"{len(init) + 3} rows")
+                         "and leave the two residual degrees of freedom the search starts with"
+                         + (" (--max-terms cuts it down by its fit)" if settings.max_terms is not None else "")
+                         + f"; give at least {len(init) + 3} rows")
 
     def columns(lo, hi, terms=cands):
         return finite_design_matrix(terms, inputs[lo:hi], None if d is None else d[lo:hi], harmonics, lo,
@@ -151,7 +152,9 @@ def fit_output(name: str, inputs: np.ndarray, y: np.ndarray, d: np.ndarray | Non
     if extra or gram is not None:
         A = compress(None, y[:0], extra=itertools.chain(*extra), start=A, gram=gram)
     init, capped = within_cap(A, init, cap)
-    res = stepwise(None, y, init, names=[t.text for t in cands], k=k, max_terms=cap, compressed=A, progress=progress)
+    # exchanges at a cap the user set; at n - 2 alone the search stays R's, which has none
+    res = stepwise(None, y, init, names=[t.text for t in cands], k=k, max_terms=cap, compressed=A, progress=progress,
+                   exchange=settings.max_terms is not None)
     terms = [cands[j] for j in res.selected]
     intercept, coefs, rss, cond = refit(A, res.selected)
     pred = np.concatenate([intercept + columns(lo, min(n, lo + ROWS), terms) @ coefs for lo in range(0, n, ROWS)])
