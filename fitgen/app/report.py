@@ -354,9 +354,13 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
         elif rms > NEAR_CONSTANT * sd and no_d and e.name in ("thx", "thy"):
             notes.append(f"{said}: it is close to a constant, fitted without the displacement terms (above)")
         elif rms > NEAR_CONSTANT * sd and isinstance(cap := (model.fit_info.get("settings") or {}).get("max_terms"),
-                                                     int):
+                                                     int) and len(e.terms) >= cap:
             notes.append(f"{said}: it is close to a constant within --max-terms {cap}, which may be too few terms for "
                          f"{e.name} on these readings: a larger cap (or none) tells")
+        elif rms > NEAR_CONSTANT * sd and isinstance(cap, int):  # the cap did not bind: the search stopped short of it
+            notes.append(f"{said}: it is close to a constant with {len(e.terms)} of the {cap} terms --max-terms "
+                         "allows: the search stopped where no one step improves it, which another cap (its start is "
+                         "eq. 1 cut down to the cap) or none may pass")
         elif rms > NEAR_CONSTANT * sd:  # no cause found; the paper's tilts, fitted its way, leave about half
             notes.append(f"{said}: it is close to a constant"
                          + (f"; against the {noise:.3g} {model.input_units} rms of reading noise it is fitted for, "
