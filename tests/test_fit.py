@@ -134,6 +134,25 @@ def test_a_cap_below_eq1_starts_from_its_best_terms_not_its_first():
     assert rss_chosen < 0.5 * rss_first, (rss_chosen, rss_first)
 
 
+def test_the_summary_and_report_name_the_criterion_the_cap_and_the_cut_of_eq1(tmp_path):
+    """--k bic --max-terms 6 printed BIC values as "AIC", and the report said neither k nor the cap, nor which of
+    eq. 1's terms the cap had cut before the trace's first move."""
+    data = tmp_path / "d.csv"
+    simulate(PAPER, random_poses(300, DEFAULT_RANGES, pose_rng(4)), noise=0.0005, seed=4).save(data)
+    for k, crit in (("bic", "BIC"), ("6", "AIC (k = 6)"), ("aic", "AIC")):
+        model = tmp_path / f"m{k}.json"
+        proc = run_cli("fitgen", "fit", str(data), "-o", str(model), "--k", k, "--max-terms", "6", "--outputs", "dx",
+                       "--held-out", "0")
+        assert proc.returncode == 0 and f"dx: 6 terms, {crit} -" in proc.stderr, proc.stderr
+        text = run_cli("fitgen", "report", str(model)).stdout
+        cut = load_model(model).fit_info["outputs"]["dx"]["initial_over_cap"]
+        head = next(line for line in text.splitlines() if line.startswith("| output"))
+        assert [c.strip() for c in head.split("|")[1:-1]] == ["output", "terms", crit, "steps", "cond"], head
+        assert f"### {crit} trace" in text, text
+        assert f"from eq. 1 on {crit}, at most 6 terms per output (--max-terms)" in text
+        assert len(cut) == 10 and f"(eq. 1 without {', '.join(cut)});" in text
+
+
 def test_true_d_option(tmp_path):
     ds = simulate(PAPER, random_poses(400, DEFAULT_RANGES, pose_rng(8)))
     m = fit_model(ds, settings=FitSettings(d_source="true"))

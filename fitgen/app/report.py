@@ -76,15 +76,28 @@ def fit_assumptions(info: dict, units: str = "") -> str:
     return line
 
 
+def criterion(fit_info: dict) -> str:
+    """The criterion the search minimised, as the model file's settings record its penalty per term: AIC (k = 2),
+    BIC (k = log n) or AIC with another k, 'AIC (k = 6)'."""
+    import math
+
+    k, n = (fit_info.get("settings") or {}).get("k"), fit_info.get("dataset_rows")
+    if not isinstance(k, (int, float)) or k == 2:
+        return "AIC"
+    if isinstance(n, int) and n > 1 and math.isclose(k, math.log(n)):
+        return "BIC"
+    return f"AIC (k = {k:.3g})"
+
+
 def fit_summary(model: Model, held_out: int) -> str:
     """What ``fitgen fit`` says after a fit: per equation its terms, AIC and training errors, what it
     assumed, a warning when it assumed no noise, and the held-out figures (``held_out``: poses asked)."""
-    lines = []
+    lines, crit = [], criterion(model.fit_info)
     for e in model.equations:
         i = model.fit_info["outputs"][e.name]
         err = i["model_training_error"]
         aic = f"{i['aic']:.2f}" if abs(i["aic"]) < 1e9 else f"{i['aic']:.4g}"  # a --k of 1e300 gives 1e300s
-        lines.append(f"{e.name}: {len(e.terms)} terms, AIC {aic}, training max error {err['max']:.4g} "
+        lines.append(f"{e.name}: {len(e.terms)} terms, {crit} {aic}, training max error {err['max']:.4g} "
                      f"{e.unit}, RMS {err['rms']:.4g}, condition {i['condition']:.3g}")
     lines.append(fit_assumptions(model.fit_info, model.input_units))
     noise = model.fit_info["noise"]
@@ -167,7 +180,9 @@ def format_report(model: Model, ds: Dataset | None = None, title: str = "", pape
                  f"({model.input_units}); fitted on {model.fit_info.get('dataset_rows', '?')} rows, "
                  f"d-terms: {model.fit_info.get('d_terms', '?')}.")
     parts.append("")
-    head = ["output", "terms", "AIC", "steps", "cond"]
+    crit = criterion(model.fit_info)
+    cap = (model.fit_info.get("settings") or {}).get("max_terms")
+    head = ["output", "terms", crit, "steps", "cond"]
     rows = []
     for e in model.equations:
         i = info.get(e.name, {})
@@ -205,13 +220,19 @@ def format_report(model: Model, ds: Dataset | None = None, title: str = "", pape
         parts.append(f"- {e.name} = {e.intercept!r} " + " ".join(
             f"{'-' if c < 0 else '+'} {abs(c)!r} {t.text}" for t, c in zip(e.terms, e.coefficients)))
     parts.append("")
-    parts.append("### AIC trace")
+    parts.append(f"### {crit} trace")
+    parts.append("")
+    parts.append(f"Bidirectional stepwise from eq. 1 on {crit}"
+                 + (f", at most {cap} terms per output (--max-terms): eq. 1 cut down to the cap first, and at the "
+                    "cap a term exchanged for a better one (- a + b)" if isinstance(cap, int) else "") + ".")
     parts.append("")
     for e in model.equations:
         steps = info.get(e.name, {}).get("steps")
         if steps:
             moves = ", ".join(f"{m} ({a:.1f})" for m, a in steps[1:]) or "no move"
-            parts.append(f"- {e.name}: start {steps[0][1]:.1f}; {moves}")
+            cut = info.get(e.name, {}).get("initial_over_cap") or []
+            parts.append(f"- {e.name}: start {steps[0][1]:.1f}" + (f" (eq. 1 without {', '.join(cut)})" if cut else "")
+                         + f"; {moves}")
     return "\n".join(parts) + "\n"
 
 
