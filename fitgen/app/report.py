@@ -244,6 +244,7 @@ def sweep_sensor(sensor, model, given: str):
     return fitted_sensor(sensor, model, "its sweep on this one would not be the model's", given=given)
 
 
+REFINE_WORSE = 1.05  # a refined training RMS past this many times the equations' own
 BLIND_SHARE = 0.5  # a training RMS past this share of an output's own spread, where a cause is found
 NEAR_CONSTANT = 0.8  # past this share the equation is near a constant, cause found or not
 
@@ -364,8 +365,8 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
         if not (sd > 0 and rms > BLIND_SHARE * sd):
             continue
         causes = _blind_causes(model, ds, sensor) if causes is None else causes
-        said = f"{e.name}'s equation leaves {rms / sd:.0%} of its spread over the rows (training RMS {rms:.3g} of " \
-               f"{sd:.3g} {e.unit})"
+        said = f"{e.name}'s {'refined estimate' if model.refine else 'equation'} leaves {rms / sd:.0%} of its " \
+               f"spread over the rows (training RMS {rms:.3g} of {sd:.3g} {e.unit})"
         if causes:
             notes.append(f"{said}: the readings barely carry {e.name} here ({'; '.join(causes)}); `fitgen observe` "
                          "tells how well each output can be seen")
@@ -387,6 +388,14 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
                          + (f"; against the {noise:.3g} {model.input_units} rms of reading noise it is fitted for, "
                             f"the readings barely carry {e.name} here" if noise > 0 else "")
                          + "; `fitgen observe` tells how well each output can be seen")
+    for e in model.equations:  # a refinement whose forward model misses these readings pulls the estimate away
+        fi = model.fit_info["outputs"][e.name]
+        refined, alone = fi["model_training_error"]["rms"], (fi.get("equations_training_error") or {}).get("rms")
+        if alone is not None and refined > REFINE_WORSE * alone:
+            notes.append(f"the refinement leaves {e.name} worse than its equations alone on the rows (training RMS "
+                         f"{refined:.3g} against {alone:.3g} {e.unit}): its forward model does not describe these "
+                         "readings well enough (more --refine-terms, or data that vary in every pose component, "
+                         "docs/refine.md); fit without --refine")
     crowded = [e for e in model.equations if len(e.terms) + 1 > rows / 3 and not _holds_out_as_trained(model, e.name)]
     if crowded:  # AIC's penalty is no guard when the terms near the rows: the equation threads the rows' noise
         e = max(crowded, key=lambda e: len(e.terms))

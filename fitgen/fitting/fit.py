@@ -368,6 +368,9 @@ def fit_model(ds: Dataset, outputs: tuple[str, ...] | None = None, settings: Fit
                                                       forward=forward)
     # the errors of the model as the device computes it (rotations from estimated d's)
     pred = model.predict(v)
+    alone = None if model.refine is None else replace(model, refine=None).predict(v)  # what the steps change
     for j, o in enumerate(outputs):
         info["outputs"][o]["model_training_error"] = error_stats(pred[:, j] - ds.target(o))
+        if alone is not None:
+            info["outputs"][o]["equations_training_error"] = error_stats(alone[:, j] - ds.target(o))
     return model
