@@ -622,6 +622,26 @@ def test_an_emulated_run_says_when_the_models_own_sensor_is_not_here(model_path,
     assert not (tmp_path / "nb").exists()
 
 
+def test_a_four_element_model_whose_sensor_file_is_gone_names_it_before_the_build(tmp_path):
+    """Its build's run at rest simulated paper's 8 elements on a map of 4, and was refused in the map's words alone,
+    naming no missing file; the library is written with --no-build, which runs nothing."""
+    four = tmp_path / "four.toml"
+    paper = Path(__file__).resolve().parents[1] / "fitgen" / "physics" / "presets" / "paper.toml"
+    four.write_text(paper.read_text().replace("count = 8", "count = 4"))
+    data, model = tmp_path / "four.csv", tmp_path / "four.json"
+    for argv in (("simulate", "--sensor", str(four), "--transfer", "gmr", "--random", "300", "-o", str(data)),
+                 ("fit", str(data), "-o", str(model), "--family", "no-roots")):  # its held-out record names four.toml
+        assert run_cli("fitgen", *argv).returncode == 0
+    four.unlink()
+    argv = ("tactile-host", "arduino-build", "--model", str(model), "--adc", "ads1115@0x48:0-3", "-o")
+    assert_one_line_error(run_cli(*argv, str(tmp_path / "lib")), 2,
+                          f"the model was fitted on {four}, not found here as it was: simulating paper; give "
+                          "--sim-sensor (the sensor the build's emulated runs read, the one at rest that measures the "
+                          "stack too): paper has 8 elements where the channel map reads 4")
+    assert not (tmp_path / "lib").exists()
+    assert run_cli(*argv, str(tmp_path / "nb"), "--no-build").returncode == 0
+
+
 def test_without_arduino_builder_the_library_is_written_and_said_not_built(model_path, tmp_path, monkeypatch):
     """The build is done when arduino-builder is installed: without it the library is written and the line says it
     was not built; --emulate, which asks for a build, is refused in one line before anything is written."""

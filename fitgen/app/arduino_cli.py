@@ -37,7 +37,12 @@ def cmd_arduino_build(args) -> int:
     if thermistor_given(args, cmap):
         raise InputError("the Arduino library reads the elements only, no thermistor: drop temp= from --adc and "
                          "--thermistor (tactile-host read and pi-build read one)")
-    load_sensor(args.sim_sensor)  # a bad one said before the library is written
+    simulated = load_sensor(args.sim_sensor)  # a bad one said before the library is written
+    if lost and not args.no_build and simulated.n_elements != cmap.n_elements:
+        # the build's run at rest (its stack peak) reads it too: the map's error alone had named no missing file
+        raise InputError(f"{lost.removeprefix('note: ')} (the sensor the build's emulated runs read, the one at "
+                         f"rest that measures the stack too): {args.sim_sensor} has {simulated.n_elements} elements "
+                         f"where the channel map reads {cmap.n_elements}")
     if args.rest and not args.tare:
         raise InputError("--rest names what --tare maps the rest readings onto: give --tare too")
     rest, onto = model_rest(model, args.rest) if args.tare else (None, None)
