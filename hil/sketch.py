@@ -51,7 +51,9 @@ def sim_pose(pose) -> np.ndarray:
         return np.asarray(pose, dtype=float)
     try:
         return parse_pose(pose)
-    except InputError:
+    except InputError as exc:
+        if "must lie within" in str(exc):  # a pose past the box any pose lies in: its reason, not the syntax
+            raise InputError(str(exc).replace("--simulate pose", "the simulated pose", 1)) from None
         raise InputError(f"the simulated pose {pose!r}: give dx=1,dz=-1 (parts left out are 0) or five numbers "
                          "dx,dy,dz,thx,thy") from None
 
