@@ -315,7 +315,15 @@ def test_codegen_cli(paper_fixed_model, tmp_path):
     assert_one_line_error(proc, 2, "fewer than 16: every reading would give one of a handful of poses")
     assert not (tmp_path / "x").exists()
     assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--input-lsb", "1e-4"),
-                          contains="fixed only")
+                          contains="apply to --precision fixed only, and this header is double")
+    # a model fitted for fixed point, its header by default another precision: the fix said (--precision fixed)
+    fitted = json.loads(path.read_text())
+    fitted["fit"]["precision"]["target"] = "fixed"
+    (tmp_path / "f.json").write_text(json.dumps(fitted))
+    assert_one_line_error(run_cli("fitgen", "codegen", str(tmp_path / "f.json"), "-o", str(tmp_path / "x"),
+                                  "--input-lsb", "1e-4", "--target", "mps2"), 2,
+                          "--input-lsb and --input-offset apply to --precision fixed only, and this header is double "
+                          "(the model was fitted for fixed point: give --precision fixed)")
     for option in (["--style", "unrolled"], ["--style", "table"], ["--fma"]):  # fixed point has one layout
         assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "x"), "--precision",
                                       "fixed", *option), 2, f"{option[0]} does not apply to --precision fixed")

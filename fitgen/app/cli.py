@@ -296,7 +296,11 @@ def cmd_codegen(args) -> int:
               + ("" if (note := rounding_note(model, fm.input_lsb)) is None else f"\nnote: {note}"), file=sys.stderr)
         return 0
     if args.input_lsb is not None or args.input_offset is not None:
-        raise InputError("--input-lsb and --input-offset apply to --precision fixed only")
+        from fitgen.fitting.holdout import device_precision
+
+        raise InputError(f"--input-lsb and --input-offset apply to --precision fixed only, and this header is "
+                         f"{args.precision}" + (" (the model was fitted for fixed point: give --precision fixed)"
+                                                if device_precision(model) == "fixed" else ""))
     # a table evaluation keeps every power and harmonic monomial in arrays on the stack, past the Uno's 2 kB of RAM
     # for the default harmonics model (docs/arduino.md): arduino-build's default there too
     args.style = args.style or ("unrolled" if args.target == "uno" else "table")
