@@ -46,7 +46,7 @@ PRECISIONS = ("float", "fixed")
 WIRE_CLOCK_HZ = 400000  # both ADCs take I2C fast mode
 WIRE_TIMEOUT_US = 25000  # one transaction of a few bytes takes < 1 ms at 100 kHz
 # RAM a build should leave above its stack's measured peak: that is one run's, and an interrupt's frame at the
-# deepest point would add to it (the builds in docs/arduino.md that fit leave 274 B or more)
+# deepest point would add to it (the builds in docs/arduino.md that fit leave 273 B or more)
 STACK_MARGIN = 128
 
 
