@@ -526,6 +526,7 @@ def test_a_penalty_past_any_datasets_is_refused_and_the_largest_taken_prints_in_
     proc = run_cli("fitgen", "fit", str(data), "--k", "100", "--held-out", "0", "-o", str(tmp_path / "m.json"))
     assert proc.returncode == 0, proc.stderr
     line = next(ln for ln in (proc.stdout + proc.stderr).splitlines() if ln.startswith("dz: "))
-    assert len(line.split("AIC ")[1].split(",")[0]) <= 10, line
+    crit, value = line.split(",")[1].strip().rsplit(" ", 1)  # "AIC (k = 100) 38.64"
+    assert crit == "AIC (k = 100)" and len(value) <= 10, line
     proc = run_cli("fitgen", "tradeoff", "paper", "--scene", "press", "--k", "1e308", "-o", str(tmp_path / "t"))
     assert_one_line_error(proc, 2, "--k takes aic, bic or numbers > 0 and at most 100, got '1e308'")
