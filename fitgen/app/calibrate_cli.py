@@ -58,14 +58,10 @@ def cmd_identify(args) -> int:
         ds, temperature = _at_t0(ds, tc, args.temp_comp, args.capture, "identify")
     elif span := rec.temperature_span_line(ds.meta, ds.n_rows):  # before a refusal, which it may explain
         print(f"identify: {span}", file=sys.stderr)
-    if unfinished := rec.unfinished_line(ds.meta, ds.n_rows, args.capture):
-        print(f"identify: {unfinished}", file=sys.stderr)
-    if ds.meta.get("schedule_check") is True:  # identified from, the rows could no longer check the twin
-        print(f"identify: note: {args.capture} was captured on a check schedule (fitgen schedule --check): poses for "
-              "fitgen check, at random in the working box with no rest row; a calibration captures fitgen schedule's "
-              "poses, and a twin identified from these rows cannot be checked on them", file=sys.stderr)
-    # the one the capture's schedule was made for
-    args.sensor, said = rec.drawing_for(args.sensor, ds.meta, args.capture)
+    for line in filter(None, (rec.unfinished_line(ds.meta, ds.n_rows, args.capture),
+                              rec.check_capture_line(ds.meta, args.capture))):
+        print(f"identify: {line}", file=sys.stderr)
+    args.sensor, said = rec.drawing_for(args.sensor, ds.meta, args.capture)  # the one the capture's schedule names
     unit_output(args.output, args.sensor, ds.meta)
     if not ds.target_names:
         raise InputError(f"{args.capture} has readings but no pose columns (dx,dy,dz,...): identify needs each row's "

@@ -332,6 +332,16 @@ def capture_temperature(meta: dict, rows: int) -> dict:
     return {} if t is None else {"capture_degc": t}
 
 
+def check_capture_line(meta: dict, capture) -> str:
+    """A note when ``capture`` was taken on a check schedule (its meta's ``schedule_check``), else '': identified
+    from, its rows could no longer check the twin."""
+    if meta.get("schedule_check") is not True:
+        return ""
+    return (f"note: {capture} was captured on a check schedule (fitgen schedule --check): poses for fitgen check, at "
+            "random in the working box with no rest row; a calibration captures fitgen schedule's poses, and a twin "
+            "identified from these rows cannot be checked on them")
+
+
 def unfinished_line(meta: dict, rows: int, capture) -> str:
     """A note when ``capture`` holds fewer than the ``schedule_poses`` its meta records (`tactile-host capture`
     stopped early), else ''; InputError saying so when it holds fewer rows than identify takes."""
