@@ -160,10 +160,12 @@ def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write
     """
     path = Path(path)
     write_target(path)  # a FIFO's or device's reading would hang or read nothing: no file to resume
-    write_target(meta_path(path))  # a folder of its name had failed the first row, after the stage took its zero
     header = header_line(n_inputs, schedule.columns)
     n_poses = len(schedule.poses)
     if not path.exists() or path.stat().st_size == 0:
+        # a folder of its meta's name had failed the first row, after the stage took its zero (a resume's meta is
+        # check_resume's, which says what it holds)
+        write_target(meta_path(path))
         if write:
             write_atomic(path, header)
         elif not path.parent.is_dir():
