@@ -112,11 +112,11 @@ class ChannelMap:
         return ",".join(parts)
 
 
-
 def check_bus(bus, where: str) -> None:
     """InputError naming ``where`` unless ``bus`` is the N of an I2C bus /dev/i2c-N (a whole number 0..MAX_BUS)."""
     if not (is_whole_number(bus) and 0 <= bus <= MAX_BUS):
         raise InputError(f"{where} must be a whole number 0..{MAX_BUS} (/dev/i2c-N), got {shown(bus)}")
+
 
 def reordered_spec(spec, order) -> str | None:
     """The ``--adc`` spec that reads as element j+1 what ``spec`` reads as element ``order[j]`` + 1 (0-based), where

@@ -299,8 +299,9 @@ def _swap_rss(A, Q, R, r, rss, outside, col_norm) -> tuple[np.ndarray, np.ndarra
     Z = Z0 - Q @ (Q.T @ Z0)
     Z = Z - Q @ (Q.T @ Z)
     g, H = U.T @ A[:, -1], U.T @ Z0
-    zz = np.sum(Z * Z, axis=0)[None, :] + H * H
-    inside = np.sqrt(np.sum(Z * Z, axis=0)) <= ALIAS_TOL * col_norm
+    zres = np.sum(Z * Z, axis=0)  # each candidate's residual against the whole model
+    zz = zres[None, :] + H * H
+    inside = np.sqrt(zres) <= ALIAS_TOL * col_norm
     ok = (np.sqrt(zz) > ALIAS_TOL * col_norm[None, :]) & ~inside[None, :]
     with np.errstate(divide="ignore", invalid="ignore"):
         swap = rss + g[:, None] ** 2 - ((Z.T @ r)[None, :] + H * g[:, None]) ** 2 / zz
