@@ -49,13 +49,7 @@ def sim_pose(pose) -> np.ndarray:
 
     if not isinstance(pose, str):
         return np.asarray(pose, dtype=float)
-    try:
-        return parse_pose(pose)
-    except InputError as exc:
-        if "must lie within" in str(exc):  # a pose past the box any pose lies in: its reason, not the syntax
-            raise InputError(str(exc).replace("--simulate pose", "the simulated pose", 1)) from None
-        raise InputError(f"the simulated pose {pose!r}: give dx=1,dz=-1 (parts left out are 0) or five numbers "
-                         "dx,dy,dz,thx,thy") from None
+    return parse_pose(pose, "the simulated pose")
 
 
 def run_sketch(elf: str | Path, cmap: ChannelMap, pose="0,0,0,0,0", *, n_lines: int = 6, sensor: str = "paper",

@@ -13,22 +13,22 @@ from fitgen.physics.pose import POSE_NAMES, check_pose_rows
 from host.simsensor import Drift
 
 
-def parse_pose(spec: str) -> np.ndarray:
-    """``dx=1,dz=-1`` (components left out are 0) or five numbers ``0.5,0,-1,0,0``."""
+def parse_pose(spec: str, what: str = "--simulate pose") -> np.ndarray:
+    """``dx=1,dz=-1`` (components left out are 0) or five numbers ``0.5,0,-1,0,0``; InputError naming ``what``."""
     if "=" in spec:
-        vals = parse_assignments(spec, POSE_NAMES, "--simulate pose")
+        vals = parse_assignments(spec, POSE_NAMES, what)
         pose = np.array([vals.get(n, 0.0) for n in POSE_NAMES])
     else:
         vals = parse_numbers(spec)
         if vals is None:
-            raise InputError(f"--simulate pose {spec!r}: not numbers")
+            raise InputError(f"{what} {spec!r}: not numbers")
         pose = np.array(vals, dtype=float)
         if pose.size != 5:
-            raise InputError(f"--simulate pose {spec!r}: give 5 numbers ({','.join(POSE_NAMES)}) "
+            raise InputError(f"{what} {spec!r}: give 5 numbers ({','.join(POSE_NAMES)}) "
                              "or NAME=VALUE parts such as dx=1,dz=-1")
     if not np.all(np.isfinite(pose)):
-        raise InputError(f"--simulate pose {spec!r}: not finite")
-    check_pose_rows(pose[None], f"--simulate pose {spec!r}")  # as --ranges and --grid: thx=1e6 had been simulated
+        raise InputError(f"{what} {spec!r}: not finite")
+    check_pose_rows(pose[None], f"{what} {spec!r}")  # as --ranges and --grid: thx=1e6 had been simulated
     return pose
 
 

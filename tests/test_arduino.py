@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fitgen.base.errors import InputError
 from host.arduino import HARDWARE, build_example, example_elf, library_properties, render_arduino
 from host.boards import BOARDS
 from host.channelmap import parse_spec
@@ -596,12 +597,25 @@ def test_emulate_refuses_no_build_and_a_bad_pose_in_one_line(model_path, tmp_pat
     assert_one_line_error(_build_cli(model_path, tmp_path / "a", "--emulate", "dx=1", "--no-build"), 2,
                           "not allowed with argument --emulate")
     proc = _build_cli(model_path, tmp_path / "b", "--emulate", "dq=1")
-    assert_one_line_error(proc, 2, "the simulated pose 'dq=1': give dx=1,dz=-1")
+    assert_one_line_error(proc, 2, "the simulated pose 'dq=1': expected NAME=NUMBER with NAME in dx, dy, dz, thx, thy")
     assert not (tmp_path / "b").exists()  # refused before anything was written
     # a pose past any pose box: its reason, where the syntax hint had read as a typo
     assert_one_line_error(_build_cli(model_path, tmp_path / "b", "--emulate", "dx=2000"), 2,
                           "the simulated pose 'dx=2000': dx from 2000 to 2000 mm: a pose box's dx must lie within "
                           "-1000..1000 mm")
+
+
+def test_a_simulated_pose_is_refused_with_parse_poses_own_reason():
+    """Each of the pose parser's reasons reaches --emulate under the name it is given there; sim_pose had matched one
+    reason's words and put a syntax hint in place of every other (a component given twice, a word for a number)."""
+    from hil.sketch import sim_pose
+
+    assert sim_pose("dx=1,dz=-1").tolist() == [1, 0, -1, 0, 0] and sim_pose([0, 1, 0, 0, 0]).tolist()[1] == 1
+    for bad, reason in (("dx=1,dx=2", "dx is given twice"), ("dx=one", "'one' is not a number"),
+                        ("1,2,3", "give 5 numbers"), ("thx=400", "thx must lie within -180..180 deg")):
+        with pytest.raises(InputError, match=re.escape(f"the simulated pose {bad!r}: ")) as err:
+            sim_pose(bad)
+        assert reason in str(err.value) and "--simulate" not in str(err.value)
 
 
 def test_an_emulated_run_says_when_the_models_own_sensor_is_not_here(model_path, tmp_path):
