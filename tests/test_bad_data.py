@@ -818,6 +818,28 @@ def test_a_ctrl_c_while_a_command_starts_is_one_line(script, prog):
     assert_one_line_error(proc, 130, f"{prog}: interrupted")
 
 
+def test_a_ctrl_c_after_the_last_line_leaves_the_commands_status(tmp_path):
+    """A Ctrl-C in the tens of milliseconds the interpreter takes to shut down, after the command's last line, had
+    ended it by SIGINT with no line (the shell's 130): the work was done and said, its status stands. One that
+    lands before the command has returned is its 'interrupted', as at any other time."""
+    import signal
+    import subprocess
+    import sys
+
+    code = "import sys; from fitgen.app.entry import fitgen; sys.argv[0] = 'fitgen'; fitgen()"
+    for k in range(3):
+        out = tmp_path / f"s{k}.csv"
+        proc = subprocess.Popen([sys.executable, "-c", code, "simulate", "--sensor", "paper", "--random", "5", "-o",
+                                 str(out)], stderr=subprocess.PIPE, text=True)
+        first = proc.stderr.readline()
+        proc.send_signal(signal.SIGINT)
+        rest = proc.stderr.read()
+        status = proc.wait(timeout=60)
+        assert first.startswith("wrote 5 rows") and out.is_file(), first + rest
+        assert (status, rest) == (0, "") or (status == 130 and rest == "fitgen simulate: interrupted\n"), \
+            (status, rest)
+
+
 @pytest.mark.parametrize("sep", [";", "\t"])
 def test_a_spreadsheets_export_with_another_separator_is_named(data, tmp_path, sep):
     """A locale whose decimal point is a comma exports ';' (or tabs): it read as 'line 2: 14 fields, the header

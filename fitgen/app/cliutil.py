@@ -136,6 +136,15 @@ def catch_ending() -> dict:
     return {s: signal.signal(s, _terminate) for s in ENDING if signal.getsignal(s) is not signal.SIG_IGN}
 
 
+def ignore_ending() -> None:
+    """Ctrl-C, SIGTERM and SIGHUP ignored from now on (in the main thread), for a process whose outcome is decided
+    and which is shutting down: a Python handler would be reset at the interpreter's finalisation, the default
+    action then ending it by the signal, with no line, its work done. SIGKILL still ends a shutdown that hangs."""
+    if _main_thread():
+        for s in (signal.SIGINT, *ENDING):
+            signal.signal(s, signal.SIG_IGN)
+
+
 def restore(previous: dict) -> None:
     for s, handler in previous.items():
         signal.signal(s, handler if handler is not None else signal.SIG_DFL)

@@ -19,7 +19,13 @@ def _main(module: str, prog: str) -> None:
     except KeyboardInterrupt as exc:
         _end(prog, *util.ended_by(exc))
     util.restore(previous)  # the defaults again, which the command's run() saves and gives back at its end
-    main()
+    try:
+        main()
+    except SystemExit:
+        # the command has said its last line and chosen its status: a signal in the tens of milliseconds the
+        # interpreter takes to shut down had ended it by SIGINT with no line, its work done
+        util.ignore_ending()
+        raise
 
 
 def _end(prog: str, said: str, status: int) -> None:
