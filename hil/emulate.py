@@ -411,8 +411,9 @@ def _check_build_folder(folder: Path) -> None:
 
 def start_target(model, target: str = "mps2", *, precision: str = "float", style: str = "table", fma: bool = False,
                  port: int | None = None, workdir: str | Path | None = None, sensor_id: str = "paper",
-                 cmap=None, bridge=None, tin=None, tempcomp=None):
-    """Render and build the firmware for ``target`` (mps2 or host) with ``model`` compiled in, and start it.
+                 cmap=None, bridge=None, tin=None, tempcomp=None, bench_inputs=None):
+    """Render and build the firmware for ``target`` (mps2 or host) with ``model`` compiled in, and start it
+    (``bench_inputs``: BENCH's readings, hil.firmware.render_firmware's).
 
     Returns the started :class:`Emulator` or :class:`HostFirmware`, with ``size`` (mps2: flash and RAM
     bytes) and ``workdir`` set; the caller stops it (it is a context manager).
@@ -444,7 +445,7 @@ def start_target(model, target: str = "mps2", *, precision: str = "float", style
     port_name = "posix" if target == "host" else target
     try:
         render_firmware(model, folder, precision=precision, style=style, fma=fma, port=port_name,
-                        sensor_id=sensor_id, cmap=cmap, tin=tin, tempcomp=tempcomp)
+                        sensor_id=sensor_id, cmap=cmap, tin=tin, tempcomp=tempcomp, bench_inputs=bench_inputs)
         image = build_firmware(folder, port_name)
         if target in MACHINES:
             runner = Emulator(image, port, bridge=bridge, machine=MACHINES[target])

@@ -351,3 +351,36 @@ def test_the_prefixes_refused_as_clashing_are_the_words_the_headers_share(model,
                            "-o", "both"], cwd=tmp_path / "c", capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert subprocess.run([str(tmp_path / "c" / "both")]).returncode == 0
+
+
+def test_bench_counts_a_whole_step_on_readings_a_pose_gives(train, held):
+    """BENCH's built-in vectors move each input apart from the others: readings no pose gives, on which a
+    refinement's step can stop part-way (its forward model undefined at the equations' far-off estimate), so that
+    bench/refine_cost.py had timed the step it gave up. Given readings, BENCH cycles through those: on readings of
+    poses in the box every step is whole, and costs at least its operations; on rows where Python's step gives up,
+    less by more than those."""
+    require_tool("qemu-system-arm")
+    require_tool("arm-none-eabi-gcc")
+    from hil.emulate import bench_instructions, start_target
+    from host.device import Device
+
+    model = fit_model(train, settings=FitSettings.family("harmonics", max_terms=12, refine=1, refine_terms=12),
+                      sensor=PAPER)
+    base = dataclasses.replace(model, refine=None)
+    lo, hi = np.array(model.input_min), np.array(model.input_max)
+    swept = lo + (hi - lo) * np.random.default_rng(0).random((4000, model.n_inputs))
+    stops = np.all(model.predict(swept, precision="float") == base.predict(swept, precision="float"), axis=1)
+    taken, given_up = held.clean[:16], swept[stops][:16]
+    assert len(given_up) == 16 and not np.any(np.all(
+        model.predict(taken, precision="float") == base.predict(taken, precision="float"), axis=1))
+    step = sum((template_ops(model, "table") - template_ops(base, "table")).values())
+    cost = {}
+    for name, rows in (("taken", taken), ("given up", given_up)):
+        for m in (base, model):
+            with start_target(m, "mps2", style="table", bench_inputs=rows) as emu:
+                with Device.open(emu.url, timeout=5) as dev:
+                    cost[name, m is model] = bench_instructions(dev)["instructions"]
+    whole, part = (cost[name, True] - cost[name, False] for name in ("taken", "given up"))
+    assert whole >= step and part < whole - step, (whole, step, part)  # a step's table loops: 7x its operations
+    with pytest.raises(InputError, match="1..16 rows of the model's 8 inputs"):
+        start_target(model, "mps2", bench_inputs=taken[:, :4])

@@ -16,7 +16,8 @@ typedef struct {
     uint8_t style;              /* the compiled-in model: 0 table, 1 unrolled */
 } device_config;
 
-/* BENCH cycles through this many fixed vectors (an ATmega328P keeps 2: 16 would take a quarter of its RAM) */
+/* BENCH cycles through this many fixed vectors (an ATmega328P keeps 2: 16 would take a quarter of its RAM); a
+ * render given readings sets it to their number (DEVICE_BENCH_INPUTS) */
 #ifndef DEVICE_BENCH_VECTORS
 #define DEVICE_BENCH_VECTORS 16u
 #endif
