@@ -519,7 +519,7 @@ def test_report_names_a_huge_label_where_it_is(fitted, data, tmp_path):
     (lambda m: m["outputs"][0]["terms"].__setitem__(0, "v1*dx"), "output dx term v1*dx needs output dx computed "
                                                                  "before it"),
     (lambda m: m["outputs"][2]["terms"].__setitem__(0, "dz"), "output dz term dz needs output dz computed before it"),
-    (lambda m: m["outputs"][0].__setitem__("terms", "v1"), "outputs[0]: terms and coefficients must be lists"),
+    (lambda m: m["outputs"][0].__setitem__("terms", "v1"), "outputs[0].terms must be a list, got 'v1'"),
     (lambda m: m["outputs"][0]["terms"].__setitem__(0, 5), "outputs[0].terms: 5 is not a term"),
     (lambda m: m["inputs"]["min"].__setitem__(0, 99.0), "input v1 has min > max"),
     # predict read -564 mm at every row, check called it 'as predicted', verify passed
@@ -541,6 +541,29 @@ def test_a_model_file_edited_by_hand_is_named_in_its_refusal(fitted, tmp_path, e
     assert_one_line_error(run_cli("fitgen", "report", str(tmp_path / "m.json")),
                           contains=f"model file {tmp_path / 'm.json'}: ")
     assert said in run_cli("fitgen", "report", str(tmp_path / "m.json")).stderr
+
+
+@pytest.mark.parametrize("edit, said", [
+    (lambda m: m.pop("inputs"), "inputs is missing"),
+    (lambda m: m["inputs"].pop("max"), "inputs.max is missing"),
+    (lambda m: m["outputs"][1].pop("name"), "outputs[1].name is missing"),
+    (lambda m: m["outputs"][0].pop("intercept"), "outputs[0].intercept is missing"),
+    (lambda m: m["outputs"][0].pop("coefficients"), "outputs[0].coefficients is missing"),
+    (lambda m: m.__setitem__("inputs", []), "inputs must be an object, got []"),
+    (lambda m: m["outputs"].__setitem__(0, []), "outputs[0] must be an object, got []"),
+    (lambda m: m["inputs"].__setitem__("min", 5), "inputs.min must be a list, got 5"),
+    (lambda m: m.__setitem__("outputs", {"dx": 1}), "outputs must be a list")])
+def test_a_model_file_missing_a_field_names_it(fitted, edit, said):
+    """A field deleted or of another kind had said only Python's exception (malformed model (KeyError: 'inputs')),
+    naming neither where it is nor what to do."""
+    from fitgen.equations.model import model_from_dict
+
+    data = json.loads(json.dumps(fitted))
+    edit(data)
+    with pytest.raises(InputError) as err:
+        model_from_dict(data, "model file m.json")
+    assert str(err.value).startswith(f"model file m.json: {said}") and "Error" not in str(err.value)
+    assert str(err.value).endswith("(fit the model again, or restore the file)")
 
 
 def test_report_refuses_data_without_the_outputs_and_leaves_no_plot_folder_when_refused(fitted, data, tmp_path):

@@ -1,5 +1,7 @@
 """The one exception type that command-line tools turn into a single line and exit status 2."""
 
+from __future__ import annotations
+
 import math
 import numbers
 
@@ -58,3 +60,20 @@ def finite_number(val, where: str) -> float:
     if not is_finite_number(val):
         raise InputError(f"{where} must be a finite number, got {shown(val)}")
     return float(val)
+
+
+KINDS = {dict: "an object", list: "a list"}
+
+
+def of_kind(val, kind: type, where: str, fix: str = ""):
+    """``val`` if it is a ``kind``; else InputError naming ``where`` (then ``fix``: what to do)."""
+    if not isinstance(val, kind):
+        raise InputError(f"{where} must be {KINDS.get(kind, kind.__name__)}, got {shown(val)}{fix}")
+    return val
+
+
+def required(obj: dict, key: str, where: str, kind: type | None = None, fix: str = ""):
+    """``obj[key]``, a file's entry at ``where``; InputError naming it where it is missing or not a ``kind``."""
+    if key not in obj:
+        raise InputError(f"{where} is missing{fix}")
+    return obj[key] if kind is None else of_kind(obj[key], kind, where, fix)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen import __version__
-from fitgen.base.errors import InputError, finite_number, is_finite_number, shown
+from fitgen.base.errors import InputError, finite_number, is_finite_number, of_kind, required, shown
 from fitgen.base.fileio import read_text, real_file, write_atomic
 from fitgen.base.texts import canonical_json, sha256_hex, text_kind
 from fitgen.equations.fma import fma as fused_multiply_add
@@ -343,17 +343,17 @@ def model_from_dict(data, origin: str = "model") -> Model:
     if type(ver) is not int or ver != SCHEMA_VERSION:  # true and 1.0 compare equal to 1
         raise InputError(f"{origin}: schema_version {ver!r} is not supported (this fitgen reads {SCHEMA_VERSION})")
     try:
-        inputs = data["inputs"]
-        lo = [finite_number(x, f"{origin}: inputs.min") for x in inputs["min"]]
-        hi = [finite_number(x, f"{origin}: inputs.max") for x in inputs["max"]]
+        fix = " (fit the model again, or restore the file)"
+        inputs = required(data, "inputs", f"{origin}: inputs", dict, fix)
+        lo, hi = ([finite_number(x, f"{origin}: inputs.{k}") for x in required(inputs, k, f"{origin}: inputs.{k}",
+                                                                                list, fix)] for k in ("min", "max"))
         units = inputs.get("units", "mT")
-        harmonics = (None if "harmonics" not in inputs
-                     else Harmonics.from_dict(inputs["harmonics"], len(lo), origin))
+        harmonics = Harmonics.from_dict(inputs["harmonics"], len(lo), origin) if "harmonics" in inputs else None
         eqs = []
-        for i, o in enumerate(data["outputs"]):
+        for i, o in enumerate(required(data, "outputs", f"{origin}: outputs", list, fix)):
             where = f"{origin}: outputs[{i}]"
-            if not isinstance(o["terms"], list) or not isinstance(o["coefficients"], list):
-                raise InputError(f"{where}: terms and coefficients must be lists")
+            for key, kind in (("name", object), ("intercept", object), ("terms", list), ("coefficients", list)):
+                required(of_kind(o, dict, where, fix), key, f"{where}.{key}", kind, fix)
             terms = tuple(_term(t, where) for t in o["terms"])
             coefs = tuple(finite_number(c, f"{where}.coefficients") for c in o["coefficients"])
             if len(terms) != len(coefs):
