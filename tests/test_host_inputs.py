@@ -100,6 +100,15 @@ def test_a_schedule_is_written_over_only_by_a_schedule_of_its_kind(tmp_path):
     for argv in (["--n", "14", "-o", str(cal)], ["--check", "6", "-o", str(chk)]):
         assert run_cli("fitgen", "schedule", *argv).returncode == 0
     assert all(p.read_bytes() != kept[p.name] for p in (cal, chk))
+    # nor a schedule over a dataset's readings (it had replaced them, and simulate then refused the name back)
+    sim = tmp_path / "sim.csv"
+    assert run_cli("fitgen", "simulate", "--random", "10", "-o", str(sim)).returncode == 0
+    kept = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    for argv in (["--n", "12", "-o", str(sim)], ["--check", "5", "-o", str(sim)]):
+        assert_one_line_error(run_cli("fitgen", "schedule", *argv), 2, f"-o {sim} is a dataset (its meta is beside "
+                              "it): schedule would write a")
+        assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == kept
+    assert run_cli("fitgen", "simulate", "--random", "12", "-o", str(sim)).returncode == 0  # a dataset over it, as ever
 
 
 def test_a_record_that_cannot_be_made_leaves_the_output_as_it_was(model_file, tmp_path):

@@ -147,7 +147,8 @@ def written_over(path: str, command: str, writes: str | None, dataset: bool = Fa
     if (kind := schedule_kind(path)) is not None and kind != writes:
         return (f"is {kind} (poses for tactile-host capture, as its meta says): {command} would write "
                 f"{writes or ('a dataset' if dataset else 'another kind of file')} over it; give another name")
-    if meta_path(path).is_file() and not dataset:
+    # a schedule is poses alone: over a dataset's readings it left a file neither fit nor simulate could take back
+    if meta_path(path).is_file() and kind is None and (not dataset or (writes or "").endswith(" schedule")):
         return (f"is a dataset (its meta is beside it): {command} would write {writes or 'another kind of file'} over "
                 "it; give another name")
     kind = json_kind(path)
