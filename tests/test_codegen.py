@@ -193,6 +193,24 @@ def test_codegen_and_verify_cli(paper_model, tmp_path):
     assert_one_line_error(run_cli("tactile-host", "verify", str(path), "--cc", "no-such-cc"), contains="not found")
 
 
+def test_codegen_writes_over_its_own_header_only(tmp_path):
+    """A header of the user's own named as codegen's output (DIR/tm_model.h) was replaced without a word; the header
+    an earlier codegen wrote, in any precision, is replaced as before."""
+    path = Path(__file__).parent / "data" / "model_gcc_fuses_at_O3.json"  # no roots: fixed point takes it
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "tm_model.h").write_text("/* my own estimator */\n")
+    for extra in ([], ["--precision", "fixed", "--input-lsb", "1e-4"]):
+        assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(out), *extra), 2,
+                              f"cannot write {out / 'tm_model.h'}: a file of that name is there which no fitgen "
+                              "codegen wrote; move it or give another folder")
+        assert (out / "tm_model.h").read_text() == "/* my own estimator */\n"
+    (out / "tm_model.h").unlink()
+    for extra in (["--precision", "fixed", "--input-lsb", "1e-4"], ["--precision", "float"], []):
+        proc = run_cli("fitgen", "codegen", str(path), "-o", str(out), *extra)
+        assert proc.returncode == 0 and (extra[1:2] or ["double"])[0] in proc.stderr, proc.stderr
+
+
 def test_verify_bounds_the_random_vectors(paper_model, tmp_path):
     """A count of vectors that could not be held is one line and status 2, not a MemoryError."""
     path = paper_model.save(tmp_path / "m.json")

@@ -124,6 +124,13 @@ def test_tempcomp_c_does_not_write_over_its_own_input(tmp_path):
     assert (folder / "tm_tempcomp.h").read_text() == kept
     proc = run_cli("tactile-host", "tempcomp-c", str(folder / "tm_tempcomp.h"), "-o", str(folder), "--prefix", "x")
     assert proc.returncode == 0 and "x_tempcomp(" in (folder / "x_tempcomp.h").read_text(), proc.stderr
+    # nor over a header of the user's own (it was replaced without a word); its own earlier one, as ever
+    (folder / "y_tempcomp.h").write_text("/* mine */\n")
+    assert_one_line_error(run_cli("tactile-host", "tempcomp-c", str(folder / "tc.json"), "-o", str(folder), "--prefix",
+                                  "y"), 2, "a file of that name is there which no tactile-host tempcomp-c wrote")
+    assert (folder / "y_tempcomp.h").read_text() == "/* mine */\n"
+    proc = run_cli("tactile-host", "tempcomp-c", str(folder / "tc.json"), "-o", str(folder), "--prefix", "x")
+    assert proc.returncode == 0, proc.stderr
 
 
 @pytest.mark.parametrize("content, said", [

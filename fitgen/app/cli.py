@@ -277,7 +277,7 @@ def cmd_report(args) -> int:
 
 
 def cmd_codegen(args) -> int:
-    from fitgen.c.codegen import render_fixed_header, write_header
+    from fitgen.c.codegen import OURS, render_fixed_header, write_header
 
     model, target = model_and_target(args)
     if args.precision == "fixed":
@@ -290,7 +290,7 @@ def cmd_codegen(args) -> int:
             raise InputError(f"{'--fma' if args.fma else '--style'} does not apply to --precision fixed")
         fm, source = plan_at(model, args.input_lsb, args.input_offset, target.mul_bits if target else 32)
         path = write_in_folder(args.output, f"{args.prefix}_model.h", render_fixed_header(fm, args.prefix),
-                               [args.model])
+                               [args.model], OURS)
         print(f"wrote {path} (fixed point, input LSB {fm.input_lsb:.6g} {model.input_units} from {source}, "
               f"offset {fm.input_offset:g}; plan: {plan_line(fm)}; {fm.summary()}; model {model.sha256[:12]})"
               + ("" if (note := rounding_note(model, fm.input_lsb)) is None else f"\nnote: {note}"), file=sys.stderr)

@@ -350,10 +350,12 @@ def foreign_files(where: str, held: list, writer: str, writes: str,
                       f"{fix}")
 
 
-def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes, inputs=()) -> Path:
+def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes, inputs=(),
+                    ours: tuple[bytes, str] | None = None) -> Path:
     """:func:`write_atomic` into ``folder/name``, creating ``folder`` (and its parents) when missing; a write that
     fails leaves no folder it made (:func:`write_all`). InputError where that is one of the command's ``inputs``
-    (a model file named tm_model.h, in the folder codegen writes its header to)."""
+    (a model file named tm_model.h, in the folder codegen writes its header to), or, with ``ours`` (what a file
+    the writer wrote holds in its first kilobyte, and the writer's name), a file there which does not hold it."""
     path = Path(folder) / name
     refuse_inputs(path, inputs, "the file written", "give another folder")
     try:
@@ -363,7 +365,18 @@ def write_in_folder(folder: str | os.PathLike, name: str, data: str | bytes, inp
     if mode is not None and not stat.S_ISREG(mode):  # the user named the folder: the name inside is ours
         raise InputError(f"cannot write {path}: {_kind(mode)} of that name is in the way; move it or give "
                          "another folder")
+    if mode is not None and ours is not None and ours[0] not in _head(path):  # a header of the user's own
+        raise InputError(f"cannot write {path}: a file of that name is there which no {ours[1]} wrote; move it or give "
+                         "another folder")
     return write_all([(path, data)])[0]
+
+
+def _head(path: Path) -> bytes:
+    try:
+        with open(path, "rb") as f:
+            return f.read(1024)
+    except OSError:  # unreadable: write_atomic says whether it can be replaced
+        return b""
 
 
 def too_long(name) -> str:
