@@ -143,6 +143,11 @@ def test_a_build_folder_holding_files_no_build_wrote_is_refused_before_any_is_wr
     (folder / "main.c").unlink()
     (folder / "notes.txt").write_text("mine\n")
     assert_one_line_error(run_cli(*argv, str(folder)), 2, "holds files no firmware build wrote (notes.txt)")
+    # a file given as the folder, or on the way to it: what is in the way, where it said the errno's words alone
+    for given, said in ((folder / "notes.txt", "it is a file"), (folder / "notes.txt" / "fw", f"{folder / 'notes.txt'} "
+                                                                  "is a file")):
+        assert_one_line_error(run_cli(*argv, str(given)), 2, f"--build-dir {given}: {said}; give a folder")
+    assert (folder / "notes.txt").read_text() == "mine\n"
     build = tmp_path / "fw"
     for _ in range(2):  # new, then an earlier build's
         proc = run_cli(*argv, str(build))

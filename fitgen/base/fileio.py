@@ -301,12 +301,17 @@ def make_folder(folder: str | os.PathLike) -> Path:
     folder = Path(folder)
     try:
         folder.mkdir(parents=True, exist_ok=True)
-    except (FileExistsError, NotADirectoryError):  # a file where the folder goes, or on the way to it
-        where = next(p for p in [folder, *folder.parents] if p.exists() and not p.is_dir())
-        raise InputError(f"cannot create {folder}: {where} is {_kind(where.stat().st_mode)}; give a folder") from None
+    except (FileExistsError, NotADirectoryError):
+        raise InputError("cannot create {}: {} is {}; give a folder".format(folder, *_in_the_way(folder))) from None
     except OSError as exc:
         raise InputError(f"cannot create {folder}: {exc.strerror}") from None
     return folder
+
+
+def _in_the_way(folder: Path) -> tuple[Path, str]:
+    """What stands where ``folder``, or a folder on the way to it, goes: its path, and its kind ('a file')."""
+    where = next(p for p in [folder, *folder.parents] if p.exists() and not p.is_dir())
+    return where, _kind(where.stat().st_mode)
 
 
 def check_folder(folder: str | os.PathLike, flag: str = "-o") -> Path:
@@ -472,6 +477,9 @@ def hold_folder(folder: Path, who: str, option: str) -> _HeldFolder:
     try:
         folder.mkdir(parents=True, exist_ok=True)
         fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    except (FileExistsError, NotADirectoryError):
+        where, kind = _in_the_way(folder)
+        raise InputError(f"{option} {folder}: {'it' if where == folder else where} is {kind}; give a folder") from None
     except OSError as exc:
         raise InputError(f"{option} {folder}: {exc.strerror or exc}") from None
     try:
