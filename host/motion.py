@@ -73,7 +73,7 @@ def parse_drift(spec: str | None, n: int) -> Drift | None:
         raise InputError(f"--sim-drift {spec!r}: over and tau must be 1..1e7 s")
     start, ramp = vals.get("start", 25.0), vals.get("ramp", 5.0)
     ends = (start, start + ramp)
-    # past the thermistor's range is a case to simulate (a read says it reads none); past these, no sensor's
+    # past the thermistor's range is a case to simulate (a read warns of it, or reads none); past these, no sensor's
     if not all(-273.15 <= t <= 1000.0 for t in ends):
         raise InputError(f"--sim-drift {spec!r}: start and start + ramp must lie within -273.15..1000 degC")
     if not abs(vals.get("creep", 0.0)) <= 1.0:

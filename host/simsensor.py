@@ -103,8 +103,13 @@ class Flicker:
 
 def ntc_volts(temp_degc: float, *, beta: float = 3950.0, r25: float = 10_000.0, series: float = 10_000.0,
               vref: float = 3.3) -> float:
-    """The divider's output: an NTC (beta model, r25 at 25 degC) to ground, ``series`` ohms to ``vref``."""
-    r = r25 * math.exp(beta * (1.0 / (temp_degc + 273.15) - 1.0 / 298.15))
+    """The divider's output: an NTC (beta model, r25 at 25 degC) to ground, ``series`` ohms to ``vref``; at
+    absolute zero the NTC's resistance is infinite, the output ``vref``."""
+    kelvin = temp_degc + 273.15
+    exponent = beta * (1.0 / kelvin - 1.0 / 298.15) if kelvin > 0.0 else math.inf
+    if exponent > 690.0:  # r / (r + series) is 1 to the last bit long before r overflows (near -215 degC)
+        return vref
+    r = r25 * math.exp(exponent)
     return vref * r / (r + series)
 
 

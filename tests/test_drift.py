@@ -47,6 +47,7 @@ def test_thermistor_reads_the_drifts_temperature(sensor):
         thermo.last_t = -1e9
         assert thermo.read() == pytest.approx(d.temperature(t), abs=0.02)
     assert tin.degc(ntc_volts(-10.0)) == pytest.approx(-10.0, abs=1e-9)
+    assert ntc_volts(-273.15) == ntc_volts(-250.0) == 3.3 and 0 < ntc_volts(1000.0) < ntc_volts(125.0)  # the rail
     assert np.isnan(tin.degc(0.0)) and np.isnan(tin.degc(3.3))  # shorted or open
     assert split_channel_map(TWO_CHIPS + ",temp=ads1115@0x4a:0") == (TWO_CHIPS, "ads1115@0x4a:0")
     for bad in ("ads1115@0x4a", "ads1115@0x50:0", "ads1115@0x4a:4", "max31855@0x4a:0"):
@@ -245,7 +246,9 @@ def test_read_says_at_once_when_its_compensation_cannot_apply(rest_model_file, t
     path = tmp_path / "tc.json"
     path.write_text(json.dumps({"kind": TempComp.KIND, "version": 1, "t0": 25.0, "offset_v_per_degc": [1e-5] * 8,
                                 "gain_per_degc": [-1e-4] * 8, "fit": {"temperatures": [15.0, 25.0, 35.0]}}))
-    for start, said in (("-200", "not compensated for temperature: the thermistor read none (is it connected?)"),
+    none = "not compensated for temperature: the thermistor read none (is it connected?)"
+    # -270 and absolute zero, which --sim-drift takes, had overflowed the simulated divider: a traceback
+    for start, said in (("-200", none), ("-270", none), ("-273.15", none),
                         ("140", "at a temperature outside -40..125 degC, where the compensation is extrapolated"),
                         ("25", None)):
         proc = run_cli("tactile-host", "read", "--model", rest_model_file, "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
