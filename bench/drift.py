@@ -59,7 +59,8 @@ from host.capture import Schedule, capture
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
 from host.engine import PythonEngine
-from host.readout import Corrections, LineFormat, Readout, rest_reference, tare
+from host.readout import Corrections, LineFormat, Readout
+from host.rest import rest_reference, tare
 from host.simbus import SimBus
 from host.simsensor import Drift
 from host.temperature import Thermometer, fit_tempcomp, parse_temperature_input

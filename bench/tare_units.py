@@ -1,5 +1,5 @@
 """A twin's tare, with its own unit resting on the bus or another: where the note that asks "is this the unit the
-model was fitted for?" falls between them (host.readout.another_unit_note, docs/calibration.md, step 8).
+model was fitted for?" falls between them (host.rest.another_unit_note, docs/calibration.md, step 8).
 
 A tare maps whatever rests on the bus onto the twin's rest. Its offsets are one unit's drift, or another unit's rest
 less this one's. The note compares their rms over the elements with TARE_UNIT_SHARE of the rms spread of the rest
@@ -22,7 +22,7 @@ import numpy as np
 from fitgen.fitting.holdout import rest_spread
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.units import UnitSpace, draw_unit
-from host.readout import TARE_UNIT_SHARE
+from host.rest import TARE_UNIT_SHARE
 from host.simsensor import Drift
 
 DEGC = (5.0, 10.0, 20.0, 30.0)

@@ -27,7 +27,7 @@ from benchutil import parse_args, table  # noqa: E402
 from fitgen.fitting.holdout import drawing_rest_spread  # noqa: E402
 from fitgen.physics.sensor import load_sensor  # noqa: E402
 from fitgen.physics.units import UnitSpace  # noqa: E402
-from host.readout import unit_limit  # noqa: E402
+from host.rest import unit_limit  # noqa: E402
 from host.simsensor import Drift  # noqa: E402
 from host.temperature import fit_tempcomp  # noqa: E402
 from host.tempunit import rest_note  # noqa: E402

@@ -41,7 +41,7 @@ from fitgen.physics.simulate import sensor_record_problem
 
 from host.adc import AdcArray
 from host.clock import REAL_CLOCK
-from host.readout import measure
+from host.rest import measure
 
 
 META_EVERY = 2.0  # seconds between rewrites of the meta during a run

@@ -30,7 +30,7 @@ from fitgen.equations.model import Model, check_input_units, load_model
 
 from host.cdrivers import chip_table, smbus_transfer
 from host.channelmap import ChannelMap, check_full_scale
-from host.readout import ANOTHER_UNIT, TARE_SAMPLES, another_unit_limit
+from host.rest import ANOTHER_UNIT, TARE_SAMPLES, another_unit_limit
 from fitgen.c.cgen import c_real, c_string
 from fitgen.c.compiled import WARNING_FLAGS, first_error, run_tool, tool_command
 
@@ -117,7 +117,7 @@ def render_pi(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: 
 
     ``precision``: float or double (default :func:`pi_precision`'s); ``tin``: the thermistor's input (read every
     0.25 s, as host/temperature.py does); ``tempcomp``: a :class:`host.temperature.TempComp` applied to the
-    readings before the model (needs ``tin``); ``rest``: (volts, whose) as host.readout.model_rest gives them,
+    readings before the model (needs ``tin``); ``rest``: (volts, whose) as host.rest.model_rest gives them,
     what ``tm_pi --tare`` maps the untouched sensor's readings onto.
     """
     from host.temperature import render_c
@@ -168,7 +168,7 @@ def _rest_block(model: Model, rest) -> str:
 
 def _another_unit_block(model: Model) -> str:
     """pi_options.h's limit on a tare's offsets past which tm_pi notes another unit, as read does
-    (host.readout.another_unit_note); none without a twin's record."""
+    (host.rest.another_unit_note); none without a twin's record."""
     limits = another_unit_limit(model)
     if limits is None:
         return ""
@@ -236,7 +236,7 @@ def describe_reads(cmap: ChannelMap, tin=None, tempcomp=None) -> str:
 def pi_build(args) -> str:
     """``tactile-host pi-build``: the compiler checked before the folder is made, the sources rendered into
     ``--output`` and built; the line that says what was built."""
-    from host.readout import model_rest
+    from host.rest import model_rest
     from host.session import channel_map_from_args
     from host.temperature import capture_temperature_note, channel_map_note, load_tempcomp, temperature_input
     from host.tempunit import model_note

@@ -277,7 +277,7 @@ def _own_rest(model: Model, header: dict, n: int, notes: list) -> tuple[np.ndarr
     ``rest_source``; a rest the user chose with --rest is kept); None to keep the run's. InputError when
     the run's is kept and the model reads it as a pose far from rest: another sensor's model, which the tare
     would bend. With the rest readings, whose they are."""
-    from host.readout import check_rest_reference, model_rest
+    from host.rest import check_rest_reference, model_rest
 
     old = np.asarray(header["reference"], dtype=float)
     if old.shape != (n,):

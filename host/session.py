@@ -26,8 +26,8 @@ from host.channelmap import CHIP_SETTINGS, CHIPS, Settings, channel_map, check_b
 from host.clock import REAL_CLOCK
 from host.engine import make_engine
 from host.motion import parse_drift, pose_or_motion
-from host.readout import (TARE_SAMPLES, Corrections, RunRecord, another_unit_note, check_rest_reference,
-                          rest_degc, rest_reference, tare)
+from host.readout import Corrections, RunRecord
+from host.rest import TARE_SAMPLES, another_unit_note, check_rest_reference, rest_degc, rest_reference, tare
 from host.simbus import simulated_bus
 from host import tempunit
 from host.temperature import (Thermometer, capture_temperature_note, channel_map_note, load_tempcomp,

@@ -8,7 +8,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.physics.pose import contact_poses
-from host.readout import model_rest, unit_limit
+from host.rest import model_rest, unit_limit
 
 OTHER_UNIT = ("note: {option} was fitted on a sensor that rests {off} mV rms from {whose}, and the rest readings "
               "of units built to its drawing spread by {between} mV rms (one unit's drift stays well under {limit} "
@@ -18,7 +18,7 @@ OTHER_UNIT = ("note: {option} was fitted on a sensor that rests {off} mV rms fro
 
 def rest_note(tempcomp, rest, spread, option: str, whose: str, degc: float | None = None) -> str:
     """A note when ``tempcomp``'s rest readings (its fit.rest_v), taken from its t0 to ``degc`` (None: t0) by its
-    own coefficients, lie from ``rest`` (V, ``whose``) past host.readout.unit_limit(``spread``) in rms over the
+    own coefficients, lie from ``rest`` (V, ``whose``) past host.rest.unit_limit(``spread``) in rms over the
     elements; '' otherwise, or without either record."""
     theirs, limits = tempcomp.rest_v, unit_limit(spread)
     if theirs is None or limits is None or theirs.shape != np.shape(rest):
@@ -33,7 +33,7 @@ def rest_note(tempcomp, rest, spread, option: str, whose: str, degc: float | Non
 
 
 def model_note(model, tempcomp, option: str) -> str:
-    """:func:`rest_note` against the rest readings of ``model``'s unit (a twin's: host.readout.model_rest, with the
+    """:func:`rest_note` against the rest readings of ``model``'s unit (a twin's: host.rest.model_rest, with the
     spread its fit recorded), at the temperature the unit was identified at where its file records one."""
     from fitgen.fitting.holdout import fitted_sensor_spec
     from fitgen.physics.sensor import load_sensor

@@ -465,10 +465,10 @@ def test_read_pose_on_the_nano_and_the_mega_prints_what_it_prints_on_the_uno(mod
 
 def test_read_pose_notes_a_tare_from_another_unit(tmp_path):
     """A twin's ReadPose tared with another unit resting: the tare's line is followed by a note, as read's tare is
-    (host.readout.another_unit_note), the offsets' rms as read computes it; on the twin's own unit, no note."""
+    (host.rest.another_unit_note), the offsets' rms as read computes it; on the twin's own unit, no note."""
     _require_emulator()
     from hil.sketch import build_readpose, run_sketch
-    from host.readout import another_unit_note, model_rest
+    from host.rest import another_unit_note, model_rest
 
     twin = twin_and_another_unit(tmp_path)
     rest, _ = model_rest(twin)
@@ -497,7 +497,7 @@ def test_read_pose_tares_at_start_onto_the_models_rest(device_model, sensor, tmp
     from fitgen.fitting.fit import FitSettings, fit_model
     from fitgen.physics.simulate import grid_poses, simulate
     from hil.sketch import build_readpose, readpose_table, run_sketch
-    from host.readout import model_rest
+    from host.rest import model_rest
 
     model = device_model
     if precision == "fixed":  # fixed point takes integer powers only

@@ -268,7 +268,7 @@ def test_a_tare_away_from_t0_maps_the_compensated_rest_onto_the_models(rest_mode
     """The tare averaged the raw readings while the offsets are taken off compensated ones: at 40 degC, 15 degC from
     the compensation's t0, every reading at rest came out shifted by the compensation's 15 mV, the estimates off
     the rest by millimetres, and auto-zero, starting there, never saw the sensor at rest."""
-    from host.readout import rest_reference
+    from host.rest import rest_reference
 
     path = tmp_path / "tc.json"
     path.write_text(json.dumps({"kind": TempComp.KIND, "version": 1, "t0": 25.0, "offset_v_per_degc": [1e-3] * 8,
@@ -975,7 +975,7 @@ def test_the_scatter_at_rest_per_volt_scales_to_other_noise_floors(device_model)
     within 1 % of the scatter measured at a quarter of that noise and at four times it, and the band's centre moves
     by under 0.005 mm or deg."""
     from host.autozero import SCATTER_NOISE, rest_estimates, rest_response
-    from host.readout import model_rest
+    from host.rest import model_rest
 
     rest = np.asarray(model_rest(device_model, "paper")[0])
     predict = lambda rows: device_model.predict(rows, precision="float")  # noqa: E731

@@ -563,7 +563,7 @@ def test_a_compensation_fitted_across_too_little_temperature_says_so_and_damaged
 
 def test_a_rest_captures_damaged_row_temperatures_are_read_as_none_recorded(tmp_path):
     """rest_degc took len() of row_degc, which a damaged meta holds as a number: a traceback in read --tare."""
-    from host.readout import rest_degc
+    from host.rest import rest_degc
 
     cap = tmp_path / "c.csv"
     cap.write_text("v1,dx\n1,0\n")

@@ -66,7 +66,8 @@ def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=N
     import io
 
     from host.engine import PythonEngine
-    from host.readout import Corrections, Readout, tare
+    from host.readout import Corrections, Readout
+    from host.rest import tare
     from host.temperature import Thermometer
 
     class FloatEngine(PythonEngine):
@@ -344,7 +345,7 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     from host.clock import VirtualClock
     from host.simbus import SimBus
     from host.simsensor import Drift
-    from host.readout import model_rest
+    from host.rest import model_rest
     from host.temperature import TempComp, parse_temperature_input
 
     require_tool("arm-linux-gnueabihf-gcc")
@@ -397,7 +398,7 @@ def test_pi_build_notes_a_tare_from_another_unit_as_read_does(tmp_path):
     from fitgen.physics.sensor import load_sensor
     from host.clock import VirtualClock
     from host.pi import _another_unit_block
-    from host.readout import another_unit_note, model_rest
+    from host.rest import another_unit_note, model_rest
     from host.simbus import SimBus
 
     require_tool("arm-linux-gnueabihf-gcc")
@@ -431,7 +432,7 @@ def test_pi_build_tares_as_the_python_readout_does(model, tmp_path):
     digit, and lines that differ from the untared ones. A build without rest readings refuses --tare in one line."""
     from fitgen.physics.sensor import load_sensor
     from host.clock import VirtualClock
-    from host.readout import model_rest
+    from host.rest import model_rest
     from host.simbus import SimBus
 
     require_tool("arm-linux-gnueabihf-gcc")
@@ -491,7 +492,7 @@ def test_pi_build_auto_zeroes_as_the_python_readout_does(model, tmp_path):
     from host.autozero import AutoZero, AutoZeroSettings
     from host.clock import VirtualClock
     from host.pi import pi_autozero
-    from host.readout import model_rest
+    from host.rest import model_rest
     from host.simbus import SimBus
     from host.simsensor import Drift
 

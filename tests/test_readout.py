@@ -18,7 +18,8 @@ from host.adc import AdcArray, DeviceSilent
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
 from host.engine import CEngine, PythonEngine
-from host.readout import LineFormat, Readout, check_rest_reference, rest_reference, tare
+from host.readout import LineFormat, Readout
+from host.rest import check_rest_reference, rest_reference, tare
 from host.simbus import SimBus
 
 from conftest import CLEARED, Terminal, assert_one_line_error, require_tool, run_cli
@@ -389,7 +390,7 @@ def test_read_command_stops_cleanly_on_ctrl_c(model_file):
 
 def test_the_tare_samples_help_gives_the_default_the_readout_takes():
     """The help's default is written as a literal (the parser stays light); it is the constant read and view use."""
-    from host.readout import TARE_SAMPLES
+    from host.rest import TARE_SAMPLES
 
     for cmd in ("read", "view"):
         proc = run_cli("tactile-host", cmd, "--help")

@@ -18,7 +18,7 @@ def cmd_arduino_build(args) -> int:
     from fitgen.app.report import rounding_note
     from fitgen.equations.fixedpoint import fixed_refusal
     from host.arduino import folder_name_note, headroom_note, lsb_volts, smaller_boards_note
-    from host.readout import model_rest
+    from host.rest import model_rest
     from host.session import channel_map_from_args
     from host.temperature import thermistor_given
 
