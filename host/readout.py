@@ -52,10 +52,15 @@ FAR_OUTSIDE = ("estimated outside the pose box the model was fitted in by more t
 TEMP_OUTSIDE = (f"at a temperature outside {T_RANGE[0]:g}..{T_RANGE[1]:g} degC, where the compensation is "
                 "extrapolated (a thermistor off its divider's range?)")
 TEMP_BEYOND = "at a temperature the compensation was not fitted near, where it is extrapolated"
+FAR_HELD = ("estimated outside the pose box the model was fitted in by more than its width, from a read held up "
+            "between its conversions (a loaded machine, or I2C retries): a sensor that moved meanwhile gives readings "
+            "of two poses, which no pose gives")
+# a read that took this many times the quickest, and this much longer (s), was held up between its conversions
+HELD_FACTOR, HELD_MARGIN = 3.0, 0.02
 # ReadoutStats' counts of samples whose estimates are off while the run goes on: each said at its first sample
 # (Readout.warn) and in the summary
 WARNED = {"uncompensated": UNCOMPENSATED, "temp_outside": TEMP_OUTSIDE, "temp_beyond": TEMP_BEYOND,
-          "far": FAR_OUTSIDE}
+          "far": FAR_OUTSIDE, "far_held": FAR_HELD}
 
 
 @dataclass
@@ -66,6 +71,7 @@ class ReadoutStats:
     clipped: int = 0  # samples with an input at its converter's full scale
     outside: int = 0  # samples with an input outside the model's fitted domain (status > 0)
     far: int = 0  # samples estimated outside the model's fitted pose box by more than its width
+    far_held: int = 0  # ... from a read held up between its conversions (not counted in far)
     uncompensated: int = 0  # samples a temperature compensation was given for and the thermistor read none
     temp_outside: int = 0  # samples whose temperature lies outside the range a compensation is checked over
     temp_beyond: int = 0  # samples more than BEYOND_DEGC past the temperatures a compensation was fitted at
@@ -189,9 +195,14 @@ class Readout:
         self._write = sink.write if sink is not None else None
         self._flush = getattr(sink, "flush", None)
         self._rate_t, self._rate_n, self.rate = None, 0, 0.0
+        self._quickest = math.inf  # s: the quickest read so far, what a read takes
 
     def step(self) -> None:
+        began = self.clock.monotonic()
         raw = self.array.read_volts()
+        took = self.clock.monotonic() - began
+        self._quickest = quickest = min(self._quickest, took)
+        held = took > max(HELD_FACTOR * quickest, quickest + HELD_MARGIN)
         temp = self.thermometer.read() if self.thermometer is not None else math.nan
         comp, v = self.corrections(raw, temp)
         out, status = self.engine.estimate(v)
@@ -209,14 +220,15 @@ class Readout:
         if status >= 0 and self._far_cols:
             est = np.asarray(out, dtype=float)[self._far_cols]
             far = bool(np.any((est < self._far_lo) | (est > self._far_hi)))
-            if far:
-                self._count("far")
+            if far:  # a read held up is not the model's fault, nor another sensor's
+                self._count(*(("far_held", f" ({took * 1e3:.0f} ms where a read takes {quickest * 1e3:.0f} ms)")
+                              if held else ("far",)))
         if self.array.clipped.any():
             st.clipped += 1
         if self.corrections.tempcomp is not None:
             self._check_temperature(temp)
         if self.observer is not None:
-            self._publish(t, raw, v, out, status, temp, far)
+            self._publish(t, raw, v, out, status, temp, far, held)
 
     def _check_temperature(self, temp: float) -> None:
         """Count a sample the compensation did not apply to, or applied outside its range."""
@@ -236,7 +248,7 @@ class Readout:
         if getattr(st, kind) == 1 and self.warn is not None:
             self.warn(f"sample {st.samples} {WARNED[kind]}{detail}; the summary counts every such sample")
 
-    def _publish(self, t, raw, v, out, status, temp, far=False) -> None:
+    def _publish(self, t, raw, v, out, status, temp, far=False, held=False) -> None:
         now = self.clock.monotonic()
         if self._rate_t is None:
             self._rate_t = now
@@ -247,6 +259,7 @@ class Readout:
         self.observer({
             "t": t, "v": [float(x) for x in v], "raw": [float(x) for x in raw],
             "out": {o: float(x) for o, x in zip(self.fmt.outputs, out)}, "status": int(status), "far": far,
+            "held": held,
             "temp": _num(temp),
             "rate": self.rate, "errors": {**self.array.counts.as_dict(), "total": self.array.counts.total},
             "zero": {"updates": 0 if az is None else len(az.updates),

@@ -539,6 +539,11 @@ def test_page_says_when_the_estimate_lies_far_outside_the_fitted_box(browser, se
     hub.publish({**sample(1), "far": False})
     page_wait(browser, lambda d: text(d, "domain") == "inside", what="the domain cleared")
     assert browser.find_element("id", "domain").get_attribute("class") == "ok"
+    # from a read held up between its conversions: readings of two poses, not another sensor's
+    hub.publish({**sample(2), "far": True, "held": True})
+    page_wait(browser, lambda d: text(d, "domain") == "inside; estimate far outside the fitted pose box from a read "
+              "held up between its conversions", what="the held-up read")
+    assert browser.find_element("id", "domain").get_attribute("class") == "warn"
 
 
 def test_page_reconnects_and_loses_nothing(browser, served):

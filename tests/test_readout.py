@@ -142,6 +142,38 @@ def test_estimates_far_outside_the_fitted_pose_box_are_counted_as_predict_counts
         assert ("estimated outside the pose box the model was fitted in" in stats.summary()) == far
 
 
+def test_a_far_estimate_from_a_read_held_up_is_not_blamed_on_another_sensor(sensor, model):
+    """A read the machine held up between its conversions (a loaded machine: 0.1-0.2 s stalls) gives a moving
+    sensor's channels at two poses, which a model can read as a pose 100 mm away: counted and said as a read held
+    up, where it had said "another sensor than the model's?"; a held-up read estimated inside the box, nothing."""
+    import dataclasses
+
+    for dx, far in (([0, 0.2], True), ([-2, 2], False)):  # POSE's dx 1 lies 0.8 past a box 0.2 wide
+        bus, arr, clock = rig(sensor)
+        m = dataclasses.replace(model, fit_info={**model.fit_info, "held_out": {"box": {"dx": dx, "dz": [-2, 0]}}})
+        read, calls = arr.read_volts, []
+
+        def held_up():  # the 3rd and 7th reads: held up 0.2 s after their first conversions
+            calls.append(1)
+            if len(calls) in (3, 7):
+                clock.sleep(0.2)
+            return read()
+
+        arr.read_volts = held_up
+        seen, warned = [], []
+        stats = Readout(arr, PythonEngine(m), io.StringIO(), LineFormat("csv", 8, m.output_names), clock=clock,
+                        observer=seen.append, warn=warned.append).run(count=10)
+        assert (stats.far, stats.far_held) == ((8, 2) if far else (0, 0))
+        assert [s["held"] for s in seen] == [k in (2, 6) for k in range(10)] and [s["far"] for s in seen] == [far] * 10
+        assert len(warned) == (2 if far else 0), warned
+        if far:
+            assert warned[1].startswith("sample 3 estimated outside the pose box the model was fitted in by more than "
+                                        "its width, from a read held up between its conversions") and " ms where a " \
+                "read takes " in warned[1] and "another sensor" not in warned[1]
+            assert "; 2 estimated outside the pose box the model was fitted in by more than its width, from a read " \
+                "held up" in stats.summary() and "; 8 estimated outside" in stats.summary()
+
+
 def test_the_rate_achieved_is_the_samples_pace_not_samples_over_the_run(sensor, model):
     """n samples paced at R Hz span n - 1 periods: the rate the summary reports is R, however few the samples
     (2 samples at 1 Hz read 2.0 Hz when counted over the run); one sample has no rate to report."""

@@ -147,7 +147,10 @@
     });
     $("rate").textContent = s.rate === null || s.rate === undefined ? "-" : s.rate.toFixed(1);
     const dom = $("domain");
-    if (s.status === 0 && s.far) {  // every reading in its range, the estimate not: another sensor's readings
+    if (s.status === 0 && s.far && s.held) {  // a read held up between conversions: readings of two poses
+      dom.textContent = "inside; estimate far outside the fitted pose box from a read held up between its conversions";
+      dom.className = "warn";
+    } else if (s.status === 0 && s.far) {  // every reading in its range, the estimate not: another sensor's readings
       dom.textContent = "inside; estimate far outside the fitted pose box: another sensor than the model's?";
       dom.className = "warn";
     } else if (s.status === 0) { dom.textContent = "inside"; dom.className = "ok"; }
