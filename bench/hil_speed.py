@@ -37,7 +37,7 @@ import time
 from pathlib import Path
 
 from benchutil import log, need_tools, parser, table
-from fitgen.physics.sensor import tomllib
+from fitgen.base.texts import tomllib
 from hil.emulate import stop_process
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -49,7 +49,8 @@ from fitgen.fitting.fit import FitSettings, error_stats, fit_model
 from fitgen.physics.observe import jacobian, observe
 from fitgen.physics.pose import POSE_NAMES
 from fitgen.physics.scenes import PRESETS
-from fitgen.physics.sensor import load_sensor, parse_sensor, tomllib
+from fitgen.base.texts import tomllib
+from fitgen.physics.sensor import load_sensor, parse_sensor
 from fitgen.physics.simulate import PAPER_GRIDS, grid_poses, pose_rng, random_poses, simulate
 from benchutil import fmt, log, parse_args, table
 

@@ -93,3 +93,19 @@ def test_the_set_up_takes_a_python3_with_pip_and_makes_a_venv_for_one_without(tm
     own = set_up(with_pip / "bin")
     assert own.returncode == 0 and own.stdout.splitlines()[0] == "python3", own.stderr
     assert not (checkout / ".venv").exists()
+
+
+def test_every_bench_script_imports():
+    """A bench whose import broke goes unseen until someone runs it (bench/layouts.py and bench/hil_speed.py
+    imported tomllib from where a refactor had taken it away): each is imported, its main left unrun."""
+    import subprocess
+    import sys
+
+    bench = Path(__file__).resolve().parent.parent / "bench"
+    code = ("import importlib, pathlib, sys\nsys.path.insert(0, sys.argv[1])\nbad = []\n"
+            "for p in sorted(pathlib.Path(sys.argv[1]).glob('*.py')):\n"
+            "    try:\n        importlib.import_module(p.stem)\n"
+            "    except Exception as exc:\n        bad.append(f'{p.name}: {exc!r}')\nprint('\\n'.join(bad))\n")
+    proc = subprocess.run([sys.executable, "-c", code, str(bench)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0 and proc.stdout.strip() == "", proc.stdout + proc.stderr
+    assert len(list(bench.glob("*.py"))) > 30  # the folder is there, with its scripts
