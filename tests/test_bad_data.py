@@ -980,10 +980,27 @@ def test_a_pose_column_removed_since_the_meta_is_refused_by_identify_and_check(d
     keep = [i for i, c in enumerate(header) if c != "dz"]
     (tmp_path / "cut.csv").write_text("".join(",".join(line.split(",")[i] for i in keep) + "\n"
                                               for line in data.read_text().splitlines()))
-    for argv in (("identify", str(tmp_path / "cut.csv"), "--sensor", "paper", "-o", str(tmp_path / "u.toml")),
-                 ("check", model_file, str(tmp_path / "cut.csv"))):
+    runs = (("identify", str(tmp_path / "cut.csv"), "--sensor", "paper", "-o", str(tmp_path / "u.toml")),
+            ("check", model_file, str(tmp_path / "cut.csv")), ("fit", str(tmp_path / "cut.csv"), "-o",
+                                                                str(tmp_path / "m.json")))
+    for argv in runs[:2]:
         assert_one_line_error(run_cli("fitgen", *argv), contains=f"{tmp_path / 'cut.csv'} has no dz column, which "
                                                                  "its meta records")
+    # fit on a stage's rows too (it had trained the rows lifted off the skin as rows in contact); a simulated
+    # dataset's label cut is an output left out, which fit takes
+    meta = json.loads((tmp_path / "cut.csv.meta.json").read_text())
+    (tmp_path / "cut.csv.meta.json").write_text(json.dumps({**meta, "labels": "stage"}))
+    assert_one_line_error(run_cli("fitgen", *runs[2]), contains="has no dz column, which its meta records")
+    (tmp_path / "cut.csv.meta.json").write_text(json.dumps(meta))
+    assert run_cli("fitgen", *runs[2], "--held-out", "0").returncode == 0
+    (tmp_path / "m.json").unlink()
+    # the last reading column cut: blamed on the meta's noise figures, whose removal led to a model of 7 inputs
+    last = max(i for i, c in enumerate(header) if c.startswith("v"))
+    (tmp_path / "cut.csv").write_text("".join(",".join(c for i, c in enumerate(line.split(",")) if i != last) + "\n"
+                                              for line in data.read_text().splitlines()))
+    for argv in runs:
+        assert_one_line_error(run_cli("fitgen", *argv), contains=f"has no {header[last]} column, which its meta "
+                                                                 "records: a reading column removed")
     assert files(tmp_path) == ["cut.csv", "cut.csv.meta.json"]
 
 

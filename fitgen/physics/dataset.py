@@ -123,18 +123,31 @@ def load_capture(path: str | Path) -> Dataset:
     for it)."""
     ds = load_dataset(path)
     refuse_huge(ds)
-    recorded = ds.meta.get("columns")
-    gone = [c for c in recorded if c in POSE_NAMES and c not in ds.target_names] if isinstance(recorded, list) else []
-    if gone:
-        raise InputError(f"{path} has no {', '.join(gone)} column, which its meta records: a pose column removed "
-                         "since it was written reads as that axis at 0 on every row; use the file as it was written")
+    _refuse_gone(ds.meta, ds.columns, path, poses=True)
     return ds
+
+
+def _refuse_gone(meta: dict, names, path, poses: bool) -> None:
+    """InputError when a column ``meta`` records is not among ``names`` (the CSV's): a reading column, or with
+    ``poses`` a pose column, removed since the file was written."""
+    recorded = meta.get("columns")
+    gone = [c for c in recorded if c not in names and (_INPUT_RE.match(str(c)) or poses and c in POSE_NAMES)] \
+        if isinstance(recorded, list) else []
+    if gone:
+        what = "a pose column removed since it was written reads as that axis at 0 on every row" \
+            if gone[0] in POSE_NAMES else "a reading column removed since it was written leaves its element out"
+        raise InputError(f"{path} has no {', '.join(map(str, gone))} column, which its meta records: {what}; use the "
+                         "file as it was written")
 
 
 def stage_labelled(ds: Dataset) -> bool:
     """Whether ``ds``'s labels are a stage's displacements: a capture (``samples_per_row`` in its meta) or a
     built unit simulated with the stage's labels."""
-    return "samples_per_row" in ds.meta or ds.meta.get("labels") == "stage"
+    return _stage_meta(ds.meta)
+
+
+def _stage_meta(meta: dict) -> bool:
+    return "samples_per_row" in meta or meta.get("labels") == "stage"
 
 
 def rows_on_the_skin(ds: Dataset) -> tuple[Dataset, int]:
@@ -285,6 +298,8 @@ def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
     if table.shape[0] < min_rows:
         raise InputError(f"{origin}: {table.shape[0]} data row(s); at least {min_rows} needed")
     meta = load_meta(path)
+    # a stage's rows read a pose column left out as 0 (a rest row lifted off the skin as one in contact)
+    _refuse_gone(meta, names, path, poses=_stage_meta(meta))
     _check_meta_numbers(meta, meta_path(path))  # what fit, identify and check read: a schedule's is capture's
     for key in META_NOISE:
         if isinstance(meta.get(key), list) and len(meta[key]) != n_in:
