@@ -1329,3 +1329,26 @@ def test_identify_notes_a_capture_that_stopped_before_its_schedule_ended(tmp_pat
                           f"-o {tmp_path / 'u.unit.toml'} is the unit the capture was simulated from (its meta records "
                           "its hash): writing the identified unit there would destroy the truth it is judged against")
     assert (tmp_path / "u.unit.toml").read_bytes() == truth and not (tmp_path / "u.unit.posterior.json").exists()
+    # a row torn as a capture stopped (no line end): read as a row at a pose the stage never took; refused in fit too
+    lines = cap.read_text().splitlines(keepends=True)
+    torn = tmp_path / "torn.csv"
+    torn.write_text("".join(lines[:-1]) + lines[-1].rstrip("\n")[:-1])
+    (tmp_path / "torn.csv.meta.json").write_text((tmp_path / "c.csv.meta.json").read_text())
+    for argv in (["identify", str(torn), "-o", str(tmp_path / "t.toml")],
+                 ["fit", str(torn), "-o", str(tmp_path / "t.json")]):
+        assert_one_line_error(run_cli("fitgen", *argv), 2, f"dataset {torn}: its last line, data row 40, has no line "
+                              "end: a row torn as the capture stopped; the same capture command run again takes it")
+    # rows copied (each counted as a new measurement, the standard errors narrowed as by new rows): refused by name;
+    # more rows than the schedule without copies (captures joined) is a note
+    copied = tmp_path / "copied.csv"
+    copied.write_text("".join(lines + lines[5:8]))
+    (tmp_path / "copied.csv.meta.json").write_text((tmp_path / "c.csv.meta.json").read_text())
+    assert_one_line_error(run_cli("fitgen", "identify", str(copied), "-o", str(tmp_path / "t.toml")), 2,
+                          f"{copied} holds 43 rows for the 40 poses of its schedule, and data row(s) 41, 42, 43 repeat "
+                          "earlier rows to the last digit")
+    assert not (tmp_path / "t.toml").exists() and not (tmp_path / "t.json").exists()
+    joined = [f"{float(ln.split(',', 1)[0]) + 1e-4!r},{ln.split(',', 1)[1]}" for ln in lines[5:8]]  # not copies
+    copied.write_text("".join(lines + joined))
+    proc = run_cli("fitgen", "identify", str(copied), "-o", str(tmp_path / "t.toml"))
+    assert proc.returncode == 0 and f"identify: note: {copied} holds 43 rows, more than the 40 poses of its " \
+        "schedule" in proc.stderr, proc.stderr

@@ -344,8 +344,11 @@ def check_capture_line(meta: dict, capture) -> str:
 
 def unfinished_line(meta: dict, rows: int, capture) -> str:
     """A note when ``capture`` holds fewer than the ``schedule_poses`` its meta records (`tactile-host capture`
-    stopped early), else ''; InputError saying so when it holds fewer rows than identify takes."""
+    stopped early), or more, else ''; InputError saying so when it holds fewer rows than identify takes."""
     total = meta.get("schedule_poses")
+    if type(total) is int and rows > total:  # no copies (load_capture): captures joined, or rows added by hand
+        return (f"note: {capture} holds {rows} rows, more than the {total} poses of its schedule (a capture writes "
+                "each once): identify takes every row as a measurement of its own")
     if type(total) is not int or not rows < total:
         return ""
     stopped = (f"{capture} holds {rows} of the {total} poses of its schedule (its capture stopped early: the same "

@@ -124,6 +124,16 @@ def load_capture(path: str | Path) -> Dataset:
     ds = load_dataset(path)
     refuse_huge(ds)
     _refuse_gone(ds.meta, ds.columns, path, poses=True)
+    total = ds.meta.get("schedule_poses")
+    if type(total) is int and ds.n_rows > total:  # capture writes each of its schedule's poses once
+        rows = np.hstack([ds.inputs, ds.targets])
+        first = np.unique(rows, axis=0, return_index=True)[1]
+        copies = sorted(set(range(ds.n_rows)) - set(first.tolist()))
+        if copies:
+            raise InputError(f"{path} holds {ds.n_rows} rows for the {total} poses of its schedule, and data row(s) "
+                             f"{', '.join(str(r + 1) for r in copies[:5])}{', ...' if len(copies) > 5 else ''} repeat "
+                             "earlier rows to the last digit: copies, each of which would count as a measurement of "
+                             "its own; delete them")
     return ds
 
 
@@ -293,11 +303,17 @@ META_NOISE = ("noise", "row_noise", "sample_noise")
 def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
     """Read and validate a dataset CSV (and its ``.meta.json`` if present)."""
     origin = f"dataset {path}"
-    names, table = parse_table(read_text(path, "dataset"), origin, lambda names: _header(names, origin))
+    text = read_text(path, "dataset")
+    names, table = parse_table(text, origin, lambda names: _header(names, origin))
     n_in, targets = _header(names, origin)
     if table.shape[0] < min_rows:
         raise InputError(f"{origin}: {table.shape[0]} data row(s); at least {min_rows} needed")
     meta = load_meta(path)
+    if str(meta.get("generator", "")).startswith("tactile-host capture") and not text.endswith("\n"):
+        # capture ends every row it writes with its line: one without was torn as a run stopped, and a tear in its
+        # last cell still reads as a row, at a pose the stage never took (capture's resume drops it)
+        raise InputError(f"{origin}: its last line, data row {table.shape[0]}, has no line end: a row torn as the "
+                         "capture stopped; the same capture command run again takes it anew (or delete the line)")
     # a stage's rows read a pose column left out as 0 (a rest row lifted off the skin as one in contact)
     _refuse_gone(meta, names, path, poses=_stage_meta(meta))
     _check_meta_numbers(meta, meta_path(path))  # what fit, identify and check read: a schedule's is capture's
