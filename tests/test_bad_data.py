@@ -1078,3 +1078,16 @@ def test_too_few_rows_for_the_initial_equation_say_why_a_cap_needs_them_too(tmp_
     for cap, said in (([], f"{head}; give at least 19 rows"),
                       (["--max-terms", "2"], f"{head} (--max-terms cuts it down by its fit); give at least 19 rows")):
         assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), *cap), 2, said)
+
+
+def test_a_dataset_of_rows_off_the_skin_alone_is_one_line_in_fit_and_report(fitted, tmp_path):
+    """Every row lifted off the skin: fit noted the rows it left out, then refused a dataset of no rows; report
+    noted them before its refusal. Each is now the refusal alone, saying why."""
+    off = tmp_path / "off.csv"
+    assert run_cli("fitgen", "simulate", "--grid", "dx=0,1 dz=0.2", "-o", str(off)).returncode == 0
+    (tmp_path / "m.json").write_text(json.dumps(fitted))
+    for argv, what in ((["fit", str(off), "-o", str(tmp_path / "new.json")], "fit"),
+                       (["report", str(tmp_path / "m.json"), "--data", str(off)], "report on")):
+        assert_one_line_error(run_cli("fitgen", *argv), 2, f"{off}: every row is lifted off the skin, so no contact "
+                              f"pose to {what}")
+    assert not (tmp_path / "new.json").exists()

@@ -107,7 +107,7 @@ def cmd_fit(args) -> int:
     loaded = refuse_huge(shown_while("fit", f"reading {args.data}", lambda: load_dataset(args.data)))
     check_sensor_file(loaded.meta, args.sensor, str(args.data), Path(args.data).resolve().parent)  # a unit file gone or changed: said, not fitted without
     edited = loaded.meta.get("dataset_sha256") not in (None, loaded.sha256)  # rows changed since the meta was written
-    ds, lifted = rows_on_the_skin(loaded)
+    ds, lifted = rows_on_the_skin(loaded, f"{args.data}: every row is lifted off the skin, so no contact pose to fit")
     recorded = ds.meta.get("units")
     if args.units is not None and recorded not in (None, args.units):
         raise InputError(f"--units {args.units}, but {args.data}'s meta says its readings are in {recorded}")
@@ -242,15 +242,14 @@ def cmd_report(args) -> int:
                          f"({', '.join(model.output_names)}): leave --sensor out")
     sensor = sweep_sensor(load_sensor(args.sensor), model, args.sensor) if folder is not None and args.sensor else None
     read = shown_while("report", f"reading {args.data}", lambda: load_dataset(args.data)) if args.data else None
-    ds, lifted = rows_on_the_skin(refuse_huge(read)) if read is not None else (None, 0)
+    ds, lifted = rows_on_the_skin(refuse_huge(read), f"{args.data}: every row is lifted off the skin, so no contact "
+                                  "pose to report on") if read is not None else (None, 0)
     if ds is not None:
         check_input_units(model, ds.meta.get("units"), f"{args.data}'s readings", f"model {args.model}")
         check_magnitudes(model, "double")  # as predict: estimates of inf had made a table of them, status 0
     if lifted:
         print(f"left out {lifted} row(s) lifted off the skin: they read the magnet at rest, no contact pose to "
               "estimate", file=sys.stderr)
-    if ds is not None and not len(ds.inputs):
-        raise InputError(f"{args.data}: every row is lifted off the skin, so no contact pose to report on")
     if ds is not None and not set(model.output_names) & set(ds.target_names):
         raise InputError(f"{args.data}: no column of the model's outputs ({', '.join(model.output_names)}), "
                          "so no error to report")

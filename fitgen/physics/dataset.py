@@ -160,13 +160,16 @@ def _stage_meta(meta: dict) -> bool:
     return "samples_per_row" in meta or meta.get("labels") == "stage"
 
 
-def rows_on_the_skin(ds: Dataset) -> tuple[Dataset, int]:
+def rows_on_the_skin(ds: Dataset, none_left: str | None = None) -> tuple[Dataset, int]:
     """``ds`` without the rows its stage lifted off the skin, and how many were left out. Such a row reads the
     magnet at rest (fitgen.physics.pose.off_skin): it helps identify a unit, but its label is no contact pose
-    for an estimator to learn. A dataset neither a stage's nor fitgen simulate's is returned as it is."""
+    for an estimator to learn. A dataset neither a stage's nor fitgen simulate's is returned as it is.
+    ``none_left``: the InputError's message when every row was lifted."""
     keep = _on_the_skin(ds)
     if keep.all():
         return ds, 0
+    if none_left is not None and not keep.any():
+        raise InputError(none_left)
     return Dataset(ds.inputs[keep], ds.targets[keep], ds.target_names, dict(ds.meta)), int(np.sum(~keep))
 
 
