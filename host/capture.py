@@ -1,18 +1,15 @@
 """Recording a calibration dataset: for each pose of a schedule, wait, average, check, append one row.
 
-The output is the shared dataset CSV (v1..vN in volts, then the schedule's pose
-columns) with ``<output>.meta.json`` beside it (units V, so ``fitgen fit`` makes a
-model in volts). Every row is one ``write`` of a complete line on a file opened
-for appending, then ``fsync``: a row is on disk whole or not at all. A run that
-stops for any reason (Ctrl-C, a kill, a power cut, a silent chip) loses no row;
-run the same command again and it resumes: a last line without its newline (a
-write cut short) is dropped, and each schedule pose already in the file is
-skipped -- counted with multiplicity, so a schedule may visit a pose twice.
+The output is the shared dataset CSV (v1..vN in volts, then the schedule's pose columns) with ``<output>.meta.json``
+beside it (units V, so ``fitgen fit`` makes a model in volts). Every row is one ``write`` of a complete line on a
+file opened for appending, then ``fsync``: a row is on disk whole or not at all. A run that stops for any reason
+(Ctrl-C, a kill, a power cut, a silent chip) loses no row; run the same command again and it resumes: a last line
+without its newline (a write cut short) is dropped, and each schedule pose already in the file is skipped -- counted
+with multiplicity, so a schedule may visit a pose twice.
 
-The meta also records the noise the capture measured (:class:`NoiseStats`), the
-time it took, and whatever the caller adds (the channel map, a stage's settings).
-It is rewritten at the start, at most every ``META_EVERY`` seconds and at the end
-of a run, so a run killed outright loses at most those seconds of figures, never a row.
+The meta also records the noise the capture measured (:class:`NoiseStats`), the time it took, and whatever the
+caller adds (the channel map, a stage's settings). It is rewritten at the start, at most every ``META_EVERY``
+seconds and at the end of a run, so a run killed outright loses at most those seconds of figures, never a row.
 """
 
 from __future__ import annotations
@@ -42,7 +39,6 @@ from fitgen.physics.simulate import sensor_record_problem
 from host.adc import AdcArray
 from host.clock import REAL_CLOCK
 from host.rest import measure
-
 
 META_EVERY = 2.0  # seconds between rewrites of the meta during a run
 
@@ -173,15 +169,15 @@ def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write
         return ResumeState(np.zeros(n_poses, dtype=bool), 0)
     origin = f"output {path}"
     text = read_text(path, "output (to resume)")  # a byte-order mark (re-saved in a spreadsheet) taken off
-    dropped = False
-    if not text.endswith("\n"):
-        text = text[: text.rfind("\n") + 1]  # the last write was cut short: it never was a row
-        dropped = True
+    cut = not text.endswith("\n")  # the last write was cut short
+    dropped = cut and text != header.rstrip("\n")  # a row torn: it never was one (else the header's line end)
+    if cut:
+        text = text[: text.rfind("\n") + 1] if dropped else header
     if not text.startswith(header):
         first = text.split("\n", 1)[0]
         raise InputError(f"{origin}: its header {first!r} is not {header.strip()!r}; it belongs to another "
                          "channel map or schedule (choose another -o)")
-    if dropped and write:
+    if cut and write:
         write_atomic(path, text)
     counts: Counter = Counter()
     where: dict = {}
@@ -196,9 +192,8 @@ def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write
             vals = []
         if len(vals) != width or not np.all(np.isfinite(vals)):
             raise InputError(f"{origin} line {lineno}: not a row of {width} numbers; repair or remove it to resume")
-        key = _key(vals[n_inputs:])
-        counts[key] += 1
-        where.setdefault(key, lineno)
+        counts[key := _key(vals[n_inputs:])] += 1
+        where.setdefault(key, []).append(lineno)
     rows = sum(counts.values())
     done = np.zeros(n_poses, dtype=bool)
     for i, vals in enumerate(schedule.values):
@@ -208,9 +203,12 @@ def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write
             done[i] = True
     extra = [k for k, c in counts.items() if c > 0]
     if extra:
-        pose = " ".join(f"{c}={v:g}" for c, v in zip(schedule.columns, extra[0]))  # as a row's progress names it
-        raise InputError(f"{origin} line {where[extra[0]]}: pose {pose} is not (or not that often) in the "
-                         f"{schedule.origin}; it belongs to another run (choose another -o)")
+        key, pose = extra[0], " ".join(f"{c}={v:g}" for c, v in zip(schedule.columns, extra[0]))  # as progress says
+        if counts[key] < len(where[key]):  # the schedule has it, less often: rows copied, not another run's
+            raise InputError(f"{origin} line(s) {', '.join(map(str, where[key][-counts[key]:]))}: pose {pose} more "
+                             f"often than the {schedule.origin} has it: rows copied? delete those lines to resume")
+        raise InputError(f"{origin} line {where[key][0]}: pose {pose} is not in the {schedule.origin}; it belongs to "
+                         "another run (choose another -o)")
     return ResumeState(done, rows, dropped)
 
 
