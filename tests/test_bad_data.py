@@ -214,6 +214,10 @@ def test_fit_options_and_columns_are_checked_before_the_fit(data, tmp_path):
     (tmp_path / "d7.csv").write_text("\n".join(lines) + "\n")
     shutil.copy(str(data) + ".meta.json", tmp_path / "d7.csv.meta.json")
     assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "d7.csv"), "-o", str(tmp_path / "m.json")),
+                          contains="d7.csv has no v8 column, which its meta records")
+    meta = json.loads((tmp_path / "d7.csv.meta.json").read_text())  # a meta that lists no columns: the sensor says
+    (tmp_path / "d7.csv.meta.json").write_text(json.dumps({k: v for k, v in meta.items() if k != "columns"}))
+    assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "d7.csv"), "-o", str(tmp_path / "m.json")),
                           contains="the dataset has 7 input columns, its sensor paper 8 elements")
     assert not (tmp_path / "m.json").exists()
 
