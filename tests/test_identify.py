@@ -1336,8 +1336,11 @@ def test_identify_notes_a_capture_that_stopped_before_its_schedule_ended(tmp_pat
     (tmp_path / "torn.csv.meta.json").write_text((tmp_path / "c.csv.meta.json").read_text())
     for argv in (["identify", str(torn), "-o", str(tmp_path / "t.toml")],
                  ["fit", str(torn), "-o", str(tmp_path / "t.json")]):
-        assert_one_line_error(run_cli("fitgen", *argv), 2, f"dataset {torn}: its last line, data row 40, has no line "
+        assert_one_line_error(run_cli("fitgen", *argv), 2, f"dataset {torn}: its last line, line 41, has no line "
                               "end: a row torn as the capture stopped; the same capture command run again takes it")
+    torn.write_text("".join(lines[:-1]) + lines[-1][:30])  # torn before its last cell: no row of 11 fields either
+    assert_one_line_error(run_cli("fitgen", "identify", str(torn), "-o", str(tmp_path / "t.toml")), 2,
+                          f"dataset {torn}: its last line, line 41, has no line end: a row torn as the capture stopped")
     # rows copied (each counted as a new measurement, the standard errors narrowed as by new rows): refused by name;
     # more rows than the schedule without copies (captures joined) is a note
     copied = tmp_path / "copied.csv"

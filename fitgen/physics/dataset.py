@@ -307,16 +307,16 @@ def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
     """Read and validate a dataset CSV (and its ``.meta.json`` if present)."""
     origin = f"dataset {path}"
     text = read_text(path, "dataset")
+    if "\n" in text and not text.endswith("\n") and _captured(path):  # a header alone: no row to tear
+        # capture ends every row it writes with its line: one without was torn as a run stopped, and a tear in its
+        # last cell still reads as a row, at a pose the stage never took (capture's resume drops it)
+        raise InputError(f"{origin}: its last line, line {text.count(chr(10)) + 1}, has no line end: a row torn as "
+                         "the capture stopped; the same capture command run again takes it anew (or delete the line)")
     names, table = parse_table(text, origin, lambda names: _header(names, origin))
     n_in, targets = _header(names, origin)
     if table.shape[0] < min_rows:
         raise InputError(f"{origin}: {table.shape[0]} data row(s); at least {min_rows} needed")
     meta = load_meta(path)
-    if str(meta.get("generator", "")).startswith("tactile-host capture") and not text.endswith("\n"):
-        # capture ends every row it writes with its line: one without was torn as a run stopped, and a tear in its
-        # last cell still reads as a row, at a pose the stage never took (capture's resume drops it)
-        raise InputError(f"{origin}: its last line, data row {table.shape[0]}, has no line end: a row torn as the "
-                         "capture stopped; the same capture command run again takes it anew (or delete the line)")
     # a stage's rows read a pose column left out as 0 (a rest row lifted off the skin as one in contact)
     _refuse_gone(meta, names, path, poses=_stage_meta(meta))
     _check_meta_numbers(meta, meta_path(path))  # what fit, identify and check read: a schedule's is capture's
@@ -326,6 +326,14 @@ def load_dataset(path: str | Path, *, min_rows: int = 2) -> Dataset:
                              "repair or remove it")
     _check_noise_against_rows(meta, table[:, :n_in], meta_path(path))
     return Dataset(table[:, :n_in].copy(), table[:, n_in:].copy(), targets, meta)
+
+
+def _captured(path) -> bool:
+    """Whether the meta beside ``path`` says `tactile-host capture` wrote it (a meta that cannot be read: no)."""
+    try:
+        return str(load_meta(path).get("generator", "")).startswith("tactile-host capture")
+    except InputError:
+        return False
 
 
 def _check_noise_against_rows(meta: dict, inputs: np.ndarray, mp) -> None:
