@@ -782,6 +782,10 @@ def test_identify_takes_the_stage_errors_the_capture_was_scheduled_for(drawing, 
                           "c.csv's meta: schedule_drawing.transfer must be raw or gmr, got 'abc'; repair it, or give "
                           "--sensor")
     assert not (tmp_path / "v.toml").exists()
+    # emptied: said as such (it read "made for sensor None, whose file is not here as it was")
+    (tmp_path / "c.csv.meta.json").write_text(json.dumps({**meta, "schedule_drawing": {}}))
+    assert_one_line_error(run_cli("fitgen", "identify", str(cap), "-o", str(tmp_path / "v.toml")), 2,
+                          "c.csv's meta: schedule_drawing is empty (no sensor named); repair it, or give --sensor")
     # a record that is no object at all: refused (it was read as none, paper and the default stage errors taken)
     for key, bad in (("schedule_stage", "x"), ("schedule_drawing", 5)):
         (tmp_path / "c.csv.meta.json").write_text(json.dumps({**meta, key: bad}))

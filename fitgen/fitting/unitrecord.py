@@ -202,6 +202,8 @@ def drawing_for(given: str | None, meta: dict, capture="the capture") -> tuple[s
         # the preset itself, as another fitgen drew it (a file of a preset's name is refused as any other file)
         return made["sensor"], (f"note: the capture's schedule was made for preset {made['sensor']} as another fitgen "
                                 f"drew it; identifying against this one's (--sensor to say which)")
+    if made == {}:  # emptied: nothing names a drawing, moved or not
+        raise InputError(f"{capture}'s meta: schedule_drawing is empty (no sensor named); repair it, or give --sensor")
     if isinstance(made, dict):  # identified against another drawing, a unit would be as far off as the drawings
         where = f" ({made['sensor_file']})" if isinstance(made.get("sensor_file"), str) else ""
         raise InputError(f"the capture's schedule was made for sensor {made.get('sensor')}{where}, whose file is not "
