@@ -1354,6 +1354,10 @@ def test_identify_notes_a_capture_that_stopped_before_its_schedule_ended(tmp_pat
                           f"{copied} holds 43 rows for the 40 poses of its schedule, and data row(s) 41, 42, 43 repeat "
                           "earlier rows to the last digit")
     assert not (tmp_path / "t.toml").exists() and not (tmp_path / "t.json").exists()
+    # one pose 20 times: identify's refusal alone (the note that the capture stopped early had come before it)
+    copied.write_text("".join(lines[:1] + [lines[5]] * 20))
+    assert_one_line_error(run_cli("fitgen", "identify", str(copied), "-o", str(tmp_path / "t.toml")), 2,
+                          "the capture visits 1 distinct pose(s); identify needs at least 6")
     joined = [f"{float(ln.split(',', 1)[0]) + 1e-4!r},{ln.split(',', 1)[1]}" for ln in lines[5:8]]  # not copies
     copied.write_text("".join(lines + joined))
     proc = run_cli("fitgen", "identify", str(copied), "-o", str(tmp_path / "t.toml"))

@@ -58,7 +58,7 @@ def cmd_identify(args) -> int:
         ds, temperature = _at_t0(ds, tc, args.temp_comp, args.capture, "identify")
     elif span := rec.temperature_span_line(ds.meta, ds.n_rows):  # before a refusal, which it may explain
         print(f"identify: {span}", file=sys.stderr)
-    for line in filter(None, (rec.unfinished_line(ds.meta, ds.n_rows, args.capture),
+    for line in filter(None, (rec.unfinished_line(ds.meta, ds.n_rows, args.capture, ds.poses()),
                               rec.check_capture_line(ds.meta, args.capture))):
         print(f"identify: {line}", file=sys.stderr)
     args.sensor, said = rec.drawing_for(args.sensor, ds.meta, args.capture)  # the one the capture's schedule names

@@ -20,6 +20,11 @@ REST_LIKE = 5.0  # noise sd: a row in contact within this of the rest rows' read
 STILL_SHARE = 0.25  # pressed rows that read as at rest, above which the zero is above the skin
 
 
+def distinct_poses(poses) -> int:
+    """How many distinct poses the rows ``poses`` (n, 5) visit, to a micrometre (a stage's labels)."""
+    return len(np.unique(np.round(np.asarray(poses, dtype=float), 6), axis=0))
+
+
 def element_noise(noise, n: int, what: str, positive: bool = True) -> np.ndarray:
     """``noise`` (one figure, or one per element) as ``n`` figures; InputError unless each is finite and > 0
     (``positive``) or >= 0."""
@@ -51,8 +56,7 @@ def check_capture(space, readings: np.ndarray, poses: np.ndarray) -> np.ndarray:
         raise InputError(f"the capture's labels reach d{axis} = {far.max():g} mm, beyond any press of a sensor "
                          f"(identify takes labels within {FARTHEST:g} mm of the zero): labels in um, or machine "
                          "coordinates rather than mm from the zero at first contact?")
-    distinct = len(np.unique(np.round(poses, 6), axis=0))
-    if distinct < MIN_DISTINCT:
+    if (distinct := distinct_poses(poses)) < MIN_DISTINCT:
         raise InputError(f"the capture visits {distinct} distinct pose(s); identify needs at least {MIN_DISTINCT} "
                          "(fitgen schedule)")
     d = space.drawing

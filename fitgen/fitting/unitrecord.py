@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from fitgen.base.errors import InputError, is_finite_number, shown
-from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, MIN_ROWS, is_stage_error
+from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, MIN_DISTINCT, MIN_ROWS, distinct_poses, is_stage_error
 from fitgen.fitting.identify import PINNABLE, RIG, RIG_ERROR, ZERO_ERROR, Identification, tilting
 from fitgen.physics.dataset import row_degc, thermistor_degc
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, box_problem, off_skin
@@ -344,19 +344,22 @@ def check_capture_line(meta: dict, capture) -> str:
             "identified from these rows cannot be checked on them")
 
 
-def unfinished_line(meta: dict, rows: int, capture) -> str:
+def unfinished_line(meta: dict, rows: int, capture, poses=None) -> str:
     """A note when ``capture`` holds fewer than the ``schedule_poses`` its meta records (`tactile-host capture`
-    stopped early), or more, else ''; InputError saying so when it holds fewer rows than identify takes."""
+    stopped early), or more, else ''; InputError saying so when it holds fewer rows than identify takes. None where
+    its ``poses`` are too few for identify, whose refusal says so alone (a refusal is one line)."""
     total = meta.get("schedule_poses")
-    if type(total) is int and rows > total:  # no copies (load_capture): captures joined, or rows added by hand
-        return (f"note: {capture} holds {rows} rows, more than the {total} poses of its schedule (a capture writes "
-                "each once): identify takes every row as a measurement of its own")
-    if type(total) is not int or not rows < total:
+    if type(total) is not int or rows == total:
         return ""
     stopped = (f"{capture} holds {rows} of the {total} poses of its schedule (its capture stopped early: the same "
                "capture command run again takes the rest)")
-    if rows < MIN_ROWS:  # said as what it is, not after a note as a capture too short
+    if rows < min(total, MIN_ROWS):  # said as what it is, not after a note as a capture too short
         raise InputError(f"{stopped}; identify needs at least {MIN_ROWS} rows")
+    if poses is not None and distinct_poses(poses) < MIN_DISTINCT:
+        return ""
+    if rows > total:  # no copies (load_capture): captures joined, or rows added by hand
+        return (f"note: {capture} holds {rows} rows, more than the {total} poses of its schedule (a capture writes "
+                "each once): identify takes every row as a measurement of its own")
     return (f"note: {stopped}; identified from these, the unit is known less well than the schedule was made for "
             "(its standard errors are wider)")
 
