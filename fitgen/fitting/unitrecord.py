@@ -346,7 +346,7 @@ def check_capture_line(meta: dict, capture) -> str:
 
 def unfinished_line(meta: dict, rows: int, capture, poses=None) -> str:
     """A note when ``capture`` holds fewer than the ``schedule_poses`` its meta records (`tactile-host capture`
-    stopped early), or more, else ''; InputError saying so when it holds fewer rows than identify takes. None where
+    stopped early), or more, else ''; InputError saying so when it holds fewer rows than identify takes; '' where
     its ``poses`` are too few for identify, whose refusal says so alone (a refusal is one line)."""
     total = meta.get("schedule_poses")
     if type(total) is not int or rows == total:
