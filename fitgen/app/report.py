@@ -351,9 +351,8 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
             "one ADC channel read twice (a channel map that lists it twice) or two elements wired together; the "
             "fit learns nothing from the copy, and on a device that reads them apart the estimates will be off by "
             "however much they differ"))
-    table = np.ascontiguousarray(np.hstack([ds.inputs, ds.targets]))
-    repeats = rows - np.unique(table.view(np.dtype((np.void, table.itemsize * table.shape[1])))).size
-    if repeats:  # a row counted twice weighs twice and adds to n in AIC: terms are admitted on less evidence
+    # a row counted twice weighs twice and adds to n in AIC: terms are admitted on less evidence
+    if repeats := len(ds.repeats()):
         notes.append(f"{repeats} of {rows} rows repeat another row exactly: the fit counts each as a measurement of "
                      "its own, so AIC admits terms on less evidence than the data hold; drop the repeats, or average "
                      "repeated readings of one pose into one row")

@@ -70,6 +70,13 @@ class Dataset:
             out[:, POSE_NAMES.index(name)] = self.targets[:, j]
         return out
 
+    def repeats(self) -> np.ndarray:
+        """Indices (ascending) of the rows that repeat an earlier row exactly, every reading and label."""
+        table = np.ascontiguousarray(np.hstack([self.inputs, self.targets]))
+        first = np.unique(table.view(np.dtype((np.void, table.itemsize * table.shape[1]))).ravel(),
+                          return_index=True)[1]
+        return np.setdiff1d(np.arange(self.n_rows), first)
+
     def to_csv_text(self) -> str:
         table = np.hstack([self.inputs, self.targets]) + 0.0  # + 0.0 folds -0.0 into 0.0
         lines = [",".join(self.columns)]
@@ -125,15 +132,12 @@ def load_capture(path: str | Path) -> Dataset:
     refuse_huge(ds)
     _refuse_gone(ds.meta, ds.columns, path, poses=True)
     total = ds.meta.get("schedule_poses")
-    if type(total) is int and ds.n_rows > total:  # capture writes each of its schedule's poses once
-        rows = np.hstack([ds.inputs, ds.targets])
-        first = np.unique(rows, axis=0, return_index=True)[1]
-        copies = sorted(set(range(ds.n_rows)) - set(first.tolist()))
-        if copies:
-            raise InputError(f"{path} holds {ds.n_rows} rows for the {total} poses of its schedule, and data row(s) "
-                             f"{', '.join(str(r + 1) for r in copies[:5])}{', ...' if len(copies) > 5 else ''} repeat "
-                             "earlier rows to the last digit: copies, each of which would count as a measurement of "
-                             "its own; delete them")
+    # capture writes each of its schedule's poses once
+    if type(total) is int and ds.n_rows > total and len(copies := ds.repeats().tolist()):
+        raise InputError(f"{path} holds {ds.n_rows} rows for the {total} poses of its schedule, and data row(s) "
+                         f"{', '.join(str(r + 1) for r in copies[:5])}{', ...' if len(copies) > 5 else ''} repeat "
+                         "earlier rows to the last digit: copies, each of which would count as a measurement of its "
+                         "own; delete them")
     return ds
 
 
