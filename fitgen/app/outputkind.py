@@ -49,7 +49,9 @@ WRITES_JSON = {("fit", "output"): "a model", ("capture", "temp_comp_output"): "a
                ("replay", "output"): "a run record"}
 
 
-DATASET_WRITERS = {("simulate", "output"), ("schedule", "output"), ("capture", "output")}  # a CSV and its meta
+# readings in a CSV and its meta, which may replace another dataset's (a schedule, poses alone, may not: over a
+# dataset's readings it left a file neither fit nor simulate could take back)
+DATASET_WRITERS = {("simulate", "output"), ("capture", "output")}
 
 
 def is_capture(path) -> bool:
@@ -147,8 +149,7 @@ def written_over(path: str, command: str, writes: str | None, dataset: bool = Fa
     if (kind := schedule_kind(path)) is not None and kind != writes:
         return (f"is {kind} (poses for tactile-host capture, as its meta says): {command} would write "
                 f"{writes or ('a dataset' if dataset else 'another kind of file')} over it; give another name")
-    # a schedule is poses alone: over a dataset's readings it left a file neither fit nor simulate could take back
-    if meta_path(path).is_file() and kind is None and (not dataset or (writes or "").endswith(" schedule")):
+    if meta_path(path).is_file() and kind is None and not dataset:
         return (f"is a dataset (its meta is beside it): {command} would write {writes or 'another kind of file'} over "
                 "it; give another name")
     kind = json_kind(path)
