@@ -368,7 +368,8 @@ def test_bench_counts_a_whole_step_on_readings_a_pose_gives(train, held):
                       sensor=PAPER)
     base = dataclasses.replace(model, refine=None)
     lo, hi = np.array(model.input_min), np.array(model.input_max)
-    swept = lo + (hi - lo) * np.random.default_rng(0).random((4000, model.n_inputs))
+    # ~150 rows of these stop part-way: room for another machine's fit (BLAS kernels move its last bits) to stop fewer
+    swept = lo + (hi - lo) * np.random.default_rng(0).random((20000, model.n_inputs))
     stops = np.all(model.predict(swept, precision="float") == base.predict(swept, precision="float"), axis=1)
     taken, given_up = held.clean[:16], swept[stops][:16]
     assert len(given_up) == 16 and not np.any(np.all(
