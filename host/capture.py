@@ -14,29 +14,22 @@ seconds and at the end of a run, so a run killed outright loses at most those se
 
 from __future__ import annotations
 
-import fcntl
-import json
 import math
-import os
-from collections import Counter
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from fitgen import __version__
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, is_stage_error
-from fitgen.physics.dataset import load_meta, meta_path, noise_figures_agree, pose_table, read_text, row_degc
+from fitgen.physics.dataset import load_meta, meta_path, noise_figures_agree, pose_table, read_text
 from fitgen.base.errors import InputError, shown
-from fitgen.base.fileio import open_output, real_file, write_atomic, write_target
-from fitgen.base.texts import sha256_hex
 from fitgen.base.signals import signals_held
 from fitgen.base.parse import MAX_NOISE, MAX_ROW_SAMPLES
 from fitgen.physics.pose import POSE_NAMES, as_poses, box_problem, check_pose_rows
 from fitgen.physics.simulate import sensor_record_problem
 
 from host.adc import AdcArray
+from host.capturefile import RowWriter, prepare_output, prior_meta, prior_row_degc, row_line, write_meta
 from host.clock import REAL_CLOCK
 from host.rest import measure
 
@@ -129,155 +122,6 @@ def simulated_sensor(args, schedule: Schedule) -> None:
         args.sensor = recorded_spec(schedule.drawing)
 
 
-def header_line(n_inputs: int, columns: tuple[str, ...]) -> str:
-    return ",".join([f"v{k}" for k in range(1, n_inputs + 1)] + list(columns)) + "\n"
-
-
-def row_line(volts: np.ndarray, pose_values: np.ndarray) -> str:
-    """Shortest round-trip text of each number (repr), as ``Dataset.to_csv_text`` writes them."""
-    return ",".join(repr(float(x) + 0.0) for x in list(volts) + list(pose_values)) + "\n"
-
-
-@dataclass
-class ResumeState:
-    done: np.ndarray  # (P,) bool: schedule poses already in the file
-    rows: int  # complete rows found
-    dropped_partial: bool = False  # a last line without its newline was removed
-
-
-def _key(values) -> tuple:
-    return tuple(round(float(x), 9) + 0.0 for x in values)
-
-
-def prepare_output(path: str | Path, n_inputs: int, schedule: Schedule, *, write: bool = True) -> ResumeState:
-    """Create the output with its header, or read it back and work out which poses are done.
-
-    ``write=False`` only checks: nothing is created or repaired.
-    """
-    path = Path(path)
-    write_target(path)  # a FIFO's or device's reading would hang or read nothing: no file to resume
-    header = header_line(n_inputs, schedule.columns)
-    n_poses = len(schedule.poses)
-    if not path.exists() or path.stat().st_size == 0:
-        # a folder of its meta's name had failed the first row, after the stage took its zero (a resume's meta is
-        # check_resume's, which says what it holds)
-        write_target(meta_path(path))
-        if write:
-            write_atomic(path, header)
-        elif not path.parent.is_dir():
-            raise InputError(f"cannot write {path}: folder {path.parent} does not exist")
-        return ResumeState(np.zeros(n_poses, dtype=bool), 0)
-    origin = f"output {path}"
-    text = read_text(path, "output (to resume)")  # a byte-order mark (re-saved in a spreadsheet) taken off
-    cut = not text.endswith("\n")  # the last write was cut short
-    dropped = cut and text != header.rstrip("\n")  # a row torn: it never was one (else the header's line end)
-    if cut:
-        text = text[: text.rfind("\n") + 1] if dropped else header
-    if not text.startswith(header):
-        first = text.split("\n", 1)[0]
-        raise InputError(f"{origin}: its header {first!r} is not {header.strip()!r}; it belongs to another "
-                         "channel map or schedule (choose another -o)")
-    if cut and write:
-        write_atomic(path, text)
-    counts: Counter = Counter()
-    where: dict = {}
-    width = n_inputs + len(schedule.columns)
-    lines = text.split("\n")[1:-1]
-    for lineno, line in enumerate(lines, start=2):
-        if not line.strip():
-            continue
-        try:
-            vals = [float(x) for x in line.split(",")]
-        except ValueError:
-            vals = []
-        if len(vals) != width or not np.all(np.isfinite(vals)):
-            raise InputError(f"{origin} line {lineno}: not a row of {width} numbers; repair or remove it to resume")
-        counts[key := _key(vals[n_inputs:])] += 1
-        where.setdefault(key, []).append(lineno)
-    rows = sum(counts.values())
-    done = np.zeros(n_poses, dtype=bool)
-    for i, vals in enumerate(schedule.values):
-        key = _key(vals)
-        if counts[key] > 0:
-            counts[key] -= 1
-            done[i] = True
-    extra = [k for k, c in counts.items() if c > 0]
-    if extra:
-        key, pose = extra[0], " ".join(f"{c}={v:g}" for c, v in zip(schedule.columns, extra[0]))  # as progress says
-        if counts[key] < len(where[key]):  # the schedule has it, less often: rows copied, not another run's
-            raise InputError(f"{origin} line(s) {', '.join(map(str, where[key][-counts[key]:]))}: pose {pose} more "
-                             f"often than the {schedule.origin} has it: rows copied? delete those lines to resume")
-        raise InputError(f"{origin} line {where[key][0]}: pose {pose} is not in the {schedule.origin}; it belongs to "
-                         "another run (choose another -o)")
-    return ResumeState(done, rows, dropped)
-
-
-def lock_path(output: str | Path) -> Path:
-    """``<output>.lock`` beside the file ``output`` is or leads to: two names of one file take one lock."""
-    return Path(str(real_file(output)) + ".lock")
-
-
-@contextmanager
-def output_lock(output: str | Path):
-    """Hold ``output`` for one capture run; InputError (one line) when another run holds it.
-
-    An exclusive flock on ``<output>.lock`` (the output itself may not exist yet), which the kernel releases
-    when the process ends, however it ends: a killed run leaves at most the empty file, and the next run takes
-    it over. The file is removed at the end, while still held.
-    """
-    path = lock_path(output)
-    while True:
-        try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as exc:
-            raise InputError(f"cannot write {path}: {exc.strerror}") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as exc:
-            os.close(fd)
-            if isinstance(exc, BlockingIOError):
-                raise InputError(f"output {output}: another capture is writing it (it holds {path.name}): let it "
-                                 "end, or choose another -o") from None
-            raise InputError(f"cannot lock {path}: {exc.strerror}") from None
-        try:
-            held, named = os.fstat(fd), os.stat(path)
-        except FileNotFoundError:
-            held = named = None
-        if held is not None and (held.st_dev, held.st_ino) == (named.st_dev, named.st_ino):
-            break
-        os.close(fd)  # the run that held it removed the file between our open and our lock: take a new one
-    try:
-        yield
-    finally:
-        path.unlink(missing_ok=True)
-        os.close(fd)
-
-
-class RowWriter:
-    """Appends complete lines: one write of the whole line, then fsync."""
-
-    def __init__(self, path: str | Path):
-        self.path = path
-        self.fd = open_output(path, append=True)
-
-    def append(self, line: str) -> None:
-        """``line`` written and synced; InputError naming the file when the disk refuses it (full, a size limit):
-        a part written is a partial row, dropped by the next run."""
-        data = line.encode()
-        try:
-            while data:
-                n = os.write(self.fd, data)
-                data = data[n:]
-            os.fsync(self.fd)
-        except OSError as exc:
-            raise InputError(f"cannot write {self.path}: {exc.strerror or exc}") from None
-
-    def close(self) -> None:
-        if self.fd is not None:
-            os.close(self.fd)
-            self.fd = None
-
-
 @dataclass
 class CaptureResult:
     total: int  # poses in the schedule
@@ -291,15 +135,6 @@ class CaptureResult:
     @property
     def complete(self) -> bool:
         return self.before + self.captured == self.total
-
-
-def write_meta(path: str | Path, info: dict) -> None:
-    text = Path(path).read_text()
-    meta = dict(info)
-    meta.update({"dataset_sha256": sha256_hex(text), "rows": max(text.count("\n") - 1, 0),
-                 "columns": text.split("\n", 1)[0].split(","), "units": "V",
-                 "generator": f"tactile-host capture (fitgen {__version__})"})
-    write_atomic(meta_path(path), json.dumps(meta, indent=2, sort_keys=True) + "\n")
 
 
 @dataclass
@@ -351,59 +186,6 @@ class NoiseStats:
         return {"noise_rows": self.rows,
                 "sample_noise": [float(x) for x in np.sqrt(self.sum_var / self.rows)],
                 "row_noise": [float(x) for x in np.sqrt(self.sum_var_row / self.rows)]}
-
-
-def prior_meta(output, rows: int) -> dict:
-    """The meta of ``output``'s ``rows`` rows so far ({} without rows). InputError when they have none, or one
-    that cannot be read: it is all that says which sensor, channels and samples they were taken with, and a
-    resume would write this run's over it as if it spoke for them."""
-    if rows == 0:
-        return {}
-    path, these = meta_path(output), "its row" if rows == 1 else f"its {rows} rows"
-    if not path.exists():
-        raise InputError(f"output {output}: no meta ({path.name}) says what {these} {'was' if rows == 1 else 'were'} "
-                         "captured with: restore it to resume, or choose another -o")
-    try:
-        meta = json.loads(read_text(path, "meta"))
-    except (InputError, ValueError, RecursionError) as exc:
-        why = str(exc).splitlines()[0] if isinstance(exc, InputError) else "not JSON"
-        raise InputError(f"output {output}: the meta of {these} cannot be read ({why}): repair it from a "
-                         "copy to resume, or choose another -o") from None
-    if not isinstance(meta, dict):
-        raise InputError(f"output {output}: the meta of {these} is not a JSON object: repair it from a copy "
-                         "to resume, or choose another -o")
-    return meta
-
-
-def prior_row_degc(prior: dict, rows: int) -> list | None:
-    """The temperatures an earlier run recorded for the ``rows`` rows kept (a row it recorded but did not finish
-    dropped), to append to; [] without rows, None when they are not recorded for every row (rows of an older
-    capture, or of a run without a thermistor), so that no list speaks for rows it does not cover."""
-    if rows == 0:
-        return []
-    got = prior.get("row_degc")
-    kept = row_degc({"row_degc": got[:rows]}, rows) if isinstance(got, list) else None
-    return None if kept is None else kept.tolist()
-
-
-def check_resume(output: str | Path, rows: int, this: dict) -> None:
-    """Refuse to add to ``output``'s ``rows`` rows taken otherwise: through another channel map, from another
-    source, or averaging another number of samples (the meta speaks for every row with one of each). A simulated
-    sensor is told by its description's hash (``sensor_sha256``) when both runs recorded one: the same unit's
-    file, by another path or moved, is the same source."""
-    prior = prior_meta(output, rows)
-    if "sensor_sha256" in prior and "sensor_sha256" in this:
-        if prior["sensor_sha256"] != this["sensor_sha256"]:
-            raise InputError(f"output {output}: its {rows} rows were captured from {prior.get('source')} (sensor "
-                             f"sha256 {str(prior['sensor_sha256'])[:12]}), this run's {this.get('source')} is "
-                             f"another sensor ({this['sensor_sha256'][:12]}): resume with the same, or choose "
-                             "another -o")
-        prior = {k: v for k, v in prior.items() if k != "source"}  # the paths typed may differ
-    for key, option in (("adc", "--adc"), ("source", "a source"), ("samples_per_row", "--samples")):
-        if key in prior and key in this and prior[key] != this[key]:
-            was = prior[key] if type(prior[key]) is type(this[key]) else repr(prior[key])  # '16', not 16
-            raise InputError(f"output {output}: its {rows} rows were captured with {option} {was}, this run's "
-                             f"is {this[key]}: resume with the same, or choose another -o")
 
 
 def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples: int = SAMPLES,

@@ -19,8 +19,8 @@ from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import recorded_spec
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.capture import (SAMPLES, SpreadTooLarge, capture, check_resume, designed_samples, load_schedule,
-                          output_lock, prepare_output, prior_meta, simulated_sensor)
+from host.capture import SAMPLES, SpreadTooLarge, capture, designed_samples, load_schedule, simulated_sensor
+from host.capturefile import check_resume, output_lock, prepare_output, prior_meta
 from host.posewait import TRIGGER_TIMEOUT, TriggerFailed, enter_waiter, trigger_waiter
 from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone

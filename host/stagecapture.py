@@ -11,7 +11,7 @@ from fitgen.base.parse import LONGEST_WAIT, parse_positive
 
 from host.stage import (AxisMap, GcodeController, PoseStage, StageError, StageSettings, StageState, choose_zero,
                         jog_to_zero, parse_approach, parse_ranges, parse_zero, stage_url)
-from host.capture import prior_meta
+from host.capturefile import prior_meta
 from host.gcode import QUEUED_WAIT
 from host.gcodereplies import LEAVE_ALARM
 from host.prompt import ask_line

@@ -15,8 +15,8 @@ from fitgen.physics.dataset import load_dataset
 from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
-from host.capture import (SpreadTooLarge, capture, check_resume, load_schedule, output_lock, prepare_output,
-                          simulated_sensor)
+from host.capture import SpreadTooLarge, capture, load_schedule, simulated_sensor
+from host.capturefile import check_resume, output_lock, prepare_output
 from host.posewait import TriggerFailed, enter_waiter, trigger_waiter
 from host.prompt import ask_line
 from host.capturerun import (CaptureFailed, CaptureInterrupted, capture_numbers, kept, same_thermistor,

@@ -12,7 +12,8 @@ from fitgen.base.errors import InputError
 from fitgen.fitting.fit import fit_model
 from fitgen.physics.transfer import readings
 from host.adc import AdcArray
-from host.capture import SpreadTooLarge, capture, header_line, load_schedule, prepare_output
+from host.capture import SpreadTooLarge, capture, load_schedule
+from host.capturefile import header_line, prepare_output
 from host.posewait import enter_waiter, trigger_waiter
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
@@ -421,7 +422,7 @@ def test_a_second_capture_on_the_same_output_is_refused_while_the_first_runs(tmp
 def test_one_file_by_two_names_takes_one_lock_and_a_temperature_run_holds_each_file(tmp_path):
     """The lock is the file's, not the name's: a link to a file being captured is refused; a --temperature run
     holds each temperature's file too, so a plain capture into one is another run."""
-    from host.capture import output_lock
+    from host.capturefile import output_lock
 
     (tmp_path / "real.csv").write_text("")
     (tmp_path / "link.csv").symlink_to("real.csv")
@@ -453,10 +454,10 @@ def test_a_killed_runs_lock_does_not_block_the_next(tmp_path):
     import subprocess
     import sys
 
-    from host.capture import output_lock
+    from host.capturefile import output_lock
 
     out = tmp_path / "d.csv"
-    code = (f"import os\nfrom host.capture import output_lock\nwith output_lock({str(out)!r}):\n"
+    code = (f"import os\nfrom host.capturefile import output_lock\nwith output_lock({str(out)!r}):\n"
             "    os.kill(os.getpid(), 9)")
     assert subprocess.run([sys.executable, "-c", code]).returncode == -9
     assert (tmp_path / "d.csv.lock").exists()

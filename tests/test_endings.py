@@ -195,7 +195,7 @@ def test_a_finished_capture_run_again_leaves_its_meta_as_it_was(tmp_path, levels
 def test_a_capture_refused_its_output_leaves_the_meta_as_it_was(sensor, tmp_path, monkeypatch):
     """An output that cannot be appended to (read-only, to a user other than root) is refused before the meta
     is touched: an earlier run's meta kept byte for byte, none made where there was none."""
-    import host.capture as capture_mod
+    import host.capturefile as capture_mod
     from fitgen.base.errors import InputError
     from host.capture import capture, load_schedule
     from test_capture import rig

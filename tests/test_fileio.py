@@ -200,7 +200,8 @@ def test_open_output_writes_a_file_in_place_and_through_a_symlink(tmp_path):
 def test_a_capture_a_run_record_and_a_pose_file_refuse_a_fifo(tmp_path):
     import numpy as np
 
-    from host.capture import RowWriter, Schedule, prepare_output
+    from host.capture import Schedule
+    from host.capturefile import RowWriter, prepare_output
     from host.session import ReadoutSession
     from host.stageserver import PoseFile
 
