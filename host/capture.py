@@ -224,7 +224,7 @@ def capture(array: AdcArray, schedule: Schedule, output: str | Path, *, samples:
             **({"schedule_drawing": schedule.drawing} if schedule.drawing else {}),
             **({"schedule_stage": schedule.stage} if schedule.stage else {}),
             **({"schedule_check": True} if schedule.check else {}), **(meta or {})}
-    temps = prior_row_degc(prior, state.rows) if temperature is not None else None
+    temps = prior_row_degc(output, prior, state.rows) if temperature is not None else None
     if temps is not None:
         info["row_degc"] = temps
 

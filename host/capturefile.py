@@ -170,11 +170,55 @@ class RowWriter:
             self.fd = None
 
 
+ROW_DIGEST = 12  # hex digits of each row's sha256 a meta keeps: rows told apart, at a sixth of a row's length
+
+
+def _row_lines(text: str) -> list[tuple[int, str]]:
+    """(line number, text) of each complete row of a capture's ``text``: not the header, not a blank line, not a
+    last line without its line end (a torn row, which the next run drops)."""
+    lines = text.split("\n")[1:-1]  # the piece after the last line end is no complete line
+    return [(n, line.strip()) for n, line in enumerate(lines, start=2) if line.strip()]
+
+
+def row_digests(text: str) -> list[str]:
+    """Each complete row of a capture's ``text`` as its sha256's first ROW_DIGEST hex digits, in order: which rows
+    a meta speaks for, so that a resume tells its rows from another capture's, and each row's temperature stays
+    with its row when rows before it are deleted to be taken again."""
+    return [sha256_hex(line)[:ROW_DIGEST] for _, line in _row_lines(text)]
+
+
+def recorded_places(output, prior: dict) -> list | None:
+    """For each complete row of ``output``, its place among the rows its meta ``prior`` recorded (``row_sha256``),
+    or None for a row written after the meta last was (a run killed outright leaves its last seconds' rows so); None
+    for a meta that records no rows' hashes (one written before they were recorded). InputError when the meta speaks
+    for other rows: a row it does not record before one it does, or none of the rows it records."""
+    got = prior.get("row_sha256")
+    if not isinstance(got, list) or not all(isinstance(d, str) for d in got):
+        return None
+    where: dict = {}
+    for i, digest in enumerate(got):
+        where.setdefault(digest, []).append(i)
+    rows = _row_lines(read_text(output, "output (to resume)"))
+    places = [where[d].pop(0) if where.get(d := sha256_hex(line)[:ROW_DIGEST]) else None for _, line in rows]
+    late = next((k for k, p in enumerate(places) if p is None), len(places))  # the rows after its last rewrite
+    stray = next((k for k in range(late, len(places)) if places[k] is not None), None)
+    name, fix = meta_path(output).name, ("restore the rows and their meta from one copy to resume, or choose "
+                                         "another -o")
+    if stray is not None:
+        raise InputError(f"output {output} line {rows[late][0]}: a row its meta ({name}) does not record, before "
+                         f"one it does (line {rows[stray][0]}): the meta is another capture's, or the row was "
+                         f"edited; {fix}")
+    if got and rows and late == 0:
+        raise InputError(f"output {output}: its meta ({name}) records none of its {len(rows)} rows: it is another "
+                         f"capture's; {fix}")
+    return places
+
+
 def write_meta(path: str | Path, info: dict) -> None:
     text = Path(path).read_text()
     meta = dict(info)
     meta.update({"dataset_sha256": sha256_hex(text), "rows": max(text.count("\n") - 1, 0),
-                 "columns": text.split("\n", 1)[0].split(","), "units": "V",
+                 "row_sha256": row_digests(text), "columns": text.split("\n", 1)[0].split(","), "units": "V",
                  "generator": f"tactile-host capture (fitgen {__version__})"})
     write_atomic(meta_path(path), json.dumps(meta, indent=2, sort_keys=True) + "\n")
 
@@ -198,17 +242,29 @@ def prior_meta(output, rows: int) -> dict:
     if not isinstance(meta, dict):
         raise InputError(f"output {output}: the meta of {these} is not a JSON object: repair it from a copy "
                          "to resume, or choose another -o")
+    recorded_places(output, meta)  # its noise figures and temperatures would be pooled with this run's
     return meta
 
 
-def prior_row_degc(prior: dict, rows: int) -> list | None:
-    """The temperatures an earlier run recorded for the ``rows`` rows kept (a row it recorded but did not finish
-    dropped), to append to; [] without rows, None when they are not recorded for every row (rows of an older
-    capture, or of a run without a thermistor), so that no list speaks for rows it does not cover."""
+def prior_row_degc(output, prior: dict, rows: int) -> list | None:
+    """The temperatures an earlier run recorded for ``output``'s ``rows`` rows kept, each its own row's (rows
+    deleted, and a row recorded but not finished, dropped), to append to; [] without rows, None when they are not
+    recorded for every row (rows of an older capture, or of a run without a thermistor), so that no list speaks
+    for rows it does not cover."""
     if rows == 0:
         return []
     got = prior.get("row_degc")
-    kept = row_degc({"row_degc": got[:rows]}, rows) if isinstance(got, list) else None
+    if not isinstance(got, list):
+        return None
+    places = recorded_places(output, prior)
+    if places is not None:
+        each, late = [], len(prior["row_sha256"])
+        for p in places:
+            if p is None:  # a row written after the meta: the temperature recorded before it, past the meta's rows
+                p, late = late, late + 1
+            each.append(got[p] if p < len(got) else None)
+        got = each
+    kept = row_degc({"row_degc": got[:rows]}, rows)
     return None if kept is None else kept.tolist()
 
 

@@ -216,6 +216,54 @@ def test_each_rows_temperature_stays_with_its_row_when_a_run_is_stopped(sensor, 
     assert ds.n_rows == 8 and row_degc(ds.meta, 8).tolist()[5:] == [23.125, 23.625, 24.125]
 
 
+def test_a_row_deleted_to_be_taken_again_keeps_the_other_rows_temperatures(sensor, tmp_path):
+    """A row deleted from the middle (identify names a knocked row to delete and take again): the resume took the
+    first rows' worth of temperatures, so every row after the deleted one was given its predecessor's."""
+    from fitgen.physics.dataset import load_dataset, row_degc
+
+    sched, out, (bus, arr, clock), degc = _eight_poses_with_a_thermistor(sensor, tmp_path)
+    capture(arr, sched, out, samples=4, set_pose=bus.set_pose, clock=clock, temperature=lambda: next(degc))
+    before = row_degc(load_dataset(out).meta, 8).tolist()
+    lines = out.read_text().splitlines(keepends=True)
+    out.write_text("".join(lines[:3] + lines[4:]))  # row 3 deleted
+    capture(arr, sched, out, samples=4, set_pose=bus.set_pose, clock=clock, temperature=lambda: next(degc))
+    ds = load_dataset(out)
+    assert ds.n_rows == 8 and row_degc(ds.meta, 8).tolist()[:7] == before[:2] + before[3:]
+    assert row_degc(ds.meta, 8)[7] > before[7]  # taken again, later: the temperatures rise
+
+
+def test_a_resume_refuses_another_captures_meta_and_keeps_rows_written_after_its_own(sensor, tmp_path):
+    """A meta copied from another capture beside the rows: its noise figures were pooled into this run's, as if they
+    spoke for these rows. Rows written after the meta's last rewrite (a run killed outright) still resume."""
+    sched = load_schedule(write_schedule(tmp_path / "s.csv", grid_rows()[:6]))
+    out, other = tmp_path / "d.csv", tmp_path / "e.csv"
+    for path, seed in ((out, 0), (other, 1)):
+        bus, arr, clock = rig(sensor, seed=seed)
+        capture(arr, sched, path, samples=4, wait=lambda i, p: i < 4, set_pose=bus.set_pose, clock=clock)
+    meta = (tmp_path / "d.csv.meta.json").read_text()
+    (tmp_path / "d.csv.meta.json").write_text((tmp_path / "e.csv.meta.json").read_text())
+    bus, arr, clock = rig(sensor, seed=2)
+    with pytest.raises(InputError, match=r"output .*d\.csv: its meta \(d\.csv\.meta\.json\) records none of its 4 "
+                                         "rows: it is another capture's; restore the rows and their meta from one "
+                                         "copy to resume, or choose another -o"):
+        capture(arr, sched, out, samples=4, set_pose=bus.set_pose, clock=clock)
+    assert len(data_rows(out)[1]) == 4
+    # the meta of its first 3 rows (a run killed outright after the fourth): resumed
+    lines = out.read_text().splitlines(keepends=True)
+    first = json.loads(meta)
+    first["row_sha256"] = first["row_sha256"][:3]
+    (tmp_path / "d.csv.meta.json").write_text(json.dumps(first))
+    capture(arr, sched, out, samples=4, set_pose=bus.set_pose, clock=clock)
+    assert len(data_rows(out)[1]) == 6 and json.loads((tmp_path / "d.csv.meta.json").read_text())["noise_rows"] == 6
+    # a row the meta does not record, before rows it does: edited, or another capture's
+    out.write_text("".join(lines[:2] + [lines[2].replace(",", ",1", 1)] + lines[3:]))
+    (tmp_path / "d.csv.meta.json").write_text(meta)
+    with pytest.raises(InputError, match=r"d\.csv line 3: a row its meta \(d\.csv\.meta\.json\) does not record, "
+                                         r"before one it does \(line 4\): the meta is another capture's, or the row "
+                                         "was edited"):
+        capture(arr, sched, out, samples=4, set_pose=bus.set_pose, clock=clock)
+
+
 def test_a_pose_scheduled_twice_is_captured_twice(sensor, tmp_path):
     rows = [(0, 0, 0), (1, 0, -1), (0, 0, 0), (1, 0, -1)]
     sched = load_schedule(write_schedule(tmp_path / "s.csv", rows))
