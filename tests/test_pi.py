@@ -1,7 +1,9 @@
 """The Raspberry Pi build (firmware_templates/pi/): the C drivers over i2c-dev, built for ARM Linux and run
 under qemu-arm against a stand-in for the kernel device answered by the bus model (host/simbus.py)."""
 
+import os
 import re
+import select
 import signal
 from dataclasses import replace
 from functools import partial
@@ -11,6 +13,7 @@ import time
 import numpy as np
 import pytest
 
+from fitgen.app.cliutil import EXIT_PIPE
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
 from host.channelmap import Settings, load_map_file, parse_spec
 from host.pi import StandIn, build_pi, render_adc_map, render_pi
@@ -643,6 +646,62 @@ def test_pi_build_signal_ends_a_rate_wait_at_once(standin_build):
     assert len(out.splitlines()) == 2
     assert took < 3.0
 
+
+def test_pi_build_ends_as_read_does_when_its_reader_goes_away_with_sigpipe_ignored(standin_build):
+    """systemd (IgnoreSIGPIPE=yes) or `trap '' PIPE` ignores SIGPIPE: tm_pi's writes then failed with EPIPE and it
+    polled the bus forever, to exit 0 when stopped. Now it stops at the first failed line, as read does: no more
+    transfers, nothing on stderr, exit status 141; a full disk is one line and exit status 2; a closed one, nowhere."""
+    require_tool("qemu-arm")
+    cmap, bus, clock = _bus()
+    stand = StandIn(bus, clock)
+    proc = stand.spawn(["sh", "-c", "trap '' PIPE; exec \"$@\"", "sh", "qemu-arm", str(standin_build)],
+                       stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        assert all(proc.stdout.readline().endswith(b"\n") for _ in range(4))
+        proc.stdout.close()  # the reader goes away mid-run
+        closed = stand.requests
+        code = proc.wait(timeout=20)
+        stand.thread.join(timeout=10)
+        assert code == EXIT_PIPE == 141 and proc.stderr.read() == b""
+        assert stand.requests - closed < 60  # the sample under way (24 transfers) at most: no more polling
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"tm_pi still ran 20 s after its reader went away ({stand.requests - closed} more requests)")
+    finally:
+        proc.kill()
+        proc.wait()
+    cmap, bus, clock = _bus()
+    with open("/dev/full", "w") as full:
+        proc = StandIn(bus, clock).spawn(["qemu-arm", str(standin_build), "--count", "3"], stdin=subprocess.DEVNULL,
+                                         stdout=full, stderr=subprocess.PIPE)
+        _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 2 and err.decode() == (
+        "tm_pi: error: cannot write standard output: No space left on device\n")
+    # a stdout closed before the start (>&-) goes nowhere, as read's: no write error, the run as asked
+    cmap, bus, clock = _bus()
+    res = StandIn(bus, clock).run(["sh", "-c", 'exec "$@" >&-', "sh", "qemu-arm", str(standin_build), "--count", "3"])
+    assert res.returncode == 0 and res.stderr.startswith("tm_pi: 3 samples in "), res.stderr
+
+
+def test_pi_build_s_lines_reach_a_pipe_as_they_are_written(standin_build):
+    """stdout to a pipe was fully buffered: at --rate 1 the first line reached its reader some 30 s late. Line
+    buffered, as read flushes each line, the first sample's line is there while tm_pi waits for the second."""
+    require_tool("qemu-arm")
+    cmap, bus, clock = _bus()
+    stand = _SlowSleeps(bus, clock)  # --rate 0.01's 100 s wait takes 10 s
+    proc = stand.spawn(["qemu-arm", str(standin_build), "--rate", "0.01"], stdin=subprocess.DEVNULL,
+                       stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    got, deadline = b"", time.monotonic() + 8
+    try:
+        while got.count(b"\n") < 2 and time.monotonic() < deadline:
+            if select.select([proc.stdout], [], [], 0.1)[0]:
+                got += os.read(proc.stdout.fileno(), 4096)
+        at = clock.monotonic()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+        stand.thread.join(timeout=10)
+    assert got.count(b"\n") == 2 and at < 100.0, (got, at)  # the header and the first sample, before the second
+    assert proc.returncode == 0 and "tm_pi: stopped: 1 samples" in err.decode(), err
 
 class _Stall(StandIn):
     """The bus hangs for 1 s at its 300th transfer (in the 10th or so sample; 24 transfers a sample)."""

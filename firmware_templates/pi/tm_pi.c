@@ -21,15 +21,23 @@
  * Ctrl-C (SIGINT) or SIGTERM ends the run after the sample under way, as tactile-host read ends: every
  * line whole, the summary, exit status 0.
  *
+ * stdout is line-buffered: each line reaches a pipe's reader when it is written, as read flushes its lines.
+ * Its reader gone (| head, with SIGPIPE ignored as systemd ignores it) ends the run as it ends read: no more
+ * samples, nothing more said, exit status 141 (128 + SIGPIPE, a shell's status for a program SIGPIPE ends);
+ * another write error (a full disk) is one line on stderr and exit status 2. A standard stream closed
+ * before the start (>&-) goes nowhere, as read's does, rather than to the I2C device that would take its fd.
+ *
  * Exit status 0, 1 when a chip stays silent (the samples so far are written), 2 for bad options
  * or a bus that cannot be opened (one line on stderr). */
 #define _POSIX_C_SOURCE 200809L
 #include <errno.h>
+#include <fcntl.h>
 #include <limits.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "adc.h"
 #include "adc_map.h"
@@ -48,6 +56,7 @@ typedef char tm_pi_assert_tempcomp_fits_model[(TM_TEMPCOMP_N == TM_N_INPUTS) ? 1
 /* the period, in ns, must fit the clock's counter with room for the grid: a sample at least every 11.6 days */
 #define RATE_MIN_HZ (1.0 / 3600.0) /* a sample an hour, as tactile-host read (LONGEST_WAIT) */
 #define RATE_MAX_HZ 100000.0
+#define EXIT_PIPE (128 + SIGPIPE) /* read's status when its output's reader went away (fitgen/app/cliutil.py) */
 
 /* set by SIGINT or SIGTERM: the loop ends after the sample under way, so that no line is cut off */
 static volatile sig_atomic_t stop_signal = 0;
@@ -126,6 +135,35 @@ static int wait_until(const adc_i2c *b, uint64_t until)
         b->sleep_ns(b->ctx, left < WAIT_SLICE_NS ? left : WAIT_SLICE_NS);
     }
     return !stop_signal;
+}
+
+/* a standard stream closed before the start (>&-) is opened onto the null device, as read's goes nowhere: left
+ * closed, its fd would be the next open's, the I2C device's, and printf would write its lines onto the bus */
+static void keep_standard_fds(void)
+{
+    int fd;
+    for (fd = 0; fd <= 2; ++fd) { /* the lowest free fd is the one open takes: fds below are open by now */
+        if (fcntl(fd, F_GETFD) == -1 && errno == EBADF) {
+            (void)open("/dev/null", fd ? O_WRONLY : O_RDONLY);
+        }
+    }
+}
+
+/* 0 while stdout takes what is written; else the errno its write failed with (EPIPE: the reader went away).
+ * errno is cleared before the writes it is to judge: printf leaves it as the failed write() set it */
+static int stdout_failed(void)
+{
+    return ferror(stdout) ? (errno ? errno : EIO) : 0;
+}
+
+/* read's ending for a failed write: a reader gone ends it without a word (EXIT_PIPE), anything else in a line */
+static int output_failed(int e)
+{
+    if (e == EPIPE) {
+        return EXIT_PIPE;
+    }
+    fprintf(stderr, "tm_pi: error: cannot write standard output: %s\n", strerror(e));
+    return 2;
 }
 
 static void catch_stop_signals(void)
@@ -280,6 +318,7 @@ int main(int argc, char **argv)
     long n = 0, late = 0, far = 0;
     char err[200], late_text[40] = "", far_text[200] = "", pace_text[40] = "";
     uint64_t start_ns = 0, began_ns = 0, first_ns = 0, last_ns = 0;
+    int out_err = 0; /* the errno a write to stdout failed with: the run ends after that line */
     double elapsed;
     i2c_linux port;
     adc_i2c i2c;
@@ -296,6 +335,8 @@ int main(int argc, char **argv)
     int t_read = 0;
 #endif
 
+    keep_standard_fds();
+    setvbuf(stdout, NULL, _IOLBF, BUFSIZ); /* each line out when written, not 4 kB later (~30 s at --rate 1) */
     for (i = 1; i < argc; ++i) {
         const char *opt = argv[i];
         const char *val = i + 1 < argc ? argv[i + 1] : NULL;
@@ -423,6 +464,7 @@ int main(int argc, char **argv)
         az_init(&az, offsets, noise_floor(spreads, lsb), band_mm, band_deg, hold_s);
         print_band(&az);
     }
+    errno = 0;
     if (!jsonl) {
         printf("t");
         for (i = 1; i <= TM_N_INPUTS; ++i) {
@@ -432,6 +474,10 @@ int main(int argc, char **argv)
             printf(",%s", names[i]);
         }
         printf(",status\n");
+    }
+    if ((out_err = stdout_failed()) != 0) {
+        i2c_linux_close(&port);
+        return output_failed(out_err);
     }
     start_ns = i2c.now_ns(i2c.ctx);
     if (rate_hz > 0.0) {
@@ -504,6 +550,7 @@ int main(int argc, char **argv)
         if (auto_zero && az_observe(&az, t_mono, comp, out, status, shift)) {
             print_update(&az, t_mono, shift);
         }
+        errno = 0;
         print_line(jsonl, t, v, out, status);
         if (status >= 0 && tm_far_outside(out)) { /* the header's test: read's bounds */
             ++far;
@@ -511,9 +558,16 @@ int main(int argc, char **argv)
         first_ns = n == 0 ? began_ns : first_ns; /* read's pace: from the first sample's start to the last's */
         last_ns = began_ns;
         ++n;
+        if ((out_err = stdout_failed()) != 0) {
+            break; /* no more samples for a reader that is gone: read's ending, no summary */
+        }
+    }
+    errno = 0;
+    if (out_err || (fflush(stdout) == EOF && (out_err = errno ? errno : EIO) != 0)) {
+        i2c_linux_close(&port);
+        return output_failed(out_err);
     }
     elapsed = (double)(i2c.now_ns(i2c.ctx) - start_ns) * 1e-9;
-    fflush(stdout);
     total = array.counts;
 #if ADC_HAS_TEMPERATURE
     /* one bus: the thermistor's errors count with the elements', as the Python readout counts them */
