@@ -22,7 +22,7 @@ import numpy as np
 from fitgen.base.errors import InputError
 
 from host.device import PortOwner, no_nagle, port_error, url_hint
-from host.gcodereplies import GRBL_BANNER, LEAVE_ALARM, NoStatus, StageError, UnknownCommand, line_fault
+from host.gcodereplies import GRBL_BANNER, LEAVE_ALARM, NoAnswer, NoStatus, StageError, UnknownCommand, line_fault
 
 __all__ = ["GcodeController", "MACHINE_AXES", "NoStatus", "POSITION_TOL", "QUEUED_WAIT", "StageError",
            "UnknownCommand", "stage_url"]
@@ -35,6 +35,8 @@ POLL = 0.02  # seconds one read of the port blocks at most
 ASK_WAIT = 1.0  # s a GRBL takes at most to answer '?' (real-time, within milliseconds); a Marlin never does
 QUEUED_WAIT = 60.0  # s a stopped run's queued moves (or homing) may take to end after a new run connects
 POSITION_TOL = 0.02  # mm: reported against commanded position (Marlin prints 2 decimals, GRBL steps)
+BOOT_SCREEN = 15.0  # s a Marlin may stay silent after its banner before it serves lines (its boot screens, settings)
+INCH = 25.4  # mm: GRBL reports positions in inches when its $13 is 1, whatever G20/G21 says
 
 _NUM = r"(-?\d+(?:\.\d*)?)"
 _MARLIN_POS = re.compile(rf"X:{_NUM}\s*Y:{_NUM}\s*Z:{_NUM}")
@@ -67,6 +69,8 @@ class GcodeController(PortOwner):
         self.alarm = ""  # GRBL's alarm state at connect ("" if none)
         self.homed = False  # homed during this connection
         self.wco = np.zeros(3)  # GRBL: work coordinate offset (MPos - WPos)
+        self.report_mm = 1.0  # GRBL: mm per unit of its reports (INCH with $13=1)
+        self.settings: dict[int, float] = {}  # GRBL: its $$ settings, read at connect
         self.max_rates: np.ndarray | None = None  # each axis's top rate, mm/min (setup(); None: not said)
         self.log = log  # optional callable(str) for each line in and out
         self.last_ok = ""  # the last command's ok line, as the controller gave it
@@ -152,8 +156,8 @@ class GcodeController(PortOwner):
                 raise StageError(f"{self.name}: {what} still busy {time.monotonic() - start:.0f} s after it was "
                                  "sent (Marlin's busy: keepalive); is the machine stuck, or paused for the user?")
             if text is None:
-                raise StageError(f"{self.name}: no answer to {what} within {limit:g} s; is the controller on, "
-                                 "and is the baud rate right?")
+                raise NoAnswer(f"{self.name}: no answer to {what} within {limit:g} s; is the controller on, "
+                               "and is the baud rate right?")
             if text == "ok" or text.startswith("ok "):
                 self.last_ok = text  # Smoothieware and Teacup answer M114 on it: "ok C: X:.. Y:.. Z:.."
                 return got
@@ -185,20 +189,29 @@ class GcodeController(PortOwner):
             m = GRBL_BANNER.match(text)
             if m:
                 seen, self.firmware = "grbl", text
-            elif text == "start" or text.startswith("echo:Marlin"):
+            elif text == "start" or text.startswith(("echo:Marlin", "Marlin ")):  # Marlin 2 prints no echo:
                 seen = "marlin"
-                if text.startswith("echo:Marlin"):
-                    self.firmware = text[5:].strip()
+                if "Marlin" in text:
+                    self.firmware = text.removeprefix("echo:").strip()
         self.banner_seen = seen is not None
         if seen is None:
-            # GRBL answers '?' at once, even behind a stopped run's queued move (M115 would wait behind it)
-            seen = self._grbl_at_rest(self.timeout if flavor == "grbl" else min(self.timeout, ASK_WAIT)) \
-                if flavor != "marlin" else self._probe(named=True)
+            try:
+                # GRBL answers '?' at once, even behind a stopped run's queued move (M115 would wait behind it)
+                seen = self._grbl_at_rest(self.timeout if flavor == "grbl" else min(self.timeout, ASK_WAIT)) \
+                    if flavor != "marlin" else self._probe(named=True)
+            except StageError:
+                if self.banner_seen:  # a slow boot, not a reset: lines sent before it may be answered late
+                    raise StageError(f"{self.name}: the controller printed its start-up banner only after "
+                                     f"--stage-boot-wait {boot_wait:g} s had passed (a board that resets when its "
+                                     f"port opens, booting slowly): give --stage-boot-wait {2 * boot_wait + 2:g}") \
+                        from None
+                raise
         if flavor != "auto" and seen != flavor:
             raise InputError(f"{self.name}: --stage-flavor {flavor}, but the controller is {seen} "
                              f"({self.firmware or 'by its answers'})")
         self.flavor = seen
         if seen == "grbl":
+            self._grbl_settings()
             self.alarm = "Alarm" if self.status()[0].startswith("Alarm") else ""
             if not self.alarm:
                 self._work_offset()
@@ -248,7 +261,8 @@ class GcodeController(PortOwner):
                 raise unnamed(name)
             if text is None:
                 raise StageError(f"{self.name}: no answer to M115 within {self.timeout:g} s; is the controller on, "
-                                 "and is the baud rate right?")
+                                 "and is the baud rate right? (a GRBL halted by a limit alarm answers nothing "
+                                 "until it is reset)")
             if "busy:" in text:  # Marlin's host keepalive: a stopped run's M400 or homing is still going on
                 deadline = _busy_deadline(deadline, start, self.timeout, self.timeout)
                 continue
@@ -281,8 +295,18 @@ class GcodeController(PortOwner):
                 raise self._fault(text, what)
             got.append(text)
 
+    def _grbl_settings(self) -> None:
+        """GRBL's $$ (answered in ALARM too): the unit of its reports ($13) and the axes' top rates ($110-$112)."""
+        self.settings = {}
+        for text in self.command("$$"):
+            m = re.fullmatch(rf"\$(\d+)={_NUM}(?:\s*\(.*\))?", text)  # 0.9 adds (a comment)
+            if m:
+                self.settings[int(m.group(1))] = float(m.group(2))
+        self.report_mm = INCH if self.settings.get(13) == 1 else 1.0
+
     def _work_offset(self) -> None:
-        """GRBL reports MPos (or WPos); G1 targets are in work coordinates: WCO = G54 + G92 (+ G43.1 on Z)."""
+        """GRBL reports MPos (or WPos); G1 targets are in work coordinates: WCO = G54 + G92 (+ G43.1 on Z), G54
+        being the system setup() selects."""
         wco = np.zeros(3)
         for text in self.command("$#"):
             m = re.match(r"\[(G54|G92|TLO):([^\]]*)\]", text)
@@ -293,14 +317,15 @@ class GcodeController(PortOwner):
         self.wco = wco
 
     def _numbers(self, field: str, text: str, n: int) -> np.ndarray:
-        """The first ``n`` comma-separated numbers of ``field`` (part of the controller's line ``text``)."""
+        """The first ``n`` comma-separated coordinates of ``field`` (part of the controller's line ``text``), in
+        mm."""
         try:
             vals = [float(v) for v in field.split(",")[:n]]
         except ValueError:
             vals = []
         if len(vals) < n or not all(math.isfinite(v) for v in vals):
             raise StageError(f"{self.name}: a report with fewer than {n} readable numbers: {text!r}")
-        return np.array(vals)
+        return np.array(vals) * self.report_mm
 
     # -- state and motion
 
@@ -357,7 +382,20 @@ class GcodeController(PortOwner):
         if self.flavor == "marlin":
             self.command("M400", timeout=timeout, what=f"M400 after {what}")
             return
-        self.command("G4 P0", timeout=timeout, what=f"G4 P0 after {what}")
+        try:
+            self.command("G4 P0", timeout=timeout, what=f"G4 P0 after {what}")
+        except NoAnswer as exc:  # a GRBL held waits with its moves: it still answers '?'
+            try:
+                state = self.status(ASK_WAIT)[0]
+            except NoStatus:
+                raise exc from None
+            if state.startswith(("Hold", "Door")):
+                door = state.startswith("Door")
+                raise StageError(f"{self.name}: the controller holds its moves ({state}: "
+                                 f"{'its safety door is open' if door else 'a feed hold'}) during {what}; "
+                                 f"{'close the door, then ' if door else ''}resume it with cycle start (its button, "
+                                 "or '~')") from None
+            raise
         deadline = time.monotonic() + self.timeout
         while True:
             state, _ = self.status()
@@ -372,10 +410,15 @@ class GcodeController(PortOwner):
             time.sleep(POLL)
 
     def setup(self) -> None:
-        """Millimetres, absolute coordinates, feed per minute; Marlin's steppers on; the axes' top rates."""
-        self.command("G21")
+        """Millimetres, absolute coordinates, feed per minute; Marlin's steppers on; GRBL's first work coordinate
+        system (G54: a G55-G59 left selected would move every target by its offset); the axes' top rates."""
+        boot = BOOT_SCREEN if self.banner_seen and self.flavor == "marlin" else 0.0  # 'start', then its boot screen
+        self.command("G21", timeout=self.timeout + boot,
+                     what="G21, the first line after its start-up banner," if boot else None)
         self.command("G90")
         self.command("M17" if self.flavor == "marlin" else "G94")
+        if self.flavor == "grbl":
+            self.command("G54")
         self.max_rates = self._max_rates()
 
     def _max_rates(self) -> np.ndarray | None:
@@ -385,10 +428,7 @@ class GcodeController(PortOwner):
         rates = {}
         try:
             if self.flavor == "grbl":
-                for text in self.command("$$"):
-                    m = re.fullmatch(rf"\$11([012])={_NUM}(?:\s*\(.*\))?", text)  # 0.9 adds (a comment)
-                    if m:
-                        rates[int(m.group(1))] = float(m.group(2))
+                rates = {k - 110: v for k, v in self.settings.items() if k in (110, 111, 112)}
             else:
                 # M203 is in mm/s on Marlin, in mm/min on RepRapFirmware (whose M503 prints its config.g)
                 per_min = 1.0 if "reprapfirmware" in self.firmware.lower() else 60.0

@@ -18,6 +18,8 @@ GRBL_ALARMS = {1: "hard limit triggered", 2: "soft limit: the target exceeds the
 
 
 LEAVE_ALARM = "run the command again with --home or --unlock to resume"  # GRBL stays in ALARM: the same one fails
+CRITICAL_ALARMS = ("1", "2")  # a limit: GRBL halts until a reset (grbl/protocol.c, "Reset to continue")
+RESET_FIRST = "GRBL halts after a limit until it is reset: press its reset button or power it off and on, then "
 
 
 class StageError(RuntimeError):
@@ -35,6 +37,10 @@ class StageError(RuntimeError):
 
 class NoStatus(StageError):
     """No answer to GRBL's real-time ``?``."""
+
+
+class NoAnswer(StageError):
+    """A command the controller did not answer within its time limit."""
 
 
 class UnknownCommand(StageError):
@@ -55,9 +61,11 @@ def line_fault(text: str, what: str, name: str, flavor: str | None) -> StageErro
     if text.startswith("ALARM:"):
         code = text[6:].strip()
         meaning = GRBL_ALARMS.get(int(code)) if code.isdigit() else None
+        halts = code in CRITICAL_ALARMS  # GRBL then answers nothing, '?' included, until it is reset
         return StageError(f"{name}: the controller raised ALARM:{code}{f' ({meaning})' if meaning else ''} "
-                          f"during {what}; home it (--home) or unlock it (--unlock), then set the zero again",
-                          lost=f"the controller raised ALARM:{code}", resume=LEAVE_ALARM)
+                          f"during {what}; {RESET_FIRST if halts else ''}home it (--home) or unlock it (--unlock), "
+                          "then set the zero again", lost=f"the controller raised ALARM:{code}",
+                          resume=("reset the controller, then " if halts else "") + LEAVE_ALARM)
     if text.startswith("!! "):  # Klipper's error line (then its ok): the command was refused
         shut = "shutdown" in low
         return StageError(f"{name}: the controller answered {what} with {text!r}"

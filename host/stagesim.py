@@ -10,8 +10,9 @@ unknown commands with ``echo:Unknown command``, and clamps moves to its software
 endstops once homed, silently, as Marlin does; GRBL answers ``G4 P0`` when the
 planner is empty, the real-time ``?`` at once with ``<State|MPos:..|FS:..>``,
 ``$I``, ``$#``, ``$X``, ``$H``, errors as ``error:N``, a target beyond its travel
-when homed as ``ALARM:2`` (then a reset), and after a reset with
-``homing_lock`` starts in Alarm with ``[MSG:'$H'|'$X' to unlock]``. ``reset()``
+when homed as ``ALARM:2``; after a limit's alarm (1 or 2) it answers nothing, ``?`` included, until it is reset
+(``reset()`` or Ctrl-X), then starts in Alarm, as it does after a reset with
+``homing_lock``, with ``[MSG:'$H'|'$X' to unlock]``. ``reset()``
 is the reset button: the carriage stays where it is and its coordinates restart at 0.
 ``inject(kind, at_move)`` makes the controller fail at its ``at_move``-th G1:
 ``error`` (GRBL error:33 / Marlin Error: and a halt), ``alarm`` (GRBL ALARM:1, a hard limit),
@@ -95,6 +96,7 @@ class SimController:
         self.absolute = True
         self.feed = None if self.flavor == "grbl" else 1500.0
         self.halted = False
+        self.critical = False  # GRBL after a limit's alarm: nothing answered until a reset
         self.homing = False
         self.alarm = self.flavor == "grbl" and self.homing_lock
         self._last_busy = 0.0
@@ -107,7 +109,7 @@ class SimController:
         """The reset button (or a power cycle): motion stops, coordinates restart at 0, the banner comes."""
         with self.lock:
             now = self.clock()
-            moving = bool(self.queue)
+            moving, halted = bool(self.queue), self.critical
             if moving:  # the carriage stops where it is
                 self.rig.move(self._where(now))
             self._power_on()
@@ -115,6 +117,8 @@ class SimController:
             self._inbuf.clear()
             if self.flavor == "grbl":
                 self._say("", self.welcome)
+                if halted:
+                    self.alarm = True
                 if moving:
                     self.alarm = True
                     self._say("ALARM:3")
@@ -153,7 +157,7 @@ class SimController:
         with self.lock:
             for b in data:
                 if self.flavor == "grbl" and b in (0x3F, 0x18, 0x21, 0x7E):  # ? ctrl-x ! ~ : real-time, never queued
-                    if b == 0x3F:
+                    if b == 0x3F and not self.critical:
                         self._status(self.clock())
                     elif b == 0x18:
                         self.reset()
@@ -180,7 +184,7 @@ class SimController:
             now = self.clock() if now is None else now
             while self.queue and self.queue[0].t1 <= now:
                 self.rig.move(self.queue.popleft().end)
-            if self.silent or self.halted:
+            if self.silent or self.halted or self.critical:
                 self.pending.clear()
                 return
             if self.blocked_until is not None:
@@ -235,7 +239,7 @@ class SimController:
         args = dict(words[1:])
         if code in ("G0", "G1"):
             self._g1(args, now)
-        elif code in ("G21", "G94", "M17", "M18", "M84", "M211"):
+        elif code in ("G21", "G54", "G94", "M17", "M18", "M84", "M211"):
             self._say("ok")
         elif code == "G90":
             self.absolute = True
@@ -289,13 +293,8 @@ class SimController:
         if self.homed:
             lo, hi = self.rig.travel[:, 0], self.rig.travel[:, 1]
             outside = np.any((home_frame < lo) | (home_frame > hi))
-            if outside and self.flavor == "grbl":  # soft limits: alarm, and GRBL resets itself
-                self.queue.clear()
-                self._say("ALARM:2")
-                self._say(self.welcome, "[MSG:'$H'|'$X' to unlock]")
-                self.alarm = True
-                self.pending.clear()
-                return
+            if outside and self.flavor == "grbl":  # soft limits: alarm, and a halt until reset
+                return self._limit_alarm(2)
             home_frame = np.clip(home_frame, lo, hi)  # Marlin's software endstops: clamped, silently
             target = home_frame - self.offset
         start = self.queue[-1].end if self.queue else self.rig.carriage.copy()
@@ -321,12 +320,17 @@ class SimController:
                 self.halted = True
         else:  # a hard limit switch hit
             if self.flavor == "grbl":
-                self.queue.clear()
-                self.alarm = True
-                self._say("ALARM:1")
+                self._limit_alarm(1)
             else:
                 self._say("Error:Printer halted. kill() called!", "!!")
                 self.halted = True
+
+    def _limit_alarm(self, code: int) -> None:
+        """GRBL's critical event (grbl/protocol.c): motion stops, and it waits for a reset."""
+        self.queue.clear()
+        self.pending.clear()
+        self.alarm = self.critical = True
+        self._say(f"ALARM:{code}", "[MSG:Reset to continue]")
 
     def _home(self, now: float) -> None:
         def done():

@@ -8,6 +8,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 
 import numpy as np
 import pytest
@@ -28,7 +29,7 @@ from host.gcode import GcodeController, StageError
 from host.stage import PoseStage, jog_to_zero
 from host.stageserver import PoseFile, PtyServer, SocketServer
 from host.stagesettings import AxisMap, StageSettings, parse_approach, parse_ranges
-from host.stagesim import GRBL_Z_SWITCH, SimController, SimRig
+from host.stagesim import GRBL_Z_SWITCH, MARLIN_VERSION, SimController, SimRig
 from host.stagezero import StageState, choose_zero, parse_zero, run_zeros, zero_still_valid
 
 from conftest import assert_one_line_error
@@ -402,6 +403,128 @@ def test_grbl_0_9_reports_and_settings_are_read():
             np.testing.assert_allclose(c.move({"X": 0.5, "Z": -1.0}, FEED), [0.5, 0.0, -1.0])
             np.testing.assert_allclose(c.position(), [0.5, 0.0, -1.0])
             np.testing.assert_allclose(srv.ctrl.machine(), [0.5, 0.0, -1.0])
+        finally:
+            c.close()
+
+
+def test_a_grbl_reporting_inches_or_left_in_g55_is_moved_in_mm_in_g54():
+    """$13=1 makes GRBL report positions and offsets in inches whatever G21 says, and a G55 left selected (a $N
+    start-up line, or a port that does not reset the board) puts every target off by its offset: a 'dz -0.1' jog
+    had moved the machine tens of mm (grbl/print.c printFloat_CoordValue; report.c's WCO, every 10th report)."""
+    class Inches(SimController):
+        def _status(self, now):
+            m = (self._where(now) - self.offset) / 25.4
+            self._say(f"<{'Run' if self.queue else 'Idle'}|MPos:{m[0]:.4f},{m[1]:.4f},{m[2]:.4f}|FS:0,0>")
+
+        def _grbl_system(self, text, now):
+            if text == "$$":
+                self._say("$13=1", "$110=12000.000", "$111=12000.000", "$112=12000.000", "ok")
+            elif text == "$#":
+                self._say("[G54:0.0000,0.0000,0.0000]", "[G92:0.0000,0.0000,0.0000]", "[TLO:0.0000]", "ok")
+            else:
+                super()._grbl_system(text, now)
+
+    class G55(SimController):
+        def _power_on(self):
+            super()._power_on()
+            self.system, self.reports = np.array([-30.0, -20.0, -25.0]), 0
+
+        def _execute(self, line, now):
+            if line.strip() != "G54":
+                return super()._execute(line, now)
+            self.system = np.zeros(3)
+            self._say("ok")
+            return True
+
+        def _g1(self, args, now):  # a target in the selected system: the machine's, less its offset
+            super()._g1({k: v + self.system["XYZ".index(k)] if k in "XYZ" else v for k, v in args.items()}, now)
+
+        def _status(self, now):
+            m, w = self._where(now) - self.offset, self.system
+            wco = f"|WCO:{w[0]:.3f},{w[1]:.3f},{w[2]:.3f}" if self.reports % 10 == 0 else ""
+            self.reports += 1
+            self._say(f"<{'Run' if self.queue else 'Idle'}|MPos:{m[0]:.3f},{m[1]:.3f},{m[2]:.3f}|FS:0,0{wco}>")
+
+    for cls in (Inches, G55):
+        with _controller(cls, "grbl") as srv:
+            c = connect(srv)
+            try:
+                c.setup()
+                np.testing.assert_allclose(c.position(), [0.0, 0.0, 0.0], atol=0.003)
+                np.testing.assert_allclose(c.move({"X": 0.5, "Z": -1.0}, FEED), [0.5, 0.0, -1.0])
+                np.testing.assert_allclose(srv.ctrl.machine(), [0.5, 0.0, -1.0], atol=1e-9)
+                np.testing.assert_allclose(c.position(), [0.5, 0.0, -1.0], atol=0.003)
+            finally:
+                c.close()
+
+
+def test_marlins_boot_screen_and_a_banner_after_the_boot_wait_are_said_as_such():
+    """Marlin prints 'start', then stays silent through its boot screens (4 s and more) before it serves lines: G21
+    had timed out at the answer's limit, which --stage-boot-wait could not change. A banner that comes after the
+    boot wait had been called a reset during a status query. Marlin 2 names itself without echo:."""
+    class SlowBoot(SimController):
+        def reset(self):
+            super().reset()
+            self._out = bytearray(self._out.replace(b"echo:Marlin", b"Marlin"))
+            self.booting = self.clock() + 3.0
+
+        def step(self, now=None):
+            if self.clock() < getattr(self, "booting", 0.0):
+                return
+            super().step(now)
+
+    with _controller(SlowBoot, "marlin") as srv:
+        c = connect_after_reset(srv)
+        try:
+            assert c.flavor == "marlin" and c.firmware == f"Marlin {MARLIN_VERSION}"
+            c.setup()  # answered after the boot screen, past the 2 s the answers have
+            assert c.position().tolist() == [0.0, 0.0, 0.0]
+        finally:
+            c.close()
+    with _controller(SimController, "marlin") as srv:
+        c = GcodeController.open(srv.url, timeout=2.0)
+        try:
+            threading.Timer(0.4, srv.ctrl.reset).start()
+            with pytest.raises(StageError) as err:
+                c.connect(boot_wait=0.1)
+            assert str(err.value).endswith("the controller printed its start-up banner only after --stage-boot-wait "
+                                           "0.1 s had passed (a board that resets when its port opens, booting "
+                                           "slowly): give --stage-boot-wait 2.2"), str(err.value)
+        finally:
+            c.close()
+
+
+@pytest.mark.parametrize("state, said", [("Hold:0", "holds its moves (Hold:0: a feed hold) during G1 X0.500 F6000; "
+                                          "resume it with cycle start (its button, or '~')"),
+                                         ("Door:1", "holds its moves (Door:1: its safety door is open) during G1 "
+                                          "X0.500 F6000; close the door, then resume it with cycle start")])
+def test_a_grbl_held_says_so_not_that_it_is_off(state, said):
+    """A feed hold or an open safety door keeps G4 P0 waiting for ever: the line had asked whether the controller
+    was on and its baud rate right."""
+    class Held(SimController):
+        held = False  # from the first move: the hold (or the door) stops it
+
+        def _execute(self, line, now):
+            if not (line.startswith("G1") or self.held and line.startswith("G4")):
+                return super()._execute(line, now)
+            self.held = True
+            self.blocked_until = (lambda t: False, lambda: None)
+            self._say("ok")
+            return True
+
+        def _status(self, now):
+            if not self.held:
+                return super()._status(now)
+            m = self._where(now) - self.offset
+            self._say(f"<{state}|MPos:{m[0]:.3f},{m[1]:.3f},{m[2]:.3f}|FS:0,0>")
+
+    with _controller(Held, "grbl") as srv:
+        c = connect(srv, timeout=0.5)
+        try:
+            c.setup()
+            with pytest.raises(StageError) as err:
+                c.move({"X": 0.5}, FEED, start=np.zeros(3))
+            assert said in str(err.value), str(err.value)
         finally:
             c.close()
 
@@ -1004,7 +1127,8 @@ def test_capture_command_killed_midway_and_reset_between_runs_keeps_every_row(se
 
 def test_an_alarm_mid_run_says_to_resume_with_unlock_and_that_resumes(tmp_path):
     """GRBL stays in ALARM after one mid-run: the line had said "run the same command again to resume", which then
-    failed on the ALARM at connect. It says to run it with --home or --unlock, and that resumes every row."""
+    failed on the ALARM at connect. It says to reset the controller (a limit's alarm halts GRBL until then) and run
+    it with --home or --unlock, and that resumes every row."""
     sched = write_schedule(tmp_path / "s.csv", grid()[:9])
     out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
     with server("grbl", PoseFile(posefile), M=M_RIG) as srv:
@@ -1016,10 +1140,15 @@ def test_an_alarm_mid_run_says_to_resume_with_unlock_and_that_resumes(tmp_path):
         assert proc.returncode == 1 and "ALARM:1" in last, proc.stderr
         assert "the stage was not in ALARM: --unlock had nothing to unlock" in proc.stderr, proc.stderr
         assert "unlocked the stage" not in proc.stderr
-        assert last.endswith(f"the rows written so far are kept in {out}: run the command again with --home or "
-                             "--unlock to resume"), last
+        # a limit's alarm halts GRBL until it is reset: --unlock alone had been told, which found no one answering
+        assert "GRBL halts after a limit until it is reset: press its reset button" in last, last
+        assert last.endswith(f"the rows written so far are kept in {out}: reset the controller, then run the command "
+                             "again with --home or --unlock to resume"), last
         kept = data_rows(out)
         assert 1 <= len(kept) < 9
+        assert_one_line_error(run_host(*args, "--unlock"), 1, "(a GRBL halted by a limit alarm answers nothing until "
+                                                              "it is reset)")
+        srv.ctrl.reset()  # the reset button
         assert_one_line_error(run_host(*args), 1, "is in ALARM")  # the same command, as the line no longer says
         proc = run_host(*args, "--unlock")
         assert proc.returncode == 0 and "unlocked the stage ($X: out of ALARM" in proc.stderr, proc.stderr
