@@ -230,6 +230,46 @@ def test_predict_refuses_a_model_whose_float_sum_could_overflow(data, tmp_path):
     assert not (tmp_path / "e.csv").exists()
 
 
+def test_a_power_float_cannot_hold_at_the_domains_end_is_refused_for_float(data, tmp_path):
+    """A reading near 0 (one glitch row of 1e-20) under v1^-2, or a channel on a 1e-12 scale under v3^-4: the
+    coefficients and the sums fit in float, but the power does not (1e40 is inf; v^4 underflows to 0 and 1/0 is
+    inf), so fit wrote, and predict and codegen ran, a float model that gives inf and NaN with status 0."""
+    lo = np.full(8, 0.5)
+    for k, low, term, coef in ((1, 1e-20, "-2", 3.2e-40), (3, 6.98e-13, "-4", 3e-46)):
+        lo_k = lo.copy()
+        lo_k[k - 1] = low
+        eqs = tuple(Equation(n, 0.1, (Term(k, term), Term(2, "1")), (coef, 1.0)) for n in ("dx", "dz"))
+        model = Model(lo_k, np.full(8, 2.0), eqs, "mT", {})
+        path = model.save(tmp_path / "m.json")
+        said = (f"output dx: its term v{k}^{term} is not finite in float at v{k} = {low:.4g}, an end of the inputs' "
+                "range")
+        assert_one_line_error(run_cli("fitgen", "predict", str(path), str(data), "-o", str(tmp_path / "e.csv"),
+                                      "--precision", "float"), contains=said)
+        assert_one_line_error(run_cli("fitgen", "codegen", str(path), "-o", str(tmp_path / "c"), "--precision",
+                                      "float"), contains=said)
+        assert not (tmp_path / "e.csv").exists() and not (tmp_path / "c").exists()
+        # in double it runs, finite at the domain's end
+        assert np.all(np.isfinite(model.predict(np.where(np.arange(8) == k - 1, low, 1.0)[None, :])))
+
+
+def test_a_reading_whose_power_overflows_the_fits_sums_is_named_in_one_line(tmp_path):
+    """A reading of 1e-40: v1^-4 is 1e160, finite, but its square is not: numpy's overflow warnings came first, then
+    a line that blamed the dx estimate the fit had made NaN, or a coefficient nan 'that does not fit in a float'
+    whose suggested --precision double then failed too."""
+    assert run_cli("fitgen", "simulate", "--sensor", "paper", "--random", "60", "--seed", "4", "-o",
+                   str(tmp_path / "d.csv")).returncode == 0
+    lines = (tmp_path / "d.csv").read_text().splitlines(keepends=True)
+    lines[1] = "1e-40," + lines[1].split(",", 1)[1]
+    (tmp_path / "d.csv").write_text("".join(lines))
+    (tmp_path / "d.csv.meta.json").unlink()  # rows of one's own, as the glitch makes them
+    for extra in ([], ["--outputs", "dx", "--precision", "double"]):
+        assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"),
+                                      "--held-out", "0", *extra),
+                              contains="candidate term v1^-4 for dx is 1e+160, past the 1e+150 the fit's sums of "
+                                       "squares hold, on data row 1")
+    assert not (tmp_path / "m.json").exists()
+
+
 def test_identify_refuses_numbers_it_cannot_solve_with(tmp_path):
     sched = tmp_path / "s.csv"
     sched.write_text("dx,dy,dz\n" + "".join(f"{x},{y},{z}\n" for x in (-1, 1) for y in (-1, 1) for z in (-0.1, -1, -2)))

@@ -18,7 +18,8 @@ from fitgen.c.cgen import GCC_FP, c_real, fp_guard, identifier, nonfinite_test, 
 from fitgen.c.targets import check_model, check_precision
 from fitgen.base.errors import InputError
 from fitgen.base.fileio import write_in_folder
-from fitgen.equations.model import Model, float_domain
+from fitgen.equations.floatrange import float_domain
+from fitgen.equations.model import Model
 from fitgen.equations.rounding import PRECISIONS
 from fitgen.equations.terms import DISPLACEMENTS, EXPONENTS, monomial_factors
 

@@ -19,6 +19,7 @@ from fitgen import __version__
 from fitgen.base.errors import InputError, finite_number, is_finite_number, of_kind, required, shown
 from fitgen.base.fileio import read_text, real_file, write_atomic
 from fitgen.base.texts import canonical_json, sha256_hex, text_kind
+from fitgen.equations.floatrange import float_domain, float_problem
 from fitgen.equations.fma import fma as fused_multiply_add
 from fitgen.physics.dataset import READING_UNITS
 from fitgen.physics.pose import POSE_NAMES, POSE_UNITS
@@ -163,31 +164,8 @@ class Model:
         return clamped, status
 
     def float_problem(self) -> str:
-        """Why the model cannot run in float ('' when it can): a number of its equations or domain past float's
-        range, which the float C cannot hold (its literal would be refused) and the float emulation would
-        turn into inf."""
-        top = float(np.finfo(np.float32).max)
-        for eq in self.equations:
-            for x in (eq.intercept, *eq.coefficients):
-                if not abs(x) <= top:
-                    return (f"output {eq.name}: the coefficient {x:.4g} does not fit in a float (|x| <= {top:.3g}): "
-                            "readings on another scale than the sensor's? rescale them, or use double")
-        for x in (*self.input_min, *self.input_max):
-            if not abs(x) <= top:
-                return f"the input domain reaches {x:.4g}, past float's range: rescale the readings, or use double"
-        if any(t.harm for e in self.equations for t in e.terms):
-            total = np.float32(0)
-            for x in float_domain(self)[0].astype(np.float32):  # left to right, as the float C sums them
-                total = total + x
-            if not total > 0:
-                return (f"the inputs' lowest sum is {float(total)!r} in float, which the harmonics divide by (> 0 "
-                        "only in double): use double")
-        if self.refine is not None:
-            x = max(map(abs, self.refine.numbers()))
-            if not x <= top:
-                return (f"refine: a weight, prior or forward coefficient of {x:.4g} does not fit in a float "
-                        f"(|x| <= {top:.3g}): use double")
-        return ""
+        """Why the model cannot run in float ('' when it can): fitgen.equations.floatrange.float_problem."""
+        return float_problem(self)
 
     def predict(self, inputs: np.ndarray, with_status: bool = False, fma: bool = False,
                 precision: str = "double"):
@@ -300,17 +278,6 @@ def check_input_units(model: Model, units: str | None, readings: str, origin: st
     other = "" if "ADC" in readings else f", or give readings in {model.input_units}"  # a device's are what they are
     raise InputError(f"{origin} takes inputs in {model.input_units}; {readings} are in {units}: fit it on a dataset "
                      f"in {units}{_UNITS_SOURCE.get(units, '')}{other}")
-
-
-def float_domain(model: Model) -> tuple[np.ndarray, np.ndarray]:
-    """The domain as floats, rounded outward so that every double inside it stays inside."""
-    with np.errstate(over="ignore"):  # beyond float's range: inf, refused where a literal is written
-        lo = model.input_min.astype(np.float32)
-        hi = model.input_max.astype(np.float32)
-    lo = np.where(lo.astype(float) > model.input_min, np.nextafter(lo, np.float32(-np.inf)), lo)
-    hi = np.where(hi.astype(float) < model.input_max, np.nextafter(hi, np.float32(np.inf)), hi)
-    lo = np.where((model.input_min > 0) & (lo <= 0), np.float32(np.finfo(np.float32).tiny), lo)
-    return lo.astype(float), hi.astype(float)
 
 
 INPUT_UNITS = READING_UNITS

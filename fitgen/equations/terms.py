@@ -354,16 +354,23 @@ def design_matrix(terms: list[Term], inputs: np.ndarray, d: np.ndarray | None = 
     return cols
 
 
+FIT_COLUMN_LIMIT = 1e150  # a column's square summed over a million rows stays within double's range
+
+
 def finite_design_matrix(terms: list[Term], inputs: np.ndarray, d: np.ndarray | None, harmonics: Harmonics | None,
                          first_row: int, what: str = "") -> np.ndarray:
     """:func:`design_matrix` of data rows ``first_row`` + 1.. for a fit; InputError naming the first term and row
-    that are not finite (a reading too close to 0 for a negative power), without numpy's warnings before it."""
+    that are not finite, or past what the fit's sums of squares hold (FIT_COLUMN_LIMIT: a reading too close to 0
+    for a negative power), without numpy's warnings before it."""
     with np.errstate(all="ignore"):
         cols = design_matrix(terms, inputs, d, harmonics)
-    bad = np.argwhere(~np.isfinite(cols))
+    bad = np.argwhere(~(np.abs(cols) <= FIT_COLUMN_LIMIT))
     if bad.size:
         r, c = bad[0]
-        raise RowError(f"candidate term {terms[c].text}{what} is not finite on data row ", first_row + int(r),
+        x = cols[r, c]
+        size = ("not finite" if not np.isfinite(x) else
+                f"{x:.3g}, past the {FIT_COLUMN_LIMIT:g} the fit's sums of squares hold,")
+        raise RowError(f"candidate term {terms[c].text}{what} is {size} on data row ", first_row + int(r),
                        " (an input too close to 0?)")
     return cols
 
