@@ -270,6 +270,28 @@ def test_a_reading_whose_power_overflows_the_fits_sums_is_named_in_one_line(tmp_
     assert not (tmp_path / "m.json").exists()
 
 
+def test_a_reading_of_0_or_less_says_which_powers_the_fit_was_not_offered(tmp_path):
+    """One glitch reading of -0.5 withholds every negative and fractional power of its element (the terms rule),
+    which had gone without a word; a family without such powers has nothing withheld to say."""
+    assert run_cli("fitgen", "simulate", "--sensor", "paper", "--random", "80", "--seed", "4", "-o",
+                   str(tmp_path / "d.csv")).returncode == 0
+    lines = (tmp_path / "d.csv").read_text().splitlines(keepends=True)
+    cells = lines[2].split(",")
+    cells[3] = "-0.5"
+    lines[2] = ",".join(cells)
+    (tmp_path / "d.csv").write_text("".join(lines))
+    (tmp_path / "d.csv.meta.json").unlink()
+    base = ["fitgen", "fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"), "--held-out", "0"]
+    proc = run_cli(*base)
+    assert proc.returncode == 0, proc.stderr
+    assert ("note: v4 reads 0 or less on some rows (v4: -0.5 on data row 2): the fit was not offered its powers -1, "
+            "-2, -3, -4, 1/2, 1/3, 1/4, which need readings > 0") in proc.stderr, proc.stderr
+    terms = {t for o in json.loads((tmp_path / "m.json").read_text())["outputs"] for t in o["terms"]}
+    assert not any(t.startswith("v4^-") or t.startswith("v4^1/") for t in terms)
+    proc = run_cli(*base, "--family", "integer")
+    assert proc.returncode == 0 and "0 or less on some rows" not in proc.stderr, proc.stderr
+
+
 def test_identify_refuses_numbers_it_cannot_solve_with(tmp_path):
     sched = tmp_path / "s.csv"
     sched.write_text("dx,dy,dz\n" + "".join(f"{x},{y},{z}\n" for x in (-1, 1) for y in (-1, 1) for z in (-0.1, -1, -2)))

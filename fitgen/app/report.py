@@ -330,8 +330,7 @@ def _blind_causes(model: Model, ds, sensor) -> list[str]:
 
 def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
     """What a user should know of a fit to dataset ``ds`` (``sensor``: its rows' own, where known) beyond its
-    summary: readings' units assumed, rows repeated, equations near the rows, outputs the readings
-    barely carry and why."""
+    summary: units assumed, repeated rows, powers withheld, equations near the rows, outputs barely carried, why."""
     rows = len(ds.inputs)
     notes = [] if units else [f"{data} has no meta saying its readings' units: taken as mT (give --units V for "
                               "volts, as an ADC gives them)"]
@@ -356,6 +355,13 @@ def fit_notes(model: Model, ds, data, units, sensor=None) -> list[str]:
         notes.append(f"{repeats} of {rows} rows repeat another row exactly: the fit counts each as a measurement of "
                      "its own, so AIC admits terms on less evidence than the data hold; drop the repeats, or average "
                      "repeated readings of one pose into one row")
+    needing = [e for e in (model.fit_info.get("settings") or {}).get("exponents") or [] if "-" in e or "/" in e]
+    if needing and len(low := np.flatnonzero(~(ds.inputs.min(axis=0) > 0))):  # the terms rule withheld them
+        k, r, one = int(low[0]), int(np.argmin(ds.inputs[:, low[0]])), len(low) == 1
+        notes.append(f"{', '.join(f'v{j + 1}' for j in low)} read{'s' if one else ''} 0 or less on some rows "
+                     f"(v{k + 1}: {ds.inputs[r, k]:g} on data row {r + 1}): the fit was not offered "
+                     f"{'its' if one else 'their'} powers {', '.join(needing)}, which need readings > 0, and may be "
+                     "the poorer for it; a glitch row? leave it out; every reading below 0? correct the readings")
     no_d = _d_terms_note(model)
     notes += no_d
     causes, noise = None, (model.fit_info.get("noise") or {}).get("device") or 0.0  # single samples
