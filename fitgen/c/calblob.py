@@ -156,6 +156,8 @@ def to_blob(model: Model, precision: str = "float", sensor_id: str = "paper", fm
             raise InputError(f"output {name}: its terms reach {mag:.3g} in the input domain, over the {precision} "
                              f"limit {_LIMIT[precision]:g} (absurd coefficients, or a sum that could overflow)")
     stored = rounded_model(model, precision)
+    if refused := magnitude_refusal(stored.input_min, stored.input_max, stored.equations, precision):
+        raise InputError(refused)  # the firmware would refuse the blob: past the limit once stored, or on the way
     real = np.dtype(REAL_DTYPES[precision])
 
     def reals(values) -> bytes:
@@ -178,6 +180,67 @@ def to_blob(model: Model, precision: str = "float", sensor_id: str = "paper", fm
     out += struct.pack("<I", zlib.crc32(out) & 0xFFFFFFFF)
     assert len(out) == blob_size(model.n_inputs, len(model.equations), total, precision)
     return bytes(out)
+
+
+def magnitude_refusal(lo, hi, equations, precision: str) -> str:
+    """Why the firmware refuses these outputs' magnitudes (cal_parse in firmware/cal.c.j2); '' when it does not.
+
+    term_magnitudes' bound of |intercept| + sum |coefficient * term| over the domain, within _LIMIT[precision],
+    and every power, power times a d, term and partial sum on the way too (so that no number the firmware forms
+    overflows; a root's bound is a power of two). cal_parse's operations in its order, in the blob's precision
+    (numpy float32 or float64 scalars: IEEE-754, rounded to nearest), so that both refuse the same blobs."""
+    real = np.float32 if precision == "float" else np.float64
+    one, limit = real(1), real(_LIMIT[precision])
+
+    def mul(a, b):  # a * b (a, b >= 0), None over the limit: tested by a division before it is formed
+        if a is None or b is None or b > one and a > limit / b:
+            return None
+        return a * b if a * b <= limit else None
+
+    def power(k: int, a, b):  # bound of |v|^p over [a, b] for exponent code k
+        if k < 4:
+            m = v = max(abs(a), abs(b))
+            for _ in range(k):
+                m = mul(m, v)
+            return m if m is not None and m <= limit else None
+        m = one
+        if k < 8:
+            for _ in range(k - 3):
+                if a < one and m > limit * a:
+                    return None
+                m = m / a
+            return m if m <= limit else None
+        h, step = b, real(2 ** (k - 6))  # k - 6: the root's n; step 2^n
+        while h > one:
+            h, m = h / step, m + m
+            if not m <= limit:
+                return None
+        return m
+
+    bound_d: dict = {}
+    over = f"over the {precision} limit {float(limit):g} in the input domain"
+    for eq in equations:
+        total = abs(real(eq.intercept))
+        if not total <= limit:
+            return f"output {eq.name}: the intercept {float(total):.3g} is {over}"
+        for t, c in zip(eq.terms, eq.coefficients):
+            m = one
+            if t.element:
+                a, b = real(lo[t.element - 1]), real(hi[t.element - 1])
+                k = EXPONENTS.index(t.exponent)
+                if (m := power(k, a, b)) is None:
+                    end = f"input_min {float(a)!r}" if 4 <= k < 8 else f"input_max {float(b)!r}" if k >= 8 else \
+                        f"bounds {float(a)!r}, {float(b)!r}"
+                    return f"output {eq.name}: {t.text} reaches {over} (its {end})"
+            if t.mult and (m := mul(m, bound_d[t.mult])) is None:
+                return f"output {eq.name}: {t.text} reaches {over} ({t.mult} up to {float(bound_d[t.mult]):.3g})"
+            if (m := mul(abs(real(c)), m)) is None or not total + m <= limit:
+                what = "its terms reach" if m is not None else f"the coefficient {c:.3g} times {t.text} reaches"
+                return f"output {eq.name}: {what} {over} (absurd coefficients, or a sum that could overflow)"
+            total = total + m
+        if eq.name in DISPLACEMENTS:
+            bound_d[eq.name] = total
+    return ""
 
 
 def _fail(message: str):
@@ -295,6 +358,8 @@ def from_blob(data: bytes) -> BlobInfo:
         eqs.append(Equation(name, float(intercept), tuple(terms), tuple(float(c) for c in coefs)))
         if d_slot:
             feeds_d.add(name)
+    if refused := magnitude_refusal(lo, hi, eqs, precision):
+        _fail(refused)
     try:
         model = Model(lo, hi, tuple(eqs), fit_info={"source": "calibration blob"})
     except InputError as exc:  # every rule is checked above; this is a safety net
