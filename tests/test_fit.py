@@ -228,7 +228,9 @@ def test_report_shows_progress_through_its_figures_on_a_terminal(paper_fit, tmp_
     ("v1,v2,dq\n1,2,3\n1,2,3\n", "unknown column"),
     ("v1,v2\n1,2\n3,4\n5,6\n", "no pose columns"),
     ("v1,v2,dx\n1,2\n3,4,5\n", "fields"),
-    ("", "empty"),
+    ("", "empty file (or a blank first line); a dataset is a CSV with the header v1,...,vN,dx,dy,dz,thx,thy"),
+    ("v1,v2,dx\n\n,,\n", "a header and no data rows (a run stopped before its first row?); a dataset is a CSV with "
+                          "the header v1,...,vN,dx,dy,dz,thx,thy, one row per line under it"),
 ])
 def test_malformed_csv_one_line(tmp_path, text, msg):
     data = tmp_path / "d.csv"

@@ -261,7 +261,7 @@ def parse_table(text: str, origin: str, header=None, expected: str = DATASET_IS)
     its first cell that is not a number). ``expected``: what the file should be, for a refusal of JSON or TOML."""
     lines = text.splitlines()
     if not lines or not lines[0].strip():
-        raise InputError(f"{origin}: empty file")
+        raise InputError(f"{origin}: empty file (or a blank first line); {expected}")
     kind = text_kind(text)
     if kind == "toml":
         raise InputError(f"{origin}: TOML, not CSV (a sensor or unit file? those go to --sensor); {expected}")
@@ -288,7 +288,8 @@ def parse_table(text: str, origin: str, header=None, expected: str = DATASET_IS)
     # blank lines, and a spreadsheet's empty rows (",,,,"), are no rows
     body = [ln for ln in lines[1:] if ln.replace(",", "").strip()]
     if not body:
-        raise InputError(f"{origin}: no data rows")
+        raise InputError(f"{origin}: a header and no data rows (a run stopped before its first row?); {expected}, "
+                         "one row per line under it")
     try:
         # quoted numbers ("1.5"), as some exporters write every cell, read as the csv module reads them
         table = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2, dtype=float, quotechar='"')
