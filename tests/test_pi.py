@@ -61,22 +61,29 @@ def _python_lines(model, n, faults=(), spec=MAP, settings=None):
     return lines, arr.counts
 
 
-def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=None, autozero=None, tare_n=50):
-    """tactile-host read's CSV lines (header first) for ``bus``, and its tare (None without ``rest``): the Python
-    drivers, a tare onto ``rest`` and ``tempcomp`` (with the thermistor at ``tin``), then Python's emulation of
-    the float header, as tm_pi's float build computes them; ``autozero(tare, lsb)``: an AutoZero that follows
-    the tare."""
-    import io
-
+def _float_engine(model):
+    """The engine of read that computes as tm_pi's float build: Python's emulation of the float header."""
     from host.engine import PythonEngine
-    from host.readout import Corrections, Readout
-    from host.rest import tare
-    from host.temperature import Thermometer
 
     class FloatEngine(PythonEngine):
         def estimate(self, inputs):
             out, status = self.model.predict(np.asarray(inputs).reshape(1, -1), with_status=True, precision="float")
             return out[0], int(status[0])
+
+    return FloatEngine(model)
+
+
+def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=None, autozero=None, tare_n=50,
+                    stats=None):
+    """tactile-host read's CSV lines (header first) for ``bus``, and its tare (None without ``rest``): the Python
+    drivers, a tare onto ``rest`` and ``tempcomp`` (with the thermistor at ``tin``), then Python's emulation of
+    the float header, as tm_pi's float build computes them; ``autozero(tare, lsb)``: an AutoZero that follows
+    the tare; ``stats``: a list the run's ReadoutStats is appended to."""
+    import io
+
+    from host.readout import Corrections, Readout
+    from host.rest import tare
+    from host.temperature import Thermometer
 
     cmap = parse_spec(MAP)
     arr = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy())
@@ -89,10 +96,12 @@ def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=N
     t = None if rest is None else tare(arr, rest, tare_n, compensate=compensate)
     sink, fmt = io.StringIO(), LineFormat("csv", model.n_inputs, model.output_names)
     sink.write(fmt.header)
-    Readout(arr, FloatEngine(model), sink, fmt, clock=clock,
-            corrections=Corrections(None if t is None else t.offsets, tempcomp,
-                                    None if autozero is None else autozero(t, arr.lsb)),
-            thermometer=thermometer).run(count=count)
+    run = Readout(arr, _float_engine(model), sink, fmt, clock=clock,
+                  corrections=Corrections(None if t is None else t.offsets, tempcomp,
+                                          None if autozero is None else autozero(t, arr.lsb)),
+                  thermometer=thermometer).run(count=count)
+    if stats is not None:
+        stats.append(run)
     return sink.getvalue().splitlines(), t
 
 
@@ -145,6 +154,64 @@ def test_pi_build_counts_estimates_far_outside_the_fitted_box_as_read_does(model
     assert int(boxed.far_outside(est).sum()) == 6
     assert res.stderr.rstrip().endswith("; 6 estimated outside the pose box the model was fitted in by more than "
                                         "its width: another sensor than the model's?")
+
+
+def _hold_up(bus, clock, reads, seconds=0.2):
+    """``bus`` holds up the sample reads numbered in ``reads`` (from 1) for ``seconds`` on ``clock`` after their
+    first conversion's result (8 elements a read): a loaded machine between the conversions, as tm_pi and read
+    meet it alike, the same transfers at the same times."""
+    transfer, results = bus._transfer, []
+
+    def held(address, wr, rd):
+        got = transfer(address, wr, rd)
+        if list(wr or ()) == [0x00] and rd == 2:  # a conversion's result (ADS1115 REG_CONVERSION)
+            results.append(1)
+            if len(results) % MAP_ELEMENTS == 1 and len(results) // MAP_ELEMENTS + 1 in reads:
+                clock.sleep(seconds)
+        return got
+
+    bus._transfer = held
+    return bus
+
+
+MAP_ELEMENTS = 8
+
+
+def test_pi_build_counts_far_estimates_from_held_up_reads_apart_as_read_does(model, tmp_path, standin_build):
+    """A read held up between its conversions (0.2 s, where a read takes some 10 ms) gives a moving sensor's
+    channels at two poses: read counts a far estimate from it apart from the others ("another sensor than the
+    model's?") and says it in its own words; tm_pi counted every one as another sensor's. It now times each read
+    with its clock, and a read over 3 times the quickest and 20 ms more is held up: the same counts as read's for
+    the same bus, the same holds (the 3rd and 7th of 10 reads) and the same box (every estimate far)."""
+    import dataclasses
+
+    from host.readout import FAR_HELD, FAR_OUTSIDE
+
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    boxed = dataclasses.replace(model, fit_info={**model.fit_info, "held_out": {"box": {"dx": [-0.1, 0.1],
+                                                                                      "dz": [-2, 0]}}})
+    build = build_pi(render_pi(boxed, parse_spec(MAP), tmp_path, precision="float"), standin=True)
+    cmap, bus, clock = _bus()
+    res = StandIn(_hold_up(bus, clock, (3, 7)), clock).run(["qemu-arm", str(build), "--count", "10"])
+    assert res.returncode == 0, res.stderr
+    cmap, bus, clock = _bus()
+    stats = []
+    lines, _ = _python_readout(boxed, _hold_up(bus, clock, (3, 7)), clock, 10, stats=stats)
+    far, far_held = stats[0].far, stats[0].far_held
+    assert (far, far_held) == (8, 2)
+    # each line's t is its sample's start: the 3rd and 7th samples' reads took 0.2 s more than the others
+    t = [float(ln.split(",")[0]) for ln in res.stdout.splitlines()[1:]]
+    assert [round(b - a, 1) for a, b in zip(t, t[1:])] == [0.0, 0.0, 0.2, 0.0, 0.0, 0.0, 0.2, 0.0, 0.0]
+    assert [ln.split(",", 1)[1] for ln in res.stdout.splitlines()[1:]] == [ln.split(",", 1)[1] for ln in lines[1:]]
+    # read's words for each count ("another sensor" as tm_pi has said it, without read's pointer to the docs)
+    assert res.stderr.rstrip().endswith(f"; {far} {FAR_OUTSIDE.split(': ', 1)[0]}: another sensor than the model's?"
+                                        f"; {far_held} {FAR_HELD}"), res.stderr
+    assert stats[0].summary().endswith(f"; {far} {FAR_OUTSIDE}; {far_held} {FAR_HELD}")
+    # held-up reads estimated inside the box: nothing to count, as read counts nothing
+    cmap, bus, clock = _bus()
+    res = StandIn(_hold_up(bus, clock, (3, 7)), clock).run(["qemu-arm", str(standin_build), "--count", "10"])
+    assert res.returncode == 0 and "estimated outside" not in res.stderr, res.stderr
 
 
 def test_pi_build_counts_faults_as_python_does_and_stops_on_a_silent_chip(model, standin_build):

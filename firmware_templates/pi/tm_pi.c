@@ -57,6 +57,10 @@ typedef char tm_pi_assert_tempcomp_fits_model[(TM_TEMPCOMP_N == TM_N_INPUTS) ? 1
 #define RATE_MIN_HZ (1.0 / 3600.0) /* a sample an hour, as tactile-host read (LONGEST_WAIT) */
 #define RATE_MAX_HZ 100000.0
 #define EXIT_PIPE (128 + SIGPIPE) /* read's status when its output's reader went away (fitgen/app/cliutil.py) */
+/* a read of the elements that took over HELD_FACTOR times the quickest and HELD_MARGIN_NS more was held up
+ * between its conversions (a loaded machine, I2C retries): host/readout.py HELD_FACTOR, HELD_MARGIN */
+#define HELD_FACTOR 3u
+#define HELD_MARGIN_NS 20000000u
 
 /* set by SIGINT or SIGTERM: the loop ends after the sample under way, so that no line is cut off */
 static volatile sig_atomic_t stop_signal = 0;
@@ -135,6 +139,19 @@ static int wait_until(const adc_i2c *b, uint64_t until)
         b->sleep_ns(b->ctx, left < WAIT_SLICE_NS ? left : WAIT_SLICE_NS);
     }
     return !stop_signal;
+}
+
+/* whether a read of the elements that took `took` ns, the quickest `quickest`, was held up between its
+ * conversions: took > max(HELD_FACTOR x quickest, quickest + HELD_MARGIN), as read tests it (no overflow: a
+ * quickest read of centuries holds up nothing) */
+static int held_up(uint64_t took, uint64_t quickest)
+{
+    uint64_t limit;
+    if (quickest > (UINT64_MAX - HELD_MARGIN_NS) / HELD_FACTOR) {
+        return 0;
+    }
+    limit = HELD_FACTOR * quickest;
+    return took > (limit > quickest + HELD_MARGIN_NS ? limit : quickest + HELD_MARGIN_NS);
 }
 
 /* a standard stream closed before the start (>&-) is opened onto the null device, as read's goes nowhere: left
@@ -315,9 +332,10 @@ int main(int argc, char **argv)
     static az_state az; /* the window: a few kB, not on the stack */
     double rate_hz = 0.0;
     int jsonl = 0, i, st = ADC_OK;
-    long n = 0, late = 0, far = 0;
-    char err[200], late_text[40] = "", far_text[200] = "", pace_text[40] = "";
+    long n = 0, late = 0, far = 0, far_held = 0; /* far_held: from a read held up (not counted in far) */
+    char err[200], late_text[40] = "", far_text[200] = "", held_text[320] = "", pace_text[40] = "";
     uint64_t start_ns = 0, began_ns = 0, first_ns = 0, last_ns = 0;
+    uint64_t quickest = UINT64_MAX; /* ns: the quickest read of the elements so far, what a read takes */
     int out_err = 0; /* the errno a write to stdout failed with: the run ends after that line */
     double elapsed;
     i2c_linux port;
@@ -489,7 +507,8 @@ int main(int argc, char **argv)
         double v[TM_N_INPUTS], comp[TM_N_INPUTS], shift[TM_N_INPUTS];
         tm_real in[TM_N_INPUTS], out[TM_N_OUTPUTS];
         double t, t_mono;
-        int status;
+        uint64_t took;
+        int status, held;
         if (period) {
             const uint64_t now = i2c.now_ns(i2c.ctx);
             if (now < next && !wait_until(&i2c, next)) {
@@ -512,6 +531,9 @@ int main(int argc, char **argv)
         if (st != ADC_OK) {
             break;
         }
+        took = i2c.now_ns(i2c.ctx) - began_ns; /* as read times it: the elements' read, not the thermistor's */
+        quickest = took < quickest ? took : quickest;
+        held = held_up(took, quickest);
         for (i = 0; i < TM_N_INPUTS; ++i) {
             v[i] = codes[i] * lsb[i];
         }
@@ -553,7 +575,11 @@ int main(int argc, char **argv)
         errno = 0;
         print_line(jsonl, t, v, out, status);
         if (status >= 0 && tm_far_outside(out)) { /* the header's test: read's bounds */
-            ++far;
+            if (held) { /* a read held up is not the model's fault, nor another sensor's */
+                ++far_held;
+            } else {
+                ++far;
+            }
         }
         first_ns = n == 0 ? began_ns : first_ns; /* read's pace: from the first sample's start to the last's */
         last_ns = began_ns;
@@ -585,15 +611,20 @@ int main(int argc, char **argv)
         snprintf(far_text, sizeof far_text, "; %ld estimated outside the pose box the model was fitted in by more "
                  "than its width: another sensor than the model's?", far);
     }
+    if (far_held) { /* read's words (host/readout.py FAR_HELD) */
+        snprintf(held_text, sizeof held_text, "; %ld estimated outside the pose box the model was fitted in by more "
+                 "than its width, from a read held up between its conversions (a loaded machine, or I2C retries): a "
+                 "sensor that moved meanwhile gives readings of two poses, which no pose gives", far_held);
+    }
     if (n > 1 && last_ns > first_ns) {
         snprintf(pace_text, sizeof pace_text, " (%.1f Hz)", (double)(n - 1) / ((double)(last_ns - first_ns) * 1e-9));
     }
     fprintf(stderr, "tm_pi: %s%ld samples in %.2f s%s; I2C errors %lu (nack %lu, timeout %lu, stuck %lu, other %lu; "
-                    "%lu retries, %lu resets)%s%s\n", stop_signal ? "stopped: " : "", n, elapsed, pace_text,
+                    "%lu retries, %lu resets)%s%s%s\n", stop_signal ? "stopped: " : "", n, elapsed, pace_text,
             (unsigned long)(total.nack + total.timeout + total.stuck + total.other),
             (unsigned long)total.nack, (unsigned long)total.timeout, (unsigned long)total.stuck,
             (unsigned long)total.other, (unsigned long)total.retries, (unsigned long)total.resets, late_text,
-            far_text);
+            far_text, held_text);
     if (st != ADC_OK) {
         fprintf(stderr, "tm_pi: error: %s %s; stopped after %ld samples\n",
                 failed ? failed : array.failed_chip >= 0 ? ADC_MAP_LABELS[array.failed_chip] : "general-call reset",
