@@ -57,6 +57,12 @@ FAR_HELD = ("estimated outside the pose box the model was fitted in by more than
             "of two poses, which no pose gives")
 # a read that took this many times the quickest, and this much longer (s), was held up between its conversions
 HELD_FACTOR, HELD_MARGIN = 3.0, 0.02
+
+
+def held_up(took, quickest):
+    """Whether a read that took ``took`` s was held up between its conversions, the quickest so far taking
+    ``quickest`` (arrays element by element; a read not timed, NaN, was not)."""
+    return took > np.maximum(HELD_FACTOR * quickest, quickest + HELD_MARGIN)
 # ReadoutStats' counts of samples whose estimates are off while the run goes on: each said at its first sample
 # (Readout.warn) and in the summary
 WARNED = {"uncompensated": UNCOMPENSATED, "temp_outside": TEMP_OUTSIDE, "temp_beyond": TEMP_BEYOND,
@@ -166,17 +172,19 @@ class RunRecord:
     """A run, sample by sample, at full precision (JSON lines): what ``tactile-host replay`` re-estimates.
 
     First line: ``{"run": 1, ...}`` with the model's hash, outputs and the corrections in force at the
-    start; then per sample ``{"t", "raw", "temp", "out", "status"}``: the ADC volts before any
-    correction, the temperature (null without a thermometer), the estimates and the status.
+    start; then per sample ``{"t", "raw", "temp", "out", "status", "read_s"}``: the ADC volts before any
+    correction, the temperature (null without a thermometer), the estimates, the status and the seconds the
+    elements' read took (null where not timed), by which a replay tells a read held up between its conversions.
     """
 
     def __init__(self, sink, header: dict):
         self.sink = sink
         sink.write(json.dumps({"run": 1, **header}) + "\n")
 
-    def write(self, t: float, raw, temp: float, out, status: int) -> None:
+    def write(self, t: float, raw, temp: float, out, status: int, read_s: float = math.nan) -> None:
         self.sink.write(json.dumps({"t": t, "raw": [float(x) for x in raw], "temp": _num(temp),
-                                    "out": [float(x) for x in out], "status": int(status)}) + "\n")
+                                    "out": [float(x) for x in out], "status": int(status),
+                                    "read_s": _num(read_s)}) + "\n")
 
 
 class Readout:
@@ -202,7 +210,7 @@ class Readout:
         raw = self.array.read_volts()
         took = self.clock.monotonic() - began
         self._quickest = quickest = min(self._quickest, took)
-        held = took > max(HELD_FACTOR * quickest, quickest + HELD_MARGIN)
+        held = bool(held_up(took, quickest))
         temp = self.thermometer.read() if self.thermometer is not None else math.nan
         comp, v = self.corrections(raw, temp)
         out, status = self.engine.estimate(v)
@@ -211,7 +219,7 @@ class Readout:
         if self._write is not None:
             self._write(self.fmt.line(t, v, out, status))
         if self.record is not None:
-            self.record.write(t, raw, temp, out, status)
+            self.record.write(t, raw, temp, out, status, took)
         st = self.stats
         st.samples += 1
         if status:

@@ -24,7 +24,7 @@ from fitgen.equations.model import Model, check_input_units, load_model, model_f
 from fitgen.physics.sensor import MAX_VOLTS
 
 from host.autozero import AutoZero, AutoZeroSettings
-from host.readout import FAR_OUTSIDE, Corrections, RunRecord
+from host.readout import FAR_HELD, FAR_OUTSIDE, Corrections, RunRecord, held_up
 from host.temperature import load_tempcomp, tempcomp_from_dict
 from host.tempunit import model_note
 
@@ -40,6 +40,7 @@ class Run:
     out: np.ndarray
     status: np.ndarray
     torn: int = 0  # the number of a last line cut short by a stop, dropped (0: none)
+    read_s: np.ndarray | None = None  # per sample, s the elements' read took (NaN: not recorded, as older runs)
 
     @property
     def n_inputs(self) -> int:
@@ -63,7 +64,7 @@ def load_run(path) -> Run:
     if type(n) is not int or n < 1 or not isinstance(outputs, list) or not all(isinstance(o, str) for o in outputs):
         raise InputError(f"{origin}: its header's n_inputs ({n!r}) or outputs ({outputs!r}) are not as tactile-host "
                          "read writes them (a whole number >= 1; a list of names)")
-    t, raw, temp, out, status, torn = [], [], [], [], [], 0
+    t, raw, temp, out, status, took, torn = [], [], [], [], [], [], 0
     m = len(outputs)
     for k, (i, ln) in enumerate(numbered[1:], start=2):
         try:
@@ -72,6 +73,7 @@ def load_run(path) -> Run:
             o = [float(x) for x in rec["out"]]
             tt, st = float(rec["t"]), int(rec["status"])
             tp = math.nan if rec.get("temp") is None else float(rec["temp"])
+            rs = math.nan if rec.get("read_s") is None else float(rec["read_s"])
         except (ValueError, KeyError, TypeError, OverflowError):  # a number past a float's range too
             if k == len(lines) and not whole:
                 torn = i  # a last line cut short by a stop: dropped, and said
@@ -81,13 +83,16 @@ def load_run(path) -> Run:
             raise InputError(f"{origin}: line {i} has {len(row)} readings and {len(o)} outputs; the header says {n} "
                              f"and {m}")
         # what read writes: a clock's time, ADC volts, a temperature or null (a NaN time or 1e308 V had replayed)
-        if not (math.isfinite(tt) and all(abs(x) <= MAX_VOLTS for x in row) and not math.isinf(tp)):
+        if not (math.isfinite(tt) and all(abs(x) <= MAX_VOLTS for x in row) and not math.isinf(tp)
+                and not rs < 0 and not math.isinf(rs)):
             raise InputError(f"{origin}: line {i} is not a sample read records (its time must be finite, its "
-                             f"readings ADC volts within +-{MAX_VOLTS:g}, its temperature a number or null)")
-        t.append(tt), raw.append(row), temp.append(tp), out.append(o), status.append(st)
+                             f"readings ADC volts within +-{MAX_VOLTS:g}, its temperature a number or null, its "
+                             "read's seconds a number >= 0 or null)")
+        t.append(tt), raw.append(row), temp.append(tp), out.append(o), status.append(st), took.append(rs)
     if not t:
         raise InputError(f"{origin}: no samples")
-    return Run(header, np.array(t), np.array(raw), np.array(temp), np.array(out), np.array(status), torn)
+    return Run(header, np.array(t), np.array(raw), np.array(temp), np.array(out), np.array(status), torn,
+               np.array(took))
 
 
 def play_times(t: np.ndarray, longest: float = 10.0) -> np.ndarray:
@@ -119,6 +124,8 @@ class ReplayResult:
     header: dict  # the re-estimation's run-record header: its model and the corrections at the start
     recorded_outputs: tuple = ()  # the names of the recorded estimates' columns (the run's header's)
     far: np.ndarray | None = None  # per sample: estimated far outside the model's fitted pose box (Model.far_outside)
+    read_s: np.ndarray | None = None  # per sample: s its read took, as recorded (NaN: not)
+    held: np.ndarray | None = None  # per sample: its read held up between its conversions (host.readout.held_up)
 
     @property
     def exact(self) -> bool:
@@ -129,7 +136,7 @@ class ReplayResult:
         n_up = sum(1 for u in self.updates if u.t <= self.t[i])
         return {"t": float(self.t[i]), "v": self.v[i].tolist(), "raw": self.raw[i].tolist(),
                 "out": {o: float(x) for o, x in zip(self.outputs, self.out[i])}, "status": int(self.status[i]),
-                "far": bool(self.far is not None and self.far[i]),
+                "far": bool(self.far is not None and self.far[i]), "held": bool(self.held is not None and self.held[i]),
                 "temp": None if not math.isfinite(self.temp[i]) else float(self.temp[i]), "rate": None,
                 "errors": None, "zero": {"updates": n_up, "last": self.updates[n_up - 1].describe() if n_up else None}}
 
@@ -137,8 +144,11 @@ class ReplayResult:
         lines = [f"replayed {len(self.t)} samples with model {self.model_hash[:12]}"
                  f"{' (the recording model)' if self.same_model else ''}; auto-zero updates {len(self.updates)}"]
         lines += [f"note: {n}" for n in self.notes]
-        if self.far is not None and (far := int(np.sum(self.far))):
-            lines.append(f"warning: {far} of {len(self.t)} samples {FAR_OUTSIDE}")
+        if self.far is not None:  # a read held up is not the model's fault, nor another sensor's, as read counts it
+            held = self.far & self.held if self.held is not None else np.zeros(len(self.far), dtype=bool)
+            for count, said in ((int(np.sum(self.far & ~held)), FAR_OUTSIDE), (int(np.sum(held)), FAR_HELD)):
+                if count:
+                    lines.append(f"warning: {count} of {len(self.t)} samples {said}")
         # the recorded columns' names: the run's header's, else (a header without them) the model's where as many
         rec = (tuple(self.recorded_outputs) if len(self.recorded_outputs) == self.recorded.shape[1]
                else self.outputs if self.out.shape == self.recorded.shape else ())
@@ -177,7 +187,8 @@ class ReplayResult:
         buf = io.StringIO()
         rec = RunRecord(buf, self.header)
         for i in range(len(self.t)):
-            rec.write(float(self.t[i]), self.raw[i], float(self.temp[i]), self.out[i], int(self.status[i]))
+            rec.write(float(self.t[i]), self.raw[i], float(self.temp[i]), self.out[i], int(self.status[i]),
+                      math.nan if self.read_s is None else float(self.read_s[i]))
         write_atomic(path, buf.getvalue())
 
 
@@ -242,7 +253,15 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     return ReplayResult(run.t, run.raw, run.temp, v_all, out_all, st_all, run.out,
                         tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes,
                         header, tuple(o for o in h.get("outputs", ()) if isinstance(o, str)),
-                        model.far_outside(out_all) & (st_all >= 0))
+                        model.far_outside(out_all) & (st_all >= 0), run.read_s, _held(run.read_s))
+
+
+def _held(read_s: np.ndarray | None) -> np.ndarray | None:
+    """Per sample, whether its read was held up (the quickest recorded read so far as the readout kept it)."""
+    if read_s is None:
+        return None
+    with np.errstate(invalid="ignore"):  # NaN, not timed: not held
+        return held_up(read_s, np.fmin.accumulate(read_s))
 
 
 def _estimate(run: Run, model: Model, precision: str, corrections: Corrections, progress):

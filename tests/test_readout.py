@@ -18,7 +18,8 @@ from host.adc import AdcArray, DeviceSilent
 from host.channelmap import parse_spec
 from host.clock import VirtualClock
 from host.engine import CEngine, PythonEngine
-from host.readout import LineFormat, Readout
+from host.readout import LineFormat, Readout, RunRecord
+from host.replay import load_run, replay
 from host.rest import check_rest_reference, rest_reference, tare
 from host.simbus import SimBus
 
@@ -142,7 +143,7 @@ def test_estimates_far_outside_the_fitted_pose_box_are_counted_as_predict_counts
         assert ("estimated outside the pose box the model was fitted in" in stats.summary()) == far
 
 
-def test_a_far_estimate_from_a_read_held_up_is_not_blamed_on_another_sensor(sensor, model):
+def test_a_far_estimate_from_a_read_held_up_is_not_blamed_on_another_sensor(sensor, model, tmp_path):
     """A read the machine held up between its conversions (a loaded machine: 0.1-0.2 s stalls) gives a moving
     sensor's channels at two poses, which a model can read as a pose 100 mm away: counted and said as a read held
     up, where it had said "another sensor than the model's?"; a held-up read estimated inside the box, nothing."""
@@ -160,10 +161,26 @@ def test_a_far_estimate_from_a_read_held_up_is_not_blamed_on_another_sensor(sens
             return read()
 
         arr.read_volts = held_up
-        seen, warned = [], []
+        seen, warned, run = [], [], io.StringIO()
+        record = RunRecord(run, {"model": m.sha256, "outputs": list(m.output_names), "n_inputs": 8,
+                                 "model_file": m.to_dict()})
         stats = Readout(arr, PythonEngine(m), io.StringIO(), LineFormat("csv", 8, m.output_names), clock=clock,
-                        observer=seen.append, warn=warned.append).run(count=10)
+                        observer=seen.append, warn=warned.append, record=record).run(count=10)
         assert (stats.far, stats.far_held) == ((8, 2) if far else (0, 0))
+        # replayed, the record's read times tell the same reads apart (a record had no timings: all 10 "another
+        # sensor's"); a record without them, as older runs, counts every far one so
+        (tmp_path / "run.jsonl").write_text(run.getvalue())
+        res = replay(load_run(tmp_path / "run.jsonl"))
+        assert res.held.tolist() == [k in (2, 6) for k in range(10)] and [res.sample(k)["held"] for k in (1, 2)] == \
+            [False, True]
+        said = res.report()
+        assert ("warning: 8 of 10 samples estimated outside" in said and "warning: 2 of 10 samples estimated outside "
+                "the pose box the model was fitted in by more than its width, from a read held up" in said) == far, said
+        lines = [json.loads(ln) for ln in run.getvalue().splitlines()]
+        (tmp_path / "old.jsonl").write_text("".join(json.dumps({k: v for k, v in ln.items() if k != "read_s"}) + "\n"
+                                                    for ln in lines))
+        assert ("warning: 10 of 10 samples estimated outside" in replay(load_run(tmp_path / "old.jsonl")).report()) \
+            == far
         assert [s["held"] for s in seen] == [k in (2, 6) for k in range(10)] and [s["far"] for s in seen] == [far] * 10
         assert len(warned) == (2 if far else 0), warned
         if far:
