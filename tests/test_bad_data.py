@@ -479,6 +479,8 @@ def test_a_meta_figure_the_fit_reads_that_is_not_as_written_is_refused(data, tmp
     (["simulate", "--grid", "paper-sim", "--ranges", "dx=-1:1", "-o", "d.csv"],
      "--ranges is the box of --random poses: give --random N with it"),
     (["simulate", "--random", "10", "--noise", "1e300", "-o", "d.csv"], "--noise 1e300 is no sensor's reading noise"),
+    # a CSV without a meta: it was taken, fitted for, and recorded in the model (with a meta it was refused)
+    (["fit", "D", "-o", "m.json", "--noise", "1e300"], "--noise 1e300 is no sensor's reading noise (at most 1000"),
     (["schedule", "--samples", "1000000000", "-o", "s.csv"], "--samples must be at most 10000"),
     # a count past float's range: "a file name is too long" (--samples may name a file), or math.isfinite's traceback
     (["schedule", "--samples", "1" + "0" * 300, "-o", "s.csv"], "--samples must be at most 10000, got 1000000000")])

@@ -4,7 +4,7 @@ target, fit's settings, the channel map's options, view's checks of --replay and
 from __future__ import annotations
 
 from fitgen.base.errors import InputError, shown
-from fitgen.base.parse import MAX_PENALTY, OutOfRange, parse_noise, parse_penalty
+from fitgen.base.parse import MAX_NOISE, MAX_PENALTY, OutOfRange, parse_noise, parse_penalty
 
 
 def sensor_of(args):
@@ -88,6 +88,9 @@ def fit_settings(args):
     except ValueError:
         raise InputError(f"--noise must be a number >= 0 (reading noise rms, input units), got {args.noise!r}") \
             from None
+    if noise is not None and noise > MAX_NOISE:  # refused with a meta (its readings overflow), kept without one
+        raise InputError(f"--noise {args.noise} is no sensor's reading noise (at most {MAX_NOISE:g}, in the readings' "
+                         "units: V or mT)")
     # --refine-terms given or not: FitSettings' own cap (30, as the help says) when not
     cap = {} if args.refine_terms is None else {"refine_terms": args.refine_terms}
     return family_settings(args.family, args.precision, noise, args.refine, k=k, max_terms=args.max_terms,
