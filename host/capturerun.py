@@ -105,6 +105,17 @@ def same_thermistor(output, rows: int, reads: bool) -> None:
                          "same, or choose another -o")
 
 
+def start_degc(thermometer, tin) -> float:
+    """The thermistor's reading as a run starts; InputError when it reads none, which every row would record."""
+    degc = thermometer.read(fresh=True)
+    if not math.isfinite(degc):
+        raise InputError(f"the thermistor ({tin.kind}@0x{tin.address:02x}:{tin.input}) reads no temperature: its "
+                         "divider reads 0 V or its reference (open, shorted), or more than its chip reads at its gain "
+                         "(--pga below the divider's reference): mend it, give that chip a --pga that reads the "
+                         "divider, or leave temp= out of --adc")
+    return degc
+
+
 def same_temperature(output, rows: int, degc: float) -> float:
     """``degc``, the thermistor's reading as a run starts; InputError when ``output``'s ``rows`` rows were taken more
     than CAPTURE_DEGC_TOL away from it (the meta speaks for every row with one temperature)."""
@@ -197,7 +208,7 @@ def _run_capture(args, prog: str) -> None:
         array.setup()
         thermometer = Thermometer(array, tin) if tin is not None else None
         if thermometer is not None:  # the unit's readings are of this temperature: identify records it (--temp-comp's t0)
-            meta["thermistor_degc"] = same_temperature(args.output, state.rows, thermometer.read(fresh=True))
+            meta["thermistor_degc"] = same_temperature(args.output, state.rows, start_degc(thermometer, tin))
         set_pose = bus.set_pose if args.simulate else None
         if stage_opts is not None:
             stage, meta["stage"] = open_stage(args, stage_opts, args.output, state.rows, prog)

@@ -46,7 +46,8 @@ class LineFormat:
         return self._fmt % (t, *volts, *outputs, status)
 
 
-UNCOMPENSATED = "not compensated for temperature: the thermistor read none (is it connected?)"
+UNCOMPENSATED = ("not compensated for temperature: the thermistor read none (is it connected? does its chip's --pga "
+                 "read its divider's reference?)")
 FAR_OUTSIDE = ("estimated outside the pose box the model was fitted in by more than its width: another sensor than "
                "the model's? a built unit needs its own calibration (docs/calibration.md)")
 TEMP_OUTSIDE = (f"at a temperature outside {T_RANGE[0]:g}..{T_RANGE[1]:g} degC, where the compensation is "

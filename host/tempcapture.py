@@ -11,7 +11,7 @@ import numpy as np
 
 from fitgen.base.errors import InputError
 from fitgen.base.parse import parse_numbers
-from fitgen.physics.dataset import load_dataset
+from fitgen.physics.dataset import load_dataset, row_degc
 from fitgen.physics.sensor import load_sensor
 
 from host.adc import AdcArray, DeviceSilent, RetryPolicy
@@ -19,8 +19,8 @@ from host.capture import SpreadTooLarge, capture, load_schedule, simulated_senso
 from host.capturefile import check_resume, output_lock, prepare_output
 from host.posewait import TriggerFailed, enter_waiter, trigger_waiter
 from host.prompt import ask_line
-from host.capturerun import (CaptureFailed, CaptureInterrupted, capture_numbers, kept, same_thermistor,
-                             trigger_timeout)
+from host.capturerun import (CaptureFailed, CaptureInterrupted, capture_numbers, kept, same_temperature,
+                             same_thermistor, start_degc, trigger_timeout)
 from host.motion import parse_drift
 from host.session import adc_defaults, channel_map_from_args, open_bus_from_args, refuse_alone
 from host.simsensor import Drift
@@ -162,12 +162,15 @@ def _capture_temperatures(args, prog: str):
                     wait = enter_waiter(schedule)
                 # read now, at this level (not a value kept from the last one); a level captured by an earlier run
                 # keeps the reading its meta recorded then
-                now = thermo.read(fresh=True) if thermo is not None else float("nan")
+                # (a resume's rows taken more than CAPTURE_DEGC_TOL away refused, as a plain capture's)
+                now = same_temperature(path, had[T][0], start_degc(thermo, tin)) if thermo is not None \
+                    else float("nan")
                 with output_lock(path):  # a plain capture into this temperature's file is another run too
                     res = capture(array, schedule, path, samples=samples, max_spread=spread, tries=tries,
                                   wait=wait, set_pose=bus.set_pose if args.simulate else None, settle=settle,
                                   clock=clock, meta={"adc": cmap.describe(), "temperature_set": T, **source,
-                                                     **({"thermistor_degc": now} if np.isfinite(now) else {})})
+                                                     **({"thermistor_degc": now} if np.isfinite(now) else {})},
+                                  temperature=None if thermo is None else lambda: thermo.read(fresh=True))
                 if not res.complete:  # 'q' at a pose stops the run, not only this level
                     return _stopped(prog, out, temps, T)
             ds = load_dataset(path, min_rows=1)
@@ -175,7 +178,8 @@ def _capture_temperatures(args, prog: str):
             measured = float(recorded) if isinstance(recorded, (int, float)) and thermo is not None else now
             rows.append(ds.inputs)
             level_poses.append(ds.poses())  # by value: a row deleted and taken again sits at the file's end
-            row_temps.append(np.full(ds.n_rows, measured if np.isfinite(measured) else T))
+            each = row_degc(ds.meta, ds.n_rows) if thermo is not None else None  # as the thermistor read each row
+            row_temps.append(each if each is not None else np.full(ds.n_rows, measured if np.isfinite(measured) else T))
             files.append(str(path))
             before = had[T][0]  # as the plain capture counts them: a resume says what it took, a rerun nothing
             print(f"{prog}: {ds.n_rows} poses at {T:g} degC"

@@ -160,7 +160,10 @@ class Thermometer:
         now = self.clock.monotonic()
         if fresh or now - self.last_t >= READ_EVERY:
             self.last_t = now
-            self.value = self.tin.degc(self.driver.read(self.tin.input))
+            volts = self.driver.read(self.tin.input)
+            # a code at the chip's full scale: the divider's voltage past what the chip reads (a gain too high for
+            # it), which would read as a temperature it is not
+            self.value = math.nan if volts >= self.driver.code_max * self.driver.lsb else self.tin.degc(volts)
         return self.value
 
 
@@ -476,8 +479,10 @@ def capture_temperature_note(model, tempcomp: "TempComp", tare: str = "--tare") 
     spec, degc = model_unit_degc(model)
     if degc is None or abs(degc - tempcomp.t0) <= CAPTURE_DEGC_TOL:
         return ""
-    shift = float(np.max(np.abs(tempcomp.offset))) * abs(degc - tempcomp.t0) * 1e3
+    # the offset's share and the gain's, over the readings the model takes (a tare takes off only the first)
+    ends = np.vstack([model.input_min, model.input_max])
+    shift = float(np.max(np.abs(tempcomp.apply(ends, np.full(2, degc)) - ends))) * 1e3
     return (f"note: the model's unit ({spec}) was identified from a capture at {degc:.1f} degC, and the compensation "
             f"maps readings to its t0, {tempcomp.t0:g} degC: they reach the model up to {shift:.2g} mV off what it "
-            f"was fitted for; tare at start ({tare}), or identify the unit with --temp-comp (its capture mapped to "
-            f"{tempcomp.t0:g} degC)")
+            f"was fitted for; identify the unit with --temp-comp (its capture mapped to {tempcomp.t0:g} degC), or "
+            f"tare at start ({tare}), which takes off the shift at rest, not the gains' share away from it")

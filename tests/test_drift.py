@@ -195,6 +195,33 @@ def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
         in blind.stderr and "note: --sim-drift's ramp was not simulated" in blind.stderr
 
 
+def test_a_thermistor_past_its_chips_full_scale_and_a_level_resumed_at_another_temperature_are_refused(tmp_path):
+    """At 5 degC the divider's 2.38 V is past the 2.048 V of --pga 2.048: the clipped code had been recorded as
+    14.3 degC, no word. A level of --temperature resumed over rows taken at another temperature had its record
+    written over (a plain capture refuses it); each level's rows now record their own temperatures too."""
+    sched = tmp_path / "s.csv"
+    sched.write_text("dx,dz\n0,0\n1,-1\n-1,-0.5\n0.5,-1\n")
+    adc = ["--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0", "--simulate"]
+    cold = run_cli("tactile-host", "capture", "--poses", str(sched), *adc, "--pga", "2.048", "--sim-drift",
+                   "ramp=0,start=5,creep=0", "-o", str(tmp_path / "c.csv"))
+    assert_one_line_error(cold, contains="the thermistor (ads1115@0x4a:0) reads no temperature: its divider reads 0 V "
+                                         "or its reference (open, shorted), or more than its chip reads at its gain")
+    assert not list(tmp_path.glob("c.*"))
+    levels = ["tactile-host", "capture", "--poses", str(sched), *adc, "--temperature", "15,25", "-o",
+              str(tmp_path / "t.csv")]
+    stopped = run_cli(*levels, "--trigger", "test $TM_POSE_INDEX -lt 3")
+    assert stopped.returncode == 1, stopped.stderr
+    meta_file = tmp_path / "t.T15.csv.meta.json"
+    meta = json.loads(meta_file.read_text())
+    assert len(meta["row_degc"]) == 2 and all(abs(t - 15.0) < 0.1 for t in meta["row_degc"]), meta
+    meta_file.write_text(json.dumps({**meta, "thermistor_degc": 19.0}))  # a chamber not yet settled
+    assert_one_line_error(run_cli(*levels), contains="the 2 rows in ")
+    assert json.loads(meta_file.read_text())["thermistor_degc"] == 19.0
+    meta_file.write_text(json.dumps(meta))
+    _ok(*levels)
+    assert all(len(json.loads((tmp_path / f"t.T{t}.csv.meta.json").read_text())["row_degc"]) == 4 for t in (15, 25))
+
+
 @pytest.mark.parametrize("edit, said", [
     ({"gain_per_degc": [1e300] + [0.0] * 7}, "gain_per_degc[0] = 1e+300 does not fit in a float"),
     # 1 - 0.04 (125 - 25) < 0: the readings would be divided by a factor through zero
@@ -246,7 +273,8 @@ def test_read_says_at_once_when_its_compensation_cannot_apply(rest_model_file, t
     path = tmp_path / "tc.json"
     path.write_text(json.dumps({"kind": TempComp.KIND, "version": 1, "t0": 25.0, "offset_v_per_degc": [1e-5] * 8,
                                 "gain_per_degc": [-1e-4] * 8, "fit": {"temperatures": [15.0, 25.0, 35.0]}}))
-    none = "not compensated for temperature: the thermistor read none (is it connected?)"
+    none = ("not compensated for temperature: the thermistor read none (is it connected? does its chip's --pga read "
+            "its divider's reference?)")
     # -270 and absolute zero, which --sim-drift takes, had overflowed the simulated divider: a traceback
     for start, said in (("-200", none), ("-270", none), ("-273.15", none),
                         ("140", "at a temperature outside -40..125 degC, where the compensation is extrapolated"),
@@ -786,14 +814,19 @@ def test_a_units_capture_temperature_is_recorded_and_a_compensation_about_anothe
        "-o", str(tmp_path / "twin.json"))
     d = Drift.typical(8)
     TempComp(25.0, d.offset_tc, d.gain_tc, {"temperatures": [15.0, 25.0, 35.0]}).save(tmp_path / "tc.json")
-    shift = np.abs(d.offset_tc).max() * 7.0 * 1e3
+    # the offsets' share and the gains' over the readings the model takes (the offsets' alone had been said)
+    m = load_model(tmp_path / "twin.json")
+    ends, dt = np.vstack([m.input_min, m.input_max]), 18.0 - 25.0
+    shift = np.abs((ends - d.offset_tc * dt) / (1.0 + d.gain_tc * dt) - ends).max() * 1e3
+    assert shift > 1.5 * np.abs(d.offset_tc).max() * 7.0 * 1e3
     read = ["tactile-host", "read", "--model", str(tmp_path / "twin.json"), "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
             "--temp-comp", str(tmp_path / "tc.json"), "--simulate", "dx=0.5", "--count", "2"]
     notes = [ln for ln in ok(*read).stderr.splitlines() if "note:" in ln]
     assert notes == [f"tactile-host read: note: the model's unit ({twin}) was identified from a capture at 18.0 degC, "
                      "and the compensation maps readings to its t0, 25 degC: they reach the model up to "
-                     f"{shift:.2g} mV off what it was fitted for; tare at start (--tare), or identify the unit "
-                     "with --temp-comp (its capture mapped to 25 degC)"]
+                     f"{shift:.2g} mV off what it was fitted for; identify the unit with --temp-comp (its capture "
+                     "mapped to 25 degC), or tare at start (--tare), which takes off the shift at rest, not the gains' "
+                     "share away from it"]
     assert "note:" not in ok(*read, "--tare").stderr  # the tare takes the offsets off at start
     # the same unit's rest read at 35 degC is refused as a tare's target, as another's is, but said to be maybe
     # its own drifted (it had been called another sensor's, without a word on temperature)

@@ -74,19 +74,18 @@ def _float_engine(model):
 
 
 def _python_readout(model, bus, clock, count, *, tempcomp=None, tin=None, rest=None, autozero=None, tare_n=50,
-                    stats=None):
+                    stats=None, cmap=None):
     """tactile-host read's CSV lines (header first) for ``bus``, and its tare (None without ``rest``): the Python
     drivers, a tare onto ``rest`` and ``tempcomp`` (with the thermistor at ``tin``), then Python's emulation of
     the float header, as tm_pi's float build computes them; ``autozero(tare, lsb)``: an AutoZero that follows
-    the tare; ``stats``: a list the run's ReadoutStats is appended to."""
+    the tare; ``stats``: a list the run's ReadoutStats is appended to; ``cmap``: the map read (default MAP's)."""
     import io
 
     from host.readout import Corrections, Readout
     from host.rest import tare
     from host.temperature import Thermometer
 
-    cmap = parse_spec(MAP)
-    arr = AdcArray(bus, cmap, clock=clock, policy=RetryPolicy())
+    arr = AdcArray(bus, cmap or parse_spec(MAP), clock=clock, policy=RetryPolicy())
     arr.probe()
     arr.setup()
     thermometer = Thermometer(arr, tin) if tin else None
@@ -459,6 +458,48 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     assert [ln.split(",", 1)[1] for ln in res3.stdout.splitlines()[1:]] == [ln.split(",", 1)[1] for ln in expected[1:]]
     assert_one_line_error(run_cli("tactile-host", "pi-build", "--model", str(tmp_path / "m.json"), "--adc", MAP,
                                   "--temp-comp", "x.json", "-o", str(tmp_path / "z")))
+
+
+def test_a_thermistor_past_its_chips_full_scale_reads_none_in_tm_pi_and_read(model, tmp_path):
+    """At 5 degC the divider gives 2.38 V, past the 2.048 V an ADS1115 reads at --pga 2.048: the clipped code had read
+    as 14.3 degC, and tm_pi and read compensated every sample for it. Now both read no temperature and leave the
+    samples uncompensated, as for an open thermistor (the model's domain cut to 2 V, which that gain reads)."""
+    from fitgen.physics.sensor import load_sensor
+    from host.clock import VirtualClock
+    from host.simbus import SimBus
+    from host.simsensor import Drift
+    from host.temperature import Thermometer, parse_temperature_input
+
+    require_tool("arm-linux-gnueabihf-gcc")
+    require_tool("qemu-arm")
+    tin = parse_temperature_input("ads1115@0x4a:2")
+    cmap = parse_spec(MAP, Settings(pga=2.048))
+    model = replace(model, input_max=np.minimum(model.input_max, 2.0))
+    drift = Drift.typical(8, seed=4).steady(5.0)
+    tc = TempComp(25.0, drift.offset_tc, drift.gain_tc)
+
+    def bus():
+        clock = VirtualClock()
+        return SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), [0.5, 0.2, -1.0, 1.0, 0.0],
+                                      clock=clock, noise=0.0005, seed=3, drift=drift, thermistor=tin), clock
+
+    b, clock = bus()
+    arr = AdcArray(b, cmap, clock=clock, policy=RetryPolicy())
+    arr.probe()
+    arr.setup()
+    assert np.isnan(Thermometer(arr, tin).read())
+    runs = []
+    for name, comp in (("comp", tc), ("plain", None)):
+        b, clock = bus()
+        binary = build_pi(render_pi(model, cmap, tmp_path / name, precision="float", tin=tin, tempcomp=comp),
+                          standin=True)
+        res = StandIn(b, clock).run(["qemu-arm", str(binary), "--count", "4"])
+        assert res.returncode == 0, res.stderr
+        runs.append([ln.split(",", 1)[1] for ln in res.stdout.splitlines()[1:]])
+    assert runs[0] == runs[1]  # nothing compensated
+    b, clock = bus()
+    expected, _ = _python_readout(model, b, clock, 4, tempcomp=tc, tin=tin, cmap=cmap)
+    assert runs[0] == [ln.split(",", 1)[1] for ln in expected[1:]]
 
 
 def test_pi_build_notes_a_tare_from_another_unit_as_read_does(tmp_path):

@@ -42,8 +42,8 @@ static int read_temperature(void)
         }
         t_read = 1;
         t_last = now;
-        degc = adc_ntc_degc(code * adc_lsb_volts(&ADC_TEMP_CHIP[0]), ADC_TEMP_BETA, ADC_TEMP_R25,
-                            ADC_TEMP_SERIES, ADC_TEMP_VREF);
+        degc = adc_code_degc(&ADC_TEMP_CHIP[0], code, ADC_TEMP_BETA, ADC_TEMP_R25,
+                             ADC_TEMP_SERIES, ADC_TEMP_VREF);
     }
     return ADC_OK;
 }

@@ -467,8 +467,8 @@ int main(int argc, char **argv)
             i2c_linux_close(&port);
             return 1;
         }
-        degc = adc_ntc_degc(tcode * adc_lsb_volts(&ADC_TEMP_CHIP[0]), ADC_TEMP_BETA, ADC_TEMP_R25, ADC_TEMP_SERIES,
-                            ADC_TEMP_VREF);
+        degc = adc_code_degc(&ADC_TEMP_CHIP[0], tcode, ADC_TEMP_BETA, ADC_TEMP_R25, ADC_TEMP_SERIES,
+                             ADC_TEMP_VREF);
     }
 #endif
     if (tared && (st = tare(&array, lsb, tare_n, degc, offsets, spreads)) != ADC_OK) {
@@ -549,7 +549,7 @@ int main(int argc, char **argv)
                     failed = ADC_TEMP_LABEL;
                     break;
                 }
-                degc = adc_ntc_degc(tcode * adc_lsb_volts(&ADC_TEMP_CHIP[0]), ADC_TEMP_BETA, ADC_TEMP_R25,
+                degc = adc_code_degc(&ADC_TEMP_CHIP[0], tcode, ADC_TEMP_BETA, ADC_TEMP_R25,
                                      ADC_TEMP_SERIES, ADC_TEMP_VREF);
             }
         }
