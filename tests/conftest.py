@@ -166,6 +166,18 @@ TWO_CHIPS = "ads1115@0x48:0-3,ads1115@0x49:0-3"
 GMR_POSE = [0.5, 0.2, -1.0, 1.0, 0.0]
 
 
+def drifting_bus(cmap, drift, tin):
+    """(SimBus at GMR_POSE with 0.5 mV noise, the elements drifting by ``drift`` and the thermistor at ``tin`` at its
+    temperature, its VirtualClock): a fresh one per run gives the same readings."""
+    from fitgen.physics.sensor import load_sensor
+    from host.clock import VirtualClock
+    from host.simbus import SimBus
+
+    clock = VirtualClock()
+    return SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), GMR_POSE, clock=clock,
+                                  noise=0.0005, seed=3, drift=drift, thermistor=tin), clock
+
+
 def sim_bus(spec=TWO_CHIPS, faults=(), settings=None, seed=3):
     """(channel map, SimBus with 0.5 mV noise at GMR_POSE, its VirtualClock), with ``faults`` injected."""
     from fitgen.physics.sensor import load_sensor

@@ -22,7 +22,7 @@ from host.device import Device
 from host.engine import make_engine
 from host.pi import StandIn
 
-from conftest import TWO_CHIPS, assert_one_line_error, require_tool, run_cli, sim_bus
+from conftest import TWO_CHIPS, assert_one_line_error, drifting_bus, require_tool, run_cli, sim_bus
 
 MAP = TWO_CHIPS
 
@@ -178,11 +178,8 @@ def test_the_firmware_compensates_temperature_as_the_python_readout_does(model, 
     """A thermistor in the map and a compensation: the firmware reads it after the elements every 0.25 s and
     compensates the volts (tm_tempcomp.h) before its model; STREAM equals tactile-host read --temp-comp's
     engine input and estimates on the Python driver."""
-    from fitgen.physics.sensor import load_sensor
     from host.channelmap import parse_spec
-    from host.clock import VirtualClock
     from host.readout import Corrections
-    from host.simbus import SimBus
     from host.simsensor import Drift
     from host.temperature import TempComp, Thermometer, parse_temperature_input
 
@@ -196,9 +193,7 @@ def test_the_firmware_compensates_temperature_as_the_python_readout_does(model, 
     tc = TempComp(25.0, drift.offset_tc, drift.gain_tc)
 
     def bus():
-        clock = VirtualClock()
-        return SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), [0.5, 0.2, -1.0, 1.0, 0.0],
-                                      clock=clock, noise=0.0005, seed=3, drift=drift, thermistor=tin), clock
+        return drifting_bus(cmap, drift, tin)
 
     b, clock = bus()
     n = 3 if target == "mps2" else 6

@@ -20,8 +20,8 @@ from host.pi import StandIn, build_pi, render_adc_map, render_pi
 from host.readout import LineFormat
 from host.temperature import TempComp
 
-from conftest import (TWO_CHIPS, assert_one_line_error, interrupt_after_rename, require_tool, run_cli, sim_bus,
-                      twin_and_another_unit)
+from conftest import (TWO_CHIPS, assert_one_line_error, drifting_bus, interrupt_after_rename, require_tool, run_cli,
+                      sim_bus, twin_and_another_unit)
 
 MAP = TWO_CHIPS
 
@@ -410,9 +410,6 @@ def test_a_ctrl_c_while_a_pi_build_replaces_the_last_one_leaves_the_new_build_wh
 def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_path):
     """A thermistor in the map and a compensation: tm_pi reads it after the elements every 0.25 s and applies
     tm_tempcomp.h before the model; the lines equal tactile-host read --temp-comp's to every printed digit."""
-    from fitgen.physics.sensor import load_sensor
-    from host.clock import VirtualClock
-    from host.simbus import SimBus
     from host.simsensor import Drift
     from host.rest import model_rest
     from host.temperature import TempComp, parse_temperature_input
@@ -425,9 +422,7 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
     tc = TempComp(25.0, drift.offset_tc * 0.9, drift.gain_tc * 1.1)
 
     def bus():
-        clock = VirtualClock()
-        return SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), [0.5, 0.2, -1.0, 1.0, 0.0],
-                                      clock=clock, noise=0.0005, seed=3, drift=drift, thermistor=tin), clock
+        return drifting_bus(cmap, drift, tin)
 
     folder = render_pi(model, cmap, tmp_path / "pi", precision="float", tin=tin, tempcomp=tc)
     binary = build_pi(folder, standin=True)
@@ -464,9 +459,6 @@ def test_a_thermistor_past_its_chips_full_scale_reads_none_in_tm_pi_and_read(mod
     """At 5 degC the divider gives 2.38 V, past the 2.048 V an ADS1115 reads at --pga 2.048: the clipped code had read
     as 14.3 degC, and tm_pi and read compensated every sample for it. Now both read no temperature and leave the
     samples uncompensated, as for an open thermistor (the model's domain cut to 2 V, which that gain reads)."""
-    from fitgen.physics.sensor import load_sensor
-    from host.clock import VirtualClock
-    from host.simbus import SimBus
     from host.simsensor import Drift
     from host.temperature import Thermometer, parse_temperature_input
 
@@ -479,9 +471,7 @@ def test_a_thermistor_past_its_chips_full_scale_reads_none_in_tm_pi_and_read(mod
     tc = TempComp(25.0, drift.offset_tc, drift.gain_tc)
 
     def bus():
-        clock = VirtualClock()
-        return SimBus.for_channel_map(cmap, load_sensor("paper").with_transfer("gmr"), [0.5, 0.2, -1.0, 1.0, 0.0],
-                                      clock=clock, noise=0.0005, seed=3, drift=drift, thermistor=tin), clock
+        return drifting_bus(cmap, drift, tin)
 
     b, clock = bus()
     arr = AdcArray(b, cmap, clock=clock, policy=RetryPolicy())
