@@ -211,7 +211,7 @@ def _run_capture(args, prog: str) -> None:
             meta["thermistor_degc"] = same_temperature(args.output, state.rows, start_degc(thermometer, tin))
         set_pose = bus.set_pose if args.simulate else None
         if stage_opts is not None:
-            stage, meta["stage"] = open_stage(args, stage_opts, args.output, state.rows, prog)
+            stage, meta["stage"] = open_stage(args, stage_opts, args.output, state.rows, prog, schedule.stage)
             meta["stage"]["settle_s"] = settle
             st = meta["stage"]
             st["zeros_machine_mm"] = run_zeros(prior_meta(args.output, state.rows), st["zero_machine_mm"],

@@ -118,14 +118,21 @@ def parse_feed(text: str) -> float:
     return feed
 
 
-def open_stage(args, opts, output, rows, prog: str):
+def open_stage(args, opts, output, rows, prog: str, planned: dict | None = None):
     """Connect, home or unlock if asked, check the controller's state, and get the zero: (PoseStage, meta).
-    ``opts``: :func:`stage_settings`'s; messages go to stderr after ``prog``."""
+    ``opts``: :func:`stage_settings`'s; ``planned``: the stage the schedule was made for (its record); messages go
+    to stderr after ``prog``."""
     ctrl = GcodeController.open(opts["url"], baud=opts["baud"], timeout=opts["timeout"])
     if sys.stderr.isatty():  # seconds pass before the controller's first answer (its start-up lines): shown
         print(f"{prog}: connecting to the stage at {opts['url']}", file=sys.stderr, flush=True)
     try:
         ctrl.connect(args.stage_flavor or "auto", boot_wait=opts["boot_wait"])
+        if ctrl.flavor == "marlin" and planned is not None and planned.get("rig_error_given") is False:
+            print(f"{prog}: note: the stage is a Marlin, a 3D printer's firmware, and the schedule was made for the "
+                  f"default rig error of {planned.get('rig_error', 0.01):g} mm, a CNC's: a printer's is about 0.03 mm, "
+                  "which identify then refuses as a stage looser than the capture allowed for (and the rows in "
+                  "contact may lift off the skin): make the schedule with --rig-error 0.03 before capturing",
+                  file=sys.stderr, flush=True)
         if args.home:
             if ctrl.flavor == "marlin":  # most printers home Z down to the bed, where the sensor sits
                 answer = ask_line(sys.stdin, sys.stderr, f"{prog}: this Marlin printer will home (G28), which on most "

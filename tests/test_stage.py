@@ -1014,6 +1014,26 @@ def data_rows(path):
     return [tuple(float(x) for x in ln.split(",")) for ln in path.read_text().splitlines()[1:]]
 
 
+@pytest.mark.parametrize("flavor, given, noted", [("marlin", False, True), ("marlin", True, False),
+                                                 ("grbl", False, False)])
+def test_a_printer_stage_on_a_schedule_for_a_cncs_rig_error_is_noted_before_the_zero(tmp_path, flavor, given, noted):
+    """The docs' commands made a schedule for the default 0.01 mm rig error; on a printer (0.03 mm) identify then
+    refused the capture as a stage looser than it allowed for, after every row was taken, with no word before."""
+    sched = write_schedule(tmp_path / "s.csv", grid()[:2])
+    (tmp_path / "s.csv.meta.json").write_text(json.dumps({"rig_error": 0.03 if given else 0.01,
+                                                         "rig_error_given": given, "zero_error": 0.02}))
+    out, posefile = tmp_path / "d.csv", tmp_path / "pose.txt"
+    with server(flavor, PoseFile(posefile), M=M_RIG) as srv:
+        zero = ",".join(f"{v:g}" for v in contact_zero(srv).values())
+        proc = run_host(*capture_args(sched, out, srv.url, posefile, "--zero", zero))
+    assert proc.returncode == 0, proc.stderr
+    said = "note: the stage is a Marlin, a 3D printer's firmware, and the schedule was made for the default rig " \
+           "error of 0.01 mm, a CNC's: a printer's is about 0.03 mm"
+    assert (said in proc.stderr) == noted, proc.stderr
+    if noted:
+        assert "make the schedule with --rig-error 0.03 before capturing" in proc.stderr
+
+
 def test_a_resume_through_another_stage_setting_or_none_is_refused_and_keeps_the_rows(tmp_path):
     """The meta's one stage record speaks for every row: a resume with no --stage dropped it (identify and check then
     lost the rows' zeros), and one with another axis map, approach or settle took rows in another frame, from
