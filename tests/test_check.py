@@ -227,6 +227,8 @@ def test_check_zero_tells_a_zero_reused_from_one_set_anew_by_the_captures_stage_
                                                          "records no stage zero); give --zero-error 0.02 for a zero "
                                                          "set anew by hand")
     assert "(the unit's posterior records no stage zero)" in check_zero({}, _stage(), "c.csv")[1]
+    # a model of a drawing, not of a unit: there is no calibration zero at all (it had blamed a unit's posterior)
+    assert "(the model's sensor has no posterior: not a unit identify wrote)" in check_zero(None, _stage(), "c.csv")[1]
     with pytest.raises(InputError, match="^c.csv's meta: the stage's zero must be machine coordinates"):
         check_zero(post, _stage(x="twelve"), "c.csv")
     with pytest.raises(InputError, match=r"^c.csv's meta: schedule_stage.zero_error must be 0..0.5 mm, got nan"):
@@ -337,6 +339,22 @@ def test_a_box_whose_top_lies_a_hair_below_first_contact_keeps_its_shallow_rows(
     labels = np.array([[0.5, -0.5, d, 0, 0] for d in (-0.02, -0.05, -0.08, -0.5, -1.0)])
     c = check(random_top, _capture(unit, labels, 100), labels, sensor, ROW_NOISE, zero_error=0.02)
     assert (c.rows, c.outside) == (5, 0)
+
+
+def test_fitgen_check_of_the_drawings_model_on_a_unit_says_it_is_the_drawings(twin, tmp_path):
+    """A model fitted on the drawing, checked on a built unit's capture (the workflow's twin mistaken for it): the
+    verdict listed a knock, a move, another unit's file and the temperature, never the drawing."""
+    folder, drawing, unit, _, _ = twin
+    poses, source = choose_poses(scene="slide", sensor=drawing)
+    train = simulate(drawing, poses, provenance={**source, "sensor_file": str(folder / "ring.toml")})
+    fit_device(train, PRESETS["slide"].outputs, FitSettings(), drawing, "auto", held_out=200,
+               unit_file=folder / "ring.toml").save(tmp_path / "drawn.json")
+    check_poses, _ = check_schedule(drawing, 30, seed=0)
+    data = save_capture(tmp_path / "c.csv", _capture(unit, check_poses, 100), check_poses, ROWS_META)
+    proc = run_cli("fitgen", "check", str(tmp_path / "drawn.json"), str(data))
+    assert proc.returncode == 1, proc.stderr
+    assert f"the model does not describe this unit as it is now (it was fitted on the drawing {drawing.name}, which a " \
+        "built unit is not: fit the twin's model (identify, simulate --sensor unit.toml, fit); a knock" in proc.stderr
 
 
 def test_fitgen_check_reads_the_model_only_where_it_was_fitted_and_never_on_the_identification_s_capture(twin,

@@ -95,7 +95,7 @@ def cmd_check(args) -> int:
         print(f"check: {result.outside} rows of {args.capture} lie outside the pose box the model was fitted in "
               f"({box_words(model.pose_box)}), where it makes no claim, or within {result.margin:.2g} mm of its "
               "edge, where the stage's error may carry them out: left out", file=sys.stderr)
-    where = (f"{result.units} units drawn from the posterior of {sensor.name}" if result.identified
+    where = (f"{result.units} units drawn from the posterior of {sensor.name} ({spec})" if result.identified
              else f"{sensor.name} (no posterior: its noise and the stage's error alone)")
     print(f"check: {result.rows} rows of {args.capture} in contact, estimated in {result.precision}; predicted on "
           f"{where}, {DRAWS} draws each of the stage's error ({result.rig_error:g} mm, {result.rig_said})"
@@ -124,8 +124,10 @@ def cmd_check(args) -> int:
     failed = result.failed()
     if failed:
         warmer = heat.startswith("check: note:")  # read away from the unit's temperature, not compensated
+        drawn = f"it was fitted on the drawing {sensor.name}, which a built unit is not: fit the twin's model " \
+            "(identify, simulate --sensor unit.toml, fit); " if sensor.is_drawing and not result.identified else ""
         print(f"\ncheck: {', '.join(failed)} err beyond {TOO_FAR:g}x every prediction (max or RMS): the model does not "
-              "describe this unit as it is now (a knock, the sensor moved on its bed, another unit's file, the "
+              f"describe this unit as it is now ({drawn}a knock, the sensor moved on its bed, another unit's file, the "
               "temperature); "
               + ("check again with --temp-comp (the note above) before you " if warmer else "")
               + "capture, identify and fit again", file=sys.stderr)

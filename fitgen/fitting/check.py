@@ -167,9 +167,11 @@ def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str]
     mine = stage_zero(meta, capture)
     theirs = (posterior or {}).get("capture_zero")
     if mine is None or not isinstance(theirs, dict):
-        which = "the check capture" if mine is None else "the unit's posterior"
-        return 0.0, (f"the calibration's zero taken as reused ({which} records no stage zero); give --zero-error 0.02 "
-                     "for a zero set anew by hand")
+        which = ("the check capture records no stage zero" if mine is None else "the model's sensor has no "
+                 "posterior: not a unit identify wrote" if posterior is None else "the unit's posterior records "
+                 "no stage zero")
+        return 0.0, (f"the calibration's zero taken as reused ({which}); give --zero-error 0.02 for a zero set anew "
+                     "by hand")
     zeros = {"check capture": mine["zeros"], "calibration capture": theirs.get("zeros", 1)}
     theirs = zero_record(theirs.get("machine_mm"), theirs.get("homed"), theirs.get("axes"),
                          "the unit's posterior (capture_zero; give --zero-error to check without it):")
