@@ -4,6 +4,8 @@ at each temperature, a thermistor on the bus)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from fitgen.base.errors import InputError
@@ -30,7 +32,7 @@ def _temperatures(ds, path) -> np.ndarray:
         degc = float(ds.meta["temperature_set"])
     if degc is None or not np.isfinite(degc):
         raise InputError(f"{path} records no temperature (its capture read no thermistor: temp=CHIP@ADDRESS:INPUT in "
-                         "--adc): a compensation needs each capture's")
+                         "--adc): a compensation needs each capture's temperature")
     return np.full(ds.n_rows, float(degc))
 
 
@@ -47,15 +49,23 @@ def captures_tempcomp(paths, t0: float | None = None) -> tuple[TempComp, list[st
         raise InputError("give two or more captures, each taken at its own temperature")
     sets = [load_dataset(p, min_rows=1) for p in paths]
     first, name = sets[0], paths[0]
+    for ds, path in zip(sets, paths):
+        if not ds.meta:
+            raise InputError(f"{path} has no meta ({Path(str(path)).name}.meta.json), which says at what temperature "
+                             "and through which channel map its rows were read: restore it, or take the capture again")
+    for key, what in (("adc", "channel map (--adc)"), ("sensor_sha256", "simulated sensor")):
+        # against the first capture that records one, in any order: the first given had been the only reference
+        ref = next(((ds.meta[key], p) for ds, p in zip(sets, paths) if key in ds.meta), None)
+        for ds, path in zip(sets, paths):
+            if ref is not None and ds.meta.get(key) != ref[0]:
+                raise InputError((f"{path} was captured through another {what} than {ref[1]}" if key in ds.meta else
+                                  f"{path}'s meta records no {what}, which {ref[1]}'s does") +
+                                 ": one compensation is for one sensor read one way")
     seen = {first.sha256: name}
     for ds, path in zip(sets[1:], paths[1:]):
         if ds.sha256 in seen:  # its rows would count twice, and pull t0 to its temperature
             raise InputError(f"{path} holds the same rows as {seen[ds.sha256]}: give each capture once")
         seen[ds.sha256] = path
-        for key, what in (("adc", "channel map (--adc)"), ("sensor_sha256", "simulated sensor")):
-            if key in first.meta and ds.meta.get(key) != first.meta[key]:
-                raise InputError(f"{path} was captured through another {what} than {name}: one compensation is "
-                                 "for one sensor read one way")
         if ds.n_inputs != first.n_inputs or ds.target_names != first.target_names:
             raise InputError(f"{path} has other columns than {name}: capture each temperature with one schedule")
         # a pose at one temperature only tells nothing of its drift, and pulls the others' fit (a capture stopped
@@ -72,7 +82,7 @@ def captures_tempcomp(paths, t0: float | None = None) -> tuple[TempComp, list[st
                          np.concatenate(temps), t0=t0, source="the captures")
     tc.info["captures"] = [str(p) for p in paths]
     if isinstance(first.meta.get("adc"), str):  # the elements each coefficient is for: read and pi-build compare
-        tc.info["adc"] = first.meta["adc"]
+        tc.info["adc"] = first.meta["adc"]  # every capture's, by the check above
     notes = [] if tc.info["gain_fitted"] else ["one pose per capture gives offsets only (gain needs two poses)"]
     spread = spread_note(tc)
     return tc, notes + ([spread.removeprefix("note: ")] if spread else [])

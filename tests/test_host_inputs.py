@@ -526,6 +526,17 @@ def test_a_compensation_from_captures_each_at_one_temperature_is_the_one_capture
         assert_one_line_error(run_cli("tactile-host", "tempcomp-fit", *argv, "-o", str(tmp_path / "x.json")), 2, said)
     assert not (tmp_path / "x.json").exists()
     assert_one_line_error(run_cli("tactile-host", "tempcomp-fit", *caps, "-o", caps[0]), 2, f"-o {caps[0]} is the input")
+    # a capture whose meta records no channel map, or that has no meta: its map was compared only when it came
+    # second (first, it was the reference, and any map passed), and no meta was called "another channel map"
+    meta = json.loads(Path(caps[0] + ".meta.json").read_text())
+    (tmp_path / "bare.csv").write_text(Path(caps[0]).read_text())
+    (tmp_path / "bare.csv.meta.json").write_text(json.dumps({k: v for k, v in meta.items() if k != "adc"}))
+    (tmp_path / "none.csv").write_text(Path(caps[0]).read_text())
+    for first, said in (("bare.csv", f"bare.csv's meta records no channel map (--adc), which {caps[1]}'s does"),
+                        ("none.csv", "none.csv has no meta (none.csv.meta.json), which says at what temperature")):
+        assert_one_line_error(run_cli("tactile-host", "tempcomp-fit", str(tmp_path / first), *caps[1:], "-o",
+                                      str(tmp_path / "x.json")), 2, said)
+    assert not (tmp_path / "x.json").exists()
 
 
 def test_a_compensation_fitted_across_too_little_temperature_says_so_and_damaged_temperatures_are_refused(tmp_path):
