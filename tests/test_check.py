@@ -353,8 +353,8 @@ def test_fitgen_check_of_the_drawings_model_on_a_unit_says_it_is_the_drawings(tw
     data = save_capture(tmp_path / "c.csv", _capture(unit, check_poses, 100), check_poses, ROWS_META)
     proc = run_cli("fitgen", "check", str(tmp_path / "drawn.json"), str(data))
     assert proc.returncode == 1, proc.stderr
-    assert f"the model does not describe this unit as it is now (it was fitted on the drawing {drawing.name}, which a " \
-        "built unit is not: fit the twin's model (identify, simulate --sensor unit.toml, fit); a knock" in proc.stderr
+    assert f"the model does not describe this unit as it is now (it was fitted on the drawing {drawing.name}, which " \
+        "a built unit is not: fit the twin's model (identify, simulate --sensor unit.toml, fit); a knock" in proc.stderr
 
 
 def test_fitgen_check_reads_the_model_only_where_it_was_fitted_and_never_on_the_identification_s_capture(twin,
