@@ -264,11 +264,15 @@ def tempcomp_from_dict(data, origin: str) -> TempComp:
     if not isinstance(fit, dict):  # it holds the temperatures fitted at: a number there was taken as no record
         raise InputError(f"{origin}: fit must be an object (what the compensation was fitted on), got {fit!r:.40}")
     temps = fit.get("temperatures")
-    if temps is not None and not (isinstance(temps, list) and len(temps) >= 2
-                                  and all(is_finite_number(t) for t in temps)):
-        # what the readouts flag extrapolation against: damaged, it would turn that check off in silence
-        raise InputError(f"{origin}: fit.temperatures must list the two or more temperatures it was fitted at "
-                         f"(degC), got {temps!r}")
+    if temps is not None and not (isinstance(temps, list) and all(is_finite_number(t) for t in temps)
+                                  and len(set(temps)) >= 2 and min(temps) <= t0 <= max(temps)):
+        # what the readouts flag extrapolation against: damaged, it would turn that check off in silence (a fit
+        # chooses t0 among them, and two alike were no fit)
+        raise InputError(f"{origin}: fit.temperatures must list the two or more different temperatures it was fitted "
+                         f"at (degC), t0 ({t0:g}) within them, got {temps!r:.60}")
+    adc = fit.get("adc")
+    if adc is not None and not isinstance(adc, str):  # what read and pi-build compare their map with
+        raise InputError(f"{origin}: fit.adc must be the channel map the captures were read through, got {adc!r:.40}")
     rest = fit.get("rest_v")
     if rest is not None:  # what read and identify tell another unit's compensation by: damaged, it would mislead
         rest = _coefficients(rest, f"{origin}: fit.rest_v")

@@ -256,9 +256,13 @@ def test_a_compensation_without_its_fitted_temperatures_is_noted_and_a_damaged_l
     # a channel map refused after it: the refusal alone, one line (the note came first, a line that was no error)
     assert_one_line_error(run_cli(*[a.replace(TWO_CHIPS, "ads1115@0x48:0-3,ads1115@0x49:0-2") for a in read]), 2,
                           "--adc reads 7 elements; the model takes 8")
-    for bad in (["a"], [25.0], "15..35"):
+    # two alike, or t0 outside them (a fit chooses it among them): accepted as a record, with no fit behind it
+    for bad in (["a"], [25.0], "15..35", [25.0, 25.0], [100.0, 110.0]):
         path.write_text(json.dumps({**base, "fit": {"temperatures": bad}}))
-        assert_one_line_error(run_cli(*read), 2, "fit.temperatures must list the two or more temperatures")
+        assert_one_line_error(run_cli(*read), 2, "fit.temperatures must list the two or more different temperatures "
+                                                 "it was fitted at (degC), t0 (25) within them")
+    path.write_text(json.dumps({**base, "fit": {"temperatures": [15.0, 35.0], "adc": 12}}))  # the map's check skipped
+    assert_one_line_error(run_cli(*read), 2, "fit.adc must be the channel map the captures were read through, got 12")
     path.write_text(json.dumps({**base, "fit": 5}))  # taken as no record, in silence
     assert_one_line_error(run_cli(*read), 2, "fit must be an object (what the compensation was fitted on), got 5")
     path.write_text(json.dumps({**base, "fit": {"temperatures": [15.0, 35.0]}}))
@@ -884,16 +888,16 @@ def test_identify_and_check_note_a_compensation_extrapolated_or_fitted_through_a
     ok = _unit_captured_with_a_thermistor(tmp_path)
     d = Drift.typical(8)
     cap = str(tmp_path / "cap.csv")
-    identify = ["fitgen", "identify", cap, "--sensor", "paper", "-o", str(tmp_path / "twin.toml"), "--temp-comp"]
+    identify = ["fitgen", "identify", cap, "--sensor", "paper", "--temp-comp"]
 
-    def notes(path):
-        return [ln for ln in ok(*identify, str(path)).stderr.splitlines() if "note:" in ln]
+    def notes(path, out="twin.toml"):
+        return [ln for ln in ok(*identify, str(path), "-o", str(tmp_path / out)).stderr.splitlines() if "note:" in ln]
 
     # fitted at 40..60 degC: the capture's 25 degC lies 15 below, beyond the readout's 5
-    far = TempComp(25.0, d.offset_tc, d.gain_tc, {"temperatures": [40.0, 50.0, 60.0],
+    far = TempComp(50.0, d.offset_tc, d.gain_tc, {"temperatures": [40.0, 50.0, 60.0],
                                                   "adc": "ads1115@0x48:0,1,2,3,ads1115@0x49:0,1,2,3"})
     far.save(tmp_path / "far.json")
-    said = notes(tmp_path / "far.json")
+    said = notes(tmp_path / "far.json", "far.toml")  # the unit at its t0, 50 degC: not the twin's 25
     assert len(said) == 1 and said[0].startswith(f"identify: note: {cap}'s rows were read at 25.0 degC") \
         and f"fitted at 40..60 degC: beyond it by more than {BEYOND_DEGC:g} degC" in said[0], said
     near = TempComp(25.0, d.offset_tc, d.gain_tc, {**far.info, "temperatures": [15.0, 25.0, 35.0]})
@@ -904,8 +908,8 @@ def test_identify_and_check_note_a_compensation_extrapolated_or_fitted_through_a
     swapped.save(tmp_path / "swapped.json")
     said = notes(tmp_path / "swapped.json")
     assert len(said) == 1 and "was fitted on the elements read through ads1115@0x49:0,1,2,3," in said[0], said
-    # check says the same of its capture
-    ok("fitgen", "simulate", "--sensor", str(tmp_path / "twin.toml"), "--grid", "paper-sim",
+    # check says the same of its capture (the unit identified at far's t0, as check takes the rows to it)
+    ok("fitgen", "simulate", "--sensor", str(tmp_path / "far.toml"), "--grid", "paper-sim",
        "-o", str(tmp_path / "twin.csv"))
     ok("fitgen", "fit", str(tmp_path / "twin.csv"), "--held-out", "50", "--family", "no-roots",
        "-o", str(tmp_path / "twin.json"))
