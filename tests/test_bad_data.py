@@ -209,7 +209,7 @@ def test_fit_options_and_columns_are_checked_before_the_fit(data, tmp_path):
     assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--held-out", "-1"),
                           contains="argument --held-out: must be >= 0")
     assert_one_line_error(run_cli("fitgen", "fit", str(data), "-o", str(tmp_path / "m.json"), "--noise", "1e300"),
-                          contains="a noise figure of 1e+300 is no sensor's")
+                          contains="--noise 1e300 is no sensor's reading noise (at most 1000")
     lines = [",".join(ln.split(",")[:7] + ln.split(",")[8:]) for ln in data.read_text().splitlines()]
     (tmp_path / "d7.csv").write_text("\n".join(lines) + "\n")
     shutil.copy(str(data) + ".meta.json", tmp_path / "d7.csv.meta.json")
