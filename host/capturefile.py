@@ -180,11 +180,15 @@ def _row_lines(text: str) -> list[tuple[int, str]]:
     return [(n, line.strip()) for n, line in enumerate(lines, start=2) if line.strip()]
 
 
+def _digest(line: str) -> str:
+    return sha256_hex(line)[:ROW_DIGEST]
+
+
 def row_digests(text: str) -> list[str]:
     """Each complete row of a capture's ``text`` as its sha256's first ROW_DIGEST hex digits, in order: which rows
     a meta speaks for, so that a resume tells its rows from another capture's, and each row's temperature stays
     with its row when rows before it are deleted to be taken again."""
-    return [sha256_hex(line)[:ROW_DIGEST] for _, line in _row_lines(text)]
+    return [_digest(line) for _, line in _row_lines(text)]
 
 
 def recorded_places(output, prior: dict) -> list | None:
@@ -199,7 +203,7 @@ def recorded_places(output, prior: dict) -> list | None:
     for i, digest in enumerate(got):
         where.setdefault(digest, []).append(i)
     rows = _row_lines(read_text(output, "output (to resume)"))
-    places = [where[d].pop(0) if where.get(d := sha256_hex(line)[:ROW_DIGEST]) else None for _, line in rows]
+    places = [where[d].pop(0) if where.get(d := _digest(line)) else None for _, line in rows]
     late = next((k for k, p in enumerate(places) if p is None), len(places))  # the rows after its last rewrite
     stray = next((k for k in range(late, len(places)) if places[k] is not None), None)
     name, fix = meta_path(output).name, ("restore the rows and their meta from one copy to resume, or choose "

@@ -14,6 +14,7 @@ import json
 import math
 import time
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -125,7 +126,15 @@ class ReplayResult:
     recorded_outputs: tuple = ()  # the names of the recorded estimates' columns (the run's header's)
     far: np.ndarray | None = None  # per sample: estimated far outside the model's fitted pose box (Model.far_outside)
     read_s: np.ndarray | None = None  # per sample: s its read took, as recorded (NaN: not)
-    held: np.ndarray | None = None  # per sample: its read held up between its conversions (host.readout.held_up)
+
+    @cached_property
+    def held(self) -> np.ndarray | None:
+        """Per sample, whether its read was held up between its conversions (host.readout.held_up: against the
+        quickest recorded read so far, as the readout kept it); None without recorded times."""
+        if self.read_s is None:
+            return None
+        with np.errstate(invalid="ignore"):  # NaN, not timed: not held
+            return held_up(self.read_s, np.fmin.accumulate(self.read_s))
 
     @property
     def exact(self) -> bool:
@@ -253,15 +262,7 @@ def replay(run: Run, *, model: str | Model | None = None, auto_zero: bool | None
     return ReplayResult(run.t, run.raw, run.temp, v_all, out_all, st_all, run.out,
                         tuple(model.output_names), model.sha256, same, [] if az is None else az.updates, notes,
                         header, tuple(o for o in h.get("outputs", ()) if isinstance(o, str)),
-                        model.far_outside(out_all) & (st_all >= 0), run.read_s, _held(run.read_s))
-
-
-def _held(read_s: np.ndarray | None) -> np.ndarray | None:
-    """Per sample, whether its read was held up (the quickest recorded read so far as the readout kept it)."""
-    if read_s is None:
-        return None
-    with np.errstate(invalid="ignore"):  # NaN, not timed: not held
-        return held_up(read_s, np.fmin.accumulate(read_s))
+                        model.far_outside(out_all) & (st_all >= 0), run.read_s)
 
 
 def _estimate(run: Run, model: Model, precision: str, corrections: Corrections, progress):

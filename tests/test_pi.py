@@ -135,17 +135,23 @@ def test_pi_build_reads_an_ads7828_to_the_digit_of_the_python_readout(model, tmp
         [ln.split(",", 1)[1] for ln in expected]
 
 
+def _boxed_build(model, folder):
+    """``model`` held out on a box dx -0.1..0.1 that GMR_POSE's dx 0.5 lies 0.4 past, and its float tm_pi built in
+    ``folder`` against the stand-in."""
+    import dataclasses
+
+    boxed = dataclasses.replace(model, fit_info={**model.fit_info, "held_out": {"box": {"dx": [-0.1, 0.1],
+                                                                                      "dz": [-2, 0]}}})
+    return boxed, build_pi(render_pi(boxed, parse_spec(MAP), folder, precision="float"), standin=True)
+
+
 def test_pi_build_counts_estimates_far_outside_the_fitted_box_as_read_does(model, tmp_path):
     """tm_pi's summary counts the samples estimated outside the model's fitted pose box by more than its width,
     by the bounds tactile-host read and fitgen predict use (Model.far_bounds): here a box dx -0.1..0.1 that
     GMR_POSE's dx 0.5 lies 0.4 past, on every sample."""
-    import dataclasses
-
     require_tool("arm-linux-gnueabihf-gcc")
     require_tool("qemu-arm")
-    boxed = dataclasses.replace(model, fit_info={**model.fit_info, "held_out": {"box": {"dx": [-0.1, 0.1],
-                                                                                      "dz": [-2, 0]}}})
-    build = build_pi(render_pi(boxed, parse_spec(MAP), tmp_path, precision="float"), standin=True)
+    boxed, build = _boxed_build(model, tmp_path)
     cmap, bus, clock = _bus()
     res = StandIn(bus, clock).run(["qemu-arm", str(build), "--count", "6"])
     assert res.returncode == 0, res.stderr
@@ -182,15 +188,11 @@ def test_pi_build_counts_far_estimates_from_held_up_reads_apart_as_read_does(mod
     model's?") and says it in its own words; tm_pi counted every one as another sensor's. It now times each read
     with its clock, and a read over 3 times the quickest and 20 ms more is held up: the same counts as read's for
     the same bus, the same holds (the 3rd and 7th of 10 reads) and the same box (every estimate far)."""
-    import dataclasses
-
     from host.readout import FAR_HELD, FAR_OUTSIDE
 
     require_tool("arm-linux-gnueabihf-gcc")
     require_tool("qemu-arm")
-    boxed = dataclasses.replace(model, fit_info={**model.fit_info, "held_out": {"box": {"dx": [-0.1, 0.1],
-                                                                                      "dz": [-2, 0]}}})
-    build = build_pi(render_pi(boxed, parse_spec(MAP), tmp_path, precision="float"), standin=True)
+    boxed, build = _boxed_build(model, tmp_path)
     cmap, bus, clock = _bus()
     res = StandIn(_hold_up(bus, clock, (3, 7)), clock).run(["qemu-arm", str(build), "--count", "10"])
     assert res.returncode == 0, res.stderr
