@@ -134,6 +134,31 @@ def test_uno_refuses_double_and_bad_options(gmr_model, tmp_path):
     assert_one_line_error(proc, 2, "target uno")
 
 
+def test_uno_refuses_a_thermistor_before_building(gmr_model, tmp_path):
+    """A thermistor on the Uno took its reads' second ADC array into RAM, and a float build's stack then ran into
+    it mid-suite ('connection closed by the device'); it is refused as arduino-build refuses it."""
+    model_file = gmr_model.save(tmp_path / "m.json")
+    proc = run_cli("tactile-hil", "emulate", "--target", "uno", "--style", "unrolled", "--model", str(model_file),
+                   "--adc", ADC + ",temp=ads1115@0x4a:0", "--simulate", "dx=1", "--suite")
+    assert_one_line_error(proc, 2, "--target uno reads no thermistor")
+    assert "building" not in proc.stderr and "ready" not in proc.stdout
+
+
+def test_a_board_that_ended_is_said_by_its_reason_not_its_counts():
+    """simavr's board prints its STACK and CYCLES counts after the reason it stopped: the reason is said."""
+    import io
+    from types import SimpleNamespace
+
+    from fitgen.app.hil_cli import _ending
+
+    err = b"the stack ran into static RAM (SP 0x071b, .bss ends at 0x07aa) at cycle 183709630\nSTACK 484\nCYCLES 1\n"
+    runner = SimpleNamespace(proc=SimpleNamespace(returncode=6, stderr=io.BytesIO(err)))
+    assert _ending(runner) == ("exit status 6 (the stack ran into static RAM (SP 0x071b, .bss ends at 0x07aa) at "
+                               "cycle 183709630)")
+    runner = SimpleNamespace(proc=SimpleNamespace(returncode=-9, stderr=io.BytesIO(b"")))
+    assert _ending(runner) == "killed by signal 9 from outside"
+
+
 def test_cli_emulate_uno_suite(gmr_model, tmp_path):
     """`tactile-hil emulate --target uno --adc ... --suite`: the command a user runs, to its JUnit file."""
     _require_avr()

@@ -139,7 +139,9 @@ def _ending(runner) -> str:
     if rc < 0:
         return f"killed by signal {-rc} from outside"
     err = runner.proc.stderr.read() if runner.proc.stderr is not None and not runner.proc.stderr.closed else ""
-    last = (err.decode(errors="replace") if isinstance(err, bytes) else err or "").strip().splitlines()[-1:]
+    lines = (err.decode(errors="replace") if isinstance(err, bytes) else err or "").strip().splitlines()
+    # simavr's board ends with its counts (STACK n, CYCLES n): the reason is the line before them
+    last = [ln for ln in lines if ln.strip() and ln.split(" ")[0] not in ("STACK", "CYCLES")][-1:]
     if last and "terminating on signal" in last[0]:
         return f"stopped from outside ({last[0].strip()})"
     return f"exit status {rc}" + (f" ({last[0].strip()})" if last else "")
@@ -172,6 +174,10 @@ def cmd_emulate(args) -> int:
         if lost:
             print(f"tactile-hil emulate: {lost}", file=sys.stderr)
     cmap, bridge, tin, tempcomp = _adc_bridge(args, model)
+    if tin is not None and args.target == "uno":  # its stack had run into static RAM mid-suite, the model's size aside
+        raise InputError("--target uno reads no thermistor: its reads need an ADC array of their own, which the "
+                         "Uno's 2 KB of RAM do not hold beside the elements' and a float model's stack (drop temp= "
+                         "from --adc; --target mps2 emulates one, tactile-host read and pi-build read one)")
     with ExitStack() as stack:
         with Progress(f"{args.target} firmware", 2) as bar:  # building and booting take seconds
             bar.update(0, "building")
@@ -200,7 +206,12 @@ def cmd_emulate(args) -> int:
             from hil.firmware import adc_input_lsb
 
             lsb = adc_input_lsb(cmap) if cmap is not None and args.precision == "fixed" else None
-            return _suite(runner.url, model, data, args, lsb)
+            try:
+                return _suite(runner.url, model, data, args, lsb)
+            except InputError:  # a board that ended mid-suite (the Uno's stack in a stream): its own last words
+                time.sleep(0.2)
+                _stopped(runner, args, advice, before=False)
+                raise
         # a flag, not an Event: Event.set in a handler deadlocks when the signal lands while wait holds its lock
         with StopFlag() as stop:  # set before "ready": a caller may stop it the moment it reads that
             print(f"ready: {runner.url} (Ctrl-C stops)", flush=True)
