@@ -81,6 +81,9 @@ def test_manifests_carry_the_specifications_required_fields(device_model, tmp_pa
     assert 0 < len(pio["description"]) <= 255
     assert (lib / "examples" / "ReadPose" / "ReadPose.ino").is_file()
     assert library_properties() == (lib / "library.properties").read_text()
+    # keywords.txt: comments, or a name, one tab and a kind the IDE knows
+    for line in (lib / "keywords.txt").read_text().splitlines():
+        assert line.startswith("#") or re.fullmatch(r"[A-Za-z_]\w*\t(KEYWORD1|KEYWORD2|KEYWORD3|LITERAL1)", line), line
 
 
 @pytest.mark.parametrize("cxx", ["avr-g++ -mmcu=atmega328p", "g++"])
@@ -95,6 +98,16 @@ def test_headers_compile_as_cxx_warning_free(device_model, tmp_path, cxx):
                                          "-Wdouble-promotion", "-Wfloat-conversion", "-I", str(lib / "src"), "-c",
                                          str(main), "-o", str(tmp_path / "main.o")], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
+    # every name keywords.txt colours is one the library declares
+    source = " ".join(p.read_text() for p in (lib / "src").iterdir())
+    for line in (lib / "keywords.txt").read_text().splitlines():
+        assert line.startswith("#") or re.search(rf"\b{line.split(chr(9))[0]}\b", source), line
+    # an adc_map.h of another build (another element count) stops the compile, before ReadPose's arrays overrun
+    amap = lib / "src" / "adc_map.h"
+    amap.write_text(re.sub(r"#define ADC_MAP_N_ELEMENTS \d+", "#define ADC_MAP_N_ELEMENTS 6", amap.read_text()))
+    proc = subprocess.run(cxx.split() + ["-std=gnu++11", "-I", str(lib / "src"), "-c", str(main), "-o",
+                                         str(tmp_path / "main.o")], capture_output=True, text=True)
+    assert proc.returncode != 0 and "come from different builds" in proc.stderr, proc.stderr
 
 
 def test_read_pose_builds_for_the_uno_and_fits(model_path, tmp_path):

@@ -15,4 +15,10 @@ extern "C" {
 #endif
 #include "tm_model.h"
 
+/* ReadPose reads ADC_MAP_N_ELEMENTS codes into arrays of TM_N_INPUTS: a tm_model.h or adc_map.h from another build
+ * would overrun them */
+#if TM_N_INPUTS != ADC_MAP_N_ELEMENTS
+#error "tm_model.h and adc_map.h come from different builds: run tactile-host arduino-build again"
+#endif
+
 #endif /* TACTILE_POSE_H */
