@@ -286,6 +286,8 @@ def render_arduino(model: Model, cmap: ChannelMap, folder: str | Path, *, precis
     write_atomic(folder / "library.properties", library_properties(model.n_inputs))
     write_atomic(folder / "library.json", library_json())
     write_atomic(folder / "keywords.txt", keywords_txt())
+    # src/ holds copies of the project's MIT-licensed drivers, whose notice must go with every copy
+    write_atomic(folder / "LICENSE", (tpl / "arduino" / "LICENSE").read_bytes())
     return folder
 
 
@@ -395,7 +397,7 @@ def _library_folder(folder: str | Path) -> Path:
     return path
 
 
-INSTALLED = ("src", f"examples/{EXAMPLE}", "library.properties", "library.json", "keywords.txt")
+INSTALLED = ("src", f"examples/{EXAMPLE}", "library.properties", "library.json", "keywords.txt", "LICENSE")
 
 
 SOURCE_SUFFIXES = (".h", ".hpp", ".c", ".cpp", ".ino", ".S")

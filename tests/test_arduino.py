@@ -81,6 +81,8 @@ def test_manifests_carry_the_specifications_required_fields(device_model, tmp_pa
     assert 0 < len(pio["description"]) <= 255
     assert (lib / "examples" / "ReadPose" / "ReadPose.ino").is_file()
     assert library_properties() == (lib / "library.properties").read_text()
+    # the drivers in src/ are the project's, under its license, whose notice goes with every copy
+    assert (lib / "LICENSE").read_text() == (Path(__file__).parents[1] / "LICENSE").read_text()
     # keywords.txt: comments, or a name, one tab and a kind the IDE knows
     for line in (lib / "keywords.txt").read_text().splitlines():
         assert line.startswith("#") or re.fullmatch(r"[A-Za-z_]\w*\t(KEYWORD1|KEYWORD2|KEYWORD3|LITERAL1)", line), line
