@@ -18,7 +18,7 @@ from fitgen.fitting.schedule import schedule
 from fitgen.fitting.unitrecord import report, row_noise, stage_errors, what_pins_more
 from fitgen.fitting.verdict import check_explained, field_line, lifted_rows_line, looser_stage_line, outlier_lines
 from fitgen.physics import presets
-from fitgen.physics.pose import POSE_NAMES
+from fitgen.physics.pose import POSE_NAMES, off_skin
 from fitgen.physics.sensor import load_sensor
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings, within_linear_range
@@ -138,6 +138,26 @@ def test_a_capture_of_128_samples_per_row_that_stalled_the_first_pass_is_identif
     rng = np.random.default_rng([277, 40, 3])
     y = magpylib_readings(unit, rig_poses(poses, rig, rng)) + rng.normal(0.0, noise, (len(poses), 8))
     _explained_and_recovered(identify(drawing, y, poses, noise, rig_error=rig, zero_error=0.0), theta)
+
+
+@pytest.mark.parametrize("seed, rig, zero, samples", [(1037, 0.01, 0.02, 128), (1056, 0.0, 0.0, SAMPLES)])
+def test_a_first_pass_that_stalled_where_the_check_passes_it_is_not_taken(drawing, plan, seed, rig, zero, samples):
+    """The first pass can stall at a false minimum the residual check passes: a capture at 128 samples per row read
+    1.16 (393 where 353 was there to find), its gains 65-129 standard errors from the truth; an exact stage's
+    read 2.50 and was told its stage was looser than it is. The second start is tried on every capture."""
+    space = UnitSpace.of(drawing)
+    rng = np.random.default_rng(seed)
+    theta = space.draw(rng)
+    true, contact = plan[0].copy(), ~off_skin(plan[0])
+    shared = rng.normal(0.0, zero, 3) if zero else 0.0
+    true[contact, :3] += rng.normal(0.0, rig, (int(contact.sum()), 3)) + shared
+    noise = drawing.noise / np.sqrt(samples)
+    y = space.readings(theta[None], true)[0] + rng.normal(0.0, noise, (len(true), drawing.n_elements))
+    ident = identify(drawing, y, plan[0], noise, rig_error=rig, zero_error=zero)
+    assert ident.reduced_chi2 < 1.3 and looser_stage_line(ident) == [], ident.reduced_chi2
+    gains = [i for i, n in enumerate(space.names) if n.endswith(".log_gain")]
+    off = np.abs(ident.theta - theta)[gains] / ident.sd[gains]
+    assert off.max() < 4.0, off
 
 
 def test_a_field_the_stage_carries_is_fitted_where_the_drawing_allows_for_it(drawing, tmp_path):
