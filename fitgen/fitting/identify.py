@@ -264,15 +264,30 @@ class Identification:
         return [(int(i), float(worst[i])) for i in idx[np.argsort(-worst[idx], kind="stable")]]
 
 
+def ring_frame(drawn: np.ndarray, built: np.ndarray) -> np.ndarray:
+    """The rotation that best lays the built elements' places (n, 3) onto the drawn ones (Kabsch), both about
+    their centres; the identity where the drawn places span no plane (a line or a point fixes no frame)."""
+    a, b = built - built.mean(axis=0), drawn - drawn.mean(axis=0)
+    if np.linalg.svd(b, compute_uv=False)[1] < 1e-9 * max(float(np.abs(b).max()), 1e-300):
+        return np.eye(3)
+    u, _, vt = np.linalg.svd(b.T @ a)
+    return u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+
+
 def derived_quantities(space: UnitSpace) -> dict:
-    """Functions of the parameters that a capture determines (invariant to the splits it cannot tell)."""
+    """Functions of the parameters that a capture determines (invariant to the splits it cannot tell). The magnet's
+    offset is taken in the elements' own frame: in the board's, a tilt of the whole sensor on the stage's bed (the
+    elements' heights along a plane, the magnet with them), which no capture separates, carried about 90 % of its
+    x and y spread (an outside review), the prior's and not the capture's."""
     n = space.drawing.n_elements
+    drawn = space.drawing.positions
 
     def centre_offset(axis):
         def fn(theta):
             p = space._parts(theta[None])
-            return float(p["rest"][0, axis] - p["pos"][0, :, axis].mean()
-                         - (space.drawing.magnet.rest_center[axis] - space.drawing.positions[:, axis].mean()))
+            pos, rest = p["pos"][0], p["rest"][0]
+            offset = ring_frame(drawn, pos) @ (rest - pos.mean(axis=0))
+            return float(offset[axis] - (space.drawing.magnet.rest_center[axis] - drawn[:, axis].mean()))
         return fn
 
     out = {f"magnet offset from the elements' centre {c} [mm]": centre_offset(i) for i, c in enumerate("xyz")}
