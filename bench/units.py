@@ -169,10 +169,16 @@ class Ctx:
 
     def __init__(self, n_held: int, draws: int, n_random: int, twins: tuple, realisations: int = REALISATIONS,
                  element_radius: float | None = None):
-        self.drawing = load_sensor(PRESET).with_transfer(TRANSFER)
-        if element_radius is not None:  # a ring known better (or worse) than the preset says: drawn and identified so
-            self.drawing = replace(self.drawing, tolerances=replace(self.drawing.tolerances,
-                                                                    element_radius=element_radius))
+        self.drawing_spec = PRESET  # what a twin's unit file names as its drawing, as fitgen identify writes it
+        if element_radius is not None:  # a ring known better (or worse) than the preset says: drawn and identified so,
+            # from a file of its own, as a user gives one (a twin's posterior is drawn from the drawing it names)
+            from importlib.resources import files
+
+            folder = Path(tempfile.mkdtemp(prefix="fitgen-units-drawing-"))
+            text = (files("fitgen.physics.presets") / f"{PRESET}.toml").read_text()
+            self.drawing_spec = str(folder / f"{PRESET}-radius.toml")
+            Path(self.drawing_spec).write_text(f"{text}\n[tolerances]\nelement_radius = {element_radius!r}\n")
+        self.drawing = load_sensor(self.drawing_spec).with_transfer(TRANSFER)
         self.noise = self.drawing.noise
         self.held_poses = random_poses(n_held, DEFAULT_RANGES, pose_rng(POSE_SEED))
         self.draws = draws
@@ -307,7 +313,7 @@ def task(spec: tuple) -> tuple[tuple, dict]:
         return spec, res
     with tempfile.TemporaryDirectory(prefix="fitgen-units-") as tmp:
         path, _ = save(ident, Path(tmp) / "unit.toml", {"capture": f"simulated capture of unit {seed}",
-                                                         "drawing_spec": PRESET})
+                                                         "drawing_spec": CTX.drawing_spec})
         twin = load_sensor(path)
         ds = simulate(twin, CTX.train, provenance={"sensor_file": str(path)})
         model = fit_default(ds, twin)
