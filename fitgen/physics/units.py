@@ -163,9 +163,10 @@ class UnitSpace:
                        axes=p["axes"], gains=p["gain"], offsets=p["off"], ambient=p["ambient"],
                        stage_map=p["map"], stiffening=float(p["stiffening"]), source={})
 
-    def readings(self, thetas: np.ndarray, poses) -> np.ndarray:
+    def readings(self, thetas: np.ndarray, poses, clipped: bool = True) -> np.ndarray:
         """Noise-free readings (K, n, N) of K units (rows of ``thetas``) at n poses, in the transfer's units,
-        without the ADC's quantisation (a gmr reading is clipped to the ADC's range)."""
+        without the ADC's quantisation (a gmr reading is clipped to the ADC's range); ``clipped=False``: the
+        gmr reading as if neither the element saturated nor the ADC had rails (the line its slope follows)."""
         d = self.drawing
         stage = as_poses(poses)[:, :3]  # where the stage is, a lifted indenter's rows too: the field it carries
         poses = contact_poses(as_poses(poses))
@@ -188,9 +189,9 @@ class UnitSpace:
         if d.transfer == "raw":
             return p["gain"][:, None, :] * mag + p["off"][:, None, :]
         g = d.gmr
-        field = p["gain"][:, None, :] * np.minimum(mag, g.saturation) + p["off"][:, None, :]
+        field = p["gain"][:, None, :] * (np.minimum(mag, g.saturation) if clipped else mag) + p["off"][:, None, :]
         out = g.offset + volts_per_mt(g) * field
-        return np.clip(out, g.adc_min, g.adc_max)
+        return np.clip(out, g.adc_min, g.adc_max) if clipped else out
 
     @property
     def free(self) -> np.ndarray:
