@@ -17,7 +17,8 @@ import numpy as np
 from fitgen.base.errors import InputError
 
 from host.boards import BOARDS
-from host.arduino import Size, arduino_build, example_elf, find_builder, require_builder
+from host.arduino import Size, arduino_build, example_elf
+from host.sketchbuild import find_builder, require_builder
 from host.channelmap import ChannelMap
 
 from hil.emulate import UnoEmulator, bss_end, build_uno_board, require_avr_tools, uno_emulator_available

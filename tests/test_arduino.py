@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from fitgen.base.errors import InputError
-from host.arduino import HARDWARE, build_example, example_elf, library_properties, render_arduino
+from host.arduino import build_example, example_elf, library_properties, render_arduino
+from host.sketchbuild import HARDWARE, build_sketch
 from host.boards import BOARDS
 from host.channelmap import parse_spec
 
@@ -101,11 +102,11 @@ def test_headers_compile_as_cxx_warning_free(device_model, tmp_path, cxx):
                                          str(main), "-o", str(tmp_path / "main.o")], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     # every name keywords.txt colours is one the library declares
-    source = " ".join(p.read_text() for p in (lib / "src").iterdir())
+    source = " ".join(p.read_text() for p in (lib / "src").rglob("*") if p.is_file())
     for line in (lib / "keywords.txt").read_text().splitlines():
         assert line.startswith("#") or re.search(rf"\b{line.split(chr(9))[0]}\b", source), line
     # an adc_map.h of another build (another element count) stops the compile, before ReadPose's arrays overrun
-    amap = lib / "src" / "adc_map.h"
+    amap = lib / "src" / "tactile" / "adc_map.h"
     amap.write_text(re.sub(r"#define ADC_MAP_N_ELEMENTS \d+", "#define ADC_MAP_N_ELEMENTS 6", amap.read_text()))
     proc = subprocess.run(cxx.split() + ["-std=gnu++11", "-I", str(lib / "src"), "-c", str(main), "-o",
                                          str(tmp_path / "main.o")], capture_output=True, text=True)
@@ -125,13 +126,33 @@ def test_read_pose_builds_for_the_uno_and_fits(model_path, tmp_path):
     assert (tmp_path / "again" / "ReadPose.ino.hex").is_file()
 
 
+def test_another_librarys_header_of_a_common_name_is_its_own_in_a_sketch_beside_ours(device_model, tmp_path):
+    """arduino-builder puts each library's src/ on the include path once a sketch includes one of its headers: a
+    driver there named adc.h answered another library's <adc.h> in the same sketch, which the other library's own
+    code then did not compile against. The library's src/ holds its one include; its parts are under src/tactile/."""
+    require_tool("arduino-builder")
+    lib = render_arduino(device_model, parse_spec(TWO_CHIPS), tmp_path / "TactilePose")
+    assert [p.name for p in (lib / "src").iterdir() if p.is_file()] == ["TactilePose.h"]
+    other = tmp_path / "OtherAdc"
+    (other / "src").mkdir(parents=True)
+    (other / "library.properties").write_text("name=OtherAdc\nversion=1.0.0\nauthor=A\nmaintainer=A\nsentence=S\n"
+                                              "paragraph=P\ncategory=Other\nurl=https://example.org\narchitectures=*\n")
+    (other / "src" / "adc.h").write_text("#define OTHER_ADC_CHANNELS 4\n")
+    sketch = tmp_path / "Both" / "Both.ino"
+    sketch.parent.mkdir()
+    sketch.write_text("#include <TactilePose.h>\n#include <adc.h>\nvoid setup() { Serial.begin(OTHER_ADC_CHANNELS); "
+                      "}\nvoid loop() {}\n")
+    size = build_sketch(sketch, {"TactilePose": lib, "OtherAdc": other}, tmp_path / "build")
+    assert size.flash > 0 and example_elf(tmp_path / "build", "Both").is_file()
+
+
 def test_fixed_point_builds_for_the_uno(model_path, tmp_path):
     require_tool("arduino-builder")
     proc = _build_cli(model_path, tmp_path / "TactilePose", "--precision", "fixed")
     assert proc.returncode == 0, proc.stderr
     flash, ram = map(int, SIZE.search(proc.stderr).groups())
     assert flash <= UNO.flash and ram <= UNO.ram
-    assert "#define TM_FIXED_POINT 1" in (tmp_path / "TactilePose" / "src" / "tm_model.h").read_text()
+    assert "#define TM_FIXED_POINT 1" in (tmp_path / "TactilePose" / "src" / "tactile" / "tm_model.h").read_text()
 
 
 def test_a_model_that_does_not_fit_is_refused_naming_a_setting_that_does(tmp_path):
@@ -198,7 +219,7 @@ def test_fixed_point_of_the_no_roots_model_fits_the_uno(sensor, tmp_path):
     assert proc.returncode == 0, proc.stderr
     flash, ram = map(int, SIZE.search(proc.stderr).groups())
     assert flash <= UNO.flash and ram <= UNO.ram
-    header = (tmp_path / "TactilePose" / "src" / "tm_model.h").read_text()
+    header = (tmp_path / "TactilePose" / "src" / "tactile" / "tm_model.h").read_text()
     assert " * Plan: for a 16-bit multiply (--target uno)" in header and "tm_avr_dot" in header
 
 
@@ -252,7 +273,7 @@ def test_a_ctrl_c_while_a_build_replaces_the_last_one_leaves_a_whole_library(mod
         host_cli.main(["arduino-build", "--model", model_path, "--adc", TWO_CHIPS, "-o", str(lib), "--no-build"])
     monkeypatch.setattr(shutil, "rmtree", real)
     assert stop.value.code == 130 and len(removed) == 1
-    assert not (lib / "src" / "extra.h").exists() and (lib / "src" / "tm_model.h").is_file()
+    assert not (lib / "src" / "extra.h").exists() and (lib / "src" / "tactile" / "tm_model.h").is_file()
     assert "architectures=avr\n" in (lib / "library.properties").read_text()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["TactilePose"]  # no partial folder left
     assert _build_cli(model_path, lib, "--no-build").returncode == 0
@@ -581,7 +602,7 @@ def test_ram_with_the_stack_fits_in_float_with_harmonics_and_in_fixed_without_ro
         from hil.sketch import readpose_table
 
         _assert_rows_show_the_pose(*readpose_table(proc.stdout.splitlines()))
-        fixed = "#define TM_FIXED_POINT 1" in (out / "src" / "tm_model.h").read_text()
+        fixed = "#define TM_FIXED_POINT 1" in (out / "src" / "tactile" / "tm_model.h").read_text()
         assert fixed == (name == "noroots")
 
 
@@ -688,7 +709,7 @@ def test_without_arduino_builder_the_library_is_written_and_said_not_built(model
     proc = _build_cli(model_path, tmp_path / "TactilePose")
     assert proc.returncode == 0, proc.stderr
     assert "not built (no arduino-builder)" in proc.stderr
-    assert (tmp_path / "TactilePose" / "src" / "tm_model.h").is_file()
+    assert (tmp_path / "TactilePose" / "src" / "tactile" / "tm_model.h").is_file()
     proc = _build_cli(model_path, tmp_path / "E", "--emulate", "dx=1")
     assert_one_line_error(proc, 2, "arduino-builder is not installed (apt-get install")
     assert not (tmp_path / "E").exists()
@@ -786,10 +807,10 @@ def test_the_precision_defaults_to_the_one_the_model_was_fitted_for(device_model
     (tmp_path / "f.json").write_text(json.dumps(model))
     proc = _build_cli(str(tmp_path / "f.json"), tmp_path / "F", "--no-build")
     assert proc.returncode == 0, proc.stderr
-    assert "#define TACTILE_FIXED_POINT 1" in (tmp_path / "F" / "src" / "tactile_config.h").read_text()
+    assert "#define TACTILE_FIXED_POINT 1" in (tmp_path / "F" / "src" / "tactile" / "tactile_config.h").read_text()
     assert_one_line_error(_build_cli(str(tmp_path / "f.json"), tmp_path / "G", "--no-build", "--style", "table"), 2,
                           "--style does not apply to --precision fixed (the model was fitted for it: give "
                           "--precision float to build it in float)")
     proc = _build_cli(str(tmp_path / "f.json"), tmp_path / "H", "--no-build", "--precision", "float")
-    assert proc.returncode == 0 and "#define TACTILE_FIXED_POINT 0" in (tmp_path / "H" / "src" /
+    assert proc.returncode == 0 and "#define TACTILE_FIXED_POINT 0" in (tmp_path / "H" / "src" / "tactile" /
                                                                          "tactile_config.h").read_text()
