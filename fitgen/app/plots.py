@@ -57,9 +57,12 @@ def _estimates(model: Model, ds: Dataset):
         a.plot(y[order], "-", lw=1.2, color="k", label="target")
         a.set_ylabel(f"{eq.name} [{eq.unit}]")
         a.legend(loc="upper left")
-        a.set_title(f"{eq.name}: {len(eq.terms)} terms, max error {np.max(np.abs(pred[:, j] - y)):.3g} {eq.unit}")
-        b.plot(pred[order, j] - y[order], ".", ms=2)
-        b.set_ylabel("error")
+        err = pred[:, j] - y
+        a.set_title(f"{eq.name}: {len(eq.terms)} terms (the model in double), on {len(y)} rows: max error "
+                    f"{np.max(np.abs(err)):.3g} {eq.unit}, RMS {np.sqrt(np.mean(err * err)):.3g} {eq.unit}",
+                    fontsize=10)
+        b.plot(err[order], ".", ms=2)
+        b.set_ylabel(f"error [{eq.unit}]")
         b.set_xlabel("data index (sorted by target)")
         fig.tight_layout()
         yield f"estimate_{eq.name}.png", _png(fig)
@@ -70,17 +73,19 @@ def estimate_vs_target(model: Model, ds: Dataset, folder: Path) -> list[Path]:
     return [write_in_folder(folder, name, png) for name, png in _estimates(model, ds)]
 
 
-def _sweep_png(model: Model, sweep_inputs: np.ndarray, sweep_values: np.ndarray, output: str) -> bytes:
+def _sweep_png(model: Model, sweep_inputs: np.ndarray, sweep_values: np.ndarray, output: str, on: str = "") -> bytes:
     plt = _plt()
     j = model.output_names.index(output)
+    unit = model.equation(output).unit
     est = model.predict(sweep_inputs)[:, j]
     fig, ax = plt.subplots(figsize=(7, 4))
     ax.plot(sweep_values, est, ".", ms=3, label="estimate")
     ax.plot(sweep_values, sweep_values, "-", color="k", lw=1, label="target")
-    ax.set_xlabel(f"target {output}")
-    ax.set_ylabel(f"estimated {output}")
+    ax.set_xlabel(f"target {output} [{unit}]")
+    ax.set_ylabel(f"estimated {output} [{unit}]")
     ax.legend()
-    ax.set_title(f"{output} in steps of {sweep_values[1] - sweep_values[0]:.2g}, other components 0")
+    ax.set_title(f"{output} in steps of {sweep_values[1] - sweep_values[0]:.2g} {unit}, other components 0"
+                 + (f" ({on})" if on else ""), fontsize=10)
     fig.tight_layout()
     return _png(fig)
 
@@ -107,7 +112,8 @@ def _sweeps(model: Model, sensor):
         values = np.round(np.arange(-5.0, 5.0 + 1e-9, 0.1), 10)
         poses = np.zeros((len(values), 5))
         poses[:, POSE_NAMES.index(name)] = values
-        yield f"sweep_{name}.png", _sweep_png(model, simulate(sensor, poses).inputs, values, name)
+        yield f"sweep_{name}.png", _sweep_png(model, simulate(sensor, poses).inputs, values, name,
+                                              f"sensor {sensor.name}, noise-free")
 
 
 def rotation_sweeps(model: Model, sensor, folder: Path) -> list[Path]:

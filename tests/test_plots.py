@@ -1,0 +1,57 @@
+"""fitgen.app.plots as a reader sees the figures: each axis's quantity with its unit, titles that say what is shown
+and on what, and no text cut off at the figure's edge. The figures are read as matplotlib draws them (``_png``
+replaced by a recorder), not as pixels."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+
+from fitgen.app import plots  # noqa: E402
+
+
+@pytest.fixture
+def figures(monkeypatch):
+    """The figures plots draws, in order, instead of their PNG bytes."""
+    drawn = []
+    monkeypatch.setattr(plots, "_png", lambda fig: drawn.append(fig) or b"")
+    return drawn
+
+
+def _texts(fig) -> list[str]:
+    """Every axis label and title of ``fig`` (suptitle included)."""
+    out = [fig._suptitle.get_text()] if fig._suptitle is not None else []
+    for ax in fig.axes:
+        out += [ax.get_xlabel(), ax.get_ylabel(), ax.get_title()]
+    return out
+
+
+def _model_and_data():
+    """A small fitted model of the paper drawing (gmr) and noise-free rows of it."""
+    from fitgen.fitting.fit import FitSettings, fit_model
+    from fitgen.physics.sensor import load_sensor
+    from fitgen.physics.simulate import DEFAULT_RANGES, pose_rng, random_poses, simulate
+
+    sensor = load_sensor("paper").with_transfer("gmr")
+    train = simulate(sensor, random_poses(400, DEFAULT_RANGES, pose_rng(3)))
+    model = fit_model(train, ("dz", "thx"), FitSettings.family("integer"))
+    return sensor, model, simulate(sensor, random_poses(50, DEFAULT_RANGES, pose_rng(4)))
+
+
+def test_the_estimate_and_sweep_figures_give_every_axis_its_unit_and_say_what_they_were_drawn_on(figures):
+    """The error panel read "error" with no unit (mm or deg: which the reader had to guess), the sweep's axes
+    "target thx" and "estimated thx" and its title "steps of 0.1" with none either, and neither figure said on what
+    it was drawn: how many rows, the sweep's sensor and that it is noise-free."""
+    sensor, model, ds = _model_and_data()
+    plots.report_figures(model, ds, sensor)
+    est_dz, est_thx, sweep = figures
+    assert est_dz.axes[1].get_ylabel() == "error [mm]" and est_thx.axes[1].get_ylabel() == "error [deg]"
+    title = est_dz.axes[0].get_title()
+    err = model.predict(ds.inputs)[:, 0] - ds.target("dz")
+    assert "on 50 rows" in title and f"RMS {np.sqrt(np.mean(err * err)):.3g} mm" in title
+    assert f"max error {np.max(np.abs(err)):.3g} mm" in title  # the figure the report prints
+    ax = sweep.axes[0]
+    assert ax.get_xlabel() == "target thx [deg]" and ax.get_ylabel() == "estimated thx [deg]"
+    assert "steps of 0.1 deg" in ax.get_title() and "sensor paper, noise-free" in ax.get_title()
