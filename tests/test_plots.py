@@ -55,3 +55,29 @@ def test_the_estimate_and_sweep_figures_give_every_axis_its_unit_and_say_what_th
     ax = sweep.axes[0]
     assert ax.get_xlabel() == "target thx [deg]" and ax.get_ylabel() == "estimated thx [deg]"
     assert "steps of 0.1 deg" in ax.get_title() and "sensor paper, noise-free" in ax.get_title()
+
+
+def _inside(fig, artist) -> bool:
+    """``artist`` drawn within ``fig``'s canvas, not cut off at its edge."""
+    fig.canvas.draw()
+    box, edge = artist.get_window_extent(fig.canvas.get_renderer()), fig.bbox
+    return edge.x0 <= box.x0 and box.x1 <= edge.x1 and edge.y0 <= box.y0 and box.y1 <= edge.y1
+
+
+def _tick_texts(fig, axis) -> set[str]:
+    fig.canvas.draw()
+    ticks = getattr(fig.axes[0], axis)
+    return {t.get_text() for t in ticks.get_ticklabels(minor=True)} | {t.get_text() for t in ticks.get_ticklabels()}
+
+
+def test_the_allan_figure_has_its_whole_title_and_plain_tick_labels(figures):
+    """tactile-host noise --plot: the title ran past the figure's right edge ("...the worst element's ratio" cut
+    off), and the deviation's ticks read 4 x 10^-1 where 0.4 mV is meant."""
+    from host.allan import averaging
+
+    x = np.random.default_rng(0).normal(0.0, 5e-4, (3000, 8))
+    plots.allan_png(averaging(x, 100.0))
+    fig = figures[0]
+    assert _inside(fig, fig.axes[0].title)
+    shown = _tick_texts(fig, "yaxis") | _tick_texts(fig, "xaxis")
+    assert not any("times" in t or "^" in t for t in shown) and {"0.1", "1"} <= shown, shown

@@ -141,6 +141,17 @@ def report_figures(model: Model, ds: Dataset, sensor=None) -> dict[str, bytes]:
     return out
 
 
+def _plain_log_ticks(axis, values) -> None:
+    """Log ``axis`` labelled in plain numbers (0.3, not 3 x 10^-1), ``values`` its data: within a decade every minor
+    tick labelled, else 1-2-3-5 (or they overlap)."""
+    from matplotlib.ticker import FuncFormatter
+
+    digits = "123456789" if max(values) < 10 * min(values) else "1235"
+    axis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
+    # by the leading digit (0.3's is 3, not its "0"): values below 1 are read off too
+    axis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if f"{x:.0e}"[0] in digits else ""))
+
+
 def tradeoff_png(result) -> bytes:
     """fitgen tradeoff: instructions (or a core's cycles) per estimate against score (log axes), the front
     joined, the target (score 1) dashed, the recommended point ringed; colour by precision, marker by family."""
@@ -173,18 +184,10 @@ def tradeoff_png(result) -> bytes:
     ax.axhline(1.0, color="red", ls="--", lw=0.8)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    from matplotlib.ticker import FuncFormatter
-
     scores = [p.score for _, p in pts] + [1.0]  # the target's line is on the axis too
     costs = [result.cost(p) for _, p in pts] or [1.0]  # no points: an empty plot, labelled as any other
-
-    def leading(values):  # within a decade: every minor tick labelled, else 1-2-3-5 (or they overlap)
-        return "123456789" if max(values) < 10 * min(values) else "1235"
-
-    for axis, digits in ((ax.xaxis, leading(costs)), (ax.yaxis, leading(scores))):
-        axis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
-        # by the leading digit (0.3's is 3, not its "0"): scores below 1 are read off too
-        axis.set_minor_formatter(FuncFormatter(lambda x, _, d=digits: f"{x:g}" if f"{x:.0e}"[0] in d else ""))
+    _plain_log_ticks(ax.xaxis, costs)
+    _plain_log_ticks(ax.yaxis, scores)
     ax.set_xlabel(f"cycles per estimate on {result.core} (simavr)" if result.core
                   else "x86-64 instructions per estimate (callgrind)")
     ax.set_ylabel("score: worst RMS error with noise / target")
@@ -262,8 +265,12 @@ def allan_png(av) -> bytes:
         ax.annotate(f"{s}: {r:.2f}x", (s / av.rate, ax.get_ylim()[1]), fontsize=7, rotation=90, va="top", ha="right")
     ax.set_xlabel("reading time of a row [s] (samples per row / sample rate)")
     ax.set_ylabel("Allan deviation [mV]")
-    ax.set_title(f"rest noise, {av.samples} samples at {av.rate:.0f}/s: solid measured, dotted white noise; "
-                 "candidates with the worst element's ratio", fontsize=8)
+    _plain_log_ticks(ax.xaxis, t)
+    _plain_log_ticks(ax.yaxis, [v for line in ax.get_lines() for v in line.get_ydata()])
+    # on two lines: on one, the figure's edge cut it
+    ax.set_title(f"rest noise, {av.samples} samples at {av.rate:.0f}/s: solid measured, dotted white noise;\n"
+                 "lines at the candidate samples per row, each with its worst element's real / recorded noise",
+                 fontsize=9)
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.legend(fontsize=7, ncol=4, loc="lower left")
     fig.tight_layout()
