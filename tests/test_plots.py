@@ -81,3 +81,26 @@ def test_the_allan_figure_has_its_whole_title_and_plain_tick_labels(figures):
     assert _inside(fig, fig.axes[0].title)
     shown = _tick_texts(fig, "yaxis") | _tick_texts(fig, "xaxis")
     assert not any("times" in t or "^" in t for t in shown) and {"0.1", "1"} <= shown, shown
+
+
+def test_the_tradeoff_plot_labels_the_cheap_end_of_an_axis_within_a_decade_and_names_the_target(figures):
+    """The press scene's points cost 124-420 instructions: the axis was labelled at 200, 300 and 400 only, so the
+    recommended point's cost (124) and its neighbours' had no label within a third of the axis; the target's red
+    dashed line was in no legend."""
+    from types import SimpleNamespace
+
+    knobs = SimpleNamespace(precision="float", method="equations", style="unrolled", refine=0, family="integer")
+    points = [SimpleNamespace(knobs=knobs, score=s, instructions=c)
+              for s, c in ((0.0156, 124), (0.0114, 133), (0.0098, 420))]
+    result = SimpleNamespace(points=points, front=[0, 1], recommended=0, met=True, constant=[], over_share=[],
+                             core=None, sensor="paper", scene=SimpleNamespace(name="press"),
+                             cost=lambda p: p.instructions)
+    plots.tradeoff_png(result)
+    fig = figures[0]
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    labelled = [float(t.get_text()) for t in ax.xaxis.get_ticklabels(minor=True) + ax.xaxis.get_ticklabels()
+                if t.get_text() and ax.get_xlim()[0] <= float(t.get_text()) <= ax.get_xlim()[1]]
+    assert min(labelled) <= 150 and {200, 300, 400} <= set(labelled), labelled
+    # and the red dashed line is named: the target
+    assert "target (score 1; below: met)" in [t.get_text() for t in ax.get_legend().get_texts()]
