@@ -104,3 +104,21 @@ def test_the_tradeoff_plot_labels_the_cheap_end_of_an_axis_within_a_decade_and_n
     assert min(labelled) <= 150 and {200, 300, 400} <= set(labelled), labelled
     # and the red dashed line is named: the target
     assert "target (score 1; below: met)" in [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def test_the_check_figure_tells_a_failed_output_by_its_marker_and_names_both_in_the_legend(figures):
+    """fitgen check --plot: a failed output's measured figures were red diamonds and a passed one's green ones, the
+    same marker (red and green read alike to many readers, and alike in greyscale), and the legend, taken from the
+    first output alone, showed one of the two."""
+    from types import SimpleNamespace
+
+    drawn = {"max": np.full(8, 0.02), "rms": np.full(8, 0.01)}
+    result = SimpleNamespace(outputs=["dx", "dz"], rows=30, drawn={"dx": drawn, "dz": drawn},
+                             measured={"dx": {"max": 0.021, "rms": 0.011}, "dz": {"max": 0.5, "rms": 0.3}},
+                             failed=lambda: ["dz"])
+    plots.check_png(result, {"dx": "mm", "dz": "mm"})
+    fig = figures[0]
+    markers = [[line.get_marker() for line in ax.get_lines()][1::2] for ax in fig.axes]
+    assert markers[0] == ["D", "D"] and markers[1] == ["X", "X"]
+    said = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "measured on the unit: as predicted" in said and "measured on the unit: beyond the prediction" in said

@@ -292,16 +292,23 @@ def check_png(result, units: dict) -> bytes:
         for x, figure in enumerate(("max", "rms")):
             ax.plot(x + jitter, result.drawn[o][figure], ".", color="0.6", ms=4,
                     label="predicted (a draw of the stage's error and the noise on each unit)" if x == 0 else None)
-            ax.plot([x], [result.measured[o][figure]], "D", color="C3" if o in failed else "C2", ms=7,
-                    label="measured on the unit" if x == 0 else None)
+            # a cross where it failed, not the colour alone: red and green read alike to many
+            marker, colour, size, said = ("X", "C3", 9, "beyond the prediction") if o in failed else \
+                ("D", "C2", 7, "as predicted")
+            ax.plot([x], [result.measured[o][figure]], marker, color=colour, ms=size,
+                    label=None if x else f"measured on the unit: {said}")
         ax.set_xticks([0, 1], ["max", "RMS"])
         ax.set_xlim(-0.5, 1.5)
         ax.set_yscale("log")
+        _plain_log_ticks(ax.yaxis, [v for line in ax.get_lines() for v in line.get_ydata()])
         ax.set_title(f"{o} [{units[o]}]", fontsize=10)
         ax.grid(True, axis="y", which="both", lw=0.3, alpha=0.5)
-    axes[0][0].set_ylabel("error: estimate - stage label")
-    fig.legend(*axes[0][0].get_legend_handles_labels(), loc="lower center", ncol=2, fontsize=8)
-    fig.suptitle(f"check: {result.rows} rows; red: beyond every prediction by more than the check allows",
+    axes[0][0].set_ylabel("|estimate - stage label|")
+    legend = {}  # every output's entries, once: the first output's alone missed a cross or a diamond
+    for ax in axes[0]:
+        legend.update((label, h) for h, label in zip(*ax.get_legend_handles_labels()) if label not in legend)
+    fig.legend(list(legend.values()), list(legend), loc="lower center", ncol=min(len(legend), 3), fontsize=8)
+    fig.suptitle(f"check: {result.rows} rows; a red cross: beyond every prediction by more than the check allows",
                  fontsize=9)
     fig.tight_layout(rect=(0, 0.07, 1, 1))
     return _png(fig)
