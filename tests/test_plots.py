@@ -122,3 +122,41 @@ def test_the_check_figure_tells_a_failed_output_by_its_marker_and_names_both_in_
     assert markers[0] == ["D", "D"] and markers[1] == ["X", "X"]
     said = [t.get_text() for t in fig.legends[0].get_texts()]
     assert "measured on the unit: as predicted" in said and "measured on the unit: beyond the prediction" in said
+
+
+def _fake_identification(worst: float):
+    """What identification_png reads of an identification: 40 rows of 8 elements, the first 3 off the skin, the
+    largest residual ``worst`` at row 35, element 8."""
+    from types import SimpleNamespace
+
+    r = np.random.default_rng(1).normal(0.0, 0.7, (40, 8))
+    r[34, 7] = worst
+    poses = np.zeros((40, 5))
+    poses[3:, 2] = -0.5
+    poses[:3, 2] = 0.2
+    names = [f"magnet offset from the elements' centre {a} [mm]" for a in "xyz"]
+    names += [f"e{k} sensitivity [x drawing]" for k in range(1, 9)]
+
+    def derived(cov=None, theta=None):
+        return {n: (0.0 if "offset" in n else 1.0, 0.2 if cov is not None else 0.01) for n in names}
+
+    return SimpleNamespace(standardized_residuals=r, reduced_chi2=1.0, derived=derived,
+                           space=SimpleNamespace(prior_sd=np.ones(11), size=11), problem=SimpleNamespace(poses=poses))
+
+
+def test_the_identify_figure_keeps_its_legends_off_the_data_and_says_the_offsets_frame(figures):
+    """fitgen identify --plot: the residuals' legend sat in the upper right corner, over the line at 3 where a row
+    standing out is drawn (one at 3.2 near the end of the capture hid behind it), and the sensitivities' legend over
+    the prior's bars; the offset panel did not say the frame its offsets are in (the elements' own, since identify
+    reads them there) nor the sensitivity axis its unit."""
+    plots.identification_png(_fake_identification(3.2))
+    fig = figures[0]
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    a, b, c = fig.axes
+    for ax in (a, b):
+        legend, area = ax.get_legend().get_window_extent(renderer), ax.get_window_extent(renderer)
+        assert not legend.overlaps(area), ax.get_title()
+    assert "own frame" in c.get_title() and c.get_ylabel() == "offset [mm]"
+    assert b.get_ylabel() == "sensitivity [x the drawing's]"
+    assert _inside(fig, a.get_legend()) and _inside(fig, b.get_legend())

@@ -219,7 +219,7 @@ def identification_png(ident, truth: dict | None = None) -> bytes:
     n, N = r.shape
     post = ident.derived()
     prior = ident.derived(np.diag(ident.space.prior_sd ** 2), np.zeros(ident.space.size))
-    fig, (a, b, c) = plt.subplots(1, 3, figsize=(13, 4.2), gridspec_kw={"width_ratios": [2.4, 1.6, 1]})
+    fig, (a, b, c) = plt.subplots(1, 3, figsize=(13, 4.8), gridspec_kw={"width_ratios": [2.4, 1.6, 1]})
     rows = np.arange(1, n + 1)
     for i in np.nonzero(off_skin(ident.problem.poses))[0]:
         a.axvspan(i + 0.5, i + 1.5, color="0.9", lw=0)
@@ -230,7 +230,8 @@ def identification_png(ident, truth: dict | None = None) -> bytes:
     a.set_xlabel("row of the capture (grey: off the skin)")
     a.set_ylabel("residual / its standard deviation")
     a.set_title(f"residuals: reduced chi-square {ident.reduced_chi2:.2f}", fontsize=10)
-    a.legend(fontsize=7, ncol=4, loc="upper right")
+    # the legends below the panels: inside, they covered the corner where a row standing out past 3 is drawn
+    a.legend(fontsize=7, ncol=N, loc="upper center", bbox_to_anchor=(0.5, -0.14), handletextpad=0.1, markerscale=2)
 
     def panel(ax, names, labels, title, unit):
         x = np.arange(len(names))
@@ -248,9 +249,11 @@ def identification_png(ident, truth: dict | None = None) -> bytes:
 
     sens = [k for k in post if "sensitivity" in k]
     offs = [k for k in post if "offset" in k]
-    panel(b, sens, [k.split()[0] for k in sens], "element sensitivity (gain x polarisation)", "x the drawing's")
-    b.legend(fontsize=7, loc="best")
-    panel(c, offs, [k.split()[-2] for k in offs], "magnet offset from\nthe elements' centre", "mm")
+    panel(b, sens, [k.split()[0] for k in sens], "element sensitivity (gain x polarisation)",
+          "sensitivity [x the drawing's]")
+    b.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.08))
+    panel(c, offs, [k.split()[-2] for k in offs], "magnet offset from the elements'\ncentre, in their own frame",
+          "offset [mm]")
     fig.tight_layout()
     return _png(fig)
 
