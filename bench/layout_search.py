@@ -117,7 +117,8 @@ def floor_row(name: str, f: dict) -> list[str]:
 def plot(floors: dict, held: np.ndarray, folder: Path) -> Path:
     """Left: the thx bound against dz (the press is what the floor depends on most); right: the distribution of
     the unbiased estimator's noisy tilt maximum over the trials, against the target."""
-    from fitgen.app.plots import _plt, _save
+    from fitgen.app.plots import _plt, _png
+    from fitgen.base.fileio import write_in_folder
 
     plt = _plt()
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.6))
@@ -141,7 +142,7 @@ def plot(floors: dict, held: np.ndarray, folder: Path) -> Path:
     ax2.grid(alpha=0.3)
     ax2.legend(loc="lower right")
     fig.tight_layout()
-    return _save(fig, folder / "layouts-tilt-floor.png")
+    return write_in_folder(folder, "layouts-tilt-floor.png", _png(fig))
 
 
 def main() -> None:

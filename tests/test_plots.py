@@ -160,3 +160,17 @@ def test_the_identify_figure_keeps_its_legends_off_the_data_and_says_the_offsets
     assert "own frame" in c.get_title() and c.get_ylabel() == "offset [mm]"
     assert b.get_ylabel() == "sensitivity [x the drawing's]"
     assert _inside(fig, a.get_legend()) and _inside(fig, b.get_legend())
+
+
+def test_bench_layout_search_draws_its_figure(tmp_path):
+    """bench/layout_search.py --plot (docs/layouts.md's figure) imported plots._save, which a refactor had
+    removed: the run ended in an ImportError after its table, and the committed figure could not be drawn again."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.run([sys.executable, str(root / "bench" / "layout_search.py"), "--no-search", "--plot",
+                           str(tmp_path)], capture_output=True, text=True, cwd=root, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "layouts-tilt-floor.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
