@@ -189,16 +189,18 @@ def _plot(fig, folder: Path) -> None:
 
     f_mv = [1e3 * f for f in FLICKER]
     p, (c, a, b) = plt.subplots(1, 3, figsize=(13, 3.8))
+    # `told` is 16 for every unit at the two higher floors: drawn dashed, hollow and larger over 16's line, or it
+    # hid it
+    style = {16: dict(marker="o"), 128: dict(marker="s"), TOLD: dict(marker="^", ls="--", mfc="none", ms=10)}
     for s in SAMPLES:
         name = f"{s} samples per row" if s != TOLD else "as tactile-host noise tells"
-        c.plot(f_mv, [fig[(f, s)][2] for f in FLICKER], "o-", label=name)
-        a.plot(f_mv, [fig[(f, s)][1] for f in FLICKER], "o-", label=name)
-        b.plot(f_mv, [fig[(f, s)][0] for f in FLICKER], "o-", label=name)
-    c.axhline(LIMIT_MM, color="k", ls="--", lw=0.7)
+        for ax, k in ((c, 2), (a, 1), (b, 0)):
+            ax.plot(f_mv, [fig[(f, s)][k] for f in FLICKER], label=name, **style.get(s, {}))
+    c.axhline(LIMIT_MM, color="k", ls=":", lw=0.9, label=f"the line: {LIMIT_MM:g} mm")
     c.set_ylabel("magnet's height: |error| [mm], median unit")
-    a.axhline(CHI2_LIMIT, color="k", ls="--", lw=0.7)
+    a.axhline(CHI2_LIMIT, color="k", ls=":", lw=0.9, label=f"identify refuses above {CHI2_LIMIT:g}")
     a.set_ylabel("reduced chi-square, median unit")
-    b.axhline(1.0, color="k", ls="--", lw=0.7)
+    b.axhline(1.0, color="k", ls=":", lw=0.9, label="1: the standard errors right")
     b.set_ylabel("error / standard error, rms")
     for ax in (c, a, b):
         ax.set_xlabel("flicker floor [mV] (white noise: 0.5 per sample)")
