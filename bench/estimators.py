@@ -623,6 +623,8 @@ def plot(layouts: list[Layout], folder: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from fitgen.app.plots import _plain_log_ticks
+
     styles = {"ours": ("o", "C0", "ours (stepwise, AIC/BIC/caps)"),
               "harmonics": ("*", "C5", "ours, harmonics family (AIC/BIC/caps)"),
               "refine": ("P", "C6", "ours, harmonics + refinement steps"), "lasso": ("s", "C1", "LassoLarsIC (+ relaxed)"),
@@ -661,14 +663,17 @@ def plot(layouts: list[Layout], folder: Path) -> Path:
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_ylim(top=top)
+            _plain_log_ticks(ax.yaxis, ax.get_ylim())  # 6, not 6 x 10^0; 1-2-3-5 over more than a decade
             # room on the right for the labels of the costliest points
             ax.set_xlim(right=4 * max(r.instructions for r, _ in pts))
             ax.set_xlabel("instructions per estimate (float C, x86-64, callgrind)")
             ax.set_ylabel(f"worst RMS error with noise [{unit}]")
             ax.set_title(f"{L.name} {TRANSFER}: worst of {'dx, dy, dz' if row == 0 else 'thx, thy'}")
             ax.grid(True, which="both", alpha=0.3)
-            ax.legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
+    # one legend below the panels: in each, it covered the costliest points and their labels (MLP 64-64)
+    handles = {label: h for ax in axes.flat for h, label in zip(*ax.get_legend_handles_labels())}
+    fig.legend(list(handles.values()), list(handles), loc="lower center", ncol=3, fontsize=8)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "estimators-front.png"
     fig.savefig(path, dpi=110)

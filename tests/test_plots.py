@@ -174,3 +174,60 @@ def test_bench_layout_search_draws_its_figure(tmp_path):
                            str(tmp_path)], capture_output=True, text=True, cwd=root, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "layouts-tilt-floor.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bench_estimators_front_keeps_its_legend_off_the_points_and_its_ticks_plain(tmp_path, monkeypatch):
+    """bench/estimators.py --plot (docs/estimators.md's figure): each panel's legend sat in its upper right corner,
+    over the costliest points and their labels (MLP 64-64 on `paper`), and the tilt panel's ticks read 6 x 10^0."""
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    import matplotlib.figure
+
+    pytest.importorskip("sklearn")
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "bench"))
+    import estimators
+
+    drawn = []
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: drawn.append(fig))
+
+    def result(name, family, cost, d, th):
+        return SimpleNamespace(name=name, family=family, instructions=cost, worst_d=d, worst_th=th, evaluations=None)
+
+    layout = SimpleNamespace(name="paper", floor_rms=np.array([0.008, 0.008, 0.009, 0.9, 0.9]),
+                             results=[result("ours, BIC", "ours", 400, 0.08, 2.9),
+                                      result("mlp 64-64 tanh", "mlp", 30000, 0.13, 1.6),
+                                      result("abess", "abess", 1200, 5.8, 7000.0)])
+    estimators.plot([layout], tmp_path)
+    fig = drawn[0]
+    fig.canvas.draw()
+    assert all(ax.get_legend() is None for ax in fig.axes) and len(fig.legends) == 1
+    shown = {t.get_text() for ax in fig.axes for t in ax.yaxis.get_ticklabels() + ax.yaxis.get_ticklabels(minor=True)}
+    assert not any("times" in t or "^" in t for t in shown) and "1" in shown, shown
+
+
+def test_bench_noise_averaging_shows_the_line_it_draws_over_and_names_its_reference_lines(tmp_path, monkeypatch):
+    """bench/noise_averaging.py --plot (docs/calibration.md's figure): `told` is 16 samples for every unit at the two
+    higher flicker floors, and its line, drawn last in the same style, hid 16's there; the dashed lines (the 0.03 mm
+    line, identify's refusal at 3, 1) were named nowhere."""
+    from pathlib import Path
+
+    import matplotlib.figure
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "bench"))
+    import noise_averaging as na
+
+    drawn = []
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: drawn.append(fig))
+    # docs/calibration.md's table: (error / standard error, reduced chi-square, offset z) per floor and samples
+    table = {16: [(1.04, 0.96, 0.0193), (0.97, 1.0, 0.0194), (1.06, 1.09, 0.0194), (1.09, 1.38, 0.0184)],
+             128: [(0.83, 0.99, 0.0134), (1.19, 1.09, 0.0263), (1.11, 1.5, 0.0233), (1.63, 2.71, 0.039)],
+             na.TOLD: [(1.0, 1.05, 0.0152), (0.99, 1.07, 0.0185), (1.06, 1.09, 0.0194), (1.09, 1.38, 0.0184)]}
+    na._plot({(f, s): table[s][i] for s in table for i, f in enumerate(na.FLICKER)}, tmp_path)
+    for ax in drawn[0].axes:
+        lines = {line.get_label(): line for line in ax.get_lines()}
+        sixteen, told = lines["16 samples per row"], lines["as tactile-host noise tells"]
+        assert (told.get_marker(), told.get_linestyle()) != (sixteen.get_marker(), sixteen.get_linestyle())
+        assert told.get_markerfacecolor() == "none"  # 16's marker seen through it
+        said = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert len(said) == 4, said  # the three runs and the reference line
