@@ -218,41 +218,47 @@ def main() -> None:
           f"update in a press): **{'PASS' if ok and stats['both']['updates_in_press'] == 0 else 'FAIL'}**")
     unit_runs = rest_test(sensor, model, cmap, tin, results)["unit 7's own equations, unit 7"]
     if args.plot:
-        import matplotlib
+        log(f"plot: {plot(results, unit_runs, outs, args.plot)}")
+    log("done")
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
 
-        fig, axes = plt.subplots(3, 1, figsize=(10, 8.5), sharex=True)
-        for ax, j, unit in ((axes[0], 2, "mm"), (axes[1], 3, "deg")):
-            for f, c in (("tare only", "C3"), ("both", "C0"), ("noise only", "0.6")):
-                r = results[f]
-                ax.plot(r["t"], r["out"][:, j], lw=0.6, color=c, label=f)
-            for a, b in PRESSES:
-                ax.axvspan(a, b, color="0.9", zorder=0)
-            ax.set_ylabel(f"{outs[j]} [{unit}]")
-            ax.set_ylim(-0.3 if j == 2 else -1.5, 0.3 if j == 2 else 1.5)
-        for u in results["both"]["updates"]:
-            axes[0].axvline(u, color="C0", lw=0.3, alpha=0.3)
-        axes[0].legend(loc="upper right", fontsize=8)
-        ax = axes[2]  # a unit's own equations: auto-zero testing every sample never ran; the window's mean does
-        for f, c, label in (("before", "C3", "auto-zero, every sample tested (before)"),
-                            ("now", "C0", "auto-zero, the window's mean tested (now)")):
-            r = unit_runs[f]
-            ax.plot(r["t"], r["out"][:, 4], lw=0.4, color=c, label=f"{label}: {len(r['updates'])} updates")
+def plot(results: dict, unit_runs: dict, outs, folder) -> Path:
+    """drift.png in ``folder``: dz and thx at rest per flow, and the unit's thy before and now."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 1, figsize=(10, 8.5), sharex=True)
+    for ax, j, unit in ((axes[0], 2, "mm"), (axes[1], 3, "deg")):
+        # "both" last and thin over a wider "noise only": drawn after it and as wide, noise only hid it whole
+        for f, c, w in (("tare only", "C3", 0.6), ("noise only", "0.6", 1.6), ("both", "C0", 0.4)):
+            r = results[f]
+            ax.plot(r["t"], r["out"][:, j], lw=w, color=c, label=f)
         for a, b in PRESSES:
             ax.axvspan(a, b, color="0.9", zorder=0)
-        ax.set_ylabel("unit 7: thy [deg]")
-        ax.set_ylim(-6, 6)
-        ax.legend(loc="upper left", fontsize=8)
-        axes[2].set_xlabel("time [s] (presses shaded, clipped; thin lines: auto-zero updates)")
-        fig.suptitle("Estimates at rest under a 5 degC ramp and creep\ntop two: tare only against auto-zero + "
-                     "compensation; bottom: a unit's own equations, auto-zero alone", fontsize=11)
-        fig.tight_layout()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=110, metadata={"Software": None})
-        log(f"plot: {write_in_folder(args.plot, 'drift.png', buf.getvalue())}")
-    log("done")
+        ax.set_ylabel(f"{outs[j]} [{unit}]")
+        ax.set_ylim(-0.3 if j == 2 else -1.5, 0.3 if j == 2 else 1.5)
+    for u in results["both"]["updates"]:
+        axes[0].axvline(u, color="C0", lw=0.3, alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    ax = axes[2]  # a unit's own equations: auto-zero testing every sample never ran; the window's mean does
+    for f, c, label in (("before", "C3", "auto-zero, every sample tested (before)"),
+                        ("now", "C0", "auto-zero, the window's mean tested (now)")):
+        r = unit_runs[f]
+        ax.plot(r["t"], r["out"][:, 4], lw=0.4, color=c, label=f"{label}: {len(r['updates'])} updates")
+    for a, b in PRESSES:
+        ax.axvspan(a, b, color="0.9", zorder=0)
+    ax.set_ylabel("unit 7: thy [deg]")
+    ax.set_ylim(-6, 6)
+    ax.legend(loc="upper left", fontsize=8)
+    axes[2].set_xlabel("time [s] (presses shaded, clipped; thin lines: auto-zero updates)")
+    fig.suptitle("Estimates at rest under a 5 degC ramp and creep\ntop two: tare only against auto-zero + "
+                 "compensation; bottom: a unit's own equations, auto-zero alone", fontsize=11)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, metadata={"Software": None})
+    return write_in_folder(folder, "drift.png", buf.getvalue())
 
 
 def rest_test(sensor, model, cmap, tin, results: dict) -> dict:

@@ -231,3 +231,28 @@ def test_bench_noise_averaging_shows_the_line_it_draws_over_and_names_its_refere
         assert told.get_markerfacecolor() == "none"  # 16's marker seen through it
         said = [t.get_text() for t in ax.get_legend().get_texts()]
         assert len(said) == 4, said  # the three runs and the reference line
+
+
+def test_bench_drift_draws_the_compensated_estimates_where_they_can_be_seen(tmp_path):
+    """bench/drift.py --plot (docs/live.md's figure): "both" (auto-zero and the compensation) was drawn before "noise
+    only" and as wide, and the two agree to within the noise, so the compensated trace, the figure's point, was
+    hidden under the grey one: the legend named a line no reader could find."""
+    from pathlib import Path
+
+    import matplotlib.figure
+
+    root = Path(__file__).resolve().parents[1]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.syspath_prepend(str(root / "bench"))
+        import drift
+
+        drawn = []
+        mp.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: drawn.append(fig))
+        t = np.linspace(0.0, 300.0, 50)
+        run = {"t": t, "out": np.zeros((50, 5)), "updates": [10.0]}
+        drift.plot({f: run for f in ("tare only", "both", "noise only")}, {"before": run, "now": run},
+                   ("dx", "dy", "dz", "thx", "thy"), tmp_path)
+    for ax in drawn[0].axes[:2]:
+        lines = [line for line in ax.get_lines() if line.get_label() in ("both", "noise only")]
+        assert [line.get_label() for line in lines] == ["noise only", "both"]  # both drawn over noise only
+        assert lines[1].get_linewidth() < lines[0].get_linewidth()  # and noise only's edges seen beside it
