@@ -742,7 +742,9 @@ def plot(per: dict, outdir: Path) -> list[Path]:
         for i, wf in enumerate(names):
             ss = ok_units(per, wf)
             v = np.array([per[wf][s]["noisy_max"][j] for s in ss])
-            if not len(v) or np.isnan(v[0]):
+            if not len(v) or np.isnan(v[0]):  # said, or the empty column reads as a lost run
+                ax.text(i, 0.5, "not\nestimated", transform=ax.get_xaxis_transform(), ha="center", va="center",
+                        fontsize=7, color="0.4")
                 continue
             ax.scatter(i + rng.uniform(-0.15, 0.15, len(v)), v, s=12, alpha=0.6, color="C0")
             ax.plot([i - 0.3, i + 0.3], [np.median(v)] * 2, color="C3", lw=2)
@@ -770,25 +772,31 @@ def plot(per: dict, outdir: Path) -> list[Path]:
                 if "sensitivity" in n:
                     a1.errorbar(t, v, yerr=se, fmt="o", ms=3, color="C0", alpha=0.6)
                 else:
-                    a2.errorbar(t, v, yerr=se, fmt="o", ms=3, color=f"C{k}", alpha=0.7,
-                                label="xyz"[k] if s == ss[0] else None)
+                    a2.errorbar(t, v, yerr=se, fmt="os^"[k], ms=3, color=f"C{k}", alpha=0.7,
+                                label="xyz"[k] if s == ss[0] else None)  # a marker each: not by colour alone
         E = np.array([derived_errors(per[head][s])[0] for s in ss])
         S = np.array([derived_errors(per[head][s])[1] for s in ss])
         zs = (E / S).ravel()
         for a in (a1, a2):
             lo, hi = min(a.get_xlim()[0], a.get_ylim()[0]), max(a.get_xlim()[1], a.get_ylim()[1])
             a.plot([lo, hi], [lo, hi], color="k", lw=0.8)
-        a1.set_xlabel("drawn sensitivity (gain x polarisation) [x drawing]")
-        a1.set_ylabel("identified (+- 1 sigma)")
-        a2.set_xlabel("drawn offset of the magnet from the elements' centre [mm]")
-        a2.set_ylabel("identified (+- 1 sigma)")
+        # "the unit's", not "drawn": beside "the drawing's" (the design), a unit drawn at random read as the design
+        a1.set_xlabel("the unit's sensitivity (gain x polarisation) [x the drawing's]")
+        a1.set_ylabel("identified, +- 1 standard error [x the drawing's]")
+        a1.set_title("element sensitivities")
+        a2.set_xlabel("the unit's offset of the magnet from the elements' centre [mm]")
+        a2.set_ylabel("identified, +- 1 standard error [mm]")
+        a2.set_title("the magnet's offset, in the elements' frame")
         a2.legend()
-        a3.hist(zs, bins=np.linspace(-4, 4, 33), density=True, alpha=0.7)
+        a3.hist(zs, bins=np.linspace(-4, 4, 33), density=True, alpha=0.7, label="sensitivities and offsets")
         x = np.linspace(-4, 4, 200)
-        a3.plot(x, np.exp(-x * x / 2) / np.sqrt(2 * np.pi), color="k", lw=1)
-        a3.set_xlabel("(identified - drawn) / standard error")
-        a3.set_title(f"coverage of 1 sigma: {np.mean(np.abs(zs) <= 1):.0%}")
-        a1.set_title(f"{head}: {len(ss)} units")
+        a3.plot(x, np.exp(-x * x / 2) / np.sqrt(2 * np.pi), color="k", lw=1, label="standard normal")
+        a3.set_xlabel("(identified - the unit's) / standard error")
+        a3.set_ylabel("density")
+        a3.set_title(f"within 1 standard error: {np.mean(np.abs(zs) <= 1):.0%} ({len(zs)} values)")
+        a3.legend(fontsize=8, loc="upper left")
+        fig.suptitle(f"What identify recovers, {head}: {len(ss)} random units within the drawing's tolerances "
+                     "(simulated)")
     fig.tight_layout()
     p2 = outdir / "units-identified.png"
     fig.savefig(p2, dpi=90)

@@ -256,3 +256,36 @@ def test_bench_drift_draws_the_compensated_estimates_where_they_can_be_seen(tmp_
         lines = [line for line in ax.get_lines() if line.get_label() in ("both", "noise only")]
         assert [line.get_label() for line in lines] == ["noise only", "both"]  # both drawn over noise only
         assert lines[1].get_linewidth() < lines[0].get_linewidth()  # and noise only's edges seen beside it
+
+
+def test_bench_units_figures_name_the_units_truth_and_say_what_is_not_estimated(tmp_path):
+    """bench/units.py --plot (docs/calibration.md's two figures): the identified figure's axes read "drawn
+    sensitivity [x drawing]" and "(identified - drawn)", where "drawn" meant a unit drawn at random beside "the
+    drawing", the design (a reader took the one for the other); its y axes had no unit and its offsets x, y and z
+    differed by colour alone; the held-out figure left the tilt of a workflow that estimates none an empty column."""
+    from pathlib import Path
+
+    import matplotlib.figure
+
+    root = Path(__file__).resolve().parents[1]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.syspath_prepend(str(root / "bench"))
+        import units
+
+        drawn = []
+        mp.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: drawn.append(fig))
+        names = [f"magnet offset from the elements' centre {a} [mm]" for a in "xyz"]
+        names += [f"e{k} sensitivity [x drawing]" for k in range(1, 9)]
+        head = f"twin, {units.HEAD[0]} poses, {units.HEAD[1]:g} mm"
+        twin = {s: {"noisy_max": np.full(5, 0.04), "derived": {n: (1.0 + 0.01 * s, 0.01) for n in names},
+                    "derived_truth": {n: 1.0 for n in names}} for s in (1, 2)}
+        three = {s: {"noisy_max": np.array([0.1, 0.1, 0.1, np.nan, np.nan])} for s in (1, 2)}
+        units.plot({head: twin, "direct, 40 three-axis rows": three}, tmp_path)
+    heldout, identified = drawn
+    said = [t.get_text() for t in heldout.axes[3].texts]
+    assert said == ["not\nestimated"], said
+    a1, a2, a3 = identified.axes
+    assert all("drawn" not in text for text in _texts(identified)), _texts(identified)
+    assert a1.get_ylabel().endswith("[x the drawing's]") and a2.get_ylabel().endswith("[mm]")
+    markers = {c.get_label(): c.lines[0].get_marker() for c in a2.containers}
+    assert len(set(markers.values())) == 3, markers
