@@ -289,3 +289,28 @@ def test_bench_units_figures_name_the_units_truth_and_say_what_is_not_estimated(
     assert a1.get_ylabel().endswith("[x the drawing's]") and a2.get_ylabel().endswith("[mm]")
     markers = {c.get_label(): c.lines[0].get_marker() for c in a2.containers}
     assert len(set(markers.values())) == 3, markers
+
+
+def test_bench_stiffening_ticks_the_c_it_measured_and_names_its_line(tmp_path):
+    """bench/stiffening.py --plot (docs/calibration.md's figure): c was ticked every 0.0025 in four decimals
+    (0.0000, 0.0025, ... 0.0200), crowded, where the bench measures 0, 0.005, 0.01 and 0.02; the dashed line was
+    "issue 21's line", which says nothing of what it is."""
+    from pathlib import Path
+
+    import matplotlib.figure
+
+    root = Path(__file__).resolve().parents[1]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.syspath_prepend(str(root / "bench"))
+        import stiffening
+
+        drawn = []
+        mp.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: drawn.append(fig))
+        pts = [(c, 0.02 + c, 0.004 + c / 2) for c in (0.0, 0.005, 0.01, 0.02)]
+        stiffening.plot({"travel": pts, "working": pts}, str(tmp_path))
+    fig = drawn[0]
+    fig.canvas.draw()
+    for ax in fig.axes:
+        assert [t.get_text() for t in ax.get_xticklabels()] == ["0", "0.005", "0.01", "0.02"]
+    said = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert "the acceptance's 0.03 mm (issue 21)" in said, said
