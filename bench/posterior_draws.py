@@ -90,7 +90,7 @@ def unit_row(seed: int) -> tuple[list[str], list[bool]]:
     cap = at(labels)
     chi2 = {k: np.array([np.sum(wh.apply(prob.readings - r) ** 2) for r in R]) for k, R in cap.items()}
     above = {k: v - chi2["map"][0] for k, v in chi2.items()}
-    trace = prob.valid.sum() - ident.dof  # tr(F C): identify's degrees of freedom are the rows' less it
+    trace = prob.usable(space.in_spreads(ident.theta)).sum() - ident.dof  # tr(F C): the readings' count less it
     three = ctx.held_poses.copy()
     three[:, 3:] = 0.0
     dev = {}

@@ -8,9 +8,10 @@ adds J_s J_s^T rig_error^2 to the row's covariance (J_s: the readings' slope by 
 displacement), so each row is whitened by its own covariance. The capture's zero (first contact, set by
 hand) is off by one error common to every row in contact (``zero_error`` mm rms per axis; rows off the skin
 read the rest and do not see it): a rank-3 term J_0 J_0^T zero_error^2 over all rows, whitened through the
-thin SVD of J_0 after the rows' own whitening. The prior: the drawing's tolerances
-(every parameter 0 +- its spread). Work is in units of the prior's spread (z = theta / sd), where the
-prior is the identity; scipy.optimize.least_squares finds the maximum, with Jacobians by central
+thin SVD of J_0 after the rows' own whitening. A reading within a few stage errors of a knee (its field's zero,
+its element's saturation, an ADC rail) weighs nothing, as a clipped one (fitgen.fitting.knees). The prior: the
+drawing's tolerances (every parameter 0 +- its spread). Work is in units of the prior's spread (z = theta / sd),
+where the prior is the identity; scipy.optimize.least_squares finds the maximum, with Jacobians by central
 differences over all parameters at once (one batched evaluation of the field).
 
 The capture's Fisher information F (in z) tells what it determines: along an eigenvector with
@@ -37,6 +38,7 @@ from scipy.optimize import least_squares
 
 from fitgen.base.errors import InputError
 from fitgen.fitting.capturecheck import check_capture, check_contact, check_error, element_noise
+from fitgen.fitting.knees import KNEE_REACH, near_knees
 from fitgen.physics.pose import POSE_NAMES, check_rows, within_box
 from fitgen.physics.sensor import Sensor
 from fitgen.physics.simulate import DEFAULT_RANGES
@@ -62,9 +64,6 @@ PINNABLE = (("where the stage really is (an encoder)", RIG),
             ("every element's radius (the ring's size)", ".radius"),
             ("every element's height", ".height"),
             ("the stage-to-magnet map", "stage."))
-# stage errors (rms) within which a reading predicted past a knee may lie on the line below it: at 5, one in
-# 3.5 million
-KNEE_REACH = 5.0
 _H_THETA = 1e-3  # central-difference step, in prior spreads
 _H_POSE = 1e-4  # mm
 
@@ -95,9 +94,8 @@ class Problem:
     valid: np.ndarray | None = None  # (n, N) False for a clipped reading, which says nothing of the field
     zero_error: float = 0.0  # mm rms per axis, common to the capture's rows in contact (not to other poses)
 
-    def predict(self, z: np.ndarray, poses: np.ndarray | None = None, clipped: bool = True) -> np.ndarray:
-        return self.space.readings(np.atleast_2d(z) * self.space.prior_sd, self.poses if poses is None else poses,
-                                   clipped)
+    def predict(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
+        return self.space.readings(np.atleast_2d(z) * self.space.prior_sd, self.poses if poses is None else poses)
 
     def jacobian(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
         """d readings / d z: (n, N, P), by central differences (one batched evaluation)."""
@@ -107,35 +105,29 @@ class Problem:
         return np.moveaxis((f[:P] - f[P:]) / (2 * _H_THETA), 0, -1)
 
     def pose_slopes(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
-        """d readings / d stage displacement: (n, N, 3); for a reading predicted within KNEE_REACH stage errors
-        of a knee (its element's saturation, an ADC rail), the slope of the line it leaves there."""
+        """d readings / d stage displacement: (n, N, 3)."""
         poses = self.poses if poses is None else poses
-        shifted = np.vstack([poses + sign * _H_POSE * np.eye(5)[a] for a in range(3) for sign in (1.0, -1.0)])
-        js = self._slopes(self.predict(z, shifted)[0], len(poses))
-        # at the knee the slope at the label is 0 on one side, and a stage error of a few micrometres carries the
-        # reading across it: the linearised covariance said the rig moved it by nothing and a good unit read a
-        # reduced chi-square of 25 (an outside review; about a unit in 200). The straight line's slope bounds
-        # how far the rig's error can move such a reading, whichever side it falls on
-        knee = self.predict(z, poses, clipped=False)[0] - self.predict(z, poses)[0]
-        if not knee.any():
-            return js
-        line = self._slopes(self.predict(z, shifted, clipped=False)[0], len(poses))
-        reach = KNEE_REACH * np.hypot(self.rig_error, self.zero_error) * np.sqrt(np.sum(line**2, axis=-1))
-        return np.where((np.abs(knee) <= reach)[..., None], line, js)
-
-    @staticmethod
-    def _slopes(f: np.ndarray, n: int) -> np.ndarray:
-        """Central differences (n, N, 3) from readings at the poses shifted +-_H_POSE along dx, dy, dz (6 n, N)."""
-        f = f.reshape(6, n, -1)
+        shifted = [poses + sign * _H_POSE * np.eye(5)[a] for a in range(3) for sign in (1.0, -1.0)]
+        f = self.predict(z, np.vstack(shifted))[0].reshape(6, len(poses), -1)
         return np.stack([(f[2 * a] - f[2 * a + 1]) / (2 * _H_POSE) for a in range(3)], axis=-1)
+
+    def usable(self, z: np.ndarray) -> np.ndarray:
+        """The readings (n, N) that weigh at z: not clipped, and not within KNEE_REACH stage errors of a knee
+        (fitgen.fitting.knees: across one the rig's error moves a reading as no slope says); without a capture's
+        mask (a design's rows, read nothing yet) every one."""
+        if self.valid is None:
+            return np.ones(self.readings.shape, dtype=bool)
+        reach = KNEE_REACH * np.hypot(self.rig_error, self.zero_error)
+        return self.valid & ~near_knees(self.space, z * self.space.prior_sd, self.readings, self.poses, reach)
 
     def whiteners(self, z: np.ndarray, poses: np.ndarray | None = None, slopes: np.ndarray | None = None) -> np.ndarray:
         """Per row, L^-1 with L L^T = diag(noise^2) + rig_error^2 J_s J_s^T: (n, N, N)."""
         js = self.pose_slopes(z, poses) if slopes is None else slopes
         cov = np.einsum("nia,nja->nij", js, js) * self.rig_error**2 + np.diag(self.noise**2)[None]
-        if poses is None and self.valid is not None and not self.valid.all():
-            # a clipped reading weighs nothing: its variance made a million times the noise's square
-            idx = np.nonzero(~self.valid)
+        usable = self.usable(z) if poses is None else None
+        if usable is not None and not usable.all():
+            # a clipped reading, or one by a knee, weighs nothing: its variance made a million times the noise's square
+            idx = np.nonzero(~usable)
             cov[idx[0], idx[1], idx[1]] += 1e12 * self.noise[idx[1]] ** 2
         L = np.linalg.cholesky(cov)
         eye = np.broadcast_to(np.eye(cov.shape[1]), cov.shape)
@@ -250,8 +242,8 @@ class Identification:
     def standardized_residuals(self) -> np.ndarray:
         """Each reading's residual at the maximum a posteriori, less the zero's shift the rows share (its
         posterior mean), over its own standard deviation (n, N): the reading noise and the rig's error through
-        the reading's slopes; NaN for a clipped reading. Rows whose residuals stand out are rows the physics
-        does not explain (a slip, a knock)."""
+        the reading's slopes; NaN for a clipped reading or one by a knee. Rows whose residuals stand out are rows
+        the physics does not explain (a slip, a knock)."""
         prob, z = self.problem, self.space.in_spreads(self.theta)
         js = prob.pose_slopes(z)
         r = prob.readings - prob.predict(z)[0]
@@ -260,14 +252,14 @@ class Identification:
             x, U = np.einsum("nij,nj->ni", wh.W, r).ravel(), wh.U
             r = r - js @ (prob.zero_error * np.linalg.solve(np.eye(3) + U.T @ U, U.T @ x))
         r = r / np.sqrt(prob.noise**2 + prob.rig_error**2 * np.sum(js**2, axis=-1))
-        return r if prob.valid is None else np.where(prob.valid, r, np.nan)
+        return np.where(prob.usable(z), r, np.nan)
 
     @cached_property
     def row_chi2(self) -> np.ndarray:
         """Each row's share of the residual chi-square, its readings whitened together (n,): a reading off on its
         own, against the others' co-moving with the pose, stands out here where its own residual may not."""
         prob, z = self.problem, self.space.in_spreads(self.theta)
-        r = np.where(prob.valid, prob.readings - prob.predict(z)[0], 0.0)
+        r = np.where(prob.usable(z), prob.readings - prob.predict(z)[0], 0.0)
         chi2 = np.sum(np.einsum("nij,nj->ni", prob.whiteners(z), r) ** 2, axis=1)
         return chi2 / max(float(chi2.sum()), 1e-300)
 
@@ -393,13 +385,13 @@ def _maximum_a_posteriori(prob: Problem, sweeps: int = 3, max_nfev: int = 60, pr
 
 def _chi2(prob: Problem, z: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray]:
     """At ``z``: the residual chi-square, its degrees of freedom, the capture's information F and the posterior
-    covariance (F + I)^-1, in prior spreads. A clipped reading's residual is left out (it weighs nothing in the fit
-    either)."""
-    wh = prob.whitening(z)
-    r = wh.apply(np.where(prob.valid, prob.readings - prob.predict(z)[0], 0.0))
+    covariance (F + I)^-1, in prior spreads. A clipped reading's residual is left out, and one by a knee (neither
+    weighs in the fit either: Problem.usable)."""
+    wh, usable = prob.whitening(z), prob.usable(z)
+    r = wh.apply(np.where(usable, prob.readings - prob.predict(z)[0], 0.0))
     F = prob.information(z, whitening=wh)
     post = np.linalg.inv(F + np.eye(prob.space.size))
-    return float(r.ravel() @ r.ravel()), max(float(prob.valid.sum()) - float(np.trace(F @ post)), 1.0), F, post
+    return float(r.ravel() @ r.ravel()), max(float(usable.sum()) - float(np.trace(F @ post)), 1.0), F, post
 
 
 def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *, rig_error: float = RIG_ERROR,
