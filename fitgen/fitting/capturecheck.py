@@ -90,6 +90,9 @@ def check_capture(space, readings: np.ndarray, poses: np.ndarray) -> np.ndarray:
             raise InputError(f"{np.mean(~valid):.0%} of the readings are saturated at the ADC's rails (row {i + 1}: "
                              f"v{k + 1} = {readings[i, k]:.6g} V, range {g.adc_min:g}..{g.adc_max:g} V): capture within "
                              "the linear range (fitgen schedule --limits), or lower the amplifier's gain")
+    elif d.raw.adc_bits > 0:  # a quantised raw transfer's ADC clips at 0 and its full scale: those say nothing
+        lsb = d.raw.full_scale / (2**d.raw.adc_bits - 1)
+        valid = (readings < d.raw.full_scale - 2 * lsb) & (readings > 2 * lsb)
     return valid
 
 

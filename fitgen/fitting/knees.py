@@ -39,8 +39,8 @@ def near_knees(space, theta: np.ndarray, readings: np.ndarray, poses: np.ndarray
     line = space.readings(th, poses, clipped=False)[0]
     p = space._parts(th)
     d = space.drawing
-    if d.transfer == "raw":
-        knees = [p["off"][0]]  # the reading at the field's zero
+    if d.transfer == "raw":  # the reading at the field's zero; quantised, the ADC's rails
+        knees = [p["off"][0]] + ([d.raw.full_scale, 0.0] if d.raw.adc_bits > 0 else [])
     else:
         g = d.gmr
         top = g.offset + volts_per_mt(g) * (p["gain"][0] * g.saturation + p["off"][0])

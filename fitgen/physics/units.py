@@ -165,8 +165,9 @@ class UnitSpace:
 
     def readings(self, thetas: np.ndarray, poses, clipped: bool = True) -> np.ndarray:
         """Noise-free readings (K, n, N) of K units (rows of ``thetas``) at n poses, in the transfer's units,
-        without the ADC's quantisation (a gmr reading is clipped to the ADC's range); ``clipped=False``: the
-        gmr reading as if neither the element saturated nor the ADC had rails (the line its slope follows)."""
+        without the ADC's quantisation (a gmr reading, or a quantised raw one, is clipped to the ADC's range);
+        ``clipped=False``: the reading as if neither the element saturated nor the ADC had rails (the line its
+        slope follows)."""
         d = self.drawing
         stage = as_poses(poses)[:, :3]  # where the stage is, a lifted indenter's rows too: the field it carries
         poses = contact_poses(as_poses(poses))
@@ -186,8 +187,9 @@ class UnitSpace:
         if self.moving_field:
             b = b + np.einsum("kmi,kij,nj->knm", p["axes"], p["field"], stage)
         mag = np.abs(b)
-        if d.transfer == "raw":
-            return p["gain"][:, None, :] * mag + p["off"][:, None, :]
+        if d.transfer == "raw":  # quantised, its ADC clips at 0 and the full scale (fitgen.physics.transfer)
+            out = p["gain"][:, None, :] * mag + p["off"][:, None, :]
+            return np.clip(out, 0.0, d.raw.full_scale) if clipped and d.raw.adc_bits > 0 else out
         g = d.gmr
         field = p["gain"][:, None, :] * (np.minimum(mag, g.saturation) if clipped else mag) + p["off"][:, None, :]
         out = g.offset + volts_per_mt(g) * field
