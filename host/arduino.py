@@ -242,9 +242,9 @@ def _alternatives(precision: str, style: str):
         yield "float", "unrolled", "--precision float"
 
 
-def example_elf(build_path: str | Path, sketch: str = EXAMPLE) -> Path:
-    """The ELF arduino-builder links ``sketch`` (the example by default) into, in its build path."""
-    return sketch_elf(build_path, sketch)
+def example_elf(build_path: str | Path) -> Path:
+    """The ELF arduino-builder links the example into, in its build path."""
+    return sketch_elf(build_path, EXAMPLE)
 
 
 def arduino_build(model: Model, cmap: ChannelMap, folder: str | Path, *, precision: str = "float",

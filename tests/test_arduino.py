@@ -13,7 +13,7 @@ import pytest
 
 from fitgen.base.errors import InputError
 from host.arduino import build_example, example_elf, library_properties, render_arduino
-from host.sketchbuild import HARDWARE, build_sketch
+from host.sketchbuild import HARDWARE, build_sketch, sketch_elf
 from host.boards import BOARDS
 from host.channelmap import parse_spec
 
@@ -143,7 +143,7 @@ def test_another_librarys_header_of_a_common_name_is_its_own_in_a_sketch_beside_
     sketch.write_text("#include <TactilePose.h>\n#include <adc.h>\nvoid setup() { Serial.begin(OTHER_ADC_CHANNELS); "
                       "}\nvoid loop() {}\n")
     size = build_sketch(sketch, {"TactilePose": lib, "OtherAdc": other}, tmp_path / "build")
-    assert size.flash > 0 and example_elf(tmp_path / "build", "Both").is_file()
+    assert size.flash > 0 and sketch_elf(tmp_path / "build", "Both").is_file()
 
 
 def test_fixed_point_builds_for_the_uno(model_path, tmp_path):

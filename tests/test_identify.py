@@ -215,7 +215,9 @@ def test_a_reading_the_rig_can_carry_across_a_knee_weighs_nothing(preset, seed):
     drawing = load_sensor(preset).with_transfer("gmr")
     poses = schedule(drawing, 40, noise=drawing.noise / np.sqrt(SAMPLES))[0]
     space, theta, true, ident = drawn_to_the_model(drawing, poses, seed, 0.01, 0.02, SAMPLES)
-    near = near_knees(space, theta, ident.problem.readings, poses, 2 * np.hypot(0.01, 0.02))
+    prob, z = ident.problem, space.in_spreads(theta)
+    line, slopes = prob.predict(z, clipped=False)[0], prob.pose_slopes(z, clipped=False)
+    near = near_knees(space, theta, prob.readings, line, slopes, 2 * np.hypot(0.01, 0.02))
     assert near[:, 6].any()  # what the test means: element 7 within two stage errors of a knee
     assert ident.reduced_chi2 < 1.3 and ident.outlying_rows() == [] and not ident.outside_tolerances()
     truth = derived_at(space, theta)

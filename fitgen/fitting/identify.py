@@ -94,8 +94,9 @@ class Problem:
     valid: np.ndarray | None = None  # (n, N) False for a clipped reading, which says nothing of the field
     zero_error: float = 0.0  # mm rms per axis, common to the capture's rows in contact (not to other poses)
 
-    def predict(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
-        return self.space.readings(np.atleast_2d(z) * self.space.prior_sd, self.poses if poses is None else poses)
+    def predict(self, z: np.ndarray, poses: np.ndarray | None = None, clipped: bool = True) -> np.ndarray:
+        return self.space.readings(np.atleast_2d(z) * self.space.prior_sd, self.poses if poses is None else poses,
+                                   clipped)
 
     def jacobian(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
         """d readings / d z: (n, N, P), by central differences (one batched evaluation)."""
@@ -104,11 +105,11 @@ class Problem:
         f = self.predict(np.vstack([z + steps, z - steps]), poses)
         return np.moveaxis((f[:P] - f[P:]) / (2 * _H_THETA), 0, -1)
 
-    def pose_slopes(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
-        """d readings / d stage displacement: (n, N, 3)."""
+    def pose_slopes(self, z: np.ndarray, poses: np.ndarray | None = None, clipped: bool = True) -> np.ndarray:
+        """d readings / d stage displacement: (n, N, 3); ``clipped=False``: of the readings' lines (UnitSpace)."""
         poses = self.poses if poses is None else poses
         shifted = [poses + sign * _H_POSE * np.eye(5)[a] for a in range(3) for sign in (1.0, -1.0)]
-        f = self.predict(z, np.vstack(shifted))[0].reshape(6, len(poses), -1)
+        f = self.predict(z, np.vstack(shifted), clipped)[0].reshape(6, len(poses), -1)
         return np.stack([(f[2 * a] - f[2 * a + 1]) / (2 * _H_POSE) for a in range(3)], axis=-1)
 
     def usable(self, z: np.ndarray) -> np.ndarray:
@@ -118,7 +119,10 @@ class Problem:
         if self.valid is None:
             return np.ones(self.readings.shape, dtype=bool)
         reach = KNEE_REACH * np.hypot(self.rig_error, self.zero_error)
-        return self.valid & ~near_knees(self.space, z * self.space.prior_sd, self.readings, self.poses, reach)
+        if reach <= 0:
+            return self.valid
+        line, slopes = self.predict(z, clipped=False)[0], self.pose_slopes(z, clipped=False)
+        return self.valid & ~near_knees(self.space, z * self.space.prior_sd, self.readings, line, slopes, reach)
 
     def whiteners(self, z: np.ndarray, poses: np.ndarray | None = None, slopes: np.ndarray | None = None) -> np.ndarray:
         """Per row, L^-1 with L L^T = diag(noise^2) + rig_error^2 J_s J_s^T: (n, N, N)."""

@@ -20,24 +20,21 @@ from fitgen.physics.transfer import volts_per_mt
 # stage errors (rms) within which a reading may cross a knee: at 5, one in 3.5 million
 KNEE_REACH = 5.0
 FOLD_GUARD = 3.0  # how many times the reach the line at a label may lie from its field's zero, its reading within it
-_H_POSE = 1e-4  # mm
 
 
-def near_knees(space, theta: np.ndarray, readings: np.ndarray, poses: np.ndarray, reach: float) -> np.ndarray:
+def near_knees(space, theta: np.ndarray, readings: np.ndarray, line: np.ndarray, slopes: np.ndarray,
+               reach: float) -> np.ndarray:
     """The readings (n, N) of a unit of ``space`` with parameters ``theta`` (physical units) that a stage's error
-    of ``reach`` mm (KNEE_REACH of its rms, rig and zero together) could carry across a knee: the reading's line
-    (unsaturated and unclipped) at the label lies within the line's slope times ``reach`` of its field's zero, its
-    element's saturation or an ADC rail, or the reading read lies that near its field's zero and the line within
-    FOLD_GUARD times that (there the line folds, and a reading the rig carried across reads on the side the label's
-    does: the fit's unit, until it has converged, may put the fold a little elsewhere)."""
+    of ``reach`` mm (KNEE_REACH of its rms, rig and zero together) could carry across a knee, given each reading's
+    ``line`` at its label (n, N: unsaturated and unclipped) and the line's ``slopes`` by the stage (n, N, 3): the
+    line lies within its slope times ``reach`` of its field's zero, its element's saturation or an ADC rail, or the
+    reading read lies that near its field's zero and the line within FOLD_GUARD times that (there the line folds,
+    and a reading the rig carried across reads on the side the label's does: the fit's unit, until it has
+    converged, may put the fold a little elsewhere)."""
     if reach <= 0:
         return np.zeros(readings.shape, dtype=bool)
-    th = np.asarray(theta, dtype=float)[None]
-    shifted = np.vstack([poses + sign * _H_POSE * np.eye(5)[a] for a in range(3) for sign in (1.0, -1.0)])
-    f = space.readings(th, shifted, clipped=False)[0].reshape(3, 2, len(poses), -1)
-    band = reach * np.sqrt(np.sum(((f[:, 0] - f[:, 1]) / (2 * _H_POSE)) ** 2, axis=0))
-    line = space.readings(th, poses, clipped=False)[0]
-    p = space._parts(th)
+    band = reach * np.sqrt(np.sum(slopes**2, axis=-1))
+    p = space._parts(np.asarray(theta, dtype=float)[None])
     d = space.drawing
     if d.transfer == "raw":  # the reading at the field's zero; quantised, the ADC's rails
         knees = [p["off"][0]] + ([d.raw.full_scale, 0.0] if d.raw.adc_bits > 0 else [])
