@@ -56,12 +56,14 @@ def rto_thetas(ident, k: int, seed: int) -> np.ndarray:
     the MAP's."""
     prob, space = ident.problem, ident.space
     P, z0 = space.size, space.in_spreads(ident.theta)
-    wh = prob.whitening(z0)
+    js = prob.pose_slopes(z0)
+    wh, first = prob.whitening(z0, slopes=js), prob.residuals(z0, js) - (prob.readings - prob.predict(z0)[0])
     rng = np.random.default_rng([RTO_SEED, seed])
     out = []
     for _ in range(k):
         eps, xi = rng.standard_normal(prob.readings.size), rng.standard_normal(P) * space.free
-        z = least_squares(lambda z: np.concatenate([wh.apply(prob.readings - prob.predict(z)[0]) + eps, z - xi]), z0,
+        z = least_squares(lambda z: np.concatenate([wh.apply(prob.readings - prob.predict(z)[0] + first) + eps,
+                                                    z - xi]), z0,
                           jac=lambda z: np.vstack([-wh.apply(prob.jacobian(z)), np.eye(P)]), method="lm",
                           max_nfev=RTO_NFEV).x
         out.append(z * space.prior_sd)
