@@ -247,8 +247,9 @@ def test_the_zero_s_error_is_read_about_its_estimate_not_about_none():
 
 def test_rows_both_starts_leave_unexplained_are_fitted_again_through_a_looser_stage(monkeypatch):
     """A tilted-axes unit at 128 samples per row whose zero is off by 0.08 mm (4 sigma of 0.02 mm per axis): both
-    starts ran off (27,160) where the unit reads 1.45. A third start, tried only for rows not yet explained, fits
-    through a stage three times looser first, whose valley is wider, then through the capture's own."""
+    starts ran off (27,160; 6.7 with OpenBLAS's Sandybridge kernel) where the unit reads 1.45. A third start,
+    tried only for rows not yet explained, fits through a stage three times looser first, whose valley is wider,
+    then through the capture's own."""
     drawing = load_sensor("tilted-axes").with_transfer("gmr")
     noise = drawing.noise / np.sqrt(128)
     poses = schedule(drawing, 40, noise=noise)[0]
@@ -262,7 +263,7 @@ def test_rows_both_starts_leave_unexplained_are_fitted_again_through_a_looser_st
     shared = (true - poses)[contact, :3].mean(axis=0)
     assert np.linalg.norm(shared) > 0.075  # what the test means
     monkeypatch.setattr(idf, "LOOSER", 1.0)  # the third start is the first again: what the two starts reach
-    assert identify(drawing, y, poses, noise, rig_error=0.01, zero_error=0.02).reduced_chi2 > 100
+    assert identify(drawing, y, poses, noise, rig_error=0.01, zero_error=0.02).reduced_chi2 > idf.CHI2_LIMIT
     monkeypatch.undo()
     ident = identify(drawing, y, poses, noise, rig_error=0.01, zero_error=0.02)
     assert ident.reduced_chi2 < 1.3 and ident.outlying_rows() == [] and not ident.outside_tolerances()
