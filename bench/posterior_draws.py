@@ -57,7 +57,7 @@ def rto_thetas(ident, k: int, seed: int) -> np.ndarray:
     prob, space = ident.problem, ident.space
     P, z0 = space.size, space.in_spreads(ident.theta)
     js = prob.pose_slopes(z0)
-    wh, first = prob.whitening(z0, slopes=js), prob.residuals(z0, js) - (prob.readings - prob.predict(z0)[0])
+    wh, first = prob.whitening(z0, slopes=js), prob.shift_term(js)
     rng = np.random.default_rng([RTO_SEED, seed])
     out = []
     for _ in range(k):

@@ -157,7 +157,7 @@ class Identification:
         r = prob.residuals(z, js)
         wh = prob.whitening(z, slopes=js)
         if wh.U is not None:  # the zero is one error of all the rows in contact: estimate it, take it out
-            r = r - js @ prob.zero_mean(z, wh, r)
+            r = r - js @ prob.zero_mean(wh, r)
         r = r / np.sqrt(prob.noise**2 + prob.rig_error**2 * np.sum(js**2, axis=-1))
         return np.where(prob.usable(z), r, np.nan)
 
@@ -278,7 +278,7 @@ def _maximum_a_posteriori(prob: Problem, sweeps: int = 3, max_nfev: int = 60, pr
         js = prob.pose_slopes(z)
         wh = prob.whitening(z, slopes=js)
         # the zero's first order at this sweep's slopes: the fit's objective stays one function within it
-        first = prob.residuals(z, js) - (prob.readings - prob.predict(z)[0])
+        first = prob.shift_term(js)
 
         def residual(zz, wh=wh, first=first):
             return np.concatenate([wh.apply(prob.readings - prob.predict(zz)[0] + first), zz])
@@ -307,7 +307,7 @@ def _about_zero(prob: Problem, z: np.ndarray) -> Problem:
     """``prob`` linearised about the zero's error's posterior mean at z, within PRIOR_LIMIT of its spread (far from
     the unit, the rows' misfit reads as a zero off by millimetres)."""
     js = prob.pose_slopes(z)
-    shift = prob.zero_mean(z, prob.whitening(z, slopes=js), prob.residuals(z, js))
+    shift = prob.zero_mean(prob.whitening(z, slopes=js), prob.residuals(z, js))
     return replace(prob, shift=np.clip(shift, -PRIOR_LIMIT * prob.zero_error, PRIOR_LIMIT * prob.zero_error))
 
 

@@ -45,14 +45,17 @@ class Problem:
 
     def residuals(self, z: np.ndarray, slopes: np.ndarray) -> np.ndarray:
         """The rows' readings less the unit's at the labels to first order in the zero's error (n, N): at ``at``,
-        plus ``slopes`` (the rows', at ``at``) times ``shift`` (the zero's share is in the rows' covariance)."""
-        r = self.readings - self.predict(z)[0]
-        if self.shift is None:
-            return r
-        return r + np.where(off_skin(self.poses)[:, None], 0.0, slopes @ self.shift)
+        plus :meth:`shift_term` (the zero's share is in the rows' covariance)."""
+        return self.readings - self.predict(z)[0] + self.shift_term(slopes)
 
-    def zero_mean(self, z: np.ndarray, wh: "Whitening", r: np.ndarray) -> np.ndarray:
-        """The zero's error's posterior mean (mm, 3) given the rows' ``residuals`` ``r`` whitened by ``wh`` at z."""
+    def shift_term(self, slopes: np.ndarray) -> np.ndarray | float:
+        """``slopes`` (the rows', at ``at``) times ``shift`` on the rows in contact (n, N); 0 without a shift."""
+        if self.shift is None:
+            return 0.0
+        return np.where(off_skin(self.poses)[:, None], 0.0, slopes @ self.shift)
+
+    def zero_mean(self, wh: "Whitening", r: np.ndarray) -> np.ndarray:
+        """The zero's error's posterior mean (mm, 3) given the rows' ``residuals`` ``r`` whitened by ``wh``."""
         if wh.U is None:
             return np.zeros(3)
         U = wh.U
