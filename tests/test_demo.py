@@ -56,9 +56,11 @@ def test_demo_runs_end_to_end(tmp_path):
     [twin_line] = [ln for ln in text.splitlines() if ln.startswith("   twin's model  ")]
     [drawing_line] = [ln for ln in text.splitlines() if ln.startswith("   drawing's model ")]
     assert twin_line.endswith(": as predicted") and drawing_line.endswith("it does not describe this unit")
-    # the check capture moved from the calibration's zero, which the twin's posterior records: no zero error
-    assert re.search(r"^ +zero error 0 mm: the calibration's zero, reused \(X\S+ Y\S+ Z\S+ on a homed machine\)$",
-                     text, re.M), text[-1500:]
+    # the check capture moved from the calibration's zero, which the twin's posterior records: its rows stand where
+    # identify found that zero, its standard error the zero's error
+    assert re.search(r"^ +zero error [\d.]+ mm: the calibration's zero, reused \(X\S+ Y\S+ Z\S+ on a homed machine\): "
+                     r"the rows stand at their labels plus where identify found that zero, dx [+-][\d.]+, dy [+-][\d.]+, "
+                     r"dz [+-][\d.]+ mm \(standard error [\d.]+\)$", text, re.M), text[-1500:]
     from fitgen.physics.dataset import load_dataset
 
     assert load_dataset(out / "check.csv").n_rows == 30

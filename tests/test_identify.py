@@ -243,6 +243,8 @@ def test_the_zero_s_error_is_read_about_its_estimate_not_about_none():
         assert abs(value - truth[name]) < 4 * se, (name, value, truth[name], se)
     shared = (true - poses)[~off_skin(poses), :3].mean(axis=0)  # the zero's error and the rig's mean over the rows
     assert np.abs(ident.problem.shift - shared).max() < 0.01, (ident.problem.shift, shared)
+    mean, cov = ident.zero  # what identify reports and records: the unit's parameters marginalised out
+    assert np.all(np.abs(mean - shared) < 3 * np.sqrt(np.diag(cov))), (mean, shared, cov)
 
 
 def test_rows_both_starts_leave_unexplained_are_fitted_again_through_a_looser_stage(monkeypatch):
@@ -988,6 +990,13 @@ def test_cli_schedule_capture_identify(tmp_path):
     assert f"plot: {png}" in proc.stderr and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     lifted = int((table[:, 2] > 0).sum())
     assert f"rows off the skin (the magnet at rest, free of the rig's error): {lifted}" in proc.stdout
+    # where the capture's zero sat (simulate's: at first contact), said and recorded for fitgen check
+    found = json.loads((tmp_path / "unit.posterior.json").read_text())["zero_found"]
+    mean, se = np.array(found["mm"]), np.sqrt(np.diag(found["covariance"]))
+    assert np.all(np.abs(mean) < 4 * se) and se.max() < 0.01, found
+    assert ("the capture's zero (its labels' 0, set by hand) sat at " + ", ".join(
+        f"{a} {v:+.4f}" for a, v in zip(("dx", "dy", "dz"), mean)) + " mm from the unit's first contact (standard "
+        f"errors {', '.join(f'{v:.2g}' for v in se)})") in proc.stdout
     # a direct fit on the capture leaves the rest rows out: their label is no contact pose
     fit = run_cli("fitgen", "fit", str(cap), "-o", str(tmp_path / "direct.json"), "--family", "no-roots",
                   "--outputs", "dx,dy,dz")

@@ -18,7 +18,7 @@ from fitgen.c.codegen import render_header
 from fitgen.physics.dataset import load_dataset
 from fitgen.base.errors import InputError
 from fitgen.fitting.fit import fit_model
-from fitgen.fitting.unitrecord import stage_zero
+from fitgen.fitting.capturezero import stage_zero
 from fitgen.physics.transfer import readings
 from host.adc import AdcArray
 from host.capture import capture, load_schedule

@@ -25,6 +25,7 @@ def cmd_identify(args) -> int:
     from fitgen.app.replaced import replaced_unit, unit_output
     from fitgen.base.progress import Progress
     from fitgen.fitting import identify as idf, unitrecord as rec, verdict
+    from fitgen.fitting.capturezero import stage_zero
     from fitgen.fitting.holdout import drawing_rest_spread
     from fitgen.physics.dataset import load_capture
     from fitgen.physics.units import require_drawing
@@ -64,7 +65,7 @@ def cmd_identify(args) -> int:
         print(f"identify: {note}", file=sys.stderr)
     noise, source = rec.row_noise(ds.meta, drawing, args.noise)
     args.rig_error, args.zero_error, stage = rec.stage_errors(args.rig_error, args.zero_error, ds.meta, args.capture)
-    zero = rec.stage_zero(ds.meta, args.capture)  # recorded, so that fitgen check tells a zero reused from one set anew
+    zero = stage_zero(ds.meta, args.capture)  # recorded, so that fitgen check tells a zero reused from one set anew
     if said:  # once the options and the meta have passed: a refusal is one line
         print(f"identify: {said}", file=sys.stderr)
     if zero and zero["zeros"] > 1:

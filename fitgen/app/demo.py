@@ -150,11 +150,12 @@ def run_demo(out: Path) -> int:
 def _unit_stage(out: Path, drawing_model) -> None:
     import numpy as np
 
+    from fitgen.fitting.capturezero import stage_zero
     from fitgen.fitting.family import fit_auto
     from fitgen.fitting.fit import FitSettings, fit_model
     from fitgen.fitting.holdout import N_POSES, fitted_held_out, held_out_set
     from fitgen.fitting.identify import identify
-    from fitgen.fitting.unitrecord import device_noise, row_noise, save, stage_zero
+    from fitgen.fitting.unitrecord import device_noise, row_noise, save
     from fitgen.physics.dataset import load_dataset, rows_on_the_skin
     from fitgen.fitting.schedule import schedule, schedule_record, write_schedule
     from fitgen.physics.sensor import load_sensor

@@ -17,7 +17,8 @@ from fitgen.equations.model import Model, check_input_units
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, check_error, element_noise
 from fitgen.fitting.holdout import POSTERIOR_UNITS, device_precision, estimator, posterior_units, unit_posterior
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR
-from fitgen.fitting.unitrecord import row_noise, schedule_stage, stage_zero, zero_record
+from fitgen.fitting.capturezero import stage_zero, zero_found, zero_record
+from fitgen.fitting.unitrecord import row_noise, schedule_stage
 from fitgen.physics.pose import POSE_NAMES, check_rows, edge_margin, inner_box, off_skin, within_box
 from fitgen.physics.simulate import rig_poses
 from fitgen.physics.transfer import readings, sensor_hashes
@@ -76,13 +77,15 @@ def _figures(err: np.ndarray) -> dict:
 
 
 def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_noise, *, posterior: dict | None = None,
-          rig_error: float = RIG_ERROR, zero_error: float = 0.0, precision: str = "float",
-          units: int = POSTERIOR_UNITS, draws: int = DRAWS, seed: int = SEED) -> Check:
+          rig_error: float = RIG_ERROR, zero_error: float = 0.0, zero: np.ndarray | None = None,
+          precision: str = "float", units: int = POSTERIOR_UNITS, draws: int = DRAWS, seed: int = SEED) -> Check:
     """:class:`Check` of ``model`` on a capture's ``inputs`` (n, N) at stage ``labels`` (n, 5), the rows' reading
     noise ``row_noise`` (per element or one number): predicted on ``units`` units drawn from ``posterior`` (an
     identified unit's record) or on ``sensor`` alone, each read ``draws`` times at the labels moved by ``rig_error``
-    (mm rms per axis) and, where the check capture's zero was set anew, by one ``zero_error`` draw shared by its rows
-    (mm rms per axis), with that noise, estimated in ``precision``. Rows off the skin are left out, and so are rows
+    (mm rms per axis) and by one ``zero_error`` draw shared by its rows (mm rms per axis: a zero set anew, or the
+    error of ``zero``), with that noise, estimated in ``precision``. ``zero`` (mm, 3): where the capture's zero sat
+    from first contact, where known (the calibration's, reused, as identify found it): the rows in contact stand at
+    their labels plus it, and are judged there. Rows off the skin are left out, and so are rows (by their labels)
     outside the pose box the model was fitted in (its held-out record's), where it makes no claim, or so near its
     edge that the stage's errors may carry them out (fitgen.physics.pose.inner_box): a model errs fast past its box,
     and one draw that carried a row there would set the greatest predicted error for the whole check."""
@@ -105,7 +108,9 @@ def check(model: Model, inputs: np.ndarray, labels: np.ndarray, sensor, row_nois
         raise InputError(f"none of the check capture's {len(labels)} rows in contact lies in the pose box the model "
                          f"was fitted in ({box_words(model.pose_box)}), {margin:.2g} mm inside its edges (the "
                          "stage's error): check it at fitgen schedule --check's poses")
-    inputs, labels = inputs[inside], labels[inside]
+    inputs, labels = inputs[inside], labels[inside].copy()
+    if zero is not None:  # after the box, which holds a scene's held components at the labels' own values
+        labels[:, :3] += zero
     fn = estimator(model, precision, sensor)
     if isinstance(fn, str):
         raise InputError(f"the model cannot run in {precision}: {fn}")
@@ -157,21 +162,23 @@ def check_rig(posterior: dict | None, meta: dict, capture, unit_file) -> tuple[f
     return RIG_ERROR, "the default: neither the unit's file nor the check capture's schedule records one"
 
 
-def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str]:
-    """The zero error (mm rms per axis) a check capture with ``meta`` is predicted with, and why: 0 where its stage
-    moved from the calibration capture's zero (the same machine coordinates on a homed machine, with the same axis
-    map, which ``posterior`` records as ``capture_zero``, and each capture's rows from that one zero); where it
-    moved from another zero, each set by hand, the
-    two zeros' errors added in quadrature (the calibration's as identified, the check's as its schedule was made
-    for, else the same); 0 as well where either capture records no stage zero, said so."""
+def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str, np.ndarray | None]:
+    """The zero error (mm rms per axis) a check capture with ``meta`` is predicted with, why, and where its zero sat
+    from first contact where known (mm, 3, else None). Its stage moved from the calibration capture's zero (the same
+    machine coordinates on a homed machine, with the same axis map, which ``posterior`` records as ``capture_zero``,
+    and each capture's rows from that one zero), or records no stage zero (said so): that zero, where identify
+    found it (``zero_found``), and its standard error. From another zero, set by hand: that zero's own error (as
+    its schedule was made for, else the calibration's) and the found zero's, in quadrature, the unit being read from
+    first contact; the two zeros' errors for a posterior without ``zero_found``, whose unit may not be."""
+    found = zero_found(posterior, "the unit's posterior:")
     mine = stage_zero(meta, capture)
     theirs = (posterior or {}).get("capture_zero")
     if mine is None or not isinstance(theirs, dict):
         which = ("the check capture records no stage zero" if mine is None else "the model's sensor has no "
                  "posterior: not a unit identify wrote" if posterior is None else "the unit's posterior records "
                  "no stage zero")
-        return 0.0, (f"the calibration's zero taken as reused ({which}); give --zero-error 0.02 for a zero set anew "
-                     "by hand")
+        return _reused(found, f"the calibration's zero taken as reused ({which}; give --zero-error 0.02 for a zero "
+                              "set anew by hand)", posterior)
     zeros = {"check capture": mine["zeros"], "calibration capture": theirs.get("zeros", 1)}
     theirs = zero_record(theirs.get("machine_mm"), theirs.get("homed"), theirs.get("axes"),
                          "the unit's posterior (capture_zero; give --zero-error to check without it):")
@@ -181,11 +188,10 @@ def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str]
     mixed = [f"the {which}'s rows were taken from {n} zeros" for which, n in zeros.items()
              if isinstance(n, int) and n > 1]
     if same and mine["homed"] and theirs["homed"] and not mixed:
-        return 0.0, f"the calibration's zero, reused ({_words(mine)} on a homed machine)"
+        return _reused(found, f"the calibration's zero, reused ({_words(mine)} on a homed machine)", posterior)
     ours = _stage_error((posterior or {}).get("zero_error", ZERO_ERROR), "the unit's posterior: zero_error")
     made = schedule_stage(meta)
     new = _stage_error(made.get("zero_error", ours), f"{capture}'s meta: schedule_stage.zero_error")
-    error = min(float(np.hypot(ours, new)), MAX_STAGE_ERROR)
     if mixed:  # a run set the zero again (a controller reset): some rows are from another zero
         why = f"{' and '.join(mixed)}, a run having set it again"
     elif mine["axes"] != theirs["axes"]:
@@ -195,7 +201,30 @@ def check_zero(posterior: dict | None, meta: dict, capture) -> tuple[float, str]
     else:
         why = (f"{_words(mine)} as the calibration's, but on a machine not homed, whose coordinates do not tell one "
                "zero from another; give --zero-error 0 if the controller was not reset since")
-    return error, f"a zero set anew ({why}): its error and the calibration's, {new:g} and {ours:g} mm, in quadrature"
+    if found is not None:
+        known = _spread(found[1])
+        error = min(float(np.hypot(new, known)), MAX_STAGE_ERROR)
+        return error, (f"a zero set anew ({why}): its own error, {new:g} mm, and that of the zero identify found, "
+                       f"{known:.2g} mm, in quadrature"), None
+    error = min(float(np.hypot(ours, new)), MAX_STAGE_ERROR)
+    return error, f"a zero set anew ({why}): its error and the calibration's, {new:g} and {ours:g} mm, in quadrature", \
+        None
+
+
+def _spread(cov: np.ndarray) -> float:
+    """A zero's covariance (3, 3) as one error, mm rms per axis."""
+    return float(np.sqrt(np.trace(cov) / 3))
+
+
+def _reused(found, said: str, posterior: dict | None) -> tuple[float, str, np.ndarray | None]:
+    """check_zero's answer for the calibration's zero reused: where identify ``found`` it, if it did."""
+    if found is None:
+        older = "" if posterior is None else "; the unit's posterior records no zero found (an exact stage's, or older)"
+        return 0.0, said + older, None
+    mean, cov = found
+    at = ", ".join(f"{a} {v:+.4f}" for a, v in zip(POSE_NAMES, mean))
+    return min(_spread(cov), MAX_STAGE_ERROR), (f"{said}: the rows stand at their labels plus where identify found "
+                                                f"that zero, {at} mm (standard error {_spread(cov):.2g})"), mean
 
 
 def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float | None = None,
@@ -217,11 +246,12 @@ def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float 
         raise InputError(f"{capture} is the capture {unit_file} was identified on: its rows are not held out, so they "
                          "check nothing; capture fitgen schedule --check's poses")
     rig_said = said = "as given"
+    zero = None
     if rig_error is None:
         rig_error, rig_said = check_rig(posterior, ds.meta, capture, unit_file)
     if zero_error is None:
-        zero_error, said = check_zero(posterior, ds.meta, capture)
+        zero_error, said, zero = check_zero(posterior, ds.meta, capture)
     noise, source = row_noise(ds.meta, sensor, option="")  # check has no --noise
     result = check(model, ds.inputs, ds.poses(), sensor, noise, posterior=posterior, rig_error=rig_error,
-                   zero_error=zero_error, precision=precision or device_precision(model))
+                   zero_error=zero_error, zero=zero, precision=precision or device_precision(model))
     return replace(result, zero_said=said, rig_said=rig_said), source

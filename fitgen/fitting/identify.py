@@ -147,6 +147,25 @@ class Identification:
         return _beyond(self.space.in_spreads(self.theta), limit)
 
     @cached_property
+    def zero(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Where the capture's zero sat from the unit's first contact (the stage's true displacement at the label
+        0 of a row in contact): its posterior mean and covariance (mm, (3,), (3, 3)), the unit's parameters
+        marginalised out; None without a zero's error. It reads the rig's mean error over the rows too."""
+        prob, z = self.problem, self.space.in_spreads(self.theta)
+        if prob.zero_error <= 0:
+            return None
+        js = prob.pose_slopes(z)
+        wh = prob.whitening(z, slopes=js)
+        mean = prob.zero_mean(wh, prob.residuals(z, js))
+        # the joint posterior of the parameters (in z, prior I) and the zero (prior zero_error^2 I) from the rows
+        # whitened by their own covariance; the zero's marginal is the inverse of its Schur complement
+        J = np.einsum("nij,njp->nip", wh.W, prob.jacobian(z)).reshape(-1, self.space.size)
+        S = wh.U / prob.zero_error
+        B = J.T @ S
+        D = S.T @ S + np.eye(3) / prob.zero_error**2
+        return mean, np.linalg.inv(D - B.T @ np.linalg.solve(J.T @ J + np.eye(self.space.size), B))
+
+    @cached_property
     def standardized_residuals(self) -> np.ndarray:
         """Each reading's residual at the maximum a posteriori, less the zero's shift the rows share (its
         posterior mean), over its own standard deviation (n, N): the reading noise and the rig's error through

@@ -9,8 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fitgen.base.errors import InputError, is_finite_number, shown
+from fitgen.base.errors import InputError, is_finite_number
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, MIN_DISTINCT, MIN_ROWS, distinct_poses, is_stage_error
+from fitgen.fitting.capturezero import zero_found, zero_line
 from fitgen.fitting.identify import PINNABLE, RIG, RIG_ERROR, ZERO_ERROR, Identification, tilting
 from fitgen.physics.dataset import row_degc, thermistor_degc
 from fitgen.physics.pose import POSE_NAMES, REST_LIFT_MM, box_problem, off_skin
@@ -40,6 +41,8 @@ def report(ident: Identification, samples: int | None = None) -> str:
     rest = int(np.sum(off_skin(ident.problem.poses)))
     hint = f"; a row with the stage lifted {REST_LIFT_MM:g} mm (fitgen schedule adds it) pins the rest readings"
     lines.append(f"rows off the skin (the magnet at rest, free of the rig's error): {rest}" + ("" if rest else hint))
+    if ident.zero is not None:
+        lines.append(zero_line(*ident.zero))
     if STIFFENING not in sp.names and np.any(ident.problem.poses[:, 2] < 0):
         # it hides: the unit's other parameters bend to it and the chi-square barely moves (bench/stiffening.py)
         lines.append("the magnet is taken to follow the stage linearly (the drawing's [tolerances] stiffening is 0): "
@@ -261,32 +264,6 @@ def stage_reach(meta: dict, capture) -> dict | None:
     return reach or None
 
 
-def stage_zero(meta: dict, capture) -> dict | None:
-    """The zero a capture's stage moved from, as `tactile-host capture --stage` records it in its meta:
-    :func:`zero_record`'s (the last run's) with ``zeros``, how many its runs moved from; or None when its meta
-    records none (a stage moved by hand, an older capture)."""
-    st = meta.get("stage")
-    if not isinstance(st, dict) or "zero_machine_mm" not in st:
-        return None
-    runs = st.get("zeros_machine_mm")  # every zero its runs moved from: more than one after a controller reset
-    zeros = len(runs) if isinstance(runs, list) and runs else 1
-    return {**zero_record(st["zero_machine_mm"], st.get("zero_homed"), st.get("axes"), f"{capture}'s meta:"),
-            "zeros": zeros}
-
-
-def zero_record(zero, homed, axes, where: str) -> dict:
-    """``{"machine_mm": {axis: mm}, "homed": bool, "axes": str}``: a stage's zero in machine coordinates, whether the
-    machine was homed, and the axis map; InputError after ``where`` when they are not those."""
-    import math
-
-    if (not isinstance(zero, dict) or not zero or not isinstance(homed, bool) or not isinstance(axes, str)
-            or not all(isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
-                       and math.isfinite(v) for k, v in zero.items())):
-        raise InputError(f"{where} the stage's zero must be machine coordinates in mm, whether the machine was homed "
-                         f"(true or false) and its axis map, got {shown(zero)}, {shown(homed)}, {shown(axes)}")
-    return {"machine_mm": {k: float(v) for k, v in zero.items()}, "homed": homed, "axes": axes}
-
-
 def in_capture_units(drawing: Sensor, meta: dict) -> Sensor:
     """``drawing`` in the transfer of the units a capture's meta names (V: gmr, mT: raw), else as it is."""
     units = meta.get("units")
@@ -433,6 +410,8 @@ def unit_files(ident: Identification, path, provenance: dict, noise: float | Non
         "prior_sd": ident.space.prior_sd.tolist(), "covariance": ident.cov.tolist(),
         "chi2": ident.chi2, "dof": ident.dof, "rows": int(ident.problem.readings.shape[0]),
         "rig_error": ident.problem.rig_error, "zero_error": ident.problem.zero_error,
+        # where the capture's zero sat from first contact: what a check capture that reuses it is off by
+        **({"zero_found": {"mm": ident.zero[0].tolist(), "covariance": ident.zero[1].tolist()}} if ident.zero else {}),
         "row_noise": ident.problem.noise.tolist(),
         "outlying_rows": [{"row": i + 1, "residual": r} for i, r in ident.outlying_rows()],
         "derived": {k: {"value": v, "se": s} for k, (v, s) in ident.derived().items()},
@@ -474,7 +453,8 @@ def load_posterior(unit_path) -> dict | None:
                          f"file): {todo}") from None
     if not (isinstance(rec, dict) and isinstance(rec.get("theta"), list) and isinstance(rec.get("covariance"), list)
             and isinstance(rec.get("drawing_spec"), str)  # and what check reads: of another type, it had read as none
-            and isinstance(rec.get("capture_zero", {}), dict) and isinstance(rec.get("capture_sha256", ""), str)):
+            and isinstance(rec.get("capture_zero", {}), dict) and isinstance(rec.get("capture_sha256", ""), str)
+            and zero_found(rec, "") is not False):
         raise InputError(f"unit file {unit_path}: its posterior {name} is malformed (expected fitgen identify's): "
                          f"{todo}")
     if not isinstance(rec.get("unit_sha256"), str):  # identify always writes it: without it no unit is checked
@@ -484,3 +464,4 @@ def load_posterior(unit_path) -> dict | None:
         raise InputError(f"unit file {unit_path}: its posterior {name} was written for another unit (another "
                          f"identification's, or the unit file was edited since): {todo}")
     return relocated(rec, path.parent, "drawing_spec", "drawing_sha256")  # a drawing's file moved with the unit's
+
