@@ -59,8 +59,8 @@ def test_demo_runs_end_to_end(tmp_path):
     # the check capture moved from the calibration's zero, which the twin's posterior records: its rows stand where
     # identify found that zero, its standard error the zero's error
     assert re.search(r"^ +zero error [\d.]+ mm: the calibration's zero, reused \(X\S+ Y\S+ Z\S+ on a homed machine\): "
-                     r"the rows stand at their labels plus where identify found that zero, dx [+-][\d.]+, dy [+-][\d.]+, "
-                     r"dz [+-][\d.]+ mm \(standard error [\d.]+\)$", text, re.M), text[-1500:]
+                     r"the rows stand at their labels plus where identify found that zero, dx [+-][\d.]+, "
+                     r"dy [+-][\d.]+, dz [+-][\d.]+ mm \(standard error [\d.]+\)$", text, re.M), text[-1500:]
     from fitgen.physics.dataset import load_dataset
 
     assert load_dataset(out / "check.csv").n_rows == 30
