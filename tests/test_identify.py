@@ -18,7 +18,8 @@ from fitgen.fitting.identify import PINNABLE, RIG, Problem, derived_at, identify
 from fitgen.fitting.knees import near_knees
 from fitgen.fitting.schedule import schedule
 from fitgen.fitting.unitrecord import report, row_noise, stage_errors, what_pins_more
-from fitgen.fitting.verdict import check_explained, field_line, lifted_rows_line, looser_stage_line, outlier_lines
+from fitgen.fitting.verdict import (check_explained, far_zero_line, field_line, lifted_rows_line, looser_stage_line,
+                                   outlier_lines)
 from fitgen.physics import presets
 from fitgen.physics.pose import POSE_NAMES, off_skin
 from fitgen.physics.sensor import load_sensor
@@ -245,6 +246,32 @@ def test_the_zero_s_error_is_read_about_its_estimate_not_about_none():
     assert np.abs(ident.problem.shift - shared).max() < 0.01, (ident.problem.shift, shared)
     mean, cov = ident.zero  # what identify reports and records: the unit's parameters marginalised out
     assert np.all(np.abs(mean - shared) < 3 * np.sqrt(np.diag(cov))), (mean, shared, cov)
+
+
+def test_a_zero_set_far_below_first_contact_is_found_and_said(drawing, plan):
+    """A zero set 0.1 mm into the skin (5 spreads of the default zero error): identify still explains the rows and
+    finds the zero, the unit read from first contact, and a note says the next capture's first contact should be set
+    again; a zero within its spread gets none."""
+    space = UnitSpace.of(drawing)
+    poses = plan[0]
+    contact = ~off_skin(poses)
+    for zero, said in ((-0.1, True), (-0.02, False)):
+        rng = np.random.default_rng(300)
+        theta = space.draw(rng)
+        true = poses.copy()
+        true[contact, :3] += rng.normal(0.0, 0.01, (int(contact.sum()), 3)) + [0.0, 0.0, zero]
+        noise = drawing.noise / np.sqrt(SAMPLES)
+        y = space.readings(theta[None], true)[0] + rng.normal(0.0, noise, (len(poses), drawing.n_elements))
+        ident = identify(drawing, y, poses, noise)
+        mean, cov = ident.zero
+        assert ident.reduced_chi2 < 1.3 and abs(mean[2] - zero) < 3 * np.sqrt(cov[2, 2]), (ident.reduced_chi2, mean)
+        lines = far_zero_line(ident)
+        assert lines == ([f"the capture's zero sat dz {mean[2]:+.3f} mm from first contact, beyond 3x the zero error "
+                          "its rows were weighed with (0.02 mm): the unit is read from first contact all the same, "
+                          "but a schedule keeps its rows on the skin only for a zero within its zero error (one set "
+                          "above first contact lifts the rows pressed least off it); set first contact again before "
+                          "the next capture (docs/calibration.md), or schedule and identify with a --zero-error as "
+                          "large"] if said else []), lines
 
 
 def test_rows_both_starts_leave_unexplained_are_fitted_again_through_a_looser_stage(monkeypatch):

@@ -15,7 +15,7 @@ from fitgen.fitting.capturecheck import check_error
 from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, RIG_ERROR, ZERO_ERROR, Identification,
                                      identify)
 from fitgen.fitting.unitrecord import pose_words
-from fitgen.physics.pose import OFF_SKIN_MM, contact_top, lift_odds, off_skin
+from fitgen.physics.pose import OFF_SKIN_MM, POSE_NAMES, contact_top, lift_odds, off_skin
 
 
 def lifted_rows_line(poses: np.ndarray, rig_error: float, zero_error: float = 0.0) -> list[str]:
@@ -70,6 +70,29 @@ def low_residual_line(ident: Identification, source: str) -> list[str]:
     return [f"the residuals are {float(np.sqrt(ident.reduced_chi2)):.2g}x what the reading noise ({source}) and the "
             "stage's errors predict: one of them is set too large (--noise, --rig-error, --zero-error), or the rows "
             "carry no noise, so the standard errors are too wide"]
+
+
+# the zero found this many zero errors (rms per axis) off first contact on an axis, and as many standard errors: set
+# off by more than the schedule was made for (within 0.15 mm below or aside, identify still finds it)
+FAR_ZERO = 3.0
+
+
+def far_zero_line(ident: Identification) -> list[str]:
+    """A line when the capture's zero sat farther from first contact than the zero error its rows were scheduled and
+    weighed for (:attr:`Identification.zero`): the next capture's first contact should be set again."""
+    if ident.zero is None:
+        return []
+    mean, cov = ident.zero
+    allowed = ident.problem.zero_error
+    far = (np.abs(mean) > FAR_ZERO * allowed) & (np.abs(mean) > FAR_ZERO * np.sqrt(np.diag(cov)))
+    if not far.any():
+        return []
+    at = ", ".join(f"{POSE_NAMES[j]} {mean[j]:+.3f} mm" for j in np.flatnonzero(far))
+    return [f"the capture's zero sat {at} from first contact, beyond {FAR_ZERO:g}x the zero error its rows were "
+            f"weighed with ({allowed:g} mm): the unit is read from first contact all the same, but a schedule keeps "
+            "its rows on the skin only for a zero within its zero error (one set above first contact lifts the rows "
+            "pressed least off it); set first contact again before the next capture (docs/calibration.md), or "
+            "schedule and identify with a --zero-error as large"]
 
 
 # an accepted capture's reduced chi-square above this: does a looser stage, or a field the stage carries, explain it?
