@@ -10,7 +10,7 @@ the labels, zero error 0 for a zero reused and 0.028 mm for one set anew, the tw
 the rows at their labels plus the found zero, with its standard error; one set anew has its own error and the
 found zero's).
 
-    python bench/check_zero.py              # about 40 s here
+    python bench/check_zero.py              # about 100 s here
     python bench/check_zero.py --checks 10  # a quick look
 """
 

@@ -35,19 +35,24 @@ def zero_record(zero, homed, axes, where: str) -> dict:
     return {"machine_mm": {k: float(v) for k, v in zero.items()}, "homed": homed, "axes": axes}
 
 
+def zero_words(mean: np.ndarray) -> str:
+    """A zero (mm, 3) as ``dx +0.0235, dy -0.0163, dz +0.0149``."""
+    return ", ".join(f"{a} {v:+.4f}" for a, v in zip(POSE_NAMES, mean))
+
+
 def zero_line(mean: np.ndarray, cov: np.ndarray) -> str:
     """The capture's zero as identify found it (:attr:`Identification.zero`), in words."""
-    at = ", ".join(f"{a} {v:+.4f}" for a, v in zip(POSE_NAMES, mean))
+    at = zero_words(mean)
     se = ", ".join(f"{v:.2g}" for v in np.sqrt(np.diag(cov)))
     return (f"the capture's zero (its labels' 0, set by hand) sat at {at} mm from the unit's first contact (standard "
             f"errors {se}): the unit is read from first contact, and fitgen check moves the labels of a check "
             "capture that reuses this zero by as much")
 
 
-def zero_found(posterior: dict | None, where: str) -> tuple[np.ndarray, np.ndarray] | None | bool:
+def zero_found(posterior: dict | None, where: str) -> tuple[np.ndarray, np.ndarray] | None:
     """A posterior's ``zero_found`` (identify's :attr:`Identification.zero`): (mean (3,), covariance (3, 3)), or
-    None where it records none (identified without a zero's error, or before identify recorded it); False where it
-    is not identify's (InputError after ``where`` instead, when ``where`` is given)."""
+    None where it records none (identified without a zero's error, or before identify recorded it); InputError
+    after ``where`` where it is not identify's."""
     found = (posterior or {}).get("zero_found")
     if found is None:
         return None
@@ -57,9 +62,7 @@ def zero_found(posterior: dict | None, where: str) -> tuple[np.ndarray, np.ndarr
               and np.allclose(cov, cov.T) and bool(np.all(np.diag(cov) >= 0)))
     except (TypeError, KeyError, ValueError):
         ok = False
-    if ok:
-        return mean, cov
-    if where:
+    if not ok:
         raise InputError(f"{where} zero_found must be a zero (mm: 3 numbers) and its covariance (3 x 3), got "
                          f"{shown(found)}")
-    return False
+    return mean, cov

@@ -17,7 +17,7 @@ from fitgen.equations.model import Model, check_input_units
 from fitgen.fitting.capturecheck import MAX_STAGE_ERROR, check_error, element_noise
 from fitgen.fitting.holdout import POSTERIOR_UNITS, device_precision, estimator, posterior_units, unit_posterior
 from fitgen.fitting.identify import RIG_ERROR, ZERO_ERROR
-from fitgen.fitting.capturezero import stage_zero, zero_found, zero_record
+from fitgen.fitting.capturezero import stage_zero, zero_found, zero_record, zero_words
 from fitgen.fitting.unitrecord import row_noise, schedule_stage
 from fitgen.physics.pose import POSE_NAMES, check_rows, edge_margin, inner_box, off_skin, within_box
 from fitgen.physics.simulate import rig_poses
@@ -222,9 +222,9 @@ def _reused(found, said: str, posterior: dict | None) -> tuple[float, str, np.nd
         older = "" if posterior is None else "; the unit's posterior records no zero found (an exact stage's, or older)"
         return 0.0, said + older, None
     mean, cov = found
-    at = ", ".join(f"{a} {v:+.4f}" for a, v in zip(POSE_NAMES, mean))
     return min(_spread(cov), MAX_STAGE_ERROR), (f"{said}: the rows stand at their labels plus where identify found "
-                                                f"that zero, {at} mm (standard error {_spread(cov):.2g})"), mean
+                                                f"that zero, {zero_words(mean)} mm (standard error "
+                                                f"{_spread(cov):.2g})"), mean
 
 
 def check_capture(model: Model, ds, sensor, unit_file=None, *, rig_error: float | None = None,

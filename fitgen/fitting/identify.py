@@ -147,6 +147,13 @@ class Identification:
         return _beyond(self.space.in_spreads(self.theta), limit)
 
     @cached_property
+    def _rows_at_map(self) -> tuple:
+        """The rows at the maximum a posteriori: their slopes by the stage, residuals and whitening."""
+        prob, z = self.problem, self.space.in_spreads(self.theta)
+        js = prob.pose_slopes(z)
+        return js, prob.residuals(z, js), prob.whitening(z, slopes=js)
+
+    @cached_property
     def zero(self) -> tuple[np.ndarray, np.ndarray] | None:
         """Where the capture's zero sat from the unit's first contact (the stage's true displacement at the label
         0 of a row in contact): its posterior mean and covariance (mm, (3,), (3, 3)), the unit's parameters
@@ -154,9 +161,8 @@ class Identification:
         prob, z = self.problem, self.space.in_spreads(self.theta)
         if prob.zero_error <= 0:
             return None
-        js = prob.pose_slopes(z)
-        wh = prob.whitening(z, slopes=js)
-        mean = prob.zero_mean(wh, prob.residuals(z, js))
+        _, r, wh = self._rows_at_map
+        mean = prob.zero_mean(wh, r)
         # the joint posterior of the parameters (in z, prior I) and the zero (prior zero_error^2 I) from the rows
         # whitened by their own covariance; the zero's marginal is the inverse of its Schur complement
         J = np.einsum("nij,njp->nip", wh.W, prob.jacobian(z)).reshape(-1, self.space.size)
@@ -172,9 +178,7 @@ class Identification:
         the reading's slopes; NaN for a clipped reading or one by a knee. Rows whose residuals stand out are rows
         the physics does not explain (a slip, a knock)."""
         prob, z = self.problem, self.space.in_spreads(self.theta)
-        js = prob.pose_slopes(z)
-        r = prob.residuals(z, js)
-        wh = prob.whitening(z, slopes=js)
+        js, r, wh = self._rows_at_map
         if wh.U is not None:  # the zero is one error of all the rows in contact: estimate it, take it out
             r = r - js @ prob.zero_mean(wh, r)
         r = r / np.sqrt(prob.noise**2 + prob.rig_error**2 * np.sum(js**2, axis=-1))
@@ -185,8 +189,8 @@ class Identification:
         """Each row's share of the residual chi-square, its readings whitened together (n,): a reading off on its
         own, against the others' co-moving with the pose, stands out here where its own residual may not."""
         prob, z = self.problem, self.space.in_spreads(self.theta)
-        r = np.where(prob.usable(z), prob.residuals(z, prob.pose_slopes(z)), 0.0)
-        chi2 = np.sum(np.einsum("nij,nj->ni", prob.whiteners(z), r) ** 2, axis=1)
+        _, r, wh = self._rows_at_map
+        chi2 = np.sum(np.einsum("nij,nj->ni", wh.W, np.where(prob.usable(z), r, 0.0)) ** 2, axis=1)
         return chi2 / max(float(chi2.sum()), 1e-300)
 
     @cached_property
