@@ -1091,7 +1091,8 @@ def test_cli_schedule_capture_identify(tmp_path):
     unit_file.write_text(text)
     record = json.loads((tmp_path / "unit.posterior.json").read_text())
     # what check reads of it too: a zero or a capture's hash of another type had read as none recorded
-    for bad in ({"theta": 1}, {**record, "capture_zero": "abc"}, {**record, "capture_sha256": 5}):
+    for bad in ({"theta": 1}, {**record, "capture_zero": "abc"}, {**record, "capture_sha256": 5},
+                {**record, "zero_found": {"mm": [0.0, 0.0], "covariance": record["zero_found"]["covariance"]}}):
         (tmp_path / "unit.posterior.json").write_text(json.dumps(bad))
         assert_one_line_error(run_cli("fitgen", "fit", str(tmp_path / "t.csv"), "-o", str(tmp_path / "e.json"),
                                       "--held-out", "50", "--family", "no-roots"), 2,
