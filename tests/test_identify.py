@@ -274,6 +274,66 @@ def test_a_zero_set_far_below_first_contact_is_found_and_said(drawing, plan):
                           "large"] if said else []), lines
 
 
+def test_rows_a_zero_above_first_contact_lifted_are_found_and_taken_as_rows_at_rest(drawing, plan):
+    """A zero set 0.08 mm above first contact with the stage off by 0.01 mm: the rows pressed least (0.039 mm) that
+    the rig's error carried past the skin's adhesion read the magnet at rest under labels that move it, and no unit
+    explains them (refused before: 384x the noise). The rows that read as the rest rows are the rows the stage lifted;
+    taken as lifted, the capture reads as a unit within the tolerances, its derived quantities and its zero where they
+    were, the zero's dz error widened by the rig's (the rows it kept on the skin beside them read the zero low)."""
+    from fitgen.fitting.capturezero import lifted_rows
+
+    space, poses = UnitSpace.of(drawing), plan[0]
+    contact = ~off_skin(poses)
+    rng = np.random.default_rng(300)
+    theta = space.draw(rng)
+    true = poses.copy()
+    true[contact, :3] += rng.normal(0.0, 0.01, (int(contact.sum()), 3)) + [0.0, 0.0, 0.08]
+    noise = drawing.noise / np.sqrt(SAMPLES)
+    y = space.readings(theta[None], true)[0] + rng.normal(0.0, noise, (len(poses), drawing.n_elements))
+    truly = tuple(int(i) for i in np.flatnonzero(contact & (true[:, 2] > 0.05)))
+    assert len(truly) == 3  # what the test means: some of the 16 rows at dz -0.039, not all
+    first = identify(drawing, y, poses, noise)
+    assert not first.explained and first.reduced_chi2 > 100 and lifted_rows(first) == truly
+    ident = identify(drawing, y, poses, noise, lifted=truly)
+    assert ident.explained and ident.reduced_chi2 < 1.3 and lifted_rows(ident) == ()
+    assert ident.problem.lifted == truly and np.all(ident.problem.poses[list(truly), 2] == 0.2)
+    truth = derived_at(space, theta)
+    for name, (value, se) in ident.derived().items():
+        assert abs(value - truth[name]) < 4 * se, (name, value, truth[name], se)
+    mean, cov = ident.zero
+    assert abs(mean[2] - 0.08) < 2 * np.sqrt(cov[2, 2]) and np.sqrt(cov[2, 2]) > 0.01, (mean, cov)
+
+
+def test_identify_takes_rows_a_zero_above_first_contact_lifted_as_rows_at_rest_and_says_so(drawing, plan, tmp_path):
+    """fitgen identify on a capture whose zero sat 0.12 mm above first contact (refused before, as a zero off first
+    contact among other causes): every row pressed 0.039 mm lifted off the skin; they are named, taken as rows at
+    rest with a zero error as large as they put the zero above first contact (the default's 0.02 mm, about it, had
+    read a zero that high 2.6 standard errors low), recorded in the posterior, and the line says where it sat."""
+    unit, theta = draw_unit(drawing, 25)
+    y, noise = simulated_capture(unit, plan[0], 25)
+    high = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 0.12))
+    y_high = readings(unit, high, adc_bits=0) + np.random.default_rng(25).normal(0.0, noise, y.shape)
+    path = save_capture(tmp_path / "high.csv", y_high, plan[0], {"samples_per_row": SAMPLES})
+    proc = run_cli("fitgen", "identify", str(path), "-o", str(tmp_path / "u.toml"))
+    assert proc.returncode == 0, proc.stderr
+    pressed = [i + 1 for i in np.flatnonzero(~off_skin(plan[0]) & (plan[0][:, 2] > -0.07))]
+    assert len(pressed) == 16, pressed
+    post = json.loads((tmp_path / "u.posterior.json").read_text())
+    assert post["rows_taken_lifted"] == pressed and post["zero_error"] == pytest.approx(0.089)
+    mean, cov = np.array(post["zero_found"]["mm"]), np.array(post["zero_found"]["covariance"])
+    assert abs(mean[2] - 0.12) < 2 * np.sqrt(cov[2, 2]), (mean, cov)
+    assert (f"identify: rows {', '.join(map(str, pressed))}, labelled in contact (dz up to -0.039 mm), read as the "
+            "capture's rows off the skin: the stage lifted them past the skin's adhesion (0.05 mm), its zero set above "
+            "first contact. Taken as rows at rest, with a zero error of 0.089 mm (as far above first contact as they "
+            "put the zero), the capture reads as a unit within the tolerances, to the noise, its zero found at dz "
+            f"{mean[2]:+.3f} mm (standard error {np.sqrt(cov[2, 2]):.2g}, which allows for the rows the rig's error "
+            "kept on the skin beside them); set first contact again before the next capture (docs/calibration.md)\n"
+            ) in proc.stderr
+    truth = derived_at(UnitSpace.of(drawing), theta)
+    for name, d in post["derived"].items():
+        assert abs(d["value"] - truth[name]) < 4 * d["se"], (name, d, truth[name])
+
+
 def test_rows_both_starts_leave_unexplained_are_fitted_again_through_a_looser_stage(monkeypatch):
     """A tilted-axes unit at 128 samples per row whose zero is off by 0.08 mm (4 sigma of 0.02 mm per axis): both
     starts ran off (27,160; 6.7 with OpenBLAS's Sandybridge kernel) where the unit reads 1.45. A third start,
@@ -1169,11 +1229,15 @@ def test_a_printers_capture_identified_for_a_tighter_stage_names_the_rig_error(d
 def test_bad_captures_are_refused_in_one_line(drawing, plan, tmp_path, monkeypatch, capsys):
     unit, _ = draw_unit(drawing, 25)
     y, noise = simulated_capture(unit, plan[0], 25)
-    # the zero set 0.12 mm above first contact: the rows pressed least (0.039 mm) read the magnet at rest
-    high = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 0.12))
+    # the zero set 1 mm above first contact: the rows pressed least (0.039 mm) read the magnet at rest, and the
+    # others lie too far up for a zero error of 0.089 mm, which those rows put the zero above first contact by
+    high = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 1.0))
     y_high = readings(unit, high, adc_bits=0) + np.random.default_rng(25).normal(0.0, noise, y.shape)
     cases = {
-        "zero high": (y_high, plan[0], "a zero off first contact (above it, the rows pressed least off the skin"),
+        "zero high": (y_high, plan[0], "16 rows labelled in contact (rows 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, "
+                      "16, 17, 18, 19; dz up to -0.039 mm) read as the capture's rows off the skin: the stage lifted "
+                      "them past the skin's adhesion, its zero set at least 0.089 mm above first contact; taken as "
+                      "rows at rest they leave the capture unexplained all the same"),
         "few": (y[:6], plan[0][:6], "at least 10"),
         "repeat": (np.repeat(y[:1], 20, axis=0), np.repeat(plan[0][:1], 20, axis=0), "distinct pose"),
         "saturated": (np.where(np.arange(8) < 2, 3.3, y), plan[0], "saturated"),

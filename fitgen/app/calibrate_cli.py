@@ -25,7 +25,7 @@ def cmd_identify(args) -> int:
     from fitgen.app.replaced import replaced_unit, unit_output
     from fitgen.base.progress import Progress
     from fitgen.fitting import identify as idf, unitrecord as rec, verdict
-    from fitgen.fitting.capturezero import stage_zero
+    from fitgen.fitting.capturezero import lifted_rows, stage_zero
     from fitgen.fitting.holdout import drawing_rest_spread
     from fitgen.physics.dataset import load_capture
     from fitgen.physics.units import require_drawing
@@ -75,10 +75,17 @@ def cmd_identify(args) -> int:
               "rows from another zero may stand out; capture them again from one zero if they do", file=sys.stderr)
     for line in verdict.lifted_rows_line(ds.poses(), args.rig_error, args.zero_error):  # before a refusal naming one
         print(f"identify: {line}", file=sys.stderr)
-    with Progress("identify", 4) as bar:
-        ident = idf.identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
-                             zero_error=args.zero_error, reach=rec.stage_reach(ds.meta, args.capture),
-                             progress=lambda i, n, note: bar.update(i - bar.done, note))
+
+    def solve(title: str, lifted: tuple = ()) -> idf.Identification:
+        with Progress(title, 4) as bar:
+            return idf.identify(drawing, ds.inputs, ds.poses(), noise, rig_error=args.rig_error,
+                                zero_error=args.zero_error, reach=rec.stage_reach(ds.meta, args.capture),
+                                progress=lambda i, n, note: bar.update(i - bar.done, note), lifted=lifted)
+
+    ident = solve("identify")
+    if rows := lifted_rows(ident):  # a zero set above first contact: rows in contact that read at rest
+        again = solve("rows the stage lifted", rows)
+        ident, rows = (again, ()) if again.explained else (ident, rows)
     with Progress("what to blame", drawing.n_elements) as bar:  # moves only when the capture is refused
 
         def trial(i, n, note):
@@ -86,7 +93,7 @@ def cmd_identify(args) -> int:
             bar.update(1, note)
 
         try:
-            verdict.check_explained(ident, args.capture, drawing.name, source, trial)
+            verdict.check_explained(ident, args.capture, drawing.name, source, trial, lifted=rows)
         except InputError as exc:
             hint = "" if args.transfer else rec.units_hint(drawing, ds.inputs, ds.poses(), ds.meta)
             text = f"{hint}; read as {drawing.units}, {exc}" if hint else str(exc)
@@ -104,7 +111,7 @@ def cmd_identify(args) -> int:
     replaced = replaced_unit(*files[0], sha, args.capture)
     unit, post, *png = write_all(files)
     print(f"reading noise per row: {source}; rig error {args.rig_error:g} mm per row, zero error "
-          f"{args.zero_error:g} mm{stage}", file=sys.stderr)
+          f"{ident.problem.zero_error:g} mm{stage}", file=sys.stderr)
     print(rec.report(ident, rec.samples_per_row(ds.meta)), end="")
     print(f"wrote {unit} (the unit at the maximum a posteriori) and {post} (every parameter's standard error and "
           "the posterior)", file=sys.stderr)
@@ -122,8 +129,8 @@ def cmd_identify(args) -> int:
     with Progress("a field the stage carries?", 4) as bar:
         field = field or verdict.field_line(ident, lambda i, n, note: bar.update(i - bar.done, note))
     # a cause every row shares first: under it, the rows that stand out may not
-    notes = (field + verdict.outlier_lines(ident, args.capture) + verdict.low_residual_line(ident, source)
-             + verdict.far_zero_line(ident))
+    notes = (verdict.taken_lifted_line(ident, ds.poses()) + field + verdict.outlier_lines(ident, args.capture)
+             + verdict.low_residual_line(ident, source) + verdict.far_zero_line(ident))
     print("".join(f"identify: {ln}\n" for ln in notes), end="", file=sys.stderr)
     # unit.toml's twin is twin.json beside it; another unit file's its own (a batch in one folder: none replaces one)
     twin = str(unit.with_name("twin" if unit.name == "unit.toml" else unit.name.removesuffix(".toml")

@@ -1,11 +1,13 @@
 """A capture's zero, the stage displacement its labels call 0 (first contact, set by hand): where the stage's
-record says it was in machine coordinates, and where identify found it from first contact."""
+record says it was in machine coordinates, where identify found it from first contact, and the rows a zero set
+above first contact lifted off the skin."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from fitgen.base.errors import InputError, shown
+from fitgen.fitting.capturecheck import reads_at_rest
 from fitgen.physics.pose import POSE_NAMES
 
 
@@ -66,3 +68,15 @@ def zero_found(posterior: dict | None, where: str) -> tuple[np.ndarray, np.ndarr
         raise InputError(f"{where} zero_found must be a zero (mm: 3 numbers) and its covariance (3 x 3), got "
                          f"{shown(found)}")
     return mean, cov
+
+
+def lifted_rows(ident) -> tuple[int, ...]:
+    """The rows of an identification (fitgen.fitting.identify.Identification) that the physics leaves unexplained
+    which are labelled in contact yet read as the capture's rows off the skin (capturecheck.reads_at_rest): the stage
+    lifted them past the skin's adhesion, its zero set above first contact. Empty where the rows are explained, or
+    none reads so."""
+    if ident.explained:
+        return ()
+    prob = ident.problem
+    at_rest = reads_at_rest(prob.readings, prob.poses, prob.noise)
+    return () if at_rest is None else tuple(int(i) for i in np.flatnonzero(at_rest))

@@ -29,6 +29,8 @@ class Problem:
     zero_error: float = 0.0  # mm rms per axis, common to the capture's rows in contact (not to other poses)
     # mm (3,): the zero's error about which the rows in contact are linearised (its posterior mean, from a sweep)
     shift: np.ndarray | None = None
+    # rows labelled in contact that read at rest, taken as lifted off the skin (their dz in ``poses`` moved there)
+    lifted: tuple = ()
 
     @property
     def at(self) -> np.ndarray:

@@ -15,7 +15,7 @@ from fitgen.fitting.capturecheck import check_error
 from fitgen.fitting.identify import (CHI2_LIMIT, OUTLIER_LIMIT, PRIOR_LIMIT, RIG_ERROR, ZERO_ERROR, Identification,
                                      identify)
 from fitgen.fitting.unitrecord import pose_words
-from fitgen.physics.pose import OFF_SKIN_MM, POSE_NAMES, contact_top, lift_odds, off_skin
+from fitgen.physics.pose import OFF_SKIN_MM, POSE_NAMES, contact_top, lift_odds, lifted_zero, off_skin
 
 
 def lifted_rows_line(poses: np.ndarray, rig_error: float, zero_error: float = 0.0) -> list[str]:
@@ -93,6 +93,25 @@ def far_zero_line(ident: Identification) -> list[str]:
             "its rows on the skin only for a zero within its zero error (one set above first contact lifts the rows "
             "pressed least off it); set first contact again before the next capture (docs/calibration.md), or "
             "schedule and identify with a --zero-error as large"]
+
+
+def taken_lifted_line(ident: Identification, labels: np.ndarray) -> list[str]:
+    """A line when identify took rows labelled in contact as lifted off the skin (``Problem.lifted``; ``labels``:
+    the capture's poses as labelled): which, and why."""
+    prob = ident.problem
+    rows = prob.lifted
+    if not rows:
+        return []
+    top = float(np.max(np.asarray(labels)[list(rows), 2]))
+    named = ", ".join(str(i + 1) for i in rows)
+    at = (f", its zero found at dz {ident.zero[0][2]:+.3f} mm (standard error {np.sqrt(ident.zero[1][2, 2]):.2g}, "
+          "which allows for the rows the rig's error kept on the skin beside them)" if ident.zero else "")
+    return [f"row{'s' * (len(rows) > 1)} {named}, labelled in contact (dz up to {top:g} mm), read as the capture's "
+            f"rows off the skin: the stage lifted {'them' if len(rows) > 1 else 'it'} past the skin's adhesion "
+            f"({OFF_SKIN_MM:g} mm), its zero set above first contact. Taken as rows at rest, with a zero error of "
+            f"{prob.zero_error:.3g} mm (as far above first contact as they put the zero), the capture reads as a unit "
+            f"within the tolerances, to the noise{at}; set first contact again before the next capture "
+            "(docs/calibration.md)"]
 
 
 # an accepted capture's reduced chi-square above this: does a looser stage, or a field the stage carries, explain it?
@@ -189,13 +208,15 @@ class ChannelOrderError(InputError):
         self.order = tuple(int(k) for k in order)
 
 
-def check_explained(ident: Identification, capture, drawing: str, source: str, progress=None) -> None:
+def check_explained(ident: Identification, capture, drawing: str, source: str, progress=None,
+                    lifted: tuple = ()) -> None:
     """InputError when the physics does not explain the capture (reduced chi-square over CHI2_LIMIT), or does only
     with a unit far outside its tolerances (a parameter beyond PRIOR_LIMIT spreads), with the cause when one thing
     alone is to blame (rows, an element, a field the stage carries, the ring's order, a swapped pair:
     :func:`fitgen.fitting.blame.blame`, ``progress`` its callback) or the stage's axes are; ``source``: where the
-    reading noise came from; ``drawing``: the sensor's name. Where the channels' order is to blame, the error is a
-    :class:`ChannelOrderError`, carrying the order."""
+    reading noise came from; ``drawing``: the sensor's name; ``lifted``: rows in contact that read at rest, which
+    taken as lifted did not explain the capture either (named where nothing else is). Where the channels' order is to
+    blame, the error is a :class:`ChannelOrderError`, carrying the order."""
     far, bad = ident.outside_tolerances(), ident.reduced_chi2 > CHI2_LIMIT
     if not (bad or far):
         return
@@ -244,6 +265,14 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
     elif far and all(ident.space.names[i].startswith("stage.") for i, _ in far[:3]):
         cause = ("the stage's axes against the sensor's: a pose axis mirrored, swapped or in other units than mm "
                  "(the capture's axis map, --stage-axes)")
+    elif lifted:  # rows in contact that read at rest, which taken as lifted (capturezero.lifted_rows) did not explain
+        top = float(np.max(ident.problem.poses[list(lifted), 2]))
+        least = lifted_zero(ident.problem.poses, lifted)
+        cause = (f"{len(lifted)} rows labelled in contact (rows {', '.join(str(i + 1) for i in lifted)}; dz up to "
+                 f"{top:g} mm) read as the capture's rows off the skin: the stage lifted them past the skin's "
+                 f"adhesion, its zero set at least {least:.3g} mm above first contact; taken as rows at rest they "
+                 "leave the capture unexplained all the same, the zero farther above first contact than the rows in "
+                 "contact can tell: set first contact again (docs/calibration.md) and capture again")
     else:
         cause = None
     if bad:

@@ -111,6 +111,20 @@ def off_skin(poses: np.ndarray) -> np.ndarray:
     return np.asarray(poses)[:, 2] > OFF_SKIN_MM
 
 
+def taken_lifted(poses: np.ndarray, rows) -> np.ndarray:
+    """``poses`` (n, 5) with ``rows`` lifted to REST_LIFT_MM, where a schedule's rest rows stand: rows that the stage
+    lifted past the skin's adhesion whatever their labels say read the magnet at rest, as those do."""
+    out = np.array(poses, dtype=float)
+    out[list(rows), 2] = REST_LIFT_MM
+    return out
+
+
+def lifted_zero(poses: np.ndarray, rows) -> float:
+    """How far above first contact (mm) a capture's zero sits for its stage to have lifted ``rows`` of ``poses`` (n,
+    5), labelled in contact, past the skin's adhesion: OFF_SKIN_MM above the deepest of them, the rig's error aside."""
+    return OFF_SKIN_MM - float(np.min(np.asarray(poses)[list(rows), 2]))
+
+
 def contact_top(rig_error: float, zero_error: float = 0.0) -> float:
     """The highest dz (mm) a scheduled row in contact takes on a stage with ``rig_error`` mm rms per axis whose zero
     is off first contact by ``zero_error`` mm rms per axis: first contact (0), or lower where the two would lift it
