@@ -109,10 +109,9 @@ def start_degc(thermometer, tin) -> float:
     """The thermistor's reading as a run starts; InputError when it reads none, which every row would record."""
     degc = thermometer.read(fresh=True)
     if not math.isfinite(degc):
-        raise InputError(f"the thermistor ({tin.kind}@0x{tin.address:02x}:{tin.input}) reads no temperature: its "
-                         "divider reads 0 V or its reference (open, shorted), or more than its chip reads at its gain "
-                         "(--pga below the divider's reference): mend it, give that chip a --pga that reads the "
-                         "divider, or leave temp= out of --adc")
+        raise InputError(f"the thermistor ({tin.kind}@0x{tin.address:02x}:{tin.input}) reads no temperature: "
+                         f"{thermometer.fault()}: mend it, give that chip a --pga that reads the divider (one below "
+                         "the divider's reference reads none), or leave temp= out of --adc")
     return degc
 
 

@@ -21,7 +21,7 @@ from fitgen.base.errors import InputError
 
 from host.adc import AdcArray, DeviceSilent, ErrorCounts
 from host.clock import REAL_CLOCK
-from host.temperature import BEYOND_DEGC, T_RANGE
+from host.temperature import BEYOND_DEGC
 
 FORMATS = ("csv", "jsonl")
 
@@ -50,8 +50,6 @@ UNCOMPENSATED = ("not compensated for temperature: the thermistor read none (is 
                  "read its divider's reference?)")
 FAR_OUTSIDE = ("estimated outside the pose box the model was fitted in by more than its width: another sensor than "
                "the model's? a built unit needs its own calibration (docs/calibration.md)")
-TEMP_OUTSIDE = (f"at a temperature outside {T_RANGE[0]:g}..{T_RANGE[1]:g} degC, where the compensation is "
-                "extrapolated (a thermistor off its divider's range?)")
 TEMP_BEYOND = "at a temperature the compensation was not fitted near, where it is extrapolated"
 FAR_HELD = ("estimated outside the pose box the model was fitted in by more than its width, from a read held up "
             "between its conversions (a loaded machine, or I2C retries): a sensor that moved meanwhile gives readings "
@@ -66,7 +64,7 @@ def held_up(took, quickest):
     return took > np.maximum(HELD_FACTOR * quickest, quickest + HELD_MARGIN)
 # ReadoutStats' counts of samples whose estimates are off while the run goes on: each said at its first sample
 # (Readout.warn) and in the summary
-WARNED = {"uncompensated": UNCOMPENSATED, "temp_outside": TEMP_OUTSIDE, "temp_beyond": TEMP_BEYOND,
+WARNED = {"uncompensated": UNCOMPENSATED, "temp_beyond": TEMP_BEYOND,
           "far": FAR_OUTSIDE, "far_held": FAR_HELD}
 
 
@@ -79,8 +77,8 @@ class ReadoutStats:
     outside: int = 0  # samples with an input outside the model's fitted domain (status > 0)
     far: int = 0  # samples estimated outside the model's fitted pose box by more than its width
     far_held: int = 0  # ... from a read held up between its conversions (not counted in far)
-    uncompensated: int = 0  # samples a temperature compensation was given for and the thermistor read none
-    temp_outside: int = 0  # samples whose temperature lies outside the range a compensation is checked over
+    # samples a temperature compensation was given for and the thermistor read none (in T_RANGE: outside it, a fault)
+    uncompensated: int = 0
     temp_beyond: int = 0  # samples more than BEYOND_DEGC past the temperatures a compensation was fitted at
     first: float = 0.0  # s (monotonic): when the first sample began
     last: float = 0.0  # and the last
@@ -242,9 +240,7 @@ class Readout:
     def _check_temperature(self, temp: float) -> None:
         """Count a sample the compensation did not apply to, or applied outside its range."""
         if not math.isfinite(temp):
-            self._count("uncompensated")
-        elif not T_RANGE[0] <= temp <= T_RANGE[1]:
-            self._count("temp_outside", f": {temp:.1f} degC")
+            self._count("uncompensated", f": {self.thermometer.fault()}" if self.thermometer is not None else "")
         elif (fitted := self.corrections.tempcomp.fitted_range) is not None and \
                 not fitted[0] - BEYOND_DEGC <= temp <= fitted[1] + BEYOND_DEGC:
             self._count("temp_beyond", f" ({temp:.1f} degC; fitted at {fitted[0]:g}..{fitted[1]:g})")

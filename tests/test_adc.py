@@ -472,6 +472,18 @@ def test_the_c_enum_of_chip_kinds_is_the_protocols_list():
     assert len(enum) == body.count("=") and enum == {k: i for i, k in enumerate(ADC_KINDS)}
 
 
+def test_the_c_drivers_thermistor_range_is_the_hosts():
+    """adc_code_degc reads no temperature outside ADC_DEGC_MIN..ADC_DEGC_MAX, as the host's Thermometer reads none
+    outside T_RANGE: the two must be one range."""
+    from importlib import resources
+
+    from host.temperature import T_RANGE
+
+    text = (resources.files("firmware_templates") / "firmware" / "adc.h").read_text()
+    got = [float(re.search(rf"#define ADC_DEGC_{end} \(?(-?[\d.]+)\)?", text)[1]) for end in ("MIN", "MAX")]
+    assert tuple(got) == T_RANGE
+
+
 @pytest.mark.parametrize("kind, key, value", [("ads7828", "pga", 2.048), ("ads7828", "mode", "continuous"),
                                               ("ads7828", "data_rate", 128), ("ads1115", "vref", 3.3)])
 def test_a_map_file_refuses_a_setting_of_the_other_chip(tmp_path, kind, key, value):

@@ -197,7 +197,7 @@ def test_capture_at_temperatures_fits_the_coefficients(tmp_path):
 
 def test_a_thermistor_past_its_chips_full_scale_and_a_level_resumed_at_another_temperature_are_refused(tmp_path):
     """At 5 degC the divider's 2.38 V is past the 2.048 V of --pga 2.048: the clipped code had been recorded as
-    14.3 degC, no word. A level of --temperature resumed over rows taken at another temperature had its record
+    14.3 degC, no word; so had an open thermistor's -72 degC, outside its rated range. A level of --temperature resumed over rows taken at another temperature had its record
     written over (a plain capture refuses it); each level's rows now record their own temperatures too."""
     sched = tmp_path / "s.csv"
     sched.write_text("dx,dz\n0,0\n1,-1\n-1,-0.5\n0.5,-1\n")
@@ -206,6 +206,13 @@ def test_a_thermistor_past_its_chips_full_scale_and_a_level_resumed_at_another_t
                    "ramp=0,start=5,creep=0", "-o", str(tmp_path / "c.csv"))
     assert_one_line_error(cold, contains="the thermistor (ads1115@0x4a:0) reads no temperature: its divider reads 0 V "
                                          "or its reference (open, shorted), or more than its chip reads at its gain")
+    assert not list(tmp_path.glob("c.*"))
+    # an open NTC against an ADS1115's input reads about -72 degC: recorded, its meta was one fitgen refuses to load
+    opened = run_cli("tactile-host", "capture", "--poses", str(sched), *adc, "--sim-drift", "ramp=0,start=-72,creep=0",
+                     "-o", str(tmp_path / "c.csv"))
+    assert_one_line_error(opened, contains="the thermistor (ads1115@0x4a:0) reads no temperature: it reads -72.")
+    assert ("degC, outside -40..125 (an open thermistor reads about -72 against an ADS1115's input, a shorted one far "
+            "above): mend it") in opened.stderr
     assert not list(tmp_path.glob("c.*"))
     levels = ["tactile-host", "capture", "--poses", str(sched), *adc, "--temperature", "15,25", "-o",
               str(tmp_path / "t.csv")]
@@ -272,17 +279,20 @@ def test_a_compensation_without_its_fitted_temperatures_is_noted_and_a_damaged_l
 
 def test_read_says_at_once_when_its_compensation_cannot_apply(rest_model_file, tmp_path):
     """A thermistor that reads nothing (its divider at the rail: open or shorted) leaves the readings
-    uncompensated, and one outside the range a compensation is checked over extrapolates it: each is a warning
-    at its first sample and a count in the summary; a thermistor in range, neither."""
+    uncompensated, and so does one that reads outside its rated range, -40..125 degC (a fault: an open NTC reads
+    about -72 against an ADS1115's input; it had compensated every sample, extrapolated): each is a warning at its
+    first sample, saying what the divider read, and a count in the summary; a thermistor in range, neither."""
     path = tmp_path / "tc.json"
     path.write_text(json.dumps({"kind": TempComp.KIND, "version": 1, "t0": 25.0, "offset_v_per_degc": [1e-5] * 8,
                                 "gain_per_degc": [-1e-4] * 8, "fit": {"temperatures": [15.0, 25.0, 35.0]}}))
     none = ("not compensated for temperature: the thermistor read none (is it connected? does its chip's --pga read "
             "its divider's reference?)")
     # -270 and absolute zero, which --sim-drift takes, had overflowed the simulated divider: a traceback
-    for start, said in (("-200", none), ("-270", none), ("-273.15", none),
-                        ("140", "at a temperature outside -40..125 degC, where the compensation is extrapolated"),
-                        ("25", None)):
+    rail = "its divider reads 0 V or its reference (open, shorted), or more than its chip reads at its gain"
+    outside = ("it reads 140.0 degC, outside -40..125 (an open thermistor reads about -72 against an ADS1115's input, "
+               "a shorted one far above)")
+    for start, said, why in (("-200", none, rail), ("-270", none, rail), ("-273.15", none, rail),
+                             ("140", none, outside), ("25", None, None)):
         proc = run_cli("tactile-host", "read", "--model", rest_model_file, "--adc", TWO_CHIPS + ",temp=ads1115@0x4a:0",
                        "--simulate", "0,0,0,0,0", "--sim-drift", f"start={start},ramp=0", "--temp-comp", str(path),
                        "--count", "5")
@@ -291,7 +301,8 @@ def test_read_says_at_once_when_its_compensation_cannot_apply(rest_model_file, t
         if said is None:
             assert len(lines) == 1 and "compensat" not in proc.stderr, proc.stderr
             continue
-        assert lines[0].startswith(f"tactile-host read: warning: sample 1 {said}") and len(lines) == 2, proc.stderr
+        assert lines[0].startswith(f"tactile-host read: warning: sample 1 {said}: {why}; ") and len(lines) == 2, \
+            proc.stderr
         assert f"; 5 {said}" in lines[1]
 
 

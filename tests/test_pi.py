@@ -457,19 +457,23 @@ def test_pi_build_compensates_temperature_as_the_python_readout_does(model, tmp_
                                   "--temp-comp", "x.json", "-o", str(tmp_path / "z")))
 
 
-def test_a_thermistor_past_its_chips_full_scale_reads_none_in_tm_pi_and_read(model, tmp_path):
+@pytest.mark.parametrize("pga, degc", [(2.048, 5.0), (4.096, -72.0), (4.096, 130.0)])
+def test_a_thermistor_past_its_chips_full_scale_reads_none_in_tm_pi_and_read(model, tmp_path, pga, degc):
     """At 5 degC the divider gives 2.38 V, past the 2.048 V an ADS1115 reads at --pga 2.048: the clipped code had read
     as 14.3 degC, and tm_pi and read compensated every sample for it. Now both read no temperature and leave the
-    samples uncompensated, as for an open thermistor (the model's domain cut to 2 V, which that gain reads)."""
+    samples uncompensated, as for an open thermistor (the model's domain cut to 2 V, which that gain reads). So for a
+    reading outside the thermistor's rated range, -40..125 degC: an open NTC against an ADS1115's input (about 6 Mohm
+    beside the 10 kohm series resistor) reads -72 degC, which both had compensated every sample for, extrapolated by
+    97 degC, and a capture had recorded in a meta fitgen refuses."""
     from host.simsensor import Drift
     from host.temperature import Thermometer, parse_temperature_input
 
     require_tool("arm-linux-gnueabihf-gcc")
     require_tool("qemu-arm")
     tin = parse_temperature_input("ads1115@0x4a:2")
-    cmap = parse_spec(MAP, Settings(pga=2.048))
+    cmap = parse_spec(MAP, Settings(pga=pga))
     model = replace(model, input_max=np.minimum(model.input_max, 2.0))
-    drift = Drift.typical(8, seed=4).steady(5.0)
+    drift = Drift.typical(8, seed=4).steady(degc)
     tc = TempComp(25.0, drift.offset_tc, drift.gain_tc)
 
     def bus():
@@ -479,7 +483,9 @@ def test_a_thermistor_past_its_chips_full_scale_reads_none_in_tm_pi_and_read(mod
     arr = AdcArray(b, cmap, clock=clock, policy=RetryPolicy())
     arr.probe()
     arr.setup()
-    assert np.isnan(Thermometer(arr, tin).read())
+    thermometer = Thermometer(arr, tin)
+    assert np.isnan(thermometer.read())
+    assert (thermometer.raw == pytest.approx(degc, abs=0.2)) if degc != 5.0 else np.isnan(thermometer.raw)
     runs = []
     for name, comp in (("comp", tc), ("plain", None)):
         b, clock = bus()

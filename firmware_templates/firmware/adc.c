@@ -55,10 +55,12 @@ double adc_ntc_degc(double volts, double beta, double r25, double series, double
 double adc_code_degc(const adc_chip *c, int32_t code, double beta, double r25, double series, double vref)
 {
     const int32_t top = c->kind == ADC_ADS1115 ? 32767 : 4095;
+    double t;
     if (code >= top) { /* the divider past what the chip reads: a clipped code reads as another temperature */
         return (double)NAN;
     }
-    return adc_ntc_degc(code * adc_lsb_volts(c), beta, r25, series, vref);
+    t = adc_ntc_degc(code * adc_lsb_volts(c), beta, r25, series, vref);
+    return t >= ADC_DEGC_MIN && t <= ADC_DEGC_MAX ? t : (double)NAN; /* NaN fails both: stays NaN */
 }
 
 /* the MUX code of an input: single-ended AINx 100..111, pairs 000 (0-1) 001 (0-3) 010 (1-3) 011 (2-3) */

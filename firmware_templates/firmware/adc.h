@@ -120,8 +120,13 @@ double adc_lsb_volts(const adc_chip *c);
 /* the temperature (degC) of an NTC divider's voltage: the NTC (beta model, r25 ohms at 25 degC) to ground,
  * `series` ohms to `vref`, as host/temperature.py computes it; NAN for an open or shorted NTC */
 double adc_ntc_degc(double volts, double beta, double r25, double series, double vref);
+/* a thermistor's rated range (degC, host/temperature.py's T_RANGE): outside it a reading is a fault, not a
+ * temperature (an open NTC against an ADS1115's input reads about -72) */
+#define ADC_DEGC_MIN (-40.0)
+#define ADC_DEGC_MAX 125.0
 /* adc_ntc_degc of a code of chip c; NaN where the code is the chip's full scale (the divider's voltage past what
- * the chip reads at its gain: clipped, it would read as another temperature) */
+ * the chip reads at its gain: clipped, it would read as another temperature) or the temperature lies outside
+ * ADC_DEGC_MIN..ADC_DEGC_MAX, where a compensation would be extrapolated by as much */
 double adc_code_degc(const adc_chip *c, int32_t code, double beta, double r25, double series, double vref);
 /* the ADS1115 config word and the ADS7828 command byte (for tests and the docs) */
 uint16_t adc_ads1115_config(const adc_array *a, uint8_t chip, uint8_t slot, int single, int start);
