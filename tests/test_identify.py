@@ -307,8 +307,9 @@ def test_rows_a_zero_above_first_contact_lifted_are_found_and_taken_as_rows_at_r
 def test_identify_takes_rows_a_zero_above_first_contact_lifted_as_rows_at_rest_and_says_so(drawing, plan, tmp_path):
     """fitgen identify on a capture whose zero sat 0.12 mm above first contact (refused before, as a zero off first
     contact among other causes): every row pressed 0.039 mm lifted off the skin; they are named, taken as rows at
-    rest with a zero error as large as they put the zero above first contact (the default's 0.02 mm, about it, had
-    read a zero that high 2.6 standard errors low), recorded in the posterior, and the line says where it sat."""
+    rest with a zero error in dz as large as they put the zero above first contact (the default's 0.02 mm, about it,
+    had read a zero that high 2.6 standard errors low), recorded in the posterior, and the line says where it sat.
+    With --zero-error 0 they are not taken so: the refusal names them and the zero error that would."""
     unit, theta = draw_unit(drawing, 25)
     y, noise = simulated_capture(unit, plan[0], 25)
     high = rig_poses(plan[0], 0.0, np.random.default_rng(0), zero=(0.0, 0.0, 0.12))
@@ -319,19 +320,27 @@ def test_identify_takes_rows_a_zero_above_first_contact_lifted_as_rows_at_rest_a
     pressed = [i + 1 for i in np.flatnonzero(~off_skin(plan[0]) & (plan[0][:, 2] > -0.07))]
     assert len(pressed) == 16, pressed
     post = json.loads((tmp_path / "u.posterior.json").read_text())
-    assert post["rows_taken_lifted"] == pressed and post["zero_error"] == pytest.approx(0.089)
+    assert post["rows_taken_lifted"] == pressed and post["zero_lift"] == pytest.approx(0.089)
+    assert post["zero_error"] == 0.02  # in dx and dy: the rows lifted tell dz
     mean, cov = np.array(post["zero_found"]["mm"]), np.array(post["zero_found"]["covariance"])
     assert abs(mean[2] - 0.12) < 2 * np.sqrt(cov[2, 2]), (mean, cov)
     assert (f"identify: rows {', '.join(map(str, pressed))}, labelled in contact (dz up to -0.039 mm), read as the "
             "capture's rows off the skin: the stage lifted them past the skin's adhesion (0.05 mm), its zero set above "
-            "first contact. Taken as rows at rest, with a zero error of 0.089 mm (as far above first contact as they "
-            "put the zero), the capture reads as a unit within the tolerances, to the noise, its zero found at dz "
+            "first contact. Taken as rows at rest, with a zero error in dz of 0.089 mm (as far above first contact as "
+            "they put the zero), the capture reads as a unit within the tolerances, to the noise, its zero found at dz "
             f"{mean[2]:+.3f} mm (standard error {np.sqrt(cov[2, 2]):.2g}, which allows for the rows the rig's error "
             "kept on the skin beside them); set first contact again before the next capture (docs/calibration.md)\n"
             ) in proc.stderr
     truth = derived_at(UnitSpace.of(drawing), theta)
     for name, d in post["derived"].items():
         assert abs(d["value"] - truth[name]) < 4 * d["se"], (name, d, truth[name])
+    exact = run_cli("fitgen", "identify", str(path), "-o", str(tmp_path / "x.toml"), "--zero-error", "0")
+    assert_one_line_error(exact, contains="dz up to -0.039 mm) read as the capture's rows off the skin: the stage "
+                          "lifted them past the skin's adhesion, its zero set at least 0.089 mm above first contact; "
+                          "--zero-error 0 allows none: identify with a zero error (the default 0.02 mm) to take them "
+                          "as lifted")
+    with pytest.raises(InputError, match="they need a zero error above 0"):
+        identify(drawing, y_high, plan[0], noise, zero_error=0.0, lifted=tuple(np.array(pressed) - 1))
 
 
 def test_rows_both_starts_leave_unexplained_are_fitted_again_through_a_looser_stage(monkeypatch):

@@ -83,7 +83,7 @@ def cmd_identify(args) -> int:
                                 progress=lambda i, n, note: bar.update(i - bar.done, note), lifted=lifted)
 
     ident = solve("identify")
-    if rows := lifted_rows(ident):  # a zero set above first contact: rows in contact that read at rest
+    if (rows := lifted_rows(ident)) and args.zero_error > 0:  # a zero set above first contact: rows that read at rest
         again = solve("rows the stage lifted", rows)
         ident, rows = (again, ()) if again.explained else (ident, rows)
     with Progress("what to blame", drawing.n_elements) as bar:  # moves only when the capture is refused

@@ -171,9 +171,9 @@ class Identification:
         # the joint posterior of the parameters (in z, prior I) and the zero (prior zero_error^2 I) from the rows
         # whitened by their own covariance; the zero's marginal is the inverse of its Schur complement
         J = np.einsum("nij,njp->nip", wh.W, prob.jacobian(z)).reshape(-1, self.space.size)
-        S = wh.U / prob.zero_error
+        S = wh.U / prob.zero_sd
         B = J.T @ S
-        D = S.T @ S + np.eye(3) / prob.zero_error**2
+        D = S.T @ S + np.diag(1.0 / prob.zero_sd**2)
         cov = np.linalg.inv(D - B.T @ np.linalg.solve(J.T @ J + np.eye(self.space.size), B))
         if prob.lifted:
             # the rows beside the lifted ones that stayed on the skin are those the rig's error carried down: their
@@ -341,7 +341,7 @@ def _about_zero(prob: Problem, z: np.ndarray) -> Problem:
     the unit, the rows' misfit reads as a zero off by millimetres)."""
     js = prob.pose_slopes(z)
     shift = prob.zero_mean(prob.whitening(z, slopes=js), prob.residuals(z, js))
-    return replace(prob, shift=np.clip(shift, -PRIOR_LIMIT * prob.zero_error, PRIOR_LIMIT * prob.zero_error))
+    return replace(prob, shift=np.clip(shift, -PRIOR_LIMIT * prob.zero_sd, PRIOR_LIMIT * prob.zero_sd))
 
 
 def _chi2(prob: Problem, z: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray]:
@@ -364,14 +364,18 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     the zero's ``zero_error`` common to the rows in contact (mm rms per axis). The poses it names to pin what the
     capture leaves to the prior lie within the elements' linear range and within ``reach`` ({pose name: (low,
     high)}, mm: where the stage can set a pose) where given. ``lifted``: rows labelled in contact to take as lifted
-    off the skin (fitgen.fitting.capturezero.lifted_rows: they read at rest), the zero's error at least as far above
-    first contact as that puts the zero."""
+    off the skin (fitgen.fitting.capturezero.lifted_rows: they read at rest), the zero's error in dz at least as far
+    above first contact as that puts the zero; they need a ``zero_error`` above 0."""
     space = unit_space(drawing)
     readings, poses = check_rows(readings, poses, "the capture")
+    lift = 0.0
     if lifted:
+        if not zero_error > 0:
+            raise InputError("rows taken as lifted off the skin put the zero above first contact: they need a zero "
+                             f"error above 0 (the default {ZERO_ERROR:g} mm)")
         # a zero error about first contact would pull the zero back there: 6 of 6 units whose zero sat 0.12 mm high
         # read it 2.6 standard errors low (median), and at 0.2 mm their derived quantities to 4.2 (bench/zero_above.py)
-        zero_error = max(zero_error, lifted_zero(poses, lifted))
+        lift = lifted_zero(poses, lifted)
         poses = taken_lifted(poses, lifted)
     valid = check_capture(space, readings, poses)
     noise = element_noise(noise, readings.shape[1], "identify's reading noise (--noise, or a sensor file's figure)")
@@ -379,7 +383,7 @@ def identify(drawing: Sensor, readings: np.ndarray, poses: np.ndarray, noise, *,
     check_error("zero error", zero_error)
     check_contact(readings, poses, noise)
     prob = Problem(space, readings, poses, noise, float(rig_error), valid, float(zero_error),
-                   lifted=tuple(int(i) for i in lifted))
+                   lifted=tuple(int(i) for i in lifted), zero_lift=lift)
     try:
         return _solve(prob, ranges, progress, reach)
     except (np.linalg.LinAlgError, OverflowError):

@@ -31,6 +31,14 @@ class Problem:
     shift: np.ndarray | None = None
     # rows labelled in contact that read at rest, taken as lifted off the skin (their dz in ``poses`` moved there)
     lifted: tuple = ()
+    # mm: how far above first contact those rows put the zero, dz's prior spread where larger than zero_error (the
+    # rows tell dz, not dx or dy: a zero free there too traded against the magnet's offset, 4 standard errors off)
+    zero_lift: float = 0.0
+
+    @property
+    def zero_sd(self) -> np.ndarray:
+        """The zero's error's prior spread per axis (mm, 3): ``zero_error``, dz's at least ``zero_lift``."""
+        return np.array([self.zero_error, self.zero_error, max(self.zero_error, self.zero_lift)])
 
     @property
     def at(self) -> np.ndarray:
@@ -61,7 +69,7 @@ class Problem:
         if wh.U is None:
             return np.zeros(3)
         U = wh.U
-        return self.zero_error * np.linalg.solve(np.eye(3) + U.T @ U, U.T @ np.einsum("nij,nj->ni", wh.W, r).ravel())
+        return self.zero_sd * np.linalg.solve(np.eye(3) + U.T @ U, U.T @ np.einsum("nij,nj->ni", wh.W, r).ravel())
 
     def jacobian(self, z: np.ndarray, poses: np.ndarray | None = None) -> np.ndarray:
         """d readings / d z: (n, N, P), by central differences (one batched evaluation)."""
@@ -108,7 +116,7 @@ class Problem:
         W = self.whiteners(z, poses, js)
         if poses is not None or self.zero_error <= 0:
             return Whitening(W)
-        U = np.einsum("nij,nja->nia", W, js).reshape(-1, 3) * self.zero_error
+        U = np.einsum("nij,nja->nia", W, js).reshape(-1, 3) * self.zero_sd
         phi, s, _ = np.linalg.svd(U, full_matrices=False)
         return Whitening(W, phi, 1.0 / np.sqrt(1.0 + s**2) - 1.0, U)
 
@@ -133,7 +141,7 @@ class Whitening:
     W: np.ndarray
     phi: np.ndarray | None = None
     c: np.ndarray | None = None
-    U: np.ndarray | None = None  # the zero's whitened slopes (n N, 3), times zero_error
+    U: np.ndarray | None = None  # the zero's whitened slopes (n N, 3), times its prior spread per axis
 
     def apply(self, a: np.ndarray) -> np.ndarray:
         """Whitened residuals (n, N) -> (n N,) or Jacobians (n, N, P) -> (n N, P)."""

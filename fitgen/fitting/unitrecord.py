@@ -413,7 +413,8 @@ def unit_files(ident: Identification, path, provenance: dict, noise: float | Non
         # where the capture's zero sat from first contact: what a check capture that reuses it is off by
         **({"zero_found": {"mm": ident.zero[0].tolist(), "covariance": ident.zero[1].tolist()}} if ident.zero else {}),
         # rows labelled in contact that read at rest, taken as lifted off the skin (numbered as in the capture)
-        **({"rows_taken_lifted": [i + 1 for i in ident.problem.lifted]} if ident.problem.lifted else {}),
+        **({"rows_taken_lifted": [i + 1 for i in ident.problem.lifted], "zero_lift": ident.problem.zero_lift}
+           if ident.problem.lifted else {}),
         "row_noise": ident.problem.noise.tolist(),
         "outlying_rows": [{"row": i + 1, "residual": r} for i, r in ident.outlying_rows()],
         "derived": {k: {"value": v, "se": s} for k, (v, s) in ident.derived().items()},

@@ -108,9 +108,9 @@ def taken_lifted_line(ident: Identification, labels: np.ndarray) -> list[str]:
           "which allows for the rows the rig's error kept on the skin beside them)" if ident.zero else "")
     return [f"row{'s' * (len(rows) > 1)} {named}, labelled in contact (dz up to {top:g} mm), read as the capture's "
             f"rows off the skin: the stage lifted {'them' if len(rows) > 1 else 'it'} past the skin's adhesion "
-            f"({OFF_SKIN_MM:g} mm), its zero set above first contact. Taken as rows at rest, with a zero error of "
-            f"{prob.zero_error:.3g} mm (as far above first contact as they put the zero), the capture reads as a unit "
-            f"within the tolerances, to the noise{at}; set first contact again before the next capture "
+            f"({OFF_SKIN_MM:g} mm), its zero set above first contact. Taken as rows at rest, with a zero error in "
+            f"dz of {prob.zero_sd[2]:.3g} mm (as far above first contact as they put the zero), the capture reads as "
+            f"a unit within the tolerances, to the noise{at}; set first contact again before the next capture "
             "(docs/calibration.md)"]
 
 
@@ -270,9 +270,12 @@ def check_explained(ident: Identification, capture, drawing: str, source: str, p
         least = lifted_zero(ident.problem.poses, lifted)
         cause = (f"{len(lifted)} rows labelled in contact (rows {', '.join(str(i + 1) for i in lifted)}; dz up to "
                  f"{top:g} mm) read as the capture's rows off the skin: the stage lifted them past the skin's "
-                 f"adhesion, its zero set at least {least:.3g} mm above first contact; taken as rows at rest they "
-                 "leave the capture unexplained all the same, the zero farther above first contact than the rows in "
-                 "contact can tell: set first contact again (docs/calibration.md) and capture again")
+                 f"adhesion, its zero set at least {least:.3g} mm above first contact; " + (
+                     "taken as rows at rest they leave the capture unexplained all the same, the zero farther above "
+                     "first contact than the rows in contact can tell: set first contact again (docs/calibration.md) "
+                     "and capture again" if ident.problem.zero_error > 0 else
+                     f"--zero-error 0 allows none: identify with a zero error (the default {ZERO_ERROR:g} mm) to "
+                     "take them as lifted, or set first contact again (docs/calibration.md) and capture again"))
     else:
         cause = None
     if bad:
