@@ -13,6 +13,7 @@ offset from the elements' centre, each element's sensitivity) against the truth,
 
     python bench/zero_above.py            # about 10 min here
     python bench/zero_above.py --units 2  # a quick look
+    python bench/zero_above.py --sensor tilted-axes --transfer raw --samples 128
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from benchutil import log, parser, table  # noqa: E402
+from fitgen.base.errors import InputError  # noqa: E402
 from fitgen.fitting.capturezero import lifted_rows  # noqa: E402
 from fitgen.fitting.identify import derived_at, identify  # noqa: E402
 from fitgen.fitting.schedule import schedule  # noqa: E402
@@ -40,6 +42,9 @@ SAMPLES = 16
 def main(argv: list[str] | None = None) -> int:
     ap = parser(__doc__)
     ap.add_argument("--units", type=int, default=6, help="units per height (default 6)")
+    ap.add_argument("--sensor", default="paper", help="the drawing (default paper)")
+    ap.add_argument("--transfer", choices=("gmr", "raw"), default="gmr", help="its transfer (default gmr)")
+    ap.add_argument("--samples", type=int, default=SAMPLES, help=f"samples per row (default {SAMPLES})")
     ap.add_argument("--heights", default=",".join(f"{h:g}" for h in HEIGHTS),
                     help="zeros above first contact, mm, comma-separated (default %(default)s)")
     args = ap.parse_args(argv)
@@ -49,8 +54,13 @@ def main(argv: list[str] | None = None) -> int:
         heights = [float(h) for h in args.heights.split(",")]
     except ValueError:
         ap.error(f"--heights must be numbers (mm), comma-separated, got {args.heights!r}")
-    drawing = load_sensor("paper").with_transfer("gmr")
-    noise = drawing.noise / np.sqrt(SAMPLES)
+    if args.samples < 1:
+        ap.error("--samples must be >= 1")
+    try:
+        drawing = load_sensor(args.sensor).with_transfer(args.transfer)
+    except InputError as exc:
+        ap.error(str(exc))
+    noise = drawing.noise / np.sqrt(args.samples)
     poses = schedule(drawing, 40, noise=noise)[0]
     contact = ~off_skin(poses)
     space = UnitSpace.of(drawing)
@@ -86,9 +96,9 @@ def main(argv: list[str] | None = None) -> int:
                      f"{same} of {n}", f"{np.median(zero_z):+.2f}" if zero_z else "-",
                      f"{max(np.abs(zero_z)):.2f}" if zero_z else "-", f"{max(worst):.2f}" if worst else "-"])
     print("# A zero set above first contact (bench/zero_above.py)\n")
-    print(f"{args.units} units of the paper's drawing per height, the default 40-pose schedule, the stage off by "
-          f"{RIG:g} mm rms, rows of {SAMPLES} samples; errors in standard errors (the found zero's and the derived "
-          "quantities') over the accepted captures.\n")
+    print(f"{args.units} units of {args.sensor} ({args.transfer}) per height, the default 40-pose schedule, the stage "
+          f"off by {RIG:g} mm rms, rows of {args.samples} samples; errors in standard errors (the found zero's and "
+          "the derived quantities') over the accepted captures.\n")
     print(table(["zero above first contact (mm)", "rows lifted", "accepted before", "accepted now",
                  "rows taken = rows lifted", "zero found, dz error (median)", "zero found, worst |dz error|",
                  "worst derived quantity"], rows))
