@@ -32,7 +32,7 @@ class Problem:
     # rows labelled in contact that read at rest, taken as lifted off the skin (their dz in ``poses`` moved there)
     lifted: tuple = ()
     # mm: how far above first contact those rows put the zero, dz's prior spread where larger than zero_error (the
-    # rows tell dz, not dx or dy: a zero free there too traded against the magnet's offset, 4 standard errors off)
+    # rows tell dz, not dx or dy, where a zero freed too takes up some of the magnet's offset)
     zero_lift: float = 0.0
 
     @property
