@@ -153,31 +153,26 @@ class Thermometer:
         self.tin, self.clock = tin, array.clock
         self.driver = make_driver(array.io, thermistor_chip(tin, array.cmap))
         self.last_t = -math.inf
-        self.value = math.nan
-        self.raw = math.nan  # degC as the divider last read, in T_RANGE or not (NaN at a rail)
+        self.value = self.raw = math.nan  # raw: degC as the divider last read, in T_RANGE or not (NaN at a rail)
 
     def read(self, fresh: bool = False) -> float:
-        """Degrees C within T_RANGE, else NaN (no temperature); the last value when read less than READ_EVERY s ago,
-        unless ``fresh``."""
+        """Degrees C within T_RANGE, else NaN; the last value when read less than READ_EVERY s ago, unless ``fresh``."""
         now = self.clock.monotonic()
         if fresh or now - self.last_t >= READ_EVERY:
             self.last_t = now
             volts = self.driver.read(self.tin.input)
-            # a code at the chip's full scale: the divider's voltage past what the chip reads (a gain too high for
-            # it), which would read as a temperature it is not
+            # a code at full scale is the divider past what the chip reads at its gain; outside the thermistor's rated
+            # range a reading is a fault (an open NTC against an ADS1115's input, about 6 Mohm, reads -72 degC):
+            # neither is a temperature to compensate at, nor one for a capture's meta (fitgen refuses it)
             self.raw = math.nan if volts >= self.driver.code_max * self.driver.lsb else self.tin.degc(volts)
-            # outside the thermistor's rated range a reading is a fault, not a temperature: an open NTC against an
-            # ADS1115's input (about 6 Mohm) reads about -72 degC, where a compensation would be extrapolated by
-            # 100 degC and a capture's meta would record what fitgen refuses to load
             self.value = self.raw if T_RANGE[0] <= self.raw <= T_RANGE[1] else math.nan
         return self.value
 
     def fault(self) -> str:
         """Why the last read gave no temperature, in a few words: what the divider read, where it read one."""
-        if math.isfinite(self.raw):
-            return (f"it reads {self.raw:.1f} degC, outside {T_RANGE[0]:g}..{T_RANGE[1]:g} (an open thermistor reads "
-                    "about -72 against an ADS1115's input, a shorted one far above)")
-        return "its divider reads 0 V or its reference (open, shorted), or more than its chip reads at its gain"
+        return (f"it reads {self.raw:.1f} degC, outside {T_RANGE[0]:g}..{T_RANGE[1]:g} (an open thermistor reads about "
+                "-72 against an ADS1115's input, a shorted one far above)" if math.isfinite(self.raw) else
+                "its divider reads 0 V or its reference (open, shorted), or more than its chip reads at its gain")
 
 
 @dataclass
