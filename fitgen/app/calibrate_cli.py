@@ -129,7 +129,8 @@ def cmd_identify(args) -> int:
     with Progress("a field the stage carries?", 4) as bar:
         field = field or verdict.field_line(ident, lambda i, n, note: bar.update(i - bar.done, note))
     # a cause every row shares first: under it, the rows that stand out may not
-    notes = (verdict.taken_lifted_line(ident, ds.poses()) + field + verdict.outlier_lines(ident, args.capture)
+    notes = (verdict.taken_lifted_line(ident, ds.poses()) + verdict.held_line(ident) + field
+             + verdict.outlier_lines(ident, args.capture)
              + verdict.low_residual_line(ident, source) + verdict.far_zero_line(ident))
     print("".join(f"identify: {ln}\n" for ln in notes), end="", file=sys.stderr)
     # unit.toml's twin is twin.json beside it; another unit file's its own (a batch in one folder: none replaces one)

@@ -34,6 +34,8 @@ class Problem:
     # mm: how far above first contact those rows put the zero, dz's prior spread where larger than zero_error (the
     # rows tell dz, not dx or dy, where a zero freed too takes up some of the magnet's offset)
     zero_lift: float = 0.0
+    # (n, N) readings that weigh nothing at any z: those a looser stage's unit put by a knee (identify's last start)
+    held: np.ndarray | None = None
 
     @property
     def zero_sd(self) -> np.ndarray:
@@ -86,16 +88,17 @@ class Problem:
         return np.stack([(f[2 * a] - f[2 * a + 1]) / (2 * _H_POSE) for a in range(3)], axis=-1)
 
     def usable(self, z: np.ndarray) -> np.ndarray:
-        """The readings (n, N) that weigh at z: not clipped, and not within KNEE_REACH stage errors of a knee
-        (fitgen.fitting.knees: across one the rig's error moves a reading as no slope says); without a capture's
-        mask (a design's rows, read nothing yet) every one."""
+        """The readings (n, N) that weigh at z: not clipped, not ``held``, and not within KNEE_REACH stage errors of
+        a knee (fitgen.fitting.knees: across one the rig's error moves a reading as no slope says); without a
+        capture's mask (a design's rows, read nothing yet) every one."""
         if self.valid is None:
             return np.ones(self.readings.shape, dtype=bool)
+        valid = self.valid if self.held is None else self.valid & ~self.held
         reach = KNEE_REACH * np.hypot(self.rig_error, self.zero_error)
         if reach <= 0:
-            return self.valid
+            return valid
         line, slopes = self.predict(z, clipped=False)[0], self.pose_slopes(z, clipped=False)
-        return self.valid & ~near_knees(self.space, z * self.space.prior_sd, self.readings, line, slopes, reach)
+        return valid & ~near_knees(self.space, z * self.space.prior_sd, self.readings, line, slopes, reach)
 
     def whiteners(self, z: np.ndarray, poses: np.ndarray | None = None, slopes: np.ndarray | None = None) -> np.ndarray:
         """Per row, L^-1 with L L^T = diag(noise^2) + rig_error^2 J_s J_s^T: (n, N, N)."""

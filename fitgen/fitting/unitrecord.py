@@ -415,6 +415,9 @@ def unit_files(ident: Identification, path, provenance: dict, noise: float | Non
         # rows labelled in contact that read at rest, taken as lifted off the skin (numbered as in the capture)
         **({"rows_taken_lifted": [i + 1 for i in ident.problem.lifted], "zero_lift": ident.problem.zero_lift}
            if ident.problem.lifted else {}),
+        # readings a looser stage's unit put by a knee, held out by identify's last start ([row, element], from 1)
+        **({"readings_held_out": (np.argwhere(ident.problem.held) + 1).tolist()}
+           if ident.problem.held is not None else {}),
         "row_noise": ident.problem.noise.tolist(),
         "outlying_rows": [{"row": i + 1, "residual": r} for i, r in ident.outlying_rows()],
         "derived": {k: {"value": v, "se": s} for k, (v, s) in ident.derived().items()},

@@ -114,6 +114,18 @@ def taken_lifted_line(ident: Identification, labels: np.ndarray) -> list[str]:
             "(docs/calibration.md)"]
 
 
+def held_line(ident: Identification) -> list[str]:
+    """A line when identify held readings out (``Problem.held``: its last start's): how many, and why."""
+    held = ident.problem.held
+    if held is None:
+        return []
+    rows = np.flatnonzero(held.any(axis=1))
+    return [f"{int(held.sum())} readings of rows {', '.join(str(i + 1) for i in rows)} held out: a unit fitted for a "
+            "stage three times looser puts them by a knee (an element's saturation, an ADC's rail, a field's zero), "
+            "and one read on a plateau had pulled the fit off the unit; without them the capture reads as a unit "
+            "within the tolerances, to the noise (docs/calibration.md)"]
+
+
 # an accepted capture's reduced chi-square above this: does a looser stage, or a field the stage carries, explain it?
 FIELD_HINT_CHI2 = 1.3
 # a row carrying this share of the chi-square or more: the excess is that row's (a slip: its line names it), not
