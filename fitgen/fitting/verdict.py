@@ -122,7 +122,7 @@ def held_line(ident: Identification) -> list[str]:
     rows = np.flatnonzero(held.any(axis=1))
     return [f"{int(held.sum())} readings of rows {', '.join(str(i + 1) for i in rows)} held out: a unit fitted for a "
             "stage three times looser puts them by a knee (an element's saturation, an ADC's rail, a field's zero), "
-            "and one read on a plateau had pulled the fit off the unit; without them the capture reads as a unit "
+            "and one read across a knee had pulled the fit off the unit; without them the capture reads as a unit "
             "within the tolerances, to the noise (docs/calibration.md)"]
 
 
